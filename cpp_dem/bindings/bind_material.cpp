@@ -1,0 +1,91 @@
+#include <cmath>
+
+#include "convert.hpp"
+#include "cpp_dem/material.hpp"
+
+namespace cpp_dem::bind {
+
+void bind_material(py::module_& m) {
+  py::enum_<ContactModel>(m, "ContactModel")
+      .value("linear", ContactModel::Linear)
+      .value("hertz_mindlin", ContactModel::HertzMindlin);
+
+  py::class_<Material>(m, "Material", R"doc(
+Elastic-frictional material (immutable; SI units).
+
+Parameters
+----------
+model : "linear" (Cundall–Strack, 000 eqs 1–6) or "hertz_mindlin".
+density : mass density, kg/m^3 (> 0).
+young : Young's modulus E, Pa (> 0).
+poisson : Poisson's ratio nu, -. For the linear law this is k_s/k_n (000 eq 5), in (0, 0.5];
+    for Hertz–Mindlin, in (-1, 0.5].
+friction_angle_deg : contact friction angle, degrees, in [0, 90).
+damping_normal, damping_shear : viscous contact damping, ratio of critical, in [0, 1].
+rolling_stiffness : beta_r, -; k_r = beta_r k_s R*^2 (0: no rolling resistance).
+rolling_friction : eta_r, -; |M_r| <= eta_r R* |F_n|.
+)doc")
+      .def(py::init([](const std::string& model, double density, double young, double poisson,
+                       double friction_angle_deg, double damping_normal, double damping_shear,
+                       double rolling_stiffness, double rolling_friction) {
+             Material mat;
+             if (model == "linear") mat.model = ContactModel::Linear;
+             else if (model == "hertz_mindlin") mat.model = ContactModel::HertzMindlin;
+             else
+               throw ParameterError("model='" + model +
+                                    "': must be 'linear' or 'hertz_mindlin'");
+             mat.density = density;
+             mat.young = young;
+             mat.poisson = poisson;
+             mat.friction_angle = friction_angle_deg * M_PI / 180.0;
+             mat.damping_normal = damping_normal;
+             mat.damping_shear = damping_shear;
+             mat.rolling_stiffness = rolling_stiffness;
+             mat.rolling_friction = rolling_friction;
+             mat.validate();
+             return mat;
+           }),
+           py::kw_only(), py::arg("model") = "linear", py::arg("density"), py::arg("young"),
+           py::arg("poisson"), py::arg("friction_angle_deg"), py::arg("damping_normal") = 0.0,
+           py::arg("damping_shear") = 0.0, py::arg("rolling_stiffness") = 0.0,
+           py::arg("rolling_friction") = 0.0)
+      .def_property_readonly("model", [](const Material& s) {
+        return s.model == ContactModel::Linear ? "linear" : "hertz_mindlin";
+      })
+      .def_readonly("density", &Material::density, "kg/m^3")
+      .def_readonly("young", &Material::young, "Pa")
+      .def_readonly("poisson", &Material::poisson, "-")
+      .def_property_readonly("friction_angle_deg",
+                             [](const Material& s) { return s.friction_angle * 180.0 / M_PI; })
+      .def_readonly("damping_normal", &Material::damping_normal)
+      .def_readonly("damping_shear", &Material::damping_shear)
+      .def_readonly("rolling_stiffness", &Material::rolling_stiffness)
+      .def_readonly("rolling_friction", &Material::rolling_friction)
+      .def_property_readonly("shear_modulus", &Material::shear_modulus, "Pa")
+      .def("__repr__", [](const Material& s) {
+        return std::string("Material(model='") +
+               (s.model == ContactModel::Linear ? "linear" : "hertz_mindlin") +
+               "', density=" + fmt_real(s.density) + ", young=" + fmt_real(s.young) +
+               ", poisson=" + fmt_real(s.poisson) +
+               ", friction_angle_deg=" + fmt_real(s.friction_angle * 180.0 / M_PI) + ")";
+      });
+
+  py::class_<ContactPhys>(m, "ContactPhys", "Mixed parameters of one contact (read-only).")
+      .def_property_readonly("model", [](const ContactPhys& p) {
+        return p.model == ContactModel::Linear ? "linear" : "hertz_mindlin";
+      })
+      .def_readonly("kn", &ContactPhys::kn, "linear: N/m; Hertz: K in F = K d^1.5, N/m^1.5")
+      .def_readonly("ks", &ContactPhys::ks, "linear: N/m; Mindlin: C in k_t = C d^0.5")
+      .def_readonly("tan_phi", &ContactPhys::tan_phi)
+      .def_readonly("beta_n", &ContactPhys::beta_n)
+      .def_readonly("beta_s", &ContactPhys::beta_s)
+      .def_readonly("mass_eff", &ContactPhys::mass_eff, "kg")
+      .def_readonly("kr", &ContactPhys::kr, "N m/rad")
+      .def_readonly("rolling_cap", &ContactPhys::rolling_cap, "m");
+
+  m.def("mix_materials", &mix_materials, py::arg("a"), py::arg("b"), py::arg("r1"),
+        py::arg("r2"), py::arg("m1"), py::arg("m2"),
+        "Contact parameters of two materials with radii r1, r2 (m) and masses m1, m2 (kg).");
+}
+
+}  // namespace cpp_dem::bind

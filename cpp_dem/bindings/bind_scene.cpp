@@ -1,0 +1,201 @@
+#include <pybind11/stl.h>
+
+#include "convert.hpp"
+#include "cpp_dem/scene.hpp"
+
+namespace cpp_dem::bind {
+
+namespace {
+py::dict energies_dict(const Energies& e) {
+  py::dict d;
+  d["kinetic"] = e.kinetic;
+  d["elastic"] = e.elastic;
+  d["gravity_potential"] = e.gravity_potential;
+  d["friction"] = e.friction;
+  d["viscous"] = e.viscous;
+  d["local_damping"] = e.local_damping;
+  d["wall_work"] = e.wall_work;
+  d["external_work"] = e.external_work;
+  d["balance_error"] = e.balance_error;
+  d["balance_error_relative"] = e.balance_error_relative;
+  return d;
+}
+
+/// Active contacts as arrays: ids (k,2) (wall contacts: body, -1-wall), force on the second
+/// body / on the sphere (k,3) N, normal (k,3), overlap (k,) m, normal force (k,) N.
+py::dict contacts_dict(const Scene& s) {
+  std::vector<int> ids;
+  std::vector<Vec3> force, normal;
+  std::vector<Real> overlap, fn;
+  for (const auto& c : s.pair_contacts()) {
+    if (!c.active) continue;
+    ids.push_back(c.i);
+    ids.push_back(c.j);
+    force.push_back(c.force);
+    normal.push_back(c.state.normal);
+    overlap.push_back(c.state.overlap);
+    fn.push_back(c.state.fn);
+  }
+  for (const auto& c : s.wall_contacts()) {
+    if (!c.active) continue;
+    ids.push_back(c.body);
+    ids.push_back(-1 - c.wall);
+    force.push_back(c.force);
+    normal.push_back(c.state.normal);
+    overlap.push_back(c.state.overlap);
+    fn.push_back(c.state.fn);
+  }
+  py::array_t<int> id_arr({static_cast<py::ssize_t>(fn.size()), py::ssize_t(2)});
+  if (!ids.empty()) std::memcpy(id_arr.mutable_data(), ids.data(), ids.size() * sizeof(int));
+  py::dict d;
+  d["ids"] = id_arr;
+  d["force"] = vec3_array(force);
+  d["normal"] = vec3_array(normal);
+  d["overlap"] = real_array(overlap);
+  d["normal_force"] = real_array(fn);
+  return d;
+}
+}  // namespace
+
+void bind_scene(py::module_& m) {
+  py::class_<Scene>(m, "Scene", "DEM scene (compiled part; see cpp_dem.Scene).")
+      .def(py::init<>())
+      .def("add_material", &Scene::add_material, py::arg("material"),
+           "Adds a material; returns its index.")
+      .def("material", &Scene::material, py::arg("index"), py::return_value_policy::copy)
+      .def_property_readonly("num_materials", &Scene::num_materials)
+      .def("_add_spheres",
+           [](Scene& s, const Array& centers, const Array& radii, int material) {
+             return s.add_spheres(to_vec3_list(centers, "centers"), to_real_list(radii, "radii"),
+                                  material);
+           },
+           py::arg("centers"), py::arg("radii"), py::arg("material"))
+      .def_property_readonly("num_bodies", &Scene::num_bodies)
+      .def("add_wall", &Scene::add_wall, py::kw_only(), py::arg("axis"), py::arg("position"),
+           py::arg("sense"), py::arg("material"),
+           "Adds an axis-aligned one-sided wall: axis 0/1/2 (x/y/z), position along the axis (m), "
+           "sense +1 if spheres are on its +axis side, -1 otherwise. Returns its index.")
+      .def_property_readonly("num_walls", &Scene::num_walls)
+      .def("set_wall_velocity",
+           [](Scene& s, int id, const Array& v) { s.wall(id).velocity = to_vec3(v, "velocity"); },
+           py::arg("wall"), py::arg("velocity"), "Imposed wall velocity (3 values), m/s.")
+      .def("set_wall_position",
+           [](Scene& s, int id, double x) {
+             require(std::isfinite(x), "position", x, "must be finite (m)");
+             Wall& w = s.wall(id);
+             w.moved_since_build += std::abs(x - w.position);
+             w.position = x;
+           },
+           py::arg("wall"), py::arg("position"), "Moves the wall plane to position (m).")
+      .def_property_readonly("wall_positions", [](const Scene& s) {
+        std::vector<Real> v;
+        for (int i = 0; i < s.num_walls(); ++i) v.push_back(s.wall(i).position);
+        return real_array(v);
+      }, "Wall plane coordinates, m, shape (n_walls,).")
+      .def_property_readonly("wall_forces", [](const Scene& s) {
+        std::vector<Vec3> v;
+        for (int i = 0; i < s.num_walls(); ++i) v.push_back(s.wall(i).force);
+        return vec3_array(v);
+      }, "Force exerted by the spheres on each wall at the last step, N, shape (n_walls, 3).")
+      .def_property_readonly("wall_velocities", [](const Scene& s) {
+        std::vector<Vec3> v;
+        for (int i = 0; i < s.num_walls(); ++i) v.push_back(s.wall(i).velocity);
+        return vec3_array(v);
+      }, "Imposed wall velocities, m/s, shape (n_walls, 3).")
+      .def_property_readonly("wall_axes", [](const Scene& s) {
+        std::vector<int> v;
+        for (int i = 0; i < s.num_walls(); ++i) v.push_back(s.wall(i).axis);
+        return v;
+      })
+      .def_property_readonly("wall_senses", [](const Scene& s) {
+        std::vector<int> v;
+        for (int i = 0; i < s.num_walls(); ++i) v.push_back(s.wall(i).sense);
+        return v;
+      })
+      .def_property("positions", [](const Scene& s) { return vec3_array(s.positions()); },
+                    [](Scene& s, const Array& a) { s.set_positions(to_vec3_list(a, "positions")); },
+                    "Body centres, m, shape (n, 3).")
+      .def_property("velocities", [](const Scene& s) { return vec3_array(s.velocities()); },
+                    [](Scene& s, const Array& a) { s.set_velocities(to_vec3_list(a, "velocities")); },
+                    "Body velocities, m/s, shape (n, 3) (leapfrog: at the last half step).")
+      .def_property("angular_velocities",
+                    [](const Scene& s) { return vec3_array(s.angular_velocities()); },
+                    [](Scene& s, const Array& a) {
+                      s.set_angular_velocities(to_vec3_list(a, "angular_velocities"));
+                    },
+                    "Angular velocities, rad/s, shape (n, 3).")
+      .def_property_readonly("forces", [](const Scene& s) { return vec3_array(s.forces()); },
+                             "Resultant force on each body at the last step (contacts, gravity, "
+                             "external), N, shape (n, 3).")
+      .def_property_readonly("torques", [](const Scene& s) { return vec3_array(s.torques()); },
+                             "Resultant torque, N m, shape (n, 3).")
+      .def_property("radii", [](const Scene& s) { return real_array(s.radii()); },
+                    [](Scene& s, const Array& a) { s.set_radii(to_real_list(a, "radii")); },
+                    "Radii, m, shape (n,). Setting them rescales masses and inertias.")
+      .def_property_readonly("masses", [](const Scene& s) { return real_array(s.masses()); },
+                             "Masses, kg, shape (n,).")
+      .def_property_readonly("inertias", [](const Scene& s) { return real_array(s.inertias()); },
+                             "Moments of inertia, kg m^2, shape (n,).")
+      .def_property_readonly("orientations", [](const Scene& s) {
+        py::array_t<double> out({static_cast<py::ssize_t>(s.num_bodies()), py::ssize_t(4)});
+        auto r = out.mutable_unchecked<2>();
+        for (int b = 0; b < s.num_bodies(); ++b) {
+          const Quat& q = s.orientations()[b];
+          r(b, 0) = q.w(); r(b, 1) = q.x(); r(b, 2) = q.y(); r(b, 3) = q.z();
+        }
+        return out;
+      }, "Orientation quaternions (w, x, y, z), shape (n, 4).")
+      .def_property_readonly("material_ids", [](const Scene& s) { return s.body_materials(); })
+      .def_property("external_forces", [](const Scene& s) { return vec3_array(s.external_forces()); },
+                    [](Scene& s, const Array& a) {
+                      s.set_external_forces(to_vec3_list(a, "external_forces"));
+                    },
+                    "Constant external force on each body, N, shape (n, 3).")
+      .def("_set_blocked", &Scene::set_blocked, py::arg("body"), py::arg("mask"))
+      .def_property_readonly("_blocked", [](const Scene& s) {
+        return std::vector<int>(s.blocked().begin(), s.blocked().end());
+      })
+      .def("set_body_material", &Scene::set_body_material, py::arg("body"), py::arg("material"))
+      .def_property("dt", &Scene::dt, &Scene::set_dt, "Time step, s.")
+      .def_property("gravity", [](const Scene& s) {
+        return std::vector<double>{s.gravity()[0], s.gravity()[1], s.gravity()[2]};
+      }, [](Scene& s, const Array& g) { s.set_gravity(to_vec3(g, "gravity")); },
+                    "Gravitational acceleration, m/s^2 (3 values).")
+      .def_property("local_damping", &Scene::local_damping, &Scene::set_local_damping,
+                    "Cundall local non-viscous damping coefficient, -, in [0, 1).")
+      .def_property("verlet_margin", &Scene::verlet_margin, &Scene::set_verlet_margin,
+                    "Broad-phase Verlet margin, m (<= 0: 0.2 x mean radius).")
+      .def_property("max_overlap_ratio", &Scene::max_overlap_ratio, &Scene::set_max_overlap_ratio,
+                    "Overlap / smaller radius above which a step raises BlowUpError (default 0.5).")
+      .def_property("track_energy", &Scene::track_energy, &Scene::set_track_energy,
+                    "Energy bookkeeping on/off (turning it on restarts the balance).")
+      .def("set_auto_timestep", &Scene::set_auto_timestep, py::arg("safety") = 0.8,
+           py::arg("period") = 100,
+           "Every `period` steps set dt = safety x critical_dt() (period 0 switches it off).")
+      .def_property_readonly("timestep_safety", &Scene::timestep_safety)
+      .def_property_readonly("timestep_period", &Scene::timestep_period)
+      .def("_run", &Scene::run, py::arg("steps"), py::call_guard<py::gil_scoped_release>())
+      .def_property_readonly("step_count", &Scene::step_count)
+      .def_property_readonly("time", &Scene::time, "Simulated time, s.")
+      .def("critical_dt", &Scene::critical_dt,
+           "Critical time-step estimate, s: min over bodies and axes of sqrt(2 m / K) from the "
+           "current contact stiffnesses; the p-wave estimate before contacts exist.")
+      .def("pwave_dt", &Scene::pwave_dt, "p-wave time step min R sqrt(rho / E), s.")
+      .def("energies", [](const Scene& s) { return energies_dict(s.energies()); },
+           "Energy terms, J, and the balance error (needs track_energy).")
+      .def("reset_energy", &Scene::reset_energy)
+      .def("unbalanced_force", &Scene::unbalanced_force,
+           "Mean resultant force on free bodies / mean contact force, - (NaN without contacts).")
+      .def("collider_stats", [](const Scene& s) {
+        const ColliderStats c = s.collider_stats();
+        py::dict d;
+        d["builds"] = c.builds;
+        d["pair_candidates"] = c.pair_candidates;
+        d["wall_candidates"] = c.wall_candidates;
+        return d;
+      })
+      .def("contacts", &contacts_dict, "Active contacts as arrays (see docs).")
+      .def_property_readonly("num_active_contacts", &Scene::num_active_contacts);
+}
+
+}  // namespace cpp_dem::bind

@@ -1,0 +1,216 @@
+// The scene: bodies (structure of arrays), walls, contacts, and the step loop.
+// State is passed explicitly; there is no global scene.
+#pragma once
+
+#include <string>
+#include <utility>
+#include <vector>
+
+#include "cpp_dem/collider.hpp"
+#include "cpp_dem/contact.hpp"
+#include "cpp_dem/material.hpp"
+
+namespace cpp_dem {
+
+/// An infinite plane normal to a coordinate axis. One-sided: spheres interact with it from
+/// the side its normal points to (sense = +1: the +axis side; -1: the -axis side).
+struct Wall {
+  int axis = 2;                 ///< 0 = x, 1 = y, 2 = z
+  int sense = 1;                ///< +1 or -1: side of the plane where spheres are
+  Real position = 0;            ///< plane coordinate along axis, m
+  Vec3 velocity = Vec3::Zero(); ///< imposed velocity, m/s (the axis component moves it)
+  int material = 0;             ///< material index
+  Vec3 force = Vec3::Zero();    ///< force exerted by the spheres on the wall (last step), N
+  Real work = 0;                ///< work done by the wall on the spheres, cumulative, J
+  Real moved_since_build = 0;   ///< |displacement| since the last broad-phase build, m
+  Vec3 normal() const {
+    Vec3 n = Vec3::Zero();
+    n[axis] = sense;
+    return n;
+  }
+};
+
+/// A sphere–sphere contact (candidate pair from the broad phase; active while overlapping).
+struct PairContact {
+  int i = 0, j = 0;             ///< body ids, i < j; side 1 = i, side 2 = j
+  bool active = false;
+  int phys_version = -1;        ///< scene phys version the phys was computed at
+  ContactPhys phys;
+  ContactState state;
+  Vec3 force = Vec3::Zero();    ///< force on j (i gets -force), N
+  Vec3 torque_i = Vec3::Zero(); ///< torque on i, N m
+  Vec3 torque_j = Vec3::Zero(); ///< torque on j, N m
+};
+
+/// A sphere–wall contact. Side 1 = the wall, side 2 = the sphere.
+struct WallContact {
+  int body = 0, wall = 0;
+  bool active = false;
+  int phys_version = -1;
+  ContactPhys phys;
+  ContactState state;
+  Vec3 force = Vec3::Zero();    ///< force on the sphere, N
+  Vec3 torque = Vec3::Zero();   ///< torque on the sphere, N m
+};
+
+/// Energy terms, J. The balance: kinetic + elastic + gravity_potential + dissipation
+/// - work_in stays equal to its value when tracking started.
+struct Energies {
+  Real kinetic = 0;            ///< translational + rotational, at the start of the last step
+  Real elastic = 0;            ///< stored in contact springs
+  Real gravity_potential = 0;  ///< -sum m g . x, relative to where tracking started
+  Real friction = 0;           ///< dissipated by Coulomb and rolling slip
+  Real viscous = 0;            ///< dissipated by viscous contact damping
+  Real local_damping = 0;      ///< dissipated by Cundall local damping
+  Real wall_work = 0;          ///< work done by moving walls on the bodies
+  Real external_work = 0;      ///< work of external forces and of imposed (blocked) DOFs
+  Real balance_error = 0;      ///< absolute, J
+  Real balance_error_relative = 0;  ///< balance_error / sum of |terms|
+};
+
+/// Summary of the broad phase, for users and tests.
+struct ColliderStats {
+  long builds = 0;          ///< number of broad-phase builds so far
+  long pair_candidates = 0; ///< sphere–sphere candidate pairs in the current list
+  long wall_candidates = 0; ///< sphere–wall candidates in the current list
+};
+
+class Scene {
+ public:
+  Scene();
+
+  // ---- materials, bodies, walls -------------------------------------------------------
+  int add_material(const Material& m);
+  const Material& material(int id) const;
+  int num_materials() const { return static_cast<int>(materials_.size()); }
+
+  /// Adds spheres; returns the id of the first. pos: n centres, m; radius: n radii, m.
+  int add_spheres(const std::vector<Vec3>& pos, const std::vector<Real>& radius, int material);
+  int num_bodies() const { return static_cast<int>(pos_.size()); }
+
+  int add_wall(int axis, Real position, int sense, int material);
+  int num_walls() const { return static_cast<int>(walls_.size()); }
+  Wall& wall(int id);
+  const Wall& wall(int id) const;
+
+  // ---- state arrays (SI) ---------------------------------------------------------------
+  const std::vector<Vec3>& positions() const { return pos_; }
+  const std::vector<Vec3>& velocities() const { return vel_; }
+  const std::vector<Vec3>& angular_velocities() const { return angvel_; }
+  const std::vector<Vec3>& forces() const { return force_; }
+  const std::vector<Vec3>& torques() const { return torque_; }
+  const std::vector<Real>& radii() const { return radius_; }
+  const std::vector<Real>& masses() const { return mass_; }
+  const std::vector<Real>& inertias() const { return inertia_; }
+  const std::vector<Quat>& orientations() const { return ori_; }
+  const std::vector<int>& body_materials() const { return body_mat_; }
+  const std::vector<std::uint8_t>& blocked() const { return blocked_; }
+  const std::vector<Vec3>& external_forces() const { return ext_force_; }
+
+  void set_positions(const std::vector<Vec3>& v);
+  void set_velocities(const std::vector<Vec3>& v);
+  void set_angular_velocities(const std::vector<Vec3>& v);
+  /// Sets radii (m) and rescales mass and inertia with the body's material density.
+  void set_radii(const std::vector<Real>& r);
+  void set_blocked(int body, std::uint8_t mask);
+  void set_external_forces(const std::vector<Vec3>& f);
+  void set_body_material(int body, int material);
+
+  // ---- parameters ----------------------------------------------------------------------
+  Real dt() const { return dt_; }
+  void set_dt(Real dt);
+  const Vec3& gravity() const { return gravity_; }
+  void set_gravity(const Vec3& g);
+  Real local_damping() const { return local_damping_; }
+  void set_local_damping(Real d);
+  /// Verlet margin of the broad phase, m. <= 0 means 0.2 x the mean radius (default).
+  Real verlet_margin() const { return margin_; }
+  void set_verlet_margin(Real m);
+  Real max_overlap_ratio() const { return max_overlap_ratio_; }
+  /// Overlap / smaller radius beyond which a step raises BlowUpError.
+  void set_max_overlap_ratio(Real r);
+  bool track_energy() const { return track_energy_; }
+  void set_track_energy(bool on);
+  /// Automatic time step: every `period` steps dt = safety x critical_dt(). period 0 = off.
+  void set_auto_timestep(Real safety, int period);
+  Real timestep_safety() const { return ts_safety_; }
+  int timestep_period() const { return ts_period_; }
+
+  // ---- running -------------------------------------------------------------------------
+  /// Runs n steps in C++.
+  void run(long n);
+  long step_count() const { return step_; }
+  Real time() const { return time_; }
+
+  // ---- estimates and measurements ------------------------------------------------------
+  /// Critical time step estimate, s, from the current contact stiffnesses
+  /// (min over bodies and axes of sqrt(2 m / K_axis), translational and rotational); the
+  /// p-wave estimate when no contact is active.
+  Real critical_dt() const;
+  /// p-wave estimate min_b R_b sqrt(rho_b / E_b), s.
+  Real pwave_dt() const;
+  Energies energies() const;
+  /// Restarts the energy balance from the current state.
+  void reset_energy();
+  /// Mean |resultant force| on free bodies / mean |contact force|, - (Yade's unbalancedForce).
+  Real unbalanced_force() const;
+  ColliderStats collider_stats() const;
+
+  const std::vector<PairContact>& pair_contacts() const { return pairs_; }
+  const std::vector<WallContact>& wall_contacts() const { return wall_contacts_; }
+  int num_active_contacts() const;
+
+ private:
+  void check_body(int b) const;
+  bool need_rebuild() const;
+  void rebuild();
+  void compute_pair_forces(long& err_contact);
+  void compute_wall_forces(long& err_contact);
+  void reduce_and_integrate(long& err_body);
+  void update_phys(PairContact& c) const;
+  void update_phys(WallContact& c) const;
+  void step();
+  void set_energy_reference();
+  void raise_overlap(long contact, bool wall) const;
+  Real default_margin() const;
+
+  std::vector<Material> materials_;
+  // Bodies (structure of arrays).
+  std::vector<Vec3> pos_, vel_, angvel_, force_, torque_, ext_force_;
+  std::vector<Quat> ori_;
+  std::vector<Real> radius_, mass_, inertia_;
+  std::vector<int> body_mat_;
+  std::vector<std::uint8_t> blocked_;
+  std::vector<Vec3> pos_at_build_;
+  std::vector<Real> radius_at_build_;
+  // Energy accumulators per body (written only when tracking).
+  std::vector<Real> ke_, damp_dissip_, ext_work_;
+  std::vector<Vec3> pos_at_energy_reset_;
+  std::vector<Wall> walls_;
+  // Contacts and their adjacency (CSR: for body b, entries adj_off[b]..adj_off[b+1]).
+  std::vector<PairContact> pairs_;
+  std::vector<WallContact> wall_contacts_;
+  std::vector<int> pair_adj_off_, pair_adj_, wall_adj_off_, wall_adj_;
+  CellGrid grid_;
+  std::vector<std::pair<int, int>> candidates_;
+  // Dissipation of contacts already dropped from the lists, J.
+  Real dropped_friction_ = 0, dropped_viscous_ = 0;
+  Real energy_reference_ = 0;  // kinetic + elastic when tracking (re)started, J
+  bool energy_reference_set_ = false;
+
+  Real dt_ = 1e-6;
+  Vec3 gravity_ = Vec3::Zero();
+  Real local_damping_ = 0;
+  Real margin_ = -1;
+  Real max_overlap_ratio_ = 0.5;
+  bool track_energy_ = false;
+  Real ts_safety_ = 0.8;
+  int ts_period_ = 0;
+  long step_ = 0;
+  Real time_ = 0;
+  int phys_version_ = 0;
+  bool dirty_ = true;
+  long builds_ = 0;
+};
+
+}  // namespace cpp_dem

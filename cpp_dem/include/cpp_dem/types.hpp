@@ -1,0 +1,53 @@
+// Basic types shared by the whole DEM core. SI units throughout.
+#pragma once
+
+#include <Eigen/Core>
+#include <Eigen/Geometry>
+#include <cstdint>
+#include <stdexcept>
+#include <string>
+
+namespace cpp_dem {
+
+using Real = double;
+using Vec3 = Eigen::Vector3d;
+using Quat = Eigen::Quaterniond;
+using Mat3 = Eigen::Matrix3d;
+
+/// Degrees of freedom that can be blocked on a body (bit mask).
+/// A blocked DOF keeps its current velocity (which may be an imposed one).
+enum Dof : std::uint8_t {
+  DOF_NONE = 0,
+  DOF_X = 1,
+  DOF_Y = 2,
+  DOF_Z = 4,
+  DOF_RX = 8,
+  DOF_RY = 16,
+  DOF_RZ = 32,
+  DOF_XYZ = DOF_X | DOF_Y | DOF_Z,
+  DOF_ROT = DOF_RX | DOF_RY | DOF_RZ,
+  DOF_ALL = DOF_XYZ | DOF_ROT,
+};
+
+/// Bad user input: names the field, the value and what is allowed.
+class ParameterError : public std::invalid_argument {
+ public:
+  using std::invalid_argument::invalid_argument;
+};
+
+/// The simulation became unphysical (non-finite value, overlap too large).
+/// The message names the step, the body (or contact) and the quantity.
+class BlowUpError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+/// Formats a value for error messages with enough digits to be recognised.
+std::string fmt_real(Real v);
+
+/// Throws ParameterError("<field>=<value>: <allowed>") unless ok.
+inline void require(bool ok, const char* field, Real value, const char* allowed) {
+  if (!ok) throw ParameterError(std::string(field) + "=" + fmt_real(value) + ": " + allowed);
+}
+
+}  // namespace cpp_dem

@@ -1,0 +1,81 @@
+#include "cpp_dem/material.hpp"
+
+#include <cmath>
+#include <cstdio>
+#include <limits>
+
+namespace cpp_dem {
+
+std::string fmt_real(Real v) {
+  char buf[64];
+  std::snprintf(buf, sizeof buf, "%.10g", v);
+  return buf;
+}
+
+void Material::validate() const {
+  require(std::isfinite(density) && density > 0, "density", density,
+          "must be > 0 (kg/m^3)");
+  require(std::isfinite(young) && young > 0, "young", young, "must be > 0 (Pa)");
+  if (model == ContactModel::Linear) {
+    require(std::isfinite(poisson) && poisson > 0 && poisson <= 0.5, "poisson", poisson,
+            "must be in (0, 0.5] for the linear law, where it is the ratio k_s/k_n of "
+            "000 eq (5)");
+  } else {
+    require(std::isfinite(poisson) && poisson > -1 && poisson <= 0.5, "poisson", poisson,
+            "must be in (-1, 0.5]");
+  }
+  require(std::isfinite(friction_angle) && friction_angle >= 0 &&
+              friction_angle < M_PI / 2,
+          "friction_angle_deg", friction_angle * 180.0 / M_PI, "must be in [0, 90) degrees");
+  require(std::isfinite(damping_normal) && damping_normal >= 0 && damping_normal <= 1,
+          "damping_normal", damping_normal, "must be in [0, 1] (ratio of critical)");
+  require(std::isfinite(damping_shear) && damping_shear >= 0 && damping_shear <= 1,
+          "damping_shear", damping_shear, "must be in [0, 1] (ratio of critical)");
+  require(std::isfinite(rolling_stiffness) && rolling_stiffness >= 0, "rolling_stiffness",
+          rolling_stiffness, "must be >= 0");
+  require(std::isfinite(rolling_friction) && rolling_friction >= 0, "rolling_friction",
+          rolling_friction, "must be >= 0");
+}
+
+ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2, Real m1,
+                          Real m2) {
+  ContactPhys p;
+  const Real r_eff = r1 * r2 / (r1 + r2);
+  const bool hm = a.model == ContactModel::HertzMindlin && b.model == ContactModel::HertzMindlin;
+  p.model = hm ? ContactModel::HertzMindlin : ContactModel::Linear;
+  if (hm) {
+    // Effective moduli of two elastic spheres (Hertz; Mindlin tangential).
+    const Real e_star = 1.0 / ((1 - a.poisson * a.poisson) / a.young +
+                               (1 - b.poisson * b.poisson) / b.young);
+    const Real g_a = a.shear_modulus(), g_b = b.shear_modulus();
+    const Real g_star = 1.0 / ((2 - a.poisson) / g_a + (2 - b.poisson) / g_b);
+    p.kn = 4.0 / 3.0 * e_star * std::sqrt(r_eff);
+    p.ks = 8.0 * g_star * std::sqrt(r_eff);
+  } else {
+    // Normal stiffness, 000 eq (4); shear stiffness, 000 eq (5).
+    const Real era = a.young * r1, erb = b.young * r2;
+    p.kn = 2.0 * era * erb / (era + erb);
+    const Real erna = era * a.poisson, ernb = erb * b.poisson;
+    p.ks = 2.0 * erna * ernb / (erna + ernb);
+  }
+  p.tan_phi = std::tan(std::min(a.friction_angle, b.friction_angle));
+  p.beta_n = 0.5 * (a.damping_normal + b.damping_normal);
+  p.beta_s = 0.5 * (a.damping_shear + b.damping_shear);
+  if (std::isinf(m1)) p.mass_eff = m2;
+  else if (std::isinf(m2)) p.mass_eff = m1;
+  else p.mass_eff = m1 * m2 / (m1 + m2);
+  const Real beta_r = 0.5 * (a.rolling_stiffness + b.rolling_stiffness);
+  const Real eta_r = 0.5 * (a.rolling_friction + b.rolling_friction);
+  if (beta_r > 0 && eta_r > 0) {
+    // For Hertz–Mindlin k_s depends on the overlap; the rolling stiffness then uses the
+    // reference stiffness E* R* so that it stays a constant of the contact.
+    const Real ks_lin =
+        hm ? r_eff / ((1 - a.poisson * a.poisson) / a.young + (1 - b.poisson * b.poisson) / b.young)
+           : p.ks;
+    p.kr = beta_r * ks_lin * r_eff * r_eff;
+    p.rolling_cap = eta_r * r_eff;
+  }
+  return p;
+}
+
+}  // namespace cpp_dem

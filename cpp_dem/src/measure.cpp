@@ -1,0 +1,154 @@
+// Measurements: time-step estimates, energies, unbalanced force.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "cpp_dem/scene.hpp"
+
+namespace cpp_dem {
+
+Real Scene::pwave_dt() const {
+  Real dt = std::numeric_limits<Real>::infinity();
+  for (int b = 0; b < num_bodies(); ++b) {
+    const Material& m = materials_[body_mat_[b]];
+    dt = std::min(dt, radius_[b] * std::sqrt(m.density / m.young));
+  }
+  return dt;
+}
+
+Real Scene::critical_dt() const {
+  // Per body and axis, the summed contact stiffness K_a (translation) and K_a^rot; the
+  // estimate sqrt(2 m / K_a) is a Gershgorin bound on 2 / omega_max for the assembled
+  // system: exact for two equal spheres in contact, sqrt(2) below the exact value for a
+  // sphere against a rigid wall.
+  const int n = num_bodies();
+  std::vector<Vec3> kt(n, Vec3::Zero()), kr(n, Vec3::Zero());
+  bool any = false;
+  auto add = [&](int b, const Vec3& nrm, Real kn, Real ks, Real arm, Real krol) {
+    for (int a = 0; a < 3; ++a) {
+      const Real n2 = nrm[a] * nrm[a];
+      kt[b][a] += kn * n2 + ks * (1 - n2);
+      kr[b][a] += ks * arm * arm * (1 - n2) + krol;
+    }
+  };
+  for (const PairContact& c : pairs_) {
+    if (!c.active) continue;
+    any = true;
+    Real kn, ks;
+    tangent_stiffness(c.phys, c.state.overlap, kn, ks);
+    add(c.i, c.state.normal, kn, ks, radius_[c.i] - 0.5 * c.state.overlap, c.phys.kr);
+    add(c.j, c.state.normal, kn, ks, radius_[c.j] - 0.5 * c.state.overlap, c.phys.kr);
+  }
+  for (const WallContact& c : wall_contacts_) {
+    if (!c.active) continue;
+    any = true;
+    Real kn, ks;
+    tangent_stiffness(c.phys, c.state.overlap, kn, ks);
+    add(c.body, c.state.normal, kn, ks, radius_[c.body] - 0.5 * c.state.overlap, c.phys.kr);
+  }
+  if (!any) return pwave_dt();
+  Real dt = std::numeric_limits<Real>::infinity();
+  for (int b = 0; b < n; ++b) {
+    for (int a = 0; a < 3; ++a) {
+      if (kt[b][a] > 0 && !(blocked_[b] & (DOF_X << a)))
+        dt = std::min(dt, std::sqrt(2 * mass_[b] / kt[b][a]));
+      if (kr[b][a] > 0 && !(blocked_[b] & (DOF_RX << a)))
+        dt = std::min(dt, std::sqrt(2 * inertia_[b] / kr[b][a]));
+    }
+  }
+  return std::isfinite(dt) ? dt : pwave_dt();
+}
+
+Energies Scene::energies() const {
+  Energies e;
+  const int n = num_bodies();
+  for (int b = 0; b < n; ++b) {
+    e.kinetic += ke_[b];
+    e.gravity_potential += -mass_[b] * gravity_.dot(pos_[b] - pos_at_energy_reset_[b]);
+    e.local_damping += damp_dissip_[b];
+    e.external_work += ext_work_[b];
+  }
+  e.friction = dropped_friction_;
+  e.viscous = dropped_viscous_;
+  for (const PairContact& c : pairs_) {
+    e.friction += c.state.dissip_friction;
+    e.viscous += c.state.dissip_viscous;
+    if (c.active) e.elastic += contact_elastic_energy(c.phys, c.state);
+  }
+  for (const WallContact& c : wall_contacts_) {
+    e.friction += c.state.dissip_friction;
+    e.viscous += c.state.dissip_viscous;
+    if (c.active) e.elastic += contact_elastic_energy(c.phys, c.state);
+  }
+  for (const Wall& w : walls_) e.wall_work += w.work;
+  if (!track_energy_ || !energy_reference_set_) return e;
+  // The potential of gravity is taken at the positions where the kinetic energy was sampled
+  // (the start of the last step): move back by v dt.
+  for (int b = 0; b < n; ++b)
+    e.gravity_potential += mass_[b] * gravity_.dot(vel_[b]) * dt_;
+  const Real now = e.kinetic + e.elastic + e.gravity_potential + e.friction + e.viscous +
+                   e.local_damping - e.wall_work - e.external_work;
+  e.balance_error = now - energy_reference_;
+  const Real scale = std::abs(e.kinetic) + std::abs(e.elastic) + std::abs(e.gravity_potential) +
+                     e.friction + e.viscous + e.local_damping + std::abs(e.wall_work) +
+                     std::abs(e.external_work) + std::abs(energy_reference_);
+  e.balance_error_relative = scale > 0 ? std::abs(e.balance_error) / scale : 0.0;
+  return e;
+}
+
+void Scene::reset_energy() {
+  const int n = num_bodies();
+  for (int b = 0; b < n; ++b) {
+    damp_dissip_[b] = 0;
+    ext_work_[b] = 0;
+    ke_[b] = 0;
+    pos_at_energy_reset_[b] = pos_[b];
+  }
+  dropped_friction_ = dropped_viscous_ = 0;
+  for (PairContact& c : pairs_) c.state.dissip_friction = c.state.dissip_viscous = 0;
+  for (WallContact& c : wall_contacts_) c.state.dissip_friction = c.state.dissip_viscous = 0;
+  for (Wall& w : walls_) w.work = 0;
+  // The reference (kinetic + elastic) is taken in the next step, once the contacts of the
+  // current positions have been evaluated, so energy stored in initial overlaps counts.
+  energy_reference_set_ = false;
+  energy_reference_ = 0;
+}
+
+void Scene::set_energy_reference() {
+  Real e = 0;
+  for (int b = 0; b < num_bodies(); ++b)
+    e += 0.5 * mass_[b] * vel_[b].squaredNorm() + 0.5 * inertia_[b] * angvel_[b].squaredNorm();
+  for (const PairContact& c : pairs_)
+    if (c.active) e += contact_elastic_energy(c.phys, c.state);
+  for (const WallContact& c : wall_contacts_)
+    if (c.active) e += contact_elastic_energy(c.phys, c.state);
+  energy_reference_ = e;
+  energy_reference_set_ = true;
+}
+
+Real Scene::unbalanced_force() const {
+  // Yade's definition: mean resultant force on free bodies over mean contact force.
+  Real sum_f = 0;
+  int nfree = 0;
+  for (int b = 0; b < num_bodies(); ++b) {
+    if (blocked_[b] & DOF_XYZ) continue;
+    sum_f += force_[b].norm();
+    ++nfree;
+  }
+  Real sum_c = 0;
+  int nc = 0;
+  for (const PairContact& c : pairs_)
+    if (c.active) {
+      sum_c += c.force.norm();
+      ++nc;
+    }
+  for (const WallContact& c : wall_contacts_)
+    if (c.active) {
+      sum_c += c.force.norm();
+      ++nc;
+    }
+  if (nfree == 0 || nc == 0 || sum_c == 0) return std::numeric_limits<Real>::quiet_NaN();
+  return (sum_f / nfree) / (sum_c / nc);
+}
+
+}  // namespace cpp_dem

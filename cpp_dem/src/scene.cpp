@@ -1,0 +1,591 @@
+#include "cpp_dem/scene.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+namespace cpp_dem {
+
+namespace {
+constexpr Real kInf = std::numeric_limits<Real>::infinity();
+
+Real sphere_mass(Real density, Real r) { return density * 4.0 / 3.0 * M_PI * r * r * r; }
+
+template <class T>
+void require_size(const std::vector<T>& v, size_t n, const char* field) {
+  if (v.size() != n)
+    throw ParameterError(std::string(field) + ": has " + std::to_string(v.size()) +
+                         " rows, the scene has " + std::to_string(n) + " bodies");
+}
+}  // namespace
+
+Scene::Scene() = default;
+
+// ---- materials, bodies, walls ---------------------------------------------------------------
+
+int Scene::add_material(const Material& m) {
+  m.validate();
+  materials_.push_back(m);
+  ++phys_version_;
+  return static_cast<int>(materials_.size()) - 1;
+}
+
+const Material& Scene::material(int id) const {
+  if (id < 0 || id >= num_materials())
+    throw ParameterError("material=" + std::to_string(id) + ": no such material (the scene has " +
+                         std::to_string(num_materials()) + ")");
+  return materials_[id];
+}
+
+int Scene::add_spheres(const std::vector<Vec3>& pos, const std::vector<Real>& radius,
+                       int material) {
+  const Material& mat = this->material(material);
+  if (pos.size() != radius.size())
+    throw ParameterError("radius: has " + std::to_string(radius.size()) +
+                         " values for " + std::to_string(pos.size()) + " centres");
+  for (size_t k = 0; k < pos.size(); ++k) {
+    require(std::isfinite(radius[k]) && radius[k] > 0, "radius", radius[k], "must be > 0 (m)");
+    if (!pos[k].allFinite())
+      throw ParameterError("position of sphere " + std::to_string(k) + ": must be finite");
+  }
+  const int first = num_bodies();
+  for (size_t k = 0; k < pos.size(); ++k) {
+    const Real r = radius[k];
+    const Real m = sphere_mass(mat.density, r);
+    pos_.push_back(pos[k]);
+    vel_.push_back(Vec3::Zero());
+    angvel_.push_back(Vec3::Zero());
+    force_.push_back(Vec3::Zero());
+    torque_.push_back(Vec3::Zero());
+    ext_force_.push_back(Vec3::Zero());
+    ori_.push_back(Quat::Identity());
+    radius_.push_back(r);
+    mass_.push_back(m);
+    inertia_.push_back(0.4 * m * r * r);
+    body_mat_.push_back(material);
+    blocked_.push_back(DOF_NONE);
+    ke_.push_back(0);
+    damp_dissip_.push_back(0);
+    ext_work_.push_back(0);
+    pos_at_energy_reset_.push_back(pos[k]);
+  }
+  dirty_ = true;
+  return first;
+}
+
+int Scene::add_wall(int axis, Real position, int sense, int material) {
+  if (axis < 0 || axis > 2)
+    throw ParameterError("axis=" + std::to_string(axis) + ": must be 0 (x), 1 (y) or 2 (z)");
+  if (sense != 1 && sense != -1)
+    throw ParameterError("sense=" + std::to_string(sense) +
+                         ": must be +1 (spheres on the +axis side) or -1");
+  require(std::isfinite(position), "position", position, "must be finite (m)");
+  this->material(material);
+  Wall w;
+  w.axis = axis;
+  w.sense = sense;
+  w.position = position;
+  w.material = material;
+  walls_.push_back(w);
+  dirty_ = true;
+  return num_walls() - 1;
+}
+
+Wall& Scene::wall(int id) {
+  if (id < 0 || id >= num_walls())
+    throw ParameterError("wall=" + std::to_string(id) + ": no such wall (the scene has " +
+                         std::to_string(num_walls()) + ")");
+  return walls_[id];
+}
+const Wall& Scene::wall(int id) const { return const_cast<Scene*>(this)->wall(id); }
+
+void Scene::set_positions(const std::vector<Vec3>& v) {
+  require_size(v, pos_.size(), "positions");
+  for (const auto& x : v)
+    if (!x.allFinite()) throw ParameterError("positions: must be finite (m)");
+  pos_ = v;
+  dirty_ = true;
+}
+void Scene::set_velocities(const std::vector<Vec3>& v) {
+  require_size(v, pos_.size(), "velocities");
+  vel_ = v;
+}
+void Scene::set_angular_velocities(const std::vector<Vec3>& v) {
+  require_size(v, pos_.size(), "angular_velocities");
+  angvel_ = v;
+}
+void Scene::set_radii(const std::vector<Real>& r) {
+  require_size(r, pos_.size(), "radii");
+  for (Real x : r) require(std::isfinite(x) && x > 0, "radius", x, "must be > 0 (m)");
+  for (size_t b = 0; b < r.size(); ++b) {
+    radius_[b] = r[b];
+    mass_[b] = sphere_mass(materials_[body_mat_[b]].density, r[b]);
+    inertia_[b] = 0.4 * mass_[b] * r[b] * r[b];
+  }
+  ++phys_version_;
+}
+void Scene::set_blocked(int body, std::uint8_t mask) {
+  check_body(body);
+  if (mask > DOF_ALL)
+    throw ParameterError("blocked=" + std::to_string(mask) + ": must be a mask of x y z rx ry rz");
+  blocked_[body] = mask;
+}
+void Scene::set_external_forces(const std::vector<Vec3>& f) {
+  require_size(f, pos_.size(), "external_forces");
+  ext_force_ = f;
+}
+void Scene::set_body_material(int body, int material) {
+  check_body(body);
+  this->material(material);
+  body_mat_[body] = material;
+  mass_[body] = sphere_mass(materials_[material].density, radius_[body]);
+  inertia_[body] = 0.4 * mass_[body] * radius_[body] * radius_[body];
+  ++phys_version_;
+}
+void Scene::check_body(int b) const {
+  if (b < 0 || b >= num_bodies())
+    throw ParameterError("body=" + std::to_string(b) + ": no such body (the scene has " +
+                         std::to_string(num_bodies()) + ")");
+}
+
+// ---- parameters -----------------------------------------------------------------------------
+
+void Scene::set_dt(Real dt) {
+  require(std::isfinite(dt) && dt > 0, "dt", dt, "must be > 0 (s)");
+  dt_ = dt;
+}
+void Scene::set_gravity(const Vec3& g) {
+  if (!g.allFinite()) throw ParameterError("gravity: must be finite (m/s^2)");
+  gravity_ = g;
+}
+void Scene::set_local_damping(Real d) {
+  require(std::isfinite(d) && d >= 0 && d < 1, "local_damping", d, "must be in [0, 1)");
+  local_damping_ = d;
+}
+void Scene::set_verlet_margin(Real m) {
+  require(std::isfinite(m), "verlet_margin", m, "must be finite (m); <= 0 selects the default");
+  margin_ = m;
+  dirty_ = true;
+}
+void Scene::set_max_overlap_ratio(Real r) {
+  require(std::isfinite(r) && r > 0 && r <= 2, "max_overlap_ratio", r, "must be in (0, 2]");
+  max_overlap_ratio_ = r;
+}
+void Scene::set_track_energy(bool on) {
+  if (on && !track_energy_) {
+    track_energy_ = true;
+    reset_energy();
+  }
+  track_energy_ = on;
+}
+void Scene::set_auto_timestep(Real safety, int period) {
+  require(std::isfinite(safety) && safety > 0, "timestep_safety", safety, "must be > 0");
+  if (period < 0)
+    throw ParameterError("timestep_period=" + std::to_string(period) + ": must be >= 0 (0 = off)");
+  ts_safety_ = safety;
+  ts_period_ = period;
+  if (period > 0) set_dt(safety * critical_dt());
+}
+
+Real Scene::default_margin() const {
+  if (radius_.empty()) return 0;
+  Real s = 0;
+  for (Real r : radius_) s += r;
+  return 0.2 * s / radius_.size();
+}
+
+// ---- broad phase ----------------------------------------------------------------------------
+
+bool Scene::need_rebuild() const {
+  if (dirty_) return true;
+  const Real half = 0.5 * (margin_ > 0 ? margin_ : default_margin());
+  for (const Wall& w : walls_)
+    if (w.moved_since_build > half) return true;
+  const int n = num_bodies();
+  Real worst = 0;
+#pragma omp parallel for reduction(max : worst) schedule(static)
+  for (int b = 0; b < n; ++b) {
+    const Real d = (pos_[b] - pos_at_build_[b]).norm() + std::max(0.0, radius_[b] - radius_at_build_[b]);
+    worst = std::max(worst, d);
+  }
+  return worst > half;
+}
+
+void Scene::rebuild() {
+  const Real margin = margin_ > 0 ? margin_ : default_margin();
+  const int n = num_bodies();
+  grid_.find_pairs(pos_, radius_, margin, candidates_);
+  // Merge the new candidate list with the old contacts, keeping history (both sorted).
+  std::vector<PairContact> next;
+  next.reserve(candidates_.size());
+  size_t k = 0;
+  for (const auto& ij : candidates_) {
+    while (k < pairs_.size() && std::make_pair(pairs_[k].i, pairs_[k].j) < ij) {
+      dropped_friction_ += pairs_[k].state.dissip_friction;
+      dropped_viscous_ += pairs_[k].state.dissip_viscous;
+      ++k;
+    }
+    if (k < pairs_.size() && pairs_[k].i == ij.first && pairs_[k].j == ij.second) {
+      next.push_back(pairs_[k++]);
+    } else {
+      PairContact c;
+      c.i = ij.first;
+      c.j = ij.second;
+      next.push_back(c);
+    }
+  }
+  for (; k < pairs_.size(); ++k) {
+    dropped_friction_ += pairs_[k].state.dissip_friction;
+    dropped_viscous_ += pairs_[k].state.dissip_viscous;
+  }
+  pairs_.swap(next);
+  // Sphere–wall candidates: signed distance to the plane below r + margin, and the centre
+  // not beyond the plane by more than r (one-sided walls ignore what is behind them).
+  std::vector<WallContact> wnext;
+  size_t kw = 0;
+  for (int b = 0; b < n; ++b) {
+    for (int w = 0; w < num_walls(); ++w) {
+      const Wall& wl = walls_[w];
+      const Real s = wl.sense * (pos_[b][wl.axis] - wl.position);
+      if (!(s < radius_[b] + margin && s > -radius_[b])) continue;
+      while (kw < wall_contacts_.size() &&
+             std::make_pair(wall_contacts_[kw].body, wall_contacts_[kw].wall) < std::make_pair(b, w)) {
+        dropped_friction_ += wall_contacts_[kw].state.dissip_friction;
+        dropped_viscous_ += wall_contacts_[kw].state.dissip_viscous;
+        ++kw;
+      }
+      if (kw < wall_contacts_.size() && wall_contacts_[kw].body == b && wall_contacts_[kw].wall == w) {
+        wnext.push_back(wall_contacts_[kw++]);
+      } else {
+        WallContact c;
+        c.body = b;
+        c.wall = w;
+        wnext.push_back(c);
+      }
+    }
+  }
+  for (; kw < wall_contacts_.size(); ++kw) {
+    dropped_friction_ += wall_contacts_[kw].state.dissip_friction;
+    dropped_viscous_ += wall_contacts_[kw].state.dissip_viscous;
+  }
+  wall_contacts_.swap(wnext);
+  // Adjacency (CSR) in contact order, so reductions into bodies have a fixed order.
+  pair_adj_off_.assign(n + 1, 0);
+  for (const auto& c : pairs_) {
+    pair_adj_off_[c.i + 1]++;
+    pair_adj_off_[c.j + 1]++;
+  }
+  for (int b = 0; b < n; ++b) pair_adj_off_[b + 1] += pair_adj_off_[b];
+  pair_adj_.resize(pair_adj_off_[n]);
+  {
+    std::vector<int> fill(pair_adj_off_.begin(), pair_adj_off_.end() - 1);
+    for (int c = 0; c < static_cast<int>(pairs_.size()); ++c) {
+      pair_adj_[fill[pairs_[c].i]++] = c;
+      pair_adj_[fill[pairs_[c].j]++] = c;
+    }
+  }
+  wall_adj_off_.assign(n + 1, 0);
+  for (const auto& c : wall_contacts_) wall_adj_off_[c.body + 1]++;
+  for (int b = 0; b < n; ++b) wall_adj_off_[b + 1] += wall_adj_off_[b];
+  wall_adj_.resize(wall_adj_off_[n]);
+  {
+    std::vector<int> fill(wall_adj_off_.begin(), wall_adj_off_.end() - 1);
+    for (int c = 0; c < static_cast<int>(wall_contacts_.size()); ++c)
+      wall_adj_[fill[wall_contacts_[c].body]++] = c;
+  }
+  pos_at_build_ = pos_;
+  radius_at_build_ = radius_;
+  for (Wall& w : walls_) w.moved_since_build = 0;
+  dirty_ = false;
+  ++builds_;
+}
+
+ColliderStats Scene::collider_stats() const {
+  ColliderStats s;
+  s.builds = builds_;
+  s.pair_candidates = static_cast<long>(pairs_.size());
+  s.wall_candidates = static_cast<long>(wall_contacts_.size());
+  return s;
+}
+
+// ---- contacts -------------------------------------------------------------------------------
+
+void Scene::update_phys(PairContact& c) const {
+  c.phys = mix_materials(materials_[body_mat_[c.i]], materials_[body_mat_[c.j]], radius_[c.i],
+                         radius_[c.j], mass_[c.i], mass_[c.j]);
+  c.phys_version = phys_version_;
+}
+
+void Scene::update_phys(WallContact& c) const {
+  // The wall takes the sphere's radius in the mixing rule (as Yade) and infinite mass.
+  c.phys = mix_materials(materials_[walls_[c.wall].material], materials_[body_mat_[c.body]],
+                         radius_[c.body], radius_[c.body], kInf, mass_[c.body]);
+  c.phys_version = phys_version_;
+}
+
+void Scene::compute_pair_forces(long& err_contact) {
+  const long nc = static_cast<long>(pairs_.size());
+  const Real dt = dt_;
+  const Real max_ratio = max_overlap_ratio_;
+  long err = std::numeric_limits<long>::max();
+#pragma omp parallel for schedule(static) reduction(min : err)
+  for (long k = 0; k < nc; ++k) {
+    PairContact& c = pairs_[k];
+    const Vec3 d = pos_[c.j] - pos_[c.i];
+    const Real dist2 = d.squaredNorm();
+    const Real rsum = radius_[c.i] + radius_[c.j];
+    if (dist2 >= rsum * rsum) {
+      if (c.active) {
+        c.active = false;
+        c.state.fs.setZero();
+        c.state.mr.setZero();
+        c.state.normal.setZero();
+        c.state.overlap = 0;
+        c.state.fn = 0;
+        c.force.setZero();
+        c.torque_i.setZero();
+        c.torque_j.setZero();
+      }
+      continue;
+    }
+    const Real dist = std::sqrt(dist2);
+    ContactGeometry g;
+    g.overlap = rsum - dist;
+    if (!(g.overlap <= max_ratio * std::min(radius_[c.i], radius_[c.j]))) {
+      err = std::min(err, k);
+      continue;
+    }
+    if (!c.active || c.phys_version != phys_version_) update_phys(c);
+    c.active = true;
+    g.normal = dist > 0 ? Vec3(d / dist) : Vec3(Vec3::UnitZ());
+    // Contact point in the middle of the overlap: branch lengths R - delta/2 (000 eq 6).
+    g.branch1 = (radius_[c.i] - 0.5 * g.overlap) * g.normal;
+    g.branch2 = -(radius_[c.j] - 0.5 * g.overlap) * g.normal;
+    g.rel_vel = (vel_[c.j] + angvel_[c.j].cross(g.branch2)) -
+                (vel_[c.i] + angvel_[c.i].cross(g.branch1));
+    g.angvel_sum = angvel_[c.i] + angvel_[c.j];
+    g.rel_angvel = angvel_[c.j] - angvel_[c.i];
+    const LawOutput out = apply_law(c.phys, g, dt, c.state);
+    c.force = out.force2;
+    // Moments, 000 eq (6): tau = (R - delta/2) n x F, plus rolling resistance.
+    c.torque_j = g.branch2.cross(out.force2) + out.moment2;
+    c.torque_i = g.branch1.cross(-out.force2) - out.moment2;
+  }
+  err_contact = err;
+}
+
+void Scene::compute_wall_forces(long& err_contact) {
+  const long nc = static_cast<long>(wall_contacts_.size());
+  const Real dt = dt_;
+  const Real max_ratio = max_overlap_ratio_;
+  long err = std::numeric_limits<long>::max();
+#pragma omp parallel for schedule(static) reduction(min : err)
+  for (long k = 0; k < nc; ++k) {
+    WallContact& c = wall_contacts_[k];
+    const Wall& w = walls_[c.wall];
+    const int b = c.body;
+    const Real s = w.sense * (pos_[b][w.axis] - w.position);
+    if (s >= radius_[b] || s <= -radius_[b]) {
+      if (c.active) {
+        c.active = false;
+        c.state.fs.setZero();
+        c.state.mr.setZero();
+        c.state.normal.setZero();
+        c.state.overlap = 0;
+        c.state.fn = 0;
+        c.force.setZero();
+        c.torque.setZero();
+      }
+      continue;
+    }
+    ContactGeometry g;
+    g.overlap = radius_[b] - s;
+    if (!(g.overlap <= max_ratio * radius_[b])) {
+      err = std::min(err, k);
+      continue;
+    }
+    if (!c.active || c.phys_version != phys_version_) update_phys(c);
+    c.active = true;
+    g.normal = w.normal();
+    g.branch2 = -(radius_[b] - 0.5 * g.overlap) * g.normal;
+    g.branch1 = pos_[b] + g.branch2;  // unused by the law (the wall does not rotate)
+    g.rel_vel = (vel_[b] + angvel_[b].cross(g.branch2)) - w.velocity;
+    g.angvel_sum = angvel_[b];
+    g.rel_angvel = angvel_[b];
+    const LawOutput out = apply_law(c.phys, g, dt, c.state);
+    c.force = out.force2;
+    c.torque = g.branch2.cross(out.force2) + out.moment2;
+  }
+  err_contact = err;
+}
+
+void Scene::raise_overlap(long k, bool wall) const {
+  std::ostringstream os;
+  os.precision(4);
+  if (wall) {
+    const WallContact& c = wall_contacts_[k];
+    const Wall& w = walls_[c.wall];
+    const Real s = w.sense * (pos_[c.body][w.axis] - w.position);
+    os << "blow-up at step " << step_ << ": body " << c.body << " overlaps wall " << c.wall
+       << " by " << (radius_[c.body] - s) / radius_[c.body]
+       << " of its radius (max_overlap_ratio=" << max_overlap_ratio_
+       << "); the time step may be too large or the contact too soft";
+  } else {
+    const PairContact& c = pairs_[k];
+    const Real ov = radius_[c.i] + radius_[c.j] - (pos_[c.j] - pos_[c.i]).norm();
+    os << "blow-up at step " << step_ << ": bodies " << c.i << " and " << c.j
+       << " overlap by " << ov / std::min(radius_[c.i], radius_[c.j])
+       << " of the smaller radius (max_overlap_ratio=" << max_overlap_ratio_
+       << "); the time step may be too large or the contact too soft";
+    if (!std::isfinite(ov)) os << " (non-finite position)";
+  }
+  throw BlowUpError(os.str());
+}
+
+// ---- integration ----------------------------------------------------------------------------
+
+namespace {
+/// Cundall local damping of one component of an acceleration (Yade's 2nd-order form).
+inline Real damp_component(Real a, Real v, Real dt, Real lambda) {
+  const Real vm = v + 0.5 * dt * a;
+  const Real s = (a * vm > 0) ? 1.0 : ((a * vm < 0) ? -1.0 : 0.0);
+  return a * (1.0 - lambda * s);
+}
+}  // namespace
+
+void Scene::reduce_and_integrate(long& err_body) {
+  const int n = num_bodies();
+  const Real dt = dt_;
+  const Real lambda = local_damping_;
+  const bool energy = track_energy_;
+  long err = std::numeric_limits<long>::max();
+#pragma omp parallel for schedule(static) reduction(min : err)
+  for (int b = 0; b < n; ++b) {
+    // Reduce contact forces into the body in a fixed order (pair contacts, then walls).
+    Vec3 f = ext_force_[b] + mass_[b] * gravity_;
+    Vec3 t = Vec3::Zero();
+    for (int e = pair_adj_off_[b]; e < pair_adj_off_[b + 1]; ++e) {
+      const PairContact& c = pairs_[pair_adj_[e]];
+      if (!c.active) continue;
+      if (c.j == b) {
+        f += c.force;
+        t += c.torque_j;
+      } else {
+        f -= c.force;
+        t += c.torque_i;
+      }
+    }
+    for (int e = wall_adj_off_[b]; e < wall_adj_off_[b + 1]; ++e) {
+      const WallContact& c = wall_contacts_[wall_adj_[e]];
+      if (!c.active) continue;
+      f += c.force;
+      t += c.torque;
+    }
+    force_[b] = f;
+    torque_[b] = t;
+    if (!f.allFinite() || !t.allFinite()) {
+      err = std::min(err, static_cast<long>(b));
+      continue;
+    }
+    const std::uint8_t blk = blocked_[b];
+    const Vec3 v_old = vel_[b], w_old = angvel_[b];
+    const Real m = mass_[b], inertia = inertia_[b];
+    Real dissip = 0, work = 0;
+    for (int a = 0; a < 3; ++a) {
+      if (blk & (DOF_X << a)) {
+        // Imposed velocity: the constraint supplies -f[a]; its work is -f[a] v dt.
+        work += -f[a] * v_old[a] * dt;
+        continue;
+      }
+      Real acc = f[a] / m;
+      if (lambda > 0) {
+        const Real damped = damp_component(acc, v_old[a], dt, lambda);
+        dissip += -(damped - acc) * m * (v_old[a] + 0.5 * dt * damped) * dt;
+        acc = damped;
+      }
+      vel_[b][a] = v_old[a] + acc * dt;
+      work += ext_force_[b][a] * 0.5 * (v_old[a] + vel_[b][a]) * dt;
+    }
+    for (int a = 0; a < 3; ++a) {
+      if (blk & (DOF_RX << a)) {
+        work += -t[a] * w_old[a] * dt;
+        continue;
+      }
+      Real acc = t[a] / inertia;
+      if (lambda > 0) {
+        const Real damped = damp_component(acc, w_old[a], dt, lambda);
+        dissip += -(damped - acc) * inertia * (w_old[a] + 0.5 * dt * damped) * dt;
+        acc = damped;
+      }
+      angvel_[b][a] = w_old[a] + acc * dt;
+    }
+    if (energy) {
+      const Vec3 vm = 0.5 * (v_old + vel_[b]);
+      const Vec3 wm = 0.5 * (w_old + angvel_[b]);
+      ke_[b] = 0.5 * m * vm.squaredNorm() + 0.5 * inertia * wm.squaredNorm();
+      damp_dissip_[b] += dissip;
+      ext_work_[b] += work;
+    }
+    pos_[b] += vel_[b] * dt;
+    const Vec3& w = angvel_[b];
+    const Real wn = w.norm();
+    if (wn > 0) {
+      ori_[b] = Quat(Eigen::AngleAxisd(wn * dt, w / wn)) * ori_[b];
+      ori_[b].normalize();
+    }
+    if (!pos_[b].allFinite() || !vel_[b].allFinite()) err = std::min(err, static_cast<long>(b));
+  }
+  err_body = err;
+}
+
+void Scene::step() {
+  if (ts_period_ > 0 && step_ % ts_period_ == 0 && step_ > 0) dt_ = ts_safety_ * critical_dt();
+  if (need_rebuild()) rebuild();
+  long err_pair, err_wall, err_body;
+  compute_pair_forces(err_pair);
+  if (err_pair != std::numeric_limits<long>::max()) raise_overlap(err_pair, false);
+  compute_wall_forces(err_wall);
+  if (err_wall != std::numeric_limits<long>::max()) raise_overlap(err_wall, true);
+  // Wall forces and work, summed in contact order.
+  for (Wall& w : walls_) w.force.setZero();
+  for (const WallContact& c : wall_contacts_)
+    if (c.active) walls_[c.wall].force -= c.force;
+  if (track_energy_ && !energy_reference_set_) set_energy_reference();
+  reduce_and_integrate(err_body);
+  if (err_body != std::numeric_limits<long>::max()) {
+    const int b = static_cast<int>(err_body);
+    std::ostringstream os;
+    os << "blow-up at step " << step_ << ": body " << b << " has a non-finite ";
+    if (!force_[b].allFinite()) os << "force " << force_[b].transpose();
+    else if (!torque_[b].allFinite()) os << "torque " << torque_[b].transpose();
+    else if (!vel_[b].allFinite()) os << "velocity " << vel_[b].transpose();
+    else os << "position " << pos_[b].transpose();
+    throw BlowUpError(os.str());
+  }
+  for (Wall& w : walls_) {
+    // Work done by the wall on the spheres: -(force on wall) . v dt.
+    w.work += -w.force.dot(w.velocity) * dt_;
+    const Real dx = w.velocity[w.axis] * dt_;
+    w.position += dx;
+    w.moved_since_build += std::abs(dx);
+  }
+  ++step_;
+  time_ += dt_;
+}
+
+void Scene::run(long n) {
+  if (n < 0) throw ParameterError("n=" + std::to_string(n) + ": must be >= 0 steps");
+  if (num_bodies() > 0 && margin_ <= 0 && default_margin() <= 0)
+    throw ParameterError("verlet_margin: could not derive a default");
+  for (long k = 0; k < n; ++k) step();
+}
+
+int Scene::num_active_contacts() const {
+  int n = 0;
+  for (const auto& c : pairs_) n += c.active;
+  for (const auto& c : wall_contacts_) n += c.active;
+  return n;
+}
+
+}  // namespace cpp_dem
