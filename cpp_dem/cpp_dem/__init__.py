@@ -25,9 +25,13 @@ from ._core import (  # noqa: F401  (re-exported)
     mix_materials,
     set_num_threads,
 )
-from .scene import Scene, hertz_mindlin_material, linear_material  # noqa: F401
+from .packing import read_packing_csv, write_packing_csv  # noqa: F401
+from .scene import BOX_WALLS, Scene, hertz_mindlin_material, linear_material  # noqa: F401
 
 __all__ = [
+    "BOX_WALLS",
+    "read_packing_csv",
+    "write_packing_csv",
     "BlowUpError",
     "ContactModel",
     "ContactPhys",

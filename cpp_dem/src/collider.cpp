@@ -51,7 +51,7 @@ void CellGrid::find_pairs(const std::vector<Vec3>& pos, const std::vector<Real>&
     for (int i = 0; i < n; ++i) cell_bodies_[fill[body_cell_[i]]++] = i;
   }
   if (static_cast<int>(per_body_.size()) < n) per_body_.resize(n);
-#pragma omp parallel for schedule(dynamic, 256)
+#pragma omp parallel for schedule(dynamic, 256) if (n > 2000)
   for (int i = 0; i < n; ++i) {
     std::vector<int>& mine = per_body_[i];
     mine.clear();

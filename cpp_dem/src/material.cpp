@@ -40,7 +40,11 @@ void Material::validate() const {
 ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2, Real m1,
                           Real m2) {
   ContactPhys p;
-  const Real r_eff = r1 * r2 / (r1 + r2);
+  // A wall passes an infinite radius: R* is then the sphere's radius, and the linear rule
+  // (000 eq 4) takes the sphere's radius for both sides, as Yade does.
+  const Real r_eff = std::isinf(r2) ? r1 : (std::isinf(r1) ? r2 : r1 * r2 / (r1 + r2));
+  if (std::isinf(r1)) r1 = r2;
+  if (std::isinf(r2)) r2 = r1;
   const bool hm = a.model == ContactModel::HertzMindlin && b.model == ContactModel::HertzMindlin;
   p.model = hm ? ContactModel::HertzMindlin : ContactModel::Linear;
   if (hm) {

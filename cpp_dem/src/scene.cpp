@@ -9,6 +9,9 @@ namespace cpp_dem {
 
 namespace {
 constexpr Real kInf = std::numeric_limits<Real>::infinity();
+/// Below this many items a loop runs serially: a parallel region costs more than it saves.
+/// (Results do not depend on it: every item is computed independently.)
+constexpr long kParallelMin = 1000;
 
 Real sphere_mass(Real density, Real r) { return density * 4.0 / 3.0 * M_PI * r * r * r; }
 
@@ -204,7 +207,7 @@ bool Scene::need_rebuild() const {
     if (w.moved_since_build > half) return true;
   const int n = num_bodies();
   Real worst = 0;
-#pragma omp parallel for reduction(max : worst) schedule(static)
+#pragma omp parallel for reduction(max : worst) schedule(static) if (n > kParallelMin)
   for (int b = 0; b < n; ++b) {
     const Real d = (pos_[b] - pos_at_build_[b]).norm() + std::max(0.0, radius_[b] - radius_at_build_[b]);
     worst = std::max(worst, d);
@@ -318,9 +321,9 @@ void Scene::update_phys(PairContact& c) const {
 }
 
 void Scene::update_phys(WallContact& c) const {
-  // The wall takes the sphere's radius in the mixing rule (as Yade) and infinite mass.
+  // The wall has infinite radius and mass (see mix_materials).
   c.phys = mix_materials(materials_[walls_[c.wall].material], materials_[body_mat_[c.body]],
-                         radius_[c.body], radius_[c.body], kInf, mass_[c.body]);
+                         kInf, radius_[c.body], kInf, mass_[c.body]);
   c.phys_version = phys_version_;
 }
 
@@ -329,7 +332,7 @@ void Scene::compute_pair_forces(long& err_contact) {
   const Real dt = dt_;
   const Real max_ratio = max_overlap_ratio_;
   long err = std::numeric_limits<long>::max();
-#pragma omp parallel for schedule(static) reduction(min : err)
+#pragma omp parallel for schedule(static) reduction(min : err) if (nc > kParallelMin)
   for (long k = 0; k < nc; ++k) {
     PairContact& c = pairs_[k];
     const Vec3 d = pos_[c.j] - pos_[c.i];
@@ -380,7 +383,7 @@ void Scene::compute_wall_forces(long& err_contact) {
   const Real dt = dt_;
   const Real max_ratio = max_overlap_ratio_;
   long err = std::numeric_limits<long>::max();
-#pragma omp parallel for schedule(static) reduction(min : err)
+#pragma omp parallel for schedule(static) reduction(min : err) if (nc > kParallelMin)
   for (long k = 0; k < nc; ++k) {
     WallContact& c = wall_contacts_[k];
     const Wall& w = walls_[c.wall];
@@ -460,7 +463,7 @@ void Scene::reduce_and_integrate(long& err_body) {
   const Real lambda = local_damping_;
   const bool energy = track_energy_;
   long err = std::numeric_limits<long>::max();
-#pragma omp parallel for schedule(static) reduction(min : err)
+#pragma omp parallel for schedule(static) reduction(min : err) if (n > kParallelMin)
   for (int b = 0; b < n; ++b) {
     // Reduce contact forces into the body in a fixed order (pair contacts, then walls).
     Vec3 f = ext_force_[b] + mass_[b] * gravity_;

@@ -60,8 +60,9 @@ struct ContactPhys {
   Real rolling_cap = 0; ///< eta_r R*, m (|M_r| <= rolling_cap |F_n|)
 };
 
-/// Mixes two materials for a contact with radii r1, r2 (m; a wall passes the sphere's radius,
-/// as Yade does) and masses m1, m2 (kg; a wall passes infinity).
+/// Mixes two materials for a contact with radii r1, r2 (m) and masses m1, m2 (kg). A wall
+/// passes infinity for both: R* is then the sphere's radius, and the linear rule (000 eq 4)
+/// uses the sphere's radius on both sides, as Yade does.
 ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2, Real m1,
                           Real m2);
 
