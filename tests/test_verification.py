@@ -347,3 +347,39 @@ def test_critical_dt_estimates():
     expected = min(math.sqrt(2 * mass / kn),
                    math.sqrt(2 * 0.4 * mass * r**2 / (ks * (r - 0.5e-5) ** 2)))
     assert s.critical_dt() == pytest.approx(expected, rel=1e-9)
+
+
+def test_hertz_sphere_resting_on_wall_static_overlap():
+    """Hertz against a flat wall (R* = R): m g = 4/3 E* sqrt(R) d^1.5 at rest."""
+    g_mod, nu, r = 1e8, 0.3, 0.01
+    s = dem.Scene(gravity=(0, 0, -G), local_damping=0.5)
+    m = s.add_material(dem.hertz_mindlin_material(density=RHO, shear_modulus=g_mod, poisson=nu,
+                                                  friction_coefficient=0.5))
+    s.add_wall(axis=2, position=0.0, sense=1, material=m)
+    s.add_spheres([[0, 0, r]], [r], material=m)
+    s.set_auto_timestep(safety=0.5, period=10)
+    s.run(20000)
+    young = 2 * g_mod * (1 + nu)
+    e_star = young / (2 * (1 - nu**2))
+    d = (sphere_mass(RHO, r) * G / (4 / 3 * e_star * math.sqrt(r))) ** (2 / 3)
+    assert r - s.positions[0, 2] == pytest.approx(d, rel=1e-6)
+
+
+def test_mindlin_tangential_stiffness_one_step():
+    """One step of a tangential velocity on a Hertz contact: F_s = 8 G* sqrt(R* d) v dt."""
+    g_mod, nu, r = 1e8, 0.25, 0.01
+    s = dem.Scene()
+    m = s.add_material(dem.hertz_mindlin_material(density=RHO, shear_modulus=g_mod, poisson=nu,
+                                                  friction_coefficient=0.8))
+    d = 1e-5
+    s.add_spheres([[0, 0, 0], [2 * r - d, 0, 0]], [r, r], material=m)
+    s.velocities = np.array([[0, 0, 0], [0, 0, 0.01]])
+    s.dt = 1e-6
+    s.run(1)
+    g_star = 1 / (2 * (2 - nu) / g_mod)
+    r_star = r / 2
+    f = s.contacts()["force"][0]
+    young = 2 * g_mod * (1 + nu)
+    e_star = young / (2 * (1 - nu**2))
+    assert f[0] == pytest.approx(4 / 3 * e_star * math.sqrt(r_star) * d**1.5, rel=1e-12)
+    assert f[2] == pytest.approx(-8 * g_star * math.sqrt(r_star * d) * 0.01 * 1e-6, rel=1e-12)
