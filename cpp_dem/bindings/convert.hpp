@@ -37,7 +37,7 @@ inline std::vector<Vec3> to_vec3_list(const Array& a, const char* field) {
     throw ParameterError(std::string(field) + ": expected an array of shape (n, 3), got " +
                          std::to_string(a.ndim()) + " dimensions");
   std::vector<Vec3> v(a.shape(0));
-  if (!v.empty()) std::memcpy(v.data(), a.data(), v.size() * sizeof(Vec3));
+  if (!v.empty()) std::memcpy(static_cast<void*>(v.data()), a.data(), v.size() * sizeof(Vec3));
   return v;
 }
 

@@ -542,8 +542,24 @@ void Scene::reduce_and_integrate(long& err_body) {
   err_body = err;
 }
 
+int Scene::add_controller(std::shared_ptr<Controller> c) {
+  if (!c) throw ParameterError("controller: must not be None");
+  if (c->period < 1)
+    throw ParameterError("period=" + std::to_string(c->period) + ": must be >= 1 step");
+  controllers_.push_back(std::move(c));
+  return static_cast<int>(controllers_.size()) - 1;
+}
+
+std::shared_ptr<Controller> Scene::controller(int id) const {
+  if (id < 0 || id >= num_controllers())
+    throw ParameterError("controller=" + std::to_string(id) + ": no such controller");
+  return controllers_[id];
+}
+
 void Scene::step() {
   if (ts_period_ > 0 && step_ % ts_period_ == 0 && step_ > 0) dt_ = ts_safety_ * critical_dt();
+  for (const auto& c : controllers_)
+    if (c->enabled && step_ % c->period == 0) c->apply(*this);
   if (need_rebuild()) rebuild();
   long err_pair, err_wall, err_body;
   compute_pair_forces(err_pair);

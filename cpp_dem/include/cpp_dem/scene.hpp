@@ -2,6 +2,7 @@
 // State is passed explicitly; there is no global scene.
 #pragma once
 
+#include <memory>
 #include <string>
 #include <utility>
 #include <vector>
@@ -75,6 +76,20 @@ struct ColliderStats {
   long wall_candidates = 0; ///< sphere–wall candidates in the current list
 };
 
+class Scene;
+
+/// A controller (servo wall, radius growth, clamp, ...) runs every `period` steps, at the start
+/// of a step, before the contact forces: it sees the forces of the previous step and touches
+/// only what it owns (its walls, its bodies).
+class Controller {
+ public:
+  virtual ~Controller() = default;
+  /// Called by the scene when step_count() % period == 0.
+  virtual void apply(Scene& scene) = 0;
+  int period = 1;        ///< steps between calls (>= 1)
+  bool enabled = true;
+};
+
 class Scene {
  public:
   Scene();
@@ -136,6 +151,12 @@ class Scene {
   Real timestep_safety() const { return ts_safety_; }
   int timestep_period() const { return ts_period_; }
 
+  // ---- controllers ---------------------------------------------------------------------
+  /// Adds a controller; returns its index. Controllers run in the order they were added.
+  int add_controller(std::shared_ptr<Controller> c);
+  int num_controllers() const { return static_cast<int>(controllers_.size()); }
+  std::shared_ptr<Controller> controller(int id) const;
+
   // ---- running -------------------------------------------------------------------------
   /// Runs n steps in C++.
   void run(long n);
@@ -161,6 +182,7 @@ class Scene {
   int num_active_contacts() const;
 
  private:
+  friend class Checkpoint;  // exact save/restore of the whole state (checkpoint.cpp)
   void check_body(int b) const;
   bool need_rebuild() const;
   void rebuild();
@@ -187,6 +209,7 @@ class Scene {
   std::vector<Real> ke_, damp_dissip_, ext_work_;
   std::vector<Vec3> pos_at_energy_reset_;
   std::vector<Wall> walls_;
+  std::vector<std::shared_ptr<Controller>> controllers_;
   // Contacts and their adjacency (CSR: for body b, entries adj_off[b]..adj_off[b+1]).
   std::vector<PairContact> pairs_;
   std::vector<WallContact> wall_contacts_;
