@@ -14,6 +14,7 @@ py::dict energies_dict(const Energies& e) {
   d["friction"] = e.friction;
   d["viscous"] = e.viscous;
   d["local_damping"] = e.local_damping;
+  d["plastic"] = e.plastic;
   d["wall_work"] = e.wall_work;
   d["external_work"] = e.external_work;
   d["balance_error"] = e.balance_error;

@@ -17,4 +17,5 @@ PYBIND11_MODULE(_core, m) {
         "Number of OpenMP threads used by the next parallel region.");
   cpp_dem::bind::bind_material(m);
   cpp_dem::bind::bind_scene(m);
+  cpp_dem::bind::bind_grid(m);
 }

@@ -46,6 +46,29 @@ Real Scene::critical_dt() const {
     tangent_stiffness(c.phys, c.state.overlap, kn, ks);
     add(c.body, c.state.normal, kn, ks, radius_[c.body] - 0.5 * c.state.overlap, c.phys.kr);
   }
+  for (const GridContact& c : grid_contacts_) {
+    if (!c.active) continue;
+    any = true;
+    Real kn, ks;
+    tangent_stiffness(c.phys, c.state.overlap, kn, ks);
+    add(c.sphere, c.state.normal, kn, ks, radius_[c.sphere] - 0.5 * c.state.overlap, c.phys.kr);
+    for (int i = 0; i < c.nnodes; ++i)
+      if (c.w[i] > 0)
+        add(c.node[i], c.state.normal, c.w[i] * kn, c.w[i] * ks, c.rc, c.w[i] * c.phys.kr);
+  }
+  for (const GridLink& l : links_) {
+    if (l.broken) continue;
+    any = true;
+    const Real half = 0.5 * (pos_[l.b] - pos_[l.a]).norm();
+    for (int side = 0; side < 2; ++side) {
+      const int b = side ? l.b : l.a;
+      for (int a = 0; a < 3; ++a) {
+        const Real n2 = l.normal[a] * l.normal[a];
+        kt[b][a] += l.kn * n2 + l.ks * (1 - n2);
+        kr[b][a] += l.kr * (1 - n2) + l.ktw * n2 + l.ks * half * half * (1 - n2);
+      }
+    }
+  }
   if (!any) return pwave_dt();
   Real dt = std::numeric_limits<Real>::infinity();
   for (int b = 0; b < n; ++b) {
@@ -80,6 +103,18 @@ Energies Scene::energies() const {
     e.viscous += c.state.dissip_viscous;
     if (c.active) e.elastic += contact_elastic_energy(c.phys, c.state);
   }
+  for (const GridContact& c : grid_contacts_) {
+    e.friction += c.state.dissip_friction;
+    e.viscous += c.state.dissip_viscous;
+    if (c.active) e.elastic += contact_elastic_energy(c.phys, c.state);
+  }
+  e.plastic = dropped_plastic_;
+  for (const GridLink& l : links_) {
+    e.plastic += l.dissip_plastic;
+    if (l.broken) continue;
+    e.elastic += 0.5 * l.fn * l.fn / l.kn + 0.5 * l.fs.squaredNorm() / l.ks +
+                 0.5 * l.mb.squaredNorm() / l.kr + 0.5 * l.mt * l.mt / l.ktw;
+  }
   for (const Wall& w : walls_) e.wall_work += w.work;
   if (!track_energy_ || !energy_reference_set_) return e;
   // The potential of gravity is taken at the positions where the kinetic energy was sampled
@@ -87,10 +122,10 @@ Energies Scene::energies() const {
   for (int b = 0; b < n; ++b)
     e.gravity_potential += mass_[b] * gravity_.dot(vel_[b]) * dt_;
   const Real now = e.kinetic + e.elastic + e.gravity_potential + e.friction + e.viscous +
-                   e.local_damping - e.wall_work - e.external_work;
+                   e.local_damping + e.plastic - e.wall_work - e.external_work;
   e.balance_error = now - energy_reference_;
   const Real scale = std::abs(e.kinetic) + std::abs(e.elastic) + std::abs(e.gravity_potential) +
-                     e.friction + e.viscous + e.local_damping + std::abs(e.wall_work) +
+                     e.friction + e.viscous + e.local_damping + e.plastic + std::abs(e.wall_work) +
                      std::abs(e.external_work) + std::abs(energy_reference_);
   e.balance_error_relative = scale > 0 ? std::abs(e.balance_error) / scale : 0.0;
   return e;
@@ -107,6 +142,9 @@ void Scene::reset_energy() {
   dropped_friction_ = dropped_viscous_ = 0;
   for (PairContact& c : pairs_) c.state.dissip_friction = c.state.dissip_viscous = 0;
   for (WallContact& c : wall_contacts_) c.state.dissip_friction = c.state.dissip_viscous = 0;
+  for (GridContact& c : grid_contacts_) c.state.dissip_friction = c.state.dissip_viscous = 0;
+  for (GridLink& l : links_) l.dissip_plastic = 0;
+  dropped_plastic_ = 0;
   for (Wall& w : walls_) w.work = 0;
   // The reference (kinetic + elastic) is taken in the next step, once the contacts of the
   // current positions have been evaluated, so energy stored in initial overlaps counts.
@@ -122,6 +160,12 @@ void Scene::set_energy_reference() {
     if (c.active) e += contact_elastic_energy(c.phys, c.state);
   for (const WallContact& c : wall_contacts_)
     if (c.active) e += contact_elastic_energy(c.phys, c.state);
+  for (const GridContact& c : grid_contacts_)
+    if (c.active) e += contact_elastic_energy(c.phys, c.state);
+  for (const GridLink& l : links_)
+    if (!l.broken)
+      e += 0.5 * l.fn * l.fn / l.kn + 0.5 * l.fs.squaredNorm() / l.ks +
+           0.5 * l.mb.squaredNorm() / l.kr + 0.5 * l.mt * l.mt / l.ktw;
   energy_reference_ = e;
   energy_reference_set_ = true;
 }
@@ -143,6 +187,11 @@ Real Scene::unbalanced_force() const {
       ++nc;
     }
   for (const WallContact& c : wall_contacts_)
+    if (c.active) {
+      sum_c += c.force.norm();
+      ++nc;
+    }
+  for (const GridContact& c : grid_contacts_)
     if (c.active) {
       sum_c += c.force.norm();
       ++nc;

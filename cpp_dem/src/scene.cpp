@@ -68,6 +68,7 @@ int Scene::add_spheres(const std::vector<Vec3>& pos, const std::vector<Real>& ra
     inertia_.push_back(0.4 * m * r * r);
     body_mat_.push_back(material);
     blocked_.push_back(DOF_NONE);
+    kind_.push_back(0);
     ke_.push_back(0);
     damp_dissip_.push_back(0);
     ext_work_.push_back(0);
@@ -218,6 +219,7 @@ bool Scene::need_rebuild() const {
 void Scene::rebuild() {
   const Real margin = margin_ > 0 ? margin_ : default_margin();
   const int n = num_bodies();
+  grid_.build(pos_, radius_, kind_, margin);
   grid_.find_pairs(pos_, radius_, margin, candidates_);
   // Merge the new candidate list with the old contacts, keeping history (both sorted).
   std::vector<PairContact> next;
@@ -248,6 +250,7 @@ void Scene::rebuild() {
   std::vector<WallContact> wnext;
   size_t kw = 0;
   for (int b = 0; b < n; ++b) {
+    if (kind_[b] != 0) continue;  // grid nodes do not touch walls
     for (int w = 0; w < num_walls(); ++w) {
       const Wall& wl = walls_[w];
       const Real s = wl.sense * (pos_[b][wl.axis] - wl.position);
@@ -297,6 +300,7 @@ void Scene::rebuild() {
     for (int c = 0; c < static_cast<int>(wall_contacts_.size()); ++c)
       wall_adj_[fill[wall_contacts_[c].body]++] = c;
   }
+  if (has_grid()) rebuild_grid_contacts(margin);
   pos_at_build_ = pos_;
   radius_at_build_ = radius_;
   for (Wall& w : walls_) w.moved_since_build = 0;
@@ -462,6 +466,7 @@ void Scene::reduce_and_integrate(long& err_body) {
   const Real dt = dt_;
   const Real lambda = local_damping_;
   const bool energy = track_energy_;
+  const bool grid = has_grid();
   long err = std::numeric_limits<long>::max();
 #pragma omp parallel for schedule(static) reduction(min : err) if (n > kParallelMin)
   for (int b = 0; b < n; ++b) {
@@ -484,6 +489,35 @@ void Scene::reduce_and_integrate(long& err_body) {
       if (!c.active) continue;
       f += c.force;
       t += c.torque;
+    }
+    if (grid) {
+      // Grain side of grain–geogrid contacts.
+      for (int e = sphere_gc_off_[b]; e < sphere_gc_off_[b + 1]; ++e) {
+        const GridContact& c = grid_contacts_[sphere_gc_[e]];
+        if (!c.active) continue;
+        f += c.force;
+        t += c.torque_sphere;
+      }
+      // Node side: the virtual sphere's force and torque split by the weights (000 eq 19).
+      for (int e = node_gc_off_[b]; e < node_gc_off_[b + 1]; ++e) {
+        const GridContact& c = grid_contacts_[node_gc_[e] / 3];
+        if (!c.active) continue;
+        const Real w = c.w[node_gc_[e] % 3];
+        f -= w * c.force;
+        t += w * c.torque_virtual;
+      }
+      // Cohesive links.
+      for (int e = node_link_off_[b]; e < node_link_off_[b + 1]; ++e) {
+        const GridLink& l = links_[node_link_[e]];
+        if (l.broken) continue;
+        if (l.b == b) {
+          f += l.force_b;
+          t += l.torque_b;
+        } else {
+          f -= l.force_b;
+          t += l.torque_a;
+        }
+      }
     }
     force_[b] = f;
     torque_[b] = t;
@@ -566,6 +600,23 @@ void Scene::step() {
   if (err_pair != std::numeric_limits<long>::max()) raise_overlap(err_pair, false);
   compute_wall_forces(err_wall);
   if (err_wall != std::numeric_limits<long>::max()) raise_overlap(err_wall, true);
+  if (has_grid()) {
+    long err_grid;
+    compute_grid_contacts(err_grid);
+    if (err_grid != std::numeric_limits<long>::max()) {
+      const GridContact& c = grid_contacts_[err_grid];
+      std::ostringstream os;
+      os.precision(4);
+      os << "blow-up at step " << step_ << ": sphere " << c.sphere << " overlaps the geogrid ("
+         << (c.kind == GridPrimitive::Node ? "node " : c.kind == GridPrimitive::Connection
+                                                          ? "connection " : "pfacet ")
+         << c.prim << ") by " << c.geom.overlap / radius_[c.sphere]
+         << " of the grain radius (max_overlap_ratio=" << max_overlap_ratio_
+         << "); the time step may be too large or the contact too soft";
+      throw BlowUpError(os.str());
+    }
+    compute_links();
+  }
   // Wall forces and work, summed in contact order.
   for (Wall& w : walls_) w.force.setZero();
   for (const WallContact& c : wall_contacts_)

@@ -1,6 +1,7 @@
 // Broad phase: a uniform cell grid with a Verlet margin.
 #pragma once
 
+#include <cstdint>
 #include <utility>
 #include <vector>
 
@@ -8,15 +9,27 @@
 
 namespace cpp_dem {
 
-/// Finds all sphere pairs (i < j) with |x_i - x_j| < r_i + r_j + margin.
-/// The output is sorted by (i, j) and does not depend on the number of threads.
+/// A cell grid over the spheres of a scene (bodies whose `skip` flag is 0).
 class CellGrid {
  public:
-  /// Candidate pairs, sorted by (i, j).
-  void find_pairs(const std::vector<Vec3>& pos, const std::vector<Real>& radius,
-                  Real margin, std::vector<std::pair<int, int>>& out);
+  /// Bins the spheres; cells are at least 2 r_max + margin wide.
+  void build(const std::vector<Vec3>& pos, const std::vector<Real>& radius,
+             const std::vector<std::uint8_t>& skip, Real margin);
+  /// All sphere pairs (i < j) with |x_i - x_j| < r_i + r_j + margin, sorted by (i, j);
+  /// the result does not depend on the number of threads.
+  void find_pairs(const std::vector<Vec3>& pos, const std::vector<Real>& radius, Real margin,
+                  std::vector<std::pair<int, int>>& out);
+  /// Appends to `out` the spheres whose box (centre +- r + margin) overlaps [lo, hi],
+  /// in increasing id order.
+  void query_box(const Vec3& lo, const Vec3& hi, const std::vector<Vec3>& pos,
+                 const std::vector<Real>& radius, Real margin, std::vector<int>& out) const;
 
  private:
+  long cell_of(const Vec3& x, int axis) const;
+  Vec3 lo_ = Vec3::Zero();
+  Real h_ = 1;
+  long ncell_[3] = {1, 1, 1};
+  int nspheres_ = 0;
   std::vector<int> cell_start_, cell_bodies_, body_cell_;
   std::vector<std::vector<int>> per_body_;  // reused buffers, one per body
 };

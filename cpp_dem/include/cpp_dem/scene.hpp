@@ -9,6 +9,7 @@
 
 #include "cpp_dem/collider.hpp"
 #include "cpp_dem/contact.hpp"
+#include "cpp_dem/grid.hpp"
 #include "cpp_dem/material.hpp"
 
 namespace cpp_dem {
@@ -63,6 +64,7 @@ struct Energies {
   Real friction = 0;           ///< dissipated by Coulomb and rolling slip
   Real viscous = 0;            ///< dissipated by viscous contact damping
   Real local_damping = 0;      ///< dissipated by Cundall local damping
+  Real plastic = 0;            ///< geogrid links: plastic moments and energy lost at breakage
   Real wall_work = 0;          ///< work done by moving walls on the bodies
   Real external_work = 0;      ///< work of external forces and of imposed (blocked) DOFs
   Real balance_error = 0;      ///< absolute, J
@@ -102,6 +104,26 @@ class Scene {
   /// Adds spheres; returns the id of the first. pos: n centres, m; radius: n radii, m.
   int add_spheres(const std::vector<Vec3>& pos, const std::vector<Real>& radius, int material);
   int num_bodies() const { return static_cast<int>(pos_.size()); }
+
+  // ---- geogrid (000 §2.2) ----------------------------------------------------------------
+  /// Adds grid nodes (6-DOF bodies that are not spheres to the collider): centres (m), the
+  /// node radius R_c (m), lumped masses (kg) and inertias (kg m^2). Returns the first id.
+  int add_grid_nodes(const std::vector<Vec3>& pos, Real radius, const std::vector<Real>& mass,
+                     const std::vector<Real>& inertia, int material);
+  /// Adds a cohesive link (and connection cylinder) between nodes a and b; returns its index.
+  int add_grid_link(int a, int b, const BeamParams& params, int material);
+  /// Adds a PFacet on three nodes joined by the links l01, l12, l20; returns its index.
+  int add_pfacet(int n0, int n1, int n2, int l01, int l12, int l20, int material);
+  int num_grid_links() const { return static_cast<int>(links_.size()); }
+  int num_pfacets() const { return static_cast<int>(facets_.size()); }
+  const std::vector<GridLink>& grid_links() const { return links_; }
+  const std::vector<PFacet>& pfacets() const { return facets_; }
+  const std::vector<GridContact>& grid_contacts() const { return grid_contacts_; }
+  const std::vector<BreakEvent>& break_events() const { return breaks_; }
+  /// Body kind: 0 sphere, 1 grid node.
+  const std::vector<std::uint8_t>& body_kinds() const { return kind_; }
+  /// Sets the masses (kg) and inertias (kg m^2) of bodies (e.g. node density scaling).
+  void set_mass_inertia(int body, Real mass, Real inertia);
 
   int add_wall(int axis, Real position, int sense, int material);
   int num_walls() const { return static_cast<int>(walls_.size()); }
@@ -191,6 +213,12 @@ class Scene {
   void reduce_and_integrate(long& err_body);
   void update_phys(PairContact& c) const;
   void update_phys(WallContact& c) const;
+  void update_phys(GridContact& c) const;
+  bool has_grid() const { return !links_.empty() || num_nodes_ > 0; }
+  void rebuild_grid_contacts(Real margin);
+  void rebuild_grid_adjacency();
+  void compute_grid_contacts(long& err_contact);
+  void compute_links();
   void step();
   void set_energy_reference();
   void raise_overlap(long contact, bool wall) const;
@@ -203,6 +231,7 @@ class Scene {
   std::vector<Real> radius_, mass_, inertia_;
   std::vector<int> body_mat_;
   std::vector<std::uint8_t> blocked_;
+  std::vector<std::uint8_t> kind_;  // 0 sphere, 1 grid node
   std::vector<Vec3> pos_at_build_;
   std::vector<Real> radius_at_build_;
   // Energy accumulators per body (written only when tracking).
@@ -214,6 +243,18 @@ class Scene {
   std::vector<PairContact> pairs_;
   std::vector<WallContact> wall_contacts_;
   std::vector<int> pair_adj_off_, pair_adj_, wall_adj_off_, wall_adj_;
+  // Geogrid.
+  int num_nodes_ = 0;
+  std::vector<GridLink> links_;
+  std::vector<PFacet> facets_;
+  std::vector<GridContact> grid_contacts_;
+  std::vector<BreakEvent> breaks_;
+  Real dropped_plastic_ = 0;   // dissipated by broken or plastic links, J
+  std::vector<int> node_link_off_, node_link_;     // node -> incident links (all bodies)
+  std::vector<int> link_facet_;                     // 2 per link: incident facets (-1: none)
+  std::vector<int> sphere_gc_off_, sphere_gc_;      // sphere -> grid contacts
+  std::vector<int> node_gc_off_, node_gc_;          // node -> grid contact * 3 + slot
+  bool grid_topology_dirty_ = true;
   CellGrid grid_;
   std::vector<std::pair<int, int>> candidates_;
   // Dissipation of contacts already dropped from the lists, J.
