@@ -152,6 +152,11 @@ void bind_scene(py::module_& m) {
                       s.set_external_forces(to_vec3_list(a, "external_forces"));
                     },
                     "Constant external force on each body, N, shape (n, 3).")
+      .def_property("external_torques", [](const Scene& s) { return vec3_array(s.external_torques()); },
+                    [](Scene& s, const Array& a) {
+                      s.set_external_torques(to_vec3_list(a, "external_torques"));
+                    },
+                    "Constant external torque on each body, N m, shape (n, 3).")
       .def("_set_blocked", &Scene::set_blocked, py::arg("body"), py::arg("mask"))
       .def_property_readonly("_blocked", [](const Scene& s) {
         return std::vector<int>(s.blocked().begin(), s.blocked().end());
@@ -180,7 +185,8 @@ void bind_scene(py::module_& m) {
       .def_property_readonly("time", &Scene::time, "Simulated time, s.")
       .def("critical_dt", &Scene::critical_dt,
            "Critical time-step estimate, s: min over bodies and axes of sqrt(2 m / K) from the "
-           "current contact stiffnesses; the p-wave estimate before contacts exist.")
+           "current contact stiffnesses; the p-wave estimate before contacts exist; inf when every "
+           "body is fully blocked.")
       .def("pwave_dt", &Scene::pwave_dt, "p-wave time step min R sqrt(rho / E), s.")
       .def("energies", [](const Scene& s) { return energies_dict(s.energies()); },
            "Energy terms, J, and the balance error (needs track_energy).")

@@ -16,6 +16,7 @@ Quick start::
 """
 
 from ._core import (  # noqa: F401  (re-exported)
+    BeamParams,
     BlowUpError,
     ContactModel,
     ContactPhys,
@@ -28,7 +29,11 @@ from ._core import (  # noqa: F401  (re-exported)
 from .packing import read_packing_csv, write_packing_csv  # noqa: F401
 from .scene import BOX_WALLS, Scene, hertz_mindlin_material, linear_material  # noqa: F401
 
+from . import geogrid  # noqa: F401,E402
+
 __all__ = [
+    "BeamParams",
+    "geogrid",
     "BOX_WALLS",
     "read_packing_csv",
     "write_packing_csv",

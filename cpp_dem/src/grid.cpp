@@ -48,6 +48,7 @@ int Scene::add_grid_nodes(const std::vector<Vec3>& pos, Real radius,
     force_.push_back(Vec3::Zero());
     torque_.push_back(Vec3::Zero());
     ext_force_.push_back(Vec3::Zero());
+    ext_torque_.push_back(Vec3::Zero());
     ori_.push_back(Quat::Identity());
     radius_.push_back(radius);
     mass_.push_back(mass[k]);

@@ -10,10 +10,11 @@ namespace cpp_dem {
 Real Scene::pwave_dt() const {
   Real dt = std::numeric_limits<Real>::infinity();
   for (int b = 0; b < num_bodies(); ++b) {
+    if ((blocked_[b] & DOF_ALL) == DOF_ALL) continue;  // a fully blocked body sets no limit
     const Material& m = materials_[body_mat_[b]];
     dt = std::min(dt, radius_[b] * std::sqrt(m.density / m.young));
   }
-  return dt;
+  return dt;  // infinite when every body is fully blocked
 }
 
 Real Scene::critical_dt() const {

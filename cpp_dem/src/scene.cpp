@@ -62,6 +62,7 @@ int Scene::add_spheres(const std::vector<Vec3>& pos, const std::vector<Real>& ra
     force_.push_back(Vec3::Zero());
     torque_.push_back(Vec3::Zero());
     ext_force_.push_back(Vec3::Zero());
+    ext_torque_.push_back(Vec3::Zero());
     ori_.push_back(Quat::Identity());
     radius_.push_back(r);
     mass_.push_back(m);
@@ -139,6 +140,10 @@ void Scene::set_external_forces(const std::vector<Vec3>& f) {
   require_size(f, pos_.size(), "external_forces");
   ext_force_ = f;
 }
+void Scene::set_external_torques(const std::vector<Vec3>& t) {
+  require_size(t, pos_.size(), "external_torques");
+  ext_torque_ = t;
+}
 void Scene::set_body_material(int body, int material) {
   check_body(body);
   this->material(material);
@@ -189,7 +194,8 @@ void Scene::set_auto_timestep(Real safety, int period) {
     throw ParameterError("timestep_period=" + std::to_string(period) + ": must be >= 0 (0 = off)");
   ts_safety_ = safety;
   ts_period_ = period;
-  if (period > 0) set_dt(safety * critical_dt());
+  const Real est = critical_dt();
+  if (period > 0 && std::isfinite(est)) set_dt(safety * est);
 }
 
 Real Scene::default_margin() const {
@@ -472,7 +478,7 @@ void Scene::reduce_and_integrate(long& err_body) {
   for (int b = 0; b < n; ++b) {
     // Reduce contact forces into the body in a fixed order (pair contacts, then walls).
     Vec3 f = ext_force_[b] + mass_[b] * gravity_;
-    Vec3 t = Vec3::Zero();
+    Vec3 t = ext_torque_[b];
     for (int e = pair_adj_off_[b]; e < pair_adj_off_[b + 1]; ++e) {
       const PairContact& c = pairs_[pair_adj_[e]];
       if (!c.active) continue;
@@ -556,6 +562,7 @@ void Scene::reduce_and_integrate(long& err_body) {
         acc = damped;
       }
       angvel_[b][a] = w_old[a] + acc * dt;
+      work += ext_torque_[b][a] * 0.5 * (w_old[a] + angvel_[b][a]) * dt;
     }
     if (energy) {
       const Vec3 vm = 0.5 * (v_old + vel_[b]);
@@ -591,7 +598,10 @@ std::shared_ptr<Controller> Scene::controller(int id) const {
 }
 
 void Scene::step() {
-  if (ts_period_ > 0 && step_ % ts_period_ == 0 && step_ > 0) dt_ = ts_safety_ * critical_dt();
+  if (ts_period_ > 0 && step_ % ts_period_ == 0 && step_ > 0) {
+    const Real est = critical_dt();
+    if (std::isfinite(est)) dt_ = ts_safety_ * est;  // nothing free: keep dt
+  }
   for (const auto& c : controllers_)
     if (c->enabled && step_ % c->period == 0) c->apply(*this);
   if (need_rebuild()) rebuild();

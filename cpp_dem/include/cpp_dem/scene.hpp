@@ -143,6 +143,7 @@ class Scene {
   const std::vector<int>& body_materials() const { return body_mat_; }
   const std::vector<std::uint8_t>& blocked() const { return blocked_; }
   const std::vector<Vec3>& external_forces() const { return ext_force_; }
+  const std::vector<Vec3>& external_torques() const { return ext_torque_; }
 
   void set_positions(const std::vector<Vec3>& v);
   void set_velocities(const std::vector<Vec3>& v);
@@ -151,6 +152,7 @@ class Scene {
   void set_radii(const std::vector<Real>& r);
   void set_blocked(int body, std::uint8_t mask);
   void set_external_forces(const std::vector<Vec3>& f);
+  void set_external_torques(const std::vector<Vec3>& t);
   void set_body_material(int body, int material);
 
   // ---- parameters ----------------------------------------------------------------------
@@ -226,7 +228,7 @@ class Scene {
 
   std::vector<Material> materials_;
   // Bodies (structure of arrays).
-  std::vector<Vec3> pos_, vel_, angvel_, force_, torque_, ext_force_;
+  std::vector<Vec3> pos_, vel_, angvel_, force_, torque_, ext_force_, ext_torque_;
   std::vector<Quat> ori_;
   std::vector<Real> radius_, mass_, inertia_;
   std::vector<int> body_mat_;

@@ -1,0 +1,453 @@
+"""Geogrid builders and member measurements (000 §2.2, 001 §4.1, App. A, §5.2).
+
+A geogrid is made of grid nodes (6-DOF bodies), cohesive links between them (each also a
+Minkowski-sum cylinder grains can touch) and, for flat ribs, PFacets (triangles of three
+nodes and their three links). Builders return a :class:`Geogrid` that knows its members:
+
+- a *member* is a rib between two junctions (or, for cylinder grids, one link), labelled by
+  direction (``longitudinal`` along the pull direction x, ``transverse`` along y,
+  ``diagonal`` for triangular grids), by aperture cell ``(i, j)`` and by its side in that cell;
+- sides follow 000 Fig. 6 in this convention: for cell (i, j) (x between junction columns i and
+  i + 1, y between rows j and j + 1), **A** is the longitudinal member on its low-y edge, **D**
+  the longitudinal member on its high-y edge, **C** the transverse member on its low-x edge and
+  **B** the transverse member on its high-x edge. Each member is stored once, labelled as the A
+  (longitudinal) or C (transverse) member of the cell it borders on its low side;
+  :meth:`Geogrid.cell_members` returns all four sides of a cell.
+
+Mass comes from the unit weight (000 Table 1: 981 N/m^3) and is lumped at the nodes: each link
+contributes rho pi R_c^2 L (half to each end) unless it belongs to a PFacet, whose slab
+(area x thickness 2 R_c) contributes a third to each node. ``node_density_scale`` multiplies
+the node masses and inertias: it raises the critical time step of the stiff grid (which
+dominates it with 000's 4 GPa grid in 1 MPa grains) at the price of the grid's inertia; it
+changes nothing in a quasi-static equilibrium but slows the grid's dynamic response.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Sequence
+
+import numpy as np
+
+from ._core import BeamParams, ParameterError
+
+G_STANDARD = 9.81  # m/s^2, to turn unit weights into densities
+
+LONGITUDINAL, TRANSVERSE, DIAGONAL, JUNCTION = "longitudinal", "transverse", "diagonal", "junction"
+
+
+@dataclasses.dataclass
+class Geogrid:
+    """A geogrid in a scene: node and link ids and the member labels.
+
+    Attributes (arrays over members unless said otherwise)
+    ------------------------------------------------------
+    nodes : body ids of the grid nodes.
+    links : link ids of the grid (indices into scene.grid_link_*).
+    pfacets : PFacet ids.
+    member_direction : 'longitudinal', 'transverse' or 'diagonal'.
+    member_cell : (n_members, 2) aperture cell (i, j); -1 where a member borders no cell.
+    member_side : 'A' (longitudinal) or 'C' (transverse) in member_cell; '' otherwise.
+    member_axis : (n_members, 3) unit vector along the member.
+    member_section_links : list of arrays of link ids cut by the member's mid-section.
+    member_links : list of arrays of all link ids of the member.
+    area : cross-section area of each member, m^2 (for stresses).
+    """
+
+    nodes: np.ndarray
+    links: np.ndarray
+    pfacets: np.ndarray
+    member_direction: np.ndarray
+    member_cell: np.ndarray
+    member_side: np.ndarray
+    member_axis: np.ndarray
+    member_section_links: list
+    member_links: list
+    area: np.ndarray
+    n_cells: tuple[int, int] = (0, 0)
+
+    @property
+    def n_members(self) -> int:
+        return len(self.member_direction)
+
+    def member_axial_forces(self, scene) -> np.ndarray:
+        """Axial force of every member, N, tension positive: the sum over the links cut by the
+        member's mid-section of the link axial force projected on the member axis."""
+        f_link = scene.grid_link_axial_forces
+        nodes = scene.grid_link_nodes
+        pos = scene.positions
+        out = np.zeros(self.n_members)
+        for m, sec in enumerate(self.member_section_links):
+            d = pos[nodes[sec, 1]] - pos[nodes[sec, 0]]
+            d /= np.linalg.norm(d, axis=1)[:, None]
+            out[m] = np.sum(f_link[sec] * np.abs(d @ self.member_axis[m]))
+        return out
+
+    def member_axial_stresses(self, scene) -> np.ndarray:
+        """Axial stress of every member, Pa, tension positive (force / cross-section area)."""
+        return self.member_axial_forces(scene) / self.area
+
+    def cell_members(self, i: int, j: int) -> dict[str, int]:
+        """Member indices on the sides A, B, C, D of aperture cell (i, j) (see module doc)."""
+        out = {}
+        for side, (ci, cj, s) in {"A": (i, j, "A"), "D": (i, j + 1, "A"),
+                                  "C": (i, j, "C"), "B": (i + 1, j, "C")}.items():
+            hit = np.flatnonzero((self.member_cell[:, 0] == ci) & (self.member_cell[:, 1] == cj)
+                                 & (self.member_side == s))
+            if len(hit):
+                out[side] = int(hit[0])
+        return out
+
+    def grouped_forces(self, scene) -> dict:
+        """Member axial forces (N) grouped by (cell i, cell j, direction)."""
+        f = self.member_axial_forces(scene)
+        groups: dict = {}
+        for m in range(self.n_members):
+            key = (int(self.member_cell[m, 0]), int(self.member_cell[m, 1]),
+                   str(self.member_direction[m]))
+            groups.setdefault(key, []).append(float(f[m]))
+        return groups
+
+    def node_displacements(self, scene, reference: np.ndarray) -> np.ndarray:
+        """Displacements of the grid nodes from reference positions (n_nodes, 3), m."""
+        return scene.positions[self.nodes] - reference
+
+    def link_member(self) -> np.ndarray:
+        """For every link of the grid, the member it belongs to (-1 for junction links)."""
+        lm = -np.ones(int(self.links.max()) + 1 if len(self.links) else 0, dtype=int)
+        for m, ls in enumerate(self.member_links):
+            lm[ls] = m
+        return lm[self.links]
+
+
+# ---- helpers -------------------------------------------------------------------------------
+
+
+def _check_positive(name: str, value: float) -> None:
+    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
+        raise ParameterError(f"{name}={value}: must be > 0")
+
+
+class _Builder:
+    """Accumulates nodes, links, facets and lumped masses, then adds them to the scene."""
+
+    def __init__(self, params: BeamParams, density: float):
+        self.params = params
+        self.density = density
+        self.points: list[np.ndarray] = []
+        self.key_to_node: dict = {}
+        self.links: dict[tuple[int, int], int] = {}
+        self.link_list: list[tuple[int, int]] = []
+        self.facets: list[tuple[int, int, int]] = []
+
+    def node(self, key, xyz) -> int:
+        if key not in self.key_to_node:
+            self.key_to_node[key] = len(self.points)
+            self.points.append(np.asarray(xyz, dtype=float))
+        return self.key_to_node[key]
+
+    def link(self, a: int, b: int) -> int:
+        k = (min(a, b), max(a, b))
+        if k not in self.links:
+            self.links[k] = len(self.link_list)
+            self.link_list.append((a, b))
+        return self.links[k]
+
+    def facet(self, a: int, b: int, c: int) -> None:
+        self.link(a, b)
+        self.link(b, c)
+        self.link(c, a)
+        self.facets.append((a, b, c))
+
+    def build(self, scene, material: int, node_density_scale: float):
+        pts = np.array(self.points)
+        rc = self.params.radius
+        mass = np.zeros(len(pts))
+        in_facet = set()
+        for a, b, c in self.facets:
+            area = 0.5 * np.linalg.norm(np.cross(pts[b] - pts[a], pts[c] - pts[a]))
+            for n in (a, b, c):
+                mass[n] += self.density * area * 2 * rc / 3
+            in_facet.update({(min(a, b), max(a, b)), (min(b, c), max(b, c)),
+                             (min(a, c), max(a, c))})
+        for a, b in self.link_list:
+            if (min(a, b), max(a, b)) in in_facet:
+                continue
+            m = self.density * math.pi * rc**2 * np.linalg.norm(pts[b] - pts[a])
+            mass[a] += m / 2
+            mass[b] += m / 2
+        mass = np.maximum(mass, 1e-12) * node_density_scale
+        inertia = 0.4 * mass * rc**2
+        first = scene._add_grid_nodes(pts, rc, mass, inertia, material)
+        node_ids = first + np.arange(len(pts))
+        link_ids = np.array([scene.add_grid_link(int(node_ids[a]), int(node_ids[b]), self.params,
+                                                 material) for a, b in self.link_list], dtype=int)
+        facet_ids = []
+        for a, b, c in self.facets:
+            l01 = link_ids[self.links[(min(a, b), max(a, b))]]
+            l12 = link_ids[self.links[(min(b, c), max(b, c))]]
+            l20 = link_ids[self.links[(min(a, c), max(a, c))]]
+            facet_ids.append(scene.add_pfacet(int(node_ids[a]), int(node_ids[b]), int(node_ids[c]),
+                                              int(l01), int(l12), int(l20), material))
+        return node_ids, link_ids, np.array(facet_ids, dtype=int)
+
+
+def _density(unit_weight: float | None, density: float | None) -> float:
+    if (unit_weight is None) == (density is None):
+        raise ParameterError("unit_weight, density: give exactly one (N/m^3 or kg/m^3)")
+    if unit_weight is not None:
+        _check_positive("unit_weight", unit_weight)
+        return unit_weight / G_STANDARD
+    _check_positive("density", density)
+    return float(density)
+
+
+# ---- generators ----------------------------------------------------------------------------
+
+
+def square_grid(scene, *, origin: Sequence[float], length: float, width: float, nodes_x: int,
+                nodes_y: int, params: BeamParams, material: int,
+                unit_weight: float | None = None, density: float | None = None,
+                node_density_scale: float = 1.0) -> Geogrid:
+    """Square grid of cylinders in the plane z = origin[2] (001 App. A).
+
+    length (x, the pull direction) and width (y) in m; nodes_x x nodes_y nodes; cylinder radius
+    from ``params.radius``; mass from unit_weight (N/m^3) or density (kg/m^3).
+    """
+    _check_positive("length", length)
+    _check_positive("width", width)
+    _check_positive("node_density_scale", node_density_scale)
+    if nodes_x < 2 or nodes_y < 2:
+        raise ParameterError(f"nodes_x={nodes_x}, nodes_y={nodes_y}: need at least 2 each")
+    o = np.asarray(origin, dtype=float)
+    b = _Builder(params, _density(unit_weight, density))
+    dx, dy = length / (nodes_x - 1), width / (nodes_y - 1)
+    ids = {}
+    for i in range(nodes_x):
+        for j in range(nodes_y):
+            ids[i, j] = b.node((i, j), o + [i * dx, j * dy, 0.0])
+    direction, cell, side, axis, links_of = [], [], [], [], []
+    for j in range(nodes_y):
+        for i in range(nodes_x - 1):
+            links_of.append(b.link(ids[i, j], ids[i + 1, j]))
+            direction.append(LONGITUDINAL)
+            cell.append((i, j) if j < nodes_y - 1 else (i, j))
+            side.append("A")
+            axis.append((1.0, 0, 0))
+    for i in range(nodes_x):
+        for j in range(nodes_y - 1):
+            links_of.append(b.link(ids[i, j], ids[i, j + 1]))
+            direction.append(TRANSVERSE)
+            cell.append((i, j))
+            side.append("C")
+            axis.append((0, 1.0, 0))
+    nodes, links, facets = b.build(scene, material, node_density_scale)
+    member_links = [np.array([links[k]]) for k in links_of]
+    return Geogrid(nodes=nodes, links=links, pfacets=facets,
+                   member_direction=np.array(direction), member_cell=np.array(cell),
+                   member_side=np.array(side), member_axis=np.array(axis),
+                   member_section_links=member_links, member_links=member_links,
+                   area=np.full(len(direction), math.pi * params.radius**2),
+                   n_cells=(nodes_x - 1, nodes_y - 1))
+
+
+def triangular_grid(scene, *, origin: Sequence[float], length: float, width: float,
+                    side: float, params: BeamParams, material: int,
+                    unit_weight: float | None = None, density: float | None = None,
+                    node_density_scale: float = 1.0) -> Geogrid:
+    """Grid of equilateral triangles of edge ``side`` (m) in the plane z = origin[2]
+    (001 §5.2: 1.43 cm). Rows along x (longitudinal members), diagonals at +-60 degrees.
+    Fills [0, length] x [0, width] with whole triangles."""
+    _check_positive("length", length)
+    _check_positive("width", width)
+    _check_positive("side", side)
+    h = side * math.sqrt(3) / 2
+    nx = int(math.floor(length / side + 1e-9)) + 1
+    ny = int(math.floor(width / h + 1e-9)) + 1
+    if nx < 2 or ny < 2:
+        raise ParameterError(f"side={side}: too large for a {length} x {width} m grid")
+    o = np.asarray(origin, dtype=float)
+    b = _Builder(params, _density(unit_weight, density))
+    ids = {}
+    for j in range(ny):
+        shift = 0.5 * side if j % 2 else 0.0
+        for i in range(nx - (1 if j % 2 else 0)):
+            ids[i, j] = b.node((i, j), o + [shift + i * side, j * h, 0.0])
+    direction, cell, sides, axis, links_of = [], [], [], [], []
+
+    def add(a, c, kind, cij, sd):
+        links_of.append(b.link(ids[a], ids[c]))
+        direction.append(kind)
+        cell.append(cij)
+        sides.append(sd)
+        p, q = b.points[ids[a]], b.points[ids[c]]
+        axis.append((q - p) / np.linalg.norm(q - p))
+
+    for (i, j) in list(ids):
+        if (i + 1, j) in ids:
+            add((i, j), (i + 1, j), LONGITUDINAL, (i, j), "A")
+        if j + 1 < ny:
+            # Neighbours in the next row: even rows connect to (i-1, j+1) and (i, j+1).
+            up = [(i - 1, j + 1), (i, j + 1)] if j % 2 == 0 else [(i, j + 1), (i + 1, j + 1)]
+            for k, nb in enumerate(up):
+                if nb in ids:
+                    add((i, j), nb, DIAGONAL, (i, j), "")
+    nodes, links, facets = b.build(scene, material, node_density_scale)
+    member_links = [np.array([links[k]]) for k in links_of]
+    return Geogrid(nodes=nodes, links=links, pfacets=facets,
+                   member_direction=np.array(direction), member_cell=np.array(cell),
+                   member_side=np.array(sides), member_axis=np.array(axis),
+                   member_section_links=member_links, member_links=member_links,
+                   area=np.full(len(direction), math.pi * params.radius**2),
+                   n_cells=(nx - 1, ny - 1))
+
+
+def biaxial_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures_y: int,
+                    aperture_area: float = 6.4e-3, rib_width: float = 0.01,
+                    params: BeamParams, material: int, unit_weight: float | None = None,
+                    density: float | None = None, segments_per_rib: int = 2,
+                    node_density_scale: float = 1.0) -> Geogrid:
+    """Flat-ribbed biaxial geogrid of PFacets and cylinders (000 §2.2, Fig. 3).
+
+    Square apertures of clear area ``aperture_area`` (m^2; 000 Table 1: 6.4e-3) between flat
+    ribs of width ``rib_width`` (m) and thickness 2 R_c (``params.radius``; 000: 2 mm). Each rib
+    between two junctions is a strip of ``segments_per_rib`` rectangles, each rectangle two
+    PFacets; junctions are square patches of two PFacets. Junction columns are at
+    x = origin + i * pitch, pitch = sqrt(aperture_area) + rib_width; the grid spans
+    apertures_x x apertures_y cells.
+    """
+    _check_positive("aperture_area", aperture_area)
+    _check_positive("rib_width", rib_width)
+    if apertures_x < 1 or apertures_y < 1:
+        raise ParameterError(f"apertures_x={apertures_x}, apertures_y={apertures_y}: need >= 1")
+    if segments_per_rib < 1:
+        raise ParameterError(f"segments_per_rib={segments_per_rib}: must be >= 1")
+    o = np.asarray(origin, dtype=float)
+    clear = math.sqrt(aperture_area)
+    pitch = clear + rib_width
+    hw = rib_width / 2
+    b = _Builder(params, _density(unit_weight, density))
+    # Node coordinates along one axis: junction edges and rib subdivisions.
+    def coords(n_ap):
+        xs = []
+        for i in range(n_ap + 1):
+            c = i * pitch
+            xs += [c - hw, c + hw]
+            if i < n_ap:
+                for s in range(1, segments_per_rib):
+                    xs.append(c + hw + clear * s / segments_per_rib)
+        return np.array(sorted(xs))
+
+    xs, ys = coords(apertures_x), coords(apertures_y)
+
+    def on_rib(v, n_ap):
+        """Index of the junction line whose rib band contains v, or -1."""
+        for i in range(n_ap + 1):
+            if abs(v - i * pitch) <= hw + 1e-12:
+                return i
+        return -1
+
+    def nid(ix, iy):
+        return b.node((ix, iy), o + [xs[ix], ys[iy], 0.0])
+
+    direction, cell, sides, axis, mem_links, mem_section = [], [], [], [], [], []
+    # Rectangles [xs[a], xs[a+1]] x [ys[c], ys[c+1]] that lie on a rib or a junction.
+    rect_member = {}
+    for a in range(len(xs) - 1):
+        xm = 0.5 * (xs[a] + xs[a + 1])
+        jx = on_rib(xm, apertures_x)
+        for c in range(len(ys) - 1):
+            ym = 0.5 * (ys[c] + ys[c + 1])
+            jy = on_rib(ym, apertures_y)
+            if jx < 0 and jy < 0:
+                continue  # aperture
+            n00, n10, n11, n01 = nid(a, c), nid(a + 1, c), nid(a + 1, c + 1), nid(a, c + 1)
+            b.facet(n00, n10, n11)
+            b.facet(n00, n11, n01)
+            if jx >= 0 and jy >= 0:
+                continue  # junction
+            if jy >= 0:  # longitudinal rib along x on junction row jy, between columns
+                key = (LONGITUDINAL, int(math.floor(xm / pitch)), jy)
+            else:
+                key = (TRANSVERSE, jx, int(math.floor(ym / pitch)))
+            rect_member.setdefault(key, []).append((a, c, (n00, n10, n11, n01)))
+    for (kind, i, j), rects in sorted(rect_member.items()):
+        links_all = set()
+        for a, c, (n00, n10, n11, n01) in rects:
+            for p, q in ((n00, n10), (n10, n11), (n11, n01), (n01, n00), (n00, n11)):
+                links_all.add(b.link(p, q))
+        # Mid-section: the middle rectangle's links that run along the member.
+        rects.sort(key=lambda r: (r[0], r[1]))
+        a, c, (n00, n10, n11, n01) = rects[len(rects) // 2]
+        if kind == LONGITUDINAL:
+            sec = [b.link(n00, n10), b.link(n01, n11), b.link(n00, n11)]
+            ax = (1.0, 0, 0)
+        else:
+            sec = [b.link(n00, n01), b.link(n10, n11), b.link(n00, n11)]
+            ax = (0, 1.0, 0)
+        direction.append(kind)
+        cell.append((i, j))
+        sides.append("A" if kind == LONGITUDINAL else "C")
+        axis.append(ax)
+        mem_links.append(sorted(links_all))
+        mem_section.append(sec)
+    nodes, links, facets = b.build(scene, material, node_density_scale)
+    return Geogrid(nodes=nodes, links=links, pfacets=facets,
+                   member_direction=np.array(direction), member_cell=np.array(cell),
+                   member_side=np.array(sides), member_axis=np.array(axis),
+                   member_section_links=[links[np.array(s)] for s in mem_section],
+                   member_links=[links[np.array(s)] for s in mem_links],
+                   area=np.full(len(direction), rib_width * 2 * params.radius),
+                   n_cells=(apertures_x, apertures_y))
+
+
+def polyline(scene, points, *, params: BeamParams, material: int,
+             unit_weight: float | None = None, density: float | None = None,
+             node_density_scale: float = 1.0) -> Geogrid:
+    """A chain of grid nodes at ``points`` (n, 3), m, joined by cohesive links (a beam, a
+    cable, a single rib). Every link is a member of its own, direction 'longitudinal'."""
+    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    if len(pts) < 2:
+        raise ParameterError(f"points: need at least 2, got {len(pts)}")
+    _check_positive("node_density_scale", node_density_scale)
+    b = _Builder(params, _density(unit_weight, density))
+    ids = [b.node(k, p) for k, p in enumerate(pts)]
+    order = [b.link(ids[k], ids[k + 1]) for k in range(len(ids) - 1)]
+    nodes, links, facets = b.build(scene, material, node_density_scale)
+    axis = np.diff(pts, axis=0)
+    axis /= np.linalg.norm(axis, axis=1)[:, None]
+    member_links = [np.array([links[k]]) for k in order]
+    n = len(order)
+    return Geogrid(nodes=nodes, links=links, pfacets=facets,
+                   member_direction=np.array([LONGITUDINAL] * n),
+                   member_cell=-np.ones((n, 2), dtype=int), member_side=np.array([""] * n),
+                   member_axis=axis, member_section_links=member_links,
+                   member_links=member_links, area=np.full(n, math.pi * params.radius**2))
+
+
+def write_vtk_geogrid(path, scene, grid: Geogrid) -> None:
+    """Writes the geogrid as a .vtp file for ParaView: links as lines and PFacets as triangles,
+    with cell data ``axial_force`` (N, tension positive), ``member`` (index, -1 for junction
+    links), ``broken`` (links) and ``kind`` (0 link, 1 pfacet); point data ``node_id`` and
+    ``displacement``-free positions (the current ones)."""
+    from .output import write_vtp
+
+    pos = scene.positions
+    nodes = grid.nodes
+    local = {int(n): k for k, n in enumerate(nodes)}
+    ln = scene.grid_link_nodes[grid.links]
+    lines = np.array([[local[int(a)], local[int(b)]] for a, b in ln], dtype=np.int64).reshape(-1, 2)
+    tri = scene.pfacet_nodes[grid.pfacets] if len(grid.pfacets) else np.zeros((0, 3), int)
+    polys = np.array([[local[int(n)] for n in t] for t in tri], dtype=np.int64).reshape(-1, 3)
+    f = scene.grid_link_axial_forces[grid.links]
+    broken = np.asarray(scene.grid_link_broken, dtype=float)[grid.links]
+    member = grid.link_member().astype(float)
+    cell_data = {
+        "axial_force": np.concatenate([f, np.zeros(len(polys))]),
+        "member": np.concatenate([member, -np.ones(len(polys))]),
+        "broken": np.concatenate([broken, np.zeros(len(polys))]),
+        "kind": np.concatenate([np.zeros(len(lines)), np.ones(len(polys))]),
+    }
+    write_vtp(path, points=pos[nodes], lines=lines, polys=polys,
+              point_data={"node_id": nodes.astype(float)}, cell_data=cell_data)

@@ -1,0 +1,364 @@
+"""Geogrid: beam law against analytic beams, breakage, grain–geogrid contact smoothness,
+energy, robustness. Tolerances are stated in each test."""
+
+import math
+
+import numpy as np
+import pytest
+
+import cpp_dem as dem
+from cpp_dem import geogrid
+
+E_GRID = 1e8       # Pa (softer than 000's 4 GPa so the verification runs are short)
+NU_GRID = 0.3
+RC = 1e-3          # m
+RHO_GRID = 1000.0  # kg/m^3
+
+
+def grid_scene(**kw):
+    s = dem.Scene(**kw)
+    m = s.add_material(dem.linear_material(density=RHO_GRID, young=E_GRID, poisson=0.3,
+                                           friction_angle_deg=20))
+    return s, m
+
+
+def beam(n_links=10, length=0.1, **params):
+    s, m = grid_scene(local_damping=0.7)
+    p = dem.BeamParams(young=E_GRID, poisson=NU_GRID, radius=RC, **params)
+    pts = np.column_stack([np.linspace(0, length, n_links + 1), np.zeros(n_links + 1),
+                           np.zeros(n_links + 1)])
+    g = geogrid.polyline(s, pts, params=p, material=m, density=RHO_GRID)
+    s.block_dofs(g.nodes[0], "all")
+    s.set_auto_timestep(safety=0.5, period=100)
+    return s, g
+
+
+def settle(s, steps=40000):
+    s.run(steps)
+    return s
+
+
+def test_bar_axial_force_equals_EA_dL_over_L():
+    s, g = beam(n_links=5, length=0.05)
+    f = 1.0  # N
+    ext = np.zeros((s.num_bodies, 3))
+    ext[g.nodes[-1]] = [f, 0, 0]
+    s.external_forces = ext
+    settle(s)
+    area = math.pi * RC**2
+    dl = s.positions[g.nodes[-1], 0] - 0.05
+    assert dl == pytest.approx(f * 0.05 / (E_GRID * area), rel=1e-2)
+    np.testing.assert_allclose(s.grid_link_axial_forces, f, rtol=1e-2)
+    np.testing.assert_allclose(g.member_axial_forces(s), f, rtol=1e-2)
+    np.testing.assert_allclose(g.member_axial_stresses(s), f / area, rtol=1e-2)
+
+
+def test_cantilever_tip_deflection():
+    length, p_tip = 0.1, 2e-4  # m, N
+    s, g = beam(n_links=10, length=length)
+    ext = np.zeros((s.num_bodies, 3))
+    ext[g.nodes[-1]] = [0, 0, -p_tip]
+    s.external_forces = ext
+    settle(s, 60000)
+    inertia = math.pi * RC**4 / 4
+    w_an = p_tip * length**3 / (3 * E_GRID * inertia)
+    assert w_an < 0.02 * length  # small deflection
+    assert -s.positions[g.nodes[-1], 2] == pytest.approx(w_an, rel=2e-2)
+
+
+def test_torsion_angle_equals_TL_over_GJ():
+    length, torque = 0.1, 1e-5  # m, N m
+    s, g = beam(n_links=10, length=length)
+    ext = np.zeros((s.num_bodies, 3))
+    ext[g.nodes[-1]] = [torque, 0, 0]
+    s.external_torques = ext
+    settle(s, 60000)
+    q = s.orientations[g.nodes[-1]]  # w, x, y, z
+    angle = 2 * math.atan2(q[1], q[0])
+    g_mod = E_GRID / (2 * (1 + NU_GRID))
+    j = math.pi * RC**4 / 2
+    assert angle == pytest.approx(torque * length / (g_mod * j), rel=2e-2)
+    np.testing.assert_allclose(s.grid_link_twisting_moments, -torque, rtol=2e-2)
+
+
+def test_stiffnesses_follow_000_eqs_7_to_10():
+    s, g = beam(n_links=1, length=0.02)
+    k = s.grid_link_stiffness[0]
+    i_r = math.pi * RC**4 / 4
+    assert k[0] == pytest.approx(E_GRID * math.pi * RC**2 / 0.02, rel=1e-12)
+    assert k[1] == pytest.approx(12 * E_GRID * i_r / 0.02**3, rel=1e-12)
+    assert k[2] == pytest.approx(E_GRID * i_r / 0.02, rel=1e-12)
+    assert k[3] == pytest.approx(E_GRID / (2 * 1.3) * 2 * i_r / 0.02, rel=1e-12)
+
+
+def test_link_breaks_exactly_at_tensile_strength():
+    sigma = 2e5  # Pa
+    s, g = beam(n_links=1, length=0.01, normal_cohesion=sigma)
+    s.local_damping = 0.0
+    s.set_auto_timestep(safety=0.5, period=0)
+    s.dt = 1e-5
+    v = 1e-3  # m/s pull
+    s.block_dofs(g.nodes[1], "all")
+    vel = np.zeros((s.num_bodies, 3))
+    vel[g.nodes[1]] = [v, 0, 0]
+    s.velocities = vel
+    f_max = sigma * math.pi * RC**2
+    kn = s.grid_link_stiffness[0, 0]
+    steps = int(1.2 * f_max / kn / v / s.dt)
+    s.run(steps)
+    ev = s.grid_break_events
+    assert len(ev) == 1 and ev[0]["reason"] == "tension" and ev[0]["link"] == int(g.links[0])
+    # The force at breakage is the strength, to within one step's increment.
+    assert f_max <= ev[0]["force"] <= f_max + kn * v * s.dt * (1 + 1e-9)
+    assert s.grid_link_broken[0]
+    assert s.grid_link_axial_forces[0] == 0.0
+    s.run(10)
+    assert np.allclose(s.forces[g.nodes[0]], 0.0)
+
+
+def test_bending_moment_is_capped_by_eq_11():
+    sigma = 1e4  # Pa: low strength so the cap is reached
+    s, g = beam(n_links=4, length=0.04, normal_cohesion=sigma)
+    ext = np.zeros((s.num_bodies, 3))
+    m_max = 4 * sigma * (math.pi * RC**4 / 4) / RC  # 000 eq (11)
+    ext[g.nodes[-1]] = [0, 0, -3 * m_max / 0.04]  # would need 3 M_max at the root
+    s.external_forces = ext
+    s.run(20000)
+    mb = np.linalg.norm(s.grid_link_bending_moments, axis=1)
+    assert mb.max() <= m_max * (1 + 1e-12)
+    assert mb.max() == pytest.approx(m_max, rel=1e-9)
+    assert s.energies()["plastic"] >= 0
+
+
+def slide_over(scene, sphere, path, speed, steps_per_unit):
+    """Moves a kinematic sphere along `path` (start, end) at `speed`; records per step the
+    number of grain–geogrid contacts, the normal and the tangential force magnitudes."""
+    start, end = np.asarray(path[0], float), np.asarray(path[1], float)
+    d = end - start
+    n_steps = int(np.linalg.norm(d) * steps_per_unit)
+    scene.dt = np.linalg.norm(d) / speed / n_steps
+    pos = scene.positions
+    pos[sphere] = start
+    scene.positions = pos
+    vel = np.zeros((scene.num_bodies, 3))
+    vel[sphere] = d / np.linalg.norm(d) * speed
+    scene.velocities = vel
+    counts, fn, ft = [], [], []
+    for _ in range(n_steps):
+        scene.run(1)
+        c = scene.grid_contacts()
+        counts.append(len(c["sphere"]))
+        if len(c["sphere"]):
+            f = c["force"].sum(axis=0)
+            n = c["normal"][0]
+            fn.append(f @ n)
+            ft.append(np.linalg.norm(f - (f @ n) * n))
+        else:
+            fn.append(0.0)
+            ft.append(0.0)
+    return np.array(counts), np.array(fn), np.array(ft)
+
+
+def kinematic_sphere(s, m, r):
+    ids = s.add_spheres([[0, 0, 1.0]], [r], material=m)
+    s.block_dofs(ids, "all")
+    return int(ids[0])
+
+
+def test_grain_slides_along_chain_across_nodes_one_contact_continuous_force():
+    s, m = grid_scene()
+    p = dem.BeamParams(young=E_GRID, poisson=NU_GRID, radius=RC)
+    pts = np.column_stack([np.linspace(0, 0.05, 6), np.zeros(6), np.zeros(6)])
+    g = geogrid.polyline(s, pts, params=p, material=m, density=RHO_GRID)
+    s.block_dofs(g.nodes, "all")
+    r, delta = 0.004, 2e-5
+    sph = kinematic_sphere(s, m, r)
+    z = RC + r - delta
+    counts, fn, ft = slide_over(s, sph, [(0.003, 0, z), (0.047, 0, z)], 0.01, 20000)
+    assert np.all(counts == 1)  # exactly one contact at every step, also over the 4 nodes
+    kn = dem.mix_materials(s.material(m), s.material(m), RC, r, 1, 1).kn
+    np.testing.assert_allclose(fn, kn * delta, rtol=1e-2)
+    # Sliding: the tangential force sits on the Coulomb cap; no reset at the nodes (the
+    # contact's history is handed over), so it stays continuous within 1 %.
+    steady = ft[len(ft) // 10:]
+    np.testing.assert_allclose(steady, math.tan(math.radians(20)) * kn * delta, rtol=1e-2)
+
+
+def pfacet_square(s, m):
+    """Two coplanar PFacets on the unit-ish square [0, a]^2 at z = 0, fixed."""
+    a = 0.03
+    p = dem.BeamParams(young=E_GRID, poisson=NU_GRID, radius=RC)
+    mass = np.full(4, 1e-4)
+    first = s._add_grid_nodes(np.array([[0, 0, 0], [a, 0, 0], [a, a, 0], [0, a, 0]], float), RC,
+                              mass, 0.4 * mass * RC**2, m)
+    n = first + np.arange(4)
+    lk = {}
+    for i, j in [(0, 1), (1, 2), (2, 3), (3, 0), (0, 2)]:
+        lk[i, j] = s.add_grid_link(int(n[i]), int(n[j]), p, m)
+    s.add_pfacet(int(n[0]), int(n[1]), int(n[2]), lk[0, 1], lk[1, 2], lk[0, 2], m)
+    s.add_pfacet(int(n[0]), int(n[2]), int(n[3]), lk[0, 2], lk[2, 3], lk[3, 0], m)
+    s.block_dofs(n, "all")
+    return a
+
+
+def test_grain_crosses_pfacet_edge_one_contact_continuous_force():
+    s, m = grid_scene()
+    a = pfacet_square(s, m)
+    r, delta = 0.004, 2e-5
+    sph = kinematic_sphere(s, m, r)
+    z = RC + r - delta
+    # Across the shared diagonal edge (facet to facet) and across a node-free path.
+    counts, fn, ft = slide_over(s, sph, [(0.02, 0.005, z), (0.005, 0.02, z)], 0.01, 20000)
+    assert np.all(counts == 1)
+    kn = dem.mix_materials(s.material(m), s.material(m), RC, r, 1, 1).kn
+    np.testing.assert_allclose(fn, kn * delta, rtol=1e-2)
+    steady = ft[len(ft) // 10:]
+    np.testing.assert_allclose(steady, math.tan(math.radians(20)) * kn * delta, rtol=1e-2)
+    # Off the outer edge y = 0: from the facet over its rounded edge (the connection), the
+    # force follows the distance to the skeleton, k_n (r + R_c - sqrt(y^2 + z^2)), with no
+    # jump where the facet hands over to the edge.
+    counts, fn, _ = slide_over(s, sph, [(0.015, 0.015, z), (0.015, -0.004, z)], 0.01, 20000)
+    assert counts.max() == 1
+    y = 0.015 - np.arange(len(fn)) * (0.019 / len(fn))  # where each step's force was computed
+    dist = np.where(y > 0, z, np.hypot(np.minimum(y, 0), z))
+    expected = kn * np.maximum(r + RC - dist, 0)
+    np.testing.assert_allclose(fn, expected, atol=1e-2 * kn * delta)
+
+
+def test_undamped_sphere_grid_impact_conserves_energy():
+    s, m = grid_scene()
+    p = dem.BeamParams(young=E_GRID, poisson=NU_GRID, radius=RC)
+    g = geogrid.square_grid(s, origin=(0, 0, 0), length=0.04, width=0.04, nodes_x=5,
+                            nodes_y=5, params=p, material=m, density=RHO_GRID)
+    ids = s.add_spheres([[0.013, 0.017, 0.01]], [0.004], material=m)
+    v = np.zeros((s.num_bodies, 3))
+    v[ids[0]] = [0.05, 0.02, -0.5]
+    s.velocities = v
+    s.track_energy = True
+    s.set_auto_timestep(safety=0.05, period=50)
+    touched = 0
+    for _ in range(300):
+        s.run(100)
+        touched += len(s.grid_contacts()["sphere"])
+    e = s.energies()
+    assert touched > 0  # the sphere hit the grid
+    ke_grid = 0.5 * (s.masses[g.nodes] * (s.velocities[g.nodes] ** 2).sum(axis=1)).sum()
+    assert ke_grid > 0 and e["elastic"] > 0  # and set it moving and vibrating
+    assert e["balance_error_relative"] < 1e-3, e
+
+
+def test_fixed_grid_keeps_every_link_and_unbalanced_force_is_finite():
+    s, m = grid_scene(gravity=(0, 0, -9.81), local_damping=0.3)
+    p = dem.BeamParams(young=E_GRID, poisson=NU_GRID, radius=RC, normal_cohesion=1e6,
+                       shear_cohesion=1e6)
+    g = geogrid.square_grid(s, origin=(0, 0, 0.02), length=0.04, width=0.04, nodes_x=5,
+                            nodes_y=5, params=p, material=m, density=RHO_GRID)
+    s.block_dofs(g.nodes, "all")  # fixed from the first step
+    sand = s.add_material(dem.linear_material(density=2600, young=1e7, poisson=0.3,
+                                              friction_angle_deg=30))
+    s.add_box((-0.005, -0.005, 0), (0.045, 0.045, 0.06), material=sand)
+    grid3 = np.stack(np.meshgrid(np.arange(5), np.arange(5), np.arange(3), indexing="ij"),
+                     -1).reshape(-1, 3)
+    s.add_spheres(0.002 + 0.009 * grid3 * [1, 1, 1] + [0, 0, 0.0255], np.full(len(grid3), 0.004),
+                  material=sand)
+    s.set_auto_timestep(safety=0.3, period=50)
+    s.run(20000)
+    assert s.num_grid_links == len(g.links)
+    assert not any(s.grid_link_broken)
+    assert np.isfinite(s.unbalanced_force())
+    # Grains rest on the grid: the grid carries them.
+    assert len(s.grid_contacts()["sphere"]) > 0
+
+
+def test_grid_held_while_grains_compressed_then_freed_stays_finite_and_settles():
+    s, m = grid_scene(gravity=(0, 0, -9.81), local_damping=0.8)
+    p = dem.BeamParams(young=E_GRID, poisson=NU_GRID, radius=RC)
+    # Apertures (4 mm clear) smaller than the grains (7 mm): grains rest on the grid.
+    g = geogrid.square_grid(s, origin=(0, 0, 0.0105), length=0.04, width=0.04, nodes_x=9,
+                            nodes_y=9, params=p, material=m, density=RHO_GRID,
+                            node_density_scale=10.0)
+    s.block_dofs(g.nodes, "all")
+    sand = s.add_material(dem.linear_material(density=2600, young=1e7, poisson=0.3,
+                                              friction_angle_deg=30, rolling_stiffness=1.0,
+                                              rolling_friction=0.1))
+    walls = s.add_box((-0.004, -0.004, 0), (0.044, 0.044, 0.0225), material=sand)
+    rng = np.random.default_rng(1)
+    lay = np.stack(np.meshgrid(np.arange(6), np.arange(6), indexing="ij"), -1).reshape(-1, 2)
+    below = np.column_stack([lay * 0.0076 + 0.0, np.full(len(lay), 0.0036)])
+    above = np.column_stack([lay * 0.0076 + 0.0, np.full(len(lay), 0.0178)])
+    c = np.vstack([below, above]) + rng.uniform(-3e-4, 3e-4, (2 * len(lay), 3)) * [1, 1, 0]
+    s.add_spheres(c, np.full(len(c), 0.0035), material=sand)
+    s.set_auto_timestep(safety=0.3, period=20)
+    s.set_wall_velocity(walls[5], [0, 0, -0.02])  # compress from the top onto the held grid
+    weight = 9.81 * s.masses[s.masses > 1e-3].sum()
+    for _ in range(50):
+        s.run(1000)
+        if s.wall_forces[walls[5], 2] > 5 * weight:
+            break
+    assert s.wall_forces[walls[5], 2] > 5 * weight  # the grains are pressed onto the grid
+    s.set_wall_velocity(walls[5], [0, 0, 0])
+    s.block_dofs(g.nodes, "")  # free the grid
+    v_max = []
+    for _ in range(150):
+        s.run(1000)
+        assert np.isfinite(s.positions).all()
+        assert np.isfinite(s.grid_link_axial_forces).all()
+        assert np.isfinite(s.grid_contacts()["force"]).all()
+        assert np.isfinite(s.unbalanced_force())
+        v_max.append(np.abs(s.velocities).max())
+        if len(v_max) > 2 and max(v_max[-3:]) < 1e-5:
+            break
+    # Settles: the fastest body slows by orders of magnitude and the forces balance.
+    assert v_max[-1] < 1e-3 and v_max[-1] < 0.01 * max(v_max), v_max
+    assert s.unbalanced_force() < 0.05
+    assert len(s.grid_contacts()["sphere"]) > 0  # grains rest on the freed grid
+
+
+def test_bad_geogrid_input_is_rejected_by_name():
+    s, m = grid_scene()
+    with pytest.raises(ValueError, match=r"radius=-1: must be > 0"):
+        dem.BeamParams(young=1e9, poisson=0.3, radius=-1)
+    with pytest.raises(ValueError, match=r"normal_cohesion=-5"):
+        dem.BeamParams(young=1e9, poisson=0.3, radius=1e-3, normal_cohesion=-5)
+    p = dem.BeamParams(young=1e9, poisson=0.3, radius=1e-3)
+    with pytest.raises(ValueError, match=r"nodes_x=1"):
+        geogrid.square_grid(s, origin=(0, 0, 0), length=0.1, width=0.1, nodes_x=1, nodes_y=5,
+                            params=p, material=m, density=100)
+    with pytest.raises(ValueError, match=r"give exactly one"):
+        geogrid.square_grid(s, origin=(0, 0, 0), length=0.1, width=0.1, nodes_x=3, nodes_y=3,
+                            params=p, material=m)
+    ids = s.add_spheres([[0, 0, 0], [1, 0, 0]], [0.1, 0.1], material=m)
+    with pytest.raises(ValueError, match=r"must be grid nodes"):
+        s.add_grid_link(int(ids[0]), int(ids[1]), p, m)
+
+
+def test_generators_label_members():
+    s, m = grid_scene()
+    p = dem.BeamParams(young=4e9, poisson=0.3, radius=1e-3)
+    sq = geogrid.square_grid(s, origin=(0, 0, 0), length=0.09, width=0.09, nodes_x=10,
+                             nodes_y=10, params=p, material=m, unit_weight=981)
+    assert len(sq.nodes) == 100 and len(sq.links) == 180
+    assert (sq.member_direction == "longitudinal").sum() == 90
+    cm = sq.cell_members(2, 3)
+    assert set(cm) == {"A", "B", "C", "D"}
+    nodes = s.grid_link_nodes
+    pos = s.positions
+    a = sq.member_links[cm["A"]][0]
+    assert pos[nodes[a, 0], 1] == pytest.approx(0.03) and pos[nodes[a, 1], 1] == pytest.approx(0.03)
+    # Lumped mass equals the grid's total mass: rho pi R^2 x total length.
+    rho = 981 / 9.81
+    total = rho * math.pi * 1e-6 * (2 * 10 * 0.09)
+    assert s.masses[sq.nodes].sum() == pytest.approx(total, rel=1e-12)
+    s2, m2 = grid_scene()
+    bx = geogrid.biaxial_geogrid(s2, origin=(0, 0, 0), apertures_x=3, apertures_y=2,
+                                 params=p, material=m2, unit_weight=981)
+    assert len(bx.pfacets) > 0
+    assert set(bx.cell_members(1, 0)) == {"A", "B", "C", "D"}
+    assert (bx.member_direction == "longitudinal").sum() == 3 * 3
+    assert (bx.member_direction == "transverse").sum() == 4 * 2
+    s3, m3 = grid_scene()
+    tri = geogrid.triangular_grid(s3, origin=(0, 0, 0), length=0.1, width=0.1, side=0.0143,
+                                  params=p, material=m3, unit_weight=981)
+    lengths = s3.grid_link_rest_lengths
+    np.testing.assert_allclose(lengths, 0.0143, rtol=1e-12)
+    assert (tri.member_direction == "diagonal").sum() > 0
