@@ -362,3 +362,32 @@ def test_generators_label_members():
     lengths = s3.grid_link_rest_lengths
     np.testing.assert_allclose(lengths, 0.0143, rtol=1e-12)
     assert (tri.member_direction == "diagonal").sum() > 0
+
+
+def test_node_density_scaling_raises_the_critical_step_by_its_square_root():
+    dts = []
+    for scale in (1.0, 100.0):
+        s, m = grid_scene()
+        p = dem.BeamParams(young=4e9, poisson=0.3, radius=1e-3)
+        geogrid.square_grid(s, origin=(0, 0, 0), length=0.09, width=0.09, nodes_x=10,
+                            nodes_y=10, params=p, material=m, unit_weight=981,
+                            node_density_scale=scale)
+        dts.append(s.critical_dt())
+    assert dts[1] / dts[0] == pytest.approx(10.0, rel=1e-9)
+
+
+def test_geogrid_vtk_has_links_facets_and_member_forces(tmp_path):
+    import xml.etree.ElementTree as ET
+
+    s, m = grid_scene()
+    p = dem.BeamParams(young=4e9, poisson=0.3, radius=1e-3)
+    g = geogrid.biaxial_geogrid(s, origin=(0, 0, 0), apertures_x=2, apertures_y=1, params=p,
+                                material=m, unit_weight=981)
+    path = tmp_path / "grid.vtp"
+    geogrid.write_vtk_geogrid(path, s, g)
+    piece = ET.parse(path).getroot().find("PolyData/Piece")
+    assert int(piece.get("NumberOfPoints")) == len(g.nodes)
+    assert int(piece.get("NumberOfLines")) == len(g.links)
+    assert int(piece.get("NumberOfPolys")) == len(g.pfacets)
+    names = {a.get("Name") for a in piece.find("CellData")}
+    assert {"axial_force", "member", "broken", "kind"} <= names

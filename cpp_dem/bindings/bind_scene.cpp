@@ -199,6 +199,7 @@ void bind_scene(py::module_& m) {
         d["builds"] = c.builds;
         d["pair_candidates"] = c.pair_candidates;
         d["wall_candidates"] = c.wall_candidates;
+        d["grid_candidates"] = c.grid_candidates;
         return d;
       })
       .def("contacts", &contacts_dict, "Active contacts as arrays (see docs).")

@@ -319,6 +319,7 @@ ColliderStats Scene::collider_stats() const {
   s.builds = builds_;
   s.pair_candidates = static_cast<long>(pairs_.size());
   s.wall_candidates = static_cast<long>(wall_contacts_.size());
+  s.grid_candidates = static_cast<long>(grid_contacts_.size());
   return s;
 }
 

@@ -76,6 +76,7 @@ struct ColliderStats {
   long builds = 0;          ///< number of broad-phase builds so far
   long pair_candidates = 0; ///< sphere–sphere candidate pairs in the current list
   long wall_candidates = 0; ///< sphere–wall candidates in the current list
+  long grid_candidates = 0; ///< grain–geogrid primitive candidates in the current list
 };
 
 class Scene;
