@@ -160,6 +160,24 @@ void Scene::rebuild_grid_adjacency() {
 
 // ---- broad phase for grain–geogrid contacts ----------------------------------------------------
 
+namespace {
+/// Distance from x to the segment [a, b], m.
+Real segment_distance(const Vec3& a, const Vec3& b, const Vec3& x) {
+  const Real t = std::min(std::max(segment_parameter(a, b, x), 0.0), 1.0);
+  return (x - ((1 - t) * a + t * b)).norm();
+}
+}  // namespace
+
+Real Scene::skeleton_distance(const int* nodes, int nn, const Vec3& x) const {
+  if (nn == 1) return (x - pos_[nodes[0]]).norm();
+  if (nn == 2) return segment_distance(pos_[nodes[0]], pos_[nodes[1]], x);
+  const Vec3 &a = pos_[nodes[0]], &b = pos_[nodes[1]], &c = pos_[nodes[2]];
+  const Eigen::Vector3d p = barycentric(a, b, c, x);
+  if (p.minCoeff() >= 0) return (x - (p[0] * a + p[1] * b + p[2] * c)).norm();
+  return std::min({segment_distance(a, b, x), segment_distance(b, c, x),
+                   segment_distance(c, a, x)});
+}
+
 void Scene::rebuild_grid_contacts(Real margin) {
   if (grid_topology_dirty_) rebuild_grid_adjacency();
   using Key = std::tuple<int, int, int>;  // sphere, kind, primitive
@@ -173,7 +191,12 @@ void Scene::rebuild_grid_contacts(Real margin) {
     }
     found.clear();
     grid_.query_box(lo - Vec3::Constant(rc), hi + Vec3::Constant(rc), pos_, radius_, margin, found);
-    for (int s : found) keys.emplace_back(s, static_cast<int>(kind), prim);
+    // Keep only the grains within reach of the primitive itself (not just of its box).
+    for (int s : found) {
+      const Real reach = radius_[s] + rc + margin;
+      if (skeleton_distance(nodes, nn, pos_[s]) < reach)
+        keys.emplace_back(s, static_cast<int>(kind), prim);
+    }
   };
   for (int b = 0; b < num_bodies(); ++b)
     if (kind_[b] == 1 && node_link_off_[b + 1] > node_link_off_[b])

@@ -219,6 +219,8 @@ class Scene {
   void update_phys(GridContact& c) const;
   bool has_grid() const { return !links_.empty() || num_nodes_ > 0; }
   void rebuild_grid_contacts(Real margin);
+  /// Distance from x to a node (nn 1), a link axis (nn 2) or a triangle (nn 3), m.
+  Real skeleton_distance(const int* nodes, int nn, const Vec3& x) const;
   void rebuild_grid_adjacency();
   void compute_grid_contacts(long& err_contact);
   void compute_links();
