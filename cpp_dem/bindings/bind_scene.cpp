@@ -28,11 +28,12 @@ py::dict contacts_dict(const Scene& s) {
   std::vector<int> ids;
   std::vector<Vec3> force, normal;
   std::vector<Real> overlap, fn;
-  for (const auto& c : s.pair_contacts()) {
+  for (size_t k = 0; k < s.pair_contacts().size(); ++k) {
+    const auto& c = s.pair_contacts()[k];
     if (!c.active) continue;
     ids.push_back(c.i);
     ids.push_back(c.j);
-    force.push_back(c.force);
+    force.push_back(s.pair_force(k));
     normal.push_back(c.state.normal);
     overlap.push_back(c.state.overlap);
     fn.push_back(c.state.fn);

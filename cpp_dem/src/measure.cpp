@@ -182,9 +182,9 @@ Real Scene::unbalanced_force() const {
   }
   Real sum_c = 0;
   int nc = 0;
-  for (const PairContact& c : pairs_)
-    if (c.active) {
-      sum_c += c.force.norm();
+  for (size_t k = 0; k < pairs_.size(); ++k)
+    if (pairs_[k].active) {
+      sum_c += pair_out_[k].force.norm();
       ++nc;
     }
   for (const WallContact& c : wall_contacts_)

@@ -251,6 +251,7 @@ void Scene::rebuild() {
     dropped_viscous_ += pairs_[k].state.dissip_viscous;
   }
   pairs_.swap(next);
+  pair_out_.assign(pairs_.size(), PairOutput());
   // Sphere–wall candidates: signed distance to the plane below r + margin, and the centre
   // not beyond the plane by more than r (one-sided walls ignore what is behind them).
   std::vector<WallContact> wnext;
@@ -293,8 +294,8 @@ void Scene::rebuild() {
   {
     std::vector<int> fill(pair_adj_off_.begin(), pair_adj_off_.end() - 1);
     for (int c = 0; c < static_cast<int>(pairs_.size()); ++c) {
-      pair_adj_[fill[pairs_[c].i]++] = c;
-      pair_adj_[fill[pairs_[c].j]++] = c;
+      pair_adj_[fill[pairs_[c].i]++] = 2 * c;
+      pair_adj_[fill[pairs_[c].j]++] = 2 * c + 1;
     }
   }
   wall_adj_off_.assign(n + 1, 0);
@@ -346,6 +347,7 @@ void Scene::compute_pair_forces(long& err_contact) {
 #pragma omp parallel for schedule(static) reduction(min : err) if (nc > kParallelMin)
   for (long k = 0; k < nc; ++k) {
     PairContact& c = pairs_[k];
+    PairOutput& o = pair_out_[k];
     const Vec3 d = pos_[c.j] - pos_[c.i];
     const Real dist2 = d.squaredNorm();
     const Real rsum = radius_[c.i] + radius_[c.j];
@@ -357,9 +359,7 @@ void Scene::compute_pair_forces(long& err_contact) {
         c.state.normal.setZero();
         c.state.overlap = 0;
         c.state.fn = 0;
-        c.force.setZero();
-        c.torque_i.setZero();
-        c.torque_j.setZero();
+        o = PairOutput();
       }
       continue;
     }
@@ -381,10 +381,10 @@ void Scene::compute_pair_forces(long& err_contact) {
     g.angvel_sum = angvel_[c.i] + angvel_[c.j];
     g.rel_angvel = angvel_[c.j] - angvel_[c.i];
     const LawOutput out = apply_law(c.phys, g, dt, c.state);
-    c.force = out.force2;
+    o.force = out.force2;
     // Moments, 000 eq (6): tau = (R - delta/2) n x F, plus rolling resistance.
-    c.torque_j = g.branch2.cross(out.force2) + out.moment2;
-    c.torque_i = g.branch1.cross(-out.force2) - out.moment2;
+    o.torque_j = g.branch2.cross(out.force2) + out.moment2;
+    o.torque_i = g.branch1.cross(-out.force2) - out.moment2;
   }
   err_contact = err;
 }
@@ -481,14 +481,14 @@ void Scene::reduce_and_integrate(long& err_body) {
     Vec3 f = ext_force_[b] + mass_[b] * gravity_;
     Vec3 t = ext_torque_[b];
     for (int e = pair_adj_off_[b]; e < pair_adj_off_[b + 1]; ++e) {
-      const PairContact& c = pairs_[pair_adj_[e]];
-      if (!c.active) continue;
-      if (c.j == b) {
-        f += c.force;
-        t += c.torque_j;
+      const int entry = pair_adj_[e];
+      const PairOutput& o = pair_out_[entry >> 1];  // zero when inactive
+      if (entry & 1) {
+        f += o.force;
+        t += o.torque_j;
       } else {
-        f -= c.force;
-        t += c.torque_i;
+        f -= o.force;
+        t += o.torque_i;
       }
     }
     for (int e = wall_adj_off_[b]; e < wall_adj_off_[b + 1]; ++e) {

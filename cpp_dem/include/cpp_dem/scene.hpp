@@ -39,9 +39,15 @@ struct PairContact {
   int phys_version = -1;        ///< scene phys version the phys was computed at
   ContactPhys phys;
   ContactState state;
-  Vec3 force = Vec3::Zero();    ///< force on j (i gets -force), N
-  Vec3 torque_i = Vec3::Zero(); ///< torque on i, N m
-  Vec3 torque_j = Vec3::Zero(); ///< torque on j, N m
+};
+
+/// What a sphere–sphere contact gives its two bodies in the last step, kept apart from the
+/// contact's history in a compact array so the reduction into bodies reads little memory.
+/// Zero for an inactive contact.
+struct PairOutput {
+  Vec3 force = Vec3::Zero();     ///< force on j (i gets -force), N
+  Vec3 torque_i = Vec3::Zero();  ///< torque on i, N m
+  Vec3 torque_j = Vec3::Zero();  ///< torque on j, N m
 };
 
 /// A sphere–wall contact. Side 1 = the wall, side 2 = the sphere.
@@ -203,6 +209,8 @@ class Scene {
   ColliderStats collider_stats() const;
 
   const std::vector<PairContact>& pair_contacts() const { return pairs_; }
+  /// Force on body j of pair contact k, N (zero when inactive).
+  const Vec3& pair_force(size_t k) const { return pair_out_[k].force; }
   const std::vector<WallContact>& wall_contacts() const { return wall_contacts_; }
   int num_active_contacts() const;
 
@@ -246,7 +254,9 @@ class Scene {
   std::vector<std::shared_ptr<Controller>> controllers_;
   // Contacts and their adjacency (CSR: for body b, entries adj_off[b]..adj_off[b+1]).
   std::vector<PairContact> pairs_;
+  std::vector<PairOutput> pair_out_;
   std::vector<WallContact> wall_contacts_;
+  // pair_adj_ holds 2 k + 1 when the body is j of contact k, 2 k when it is i.
   std::vector<int> pair_adj_off_, pair_adj_, wall_adj_off_, wall_adj_;
   // Geogrid.
   int num_nodes_ = 0;
