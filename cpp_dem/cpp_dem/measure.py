@@ -63,7 +63,7 @@ def love_weber_stress(scene, volume: float) -> np.ndarray:
 
     with f_c the force on the second sphere of a pair, l_c = x_j - x_i the branch vector, and
     for a sphere–wall contact f_c the force on the sphere and x_p - x_c the vector from the
-    contact point to the sphere's centre. V is the volume the stress is averaged over (m^3):
+    contact point (on the wall plane) to the sphere's centre. V is the volume the stress is averaged over (m^3):
     the box volume for a confined sample. For a sample in equilibrium it equals the average
     boundary traction; the tensor is symmetrised.
     """
@@ -81,8 +81,10 @@ def love_weber_stress(scene, volume: float) -> np.ndarray:
     wl = ~pair
     if wl.any():
         b = ids[wl, 0]
-        # Contact point = x_p - (r - delta/2) n (n: wall normal, towards the sphere).
-        arm = (r[b] - 0.5 * ov[wl])[:, None] * nrm[wl]
+        # The wall is rigid: the contact point is on the wall plane, x_p - (r - delta) n
+        # (n: the wall normal, towards the sphere), so the boundary term is exactly the
+        # wall force times the wall-to-wall distance.
+        arm = (r[b] - ov[wl])[:, None] * nrm[wl]
         s += np.einsum("ki,kj->ij", f[wl], arm)
     s /= volume
     return 0.5 * (s + s.T)
