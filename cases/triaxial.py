@@ -158,7 +158,9 @@ def run(p: Params, out: Path) -> dict:
     grow = None
     if not p.packing:
         t0 = time.perf_counter()
+        # Slow growth (1e-4 radius strain per step at most) lets the grains rearrange.
         grow = prep.grow_to_stress(sc, walls, p.cell_pressure, tol=0.05, unbalanced=0.05,
+                                   max_strain=1e-4,
                                    max_steps=200_000, callback=progress)
         log(f"expansion: {grow.steps} steps, growth factor {grow.extra['growth_factor']:.4f}, "
             f"mean stress {grow.mean_stress / 1e3:.2f} kPa, porosity {grow.porosity:.4f} "

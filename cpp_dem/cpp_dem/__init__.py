@@ -26,10 +26,17 @@ from ._core import (  # noqa: F401  (re-exported)
     set_num_threads,
 )
 from .packing import read_packing_csv, write_packing_csv  # noqa: F401
+from ._core import RadiusGrowth, ServoWall, TriaxialController  # noqa: F401  (samples)
+from .checkpoint import load_checkpoint, save_checkpoint  # noqa: F401
 from .scene import BOX_WALLS, Scene, hertz_mindlin_material, linear_material  # noqa: F401
 
 __all__ = [
     "BOX_WALLS",
+    "RadiusGrowth",
+    "ServoWall",
+    "TriaxialController",
+    "load_checkpoint",
+    "save_checkpoint",
     "read_packing_csv",
     "write_packing_csv",
     "BlowUpError",
