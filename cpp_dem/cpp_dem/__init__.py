@@ -27,6 +27,8 @@ from ._core import (  # noqa: F401  (re-exported)
     set_num_threads,
 )
 from .packing import read_packing_csv, write_packing_csv  # noqa: F401
+from ._core import RadiusGrowth, ServoWall, TriaxialController  # noqa: F401  (samples)
+from .checkpoint import load_checkpoint, save_checkpoint  # noqa: F401
 from .scene import BOX_WALLS, Scene, hertz_mindlin_material, linear_material  # noqa: F401
 
 from . import geogrid  # noqa: F401,E402
@@ -35,6 +37,11 @@ __all__ = [
     "BeamParams",
     "geogrid",
     "BOX_WALLS",
+    "RadiusGrowth",
+    "ServoWall",
+    "TriaxialController",
+    "load_checkpoint",
+    "save_checkpoint",
     "read_packing_csv",
     "write_packing_csv",
     "BlowUpError",

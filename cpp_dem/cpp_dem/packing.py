@@ -51,3 +51,143 @@ def read_packing_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
         raise ParameterError(f"{path}: no spheres")
     data = np.asarray(rows, dtype=float)
     return data[:, :3].copy(), data[:, 3].copy()
+
+
+# ---------------------------------------------------------------------------------------------
+# Generators
+# ---------------------------------------------------------------------------------------------
+
+
+def _check_box(lo, hi, r_max: float) -> tuple[np.ndarray, np.ndarray]:
+    lo_a = np.asarray(lo, dtype=float).reshape(-1)
+    hi_a = np.asarray(hi, dtype=float).reshape(-1)
+    if lo_a.shape != (3,) or hi_a.shape != (3,):
+        raise ParameterError("lo, hi: expected 3 values each (m)")
+    for a in range(3):
+        size = hi_a[a] - lo_a[a]
+        if not size > 2 * r_max:
+            raise ParameterError(f"box size along {'xyz'[a]}={size}: must be > the largest "
+                                 f"grain diameter {2 * r_max} (m)")
+    return lo_a, hi_a
+
+
+def loose_cloud(radii, lo, hi, *, seed: int = 0, max_tries: int = 2000
+                ) -> tuple[np.ndarray, np.ndarray]:
+    """A random loose cloud: spheres of the given radii (m) placed one by one, largest first,
+    at uniformly random positions inside the box [lo, hi] (m), rejecting any overlap with a
+    sphere already placed or with the box faces (random sequential addition; seeded).
+
+    Returns (centres (n, 3), radii (n,)) in placement order (largest first). Raises
+    ParameterError if the box is smaller than the largest grain, or if a sphere cannot be
+    placed in ``max_tries`` attempts (the cloud is too dense for sequential addition: solid
+    fractions above about 0.3 need a bigger box and then compaction).
+    """
+    r = np.sort(np.asarray(radii, dtype=float).reshape(-1))[::-1]
+    if len(r) == 0:
+        raise ParameterError("radii: no spheres")
+    if not np.all(np.isfinite(r)) or r[-1] <= 0:
+        raise ParameterError(f"radii: must be > 0 (m); smallest is {r[-1]}")
+    lo_a, hi_a = _check_box(lo, hi, r[0])
+    rng = np.random.default_rng(seed)
+    h = 2 * r[0]  # cell size: a sphere overlaps only spheres in its own or adjacent cells
+    ncell = np.maximum(1, np.floor((hi_a - lo_a) / h).astype(int))
+    h3 = (hi_a - lo_a) / ncell
+    cells: dict[tuple, list[int]] = {}
+    pos = np.empty((len(r), 3))
+    for k, rk in enumerate(r):
+        placed = False
+        for _ in range(max_tries):
+            x = lo_a + rk + rng.random(3) * (hi_a - lo_a - 2 * rk)
+            c = np.minimum((x - lo_a) // h3, ncell - 1).astype(int)
+            ok = True
+            for i in range(max(c[0] - 1, 0), min(c[0] + 2, ncell[0])):
+                for j in range(max(c[1] - 1, 0), min(c[1] + 2, ncell[1])):
+                    for m in range(max(c[2] - 1, 0), min(c[2] + 2, ncell[2])):
+                        lst = cells.get((i, j, m))
+                        if not lst:
+                            continue
+                        idx = np.asarray(lst)
+                        d2 = ((pos[idx] - x) ** 2).sum(1)
+                        if np.any(d2 < (r[idx] + rk) ** 2):
+                            ok = False
+                            break
+                    if not ok:
+                        break
+                if not ok:
+                    break
+            if ok:
+                pos[k] = x
+                cells.setdefault(tuple(c), []).append(k)
+                placed = True
+                break
+        if not placed:
+            solid = float(np.sum(4.0 / 3.0 * np.pi * r**3) / np.prod(hi_a - lo_a))
+            raise ParameterError(f"loose_cloud: could not place sphere {k} (r={rk}) in "
+                                 f"{max_tries} tries; the spheres fill {solid:.3f} of the box "
+                                 "(random sequential addition jams above about 0.3); use a "
+                                 "bigger box or smaller radii, then compact")
+    return pos, r.copy()
+
+
+def hex_packing(lo, hi, radius: float, *, gap: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
+    """Regular hexagonal close packing of equal spheres inside the box [lo, hi] (m), as Yade's
+    ``pack.regularHexa(pack.inParallelepiped(...), radius, gap)`` (001 App. A): layers in z
+    stacked ABAB, spacing 2 radius + gap (m). Every sphere lies fully inside the box.
+    Returns (centres (n, 3), radii (n,))."""
+    if not (np.isfinite(radius) and radius > 0):
+        raise ParameterError(f"radius={radius}: must be > 0 (m)")
+    if not (np.isfinite(gap) and gap >= 0):
+        raise ParameterError(f"gap={gap}: must be >= 0 (m)")
+    lo_a, hi_a = _check_box(lo, hi, radius)
+    a = 2 * radius + gap
+    dy = a * np.sqrt(3) / 2
+    dz = a * np.sqrt(2.0 / 3.0)
+    pts = []
+    k = 0
+    while True:
+        z = lo_a[2] + radius + k * dz
+        if z > hi_a[2] - radius + 1e-12 * a:
+            break
+        # Layer B is shifted by (a/2, dy/3) (hcp stacking).
+        ox, oy = (0.5 * a, dy / 3.0) if k % 2 else (0.0, 0.0)
+        j = 0
+        while True:
+            y = lo_a[1] + radius + oy + j * dy
+            if y > hi_a[1] - radius + 1e-12 * a:
+                break
+            x0 = lo_a[0] + radius + ox + (0.5 * a if j % 2 else 0.0)
+            xs = np.arange(x0, hi_a[0] - radius + 1e-12 * a, a)
+            pts.extend((x, y, z) for x in xs)
+            j += 1
+        k += 1
+    if not pts:
+        raise ParameterError("hex_packing: no sphere fits in the box")
+    c = np.asarray(pts, dtype=float)
+    return c, np.full(len(c), float(radius))
+
+
+def gravity_deposition(radii, lo, hi, *, material, seed: int = 0, gravity: float = 9.81,
+                       local_damping: float = 0.3, max_time: float = 2.0,
+                       settled_speed: float = 1e-3, check_every: int = 500,
+                       dt_safety: float = 0.3) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Deposits the spheres into the box [lo, hi] (m) under gravity (-z): a loose cloud
+    (``loose_cloud``) in the box settles until max |v| < ``settled_speed`` (m/s) or
+    ``max_time`` (s). ``material`` is a cpp_dem.Material. Returns (centres, radii, info) with
+    info: time (s), steps, settled (bool), max_speed (m/s)."""
+    from .scene import Scene
+
+    c, r = loose_cloud(radii, lo, hi, seed=seed)
+    s = Scene(gravity=(0.0, 0.0, -gravity), local_damping=local_damping)
+    m = s.add_material(material)
+    s.add_box(lo, hi, material=m)
+    s.add_spheres(c, r, material=m)
+    s.set_auto_timestep(safety=dt_safety, period=100)
+    vmax = float("inf")
+    while s.time < max_time:
+        s.run(check_every)
+        vmax = float(np.sqrt((s.velocities**2).sum(1).max()))
+        if vmax < settled_speed and s.time > 0.05:
+            break
+    info = {"time": s.time, "steps": s.step_count, "settled": vmax < settled_speed,
+            "max_speed": vmax}
+    return s.positions, s.radii, info

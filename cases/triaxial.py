@@ -1,0 +1,342 @@
+#!/usr/bin/env python3
+"""Drained triaxial test of a granular sample in a box (001 chapter 6 and Appendix B).
+
+Axis z is the axial axis (the 0.6 m side of the default 0.3 x 0.3 x 0.6 m box); x and y are
+the lateral axes held at the cell pressure. Six frictionless, servo-controlled walls.
+
+Stages: (0) sample: radii from the App. B sieve curve (by mass; truncated below d_min so the
+box holds about --n grains, see docs/triaxial.md), a random loose cloud, radius expansion to
+the cell pressure at the preparation friction (--prep-friction, App. B's compFricDegree);
+(1) isotropic: servo walls to the cell pressure until all axis stresses are within 1 % and
+the unbalanced force is below 0.01, at the contact friction --phi; (2) deviatoric: the z
+walls move at a constant axial strain rate with the x and y stresses held, until
+--stop-strain. With --packing CSV (x,y,z,r) the given spheres are used in the box they span
+and the run starts at stage (1).
+
+Outputs in --out: triaxial.h5 (series + final snapshot), triaxial.csv (columns
+axial_strain, volumetric_strain, deviatoric_stress, ...), triaxial.png (eps_v-eps_a,
+q-eps_a, eps_v-time), isotropic.h5 (checkpoint after stage 1), packing_isotropic.csv,
+vtk/ (spheres and box at the end of each stage), summary.json. SI units; stresses and
+strains compression positive; q = sigma_z - (sigma_x + sigma_y) / 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+import cpp_dem as dem
+from cpp_dem import measure, prep, psd
+from cpp_dem.checkpoint import save_checkpoint
+from cpp_dem.output import CsvRecorder, H5Recorder, write_vtk_box, write_vtk_spheres
+from cpp_dem.packing import loose_cloud
+from cpp_dem.triaxial import build_box_sample, deviatoric_stage, isotropic_stage
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+@dataclass
+class Params:
+    """Parameters of the triaxial case (SI)."""
+
+    n: int = 15000                   #: target number of grains, -
+    box: tuple = (0.3, 0.3, 0.6)     #: box x, y, z (axial), m
+    seed: int = 1                    #: RNG seed, -
+    young: float = 4.5e6             #: E of the linear law, Pa (001 §6, App. B)
+    poisson: float = 0.33            #: k_s / k_n of the linear law, - (App. B)
+    phi: float = 32.0                #: contact friction angle, deg (App. B finalFricDegree)
+    prep_friction: float = 32.0      #: friction during the expansion, deg (compFricDegree)
+    density: float = 2650.0          #: grain density, kg/m^3
+    damping: float = 0.2             #: Cundall local damping, - (App. B damp)
+    cell_pressure: float = 75e3      #: Pa (001 §6)
+    strain_rate: float = 0.1         #: axial strain rate, 1/s
+    stop_strain: float = 0.15        #: axial strain at which to stop, -
+    solid_fraction: float = 0.6      #: assumed solid fraction to size the PSD truncation, -
+    cloud_fraction: float = 0.25     #: solid fraction of the initial cloud, -
+    dt_safety: float = 0.5           #: dt = safety x critical_dt, -
+    record_every: int = 100          #: steps between records, -
+    threads: int = 0                 #: OpenMP threads (0: library default)
+    packing: str = ""                #: CSV packing to start from ('' = generate)
+
+
+SMOKE = dict(n=300, strain_rate=0.5, stop_strain=0.04, record_every=50)
+
+
+def smoke_box(p: Params) -> tuple:
+    """The box scaled with the grain count (grain sizes kept): (n / 15000)^(1/3) x 0.3 ..."""
+    f = (p.n / 15000.0) ** (1.0 / 3.0)
+    return tuple(float(x * f) for x in (0.3, 0.3, 0.6))
+
+
+def make_sample(p: Params, log) -> tuple:
+    """Centres, radii and the box (lo, hi) of the sample; info about the PSD."""
+    if p.packing:
+        c, r = dem.read_packing_csv(p.packing)
+        lo = (c - r[:, None]).min(0)
+        hi = (c + r[:, None]).max(0)
+        log(f"packing {p.packing}: {len(r)} spheres, box {np.round(hi - lo, 4)} m")
+        return c, r, lo, hi, {"source": str(p.packing)}
+    box = np.asarray(p.box, float)
+    vol_solid = p.solid_fraction * float(np.prod(box))
+    d, pc, d_min = psd.fit_psd_to_count(psd.APPENDIX_B_SIZES, psd.APPENDIX_B_PASSING, p.n,
+                                        vol_solid, by="mass", method="truncate")
+    n = int(round(psd.expected_count(d, pc, vol_solid, by="mass")))
+    radii = psd.radii_from_psd(d, pc, n, by="mass", seed=p.seed)
+    shrink = (p.cloud_fraction / p.solid_fraction) ** (1.0 / 3.0)
+    c, r = loose_cloud(radii * shrink, (0, 0, 0), box, seed=p.seed)
+    log(f"PSD: App. B by mass, fines below d_min = {d_min * 1e3:.2f} mm removed -> {n} grains,"
+        f" d = {2 * radii.min() * 1e3:.1f}-{2 * radii.max() * 1e3:.1f} mm; cloud at radii x "
+        f"{shrink:.3f}")
+    return c, r, np.zeros(3), box, {"d_min_m": d_min, "sizes_m": d.tolist(),
+                                     "passing_mass": pc.tolist(), "cloud_shrink": shrink}
+
+
+def plot(rows: dict, png: Path, p: Params) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 3, figsize=(14, 4.2))
+    ea = 100 * rows["axial_strain"]
+    ax[0].plot(ea, 100 * rows["volumetric_strain"])
+    ax[0].set_xlabel("axial strain (%)")
+    ax[0].set_ylabel("volumetric strain (%, compression +)")
+    ax[1].plot(ea, rows["deviatoric_stress"] / 1e3)
+    ax[1].set_xlabel("axial strain (%)")
+    ax[1].set_ylabel("q = sigma_z - (sigma_x + sigma_y)/2 (kPa)")
+    ax[2].plot(rows["time"], 100 * rows["volumetric_strain"])
+    ax[2].set_xlabel("time in the deviatoric stage (s)")
+    ax[2].set_ylabel("volumetric strain (%)")
+    for a in ax:
+        a.grid(alpha=0.3)
+    fig.suptitle(f"Triaxial test, cell pressure {p.cell_pressure / 1e3:g} kPa, "
+                 f"E = {p.young / 1e6:g} MPa, phi = {p.phi:g} deg")
+    fig.tight_layout()
+    fig.savefig(png, dpi=110)
+    plt.close(fig)
+
+
+SERIES = {"time": (None, "s"), "step": (None, "-"), "axial_strain": (None, "-"),
+          "volumetric_strain": (None, "-"), "deviatoric_stress": (None, "Pa"),
+          "mean_stress": (None, "Pa"), "sigma_x": (None, "Pa"), "sigma_y": (None, "Pa"),
+          "sigma_z": (None, "Pa"), "porosity": (None, "-"), "unbalanced_force": (None, "-")}
+
+
+def run(p: Params, out: Path) -> dict:
+    t_start = time.perf_counter()
+    if p.threads > 0:
+        dem.set_num_threads(p.threads)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "vtk").mkdir(exist_ok=True)
+
+    def log(msg: str) -> None:
+        print(f"[triaxial] {msg}", flush=True)
+
+    c, r, lo, hi, psd_info = make_sample(p, log)
+    sample = build_box_sample(c, r, lo, hi, young=p.young, poisson=p.poisson,
+                              friction_deg=p.prep_friction if not p.packing else p.phi,
+                              density=p.density, local_damping=p.damping,
+                              dt_safety=p.dt_safety)
+    sc, walls = sample.scene, sample.walls
+    log(f"{sc.num_bodies} grains, box {np.round(measure.box_size(sc, walls), 4)} m, "
+        f"{dem.get_num_threads()} threads, dt {sc.dt:.3g} s")
+
+    def progress(s) -> None:
+        if s.step_count % 2000 == 0:
+            ax = measure.axis_stresses(s, walls)
+            log(f"step {s.step_count}: axis stresses {np.round(ax / 1e3, 2)} kPa, unbalanced "
+                f"{s.unbalanced_force():.3g}, porosity {measure.porosity(s, walls):.4f}")
+
+    grow = None
+    if not p.packing:
+        t0 = time.perf_counter()
+        # Slow growth (1e-4 radius strain per step at most) lets the grains rearrange.
+        grow = prep.grow_to_stress(sc, walls, p.cell_pressure, tol=0.05, unbalanced=0.05,
+                                   max_strain=1e-4,
+                                   max_steps=200_000, callback=progress)
+        log(f"expansion: {grow.steps} steps, growth factor {grow.extra['growth_factor']:.4f}, "
+            f"mean stress {grow.mean_stress / 1e3:.2f} kPa, porosity {grow.porosity:.4f} "
+            f"({time.perf_counter() - t0:.1f} s)")
+        if p.prep_friction != p.phi:
+            prep.set_friction(sc, np.arange(sc.num_bodies), sc.material(sample.material), p.phi)
+    t0 = time.perf_counter()
+    iso = isotropic_stage(sample, p.cell_pressure, callback=progress)
+    t_iso = time.perf_counter() - t0
+    if not iso.converged:
+        raise SystemExit(f"error: isotropic stage did not converge in {iso.steps} steps "
+                         f"(axis stresses {iso.axis_stresses} Pa, unbalanced "
+                         f"{iso.unbalanced_force:.3g})")
+    log(f"isotropic: {iso.steps} steps, axis stresses {np.round(iso.axis_stresses / 1e3, 3)} "
+        f"kPa, unbalanced {iso.unbalanced_force:.4f}, porosity {iso.porosity:.4f} "
+        f"({t_iso:.1f} s)")
+    state_iso = measure.sample_state(sc, walls)
+    save_checkpoint(out / "isotropic.h5", sc, extra={"walls": list(walls)})
+    dem.write_packing_csv(out / "packing_isotropic.csv", sc.positions, sc.radii)
+    write_vtk_spheres(out / "vtk" / "spheres_isotropic.vtp", sc)
+    size = measure.box_size(sc, walls)
+    lo_now = np.array([sc.wall_positions[walls[2 * a]] for a in range(3)])
+    write_vtk_box(out / "vtk" / "box_isotropic.vtp", lo_now, lo_now + size)
+
+    meta = {**asdict(p), "case": "triaxial", "axial_axis": "z", "psd": psd_info,
+            "units": "SI; stresses and strains compression positive"}
+    h5 = H5Recorder(out / "triaxial.h5", series=SERIES, metadata=meta, overwrite=True,
+                    snapshot_fields=("positions", "velocities", "radii"))
+    csv = CsvRecorder(out / "triaxial.csv", series=SERIES, overwrite=True)
+    last = [time.perf_counter()]
+
+    def on_record(row: dict) -> None:
+        h5.record(**row)
+        csv.record(**row)
+        if time.perf_counter() - last[0] > 5:
+            last[0] = time.perf_counter()
+            log(f"eps_a {100 * row['axial_strain']:.2f} %  eps_v "
+                f"{100 * row['volumetric_strain']:.3f} %  q {row['deviatoric_stress'] / 1e3:.2f}"
+                f" kPa  sigma_x,y {row['sigma_x'] / 1e3:.2f},{row['sigma_y'] / 1e3:.2f} kPa")
+
+    t0 = time.perf_counter()
+    steps0 = sc.step_count
+    try:
+        rows = deviatoric_stage(sample, p.cell_pressure, p.strain_rate, p.stop_strain,
+                                record_every=p.record_every, on_record=on_record)
+        h5.snapshot(sc)
+    finally:
+        h5.close()
+        csv.close()
+    t_dev = time.perf_counter() - t0
+    dev_steps = sc.step_count - steps0
+    write_vtk_spheres(out / "vtk" / "spheres_final.vtp", sc)
+    plot(rows, out / "triaxial.png", p)
+
+    ea = rows["axial_strain"]
+    late = ea > 0.2 * p.stop_strain  # lateral hold measured once loading is under way
+    lat = np.concatenate([rows["sigma_x"][late], rows["sigma_y"][late]])
+    k_peak = int(np.argmax(rows["deviatoric_stress"]))
+    q_peak = float(rows["deviatoric_stress"][k_peak])
+    s_peak = q_peak + p.cell_pressure
+    summary = {
+        "num_grains": sc.num_bodies, "axial_axis": "z",
+        "porosity_isotropic": iso.porosity,
+        "isotropic_axis_stresses_Pa": iso.axis_stresses.tolist(),
+        "isotropic_unbalanced": iso.unbalanced_force,
+        "isotropic_love_weber_Pa": np.diag(state_iso["love_weber"]).tolist(),
+        "coordination_isotropic": state_iso["coordination"],
+        "coordination_mechanical_isotropic": state_iso["coordination_mechanical"],
+        "q_peak_Pa": q_peak, "axial_strain_at_peak": float(ea[k_peak]),
+        "friction_angle_peak_deg": math.degrees(math.asin((s_peak - p.cell_pressure) /
+                                                          (s_peak + p.cell_pressure))),
+        "volumetric_strain_final": float(rows["volumetric_strain"][-1]),
+        "volumetric_strain_min": float(rows["volumetric_strain"].min()),
+        "lateral_stress_max_rel_error": float(np.max(np.abs(lat / p.cell_pressure - 1)))
+        if lat.size else float("nan"),
+        "deviatoric_steps": dev_steps,
+        "wall_time_isotropic_s": t_iso, "wall_time_deviatoric_s": t_dev,
+        "particle_steps_per_s_deviatoric": sc.num_bodies * dev_steps / t_dev,
+        "wall_time_total_s": time.perf_counter() - t_start,
+        "expansion_growth_factor": grow.extra["growth_factor"] if grow else None,
+        "threads": dem.get_num_threads(),
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    log(f"peak q {q_peak / 1e3:.2f} kPa at eps_a {100 * ea[k_peak]:.2f} % (mobilised friction "
+        f"{summary['friction_angle_peak_deg']:.1f} deg); final eps_v "
+        f"{100 * summary['volumetric_strain_final']:.3f} %; lateral stress within "
+        f"{100 * summary['lateral_stress_max_rel_error']:.2f} % of the cell pressure")
+    log(f"wall time: isotropic {t_iso:.1f} s, deviatoric {t_dev:.1f} s ({dev_steps} steps, "
+        f"{summary['particle_steps_per_s_deviatoric']:.3g} particle-steps/s), total "
+        f"{summary['wall_time_total_s']:.1f} s")
+    return summary
+
+
+def _positive(name: str, ap):
+    def conv(s: str) -> float:
+        try:
+            v = float(s)
+        except ValueError:
+            ap.error(f"{name}={s!r}: not a number")
+        if not (math.isfinite(v) and v > 0):
+            ap.error(f"{name}={v}: must be > 0")
+        return v
+    return conv
+
+
+def parse_args(argv=None) -> tuple[Params, Path]:
+    ap = argparse.ArgumentParser(
+        description="Triaxial test (001 ch. 6, App. B). The AXIAL axis is z; x and y are "
+                    "held at the cell pressure. Stresses and strains compression positive.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    d = Params()
+    ap.add_argument("--smoke", action="store_true",
+                    help=f"test-sized run: {SMOKE['n']} grains in a box scaled down with the "
+                         "count, faster loading, stop at 4 %% axial strain")
+    ap.add_argument("--out", type=Path, default=ROOT / "results" / "triaxial",
+                    help="output directory")
+    ap.add_argument("--packing", type=str, default="",
+                    help="CSV x,y,z,r (m): start from these spheres in the box they span")
+    ap.add_argument("--n", type=int, default=None, help="target number of grains (default "
+                    f"{d.n}; the box is scaled with it when != {d.n})")
+    ap.add_argument("--cell-pressure", type=_positive("--cell-pressure", ap),
+                    default=d.cell_pressure, help="cell (confining) pressure, Pa, > 0")
+    ap.add_argument("--strain-rate", type=_positive("--strain-rate", ap), default=None,
+                    help=f"axial strain rate, 1/s (default {d.strain_rate})")
+    ap.add_argument("--stop-strain", type=float, default=None,
+                    help=f"axial strain to stop at, - (default {d.stop_strain})")
+    ap.add_argument("--damping", type=float, default=d.damping, help="local damping, [0, 1)")
+    ap.add_argument("--young", "--E", dest="young", type=_positive("--young", ap),
+                    default=d.young, help="Young's modulus of the grains, Pa")
+    ap.add_argument("--poisson", "--nu", dest="poisson", type=float, default=d.poisson,
+                    help="k_s/k_n of the linear law, (0, 0.5]")
+    ap.add_argument("--phi", type=float, default=d.phi, help="contact friction angle, deg")
+    ap.add_argument("--prep-friction", type=float, default=None,
+                    help="friction during sample expansion, deg (default = --phi; 0 gives a "
+                         "dense sample)")
+    ap.add_argument("--density", type=_positive("--density", ap), default=d.density,
+                    help="grain density, kg/m^3")
+    ap.add_argument("--seed", type=int, default=d.seed)
+    ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: default)")
+    a = ap.parse_args(argv)
+    p = Params(**SMOKE) if a.smoke else Params()
+    if a.n is not None:
+        if a.n < 10:
+            ap.error(f"--n={a.n}: must be >= 10")
+        p.n = a.n
+    if p.n != 15000:
+        p.box = smoke_box(p)
+    p.cell_pressure, p.damping, p.young, p.poisson = (a.cell_pressure, a.damping, a.young,
+                                                       a.poisson)
+    p.phi, p.density, p.seed, p.threads = a.phi, a.density, a.seed, a.threads
+    p.prep_friction = a.prep_friction if a.prep_friction is not None else a.phi
+    if a.strain_rate is not None:
+        p.strain_rate = a.strain_rate
+    if a.stop_strain is not None:
+        p.stop_strain = a.stop_strain
+    if not (0 < p.stop_strain < 0.5):
+        ap.error(f"--stop-strain={p.stop_strain}: must be in (0, 0.5)")
+    if not (0 <= p.damping < 1):
+        ap.error(f"--damping={p.damping}: must be in [0, 1)")
+    if not (0 < p.poisson <= 0.5):
+        ap.error(f"--poisson={p.poisson}: must be in (0, 0.5] for the linear law")
+    for name, v in (("--phi", p.phi), ("--prep-friction", p.prep_friction)):
+        if not (0 <= v < 90):
+            ap.error(f"{name}={v}: must be in [0, 90) deg")
+    if a.packing:
+        if not Path(a.packing).is_file():
+            ap.error(f"--packing={a.packing}: no such file")
+        p.packing = a.packing
+    return p, a.out
+
+
+def main(argv=None) -> int:
+    p, out = parse_args(argv)
+    run(p, out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

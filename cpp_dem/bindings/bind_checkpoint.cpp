@@ -1,0 +1,20 @@
+// Binding of the exact checkpoint (checkpoint.hpp): bytes in, bytes out.
+#include "convert.hpp"
+#include "cpp_dem/checkpoint.hpp"
+
+namespace cpp_dem::bind {
+
+void bind_checkpoint(py::module_& m) {
+  m.def("_checkpoint_save", [](const Scene& s) {
+    const auto blob = Checkpoint::save(s);
+    return py::bytes(reinterpret_cast<const char*>(blob.data()), blob.size());
+  }, py::arg("scene"), "The whole state of a scene and of its controllers as bytes.");
+  m.def("_checkpoint_load", [](Scene& s, py::bytes data) {
+    const std::string str = data;
+    std::vector<std::uint8_t> blob(str.begin(), str.end());
+    Checkpoint::load(s, blob);
+  }, py::arg("scene"), py::arg("blob"),
+     "Restores bytes from _checkpoint_save into a scene holding the same controllers.");
+}
+
+}  // namespace cpp_dem::bind

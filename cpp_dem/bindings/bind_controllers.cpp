@@ -1,0 +1,118 @@
+// Bindings of the sample controllers (controllers.hpp). Type conversion only.
+#include <pybind11/stl.h>
+
+#include "convert.hpp"
+#include "cpp_dem/controllers.hpp"
+
+namespace cpp_dem::bind {
+
+namespace {
+py::array_t<double> vec3_np(const Vec3& v) { return vec3_array({v}).attr("reshape")(3); }
+}  // namespace
+
+void bind_controllers(py::module_& m) {
+  py::class_<Controller, std::shared_ptr<Controller>>(m, "Controller",
+      "Base of the controllers the step loop runs every `period` steps (before the forces).")
+      .def_readwrite("period", &Controller::period, "Steps between calls, >= 1.")
+      .def_readwrite("enabled", &Controller::enabled);
+
+  // Scene.add_controller lives here (the Controller type is bound in this file).
+  py::object scene_cls = py::type::of<Scene>();
+  scene_cls.attr("add_controller") = py::cpp_function(
+      [](Scene& s, std::shared_ptr<Controller> c) { return s.add_controller(std::move(c)); },
+      py::name("add_controller"), py::is_method(scene_cls), py::arg("controller"),
+      "Adds a controller (run every controller.period steps, before the forces, in the order "
+      "added); returns its index. The scene keeps it alive.");
+  scene_cls.attr("num_controllers") = py::cpp_function(
+      [](const Scene& s) { return s.num_controllers(); }, py::name("num_controllers"),
+      py::is_method(scene_cls), "Number of controllers.");
+
+  m.def("servo_speed", &servo_speed, py::arg("sigma_target"), py::arg("sigma"), py::arg("area"),
+        py::arg("stiffness"), py::arg("dt"), py::arg("period"), py::arg("gain"),
+        py::arg("max_speed"),
+        "Servo wall speed along the inward normal, m/s: gain (sigma_target - sigma) area / "
+        "(stiffness dt period), capped to +-max_speed (stresses Pa, area m^2, stiffness N/m).");
+
+  py::class_<ServoWall, Controller, std::shared_ptr<ServoWall>>(m, "ServoWall", R"doc(
+One wall driven to a target normal stress (Pa, compressive positive) by its velocity.
+
+Each call sets the wall velocity along its inward normal to
+gain (sigma_target - sigma) A / (k dt period), k the summed normal stiffness of the wall's
+contacts (N/m), capped to +-max_speed (m/s). A is `area` (m^2), or the current box face area
+when `box_walls` (the six walls of Scene.add_box) are given.
+)doc")
+      .def(py::init<int, Real, Real, Real, Real, std::vector<int>>(), py::kw_only(),
+           py::arg("wall"), py::arg("target_stress"), py::arg("area") = 0.0,
+           py::arg("gain") = 0.5, py::arg("max_speed"), py::arg("box_walls") = std::vector<int>{})
+      .def_property("target_stress", &ServoWall::target_stress, &ServoWall::set_target_stress,
+                    "Target normal stress, Pa (compressive positive).")
+      .def_property("max_speed", &ServoWall::max_speed, &ServoWall::set_max_speed,
+                    "Velocity cap, m/s.")
+      .def_property("gain", &ServoWall::gain, &ServoWall::set_gain, "Gain alpha in (0, 1].")
+      .def_property_readonly("wall", &ServoWall::wall)
+      .def_property_readonly("area", &ServoWall::area, "Area at the last call, m^2.")
+      .def_property_readonly("measured_stress", &ServoWall::measured_stress,
+                             "Stress at the last call, Pa.")
+      .def_property_readonly("stiffness", &ServoWall::stiffness,
+                             "Summed contact normal stiffness at the last call, N/m.");
+
+  py::class_<TriaxialController, Controller, std::shared_ptr<TriaxialController>> tc(
+      m, "TriaxialController", R"doc(
+Per-axis control of a box of six walls (order x-, x+, y-, y+, z-, z+): stress control (both
+walls of the axis servo to a normal stress, Pa, compressive positive, with the face area
+recomputed from the current box) or strain-rate control (both walls move inwards at
+rate L0 / 2, rate in 1/s, compression positive). Strains are engineering (L0 - L) / L0,
+compression positive, from the box size when the controller first ran (or reset_strain).
+)doc");
+  tc.def(py::init<std::vector<int>, Real, Real>(), py::kw_only(), py::arg("walls"),
+         py::arg("gain") = 0.5, py::arg("max_speed"))
+      .def("set_stress", &TriaxialController::set_stress, py::arg("axis"), py::arg("stress"))
+      .def("set_strain_rate", &TriaxialController::set_strain_rate, py::arg("axis"),
+           py::arg("rate"))
+      .def("mode", [](const TriaxialController& c, int a) {
+        return c.mode(a) == TriaxialController::Mode::Stress ? "stress" : "strain_rate";
+      }, py::arg("axis"))
+      .def("goal", &TriaxialController::goal, py::arg("axis"),
+           "Target stress (Pa) or strain rate (1/s) of the axis.")
+      .def_property("max_speed", &TriaxialController::max_speed,
+                    &TriaxialController::set_max_speed, "Velocity cap of the servo, m/s.")
+      .def_property("gain", &TriaxialController::gain, &TriaxialController::set_gain)
+      .def_property_readonly("walls", &TriaxialController::walls)
+      .def("strains", [](const TriaxialController& c, const Scene& s) {
+        return vec3_np(c.strains(s));
+      }, py::arg("scene"), "Engineering strains per axis, -, compression positive.")
+      .def_property_readonly("reference_lengths", [](const TriaxialController& c) {
+        return vec3_np(c.reference_lengths());
+      }, "Box size at zero strain, m.")
+      .def("reset_strain", &TriaxialController::reset_strain, py::arg("scene"))
+      .def_static("box_size", [](const Scene& s, const std::vector<int>& w) {
+        return vec3_np(TriaxialController::box_size(s, w));
+      }, py::arg("scene"), py::arg("walls"), "Box dimensions from the six walls, m.")
+      .def_static("wall_stresses", [](const Scene& s, const std::vector<int>& w) {
+        auto st = TriaxialController::wall_stresses(s, w);
+        return real_array(std::vector<Real>(st.begin(), st.end()));
+      }, py::arg("scene"), py::arg("walls"),
+         "Normal stresses of the six walls, Pa (compressive positive), current areas.")
+      .def_static("axis_stresses", [](const Scene& s, const std::vector<int>& w) {
+        return vec3_np(TriaxialController::axis_stresses(s, w));
+      }, py::arg("scene"), py::arg("walls"), "Per-axis mean wall stress, Pa.");
+
+  py::class_<RadiusGrowth, Controller, std::shared_ptr<RadiusGrowth>>(m, "RadiusGrowth", R"doc(
+Radius growth under stress control (001 §4.3.1; the expansion of REFD, 000 §2.3): each call
+multiplies the radii by m = 1 + gain (sigma_t - sigma) / S, sigma the mean stress of the six
+box walls (Pa), S = (1/V) sum_c k_n l_c^2 (Pa) from the current contacts; m is capped to
+[1 - max_strain, 1 + max_strain]. Masses follow the radii.
+)doc")
+      .def(py::init<std::vector<int>, std::vector<int>, Real, Real, Real>(), py::kw_only(),
+           py::arg("walls"), py::arg("bodies") = std::vector<int>{}, py::arg("target_stress"),
+           py::arg("gain") = 0.5, py::arg("max_strain") = 1e-3)
+      .def_property("target_stress", &RadiusGrowth::target_stress,
+                    &RadiusGrowth::set_target_stress, "Target mean wall stress, Pa.")
+      .def_property_readonly("measured_stress", &RadiusGrowth::measured_stress,
+                             "Mean wall stress at the last call, Pa.")
+      .def_property_readonly("total_factor", &RadiusGrowth::total_factor,
+                             "Product of the multipliers applied so far, -.")
+      .def_property_readonly("last_factor", &RadiusGrowth::last_factor);
+}
+
+}  // namespace cpp_dem::bind

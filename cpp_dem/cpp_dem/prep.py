@@ -1,0 +1,193 @@
+"""Sample preparation in a box of six walls: isotropic compaction by servo walls, radius
+expansion under stress control (001 §4.3.1), and REFD (radius expansion – friction decrease,
+000 §2.3). Stresses Pa (compressive positive); ``walls`` in the order of ``Scene.add_box``.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from . import _core, measure
+from ._core import Material, ParameterError
+
+
+def default_max_speed(scene, walls, fraction: float = 1e-4) -> float:
+    """A velocity cap for servo walls, m/s: each wall may move ``fraction`` of the mean
+    radius per step (quasi-static: far below the grains' elastic wave speed)."""
+    r = float(np.mean(scene.radii))
+    return fraction * r / scene.dt
+
+
+def _check_target(stress: float, field_name: str = "stress") -> None:
+    if not (math.isfinite(stress) and stress > 0):
+        raise ParameterError(f"{field_name}={stress}: must be > 0 (Pa, compressive positive; "
+                             "a confining stress pushes the walls onto the sample)")
+
+
+def _stable(scene, walls, targets, tol: float, unb: float) -> tuple[bool, np.ndarray, float]:
+    ax = measure.axis_stresses(scene, walls)
+    u = float(scene.unbalanced_force())
+    ok = bool(np.all(np.abs(ax - targets) <= tol * np.abs(targets))) and u < unb
+    return ok, ax, u
+
+
+@dataclass
+class StageResult:
+    """What a preparation stage achieved."""
+
+    converged: bool
+    steps: int
+    axis_stresses: np.ndarray          #: Pa
+    mean_stress: float                 #: Pa
+    unbalanced_force: float            #: -
+    porosity: float                    #: -
+    extra: dict = field(default_factory=dict)
+
+
+def set_friction(scene, bodies, material: Material, friction_angle_deg: float) -> int:
+    """Gives ``bodies`` a copy of ``material`` with another friction angle (deg); returns the
+    new material index. Contacts remix their parameters at the next step (the stored shear
+    forces are capped by the new Coulomb limit)."""
+    m = Material(model=material.model, density=material.density, young=material.young,
+                 poisson=material.poisson, friction_angle_deg=friction_angle_deg,
+                 damping_normal=material.damping_normal, damping_shear=material.damping_shear,
+                 rolling_stiffness=material.rolling_stiffness,
+                 rolling_friction=material.rolling_friction)
+    idx = scene.add_material(m)
+    for b in np.asarray(bodies, dtype=int):
+        scene.set_body_material(int(b), idx)
+    return idx
+
+
+def compact_isotropic(scene, walls, stress: float, *, controller=None, tol: float = 0.01,
+                      unbalanced: float = 0.01, check_every: int = 200,
+                      max_steps: int = 200_000, gain: float = 0.5,
+                      max_speed: float | None = None, callback=None) -> StageResult:
+    """Servo walls to an isotropic ``stress`` (Pa) until every axis stress is within ``tol``
+    (relative) of it and the unbalanced force is below ``unbalanced``. Uses (or adds) a
+    TriaxialController; returns a StageResult (``extra['controller']`` the controller)."""
+    _check_target(stress)
+    if controller is None:
+        controller = _core.TriaxialController(
+            walls=list(walls), gain=gain,
+            max_speed=max_speed if max_speed is not None else default_max_speed(scene, walls))
+        scene.add_controller(controller)
+    for a in range(3):
+        controller.set_stress(a, stress)
+    controller.enabled = True
+    targets = np.full(3, float(stress))
+    start = scene.step_count
+    ok, ax, u = False, None, float("nan")
+    while scene.step_count - start < max_steps:
+        scene.run(check_every)
+        ok, ax, u = _stable(scene, walls, targets, tol, unbalanced)
+        if callback is not None:
+            callback(scene)
+        if ok:
+            break
+    return StageResult(ok, scene.step_count - start, ax, float(ax.mean()), u,
+                       measure.porosity(scene, walls), {"controller": controller})
+
+
+def grow_to_stress(scene, walls, stress: float, *, tol: float = 0.01, unbalanced: float = 0.01,
+                   gain: float = 0.5, max_strain: float = 1e-3, period: int = 1,
+                   check_every: int = 200, max_steps: int = 200_000, bodies=(),
+                   callback=None) -> StageResult:
+    """Radius expansion with fixed walls until the mean wall stress is within ``tol`` of
+    ``stress`` (Pa) and the unbalanced force is below ``unbalanced`` (001 §4.3.1). The
+    RadiusGrowth controller is removed from duty (disabled) at the end."""
+    _check_target(stress)
+    for w in walls:
+        scene.set_wall_velocity(int(w), (0.0, 0.0, 0.0))
+    g = _core.RadiusGrowth(walls=list(walls), bodies=list(bodies), target_stress=stress,
+                           gain=gain, max_strain=max_strain)
+    g.period = period
+    scene.add_controller(g)
+    start = scene.step_count
+    ok, u, mean = False, float("nan"), float("nan")
+    while scene.step_count - start < max_steps:
+        scene.run(check_every)
+        mean = float(measure.wall_stresses(scene, walls).mean())
+        u = float(scene.unbalanced_force())
+        if callback is not None:
+            callback(scene)
+        if abs(mean - stress) <= tol * stress and u < unbalanced:
+            ok = True
+            break
+    g.enabled = False
+    return StageResult(ok, scene.step_count - start, measure.axis_stresses(scene, walls), mean,
+                       u, measure.porosity(scene, walls),
+                       {"growth_factor": g.total_factor, "controller": g})
+
+
+@dataclass
+class RefdResult:
+    """Outcome of REFD: achieved stress (Pa), porosity (-), the friction angle (deg) at which
+    the target porosity was reached, and the stages."""
+
+    stress: float
+    porosity: float
+    friction_deg_reached: float
+    steps: int
+    stages: list
+
+
+def refd(scene, walls, material_id: int, *, stress: float, porosity: float,
+         friction_steps_deg=(20.0, 10.0, 5.0, 2.0, 0.0), tol: float = 0.01,
+         unbalanced: float = 0.01, max_steps_per_stage: int = 100_000, gain: float = 0.5,
+         max_strain: float = 1e-3, check_every: int = 200, log=None) -> RefdResult:
+    """REFD (000 §2.3): (1) expand the radii to ``stress`` (Pa) at the material's friction;
+    (2) lower the grains' friction step by step (``friction_steps_deg``) and keep expanding
+    at that stress until the porosity is at or below ``porosity`` (-); (3) restore the
+    friction and re-balance at the stress. Walls stay fixed (frictionless walls are the
+    caller's material choice, as 000). Raises ParameterError when the sample is already
+    denser than the target after stage 1, or when the target is not reached at the lowest
+    friction (the message gives the porosity reached)."""
+    _check_target(stress)
+    if not (0 < porosity < 1):
+        raise ParameterError(f"porosity={porosity}: must be in (0, 1)")
+    mat = scene.material(material_id)
+    spheres = np.arange(scene.num_bodies)
+    stages = []
+    r1 = grow_to_stress(scene, walls, stress, tol=tol, unbalanced=unbalanced, gain=gain,
+                        max_strain=max_strain, check_every=check_every,
+                        max_steps=max_steps_per_stage)
+    stages.append(("expand", mat.friction_angle_deg, r1))
+    if log:
+        log(f"REFD expand: stress {r1.mean_stress:.4g} Pa, porosity {r1.porosity:.4f}")
+    if r1.porosity <= porosity:
+        raise ParameterError(f"porosity={porosity}: the sample is already denser (porosity "
+                             f"{r1.porosity:.4f} at {stress} Pa after expansion); REFD only "
+                             "densifies; ask for a porosity above that")
+    reached = None
+    last = r1
+    for phi in friction_steps_deg:
+        if phi >= mat.friction_angle_deg:
+            continue
+        set_friction(scene, spheres, mat, phi)
+        last = grow_to_stress(scene, walls, stress, tol=tol, unbalanced=unbalanced, gain=gain,
+                              max_strain=max_strain, check_every=check_every,
+                              max_steps=max_steps_per_stage)
+        stages.append(("friction", phi, last))
+        if log:
+            log(f"REFD friction {phi} deg: porosity {last.porosity:.4f}")
+        if last.porosity <= porosity:
+            reached = phi
+            break
+    if reached is None:
+        raise ParameterError(f"porosity={porosity}: not reachable; REFD reached "
+                             f"{last.porosity:.4f} at {stress} Pa with friction down to "
+                             f"{min(friction_steps_deg)} deg (this PSD packs no denser here); "
+                             "ask for a porosity of at least that")
+    # Restore the friction: the grains take back their original material.
+    for b in spheres:
+        scene.set_body_material(int(b), material_id)
+    r3 = grow_to_stress(scene, walls, stress, tol=tol, unbalanced=unbalanced, gain=gain,
+                        max_strain=max_strain, check_every=check_every,
+                        max_steps=max_steps_per_stage)
+    stages.append(("restore", mat.friction_angle_deg, r3))
+    steps = sum(s[2].steps for s in stages)
+    return RefdResult(r3.mean_stress, r3.porosity, reached, steps, stages)

@@ -1,0 +1,112 @@
+"""The drained triaxial test in a box of six frictionless walls (001 chapter 6, App. B).
+
+Axis z is axial. Stage 1 (isotropic): servo walls bring all three axis stresses to the cell
+pressure (within ``tol``, unbalanced force below ``unbalanced``). Stage 2 (deviatoric): the z
+walls move inwards at a constant axial strain rate (engineering, from the box height at the
+start of the stage) while the x and y walls hold the cell pressure. Recorded: axial strain
+eps_a = (H0 - H) / H0, volumetric strain eps_v = (V0 - V) / V0 (compression positive), the
+deviator q = sigma_z - (sigma_x + sigma_y) / 2 (Pa), mean stress p, the three axis stresses,
+porosity, unbalanced force.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from . import _core, measure, prep
+from .scene import Scene
+
+
+@dataclass
+class TriaxialSample:
+    """A scene with its six walls, the grain material index and the box controller."""
+
+    scene: Scene
+    walls: list
+    material: int
+    controller: object
+
+
+def build_box_sample(centers, radii, lo, hi, *, young: float, poisson: float,
+                     friction_deg: float, density: float, local_damping: float,
+                     dt_safety: float = 0.5, gain: float = 0.5) -> TriaxialSample:
+    """A scene with the spheres in the box [lo, hi] (m): grains of the linear law (E Pa, nu
+    -, phi deg, rho kg/m^3), frictionless walls, Cundall local damping, automatic time step,
+    and a TriaxialController on the walls (all axes at zero stress until set)."""
+    s = Scene(local_damping=local_damping)
+    mat = s.add_material(_core.Material(model="linear", density=density, young=young,
+                                        poisson=poisson, friction_angle_deg=friction_deg))
+    wall_mat = s.add_material(_core.Material(model="linear", density=density, young=young,
+                                             poisson=poisson, friction_angle_deg=0.0))
+    walls = s.add_box(lo, hi, material=wall_mat)
+    s.add_spheres(centers, radii, material=mat)
+    s.set_auto_timestep(safety=dt_safety, period=100)
+    ctl = _core.TriaxialController(walls=walls, gain=gain,
+                                   max_speed=prep.default_max_speed(s, walls))
+    for a in range(3):
+        ctl.set_stress(a, 0.0)
+    ctl.enabled = False
+    s.add_controller(ctl)
+    return TriaxialSample(s, walls, mat, ctl)
+
+
+def isotropic_stage(sample: TriaxialSample, pressure: float, *, tol: float = 0.01,
+                    unbalanced: float = 0.01, check_every: int = 200,
+                    max_steps: int = 300_000, callback=None) -> prep.StageResult:
+    """Servo walls to the isotropic cell ``pressure`` (Pa)."""
+    sample.controller.max_speed = prep.default_max_speed(sample.scene, sample.walls)
+    return prep.compact_isotropic(sample.scene, sample.walls, pressure,
+                                  controller=sample.controller, tol=tol, unbalanced=unbalanced,
+                                  check_every=check_every, max_steps=max_steps,
+                                  callback=callback)
+
+
+def deviatoric_stage(sample: TriaxialSample, pressure: float, strain_rate: float,
+                     stop_strain: float, *, record_every: int = 100, on_record=None,
+                     max_steps: int = 10_000_000) -> dict:
+    """Axial (z) compression at ``strain_rate`` (1/s, > 0) with x and y held at ``pressure``
+    (Pa), until the axial strain reaches ``stop_strain`` (-). Calls ``on_record(row)`` every
+    ``record_every`` steps with a dict of the recorded values; returns the arrays."""
+    if not (np.isfinite(strain_rate) and strain_rate > 0):
+        raise _core.ParameterError(f"strain_rate={strain_rate}: must be > 0 (1/s, axial "
+                                   "compression)")
+    if not (0 < stop_strain < 0.5):
+        raise _core.ParameterError(f"stop_strain={stop_strain}: must be in (0, 0.5)")
+    sc, walls, ctl = sample.scene, sample.walls, sample.controller
+    ctl.reset_strain(sc)
+    l0 = np.asarray(ctl.reference_lengths)
+    v0 = float(np.prod(l0))
+    ctl.set_stress(0, pressure)
+    ctl.set_stress(1, pressure)
+    ctl.set_strain_rate(2, strain_rate)
+    # The lateral walls must be able to follow: cap at 4 x the axial wall speed, or above.
+    ctl.max_speed = max(ctl.max_speed, 4.0 * 0.5 * strain_rate * l0[2])
+    ctl.enabled = True
+    t0 = sc.time
+    rows = []
+
+    def row() -> dict:
+        size = measure.box_size(sc, walls)
+        ax = measure.axis_stresses(sc, walls)
+        r = {"time": sc.time - t0, "step": sc.step_count,
+             "axial_strain": float((l0[2] - size[2]) / l0[2]),
+             "volumetric_strain": float((v0 - np.prod(size)) / v0),
+             "deviatoric_stress": float(ax[2] - 0.5 * (ax[0] + ax[1])),
+             "mean_stress": float(ax.mean()),
+             "sigma_x": float(ax[0]), "sigma_y": float(ax[1]), "sigma_z": float(ax[2]),
+             "porosity": measure.porosity(sc, walls),
+             "unbalanced_force": float(sc.unbalanced_force())}
+        rows.append(r)
+        if on_record is not None:
+            on_record(r)
+        return r
+
+    row()
+    steps = 0
+    while rows[-1]["axial_strain"] < stop_strain and steps < max_steps:
+        sc.run(record_every)
+        steps += record_every
+        row()
+    return {k: np.array([r[k] for r in rows]) for k in rows[0]}

@@ -1,0 +1,29 @@
+// Exact save and restore of the whole state of a scene (bodies, walls, contacts with their
+// history, geogrid containers, broad-phase bookkeeping, parameters, energy accumulators,
+// step, time) and of its controllers' state, as one binary blob. Restoring a blob and
+// running n steps gives bitwise the same state as running on without the save.
+// The HDF5 file around the blob is written in Python (cpp_dem/checkpoint.py).
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "cpp_dem/scene.hpp"
+
+namespace cpp_dem {
+
+class Checkpoint {
+ public:
+  /// Format version of the blob; bumped when the layout changes.
+  static constexpr std::uint32_t kVersion = 1;
+  /// The whole state of `scene` as bytes. Controllers are code, not data: the blob holds
+  /// their count, `period`, `enabled` and, for StatefulController ones, their state.
+  static std::vector<std::uint8_t> save(const Scene& scene);
+  /// Restores a blob into `scene`, replacing all its state. The scene must hold the same
+  /// controllers (same number, added in the same order, same kinds) as the saved one: a
+  /// restart script rebuilds them and this restores their state. Throws ParameterError on a
+  /// blob from another format or build (struct sizes differ) or a controller mismatch.
+  static void load(Scene& scene, const std::vector<std::uint8_t>& blob);
+};
+
+}  // namespace cpp_dem

@@ -1,0 +1,154 @@
+// Controllers for granular samples: servo walls, the triaxial (box) controller, and radius
+// growth under stress control (001 §4.3.1, the "grow factor"; the expansion stage of REFD,
+// 000 §2.3). Each is a Controller (scene.hpp): it runs at the start of a step, sees the wall
+// forces of the previous step and touches only what it owns.
+//
+// Sign convention: stresses are compressive positive (Pa); strains are compressive positive.
+#pragma once
+
+#include <array>
+#include <vector>
+
+#include "cpp_dem/scene.hpp"
+
+namespace cpp_dem {
+
+/// State a checkpoint saves and restores (checkpoint.cpp): controllers with history implement
+/// it, so a restart continues bitwise.
+class StatefulController {
+ public:
+  virtual ~StatefulController() = default;
+  virtual std::vector<Real> save_state() const = 0;
+  virtual void load_state(const std::vector<Real>& s) = 0;
+};
+
+/// Normal stress on a wall, Pa, compressive positive: -sense * F_axis / area.
+Real wall_normal_stress(const Wall& w, Real area);
+
+/// Sum of the tangent normal stiffnesses of the active sphere contacts of a wall, N/m.
+Real wall_contact_stiffness(const Scene& s, int wall);
+
+/// Servo law of one wall (Yade's TriaxialStressController / PFC servo, with the gain from the
+/// measured stiffness): the wall displacement towards the spheres over the next `period`
+/// steps is alpha (sigma_target - sigma) A / k, k the sum of the normal stiffnesses of the
+/// wall's contacts (N/m). Returns the velocity along the wall's inward normal, m/s, capped to
+/// [-max_speed, max_speed]; without contacts (k = 0) the wall approaches at +max_speed when
+/// the target is not reached (and stays when it is, sigma_target = 0).
+Real servo_speed(Real sigma_target, Real sigma, Real area, Real stiffness, Real dt, int period,
+                 Real gain, Real max_speed);
+
+/// One wall driven to a target normal stress by its velocity (the other walls are not
+/// touched). The area is fixed (m^2) or, when `box_walls` holds the six walls of a box (order
+/// x-, x+, y-, y+, z-, z+), recomputed every call from the current box dimensions.
+class ServoWall : public Controller {
+ public:
+  /// wall: wall id; target_stress: Pa, >= 0 (compressive); area: m^2 (> 0) or 0 when
+  /// box_walls are given; gain: alpha in (0, 1] (fraction of the stiffness-predicted
+  /// correction applied per period); max_speed: the velocity cap, m/s (> 0).
+  ServoWall(int wall, Real target_stress, Real area, Real gain, Real max_speed,
+            std::vector<int> box_walls = {});
+  void apply(Scene& scene) override;
+
+  void set_target_stress(Real sigma);
+  Real target_stress() const { return target_; }
+  void set_max_speed(Real v);
+  Real max_speed() const { return max_speed_; }
+  void set_gain(Real g);
+  Real gain() const { return gain_; }
+  int wall() const { return wall_; }
+  /// Wall area used at the last call, m^2.
+  Real area() const { return area_; }
+  /// Stress measured at the last call, Pa (compressive positive).
+  Real measured_stress() const { return sigma_; }
+  /// Contact stiffness measured at the last call, N/m.
+  Real stiffness() const { return stiffness_; }
+
+ private:
+  int wall_;
+  Real target_, area0_, gain_, max_speed_;
+  std::vector<int> box_;
+  Real area_ = 0, sigma_ = 0, stiffness_ = 0;
+};
+
+/// Per-axis control of a box of six walls (order x-, x+, y-, y+, z-, z+): each axis is either
+/// stress-controlled (both walls servo to the target normal stress, with the wall area
+/// recomputed from the current box dimensions) or strain-rate-controlled (both walls move
+/// inwards at rate L0 / 2 each, so the engineering strain (L0 - L) / L0 grows at `rate`, 1/s;
+/// compression positive; rate 0 holds the walls still).
+class TriaxialController : public Controller, public StatefulController {
+ public:
+  enum class Mode : int { Stress = 0, StrainRate = 1 };
+  /// walls: the six box walls; gain, max_speed as ServoWall. The reference lengths L0 are
+  /// the box dimensions now (reset with reset_strain()).
+  TriaxialController(std::vector<int> walls, Real gain, Real max_speed);
+  void apply(Scene& scene) override;
+
+  /// Stress control of an axis (0 x, 1 y, 2 z) to sigma (Pa, >= 0, compressive positive).
+  void set_stress(int axis, Real sigma);
+  /// Strain-rate control of an axis: rate in 1/s (compression positive; negative extends).
+  void set_strain_rate(int axis, Real rate);
+  Mode mode(int axis) const;
+  Real goal(int axis) const;
+  void set_max_speed(Real v);
+  Real max_speed() const { return max_speed_; }
+  void set_gain(Real g);
+  Real gain() const { return gain_; }
+  const std::vector<int>& walls() const { return walls_; }
+
+  /// Current box dimensions, m (from the wall positions; needs a scene).
+  static Vec3 box_size(const Scene& s, const std::vector<int>& walls);
+  /// Stresses of the six walls, Pa (compressive positive), with the current areas.
+  static std::array<Real, 6> wall_stresses(const Scene& s, const std::vector<int>& walls);
+  /// Per-axis stress: mean of the two walls of the axis, Pa.
+  static Vec3 axis_stresses(const Scene& s, const std::vector<int>& walls);
+  /// Engineering strains (L0 - L) / L0 per axis, -, compression positive.
+  Vec3 strains(const Scene& s) const;
+  Vec3 reference_lengths() const { return l0_; }
+  /// Takes the current box dimensions as the reference L0 (zero strain).
+  void reset_strain(const Scene& s);
+
+  std::vector<Real> save_state() const override;
+  void load_state(const std::vector<Real>& st) override;
+
+ private:
+  std::vector<int> walls_;
+  Real gain_, max_speed_;
+  std::array<Mode, 3> mode_{Mode::Stress, Mode::Stress, Mode::Stress};
+  Vec3 goal_ = Vec3::Zero();
+  Vec3 l0_ = Vec3::Zero();
+  bool l0_set_ = false;
+};
+
+/// Radius growth under stress control (001 §4.3.1; the expansion of REFD, 000 §2.3): every
+/// call multiplies the radii of the controlled spheres by m = 1 + gain (sigma_t - sigma) / S,
+/// where sigma is the mean normal stress of the box walls (Pa) and
+/// S = (1/V) sum_c k_n,c l_c^2 (Pa) the stress increase per unit radius strain predicted from
+/// the current contacts (l_c the branch length: r_i + r_j for a pair, r for a sphere on a
+/// wall) — an adaptive form of 001's fixed constant K. m is capped to [1 - max_strain,
+/// 1 + max_strain] per call; with no contact, m = 1 + max_strain. Masses follow the radii.
+class RadiusGrowth : public Controller, public StatefulController {
+ public:
+  /// walls: the six box walls; bodies: ids of the spheres that grow (empty: all spheres);
+  /// target_stress Pa (> 0); gain in (0, 1]; max_strain in (0, 0.1].
+  RadiusGrowth(std::vector<int> walls, std::vector<int> bodies, Real target_stress, Real gain,
+               Real max_strain);
+  void apply(Scene& scene) override;
+  void set_target_stress(Real sigma);
+  Real target_stress() const { return target_; }
+  /// Mean wall stress at the last call, Pa.
+  Real measured_stress() const { return sigma_; }
+  /// Product of all multipliers applied so far, -.
+  Real total_factor() const { return total_; }
+  /// Multiplier of the last call, -.
+  Real last_factor() const { return last_; }
+  std::vector<Real> save_state() const override;
+  void load_state(const std::vector<Real>& st) override;
+
+ private:
+  std::vector<int> walls_, bodies_;
+  Real target_, gain_, max_strain_;
+  Real sigma_ = 0, total_ = 1, last_ = 1;
+  std::vector<Real> radii_;  // scratch
+};
+
+}  // namespace cpp_dem

@@ -1,0 +1,275 @@
+#include "cpp_dem/checkpoint.hpp"
+
+#include <cstring>
+#include <string>
+#include <type_traits>
+
+#include "cpp_dem/controllers.hpp"
+
+namespace cpp_dem {
+
+namespace {
+constexpr char kMagic[8] = {'C', 'P', 'D', 'E', 'M', 'C', 'K', 'P'};
+
+// The records below hold only numbers (doubles, ints, Eigen fixed-size vectors): no pointers,
+// no heap. They are copied byte for byte; the blob header stores their sizes, so a blob from
+// a build with another layout is refused instead of misread.
+template <class T>
+constexpr bool kPlain = std::is_standard_layout_v<T> && !std::is_pointer_v<T>;
+
+class Writer {
+ public:
+  std::vector<std::uint8_t> buf;
+  void raw(const void* p, size_t n) {
+    const auto* c = static_cast<const std::uint8_t*>(p);
+    buf.insert(buf.end(), c, c + n);
+  }
+  template <class T>
+  void put(const T& v) {
+    static_assert(kPlain<T>);
+    raw(static_cast<const void*>(&v), sizeof(T));
+  }
+  template <class T>
+  void vec(const std::vector<T>& v) {
+    static_assert(kPlain<T>);
+    const std::uint64_t n = v.size();
+    put(n);
+    if (n) raw(static_cast<const void*>(v.data()), n * sizeof(T));
+  }
+};
+
+class Reader {
+ public:
+  Reader(const std::vector<std::uint8_t>& b) : buf(b) {}
+  const std::vector<std::uint8_t>& buf;
+  size_t at = 0;
+  void raw(void* p, size_t n) {
+    if (at + n > buf.size())
+      throw ParameterError("checkpoint: truncated blob (needs " + std::to_string(at + n) +
+                           " bytes, has " + std::to_string(buf.size()) + ")");
+    std::memcpy(p, buf.data() + at, n);
+    at += n;
+  }
+  template <class T>
+  T get() {
+    T v;
+    raw(static_cast<void*>(&v), sizeof(T));
+    return v;
+  }
+  template <class T>
+  void get(T& v) {
+    raw(static_cast<void*>(&v), sizeof(T));
+  }
+  template <class T>
+  void vec(std::vector<T>& v) {
+    const auto n = get<std::uint64_t>();
+    if (n > buf.size()) throw ParameterError("checkpoint: corrupt vector length");
+    v.resize(n);
+    if (n) raw(static_cast<void*>(v.data()), n * sizeof(T));
+  }
+};
+
+/// Sizes of every record type, in a fixed order: the layout fingerprint.
+std::vector<std::uint64_t> layout() {
+  return {sizeof(Real),        sizeof(Vec3),        sizeof(Quat),       sizeof(Material),
+          sizeof(Wall),        sizeof(PairContact), sizeof(WallContact), sizeof(GridLink),
+          sizeof(PFacet),      sizeof(GridContact), sizeof(BreakEvent), sizeof(ContactPhys),
+          sizeof(ContactState)};
+}
+}  // namespace
+
+std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
+  Writer w;
+  w.raw(kMagic, sizeof(kMagic));
+  w.put(kVersion);
+  w.vec(layout());
+  w.vec(s.materials_);
+  // Bodies.
+  w.vec(s.pos_);
+  w.vec(s.vel_);
+  w.vec(s.angvel_);
+  w.vec(s.force_);
+  w.vec(s.torque_);
+  w.vec(s.ext_force_);
+  w.vec(s.ori_);
+  w.vec(s.radius_);
+  w.vec(s.mass_);
+  w.vec(s.inertia_);
+  w.vec(s.body_mat_);
+  w.vec(s.blocked_);
+  w.vec(s.kind_);
+  w.vec(s.pos_at_build_);
+  w.vec(s.radius_at_build_);
+  w.vec(s.ke_);
+  w.vec(s.damp_dissip_);
+  w.vec(s.ext_work_);
+  w.vec(s.pos_at_energy_reset_);
+  w.vec(s.walls_);
+  // Contacts and adjacency.
+  w.vec(s.pairs_);
+  w.vec(s.wall_contacts_);
+  w.vec(s.pair_adj_off_);
+  w.vec(s.pair_adj_);
+  w.vec(s.wall_adj_off_);
+  w.vec(s.wall_adj_);
+  // Geogrid.
+  w.put(s.num_nodes_);
+  w.vec(s.links_);
+  w.vec(s.facets_);
+  w.vec(s.grid_contacts_);
+  w.vec(s.breaks_);
+  w.put(s.dropped_plastic_);
+  w.vec(s.node_link_off_);
+  w.vec(s.node_link_);
+  w.vec(s.link_facet_);
+  w.vec(s.sphere_gc_off_);
+  w.vec(s.sphere_gc_);
+  w.vec(s.node_gc_off_);
+  w.vec(s.node_gc_);
+  w.put(s.grid_topology_dirty_);
+  w.vec(s.candidates_);
+  // Energy bookkeeping.
+  w.put(s.dropped_friction_);
+  w.put(s.dropped_viscous_);
+  w.put(s.energy_reference_);
+  w.put(s.energy_reference_set_);
+  // Parameters and counters.
+  w.put(s.dt_);
+  w.put(s.gravity_);
+  w.put(s.local_damping_);
+  w.put(s.margin_);
+  w.put(s.max_overlap_ratio_);
+  w.put(s.track_energy_);
+  w.put(s.ts_safety_);
+  w.put(s.ts_period_);
+  w.put(s.step_);
+  w.put(s.time_);
+  w.put(s.phys_version_);
+  w.put(s.dirty_);
+  w.put(s.builds_);
+  // Controllers.
+  const std::uint64_t nc = s.controllers_.size();
+  w.put(nc);
+  for (const auto& c : s.controllers_) {
+    w.put(c->period);
+    w.put(c->enabled);
+    const auto* st = dynamic_cast<const StatefulController*>(c.get());
+    w.put(static_cast<std::uint8_t>(st ? 1 : 0));
+    if (st) w.vec(st->save_state());
+  }
+  return std::move(w.buf);
+}
+
+void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
+  Reader r(blob);
+  char magic[8];
+  r.raw(magic, sizeof(magic));
+  if (std::memcmp(magic, kMagic, sizeof(kMagic)) != 0)
+    throw ParameterError("checkpoint: not a cpp_dem checkpoint blob (bad magic)");
+  const auto version = r.get<std::uint32_t>();
+  if (version != kVersion)
+    throw ParameterError("checkpoint: format version " + std::to_string(version) +
+                         ", this build reads version " + std::to_string(kVersion));
+  std::vector<std::uint64_t> lay;
+  r.vec(lay);
+  if (lay != layout())
+    throw ParameterError("checkpoint: written by a build with other record layouts (struct "
+                         "sizes differ); restart with the build that wrote it");
+  // Read everything into a copy first, so a bad blob leaves the scene untouched.
+  Scene t;
+  r.vec(t.materials_);
+  r.vec(t.pos_);
+  r.vec(t.vel_);
+  r.vec(t.angvel_);
+  r.vec(t.force_);
+  r.vec(t.torque_);
+  r.vec(t.ext_force_);
+  r.vec(t.ori_);
+  r.vec(t.radius_);
+  r.vec(t.mass_);
+  r.vec(t.inertia_);
+  r.vec(t.body_mat_);
+  r.vec(t.blocked_);
+  r.vec(t.kind_);
+  r.vec(t.pos_at_build_);
+  r.vec(t.radius_at_build_);
+  r.vec(t.ke_);
+  r.vec(t.damp_dissip_);
+  r.vec(t.ext_work_);
+  r.vec(t.pos_at_energy_reset_);
+  r.vec(t.walls_);
+  r.vec(t.pairs_);
+  r.vec(t.wall_contacts_);
+  r.vec(t.pair_adj_off_);
+  r.vec(t.pair_adj_);
+  r.vec(t.wall_adj_off_);
+  r.vec(t.wall_adj_);
+  r.get(t.num_nodes_);
+  r.vec(t.links_);
+  r.vec(t.facets_);
+  r.vec(t.grid_contacts_);
+  r.vec(t.breaks_);
+  r.get(t.dropped_plastic_);
+  r.vec(t.node_link_off_);
+  r.vec(t.node_link_);
+  r.vec(t.link_facet_);
+  r.vec(t.sphere_gc_off_);
+  r.vec(t.sphere_gc_);
+  r.vec(t.node_gc_off_);
+  r.vec(t.node_gc_);
+  r.get(t.grid_topology_dirty_);
+  r.vec(t.candidates_);
+  r.get(t.dropped_friction_);
+  r.get(t.dropped_viscous_);
+  r.get(t.energy_reference_);
+  r.get(t.energy_reference_set_);
+  r.get(t.dt_);
+  r.get(t.gravity_);
+  r.get(t.local_damping_);
+  r.get(t.margin_);
+  r.get(t.max_overlap_ratio_);
+  r.get(t.track_energy_);
+  r.get(t.ts_safety_);
+  r.get(t.ts_period_);
+  r.get(t.step_);
+  r.get(t.time_);
+  r.get(t.phys_version_);
+  r.get(t.dirty_);
+  r.get(t.builds_);
+  const auto nc = r.get<std::uint64_t>();
+  if (nc != s.controllers_.size())
+    throw ParameterError("checkpoint: the saved scene had " + std::to_string(nc) +
+                         " controllers, this scene has " + std::to_string(s.controllers_.size()) +
+                         "; add the same controllers, in the same order, before loading");
+  struct Ctl {
+    int period;
+    bool enabled;
+    bool stateful;
+    std::vector<Real> state;
+  };
+  std::vector<Ctl> ctl(nc);
+  for (std::uint64_t k = 0; k < nc; ++k) {
+    r.get(ctl[k].period);
+    r.get(ctl[k].enabled);
+    ctl[k].stateful = r.get<std::uint8_t>() != 0;
+    if (ctl[k].stateful) r.vec(ctl[k].state);
+    const bool here = dynamic_cast<StatefulController*>(s.controllers_[k].get()) != nullptr;
+    if (here != ctl[k].stateful)
+      throw ParameterError("checkpoint: controller " + std::to_string(k) +
+                           " is of another kind than the saved one");
+  }
+  if (r.at != blob.size())
+    throw ParameterError("checkpoint: " + std::to_string(blob.size() - r.at) +
+                         " unexpected trailing bytes");
+  for (std::uint64_t k = 0; k < nc; ++k) {
+    if (ctl[k].stateful)
+      dynamic_cast<StatefulController*>(s.controllers_[k].get())->load_state(ctl[k].state);
+    s.controllers_[k]->period = ctl[k].period;
+    s.controllers_[k]->enabled = ctl[k].enabled;
+  }
+  t.controllers_ = std::move(s.controllers_);
+  // The cell grid is scratch of the broad phase (rebuilt from scratch at every build).
+  s = std::move(t);
+}
+
+}  // namespace cpp_dem

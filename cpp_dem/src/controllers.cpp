@@ -1,0 +1,322 @@
+#include "cpp_dem/controllers.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <string>
+
+namespace cpp_dem {
+
+namespace {
+void check_box_walls(const Scene& s, const std::vector<int>& walls, const char* field) {
+  if (walls.size() != 6)
+    throw ParameterError(std::string(field) + ": expected the 6 walls of a box (x-, x+, y-, "
+                         "y+, z-, z+), got " + std::to_string(walls.size()));
+  for (int k = 0; k < 6; ++k) {
+    const Wall& w = s.wall(walls[k]);
+    const int axis = k / 2, sense = (k % 2 == 0) ? 1 : -1;
+    if (w.axis != axis || w.sense != sense)
+      throw ParameterError(std::string(field) + "[" + std::to_string(k) + "]=wall " +
+                           std::to_string(walls[k]) + ": expected the wall of axis " +
+                           std::to_string(axis) + " with sense " + std::to_string(sense) +
+                           " (order x-, x+, y-, y+, z-, z+, as Scene.add_box)");
+  }
+}
+
+void check_gain(Real g) {
+  require(std::isfinite(g) && g > 0 && g <= 1, "gain", g, "must be in (0, 1]");
+}
+void check_speed(Real v) {
+  require(std::isfinite(v) && v > 0, "max_speed", v, "must be > 0 (m/s)");
+}
+void check_stress(Real s, const char* field) {
+  require(std::isfinite(s) && s >= 0, field, s,
+          "must be >= 0 (Pa, compressive positive; walls cannot pull on the spheres)");
+}
+
+/// Area of the box wall k (order x-, x+, ...) from the current box size, m^2.
+Real box_wall_area(const Vec3& size, int k) {
+  const int a = k / 2;
+  return size[(a + 1) % 3] * size[(a + 2) % 3];
+}
+}  // namespace
+
+Real wall_normal_stress(const Wall& w, Real area) {
+  // The spheres push the wall against its normal (towards -sense): that is compression.
+  return -w.sense * w.force[w.axis] / area;
+}
+
+Real wall_contact_stiffness(const Scene& s, int wall) {
+  Real k = 0;
+  for (const WallContact& c : s.wall_contacts()) {
+    if (!c.active || c.wall != wall) continue;
+    Real kn, ks;
+    tangent_stiffness(c.phys, c.state.overlap, kn, ks);
+    k += kn;
+  }
+  return k;
+}
+
+Real servo_speed(Real sigma_target, Real sigma, Real area, Real stiffness, Real dt, int period,
+                 Real gain, Real max_speed) {
+  const Real err = sigma_target - sigma;  // > 0: push further in
+  Real v;
+  if (stiffness > 0) {
+    v = gain * err * area / (stiffness * dt * period);
+  } else {
+    v = err > 0 ? max_speed : 0.0;
+  }
+  // The cap applies to every branch (Yade's max_vel does not cap all of them).
+  return std::clamp(v, -max_speed, max_speed);
+}
+
+// ---- ServoWall ------------------------------------------------------------------------------
+
+ServoWall::ServoWall(int wall, Real target_stress, Real area, Real gain, Real max_speed,
+                     std::vector<int> box_walls)
+    : wall_(wall), target_(target_stress), area0_(area), gain_(gain), max_speed_(max_speed),
+      box_(std::move(box_walls)) {
+  check_stress(target_stress, "target_stress");
+  check_gain(gain);
+  check_speed(max_speed);
+  if (box_.empty())
+    require(std::isfinite(area) && area > 0, "area", area,
+            "must be > 0 (m^2), or give box_walls to compute it from the box");
+  else if (box_.size() != 6)
+    throw ParameterError("box_walls: expected 6 walls (x-, x+, y-, y+, z-, z+), got " +
+                         std::to_string(box_.size()));
+}
+
+void ServoWall::set_target_stress(Real sigma) {
+  check_stress(sigma, "target_stress");
+  target_ = sigma;
+}
+void ServoWall::set_max_speed(Real v) {
+  check_speed(v);
+  max_speed_ = v;
+}
+void ServoWall::set_gain(Real g) {
+  check_gain(g);
+  gain_ = g;
+}
+
+void ServoWall::apply(Scene& scene) {
+  Wall& w = scene.wall(wall_);
+  if (box_.empty()) {
+    area_ = area0_;
+  } else {
+    const Vec3 size = TriaxialController::box_size(scene, box_);
+    int k = -1;
+    for (int i = 0; i < 6; ++i)
+      if (box_[i] == wall_) k = i;
+    if (k < 0) k = 2 * w.axis;  // a wall outside the box: area normal to its axis
+    area_ = box_wall_area(size, k);
+  }
+  sigma_ = wall_normal_stress(w, area_);
+  stiffness_ = wall_contact_stiffness(scene, wall_);
+  const Real v = servo_speed(target_, sigma_, area_, stiffness_, scene.dt(), period, gain_,
+                             max_speed_);
+  w.velocity.setZero();
+  w.velocity[w.axis] = w.sense * v;
+}
+
+// ---- TriaxialController ---------------------------------------------------------------------
+
+TriaxialController::TriaxialController(std::vector<int> walls, Real gain, Real max_speed)
+    : walls_(std::move(walls)), gain_(gain), max_speed_(max_speed) {
+  if (walls_.size() != 6)
+    throw ParameterError("walls: expected the 6 walls of a box (x-, x+, y-, y+, z-, z+), got " +
+                         std::to_string(walls_.size()));
+  check_gain(gain);
+  check_speed(max_speed);
+}
+
+Vec3 TriaxialController::box_size(const Scene& s, const std::vector<int>& walls) {
+  Vec3 size;
+  for (int a = 0; a < 3; ++a) size[a] = s.wall(walls[2 * a + 1]).position - s.wall(walls[2 * a]).position;
+  return size;
+}
+
+std::array<Real, 6> TriaxialController::wall_stresses(const Scene& s,
+                                                      const std::vector<int>& walls) {
+  const Vec3 size = box_size(s, walls);
+  std::array<Real, 6> out{};
+  for (int k = 0; k < 6; ++k) out[k] = wall_normal_stress(s.wall(walls[k]), box_wall_area(size, k));
+  return out;
+}
+
+Vec3 TriaxialController::axis_stresses(const Scene& s, const std::vector<int>& walls) {
+  const auto st = wall_stresses(s, walls);
+  return Vec3(0.5 * (st[0] + st[1]), 0.5 * (st[2] + st[3]), 0.5 * (st[4] + st[5]));
+}
+
+void TriaxialController::reset_strain(const Scene& s) {
+  check_box_walls(s, walls_, "walls");
+  l0_ = box_size(s, walls_);
+  l0_set_ = true;
+}
+
+Vec3 TriaxialController::strains(const Scene& s) const {
+  if (!l0_set_) return Vec3::Zero();
+  const Vec3 size = box_size(s, walls_);
+  return Vec3((l0_[0] - size[0]) / l0_[0], (l0_[1] - size[1]) / l0_[1], (l0_[2] - size[2]) / l0_[2]);
+}
+
+void TriaxialController::set_stress(int axis, Real sigma) {
+  if (axis < 0 || axis > 2)
+    throw ParameterError("axis=" + std::to_string(axis) + ": must be 0 (x), 1 (y) or 2 (z)");
+  check_stress(sigma, "stress");
+  mode_[axis] = Mode::Stress;
+  goal_[axis] = sigma;
+}
+
+void TriaxialController::set_strain_rate(int axis, Real rate) {
+  if (axis < 0 || axis > 2)
+    throw ParameterError("axis=" + std::to_string(axis) + ": must be 0 (x), 1 (y) or 2 (z)");
+  require(std::isfinite(rate), "strain_rate", rate, "must be finite (1/s)");
+  mode_[axis] = Mode::StrainRate;
+  goal_[axis] = rate;
+}
+
+TriaxialController::Mode TriaxialController::mode(int axis) const {
+  if (axis < 0 || axis > 2)
+    throw ParameterError("axis=" + std::to_string(axis) + ": must be 0 (x), 1 (y) or 2 (z)");
+  return mode_[axis];
+}
+Real TriaxialController::goal(int axis) const {
+  mode(axis);
+  return goal_[axis];
+}
+void TriaxialController::set_max_speed(Real v) {
+  check_speed(v);
+  max_speed_ = v;
+}
+void TriaxialController::set_gain(Real g) {
+  check_gain(g);
+  gain_ = g;
+}
+
+void TriaxialController::apply(Scene& scene) {
+  if (!l0_set_) reset_strain(scene);
+  const Vec3 size = box_size(scene, walls_);
+  for (int k = 0; k < 6; ++k) {
+    const int a = k / 2;
+    Wall& w = scene.wall(walls_[k]);
+    Real v;  // along the inward normal, m/s
+    if (mode_[a] == Mode::StrainRate) {
+      v = 0.5 * goal_[a] * l0_[a];
+    } else {
+      const Real area = box_wall_area(size, k);
+      v = servo_speed(goal_[a], wall_normal_stress(w, area), area,
+                      wall_contact_stiffness(scene, walls_[k]), scene.dt(), period, gain_,
+                      max_speed_);
+    }
+    w.velocity.setZero();
+    w.velocity[w.axis] = w.sense * v;
+  }
+}
+
+std::vector<Real> TriaxialController::save_state() const {
+  std::vector<Real> s;
+  for (int a = 0; a < 3; ++a) {
+    s.push_back(static_cast<Real>(mode_[a]));
+    s.push_back(goal_[a]);
+    s.push_back(l0_[a]);
+  }
+  s.push_back(l0_set_ ? 1.0 : 0.0);
+  s.push_back(gain_);
+  s.push_back(max_speed_);
+  return s;
+}
+
+void TriaxialController::load_state(const std::vector<Real>& s) {
+  if (s.size() != 12)
+    throw ParameterError("TriaxialController state: expected 12 values, got " +
+                         std::to_string(s.size()));
+  for (int a = 0; a < 3; ++a) {
+    mode_[a] = static_cast<Mode>(static_cast<int>(s[3 * a]));
+    goal_[a] = s[3 * a + 1];
+    l0_[a] = s[3 * a + 2];
+  }
+  l0_set_ = s[9] != 0;
+  gain_ = s[10];
+  max_speed_ = s[11];
+}
+
+// ---- RadiusGrowth ---------------------------------------------------------------------------
+
+RadiusGrowth::RadiusGrowth(std::vector<int> walls, std::vector<int> bodies, Real target_stress,
+                           Real gain, Real max_strain)
+    : walls_(std::move(walls)), bodies_(std::move(bodies)), target_(target_stress), gain_(gain),
+      max_strain_(max_strain) {
+  if (walls_.size() != 6)
+    throw ParameterError("walls: expected the 6 walls of a box (x-, x+, y-, y+, z-, z+), got " +
+                         std::to_string(walls_.size()));
+  require(std::isfinite(target_stress) && target_stress > 0, "target_stress", target_stress,
+          "must be > 0 (Pa, compressive positive)");
+  check_gain(gain);
+  require(std::isfinite(max_strain) && max_strain > 0 && max_strain <= 0.1, "max_strain",
+          max_strain, "must be in (0, 0.1] (radius strain per call)");
+}
+
+void RadiusGrowth::set_target_stress(Real sigma) {
+  require(std::isfinite(sigma) && sigma > 0, "target_stress", sigma,
+          "must be > 0 (Pa, compressive positive)");
+  target_ = sigma;
+}
+
+void RadiusGrowth::apply(Scene& scene) {
+  const auto st = TriaxialController::wall_stresses(scene, walls_);
+  Real mean = 0;
+  for (Real x : st) mean += x;
+  sigma_ = mean / 6.0;
+  const Vec3 size = TriaxialController::box_size(scene, walls_);
+  const Real volume = size[0] * size[1] * size[2];
+  const auto& r = scene.radii();
+  // Stress increase per unit radius strain from the current contacts, Pa.
+  Real s = 0;
+  for (const PairContact& c : scene.pair_contacts()) {
+    if (!c.active) continue;
+    Real kn, ks;
+    tangent_stiffness(c.phys, c.state.overlap, kn, ks);
+    const Real l = r[c.i] + r[c.j];
+    s += kn * l * l;
+  }
+  for (const WallContact& c : scene.wall_contacts()) {
+    if (!c.active) continue;
+    Real kn, ks;
+    tangent_stiffness(c.phys, c.state.overlap, kn, ks);
+    s += kn * r[c.body] * r[c.body];
+  }
+  s /= volume;
+  Real m = s > 0 ? 1.0 + gain_ * (target_ - sigma_) / s : 1.0 + max_strain_;
+  m = std::clamp(m, 1.0 - max_strain_, 1.0 + max_strain_);
+  last_ = m;
+  if (m == 1.0) return;
+  total_ *= m;
+  radii_ = r;
+  const auto& kind = scene.body_kinds();
+  if (bodies_.empty()) {
+    for (size_t b = 0; b < radii_.size(); ++b)
+      if (kind[b] == 0) radii_[b] *= m;
+  } else {
+    for (int b : bodies_) radii_.at(b) *= m;
+  }
+  scene.set_radii(radii_);
+}
+
+std::vector<Real> RadiusGrowth::save_state() const {
+  return {target_, gain_, max_strain_, sigma_, total_, last_};
+}
+
+void RadiusGrowth::load_state(const std::vector<Real>& s) {
+  if (s.size() != 6)
+    throw ParameterError("RadiusGrowth state: expected 6 values, got " + std::to_string(s.size()));
+  target_ = s[0];
+  gain_ = s[1];
+  max_strain_ = s[2];
+  sigma_ = s[3];
+  total_ = s[4];
+  last_ = s[5];
+}
+
+}  // namespace cpp_dem

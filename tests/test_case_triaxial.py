@@ -1,0 +1,73 @@
+"""cases/triaxial.py --smoke: isotropic stage within 1 % with unbalanced force < 0.01, lateral
+stress held within 1 % during axial loading, every output written, same results with 1 and
+2 threads (bitwise), bad inputs answered clearly."""
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from cpp_dem.output import read_csv_series, read_h5_series
+
+ROOT = Path(__file__).resolve().parents[1]
+CASE = ROOT / "cases" / "triaxial.py"
+
+
+def run_case(out, *args):
+    return subprocess.run([sys.executable, str(CASE), "--out", str(out), *args],
+                          capture_output=True, text=True, timeout=600, cwd=ROOT)
+
+
+@pytest.fixture(scope="module")
+def smoke(tmp_path_factory):
+    out = tmp_path_factory.mktemp("triax")
+    return out, run_case(out, "--smoke", "--threads", "2")
+
+
+def test_smoke_runs_and_meets_the_stated_bounds(smoke):
+    out, proc = smoke
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    for name in ("triaxial.h5", "triaxial.csv", "triaxial.png", "isotropic.h5",
+                 "packing_isotropic.csv", "summary.json", "vtk/spheres_final.vtp"):
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    s = json.loads((out / "summary.json").read_text())
+    assert np.all(np.abs(np.array(s["isotropic_axis_stresses_Pa"]) / 75e3 - 1) <= 0.01)
+    assert s["isotropic_unbalanced"] < 0.01
+    assert s["lateral_stress_max_rel_error"] <= 0.01
+    assert s["axial_axis"] == "z" and s["q_peak_Pa"] > 0
+    csv = read_csv_series(out / "triaxial.csv")
+    for col in ("axial_strain", "volumetric_strain", "deviatoric_stress"):
+        assert col in csv
+    h5 = read_h5_series(out / "triaxial.h5")
+    assert np.array_equal(h5["deviatoric_stress"], csv["deviatoric_stress"])
+    assert csv["axial_strain"][-1] >= 0.04
+
+
+def test_thread_count_independence(tmp_path):
+    a = run_case(tmp_path / "t1", "--n", "1500", "--stop-strain", "0.005", "--strain-rate",
+                 "0.5", "--threads", "1")
+    b = run_case(tmp_path / "t2", "--n", "1500", "--stop-strain", "0.005", "--strain-rate",
+                 "0.5", "--threads", "2")
+    assert a.returncode == 0 and b.returncode == 0, a.stderr[-2000:] + b.stderr[-2000:]
+    assert (tmp_path / "t1/triaxial.csv").read_bytes() == (tmp_path / "t2/triaxial.csv").read_bytes()
+    assert ((tmp_path / "t1/packing_isotropic.csv").read_bytes()
+            == (tmp_path / "t2/packing_isotropic.csv").read_bytes())
+
+
+@pytest.mark.parametrize("args,msg", [
+    (["--cell-pressure", "-75000"], "--cell-pressure=-75000.0: must be > 0"),
+    (["--stop-strain", "0.7"], "--stop-strain=0.7: must be in (0, 0.5)"),
+    (["--damping", "1.5"], "--damping=1.5: must be in [0, 1)"),
+    (["--packing", "/nonexistent.csv"], "--packing=/nonexistent.csv: no such file"),
+])
+def test_bad_inputs(tmp_path, args, msg):
+    p = run_case(tmp_path, "--smoke", *args)
+    assert p.returncode != 0 and msg in p.stderr, p.stderr
+
+
+def test_help_names_the_axial_axis():
+    p = subprocess.run([sys.executable, str(CASE), "--help"], capture_output=True, text=True)
+    assert "AXIAL axis is z" in p.stdout
