@@ -72,7 +72,7 @@ class Reader {
 /// Sizes of every record type, in a fixed order: the layout fingerprint.
 std::vector<std::uint64_t> layout() {
   return {sizeof(Real),        sizeof(Vec3),        sizeof(Quat),       sizeof(Material),
-          sizeof(Wall),        sizeof(PairContact), sizeof(WallContact), sizeof(GridLink),
+          sizeof(Wall),        sizeof(PairContact), sizeof(PairOutput), sizeof(WallContact), sizeof(GridLink),
           sizeof(PFacet),      sizeof(GridContact), sizeof(BreakEvent), sizeof(ContactPhys),
           sizeof(ContactState)};
 }
@@ -91,6 +91,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.vec(s.force_);
   w.vec(s.torque_);
   w.vec(s.ext_force_);
+  w.vec(s.ext_torque_);
   w.vec(s.ori_);
   w.vec(s.radius_);
   w.vec(s.mass_);
@@ -107,6 +108,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.vec(s.walls_);
   // Contacts and adjacency.
   w.vec(s.pairs_);
+  w.vec(s.pair_out_);
   w.vec(s.wall_contacts_);
   w.vec(s.pair_adj_off_);
   w.vec(s.pair_adj_);
@@ -184,6 +186,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   r.vec(t.force_);
   r.vec(t.torque_);
   r.vec(t.ext_force_);
+  r.vec(t.ext_torque_);
   r.vec(t.ori_);
   r.vec(t.radius_);
   r.vec(t.mass_);
@@ -199,6 +202,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   r.vec(t.pos_at_energy_reset_);
   r.vec(t.walls_);
   r.vec(t.pairs_);
+  r.vec(t.pair_out_);
   r.vec(t.wall_contacts_);
   r.vec(t.pair_adj_off_);
   r.vec(t.pair_adj_);
