@@ -33,7 +33,7 @@ from pathlib import Path
 import numpy as np
 
 import cpp_dem as dem
-from cpp_dem import measure, prep, psd
+from cpp_dem import geogrid, measure, prep, psd
 from cpp_dem.checkpoint import save_checkpoint
 from cpp_dem.output import CsvRecorder, H5Recorder, write_vtk_box, write_vtk_spheres
 from cpp_dem.packing import loose_cloud
@@ -64,6 +64,9 @@ class Params:
     record_every: int = 100          #: steps between records, -
     threads: int = 0                 #: OpenMP threads (0: library default)
     packing: str = ""                #: CSV packing to start from ('' = generate)
+    geogrid: str = "none"            #: geogrid layer at mid-height: none, square, triangular
+    clear_layer: bool = False        #: remove the grains in the geogrid layer (also without
+                                     #: a geogrid, for a same-packing comparison)
 
 
 SMOKE = dict(n=300, strain_rate=0.5, stop_strain=0.04, record_every=50)
@@ -96,6 +99,52 @@ def make_sample(p: Params, log) -> tuple:
         f"{shrink:.3f}")
     return c, r, np.zeros(3), box, {"d_min_m": d_min, "sizes_m": d.tolist(),
                                      "passing_mass": pc.tolist(), "cloud_shrink": shrink}
+
+
+@dataclass
+class GridLayer:
+    """A geogrid layer at mid-height of the sample (001 §6.3): the §5.1 grids, 9.5 cm wide
+    (or 0.8 of the box width in a smaller smoke box), centred in x and y."""
+
+    z: float
+    centre: np.ndarray
+    width: float
+
+    def radius(self, p: Params) -> float:
+        """Cylinder radius, m: 1 mm for the square grid, 0.5 mm for the triangular (001 §5.1)."""
+        return 1e-3 if p.geogrid == "square" else 0.5e-3
+
+    def overlaps(self, c: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """Grains (at the cloud's radii) that cut the layer slab over the grid's footprint."""
+        half = 0.5 * self.width
+        inside = np.all(np.abs(c[:, :2] - self.centre) < half + r[:, None], axis=1)
+        return inside & (np.abs(c[:, 2] - self.z) < r + 1e-3)
+
+    def build(self, sc, p: Params):
+        """Adds the geogrid: 001 Table 5.1 material (E = 5 MPa, nu = 0.3, rho = 2650 kg/m^3,
+        phi = 20 deg) with cohesive links of normal and shear cohesion 1e7 Pa (App. A)."""
+        mat = sc.add_material(dem.linear_material(density=2650.0, young=5e6, poisson=0.3,
+                                                  friction_angle_deg=20.0))
+        beam = dem.BeamParams(young=5e6, poisson=0.3, radius=self.radius(p),
+                              normal_cohesion=1e7, shear_cohesion=1e7)
+        o = np.array([self.centre[0] - 0.5 * self.width, self.centre[1] - 0.5 * self.width,
+                      self.z])
+        if p.geogrid == "square":
+            n = max(2, int(round(10 * self.width / 0.095)))
+            return geogrid.square_grid(sc, origin=o, length=self.width, width=self.width,
+                                       nodes_x=n, nodes_y=n, params=beam, material=mat,
+                                       density=2650.0)
+        return geogrid.triangular_grid(sc, origin=o, length=self.width, width=self.width,
+                                       side=0.0143, params=beam, material=mat, density=2650.0)
+
+
+def grid_layer(p: Params, lo, hi) -> GridLayer | None:
+    """The mid-height geogrid layer of the sample in [lo, hi], or None without one."""
+    if p.geogrid == "none" and not p.clear_layer:
+        return None
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    width = min(0.095, 0.8 * float(min(hi[0] - lo[0], hi[1] - lo[1])))
+    return GridLayer(z=0.5 * (lo[2] + hi[2]), centre=0.5 * (lo[:2] + hi[:2]), width=width)
 
 
 def plot(rows: dict, png: Path, p: Params) -> None:
@@ -141,12 +190,29 @@ def run(p: Params, out: Path) -> dict:
         print(f"[triaxial] {msg}", flush=True)
 
     c, r, lo, hi, psd_info = make_sample(p, log)
+    layer = grid_layer(p, lo, hi)
+    if layer is not None and (p.clear_layer or p.geogrid != "none"):
+        keep = ~layer.overlaps(c, r)
+        log(f"geogrid layer at z = {layer.z:.4f} m: {int((~keep).sum())} grains removed from it "
+            f"({'with' if p.geogrid != 'none' else 'without'} a geogrid)")
+        c, r = c[keep], r[keep]
     sample = build_box_sample(c, r, lo, hi, young=p.young, poisson=p.poisson,
                               friction_deg=p.prep_friction if not p.packing else p.phi,
                               density=p.density, local_damping=p.damping,
                               dt_safety=p.dt_safety)
     sc, walls = sample.scene, sample.walls
-    log(f"{sc.num_bodies} grains, box {np.round(measure.box_size(sc, walls), 4)} m, "
+    grid = layer.build(sc, p) if (layer is not None and p.geogrid != "none") else None
+    if grid is not None:
+        sc.block_dofs(grid.nodes, "all")  # held during the expansion (as 000 §2.3)
+        # Grain–geogrid contacts are soft: the mixing rule takes the virtual sphere's radius
+        # R_c (001 §4.2), so k_n ~ E R_c and, at 75 kPa, a 1 cm grain sinks by a large
+        # fraction of its radius into a 0.5 mm grid. Allow overlaps up to 0.95 R (the grain's
+        # centre stays clear of the grid's axis); deeper still stops the run.
+        sc.max_overlap_ratio = 0.95
+        log(f"{p.geogrid} geogrid: {len(grid.nodes)} nodes, {len(grid.links)} members, "
+            f"R_c = {layer.radius(p) * 1e3:.2f} mm, held until the isotropic stage")
+    n_grains = int(np.count_nonzero(measure.sphere_mask(sc)))
+    log(f"{n_grains} grains, box {np.round(measure.box_size(sc, walls), 4)} m, "
         f"{dem.get_num_threads()} threads, dt {sc.dt:.3g} s")
 
     def progress(s) -> None:
@@ -166,7 +232,10 @@ def run(p: Params, out: Path) -> dict:
             f"mean stress {grow.mean_stress / 1e3:.2f} kPa, porosity {grow.porosity:.4f} "
             f"({time.perf_counter() - t0:.1f} s)")
         if p.prep_friction != p.phi:
-            prep.set_friction(sc, np.arange(sc.num_bodies), sc.material(sample.material), p.phi)
+            prep.set_friction(sc, np.flatnonzero(measure.sphere_mask(sc)),
+                              sc.material(sample.material), p.phi)
+    if grid is not None:
+        sc.block_dofs(grid.nodes, "")  # the geogrid is free from the isotropic stage on
     t0 = time.perf_counter()
     iso = isotropic_stage(sample, p.cell_pressure, callback=progress)
     t_iso = time.perf_counter() - t0
@@ -213,6 +282,8 @@ def run(p: Params, out: Path) -> dict:
     t_dev = time.perf_counter() - t0
     dev_steps = sc.step_count - steps0
     write_vtk_spheres(out / "vtk" / "spheres_final.vtp", sc)
+    if grid is not None:
+        geogrid.write_vtk_geogrid(out / "vtk" / "geogrid_final.vtp", sc, grid)
     plot(rows, out / "triaxial.png", p)
 
     ea = rows["axial_strain"]
@@ -222,7 +293,10 @@ def run(p: Params, out: Path) -> dict:
     q_peak = float(rows["deviatoric_stress"][k_peak])
     s_peak = q_peak + p.cell_pressure
     summary = {
-        "num_grains": sc.num_bodies, "axial_axis": "z",
+        "num_grains": n_grains, "axial_axis": "z",
+        "geogrid": p.geogrid, "geogrid_members": int(len(grid.links)) if grid else 0,
+        "geogrid_max_axial_force_N": float(np.max(grid.member_axial_forces(sc))) if grid
+        else None,
         "porosity_isotropic": iso.porosity,
         "isotropic_axis_stresses_Pa": iso.axis_stresses.tolist(),
         "isotropic_unbalanced": iso.unbalanced_force,
@@ -238,7 +312,7 @@ def run(p: Params, out: Path) -> dict:
         if lat.size else float("nan"),
         "deviatoric_steps": dev_steps,
         "wall_time_isotropic_s": t_iso, "wall_time_deviatoric_s": t_dev,
-        "particle_steps_per_s_deviatoric": sc.num_bodies * dev_steps / t_dev,
+        "particle_steps_per_s_deviatoric": n_grains * dev_steps / t_dev,
         "wall_time_total_s": time.perf_counter() - t_start,
         "expansion_growth_factor": grow.extra["growth_factor"] if grow else None,
         "threads": dem.get_num_threads(),
@@ -298,6 +372,11 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                          "dense sample)")
     ap.add_argument("--density", type=_positive("--density", ap), default=d.density,
                     help="grain density, kg/m^3")
+    ap.add_argument("--geogrid", choices=("none", "square", "triangular"), default="none",
+                    help="geogrid layer at mid-height (001 §6.3, grids of §5.1)")
+    ap.add_argument("--clear-layer", action="store_true",
+                    help="remove the grains of the geogrid layer even without a geogrid, so "
+                    "that runs with and without one start from the same packing")
     ap.add_argument("--seed", type=int, default=d.seed)
     ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: default)")
     a = ap.parse_args(argv)
@@ -311,6 +390,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     p.cell_pressure, p.damping, p.young, p.poisson = (a.cell_pressure, a.damping, a.young,
                                                        a.poisson)
     p.phi, p.density, p.seed, p.threads = a.phi, a.density, a.seed, a.threads
+    p.geogrid, p.clear_layer = a.geogrid, a.clear_layer
     p.prep_friction = a.prep_friction if a.prep_friction is not None else a.phi
     if a.strain_rate is not None:
         p.strain_rate = a.strain_rate

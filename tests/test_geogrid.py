@@ -391,3 +391,30 @@ def test_geogrid_vtk_has_links_facets_and_member_forces(tmp_path):
     assert int(piece.get("NumberOfPolys")) == len(g.pfacets)
     names = {a.get("Name") for a in piece.find("CellData")}
     assert {"axial_force", "member", "broken", "kind"} <= names
+
+
+def test_triaxial_case_with_geogrid_layers_smoke(tmp_path):
+    """001 §6.3: square and triangular geogrid layers at mid-height, and the same packing
+    without a geogrid (--clear-layer removes the same grains)."""
+    import json
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+
+    out = {}
+    for name, extra in (("square", ["--geogrid", "square"]),
+                        ("triangular", ["--geogrid", "triangular"]),
+                        ("none", ["--clear-layer"])):
+        d = tmp_path / name
+        subprocess.run([sys.executable, str(ROOT / "cases" / "triaxial.py"), "--smoke",
+                        "--out", str(d), *extra], check=True, capture_output=True, text=True)
+        out[name] = json.loads((d / "summary.json").read_text())
+    assert out["square"]["num_grains"] == out["none"]["num_grains"] == \
+        out["triangular"]["num_grains"]
+    assert out["square"]["geogrid_members"] > 0 and out["triangular"]["geogrid_members"] > 0
+    assert out["none"]["geogrid_members"] == 0
+    assert (tmp_path / "square" / "vtk" / "geogrid_final.vtp").is_file()
+    for s in out.values():
+        assert s["lateral_stress_max_rel_error"] < 0.01
+        assert math.isfinite(s["q_peak_Pa"]) and s["q_peak_Pa"] > 0

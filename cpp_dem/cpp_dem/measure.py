@@ -33,9 +33,15 @@ def axis_stresses(scene, walls) -> np.ndarray:
     return np.asarray(_core.TriaxialController.axis_stresses(scene, list(walls)))
 
 
+def sphere_mask(scene) -> np.ndarray:
+    """True for the bodies that are grains (spheres), False for geogrid nodes, (n,)."""
+    return np.asarray(scene.body_kinds) == 0
+
+
 def solid_volume(scene) -> float:
-    """Sum of the sphere volumes 4/3 pi r^3, m^3 (overlaps counted twice; see porosity)."""
-    r = np.asarray(scene.radii)
+    """Sum of the grain volumes 4/3 pi r^3, m^3 (overlaps counted twice; see porosity).
+    Geogrid nodes are not grains and are left out."""
+    r = np.asarray(scene.radii)[sphere_mask(scene)]
     return float(np.sum(4.0 / 3.0 * np.pi * r**3))
 
 
@@ -100,14 +106,15 @@ def coordination_number(scene, *, mechanical: bool = False) -> float:
     c = scene.contacts()
     ids = c["ids"]
     n = int(scene.num_bodies)
-    if n == 0:
+    n_grains = int(np.count_nonzero(sphere_mask(scene)))
+    if n_grains == 0:
         return float("nan")
     pair = ids[:, 1] >= 0
     pi, pj = ids[pair, 0], ids[pair, 1]
     if not mechanical:
-        return 2.0 * len(pi) / n
+        return 2.0 * len(pi) / n_grains
     wall_count = np.bincount(ids[~pair, 0], minlength=n)
-    alive = np.ones(n, bool)
+    alive = sphere_mask(scene).copy()
     while True:
         keep = alive[pi] & alive[pj]
         cnt = np.bincount(pi[keep], minlength=n) + np.bincount(pj[keep], minlength=n) + wall_count

@@ -17,7 +17,7 @@ from ._core import Material, ParameterError
 def default_max_speed(scene, walls, fraction: float = 1e-4) -> float:
     """A velocity cap for servo walls, m/s: each wall may move ``fraction`` of the mean
     radius per step (quasi-static: far below the grains' elastic wave speed)."""
-    r = float(np.mean(scene.radii))
+    r = float(np.mean(np.asarray(scene.radii)[measure.sphere_mask(scene)]))
     return fraction * r / scene.dt
 
 
@@ -150,7 +150,7 @@ def refd(scene, walls, material_id: int, *, stress: float, porosity: float,
     if not (0 < porosity < 1):
         raise ParameterError(f"porosity={porosity}: must be in (0, 1)")
     mat = scene.material(material_id)
-    spheres = np.arange(scene.num_bodies)
+    spheres = np.flatnonzero(measure.sphere_mask(scene))  # grains only, not geogrid nodes
     stages = []
     r1 = grow_to_stress(scene, walls, stress, tol=tol, unbalanced=unbalanced, gain=gain,
                         max_strain=max_strain, check_every=check_every,
