@@ -203,6 +203,20 @@ def _density(unit_weight: float | None, density: float | None) -> float:
     return float(density)
 
 
+def _one_link_members(b: "_Builder", scene, material: int, node_density_scale: float,
+                      links_of, direction, cell, side, axis, radius: float,
+                      n_cells=(0, 0)) -> Geogrid:
+    """Adds the built grid to the scene; every member is a single link (cylinder grids)."""
+    nodes, links, facets = b.build(scene, material, node_density_scale)
+    member_links = [np.array([links[k]]) for k in links_of]
+    n = len(links_of)
+    return Geogrid(nodes=nodes, links=links, pfacets=facets,
+                   member_direction=np.array(direction), member_cell=np.array(cell).reshape(n, 2),
+                   member_side=np.array(side), member_axis=np.array(axis, dtype=float),
+                   member_section_links=member_links, member_links=member_links,
+                   area=np.full(n, math.pi * radius**2), n_cells=n_cells)
+
+
 # ---- generators ----------------------------------------------------------------------------
 
 
@@ -232,7 +246,7 @@ def square_grid(scene, *, origin: Sequence[float], length: float, width: float, 
         for i in range(nodes_x - 1):
             links_of.append(b.link(ids[i, j], ids[i + 1, j]))
             direction.append(LONGITUDINAL)
-            cell.append((i, j) if j < nodes_y - 1 else (i, j))
+            cell.append((i, j))
             side.append("A")
             axis.append((1.0, 0, 0))
     for i in range(nodes_x):
@@ -242,14 +256,8 @@ def square_grid(scene, *, origin: Sequence[float], length: float, width: float, 
             cell.append((i, j))
             side.append("C")
             axis.append((0, 1.0, 0))
-    nodes, links, facets = b.build(scene, material, node_density_scale)
-    member_links = [np.array([links[k]]) for k in links_of]
-    return Geogrid(nodes=nodes, links=links, pfacets=facets,
-                   member_direction=np.array(direction), member_cell=np.array(cell),
-                   member_side=np.array(side), member_axis=np.array(axis),
-                   member_section_links=member_links, member_links=member_links,
-                   area=np.full(len(direction), math.pi * params.radius**2),
-                   n_cells=(nodes_x - 1, nodes_y - 1))
+    return _one_link_members(b, scene, material, node_density_scale, links_of, direction, cell,
+                             side, axis, params.radius, (nodes_x - 1, nodes_y - 1))
 
 
 def triangular_grid(scene, *, origin: Sequence[float], length: float, width: float,
@@ -293,14 +301,8 @@ def triangular_grid(scene, *, origin: Sequence[float], length: float, width: flo
             for k, nb in enumerate(up):
                 if nb in ids:
                     add((i, j), nb, DIAGONAL, (i, j), "")
-    nodes, links, facets = b.build(scene, material, node_density_scale)
-    member_links = [np.array([links[k]]) for k in links_of]
-    return Geogrid(nodes=nodes, links=links, pfacets=facets,
-                   member_direction=np.array(direction), member_cell=np.array(cell),
-                   member_side=np.array(sides), member_axis=np.array(axis),
-                   member_section_links=member_links, member_links=member_links,
-                   area=np.full(len(direction), math.pi * params.radius**2),
-                   n_cells=(nx - 1, ny - 1))
+    return _one_link_members(b, scene, material, node_density_scale, links_of, direction, cell,
+                             sides, axis, params.radius, (nx - 1, ny - 1))
 
 
 def biaxial_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures_y: int,
@@ -414,16 +416,11 @@ def polyline(scene, points, *, params: BeamParams, material: int,
     b = _Builder(params, _density(unit_weight, density))
     ids = [b.node(k, p) for k, p in enumerate(pts)]
     order = [b.link(ids[k], ids[k + 1]) for k in range(len(ids) - 1)]
-    nodes, links, facets = b.build(scene, material, node_density_scale)
     axis = np.diff(pts, axis=0)
     axis /= np.linalg.norm(axis, axis=1)[:, None]
-    member_links = [np.array([links[k]]) for k in order]
     n = len(order)
-    return Geogrid(nodes=nodes, links=links, pfacets=facets,
-                   member_direction=np.array([LONGITUDINAL] * n),
-                   member_cell=-np.ones((n, 2), dtype=int), member_side=np.array([""] * n),
-                   member_axis=axis, member_section_links=member_links,
-                   member_links=member_links, area=np.full(n, math.pi * params.radius**2))
+    return _one_link_members(b, scene, material, node_density_scale, order, [LONGITUDINAL] * n,
+                             -np.ones((n, 2), dtype=int), [""] * n, axis, params.radius)
 
 
 def write_vtk_geogrid(path, scene, grid: Geogrid) -> None:

@@ -395,11 +395,7 @@ void Scene::compute_grid_contacts(long& err_contact) {
     if (!c.owner) {
       if (c.active) {
         c.active = false;
-        c.state.fs.setZero();
-        c.state.mr.setZero();
-        c.state.normal.setZero();
-        c.state.overlap = 0;
-        c.state.fn = 0;
+        c.state.clear_history();
       }
       c.force.setZero();
       c.torque_sphere.setZero();

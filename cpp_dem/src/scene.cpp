@@ -354,11 +354,7 @@ void Scene::compute_pair_forces(long& err_contact) {
     if (dist2 >= rsum * rsum) {
       if (c.active) {
         c.active = false;
-        c.state.fs.setZero();
-        c.state.mr.setZero();
-        c.state.normal.setZero();
-        c.state.overlap = 0;
-        c.state.fn = 0;
+        c.state.clear_history();
         o = PairOutput();
       }
       continue;
@@ -403,11 +399,7 @@ void Scene::compute_wall_forces(long& err_contact) {
     if (s >= radius_[b] || s <= -radius_[b]) {
       if (c.active) {
         c.active = false;
-        c.state.fs.setZero();
-        c.state.mr.setZero();
-        c.state.normal.setZero();
-        c.state.overlap = 0;
-        c.state.fn = 0;
+        c.state.clear_history();
         c.force.setZero();
         c.torque.setZero();
       }

@@ -31,6 +31,15 @@ struct ContactState {
   Real fn = 0;                  ///< total normal force (elastic + viscous) on side 2, N
   Real dissip_friction = 0;     ///< cumulative Coulomb + rolling slip dissipation, J
   Real dissip_viscous = 0;      ///< cumulative viscous dissipation, J
+
+  /// The contact opened: forget the springs' history (dissipation totals are kept).
+  void clear_history() {
+    fs.setZero();
+    mr.setZero();
+    normal.setZero();
+    overlap = 0;
+    fn = 0;
+  }
 };
 
 /// What the law returns: the force and extra moment on side 2 (side 1 gets the opposite).
