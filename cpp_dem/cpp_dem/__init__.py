@@ -31,7 +31,7 @@ from ._core import RadiusGrowth, ServoWall, TriaxialController  # noqa: F401  (s
 from .checkpoint import load_checkpoint, save_checkpoint  # noqa: F401
 from .scene import BOX_WALLS, Scene, hertz_mindlin_material, linear_material  # noqa: F401
 
-from . import geogrid  # noqa: F401,E402
+from . import geogrid, packing  # noqa: F401,E402
 
 __all__ = [
     "BeamParams",

@@ -77,7 +77,7 @@ def loose_cloud(radii, lo, hi, *, seed: int = 0, max_tries: int = 2000
     at uniformly random positions inside the box [lo, hi] (m), rejecting any overlap with a
     sphere already placed or with the box faces (random sequential addition; seeded).
 
-    Returns (centres (n, 3), radii (n,)) in placement order (largest first). Raises
+    Returns (centres (n, 3), radii (n,)) numbered in space order (see spatial_order). Raises
     ParameterError if the box is smaller than the largest grain, or if a sphere cannot be
     placed in ``max_tries`` attempts (the cloud is too dense for sequential addition: solid
     fractions above about 0.3 need a bigger box and then compaction).
@@ -126,7 +126,9 @@ def loose_cloud(radii, lo, hi, *, seed: int = 0, max_tries: int = 2000
                                  f"{max_tries} tries; the spheres fill {solid:.3f} of the box "
                                  "(random sequential addition jams above about 0.3); use a "
                                  "bigger box or smaller radii, then compact")
-    return pos, r.copy()
+    # Number the spheres in space order (the placement order is random): faster scenes.
+    order = spatial_order(pos, r)
+    return pos[order], r[order]
 
 
 def hex_packing(lo, hi, radius: float, *, gap: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
@@ -191,3 +193,17 @@ def gravity_deposition(radii, lo, hi, *, material, seed: int = 0, gravity: float
     info = {"time": s.time, "steps": s.step_count, "settled": vmax < settled_speed,
             "max_speed": vmax}
     return s.positions, s.radii, info
+
+
+def spatial_order(centers, radii, *, cell_radii: float = 4.0) -> np.ndarray:
+    """A permutation that renumbers spheres in cell order (cells of ``cell_radii`` mean radii,
+    x-major), so that neighbours get nearby ids. Adding spheres to a scene in this order keeps
+    the hot loops' memory accesses local: measured 1.7x faster at 1e5 spheres and +10-18 %
+    at 1e4 (docs/benchmarks.md). Returns indices: ``centers[order]``, ``radii[order]``."""
+    c = np.asarray(centers, dtype=float).reshape(-1, 3)
+    r = np.asarray(radii, dtype=float).reshape(-1)
+    if len(c) == 0:
+        return np.zeros(0, dtype=np.int64)
+    h = cell_radii * float(r.mean())
+    cell = np.floor((c - c.min(axis=0)) / h).astype(np.int64)
+    return np.lexsort((cell[:, 2], cell[:, 1], cell[:, 0]))

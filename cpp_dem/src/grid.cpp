@@ -9,7 +9,7 @@
 namespace cpp_dem {
 
 namespace {
-constexpr long kParallelMinGrid = 1000;
+constexpr long kParallelMinGrid = 128;
 }
 
 void BeamParams::validate() const {
