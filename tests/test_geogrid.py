@@ -418,3 +418,21 @@ def test_triaxial_case_with_geogrid_layers_smoke(tmp_path):
     for s in out.values():
         assert s["lateral_stress_max_rel_error"] < 0.01
         assert math.isfinite(s["q_peak_Pa"]) and s["q_peak_Pa"] > 0
+
+
+def test_grid_wall_contacts_only_when_asked():
+    """Grid nodes pass through walls by default (000's box never touches the geogrid) and
+    rest on them, as spheres of radius R_c, when grid_wall_contacts is on."""
+    z_end = {}
+    for on in (False, True):
+        s, m = grid_scene(gravity=(0, 0, -9.81), local_damping=0.5)
+        s.add_wall(axis=2, position=0.0, sense=1, material=m)
+        s.grid_wall_contacts = on
+        p = dem.BeamParams(young=E_GRID, poisson=NU_GRID, radius=RC)
+        pts = np.array([[0, 0, 0.002], [0.01, 0, 0.002]])
+        g = geogrid.polyline(s, pts, params=p, material=m, density=RHO_GRID)
+        s.set_auto_timestep(safety=0.3, period=50)
+        s.run(20000)
+        z_end[on] = s.positions[g.nodes, 2]
+    assert np.all(z_end[False] < 0)  # fell through the floor
+    np.testing.assert_allclose(z_end[True], RC, rtol=1e-2)  # rests on it

@@ -70,6 +70,9 @@ M_r^max = 4 sigma_n^max I / R, M_tw^max = 2 sigma_n^max J / R (plastic caps).
            "PFacet on three nodes joined by three existing links.")
       .def("set_mass_inertia", &Scene::set_mass_inertia, py::arg("body"), py::arg("mass"),
            py::arg("inertia"), "Sets a body's mass (kg) and inertia (kg m^2).")
+      .def_property("grid_wall_contacts", &Scene::grid_wall_contacts,
+                    &Scene::set_grid_wall_contacts,
+                    "Grid nodes touch walls (as spheres of radius R_c) when True; default False.")
       .def_property_readonly("num_grid_links", &Scene::num_grid_links)
       .def_property_readonly("num_pfacets", &Scene::num_pfacets)
       .def_property_readonly("body_kinds", [](const Scene& s) {

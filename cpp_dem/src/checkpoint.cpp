@@ -129,6 +129,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.vec(s.node_gc_off_);
   w.vec(s.node_gc_);
   w.put(s.grid_topology_dirty_);
+  w.put(s.grid_wall_contacts_);
   w.vec(s.candidates_);
   // Energy bookkeeping.
   w.put(s.dropped_friction_);
@@ -222,6 +223,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   r.vec(t.node_gc_off_);
   r.vec(t.node_gc_);
   r.get(t.grid_topology_dirty_);
+  r.get(t.grid_wall_contacts_);
   r.vec(t.candidates_);
   r.get(t.dropped_friction_);
   r.get(t.dropped_viscous_);

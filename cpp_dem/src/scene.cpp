@@ -258,7 +258,7 @@ void Scene::rebuild() {
   std::vector<WallContact> wnext;
   size_t kw = 0;
   for (int b = 0; b < n; ++b) {
-    if (kind_[b] != 0) continue;  // grid nodes do not touch walls
+    if (kind_[b] != 0 && !grid_wall_contacts_) continue;  // grid nodes: only if asked for
     for (int w = 0; w < num_walls(); ++w) {
       const Wall& wl = walls_[w];
       const Real s = wl.sense * (pos_[b][wl.axis] - wl.position);

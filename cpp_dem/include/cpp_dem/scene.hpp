@@ -129,6 +129,13 @@ class Scene {
   const std::vector<BreakEvent>& break_events() const { return breaks_; }
   /// Body kind: 0 sphere, 1 grid node.
   const std::vector<std::uint8_t>& body_kinds() const { return kind_; }
+  /// Grid nodes touch walls (as spheres of radius R_c) only when this is on; off by default
+  /// (the pull-out box of 000 never touches the geogrid).
+  bool grid_wall_contacts() const { return grid_wall_contacts_; }
+  void set_grid_wall_contacts(bool on) {
+    grid_wall_contacts_ = on;
+    dirty_ = true;
+  }
   /// Sets the masses (kg) and inertias (kg m^2) of bodies (e.g. node density scaling).
   void set_mass_inertia(int body, Real mass, Real inertia);
 
@@ -270,6 +277,7 @@ class Scene {
   std::vector<int> sphere_gc_off_, sphere_gc_;      // sphere -> grid contacts
   std::vector<int> node_gc_off_, node_gc_;          // node -> grid contact * 3 + slot
   bool grid_topology_dirty_ = true;
+  bool grid_wall_contacts_ = false;
   CellGrid grid_;
   std::vector<std::pair<int, int>> candidates_;
   // Dissipation of contacts already dropped from the lists, J.
