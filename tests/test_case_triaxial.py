@@ -71,3 +71,26 @@ def test_bad_inputs(tmp_path, args, msg):
 def test_help_names_the_axial_axis():
     p = subprocess.run([sys.executable, str(CASE), "--help"], capture_output=True, text=True)
     assert "AXIAL axis is z" in p.stdout
+
+
+def test_dense_sample_dilates_loose_sample_contracts(tmp_path):
+    """App. B PSD, E = 4.5 MPa, 75 kPa, 1500 grains, to 25 % axial strain: the dense sample
+    (expanded without friction, porosity ~0.31) contracts, peaks and then dilates past its
+    initial volume; the loose one (expanded at 32 deg, porosity ~0.37) only contracts."""
+    import csv
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+
+    ev = {}
+    for name, prep in (("dense", "0"), ("loose", "32")):
+        d = tmp_path / name
+        subprocess.run([sys.executable, str(ROOT / "cases" / "triaxial.py"), "--n", "1500",
+                        "--prep-friction", prep, "--strain-rate", "0.5", "--stop-strain",
+                        "0.25", "--out", str(d)], check=True, capture_output=True, text=True)
+        rows = list(csv.DictReader(open(d / "triaxial.csv")))
+        ev[name] = [float(r["volumetric_strain"]) for r in rows]
+    dense, loose = ev["dense"], ev["loose"]
+    assert max(dense) - dense[-1] > 0.02 and dense[-1] < 0  # dilates past the start volume
+    assert max(loose) - loose[-1] < 0.005 and loose[-1] > 0.02  # contracts, no dilation
