@@ -41,26 +41,7 @@ int Scene::add_grid_nodes(const std::vector<Vec3>& pos, Real radius,
       throw ParameterError("position of node " + std::to_string(k) + ": must be finite");
   }
   const int first = num_bodies();
-  for (size_t k = 0; k < pos.size(); ++k) {
-    pos_.push_back(pos[k]);
-    vel_.push_back(Vec3::Zero());
-    angvel_.push_back(Vec3::Zero());
-    force_.push_back(Vec3::Zero());
-    torque_.push_back(Vec3::Zero());
-    ext_force_.push_back(Vec3::Zero());
-    ext_torque_.push_back(Vec3::Zero());
-    ori_.push_back(Quat::Identity());
-    radius_.push_back(radius);
-    mass_.push_back(mass[k]);
-    inertia_.push_back(inertia[k]);
-    body_mat_.push_back(material);
-    blocked_.push_back(DOF_NONE);
-    kind_.push_back(1);
-    ke_.push_back(0);
-    damp_dissip_.push_back(0);
-    ext_work_.push_back(0);
-    pos_at_energy_reset_.push_back(pos[k]);
-  }
+  for (size_t k = 0; k < pos.size(); ++k) push_body(pos[k], radius, mass[k], inertia[k], material, 1);
   num_nodes_ += static_cast<int>(pos.size());
   dirty_ = true;
   grid_topology_dirty_ = true;

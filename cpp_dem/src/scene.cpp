@@ -57,27 +57,32 @@ int Scene::add_spheres(const std::vector<Vec3>& pos, const std::vector<Real>& ra
   for (size_t k = 0; k < pos.size(); ++k) {
     const Real r = radius[k];
     const Real m = sphere_mass(mat.density, r);
-    pos_.push_back(pos[k]);
-    vel_.push_back(Vec3::Zero());
-    angvel_.push_back(Vec3::Zero());
-    force_.push_back(Vec3::Zero());
-    torque_.push_back(Vec3::Zero());
-    ext_force_.push_back(Vec3::Zero());
-    ext_torque_.push_back(Vec3::Zero());
-    ori_.push_back(Quat::Identity());
-    radius_.push_back(r);
-    mass_.push_back(m);
-    inertia_.push_back(0.4 * m * r * r);
-    body_mat_.push_back(material);
-    blocked_.push_back(DOF_NONE);
-    kind_.push_back(0);
-    ke_.push_back(0);
-    damp_dissip_.push_back(0);
-    ext_work_.push_back(0);
-    pos_at_energy_reset_.push_back(pos[k]);
+    push_body(pos[k], r, m, 0.4 * m * r * r, material, 0);
   }
   dirty_ = true;
   return first;
+}
+
+void Scene::push_body(const Vec3& x, Real radius, Real mass, Real inertia, int material,
+                      std::uint8_t kind) {
+  pos_.push_back(x);
+  vel_.push_back(Vec3::Zero());
+  angvel_.push_back(Vec3::Zero());
+  force_.push_back(Vec3::Zero());
+  torque_.push_back(Vec3::Zero());
+  ext_force_.push_back(Vec3::Zero());
+  ext_torque_.push_back(Vec3::Zero());
+  ori_.push_back(Quat::Identity());
+  radius_.push_back(radius);
+  mass_.push_back(mass);
+  inertia_.push_back(inertia);
+  body_mat_.push_back(material);
+  blocked_.push_back(DOF_NONE);
+  kind_.push_back(kind);
+  ke_.push_back(0);
+  damp_dissip_.push_back(0);
+  ext_work_.push_back(0);
+  pos_at_energy_reset_.push_back(x);
 }
 
 int Scene::add_wall(int axis, Real position, int sense, int material) {

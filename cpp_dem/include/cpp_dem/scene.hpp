@@ -224,6 +224,9 @@ class Scene {
  private:
   friend class Checkpoint;  // exact save/restore of the whole state (checkpoint.cpp)
   void check_body(int b) const;
+  /// Appends one body (kind 0 sphere, 1 grid node) at rest to every per-body array.
+  void push_body(const Vec3& x, Real radius, Real mass, Real inertia, int material,
+                 std::uint8_t kind);
   bool need_rebuild() const;
   void rebuild();
   void compute_pair_forces(long& err_contact);
