@@ -199,8 +199,7 @@ void Scene::rebuild_grid_contacts(Real margin) {
   };
   for (const Key& key : keys) {
     while (k < grid_contacts_.size() && key_of(grid_contacts_[k]) < key) {
-      dropped_friction_ += grid_contacts_[k].state.dissip_friction;
-      dropped_viscous_ += grid_contacts_[k].state.dissip_viscous;
+      drop_dissipation(grid_contacts_[k].state);
       ++k;
     }
     if (k < grid_contacts_.size() && key_of(grid_contacts_[k]) == key) {
@@ -228,8 +227,7 @@ void Scene::rebuild_grid_contacts(Real margin) {
     next.push_back(c);
   }
   for (; k < grid_contacts_.size(); ++k) {
-    dropped_friction_ += grid_contacts_[k].state.dissip_friction;
-    dropped_viscous_ += grid_contacts_[k].state.dissip_viscous;
+    drop_dissipation(grid_contacts_[k].state);
   }
   grid_contacts_.swap(next);
   // Adjacency for the reductions: sphere -> contacts, node -> (contact, slot).
@@ -462,8 +460,7 @@ void Scene::compute_links() {
     ev.reason = l.pending_break;
     ev.force = l.pending_break == 0 ? l.fn : l.fs.norm();
     breaks_.push_back(ev);
-    dropped_plastic_ += 0.5 * l.fn * l.fn / l.kn + 0.5 * l.fs.squaredNorm() / l.ks +
-                        0.5 * l.mb.squaredNorm() / l.kr + 0.5 * l.mt * l.mt / l.ktw;
+    dropped_plastic_ += l.elastic_energy();
     l.broken = true;
     l.pending_break = -1;
     l.force_b.setZero();

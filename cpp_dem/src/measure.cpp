@@ -94,28 +94,16 @@ Energies Scene::energies() const {
   }
   e.friction = dropped_friction_;
   e.viscous = dropped_viscous_;
-  for (const PairContact& c : pairs_) {
-    e.friction += c.state.dissip_friction;
-    e.viscous += c.state.dissip_viscous;
-    if (c.active) e.elastic += contact_elastic_energy(c.phys, c.state);
-  }
-  for (const WallContact& c : wall_contacts_) {
-    e.friction += c.state.dissip_friction;
-    e.viscous += c.state.dissip_viscous;
-    if (c.active) e.elastic += contact_elastic_energy(c.phys, c.state);
-  }
-  for (const GridContact& c : grid_contacts_) {
-    e.friction += c.state.dissip_friction;
-    e.viscous += c.state.dissip_viscous;
-    if (c.active) e.elastic += contact_elastic_energy(c.phys, c.state);
-  }
+  auto dissipation = [&e](const ContactState& s) {
+    e.friction += s.dissip_friction;
+    e.viscous += s.dissip_viscous;
+  };
+  for (const PairContact& c : pairs_) dissipation(c.state);
+  for (const WallContact& c : wall_contacts_) dissipation(c.state);
+  for (const GridContact& c : grid_contacts_) dissipation(c.state);
   e.plastic = dropped_plastic_;
-  for (const GridLink& l : links_) {
-    e.plastic += l.dissip_plastic;
-    if (l.broken) continue;
-    e.elastic += 0.5 * l.fn * l.fn / l.kn + 0.5 * l.fs.squaredNorm() / l.ks +
-                 0.5 * l.mb.squaredNorm() / l.kr + 0.5 * l.mt * l.mt / l.ktw;
-  }
+  for (const GridLink& l : links_) e.plastic += l.dissip_plastic;
+  e.elastic = stored_elastic_energy();
   for (const Wall& w : walls_) e.wall_work += w.work;
   if (!track_energy_ || !energy_reference_set_) return e;
   // The potential of gravity is taken at the positions where the kinetic energy was sampled
@@ -153,10 +141,8 @@ void Scene::reset_energy() {
   energy_reference_ = 0;
 }
 
-void Scene::set_energy_reference() {
+Real Scene::stored_elastic_energy() const {
   Real e = 0;
-  for (int b = 0; b < num_bodies(); ++b)
-    e += 0.5 * mass_[b] * vel_[b].squaredNorm() + 0.5 * inertia_[b] * angvel_[b].squaredNorm();
   for (const PairContact& c : pairs_)
     if (c.active) e += contact_elastic_energy(c.phys, c.state);
   for (const WallContact& c : wall_contacts_)
@@ -164,9 +150,14 @@ void Scene::set_energy_reference() {
   for (const GridContact& c : grid_contacts_)
     if (c.active) e += contact_elastic_energy(c.phys, c.state);
   for (const GridLink& l : links_)
-    if (!l.broken)
-      e += 0.5 * l.fn * l.fn / l.kn + 0.5 * l.fs.squaredNorm() / l.ks +
-           0.5 * l.mb.squaredNorm() / l.kr + 0.5 * l.mt * l.mt / l.ktw;
+    if (!l.broken) e += l.elastic_energy();
+  return e;
+}
+
+void Scene::set_energy_reference() {
+  Real e = stored_elastic_energy();
+  for (int b = 0; b < num_bodies(); ++b)
+    e += 0.5 * mass_[b] * vel_[b].squaredNorm() + 0.5 * inertia_[b] * angvel_[b].squaredNorm();
   energy_reference_ = e;
   energy_reference_set_ = true;
 }

@@ -239,8 +239,7 @@ void Scene::rebuild() {
   size_t k = 0;
   for (const auto& ij : candidates_) {
     while (k < pairs_.size() && std::make_pair(pairs_[k].i, pairs_[k].j) < ij) {
-      dropped_friction_ += pairs_[k].state.dissip_friction;
-      dropped_viscous_ += pairs_[k].state.dissip_viscous;
+      drop_dissipation(pairs_[k].state);
       ++k;
     }
     if (k < pairs_.size() && pairs_[k].i == ij.first && pairs_[k].j == ij.second) {
@@ -253,8 +252,7 @@ void Scene::rebuild() {
     }
   }
   for (; k < pairs_.size(); ++k) {
-    dropped_friction_ += pairs_[k].state.dissip_friction;
-    dropped_viscous_ += pairs_[k].state.dissip_viscous;
+    drop_dissipation(pairs_[k].state);
   }
   pairs_.swap(next);
   pair_out_.assign(pairs_.size(), PairOutput());
@@ -270,8 +268,7 @@ void Scene::rebuild() {
       if (!(s < radius_[b] + margin && s > -radius_[b])) continue;
       while (kw < wall_contacts_.size() &&
              std::make_pair(wall_contacts_[kw].body, wall_contacts_[kw].wall) < std::make_pair(b, w)) {
-        dropped_friction_ += wall_contacts_[kw].state.dissip_friction;
-        dropped_viscous_ += wall_contacts_[kw].state.dissip_viscous;
+        drop_dissipation(wall_contacts_[kw].state);
         ++kw;
       }
       if (kw < wall_contacts_.size() && wall_contacts_[kw].body == b && wall_contacts_[kw].wall == w) {
@@ -285,8 +282,7 @@ void Scene::rebuild() {
     }
   }
   for (; kw < wall_contacts_.size(); ++kw) {
-    dropped_friction_ += wall_contacts_[kw].state.dissip_friction;
-    dropped_viscous_ += wall_contacts_[kw].state.dissip_viscous;
+    drop_dissipation(wall_contacts_[kw].state);
   }
   wall_contacts_.swap(wnext);
   // Adjacency (CSR) in contact order, so reductions into bodies have a fixed order.

@@ -41,6 +41,12 @@ struct GridLink {
   // Output of the last step.
   Vec3 force_b = Vec3::Zero();   ///< total force on b (a gets the opposite), N
   Vec3 torque_a = Vec3::Zero(), torque_b = Vec3::Zero();  ///< N m
+
+  /// Energy stored in the link's four springs (axial, shear, bending, twisting), J.
+  Real elastic_energy() const {
+    return 0.5 * fn * fn / kn + 0.5 * fs.squaredNorm() / ks + 0.5 * mb.squaredNorm() / kr +
+           0.5 * mt * mt / ktw;
+  }
 };
 
 /// A PFacet: a triangle of three nodes with its three connections, dilated by R_c.

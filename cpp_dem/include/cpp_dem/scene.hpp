@@ -224,6 +224,13 @@ class Scene {
  private:
   friend class Checkpoint;  // exact save/restore of the whole state (checkpoint.cpp)
   void check_body(int b) const;
+  /// A contact leaves the lists: its dissipation moves to the scene's totals.
+  void drop_dissipation(const ContactState& s) {
+    dropped_friction_ += s.dissip_friction;
+    dropped_viscous_ += s.dissip_viscous;
+  }
+  /// Energy stored in active contacts and unbroken geogrid links, J.
+  Real stored_elastic_energy() const;
   /// Appends one body (kind 0 sphere, 1 grid node) at rest to every per-body array.
   void push_body(const Vec3& x, Real radius, Real mass, Real inertia, int material,
                  std::uint8_t kind);
