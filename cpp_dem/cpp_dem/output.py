@@ -338,7 +338,27 @@ def write_vtk_box(path: PathLike, lo: Sequence[float], hi: Sequence[float], *,
                      encoding=encoding)
 
 
-class PvdWriter:
+class _ClosesOnExit:
+    """Context-manager protocol for the writers here: ``with`` closes, and so (best effort)
+    does garbage collection. Subclasses define an idempotent ``close()``."""
+
+    def close(self) -> None:  # pragma: no cover - overridden
+        raise NotImplementedError
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def __del__(self) -> None:  # pragma: no cover - best effort
+        try:
+            self.close()
+        except Exception:
+            pass
+
+
+class PvdWriter(_ClosesOnExit):
     """A ParaView ``.pvd`` collection: a list of (time, file) entries for a time series.
 
     Every :meth:`add` rewrites the (small) ``.pvd`` file atomically, so after a crash it is a
@@ -403,12 +423,6 @@ class PvdWriter:
 
     def close(self) -> None:
         """Nothing to release (the file is complete after every :meth:`add`); for symmetry."""
-
-    def __enter__(self) -> "PvdWriter":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
 
 # ---------------------------------------------------------------------------------------------
@@ -549,7 +563,7 @@ def _metadata_attr(value: Any) -> Any:
 # ---------------------------------------------------------------------------------------------
 
 
-class H5Recorder:
+class H5Recorder(_ClosesOnExit):
     """Appends time series and snapshots to an HDF5 file as a run goes.
 
     Layout::
@@ -753,18 +767,6 @@ class H5Recorder:
     def closed(self) -> bool:
         return self._file is None
 
-    def __enter__(self) -> "H5Recorder":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    def __del__(self) -> None:  # pragma: no cover - best effort
-        try:
-            self.close()
-        except Exception:
-            pass
-
 
 def _open_h5_for_reading(path: PathLike):
     """Opens an HDF5 file read-only. If another process holds it open for writing (a live
@@ -817,7 +819,7 @@ def read_h5_snapshot(path: PathLike, index: int = -1) -> dict[str, Any]:
 # ---------------------------------------------------------------------------------------------
 
 
-class CsvRecorder:
+class CsvRecorder(_ClosesOnExit):
     """Writes series as CSV rows, one per :meth:`record`, flushed per row (and fsync'ed with
     ``fsync=True``).
 
@@ -904,18 +906,6 @@ class CsvRecorder:
             self._fh.flush()
             self._fh.close()
             self._fh = None
-
-    def __enter__(self) -> "CsvRecorder":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    def __del__(self) -> None:  # pragma: no cover - best effort
-        try:
-            self.close()
-        except Exception:
-            pass
 
 
 def read_csv_series(path: PathLike) -> dict[str, np.ndarray]:
