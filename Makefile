@@ -5,8 +5,11 @@ PY := .venv/bin/python
 setup:
 	@bash scripts/setup.sh
 
+# The main demo: a small geogrid pull-out (000 set-up, half-size box, 375 spheres, 50 mm),
+# ending in its force-displacement plot results/demo_pullout/pullout_force.png.
 demo: setup
-	$(PY) cases/deposition.py --out results/deposition
+	$(PY) cases/pullout_000.py --smoke --distance 0.05 --snapshots 5 --out results/demo_pullout
+	@echo "force-displacement plot: results/demo_pullout/pullout_force.png"
 
 test: setup
 	$(PY) -m pytest -q tests

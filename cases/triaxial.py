@@ -201,12 +201,9 @@ def run(p: Params, out: Path) -> dict:
                               density=p.density, local_damping=p.damping,
                               dt_safety=p.dt_safety)
     sc, walls = sample.scene, sample.walls
-    # Soft grains under high confinement overlap by design: with k_n = E R, a contact carrying
-    # sigma (2R)^2 overlaps by 4 sigma / E of the radius (0.07 at 75 kPa and E = 4.5 MPa), the
-    # axial stress reaches about 3-4 times the cell pressure, and the most loaded contacts
-    # carry several times the mean. Allow 60 sigma_cell / E (at least 0.5, at most 0.95)
-    # before the run stops with a BlowUpError.
-    sc.max_overlap_ratio = min(0.95, max(0.5, 60.0 * p.cell_pressure / p.young))
+    # Soft grains under high confinement overlap by design (0.07 of the radius at 75 kPa and
+    # E = 4.5 MPa, the axial stress reaches 3-4 times the cell pressure): see overlap_limit.
+    sc.max_overlap_ratio = prep.overlap_limit(p.cell_pressure, p.young)
     grid = layer.build(sc, p) if (layer is not None and p.geogrid != "none") else None
     if grid is not None:
         sc.block_dofs(grid.nodes, "all")  # held during the expansion (as 000 §2.3)

@@ -15,7 +15,19 @@ Quick start::
     scene.run(1000)
 """
 
-from ._core import (  # noqa: F401  (re-exported)
+import os as _os
+
+# OpenMP threads that wait at a barrier spin for a long time by default (libgomp: ~300k
+# spins). When another process holds a core, a spinning thread steals it from the thread
+# the barrier waits for and a 2-thread run slows down ten-fold or more (measured: a smoke
+# pull-out that takes 10 s ran for half an hour beside another job). A short spin, then
+# sleep, keeps the dedicated-machine speed and degrades gracefully when shared. Set
+# GOMP_SPINCOUNT / OMP_WAIT_POLICY yourself to override; it must be set before the first
+# import of cpp_dem (libgomp reads it when it loads).
+if "OMP_WAIT_POLICY" not in _os.environ:
+    _os.environ.setdefault("GOMP_SPINCOUNT", "20000")
+
+from ._core import (  # noqa: F401,E402  (re-exported)
     BeamParams,
     BlowUpError,
     ContactModel,

@@ -21,6 +21,15 @@ def default_max_speed(scene, walls, fraction: float = 1e-4) -> float:
     return fraction * r / scene.dt
 
 
+def overlap_limit(stress: float, young: float) -> float:
+    """A blow-up limit on the overlap (fraction of the radius) for soft grains under
+    confinement: with k_n = E R a contact carrying sigma (2R)^2 overlaps by 4 sigma / E of
+    the radius, and the most loaded contacts carry several times the mean, so soft grains
+    (E of a few MPa) at tens of kPa overlap by design. Returns 60 sigma / E, at least 0.5 and
+    at most 0.95 (stress and young in Pa)."""
+    return min(0.95, max(0.5, 60.0 * stress / young))
+
+
 def _check_target(stress: float, field_name: str = "stress") -> None:
     if not (math.isfinite(stress) and stress > 0):
         raise ParameterError(f"{field_name}={stress}: must be > 0 (Pa, compressive positive; "
@@ -138,14 +147,16 @@ class RefdResult:
 def refd(scene, walls, material_id: int, *, stress: float, porosity: float,
          friction_steps_deg=(20.0, 10.0, 5.0, 2.0, 0.0), tol: float = 0.01,
          unbalanced: float = 0.01, max_steps_per_stage: int = 100_000, gain: float = 0.5,
-         max_strain: float = 1e-3, check_every: int = 200, log=None) -> RefdResult:
+         max_strain: float = 1e-3, check_every: int = 200, accept_denser: bool = False,
+         log=None) -> RefdResult:
     """REFD (000 §2.3): (1) expand the radii to ``stress`` (Pa) at the material's friction;
     (2) lower the grains' friction step by step (``friction_steps_deg``) and keep expanding
     at that stress until the porosity is at or below ``porosity`` (-); (3) restore the
     friction and re-balance at the stress. Walls stay fixed (frictionless walls are the
     caller's material choice, as 000). Raises ParameterError when the sample is already
     denser than the target after stage 1, or when the target is not reached at the lowest
-    friction (the message gives the porosity reached)."""
+    friction (the message gives the porosity reached). With ``accept_denser`` a sample already
+    at or below the target after stage 1 is accepted as it is (the target is a maximum)."""
     _check_target(stress)
     if not (0 < porosity < 1):
         raise ParameterError(f"porosity={porosity}: must be in (0, 1)")
@@ -158,6 +169,11 @@ def refd(scene, walls, material_id: int, *, stress: float, porosity: float,
     stages.append(("expand", mat.friction_angle_deg, r1))
     if log:
         log(f"REFD expand: stress {r1.mean_stress:.4g} Pa, porosity {r1.porosity:.4f}")
+    if r1.porosity <= porosity and accept_denser:
+        if log:
+            log(f"REFD: porosity {r1.porosity:.4f} after expansion is already at or below "
+                f"the target {porosity}; no friction decrease needed")
+        return RefdResult(r1.mean_stress, r1.porosity, mat.friction_angle_deg, r1.steps, stages)
     if r1.porosity <= porosity:
         raise ParameterError(f"porosity={porosity}: the sample is already denser (porosity "
                              f"{r1.porosity:.4f} at {stress} Pa after expansion); REFD only "

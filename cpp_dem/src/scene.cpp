@@ -130,6 +130,14 @@ void Scene::set_radii(const std::vector<Real>& r) {
   require_size(r, pos_.size(), "radii");
   for (Real x : r) require(std::isfinite(x) && x > 0, "radius", x, "must be > 0 (m)");
   for (size_t b = 0; b < r.size(); ++b) {
+    if (kind_[b] != 0) {
+      // Grid nodes keep their lumped mass; their radius is the geogrid's R_c.
+      if (r[b] != radius_[b])
+        throw ParameterError("radius[" + std::to_string(b) + "]=" + std::to_string(r[b]) +
+                             ": body " + std::to_string(b) +
+                             " is a grid node; its radius (the geogrid's R_c) cannot change");
+      continue;
+    }
     radius_[b] = r[b];
     mass_[b] = sphere_mass(materials_[body_mat_[b]].density, r[b]);
     inertia_[b] = 0.4 * mass_[b] * r[b] * r[b];

@@ -162,7 +162,8 @@ class Scene {
   void set_positions(const std::vector<Vec3>& v);
   void set_velocities(const std::vector<Vec3>& v);
   void set_angular_velocities(const std::vector<Vec3>& v);
-  /// Sets radii (m) and rescales mass and inertia with the body's material density.
+  /// Sets radii (m) and rescales the spheres' mass and inertia with their material density.
+  /// Grid nodes keep their lumped mass and must keep their radius (R_c).
   void set_radii(const std::vector<Real>& r);
   void set_blocked(int body, std::uint8_t mask);
   void set_external_forces(const std::vector<Vec3>& f);
