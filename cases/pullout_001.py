@@ -139,8 +139,8 @@ def run(p: Params, out: Path) -> dict:
 
 
 def study(p: Params, out: Path, grids, radii, pressures, radii_given: bool) -> None:
-    rows = []
     out.mkdir(parents=True, exist_ok=True)
+    rows = read_study(out)  # earlier runs of the study in this directory stay in the table
     for g in grids:
         # 001 ran the triangular grid with r = 2.5 mm only (Table 5.3, last column).
         for r in (radii if g == "square" or radii_given else [2.5e-3]):
@@ -149,6 +149,7 @@ def study(p: Params, out: Path, grids, radii, pressures, radii_given: bool) -> N
                 sub = out / f"{g}_r{r * 1e3:g}mm_P{P / 1e3:g}kPa"
                 s = run(q, sub)
                 key = (g, r, P)
+                rows = [x for x in rows if (x["grid"], x["radius_m"], x["pressure_Pa"]) != key]
                 rows.append({"grid": g, "radius_m": r, "pressure_Pa": P,
                              "grains": s["num_grains"], "mean_force_N": s["mean_force_N"],
                              "cov_force": s["cov_force"],
@@ -161,7 +162,22 @@ def study(p: Params, out: Path, grids, radii, pressures, radii_given: bool) -> N
                 write_study(rows, out)
 
 
+def read_study(out: Path) -> list:
+    """Rows of an existing study.csv in ``out`` (numbers parsed; empty cells are None)."""
+    f = out / "study.csv"
+    if not f.is_file():
+        return []
+    rows = []
+    with open(f, newline="") as fh:
+        for r in csv.DictReader(fh):
+            rows.append({k: (v if k == "grid" else (None if v == "" else float(v)))
+                         for k, v in r.items()})
+    return rows
+
+
 def write_study(rows: list, out: Path) -> None:
+    rows = sorted(rows, key=lambda r: (r["grid"] != "square", -r["radius_m"],
+                                       r["pressure_Pa"]))
     with open(out / "study.csv", "w", newline="") as f:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
@@ -173,7 +189,7 @@ def write_study(rows: list, out: Path) -> None:
         def f(v, fmt):
             return "—" if v is None else format(v, fmt)
         lines.append(f"| {r['grid']} | {r['radius_m'] * 1e3:g} | {r['pressure_Pa'] / 1e3:g} | "
-                     f"{r['grains']} | {r['mean_force_N']:.2f} | {f(r['mean_force_001_N'], '.2f')}"
+                     f"{r['grains']:.0f} | {r['mean_force_N']:.2f} | {f(r['mean_force_001_N'], '.2f')}"
                      f" | {r['cov_force']:.3f} | {f(r['cov_001'], '.3f')} | "
                      f"{r['mean_front_force_N']:.2f} | {r['wall_time_s']:.0f} |")
     (out / "study.md").write_text("\n".join(lines) + "\n")

@@ -207,3 +207,133 @@ def refd(scene, walls, material_id: int, *, stress: float, porosity: float,
     stages.append(("restore", mat.friction_angle_deg, r3))
     steps = sum(s[2].steps for s in stages)
     return RefdResult(r3.mean_stress, r3.porosity, reached, steps, stages)
+
+
+def _pair_overlaps(c: np.ndarray, r: np.ndarray):
+    """All overlapping sphere pairs (i < j): (pairs, overlap / smaller radius, centre
+    distance, sum of radii, smaller radius)."""
+    empty = (np.zeros((0, 2), int),) + (np.zeros(0),) * 4
+    if len(r) < 2:
+        return empty
+    h = 2.0 * float(r.max())
+    cell = np.floor((c - c.min(0)) / h).astype(np.int64)
+    cells: dict = {}
+    for k, key in enumerate(map(tuple, cell)):
+        cells.setdefault(key, []).append(k)
+    cells = {k: np.asarray(v) for k, v in cells.items()}
+    pairs = []
+    offs = [(a, b, d) for a in (-1, 0, 1) for b in (-1, 0, 1) for d in (-1, 0, 1)]
+    for key, idx in cells.items():
+        for o in offs:
+            nb = cells.get((key[0] + o[0], key[1] + o[1], key[2] + o[2]))
+            if nb is None:
+                continue
+            d = np.linalg.norm(c[idx][:, None, :] - c[nb][None, :, :], axis=2)
+            ii, jj = np.nonzero(d < r[idx][:, None] + r[nb][None, :])
+            a, b = idx[ii], nb[jj]
+            keep = a < b
+            if np.any(keep):
+                pairs.append(np.column_stack([a[keep], b[keep]]))
+    if not pairs:
+        return empty
+    p = np.vstack(pairs)
+    dist = np.linalg.norm(c[p[:, 1]] - c[p[:, 0]], axis=1)
+    rs = r[p[:, 0]] + r[p[:, 1]]
+    rmin = np.minimum(r[p[:, 0]], r[p[:, 1]])
+    return p, (rs - dist) / rmin, dist, rs, rmin
+
+
+def overlap_report(scene, walls=()) -> dict:
+    """The largest overlaps in a scene's current configuration, as fractions of the (smaller)
+    radius: ``pair`` (sphere-sphere, with the pair), ``wall`` (sphere-wall, with the body and
+    wall). Spheres only (grid nodes are skipped). Computed in NumPy from the positions."""
+    mask = measure.sphere_mask(scene)
+    ids = np.flatnonzero(mask)
+    c = np.asarray(scene.positions)[ids]
+    r = np.asarray(scene.radii)[ids]
+    out = {"pair": 0.0, "pair_bodies": None, "wall": 0.0, "wall_body": None}
+    res = _pair_overlaps(c, r)
+    if len(res[0]):
+        p, ratio = res[0], res[1]
+        k = int(np.argmax(ratio))
+        out["pair"], out["pair_bodies"] = float(ratio[k]), (int(ids[p[k, 0]]), int(ids[p[k, 1]]))
+    wp = np.asarray(scene.wall_positions)
+    ax, se = np.asarray(scene.wall_axes), np.asarray(scene.wall_senses)
+    for w in walls:
+        gap = se[w] * (c[:, ax[w]] - wp[w])  # centre distance to the wall, inside positive
+        ratio = (r - gap) / r
+        k = int(np.argmax(ratio))
+        if ratio[k] > out["wall"]:
+            out["wall"], out["wall_body"] = float(ratio[k]), (int(ids[k]), int(w))
+    return out
+
+
+def relax_overlaps(scene, walls=(), *, target_ratio: float = 0.01, steps: int = 4000,
+                   chunks: int = 40, damping: float = 0.8, log=None) -> dict:
+    """Controlled relaxation of initial overlaps (e.g. of a packing read from a file).
+
+    If the largest sphere-sphere or sphere-wall overlap exceeds ``target_ratio`` of the radius,
+    every sphere radius is multiplied by the one factor s < 1 that brings the largest overlap
+    down to ``target_ratio``; then the radii grow back to their original values in ``chunks``
+    equal increments over ``steps`` steps with Cundall local damping ``damping`` (the overlap
+    added per increment is (1 - s) / chunks of the radius, resolved before the next one), and
+    velocities are zeroed at the end. The radii, masses and damping are restored exactly. Walls
+    (ids in ``walls``) stay where they are. Returns the overlaps before and after, and s.
+    """
+    if not (0 <= target_ratio < 0.5):
+        raise ParameterError(f"target_ratio={target_ratio}: must be in [0, 0.5)")
+    if steps < chunks or chunks < 1:
+        raise ParameterError(f"steps={steps}, chunks={chunks}: need 1 <= chunks <= steps")
+    if not (0 <= damping < 1):
+        raise ParameterError(f"damping={damping}: must be in [0, 1)")
+    before = overlap_report(scene, walls)
+    worst = max(before["pair"], before["wall"])
+    if worst <= target_ratio:
+        return {"before": before, "after": before, "shrink": 1.0, "steps": 0}
+    mask = measure.sphere_mask(scene)
+    ids = np.flatnonzero(mask)
+    c = np.asarray(scene.positions)[ids]
+    r0_all = np.asarray(scene.radii).copy()
+    r = r0_all[ids]
+    s = 1.0
+    res = _pair_overlaps(c, r)
+    t = target_ratio
+    if len(res[0]):
+        _, _, dist, rs, rmin = res
+        # ((ri + rj) s - d) / (rmin s) <= t  <=>  s <= d / (ri + rj - t rmin)
+        s = min(s, float(np.min(dist / (rs - t * rmin))))
+    wp = np.asarray(scene.wall_positions)
+    ax, se = np.asarray(scene.wall_axes), np.asarray(scene.wall_senses)
+    for w in walls:
+        gap = se[w] * (c[:, ax[w]] - wp[w])
+        if np.any(gap <= 0):
+            k = int(ids[np.argmin(gap)])
+            raise ParameterError(f"body {k}: its centre is outside wall {w}; relax_overlaps "
+                                 "cannot push it back in")
+        s = min(s, float(np.min(gap / (r * (1 - t)))))
+    s *= 1 - 1e-9
+    if log:
+        log(f"relax_overlaps: largest overlap {worst:.3g} of the radius; radii x {s:.4f}, "
+            f"grown back over {steps} steps")
+    damp0 = scene.local_damping
+    scene.local_damping = damping
+    try:
+        for k in range(chunks + 1):
+            f = s + (1.0 - s) * k / chunks
+            rr = r0_all.copy()
+            rr[ids] = r * f if k < chunks else r
+            scene.radii = rr
+            if k < chunks:
+                scene.run(steps // chunks)
+        scene.run(steps // chunks)
+    finally:
+        scene.local_damping = damp0
+        scene.radii = r0_all
+    v = np.asarray(scene.velocities)
+    v[ids] = 0.0
+    scene.velocities = v
+    w = np.asarray(scene.angular_velocities)
+    w[ids] = 0.0
+    scene.angular_velocities = w
+    after = overlap_report(scene, walls)
+    return {"before": before, "after": after, "shrink": s, "steps": steps + steps // chunks}

@@ -439,21 +439,24 @@ void Scene::compute_wall_forces(long& err_contact) {
 void Scene::raise_overlap(long k, bool wall) const {
   std::ostringstream os;
   os.precision(4);
+  // Before the first step nothing has moved: the overlap was in the input.
+  const char* why = step_ == 0
+                        ? "); the initial configuration overlaps this much: move the bodies "
+                          "apart or relax the overlaps first (cpp_dem.prep.relax_overlaps)"
+                        : "); the time step may be too large or the contact too soft";
   if (wall) {
     const WallContact& c = wall_contacts_[k];
     const Wall& w = walls_[c.wall];
     const Real s = w.sense * (pos_[c.body][w.axis] - w.position);
     os << "blow-up at step " << step_ << ": body " << c.body << " overlaps wall " << c.wall
        << " by " << (radius_[c.body] - s) / radius_[c.body]
-       << " of its radius (max_overlap_ratio=" << max_overlap_ratio_
-       << "); the time step may be too large or the contact too soft";
+       << " of its radius (max_overlap_ratio=" << max_overlap_ratio_ << why;
   } else {
     const PairContact& c = pairs_[k];
     const Real ov = radius_[c.i] + radius_[c.j] - (pos_[c.j] - pos_[c.i]).norm();
     os << "blow-up at step " << step_ << ": bodies " << c.i << " and " << c.j
        << " overlap by " << ov / std::min(radius_[c.i], radius_[c.j])
-       << " of the smaller radius (max_overlap_ratio=" << max_overlap_ratio_
-       << "); the time step may be too large or the contact too soft";
+       << " of the smaller radius (max_overlap_ratio=" << max_overlap_ratio_ << why;
     if (!std::isfinite(ov)) os << " (non-finite position)";
   }
   throw BlowUpError(os.str());
