@@ -117,3 +117,27 @@ def test_relax_overlaps_rejects_bad_input_and_skips_clean_scenes():
         prep.relax_overlaps(sc, walls, target_ratio=0.7)
     with pytest.raises(dem.ParameterError, match="damping=1.0"):
         prep.relax_overlaps(sc, walls, damping=1.0)
+
+
+def test_a_manual_dt_above_the_estimate_is_stopped_even_when_it_looks_stable():
+    """A sphere resting on a wall is stable up to sqrt(2) x the estimate, so 1.2 x would run
+    on quietly; the dt check stops it at step 100 and names the body that sets the estimate."""
+    sc = dem.Scene(gravity=(0, 0, -9.81), local_damping=0.5)
+    m = sc.add_material(dem.linear_material(density=2000, young=E, poisson=0.3,
+                                            friction_angle_deg=30))
+    sc.add_wall(axis=2, position=0.0, sense=1, material=m)
+    sc.add_spheres([[0, 0, R]], [R], material=m)
+    sc.set_auto_timestep(safety=0.5, period=10)
+    sc.run(3000)  # settled on the wall
+    sc.set_auto_timestep(safety=0.5, period=0)
+    assert sc.num_active_contacts == 1
+    sc.dt = 1.2 * sc.critical_dt()
+    with pytest.raises(dem.BlowUpError, match=r"step 3000: the time step dt=.* exceeds the "
+                                              r"critical estimate .* \(set by body 0\)"):
+        sc.run(500)
+    sc.dt_check_period = 0  # the user may switch it off deliberately
+    sc.run(100)
+    with pytest.raises(dem.ParameterError, match="timestep_safety=1.2"):
+        sc.set_auto_timestep(safety=1.2)
+    with pytest.raises(dem.ParameterError, match="dt_check_period=-1"):
+        sc.dt_check_period = -1

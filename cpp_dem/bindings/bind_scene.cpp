@@ -181,6 +181,9 @@ void bind_scene(py::module_& m) {
            "Every `period` steps set dt = safety x critical_dt() (period 0 switches it off).")
       .def_property_readonly("timestep_safety", &Scene::timestep_safety)
       .def_property_readonly("timestep_period", &Scene::timestep_period)
+      .def_property("dt_check_period", &Scene::dt_check_period, &Scene::set_dt_check_period,
+                    "Without the automatic time step: every this many steps (0 = off) a dt "
+                    "above critical_dt() stops the run with BlowUpError.")
       .def("_run", &Scene::run, py::arg("steps"), py::call_guard<py::gil_scoped_release>())
       .def_property_readonly("step_count", &Scene::step_count)
       .def_property_readonly("time", &Scene::time, "Simulated time, s.")

@@ -17,7 +17,9 @@ Real Scene::pwave_dt() const {
   return dt;  // infinite when every body is fully blocked
 }
 
-Real Scene::critical_dt() const {
+Real Scene::critical_dt() const { return critical_dt_body(nullptr); }
+
+Real Scene::critical_dt_body(int* arg_body) const {
   // Per body and axis, the summed contact stiffness K_a (translation) and K_a^rot; the
   // estimate sqrt(2 m / K_a) is a Gershgorin bound on 2 / omega_max for the assembled
   // system: exact for two equal spheres in contact, sqrt(2) below the exact value for a
@@ -70,14 +72,19 @@ Real Scene::critical_dt() const {
       }
     }
   }
+  if (arg_body) *arg_body = -1;
   if (!any) return pwave_dt();
   Real dt = std::numeric_limits<Real>::infinity();
   for (int b = 0; b < n; ++b) {
     for (int a = 0; a < 3; ++a) {
-      if (kt[b][a] > 0 && !(blocked_[b] & (DOF_X << a)))
-        dt = std::min(dt, std::sqrt(2 * mass_[b] / kt[b][a]));
+      Real d = std::numeric_limits<Real>::infinity();
+      if (kt[b][a] > 0 && !(blocked_[b] & (DOF_X << a))) d = std::sqrt(2 * mass_[b] / kt[b][a]);
       if (kr[b][a] > 0 && !(blocked_[b] & (DOF_RX << a)))
-        dt = std::min(dt, std::sqrt(2 * inertia_[b] / kr[b][a]));
+        d = std::min(d, std::sqrt(2 * inertia_[b] / kr[b][a]));
+      if (d < dt) {
+        dt = d;
+        if (arg_body) *arg_body = b;
+      }
     }
   }
   return std::isfinite(dt) ? dt : pwave_dt();

@@ -203,13 +203,21 @@ void Scene::set_track_energy(bool on) {
   track_energy_ = on;
 }
 void Scene::set_auto_timestep(Real safety, int period) {
-  require(std::isfinite(safety) && safety > 0, "timestep_safety", safety, "must be > 0");
+  require(std::isfinite(safety) && safety > 0 && safety <= 1, "timestep_safety", safety,
+          "must be in (0, 1]: above 1 the step exceeds the critical estimate and leapfrog can "
+          "go unstable");
   if (period < 0)
     throw ParameterError("timestep_period=" + std::to_string(period) + ": must be >= 0 (0 = off)");
   ts_safety_ = safety;
   ts_period_ = period;
   const Real est = critical_dt();
   if (period > 0 && std::isfinite(est)) set_dt(safety * est);
+}
+
+void Scene::set_dt_check_period(int period) {
+  if (period < 0)
+    throw ParameterError("dt_check_period=" + std::to_string(period) + ": must be >= 0 (0 = off)");
+  dt_check_period_ = period;
 }
 
 Real Scene::default_margin() const {
@@ -607,6 +615,19 @@ void Scene::step() {
   if (ts_period_ > 0 && step_ % ts_period_ == 0 && step_ > 0) {
     const Real est = critical_dt();
     if (std::isfinite(est)) dt_ = ts_safety_ * est;  // nothing free: keep dt
+  }
+  if (ts_period_ == 0 && dt_check_period_ > 0 && step_ > 0 && step_ % dt_check_period_ == 0) {
+    int body = -1;
+    const Real est = critical_dt_body(&body);
+    if (body >= 0 && dt_ > est * (1 + 1e-12)) {
+      std::ostringstream os;
+      os.precision(4);
+      os << "blow-up at step " << step_ << ": the time step dt=" << dt_
+         << " s exceeds the critical estimate " << est << " s (set by body " << body
+         << "); leapfrog may be unstable and results would be wrong: lower dt or use "
+            "set_auto_timestep(safety <= 1)";
+      throw BlowUpError(os.str());
+    }
   }
   for (const auto& c : controllers_)
     if (c->enabled && step_ % c->period == 0) c->apply(*this);

@@ -207,6 +207,12 @@ class Scene {
   /// (min over bodies and axes of sqrt(2 m / K_axis), translational and rotational); the
   /// p-wave estimate when no contact is active.
   Real critical_dt() const;
+  /// critical_dt() and the body that sets it (-1 when no contact or link exists).
+  Real critical_dt_body(int* body) const;
+  /// Every `period` steps (0 = off) a run without the automatic time step checks that dt does
+  /// not exceed critical_dt() and throws BlowUpError naming the step and body if it does.
+  void set_dt_check_period(int period);
+  int dt_check_period() const { return dt_check_period_; }
   /// p-wave estimate min_b R_b sqrt(rho_b / E_b), s.
   Real pwave_dt() const;
   Energies energies() const;
@@ -304,6 +310,7 @@ class Scene {
   bool track_energy_ = false;
   Real ts_safety_ = 0.8;
   int ts_period_ = 0;
+  int dt_check_period_ = 100;
   long step_ = 0;
   Real time_ = 0;
   int phys_version_ = 0;
