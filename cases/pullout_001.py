@@ -24,6 +24,7 @@ import argparse
 import csv
 import math
 import sys
+import time
 from dataclasses import asdict, dataclass, replace
 from pathlib import Path
 
@@ -147,18 +148,31 @@ def study(p: Params, out: Path, grids, radii, pressures, radii_given: bool) -> N
             for P in pressures:
                 q = replace(p, grid=g, radius=r, pressure=P)
                 sub = out / f"{g}_r{r * 1e3:g}mm_P{P / 1e3:g}kPa"
-                s = run(q, sub)
+                t0 = time.perf_counter()
+                try:
+                    run(q, sub)
+                    status = "ok"
+                except dem.BlowUpError as e:  # keep the table going; say where it stopped
+                    status = str(e).split(";")[0]
+                    print(f"[pullout-001] {sub.name} STOPPED: {e}", flush=True)
                 key = (g, r, P)
                 rows = [x for x in rows if (x["grid"], x["radius_m"], x["pressure_Pa"]) != key]
+                rec = pullout.read_record(sub / "pullout.csv")
+                if not rec or len(rec.get("pull_force", ())) < 3:
+                    rec = None  # stopped before the pull
+                st = pullout.summarize(rec) if rec is not None else {
+                    "mean_force_N": float("nan"), "cov_force": float("nan"),
+                    "initial_peak_force_N": float("nan")}
                 rows.append({"grid": g, "radius_m": r, "pressure_Pa": P,
-                             "grains": s["num_grains"], "mean_force_N": s["mean_force_N"],
-                             "cov_force": s["cov_force"],
-                             "mean_front_force_N": None,
-                             "initial_peak_force_N": s["initial_peak_force_N"],
+                             "grains": int(len(build(q).grain_ids)),
+                             "mean_force_N": st["mean_force_N"], "cov_force": st["cov_force"],
+                             "mean_front_force_N": float(np.mean(rec["front_force"][1:]))
+                             if rec is not None else float("nan"),
+                             "initial_peak_force_N": st["initial_peak_force_N"],
+                             "pulled_m": float(rec["displacement"][-1]) if rec is not None
+                             else 0.0,
                              "mean_force_001_N": T53.get(key), "cov_001": T54.get(key),
-                             "wall_time_s": s["wall_time_total_s"]})
-                rec = np.genfromtxt(sub / "pullout.csv", delimiter=",", names=True)
-                rows[-1]["mean_front_force_N"] = float(np.mean(rec["front_force"][1:]))
+                             "wall_time_s": time.perf_counter() - t0, "status": status})
                 write_study(rows, out)
 
 
@@ -170,8 +184,8 @@ def read_study(out: Path) -> list:
     rows = []
     with open(f, newline="") as fh:
         for r in csv.DictReader(fh):
-            rows.append({k: (v if k == "grid" else (None if v == "" else float(v)))
-                         for k, v in r.items()})
+            rows.append({k: (v if k in ("grid", "status") else
+                             (None if v == "" else float(v))) for k, v in r.items()})
     return rows
 
 
@@ -182,16 +196,16 @@ def write_study(rows: list, out: Path) -> None:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
-    lines = ["| grid | r (mm) | P (kPa) | grains | mean F (N) | 001 T5.3 (N) | CoV | "
-             "001 T5.4 | mean F, front row only (N) | wall time (s) |",
-             "|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| grid | r (mm) | P (kPa) | grains | pulled (mm) | mean F (N) | 001 T5.3 (N) | "
+             "CoV | 001 T5.4 | mean F, front row only (N) | wall time (s) | status |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         def f(v, fmt):
             return "—" if v is None else format(v, fmt)
         lines.append(f"| {r['grid']} | {r['radius_m'] * 1e3:g} | {r['pressure_Pa'] / 1e3:g} | "
-                     f"{r['grains']:.0f} | {r['mean_force_N']:.2f} | {f(r['mean_force_001_N'], '.2f')}"
+                     f"{r['grains']:.0f} | {1e3 * r['pulled_m']:.1f} | {r['mean_force_N']:.2f} | {f(r['mean_force_001_N'], '.2f')}"
                      f" | {r['cov_force']:.3f} | {f(r['cov_001'], '.3f')} | "
-                     f"{r['mean_front_force_N']:.2f} | {r['wall_time_s']:.0f} |")
+                     f"{r['mean_front_force_N']:.2f} | {r['wall_time_s']:.0f} | {r['status']} |")
     (out / "study.md").write_text("\n".join(lines) + "\n")
     import matplotlib
 

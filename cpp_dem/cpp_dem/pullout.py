@@ -487,3 +487,14 @@ def summarize(rec: dict, *, mobilised_from: float = 0.0) -> dict:
                   for k in (1, 2) if np.mean(np.abs(rec[f"force_C{k}"][sel])) > 0]
         out["transverse_peak_over_mean"] = max(ratios) if ratios else float("nan")
     return out
+
+
+def read_record(path) -> dict | None:
+    """A pull-out record from its CSV (as written by the cases, flushed row by row, so a run
+    that stopped early leaves the rows up to the stop); None if the file does not exist."""
+    from .output import read_csv_series
+
+    try:
+        return read_csv_series(path)
+    except FileNotFoundError:
+        return None
