@@ -131,7 +131,8 @@ class ReinforcedSoilBody:
     Attributes:
         width_m: extent in x from the symmetry plane x = 0, m.
         height_m: extent in z (vertical), m.
-        footing_half_width_m: half width b of the (strip) footing, m (< width_m).
+        footing_half_width_m: half width b of the (strip) footing, m (<= width_m; = width_m
+            loads the whole top: a uniform surcharge, e.g. an oedometric homogeneous field).
         layers: geogrid layers.
         regions: DEM element regions (each must lie inside the body).
         dim: 2 (plane strain) or 3.
@@ -159,8 +160,9 @@ class ReinforcedSoilBody:
         w = _pos("width_m", self.width_m)
         h = _pos("height_m", self.height_m)
         b = _pos("footing_half_width_m", self.footing_half_width_m)
-        if b >= w:
-            raise FemInputError(f"footing_half_width_m={b!r}: must be < width_m={w!r}")
+        if b > w:
+            raise FemInputError(f"footing_half_width_m={b!r}: must be <= width_m={w!r} "
+                                "(= width_m: a uniform surcharge on the whole top)")
         if self.dim not in (2, 3):
             raise FemInputError(f"dim={self.dim!r}: must be 2 or 3")
         _pos("length_m", self.length_m)
@@ -254,10 +256,12 @@ def _build(gmsh: Any, body: ReinforcedSoilBody) -> None:
     pieces = []
     if dim == 2:
         pieces.append((2, occ.addRectangle(0, 0, 0, b, h)))
-        pieces.append((2, occ.addRectangle(b, 0, 0, w - b, h)))
+        if b < w:
+            pieces.append((2, occ.addRectangle(b, 0, 0, w - b, h)))
     else:
         pieces.append((3, occ.addBox(0, 0, 0, b, ly, h)))
-        pieces.append((3, occ.addBox(b, 0, 0, w - b, ly, h)))
+        if b < w:
+            pieces.append((3, occ.addBox(b, 0, 0, w - b, ly, h)))
     layer_boxes = []
     for lay in body.layers:
         z0 = lay.z_m - lay.thickness_m / 2
@@ -278,7 +282,8 @@ def _build(gmsh: Any, body: ReinforcedSoilBody) -> None:
         else:
             pieces.append((3, occ.addBox(lo[0], lo[1], lo[2], s, s, s)))
         region_boxes.append((lo, tuple(c + s / 2 for c in reg.center_m)))
-    occ.fragment(pieces[:1], pieces[1:])
+    if len(pieces) > 1:
+        occ.fragment(pieces[:1], pieces[1:])
     occ.synchronize()
 
     # Classify cells by their centres of mass: layer first (a layer crossing a region keeps
@@ -313,7 +318,7 @@ def _build(gmsh: Any, body: ReinforcedSoilBody) -> None:
         if abs(c[zc]) < tol:
             t = BOTTOM
         elif abs(c[zc] - h) < tol:
-            t = FOOTING if c[0] < b else TOP
+            t = FOOTING if c[0] < b + tol else TOP
         elif abs(c[0]) < tol:
             t = X_MIN
         elif abs(c[0] - w) < tol:
