@@ -386,7 +386,7 @@ def plot_fem(m, png: Path, title: str) -> None:
     from femcoupling.materials import mandel_to_tensor
 
     g = m.mesh.geometry
-    cells = g.dofmaps(0)[: m.n_owned]
+    cells = g.dofmaps[0][: m.n_owned]
     xy = g.x[:, :2][cells[:, :3]]
     szz = mandel_to_tensor(m.cell_mean_stress()[: m.n_owned])[:, 2, 2]
     fig, ax = plt.subplots(figsize=(9, 5))

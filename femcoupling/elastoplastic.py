@@ -521,7 +521,7 @@ class SoilModel:
 
     def _cell_centres(self) -> np.ndarray:
         g = self.mesh.geometry
-        dm = g.dofmaps(0)[: self.n_cells]
+        dm = g.dofmaps[0][: self.n_cells]
         return g.x[dm].mean(axis=1)
 
     def point_stress(self, points_m: npt.ArrayLike) -> np.ndarray:

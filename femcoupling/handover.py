@@ -86,8 +86,8 @@ def fem_to_dem(stress_fem_pa: npt.ArrayLike, *, min_stress_pa: float = 0.0) -> W
     normal = np.diag(dem).copy()
     for a, name in enumerate("xyz"):
         if not normal[a] > min_stress_pa:
-            raise HandoverError(f"sigma_{name}{name}={s[a, a]!r} Pa (FEM, tension positive): "
-                                f"the {name} walls would need {normal[a]!r} Pa compression; "
+            raise HandoverError(f"sigma_{name}{name}={float(s[a, a])!r} Pa (FEM, tension positive): "
+                                f"the {name} walls would need {float(normal[a])!r} Pa compression; "
                                 f"must be > {min_stress_pa!r} Pa (servo walls only push)")
     shear = np.array([dem[1, 2], dem[0, 2], dem[0, 1]])
     w, v = np.linalg.eigh(dem)
