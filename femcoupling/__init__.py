@@ -13,9 +13,13 @@ The package will hold:
   servo walls (and, in two-way mode, the element's secant stiffness goes back
   to the region's material until the handed-over stresses stop changing).
 
-So far only the first, verification-sized piece exists:
-:func:`solve_elastic_block`, a linear-elastic box on rollers under a uniform
-top traction, returning an :class:`ElasticBlockResult` of plain NumPy values.
+Modules: :mod:`femcoupling.geometry` (gmsh reinforced-soil body with tagged geogrid
+layers and element regions), :mod:`femcoupling.materials` (elastic, Drucker-Prager and
+its return mapping), :mod:`femcoupling.elastoplastic` (:class:`SoilModel`: K0 state,
+prestress, footing load steps, Newton, extraction, XDMF), :mod:`femcoupling.handover`
+(FEM -> DEM servo targets, NumPy only), :mod:`femcoupling.twoway` (one-way, two-way,
+HDF5 history), and the first toolchain check :func:`solve_elastic_block`. Import the
+submodules directly; this package namespace stays small and cheap. See docs/fem.md.
 
 Units are SI (m, Pa); stresses are tension-positive.
 

@@ -1,0 +1,619 @@
+"""The continuum outer domain: a reinforced soil body solved in dolfinx (plane strain or 3D).
+
+:class:`SoilModel` holds the mesh of a :class:`~femcoupling.geometry.ReinforcedSoilBody`,
+P2 (default) displacements, and a stress history at the quadrature points (a quadrature
+space; the return mapping is the NumPy kernel
+:func:`femcoupling.materials.drucker_prager_return`). Loading is incremental with a full
+Newton iteration on the consistent tangent at each step (MUMPS LU).
+
+Stages (each one a sequence of equilibrium steps):
+
+1. :meth:`SoilModel.set_geostatic` -- a K0 initial state from the self-weight:
+   sigma_zz = -gamma (H - z), sigma_xx = sigma_yy = K0 sigma_zz (tension positive), in
+   equilibrium with the body force (no displacement results).
+2. :meth:`SoilModel.apply_prestress` -- prestressed geogrid layers (PRS, 002): the initial
+   tensile stress T_p / t along x is added in the layers' bands, and the body is brought to
+   equilibrium (the band shortens and compresses the soil around it).
+3. :meth:`SoilModel.load_footing` -- a footing pressure (load control) or a footing
+   settlement (displacement control, smooth footing) in steps.
+
+Boundary conditions: bottom fixed; x = 0 (symmetry) and x = width rollers (u_x = 0);
+3D: y = 0 and y = length rollers (u_y = 0); the top is free apart from the footing.
+
+Extraction: :meth:`SoilModel.region_stress` (volume average over a tagged region) and
+:meth:`SoilModel.point_stress` (from a local L2 projection onto DG1) return NumPy 3x3
+tensors ordered (x, y, z), **tension positive** (in 2D y is the out-of-plane direction).
+Every method is collective under MPI and returns the same values on every rank.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import itertools
+import math
+from collections.abc import Mapping, Sequence
+from typing import Any
+
+import numpy as np
+import numpy.typing as npt
+
+from femcoupling import geometry as geo
+from femcoupling.geometry import FemInputError
+from femcoupling.materials import (DruckerPrager, GeogridLayerMaterial, LinearElastic,
+                                   drucker_prager_return, elastic_tangent, mandel_identity,
+                                   mandel_to_tensor)
+
+__all__ = ["SoilModel", "StepResult", "NewtonDivergence"]
+
+_counter = itertools.count()
+SQRT2 = math.sqrt(2.0)
+
+
+class NewtonDivergence(RuntimeError):
+    """Newton did not converge even after the step was cut ``max_cuts`` times."""
+
+
+@dataclasses.dataclass(frozen=True)
+class StepResult:
+    """One converged load step.
+
+    Attributes:
+        stage: 'geostatic', 'prestress' or 'footing'.
+        load_factor: fraction of the stage's load applied, -.
+        footing_settlement_m: mean downward displacement of the footing, m (positive down).
+        footing_pressure_pa: mean footing pressure, Pa, **compression positive** (the reaction
+            in displacement control; the applied pressure in load control).
+        newton_iterations: iterations this step took.
+        plastic_points: number of plastic quadrature points (global).
+    """
+
+    stage: str
+    load_factor: float
+    footing_settlement_m: float
+    footing_pressure_pa: float
+    newton_iterations: int
+    plastic_points: int
+
+
+class SoilModel:
+    """A reinforced soil body in dolfinx; see the module doc. Collective on ``comm``.
+
+    Args:
+        body: the geometry (tags documented in :mod:`femcoupling.geometry`).
+        soil: the soil's material (:class:`LinearElastic` or :class:`DruckerPrager`).
+        layers: one :class:`GeogridLayerMaterial` per geogrid layer of ``body``.
+        region_materials: optional material per element-region name (default: ``soil``).
+        unit_weight_n_m3: soil unit weight gamma, N/m^3, >= 0 (0: weightless).
+        degree: displacement degree (1 or 2).
+        newton_rtol: Newton stops when |R| <= newton_rtol * |F_int| (free dofs), -.
+        max_newton: iterations before a step is cut in half.
+        max_cuts: step halvings before :class:`NewtonDivergence`.
+        comm: mpi4py communicator (default COMM_WORLD).
+    """
+
+    def __init__(self, body: geo.ReinforcedSoilBody, *, soil: LinearElastic,
+                 layers: Sequence[GeogridLayerMaterial] = (),
+                 region_materials: Mapping[str, LinearElastic] | None = None,
+                 unit_weight_n_m3: float = 0.0, degree: int = 2, newton_rtol: float = 1e-8,
+                 max_newton: int = 25, max_cuts: int = 6, comm: Any = None) -> None:
+        if not isinstance(soil, LinearElastic):
+            raise FemInputError(f"soil={soil!r}: must be a LinearElastic or DruckerPrager")
+        layers = tuple(layers)
+        if len(layers) != len(body.layers):
+            raise FemInputError(f"layers: {len(layers)} materials given for "
+                                f"{len(body.layers)} geogrid layers")
+        for i, lm in enumerate(layers):
+            if not isinstance(lm, GeogridLayerMaterial):
+                raise FemInputError(f"layers[{i}]={lm!r}: must be a GeogridLayerMaterial")
+        region_materials = dict(region_materials or {})
+        for name, mat in region_materials.items():
+            body.region_tag(name)
+            if not isinstance(mat, LinearElastic):
+                raise FemInputError(f"region_materials[{name!r}]={mat!r}: must be a material")
+        gamma = geo._real("unit_weight_n_m3", unit_weight_n_m3)
+        if gamma < 0:
+            raise FemInputError(f"unit_weight_n_m3={gamma!r}: must be >= 0")
+        if degree not in (1, 2):
+            raise FemInputError(f"degree={degree!r}: must be 1 or 2")
+        geo._pos("newton_rtol", newton_rtol)
+
+        from femcoupling import _dolfinx
+
+        fx = self._fx = _dolfinx.load()
+        fem, ufl = fx.fem, fx.ufl
+        import basix
+        import basix.ufl
+
+        self.body, self.soil, self.layers = body, soil, layers
+        self.region_materials = region_materials
+        self.unit_weight_n_m3, self.degree = gamma, degree
+        self.newton_rtol, self.max_newton, self.max_cuts = newton_rtol, max_newton, max_cuts
+        self.comm = comm if comm is not None else fx.MPI.COMM_WORLD
+        self.history: list[StepResult] = []
+
+        mb = geo.build_mesh(body, comm=self.comm)
+        self.mesh, self.cell_tags, self.facet_tags = mb.mesh, mb.cell_tags, mb.facet_tags
+        msh = self.mesh
+        tdim = self.tdim = msh.topology.dim
+        self.ncomp = 4 if tdim == 2 else 6
+        self.zc = tdim - 1  # index of the vertical coordinate
+        msh.topology.create_connectivity(tdim - 1, tdim)
+        cmap = msh.topology.index_map(tdim)
+        self.n_owned = cmap.size_local
+        self.n_cells = cmap.size_local + cmap.num_ghosts
+
+        # --- spaces ---
+        self.V = fem.functionspace(msh, ("Lagrange", degree, (tdim,)))
+        qdeg = max(1, 2 * (degree - 1))
+        self.qdeg = qdeg
+        cell = msh.basix_cell()
+        qe_v = basix.ufl.quadrature_element(cell, value_shape=(self.ncomp,), scheme="default",
+                                            degree=qdeg)
+        qe_t = basix.ufl.quadrature_element(cell, value_shape=(self.ncomp, self.ncomp),
+                                            scheme="default", degree=qdeg)
+        self.Wv = fem.functionspace(msh, qe_v)
+        self.Wt = fem.functionspace(msh, qe_t)
+        pts, wts = basix.make_quadrature(cell, qdeg)
+        self.qpoints, self.qweights = pts, wts / wts.sum()
+        self.nq = len(wts)
+        self._qdofs = self.Wv.dofmap.list.reshape(-1)  # (cell, q) -> quadrature dof (block)
+        self._qdofs_t = self.Wt.dofmap.list.reshape(-1)
+
+        self.u = fem.Function(self.V, name="displacement")
+        self.u_n = fem.Function(self.V)
+        self.du = fem.Function(self.V)
+        self.sig_q = fem.Function(self.Wv)      # current stress at the quadrature points
+        self.tan_q = fem.Function(self.Wt)      # consistent tangent
+        n_qp = self.n_cells * self.nq
+        self.sig_n = np.zeros((n_qp, self.ncomp))  # converged stress, (cell, q) order
+        self.sig_cur = np.zeros((n_qp, self.ncomp))
+        self.dlam = np.zeros(n_qp)
+
+        # --- per-quadrature-point material parameters ---
+        self.cell_tag_of = np.full(self.n_cells, geo.SOIL_TAG, dtype=np.int32)
+        self.cell_tag_of[self.cell_tags.indices] = self.cell_tags.values
+        self._set_material_arrays()
+
+        # --- forms ---
+        v, dv = ufl.TestFunction(self.V), ufl.TrialFunction(self.V)
+        self.dxq = ufl.Measure("dx", domain=msh, metadata={"quadrature_degree": qdeg,
+                                                           "quadrature_scheme": "default"})
+        ds = ufl.Measure("ds", domain=msh, subdomain_data=self.facet_tags)
+        dx = ufl.Measure("dx", domain=msh)
+        st = fx.PETSc.ScalarType
+        self.traction = fem.Constant(msh, np.zeros(tdim, dtype=st))
+        grav = np.zeros(tdim, dtype=st)
+        grav[self.zc] = -gamma
+        self.body_force = fem.Constant(msh, grav)
+        self._eps = self._mandel_strain
+        f_int = ufl.dot(self.sig_q, self._eps(v)) * self.dxq
+        f_body = ufl.dot(self.body_force, v) * dx
+        f_trac = ufl.dot(self.traction, v) * ds(geo.FOOTING)
+        self.form_res = fem.form(f_int - f_body - f_trac)
+        self.form_react = fem.form(f_int - f_body)
+        self.form_jac = fem.form(ufl.dot(ufl.dot(self.tan_q, self._eps(dv)), self._eps(v))
+                                 * self.dxq)
+        self.expr_eps = fem.Expression(self._eps(self.u), self.qpoints)
+        one = fem.Constant(msh, st(1.0))
+        self.footing_area = self.comm.allreduce(
+            fem.assemble_scalar(fem.form(one * ds(geo.FOOTING))), op=fx.MPI.SUM)
+        self.form_settle = fem.form(-self.u[self.zc] * ds(geo.FOOTING))
+        dg0 = fem.functionspace(msh, ("DG", 0))
+        self.cell_volume = fem.assemble_vector(
+            fem.form(ufl.TestFunction(dg0) * dx)).array[: self.n_cells].copy()
+
+        # --- boundary conditions ---
+        fdim = tdim - 1
+        ft = self.facet_tags
+        zero = st(0.0)
+        self.bcs = []
+        bottom = ft.find(geo.BOTTOM)
+        for c in range(tdim):
+            dofs = fem.locate_dofs_topological(self.V.sub(c), fdim, bottom)
+            self.bcs.append(fem.dirichletbc(zero, dofs, self.V.sub(c)))
+        rollers = [(geo.X_MIN, 0), (geo.X_MAX, 0)]
+        if tdim == 3:
+            rollers += [(geo.Y_MIN, 1), (geo.Y_MAX, 1)]
+        for tag, c in rollers:
+            dofs = fem.locate_dofs_topological(self.V.sub(c), fdim, ft.find(tag))
+            self.bcs.append(fem.dirichletbc(zero, dofs, self.V.sub(c)))
+        self.footing_dofs = fem.locate_dofs_topological(self.V.sub(self.zc), fdim,
+                                                        ft.find(geo.FOOTING))
+        self.footing_u = fem.Constant(msh, zero)
+        self.footing_bc = fem.dirichletbc(self.footing_u, self.footing_dofs, self.V.sub(self.zc))
+        self._displacement_control = False
+
+        self.A = fx.fem_petsc.create_matrix(self.form_jac)
+        self.b = fx.fem_petsc.create_vector(self.V)
+        self.ksp = fx.PETSc.KSP().create(self.comm)
+        self.ksp.setOperators(self.A)
+        self.ksp.setType("preonly")
+        pc = self.ksp.getPC()
+        pc.setType("lu")
+        pc.setFactorSolverType("mumps")
+        self._update_tangent_and_stress(np.zeros((n_qp, self.ncomp)))
+
+    # ---- helpers -------------------------------------------------------------------------
+
+    def _mandel_strain(self, w: Any) -> Any:
+        ufl = self._fx.ufl
+        e = ufl.sym(ufl.grad(w))
+        if self.tdim == 2:
+            return ufl.as_vector([e[0, 0], e[1, 1], 0.0, SQRT2 * e[0, 1]])
+        return ufl.as_vector([e[0, 0], e[1, 1], e[2, 2], SQRT2 * e[1, 2], SQRT2 * e[0, 2],
+                              SQRT2 * e[0, 1]])
+
+    def material_of_tag(self, tag: int) -> LinearElastic:
+        """The material of the cells with tag ``tag``."""
+        if tag == geo.SOIL_TAG:
+            return self.soil
+        if geo.LAYER_TAG0 <= tag < geo.REGION_TAG0:
+            i = tag - geo.LAYER_TAG0
+            return self.layers[i].band(self.body.layers[i].thickness_m)
+        name = self.body.regions[tag - geo.REGION_TAG0].name
+        return self.region_materials.get(name, self.soil)
+
+    def _set_material_arrays(self) -> None:
+        n = self.n_cells
+        K, G, A, B, Kc = (np.zeros(n) for _ in range(5))
+        for tag in np.unique(self.cell_tag_of):
+            m = self.material_of_tag(int(tag))
+            sel = self.cell_tag_of == tag
+            K[sel], G[sel] = m.bulk_pa, m.shear_pa
+            A[sel], B[sel], Kc[sel] = m.dp_parameters()
+        rep = lambda a: np.repeat(a, self.nq)  # noqa: E731 - (cell, q) order
+        self.K, self.G, self.alpha, self.beta, self.kc = map(rep, (K, G, A, B, Kc))
+
+    def set_region_material(self, name: str, material: LinearElastic) -> None:
+        """Give the element region ``name`` a new material (two-way coupling)."""
+        self.body.region_tag(name)
+        if not isinstance(material, LinearElastic):
+            raise FemInputError(f"material={material!r}: must be a LinearElastic")
+        self.region_materials[name] = material
+        self._set_material_arrays()
+
+    def _to_q(self, func: Any, values: np.ndarray, dofs: np.ndarray, size: int) -> None:
+        func.x.array.reshape(-1, size)[dofs] = values.reshape(-1, size)
+        func.x.scatter_forward()
+
+    def _update_tangent_and_stress(self, deps: np.ndarray) -> None:
+        trial = self.sig_n + np.einsum("nij,nj->ni", elastic_tangent(self.K, self.G, self.ncomp),
+                                       deps)
+        sig, tan, dl = drucker_prager_return(trial, bulk_pa=self.K, shear_pa=self.G,
+                                             alpha=self.alpha, beta=self.beta, k_pa=self.kc)
+        self.sig_cur, self.dlam = sig, dl
+        self._to_q(self.sig_q, sig, self._qdofs, self.ncomp)
+        self._to_q(self.tan_q, tan.reshape(len(tan), -1), self._qdofs_t, self.ncomp**2)
+
+    def _strain_increment(self) -> np.ndarray:
+        cells = np.arange(self.n_cells, dtype=np.int32)
+        eps = self.expr_eps.eval(self.mesh, cells).reshape(-1, self.ncomp)
+        self.u_n.x.scatter_forward()
+        # increment = eps(u) - eps(u_n): evaluate eps(u_n) by swapping arrays (no 2nd Expression)
+        saved = self.u.x.array.copy()
+        self.u.x.array[:] = self.u_n.x.array
+        eps_n = self.expr_eps.eval(self.mesh, cells).reshape(-1, self.ncomp)
+        self.u.x.array[:] = saved
+        return eps - eps_n
+
+    def _active_bcs(self) -> list:
+        return self.bcs + ([self.footing_bc] if self._displacement_control else [])
+
+    def _assemble_residual(self) -> float:
+        """b = R(u) lifted by J (g - u) at the constrained dofs (the predictor of the
+        prescribed increment), b = u - g there; returns |b| (dolfinx's Newton convention:
+        solve J dx = b, u <- u - dx)."""
+        fx = self._fx
+        PETSc = fx.PETSc
+        bcs = self._active_bcs()
+        with self.b.localForm() as loc:
+            loc.set(0.0)
+        fx.fem_petsc.assemble_vector(self.b, self.form_res)
+        fx.fem_petsc.apply_lifting(self.b, [self.form_jac], bcs=[bcs], x0=[self.u.x.petsc_vec],
+                                   alpha=-1.0)
+        self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        fx.fem_petsc.set_bc(self.b, bcs, x0=self.u.x.petsc_vec, alpha=-1.0)
+        return self.b.norm()
+
+    def _internal_scale(self) -> float:
+        """|F_int| over all dofs (the Newton tolerance's scale), >= tiny."""
+        fx = self._fx
+        vec = fx.fem.assemble_vector(self.form_react)
+        vec.scatter_reverse(fx.dolfinx.la.InsertMode.add)
+        own = vec.array[: self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs]
+        return math.sqrt(self.comm.allreduce(float(own @ own), op=fx.MPI.SUM)) + 1e-300
+
+    def _newton(self) -> int:
+        """Newton iterations of the current step; returns their number, or -1 on failure."""
+        fx = self._fx
+        bcs = self._active_bcs()
+        self._update_tangent_and_stress(self._strain_increment())
+        for it in range(0, self.max_newton + 1):
+            rnorm = self._assemble_residual()
+            scale = max(self._internal_scale(), self._ext_scale)
+            if not np.isfinite(rnorm):
+                return -1
+            if rnorm <= self.newton_rtol * scale:
+                return it
+            if it == self.max_newton:
+                break
+            self.A.zeroEntries()
+            fx.fem_petsc.assemble_matrix(self.A, self.form_jac, bcs=bcs)
+            self.A.assemble()
+            self.ksp.setOperators(self.A)
+            self.ksp.solve(self.b, self.du.x.petsc_vec)
+            if self.ksp.getConvergedReason() <= 0:
+                return -1
+            self.du.x.scatter_forward()
+            self.u.x.array[:] -= self.du.x.array
+            self.u.x.scatter_forward()
+            self._update_tangent_and_stress(self._strain_increment())
+        return -1
+
+    def _commit(self) -> None:
+        self.sig_n = self.sig_cur.copy()
+        self.u_n.x.array[:] = self.u.x.array
+        self.u_n.x.scatter_forward()
+
+    def _rollback(self) -> None:
+        self.u.x.array[:] = self.u_n.x.array
+        self.u.x.scatter_forward()
+
+    # ---- stages --------------------------------------------------------------------------
+
+    def _run_stage(self, stage: str, apply: Any, steps: int, callback: Any = None) -> list:
+        """Apply ``apply(load_factor)`` in ``steps`` equal increments, Newton at each."""
+        if not isinstance(steps, int) or steps < 1:
+            raise FemInputError(f"steps={steps!r}: must be an integer >= 1")
+        out = []
+        lf_done, dlf = 0.0, 1.0 / steps
+        cuts = 0
+        while lf_done < 1.0 - 1e-12:
+            lf = min(1.0, lf_done + dlf)
+            apply(lf)
+            its = self._newton()
+            if its < 0:
+                self._rollback()
+                cuts += 1
+                if cuts > self.max_cuts:
+                    raise NewtonDivergence(f"stage {stage!r}: Newton failed at load factor "
+                                           f"{lf:.6g} after {self.max_cuts} step cuts")
+                dlf /= 2.0
+                continue
+            self._commit()
+            lf_done = lf
+            cuts = 0
+            if its <= self.max_newton // 2:  # easy step: grow back towards the nominal size
+                dlf = min(2.0 * dlf, 1.0 / steps)
+            r = StepResult(stage, lf, self.footing_settlement_m(), self.footing_pressure_pa(),
+                           its, self.plastic_points())
+            self.history.append(r)
+            out.append(r)
+            if callback is not None:
+                callback(r)
+        return out
+
+    _ext_scale = 0.0
+
+    def set_geostatic(self, *, k0: float | None = None) -> None:
+        """K0 initial state from the self-weight (tension positive, see the module doc).
+
+        ``k0`` (-, > 0) defaults to the soil's: 1 - sin(phi) for Drucker–Prager, nu / (1 - nu)
+        for an elastic soil. The state is in equilibrium with the body force; a check solve is
+        run (it must converge in 0 or 1 iterations).
+        """
+        k0 = self.soil.k0() if k0 is None else geo._pos("k0", k0)
+        fx = self._fx
+        x = fx.fem.Expression(fx.ufl.SpatialCoordinate(self.mesh), self.qpoints)
+        xq = x.eval(self.mesh, np.arange(self.n_cells, dtype=np.int32)).reshape(-1, self.tdim)
+        sv = -self.unit_weight_n_m3 * (self.body.height_m - xq[:, self.zc])
+        sig = np.zeros((len(sv), self.ncomp))
+        sig[:, :3] = k0 * sv[:, None]
+        sig[:, self.zc] = sv
+        self.sig_n = sig
+        self._ext_scale = self.unit_weight_n_m3 * self.body.height_m * self.footing_area
+        self._run_stage("geostatic", lambda lf: None, 1)
+
+    def apply_prestress(self, *, steps: int = 1) -> list[StepResult]:
+        """Add each layer's prestress T_p / t (tension along x) and equilibrate (PRS, 002)."""
+        add = np.zeros_like(self.sig_n)
+        for i, lm in enumerate(self.layers):
+            sel = np.repeat(self.cell_tag_of == geo.LAYER_TAG0 + i, self.nq)
+            add[sel, 0] = lm.prestress_n_per_m / self.body.layers[i].thickness_m
+        base = self.sig_n.copy()
+        done = [0.0]
+
+        def apply(lf: float) -> None:
+            self.sig_n = self.sig_n + (lf - done[0]) * add
+            done[0] = lf
+
+        del base
+        return self._run_stage("prestress", apply, steps)
+
+    def load_footing(self, *, pressure_pa: float | None = None,
+                     settlement_m: float | None = None, steps: int = 10,
+                     callback: Any = None) -> list[StepResult]:
+        """Load the footing by a pressure (Pa, compression positive; load control) or a
+        settlement (m, downward positive; displacement control of a smooth footing), from the
+        current state, in ``steps`` equal increments. Returns the converged steps."""
+        if (pressure_pa is None) == (settlement_m is None):
+            raise FemInputError("load_footing: give exactly one of pressure_pa, settlement_m")
+        if pressure_pa is not None:
+            p = geo._real("pressure_pa", pressure_pa)
+            self._displacement_control = False
+            t0 = float(self.traction.value[self.zc])
+
+            def apply(lf: float) -> None:
+                self.traction.value[self.zc] = t0 - lf * p
+            self._ext_scale = max(self._ext_scale, abs(p) * self.footing_area)
+        else:
+            d = geo._real("settlement_m", settlement_m)
+            self._displacement_control = True
+            u0 = -self.footing_settlement_m()
+
+            def apply(lf: float) -> None:
+                self.footing_u.value = u0 - lf * d
+        return self._run_stage("footing", apply, steps, callback)
+
+    # ---- measurements (NumPy out, identical on every rank) -------------------------------
+
+    def footing_settlement_m(self) -> float:
+        """Mean downward displacement of the footing, m."""
+        s = self._fx.fem.assemble_scalar(self.form_settle)
+        return float(self.comm.allreduce(s, op=self._fx.MPI.SUM) / self.footing_area)
+
+    def footing_pressure_pa(self) -> float:
+        """Mean footing pressure, Pa, compression positive: from the reaction at the footing's
+        constrained dofs in displacement control, the applied traction otherwise."""
+        fx = self._fx
+        if not self._displacement_control:
+            return float(-self.traction.value[self.zc])
+        vec = fx.fem.assemble_vector(self.form_react)
+        vec.scatter_reverse(fx.dolfinx.la.InsertMode.add)
+        n_own = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
+        d = self.footing_dofs[self.footing_dofs < n_own]
+        f = self.comm.allreduce(float(vec.array[d].sum()), op=fx.MPI.SUM)
+        return float(-f / self.footing_area)
+
+    def plastic_points(self) -> int:
+        """Number of quadrature points that yielded in the last converged step (global)."""
+        own = self.n_owned * self.nq
+        return int(self.comm.allreduce(int(np.count_nonzero(self.dlam[:own])),
+                                       op=self._fx.MPI.SUM))
+
+    def cell_mean_stress(self) -> np.ndarray:
+        """(n_cells, ncomp) cell averages of the converged stress (Mandel), Pa."""
+        s = self.sig_n.reshape(self.n_cells, self.nq, self.ncomp)
+        return np.einsum("cqi,q->ci", s, self.qweights)
+
+    def region_stress(self, name: str, *, tags: Sequence[int] | None = None) -> np.ndarray:
+        """Volume-averaged stress over the element region ``name`` (its soil cells), 3x3 (x, y,
+        z), Pa, tension positive. ``tags`` overrides the cell tags averaged over."""
+        tag_list = [self.body.region_tag(name)] if tags is None else list(tags)
+        return self.tag_stress(tag_list)
+
+    def tag_stress(self, tags: Sequence[int]) -> np.ndarray:
+        """Volume-averaged stress over the cells with any of ``tags``, 3x3, Pa, tension +."""
+        sel = np.isin(self.cell_tag_of[: self.n_owned], np.asarray(tags))
+        cm = self.cell_mean_stress()[: self.n_owned][sel]
+        vol = self.cell_volume[: self.n_owned][sel]
+        MPI = self._fx.MPI
+        tot = np.asarray(self.comm.allreduce(np.concatenate([(cm * vol[:, None]).sum(0),
+                                                             [vol.sum()]]), op=MPI.SUM))
+        if tot[-1] <= 0:
+            raise FemInputError(f"tags={list(tags)}: no cells carry these tags")
+        return mandel_to_tensor(tot[:-1] / tot[-1])
+
+    def layer_force_n_per_m(self, i: int, *, x_range_m: tuple[float, float] | None = None
+                            ) -> float:
+        """Mean axial force per metre width in geogrid layer ``i`` (sigma_xx t), N/m, tension
+        positive; over the cells whose centre lies in ``x_range_m`` if given."""
+        tag = geo.LAYER_TAG0 + i
+        sel = self.cell_tag_of[: self.n_owned] == tag
+        if x_range_m is not None:
+            xc = self._cell_centres()[: self.n_owned, 0]
+            sel &= (xc >= x_range_m[0]) & (xc <= x_range_m[1])
+        cm = self.cell_mean_stress()[: self.n_owned][sel, 0]
+        vol = self.cell_volume[: self.n_owned][sel]
+        MPI = self._fx.MPI
+        s = self.comm.allreduce(np.array([(cm * vol).sum(), vol.sum()]), op=MPI.SUM)
+        return float(s[0] / s[1] * self.body.layers[i].thickness_m) if s[1] > 0 else math.nan
+
+    def _cell_centres(self) -> np.ndarray:
+        g = self.mesh.geometry
+        dm = g.dofmaps[0][: self.n_cells]
+        return g.x[dm].mean(axis=1)
+
+    def point_stress(self, points_m: npt.ArrayLike) -> np.ndarray:
+        """Stress at points (n, dim) m: the converged quadrature stress L2-projected onto DG1
+        per cell (exact for a P2 elastic field), evaluated at the points. (n, 3, 3) Pa, tension
+        positive (x, y, z). Points outside the body raise FemInputError."""
+        fx = self._fx
+        fem, ufl = fx.fem, fx.ufl
+        import dolfinx.geometry as dg
+
+        pts = np.atleast_2d(np.asarray(points_m, float))
+        if pts.shape[1] != self.tdim:
+            raise FemInputError(f"points_m: shape {pts.shape}, need (n, {self.tdim})")
+        p3 = np.zeros((len(pts), 3))
+        p3[:, : self.tdim] = pts
+        D = fem.functionspace(self.mesh, ("DG", 1, (self.ncomp,)))
+        t, s = ufl.TrialFunction(D), ufl.TestFunction(D)
+        self._to_q(self.sig_q, self.sig_n, self._qdofs, self.ncomp)
+        prob = fx.fem_petsc.LinearProblem(
+            ufl.inner(t, s) * self.dxq, ufl.inner(self.sig_q, s) * self.dxq,
+            petsc_options_prefix=f"femcoupling_proj_{next(_counter)}_",
+            petsc_options={"ksp_type": "preonly", "pc_type": "lu",
+                           "pc_factor_mat_solver_type": "mumps"})
+        sh = prob.solve()
+        tree = dg.bb_tree(self.mesh, self.tdim)
+        cand = dg.compute_collisions_points(tree, p3)
+        coll = dg.compute_colliding_cells(self.mesh, cand, p3)
+        vals = np.zeros((len(pts), self.ncomp))
+        found = np.zeros(len(pts))
+        for i in range(len(pts)):
+            cells = coll.links(i)
+            cells = cells[cells < self.n_owned]
+            if len(cells):
+                vals[i] = sh.eval(p3[i], cells[:1])
+                found[i] = 1.0
+        MPI = fx.MPI
+        fnd = np.asarray(self.comm.allreduce(found, op=MPI.SUM))
+        tot = np.asarray(self.comm.allreduce(vals, op=MPI.SUM))
+        if np.any(fnd == 0):
+            raise FemInputError(f"points_m: {pts[fnd == 0].tolist()} lie outside the body")
+        return mandel_to_tensor(tot / fnd[:, None])
+
+    # ---- state ---------------------------------------------------------------------------
+
+    def save_state(self) -> dict:
+        """A copy of the state (displacements, stresses, loads) for :meth:`restore_state`."""
+        return {"u": self.u.x.array.copy(), "sig": self.sig_n.copy(),
+                "traction": self.traction.value.copy(), "footing_u": float(self.footing_u.value),
+                "dc": self._displacement_control, "ext": self._ext_scale,
+                "nhist": len(self.history)}
+
+    def restore_state(self, state: Mapping) -> None:
+        """Return to a state saved by :meth:`save_state` (materials are not restored)."""
+        self.u.x.array[:] = state["u"]
+        self.u.x.scatter_forward()
+        self.u_n.x.array[:] = state["u"]
+        self.u_n.x.scatter_forward()
+        self.sig_n = state["sig"].copy()
+        self.sig_cur = self.sig_n.copy()
+        self.traction.value[:] = state["traction"]
+        self.footing_u.value = state["footing_u"]
+        self._displacement_control = state["dc"]
+        self._ext_scale = state["ext"]
+        del self.history[state["nhist"]:]
+
+    # ---- output --------------------------------------------------------------------------
+
+    def write_xdmf(self, path: Any, *, time: float = 0.0, append: bool = False) -> None:
+        """Write the mesh with its cell tags (element regions and layers marked), the
+        displacement (P1 interpolation, m) and the cell-mean stress (3x3 (x, y, z), Pa,
+        tension positive) to an XDMF/HDF5 pair; ``append`` adds a time to an existing file."""
+        fx = self._fx
+        fem = fx.fem
+        import dolfinx.io
+
+        P1 = fem.functionspace(self.mesh, ("Lagrange", 1, (self.tdim,)))
+        u1 = fem.Function(P1, name="displacement_m")
+        u1.interpolate(self.u)
+        T = fem.functionspace(self.mesh, ("DG", 0, (3, 3)))
+        sig = fem.Function(T, name="stress_pa")
+        sig.x.array[:] = mandel_to_tensor(self.cell_mean_stress()).reshape(-1)[
+            : sig.x.array.size]
+        sig.x.scatter_forward()
+        pl = fem.Function(fem.functionspace(self.mesh, ("DG", 0)), name="plastic_fraction")
+        pl.x.array[:] = (self.dlam.reshape(self.n_cells, self.nq) != 0).mean(1)
+        tagf = fem.Function(fem.functionspace(self.mesh, ("DG", 0)), name="cell_tag")
+        tagf.x.array[:] = self.cell_tag_of
+        mode = "a" if append else "w"
+        with dolfinx.io.XDMFFile(self.comm, str(path), mode) as xf:
+            if not append:
+                xf.write_mesh(self.mesh)
+                self.cell_tags.name = "cell_tags"
+                xf.write_meshtags(self.cell_tags, self.mesh.geometry)
+            for f in (u1, sig, pl, tagf):
+                xf.write_function(f, time)

@@ -1,0 +1,129 @@
+"""The FEM -> DEM handover: plain NumPy, no dolfinx (usable in DEM-only runs).
+
+Sign conventions -- converted here, explicitly, and nowhere else:
+
+- FEM (``femcoupling``): Cauchy stress **tension positive**, 3x3 ordered (x, y, z), z up.
+- DEM (``cpp_dem`` servo walls, ``TriaxialController.set_stress``): **compression
+  positive**, one normal stress per axis of the axis-aligned element.
+
+So ``sigma_DEM = -sigma_FEM``. The element's walls are axis-aligned, frictionless and can only
+impose the three *normal* stresses sigma_xx, sigma_yy, sigma_zz. The shear components of
+the FEM tensor cannot be imposed; they are reported (:attr:`WallTargets.shear_pa`), together
+with the principal stresses and the angle by which the principal axes are turned away from the
+wall normals (:attr:`WallTargets.rotation_deg`), so that a user sees when the axis-aligned
+element misrepresents the field: then the walls impose the right normal stresses on the wrong
+planes and the element sees a mean stress right but a deviator too small.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+__all__ = ["HandoverError", "WallTargets", "fem_to_dem", "secant_stiffness"]
+
+
+class HandoverError(ValueError):
+    """A FEM stress that cannot become servo targets (names the value and the reason)."""
+
+
+@dataclasses.dataclass(frozen=True)
+class WallTargets:
+    """Servo targets of an axis-aligned DEM element, **compression positive**, Pa.
+
+    Attributes:
+        normal_pa: (3,) targets of the x, y, z walls (``TriaxialController.set_stress``).
+        shear_pa: (3,) the shear stresses (yz, xz, xy) the walls cannot impose, in the DEM
+            sign convention (= minus the FEM ones).
+        principal_pa: (3,) principal stresses, compression positive, descending.
+        principal_axes: (3, 3) unit principal directions as columns, same order.
+        rotation_deg: largest angle between a principal direction and its nearest coordinate
+            axis, deg (0 when the principal axes are the wall normals).
+        shear_ratio: max |shear| / mean normal stress, -.
+        fem_stress_pa: the FEM tensor handed over (tension positive), for the record.
+    """
+
+    normal_pa: np.ndarray
+    shear_pa: np.ndarray
+    principal_pa: np.ndarray
+    principal_axes: np.ndarray
+    rotation_deg: float
+    shear_ratio: float
+    fem_stress_pa: np.ndarray
+
+    def report(self) -> str:
+        """One line for the progress log."""
+        n, s = self.normal_pa / 1e3, self.shear_pa / 1e3
+        return (f"walls x,y,z {n[0]:.2f}, {n[1]:.2f}, {n[2]:.2f} kPa (compression +); shear "
+                f"yz,xz,xy {s[0]:.2f}, {s[1]:.2f}, {s[2]:.2f} kPa not imposed; principal axes "
+                f"turned {self.rotation_deg:.1f} deg from the walls")
+
+
+def _rotation_deg(axes: np.ndarray) -> float:
+    """Largest angle between a column of ``axes`` and its nearest coordinate axis, deg."""
+    cos = np.max(np.abs(axes), axis=0).clip(-1.0, 1.0)
+    return float(np.degrees(np.arccos(cos)).max())
+
+
+def fem_to_dem(stress_fem_pa: npt.ArrayLike, *, min_stress_pa: float = 0.0) -> WallTargets:
+    """Servo targets from a FEM stress tensor (3x3, (x, y, z), Pa, **tension positive**).
+
+    The normal targets are ``-sigma_ii`` (compression positive). Raises
+    :class:`HandoverError` if the tensor is not a finite symmetric 3x3 or a normal target is
+    not above ``min_stress_pa`` (walls can push, not pull).
+    """
+    s = np.asarray(stress_fem_pa, dtype=float)
+    if s.shape != (3, 3) or not np.all(np.isfinite(s)):
+        raise HandoverError(f"stress_fem_pa={s.tolist()!r}: must be a finite 3x3 tensor")
+    scale = max(float(np.abs(s).max()), 1e-300)
+    if not np.allclose(s, s.T, rtol=0.0, atol=1e-9 * scale):
+        raise HandoverError(f"stress_fem_pa={s.tolist()!r}: must be symmetric")
+    s = 0.5 * (s + s.T)
+    dem = -s  # FEM tension positive -> DEM compression positive
+    normal = np.diag(dem).copy()
+    for a, name in enumerate("xyz"):
+        if not normal[a] > min_stress_pa:
+            raise HandoverError(f"sigma_{name}{name}={float(s[a, a])!r} Pa (FEM, tension positive): "
+                                f"the {name} walls would need {float(normal[a])!r} Pa compression; "
+                                f"must be > {min_stress_pa!r} Pa (servo walls only push)")
+    shear = np.array([dem[1, 2], dem[0, 2], dem[0, 1]])
+    w, v = np.linalg.eigh(dem)
+    order = np.argsort(w)[::-1]
+    w, v = w[order], v[:, order]
+    return WallTargets(normal_pa=normal, shear_pa=shear, principal_pa=w, principal_axes=v,
+                       rotation_deg=_rotation_deg(v) if np.ptp(w) > 1e-9 * scale else 0.0,
+                       shear_ratio=float(np.abs(shear).max() / normal.mean()),
+                       fem_stress_pa=s)
+
+
+def secant_stiffness(*, stress_increment_pa: npt.ArrayLike, strain_increment: npt.ArrayLike,
+                     poisson_bounds: tuple[float, float] = (0.0, 0.45)) -> tuple[float, float]:
+    """Isotropic secant (E, nu) of an element from its normal stress and strain increments.
+
+    Both increments are (3,) along x, y, z in the same sign convention (the DEM's
+    compression positive, or both tension positive). Least squares on
+    ``d_eps_i = (d_sig_i - nu (d_sig_j + d_sig_k)) / E``; nu is clipped to
+    ``poisson_bounds`` (then E is refitted). Returns (E / Pa, nu / -).
+    """
+    ds = np.asarray(stress_increment_pa, float)
+    de = np.asarray(strain_increment, float)
+    if ds.shape != (3,) or de.shape != (3,) or not (np.all(np.isfinite(ds))
+                                                    and np.all(np.isfinite(de))):
+        raise HandoverError(f"stress_increment_pa={ds.tolist()}, strain_increment="
+                            f"{de.tolist()}: must be finite (3,) vectors")
+    others = ds.sum() - ds
+    A = np.column_stack([ds, -others])  # unknowns (1/E, nu/E)
+    (a, b), *_ = np.linalg.lstsq(A, de, rcond=None)
+    nu = b / a if a > 0 else math.nan
+    lo, hi = poisson_bounds
+    if not (math.isfinite(nu) and lo <= nu <= hi):
+        nu = min(max(nu, lo), hi) if math.isfinite(nu) else lo
+        x = ds - nu * others
+        a = float(x @ de) / float(x @ x) if float(x @ x) > 0 else math.nan
+    if not (math.isfinite(a) and a > 0):
+        raise HandoverError(f"secant stiffness: stress increment {ds.tolist()} Pa and strain "
+                            f"increment {de.tolist()} give no positive modulus")
+    return float(1.0 / a), float(nu)

@@ -1,0 +1,264 @@
+"""Soil and geogrid materials and the Drucker–Prager return mapping (pure NumPy kernels).
+
+Sign convention: **tension positive** (continuum mechanics); a compressive mean stress p is
+negative. Stresses and strains are Mandel vectors (shear components scaled by sqrt 2, so that
+dot products are the tensor double contractions):
+
+- plane strain (2D), coordinates (x, z), z vertical, y out of plane:
+  ``(s_xx, s_zz, s_yy, sqrt2 s_xz)`` -- index 2 is the out-of-plane component;
+- 3D, coordinates (x, y, z): ``(s_xx, s_yy, s_zz, sqrt2 s_yz, sqrt2 s_xz, sqrt2 s_xy)``.
+
+Drucker–Prager yield function and plastic potential (perfect plasticity)::
+
+    f = alpha I1 + sqrt(J2) - k,     g = beta I1 + sqrt(J2)
+
+matched to Mohr–Coulomb (c, phi) in **plane strain with associated flow** (Drucker &
+Prager 1952; e.g. de Souza Neto et al., *Computational Methods for Plasticity*, 2008, §8.2):
+alpha = tan(phi) / sqrt(9 + 12 tan^2 phi), k = 3 c / sqrt(9 + 12 tan^2 phi). With associated
+flow (beta = alpha) the plane-strain collapse loads of this cone equal Mohr–Coulomb's.
+For non-associated flow (dilation psi < phi), beta is obtained from psi the same way; the
+match of the collapse load is then approximate.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+
+import numpy as np
+import numpy.typing as npt
+
+from femcoupling.geometry import FemInputError, _pos, _real
+
+__all__ = ["LinearElastic", "DruckerPrager", "GeogridLayerMaterial", "elastic_tangent",
+           "drucker_prager_return", "mandel_identity", "mandel_to_tensor",
+           "tensor_to_mandel"]
+
+SQRT2 = math.sqrt(2.0)
+
+
+@dataclasses.dataclass(frozen=True)
+class LinearElastic:
+    """Isotropic linear elasticity: Young's modulus ``young_pa`` (Pa, > 0), ``poisson`` (-)."""
+
+    young_pa: float
+    poisson: float
+
+    def __post_init__(self) -> None:
+        _pos("young_pa", self.young_pa)
+        nu = _real("poisson", self.poisson)
+        if not -1.0 < nu < 0.5:
+            raise FemInputError(f"poisson={nu!r}: must be in (-1, 0.5)")
+
+    @property
+    def bulk_pa(self) -> float:
+        """Bulk modulus K = E / (3 (1 - 2 nu)), Pa."""
+        return self.young_pa / (3.0 * (1.0 - 2.0 * self.poisson))
+
+    @property
+    def shear_pa(self) -> float:
+        """Shear modulus G = E / (2 (1 + nu)), Pa."""
+        return self.young_pa / (2.0 * (1.0 + self.poisson))
+
+    def k0(self) -> float:
+        """At-rest coefficient of an elastic soil under 1D loading, nu / (1 - nu), -."""
+        return self.poisson / (1.0 - self.poisson)
+
+    def dp_parameters(self) -> tuple[float, float, float]:
+        """(alpha, beta, k/Pa) of the yield function: never yields (k = inf)."""
+        return 0.0, 0.0, math.inf
+
+
+@dataclasses.dataclass(frozen=True)
+class DruckerPrager(LinearElastic):
+    """Elastic–perfectly plastic Drucker–Prager soil matched to Mohr–Coulomb in plane strain.
+
+    Attributes:
+        young_pa, poisson: elasticity (Pa, -).
+        cohesion_pa: Mohr–Coulomb cohesion c, Pa, >= 0.
+        friction_deg: Mohr–Coulomb friction angle phi, deg, in [0, 60].
+        dilation_deg: dilation angle psi, deg, in [0, phi]; None means associated (psi = phi).
+    """
+
+    cohesion_pa: float = 0.0
+    friction_deg: float = 30.0
+    dilation_deg: float | None = None
+
+    def __post_init__(self) -> None:
+        super().__post_init__()
+        if _real("cohesion_pa", self.cohesion_pa) < 0:
+            raise FemInputError(f"cohesion_pa={self.cohesion_pa!r}: must be >= 0")
+        phi = _real("friction_deg", self.friction_deg)
+        if not 0.0 <= phi <= 60.0:
+            raise FemInputError(f"friction_deg={phi!r}: must be in [0, 60]")
+        if self.dilation_deg is not None:
+            psi = _real("dilation_deg", self.dilation_deg)
+            if not 0.0 <= psi <= phi:
+                raise FemInputError(f"dilation_deg={psi!r}: must be in [0, friction_deg={phi}]")
+        if self.cohesion_pa == 0.0 and phi == 0.0:
+            raise FemInputError("cohesion_pa=0 and friction_deg=0: the soil has no strength")
+
+    def k0(self) -> float:
+        """Jaky's at-rest coefficient 1 - sin(phi), -."""
+        return 1.0 - math.sin(math.radians(self.friction_deg))
+
+    def dp_parameters(self) -> tuple[float, float, float]:
+        """(alpha, beta, k/Pa): plane-strain match to Mohr–Coulomb (module doc)."""
+        t = math.tan(math.radians(self.friction_deg))
+        root = math.sqrt(9.0 + 12.0 * t * t)
+        psi = self.friction_deg if self.dilation_deg is None else self.dilation_deg
+        tp = math.tan(math.radians(psi))
+        return t / root, tp / math.sqrt(9.0 + 12.0 * tp * tp), 3.0 * self.cohesion_pa / root
+
+
+@dataclasses.dataclass(frozen=True)
+class GeogridLayerMaterial:
+    """A geogrid layer as a thin band of cells (the band's thickness is in the geometry).
+
+    Attributes:
+        axial_stiffness_n_per_m: geogrid tensile stiffness J, N/m (the band gets E = J / t).
+        prestress_n_per_m: prestress force per metre width T_p, N/m, >= 0 (PRS, 002): an
+            initial tensile stress T_p / t along x in the band, equilibrated with the soil
+            by :meth:`femcoupling.elastoplastic.SoilModel.apply_prestress`.
+        poisson: Poisson's ratio of the band, -.
+    """
+
+    axial_stiffness_n_per_m: float
+    prestress_n_per_m: float = 0.0
+    poisson: float = 0.0
+
+    def __post_init__(self) -> None:
+        _pos("axial_stiffness_n_per_m", self.axial_stiffness_n_per_m)
+        if _real("prestress_n_per_m", self.prestress_n_per_m) < 0:
+            raise FemInputError(f"prestress_n_per_m={self.prestress_n_per_m!r}: must be >= 0 "
+                                "(tension)")
+        LinearElastic(1.0, self.poisson)
+
+    def band(self, thickness_m: float) -> LinearElastic:
+        """The band's elastic material for a band ``thickness_m`` thick (E = J / t)."""
+        return LinearElastic(self.axial_stiffness_n_per_m / thickness_m, self.poisson)
+
+
+# ---- Mandel algebra -----------------------------------------------------------------------
+
+
+def mandel_identity(ncomp: int) -> npt.NDArray[np.float64]:
+    """The identity tensor as a Mandel vector of length 4 (plane strain) or 6 (3D)."""
+    i = np.zeros(ncomp)
+    i[:3] = 1.0
+    return i
+
+
+def elastic_tangent(bulk_pa: npt.ArrayLike, shear_pa: npt.ArrayLike,
+                    ncomp: int) -> npt.NDArray[np.float64]:
+    """C = 3K P_vol + 2G P_dev (Mandel), shape (n, ncomp, ncomp) for n values of K, G (Pa)."""
+    k = np.atleast_1d(np.asarray(bulk_pa, float))
+    g = np.atleast_1d(np.asarray(shear_pa, float))
+    one = mandel_identity(ncomp)
+    pvol = np.outer(one, one) / 3.0
+    pdev = np.eye(ncomp) - pvol
+    return 3.0 * k[:, None, None] * pvol + 2.0 * g[:, None, None] * pdev
+
+
+def mandel_to_tensor(v: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """Mandel vectors (..., 4 or 6) -> 3x3 tensors (..., 3, 3) ordered (x, y, z)."""
+    v = np.asarray(v, float)
+    out = np.zeros(v.shape[:-1] + (3, 3))
+    if v.shape[-1] == 4:  # (xx, zz, yy_out, sqrt2 xz)
+        out[..., 0, 0] = v[..., 0]
+        out[..., 2, 2] = v[..., 1]
+        out[..., 1, 1] = v[..., 2]
+        out[..., 0, 2] = out[..., 2, 0] = v[..., 3] / SQRT2
+    elif v.shape[-1] == 6:
+        for a in range(3):
+            out[..., a, a] = v[..., a]
+        for k, (a, b) in enumerate(((1, 2), (0, 2), (0, 1))):
+            out[..., a, b] = out[..., b, a] = v[..., 3 + k] / SQRT2
+    else:
+        raise FemInputError(f"Mandel vector length {v.shape[-1]}: must be 4 or 6")
+    return out
+
+
+def tensor_to_mandel(t: npt.ArrayLike, ncomp: int) -> npt.NDArray[np.float64]:
+    """3x3 tensors (x, y, z) -> Mandel vectors of length ``ncomp`` (4: plane strain, 6: 3D)."""
+    t = np.asarray(t, float)
+    if ncomp == 4:
+        return np.stack([t[..., 0, 0], t[..., 2, 2], t[..., 1, 1], SQRT2 * t[..., 0, 2]], -1)
+    return np.stack([t[..., 0, 0], t[..., 1, 1], t[..., 2, 2], SQRT2 * t[..., 1, 2],
+                     SQRT2 * t[..., 0, 2], SQRT2 * t[..., 0, 1]], -1)
+
+
+APEX_TANGENT_FRACTION = 1e-6
+"""At the cone's apex the consistent tangent is zero; this fraction of C keeps the Jacobian
+regular (it only slows Newton where points sit at the apex)."""
+
+
+def drucker_prager_return(sig_trial: npt.NDArray[np.float64], *, bulk_pa, shear_pa, alpha,
+                          beta, k_pa) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Return mapping of trial stresses onto the Drucker–Prager cone, with consistent tangent.
+
+    Args:
+        sig_trial: (n, ncomp) trial stresses (Mandel, Pa, tension positive).
+        bulk_pa, shear_pa: (n,) elastic moduli K, G, Pa.
+        alpha, beta: (n,) friction and dilatancy coefficients of f and g, -.
+        k_pa: (n,) cohesion term of f, Pa (inf: elastic).
+
+    Returns:
+        (sig, tangent, dlambda): (n, ncomp) stresses, (n, ncomp, ncomp) consistent tangents
+        (Pa), (n,) plastic multipliers (0 where elastic; -1 marks the apex).
+
+    Cone return (derivation in docs/fem.md): with n = s_tr / |s_tr| the unit deviator,
+    dlambda = f_tr / (G + 9 K alpha beta), sig = sig_tr - dlambda (3 K beta I + sqrt2 G n),
+    C_ep = C - a_g (x) a_f / (G + 9 K alpha beta) - 2 sqrt2 G^2 dlambda / |s_tr| (P_dev - n (x) n)
+    with a_g = 3 K beta I + sqrt2 G n and a_f = 3 K alpha I + sqrt2 G n. Apex return
+    (when sqrt(J2_tr) - G dlambda < 0): sig = k / (3 alpha) I.
+    """
+    sig_trial = np.asarray(sig_trial, float)
+    n, ncomp = sig_trial.shape
+    K = np.broadcast_to(np.asarray(bulk_pa, float), (n,))
+    G = np.broadcast_to(np.asarray(shear_pa, float), (n,))
+    al = np.broadcast_to(np.asarray(alpha, float), (n,))
+    be = np.broadcast_to(np.asarray(beta, float), (n,))
+    kk = np.broadcast_to(np.asarray(k_pa, float), (n,))
+    one = mandel_identity(ncomp)
+    C = elastic_tangent(K, G, ncomp)
+    p = sig_trial[:, :3].sum(1) / 3.0
+    s = sig_trial - p[:, None] * one
+    snorm = np.linalg.norm(s, axis=1)
+    sqrt_j2 = snorm / SQRT2
+    with np.errstate(invalid="ignore"):
+        f = 3.0 * al * p + sqrt_j2 - kk
+    f = np.where(np.isfinite(kk), f, -np.inf)
+    plastic = f > 0.0
+    sig = sig_trial.copy()
+    tangent = C.copy()
+    dlam = np.zeros(n)
+    if np.any(plastic):
+        idx = np.flatnonzero(plastic)
+        Ki, Gi, ai, bi, ki = K[idx], G[idx], al[idx], be[idx], kk[idx]
+        denom = Gi + 9.0 * Ki * ai * bi
+        dl = f[idx] / denom
+        cone = sqrt_j2[idx] - Gi * dl >= 0.0
+        # cone points
+        c_idx = idx[cone]
+        if c_idx.size:
+            Kc, Gc, ac, bc, dlc = Ki[cone], Gi[cone], ai[cone], bi[cone], dl[cone]
+            nhat = s[c_idx] / snorm[c_idx, None]
+            ag = 3.0 * Kc[:, None] * bc[:, None] * one + SQRT2 * Gc[:, None] * nhat
+            af = 3.0 * Kc[:, None] * ac[:, None] * one + SQRT2 * Gc[:, None] * nhat
+            sig[c_idx] = sig_trial[c_idx] - dlc[:, None] * ag
+            pdev = np.eye(ncomp) - np.outer(one, one) / 3.0
+            coef = 2.0 * SQRT2 * Gc**2 * dlc / snorm[c_idx]
+            tangent[c_idx] = (C[c_idx] - np.einsum("ni,nj->nij", ag, af)
+                              / (Gc + 9.0 * Kc * ac * bc)[:, None, None]
+                              - coef[:, None, None] * (pdev[None] - np.einsum("ni,nj->nij",
+                                                                                nhat, nhat)))
+            dlam[c_idx] = dlc
+        a_idx = idx[~cone]
+        if a_idx.size:
+            if np.any(al[a_idx] <= 0):
+                raise FloatingPointError("Drucker-Prager apex return with alpha = 0")
+            sig[a_idx] = (kk[a_idx] / (3.0 * al[a_idx]))[:, None] * one
+            tangent[a_idx] = APEX_TANGENT_FRACTION * C[a_idx]
+            dlam[a_idx] = -1.0
+    return sig, tangent, dlam

@@ -1,0 +1,119 @@
+"""cases/prs_element.py: FEM -> DEM smoke run (RE and PRS), DEM-only mode without dolfinx,
+and a homogeneous FEM field handed over reproducing the standalone element test."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+CASE = ROOT / "cases" / "prs_element.py"
+
+
+def run_case(out, *args):
+    return subprocess.run([sys.executable, str(CASE), "--out", str(out), *args],
+                          capture_output=True, text=True, timeout=600, cwd=ROOT)
+
+
+@pytest.fixture(scope="module")
+def smoke(tmp_path_factory):
+    out = tmp_path_factory.mktemp("prs")
+    return out, run_case(out, "--smoke")
+
+
+def test_fem_to_dem_smoke_outputs_and_servo_hold(smoke):
+    out, proc = smoke
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    for name in ("summary.json", "report.md", "handover.h5", "fem_RE.xdmf", "fem_PRS.xdmf",
+                 "fem_PRS.png", "element_RE.h5", "element_PRS.csv",
+                 "vtk/element_PRS_contacts.vtp", "vtk/element_PRS_geogrid.vtp"):
+        assert (out / name).is_file() and (out / name).stat().st_size > 0, name
+    s = json.loads((out / "summary.json").read_text())
+    for v in ("RE", "PRS"):
+        e = s["elements"][v]
+        assert e["hold_max_rel_error"] <= 0.01
+        np.testing.assert_allclose(e["stress_final_pa"], e["targets_pa"][-1], rtol=0.01)
+        np.testing.assert_allclose(e["targets_pa"][-1], s["fem"][v]["targets_final_pa"])
+    # the prestress is there on both sides: FEM layer force ~ T_p, DEM grid in tension
+    assert s["fem"]["PRS"]["layer_force_upper_n_per_m"] > 0.8 * 2000.0
+    assert abs(s["fem"]["RE"]["layer_force_upper_n_per_m"]) < 0.2 * 2000.0
+    assert (s["elements"]["PRS"]["grid_force_longitudinal_mean_n"]
+            > s["elements"]["RE"]["grid_force_longitudinal_mean_n"])
+    # PRS raises the horizontal x stress of the initial state (the band compresses the soil)
+    assert s["fem"]["PRS"]["targets_initial_pa"][0] > s["fem"]["RE"]["targets_initial_pa"][0]
+    assert "principal axes turned" in proc.stdout
+
+
+DEM_ONLY = """
+import runpy, sys, json
+sys.argv = ["prs_element.py", "--smoke", "--out", {out!r}, "--stresses", {st!r}]
+try:
+    runpy.run_path({case!r}, run_name="__main__")
+except SystemExit as e:
+    assert not e.code, e.code
+print(json.dumps(sorted(m for m in sys.modules if m.split(".")[0] in
+                        ("dolfinx", "dolfinx_solver", "ufl", "petsc4py", "gmsh"))))
+"""
+
+
+def test_dem_only_mode_imports_no_dolfinx_and_holds_given_stresses(tmp_path):
+    code = DEM_ONLY.format(out=str(tmp_path), st="25000,25000,60000", case=str(CASE))
+    p = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True,
+                       timeout=300, cwd=ROOT)
+    assert p.returncode == 0, p.stderr[-3000:]
+    assert json.loads(p.stdout.strip().splitlines()[-1]) == []
+    s = json.loads((tmp_path / "summary.json").read_text())
+    e = s["elements"]["RE"]
+    np.testing.assert_allclose(e["stress_final_pa"], [25e3, 25e3, 60e3], rtol=0.01)
+    assert e["hold_max_rel_error"] <= 0.01
+
+
+def test_homogeneous_field_handed_over_reproduces_the_standalone_element(tmp_path):
+    """An oedometric FEM block (weightless, elastic, uniform surcharge p on the whole top):
+    sigma_zz = -p, sigma_xx = sigma_yy = -nu/(1-nu) p exactly; handed over, the element
+    reaches them within 1 % and matches the element run with the numbers given directly."""
+    sys.path.insert(0, str(ROOT / "cases"))
+    import prs_element as pe
+
+    from femcoupling.elastoplastic import SoilModel
+    from femcoupling.geometry import ElementRegion, ReinforcedSoilBody
+    from femcoupling.handover import fem_to_dem
+    from femcoupling.materials import LinearElastic
+
+    p_pa, nu = 60e3, 0.3
+    body = ReinforcedSoilBody(width_m=1.0, height_m=1.0, footing_half_width_m=1.0,
+                              regions=(ElementRegion("e", (0.5, 0.5), 0.1),),
+                              mesh_size_m=0.25, fine_size_m=0.05)
+    m = SoilModel(body, soil=LinearElastic(30e6, nu), degree=1)
+    m.set_geostatic()
+    m.load_footing(pressure_pa=p_pa, steps=1)
+    t = fem_to_dem(m.region_stress("e"))
+    exact = np.array([nu / (1 - nu) * p_pa, nu / (1 - nu) * p_pa, p_pa])
+    np.testing.assert_allclose(t.normal_pa, exact, rtol=1e-6)
+    assert t.rotation_deg == 0.0 and np.all(np.abs(t.shear_pa) < 1e-6 * p_pa)
+
+    prm = pe.Params(**pe.SMOKE)
+    a = pe.run_element(prm, [t.normal_pa], prestressed=False, label="handed", out=tmp_path)
+    b = pe.run_element(prm, [exact], prestressed=False, label="given", out=tmp_path)
+    for e in (a, b):
+        assert e["hold_max_rel_error"] <= 0.01
+        np.testing.assert_allclose(e["stress_final_pa"], exact, rtol=0.01)
+    np.testing.assert_allclose(a["stress_final_pa"], b["stress_final_pa"], rtol=0.01)
+    assert a["porosity_final"] == pytest.approx(b["porosity_final"], abs=0.005)
+
+
+@pytest.mark.parametrize("args,msg", [
+    (["--stresses", "1,2"], "need three numbers sx,sy,sz in Pa, got 2"),
+    (["--stresses", "1000,-5,3000"], "--stresses: sy=-5.0: must be > 0"),
+    (["--stresses", "/nonexistent.csv"], "--stresses=/nonexistent.csv: no such file"),
+    (["--prestress", "-1"], "--prestress=-1.0: must be >= 0 (N/m)"),
+    (["--stresses", "1e4,1e4,2e4", "--two-way"], "--two-way needs the FEM"),
+])
+def test_bad_inputs(tmp_path, args, msg):
+    p = run_case(tmp_path, "--smoke", *args)
+    assert p.returncode != 0 and msg in p.stderr, p.stderr

@@ -1,0 +1,98 @@
+"""The FEM -> DEM handover (plain NumPy) and the two-way loop with a stand-in element.
+
+The stand-in element is linear elastic with known (E, nu): the secant fit must return them,
+and the two-way loop must converge with that material in the region.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from femcoupling.handover import HandoverError, fem_to_dem, secant_stiffness
+
+
+def test_sign_convention_tension_positive_to_compression_positive():
+    s = np.diag([-20e3, -30e3, -60e3])
+    t = fem_to_dem(s)
+    np.testing.assert_array_equal(t.normal_pa, [20e3, 30e3, 60e3])
+    assert t.rotation_deg == 0.0 and t.shear_ratio == 0.0
+    np.testing.assert_allclose(t.principal_pa, [60e3, 30e3, 20e3])
+
+
+def test_shear_is_reported_and_rotation_measured():
+    theta = np.radians(20.0)
+    c, s_ = np.cos(theta), np.sin(theta)
+    R = np.array([[c, 0, -s_], [0, 1, 0], [s_, 0, c]])
+    sig = R @ np.diag([-20e3, -30e3, -80e3]) @ R.T  # principal axes turned 20 deg about y
+    t = fem_to_dem(sig)
+    assert t.rotation_deg == pytest.approx(20.0, abs=1e-9)
+    assert t.shear_pa[1] == pytest.approx(-sig[0, 2])
+    assert t.shear_pa[0] == 0.0 and t.shear_pa[2] == 0.0
+    assert "20.0 deg" in t.report()
+
+
+def test_tension_cannot_be_handed_to_walls():
+    with pytest.raises(HandoverError, match=r"sigma_xx=1000.0 Pa .* the x walls would need"):
+        fem_to_dem(np.diag([1e3, -10e3, -10e3]))
+    with pytest.raises(HandoverError, match="must be symmetric"):
+        fem_to_dem([[-1e3, 5e2, 0], [0, -1e3, 0], [0, 0, -1e3]])
+
+
+def test_secant_stiffness_recovers_an_elastic_element():
+    E, nu = 40e6, 0.27
+    ds = np.array([10e3, 15e3, 50e3])
+    de = (ds - nu * (ds.sum() - ds)) / E
+    e, n = secant_stiffness(stress_increment_pa=ds, strain_increment=de)
+    assert e == pytest.approx(E, rel=1e-10) and n == pytest.approx(nu, rel=1e-10)
+    # nu outside the bounds is clipped and E refitted
+    de_bad = (ds - 0.6 * (ds.sum() - ds)) / E
+    e2, n2 = secant_stiffness(stress_increment_pa=ds, strain_increment=de_bad)
+    assert n2 == 0.45 and e2 > 0
+
+
+class ElasticElement:
+    """Stand-in DEM element: linear elastic (E, nu), compression positive (picklable)."""
+
+    def __init__(self, young_pa: float, poisson: float):
+        self.E, self.nu = young_pa, poisson
+
+    def __call__(self, name, initial, final):
+        from femcoupling.twoway import ElementResponse
+
+        ds = final.normal_pa - initial.normal_pa
+        de = (ds - self.nu * (ds.sum() - ds)) / self.E
+        return ElementResponse(stress_initial_pa=initial.normal_pa,
+                               stress_final_pa=final.normal_pa, strain_increment=de)
+
+
+def test_two_way_converges_and_puts_the_element_stiffness_into_the_region(tmp_path):
+    import h5py
+
+    from femcoupling.elastoplastic import SoilModel
+    from femcoupling.geometry import ElementRegion, ReinforcedSoilBody
+    from femcoupling.materials import LinearElastic
+    from femcoupling.twoway import HandoverHistory, two_way
+
+    body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5,
+                              regions=(ElementRegion("a", (0.25, 2.7), 0.2),
+                                       ElementRegion("b", (0.75, 2.4), 0.2)),
+                              mesh_size_m=0.6, fine_size_m=0.06)
+    m = SoilModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1)
+    m.set_geostatic()
+    load = lambda model: model.load_footing(pressure_pa=100e3, steps=1)  # noqa: E731
+    with HandoverHistory(tmp_path / "h.h5", regions=["a", "b"]) as hist:
+        res = two_way(m, regions=["a", "b"], load=load,
+                      element_runner=ElasticElement(10e6, 0.25), tol=1e-3,
+                      max_iterations=8, history=hist)
+    assert res.converged and 2 <= res.iterations <= 8
+    assert res.changes[0] == float("inf") and res.changes[-1] < 1e-3
+    for r in ("a", "b"):
+        E, nu = res.materials[r]
+        assert E == pytest.approx(10e6, rel=1e-8) and nu == pytest.approx(0.25, rel=1e-8)
+    # the softer region carries less vertical stress than with the soil's stiffness
+    m.restore_state(m.save_state())
+    with h5py.File(tmp_path / "h.h5") as f:
+        assert f["iteration"].shape[0] >= 2 * (res.iterations - 1)
+        assert list(f.attrs["regions"]) == ["a", "b"]
+        assert np.all(np.isfinite(f["fem_stress_pa"][:]))
