@@ -66,6 +66,8 @@ class Params:
     poisson: float = 0.3            #: nu, - (Table 5.1)
     density: float = 2650.0         #: kg/m^3 (Table 5.1)
     phi: float = 20.0               #: contact friction angle, deg (Table 5.1)
+    grid_young: float = 5e6         #: E of the grid material, Pa (Table 5.1: as the grains);
+                                    #: with the rigid pull it sets only the contact stiffness
     growth_stress: float = 10e3     #: radius growth target, Pa (App. A: 10 kN/m^2)
     velocity: float = 0.06          #: pull velocity, m/s (001 §5.1)
     distance: float = 0.095         #: pull distance, m (001: total pull-out, 9.5 cm)
@@ -98,9 +100,9 @@ def build(p: Params) -> pullout.PulloutSample:
                                 friction_angle_deg=p.phi)
 
     def grid_builder(sc):
-        gm = sc.add_material(dem.linear_material(density=p.density, young=p.young,
+        gm = sc.add_material(dem.linear_material(density=p.density, young=p.grid_young,
                                                  poisson=p.poisson, friction_angle_deg=p.phi))
-        beam = dem.BeamParams(young=p.young, poisson=p.poisson, radius=rc,
+        beam = dem.BeamParams(young=p.grid_young, poisson=p.poisson, radius=rc,
                               normal_cohesion=1e7, shear_cohesion=1e7)  # App. A
         if p.grid == "square":
             sp = p.box / 10.0
@@ -269,6 +271,9 @@ def parse_args(argv=None):
     ap.add_argument("--pull", choices=("all", "front"), default=d.pull,
                     help="pull every grid node (001 App. A) or only the front row")
     ap.add_argument("--damping", type=float, default=d.damping, help="local damping, [0, 1)")
+    ap.add_argument("--grid-young", type=float, default=d.grid_young,
+                    help="E of the grid material, Pa (Table 5.1: 5e6, as the grains); with "
+                         "the rigid pull it only sets the grain-grid contact stiffness")
     ap.add_argument("--study", action="store_true",
                     help="run the grid x radius x pressure table (Table 5.2) and summarise it "
                          "like Tables 5.3-5.4; --grids, --radius and --pressure select")
@@ -297,7 +302,10 @@ def parse_args(argv=None):
         ap.error(f"--velocity={a.velocity}: must be > 0 (m/s)")
     if not (0 <= a.damping < 1):
         ap.error(f"--damping={a.damping}: must be in [0, 1)")
+    if not (math.isfinite(a.grid_young) and a.grid_young > 0):
+        ap.error(f"--grid-young={a.grid_young}: must be > 0 (Pa)")
     p = replace(p, grid=a.grid, radius=radii[0], pressure=pressures[0], velocity=a.velocity,
+                grid_young=a.grid_young,
                 pull=a.pull, damping=a.damping, seed=a.seed, threads=a.threads)
     if a.distance is not None:
         if not (math.isfinite(a.distance) and a.distance > 0):

@@ -36,6 +36,8 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
+from femcoupling._checks import _pos, _real
+
 __all__ = ["ElasticBlockResult", "solve_elastic_block"]
 
 # Physical-group tags written into the gmsh model (cell tags and facet tags are
@@ -79,24 +81,6 @@ class ElasticBlockResult:
     degree: int
 
 
-def _check_finite(name: str, value: Any) -> float:
-    """Return ``value`` as a float, or raise naming the field if it is not a finite real."""
-    if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
-        raise TypeError(f"{name}={value!r}: must be a real number")
-    result = float(value)
-    if not math.isfinite(result):
-        raise ValueError(f"{name}={result!r}: must be finite")
-    return result
-
-
-def _check_positive(name: str, value: Any) -> float:
-    """Return ``value`` as a float, or raise naming the field if it is not finite and > 0."""
-    result = _check_finite(name, value)
-    if result <= 0.0:
-        raise ValueError(f"{name}={result!r}: must be > 0")
-    return result
-
-
 def _validate(
     lx_m: Any,
     ly_m: Any,
@@ -108,15 +92,15 @@ def _validate(
     degree: Any,
 ) -> tuple[float, float, float, float, float, float, float, int]:
     """Check every input of :func:`solve_elastic_block`; errors name the field and value."""
-    lx = _check_positive("lx_m", lx_m)
-    ly = _check_positive("ly_m", ly_m)
-    lz = _check_positive("lz_m", lz_m)
-    young = _check_positive("young_pa", young_pa)
-    nu = _check_finite("poisson", poisson)
+    lx = _pos("lx_m", lx_m)
+    ly = _pos("ly_m", ly_m)
+    lz = _pos("lz_m", lz_m)
+    young = _pos("young_pa", young_pa)
+    nu = _real("poisson", poisson)
     if not -1.0 < nu < 0.5:
         raise ValueError(f"poisson={nu!r}: must be in (-1, 0.5)")
-    traction = _check_finite("top_traction_pa", top_traction_pa)
-    h = _check_positive("mesh_size_m", mesh_size_m)
+    traction = _real("top_traction_pa", top_traction_pa)
+    h = _pos("mesh_size_m", mesh_size_m)
     if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) or degree not in (1, 2):
         raise ValueError(f"degree={degree!r}: must be 1 or 2")
     return lx, ly, lz, young, nu, traction, h, int(degree)

@@ -36,6 +36,8 @@ import math
 from collections.abc import Iterator, Sequence
 from typing import Any
 
+from femcoupling._checks import FemInputError, _pos, _real  # noqa: F401  (re-exported)
+
 __all__ = [
     "SOIL_TAG", "LAYER_TAG0", "REGION_TAG0", "BOTTOM", "TOP", "X_MIN", "X_MAX", "FOOTING",
     "Y_MIN", "Y_MAX", "FemInputError", "GeogridLayer", "ElementRegion", "ReinforcedSoilBody",
@@ -53,26 +55,6 @@ BOTTOM, TOP, X_MIN, X_MAX, FOOTING, Y_MIN, Y_MAX = 1, 2, 3, 4, 5, 6, 7
 
 _GMSH_RANK = 0
 _counter = itertools.count()
-
-
-class FemInputError(ValueError):
-    """A bad input to femcoupling; the message names the field, its value and what is allowed."""
-
-
-def _real(name: str, value: Any) -> float:
-    if isinstance(value, bool) or not isinstance(value, (int, float)) and not hasattr(value, "__float__"):
-        raise FemInputError(f"{name}={value!r}: must be a real number")
-    v = float(value)
-    if not math.isfinite(v):
-        raise FemInputError(f"{name}={v!r}: must be finite")
-    return v
-
-
-def _pos(name: str, value: Any) -> float:
-    v = _real(name, value)
-    if v <= 0.0:
-        raise FemInputError(f"{name}={v!r}: must be > 0")
-    return v
 
 
 @dataclasses.dataclass(frozen=True)
