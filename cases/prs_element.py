@@ -110,7 +110,7 @@ class Params:
 
 
 SMOKE = dict(n=300, hold_steps=600, fem_steps=3, mesh_size=1.0, fine_size=0.05,
-             layer_thickness=0.02, max_steps=40_000, unbalanced=0.05)
+             layer_thickness=0.02, max_steps=80_000, unbalanced=0.05)
 
 
 def log(msg: str) -> None:

@@ -141,3 +141,19 @@ def test_a_manual_dt_above_the_estimate_is_stopped_even_when_it_looks_stable():
         sc.set_auto_timestep(safety=1.2)
     with pytest.raises(dem.ParameterError, match="dt_check_period=-1"):
         sc.dt_check_period = -1
+
+
+def test_estimate_covers_small_grains_not_yet_in_contact():
+    """PSD span 1:20: two big grains in contact and a small free one. The estimate must not
+    follow the big pair alone (it did: 36 x too large a step, and the first impact of a small
+    grain blew up); a free sphere counts with one contact of stiffness E R."""
+    sc = dem.Scene()
+    m = sc.add_material(dem.linear_material(density=2650, young=1e7, poisson=0.3,
+                                            friction_angle_deg=30))
+    sc.add_spheres([[0, 0, 0], [0.0199, 0, 0], [0.1, 0.1, 0.1]], [0.01, 0.01, 0.0005],
+                   material=m)
+    sc.run(1)
+    small = sc.masses[2]
+    big_pair = np.sqrt(2 * sc.masses[0] / (1e7 * 0.01))
+    assert sc.critical_dt() == pytest.approx(np.sqrt(2 * small / (1e7 * 0.0005)), rel=1e-9)
+    assert sc.critical_dt() < big_pair / 19  # dt scales with the radius: 20 x smaller

@@ -199,9 +199,12 @@ def test_case_001_smoke(tmp_path):
     rec = read_csv_series(tmp_path / "pullout.csv")
     assert s["top_stress_max_rel_dev"] < 0.05
     assert s["mean_force_N"] > 0
-    # Rigid pull (App. A): every node is clamped; the front row carries part of the force.
+    # Rigid pull (App. A): every node is clamped and moves at the pull velocity, so the grid's
+    # kinetic energy is the same (1/2 M v^2) in every record after the first.
     assert s["grid_nodes"] == 25
-    assert np.all(np.abs(rec["front_force"][1:]) <= np.abs(rec["pull_force"][1:]) + 1e-9)
+    ke = rec["grid_kinetic_energy"][1:]
+    assert ke[0] > 0
+    np.testing.assert_allclose(ke, ke[0], rtol=1e-9)
     assert "pulling at 0.06 m/s" in r.stdout
 
 
