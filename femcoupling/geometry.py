@@ -33,10 +33,11 @@ import contextlib
 import dataclasses
 import itertools
 import math
-from collections.abc import Iterator, Sequence
+from collections.abc import Sequence
 from typing import Any
 
 from femcoupling._checks import FemInputError, _pos, _real  # noqa: F401  (re-exported)
+from femcoupling.elastic import _gmsh_model
 
 __all__ = [
     "SOIL_TAG", "LAYER_TAG0", "REGION_TAG0", "BOTTOM", "TOP", "X_MIN", "X_MAX", "FOOTING",
@@ -202,30 +203,6 @@ class MeshBundle:
     body: ReinforcedSoilBody
 
 
-@contextlib.contextmanager
-def _gmsh_session(name: str) -> Iterator[Any]:
-    import gmsh
-
-    owns = not gmsh.isInitialized()
-    if owns:
-        gmsh.initialize(readConfigFiles=False, interruptible=False)
-    previous = None if owns else gmsh.model.getCurrent()
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add(name)
-        try:
-            yield gmsh
-        finally:
-            gmsh.model.setCurrent(name)
-            gmsh.model.remove()
-    finally:
-        if owns:
-            gmsh.finalize()
-        elif previous is not None:
-            with contextlib.suppress(Exception):
-                gmsh.model.setCurrent(previous)
-
-
 def _inside(p: Sequence[float], lo: Sequence[float], hi: Sequence[float], tol: float) -> bool:
     return all(lo[k] - tol <= p[k] <= hi[k] + tol for k in range(len(lo)))
 
@@ -374,7 +351,7 @@ def build_mesh(body: ReinforcedSoilBody, *, comm: Any = None) -> MeshBundle:
         model, err = None, ""
         if comm.rank == _GMSH_RANK:
             try:
-                gmsh = stack.enter_context(_gmsh_session(name))
+                gmsh = stack.enter_context(_gmsh_model(name))
                 _build(gmsh, body)
                 model = gmsh.model
             except Exception as exc:  # reported on every rank so that none hangs
