@@ -70,17 +70,60 @@ def one(base, field: str, value, distance: float) -> dict:
                                                        p.pressure)}
 
 
+def presets_run(base, distance: float) -> list:
+    """The three presets against the most accurate value of every knob at once."""
+    from cpp_dem import presets
+
+    rho = base.unit_weight / 9.81
+    ref = presets.Preset("reference", dt_safety=0.2, node_density_scale=1e3,
+                         local_damping=0.05, inertial_number=float("nan"))
+    rows = []
+    for ps in [ref] + [presets.preset(n) for n in presets.PRESETS]:
+        t0 = time.perf_counter()
+        sample = case.build(base)
+        pullout.prepare(sample, stress=base.pressure, porosity=base.porosity,
+                        node_density_scale="auto")
+        sc = sample.scene
+        pullout.set_node_density_scale(sample, pullout.auto_node_density_scale(sample)
+                                       if ps.node_density_scale == "auto"
+                                       else float(ps.node_density_scale))
+        sc.set_auto_timestep(safety=ps.dt_safety, period=100)
+        sc.local_damping = ps.local_damping
+        sc.dt = ps.dt_safety * sc.critical_dt()
+        v = 0.0025 if ps.name == "reference" else ps.velocity(density=rho, stress=base.pressure)
+        t1 = time.perf_counter()
+        rec = pullout.pull(sample, velocity=v, distance=distance, record_every=50)
+        t2 = time.perf_counter()
+        rows.append({"knob": "preset", "value": ps.name, "velocity_m_s": v,
+                     "force_end_N": float(rec["pull_force"][-1]),
+                     "force_mean_N": float(rec["pull_force"][1:].mean()),
+                     "A1_mean_N": float(rec["force_A1"][1:].mean()), "dt_s": sc.dt,
+                     "wall_pull_s": t2 - t1, "wall_s": t2 - t0,
+                     "inertial_number": pullout.inertial_number(v, rho, base.pressure)})
+    for r in rows:
+        for k in ("force_end_N", "force_mean_N", "A1_mean_N"):
+            r[f"err_{k}"] = (r[k] - rows[0][k]) / rows[0][k]
+        r["cost_vs_reference"] = r["wall_s"] / rows[0]["wall_s"]
+        print(json.dumps(r, default=float), flush=True)
+    return rows
+
+
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--knobs", nargs="*", choices=sorted(KNOBS), default=list(KNOBS))
     ap.add_argument("--distance", type=float, default=0.02, help="pull distance, m")
     ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--presets", action="store_true",
+                    help="measure the presets fast/balanced/accurate against the most "
+                         "accurate value of every knob at once, instead of the knobs")
     a = ap.parse_args(argv)
     dem.set_num_threads(a.threads)
     base = case.Params(**case.SMOKE)
-    table = []
+    table = presets_run(base, a.distance) if a.presets else []
+    if a.presets:
+        a.knobs = []
     for knob in a.knobs:
-        values, ref_i, field = KNOBS[knob]
+        values, ref_i, field = KNOBS[knob]  # noqa: B007
         runs = []
         for v in values:
             r = one(base, field, v, a.distance)

@@ -36,7 +36,7 @@ import numpy as np
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
 import cpp_dem as dem  # noqa: E402
-from cpp_dem import geogrid, prep, pullout  # noqa: E402
+from cpp_dem import geogrid, prep, presets, pullout  # noqa: E402
 from pullout_common import make_logger, run_case  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -72,6 +72,7 @@ class Params:
     snapshots: int = 4                  #: VTK/HDF5 snapshots over the pull
     seed: int = 1
     threads: int = 0
+    preset: str = ""                    #: speed-accuracy preset for the pull ('' = none)
 
 
 SMOKE = dict(spheres=375, box=(0.5, 0.25, 0.25), distance=0.01, snapshots=2)
@@ -122,13 +123,25 @@ def run(p: Params, out: Path) -> dict:
     nds = p.node_density_scale if p.node_density_scale == "auto" else float(
         p.node_density_scale)
     snaps = np.linspace(0, p.distance, p.snapshots + 1)[1:] if p.snapshots else []
+    before_pull = None
+    if p.preset:
+        ps = presets.preset(p.preset)
+        p = replace(p, velocity=ps.velocity(density=p.unit_weight / geogrid.G_STANDARD,
+                                            stress=p.pressure))
+        log(f"preset {p.preset!r} for the pull: dt safety {ps.dt_safety}, node density scale "
+            f"{ps.node_density_scale}, damping {ps.local_damping}, I = {ps.inertial_number} "
+            f"-> {p.velocity:.4g} m/s")
+
+        def before_pull(sample):
+            pullout.apply_preset(sample, p.preset)
     return run_case(sample, out, tag="pullout-000", meta={**asdict(p), "case": "000"},
                     prep_kwargs={"porosity": p.porosity, "node_density_scale": nds},
                     velocity=p.velocity, distance=p.distance, record_every=p.record_every,
                     snapshot_displacements=snaps,
                     grain_density=p.unit_weight / geogrid.G_STANDARD, stress=p.pressure,
                     title=f"000 pull-out, {len(sample.grain_ids)} spheres, "
-                          f"{p.pressure / 1e3:g} kPa, {p.velocity} m/s", log=log)
+                          f"{p.pressure / 1e3:g} kPa, {p.velocity:.4g} m/s", log=log,
+                    before_pull=before_pull)
 
 
 def compare(runs: dict, out: Path) -> None:
@@ -192,6 +205,10 @@ def parse_args(argv=None) -> tuple[Params, list[int], Path]:
                     help="geogrid node mass factor (>= 1), or 'auto'")
     ap.add_argument("--snapshots", type=int, default=None,
                     help=f"VTK/HDF5 snapshots over the pull (default {d.snapshots})")
+    ap.add_argument("--preset", choices=("fast", "balanced", "accurate"), default="",
+                    help="speed-accuracy preset for the pull (dt safety, node density scale, "
+                         "damping, rate as an inertial number; overrides --velocity): see "
+                         "docs/speed_accuracy.md")
     ap.add_argument("--seed", type=int, default=d.seed)
     ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: default)")
     a = ap.parse_args(argv)
@@ -222,7 +239,8 @@ def parse_args(argv=None) -> tuple[Params, list[int], Path]:
                      "or 'auto'")
     p = replace(p, pressure=a.pressure, porosity=a.porosity, velocity=a.velocity,
                 damping=a.damping, dt_safety=a.dt_safety,
-                node_density_scale=a.node_density_scale, seed=a.seed, threads=a.threads)
+                node_density_scale=a.node_density_scale, seed=a.seed, threads=a.threads,
+                preset=a.preset)
     if a.distance is not None:
         if not (math.isfinite(a.distance) and a.distance > 0):
             ap.error(f"--distance={a.distance}: must be > 0 (m)")

@@ -87,8 +87,10 @@ def plot_pull(rec: dict, png_force: Path, png_members: Path, title: str,
 def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
              prep_kwargs: dict, velocity: float, distance: float, record_every: int,
              snapshot_displacements, grain_density: float, stress: float, title: str,
-             log) -> dict:
-    """Prepares the sample, pulls it, writes every output in ``out``; returns the summary."""
+             log, before_pull=None) -> dict:
+    """Prepares the sample, pulls it, writes every output in ``out``; returns the summary.
+    ``before_pull(sample)``, if given, runs between the preparation and the pull (e.g. a
+    speed-accuracy preset that applies to the pull only)."""
     t_start = time.perf_counter()
     out.mkdir(parents=True, exist_ok=True)
     vtk = out / "vtk"
@@ -106,6 +108,8 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
     if not res.converged:
         log("warning: the sample did not reach the stability criteria; pulling anyway")
     write_vtk_state(sample, vtk, "prepared")
+    if before_pull is not None:
+        before_pull(sample)
     inertial = pullout.inertial_number(velocity, grain_density, stress)
     log(f"preparation {t_prep:.1f} s; pulling at {velocity} m/s to {distance * 1e3:g} mm "
         f"(inertial number I = v sqrt(rho/sigma) = {inertial:.2g}), dt {sc.dt:.3g} s")

@@ -225,3 +225,18 @@ def test_overlap_limit_rule():
     assert prep.overlap_limit(25e3, 1e6) == pytest.approx(0.95)
     assert prep.overlap_limit(1e3, 1e9) == pytest.approx(0.5)
     assert prep.overlap_limit(1e4, 1e6) == pytest.approx(0.6)
+
+
+def test_presets_are_named_and_applied():
+    from cpp_dem import presets
+
+    with pytest.raises(dem.ParameterError, match="preset='quick': unknown"):
+        presets.preset("quick")
+    b = presets.preset("balanced")
+    assert b.velocity(density=2600.0, stress=26e3) == pytest.approx(3.2e-3 * math.sqrt(10.0))
+    s, _ = _bar_sample()
+    pullout.apply_preset(s, "accurate")
+    assert s.scene.local_damping == 0.05
+    assert s.node_density_scale == 3e3
+    assert s.scene.timestep_safety == 0.35
+    assert s.scene.dt == pytest.approx(0.35 * s.scene.critical_dt(), rel=1e-12)

@@ -498,3 +498,18 @@ def read_record(path) -> dict | None:
         return read_csv_series(path)
     except FileNotFoundError:
         return None
+
+
+def apply_preset(sample: PulloutSample, name: str) -> None:
+    """Applies a speed-accuracy preset (cpp_dem.presets) to the pull stage of a prepared
+    sample: time-step safety, geogrid node density scale and local damping; dt is reset at
+    once. (The loading velocity is the preset's inertial number: Preset.velocity.)"""
+    from .presets import preset
+
+    ps = preset(name)
+    sc = sample.scene
+    set_node_density_scale(sample, auto_node_density_scale(sample)
+                           if ps.node_density_scale == "auto" else float(ps.node_density_scale))
+    sc.set_auto_timestep(safety=ps.dt_safety, period=100)
+    sc.local_damping = ps.local_damping
+    sc.dt = ps.dt_safety * sc.critical_dt()
