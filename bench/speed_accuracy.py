@@ -19,10 +19,8 @@ import argparse
 import json
 import sys
 import time
-from dataclasses import replace
 from pathlib import Path
 
-import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "cases"))
@@ -40,34 +38,51 @@ KNOBS = {
 }
 
 
-def one(base, field: str, value, distance: float) -> dict:
-    """The sample is prepared with the default settings (so every run pulls the same,
-    bitwise identical, sample); the knob applies to the pull."""
+def run_pull(base, distance: float, velocity: float, **settings) -> dict:
+    """Prepares the sample with the default settings (so every run pulls the same, bitwise
+    identical, sample), applies the pull settings with pullout.apply_preset (dt_safety,
+    node_density_scale, local_damping; each defaults to what the preparation left) and pulls
+    at ``velocity`` (m/s) over ``distance`` (m)."""
+    from cpp_dem.presets import Preset
+
     t0 = time.perf_counter()
-    p = replace(base, **{field: value})
     sample = case.build(base)
     pullout.prepare(sample, stress=base.pressure, porosity=base.porosity,
                     node_density_scale="auto")
     sc = sample.scene
-    if field == "node_density_scale":
-        pullout.set_node_density_scale(
-            sample, pullout.auto_node_density_scale(sample) if value == "auto" else value)
-    elif field == "dt_safety":
-        sc.set_auto_timestep(safety=value, period=100)
-    elif field == "damping":
-        sc.local_damping = value
-    sc.dt = sc.timestep_safety * sc.critical_dt()
+    pullout.apply_preset(sample, Preset(
+        "run", dt_safety=settings.get("dt_safety", base.dt_safety),
+        node_density_scale=settings.get("node_density_scale", sample.node_density_scale),
+        local_damping=settings.get("local_damping", base.damping),
+        inertial_number=float("nan")))
     t1 = time.perf_counter()
-    rec = pullout.pull(sample, velocity=p.velocity, distance=distance, record_every=50)
+    rec = pullout.pull(sample, velocity=velocity, distance=distance, record_every=50)
     t2 = time.perf_counter()
-    return {"force_end_N": float(rec["pull_force"][-1]),
+    rho = base.unit_weight / 9.81
+    return {"velocity_m_s": velocity, "force_end_N": float(rec["pull_force"][-1]),
             "force_mean_N": float(rec["pull_force"][1:].mean()),
             "A1_mean_N": float(rec["force_A1"][1:].mean()),
             "grid_kinetic_max_J": float(rec["grid_kinetic_energy"].max()),
-            "node_density_scale": sample.node_density_scale, "dt_s": sample.scene.dt,
+            "node_density_scale": sample.node_density_scale, "dt_s": sc.dt,
             "wall_prep_s": t1 - t0, "wall_pull_s": t2 - t1, "wall_s": t2 - t0,
-            "inertial_number": pullout.inertial_number(p.velocity, p.unit_weight / 9.81,
-                                                       p.pressure)}
+            "inertial_number": pullout.inertial_number(velocity, rho, base.pressure)}
+
+
+def one(base, field: str, value, distance: float) -> dict:
+    """One knob (a Params field) at ``value`` for the pull, the others at their defaults."""
+    if field == "velocity":
+        return run_pull(base, distance, value)
+    key = {"damping": "local_damping"}.get(field, field)
+    return run_pull(base, distance, base.velocity, **{key: value})
+
+
+def with_errors(rows: list, ref: dict) -> None:
+    """Adds the relative errors and the cost against ``ref`` to every row and prints it."""
+    for r in rows:
+        for k in ("force_end_N", "force_mean_N", "A1_mean_N"):
+            r[f"err_{k}"] = (r[k] - ref[k]) / ref[k]
+        r["cost_vs_reference"] = r["wall_s"] / ref["wall_s"]
+        print(json.dumps(r, default=float), flush=True)
 
 
 def presets_run(base, distance: float) -> list:
@@ -75,36 +90,17 @@ def presets_run(base, distance: float) -> list:
     from cpp_dem import presets
 
     rho = base.unit_weight / 9.81
-    ref = presets.Preset("reference", dt_safety=0.2, node_density_scale=1e3,
-                         local_damping=0.05, inertial_number=float("nan"))
-    rows = []
-    for ps in [ref] + [presets.preset(n) for n in presets.PRESETS]:
-        t0 = time.perf_counter()
-        sample = case.build(base)
-        pullout.prepare(sample, stress=base.pressure, porosity=base.porosity,
-                        node_density_scale="auto")
-        sc = sample.scene
-        pullout.set_node_density_scale(sample, pullout.auto_node_density_scale(sample)
-                                       if ps.node_density_scale == "auto"
-                                       else float(ps.node_density_scale))
-        sc.set_auto_timestep(safety=ps.dt_safety, period=100)
-        sc.local_damping = ps.local_damping
-        sc.dt = ps.dt_safety * sc.critical_dt()
-        v = 0.0025 if ps.name == "reference" else ps.velocity(density=rho, stress=base.pressure)
-        t1 = time.perf_counter()
-        rec = pullout.pull(sample, velocity=v, distance=distance, record_every=50)
-        t2 = time.perf_counter()
-        rows.append({"knob": "preset", "value": ps.name, "velocity_m_s": v,
-                     "force_end_N": float(rec["pull_force"][-1]),
-                     "force_mean_N": float(rec["pull_force"][1:].mean()),
-                     "A1_mean_N": float(rec["force_A1"][1:].mean()), "dt_s": sc.dt,
-                     "wall_pull_s": t2 - t1, "wall_s": t2 - t0,
-                     "inertial_number": pullout.inertial_number(v, rho, base.pressure)})
-    for r in rows:
-        for k in ("force_end_N", "force_mean_N", "A1_mean_N"):
-            r[f"err_{k}"] = (r[k] - rows[0][k]) / rows[0][k]
-        r["cost_vs_reference"] = r["wall_s"] / rows[0]["wall_s"]
-        print(json.dumps(r, default=float), flush=True)
+    rows = [{"knob": "preset", "value": "reference",
+             **run_pull(base, distance, 0.0025, dt_safety=0.2, node_density_scale=1e3,
+                        local_damping=0.05)}]
+    for name in presets.PRESETS:
+        ps = presets.preset(name)
+        rows.append({"knob": "preset", "value": name,
+                     **run_pull(base, distance, ps.velocity(density=rho, stress=base.pressure),
+                                dt_safety=ps.dt_safety,
+                                node_density_scale=ps.node_density_scale,
+                                local_damping=ps.local_damping)})
+    with_errors(rows, rows[0])
     return rows
 
 
@@ -123,19 +119,10 @@ def main(argv=None) -> int:
     if a.presets:
         a.knobs = []
     for knob in a.knobs:
-        values, ref_i, field = KNOBS[knob]  # noqa: B007
-        runs = []
-        for v in values:
-            r = one(base, field, v, a.distance)
-            r.update(knob=knob, value=v)
-            runs.append(r)
-        ref = runs[ref_i]
-        for r in runs:
-            for k in ("force_end_N", "force_mean_N", "A1_mean_N"):
-                r[f"err_{k}"] = (r[k] - ref[k]) / ref[k]
-            r["cost_vs_reference"] = r["wall_s"] / ref["wall_s"]
-            print(json.dumps(r, default=float), flush=True)
-            table.append(r)
+        values, ref_i, field = KNOBS[knob]
+        runs = [{**one(base, field, v, a.distance), "knob": knob, "value": v} for v in values]
+        with_errors(runs, runs[ref_i])
+        table += runs
     print("\n| knob | value | wall (s) | cost / ref | F end (N) | err F end | err F mean | "
           "err A1 mean | dt (s) | I |", file=sys.stderr)
     print("|---|---|---|---|---|---|---|---|---|---|", file=sys.stderr)

@@ -312,11 +312,10 @@ def prepare(sample: PulloutSample, *, stress: float, porosity: float | None = No
     # Free the geogrid (the clamp takes it at the start of the pull), weight and servo.
     if sample.info["clamp"] != "all":
         sc.block_dofs(grid.nodes, "")
+    sc.gravity = (0.0, 0.0, -float(gravity))  # first: the true-weight force depends on it
     if node_density_scale == "auto":
         node_density_scale = auto_node_density_scale(sample)
     set_node_density_scale(sample, float(node_density_scale))
-    sc.gravity = (0.0, 0.0, -float(gravity))
-    _apply_true_weight(sample)
     lo, hi = sample.box_lo_hi()
     area = float((hi[0] - lo[0]) * (hi[1] - lo[1]))
     servo = _core.ServoWall(wall=walls[Z_PLUS], target_stress=stress, area=area, gain=0.5,
@@ -500,13 +499,14 @@ def read_record(path) -> dict | None:
         return None
 
 
-def apply_preset(sample: PulloutSample, name: str) -> None:
-    """Applies a speed-accuracy preset (cpp_dem.presets) to the pull stage of a prepared
-    sample: time-step safety, geogrid node density scale and local damping; dt is reset at
-    once. (The loading velocity is the preset's inertial number: Preset.velocity.)"""
-    from .presets import preset
+def apply_preset(sample: PulloutSample, preset) -> None:
+    """Applies a speed-accuracy preset (a cpp_dem.presets.Preset or its name) to the pull
+    stage of a prepared sample: time-step safety, geogrid node density scale and local
+    damping; dt is reset at once. (The loading velocity is the preset's inertial number:
+    Preset.velocity.)"""
+    from .presets import preset as by_name
 
-    ps = preset(name)
+    ps = by_name(preset) if isinstance(preset, str) else preset
     sc = sample.scene
     set_node_density_scale(sample, auto_node_density_scale(sample)
                            if ps.node_density_scale == "auto" else float(ps.node_density_scale))
