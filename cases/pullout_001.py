@@ -89,13 +89,18 @@ def grid_spec(p: Params) -> tuple[float, int]:
     return rc, max(3, int(round(10 * p.box / 0.1)))
 
 
+def grains(p: Params) -> tuple[np.ndarray, np.ndarray]:
+    """Centres and radii (m): the App. A lattice (gap r/2) with the grid's layer left empty."""
+    c, r = hex_packing(np.zeros(3), np.full(3, p.box), p.radius, gap=p.radius / 2)
+    keep = np.abs(c[:, 2] - 0.5 * p.box) > r + 1.5 * grid_spec(p)[0]
+    return c[keep], r[keep]
+
+
 def build(p: Params) -> pullout.PulloutSample:
     lo, hi = np.zeros(3), np.full(3, p.box)
     zg = 0.5 * p.box
     rc, n_nodes = grid_spec(p)
-    c, r = hex_packing(lo, hi, p.radius, gap=p.radius / 2)
-    keep = np.abs(c[:, 2] - zg) > r + 1.5 * rc  # the grid's layer is left empty
-    c, r = c[keep], r[keep]
+    c, r = grains(p)
     grain = dem.linear_material(density=p.density, young=p.young, poisson=p.poisson,
                                 friction_angle_deg=p.phi)
 
@@ -166,7 +171,7 @@ def study(p: Params, out: Path, grids, radii, pressures, radii_given: bool) -> N
                     "mean_force_N": float("nan"), "cov_force": float("nan"),
                     "initial_peak_force_N": float("nan")}
                 rows.append({"grid": g, "radius_m": r, "pressure_Pa": P,
-                             "grains": int(len(build(q).grain_ids)),
+                             "grains": len(grains(q)[1]),
                              "mean_force_N": st["mean_force_N"], "cov_force": st["cov_force"],
                              "mean_front_force_N": float(np.mean(rec["front_force"][1:]))
                              if rec is not None else float("nan"),
