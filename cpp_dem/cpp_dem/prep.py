@@ -243,29 +243,47 @@ def _pair_overlaps(c: np.ndarray, r: np.ndarray):
     return p, (rs - dist) / rmin, dist, rs, rmin
 
 
+@dataclass
+class _Overlaps:
+    """Spheres of a scene (ids, centres, radii), their overlapping pairs (_pair_overlaps) and
+    the centre distance to each wall (inside positive), in one pass."""
+
+    ids: np.ndarray
+    c: np.ndarray
+    r: np.ndarray
+    pairs: tuple
+    wall_gaps: list  #: (wall id, gap per sphere, m)
+
+    @classmethod
+    def of(cls, scene, walls) -> "_Overlaps":
+        ids = np.flatnonzero(measure.sphere_mask(scene))
+        c = np.asarray(scene.positions)[ids]
+        r = np.asarray(scene.radii)[ids]
+        wp = np.asarray(scene.wall_positions)
+        ax, se = np.asarray(scene.wall_axes), np.asarray(scene.wall_senses)
+        gaps = [(int(w), se[w] * (c[:, ax[w]] - wp[w])) for w in walls]
+        return cls(ids, c, r, _pair_overlaps(c, r), gaps)
+
+    def report(self) -> dict:
+        out = {"pair": 0.0, "pair_bodies": None, "wall": 0.0, "wall_body": None}
+        p, ratio = self.pairs[0], self.pairs[1]
+        if len(p):
+            k = int(np.argmax(ratio))
+            out["pair"] = float(ratio[k])
+            out["pair_bodies"] = (int(self.ids[p[k, 0]]), int(self.ids[p[k, 1]]))
+        for w, gap in self.wall_gaps:
+            ratio = (self.r - gap) / self.r
+            k = int(np.argmax(ratio))
+            if ratio[k] > out["wall"]:
+                out["wall"], out["wall_body"] = float(ratio[k]), (int(self.ids[k]), w)
+        return out
+
+
 def overlap_report(scene, walls=()) -> dict:
     """The largest overlaps in a scene's current configuration, as fractions of the (smaller)
     radius: ``pair`` (sphere-sphere, with the pair), ``wall`` (sphere-wall, with the body and
     wall). Spheres only (grid nodes are skipped). Computed in NumPy from the positions."""
-    mask = measure.sphere_mask(scene)
-    ids = np.flatnonzero(mask)
-    c = np.asarray(scene.positions)[ids]
-    r = np.asarray(scene.radii)[ids]
-    out = {"pair": 0.0, "pair_bodies": None, "wall": 0.0, "wall_body": None}
-    res = _pair_overlaps(c, r)
-    if len(res[0]):
-        p, ratio = res[0], res[1]
-        k = int(np.argmax(ratio))
-        out["pair"], out["pair_bodies"] = float(ratio[k]), (int(ids[p[k, 0]]), int(ids[p[k, 1]]))
-    wp = np.asarray(scene.wall_positions)
-    ax, se = np.asarray(scene.wall_axes), np.asarray(scene.wall_senses)
-    for w in walls:
-        gap = se[w] * (c[:, ax[w]] - wp[w])  # centre distance to the wall, inside positive
-        ratio = (r - gap) / r
-        k = int(np.argmax(ratio))
-        if ratio[k] > out["wall"]:
-            out["wall"], out["wall_body"] = float(ratio[k]), (int(ids[k]), int(w))
-    return out
+    return _Overlaps.of(scene, walls).report()
 
 
 def relax_overlaps(scene, walls=(), *, target_ratio: float = 0.01, steps: int = 4000,
@@ -286,26 +304,20 @@ def relax_overlaps(scene, walls=(), *, target_ratio: float = 0.01, steps: int = 
         raise ParameterError(f"steps={steps}, chunks={chunks}: need 1 <= chunks <= steps")
     if not (0 <= damping < 1):
         raise ParameterError(f"damping={damping}: must be in [0, 1)")
-    before = overlap_report(scene, walls)
+    ov = _Overlaps.of(scene, walls)
+    before = ov.report()
     worst = max(before["pair"], before["wall"])
     if worst <= target_ratio:
         return {"before": before, "after": before, "shrink": 1.0, "steps": 0}
-    mask = measure.sphere_mask(scene)
-    ids = np.flatnonzero(mask)
-    c = np.asarray(scene.positions)[ids]
+    ids, r = ov.ids, ov.r
     r0_all = np.asarray(scene.radii).copy()
-    r = r0_all[ids]
     s = 1.0
-    res = _pair_overlaps(c, r)
     t = target_ratio
-    if len(res[0]):
-        _, _, dist, rs, rmin = res
+    if len(ov.pairs[0]):
+        _, _, dist, rs, rmin = ov.pairs
         # ((ri + rj) s - d) / (rmin s) <= t  <=>  s <= d / (ri + rj - t rmin)
         s = min(s, float(np.min(dist / (rs - t * rmin))))
-    wp = np.asarray(scene.wall_positions)
-    ax, se = np.asarray(scene.wall_axes), np.asarray(scene.wall_senses)
-    for w in walls:
-        gap = se[w] * (c[:, ax[w]] - wp[w])
+    for w, gap in ov.wall_gaps:
         if np.any(gap <= 0):
             k = int(ids[np.argmin(gap)])
             raise ParameterError(f"body {k}: its centre is outside wall {w}; relax_overlaps "
