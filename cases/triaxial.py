@@ -37,7 +37,8 @@ from cpp_dem import geogrid, measure, prep, psd
 from cpp_dem.checkpoint import save_checkpoint
 from cpp_dem.output import CsvRecorder, H5Recorder, write_vtk_box, write_vtk_spheres
 from cpp_dem.packing import loose_cloud
-from cpp_dem.triaxial import build_box_sample, deviatoric_stage, isotropic_stage
+from cpp_dem.triaxial import (apply_preset, build_box_sample, deviatoric_stage,
+                              isotropic_stage)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -67,6 +68,9 @@ class Params:
     geogrid: str = "none"            #: geogrid layer at mid-height: none, square, triangular
     clear_layer: bool = False        #: remove the grains in the geogrid layer (also without
                                      #: a geogrid, for a same-packing comparison)
+    preset: str = ""                 #: speed-accuracy preset of the loading ('' = none)
+    grain_scale: float = 1.0         #: every grain size x this factor after the PSD is fitted
+                                     #: to n (same box: about n / grain_scale^3 grains), -
 
 
 SMOKE = dict(n=300, strain_rate=0.5, stop_strain=0.04, record_every=50)
@@ -90,14 +94,17 @@ def make_sample(p: Params, log) -> tuple:
     vol_solid = p.solid_fraction * float(np.prod(box))
     d, pc, d_min = psd.fit_psd_to_count(psd.APPENDIX_B_SIZES, psd.APPENDIX_B_PASSING, p.n,
                                         vol_solid, by="mass", method="truncate")
+    if p.grain_scale != 1.0:  # coarser (> 1) or finer (< 1) grains in the same box
+        d = d * p.grain_scale
+        log(f"grain sizes x {p.grain_scale:g} (--grain-scale)")
     n = int(round(psd.expected_count(d, pc, vol_solid, by="mass")))
     radii = psd.radii_from_psd(d, pc, n, by="mass", seed=p.seed)
     shrink = (p.cloud_fraction / p.solid_fraction) ** (1.0 / 3.0)
     c, r = loose_cloud(radii * shrink, (0, 0, 0), box, seed=p.seed)
-    log(f"PSD: App. B by mass, fines below d_min = {d_min * 1e3:.2f} mm removed -> {n} grains,"
+    log(f"PSD: App. B by mass, fines below d_min = {d_min * p.grain_scale * 1e3:.2f} mm removed -> {n} grains,"
         f" d = {2 * radii.min() * 1e3:.1f}-{2 * radii.max() * 1e3:.1f} mm; cloud at radii x "
         f"{shrink:.3f}")
-    return c, r, np.zeros(3), box, {"d_min_m": d_min, "sizes_m": d.tolist(),
+    return c, r, np.zeros(3), box, {"d_min_m": d_min * p.grain_scale, "sizes_m": d.tolist(),
                                      "passing_mass": pc.tolist(), "cloud_shrink": shrink}
 
 
@@ -179,16 +186,23 @@ SERIES = {"time": (None, "s"), "step": (None, "-"), "axial_strain": (None, "-"),
           "sigma_z": (None, "Pa"), "porosity": (None, "-"), "unbalanced_force": (None, "-")}
 
 
-def run(p: Params, out: Path) -> dict:
-    t_start = time.perf_counter()
-    if p.threads > 0:
-        dem.set_num_threads(p.threads)
-    out.mkdir(parents=True, exist_ok=True)
-    (out / "vtk").mkdir(exist_ok=True)
+@dataclass
+class Prepared:
+    """A sample after the isotropic stage (stages 0 and 1)."""
 
-    def log(msg: str) -> None:
-        print(f"[triaxial] {msg}", flush=True)
+    sample: object          #: cpp_dem.triaxial.TriaxialSample
+    grid: object            #: geogrid.Geogrid or None
+    n_grains: int
+    psd_info: dict
+    grow: object            #: prep.StageResult of the expansion, or None (given packing)
+    iso: object             #: prep.StageResult of the isotropic stage
+    t_iso: float            #: wall time of the isotropic stage, s
 
+
+def prepare(p: Params, log) -> Prepared:
+    """Stages 0 and 1: the sample (or the given packing), the geogrid layer if any, the
+    expansion to the cell pressure, the isotropic stage; progress lines go to ``log``.
+    Raises SystemExit if the isotropic stage does not converge."""
     c, r, lo, hi, psd_info = make_sample(p, log)
     layer = grid_layer(p, lo, hi)
     if layer is not None and (p.clear_layer or p.geogrid != "none"):
@@ -249,6 +263,37 @@ def run(p: Params, out: Path) -> dict:
     log(f"isotropic: {iso.steps} steps, axis stresses {np.round(iso.axis_stresses / 1e3, 3)} "
         f"kPa, unbalanced {iso.unbalanced_force:.4f}, porosity {iso.porosity:.4f} "
         f"({t_iso:.1f} s)")
+    return Prepared(sample, grid, n_grains, psd_info, grow, iso, t_iso)
+
+
+def inertial_number(sc, p: Params) -> float:
+    """Inertial number of the axial loading, I = strain_rate x d_mean x sqrt(rho / p_cell), -
+    (d_mean: mean grain diameter, m). Below ~1e-3 the loading is quasi-static."""
+    d_mean = 2.0 * float(np.mean(sc.radii[measure.sphere_mask(sc)]))
+    return p.strain_rate * d_mean * math.sqrt(p.density / p.cell_pressure)
+
+
+def run(p: Params, out: Path) -> dict:
+    t_start = time.perf_counter()
+    if p.threads > 0:
+        dem.set_num_threads(p.threads)
+    out.mkdir(parents=True, exist_ok=True)
+    (out / "vtk").mkdir(exist_ok=True)
+
+    def log(msg: str) -> None:
+        print(f"[triaxial] {msg}", flush=True)
+
+    prepared = prepare(p, log)
+    sample, grid, n_grains, iso, t_iso = (prepared.sample, prepared.grid, prepared.n_grains,
+                                          prepared.iso, prepared.t_iso)
+    sc, walls, grow, psd_info = sample.scene, sample.walls, prepared.grow, prepared.psd_info
+    if p.preset:
+        p.strain_rate = apply_preset(sample, p.preset, pressure=p.cell_pressure,
+                                     density=p.density)
+        log(f"preset {p.preset!r}: dt {sc.dt:.3g} s, local damping {sc.local_damping:g}, "
+            f"strain rate {p.strain_rate:.3g} 1/s")
+    log(f"axial loading at {p.strain_rate:g} 1/s: inertial number "
+        f"{inertial_number(sc, p):.2g} (quasi-static below ~1e-3)")
     state_iso = measure.sample_state(sc, walls)
     save_checkpoint(out / "isotropic.h5", sc, extra={"walls": list(walls)})
     dem.write_packing_csv(out / "packing_isotropic.csv", sc.positions, sc.radii)
@@ -314,6 +359,7 @@ def run(p: Params, out: Path) -> dict:
         "lateral_stress_max_rel_error": float(np.max(np.abs(lat / p.cell_pressure - 1)))
         if lat.size else float("nan"),
         "deviatoric_steps": dev_steps,
+        "inertial_number": inertial_number(sc, p),
         "wall_time_isotropic_s": t_iso, "wall_time_deviatoric_s": t_dev,
         "particle_steps_per_s_deviatoric": n_grains * dev_steps / t_dev,
         "wall_time_total_s": time.perf_counter() - t_start,
@@ -380,6 +426,15 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     ap.add_argument("--clear-layer", action="store_true",
                     help="remove the grains of the geogrid layer even without a geogrid, so "
                     "that runs with and without one start from the same packing")
+    ap.add_argument("--grain-scale", type=_positive("--grain-scale", ap), default=1.0,
+                    help="multiply every grain size by this after the PSD is fitted to --n: "
+                    "the same box with about n / scale^3 grains (coarse graining), > 0")
+    ap.add_argument("--preset", choices=("fast", "balanced", "accurate"), default="",
+                    help="speed-accuracy preset of the axial loading (dt safety, local "
+                    "damping, strain rate from an inertial number; overrides --strain-rate, "
+                    "--damping, --dt-safety for that stage; docs/speed_accuracy.md)")
+    ap.add_argument("--dt-safety", type=float, default=d.dt_safety,
+                    help="time step = safety x critical estimate, (0, 1]")
     ap.add_argument("--seed", type=int, default=d.seed)
     ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: default)")
     a = ap.parse_args(argv)
@@ -394,6 +449,9 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                                                        a.poisson)
     p.phi, p.density, p.seed, p.threads = a.phi, a.density, a.seed, a.threads
     p.geogrid, p.clear_layer = a.geogrid, a.clear_layer
+    p.grain_scale, p.dt_safety, p.preset = a.grain_scale, a.dt_safety, a.preset
+    if not (0 < p.dt_safety <= 1):
+        ap.error(f"--dt-safety={p.dt_safety}: must be in (0, 1]")
     p.prep_friction = a.prep_friction if a.prep_friction is not None else a.phi
     if a.strain_rate is not None:
         p.strain_rate = a.strain_rate

@@ -62,6 +62,8 @@ def test_thread_count_independence(tmp_path):
     (["--stop-strain", "0.7"], "--stop-strain=0.7: must be in (0, 0.5)"),
     (["--damping", "1.5"], "--damping=1.5: must be in [0, 1)"),
     (["--packing", "/nonexistent.csv"], "--packing=/nonexistent.csv: no such file"),
+    (["--grain-scale", "0"], "--grain-scale=0.0: must be > 0"),
+    (["--dt-safety", "1.2"], "--dt-safety=1.2: must be in (0, 1]"),
 ])
 def test_bad_inputs(tmp_path, args, msg):
     p = run_case(tmp_path, "--smoke", *args)
@@ -94,3 +96,33 @@ def test_dense_sample_dilates_loose_sample_contracts(tmp_path):
     dense, loose = ev["dense"], ev["loose"]
     assert max(dense) - dense[-1] > 0.02 and dense[-1] < 0  # dilates past the start volume
     assert max(loose) - loose[-1] < 0.005 and loose[-1] > 0.02  # contracts, no dilation
+
+
+def test_grain_scale_coarsens_the_same_box(tmp_path):
+    """--grain-scale 1.26 fills the same box with grains 1.26 x larger: about half as many
+    (n / 1.26^3 = 0.5 n), and the summary's inertial number is rate x d_mean x sqrt(rho/p)."""
+    base = run_case(tmp_path / "a", "--smoke", "--threads", "1", "--stop-strain", "0.005")
+    big = run_case(tmp_path / "b", "--smoke", "--threads", "1", "--stop-strain", "0.005",
+                   "--grain-scale", "1.26")
+    assert base.returncode == 0 and big.returncode == 0, base.stderr[-2000:] + big.stderr[-2000:]
+    sa = json.loads((tmp_path / "a/summary.json").read_text())
+    sb = json.loads((tmp_path / "b/summary.json").read_text())
+    assert 0.4 <= sb["num_grains"] / sa["num_grains"] <= 0.6
+    for d, s in (("a", sa), ("b", sb)):
+        r = np.loadtxt(tmp_path / d / "packing_isotropic.csv", delimiter=",", skiprows=1)[:, 3]
+        expect = 0.5 * 2 * r.mean() * np.sqrt(2650.0 / 75e3)  # smoke rate 0.5 /s
+        assert s["inertial_number"] == pytest.approx(expect, rel=1e-9)
+    assert sb["inertial_number"] > 1.2 * sa["inertial_number"]
+
+
+def test_preset_sets_the_loading(tmp_path):
+    """--preset accurate: the loading runs at the preset's inertial number (8e-4) with its
+    local damping (0.05)."""
+    from cpp_dem.presets import preset
+
+    p = run_case(tmp_path, "--smoke", "--threads", "1", "--stop-strain", "0.005",
+                 "--preset", "accurate")
+    assert p.returncode == 0, p.stderr[-2000:]
+    s = json.loads((tmp_path / "summary.json").read_text())
+    assert s["inertial_number"] == pytest.approx(preset("accurate").inertial_number, rel=1e-9)
+    assert "local damping 0.05" in p.stdout

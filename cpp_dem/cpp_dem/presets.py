@@ -3,8 +3,9 @@
 Each preset sets the time-step safety factor, the geogrid node density scale, the Cundall
 local damping of the loading stage, and the loading rate as an inertial number I (the loading
 velocity follows from the scene: v = I sqrt(sigma / rho)). Their measured cost and error are in
-docs/speed_accuracy.md (`bench/speed_accuracy.py --presets`); so far measured on the 000
-pull-out only.
+docs/speed_accuracy.md (`bench/speed_accuracy.py --presets` on the 000 pull-out,
+`bench/triaxial_accuracy.py --presets` on the triaxial test). Applied by
+``cpp_dem.pullout.apply_preset`` and ``cpp_dem.triaxial.apply_preset``.
 """
 
 from __future__ import annotations
@@ -30,6 +31,13 @@ class Preset:
         if not (density > 0 and stress > 0):
             raise ParameterError(f"density={density}, stress={stress}: must be > 0")
         return self.inertial_number * math.sqrt(stress / density)
+
+    def strain_rate(self, *, grain_diameter: float, density: float, stress: float) -> float:
+        """Loading strain rate, 1/s, of an element test on grains of ``grain_diameter`` (m)
+        and ``density`` (kg/m^3) under ``stress`` (Pa): I = rate d sqrt(rho / sigma)."""
+        if not (grain_diameter > 0):
+            raise ParameterError(f"grain_diameter={grain_diameter}: must be > 0 (m)")
+        return self.velocity(density=density, stress=stress) / grain_diameter
 
 
 PRESETS = {

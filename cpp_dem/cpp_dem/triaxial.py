@@ -63,6 +63,22 @@ def isotropic_stage(sample: TriaxialSample, pressure: float, *, tol: float = 0.0
                                   callback=callback)
 
 
+def apply_preset(sample: TriaxialSample, preset, *, pressure: float, density: float) -> float:
+    """Applies a speed-accuracy preset (a cpp_dem.presets.Preset or its name) to the loading
+    of a prepared sample: time-step safety (dt reset at once) and local damping. Returns the
+    preset's axial strain rate, 1/s, for the mean grain diameter, ``density`` (kg/m^3) and the
+    cell ``pressure`` (Pa)."""
+    from .presets import preset as by_name
+
+    ps = by_name(preset) if isinstance(preset, str) else preset
+    sc = sample.scene
+    sc.set_auto_timestep(safety=ps.dt_safety, period=100)
+    sc.local_damping = ps.local_damping
+    sc.dt = ps.dt_safety * sc.critical_dt()
+    d_mean = 2.0 * float(np.mean(np.asarray(sc.radii)[measure.sphere_mask(sc)]))
+    return ps.strain_rate(grain_diameter=d_mean, density=density, stress=pressure)
+
+
 def deviatoric_stage(sample: TriaxialSample, pressure: float, strain_rate: float,
                      stop_strain: float, *, record_every: int = 100, on_record=None,
                      max_steps: int = 10_000_000) -> dict:
