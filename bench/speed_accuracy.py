@@ -20,7 +20,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 import time
 from pathlib import Path
@@ -28,8 +27,10 @@ from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "cases"))
+sys.path.insert(0, str(ROOT / "bench"))
 
 import cpp_dem as dem  # noqa: E402
+from _report import emit, markdown_table, pct  # noqa: E402
 import pullout_000 as case  # noqa: E402
 from cpp_dem import pullout  # noqa: E402
 
@@ -103,11 +104,7 @@ def with_errors(rows: list, ref: dict, out: Path | None = None) -> None:
         for k in ("force_end_N", "force_max_N", "force_mean_N", "A1_mean_N", "A2_mean_N"):
             r[f"err_{k}"] = (r[k] - ref[k]) / ref[k]
         r["cost_vs_reference"] = r["cpu_s"] / ref["cpu_s"]
-        line = json.dumps({"case": CASE, **r}, default=float)
-        print(line, flush=True)
-        if out is not None:
-            with open(out, "a") as f:
-                f.write(line + "\n")
+        emit({"case": CASE, **r}, out)
 
 
 def presets_run(base, distance: float, out: Path | None = None) -> list:
@@ -157,16 +154,17 @@ def main(argv=None) -> int:
         runs = [{**one(base, field, v, a.distance), "knob": knob, "value": v} for v in values]
         with_errors(runs, runs[ref_i], a.out)
         table += runs
-    print("\n| knob | value | CPU (s) | cost / ref | F end (N) | err F end | err F mean | "
-          "err F max | err A1 mean | err A2 mean | dt (s) | I |", file=sys.stderr)
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|", file=sys.stderr)
-    for r in table:
-        print(f"| {r['knob']} | {r['value']} | {r['cpu_s']:.1f} | {r['cost_vs_reference']:.3f}"
-              f" | {r['force_end_N']:.0f} | {100 * r['err_force_end_N']:+.1f} % | "
-              f"{100 * r['err_force_mean_N']:+.1f} % | {100 * r['err_force_max_N']:+.1f} % | "
-              f"{100 * r['err_A1_mean_N']:+.1f} % | "
-              f"{100 * r['err_A2_mean_N']:+.1f} % | {r['dt_s']:.2g} | "
-              f"{r['inertial_number']:.2g} |", file=sys.stderr)
+    markdown_table(table, [
+        ("knob", lambda r: str(r["knob"])), ("value", lambda r: str(r["value"])),
+        ("CPU (s)", lambda r: f"{r['cpu_s']:.1f}"),
+        ("cost / ref", lambda r: f"{r['cost_vs_reference']:.3f}"),
+        ("F end (N)", lambda r: f"{r['force_end_N']:.0f}"),
+        ("err F end", lambda r: pct(r["err_force_end_N"])),
+        ("err F mean", lambda r: pct(r["err_force_mean_N"])),
+        ("err F max", lambda r: pct(r["err_force_max_N"])),
+        ("err A1 mean", lambda r: pct(r["err_A1_mean_N"])),
+        ("err A2 mean", lambda r: pct(r["err_A2_mean_N"])),
+        ("dt (s)", lambda r: f"{r['dt_s']:.2g}"), ("I", lambda r: f"{r['inertial_number']:.2g}")])
     return 0
 
 

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import argparse
 import dataclasses
-import json
 import sys
 import time
 from pathlib import Path
@@ -33,8 +32,10 @@ import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "cases"))
+sys.path.insert(0, str(ROOT / "bench"))
 
 import cpp_dem as dem  # noqa: E402
+from _report import emit, markdown_table, pct  # noqa: E402
 import triaxial as case  # noqa: E402
 from cpp_dem import _core  # noqa: E402
 from cpp_dem.triaxial import apply_preset, build_box_sample, deviatoric_stage  # noqa: E402
@@ -120,11 +121,7 @@ def with_errors(rows: list, ref: dict, out) -> None:
         r["diff_volumetric_strain_end"] = (r["volumetric_strain_end"]
                                            - ref["volumetric_strain_end"])
         r["cost_vs_reference"] = r["cpu_s"] / ref["cpu_s"]
-        line = json.dumps({"case": "triaxial", **r}, default=float)
-        print(line, flush=True)
-        if out is not None:
-            with open(out, "a") as f:
-                f.write(line + "\n")
+        emit({"case": "triaxial", **r}, out)
 
 
 def knob_runs(iso: Isotropic, knob: str, log) -> list:
@@ -196,15 +193,15 @@ def main(argv=None) -> int:
         rows = knob_runs(iso, knob, log)
         with_errors(rows, rows[KNOBS[knob][1]], a.out)
         table += rows
-    print("\n| knob | value | grains | CPU (s) | cost / ref | q peak (kPa) | err q peak | "
-          "eps_a at peak | eps_v end | dt (s) | I |", file=sys.stderr)
-    print("|---|---|---|---|---|---|---|---|---|---|---|", file=sys.stderr)
-    for r in table:
-        print(f"| {r['knob']} | {r['value']} | {r['n_grains']} | {r['cpu_s']:.1f} | "
-              f"{r['cost_vs_reference']:.3f} | {r['q_peak_Pa'] / 1e3:.1f} | "
-              f"{100 * r['err_q_peak']:+.1f} % | {100 * r['axial_strain_at_peak']:.1f} % | "
-              f"{100 * r['volumetric_strain_end']:+.2f} % | {r['dt_s']:.2g} | "
-              f"{r['inertial_number']:.2g} |", file=sys.stderr)
+    markdown_table(table, [
+        ("knob", lambda r: str(r["knob"])), ("value", lambda r: str(r["value"])),
+        ("grains", lambda r: str(r["n_grains"])), ("CPU (s)", lambda r: f"{r['cpu_s']:.1f}"),
+        ("cost / ref", lambda r: f"{r['cost_vs_reference']:.3f}"),
+        ("q peak (kPa)", lambda r: f"{r['q_peak_Pa'] / 1e3:.1f}"),
+        ("err q peak", lambda r: pct(r["err_q_peak"])),
+        ("eps_a at peak", lambda r: f"{100 * r['axial_strain_at_peak']:.1f} %"),
+        ("eps_v end", lambda r: f"{100 * r['volumetric_strain_end']:+.2f} %"),
+        ("dt (s)", lambda r: f"{r['dt_s']:.2g}"), ("I", lambda r: f"{r['inertial_number']:.2g}")])
     return 0
 
 
