@@ -74,7 +74,7 @@ std::vector<std::uint64_t> layout() {
   return {sizeof(Real),        sizeof(Vec3),        sizeof(Quat),       sizeof(Material),
           sizeof(Wall),        sizeof(PairContact), sizeof(PairOutput), sizeof(WallContact), sizeof(GridLink),
           sizeof(PFacet),      sizeof(GridContact), sizeof(BreakEvent), sizeof(ContactPhys),
-          sizeof(ContactState)};
+          sizeof(ContactState), sizeof(PairContactCold)};
 }
 }  // namespace
 
@@ -108,6 +108,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.vec(s.walls_);
   // Contacts and adjacency.
   w.vec(s.pairs_);
+  w.vec(s.pair_cold_);
   w.vec(s.pair_out_);
   w.vec(s.wall_contacts_);
   w.vec(s.pair_adj_off_);
@@ -203,6 +204,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   r.vec(t.pos_at_energy_reset_);
   r.vec(t.walls_);
   r.vec(t.pairs_);
+  r.vec(t.pair_cold_);
   r.vec(t.pair_out_);
   r.vec(t.wall_contacts_);
   r.vec(t.pair_adj_off_);

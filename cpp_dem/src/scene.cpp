@@ -251,26 +251,31 @@ void Scene::rebuild() {
   grid_.find_pairs(pos_, radius_, margin, candidates_);
   // Merge the new candidate list with the old contacts, keeping history (both sorted).
   std::vector<PairContact> next;
+  std::vector<PairContactCold> next_cold;
   next.reserve(candidates_.size());
+  next_cold.reserve(candidates_.size());
   size_t k = 0;
   for (const auto& ij : candidates_) {
     while (k < pairs_.size() && std::make_pair(pairs_[k].i, pairs_[k].j) < ij) {
-      drop_dissipation(pairs_[k].state);
+      drop_dissipation(pair_cold_[k]);
       ++k;
     }
     if (k < pairs_.size() && pairs_[k].i == ij.first && pairs_[k].j == ij.second) {
-      next.push_back(pairs_[k++]);
+      next.push_back(pairs_[k]);
+      next_cold.push_back(pair_cold_[k++]);
     } else {
       PairContact c;
       c.i = ij.first;
       c.j = ij.second;
       next.push_back(c);
+      next_cold.emplace_back();
     }
   }
   for (; k < pairs_.size(); ++k) {
-    drop_dissipation(pairs_[k].state);
+    drop_dissipation(pair_cold_[k]);
   }
   pairs_.swap(next);
+  pair_cold_.swap(next_cold);
   pair_out_.assign(pairs_.size(), PairOutput());
   // Sphere–wall candidates: signed distance to the plane below r + margin, and the centre
   // not beyond the plane by more than r (one-sided walls ignore what is behind them).
@@ -344,9 +349,16 @@ ColliderStats Scene::collider_stats() const {
 
 // ---- contacts -------------------------------------------------------------------------------
 
-void Scene::update_phys(PairContact& c) const {
-  c.phys = mix_materials(materials_[body_mat_[c.i]], materials_[body_mat_[c.j]], radius_[c.i],
-                         radius_[c.j], mass_[c.i], mass_[c.j]);
+void Scene::update_phys(PairContact& c, PairContactCold& cold) const {
+  const ContactPhys& p = cold.phys =
+      mix_materials(materials_[body_mat_[c.i]], materials_[body_mat_[c.j]], radius_[c.i],
+                    radius_[c.j], mass_[c.i], mass_[c.j]);
+  c.kn = p.kn;
+  c.ks = p.ks;
+  c.tan_phi = p.tan_phi;
+  // The short kernel is apply_law with these parts off (same operations, same results).
+  c.simple = p.model == ContactModel::Linear && !(p.beta_n > 0) && !(p.beta_s > 0) &&
+             !(p.kr > 0);
   c.phys_version = phys_version_;
 }
 
@@ -355,6 +367,21 @@ void Scene::update_phys(WallContact& c) const {
   c.phys = mix_materials(materials_[walls_[c.wall].material], materials_[body_mat_[c.body]],
                          kInf, radius_[c.body], kInf, mass_[c.body]);
   c.phys_version = phys_version_;
+}
+
+LawOutput Scene::apply_pair_law(size_t k, const ContactGeometry& g, Real dt) {
+  PairContact& c = pairs_[k];
+  PairContactCold& cold = pair_cold_[k];
+  ContactState s = pair_state(k);
+  const LawOutput out = apply_law(cold.phys, g, dt, s);
+  c.fs = s.fs;
+  c.normal = s.normal;
+  c.overlap = s.overlap;
+  c.fn = s.fn;
+  cold.mr = s.mr;
+  cold.dissip_friction = s.dissip_friction;
+  cold.dissip_viscous = s.dissip_viscous;
+  return out;
 }
 
 void Scene::compute_pair_forces(long& err_contact) {
@@ -366,39 +393,83 @@ void Scene::compute_pair_forces(long& err_contact) {
   for (long k = 0; k < nc; ++k) {
     PairContact& c = pairs_[k];
     PairOutput& o = pair_out_[k];
-    const Vec3 d = pos_[c.j] - pos_[c.i];
+    const int i = c.i, j = c.j;
+    const Vec3 d = pos_[j] - pos_[i];
     const Real dist2 = d.squaredNorm();
-    const Real rsum = radius_[c.i] + radius_[c.j];
+    const Real ri = radius_[i], rj = radius_[j];
+    const Real rsum = ri + rj;
     if (dist2 >= rsum * rsum) {
       if (c.active) {
+        // The contact opened: forget the springs' history (ContactState::clear_history).
         c.active = false;
-        c.state.clear_history();
+        c.fs.setZero();
+        c.normal.setZero();
+        c.overlap = 0;
+        c.fn = 0;
+        pair_cold_[k].mr.setZero();
         o = PairOutput();
       }
       continue;
     }
     const Real dist = std::sqrt(dist2);
-    ContactGeometry g;
-    g.overlap = rsum - dist;
-    if (!(g.overlap <= max_ratio * std::min(radius_[c.i], radius_[c.j]))) {
+    const Real overlap = rsum - dist;
+    if (!(overlap <= max_ratio * std::min(ri, rj))) {
       err = std::min(err, k);
       continue;
     }
-    if (!c.active || c.phys_version != phys_version_) update_phys(c);
+    if (!c.active || c.phys_version != phys_version_) update_phys(c, pair_cold_[k]);
     c.active = true;
-    g.normal = dist > 0 ? Vec3(d / dist) : Vec3(Vec3::UnitZ());
+    const Vec3 n = dist > 0 ? Vec3(d / dist) : Vec3(Vec3::UnitZ());
     // Contact point in the middle of the overlap: branch lengths R - delta/2 (000 eq 6).
-    g.branch1 = (radius_[c.i] - 0.5 * g.overlap) * g.normal;
-    g.branch2 = -(radius_[c.j] - 0.5 * g.overlap) * g.normal;
-    g.rel_vel = (vel_[c.j] + angvel_[c.j].cross(g.branch2)) -
-                (vel_[c.i] + angvel_[c.i].cross(g.branch1));
-    g.angvel_sum = angvel_[c.i] + angvel_[c.j];
-    g.rel_angvel = angvel_[c.j] - angvel_[c.i];
-    const LawOutput out = apply_law(c.phys, g, dt, c.state);
-    o.force = out.force2;
-    // Moments, 000 eq (6): tau = (R - delta/2) n x F, plus rolling resistance.
-    o.torque_j = g.branch2.cross(out.force2) + out.moment2;
-    o.torque_i = g.branch1.cross(-out.force2) - out.moment2;
+    const Vec3 b1 = (ri - 0.5 * overlap) * n;
+    const Vec3 b2 = -(rj - 0.5 * overlap) * n;
+    const Vec3 rel_vel = (vel_[j] + angvel_[j].cross(b2)) - (vel_[i] + angvel_[i].cross(b1));
+    if (!c.simple) {
+      ContactGeometry g;
+      g.normal = n;
+      g.overlap = overlap;
+      g.branch1 = b1;
+      g.branch2 = b2;
+      g.rel_vel = rel_vel;
+      g.angvel_sum = angvel_[i] + angvel_[j];
+      g.rel_angvel = angvel_[j] - angvel_[i];
+      const LawOutput out = apply_pair_law(k, g, dt);
+      o.force = out.force2;
+      // Moments, 000 eq (6): tau = (R - delta/2) n x F, plus rolling resistance.
+      o.torque_j = b2.cross(out.force2) + out.moment2;
+      o.torque_i = b1.cross(-out.force2) - out.moment2;
+      continue;
+    }
+    // The short kernel: apply_law for a linear law without viscous damping and rolling
+    // resistance, the same operations in the same order (000 eqs 1-3), on the hot record.
+    const Real fn = c.kn * overlap;
+    const Real vn = rel_vel.dot(n);
+    const Vec3 vt = rel_vel - vn * n;
+    Vec3 fs = c.fs;
+    if (c.normal.squaredNorm() > 0) {
+      // Keep the stored shear force in the tangent plane of the rotated contact frame.
+      const Vec3 axis = c.normal.cross(n);
+      const Vec3 twist = (0.5 * dt * n.dot(angvel_[i] + angvel_[j])) * n;
+      fs -= fs.cross(axis);
+      fs -= fs.cross(twist);
+      fs -= fs.dot(n) * n;
+    }
+    fs -= c.ks * dt * vt;
+    const Real cap = c.tan_phi * (fn > 0 ? fn : 0.0);
+    if (fs.squaredNorm() > cap * cap) {
+      const Real norm = fs.norm();
+      const Vec3 capped = norm > 0 ? Vec3(fs * (cap / norm)) : Vec3(Vec3::Zero());
+      if (c.ks > 0) pair_cold_[k].dissip_friction += (fs - capped).dot(capped) / c.ks;
+      fs = capped;
+    }
+    c.fs = fs;
+    c.normal = n;
+    c.overlap = overlap;
+    c.fn = fn;
+    const Vec3 f = fn * n + fs;
+    o.force = f;
+    o.torque_j = b2.cross(f);
+    o.torque_i = b1.cross(-f);
   }
   err_contact = err;
 }
