@@ -142,6 +142,7 @@ void Scene::set_radii(const std::vector<Real>& r) {
     mass_[b] = sphere_mass(materials_[body_mat_[b]].density, r[b]);
     inertia_[b] = 0.4 * mass_[b] * r[b] * r[b];
   }
+  disp_valid_ = false;  // grown radii count in the broad phase's check
   ++phys_version_;
 }
 void Scene::set_blocked(int body, std::uint8_t mask) {
@@ -234,6 +235,8 @@ bool Scene::need_rebuild() const {
   const Real half = 0.5 * (margin_ > 0 ? margin_ : default_margin());
   for (const Wall& w : walls_)
     if (w.moved_since_build > half) return true;
+  // The last integration pass measured the displacements already (nothing moved since).
+  if (disp_valid_) return max_disp_ > half;
   const int n = num_bodies();
   Real worst = 0;
 #pragma omp parallel for reduction(max : worst) schedule(static) if (n > kParallelMin)
@@ -307,19 +310,21 @@ void Scene::rebuild() {
   }
   wall_contacts_.swap(wnext);
   // Adjacency (CSR) in contact order, so reductions into bodies have a fixed order.
-  pair_adj_off_.assign(n + 1, 0);
+  pair_jadj_off_.assign(n + 1, 0);
+  pair_ioff_.assign(n + 1, 0);
   for (const auto& c : pairs_) {
-    pair_adj_off_[c.i + 1]++;
-    pair_adj_off_[c.j + 1]++;
+    pair_ioff_[c.i + 1]++;
+    pair_jadj_off_[c.j + 1]++;
   }
-  for (int b = 0; b < n; ++b) pair_adj_off_[b + 1] += pair_adj_off_[b];
-  pair_adj_.resize(pair_adj_off_[n]);
+  for (int b = 0; b < n; ++b) {
+    pair_ioff_[b + 1] += pair_ioff_[b];
+    pair_jadj_off_[b + 1] += pair_jadj_off_[b];
+  }
+  pair_jadj_.resize(pair_jadj_off_[n]);
   {
-    std::vector<int> fill(pair_adj_off_.begin(), pair_adj_off_.end() - 1);
-    for (int c = 0; c < static_cast<int>(pairs_.size()); ++c) {
-      pair_adj_[fill[pairs_[c].i]++] = 2 * c;
-      pair_adj_[fill[pairs_[c].j]++] = 2 * c + 1;
-    }
+    std::vector<int> fill(pair_jadj_off_.begin(), pair_jadj_off_.end() - 1);
+    for (int c = 0; c < static_cast<int>(pairs_.size()); ++c)
+      pair_jadj_[fill[pairs_[c].j]++] = c;
   }
   wall_adj_off_.assign(n + 1, 0);
   for (const auto& c : wall_contacts_) wall_adj_off_[c.body + 1]++;
@@ -559,21 +564,23 @@ void Scene::reduce_and_integrate(long& err_body) {
   const bool energy = track_energy_;
   const bool grid = has_grid();
   long err = std::numeric_limits<long>::max();
-#pragma omp parallel for schedule(static) reduction(min : err) if (n > kParallelMin)
+  Real worst = 0;
+#pragma omp parallel for schedule(static) reduction(min : err) reduction(max : worst) \
+    if (n > kParallelMin)
   for (int b = 0; b < n; ++b) {
     // Reduce contact forces into the body in a fixed order (pair contacts, then walls).
     Vec3 f = ext_force_[b] + mass_[b] * gravity_;
     Vec3 t = ext_torque_[b];
-    for (int e = pair_adj_off_[b]; e < pair_adj_off_[b + 1]; ++e) {
-      const int entry = pair_adj_[e];
-      const PairOutput& o = pair_out_[entry >> 1];  // zero when inactive
-      if (entry & 1) {
-        f += o.force;
-        t += o.torque_j;
-      } else {
-        f -= o.force;
-        t += o.torque_i;
-      }
+    // Contact order: first the contacts where b is j (smaller indices), then where it is i.
+    for (int e = pair_jadj_off_[b]; e < pair_jadj_off_[b + 1]; ++e) {
+      const PairOutput& o = pair_out_[pair_jadj_[e]];  // zero when inactive
+      f += o.force;
+      t += o.torque_j;
+    }
+    for (int k = pair_ioff_[b]; k < pair_ioff_[b + 1]; ++k) {
+      const PairOutput& o = pair_out_[k];
+      f -= o.force;
+      t += o.torque_i;
     }
     for (int e = wall_adj_off_[b]; e < wall_adj_off_[b + 1]; ++e) {
       const WallContact& c = wall_contacts_[wall_adj_[e]];
@@ -612,49 +619,68 @@ void Scene::reduce_and_integrate(long& err_body) {
     }
     force_[b] = f;
     torque_[b] = t;
-    if (!f.allFinite() || !t.allFinite()) {
+    // A NaN or inf in any component makes the sum non-finite; only then the exact test.
+    if (!std::isfinite((f[0] + f[1] + f[2]) + (t[0] + t[1] + t[2])) &&
+        (!f.allFinite() || !t.allFinite())) {
       err = std::min(err, static_cast<long>(b));
       continue;
     }
     const std::uint8_t blk = blocked_[b];
     const Vec3 v_old = vel_[b], w_old = angvel_[b];
     const Real m = mass_[b], inertia = inertia_[b];
-    Real dissip = 0, work = 0;
-    for (int a = 0; a < 3; ++a) {
-      if (blk & (DOF_X << a)) {
-        // Imposed velocity: the constraint supplies -f[a]; its work is -f[a] v dt.
-        if (energy) work += -f[a] * v_old[a] * dt;
-        continue;
+    if (blk == DOF_NONE && !energy) {
+      // The common case (free body, no energy bookkeeping): the general loop below without
+      // its branches, the same operations.
+      Vec3& v = vel_[b];
+      Vec3& w = angvel_[b];
+      for (int a = 0; a < 3; ++a) {
+        Real acc = f[a] / m;
+        if (lambda > 0) acc = damp_component(acc, v_old[a], dt, lambda);
+        v[a] = v_old[a] + acc * dt;
       }
-      Real acc = f[a] / m;
-      if (lambda > 0) {
-        const Real damped = damp_component(acc, v_old[a], dt, lambda);
-        if (energy) dissip += -(damped - acc) * m * (v_old[a] + 0.5 * dt * damped) * dt;
-        acc = damped;
+      for (int a = 0; a < 3; ++a) {
+        Real acc = t[a] / inertia;
+        if (lambda > 0) acc = damp_component(acc, w_old[a], dt, lambda);
+        w[a] = w_old[a] + acc * dt;
       }
-      vel_[b][a] = v_old[a] + acc * dt;
-      if (energy) work += ext_force_[b][a] * 0.5 * (v_old[a] + vel_[b][a]) * dt;
-    }
-    for (int a = 0; a < 3; ++a) {
-      if (blk & (DOF_RX << a)) {
-        if (energy) work += -t[a] * w_old[a] * dt;
-        continue;
+    } else {
+      Real dissip = 0, work = 0;
+      for (int a = 0; a < 3; ++a) {
+        if (blk & (DOF_X << a)) {
+          // Imposed velocity: the constraint supplies -f[a]; its work is -f[a] v dt.
+          if (energy) work += -f[a] * v_old[a] * dt;
+          continue;
+        }
+        Real acc = f[a] / m;
+        if (lambda > 0) {
+          const Real damped = damp_component(acc, v_old[a], dt, lambda);
+          if (energy) dissip += -(damped - acc) * m * (v_old[a] + 0.5 * dt * damped) * dt;
+          acc = damped;
+        }
+        vel_[b][a] = v_old[a] + acc * dt;
+        if (energy) work += ext_force_[b][a] * 0.5 * (v_old[a] + vel_[b][a]) * dt;
       }
-      Real acc = t[a] / inertia;
-      if (lambda > 0) {
-        const Real damped = damp_component(acc, w_old[a], dt, lambda);
-        if (energy) dissip += -(damped - acc) * inertia * (w_old[a] + 0.5 * dt * damped) * dt;
-        acc = damped;
+      for (int a = 0; a < 3; ++a) {
+        if (blk & (DOF_RX << a)) {
+          if (energy) work += -t[a] * w_old[a] * dt;
+          continue;
+        }
+        Real acc = t[a] / inertia;
+        if (lambda > 0) {
+          const Real damped = damp_component(acc, w_old[a], dt, lambda);
+          if (energy) dissip += -(damped - acc) * inertia * (w_old[a] + 0.5 * dt * damped) * dt;
+          acc = damped;
+        }
+        angvel_[b][a] = w_old[a] + acc * dt;
+        if (energy) work += ext_torque_[b][a] * 0.5 * (w_old[a] + angvel_[b][a]) * dt;
       }
-      angvel_[b][a] = w_old[a] + acc * dt;
-      if (energy) work += ext_torque_[b][a] * 0.5 * (w_old[a] + angvel_[b][a]) * dt;
-    }
-    if (energy) {
-      const Vec3 vm = 0.5 * (v_old + vel_[b]);
-      const Vec3 wm = 0.5 * (w_old + angvel_[b]);
-      ke_[b] = 0.5 * m * vm.squaredNorm() + 0.5 * inertia * wm.squaredNorm();
-      damp_dissip_[b] += dissip;
-      ext_work_[b] += work;
+      if (energy) {
+        const Vec3 vm = 0.5 * (v_old + vel_[b]);
+        const Vec3 wm = 0.5 * (w_old + angvel_[b]);
+        ke_[b] = 0.5 * m * vm.squaredNorm() + 0.5 * inertia * wm.squaredNorm();
+        damp_dissip_[b] += dissip;
+        ext_work_[b] += work;
+      }
     }
     pos_[b] += vel_[b] * dt;
     const Vec3& w = angvel_[b];
@@ -677,9 +703,22 @@ void Scene::reduce_and_integrate(long& err_body) {
       ori_[b] = Quat(ch, axis.x(), axis.y(), axis.z()) * ori_[b];
       ori_[b].normalize();
     }
-    if (!pos_[b].allFinite() || !vel_[b].allFinite()) err = std::min(err, static_cast<long>(b));
+    const Vec3& x = pos_[b];
+    const Vec3& v = vel_[b];
+    if (!std::isfinite((x[0] + x[1] + x[2]) + (v[0] + v[1] + v[2])) &&
+        (!x.allFinite() || !v.allFinite())) {
+      err = std::min(err, static_cast<long>(b));
+      continue;
+    }
+    // The broad phase's displacement check (need_rebuild) for the next step, in this pass.
+    const Real d = (x - pos_at_build_[b]).norm() + std::max(0.0, radius_[b] - radius_at_build_[b]);
+    worst = std::max(worst, d);
   }
   err_body = err;
+  if (err == std::numeric_limits<long>::max()) {
+    max_disp_ = worst;
+    disp_valid_ = true;
+  }
 }
 
 int Scene::add_controller(std::shared_ptr<Controller> c) {
@@ -717,6 +756,7 @@ void Scene::step() {
   for (const auto& c : controllers_)
     if (c->enabled && step_ % c->period == 0) c->apply(*this);
   if (need_rebuild()) rebuild();
+  disp_valid_ = false;  // until this step's integration measures them again
   long err_pair, err_wall, err_body;
   compute_pair_forces(err_pair);
   if (err_pair != std::numeric_limits<long>::max()) raise_overlap(err_pair, false);

@@ -324,8 +324,12 @@ class Scene {
   std::vector<PairContactCold> pair_cold_;
   std::vector<PairOutput> pair_out_;
   std::vector<WallContact> wall_contacts_;
-  // pair_adj_ holds 2 k + 1 when the body is j of contact k, 2 k when it is i.
-  std::vector<int> pair_adj_off_, pair_adj_, wall_adj_off_, wall_adj_;
+  // Pair contacts of body b: those where b is j are pair_jadj_[pair_jadj_off_[b] ..
+  // pair_jadj_off_[b + 1]) (contact indices, ascending), those where b is i are the contacts
+  // pair_ioff_[b] .. pair_ioff_[b + 1] (contiguous: pairs_ is sorted by (i, j)). Every
+  // j-side contact has a smaller index than every i-side one, so "j side, then i side" is
+  // contact order: the reduction into bodies has a fixed order without a branch per entry.
+  std::vector<int> pair_jadj_off_, pair_jadj_, pair_ioff_, wall_adj_off_, wall_adj_;
   // Geogrid.
   int num_nodes_ = 0;
   std::vector<GridLink> links_;
@@ -360,6 +364,10 @@ class Scene {
   int phys_version_ = 0;
   bool dirty_ = true;
   long builds_ = 0;
+  // Largest broad-phase displacement measured by the last integration pass (valid while
+  // nothing else moved bodies or changed radii since); not saved in checkpoints.
+  Real max_disp_ = 0;
+  bool disp_valid_ = false;
 };
 
 }  // namespace cpp_dem
