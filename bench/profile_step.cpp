@@ -21,6 +21,7 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <cstring>
 #include <fstream>
 #include <iostream>
@@ -107,6 +108,13 @@ int main(int argc, char** argv) {
   }
   for (int w = 0; w < s.num_walls(); ++w)
     for (int a = 0; a < 3; ++a) h = mix(h, s.wall(w).force[a]);
+  // DUMP_STATE=file: positions, velocities, angular velocities, forces (n x 3 doubles each,
+  // raw) to compare two builds that are not bit-identical.
+  if (const char* dump = std::getenv("DUMP_STATE")) {
+    std::ofstream out(dump, std::ios::binary);
+    for (const auto* v : {&s.positions(), &s.velocities(), &s.angular_velocities(), &s.forces()})
+      out.write(reinterpret_cast<const char*>(v->data()), v->size() * sizeof(Vec3));
+  }
   std::printf(
       "n=%d threads=%d steps=%ld ms/step=%.4f p-steps/s=%.3e contacts=%d builds_timed=%ld "
       "checksum=%016llx\n",

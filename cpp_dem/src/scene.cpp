@@ -424,12 +424,15 @@ void Scene::compute_pair_forces(long& err_contact) {
     }
     if (!c.active || c.phys_version != phys_version_) update_phys(c, pair_cold_[k]);
     c.active = true;
-    const Vec3 n = dist > 0 ? Vec3(d / dist) : Vec3(Vec3::UnitZ());
-    // Contact point in the middle of the overlap: branch lengths R - delta/2 (000 eq 6).
-    const Vec3 b1 = (ri - 0.5 * overlap) * n;
-    const Vec3 b2 = -(rj - 0.5 * overlap) * n;
-    const Vec3 rel_vel = (vel_[j] + angvel_[j].cross(b2)) - (vel_[i] + angvel_[i].cross(b1));
+    const Vec3 n = dist > 0 ? Vec3(d * (1.0 / dist)) : Vec3(Vec3::UnitZ());
+    // Contact point in the middle of the overlap: branch vectors l_i n and -l_j n, lengths
+    // R - delta/2 (000 eq 6).
+    const Real li = ri - 0.5 * overlap, lj = rj - 0.5 * overlap;
+    // v_j + w_j x (-l_j n) - (v_i + w_i x l_i n), with one cross product.
+    const Vec3 rel_vel = (vel_[j] - vel_[i]) - (lj * angvel_[j] + li * angvel_[i]).cross(n);
     if (!c.simple) {
+      const Vec3 b1 = li * n;
+      const Vec3 b2 = -lj * n;
       ContactGeometry g;
       g.normal = n;
       g.overlap = overlap;
@@ -471,10 +474,11 @@ void Scene::compute_pair_forces(long& err_contact) {
     c.normal = n;
     c.overlap = overlap;
     c.fn = fn;
-    const Vec3 f = fn * n + fs;
-    o.force = f;
-    o.torque_j = b2.cross(f);
-    o.torque_i = b1.cross(-f);
+    o.force = fn * n + fs;
+    // Moments (000 eq 6): -l_j n x F on j, l_i n x (-F) on i; n x F = n x fs.
+    const Vec3 nxf = n.cross(fs);
+    o.torque_j = -lj * nxf;
+    o.torque_i = -li * nxf;
   }
   err_contact = err;
 }
