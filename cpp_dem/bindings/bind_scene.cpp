@@ -34,9 +34,9 @@ py::dict contacts_dict(const Scene& s) {
     ids.push_back(c.i);
     ids.push_back(c.j);
     force.push_back(s.pair_force(k));
-    normal.push_back(c.state.normal);
-    overlap.push_back(c.state.overlap);
-    fn.push_back(c.state.fn);
+    normal.push_back(c.normal);
+    overlap.push_back(c.overlap);
+    fn.push_back(c.fn);
   }
   for (const auto& c : s.wall_contacts()) {
     if (!c.active) continue;

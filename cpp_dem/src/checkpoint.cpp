@@ -74,7 +74,7 @@ std::vector<std::uint64_t> layout() {
   return {sizeof(Real),        sizeof(Vec3),        sizeof(Quat),       sizeof(Material),
           sizeof(Wall),        sizeof(PairContact), sizeof(PairOutput), sizeof(WallContact), sizeof(GridLink),
           sizeof(PFacet),      sizeof(GridContact), sizeof(BreakEvent), sizeof(ContactPhys),
-          sizeof(ContactState)};
+          sizeof(ContactState), sizeof(PairContactCold)};
 }
 }  // namespace
 
@@ -108,10 +108,12 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.vec(s.walls_);
   // Contacts and adjacency.
   w.vec(s.pairs_);
+  w.vec(s.pair_cold_);
   w.vec(s.pair_out_);
   w.vec(s.wall_contacts_);
-  w.vec(s.pair_adj_off_);
-  w.vec(s.pair_adj_);
+  w.vec(s.pair_jadj_off_);
+  w.vec(s.pair_jadj_);
+  w.vec(s.pair_ioff_);
   w.vec(s.wall_adj_off_);
   w.vec(s.wall_adj_);
   // Geogrid.
@@ -203,10 +205,12 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   r.vec(t.pos_at_energy_reset_);
   r.vec(t.walls_);
   r.vec(t.pairs_);
+  r.vec(t.pair_cold_);
   r.vec(t.pair_out_);
   r.vec(t.wall_contacts_);
-  r.vec(t.pair_adj_off_);
-  r.vec(t.pair_adj_);
+  r.vec(t.pair_jadj_off_);
+  r.vec(t.pair_jadj_);
+  r.vec(t.pair_ioff_);
   r.vec(t.wall_adj_off_);
   r.vec(t.wall_adj_);
   r.get(t.num_nodes_);
@@ -241,6 +245,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   r.get(t.time_);
   r.get(t.phys_version_);
   r.get(t.dirty_);
+  t.disp_valid_ = false;  // need_rebuild measures the displacements itself
   r.get(t.builds_);
   const auto nc = r.get<std::uint64_t>();
   if (nc != s.controllers_.size())

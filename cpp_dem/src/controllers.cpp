@@ -274,10 +274,11 @@ void RadiusGrowth::apply(Scene& scene) {
   const auto& r = scene.radii();
   // Stress increase per unit radius strain from the current contacts, Pa.
   Real s = 0;
-  for (const PairContact& c : scene.pair_contacts()) {
+  for (size_t k = 0; k < scene.pair_contacts().size(); ++k) {
+    const PairContact& c = scene.pair_contacts()[k];
     if (!c.active) continue;
     Real kn, ks;
-    tangent_stiffness(c.phys, c.state.overlap, kn, ks);
+    tangent_stiffness(scene.pair_phys(k), c.overlap, kn, ks);
     const Real l = r[c.i] + r[c.j];
     s += kn * l * l;
   }

@@ -34,13 +34,15 @@ Real Scene::critical_dt_body(int* arg_body) const {
       kr[b][a] += ks * arm * arm * (1 - n2) + krol;
     }
   };
-  for (const PairContact& c : pairs_) {
+  for (size_t k = 0; k < pairs_.size(); ++k) {
+    const PairContact& c = pairs_[k];
     if (!c.active) continue;
     any = true;
+    const ContactPhys& phys = pair_cold_[k].phys;
     Real kn, ks;
-    tangent_stiffness(c.phys, c.state.overlap, kn, ks);
-    add(c.i, c.state.normal, kn, ks, radius_[c.i] - 0.5 * c.state.overlap, c.phys.kr);
-    add(c.j, c.state.normal, kn, ks, radius_[c.j] - 0.5 * c.state.overlap, c.phys.kr);
+    tangent_stiffness(phys, c.overlap, kn, ks);
+    add(c.i, c.normal, kn, ks, radius_[c.i] - 0.5 * c.overlap, phys.kr);
+    add(c.j, c.normal, kn, ks, radius_[c.j] - 0.5 * c.overlap, phys.kr);
   }
   for (const WallContact& c : wall_contacts_) {
     if (!c.active) continue;
@@ -114,7 +116,10 @@ Energies Scene::energies() const {
     e.friction += s.dissip_friction;
     e.viscous += s.dissip_viscous;
   };
-  for (const PairContact& c : pairs_) dissipation(c.state);
+  for (const PairContactCold& c : pair_cold_) {
+    e.friction += c.dissip_friction;
+    e.viscous += c.dissip_viscous;
+  }
   for (const WallContact& c : wall_contacts_) dissipation(c.state);
   for (const GridContact& c : grid_contacts_) dissipation(c.state);
   e.plastic = dropped_plastic_;
@@ -145,7 +150,7 @@ void Scene::reset_energy() {
     pos_at_energy_reset_[b] = pos_[b];
   }
   dropped_friction_ = dropped_viscous_ = 0;
-  for (PairContact& c : pairs_) c.state.dissip_friction = c.state.dissip_viscous = 0;
+  for (PairContactCold& c : pair_cold_) c.dissip_friction = c.dissip_viscous = 0;
   for (WallContact& c : wall_contacts_) c.state.dissip_friction = c.state.dissip_viscous = 0;
   for (GridContact& c : grid_contacts_) c.state.dissip_friction = c.state.dissip_viscous = 0;
   for (GridLink& l : links_) l.dissip_plastic = 0;
@@ -159,8 +164,8 @@ void Scene::reset_energy() {
 
 Real Scene::stored_elastic_energy() const {
   Real e = 0;
-  for (const PairContact& c : pairs_)
-    if (c.active) e += contact_elastic_energy(c.phys, c.state);
+  for (size_t k = 0; k < pairs_.size(); ++k)
+    if (pairs_[k].active) e += contact_elastic_energy(pair_cold_[k].phys, pair_state(k));
   for (const WallContact& c : wall_contacts_)
     if (c.active) e += contact_elastic_energy(c.phys, c.state);
   for (const GridContact& c : grid_contacts_)

@@ -142,6 +142,7 @@ void Scene::set_radii(const std::vector<Real>& r) {
     mass_[b] = sphere_mass(materials_[body_mat_[b]].density, r[b]);
     inertia_[b] = 0.4 * mass_[b] * r[b] * r[b];
   }
+  disp_valid_ = false;  // grown radii count in the broad phase's check
   ++phys_version_;
 }
 void Scene::set_blocked(int body, std::uint8_t mask) {
@@ -234,6 +235,8 @@ bool Scene::need_rebuild() const {
   const Real half = 0.5 * (margin_ > 0 ? margin_ : default_margin());
   for (const Wall& w : walls_)
     if (w.moved_since_build > half) return true;
+  // The last integration pass measured the displacements already (nothing moved since).
+  if (disp_valid_) return max_disp_ > half;
   const int n = num_bodies();
   Real worst = 0;
 #pragma omp parallel for reduction(max : worst) schedule(static) if (n > kParallelMin)
@@ -251,26 +254,31 @@ void Scene::rebuild() {
   grid_.find_pairs(pos_, radius_, margin, candidates_);
   // Merge the new candidate list with the old contacts, keeping history (both sorted).
   std::vector<PairContact> next;
+  std::vector<PairContactCold> next_cold;
   next.reserve(candidates_.size());
+  next_cold.reserve(candidates_.size());
   size_t k = 0;
   for (const auto& ij : candidates_) {
     while (k < pairs_.size() && std::make_pair(pairs_[k].i, pairs_[k].j) < ij) {
-      drop_dissipation(pairs_[k].state);
+      drop_dissipation(pair_cold_[k]);
       ++k;
     }
     if (k < pairs_.size() && pairs_[k].i == ij.first && pairs_[k].j == ij.second) {
-      next.push_back(pairs_[k++]);
+      next.push_back(pairs_[k]);
+      next_cold.push_back(pair_cold_[k++]);
     } else {
       PairContact c;
       c.i = ij.first;
       c.j = ij.second;
       next.push_back(c);
+      next_cold.emplace_back();
     }
   }
   for (; k < pairs_.size(); ++k) {
-    drop_dissipation(pairs_[k].state);
+    drop_dissipation(pair_cold_[k]);
   }
   pairs_.swap(next);
+  pair_cold_.swap(next_cold);
   pair_out_.assign(pairs_.size(), PairOutput());
   // Sphere–wall candidates: signed distance to the plane below r + margin, and the centre
   // not beyond the plane by more than r (one-sided walls ignore what is behind them).
@@ -302,19 +310,21 @@ void Scene::rebuild() {
   }
   wall_contacts_.swap(wnext);
   // Adjacency (CSR) in contact order, so reductions into bodies have a fixed order.
-  pair_adj_off_.assign(n + 1, 0);
+  pair_jadj_off_.assign(n + 1, 0);
+  pair_ioff_.assign(n + 1, 0);
   for (const auto& c : pairs_) {
-    pair_adj_off_[c.i + 1]++;
-    pair_adj_off_[c.j + 1]++;
+    pair_ioff_[c.i + 1]++;
+    pair_jadj_off_[c.j + 1]++;
   }
-  for (int b = 0; b < n; ++b) pair_adj_off_[b + 1] += pair_adj_off_[b];
-  pair_adj_.resize(pair_adj_off_[n]);
+  for (int b = 0; b < n; ++b) {
+    pair_ioff_[b + 1] += pair_ioff_[b];
+    pair_jadj_off_[b + 1] += pair_jadj_off_[b];
+  }
+  pair_jadj_.resize(pair_jadj_off_[n]);
   {
-    std::vector<int> fill(pair_adj_off_.begin(), pair_adj_off_.end() - 1);
-    for (int c = 0; c < static_cast<int>(pairs_.size()); ++c) {
-      pair_adj_[fill[pairs_[c].i]++] = 2 * c;
-      pair_adj_[fill[pairs_[c].j]++] = 2 * c + 1;
-    }
+    std::vector<int> fill(pair_jadj_off_.begin(), pair_jadj_off_.end() - 1);
+    for (int c = 0; c < static_cast<int>(pairs_.size()); ++c)
+      pair_jadj_[fill[pairs_[c].j]++] = c;
   }
   wall_adj_off_.assign(n + 1, 0);
   for (const auto& c : wall_contacts_) wall_adj_off_[c.body + 1]++;
@@ -344,9 +354,16 @@ ColliderStats Scene::collider_stats() const {
 
 // ---- contacts -------------------------------------------------------------------------------
 
-void Scene::update_phys(PairContact& c) const {
-  c.phys = mix_materials(materials_[body_mat_[c.i]], materials_[body_mat_[c.j]], radius_[c.i],
-                         radius_[c.j], mass_[c.i], mass_[c.j]);
+void Scene::update_phys(PairContact& c, PairContactCold& cold) const {
+  const ContactPhys& p = cold.phys =
+      mix_materials(materials_[body_mat_[c.i]], materials_[body_mat_[c.j]], radius_[c.i],
+                    radius_[c.j], mass_[c.i], mass_[c.j]);
+  c.kn = p.kn;
+  c.ks = p.ks;
+  c.tan_phi = p.tan_phi;
+  // The short kernel is apply_law with these parts off (same operations, same results).
+  c.simple = p.model == ContactModel::Linear && !(p.beta_n > 0) && !(p.beta_s > 0) &&
+             !(p.kr > 0);
   c.phys_version = phys_version_;
 }
 
@@ -355,6 +372,21 @@ void Scene::update_phys(WallContact& c) const {
   c.phys = mix_materials(materials_[walls_[c.wall].material], materials_[body_mat_[c.body]],
                          kInf, radius_[c.body], kInf, mass_[c.body]);
   c.phys_version = phys_version_;
+}
+
+LawOutput Scene::apply_pair_law(size_t k, const ContactGeometry& g, Real dt) {
+  PairContact& c = pairs_[k];
+  PairContactCold& cold = pair_cold_[k];
+  ContactState s = pair_state(k);
+  const LawOutput out = apply_law(cold.phys, g, dt, s);
+  c.fs = s.fs;
+  c.normal = s.normal;
+  c.overlap = s.overlap;
+  c.fn = s.fn;
+  cold.mr = s.mr;
+  cold.dissip_friction = s.dissip_friction;
+  cold.dissip_viscous = s.dissip_viscous;
+  return out;
 }
 
 void Scene::compute_pair_forces(long& err_contact) {
@@ -366,39 +398,87 @@ void Scene::compute_pair_forces(long& err_contact) {
   for (long k = 0; k < nc; ++k) {
     PairContact& c = pairs_[k];
     PairOutput& o = pair_out_[k];
-    const Vec3 d = pos_[c.j] - pos_[c.i];
+    const int i = c.i, j = c.j;
+    const Vec3 d = pos_[j] - pos_[i];
     const Real dist2 = d.squaredNorm();
-    const Real rsum = radius_[c.i] + radius_[c.j];
+    const Real ri = radius_[i], rj = radius_[j];
+    const Real rsum = ri + rj;
     if (dist2 >= rsum * rsum) {
       if (c.active) {
+        // The contact opened: forget the springs' history (ContactState::clear_history).
         c.active = false;
-        c.state.clear_history();
+        c.fs.setZero();
+        c.normal.setZero();
+        c.overlap = 0;
+        c.fn = 0;
+        pair_cold_[k].mr.setZero();
         o = PairOutput();
       }
       continue;
     }
     const Real dist = std::sqrt(dist2);
-    ContactGeometry g;
-    g.overlap = rsum - dist;
-    if (!(g.overlap <= max_ratio * std::min(radius_[c.i], radius_[c.j]))) {
+    const Real overlap = rsum - dist;
+    if (!(overlap <= max_ratio * std::min(ri, rj))) {
       err = std::min(err, k);
       continue;
     }
-    if (!c.active || c.phys_version != phys_version_) update_phys(c);
+    if (!c.active || c.phys_version != phys_version_) update_phys(c, pair_cold_[k]);
     c.active = true;
-    g.normal = dist > 0 ? Vec3(d / dist) : Vec3(Vec3::UnitZ());
-    // Contact point in the middle of the overlap: branch lengths R - delta/2 (000 eq 6).
-    g.branch1 = (radius_[c.i] - 0.5 * g.overlap) * g.normal;
-    g.branch2 = -(radius_[c.j] - 0.5 * g.overlap) * g.normal;
-    g.rel_vel = (vel_[c.j] + angvel_[c.j].cross(g.branch2)) -
-                (vel_[c.i] + angvel_[c.i].cross(g.branch1));
-    g.angvel_sum = angvel_[c.i] + angvel_[c.j];
-    g.rel_angvel = angvel_[c.j] - angvel_[c.i];
-    const LawOutput out = apply_law(c.phys, g, dt, c.state);
-    o.force = out.force2;
-    // Moments, 000 eq (6): tau = (R - delta/2) n x F, plus rolling resistance.
-    o.torque_j = g.branch2.cross(out.force2) + out.moment2;
-    o.torque_i = g.branch1.cross(-out.force2) - out.moment2;
+    const Vec3 n = dist > 0 ? Vec3(d * (1.0 / dist)) : Vec3(Vec3::UnitZ());
+    // Contact point in the middle of the overlap: branch vectors l_i n and -l_j n, lengths
+    // R - delta/2 (000 eq 6).
+    const Real li = ri - 0.5 * overlap, lj = rj - 0.5 * overlap;
+    // v_j + w_j x (-l_j n) - (v_i + w_i x l_i n), with one cross product.
+    const Vec3 rel_vel = (vel_[j] - vel_[i]) - (lj * angvel_[j] + li * angvel_[i]).cross(n);
+    if (!c.simple) {
+      const Vec3 b1 = li * n;
+      const Vec3 b2 = -lj * n;
+      ContactGeometry g;
+      g.normal = n;
+      g.overlap = overlap;
+      g.branch1 = b1;
+      g.branch2 = b2;
+      g.rel_vel = rel_vel;
+      g.angvel_sum = angvel_[i] + angvel_[j];
+      g.rel_angvel = angvel_[j] - angvel_[i];
+      const LawOutput out = apply_pair_law(k, g, dt);
+      o.force = out.force2;
+      // Moments, 000 eq (6): tau = (R - delta/2) n x F, plus rolling resistance.
+      o.torque_j = b2.cross(out.force2) + out.moment2;
+      o.torque_i = b1.cross(-out.force2) - out.moment2;
+      continue;
+    }
+    // The short kernel: apply_law for a linear law without viscous damping and rolling
+    // resistance, the same operations in the same order (000 eqs 1-3), on the hot record.
+    const Real fn = c.kn * overlap;
+    const Real vn = rel_vel.dot(n);
+    const Vec3 vt = rel_vel - vn * n;
+    Vec3 fs = c.fs;
+    if (c.normal.squaredNorm() > 0) {
+      // Keep the stored shear force in the tangent plane of the rotated contact frame.
+      const Vec3 axis = c.normal.cross(n);
+      const Vec3 twist = (0.5 * dt * n.dot(angvel_[i] + angvel_[j])) * n;
+      fs -= fs.cross(axis);
+      fs -= fs.cross(twist);
+      fs -= fs.dot(n) * n;
+    }
+    fs -= c.ks * dt * vt;
+    const Real cap = c.tan_phi * (fn > 0 ? fn : 0.0);
+    if (fs.squaredNorm() > cap * cap) {
+      const Real norm = fs.norm();
+      const Vec3 capped = norm > 0 ? Vec3(fs * (cap / norm)) : Vec3(Vec3::Zero());
+      if (c.ks > 0) pair_cold_[k].dissip_friction += (fs - capped).dot(capped) / c.ks;
+      fs = capped;
+    }
+    c.fs = fs;
+    c.normal = n;
+    c.overlap = overlap;
+    c.fn = fn;
+    o.force = fn * n + fs;
+    // Moments (000 eq 6): -l_j n x F on j, l_i n x (-F) on i; n x F = n x fs.
+    const Vec3 nxf = n.cross(fs);
+    o.torque_j = -lj * nxf;
+    o.torque_i = -li * nxf;
   }
   err_contact = err;
 }
@@ -488,21 +568,23 @@ void Scene::reduce_and_integrate(long& err_body) {
   const bool energy = track_energy_;
   const bool grid = has_grid();
   long err = std::numeric_limits<long>::max();
-#pragma omp parallel for schedule(static) reduction(min : err) if (n > kParallelMin)
+  Real worst = 0;
+#pragma omp parallel for schedule(static) reduction(min : err) reduction(max : worst) \
+    if (n > kParallelMin)
   for (int b = 0; b < n; ++b) {
     // Reduce contact forces into the body in a fixed order (pair contacts, then walls).
     Vec3 f = ext_force_[b] + mass_[b] * gravity_;
     Vec3 t = ext_torque_[b];
-    for (int e = pair_adj_off_[b]; e < pair_adj_off_[b + 1]; ++e) {
-      const int entry = pair_adj_[e];
-      const PairOutput& o = pair_out_[entry >> 1];  // zero when inactive
-      if (entry & 1) {
-        f += o.force;
-        t += o.torque_j;
-      } else {
-        f -= o.force;
-        t += o.torque_i;
-      }
+    // Contact order: first the contacts where b is j (smaller indices), then where it is i.
+    for (int e = pair_jadj_off_[b]; e < pair_jadj_off_[b + 1]; ++e) {
+      const PairOutput& o = pair_out_[pair_jadj_[e]];  // zero when inactive
+      f += o.force;
+      t += o.torque_j;
+    }
+    for (int k = pair_ioff_[b]; k < pair_ioff_[b + 1]; ++k) {
+      const PairOutput& o = pair_out_[k];
+      f -= o.force;
+      t += o.torque_i;
     }
     for (int e = wall_adj_off_[b]; e < wall_adj_off_[b + 1]; ++e) {
       const WallContact& c = wall_contacts_[wall_adj_[e]];
@@ -541,49 +623,68 @@ void Scene::reduce_and_integrate(long& err_body) {
     }
     force_[b] = f;
     torque_[b] = t;
-    if (!f.allFinite() || !t.allFinite()) {
+    // A NaN or inf in any component makes the sum non-finite; only then the exact test.
+    if (!std::isfinite((f[0] + f[1] + f[2]) + (t[0] + t[1] + t[2])) &&
+        (!f.allFinite() || !t.allFinite())) {
       err = std::min(err, static_cast<long>(b));
       continue;
     }
     const std::uint8_t blk = blocked_[b];
     const Vec3 v_old = vel_[b], w_old = angvel_[b];
     const Real m = mass_[b], inertia = inertia_[b];
-    Real dissip = 0, work = 0;
-    for (int a = 0; a < 3; ++a) {
-      if (blk & (DOF_X << a)) {
-        // Imposed velocity: the constraint supplies -f[a]; its work is -f[a] v dt.
-        if (energy) work += -f[a] * v_old[a] * dt;
-        continue;
+    if (blk == DOF_NONE && !energy) {
+      // The common case (free body, no energy bookkeeping): the general loop below without
+      // its branches, the same operations.
+      Vec3& v = vel_[b];
+      Vec3& w = angvel_[b];
+      for (int a = 0; a < 3; ++a) {
+        Real acc = f[a] / m;
+        if (lambda > 0) acc = damp_component(acc, v_old[a], dt, lambda);
+        v[a] = v_old[a] + acc * dt;
       }
-      Real acc = f[a] / m;
-      if (lambda > 0) {
-        const Real damped = damp_component(acc, v_old[a], dt, lambda);
-        if (energy) dissip += -(damped - acc) * m * (v_old[a] + 0.5 * dt * damped) * dt;
-        acc = damped;
+      for (int a = 0; a < 3; ++a) {
+        Real acc = t[a] / inertia;
+        if (lambda > 0) acc = damp_component(acc, w_old[a], dt, lambda);
+        w[a] = w_old[a] + acc * dt;
       }
-      vel_[b][a] = v_old[a] + acc * dt;
-      if (energy) work += ext_force_[b][a] * 0.5 * (v_old[a] + vel_[b][a]) * dt;
-    }
-    for (int a = 0; a < 3; ++a) {
-      if (blk & (DOF_RX << a)) {
-        if (energy) work += -t[a] * w_old[a] * dt;
-        continue;
+    } else {
+      Real dissip = 0, work = 0;
+      for (int a = 0; a < 3; ++a) {
+        if (blk & (DOF_X << a)) {
+          // Imposed velocity: the constraint supplies -f[a]; its work is -f[a] v dt.
+          if (energy) work += -f[a] * v_old[a] * dt;
+          continue;
+        }
+        Real acc = f[a] / m;
+        if (lambda > 0) {
+          const Real damped = damp_component(acc, v_old[a], dt, lambda);
+          if (energy) dissip += -(damped - acc) * m * (v_old[a] + 0.5 * dt * damped) * dt;
+          acc = damped;
+        }
+        vel_[b][a] = v_old[a] + acc * dt;
+        if (energy) work += ext_force_[b][a] * 0.5 * (v_old[a] + vel_[b][a]) * dt;
       }
-      Real acc = t[a] / inertia;
-      if (lambda > 0) {
-        const Real damped = damp_component(acc, w_old[a], dt, lambda);
-        if (energy) dissip += -(damped - acc) * inertia * (w_old[a] + 0.5 * dt * damped) * dt;
-        acc = damped;
+      for (int a = 0; a < 3; ++a) {
+        if (blk & (DOF_RX << a)) {
+          if (energy) work += -t[a] * w_old[a] * dt;
+          continue;
+        }
+        Real acc = t[a] / inertia;
+        if (lambda > 0) {
+          const Real damped = damp_component(acc, w_old[a], dt, lambda);
+          if (energy) dissip += -(damped - acc) * inertia * (w_old[a] + 0.5 * dt * damped) * dt;
+          acc = damped;
+        }
+        angvel_[b][a] = w_old[a] + acc * dt;
+        if (energy) work += ext_torque_[b][a] * 0.5 * (w_old[a] + angvel_[b][a]) * dt;
       }
-      angvel_[b][a] = w_old[a] + acc * dt;
-      if (energy) work += ext_torque_[b][a] * 0.5 * (w_old[a] + angvel_[b][a]) * dt;
-    }
-    if (energy) {
-      const Vec3 vm = 0.5 * (v_old + vel_[b]);
-      const Vec3 wm = 0.5 * (w_old + angvel_[b]);
-      ke_[b] = 0.5 * m * vm.squaredNorm() + 0.5 * inertia * wm.squaredNorm();
-      damp_dissip_[b] += dissip;
-      ext_work_[b] += work;
+      if (energy) {
+        const Vec3 vm = 0.5 * (v_old + vel_[b]);
+        const Vec3 wm = 0.5 * (w_old + angvel_[b]);
+        ke_[b] = 0.5 * m * vm.squaredNorm() + 0.5 * inertia * wm.squaredNorm();
+        damp_dissip_[b] += dissip;
+        ext_work_[b] += work;
+      }
     }
     pos_[b] += vel_[b] * dt;
     const Vec3& w = angvel_[b];
@@ -606,9 +707,22 @@ void Scene::reduce_and_integrate(long& err_body) {
       ori_[b] = Quat(ch, axis.x(), axis.y(), axis.z()) * ori_[b];
       ori_[b].normalize();
     }
-    if (!pos_[b].allFinite() || !vel_[b].allFinite()) err = std::min(err, static_cast<long>(b));
+    const Vec3& x = pos_[b];
+    const Vec3& v = vel_[b];
+    if (!std::isfinite((x[0] + x[1] + x[2]) + (v[0] + v[1] + v[2])) &&
+        (!x.allFinite() || !v.allFinite())) {
+      err = std::min(err, static_cast<long>(b));
+      continue;
+    }
+    // The broad phase's displacement check (need_rebuild) for the next step, in this pass.
+    const Real d = (x - pos_at_build_[b]).norm() + std::max(0.0, radius_[b] - radius_at_build_[b]);
+    worst = std::max(worst, d);
   }
   err_body = err;
+  if (err == std::numeric_limits<long>::max()) {
+    max_disp_ = worst;
+    disp_valid_ = true;
+  }
 }
 
 int Scene::add_controller(std::shared_ptr<Controller> c) {
@@ -646,6 +760,7 @@ void Scene::step() {
   for (const auto& c : controllers_)
     if (c->enabled && step_ % c->period == 0) c->apply(*this);
   if (need_rebuild()) rebuild();
+  disp_valid_ = false;  // until this step's integration measures them again
   long err_pair, err_wall, err_body;
   compute_pair_forces(err_pair);
   if (err_pair != std::numeric_limits<long>::max()) raise_overlap(err_pair, false);

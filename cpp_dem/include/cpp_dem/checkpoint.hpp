@@ -15,7 +15,7 @@ namespace cpp_dem {
 class Checkpoint {
  public:
   /// Format version of the blob; bumped when the layout changes.
-  static constexpr std::uint32_t kVersion = 1;
+  static constexpr std::uint32_t kVersion = 2;  // 2: pair contacts split hot / cold
   /// The whole state of `scene` as bytes. Controllers are code, not data: the blob holds
   /// their count, `period`, `enabled` and, for StatefulController ones, their state.
   static std::vector<std::uint8_t> save(const Scene& scene);

@@ -32,13 +32,33 @@ struct Wall {
   }
 };
 
-/// A sphere–sphere contact (candidate pair from the broad phase; active while overlapping).
+/// A sphere–sphere contact (candidate pair from the broad phase; active while overlapping):
+/// the hot part, what the pair pass reads and writes every step (104 bytes). The rest of the
+/// contact's parameters and history (PairContactCold) is in a parallel array, touched when
+/// the contact is (re)activated, when it slips, and by laws with damping or rolling.
+/// The full records: Scene::pair_phys(k), Scene::pair_state(k).
 struct PairContact {
   int i = 0, j = 0;             ///< body ids, i < j; side 1 = i, side 2 = j
   bool active = false;
+  /// The law is linear without viscous damping and without rolling resistance: the pair
+  /// pass runs the short kernel, which reads only this record.
+  bool simple = false;
   int phys_version = -1;        ///< scene phys version the phys was computed at
+  Real kn = 0;                  ///< copy of ContactPhys::kn
+  Real ks = 0;                  ///< copy of ContactPhys::ks
+  Real tan_phi = 0;             ///< copy of ContactPhys::tan_phi
+  Vec3 fs = Vec3::Zero();       ///< ContactState::fs, elastic shear force on j, N
+  Vec3 normal = Vec3::Zero();   ///< ContactState::normal (zero: new contact)
+  Real overlap = 0;             ///< ContactState::overlap, m
+  Real fn = 0;                  ///< ContactState::fn, N
+};
+
+/// The cold part of a sphere–sphere contact (same index as its PairContact).
+struct PairContactCold {
   ContactPhys phys;
-  ContactState state;
+  Vec3 mr = Vec3::Zero();       ///< ContactState::mr, rolling moment on j, N m
+  Real dissip_friction = 0;     ///< ContactState::dissip_friction, J
+  Real dissip_viscous = 0;      ///< ContactState::dissip_viscous, J
 };
 
 /// What a sphere–sphere contact gives its two bodies in the last step, kept apart from the
@@ -222,7 +242,23 @@ class Scene {
   Real unbalanced_force() const;
   ColliderStats collider_stats() const;
 
+  /// Sphere–sphere contacts, hot part (ids, activity, spring state); see pair_phys and
+  /// pair_state for the full records.
   const std::vector<PairContact>& pair_contacts() const { return pairs_; }
+  /// Parameters of pair contact k.
+  const ContactPhys& pair_phys(size_t k) const { return pair_cold_[k].phys; }
+  /// History of pair contact k, assembled from its hot and cold parts.
+  ContactState pair_state(size_t k) const {
+    ContactState s;
+    s.fs = pairs_[k].fs;
+    s.mr = pair_cold_[k].mr;
+    s.normal = pairs_[k].normal;
+    s.overlap = pairs_[k].overlap;
+    s.fn = pairs_[k].fn;
+    s.dissip_friction = pair_cold_[k].dissip_friction;
+    s.dissip_viscous = pair_cold_[k].dissip_viscous;
+    return s;
+  }
   /// Force on body j of pair contact k, N (zero when inactive).
   const Vec3& pair_force(size_t k) const { return pair_out_[k].force; }
   const std::vector<WallContact>& wall_contacts() const { return wall_contacts_; }
@@ -236,6 +272,10 @@ class Scene {
     dropped_friction_ += s.dissip_friction;
     dropped_viscous_ += s.dissip_viscous;
   }
+  void drop_dissipation(const PairContactCold& c) {
+    dropped_friction_ += c.dissip_friction;
+    dropped_viscous_ += c.dissip_viscous;
+  }
   /// Energy stored in active contacts and unbroken geogrid links, J.
   Real stored_elastic_energy() const;
   /// Appends one body (kind 0 sphere, 1 grid node) at rest to every per-body array.
@@ -246,7 +286,10 @@ class Scene {
   void compute_pair_forces(long& err_contact);
   void compute_wall_forces(long& err_contact);
   void reduce_and_integrate(long& err_body);
-  void update_phys(PairContact& c) const;
+  void update_phys(PairContact& c, PairContactCold& cold) const;
+  /// Pair contact k with the full composed law (apply_law) on geometry g; returns the force
+  /// on j and the extra moment, as apply_law.
+  LawOutput apply_pair_law(size_t k, const ContactGeometry& g, Real dt);
   void update_phys(WallContact& c) const;
   void update_phys(GridContact& c) const;
   bool has_grid() const { return !links_.empty() || num_nodes_ > 0; }
@@ -278,10 +321,15 @@ class Scene {
   std::vector<std::shared_ptr<Controller>> controllers_;
   // Contacts and their adjacency (CSR: for body b, entries adj_off[b]..adj_off[b+1]).
   std::vector<PairContact> pairs_;
+  std::vector<PairContactCold> pair_cold_;
   std::vector<PairOutput> pair_out_;
   std::vector<WallContact> wall_contacts_;
-  // pair_adj_ holds 2 k + 1 when the body is j of contact k, 2 k when it is i.
-  std::vector<int> pair_adj_off_, pair_adj_, wall_adj_off_, wall_adj_;
+  // Pair contacts of body b: those where b is j are pair_jadj_[pair_jadj_off_[b] ..
+  // pair_jadj_off_[b + 1]) (contact indices, ascending), those where b is i are the contacts
+  // pair_ioff_[b] .. pair_ioff_[b + 1] (contiguous: pairs_ is sorted by (i, j)). Every
+  // j-side contact has a smaller index than every i-side one, so "j side, then i side" is
+  // contact order: the reduction into bodies has a fixed order without a branch per entry.
+  std::vector<int> pair_jadj_off_, pair_jadj_, pair_ioff_, wall_adj_off_, wall_adj_;
   // Geogrid.
   int num_nodes_ = 0;
   std::vector<GridLink> links_;
@@ -316,6 +364,10 @@ class Scene {
   int phys_version_ = 0;
   bool dirty_ = true;
   long builds_ = 0;
+  // Largest broad-phase displacement measured by the last integration pass (valid while
+  // nothing else moved bodies or changed radii since); not saved in checkpoints.
+  Real max_disp_ = 0;
+  bool disp_valid_ = false;
 };
 
 }  // namespace cpp_dem

@@ -1,0 +1,11 @@
+#!/usr/bin/env bash
+# Builds bench/profile_step.cpp against the core's sources (not the installed module) into
+# build/profile/profile_step. Extra compiler flags in CXXFLAGS_EXTRA (e.g. -march=x86-64-v3).
+set -euo pipefail
+ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
+OUT="${OUT:-$ROOT/build/profile/profile_step}"
+mkdir -p "$(dirname "$OUT")"
+g++ -std=c++17 -O3 -g -fopenmp -DEIGEN_DONT_PARALLELIZE ${CXXFLAGS_EXTRA:-} \
+  -I"$ROOT/cpp_dem/include" -I/usr/include/eigen3 \
+  "$ROOT/bench/profile_step.cpp" "$ROOT"/cpp_dem/src/*.cpp -o "$OUT"
+echo "$OUT"
