@@ -15,16 +15,18 @@ Does a sphere-only scene pay for the geogrid code compiled into the step loop? I
    0.2, fixed dt = 0.5 x the p-wave step. Each *block* is a fresh subprocess that builds the
    scene, runs ``--warmup`` untimed steps, then times ``--steps`` steps with
    ``time.process_time`` (CPU of that process) and ``time.perf_counter`` (wall). Blocks
-   alternate full, lean, full, lean, ... for ``--rounds`` rounds; round k gives the ratio
-   full_k / lean_k of the CPU time per step. The spread of that ratio over the rounds is the
-   noise of the measurement. Every block hashes the final positions (and the whole state:
-   velocities, angular velocities, orientations, wall forces): both builds must give bitwise
-   identical results.
+   alternate between the builds for ``--rounds`` rounds (full lean | lean full | full lean
+   ...: the first of a round alternates too, so a drift of the load cancels); round k gives
+   the ratio full_k / lean_k of the CPU time per step, and the spread of that ratio over the
+   rounds is the noise of the measurement. Every block hashes the final positions (and the
+   whole state: velocities, angular velocities, orientations, wall forces): both builds must
+   give bitwise identical results.
    On a shared machine CPU time still varies by a few per cent (caches and memory bandwidth
    are shared), so the same scene is also run under ``valgrind --tool=callgrind`` (1 thread,
    if valgrind is installed): the instructions executed per step by each build, an exact
    count that other jobs cannot disturb (two runs per build that differ only in the number
-   of steps; the difference of their whole-process counts over the step difference).
+   of steps; the difference of their whole-process counts over the step difference;
+   PYTHONHASHSEED=0 so that the interpreter's start-up work is the same in both).
 3. **DEM-only never imports dolfinx.** A short DEM-only case (``cases/prs_element.py --smoke
    --stresses 20e3,20e3,40e3``: a geogrid element driven by given stresses, no FEM) runs in
    a subprocess; at its end the script lists which of dolfinx / petsc4py / ufl (and basix,
@@ -42,7 +44,7 @@ figure, wall time and the CPU other processes used during each block (``other_lo
 from /proc/stat) are reported with it.
 
 Usage (repository root, project venv; ``bash scripts/setup.sh`` first):
-    .venv/bin/python bench/lean_build.py                     # N = 2000, 10000; ~5 min
+    .venv/bin/python bench/lean_build.py                     # N = 2000, 10000; ~4 min
     .venv/bin/python bench/lean_build.py --quick --no-callgrind   # N = 2000, 2 rounds; ~30 s
     .venv/bin/python bench/lean_build.py --sizes 10000 --rounds 8 --out runs.jsonl
 """
@@ -183,6 +185,10 @@ def worker(cfg: dict) -> dict:
 def run_worker(cfg: dict, threads: int, prefix: list[str] | None = None) -> dict:
     """Runs one block in a fresh interpreter (under `prefix`, e.g. valgrind, if given)."""
     env = dict(os.environ, OMP_NUM_THREADS=str(threads), OPENBLAS_NUM_THREADS="1")
+    if prefix:
+        # A fixed hash seed makes the interpreter's own work repeatable: whole-process counts
+        # then vary by ~1e4 instructions between identical runs instead of ~3e5.
+        env["PYTHONHASHSEED"] = "0"
     proc = subprocess.run([*(prefix or []), sys.executable, str(Path(__file__).resolve()),
                            "--worker", json.dumps(cfg)], cwd=ROOT, env=env, capture_output=True,
                           text=True)
@@ -391,7 +397,10 @@ def compare(n: int, csv: Path, args, overlay: Path, out: Path | None) -> dict:
     warmup = args.warmup
     blocks: dict[str, list[dict]] = {"full": [], "lean": []}
     for k in range(args.rounds):
-        for variant in ("full", "lean"):
+        # The builds alternate block by block, and the first of each round alternates too
+        # (full lean | lean full | ...): a drift of the machine's load or an effect of running
+        # first or second in a round cancels in the ratios.
+        for variant in (("full", "lean") if k % 2 == 0 else ("lean", "full")):
             if args.wait_idle > 0:
                 wait_idle(args.wait_idle)
             cfg = {"variant": variant, "csv": str(csv), "steps": steps, "warmup": warmup,
@@ -500,13 +509,13 @@ def main(argv: list[str] | None = None) -> int:
         formatter_class=argparse.RawDescriptionHelpFormatter,
         epilog="Times are CPU time of the measured process (time.process_time) unless named "
                "wall; per step = the block's time / --steps. The ratio full/lean is taken per "
-               "round (one full block, then one lean block); its min-max over the rounds is "
-               "the noise.")
+               "round (one full and one lean block); its min-max over the rounds is the "
+               "noise.")
     ap.add_argument("--sizes", type=int, nargs="+", default=None, metavar="N",
                     help="numbers of spheres of the packings (default 2000 10000; --quick: 2000)")
     ap.add_argument("--rounds", type=int, default=None,
-                    help="A/B rounds; each runs one full and one lean block, alternating "
-                         "(default 5; --quick: 2)")
+                    help="A/B rounds; each runs one full and one lean block, the full one "
+                         "first in even rounds, second in odd ones (default 6; --quick: 2)")
     ap.add_argument("--steps", type=int, default=0,
                     help="timed steps per block (default ceil(6e6 / N): 3000 at N=2000, 600 at "
                          "N=10000; --quick: a third)")
@@ -548,7 +557,7 @@ def main(argv: list[str] | None = None) -> int:
         return 0
 
     sizes = args.sizes or ([2000] if args.quick else [2000, 10000])
-    args.rounds = args.rounds or (2 if args.quick else 5)
+    args.rounds = args.rounds or (2 if args.quick else 6)
     if args.rounds < 1 or args.threads < 1 or args.jobs < 1 or args.warmup < 0:
         ap.error("--rounds, --threads, --jobs must be >= 1 and --warmup >= 0")
     sys.path.insert(0, str(ROOT / "bench"))
