@@ -15,6 +15,7 @@ PYBIND11_MODULE(_core, m) {
   }, py::arg("threads"), "Sets the number of OpenMP threads used by every scene.");
   m.def("get_num_threads", []() { return omp_get_max_threads(); },
         "Number of OpenMP threads used by the next parallel region.");
+  m.attr("GEOGRID") = py::bool_(cpp_dem::kGeogridBuilt);  // CMake option CPP_DEM_GEOGRID
   cpp_dem::bind::bind_material(m);
   cpp_dem::bind::bind_scene(m);
   cpp_dem::bind::bind_grid(m);

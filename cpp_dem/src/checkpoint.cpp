@@ -272,6 +272,9 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   if (r.at != blob.size())
     throw ParameterError("checkpoint: " + std::to_string(blob.size() - r.at) +
                          " unexpected trailing bytes");
+  if (!kGeogridBuilt && (t.num_nodes_ > 0 || !t.links_.empty()))
+    throw ParameterError("checkpoint: the saved scene has a geogrid; this build has no geogrid "
+                         "support (built with -DCPP_DEM_GEOGRID=OFF)");
   for (std::uint64_t k = 0; k < nc; ++k) {
     if (ctl[k].stateful)
       dynamic_cast<StatefulController*>(s.controllers_[k].get())->load_state(ctl[k].state);

@@ -12,17 +12,6 @@ namespace {
 constexpr long kParallelMinGrid = 128;
 }
 
-void BeamParams::validate() const {
-  require(std::isfinite(young) && young > 0, "young", young, "must be > 0 (Pa)");
-  require(std::isfinite(poisson) && poisson > -1 && poisson <= 0.5, "poisson", poisson,
-          "must be in (-1, 0.5]");
-  require(std::isfinite(radius) && radius > 0, "radius", radius, "must be > 0 (m)");
-  require(std::isfinite(normal_cohesion) && normal_cohesion >= 0, "normal_cohesion",
-          normal_cohesion, "must be >= 0 (Pa; 0 = unbreakable)");
-  require(std::isfinite(shear_cohesion) && shear_cohesion >= 0, "shear_cohesion",
-          shear_cohesion, "must be >= 0 (Pa; 0 = unbreakable)");
-}
-
 // ---- building -------------------------------------------------------------------------------
 
 int Scene::add_grid_nodes(const std::vector<Vec3>& pos, Real radius,
@@ -103,15 +92,6 @@ int Scene::add_pfacet(int n0, int n1, int n2, int l01, int l12, int l20, int mat
   dirty_ = true;
   grid_topology_dirty_ = true;
   return static_cast<int>(facets_.size()) - 1;
-}
-
-void Scene::set_mass_inertia(int body, Real mass, Real inertia) {
-  check_body(body);
-  require(std::isfinite(mass) && mass > 0, "mass", mass, "must be > 0 (kg)");
-  require(std::isfinite(inertia) && inertia > 0, "inertia", inertia, "must be > 0 (kg m^2)");
-  mass_[body] = mass;
-  inertia_[body] = inertia;
-  ++phys_version_;
 }
 
 void Scene::rebuild_grid_adjacency() {

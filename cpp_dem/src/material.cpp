@@ -4,6 +4,8 @@
 #include <cstdio>
 #include <limits>
 
+#include "cpp_dem/grid.hpp"  // BeamParams
+
 namespace cpp_dem {
 
 std::string fmt_real(Real v) {
@@ -80,6 +82,19 @@ ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2
     p.rolling_cap = eta_r * r_eff;
   }
   return p;
+}
+
+/// Parameters of the geogrid's cohesive beam (grid.hpp); validated here with the other
+/// material parameters so that a build without the geogrid (grid_off.cpp) still checks them.
+void BeamParams::validate() const {
+  require(std::isfinite(young) && young > 0, "young", young, "must be > 0 (Pa)");
+  require(std::isfinite(poisson) && poisson > -1 && poisson <= 0.5, "poisson", poisson,
+          "must be in (-1, 0.5]");
+  require(std::isfinite(radius) && radius > 0, "radius", radius, "must be > 0 (m)");
+  require(std::isfinite(normal_cohesion) && normal_cohesion >= 0, "normal_cohesion",
+          normal_cohesion, "must be >= 0 (Pa; 0 = unbreakable)");
+  require(std::isfinite(shear_cohesion) && shear_cohesion >= 0, "shear_cohesion",
+          shear_cohesion, "must be >= 0 (Pa; 0 = unbreakable)");
 }
 
 }  // namespace cpp_dem

@@ -167,6 +167,14 @@ void Scene::set_body_material(int body, int material) {
   inertia_[body] = 0.4 * mass_[body] * radius_[body] * radius_[body];
   ++phys_version_;
 }
+void Scene::set_mass_inertia(int body, Real mass, Real inertia) {
+  check_body(body);
+  require(std::isfinite(mass) && mass > 0, "mass", mass, "must be > 0 (kg)");
+  require(std::isfinite(inertia) && inertia > 0, "inertia", inertia, "must be > 0 (kg m^2)");
+  mass_[body] = mass;
+  inertia_[body] = inertia;
+  ++phys_version_;
+}
 void Scene::check_body(int b) const {
   if (b < 0 || b >= num_bodies())
     throw ParameterError("body=" + std::to_string(b) + ": no such body (the scene has " +
@@ -335,7 +343,9 @@ void Scene::rebuild() {
     for (int c = 0; c < static_cast<int>(wall_contacts_.size()); ++c)
       wall_adj_[fill[wall_contacts_[c].body]++] = c;
   }
-  if (has_grid()) rebuild_grid_contacts(margin);
+  if constexpr (kGeogridBuilt) {
+    if (has_grid()) rebuild_grid_contacts(margin);
+  }
   pos_at_build_ = pos_;
   radius_at_build_ = radius_;
   for (Wall& w : walls_) w.moved_since_build = 0;
@@ -566,7 +576,7 @@ void Scene::reduce_and_integrate(long& err_body) {
   const Real dt = dt_;
   const Real lambda = local_damping_;
   const bool energy = track_energy_;
-  const bool grid = has_grid();
+  const bool grid = has_grid();  // constant false without the geogrid: the branch vanishes
   long err = std::numeric_limits<long>::max();
   Real worst = 0;
 #pragma omp parallel for schedule(static) reduction(min : err) reduction(max : worst) \
@@ -766,22 +776,26 @@ void Scene::step() {
   if (err_pair != std::numeric_limits<long>::max()) raise_overlap(err_pair, false);
   compute_wall_forces(err_wall);
   if (err_wall != std::numeric_limits<long>::max()) raise_overlap(err_wall, true);
-  if (has_grid()) {
-    long err_grid;
-    compute_grid_contacts(err_grid);
-    if (err_grid != std::numeric_limits<long>::max()) {
-      const GridContact& c = grid_contacts_[err_grid];
-      std::ostringstream os;
-      os.precision(4);
-      os << "blow-up at step " << step_ << ": sphere " << c.sphere << " overlaps the geogrid ("
-         << (c.kind == GridPrimitive::Node ? "node " : c.kind == GridPrimitive::Connection
-                                                          ? "connection " : "pfacet ")
-         << c.prim << ") by " << c.geom.overlap / radius_[c.sphere]
-         << " of the grain radius (max_overlap_ratio=" << max_overlap_ratio_
-         << "); the time step may be too large or the contact too soft";
-      throw BlowUpError(os.str());
+  if constexpr (kGeogridBuilt) {
+    if (has_grid()) {
+      long err_grid;
+      compute_grid_contacts(err_grid);
+      if (err_grid != std::numeric_limits<long>::max()) {
+        const GridContact& c = grid_contacts_[err_grid];
+        std::ostringstream os;
+        os.precision(4);
+        os << "blow-up at step " << step_ << ": sphere " << c.sphere
+           << " overlaps the geogrid ("
+           << (c.kind == GridPrimitive::Node         ? "node "
+               : c.kind == GridPrimitive::Connection ? "connection "
+                                                     : "pfacet ")
+           << c.prim << ") by " << c.geom.overlap / radius_[c.sphere]
+           << " of the grain radius (max_overlap_ratio=" << max_overlap_ratio_
+           << "); the time step may be too large or the contact too soft";
+        throw BlowUpError(os.str());
+      }
+      compute_links();
     }
-    compute_links();
   }
   // Wall forces and work, summed in contact order.
   for (Wall& w : walls_) w.force.setZero();

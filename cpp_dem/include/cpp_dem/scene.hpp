@@ -133,6 +133,8 @@ class Scene {
   int num_bodies() const { return static_cast<int>(pos_.size()); }
 
   // ---- geogrid (000 §2.2) ----------------------------------------------------------------
+  // Without the geogrid (built with -DCPP_DEM_GEOGRID=OFF, kGeogridBuilt false) the three
+  // add_* entry points throw ParameterError and the accessors return empty lists.
   /// Adds grid nodes (6-DOF bodies that are not spheres to the collider): centres (m), the
   /// node radius R_c (m), lumped masses (kg) and inertias (kg m^2). Returns the first id.
   int add_grid_nodes(const std::vector<Vec3>& pos, Real radius, const std::vector<Real>& mass,
@@ -292,7 +294,10 @@ class Scene {
   LawOutput apply_pair_law(size_t k, const ContactGeometry& g, Real dt);
   void update_phys(WallContact& c) const;
   void update_phys(GridContact& c) const;
-  bool has_grid() const { return !links_.empty() || num_nodes_ > 0; }
+  /// The scene has geogrid bodies or links; a compile-time false without the geogrid
+  /// (kGeogridBuilt). Callers guard the geogrid calls with `if constexpr (kGeogridBuilt)` so
+  /// a build without grid.cpp never references them.
+  bool has_grid() const { return kGeogridBuilt && (!links_.empty() || num_nodes_ > 0); }
   void rebuild_grid_contacts(Real margin);
   /// Distance from x to a node (nn 1), a link axis (nn 2) or a triangle (nn 3), m.
   Real skeleton_distance(const int* nodes, int nn, const Vec3& x) const;

@@ -14,6 +14,16 @@ using Vec3 = Eigen::Vector3d;
 using Quat = Eigen::Quaterniond;
 using Mat3 = Eigen::Matrix3d;
 
+/// Whether the geogrid (grid nodes, cohesive links, PFacets, grain–geogrid contacts) is
+/// compiled into the step loop. CMake option CPP_DEM_GEOGRID (default ON); OFF defines
+/// CPP_DEM_NO_GEOGRID, the step loop loses its geogrid branches (`if constexpr`) and the
+/// entry points that add grid nodes, links or PFacets throw ParameterError.
+#ifdef CPP_DEM_NO_GEOGRID
+inline constexpr bool kGeogridBuilt = false;
+#else
+inline constexpr bool kGeogridBuilt = true;
+#endif
+
 /// Degrees of freedom that can be blocked on a body (bit mask).
 /// A blocked DOF keeps its current velocity (which may be an imposed one).
 enum Dof : std::uint8_t {
