@@ -5,7 +5,8 @@ knob, the presets marked, the non-dominated points joined.
         results/speed_accuracy/triaxial.jsonl --out docs/img
 
 Reads the JSON lines written with --out by bench/speed_accuracy.py (case "pullout") and
-bench/triaxial_accuracy.py (case "triaxial"); writes pareto_<case>.png per case found. The
+bench/triaxial_accuracy.py (case "triaxial") and bench/coupled_accuracy.py (case "coupled");
+writes pareto_<case>.png per case found. The
 error of a knob's run is against that knob's own reference (its most accurate value, the
 other knobs at their defaults); the presets' error is against all knobs at their most
 accurate values at once. Errors below FLOOR are drawn at FLOOR (log axis).
@@ -18,12 +19,23 @@ import json
 import sys
 from pathlib import Path
 
-#: case -> (error key, label of the error axis)
+#: case -> (error key, or {knob: key}, label of the error axis)
 ERRORS = {
     "pullout": ("err_force_mean_N", "|error| of the mean pull-out force"),
     "pullout_full": ("err_force_mean_N", "|error| of the mean pull-out force"),
     "triaxial": ("err_q_peak", "|error| of the peak deviator q"),
+    "coupled": ({"fem_mesh": "err_prs_minus_re", "two_way_tol": "err_vs_last",
+                 "preset": "err_vs_reference"},
+                "|error| of the handed-over stresses (mesh: PRS − RE; tol: targets)"),
 }
+
+
+def error_of(case: str, r: dict) -> float | None:
+    """The plotted error of row ``r`` (None: the row is not a knob run)."""
+    key = ERRORS[case][0]
+    if isinstance(key, dict):
+        key = key.get(r.get("knob"))
+    return None if key is None or key not in r else abs(r[key])
 FLOOR = 1e-3  #: smallest error drawn (the references themselves), -
 MARKERS = "osD^v<>ph*"
 
@@ -58,13 +70,14 @@ def plot(case: str, rows: list, png: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    key, label = ERRORS[case]
+    label = ERRORS[case][1]
+    rows = [r for r in rows if error_of(case, r) is not None]
     fig, ax = plt.subplots(figsize=(7.5, 5.2))
     knobs = [k for k in dict.fromkeys(r["knob"] for r in rows) if k != "preset"]
     pts = []
     for i, knob in enumerate(knobs):
         sel = [r for r in rows if r["knob"] == knob]
-        e = [max(abs(r[key]), FLOOR) for r in sel]
+        e = [max(error_of(case, r), FLOOR) for r in sel]
         c = [r["cpu_s"] for r in sel]
         ax.plot(e, c, MARKERS[i % len(MARKERS)], ls=":", label=knob, alpha=0.8)
         for r, x, y in zip(sel, e, c):
@@ -73,20 +86,23 @@ def plot(case: str, rows: list, png: Path) -> None:
         pts += list(zip(e, c))
     pre = [r for r in rows if r["knob"] == "preset"]
     if pre:
-        e = [max(abs(r[key]), FLOOR) for r in pre]
+        e = [max(error_of(case, r), FLOOR) for r in pre]
         c = [r["cpu_s"] for r in pre]
         ax.plot(e, c, "k*", ms=13, label="presets (vs all-accurate reference)")
         for r, x, y in zip(pre, e, c):
             ax.annotate(str(r["value"]), (x, y), fontsize=9, weight="bold", xytext=(5, -10),
                         textcoords="offset points")
         pts += list(zip(e, c))
-    f = front(pts)
-    ax.plot([p[0] for p in f], [p[1] for p in f], "-", color="grey", lw=1, alpha=0.6,
-            label="non-dominated")
+    if case != "coupled":  # there the two knobs' costs are of different runs
+        f = front(pts)
+        ax.plot([p[0] for p in f], [p[1] for p in f], "-", color="grey", lw=1, alpha=0.6,
+                label="non-dominated")
     ax.set_xscale("log")
     ax.set_yscale("log")
     ax.set_xlabel(f"{label} (errors < {FLOOR:g} drawn at {FLOOR:g})")
     ax.set_ylabel("CPU time of the run, s (one thread)")
+    if case == "coupled":
+        ax.set_ylabel("CPU time, s (mesh: FEM of RE + PRS; tol: the two-way run so far)")
     ax.set_title(f"Speed-accuracy, {case}: one knob at a time")
     ax.grid(alpha=0.3, which="both")
     ax.legend(fontsize=8)

@@ -41,7 +41,7 @@ import json
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -102,7 +102,7 @@ class Params:
     # --- coupling ---
     two_way: bool = False
     two_way_tol: float = 0.02
-    max_iterations: int = 4
+    max_iterations: int = 8
     workers: int = 1
     threads: int = 0
     stresses: list = field(default_factory=list)  #: DEM-only targets (rows of 3), Pa
@@ -551,6 +551,19 @@ def run(p: Params, out: Path) -> dict:
 # ---- command line ----------------------------------------------------------------------------
 
 
+def apply_coupling_preset(p: Params, name: str) -> Params:
+    """The coupling part of a speed-accuracy preset (cpp_dem.presets): fine FEM mesh size =
+    preset.fem_size_per_element x the element edge (coarse size 20 x that) and the two-way
+    tolerance. The DEM element's own settings are not changed."""
+    from cpp_dem.presets import preset
+
+    ps = preset(name)
+    h = ps.fem_size_per_element * p.edge
+    log(f"preset {name!r}: fine FEM mesh {h:g} m, coarse {20 * h:g} m, two-way tolerance "
+        f"{ps.two_way_tol:g}")
+    return replace(p, fine_size=h, mesh_size=20 * h, two_way_tol=ps.two_way_tol)
+
+
 def parse_stresses(text: str, ap) -> list:
     """'sx,sy,sz' (Pa) or a CSV file with columns sx,sy,sz (optionally time first)."""
     path = Path(text)
@@ -617,6 +630,10 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     ap.add_argument("--tol", type=float, default=d.two_way_tol,
                     help="two-way tolerance on the handed-over stresses, relative")
     ap.add_argument("--max-iterations", type=int, default=d.max_iterations)
+    ap.add_argument("--preset", choices=("fast", "balanced", "accurate"), default="",
+                    help="speed-accuracy preset of the coupling: fine FEM mesh size (x the "
+                         "element edge; coarse size 20 x that) and the two-way tolerance "
+                         "(overrides --tol); docs/speed_accuracy.md")
     ap.add_argument("--workers", type=int, default=1,
                     help="processes for the DEM elements of the two-way loop (<= 2 here)")
     ap.add_argument("--seed", type=int, default=d.seed)
@@ -641,6 +658,10 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                                                            a.seed, a.threads)
     p.two_way, p.two_way_tol, p.max_iterations, p.workers = (a.two_way, a.tol, a.max_iterations,
                                                              a.workers)
+    if a.preset:
+        if a.stresses:
+            ap.error("--preset sets the FEM mesh and the two-way tolerance: not with --stresses")
+        p = apply_coupling_preset(p, a.preset)
     if a.stresses:
         if a.two_way:
             ap.error("--two-way needs the FEM: not with --stresses")

@@ -113,7 +113,24 @@ def test_homogeneous_field_handed_over_reproduces_the_standalone_element(tmp_pat
     (["--stresses", "/nonexistent.csv"], "--stresses=/nonexistent.csv: no such file"),
     (["--prestress", "-1"], "--prestress=-1.0: must be >= 0 (N/m)"),
     (["--stresses", "1e4,1e4,2e4", "--two-way"], "--two-way needs the FEM"),
+    (["--stresses", "1e4,1e4,2e4", "--preset", "fast"], "--preset sets the FEM mesh"),
+    (["--preset", "quick"], "invalid choice: 'quick'"),
 ])
 def test_bad_inputs(tmp_path, args, msg):
     p = run_case(tmp_path, "--smoke", *args)
     assert p.returncode != 0 and msg in p.stderr, p.stderr
+
+
+@pytest.mark.parametrize("name,h,tol", [("fast", 0.05, 0.1), ("balanced", 0.025, 0.02),
+                                        ("accurate", 0.0125, 0.005)])
+def test_preset_sets_the_fem_mesh_and_the_two_way_tolerance(name, h, tol):
+    """--preset: fine mesh = fem_size_per_element x the 0.1 m element edge, coarse 20 x that,
+    the preset's two-way tolerance; the DEM element's settings unchanged."""
+    sys.path.insert(0, str(ROOT / "cases"))
+    import prs_element
+
+    p, _ = prs_element.parse_args(["--preset", name])
+    d, _ = prs_element.parse_args([])
+    assert p.fine_size == pytest.approx(h) and p.mesh_size == pytest.approx(20 * h)
+    assert p.two_way_tol == tol
+    assert (p.n, p.damping, p.hold_steps) == (d.n, d.damping, d.hold_steps)

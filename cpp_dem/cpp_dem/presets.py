@@ -2,10 +2,12 @@
 
 Each preset sets the time-step safety factor, the geogrid node density scale, the Cundall
 local damping of the loading stage, and the loading rate as an inertial number I (the loading
-velocity follows from the scene: v = I sqrt(sigma / rho)). Their measured cost and error are in
+velocity follows from the scene: v = I sqrt(sigma / rho)); for coupled runs also the fine FEM
+mesh size (relative to the DEM element's edge) and the two-way tolerance. Their measured cost and error are in
 docs/speed_accuracy.md (`bench/speed_accuracy.py --presets` on the 000 pull-out,
-`bench/triaxial_accuracy.py --presets` on the triaxial test). Applied by
-``cpp_dem.pullout.apply_preset`` and ``cpp_dem.triaxial.apply_preset``.
+`bench/triaxial_accuracy.py --presets` on the triaxial test, `bench/coupled_accuracy.py
+--study presets` on the coupled PRS element). Applied by ``cpp_dem.pullout.apply_preset``,
+``cpp_dem.triaxial.apply_preset`` and ``cases/prs_element.py --preset``.
 """
 
 from __future__ import annotations
@@ -25,6 +27,8 @@ class Preset:
     node_density_scale: object  #: geogrid node mass factor, or "auto"
     local_damping: float        #: Cundall local damping during loading, -
     inertial_number: float      #: loading rate as I = v sqrt(rho / sigma), -
+    fem_size_per_element: float = 0.25  #: coupled runs: fine FEM mesh size / element edge, -
+    two_way_tol: float = 0.02   #: coupled runs: two-way tolerance on the handed-over stress, -
 
     def velocity(self, *, density: float, stress: float) -> float:
         """Loading velocity, m/s, for grains of ``density`` (kg/m^3) under ``stress`` (Pa)."""
@@ -42,11 +46,13 @@ class Preset:
 
 PRESETS = {
     "fast": Preset("fast", dt_safety=0.8, node_density_scale=1e5, local_damping=0.2,
-                   inertial_number=6.4e-3),
+                   inertial_number=6.4e-3, fem_size_per_element=0.5, two_way_tol=0.1),
     "balanced": Preset("balanced", dt_safety=0.5, node_density_scale="auto",
-                       local_damping=0.2, inertial_number=3.2e-3),
+                       local_damping=0.2, inertial_number=3.2e-3, fem_size_per_element=0.25,
+                       two_way_tol=0.02),
     "accurate": Preset("accurate", dt_safety=0.35, node_density_scale=3e3,
-                       local_damping=0.05, inertial_number=8e-4),
+                       local_damping=0.05, inertial_number=8e-4, fem_size_per_element=0.125,
+                       two_way_tol=0.005),
 }
 
 
