@@ -70,6 +70,8 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+from _machine import busy_cpu_seconds, own_cpu_seconds  # noqa: E402  (bench/ is on sys.path)
+
 ROOT = Path(__file__).resolve().parents[1]
 PKG_SRC = ROOT / "cpp_dem" / "cpp_dem"
 DEFAULT_BUILD = ROOT / "build" / "lean"
@@ -98,20 +100,6 @@ def fem_modules_loaded() -> dict:
     tops = {name.split(".")[0] for name in list(sys.modules)}
     return {"fem_modules": sorted(m for m in FEM_MODULES if m in tops),
             "fem_related_modules": sorted(m for m in FEM_MODULES_INFO if m in tops)}
-
-
-# ---- machine load (as bench/throughput.py; repeated so the worker imports nothing) -------------
-
-def _busy_cpu_seconds() -> float:
-    with open("/proc/stat", encoding="ascii") as fh:
-        fields = [int(v) for v in fh.readline().split()[1:]]
-    idle = fields[3] + (fields[4] if len(fields) > 4 else 0)
-    return (sum(fields[:8]) - idle) / os.sysconf("SC_CLK_TCK")
-
-
-def _own_cpu_seconds() -> float:
-    t = os.times()
-    return t.user + t.system
 
 
 # ---- worker: one timed block in a fresh process -----------------------------------------------
@@ -155,11 +143,11 @@ def worker(cfg: dict) -> dict:
 
     scene.run(cfg["warmup"])
     builds0 = scene.collider_stats()["builds"]
-    busy0, own0 = _busy_cpu_seconds(), _own_cpu_seconds()
+    busy0, own0 = busy_cpu_seconds(), own_cpu_seconds()
     c0, w0 = time.process_time(), time.perf_counter()
     scene.run(cfg["steps"])
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
-    other = max(0.0, _busy_cpu_seconds() - busy0 - (_own_cpu_seconds() - own0))
+    other = max(0.0, busy_cpu_seconds() - busy0 - (own_cpu_seconds() - own0))
 
     pos = np.ascontiguousarray(scene.positions, dtype=np.float64)
     state = hashlib.sha256(pos.tobytes())
@@ -456,9 +444,9 @@ def wait_idle(max_wait_s: float, threshold: float = 0.1) -> float:
     """Waits until other processes use < threshold cores (or max_wait_s); returns their load."""
     t0 = time.perf_counter()
     while True:
-        b0, o0 = _busy_cpu_seconds(), _own_cpu_seconds()
+        b0, o0 = busy_cpu_seconds(), own_cpu_seconds()
         time.sleep(1.0)
-        load = max(0.0, (_busy_cpu_seconds() - b0) - (_own_cpu_seconds() - o0))
+        load = max(0.0, (busy_cpu_seconds() - b0) - (own_cpu_seconds() - o0))
         if load < threshold or time.perf_counter() - t0 > max_wait_s:
             return load
 

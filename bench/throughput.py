@@ -64,6 +64,8 @@ import tempfile  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
+from _machine import busy_cpu_seconds, own_cpu_seconds  # noqa: E402  (bench/ is on sys.path)
+
 import numpy as np  # noqa: E402
 
 import cpp_dem as dem  # noqa: E402
@@ -130,33 +132,18 @@ def log(msg: str) -> None:
     print(f"[throughput] {msg}", file=sys.stderr, flush=True)
 
 
-# ---- machine load -----------------------------------------------------------------------------
-
-def _busy_cpu_seconds() -> float:
-    """CPU seconds spent busy (not idle/iowait) by the whole machine since boot."""
-    with open("/proc/stat", encoding="ascii") as fh:
-        fields = [int(v) for v in fh.readline().split()[1:]]
-    idle = fields[3] + (fields[4] if len(fields) > 4 else 0)
-    return (sum(fields[:8]) - idle) / os.sysconf("SC_CLK_TCK")
-
-
-def _own_cpu_seconds() -> float:
-    t = os.times()
-    return t.user + t.system
-
-
 class LoadMeter:
     """CPU used by this process and by everything else on the machine during a block."""
 
     def __enter__(self):
-        self.busy0, self.own0 = _busy_cpu_seconds(), _own_cpu_seconds()
+        self.busy0, self.own0 = busy_cpu_seconds(), own_cpu_seconds()
         self.t0 = time.perf_counter()
         return self
 
     def __exit__(self, *exc):
         self.wall = time.perf_counter() - self.t0
-        self.own = _own_cpu_seconds() - self.own0
-        self.other = max(0.0, _busy_cpu_seconds() - self.busy0 - self.own)
+        self.own = own_cpu_seconds() - self.own0
+        self.other = max(0.0, busy_cpu_seconds() - self.busy0 - self.own)
         return False
 
 
@@ -171,10 +158,10 @@ def wait_idle(max_wait_s: float, threshold: float = 0.1) -> float:
 
 def other_load_now(seconds: float = 0.5) -> float:
     """Cores busy with other processes, averaged over a short sleep."""
-    b0 = _busy_cpu_seconds()
-    o0 = _own_cpu_seconds()
+    b0 = busy_cpu_seconds()
+    o0 = own_cpu_seconds()
     time.sleep(seconds)
-    return max(0.0, (_busy_cpu_seconds() - b0) - (_own_cpu_seconds() - o0)) / seconds
+    return max(0.0, (busy_cpu_seconds() - b0) - (own_cpu_seconds() - o0)) / seconds
 
 
 # ---- provenance -------------------------------------------------------------------------------
