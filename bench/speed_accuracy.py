@@ -81,6 +81,25 @@ def run_pull(base, distance: float, velocity: float, **settings) -> dict:
             "inertial_number": pullout.inertial_number(velocity, rho, base.pressure)}
 
 
+OUTPUTS = ("force_end_N", "force_max_N", "force_mean_N", "A1_mean_N", "A2_mean_N")
+
+
+def over_seeds(base, field: str, value, distance: float, seeds: int) -> dict:
+    """The knob at ``value`` on samples of seeds 1..``seeds``: the mean of every output and
+    CPU time over the samples, and each output's sample standard deviation (``sd_...``)."""
+    runs = [one(dataclasses.replace(base, seed=k), field, value, distance)
+            for k in range(1, seeds + 1)]
+    row = dict(runs[0])
+    for k in (*OUTPUTS, "cpu_s", "wall_s"):
+        vals = [r[k] for r in runs]
+        row[k] = float(sum(vals) / len(vals))
+        if k in OUTPUTS:
+            m = row[k]
+            row[f"sd_{k}"] = float((sum((v - m) ** 2 for v in vals) / (len(vals) - 1)) ** 0.5)
+    row["seeds"] = seeds
+    return row
+
+
 def one(base, field: str, value, distance: float) -> dict:
     """One knob (a Params field) at ``value`` for the pull, the others at their defaults."""
     if field == "velocity":
@@ -101,7 +120,7 @@ def with_errors(rows: list, ref: dict, out: Path | None = None) -> None:
     """Adds the relative errors and the cost (CPU time) against ``ref`` to every row, prints
     it and appends it to ``out``."""
     for r in rows:
-        for k in ("force_end_N", "force_max_N", "force_mean_N", "A1_mean_N", "A2_mean_N"):
+        for k in OUTPUTS:
             r[f"err_{k}"] = (r[k] - ref[k]) / ref[k]
         r["cost_vs_reference"] = r["cpu_s"] / ref["cpu_s"]
         emit({"case": CASE, **r}, out)
@@ -136,10 +155,15 @@ def main(argv=None) -> int:
                          "smoke scene; the spheres knob then runs 3000, 6000, 9000")
     ap.add_argument("--out", type=Path, default=None,
                     help="append the JSON lines to this file (for bench/pareto.py)")
+    ap.add_argument("--seeds", type=int, default=1,
+                    help="spheres knob: samples per count (seeds 1..K); rows hold the means "
+                         "over the samples and their standard deviations (sd_*)")
     ap.add_argument("--presets", action="store_true",
                     help="measure the presets fast/balanced/accurate against the most "
                          "accurate value of every knob at once, instead of the knobs")
     a = ap.parse_args(argv)
+    if a.seeds < 1:
+        ap.error(f"--seeds={a.seeds}: must be >= 1")
     dem.set_num_threads(a.threads)
     base = case.Params() if a.full else case.Params(**case.SMOKE)
     if a.full:
@@ -151,7 +175,12 @@ def main(argv=None) -> int:
         a.knobs = []
     for knob in a.knobs:
         values, ref_i, field = KNOBS[knob]
-        runs = [{**one(base, field, v, a.distance), "knob": knob, "value": v} for v in values]
+        if a.seeds > 1 and knob == "spheres":
+            runs = [{**over_seeds(base, field, v, a.distance, a.seeds), "knob": knob,
+                     "value": v} for v in values]
+        else:
+            runs = [{**one(base, field, v, a.distance), "knob": knob, "value": v}
+                    for v in values]
         with_errors(runs, runs[ref_i], a.out)
         table += runs
     markdown_table(table, [
