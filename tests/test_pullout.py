@@ -146,6 +146,17 @@ def test_first_peak_and_summary_statistics():
     assert pullout.inertial_number(0.01, 2500.0, 25e3) == pytest.approx(0.01 * 0.31622776601)
 
 
+def test_first_peak_of_a_rising_curve_is_its_end():
+    """A curve that rises to the end of the record has no initial peak before the end: the
+    smoothing must not sag at the last records (a zero-padded moving average fell by 40 %
+    there and reported a false peak 1.5 records before the end)."""
+    d = np.linspace(0, 0.05, 101)
+    f = 1000 * d / 0.05 + 50
+    dp, fp = pullout.first_peak(d, f)
+    assert dp == pytest.approx(d[-1])
+    assert fp == pytest.approx(np.mean(f[-3:]), rel=1e-12)
+
+
 def _run_case(script, out, *extra):
     r = subprocess.run([sys.executable, str(ROOT / "cases" / script), "--smoke", "--out",
                         str(out), *extra], capture_output=True, text=True, timeout=600)

@@ -441,7 +441,10 @@ def first_peak(displacement, force, *, drop: float = 0.1, window: int = 5) -> tu
     if len(f) == 0:
         raise ParameterError("force: empty record")
     w = max(1, min(int(window), len(f)))
-    fs = np.convolve(f, np.ones(w) / w, mode="same")
+    # Centred moving average over the records inside the window (near the ends fewer: a
+    # zero-padded average would sag there and fake a drop at the end of a rising curve).
+    fs = (np.convolve(f, np.ones(w), mode="same")
+          / np.convolve(np.ones_like(f), np.ones(w), mode="same"))
     k_max = 0
     for k in range(len(fs)):
         if fs[k] > fs[k_max]:
