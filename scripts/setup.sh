@@ -48,9 +48,12 @@ fi
 SRC_HASH=$(cat CMakeLists.txt pyproject.toml $(find cpp_dem/include cpp_dem/src cpp_dem/bindings -type f | sort) | sha256sum | cut -d' ' -f1)
 BUILD_STAMP="$VENV/.build-stamp"
 if [ ! -f "$BUILD_STAMP" ] || [ "$(cat "$BUILD_STAMP")" != "$SRC_HASH" ] || \
-   ! "$PY" -c "import cpp_dem._core" >/dev/null 2>&1; then
+   ! "$PY" -c "import cpp_dem._core as c; assert c.GEOGRID" >/dev/null 2>&1; then
+  # The default build (with the geogrid): a lean build installed by hand
+  # (-DCPP_DEM_GEOGRID=OFF, docs/lean_build.md) is replaced, the CMake cache keeps options.
   say "building the C++ core (editable install)"
-  "$PY" -m pip install -q --no-build-isolation --no-deps -e "$ROOT"
+  "$PY" -m pip install -q --no-build-isolation --no-deps -e "$ROOT" \
+    -Ccmake.define.CPP_DEM_GEOGRID=ON
   echo "$SRC_HASH" > "$BUILD_STAMP"
 fi
 say "ready: $($PY -c 'import cpp_dem, sys; print("cpp_dem", "python", sys.version.split()[0], "threads", cpp_dem.get_num_threads())')"
