@@ -123,10 +123,17 @@ def test_bending_moment_is_capped_by_eq_11():
     m_max = 4 * sigma * (math.pi * RC**4 / 4) / RC  # 000 eq (11)
     ext[g.nodes[-1]] = [0, 0, -3 * m_max / 0.04]  # would need 3 M_max at the root
     s.external_forces = ext
-    s.run(20000)
-    mb = np.linalg.norm(s.grid_link_bending_moments, axis=1)
-    assert mb.max() <= m_max * (1 + 1e-12)
-    assert mb.max() == pytest.approx(m_max, rel=1e-9)
+    # The root hinges and the beam swings down; near the bottom of a swing the moment dips
+    # below the cap for a moment, so the moments are sampled through the run: never above
+    # the cap, and at it while the hinge turns.
+    peaks = []
+    for _ in range(20):
+        s.run(1000)
+        mb = np.linalg.norm(s.grid_link_bending_moments, axis=1)
+        assert mb.max() <= m_max * (1 + 1e-12)
+        peaks.append(mb.max())
+    assert max(peaks) == pytest.approx(m_max, rel=1e-9)
+    assert sum(p == pytest.approx(m_max, rel=1e-9) for p in peaks) >= 10
     assert s.energies()["plastic"] >= 0
 
 

@@ -112,7 +112,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.vec(s.pair_out_);
   w.vec(s.wall_contacts_);
   w.vec(s.pair_jadj_off_);
-  w.vec(s.pair_jadj_);
+  w.vec(s.pair_jslot_);
   w.vec(s.pair_ioff_);
   w.vec(s.wall_adj_off_);
   w.vec(s.wall_adj_);
@@ -209,7 +209,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   r.vec(t.pair_out_);
   r.vec(t.wall_contacts_);
   r.vec(t.pair_jadj_off_);
-  r.vec(t.pair_jadj_);
+  r.vec(t.pair_jslot_);
   r.vec(t.pair_ioff_);
   r.vec(t.wall_adj_off_);
   r.vec(t.wall_adj_);

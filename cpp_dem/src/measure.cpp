@@ -196,7 +196,7 @@ Real Scene::unbalanced_force() const {
   int nc = 0;
   for (size_t k = 0; k < pairs_.size(); ++k)
     if (pairs_[k].active) {
-      sum_c += pair_out_[k].force.norm();
+      sum_c += pair_force(k).norm();
       ++nc;
     }
   for (const WallContact& c : wall_contacts_)

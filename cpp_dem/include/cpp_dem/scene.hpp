@@ -61,12 +61,12 @@ struct PairContactCold {
   Real dissip_viscous = 0;      ///< ContactState::dissip_viscous, J
 };
 
-/// What a sphere–sphere contact gives its two bodies in the last step, kept apart from the
-/// contact's history in a compact array so the reduction into bodies reads little memory.
-/// Zero for an inactive contact.
+/// What a sphere–sphere contact gives its body j in the last step, kept apart from the
+/// contact's history in a compact array grouped by j, so the reduction into bodies reads it
+/// contiguously. Zero for an inactive contact.
+/// (i's share is summed by the pair pass per body, Scene::pair_fi_ / pair_ti_.)
 struct PairOutput {
   Vec3 force = Vec3::Zero();     ///< force on j (i gets -force), N
-  Vec3 torque_i = Vec3::Zero();  ///< torque on i, N m
   Vec3 torque_j = Vec3::Zero();  ///< torque on j, N m
 };
 
@@ -74,6 +74,9 @@ struct PairOutput {
 struct WallContact {
   int body = 0, wall = 0;
   bool active = false;
+  /// Linear law without viscous damping and rolling resistance: the wall pass runs its
+  /// short kernel (the same operations as apply_law).
+  bool simple = false;
   int phys_version = -1;
   ContactPhys phys;
   ContactState state;
@@ -262,7 +265,7 @@ class Scene {
     return s;
   }
   /// Force on body j of pair contact k, N (zero when inactive).
-  const Vec3& pair_force(size_t k) const { return pair_out_[k].force; }
+  const Vec3& pair_force(size_t k) const { return pair_out_[pair_jslot_[k]].force; }
   const std::vector<WallContact>& wall_contacts() const { return wall_contacts_; }
   int num_active_contacts() const;
 
@@ -328,13 +331,16 @@ class Scene {
   std::vector<PairContact> pairs_;
   std::vector<PairContactCold> pair_cold_;
   std::vector<PairOutput> pair_out_;
+  // Per body: the sum over its contacts as i of -force and torque_i, written by the pair
+  // pass every step (scratch, not state).
+  std::vector<Vec3> pair_fi_, pair_ti_;
   std::vector<WallContact> wall_contacts_;
-  // Pair contacts of body b: those where b is j are pair_jadj_[pair_jadj_off_[b] ..
-  // pair_jadj_off_[b + 1]) (contact indices, ascending), those where b is i are the contacts
-  // pair_ioff_[b] .. pair_ioff_[b + 1] (contiguous: pairs_ is sorted by (i, j)). Every
-  // j-side contact has a smaller index than every i-side one, so "j side, then i side" is
-  // contact order: the reduction into bodies has a fixed order without a branch per entry.
-  std::vector<int> pair_jadj_off_, pair_jadj_, pair_ioff_, wall_adj_off_, wall_adj_;
+  // Pair contacts of body b: those where b is i are the contacts pair_ioff_[b] ..
+  // pair_ioff_[b + 1] (contiguous: pairs_ is sorted by (i, j)); those where b is j have their
+  // outputs in pair_out_[pair_jadj_off_[b] .. pair_jadj_off_[b + 1]) (grouped by j, ascending
+  // contact index within a group; contact k writes to slot pair_jslot_[k]). The reduction
+  // into bodies reads both in a fixed order, contiguously, without a branch per entry.
+  std::vector<int> pair_jadj_off_, pair_jslot_, pair_ioff_, wall_adj_off_, wall_adj_;
   // Geogrid.
   int num_nodes_ = 0;
   std::vector<GridLink> links_;
