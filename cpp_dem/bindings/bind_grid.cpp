@@ -76,7 +76,8 @@ M_r^max = 4 sigma_n^max I / R, M_tw^max = 2 sigma_n^max J / R (plastic caps).
       .def_property_readonly("num_grid_links", &Scene::num_grid_links)
       .def_property_readonly("num_pfacets", &Scene::num_pfacets)
       .def_property_readonly("body_kinds", [](const Scene& s) {
-        return std::vector<int>(s.body_kinds().begin(), s.body_kinds().end());
+        const auto k = s.by_id(s.body_kinds());
+        return std::vector<int>(k.begin(), k.end());
       }, "0 sphere, 1 grid node, per body.")
       .def_property_readonly("grid_link_nodes", [](const Scene& s) {
         py::array_t<int> out({static_cast<py::ssize_t>(s.num_grid_links()), py::ssize_t(2)});
@@ -146,7 +147,7 @@ M_r^max = 4 sigma_n^max I / R, M_tw^max = 2 sigma_n^max J / R (plastic caps).
         std::vector<Real> overlap;
         for (const GridContact& c : s.grid_contacts()) {
           if (!c.active) continue;
-          sphere.push_back(c.sphere);
+          sphere.push_back(s.id_of(c.sphere));
           kind.push_back(static_cast<int>(c.kind));
           prim.push_back(c.prim);
           force.push_back(c.force);

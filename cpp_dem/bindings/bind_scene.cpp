@@ -31,8 +31,8 @@ py::dict contacts_dict(const Scene& s) {
   for (size_t k = 0; k < s.pair_contacts().size(); ++k) {
     const auto& c = s.pair_contacts()[k];
     if (!c.active) continue;
-    ids.push_back(c.i);
-    ids.push_back(c.j);
+    ids.push_back(s.id_of(c.i));
+    ids.push_back(s.id_of(c.j));
     force.push_back(s.pair_force(k));
     normal.push_back(c.normal);
     overlap.push_back(c.overlap);
@@ -40,7 +40,7 @@ py::dict contacts_dict(const Scene& s) {
   }
   for (const auto& c : s.wall_contacts()) {
     if (!c.active) continue;
-    ids.push_back(c.body);
+    ids.push_back(s.id_of(c.body));
     ids.push_back(-1 - c.wall);
     force.push_back(c.force);
     normal.push_back(c.state.normal);
@@ -114,55 +114,61 @@ void bind_scene(py::module_& m) {
         for (int i = 0; i < s.num_walls(); ++i) v.push_back(s.wall(i).sense);
         return v;
       })
-      .def_property("positions", [](const Scene& s) { return vec3_array(s.positions()); },
-                    [](Scene& s, const Array& a) { s.set_positions(to_vec3_list(a, "positions")); },
+      .def_property("positions", [](const Scene& s) { return vec3_array(s.by_id(s.positions())); },
+                    [](Scene& s, const Array& a) { s.set_positions(s.by_slot(to_vec3_list(a, "positions"))); },
                     "Body centres, m, shape (n, 3).")
-      .def_property("velocities", [](const Scene& s) { return vec3_array(s.velocities()); },
-                    [](Scene& s, const Array& a) { s.set_velocities(to_vec3_list(a, "velocities")); },
+      .def_property("velocities", [](const Scene& s) { return vec3_array(s.by_id(s.velocities())); },
+                    [](Scene& s, const Array& a) { s.set_velocities(s.by_slot(to_vec3_list(a, "velocities"))); },
                     "Body velocities, m/s, shape (n, 3) (leapfrog: at the last half step).")
       .def_property("angular_velocities",
-                    [](const Scene& s) { return vec3_array(s.angular_velocities()); },
+                    [](const Scene& s) { return vec3_array(s.by_id(s.angular_velocities())); },
                     [](Scene& s, const Array& a) {
-                      s.set_angular_velocities(to_vec3_list(a, "angular_velocities"));
+                      s.set_angular_velocities(s.by_slot(to_vec3_list(a, "angular_velocities")));
                     },
                     "Angular velocities, rad/s, shape (n, 3).")
-      .def_property_readonly("forces", [](const Scene& s) { return vec3_array(s.forces()); },
+      .def_property_readonly("forces", [](const Scene& s) { return vec3_array(s.by_id(s.forces())); },
                              "Resultant force on each body at the last step (contacts, gravity, "
                              "external), N, shape (n, 3).")
-      .def_property_readonly("torques", [](const Scene& s) { return vec3_array(s.torques()); },
+      .def_property_readonly("torques", [](const Scene& s) { return vec3_array(s.by_id(s.torques())); },
                              "Resultant torque, N m, shape (n, 3).")
-      .def_property("radii", [](const Scene& s) { return real_array(s.radii()); },
-                    [](Scene& s, const Array& a) { s.set_radii(to_real_list(a, "radii")); },
+      .def_property("radii", [](const Scene& s) { return real_array(s.by_id(s.radii())); },
+                    [](Scene& s, const Array& a) { s.set_radii(s.by_slot(to_real_list(a, "radii"))); },
                     "Radii, m, shape (n,). Setting them rescales masses and inertias.")
-      .def_property_readonly("masses", [](const Scene& s) { return real_array(s.masses()); },
+      .def_property_readonly("masses", [](const Scene& s) { return real_array(s.by_id(s.masses())); },
                              "Masses, kg, shape (n,).")
-      .def_property_readonly("inertias", [](const Scene& s) { return real_array(s.inertias()); },
+      .def_property_readonly("inertias", [](const Scene& s) { return real_array(s.by_id(s.inertias())); },
                              "Moments of inertia, kg m^2, shape (n,).")
       .def_property_readonly("orientations", [](const Scene& s) {
         py::array_t<double> out({static_cast<py::ssize_t>(s.num_bodies()), py::ssize_t(4)});
         auto r = out.mutable_unchecked<2>();
         for (int b = 0; b < s.num_bodies(); ++b) {
-          const Quat& q = s.orientations()[b];
+          const Quat& q = s.orientations()[s.slot_of(b)];
           r(b, 0) = q.w(); r(b, 1) = q.x(); r(b, 2) = q.y(); r(b, 3) = q.z();
         }
         return out;
       }, "Orientation quaternions (w, x, y, z), shape (n, 4).")
-      .def_property_readonly("material_ids", [](const Scene& s) { return s.body_materials(); })
-      .def_property("external_forces", [](const Scene& s) { return vec3_array(s.external_forces()); },
+      .def_property_readonly("material_ids", [](const Scene& s) { return s.by_id(s.body_materials()); })
+      .def_property("external_forces", [](const Scene& s) { return vec3_array(s.by_id(s.external_forces())); },
                     [](Scene& s, const Array& a) {
-                      s.set_external_forces(to_vec3_list(a, "external_forces"));
+                      s.set_external_forces(s.by_slot(to_vec3_list(a, "external_forces")));
                     },
                     "Constant external force on each body, N, shape (n, 3).")
-      .def_property("external_torques", [](const Scene& s) { return vec3_array(s.external_torques()); },
+      .def_property("external_torques", [](const Scene& s) { return vec3_array(s.by_id(s.external_torques())); },
                     [](Scene& s, const Array& a) {
-                      s.set_external_torques(to_vec3_list(a, "external_torques"));
+                      s.set_external_torques(s.by_slot(to_vec3_list(a, "external_torques")));
                     },
                     "Constant external torque on each body, N m, shape (n, 3).")
       .def("_set_blocked", &Scene::set_blocked, py::arg("body"), py::arg("mask"))
       .def_property_readonly("_blocked", [](const Scene& s) {
-        return std::vector<int>(s.blocked().begin(), s.blocked().end());
+        const auto b = s.by_id(s.blocked());
+        return std::vector<int>(b.begin(), b.end());
       })
       .def("set_body_material", &Scene::set_body_material, py::arg("body"), py::arg("material"))
+      .def_property("spatial_sort", &Scene::spatial_sort, &Scene::set_spatial_sort,
+                    "Store the spheres in spatial order at the first broad-phase build (default "
+                    "True; ids and every array seen from Python are unchanged).")
+      .def_property_readonly("identity_order", &Scene::identity_order,
+                             "True while the bodies are stored in id order.")
       .def_property("dt", &Scene::dt, &Scene::set_dt, "Time step, s.")
       .def_property("gravity", [](const Scene& s) {
         return std::vector<double>{s.gravity()[0], s.gravity()[1], s.gravity()[2]};

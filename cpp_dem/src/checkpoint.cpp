@@ -99,6 +99,8 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.vec(s.body_mat_);
   w.vec(s.blocked_);
   w.vec(s.kind_);
+  w.vec(s.id_of_slot_);
+  w.put(s.spatial_sort_);
   w.vec(s.pos_at_build_);
   w.vec(s.radius_at_build_);
   w.vec(s.ke_);
@@ -197,6 +199,19 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   r.vec(t.body_mat_);
   r.vec(t.blocked_);
   r.vec(t.kind_);
+  r.vec(t.id_of_slot_);
+  r.get(t.spatial_sort_);
+  if (!t.id_of_slot_.empty()) {
+    if (t.id_of_slot_.size() != t.pos_.size())
+      throw ParameterError("checkpoint: corrupt storage order");
+    t.slot_of_id_.assign(t.id_of_slot_.size(), -1);
+    for (size_t b = 0; b < t.id_of_slot_.size(); ++b) {
+      const int id = t.id_of_slot_[b];
+      if (id < 0 || id >= static_cast<int>(t.pos_.size()) || t.slot_of_id_[id] != -1)
+        throw ParameterError("checkpoint: corrupt storage order");
+      t.slot_of_id_[id] = static_cast<int>(b);
+    }
+  }
   r.vec(t.pos_at_build_);
   r.vec(t.radius_at_build_);
   r.vec(t.ke_);

@@ -300,7 +300,10 @@ void RadiusGrowth::apply(Scene& scene) {
     for (size_t b = 0; b < radii_.size(); ++b)
       if (kind[b] == 0) radii_[b] *= m;
   } else {
-    for (int b : bodies_) radii_.at(b) *= m;
+    for (int b : bodies_) {
+      const bool known = b >= 0 && b < static_cast<int>(radii_.size());
+      radii_.at(known ? scene.slot_of(b) : b) *= m;  // ids -> storage order
+    }
   }
   scene.set_radii(radii_);
 }

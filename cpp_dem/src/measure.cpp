@@ -94,7 +94,7 @@ Real Scene::critical_dt_body(int* arg_body) const {
         d = std::min(d, std::sqrt(2 * inertia_[b] / kr[b][a]));
       if (d < dt) {
         dt = d;
-        if (arg_body) *arg_body = b;
+        if (arg_body) *arg_body = id_of(b);
       }
     }
   }

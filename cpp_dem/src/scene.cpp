@@ -69,6 +69,11 @@ int Scene::add_spheres(const std::vector<Vec3>& pos, const std::vector<Real>& ra
 
 void Scene::push_body(const Vec3& x, Real radius, Real mass, Real inertia, int material,
                       std::uint8_t kind) {
+  if (!id_of_slot_.empty()) {
+    // A new body is stored at the end, under its own id.
+    id_of_slot_.push_back(num_bodies());
+    slot_of_id_.push_back(num_bodies());
+  }
   pos_.push_back(x);
   vel_.push_back(Vec3::Zero());
   angvel_.push_back(Vec3::Zero());
@@ -137,8 +142,8 @@ void Scene::set_radii(const std::vector<Real>& r) {
     if (kind_[b] != 0) {
       // Grid nodes keep their lumped mass; their radius is the geogrid's R_c.
       if (r[b] != radius_[b])
-        throw ParameterError("radius[" + std::to_string(b) + "]=" + std::to_string(r[b]) +
-                             ": body " + std::to_string(b) +
+        throw ParameterError("radius[" + std::to_string(id_of(b)) + "]=" + std::to_string(r[b]) +
+                             ": body " + std::to_string(id_of(b)) +
                              " is a grid node; its radius (the geogrid's R_c) cannot change");
       continue;
     }
@@ -153,7 +158,7 @@ void Scene::set_blocked(int body, std::uint8_t mask) {
   check_body(body);
   if (mask > DOF_ALL)
     throw ParameterError("blocked=" + std::to_string(mask) + ": must be a mask of x y z rx ry rz");
-  blocked_[body] = mask;
+  blocked_[slot_of(body)] = mask;
 }
 void Scene::set_external_forces(const std::vector<Vec3>& f) {
   require_size(f, pos_.size(), "external_forces");
@@ -166,6 +171,7 @@ void Scene::set_external_torques(const std::vector<Vec3>& t) {
 void Scene::set_body_material(int body, int material) {
   check_body(body);
   this->material(material);
+  body = slot_of(body);
   body_mat_[body] = material;
   mass_[body] = sphere_mass(materials_[material].density, radius_[body]);
   inertia_[body] = 0.4 * mass_[body] * radius_[body] * radius_[body];
@@ -175,6 +181,7 @@ void Scene::set_mass_inertia(int body, Real mass, Real inertia) {
   check_body(body);
   require(std::isfinite(mass) && mass > 0, "mass", mass, "must be > 0 (kg)");
   require(std::isfinite(inertia) && inertia > 0, "inertia", inertia, "must be > 0 (kg m^2)");
+  body = slot_of(body);
   mass_[body] = mass;
   inertia_[body] = inertia;
   ++phys_version_;
@@ -259,7 +266,97 @@ bool Scene::need_rebuild() const {
   return worst > half;
 }
 
+namespace {
+/// The lowest 21 bits of v spread to every third bit (Morton code of one axis).
+std::uint64_t spread_bits(std::uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffULL;
+  v = (v | v << 16) & 0x1f0000ff0000ffULL;
+  v = (v | v << 8) & 0x100f00f00f00f00fULL;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+  v = (v | v << 2) & 0x1249249249249249ULL;
+  return v;
+}
+}  // namespace
+
+void Scene::sort_bodies_spatially() {
+  const int n = num_bodies();
+  std::vector<int> slots;  // sphere slots, ascending; grid nodes keep theirs
+  Vec3 lo = Vec3::Constant(kInf), hi = Vec3::Constant(-kInf);
+  Real rsum = 0;
+  for (int b = 0; b < n; ++b) {
+    if (kind_[b] != 0) continue;
+    if (!pos_[b].allFinite()) return;
+    slots.push_back(b);
+    lo = lo.cwiseMin(pos_[b]);
+    hi = hi.cwiseMax(pos_[b]);
+    rsum += radius_[b];
+  }
+  if (slots.size() < 2) return;
+  // Cells one mean diameter wide (at most 2^21 per axis), in Morton (Z) order: a body's
+  // neighbours are mostly within a few hundred slots of it.
+  const Real cell = std::max(2.0 * rsum / static_cast<Real>(slots.size()),
+                             (hi - lo).maxCoeff() / 2097151.0);
+  if (!(cell > 0)) return;
+  std::vector<std::pair<std::uint64_t, int>> key(slots.size());
+  for (size_t k = 0; k < slots.size(); ++k) {
+    const Vec3 c = (pos_[slots[k]] - lo) / cell;
+    std::uint64_t code = 0;
+    for (int a = 0; a < 3; ++a) {
+      const auto q = static_cast<std::uint64_t>(std::clamp(c[a], 0.0, 2097151.0));
+      code |= spread_bits(q) << a;
+    }
+    key[k] = {code, slots[k]};
+  }
+  std::sort(key.begin(), key.end());  // ties by slot: the order is deterministic
+  // perm[new slot] = old slot.
+  std::vector<int> perm(n);
+  for (int b = 0; b < n; ++b) perm[b] = b;
+  bool identity = true;
+  for (size_t k = 0; k < slots.size(); ++k) {
+    perm[slots[k]] = key[k].second;
+    identity = identity && key[k].second == slots[k];
+  }
+  if (identity) return;
+  const auto permute = [&](auto& v) {
+    if (static_cast<int>(v.size()) != n) return;  // not in use (energy arrays)
+    auto old = v;
+    for (int b = 0; b < n; ++b) v[b] = old[perm[b]];
+  };
+  permute(pos_);
+  permute(vel_);
+  permute(angvel_);
+  permute(force_);
+  permute(torque_);
+  permute(ext_force_);
+  permute(ext_torque_);
+  permute(ori_);
+  permute(radius_);
+  permute(mass_);
+  permute(inertia_);
+  permute(body_mat_);
+  permute(blocked_);
+  permute(kind_);
+  permute(ke_);
+  permute(damp_dissip_);
+  permute(ext_work_);
+  permute(pos_at_energy_reset_);
+  permute(pos_at_build_);
+  permute(radius_at_build_);
+  permute(pair_fi_);
+  permute(pair_ti_);
+  std::vector<int> ids(n);
+  for (int b = 0; b < n; ++b) ids[b] = id_of(perm[b]);
+  id_of_slot_.swap(ids);
+  slot_of_id_.assign(n, 0);
+  for (int b = 0; b < n; ++b) slot_of_id_[id_of_slot_[b]] = b;
+  disp_valid_ = false;
+}
+
 void Scene::rebuild() {
+  // Spatial order while no contact (and so no contact history) exists yet.
+  if (spatial_sort_ && pairs_.empty() && wall_contacts_.empty() && grid_contacts_.empty())
+    sort_bodies_spatially();
   const Real margin = margin_ > 0 ? margin_ : default_margin();
   const int n = num_bodies();
   grid_.build(pos_, radius_, kind_, margin);
@@ -648,13 +745,13 @@ void Scene::raise_overlap(long k, bool wall) const {
     const WallContact& c = wall_contacts_[k];
     const Wall& w = walls_[c.wall];
     const Real s = w.sense * (pos_[c.body][w.axis] - w.position);
-    os << "blow-up at step " << step_ << ": body " << c.body << " overlaps wall " << c.wall
+    os << "blow-up at step " << step_ << ": body " << id_of(c.body) << " overlaps wall " << c.wall
        << " by " << (radius_[c.body] - s) / radius_[c.body]
        << " of its radius (max_overlap_ratio=" << max_overlap_ratio_ << why;
   } else {
     const PairContact& c = pairs_[k];
     const Real ov = radius_[c.i] + radius_[c.j] - (pos_[c.j] - pos_[c.i]).norm();
-    os << "blow-up at step " << step_ << ": bodies " << c.i << " and " << c.j
+    os << "blow-up at step " << step_ << ": bodies " << id_of(c.i) << " and " << id_of(c.j)
        << " overlap by " << ov / std::min(radius_[c.i], radius_[c.j])
        << " of the smaller radius (max_overlap_ratio=" << max_overlap_ratio_ << why;
     if (!std::isfinite(ov)) os << " (non-finite position)";
@@ -900,7 +997,7 @@ void Scene::step() {
         const GridContact& c = grid_contacts_[err_grid];
         std::ostringstream os;
         os.precision(4);
-        os << "blow-up at step " << step_ << ": sphere " << c.sphere
+        os << "blow-up at step " << step_ << ": sphere " << id_of(c.sphere)
            << " overlaps the geogrid ("
            << (c.kind == GridPrimitive::Node         ? "node "
                : c.kind == GridPrimitive::Connection ? "connection "
@@ -922,7 +1019,7 @@ void Scene::step() {
   if (err_body != std::numeric_limits<long>::max()) {
     const int b = static_cast<int>(err_body);
     std::ostringstream os;
-    os << "blow-up at step " << step_ << ": body " << b << " has a non-finite ";
+    os << "blow-up at step " << step_ << ": body " << id_of(b) << " has a non-finite ";
     if (!force_[b].allFinite()) os << "force " << force_[b].transpose();
     else if (!torque_[b].allFinite()) os << "torque " << torque_[b].transpose();
     else if (!vel_[b].allFinite()) os << "velocity " << vel_[b].transpose();

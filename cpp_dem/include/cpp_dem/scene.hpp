@@ -169,7 +169,42 @@ class Scene {
   Wall& wall(int id);
   const Wall& wall(int id) const;
 
-  // ---- state arrays (SI) ---------------------------------------------------------------
+  // ---- storage order ------------------------------------------------------------------
+  // At its first broad-phase build (while no contact exists yet) the scene stores its
+  // spheres in a spatial order (Morton order of cells one mean diameter wide), so that bodies
+  // near in space are near in memory; grid nodes keep their places. Ids do not change: the
+  // per-body arrays below and the body indices in contact records (PairContact::i/j,
+  // WallContact::body, GridContact::sphere) are in storage order ("slots"); the methods that
+  // take one body (set_blocked, set_mass_inertia, set_body_material, add_grid_link,
+  // add_pfacet) take its id, and errors name ids. The Python face speaks ids only.
+  /// Id of the body stored at slot s.
+  int id_of(int slot) const { return id_of_slot_.empty() ? slot : id_of_slot_[slot]; }
+  /// Slot where body `id` is stored.
+  int slot_of(int id) const { return slot_of_id_.empty() ? id : slot_of_id_[id]; }
+  /// The bodies are stored in id order (no spatial sort happened, or it was switched off).
+  bool identity_order() const { return id_of_slot_.empty(); }
+  /// A per-body array in storage order, copied into id order.
+  template <class T>
+  std::vector<T> by_id(const std::vector<T>& a) const {
+    if (id_of_slot_.empty()) return a;
+    std::vector<T> out(a.size());
+    for (size_t s = 0; s < a.size(); ++s) out[id_of_slot_[s]] = a[s];
+    return out;
+  }
+  /// A per-body array in id order, copied into storage order.
+  template <class T>
+  std::vector<T> by_slot(const std::vector<T>& a) const {
+    if (id_of_slot_.empty() || a.size() != id_of_slot_.size()) return a;  // size checked later
+    std::vector<T> out(a.size());
+    for (size_t s = 0; s < a.size(); ++s) out[s] = a[id_of_slot_[s]];
+    return out;
+  }
+  /// Sort the spheres spatially at the first broad-phase build (default on). Off keeps the
+  /// storage order equal to the id order. Has no effect once the scene has contacts.
+  bool spatial_sort() const { return spatial_sort_; }
+  void set_spatial_sort(bool on) { spatial_sort_ = on; }
+
+  // ---- state arrays (SI, storage order) --------------------------------------------------
   const std::vector<Vec3>& positions() const { return pos_; }
   const std::vector<Vec3>& velocities() const { return vel_; }
   const std::vector<Vec3>& angular_velocities() const { return angvel_; }
@@ -184,6 +219,7 @@ class Scene {
   const std::vector<Vec3>& external_forces() const { return ext_force_; }
   const std::vector<Vec3>& external_torques() const { return ext_torque_; }
 
+  // Setters of whole arrays take storage order (the bindings translate from id order).
   void set_positions(const std::vector<Vec3>& v);
   void set_velocities(const std::vector<Vec3>& v);
   void set_angular_velocities(const std::vector<Vec3>& v);
@@ -288,6 +324,8 @@ class Scene {
                  std::uint8_t kind);
   bool need_rebuild() const;
   void rebuild();
+  /// Stores the spheres in spatial order (see "storage order"); only while no contact exists.
+  void sort_bodies_spatially();
   void compute_pair_forces(long& err_contact);
   void compute_wall_forces(long& err_contact);
   void reduce_and_integrate(long& err_body);
@@ -320,6 +358,9 @@ class Scene {
   std::vector<int> body_mat_;
   std::vector<std::uint8_t> blocked_;
   std::vector<std::uint8_t> kind_;  // 0 sphere, 1 grid node
+  // Storage order: id of the body at each slot and its inverse (both empty: identity).
+  std::vector<int> id_of_slot_, slot_of_id_;
+  bool spatial_sort_ = true;
   std::vector<Vec3> pos_at_build_;
   std::vector<Real> radius_at_build_;
   // Energy accumulators per body (written only when tracking).
