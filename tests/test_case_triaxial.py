@@ -78,24 +78,35 @@ def test_help_names_the_axial_axis():
 def test_dense_sample_dilates_loose_sample_contracts(tmp_path):
     """App. B PSD, E = 4.5 MPa, 75 kPa, 1500 grains, to 25 % axial strain: the dense sample
     (expanded without friction, porosity ~0.31) contracts, peaks and then dilates past its
-    initial volume; the loose one (expanded at 32 deg, porosity ~0.37) only contracts."""
+    initial volume; the loose one (expanded at 32 deg, porosity ~0.37) only contracts.
+
+    Three samples (seeds) of each: past its peak contraction a 1500-grain loose sample at
+    critical state swings by up to ~0.7 % of volume from one sample to the next (8 seeds:
+    0 to 0.0068), so the bound on its dilation holds for the mean of the three; every dense
+    sample must dilate past its start and every loose one stay contracted."""
     import csv
     import subprocess
     import sys
 
     from conftest import ROOT
 
-    ev = {}
-    for name, prep in (("dense", "0"), ("loose", "32")):
-        d = tmp_path / name
-        subprocess.run([sys.executable, str(ROOT / "cases" / "triaxial.py"), "--n", "1500",
-                        "--prep-friction", prep, "--strain-rate", "0.5", "--stop-strain",
-                        "0.25", "--out", str(d)], check=True, capture_output=True, text=True)
-        rows = list(csv.DictReader(open(d / "triaxial.csv")))
-        ev[name] = [float(r["volumetric_strain"]) for r in rows]
-    dense, loose = ev["dense"], ev["loose"]
-    assert max(dense) - dense[-1] > 0.02 and dense[-1] < 0  # dilates past the start volume
-    assert max(loose) - loose[-1] < 0.005 and loose[-1] > 0.02  # contracts, no dilation
+    swing = {"dense": [], "loose": []}
+    for seed in ("1", "2", "3"):
+        for name, prep in (("dense", "0"), ("loose", "32")):
+            d = tmp_path / f"{name}{seed}"
+            subprocess.run([sys.executable, str(ROOT / "cases" / "triaxial.py"), "--n", "1500",
+                            "--prep-friction", prep, "--strain-rate", "0.5", "--stop-strain",
+                            "0.25", "--seed", seed, "--out", str(d)], check=True,
+                           capture_output=True, text=True)
+            rows = list(csv.DictReader(open(d / "triaxial.csv")))
+            ev = [float(r["volumetric_strain"]) for r in rows]
+            swing[name].append(max(ev) - ev[-1])
+            if name == "dense":
+                assert ev[-1] < 0, f"seed {seed}: dense ends at {ev[-1]}"  # past its start
+            else:
+                assert ev[-1] > 0.02, f"seed {seed}: loose ends at {ev[-1]}"  # contracted
+    assert min(swing["dense"]) > 0.02  # every dense sample dilates after its peak
+    assert sum(swing["loose"]) / 3 < 0.005  # the loose ones do not (mean of three)
 
 
 def test_grain_scale_coarsens_the_same_box(tmp_path):

@@ -326,9 +326,9 @@ class Scene {
   void rebuild();
   /// Stores the spheres in spatial order (see "storage order"); only while no contact exists.
   void sort_bodies_spatially();
-  void compute_pair_forces(long& err_contact);
-  void compute_wall_forces(long& err_contact);
-  void reduce_and_integrate(long& err_body);
+  CPP_DEM_HOT void compute_pair_forces(long& err_contact);
+  CPP_DEM_HOT void compute_wall_forces(long& err_contact);
+  CPP_DEM_HOT void reduce_and_integrate(long& err_body);
   void update_phys(PairContact& c, PairContactCold& cold) const;
   /// Pair contact k with the full composed law (apply_law) on geometry g; returns the force
   /// on j and the extra moment, as apply_law.
