@@ -20,6 +20,9 @@ constexpr long kParallelMin = 128;
 
 Real sphere_mass(Real density, Real r) { return density * 4.0 / 3.0 * M_PI * r * r * r; }
 
+/// Steps between two renormalisations of the orientation quaternions (rotate_orientation).
+constexpr long kRenormalizePeriod = 64;
+
 template <class T>
 void require_size(const std::vector<T>& v, size_t n, const char* field) {
   if (v.size() != n)
@@ -790,9 +793,10 @@ inline Real damp_component(Real a, Real v, Real dt, Real lambda) {
 /// Turns q by the rotation |w| dt about w (w in rad/s, dt in s): q <- (cos h, sin h w/|w|) q
 /// with h = |w| dt / 2. For the small angles of a stable step, series in h^2 replace sin/cos
 /// and the division by |w| (truncation < h^6/720: below 2e-11 for h < 0.05), so the step
-/// needs no square root and no division; the product is brought back to unit length by one
-/// Newton step for 1/|q| (|q|^2 = 1 + e with |e| ~ 1e-11, the step leaves O(e^2)).
-inline void rotate_orientation(Quat& q, const Vec3& w, Real dt) {
+/// needs no square root and no division. The rotation is a unit quaternion to round-off, so
+/// |q| drifts by about one ulp per step; with `renormalize` (every kRenormalizePeriod steps)
+/// one Newton step for 1/|q| brings it back (|q|^2 = 1 + e, the step leaves O(e^2)).
+inline void rotate_orientation(Quat& q, const Vec3& w, Real dt, bool renormalize) {
   const Real w2 = w.squaredNorm();
   if (!(w2 > 0)) return;
   const Real h2 = 0.25 * dt * dt * w2;
@@ -813,8 +817,14 @@ inline void rotate_orientation(Quat& q, const Vec3& w, Real dt) {
   Real nx = rw * qx + rx * qw + ry * qz - rz * qy;
   Real ny = rw * qy - rx * qz + ry * qw + rz * qx;
   Real nz = rw * qz + rx * qy - ry * qx + rz * qw;
-  const Real k = 1.5 - 0.5 * (nw * nw + nx * nx + ny * ny + nz * nz);
-  q = Quat(k * nw, k * nx, k * ny, k * nz);
+  if (renormalize) {
+    const Real k = 1.5 - 0.5 * (nw * nw + nx * nx + ny * ny + nz * nz);
+    nw *= k;
+    nx *= k;
+    ny *= k;
+    nz *= k;
+  }
+  q = Quat(nw, nx, ny, nz);
 }
 }  // namespace
 
@@ -824,6 +834,7 @@ void Scene::reduce_and_integrate(long& err_body) {
   const Real lambda = local_damping_;
   const bool energy = track_energy_;
   const bool grid = has_grid();  // constant false without the geogrid: the branch vanishes
+  const bool renormalize = step_ % kRenormalizePeriod == 0;
   long err = std::numeric_limits<long>::max();
   Real worst = 0;
 #pragma omp parallel for schedule(static) reduction(min : err) reduction(max : worst) \
@@ -944,7 +955,7 @@ void Scene::reduce_and_integrate(long& err_body) {
       }
     }
     pos_[b] += vel_[b] * dt;
-    rotate_orientation(ori_[b], angvel_[b], dt);
+    rotate_orientation(ori_[b], angvel_[b], dt, renormalize);
     const Vec3& x = pos_[b];
     const Vec3& v = vel_[b];
     if (!std::isfinite((x[0] + x[1] + x[2]) + (v[0] + v[1] + v[2])) &&
