@@ -55,7 +55,9 @@ def plot_pull(rec: dict, png_force: Path, png_members: Path, title: str,
     ax[0].plot(d_mm, rec["pull_force"], label="pull-out force (clamp reaction)")
     if summary is not None:
         ax[0].plot(1e3 * summary["initial_peak_displacement_m"],
-                   summary["initial_peak_force_N"], "o", color="C3", label="initial peak")
+                   summary["initial_peak_force_N"], "o", color="C3",
+                   label="initial peak" if summary.get("initial_peak_found", True)
+                   else "largest force so far (no peak yet)")
     ax[0].set_xlabel("front displacement (mm)")
     ax[0].set_ylabel("pull-out force (N)")
     ax[0].legend()
@@ -174,7 +176,9 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
                "particle_steps_per_s_pull": n_grains * pull_steps / t_pull if t_pull else 0,
                "threads": dem.get_num_threads()}
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
-    log(f"initial peak {summ['initial_peak_force_N']:.2f} N at "
+    peak = ("initial peak" if summ["initial_peak_found"]
+            else "initial peak: none yet (the force has not dropped 10 %); largest force")
+    log(f"{peak} {summ['initial_peak_force_N']:.2f} N at "
         f"{1e3 * summ['initial_peak_displacement_m']:.1f} mm; mean {summ['mean_force_N']:.2f} N,"
         f" CoV {summ['cov_force']:.3f}; |C|/|A| (apertures 1-2) "
         f"{summ.get('transverse_over_longitudinal', float('nan')):.3f}")

@@ -133,6 +133,7 @@ def test_first_peak_and_summary_statistics():
     dp, fp = pullout.first_peak(d, f)
     assert dp == pytest.approx(0.02, abs=0.002)
     assert fp == pytest.approx(100, rel=0.05)
+    assert pullout.peak_found(d, f)
     rec = {"displacement": d, "pull_force": f,
            "force_A1": np.full_like(d, 10.0), "force_A2": np.full_like(d, 30.0),
            "force_C1": np.where(np.arange(len(d)) == 50, 12.0, 2.0),
@@ -155,6 +156,8 @@ def test_first_peak_of_a_rising_curve_is_its_end():
     dp, fp = pullout.first_peak(d, f)
     assert dp == pytest.approx(d[-1])
     assert fp == pytest.approx(np.mean(f[-3:]), rel=1e-12)
+    assert not pullout.peak_found(d, f)
+    assert not pullout.summarize({"displacement": d, "pull_force": f})["initial_peak_found"]
 
 
 def _run_case(script, out, *extra):

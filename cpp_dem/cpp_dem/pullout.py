@@ -442,8 +442,19 @@ def pull(sample: PulloutSample, *, velocity: float, distance: float, record_ever
 def first_peak(displacement, force, *, drop: float = 0.1, window: int = 5) -> tuple[float, float]:
     """The initial peak of a pull-out curve: the running maximum of the force (smoothed by a
     centred moving average of ``window`` records) at the first point where the smoothed force
-    has fallen ``drop`` (relative) below it; the global maximum if it never falls. Returns
-    (displacement m, force N)."""
+    has fallen ``drop`` (relative) below it; the global maximum if it never falls (see
+    :func:`peak_found`). Returns (displacement m, force N)."""
+    d, f, _ = _first_peak(displacement, force, drop, window)
+    return d, f
+
+
+def peak_found(displacement, force, *, drop: float = 0.1, window: int = 5) -> bool:
+    """Whether the smoothed force fell ``drop`` below its running maximum within the record,
+    i.e. whether :func:`first_peak` is a peak and not just the largest force so far."""
+    return _first_peak(displacement, force, drop, window)[2]
+
+
+def _first_peak(displacement, force, drop: float, window: int) -> tuple[float, float, bool]:
     f = np.asarray(force, float)
     d = np.asarray(displacement, float)
     if len(f) == 0:
@@ -458,13 +469,14 @@ def first_peak(displacement, force, *, drop: float = 0.1, window: int = 5) -> tu
         if fs[k] > fs[k_max]:
             k_max = k
         elif fs[k_max] > 0 and fs[k] < (1 - drop) * fs[k_max]:
-            return float(d[k_max]), float(fs[k_max])
+            return float(d[k_max]), float(fs[k_max]), True
     k = int(np.argmax(fs))
-    return float(d[k]), float(fs[k])
+    return float(d[k]), float(fs[k]), False
 
 
 def summarize(rec: dict, *, mobilised_from: float = 0.0) -> dict:
-    """Statistics of a pull-out record (SI): initial peak (:func:`first_peak`), maximum, mean
+    """Statistics of a pull-out record (SI): initial peak (:func:`first_peak`; with
+    ``initial_peak_found`` False the force has not dropped yet and it is the largest so far), maximum, mean
     and coefficient of variation of the pull-out force over the displacements beyond
     ``mobilised_from`` (m; 0 = the whole pull, as 001's averages), and of the member forces
     of apertures 1 and 2: mean and maximum of A and C (signed), the ratio of the mean magnitudes
@@ -475,8 +487,9 @@ def summarize(rec: dict, *, mobilised_from: float = 0.0) -> dict:
     sel = d > mobilised_from
     if not np.any(sel):
         sel = np.ones_like(d, bool)
-    dp, fp = first_peak(d, f)
+    dp, fp, found = _first_peak(d, f, 0.1, 5)
     out = {"initial_peak_force_N": fp, "initial_peak_displacement_m": dp,
+           "initial_peak_found": found,
            "max_force_N": float(f.max()), "mean_force_N": float(f[sel].mean()),
            "cov_force": float(f[sel].std() / f[sel].mean()) if f[sel].mean() != 0
            else float("nan"),
