@@ -5,7 +5,7 @@ set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 OUT="${OUT:-$ROOT/build/profile/profile_step}"
 mkdir -p "$(dirname "$OUT")"
-# CLONES=0: without the x86-64-v3 variants of the hot loops (CMake's CPP_DEM_CLONES=OFF).
+# CLONES=0: without the x86-64-v4/v3 variants of the hot loops (CMake's CPP_DEM_CLONES=OFF).
 CLONE_DEF="-DCPP_DEM_CLONES"
 [ "${CLONES:-1}" = "0" ] && CLONE_DEF=""
 g++ -std=c++17 -O3 -g -fopenmp -DEIGEN_DONT_PARALLELIZE $CLONE_DEF ${CXXFLAGS_EXTRA:-} \

@@ -476,8 +476,8 @@ def _first_peak(displacement, force, drop: float, window: int) -> tuple[float, f
 
 def summarize(rec: dict, *, mobilised_from: float = 0.0) -> dict:
     """Statistics of a pull-out record (SI): initial peak (:func:`first_peak`; with
-    ``initial_peak_found`` False the force has not dropped yet and it is the largest so far), maximum, mean
-    and coefficient of variation of the pull-out force over the displacements beyond
+    ``initial_peak_found`` False the force has not dropped yet and it is the largest so far),
+    maximum, mean and coefficient of variation of the pull-out force over the displacements beyond
     ``mobilised_from`` (m; 0 = the whole pull, as 001's averages), and of the member forces
     of apertures 1 and 2: mean and maximum of A and C (signed), the ratio of the mean magnitudes
     |C| / |A| (000: about 14 %), and the largest |C| over its mean (000: secondary peaks up to

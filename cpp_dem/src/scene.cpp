@@ -23,6 +23,12 @@ Real sphere_mass(Real density, Real r) { return density * 4.0 / 3.0 * M_PI * r *
 /// Steps between two renormalisations of the orientation quaternions (rotate_orientation).
 constexpr long kRenormalizePeriod = 64;
 
+/// The contact's law is linear without viscous damping and rolling resistance: the pair and
+/// wall passes run their short kernels, which are apply_law with these parts off.
+bool short_kernel_applies(const ContactPhys& p) {
+  return p.model == ContactModel::Linear && !(p.beta_n > 0) && !(p.beta_s > 0) && !(p.kr > 0);
+}
+
 template <class T>
 void require_size(const std::vector<T>& v, size_t n, const char* field) {
   if (v.size() != n)
@@ -344,10 +350,8 @@ void Scene::sort_bodies_spatially() {
   permute(damp_dissip_);
   permute(ext_work_);
   permute(pos_at_energy_reset_);
-  permute(pos_at_build_);
-  permute(radius_at_build_);
-  permute(pair_fi_);
-  permute(pair_ti_);
+  // pos_at_build_ and radius_at_build_ are set at the end of the rebuild that called this,
+  // pair_fi_ / pair_ti_ by the next pair pass.
   std::vector<int> ids(n);
   for (int b = 0; b < n; ++b) ids[b] = id_of(perm[b]);
   id_of_slot_.swap(ids);
@@ -475,9 +479,7 @@ void Scene::update_phys(PairContact& c, PairContactCold& cold) const {
   c.kn = p.kn;
   c.ks = p.ks;
   c.tan_phi = p.tan_phi;
-  // The short kernel is apply_law with these parts off (same operations, same results).
-  c.simple = p.model == ContactModel::Linear && !(p.beta_n > 0) && !(p.beta_s > 0) &&
-             !(p.kr > 0);
+  c.simple = short_kernel_applies(p);
   c.phys_version = phys_version_;
 }
 
@@ -485,9 +487,7 @@ void Scene::update_phys(WallContact& c) const {
   // The wall has infinite radius and mass (see mix_materials).
   c.phys = mix_materials(materials_[walls_[c.wall].material], materials_[body_mat_[c.body]],
                          kInf, radius_[c.body], kInf, mass_[c.body]);
-  const ContactPhys& p = c.phys;
-  c.simple = p.model == ContactModel::Linear && !(p.beta_n > 0) && !(p.beta_s > 0) &&
-             !(p.kr > 0);
+  c.simple = short_kernel_applies(c.phys);
   c.phys_version = phys_version_;
 }
 
@@ -899,12 +899,12 @@ void Scene::reduce_and_integrate(long& err_body) {
     const std::uint8_t blk = blocked_[b];
     const Vec3 v_old = vel_[b], w_old = angvel_[b];
     const Real m = mass_[b], inertia = inertia_[b];
+    const Real inv_m = 1.0 / m, inv_i = 1.0 / inertia;  // two divisions instead of six
     if (blk == DOF_NONE && !energy) {
       // The common case (free body, no energy bookkeeping): the general loop below without
       // its branches, the same operations.
       Vec3& v = vel_[b];
       Vec3& w = angvel_[b];
-      const Real inv_m = 1.0 / m, inv_i = 1.0 / inertia;  // two divisions instead of six
       for (int a = 0; a < 3; ++a) {
         Real acc = f[a] * inv_m;
         if (lambda > 0) acc = damp_component(acc, v_old[a], dt, lambda);
@@ -923,7 +923,7 @@ void Scene::reduce_and_integrate(long& err_body) {
           if (energy) work += -f[a] * v_old[a] * dt;
           continue;
         }
-        Real acc = f[a] / m;
+        Real acc = f[a] * inv_m;
         if (lambda > 0) {
           const Real damped = damp_component(acc, v_old[a], dt, lambda);
           if (energy) dissip += -(damped - acc) * m * (v_old[a] + 0.5 * dt * damped) * dt;
@@ -937,7 +937,7 @@ void Scene::reduce_and_integrate(long& err_body) {
           if (energy) work += -t[a] * w_old[a] * dt;
           continue;
         }
-        Real acc = t[a] / inertia;
+        Real acc = t[a] * inv_i;
         if (lambda > 0) {
           const Real damped = damp_component(acc, w_old[a], dt, lambda);
           if (energy) dissip += -(damped - acc) * inertia * (w_old[a] + 0.5 * dt * damped) * dt;

@@ -28,8 +28,8 @@ inline constexpr bool kGeogridBuilt = true;
 /// FMA) and the baseline x86-64, and the dynamic loader picks the best one the CPU runs (GCC
 /// function multiversioning): the default build runs on any x86-64 and uses AVX2 + FMA where
 /// the CPU has them (measured on the benchmark packing: 12 % less time per step). Results
-/// are the same on 1 and 2 threads either way; the two variants differ in the last bits
-/// (fused multiply-adds), so one machine's results are bitwise repeatable, not every
+/// are the same on 1 and 2 threads either way; the baseline differs from the others in the
+/// last bits (fused multiply-adds), so one machine's results are bitwise repeatable, not every
 /// machine's. CMake: CPP_DEM_CLONES (default ON; off when CPP_DEM_MARCH is set).
 #if defined(CPP_DEM_CLONES) && defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
 #define CPP_DEM_HOT __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
