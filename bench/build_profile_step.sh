@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Builds bench/profile_step.cpp against the core's sources (not the installed module) into
-# build/profile/profile_step. Extra compiler flags in CXXFLAGS_EXTRA (e.g. -march=x86-64-v3).
+# build/profile/profile_step, with the Release flags of the module (-O3 -DNDEBUG). Extra compiler flags in CXXFLAGS_EXTRA (e.g. -march=x86-64-v3).
 set -euo pipefail
 ROOT="$(cd "$(dirname "${BASH_SOURCE[0]}")/.." && pwd)"
 OUT="${OUT:-$ROOT/build/profile/profile_step}"
@@ -8,7 +8,7 @@ mkdir -p "$(dirname "$OUT")"
 # CLONES=0: without the x86-64-v4/v3 variants of the hot loops (CMake's CPP_DEM_CLONES=OFF).
 CLONE_DEF="-DCPP_DEM_CLONES"
 [ "${CLONES:-1}" = "0" ] && CLONE_DEF=""
-g++ -std=c++17 -O3 -g -fopenmp -DEIGEN_DONT_PARALLELIZE $CLONE_DEF ${CXXFLAGS_EXTRA:-} \
+g++ -std=c++17 -O3 -DNDEBUG -g -fopenmp -DEIGEN_DONT_PARALLELIZE $CLONE_DEF ${CXXFLAGS_EXTRA:-} \
   -I"$ROOT/cpp_dem/include" -I/usr/include/eigen3 \
   "$ROOT/bench/profile_step.cpp" $(ls "$ROOT"/cpp_dem/src/*.cpp | grep -v grid_off.cpp) -o "$OUT"
 echo "$OUT"
