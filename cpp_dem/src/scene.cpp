@@ -4,10 +4,15 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <type_traits>
 
 #ifdef _OPENMP
 #include <omp.h>
 #endif
+
+// V4 below is a 32-byte vector type; GCC notes that passing one by value has an ABI that
+// depends on AVX. Its helpers are always inlined and no V4 crosses a function boundary.
+#pragma GCC diagnostic ignored "-Wpsabi"
 
 namespace cpp_dem {
 
@@ -19,6 +24,28 @@ constexpr Real kInf = std::numeric_limits<Real>::infinity();
 constexpr long kParallelMin = 128;
 
 Real sphere_mass(Real density, Real r) { return density * 4.0 / 3.0 * M_PI * r * r * r; }
+
+/// 3-vectors in 4-lane registers (lane 3 zero) for the pair pass: one instruction per
+/// operation where Eigen's Vector3d takes a 2-lane packet plus a scalar. GCC lowers the type
+/// to the widest registers of each clone (two SSE2 registers in the baseline one).
+typedef double V4 __attribute__((vector_size(32)));
+typedef long long V4i __attribute__((vector_size(32)));
+__attribute__((always_inline)) inline V4 v4(const Vec3& a) { return V4{a[0], a[1], a[2], 0.0}; }
+__attribute__((always_inline)) inline Vec3 vec3(const V4& a) { return Vec3(a[0], a[1], a[2]); }
+__attribute__((always_inline)) inline void store3(Vec3& a, const V4& v) {
+  a[0] = v[0];
+  a[1] = v[1];
+  a[2] = v[2];
+}
+__attribute__((always_inline)) inline Real dot3(const V4& a, const V4& b) {
+  const V4 p = a * b;
+  return (p[0] + p[1]) + p[2];
+}
+__attribute__((always_inline)) inline V4 cross3(const V4& a, const V4& b) {
+  const V4i yzx = {1, 2, 0, 3}, zxy = {2, 0, 1, 3};
+  return __builtin_shuffle(a, yzx) * __builtin_shuffle(b, zxy) -
+         __builtin_shuffle(a, zxy) * __builtin_shuffle(b, yzx);
+}
 
 /// Steps between two renormalisations of the orientation quaternions (rotate_orientation).
 constexpr long kRenormalizePeriod = 64;
@@ -521,6 +548,18 @@ void Scene::compute_pair_forces(long& err_contact) {
   long err = std::numeric_limits<long>::max();
   pair_fi_.resize(n);
   pair_ti_.resize(n);
+  // The loop works through local pointers: its stores of bools could alias the vectors'
+  // own pointers, so through the members the compiler reloads them for every access.
+  const Vec3* const pos = pos_.data();
+  const Vec3* const vel = vel_.data();
+  const Vec3* const angvel = angvel_.data();
+  const Real* const radius = radius_.data();
+  const int* const ioff = pair_ioff_.data();
+  const int* const jslot = pair_jslot_.data();
+  PairContact* const pairs = pairs_.data();
+  PairOutput* const out_j = pair_out_.data();
+  Vec3* const out_fi = pair_fi_.data();
+  Vec3* const out_ti = pair_ti_.data();
 #pragma omp parallel reduction(min : err) if (nc > kParallelMin)
   {
 #ifdef _OPENMP
@@ -538,19 +577,19 @@ void Scene::compute_pair_forces(long& err_contact) {
     const int b0 = first_body_at(t * nc / nt);
     const int b1 = t + 1 == nt ? n : first_body_at((t + 1) * nc / nt);
     for (int i = b0; i < b1; ++i) {
-      const int k0 = pair_ioff_[i], k1 = pair_ioff_[i + 1];
+      const int k0 = ioff[i], k1 = ioff[i + 1];
       // i's share: -force and torque_i summed over its contacts.
-      Vec3 fi = Vec3::Zero(), ti = Vec3::Zero();
+      V4 fi = V4{}, ti = V4{};
       if (k0 < k1) {
-        const Vec3 xi = pos_[i], vi = vel_[i], wi = angvel_[i];
-        const Real ri = radius_[i];
+        const V4 xi = v4(pos[i]), vi = v4(vel[i]), wi = v4(angvel[i]);
+        const Real ri = radius[i];
         for (int k = k0; k < k1; ++k) {
-          PairContact& c = pairs_[k];
-          PairOutput& o = pair_out_[pair_jslot_[k]];
+          PairContact& c = pairs[k];
+          PairOutput& o = out_j[jslot[k]];
           const int j = c.j;
-          const Vec3 d = pos_[j] - xi;
-          const Real dist2 = d.squaredNorm();
-          const Real rj = radius_[j];
+          const V4 d = v4(pos[j]) - xi;
+          const Real dist2 = dot3(d, d);
+          const Real rj = radius[j];
           const Real rsum = ri + rj;
           if (dist2 >= rsum * rsum) {
             if (c.active) {
@@ -573,69 +612,72 @@ void Scene::compute_pair_forces(long& err_contact) {
           }
           if (!c.active || c.phys_version != version) update_phys(c, pair_cold_[k]);
           c.active = true;
-          const Vec3 n = dist > 0 ? Vec3(d * (1.0 / dist)) : Vec3(Vec3::UnitZ());
+          const V4 n = dist > 0 ? d * (1.0 / dist) : V4{0, 0, 1, 0};
           // Contact point in the middle of the overlap: branch vectors l_i n and -l_j n,
           // lengths R - delta/2 (000 eq 6).
           const Real li = ri - 0.5 * overlap, lj = rj - 0.5 * overlap;
-          const Vec3& wj = angvel_[j];
+          const V4 wj = v4(angvel[j]);
           // v_j + w_j x (-l_j n) - (v_i + w_i x l_i n), with one cross product.
-          const Vec3 rel_vel = (vel_[j] - vi) - (lj * wj + li * wi).cross(n);
+          const V4 rel_vel = (v4(vel[j]) - vi) - cross3(lj * wj + li * wi, n);
           if (!c.simple) {
-            const Vec3 b1 = li * n;
-            const Vec3 b2 = -lj * n;
+            const Vec3 n3 = vec3(n);
+            const Vec3 b1 = li * n3;
+            const Vec3 b2 = -lj * n3;
             ContactGeometry g;
-            g.normal = n;
+            g.normal = n3;
             g.overlap = overlap;
             g.branch1 = b1;
             g.branch2 = b2;
-            g.rel_vel = rel_vel;
-            g.angvel_sum = wi + wj;
-            g.rel_angvel = wj - wi;
+            g.rel_vel = vec3(rel_vel);
+            g.angvel_sum = vec3(wi + wj);
+            g.rel_angvel = vec3(wj - wi);
             const LawOutput out = apply_pair_law(k, g, dt);
             o.force = out.force2;
             // Moments, 000 eq (6): tau = (R - delta/2) n x F, plus rolling resistance.
             o.torque_j = b2.cross(out.force2) + out.moment2;
-            fi -= out.force2;
-            ti += b1.cross(-out.force2) - out.moment2;
+            fi -= v4(out.force2);
+            ti += v4(Vec3(b1.cross(-out.force2) - out.moment2));
             continue;
           }
           // The short kernel: apply_law for a linear law without viscous damping and rolling
-          // resistance, the same operations in the same order (000 eqs 1-3), on the hot record.
+          // resistance (000 eqs 1-3), on the hot record, with 3-vectors in 4-lane registers.
           const Real fn = c.kn * overlap;
-          const Real vn = rel_vel.dot(n);
-          const Vec3 vt = rel_vel - vn * n;
-          Vec3 fs = c.fs;
-          if (c.normal.squaredNorm() > 0) {
+          const Real vn = dot3(rel_vel, n);
+          const V4 vt = rel_vel - vn * n;
+          V4 fs = v4(c.fs);
+          const V4 n_old = v4(c.normal);
+          if (dot3(n_old, n_old) > 0) {
             // Keep the stored shear force in the tangent plane of the rotated contact frame.
-            const Vec3 axis = c.normal.cross(n);
-            const Vec3 twist = (0.5 * dt * n.dot(wi + wj)) * n;
-            fs -= fs.cross(axis);
-            fs -= fs.cross(twist);
-            fs -= fs.dot(n) * n;
+            const V4 axis = cross3(n_old, n);
+            const V4 twist = (0.5 * dt * dot3(n, wi + wj)) * n;
+            fs -= cross3(fs, axis);
+            fs -= cross3(fs, twist);
+            fs -= dot3(fs, n) * n;
           }
-          fs -= c.ks * dt * vt;
+          fs -= (c.ks * dt) * vt;
           const Real cap = c.tan_phi * (fn > 0 ? fn : 0.0);
-          if (fs.squaredNorm() > cap * cap) {
-            const Real norm = fs.norm();
-            const Vec3 capped = norm > 0 ? Vec3(fs * (cap / norm)) : Vec3(Vec3::Zero());
-            if (c.ks > 0) pair_cold_[k].dissip_friction += (fs - capped).dot(capped) / c.ks;
+          const Real fs2 = dot3(fs, fs);
+          if (fs2 > cap * cap) {
+            const Real norm = std::sqrt(fs2);
+            const V4 capped = norm > 0 ? fs * (cap / norm) : V4{};
+            if (c.ks > 0) pair_cold_[k].dissip_friction += dot3(fs - capped, capped) / c.ks;
             fs = capped;
           }
-          c.fs = fs;
-          c.normal = n;
+          store3(c.fs, fs);
+          store3(c.normal, n);
           c.overlap = overlap;
           c.fn = fn;
-          const Vec3 f = fn * n + fs;
-          o.force = f;
+          const V4 f = fn * n + fs;
+          store3(o.force, f);
           // Moments (000 eq 6): -l_j n x F on j, l_i n x (-F) on i; n x F = n x fs.
-          const Vec3 nxf = n.cross(fs);
-          o.torque_j = -lj * nxf;
+          const V4 nxf = cross3(n, fs);
+          store3(o.torque_j, -lj * nxf);
           fi -= f;
           ti -= li * nxf;
         }
       }
-      pair_fi_[i] = fi;
-      pair_ti_[i] = ti;
+      store3(out_fi[i], fi);
+      store3(out_ti[i], ti);
     }
   }
   err_contact = err;
@@ -680,23 +722,22 @@ __attribute__((always_inline)) inline void wall_short_kernel(WallContact& c, con
     f1 = c1;
     f2 = c2;
   }
-  Vec3 fs;
-  fs[AX] = 0;
-  fs[A1] = f1;
-  fs[A2] = f2;
-  st.fs = fs;
-  st.normal = w.normal();
+  // Component by component into the record (Vec3 temporaries went through the stack).
+  st.fs[AX] = 0;
+  st.fs[A1] = f1;
+  st.fs[A2] = f2;
+  st.normal[AX] = sense;  // w.normal()
+  st.normal[A1] = 0;
+  st.normal[A2] = 0;
   st.overlap = overlap;
   st.fn = fn;
-  Vec3 f = fs;
-  f[AX] = fn * sense;
-  c.force = f;
+  c.force[AX] = fn * sense;
+  c.force[A1] = f1;
+  c.force[A2] = f2;
   // Torque (-l n) x f.
-  Vec3 tq;
-  tq[AX] = 0;
-  tq[A1] = ls * f2;
-  tq[A2] = -ls * f1;
-  c.torque = tq;
+  c.torque[AX] = 0;
+  c.torque[A1] = ls * f2;
+  c.torque[A2] = -ls * f1;
 }
 }  // namespace
 
@@ -704,49 +745,79 @@ void Scene::compute_wall_forces(long& err_contact) {
   const long nc = static_cast<long>(wall_contacts_.size());
   const Real dt = dt_;
   const Real max_ratio = max_overlap_ratio_;
+  const int version = phys_version_;
+  // The contacts in the order of their walls' axes (contact order within an axis), so the
+  // kernel's axis is a compile-time constant and the branch to it is predictable: in contact
+  // order (by body) the axis changes at random and the jump missed (perf, N = 1e3). Each
+  // contact is computed independently, so the order does not change any result.
+  if (wall_order_builds_ != builds_ || static_cast<long>(wall_order_.size()) != nc) {
+    wall_order_.resize(nc);
+    long at = 0;
+    for (int ax = 0; ax < 3; ++ax) {
+      wall_axis_end_[ax] = at;  // start of this axis, finished below
+      for (long k = 0; k < nc; ++k)
+        if (walls_[wall_contacts_[k].wall].axis == ax) wall_order_[at++] = static_cast<int>(k);
+      wall_axis_end_[ax] = at;
+    }
+    wall_order_builds_ = builds_;
+  }
+  const long end0 = wall_axis_end_[0], end1 = wall_axis_end_[1];
+  const int* const order = wall_order_.data();
+  WallContact* const contacts = wall_contacts_.data();
+  const Wall* const walls = walls_.data();
+  const Vec3* const pos = pos_.data();
+  const Vec3* const vel = vel_.data();
+  const Vec3* const angvel = angvel_.data();
+  const Real* const radius = radius_.data();
   long err = std::numeric_limits<long>::max();
-#pragma omp parallel for schedule(static) reduction(min : err) if (nc > kParallelMin)
-  for (long k = 0; k < nc; ++k) {
-    WallContact& c = wall_contacts_[k];
-    const Wall& w = walls_[c.wall];
+  // (err is an argument: inside the parallel loop it is the thread's reduction copy.)
+  const auto one = [&](long k, long& err, auto axis) __attribute__((always_inline)) {
+    constexpr int AX = decltype(axis)::value;
+    WallContact& c = contacts[k];
+    const Wall& w = walls[c.wall];
     const int b = c.body;
-    const Real s = w.sense * (pos_[b][w.axis] - w.position);
-    if (s >= radius_[b] || s <= -radius_[b]) {
+    const Real r = radius[b];
+    const Real s = w.sense * (pos[b][AX] - w.position);
+    if (s >= r || s <= -r) {
       if (c.active) {
         c.active = false;
         c.state.clear_history();
         c.force.setZero();
         c.torque.setZero();
       }
-      continue;
+      return;
     }
-    ContactGeometry g;
-    g.overlap = radius_[b] - s;
-    if (!(g.overlap <= max_ratio * radius_[b])) {
+    const Real overlap = r - s;
+    if (!(overlap <= max_ratio * r)) {
       err = std::min(err, k);
-      continue;
+      return;
     }
-    if (!c.active || c.phys_version != phys_version_) update_phys(c);
+    if (!c.active || c.phys_version != version) update_phys(c);
     c.active = true;
     if (c.simple) {
-      // The axis as a constant, so the vectors stay in registers (indexed by a run-time axis
-      // they went through the stack: 12 % of a step at 1e3 spheres).
-      switch (w.axis) {
-        case 0: wall_short_kernel<0>(c, w, vel_[b], angvel_[b], radius_[b], g.overlap, dt); break;
-        case 1: wall_short_kernel<1>(c, w, vel_[b], angvel_[b], radius_[b], g.overlap, dt); break;
-        default: wall_short_kernel<2>(c, w, vel_[b], angvel_[b], radius_[b], g.overlap, dt);
-      }
-      continue;
+      wall_short_kernel<AX>(c, w, vel[b], angvel[b], r, overlap, dt);
+      return;
     }
+    // (The general law's geometry only here: its zero-initialised fields cost the short
+    // kernel a stack fill per contact.)
+    ContactGeometry g;
+    g.overlap = overlap;
     g.normal = w.normal();
-    g.branch2 = -(radius_[b] - 0.5 * g.overlap) * g.normal;
-    g.branch1 = pos_[b] + g.branch2;  // unused by the law (the wall does not rotate)
-    g.rel_vel = (vel_[b] + angvel_[b].cross(g.branch2)) - w.velocity;
-    g.angvel_sum = angvel_[b];
-    g.rel_angvel = angvel_[b];
+    g.branch2 = -(r - 0.5 * g.overlap) * g.normal;
+    g.branch1 = pos[b] + g.branch2;  // unused by the law (the wall does not rotate)
+    g.rel_vel = (vel[b] + angvel[b].cross(g.branch2)) - w.velocity;
+    g.angvel_sum = angvel[b];
+    g.rel_angvel = angvel[b];
     const LawOutput out = apply_law(c.phys, g, dt, c.state);
     c.force = out.force2;
     c.torque = g.branch2.cross(out.force2) + out.moment2;
+  };
+#pragma omp parallel for schedule(static) reduction(min : err) if (nc > kParallelMin)
+  for (long p = 0; p < nc; ++p) {
+    const long k = order[p];
+    if (p < end0) one(k, err, std::integral_constant<int, 0>());
+    else if (p < end1) one(k, err, std::integral_constant<int, 1>());
+    else one(k, err, std::integral_constant<int, 2>());
   }
   err_contact = err;
 }
@@ -826,6 +897,36 @@ inline void rotate_orientation(Quat& q, const Vec3& w, Real dt, bool renormalize
   }
   q = Quat(nw, nx, ny, nz);
 }
+
+
+/// One leapfrog half of the update for a run of degrees of freedom [k0, k1) of flat arrays:
+/// the accelerations acc (m/s^2 or rad/s^2, zero for a blocked DOF) are damped (Cundall local
+/// damping, lambda) and give the new velocities vel; with pos (not null) the positions follow,
+/// pos += vel dt. Returns the sum of the new positions and velocities, which is finite unless
+/// one of them is not (or the sum overflows; the caller then tests each body). The loop is
+/// elementwise, so the compiler vectorises it across bodies.
+template <bool kDamp>
+inline Real leapfrog_dofs(Real* __restrict vel, const Real* __restrict acc, Real* __restrict pos,
+                          long k0, long k1, Real dt, Real lambda) {
+  Real check = 0;
+  if (pos) {
+#pragma omp simd reduction(+ : check)
+    for (long k = k0; k < k1; ++k) {
+      const Real v = vel[k] + (kDamp ? damp_component(acc[k], vel[k], dt, lambda) : acc[k]) * dt;
+      vel[k] = v;
+      pos[k] += v * dt;
+      check += pos[k] + v;
+    }
+  } else {
+#pragma omp simd reduction(+ : check)
+    for (long k = k0; k < k1; ++k) {
+      const Real v = vel[k] + (kDamp ? damp_component(acc[k], vel[k], dt, lambda) : acc[k]) * dt;
+      vel[k] = v;
+      check += v;
+    }
+  }
+  return check;
+}
 }  // namespace
 
 void Scene::reduce_and_integrate(long& err_body) {
@@ -837,20 +938,18 @@ void Scene::reduce_and_integrate(long& err_body) {
   const bool renormalize = step_ % kRenormalizePeriod == 0;
   long err = std::numeric_limits<long>::max();
   Real worst = 0;
-#pragma omp parallel for schedule(static) reduction(min : err) reduction(max : worst) \
-    if (n > kParallelMin)
-  for (int b = 0; b < n; ++b) {
-    // Reduce contact forces into the body in a fixed order (pair contacts, then walls).
-    Vec3 f = ext_force_[b] + mass_[b] * gravity_;
-    Vec3 t = ext_torque_[b];
-    // First the contacts where b is j, in contact order (contiguous in pair_out_), then the sum
-    // over the contacts where b is i, which the pair pass formed in contact order.
+
+  // Reduce the contact forces into body b in a fixed order: the contacts where b is j (in
+  // contact order, contiguous in pair_out_), the sum over the contacts where b is i (which
+  // the pair pass formed in contact order), walls, then the geogrid's contacts and links.
+  const auto sum_forces = [&](int b, Vec3& f, Vec3& t) __attribute__((always_inline)) {
+    f = ext_force_[b] + mass_[b] * gravity_;
+    t = ext_torque_[b];
     for (int e = pair_jadj_off_[b]; e < pair_jadj_off_[b + 1]; ++e) {
       const PairOutput& o = pair_out_[e];  // zero when inactive
       f += o.force;
       t += o.torque_j;
     }
-    // Then its contacts as i.
     f += pair_fi_[b];
     t += pair_ti_[b];
     for (int e = wall_adj_off_[b]; e < wall_adj_off_[b + 1]; ++e) {
@@ -891,81 +990,134 @@ void Scene::reduce_and_integrate(long& err_body) {
     force_[b] = f;
     torque_[b] = t;
     // A NaN or inf in any component makes the sum non-finite; only then the exact test.
-    if (!std::isfinite((f[0] + f[1] + f[2]) + (t[0] + t[1] + t[2])) &&
-        (!f.allFinite() || !t.allFinite())) {
-      err = std::min(err, static_cast<long>(b));
-      continue;
+    return std::isfinite((f[0] + f[1] + f[2]) + (t[0] + t[1] + t[2])) ||
+           (f.allFinite() && t.allFinite());
+  };
+  // The broad phase's displacement check (need_rebuild) for the next step, in this pass.
+  const auto displacement = [&](int b) __attribute__((always_inline)) {
+    return (pos_[b] - pos_at_build_[b]).norm() +
+           std::max(0.0, radius_[b] - radius_at_build_[b]);
+  };
+
+  if (!energy) {
+    // Blocks of bodies, each in three passes while it stays in the L1 cache: forces and
+    // accelerations per body, then the velocities and positions as flat arrays of degrees of
+    // freedom (vectorised across bodies), then orientations and checks per body. Every body's
+    // update is the same arithmetic whatever the blocks or threads.
+    acc_lin_.resize(n);
+    acc_ang_.resize(n);
+    Real* const vel = vel_.data()->data();
+    Real* const angvel = angvel_.data()->data();
+    Real* const pos = pos_.data()->data();
+    const Real* const acc_lin = acc_lin_.data()->data();
+    const Real* const acc_ang = acc_ang_.data()->data();
+    constexpr int kBlock = 64;
+    const int nblocks = (n + kBlock - 1) / kBlock;
+#pragma omp parallel for schedule(static) reduction(min : err) reduction(max : worst) \
+    if (n > kParallelMin)
+    for (int blk = 0; blk < nblocks; ++blk) {
+      const int b0 = blk * kBlock, b1 = std::min(n, b0 + kBlock);
+      for (int b = b0; b < b1; ++b) {
+        Vec3 f, t;
+        if (!sum_forces(b, f, t)) {
+          err = std::min(err, static_cast<long>(b));
+          acc_lin_[b].setZero();
+          acc_ang_[b].setZero();
+          continue;
+        }
+        Vec3 al = f * (1.0 / mass_[b]), aa = t * (1.0 / inertia_[b]);
+        if (const std::uint8_t dofs = blocked_[b]) {
+          // A blocked DOF keeps its imposed velocity: zero acceleration, nothing to damp.
+          for (int a = 0; a < 3; ++a) {
+            if (dofs & (DOF_X << a)) al[a] = 0;
+            if (dofs & (DOF_RX << a)) aa[a] = 0;
+          }
+        }
+        acc_lin_[b] = al;
+        acc_ang_[b] = aa;
+      }
+      const long k0 = 3L * b0, k1 = 3L * b1;
+      Real check;
+      if (lambda > 0) {
+        check = leapfrog_dofs<true>(vel, acc_lin, pos, k0, k1, dt, lambda) +
+                leapfrog_dofs<true>(angvel, acc_ang, nullptr, k0, k1, dt, lambda);
+      } else {
+        check = leapfrog_dofs<false>(vel, acc_lin, pos, k0, k1, dt, lambda) +
+                leapfrog_dofs<false>(angvel, acc_ang, nullptr, k0, k1, dt, lambda);
+      }
+      const bool finite = std::isfinite(check);
+      for (int b = b0; b < b1; ++b) {
+        rotate_orientation(ori_[b], angvel_[b], dt, renormalize);
+        if (!finite && (!pos_[b].allFinite() || !vel_[b].allFinite() || !angvel_[b].allFinite())) {
+          err = std::min(err, static_cast<long>(b));
+          continue;
+        }
+        worst = std::max(worst, displacement(b));
+      }
     }
-    const std::uint8_t blk = blocked_[b];
-    const Vec3 v_old = vel_[b], w_old = angvel_[b];
-    const Real m = mass_[b], inertia = inertia_[b];
-    const Real inv_m = 1.0 / m, inv_i = 1.0 / inertia;  // two divisions instead of six
-    if (blk == DOF_NONE && !energy) {
-      // The common case (free body, no energy bookkeeping): the general loop below without
-      // its branches, the same operations.
-      Vec3& v = vel_[b];
-      Vec3& w = angvel_[b];
-      for (int a = 0; a < 3; ++a) {
-        Real acc = f[a] * inv_m;
-        if (lambda > 0) acc = damp_component(acc, v_old[a], dt, lambda);
-        v[a] = v_old[a] + acc * dt;
+  } else {
+    // With energy bookkeeping: per body, the same arithmetic plus the damping's dissipation
+    // and the work of external forces and of imposed velocities.
+#pragma omp parallel for schedule(static) reduction(min : err) reduction(max : worst) \
+    if (n > kParallelMin)
+    for (int b = 0; b < n; ++b) {
+      Vec3 f, t;
+      if (!sum_forces(b, f, t)) {
+        err = std::min(err, static_cast<long>(b));
+        continue;
       }
-      for (int a = 0; a < 3; ++a) {
-        Real acc = t[a] * inv_i;
-        if (lambda > 0) acc = damp_component(acc, w_old[a], dt, lambda);
-        w[a] = w_old[a] + acc * dt;
-      }
-    } else {
+      const std::uint8_t dofs = blocked_[b];
+      const Vec3 v_old = vel_[b], w_old = angvel_[b];
+      const Real m = mass_[b], inertia = inertia_[b];
+      const Real inv_m = 1.0 / m, inv_i = 1.0 / inertia;
+      Vec3 v = v_old, w = w_old;
       Real dissip = 0, work = 0;
       for (int a = 0; a < 3; ++a) {
-        if (blk & (DOF_X << a)) {
+        if (dofs & (DOF_X << a)) {
           // Imposed velocity: the constraint supplies -f[a]; its work is -f[a] v dt.
-          if (energy) work += -f[a] * v_old[a] * dt;
+          work += -f[a] * v_old[a] * dt;
           continue;
         }
         Real acc = f[a] * inv_m;
         if (lambda > 0) {
           const Real damped = damp_component(acc, v_old[a], dt, lambda);
-          if (energy) dissip += -(damped - acc) * m * (v_old[a] + 0.5 * dt * damped) * dt;
+          dissip += -(damped - acc) * m * (v_old[a] + 0.5 * dt * damped) * dt;
           acc = damped;
         }
-        vel_[b][a] = v_old[a] + acc * dt;
-        if (energy) work += ext_force_[b][a] * 0.5 * (v_old[a] + vel_[b][a]) * dt;
+        v[a] = v_old[a] + acc * dt;
+        work += ext_force_[b][a] * 0.5 * (v_old[a] + v[a]) * dt;
       }
       for (int a = 0; a < 3; ++a) {
-        if (blk & (DOF_RX << a)) {
-          if (energy) work += -t[a] * w_old[a] * dt;
+        if (dofs & (DOF_RX << a)) {
+          work += -t[a] * w_old[a] * dt;
           continue;
         }
         Real acc = t[a] * inv_i;
         if (lambda > 0) {
           const Real damped = damp_component(acc, w_old[a], dt, lambda);
-          if (energy) dissip += -(damped - acc) * inertia * (w_old[a] + 0.5 * dt * damped) * dt;
+          dissip += -(damped - acc) * inertia * (w_old[a] + 0.5 * dt * damped) * dt;
           acc = damped;
         }
-        angvel_[b][a] = w_old[a] + acc * dt;
-        if (energy) work += ext_torque_[b][a] * 0.5 * (w_old[a] + angvel_[b][a]) * dt;
+        w[a] = w_old[a] + acc * dt;
+        work += ext_torque_[b][a] * 0.5 * (w_old[a] + w[a]) * dt;
       }
-      if (energy) {
-        const Vec3 vm = 0.5 * (v_old + vel_[b]);
-        const Vec3 wm = 0.5 * (w_old + angvel_[b]);
-        ke_[b] = 0.5 * m * vm.squaredNorm() + 0.5 * inertia * wm.squaredNorm();
-        damp_dissip_[b] += dissip;
-        ext_work_[b] += work;
+      const Vec3 vm = 0.5 * (v_old + v);
+      const Vec3 wm = 0.5 * (w_old + w);
+      ke_[b] = 0.5 * m * vm.squaredNorm() + 0.5 * inertia * wm.squaredNorm();
+      damp_dissip_[b] += dissip;
+      ext_work_[b] += work;
+      vel_[b] = v;
+      angvel_[b] = w;
+      const Vec3 x = pos_[b] + v * dt;
+      pos_[b] = x;
+      rotate_orientation(ori_[b], w, dt, renormalize);
+      if (!std::isfinite((x[0] + x[1] + x[2]) + (v[0] + v[1] + v[2]) + (w[0] + w[1] + w[2])) &&
+          (!x.allFinite() || !v.allFinite() || !w.allFinite())) {
+        err = std::min(err, static_cast<long>(b));
+        continue;
       }
+      worst = std::max(worst, displacement(b));
     }
-    pos_[b] += vel_[b] * dt;
-    rotate_orientation(ori_[b], angvel_[b], dt, renormalize);
-    const Vec3& x = pos_[b];
-    const Vec3& v = vel_[b];
-    if (!std::isfinite((x[0] + x[1] + x[2]) + (v[0] + v[1] + v[2])) &&
-        (!x.allFinite() || !v.allFinite())) {
-      err = std::min(err, static_cast<long>(b));
-      continue;
-    }
-    // The broad phase's displacement check (need_rebuild) for the next step, in this pass.
-    const Real d = (x - pos_at_build_[b]).norm() + std::max(0.0, radius_[b] - radius_at_build_[b]);
-    worst = std::max(worst, d);
   }
   err_body = err;
   if (err == std::numeric_limits<long>::max()) {
@@ -1049,6 +1201,7 @@ void Scene::step() {
     if (!force_[b].allFinite()) os << "force " << force_[b].transpose();
     else if (!torque_[b].allFinite()) os << "torque " << torque_[b].transpose();
     else if (!vel_[b].allFinite()) os << "velocity " << vel_[b].transpose();
+    else if (!angvel_[b].allFinite()) os << "angular velocity " << angvel_[b].transpose();
     else os << "position " << pos_[b].transpose();
     throw BlowUpError(os.str());
   }

@@ -375,6 +375,12 @@ class Scene {
   // Per body: the sum over its contacts as i of -force and torque_i, written by the pair
   // pass every step (scratch, not state).
   std::vector<Vec3> pair_fi_, pair_ti_;
+  // Scratch of reduce_and_integrate: accelerations of the step (zero for blocked DOFs).
+  std::vector<Vec3> acc_lin_, acc_ang_;
+  // Scratch of compute_wall_forces: wall contacts by wall axis, made again after each build.
+  std::vector<int> wall_order_;
+  long wall_axis_end_[3] = {0, 0, 0};
+  long wall_order_builds_ = -1;
   std::vector<WallContact> wall_contacts_;
   // Pair contacts of body b: those where b is i are the contacts pair_ioff_[b] ..
   // pair_ioff_[b + 1] (contiguous: pairs_ is sorted by (i, j)); those where b is j have their
