@@ -20,7 +20,12 @@ CASE = ROOT / "cases" / "deposition.py"
 SMOKE_BOX = (0.06, 0.06, 0.12)  # m, the --smoke box of cases/deposition.py
 
 #: Stated bounds.
-MAX_SPEED = 1e-3          # m/s: the packing is at rest
+#: At rest: every sphere below the case's own "settled" speed (Params.settled_speed, m/s),
+#: and 99 % of them below BULK_SPEED. A rattler (a grain held by two contacts, still rolling
+#: into its seat) can keep a few mm/s when the case stops: over seeds 1-5 the fastest grain
+#: ended at 4e-4 to 5e-3 m/s while the 99th percentile stayed at 1e-7 to 2e-5 m/s.
+MAX_SPEED = 5e-3          # m/s, = cases/deposition.py Params.settled_speed
+BULK_SPEED = 1e-4         # m/s
 ENERGY_BALANCE = 0.02     # |balance error| / gravity energy released (measured: 0.75 %)
 
 
@@ -64,7 +69,9 @@ def test_packing_is_settled_inside_the_box_and_on_the_floor(smoke):
     pos, r, vel = last["positions"], last["radii"], last["velocities"]
     assert len(r) == summary["num_spheres"] == 400
     # At rest.
-    assert np.sqrt((vel**2).sum(1)).max() < MAX_SPEED
+    speed = np.sqrt((vel**2).sum(1))
+    assert speed.max() < MAX_SPEED
+    assert np.percentile(speed, 99) < BULK_SPEED
     # Inside the box (overlap with a wall at most 1 % of the radius).
     tol = 0.01 * r[:, None]
     assert np.all(pos - r[:, None] > -tol) and np.all(pos + r[:, None] < np.array(SMOKE_BOX) + tol)
