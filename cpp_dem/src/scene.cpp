@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstddef>
+#include <cstring>
 #include <limits>
 #include <sstream>
 #include <type_traits>
@@ -37,6 +39,22 @@ __attribute__((always_inline)) inline void store3(Vec3& a, const V4& v) {
   a[1] = v[1];
   a[2] = v[2];
 }
+/// Four doubles from / to memory laid out for it (a padded record: PairOutput, pair_fi_).
+__attribute__((always_inline)) inline V4 load4(const Real* p) {
+  V4 r;
+  std::memcpy(&r, p, sizeof r);
+  return r;
+}
+__attribute__((always_inline)) inline void store4(Real* p, const V4& v) {
+  std::memcpy(p, &v, sizeof v);
+}
+/// v with lane 3 set to zero, and v with lane 3 set to s.
+__attribute__((always_inline)) inline V4 zero_lane3(const V4& v) {
+  return __builtin_shuffle(v, V4{}, V4i{0, 1, 2, 4});
+}
+__attribute__((always_inline)) inline V4 with_lane3(const V4& v, Real s) {
+  return __builtin_shuffle(v, V4{s, s, s, s}, V4i{0, 1, 2, 7});
+}
 __attribute__((always_inline)) inline Real dot3(const V4& a, const V4& b) {
   const V4 p = a * b;
   return (p[0] + p[1]) + p[2];
@@ -46,6 +64,15 @@ __attribute__((always_inline)) inline V4 cross3(const V4& a, const V4& b) {
   return __builtin_shuffle(a, yzx) * __builtin_shuffle(b, zxy) -
          __builtin_shuffle(a, zxy) * __builtin_shuffle(b, yzx);
 }
+
+// The 4-double loads and stores of the pair pass rely on these layouts.
+static_assert(sizeof(Vec3) == 3 * sizeof(Real), "Vec3 must be three packed doubles");
+static_assert(offsetof(PairContact, overlap) == offsetof(PairContact, fs) + sizeof(Vec3) &&
+                  offsetof(PairContact, fn) == offsetof(PairContact, normal) + sizeof(Vec3),
+              "PairContact: fs, overlap and normal, fn must be adjacent");
+static_assert(offsetof(PairOutput, pad_force) == offsetof(PairOutput, force) + sizeof(Vec3) &&
+                  offsetof(PairOutput, pad_torque) == offsetof(PairOutput, torque_j) + sizeof(Vec3),
+              "PairOutput: each vector must be followed by its padding");
 
 /// Steps between two renormalisations of the orientation quaternions (rotate_orientation).
 constexpr long kRenormalizePeriod = 64;
@@ -558,8 +585,8 @@ void Scene::compute_pair_forces(long& err_contact) {
   const int* const jslot = pair_jslot_.data();
   PairContact* const pairs = pairs_.data();
   PairOutput* const out_j = pair_out_.data();
-  Vec3* const out_fi = pair_fi_.data();
-  Vec3* const out_ti = pair_ti_.data();
+  Real* const out_fi = pair_fi_.data()->data();
+  Real* const out_ti = pair_ti_.data()->data();
 #pragma omp parallel reduction(min : err) if (nc > kParallelMin)
   {
 #ifdef _OPENMP
@@ -644,8 +671,8 @@ void Scene::compute_pair_forces(long& err_contact) {
           const Real fn = c.kn * overlap;
           const Real vn = dot3(rel_vel, n);
           const V4 vt = rel_vel - vn * n;
-          V4 fs = v4(c.fs);
-          const V4 n_old = v4(c.normal);
+          V4 fs = zero_lane3(load4(c.fs.data()));  // (fs, overlap) in the record
+          const V4 n_old = zero_lane3(load4(c.normal.data()));  // (normal, fn)
           if (dot3(n_old, n_old) > 0) {
             // Keep the stored shear force in the tangent plane of the rotated contact frame.
             const V4 axis = cross3(n_old, n);
@@ -663,21 +690,19 @@ void Scene::compute_pair_forces(long& err_contact) {
             if (c.ks > 0) pair_cold_[k].dissip_friction += dot3(fs - capped, capped) / c.ks;
             fs = capped;
           }
-          store3(c.fs, fs);
-          store3(c.normal, n);
-          c.overlap = overlap;
-          c.fn = fn;
+          store4(c.fs.data(), with_lane3(fs, overlap));  // fs, overlap
+          store4(c.normal.data(), with_lane3(n, fn));    // normal, fn
           const V4 f = fn * n + fs;
-          store3(o.force, f);
+          store4(o.force.data(), f);  // with its padding (lane 3, zero)
           // Moments (000 eq 6): -l_j n x F on j, l_i n x (-F) on i; n x F = n x fs.
           const V4 nxf = cross3(n, fs);
-          store3(o.torque_j, -lj * nxf);
+          store4(o.torque_j.data(), -lj * nxf);
           fi -= f;
           ti -= li * nxf;
         }
       }
-      store3(out_fi[i], fi);
-      store3(out_ti[i], ti);
+      store4(out_fi + 4L * i, fi);  // lane 3 is zero: every term had a zero lane 3
+      store4(out_ti + 4L * i, ti);
     }
   }
   err_contact = err;
@@ -867,12 +892,15 @@ inline Real damp_component(Real a, Real v, Real dt, Real lambda) {
 /// needs no square root and no division. The rotation is a unit quaternion to round-off, so
 /// |q| drifts by about one ulp per step; with `renormalize` (every kRenormalizePeriod steps)
 /// one Newton step for 1/|q| brings it back (|q|^2 = 1 + e, the step leaves O(e^2)).
-inline void rotate_orientation(Quat& q, const Vec3& w, Real dt, bool renormalize) {
-  const Real w2 = w.squaredNorm();
-  if (!(w2 > 0)) return;
+/// The rotation quaternion r and the Hamilton product r q of rotate_orientation, written
+/// for one body's doubles: q = (x, y, z, w) in Eigen's storage order, w = spin (rad/s).
+/// `series`: h^2 < 0.0025 (the caller checked), so no sin/cos.
+template <bool kRenormalize>
+__attribute__((always_inline)) inline void rotate_quat(Real* q, Real wx, Real wy, Real wz,
+                                                        Real dt, Real w2, bool series) {
   const Real h2 = 0.25 * dt * dt * w2;
   Real ch, sh_over_wn;
-  if (h2 < 0.0025) {
+  if (series) {
     ch = 1 - h2 * (0.5 - h2 * (1.0 / 24));
     sh_over_wn = 0.5 * dt * (1 - h2 * (1.0 / 6 - h2 * (1.0 / 120)));
   } else {
@@ -881,23 +909,49 @@ inline void rotate_orientation(Quat& q, const Vec3& w, Real dt, bool renormalize
     ch = std::cos(h);
     sh_over_wn = std::sin(h) / wn;
   }
-  const Real rw = ch, rx = sh_over_wn * w[0], ry = sh_over_wn * w[1], rz = sh_over_wn * w[2];
-  const Real qw = q.w(), qx = q.x(), qy = q.y(), qz = q.z();
+  const Real rw = ch, rx = sh_over_wn * wx, ry = sh_over_wn * wy, rz = sh_over_wn * wz;
+  const Real qx = q[0], qy = q[1], qz = q[2], qw = q[3];
   // Hamilton product r q.
   Real nw = rw * qw - rx * qx - ry * qy - rz * qz;
   Real nx = rw * qx + rx * qw + ry * qz - rz * qy;
   Real ny = rw * qy - rx * qz + ry * qw + rz * qx;
   Real nz = rw * qz + rx * qy - ry * qx + rz * qw;
-  if (renormalize) {
+  if (kRenormalize) {
     const Real k = 1.5 - 0.5 * (nw * nw + nx * nx + ny * ny + nz * nz);
     nw *= k;
     nx *= k;
     ny *= k;
     nz *= k;
   }
-  q = Quat(nw, nx, ny, nz);
+  q[0] = nx;
+  q[1] = ny;
+  q[2] = nz;
+  q[3] = nw;
 }
 
+/// h^2 = (|w| dt / 2)^2 below which rotate_quat uses its series.
+constexpr Real kSeriesH2 = 0.0025;
+
+inline void rotate_orientation(Quat& q, const Vec3& w, Real dt, bool renormalize) {
+  const Real w2 = w.squaredNorm();
+  const bool series = 0.25 * dt * dt * w2 < kSeriesH2;
+  if (renormalize) rotate_quat<true>(q.coeffs().data(), w[0], w[1], w[2], dt, w2, series);
+  else rotate_quat<false>(q.coeffs().data(), w[0], w[1], w[2], dt, w2, series);
+}
+
+/// rotate_orientation for `count` bodies: q, 4 doubles per body (x, y, z, w); w, 3 per body.
+/// Every |w| dt / 2 must be in the series range (the caller checked); the loop vectorises
+/// across bodies.
+template <bool kRenormalize>
+inline void rotate_orientations(Real* __restrict q, const Real* __restrict w, long count,
+                                Real dt) {
+#pragma omp simd
+  for (long b = 0; b < count; ++b) {
+    const Real wx = w[3 * b], wy = w[3 * b + 1], wz = w[3 * b + 2];
+    const Real w2 = wx * wx + wy * wy + wz * wz;
+    rotate_quat<kRenormalize>(q + 4 * b, wx, wy, wz, dt, w2, true);
+  }
+}
 
 /// One leapfrog half of the update for a run of degrees of freedom [k0, k1) of flat arrays:
 /// the accelerations acc (m/s^2 or rad/s^2, zero for a blocked DOF) are damped (Cundall local
@@ -942,57 +996,57 @@ void Scene::reduce_and_integrate(long& err_body) {
   // Reduce the contact forces into body b in a fixed order: the contacts where b is j (in
   // contact order, contiguous in pair_out_), the sum over the contacts where b is i (which
   // the pair pass formed in contact order), walls, then the geogrid's contacts and links.
-  const auto sum_forces = [&](int b, Vec3& f, Vec3& t) __attribute__((always_inline)) {
-    f = ext_force_[b] + mass_[b] * gravity_;
-    t = ext_torque_[b];
+  const Real* const fi = pair_fi_.data()->data();
+  const Real* const ti = pair_ti_.data()->data();
+  const auto sum_forces = [&](int b, V4& f, V4& t) __attribute__((always_inline)) {
+    f = v4(ext_force_[b]) + mass_[b] * v4(gravity_);
+    t = v4(ext_torque_[b]);
     for (int e = pair_jadj_off_[b]; e < pair_jadj_off_[b + 1]; ++e) {
       const PairOutput& o = pair_out_[e];  // zero when inactive
-      f += o.force;
-      t += o.torque_j;
+      f += load4(o.force.data());          // (with its zero padding)
+      t += load4(o.torque_j.data());
     }
-    f += pair_fi_[b];
-    t += pair_ti_[b];
+    f += load4(fi + 4L * b);
+    t += load4(ti + 4L * b);
     for (int e = wall_adj_off_[b]; e < wall_adj_off_[b + 1]; ++e) {
       const WallContact& c = wall_contacts_[wall_adj_[e]];
       if (!c.active) continue;
-      f += c.force;
-      t += c.torque;
+      f += v4(c.force);
+      t += v4(c.torque);
     }
     if (grid) {
       // Grain side of grain–geogrid contacts.
       for (int e = sphere_gc_off_[b]; e < sphere_gc_off_[b + 1]; ++e) {
         const GridContact& c = grid_contacts_[sphere_gc_[e]];
         if (!c.active) continue;
-        f += c.force;
-        t += c.torque_sphere;
+        f += v4(c.force);
+        t += v4(c.torque_sphere);
       }
       // Node side: the virtual sphere's force and torque split by the weights (000 eq 19).
       for (int e = node_gc_off_[b]; e < node_gc_off_[b + 1]; ++e) {
         const GridContact& c = grid_contacts_[node_gc_[e] / 3];
         if (!c.active) continue;
         const Real w = c.w[node_gc_[e] % 3];
-        f -= w * c.force;
-        t += w * c.torque_virtual;
+        f -= w * v4(c.force);
+        t += w * v4(c.torque_virtual);
       }
       // Cohesive links.
       for (int e = node_link_off_[b]; e < node_link_off_[b + 1]; ++e) {
         const GridLink& l = links_[node_link_[e]];
         if (l.broken) continue;
         if (l.b == b) {
-          f += l.force_b;
-          t += l.torque_b;
+          f += v4(l.force_b);
+          t += v4(l.torque_b);
         } else {
-          f -= l.force_b;
-          t += l.torque_a;
+          f -= v4(l.force_b);
+          t += v4(l.torque_a);
         }
       }
     }
-    force_[b] = f;
-    torque_[b] = t;
-    // A NaN or inf in any component makes the sum non-finite; only then the exact test.
-    return std::isfinite((f[0] + f[1] + f[2]) + (t[0] + t[1] + t[2])) ||
-           (f.allFinite() && t.allFinite());
+    store3(force_[b], f);
+    store3(torque_[b], t);
   };
+  const auto forces_finite = [&](int b) { return force_[b].allFinite() && torque_[b].allFinite(); };
   // The broad phase's displacement check (need_rebuild) for the next step, in this pass.
   const auto displacement = [&](int b) __attribute__((always_inline)) {
     return (pos_[b] - pos_at_build_[b]).norm() +
@@ -1011,21 +1065,28 @@ void Scene::reduce_and_integrate(long& err_body) {
     Real* const pos = pos_.data()->data();
     const Real* const acc_lin = acc_lin_.data()->data();
     const Real* const acc_ang = acc_ang_.data()->data();
+    const Real* const mass = mass_.data();
+    const Real* const inertia = inertia_.data();
     constexpr int kBlock = 64;
     const int nblocks = (n + kBlock - 1) / kBlock;
 #pragma omp parallel for schedule(static) reduction(min : err) reduction(max : worst) \
     if (n > kParallelMin)
     for (int blk = 0; blk < nblocks; ++blk) {
       const int b0 = blk * kBlock, b1 = std::min(n, b0 + kBlock);
+      const int count = b1 - b0;
+      // Inverse masses and inertias of the block (vectorised divisions).
+      Real inv_m[kBlock], inv_i[kBlock];
+#pragma omp simd
+      for (int q = 0; q < count; ++q) {
+        inv_m[q] = 1.0 / mass[b0 + q];
+        inv_i[q] = 1.0 / inertia[b0 + q];
+      }
+      V4 fcheck = V4{};  // sum of every force and torque: finite unless one of them is not
       for (int b = b0; b < b1; ++b) {
-        Vec3 f, t;
-        if (!sum_forces(b, f, t)) {
-          err = std::min(err, static_cast<long>(b));
-          acc_lin_[b].setZero();
-          acc_ang_[b].setZero();
-          continue;
-        }
-        Vec3 al = f * (1.0 / mass_[b]), aa = t * (1.0 / inertia_[b]);
+        V4 f, t;
+        sum_forces(b, f, t);
+        fcheck += f + t;
+        V4 al = f * inv_m[b - b0], aa = t * inv_i[b - b0];
         if (const std::uint8_t dofs = blocked_[b]) {
           // A blocked DOF keeps its imposed velocity: zero acceleration, nothing to damp.
           for (int a = 0; a < 3; ++a) {
@@ -1033,8 +1094,18 @@ void Scene::reduce_and_integrate(long& err_body) {
             if (dofs & (DOF_RX << a)) aa[a] = 0;
           }
         }
-        acc_lin_[b] = al;
-        acc_ang_[b] = aa;
+        store3(acc_lin_[b], al);
+        store3(acc_ang_[b], aa);
+      }
+      if (!std::isfinite(fcheck[0] + fcheck[1] + fcheck[2])) {
+        // Only now the exact test; a body with a non-finite force or torque does not move.
+        for (int b = b0; b < b1; ++b) {
+          if (!forces_finite(b)) {
+            err = std::min(err, static_cast<long>(b));
+            acc_lin_[b].setZero();
+            acc_ang_[b].setZero();
+          }
+        }
       }
       const long k0 = 3L * b0, k1 = 3L * b1;
       Real check;
@@ -1045,9 +1116,19 @@ void Scene::reduce_and_integrate(long& err_body) {
         check = leapfrog_dofs<false>(vel, acc_lin, pos, k0, k1, dt, lambda) +
                 leapfrog_dofs<false>(angvel, acc_ang, nullptr, k0, k1, dt, lambda);
       }
+      // Orientations: vectorised across the block when every spin is in the series range.
+      Real w2max = 0;
+#pragma omp simd reduction(max : w2max)
+      for (long k = k0; k < k1; ++k) w2max = std::max(w2max, angvel[k] * angvel[k]);
+      if (3 * 0.25 * dt * dt * w2max < kSeriesH2) {  // |w|^2 <= 3 max_a w_a^2
+        Real* const q = ori_[b0].coeffs().data();
+        if (renormalize) rotate_orientations<true>(q, angvel + k0, count, dt);
+        else rotate_orientations<false>(q, angvel + k0, count, dt);
+      } else {
+        for (int b = b0; b < b1; ++b) rotate_orientation(ori_[b], angvel_[b], dt, renormalize);
+      }
       const bool finite = std::isfinite(check);
       for (int b = b0; b < b1; ++b) {
-        rotate_orientation(ori_[b], angvel_[b], dt, renormalize);
         if (!finite && (!pos_[b].allFinite() || !vel_[b].allFinite() || !angvel_[b].allFinite())) {
           err = std::min(err, static_cast<long>(b));
           continue;
@@ -1061,11 +1142,14 @@ void Scene::reduce_and_integrate(long& err_body) {
 #pragma omp parallel for schedule(static) reduction(min : err) reduction(max : worst) \
     if (n > kParallelMin)
     for (int b = 0; b < n; ++b) {
-      Vec3 f, t;
-      if (!sum_forces(b, f, t)) {
+      V4 f4, t4;
+      sum_forces(b, f4, t4);
+      // A NaN or inf in any component makes the sum non-finite; only then the exact test.
+      if (!std::isfinite((f4[0] + f4[1] + f4[2]) + (t4[0] + t4[1] + t4[2])) && !forces_finite(b)) {
         err = std::min(err, static_cast<long>(b));
         continue;
       }
+      const Vec3 f = vec3(f4), t = vec3(t4);
       const std::uint8_t dofs = blocked_[b];
       const Vec3 v_old = vel_[b], w_old = angvel_[b];
       const Real m = mass_[b], inertia = inertia_[b];

@@ -2,6 +2,7 @@
 // State is passed explicitly; there is no global scene.
 #pragma once
 
+#include <array>
 #include <memory>
 #include <string>
 #include <utility>
@@ -47,9 +48,11 @@ struct PairContact {
   Real kn = 0;                  ///< copy of ContactPhys::kn
   Real ks = 0;                  ///< copy of ContactPhys::ks
   Real tan_phi = 0;             ///< copy of ContactPhys::tan_phi
+  // (Each vector is followed by a scalar, so the pair pass loads and stores the pair as one
+  // 4-double register.)
   Vec3 fs = Vec3::Zero();       ///< ContactState::fs, elastic shear force on j, N
-  Vec3 normal = Vec3::Zero();   ///< ContactState::normal (zero: new contact)
   Real overlap = 0;             ///< ContactState::overlap, m
+  Vec3 normal = Vec3::Zero();   ///< ContactState::normal (zero: new contact)
   Real fn = 0;                  ///< ContactState::fn, N
 };
 
@@ -65,9 +68,13 @@ struct PairContactCold {
 /// contact's history in a compact array grouped by j, so the reduction into bodies reads it
 /// contiguously. Zero for an inactive contact.
 /// (i's share is summed by the pair pass per body, Scene::pair_fi_ / pair_ti_.)
+/// Each vector is followed by a zero double, so that the pair pass stores and the reduction
+/// loads it as one 4-double register.
 struct PairOutput {
   Vec3 force = Vec3::Zero();     ///< force on j (i gets -force), N
+  Real pad_force = 0;            ///< zero (padding)
   Vec3 torque_j = Vec3::Zero();  ///< torque on j, N m
+  Real pad_torque = 0;           ///< zero (padding)
 };
 
 /// A sphere–wall contact. Side 1 = the wall, side 2 = the sphere.
@@ -374,7 +381,9 @@ class Scene {
   std::vector<PairOutput> pair_out_;
   // Per body: the sum over its contacts as i of -force and torque_i, written by the pair
   // pass every step (scratch, not state).
-  std::vector<Vec3> pair_fi_, pair_ti_;
+  // i's share of its pair contacts' forces (N) and torques (N m), 4 doubles per body (the
+  // fourth zero), so they are stored and loaded as one register.
+  std::vector<std::array<Real, 4>> pair_fi_, pair_ti_;
   // Scratch of reduce_and_integrate: accelerations of the step (zero for blocked DOFs).
   std::vector<Vec3> acc_lin_, acc_ang_;
   // Scratch of compute_wall_forces: wall contacts by wall axis, made again after each build.
