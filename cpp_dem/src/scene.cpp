@@ -74,6 +74,14 @@ static_assert(offsetof(PairOutput, pad_force) == offsetof(PairOutput, force) + s
                   offsetof(PairOutput, pad_torque) == offsetof(PairOutput, torque_j) + sizeof(Vec3),
               "PairOutput: each vector must be followed by its padding");
 
+/// Bodies per block of the integration pass; the wall pass visits its contacts by the same
+/// blocks, and both give thread t the blocks thread_share(nblocks, t, nt), so a thread's wall
+/// contacts belong to the bodies it integrates (their records stay in its cache).
+constexpr int kBodyBlock = 64;
+inline std::pair<long, long> thread_share(long total, long t, long nt) {
+  return {t * total / nt, (t + 1) * total / nt};
+}
+
 /// Steps between two renormalisations of the orientation quaternions (rotate_orientation).
 constexpr long kRenormalizePeriod = 64;
 
@@ -771,23 +779,28 @@ void Scene::compute_wall_forces(long& err_contact) {
   const Real dt = dt_;
   const Real max_ratio = max_overlap_ratio_;
   const int version = phys_version_;
-  // The contacts in the order of their walls' axes (contact order within an axis), so the
-  // kernel's axis is a compile-time constant and the branch to it is predictable: in contact
-  // order (by body) the axis changes at random and the jump missed (perf, N = 1e3). Each
-  // contact is computed independently, so the order does not change any result.
-  if (wall_order_builds_ != builds_ || static_cast<long>(wall_order_.size()) != nc) {
+  // The contacts by blocks of bodies (those of the integration pass) and, within a block, by
+  // wall axis (contact order within an axis): the kernel's axis is a compile-time constant and
+  // the branch to it changes at most three times per block, where in contact order (by body)
+  // it changed at random and missed (perf, N = 1e3). Each contact is computed independently,
+  // so the order does not change any result.
+  const int nblocks = (num_bodies() + kBodyBlock - 1) / kBodyBlock;
+  if (wall_order_builds_ != builds_ || static_cast<long>(wall_order_.size()) != nc ||
+      static_cast<int>(wall_block_off_.size()) != nblocks + 1) {
+    std::vector<int> start(3 * nblocks + 1, 0);
+    const auto key = [&](long k) {
+      return 3 * (wall_contacts_[k].body / kBodyBlock) + walls_[wall_contacts_[k].wall].axis;
+    };
+    for (long k = 0; k < nc; ++k) ++start[key(k) + 1];
+    for (int q = 0; q < 3 * nblocks; ++q) start[q + 1] += start[q];
+    wall_block_off_.resize(nblocks + 1);
+    for (int blk = 0; blk <= nblocks; ++blk) wall_block_off_[blk] = start[3 * blk];
     wall_order_.resize(nc);
-    long at = 0;
-    for (int ax = 0; ax < 3; ++ax) {
-      wall_axis_end_[ax] = at;  // start of this axis, finished below
-      for (long k = 0; k < nc; ++k)
-        if (walls_[wall_contacts_[k].wall].axis == ax) wall_order_[at++] = static_cast<int>(k);
-      wall_axis_end_[ax] = at;
-    }
+    for (long k = 0; k < nc; ++k) wall_order_[start[key(k)]++] = static_cast<int>(k);
     wall_order_builds_ = builds_;
   }
-  const long end0 = wall_axis_end_[0], end1 = wall_axis_end_[1];
   const int* const order = wall_order_.data();
+  const int* const block_off = wall_block_off_.data();
   WallContact* const contacts = wall_contacts_.data();
   const Wall* const walls = walls_.data();
   const Vec3* const pos = pos_.data();
@@ -837,12 +850,22 @@ void Scene::compute_wall_forces(long& err_contact) {
     c.force = out.force2;
     c.torque = g.branch2.cross(out.force2) + out.moment2;
   };
-#pragma omp parallel for schedule(static) reduction(min : err) if (nc > kParallelMin)
-  for (long p = 0; p < nc; ++p) {
-    const long k = order[p];
-    if (p < end0) one(k, err, std::integral_constant<int, 0>());
-    else if (p < end1) one(k, err, std::integral_constant<int, 1>());
-    else one(k, err, std::integral_constant<int, 2>());
+#pragma omp parallel reduction(min : err) if (nc > kParallelMin)
+  {
+#ifdef _OPENMP
+    const long nt = omp_get_num_threads(), t = omp_get_thread_num();
+#else
+    const long nt = 1, t = 0;
+#endif
+    const auto blocks = thread_share(nblocks, t, nt);
+    for (long p = block_off[blocks.first]; p < block_off[blocks.second]; ++p) {
+      const long k = order[p];
+      switch (walls[contacts[k].wall].axis) {
+        case 0: one(k, err, std::integral_constant<int, 0>()); break;
+        case 1: one(k, err, std::integral_constant<int, 1>()); break;
+        default: one(k, err, std::integral_constant<int, 2>());
+      }
+    }
   }
   err_contact = err;
 }
@@ -1067,12 +1090,18 @@ void Scene::reduce_and_integrate(long& err_body) {
     const Real* const acc_ang = acc_ang_.data()->data();
     const Real* const mass = mass_.data();
     const Real* const inertia = inertia_.data();
-    constexpr int kBlock = 64;
+    constexpr int kBlock = kBodyBlock;
     const int nblocks = (n + kBlock - 1) / kBlock;
-#pragma omp parallel for schedule(static) reduction(min : err) reduction(max : worst) \
-    if (n > kParallelMin)
-    for (int blk = 0; blk < nblocks; ++blk) {
-      const int b0 = blk * kBlock, b1 = std::min(n, b0 + kBlock);
+#pragma omp parallel reduction(min : err) reduction(max : worst) if (n > kParallelMin)
+  {
+#ifdef _OPENMP
+    const long nt = omp_get_num_threads(), t = omp_get_thread_num();
+#else
+    const long nt = 1, t = 0;
+#endif
+    const auto blocks = thread_share(nblocks, t, nt);
+    for (long blk = blocks.first; blk < blocks.second; ++blk) {
+      const int b0 = static_cast<int>(blk) * kBlock, b1 = std::min(n, b0 + kBlock);
       const int count = b1 - b0;
       // Inverse masses and inertias of the block (vectorised divisions).
       Real inv_m[kBlock], inv_i[kBlock];
@@ -1136,6 +1165,7 @@ void Scene::reduce_and_integrate(long& err_body) {
         worst = std::max(worst, displacement(b));
       }
     }
+  }
   } else {
     // With energy bookkeeping: per body, the same arithmetic plus the damping's dissipation
     // and the work of external forces and of imposed velocities.

@@ -386,9 +386,9 @@ class Scene {
   std::vector<std::array<Real, 4>> pair_fi_, pair_ti_;
   // Scratch of reduce_and_integrate: accelerations of the step (zero for blocked DOFs).
   std::vector<Vec3> acc_lin_, acc_ang_;
-  // Scratch of compute_wall_forces: wall contacts by wall axis, made again after each build.
-  std::vector<int> wall_order_;
-  long wall_axis_end_[3] = {0, 0, 0};
+  // Scratch of compute_wall_forces, made again after each build: wall contacts by block of
+  // bodies and wall axis, and where each block's contacts start in that order.
+  std::vector<int> wall_order_, wall_block_off_;
   long wall_order_builds_ = -1;
   std::vector<WallContact> wall_contacts_;
   // Pair contacts of body b: those where b is i are the contacts pair_ioff_[b] ..
