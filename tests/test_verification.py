@@ -271,18 +271,27 @@ def test_rolling_resistance_decelerates_at_the_capped_moment():
     assert abs(s.velocities[0, 0]) < 1e-3
 
 
+def grains_in_box(rng, n_side, first, spacing, jitter, r_range, box, damping_normal=0.0,
+                  **scene_kw):
+    """n_side^3 frictional grains (radii uniform in r_range, m) on a jittered lattice
+    (first + spacing * index +- jitter, m) in a box [0, box] of six walls."""
+    s = dem.Scene(**scene_kw)
+    m = s.add_material(dem.linear_material(density=RHO, young=E, poisson=0.3,
+                                           friction_angle_deg=30, damping_normal=damping_normal))
+    s.add_box((0, 0, 0), box, material=m)
+    g = np.stack(np.meshgrid(*[np.arange(n_side)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    c = first + spacing * g + rng.uniform(-jitter, jitter, g.shape)
+    s.add_spheres(c, rng.uniform(*r_range, len(c)), material=m)
+    return s
+
+
 def test_energy_balance_undamped_over_1e5_steps():
     """Frictional spheres bouncing in a box under gravity, no damping: the energy balance
     (kinetic + elastic + potential + friction dissipation) drifts by < 1e-3 relative."""
     rng = np.random.default_rng(3)
-    s = dem.Scene(gravity=(0, 0, -G))
-    m = s.add_material(dem.linear_material(density=RHO, young=E, poisson=0.3,
-                                           friction_angle_deg=30))
-    s.add_box((0, 0, 0), (0.06, 0.06, 0.06), material=m)
-    g = np.stack(np.meshgrid(*[np.arange(3)] * 3, indexing="ij"), -1).reshape(-1, 3)
-    c = 0.012 + 0.018 * g + rng.uniform(-0.002, 0.002, g.shape)
-    s.add_spheres(c, rng.uniform(0.004, 0.006, len(c)), material=m)
-    s.velocities = rng.normal(0, 0.3, (len(c), 3))
+    s = grains_in_box(rng, 3, 0.012, 0.018, 0.002, (0.004, 0.006), (0.06, 0.06, 0.06),
+                      gravity=(0, 0, -G))
+    s.velocities = rng.normal(0, 0.3, (s.num_bodies, 3))
     s.track_energy = True
     # Each contact resolved in about 30 steps: the per-collision error of leapfrog (from the
     # force jumping on at contact entry) scales with (omega dt)^2 and adds up as a random walk.
@@ -293,18 +302,14 @@ def test_energy_balance_undamped_over_1e5_steps():
     assert e["balance_error_relative"] < 1e-3, e
 
 
-def test_one_and_two_threads_bitwise_identical():
+@pytest.mark.parametrize("energy", [False, True])  # the two integration paths
+def test_one_and_two_threads_bitwise_identical(energy):
     def run(threads):
         dem.set_num_threads(threads)
-        rng = np.random.default_rng(7)
-        s = dem.Scene(gravity=(0, 0, -G), local_damping=0.1)
-        m = s.add_material(dem.linear_material(density=RHO, young=E, poisson=0.3,
-                                               friction_angle_deg=30, damping_normal=0.1))
-        s.add_box((0, 0, 0), (0.1, 0.1, 0.2), material=m)
-        g = np.stack(np.meshgrid(*[np.arange(8)] * 3, indexing="ij"), -1).reshape(-1, 3)
-        c = 0.008 + 0.012 * g + rng.uniform(-0.001, 0.001, g.shape)
-        s.add_spheres(c, rng.uniform(0.004, 0.0055, len(c)), material=m)
-        s.track_energy = True
+        s = grains_in_box(np.random.default_rng(7), 8, 0.008, 0.012, 0.001, (0.004, 0.0055),
+                          (0.1, 0.1, 0.2), damping_normal=0.1, gravity=(0, 0, -G),
+                          local_damping=0.1)
+        s.track_energy = energy
         s.set_auto_timestep(safety=0.5, period=50)
         s.run(3000)
         return s.positions, s.velocities, s.forces, s.wall_forces, s.energies()
@@ -324,14 +329,8 @@ def test_energy_bookkeeping_does_not_change_the_trajectory():
     # in vectorised blocks: the same arithmetic, so positions and velocities are bitwise
     # equal; the orientations may differ in the last bits (docs/core.md, Time integration).
     def run(energy):
-        rng = np.random.default_rng(3)
-        s = dem.Scene(gravity=(0, 0, -G), local_damping=0.2)
-        m = s.add_material(dem.linear_material(density=RHO, young=E, poisson=0.3,
-                                               friction_angle_deg=30))
-        s.add_box((0, 0, 0), (0.1, 0.1, 0.2), material=m)
-        g = np.stack(np.meshgrid(*[np.arange(8)] * 3, indexing="ij"), -1).reshape(-1, 3)
-        c = 0.008 + 0.012 * g + rng.uniform(-0.001, 0.001, g.shape)
-        s.add_spheres(c, rng.uniform(0.004, 0.0055, len(c)), material=m)
+        s = grains_in_box(np.random.default_rng(3), 8, 0.008, 0.012, 0.001, (0.004, 0.0055),
+                          (0.1, 0.1, 0.2), gravity=(0, 0, -G), local_damping=0.2)
         s.block_dofs(0, "xyz")  # one body on the blocked-DOF path
         s.track_energy = energy
         s.dt = 2e-5

@@ -81,6 +81,14 @@ constexpr int kBodyBlock = 64;
 inline std::pair<long, long> thread_share(long total, long t, long nt) {
   return {t * total / nt, (t + 1) * total / nt};
 }
+/// This thread's number and the number of threads in the team.
+inline std::pair<long, long> thread_and_team() {
+#ifdef _OPENMP
+  return {omp_get_thread_num(), omp_get_num_threads()};
+#else
+  return {0, 1};
+#endif
+}
 
 /// Steps between two renormalisations of the orientation quaternions (rotate_orientation).
 constexpr long kRenormalizePeriod = 64;
@@ -597,11 +605,7 @@ void Scene::compute_pair_forces(long& err_contact) {
   Real* const out_ti = pair_ti_.data()->data();
 #pragma omp parallel reduction(min : err) if (nc > kParallelMin)
   {
-#ifdef _OPENMP
-    const long nt = omp_get_num_threads(), t = omp_get_thread_num();
-#else
-    const long nt = 1, t = 0;
-#endif
+    const auto [t, nt] = thread_and_team();
     // Each thread takes the bodies whose contacts fall in its equal share of the contact
     // list: a body owns its contacts with larger ids, so with ids in random order low ids own
     // more contacts, and equal body counts would give the first thread most of the work.
@@ -852,11 +856,7 @@ void Scene::compute_wall_forces(long& err_contact) {
   };
 #pragma omp parallel reduction(min : err) if (nc > kParallelMin)
   {
-#ifdef _OPENMP
-    const long nt = omp_get_num_threads(), t = omp_get_thread_num();
-#else
-    const long nt = 1, t = 0;
-#endif
+    const auto [t, nt] = thread_and_team();
     const auto blocks = thread_share(nblocks, t, nt);
     for (long p = block_off[blocks.first]; p < block_off[blocks.second]; ++p) {
       const long k = order[p];
@@ -1094,11 +1094,7 @@ void Scene::reduce_and_integrate(long& err_body) {
     const int nblocks = (n + kBlock - 1) / kBlock;
 #pragma omp parallel reduction(min : err) reduction(max : worst) if (n > kParallelMin)
   {
-#ifdef _OPENMP
-    const long nt = omp_get_num_threads(), t = omp_get_thread_num();
-#else
-    const long nt = 1, t = 0;
-#endif
+    const auto [t, nt] = thread_and_team();
     const auto blocks = thread_share(nblocks, t, nt);
     for (long blk = blocks.first; blk < blocks.second; ++blk) {
       const int b0 = static_cast<int>(blk) * kBlock, b1 = std::min(n, b0 + kBlock);
