@@ -3,9 +3,11 @@
 #include <algorithm>
 #include <cmath>
 #include <cstddef>
+#include <cstdlib>
 #include <cstring>
 #include <limits>
 #include <sstream>
+#include <string>
 #include <type_traits>
 
 #ifdef _OPENMP
@@ -26,6 +28,8 @@ constexpr Real kInf = std::numeric_limits<Real>::infinity();
 constexpr long kParallelMin = 128;
 
 Real sphere_mass(Real density, Real r) { return density * 4.0 / 3.0 * M_PI * r * r * r; }
+
+#define ALWAYS_INLINE __attribute__((always_inline)) inline
 
 /// 3-vectors in 4-lane registers (lane 3 zero) for the pair pass: one instruction per
 /// operation where Eigen's Vector3d takes a 2-lane packet plus a scalar. GCC lowers the type
@@ -63,6 +67,69 @@ __attribute__((always_inline)) inline V4 cross3(const V4& a, const V4& b) {
   const V4i yzx = {1, 2, 0, 3}, zxy = {2, 0, 1, 3};
   return __builtin_shuffle(a, yzx) * __builtin_shuffle(b, zxy) -
          __builtin_shuffle(a, zxy) * __builtin_shuffle(b, yzx);
+}
+
+/// The 3-vector operations of the pair pass and the reduction, in two forms with the same
+/// arithmetic. WideOps keeps a 3-vector in one 4-lane register (lane 3 zero), which pays where
+/// the CPU has 256-bit registers (AVX2, AVX-512). NarrowOps is Eigen's Vector3d: without AVX,
+/// GCC lowers the 4-lane type through the stack and the wide pass ran 5x slower (measured
+/// with CPP_DEM_CLONES=OFF). The hot functions pick one per call (use_wide_ops()).
+struct WideOps {
+  using V = V4;
+  ALWAYS_INLINE static V zero() { return V4{}; }
+  ALWAYS_INLINE static V unit_z() { return V4{0, 0, 1, 0}; }
+  ALWAYS_INLINE static V load(const Vec3& a) { return v4(a); }
+  /// Three doubles and a zero pad (PairOutput, pair_fi_).
+  ALWAYS_INLINE static V load_padded(const Real* p) { return load4(p); }
+  /// Three doubles followed by another value (PairContact's fs, overlap and normal, fn).
+  ALWAYS_INLINE static V load_head(const Real* p) { return zero_lane3(load4(p)); }
+  ALWAYS_INLINE static void store(Vec3& a, const V& v) { store3(a, v); }
+  ALWAYS_INLINE static void store_padded(Real* p, const V& v) { store4(p, v); }  // lane 3: 0
+  ALWAYS_INLINE static void store_with(Real* p, const V& v, Real s) {
+    store4(p, with_lane3(v, s));
+  }
+  ALWAYS_INLINE static Real dot(const V& a, const V& b) { return dot3(a, b); }
+  ALWAYS_INLINE static V cross(const V& a, const V& b) { return cross3(a, b); }
+  ALWAYS_INLINE static Vec3 vec(const V& a) { return vec3(a); }
+};
+struct NarrowOps {
+  using V = Vec3;
+  ALWAYS_INLINE static V zero() { return Vec3::Zero(); }
+  ALWAYS_INLINE static V unit_z() { return Vec3::UnitZ(); }
+  ALWAYS_INLINE static V load(const Vec3& a) { return a; }
+  ALWAYS_INLINE static V load_padded(const Real* p) { return Vec3(p[0], p[1], p[2]); }
+  ALWAYS_INLINE static V load_head(const Real* p) { return Vec3(p[0], p[1], p[2]); }
+  ALWAYS_INLINE static void store(Vec3& a, const V& v) { a = v; }
+  ALWAYS_INLINE static void store_padded(Real* p, const V& v) {  // the pad stays zero
+    p[0] = v[0];
+    p[1] = v[1];
+    p[2] = v[2];
+  }
+  ALWAYS_INLINE static void store_with(Real* p, const V& v, Real s) {
+    store_padded(p, v);
+    p[3] = s;
+  }
+  ALWAYS_INLINE static Real dot(const V& a, const V& b) { return a.dot(b); }
+  ALWAYS_INLINE static V cross(const V& a, const V& b) { return a.cross(b); }
+  ALWAYS_INLINE static Vec3 vec(const V& a) { return a; }
+};
+
+/// Whether the hot loops run WideOps: in the x86-64-v3/v4 variants of a multiversioned build
+/// (the loader picked one, so the CPU has AVX2), or in a build for AVX; never with the
+/// environment variable CPP_DEM_NARROW=1 set when the module loads (tests run both forms).
+inline bool use_wide_ops() {
+  static const bool narrow_asked = [] {
+    const char* v = std::getenv("CPP_DEM_NARROW");
+    return v != nullptr && std::string(v) == "1";
+  }();
+#if defined(CPP_DEM_CLONES)
+  static const bool wide = __builtin_cpu_supports("avx2") && __builtin_cpu_supports("fma");
+  return wide && !narrow_asked;
+#elif defined(__AVX__)
+  return !narrow_asked;
+#else
+  return false;
+#endif
 }
 
 // The 4-double loads and stores of the pair pass rely on these layouts.
@@ -576,13 +643,175 @@ LawOutput Scene::apply_pair_law(size_t k, const ContactGeometry& g, Real dt) {
   return out;
 }
 
+/// Pair contact k has opened: forget its springs' history (ContactState::clear_history) and
+/// its output o.
+void Scene::open_pair(long k, PairOutput& o) {
+  PairContact& c = pairs_[k];
+  c.active = false;
+  c.fs.setZero();
+  c.normal.setZero();
+  c.overlap = 0;
+  c.fn = 0;
+  pair_cold_[k].mr.setZero();
+  o = PairOutput();
+}
+
+/// Pair contact k with a law other than the short kernel's: normal n, overlap (m), branch
+/// lengths li, lj (m), relative velocity (m/s), sum and difference of the spins (rad/s).
+/// Writes j's force and torque into o; returns i's force (N) and torque (N m).
+std::pair<Vec3, Vec3> Scene::general_pair(long k, PairOutput& o, const Vec3& n, Real overlap,
+                                          Real li, Real lj, const Vec3& rel_vel,
+                                          const Vec3& angvel_sum, const Vec3& rel_angvel) {
+  const Vec3 b1 = li * n;
+  const Vec3 b2 = -lj * n;
+  ContactGeometry g;
+  g.normal = n;
+  g.overlap = overlap;
+  g.branch1 = b1;
+  g.branch2 = b2;
+  g.rel_vel = rel_vel;
+  g.angvel_sum = angvel_sum;
+  g.rel_angvel = rel_angvel;
+  const LawOutput out = apply_pair_law(k, g, dt_);
+  o.force = out.force2;
+  // Moments, 000 eq (6): tau = (R - delta/2) n x F, plus rolling resistance.
+  o.torque_j = b2.cross(out.force2) + out.moment2;
+  return {-out.force2, b1.cross(-out.force2) - out.moment2};
+}
+
+/// The bodies [first, second) whose contacts fall in thread t's equal share of the contact
+/// list (of nt threads): a body owns its contacts with larger slots, so equal body counts
+/// would give some threads much more work than others.
+std::pair<int, int> Scene::pair_bodies_of_thread(long t, long nt) const {
+  const int n = num_bodies();
+  const long nc = static_cast<long>(pairs_.size());
+  const auto first_body_at = [&](long k) {
+    return static_cast<int>(std::lower_bound(pair_ioff_.begin(), pair_ioff_.begin() + n, k) -
+                            pair_ioff_.begin());
+  };
+  return {first_body_at(t * nc / nt), t + 1 == nt ? n : first_body_at((t + 1) * nc / nt)};
+}
+
+/// Bodies [b0, b1) of the pair pass and their contacts with Eigen's Vector3d (NarrowOps), for
+/// CPUs without AVX2 and builds without multiversioning (compute_pair_forces_narrow). The same
+/// arithmetic as the loop in compute_pair_forces, which is written out there with 4-lane
+/// registers: instantiated from one template with WideOps it ran 12 % slower at 1e3 (same
+/// instructions, measured 0.070 against 0.063 ms per step, not understood), so the loop is
+/// written twice.
+void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
+  using Ops = NarrowOps;
+  using V = Ops::V;
+  const Ops ops;
+  long err = err_out;
+  const Real dt = dt_;
+  const Real max_ratio = max_overlap_ratio_;
+  const int version = phys_version_;
+  // Local pointers: the loop's stores of bools could alias the vectors' own pointers, so
+  // through the members the compiler reloaded them for every access.
+  const Vec3* const pos = pos_.data();
+  const Vec3* const vel = vel_.data();
+  const Vec3* const angvel = angvel_.data();
+  const Real* const radius = radius_.data();
+  const int* const ioff = pair_ioff_.data();
+  const int* const jslot = pair_jslot_.data();
+  PairContact* const pairs = pairs_.data();
+  PairOutput* const out_j = pair_out_.data();
+  Real* const out_fi = pair_fi_.data()->data();
+  Real* const out_ti = pair_ti_.data()->data();
+  for (int i = b0; i < b1; ++i) {
+    const int k0 = ioff[i], k1 = ioff[i + 1];
+    // i's share: -force and torque_i summed over its contacts.
+    V fi = ops.zero(), ti = ops.zero();
+    if (k0 < k1) {
+      const V xi = ops.load(pos[i]), vi = ops.load(vel[i]), wi = ops.load(angvel[i]);
+      const Real ri = radius[i];
+      for (int k = k0; k < k1; ++k) {
+        PairContact& c = pairs[k];
+        PairOutput& o = out_j[jslot[k]];
+        const int j = c.j;
+        const V d = ops.load(pos[j]) - xi;
+        const Real dist2 = ops.dot(d, d);
+        const Real rj = radius[j];
+        const Real rsum = ri + rj;
+        if (dist2 >= rsum * rsum) {
+          if (c.active) open_pair(k, o);  // the contact opened
+          continue;
+        }
+        const Real dist = std::sqrt(dist2);
+        const Real overlap = rsum - dist;
+        if (!(overlap <= max_ratio * std::min(ri, rj))) {
+          err = std::min(err, static_cast<long>(k));
+          continue;
+        }
+        if (!c.active || c.phys_version != version) update_phys(c, pair_cold_[k]);
+        c.active = true;
+        const V n = dist > 0 ? V(d * (1.0 / dist)) : ops.unit_z();
+        // Contact point in the middle of the overlap: branch vectors l_i n and -l_j n,
+        // lengths R - delta/2 (000 eq 6).
+        const Real li = ri - 0.5 * overlap, lj = rj - 0.5 * overlap;
+        const V wj = ops.load(angvel[j]);
+        // v_j + w_j x (-l_j n) - (v_i + w_i x l_i n), with one cross product.
+        const V rel_vel = (ops.load(vel[j]) - vi) - ops.cross(lj * wj + li * wi, n);
+        if (!c.simple) {
+          const auto on_i = general_pair(k, o, ops.vec(n), overlap, li, lj, ops.vec(rel_vel),
+                                         ops.vec(wi + wj), ops.vec(wj - wi));
+          fi += ops.load(on_i.first);
+          ti += ops.load(on_i.second);
+          continue;
+        }
+        // The short kernel: apply_law for a linear law without viscous damping and rolling
+        // resistance (000 eqs 1-3), on the hot record.
+        const Real fn = c.kn * overlap;
+        const Real vn = ops.dot(rel_vel, n);
+        const V vt = rel_vel - vn * n;
+        V fs = ops.load_head(c.fs.data());  // (fs, overlap) in the record
+        const V n_old = ops.load_head(c.normal.data());  // (normal, fn)
+        if (ops.dot(n_old, n_old) > 0) {
+          // Keep the stored shear force in the tangent plane of the rotated contact frame.
+          const V axis = ops.cross(n_old, n);
+          const V twist = (0.5 * dt * ops.dot(n, wi + wj)) * n;
+          fs -= ops.cross(fs, axis);
+          fs -= ops.cross(fs, twist);
+          fs -= ops.dot(fs, n) * n;
+        }
+        fs -= (c.ks * dt) * vt;
+        const Real cap = c.tan_phi * (fn > 0 ? fn : 0.0);
+        const Real fs2 = ops.dot(fs, fs);
+        if (fs2 > cap * cap) {
+          const Real norm = std::sqrt(fs2);
+          const V capped = norm > 0 ? V(fs * (cap / norm)) : ops.zero();
+          if (c.ks > 0) pair_cold_[k].dissip_friction += ops.dot(fs - capped, capped) / c.ks;
+          fs = capped;
+        }
+        ops.store_with(c.fs.data(), fs, overlap);  // fs, overlap
+        ops.store_with(c.normal.data(), n, fn);    // normal, fn
+        const V f = fn * n + fs;
+        ops.store_padded(o.force.data(), f);
+        // Moments (000 eq 6): -l_j n x F on j, l_i n x (-F) on i; n x F = n x fs.
+        const V nxf = ops.cross(n, fs);
+        ops.store_padded(o.torque_j.data(), V(-lj * nxf));
+        fi -= f;
+        ti -= li * nxf;
+      }
+    }
+    ops.store_padded(out_fi + 4L * i, fi);
+    ops.store_padded(out_ti + 4L * i, ti);
+  }
+  err_out = err;
+}
+
 void Scene::compute_pair_forces(long& err_contact) {
   // Body-major: body i and its contacts (i, j), j > i, which are contiguous in pairs_ (sorted
   // by (i, j)). i's position, velocities and radius are loaded once; i's share of the forces
   // and torques is summed in registers, in contact order, into pair_fi_/pair_ti_; j's share
   // goes to its slot in pair_out_, which holds the contacts grouped by j (in contact order
   // within a body), so reduce_and_integrate reads them contiguously. Both orders are fixed,
-  // so the sums do not depend on the number of threads.
+  // so the sums do not depend on the number of threads. 3-vectors in 4-lane registers
+  // (WideOps) where the CPU has AVX2; otherwise the same loop with Eigen's Vector3d.
+  if (!use_wide_ops()) {
+    compute_pair_forces_narrow(err_contact);
+    return;
+  }
   const int n = num_bodies();
   const long nc = static_cast<long>(pairs_.size());
   const Real dt = dt_;
@@ -606,15 +835,7 @@ void Scene::compute_pair_forces(long& err_contact) {
 #pragma omp parallel reduction(min : err) if (nc > kParallelMin)
   {
     const auto [t, nt] = thread_and_team();
-    // Each thread takes the bodies whose contacts fall in its equal share of the contact
-    // list: a body owns its contacts with larger ids, so with ids in random order low ids own
-    // more contacts, and equal body counts would give the first thread most of the work.
-    const auto first_body_at = [&](long k) {
-      return static_cast<int>(std::lower_bound(pair_ioff_.begin(), pair_ioff_.begin() + n, k) -
-                              pair_ioff_.begin());
-    };
-    const int b0 = first_body_at(t * nc / nt);
-    const int b1 = t + 1 == nt ? n : first_body_at((t + 1) * nc / nt);
+    const auto [b0, b1] = pair_bodies_of_thread(t, nt);
     for (int i = b0; i < b1; ++i) {
       const int k0 = ioff[i], k1 = ioff[i + 1];
       // i's share: -force and torque_i summed over its contacts.
@@ -631,16 +852,7 @@ void Scene::compute_pair_forces(long& err_contact) {
           const Real rj = radius[j];
           const Real rsum = ri + rj;
           if (dist2 >= rsum * rsum) {
-            if (c.active) {
-              // The contact opened: forget the springs' history (ContactState::clear_history).
-              c.active = false;
-              c.fs.setZero();
-              c.normal.setZero();
-              c.overlap = 0;
-              c.fn = 0;
-              pair_cold_[k].mr.setZero();
-              o = PairOutput();
-            }
+            if (c.active) open_pair(k, o);  // the contact opened
             continue;
           }
           const Real dist = std::sqrt(dist2);
@@ -659,23 +871,10 @@ void Scene::compute_pair_forces(long& err_contact) {
           // v_j + w_j x (-l_j n) - (v_i + w_i x l_i n), with one cross product.
           const V4 rel_vel = (v4(vel[j]) - vi) - cross3(lj * wj + li * wi, n);
           if (!c.simple) {
-            const Vec3 n3 = vec3(n);
-            const Vec3 b1 = li * n3;
-            const Vec3 b2 = -lj * n3;
-            ContactGeometry g;
-            g.normal = n3;
-            g.overlap = overlap;
-            g.branch1 = b1;
-            g.branch2 = b2;
-            g.rel_vel = vec3(rel_vel);
-            g.angvel_sum = vec3(wi + wj);
-            g.rel_angvel = vec3(wj - wi);
-            const LawOutput out = apply_pair_law(k, g, dt);
-            o.force = out.force2;
-            // Moments, 000 eq (6): tau = (R - delta/2) n x F, plus rolling resistance.
-            o.torque_j = b2.cross(out.force2) + out.moment2;
-            fi -= v4(out.force2);
-            ti += v4(Vec3(b1.cross(-out.force2) - out.moment2));
+            const auto on_i = general_pair(k, o, vec3(n), overlap, li, lj, vec3(rel_vel),
+                                           vec3(wi + wj), vec3(wj - wi));
+            fi += v4(on_i.first);
+            ti += v4(on_i.second);
             continue;
           }
           // The short kernel: apply_law for a linear law without viscous damping and rolling
@@ -716,6 +915,20 @@ void Scene::compute_pair_forces(long& err_contact) {
       store4(out_fi + 4L * i, fi);  // lane 3 is zero: every term had a zero lane 3
       store4(out_ti + 4L * i, ti);
     }
+  }
+  err_contact = err;
+}
+
+void Scene::compute_pair_forces_narrow(long& err_contact) {
+  const int n = num_bodies();
+  long err = std::numeric_limits<long>::max();
+  pair_fi_.resize(n);
+  pair_ti_.resize(n);
+#pragma omp parallel reduction(min : err) if (static_cast<long>(pairs_.size()) > kParallelMin)
+  {
+    const auto [t, nt] = thread_and_team();
+    const auto bodies = pair_bodies_of_thread(t, nt);
+    pair_bodies_narrow(bodies.first, bodies.second, err);
   }
   err_contact = err;
 }
@@ -1021,55 +1234,80 @@ void Scene::reduce_and_integrate(long& err_body) {
   // the pair pass formed in contact order), walls, then the geogrid's contacts and links.
   const Real* const fi = pair_fi_.data()->data();
   const Real* const ti = pair_ti_.data()->data();
-  const auto sum_forces = [&](int b, V4& f, V4& t) __attribute__((always_inline)) {
-    f = v4(ext_force_[b]) + mass_[b] * v4(gravity_);
-    t = v4(ext_torque_[b]);
+  // (With the 3-vector operations of `ops`, WideOps or NarrowOps: see the pair pass.)
+  const auto sum_forces = [&](int b, auto& f, auto& t, auto ops) __attribute__((always_inline)) {
+    f = ops.load(ext_force_[b]) + mass_[b] * ops.load(gravity_);
+    t = ops.load(ext_torque_[b]);
     for (int e = pair_jadj_off_[b]; e < pair_jadj_off_[b + 1]; ++e) {
       const PairOutput& o = pair_out_[e];  // zero when inactive
-      f += load4(o.force.data());          // (with its zero padding)
-      t += load4(o.torque_j.data());
+      f += ops.load_padded(o.force.data());
+      t += ops.load_padded(o.torque_j.data());
     }
-    f += load4(fi + 4L * b);
-    t += load4(ti + 4L * b);
+    f += ops.load_padded(fi + 4L * b);
+    t += ops.load_padded(ti + 4L * b);
     for (int e = wall_adj_off_[b]; e < wall_adj_off_[b + 1]; ++e) {
       const WallContact& c = wall_contacts_[wall_adj_[e]];
       if (!c.active) continue;
-      f += v4(c.force);
-      t += v4(c.torque);
+      f += ops.load(c.force);
+      t += ops.load(c.torque);
     }
     if (grid) {
       // Grain side of grain–geogrid contacts.
       for (int e = sphere_gc_off_[b]; e < sphere_gc_off_[b + 1]; ++e) {
         const GridContact& c = grid_contacts_[sphere_gc_[e]];
         if (!c.active) continue;
-        f += v4(c.force);
-        t += v4(c.torque_sphere);
+        f += ops.load(c.force);
+        t += ops.load(c.torque_sphere);
       }
       // Node side: the virtual sphere's force and torque split by the weights (000 eq 19).
       for (int e = node_gc_off_[b]; e < node_gc_off_[b + 1]; ++e) {
         const GridContact& c = grid_contacts_[node_gc_[e] / 3];
         if (!c.active) continue;
         const Real w = c.w[node_gc_[e] % 3];
-        f -= w * v4(c.force);
-        t += w * v4(c.torque_virtual);
+        f -= w * ops.load(c.force);
+        t += w * ops.load(c.torque_virtual);
       }
       // Cohesive links.
       for (int e = node_link_off_[b]; e < node_link_off_[b + 1]; ++e) {
         const GridLink& l = links_[node_link_[e]];
         if (l.broken) continue;
         if (l.b == b) {
-          f += v4(l.force_b);
-          t += v4(l.torque_b);
+          f += ops.load(l.force_b);
+          t += ops.load(l.torque_b);
         } else {
-          f -= v4(l.force_b);
-          t += v4(l.torque_a);
+          f -= ops.load(l.force_b);
+          t += ops.load(l.torque_a);
         }
       }
     }
-    store3(force_[b], f);
-    store3(torque_[b], t);
+    ops.store(force_[b], f);
+    ops.store(torque_[b], t);
   };
   const auto forces_finite = [&](int b) { return force_[b].allFinite() && torque_[b].allFinite(); };
+  // Forces and accelerations of bodies [b0, b1) (inverse masses and inertias from b0 on);
+  // false if a force or torque may be non-finite.
+  const auto block_forces = [&](int b0, int b1, const Real* inv_m, const Real* inv_i,
+                                auto ops) __attribute__((always_inline)) {
+    using V = typename decltype(ops)::V;
+    V fcheck = ops.zero();  // sum of every force and torque: finite unless one of them is not
+    for (int b = b0; b < b1; ++b) {
+      V f, t;
+      sum_forces(b, f, t, ops);
+      fcheck += f + t;
+      V al = f * inv_m[b - b0], aa = t * inv_i[b - b0];
+      if (const std::uint8_t dofs = blocked_[b]) {
+        // A blocked DOF keeps its imposed velocity: zero acceleration, nothing to damp.
+        for (int a = 0; a < 3; ++a) {
+          if (dofs & (DOF_X << a)) al[a] = 0;
+          if (dofs & (DOF_RX << a)) aa[a] = 0;
+        }
+      }
+      ops.store(acc_lin_[b], al);
+      ops.store(acc_ang_[b], aa);
+    }
+    return std::isfinite(fcheck[0] + fcheck[1] + fcheck[2]);
+  };
+  const bool wide = use_wide_ops();
   // The broad phase's displacement check (need_rebuild) for the next step, in this pass.
   const auto displacement = [&](int b) __attribute__((always_inline)) {
     return (pos_[b] - pos_at_build_[b]).norm() +
@@ -1106,23 +1344,9 @@ void Scene::reduce_and_integrate(long& err_body) {
         inv_m[q] = 1.0 / mass[b0 + q];
         inv_i[q] = 1.0 / inertia[b0 + q];
       }
-      V4 fcheck = V4{};  // sum of every force and torque: finite unless one of them is not
-      for (int b = b0; b < b1; ++b) {
-        V4 f, t;
-        sum_forces(b, f, t);
-        fcheck += f + t;
-        V4 al = f * inv_m[b - b0], aa = t * inv_i[b - b0];
-        if (const std::uint8_t dofs = blocked_[b]) {
-          // A blocked DOF keeps its imposed velocity: zero acceleration, nothing to damp.
-          for (int a = 0; a < 3; ++a) {
-            if (dofs & (DOF_X << a)) al[a] = 0;
-            if (dofs & (DOF_RX << a)) aa[a] = 0;
-          }
-        }
-        store3(acc_lin_[b], al);
-        store3(acc_ang_[b], aa);
-      }
-      if (!std::isfinite(fcheck[0] + fcheck[1] + fcheck[2])) {
+      const bool forces_ok = wide ? block_forces(b0, b1, inv_m, inv_i, WideOps())
+                                  : block_forces(b0, b1, inv_m, inv_i, NarrowOps());
+      if (!forces_ok) {
         // Only now the exact test; a body with a non-finite force or torque does not move.
         for (int b = b0; b < b1; ++b) {
           if (!forces_finite(b)) {
@@ -1168,14 +1392,14 @@ void Scene::reduce_and_integrate(long& err_body) {
 #pragma omp parallel for schedule(static) reduction(min : err) reduction(max : worst) \
     if (n > kParallelMin)
     for (int b = 0; b < n; ++b) {
-      V4 f4, t4;
-      sum_forces(b, f4, t4);
+      Vec3 f4, t4;
+      sum_forces(b, f4, t4, NarrowOps());  // (per body: no gain from the wide form)
       // A NaN or inf in any component makes the sum non-finite; only then the exact test.
       if (!std::isfinite((f4[0] + f4[1] + f4[2]) + (t4[0] + t4[1] + t4[2])) && !forces_finite(b)) {
         err = std::min(err, static_cast<long>(b));
         continue;
       }
-      const Vec3 f = vec3(f4), t = vec3(t4);
+      const Vec3 f = f4, t = t4;
       const std::uint8_t dofs = blocked_[b];
       const Vec3 v_old = vel_[b], w_old = angvel_[b];
       const Real m = mass_[b], inertia = inertia_[b];

@@ -334,6 +334,15 @@ class Scene {
   /// Stores the spheres in spatial order (see "storage order"); only while no contact exists.
   void sort_bodies_spatially();
   CPP_DEM_HOT void compute_pair_forces(long& err_contact);
+  // The pair pass without AVX2 (scene.cpp, pair_bodies_narrow) and its threads' bodies.
+  void compute_pair_forces_narrow(long& err_contact);
+  void pair_bodies_narrow(int b0, int b1, long& err);
+  std::pair<int, int> pair_bodies_of_thread(long t, long nt) const;
+  // The pair pass's cold paths (both forms): a contact opened; a law without short kernel.
+  void open_pair(long k, PairOutput& o);
+  std::pair<Vec3, Vec3> general_pair(long k, PairOutput& o, const Vec3& n, Real overlap, Real li,
+                                     Real lj, const Vec3& rel_vel, const Vec3& angvel_sum,
+                                     const Vec3& rel_angvel);
   CPP_DEM_HOT void compute_wall_forces(long& err_contact);
   CPP_DEM_HOT void reduce_and_integrate(long& err_body);
   void update_phys(PairContact& c, PairContactCold& cold) const;
