@@ -134,6 +134,7 @@ inline bool use_wide_ops() {
 
 // The 4-double loads and stores of the pair pass rely on these layouts.
 static_assert(sizeof(Vec3) == 3 * sizeof(Real), "Vec3 must be three packed doubles");
+static_assert(sizeof(Quat) == 4 * sizeof(Real), "Quat must be four packed doubles (x, y, z, w)");
 static_assert(offsetof(PairContact, overlap) == offsetof(PairContact, fs) + sizeof(Vec3) &&
                   offsetof(PairContact, fn) == offsetof(PairContact, normal) + sizeof(Vec3),
               "PairContact: fs, overlap and normal, fn must be adjacent");
