@@ -36,34 +36,34 @@ Real sphere_mass(Real density, Real r) { return density * 4.0 / 3.0 * M_PI * r *
 /// to the widest registers of each clone (two SSE2 registers in the baseline one).
 typedef double V4 __attribute__((vector_size(32)));
 typedef long long V4i __attribute__((vector_size(32)));
-__attribute__((always_inline)) inline V4 v4(const Vec3& a) { return V4{a[0], a[1], a[2], 0.0}; }
-__attribute__((always_inline)) inline Vec3 vec3(const V4& a) { return Vec3(a[0], a[1], a[2]); }
-__attribute__((always_inline)) inline void store3(Vec3& a, const V4& v) {
+ALWAYS_INLINE V4 v4(const Vec3& a) { return V4{a[0], a[1], a[2], 0.0}; }
+ALWAYS_INLINE Vec3 vec3(const V4& a) { return Vec3(a[0], a[1], a[2]); }
+ALWAYS_INLINE void store3(Vec3& a, const V4& v) {
   a[0] = v[0];
   a[1] = v[1];
   a[2] = v[2];
 }
 /// Four doubles from / to memory laid out for it (a padded record: PairOutput, pair_fi_).
-__attribute__((always_inline)) inline V4 load4(const Real* p) {
+ALWAYS_INLINE V4 load4(const Real* p) {
   V4 r;
   std::memcpy(&r, p, sizeof r);
   return r;
 }
-__attribute__((always_inline)) inline void store4(Real* p, const V4& v) {
+ALWAYS_INLINE void store4(Real* p, const V4& v) {
   std::memcpy(p, &v, sizeof v);
 }
 /// v with lane 3 set to zero, and v with lane 3 set to s.
-__attribute__((always_inline)) inline V4 zero_lane3(const V4& v) {
+ALWAYS_INLINE V4 zero_lane3(const V4& v) {
   return __builtin_shuffle(v, V4{}, V4i{0, 1, 2, 4});
 }
-__attribute__((always_inline)) inline V4 with_lane3(const V4& v, Real s) {
+ALWAYS_INLINE V4 with_lane3(const V4& v, Real s) {
   return __builtin_shuffle(v, V4{s, s, s, s}, V4i{0, 1, 2, 7});
 }
-__attribute__((always_inline)) inline Real dot3(const V4& a, const V4& b) {
+ALWAYS_INLINE Real dot3(const V4& a, const V4& b) {
   const V4 p = a * b;
   return (p[0] + p[1]) + p[2];
 }
-__attribute__((always_inline)) inline V4 cross3(const V4& a, const V4& b) {
+ALWAYS_INLINE V4 cross3(const V4& a, const V4& b) {
   const V4i yzx = {1, 2, 0, 3}, zxy = {2, 0, 1, 3};
   return __builtin_shuffle(a, yzx) * __builtin_shuffle(b, zxy) -
          __builtin_shuffle(a, zxy) * __builtin_shuffle(b, yzx);
@@ -809,18 +809,18 @@ void Scene::compute_pair_forces(long& err_contact) {
   // within a body), so reduce_and_integrate reads them contiguously. Both orders are fixed,
   // so the sums do not depend on the number of threads. 3-vectors in 4-lane registers
   // (WideOps) where the CPU has AVX2; otherwise the same loop with Eigen's Vector3d.
+  const int n = num_bodies();
+  pair_fi_.resize(n);
+  pair_ti_.resize(n);
   if (!use_wide_ops()) {
     compute_pair_forces_narrow(err_contact);
     return;
   }
-  const int n = num_bodies();
   const long nc = static_cast<long>(pairs_.size());
   const Real dt = dt_;
   const Real max_ratio = max_overlap_ratio_;
   const int version = phys_version_;
   long err = std::numeric_limits<long>::max();
-  pair_fi_.resize(n);
-  pair_ti_.resize(n);
   // The loop works through local pointers: its stores of bools could alias the vectors'
   // own pointers, so through the members the compiler reloads them for every access.
   const Vec3* const pos = pos_.data();
@@ -921,10 +921,8 @@ void Scene::compute_pair_forces(long& err_contact) {
 }
 
 void Scene::compute_pair_forces_narrow(long& err_contact) {
-  const int n = num_bodies();
+  // (compute_pair_forces has sized pair_fi_ and pair_ti_.)
   long err = std::numeric_limits<long>::max();
-  pair_fi_.resize(n);
-  pair_ti_.resize(n);
 #pragma omp parallel reduction(min : err) if (static_cast<long>(pairs_.size()) > kParallelMin)
   {
     const auto [t, nt] = thread_and_team();
@@ -1318,7 +1316,7 @@ void Scene::reduce_and_integrate(long& err_body) {
   if (!energy) {
     // Blocks of bodies, each in three passes while it stays in the L1 cache: forces and
     // accelerations per body, then the velocities and positions as flat arrays of degrees of
-    // freedom (vectorised across bodies), then orientations and checks per body. Every body's
+    // freedom (vectorised across bodies), then orientations and checks. Every body's
     // update is the same arithmetic whatever the blocks or threads.
     acc_lin_.resize(n);
     acc_ang_.resize(n);
@@ -1332,75 +1330,75 @@ void Scene::reduce_and_integrate(long& err_body) {
     constexpr int kBlock = kBodyBlock;
     const int nblocks = (n + kBlock - 1) / kBlock;
 #pragma omp parallel reduction(min : err) reduction(max : worst) if (n > kParallelMin)
-  {
-    const auto [t, nt] = thread_and_team();
-    const auto blocks = thread_share(nblocks, t, nt);
-    for (long blk = blocks.first; blk < blocks.second; ++blk) {
-      const int b0 = static_cast<int>(blk) * kBlock, b1 = std::min(n, b0 + kBlock);
-      const int count = b1 - b0;
-      // Inverse masses and inertias of the block (vectorised divisions).
-      Real inv_m[kBlock], inv_i[kBlock];
+    {
+      const auto [t, nt] = thread_and_team();
+      const auto blocks = thread_share(nblocks, t, nt);
+      for (long blk = blocks.first; blk < blocks.second; ++blk) {
+        const int b0 = static_cast<int>(blk) * kBlock, b1 = std::min(n, b0 + kBlock);
+        const int count = b1 - b0;
+        // Inverse masses and inertias of the block (vectorised divisions).
+        Real inv_m[kBlock], inv_i[kBlock];
 #pragma omp simd
-      for (int q = 0; q < count; ++q) {
-        inv_m[q] = 1.0 / mass[b0 + q];
-        inv_i[q] = 1.0 / inertia[b0 + q];
-      }
-      const bool forces_ok = wide ? block_forces(b0, b1, inv_m, inv_i, WideOps())
-                                  : block_forces(b0, b1, inv_m, inv_i, NarrowOps());
-      if (!forces_ok) {
-        // Only now the exact test; a body with a non-finite force or torque does not move.
-        for (int b = b0; b < b1; ++b) {
-          if (!forces_finite(b)) {
-            err = std::min(err, static_cast<long>(b));
-            acc_lin_[b].setZero();
-            acc_ang_[b].setZero();
+        for (int q = 0; q < count; ++q) {
+          inv_m[q] = 1.0 / mass[b0 + q];
+          inv_i[q] = 1.0 / inertia[b0 + q];
+        }
+        const bool forces_ok =
+            wide ? block_forces(b0, b1, inv_m, inv_i, WideOps())
+                 : block_forces(b0, b1, inv_m, inv_i, NarrowOps());
+        if (!forces_ok) {
+          // Only now the exact test; a body with a non-finite force or torque does not move.
+          for (int b = b0; b < b1; ++b) {
+            if (!forces_finite(b)) {
+              err = std::min(err, static_cast<long>(b));
+              acc_lin_[b].setZero();
+              acc_ang_[b].setZero();
+            }
           }
         }
-      }
-      const long k0 = 3L * b0, k1 = 3L * b1;
-      Real check;
-      if (lambda > 0) {
-        check = leapfrog_dofs<true>(vel, acc_lin, pos, k0, k1, dt, lambda) +
-                leapfrog_dofs<true>(angvel, acc_ang, nullptr, k0, k1, dt, lambda);
-      } else {
-        check = leapfrog_dofs<false>(vel, acc_lin, pos, k0, k1, dt, lambda) +
-                leapfrog_dofs<false>(angvel, acc_ang, nullptr, k0, k1, dt, lambda);
-      }
-      // Orientations: vectorised across the block when every spin is in the series range.
-      Real w2max = 0;
-#pragma omp simd reduction(max : w2max)
-      for (long k = k0; k < k1; ++k) w2max = std::max(w2max, angvel[k] * angvel[k]);
-      if (3 * 0.25 * dt * dt * w2max < kSeriesH2) {  // |w|^2 <= 3 max_a w_a^2
-        Real* const q = ori_[b0].coeffs().data();
-        if (renormalize) rotate_orientations<true>(q, angvel + k0, count, dt);
-        else rotate_orientations<false>(q, angvel + k0, count, dt);
-      } else {
-        for (int b = b0; b < b1; ++b) rotate_orientation(ori_[b], angvel_[b], dt, renormalize);
-      }
-      const bool finite = std::isfinite(check);
-      for (int b = b0; b < b1; ++b) {
-        if (!finite && (!pos_[b].allFinite() || !vel_[b].allFinite() || !angvel_[b].allFinite())) {
-          err = std::min(err, static_cast<long>(b));
-          continue;
+        const long k0 = 3L * b0, k1 = 3L * b1;
+        Real check;
+        if (lambda > 0) {
+          check = leapfrog_dofs<true>(vel, acc_lin, pos, k0, k1, dt, lambda) +
+                  leapfrog_dofs<true>(angvel, acc_ang, nullptr, k0, k1, dt, lambda);
+        } else {
+          check = leapfrog_dofs<false>(vel, acc_lin, pos, k0, k1, dt, lambda) +
+                  leapfrog_dofs<false>(angvel, acc_ang, nullptr, k0, k1, dt, lambda);
         }
-        worst = std::max(worst, displacement(b));
+        // Orientations: vectorised across the block when every spin is in the series range.
+        Real w2max = 0;
+#pragma omp simd reduction(max : w2max)
+        for (long k = k0; k < k1; ++k) w2max = std::max(w2max, angvel[k] * angvel[k]);
+        if (3 * 0.25 * dt * dt * w2max < kSeriesH2) {  // |w|^2 <= 3 max_a w_a^2
+          Real* const q = ori_[b0].coeffs().data();
+          if (renormalize) rotate_orientations<true>(q, angvel + k0, count, dt);
+          else rotate_orientations<false>(q, angvel + k0, count, dt);
+        } else {
+          for (int b = b0; b < b1; ++b) rotate_orientation(ori_[b], angvel_[b], dt, renormalize);
+        }
+        const bool finite = std::isfinite(check);
+        for (int b = b0; b < b1; ++b) {
+          if (!finite && (!pos_[b].allFinite() || !vel_[b].allFinite() || !angvel_[b].allFinite())) {
+            err = std::min(err, static_cast<long>(b));
+            continue;
+          }
+          worst = std::max(worst, displacement(b));
+        }
       }
     }
-  }
   } else {
     // With energy bookkeeping: per body, the same arithmetic plus the damping's dissipation
     // and the work of external forces and of imposed velocities.
 #pragma omp parallel for schedule(static) reduction(min : err) reduction(max : worst) \
     if (n > kParallelMin)
     for (int b = 0; b < n; ++b) {
-      Vec3 f4, t4;
-      sum_forces(b, f4, t4, NarrowOps());  // (per body: no gain from the wide form)
+      Vec3 f, t;
+      sum_forces(b, f, t, NarrowOps());  // (per body: no gain from the wide form)
       // A NaN or inf in any component makes the sum non-finite; only then the exact test.
-      if (!std::isfinite((f4[0] + f4[1] + f4[2]) + (t4[0] + t4[1] + t4[2])) && !forces_finite(b)) {
+      if (!std::isfinite((f[0] + f[1] + f[2]) + (t[0] + t[1] + t[2])) && !forces_finite(b)) {
         err = std::min(err, static_cast<long>(b));
         continue;
       }
-      const Vec3 f = f4, t = t4;
       const std::uint8_t dofs = blocked_[b];
       const Vec3 v_old = vel_[b], w_old = angvel_[b];
       const Real m = mass_[b], inertia = inertia_[b];
