@@ -10,5 +10,5 @@ CLONE_DEF="-DCPP_DEM_CLONES"
 [ "${CLONES:-1}" = "0" ] && CLONE_DEF=""
 g++ -std=c++17 -O3 -DNDEBUG -g -fopenmp -DEIGEN_DONT_PARALLELIZE $CLONE_DEF ${CXXFLAGS_EXTRA:-} \
   -I"$ROOT/cpp_dem/include" -I/usr/include/eigen3 \
-  "$ROOT/bench/profile_step.cpp" $(ls "$ROOT"/cpp_dem/src/*.cpp | grep -v grid_off.cpp) -o "$OUT"
+  "$ROOT/bench/profile_step.cpp" $(find "$ROOT"/cpp_dem/src -name "*.cpp" ! -name off.cpp | sort) -o "$OUT"
 echo "$OUT"

@@ -1,21 +1,33 @@
 #include <cmath>
 
 #include "convert.hpp"
-#include "cpp_dem/material.hpp"
+#include "cpp_dem/laws/registry.hpp"
 
 namespace cpp_dem::bind {
 
 void bind_material(py::module_& m) {
-  py::enum_<ContactModel>(m, "ContactModel")
-      .value("linear", ContactModel::Linear)
-      .value("hertz_mindlin", ContactModel::HertzMindlin);
+  // The laws of the registry (laws/law_list.hpp): their ids and names.
+  py::enum_<ContactModel> model_enum(m, "ContactModel");
+  for (const LawInfo& law : kLaws) model_enum.value(law.name, law.id);
+  m.def("contact_laws", [] {
+    py::list out;
+    for (const LawInfo& law : kLaws) {
+      py::dict row;
+      row["name"] = law.name;
+      row["summary"] = law.summary;
+      row["short_kernel"] = law.short_kernel;
+      out.append(row);
+    }
+    return out;
+  }, "The contact laws of the registry: name, summary, whether the hot loops have a short kernel.");
 
   py::class_<Material>(m, "Material", R"doc(
 Elastic-frictional material (immutable; SI units).
 
 Parameters
 ----------
-model : "linear" (Cundall–Strack, 000 eqs 1–6) or "hertz_mindlin".
+model : a law of the registry (cpp_dem.contact_laws()): "linear" (Cundall–Strack, 000 eqs
+    1–6) or "hertz_mindlin".
 density : mass density, kg/m^3 (> 0).
 young : Young's modulus E, Pa (> 0).
 poisson : Poisson's ratio nu, -. For the linear law this is k_s/k_n (000 eq 5), in (0, 0.5];
@@ -29,11 +41,7 @@ rolling_friction : eta_r, -; |M_r| <= eta_r R* |F_n|.
                        double friction_angle_deg, double damping_normal, double damping_shear,
                        double rolling_stiffness, double rolling_friction) {
              Material mat;
-             if (model == "linear") mat.model = ContactModel::Linear;
-             else if (model == "hertz_mindlin") mat.model = ContactModel::HertzMindlin;
-             else
-               throw ParameterError("model='" + model +
-                                    "': must be 'linear' or 'hertz_mindlin'");
+             mat.model = law_by_name(model);
              mat.density = density;
              mat.young = young;
              mat.poisson = poisson;
@@ -50,7 +58,7 @@ rolling_friction : eta_r, -; |M_r| <= eta_r R* |F_n|.
            py::arg("damping_shear") = 0.0, py::arg("rolling_stiffness") = 0.0,
            py::arg("rolling_friction") = 0.0)
       .def_property_readonly("model", [](const Material& s) {
-        return s.model == ContactModel::Linear ? "linear" : "hertz_mindlin";
+        return law_info(s.model).name;
       })
       .def_readonly("density", &Material::density, "kg/m^3")
       .def_readonly("young", &Material::young, "Pa")
@@ -64,7 +72,7 @@ rolling_friction : eta_r, -; |M_r| <= eta_r R* |F_n|.
       .def_property_readonly("shear_modulus", &Material::shear_modulus, "Pa")
       .def("__repr__", [](const Material& s) {
         return std::string("Material(model='") +
-               (s.model == ContactModel::Linear ? "linear" : "hertz_mindlin") +
+               law_info(s.model).name +
                "', density=" + fmt_real(s.density) + ", young=" + fmt_real(s.young) +
                ", poisson=" + fmt_real(s.poisson) +
                ", friction_angle_deg=" + fmt_real(s.friction_angle * 180.0 / M_PI) + ")";
@@ -72,7 +80,7 @@ rolling_friction : eta_r, -; |M_r| <= eta_r R* |F_n|.
 
   py::class_<ContactPhys>(m, "ContactPhys", "Mixed parameters of one contact (read-only).")
       .def_property_readonly("model", [](const ContactPhys& p) {
-        return p.model == ContactModel::Linear ? "linear" : "hertz_mindlin";
+        return law_info(p.model).name;
       })
       .def_readonly("kn", &ContactPhys::kn, "linear: N/m; Hertz: K in F = K d^1.5, N/m^1.5")
       .def_readonly("ks", &ContactPhys::ks, "linear: N/m; Mindlin: C in k_t = C d^0.5")

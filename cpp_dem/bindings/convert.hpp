@@ -8,7 +8,7 @@
 #include <string>
 #include <vector>
 
-#include "cpp_dem/types.hpp"
+#include "cpp_dem/core/types.hpp"
 
 namespace cpp_dem::bind {
 

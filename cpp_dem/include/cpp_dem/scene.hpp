@@ -8,88 +8,15 @@
 #include <utility>
 #include <vector>
 
-#include "cpp_dem/collider.hpp"
-#include "cpp_dem/contact.hpp"
-#include "cpp_dem/grid.hpp"
-#include "cpp_dem/material.hpp"
+#include "cpp_dem/bodies/geogrid.hpp"
+#include "cpp_dem/bodies/wall.hpp"
+#include "cpp_dem/broadphase/collider.hpp"
+#include "cpp_dem/contacts/grid_contact.hpp"
+#include "cpp_dem/contacts/pair_contact.hpp"
+#include "cpp_dem/contacts/wall_contact.hpp"
+#include "cpp_dem/laws/material.hpp"
 
 namespace cpp_dem {
-
-/// An infinite plane normal to a coordinate axis. One-sided: spheres interact with it from
-/// the side its normal points to (sense = +1: the +axis side; -1: the -axis side).
-struct Wall {
-  int axis = 2;                 ///< 0 = x, 1 = y, 2 = z
-  int sense = 1;                ///< +1 or -1: side of the plane where spheres are
-  Real position = 0;            ///< plane coordinate along axis, m
-  Vec3 velocity = Vec3::Zero(); ///< imposed velocity, m/s (the axis component moves it)
-  int material = 0;             ///< material index
-  Vec3 force = Vec3::Zero();    ///< force exerted by the spheres on the wall (last step), N
-  Real work = 0;                ///< work done by the wall on the spheres, cumulative, J
-  Real moved_since_build = 0;   ///< |displacement| since the last broad-phase build, m
-  Vec3 normal() const {
-    Vec3 n = Vec3::Zero();
-    n[axis] = sense;
-    return n;
-  }
-};
-
-/// A sphere–sphere contact (candidate pair from the broad phase; active while overlapping):
-/// the hot part, what the pair pass reads and writes every step (104 bytes). The rest of the
-/// contact's parameters and history (PairContactCold) is in a parallel array, touched when
-/// the contact is (re)activated, when it slips, and by laws with damping or rolling.
-/// The full records: Scene::pair_phys(k), Scene::pair_state(k).
-struct PairContact {
-  int i = 0, j = 0;             ///< body ids, i < j; side 1 = i, side 2 = j
-  bool active = false;
-  /// The law is linear without viscous damping and without rolling resistance: the pair
-  /// pass runs the short kernel, which reads only this record.
-  bool simple = false;
-  int phys_version = -1;        ///< scene phys version the phys was computed at
-  Real kn = 0;                  ///< copy of ContactPhys::kn
-  Real ks = 0;                  ///< copy of ContactPhys::ks
-  Real tan_phi = 0;             ///< copy of ContactPhys::tan_phi
-  // (Each vector is followed by a scalar, so the pair pass loads and stores the pair as one
-  // 4-double register.)
-  Vec3 fs = Vec3::Zero();       ///< ContactState::fs, elastic shear force on j, N
-  Real overlap = 0;             ///< ContactState::overlap, m
-  Vec3 normal = Vec3::Zero();   ///< ContactState::normal (zero: new contact)
-  Real fn = 0;                  ///< ContactState::fn, N
-};
-
-/// The cold part of a sphere–sphere contact (same index as its PairContact).
-struct PairContactCold {
-  ContactPhys phys;
-  Vec3 mr = Vec3::Zero();       ///< ContactState::mr, rolling moment on j, N m
-  Real dissip_friction = 0;     ///< ContactState::dissip_friction, J
-  Real dissip_viscous = 0;      ///< ContactState::dissip_viscous, J
-};
-
-/// What a sphere–sphere contact gives its body j in the last step, kept apart from the
-/// contact's history in a compact array grouped by j, so the reduction into bodies reads it
-/// contiguously. Zero for an inactive contact.
-/// (i's share is summed by the pair pass per body, Scene::pair_fi_ / pair_ti_.)
-/// Each vector is followed by a zero double, so that the pair pass stores and the reduction
-/// loads it as one 4-double register.
-struct PairOutput {
-  Vec3 force = Vec3::Zero();     ///< force on j (i gets -force), N
-  Real pad_force = 0;            ///< zero (padding)
-  Vec3 torque_j = Vec3::Zero();  ///< torque on j, N m
-  Real pad_torque = 0;           ///< zero (padding)
-};
-
-/// A sphere–wall contact. Side 1 = the wall, side 2 = the sphere.
-struct WallContact {
-  int body = 0, wall = 0;
-  bool active = false;
-  /// Linear law without viscous damping and rolling resistance: the wall pass runs its
-  /// short kernel (the same operations as apply_law).
-  bool simple = false;
-  int phys_version = -1;
-  ContactPhys phys;
-  ContactState state;
-  Vec3 force = Vec3::Zero();    ///< force on the sphere, N
-  Vec3 torque = Vec3::Zero();   ///< torque on the sphere, N m
-};
 
 /// Energy terms, J. The balance: kinetic + elastic + gravity_potential + dissipation
 /// - work_in stays equal to its value when tracking started.
@@ -333,7 +260,11 @@ class Scene {
   void rebuild();
   /// Stores the spheres in spatial order (see "storage order"); only while no contact exists.
   void sort_bodies_spatially();
-  CPP_DEM_HOT void compute_pair_forces(long& err_contact);
+  // The three hot passes. Each is a plain entry point (called by step(), in scene.cpp) and
+  // its multiversioned body (CPP_DEM_HOT), which only its own unit calls: GCC emits the
+  // clones of a target_clones function as local symbols of the unit that defines it.
+  void compute_pair_forces(long& err_contact);
+  CPP_DEM_HOT void compute_pair_forces_hot(long& err_contact);
   // The pair pass without AVX2 (scene.cpp, pair_bodies_narrow) and its threads' bodies.
   void compute_pair_forces_narrow(long& err_contact);
   void pair_bodies_narrow(int b0, int b1, long& err);
@@ -343,8 +274,10 @@ class Scene {
   std::pair<Vec3, Vec3> general_pair(long k, PairOutput& o, const Vec3& n, Real overlap, Real li,
                                      Real lj, const Vec3& rel_vel, const Vec3& angvel_sum,
                                      const Vec3& rel_angvel);
-  CPP_DEM_HOT void compute_wall_forces(long& err_contact);
-  CPP_DEM_HOT void reduce_and_integrate(long& err_body);
+  void compute_wall_forces(long& err_contact);
+  CPP_DEM_HOT void compute_wall_forces_hot(long& err_contact);
+  void reduce_and_integrate(long& err_body);
+  CPP_DEM_HOT void reduce_and_integrate_hot(long& err_body);
   void update_phys(PairContact& c, PairContactCold& cold) const;
   /// Pair contact k with the full composed law (apply_law) on geometry g; returns the force
   /// on j and the extra moment, as apply_law.

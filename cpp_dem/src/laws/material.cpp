@@ -1,10 +1,13 @@
-#include "cpp_dem/material.hpp"
+// Materials: validation and the mixing of two materials into a contact's parameters, through
+// the law registry (laws/registry.hpp).
+#include "cpp_dem/laws/material.hpp"
 
 #include <cmath>
 #include <cstdio>
 #include <limits>
 
-#include "cpp_dem/grid.hpp"  // BeamParams
+#include "cpp_dem/laws/beam.hpp"  // BeamParams
+#include "cpp_dem/laws/registry.hpp"
 
 namespace cpp_dem {
 
@@ -18,14 +21,8 @@ void Material::validate() const {
   require(std::isfinite(density) && density > 0, "density", density,
           "must be > 0 (kg/m^3)");
   require(std::isfinite(young) && young > 0, "young", young, "must be > 0 (Pa)");
-  if (model == ContactModel::Linear) {
-    require(std::isfinite(poisson) && poisson > 0 && poisson <= 0.5, "poisson", poisson,
-            "must be in (0, 0.5] for the linear law, where it is the ratio k_s/k_n of "
-            "000 eq (5)");
-  } else {
-    require(std::isfinite(poisson) && poisson > -1 && poisson <= 0.5, "poisson", poisson,
-            "must be in (-1, 0.5]");
-  }
+  // The law's own rule for nu (and any other field it reads differently).
+  with_elastic_part(model, [&](auto part) { decltype(part)::validate(*this); });
   require(std::isfinite(friction_angle) && friction_angle >= 0 &&
               friction_angle < M_PI / 2,
           "friction_angle_deg", friction_angle * 180.0 / M_PI, "must be in [0, 90) degrees");
@@ -47,23 +44,10 @@ ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2
   const Real r_eff = std::isinf(r2) ? r1 : (std::isinf(r1) ? r2 : r1 * r2 / (r1 + r2));
   if (std::isinf(r1)) r1 = r2;
   if (std::isinf(r2)) r2 = r1;
-  const bool hm = a.model == ContactModel::HertzMindlin && b.model == ContactModel::HertzMindlin;
-  p.model = hm ? ContactModel::HertzMindlin : ContactModel::Linear;
-  if (hm) {
-    // Effective moduli of two elastic spheres (Hertz; Mindlin tangential).
-    const Real e_star = 1.0 / ((1 - a.poisson * a.poisson) / a.young +
-                               (1 - b.poisson * b.poisson) / b.young);
-    const Real g_a = a.shear_modulus(), g_b = b.shear_modulus();
-    const Real g_star = 1.0 / ((2 - a.poisson) / g_a + (2 - b.poisson) / g_b);
-    p.kn = 4.0 / 3.0 * e_star * std::sqrt(r_eff);
-    p.ks = 8.0 * g_star * std::sqrt(r_eff);
-  } else {
-    // Normal stiffness, 000 eq (4); shear stiffness, 000 eq (5).
-    const Real era = a.young * r1, erb = b.young * r2;
-    p.kn = 2.0 * era * erb / (era + erb);
-    const Real erna = era * a.poisson, ernb = erb * b.poisson;
-    p.ks = 2.0 * erna * ernb / (erna + ernb);
-  }
+  // Two materials of different laws meet with the linear law (e.g. Hertz–Mindlin grains
+  // against a linear geogrid, as 002 §2.3).
+  p.model = a.model == b.model ? a.model : ContactModel::Linear;
+  with_elastic_part(p.model, [&](auto part) { decltype(part)::mix(a, b, r1, r2, r_eff, p); });
   p.tan_phi = std::tan(std::min(a.friction_angle, b.friction_angle));
   p.beta_n = 0.5 * (a.damping_normal + b.damping_normal);
   p.beta_s = 0.5 * (a.damping_shear + b.damping_shear);
@@ -73,11 +57,9 @@ ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2
   const Real beta_r = 0.5 * (a.rolling_stiffness + b.rolling_stiffness);
   const Real eta_r = 0.5 * (a.rolling_friction + b.rolling_friction);
   if (beta_r > 0 && eta_r > 0) {
-    // For Hertz–Mindlin k_s depends on the overlap; the rolling stiffness then uses the
-    // reference stiffness E* R* so that it stays a constant of the contact.
-    const Real ks_lin =
-        hm ? r_eff / ((1 - a.poisson * a.poisson) / a.young + (1 - b.poisson * b.poisson) / b.young)
-           : p.ks;
+    // The rolling stiffness scales with the law's reference shear stiffness.
+    const Real ks_lin = with_elastic_part(
+        p.model, [&](auto part) { return decltype(part)::rolling_reference(a, b, r_eff, p); });
     p.kr = beta_r * ks_lin * r_eff * r_eff;
     p.rolling_cap = eta_r * r_eff;
   }

@@ -1,4 +1,4 @@
-#include "cpp_dem/collider.hpp"
+#include "cpp_dem/broadphase/collider.hpp"
 
 #include <algorithm>
 #include <cmath>

@@ -1,10 +1,10 @@
-// Deformable geogrid: grid nodes, connections (Minkowski-sum cylinders), PFacets, and the
-// cohesive beam law between nodes (000 §2.2, eqs 7–19).
+// The geogrid's cohesive beam law between two grid nodes (000 §2.2, eqs 7–12): its parameters,
+// the link record (parameters and history), the stiffnesses, and the link kernel.
 #pragma once
 
 #include <cmath>
 
-#include "cpp_dem/contact.hpp"
+#include "cpp_dem/laws/tangential.hpp"
 
 namespace cpp_dem {
 
@@ -49,50 +49,6 @@ struct GridLink {
   }
 };
 
-/// A PFacet: a triangle of three nodes with its three connections, dilated by R_c.
-struct PFacet {
-  int n[3] = {0, 0, 0};     ///< node body ids
-  int link[3] = {-1, -1, -1};  ///< connections (n0 n1), (n1 n2), (n2 n0)
-  int material = 0;
-  Real radius = 0;          ///< R_c, m
-};
-
-/// Kinds of grid primitive a grain can touch.
-enum class GridPrimitive : std::uint8_t { Node = 0, Connection = 1, Facet = 2 };
-
-/// A grain–geogrid contact: one sphere and one primitive, through a virtual sphere of radius
-/// R_c centred at the closest skeleton point q (000 eqs 13–19). Only the primitive that owns
-/// the closest point (a local minimum of the distance to the skeleton) is active, so a grain
-/// crossing a node or an edge keeps exactly one contact; its history is handed over.
-struct GridContact {
-  int sphere = 0;
-  GridPrimitive kind = GridPrimitive::Node;
-  int prim = 0;                ///< node body id, link index or facet index
-  bool active = false;
-  bool owner = false;          ///< owns the contact this step
-  int phys_version = -1;
-  Real rc = 0;                 ///< radius of the virtual sphere R_c, m
-  int nnodes = 0;              ///< 1, 2 or 3
-  int node[3] = {0, 0, 0};
-  Real w[3] = {0, 0, 0};       ///< interpolation weights of the nodes, sum 1
-  ContactPhys phys;
-  ContactState state;
-  ContactGeometry geom{Vec3::Zero(), 0, Vec3::Zero(), Vec3::Zero(),
-                       Vec3::Zero(), Vec3::Zero(), Vec3::Zero()};  ///< scratch of this step
-  Vec3 force = Vec3::Zero();   ///< force on the sphere, N (the nodes get -w_i force)
-  Vec3 torque_sphere = Vec3::Zero();
-  Vec3 torque_virtual = Vec3::Zero();  ///< torque on the virtual sphere (split by weights)
-};
-
-/// A link that broke: when, which, why.
-struct BreakEvent {
-  long step = 0;
-  Real time = 0;       ///< s
-  int link = 0;
-  int reason = 0;      ///< 0 tension, 1 shear
-  Real force = 0;      ///< the force that exceeded the limit, N
-};
-
 /// Beam stiffnesses and limits of a link of length L from its parameters (000 eqs 7–12).
 inline void beam_stiffness(const BeamParams& p, Real length, GridLink& l) {
   const Real area = M_PI * p.radius * p.radius;
@@ -111,25 +67,50 @@ inline void beam_stiffness(const BeamParams& p, Real length, GridLink& l) {
   l.length0 = length;
 }
 
-/// Closest point of segment [a, b] to c: returns the parameter t (unclamped).
-inline Real segment_parameter(const Vec3& a, const Vec3& b, const Vec3& c) {
-  const Vec3 ab = b - a;
-  const Real l2 = ab.squaredNorm();
-  return l2 > 0 ? (c - a).dot(ab) / l2 : 0.0;
-}
-
-/// Barycentric coordinates (p1, p2, p3) of the projection of c on the plane of triangle
-/// (x1, x2, x3) (000 eqs 13–16, computed with dot products instead of areas).
-inline Eigen::Vector3d barycentric(const Vec3& x1, const Vec3& x2, const Vec3& x3,
-                                   const Vec3& c) {
-  const Vec3 e0 = x2 - x1, e1 = x3 - x1, d = c - x1;
-  const Real d00 = e0.dot(e0), d01 = e0.dot(e1), d11 = e1.dot(e1);
-  const Real d20 = d.dot(e0), d21 = d.dot(e1);
-  const Real den = d00 * d11 - d01 * d01;
-  if (!(den > 0)) return Eigen::Vector3d(-1, -1, -1);
-  const Real v = (d11 * d20 - d01 * d21) / den;
-  const Real w = (d00 * d21 - d01 * d20) / den;
-  return Eigen::Vector3d(1.0 - v - w, v, w);
+/// One step of the beam law for link l (000 eqs 7–12), from its nodes' positions xa, xb (m),
+/// velocities va, vb (m/s) and spins wa, wb (rad/s), over dt (s): the shear force and the
+/// bending moment are carried into the turned frame of the link, the four springs are
+/// incremented, the moments capped at their elastic limits (perfectly plastic beyond, eqs 11,
+/// 12), a break at the tensile or shear strength is flagged (pending_break), and the forces
+/// and torques on the nodes are set.
+inline void beam_link_step(GridLink& l, const Vec3& xa, const Vec3& xb, const Vec3& va,
+                           const Vec3& vb, const Vec3& wa, const Vec3& wb, Real dt) {
+  const Vec3 d = xb - xa;
+  const Real len = d.norm();
+  const Vec3 n = d / len;
+  // Keep the shear force and bending moment in the rotated frame of the link.
+  Vec3 axis, twist;
+  frame_turn<NarrowOps>(l.normal, n, Vec3(wa + wb), dt, axis, twist);
+  turn_into_frame<NarrowOps>(l.fs, axis, twist, n);
+  turn_into_frame<NarrowOps>(l.mb, axis, twist, n);
+  l.normal = n;
+  // Axial force, tension positive: k_n (L - L0), eq (7).
+  l.fn = l.kn * (len - l.length0);
+  // Shear at the middle of the link, eq (8); this with eq (9) gives the Euler–Bernoulli
+  // beam element exactly for small rotations.
+  const Vec3 ba = 0.5 * len * n, bb = -0.5 * len * n;
+  const Vec3 vrel = (vb + wb.cross(bb)) - (va + wa.cross(ba));
+  l.fs -= l.ks * dt * (vrel - vrel.dot(n) * n);
+  // Bending, eq (9), and twisting, eq (10).
+  const Vec3 wrel = wb - wa;
+  const Real wtw = wrel.dot(n);
+  l.mb -= l.kr * dt * (wrel - wtw * n);
+  l.mt -= l.ktw * dt * wtw;
+  // Elastic limits of the moments, eqs (11), (12): perfectly plastic beyond.
+  if (l.mr_max > 0) cap_magnitude<NarrowOps>(l.mb, l.mr_max, l.kr, l.dissip_plastic);
+  if (l.mtw_max > 0 && std::abs(l.mt) > l.mtw_max) {
+    const Real trial = l.mt;
+    l.mt = std::copysign(l.mtw_max, l.mt);
+    l.dissip_plastic += (trial - l.mt) * l.mt / l.ktw;
+  }
+  // Breakage at the tensile or shear strength (the normal and shear cohesion).
+  l.pending_break = -1;
+  if (l.fn_max > 0 && l.fn >= l.fn_max) l.pending_break = 0;
+  else if (l.fs_max > 0 && l.fs.norm() >= l.fs_max) l.pending_break = 1;
+  l.force_b = -l.fn * n + l.fs;
+  const Vec3 m = l.mb + l.mt * n;
+  l.torque_b = bb.cross(l.force_b) + m;
+  l.torque_a = ba.cross(-l.force_b) - m;
 }
 
 }  // namespace cpp_dem

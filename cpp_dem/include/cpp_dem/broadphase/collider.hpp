@@ -5,7 +5,7 @@
 #include <utility>
 #include <vector>
 
-#include "cpp_dem/types.hpp"
+#include "cpp_dem/core/types.hpp"
 
 namespace cpp_dem {
 

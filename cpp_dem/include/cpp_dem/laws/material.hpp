@@ -1,17 +1,10 @@
 // Materials and the per-contact parameters mixed from two materials.
 #pragma once
 
-#include "cpp_dem/types.hpp"
+#include "cpp_dem/core/types.hpp"
+#include "cpp_dem/laws/law_list.hpp"
 
 namespace cpp_dem {
-
-/// The normal/tangential pair of a contact law (the "model" of the law).
-enum class ContactModel : std::uint8_t {
-  /// Linear Cundall–Strack: F_n = k_n u_n, dF_s = k_s du_s, Coulomb cap (000 eqs 1–5).
-  Linear = 0,
-  /// Hertz normal force with no-slip Mindlin tangential stiffness, Coulomb cap.
-  HertzMindlin = 1,
-};
 
 /// An elastic-frictional material. All values SI.
 ///
@@ -25,7 +18,7 @@ enum class ContactModel : std::uint8_t {
 ///  - two materials with different models meet with the linear model (e.g. Hertz–Mindlin
 ///    grains against a linear geogrid, as 002 §2.3).
 struct Material {
-  ContactModel model = ContactModel::Linear;
+  ContactModel model = ContactModel::Linear;  ///< the law's elastic part (laws/law_list.hpp)
   Real density = 2650.0;          ///< mass density, kg/m^3
   Real young = 1e7;               ///< Young's modulus E, Pa
   /// Poisson's ratio nu, -. For the linear law this is the ratio k_s / k_n entering 000 eq (5)

@@ -1,0 +1,261 @@
+#!/usr/bin/env python3
+"""A/B of two builds of the DEM core on the same scenes, in one run (issue 14: "no slower").
+
+The *new* build is the installed one (the working tree, after ``make setup``); the *old* one
+is built here from a git revision (``--ref``, default ``HEAD``) into ``build/ab/<sha>/``
+(CMake, Release, the same compiler as the installed build; cached), with an overlay package
+made of that revision's own Python sources and its ``_core``, so each build runs with the
+Python layer it was written for.
+
+Scenes (SI units; the same input for both builds):
+- ``spheres``: the benchmark packing of bench/throughput.py (N spheres, linear law with
+  friction, six walls, local damping 0.2, fixed dt = 0.5 x the p-wave step);
+- ``general``: the same packing with viscous damping and rolling resistance on every contact
+  (the composed law, not the short kernel);
+- ``hertz``: the same packing with Hertz–Mindlin grains;
+- ``geogrid``: a square geogrid (cohesive beams, grain–cylinder and grain–PFacet contacts)
+  between two layers of grains (bench/geogrid_cost.py's scene, small).
+
+Each *block* is a fresh subprocess that builds the scene, runs ``--warmup`` untimed steps and
+times ``--steps`` steps (CPU time of that process). Blocks alternate old | new, new | old, ...
+round by round, so a drift of the machine's load cancels in the ratios. Every block hashes
+the final state (positions, velocities, spins, orientations, wall forces): the closing table
+says whether the two builds gave bitwise equal results, and if not the largest position
+difference relative to the mean radius.
+
+The ratio reported is new/old in particle-steps per second (> 1: the new build is faster),
+median over the rounds, with its spread.
+
+    .venv/bin/python bench/ab_build.py --ref 1f3da9b                    # the issue's set
+    .venv/bin/python bench/ab_build.py --ref HEAD --scenes spheres:1000 --rounds 2
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import hashlib  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import shutil  # noqa: E402
+import statistics  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import sysconfig  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+BENCH = ROOT / "bench"
+DEFAULT_SCENES = ("spheres:1000", "spheres:10000", "general:1000", "hertz:1000", "geogrid:2000")
+
+
+def log(msg: str) -> None:
+    print(f"[ab] {msg}", file=sys.stderr, flush=True)
+
+
+# ---- the old build ------------------------------------------------------------------------------
+
+def installed_cmake_cache() -> dict:
+    entries: dict = {}
+    for cache in sorted((ROOT / "build").glob("cp*/CMakeCache.txt")):
+        for line in cache.read_text(errors="replace").splitlines():
+            if ":" in line and "=" in line and not line.startswith(("//", "#")):
+                key, val = line.split("=", 1)
+                entries[key.split(":")[0]] = val
+        break
+    return entries
+
+
+def build_ref(ref: str, jobs: int) -> Path:
+    """Builds `_core` of revision `ref`; returns the overlay directory to put on sys.path."""
+    sha = subprocess.run(["git", "rev-parse", "--short=10", ref], cwd=ROOT, check=True,
+                         capture_output=True, text=True).stdout.strip()
+    base = ROOT / "build" / "ab" / sha
+    src, bld, overlay = base / "src", base / "build", base / "overlay"
+    if not (src / "CMakeLists.txt").exists():
+        src.mkdir(parents=True, exist_ok=True)
+        archive = subprocess.run(["git", "archive", sha], cwd=ROOT, check=True,
+                                 capture_output=True).stdout
+        subprocess.run(["tar", "-x", "-C", str(src)], input=archive, check=True)
+    if not (bld / "CMakeCache.txt").exists():
+        pybind11_dir = subprocess.run([sys.executable, "-m", "pybind11", "--cmakedir"],
+                                      capture_output=True, text=True, check=True).stdout.strip()
+        args = ["cmake", "-S", str(src), "-B", str(bld), "-DCMAKE_BUILD_TYPE=Release",
+                f"-Dpybind11_DIR={pybind11_dir}", f"-DPython_EXECUTABLE={sys.executable}"]
+        compiler = installed_cmake_cache().get("CMAKE_CXX_COMPILER")
+        if compiler:
+            args.append(f"-DCMAKE_CXX_COMPILER={compiler}")
+        if shutil.which("ninja"):
+            args += ["-G", "Ninja"]
+        log(f"configuring the old build ({sha})")
+        subprocess.run(args, check=True, stdout=subprocess.DEVNULL)
+    log(f"building the old _core ({sha}, -j{jobs}; no-op when up to date)")
+    proc = subprocess.run(["cmake", "--build", str(bld), "--target", "_core", "-j", str(jobs)],
+                          capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise SystemExit(f"old build failed:\n{proc.stdout}\n{proc.stderr}")
+    so = bld / f"_core{sysconfig.get_config_var('EXT_SUFFIX')}"
+    pkg = overlay / "cpp_dem"
+    if pkg.exists():
+        shutil.rmtree(pkg)
+    shutil.copytree(src / "cpp_dem" / "cpp_dem", pkg, symlinks=True)
+    (pkg / so.name).symlink_to(so)
+    return overlay
+
+
+def use_overlay(overlay: Path) -> None:
+    """`import cpp_dem` then loads the overlay package, not the editable install."""
+    sys.meta_path[:] = [f for f in sys.meta_path
+                        if type(f).__name__ != "ScikitBuildRedirectingFinder"]
+    sys.path.insert(0, str(overlay))
+
+
+# ---- one block -----------------------------------------------------------------------------------
+
+def make_scene(kind: str, n: int):
+    import numpy as np
+
+    import cpp_dem as dem
+
+    if kind == "geogrid":
+        sys.path.insert(0, str(BENCH))
+        from geogrid_cost import build
+
+        scene, _ = build(n, 15, True)
+        scene.dt = 0.5 * scene.critical_dt()
+        return scene
+    sys.path.insert(0, str(BENCH))
+    from throughput import BenchScene, DEFAULT_CACHE, bench_dt, get_packing
+
+    cfg = BenchScene()
+    p = get_packing(n, 1, DEFAULT_CACHE, cfg)
+    scene = dem.Scene(gravity=cfg.gravity, local_damping=cfg.local_damping)
+    if kind == "hertz":
+        mat = dem.hertz_mindlin_material(density=cfg.density, shear_modulus=4e6, poisson=0.25,
+                                         friction_coefficient=0.5)
+    else:
+        parts = ({"damping_normal": 0.2, "damping_shear": 0.1, "rolling_stiffness": 0.5,
+                  "rolling_friction": 0.1} if kind == "general" else {})
+        mat = dem.linear_material(density=cfg.density, young=cfg.young, poisson=cfg.poisson,
+                                  friction_angle_deg=cfg.friction_angle_deg, **parts)
+    m = scene.add_material(mat)
+    scene.add_box(p.lo, p.hi, material=m)
+    scene.add_spheres(p.centers, p.radii, material=m)
+    scene.verlet_margin = cfg.margin_factor * float(np.mean(p.radii))
+    scene.dt = bench_dt(p, cfg)
+    return scene
+
+
+def worker(cfg: dict) -> dict:
+    if cfg["overlay"]:
+        use_overlay(Path(cfg["overlay"]))
+    import numpy as np
+
+    import cpp_dem as dem
+
+    dem.set_num_threads(cfg["threads"])
+    scene = make_scene(cfg["scene"], cfg["n"])
+    scene.run(cfg["warmup"])
+    c0, w0 = time.process_time(), time.perf_counter()
+    scene.run(cfg["steps"])
+    cpu, wall = time.process_time() - c0, time.perf_counter() - w0
+    arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in
+              (scene.positions, scene.velocities, scene.angular_velocities, scene.orientations,
+               scene.wall_forces)]
+    state = hashlib.sha256()
+    for a in arrays:
+        state.update(a.tobytes())
+    tmp = Path(cfg["dump"])
+    np.save(tmp, arrays[0])
+    return {"core": dem._core.__file__, "cpu_s": cpu, "wall_s": wall,
+            "bodies": int(scene.num_bodies), "state_sha256": state.hexdigest()[:16]}
+
+
+def run_block(cfg: dict) -> dict:
+    env = dict(os.environ, OMP_NUM_THREADS=str(cfg["threads"]), OPENBLAS_NUM_THREADS="1")
+    proc = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker",
+                           json.dumps(cfg)], cwd=ROOT, env=env, capture_output=True, text=True)
+    if proc.returncode != 0:
+        raise SystemExit(f"block failed ({cfg['variant']} {cfg['scene']}):\n{proc.stderr}")
+    return json.loads(proc.stdout.strip().splitlines()[-1])
+
+
+def compare(scene: str, n: int, threads: int, args, overlay: Path, tmp: Path) -> dict:
+    import numpy as np
+
+    steps = args.steps or max(100, math.ceil(args.particle_steps / n))
+    cpu: dict[str, list[float]] = {"old": [], "new": []}
+    hashes: dict[str, set] = {"old": set(), "new": set()}
+    dumps = {}
+    for k in range(args.rounds):
+        for variant in (("old", "new") if k % 2 == 0 else ("new", "old")):
+            dump = tmp / f"{scene}_{n}_{threads}_{variant}.npy"
+            cfg = {"variant": variant, "scene": scene, "n": n, "threads": threads,
+                   "steps": steps, "warmup": args.warmup, "dump": str(dump),
+                   "overlay": str(overlay) if variant == "old" else ""}
+            r = run_block(cfg)
+            cpu[variant].append(r["cpu_s"] / steps)
+            hashes[variant].add(r["state_sha256"])
+            dumps[variant] = dump
+            log(f"{scene} N={n} threads={threads} round {k} {variant}: "
+                f"{1e6 * r['cpu_s'] / steps:9.1f} us/step CPU, state {r['state_sha256']}")
+    ratios = [o / nw for o, nw in zip(cpu["old"], cpu["new"])]
+    a, b = np.load(dumps["old"]), np.load(dumps["new"])
+    rec = {"scene": scene, "n": n, "bodies": int(len(a)), "threads": threads, "steps": steps,
+           "rounds": args.rounds,
+           "old_us_per_step": 1e6 * statistics.median(cpu["old"]),
+           "new_us_per_step": 1e6 * statistics.median(cpu["new"]),
+           "ratio_new_over_old": statistics.median(ratios),
+           "ratio_min": min(ratios), "ratio_max": max(ratios),
+           "bitwise_equal": hashes["old"] == hashes["new"] and len(hashes["old"]) == 1,
+           "max_position_diff_m": float(np.max(np.abs(a - b))) if a.shape == b.shape else None}
+    print(json.dumps(rec), flush=True)
+    return rec
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--worker", help=argparse.SUPPRESS)
+    ap.add_argument("--ref", default="HEAD", help="git revision of the old build (HEAD)")
+    ap.add_argument("--scenes", nargs="+", default=list(DEFAULT_SCENES),
+                    help="KIND:N, KIND one of spheres, general, hertz, geogrid")
+    ap.add_argument("--threads", nargs="+", type=int, default=[1, 2])
+    ap.add_argument("--rounds", type=int, default=4)
+    ap.add_argument("--steps", type=int, default=0, help="timed steps (0: from --particle-steps)")
+    ap.add_argument("--particle-steps", type=float, default=4e6,
+                    help="particle-steps per block when --steps is 0")
+    ap.add_argument("--warmup", type=int, default=200)
+    ap.add_argument("--jobs", type=int, default=2, help="compile jobs for the old build")
+    args = ap.parse_args(argv)
+    if args.worker:
+        print(json.dumps(worker(json.loads(args.worker))))
+        return 0
+    overlay = build_ref(args.ref, args.jobs)
+    rows = []
+    with tempfile.TemporaryDirectory() as tmp:
+        for spec in args.scenes:
+            kind, _, n = spec.partition(":")
+            if kind not in ("spheres", "general", "hertz", "geogrid") or not n.isdigit():
+                raise SystemExit(f"--scenes {spec}: must be KIND:N with KIND spheres, general, "
+                                 "hertz or geogrid and N a whole number")
+            for t in args.threads:
+                rows.append(compare(kind, int(n), t, args, overlay, Path(tmp)))
+    print("\n| scene | N | threads | old us/step | new us/step | new/old p-steps/s (min-max)"
+          " | bitwise |", file=sys.stderr)
+    print("|---|---|---|---|---|---|---|", file=sys.stderr)
+    for r in rows:
+        bit = "yes" if r["bitwise_equal"] else f"no (max dx {r['max_position_diff_m']:.1e} m)"
+        print(f"| {r['scene']} | {r['n']} | {r['threads']} | {r['old_us_per_step']:.1f} | "
+              f"{r['new_us_per_step']:.1f} | {r['ratio_new_over_old']:.3f} "
+              f"({r['ratio_min']:.3f}-{r['ratio_max']:.3f}) | {bit} |", file=sys.stderr)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

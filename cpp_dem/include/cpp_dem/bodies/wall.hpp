@@ -1,0 +1,26 @@
+// Walls: infinite planes normal to a coordinate axis, with imposed velocities.
+#pragma once
+
+#include "cpp_dem/core/types.hpp"
+
+namespace cpp_dem {
+
+/// An infinite plane normal to a coordinate axis. One-sided: spheres interact with it from
+/// the side its normal points to (sense = +1: the +axis side; -1: the -axis side).
+struct Wall {
+  int axis = 2;                 ///< 0 = x, 1 = y, 2 = z
+  int sense = 1;                ///< +1 or -1: side of the plane where spheres are
+  Real position = 0;            ///< plane coordinate along axis, m
+  Vec3 velocity = Vec3::Zero(); ///< imposed velocity, m/s (the axis component moves it)
+  int material = 0;             ///< material index
+  Vec3 force = Vec3::Zero();    ///< force exerted by the spheres on the wall (last step), N
+  Real work = 0;                ///< work done by the wall on the spheres, cumulative, J
+  Real moved_since_build = 0;   ///< |displacement| since the last broad-phase build, m
+  Vec3 normal() const {
+    Vec3 n = Vec3::Zero();
+    n[axis] = sense;
+    return n;
+  }
+};
+
+}  // namespace cpp_dem

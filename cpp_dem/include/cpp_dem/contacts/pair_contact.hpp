@@ -1,0 +1,53 @@
+// Sphere–sphere contacts: the hot record the pair pass reads and writes every step, its cold
+// part, and the per-step output grouped by the second body.
+#pragma once
+
+#include "cpp_dem/laws/contact_law.hpp"
+
+namespace cpp_dem {
+
+/// A sphere–sphere contact (candidate pair from the broad phase; active while overlapping):
+/// the hot part, what the pair pass reads and writes every step (104 bytes). The rest of the
+/// contact's parameters and history (PairContactCold) is in a parallel array, touched when
+/// the contact is (re)activated, when it slips, and by laws with damping or rolling.
+/// The full records: Scene::pair_phys(k), Scene::pair_state(k).
+struct PairContact {
+  int i = 0, j = 0;             ///< body ids, i < j; side 1 = i, side 2 = j
+  bool active = false;
+  /// The law is linear without viscous damping and without rolling resistance: the pair
+  /// pass runs the short kernel, which reads only this record.
+  bool simple = false;
+  int phys_version = -1;        ///< scene phys version the phys was computed at
+  Real kn = 0;                  ///< copy of ContactPhys::kn
+  Real ks = 0;                  ///< copy of ContactPhys::ks
+  Real tan_phi = 0;             ///< copy of ContactPhys::tan_phi
+  // (Each vector is followed by a scalar, so the pair pass loads and stores the pair as one
+  // 4-double register.)
+  Vec3 fs = Vec3::Zero();       ///< ContactState::fs, elastic shear force on j, N
+  Real overlap = 0;             ///< ContactState::overlap, m
+  Vec3 normal = Vec3::Zero();   ///< ContactState::normal (zero: new contact)
+  Real fn = 0;                  ///< ContactState::fn, N
+};
+
+/// The cold part of a sphere–sphere contact (same index as its PairContact).
+struct PairContactCold {
+  ContactPhys phys;
+  Vec3 mr = Vec3::Zero();       ///< ContactState::mr, rolling moment on j, N m
+  Real dissip_friction = 0;     ///< ContactState::dissip_friction, J
+  Real dissip_viscous = 0;      ///< ContactState::dissip_viscous, J
+};
+
+/// What a sphere–sphere contact gives its body j in the last step, kept apart from the
+/// contact's history in a compact array grouped by j, so the reduction into bodies reads it
+/// contiguously. Zero for an inactive contact.
+/// (i's share is summed by the pair pass per body, Scene::pair_fi_ / pair_ti_.)
+/// Each vector is followed by a zero double, so that the pair pass stores and the reduction
+/// loads it as one 4-double register.
+struct PairOutput {
+  Vec3 force = Vec3::Zero();     ///< force on j (i gets -force), N
+  Real pad_force = 0;            ///< zero (padding)
+  Vec3 torque_j = Vec3::Zero();  ///< torque on j, N m
+  Real pad_torque = 0;           ///< zero (padding)
+};
+
+}  // namespace cpp_dem

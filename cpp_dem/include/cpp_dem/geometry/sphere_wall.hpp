@@ -1,0 +1,30 @@
+// Shape pair sphere–wall: a sphere against an axis-aligned, one-sided plane (bodies/wall.hpp).
+#pragma once
+
+#include "cpp_dem/bodies/wall.hpp"
+#include "cpp_dem/geometry/contact_geometry.hpp"
+
+namespace cpp_dem {
+
+/// Signed distance of the centre x (m) from wall w, positive on the wall's side.
+inline Real wall_distance(const Wall& w, const Vec3& x) {
+  return w.sense * (x[w.axis] - w.position);
+}
+
+/// The ContactGeometry record of a sphere (centre x, radius r, m; velocity v, m/s; spin om,
+/// rad/s) overlapping wall w by `overlap` (m). Side 1 is the wall (it does not rotate), side
+/// 2 the sphere; the contact point sits in the middle of the overlap.
+inline ContactGeometry sphere_wall_geometry(const Wall& w, const Vec3& x, Real r, const Vec3& v,
+                                            const Vec3& om, Real overlap) {
+  ContactGeometry g;
+  g.overlap = overlap;
+  g.normal = w.normal();
+  g.branch2 = -(r - 0.5 * g.overlap) * g.normal;
+  g.branch1 = x + g.branch2;  // unused by the law (the wall does not rotate)
+  g.rel_vel = (v + om.cross(g.branch2)) - w.velocity;
+  g.angvel_sum = om;
+  g.rel_angvel = om;
+  return g;
+}
+
+}  // namespace cpp_dem

@@ -1,0 +1,68 @@
+// The Hertz–Mindlin law (002 Table 1): Hertz normal force, no-slip Mindlin tangential
+// stiffness, Coulomb cap. Its elastic part for the registry.
+#pragma once
+
+#include <cmath>
+
+#include "cpp_dem/laws/material.hpp"
+
+namespace cpp_dem {
+
+/// Hertz normal force magnitude, N: F_n = K delta^(3/2), K = 4/3 E* sqrt(R*).
+inline Real hertz_normal_force(Real k_hertz, Real overlap) {
+  return k_hertz * overlap * std::sqrt(overlap);
+}
+
+/// Hertz tangent normal stiffness dF_n/d delta, N/m: 3/2 K delta^(1/2).
+inline Real hertz_normal_stiffness(Real k_hertz, Real overlap) {
+  return 1.5 * k_hertz * std::sqrt(overlap);
+}
+
+/// Mindlin no-slip tangential stiffness, N/m: k_t = 8 G* sqrt(R* delta) = C sqrt(delta).
+inline Real mindlin_shear_stiffness(Real c_mindlin, Real overlap) {
+  return c_mindlin * std::sqrt(overlap);
+}
+
+/// The elastic part of the Hertz–Mindlin law (registry row "hertz_mindlin").
+struct HertzMindlinElastic {
+  static constexpr bool kShortKernel = false;
+  static constexpr const char* kSummary =
+      "Hertz normal force, no-slip Mindlin tangential stiffness, Coulomb cap";
+  static void validate(const Material& m) {
+    require(std::isfinite(m.poisson) && m.poisson > -1 && m.poisson <= 0.5, "poisson",
+            m.poisson, "must be in (-1, 0.5]");
+  }
+  /// 1 / E* of two elastic bodies, 1/Pa.
+  static Real inverse_e_star(const Material& a, const Material& b) {
+    return (1 - a.poisson * a.poisson) / a.young + (1 - b.poisson * b.poisson) / b.young;
+  }
+  /// p.kn = K = 4/3 E* sqrt(R*) (N/m^1.5) and p.ks = C = 8 G* sqrt(R*) (N/m^1.5), with the
+  /// effective moduli E*, G* of two elastic spheres (reciprocal sums).
+  static void mix(const Material& a, const Material& b, Real, Real, Real r_eff, ContactPhys& p) {
+    const Real e_star = 1.0 / inverse_e_star(a, b);
+    const Real g_a = a.shear_modulus(), g_b = b.shear_modulus();
+    const Real g_star = 1.0 / ((2 - a.poisson) / g_a + (2 - b.poisson) / g_b);
+    p.kn = 4.0 / 3.0 * e_star * std::sqrt(r_eff);
+    p.ks = 8.0 * g_star * std::sqrt(r_eff);
+  }
+  /// k_s depends on the overlap, so the rolling stiffness takes the reference stiffness
+  /// E* R* (N/m) and stays a constant of the contact.
+  static Real rolling_reference(const Material& a, const Material& b, Real r_eff,
+                                const ContactPhys&) {
+    return r_eff / inverse_e_star(a, b);
+  }
+  static Real normal_force(const ContactPhys& p, Real overlap) {
+    return hertz_normal_force(p.kn, overlap);
+  }
+  /// Tangent stiffnesses at the overlap, N/m.
+  static void stiffness(const ContactPhys& p, Real overlap, Real& kn, Real& ks) {
+    kn = hertz_normal_stiffness(p.kn, overlap);
+    ks = mindlin_shear_stiffness(p.ks, overlap);
+  }
+  /// Energy of the normal spring, J: int K d^1.5 = 2/5 K d^2.5.
+  static Real normal_energy(const ContactPhys& p, Real overlap) {
+    return 0.4 * p.kn * overlap * overlap * std::sqrt(overlap);
+  }
+};
+
+}  // namespace cpp_dem

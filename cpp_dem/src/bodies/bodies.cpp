@@ -1,0 +1,184 @@
+// The body API of the scene: materials, spheres, walls, and setters of per-body state.
+#include <cmath>
+#include <string>
+
+#include "cpp_dem/scene.hpp"
+
+namespace cpp_dem {
+
+namespace {
+Real sphere_mass(Real density, Real r) { return density * 4.0 / 3.0 * M_PI * r * r * r; }
+
+template <class T>
+void require_size(const std::vector<T>& v, size_t n, const char* field) {
+  if (v.size() != n)
+    throw ParameterError(std::string(field) + ": has " + std::to_string(v.size()) +
+                         " rows, the scene has " + std::to_string(n) + " bodies");
+}
+}  // namespace
+
+Scene::Scene() = default;
+
+// ---- materials, bodies, walls ---------------------------------------------------------------
+
+int Scene::add_material(const Material& m) {
+  m.validate();
+  materials_.push_back(m);
+  ++phys_version_;
+  return static_cast<int>(materials_.size()) - 1;
+}
+
+const Material& Scene::material(int id) const {
+  if (id < 0 || id >= num_materials())
+    throw ParameterError("material=" + std::to_string(id) + ": no such material (the scene has " +
+                         std::to_string(num_materials()) + ")");
+  return materials_[id];
+}
+
+int Scene::add_spheres(const std::vector<Vec3>& pos, const std::vector<Real>& radius,
+                       int material) {
+  const Material& mat = this->material(material);
+  if (pos.size() != radius.size())
+    throw ParameterError("radius: has " + std::to_string(radius.size()) +
+                         " values for " + std::to_string(pos.size()) + " centres");
+  for (size_t k = 0; k < pos.size(); ++k) {
+    require(std::isfinite(radius[k]) && radius[k] > 0, "radius", radius[k], "must be > 0 (m)");
+    if (!pos[k].allFinite())
+      throw ParameterError("position of sphere " + std::to_string(k) + ": must be finite");
+  }
+  const int first = num_bodies();
+  for (size_t k = 0; k < pos.size(); ++k) {
+    const Real r = radius[k];
+    const Real m = sphere_mass(mat.density, r);
+    push_body(pos[k], r, m, 0.4 * m * r * r, material, 0);
+  }
+  dirty_ = true;
+  return first;
+}
+
+void Scene::push_body(const Vec3& x, Real radius, Real mass, Real inertia, int material,
+                      std::uint8_t kind) {
+  if (!id_of_slot_.empty()) {
+    // A new body is stored at the end, under its own id.
+    id_of_slot_.push_back(num_bodies());
+    slot_of_id_.push_back(num_bodies());
+  }
+  pos_.push_back(x);
+  vel_.push_back(Vec3::Zero());
+  angvel_.push_back(Vec3::Zero());
+  force_.push_back(Vec3::Zero());
+  torque_.push_back(Vec3::Zero());
+  ext_force_.push_back(Vec3::Zero());
+  ext_torque_.push_back(Vec3::Zero());
+  ori_.push_back(Quat::Identity());
+  radius_.push_back(radius);
+  mass_.push_back(mass);
+  inertia_.push_back(inertia);
+  body_mat_.push_back(material);
+  blocked_.push_back(DOF_NONE);
+  kind_.push_back(kind);
+  ke_.push_back(0);
+  damp_dissip_.push_back(0);
+  ext_work_.push_back(0);
+  pos_at_energy_reset_.push_back(x);
+}
+
+int Scene::add_wall(int axis, Real position, int sense, int material) {
+  if (axis < 0 || axis > 2)
+    throw ParameterError("axis=" + std::to_string(axis) + ": must be 0 (x), 1 (y) or 2 (z)");
+  if (sense != 1 && sense != -1)
+    throw ParameterError("sense=" + std::to_string(sense) +
+                         ": must be +1 (spheres on the +axis side) or -1");
+  require(std::isfinite(position), "position", position, "must be finite (m)");
+  this->material(material);
+  Wall w;
+  w.axis = axis;
+  w.sense = sense;
+  w.position = position;
+  w.material = material;
+  walls_.push_back(w);
+  dirty_ = true;
+  return num_walls() - 1;
+}
+
+Wall& Scene::wall(int id) {
+  if (id < 0 || id >= num_walls())
+    throw ParameterError("wall=" + std::to_string(id) + ": no such wall (the scene has " +
+                         std::to_string(num_walls()) + ")");
+  return walls_[id];
+}
+const Wall& Scene::wall(int id) const { return const_cast<Scene*>(this)->wall(id); }
+
+void Scene::set_positions(const std::vector<Vec3>& v) {
+  require_size(v, pos_.size(), "positions");
+  for (const auto& x : v)
+    if (!x.allFinite()) throw ParameterError("positions: must be finite (m)");
+  pos_ = v;
+  dirty_ = true;
+}
+void Scene::set_velocities(const std::vector<Vec3>& v) {
+  require_size(v, pos_.size(), "velocities");
+  vel_ = v;
+}
+void Scene::set_angular_velocities(const std::vector<Vec3>& v) {
+  require_size(v, pos_.size(), "angular_velocities");
+  angvel_ = v;
+}
+void Scene::set_radii(const std::vector<Real>& r) {
+  require_size(r, pos_.size(), "radii");
+  for (Real x : r) require(std::isfinite(x) && x > 0, "radius", x, "must be > 0 (m)");
+  for (size_t b = 0; b < r.size(); ++b) {
+    if (kind_[b] != 0) {
+      // Grid nodes keep their lumped mass; their radius is the geogrid's R_c.
+      if (r[b] != radius_[b])
+        throw ParameterError("radius[" + std::to_string(id_of(b)) + "]=" + std::to_string(r[b]) +
+                             ": body " + std::to_string(id_of(b)) +
+                             " is a grid node; its radius (the geogrid's R_c) cannot change");
+      continue;
+    }
+    radius_[b] = r[b];
+    mass_[b] = sphere_mass(materials_[body_mat_[b]].density, r[b]);
+    inertia_[b] = 0.4 * mass_[b] * r[b] * r[b];
+  }
+  disp_valid_ = false;  // grown radii count in the broad phase's check
+  ++phys_version_;
+}
+void Scene::set_blocked(int body, std::uint8_t mask) {
+  check_body(body);
+  if (mask > DOF_ALL)
+    throw ParameterError("blocked=" + std::to_string(mask) + ": must be a mask of x y z rx ry rz");
+  blocked_[slot_of(body)] = mask;
+}
+void Scene::set_external_forces(const std::vector<Vec3>& f) {
+  require_size(f, pos_.size(), "external_forces");
+  ext_force_ = f;
+}
+void Scene::set_external_torques(const std::vector<Vec3>& t) {
+  require_size(t, pos_.size(), "external_torques");
+  ext_torque_ = t;
+}
+void Scene::set_body_material(int body, int material) {
+  check_body(body);
+  this->material(material);
+  body = slot_of(body);
+  body_mat_[body] = material;
+  mass_[body] = sphere_mass(materials_[material].density, radius_[body]);
+  inertia_[body] = 0.4 * mass_[body] * radius_[body] * radius_[body];
+  ++phys_version_;
+}
+void Scene::set_mass_inertia(int body, Real mass, Real inertia) {
+  check_body(body);
+  require(std::isfinite(mass) && mass > 0, "mass", mass, "must be > 0 (kg)");
+  require(std::isfinite(inertia) && inertia > 0, "inertia", inertia, "must be > 0 (kg m^2)");
+  body = slot_of(body);
+  mass_[body] = mass;
+  inertia_[body] = inertia;
+  ++phys_version_;
+}
+void Scene::check_body(int b) const {
+  if (b < 0 || b >= num_bodies())
+    throw ParameterError("body=" + std::to_string(b) + ": no such body (the scene has " +
+                         std::to_string(num_bodies()) + ")");
+}
+
+}  // namespace cpp_dem

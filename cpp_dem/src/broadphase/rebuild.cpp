@@ -1,0 +1,238 @@
+// The broad phase of the step: when to rebuild, the spatial storage order, and the merge of
+// the new candidate lists with the contacts that carry history.
+#include <algorithm>
+#include <cmath>
+#include <cstdint>
+#include <limits>
+
+#include "cpp_dem/core/parallel.hpp"
+#include "cpp_dem/scene.hpp"
+
+namespace cpp_dem {
+
+namespace {
+constexpr Real kInf = std::numeric_limits<Real>::infinity();
+}  // namespace
+
+Real Scene::default_margin() const {
+  if (radius_.empty()) return 0;
+  Real s = 0;
+  for (Real r : radius_) s += r;
+  return 0.2 * s / radius_.size();
+}
+
+// ---- broad phase ----------------------------------------------------------------------------
+
+bool Scene::need_rebuild() const {
+  if (dirty_) return true;
+  const Real half = 0.5 * (margin_ > 0 ? margin_ : default_margin());
+  for (const Wall& w : walls_)
+    if (w.moved_since_build > half) return true;
+  // The last integration pass measured the displacements already (nothing moved since).
+  if (disp_valid_) return max_disp_ > half;
+  const int n = num_bodies();
+  Real worst = 0;
+#pragma omp parallel for reduction(max : worst) schedule(static) if (n > kParallelMin)
+  for (int b = 0; b < n; ++b) {
+    const Real d = (pos_[b] - pos_at_build_[b]).norm() + std::max(0.0, radius_[b] - radius_at_build_[b]);
+    worst = std::max(worst, d);
+  }
+  return worst > half;
+}
+
+namespace {
+/// The lowest 21 bits of v spread to every third bit (Morton code of one axis).
+std::uint64_t spread_bits(std::uint64_t v) {
+  v &= 0x1fffff;
+  v = (v | v << 32) & 0x1f00000000ffffULL;
+  v = (v | v << 16) & 0x1f0000ff0000ffULL;
+  v = (v | v << 8) & 0x100f00f00f00f00fULL;
+  v = (v | v << 4) & 0x10c30c30c30c30c3ULL;
+  v = (v | v << 2) & 0x1249249249249249ULL;
+  return v;
+}
+}  // namespace
+
+void Scene::sort_bodies_spatially() {
+  const int n = num_bodies();
+  std::vector<int> slots;  // sphere slots, ascending; grid nodes keep theirs
+  Vec3 lo = Vec3::Constant(kInf), hi = Vec3::Constant(-kInf);
+  Real rsum = 0;
+  for (int b = 0; b < n; ++b) {
+    if (kind_[b] != 0) continue;
+    if (!pos_[b].allFinite()) return;
+    slots.push_back(b);
+    lo = lo.cwiseMin(pos_[b]);
+    hi = hi.cwiseMax(pos_[b]);
+    rsum += radius_[b];
+  }
+  if (slots.size() < 2) return;
+  // Cells one mean diameter wide (at most 2^21 per axis), in Morton (Z) order: a body's
+  // neighbours are mostly within a few hundred slots of it.
+  const Real cell = std::max(2.0 * rsum / static_cast<Real>(slots.size()),
+                             (hi - lo).maxCoeff() / 2097151.0);
+  if (!(cell > 0)) return;
+  std::vector<std::pair<std::uint64_t, int>> key(slots.size());
+  for (size_t k = 0; k < slots.size(); ++k) {
+    const Vec3 c = (pos_[slots[k]] - lo) / cell;
+    std::uint64_t code = 0;
+    for (int a = 0; a < 3; ++a) {
+      const auto q = static_cast<std::uint64_t>(std::clamp(c[a], 0.0, 2097151.0));
+      code |= spread_bits(q) << a;
+    }
+    key[k] = {code, slots[k]};
+  }
+  std::sort(key.begin(), key.end());  // ties by slot: the order is deterministic
+  // perm[new slot] = old slot.
+  std::vector<int> perm(n);
+  for (int b = 0; b < n; ++b) perm[b] = b;
+  bool identity = true;
+  for (size_t k = 0; k < slots.size(); ++k) {
+    perm[slots[k]] = key[k].second;
+    identity = identity && key[k].second == slots[k];
+  }
+  if (identity) return;
+  const auto permute = [&](auto& v) {
+    if (static_cast<int>(v.size()) != n) return;  // not in use (energy arrays)
+    auto old = v;
+    for (int b = 0; b < n; ++b) v[b] = old[perm[b]];
+  };
+  permute(pos_);
+  permute(vel_);
+  permute(angvel_);
+  permute(force_);
+  permute(torque_);
+  permute(ext_force_);
+  permute(ext_torque_);
+  permute(ori_);
+  permute(radius_);
+  permute(mass_);
+  permute(inertia_);
+  permute(body_mat_);
+  permute(blocked_);
+  permute(kind_);
+  permute(ke_);
+  permute(damp_dissip_);
+  permute(ext_work_);
+  permute(pos_at_energy_reset_);
+  // pos_at_build_ and radius_at_build_ are set at the end of the rebuild that called this,
+  // pair_fi_ / pair_ti_ by the next pair pass.
+  std::vector<int> ids(n);
+  for (int b = 0; b < n; ++b) ids[b] = id_of(perm[b]);
+  id_of_slot_.swap(ids);
+  slot_of_id_.assign(n, 0);
+  for (int b = 0; b < n; ++b) slot_of_id_[id_of_slot_[b]] = b;
+  disp_valid_ = false;
+}
+
+void Scene::rebuild() {
+  // Spatial order while no contact (and so no contact history) exists yet.
+  if (spatial_sort_ && pairs_.empty() && wall_contacts_.empty() && grid_contacts_.empty())
+    sort_bodies_spatially();
+  const Real margin = margin_ > 0 ? margin_ : default_margin();
+  const int n = num_bodies();
+  grid_.build(pos_, radius_, kind_, margin);
+  grid_.find_pairs(pos_, radius_, margin, candidates_);
+  // Merge the new candidate list with the old contacts, keeping history (both sorted).
+  std::vector<PairContact> next;
+  std::vector<PairContactCold> next_cold;
+  next.reserve(candidates_.size());
+  next_cold.reserve(candidates_.size());
+  size_t k = 0;
+  for (const auto& ij : candidates_) {
+    while (k < pairs_.size() && std::make_pair(pairs_[k].i, pairs_[k].j) < ij) {
+      drop_dissipation(pair_cold_[k]);
+      ++k;
+    }
+    if (k < pairs_.size() && pairs_[k].i == ij.first && pairs_[k].j == ij.second) {
+      next.push_back(pairs_[k]);
+      next_cold.push_back(pair_cold_[k++]);
+    } else {
+      PairContact c;
+      c.i = ij.first;
+      c.j = ij.second;
+      next.push_back(c);
+      next_cold.emplace_back();
+    }
+  }
+  for (; k < pairs_.size(); ++k) {
+    drop_dissipation(pair_cold_[k]);
+  }
+  pairs_.swap(next);
+  pair_cold_.swap(next_cold);
+  pair_out_.assign(pairs_.size(), PairOutput());
+  // Sphere–wall candidates: signed distance to the plane below r + margin, and the centre
+  // not beyond the plane by more than r (one-sided walls ignore what is behind them).
+  std::vector<WallContact> wnext;
+  size_t kw = 0;
+  for (int b = 0; b < n; ++b) {
+    if (kind_[b] != 0 && !grid_wall_contacts_) continue;  // grid nodes: only if asked for
+    for (int w = 0; w < num_walls(); ++w) {
+      const Wall& wl = walls_[w];
+      const Real s = wl.sense * (pos_[b][wl.axis] - wl.position);
+      if (!(s < radius_[b] + margin && s > -radius_[b])) continue;
+      while (kw < wall_contacts_.size() &&
+             std::make_pair(wall_contacts_[kw].body, wall_contacts_[kw].wall) < std::make_pair(b, w)) {
+        drop_dissipation(wall_contacts_[kw].state);
+        ++kw;
+      }
+      if (kw < wall_contacts_.size() && wall_contacts_[kw].body == b && wall_contacts_[kw].wall == w) {
+        wnext.push_back(wall_contacts_[kw++]);
+      } else {
+        WallContact c;
+        c.body = b;
+        c.wall = w;
+        wnext.push_back(c);
+      }
+    }
+  }
+  for (; kw < wall_contacts_.size(); ++kw) {
+    drop_dissipation(wall_contacts_[kw].state);
+  }
+  wall_contacts_.swap(wnext);
+  // Adjacency (CSR) in contact order, so reductions into bodies have a fixed order.
+  pair_jadj_off_.assign(n + 1, 0);
+  pair_ioff_.assign(n + 1, 0);
+  for (const auto& c : pairs_) {
+    pair_ioff_[c.i + 1]++;
+    pair_jadj_off_[c.j + 1]++;
+  }
+  for (int b = 0; b < n; ++b) {
+    pair_ioff_[b + 1] += pair_ioff_[b];
+    pair_jadj_off_[b + 1] += pair_jadj_off_[b];
+  }
+  pair_jslot_.resize(pairs_.size());
+  {
+    std::vector<int> fill(pair_jadj_off_.begin(), pair_jadj_off_.end() - 1);
+    for (int c = 0; c < static_cast<int>(pairs_.size()); ++c)
+      pair_jslot_[c] = fill[pairs_[c].j]++;
+  }
+  wall_adj_off_.assign(n + 1, 0);
+  for (const auto& c : wall_contacts_) wall_adj_off_[c.body + 1]++;
+  for (int b = 0; b < n; ++b) wall_adj_off_[b + 1] += wall_adj_off_[b];
+  wall_adj_.resize(wall_adj_off_[n]);
+  {
+    std::vector<int> fill(wall_adj_off_.begin(), wall_adj_off_.end() - 1);
+    for (int c = 0; c < static_cast<int>(wall_contacts_.size()); ++c)
+      wall_adj_[fill[wall_contacts_[c].body]++] = c;
+  }
+  if constexpr (kGeogridBuilt) {
+    if (has_grid()) rebuild_grid_contacts(margin);
+  }
+  pos_at_build_ = pos_;
+  radius_at_build_ = radius_;
+  for (Wall& w : walls_) w.moved_since_build = 0;
+  dirty_ = false;
+  ++builds_;
+}
+
+ColliderStats Scene::collider_stats() const {
+  ColliderStats s;
+  s.builds = builds_;
+  s.pair_candidates = static_cast<long>(pairs_.size());
+  s.wall_candidates = static_cast<long>(wall_contacts_.size());
+  s.grid_candidates = static_cast<long>(grid_contacts_.size());
+  return s;
+}
+
+}  // namespace cpp_dem

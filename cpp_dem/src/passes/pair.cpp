@@ -1,0 +1,284 @@
+// The pair pass: every sphere–sphere contact, body-major, in two vector forms (4-lane
+// registers where the CPU has AVX2, Eigen elsewhere) around the same law kernels.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "cpp_dem/core/parallel.hpp"
+#include "cpp_dem/core/simd.hpp"
+#include "cpp_dem/geometry/sphere_sphere.hpp"
+#include "cpp_dem/laws/linear.hpp"
+#include "cpp_dem/laws/registry.hpp"
+#include "cpp_dem/scene.hpp"
+
+namespace cpp_dem {
+
+void Scene::update_phys(PairContact& c, PairContactCold& cold) const {
+  const ContactPhys& p = cold.phys =
+      mix_materials(materials_[body_mat_[c.i]], materials_[body_mat_[c.j]], radius_[c.i],
+                    radius_[c.j], mass_[c.i], mass_[c.j]);
+  c.kn = p.kn;
+  c.ks = p.ks;
+  c.tan_phi = p.tan_phi;
+  c.simple = short_kernel_applies(p);
+  c.phys_version = phys_version_;
+}
+
+
+LawOutput Scene::apply_pair_law(size_t k, const ContactGeometry& g, Real dt) {
+  PairContact& c = pairs_[k];
+  PairContactCold& cold = pair_cold_[k];
+  ContactState s = pair_state(k);
+  const LawOutput out = apply_law(cold.phys, g, dt, s);
+  c.fs = s.fs;
+  c.normal = s.normal;
+  c.overlap = s.overlap;
+  c.fn = s.fn;
+  cold.mr = s.mr;
+  cold.dissip_friction = s.dissip_friction;
+  cold.dissip_viscous = s.dissip_viscous;
+  return out;
+}
+
+/// Pair contact k has opened: forget its springs' history (ContactState::clear_history) and
+/// its output o.
+void Scene::open_pair(long k, PairOutput& o) {
+  PairContact& c = pairs_[k];
+  c.active = false;
+  c.fs.setZero();
+  c.normal.setZero();
+  c.overlap = 0;
+  c.fn = 0;
+  pair_cold_[k].mr.setZero();
+  o = PairOutput();
+}
+
+/// Pair contact k with a law other than the short kernel's: normal n, overlap (m), branch
+/// lengths li, lj (m), relative velocity (m/s), sum and difference of the spins (rad/s).
+/// Writes j's force and torque into o; returns i's force (N) and torque (N m).
+std::pair<Vec3, Vec3> Scene::general_pair(long k, PairOutput& o, const Vec3& n, Real overlap,
+                                          Real li, Real lj, const Vec3& rel_vel,
+                                          const Vec3& angvel_sum, const Vec3& rel_angvel) {
+  const ContactGeometry g =
+      sphere_sphere_geometry(n, overlap, li, lj, rel_vel, angvel_sum, rel_angvel);
+  const LawOutput out = apply_pair_law(k, g, dt_);
+  o.force = out.force2;
+  // Moments, 000 eq (6): tau = (R - delta/2) n x F, plus rolling resistance.
+  o.torque_j = g.branch2.cross(out.force2) + out.moment2;
+  return {-out.force2, g.branch1.cross(-out.force2) - out.moment2};
+}
+
+/// The bodies [first, second) whose contacts fall in thread t's equal share of the contact
+/// list (of nt threads): a body owns its contacts with larger slots, so equal body counts
+/// would give some threads much more work than others.
+std::pair<int, int> Scene::pair_bodies_of_thread(long t, long nt) const {
+  const int n = num_bodies();
+  const long nc = static_cast<long>(pairs_.size());
+  const auto first_body_at = [&](long k) {
+    return static_cast<int>(std::lower_bound(pair_ioff_.begin(), pair_ioff_.begin() + n, k) -
+                            pair_ioff_.begin());
+  };
+  return {first_body_at(t * nc / nt), t + 1 == nt ? n : first_body_at((t + 1) * nc / nt)};
+}
+
+/// Bodies [b0, b1) of the pair pass and their contacts with Eigen's Vector3d (NarrowOps), for
+/// CPUs without AVX2 and builds without multiversioning (compute_pair_forces_narrow). The same
+/// arithmetic as the loop in compute_pair_forces, which is written out there with 4-lane
+/// registers: instantiated from one template with WideOps it ran 12 % slower at 1e3 (same
+/// instructions, measured 0.070 against 0.063 ms per step, not understood), so the loop is
+/// written twice.
+void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
+  using Ops = NarrowOps;
+  using V = Ops::V;
+  const Ops ops;
+  long err = err_out;
+  const Real dt = dt_;
+  const Real max_ratio = max_overlap_ratio_;
+  const int version = phys_version_;
+  // Local pointers: the loop's stores of bools could alias the vectors' own pointers, so
+  // through the members the compiler reloaded them for every access.
+  const Vec3* const pos = pos_.data();
+  const Vec3* const vel = vel_.data();
+  const Vec3* const angvel = angvel_.data();
+  const Real* const radius = radius_.data();
+  const int* const ioff = pair_ioff_.data();
+  const int* const jslot = pair_jslot_.data();
+  PairContact* const pairs = pairs_.data();
+  PairOutput* const out_j = pair_out_.data();
+  Real* const out_fi = pair_fi_.data()->data();
+  Real* const out_ti = pair_ti_.data()->data();
+  for (int i = b0; i < b1; ++i) {
+    const int k0 = ioff[i], k1 = ioff[i + 1];
+    // i's share: -force and torque_i summed over its contacts.
+    V fi = ops.zero(), ti = ops.zero();
+    if (k0 < k1) {
+      const V xi = ops.load(pos[i]), vi = ops.load(vel[i]), wi = ops.load(angvel[i]);
+      const Real ri = radius[i];
+      for (int k = k0; k < k1; ++k) {
+        PairContact& c = pairs[k];
+        PairOutput& o = out_j[jslot[k]];
+        const int j = c.j;
+        const V d = ops.load(pos[j]) - xi;
+        const Real dist2 = ops.dot(d, d);
+        const Real rj = radius[j];
+        const Real rsum = ri + rj;
+        if (dist2 >= rsum * rsum) {
+          if (c.active) open_pair(k, o);  // the contact opened
+          continue;
+        }
+        const Real dist = std::sqrt(dist2);
+        const Real overlap = rsum - dist;
+        if (!(overlap <= max_ratio * std::min(ri, rj))) {
+          err = std::min(err, static_cast<long>(k));
+          continue;
+        }
+        if (!c.active || c.phys_version != version) update_phys(c, pair_cold_[k]);
+        c.active = true;
+        const V wj = ops.load(angvel[j]);
+        V n, rel_vel;
+        Real li, lj;
+        sphere_sphere_frame<Ops>(d, dist, overlap, ri, rj, vi, ops.load(vel[j]), wi, wj, n, li,
+                                 lj, rel_vel);
+        if (!c.simple) {
+          const auto on_i = general_pair(k, o, ops.vec(n), overlap, li, lj, ops.vec(rel_vel),
+                                         ops.vec(wi + wj), ops.vec(wj - wi));
+          fi += ops.load(on_i.first);
+          ti += ops.load(on_i.second);
+          continue;
+        }
+        // The short kernel on the hot record: (fs, overlap) and (normal, fn) in the record.
+        V fs = ops.load_head(c.fs.data());
+        const Real fn = linear_frictional<Ops>(fs, ops.load_head(c.normal.data()), n, overlap,
+                                               rel_vel, V(wi + wj), c.kn, c.ks, c.tan_phi, dt,
+                                               pair_cold_[k].dissip_friction);
+        ops.store_with(c.fs.data(), fs, overlap);  // fs, overlap
+        ops.store_with(c.normal.data(), n, fn);    // normal, fn
+        const V f = fn * n + fs;
+        ops.store_padded(o.force.data(), f);
+        // Moments (000 eq 6): -l_j n x F on j, l_i n x (-F) on i; n x F = n x fs.
+        const V nxf = ops.cross(n, fs);
+        ops.store_padded(o.torque_j.data(), V(-lj * nxf));
+        fi -= f;
+        ti -= li * nxf;
+      }
+    }
+    ops.store_padded(out_fi + 4L * i, fi);
+    ops.store_padded(out_ti + 4L * i, ti);
+  }
+  err_out = err;
+}
+
+void Scene::compute_pair_forces(long& err_contact) { compute_pair_forces_hot(err_contact); }
+
+void Scene::compute_pair_forces_hot(long& err_contact) {
+  // Body-major: body i and its contacts (i, j), j > i, which are contiguous in pairs_ (sorted
+  // by (i, j)). i's position, velocities and radius are loaded once; i's share of the forces
+  // and torques is summed in registers, in contact order, into pair_fi_/pair_ti_; j's share
+  // goes to its slot in pair_out_, which holds the contacts grouped by j (in contact order
+  // within a body), so reduce_and_integrate reads them contiguously. Both orders are fixed,
+  // so the sums do not depend on the number of threads. 3-vectors in 4-lane registers
+  // (WideOps) where the CPU has AVX2; otherwise the same loop with Eigen's Vector3d.
+  const int n = num_bodies();
+  pair_fi_.resize(n);
+  pair_ti_.resize(n);
+  if (!use_wide_ops()) {
+    compute_pair_forces_narrow(err_contact);
+    return;
+  }
+  const long nc = static_cast<long>(pairs_.size());
+  const Real dt = dt_;
+  const Real max_ratio = max_overlap_ratio_;
+  const int version = phys_version_;
+  long err = std::numeric_limits<long>::max();
+  // The loop works through local pointers: its stores of bools could alias the vectors'
+  // own pointers, so through the members the compiler reloads them for every access.
+  const Vec3* const pos = pos_.data();
+  const Vec3* const vel = vel_.data();
+  const Vec3* const angvel = angvel_.data();
+  const Real* const radius = radius_.data();
+  const int* const ioff = pair_ioff_.data();
+  const int* const jslot = pair_jslot_.data();
+  PairContact* const pairs = pairs_.data();
+  PairOutput* const out_j = pair_out_.data();
+  Real* const out_fi = pair_fi_.data()->data();
+  Real* const out_ti = pair_ti_.data()->data();
+#pragma omp parallel reduction(min : err) if (nc > kParallelMin)
+  {
+    const auto [t, nt] = thread_and_team();
+    const auto [b0, b1] = pair_bodies_of_thread(t, nt);
+    for (int i = b0; i < b1; ++i) {
+      const int k0 = ioff[i], k1 = ioff[i + 1];
+      // i's share: -force and torque_i summed over its contacts.
+      V4 fi = V4{}, ti = V4{};
+      if (k0 < k1) {
+        const V4 xi = v4(pos[i]), vi = v4(vel[i]), wi = v4(angvel[i]);
+        const Real ri = radius[i];
+        for (int k = k0; k < k1; ++k) {
+          PairContact& c = pairs[k];
+          PairOutput& o = out_j[jslot[k]];
+          const int j = c.j;
+          const V4 d = v4(pos[j]) - xi;
+          const Real dist2 = dot3(d, d);
+          const Real rj = radius[j];
+          const Real rsum = ri + rj;
+          if (dist2 >= rsum * rsum) {
+            if (c.active) open_pair(k, o);  // the contact opened
+            continue;
+          }
+          const Real dist = std::sqrt(dist2);
+          const Real overlap = rsum - dist;
+          if (!(overlap <= max_ratio * std::min(ri, rj))) {
+            err = std::min(err, static_cast<long>(k));
+            continue;
+          }
+          if (!c.active || c.phys_version != version) update_phys(c, pair_cold_[k]);
+          c.active = true;
+          const V4 wj = v4(angvel[j]);
+          V4 n, rel_vel;
+          Real li, lj;
+          sphere_sphere_frame<WideOps>(d, dist, overlap, ri, rj, vi, v4(vel[j]), wi, wj, n, li,
+                                       lj, rel_vel);
+          if (!c.simple) {
+            const auto on_i = general_pair(k, o, vec3(n), overlap, li, lj, vec3(rel_vel),
+                                           vec3(wi + wj), vec3(wj - wi));
+            fi += v4(on_i.first);
+            ti += v4(on_i.second);
+            continue;
+          }
+          // The short kernel on the hot record, with 3-vectors in 4-lane registers:
+          // (fs, overlap) and (normal, fn) are loaded as one register each.
+          V4 fs = zero_lane3(load4(c.fs.data()));
+          const Real fn = linear_frictional<WideOps>(fs, zero_lane3(load4(c.normal.data())), n,
+                                                     overlap, rel_vel, wi + wj, c.kn, c.ks,
+                                                     c.tan_phi, dt, pair_cold_[k].dissip_friction);
+          store4(c.fs.data(), with_lane3(fs, overlap));  // fs, overlap
+          store4(c.normal.data(), with_lane3(n, fn));    // normal, fn
+          const V4 f = fn * n + fs;
+          store4(o.force.data(), f);  // with its padding (lane 3, zero)
+          // Moments (000 eq 6): -l_j n x F on j, l_i n x (-F) on i; n x F = n x fs.
+          const V4 nxf = cross3(n, fs);
+          store4(o.torque_j.data(), -lj * nxf);
+          fi -= f;
+          ti -= li * nxf;
+        }
+      }
+      store4(out_fi + 4L * i, fi);  // lane 3 is zero: every term had a zero lane 3
+      store4(out_ti + 4L * i, ti);
+    }
+  }
+  err_contact = err;
+}
+
+void Scene::compute_pair_forces_narrow(long& err_contact) {
+  // (compute_pair_forces has sized pair_fi_ and pair_ti_.)
+  long err = std::numeric_limits<long>::max();
+#pragma omp parallel reduction(min : err) if (static_cast<long>(pairs_.size()) > kParallelMin)
+  {
+    const auto [t, nt] = thread_and_team();
+    const auto bodies = pair_bodies_of_thread(t, nt);
+    pair_bodies_narrow(bodies.first, bodies.second, err);
+  }
+  err_contact = err;
+}
+
+}  // namespace cpp_dem

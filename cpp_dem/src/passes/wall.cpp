@@ -1,0 +1,168 @@
+// The wall pass: every sphere–wall contact, by blocks of bodies and wall axis.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <type_traits>
+
+#include "cpp_dem/core/parallel.hpp"
+#include "cpp_dem/core/simd.hpp"
+#include "cpp_dem/geometry/sphere_wall.hpp"
+#include "cpp_dem/laws/registry.hpp"
+#include "cpp_dem/laws/tangential.hpp"
+#include "cpp_dem/scene.hpp"
+
+namespace cpp_dem {
+
+namespace {
+constexpr Real kInf = std::numeric_limits<Real>::infinity();
+}  // namespace
+
+void Scene::update_phys(WallContact& c) const {
+  // The wall has infinite radius and mass (see mix_materials).
+  c.phys = mix_materials(materials_[walls_[c.wall].material], materials_[body_mat_[c.body]],
+                         kInf, radius_[c.body], kInf, mass_[c.body]);
+  c.simple = short_kernel_applies(c.phys);
+  c.phys_version = phys_version_;
+}
+
+namespace {
+/// The short kernel of a wall contact: apply_law for a linear law without viscous damping and
+/// rolling resistance. The wall's normal n = sense e_AX never turns, so the frame rotation of
+/// the stored shear force is the twist about n alone (000 eqs 1-3, 6). v, om: the sphere's
+/// velocity (m/s) and spin (rad/s); r: its radius, overlap (m); dt (s).
+template <int AX>
+__attribute__((always_inline)) inline void wall_short_kernel(WallContact& c, const Wall& w,
+                                                             const Vec3& v, const Vec3& om,
+                                                             Real r, Real overlap, Real dt) {
+  constexpr int A1 = (AX + 1) % 3, A2 = (AX + 2) % 3;
+  const Real sense = w.sense;
+  const Real ls = (r - 0.5 * overlap) * sense;  // branch vector -l n, times sense
+  // Relative velocity at the contact point, v + om x (-l n) - v_wall, tangential part
+  // (the AX component drops out).
+  const Real v1 = (v[A1] - w.velocity[A1]) - ls * om[A2];
+  const Real v2 = (v[A2] - w.velocity[A2]) + ls * om[A1];
+  ContactState& st = c.state;
+  const Real fn = c.phys.kn * overlap;
+  Real f1 = st.fs[A1], f2 = st.fs[A2];
+  if (st.normal.squaredNorm() > 0) {
+    // fs -= fs x (tw n), tw = dt/2 n . om.
+    const Real tws = 0.5 * dt * (sense * om[AX]) * sense;
+    const Real g1 = f1 - f2 * tws;
+    f2 = f2 + f1 * tws;
+    f1 = g1;
+  }
+  const Real kdt = c.phys.ks * dt;
+  f1 -= kdt * v1;
+  f2 -= kdt * v2;
+  Tan2 f{f1, f2};
+  cap_magnitude<PlaneOps>(f, c.phys.tan_phi * (fn > 0 ? fn : 0.0), c.phys.ks,
+                          st.dissip_friction);  // 000 eq (3)
+  f1 = f.a;
+  f2 = f.b;
+  // Component by component into the record (Vec3 temporaries went through the stack).
+  st.fs[AX] = 0;
+  st.fs[A1] = f1;
+  st.fs[A2] = f2;
+  st.normal[AX] = sense;  // w.normal()
+  st.normal[A1] = 0;
+  st.normal[A2] = 0;
+  st.overlap = overlap;
+  st.fn = fn;
+  c.force[AX] = fn * sense;
+  c.force[A1] = f1;
+  c.force[A2] = f2;
+  // Torque (-l n) x f.
+  c.torque[AX] = 0;
+  c.torque[A1] = ls * f2;
+  c.torque[A2] = -ls * f1;
+}
+}  // namespace
+
+void Scene::compute_wall_forces(long& err_contact) { compute_wall_forces_hot(err_contact); }
+
+void Scene::compute_wall_forces_hot(long& err_contact) {
+  const long nc = static_cast<long>(wall_contacts_.size());
+  const Real dt = dt_;
+  const Real max_ratio = max_overlap_ratio_;
+  const int version = phys_version_;
+  // The contacts by blocks of bodies (those of the integration pass) and, within a block, by
+  // wall axis (contact order within an axis): the kernel's axis is a compile-time constant and
+  // the branch to it changes at most three times per block, where in contact order (by body)
+  // it changed at random and missed (perf, N = 1e3). Each contact is computed independently,
+  // so the order does not change any result.
+  const int nblocks = (num_bodies() + kBodyBlock - 1) / kBodyBlock;
+  if (wall_order_builds_ != builds_ || static_cast<long>(wall_order_.size()) != nc ||
+      static_cast<int>(wall_block_off_.size()) != nblocks + 1) {
+    std::vector<int> start(3 * nblocks + 1, 0);
+    const auto key = [&](long k) {
+      return 3 * (wall_contacts_[k].body / kBodyBlock) + walls_[wall_contacts_[k].wall].axis;
+    };
+    for (long k = 0; k < nc; ++k) ++start[key(k) + 1];
+    for (int q = 0; q < 3 * nblocks; ++q) start[q + 1] += start[q];
+    wall_block_off_.resize(nblocks + 1);
+    for (int blk = 0; blk <= nblocks; ++blk) wall_block_off_[blk] = start[3 * blk];
+    wall_order_.resize(nc);
+    for (long k = 0; k < nc; ++k) wall_order_[start[key(k)]++] = static_cast<int>(k);
+    wall_order_builds_ = builds_;
+  }
+  const int* const order = wall_order_.data();
+  const int* const block_off = wall_block_off_.data();
+  WallContact* const contacts = wall_contacts_.data();
+  const Wall* const walls = walls_.data();
+  const Vec3* const pos = pos_.data();
+  const Vec3* const vel = vel_.data();
+  const Vec3* const angvel = angvel_.data();
+  const Real* const radius = radius_.data();
+  long err = std::numeric_limits<long>::max();
+  // (err is an argument: inside the parallel loop it is the thread's reduction copy.)
+  const auto one = [&](long k, long& err, auto axis) __attribute__((always_inline)) {
+    constexpr int AX = decltype(axis)::value;
+    WallContact& c = contacts[k];
+    const Wall& w = walls[c.wall];
+    const int b = c.body;
+    const Real r = radius[b];
+    const Real s = w.sense * (pos[b][AX] - w.position);  // wall_distance, AX constant
+    if (s >= r || s <= -r) {
+      if (c.active) {
+        c.active = false;
+        c.state.clear_history();
+        c.force.setZero();
+        c.torque.setZero();
+      }
+      return;
+    }
+    const Real overlap = r - s;
+    if (!(overlap <= max_ratio * r)) {
+      err = std::min(err, k);
+      return;
+    }
+    if (!c.active || c.phys_version != version) update_phys(c);
+    c.active = true;
+    if (c.simple) {
+      wall_short_kernel<AX>(c, w, vel[b], angvel[b], r, overlap, dt);
+      return;
+    }
+    // (The general law's geometry only here: its zero-initialised fields cost the short
+    // kernel a stack fill per contact.)
+    const ContactGeometry g = sphere_wall_geometry(w, pos[b], r, vel[b], angvel[b], overlap);
+    const LawOutput out = apply_law(c.phys, g, dt, c.state);
+    c.force = out.force2;
+    c.torque = g.branch2.cross(out.force2) + out.moment2;
+  };
+#pragma omp parallel reduction(min : err) if (nc > kParallelMin)
+  {
+    const auto [t, nt] = thread_and_team();
+    const auto blocks = thread_share(nblocks, t, nt);
+    for (long p = block_off[blocks.first]; p < block_off[blocks.second]; ++p) {
+      const long k = order[p];
+      switch (walls[contacts[k].wall].axis) {
+        case 0: one(k, err, std::integral_constant<int, 0>()); break;
+        case 1: one(k, err, std::integral_constant<int, 1>()); break;
+        default: one(k, err, std::integral_constant<int, 2>());
+      }
+    }
+  }
+  err_contact = err;
+}
+
+}  // namespace cpp_dem
