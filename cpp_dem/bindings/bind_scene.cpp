@@ -28,25 +28,15 @@ py::dict contacts_dict(const Scene& s) {
   std::vector<int> ids;
   std::vector<Vec3> force, normal;
   std::vector<Real> overlap, fn;
-  for (size_t k = 0; k < s.pair_contacts().size(); ++k) {
-    const auto& c = s.pair_contacts()[k];
-    if (!c.active) continue;
-    ids.push_back(s.id_of(c.i));
-    ids.push_back(s.id_of(c.j));
-    force.push_back(s.pair_force(k));
-    normal.push_back(c.normal);
-    overlap.push_back(c.overlap);
-    fn.push_back(c.fn);
-  }
-  for (const auto& c : s.wall_contacts()) {
-    if (!c.active) continue;
-    ids.push_back(s.id_of(c.body));
-    ids.push_back(-1 - c.wall);
-    force.push_back(c.force);
+  s.for_each_contact([&](const ContactRecord& c) {
+    if (!c.active || c.kind == ContactKind::Grid) return;  // grid: Scene.grid_contacts()
+    ids.push_back(s.id_of(c.kind == ContactKind::Pair ? c.body1 : c.body2));
+    ids.push_back(c.kind == ContactKind::Pair ? s.id_of(c.body2) : -1 - c.other);
+    force.push_back(c.force2);
     normal.push_back(c.state.normal);
     overlap.push_back(c.state.overlap);
     fn.push_back(c.state.fn);
-  }
+  });
   py::array_t<int> id_arr({static_cast<py::ssize_t>(fn.size()), py::ssize_t(2)});
   if (!ids.empty()) std::memcpy(id_arr.mutable_data(), ids.data(), ids.size() * sizeof(int));
   py::dict d;

@@ -181,9 +181,9 @@ void Scene::run(long n) {
 }
 
 int Scene::num_active_contacts() const {
+  // Sphere–sphere and sphere–wall contacts (grain–geogrid contacts: grid_contacts()).
   int n = 0;
-  for (const auto& c : pairs_) n += c.active;
-  for (const auto& c : wall_contacts_) n += c.active;
+  for_each_contact([&n](const ContactRecord& c) { n += c.active && c.kind != ContactKind::Grid; });
   return n;
 }
 

@@ -11,6 +11,7 @@
 #include "cpp_dem/bodies/geogrid.hpp"
 #include "cpp_dem/bodies/wall.hpp"
 #include "cpp_dem/broadphase/collider.hpp"
+#include "cpp_dem/contacts/contact_record.hpp"
 #include "cpp_dem/contacts/grid_contact.hpp"
 #include "cpp_dem/contacts/pair_contact.hpp"
 #include "cpp_dem/contacts/wall_contact.hpp"
@@ -238,6 +239,11 @@ class Scene {
   const Vec3& pair_force(size_t k) const { return pair_out_[pair_jslot_[k]].force; }
   const std::vector<WallContact>& wall_contacts() const { return wall_contacts_; }
   int num_active_contacts() const;
+  /// Calls f(const ContactRecord&) for every contact of every container, active or not, in a
+  /// fixed order (pair, wall, then grain–geogrid contacts, each in container order): the one
+  /// walk of the contact containers for measurements, stiffness and output.
+  template <class F>
+  void for_each_contact(F&& f) const;
 
  private:
   friend class Checkpoint;  // exact save/restore of the whole state (checkpoint.cpp)
@@ -378,5 +384,53 @@ class Scene {
   Real max_disp_ = 0;
   bool disp_valid_ = false;
 };
+
+template <class F>
+void Scene::for_each_contact(F&& f) const {
+  ContactRecord r;
+  r.kind = ContactKind::Pair;
+  for (size_t k = 0; k < pairs_.size(); ++k) {
+    const PairContact& c = pairs_[k];
+    r.index = static_cast<long>(k);
+    r.active = c.active;
+    r.body1 = c.i;
+    r.body2 = c.j;
+    r.phys = &pair_cold_[k].phys;
+    r.state = pair_state(k);
+    r.force2 = pair_out_[pair_jslot_[k]].force;
+    r.arm1 = radius_[c.i] - 0.5 * c.overlap;
+    r.arm2 = radius_[c.j] - 0.5 * c.overlap;
+    f(static_cast<const ContactRecord&>(r));
+  }
+  r.kind = ContactKind::Wall;
+  r.body1 = -1;
+  r.arm1 = 0;
+  for (size_t k = 0; k < wall_contacts_.size(); ++k) {
+    const WallContact& c = wall_contacts_[k];
+    r.index = static_cast<long>(k);
+    r.active = c.active;
+    r.body2 = c.body;
+    r.other = c.wall;
+    r.phys = &c.phys;
+    r.state = c.state;
+    r.force2 = c.force;
+    r.arm2 = radius_[c.body] - 0.5 * c.state.overlap;
+    f(static_cast<const ContactRecord&>(r));
+  }
+  r.kind = ContactKind::Grid;
+  for (size_t k = 0; k < grid_contacts_.size(); ++k) {
+    const GridContact& c = grid_contacts_[k];
+    r.index = static_cast<long>(k);
+    r.active = c.active;
+    r.body2 = c.sphere;
+    r.other = c.prim;
+    r.phys = &c.phys;
+    r.state = c.state;
+    r.force2 = c.force;
+    r.arm1 = c.rc - 0.5 * c.state.overlap;
+    r.arm2 = radius_[c.sphere] - 0.5 * c.state.overlap;
+    f(static_cast<const ContactRecord&>(r));
+  }
+}
 
 }  // namespace cpp_dem

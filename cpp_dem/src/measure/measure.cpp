@@ -34,33 +34,22 @@ Real Scene::critical_dt_body(int* arg_body) const {
       kr[b][a] += ks * arm * arm * (1 - n2) + krol;
     }
   };
-  for (size_t k = 0; k < pairs_.size(); ++k) {
-    const PairContact& c = pairs_[k];
-    if (!c.active) continue;
-    any = true;
-    const ContactPhys& phys = pair_cold_[k].phys;
-    Real kn, ks;
-    tangent_stiffness(phys, c.overlap, kn, ks);
-    add(c.i, c.normal, kn, ks, radius_[c.i] - 0.5 * c.overlap, phys.kr);
-    add(c.j, c.normal, kn, ks, radius_[c.j] - 0.5 * c.overlap, phys.kr);
-  }
-  for (const WallContact& c : wall_contacts_) {
-    if (!c.active) continue;
+  for_each_contact([&](const ContactRecord& c) {
+    if (!c.active) return;
     any = true;
     Real kn, ks;
-    tangent_stiffness(c.phys, c.state.overlap, kn, ks);
-    add(c.body, c.state.normal, kn, ks, radius_[c.body] - 0.5 * c.state.overlap, c.phys.kr);
-  }
-  for (const GridContact& c : grid_contacts_) {
-    if (!c.active) continue;
-    any = true;
-    Real kn, ks;
-    tangent_stiffness(c.phys, c.state.overlap, kn, ks);
-    add(c.sphere, c.state.normal, kn, ks, radius_[c.sphere] - 0.5 * c.state.overlap, c.phys.kr);
-    for (int i = 0; i < c.nnodes; ++i)
-      if (c.w[i] > 0)
-        add(c.node[i], c.state.normal, c.w[i] * kn, c.w[i] * ks, c.rc, c.w[i] * c.phys.kr);
-  }
+    c.stiffness(kn, ks);
+    const Real krol = c.phys->kr;
+    if (c.body1 >= 0) add(c.body1, c.state.normal, kn, ks, c.arm1, krol);
+    add(c.body2, c.state.normal, kn, ks, c.arm2, krol);
+    if (c.kind == ContactKind::Grid) {
+      // The virtual sphere's share goes to the primitive's nodes by their weights.
+      const GridContact& g = grid_contacts_[c.index];
+      for (int i = 0; i < g.nnodes; ++i)
+        if (g.w[i] > 0)
+          add(g.node[i], c.state.normal, g.w[i] * kn, g.w[i] * ks, g.rc, g.w[i] * krol);
+    }
+  });
   for (const GridLink& l : links_) {
     if (l.broken) continue;
     any = true;
@@ -112,16 +101,10 @@ Energies Scene::energies() const {
   }
   e.friction = dropped_friction_;
   e.viscous = dropped_viscous_;
-  auto dissipation = [&e](const ContactState& s) {
-    e.friction += s.dissip_friction;
-    e.viscous += s.dissip_viscous;
-  };
-  for (const PairContactCold& c : pair_cold_) {
-    e.friction += c.dissip_friction;
-    e.viscous += c.dissip_viscous;
-  }
-  for (const WallContact& c : wall_contacts_) dissipation(c.state);
-  for (const GridContact& c : grid_contacts_) dissipation(c.state);
+  for_each_contact([&e](const ContactRecord& c) {
+    e.friction += c.state.dissip_friction;
+    e.viscous += c.state.dissip_viscous;
+  });
   e.plastic = dropped_plastic_;
   for (const GridLink& l : links_) e.plastic += l.dissip_plastic;
   e.elastic = stored_elastic_energy();
@@ -164,12 +147,9 @@ void Scene::reset_energy() {
 
 Real Scene::stored_elastic_energy() const {
   Real e = 0;
-  for (size_t k = 0; k < pairs_.size(); ++k)
-    if (pairs_[k].active) e += contact_elastic_energy(pair_cold_[k].phys, pair_state(k));
-  for (const WallContact& c : wall_contacts_)
-    if (c.active) e += contact_elastic_energy(c.phys, c.state);
-  for (const GridContact& c : grid_contacts_)
-    if (c.active) e += contact_elastic_energy(c.phys, c.state);
+  for_each_contact([&e](const ContactRecord& c) {
+    if (c.active) e += c.elastic_energy();
+  });
   for (const GridLink& l : links_)
     if (!l.broken) e += l.elastic_energy();
   return e;
@@ -194,21 +174,11 @@ Real Scene::unbalanced_force() const {
   }
   Real sum_c = 0;
   int nc = 0;
-  for (size_t k = 0; k < pairs_.size(); ++k)
-    if (pairs_[k].active) {
-      sum_c += pair_force(k).norm();
-      ++nc;
-    }
-  for (const WallContact& c : wall_contacts_)
-    if (c.active) {
-      sum_c += c.force.norm();
-      ++nc;
-    }
-  for (const GridContact& c : grid_contacts_)
-    if (c.active) {
-      sum_c += c.force.norm();
-      ++nc;
-    }
+  for_each_contact([&](const ContactRecord& c) {
+    if (!c.active) return;
+    sum_c += c.force2.norm();
+    ++nc;
+  });
   if (nfree == 0 || nc == 0 || sum_c == 0) return std::numeric_limits<Real>::quiet_NaN();
   return (sum_f / nfree) / (sum_c / nc);
 }
