@@ -168,6 +168,9 @@ void bind_scene(py::module_& m) {
                     "Cundall local non-viscous damping coefficient, -, in [0, 1).")
       .def_property("verlet_margin", &Scene::verlet_margin, &Scene::set_verlet_margin,
                     "Broad-phase Verlet margin, m (<= 0: 0.2 x mean radius).")
+      .def_property("max_step_ratio", &Scene::max_step_ratio, &Scene::set_max_step_ratio,
+                    "Largest move of a body in one step, in radii (default 0.5); beyond it the "
+                    "step raises BlowUpError (tunnelling).")
       .def_property("max_overlap_ratio", &Scene::max_overlap_ratio, &Scene::set_max_overlap_ratio,
                     "Overlap / smaller radius above which a step raises BlowUpError (default 0.5).")
       .def_property("track_energy", &Scene::track_energy, &Scene::set_track_energy,

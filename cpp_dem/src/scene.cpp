@@ -2,6 +2,7 @@
 // are in src/broadphase/, src/passes/ and src/integrate/; the body API in src/bodies/.
 #include "cpp_dem/scene.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -31,6 +32,11 @@ void Scene::set_verlet_margin(Real m) {
 void Scene::set_max_overlap_ratio(Real r) {
   require(std::isfinite(r) && r > 0 && r <= 2, "max_overlap_ratio", r, "must be in (0, 2]");
   max_overlap_ratio_ = r;
+}
+void Scene::set_max_step_ratio(Real r) {
+  require(std::isfinite(r) && r > 0 && r <= 2, "max_step_ratio", r,
+          "must be in (0, 2] (largest move of a body in one step, in radii)");
+  max_step_ratio_ = r;
 }
 void Scene::set_track_energy(bool on) {
   if (on && !track_energy_) {
@@ -162,6 +168,7 @@ void Scene::step() {
     else os << "position " << pos_[b].transpose();
     throw BlowUpError(os.str());
   }
+  check_tunnelling();
   for (Wall& w : walls_) {
     // Work done by the wall on the spheres: -(force on wall) . v dt.
     w.work += -w.force.dot(w.velocity) * dt_;
@@ -171,6 +178,32 @@ void Scene::step() {
   }
   ++step_;
   time_ += dt_;
+}
+
+void Scene::check_tunnelling() {
+  // Leapfrog moved each body by v dt, and no body moved farther in this step than since the
+  // last build (max_disp_): below max_step_ratio x the smallest radius nothing can tunnel.
+  if (min_radius_ < 0) {
+    min_radius_ = std::numeric_limits<Real>::infinity();
+    for (Real r : radius_) min_radius_ = std::min(min_radius_, r);
+  }
+  if (disp_valid_ && max_disp_ <= max_step_ratio_ * min_radius_) return;
+  const int n = num_bodies();
+  const Real dt2 = dt_ * dt_;
+  for (int b = 0; b < n; ++b) {
+    const Real reach = max_step_ratio_ * radius_[b];
+    if (vel_[b].squaredNorm() * dt2 <= reach * reach) continue;  // NaN was caught before
+    const Real step_len = vel_[b].norm() * dt_;
+    std::ostringstream os;
+    os.precision(4);
+    os << "blow-up at step " << step_ << ": body " << id_of(b) << " moved " << step_len
+       << " m in one step (speed " << vel_[b].norm() << " m/s, velocity ("
+       << vel_[b][0] << ", " << vel_[b][1] << ", " << vel_[b][2] << ") m/s, dt " << dt_
+       << " s), more than max_step_ratio=" << max_step_ratio_ << " of its radius " << radius_[b]
+       << " m: it can pass through a wall, a grain or a geogrid member without touching it "
+          "(tunnelling); check the velocities and forces you imposed, or lower dt";
+    throw BlowUpError(os.str());
+  }
 }
 
 void Scene::run(long n) {

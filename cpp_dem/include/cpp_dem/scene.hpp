@@ -179,6 +179,11 @@ class Scene {
   Real max_overlap_ratio() const { return max_overlap_ratio_; }
   /// Overlap / smaller radius beyond which a step raises BlowUpError.
   void set_max_overlap_ratio(Real r);
+  /// Largest distance a body may move in one step, as a fraction of its radius, -: beyond it
+  /// the step raises BlowUpError (tunnelling: a body that jumps that far can pass through a
+  /// wall, a grain or a geogrid member without ever overlapping it). Default 0.5.
+  Real max_step_ratio() const { return max_step_ratio_; }
+  void set_max_step_ratio(Real r);
   bool track_energy() const { return track_energy_; }
   void set_track_energy(bool on);
   /// Automatic time step: every `period` steps dt = safety x critical_dt(). period 0 = off.
@@ -370,6 +375,13 @@ class Scene {
   Real local_damping_ = 0;
   Real margin_ = -1;
   Real max_overlap_ratio_ = 0.5;
+  Real max_step_ratio_ = 0.5;
+  // Smallest radius of a body, m (-1: not known yet; set by rebuild and set_radii, not saved).
+  Real min_radius_ = -1;
+  /// Throws BlowUpError if a body moved more than max_step_ratio of its radius in the step
+  /// just integrated (it scans the bodies only when the largest displacement since the last
+  /// broad-phase build says one may have).
+  void check_tunnelling();
   bool track_energy_ = false;
   Real ts_safety_ = 0.8;
   int ts_period_ = 0;

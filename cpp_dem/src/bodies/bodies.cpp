@@ -141,6 +141,7 @@ void Scene::set_radii(const std::vector<Real>& r) {
     inertia_[b] = 0.4 * mass_[b] * r[b] * r[b];
   }
   disp_valid_ = false;  // grown radii count in the broad phase's check
+  min_radius_ = -1;
   ++phys_version_;
 }
 void Scene::set_blocked(int body, std::uint8_t mask) {

@@ -221,6 +221,7 @@ void Scene::rebuild() {
   }
   pos_at_build_ = pos_;
   radius_at_build_ = radius_;
+  min_radius_ = -1;  // check_tunnelling takes it again
   for (Wall& w : walls_) w.moved_since_build = 0;
   dirty_ = false;
   ++builds_;
