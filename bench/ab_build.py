@@ -26,8 +26,14 @@ difference relative to the mean radius.
 The ratio reported is new/old in particle-steps per second (> 1: the new build is faster),
 median over the rounds, with its spread.
 
+On a loaded machine timings drift by several per cent; ``--instructions`` counts instead the
+instructions each build executes per step under ``valgrind --tool=callgrind`` (1 thread; two
+runs per build that differ only in the number of timed steps, whose difference is the cost of
+those steps alone): exact and repeatable whatever else runs, though not a time.
+
     .venv/bin/python bench/ab_build.py --ref 1f3da9b                    # the issue's set
     .venv/bin/python bench/ab_build.py --ref HEAD --scenes spheres:1000 --rounds 2
+    .venv/bin/python bench/ab_build.py --ref 1f3da9b --instructions
 """
 
 from __future__ import annotations
@@ -40,6 +46,7 @@ import argparse  # noqa: E402
 import hashlib  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
+import re  # noqa: E402
 import shutil  # noqa: E402
 import statistics  # noqa: E402
 import subprocess  # noqa: E402
@@ -176,13 +183,47 @@ def worker(cfg: dict) -> dict:
             "bodies": int(scene.num_bodies), "state_sha256": state.hexdigest()[:16]}
 
 
-def run_block(cfg: dict) -> dict:
+def run_block(cfg: dict, prefix: list[str] | None = None) -> dict:
     env = dict(os.environ, OMP_NUM_THREADS=str(cfg["threads"]), OPENBLAS_NUM_THREADS="1")
-    proc = subprocess.run([sys.executable, str(Path(__file__).resolve()), "--worker",
-                           json.dumps(cfg)], cwd=ROOT, env=env, capture_output=True, text=True)
+    if prefix:
+        env["PYTHONHASHSEED"] = "0"  # the interpreter's own work repeats exactly
+    proc = subprocess.run([*(prefix or []), sys.executable, str(Path(__file__).resolve()),
+                           "--worker", json.dumps(cfg)], cwd=ROOT, env=env, capture_output=True,
+                          text=True)
     if proc.returncode != 0:
         raise SystemExit(f"block failed ({cfg['variant']} {cfg['scene']}):\n{proc.stderr}")
-    return json.loads(proc.stdout.strip().splitlines()[-1])
+    out = json.loads(proc.stdout.strip().splitlines()[-1])
+    if prefix:
+        hits = re.findall(r"Collected\s*:\s*(\d+)", proc.stderr)
+        if not hits:
+            raise SystemExit(f"no instruction count in the valgrind output:\n{proc.stderr}")
+        out["instructions"] = int(hits[-1])
+    return out
+
+
+def count_instructions(scene: str, n: int, args, overlay: Path, tmp: Path) -> dict:
+    """Instructions per step of each build, 1 thread, from two callgrind runs per build."""
+    valgrind = shutil.which("valgrind")
+    if valgrind is None:
+        raise SystemExit("--instructions needs valgrind (apt-get install valgrind)")
+    prefix = [valgrind, "--tool=callgrind", "--callgrind-out-file=/dev/null"]
+    lo = 20
+    hi = lo + (args.steps or max(20, math.ceil(4e5 / n)))
+    per_step = {}
+    for variant in ("old", "new"):
+        counts = {}
+        for steps in (lo, hi):
+            cfg = {"variant": variant, "scene": scene, "n": n, "threads": 1, "steps": steps,
+                   "warmup": 50, "dump": str(tmp / f"cg_{variant}.npy"),
+                   "overlay": str(overlay) if variant == "old" else ""}
+            counts[steps] = run_block(cfg, prefix)["instructions"]
+        per_step[variant] = (counts[hi] - counts[lo]) / (hi - lo)
+        log(f"{scene} N={n} {variant}: {per_step[variant]:.4g} instructions per step")
+    rec = {"scene": scene, "n": n, "old_instructions_per_step": per_step["old"],
+           "new_instructions_per_step": per_step["new"],
+           "ratio_old_over_new": per_step["old"] / per_step["new"]}
+    print(json.dumps(rec), flush=True)
+    return rec
 
 
 def compare(scene: str, n: int, threads: int, args, overlay: Path, tmp: Path) -> dict:
@@ -232,18 +273,34 @@ def main(argv: list[str] | None = None) -> int:
                     help="particle-steps per block when --steps is 0")
     ap.add_argument("--warmup", type=int, default=200)
     ap.add_argument("--jobs", type=int, default=2, help="compile jobs for the old build")
+    ap.add_argument("--instructions", action="store_true",
+                    help="count instructions per step under callgrind instead of timing")
     args = ap.parse_args(argv)
     if args.worker:
         print(json.dumps(worker(json.loads(args.worker))))
         return 0
+    for spec in args.scenes:
+        kind, _, n = spec.partition(":")
+        if kind not in ("spheres", "general", "hertz", "geogrid") or not n.isdigit():
+            raise SystemExit(f"--scenes {spec}: must be KIND:N with KIND spheres, general, "
+                             "hertz or geogrid and N a whole number")
     overlay = build_ref(args.ref, args.jobs)
     rows = []
+    if args.instructions:
+        with tempfile.TemporaryDirectory() as tmp:
+            for spec in args.scenes:
+                kind, _, n = spec.partition(":")
+                rows.append(count_instructions(kind, int(n), args, overlay, Path(tmp)))
+        print("\n| scene | N | old instr./step | new instr./step | old/new |", file=sys.stderr)
+        print("|---|---|---|---|---|", file=sys.stderr)
+        for r in rows:
+            print(f"| {r['scene']} | {r['n']} | {r['old_instructions_per_step']:.4g} | "
+                  f"{r['new_instructions_per_step']:.4g} | {r['ratio_old_over_new']:.4f} |",
+                  file=sys.stderr)
+        return 0
     with tempfile.TemporaryDirectory() as tmp:
         for spec in args.scenes:
             kind, _, n = spec.partition(":")
-            if kind not in ("spheres", "general", "hertz", "geogrid") or not n.isdigit():
-                raise SystemExit(f"--scenes {spec}: must be KIND:N with KIND spheres, general, "
-                                 "hertz or geogrid and N a whole number")
             for t in args.threads:
                 rows.append(compare(kind, int(n), t, args, overlay, Path(tmp)))
     print("\n| scene | N | threads | old us/step | new us/step | new/old p-steps/s (min-max)"

@@ -60,7 +60,14 @@ def test_at_and_above_the_estimate_the_run_stops_with_a_named_blowup(factor):
     with pytest.raises(dem.BlowUpError) as ei:
         sc.run(steps)
     msg = str(ei.value)
-    assert re.search(r"blow-up at step \d+: bodies 0 and 1 overlap by", msg)
+    if factor == 1.0:
+        assert re.search(r"blow-up at step \d+: bodies 0 and 1 overlap by", msg)
+    else:
+        # At 1.2 x the estimate the pair blows up fast: at step 105 a body moves 1.17 R in
+        # one step while the overlap, checked once per step, stays below 0.5 R until step
+        # 269. The tunnelling check (Scene.max_step_ratio, issue 20) stops it at the first
+        # such step, and names the body.
+        assert re.search(r"blow-up at step 105: body [01] moved .* \(tunnelling\)", msg)
     assert "time step may be too large" in msg
     assert np.all(np.isfinite(sc.positions))  # stopped before anything became garbage
 

@@ -144,13 +144,20 @@ def test_radius_growth_of_listed_ids_after_sorting():
     np.testing.assert_array_equal(np.delete(ratio, grow), 1.0)
 
 
-def test_blow_up_names_ids_not_slots():
-    """Sphere 11 is shot across the box; the sorted and the unsorted scene stop at the same
-    step with the same message, naming sphere 11 by its id."""
+@pytest.mark.parametrize("max_step_ratio, pattern", [
+    # The overlap check (the tunnelling check allows the 1.3 R per step here).
+    (2.0, r"bodies (11 and \d+|\d+ and 11) overlap"),
+    # The tunnelling check (default: at most 1 R per step), which stops it first.
+    (1.0, r"step 1: body 11 moved .* \(tunnelling\)"),
+])
+def test_blow_up_names_ids_not_slots(max_step_ratio, pattern):
+    """Sphere 11 is shot across the box at 200 m/s (1.3 radii per step); the sorted and the
+    unsorted scene stop at the same step with the same message, naming sphere 11 by its id."""
     msgs = []
     for sort in (True, False):
         s, _ = scattered_scene(sort=sort)
         s.gravity = (0, 0, 0)
+        s.max_step_ratio = max_step_ratio
         s.run(1)
         assert s.identity_order != sort
         x = s.positions
@@ -158,7 +165,7 @@ def test_blow_up_names_ids_not_slots():
         v = np.zeros((s.num_bodies, 3))
         v[11] = d / np.linalg.norm(d) * 200.0
         s.velocities = v
-        with pytest.raises(dem.BlowUpError, match=r"bodies (11 and \d+|\d+ and 11) overlap") as e:
+        with pytest.raises(dem.BlowUpError, match=pattern) as e:
             s.run(2000)
         msgs.append(str(e.value))
     assert msgs[0] == msgs[1]

@@ -52,15 +52,22 @@ def test_overflowing_velocity_stops_before_anything_is_recorded():
 
 
 def test_a_grain_just_below_the_limit_runs_and_one_just_above_stops():
-    s = grains_in_box(gravity=(0.0, 0.0, 0.0))
-    s.set_auto_timestep(safety=0.8, period=0)
+    # One grain alone in the middle of the box: nothing to touch within a few steps.
+    s = dem.Scene()
+    m = s.add_material(dem.linear_material(density=2650, young=1e7, poisson=0.3,
+                                           friction_angle_deg=30))
+    s.add_box((0, 0, 0), (0.1, 0.1, 0.1), material=m)
+    s.add_spheres([[0.05, 0.05, 0.05]], [R], material=m)
     s.dt = 1e-4
-    s.max_step_ratio = 0.5
-    # 0.4 R per step: allowed (a single step, then it is moving freely in the box).
-    launch(s, 0, (0.4 * R / 1e-4, 0.0, 0.0))
+    assert s.max_step_ratio == 1.0  # the default
+    launch(s, 0, (0.9 * R / 1e-4, 0.0, 0.0))  # 0.9 R per step: allowed
     s.run(1)
+    launch(s, 0, (-1.1 * R / 1e-4, 0.0, 0.0))
+    with pytest.raises(dem.BlowUpError, match="body 0 moved .* max_step_ratio=1 "):
+        s.run(1)
+    s.max_step_ratio = 0.5
     launch(s, 0, (0.6 * R / 1e-4, 0.0, 0.0))
-    with pytest.raises(dem.BlowUpError, match="max_step_ratio=0.5"):
+    with pytest.raises(dem.BlowUpError, match="max_step_ratio=0.5 "):
         s.run(1)
 
 
@@ -76,3 +83,22 @@ def test_max_step_ratio_is_validated(bad):
     s = grains_in_box()
     with pytest.raises(dem.ParameterError, match="max_step_ratio"):
         s.max_step_ratio = bad
+
+
+def test_a_geogrid_node_may_move_its_radius_plus_the_smallest_grain_radius():
+    # A node is a member of radius R_c; what it must not cross is a grain of radius r, along
+    # which the deep-overlap band is r + 2 R_c long: the limit is (R_c + r_min) per step.
+    s = dem.Scene()
+    m = s.add_material(dem.linear_material(density=2650, young=1e7, poisson=0.3,
+                                           friction_angle_deg=30))
+    s.add_box((0, 0, 0), (0.2, 0.2, 0.2), material=m)
+    s.add_spheres([[0.15, 0.15, 0.15]], [R], material=m)
+    rc = 0.001
+    node = [s._add_grid_nodes(np.array([[0.05, 0.05, 0.05]]), rc, np.array([1e-3]),
+                              np.array([1e-9]), m)]
+    s.dt = 1e-4
+    launch(s, int(node[0]), (0.9 * (rc + R) / 1e-4, 0.0, 0.0))  # 5.4 mm per step: allowed
+    s.run(1)
+    launch(s, int(node[0]), (-1.1 * (rc + R) / 1e-4, 0.0, 0.0))
+    with pytest.raises(dem.BlowUpError, match="its radius plus the smallest grain's 0.006 m"):
+        s.run(1)

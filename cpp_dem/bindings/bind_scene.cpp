@@ -169,7 +169,7 @@ void bind_scene(py::module_& m) {
       .def_property("verlet_margin", &Scene::verlet_margin, &Scene::set_verlet_margin,
                     "Broad-phase Verlet margin, m (<= 0: 0.2 x mean radius).")
       .def_property("max_step_ratio", &Scene::max_step_ratio, &Scene::set_max_step_ratio,
-                    "Largest move of a body in one step, in radii (default 0.5); beyond it the "
+                    "Largest move of a body in one step, in radii (default 1); beyond it the "
                     "step raises BlowUpError (tunnelling).")
       .def_property("max_overlap_ratio", &Scene::max_overlap_ratio, &Scene::set_max_overlap_ratio,
                     "Overlap / smaller radius above which a step raises BlowUpError (default 0.5).")

@@ -71,7 +71,7 @@ class Reader {
 
 /// Sizes of every record type, in a fixed order: the layout fingerprint.
 std::vector<std::uint64_t> layout() {
-  return {sizeof(Real),        sizeof(Vec3),        sizeof(Quat),       sizeof(Material),
+  return {sizeof(Real),        sizeof(BodyStore),        sizeof(Vec3),        sizeof(Quat),       sizeof(Material),
           sizeof(Wall),        sizeof(PairContact), sizeof(PairOutput), sizeof(WallContact), sizeof(GridLink),
           sizeof(PFacet),      sizeof(GridContact), sizeof(BreakEvent), sizeof(ContactPhys),
           sizeof(ContactState), sizeof(PairContactCold)};
@@ -85,28 +85,11 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.vec(layout());
   w.vec(s.materials_);
   // Bodies.
-  w.vec(s.pos_);
-  w.vec(s.vel_);
-  w.vec(s.angvel_);
-  w.vec(s.force_);
-  w.vec(s.torque_);
-  w.vec(s.ext_force_);
-  w.vec(s.ext_torque_);
-  w.vec(s.ori_);
-  w.vec(s.radius_);
-  w.vec(s.mass_);
-  w.vec(s.inertia_);
-  w.vec(s.body_mat_);
-  w.vec(s.blocked_);
-  w.vec(s.kind_);
+  s.bodies_.for_each_array([&](const auto& v) { w.vec(v); });
   w.vec(s.id_of_slot_);
   w.put(s.spatial_sort_);
   w.vec(s.pos_at_build_);
   w.vec(s.radius_at_build_);
-  w.vec(s.ke_);
-  w.vec(s.damp_dissip_);
-  w.vec(s.ext_work_);
-  w.vec(s.pos_at_energy_reset_);
   w.vec(s.walls_);
   // Contacts and adjacency.
   w.vec(s.pairs_);
@@ -185,39 +168,26 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   // Read everything into a copy first, so a bad blob leaves the scene untouched.
   Scene t;
   r.vec(t.materials_);
-  r.vec(t.pos_);
-  r.vec(t.vel_);
-  r.vec(t.angvel_);
-  r.vec(t.force_);
-  r.vec(t.torque_);
-  r.vec(t.ext_force_);
-  r.vec(t.ext_torque_);
-  r.vec(t.ori_);
-  r.vec(t.radius_);
-  r.vec(t.mass_);
-  r.vec(t.inertia_);
-  r.vec(t.body_mat_);
-  r.vec(t.blocked_);
-  r.vec(t.kind_);
+  t.bodies_.for_each_array([&](auto& v) { r.vec(v); });
+  const size_t nb = t.bodies_.pos.size();
+  t.bodies_.for_each_array([&](const auto& v) {
+    if (v.size() != nb) throw ParameterError("checkpoint: corrupt body arrays");
+  });
   r.vec(t.id_of_slot_);
   r.get(t.spatial_sort_);
   if (!t.id_of_slot_.empty()) {
-    if (t.id_of_slot_.size() != t.pos_.size())
+    if (t.id_of_slot_.size() != t.bodies_.pos.size())
       throw ParameterError("checkpoint: corrupt storage order");
     t.slot_of_id_.assign(t.id_of_slot_.size(), -1);
     for (size_t b = 0; b < t.id_of_slot_.size(); ++b) {
       const int id = t.id_of_slot_[b];
-      if (id < 0 || id >= static_cast<int>(t.pos_.size()) || t.slot_of_id_[id] != -1)
+      if (id < 0 || id >= static_cast<int>(t.bodies_.pos.size()) || t.slot_of_id_[id] != -1)
         throw ParameterError("checkpoint: corrupt storage order");
       t.slot_of_id_[id] = static_cast<int>(b);
     }
   }
   r.vec(t.pos_at_build_);
   r.vec(t.radius_at_build_);
-  r.vec(t.ke_);
-  r.vec(t.damp_dissip_);
-  r.vec(t.ext_work_);
-  r.vec(t.pos_at_energy_reset_);
   r.vec(t.walls_);
   r.vec(t.pairs_);
   r.vec(t.pair_cold_);

@@ -2,6 +2,8 @@
 // are in src/broadphase/, src/passes/ and src/integrate/; the body API in src/bodies/.
 #include "cpp_dem/scene.hpp"
 
+#include "cpp_dem/geometry/sphere_wall.hpp"
+
 #include <algorithm>
 #include <cmath>
 #include <limits>
@@ -74,15 +76,15 @@ void Scene::raise_overlap(long k, bool wall) const {
   if (wall) {
     const WallContact& c = wall_contacts_[k];
     const Wall& w = walls_[c.wall];
-    const Real s = w.sense * (pos_[c.body][w.axis] - w.position);
+    const Real s = w.sense * (bodies_.pos[c.body][w.axis] - w.position);
     os << "blow-up at step " << step_ << ": body " << id_of(c.body) << " overlaps wall " << c.wall
-       << " by " << (radius_[c.body] - s) / radius_[c.body]
+       << " by " << (bodies_.radius[c.body] - s) / bodies_.radius[c.body]
        << " of its radius (max_overlap_ratio=" << max_overlap_ratio_ << why;
   } else {
     const PairContact& c = pairs_[k];
-    const Real ov = radius_[c.i] + radius_[c.j] - (pos_[c.j] - pos_[c.i]).norm();
+    const Real ov = bodies_.radius[c.i] + bodies_.radius[c.j] - (bodies_.pos[c.j] - bodies_.pos[c.i]).norm();
     os << "blow-up at step " << step_ << ": bodies " << id_of(c.i) << " and " << id_of(c.j)
-       << " overlap by " << ov / std::min(radius_[c.i], radius_[c.j])
+       << " overlap by " << ov / std::min(bodies_.radius[c.i], bodies_.radius[c.j])
        << " of the smaller radius (max_overlap_ratio=" << max_overlap_ratio_ << why;
     if (!std::isfinite(ov)) os << " (non-finite position)";
   }
@@ -143,7 +145,7 @@ void Scene::step() {
            << (c.kind == GridPrimitive::Node         ? "node "
                : c.kind == GridPrimitive::Connection ? "connection "
                                                      : "pfacet ")
-           << c.prim << ") by " << c.geom.overlap / radius_[c.sphere]
+           << c.prim << ") by " << c.geom.overlap / bodies_.radius[c.sphere]
            << " of the grain radius (max_overlap_ratio=" << max_overlap_ratio_
            << "); the time step may be too large or the contact too soft";
         throw BlowUpError(os.str());
@@ -161,11 +163,11 @@ void Scene::step() {
     const int b = static_cast<int>(err_body);
     std::ostringstream os;
     os << "blow-up at step " << step_ << ": body " << id_of(b) << " has a non-finite ";
-    if (!force_[b].allFinite()) os << "force " << force_[b].transpose();
-    else if (!torque_[b].allFinite()) os << "torque " << torque_[b].transpose();
-    else if (!vel_[b].allFinite()) os << "velocity " << vel_[b].transpose();
-    else if (!angvel_[b].allFinite()) os << "angular velocity " << angvel_[b].transpose();
-    else os << "position " << pos_[b].transpose();
+    if (!bodies_.force[b].allFinite()) os << "force " << bodies_.force[b].transpose();
+    else if (!bodies_.torque[b].allFinite()) os << "torque " << bodies_.torque[b].transpose();
+    else if (!bodies_.vel[b].allFinite()) os << "velocity " << bodies_.vel[b].transpose();
+    else if (!bodies_.angvel[b].allFinite()) os << "angular velocity " << bodies_.angvel[b].transpose();
+    else os << "position " << bodies_.pos[b].transpose();
     throw BlowUpError(os.str());
   }
   check_tunnelling();
@@ -181,27 +183,54 @@ void Scene::step() {
 }
 
 void Scene::check_tunnelling() {
-  // Leapfrog moved each body by v dt, and no body moved farther in this step than since the
-  // last build (max_disp_): below max_step_ratio x the smallest radius nothing can tunnel.
+  // A grain may move its radius times max_step_ratio per step. A geogrid node is a member of
+  // radius R_c, and what it must not cross is a grain: the band of deep overlaps along its
+  // path through a grain of radius r is r + 2 R_c long, so it may move (R_c + r_min) times
+  // max_step_ratio, r_min the smallest grain radius.
   if (min_radius_ < 0) {
-    min_radius_ = std::numeric_limits<Real>::infinity();
-    for (Real r : radius_) min_radius_ = std::min(min_radius_, r);
+    Real grains = std::numeric_limits<Real>::infinity(), all = grains;
+    for (int b = 0; b < num_bodies(); ++b) {
+      all = std::min(all, bodies_.radius[b]);
+      if (bodies_.kind[b] == BODY_SPHERE) grains = std::min(grains, bodies_.radius[b]);
+    }
+    min_radius_ = std::isfinite(grains) ? grains : all;
   }
+  // Leapfrog moved each body by v dt, and no body moved farther in this step than since the
+  // last build (max_disp_): below max_step_ratio x the smallest grain radius nothing tunnels.
   if (disp_valid_ && max_disp_ <= max_step_ratio_ * min_radius_) return;
   const int n = num_bodies();
   const Real dt2 = dt_ * dt_;
   for (int b = 0; b < n; ++b) {
-    const Real reach = max_step_ratio_ * radius_[b];
-    if (vel_[b].squaredNorm() * dt2 <= reach * reach) continue;  // NaN was caught before
-    const Real step_len = vel_[b].norm() * dt_;
+    const Real allowed = bodies_.kind[b] == BODY_SPHERE ? bodies_.radius[b]
+                                                        : bodies_.radius[b] + min_radius_;
+    const Real reach = max_step_ratio_ * allowed;
+    if (bodies_.vel[b].squaredNorm() * dt2 <= reach * reach) continue;  // NaN was caught before
+    // Where the move ended in too deep an overlap, that is the more telling message (the
+    // next step's overlap check would give it).
+    const auto& x = bodies_.pos;
+    const auto& r = bodies_.radius;
+    for (size_t k = 0; k < pairs_.size(); ++k) {
+      const PairContact& c = pairs_[k];
+      if (c.i != b && c.j != b) continue;
+      const Real ov = r[c.i] + r[c.j] - (x[c.j] - x[c.i]).norm();
+      if (!(ov <= max_overlap_ratio_ * std::min(r[c.i], r[c.j]))) raise_overlap(k, false);
+    }
+    for (size_t k = 0; k < wall_contacts_.size(); ++k) {
+      const WallContact& c = wall_contacts_[k];
+      if (c.body != b) continue;
+      const Real ov = r[b] - wall_distance(walls_[c.wall], x[b]);
+      if (ov < r[b] && !(ov <= max_overlap_ratio_ * r[b])) raise_overlap(k, true);
+    }
+    const Real step_len = bodies_.vel[b].norm() * dt_;
     std::ostringstream os;
     os.precision(4);
     os << "blow-up at step " << step_ << ": body " << id_of(b) << " moved " << step_len
-       << " m in one step (speed " << vel_[b].norm() << " m/s, velocity ("
-       << vel_[b][0] << ", " << vel_[b][1] << ", " << vel_[b][2] << ") m/s, dt " << dt_
-       << " s), more than max_step_ratio=" << max_step_ratio_ << " of its radius " << radius_[b]
-       << " m: it can pass through a wall, a grain or a geogrid member without touching it "
-          "(tunnelling); check the velocities and forces you imposed, or lower dt";
+       << " m in one step (speed " << bodies_.vel[b].norm() << " m/s, velocity ("
+       << bodies_.vel[b][0] << ", " << bodies_.vel[b][1] << ", " << bodies_.vel[b][2] << ") m/s, dt " << dt_
+       << " s), more than max_step_ratio=" << max_step_ratio_ << " of "
+       << (bodies_.kind[b] == BODY_SPHERE ? "its radius " : "its radius plus the smallest grain's ")
+       << allowed << " m: it can pass through a wall, a grain or a geogrid member without touching it "
+          "(tunnelling); the time step may be too large, or an imposed velocity or force too big";
     throw BlowUpError(os.str());
   }
 }

@@ -8,6 +8,7 @@
 #include <utility>
 #include <vector>
 
+#include "cpp_dem/bodies/body_store.hpp"
 #include "cpp_dem/bodies/geogrid.hpp"
 #include "cpp_dem/bodies/wall.hpp"
 #include "cpp_dem/broadphase/collider.hpp"
@@ -68,7 +69,7 @@ class Scene {
 
   /// Adds spheres; returns the id of the first. pos: n centres, m; radius: n radii, m.
   int add_spheres(const std::vector<Vec3>& pos, const std::vector<Real>& radius, int material);
-  int num_bodies() const { return static_cast<int>(pos_.size()); }
+  int num_bodies() const { return static_cast<int>(bodies_.pos.size()); }
 
   // ---- geogrid (000 §2.2) ----------------------------------------------------------------
   // Without the geogrid (built with -DCPP_DEM_GEOGRID=OFF, kGeogridBuilt false) the three
@@ -88,7 +89,7 @@ class Scene {
   const std::vector<GridContact>& grid_contacts() const { return grid_contacts_; }
   const std::vector<BreakEvent>& break_events() const { return breaks_; }
   /// Body kind: 0 sphere, 1 grid node.
-  const std::vector<std::uint8_t>& body_kinds() const { return kind_; }
+  const std::vector<std::uint8_t>& body_kinds() const { return bodies_.kind; }
   /// Grid nodes touch walls (as spheres of radius R_c) only when this is on; off by default
   /// (the pull-out box of 000 never touches the geogrid).
   bool grid_wall_contacts() const { return grid_wall_contacts_; }
@@ -140,19 +141,19 @@ class Scene {
   void set_spatial_sort(bool on) { spatial_sort_ = on; }
 
   // ---- state arrays (SI, storage order) --------------------------------------------------
-  const std::vector<Vec3>& positions() const { return pos_; }
-  const std::vector<Vec3>& velocities() const { return vel_; }
-  const std::vector<Vec3>& angular_velocities() const { return angvel_; }
-  const std::vector<Vec3>& forces() const { return force_; }
-  const std::vector<Vec3>& torques() const { return torque_; }
-  const std::vector<Real>& radii() const { return radius_; }
-  const std::vector<Real>& masses() const { return mass_; }
-  const std::vector<Real>& inertias() const { return inertia_; }
-  const std::vector<Quat>& orientations() const { return ori_; }
-  const std::vector<int>& body_materials() const { return body_mat_; }
-  const std::vector<std::uint8_t>& blocked() const { return blocked_; }
-  const std::vector<Vec3>& external_forces() const { return ext_force_; }
-  const std::vector<Vec3>& external_torques() const { return ext_torque_; }
+  const std::vector<Vec3>& positions() const { return bodies_.pos; }
+  const std::vector<Vec3>& velocities() const { return bodies_.vel; }
+  const std::vector<Vec3>& angular_velocities() const { return bodies_.angvel; }
+  const std::vector<Vec3>& forces() const { return bodies_.force; }
+  const std::vector<Vec3>& torques() const { return bodies_.torque; }
+  const std::vector<Real>& radii() const { return bodies_.radius; }
+  const std::vector<Real>& masses() const { return bodies_.mass; }
+  const std::vector<Real>& inertias() const { return bodies_.inertia; }
+  const std::vector<Quat>& orientations() const { return bodies_.ori; }
+  const std::vector<int>& body_materials() const { return bodies_.material; }
+  const std::vector<std::uint8_t>& blocked() const { return bodies_.blocked; }
+  const std::vector<Vec3>& external_forces() const { return bodies_.ext_force; }
+  const std::vector<Vec3>& external_torques() const { return bodies_.ext_torque; }
 
   // Setters of whole arrays take storage order (the bindings translate from id order).
   void set_positions(const std::vector<Vec3>& v);
@@ -180,8 +181,11 @@ class Scene {
   /// Overlap / smaller radius beyond which a step raises BlowUpError.
   void set_max_overlap_ratio(Real r);
   /// Largest distance a body may move in one step, as a fraction of its radius, -: beyond it
-  /// the step raises BlowUpError (tunnelling: a body that jumps that far can pass through a
-  /// wall, a grain or a geogrid member without ever overlapping it). Default 0.5.
+  /// the step raises BlowUpError (tunnelling). Default 1: a grain that moves at most its
+  /// radius per step cannot cross a wall, a grain or a geogrid member without one step in an
+  /// overlap deeper than max_overlap_ratio = 0.5 of its radius (the band of such overlaps
+  /// along any path through them is at least one radius long), which the overlap check
+  /// names; a grain that moves farther can pass through without ever overlapping.
   Real max_step_ratio() const { return max_step_ratio_; }
   void set_max_step_ratio(Real r);
   bool track_energy() const { return track_energy_; }
@@ -311,21 +315,13 @@ class Scene {
   Real default_margin() const;
 
   std::vector<Material> materials_;
-  // Bodies (structure of arrays).
-  std::vector<Vec3> pos_, vel_, angvel_, force_, torque_, ext_force_, ext_torque_;
-  std::vector<Quat> ori_;
-  std::vector<Real> radius_, mass_, inertia_;
-  std::vector<int> body_mat_;
-  std::vector<std::uint8_t> blocked_;
-  std::vector<std::uint8_t> kind_;  // 0 sphere, 1 grid node
+  // Bodies (structure of arrays, storage order).
+  BodyStore bodies_;
   // Storage order: id of the body at each slot and its inverse (both empty: identity).
   std::vector<int> id_of_slot_, slot_of_id_;
   bool spatial_sort_ = true;
   std::vector<Vec3> pos_at_build_;
   std::vector<Real> radius_at_build_;
-  // Energy accumulators per body (written only when tracking).
-  std::vector<Real> ke_, damp_dissip_, ext_work_;
-  std::vector<Vec3> pos_at_energy_reset_;
   std::vector<Wall> walls_;
   std::vector<std::shared_ptr<Controller>> controllers_;
   // Contacts and their adjacency (CSR: for body b, entries adj_off[b]..adj_off[b+1]).
@@ -375,7 +371,7 @@ class Scene {
   Real local_damping_ = 0;
   Real margin_ = -1;
   Real max_overlap_ratio_ = 0.5;
-  Real max_step_ratio_ = 0.5;
+  Real max_step_ratio_ = 1.0;
   // Smallest radius of a body, m (-1: not known yet; set by rebuild and set_radii, not saved).
   Real min_radius_ = -1;
   /// Throws BlowUpError if a body moved more than max_step_ratio of its radius in the step
@@ -410,8 +406,8 @@ void Scene::for_each_contact(F&& f) const {
     r.phys = &pair_cold_[k].phys;
     r.state = pair_state(k);
     r.force2 = pair_out_[pair_jslot_[k]].force;
-    r.arm1 = radius_[c.i] - 0.5 * c.overlap;
-    r.arm2 = radius_[c.j] - 0.5 * c.overlap;
+    r.arm1 = bodies_.radius[c.i] - 0.5 * c.overlap;
+    r.arm2 = bodies_.radius[c.j] - 0.5 * c.overlap;
     f(static_cast<const ContactRecord&>(r));
   }
   r.kind = ContactKind::Wall;
@@ -426,7 +422,7 @@ void Scene::for_each_contact(F&& f) const {
     r.phys = &c.phys;
     r.state = c.state;
     r.force2 = c.force;
-    r.arm2 = radius_[c.body] - 0.5 * c.state.overlap;
+    r.arm2 = bodies_.radius[c.body] - 0.5 * c.state.overlap;
     f(static_cast<const ContactRecord&>(r));
   }
   r.kind = ContactKind::Grid;
@@ -440,7 +436,7 @@ void Scene::for_each_contact(F&& f) const {
     r.state = c.state;
     r.force2 = c.force;
     r.arm1 = c.rc - 0.5 * c.state.overlap;
-    r.arm2 = radius_[c.sphere] - 0.5 * c.state.overlap;
+    r.arm2 = bodies_.radius[c.sphere] - 0.5 * c.state.overlap;
     f(static_cast<const ContactRecord&>(r));
   }
 }

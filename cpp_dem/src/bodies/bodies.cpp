@@ -50,7 +50,7 @@ int Scene::add_spheres(const std::vector<Vec3>& pos, const std::vector<Real>& ra
   for (size_t k = 0; k < pos.size(); ++k) {
     const Real r = radius[k];
     const Real m = sphere_mass(mat.density, r);
-    push_body(pos[k], r, m, 0.4 * m * r * r, material, 0);
+    push_body(pos[k], r, m, 0.4 * m * r * r, material, BODY_SPHERE);
   }
   dirty_ = true;
   return first;
@@ -63,24 +63,7 @@ void Scene::push_body(const Vec3& x, Real radius, Real mass, Real inertia, int m
     id_of_slot_.push_back(num_bodies());
     slot_of_id_.push_back(num_bodies());
   }
-  pos_.push_back(x);
-  vel_.push_back(Vec3::Zero());
-  angvel_.push_back(Vec3::Zero());
-  force_.push_back(Vec3::Zero());
-  torque_.push_back(Vec3::Zero());
-  ext_force_.push_back(Vec3::Zero());
-  ext_torque_.push_back(Vec3::Zero());
-  ori_.push_back(Quat::Identity());
-  radius_.push_back(radius);
-  mass_.push_back(mass);
-  inertia_.push_back(inertia);
-  body_mat_.push_back(material);
-  blocked_.push_back(DOF_NONE);
-  kind_.push_back(kind);
-  ke_.push_back(0);
-  damp_dissip_.push_back(0);
-  ext_work_.push_back(0);
-  pos_at_energy_reset_.push_back(x);
+  bodies_.push(x, radius, mass, inertia, material, kind);
 }
 
 int Scene::add_wall(int axis, Real position, int sense, int material) {
@@ -110,35 +93,35 @@ Wall& Scene::wall(int id) {
 const Wall& Scene::wall(int id) const { return const_cast<Scene*>(this)->wall(id); }
 
 void Scene::set_positions(const std::vector<Vec3>& v) {
-  require_size(v, pos_.size(), "positions");
+  require_size(v, bodies_.pos.size(), "positions");
   for (const auto& x : v)
     if (!x.allFinite()) throw ParameterError("positions: must be finite (m)");
-  pos_ = v;
+  bodies_.pos = v;
   dirty_ = true;
 }
 void Scene::set_velocities(const std::vector<Vec3>& v) {
-  require_size(v, pos_.size(), "velocities");
-  vel_ = v;
+  require_size(v, bodies_.pos.size(), "velocities");
+  bodies_.vel = v;
 }
 void Scene::set_angular_velocities(const std::vector<Vec3>& v) {
-  require_size(v, pos_.size(), "angular_velocities");
-  angvel_ = v;
+  require_size(v, bodies_.pos.size(), "angular_velocities");
+  bodies_.angvel = v;
 }
 void Scene::set_radii(const std::vector<Real>& r) {
-  require_size(r, pos_.size(), "radii");
+  require_size(r, bodies_.pos.size(), "radii");
   for (Real x : r) require(std::isfinite(x) && x > 0, "radius", x, "must be > 0 (m)");
   for (size_t b = 0; b < r.size(); ++b) {
-    if (kind_[b] != 0) {
+    if (bodies_.kind[b] != BODY_SPHERE) {
       // Grid nodes keep their lumped mass; their radius is the geogrid's R_c.
-      if (r[b] != radius_[b])
+      if (r[b] != bodies_.radius[b])
         throw ParameterError("radius[" + std::to_string(id_of(b)) + "]=" + std::to_string(r[b]) +
                              ": body " + std::to_string(id_of(b)) +
                              " is a grid node; its radius (the geogrid's R_c) cannot change");
       continue;
     }
-    radius_[b] = r[b];
-    mass_[b] = sphere_mass(materials_[body_mat_[b]].density, r[b]);
-    inertia_[b] = 0.4 * mass_[b] * r[b] * r[b];
+    bodies_.radius[b] = r[b];
+    bodies_.mass[b] = sphere_mass(materials_[bodies_.material[b]].density, r[b]);
+    bodies_.inertia[b] = 0.4 * bodies_.mass[b] * r[b] * r[b];
   }
   disp_valid_ = false;  // grown radii count in the broad phase's check
   min_radius_ = -1;
@@ -148,23 +131,23 @@ void Scene::set_blocked(int body, std::uint8_t mask) {
   check_body(body);
   if (mask > DOF_ALL)
     throw ParameterError("blocked=" + std::to_string(mask) + ": must be a mask of x y z rx ry rz");
-  blocked_[slot_of(body)] = mask;
+  bodies_.blocked[slot_of(body)] = mask;
 }
 void Scene::set_external_forces(const std::vector<Vec3>& f) {
-  require_size(f, pos_.size(), "external_forces");
-  ext_force_ = f;
+  require_size(f, bodies_.pos.size(), "external_forces");
+  bodies_.ext_force = f;
 }
 void Scene::set_external_torques(const std::vector<Vec3>& t) {
-  require_size(t, pos_.size(), "external_torques");
-  ext_torque_ = t;
+  require_size(t, bodies_.pos.size(), "external_torques");
+  bodies_.ext_torque = t;
 }
 void Scene::set_body_material(int body, int material) {
   check_body(body);
   this->material(material);
   body = slot_of(body);
-  body_mat_[body] = material;
-  mass_[body] = sphere_mass(materials_[material].density, radius_[body]);
-  inertia_[body] = 0.4 * mass_[body] * radius_[body] * radius_[body];
+  bodies_.material[body] = material;
+  bodies_.mass[body] = sphere_mass(materials_[material].density, bodies_.radius[body]);
+  bodies_.inertia[body] = 0.4 * bodies_.mass[body] * bodies_.radius[body] * bodies_.radius[body];
   ++phys_version_;
 }
 void Scene::set_mass_inertia(int body, Real mass, Real inertia) {
@@ -172,8 +155,8 @@ void Scene::set_mass_inertia(int body, Real mass, Real inertia) {
   require(std::isfinite(mass) && mass > 0, "mass", mass, "must be > 0 (kg)");
   require(std::isfinite(inertia) && inertia > 0, "inertia", inertia, "must be > 0 (kg m^2)");
   body = slot_of(body);
-  mass_[body] = mass;
-  inertia_[body] = inertia;
+  bodies_.mass[body] = mass;
+  bodies_.inertia[body] = inertia;
   ++phys_version_;
 }
 void Scene::check_body(int b) const {

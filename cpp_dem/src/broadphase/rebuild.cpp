@@ -15,10 +15,10 @@ constexpr Real kInf = std::numeric_limits<Real>::infinity();
 }  // namespace
 
 Real Scene::default_margin() const {
-  if (radius_.empty()) return 0;
+  if (bodies_.radius.empty()) return 0;
   Real s = 0;
-  for (Real r : radius_) s += r;
-  return 0.2 * s / radius_.size();
+  for (Real r : bodies_.radius) s += r;
+  return 0.2 * s / bodies_.radius.size();
 }
 
 // ---- broad phase ----------------------------------------------------------------------------
@@ -34,7 +34,7 @@ bool Scene::need_rebuild() const {
   Real worst = 0;
 #pragma omp parallel for reduction(max : worst) schedule(static) if (n > kParallelMin)
   for (int b = 0; b < n; ++b) {
-    const Real d = (pos_[b] - pos_at_build_[b]).norm() + std::max(0.0, radius_[b] - radius_at_build_[b]);
+    const Real d = (bodies_.pos[b] - pos_at_build_[b]).norm() + std::max(0.0, bodies_.radius[b] - radius_at_build_[b]);
     worst = std::max(worst, d);
   }
   return worst > half;
@@ -59,12 +59,12 @@ void Scene::sort_bodies_spatially() {
   Vec3 lo = Vec3::Constant(kInf), hi = Vec3::Constant(-kInf);
   Real rsum = 0;
   for (int b = 0; b < n; ++b) {
-    if (kind_[b] != 0) continue;
-    if (!pos_[b].allFinite()) return;
+    if (bodies_.kind[b] != BODY_SPHERE) continue;
+    if (!bodies_.pos[b].allFinite()) return;
     slots.push_back(b);
-    lo = lo.cwiseMin(pos_[b]);
-    hi = hi.cwiseMax(pos_[b]);
-    rsum += radius_[b];
+    lo = lo.cwiseMin(bodies_.pos[b]);
+    hi = hi.cwiseMax(bodies_.pos[b]);
+    rsum += bodies_.radius[b];
   }
   if (slots.size() < 2) return;
   // Cells one mean diameter wide (at most 2^21 per axis), in Morton (Z) order: a body's
@@ -74,7 +74,7 @@ void Scene::sort_bodies_spatially() {
   if (!(cell > 0)) return;
   std::vector<std::pair<std::uint64_t, int>> key(slots.size());
   for (size_t k = 0; k < slots.size(); ++k) {
-    const Vec3 c = (pos_[slots[k]] - lo) / cell;
+    const Vec3 c = (bodies_.pos[slots[k]] - lo) / cell;
     std::uint64_t code = 0;
     for (int a = 0; a < 3; ++a) {
       const auto q = static_cast<std::uint64_t>(std::clamp(c[a], 0.0, 2097151.0));
@@ -92,29 +92,7 @@ void Scene::sort_bodies_spatially() {
     identity = identity && key[k].second == slots[k];
   }
   if (identity) return;
-  const auto permute = [&](auto& v) {
-    if (static_cast<int>(v.size()) != n) return;  // not in use (energy arrays)
-    auto old = v;
-    for (int b = 0; b < n; ++b) v[b] = old[perm[b]];
-  };
-  permute(pos_);
-  permute(vel_);
-  permute(angvel_);
-  permute(force_);
-  permute(torque_);
-  permute(ext_force_);
-  permute(ext_torque_);
-  permute(ori_);
-  permute(radius_);
-  permute(mass_);
-  permute(inertia_);
-  permute(body_mat_);
-  permute(blocked_);
-  permute(kind_);
-  permute(ke_);
-  permute(damp_dissip_);
-  permute(ext_work_);
-  permute(pos_at_energy_reset_);
+  bodies_.permute(perm);
   // pos_at_build_ and radius_at_build_ are set at the end of the rebuild that called this,
   // pair_fi_ / pair_ti_ by the next pair pass.
   std::vector<int> ids(n);
@@ -131,8 +109,8 @@ void Scene::rebuild() {
     sort_bodies_spatially();
   const Real margin = margin_ > 0 ? margin_ : default_margin();
   const int n = num_bodies();
-  grid_.build(pos_, radius_, kind_, margin);
-  grid_.find_pairs(pos_, radius_, margin, candidates_);
+  grid_.build(bodies_.pos, bodies_.radius, bodies_.kind, margin);
+  grid_.find_pairs(bodies_.pos, bodies_.radius, margin, candidates_);
   // Merge the new candidate list with the old contacts, keeping history (both sorted).
   std::vector<PairContact> next;
   std::vector<PairContactCold> next_cold;
@@ -166,11 +144,11 @@ void Scene::rebuild() {
   std::vector<WallContact> wnext;
   size_t kw = 0;
   for (int b = 0; b < n; ++b) {
-    if (kind_[b] != 0 && !grid_wall_contacts_) continue;  // grid nodes: only if asked for
+    if (bodies_.kind[b] != BODY_SPHERE && !grid_wall_contacts_) continue;  // grid nodes: only if asked for
     for (int w = 0; w < num_walls(); ++w) {
       const Wall& wl = walls_[w];
-      const Real s = wl.sense * (pos_[b][wl.axis] - wl.position);
-      if (!(s < radius_[b] + margin && s > -radius_[b])) continue;
+      const Real s = wl.sense * (bodies_.pos[b][wl.axis] - wl.position);
+      if (!(s < bodies_.radius[b] + margin && s > -bodies_.radius[b])) continue;
       while (kw < wall_contacts_.size() &&
              std::make_pair(wall_contacts_[kw].body, wall_contacts_[kw].wall) < std::make_pair(b, w)) {
         drop_dissipation(wall_contacts_[kw].state);
@@ -219,8 +197,8 @@ void Scene::rebuild() {
   if constexpr (kGeogridBuilt) {
     if (has_grid()) rebuild_grid_contacts(margin);
   }
-  pos_at_build_ = pos_;
-  radius_at_build_ = radius_;
+  pos_at_build_ = bodies_.pos;
+  radius_at_build_ = bodies_.radius;
   min_radius_ = -1;  // check_tunnelling takes it again
   for (Wall& w : walls_) w.moved_since_build = 0;
   dirty_ = false;

@@ -32,7 +32,7 @@ int Scene::add_grid_nodes(const std::vector<Vec3>& pos, Real radius,
       throw ParameterError("position of node " + std::to_string(k) + ": must be finite");
   }
   const int first = num_bodies();
-  for (size_t k = 0; k < pos.size(); ++k) push_body(pos[k], radius, mass[k], inertia[k], material, 1);
+  for (size_t k = 0; k < pos.size(); ++k) push_body(pos[k], radius, mass[k], inertia[k], material, BODY_GRID_NODE);
   num_nodes_ += static_cast<int>(pos.size());
   dirty_ = true;
   grid_topology_dirty_ = true;
@@ -42,13 +42,13 @@ int Scene::add_grid_nodes(const std::vector<Vec3>& pos, Real radius,
 int Scene::add_grid_link(int a, int b, const BeamParams& params, int material) {
   check_body(a);
   check_body(b);
-  if (kind_[a] != 1 || kind_[b] != 1)
+  if (bodies_.kind[a] != BODY_GRID_NODE || bodies_.kind[b] != BODY_GRID_NODE)
     throw ParameterError("link " + std::to_string(a) + "-" + std::to_string(b) +
                          ": both bodies must be grid nodes");
   if (a == b) throw ParameterError("link: nodes a and b must differ (got " + std::to_string(a) + ")");
   this->material(material);
   params.validate();
-  const Vec3 d = pos_[b] - pos_[a];
+  const Vec3 d = bodies_.pos[b] - bodies_.pos[a];
   const Real length = d.norm();
   if (!(length > 0))
     throw ParameterError("link " + std::to_string(a) + "-" + std::to_string(b) +
@@ -81,7 +81,7 @@ int Scene::add_pfacet(int n0, int n1, int n2, int l01, int l12, int l20, int mat
     if (links_[lk[k]].radius != links_[l01].radius)
       throw ParameterError("pfacet: its three links must have the same radius");
   }
-  if (((pos_[n1] - pos_[n0]).cross(pos_[n2] - pos_[n0])).norm() <= 0)
+  if (((bodies_.pos[n1] - bodies_.pos[n0]).cross(bodies_.pos[n2] - bodies_.pos[n0])).norm() <= 0)
     throw ParameterError("pfacet: nodes are collinear");
   PFacet f;
   for (int k = 0; k < 3; ++k) {
@@ -124,9 +124,9 @@ void Scene::rebuild_grid_adjacency() {
 // ---- broad phase for grain–geogrid contacts ----------------------------------------------------
 
 Real Scene::skeleton_distance(const int* nodes, int nn, const Vec3& x) const {
-  if (nn == 1) return (x - pos_[nodes[0]]).norm();
-  if (nn == 2) return segment_distance(pos_[nodes[0]], pos_[nodes[1]], x);
-  const Vec3 &a = pos_[nodes[0]], &b = pos_[nodes[1]], &c = pos_[nodes[2]];
+  if (nn == 1) return (x - bodies_.pos[nodes[0]]).norm();
+  if (nn == 2) return segment_distance(bodies_.pos[nodes[0]], bodies_.pos[nodes[1]], x);
+  const Vec3 &a = bodies_.pos[nodes[0]], &b = bodies_.pos[nodes[1]], &c = bodies_.pos[nodes[2]];
   const Eigen::Vector3d p = barycentric(a, b, c, x);
   if (p.minCoeff() >= 0) return (x - (p[0] * a + p[1] * b + p[2] * c)).norm();
   return std::min({segment_distance(a, b, x), segment_distance(b, c, x),
@@ -139,23 +139,23 @@ void Scene::rebuild_grid_contacts(Real margin) {
   std::vector<Key> keys;
   std::vector<int> found;
   auto collect = [&](GridPrimitive kind, int prim, const int* nodes, int nn, Real rc) {
-    Vec3 lo = pos_[nodes[0]], hi = pos_[nodes[0]];
+    Vec3 lo = bodies_.pos[nodes[0]], hi = bodies_.pos[nodes[0]];
     for (int k = 1; k < nn; ++k) {
-      lo = lo.cwiseMin(pos_[nodes[k]]);
-      hi = hi.cwiseMax(pos_[nodes[k]]);
+      lo = lo.cwiseMin(bodies_.pos[nodes[k]]);
+      hi = hi.cwiseMax(bodies_.pos[nodes[k]]);
     }
     found.clear();
-    grid_.query_box(lo - Vec3::Constant(rc), hi + Vec3::Constant(rc), pos_, radius_, margin, found);
+    grid_.query_box(lo - Vec3::Constant(rc), hi + Vec3::Constant(rc), bodies_.pos, bodies_.radius, margin, found);
     // Keep only the grains within reach of the primitive itself (not just of its box).
     for (int s : found) {
-      const Real reach = radius_[s] + rc + margin;
-      if (skeleton_distance(nodes, nn, pos_[s]) < reach)
+      const Real reach = bodies_.radius[s] + rc + margin;
+      if (skeleton_distance(nodes, nn, bodies_.pos[s]) < reach)
         keys.emplace_back(s, static_cast<int>(kind), prim);
     }
   };
   for (int b = 0; b < num_bodies(); ++b)
-    if (kind_[b] == 1 && node_link_off_[b + 1] > node_link_off_[b])
-      collect(GridPrimitive::Node, b, &b, 1, radius_[b]);
+    if (bodies_.kind[b] == BODY_GRID_NODE && node_link_off_[b + 1] > node_link_off_[b])
+      collect(GridPrimitive::Node, b, &b, 1, bodies_.radius[b]);
   for (int k = 0; k < num_grid_links(); ++k) {
     if (links_[k].broken) continue;
     const int nn[2] = {links_[k].a, links_[k].b};
@@ -187,7 +187,7 @@ void Scene::rebuild_grid_contacts(Real margin) {
     if (c.kind == GridPrimitive::Node) {
       c.nnodes = 1;
       c.node[0] = c.prim;
-      c.rc = radius_[c.prim];
+      c.rc = bodies_.radius[c.prim];
     } else if (c.kind == GridPrimitive::Connection) {
       c.nnodes = 2;
       c.node[0] = links_[c.prim].a;

@@ -10,9 +10,9 @@ namespace cpp_dem {
 Real Scene::pwave_dt() const {
   Real dt = std::numeric_limits<Real>::infinity();
   for (int b = 0; b < num_bodies(); ++b) {
-    if ((blocked_[b] & DOF_ALL) == DOF_ALL) continue;  // a fully blocked body sets no limit
-    const Material& m = materials_[body_mat_[b]];
-    dt = std::min(dt, radius_[b] * std::sqrt(m.density / m.young));
+    if ((bodies_.blocked[b] & DOF_ALL) == DOF_ALL) continue;  // a fully blocked body sets no limit
+    const Material& m = materials_[bodies_.material[b]];
+    dt = std::min(dt, bodies_.radius[b] * std::sqrt(m.density / m.young));
   }
   return dt;  // infinite when every body is fully blocked
 }
@@ -53,7 +53,7 @@ Real Scene::critical_dt_body(int* arg_body) const {
   for (const GridLink& l : links_) {
     if (l.broken) continue;
     any = true;
-    const Real half = 0.5 * (pos_[l.b] - pos_[l.a]).norm();
+    const Real half = 0.5 * (bodies_.pos[l.b] - bodies_.pos[l.a]).norm();
     for (int side = 0; side < 2; ++side) {
       const int b = side ? l.b : l.a;
       for (int a = 0; a < 3; ++a) {
@@ -70,17 +70,17 @@ Real Scene::critical_dt_body(int* arg_body) const {
   // law's k_n). Without this floor the estimate followed only the bodies in contact, and in
   // a 1:20 PSD the first big-big contact lifted dt 36-fold above what a small grain needs.
   for (int b = 0; b < n; ++b) {
-    if (kind_[b] != 0) continue;
-    const Real floor_k = materials_[body_mat_[b]].young * radius_[b];
+    if (bodies_.kind[b] != BODY_SPHERE) continue;
+    const Real floor_k = materials_[bodies_.material[b]].young * bodies_.radius[b];
     for (int a = 0; a < 3; ++a) kt[b][a] = std::max(kt[b][a], floor_k);
   }
   Real dt = std::numeric_limits<Real>::infinity();
   for (int b = 0; b < n; ++b) {
     for (int a = 0; a < 3; ++a) {
       Real d = std::numeric_limits<Real>::infinity();
-      if (kt[b][a] > 0 && !(blocked_[b] & (DOF_X << a))) d = std::sqrt(2 * mass_[b] / kt[b][a]);
-      if (kr[b][a] > 0 && !(blocked_[b] & (DOF_RX << a)))
-        d = std::min(d, std::sqrt(2 * inertia_[b] / kr[b][a]));
+      if (kt[b][a] > 0 && !(bodies_.blocked[b] & (DOF_X << a))) d = std::sqrt(2 * bodies_.mass[b] / kt[b][a]);
+      if (kr[b][a] > 0 && !(bodies_.blocked[b] & (DOF_RX << a)))
+        d = std::min(d, std::sqrt(2 * bodies_.inertia[b] / kr[b][a]));
       if (d < dt) {
         dt = d;
         if (arg_body) *arg_body = id_of(b);
@@ -94,10 +94,10 @@ Energies Scene::energies() const {
   Energies e;
   const int n = num_bodies();
   for (int b = 0; b < n; ++b) {
-    e.kinetic += ke_[b];
-    e.gravity_potential += -mass_[b] * gravity_.dot(pos_[b] - pos_at_energy_reset_[b]);
-    e.local_damping += damp_dissip_[b];
-    e.external_work += ext_work_[b];
+    e.kinetic += bodies_.ke[b];
+    e.gravity_potential += -bodies_.mass[b] * gravity_.dot(bodies_.pos[b] - bodies_.pos_at_energy_reset[b]);
+    e.local_damping += bodies_.damp_dissip[b];
+    e.external_work += bodies_.ext_work[b];
   }
   e.friction = dropped_friction_;
   e.viscous = dropped_viscous_;
@@ -113,7 +113,7 @@ Energies Scene::energies() const {
   // The potential of gravity is taken at the positions where the kinetic energy was sampled
   // (the start of the last step): move back by v dt.
   for (int b = 0; b < n; ++b)
-    e.gravity_potential += mass_[b] * gravity_.dot(vel_[b]) * dt_;
+    e.gravity_potential += bodies_.mass[b] * gravity_.dot(bodies_.vel[b]) * dt_;
   const Real now = e.kinetic + e.elastic + e.gravity_potential + e.friction + e.viscous +
                    e.local_damping + e.plastic - e.wall_work - e.external_work;
   e.balance_error = now - energy_reference_;
@@ -127,10 +127,10 @@ Energies Scene::energies() const {
 void Scene::reset_energy() {
   const int n = num_bodies();
   for (int b = 0; b < n; ++b) {
-    damp_dissip_[b] = 0;
-    ext_work_[b] = 0;
-    ke_[b] = 0;
-    pos_at_energy_reset_[b] = pos_[b];
+    bodies_.damp_dissip[b] = 0;
+    bodies_.ext_work[b] = 0;
+    bodies_.ke[b] = 0;
+    bodies_.pos_at_energy_reset[b] = bodies_.pos[b];
   }
   dropped_friction_ = dropped_viscous_ = 0;
   for (PairContactCold& c : pair_cold_) c.dissip_friction = c.dissip_viscous = 0;
@@ -158,7 +158,7 @@ Real Scene::stored_elastic_energy() const {
 void Scene::set_energy_reference() {
   Real e = stored_elastic_energy();
   for (int b = 0; b < num_bodies(); ++b)
-    e += 0.5 * mass_[b] * vel_[b].squaredNorm() + 0.5 * inertia_[b] * angvel_[b].squaredNorm();
+    e += 0.5 * bodies_.mass[b] * bodies_.vel[b].squaredNorm() + 0.5 * bodies_.inertia[b] * bodies_.angvel[b].squaredNorm();
   energy_reference_ = e;
   energy_reference_set_ = true;
 }
@@ -168,8 +168,8 @@ Real Scene::unbalanced_force() const {
   Real sum_f = 0;
   int nfree = 0;
   for (int b = 0; b < num_bodies(); ++b) {
-    if (blocked_[b] & DOF_XYZ) continue;
-    sum_f += force_[b].norm();
+    if (bodies_.blocked[b] & DOF_XYZ) continue;
+    sum_f += bodies_.force[b].norm();
     ++nfree;
   }
   Real sum_c = 0;

@@ -16,9 +16,9 @@ constexpr long kParallelMinGrid = 128;
 void Scene::update_phys(GridContact& c) const {
   // The virtual sphere: radius R_c, mass interpolated from the nodes.
   Real m_virtual = 0;
-  for (int i = 0; i < c.nnodes; ++i) m_virtual += c.w[i] * mass_[c.node[i]];
-  c.phys = mix_materials(materials_[body_mat_[c.node[0]]], materials_[body_mat_[c.sphere]], c.rc,
-                         radius_[c.sphere], m_virtual, mass_[c.sphere]);
+  for (int i = 0; i < c.nnodes; ++i) m_virtual += c.w[i] * bodies_.mass[c.node[i]];
+  c.phys = mix_materials(materials_[bodies_.material[c.node[0]]], materials_[bodies_.material[c.sphere]], c.rc,
+                         bodies_.radius[c.sphere], m_virtual, bodies_.mass[c.sphere]);
   c.phys_version = phys_version_;
 }
 
@@ -38,24 +38,24 @@ void Scene::compute_grid_contacts(long& err_contact) {
 #pragma omp parallel for schedule(static) if (nc > kParallelMinGrid)
   for (long k = 0; k < nc; ++k) {
     GridContact& c = grid_contacts_[k];
-    const Vec3& x = pos_[c.sphere];
-    const Real reach = radius_[c.sphere] + c.rc;
+    const Vec3& x = bodies_.pos[c.sphere];
+    const Real reach = bodies_.radius[c.sphere] + c.rc;
     Vec3 q;
     bool own = false;
     if (c.kind == GridPrimitive::Node) {
-      q = pos_[c.prim];
+      q = bodies_.pos[c.prim];
       own = (x - q).squaredNorm() < reach * reach;
       for (int e = node_link_off_[c.prim]; own && e < node_link_off_[c.prim + 1]; ++e) {
         const GridLink& l = links_[node_link_[e]];
         if (l.broken) continue;
-        const Vec3 u = pos_[l.a == c.prim ? l.b : l.a] - q;  // outward along the link
+        const Vec3 u = bodies_.pos[l.a == c.prim ? l.b : l.a] - q;  // outward along the link
         own = (x - q).dot(u) <= 0;
       }
       c.w[0] = 1;
     } else if (c.kind == GridPrimitive::Connection) {
       const GridLink& l = links_[c.prim];
-      const Real t = segment_parameter(pos_[l.a], pos_[l.b], x);
-      q = (1 - t) * pos_[l.a] + t * pos_[l.b];
+      const Real t = segment_parameter(bodies_.pos[l.a], bodies_.pos[l.b], x);
+      q = (1 - t) * bodies_.pos[l.a] + t * bodies_.pos[l.b];
       own = !l.broken && t > 0 && t < 1 && (x - q).squaredNorm() < reach * reach;
       for (int side = 0; own && side < 2; ++side) {
         const int f = link_facet_[2 * c.prim + side];
@@ -63,8 +63,8 @@ void Scene::compute_grid_contacts(long& err_contact) {
         int third = facets_[f].n[0];
         for (int i = 0; i < 3; ++i)
           if (facets_[f].n[i] != l.a && facets_[f].n[i] != l.b) third = facets_[f].n[i];
-        const Vec3 edge = pos_[l.b] - pos_[l.a];
-        Vec3 inward = pos_[third] - pos_[l.a];
+        const Vec3 edge = bodies_.pos[l.b] - bodies_.pos[l.a];
+        Vec3 inward = bodies_.pos[third] - bodies_.pos[l.a];
         inward -= inward.dot(edge) / edge.squaredNorm() * edge;  // in-plane, towards third
         own = (x - q).dot(inward) <= 0;
       }
@@ -72,8 +72,8 @@ void Scene::compute_grid_contacts(long& err_contact) {
       c.w[1] = t;
     } else {
       const PFacet& f = facets_[c.prim];
-      const Eigen::Vector3d p = barycentric(pos_[f.n[0]], pos_[f.n[1]], pos_[f.n[2]], x);
-      q = p[0] * pos_[f.n[0]] + p[1] * pos_[f.n[1]] + p[2] * pos_[f.n[2]];
+      const Eigen::Vector3d p = barycentric(bodies_.pos[f.n[0]], bodies_.pos[f.n[1]], bodies_.pos[f.n[2]], x);
+      q = p[0] * bodies_.pos[f.n[0]] + p[1] * bodies_.pos[f.n[1]] + p[2] * bodies_.pos[f.n[2]];
       own = facet_alive(c.prim) && p[0] > 0 && p[1] > 0 && p[2] > 0 &&
             (x - q).squaredNorm() < reach * reach;  // 000 eq (14)
       for (int i = 0; i < 3; ++i) c.w[i] = p[i];    // 000 eqs (13), (15), (16)
@@ -83,11 +83,11 @@ void Scene::compute_grid_contacts(long& err_contact) {
     // Virtual-sphere velocities interpolated from the nodes, 000 eqs (17), (18).
     Vec3 vq = Vec3::Zero(), wq = Vec3::Zero();
     for (int i = 0; i < c.nnodes; ++i) {
-      vq += c.w[i] * vel_[c.node[i]];
-      wq += c.w[i] * angvel_[c.node[i]];
+      vq += c.w[i] * bodies_.vel[c.node[i]];
+      wq += c.w[i] * bodies_.angvel[c.node[i]];
     }
     const int s = c.sphere;
-    c.geom = virtual_sphere_geometry(x, radius_[s], vel_[s], angvel_[s], q, c.rc, vq, wq);
+    c.geom = virtual_sphere_geometry(x, bodies_.radius[s], bodies_.vel[s], bodies_.angvel[s], q, c.rc, vq, wq);
   }
   // B. Hand-over: a grain whose contact moved to an adjacent primitive (across a node or an
   //    edge) keeps its shear history, so it has one continuous contact.
@@ -133,7 +133,7 @@ void Scene::compute_grid_contacts(long& err_contact) {
       c.torque_virtual.setZero();
       continue;
     }
-    if (!(c.geom.overlap <= max_ratio * radius_[c.sphere])) {
+    if (!(c.geom.overlap <= max_ratio * bodies_.radius[c.sphere])) {
       err = std::min(err, k);
       continue;
     }

@@ -15,7 +15,7 @@ void Scene::compute_links() {
   for (long k = 0; k < nl; ++k) {
     GridLink& l = links_[k];
     if (l.broken) continue;
-    beam_link_step(l, pos_[l.a], pos_[l.b], vel_[l.a], vel_[l.b], angvel_[l.a], angvel_[l.b], dt);
+    beam_link_step(l, bodies_.pos[l.a], bodies_.pos[l.b], bodies_.vel[l.a], bodies_.vel[l.b], bodies_.angvel[l.a], bodies_.angvel[l.b], dt);
   }
   // Breakage events, in link order: the link is removed and the event recorded.
   for (long k = 0; k < nl; ++k) {

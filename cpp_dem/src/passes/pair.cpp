@@ -15,8 +15,8 @@ namespace cpp_dem {
 
 void Scene::update_phys(PairContact& c, PairContactCold& cold) const {
   const ContactPhys& p = cold.phys =
-      mix_materials(materials_[body_mat_[c.i]], materials_[body_mat_[c.j]], radius_[c.i],
-                    radius_[c.j], mass_[c.i], mass_[c.j]);
+      mix_materials(materials_[bodies_.material[c.i]], materials_[bodies_.material[c.j]], bodies_.radius[c.i],
+                    bodies_.radius[c.j], bodies_.mass[c.i], bodies_.mass[c.j]);
   c.kn = p.kn;
   c.ks = p.ks;
   c.tan_phi = p.tan_phi;
@@ -97,10 +97,10 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
   const int version = phys_version_;
   // Local pointers: the loop's stores of bools could alias the vectors' own pointers, so
   // through the members the compiler reloaded them for every access.
-  const Vec3* const pos = pos_.data();
-  const Vec3* const vel = vel_.data();
-  const Vec3* const angvel = angvel_.data();
-  const Real* const radius = radius_.data();
+  const Vec3* const pos = bodies_.pos.data();
+  const Vec3* const vel = bodies_.vel.data();
+  const Vec3* const angvel = bodies_.angvel.data();
+  const Real* const radius = bodies_.radius.data();
   const int* const ioff = pair_ioff_.data();
   const int* const jslot = pair_jslot_.data();
   PairContact* const pairs = pairs_.data();
@@ -192,10 +192,10 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   long err = std::numeric_limits<long>::max();
   // The loop works through local pointers: its stores of bools could alias the vectors'
   // own pointers, so through the members the compiler reloads them for every access.
-  const Vec3* const pos = pos_.data();
-  const Vec3* const vel = vel_.data();
-  const Vec3* const angvel = angvel_.data();
-  const Real* const radius = radius_.data();
+  const Vec3* const pos = bodies_.pos.data();
+  const Vec3* const vel = bodies_.vel.data();
+  const Vec3* const angvel = bodies_.angvel.data();
+  const Real* const radius = bodies_.radius.data();
   const int* const ioff = pair_ioff_.data();
   const int* const jslot = pair_jslot_.data();
   PairContact* const pairs = pairs_.data();

@@ -128,6 +128,7 @@ inline bool use_wide_ops() {
 #elif defined(__AVX__)
   return !narrow_asked;
 #else
+  (void)narrow_asked;
   return false;
 #endif
 }

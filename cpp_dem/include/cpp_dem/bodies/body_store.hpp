@@ -1,0 +1,95 @@
+// The body store: the state of every body as structure of arrays, in storage order (slots;
+// see Scene's "storage order"). A new body kind (clumps, bonded particles) adds its arrays
+// here, to push() and to for_each_array(); the passes read the arrays directly.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "cpp_dem/core/types.hpp"
+
+namespace cpp_dem {
+
+/// Kinds of body in the store.
+enum BodyKind : std::uint8_t {
+  BODY_SPHERE = 0,     ///< a grain: a sphere to the collider
+  BODY_GRID_NODE = 1,  ///< a geogrid node (000 §2.2): 6 DOF, touched through its links
+};
+
+struct BodyStore {
+  std::vector<Vec3> pos;         ///< centres, m
+  std::vector<Vec3> vel;         ///< velocities, m/s
+  std::vector<Vec3> angvel;      ///< spins, rad/s
+  std::vector<Vec3> force;       ///< resultant force of the last step, N
+  std::vector<Vec3> torque;      ///< resultant torque of the last step, N m
+  std::vector<Vec3> ext_force;   ///< imposed external force, N
+  std::vector<Vec3> ext_torque;  ///< imposed external torque, N m
+  std::vector<Quat> ori;         ///< orientations
+  std::vector<Real> radius;      ///< m (a grid node's: the geogrid's R_c)
+  std::vector<Real> mass;        ///< kg
+  std::vector<Real> inertia;     ///< kg m^2 (spherical)
+  std::vector<int> material;     ///< material index
+  std::vector<std::uint8_t> blocked;  ///< blocked DOFs (Dof mask)
+  std::vector<std::uint8_t> kind;     ///< BodyKind
+  // Energy accumulators per body (written only when the scene tracks energy).
+  std::vector<Real> ke;                    ///< kinetic energy at the last step, J
+  std::vector<Real> damp_dissip;           ///< dissipated by local damping, J
+  std::vector<Real> ext_work;              ///< work of external forces and imposed DOFs, J
+  std::vector<Vec3> pos_at_energy_reset;   ///< m
+
+  int size() const { return static_cast<int>(pos.size()); }
+
+  /// Appends one body at rest.
+  void push(const Vec3& x, Real r, Real m, Real i, int mat, std::uint8_t k) {
+    pos.push_back(x);
+    vel.push_back(Vec3::Zero());
+    angvel.push_back(Vec3::Zero());
+    force.push_back(Vec3::Zero());
+    torque.push_back(Vec3::Zero());
+    ext_force.push_back(Vec3::Zero());
+    ext_torque.push_back(Vec3::Zero());
+    ori.push_back(Quat::Identity());
+    radius.push_back(r);
+    mass.push_back(m);
+    inertia.push_back(i);
+    material.push_back(mat);
+    blocked.push_back(DOF_NONE);
+    kind.push_back(k);
+    ke.push_back(0);
+    damp_dissip.push_back(0);
+    ext_work.push_back(0);
+    pos_at_energy_reset.push_back(x);
+  }
+
+  /// Calls f(array) for every per-body array, in a fixed order (the checkpoint's).
+  template <class F>
+  void for_each_array(F&& f) {
+    visit(*this, f);
+  }
+  template <class F>
+  void for_each_array(F&& f) const {
+    visit(*this, f);
+  }
+
+ private:
+  template <class Self, class F>
+  static void visit(Self& b, F& f) {
+    f(b.pos), f(b.vel), f(b.angvel), f(b.force), f(b.torque), f(b.ext_force), f(b.ext_torque);
+    f(b.ori), f(b.radius), f(b.mass), f(b.inertia), f(b.material), f(b.blocked), f(b.kind);
+    f(b.ke), f(b.damp_dissip), f(b.ext_work), f(b.pos_at_energy_reset);
+  }
+
+ public:
+
+  /// Reorders every array: the body at slot perm[s] moves to slot s.
+  void permute(const std::vector<int>& perm) {
+    const size_t n = perm.size();
+    for_each_array([&](auto& v) {
+      if (v.size() != n) return;
+      auto old = v;
+      for (size_t b = 0; b < n; ++b) v[b] = old[perm[b]];
+    });
+  }
+};
+
+}  // namespace cpp_dem
