@@ -13,9 +13,7 @@ namespace cpp_dem {
 namespace {
 /// Steps between two renormalisations of the orientation quaternions (rotate_orientation).
 constexpr long kRenormalizePeriod = 64;
-}  // namespace
 
-namespace {
 /// Cundall local damping of one component of an acceleration (Yade's 2nd-order form).
 inline Real damp_component(Real a, Real v, Real dt, Real lambda) {
   const Real vm = v + 0.5 * dt * a;
@@ -142,8 +140,8 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
   const Real* const ti = pair_ti_.data()->data();
   // (With the 3-vector operations of `ops`, WideOps or NarrowOps: see the pair pass.)
   const auto sum_forces = [&](int b, auto& f, auto& t, auto ops) __attribute__((always_inline)) {
-    f = ops.load(ext_force_[b]) + mass_[b] * ops.load(gravity_);
-    t = ops.load(ext_torque_[b]);
+    f = ops.load(bodies_.ext_force[b]) + bodies_.mass[b] * ops.load(gravity_);
+    t = ops.load(bodies_.ext_torque[b]);
     for (int e = pair_jadj_off_[b]; e < pair_jadj_off_[b + 1]; ++e) {
       const PairOutput& o = pair_out_[e];  // zero when inactive
       f += ops.load_padded(o.force.data());
@@ -186,10 +184,10 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
         }
       }
     }
-    ops.store(force_[b], f);
-    ops.store(torque_[b], t);
+    ops.store(bodies_.force[b], f);
+    ops.store(bodies_.torque[b], t);
   };
-  const auto forces_finite = [&](int b) { return force_[b].allFinite() && torque_[b].allFinite(); };
+  const auto forces_finite = [&](int b) { return bodies_.force[b].allFinite() && bodies_.torque[b].allFinite(); };
   // Forces and accelerations of bodies [b0, b1) (inverse masses and inertias from b0 on);
   // false if a force or torque may be non-finite.
   const auto block_forces = [&](int b0, int b1, const Real* inv_m, const Real* inv_i,
@@ -201,7 +199,7 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
       sum_forces(b, f, t, ops);
       fcheck += f + t;
       V al = f * inv_m[b - b0], aa = t * inv_i[b - b0];
-      if (const std::uint8_t dofs = blocked_[b]) {
+      if (const std::uint8_t dofs = bodies_.blocked[b]) {
         // A blocked DOF keeps its imposed velocity: zero acceleration, nothing to damp.
         for (int a = 0; a < 3; ++a) {
           if (dofs & (DOF_X << a)) al[a] = 0;
@@ -216,8 +214,8 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
   const bool wide = use_wide_ops();
   // The broad phase's displacement check (need_rebuild) for the next step, in this pass.
   const auto displacement = [&](int b) __attribute__((always_inline)) {
-    return (pos_[b] - pos_at_build_[b]).norm() +
-           std::max(0.0, radius_[b] - radius_at_build_[b]);
+    return (bodies_.pos[b] - pos_at_build_[b]).norm() +
+           std::max(0.0, bodies_.radius[b] - radius_at_build_[b]);
   };
 
   if (!energy) {
@@ -227,13 +225,13 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
     // update is the same arithmetic whatever the blocks or threads.
     acc_lin_.resize(n);
     acc_ang_.resize(n);
-    Real* const vel = vel_.data()->data();
-    Real* const angvel = angvel_.data()->data();
-    Real* const pos = pos_.data()->data();
+    Real* const vel = bodies_.vel.data()->data();
+    Real* const angvel = bodies_.angvel.data()->data();
+    Real* const pos = bodies_.pos.data()->data();
     const Real* const acc_lin = acc_lin_.data()->data();
     const Real* const acc_ang = acc_ang_.data()->data();
-    const Real* const mass = mass_.data();
-    const Real* const inertia = inertia_.data();
+    const Real* const mass = bodies_.mass.data();
+    const Real* const inertia = bodies_.inertia.data();
     constexpr int kBlock = kBodyBlock;
     const int nblocks = (n + kBlock - 1) / kBlock;
 #pragma omp parallel reduction(min : err) reduction(max : worst) if (n > kParallelMin)
@@ -277,15 +275,15 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
 #pragma omp simd reduction(max : w2max)
         for (long k = k0; k < k1; ++k) w2max = std::max(w2max, angvel[k] * angvel[k]);
         if (3 * 0.25 * dt * dt * w2max < kSeriesH2) {  // |w|^2 <= 3 max_a w_a^2
-          Real* const q = ori_[b0].coeffs().data();
+          Real* const q = bodies_.ori[b0].coeffs().data();
           if (renormalize) rotate_orientations<true>(q, angvel + k0, count, dt);
           else rotate_orientations<false>(q, angvel + k0, count, dt);
         } else {
-          for (int b = b0; b < b1; ++b) rotate_orientation(ori_[b], angvel_[b], dt, renormalize);
+          for (int b = b0; b < b1; ++b) rotate_orientation(bodies_.ori[b], bodies_.angvel[b], dt, renormalize);
         }
         const bool finite = std::isfinite(check);
         for (int b = b0; b < b1; ++b) {
-          if (!finite && (!pos_[b].allFinite() || !vel_[b].allFinite() || !angvel_[b].allFinite())) {
+          if (!finite && (!bodies_.pos[b].allFinite() || !bodies_.vel[b].allFinite() || !bodies_.angvel[b].allFinite())) {
             err = std::min(err, static_cast<long>(b));
             continue;
           }
@@ -306,9 +304,9 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
         err = std::min(err, static_cast<long>(b));
         continue;
       }
-      const std::uint8_t dofs = blocked_[b];
-      const Vec3 v_old = vel_[b], w_old = angvel_[b];
-      const Real m = mass_[b], inertia = inertia_[b];
+      const std::uint8_t dofs = bodies_.blocked[b];
+      const Vec3 v_old = bodies_.vel[b], w_old = bodies_.angvel[b];
+      const Real m = bodies_.mass[b], inertia = bodies_.inertia[b];
       const Real inv_m = 1.0 / m, inv_i = 1.0 / inertia;
       Vec3 v = v_old, w = w_old;
       Real dissip = 0, work = 0;
@@ -325,7 +323,7 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
           acc = damped;
         }
         v[a] = v_old[a] + acc * dt;
-        work += ext_force_[b][a] * 0.5 * (v_old[a] + v[a]) * dt;
+        work += bodies_.ext_force[b][a] * 0.5 * (v_old[a] + v[a]) * dt;
       }
       for (int a = 0; a < 3; ++a) {
         if (dofs & (DOF_RX << a)) {
@@ -339,18 +337,18 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
           acc = damped;
         }
         w[a] = w_old[a] + acc * dt;
-        work += ext_torque_[b][a] * 0.5 * (w_old[a] + w[a]) * dt;
+        work += bodies_.ext_torque[b][a] * 0.5 * (w_old[a] + w[a]) * dt;
       }
       const Vec3 vm = 0.5 * (v_old + v);
       const Vec3 wm = 0.5 * (w_old + w);
-      ke_[b] = 0.5 * m * vm.squaredNorm() + 0.5 * inertia * wm.squaredNorm();
-      damp_dissip_[b] += dissip;
-      ext_work_[b] += work;
-      vel_[b] = v;
-      angvel_[b] = w;
-      const Vec3 x = pos_[b] + v * dt;
-      pos_[b] = x;
-      rotate_orientation(ori_[b], w, dt, renormalize);
+      bodies_.ke[b] = 0.5 * m * vm.squaredNorm() + 0.5 * inertia * wm.squaredNorm();
+      bodies_.damp_dissip[b] += dissip;
+      bodies_.ext_work[b] += work;
+      bodies_.vel[b] = v;
+      bodies_.angvel[b] = w;
+      const Vec3 x = bodies_.pos[b] + v * dt;
+      bodies_.pos[b] = x;
+      rotate_orientation(bodies_.ori[b], w, dt, renormalize);
       if (!std::isfinite((x[0] + x[1] + x[2]) + (v[0] + v[1] + v[2]) + (w[0] + w[1] + w[2])) &&
           (!x.allFinite() || !v.allFinite() || !w.allFinite())) {
         err = std::min(err, static_cast<long>(b));

@@ -19,8 +19,8 @@ constexpr Real kInf = std::numeric_limits<Real>::infinity();
 
 void Scene::update_phys(WallContact& c) const {
   // The wall has infinite radius and mass (see mix_materials).
-  c.phys = mix_materials(materials_[walls_[c.wall].material], materials_[body_mat_[c.body]],
-                         kInf, radius_[c.body], kInf, mass_[c.body]);
+  c.phys = mix_materials(materials_[walls_[c.wall].material], materials_[bodies_.material[c.body]],
+                         kInf, bodies_.radius[c.body], kInf, bodies_.mass[c.body]);
   c.simple = short_kernel_applies(c.phys);
   c.phys_version = phys_version_;
 }
@@ -43,38 +43,33 @@ __attribute__((always_inline)) inline void wall_short_kernel(WallContact& c, con
   const Real v2 = (v[A2] - w.velocity[A2]) + ls * om[A1];
   ContactState& st = c.state;
   const Real fn = c.phys.kn * overlap;
-  Real f1 = st.fs[A1], f2 = st.fs[A2];
+  Tan2 f{st.fs[A1], st.fs[A2]};  // the shear force in the wall's plane
   if (st.normal.squaredNorm() > 0) {
-    // fs -= fs x (tw n), tw = dt/2 n . om.
+    // fs -= fs x (tw n), tw = dt/2 n . om (frame_turn with a normal that never turns).
     const Real tws = 0.5 * dt * (sense * om[AX]) * sense;
-    const Real g1 = f1 - f2 * tws;
-    f2 = f2 + f1 * tws;
-    f1 = g1;
+    f = Tan2{f.a - f.b * tws, f.b + f.a * tws};
   }
   const Real kdt = c.phys.ks * dt;
-  f1 -= kdt * v1;
-  f2 -= kdt * v2;
-  Tan2 f{f1, f2};
+  f.a -= kdt * v1;  // 000 eq (2)
+  f.b -= kdt * v2;
   cap_magnitude<PlaneOps>(f, c.phys.tan_phi * (fn > 0 ? fn : 0.0), c.phys.ks,
                           st.dissip_friction);  // 000 eq (3)
-  f1 = f.a;
-  f2 = f.b;
   // Component by component into the record (Vec3 temporaries went through the stack).
   st.fs[AX] = 0;
-  st.fs[A1] = f1;
-  st.fs[A2] = f2;
+  st.fs[A1] = f.a;
+  st.fs[A2] = f.b;
   st.normal[AX] = sense;  // w.normal()
   st.normal[A1] = 0;
   st.normal[A2] = 0;
   st.overlap = overlap;
   st.fn = fn;
   c.force[AX] = fn * sense;
-  c.force[A1] = f1;
-  c.force[A2] = f2;
+  c.force[A1] = f.a;
+  c.force[A2] = f.b;
   // Torque (-l n) x f.
   c.torque[AX] = 0;
-  c.torque[A1] = ls * f2;
-  c.torque[A2] = -ls * f1;
+  c.torque[A1] = ls * f.b;
+  c.torque[A2] = -ls * f.a;
 }
 }  // namespace
 
@@ -109,10 +104,10 @@ void Scene::compute_wall_forces_hot(long& err_contact) {
   const int* const block_off = wall_block_off_.data();
   WallContact* const contacts = wall_contacts_.data();
   const Wall* const walls = walls_.data();
-  const Vec3* const pos = pos_.data();
-  const Vec3* const vel = vel_.data();
-  const Vec3* const angvel = angvel_.data();
-  const Real* const radius = radius_.data();
+  const Vec3* const pos = bodies_.pos.data();
+  const Vec3* const vel = bodies_.vel.data();
+  const Vec3* const angvel = bodies_.angvel.data();
+  const Real* const radius = bodies_.radius.data();
   long err = std::numeric_limits<long>::max();
   // (err is an argument: inside the parallel loop it is the thread's reduction copy.)
   const auto one = [&](long k, long& err, auto axis) __attribute__((always_inline)) {
