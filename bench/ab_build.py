@@ -14,7 +14,10 @@ Scenes (SI units; the same input for both builds):
   (the composed law, not the short kernel);
 - ``hertz``: the same packing with Hertz–Mindlin grains;
 - ``geogrid``: a square geogrid (cohesive beams, grain–cylinder and grain–PFacet contacts)
-  between two layers of grains (bench/geogrid_cost.py's scene, small).
+  between two layers of grains (bench/geogrid_cost.py's scene, small);
+- ``pullout``: the geogrid pull-out of ``cases/pullout_000.py --smoke`` (N is ignored: 375
+  grains and a flat-ribbed biaxial grid of PFacets), prepared untimed (REFD, gravity, top servo)
+  and timed while the clamp pulls the grid.
 
 Each *block* is a fresh subprocess that builds the scene, runs ``--warmup`` untimed steps and
 times ``--steps`` steps (CPU time of that process). Blocks alternate old | new, new | old, ...
@@ -58,7 +61,8 @@ from pathlib import Path  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 BENCH = ROOT / "bench"
-DEFAULT_SCENES = ("spheres:1000", "spheres:10000", "general:1000", "hertz:1000", "geogrid:2000")
+DEFAULT_SCENES = ("spheres:1000", "spheres:10000", "general:1000", "hertz:1000", "geogrid:2000",
+                  "pullout:0")
 
 
 def log(msg: str) -> None:
@@ -158,6 +162,27 @@ def make_scene(kind: str, n: int):
     return scene
 
 
+def pullout_scene():
+    """The smoke pull-out of cases/pullout_000.py, prepared; returns (scene, pull)."""
+    import importlib.util
+
+    from cpp_dem import pullout
+
+    spec = importlib.util.spec_from_file_location("pullout_000", ROOT / "cases" / "pullout_000.py")
+    case = importlib.util.module_from_spec(spec)
+    sys.modules["pullout_000"] = case  # (its dataclasses look their module up)
+    sys.path.insert(0, str(ROOT / "cases"))
+    spec.loader.exec_module(case)
+    p, _, _ = case.parse_args(["--smoke"])
+    sample = case.build(p)
+    pullout.prepare(sample, stress=p.pressure, porosity=p.porosity, node_density_scale="auto")
+
+    def pull(steps: int) -> None:
+        pullout.pull(sample, velocity=p.velocity, distance=p.velocity * sample.scene.dt * steps,
+                     record_every=50)
+    return sample.scene, pull
+
+
 def worker(cfg: dict) -> dict:
     if cfg["overlay"]:
         use_overlay(Path(cfg["overlay"]))
@@ -166,10 +191,16 @@ def worker(cfg: dict) -> dict:
     import cpp_dem as dem
 
     dem.set_num_threads(cfg["threads"])
-    scene = make_scene(cfg["scene"], cfg["n"])
-    scene.run(cfg["warmup"])
+    if cfg["scene"] == "pullout":
+        scene, advance = pullout_scene()
+    else:
+        scene = make_scene(cfg["scene"], cfg["n"])
+        advance = scene.run
+    advance(cfg["warmup"])
     c0, w0 = time.process_time(), time.perf_counter()
-    scene.run(cfg["steps"])
+    step0 = scene.step_count
+    advance(cfg["steps"])
+    steps_done = scene.step_count - step0
     cpu, wall = time.process_time() - c0, time.perf_counter() - w0
     arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in
               (scene.positions, scene.velocities, scene.angular_velocities, scene.orientations,
@@ -179,7 +210,7 @@ def worker(cfg: dict) -> dict:
         state.update(a.tobytes())
     tmp = Path(cfg["dump"])
     np.save(tmp, arrays[0])
-    return {"core": dem._core.__file__, "cpu_s": cpu, "wall_s": wall,
+    return {"core": dem._core.__file__, "cpu_s": cpu, "wall_s": wall, "steps_done": steps_done,
             "bodies": int(scene.num_bodies), "state_sha256": state.hexdigest()[:16]}
 
 
@@ -211,13 +242,14 @@ def count_instructions(scene: str, n: int, args, overlay: Path, tmp: Path) -> di
     hi = lo + (args.steps or max(20, math.ceil(4e5 / n)))
     per_step = {}
     for variant in ("old", "new"):
-        counts = {}
+        counts, done = {}, {}
         for steps in (lo, hi):
             cfg = {"variant": variant, "scene": scene, "n": n, "threads": 1, "steps": steps,
                    "warmup": 50, "dump": str(tmp / f"cg_{variant}.npy"),
                    "overlay": str(overlay) if variant == "old" else ""}
-            counts[steps] = run_block(cfg, prefix)["instructions"]
-        per_step[variant] = (counts[hi] - counts[lo]) / (hi - lo)
+            r = run_block(cfg, prefix)
+            counts[steps], done[steps] = r["instructions"], r["steps_done"]
+        per_step[variant] = (counts[hi] - counts[lo]) / (done[hi] - done[lo])
         log(f"{scene} N={n} {variant}: {per_step[variant]:.4g} instructions per step")
     rec = {"scene": scene, "n": n, "old_instructions_per_step": per_step["old"],
            "new_instructions_per_step": per_step["new"],
@@ -240,7 +272,7 @@ def compare(scene: str, n: int, threads: int, args, overlay: Path, tmp: Path) ->
                    "steps": steps, "warmup": args.warmup, "dump": str(dump),
                    "overlay": str(overlay) if variant == "old" else ""}
             r = run_block(cfg)
-            cpu[variant].append(r["cpu_s"] / steps)
+            cpu[variant].append(r["cpu_s"] / r["steps_done"])
             hashes[variant].add(r["state_sha256"])
             dumps[variant] = dump
             log(f"{scene} N={n} threads={threads} round {k} {variant}: "
@@ -281,9 +313,9 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     for spec in args.scenes:
         kind, _, n = spec.partition(":")
-        if kind not in ("spheres", "general", "hertz", "geogrid") or not n.isdigit():
+        if kind not in ("spheres", "general", "hertz", "geogrid", "pullout") or not n.isdigit():
             raise SystemExit(f"--scenes {spec}: must be KIND:N with KIND spheres, general, "
-                             "hertz or geogrid and N a whole number")
+                             "hertz, geogrid or pullout and N a whole number")
     overlay = build_ref(args.ref, args.jobs)
     rows = []
     if args.instructions:
@@ -303,12 +335,12 @@ def main(argv: list[str] | None = None) -> int:
             kind, _, n = spec.partition(":")
             for t in args.threads:
                 rows.append(compare(kind, int(n), t, args, overlay, Path(tmp)))
-    print("\n| scene | N | threads | old us/step | new us/step | new/old p-steps/s (min-max)"
+    print("\n| scene | bodies | threads | old us/step | new us/step | new/old p-steps/s (min-max)"
           " | bitwise |", file=sys.stderr)
     print("|---|---|---|---|---|---|---|", file=sys.stderr)
     for r in rows:
         bit = "yes" if r["bitwise_equal"] else f"no (max dx {r['max_position_diff_m']:.1e} m)"
-        print(f"| {r['scene']} | {r['n']} | {r['threads']} | {r['old_us_per_step']:.1f} | "
+        print(f"| {r['scene']} | {r['bodies']} | {r['threads']} | {r['old_us_per_step']:.1f} | "
               f"{r['new_us_per_step']:.1f} | {r['ratio_new_over_old']:.3f} "
               f"({r['ratio_min']:.3f}-{r['ratio_max']:.3f}) | {bit} |", file=sys.stderr)
     return 0
