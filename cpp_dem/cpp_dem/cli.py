@@ -1,0 +1,528 @@
+"""The ``geogrid-dem`` command: run a case, a run file, or a sweep of runs on Dask.
+
+    geogrid-dem cases                                  # the cases and what they are
+    geogrid-dem run triaxial --smoke --out results/t   # a case, with its own flags after it
+    geogrid-dem run my_run.toml                        # a run file (TOML)
+    geogrid-dem sweep my_sweep.toml --workers 2        # a parameter table, on Dask
+
+Shared options (same names and units for every case): ``--out DIR``, ``--seed N``,
+``--threads N`` (0 = all cores), ``--preset fast|balanced|accurate`` (where the case has
+presets), ``--smoke``. Everything after the case name that the command does not know is
+passed to the case as it is (``geogrid-dem run triaxial --help`` shows the case's flags).
+
+A **run file** names the case and its parameters; the keys are the case's flags without the
+leading dashes (``cell-pressure`` or ``cell_pressure``), ``true`` switches a flag on, a list
+becomes a comma list::
+
+    case = "triaxial"
+    [params]
+    smoke = true
+    cell-pressure = 100e3     # Pa
+    out = "results/tri_100k"
+
+Every results folder gets ``run.toml``: the case, the parameters, the package version, the
+git commit and the date, so ``geogrid-dem run DIR/run.toml`` runs it again.
+
+A **sweep file** adds a table of values, as a product of the lists or row by row::
+
+    case = "triaxial"
+    out = "results/sweep"
+    [params]                  # the same for every row
+    smoke = true
+    [sweep]
+    mode = "product"          # or "list" (equal-length lists, one row per index)
+    cell-pressure = [50e3, 100e3]
+    seed = [1, 2]
+
+Rows run as separate processes on ``dask.distributed`` workers (a ``LocalCluster`` of
+``--workers`` processes by default, or ``--scheduler ADDRESS`` for a cluster), each in
+``OUT/row_NNN/``. A row whose folder holds a ``summary.json`` and a ``run.toml`` with the
+same parameters is finished and skipped, so a sweep resumes where it stopped; a row lost with
+a killed worker is run again by Dask. ``OUT/results.csv`` (and ``results.parquet`` where
+pyarrow is installed) gathers one line per row: its parameters, status, wall time and the
+scalar numbers of its ``summary.json``; the CSV is rewritten after every finished row.
+"""
+
+from __future__ import annotations
+
+import csv
+import datetime as _dt
+import itertools
+import json
+import os
+import shutil
+import subprocess
+import sys
+import time
+import tomllib
+from pathlib import Path
+from typing import Any
+
+import click
+
+#: The cases: command name -> (script in cases/, one line).
+CASES = {
+    "pullout-000": ("pullout_000.py", "geogrid pull-out of 000 (Yade, 3000-9000 spheres)"),
+    "pullout-001": ("pullout_001.py", "pull-out of 001 (square and triangular grids, Table 5.2)"),
+    "triaxial": ("triaxial.py", "triaxial test of 001 ch. 6, with or without geogrid"),
+    "prs-element": ("prs_element.py", "002's reinforced vs prestressed element from FEM stresses"),
+    "deposition": ("deposition.py", "spheres deposited into a box under gravity"),
+}
+#: Cases whose --threads 0 means one thread rather than all (translated by the command).
+_THREADS_ZERO_IS_ONE = {"prs-element"}
+ROOT = Path(__file__).resolve().parents[2]
+
+
+class RunFileError(click.ClickException):
+    """A run or sweep file names a bad field; the message says which, its value and why."""
+
+
+def cases_dir() -> Path:
+    d = ROOT / "cases"
+    if not d.is_dir():
+        raise click.ClickException(
+            f"the cases are not next to this package ({d} is missing): run the command from "
+            "the source tree's install (pip install -e .)")
+    return d
+
+
+def case_script(name: str, *, field: str = "case") -> Path:
+    if name not in CASES:
+        raise RunFileError(f"{field}={name!r}: no such case; allowed: {', '.join(CASES)}")
+    return cases_dir() / CASES[name][0]
+
+
+def version() -> str:
+    try:
+        from importlib.metadata import version as _v
+
+        return _v("geogrid-dem")
+    except Exception:  # noqa: BLE001  (not installed as a distribution)
+        return "unknown"
+
+
+def git_commit() -> str:
+    try:
+        out = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True,
+                             text=True, timeout=10)
+        if out.returncode == 0:
+            dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain",
+                                    "--untracked-files=no"], capture_output=True, text=True,
+                                   timeout=10).stdout.strip()
+            return out.stdout.strip() + ("+dirty" if dirty else "")
+    except (OSError, subprocess.SubprocessError):
+        pass
+    return "unknown"
+
+
+# ---- parameters -> the case's flags -----------------------------------------------------------
+
+def params_to_argv(params: dict[str, Any], *, source: str) -> list[str]:
+    """The case's command-line flags from a table of parameters (keys without dashes)."""
+    argv: list[str] = []
+    for key, value in params.items():
+        if not isinstance(key, str) or not key or key.startswith("-"):
+            raise RunFileError(f"{source}: field {key!r}: write the flag's name without dashes")
+        flag = "--" + key.replace("_", "-")
+        if isinstance(value, bool):
+            if value:
+                argv.append(flag)
+        elif isinstance(value, (int, float, str)):
+            argv += [flag, str(value)]
+        elif isinstance(value, list) and all(isinstance(v, (int, float, str)) and
+                                             not isinstance(v, bool) for v in value):
+            argv += [flag, ",".join(str(v) for v in value)]
+        else:
+            raise RunFileError(f"{source}: field {key!r}={value!r}: must be a number, a string, "
+                               "true/false or a list of numbers or strings")
+    return argv
+
+
+def shared_argv(case: str, out: str | None, seed: int | None, threads: int | None,
+                preset: str | None, smoke: bool) -> list[str]:
+    argv: list[str] = []
+    if smoke:
+        argv.append("--smoke")
+    if out is not None:
+        argv += ["--out", str(out)]
+    if seed is not None:
+        argv += ["--seed", str(seed)]
+    if threads is not None:
+        if threads < 0:
+            raise click.BadParameter(f"--threads={threads}: must be >= 0 (0 = all cores)")
+        if threads == 0 and case in _THREADS_ZERO_IS_ONE:
+            threads = os.cpu_count() or 1
+        argv += ["--threads", str(threads)]
+    if preset:
+        argv += ["--preset", preset]
+    return argv
+
+
+def out_of(argv: list[str]) -> Path | None:
+    for k, a in enumerate(argv):
+        if a == "--out" and k + 1 < len(argv):
+            return Path(argv[k + 1])
+        if a.startswith("--out="):
+            return Path(a.split("=", 1)[1])
+    return None
+
+
+def write_run_file(out: Path, case: str, params: dict[str, Any]) -> None:
+    """OUT/run.toml: the case, its parameters and where they came from (rerunnable)."""
+    lines = ["# Written by geogrid-dem; `geogrid-dem run` this file to run it again.",
+             f"case = {json.dumps(case)}", "", "[params]"]
+    for key, value in params.items():
+        lines.append(f"{key} = {_toml_value(value)}")
+    lines += ["", "[provenance]", f"version = {json.dumps(version())}",
+              f"commit = {json.dumps(git_commit())}",
+              f"date = {json.dumps(_dt.datetime.now(_dt.timezone.utc).isoformat())}",
+              f"python = {json.dumps(sys.version.split()[0])}", ""]
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = out / ".run.toml.tmp"
+    tmp.write_text("\n".join(lines))
+    tmp.replace(out / "run.toml")
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return json.dumps(str(v))
+
+
+def argv_to_params(argv: list[str]) -> dict[str, Any]:
+    """The flags given on the command line as run-file parameters (for OUT/run.toml)."""
+    params: dict[str, Any] = {}
+    k = 0
+    while k < len(argv):
+        a = argv[k]
+        if not a.startswith("--"):
+            k += 1
+            continue
+        key, _, inline = a[2:].partition("=")
+        if inline:
+            params[key] = _number_or_string(inline)
+        elif k + 1 < len(argv) and not argv[k + 1].startswith("--"):
+            params[key] = _number_or_string(argv[k + 1])
+            k += 1
+        else:
+            params[key] = True
+        k += 1
+    return params
+
+
+def _number_or_string(s: str) -> Any:
+    for cast in (int, float):
+        try:
+            return cast(s)
+        except ValueError:
+            pass
+    return s
+
+
+def load_toml(path: Path, kind: str) -> dict[str, Any]:
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise RunFileError(f"{kind} file {path}: not found") from None
+    except tomllib.TOMLDecodeError as e:
+        raise RunFileError(f"{kind} file {path}: not valid TOML: {e}") from None
+    if "case" not in data:
+        raise RunFileError(f"{kind} file {path}: field 'case' is missing; allowed: "
+                           f"{', '.join(CASES)}")
+    params = data.get("params", {})
+    if not isinstance(params, dict):
+        raise RunFileError(f"{kind} file {path}: field 'params' must be a table ([params])")
+    known = {"case", "params", "provenance", "out", "sweep"}
+    for key in data:
+        if key not in known:
+            raise RunFileError(f"{kind} file {path}: field {key!r} is not known; allowed at the "
+                               f"top: {', '.join(sorted(known))} (a case's parameters go in "
+                               "[params])")
+    case_script(data["case"], field=f"{path}: case")
+    return data
+
+
+def run_case(case: str, argv: list[str], *, source: str | None = None) -> int:
+    """Runs the case's script in a fresh interpreter with `argv` (its output passes through as
+    it comes); an argparse rejection (exit 2) of a run file's parameters is reported against
+    the run file. Returns the exit status."""
+    script = case_script(case)
+    proc = subprocess.Popen([sys.executable, str(script), *argv], stderr=subprocess.PIPE,
+                            text=True, bufsize=1)
+    tail: list[str] = []
+    for line in proc.stderr:
+        sys.stderr.write(line)
+        sys.stderr.flush()
+        tail = (tail + [line.rstrip()])[-5:]
+    status = proc.wait()
+    if status == 2 and source is not None:
+        detail = next((t for t in reversed(tail) if t.strip()), "")
+        raise RunFileError(f"{source}: the case {case!r} rejected its parameters: {detail}; "
+                           f"a field `name` is the case's flag --name (geogrid-dem run {case} "
+                           "--help lists them)")
+    return status
+
+
+# ---- the command ----------------------------------------------------------------------------
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(version(), prog_name="geogrid-dem")
+def main() -> None:
+    """Coupled DEM-FEM for geogrid-reinforced soil: cases, run files and sweeps."""
+
+
+@main.command("cases")
+def list_cases() -> None:
+    """Lists the cases."""
+    for name, (_, what) in CASES.items():
+        click.echo(f"{name:12s} {what}")
+
+
+_SHARED = [
+    click.option("--out", type=click.Path(path_type=Path), default=None,
+                 help="results folder"),
+    click.option("--seed", type=int, default=None, help="random seed"),
+    click.option("--threads", type=int, default=None, help="OpenMP threads, 0 = all cores"),
+    click.option("--preset", type=click.Choice(["fast", "balanced", "accurate"]), default=None,
+                 help="speed-accuracy preset (cases that have presets)"),
+    click.option("--smoke", is_flag=True, help="test-sized run"),
+]
+
+
+def _shared(f):
+    for opt in reversed(_SHARED):
+        f = opt(f)
+    return f
+
+
+@main.command("run", context_settings={"ignore_unknown_options": True,
+                                       "allow_extra_args": True, "help_option_names": []})
+@click.argument("target")
+@_shared
+@click.pass_context
+def run_cmd(ctx, target: str, out, seed, threads, preset, smoke) -> None:
+    """Runs a case (TARGET = its name, then its own flags) or a run file (TARGET.toml)."""
+    extra = list(ctx.args)
+    if target.endswith(".toml"):
+        path = Path(target)
+        data = load_toml(path, "run")
+        case = data["case"]
+        params = dict(data.get("params", {}))
+        if "out" in data and "out" not in params:
+            params["out"] = data["out"]
+        argv = params_to_argv(params, source=str(path))
+        argv += shared_argv(case, out, seed, threads, preset, smoke) + extra
+        status = run_case(case, argv, source=str(path))
+    else:
+        if target in ("-h", "--help"):
+            click.echo(ctx.get_help())
+            return
+        case = target
+        case_script(case, field="case")
+        argv = shared_argv(case, out, seed, threads, preset, smoke) + extra
+        status = run_case(case, argv)
+    if status != 0:
+        sys.exit(status)
+    dest = out_of(argv)
+    if dest is not None and "--help" not in argv and "-h" not in argv:
+        write_run_file(dest, case, argv_to_params(argv))
+
+
+def sweep_rows(data: dict[str, Any], source: str) -> list[dict[str, Any]]:
+    """The parameter table of a sweep file: one dict of varied parameters per row."""
+    sweep = data.get("sweep")
+    if not isinstance(sweep, dict) or not sweep:
+        raise RunFileError(f"{source}: field 'sweep' is missing: a [sweep] table with lists of "
+                           "values per parameter")
+    mode = sweep.get("mode", "product")
+    values = {k: v for k, v in sweep.items() if k != "mode"}
+    if mode not in ("product", "list"):
+        raise RunFileError(f"{source}: field 'sweep.mode'={mode!r}: must be 'product' or 'list'")
+    for key, v in values.items():
+        if not isinstance(v, list) or not v:
+            raise RunFileError(f"{source}: field 'sweep.{key}'={v!r}: must be a non-empty list")
+    if not values:
+        raise RunFileError(f"{source}: [sweep] has no parameter lists")
+    keys = list(values)
+    if mode == "product":
+        return [dict(zip(keys, combo)) for combo in itertools.product(*values.values())]
+    lengths = {k: len(v) for k, v in values.items()}
+    if len(set(lengths.values())) != 1:
+        raise RunFileError(f"{source}: field 'sweep' (mode 'list'): the lists must have equal "
+                           f"lengths, got {lengths}")
+    n = next(iter(lengths.values()))
+    return [{k: values[k][i] for k in keys} for i in range(n)]
+
+
+def _row_params(fixed: dict[str, Any], row: dict[str, Any], row_dir: Path,
+                threads: int) -> dict[str, Any]:
+    params = {**fixed, **row, "out": str(row_dir)}
+    params.setdefault("threads", threads)
+    return params
+
+
+def _row_finished(row_dir: Path, case: str, params: dict[str, Any]) -> bool:
+    run_file = row_dir / "run.toml"
+    if not (row_dir / "summary.json").exists() or not run_file.exists():
+        return False
+    try:
+        with open(run_file, "rb") as f:
+            old = tomllib.load(f)
+    except (OSError, tomllib.TOMLDecodeError):
+        return False
+    return old.get("case") == case and old.get("params") == json.loads(json.dumps(params))
+
+
+def _run_row(script: str, argv: list[str], env: dict[str, str]) -> dict[str, Any]:
+    """One row, on a Dask worker: the case in its own interpreter."""
+    t0 = time.perf_counter()
+    proc = subprocess.run([sys.executable, script, *argv], capture_output=True, text=True,
+                          env={**os.environ, **env})
+    return {"returncode": proc.returncode, "wall_s": time.perf_counter() - t0,
+            "stderr_tail": "\n".join((proc.stderr or "").strip().splitlines()[-5:])}
+
+
+def _flatten(prefix: str, obj: Any, out: dict[str, Any]) -> None:
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            _flatten(f"{prefix}.{k}" if prefix else str(k), v, out)
+    elif isinstance(obj, (int, float, str, bool)) or obj is None:
+        out[prefix] = obj
+
+
+def write_results(out: Path, rows: list[dict[str, Any]]) -> Path:
+    """OUT/results.csv (rewritten atomically), and results.parquet where pyarrow is."""
+    columns: list[str] = []
+    for r in rows:
+        for k in r:
+            if k not in columns:
+                columns.append(k)
+    tmp = out / ".results.csv.tmp"
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=columns)
+        w.writeheader()
+        for r in rows:
+            w.writerow(r)
+        f.flush()
+        os.fsync(f.fileno())
+    tmp.replace(out / "results.csv")
+    return out / "results.csv"
+
+
+@main.command("sweep")
+@click.argument("file", type=click.Path(path_type=Path))
+@click.option("--workers", type=int, default=2, show_default=True,
+              help="processes of the local Dask cluster")
+@click.option("--scheduler", default=None, help="address of a running Dask scheduler")
+@click.option("--threads", type=int, default=1, show_default=True,
+              help="OpenMP threads per row (0 = all cores)")
+def sweep_cmd(file: Path, workers: int, scheduler: str | None, threads: int) -> None:
+    """Runs a sweep file's rows on Dask, skipping finished rows; gathers OUT/results.csv."""
+    data = load_toml(file, "sweep")
+    case = data["case"]
+    if "out" not in data:
+        raise RunFileError(f"{file}: field 'out' is missing: the sweep's results folder")
+    if workers < 1:
+        raise click.BadParameter(f"--workers={workers}: must be >= 1")
+    if threads < 0:
+        raise click.BadParameter(f"--threads={threads}: must be >= 0 (0 = all cores)")
+    out = Path(data["out"])
+    fixed = dict(data.get("params", {}))
+    for k in ("out",):
+        if k in fixed:
+            raise RunFileError(f"{file}: field 'params.{k}': set the sweep's folder with the "
+                               "top-level field 'out' (each row writes in OUT/row_NNN)")
+    rows = sweep_rows(data, str(file))
+    script = str(case_script(case))
+    out.mkdir(parents=True, exist_ok=True)
+    if threads == 0 and case in _THREADS_ZERO_IS_ONE:
+        threads = os.cpu_count() or 1
+    todo, results = [], [None] * len(rows)
+    for i, row in enumerate(rows):
+        row_dir = out / f"row_{i:03d}"
+        params = _row_params(fixed, row, row_dir, threads)
+        argv = params_to_argv(params, source=str(file))
+        base = {"row": i, **{f"param.{k}": v for k, v in row.items()}}
+        if _row_finished(row_dir, case, params):
+            results[i] = {**base, "status": "done (earlier run)", **_summary_of(row_dir)}
+        else:
+            todo.append((i, row_dir, params, argv, base))
+    click.echo(f"[sweep] {case}: {len(rows)} rows, {len(rows) - len(todo)} finished before, "
+               f"{len(todo)} to run on "
+               + (f"the scheduler at {scheduler}" if scheduler else f"{workers} local workers"))
+    if todo:
+        _run_on_dask(todo, results, script, case, scheduler, workers, threads, out)
+    done = [r for r in results if r is not None]
+    path = write_results(out, done)
+    try:
+        import pyarrow  # noqa: F401
+        import pyarrow.csv as pacsv
+        import pyarrow.parquet as pq
+
+        pq.write_table(pacsv.read_csv(path), out / "results.parquet")
+    except ImportError:
+        pass
+    failed = [r for r in done if r["status"] == "failed"]
+    click.echo(f"[sweep] results: {path} ({len(done)} rows, {len(failed)} failed)")
+    if failed:
+        sys.exit(1)
+
+
+def _summary_of(row_dir: Path) -> dict[str, Any]:
+    flat: dict[str, Any] = {}
+    try:
+        _flatten("", json.loads((row_dir / "summary.json").read_text()), flat)
+    except (OSError, json.JSONDecodeError):
+        pass
+    return {f"summary.{k}": v for k, v in flat.items()}
+
+
+def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) -> None:
+    from dask.distributed import Client, LocalCluster, as_completed
+
+    cluster = None
+    if scheduler:
+        client = Client(scheduler)
+    else:
+        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                               dashboard_address=None)
+        client = Client(cluster)
+    env = {"OMP_NUM_THREADS": str(threads or (os.cpu_count() or 1))}
+    try:
+        futures = {}
+        for i, row_dir, params, argv, base in todo:
+            if row_dir.exists():
+                # An unfinished row of an earlier run: its files are incomplete.
+                shutil.rmtree(row_dir)
+            fut = client.submit(_run_row, script, argv, env, pure=False, key=f"row-{i:03d}")
+            futures[fut] = (i, row_dir, params, base)
+        t0 = time.perf_counter()
+        for n_done, fut in enumerate(as_completed(futures), start=1):
+            i, row_dir, params, base = futures[fut]
+            r = fut.result()
+            ok = r["returncode"] == 0
+            if ok:
+                write_run_file(row_dir, case, params)
+            results[i] = {**base, "status": "ok" if ok else "failed",
+                          "wall_s": round(r["wall_s"], 3),
+                          **(_summary_of(row_dir) if ok else {"error": r["stderr_tail"]})}
+            write_results(out, [x for x in results if x is not None])
+            el = time.perf_counter() - t0
+            eta = el / n_done * (len(todo) - n_done)
+            click.echo(f"[sweep] row {i:03d} {'ok' if ok else 'FAILED'} in {r['wall_s']:.1f} s "
+                       f"({n_done}/{len(todo)}, elapsed {el:.0f} s, ETA {eta:.0f} s)")
+            if not ok:
+                click.echo(f"[sweep] row {i:03d}: {r['stderr_tail']}", err=True)
+    finally:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+if __name__ == "__main__":
+    main()

@@ -1,0 +1,102 @@
+"""The geogrid-dem command: cases, run files (validated, written back into every results
+folder) and sweeps on Dask (results table, resume)."""
+
+import csv
+import os
+import shutil
+import subprocess
+import sys
+import tomllib
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def cli(*args, cwd=None):
+    exe = shutil.which("geogrid-dem", path=str(Path(sys.executable).parent))
+    cmd = [exe] if exe else [sys.executable, "-m", "cpp_dem.cli"]
+    return subprocess.run([*cmd, *map(str, args)], capture_output=True, text=True,
+                          cwd=cwd or ROOT, env={**os.environ, "OMP_NUM_THREADS": "1"})
+
+
+def test_the_command_is_installed_and_lists_the_cases():
+    assert shutil.which("geogrid-dem", path=str(Path(sys.executable).parent)), \
+        "pip install -e . installs the console script geogrid-dem"
+    r = cli("--version")
+    assert r.returncode == 0 and "geogrid-dem, version" in r.stdout
+    r = cli("cases")
+    assert r.returncode == 0
+    for name in ("pullout-000", "pullout-001", "triaxial", "prs-element", "deposition"):
+        assert name in r.stdout
+
+
+def test_run_a_case_writes_a_rerunnable_run_file(tmp_path):
+    out = tmp_path / "tri"
+    r = cli("run", "triaxial", "--smoke", "--out", out, "--seed", 3, "--threads", 1)
+    assert r.returncode == 0, r.stderr
+    assert (out / "summary.json").exists()
+    with open(out / "run.toml", "rb") as f:
+        run = tomllib.load(f)
+    assert run["case"] == "triaxial"
+    assert run["params"]["smoke"] is True and run["params"]["seed"] == 3
+    assert run["params"]["out"] == str(out)
+    assert run["provenance"]["version"] and run["provenance"]["commit"]
+    # The run file runs it again (into another folder).
+    out2 = tmp_path / "again"
+    r = cli("run", out / "run.toml", "--out", out2)
+    assert r.returncode == 0, r.stderr
+    assert (out2 / "summary.json").exists()
+
+
+@pytest.mark.parametrize("text, expect", [
+    ('case = "triax"\n', "case='triax': no such case; allowed: pullout-000"),
+    ('case = "triaxial"\nsmoke = true\n', "field 'smoke' is not known"),
+    ('case = "triaxial"\n[params]\nsmoke = true\ncel-pressure = 1e5\n',
+     "rejected its parameters: .*unrecognized arguments: --cel-pressure"),
+    ('case = "triaxial"\n[params]\nsmoke = {a = 1}\n', "field 'smoke'="),
+    ('case = "triaxial"\n[params\n', "not valid TOML"),
+])
+def test_a_bad_run_file_names_the_field(tmp_path, text, expect):
+    f = tmp_path / "bad.toml"
+    f.write_text(text)
+    r = cli("run", f)
+    assert r.returncode != 0
+    import re
+    assert re.search(expect, r.stderr), r.stderr
+
+
+def test_sweep_runs_rows_on_dask_gathers_results_and_resumes(tmp_path):
+    out = tmp_path / "sweep"
+    f = tmp_path / "sweep.toml"
+    f.write_text(f'case = "triaxial"\nout = "{out}"\n[params]\nsmoke = true\n'
+                 '[sweep]\nmode = "list"\nseed = [1, 2]\n')
+    r = cli("sweep", f, "--workers", 2)
+    assert r.returncode == 0, r.stderr + r.stdout
+    assert "2 rows, 0 finished before, 2 to run" in r.stdout and "ETA" in r.stdout
+    with open(out / "results.csv") as fh:
+        rows = list(csv.DictReader(fh))
+    assert [row["param.seed"] for row in sorted(rows, key=lambda x: x["row"])] == ["1", "2"]
+    assert all(row["status"] == "ok" for row in rows)
+    assert any(k.startswith("summary.") for k in rows[0])  # the case's numbers
+    # Different seeds, different samples: the rows are not copies of each other.
+    summaries = {tuple(v for k, v in row.items() if k.startswith("summary.")) for row in rows}
+    assert len(summaries) == 2
+    stamp = (out / "row_000" / "summary.json").stat().st_mtime_ns
+    # Resume: both rows are finished, nothing runs again.
+    r = cli("sweep", f, "--workers", 1)
+    assert r.returncode == 0, r.stderr
+    assert "2 finished before, 0 to run" in r.stdout
+    assert (out / "row_000" / "summary.json").stat().st_mtime_ns == stamp
+
+
+def test_sweep_file_errors_name_the_field(tmp_path):
+    f = tmp_path / "s.toml"
+    f.write_text('case = "triaxial"\nout = "x"\n[sweep]\nmode = "list"\nseed = [1, 2]\n'
+                 'cell-pressure = [1e5]\n')
+    r = cli("sweep", f)
+    assert r.returncode != 0 and "must have equal lengths" in r.stderr
+    f.write_text('case = "triaxial"\n[sweep]\nseed = [1]\n')
+    r = cli("sweep", f)
+    assert r.returncode != 0 and "field 'out' is missing" in r.stderr
