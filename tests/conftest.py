@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import subprocess
 import sys
 from pathlib import Path
 
@@ -29,3 +30,40 @@ def linear_mat():
 @pytest.fixture
 def rng():
     return np.random.default_rng(12345)
+
+
+#: The flags each case's --smoke run is made with, shared by tests/test_cases_smoke.py (which
+#: finds every case by glob) and the case's own physics tests, so each smoke runs once per
+#: session. A new case needs no entry: it runs with --smoke and --out alone.
+SMOKE_ARGS: dict[str, tuple[str, ...]] = {
+    "deposition": ("--threads", "2"),
+    "triaxial": ("--threads", "2"),
+    "pullout_000": ("--threads", "2"),
+    "prs_element": (),
+    "pullout_001": (),
+}
+
+
+def case_names() -> list[str]:
+    """The runnable cases: cases/*.py with a main() (helpers such as pullout_common.py have
+    none)."""
+    return sorted(p.stem for p in (ROOT / "cases").glob("*.py")
+                  if "def main(" in p.read_text())
+
+
+@pytest.fixture(scope="session")
+def case_smoke(tmp_path_factory):
+    """case_smoke(name) -> (out folder, CompletedProcess) of ``cases/<name>.py --smoke`` with
+    its SMOKE_ARGS, run once per session."""
+    runs: dict[str, tuple[Path, subprocess.CompletedProcess]] = {}
+
+    def run(name: str):
+        if name not in runs:
+            out = tmp_path_factory.mktemp(f"smoke_{name}")
+            proc = subprocess.run([PYTHON, str(ROOT / "cases" / f"{name}.py"), "--smoke",
+                                   "--out", str(out), *SMOKE_ARGS.get(name, ())],
+                                  capture_output=True, text=True, timeout=900, cwd=ROOT)
+            runs[name] = (out, proc)
+        return runs[name]
+
+    return run

@@ -30,12 +30,8 @@ ENERGY_BALANCE = 0.02     # |balance error| / gravity energy released (measured:
 
 
 @pytest.fixture(scope="module")
-def smoke(tmp_path_factory):
-    out = tmp_path_factory.mktemp("deposition")
-    proc = subprocess.run([sys.executable, str(CASE), "--smoke", "--out", str(out),
-                           "--threads", "2"],
-                          capture_output=True, text=True, timeout=300, cwd=ROOT)
-    return out, proc
+def smoke(case_smoke):
+    return case_smoke("deposition")  # --smoke --threads 2 (conftest.SMOKE_ARGS)
 
 
 def test_runs_and_writes_every_output(smoke):

@@ -21,9 +21,8 @@ def run_case(out, *args):
 
 
 @pytest.fixture(scope="module")
-def smoke(tmp_path_factory):
-    out = tmp_path_factory.mktemp("prs")
-    return out, run_case(out, "--smoke")
+def smoke(case_smoke):
+    return case_smoke("prs_element")  # --smoke (conftest.SMOKE_ARGS)
 
 
 def test_fem_to_dem_smoke_outputs_and_servo_hold(smoke):

@@ -22,9 +22,8 @@ def run_case(out, *args):
 
 
 @pytest.fixture(scope="module")
-def smoke(tmp_path_factory):
-    out = tmp_path_factory.mktemp("triax")
-    return out, run_case(out, "--smoke", "--threads", "2")
+def smoke(case_smoke):
+    return case_smoke("triaxial")  # --smoke --threads 2 (conftest.SMOKE_ARGS)
 
 
 def test_smoke_runs_and_meets_the_stated_bounds(smoke):

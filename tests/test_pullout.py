@@ -168,9 +168,9 @@ def _run_case(script, out, *extra):
 
 
 @pytest.fixture(scope="module")
-def smoke000(tmp_path_factory):
-    out = tmp_path_factory.mktemp("po000")
-    r = _run_case("pullout_000.py", out, "--threads", "2")
+def smoke000(case_smoke):
+    out, r = case_smoke("pullout_000")  # --smoke --threads 2 (conftest.SMOKE_ARGS)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     return out, r
 
 
@@ -207,10 +207,11 @@ def test_case_000_same_result_on_1_and_2_threads(smoke000, tmp_path):
         np.testing.assert_array_equal(a[k], b[k])
 
 
-def test_case_001_smoke(tmp_path):
-    r = _run_case("pullout_001.py", tmp_path)
-    s = json.loads((tmp_path / "summary.json").read_text())
-    rec = read_csv_series(tmp_path / "pullout.csv")
+def test_case_001_smoke(case_smoke):
+    out, r = case_smoke("pullout_001")
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    rec = read_csv_series(out / "pullout.csv")
     assert s["top_stress_max_rel_dev"] < 0.05
     assert s["mean_force_N"] > 0
     # Rigid pull (App. A): every node is clamped and moves at the pull velocity, so the grid's
