@@ -39,6 +39,7 @@ from pathlib import Path
 import numpy as np
 
 import cpp_dem as dem
+from cpp_dem.measure import interior_porosity, slab_solid_volume, surface_height
 from cpp_dem.output import (CsvRecorder, H5Recorder, PvdWriter, read_h5_series,
                             standard_series, write_vtk_box, write_vtk_contacts,
                             write_vtk_spheres)
@@ -136,46 +137,6 @@ def build_scene(p: Params) -> tuple[dem.Scene, list[int]]:
     scene.set_auto_timestep(safety=p.dt_safety, period=p.dt_period)
     scene.track_energy = True
     return scene, walls
-
-
-# ---------------------------------------------------------------------------------------------
-# Measurements
-# ---------------------------------------------------------------------------------------------
-
-
-def slab_solid_volume(z: np.ndarray, r: np.ndarray, z0: float, z1: float) -> float:
-    """Exact volume (m^3) of the spheres (centres z, radii r) inside the slab z0 <= z <= z1:
-    the integral of pi (r^2 - (s - z)^2) ds over the part of [z - r, z + r] in the slab."""
-    a = np.clip(z0 - z, -r, r)
-    b = np.clip(z1 - z, -r, r)
-    # integral of pi (r^2 - u^2) du from a to b
-    return float(np.sum(np.pi * (r**2 * (b - a) - (b**3 - a**3) / 3.0)))
-
-
-def interior_porosity(pos: np.ndarray, radii: np.ndarray, box, inset: float,
-                      z_top: float) -> float:
-    """Porosity estimate away from the walls, -: the region inset by ``inset`` (m) from the
-    side walls and the floor, up to ``z_top`` (m); solid volume = the volumes of the spheres
-    whose centres lie in it (unbiased up to boundary noise of order inset / region size)."""
-    lo = np.array([inset, inset, inset])
-    hi = np.array([box[0] - inset, box[1] - inset, z_top])
-    if np.any(hi - lo < 2 * inset):  # too thin for a meaningful count
-        return float("nan")
-    inside = np.all((pos >= lo) & (pos < hi), axis=1)
-    solid = float(np.sum(4.0 / 3.0 * np.pi * radii[inside] ** 3))
-    return 1.0 - solid / float(np.prod(hi - lo))
-
-
-def surface_height(pos: np.ndarray, radii: np.ndarray, box, cells: int = 5) -> float:
-    """Mean height of the free surface, m: the box footprint is cut into cells x cells
-    columns; in each, the highest sphere top z + r; the mean over the columns."""
-    ix = np.clip((pos[:, 0] / box[0] * cells).astype(int), 0, cells - 1)
-    iy = np.clip((pos[:, 1] / box[1] * cells).astype(int), 0, cells - 1)
-    top = np.full((cells, cells), np.nan)
-    for i, j, h in zip(ix, iy, pos[:, 2] + radii):
-        if not h <= top[i, j]:
-            top[i, j] = h
-    return float(np.nanmean(top))
 
 
 def _json_safe(x):

@@ -46,12 +46,8 @@ from pathlib import Path
 
 import numpy as np
 
-import cpp_dem as dem
-from cpp_dem import geogrid, measure, prep
-from cpp_dem.output import (CsvRecorder, H5Recorder, write_vtk_box, write_vtk_contacts,
-                            write_vtk_spheres)
-from cpp_dem.packing import loose_cloud
-from cpp_dem.triaxial import build_box_sample
+from cpp_dem import element as _element
+from cpp_dem.element import grid_axial_stiffness
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -117,205 +113,19 @@ def log(msg: str) -> None:
     print(f"[prs_element] {msg}", flush=True)
 
 
-# ---- DEM element ---------------------------------------------------------------------------
-
-
-def grid_spacing(p: Params) -> float:
-    return p.grid_width / (p.grid_nodes - 1)
-
-
-def grid_axial_stiffness(p: Params) -> float:
-    """J = E pi R^2 / spacing, N/m: the DEM grid's tensile stiffness per metre width."""
-    return p.grid_young * math.pi * p.grid_radius**2 / grid_spacing(p)
-
-
 def make_element(p: Params, mean_stress: float, prestressed: bool):
-    """The element: spheres in the cube, the geogrid, radius growth to ``mean_stress`` (Pa)."""
-    rng_r = np.random.default_rng(p.seed)
-    vol = p.edge**3
-    r_mean = (0.6 * vol / (p.n * 4.0 / 3.0 * math.pi)) ** (1.0 / 3.0)
-    radii = r_mean * (1.0 + p.radius_spread * (2.0 * rng_r.random(p.n) - 1.0))
-    shrink = (0.25 / 0.6) ** (1.0 / 3.0)
-    c, r = loose_cloud(radii * shrink, (0, 0, 0), (p.edge,) * 3, seed=p.seed)
-    z_grid = 0.5 * p.edge
-    half = 0.5 * p.grid_width
-    mid = 0.5 * p.edge
-    over = (np.all(np.abs(c[:, :2] - mid) < half + r[:, None], axis=1)
-            & (np.abs(c[:, 2] - z_grid) < r + p.grid_radius))
-    c, r = c[~over], r[~over]
-    sample = build_box_sample(c, r, (0, 0, 0), (p.edge,) * 3, young=p.young,
-                              poisson=p.poisson, friction_deg=p.prep_friction_deg,
-                              density=p.density, local_damping=p.damping)
-    sc = sample.scene
-    gmat = sc.add_material(dem.linear_material(density=p.grid_density, young=p.young,
-                                               poisson=p.poisson, friction_angle_deg=26.57))
-    beam = dem.BeamParams(young=p.grid_young, poisson=0.3, radius=p.grid_radius,
-                          normal_cohesion=1e12, shear_cohesion=1e12)
-    grid = geogrid.square_grid(sc, origin=(mid - half, mid - half, z_grid), length=p.grid_width,
-                               width=p.grid_width, nodes_x=p.grid_nodes, nodes_y=p.grid_nodes,
-                               params=beam, material=gmat, density=p.grid_density)
-    sc.max_overlap_ratio = 0.95
-    sc.block_dofs(grid.nodes, "all")
-    t0 = time.perf_counter()
-    grow = prep.grow_to_stress(sc, sample.walls, mean_stress, tol=0.05, unbalanced=0.05,
-                               max_strain=1e-4, max_steps=p.max_steps)
-    log(f"element: {len(r)} grains (r_mean {r_mean * 1e3:.2f} mm), geogrid {p.grid_nodes}x"
-        f"{p.grid_nodes} nodes, J = {grid_axial_stiffness(p) / 1e3:.0f} kN/m; grown to "
-        f"{grow.mean_stress / 1e3:.2f} kPa in {grow.steps} steps, porosity {grow.porosity:.3f}"
-        f" ({time.perf_counter() - t0:.1f} s)")
-    prep.set_friction(sc, np.flatnonzero(measure.sphere_mask(sc)), sc.material(sample.material),
-                      p.friction_deg)
-    sc.block_dofs(grid.nodes, "")
-    if prestressed:
-        pos = sc.positions[grid.nodes]
-        ext = np.asarray(sc.external_forces).copy()
-        f_end = p.prestress * grid_spacing(p)  # N per longitudinal member
-        lo_end = np.isclose(pos[:, 0], mid - half)
-        hi_end = np.isclose(pos[:, 0], mid + half)
-        ext[grid.nodes[lo_end], 0] -= f_end
-        ext[grid.nodes[hi_end], 0] += f_end
-        sc.external_forces = ext
-        log(f"PRS: end nodes of the {int(lo_end.sum())} longitudinal members pulled by "
-            f"{f_end:.1f} N each (T_p = {p.prestress / 1e3:g} kN/m)")
-    return sample, grid
-
-
-SERIES = {"stage": (None, "-"), "step": (None, "-"), "time": (None, "s"),
-          "sigma_x": (None, "Pa"), "sigma_y": (None, "Pa"), "sigma_z": (None, "Pa"),
-          "target_x": (None, "Pa"), "target_y": (None, "Pa"), "target_z": (None, "Pa"),
-          "lx": (None, "m"), "ly": (None, "m"), "lz": (None, "m"),
-          "unbalanced_force": (None, "-"), "grid_force_longitudinal_mean": (None, "N"),
-          "grid_force_transverse_mean": (None, "N")}
+    """The DEM element of :mod:`cpp_dem.element` with this case's parameters and log."""
+    return _element.make_element(p, mean_stress, prestressed, log=log)
 
 
 def servo_stage(sample, grid, targets, stage: int, p: Params, rec) -> dict:
-    """Servo walls to ``targets`` (3,) Pa compression positive: converge within p.tol and
-    p.unbalanced, then hold p.hold_steps steps; returns the max relative error while held."""
-    sc, walls, ctl = sample.scene, sample.walls, sample.controller
-    t = np.asarray(targets, float)
-    for a in range(3):
-        ctl.set_stress(a, float(t[a]))
-    ctl.max_speed = prep.default_max_speed(sc, walls, fraction=4e-4)
-    ctl.enabled = True
-    longi = grid.member_direction == geogrid.LONGITUDINAL
-
-    def record() -> np.ndarray:
-        ax = measure.axis_stresses(sc, walls)
-        size = measure.box_size(sc, walls)
-        f = grid.member_axial_forces(sc)
-        rec(stage=stage, step=sc.step_count, time=sc.time, sigma_x=ax[0], sigma_y=ax[1],
-            sigma_z=ax[2], target_x=t[0], target_y=t[1], target_z=t[2], lx=size[0],
-            ly=size[1], lz=size[2], unbalanced_force=sc.unbalanced_force(),
-            grid_force_longitudinal_mean=float(f[longi].mean()),
-            grid_force_transverse_mean=float(f[~longi].mean()))
-        return ax
-
-    start, last = sc.step_count, time.perf_counter()
-    ok = False
-    while sc.step_count - start < p.max_steps:
-        sc.run(p.record_every)
-        ax = record()
-        err = np.abs(ax - t) / t
-        if time.perf_counter() - last > 5:
-            last = time.perf_counter()
-            log(f"  stage {stage}: step {sc.step_count - start}, walls "
-                f"{np.round(ax / 1e3, 2).tolist()} kPa (targets {np.round(t / 1e3, 2).tolist()}),"
-                f" unbalanced {sc.unbalanced_force():.3g}")
-        if np.all(err <= p.tol) and sc.unbalanced_force() < p.unbalanced:
-            ok = True
-            break
-    steps = sc.step_count - start
-    hold_err = 0.0
-    held = 0
-    while held < p.hold_steps:
-        sc.run(p.record_every)
-        held += p.record_every
-        hold_err = max(hold_err, float(np.max(np.abs(record() - t) / t)))
-    ax = measure.axis_stresses(sc, walls)
-    return {"converged": ok, "steps": steps, "hold_max_rel_error": hold_err,
-            "wall_stresses_pa": ax, "box_size_m": measure.box_size(sc, walls)}
+    return _element.servo_stage(sample, grid, targets, stage, p, rec, log=log)
 
 
 def run_element(p: Params, targets: list, *, prestressed: bool, label: str, out: Path) -> dict:
-    """The DEM element driven through ``targets`` (rows of 3, Pa, compression positive).
-
-    Prepared at the first row's mean stress, then servoed to each row in turn. Returns the
-    element summary (plain numbers); writes <label>.h5/.csv and the VTK files."""
-    t_start = time.perf_counter()
-    targets = [np.asarray(t, float) for t in targets]
-    # One thread unless asked: on a shared 2-core machine OpenMP with 2 threads was measured
-    # ~1000x slower than 1 thread for this small scene (oversubscription).
-    dem.set_num_threads(p.threads if p.threads > 0 else 1)
-    (out / "vtk").mkdir(parents=True, exist_ok=True)
-    sample, grid = make_element(p, float(targets[0].mean()), prestressed)
-    sc, walls = sample.scene, sample.walls
-    meta = {"case": "prs_element", "label": label, "prestressed": prestressed,
-            "units": "SI; stresses compression positive"}
-    h5 = H5Recorder(out / f"{label}.h5", series=SERIES, metadata=meta, overwrite=True,
-                    snapshot_fields=("positions", "radii"))
-    csv = CsvRecorder(out / f"{label}.csv", series=SERIES, overwrite=True)
-
-    def rec(**row) -> None:
-        h5.record(**row)
-        csv.record(**row)
-
-    stages = []
-    try:
-        ref_pos = None
-        for k, t in enumerate(targets):
-            if k == len(targets) - 1:
-                ref_pos = sc.positions.copy()
-                size_before = measure.box_size(sc, walls)
-                stress_before = measure.axis_stresses(sc, walls)
-            st = servo_stage(sample, grid, t, k, p, rec)
-            stages.append(st)
-            log(f"{label} stage {k}: walls {np.round(st['wall_stresses_pa'] / 1e3, 3).tolist()} "
-                f"kPa for targets {np.round(t / 1e3, 3).tolist()} kPa in {st['steps']} steps "
-                f"({'converged' if st['converged'] else 'NOT converged'}); held within "
-                f"{100 * st['hold_max_rel_error']:.2f} % over {p.hold_steps} steps")
-        h5.snapshot(sc)
-    finally:
-        h5.close()
-        csv.close()
-    size_after = measure.box_size(sc, walls)
-    # Displacement above vs below the geogrid over the last stage (002 §6), m, from the
-    # element centre's frame (the walls move symmetrically about it).
-    mask = measure.sphere_mask(sc)
-    disp = sc.positions - ref_pos
-    z0 = ref_pos[:, 2]
-    zg = 0.5 * (sc.wall_positions[walls[4]] + sc.wall_positions[walls[5]])
-    above = mask & (z0 > zg)
-    below = mask & (z0 < zg)
-    f = grid.member_axial_forces(sc)
-    longi = grid.member_direction == geogrid.LONGITUDINAL
-    write_vtk_spheres(out / "vtk" / f"{label}_spheres.vtp", sc)
-    write_vtk_contacts(out / "vtk" / f"{label}_contacts.vtp", sc)
-    geogrid.write_vtk_geogrid(out / "vtk" / f"{label}_geogrid.vtp", sc, grid)
-    lo = np.array([sc.wall_positions[walls[2 * a]] for a in range(3)])
-    write_vtk_box(out / "vtk" / f"{label}_box.vtp", lo, lo + size_after)
-    strain_inc = (size_before - size_after) / size_before
-    return {
-        "label": label, "prestressed": prestressed,
-        "num_grains": int(np.count_nonzero(mask)),
-        "targets_pa": [t.tolist() for t in targets],
-        "wall_stresses_pa": [s["wall_stresses_pa"].tolist() for s in stages],
-        "converged": [bool(s["converged"]) for s in stages],
-        "servo_steps": [int(s["steps"]) for s in stages],
-        "hold_max_rel_error": max(s["hold_max_rel_error"] for s in stages),
-        "stress_initial_pa": stress_before.tolist(),
-        "stress_final_pa": stages[-1]["wall_stresses_pa"].tolist(),
-        "strain_increment": strain_inc.tolist(),
-        "porosity_final": measure.porosity(sc, walls),
-        "disp_above_grid_mean_m": float(np.linalg.norm(disp[above], axis=1).mean()),
-        "disp_below_grid_mean_m": float(np.linalg.norm(disp[below], axis=1).mean()),
-        "disp_z_above_grid_mean_m": float(disp[above, 2].mean()),
-        "disp_z_below_grid_mean_m": float(disp[below, 2].mean()),
-        "grid_force_longitudinal_mean_n": float(f[longi].mean()),
-        "grid_force_longitudinal_max_n": float(f[longi].max()),
-        "grid_force_transverse_mean_n": float(f[~longi].mean()),
-        "grid_force_longitudinal_cv": float(f[longi].std() / max(abs(f[longi].mean()), 1e-12)),
-        "wall_time_s": time.perf_counter() - t_start,
-    }
+    """:func:`cpp_dem.element.run_element` with this case's log."""
+    return _element.run_element(p, targets, prestressed=prestressed, label=label, out=out,
+                                log=log)
 
 
 def element_runner(p_dict: dict, out: str, name: str, initial, final):

@@ -42,3 +42,36 @@ def test_coordination_of_a_cubic_lattice_and_rattlers():
     assert measure.coordination_number(s) == pytest.approx(2 * 54 / 28)
     # Mechanical: the rattler goes, then corner spheres (3 contacts) stay: 54 bonds / 27.
     assert measure.coordination_number(s, mechanical=True) == pytest.approx(2 * 54 / 27)
+
+
+# ---- packing measures (cpp_dem.measure, from the deposition case) --------------------------
+
+def test_slab_solid_volume_is_exact_for_cut_spheres():
+    from cpp_dem.measure import slab_solid_volume
+
+    r = np.array([0.01, 0.02])
+    z = np.array([0.0, 1.0])
+    # The slab [-0.01, 0.0] holds the lower half of sphere 0 and nothing of sphere 1.
+    assert slab_solid_volume(z, r, -0.01, 0.0) == pytest.approx(2 / 3 * np.pi * 0.01**3,
+                                                                 rel=1e-12)
+    # A slab holding both whole.
+    whole = 4 / 3 * np.pi * (0.01**3 + 0.02**3)
+    assert slab_solid_volume(z, r, -1.0, 2.0) == pytest.approx(whole, rel=1e-12)
+    # A cap of height h = r / 2 of sphere 1: pi h^2 (3 r - h) / 3.
+    h = 0.01
+    assert slab_solid_volume(z, r, 1.02 - h, 5.0) == pytest.approx(
+        np.pi * h**2 * (3 * 0.02 - h) / 3, rel=1e-9)
+
+
+def test_interior_porosity_and_surface_height_of_a_cubic_lattice():
+    from cpp_dem.measure import interior_porosity, surface_height
+
+    d = 0.01  # lattice spacing = diameter: simple cubic, porosity 1 - pi/6
+    g = np.stack(np.meshgrid(*[np.arange(10)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    pos = (g + 0.5) * d
+    radii = np.full(len(pos), d / 2)
+    box = (0.1, 0.1, 0.1)
+    phi = interior_porosity(pos, radii, box, inset=2 * d, z_top=0.08)
+    assert phi == pytest.approx(1 - np.pi / 6, abs=1e-12)
+    assert surface_height(pos, radii, box) == pytest.approx(0.1, rel=1e-12)
+    assert np.isnan(interior_porosity(pos, radii, box, inset=0.03, z_top=0.05))

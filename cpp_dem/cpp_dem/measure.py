@@ -1,5 +1,7 @@
 """Measurements on a confined sample: wall stresses, Love–Weber average stress, porosity,
-coordination number, unbalanced force, energies. SI units; stresses compressive positive.
+coordination number, unbalanced force, energies; and on a deposited packing (from its
+arrays): the solid volume in a horizontal slab, the interior porosity, the free-surface
+height. SI units; stresses compressive positive.
 
 ``walls`` is always the list of the six box walls in the order of ``Scene.add_box``
 (x-, x+, y-, y+, z-, z+).
@@ -145,3 +147,40 @@ def sample_state(scene, walls) -> dict:
         "unbalanced_force": float(scene.unbalanced_force()),
         "box_size": box_size(scene, walls),
     }
+
+
+# ---- a deposited packing, from its arrays (centres pos (n, 3), m; radii (n,), m) ---------------
+
+def slab_solid_volume(z: np.ndarray, r: np.ndarray, z0: float, z1: float) -> float:
+    """Exact volume (m^3) of the spheres (centres z, radii r) inside the slab z0 <= z <= z1:
+    the integral of pi (r^2 - (s - z)^2) ds over the part of [z - r, z + r] in the slab."""
+    a = np.clip(z0 - z, -r, r)
+    b = np.clip(z1 - z, -r, r)
+    # integral of pi (r^2 - u^2) du from a to b
+    return float(np.sum(np.pi * (r**2 * (b - a) - (b**3 - a**3) / 3.0)))
+
+
+def interior_porosity(pos: np.ndarray, radii: np.ndarray, box, inset: float,
+                      z_top: float) -> float:
+    """Porosity estimate away from the walls, -: the region inset by ``inset`` (m) from the
+    side walls and the floor, up to ``z_top`` (m); solid volume = the volumes of the spheres
+    whose centres lie in it (unbiased up to boundary noise of order inset / region size)."""
+    lo = np.array([inset, inset, inset])
+    hi = np.array([box[0] - inset, box[1] - inset, z_top])
+    if np.any(hi - lo < 2 * inset):  # too thin for a meaningful count
+        return float("nan")
+    inside = np.all((pos >= lo) & (pos < hi), axis=1)
+    solid = float(np.sum(4.0 / 3.0 * np.pi * radii[inside] ** 3))
+    return 1.0 - solid / float(np.prod(hi - lo))
+
+
+def surface_height(pos: np.ndarray, radii: np.ndarray, box, cells: int = 5) -> float:
+    """Mean height of the free surface, m: the box footprint is cut into cells x cells
+    columns; in each, the highest sphere top z + r; the mean over the columns."""
+    ix = np.clip((pos[:, 0] / box[0] * cells).astype(int), 0, cells - 1)
+    iy = np.clip((pos[:, 1] / box[1] * cells).astype(int), 0, cells - 1)
+    top = np.full((cells, cells), np.nan)
+    for i, j, h in zip(ix, iy, pos[:, 2] + radii):
+        if not h <= top[i, j]:
+            top[i, j] = h
+    return float(np.nanmean(top))

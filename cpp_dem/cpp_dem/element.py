@@ -1,0 +1,260 @@
+"""The servo-walled DEM element of 002's prestressed reinforced-soil element: a cube of
+grains around a square geogrid, grown to a mean stress, then servo-controlled walls driven to
+given normal stresses (from an FEM analysis or given), reinforced (RE) or with prestressed
+longitudinal members (PRS). Used by ``cases/prs_element.py`` and ``femcoupling``'s two-way
+coupling. SI units; stresses compression positive.
+
+The functions take a parameter object with the fields of :class:`ElementParams` (the case's
+``Params`` has them all).
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from pathlib import Path
+from typing import Callable
+
+import numpy as np
+
+from . import geogrid, measure, prep
+from ._core import BeamParams, set_num_threads
+from .output import CsvRecorder, H5Recorder, write_vtk_box, write_vtk_contacts, write_vtk_spheres
+from .packing import loose_cloud
+from .scene import linear_material
+from .triaxial import build_box_sample
+
+
+def _log(msg: str) -> None:
+    print(f"[element] {msg}", flush=True)
+
+
+@dataclass
+class ElementParams:
+    """The element's parameters (SI). Defaults: the 002 element of cases/prs_element.py."""
+
+    n: int = 2000                    #: number of grains, -
+    edge: float = 0.1                #: element edge length, m (002)
+    seed: int = 1                    #: RNG seed, -
+    radius_spread: float = 0.2       #: radii uniform in r_mean (1 +- spread), -
+    young: float = 50e6              #: grain Young's modulus (linear law), Pa
+    poisson: float = 0.23            #: k_s / k_n, -
+    friction_deg: float = 38.66      #: grain friction, deg
+    prep_friction_deg: float = 20.0  #: friction during radius growth, deg
+    density: float = 2640.0          #: grain density, kg/m^3
+    damping: float = 0.7             #: Cundall local damping, -
+    grid_nodes: int = 10             #: nodes per side of the square grid, -
+    grid_width: float = 0.095        #: grid width, m
+    grid_radius: float = 1e-3        #: member (cylinder) radius, m
+    grid_young: float = 1e9          #: member Young's modulus, Pa
+    grid_density: float = 1030.0     #: geogrid density, kg/m^3
+    prestress: float = 2000.0        #: PRS prestress T_p, N/m of grid width
+    tol: float = 0.005               #: servo convergence, relative, -
+    unbalanced: float = 0.02         #: servo convergence, unbalanced force, -
+    hold_steps: int = 2000           #: steps the walls then hold the targets
+    max_steps: int = 400_000         #: per servo stage
+    record_every: int = 200          #: steps between records
+    threads: int = 0                 #: OpenMP threads (0: one; see run_element)
+
+
+def grid_spacing(p: ElementParams) -> float:
+    """Node spacing of the square grid, m."""
+    return p.grid_width / (p.grid_nodes - 1)
+
+
+def grid_axial_stiffness(p: ElementParams) -> float:
+    """J = E pi R^2 / spacing, N/m: the DEM grid's tensile stiffness per metre width."""
+    return p.grid_young * math.pi * p.grid_radius**2 / grid_spacing(p)
+
+
+def make_element(p: ElementParams, mean_stress: float, prestressed: bool,
+                 log: Callable[[str], None] = _log):
+    """The element: spheres in the cube, the geogrid, radius growth to ``mean_stress`` (Pa)."""
+    rng_r = np.random.default_rng(p.seed)
+    vol = p.edge**3
+    r_mean = (0.6 * vol / (p.n * 4.0 / 3.0 * math.pi)) ** (1.0 / 3.0)
+    radii = r_mean * (1.0 + p.radius_spread * (2.0 * rng_r.random(p.n) - 1.0))
+    shrink = (0.25 / 0.6) ** (1.0 / 3.0)
+    c, r = loose_cloud(radii * shrink, (0, 0, 0), (p.edge,) * 3, seed=p.seed)
+    z_grid = 0.5 * p.edge
+    half = 0.5 * p.grid_width
+    mid = 0.5 * p.edge
+    over = (np.all(np.abs(c[:, :2] - mid) < half + r[:, None], axis=1)
+            & (np.abs(c[:, 2] - z_grid) < r + p.grid_radius))
+    c, r = c[~over], r[~over]
+    sample = build_box_sample(c, r, (0, 0, 0), (p.edge,) * 3, young=p.young,
+                              poisson=p.poisson, friction_deg=p.prep_friction_deg,
+                              density=p.density, local_damping=p.damping)
+    sc = sample.scene
+    gmat = sc.add_material(linear_material(density=p.grid_density, young=p.young,
+                                               poisson=p.poisson, friction_angle_deg=26.57))
+    beam = BeamParams(young=p.grid_young, poisson=0.3, radius=p.grid_radius,
+                          normal_cohesion=1e12, shear_cohesion=1e12)
+    grid = geogrid.square_grid(sc, origin=(mid - half, mid - half, z_grid), length=p.grid_width,
+                               width=p.grid_width, nodes_x=p.grid_nodes, nodes_y=p.grid_nodes,
+                               params=beam, material=gmat, density=p.grid_density)
+    sc.max_overlap_ratio = 0.95
+    sc.block_dofs(grid.nodes, "all")
+    t0 = time.perf_counter()
+    grow = prep.grow_to_stress(sc, sample.walls, mean_stress, tol=0.05, unbalanced=0.05,
+                               max_strain=1e-4, max_steps=p.max_steps)
+    log(f"element: {len(r)} grains (r_mean {r_mean * 1e3:.2f} mm), geogrid {p.grid_nodes}x"
+        f"{p.grid_nodes} nodes, J = {grid_axial_stiffness(p) / 1e3:.0f} kN/m; grown to "
+        f"{grow.mean_stress / 1e3:.2f} kPa in {grow.steps} steps, porosity {grow.porosity:.3f}"
+        f" ({time.perf_counter() - t0:.1f} s)")
+    prep.set_friction(sc, np.flatnonzero(measure.sphere_mask(sc)), sc.material(sample.material),
+                      p.friction_deg)
+    sc.block_dofs(grid.nodes, "")
+    if prestressed:
+        pos = sc.positions[grid.nodes]
+        ext = np.asarray(sc.external_forces).copy()
+        f_end = p.prestress * grid_spacing(p)  # N per longitudinal member
+        lo_end = np.isclose(pos[:, 0], mid - half)
+        hi_end = np.isclose(pos[:, 0], mid + half)
+        ext[grid.nodes[lo_end], 0] -= f_end
+        ext[grid.nodes[hi_end], 0] += f_end
+        sc.external_forces = ext
+        log(f"PRS: end nodes of the {int(lo_end.sum())} longitudinal members pulled by "
+            f"{f_end:.1f} N each (T_p = {p.prestress / 1e3:g} kN/m)")
+    return sample, grid
+
+
+SERIES = {"stage": (None, "-"), "step": (None, "-"), "time": (None, "s"),
+          "sigma_x": (None, "Pa"), "sigma_y": (None, "Pa"), "sigma_z": (None, "Pa"),
+          "target_x": (None, "Pa"), "target_y": (None, "Pa"), "target_z": (None, "Pa"),
+          "lx": (None, "m"), "ly": (None, "m"), "lz": (None, "m"),
+          "unbalanced_force": (None, "-"), "grid_force_longitudinal_mean": (None, "N"),
+          "grid_force_transverse_mean": (None, "N")}
+
+
+def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
+                log: Callable[[str], None] = _log) -> dict:
+    """Servo walls to ``targets`` (3,) Pa compression positive: converge within p.tol and
+    p.unbalanced, then hold p.hold_steps steps; returns the max relative error while held."""
+    sc, walls, ctl = sample.scene, sample.walls, sample.controller
+    t = np.asarray(targets, float)
+    for a in range(3):
+        ctl.set_stress(a, float(t[a]))
+    ctl.max_speed = prep.default_max_speed(sc, walls, fraction=4e-4)
+    ctl.enabled = True
+    longi = grid.member_direction == geogrid.LONGITUDINAL
+
+    def record() -> np.ndarray:
+        ax = measure.axis_stresses(sc, walls)
+        size = measure.box_size(sc, walls)
+        f = grid.member_axial_forces(sc)
+        rec(stage=stage, step=sc.step_count, time=sc.time, sigma_x=ax[0], sigma_y=ax[1],
+            sigma_z=ax[2], target_x=t[0], target_y=t[1], target_z=t[2], lx=size[0],
+            ly=size[1], lz=size[2], unbalanced_force=sc.unbalanced_force(),
+            grid_force_longitudinal_mean=float(f[longi].mean()),
+            grid_force_transverse_mean=float(f[~longi].mean()))
+        return ax
+
+    start, last = sc.step_count, time.perf_counter()
+    ok = False
+    while sc.step_count - start < p.max_steps:
+        sc.run(p.record_every)
+        ax = record()
+        err = np.abs(ax - t) / t
+        if time.perf_counter() - last > 5:
+            last = time.perf_counter()
+            log(f"  stage {stage}: step {sc.step_count - start}, walls "
+                f"{np.round(ax / 1e3, 2).tolist()} kPa (targets {np.round(t / 1e3, 2).tolist()}),"
+                f" unbalanced {sc.unbalanced_force():.3g}")
+        if np.all(err <= p.tol) and sc.unbalanced_force() < p.unbalanced:
+            ok = True
+            break
+    steps = sc.step_count - start
+    hold_err = 0.0
+    held = 0
+    while held < p.hold_steps:
+        sc.run(p.record_every)
+        held += p.record_every
+        hold_err = max(hold_err, float(np.max(np.abs(record() - t) / t)))
+    ax = measure.axis_stresses(sc, walls)
+    return {"converged": ok, "steps": steps, "hold_max_rel_error": hold_err,
+            "wall_stresses_pa": ax, "box_size_m": measure.box_size(sc, walls)}
+
+
+def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: str, out: Path,
+                log: Callable[[str], None] = _log) -> dict:
+    """The DEM element driven through ``targets`` (rows of 3, Pa, compression positive).
+
+    Prepared at the first row's mean stress, then servoed to each row in turn. Returns the
+    element summary (plain numbers); writes <label>.h5/.csv and the VTK files."""
+    t_start = time.perf_counter()
+    targets = [np.asarray(t, float) for t in targets]
+    # One thread unless asked: on a shared 2-core machine OpenMP with 2 threads was measured
+    # ~1000x slower than 1 thread for this small scene (oversubscription).
+    set_num_threads(p.threads if p.threads > 0 else 1)
+    (out / "vtk").mkdir(parents=True, exist_ok=True)
+    sample, grid = make_element(p, float(targets[0].mean()), prestressed, log=log)
+    sc, walls = sample.scene, sample.walls
+    meta = {"case": "prs_element", "label": label, "prestressed": prestressed,
+            "units": "SI; stresses compression positive"}
+    h5 = H5Recorder(out / f"{label}.h5", series=SERIES, metadata=meta, overwrite=True,
+                    snapshot_fields=("positions", "radii"))
+    csv = CsvRecorder(out / f"{label}.csv", series=SERIES, overwrite=True)
+
+    def rec(**row) -> None:
+        h5.record(**row)
+        csv.record(**row)
+
+    stages = []
+    try:
+        ref_pos = None
+        for k, t in enumerate(targets):
+            if k == len(targets) - 1:
+                ref_pos = sc.positions.copy()
+                size_before = measure.box_size(sc, walls)
+                stress_before = measure.axis_stresses(sc, walls)
+            st = servo_stage(sample, grid, t, k, p, rec, log=log)
+            stages.append(st)
+            log(f"{label} stage {k}: walls {np.round(st['wall_stresses_pa'] / 1e3, 3).tolist()} "
+                f"kPa for targets {np.round(t / 1e3, 3).tolist()} kPa in {st['steps']} steps "
+                f"({'converged' if st['converged'] else 'NOT converged'}); held within "
+                f"{100 * st['hold_max_rel_error']:.2f} % over {p.hold_steps} steps")
+        h5.snapshot(sc)
+    finally:
+        h5.close()
+        csv.close()
+    size_after = measure.box_size(sc, walls)
+    # Displacement above vs below the geogrid over the last stage (002 §6), m, from the
+    # element centre's frame (the walls move symmetrically about it).
+    mask = measure.sphere_mask(sc)
+    disp = sc.positions - ref_pos
+    z0 = ref_pos[:, 2]
+    zg = 0.5 * (sc.wall_positions[walls[4]] + sc.wall_positions[walls[5]])
+    above = mask & (z0 > zg)
+    below = mask & (z0 < zg)
+    f = grid.member_axial_forces(sc)
+    longi = grid.member_direction == geogrid.LONGITUDINAL
+    write_vtk_spheres(out / "vtk" / f"{label}_spheres.vtp", sc)
+    write_vtk_contacts(out / "vtk" / f"{label}_contacts.vtp", sc)
+    geogrid.write_vtk_geogrid(out / "vtk" / f"{label}_geogrid.vtp", sc, grid)
+    lo = np.array([sc.wall_positions[walls[2 * a]] for a in range(3)])
+    write_vtk_box(out / "vtk" / f"{label}_box.vtp", lo, lo + size_after)
+    strain_inc = (size_before - size_after) / size_before
+    return {
+        "label": label, "prestressed": prestressed,
+        "num_grains": int(np.count_nonzero(mask)),
+        "targets_pa": [t.tolist() for t in targets],
+        "wall_stresses_pa": [s["wall_stresses_pa"].tolist() for s in stages],
+        "converged": [bool(s["converged"]) for s in stages],
+        "servo_steps": [int(s["steps"]) for s in stages],
+        "hold_max_rel_error": max(s["hold_max_rel_error"] for s in stages),
+        "stress_initial_pa": stress_before.tolist(),
+        "stress_final_pa": stages[-1]["wall_stresses_pa"].tolist(),
+        "strain_increment": strain_inc.tolist(),
+        "porosity_final": measure.porosity(sc, walls),
+        "disp_above_grid_mean_m": float(np.linalg.norm(disp[above], axis=1).mean()),
+        "disp_below_grid_mean_m": float(np.linalg.norm(disp[below], axis=1).mean()),
+        "disp_z_above_grid_mean_m": float(disp[above, 2].mean()),
+        "disp_z_below_grid_mean_m": float(disp[below, 2].mean()),
+        "grid_force_longitudinal_mean_n": float(f[longi].mean()),
+        "grid_force_longitudinal_max_n": float(f[longi].max()),
+        "grid_force_transverse_mean_n": float(f[~longi].mean()),
+        "grid_force_longitudinal_cv": float(f[longi].std() / max(abs(f[longi].mean()), 1e-12)),
+        "wall_time_s": time.perf_counter() - t_start,
+    }
