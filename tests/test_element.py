@@ -2,6 +2,7 @@
 cases/prs_element.py): driven from ElementParams alone, it reaches and holds the given wall
 stresses and writes its records, without importing dolfinx."""
 
+import subprocess
 import sys
 
 import numpy as np
@@ -22,6 +23,12 @@ def test_element_from_its_own_parameters_holds_the_targets(tmp_path):
     np.testing.assert_allclose(s["stress_final_pa"], targets[0], rtol=0.01)
     assert (tmp_path / "RE.h5").exists() and (tmp_path / "vtk" / "RE_geogrid.vtp").exists()
     assert any("grown to" in m for m in logged)
-    assert "dolfinx" not in sys.modules
     # J = E pi R^2 / spacing (N/m per metre width).
     assert grid_axial_stiffness(p) == pytest.approx(np.pi * 1e9 * 1e-6 / (0.095 / 9), rel=1e-14)
+
+
+def test_importing_the_element_imports_no_dolfinx():
+    code = "import sys, cpp_dem.element; print('dolfinx' in sys.modules)"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.strip() == "False"
