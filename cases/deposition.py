@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cpp_dem.rundir import check_common_args
 import cpp_dem as dem
 from cpp_dem.measure import interior_porosity, slab_solid_volume, surface_height
 from cpp_dem.output import (CsvRecorder, H5Recorder, PvdWriter, read_h5_series,
@@ -418,6 +419,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     ap.add_argument("--no-early-stop", action="store_true",
                     help="run the full duration even once settled")
     a = ap.parse_args(argv)
+    check_common_args(ap, a)
     p = Params(**SMOKE) if a.smoke else Params()
     if a.n is not None:
         p.n = a.n

@@ -46,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cpp_dem.rundir import begin_run, check_common_args, end_run
 from cpp_dem import element as _element
 from cpp_dem.element import grid_axial_stiffness
 
@@ -307,7 +308,7 @@ def write_report(out: Path, summary: dict) -> None:
 
 def run(p: Params, out: Path) -> dict:
     t_start = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
+    begin_run(out, "prs_element", log=log)
     summary: dict = {"params": {k: v for k, v in asdict(p).items()}, "elements": {}}
     if p.stresses:
         summary["mode"] = "DEM-only (stresses given)"
@@ -349,6 +350,7 @@ def run(p: Params, out: Path) -> dict:
                             dem_stress_pa=e["stress_final_pa"])
     summary["wall_time_total_s"] = time.perf_counter() - t_start
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
+    end_run(out)
     write_report(out, summary)
     for v, e in summary["elements"].items():
         log(f"{v}: walls held within {100 * e['hold_max_rel_error']:.2f} %; |u| above/below "
@@ -449,6 +451,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     ap.add_argument("--seed", type=int, default=d.seed)
     ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: one thread)")
     a = ap.parse_args(argv)
+    check_common_args(ap, a)
     p = Params(**SMOKE) if a.smoke else Params()
     if a.n is not None:
         if a.n < 50:

@@ -35,6 +35,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from cpp_dem.rundir import check_common_args
 import cpp_dem as dem  # noqa: E402
 from cpp_dem import geogrid, prep, presets, pullout  # noqa: E402
 from pullout_common import make_logger, run_case  # noqa: E402
@@ -212,6 +213,7 @@ def parse_args(argv=None) -> tuple[Params, list[int], Path]:
     ap.add_argument("--seed", type=int, default=d.seed)
     ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: default)")
     a = ap.parse_args(argv)
+    check_common_args(ap, a)
     p = Params(**SMOKE) if a.smoke else Params()
     counts = [p.spheres]
     if a.spheres is not None:

@@ -32,6 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from cpp_dem.rundir import check_common_args
 import cpp_dem as dem  # noqa: E402
 from cpp_dem import geogrid, prep, pullout  # noqa: E402
 from cpp_dem.packing import hex_packing  # noqa: E402
@@ -287,6 +288,7 @@ def parse_args(argv=None):
     ap.add_argument("--seed", type=int, default=d.seed)
     ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: default)")
     a = ap.parse_args(argv)
+    check_common_args(ap, a)
     p = Params(**SMOKE) if a.smoke else Params()
     radii = _floats("--radius", a.radius, ap) if a.radius else [p.radius]
     pressures = _floats("--pressure", a.pressure, ap) if a.pressure else [p.pressure]

@@ -12,6 +12,7 @@ import numpy as np
 
 import cpp_dem as dem
 from cpp_dem import geogrid, pullout
+from cpp_dem.rundir import begin_run, end_run
 from cpp_dem.output import (CsvRecorder, H5Recorder, PvdWriter, write_vtk_box,
                             write_vtk_contacts, write_vtk_spheres)
 
@@ -94,7 +95,7 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
     ``before_pull(sample)``, if given, runs between the preparation and the pull (e.g. a
     speed-accuracy preset that applies to the pull only)."""
     t_start = time.perf_counter()
-    out.mkdir(parents=True, exist_ok=True)
+    begin_run(out, tag)
     vtk = out / "vtk"
     vtk.mkdir(exist_ok=True)
     sc = sample.scene
@@ -176,6 +177,7 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
                "particle_steps_per_s_pull": n_grains * pull_steps / t_pull if t_pull else 0,
                "threads": dem.get_num_threads()}
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
+    end_run(out)
     peak = ("initial peak" if summ["initial_peak_found"]
             else "initial peak: none yet (the force has not dropped 10 %); largest force")
     log(f"{peak} {summ['initial_peak_force_N']:.2f} N at "

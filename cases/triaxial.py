@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cpp_dem.rundir import begin_run, check_common_args, end_run
 import cpp_dem as dem
 from cpp_dem import geogrid, measure, prep, psd
 from cpp_dem.checkpoint import save_checkpoint
@@ -98,6 +99,10 @@ def make_sample(p: Params, log) -> tuple:
         d = d * p.grain_scale
         log(f"grain sizes x {p.grain_scale:g} (--grain-scale)")
     n = int(round(psd.expected_count(d, pc, vol_solid, by="mass")))
+    if n < 10:
+        raise SystemExit(f"error: --grain-scale={p.grain_scale:g}: leaves {n} grains in the "
+                         f"{np.round(box, 4).tolist()} m box (at least 10 are needed); use a "
+                         "smaller factor or a larger box")
     radii = psd.radii_from_psd(d, pc, n, by="mass", seed=p.seed)
     shrink = (p.cloud_fraction / p.solid_fraction) ** (1.0 / 3.0)
     c, r = loose_cloud(radii * shrink, (0, 0, 0), box, seed=p.seed)
@@ -277,7 +282,7 @@ def run(p: Params, out: Path) -> dict:
     t_start = time.perf_counter()
     if p.threads > 0:
         dem.set_num_threads(p.threads)
-    out.mkdir(parents=True, exist_ok=True)
+    begin_run(out, "triaxial")
     (out / "vtk").mkdir(exist_ok=True)
 
     def log(msg: str) -> None:
@@ -367,6 +372,7 @@ def run(p: Params, out: Path) -> dict:
         "threads": dem.get_num_threads(),
     }
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    end_run(out)
     log(f"peak q {q_peak / 1e3:.2f} kPa at eps_a {100 * ea[k_peak]:.2f} % (mobilised friction "
         f"{summary['friction_angle_peak_deg']:.1f} deg); final eps_v "
         f"{100 * summary['volumetric_strain_final']:.3f} %; lateral stress within "
@@ -438,6 +444,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     ap.add_argument("--seed", type=int, default=d.seed)
     ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: default)")
     a = ap.parse_args(argv)
+    check_common_args(ap, a)
     p = Params(**SMOKE) if a.smoke else Params()
     if a.n is not None:
         if a.n < 10:

@@ -151,6 +151,9 @@ class ReinforcedSoilBody:
         _pos("length_m", self.length_m)
         _pos("mesh_size_m", self.mesh_size_m)
         _pos("fine_size_m", self.fine_size_m)
+        if self.fine_size_m > self.mesh_size_m:
+            raise FemInputError(f"fine_size_m={self.fine_size_m!r}: must be <= mesh_size_m="
+                                f"{self.mesh_size_m!r} (the fine size refines the mesh)")
         if _real("fine_radius_m", self.fine_radius_m) < 0:
             raise FemInputError(f"fine_radius_m={self.fine_radius_m!r}: must be >= 0")
         object.__setattr__(self, "layers", tuple(self.layers))

@@ -23,6 +23,9 @@ void bind_controllers(py::module_& m) {
       py::name("add_controller"), py::is_method(scene_cls), py::arg("controller"),
       "Adds a controller (run every controller.period steps, before the forces, in the order "
       "added); returns its index. The scene keeps it alive.");
+  scene_cls.attr("controller") = py::cpp_function(
+      [](const Scene& s, int i) { return s.controller(i); }, py::name("controller"),
+      py::is_method(scene_cls), py::arg("index"), "The controller added as number `index`.");
   scene_cls.attr("num_controllers") = py::cpp_function(
       [](const Scene& s) { return s.num_controllers(); }, py::name("num_controllers"),
       py::is_method(scene_cls), "Number of controllers.");
@@ -49,6 +52,23 @@ when `box_walls` (the six walls of Scene.add_box) are given.
       .def_property("max_speed", &ServoWall::max_speed, &ServoWall::set_max_speed,
                     "Velocity cap, m/s.")
       .def_property("gain", &ServoWall::gain, &ServoWall::set_gain, "Gain alpha in (0, 1].")
+      .def("limit_report", [](const ServoWall& c) {
+        py::list out;
+        const LimitWatch& l = c.limit();
+        if (l.count > 0) {
+          py::dict d;
+          d["wall"] = c.wall();
+          d["calls"] = l.count;
+          d["target_pa"] = l.target;
+          d["reached_pa"] = l.reached;
+          d["cap_m_per_s"] = l.cap;
+          out.append(d);
+        }
+        return out;
+      }, "Calls since the last clear at the speed cap while drifting from the target stress "
+         "(off by more than 5 % and growing): a list with one dict (wall, calls, target_pa, "
+         "reached_pa, cap_m_per_s), or empty.")
+      .def("clear_limit_report", &ServoWall::clear_limit)
       .def_property_readonly("wall", &ServoWall::wall)
       .def_property_readonly("area", &ServoWall::area, "Area at the last call, m^2.")
       .def_property_readonly("measured_stress", &ServoWall::measured_stress,
@@ -77,6 +97,29 @@ compression positive, from the box size when the controller first ran (or reset_
       .def_property("max_speed", &TriaxialController::max_speed,
                     &TriaxialController::set_max_speed, "Velocity cap of the servo, m/s.")
       .def_property("gain", &TriaxialController::gain, &TriaxialController::set_gain)
+      .def_property_readonly("effective_max_speed", &TriaxialController::effective_max_speed,
+                             "Cap of the stress-controlled walls now, m/s: max_speed, raised "
+                             "while an axis is strain-rate controlled to |rate| x the longest "
+                             "reference length.")
+      .def("limit_report", [](const TriaxialController& c) {
+        py::list out;
+        for (int k = 0; k < 6; ++k) {
+          const LimitWatch& l = c.limit(k);
+          if (l.count == 0) continue;
+          py::dict d;
+          d["axis"] = std::string(1, "xyz"[k / 2]);
+          d["wall"] = c.walls()[k];
+          d["calls"] = l.count;
+          d["target_pa"] = l.target;
+          d["reached_pa"] = l.reached;
+          d["cap_m_per_s"] = l.cap;
+          out.append(d);
+        }
+        return out;
+      }, "Per stress-controlled wall, calls since the last clear at the speed cap while "
+         "drifting from the target (off by more than 5 % and growing): dicts (axis, wall, "
+         "calls, target_pa, reached_pa, cap_m_per_s).")
+      .def("clear_limit_report", &TriaxialController::clear_limits)
       .def_property_readonly("walls", &TriaxialController::walls)
       .def("strains", [](const TriaxialController& c, const Scene& s) {
         return vec3_np(c.strains(s));

@@ -69,7 +69,14 @@ void bind_scene(py::module_& m) {
            "sense +1 if spheres are on its +axis side, -1 otherwise. Returns its index.")
       .def_property_readonly("num_walls", &Scene::num_walls)
       .def("set_wall_velocity",
-           [](Scene& s, int id, const Array& v) { s.wall(id).velocity = to_vec3(v, "velocity"); },
+           [](Scene& s, int id, const Array& v) {
+             const Vec3 vel = to_vec3(v, "velocity");
+             if (!vel.allFinite())
+               throw ParameterError("velocity=(" + fmt_real(vel[0]) + ", " + fmt_real(vel[1]) +
+                                    ", " + fmt_real(vel[2]) + ") of wall " + std::to_string(id) +
+                                    ": must be finite (m/s)");
+             s.wall(id).velocity = vel;
+           },
            py::arg("wall"), py::arg("velocity"), "Imposed wall velocity (3 values), m/s.")
       .def("set_wall_position",
            [](Scene& s, int id, double x) {
@@ -167,7 +174,7 @@ void bind_scene(py::module_& m) {
       .def_property("local_damping", &Scene::local_damping, &Scene::set_local_damping,
                     "Cundall local non-viscous damping coefficient, -, in [0, 1).")
       .def_property("verlet_margin", &Scene::verlet_margin, &Scene::set_verlet_margin,
-                    "Broad-phase Verlet margin, m (<= 0: 0.2 x mean radius).")
+                    "Broad-phase Verlet margin, m, >= 0 (0: 0.2 x the mean radius, the default).")
       .def_property("max_step_ratio", &Scene::max_step_ratio, &Scene::set_max_step_ratio,
                     "Largest move of a body in one step, in radii (default 1); beyond it the "
                     "step raises BlowUpError (tunnelling).")

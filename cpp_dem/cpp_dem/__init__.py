@@ -41,7 +41,8 @@ from ._core import (  # noqa: F401,E402  (re-exported)
 from .packing import read_packing_csv, write_packing_csv  # noqa: F401
 from ._core import RadiusGrowth, ServoWall, TriaxialController  # noqa: F401  (samples)
 from .checkpoint import load_checkpoint, save_checkpoint  # noqa: F401
-from .scene import BOX_WALLS, Scene, hertz_mindlin_material, linear_material  # noqa: F401
+from .scene import (BOX_WALLS, ControllerLimitWarning, Scene, hertz_mindlin_material,  # noqa: F401
+                    linear_material)
 
 from . import geogrid, packing  # noqa: F401,E402
 
@@ -58,6 +59,7 @@ __all__ = [
     "write_packing_csv",
     "BlowUpError",
     "ContactModel",
+    "ControllerLimitWarning",
     "ContactPhys",
     "Material",
     "ParameterError",

@@ -198,6 +198,10 @@ class Scene:
         """
         Active contacts as arrays (see docs).
         """
+    def controller(self, index: int) -> Controller:
+        """
+        The controller added as number `index`.
+        """
     def critical_dt(self) -> float:
         """
         Critical time-step estimate, s: min over bodies and axes of sqrt(2 m / K) from the current contact stiffnesses; the p-wave estimate before contacts exist; inf when every body is fully blocked.
@@ -493,7 +497,7 @@ class Scene:
     @property
     def verlet_margin(self) -> float:
         """
-        Broad-phase Verlet margin, m (<= 0: 0.2 x mean radius).
+        Broad-phase Verlet margin, m, >= 0 (0: 0.2 x the mean radius, the default).
         """
     @verlet_margin.setter
     def verlet_margin(self, arg1: float) -> None:
@@ -571,6 +575,12 @@ class ServoWall(Controller):
     """
     def __init__(self, *, wall: int, target_stress: float, area: float = 0.0, gain: float = 0.5, max_speed: float, box_walls: collections.abc.Sequence[int] = []) -> None:
         ...
+    def clear_limit_report(self) -> None:
+        ...
+    def limit_report(self) -> list:
+        """
+        Calls since the last clear at the speed cap while drifting from the target stress (off by more than 5 % and growing): a list with one dict (wall, calls, target_pa, reached_pa, cap_m_per_s), or empty.
+        """
     @property
     def area(self) -> float:
         """
@@ -638,9 +648,15 @@ class TriaxialController(Controller):
         """
     def __init__(self, *, walls: collections.abc.Sequence[int], gain: float = 0.5, max_speed: float) -> None:
         ...
+    def clear_limit_report(self) -> None:
+        ...
     def goal(self, axis: int) -> float:
         """
         Target stress (Pa) or strain rate (1/s) of the axis.
+        """
+    def limit_report(self) -> list:
+        """
+        Per stress-controlled wall, calls since the last clear at the speed cap while drifting from the target (off by more than 5 % and growing): dicts (axis, wall, calls, target_pa, reached_pa, cap_m_per_s).
         """
     def mode(self, axis: int) -> str:
         ...
@@ -653,6 +669,11 @@ class TriaxialController(Controller):
     def strains(self, scene: Scene) -> numpy.typing.NDArray[numpy.float64]:
         """
         Engineering strains per axis, -, compression positive.
+        """
+    @property
+    def effective_max_speed(self) -> float:
+        """
+        Cap of the stress-controlled walls now, m/s: max_speed, raised while an axis is strain-rate controlled to |rate| x the longest reference length.
         """
     @property
     def gain(self) -> float:

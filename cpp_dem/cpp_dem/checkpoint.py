@@ -26,27 +26,41 @@ def save_checkpoint(path: str | os.PathLike, scene, *, extra: dict | None = None
 
     blob = _core._checkpoint_save(scene)
     tmp = f"{os.fspath(path)}.tmp"
-    with h5py.File(tmp, "w") as f:
-        f.attrs["format"] = FORMAT
-        f.attrs["step"] = int(scene.step_count)
-        f.attrs["time"] = float(scene.time)
-        f.attrs["extra_json"] = json.dumps(extra or {})
-        g = f.create_group("checkpoint")
-        g.create_dataset("blob", data=np.frombuffer(blob, dtype=np.uint8))
-        r = f.create_group("readable")
-        r.create_dataset("positions", data=np.asarray(scene.positions))
-        r.create_dataset("velocities", data=np.asarray(scene.velocities))
-        r.create_dataset("radii", data=np.asarray(scene.radii))
-        r.create_dataset("wall_positions", data=np.asarray(scene.wall_positions))
-        r.create_dataset("wall_velocities", data=np.asarray(scene.wall_velocities))
-    os.replace(tmp, path)
+    try:
+        with h5py.File(tmp, "w") as f:
+            f.attrs["format"] = FORMAT
+            f.attrs["step"] = int(scene.step_count)
+            f.attrs["time"] = float(scene.time)
+            f.attrs["extra_json"] = json.dumps(extra or {})
+            g = f.create_group("checkpoint")
+            g.create_dataset("blob", data=np.frombuffer(blob, dtype=np.uint8))
+            r = f.create_group("readable")
+            r.create_dataset("positions", data=np.asarray(scene.positions))
+            r.create_dataset("velocities", data=np.asarray(scene.velocities))
+            r.create_dataset("radii", data=np.asarray(scene.radii))
+            r.create_dataset("wall_positions", data=np.asarray(scene.wall_positions))
+            r.create_dataset("wall_velocities", data=np.asarray(scene.wall_velocities))
+        os.replace(tmp, path)
+    except (OSError, RuntimeError) as e:
+        # A full disk or a file-size limit (h5py reports either); nothing partial is left.
+        try:
+            os.unlink(tmp)
+        except OSError:
+            pass
+        raise OSError(f"{os.fspath(path)}: the checkpoint could not be written ({e}); the disk "
+                      "may be full or a file-size limit reached; no partial file was left") from e
 
 
 def load_checkpoint(path: str | os.PathLike, scene) -> dict:
     """Restores the state saved in ``path`` into ``scene``; returns the ``extra`` dict."""
     import h5py
 
-    with h5py.File(path, "r") as f:
+    try:
+        f = h5py.File(path, "r")
+    except OSError as e:
+        raise _core.ParameterError(f"{os.fspath(path)}: not a readable checkpoint (an HDF5 file "
+                                   f"written by save_checkpoint): {e}") from None
+    with f:
         if f.attrs.get("format") != FORMAT:
             raise _core.ParameterError(f"{path}: format {f.attrs.get('format')!r}, expected "
                                        f"{FORMAT!r}")

@@ -129,6 +129,32 @@ def _check_positive(name: str, value: float) -> None:
         raise ParameterError(f"{name}={value}: must be > 0")
 
 
+def _check_count(name: str, value, least: int) -> int:
+    """A whole number >= least, or ParameterError naming the field."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ParameterError(f"{name}={value!r}: must be a whole number >= {least}")
+    if value < least:
+        raise ParameterError(f"{name}={value}: must be >= {least}")
+    return int(value)
+
+
+def _check_origin(origin) -> np.ndarray:
+    try:
+        o = np.asarray(origin, dtype=float)
+    except (TypeError, ValueError):
+        raise ParameterError(f"origin={origin!r}: must be 3 numbers (m)") from None
+    if o.shape != (3,) or not np.all(np.isfinite(o)):
+        raise ParameterError(f"origin={origin!r}: must be 3 finite numbers (m)")
+    return o
+
+
+def _check_members_apart(spacing: float, radius: float, what: str) -> None:
+    """Cylinders of radius R_c whose axes are `spacing` apart must not overlap (2 R_c <)."""
+    if not 2 * radius < spacing:
+        raise ParameterError(f"params.radius={radius}: the members would overlap; 2 x radius "
+                             f"must be < the {what} {spacing:g} m")
+
+
 class _Builder:
     """Accumulates nodes, links, facets and lumped masses, then adds them to the scene."""
 
@@ -232,11 +258,12 @@ def square_grid(scene, *, origin: Sequence[float], length: float, width: float, 
     _check_positive("length", length)
     _check_positive("width", width)
     _check_positive("node_density_scale", node_density_scale)
-    if nodes_x < 2 or nodes_y < 2:
-        raise ParameterError(f"nodes_x={nodes_x}, nodes_y={nodes_y}: need at least 2 each")
-    o = np.asarray(origin, dtype=float)
+    nodes_x = _check_count("nodes_x", nodes_x, 2)
+    nodes_y = _check_count("nodes_y", nodes_y, 2)
+    o = _check_origin(origin)
     b = _Builder(params, _density(unit_weight, density))
     dx, dy = length / (nodes_x - 1), width / (nodes_y - 1)
+    _check_members_apart(min(dx, dy), params.radius, "node spacing")
     ids = {}
     for i in range(nodes_x):
         for j in range(nodes_y):
@@ -275,7 +302,7 @@ def triangular_grid(scene, *, origin: Sequence[float], length: float, width: flo
     ny = int(math.floor(width / h + 1e-9)) + 1
     if nx < 2 or ny < 2:
         raise ParameterError(f"side={side}: too large for a {length} x {width} m grid")
-    o = np.asarray(origin, dtype=float)
+    o = _check_origin(origin)
     b = _Builder(params, _density(unit_weight, density))
     ids = {}
     for j in range(ny):
@@ -321,12 +348,15 @@ def biaxial_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertur
     """
     _check_positive("aperture_area", aperture_area)
     _check_positive("rib_width", rib_width)
-    if apertures_x < 1 or apertures_y < 1:
-        raise ParameterError(f"apertures_x={apertures_x}, apertures_y={apertures_y}: need >= 1")
-    if segments_per_rib < 1:
-        raise ParameterError(f"segments_per_rib={segments_per_rib}: must be >= 1")
-    o = np.asarray(origin, dtype=float)
+    apertures_x = _check_count("apertures_x", apertures_x, 1)
+    apertures_y = _check_count("apertures_y", apertures_y, 1)
+    segments_per_rib = _check_count("segments_per_rib", segments_per_rib, 1)
+    o = _check_origin(origin)
     clear = math.sqrt(aperture_area)
+    if not rib_width < clear:
+        raise ParameterError(f"rib_width={rib_width}: must be < the aperture's side "
+                             f"sqrt(aperture_area) = {clear:g} m (a biaxial geogrid is mostly "
+                             "aperture; 000: 10 mm ribs, 80 mm apertures)")
     pitch = clear + rib_width
     hw = rib_width / 2
     b = _Builder(params, _density(unit_weight, density))

@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import io
 import os
 
 import numpy as np
@@ -26,7 +27,12 @@ def read_packing_csv(path: str | os.PathLike) -> tuple[np.ndarray, np.ndarray]:
 
     Raises ParameterError naming the file, line and problem for bad content.
     """
-    with open(path, encoding="utf-8") as fh:
+    try:
+        text = open(path, encoding="utf-8").read()
+    except UnicodeDecodeError as exc:
+        raise ParameterError(f"{path}: not a text CSV (header x,y,z,r, numbers in m): "
+                             f"{exc.reason} at byte {exc.start}") from None
+    with io.StringIO(text) as fh:
         header = fh.readline().strip().replace(" ", "").lower()
         if header != CSV_HEADER:
             raise ParameterError(f"{path}: header is '{header}', expected '{CSV_HEADER}'")

@@ -18,6 +18,21 @@ _DOF_BITS = {"x": 1, "y": 2, "z": 4, "rx": 8, "ry": 16, "rz": 32}
 BOX_WALLS = ("x-", "x+", "y-", "y+", "z-", "z+")
 
 
+#: The optional law parts a material helper takes (ratios of critical, -).
+LAW_PARTS = ("damping_normal", "damping_shear", "rolling_stiffness", "rolling_friction")
+
+
+def _check_parts(parts: dict) -> None:
+    for key, value in parts.items():
+        if key not in LAW_PARTS:
+            close = [p for p in LAW_PARTS if p[:4] == key[:4]]
+            raise ParameterError(f"{key}={value!r}: not a parameter of the material; allowed: "
+                                 f"{', '.join(LAW_PARTS)}"
+                                 + (f" (did you mean {close[0]}?)" if close else ""))
+        if not isinstance(value, (int, float)) or isinstance(value, bool):
+            raise ParameterError(f"{key}={value!r}: must be a number")
+
+
 def linear_material(*, density: float, young: float, poisson: float,
                     friction_angle_deg: float, **parts: float) -> Material:
     """Material for the linear Cundall–Strack law (000 eqs 1–6). SI units (kg/m^3, Pa, deg).
@@ -25,6 +40,7 @@ def linear_material(*, density: float, young: float, poisson: float,
     ``parts`` are the optional law parts: damping_normal, damping_shear (ratios of critical),
     rolling_stiffness, rolling_friction.
     """
+    _check_parts(parts)
     return Material(model="linear", density=density, young=young, poisson=poisson,
                     friction_angle_deg=friction_angle_deg, **parts)
 
@@ -36,6 +52,9 @@ def hertz_mindlin_material(*, density: float, shear_modulus: float, poisson: flo
     shear_modulus: G, Pa; poisson: nu, -; friction_coefficient: mu = tan(phi), -;
     density: kg/m^3. Young's modulus is E = 2 G (1 + nu).
     """
+    _check_parts(parts)
+    if not (math.isfinite(poisson) and -1 < poisson <= 0.5):
+        raise ParameterError(f"poisson={poisson}: must be in (-1, 0.5]")
     if not (friction_coefficient >= 0 and math.isfinite(friction_coefficient)):
         raise ParameterError(f"friction_coefficient={friction_coefficient}: must be >= 0")
     if not (shear_modulus > 0 and math.isfinite(shear_modulus)):
@@ -43,6 +62,29 @@ def hertz_mindlin_material(*, density: float, shear_modulus: float, poisson: flo
     return Material(model="hertz_mindlin", density=density,
                     young=2.0 * shear_modulus * (1.0 + poisson), poisson=poisson,
                     friction_angle_deg=math.degrees(math.atan(friction_coefficient)), **parts)
+
+
+def _numbers(values, field: str, unit: str) -> np.ndarray:
+    """values as a float array, or ParameterError naming the field."""
+    try:
+        a = np.asarray(values, dtype=float)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{field}={values!r}: must be numbers ({unit})") from None
+    return a
+
+
+def _index(value, field: str) -> int:
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise ParameterError(f"{field}={value!r}: must be a whole number (an index returned by "
+                             "add_material)")
+    return int(value)
+
+
+class ControllerLimitWarning(UserWarning):
+    """A stress-controlled wall drifted from its target at its speed cap during a run (the
+    message names the controller, axis or wall, target, reached stress and cap). Make it an
+    error with ``warnings.simplefilter("error", cpp_dem.ControllerLimitWarning)`` or
+    ``scene.strict_controllers = True``."""
 
 
 class Scene(_core.Scene):
@@ -65,11 +107,29 @@ class Scene(_core.Scene):
 
     # ---- building ------------------------------------------------------------------------
     def add_spheres(self, centers, radii, *, material: int) -> np.ndarray:
-        """Adds spheres with centres (n, 3) in m and radii (n,) in m; returns their ids."""
-        c = np.atleast_2d(np.asarray(centers, dtype=float))
-        r = np.atleast_1d(np.asarray(radii, dtype=float))
+        """Adds spheres with centres (n, 3) in m and radii (n,) in m; returns their ids.
+
+        A sphere whose centre lies behind a wall of the scene (outside the box) is refused:
+        the one-sided wall would never touch it."""
+        c = _numbers(centers, "centers", "m")
+        r = np.atleast_1d(_numbers(radii, "radii", "m"))
+        c = np.atleast_2d(c)
+        material = _index(material, "material")
+        if self.num_walls and len(c) and c.shape[-1] == 3:
+            pos = np.asarray(self.wall_positions)
+            axes, senses = np.asarray(self.wall_axes), np.asarray(self.wall_senses)
+            for w in range(self.num_walls):
+                axis, sense = int(axes[w]), int(senses[w])
+                behind = sense * (c[:, axis] - pos[w]) < 0
+                if np.any(behind):
+                    k = int(np.flatnonzero(behind)[0])
+                    raise ParameterError(
+                        f"centers[{k}]={c[k].tolist()}: behind wall {w} ({'xyz'[axis]} "
+                        f"{'>=' if sense > 0 else '<='} {pos[w]:g} m is inside), outside the "
+                        "walls; move it inside or add the walls after the spheres")
         first = self._add_spheres(c, r, material)
         return np.arange(first, first + len(r))
+
 
     def add_box(self, lo: Sequence[float], hi: Sequence[float], *, material: int) -> list[int]:
         """Adds the six walls of the box [lo, hi] (m), facing inwards.
@@ -115,6 +175,32 @@ class Scene(_core.Scene):
         return " ".join(k for k, bit in _DOF_BITS.items() if mask & bit)
 
     # ---- running ---------------------------------------------------------------------------
+    #: Raise ControllerLimitWarning as an error (see :meth:`_check_controller_limits`).
+    strict_controllers: bool = False
+
+    def _check_controller_limits(self) -> None:
+        """Says which stress-controlled walls drifted from their targets at their speed caps
+        during the steps just run (ControllerLimitWarning; an error with
+        ``strict_controllers``); the watch then starts again."""
+        import warnings
+
+        for i in range(self.num_controllers()):
+            c = self.controller(i)
+            if not hasattr(c, "limit_report"):
+                continue
+            rows = c.limit_report()
+            if not rows:
+                continue
+            c.clear_limit_report()
+            for r in rows:
+                where = f"axis {r['axis']}, wall {r['wall']}" if "axis" in r else f"wall {r['wall']}"
+                msg = (f"controller {i} ({type(c).__name__}, {where}): at its speed cap "
+                       f"{r['cap_m_per_s']:.4g} m/s for {r['calls']} calls while the stress "
+                       f"drifted from the target {r['target_pa']:.6g} Pa to "
+                       f"{r['reached_pa']:.6g} Pa; raise its max_speed or slow the loading")
+                if self.strict_controllers:
+                    raise RuntimeError(msg)
+                warnings.warn(ControllerLimitWarning(msg), stacklevel=3)
     def run(self, steps: int, *, every: int = 0, callback: Callable[["Scene"], None] | None = None,
             progress: bool = False, label: str = "run") -> None:
         """Runs ``steps`` steps in C++.
@@ -122,17 +208,21 @@ class Scene(_core.Scene):
         If ``every`` > 0, the loop returns to Python every ``every`` steps to call
         ``callback(scene)`` (never per contact) and, with ``progress``, to print a line.
         """
+        if isinstance(steps, bool) or not float(steps).is_integer():
+            raise ParameterError(f"steps={steps!r}: must be a whole number of steps")
         steps = int(steps)
         if steps < 0:
             raise ParameterError(f"steps={steps}: must be >= 0")
         if every <= 0:
             self._run(steps)
+            self._check_controller_limits()
             return
         t0 = _time.perf_counter()
         done = 0
         while done < steps:
             n = min(every, steps - done)
             self._run(n)
+            self._check_controller_limits()
             done += n
             if callback is not None:
                 callback(self)

@@ -115,6 +115,7 @@ void ServoWall::apply(Scene& scene) {
   stiffness_ = wall_contact_stiffness(scene, wall_);
   const Real v = servo_speed(target_, sigma_, area_, stiffness_, scene.dt(), period, gain_,
                              max_speed_);
+  limit_.observe(v, max_speed_, sigma_, target_);
   w.velocity.setZero();
   w.velocity[w.axis] = w.sense * v;
 }
@@ -198,6 +199,11 @@ void TriaxialController::set_gain(Real g) {
 void TriaxialController::apply(Scene& scene) {
   if (!l0_set_) reset_strain(scene);
   const Vec3 size = box_size(scene, walls_);
+  const Real cap = effective_max_speed();
+  // The walls are watched for drift at their cap while the box is loaded (an axis under
+  // strain-rate control); a stress-only stage (a preparation) settles as it may.
+  const bool loading = mode_[0] == Mode::StrainRate || mode_[1] == Mode::StrainRate ||
+                       mode_[2] == Mode::StrainRate;
   for (int k = 0; k < 6; ++k) {
     const int a = k / 2;
     Wall& w = scene.wall(walls_[k]);
@@ -206,13 +212,21 @@ void TriaxialController::apply(Scene& scene) {
       v = 0.5 * goal_[a] * l0_[a];
     } else {
       const Real area = box_wall_area(size, k);
-      v = servo_speed(goal_[a], wall_normal_stress(w, area), area,
-                      wall_contact_stiffness(scene, walls_[k]), scene.dt(), period, gain_,
-                      max_speed_);
+      const Real sigma = wall_normal_stress(w, area);
+      v = servo_speed(goal_[a], sigma, area, wall_contact_stiffness(scene, walls_[k]),
+                      scene.dt(), period, gain_, cap);
+      if (loading) limit_[k].observe(v, cap, sigma, goal_[a]);
     }
     w.velocity.setZero();
     w.velocity[w.axis] = w.sense * v;
   }
+}
+
+Real TriaxialController::effective_max_speed() const {
+  Real cap = max_speed_;
+  for (int a = 0; a < 3; ++a)
+    if (mode_[a] == Mode::StrainRate) cap = std::max(cap, std::abs(goal_[a]) * l0_.maxCoeff());
+  return cap;
 }
 
 std::vector<Real> TriaxialController::save_state() const {

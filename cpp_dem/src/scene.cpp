@@ -27,7 +27,8 @@ void Scene::set_local_damping(Real d) {
   local_damping_ = d;
 }
 void Scene::set_verlet_margin(Real m) {
-  require(std::isfinite(m), "verlet_margin", m, "must be finite (m); <= 0 selects the default");
+  require(std::isfinite(m) && m >= 0, "verlet_margin", m,
+          "must be >= 0 (m); 0 selects the default, 0.2 x the mean radius");
   margin_ = m;
   dirty_ = true;
 }
@@ -55,8 +56,10 @@ void Scene::set_auto_timestep(Real safety, int period) {
     throw ParameterError("timestep_period=" + std::to_string(period) + ": must be >= 0 (0 = off)");
   ts_safety_ = safety;
   ts_period_ = period;
+  // Period 0: dt is set once, now, and not updated during the run (the dt check still
+  // watches it); a positive period also sets it now and then every `period` steps.
   const Real est = critical_dt();
-  if (period > 0 && std::isfinite(est)) set_dt(safety * est);
+  if (std::isfinite(est)) set_dt(safety * est);
 }
 
 void Scene::set_dt_check_period(int period) {

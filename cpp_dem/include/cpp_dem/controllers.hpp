@@ -6,7 +6,9 @@
 // Sign convention: stresses are compressive positive (Pa); strains are compressive positive.
 #pragma once
 
+#include <algorithm>
 #include <array>
+#include <cmath>
 #include <vector>
 
 #include "cpp_dem/scene.hpp"
@@ -37,6 +39,48 @@ Real wall_contact_stiffness(const Scene& s, int wall);
 Real servo_speed(Real sigma_target, Real sigma, Real area, Real stiffness, Real dt, int period,
                  Real gain, Real max_speed);
 
+/// A stress-controlled wall that has reached its target and then drifts from it at its
+/// speed cap. Once the stress has been within `tolerance` of the target (the wall holds it),
+/// a run of consecutive calls at the cap is an episode, and a call of an episode whose stress
+/// error has grown by more than `tolerance` x the target since the episode began is counted,
+/// with the target, the reached stress and the cap. (Before the target is first reached, as
+/// while a preparation compacts a loose sample at the cap, nothing is counted; a new target
+/// starts over.) The Python face turns a count into a warning naming them after each run,
+/// or an error if asked.
+struct LimitWatch {
+  static constexpr Real tolerance = 0.05;  ///< relative stress error, -
+  long count = 0;        ///< such calls since the last clear
+  Real target = 0;       ///< Pa, at the last such call
+  Real reached = 0;      ///< Pa, at the last such call
+  Real cap = 0;          ///< m/s, at the last such call
+  bool held = false;     ///< the stress has been within tolerance of the current target
+  Real goal_seen = -1;   ///< the target the watch follows, Pa
+  Real episode_error = -1;  ///< |sigma - goal| when the current episode began, Pa (-1: none)
+  /// Records one call: v the servo's speed (m/s), cap (m/s), sigma and goal (Pa).
+  void observe(Real v, Real cap_speed, Real sigma, Real goal) {
+    if (goal != goal_seen) {  // a new target: start over
+      goal_seen = goal;
+      held = false;
+      episode_error = -1;
+    }
+    const Real err = std::abs(sigma - goal);
+    const Real band = tolerance * std::max(std::abs(goal), 1.0);
+    if (err <= band) held = true;
+    if (!(std::abs(v) >= cap_speed * (1 - 1e-12))) {
+      episode_error = -1;  // below the cap: the episode ends
+      return;
+    }
+    if (episode_error < 0) episode_error = err;
+    if (held && err > episode_error + band) {
+      ++count;
+      target = goal;
+      reached = sigma;
+      cap = cap_speed;
+    }
+  }
+  void clear() { count = 0; }
+};
+
 /// One wall driven to a target normal stress by its velocity (the other walls are not
 /// touched). The area is fixed (m^2) or, when `box_walls` holds the six walls of a box (order
 /// x-, x+, y-, y+, z-, z+), recomputed every call from the current box dimensions.
@@ -62,8 +106,12 @@ class ServoWall : public Controller {
   Real measured_stress() const { return sigma_; }
   /// Contact stiffness measured at the last call, N/m.
   Real stiffness() const { return stiffness_; }
+  /// Calls at the speed cap while off the target (see LimitWatch).
+  const LimitWatch& limit() const { return limit_; }
+  void clear_limit() { limit_.clear(); }
 
  private:
+  LimitWatch limit_;
   int wall_;
   Real target_, area0_, gain_, max_speed_;
   std::vector<int> box_;
@@ -106,6 +154,18 @@ class TriaxialController : public Controller, public StatefulController {
   Vec3 reference_lengths() const { return l0_; }
   /// Takes the current box dimensions as the reference L0 (zero strain).
   void reset_strain(const Scene& s);
+  /// The cap the stress-controlled walls get, m/s: max_speed, raised while an axis is
+  /// strain-rate controlled to |rate| x the longest reference length, so the lateral walls
+  /// can follow the deformation the loading drives (a lateral strain rate up to the axial
+  /// one) instead of lagging behind at a cap set for the preparation.
+  Real effective_max_speed() const;
+  /// Per wall k (0..5, x-, x+, y-, y+, z-, z+; axis k / 2): calls at the cap while
+  /// drifting from the target (see LimitWatch), watched while an axis is under strain-rate
+  /// control (the box is loaded).
+  const LimitWatch& limit(int k) const { return limit_.at(k); }
+  void clear_limits() {
+    for (auto& l : limit_) l.clear();
+  }
 
   std::vector<Real> save_state() const override;
   void load_state(const std::vector<Real>& st) override;
@@ -117,6 +177,7 @@ class TriaxialController : public Controller, public StatefulController {
   Vec3 goal_ = Vec3::Zero();
   Vec3 l0_ = Vec3::Zero();
   bool l0_set_ = false;
+  std::array<LimitWatch, 6> limit_{};
 };
 
 /// Radius growth under stress control (001 §4.3.1; the expansion of REFD, 000 §2.3): every

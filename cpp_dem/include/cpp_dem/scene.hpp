@@ -174,7 +174,7 @@ class Scene {
   void set_gravity(const Vec3& g);
   Real local_damping() const { return local_damping_; }
   void set_local_damping(Real d);
-  /// Verlet margin of the broad phase, m. <= 0 means 0.2 x the mean radius (default).
+  /// Verlet margin of the broad phase, m, >= 0; 0 means 0.2 x the mean radius (default).
   Real verlet_margin() const { return margin_; }
   void set_verlet_margin(Real m);
   Real max_overlap_ratio() const { return max_overlap_ratio_; }
@@ -190,7 +190,8 @@ class Scene {
   void set_max_step_ratio(Real r);
   bool track_energy() const { return track_energy_; }
   void set_track_energy(bool on);
-  /// Automatic time step: every `period` steps dt = safety x critical_dt(). period 0 = off.
+  /// Automatic time step: dt = safety x critical_dt() now and, with period > 0, again every
+  /// `period` steps; period 0 sets it once (it is not updated during the run).
   void set_auto_timestep(Real safety, int period);
   Real timestep_safety() const { return ts_safety_; }
   int timestep_period() const { return ts_period_; }
@@ -369,7 +370,7 @@ class Scene {
   Real dt_ = 1e-6;
   Vec3 gravity_ = Vec3::Zero();
   Real local_damping_ = 0;
-  Real margin_ = -1;
+  Real margin_ = 0;  // 0: the default, 0.2 x the mean radius
   Real max_overlap_ratio_ = 0.5;
   Real max_step_ratio_ = 1.0;
   // Smallest radius of a body, m (-1: not known yet; set by rebuild and set_radii, not saved).
