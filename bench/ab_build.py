@@ -162,16 +162,17 @@ def make_scene(kind: str, n: int):
     return scene
 
 
-def pullout_scene():
-    """The smoke pull-out of cases/pullout_000.py, prepared; returns (scene, pull)."""
+def pullout_scene(root: Path = ROOT):
+    """The smoke pull-out of `root`/cases/pullout_000.py (each build runs its own revision's
+    case), prepared; returns (scene, pull)."""
     import importlib.util
 
     from cpp_dem import pullout
 
-    spec = importlib.util.spec_from_file_location("pullout_000", ROOT / "cases" / "pullout_000.py")
+    spec = importlib.util.spec_from_file_location("pullout_000", root / "cases" / "pullout_000.py")
     case = importlib.util.module_from_spec(spec)
     sys.modules["pullout_000"] = case  # (its dataclasses look their module up)
-    sys.path.insert(0, str(ROOT / "cases"))
+    sys.path.insert(0, str(root / "cases"))
     spec.loader.exec_module(case)
     p, _, _ = case.parse_args(["--smoke"])
     sample = case.build(p)
@@ -192,7 +193,8 @@ def worker(cfg: dict) -> dict:
 
     dem.set_num_threads(cfg["threads"])
     if cfg["scene"] == "pullout":
-        scene, advance = pullout_scene()
+        root = Path(cfg["overlay"]).parent / "src" if cfg["overlay"] else ROOT
+        scene, advance = pullout_scene(root)
     else:
         scene = make_scene(cfg["scene"], cfg["n"])
         advance = scene.run

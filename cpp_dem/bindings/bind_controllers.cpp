@@ -2,7 +2,7 @@
 #include <pybind11/stl.h>
 
 #include "convert.hpp"
-#include "cpp_dem/controllers.hpp"
+#include "cpp_dem/control/controllers.hpp"
 
 namespace cpp_dem::bind {
 

@@ -33,9 +33,9 @@ py::dict contacts_dict(const Scene& s) {
     ids.push_back(s.id_of(c.kind == ContactKind::Pair ? c.body1 : c.body2));
     ids.push_back(c.kind == ContactKind::Pair ? s.id_of(c.body2) : -1 - c.other);
     force.push_back(c.force2);
-    normal.push_back(c.state.normal);
-    overlap.push_back(c.state.overlap);
-    fn.push_back(c.state.fn);
+    normal.push_back(c.state->normal);
+    overlap.push_back(c.state->overlap);
+    fn.push_back(c.state->fn);
   });
   py::array_t<int> id_arr({static_cast<py::ssize_t>(fn.size()), py::ssize_t(2)});
   if (!ids.empty()) std::memcpy(id_arr.mutable_data(), ids.data(), ids.size() * sizeof(int));

@@ -4,7 +4,7 @@
 #include <string>
 #include <type_traits>
 
-#include "cpp_dem/controllers.hpp"
+#include "cpp_dem/control/controllers.hpp"
 
 namespace cpp_dem {
 

@@ -254,6 +254,9 @@ class Scene {
   /// walk of the contact containers for measurements, stiffness and output.
   template <class F>
   void for_each_contact(F&& f) const;
+  /// for_each_contact over one container only (ContactKind::Pair, Wall or Grid).
+  template <class F>
+  void for_each_contact_of(ContactKind kind, F&& f) const;
 
  private:
   friend class Checkpoint;  // exact save/restore of the whole state (checkpoint.cpp)
@@ -396,49 +399,58 @@ class Scene {
 
 template <class F>
 void Scene::for_each_contact(F&& f) const {
+  for_each_contact_of(ContactKind::Pair, f);
+  for_each_contact_of(ContactKind::Wall, f);
+  for_each_contact_of(ContactKind::Grid, f);
+}
+
+template <class F>
+void Scene::for_each_contact_of(ContactKind kind, F&& f) const {
   ContactRecord r;
-  r.kind = ContactKind::Pair;
-  for (size_t k = 0; k < pairs_.size(); ++k) {
-    const PairContact& c = pairs_[k];
-    r.index = static_cast<long>(k);
-    r.active = c.active;
-    r.body1 = c.i;
-    r.body2 = c.j;
-    r.phys = &pair_cold_[k].phys;
-    r.state = pair_state(k);
-    r.force2 = pair_out_[pair_jslot_[k]].force;
-    r.arm1 = bodies_.radius[c.i] - 0.5 * c.overlap;
-    r.arm2 = bodies_.radius[c.j] - 0.5 * c.overlap;
-    f(static_cast<const ContactRecord&>(r));
-  }
-  r.kind = ContactKind::Wall;
-  r.body1 = -1;
-  r.arm1 = 0;
-  for (size_t k = 0; k < wall_contacts_.size(); ++k) {
-    const WallContact& c = wall_contacts_[k];
-    r.index = static_cast<long>(k);
-    r.active = c.active;
-    r.body2 = c.body;
-    r.other = c.wall;
-    r.phys = &c.phys;
-    r.state = c.state;
-    r.force2 = c.force;
-    r.arm2 = bodies_.radius[c.body] - 0.5 * c.state.overlap;
-    f(static_cast<const ContactRecord&>(r));
-  }
-  r.kind = ContactKind::Grid;
-  for (size_t k = 0; k < grid_contacts_.size(); ++k) {
-    const GridContact& c = grid_contacts_[k];
-    r.index = static_cast<long>(k);
-    r.active = c.active;
-    r.body2 = c.sphere;
-    r.other = c.prim;
-    r.phys = &c.phys;
-    r.state = c.state;
-    r.force2 = c.force;
-    r.arm1 = c.rc - 0.5 * c.state.overlap;
-    r.arm2 = bodies_.radius[c.sphere] - 0.5 * c.state.overlap;
-    f(static_cast<const ContactRecord&>(r));
+  r.kind = kind;
+  if (kind == ContactKind::Pair) {
+    ContactState scratch;
+    r.state = &scratch;
+    for (size_t k = 0; k < pairs_.size(); ++k) {
+      const PairContact& c = pairs_[k];
+      r.index = static_cast<long>(k);
+      r.active = c.active;
+      r.body1 = c.i;
+      r.body2 = c.j;
+      r.phys = &pair_cold_[k].phys;
+      scratch = pair_state(k);
+      r.force2 = pair_out_[pair_jslot_[k]].force;
+      r.arm1 = bodies_.radius[c.i] - 0.5 * c.overlap;
+      r.arm2 = bodies_.radius[c.j] - 0.5 * c.overlap;
+      f(static_cast<const ContactRecord&>(r));
+    }
+  } else if (kind == ContactKind::Wall) {
+    for (size_t k = 0; k < wall_contacts_.size(); ++k) {
+      const WallContact& c = wall_contacts_[k];
+      r.index = static_cast<long>(k);
+      r.active = c.active;
+      r.body2 = c.body;
+      r.other = c.wall;
+      r.phys = &c.phys;
+      r.state = &c.state;
+      r.force2 = c.force;
+      r.arm2 = bodies_.radius[c.body] - 0.5 * c.state.overlap;
+      f(static_cast<const ContactRecord&>(r));
+    }
+  } else {
+    for (size_t k = 0; k < grid_contacts_.size(); ++k) {
+      const GridContact& c = grid_contacts_[k];
+      r.index = static_cast<long>(k);
+      r.active = c.active;
+      r.body2 = c.sphere;
+      r.other = c.prim;
+      r.phys = &c.phys;
+      r.state = &c.state;
+      r.force2 = c.force;
+      r.arm1 = c.rc - 0.5 * c.state.overlap;
+      r.arm2 = bodies_.radius[c.sphere] - 0.5 * c.state.overlap;
+      f(static_cast<const ContactRecord&>(r));
+    }
   }
 }
 

@@ -40,14 +40,14 @@ Real Scene::critical_dt_body(int* arg_body) const {
     Real kn, ks;
     c.stiffness(kn, ks);
     const Real krol = c.phys->kr;
-    if (c.body1 >= 0) add(c.body1, c.state.normal, kn, ks, c.arm1, krol);
-    add(c.body2, c.state.normal, kn, ks, c.arm2, krol);
+    if (c.body1 >= 0) add(c.body1, c.state->normal, kn, ks, c.arm1, krol);
+    add(c.body2, c.state->normal, kn, ks, c.arm2, krol);
     if (c.kind == ContactKind::Grid) {
       // The virtual sphere's share goes to the primitive's nodes by their weights.
       const GridContact& g = grid_contacts_[c.index];
       for (int i = 0; i < g.nnodes; ++i)
         if (g.w[i] > 0)
-          add(g.node[i], c.state.normal, g.w[i] * kn, g.w[i] * ks, g.rc, g.w[i] * krol);
+          add(g.node[i], c.state->normal, g.w[i] * kn, g.w[i] * ks, g.rc, g.w[i] * krol);
     }
   });
   for (const GridLink& l : links_) {
@@ -102,8 +102,8 @@ Energies Scene::energies() const {
   e.friction = dropped_friction_;
   e.viscous = dropped_viscous_;
   for_each_contact([&e](const ContactRecord& c) {
-    e.friction += c.state.dissip_friction;
-    e.viscous += c.state.dissip_viscous;
+    e.friction += c.state->dissip_friction;
+    e.viscous += c.state->dissip_viscous;
   });
   e.plastic = dropped_plastic_;
   for (const GridLink& l : links_) e.plastic += l.dissip_plastic;

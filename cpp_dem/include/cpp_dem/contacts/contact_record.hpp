@@ -23,15 +23,17 @@ struct ContactRecord {
   int body2 = -1;        ///< storage slot of side 2
   int other = -1;        ///< the wall's index, or the grid contact's primitive (-1 for a pair)
   const ContactPhys* phys = nullptr;  ///< its law's parameters
-  ContactState state;    ///< its history: springs, normal, overlap, f_n, dissipation
+  /// Its history (springs, normal, overlap, f_n, dissipation): the container's record, or for
+  /// a pair contact (stored in a hot and a cold part) a copy valid during the visit.
+  const ContactState* state = nullptr;
   Vec3 force2 = Vec3::Zero();  ///< force on side 2 in the last step, N
   Real arm1 = 0;         ///< branch length of side 1, m (a wall: 0; a virtual sphere: R_c - d/2)
   Real arm2 = 0;         ///< branch length of side 2, R - overlap/2, m
 
   /// Tangent stiffnesses at the current overlap, N/m.
-  void stiffness(Real& kn, Real& ks) const { tangent_stiffness(*phys, state.overlap, kn, ks); }
+  void stiffness(Real& kn, Real& ks) const { tangent_stiffness(*phys, state->overlap, kn, ks); }
   /// Energy stored in the contact's springs, J (0 when not active).
-  Real elastic_energy() const { return active ? contact_elastic_energy(*phys, state) : 0.0; }
+  Real elastic_energy() const { return active ? contact_elastic_energy(*phys, *state) : 0.0; }
 };
 
 }  // namespace cpp_dem

@@ -1,4 +1,4 @@
-#include "cpp_dem/controllers.hpp"
+#include "cpp_dem/control/controllers.hpp"
 
 #include <algorithm>
 #include <cmath>
@@ -47,12 +47,12 @@ Real wall_normal_stress(const Wall& w, Real area) {
 
 Real wall_contact_stiffness(const Scene& s, int wall) {
   Real k = 0;
-  for (const WallContact& c : s.wall_contacts()) {
-    if (!c.active || c.wall != wall) continue;
+  s.for_each_contact_of(ContactKind::Wall, [&](const ContactRecord& c) {
+    if (!c.active || c.other != wall) return;
     Real kn, ks;
-    tangent_stiffness(c.phys, c.state.overlap, kn, ks);
+    c.stiffness(kn, ks);
     k += kn;
-  }
+  });
   return k;
 }
 
@@ -288,20 +288,19 @@ void RadiusGrowth::apply(Scene& scene) {
   const auto& r = scene.radii();
   // Stress increase per unit radius strain from the current contacts, Pa.
   Real s = 0;
-  for (size_t k = 0; k < scene.pair_contacts().size(); ++k) {
-    const PairContact& c = scene.pair_contacts()[k];
-    if (!c.active) continue;
+  scene.for_each_contact_of(ContactKind::Pair, [&](const ContactRecord& c) {
+    if (!c.active) return;
     Real kn, ks;
-    tangent_stiffness(scene.pair_phys(k), c.overlap, kn, ks);
-    const Real l = r[c.i] + r[c.j];
+    c.stiffness(kn, ks);
+    const Real l = r[c.body1] + r[c.body2];
     s += kn * l * l;
-  }
-  for (const WallContact& c : scene.wall_contacts()) {
-    if (!c.active) continue;
+  });
+  scene.for_each_contact_of(ContactKind::Wall, [&](const ContactRecord& c) {
+    if (!c.active) return;
     Real kn, ks;
-    tangent_stiffness(c.phys, c.state.overlap, kn, ks);
-    s += kn * r[c.body] * r[c.body];
-  }
+    c.stiffness(kn, ks);
+    s += kn * r[c.body2] * r[c.body2];
+  });
   s /= volume;
   Real m = s > 0 ? 1.0 + gain_ * (target_ - sigma_) / s : 1.0 + max_strain_;
   m = std::clamp(m, 1.0 - max_strain_, 1.0 + max_strain_);
