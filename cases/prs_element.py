@@ -48,37 +48,16 @@ import numpy as np
 
 from cpp_dem.rundir import begin_run, check_common_args, end_run
 from cpp_dem import element as _element
-from cpp_dem.element import grid_axial_stiffness
+from cpp_dem.element import ElementParams, grid_axial_stiffness
 
 ROOT = Path(__file__).resolve().parents[1]
 
 
 @dataclass
-class Params:
-    """Parameters of the PRS element case (SI)."""
+class Params(ElementParams):
+    """Parameters of the PRS element case (SI): the DEM element's (cpp_dem.element.
+    ElementParams: grains, geogrid, servo) and the FEM structure's and coupling's below."""
 
-    # --- DEM element ---
-    n: int = 2000                    #: number of grains, -
-    edge: float = 0.1                #: element edge length, m (002)
-    seed: int = 1                    #: RNG seed, -
-    radius_spread: float = 0.2       #: radii uniform in r_mean (1 +- spread), -
-    young: float = 50e6              #: grain Young's modulus (linear law), Pa
-    poisson: float = 0.23            #: k_s / k_n, - (002 Table 1: 9.0e5 / 3.9e6)
-    friction_deg: float = 38.66      #: grain friction, deg (002 Table 1: mu = 0.8)
-    prep_friction_deg: float = 20.0  #: friction during radius growth, deg (denser sample)
-    density: float = 2640.0          #: grain density, kg/m^3 (002 Table 1)
-    damping: float = 0.7             #: Cundall local damping, - (002 uses 0.9 quasi-static)
-    grid_nodes: int = 10             #: nodes per side of the square grid, -
-    grid_width: float = 0.095        #: grid width, m (001 §5.1)
-    grid_radius: float = 1e-3        #: member (cylinder) radius, m
-    grid_young: float = 1e9          #: member Young's modulus, Pa (J = E pi R^2 / spacing)
-    grid_density: float = 1030.0     #: geogrid density, kg/m^3 (002 Table 2, detailed)
-    prestress: float = 2000.0        #: PRS prestress T_p, N/m (per metre of grid width)
-    tol: float = 0.005               #: servo convergence, relative, -
-    unbalanced: float = 0.02         #: servo convergence, unbalanced force, -
-    hold_steps: int = 2000           #: steps the walls must then hold the targets within 1 %
-    max_steps: int = 400_000         #: per servo stage
-    record_every: int = 200          #: steps between records
     # --- FEM structure (plane strain) ---
     fem_width: float = 4.0           #: half width of the modelled fill, m
     fem_height: float = 3.0          #: height of the fill, m
@@ -101,7 +80,6 @@ class Params:
     two_way_tol: float = 0.02
     max_iterations: int = 8
     workers: int = 1
-    threads: int = 0
     stresses: list = field(default_factory=list)  #: DEM-only targets (rows of 3), Pa
     prs: bool = False                #: DEM-only: prestress the grid (else RE)
 

@@ -10,6 +10,21 @@ namespace {
 py::array_t<double> vec3_np(const Vec3& v) { return vec3_array({v}).attr("reshape")(3); }
 }  // namespace
 
+namespace {
+/// A LimitWatch as the dict of limit_report(): wall, axis (when given), calls, target_pa,
+/// reached_pa, cap_m_per_s.
+py::dict limit_dict(const LimitWatch& l, int wall, const std::string& axis) {
+  py::dict d;
+  if (!axis.empty()) d["axis"] = axis;
+  d["wall"] = wall;
+  d["calls"] = l.count;
+  d["target_pa"] = l.target;
+  d["reached_pa"] = l.reached;
+  d["cap_m_per_s"] = l.cap;
+  return d;
+}
+}  // namespace
+
 void bind_controllers(py::module_& m) {
   py::class_<Controller, std::shared_ptr<Controller>>(m, "Controller",
       "Base of the controllers the step loop runs every `period` steps (before the forces).")
@@ -54,16 +69,7 @@ when `box_walls` (the six walls of Scene.add_box) are given.
       .def_property("gain", &ServoWall::gain, &ServoWall::set_gain, "Gain alpha in (0, 1].")
       .def("limit_report", [](const ServoWall& c) {
         py::list out;
-        const LimitWatch& l = c.limit();
-        if (l.count > 0) {
-          py::dict d;
-          d["wall"] = c.wall();
-          d["calls"] = l.count;
-          d["target_pa"] = l.target;
-          d["reached_pa"] = l.reached;
-          d["cap_m_per_s"] = l.cap;
-          out.append(d);
-        }
+        if (c.limit().count > 0) out.append(limit_dict(c.limit(), c.wall(), ""));
         return out;
       }, "Calls since the last clear at the speed cap while drifting from the target stress "
          "(off by more than 5 % and growing): a list with one dict (wall, calls, target_pa, "
@@ -103,18 +109,9 @@ compression positive, from the box size when the controller first ran (or reset_
                              "reference length.")
       .def("limit_report", [](const TriaxialController& c) {
         py::list out;
-        for (int k = 0; k < 6; ++k) {
-          const LimitWatch& l = c.limit(k);
-          if (l.count == 0) continue;
-          py::dict d;
-          d["axis"] = std::string(1, "xyz"[k / 2]);
-          d["wall"] = c.walls()[k];
-          d["calls"] = l.count;
-          d["target_pa"] = l.target;
-          d["reached_pa"] = l.reached;
-          d["cap_m_per_s"] = l.cap;
-          out.append(d);
-        }
+        for (int k = 0; k < 6; ++k)
+          if (c.limit(k).count > 0)
+            out.append(limit_dict(c.limit(k), c.walls()[k], std::string(1, "xyz"[k / 2])));
         return out;
       }, "Per stress-controlled wall, calls since the last clear at the speed cap while "
          "drifting from the target (off by more than 5 % and growing): dicts (axis, wall, "
