@@ -38,6 +38,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cpp_dem.io.figures import save_figure
 from cpp_dem.rundir import check_common_args
 import cpp_dem as dem
 from cpp_dem.measure import interior_porosity, slab_solid_volume, surface_height
@@ -213,7 +214,7 @@ def plot_energies(h5_path: Path, png_path: Path) -> None:
     ax2.legend(fontsize=8)
     ax2.grid(True, which="major", alpha=0.3)
     fig.tight_layout()
-    fig.savefig(png_path, dpi=120)
+    save_figure(fig, png_path)
     plt.close(fig)
 
 
@@ -225,7 +226,7 @@ def plot_energies(h5_path: Path, png_path: Path) -> None:
 def clean_outputs(out: Path) -> None:
     """Removes the files a previous run of this case wrote in ``out`` (only those)."""
     for name in ("deposition.h5", "deposition.csv", "deposition.pvd", "contacts.pvd",
-                 "energies.png", "packing.csv", "summary.json"):
+                 "energies.png", "energies.pdf", "packing.csv", "summary.json"):
         (out / name).unlink(missing_ok=True)
     vtk = out / "vtk"
     if vtk.is_dir():

@@ -46,6 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cpp_dem.io.figures import save_figure
 from cpp_dem.rundir import begin_run, check_common_args, end_run
 from cpp_dem import element as _element
 from cpp_dem.element import ElementParams, grid_axial_stiffness
@@ -205,7 +206,7 @@ def plot_fem(m, png: Path, title: str) -> None:
     ax.legend(loc="lower right")
     ax.set_title(title)
     fig.tight_layout()
-    fig.savefig(png, dpi=110)
+    save_figure(fig, png)
     plt.close(fig)
 
 

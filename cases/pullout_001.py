@@ -32,6 +32,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 
+from cpp_dem.io.figures import save_figure
 from cpp_dem.rundir import check_common_args
 import cpp_dem as dem  # noqa: E402
 from cpp_dem import geogrid, prep, pullout  # noqa: E402
@@ -242,7 +243,7 @@ def write_study(rows: list, out: Path) -> None:
         a.grid(alpha=0.3)
         a.legend(fontsize=7)
     fig.tight_layout()
-    fig.savefig(out / "study.png", dpi=110)
+    save_figure(fig, out / "study.png")
     plt.close(fig)
 
 

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cpp_dem.io.figures import save_figure
 import cpp_dem as dem
 from cpp_dem import geogrid, pullout
 from cpp_dem.rundir import begin_run, end_run
@@ -69,7 +70,7 @@ def plot_pull(rec: dict, png_force: Path, png_members: Path, title: str,
         a.grid(alpha=0.3)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(png_force, dpi=110)
+    save_figure(fig, png_force)
     plt.close(fig)
 
     fig, ax = plt.subplots(1, 2, figsize=(12, 4.2))
@@ -83,7 +84,7 @@ def plot_pull(rec: dict, png_force: Path, png_members: Path, title: str,
         a.grid(alpha=0.3)
     fig.suptitle(title)
     fig.tight_layout()
-    fig.savefig(png_members, dpi=110)
+    save_figure(fig, png_members)
     plt.close(fig)
 
 

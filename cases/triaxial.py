@@ -32,6 +32,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cpp_dem.io.figures import save_figure
 from cpp_dem.rundir import begin_run, check_common_args, end_run
 import cpp_dem as dem
 from cpp_dem import geogrid, measure, prep, psd
@@ -181,7 +182,7 @@ def plot(rows: dict, png: Path, p: Params) -> None:
     fig.suptitle(f"Triaxial test, cell pressure {p.cell_pressure / 1e3:g} kPa, "
                  f"E = {p.young / 1e6:g} MPa, phi = {p.phi:g} deg")
     fig.tight_layout()
-    fig.savefig(png, dpi=110)
+    save_figure(fig, png)
     plt.close(fig)
 
 

@@ -130,9 +130,11 @@ def coordination_number(scene, *, mechanical: bool = False) -> float:
 
 
 def sample_state(scene, walls) -> dict:
-    """The usual numbers of a confined sample: wall and axis stresses (Pa), mean stress p
-    (Pa), deviator q = sigma_z - (sigma_x + sigma_y) / 2 (Pa), Love–Weber tensor (Pa),
-    porosity (-), coordination numbers (-), unbalanced force (-), box size (m)."""
+    """The usual numbers of a confined sample, by key: ``wall_stresses`` (6, Pa),
+    ``axis_stresses`` (3, Pa), ``mean_stress`` (p, Pa), ``deviator_stress``
+    (q = sigma_z - (sigma_x + sigma_y) / 2, Pa), ``love_weber`` (3 x 3, Pa), ``porosity`` (-),
+    ``coordination`` and ``coordination_mechanical`` (-), ``unbalanced_force`` (-),
+    ``box_size`` (3, m). Stresses compression positive."""
     ax = axis_stresses(scene, walls)
     vol = box_volume(scene, walls)
     return {

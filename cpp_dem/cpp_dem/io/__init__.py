@@ -28,9 +28,13 @@ Recorders (append as the run goes, flush after every record):
   :func:`read_csv_series` read the files back.
 """
 
+from . import foreign  # noqa: F401  (Yade, LIGGGHTS, PFC packing files)
 from .csvfile import CsvRecorder, read_csv_series
 from .hdf5 import H5Recorder, read_h5_series, read_h5_snapshot
 from .series import SNAPSHOT_FIELDS, NonFiniteValueError, standard_series
+from .figures import save_figure
+from .foreign import (read_liggghts_box, read_liggghts_data, read_pfc_balls, read_yade_text,
+                      write_liggghts_data, write_pfc_balls, write_yade_text)
 from .vtk import PvdWriter, write_vtk_box, write_vtk_contacts, write_vtk_spheres, write_vtp
 
 __all__ = [
@@ -40,6 +44,14 @@ __all__ = [
     "H5Recorder",
     "PvdWriter",
     "read_csv_series",
+    "read_liggghts_box",
+    "read_liggghts_data",
+    "read_pfc_balls",
+    "read_yade_text",
+    "save_figure",
+    "write_liggghts_data",
+    "write_pfc_balls",
+    "write_yade_text",
     "read_h5_series",
     "read_h5_snapshot",
     "standard_series",
