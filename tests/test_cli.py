@@ -100,3 +100,16 @@ def test_sweep_file_errors_name_the_field(tmp_path):
     f.write_text('case = "triaxial"\n[sweep]\nseed = [1]\n')
     r = cli("sweep", f)
     assert r.returncode != 0 and "field 'out' is missing" in r.stderr
+
+
+def test_scene_run_progress_prints_an_eta(capsys):
+    import cpp_dem as dem
+
+    s = dem.Scene()
+    m = s.add_material(dem.linear_material(density=2650, young=1e7, poisson=0.3,
+                                           friction_angle_deg=30))
+    s.add_spheres([[0, 0, 0]], [0.005], material=m)
+    s.dt = 1e-5
+    s.run(100, every=50, progress=True, label="demo")
+    out = capsys.readouterr().out
+    assert "[demo] step 50/100" in out and "ETA" in out

@@ -228,7 +228,8 @@ class Scene(_core.Scene):
                 callback(self)
             if progress:
                 el = _time.perf_counter() - t0
+                eta = el / done * (steps - done)
                 print(f"[{label}] step {done}/{steps}  t={self.time:.4g} s  dt={self.dt:.3g} s  "
                       f"contacts={self.num_active_contacts}  "
-                      f"unbalanced={self.unbalanced_force():.3g}  wall {el:.1f} s",
-                      file=sys.stdout, flush=True)
+                      f"unbalanced={self.unbalanced_force():.3g}  wall {el:.1f} s  "
+                      f"ETA {eta:.1f} s", file=sys.stdout, flush=True)
