@@ -302,7 +302,8 @@ def run(p: Params, out: Path) -> dict:
         f"{inertial_number(sc, p):.2g} (quasi-static below ~1e-3)")
     state_iso = measure.sample_state(sc, walls)
     save_checkpoint(out / "isotropic.h5", sc, extra={"walls": list(walls)})
-    dem.write_packing_csv(out / "packing_isotropic.csv", sc.positions, sc.radii)
+    grains = measure.sphere_mask(sc)  # grains only: never the geogrid's nodes
+    dem.write_packing_csv(out / "packing_isotropic.csv", sc.positions[grains], sc.radii[grains])
     write_vtk_spheres(out / "vtk" / "spheres_isotropic.vtp", sc)
     size = measure.box_size(sc, walls)
     lo_now = np.array([sc.wall_positions[walls[2 * a]] for a in range(3)])

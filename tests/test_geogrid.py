@@ -422,6 +422,11 @@ def test_triaxial_case_with_geogrid_layers_smoke(tmp_path):
     assert out["square"]["geogrid_members"] > 0 and out["triangular"]["geogrid_members"] > 0
     assert out["none"]["geogrid_members"] == 0
     assert (tmp_path / "square" / "vtk" / "geogrid_final.vtp").is_file()
+    # The packing written after the isotropic stage holds the grains only, never grid nodes.
+    import cpp_dem as dem
+
+    _, radii = dem.read_packing_csv(tmp_path / "square" / "packing_isotropic.csv")
+    assert len(radii) == out["square"]["num_grains"]
     for s in out.values():
         assert s["lateral_stress_max_rel_error"] < 0.01
         assert math.isfinite(s["q_peak_Pa"]) and s["q_peak_Pa"] > 0
