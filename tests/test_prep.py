@@ -44,3 +44,24 @@ def test_wrong_sign_stress_refused():
     s = sample()
     with pytest.raises(dem.ParameterError, match=r"stress=-75000.0: must be > 0"):
         prep.compact_isotropic(s.scene, s.walls, -75e3)
+
+
+def test_drive_to_stresses_reaches_an_anisotropic_state_and_solve_to_equilibrium_settles():
+    import cpp_dem as dem
+    from cpp_dem import measure, prep
+    from cpp_dem.packing import loose_cloud
+    from cpp_dem.triaxial import build_box_sample
+
+    c, r = loose_cloud(np.full(150, 0.003), (0, 0, 0), (0.05, 0.05, 0.05), seed=4)
+    sample = build_box_sample(c, r * 1.2, (0, 0, 0), (0.05, 0.05, 0.05), young=5e7, poisson=0.3,
+                              friction_deg=30, density=2650, local_damping=0.3)
+    targets = (10e3, 10e3, 25e3)  # Pa, a K0-like state
+    st = prep.drive_to_stresses(sample.scene, sample.walls, targets,
+                                controller=sample.controller, tol=0.02, unbalanced=0.02)
+    assert st.converged
+    np.testing.assert_allclose(measure.axis_stresses(sample.scene, sample.walls), targets,
+                               rtol=0.02)
+    ok, steps, u = prep.solve_to_equilibrium(sample.scene, unbalanced=0.02)
+    assert ok and u < 0.02
+    with pytest.raises(dem.ParameterError, match=r"stresses\[2\]=-1.0"):
+        prep.drive_to_stresses(sample.scene, sample.walls, (1e3, 1e3, -1.0))

@@ -79,26 +79,69 @@ def compact_isotropic(scene, walls, stress: float, *, controller=None, tol: floa
     (relative) of it and the unbalanced force is below ``unbalanced``. Uses (or adds) a
     TriaxialController; returns a StageResult (``extra['controller']`` the controller)."""
     _check_target(stress)
+    return drive_to_stresses(scene, walls, (stress, stress, stress), controller=controller,
+                             tol=tol, unbalanced=unbalanced, check_every=check_every,
+                             max_steps=max_steps, gain=gain, max_speed=max_speed,
+                             callback=callback)
+
+
+def drive_to_stresses(scene, walls, stresses, *, controller=None, tol: float = 0.01,
+                      unbalanced: float = 0.01, check_every: int = 200,
+                      max_steps: int = 200_000, gain: float = 0.5,
+                      max_speed: float | None = None, callback=None) -> StageResult:
+    """Servo the six walls of the box to the axis stresses ``stresses`` = (sigma_x, sigma_y,
+    sigma_z), Pa, compressive positive (an anisotropic state, e.g. K0 or the stresses an FEM
+    analysis hands over), until every axis stress is within ``tol`` (relative) of its target
+    and the unbalanced force is below ``unbalanced``. Uses (or adds) a TriaxialController;
+    returns a StageResult (``extra['controller']`` the controller; ``converged`` False when
+    ``max_steps`` ran out first)."""
+    t = np.asarray(stresses, dtype=float)
+    if t.shape != (3,):
+        raise ParameterError(f"stresses={stresses!r}: must be 3 values (sigma_x, sigma_y, "
+                             "sigma_z), Pa")
+    for a in range(3):
+        _check_target(float(t[a]), f"stresses[{a}]")
     if controller is None:
         controller = _core.TriaxialController(
             walls=list(walls), gain=gain,
             max_speed=max_speed if max_speed is not None else default_max_speed(scene, walls))
         scene.add_controller(controller)
     for a in range(3):
-        controller.set_stress(a, stress)
+        controller.set_stress(a, float(t[a]))
     controller.enabled = True
-    targets = np.full(3, float(stress))
     start = scene.step_count
     ok, ax, u = False, None, float("nan")
     while scene.step_count - start < max_steps:
         scene.run(check_every)
-        ok, ax, u = _stable(scene, walls, targets, tol, unbalanced)
+        ok, ax, u = _stable(scene, walls, t, tol, unbalanced)
         if callback is not None:
             callback(scene)
         if ok:
             break
     return StageResult(ok, scene.step_count - start, ax, float(ax.mean()), u,
                        measure.porosity(scene, walls), {"controller": controller})
+
+
+def solve_to_equilibrium(scene, *, unbalanced: float = 0.01, check_every: int = 200,
+                         max_steps: int = 200_000, callback=None) -> tuple[bool, int, float]:
+    """Runs ``scene`` until its unbalanced force (Yade's definition, -) is below
+    ``unbalanced``, checking every ``check_every`` steps; returns (converged, steps run,
+    unbalanced force). Without contacts the unbalanced force is undefined and the scene is
+    not in equilibrium (it runs on until ``max_steps``)."""
+    if not (math.isfinite(unbalanced) and unbalanced > 0):
+        raise ParameterError(f"unbalanced={unbalanced}: must be > 0 (-)")
+    if check_every < 1 or max_steps < 1:
+        raise ParameterError(f"check_every={check_every}, max_steps={max_steps}: must be >= 1")
+    start = scene.step_count
+    u = float("nan")
+    while scene.step_count - start < max_steps:
+        scene.run(min(check_every, max_steps - (scene.step_count - start)))
+        u = float(scene.unbalanced_force())
+        if callback is not None:
+            callback(scene)
+        if u < unbalanced:
+            return True, scene.step_count - start, u
+    return False, scene.step_count - start, u
 
 
 def grow_to_stress(scene, walls, stress: float, *, tol: float = 0.01, unbalanced: float = 0.01,
