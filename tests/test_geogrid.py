@@ -448,3 +448,24 @@ def test_grid_wall_contacts_only_when_asked():
         z_end[on] = s.positions[g.nodes, 2]
     assert np.all(z_end[False] < 0)  # fell through the floor
     np.testing.assert_allclose(z_end[True], RC, rtol=1e-2)  # rests on it
+
+
+def test_geogrid_vtk_has_time_forces_moments_and_displacements(tmp_path):
+    import xml.etree.ElementTree as ET
+
+    s, g = beam(n_links=3, length=0.03)
+    s.block_dofs(g.nodes[0], "all")
+    f = np.zeros((s.num_bodies, 3))
+    f[g.nodes[-1]] = (0.0, 0.0, -0.01)  # N, bends the cantilever
+    s.external_forces = f
+    s.dt = 0.5 * s.critical_dt()
+    s.run(200)
+    geogrid.write_vtk_geogrid(tmp_path / "g.vtp", s, g)
+    root = ET.parse(tmp_path / "g.vtp").getroot()
+    names = {a.get("Name") for a in root.iter("DataArray")}
+    for name in ("TimeValue", "axial_force", "shear_force", "bending_moment", "twisting_moment",
+                 "displacement", "node_id"):
+        assert name in names, name
+    # The clamped node has not moved; the loaded tip has, downwards.
+    disp = np.asarray(s.positions)[g.nodes] - g.reference_positions
+    assert np.all(disp[0] == 0) and disp[-1, 2] < 0

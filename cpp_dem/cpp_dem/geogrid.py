@@ -53,6 +53,8 @@ class Geogrid:
     member_section_links : list of arrays of link ids cut by the member's mid-section.
     member_links : list of arrays of all link ids of the member.
     area : cross-section area of each member, m^2 (for stresses).
+    reference_positions : (n_nodes, 3) node positions when the grid was built, m (the
+        reference of the node displacements written by write_vtk_geogrid).
     """
 
     nodes: np.ndarray
@@ -66,6 +68,7 @@ class Geogrid:
     member_links: list
     area: np.ndarray
     n_cells: tuple[int, int] = (0, 0)
+    reference_positions: np.ndarray | None = None
 
     @property
     def n_members(self) -> int:
@@ -240,7 +243,8 @@ def _one_link_members(b: "_Builder", scene, material: int, node_density_scale: f
                    member_direction=np.array(direction), member_cell=np.array(cell).reshape(n, 2),
                    member_side=np.array(side), member_axis=np.array(axis, dtype=float),
                    member_section_links=member_links, member_links=member_links,
-                   area=np.full(n, math.pi * radius**2), n_cells=n_cells)
+                   area=np.full(n, math.pi * radius**2), n_cells=n_cells,
+                   reference_positions=np.asarray(scene.positions)[nodes].copy())
 
 
 # ---- generators ----------------------------------------------------------------------------
@@ -431,7 +435,8 @@ def biaxial_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertur
                    member_section_links=[links[np.array(s)] for s in mem_section],
                    member_links=[links[np.array(s)] for s in mem_links],
                    area=np.full(len(direction), rib_width * 2 * params.radius),
-                   n_cells=(apertures_x, apertures_y))
+                   n_cells=(apertures_x, apertures_y),
+                   reference_positions=np.asarray(scene.positions)[nodes].copy())
 
 
 def polyline(scene, points, *, params: BeamParams, material: int,
@@ -453,11 +458,17 @@ def polyline(scene, points, *, params: BeamParams, material: int,
                              -np.ones((n, 2), dtype=int), [""] * n, axis, params.radius)
 
 
-def write_vtk_geogrid(path, scene, grid: Geogrid) -> None:
-    """Writes the geogrid as a .vtp file for ParaView: links as lines and PFacets as triangles,
-    with cell data ``axial_force`` (N, tension positive), ``member`` (index, -1 for junction
-    links), ``broken`` (links) and ``kind`` (0 link, 1 pfacet); point data ``node_id`` and
-    ``displacement``-free positions (the current ones)."""
+def write_vtk_geogrid(path, scene, grid: Geogrid, *, reference_positions=None) -> None:
+    """Writes the geogrid as a .vtp file for ParaView: links as lines and PFacets as triangles
+    at the nodes' current positions, with the scene's time (``TimeValue``, s) and
+
+    - cell data (links; zero on PFacets): ``axial_force`` (N, tension positive),
+      ``shear_force`` (|F_s| on node b, N), ``bending_moment`` (|M_b|, N m),
+      ``twisting_moment`` (N m), ``member`` (index, -1 for junction links), ``broken``,
+      ``kind`` (0 link, 1 pfacet);
+    - point data: ``node_id`` and ``displacement`` (m) from ``reference_positions`` (default:
+      the positions when the grid was built, ``grid.reference_positions``)."""
+    from .io.vtk import _time_field
     from .output import write_vtp
 
     pos = scene.positions
@@ -468,13 +479,24 @@ def write_vtk_geogrid(path, scene, grid: Geogrid) -> None:
     tri = scene.pfacet_nodes[grid.pfacets] if len(grid.pfacets) else np.zeros((0, 3), int)
     polys = np.array([[local[int(n)] for n in t] for t in tri], dtype=np.int64).reshape(-1, 3)
     f = scene.grid_link_axial_forces[grid.links]
+    shear = np.linalg.norm(np.asarray(scene.grid_link_shear_forces)[grid.links], axis=1)
+    bend = np.linalg.norm(np.asarray(scene.grid_link_bending_moments)[grid.links], axis=1)
+    twist = np.asarray(scene.grid_link_twisting_moments)[grid.links]
     broken = np.asarray(scene.grid_link_broken, dtype=float)[grid.links]
     member = grid.link_member().astype(float)
+    zeros = np.zeros(len(polys))
     cell_data = {
-        "axial_force": np.concatenate([f, np.zeros(len(polys))]),
+        "axial_force": np.concatenate([f, zeros]),
+        "shear_force": np.concatenate([shear, zeros]),
+        "bending_moment": np.concatenate([bend, zeros]),
+        "twisting_moment": np.concatenate([twist, zeros]),
         "member": np.concatenate([member, -np.ones(len(polys))]),
-        "broken": np.concatenate([broken, np.zeros(len(polys))]),
+        "broken": np.concatenate([broken, zeros]),
         "kind": np.concatenate([np.zeros(len(lines)), np.ones(len(polys))]),
     }
-    write_vtp(path, points=pos[nodes], lines=lines, polys=polys,
-              point_data={"node_id": nodes.astype(float)}, cell_data=cell_data)
+    ref = reference_positions if reference_positions is not None else grid.reference_positions
+    point_data = {"node_id": nodes.astype(float)}
+    if ref is not None:
+        point_data["displacement"] = np.asarray(pos)[nodes] - np.asarray(ref, dtype=float)
+    write_vtp(path, points=pos[nodes], lines=lines, polys=polys, point_data=point_data,
+              cell_data=cell_data, field_data=_time_field(scene))
