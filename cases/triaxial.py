@@ -13,9 +13,10 @@ walls move at a constant axial strain rate with the x and y stresses held, until
 --stop-strain. With --packing CSV (x,y,z,r) the given spheres are used in the box they span
 and the run starts at stage (1).
 
-Outputs in --out: triaxial.h5 (series + final snapshot), triaxial.csv (columns
-axial_strain, volumetric_strain, deviatoric_stress, ...), triaxial.png (eps_v-eps_a,
-q-eps_a, eps_v-time), isotropic.h5 (checkpoint after stage 1), packing_isotropic.csv,
+Outputs in --out: triaxial.h5 (series + final snapshot; with a geogrid also the series
+member_axial_force, (n_records, n_members) N), triaxial.csv (columns axial_strain,
+volumetric_strain, deviatoric_stress, ...), triaxial.png and .pdf (eps_v-eps_a, q-eps_a,
+eps_v-time), isotropic.h5 (checkpoint after stage 1), packing_isotropic.csv (grains only),
 vtk/ (spheres and box at the end of each stage), summary.json. SI units; stresses and
 strains compression positive; q = sigma_z - (sigma_x + sigma_y) / 2.
 """
@@ -311,7 +312,11 @@ def run(p: Params, out: Path) -> dict:
 
     meta = {**asdict(p), "case": "triaxial", "axial_axis": "z", "psd": psd_info,
             "units": "SI; stresses and strains compression positive"}
-    h5 = H5Recorder(out / "triaxial.h5", series=SERIES, metadata=meta, overwrite=True,
+    h5_series = dict(SERIES)
+    if grid is not None:
+        # The geogrid's member forces with every record: (n_members,) N, tension positive.
+        h5_series["member_axial_force"] = (lambda scene: grid.member_axial_forces(scene), "N")
+    h5 = H5Recorder(out / "triaxial.h5", sc, series=h5_series, metadata=meta, overwrite=True,
                     snapshot_fields=("positions", "velocities", "radii"))
     csv = CsvRecorder(out / "triaxial.csv", series=SERIES, overwrite=True)
     last = [time.perf_counter()]

@@ -427,6 +427,13 @@ def test_triaxial_case_with_geogrid_layers_smoke(tmp_path):
 
     _, radii = dem.read_packing_csv(tmp_path / "square" / "packing_isotropic.csv")
     assert len(radii) == out["square"]["num_grains"]
+    # The HDF5 series carry the member forces with every record.
+    from cpp_dem.output import read_h5_series
+
+    series = read_h5_series(tmp_path / "square" / "triaxial.h5")
+    assert series["member_axial_force"].shape == (len(series["time"]),
+                                                  out["square"]["geogrid_members"])
+    assert np.any(series["member_axial_force"] != 0)
     for s in out.values():
         assert s["lateral_stress_max_rel_error"] < 0.01
         assert math.isfinite(s["q_peak_Pa"]) and s["q_peak_Pa"] > 0
