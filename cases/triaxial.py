@@ -67,7 +67,12 @@ class Params:
     dt_safety: float = 0.5           #: dt = safety x critical_dt, -
     record_every: int = 100          #: steps between records, -
     threads: int = 0                 #: OpenMP threads (0: library default)
-    packing: str = ""                #: CSV packing to start from ('' = generate)
+    packing: str = ""                #: packing file to start from ('' = generate)
+    packing_format: str = "csv"      #: csv (x,y,z,r), yade, liggghts or pfc
+    box: tuple = ()                  #: wall planes (x0, y0, z0, x1, y1, z1), m ('' = the
+                                     #: packing's bounding box, or a LIGGGHTS file's box)
+    skip_isotropic: bool = False     #: take the packing's state as it is (no growth, no
+                                     #: isotropic stage): continue another code's state
     geogrid: str = "none"            #: geogrid layer at mid-height: none, square, triangular
     clear_layer: bool = False        #: remove the grains in the geogrid layer (also without
                                      #: a geogrid, for a same-packing comparison)
@@ -88,11 +93,25 @@ def smoke_box(p: Params) -> tuple:
 def make_sample(p: Params, log) -> tuple:
     """Centres, radii and the box (lo, hi) of the sample; info about the PSD."""
     if p.packing:
-        c, r = dem.read_packing_csv(p.packing)
-        lo = (c - r[:, None]).min(0)
-        hi = (c + r[:, None]).max(0)
-        log(f"packing {p.packing}: {len(r)} spheres, box {np.round(hi - lo, 4)} m")
-        return c, r, lo, hi, {"source": str(p.packing)}
+        from cpp_dem.io import foreign
+
+        readers = {"csv": dem.read_packing_csv, "yade": foreign.read_yade_text,
+                   "liggghts": foreign.read_liggghts_data, "pfc": foreign.read_pfc_balls}
+        c, r = readers[p.packing_format](p.packing)
+        if p.box:
+            lo, hi = np.asarray(p.box[:3], float), np.asarray(p.box[3:], float)
+        elif p.packing_format == "liggghts":
+            lo, hi = foreign.read_liggghts_box(p.packing)
+        else:
+            lo = (c - r[:, None]).min(0)
+            hi = (c + r[:, None]).max(0)
+        outside = np.any((c < lo) | (c > hi), axis=1)
+        if np.any(outside):
+            raise SystemExit(f"error: --packing={p.packing}: {int(outside.sum())} centres lie "
+                             f"outside the box {lo.tolist()}-{hi.tolist()} m (--box)")
+        log(f"packing {p.packing} ({p.packing_format}): {len(r)} spheres, walls at "
+            f"{np.round(lo, 5).tolist()} - {np.round(hi, 5).tolist()} m")
+        return c, r, lo, hi, {"source": str(p.packing), "format": p.packing_format}
     box = np.asarray(p.box, float)
     vol_solid = p.solid_fraction * float(np.prod(box))
     d, pc, d_min = psd.fit_psd_to_count(psd.APPENDIX_B_SIZES, psd.APPENDIX_B_PASSING, p.n,
@@ -246,6 +265,22 @@ def prepare(p: Params, log) -> Prepared:
                 f"{s.unbalanced_force():.3g}, porosity {measure.porosity(s, walls):.4f}")
 
     grow = None
+    if p.skip_isotropic:
+        # Another code's state, continued as it is: the walls where it had them, no growth, no
+        # servo stage; the controller holds the cell pressure from the deviatoric stage on.
+        if grid is not None:
+            sc.block_dofs(grid.nodes, "")
+        sample.controller.enabled = False
+        sc.run(1)  # the contact forces of the given state
+        ax = measure.axis_stresses(sc, walls)
+        iso = prep.StageResult(True, 1, ax, float(ax.mean()), float(sc.unbalanced_force()),
+                               measure.porosity(sc, walls), {"skipped": True})
+        log(f"isotropic stage skipped (--skip-isotropic): axis stresses of the given state "
+            f"{np.round(ax / 1e3, 3)} kPa, porosity {iso.porosity:.4f}")
+        for a in range(3):
+            sample.controller.set_stress(a, p.cell_pressure)
+        sample.controller.enabled = True
+        return Prepared(sample, grid, n_grains, psd_info, None, iso, 0.0)
     if not p.packing:
         t0 = time.perf_counter()
         # Slow growth (1e-4 radius strain per step at most) lets the grains rearrange.
@@ -414,7 +449,16 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     ap.add_argument("--out", type=Path, default=ROOT / "results" / "triaxial",
                     help="output directory")
     ap.add_argument("--packing", type=str, default="",
-                    help="CSV x,y,z,r (m): start from these spheres in the box they span")
+                    help="start from these spheres (m), in the box they span or --box")
+    ap.add_argument("--packing-format", choices=("csv", "yade", "liggghts", "pfc"),
+                    default="csv", help="csv (x,y,z,r), Yade text, LIGGGHTS data file, PFC "
+                    "ball list (cpp_dem.io.foreign)")
+    ap.add_argument("--box", type=str, default="",
+                    help="wall planes x0,y0,z0,x1,y1,z1 (m) of the --packing (default: its "
+                         "bounding box, or a LIGGGHTS file's box)")
+    ap.add_argument("--skip-isotropic", action="store_true",
+                    help="with --packing: take its state as it is (walls at --box, no growth, "
+                         "no isotropic stage) and go straight to the axial loading")
     ap.add_argument("--n", type=int, default=None, help="target number of grains (default "
                     f"{d.n}; the box is scaled with it when != {d.n})")
     ap.add_argument("--cell-pressure", type=_positive("--cell-pressure", ap),
@@ -484,6 +528,22 @@ def parse_args(argv=None) -> tuple[Params, Path]:
         if not Path(a.packing).is_file():
             ap.error(f"--packing={a.packing}: no such file")
         p.packing = a.packing
+    p.packing_format = a.packing_format
+    if a.box:
+        try:
+            box = tuple(float(v) for v in a.box.split(","))
+        except ValueError:
+            ap.error(f"--box={a.box}: must be 6 numbers x0,y0,z0,x1,y1,z1 (m)")
+        if len(box) != 6 or not all(math.isfinite(v) for v in box) or \
+                not all(box[k + 3] > box[k] for k in range(3)):
+            ap.error(f"--box={a.box}: must be 6 finite numbers x0,y0,z0,x1,y1,z1 (m) with "
+                     "x1 > x0, y1 > y0, z1 > z0")
+        if not a.packing:
+            ap.error("--box: goes with --packing")
+        p.box = box
+    if a.skip_isotropic and not a.packing:
+        ap.error("--skip-isotropic: goes with --packing (the state to continue)")
+    p.skip_isotropic = a.skip_isotropic
     return p, a.out
 
 

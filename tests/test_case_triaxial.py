@@ -136,3 +136,25 @@ def test_preset_sets_the_loading(tmp_path):
     s = json.loads((tmp_path / "summary.json").read_text())
     assert s["inertial_number"] == pytest.approx(preset("accurate").inertial_number, rel=1e-9)
     assert "local damping 0.05" in p.stdout
+
+
+def test_a_state_is_continued_as_it_is_with_skip_isotropic(smoke, tmp_path):
+    """Issue 19: a packing with given wall planes (here our own isotropic state: its CSV and
+    the wall planes of its checkpoint) continues without a new isotropic stage; the given state
+    is at the cell pressure and the loading gives the same peak within the 2 % that the lost
+    shear-spring history costs."""
+    import h5py
+
+    out, proc = smoke
+    assert proc.returncode == 0, proc.stderr
+    w = h5py.File(out / "isotropic.h5", "r")["readable/wall_positions"][()]
+    box = ",".join(repr(float(v)) for v in (w[0], w[2], w[4], w[1], w[3], w[5]))
+    r = run_case(tmp_path / "cont", "--smoke", "--threads", "2", "--packing",
+                 str(out / "packing_isotropic.csv"), "--box", box, "--skip-isotropic")
+    assert r.returncode == 0, r.stderr
+    assert "isotropic stage skipped" in r.stdout
+    first = json.loads((out / "summary.json").read_text())
+    cont = json.loads((tmp_path / "cont" / "summary.json").read_text())
+    assert cont["q_peak_Pa"] == pytest.approx(first["q_peak_Pa"], rel=0.02)
+    bad = run_case(tmp_path / "bad", "--smoke", "--box", box)
+    assert bad.returncode != 0 and "--box: goes with --packing" in bad.stderr
