@@ -9,7 +9,7 @@ from typing import Any
 import numpy as np
 
 from ._files import PathLike, _ClosesOnExit
-from .series import Series, _check_overwrite, _evaluate, _normalise_series, standard_series
+from .series import Series, _check_overwrite, _evaluate, _series_for
 
 
 # CSV recorder
@@ -38,11 +38,7 @@ class CsvRecorder(_ClosesOnExit):
                  overwrite: bool = False, append: bool = False, fsync: bool = False) -> None:
         self.path = Path(path)
         self.scene = scene
-        if series is None:
-            if scene is None:
-                raise ValueError("series: required when no scene is given")
-            series = standard_series(scene)
-        self.series = _normalise_series(series)
+        self.series = _series_for(series, scene)
         self.fsync = fsync
         #: series name -> units
         self.units = {k: u for k, (_f, u) in self.series.items()}

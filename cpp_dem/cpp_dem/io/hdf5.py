@@ -12,7 +12,7 @@ import numpy as np
 
 from ._files import PathLike, _ClosesOnExit
 from .series import (SNAPSHOT_FIELDS, Series, _check_overwrite, _evaluate, _metadata_attr,
-                     _normalise_series, standard_series)
+                     _series_for)
 
 
 # HDF5 recorder
@@ -68,11 +68,7 @@ class H5Recorder(_ClosesOnExit):
 
         self.path = Path(path)
         self.scene = scene
-        if series is None:
-            if scene is None:
-                raise ValueError("series: required when no scene is given")
-            series = standard_series(scene)
-        self.series = _normalise_series(series)
+        self.series = _series_for(series, scene)
         for f in snapshot_fields:
             if f not in SNAPSHOT_FIELDS:
                 raise ValueError(f"snapshot_fields: unknown field {f!r}; known: "

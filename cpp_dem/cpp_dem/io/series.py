@@ -103,6 +103,15 @@ class NonFiniteValueError(ValueError):
     results). The message names the series, the value and the step."""
 
 
+def _series_for(series: Series | None, scene) -> dict[str, tuple[Callable | None, str]]:
+    """A recorder's series: the given ones, or the scene's standard_series."""
+    if series is None:
+        if scene is None:
+            raise ValueError("series: required when no scene is given")
+        series = standard_series(scene)
+    return _normalise_series(series)
+
+
 def _evaluate(series: dict[str, tuple[Callable | None, str]], scene,
               values: Mapping[str, Any]) -> dict[str, np.ndarray]:
     unknown = set(values) - set(series)
