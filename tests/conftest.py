@@ -45,10 +45,10 @@ SMOKE_ARGS: dict[str, tuple[str, ...]] = {
 
 
 def case_names() -> list[str]:
-    """The runnable cases: cases/*.py with a main() (helpers such as pullout_common.py have
-    none)."""
+    """The runnable cases: cases/*.py that run as a script (the thin wrappers of
+    cpp_dem.cases; helpers such as pullout_common.py do not)."""
     return sorted(p.stem for p in (ROOT / "cases").glob("*.py")
-                  if "def main(" in p.read_text())
+                  if '__name__ == "__main__"' in p.read_text())
 
 
 @pytest.fixture(scope="session")

@@ -60,36 +60,28 @@ from typing import Any
 
 import click
 
-#: The cases: command name -> (script in cases/, one line).
+#: The cases: command name -> (module in cpp_dem.cases, one line).
 CASES = {
-    "pullout-000": ("pullout_000.py", "geogrid pull-out of 000 (Yade, 3000-9000 spheres)"),
-    "pullout-001": ("pullout_001.py", "pull-out of 001 (square and triangular grids, Table 5.2)"),
-    "triaxial": ("triaxial.py", "triaxial test of 001 ch. 6, with or without geogrid"),
-    "prs-element": ("prs_element.py", "002's reinforced vs prestressed element from FEM stresses"),
-    "deposition": ("deposition.py", "spheres deposited into a box under gravity"),
+    "pullout-000": ("pullout_000", "geogrid pull-out of 000 (Yade, 3000-9000 spheres)"),
+    "pullout-001": ("pullout_001", "pull-out of 001 (square and triangular grids, Table 5.2)"),
+    "triaxial": ("triaxial", "triaxial test of 001 ch. 6, with or without geogrid"),
+    "prs-element": ("prs_element", "002's reinforced vs prestressed element from FEM stresses"),
+    "deposition": ("deposition", "spheres deposited into a box under gravity"),
 }
 #: Cases whose --threads 0 means one thread rather than all (translated by the command).
 _THREADS_ZERO_IS_ONE = {"prs-element"}
-ROOT = Path(__file__).resolve().parents[2]
+ROOT = Path(__file__).resolve().parents[2]  # the source tree (for the git commit), if any
 
 
 class RunFileError(click.ClickException):
     """A run or sweep file names a bad field; the message says which, its value and why."""
 
 
-def cases_dir() -> Path:
-    d = ROOT / "cases"
-    if not d.is_dir():
-        raise click.ClickException(
-            f"the cases are not next to this package ({d} is missing): run the command from "
-            "the source tree's install (pip install -e .)")
-    return d
-
-
-def case_script(name: str, *, field: str = "case") -> Path:
+def case_command(name: str, *, field: str = "case") -> list[str]:
+    """The interpreter command that runs case `name` (its module in cpp_dem.cases)."""
     if name not in CASES:
         raise RunFileError(f"{field}={name!r}: no such case; allowed: {', '.join(CASES)}")
-    return cases_dir() / CASES[name][0]
+    return [sys.executable, "-m", f"cpp_dem.cases.{CASES[name][0]}"]
 
 
 def version() -> str:
@@ -243,7 +235,7 @@ def load_toml(path: Path, kind: str) -> dict[str, Any]:
             raise RunFileError(f"{kind} file {path}: field {key!r} is not known; allowed at the "
                                f"top: {', '.join(sorted(known))} (a case's parameters go in "
                                "[params])")
-    case_script(data["case"], field=f"{path}: case")
+    case_command(data["case"], field=f"{path}: case")
     return data
 
 
@@ -251,9 +243,8 @@ def run_case(case: str, argv: list[str], *, source: str | None = None) -> int:
     """Runs the case's script in a fresh interpreter with `argv` (its output passes through as
     it comes); an argparse rejection (exit 2) of a run file's parameters is reported against
     the run file. Returns the exit status."""
-    script = case_script(case)
-    proc = subprocess.Popen([sys.executable, str(script), *argv], stderr=subprocess.PIPE,
-                            text=True, bufsize=1)
+    proc = subprocess.Popen([*case_command(case), *argv], stderr=subprocess.PIPE, text=True,
+                            bufsize=1)
     tail: list[str] = []
     for line in proc.stderr:
         sys.stderr.write(line)
@@ -323,7 +314,7 @@ def run_cmd(ctx, target: str, out, seed, threads, preset, smoke) -> None:
             click.echo(ctx.get_help())
             return
         case = target
-        case_script(case, field="case")
+        case_command(case, field="case")
         argv = shared_argv(case, out, seed, threads, preset, smoke) + extra
         status = run_case(case, argv)
     if status != 0:
@@ -378,10 +369,10 @@ def _row_finished(row_dir: Path, case: str, params: dict[str, Any]) -> bool:
     return old.get("case") == case and old.get("params") == json.loads(json.dumps(params))
 
 
-def _run_row(script: str, argv: list[str], env: dict[str, str]) -> dict[str, Any]:
+def _run_row(command: list[str], argv: list[str], env: dict[str, str]) -> dict[str, Any]:
     """One row, on a Dask worker: the case in its own interpreter."""
     t0 = time.perf_counter()
-    proc = subprocess.run([sys.executable, script, *argv], capture_output=True, text=True,
+    proc = subprocess.run([*command, *argv], capture_output=True, text=True,
                           env={**os.environ, **env})
     return {"returncode": proc.returncode, "wall_s": time.perf_counter() - t0,
             "stderr_tail": "\n".join((proc.stderr or "").strip().splitlines()[-5:])}
@@ -438,7 +429,7 @@ def sweep_cmd(file: Path, workers: int, scheduler: str | None, threads: int) -> 
             raise RunFileError(f"{file}: field 'params.{k}': set the sweep's folder with the "
                                "top-level field 'out' (each row writes in OUT/row_NNN)")
     rows = sweep_rows(data, str(file))
-    script = str(case_script(case))
+    script = case_command(case)
     out.mkdir(parents=True, exist_ok=True)
     if threads == 0 and case in _THREADS_ZERO_IS_ONE:
         threads = os.cpu_count() or 1

@@ -1,0 +1,474 @@
+#!/usr/bin/env python3
+"""Prestressed reinforced-soil (PRS) element of 002, with its boundary stresses from a FEM model.
+
+002 §3: a 0.1 m cube of grains with a geogrid at mid-height, six servo-controlled walls
+driven to the stresses "calculated by a multiscale FEM analysis"; reinforced (RE) versus
+prestressed reinforced (PRS) soil. Here:
+
+1. **FEM** (``femcoupling``, dolfinx, plane strain): a reinforced fill under a strip footing
+   (self-weight with a K0 state, two geogrid layers as thin bands of the geogrid's axial
+   stiffness, Drucker–Prager soil matched to Mohr–Coulomb). Solved twice: RE (no prestress)
+   and PRS (prestress T_p in the layers, equilibrated with the soil before the footing
+   load). The stress averaged over the soil cells of the element region (a 0.1 m square on
+   the upper layer under the footing) before and after the footing load is handed over
+   (``femcoupling.handover.fem_to_dem``: tension positive -> compression positive; the shear
+   components and the principal-axis rotation are reported, not imposed).
+2. **DEM** (``cpp_dem``): a 0.1 m cube of spheres (the grains of 002 are clumps; spheres for
+   now) with a square geogrid at mid-height (001 §5.1 layout; PET-like stiffness), prepared by
+   radius growth, then servo walls to the initial (pre-load) stresses, then to the final ones.
+   PRS: the grid's longitudinal (x) members are pulled at their ends by T_p x spacing (an
+   external force on the end nodes: cpp_dem has no built-in prestress).
+3. **Two-way** (``--two-way``): the element's secant stiffness over the handed-over increment
+   goes back to the region's material and the FEM re-solves until the handed-over stresses
+   change by less than ``--tol``.
+
+DEM-only mode: ``--stresses sx,sy,sz`` (Pa, compression positive) or ``--stresses FILE.csv``
+(columns sx,sy,sz, optionally time first: the element is driven through the rows in order)
+runs the element with no FEM and **without importing dolfinx**.
+
+Outputs in ``--out``: ``<label>.h5`` / ``<label>.csv`` (wall stresses, targets, box size,
+geogrid forces; appended as the run goes), ``vtk/<label>_{spheres,contacts,geogrid,box}.vtp``
+(contact force network, geogrid tensile forces), ``fem_<RE|PRS>.xdmf`` (displacement, stress,
+cell tags: element region and layers marked), ``fem_<RE|PRS>.png``, ``handover.h5`` (the
+handover history), ``report.md`` and ``summary.json``. SI units. DEM stresses and strains are
+compression positive; FEM stresses tension positive.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass, field, replace
+from pathlib import Path
+
+import numpy as np
+
+from cpp_dem.io.figures import save_figure
+from cpp_dem.rundir import begin_run, check_common_args, end_run
+from cpp_dem import element as _element
+from cpp_dem.element import ElementParams, grid_axial_stiffness
+
+ROOT = Path(__file__).resolve().parents[3]  # the source tree (for git), when there is one
+
+
+@dataclass
+class Params(ElementParams):
+    """Parameters of the PRS element case (SI): the DEM element's (cpp_dem.element.
+    ElementParams: grains, geogrid, servo) and the FEM structure's and coupling's below."""
+
+    # --- FEM structure (plane strain) ---
+    fem_width: float = 4.0           #: half width of the modelled fill, m
+    fem_height: float = 3.0          #: height of the fill, m
+    footing_b: float = 0.5           #: footing half width, m
+    footing_pressure: float = 100e3  #: footing pressure, Pa
+    fem_steps: int = 6               #: load steps
+    soil_young: float = 50e6         #: Pa
+    soil_poisson: float = 0.3        #: -
+    soil_cohesion: float = 10e3      #: Pa (apparent cohesion of a compacted gravelly fill)
+    soil_friction: float = 35.0      #: deg
+    unit_weight: float = 18e3        #: N/m^3
+    layer_depths: tuple = (0.3, 0.6)  #: depths of the geogrid layers below the top, m
+    layer_length: float = 2.0        #: layer extent from the symmetry plane, m
+    layer_thickness: float = 0.01    #: band thickness, m
+    region_x: float = 0.25           #: element region centre x (on the upper layer), m
+    mesh_size: float = 0.5           #: coarse FEM mesh size, m
+    fine_size: float = 0.025         #: fine FEM mesh size (footing edge, region, layers), m
+    # --- coupling ---
+    two_way: bool = False
+    two_way_tol: float = 0.02
+    max_iterations: int = 8
+    workers: int = 1
+    stresses: list = field(default_factory=list)  #: DEM-only targets (rows of 3), Pa
+    prs: bool = False                #: DEM-only: prestress the grid (else RE)
+
+
+SMOKE = dict(n=300, hold_steps=600, fem_steps=3, mesh_size=1.0, fine_size=0.05,
+             layer_thickness=0.02, max_steps=80_000, unbalanced=0.05)
+
+
+def log(msg: str) -> None:
+    print(f"[prs_element] {msg}", flush=True)
+
+
+def make_element(p: Params, mean_stress: float, prestressed: bool):
+    """The DEM element of :mod:`cpp_dem.element` with this case's parameters and log."""
+    return _element.make_element(p, mean_stress, prestressed, log=log)
+
+
+def servo_stage(sample, grid, targets, stage: int, p: Params, rec) -> dict:
+    return _element.servo_stage(sample, grid, targets, stage, p, rec, log=log)
+
+
+def run_element(p: Params, targets: list, *, prestressed: bool, label: str, out: Path) -> dict:
+    """:func:`cpp_dem.element.run_element` with this case's log."""
+    return _element.run_element(p, targets, prestressed=prestressed, label=label, out=out,
+                                log=log)
+
+
+def element_runner(p_dict: dict, out: str, name: str, initial, final):
+    """Picklable two-way runner: the element from the initial to the final WallTargets."""
+    from femcoupling.twoway import ElementResponse
+
+    p = Params(**p_dict)
+    prestressed = name.endswith("PRS")
+    s = run_element(p, [initial.normal_pa, final.normal_pa], prestressed=prestressed,
+                    label=f"twoway_{name}", out=Path(out))
+    return ElementResponse(stress_initial_pa=np.array(s["stress_initial_pa"]),
+                           stress_final_pa=np.array(s["stress_final_pa"]),
+                           strain_increment=np.array(s["strain_increment"]),
+                           info={"hold_max_rel_error": s["hold_max_rel_error"]})
+
+
+class _Runner:
+    """Binds the case parameters to :func:`element_runner` (picklable)."""
+
+    def __init__(self, p: Params, out: Path, variant: str):
+        self.p, self.out, self.variant = asdict(p), str(out), variant
+
+    def __call__(self, name, initial, final):
+        return element_runner(self.p, self.out, f"{name}_{self.variant}", initial, final)
+
+
+# ---- FEM structure ---------------------------------------------------------------------------
+
+
+def fem_body(p: Params):
+    from femcoupling.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
+
+    h = p.fem_height
+    layers = tuple(GeogridLayer(z_m=h - d, x_min_m=0.0, x_max_m=p.layer_length,
+                                thickness_m=p.layer_thickness, name=f"geogrid_{k}")
+                   for k, d in enumerate(p.layer_depths))
+    region = ElementRegion("element", (p.region_x, h - p.layer_depths[0]), p.edge)
+    return ReinforcedSoilBody(width_m=p.fem_width, height_m=h, footing_half_width_m=p.footing_b,
+                              layers=layers, regions=(region,), mesh_size_m=p.mesh_size,
+                              fine_size_m=p.fine_size, fine_radius_m=2 * p.footing_b)
+
+
+def fem_model(p: Params, prestressed: bool):
+    """The FEM model of the structure in its initial state (geostatic, then the prestress)."""
+    from femcoupling.elastoplastic import SoilModel
+    from femcoupling.materials import DruckerPrager, GeogridLayerMaterial
+
+    J = grid_axial_stiffness(p)
+    layer = GeogridLayerMaterial(axial_stiffness_n_per_m=J,
+                                 prestress_n_per_m=p.prestress if prestressed else 0.0)
+    soil = DruckerPrager(young_pa=p.soil_young, poisson=p.soil_poisson,
+                         cohesion_pa=p.soil_cohesion, friction_deg=p.soil_friction)
+    m = SoilModel(fem_body(p), soil=soil, layers=[layer] * len(p.layer_depths),
+                  unit_weight_n_m3=p.unit_weight, newton_rtol=1e-6)
+    m.set_geostatic()
+    if prestressed:
+        m.apply_prestress(steps=2)
+    return m
+
+
+def plot_fem(m, png: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+
+    from femcoupling.materials import mandel_to_tensor
+
+    g = m.mesh.geometry
+    cells = g.dofmaps[0][: m.n_owned]
+    xy = g.x[:, :2][cells[:, :3]]
+    szz = mandel_to_tensor(m.cell_mean_stress()[: m.n_owned])[:, 2, 2]
+    fig, ax = plt.subplots(figsize=(9, 5))
+    pc = PolyCollection(xy, array=szz / 1e3, cmap="viridis", edgecolors="none")
+    ax.add_collection(pc)
+    fig.colorbar(pc, ax=ax, label="sigma_zz (kPa, tension +)")
+    tags = m.cell_tag_of[: m.n_owned]
+    for tag, col in ((200, "red"),):
+        sel = tags == tag
+        if sel.any():
+            ax.add_collection(PolyCollection(xy[sel], facecolors="none", edgecolors=col, lw=0.3))
+    for k in range(len(m.layers)):
+        sel = tags == 100 + k
+        ax.add_collection(PolyCollection(xy[sel], facecolors="white", edgecolors="white",
+                                         lw=0.2))
+    r = m.body.regions[0]
+    s = r.size_m / 2
+    ax.plot([r.center_m[0] - s, r.center_m[0] + s, r.center_m[0] + s, r.center_m[0] - s,
+             r.center_m[0] - s], [r.center_m[1] - s, r.center_m[1] - s, r.center_m[1] + s,
+                                  r.center_m[1] + s, r.center_m[1] - s], "r-", lw=1.5,
+            label="DEM element region")
+    ax.set_xlim(0, min(m.body.width_m, 2.5))
+    ax.set_ylim(m.body.height_m - 1.5, m.body.height_m)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("z (m)")
+    ax.legend(loc="lower right")
+    ax.set_title(title)
+    fig.tight_layout()
+    save_figure(fig, png)
+    plt.close(fig)
+
+
+def run_fem(p: Params, out: Path, variant: str, history) -> tuple:
+    """FEM of the structure for RE or PRS; returns (initial, final) WallTargets, the model,
+    and numbers for the report."""
+    from femcoupling.twoway import one_way
+
+    t0 = time.perf_counter()
+    prestressed = variant == "PRS"
+    m = fem_model(p, prestressed)
+    ncell = m.mesh.topology.index_map(m.tdim).size_global
+    log(f"FEM {variant}: {ncell} cells (P2, plane strain), K0 state"
+        + (f", prestress {p.prestress / 1e3:g} kN/m equilibrated: upper layer force "
+           f"{m.layer_force_n_per_m(0) / 1e3:.3f} kN/m" if prestressed else ""))
+    state0 = m.save_state()
+
+    def load(model):
+        return model.load_footing(pressure_pa=p.footing_pressure, steps=p.fem_steps,
+                                  callback=lambda r: log(
+                                      f"FEM {variant}: footing {r.footing_pressure_pa / 1e3:.1f}"
+                                      f" kPa, settlement {1e3 * r.footing_settlement_m:.2f} mm,"
+                                      f" {r.newton_iterations} Newton its, {r.plastic_points}"
+                                      f" plastic points"))
+
+    initial, final = one_way(m, regions=["element"], load=load)
+    ini, fin = initial["element"], final["element"]
+    log(f"FEM {variant} handover, initial: {ini.report()}")
+    log(f"FEM {variant} handover, loaded:  {fin.report()}")
+    m.write_xdmf(out / f"fem_{variant}.xdmf")
+    plot_fem(m, out / f"fem_{variant}.png", f"FEM {variant}: sigma_zz under "
+             f"{p.footing_pressure / 1e3:g} kPa footing")
+    info = {"cells": int(ncell), "settlement_m": m.footing_settlement_m(),
+            "layer_force_upper_n_per_m": m.layer_force_n_per_m(0),
+            "layer_force_upper_under_footing_n_per_m":
+                m.layer_force_n_per_m(0, x_range_m=(0.0, p.footing_b)),
+            "wall_time_s": time.perf_counter() - t0}
+    return ini, fin, m, state0, load, info
+
+
+def write_report(out: Path, summary: dict) -> None:
+    lines = ["# PRS element: report", ""]
+    mode = summary["mode"]
+    lines.append(f"Mode: {mode}. Stresses in kPa, DEM compression positive.")
+    lines.append("")
+    for v, e in summary["elements"].items():
+        ini = np.array(e["targets_pa"][0]) / 1e3
+        fin = np.array(e["targets_pa"][-1]) / 1e3
+        lines += [f"## {v}", "",
+                  f"- targets initial {np.round(ini, 2).tolist()}, final "
+                  f"{np.round(fin, 2).tolist()} kPa; walls reached "
+                  f"{np.round(np.array(e['stress_final_pa']) / 1e3, 2).tolist()} kPa, held "
+                  f"within {100 * e['hold_max_rel_error']:.2f} %",
+                  f"- strain increment (x, y, z) {np.round(e['strain_increment'], 5).tolist()}",
+                  f"- mean |displacement| above / below the geogrid "
+                  f"{1e3 * e['disp_above_grid_mean_m']:.3f} / "
+                  f"{1e3 * e['disp_below_grid_mean_m']:.3f} mm",
+                  f"- geogrid force, longitudinal mean {e['grid_force_longitudinal_mean_n']:.2f}"
+                  f" N (max {e['grid_force_longitudinal_max_n']:.2f} N, CV "
+                  f"{e['grid_force_longitudinal_cv']:.2f}), transverse mean "
+                  f"{e['grid_force_transverse_mean_n']:.2f} N", ""]
+        if v in summary.get("fem", {}):
+            f = summary["fem"][v]
+            lines += [f"- FEM: {f['cells']} cells, settlement {1e3 * f['settlement_m']:.2f} mm,"
+                      f" upper layer force {f['layer_force_upper_n_per_m'] / 1e3:.3f} kN/m; "
+                      f"handover shear (yz, xz, xy) "
+                      f"{np.round(np.array(f['shear_pa']) / 1e3, 2).tolist()} kPa, principal "
+                      f"axes turned {f['rotation_deg']:.1f} deg from the walls", ""]
+    if "two_way" in summary:
+        lines += ["## Two-way", ""]
+        for v, t in summary["two_way"].items():
+            lines.append(f"- {v}: {'converged' if t['converged'] else 'NOT converged'} in "
+                         f"{t['iterations']} FEM solves; changes {t['changes']}; secant "
+                         f"(E, nu) {t['materials']}")
+        lines.append("")
+    (out / "report.md").write_text("\n".join(lines) + "\n")
+
+
+def run(p: Params, out: Path) -> dict:
+    t_start = time.perf_counter()
+    begin_run(out, "prs_element", log=log)
+    summary: dict = {"params": {k: v for k, v in asdict(p).items()}, "elements": {}}
+    if p.stresses:
+        summary["mode"] = "DEM-only (stresses given)"
+        log(f"DEM-only: {len(p.stresses)} target row(s), no FEM")
+        summary["elements"]["PRS" if p.prs else "RE"] = run_element(
+            p, p.stresses, prestressed=p.prs, label="element", out=out)
+    else:
+        from femcoupling.twoway import HandoverHistory, two_way
+
+        summary["mode"] = "FEM -> DEM" + (" (two-way)" if p.two_way else " (one-way)")
+        summary["fem"] = {}
+        with HandoverHistory(out / "handover.h5", regions=["element_RE", "element_PRS"],
+                             metadata={"case": "prs_element"}) as hist:
+            for j, variant in enumerate(("RE", "PRS")):
+                ini, fin, m, state0, load, info = run_fem(p, out, variant, hist)
+                info.update(shear_pa=fin.shear_pa.tolist(), rotation_deg=fin.rotation_deg,
+                            targets_initial_pa=ini.normal_pa.tolist(),
+                            targets_final_pa=fin.normal_pa.tolist())
+                summary["fem"][variant] = info
+                if p.two_way:
+                    m.restore_state(state0)
+                    tw = two_way(m, regions=["element"], load=load,
+                                 element_runner=_Runner(p, out, variant), tol=p.two_way_tol,
+                                 max_iterations=p.max_iterations, workers=p.workers,
+                                 history=hist, log=log)
+                    fin = tw.targets["element"]
+                    summary.setdefault("two_way", {})[variant] = {
+                        "converged": tw.converged, "iterations": tw.iterations,
+                        "changes": [float(c) for c in tw.changes],
+                        "materials": {k: list(v) for k, v in tw.materials.items()}}
+                    log(f"two-way {variant}: {'converged' if tw.converged else 'NOT converged'}"
+                        f" after {tw.iterations} FEM solves, changes {tw.changes}")
+                e = run_element(p, [ini.normal_pa, fin.normal_pa], prestressed=variant == "PRS",
+                                label=f"element_{variant}", out=out)
+                summary["elements"][variant] = e
+                hist.append(iteration=0, region=j, fem_stress_pa=fin.fem_stress_pa,
+                            targets_pa=fin.normal_pa, shear_pa=fin.shear_pa,
+                            rotation_deg=fin.rotation_deg, change=0.0,
+                            dem_stress_pa=e["stress_final_pa"])
+    summary["wall_time_total_s"] = time.perf_counter() - t_start
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
+    end_run(out)
+    write_report(out, summary)
+    for v, e in summary["elements"].items():
+        log(f"{v}: walls held within {100 * e['hold_max_rel_error']:.2f} %; |u| above/below "
+            f"grid {1e3 * e['disp_above_grid_mean_m']:.3f}/{1e3 * e['disp_below_grid_mean_m']:.3f}"
+            f" mm; longitudinal grid force {e['grid_force_longitudinal_mean_n']:.2f} N")
+    log(f"done in {summary['wall_time_total_s']:.1f} s; report in {out / 'report.md'}")
+    return summary
+
+
+# ---- command line ----------------------------------------------------------------------------
+
+
+def apply_coupling_preset(p: Params, name: str) -> Params:
+    """The coupling part of a speed-accuracy preset (cpp_dem.presets): fine FEM mesh size =
+    preset.fem_size_per_element x the element edge (coarse size 20 x that) and the two-way
+    tolerance. The DEM element's own settings are not changed."""
+    from cpp_dem.presets import preset
+
+    ps = preset(name)
+    h = ps.fem_size_per_element * p.edge
+    log(f"preset {name!r}: fine FEM mesh {h:g} m, coarse {20 * h:g} m, two-way tolerance "
+        f"{ps.two_way_tol:g}")
+    return replace(p, fine_size=h, mesh_size=20 * h, two_way_tol=ps.two_way_tol)
+
+
+def parse_stresses(text: str, ap) -> list:
+    """'sx,sy,sz' (Pa) or a CSV file with columns sx,sy,sz (optionally time first)."""
+    path = Path(text)
+    rows = []
+    if path.suffix.lower() == ".csv" or path.is_file():
+        if not path.is_file():
+            ap.error(f"--stresses={text}: no such file")
+        for k, line in enumerate(path.read_text().splitlines()):
+            cells = [c.strip() for c in line.split(",") if c.strip()]
+            if not cells or cells[0].startswith("#"):
+                continue
+            try:
+                vals = [float(c) for c in cells]
+            except ValueError:
+                if k == 0:
+                    continue  # header
+                ap.error(f"--stresses={text}: line {k + 1} {line!r} is not numbers")
+            if len(vals) == 4:
+                vals = vals[1:]
+            if len(vals) != 3:
+                ap.error(f"--stresses={text}: line {k + 1} has {len(vals)} values, need 3 "
+                         "(sx,sy,sz) or 4 (time,sx,sy,sz)")
+            rows.append(vals)
+    else:
+        try:
+            vals = [float(c) for c in text.split(",")]
+        except ValueError:
+            ap.error(f"--stresses={text!r}: need three numbers sx,sy,sz in Pa")
+        if len(vals) != 3:
+            ap.error(f"--stresses={text!r}: need three numbers sx,sy,sz in Pa, got {len(vals)}")
+        rows.append(vals)
+    if not rows:
+        ap.error(f"--stresses={text}: no rows")
+    for row in rows:
+        for name, v in zip(("sx", "sy", "sz"), row):
+            if not (math.isfinite(v) and v > 0):
+                ap.error(f"--stresses: {name}={v}: must be > 0 (Pa, compression positive; "
+                         "servo walls only push)")
+    return rows
+
+
+def parse_args(argv=None) -> tuple[Params, Path]:
+    ap = argparse.ArgumentParser(
+        description="Prestressed reinforced-soil element (002): a 0.1 m cube of grains with "
+                    "a geogrid, servo walls driven to FEM stresses (RE and PRS), or to given "
+                    "stresses (--stresses, DEM only, no dolfinx). z is vertical; DEM stresses "
+                    "compression positive.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    d = Params()
+    ap.add_argument("--smoke", action="store_true",
+                    help=f"test-sized run: {SMOKE['n']} grains, coarse FEM mesh")
+    ap.add_argument("--out", type=Path, default=Path("results") / "prs_element")
+    ap.add_argument("--stresses", type=str, default="",
+                    help="DEM-only: 'sx,sy,sz' in Pa (compression positive) or a CSV table "
+                         "(sx,sy,sz or time,sx,sy,sz per row, driven in order)")
+    ap.add_argument("--prs", action="store_true",
+                    help="DEM-only: prestress the geogrid by --prestress (default: RE)")
+    ap.add_argument("--n", type=int, default=None, help=f"number of grains (default {d.n})")
+    ap.add_argument("--prestress", type=float, default=d.prestress,
+                    help="PRS prestress T_p, N/m (>= 0)")
+    ap.add_argument("--footing-pressure", type=float, default=d.footing_pressure,
+                    help="FEM footing pressure, Pa (> 0)")
+    ap.add_argument("--two-way", action="store_true", help="iterate FEM <-> DEM")
+    ap.add_argument("--tol", type=float, default=d.two_way_tol,
+                    help="two-way tolerance on the handed-over stresses, relative")
+    ap.add_argument("--max-iterations", type=int, default=d.max_iterations)
+    ap.add_argument("--preset", choices=("fast", "balanced", "accurate"), default="",
+                    help="speed-accuracy preset of the coupling: fine FEM mesh size (x the "
+                         "element edge; coarse size 20 x that) and the two-way tolerance "
+                         "(overrides --tol); docs/speed_accuracy.md")
+    ap.add_argument("--workers", type=int, default=1,
+                    help="processes for the DEM elements of the two-way loop (<= 2 here)")
+    ap.add_argument("--seed", type=int, default=d.seed)
+    ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: one thread)")
+    a = ap.parse_args(argv)
+    check_common_args(ap, a)
+    p = Params(**SMOKE) if a.smoke else Params()
+    if a.n is not None:
+        if a.n < 50:
+            ap.error(f"--n={a.n}: must be >= 50")
+        p.n = a.n
+    if not (math.isfinite(a.prestress) and a.prestress >= 0):
+        ap.error(f"--prestress={a.prestress}: must be >= 0 (N/m)")
+    if not (math.isfinite(a.footing_pressure) and a.footing_pressure > 0):
+        ap.error(f"--footing-pressure={a.footing_pressure}: must be > 0 (Pa)")
+    if not a.tol > 0:
+        ap.error(f"--tol={a.tol}: must be > 0")
+    if a.max_iterations < 2:
+        ap.error(f"--max-iterations={a.max_iterations}: must be >= 2")
+    if a.workers < 1:
+        ap.error(f"--workers={a.workers}: must be >= 1")
+    p.prestress, p.footing_pressure, p.seed, p.threads = (a.prestress, a.footing_pressure,
+                                                           a.seed, a.threads)
+    p.two_way, p.two_way_tol, p.max_iterations, p.workers = (a.two_way, a.tol, a.max_iterations,
+                                                             a.workers)
+    if a.preset:
+        if a.stresses:
+            ap.error("--preset sets the FEM mesh and the two-way tolerance: not with --stresses")
+        p = apply_coupling_preset(p, a.preset)
+    if a.stresses:
+        if a.two_way:
+            ap.error("--two-way needs the FEM: not with --stresses")
+        p.stresses = parse_stresses(a.stresses, ap)
+        p.prs = a.prs
+    elif a.prs:
+        ap.error("--prs is for DEM-only runs (--stresses); the FEM mode runs RE and PRS")
+    return p, a.out
+
+
+def main(argv=None) -> int:
+    p, out = parse_args(argv)
+    run(p, out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())

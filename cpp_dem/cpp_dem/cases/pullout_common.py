@@ -1,0 +1,191 @@
+"""What the two pull-out cases (pullout_000.py, pullout_001.py) share: running the stages
+with progress lines, the recorders (HDF5 + CSV, appended and flushed as the run goes), the VTK
+snapshots at chosen displacements, the plots (000 Figs 5, 7, 8) and the summary."""
+
+from __future__ import annotations
+
+import json
+import time
+from pathlib import Path
+
+import numpy as np
+
+from cpp_dem.io.figures import save_figure
+import cpp_dem as dem
+from cpp_dem import geogrid, pullout
+from cpp_dem.rundir import begin_run, end_run
+from cpp_dem.output import (CsvRecorder, H5Recorder, PvdWriter, write_vtk_box,
+                            write_vtk_contacts, write_vtk_spheres)
+
+SERIES = {k: (None, u) for k, u in pullout.PULL_UNITS.items()}
+
+
+def make_logger(tag: str):
+    def log(msg: str) -> None:
+        print(f"[{tag}] {msg}", flush=True)
+    return log
+
+
+def write_vtk_state(sample: pullout.PulloutSample, vtk_dir: Path, name: str,
+                    pvds: dict | None = None) -> None:
+    """Spheres, contact network, geogrid (member forces) and box as .vtp files; adds them to
+    the PVD collections in ``pvds`` (keys 'spheres', 'contacts', 'geogrid') when given."""
+    sc = sample.scene
+    files = {"spheres": write_vtk_spheres(vtk_dir / f"spheres_{name}.vtp", sc),
+             "contacts": write_vtk_contacts(vtk_dir / f"contacts_{name}.vtp", sc)}
+    gpath = vtk_dir / f"geogrid_{name}.vtp"
+    geogrid.write_vtk_geogrid(gpath, sc, sample.grid)
+    files["geogrid"] = gpath
+    lo, hi = sample.box_lo_hi()
+    write_vtk_box(vtk_dir / f"box_{name}.vtp", lo, hi)
+    if pvds is not None:
+        for k, f in files.items():
+            pvds[k].add(sc.time, Path(f).name)
+
+
+def plot_pull(rec: dict, png_force: Path, png_members: Path, title: str,
+              summary: dict | None = None) -> None:
+    """Force-displacement with the top-wall stress (000 Fig. 5) and the axial stresses of
+    members A and C in apertures 1 and 2 (000 Figs 7 and 8)."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    d_mm = 1e3 * rec["displacement"]
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4.2))
+    ax[0].plot(d_mm, rec["pull_force"], label="pull-out force (clamp reaction)")
+    if summary is not None:
+        ax[0].plot(1e3 * summary["initial_peak_displacement_m"],
+                   summary["initial_peak_force_N"], "o", color="C3",
+                   label="initial peak" if summary.get("initial_peak_found", True)
+                   else "largest force so far (no peak yet)")
+    ax[0].set_xlabel("front displacement (mm)")
+    ax[0].set_ylabel("pull-out force (N)")
+    ax[0].legend()
+    ax[1].plot(d_mm, rec["top_stress"] / 1e3, color="C2")
+    ax[1].set_xlabel("front displacement (mm)")
+    ax[1].set_ylabel("top-wall normal stress (kPa)")
+    for a in ax:
+        a.grid(alpha=0.3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    save_figure(fig, png_force)
+    plt.close(fig)
+
+    fig, ax = plt.subplots(1, 2, figsize=(12, 4.2))
+    for k, a in (("A", ax[0]), ("C", ax[1])):
+        for n in (1, 2):
+            a.plot(d_mm, rec[f"stress_{k}{n}"] / 1e6, label=f"{k}, aperture {n}")
+        a.set_xlabel("front displacement (mm)")
+        a.set_ylabel("axial stress (MPa, tension +)")
+        a.set_title("longitudinal members A" if k == "A" else "transverse members C")
+        a.legend()
+        a.grid(alpha=0.3)
+    fig.suptitle(title)
+    fig.tight_layout()
+    save_figure(fig, png_members)
+    plt.close(fig)
+
+
+def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
+             prep_kwargs: dict, velocity: float, distance: float, record_every: int,
+             snapshot_displacements, grain_density: float, stress: float, title: str,
+             log, before_pull=None) -> dict:
+    """Prepares the sample, pulls it, writes every output in ``out``; returns the summary.
+    ``before_pull(sample)``, if given, runs between the preparation and the pull (e.g. a
+    speed-accuracy preset that applies to the pull only)."""
+    t_start = time.perf_counter()
+    begin_run(out, tag)
+    vtk = out / "vtk"
+    vtk.mkdir(exist_ok=True)
+    sc = sample.scene
+    n_grains = len(sample.grain_ids)
+    log(f"{n_grains} grains, geogrid of {len(sample.grid.nodes)} nodes / "
+        f"{len(sample.grid.links)} links / {len(sample.grid.pfacets)} PFacets / "
+        f"{sample.grid.n_members} members; clamp holds {len(sample.clamp_nodes)} nodes "
+        f"({sample.info['clamp']}); apertures 1, 2 = cells {sample.apertures.tolist()}; "
+        f"{dem.get_num_threads()} threads")
+    t0 = time.perf_counter()
+    res = pullout.prepare(sample, stress=stress, log=log, **prep_kwargs)
+    t_prep = time.perf_counter() - t0
+    if not res.converged:
+        log("warning: the sample did not reach the stability criteria; pulling anyway")
+    write_vtk_state(sample, vtk, "prepared")
+    if before_pull is not None:
+        before_pull(sample)
+    inertial = pullout.inertial_number(velocity, grain_density, stress)
+    log(f"preparation {t_prep:.1f} s; pulling at {velocity} m/s to {distance * 1e3:g} mm "
+        f"(inertial number I = v sqrt(rho/sigma) = {inertial:.2g}), dt {sc.dt:.3g} s")
+    h5 = H5Recorder(out / "pullout.h5", series=SERIES, overwrite=True,
+                    metadata={**meta, "units": "SI; pull towards -x; pull-out force and member "
+                                               "forces tension/resistance positive"},
+                    snapshot_fields=("positions", "velocities", "radii"))
+    csv = CsvRecorder(out / "pullout.csv", series=SERIES, overwrite=True)
+    pvds = {k: PvdWriter(vtk / f"{k}.pvd", overwrite=True)
+            for k in ("spheres", "contacts", "geogrid")}
+    last = [time.perf_counter()]
+    t_pull0 = time.perf_counter()
+
+    def on_record(row: dict) -> None:
+        h5.record(**row)
+        csv.record(**row)
+        if time.perf_counter() - last[0] > 5:
+            last[0] = time.perf_counter()
+            frac = row["displacement"] / distance
+            el = time.perf_counter() - t_pull0
+            eta = el * (1 - frac) / frac if frac > 0.01 else float("nan")
+            log(f"d {1e3 * row['displacement']:7.2f} mm  F {row['pull_force']:9.2f} N  "
+                f"A1 {row['force_A1']:8.2f} N  C1 {row['force_C1']:8.2f} N  top "
+                f"{row['top_stress'] / 1e3:6.2f} kPa  ({100 * frac:.0f} %, ~{eta:.0f} s left)")
+
+    def on_snapshot(d: float) -> None:
+        name = f"d{1e3 * d:06.2f}mm"
+        f = sample.grid.member_axial_forces(sc)
+        h5.snapshot(sc, extra={"member_axial_force": (f, "N"),
+                               "grid_node_positions": (sc.positions[sample.grid.nodes], "m"),
+                               "front_displacement": (np.array([d]), "m")})
+        write_vtk_state(sample, vtk, name, pvds)
+        log(f"snapshot at {1e3 * d:.1f} mm: member forces {f.min():.1f} .. {f.max():.1f} N "
+            f"-> vtk/*_{name}.vtp")
+
+    steps0 = sc.step_count
+    try:
+        rec = pullout.pull(sample, velocity=velocity, distance=distance,
+                           record_every=record_every, on_record=on_record,
+                           snapshot_displacements=snapshot_displacements,
+                           on_snapshot=on_snapshot)
+    finally:
+        h5.close()
+        csv.close()
+        for p in pvds.values():
+            p.close()
+    t_pull = time.perf_counter() - t_pull0
+    pull_steps = sc.step_count - steps0
+    summ = pullout.summarize(rec)
+    plot_pull(rec, out / "pullout_force.png", out / "pullout_members.png", title, summ)
+    summary = {**meta, **summ, "num_grains": n_grains, "grid_nodes": int(len(sample.grid.nodes)),
+               "grid_members": int(sample.grid.n_members),
+               "apertures": sample.apertures.tolist(),
+               "porosity_prepared": res.porosity, "top_stress_prepared_Pa": res.top_stress,
+               "prep_converged": res.converged,
+               "node_density_scale": sample.node_density_scale,
+               "inertial_number": inertial, "dt_s": sc.dt, "pull_steps": pull_steps,
+               "top_stress_mean_Pa": float(rec["top_stress"].mean()),
+               "top_stress_max_rel_dev": float(np.max(np.abs(rec["top_stress"] / stress - 1))),
+               "wall_time_prep_s": t_prep, "wall_time_pull_s": t_pull,
+               "wall_time_total_s": time.perf_counter() - t_start,
+               "particle_steps_per_s_pull": n_grains * pull_steps / t_pull if t_pull else 0,
+               "threads": dem.get_num_threads()}
+    (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
+    end_run(out)
+    peak = ("initial peak" if summ["initial_peak_found"]
+            else "initial peak: none yet (the force has not dropped 10 %); largest force")
+    log(f"{peak} {summ['initial_peak_force_N']:.2f} N at "
+        f"{1e3 * summ['initial_peak_displacement_m']:.1f} mm; mean {summ['mean_force_N']:.2f} N,"
+        f" CoV {summ['cov_force']:.3f}; |C|/|A| (apertures 1-2) "
+        f"{summ.get('transverse_over_longitudinal', float('nan')):.3f}")
+    log(f"wall time: preparation {t_prep:.1f} s, pull {t_pull:.1f} s ({pull_steps} steps), "
+        f"total {summary['wall_time_total_s']:.1f} s; outputs in {out}")
+    return summary
+

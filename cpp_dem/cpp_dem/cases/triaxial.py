@@ -1,0 +1,557 @@
+#!/usr/bin/env python3
+"""Drained triaxial test of a granular sample in a box (001 chapter 6 and Appendix B).
+
+Axis z is the axial axis (the 0.6 m side of the default 0.3 x 0.3 x 0.6 m box); x and y are
+the lateral axes held at the cell pressure. Six frictionless, servo-controlled walls.
+
+Stages: (0) sample: radii from the App. B sieve curve (by mass; truncated below d_min so the
+box holds about --n grains, see docs/triaxial.md), a random loose cloud, radius expansion to
+the cell pressure at the preparation friction (--prep-friction, App. B's compFricDegree);
+(1) isotropic: servo walls to the cell pressure until all axis stresses are within 1 % and
+the unbalanced force is below 0.01, at the contact friction --phi; (2) deviatoric: the z
+walls move at a constant axial strain rate with the x and y stresses held, until
+--stop-strain. With --packing CSV (x,y,z,r) the given spheres are used in the box they span
+and the run starts at stage (1).
+
+Outputs in --out: triaxial.h5 (series + final snapshot; with a geogrid also the series
+member_axial_force, (n_records, n_members) N), triaxial.csv (columns axial_strain,
+volumetric_strain, deviatoric_stress, ...), triaxial.png and .pdf (eps_v-eps_a, q-eps_a,
+eps_v-time), isotropic.h5 (checkpoint after stage 1), packing_isotropic.csv (grains only),
+vtk/ (spheres and box at the end of each stage), summary.json. SI units; stresses and
+strains compression positive; q = sigma_z - (sigma_x + sigma_y) / 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from cpp_dem.io.figures import save_figure
+from cpp_dem.rundir import begin_run, check_common_args, end_run
+import cpp_dem as dem
+from cpp_dem import geogrid, measure, prep, psd
+from cpp_dem.checkpoint import save_checkpoint
+from cpp_dem.output import CsvRecorder, H5Recorder, write_vtk_box, write_vtk_spheres
+from cpp_dem.packing import loose_cloud
+from cpp_dem.triaxial import (apply_preset, build_box_sample, deviatoric_stage,
+                              isotropic_stage)
+
+ROOT = Path(__file__).resolve().parents[3]  # the source tree (for git), when there is one
+
+
+@dataclass
+class Params:
+    """Parameters of the triaxial case (SI)."""
+
+    n: int = 15000                   #: target number of grains, -
+    box: tuple = (0.3, 0.3, 0.6)     #: box x, y, z (axial), m
+    seed: int = 1                    #: RNG seed, -
+    young: float = 4.5e6             #: E of the linear law, Pa (001 §6, App. B)
+    poisson: float = 0.33            #: k_s / k_n of the linear law, - (App. B)
+    phi: float = 32.0                #: contact friction angle, deg (App. B finalFricDegree)
+    prep_friction: float = 32.0      #: friction during the expansion, deg (compFricDegree)
+    density: float = 2650.0          #: grain density, kg/m^3
+    damping: float = 0.2             #: Cundall local damping, - (App. B damp)
+    cell_pressure: float = 75e3      #: Pa (001 §6)
+    strain_rate: float = 0.1         #: axial strain rate, 1/s
+    stop_strain: float = 0.15        #: axial strain at which to stop, -
+    solid_fraction: float = 0.6      #: assumed solid fraction to size the PSD truncation, -
+    cloud_fraction: float = 0.25     #: solid fraction of the initial cloud, -
+    dt_safety: float = 0.5           #: dt = safety x critical_dt, -
+    record_every: int = 100          #: steps between records, -
+    threads: int = 0                 #: OpenMP threads (0: library default)
+    packing: str = ""                #: packing file to start from ('' = generate)
+    packing_format: str = "csv"      #: csv (x,y,z,r), yade, liggghts or pfc
+    box: tuple = ()                  #: wall planes (x0, y0, z0, x1, y1, z1), m ('' = the
+                                     #: packing's bounding box, or a LIGGGHTS file's box)
+    skip_isotropic: bool = False     #: take the packing's state as it is (no growth, no
+                                     #: isotropic stage): continue another code's state
+    geogrid: str = "none"            #: geogrid layer at mid-height: none, square, triangular
+    clear_layer: bool = False        #: remove the grains in the geogrid layer (also without
+                                     #: a geogrid, for a same-packing comparison)
+    preset: str = ""                 #: speed-accuracy preset of the loading ('' = none)
+    grain_scale: float = 1.0         #: every grain size x this factor after the PSD is fitted
+                                     #: to n (same box: about n / grain_scale^3 grains), -
+
+
+SMOKE = dict(n=300, strain_rate=0.5, stop_strain=0.04, record_every=50)
+
+
+def smoke_box(p: Params) -> tuple:
+    """The box scaled with the grain count (grain sizes kept): (n / 15000)^(1/3) x 0.3 ..."""
+    f = (p.n / 15000.0) ** (1.0 / 3.0)
+    return tuple(float(x * f) for x in (0.3, 0.3, 0.6))
+
+
+def make_sample(p: Params, log) -> tuple:
+    """Centres, radii and the box (lo, hi) of the sample; info about the PSD."""
+    if p.packing:
+        from cpp_dem.io import foreign
+
+        readers = {"csv": dem.read_packing_csv, "yade": foreign.read_yade_text,
+                   "liggghts": foreign.read_liggghts_data, "pfc": foreign.read_pfc_balls}
+        c, r = readers[p.packing_format](p.packing)
+        if p.box:
+            lo, hi = np.asarray(p.box[:3], float), np.asarray(p.box[3:], float)
+        elif p.packing_format == "liggghts":
+            lo, hi = foreign.read_liggghts_box(p.packing)
+        else:
+            lo = (c - r[:, None]).min(0)
+            hi = (c + r[:, None]).max(0)
+        outside = np.any((c < lo) | (c > hi), axis=1)
+        if np.any(outside):
+            raise SystemExit(f"error: --packing={p.packing}: {int(outside.sum())} centres lie "
+                             f"outside the box {lo.tolist()}-{hi.tolist()} m (--box)")
+        log(f"packing {p.packing} ({p.packing_format}): {len(r)} spheres, walls at "
+            f"{np.round(lo, 5).tolist()} - {np.round(hi, 5).tolist()} m")
+        return c, r, lo, hi, {"source": str(p.packing), "format": p.packing_format}
+    box = np.asarray(p.box, float)
+    vol_solid = p.solid_fraction * float(np.prod(box))
+    d, pc, d_min = psd.fit_psd_to_count(psd.APPENDIX_B_SIZES, psd.APPENDIX_B_PASSING, p.n,
+                                        vol_solid, by="mass", method="truncate")
+    if p.grain_scale != 1.0:  # coarser (> 1) or finer (< 1) grains in the same box
+        d = d * p.grain_scale
+        log(f"grain sizes x {p.grain_scale:g} (--grain-scale)")
+    n = int(round(psd.expected_count(d, pc, vol_solid, by="mass")))
+    if n < 10:
+        raise SystemExit(f"error: --grain-scale={p.grain_scale:g}: leaves {n} grains in the "
+                         f"{np.round(box, 4).tolist()} m box (at least 10 are needed); use a "
+                         "smaller factor or a larger box")
+    radii = psd.radii_from_psd(d, pc, n, by="mass", seed=p.seed)
+    shrink = (p.cloud_fraction / p.solid_fraction) ** (1.0 / 3.0)
+    c, r = loose_cloud(radii * shrink, (0, 0, 0), box, seed=p.seed)
+    log(f"PSD: App. B by mass, fines below d_min = {d_min * p.grain_scale * 1e3:.2f} mm removed -> {n} grains,"
+        f" d = {2 * radii.min() * 1e3:.1f}-{2 * radii.max() * 1e3:.1f} mm; cloud at radii x "
+        f"{shrink:.3f}")
+    return c, r, np.zeros(3), box, {"d_min_m": d_min * p.grain_scale, "sizes_m": d.tolist(),
+                                     "passing_mass": pc.tolist(), "cloud_shrink": shrink}
+
+
+@dataclass
+class GridLayer:
+    """A geogrid layer at mid-height of the sample (001 §6.3): the §5.1 grids, 9.5 cm wide
+    (or 0.8 of the box width in a smaller smoke box), centred in x and y."""
+
+    z: float
+    centre: np.ndarray
+    width: float
+
+    def radius(self, p: Params) -> float:
+        """Cylinder radius, m: 1 mm for the square grid, 0.5 mm for the triangular (001 §5.1)."""
+        return 1e-3 if p.geogrid == "square" else 0.5e-3
+
+    def overlaps(self, c: np.ndarray, r: np.ndarray) -> np.ndarray:
+        """Grains (at the cloud's radii) that cut the layer slab over the grid's footprint."""
+        half = 0.5 * self.width
+        inside = np.all(np.abs(c[:, :2] - self.centre) < half + r[:, None], axis=1)
+        return inside & (np.abs(c[:, 2] - self.z) < r + 1e-3)
+
+    def build(self, sc, p: Params):
+        """Adds the geogrid: 001 Table 5.1 material (E = 5 MPa, nu = 0.3, rho = 2650 kg/m^3,
+        phi = 20 deg) with cohesive links of normal and shear cohesion 1e7 Pa (App. A)."""
+        mat = sc.add_material(dem.linear_material(density=2650.0, young=5e6, poisson=0.3,
+                                                  friction_angle_deg=20.0))
+        beam = dem.BeamParams(young=5e6, poisson=0.3, radius=self.radius(p),
+                              normal_cohesion=1e7, shear_cohesion=1e7)
+        o = np.array([self.centre[0] - 0.5 * self.width, self.centre[1] - 0.5 * self.width,
+                      self.z])
+        if p.geogrid == "square":
+            n = max(2, int(round(10 * self.width / 0.095)))
+            return geogrid.square_grid(sc, origin=o, length=self.width, width=self.width,
+                                       nodes_x=n, nodes_y=n, params=beam, material=mat,
+                                       density=2650.0)
+        return geogrid.triangular_grid(sc, origin=o, length=self.width, width=self.width,
+                                       side=0.0143, params=beam, material=mat, density=2650.0)
+
+
+def grid_layer(p: Params, lo, hi) -> GridLayer | None:
+    """The mid-height geogrid layer of the sample in [lo, hi], or None without one."""
+    if p.geogrid == "none" and not p.clear_layer:
+        return None
+    lo, hi = np.asarray(lo, float), np.asarray(hi, float)
+    width = min(0.095, 0.8 * float(min(hi[0] - lo[0], hi[1] - lo[1])))
+    return GridLayer(z=0.5 * (lo[2] + hi[2]), centre=0.5 * (lo[:2] + hi[:2]), width=width)
+
+
+def plot(rows: dict, png: Path, p: Params) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(1, 3, figsize=(14, 4.2))
+    ea = 100 * rows["axial_strain"]
+    ax[0].plot(ea, 100 * rows["volumetric_strain"])
+    ax[0].set_xlabel("axial strain (%)")
+    ax[0].set_ylabel("volumetric strain (%, compression +)")
+    ax[1].plot(ea, rows["deviatoric_stress"] / 1e3)
+    ax[1].set_xlabel("axial strain (%)")
+    ax[1].set_ylabel("q = sigma_z - (sigma_x + sigma_y)/2 (kPa)")
+    ax[2].plot(rows["time"], 100 * rows["volumetric_strain"])
+    ax[2].set_xlabel("time in the deviatoric stage (s)")
+    ax[2].set_ylabel("volumetric strain (%)")
+    for a in ax:
+        a.grid(alpha=0.3)
+    fig.suptitle(f"Triaxial test, cell pressure {p.cell_pressure / 1e3:g} kPa, "
+                 f"E = {p.young / 1e6:g} MPa, phi = {p.phi:g} deg")
+    fig.tight_layout()
+    save_figure(fig, png)
+    plt.close(fig)
+
+
+SERIES = {"time": (None, "s"), "step": (None, "-"), "axial_strain": (None, "-"),
+          "volumetric_strain": (None, "-"), "deviatoric_stress": (None, "Pa"),
+          "mean_stress": (None, "Pa"), "sigma_x": (None, "Pa"), "sigma_y": (None, "Pa"),
+          "sigma_z": (None, "Pa"), "porosity": (None, "-"), "unbalanced_force": (None, "-")}
+
+
+@dataclass
+class Prepared:
+    """A sample after the isotropic stage (stages 0 and 1)."""
+
+    sample: object          #: cpp_dem.triaxial.TriaxialSample
+    grid: object            #: geogrid.Geogrid or None
+    n_grains: int
+    psd_info: dict
+    grow: object            #: prep.StageResult of the expansion, or None (given packing)
+    iso: object             #: prep.StageResult of the isotropic stage
+    t_iso: float            #: wall time of the isotropic stage, s
+
+
+def prepare(p: Params, log) -> Prepared:
+    """Stages 0 and 1: the sample (or the given packing), the geogrid layer if any, the
+    expansion to the cell pressure, the isotropic stage; progress lines go to ``log``.
+    Raises SystemExit if the isotropic stage does not converge."""
+    c, r, lo, hi, psd_info = make_sample(p, log)
+    layer = grid_layer(p, lo, hi)
+    if layer is not None and (p.clear_layer or p.geogrid != "none"):
+        keep = ~layer.overlaps(c, r)
+        log(f"geogrid layer at z = {layer.z:.4f} m: {int((~keep).sum())} grains removed from it "
+            f"({'with' if p.geogrid != 'none' else 'without'} a geogrid)")
+        c, r = c[keep], r[keep]
+    sample = build_box_sample(c, r, lo, hi, young=p.young, poisson=p.poisson,
+                              friction_deg=p.prep_friction if not p.packing else p.phi,
+                              density=p.density, local_damping=p.damping,
+                              dt_safety=p.dt_safety)
+    sc, walls = sample.scene, sample.walls
+    # Soft grains under high confinement overlap by design (0.07 of the radius at 75 kPa and
+    # E = 4.5 MPa, the axial stress reaches 3-4 times the cell pressure): see overlap_limit.
+    sc.max_overlap_ratio = prep.overlap_limit(p.cell_pressure, p.young)
+    grid = layer.build(sc, p) if (layer is not None and p.geogrid != "none") else None
+    if grid is not None:
+        sc.block_dofs(grid.nodes, "all")  # held during the expansion (as 000 §2.3)
+        # Grain–geogrid contacts are soft: the mixing rule takes the virtual sphere's radius
+        # R_c (001 §4.2), so k_n ~ E R_c and, at 75 kPa, a 1 cm grain sinks by a large
+        # fraction of its radius into a 0.5 mm grid. Allow overlaps up to 0.95 R (the grain's
+        # centre stays clear of the grid's axis); deeper still stops the run.
+        sc.max_overlap_ratio = 0.95
+        log(f"{p.geogrid} geogrid: {len(grid.nodes)} nodes, {len(grid.links)} members, "
+            f"R_c = {layer.radius(p) * 1e3:.2f} mm, held until the isotropic stage")
+    n_grains = int(np.count_nonzero(measure.sphere_mask(sc)))
+    log(f"{n_grains} grains, box {np.round(measure.box_size(sc, walls), 4)} m, "
+        f"{dem.get_num_threads()} threads, dt {sc.dt:.3g} s")
+
+    def progress(s) -> None:
+        if s.step_count % 2000 == 0:
+            ax = measure.axis_stresses(s, walls)
+            log(f"step {s.step_count}: axis stresses {np.round(ax / 1e3, 2)} kPa, unbalanced "
+                f"{s.unbalanced_force():.3g}, porosity {measure.porosity(s, walls):.4f}")
+
+    grow = None
+    if p.skip_isotropic:
+        # Another code's state, continued as it is: the walls where it had them, no growth, no
+        # servo stage; the controller holds the cell pressure from the deviatoric stage on.
+        if grid is not None:
+            sc.block_dofs(grid.nodes, "")
+        sample.controller.enabled = False
+        sc.run(1)  # the contact forces of the given state
+        ax = measure.axis_stresses(sc, walls)
+        iso = prep.StageResult(True, 1, ax, float(ax.mean()), float(sc.unbalanced_force()),
+                               measure.porosity(sc, walls), {"skipped": True})
+        log(f"isotropic stage skipped (--skip-isotropic): axis stresses of the given state "
+            f"{np.round(ax / 1e3, 3)} kPa, porosity {iso.porosity:.4f}")
+        for a in range(3):
+            sample.controller.set_stress(a, p.cell_pressure)
+        sample.controller.enabled = True
+        return Prepared(sample, grid, n_grains, psd_info, None, iso, 0.0)
+    if not p.packing:
+        t0 = time.perf_counter()
+        # Slow growth (1e-4 radius strain per step at most) lets the grains rearrange.
+        grow = prep.grow_to_stress(sc, walls, p.cell_pressure, tol=0.05, unbalanced=0.05,
+                                   max_strain=1e-4,
+                                   max_steps=200_000, callback=progress)
+        log(f"expansion: {grow.steps} steps, growth factor {grow.extra['growth_factor']:.4f}, "
+            f"mean stress {grow.mean_stress / 1e3:.2f} kPa, porosity {grow.porosity:.4f} "
+            f"({time.perf_counter() - t0:.1f} s)")
+        if p.prep_friction != p.phi:
+            prep.set_friction(sc, np.flatnonzero(measure.sphere_mask(sc)),
+                              sc.material(sample.material), p.phi)
+    if grid is not None:
+        sc.block_dofs(grid.nodes, "")  # the geogrid is free from the isotropic stage on
+    t0 = time.perf_counter()
+    iso = isotropic_stage(sample, p.cell_pressure, callback=progress)
+    t_iso = time.perf_counter() - t0
+    if not iso.converged:
+        raise SystemExit(f"error: isotropic stage did not converge in {iso.steps} steps "
+                         f"(axis stresses {iso.axis_stresses} Pa, unbalanced "
+                         f"{iso.unbalanced_force:.3g})")
+    log(f"isotropic: {iso.steps} steps, axis stresses {np.round(iso.axis_stresses / 1e3, 3)} "
+        f"kPa, unbalanced {iso.unbalanced_force:.4f}, porosity {iso.porosity:.4f} "
+        f"({t_iso:.1f} s)")
+    return Prepared(sample, grid, n_grains, psd_info, grow, iso, t_iso)
+
+
+def inertial_number(sc, p: Params) -> float:
+    """Inertial number of the axial loading, I = strain_rate x d_mean x sqrt(rho / p_cell), -
+    (d_mean: mean grain diameter, m). Below ~1e-3 the loading is quasi-static."""
+    d_mean = 2.0 * float(np.mean(sc.radii[measure.sphere_mask(sc)]))
+    return p.strain_rate * d_mean * math.sqrt(p.density / p.cell_pressure)
+
+
+def run(p: Params, out: Path) -> dict:
+    t_start = time.perf_counter()
+    if p.threads > 0:
+        dem.set_num_threads(p.threads)
+    begin_run(out, "triaxial")
+    (out / "vtk").mkdir(exist_ok=True)
+
+    def log(msg: str) -> None:
+        print(f"[triaxial] {msg}", flush=True)
+
+    prepared = prepare(p, log)
+    sample, grid, n_grains, iso, t_iso = (prepared.sample, prepared.grid, prepared.n_grains,
+                                          prepared.iso, prepared.t_iso)
+    sc, walls, grow, psd_info = sample.scene, sample.walls, prepared.grow, prepared.psd_info
+    if p.preset:
+        p.strain_rate = apply_preset(sample, p.preset, pressure=p.cell_pressure,
+                                     density=p.density)
+        log(f"preset {p.preset!r}: dt {sc.dt:.3g} s, local damping {sc.local_damping:g}, "
+            f"strain rate {p.strain_rate:.3g} 1/s")
+    log(f"axial loading at {p.strain_rate:g} 1/s: inertial number "
+        f"{inertial_number(sc, p):.2g} (quasi-static below ~1e-3)")
+    state_iso = measure.sample_state(sc, walls)
+    save_checkpoint(out / "isotropic.h5", sc, extra={"walls": list(walls)})
+    grains = measure.sphere_mask(sc)  # grains only: never the geogrid's nodes
+    dem.write_packing_csv(out / "packing_isotropic.csv", sc.positions[grains], sc.radii[grains])
+    write_vtk_spheres(out / "vtk" / "spheres_isotropic.vtp", sc)
+    size = measure.box_size(sc, walls)
+    lo_now = np.array([sc.wall_positions[walls[2 * a]] for a in range(3)])
+    write_vtk_box(out / "vtk" / "box_isotropic.vtp", lo_now, lo_now + size)
+
+    meta = {**asdict(p), "case": "triaxial", "axial_axis": "z", "psd": psd_info,
+            "units": "SI; stresses and strains compression positive"}
+    h5_series = dict(SERIES)
+    if grid is not None:
+        # The geogrid's member forces with every record: (n_members,) N, tension positive.
+        h5_series["member_axial_force"] = (lambda scene: grid.member_axial_forces(scene), "N")
+    h5 = H5Recorder(out / "triaxial.h5", sc, series=h5_series, metadata=meta, overwrite=True,
+                    snapshot_fields=("positions", "velocities", "radii"))
+    csv = CsvRecorder(out / "triaxial.csv", series=SERIES, overwrite=True)
+    last = [time.perf_counter()]
+
+    def on_record(row: dict) -> None:
+        h5.record(**row)
+        csv.record(**row)
+        if time.perf_counter() - last[0] > 5:
+            last[0] = time.perf_counter()
+            log(f"eps_a {100 * row['axial_strain']:.2f} %  eps_v "
+                f"{100 * row['volumetric_strain']:.3f} %  q {row['deviatoric_stress'] / 1e3:.2f}"
+                f" kPa  sigma_x,y {row['sigma_x'] / 1e3:.2f},{row['sigma_y'] / 1e3:.2f} kPa")
+
+    t0 = time.perf_counter()
+    steps0 = sc.step_count
+    try:
+        rows = deviatoric_stage(sample, p.cell_pressure, p.strain_rate, p.stop_strain,
+                                record_every=p.record_every, on_record=on_record)
+        h5.snapshot(sc)
+    finally:
+        h5.close()
+        csv.close()
+    t_dev = time.perf_counter() - t0
+    dev_steps = sc.step_count - steps0
+    write_vtk_spheres(out / "vtk" / "spheres_final.vtp", sc)
+    if grid is not None:
+        geogrid.write_vtk_geogrid(out / "vtk" / "geogrid_final.vtp", sc, grid)
+    plot(rows, out / "triaxial.png", p)
+
+    ea = rows["axial_strain"]
+    late = ea > 0.2 * p.stop_strain  # lateral hold measured once loading is under way
+    lat = np.concatenate([rows["sigma_x"][late], rows["sigma_y"][late]])
+    k_peak = int(np.argmax(rows["deviatoric_stress"]))
+    q_peak = float(rows["deviatoric_stress"][k_peak])
+    s_peak = q_peak + p.cell_pressure
+    summary = {
+        "num_grains": n_grains, "axial_axis": "z",
+        "geogrid": p.geogrid, "geogrid_members": int(len(grid.links)) if grid else 0,
+        "geogrid_max_axial_force_N": float(np.max(grid.member_axial_forces(sc))) if grid
+        else None,
+        "porosity_isotropic": iso.porosity,
+        "isotropic_axis_stresses_Pa": iso.axis_stresses.tolist(),
+        "isotropic_unbalanced": iso.unbalanced_force,
+        "isotropic_love_weber_Pa": np.diag(state_iso["love_weber"]).tolist(),
+        "coordination_isotropic": state_iso["coordination"],
+        "coordination_mechanical_isotropic": state_iso["coordination_mechanical"],
+        "q_peak_Pa": q_peak, "axial_strain_at_peak": float(ea[k_peak]),
+        "friction_angle_peak_deg": math.degrees(math.asin((s_peak - p.cell_pressure) /
+                                                          (s_peak + p.cell_pressure))),
+        "volumetric_strain_final": float(rows["volumetric_strain"][-1]),
+        "volumetric_strain_min": float(rows["volumetric_strain"].min()),
+        "lateral_stress_max_rel_error": float(np.max(np.abs(lat / p.cell_pressure - 1)))
+        if lat.size else float("nan"),
+        "deviatoric_steps": dev_steps,
+        "inertial_number": inertial_number(sc, p),
+        "wall_time_isotropic_s": t_iso, "wall_time_deviatoric_s": t_dev,
+        "particle_steps_per_s_deviatoric": n_grains * dev_steps / t_dev,
+        "wall_time_total_s": time.perf_counter() - t_start,
+        "expansion_growth_factor": grow.extra["growth_factor"] if grow else None,
+        "threads": dem.get_num_threads(),
+    }
+    (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
+    end_run(out)
+    log(f"peak q {q_peak / 1e3:.2f} kPa at eps_a {100 * ea[k_peak]:.2f} % (mobilised friction "
+        f"{summary['friction_angle_peak_deg']:.1f} deg); final eps_v "
+        f"{100 * summary['volumetric_strain_final']:.3f} %; lateral stress within "
+        f"{100 * summary['lateral_stress_max_rel_error']:.2f} % of the cell pressure")
+    log(f"wall time: isotropic {t_iso:.1f} s, deviatoric {t_dev:.1f} s ({dev_steps} steps, "
+        f"{summary['particle_steps_per_s_deviatoric']:.3g} particle-steps/s), total "
+        f"{summary['wall_time_total_s']:.1f} s")
+    return summary
+
+
+def _positive(name: str, ap):
+    def conv(s: str) -> float:
+        try:
+            v = float(s)
+        except ValueError:
+            ap.error(f"{name}={s!r}: not a number")
+        if not (math.isfinite(v) and v > 0):
+            ap.error(f"{name}={v}: must be > 0")
+        return v
+    return conv
+
+
+def parse_args(argv=None) -> tuple[Params, Path]:
+    ap = argparse.ArgumentParser(
+        description="Triaxial test (001 ch. 6, App. B). The AXIAL axis is z; x and y are "
+                    "held at the cell pressure. Stresses and strains compression positive.",
+        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+    d = Params()
+    ap.add_argument("--smoke", action="store_true",
+                    help=f"test-sized run: {SMOKE['n']} grains in a box scaled down with the "
+                         "count, faster loading, stop at 4 %% axial strain")
+    ap.add_argument("--out", type=Path, default=Path("results") / "triaxial",
+                    help="output directory")
+    ap.add_argument("--packing", type=str, default="",
+                    help="start from these spheres (m), in the box they span or --box")
+    ap.add_argument("--packing-format", choices=("csv", "yade", "liggghts", "pfc"),
+                    default="csv", help="csv (x,y,z,r), Yade text, LIGGGHTS data file, PFC "
+                    "ball list (cpp_dem.io.foreign)")
+    ap.add_argument("--box", type=str, default="",
+                    help="wall planes x0,y0,z0,x1,y1,z1 (m) of the --packing (default: its "
+                         "bounding box, or a LIGGGHTS file's box)")
+    ap.add_argument("--skip-isotropic", action="store_true",
+                    help="with --packing: take its state as it is (walls at --box, no growth, "
+                         "no isotropic stage) and go straight to the axial loading")
+    ap.add_argument("--n", type=int, default=None, help="target number of grains (default "
+                    f"{d.n}; the box is scaled with it when != {d.n})")
+    ap.add_argument("--cell-pressure", type=_positive("--cell-pressure", ap),
+                    default=d.cell_pressure, help="cell (confining) pressure, Pa, > 0")
+    ap.add_argument("--strain-rate", type=_positive("--strain-rate", ap), default=None,
+                    help=f"axial strain rate, 1/s (default {d.strain_rate})")
+    ap.add_argument("--stop-strain", type=float, default=None,
+                    help=f"axial strain to stop at, - (default {d.stop_strain})")
+    ap.add_argument("--damping", type=float, default=d.damping, help="local damping, [0, 1)")
+    ap.add_argument("--young", "--E", dest="young", type=_positive("--young", ap),
+                    default=d.young, help="Young's modulus of the grains, Pa")
+    ap.add_argument("--poisson", "--nu", dest="poisson", type=float, default=d.poisson,
+                    help="k_s/k_n of the linear law, (0, 0.5]")
+    ap.add_argument("--phi", type=float, default=d.phi, help="contact friction angle, deg")
+    ap.add_argument("--prep-friction", type=float, default=None,
+                    help="friction during sample expansion, deg (default = --phi; 0 gives a "
+                         "dense sample)")
+    ap.add_argument("--density", type=_positive("--density", ap), default=d.density,
+                    help="grain density, kg/m^3")
+    ap.add_argument("--geogrid", choices=("none", "square", "triangular"), default="none",
+                    help="geogrid layer at mid-height (001 §6.3, grids of §5.1)")
+    ap.add_argument("--clear-layer", action="store_true",
+                    help="remove the grains of the geogrid layer even without a geogrid, so "
+                    "that runs with and without one start from the same packing")
+    ap.add_argument("--grain-scale", type=_positive("--grain-scale", ap), default=1.0,
+                    help="multiply every grain size by this after the PSD is fitted to --n: "
+                    "the same box with about n / scale^3 grains (coarse graining), > 0")
+    ap.add_argument("--preset", choices=("fast", "balanced", "accurate"), default="",
+                    help="speed-accuracy preset of the axial loading (dt safety, local "
+                    "damping, strain rate from an inertial number; overrides --strain-rate, "
+                    "--damping, --dt-safety for that stage; docs/speed_accuracy.md)")
+    ap.add_argument("--dt-safety", type=float, default=d.dt_safety,
+                    help="time step = safety x critical estimate, (0, 1]")
+    ap.add_argument("--seed", type=int, default=d.seed)
+    ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: default)")
+    a = ap.parse_args(argv)
+    check_common_args(ap, a)
+    p = Params(**SMOKE) if a.smoke else Params()
+    if a.n is not None:
+        if a.n < 10:
+            ap.error(f"--n={a.n}: must be >= 10")
+        p.n = a.n
+    if p.n != 15000:
+        p.box = smoke_box(p)
+    p.cell_pressure, p.damping, p.young, p.poisson = (a.cell_pressure, a.damping, a.young,
+                                                       a.poisson)
+    p.phi, p.density, p.seed, p.threads = a.phi, a.density, a.seed, a.threads
+    p.geogrid, p.clear_layer = a.geogrid, a.clear_layer
+    p.grain_scale, p.dt_safety, p.preset = a.grain_scale, a.dt_safety, a.preset
+    if not (0 < p.dt_safety <= 1):
+        ap.error(f"--dt-safety={p.dt_safety}: must be in (0, 1]")
+    p.prep_friction = a.prep_friction if a.prep_friction is not None else a.phi
+    if a.strain_rate is not None:
+        p.strain_rate = a.strain_rate
+    if a.stop_strain is not None:
+        p.stop_strain = a.stop_strain
+    if not (0 < p.stop_strain < 0.5):
+        ap.error(f"--stop-strain={p.stop_strain}: must be in (0, 0.5)")
+    if not (0 <= p.damping < 1):
+        ap.error(f"--damping={p.damping}: must be in [0, 1)")
+    if not (0 < p.poisson <= 0.5):
+        ap.error(f"--poisson={p.poisson}: must be in (0, 0.5] for the linear law")
+    for name, v in (("--phi", p.phi), ("--prep-friction", p.prep_friction)):
+        if not (0 <= v < 90):
+            ap.error(f"{name}={v}: must be in [0, 90) deg")
+    if a.packing:
+        if not Path(a.packing).is_file():
+            ap.error(f"--packing={a.packing}: no such file")
+        p.packing = a.packing
+    p.packing_format = a.packing_format
+    if a.box:
+        try:
+            box = tuple(float(v) for v in a.box.split(","))
+        except ValueError:
+            ap.error(f"--box={a.box}: must be 6 numbers x0,y0,z0,x1,y1,z1 (m)")
+        if len(box) != 6 or not all(math.isfinite(v) for v in box) or \
+                not all(box[k + 3] > box[k] for k in range(3)):
+            ap.error(f"--box={a.box}: must be 6 finite numbers x0,y0,z0,x1,y1,z1 (m) with "
+                     "x1 > x0, y1 > y0, z1 > z0")
+        if not a.packing:
+            ap.error("--box: goes with --packing")
+        p.box = box
+    if a.skip_isotropic and not a.packing:
+        ap.error("--skip-isotropic: goes with --packing (the state to continue)")
+    p.skip_isotropic = a.skip_isotropic
+    return p, a.out
+
+
+def main(argv=None) -> int:
+    p, out = parse_args(argv)
+    run(p, out)
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
