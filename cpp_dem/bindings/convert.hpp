@@ -57,6 +57,7 @@ inline Vec3 to_vec3(const Array& a, const char* field) {
 void bind_material(py::module_& m);
 void bind_scene(py::module_& m);
 void bind_grid(py::module_& m);
+void bind_clumps(py::module_& m);
 void bind_controllers(py::module_& m);  // samples: controllers and checkpoint
 void bind_checkpoint(py::module_& m);
 

@@ -19,6 +19,7 @@ PYBIND11_MODULE(_core, m) {
   cpp_dem::bind::bind_material(m);
   cpp_dem::bind::bind_scene(m);
   cpp_dem::bind::bind_grid(m);
+  cpp_dem::bind::bind_clumps(m);
   cpp_dem::bind::bind_controllers(m);
   cpp_dem::bind::bind_checkpoint(m);
 }

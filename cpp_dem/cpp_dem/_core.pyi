@@ -164,6 +164,8 @@ class Scene:
     """
     def __init__(self) -> None:
         ...
+    def _add_clump(self, local: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], radius: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], material: int, mass: float, inertia: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], com: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], ori: typing.Annotated[numpy.typing.ArrayLike, numpy.float64]) -> int:
+        ...
     def _add_grid_nodes(self, positions: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], radius: float, mass: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], inertia: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], material: int) -> int:
         ...
     def _add_spheres(self, centers: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], radii: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], material: int) -> int:
@@ -171,6 +173,8 @@ class Scene:
     def _run(self, steps: int) -> None:
         ...
     def _set_blocked(self, body: int, mask: int) -> None:
+        ...
+    def _set_clump_blocked(self, clump: int, mask: int) -> None:
         ...
     def add_controller(self, controller: Controller) -> int:
         """
@@ -191,6 +195,10 @@ class Scene:
     def add_wall(self, *, axis: int, position: float, sense: int, material: int) -> int:
         """
         Adds an axis-aligned one-sided wall: axis 0/1/2 (x/y/z), position along the axis (m), sense +1 if spheres are on its +axis side, -1 otherwise. Returns its index.
+        """
+    def clump_members(self, clump: int) -> list[int]:
+        """
+        Body ids of a clump's member spheres.
         """
     def collider_stats(self) -> dict:
         ...
@@ -232,6 +240,12 @@ class Scene:
         """
     def set_body_material(self, body: int, material: int) -> None:
         ...
+    def set_clump_external(self, clump: int, force: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], torque: typing.Annotated[numpy.typing.ArrayLike, numpy.float64]) -> None:
+        """
+        Imposed force (N) and torque (N m, about the centre of mass) on a clump.
+        """
+    def set_clump_state(self, clump: int, position: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], orientation: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], velocity: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], angular_velocity: typing.Annotated[numpy.typing.ArrayLike, numpy.float64]) -> None:
+        ...
     def set_mass_inertia(self, body: int, mass: float, inertia: float) -> None:
         """
         Sets a body's mass (kg) and inertia (kg m^2).
@@ -252,6 +266,9 @@ class Scene:
     def _blocked(self) -> list[int]:
         ...
     @property
+    def _clump_blocked(self) -> list[int]:
+        ...
+    @property
     def angular_velocities(self) -> numpy.typing.NDArray[numpy.float64]:
         """
         Angular velocities, rad/s, shape (n, 3).
@@ -263,6 +280,61 @@ class Scene:
     def body_kinds(self) -> list[int]:
         """
         0 sphere, 1 grid node, per body.
+        """
+    @property
+    def clump_angular_momenta(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Clump angular momenta about their centres (global), kg m^2/s, shape (c, 3).
+        """
+    @property
+    def clump_angular_velocities(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Clump spins (global frame, last half step), rad/s, shape (c, 3).
+        """
+    @property
+    def clump_forces(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Resultant force on each clump in the last step, N, shape (c, 3).
+        """
+    @property
+    def clump_ids(self) -> list[int]:
+        """
+        Per body: the index of its clump, -1 for a free body, shape (n,).
+        """
+    @property
+    def clump_inertias(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Principal moments of inertia, kg m^2, shape (c, 3).
+        """
+    @property
+    def clump_kinetic_energies(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Kinetic energy of each clump at the last step (with track_energy), J.
+        """
+    @property
+    def clump_masses(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Clump masses, kg, shape (c,).
+        """
+    @property
+    def clump_orientations(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Clump orientations, principal frame -> global, (w, x, y, z), shape (c, 4).
+        """
+    @property
+    def clump_positions(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Clump centres of mass, m, shape (c, 3).
+        """
+    @property
+    def clump_torques(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Resultant torque about each centre of mass in the last step, N m, shape (c, 3).
+        """
+    @property
+    def clump_velocities(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Clump velocities (last half step), m/s, shape (c, 3).
         """
     @property
     def dt(self) -> float:
@@ -412,6 +484,9 @@ class Scene:
         ...
     @property
     def num_bodies(self) -> int:
+        ...
+    @property
+    def num_clumps(self) -> int:
         ...
     @property
     def num_grid_links(self) -> int:

@@ -40,11 +40,47 @@ def sphere_mask(scene) -> np.ndarray:
     return np.asarray(scene.body_kinds) == 0
 
 
+def grain_of_body(scene) -> tuple[np.ndarray, int]:
+    """Per body, the index of the grain it belongs to, and the number of grains: a free
+    sphere is a grain, a clump (all its members) is one grain; geogrid nodes get -1."""
+    n = int(scene.num_bodies)
+    sph = sphere_mask(scene)
+    cl = np.asarray(scene.clump_ids) if scene.num_clumps else np.full(n, -1)
+    free = sph & (cl < 0)
+    g = np.full(n, -1)
+    g[free] = np.arange(int(free.sum()))
+    nfree = int(free.sum())
+    g[cl >= 0] = nfree + cl[cl >= 0]
+    return g, nfree + int(scene.num_clumps)
+
+
+def reference_points(scene) -> np.ndarray:
+    """Per body, the point that stands for its grain, m (n, 3): a free sphere's centre, a
+    clump member's clump centre of mass (the branch vectors of Love–Weber join these)."""
+    pos = np.asarray(scene.positions).copy()
+    if scene.num_clumps:
+        cl = np.asarray(scene.clump_ids)
+        m = cl >= 0
+        pos[m] = np.asarray(scene.clump_positions)[cl[m]]
+    return pos
+
+
 def solid_volume(scene) -> float:
-    """Sum of the grain volumes 4/3 pi r^3, m^3 (overlaps counted twice; see porosity).
-    Geogrid nodes are not grains and are left out."""
-    r = np.asarray(scene.radii)[sphere_mask(scene)]
-    return float(np.sum(4.0 / 3.0 * np.pi * r**3))
+    """Volume of the grains, m^3: free spheres 4/3 pi r^3 (overlaps between grains counted
+    twice; see porosity), clumps the volume of the union of their members (mass / density:
+    overlaps inside a clump count once). Geogrid nodes are not grains and are left out."""
+    sph = sphere_mask(scene)
+    if scene.num_clumps:
+        cl = np.asarray(scene.clump_ids)
+        r = np.asarray(scene.radii)[sph & (cl < 0)]
+        mats = np.asarray(scene.material_ids)
+        first = np.array([scene.clump_members(c)[0] for c in range(scene.num_clumps)])
+        rho = np.array([scene.material(int(m)).density for m in mats[first]])
+        vc = float(np.sum(np.asarray(scene.clump_masses) / rho))
+    else:
+        r = np.asarray(scene.radii)[sph]
+        vc = 0.0
+    return float(np.sum(4.0 / 3.0 * np.pi * r**3)) + vc
 
 
 def porosity(scene, walls) -> float:
@@ -71,7 +107,9 @@ def love_weber_stress(scene, volume: float) -> np.ndarray:
 
     with f_c the force on the second sphere of a pair, l_c = x_j - x_i the branch vector, and
     for a sphere–wall contact f_c the force on the sphere and x_p - x_c the vector from the
-    contact point (on the wall plane) to the sphere's centre. V is the volume the stress is averaged over (m^3):
+    contact point (on the wall plane) to the sphere's centre. For clumps the branch vectors
+    join the clumps' centres of mass (exact for rigid grains in equilibrium; see
+    reference_points). V is the volume the stress is averaged over (m^3):
     the box volume for a confined sample. For a sample in equilibrium it equals the average
     boundary traction; the tensor is symmetrised.
     """
@@ -79,7 +117,7 @@ def love_weber_stress(scene, volume: float) -> np.ndarray:
         raise _core.ParameterError(f"volume={volume}: must be > 0 (m^3)")
     c = scene.contacts()
     ids, f, nrm, ov = c["ids"], c["force"], c["normal"], c["overlap"]
-    pos = np.asarray(scene.positions)
+    pos = reference_points(scene)
     r = np.asarray(scene.radii)
     pair = ids[:, 1] >= 0
     s = np.zeros((3, 3))
@@ -93,33 +131,39 @@ def love_weber_stress(scene, volume: float) -> np.ndarray:
         # (n: the wall normal, towards the sphere), so the boundary term is exactly the
         # wall force times the wall-to-wall distance.
         arm = (r[b] - ov[wl])[:, None] * nrm[wl]
+        if scene.num_clumps:
+            arm += pos[b] - np.asarray(scene.positions)[b]  # member centre -> clump centre
         s += np.einsum("ki,kj->ij", f[wl], arm)
     s /= volume
     return 0.5 * (s + s.T)
 
 
 def coordination_number(scene, *, mechanical: bool = False) -> float:
-    """Mean number of sphere–sphere contacts per sphere, -: 2 C / N.
+    """Mean number of grain–grain contacts per grain, -: 2 C / N (a clump is one grain; each
+    member–member contact between two clumps counts, as in Yade and PFC).
 
     With ``mechanical``, rattlers are left out (Thornton's mechanical coordination number):
-    spheres with fewer than 2 contacts (walls included) are removed repeatedly, then
-    Z = 2 C' / N' over the remaining spheres and their sphere–sphere contacts.
+    grains with fewer than 2 contacts (walls included) are removed repeatedly, then
+    Z = 2 C' / N' over the remaining grains and their grain–grain contacts.
     """
     c = scene.contacts()
     ids = c["ids"]
-    n = int(scene.num_bodies)
-    n_grains = int(np.count_nonzero(sphere_mask(scene)))
+    g, n_grains = grain_of_body(scene)
     if n_grains == 0:
         return float("nan")
     pair = ids[:, 1] >= 0
-    pi, pj = ids[pair, 0], ids[pair, 1]
+    pi, pj = g[ids[pair, 0]], g[ids[pair, 1]]
+    ok = (pi >= 0) & (pj >= 0)
+    pi, pj = pi[ok], pj[ok]
     if not mechanical:
         return 2.0 * len(pi) / n_grains
-    wall_count = np.bincount(ids[~pair, 0], minlength=n)
-    alive = sphere_mask(scene).copy()
+    wb = g[ids[~pair, 0]]
+    wall_count = np.bincount(wb[wb >= 0], minlength=n_grains)
+    alive = np.ones(n_grains, dtype=bool)
     while True:
         keep = alive[pi] & alive[pj]
-        cnt = np.bincount(pi[keep], minlength=n) + np.bincount(pj[keep], minlength=n) + wall_count
+        cnt = (np.bincount(pi[keep], minlength=n_grains) +
+               np.bincount(pj[keep], minlength=n_grains) + wall_count)
         drop = alive & (cnt < 2)
         if not drop.any():
             break

@@ -80,6 +80,51 @@ def _index(value, field: str) -> int:
     return int(value)
 
 
+def _dof_mask(dofs: str) -> int:
+    mask = 0
+    for w in dofs.replace(",", " ").split():
+        if w == "all":
+            mask |= 63
+        elif w == "xyz":
+            mask |= 7
+        elif w == "rot":
+            mask |= 56
+        elif w in _DOF_BITS:
+            mask |= _DOF_BITS[w]
+        else:
+            raise ParameterError(f"dofs='{dofs}': unknown DOF '{w}'; allowed: x y z rx ry rz "
+                                 "xyz rot all")
+    return mask
+
+
+def _quat_mul(a, b) -> np.ndarray:
+    """Hamilton product of quaternions (w, x, y, z)."""
+    aw, ax, ay, az = a
+    bw, bx, by, bz = b
+    return np.array([aw * bw - ax * bx - ay * by - az * bz, aw * bx + ax * bw + ay * bz - az * by,
+                     aw * by - ax * bz + ay * bw + az * bx, aw * bz + ax * by - ay * bx + az * bw])
+
+
+def _quat_from_matrix(m) -> np.ndarray:
+    """Unit quaternion (w, x, y, z) of a rotation matrix (Shepperd's method)."""
+    m = np.asarray(m, dtype=float)
+    t = np.trace(m)
+    if t > 0:
+        s = 2.0 * math.sqrt(1.0 + t)
+        q = [0.25 * s, (m[2, 1] - m[1, 2]) / s, (m[0, 2] - m[2, 0]) / s, (m[1, 0] - m[0, 1]) / s]
+    else:
+        i = int(np.argmax(np.diag(m)))
+        j, k = (i + 1) % 3, (i + 2) % 3
+        s = 2.0 * math.sqrt(1.0 + m[i, i] - m[j, j] - m[k, k])
+        q = [0.0, 0.0, 0.0, 0.0]
+        q[0] = (m[k, j] - m[j, k]) / s
+        q[1 + i] = 0.25 * s
+        q[1 + j] = (m[j, i] + m[i, j]) / s
+        q[1 + k] = (m[k, i] + m[i, k]) / s
+    q = np.asarray(q)
+    return q / np.linalg.norm(q)
+
+
 class ControllerLimitWarning(UserWarning):
     """A stress-controlled wall drifted from its target at its speed cap during a run (the
     message names the controller, axis or wall, target, reached stress and cap). Make it an
@@ -151,23 +196,79 @@ class Scene(_core.Scene):
 
     def block_dofs(self, bodies: Iterable[int] | int, dofs: str) -> None:
         """Blocks DOFs of bodies: ``dofs`` is a space-separated subset of 'x y z rx ry rz'
-        (or 'xyz', 'all', '' to free). A blocked DOF keeps its (possibly imposed) velocity."""
-        mask = 0
-        words = dofs.replace(",", " ").split()
-        for w in words:
-            if w == "all":
-                mask |= 63
-            elif w == "xyz":
-                mask |= 7
-            elif w == "rot":
-                mask |= 56
-            elif w in _DOF_BITS:
-                mask |= _DOF_BITS[w]
-            else:
-                raise ParameterError(f"dofs='{dofs}': unknown DOF '{w}'; allowed: x y z rx ry rz "
-                                     "xyz rot all")
+        (or 'xyz', 'all', '' to free). A blocked DOF keeps its (possibly imposed) velocity.
+        A clump's members cannot be blocked one by one: see :meth:`block_clump_dofs`."""
+        mask = _dof_mask(dofs)
         for b in np.atleast_1d(np.asarray(bodies, dtype=int)):
             self._set_blocked(int(b), mask)
+
+    # ---- clumps ----------------------------------------------------------------------------
+    def add_clumps(self, template, positions, orientations=None, *, material: int,
+                   scale=1.0) -> np.ndarray:
+        """Adds rigid clumps, copies of a :class:`cpp_dem.clumps.ClumpTemplate`.
+
+        positions: (n, 3) centres of mass, m. orientations: (n, 4) unit quaternions (w, x, y,
+        z) turning the template frame into the global one (None: all identity; see
+        :func:`cpp_dem.clumps.random_orientations`). scale: one factor or n factors (> 0)
+        scaling the template about its centre of mass. The mass and inertia are the union's
+        (template.props) times the material's density. Returns the clump indices; the
+        members' body ids are ``clump_members(c)``.
+        """
+        from .clumps import ClumpTemplate
+
+        if not isinstance(template, ClumpTemplate):
+            raise ParameterError(f"template={type(template).__name__}: must be a ClumpTemplate "
+                                 "(cpp_dem.clumps.ClumpTemplate.from_spheres)")
+        x = np.atleast_2d(_numbers(positions, "positions", "m"))
+        if x.shape[1] != 3:
+            raise ParameterError(f"positions: shape {x.shape}; must be (n, 3) centres of mass, m")
+        n = len(x)
+        if orientations is None:
+            q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
+        else:
+            q = np.atleast_2d(np.asarray(orientations, dtype=float))
+            if q.shape != (n, 4):
+                raise ParameterError(f"orientations: shape {q.shape}; must be ({n}, 4) "
+                                     "quaternions (w, x, y, z)")
+            norm = np.linalg.norm(q, axis=1)
+            bad = ~(np.abs(norm - 1) < 1e-6)
+            if bad.any():
+                k = int(np.argmax(bad))
+                raise ParameterError(f"orientations[{k}]: norm {norm[k]!r}; must be a unit quaternion")
+        f = np.broadcast_to(np.asarray(scale, dtype=float), (n,))
+        if not np.all(np.isfinite(f) & (f > 0)):
+            raise ParameterError(f"scale={scale!r}: must be > 0 (one factor or one per clump)")
+        material = _index(material, "material")
+        rho = self.material(material).density
+        props = template.props
+        local = template.local_centres
+        q_axes = _quat_from_matrix(props.axes)
+        out = np.empty(n, dtype=int)
+        for k in range(n):
+            fk = float(f[k])
+            qc = _quat_mul(q[k] / np.linalg.norm(q[k]), q_axes)
+            if template.num_members == 1:
+                # Exact, with the same arithmetic as a sphere of the scaled radius.
+                r = float(template.radii[0]) * fk
+                m = rho * 4.0 / 3.0 * math.pi * r * r * r
+                inertia = np.full(3, 0.4 * m * r * r)
+            else:
+                m = rho * props.volume * fk ** 3
+                inertia = rho * props.principal * fk ** 5
+            out[k] = self._add_clump(local * fk, template.radii * fk, material, m, inertia,
+                                     x[k], qc)
+        return out
+
+    def block_clump_dofs(self, clumps: Iterable[int] | int, dofs: str) -> None:
+        """Blocks DOFs of clumps (as :meth:`block_dofs`; rotations about the global axes)."""
+        mask = _dof_mask(dofs)
+        for c in np.atleast_1d(np.asarray(clumps, dtype=int)):
+            self._set_clump_blocked(int(c), mask)
+
+    def clump_blocked_dofs(self, clump: int) -> str:
+        """The blocked DOFs of a clump as a string like 'x y rz'."""
+        mask = self._clump_blocked[clump]
+        return " ".join(k for k, bit in _DOF_BITS.items() if mask & bit)
 
     def blocked_dofs(self, body: int) -> str:
         """The blocked DOFs of a body as a string like 'x y rz'."""

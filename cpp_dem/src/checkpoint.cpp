@@ -86,6 +86,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.vec(s.materials_);
   // Bodies.
   s.bodies_.for_each_array([&](const auto& v) { w.vec(v); });
+  s.clumps_.for_each_array([&](const auto& v) { w.vec(v); });
   w.vec(s.id_of_slot_);
   w.put(s.spatial_sort_);
   w.vec(s.pos_at_build_);
@@ -173,6 +174,13 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   t.bodies_.for_each_array([&](const auto& v) {
     if (v.size() != nb) throw ParameterError("checkpoint: corrupt body arrays");
   });
+  t.clumps_.for_each_array([&](auto& v) { r.vec(v); });
+  {
+    const size_t ncl = t.clumps_.pos.size(), nm = t.clumps_.member.size();
+    bool ok = t.clumps_.member_off.size() == (ncl ? ncl + 1 : 0) && t.clumps_.member_local.size() == nm;
+    for (int m : t.clumps_.member) ok = ok && m >= 0 && static_cast<size_t>(m) < nb;
+    if (!ok) throw ParameterError("checkpoint: corrupt clump arrays");
+  }
   r.vec(t.id_of_slot_);
   r.get(t.spatial_sort_);
   if (!t.id_of_slot_.empty()) {

@@ -173,6 +173,22 @@ void Scene::step() {
     else os << "position " << bodies_.pos[b].transpose();
     throw BlowUpError(os.str());
   }
+  if (has_clumps()) {
+    long err_clump;
+    integrate_clumps(err_clump);
+    if (err_clump != std::numeric_limits<long>::max()) {
+      const int c = static_cast<int>(err_clump);
+      std::ostringstream os;
+      os << "blow-up at step " << step_ << ": clump " << c << " (members from body "
+         << id_of(clumps_.member[clumps_.member_off[c]]) << ") has a non-finite ";
+      if (!clumps_.force[c].allFinite()) os << "force " << clumps_.force[c].transpose();
+      else if (!clumps_.torque[c].allFinite()) os << "torque " << clumps_.torque[c].transpose();
+      else if (!clumps_.vel[c].allFinite()) os << "velocity " << clumps_.vel[c].transpose();
+      else if (!clumps_.angvel[c].allFinite()) os << "angular velocity " << clumps_.angvel[c].transpose();
+      else os << "position " << clumps_.pos[c].transpose();
+      throw BlowUpError(os.str());
+    }
+  }
   check_tunnelling();
   for (Wall& w : walls_) {
     // Work done by the wall on the spheres: -(force on wall) . v dt.

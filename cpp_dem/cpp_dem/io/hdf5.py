@@ -11,7 +11,8 @@ from typing import Any, Mapping, Sequence
 import numpy as np
 
 from ._files import PathLike, _ClosesOnExit
-from .series import (SNAPSHOT_FIELDS, Series, _check_overwrite, _evaluate, _metadata_attr,
+from .series import (CLUMP_SNAPSHOT_FIELDS, SNAPSHOT_FIELDS, Series, _check_overwrite,
+                     _evaluate, _metadata_attr,
                      _series_for)
 
 
@@ -172,7 +173,8 @@ class H5Recorder(_ClosesOnExit):
                  extra: Mapping[str, tuple[Any, str]] | None = None) -> str:
         """Stores per-body arrays in a new group ``/snapshots/NNNNNN``; returns its name.
 
-        ``fields`` defaults to the recorder's ``snapshot_fields``; ``extra`` adds arrays as
+        ``fields`` defaults to the recorder's ``snapshot_fields`` (with clumps in the scene,
+        ``clump_ids``, ``clump_positions`` and ``clump_orientations`` too); ``extra`` adds arrays as
         name -> (array, units). The group's attrs hold ``time`` (s) and ``step`` of the scene
         and ``complete`` = True once every array is written. Flushes the file.
         """
@@ -193,6 +195,10 @@ class H5Recorder(_ClosesOnExit):
             if fld not in SNAPSHOT_FIELDS:
                 raise ValueError(f"fields: unknown field {fld!r}; known: {list(SNAPSHOT_FIELDS)}")
             items.append((fld, getattr(sc, fld), SNAPSHOT_FIELDS[fld]))
+        if sc is not None and getattr(sc, "num_clumps", 0):
+            for fld in CLUMP_SNAPSHOT_FIELDS:
+                if fld not in fields:
+                    items.append((fld, np.asarray(getattr(sc, fld)), SNAPSHOT_FIELDS[fld]))
         for k, (arr, units) in (extra or {}).items():
             items.append((k, arr, units))
         for k, arr, units in items:

@@ -25,7 +25,17 @@ SNAPSHOT_FIELDS: dict[str, str] = {
     "forces": "N",
     "torques": "N m",
     "orientations": "-",
+    "clump_ids": "-",
+    "clump_positions": "m",
+    "clump_velocities": "m/s",
+    "clump_angular_velocities": "rad/s",
+    "clump_orientations": "-",
+    "clump_masses": "kg",
 }
+
+#: Stored with every snapshot of a scene that has clumps (per body: its clump, -1 free; per
+#: clump: centre of mass, orientation of the principal frame (w, x, y, z)).
+CLUMP_SNAPSHOT_FIELDS = ("clump_ids", "clump_positions", "clump_orientations")
 
 Series = Mapping[str, Any]  # name -> callable(scene) | (callable | None, units)
 

@@ -159,6 +159,9 @@ def write_vtk_spheres(path: PathLike, scene, *, extra_point_data: Mapping[str, A
     ``angular_velocity`` (rad/s), ``force`` (resultant at the last step, N), ``orientation``
     (unit quaternion w, x, y, z, -), ``id`` (body index, -), plus ``extra_point_data``
     (name -> (n,) or (n, k) array). Field data ``TimeValue`` holds the scene time (s).
+    With clumps in the scene, the members are the points, with ``clump_id`` (the clump's
+    index, -1 for a free sphere) and ``clump_orientation`` (its clump's principal frame,
+    w, x, y, z; the free spheres' own orientation); colour by ``clump_id`` to see grains.
 
     In ParaView: Glyph filter, glyph type Sphere, Scale Array ``radius``, Scale Factor 2
     (ParaView's unit sphere glyph has diameter 1), Glyph Mode "All Points".
@@ -172,6 +175,13 @@ def write_vtk_spheres(path: PathLike, scene, *, extra_point_data: Mapping[str, A
         "orientation": scene.orientations,
         "id": np.arange(n, dtype=np.int64),
     }
+    if getattr(scene, "num_clumps", 0):
+        cid = np.asarray(scene.clump_ids, dtype=np.int64)
+        q = np.asarray(scene.orientations).copy()
+        m = cid >= 0
+        q[m] = np.asarray(scene.clump_orientations)[cid[m]]
+        pd["clump_id"] = cid
+        pd["clump_orientation"] = q
     if extra_point_data:
         for k, v in extra_point_data.items():
             if k in pd:

@@ -18,7 +18,7 @@ class Checkpoint {
   /// 2: pair contacts split hot / cold; 3: pair outputs grouped by j without i's torque,
   /// the bodies' storage order; 4: pair outputs padded to 4 doubles per vector; 5: the
   /// body store's arrays together (BodyStore::for_each_array).
-  static constexpr std::uint32_t kVersion = 5;
+  static constexpr std::uint32_t kVersion = 6;
   /// The whole state of `scene` as bytes. Controllers are code, not data: the blob holds
   /// their count, `period`, `enabled` and, for StatefulController ones, their state.
   static std::vector<std::uint8_t> save(const Scene& scene);

@@ -9,6 +9,7 @@
 #include <vector>
 
 #include "cpp_dem/bodies/body_store.hpp"
+#include "cpp_dem/bodies/clump.hpp"
 #include "cpp_dem/bodies/geogrid.hpp"
 #include "cpp_dem/bodies/wall.hpp"
 #include "cpp_dem/broadphase/collider.hpp"
@@ -99,6 +100,33 @@ class Scene {
   }
   /// Sets the masses (kg) and inertias (kg m^2) of bodies (e.g. node density scaling).
   void set_mass_inertia(int body, Real mass, Real inertia);
+
+  // ---- clumps (bodies/clump.hpp) ----------------------------------------------------------
+  /// Adds a clump: member spheres at `local` (m, in the clump's principal frame about its
+  /// centre of mass) with radii `radius` (m) and one material; the clump's mass (kg),
+  /// principal moments of inertia (kg m^2), centre of mass `com` (m) and orientation `ori`
+  /// (principal frame -> global). The members become spheres with consecutive ids (the first
+  /// is num_bodies() before the call); each carries the clump's mass times its share of the
+  /// members' summed volume. Returns the clump's index.
+  int add_clump(const std::vector<Vec3>& local, const std::vector<Real>& radius, int material,
+                Real mass, const Vec3& inertia, const Vec3& com, const Quat& ori);
+  int num_clumps() const { return clumps_.size(); }
+  bool has_clumps() const { return !clumps_.pos.empty(); }
+  /// The clumps' state (members by slot; see clump_members for ids).
+  const ClumpStore& clumps() const { return clumps_; }
+  /// Per body (storage order): its clump's index, -1 for a free body.
+  const std::vector<int>& clumps_of_bodies() const { return bodies_.clump; }
+  /// Ids of clump c's members.
+  std::vector<int> clump_members(int c) const;
+  /// Sets clump c's centre of mass (m), orientation, velocity (m/s) and spin (rad/s, global),
+  /// and moves its members with it.
+  void set_clump_state(int c, const Vec3& pos, const Quat& ori, const Vec3& vel,
+                       const Vec3& angvel);
+  /// Blocked DOFs of clump c (Dof mask; a blocked DOF keeps its velocity, which may be an
+  /// imposed one). Blocked rotations are taken about the global axes.
+  void set_clump_blocked(int c, std::uint8_t mask);
+  /// Imposed force (N) and torque (N m, about the centre of mass) on clump c.
+  void set_clump_external(int c, const Vec3& force, const Vec3& torque);
 
   int add_wall(int axis, Real position, int sense, int material);
   int num_walls() const { return static_cast<int>(walls_.size()); }
@@ -297,6 +325,13 @@ class Scene {
   CPP_DEM_HOT void compute_wall_forces_hot(long& err_contact);
   void reduce_and_integrate(long& err_body);
   CPP_DEM_HOT void reduce_and_integrate_hot(long& err_body);
+  /// The clump pass (after reduce_and_integrate, only with clumps): member forces into the
+  /// clumps, the clumps' leapfrog, the members' state from their clump (integrate/clumps.cpp).
+  void integrate_clumps(long& err_clump);
+  CPP_DEM_HOT void integrate_clumps_hot(long& err_clump);
+  /// Members of clump c at their clump's pose: positions, velocities, spins, orientations.
+  void place_members(int c);
+  void check_clump(int c) const;
   void update_phys(PairContact& c, PairContactCold& cold) const;
   /// Pair contact k with the full composed law (apply_law) on geometry g; returns the force
   /// on j and the extra moment, as apply_law.
@@ -321,6 +356,7 @@ class Scene {
   std::vector<Material> materials_;
   // Bodies (structure of arrays, storage order).
   BodyStore bodies_;
+  ClumpStore clumps_;
   // Storage order: id of the body at each slot and its inverse (both empty: identity).
   std::vector<int> id_of_slot_, slot_of_id_;
   bool spatial_sort_ = true;

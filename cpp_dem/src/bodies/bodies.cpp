@@ -110,7 +110,30 @@ void Scene::set_angular_velocities(const std::vector<Vec3>& v) {
 void Scene::set_radii(const std::vector<Real>& r) {
   require_size(r, bodies_.pos.size(), "radii");
   for (Real x : r) require(std::isfinite(x) && x > 0, "radius", x, "must be > 0 (m)");
+  // A clump scales about its centre of mass by one factor, its members' radius ratio.
+  std::vector<Real> clump_factor(clumps_.size(), 1.0);
+  for (int c = 0; c < clumps_.size(); ++c) {
+    const int e0 = clumps_.member_off[c], e1 = clumps_.member_off[c + 1];
+    const int s0 = clumps_.member[e0];
+    const Real f = r[s0] / bodies_.radius[s0];
+    for (int e = e0 + 1; e < e1; ++e) {
+      const int s = clumps_.member[e];
+      if (std::abs(r[s] / bodies_.radius[s] - f) > 1e-12 * f)
+        throw ParameterError("radius[" + std::to_string(id_of(s)) + "]=" + fmt_real(r[s]) +
+                             ": body " + std::to_string(id_of(s)) + " is a member of clump " +
+                             std::to_string(c) + ", whose members must all scale by one factor (" +
+                             fmt_real(f) + ", from member " + std::to_string(id_of(s0)) + ")");
+    }
+    clump_factor[c] = f;
+  }
   for (size_t b = 0; b < r.size(); ++b) {
+    if (bodies_.clump[b] >= 0) {
+      const Real f = clump_factor[bodies_.clump[b]];
+      bodies_.radius[b] = r[b];
+      bodies_.mass[b] *= f * f * f;
+      bodies_.inertia[b] = 0.4 * bodies_.mass[b] * r[b] * r[b];
+      continue;
+    }
     if (bodies_.kind[b] != BODY_SPHERE) {
       // Grid nodes keep their lumped mass; their radius is the geogrid's R_c.
       if (r[b] != bodies_.radius[b])
@@ -123,12 +146,26 @@ void Scene::set_radii(const std::vector<Real>& r) {
     bodies_.mass[b] = sphere_mass(materials_[bodies_.material[b]].density, r[b]);
     bodies_.inertia[b] = 0.4 * bodies_.mass[b] * r[b] * r[b];
   }
+  for (int c = 0; c < clumps_.size(); ++c) {
+    const Real f = clump_factor[c];
+    if (f == 1.0) continue;
+    const Real f3 = f * f * f;
+    clumps_.mass[c] *= f3;
+    clumps_.inertia[c] *= f3 * f * f;
+    clumps_.weight_arm[c] *= f3 * f;
+    clumps_.angmom[c] *= f3 * f * f;  // the spin is kept
+    for (int e = clumps_.member_off[c]; e < clumps_.member_off[c + 1]; ++e) clumps_.member_local[e] *= f;
+    place_members(c);
+  }
   disp_valid_ = false;  // grown radii count in the broad phase's check
   min_radius_ = -1;
   ++phys_version_;
 }
 void Scene::set_blocked(int body, std::uint8_t mask) {
   check_body(body);
+  if (const int c = bodies_.clump[slot_of(body)]; c >= 0)
+    throw ParameterError("body=" + std::to_string(body) + ": is a member of clump " +
+                         std::to_string(c) + "; block the clump (set_clump_blocked)");
   if (mask > DOF_ALL)
     throw ParameterError("blocked=" + std::to_string(mask) + ": must be a mask of x y z rx ry rz");
   bodies_.blocked[slot_of(body)] = mask;
@@ -143,6 +180,9 @@ void Scene::set_external_torques(const std::vector<Vec3>& t) {
 }
 void Scene::set_body_material(int body, int material) {
   check_body(body);
+  if (const int c = bodies_.clump[slot_of(body)]; c >= 0)
+    throw ParameterError("body=" + std::to_string(body) + ": is a member of clump " +
+                         std::to_string(c) + "; a clump's material is set when it is added");
   this->material(material);
   body = slot_of(body);
   bodies_.material[body] = material;
@@ -152,6 +192,9 @@ void Scene::set_body_material(int body, int material) {
 }
 void Scene::set_mass_inertia(int body, Real mass, Real inertia) {
   check_body(body);
+  if (const int c = bodies_.clump[slot_of(body)]; c >= 0)
+    throw ParameterError("body=" + std::to_string(body) + ": is a member of clump " +
+                         std::to_string(c) + "; its mass is a share of the clump's");
   require(std::isfinite(mass) && mass > 0, "mass", mass, "must be > 0 (kg)");
   require(std::isfinite(inertia) && inertia > 0, "inertia", inertia, "must be > 0 (kg m^2)");
   body = slot_of(body);

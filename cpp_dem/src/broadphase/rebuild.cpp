@@ -93,6 +93,7 @@ void Scene::sort_bodies_spatially() {
   }
   if (identity) return;
   bodies_.permute(perm);
+  clumps_.remap_members(perm);
   // pos_at_build_ and radius_at_build_ are set at the end of the rebuild that called this,
   // pair_fi_ / pair_ti_ by the next pair pass.
   std::vector<int> ids(n);
@@ -111,6 +112,15 @@ void Scene::rebuild() {
   const int n = num_bodies();
   grid_.build(bodies_.pos, bodies_.radius, bodies_.kind, margin);
   grid_.find_pairs(bodies_.pos, bodies_.radius, margin, candidates_);
+  if (has_clumps()) {
+    // Two members of one clump never touch.
+    const auto& cl = bodies_.clump;
+    candidates_.erase(std::remove_if(candidates_.begin(), candidates_.end(),
+                                     [&cl](const std::pair<int, int>& p) {
+                                       return cl[p.first] >= 0 && cl[p.first] == cl[p.second];
+                                     }),
+                      candidates_.end());
+  }
   // Merge the new candidate list with the old contacts, keeping history (both sorted).
   std::vector<PairContact> next;
   std::vector<PairContactCold> next_cold;

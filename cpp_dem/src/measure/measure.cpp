@@ -10,7 +10,9 @@ namespace cpp_dem {
 Real Scene::pwave_dt() const {
   Real dt = std::numeric_limits<Real>::infinity();
   for (int b = 0; b < num_bodies(); ++b) {
-    if ((bodies_.blocked[b] & DOF_ALL) == DOF_ALL) continue;  // a fully blocked body sets no limit
+    // A fully blocked body sets no limit (a clump member: when its clump is fully blocked).
+    const int c = bodies_.clump[b];
+    if (((c >= 0 ? clumps_.blocked[c] : bodies_.blocked[b]) & DOF_ALL) == DOF_ALL) continue;
     const Material& m = materials_[bodies_.material[b]];
     dt = std::min(dt, bodies_.radius[b] * std::sqrt(m.density / m.young));
   }
@@ -75,6 +77,29 @@ Real Scene::critical_dt_body(int* arg_body) const {
     for (int a = 0; a < 3; ++a) kt[b][a] = std::max(kt[b][a], floor_k);
   }
   Real dt = std::numeric_limits<Real>::infinity();
+  // A clump: its members' stiffnesses summed (translation), and for rotation each member's
+  // largest translational stiffness at its lever arm plus its rotational one, against the
+  // smallest principal moment (members are fully blocked bodies and set no limit below).
+  for (int c = 0; c < clumps_.size(); ++c) {
+    Vec3 ktc = Vec3::Zero(), krc = Vec3::Zero();
+    const Mat3 rot = clumps_.ori[c].toRotationMatrix();
+    for (int e = clumps_.member_off[c]; e < clumps_.member_off[c + 1]; ++e) {
+      const int s = clumps_.member[e];
+      ktc += kt[s];
+      const Real arm2 = (rot * clumps_.member_local[e]).squaredNorm();
+      krc += kr[s] + Vec3::Constant(kt[s].maxCoeff() * arm2);
+    }
+    const Real imin = clumps_.inertia[c].minCoeff();
+    for (int a = 0; a < 3; ++a) {
+      Real d = std::numeric_limits<Real>::infinity();
+      if (ktc[a] > 0 && !(clumps_.blocked[c] & (DOF_X << a))) d = std::sqrt(2 * clumps_.mass[c] / ktc[a]);
+      if (krc[a] > 0 && !(clumps_.blocked[c] & (DOF_RX << a))) d = std::min(d, std::sqrt(2 * imin / krc[a]));
+      if (d < dt) {
+        dt = d;
+        if (arg_body) *arg_body = id_of(clumps_.member[clumps_.member_off[c]]);
+      }
+    }
+  }
   for (int b = 0; b < n; ++b) {
     for (int a = 0; a < 3; ++a) {
       Real d = std::numeric_limits<Real>::infinity();
@@ -93,7 +118,14 @@ Real Scene::critical_dt_body(int* arg_body) const {
 Energies Scene::energies() const {
   Energies e;
   const int n = num_bodies();
+  for (int c = 0; c < clumps_.size(); ++c) {
+    e.kinetic += clumps_.ke[c];
+    e.gravity_potential += -clumps_.mass[c] * gravity_.dot(clumps_.pos[c] - clumps_.pos_at_energy_reset[c]);
+    e.local_damping += clumps_.damp_dissip[c];
+    e.external_work += clumps_.ext_work[c];
+  }
   for (int b = 0; b < n; ++b) {
+    if (bodies_.clump[b] >= 0) continue;  // counted with its clump
     e.kinetic += bodies_.ke[b];
     e.gravity_potential += -bodies_.mass[b] * gravity_.dot(bodies_.pos[b] - bodies_.pos_at_energy_reset[b]);
     e.local_damping += bodies_.damp_dissip[b];
@@ -113,7 +145,9 @@ Energies Scene::energies() const {
   // The potential of gravity is taken at the positions where the kinetic energy was sampled
   // (the start of the last step): move back by v dt.
   for (int b = 0; b < n; ++b)
-    e.gravity_potential += bodies_.mass[b] * gravity_.dot(bodies_.vel[b]) * dt_;
+    if (bodies_.clump[b] < 0) e.gravity_potential += bodies_.mass[b] * gravity_.dot(bodies_.vel[b]) * dt_;
+  for (int c = 0; c < clumps_.size(); ++c)
+    e.gravity_potential += clumps_.mass[c] * gravity_.dot(clumps_.vel[c]) * dt_;
   const Real now = e.kinetic + e.elastic + e.gravity_potential + e.friction + e.viscous +
                    e.local_damping + e.plastic - e.wall_work - e.external_work;
   e.balance_error = now - energy_reference_;
@@ -131,6 +165,10 @@ void Scene::reset_energy() {
     bodies_.ext_work[b] = 0;
     bodies_.ke[b] = 0;
     bodies_.pos_at_energy_reset[b] = bodies_.pos[b];
+  }
+  for (int c = 0; c < clumps_.size(); ++c) {
+    clumps_.damp_dissip[c] = clumps_.ext_work[c] = clumps_.ke[c] = 0;
+    clumps_.pos_at_energy_reset[c] = clumps_.pos[c];
   }
   dropped_friction_ = dropped_viscous_ = 0;
   for (PairContactCold& c : pair_cold_) c.dissip_friction = c.dissip_viscous = 0;
@@ -158,7 +196,10 @@ Real Scene::stored_elastic_energy() const {
 void Scene::set_energy_reference() {
   Real e = stored_elastic_energy();
   for (int b = 0; b < num_bodies(); ++b)
-    e += 0.5 * bodies_.mass[b] * bodies_.vel[b].squaredNorm() + 0.5 * bodies_.inertia[b] * bodies_.angvel[b].squaredNorm();
+    if (bodies_.clump[b] < 0)
+      e += 0.5 * bodies_.mass[b] * bodies_.vel[b].squaredNorm() + 0.5 * bodies_.inertia[b] * bodies_.angvel[b].squaredNorm();
+  for (int c = 0; c < clumps_.size(); ++c)
+    e += 0.5 * clumps_.mass[c] * clumps_.vel[c].squaredNorm() + 0.5 * clumps_.angvel[c].dot(clumps_.angmom[c]);
   energy_reference_ = e;
   energy_reference_set_ = true;
 }
@@ -179,6 +220,11 @@ Real Scene::unbalanced_force() const {
     sum_c += c.force2.norm();
     ++nc;
   });
+  for (int c = 0; c < clumps_.size(); ++c) {
+    if (clumps_.blocked[c] & DOF_XYZ) continue;
+    sum_f += clumps_.force[c].norm();
+    ++nfree;
+  }
   if (nfree == 0 || nc == 0 || sum_c == 0) return std::numeric_limits<Real>::quiet_NaN();
   return (sum_f / nfree) / (sum_c / nc);
 }

@@ -15,6 +15,7 @@ enum BodyKind : std::uint8_t {
   BODY_SPHERE = 0,     ///< a grain: a sphere to the collider
   BODY_GRID_NODE = 1,  ///< a geogrid node (000 §2.2): 6 DOF, touched through its links
 };
+// (A clump member is a BODY_SPHERE with clump >= 0; the clump itself is in ClumpStore.)
 
 struct BodyStore {
   std::vector<Vec3> pos;         ///< centres, m
@@ -31,6 +32,7 @@ struct BodyStore {
   std::vector<int> material;     ///< material index
   std::vector<std::uint8_t> blocked;  ///< blocked DOFs (Dof mask)
   std::vector<std::uint8_t> kind;     ///< BodyKind
+  std::vector<int> clump;             ///< index of the clump a member belongs to, -1: free
   // Energy accumulators per body (written only when the scene tracks energy).
   std::vector<Real> ke;                    ///< kinetic energy at the last step, J
   std::vector<Real> damp_dissip;           ///< dissipated by local damping, J
@@ -55,6 +57,7 @@ struct BodyStore {
     material.push_back(mat);
     blocked.push_back(DOF_NONE);
     kind.push_back(k);
+    clump.push_back(-1);
     ke.push_back(0);
     damp_dissip.push_back(0);
     ext_work.push_back(0);
@@ -76,6 +79,7 @@ struct BodyStore {
   static void visit(Self& b, F& f) {
     f(b.pos), f(b.vel), f(b.angvel), f(b.force), f(b.torque), f(b.ext_force), f(b.ext_torque);
     f(b.ori), f(b.radius), f(b.mass), f(b.inertia), f(b.material), f(b.blocked), f(b.kind);
+    f(b.clump);
     f(b.ke), f(b.damp_dissip), f(b.ext_work), f(b.pos_at_energy_reset);
   }
 

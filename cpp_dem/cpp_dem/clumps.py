@@ -1,0 +1,289 @@
+"""Clumps: rigid grains made of overlapping spheres (Yade's Clump, PFC's clump).
+
+A :class:`ClumpTemplate` is a grain shape: member spheres (centres, m; radii, m) in the
+template's own frame. Its mass properties are those of the *union* of the members, overlaps
+counted once (:func:`union_mass_properties`). ``scene.add_clumps(template, positions,
+orientations, material)`` places copies; each becomes one rigid body in the core (integrated in
+its principal axes), and its members are spheres to the contact detection that carry the
+clump's id and never touch each other.
+
+Mass properties of a union of spheres
+-------------------------------------
+The union is cut into chords parallel to x on a regular (y, z) grid of ``cells`` x ``cells``
+midpoints over its bounding box. Along one chord the union is a union of intervals (one per
+sphere the line crosses), merged exactly, so the x-integrals of 1, x and x^2 over it are exact;
+only the (y, z) quadrature (midpoint rule) approximates. For one sphere the volume error of the
+midpoint rule on the chord-area function is about 0.3 (h / r)^1.5 (h the cell size), and for
+unions it is of the same order: with the default 160 cells across the grain, volume and inertia
+are within 2e-4 (measured against exact sphere, two-sphere lens and ellipsoid values in
+tests/test_clumps.py; stated per template as ``fill_accuracy``). A single sphere at the origin
+is exact (analytic), so a one-sphere clump is the sphere itself.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ._core import ParameterError
+
+__all__ = ["ClumpTemplate", "ClumpCloud", "MassProperties", "clump_cloud", "union_mass_properties",
+           "random_orientations"]
+
+
+@dataclass(frozen=True)
+class MassProperties:
+    """Mass properties of a solid of unit density.
+
+    volume: m^3; centroid: (3,), m; inertia: (3, 3) tensor about the centroid per unit density,
+    m^5 (multiply by the density, kg/m^3, for kg m^2); principal: (3,) principal moments per
+    unit density, m^5, ascending; axes: (3, 3) rotation whose columns are the principal axes
+    (right-handed), in the frame the centres were given in.
+    """
+
+    volume: float
+    centroid: np.ndarray
+    inertia: np.ndarray
+    principal: np.ndarray
+    axes: np.ndarray
+
+
+def _as_spheres(centres, radii):
+    c = np.asarray(centres, dtype=float)
+    r = np.asarray(radii, dtype=float).ravel()
+    if c.ndim != 2 or c.shape[1] != 3:
+        raise ParameterError(f"centres: shape {c.shape}; must be (k, 3) member centres, m")
+    if len(r) != len(c):
+        raise ParameterError(f"radii: {len(r)} values for {len(c)} centres; one radius (m) per member")
+    if len(r) == 0:
+        raise ParameterError("centres: empty; a clump needs at least one member sphere")
+    if not np.all(np.isfinite(c)):
+        raise ParameterError("centres: must be finite (m)")
+    bad = ~(np.isfinite(r) & (r > 0))
+    if bad.any():
+        raise ParameterError(f"radii[{int(np.argmax(bad))}]={r[bad][0]!r}: must be > 0 (m)")
+    return c, r
+
+
+def _principal(inertia: np.ndarray):
+    w, v = np.linalg.eigh(0.5 * (inertia + inertia.T))
+    if np.linalg.det(v) < 0:
+        v[:, 2] = -v[:, 2]
+    return w, v
+
+
+def union_mass_properties(centres, radii, cells: int = 160) -> MassProperties:
+    """Volume, centroid and inertia of the union of spheres (unit density; see the module
+    docstring for the method and its accuracy). cells: (y, z) grid points across the bounding
+    box per axis, >= 8."""
+    c, r = _as_spheres(centres, radii)
+    if not (isinstance(cells, (int, np.integer)) and cells >= 8):
+        raise ParameterError(f"cells={cells!r}: must be an integer >= 8")
+    if len(r) == 1:
+        # Exact; the same arithmetic as the core's sphere mass (density 4/3 pi r^3).
+        vol = 4.0 / 3.0 * math.pi * r[0] * r[0] * r[0]
+        i = 0.4 * vol * r[0] * r[0]
+        return MassProperties(vol, c[0].copy(), np.eye(3) * i, np.full(3, i), np.eye(3))
+    lo = (c - r[:, None]).min(axis=0)
+    hi = (c + r[:, None]).max(axis=0)
+    hy = (hi[1] - lo[1]) / cells
+    hz = (hi[2] - lo[2]) / cells
+    y = lo[1] + (np.arange(cells) + 0.5) * hy
+    z = lo[2] + (np.arange(cells) + 0.5) * hz
+    Y, Z = np.meshgrid(y, z, indexing="ij")
+    Y = Y.ravel()
+    Z = Z.ravel()
+    # Chord of sphere k on line (y, z): [x_k - s, x_k + s], s^2 = r^2 - (y-y_k)^2 - (z-z_k)^2.
+    s2 = r[None, :] ** 2 - (Y[:, None] - c[None, :, 1]) ** 2 - (Z[:, None] - c[None, :, 2]) ** 2
+    hit = s2 > 0
+    s = np.sqrt(np.where(hit, s2, 0.0))
+    a = np.where(hit, c[None, :, 0] - s, np.inf)
+    b = np.where(hit, c[None, :, 0] + s, -np.inf)
+    order = np.argsort(a, axis=1)
+    a = np.take_along_axis(a, order, axis=1)
+    b = np.take_along_axis(b, order, axis=1)
+    # Merge the sorted intervals line by line (vectorised across lines).
+    m0 = np.zeros(len(Y))
+    m1 = np.zeros(len(Y))
+    m2 = np.zeros(len(Y))
+    cur_a = a[:, 0].copy()
+    cur_b = b[:, 0].copy()
+
+    def close(mask):
+        lo_, hi_ = cur_a[mask], cur_b[mask]
+        ok = np.isfinite(lo_) & (hi_ > lo_)
+        lo_ = np.where(ok, lo_, 0.0)
+        hi_ = np.where(ok, hi_, 0.0)
+        m0[mask] += hi_ - lo_
+        m1[mask] += 0.5 * (hi_ ** 2 - lo_ ** 2)
+        m2[mask] += (hi_ ** 3 - lo_ ** 3) / 3.0
+
+    for k in range(1, len(r)):
+        ak, bk = a[:, k], b[:, k]
+        gap = np.isfinite(ak) & (ak > cur_b)
+        close(gap)
+        cur_a = np.where(gap, ak, cur_a)
+        cur_b = np.where(gap, bk, np.where(np.isfinite(ak), np.maximum(cur_b, bk), cur_b))
+    close(np.ones(len(Y), dtype=bool))
+    w = hy * hz
+    vol = w * m0.sum()
+    sx, sy, sz = w * m1.sum(), w * (Y * m0).sum(), w * (Z * m0).sum()
+    cen = np.array([sx, sy, sz]) / vol
+    xx = w * m2.sum()
+    yy = w * (Y * Y * m0).sum()
+    zz = w * (Z * Z * m0).sum()
+    xy = w * (Y * m1).sum()
+    xz = w * (Z * m1).sum()
+    yz = w * (Y * Z * m0).sum()
+    # Second moments about the centroid, then the inertia tensor.
+    S = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]]) - vol * np.outer(cen, cen)
+    inertia = np.trace(S) * np.eye(3) - S
+    pm, axes = _principal(inertia)
+    return MassProperties(vol, cen, inertia, pm, axes)
+
+
+@dataclass(frozen=True)
+class ClumpTemplate:
+    """A grain shape: member spheres in the template frame.
+
+    centres: (k, 3), m; radii: (k,), m; name: for output and run files; cells: the (y, z) grid
+    of the mass-property integration. The derived fields: ``props`` (unit density, template
+    frame), ``local_centres`` (members in the principal frame about the centroid, m) and
+    ``fill_accuracy`` (the stated relative accuracy of volume and inertia).
+    """
+
+    centres: np.ndarray
+    radii: np.ndarray
+    name: str = "clump"
+    cells: int = 160
+    props: MassProperties = field(init=False, repr=False)
+
+    def __post_init__(self) -> None:
+        c, r = _as_spheres(self.centres, self.radii)
+        object.__setattr__(self, "centres", c)
+        object.__setattr__(self, "radii", r)
+        object.__setattr__(self, "props", union_mass_properties(c, r, self.cells))
+
+    @classmethod
+    def from_spheres(cls, centres, radii, name: str = "clump", cells: int = 160) -> "ClumpTemplate":
+        """A template from a list of (centre, radius), m."""
+        return cls(np.asarray(centres, dtype=float), np.asarray(radii, dtype=float), name, cells)
+
+    @property
+    def num_members(self) -> int:
+        return len(self.radii)
+
+    @property
+    def volume(self) -> float:
+        """Volume of the union, m^3."""
+        return self.props.volume
+
+    @property
+    def equivalent_diameter(self) -> float:
+        """Diameter of the sphere of the same volume, m."""
+        return (6.0 * self.volume / math.pi) ** (1.0 / 3.0)
+
+    @property
+    def local_centres(self) -> np.ndarray:
+        """Member centres in the principal frame about the centroid, m (k, 3)."""
+        return (self.centres - self.props.centroid) @ self.props.axes
+
+    @property
+    def bounding_radius(self) -> float:
+        """Radius of the sphere about the centre of mass that holds every member, m."""
+        return float(np.max(np.linalg.norm(self.local_centres, axis=1) + self.radii))
+
+    @property
+    def fill_accuracy(self) -> float:
+        """Stated relative accuracy of volume and inertia (0 for one sphere: exact)."""
+        return 0.0 if self.num_members == 1 else 2e-4 * (160.0 / self.cells) ** 1.5
+
+    def scaled(self, factor: float) -> "ClumpTemplate":
+        """The same shape scaled about the template origin by `factor` (> 0)."""
+        if not (math.isfinite(factor) and factor > 0):
+            raise ParameterError(f"factor={factor!r}: must be > 0")
+        return ClumpTemplate(self.centres * factor, self.radii * factor, self.name, self.cells)
+
+    def save(self, path) -> None:
+        """Writes the members as CSV: x, y, z, r (m), with a header."""
+        np.savetxt(path, np.column_stack([self.centres, self.radii]), delimiter=",",
+                   header=f"clump template {self.name}: x_m,y_m,z_m,r_m", comments="# ")
+
+    @classmethod
+    def load(cls, path, name: str | None = None, cells: int = 160) -> "ClumpTemplate":
+        """Reads a template written by :meth:`save` (or any CSV of x, y, z, r in m)."""
+        a = np.loadtxt(path, delimiter=",", ndmin=2)
+        if a.shape[1] != 4:
+            raise ParameterError(f"{path}: has {a.shape[1]} columns; a template CSV has 4 (x, y, z, r in m)")
+        import os
+        return cls(a[:, :3], a[:, 3], name or os.path.splitext(os.path.basename(str(path)))[0], cells)
+
+
+def random_orientations(n: int, seed: int = 0) -> np.ndarray:
+    """n uniformly random rotations as unit quaternions (w, x, y, z), seeded (Shoemake's
+    method)."""
+    rng = np.random.default_rng(seed)
+    u1, u2, u3 = rng.random((3, n))
+    a, b = np.sqrt(1 - u1), np.sqrt(u1)
+    return np.column_stack([b * np.cos(2 * math.pi * u3), a * np.sin(2 * math.pi * u2),
+                            a * np.cos(2 * math.pi * u2), b * np.sin(2 * math.pi * u3)])
+
+
+@dataclass(frozen=True)
+class ClumpCloud:
+    """A loose cloud of clumps: per clump the template index (into the templates given to
+    :func:`clump_cloud`), centre of mass (m), orientation (w, x, y, z) and scale factor."""
+
+    template: np.ndarray
+    positions: np.ndarray
+    orientations: np.ndarray
+    scales: np.ndarray
+
+    def __len__(self) -> int:
+        return len(self.template)
+
+    def add_to(self, scene, templates, *, material: int) -> np.ndarray:
+        """Adds the clumps to ``scene``; returns their clump indices in cloud order."""
+        templates = _templates(templates)
+        out = np.empty(len(self), dtype=int)
+        for k, t in enumerate(templates):
+            sel = np.flatnonzero(self.template == k)
+            if len(sel):
+                out[sel] = scene.add_clumps(t, self.positions[sel], self.orientations[sel],
+                                            material=material, scale=self.scales[sel])
+        return out
+
+
+def _templates(templates) -> list:
+    ts = [templates] if isinstance(templates, ClumpTemplate) else list(templates)
+    if not ts or not all(isinstance(t, ClumpTemplate) for t in ts):
+        raise ParameterError("templates: must be a ClumpTemplate or a non-empty list of them")
+    return ts
+
+
+def clump_cloud(templates, diameters, lo, hi, *, seed: int = 0, max_tries: int = 2000) -> ClumpCloud:
+    """Clumps placed at random, without overlap, in the box [lo, hi] (m): one per entry of
+    ``diameters`` (equivalent-volume diameters, m, e.g. from cpp_dem.psd.radii_from_psd
+    times 2), each a copy of one of ``templates`` (chosen at random, seeded) scaled to that
+    diameter, at a uniformly random orientation (seeded). Placement is random sequential
+    addition of the clumps' bounding spheres (cpp_dem.packing.loose_cloud), so the cloud is
+    loose (compact it with radius growth or the servo walls)."""
+    from .packing import loose_cloud
+
+    ts = _templates(templates)
+    d = np.asarray(diameters, dtype=float).ravel()
+    if len(d) == 0 or not np.all(np.isfinite(d) & (d > 0)):
+        raise ParameterError("diameters: must be a non-empty list of equivalent diameters > 0 (m)")
+    rng = np.random.default_rng(seed)
+    which = rng.integers(0, len(ts), len(d)) if len(ts) > 1 else np.zeros(len(d), dtype=int)
+    scale = d / np.array([ts[k].equivalent_diameter for k in which])
+    rb = scale * np.array([ts[k].bounding_radius for k in which])
+    # Tiny distinct offsets keep the bounding radii unique, so each placed sphere maps back
+    # to its clump (loose_cloud returns the spheres in space order).
+    rb_key = rb * (1 + 1e-12 * np.arange(len(rb)))
+    pos, rr = loose_cloud(rb_key, lo, hi, seed=seed, max_tries=max_tries)
+    order = np.argsort(rb_key)
+    idx = order[np.searchsorted(rb_key[order], rr)]
+    return ClumpCloud(which[idx], pos, random_orientations(len(d), seed + 1), scale[idx])

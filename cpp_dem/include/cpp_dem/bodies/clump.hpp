@@ -1,0 +1,72 @@
+// Clumps: rigid bodies made of member spheres (Yade's Clump, PFC's clump). The members are
+// spheres in the body store (kind BODY_SPHERE, BodyStore::clump = the clump's index), so the
+// broad phase, the contact geometry and the laws see spheres; the scene never pairs two
+// members of one clump. Each step the integration pass treats members as fully blocked
+// bodies, then the clump pass (integrate/clumps.cpp) sums their forces and torques into the
+// clump, integrates the clump in its principal axes and sets the members' state from it.
+#pragma once
+
+#include <cstdint>
+#include <vector>
+
+#include "cpp_dem/core/types.hpp"
+
+namespace cpp_dem {
+
+struct ClumpStore {
+  // Per clump (index c).
+  std::vector<Vec3> pos;        ///< centre of mass, m
+  std::vector<Vec3> vel;        ///< velocity at the last half step, m/s
+  std::vector<Vec3> angvel;     ///< spin at the last half step (global frame), rad/s
+  std::vector<Vec3> angmom;     ///< angular momentum at the last half step (global), kg m^2/s
+  std::vector<Quat> ori;        ///< orientation: principal frame -> global
+  std::vector<Vec3> force;      ///< resultant force of the last step (members + gravity), N
+  std::vector<Vec3> torque;     ///< resultant torque about the centre of mass, N m
+  std::vector<Vec3> ext_force;  ///< imposed force on the clump, N
+  std::vector<Vec3> ext_torque; ///< imposed torque on the clump, N m
+  std::vector<Real> mass;       ///< kg
+  std::vector<Vec3> inertia;    ///< principal moments, kg m^2
+  /// Sum of member mass x member offset (principal frame), kg m: the members' masses carry
+  /// gravity in the integration pass, and this is the torque arm their weights add about the
+  /// centre of mass (zero when the members' mass centroid is the clump's).
+  std::vector<Vec3> weight_arm;
+  std::vector<std::uint8_t> blocked;  ///< Dof mask; a blocked DOF keeps its velocity
+  std::vector<int> member_off;        ///< members of c: member_off[c] .. member_off[c + 1]
+  // Energy accumulators (written when the scene tracks energy).
+  std::vector<Real> ke, damp_dissip, ext_work;
+  std::vector<Vec3> pos_at_energy_reset;
+  // Per member (index e in member_off order).
+  std::vector<int> member;        ///< slot of the member sphere
+  std::vector<Vec3> member_local; ///< member centre in the principal frame, m
+
+  int size() const { return static_cast<int>(pos.size()); }
+
+  /// Calls f(array) for every array in a fixed order (the checkpoint's).
+  template <class F>
+  void for_each_array(F&& f) {
+    visit(*this, f);
+  }
+  template <class F>
+  void for_each_array(F&& f) const {
+    visit(*this, f);
+  }
+
+  /// The member slots after the body store's permutation (perm[new slot] = old slot).
+  void remap_members(const std::vector<int>& perm) {
+    if (member.empty()) return;
+    std::vector<int> new_of_old(perm.size());
+    for (size_t s = 0; s < perm.size(); ++s) new_of_old[perm[s]] = static_cast<int>(s);
+    for (int& m : member) m = new_of_old[m];
+  }
+
+ private:
+  template <class Self, class F>
+  static void visit(Self& s, F& f) {
+    f(s.pos), f(s.vel), f(s.angvel), f(s.angmom), f(s.ori), f(s.force), f(s.torque);
+    f(s.ext_force), f(s.ext_torque), f(s.mass), f(s.inertia), f(s.weight_arm), f(s.blocked);
+    f(s.member_off), f(s.ke), f(s.damp_dissip), f(s.ext_work), f(s.pos_at_energy_reset);
+    f(s.member), f(s.member_local);
+  }
+};
+
+}  // namespace cpp_dem

@@ -1,0 +1,189 @@
+// The clump pass: runs after the integration pass, only in scenes with clumps. The members'
+// resultant forces (the integration pass summed their contacts, imposed forces and the weight
+// of their mass share, and left them in place as fully blocked bodies) go to their clump; the
+// clump moves by leapfrog in its principal axes; the members take their clump's state.
+//
+// Rotation: the leapfrog of Fincham (1992, "Leapfrog rotational algorithms", Mol. Simul. 8)
+// for the angular momentum L and a quaternion, as Yade's NewtonIntegrator applies it to
+// aspherical bodies: L at the half step, the orientation advanced through a predicted
+// half-step orientation. Local damping of the torque is Yade's first-order form
+// (T_a (1 - lambda sign(T_a w_a))), of the force the same second-order form as for spheres.
+// A clump with three equal principal moments takes the spheres' update (Euler's equations
+// have no gyroscopic term then), so a one-sphere clump moves bitwise as the sphere.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+
+#include "cpp_dem/core/parallel.hpp"
+#include "cpp_dem/scene.hpp"
+#include "terms.hpp"
+
+namespace cpp_dem {
+
+namespace {
+using namespace integrate_terms;
+
+/// dq/dt of orientation q for the body-frame spin wb: q (0, wb) / 2.
+inline Quat quat_rate(const Quat& q, const Vec3& wb) {
+  const Quat p = q * Quat(0, wb[0], wb[1], wb[2]);
+  return Quat(0.5 * p.w(), 0.5 * p.x(), 0.5 * p.y(), 0.5 * p.z());
+}
+
+inline Quat quat_axpy(const Quat& q, Real h, const Quat& d) {
+  return Quat(q.w() + h * d.w(), q.x() + h * d.x(), q.y() + h * d.y(), q.z() + h * d.z());
+}
+}  // namespace
+
+void Scene::integrate_clumps(long& err_clump) { integrate_clumps_hot(err_clump); }
+
+void Scene::integrate_clumps_hot(long& err_clump) {
+  const int nc = clumps_.size();
+  const Real dt = dt_;
+  const Real lambda = local_damping_;
+  const bool energy = track_energy_;
+  const bool renormalize = step_ % kRenormalizePeriod == 0;
+  long err = std::numeric_limits<long>::max();
+  Real worst = 0;
+#pragma omp parallel for schedule(static) reduction(min : err) reduction(max : worst) \
+    if (nc > kParallelMin)
+  for (int c = 0; c < nc; ++c) {
+    const int e0 = clumps_.member_off[c], e1 = clumps_.member_off[c + 1];
+    const Mat3 rot_old = clumps_.ori[c].toRotationMatrix();
+    // Resultants about the centre of mass, in member order (the members' forces include
+    // their weights; weight_arm takes the weights' torque about the centre back out).
+    Vec3 f = bodies_.force[clumps_.member[e0]];
+    Vec3 t = bodies_.torque[clumps_.member[e0]];
+    {
+      const Vec3 r = rot_old * clumps_.member_local[e0];
+      t += r.cross(f);
+    }
+    for (int e = e0 + 1; e < e1; ++e) {
+      const int s = clumps_.member[e];
+      const Vec3 r = rot_old * clumps_.member_local[e];
+      f += bodies_.force[s];
+      t += bodies_.torque[s] + r.cross(bodies_.force[s]);
+    }
+    if (clumps_.weight_arm[c].squaredNorm() > 0) t -= (rot_old * clumps_.weight_arm[c]).cross(gravity_);
+    const Vec3& fe = clumps_.ext_force[c];
+    const Vec3& te = clumps_.ext_torque[c];
+    if (fe.squaredNorm() > 0) f += fe;
+    if (te.squaredNorm() > 0) t += te;
+    clumps_.force[c] = f;
+    clumps_.torque[c] = t;
+    if (!f.allFinite() || !t.allFinite()) {
+      err = std::min(err, static_cast<long>(c));
+      continue;
+    }
+    const std::uint8_t dofs = clumps_.blocked[c];
+    const Real m = clumps_.mass[c];
+    const Vec3& inertia = clumps_.inertia[c];
+    // Translation: the spheres' leapfrog.
+    const Real inv_m = 1.0 / m;
+    const Vec3 v_old = clumps_.vel[c];
+    Vec3 v = v_old;
+    Real dissip = 0, work = 0;
+    for (int a = 0; a < 3; ++a) {
+      if (dofs & (DOF_X << a)) {
+        work += -f[a] * v_old[a] * dt;  // the constraint's work
+        continue;
+      }
+      Real acc = f[a] * inv_m;
+      if (lambda > 0) {
+        const Real damped = damp_component(acc, v_old[a], dt, lambda);
+        if (energy) dissip += -(damped - acc) * m * (v_old[a] + 0.5 * dt * damped) * dt;
+        acc = damped;
+      }
+      v[a] = v_old[a] + acc * dt;
+      if (energy) work += fe[a] * 0.5 * (v_old[a] + v[a]) * dt;
+    }
+    clumps_.vel[c] = v;
+    clumps_.pos[c] += v * dt;
+    // Rotation.
+    const Vec3 w_old = clumps_.angvel[c];
+    Vec3 w = w_old;
+    Real ke_rot = 0;
+    if (inertia[0] == inertia[1] && inertia[1] == inertia[2]) {
+      const Real inv_i = 1.0 / inertia[0];
+      for (int a = 0; a < 3; ++a) {
+        if (dofs & (DOF_RX << a)) {
+          work += -t[a] * w_old[a] * dt;
+          continue;
+        }
+        Real acc = t[a] * inv_i;
+        if (lambda > 0) {
+          const Real damped = damp_component(acc, w_old[a], dt, lambda);
+          if (energy) dissip += -(damped - acc) * inertia[0] * (w_old[a] + 0.5 * dt * damped) * dt;
+          acc = damped;
+        }
+        w[a] = w_old[a] + acc * dt;
+        if (energy) work += te[a] * 0.5 * (w_old[a] + w[a]) * dt;
+      }
+      clumps_.angvel[c] = w;
+      clumps_.angmom[c] = inertia[0] * w;
+      // (The integration pass turns a block of spheres in a vectorised form whose last bits
+      // may differ from this one's: a one-sphere clump's orientation, which no force
+      // depends on, equals the sphere's to round-off; everything else is bitwise.)
+      rotate_orientation(clumps_.ori[c], w, dt, renormalize);
+      if (energy) ke_rot = 0.5 * inertia[0] * (0.5 * (w_old + w)).squaredNorm();
+    } else {
+      Vec3 tq = t;
+      if (lambda > 0) {
+        for (int a = 0; a < 3; ++a) {
+          const Real p = tq[a] * w_old[a];
+          tq[a] *= 1.0 - lambda * (p > 0 ? 1.0 : p < 0 ? -1.0 : 0.0);
+        }
+      }
+      for (int a = 0; a < 3; ++a)
+        if (dofs & (DOF_RX << a)) tq[a] = 0;  // fixed below
+      Vec3& L = clumps_.angmom[c];
+      const Quat q = clumps_.ori[c];
+      const Vec3 l_now = L + 0.5 * dt * tq;  // at the start of the step
+      const Vec3 wb_now = (rot_old.transpose() * l_now).cwiseQuotient(inertia);
+      const Quat q_half = quat_axpy(q, 0.5 * dt, quat_rate(q, wb_now)).normalized();
+      L += dt * tq;
+      const Mat3 rot_half = q_half.toRotationMatrix();
+      const Vec3 wb_half = (rot_half.transpose() * L).cwiseQuotient(inertia);
+      Quat q_new = quat_axpy(q, dt, quat_rate(q_half, wb_half));
+      q_new.normalize();
+      clumps_.ori[c] = q_new;
+      const Mat3 rot_new = q_new.toRotationMatrix();
+      // The spin at the half step, in the half step's frame (the new frame would tilt it by
+      // w dt / 2: an error of first order in the friction work).
+      w = rot_half * wb_half;
+      if (dofs & DOF_ROT) {
+        // Blocked rotations about global axes keep their spin; L follows the spin.
+        for (int a = 0; a < 3; ++a)
+          if (dofs & (DOF_RX << a)) w[a] = w_old[a];
+        L = rot_new * inertia.cwiseProduct(rot_new.transpose() * w);
+      }
+      clumps_.angvel[c] = w;
+      if (energy) {
+        const Vec3 w_now = rot_old * wb_now;
+        ke_rot = 0.5 * l_now.dot(w_now);
+        if (lambda > 0) dissip += -(tq - t).dot(w_now) * dt;
+        work += te.dot(w_now) * dt;
+        for (int a = 0; a < 3; ++a)
+          if (dofs & (DOF_RX << a)) work += -t[a] * w_old[a] * dt;
+      }
+    }
+    if (energy) {
+      clumps_.ke[c] = 0.5 * m * (0.5 * (v_old + v)).squaredNorm() + ke_rot;
+      clumps_.damp_dissip[c] += dissip;
+      clumps_.ext_work[c] += work;
+    }
+    if (!clumps_.pos[c].allFinite() || !v.allFinite() || !w.allFinite()) {
+      err = std::min(err, static_cast<long>(c));
+      continue;
+    }
+    place_members(c);
+    for (int e = e0; e < e1; ++e) {
+      const int s = clumps_.member[e];
+      worst = std::max(worst, (bodies_.pos[s] - pos_at_build_[s]).norm() +
+                                  std::max(0.0, bodies_.radius[s] - radius_at_build_[s]));
+    }
+  }
+  err_clump = err;
+  if (err == std::numeric_limits<long>::max() && disp_valid_) max_disp_ = std::max(max_disp_, worst);
+}
+
+}  // namespace cpp_dem

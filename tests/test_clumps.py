@@ -1,0 +1,310 @@
+"""Clumps (issue 15): the rigid body of member spheres, verified against analytic solutions.
+
+Tolerances are stated per test; the mass properties of a union of spheres are integrated to
+the template's stated fill accuracy (cpp_dem.clumps, 2e-4 at 160 cells)."""
+
+import math
+
+import numpy as np
+import pytest
+
+import cpp_dem as dem
+from cpp_dem import _core
+from cpp_dem.checkpoint import load_checkpoint, save_checkpoint
+from cpp_dem.clumps import ClumpTemplate, random_orientations, union_mass_properties
+
+RHO = 2650.0
+
+
+def material(scene, friction_deg=30.0, **parts):
+    return scene.add_material(dem.linear_material(density=RHO, young=1e7, poisson=0.3,
+                                                  friction_angle_deg=friction_deg, **parts))
+
+
+# ---- mass properties -------------------------------------------------------------------------
+
+def test_union_two_equal_spheres_matches_the_lens_formula():
+    r, d = 1.0, 1.0
+    p = union_mass_properties([[0, 0, 0], [d, 0, 0]], [r, r])
+    exact = 2 * 4 / 3 * math.pi * r ** 3 - math.pi * (4 * r + d) * (2 * r - d) ** 2 / 12
+    assert abs(p.volume / exact - 1) < 2e-4
+    assert np.allclose(p.centroid, [d / 2, 0, 0], atol=1e-12)
+
+
+def test_union_disjoint_spheres_inertia_is_parallel_axis():
+    p = union_mass_properties([[0, 0, 0], [3, 0, 0]], [1, 1])
+    v = 4 / 3 * math.pi
+    expect = np.array([2 * 0.4 * v, 2 * (0.4 * v + v * 1.5 ** 2), 2 * (0.4 * v + v * 1.5 ** 2)])
+    assert abs(p.volume / (2 * v) - 1) < 2e-4
+    assert np.all(np.abs(p.principal / expect - 1) < 2e-4)
+    assert abs(abs(p.axes[0, 0]) - 1) < 1e-9  # the smallest moment is about the x axis
+
+
+def test_one_sphere_template_is_exact():
+    t = ClumpTemplate.from_spheres([[0.1, 0.2, 0.3]], [0.01])
+    assert t.fill_accuracy == 0
+    assert t.volume == 4.0 / 3.0 * math.pi * 0.01 * 0.01 * 0.01
+    assert np.allclose(t.local_centres, 0)
+
+
+def test_bad_templates_are_refused():
+    with pytest.raises(dem.ParameterError, match="radii"):
+        ClumpTemplate.from_spheres([[0, 0, 0]], [-1.0])
+    with pytest.raises(dem.ParameterError, match="centres"):
+        ClumpTemplate.from_spheres([[0, 0]], [1.0])
+    with pytest.raises(dem.ParameterError, match="at least one"):
+        ClumpTemplate.from_spheres(np.zeros((0, 3)), [])
+
+
+# ---- one sphere ---------------------------------------------------------------------------
+
+def _drop(clump: bool, energy: bool):
+    s = dem.Scene(gravity=(0, 0, -9.81), local_damping=0.3)
+    mat = material(s)
+    s.add_box((0, 0, 0), (0.1, 0.1, 0.3), material=mat)
+    rng = np.random.default_rng(1)
+    n = 22
+    x = np.column_stack([rng.uniform(0.01, 0.09, n), rng.uniform(0.01, 0.09, n),
+                         0.01 + 0.0125 * np.arange(n)])
+    r = rng.uniform(0.004, 0.006, n)
+    if clump:
+        for k in range(n):
+            s.add_clumps(ClumpTemplate.from_spheres([[0, 0, 0]], [r[k]]), x[k:k + 1], material=mat)
+    else:
+        s.add_spheres(x, r, material=mat)
+    s.track_energy = energy
+    s.dt = 2e-5
+    s.run(30000)
+    assert s.num_active_contacts > 10
+    return s
+
+
+@pytest.mark.parametrize("energy", [False, True])
+def test_one_sphere_clump_moves_bitwise_as_the_sphere(energy):
+    a, b = _drop(False, energy), _drop(True, energy)
+    for name in ("positions", "velocities", "angular_velocities", "forces", "torques"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert np.array_equal(a.contacts()["force"], b.contacts()["force"])
+    if energy:
+        assert np.array_equal(a.orientations, b.orientations)
+        ea, eb = a.energies(), b.energies()  # (summed in another order: clumps first)
+        for k in ("kinetic", "elastic", "gravity_potential", "friction", "local_damping"):
+            assert abs(ea[k] - eb[k]) <= 1e-12 * abs(ea[k]), k
+    else:
+        # The sphere pass turns orientations in a vectorised form whose last bits differ
+        # from the scalar one (as the sphere's own energy pass does); no force depends on a
+        # sphere's orientation.
+        assert np.abs(a.orientations - b.orientations).max() < 1e-13
+
+
+# ---- free rotation -----------------------------------------------------------------------
+
+def _asymmetric():
+    # Three spheres on the axes: three distinct principal moments.
+    return ClumpTemplate.from_spheres([[0, 0, 0], [0.012, 0, 0], [0, 0.006, 0]],
+                                      [0.005, 0.004, 0.004])
+
+
+def _rot(q):
+    w, x, y, z = q
+    return np.array([[1 - 2 * (y * y + z * z), 2 * (x * y - w * z), 2 * (x * z + w * y)],
+                     [2 * (x * y + w * z), 1 - 2 * (x * x + z * z), 2 * (y * z - w * x)],
+                     [2 * (x * z - w * y), 2 * (y * z + w * x), 1 - 2 * (x * x + y * y)]])
+
+
+def spin_run(axis: int, perturb: float, steps: int, dt=5e-5, every=200):
+    s = dem.Scene()
+    mat = material(s)
+    s.add_clumps(_asymmetric(), [[0, 0, 0]], material=mat)
+    pm = s.clump_inertias[0]
+    assert pm[0] < pm[1] < pm[2]
+    R = _rot(s.clump_orientations[0])
+    w_body = np.full(3, perturb)
+    w_body[axis] = 20.0
+    s.set_clump_state(0, [0, 0, 0], s.clump_orientations[0], [0, 0, 0], R @ w_body)
+    s.dt = dt
+    s.track_energy = True
+    L0 = s.clump_angular_momenta[0].copy()
+    ke0 = 0.5 * w_body @ (pm * w_body)
+    hist = []
+    for _ in range(steps // every):
+        s.run(every)
+        R = _rot(s.clump_orientations[0])
+        wb = R.T @ s.clump_angular_momenta[0] / pm
+        hist.append(wb)
+    return s, np.array(hist), L0, ke0
+
+
+def test_free_rotation_conserves_energy_and_angular_momentum():
+    s, hist, L0, ke0 = spin_run(axis=1, perturb=0.5, steps=40000)
+    L = s.clump_angular_momenta[0]
+    assert np.linalg.norm(L - L0) / np.linalg.norm(L0) < 1e-12  # no torque: L is constant
+    ke = s.clump_kinetic_energies[0]
+    assert abs(ke / ke0 - 1) < 1e-4
+    # The body-frame spin changed a lot (the intermediate axis tumbles), so the test bites.
+    assert np.abs(hist[:, 1]).min() < 0.5 * 20.0
+
+
+@pytest.mark.parametrize("axis,stable", [(0, True), (1, False), (2, True)])
+def test_rotation_about_the_intermediate_axis_is_unstable(axis, stable):
+    _, hist, _, _ = spin_run(axis=axis, perturb=0.05, steps=40000)
+    drift = np.abs(hist[:, [a for a in range(3) if a != axis]]).max()
+    if stable:
+        assert drift < 1.0  # the small perturbation stays small (rad/s)
+        assert np.abs(hist[:, axis]).min() > 19.0
+    else:
+        assert drift > 5.0  # it grows to the size of the spin (tumbling)
+
+
+# ---- contact mechanics -------------------------------------------------------------------
+
+def incline_run(theta_deg: float, spacing: float, friction_deg: float, steps=40000):
+    """A two-sphere clump lying along the slope (x) on a floor, gravity tilted by theta."""
+    r = 0.005
+    s = dem.Scene(gravity=9.81 * np.array([math.sin(math.radians(theta_deg)), 0,
+                                           -math.cos(math.radians(theta_deg))]))
+    mat = material(s, friction_deg=friction_deg, damping_normal=0.5)
+    s.add_wall(axis=2, position=0.0, sense=1, material=mat)
+    t = ClumpTemplate.from_spheres([[-spacing * r / 2, 0, 0], [spacing * r / 2, 0, 0]], [r, r])
+    s.add_clumps(t, [[0, 0, r]], material=mat)
+    s.dt = 1e-5
+    x0 = s.clump_positions[0].copy()
+    s.run(steps)
+    return s, x0
+
+
+def test_incline_stays_below_both_criteria():
+    # tan 15 deg = 0.27 < mu = tan 30 deg and < tipping (d/2)/h = 1.5
+    s, x0 = incline_run(15, spacing=3.0, friction_deg=30)
+    assert np.linalg.norm(s.clump_positions[0] - x0) < 1e-5
+    assert np.linalg.norm(s.clump_angular_velocities[0]) < 1e-3
+
+
+def test_incline_slides_at_the_coulomb_acceleration():
+    # tan 40 deg = 0.84 > mu = tan 30 deg, < tipping 1.5: slides, a = g (sin - mu cos).
+    th, mu = math.radians(40), math.tan(math.radians(30))
+    s, x0 = incline_run(40, spacing=3.0, friction_deg=30, steps=20000)
+    t = s.time
+    a = 9.81 * (math.sin(th) - mu * math.cos(th))
+    assert abs(s.clump_velocities[0][0] / (a * t) - 1) < 0.02
+    assert np.linalg.norm(s.clump_angular_velocities[0]) < 0.05 * s.clump_velocities[0][0] / 0.005
+
+
+def test_incline_tips_before_it_slides():
+    # (d/2)/h = 0.4 = tan 21.8 deg < tan 26 deg < mu = tan 40 deg: it tips about the front
+    # sphere; at 18 deg it stays.
+    s, _ = incline_run(26, spacing=0.8, friction_deg=40, steps=20000)
+    assert abs(s.clump_angular_velocities[0][1]) > 1.0  # turning about y
+    s, x0 = incline_run(18, spacing=0.8, friction_deg=40, steps=20000)
+    assert np.linalg.norm(s.clump_angular_velocities[0]) < 1e-3
+
+
+def _box_of_clumps(n=150, seed=4, energy=True):
+    s = dem.Scene(gravity=(0, 0, -9.81), local_damping=0.2)
+    mat = material(s)
+    s.add_box((0, 0, 0), (0.14, 0.14, 0.4), material=mat)
+    t = _asymmetric()
+    rng = np.random.default_rng(seed)
+    k = np.arange(n)
+    x = np.column_stack([0.02 + 0.033 * (k % 4), 0.02 + 0.033 * ((k // 4) % 4),
+                         0.02 + 0.033 * (k // 16)]) + rng.uniform(-0.001, 0.001, (n, 3))
+    s.add_clumps(t, x, random_orientations(n, seed), material=mat, scale=rng.uniform(0.8, 1.0, n))
+    s.track_energy = energy
+    s.set_auto_timestep(safety=0.5, period=100)
+    return s
+
+
+def test_clumps_settle_in_a_box_with_the_energy_balance_closing_with_dt():
+    # The balance of a frictional drop closes to first order in dt (the friction work is
+    # booked at the half-step velocities; spheres have the same term, of the other sign):
+    # halving dt halves the error.
+    err = []
+    for safety in (0.5, 0.25):
+        s = _box_of_clumps(n=60)
+        s.set_auto_timestep(safety=safety, period=100)
+        s.run(int(10000 / safety))
+        assert s.num_active_contacts > 120
+        err.append(s.energies()["balance_error_relative"])
+    assert err[0] < 0.05
+    assert err[1] < 0.65 * err[0]
+    ij = s.contacts()["ids"]
+    ids = np.asarray(s.clump_ids)
+    pair = ij[:, 1] >= 0
+    a, b = ij[pair, 0], ij[pair, 1]
+    assert np.all(ids[a] != ids[b])
+    # (every member is in a clump here: a pair contact joins two clumps)
+    assert np.all(ids >= 0)
+
+
+def test_clump_run_is_independent_of_threads():
+    res = []
+    for nt in (1, 2):
+        old = _core.get_num_threads()
+        _core.set_num_threads(nt)
+        try:
+            s = _box_of_clumps(n=150, energy=False)
+            s.run(1500)
+            res.append((s.clump_positions, s.clump_orientations, s.positions, s.forces))
+        finally:
+            _core.set_num_threads(old)
+    for a, b in zip(*res):
+        assert np.array_equal(a, b)
+
+
+def test_clump_checkpoint_restart_is_bitwise(tmp_path):
+    a = _box_of_clumps(n=60)
+    a.run(800)
+    save_checkpoint(tmp_path / "ck.h5", a)
+    a.run(800)
+    b = _box_of_clumps(n=60)
+    load_checkpoint(tmp_path / "ck.h5", b)
+    b.run(800)
+    for name in ("clump_positions", "clump_orientations", "clump_angular_momenta",
+                 "positions", "velocities", "forces"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    assert a.energies() == b.energies()
+
+
+def test_radius_growth_scales_a_clump_about_its_centre():
+    s = dem.Scene()
+    mat = material(s)
+    t = _asymmetric()
+    s.add_clumps(t, [[0.1, 0.1, 0.1]], material=mat)
+    m0, i0 = s.clump_masses[0], s.clump_inertias[0].copy()
+    x0 = s.positions.copy()
+    s.radii = s.radii * 1.1
+    assert abs(s.clump_masses[0] / (m0 * 1.1 ** 3) - 1) < 1e-12
+    assert np.allclose(s.clump_inertias[0], i0 * 1.1 ** 5, rtol=1e-12)
+    assert np.allclose(s.positions - [0.1, 0.1, 0.1], (x0 - [0.1, 0.1, 0.1]) * 1.1, atol=1e-15)
+    r = s.radii
+    r[0] *= 1.01
+    with pytest.raises(dem.ParameterError, match="one factor"):
+        s.radii = r
+
+
+def test_member_dofs_and_inputs_are_refused_clearly():
+    s = dem.Scene()
+    mat = material(s)
+    c = s.add_clumps(_asymmetric(), [[0, 0, 0]], material=mat)
+    m = s.clump_members(int(c[0]))
+    with pytest.raises(dem.ParameterError, match="member of clump 0"):
+        s.block_dofs(m[0], "x")
+    with pytest.raises(dem.ParameterError, match="unit quaternion"):
+        s.add_clumps(_asymmetric(), [[0, 0, 0]], [[2, 0, 0, 0]], material=mat)
+    with pytest.raises(dem.ParameterError, match="ClumpTemplate"):
+        s.add_clumps([[0, 0, 0]], [[0, 0, 0]], material=mat)
+    s.block_clump_dofs(0, "x rz")
+    assert s.clump_blocked_dofs(0) == "x rz"
+
+
+def test_blocked_clump_keeps_its_imposed_velocity():
+    s = dem.Scene(gravity=(0, 0, -9.81))
+    mat = material(s)
+    s.add_clumps(_asymmetric(), [[0, 0, 0]], material=mat)
+    s.set_clump_state(0, [0, 0, 0], s.clump_orientations[0], [0.1, 0, 0], [0, 0, 2.0])
+    s.block_clump_dofs(0, "all")
+    s.dt = 1e-5
+    s.run(1000)
+    assert np.allclose(s.clump_velocities[0], [0.1, 0, 0], atol=0)
+    assert np.allclose(s.clump_angular_velocities[0], [0, 0, 2.0], atol=1e-12)
+    assert abs(s.clump_positions[0][0] - 0.1 * s.time) < 1e-12
