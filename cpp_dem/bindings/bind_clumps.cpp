@@ -69,6 +69,15 @@ void bind_clumps(py::module_& m) {
            py::arg("angular_velocity"))
       .def("_set_clump_blocked", &Scene::set_clump_blocked, py::arg("clump"), py::arg("mask"))
       .def_property_readonly("_clump_blocked", [](const Scene& s) { return s.clumps().blocked; })
+      .def_property("clump_rotation",
+                    [](const Scene& s) { return s.clump_rotation() == ClumpRotation::Yade ? "yade" : "fincham"; },
+                    [](Scene& s, const std::string& v) {
+                      if (v == "fincham") s.set_clump_rotation(ClumpRotation::Fincham);
+                      else if (v == "yade") s.set_clump_rotation(ClumpRotation::Yade);
+                      else throw ParameterError("clump_rotation='" + v + "': must be 'fincham' (default, "
+                                                "second order) or 'yade' (Yade 2023's first-order variant)");
+                    },
+                    "Rotation update of clumps: 'fincham' (default) or 'yade' (see docs/clumps.md).")
       .def("set_clump_external",
            [](Scene& s, int c, const Array& f, const Array& t) {
              s.set_clump_external(c, to_vec3(f, "force"), to_vec3(t, "torque"));

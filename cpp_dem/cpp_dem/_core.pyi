@@ -327,6 +327,14 @@ class Scene:
         Clump centres of mass, m, shape (c, 3).
         """
     @property
+    def clump_rotation(self) -> str:
+        """
+        Rotation update of clumps: 'fincham' (default) or 'yade' (see docs/clumps.md).
+        """
+    @clump_rotation.setter
+    def clump_rotation(self, arg1: str) -> None:
+        ...
+    @property
     def clump_torques(self) -> numpy.typing.NDArray[numpy.float64]:
         """
         Resultant torque about each centre of mass in the last step, N m, shape (c, 3).

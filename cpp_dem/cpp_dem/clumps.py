@@ -15,9 +15,10 @@ sphere the line crosses), merged exactly, so the x-integrals of 1, x and x^2 ove
 only the (y, z) quadrature (midpoint rule) approximates. For one sphere the volume error of the
 midpoint rule on the chord-area function is about 0.3 (h / r)^1.5 (h the cell size), and for
 unions it is of the same order: with the default 160 cells across the grain, volume and inertia
-are within 2e-4 (measured against exact sphere, two-sphere lens and ellipsoid values in
-tests/test_clumps.py; stated per template as ``fill_accuracy``). A single sphere at the origin
-is exact (analytic), so a one-sphere clump is the sphere itself.
+are within 2e-4 (measured against exact sphere and two-sphere lens values in
+tests/test_clumps.py; stated per template as ``fill_accuracy``). Members that do not overlap
+(one sphere among them) are summed exactly instead (analytic spheres, parallel axes), as Yade
+and PFC do for any clump, so a one-sphere clump is the sphere itself.
 """
 
 from __future__ import annotations
@@ -86,6 +87,19 @@ def union_mass_properties(centres, radii, cells: int = 160) -> MassProperties:
         vol = 4.0 / 3.0 * math.pi * r[0] * r[0] * r[0]
         i = 0.4 * vol * r[0] * r[0]
         return MassProperties(vol, c[0].copy(), np.eye(3) * i, np.full(3, i), np.eye(3))
+    d = np.linalg.norm(c[:, None, :] - c[None, :, :], axis=2)
+    iu = np.triu_indices(len(r), 1)
+    if np.all(d[iu] >= (r[:, None] + r[None, :])[iu]):
+        # No two members overlap: the sum of the spheres is exact (parallel axes).
+        v = 4.0 / 3.0 * math.pi * r ** 3
+        vol = float(v.sum())
+        cen = (v[:, None] * c).sum(axis=0) / vol
+        x = c - cen
+        inertia = np.zeros((3, 3))
+        for k in range(len(r)):
+            inertia += np.eye(3) * (0.4 * v[k] * r[k] ** 2 + v[k] * x[k] @ x[k]) - v[k] * np.outer(x[k], x[k])
+        pm, axes = _principal(inertia)
+        return MassProperties(vol, cen, inertia, pm, axes)
     lo = (c - r[:, None]).min(axis=0)
     hi = (c + r[:, None]).max(axis=0)
     hy = (hi[1] - lo[1]) / cells
@@ -198,7 +212,12 @@ class ClumpTemplate:
     @property
     def fill_accuracy(self) -> float:
         """Stated relative accuracy of volume and inertia (0 for one sphere: exact)."""
-        return 0.0 if self.num_members == 1 else 2e-4 * (160.0 / self.cells) ** 1.5
+        c, r = self.centres, self.radii
+        d = np.linalg.norm(c[:, None, :] - c[None, :, :], axis=2)
+        iu = np.triu_indices(len(r), 1)
+        if np.all(d[iu] >= (r[:, None] + r[None, :])[iu]):
+            return 0.0  # summed exactly
+        return 2e-4 * (160.0 / self.cells) ** 1.5
 
     def scaled(self, factor: float) -> "ClumpTemplate":
         """The same shape scaled about the template origin by `factor` (> 0)."""

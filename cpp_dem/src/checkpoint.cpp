@@ -131,6 +131,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.put(s.margin_);
   w.put(s.max_overlap_ratio_);
   w.put(s.track_energy_);
+  w.put(s.clump_rotation_);
   w.put(s.ts_safety_);
   w.put(s.ts_period_);
   w.put(s.step_);
@@ -232,6 +233,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   r.get(t.margin_);
   r.get(t.max_overlap_ratio_);
   r.get(t.track_energy_);
+  r.get(t.clump_rotation_);
   r.get(t.ts_safety_);
   r.get(t.ts_period_);
   r.get(t.step_);

@@ -47,6 +47,12 @@ struct ColliderStats {
 
 class Scene;
 
+/// The rotation update of clumps with distinct principal moments (integrate/clumps.cpp).
+enum class ClumpRotation : std::uint8_t {
+  Fincham = 0,  ///< Fincham's (1992) leapfrog: second order (default)
+  Yade = 1,     ///< Yade 2023's variant of it, first order: for comparisons with Yade
+};
+
 /// A controller (servo wall, radius growth, clamp, ...) runs every `period` steps, at the start
 /// of a step, before the contact forces: it sees the forces of the previous step and touches
 /// only what it owns (its walls, its bodies).
@@ -127,6 +133,8 @@ class Scene {
   void set_clump_blocked(int c, std::uint8_t mask);
   /// Imposed force (N) and torque (N m, about the centre of mass) on clump c.
   void set_clump_external(int c, const Vec3& force, const Vec3& torque);
+  ClumpRotation clump_rotation() const { return clump_rotation_; }
+  void set_clump_rotation(ClumpRotation r) { clump_rotation_ = r; }
 
   int add_wall(int axis, Real position, int sense, int material);
   int num_walls() const { return static_cast<int>(walls_.size()); }
@@ -419,6 +427,7 @@ class Scene {
   /// broad-phase build says one may have).
   void check_tunnelling();
   bool track_energy_ = false;
+  ClumpRotation clump_rotation_ = ClumpRotation::Fincham;
   Real ts_safety_ = 0.8;
   int ts_period_ = 0;
   int dt_check_period_ = 100;

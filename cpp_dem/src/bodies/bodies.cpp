@@ -152,7 +152,6 @@ void Scene::set_radii(const std::vector<Real>& r) {
     const Real f3 = f * f * f;
     clumps_.mass[c] *= f3;
     clumps_.inertia[c] *= f3 * f * f;
-    clumps_.weight_arm[c] *= f3 * f;
     clumps_.angmom[c] *= f3 * f * f;  // the spin is kept
     for (int e = clumps_.member_off[c]; e < clumps_.member_off[c + 1]; ++e) clumps_.member_local[e] *= f;
     place_members(c);

@@ -46,10 +46,9 @@ int Scene::add_clump(const std::vector<Vec3>& local, const std::vector<Real>& ra
   clumps_.ext_work.push_back(0);
   clumps_.pos_at_energy_reset.push_back(com);
   // Members: spheres whose masses share the clump's by volume (they carry its weight in the
-  // integration pass; weight_arm corrects the torque of that weight about the centre).
+  // integration pass; the clump pass applies it at the centre of mass).
   Real vsum = 0;
   for (Real r : radius) vsum += r * r * r;
-  Vec3 arm = Vec3::Zero();
   for (size_t k = 0; k < local.size(); ++k) {
     const Real r = radius[k];
     const Real m = mass * (r * r * r / vsum);
@@ -59,9 +58,7 @@ int Scene::add_clump(const std::vector<Vec3>& local, const std::vector<Real>& ra
     bodies_.blocked[slot] = DOF_ALL;  // moved by the clump pass, not as a free body
     clumps_.member.push_back(slot);
     clumps_.member_local.push_back(local[k]);
-    arm += m * local[k];
   }
-  clumps_.weight_arm.push_back(arm);
   clumps_.member_off.push_back(static_cast<int>(clumps_.member.size()));
   place_members(c);
   min_radius_ = -1;

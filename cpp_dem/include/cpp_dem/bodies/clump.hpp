@@ -26,10 +26,6 @@ struct ClumpStore {
   std::vector<Vec3> ext_torque; ///< imposed torque on the clump, N m
   std::vector<Real> mass;       ///< kg
   std::vector<Vec3> inertia;    ///< principal moments, kg m^2
-  /// Sum of member mass x member offset (principal frame), kg m: the members' masses carry
-  /// gravity in the integration pass, and this is the torque arm their weights add about the
-  /// centre of mass (zero when the members' mass centroid is the clump's).
-  std::vector<Vec3> weight_arm;
   std::vector<std::uint8_t> blocked;  ///< Dof mask; a blocked DOF keeps its velocity
   std::vector<int> member_off;        ///< members of c: member_off[c] .. member_off[c + 1]
   // Energy accumulators (written when the scene tracks energy).
@@ -63,7 +59,7 @@ struct ClumpStore {
   template <class Self, class F>
   static void visit(Self& s, F& f) {
     f(s.pos), f(s.vel), f(s.angvel), f(s.angmom), f(s.ori), f(s.force), f(s.torque);
-    f(s.ext_force), f(s.ext_torque), f(s.mass), f(s.inertia), f(s.weight_arm), f(s.blocked);
+    f(s.ext_force), f(s.ext_torque), f(s.mass), f(s.inertia), f(s.blocked);
     f(s.member_off), f(s.ke), f(s.damp_dissip), f(s.ext_work), f(s.pos_at_energy_reset);
     f(s.member), f(s.member_local);
   }
