@@ -356,3 +356,24 @@ def test_yade_rotation_variant_is_first_order():
     assert 1.6 < err["yade", 5e-5] / err["yade", 2.5e-5] < 2.5  # first order
     with pytest.raises(dem.ParameterError, match="clump_rotation"):
         dem.Scene().clump_rotation = "euler"
+
+
+def test_grain_stiffness_takes_the_equivalent_radius():
+    # A linear wall contact has k_n proportional to the sphere's radius: with
+    # stiffness='grain' the members' contacts take the clump's equivalent radius, so at rest
+    # on the floor (same weight, same two contacts) the overlaps shrink by r_member / R_eq.
+    t = ClumpTemplate.from_spheres([[-0.003, 0, 0], [0.003, 0, 0]], [0.0025, 0.0025])
+    ov = {}
+    for mode in ("member", "grain"):
+        s = dem.Scene(gravity=(0, 0, -9.81), local_damping=0.5)
+        mat = material(s)
+        s.add_wall(axis=2, position=0.0, sense=1, material=mat)
+        s.add_clumps(t, [[0, 0, 0.0025]], material=mat, stiffness=mode)
+        s.dt = 1e-5
+        s.run(20000)
+        ov[mode] = s.contacts()["overlap"]
+        assert len(ov[mode]) == 2
+    r_eq = 0.5 * t.equivalent_diameter
+    assert np.allclose(ov["grain"] / ov["member"], 0.0025 / r_eq, rtol=1e-6)
+    with pytest.raises(dem.ParameterError, match="stiffness"):
+        dem.Scene().add_clumps(t, [[0, 0, 0]], material=0, stiffness="pebble")

@@ -26,13 +26,17 @@ void bind_clumps(py::module_& m) {
   auto cls = py::reinterpret_borrow<py::class_<Scene>>(m.attr("Scene"));
   cls.def("_add_clump",
           [](Scene& s, const Array& local, const Array& radius, int material, double mass,
-             const Array& inertia, const Array& com, const Array& ori) {
+             const Array& inertia, const Array& com, const Array& ori, double stiffness_radius) {
             return s.add_clump(to_vec3_list(local, "members"), to_real_list(radius, "radii"),
                                material, mass, to_vec3(inertia, "inertia"), to_vec3(com, "position"),
-                               to_quat(ori, "orientation"));
+                               to_quat(ori, "orientation"), stiffness_radius);
           },
           py::arg("local"), py::arg("radius"), py::arg("material"), py::arg("mass"),
-          py::arg("inertia"), py::arg("com"), py::arg("ori"))
+          py::arg("inertia"), py::arg("com"), py::arg("ori"), py::arg("stiffness_radius") = 0.0)
+      .def_property_readonly("clump_stiffness_radii",
+                             [](const Scene& s) { return real_array(s.clumps().stiffness_radius); },
+                             "Radius each clump's members take for their contact stiffness, m "
+                             "(0: their own radii), shape (c,).")
       .def_property_readonly("num_clumps", &Scene::num_clumps)
       .def("clump_members", &Scene::clump_members, py::arg("clump"),
            "Body ids of a clump's member spheres.")

@@ -164,7 +164,7 @@ class Scene:
     """
     def __init__(self) -> None:
         ...
-    def _add_clump(self, local: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], radius: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], material: int, mass: float, inertia: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], com: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], ori: typing.Annotated[numpy.typing.ArrayLike, numpy.float64]) -> int:
+    def _add_clump(self, local: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], radius: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], material: int, mass: float, inertia: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], com: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], ori: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], stiffness_radius: float = 0.0) -> int:
         ...
     def _add_grid_nodes(self, positions: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], radius: float, mass: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], inertia: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], material: int) -> int:
         ...
@@ -334,6 +334,11 @@ class Scene:
     @clump_rotation.setter
     def clump_rotation(self, arg1: str) -> None:
         ...
+    @property
+    def clump_stiffness_radii(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Radius each clump's members take for their contact stiffness, m (0: their own radii), shape (c,).
+        """
     @property
     def clump_torques(self) -> numpy.typing.NDArray[numpy.float64]:
         """

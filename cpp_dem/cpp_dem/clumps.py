@@ -263,15 +263,17 @@ class ClumpCloud:
     def __len__(self) -> int:
         return len(self.template)
 
-    def add_to(self, scene, templates, *, material: int) -> np.ndarray:
-        """Adds the clumps to ``scene``; returns their clump indices in cloud order."""
+    def add_to(self, scene, templates, *, material: int, stiffness: str = "member") -> np.ndarray:
+        """Adds the clumps to ``scene`` (stiffness: see Scene.add_clumps); returns their clump
+        indices in cloud order."""
         templates = _templates(templates)
         out = np.empty(len(self), dtype=int)
         for k, t in enumerate(templates):
             sel = np.flatnonzero(self.template == k)
             if len(sel):
                 out[sel] = scene.add_clumps(t, self.positions[sel], self.orientations[sel],
-                                            material=material, scale=self.scales[sel])
+                                            material=material, scale=self.scales[sel],
+                                            stiffness=stiffness)
         return out
 
 

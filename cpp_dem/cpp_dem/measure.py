@@ -65,6 +65,21 @@ def reference_points(scene) -> np.ndarray:
     return pos
 
 
+def grain_diameters(scene) -> np.ndarray:
+    """Equivalent-volume diameters of the grains, m: free spheres 2 r, clumps (6 V / pi)^(1/3)
+    with V the union's volume (order: the free spheres by id, then the clumps)."""
+    sph = sphere_mask(scene)
+    r = np.asarray(scene.radii)
+    if not scene.num_clumps:
+        return 2.0 * r[sph]
+    cl = np.asarray(scene.clump_ids)
+    mats = np.asarray(scene.material_ids)
+    first = np.array([scene.clump_members(c)[0] for c in range(scene.num_clumps)])
+    rho = np.array([scene.material(int(m)).density for m in mats[first]])
+    v = np.asarray(scene.clump_masses) / rho
+    return np.concatenate([2.0 * r[sph & (cl < 0)], (6.0 * v / np.pi) ** (1.0 / 3.0)])
+
+
 def solid_volume(scene) -> float:
     """Volume of the grains, m^3: free spheres 4/3 pi r^3 (overlaps between grains counted
     twice; see porosity), clumps the volume of the union of their members (mass / density:

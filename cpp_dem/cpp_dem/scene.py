@@ -204,7 +204,7 @@ class Scene(_core.Scene):
 
     # ---- clumps ----------------------------------------------------------------------------
     def add_clumps(self, template, positions, orientations=None, *, material: int,
-                   scale=1.0) -> np.ndarray:
+                   scale=1.0, stiffness: str = "member") -> np.ndarray:
         """Adds rigid clumps, copies of a :class:`cpp_dem.clumps.ClumpTemplate`.
 
         positions: (n, 3) centres of mass, m. orientations: (n, 4) unit quaternions (w, x, y,
@@ -213,6 +213,12 @@ class Scene(_core.Scene):
         scaling the template about its centre of mass. The mass and inertia are the union's
         (template.props) times the material's density. Returns the clump indices; the
         members' body ids are ``clump_members(c)``.
+
+        stiffness: which radius the members' contacts take in the contact law's stiffness
+        (and mixing rules): "member" (each member's own, as Yade, PFC's deformability method
+        and LIGGGHTS) or "grain" (the clump's equivalent-volume radius: the grain is as stiff
+        as its equivalent sphere whatever the number of members, so a small member at a
+        grain's corner does not sink deep into what it touches).
         """
         from .clumps import ClumpTemplate
 
@@ -238,6 +244,8 @@ class Scene(_core.Scene):
         f = np.broadcast_to(np.asarray(scale, dtype=float), (n,))
         if not np.all(np.isfinite(f) & (f > 0)):
             raise ParameterError(f"scale={scale!r}: must be > 0 (one factor or one per clump)")
+        if stiffness not in ("member", "grain"):
+            raise ParameterError(f"stiffness={stiffness!r}: must be 'member' or 'grain'")
         material = _index(material, "material")
         rho = self.material(material).density
         props = template.props
@@ -255,8 +263,9 @@ class Scene(_core.Scene):
             else:
                 m = rho * props.volume * fk ** 3
                 inertia = rho * props.principal * fk ** 5
+            rs = 0.5 * template.equivalent_diameter * fk if stiffness == "grain" else 0.0
             out[k] = self._add_clump(local * fk, template.radii * fk, material, m, inertia,
-                                     x[k], qc)
+                                     x[k], qc, rs)
         return out
 
     def block_clump_dofs(self, clumps: Iterable[int] | int, dofs: str) -> None:

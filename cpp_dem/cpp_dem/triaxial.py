@@ -31,17 +31,26 @@ class TriaxialSample:
 
 def build_box_sample(centers, radii, lo, hi, *, young: float, poisson: float,
                      friction_deg: float, density: float, local_damping: float,
-                     dt_safety: float = 0.5, gain: float = 0.5) -> TriaxialSample:
+                     dt_safety: float = 0.5, gain: float = 0.5, clumps=None) -> TriaxialSample:
     """A scene with the spheres in the box [lo, hi] (m): grains of the linear law (E Pa, nu
     -, phi deg, rho kg/m^3), frictionless walls, Cundall local damping, automatic time step,
-    and a TriaxialController on the walls (all axes at zero stress until set)."""
+    and a TriaxialController on the walls (all axes at zero stress until set).
+
+    clumps: (ClumpCloud, templates) to add clumps instead of the spheres (``centers`` and
+    ``radii`` are then ignored; see cpp_dem.clumps.clump_cloud)."""
     s = Scene(local_damping=local_damping)
     mat = s.add_material(_core.Material(model="linear", density=density, young=young,
                                         poisson=poisson, friction_angle_deg=friction_deg))
     wall_mat = s.add_material(_core.Material(model="linear", density=density, young=young,
                                              poisson=poisson, friction_angle_deg=0.0))
     walls = s.add_box(lo, hi, material=wall_mat)
-    s.add_spheres(centers, radii, material=mat)
+    if clumps is not None:
+        cloud, templates = clumps
+        # Members as stiff as the grain's equivalent sphere (E R_eq): the calibrated E of a
+        # sphere sample keeps its meaning, and small corner members do not sink into walls.
+        cloud.add_to(s, templates, material=mat, stiffness="grain")
+    else:
+        s.add_spheres(centers, radii, material=mat)
     s.set_auto_timestep(safety=dt_safety, period=100)
     ctl = _core.TriaxialController(walls=walls, gain=gain,
                                    max_speed=prep.default_max_speed(s, walls))

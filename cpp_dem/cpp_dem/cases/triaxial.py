@@ -79,6 +79,9 @@ class Params:
     preset: str = ""                 #: speed-accuracy preset of the loading ('' = none)
     grain_scale: float = 1.0         #: every grain size x this factor after the PSD is fitted
                                      #: to n (same box: about n / grain_scale^3 grains), -
+    grains: str = "spheres"          #: spheres, or clumps:NAME (a shipped grain gravel_a ..
+                                     #: gravel_d, 'gravel' for the four mixed, or a template
+                                     #: CSV x,y,z,r); sizes are equivalent-volume diameters
 
 
 SMOKE = dict(n=300, strain_rate=0.5, stop_strain=0.04, record_every=50)
@@ -90,8 +93,29 @@ def smoke_box(p: Params) -> tuple:
     return tuple(float(x * f) for x in (0.3, 0.3, 0.6))
 
 
+def grain_templates(spec: str) -> list:
+    """The clump templates of a --grains value 'clumps:NAME' (see Params.grains)."""
+    from cpp_dem.clump_mesh import shipped_template, shipped_templates
+    from cpp_dem.clumps import ClumpTemplate
+
+    name = spec.split(":", 1)[1] if spec.startswith("clumps:") else ""
+    if not name:
+        raise SystemExit(f"error: --grains={spec}: must be 'spheres' or 'clumps:NAME'")
+    if name == "gravel":
+        return list(shipped_templates().values())
+    if Path(name).is_file():
+        return [ClumpTemplate.load(name)]
+    try:
+        return [shipped_template(name)]
+    except dem.ParameterError as e:
+        raise SystemExit(f"error: --grains={spec}: {e} (or 'gravel' for all of them, or a "
+                         "template CSV x,y,z,r)")
+
+
 def make_sample(p: Params, log) -> tuple:
-    """Centres, radii and the box (lo, hi) of the sample; info about the PSD."""
+    """Centres, radii and the box (lo, hi) of the sample; info about the PSD; and for clumps
+    (cloud, templates) (the centres and radii are then the clumps' bounding spheres), else
+    None."""
     if p.packing:
         from cpp_dem.io import foreign
 
@@ -111,7 +135,7 @@ def make_sample(p: Params, log) -> tuple:
                              f"outside the box {lo.tolist()}-{hi.tolist()} m (--box)")
         log(f"packing {p.packing} ({p.packing_format}): {len(r)} spheres, walls at "
             f"{np.round(lo, 5).tolist()} - {np.round(hi, 5).tolist()} m")
-        return c, r, lo, hi, {"source": str(p.packing), "format": p.packing_format}
+        return c, r, lo, hi, {"source": str(p.packing), "format": p.packing_format}, None
     box = np.asarray(p.box, float)
     vol_solid = p.solid_fraction * float(np.prod(box))
     d, pc, d_min = psd.fit_psd_to_count(psd.APPENDIX_B_SIZES, psd.APPENDIX_B_PASSING, p.n,
@@ -125,13 +149,30 @@ def make_sample(p: Params, log) -> tuple:
                          f"{np.round(box, 4).tolist()} m box (at least 10 are needed); use a "
                          "smaller factor or a larger box")
     radii = psd.radii_from_psd(d, pc, n, by="mass", seed=p.seed)
+    info = {"d_min_m": d_min * p.grain_scale, "sizes_m": d.tolist(),
+            "passing_mass": pc.tolist(), "grains": p.grains}
+    log(f"PSD: App. B by mass, fines below d_min = {d_min * p.grain_scale * 1e3:.2f} mm removed -> {n} grains,"
+        f" d = {2 * radii.min() * 1e3:.1f}-{2 * radii.max() * 1e3:.1f} mm")
+    if p.grains != "spheres":
+        # Clumps of the template(s) at the PSD's equivalent-volume diameters, random seeded
+        # orientations; their bounding spheres are placed, loose enough to be placed at random.
+        from cpp_dem.clumps import clump_cloud
+
+        templates = grain_templates(p.grains)
+        k = float(np.mean([(t.bounding_radius / (0.5 * t.equivalent_diameter)) ** 3
+                           for t in templates]))
+        shrink = (p.cloud_fraction / (p.solid_fraction * k)) ** (1.0 / 3.0)
+        cloud = clump_cloud(templates, 2.0 * radii * shrink, (0, 0, 0), box, seed=p.seed)
+        rb = cloud.scales * np.array([templates[t].bounding_radius for t in cloud.template])
+        log(f"grains: clumps of {', '.join(t.name for t in templates)} "
+            f"({sum(t.num_members for t in templates) / len(templates):.0f} spheres each), "
+            f"cloud at diameters x {shrink:.3f}")
+        return cloud.positions, rb, np.zeros(3), box, {**info, "cloud_shrink": shrink}, \
+            (cloud, templates)
     shrink = (p.cloud_fraction / p.solid_fraction) ** (1.0 / 3.0)
     c, r = loose_cloud(radii * shrink, (0, 0, 0), box, seed=p.seed)
-    log(f"PSD: App. B by mass, fines below d_min = {d_min * p.grain_scale * 1e3:.2f} mm removed -> {n} grains,"
-        f" d = {2 * radii.min() * 1e3:.1f}-{2 * radii.max() * 1e3:.1f} mm; cloud at radii x "
-        f"{shrink:.3f}")
-    return c, r, np.zeros(3), box, {"d_min_m": d_min * p.grain_scale, "sizes_m": d.tolist(),
-                                     "passing_mass": pc.tolist(), "cloud_shrink": shrink}
+    log(f"cloud at radii x {shrink:.3f}")
+    return c, r, np.zeros(3), box, {**info, "cloud_shrink": shrink}, None
 
 
 @dataclass
@@ -229,17 +270,23 @@ def prepare(p: Params, log) -> Prepared:
     """Stages 0 and 1: the sample (or the given packing), the geogrid layer if any, the
     expansion to the cell pressure, the isotropic stage; progress lines go to ``log``.
     Raises SystemExit if the isotropic stage does not converge."""
-    c, r, lo, hi, psd_info = make_sample(p, log)
+    c, r, lo, hi, psd_info, clumps = make_sample(p, log)
     layer = grid_layer(p, lo, hi)
     if layer is not None and (p.clear_layer or p.geogrid != "none"):
         keep = ~layer.overlaps(c, r)
         log(f"geogrid layer at z = {layer.z:.4f} m: {int((~keep).sum())} grains removed from it "
             f"({'with' if p.geogrid != 'none' else 'without'} a geogrid)")
         c, r = c[keep], r[keep]
+        if clumps is not None:
+            from cpp_dem.clumps import ClumpCloud
+
+            cl, tpl = clumps
+            clumps = (ClumpCloud(cl.template[keep], cl.positions[keep], cl.orientations[keep],
+                                 cl.scales[keep]), tpl)
     sample = build_box_sample(c, r, lo, hi, young=p.young, poisson=p.poisson,
                               friction_deg=p.prep_friction if not p.packing else p.phi,
                               density=p.density, local_damping=p.damping,
-                              dt_safety=p.dt_safety)
+                              dt_safety=p.dt_safety, clumps=clumps)
     sc, walls = sample.scene, sample.walls
     # Soft grains under high confinement overlap by design (0.07 of the radius at 75 kPa and
     # E = 4.5 MPa, the axial stress reaches 3-4 times the cell pressure): see overlap_limit.
@@ -254,8 +301,10 @@ def prepare(p: Params, log) -> Prepared:
         sc.max_overlap_ratio = 0.95
         log(f"{p.geogrid} geogrid: {len(grid.nodes)} nodes, {len(grid.links)} members, "
             f"R_c = {layer.radius(p) * 1e3:.2f} mm, held until the isotropic stage")
-    n_grains = int(np.count_nonzero(measure.sphere_mask(sc)))
-    log(f"{n_grains} grains, box {np.round(measure.box_size(sc, walls), 4)} m, "
+    n_grains = measure.grain_of_body(sc)[1]
+    what = (f"{n_grains} grains (clumps of {sc.num_bodies} spheres in all)" if sc.num_clumps
+            else f"{n_grains} grains")
+    log(f"{what}, box {np.round(measure.box_size(sc, walls), 4)} m, "
         f"{dem.get_num_threads()} threads, dt {sc.dt:.3g} s")
 
     def progress(s) -> None:
@@ -311,7 +360,7 @@ def prepare(p: Params, log) -> Prepared:
 def inertial_number(sc, p: Params) -> float:
     """Inertial number of the axial loading, I = strain_rate x d_mean x sqrt(rho / p_cell), -
     (d_mean: mean grain diameter, m). Below ~1e-3 the loading is quasi-static."""
-    d_mean = 2.0 * float(np.mean(sc.radii[measure.sphere_mask(sc)]))
+    d_mean = float(np.mean(measure.grain_diameters(sc)))
     return p.strain_rate * d_mean * math.sqrt(p.density / p.cell_pressure)
 
 
@@ -340,6 +389,14 @@ def run(p: Params, out: Path) -> dict:
     save_checkpoint(out / "isotropic.h5", sc, extra={"walls": list(walls)})
     grains = measure.sphere_mask(sc)  # grains only: never the geogrid's nodes
     dem.write_packing_csv(out / "packing_isotropic.csv", sc.positions[grains], sc.radii[grains])
+    if sc.num_clumps:
+        # The clumps themselves: centre of mass (m), orientation of the principal frame
+        # (w, x, y, z) and mass (kg); packing_isotropic.csv holds their member spheres.
+        np.savetxt(out / "clumps_isotropic.csv",
+                   np.column_stack([np.arange(sc.num_clumps), sc.clump_positions,
+                                    sc.clump_orientations, sc.clump_masses]),
+                   delimiter=",", header="clump,x_m,y_m,z_m,qw,qx,qy,qz,mass_kg", comments="",
+                   fmt=["%d"] + ["%.10g"] * 8)
     write_vtk_spheres(out / "vtk" / "spheres_isotropic.vtp", sc)
     size = measure.box_size(sc, walls)
     lo_now = np.array([sc.wall_positions[walls[2 * a]] for a in range(3)])
@@ -388,7 +445,8 @@ def run(p: Params, out: Path) -> dict:
     q_peak = float(rows["deviatoric_stress"][k_peak])
     s_peak = q_peak + p.cell_pressure
     summary = {
-        "num_grains": n_grains, "axial_axis": "z",
+        "num_grains": n_grains, "grains": p.grains, "num_clumps": int(sc.num_clumps),
+        "num_spheres": int(np.count_nonzero(measure.sphere_mask(sc))), "axial_axis": "z",
         "geogrid": p.geogrid, "geogrid_members": int(len(grid.links)) if grid else 0,
         "geogrid_max_axial_force_N": float(np.max(grid.member_axial_forces(sc))) if grid
         else None,
@@ -486,6 +544,10 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     ap.add_argument("--grain-scale", type=_positive("--grain-scale", ap), default=1.0,
                     help="multiply every grain size by this after the PSD is fitted to --n: "
                     "the same box with about n / scale^3 grains (coarse graining), > 0")
+    ap.add_argument("--grains", type=str, default=d.grains,
+                    help="spheres, or clumps:NAME with NAME a shipped grain (gravel_a .. "
+                    "gravel_d; 'gravel' mixes the four) or a clump template CSV (x,y,z,r); the "
+                    "PSD gives equivalent-volume diameters (docs/clumps.md)")
     ap.add_argument("--preset", choices=("fast", "balanced", "accurate"), default="",
                     help="speed-accuracy preset of the axial loading (dt safety, local "
                     "damping, strain rate from an inertial number; overrides --strain-rate, "
@@ -508,6 +570,12 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     p.phi, p.density, p.seed, p.threads = a.phi, a.density, a.seed, a.threads
     p.geogrid, p.clear_layer = a.geogrid, a.clear_layer
     p.grain_scale, p.dt_safety, p.preset = a.grain_scale, a.dt_safety, a.preset
+    if a.grains != "spheres":
+        if not a.grains.startswith("clumps:") or not a.grains[7:]:
+            ap.error(f"--grains={a.grains}: must be 'spheres' or 'clumps:NAME'")
+        if a.packing:
+            ap.error("--grains: clumps are generated; --packing gives spheres")
+    p.grains = a.grains
     if not (0 < p.dt_safety <= 1):
         ap.error(f"--dt-safety={p.dt_safety}: must be in (0, 1]")
     p.prep_friction = a.prep_friction if a.prep_friction is not None else a.phi

@@ -114,8 +114,11 @@ class Scene {
   /// (principal frame -> global). The members become spheres with consecutive ids (the first
   /// is num_bodies() before the call); each carries the clump's mass times its share of the
   /// members' summed volume. Returns the clump's index.
+  /// stiffness_radius (m, >= 0): the radius the members' contacts take for their stiffness
+  /// (ClumpStore::stiffness_radius; 0: each member's own).
   int add_clump(const std::vector<Vec3>& local, const std::vector<Real>& radius, int material,
-                Real mass, const Vec3& inertia, const Vec3& com, const Quat& ori);
+                Real mass, const Vec3& inertia, const Vec3& com, const Quat& ori,
+                Real stiffness_radius = 0);
   int num_clumps() const { return clumps_.size(); }
   bool has_clumps() const { return !clumps_.pos.empty(); }
   /// The clumps' state (members by slot; see clump_members for ids).
@@ -341,6 +344,13 @@ class Scene {
   void place_members(int c);
   void check_clump(int c) const;
   void update_phys(PairContact& c, PairContactCold& cold) const;
+  /// The radius body `slot` takes in the mixing rules: its own, or its clump's stiffness radius.
+  Real stiffness_radius(int slot) const {
+    if (!has_clumps()) return bodies_.radius[slot];
+    const int c = bodies_.clump[slot];
+    return c >= 0 && clumps_.stiffness_radius[c] > 0 ? clumps_.stiffness_radius[c]
+                                                      : bodies_.radius[slot];
+  }
   /// Pair contact k with the full composed law (apply_law) on geometry g; returns the force
   /// on j and the extra moment, as apply_law.
   LawOutput apply_pair_law(size_t k, const ContactGeometry& g, Real dt);

@@ -152,6 +152,7 @@ void Scene::set_radii(const std::vector<Real>& r) {
     const Real f3 = f * f * f;
     clumps_.mass[c] *= f3;
     clumps_.inertia[c] *= f3 * f * f;
+    clumps_.stiffness_radius[c] *= f;
     clumps_.angmom[c] *= f3 * f * f;  // the spin is kept
     for (int e = clumps_.member_off[c]; e < clumps_.member_off[c + 1]; ++e) clumps_.member_local[e] *= f;
     place_members(c);
@@ -179,10 +180,21 @@ void Scene::set_external_torques(const std::vector<Vec3>& t) {
 }
 void Scene::set_body_material(int body, int material) {
   check_body(body);
-  if (const int c = bodies_.clump[slot_of(body)]; c >= 0)
-    throw ParameterError("body=" + std::to_string(body) + ": is a member of clump " +
-                         std::to_string(c) + "; a clump's material is set when it is added");
   this->material(material);
+  if (const int c = bodies_.clump[slot_of(body)]; c >= 0) {
+    // A member keeps its share of the clump's mass: only a material of the same density.
+    const int s = slot_of(body);
+    const Real rho_old = materials_[bodies_.material[s]].density;
+    if (materials_[material].density != rho_old)
+      throw ParameterError("material=" + std::to_string(material) + ": body " +
+                           std::to_string(body) + " is a member of clump " + std::to_string(c) +
+                           ", whose mass is fixed; the new material's density " +
+                           fmt_real(materials_[material].density) + " kg/m^3 must equal " +
+                           fmt_real(rho_old) + " kg/m^3");
+    bodies_.material[s] = material;
+    ++phys_version_;
+    return;
+  }
   body = slot_of(body);
   bodies_.material[body] = material;
   bodies_.mass[body] = sphere_mass(materials_[material].density, bodies_.radius[body]);

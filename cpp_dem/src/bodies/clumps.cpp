@@ -8,7 +8,7 @@ namespace cpp_dem {
 
 int Scene::add_clump(const std::vector<Vec3>& local, const std::vector<Real>& radius,
                      int material, Real mass, const Vec3& inertia, const Vec3& com,
-                     const Quat& ori) {
+                     const Quat& ori, Real stiffness_radius) {
   this->material(material);
   if (local.empty()) throw ParameterError("members: empty; a clump needs at least one sphere");
   if (local.size() != radius.size())
@@ -24,6 +24,8 @@ int Scene::add_clump(const std::vector<Vec3>& local, const std::vector<Real>& ra
     require(std::isfinite(inertia[a]) && inertia[a] > 0, "inertia", inertia[a],
             "principal moments must be > 0 (kg m^2)");
   if (!com.allFinite()) throw ParameterError("com: must be finite (m)");
+  require(std::isfinite(stiffness_radius) && stiffness_radius >= 0, "stiffness_radius",
+          stiffness_radius, "must be >= 0 (m; 0: the members' own radii)");
   const Real qn = ori.norm();
   require(std::isfinite(qn) && std::abs(qn - 1) < 1e-6, "orientation norm", qn,
           "must be a unit quaternion");
@@ -40,6 +42,7 @@ int Scene::add_clump(const std::vector<Vec3>& local, const std::vector<Real>& ra
   clumps_.ext_torque.push_back(Vec3::Zero());
   clumps_.mass.push_back(mass);
   clumps_.inertia.push_back(inertia);
+  clumps_.stiffness_radius.push_back(stiffness_radius);
   clumps_.blocked.push_back(DOF_NONE);
   clumps_.ke.push_back(0);
   clumps_.damp_dissip.push_back(0);

@@ -26,6 +26,10 @@ struct ClumpStore {
   std::vector<Vec3> ext_torque; ///< imposed torque on the clump, N m
   std::vector<Real> mass;       ///< kg
   std::vector<Vec3> inertia;    ///< principal moments, kg m^2
+  /// Radius the members' contacts take for their stiffness (and the mixing rules), m; 0: each
+  /// member's own radius (as Yade and LIGGGHTS). The clump's equivalent radius makes the
+  /// grain as stiff as its equivalent sphere whatever the number of members.
+  std::vector<Real> stiffness_radius;
   std::vector<std::uint8_t> blocked;  ///< Dof mask; a blocked DOF keeps its velocity
   std::vector<int> member_off;        ///< members of c: member_off[c] .. member_off[c + 1]
   // Energy accumulators (written when the scene tracks energy).
@@ -59,7 +63,7 @@ struct ClumpStore {
   template <class Self, class F>
   static void visit(Self& s, F& f) {
     f(s.pos), f(s.vel), f(s.angvel), f(s.angmom), f(s.ori), f(s.force), f(s.torque);
-    f(s.ext_force), f(s.ext_torque), f(s.mass), f(s.inertia), f(s.blocked);
+    f(s.ext_force), f(s.ext_torque), f(s.mass), f(s.inertia), f(s.stiffness_radius), f(s.blocked);
     f(s.member_off), f(s.ke), f(s.damp_dissip), f(s.ext_work), f(s.pos_at_energy_reset);
     f(s.member), f(s.member_local);
   }

@@ -1,0 +1,119 @@
+#!/usr/bin/env python3
+"""Cost per step of clumps against the same spheres free (issue 15: a clump of k members
+costs at most 1.3 x k free spheres per step). Not a test: prints a table and JSON lines.
+
+The packing: --clumps clumps of a three-sphere template whose members do not overlap (so the
+same spheres can also run free without initial overlaps), dropped in a box under gravity and
+settled (local damping 0.3). From that state two scenes are built with the same spheres, the
+same contacts' geometry, the same walls and the same dt: A, the clumps; B, the members as
+free spheres (their contacts with each other inside a clump, absent in A, exist in B). Each
+scene runs --steps steps per block; blocks alternate A | B, B | A, ... for --rounds rounds
+(CPU time of this process), so a drift of the machine's load cancels in the ratio.
+
+    .venv/bin/python bench/clump_cost.py                    # 2000 clumps, 1 thread
+    .venv/bin/python bench/clump_cost.py --clumps 4000 --threads 2
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import statistics
+import time
+
+import numpy as np
+
+import cpp_dem as dem
+from cpp_dem.clumps import ClumpTemplate, clump_cloud
+
+
+def template():
+    r = 0.002
+    return ClumpTemplate.from_spheres([[-1.02 * r, 0, 0], [1.02 * r, 0, 0], [0, 1.8 * r, 0]],
+                                      [r, r, 0.9 * r], name="tri3")
+
+
+def settled(n: int, seed: int):
+    tpl = template()
+    side = (n * 1.2e-7) ** (1 / 3) * 1.6
+    sc = dem.Scene(gravity=(0, 0, -9.81), local_damping=0.3)
+    mat = sc.add_material(dem.linear_material(density=2650, young=5e7, poisson=0.3,
+                                              friction_angle_deg=30))
+    lo, hi = np.zeros(3), np.array([side, side, 3 * side])
+    sc.add_box(lo, hi, material=mat)
+    cloud = clump_cloud(tpl, np.full(n, tpl.equivalent_diameter), lo, hi, seed=seed)
+    cloud.add_to(sc, tpl, material=mat)
+    sc.set_auto_timestep(safety=0.5, period=100)
+    t = 0
+    while t < 40:  # settle to a quiet pile (unbalanced force below 0.05) or 40 rounds
+        sc.run(2000)
+        t += 1
+        u = sc.unbalanced_force()
+        if np.isfinite(u) and u < 0.05 and t > 5:
+            break
+    return sc, (lo, hi), mat
+
+
+def clone(src, free: bool, hi):
+    """A new scene with src's spheres (positions, velocities, spins), as clumps or free."""
+    sc = dem.Scene(gravity=(0, 0, -9.81), local_damping=0.3)
+    mat = sc.add_material(dem.linear_material(density=2650, young=5e7, poisson=0.3,
+                                              friction_angle_deg=30))
+    sc.add_box((0, 0, 0), hi, material=mat)
+    if free:
+        sc.add_spheres(src.positions, src.radii, material=mat)
+        sc.velocities = src.velocities
+        sc.angular_velocities = src.angular_velocities
+    else:
+        tpl = template()
+        # set_clump_state sets the principal frame itself (add_clumps' orientation is the
+        # template frame's): the clumps and their members are where src has them.
+        for c in range(src.num_clumps):
+            sc.add_clumps(tpl, src.clump_positions[c:c + 1], material=mat)
+            sc.set_clump_state(c, src.clump_positions[c], src.clump_orientations[c],
+                               src.clump_velocities[c], src.clump_angular_velocities[c])
+    sc.dt = src.dt
+    return sc
+
+
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--clumps", type=int, default=2000)
+    ap.add_argument("--steps", type=int, default=500)
+    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--threads", type=int, default=1)
+    ap.add_argument("--seed", type=int, default=1)
+    args = ap.parse_args()
+    dem.set_num_threads(args.threads)
+    src, (lo, hi), _ = settled(args.clumps, args.seed)
+    a = clone(src, free=False, hi=hi)
+    b = clone(src, free=True, hi=hi)
+    for sc in (a, b):
+        sc.run(50)  # contacts formed, lists built
+    ta, tb = [], []
+    for k in range(args.rounds):
+        order = (a, b) if k % 2 == 0 else (b, a)
+        for sc in order:
+            t0 = time.process_time()
+            sc.run(args.steps)
+            dt = (time.process_time() - t0) / args.steps
+            (ta if sc is a else tb).append(dt)
+    k_members = a.num_bodies
+    res = {"clumps": a.num_clumps, "spheres": k_members, "threads": args.threads,
+           "steps_per_block": args.steps, "rounds": args.rounds,
+           "clump_us_per_step": 1e6 * statistics.median(ta),
+           "free_us_per_step": 1e6 * statistics.median(tb),
+           "ratio_clumps_over_free": statistics.median(ta) / statistics.median(tb),
+           "ratio_min": min(x / y for x, y in zip(ta, tb)),
+           "ratio_max": max(x / y for x, y in zip(ta, tb)),
+           "contacts_clumps": int(a.num_active_contacts), "contacts_free": int(b.num_active_contacts)}
+    print("| clumps | spheres | threads | clumps us/step | free spheres us/step | ratio (min-max) | contacts clumps / free |")
+    print("|---|---|---|---|---|---|---|")
+    print(f"| {res['clumps']} | {k_members} | {args.threads} | {res['clump_us_per_step']:.1f} | "
+          f"{res['free_us_per_step']:.1f} | {res['ratio_clumps_over_free']:.3f} "
+          f"({res['ratio_min']:.3f}-{res['ratio_max']:.3f}) | {res['contacts_clumps']} / {res['contacts_free']} |")
+    print(json.dumps(res))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())
