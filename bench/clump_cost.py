@@ -4,11 +4,13 @@ costs at most 1.3 x k free spheres per step). Not a test: prints a table and JSO
 
 The packing: --clumps clumps of a three-sphere template whose members do not overlap (so the
 same spheres can also run free without initial overlaps), dropped in a box under gravity and
-settled (local damping 0.3). From that state two scenes are built with the same spheres, the
-same contacts' geometry, the same walls and the same dt: A, the clumps; B, the members as
-free spheres (their contacts with each other inside a clump, absent in A, exist in B). Each
-scene runs --steps steps per block; blocks alternate A | B, B | A, ... for --rounds rounds
-(CPU time of this process), so a drift of the machine's load cancels in the ratio.
+settled (local damping 0.3). From that state every block builds two scenes with the same
+spheres, velocities, walls and dt: A, the clumps; B, the members as free spheres (a settled
+clump pile released as spheres slumps, so B is timed only over --steps steps from the shared
+state, while its contacts are still A's; the pairs of members inside a clump, which A never
+pairs, are B's extra candidates). Each block times --steps steps after --warmup untimed
+ones (CPU time); blocks alternate A | B, B | A, ... for --rounds rounds, so a drift of the
+machine's load cancels in the ratio.
 
     .venv/bin/python bench/clump_cost.py                    # 2000 clumps, 1 thread
     .venv/bin/python bench/clump_cost.py --clumps 4000 --threads 2
@@ -32,7 +34,9 @@ def template():
                                       [r, r, 0.9 * r], name="tri3")
 
 
-def settled(n: int, seed: int):
+def settled(n: int, seed: int, free: bool = False):
+    """The clump pile settled under gravity; with ``free``, the same spheres (the members of
+    the same loose cloud) as free spheres, settled the same way."""
     tpl = template()
     side = (n * 1.2e-7) ** (1 / 3) * 1.6
     sc = dem.Scene(gravity=(0, 0, -9.81), local_damping=0.3)
@@ -42,6 +46,13 @@ def settled(n: int, seed: int):
     sc.add_box(lo, hi, material=mat)
     cloud = clump_cloud(tpl, np.full(n, tpl.equivalent_diameter), lo, hi, seed=seed)
     cloud.add_to(sc, tpl, material=mat)
+    if free:
+        pos, rad = sc.positions, sc.radii
+        sc = dem.Scene(gravity=(0, 0, -9.81), local_damping=0.3)
+        mat = sc.add_material(dem.linear_material(density=2650, young=5e7, poisson=0.3,
+                                                  friction_angle_deg=30))
+        sc.add_box(lo, hi, material=mat)
+        sc.add_spheres(pos, rad, material=mat)
     sc.set_auto_timestep(safety=0.5, period=100)
     t = 0
     while t < 40:  # settle to a quiet pile (unbalanced force below 0.05) or 40 rounds
@@ -78,34 +89,53 @@ def clone(src, free: bool, hi):
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--clumps", type=int, default=2000)
-    ap.add_argument("--steps", type=int, default=500)
-    ap.add_argument("--rounds", type=int, default=5)
+    ap.add_argument("--mode", choices=("settled", "same-state"), default="settled",
+                    help="settled: each pile settled on its own, timed at rest; same-state: "
+                         "both from the clump pile's state, timed over --steps steps")
+    ap.add_argument("--steps", type=int, default=100)
+    ap.add_argument("--warmup", type=int, default=5)
+    ap.add_argument("--rounds", type=int, default=6)
     ap.add_argument("--threads", type=int, default=1)
     ap.add_argument("--seed", type=int, default=1)
     args = ap.parse_args()
     dem.set_num_threads(args.threads)
-    src, (lo, hi), _ = settled(args.clumps, args.seed)
-    a = clone(src, free=False, hi=hi)
-    b = clone(src, free=True, hi=hi)
-    for sc in (a, b):
-        sc.run(50)  # contacts formed, lists built
-    ta, tb = [], []
-    for k in range(args.rounds):
-        order = (a, b) if k % 2 == 0 else (b, a)
-        for sc in order:
-            t0 = time.process_time()
-            sc.run(args.steps)
-            dt = (time.process_time() - t0) / args.steps
-            (ta if sc is a else tb).append(dt)
+    if args.mode == "settled":
+        # Each pile settled on its own (the clumps' and the same spheres' free), then timed
+        # where it rests, at the same fixed dt (the smaller of the two auto steps).
+        a, _, _ = settled(args.clumps, args.seed)
+        b, _, _ = settled(args.clumps, args.seed, free=True)
+        a.set_auto_timestep(safety=0.5, period=0)
+        b.set_auto_timestep(safety=0.5, period=0)
+        a.dt = b.dt = min(a.dt, b.dt)
+        ta, tb, ca, cb = [], [], [], []
+        for k in range(args.rounds):
+            for sc in ((a, b) if k % 2 == 0 else (b, a)):
+                t0 = time.process_time()
+                sc.run(args.steps)
+                (ta if sc is a else tb).append((time.process_time() - t0) / args.steps)
+                (ca if sc is a else cb).append(sc.num_active_contacts)
+    else:
+        src, (lo, hi), _ = settled(args.clumps, args.seed)
+        ta, tb, ca, cb = [], [], [], []
+        for k in range(args.rounds):
+            for free in ((False, True) if k % 2 == 0 else (True, False)):
+                sc = clone(src, free=free, hi=hi)
+                sc.run(args.warmup)  # contacts formed, lists built
+                t0 = time.process_time()
+                sc.run(args.steps)
+                (tb if free else ta).append((time.process_time() - t0) / args.steps)
+                (cb if free else ca).append(sc.num_active_contacts)
+                if not free:
+                    a = sc
     k_members = a.num_bodies
-    res = {"clumps": a.num_clumps, "spheres": k_members, "threads": args.threads,
+    res = {"mode": args.mode, "clumps": a.num_clumps, "spheres": k_members, "threads": args.threads,
            "steps_per_block": args.steps, "rounds": args.rounds,
            "clump_us_per_step": 1e6 * statistics.median(ta),
            "free_us_per_step": 1e6 * statistics.median(tb),
            "ratio_clumps_over_free": statistics.median(ta) / statistics.median(tb),
            "ratio_min": min(x / y for x, y in zip(ta, tb)),
            "ratio_max": max(x / y for x, y in zip(ta, tb)),
-           "contacts_clumps": int(a.num_active_contacts), "contacts_free": int(b.num_active_contacts)}
+           "contacts_clumps": int(np.median(ca)), "contacts_free": int(np.median(cb))}
     print("| clumps | spheres | threads | clumps us/step | free spheres us/step | ratio (min-max) | contacts clumps / free |")
     print("|---|---|---|---|---|---|---|")
     print(f"| {res['clumps']} | {k_members} | {args.threads} | {res['clump_us_per_step']:.1f} | "

@@ -36,6 +36,7 @@ int Scene::add_clump(const std::vector<Vec3>& local, const std::vector<Real>& ra
   clumps_.angvel.push_back(Vec3::Zero());
   clumps_.angmom.push_back(Vec3::Zero());
   clumps_.ori.push_back(ori.normalized());
+  clumps_.rot.push_back(clumps_.ori.back().toRotationMatrix());
   clumps_.force.push_back(Vec3::Zero());
   clumps_.torque.push_back(Vec3::Zero());
   clumps_.ext_force.push_back(Vec3::Zero());
@@ -85,6 +86,7 @@ std::vector<int> Scene::clump_members(int c) const {
 
 void Scene::place_members(int c) {
   const Mat3 rot = clumps_.ori[c].toRotationMatrix();
+  clumps_.rot[c] = rot;
   const Vec3& x = clumps_.pos[c];
   const Vec3& v = clumps_.vel[c];
   const Vec3& w = clumps_.angvel[c];

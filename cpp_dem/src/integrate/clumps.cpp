@@ -39,6 +39,27 @@ inline Quat quat_rate(const Quat& q, const Vec3& wb) {
 /// leave the product's rounding error as a spurious force).
 [[gnu::noinline]] Vec3 weight(Real m, const Vec3& g) { return m * g; }
 
+}  // namespace
+
+/// place_members with the rotation matrix of the clump's new orientation (cached for the next
+/// step), inlined in the pass.
+static inline void place_clump_members(ClumpStore& cs, BodyStore& bs, int c) {
+  const Mat3 rot = cs.ori[c].toRotationMatrix();
+  cs.rot[c] = rot;
+  const Vec3 x = cs.pos[c], v = cs.vel[c], w = cs.angvel[c];
+  const Quat q = cs.ori[c];
+  for (int e = cs.member_off[c]; e < cs.member_off[c + 1]; ++e) {
+    const int s = cs.member[e];
+    const Vec3 r = rot * cs.member_local[e];
+    bs.pos[s] = x + r;
+    bs.vel[s] = v + w.cross(r);
+    bs.angvel[s] = w;
+    bs.ori[s] = q;
+  }
+}
+
+namespace {
+
 inline Quat quat_axpy(const Quat& q, Real h, const Quat& d) {
   return Quat(q.w() + h * d.w(), q.x() + h * d.x(), q.y() + h * d.y(), q.z() + h * d.z());
 }
@@ -59,7 +80,7 @@ void Scene::integrate_clumps_hot(long& err_clump) {
     if (nc > kParallelMin)
   for (int c = 0; c < nc; ++c) {
     const int e0 = clumps_.member_off[c], e1 = clumps_.member_off[c + 1];
-    const Mat3 rot_old = clumps_.ori[c].toRotationMatrix();
+    const Mat3 rot_old = clumps_.rot[c];  // of ori[c], kept by place_members
     // Resultants about the centre of mass, in member order. The members' forces include the
     // weights of their mass shares, which sum to the clump's weight; the weight acts at the
     // centre of mass, so a member's lever arm takes its force without its weight (exactly
@@ -155,29 +176,29 @@ void Scene::integrate_clumps_hot(long& err_clump) {
       Quat q_half = quat_axpy(q, 0.5 * dt, quat_rate(q, wb_now));
       L += dt * tq;
       Vec3 wb_half;
+      Mat3 rot_half;
       if (!yade_rotation) {
         // Fincham: the half-step spin in the half step's frame.
         q_half.normalize();
-        wb_half = (q_half.toRotationMatrix().transpose() * L).cwiseQuotient(inertia);
+        rot_half = q_half.toRotationMatrix();
+        wb_half = (rot_half.transpose() * L).cwiseQuotient(inertia);
       } else {
         // Yade (2023): in the start-of-step frame, q_half not normalised.
         wb_half = (rot_old.transpose() * L).cwiseQuotient(inertia);
       }
       Quat q_new = quat_axpy(q, dt, quat_rate(q_half, wb_half));
-      Mat3 rot_new;
       if (!yade_rotation) {
         q_new.normalize();
-        rot_new = q_new.toRotationMatrix();
         // The spin at the half step, in the half step's frame (the new frame would tilt it
         // by w dt / 2: an error of first order in the energy).
-        w = q_half.toRotationMatrix() * wb_half;
+        w = rot_half * wb_half;
       } else {
         w = q_new * wb_half;  // the end-of-step frame, before normalising (as Yade)
         q_new.normalize();
-        rot_new = q_new.toRotationMatrix();
       }
       clumps_.ori[c] = q_new;
       if (dofs & DOF_ROT) {
+        const Mat3 rot_new = q_new.toRotationMatrix();
         // Blocked rotations about global axes keep their spin; L follows the spin.
         for (int a = 0; a < 3; ++a)
           if (dofs & (DOF_RX << a)) w[a] = w_old[a];
@@ -202,7 +223,7 @@ void Scene::integrate_clumps_hot(long& err_clump) {
       err = std::min(err, static_cast<long>(c));
       continue;
     }
-    place_members(c);
+    place_clump_members(clumps_, bodies_, c);
     for (int e = e0; e < e1; ++e) {
       const int s = clumps_.member[e];
       worst = std::max(worst, (bodies_.pos[s] - pos_at_build_[s]).norm() +

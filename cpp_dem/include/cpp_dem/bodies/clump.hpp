@@ -20,6 +20,7 @@ struct ClumpStore {
   std::vector<Vec3> angvel;     ///< spin at the last half step (global frame), rad/s
   std::vector<Vec3> angmom;     ///< angular momentum at the last half step (global), kg m^2/s
   std::vector<Quat> ori;        ///< orientation: principal frame -> global
+  std::vector<Mat3> rot;        ///< rotation matrix of ori (kept with it; the pass reads it)
   std::vector<Vec3> force;      ///< resultant force of the last step (members + gravity), N
   std::vector<Vec3> torque;     ///< resultant torque about the centre of mass, N m
   std::vector<Vec3> ext_force;  ///< imposed force on the clump, N
@@ -62,7 +63,7 @@ struct ClumpStore {
  private:
   template <class Self, class F>
   static void visit(Self& s, F& f) {
-    f(s.pos), f(s.vel), f(s.angvel), f(s.angmom), f(s.ori), f(s.force), f(s.torque);
+    f(s.pos), f(s.vel), f(s.angvel), f(s.angmom), f(s.ori), f(s.rot), f(s.force), f(s.torque);
     f(s.ext_force), f(s.ext_torque), f(s.mass), f(s.inertia), f(s.stiffness_radius), f(s.blocked);
     f(s.member_off), f(s.ke), f(s.damp_dissip), f(s.ext_work), f(s.pos_at_energy_reset);
     f(s.member), f(s.member_local);
