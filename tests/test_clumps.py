@@ -377,3 +377,57 @@ def test_grain_stiffness_takes_the_equivalent_radius():
     assert np.allclose(ov["grain"] / ov["member"], 0.0025 / r_eq, rtol=1e-6)
     with pytest.raises(dem.ParameterError, match="stiffness"):
         dem.Scene().add_clumps(t, [[0, 0, 0]], material=0, stiffness="pebble")
+
+
+def test_clump_rests_on_a_geogrid_of_cylinders():
+    # A clump dropped on a held square geogrid comes to rest on its cylinders: the grid
+    # contacts of its members carry its weight (within 1 %), none of its members falls through.
+    from cpp_dem import geogrid
+
+    s = dem.Scene(gravity=(0, 0, -9.81), local_damping=0.5)
+    mat = material(s)
+    gmat = s.add_material(dem.linear_material(density=1000, young=1e8, poisson=0.3,
+                                              friction_angle_deg=20))
+    g = geogrid.square_grid(s, origin=(0, 0, 0), length=0.04, width=0.04, nodes_x=5, nodes_y=5,
+                            params=dem.BeamParams(young=1e8, poisson=0.3, radius=0.001),
+                            material=gmat, density=1000)
+    s.block_dofs(g.nodes, "all")
+    t = ClumpTemplate.from_spheres([[-0.006, 0, 0], [0.006, 0, 0], [0, 0.007, 0]],
+                                   [0.004, 0.004, 0.0035])
+    s.add_clumps(t, [[0.02, 0.02, 0.012]], random_orientations(1, 2), material=mat)
+    s.set_auto_timestep(safety=0.5, period=100)
+    s.run(40000)
+    gc = s.grid_contacts()
+    assert len(gc["sphere"]) >= 2
+    members = set(s.clump_members(0))
+    assert set(gc["sphere"]) <= members
+    weight = s.clump_masses[0] * 9.81
+    assert abs(gc["force"][:, 2].sum() / weight - 1) < 0.01
+    assert np.linalg.norm(s.clump_velocities[0]) < 1e-3
+    assert s.clump_positions[0][2] > 0  # resting on the grid (a member may hang through an
+    # aperture: interlocking)
+
+
+def test_refd_densifies_a_clump_sample():
+    # REFD (000 §2.3) on clumps: expansion about the centres of mass, friction lowered step by
+    # step on the members (a material of the same density), restored at the end.
+    from cpp_dem import prep
+
+    s = dem.Scene(local_damping=0.3)
+    mat = material(s)
+    wmat = s.add_material(dem.linear_material(density=RHO, young=1e7, poisson=0.3,
+                                              friction_angle_deg=0))
+    walls = s.add_box((0, 0, 0), (0.05, 0.05, 0.05), material=wmat)
+    from cpp_dem.clumps import clump_cloud
+
+    t = _asymmetric()
+    cloud = clump_cloud(t, np.full(60, 0.35 * t.equivalent_diameter), (0, 0, 0),
+                        (0.05, 0.05, 0.05), seed=3)
+    cloud.add_to(s, t, material=mat, stiffness="grain")
+    s.set_auto_timestep(safety=0.5, period=100)
+    r = prep.refd(s, walls, mat, stress=2e4, porosity=0.49, max_steps_per_stage=60000)
+    from cpp_dem import measure
+
+    assert r.porosity <= 0.49 < r.stages[0][2].porosity  # densified by the friction steps
+    assert abs(measure.axis_stresses(s, walls).mean() / 2e4 - 1) < 0.02
+    assert all(m == mat for m in np.asarray(s.material_ids))  # friction restored
