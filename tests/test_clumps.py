@@ -431,3 +431,25 @@ def test_refd_densifies_a_clump_sample():
     assert r.porosity <= 0.49 < r.stages[0][2].porosity  # densified by the friction steps
     assert abs(measure.axis_stresses(s, walls).mean() / 2e4 - 1) < 0.02
     assert all(m == mat for m in np.asarray(s.material_ids))  # friction restored
+
+
+def test_layered_clump_cloud_keeps_the_geogrid_plane_clear():
+    from cpp_dem import pullout
+
+    t = _asymmetric()
+    d = np.linspace(0.5, 0.7, 80) * t.equivalent_diameter
+    cl = pullout.layered_clump_cloud([t, t.scaled(0.8)], d, (0, 0, 0), (0.2, 0.1, 0.1),
+                                     grid_z=0.05, clearance=0.0015, seed=2)
+    assert len(cl) == 80
+    tpl = [t, t.scaled(0.8)]
+    rb = cl.scales * np.array([tpl[k].bounding_radius for k in cl.template])
+    gap = np.abs(cl.positions[:, 2] - 0.05) - rb
+    assert gap.min() >= 0.0015 - 1e-12  # no bounding sphere reaches into the grid's slab
+    below = cl.positions[:, 2] < 0.05
+    assert 25 < below.sum() < 55  # dealt by volume between the two (equal) layers
+    s = dem.Scene()
+    mat = material(s)
+    cl.add_to(s, tpl, material=mat, stiffness="grain")
+    eq = np.asarray([tpl[k].equivalent_diameter for k in cl.template]) * cl.scales
+    assert np.allclose(np.sort(eq), np.sort(d), rtol=1e-12)
+    assert np.allclose(np.sort(s.clump_stiffness_radii), np.sort(0.5 * eq), rtol=1e-12)

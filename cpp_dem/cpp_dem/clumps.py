@@ -308,3 +308,35 @@ def clump_cloud(templates, diameters, lo, hi, *, seed: int = 0, max_tries: int =
     order = np.argsort(rb_key)
     idx = order[np.searchsorted(rb_key[order], rr)]
     return ClumpCloud(which[idx], pos, random_orientations(len(d), seed + 1), scale[idx])
+
+
+def templates_from_spec(spec: str) -> list:
+    """The clump templates a case's ``--grains clumps:NAME`` names: a shipped grain
+    (cpp_dem.clump_mesh.shipped_templates: gravel_a .. gravel_d), ``gravel`` for all of them,
+    or a template CSV (x, y, z, r in m; ClumpTemplate.load). Raises ParameterError naming the
+    value and what is allowed."""
+    import os
+
+    from .clump_mesh import shipped_template, shipped_templates
+
+    name = spec.split(":", 1)[1] if spec.startswith("clumps:") else ""
+    if not name:
+        raise ParameterError(f"grains={spec!r}: must be 'spheres' or 'clumps:NAME' (NAME: a "
+                             f"shipped grain {sorted(shipped_templates())}, 'gravel', or a "
+                             "template CSV)")
+    if name == "gravel":
+        return list(shipped_templates().values())
+    if os.path.isfile(name):
+        return [ClumpTemplate.load(name)]
+    try:
+        return [shipped_template(name)]
+    except ParameterError as e:
+        raise ParameterError(f"grains={spec!r}: {e} (or 'gravel' for all of them, or a "
+                             "template CSV x,y,z,r)") from None
+
+
+def bounding_volume_factor(templates) -> float:
+    """Mean (bounding radius / equivalent radius)^3 of the templates: how much more room a
+    clump's bounding sphere takes than its volume, for sizing loose clouds."""
+    return float(np.mean([(t.bounding_radius / (0.5 * t.equivalent_diameter)) ** 3
+                          for t in _templates(templates)]))

@@ -116,6 +116,15 @@ def layered_cloud(radii, lo, hi, *, grid_z: float, clearance: float, seed: int =
         raise ParameterError(f"grid_z={grid_z}: the geogrid plane with clearance {clearance} m "
                              f"must lie inside the box z range ({lo[2]}, {hi[2]})")
     r = np.sort(np.asarray(radii, float).reshape(-1))[::-1]
+    to_low = _deal_layers(r, lo, hi, grid_z, clearance)
+    c1, r1 = loose_cloud(r[to_low], lo, [hi[0], hi[1], grid_z - clearance], seed=seed)
+    c2, r2 = loose_cloud(r[~to_low], [lo[0], lo[1], grid_z + clearance], hi, seed=seed + 1)
+    return np.vstack([c1, c2]), np.concatenate([r1, r2])
+
+
+def _deal_layers(r, lo, hi, grid_z: float, clearance: float) -> np.ndarray:
+    """Which of the sizes r (sorted, largest first) go below the geogrid: dealt so that both
+    layers get volumes in proportion to their heights (deterministic)."""
     h_lo = grid_z - clearance - lo[2]
     h_hi = hi[2] - grid_z - clearance
     share = h_lo / (h_lo + h_hi)
@@ -128,15 +137,35 @@ def layered_cloud(radii, lo, hi, *, grid_z: float, clearance: float, seed: int =
             acc_lo += v
         else:
             acc_hi += v
-    c1, r1 = loose_cloud(r[to_low], lo, [hi[0], hi[1], grid_z - clearance], seed=seed)
-    c2, r2 = loose_cloud(r[~to_low], [lo[0], lo[1], grid_z + clearance], hi, seed=seed + 1)
-    return np.vstack([c1, c2]), np.concatenate([r1, r2])
+    return to_low
+
+
+def layered_clump_cloud(templates, diameters, lo, hi, *, grid_z: float, clearance: float,
+                        seed: int = 0):
+    """:func:`layered_cloud` for clumps: equivalent-volume diameters (m) dealt to the two
+    layers the same way, each layer a :func:`cpp_dem.clumps.clump_cloud` (bounding spheres
+    clear of the geogrid plane by ``clearance``). Returns one ClumpCloud."""
+    from .clumps import ClumpCloud, clump_cloud
+
+    lo = np.asarray(lo, float)
+    hi = np.asarray(hi, float)
+    if not (lo[2] < grid_z - clearance and grid_z + clearance < hi[2]):
+        raise ParameterError(f"grid_z={grid_z}: the geogrid plane with clearance {clearance} m "
+                             f"must lie inside the box z range ({lo[2]}, {hi[2]})")
+    d = np.sort(np.asarray(diameters, float).reshape(-1))[::-1]
+    to_low = _deal_layers(0.5 * d, lo, hi, grid_z, clearance)
+    a = clump_cloud(templates, d[to_low], lo, [hi[0], hi[1], grid_z - clearance], seed=seed)
+    b = clump_cloud(templates, d[~to_low], [lo[0], lo[1], grid_z + clearance], hi, seed=seed + 1)
+    return ClumpCloud(np.concatenate([a.template, b.template]),
+                      np.vstack([a.positions, b.positions]),
+                      np.vstack([a.orientations, b.orientations]),
+                      np.concatenate([a.scales, b.scales]))
 
 
 def build_sample(centers, radii, lo, hi, *, grain: Material, grid_builder: Callable,
                  grid_z: float, clamp_depth: float = 0.0, clamp: str = "front",
                  local_damping: float = 0.2, dt_safety: float = 0.5,
-                 max_overlap_ratio: float = 0.5) -> PulloutSample:
+                 max_overlap_ratio: float = 0.5, clumps=None) -> PulloutSample:
     """The pull-out scene: grains of material ``grain`` at ``centers``/``radii`` (m) in the box
     [lo, hi] (m) of frictionless walls, and the geogrid made by ``grid_builder(scene)`` (which
     adds it and returns a :class:`Geogrid`, laid in the plane z = ``grid_z``, m).
@@ -144,6 +173,9 @@ def build_sample(centers, radii, lo, hi, *, grain: Material, grid_builder: Calla
     clamp: ``"front"`` holds the nodes within ``clamp_depth`` (m) of the grid's front edge
     (x = min), as a clamp gripping the front rib (000); ``"all"`` holds every node: the grid is
     pulled as a rigid body (001 App. A blocks all nodes and gives them the pull velocity).
+
+    clumps: (ClumpCloud, templates) to add clumps instead of the spheres (their members take
+    the grain's equivalent radius for their contact stiffness; see Scene.add_clumps).
     """
     if clamp not in ("front", "all"):
         raise ParameterError(f"clamp={clamp!r}: must be 'front' or 'all'")
@@ -155,7 +187,11 @@ def build_sample(centers, radii, lo, hi, *, grain: Material, grid_builder: Calla
                                         young=grain.young, poisson=grain.poisson,
                                         friction_angle_deg=0.0))
     walls = sc.add_box(lo, hi, material=wall_mat)
-    sc.add_spheres(centers, radii, material=gmat)
+    if clumps is not None:
+        cloud, templates = clumps
+        cloud.add_to(sc, templates, material=gmat, stiffness="grain")
+    else:
+        sc.add_spheres(centers, radii, material=gmat)
     grid = grid_builder(sc)
     if not isinstance(grid, Geogrid):
         raise ParameterError("grid_builder: must add a geogrid to the scene and return it")
@@ -233,11 +269,18 @@ def auto_node_density_scale(sample: PulloutSample, *, target_ratio: float = 0.25
     if not (0 < target_ratio <= 1):
         raise ParameterError(f"target_ratio={target_ratio}: must be in (0, 1]")
     mask = np.asarray(sc._blocked).copy()
-    sc.block_dofs(sample.grain_ids, "all")
+    cmask = np.asarray(sc._clump_blocked).copy() if sc.num_clumps else []
+    free = sample.grain_ids
+    if sc.num_clumps:
+        free = free[np.asarray(sc.clump_ids)[free] < 0]
+        sc.block_clump_dofs(np.arange(sc.num_clumps), "all")
+    sc.block_dofs(free, "all")
     sc.block_dofs(sample.grid.nodes, "")
     dt_grid = sc.critical_dt()
-    for b in sample.grain_ids:
+    for b in free:
         sc._set_blocked(int(b), int(mask[b]))
+    for c, m in enumerate(cmask):
+        sc._set_clump_blocked(c, int(m))
     sc.block_dofs(sample.grid.nodes, "all")
     dt_grains = sc.critical_dt()
     for b in sample.grid.nodes:

@@ -95,21 +95,12 @@ def smoke_box(p: Params) -> tuple:
 
 def grain_templates(spec: str) -> list:
     """The clump templates of a --grains value 'clumps:NAME' (see Params.grains)."""
-    from cpp_dem.clump_mesh import shipped_template, shipped_templates
-    from cpp_dem.clumps import ClumpTemplate
+    from cpp_dem.clumps import templates_from_spec
 
-    name = spec.split(":", 1)[1] if spec.startswith("clumps:") else ""
-    if not name:
-        raise SystemExit(f"error: --grains={spec}: must be 'spheres' or 'clumps:NAME'")
-    if name == "gravel":
-        return list(shipped_templates().values())
-    if Path(name).is_file():
-        return [ClumpTemplate.load(name)]
     try:
-        return [shipped_template(name)]
+        return templates_from_spec(spec)
     except dem.ParameterError as e:
-        raise SystemExit(f"error: --grains={spec}: {e} (or 'gravel' for all of them, or a "
-                         "template CSV x,y,z,r)")
+        raise SystemExit(f"error: --{e}")
 
 
 def make_sample(p: Params, log) -> tuple:
@@ -159,8 +150,9 @@ def make_sample(p: Params, log) -> tuple:
         from cpp_dem.clumps import clump_cloud
 
         templates = grain_templates(p.grains)
-        k = float(np.mean([(t.bounding_radius / (0.5 * t.equivalent_diameter)) ** 3
-                           for t in templates]))
+        from cpp_dem.clumps import bounding_volume_factor
+
+        k = bounding_volume_factor(templates)
         shrink = (p.cloud_fraction / (p.solid_fraction * k)) ** (1.0 / 3.0)
         cloud = clump_cloud(templates, 2.0 * radii * shrink, (0, 0, 0), box, seed=p.seed)
         rb = cloud.scales * np.array([templates[t].bounding_radius for t in cloud.template])
