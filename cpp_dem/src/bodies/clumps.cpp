@@ -84,21 +84,7 @@ std::vector<int> Scene::clump_members(int c) const {
   return ids;
 }
 
-void Scene::place_members(int c) {
-  const Mat3 rot = clumps_.ori[c].toRotationMatrix();
-  clumps_.rot[c] = rot;
-  const Vec3& x = clumps_.pos[c];
-  const Vec3& v = clumps_.vel[c];
-  const Vec3& w = clumps_.angvel[c];
-  for (int e = clumps_.member_off[c]; e < clumps_.member_off[c + 1]; ++e) {
-    const int s = clumps_.member[e];
-    const Vec3 r = rot * clumps_.member_local[e];
-    bodies_.pos[s] = x + r;
-    bodies_.vel[s] = v + w.cross(r);
-    bodies_.angvel[s] = w;
-    bodies_.ori[s] = clumps_.ori[c];
-  }
-}
+void Scene::place_members(int c) { cpp_dem::place_members(clumps_, bodies_, c); }
 
 void Scene::set_clump_state(int c, const Vec3& pos, const Quat& ori, const Vec3& vel,
                             const Vec3& angvel) {

@@ -41,23 +41,6 @@ inline Quat quat_rate(const Quat& q, const Vec3& wb) {
 
 }  // namespace
 
-/// place_members with the rotation matrix of the clump's new orientation (cached for the next
-/// step), inlined in the pass.
-static inline void place_clump_members(ClumpStore& cs, BodyStore& bs, int c) {
-  const Mat3 rot = cs.ori[c].toRotationMatrix();
-  cs.rot[c] = rot;
-  const Vec3 x = cs.pos[c], v = cs.vel[c], w = cs.angvel[c];
-  const Quat q = cs.ori[c];
-  for (int e = cs.member_off[c]; e < cs.member_off[c + 1]; ++e) {
-    const int s = cs.member[e];
-    const Vec3 r = rot * cs.member_local[e];
-    bs.pos[s] = x + r;
-    bs.vel[s] = v + w.cross(r);
-    bs.angvel[s] = w;
-    bs.ori[s] = q;
-  }
-}
-
 namespace {
 
 inline Quat quat_axpy(const Quat& q, Real h, const Quat& d) {
@@ -114,22 +97,11 @@ void Scene::integrate_clumps_hot(long& err_clump) {
     // Translation: the spheres' leapfrog.
     const Real inv_m = 1.0 / m;
     const Vec3 v_old = clumps_.vel[c];
-    Vec3 v = v_old;
     Real dissip = 0, work = 0;
-    for (int a = 0; a < 3; ++a) {
-      if (dofs & (DOF_X << a)) {
-        work += -f[a] * v_old[a] * dt;  // the constraint's work
-        continue;
-      }
-      Real acc = f[a] * inv_m;
-      if (lambda > 0) {
-        const Real damped = damp_component(acc, v_old[a], dt, lambda);
-        if (energy) dissip += -(damped - acc) * m * (v_old[a] + 0.5 * dt * damped) * dt;
-        acc = damped;
-      }
-      v[a] = v_old[a] + acc * dt;
-      if (energy) work += fe[a] * 0.5 * (v_old[a] + v[a]) * dt;
-    }
+    const Vec3 v = energy ? leapfrog_velocity<true>(f, fe, m, inv_m, dofs, DOF_X, v_old, dt, lambda,
+                                                    dissip, work)
+                          : leapfrog_velocity<false>(f, fe, m, inv_m, dofs, DOF_X, v_old, dt,
+                                                     lambda, dissip, work);
     clumps_.vel[c] = v;
     clumps_.pos[c] += v * dt;
     // Rotation.
@@ -138,20 +110,10 @@ void Scene::integrate_clumps_hot(long& err_clump) {
     Real ke_rot = 0;
     if (inertia[0] == inertia[1] && inertia[1] == inertia[2]) {
       const Real inv_i = 1.0 / inertia[0];
-      for (int a = 0; a < 3; ++a) {
-        if (dofs & (DOF_RX << a)) {
-          work += -t[a] * w_old[a] * dt;
-          continue;
-        }
-        Real acc = t[a] * inv_i;
-        if (lambda > 0) {
-          const Real damped = damp_component(acc, w_old[a], dt, lambda);
-          if (energy) dissip += -(damped - acc) * inertia[0] * (w_old[a] + 0.5 * dt * damped) * dt;
-          acc = damped;
-        }
-        w[a] = w_old[a] + acc * dt;
-        if (energy) work += te[a] * 0.5 * (w_old[a] + w[a]) * dt;
-      }
+      w = energy ? leapfrog_velocity<true>(t, te, inertia[0], inv_i, dofs, DOF_RX, w_old, dt,
+                                           lambda, dissip, work)
+                 : leapfrog_velocity<false>(t, te, inertia[0], inv_i, dofs, DOF_RX, w_old, dt,
+                                            lambda, dissip, work);
       clumps_.angvel[c] = w;
       clumps_.angmom[c] = inertia[0] * w;
       // (The integration pass turns a block of spheres in a vectorised form whose last bits
@@ -223,7 +185,7 @@ void Scene::integrate_clumps_hot(long& err_clump) {
       err = std::min(err, static_cast<long>(c));
       continue;
     }
-    place_clump_members(clumps_, bodies_, c);
+    cpp_dem::place_members(clumps_, bodies_, c);
     for (int e = e0; e < e1; ++e) {
       const int s = clumps_.member[e];
       worst = std::max(worst, (bodies_.pos[s] - pos_at_build_[s]).norm() +

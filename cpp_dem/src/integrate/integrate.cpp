@@ -232,37 +232,12 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
       const Vec3 v_old = bodies_.vel[b], w_old = bodies_.angvel[b];
       const Real m = bodies_.mass[b], inertia = bodies_.inertia[b];
       const Real inv_m = 1.0 / m, inv_i = 1.0 / inertia;
-      Vec3 v = v_old, w = w_old;
       Real dissip = 0, work = 0;
-      for (int a = 0; a < 3; ++a) {
-        if (dofs & (DOF_X << a)) {
-          // Imposed velocity: the constraint supplies -f[a]; its work is -f[a] v dt.
-          work += -f[a] * v_old[a] * dt;
-          continue;
-        }
-        Real acc = f[a] * inv_m;
-        if (lambda > 0) {
-          const Real damped = damp_component(acc, v_old[a], dt, lambda);
-          dissip += -(damped - acc) * m * (v_old[a] + 0.5 * dt * damped) * dt;
-          acc = damped;
-        }
-        v[a] = v_old[a] + acc * dt;
-        work += bodies_.ext_force[b][a] * 0.5 * (v_old[a] + v[a]) * dt;
-      }
-      for (int a = 0; a < 3; ++a) {
-        if (dofs & (DOF_RX << a)) {
-          work += -t[a] * w_old[a] * dt;
-          continue;
-        }
-        Real acc = t[a] * inv_i;
-        if (lambda > 0) {
-          const Real damped = damp_component(acc, w_old[a], dt, lambda);
-          dissip += -(damped - acc) * inertia * (w_old[a] + 0.5 * dt * damped) * dt;
-          acc = damped;
-        }
-        w[a] = w_old[a] + acc * dt;
-        work += bodies_.ext_torque[b][a] * 0.5 * (w_old[a] + w[a]) * dt;
-      }
+      // (Imposed velocity: the constraint supplies -f[a]; its work is -f[a] v dt.)
+      const Vec3 v = leapfrog_velocity<true>(f, bodies_.ext_force[b], m, inv_m, dofs, DOF_X, v_old,
+                                             dt, lambda, dissip, work);
+      const Vec3 w = leapfrog_velocity<true>(t, bodies_.ext_torque[b], inertia, inv_i, dofs, DOF_RX,
+                                             w_old, dt, lambda, dissip, work);
       const Vec3 vm = 0.5 * (v_old + v);
       const Vec3 wm = 0.5 * (w_old + w);
       bodies_.ke[b] = 0.5 * m * vm.squaredNorm() + 0.5 * inertia * wm.squaredNorm();

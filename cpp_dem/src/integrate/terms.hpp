@@ -90,5 +90,33 @@ inline void rotate_orientations(Real* __restrict q, const Real* __restrict w, lo
   }
 }
 
+/// The leapfrog velocity update of the three components of v_old (m/s or rad/s) under the
+/// force or torque f (N or N m) on a mass or moment m (inv_m = 1 / m), with Cundall local
+/// damping lambda; components whose bit (first_dof << a) is in `dofs` are blocked (they keep
+/// their velocity, and the constraint's work -f v dt is booked). With kEnergy, the damping's
+/// dissipation and the work of the imposed part `ext` of f are booked too (J). The one form
+/// of the update for the energy pass and the clump pass.
+template <bool kEnergy>
+__attribute__((always_inline)) inline Vec3 leapfrog_velocity(
+    const Vec3& f, const Vec3& ext, Real m, Real inv_m, std::uint8_t dofs, int first_dof,
+    const Vec3& v_old, Real dt, Real lambda, Real& dissip, Real& work) {
+  Vec3 v = v_old;
+  for (int a = 0; a < 3; ++a) {
+    if (dofs & (first_dof << a)) {
+      work += -f[a] * v_old[a] * dt;
+      continue;
+    }
+    Real acc = f[a] * inv_m;
+    if (lambda > 0) {
+      const Real damped = damp_component(acc, v_old[a], dt, lambda);
+      if (kEnergy) dissip += -(damped - acc) * m * (v_old[a] + 0.5 * dt * damped) * dt;
+      acc = damped;
+    }
+    v[a] = v_old[a] + acc * dt;
+    if (kEnergy) work += ext[a] * 0.5 * (v_old[a] + v[a]) * dt;
+  }
+  return v;
+}
+
 }  // namespace integrate_terms
 }  // namespace cpp_dem

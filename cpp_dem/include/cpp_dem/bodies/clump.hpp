@@ -9,6 +9,7 @@
 #include <cstdint>
 #include <vector>
 
+#include "cpp_dem/bodies/body_store.hpp"
 #include "cpp_dem/core/types.hpp"
 
 namespace cpp_dem {
@@ -69,5 +70,22 @@ struct ClumpStore {
     f(s.member), f(s.member_local);
   }
 };
+
+/// Puts clump c's members at its pose: positions, velocities (v + w x r), spins and
+/// orientations; keeps the rotation matrix of its orientation (cs.rot) for the next step.
+inline void place_members(ClumpStore& cs, BodyStore& bs, int c) {
+  const Mat3 rot = cs.ori[c].toRotationMatrix();
+  cs.rot[c] = rot;
+  const Vec3 x = cs.pos[c], v = cs.vel[c], w = cs.angvel[c];
+  const Quat q = cs.ori[c];
+  for (int e = cs.member_off[c]; e < cs.member_off[c + 1]; ++e) {
+    const int s = cs.member[e];
+    const Vec3 r = rot * cs.member_local[e];
+    bs.pos[s] = x + r;
+    bs.vel[s] = v + w.cross(r);
+    bs.angvel[s] = w;
+    bs.ori[s] = q;
+  }
+}
 
 }  // namespace cpp_dem
