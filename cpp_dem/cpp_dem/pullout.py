@@ -110,16 +110,22 @@ def layered_cloud(radii, lo, hi, *, grid_z: float, clearance: float, seed: int =
     ``grid_z - clearance`` and above ``grid_z + clearance`` (m), so that no sphere touches the
     geogrid plane. Radii are dealt to the layers alternately from the largest down, so both
     layers get the same size distribution and volumes in proportion to the layers' heights."""
-    lo = np.asarray(lo, float)
-    hi = np.asarray(hi, float)
-    if not (lo[2] < grid_z - clearance and grid_z + clearance < hi[2]):
-        raise ParameterError(f"grid_z={grid_z}: the geogrid plane with clearance {clearance} m "
-                             f"must lie inside the box z range ({lo[2]}, {hi[2]})")
+    lo, hi = _layer_box(lo, hi, grid_z, clearance)
     r = np.sort(np.asarray(radii, float).reshape(-1))[::-1]
     to_low = _deal_layers(r, lo, hi, grid_z, clearance)
     c1, r1 = loose_cloud(r[to_low], lo, [hi[0], hi[1], grid_z - clearance], seed=seed)
     c2, r2 = loose_cloud(r[~to_low], [lo[0], lo[1], grid_z + clearance], hi, seed=seed + 1)
     return np.vstack([c1, c2]), np.concatenate([r1, r2])
+
+
+def _layer_box(lo, hi, grid_z: float, clearance: float) -> tuple[np.ndarray, np.ndarray]:
+    """The box as arrays, checked to hold the geogrid plane with its clearance (m)."""
+    lo = np.asarray(lo, float)
+    hi = np.asarray(hi, float)
+    if not (lo[2] < grid_z - clearance and grid_z + clearance < hi[2]):
+        raise ParameterError(f"grid_z={grid_z}: the geogrid plane with clearance {clearance} m "
+                             f"must lie inside the box z range ({lo[2]}, {hi[2]})")
+    return lo, hi
 
 
 def _deal_layers(r, lo, hi, grid_z: float, clearance: float) -> np.ndarray:
@@ -147,11 +153,7 @@ def layered_clump_cloud(templates, diameters, lo, hi, *, grid_z: float, clearanc
     clear of the geogrid plane by ``clearance``). Returns one ClumpCloud."""
     from .clumps import ClumpCloud, clump_cloud
 
-    lo = np.asarray(lo, float)
-    hi = np.asarray(hi, float)
-    if not (lo[2] < grid_z - clearance and grid_z + clearance < hi[2]):
-        raise ParameterError(f"grid_z={grid_z}: the geogrid plane with clearance {clearance} m "
-                             f"must lie inside the box z range ({lo[2]}, {hi[2]})")
+    lo, hi = _layer_box(lo, hi, grid_z, clearance)
     d = np.sort(np.asarray(diameters, float).reshape(-1))[::-1]
     to_low = _deal_layers(0.5 * d, lo, hi, grid_z, clearance)
     a = clump_cloud(templates, d[to_low], lo, [hi[0], hi[1], grid_z - clearance], seed=seed)
