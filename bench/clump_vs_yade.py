@@ -51,13 +51,13 @@ def build(args):
     a cubic lattice (--lattice per side, bounding spheres 5 % apart, random orientations), the
     box tight around it, no gravity (stage 1 then does nothing)."""
     tpl = template()
-    sc = dem.Scene(gravity=(0, 0, -9.81) if args.layout == "cloud" else (0, 0, 0),
+    sc = dem.Scene(gravity=(0, 0, -9.81) if args.layout != "lattice" else (0, 0, 0),
                    local_damping=args.damping)
     grains = sc.add_material(dem.linear_material(density=2650, young=args.young, poisson=0.3,
                                                  friction_angle_deg=args.friction))
     wall_mat = sc.add_material(dem.linear_material(density=2650, young=args.young, poisson=0.3,
                                                    friction_angle_deg=0.0))
-    if args.layout == "cloud":
+    if args.layout != "lattice":
         lo, hi = np.zeros(3), np.array([args.width, args.width, args.height])
         walls = sc.add_box(lo, hi, material=wall_mat)
         d = np.full(args.clumps, tpl.equivalent_diameter)
@@ -101,7 +101,12 @@ def run_ours(sc, walls, stages):
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--layout", choices=("cloud", "lattice"), default="lattice")
+    ap.add_argument("--layout", choices=("cloud", "lattice", "settled"), default="cloud",
+                    help="settled: the cloud settled by cpp_dem first, then both codes start "
+                         "from that pile (positions, orientations; no velocities, no contact "
+                         "history) and the top wall presses it quasi-statically; cloud: both "
+                         "codes drop the cloud themselves; lattice: no gravity, clumps on a "
+                         "lattice pressed by the top wall")
     ap.add_argument("--lattice", type=int, default=4, help="clumps per side (lattice layout)")
     ap.add_argument("--clumps", type=int, default=30, help="number of clumps (cloud layout)")
     ap.add_argument("--width", type=float, default=0.04, help="box width, m")
@@ -127,9 +132,22 @@ def main() -> int:
         print(f"error: --yade={args.yade}: not found (apt-get install yade)", file=sys.stderr)
         return 2
     sc, walls, tpl, (lo, hi) = build(args)
+    if args.layout == "settled":
+        # cpp_dem settles the cloud; a fresh scene takes the pile's clumps where they rest
+        # (no velocities, no contact history), as Yade will.
+        sc.run(args.settle)
+        fresh, walls, _, _ = build(argparse.Namespace(**{**vars(args), "layout": "cloud"}))
+        for c in range(sc.num_clumps):
+            fresh.set_clump_state(c, sc.clump_positions[c], sc.clump_orientations[c],
+                                  [0, 0, 0], [0, 0, 0])
+        top0 = float((np.asarray(sc.positions)[:, 2] + np.asarray(sc.radii)).max())
+        sc = fresh
+        args.settle = 0
     mem = members(sc)
     # Stage 1 settles; stage 2 starts with the top wall just above the highest member.
-    if args.layout == "cloud":
+    if args.layout == "settled":
+        pass
+    elif args.layout == "cloud":
         probe, _, _, _ = build(argparse.Namespace(**vars(args)))
         probe.run(args.settle)
         top0 = float((np.asarray(probe.positions)[:, 2] + np.asarray(probe.radii)).max()) + 0.2e-3
