@@ -55,3 +55,17 @@ def test_controller_mismatch_is_refused(tmp_path):
     s = dem.Scene()
     with pytest.raises(dem.ParameterError, match="saved scene had 2 controllers"):
         load_checkpoint(tmp_path / "ck.h5", s)
+
+
+def test_checkpoint_keeps_the_blow_up_settings(tmp_path):
+    # max_step_ratio (tunnelling) and dt_check_period travel with the state: a restart must
+    # not fall back silently to the defaults.
+    a = make()
+    a.scene.max_step_ratio = 0.5
+    a.scene.dt_check_period = 7
+    a.scene.run(10)
+    save_checkpoint(tmp_path / "ck.h5", a.scene)
+    b = make()
+    load_checkpoint(tmp_path / "ck.h5", b.scene)
+    assert b.scene.max_step_ratio == 0.5
+    assert b.scene.dt_check_period == 7

@@ -130,6 +130,8 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.put(s.local_damping_);
   w.put(s.margin_);
   w.put(s.max_overlap_ratio_);
+  w.put(s.max_step_ratio_);
+  w.put(s.dt_check_period_);
   w.put(s.track_energy_);
   w.put(s.clump_rotation_);
   w.put(s.ts_safety_);
@@ -232,6 +234,8 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   r.get(t.local_damping_);
   r.get(t.margin_);
   r.get(t.max_overlap_ratio_);
+  r.get(t.max_step_ratio_);
+  r.get(t.dt_check_period_);
   r.get(t.track_energy_);
   r.get(t.clump_rotation_);
   r.get(t.ts_safety_);
