@@ -453,3 +453,21 @@ def test_layered_clump_cloud_keeps_the_geogrid_plane_clear():
     eq = np.asarray([tpl[k].equivalent_diameter for k in cl.template]) * cl.scales
     assert np.allclose(np.sort(eq), np.sort(d), rtol=1e-12)
     assert np.allclose(np.sort(s.clump_stiffness_radii), np.sort(0.5 * eq), rtol=1e-12)
+
+
+def test_moving_a_member_by_hand_is_refused():
+    s = dem.Scene()
+    mat = material(s)
+    s.add_clumps(_asymmetric(), [[0, 0, 0]], material=mat)
+    s.add_spheres([[0.1, 0, 0]], [0.004], material=mat)
+    x = s.positions
+    s.positions = x  # unchanged: allowed (a whole-array round trip)
+    x[3] += 0.01     # the free sphere: allowed
+    s.positions = x
+    x[0] += 0.001    # a member
+    with pytest.raises(dem.ParameterError, match="member of clump 0"):
+        s.positions = x
+    v = s.velocities
+    v[1] = [1, 0, 0]
+    with pytest.raises(dem.ParameterError, match="set_clump_state"):
+        s.velocities = v

@@ -19,6 +19,23 @@ void require_size(const std::vector<T>& v, size_t n, const char* field) {
 
 Scene::Scene() = default;
 
+namespace {
+/// A clump's members move with their clump: a whole-array setter may pass their current
+/// values back unchanged, not new ones (that would be undone silently at the next step).
+template <class T>
+void check_members_unchanged(const Scene& s, const std::vector<T>& now, const std::vector<T>& given,
+                             const char* field) {
+  if (!s.has_clumps()) return;
+  const auto& cl = s.clumps_of_bodies();
+  for (size_t b = 0; b < given.size(); ++b)
+    if (cl[b] >= 0 && given[b] != now[b])
+      throw ParameterError(std::string(field) + "[" + std::to_string(s.id_of(static_cast<int>(b))) +
+                           "]: body " + std::to_string(s.id_of(static_cast<int>(b))) +
+                           " is a member of clump " + std::to_string(cl[b]) +
+                           ", which moves it; set the clump's state (set_clump_state)");
+}
+}  // namespace
+
 // ---- materials, bodies, walls ---------------------------------------------------------------
 
 int Scene::add_material(const Material& m) {
@@ -96,15 +113,18 @@ void Scene::set_positions(const std::vector<Vec3>& v) {
   require_size(v, bodies_.pos.size(), "positions");
   for (const auto& x : v)
     if (!x.allFinite()) throw ParameterError("positions: must be finite (m)");
+  check_members_unchanged(*this, bodies_.pos, v, "positions");
   bodies_.pos = v;
   dirty_ = true;
 }
 void Scene::set_velocities(const std::vector<Vec3>& v) {
   require_size(v, bodies_.pos.size(), "velocities");
+  check_members_unchanged(*this, bodies_.vel, v, "velocities");
   bodies_.vel = v;
 }
 void Scene::set_angular_velocities(const std::vector<Vec3>& v) {
   require_size(v, bodies_.pos.size(), "angular_velocities");
+  check_members_unchanged(*this, bodies_.angvel, v, "angular_velocities");
   bodies_.angvel = v;
 }
 void Scene::set_radii(const std::vector<Real>& r) {
