@@ -471,3 +471,22 @@ def test_moving_a_member_by_hand_is_refused():
     v[1] = [1, 0, 0]
     with pytest.raises(dem.ParameterError, match="set_clump_state"):
         s.velocities = v
+
+
+def test_clump_output_vtk_and_hdf5(tmp_path):
+    from cpp_dem.output import H5Recorder, read_h5_snapshot, write_vtk_spheres
+
+    s = dem.Scene()
+    mat = material(s)
+    s.add_clumps(_asymmetric(), [[0, 0, 0], [0.05, 0, 0]], random_orientations(2, 1),
+                 material=mat)
+    s.add_spheres([[0.1, 0, 0]], [0.004], material=mat)
+    with H5Recorder(tmp_path / "r.h5", s, series={"time": lambda sc: sc.time}) as h5:
+        h5.snapshot(s)
+    snap = read_h5_snapshot(tmp_path / "r.h5")
+    assert snap["clump_ids"].tolist() == [0, 0, 0, 1, 1, 1, -1]
+    assert np.array_equal(snap["clump_positions"], s.clump_positions)
+    assert np.array_equal(snap["clump_orientations"], s.clump_orientations)
+    path = write_vtk_spheres(tmp_path / "s.vtp", s, encoding="ascii")
+    text = path.read_text()
+    assert 'Name="clump_id"' in text and 'Name="clump_orientation"' in text
