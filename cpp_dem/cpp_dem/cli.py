@@ -4,6 +4,7 @@
     geogrid-dem run triaxial --smoke --out results/t   # a case, with its own flags after it
     geogrid-dem run my_run.toml                        # a run file (TOML)
     geogrid-dem sweep my_sweep.toml --workers 2        # a parameter table, on Dask
+    geogrid-dem calibrate cases/calibrate_triaxial.toml  # fit E, nu, phi (001 §6.1)
 
 Shared options (same names and units for every case): ``--out DIR``, ``--seed N``,
 ``--threads N`` (0 = all cores), ``--preset fast|balanced|accurate`` (where the case has
@@ -369,10 +370,28 @@ def _row_finished(row_dir: Path, case: str, params: dict[str, Any]) -> bool:
     return old.get("case") == case and old.get("params") == json.loads(json.dumps(params))
 
 
+#: Run before the case, in a fresh interpreter (no threads): asks Linux to SIGKILL this
+#: process when the worker thread that started it dies (PR_SET_PDEATHSIG, kept across exec),
+#: then becomes the case. A killed Dask worker so leaves no orphan writing into the row's
+#: folder while Dask runs the row again elsewhere. (A preexec_fn would run in the forked
+#: child of a threaded worker, which is not safe.)
+_DIE_WITH_PARENT = ("import ctypes, os, signal, sys\n"
+                    "try:\n"
+                    "    ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))\n"
+                    "except Exception:\n"
+                    "    pass\n"
+                    "os.execv(sys.argv[1], sys.argv[1:])\n")
+
+
 def _run_row(command: list[str], argv: list[str], env: dict[str, str]) -> dict[str, Any]:
-    """One row, on a Dask worker: the case in its own interpreter."""
+    """One row, on a Dask worker: the case in its own interpreter. A row run again after a
+    killed worker starts from an empty folder (the lost attempt's files are removed)."""
+    dest = out_of(argv)
+    if dest is not None and dest.exists():
+        shutil.rmtree(dest, ignore_errors=True)
     t0 = time.perf_counter()
-    proc = subprocess.run([*command, *argv], capture_output=True, text=True,
+    wrap = [sys.executable, "-c", _DIE_WITH_PARENT] if sys.platform.startswith("linux") else []
+    proc = subprocess.run([*wrap, *command, *argv], capture_output=True, text=True,
                           env={**os.environ, **env})
     return {"returncode": proc.returncode, "wall_s": time.perf_counter() - t0,
             "stderr_tail": "\n".join((proc.stderr or "").strip().splitlines()[-5:])}
@@ -490,12 +509,20 @@ def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) 
             if row_dir.exists():
                 # An unfinished row of an earlier run: its files are incomplete.
                 shutil.rmtree(row_dir)
-            fut = client.submit(_run_row, script, argv, env, pure=False, key=f"row-{i:03d}")
+            # retries: a row whose worker died is run again (Dask itself reschedules a task
+            # lost with its worker up to distributed.scheduler.allowed-failures times; a
+            # KilledWorker after that, or any error, makes the row 'failed', not the sweep).
+            fut = client.submit(_run_row, script, argv, env, pure=False, key=f"row-{i:03d}",
+                                retries=2)
             futures[fut] = (i, row_dir, params, base)
         t0 = time.perf_counter()
         for n_done, fut in enumerate(as_completed(futures), start=1):
             i, row_dir, params, base = futures[fut]
-            r = fut.result()
+            try:
+                r = fut.result()
+            except Exception as e:  # noqa: BLE001  (KilledWorker, a lost scheduler ...)
+                r = {"returncode": -1, "wall_s": 0.0,
+                     "stderr_tail": f"{type(e).__name__}: {e}"}
             ok = r["returncode"] == 0
             if ok:
                 write_run_file(row_dir, case, params)
@@ -511,6 +538,53 @@ def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) 
                 click.echo(f"[sweep] row {i:03d}: {r['stderr_tail']}", err=True)
     finally:
         client.close()
+        if cluster is not None:
+            cluster.close()
+
+
+@main.command("calibrate")
+@click.argument("file", type=click.Path(path_type=Path))
+@click.option("--out", type=click.Path(path_type=Path), default=None,
+              help="results folder (default: the file's field 'out')")
+@click.option("--workers", type=int, default=2, show_default=True,
+              help="processes of the local Dask cluster (0: run in this process)")
+@click.option("--scheduler", default=None, help="address of a running Dask scheduler")
+@click.option("--threads", type=int, default=1, show_default=True,
+              help="OpenMP threads per triaxial run (fixed: the results do not depend on the "
+                   "number of workers)")
+def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | None,
+                  threads: int) -> None:
+    """Fits E, nu and phi of the triaxial case to a reference curve (001 §6.1, Table 6.1):
+    a grid on Dask, then Nelder-Mead; writes OUT/grid.csv, best.json, misfit.png/.pdf."""
+    from cpp_dem import calibrate as cal
+
+    try:
+        cfg = cal.Config.load(file)
+    except FileNotFoundError:
+        raise RunFileError(f"calibration file {file}: not found") from None
+    except (ValueError, tomllib.TOMLDecodeError) as e:
+        raise RunFileError(str(e)) from None
+    if out is not None:
+        cfg.out = out
+    if workers < 0 or threads < 0:
+        raise click.BadParameter("--workers and --threads must be >= 0")
+    client = cluster = None
+    if scheduler or workers > 0:
+        from dask.distributed import Client, LocalCluster
+
+        if scheduler:
+            client = Client(scheduler)
+        else:
+            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                                   dashboard_address=None)
+            client = Client(cluster)
+    try:
+        cal.calibrate(cfg, client=client, threads=threads, log=click.echo)
+    except RuntimeError as e:
+        raise click.ClickException(str(e)) from None
+    finally:
+        if client is not None:
+            client.close()
         if cluster is not None:
             cluster.close()
 
