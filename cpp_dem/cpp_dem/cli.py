@@ -492,16 +492,22 @@ def _summary_of(row_dir: Path) -> dict[str, Any]:
     return {f"summary.{k}": v for k, v in flat.items()}
 
 
-def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) -> None:
-    from dask.distributed import Client, LocalCluster, as_completed
+def _dask_client(scheduler: str | None, workers: int):
+    """(client, cluster): the scheduler at ``scheduler``, or a LocalCluster of ``workers``
+    single-threaded processes (cluster None for a given scheduler)."""
+    from dask.distributed import Client, LocalCluster
 
-    cluster = None
     if scheduler:
-        client = Client(scheduler)
-    else:
-        cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                               dashboard_address=None)
-        client = Client(cluster)
+        return Client(scheduler), None
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           dashboard_address=None)
+    return Client(cluster), cluster
+
+
+def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) -> None:
+    from dask.distributed import as_completed
+
+    client, cluster = _dask_client(scheduler, workers)
     env = {"OMP_NUM_THREADS": str(threads or (os.cpu_count() or 1))}
     try:
         futures = {}
@@ -570,14 +576,7 @@ def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | N
         raise click.BadParameter("--workers and --threads must be >= 0")
     client = cluster = None
     if scheduler or workers > 0:
-        from dask.distributed import Client, LocalCluster
-
-        if scheduler:
-            client = Client(scheduler)
-        else:
-            cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                                   dashboard_address=None)
-            client = Client(cluster)
+        client, cluster = _dask_client(scheduler, workers)
     try:
         cal.calibrate(cfg, client=client, threads=threads, log=click.echo)
     except RuntimeError as e:
