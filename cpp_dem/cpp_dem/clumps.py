@@ -75,6 +75,13 @@ def _principal(inertia: np.ndarray):
     return w, v
 
 
+def _disjoint(c: np.ndarray, r: np.ndarray) -> bool:
+    """No two of the spheres (centres c, radii r) overlap (touching is allowed)."""
+    d = np.linalg.norm(c[:, None, :] - c[None, :, :], axis=2)
+    iu = np.triu_indices(len(r), 1)
+    return bool(np.all(d[iu] >= (r[:, None] + r[None, :])[iu]))
+
+
 def union_mass_properties(centres, radii, cells: int = 160) -> MassProperties:
     """Volume, centroid and inertia of the union of spheres (unit density; see the module
     docstring for the method and its accuracy). cells: (y, z) grid points across the bounding
@@ -87,9 +94,7 @@ def union_mass_properties(centres, radii, cells: int = 160) -> MassProperties:
         vol = 4.0 / 3.0 * math.pi * r[0] * r[0] * r[0]
         i = 0.4 * vol * r[0] * r[0]
         return MassProperties(vol, c[0].copy(), np.eye(3) * i, np.full(3, i), np.eye(3))
-    d = np.linalg.norm(c[:, None, :] - c[None, :, :], axis=2)
-    iu = np.triu_indices(len(r), 1)
-    if np.all(d[iu] >= (r[:, None] + r[None, :])[iu]):
+    if _disjoint(c, r):
         # No two members overlap: the sum of the spheres is exact (parallel axes).
         v = 4.0 / 3.0 * math.pi * r ** 3
         vol = float(v.sum())
@@ -212,10 +217,7 @@ class ClumpTemplate:
     @property
     def fill_accuracy(self) -> float:
         """Stated relative accuracy of volume and inertia (0 for one sphere: exact)."""
-        c, r = self.centres, self.radii
-        d = np.linalg.norm(c[:, None, :] - c[None, :, :], axis=2)
-        iu = np.triu_indices(len(r), 1)
-        if np.all(d[iu] >= (r[:, None] + r[None, :])[iu]):
+        if _disjoint(self.centres, self.radii):
             return 0.0  # summed exactly
         return 2e-4 * (160.0 / self.cells) ** 1.5
 

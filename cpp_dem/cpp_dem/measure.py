@@ -65,37 +65,33 @@ def reference_points(scene) -> np.ndarray:
     return pos
 
 
-def grain_diameters(scene) -> np.ndarray:
-    """Equivalent-volume diameters of the grains, m: free spheres 2 r, clumps (6 V / pi)^(1/3)
-    with V the union's volume (order: the free spheres by id, then the clumps)."""
+def _free_radii_and_clump_volumes(scene) -> tuple[np.ndarray, np.ndarray]:
+    """Radii of the free spheres (m, by id; no geogrid nodes) and the volume of each clump's
+    union of members (m^3: its mass over its members' density)."""
     sph = sphere_mask(scene)
     r = np.asarray(scene.radii)
     if not scene.num_clumps:
-        return 2.0 * r[sph]
+        return r[sph], np.zeros(0)
     cl = np.asarray(scene.clump_ids)
     mats = np.asarray(scene.material_ids)
     first = np.array([scene.clump_members(c)[0] for c in range(scene.num_clumps)])
     rho = np.array([scene.material(int(m)).density for m in mats[first]])
-    v = np.asarray(scene.clump_masses) / rho
-    return np.concatenate([2.0 * r[sph & (cl < 0)], (6.0 * v / np.pi) ** (1.0 / 3.0)])
+    return r[sph & (cl < 0)], np.asarray(scene.clump_masses) / rho
+
+
+def grain_diameters(scene) -> np.ndarray:
+    """Equivalent-volume diameters of the grains, m: free spheres 2 r, clumps (6 V / pi)^(1/3)
+    with V the union's volume (order: the free spheres by id, then the clumps)."""
+    r, v = _free_radii_and_clump_volumes(scene)
+    return np.concatenate([2.0 * r, (6.0 * v / np.pi) ** (1.0 / 3.0)])
 
 
 def solid_volume(scene) -> float:
     """Volume of the grains, m^3: free spheres 4/3 pi r^3 (overlaps between grains counted
     twice; see porosity), clumps the volume of the union of their members (mass / density:
     overlaps inside a clump count once). Geogrid nodes are not grains and are left out."""
-    sph = sphere_mask(scene)
-    if scene.num_clumps:
-        cl = np.asarray(scene.clump_ids)
-        r = np.asarray(scene.radii)[sph & (cl < 0)]
-        mats = np.asarray(scene.material_ids)
-        first = np.array([scene.clump_members(c)[0] for c in range(scene.num_clumps)])
-        rho = np.array([scene.material(int(m)).density for m in mats[first]])
-        vc = float(np.sum(np.asarray(scene.clump_masses) / rho))
-    else:
-        r = np.asarray(scene.radii)[sph]
-        vc = 0.0
-    return float(np.sum(4.0 / 3.0 * np.pi * r**3)) + vc
+    r, v = _free_radii_and_clump_volumes(scene)
+    return float(np.sum(4.0 / 3.0 * np.pi * r**3)) + float(np.sum(v))
 
 
 def porosity(scene, walls) -> float:

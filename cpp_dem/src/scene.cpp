@@ -108,6 +108,21 @@ std::shared_ptr<Controller> Scene::controller(int id) const {
   return controllers_[id];
 }
 
+namespace {
+/// The first non-finite of a body's force, torque, velocity, spin and position, named with
+/// its value (for the blow-up messages).
+std::string non_finite_quantity(const Vec3& f, const Vec3& t, const Vec3& v, const Vec3& w,
+                                const Vec3& x) {
+  std::ostringstream os;
+  if (!f.allFinite()) os << "force " << f.transpose();
+  else if (!t.allFinite()) os << "torque " << t.transpose();
+  else if (!v.allFinite()) os << "velocity " << v.transpose();
+  else if (!w.allFinite()) os << "angular velocity " << w.transpose();
+  else os << "position " << x.transpose();
+  return os.str();
+}
+}  // namespace
+
 void Scene::step() {
   if (ts_period_ > 0 && step_ % ts_period_ == 0 && step_ > 0) {
     const Real est = critical_dt();
@@ -165,12 +180,9 @@ void Scene::step() {
   if (err_body != std::numeric_limits<long>::max()) {
     const int b = static_cast<int>(err_body);
     std::ostringstream os;
-    os << "blow-up at step " << step_ << ": body " << id_of(b) << " has a non-finite ";
-    if (!bodies_.force[b].allFinite()) os << "force " << bodies_.force[b].transpose();
-    else if (!bodies_.torque[b].allFinite()) os << "torque " << bodies_.torque[b].transpose();
-    else if (!bodies_.vel[b].allFinite()) os << "velocity " << bodies_.vel[b].transpose();
-    else if (!bodies_.angvel[b].allFinite()) os << "angular velocity " << bodies_.angvel[b].transpose();
-    else os << "position " << bodies_.pos[b].transpose();
+    os << "blow-up at step " << step_ << ": body " << id_of(b) << " has a non-finite "
+       << non_finite_quantity(bodies_.force[b], bodies_.torque[b], bodies_.vel[b],
+                              bodies_.angvel[b], bodies_.pos[b]);
     throw BlowUpError(os.str());
   }
   if (has_clumps()) {
@@ -180,12 +192,9 @@ void Scene::step() {
       const int c = static_cast<int>(err_clump);
       std::ostringstream os;
       os << "blow-up at step " << step_ << ": clump " << c << " (members from body "
-         << id_of(clumps_.member[clumps_.member_off[c]]) << ") has a non-finite ";
-      if (!clumps_.force[c].allFinite()) os << "force " << clumps_.force[c].transpose();
-      else if (!clumps_.torque[c].allFinite()) os << "torque " << clumps_.torque[c].transpose();
-      else if (!clumps_.vel[c].allFinite()) os << "velocity " << clumps_.vel[c].transpose();
-      else if (!clumps_.angvel[c].allFinite()) os << "angular velocity " << clumps_.angvel[c].transpose();
-      else os << "position " << clumps_.pos[c].transpose();
+         << id_of(clumps_.member[clumps_.member_off[c]]) << ") has a non-finite "
+         << non_finite_quantity(clumps_.force[c], clumps_.torque[c], clumps_.vel[c],
+                                clumps_.angvel[c], clumps_.pos[c]);
       throw BlowUpError(os.str());
     }
   }

@@ -2,6 +2,7 @@
 // State is passed explicitly; there is no global scene.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <memory>
 #include <string>
@@ -315,6 +316,12 @@ class Scene {
   void push_body(const Vec3& x, Real radius, Real mass, Real inertia, int material,
                  std::uint8_t kind);
   bool need_rebuild() const;
+  /// How far body `slot` has moved (m) since the last broad-phase build, plus any growth of
+  /// its radius: the Verlet margin's measure (need_rebuild, the integration and clump passes).
+  __attribute__((always_inline)) inline Real displacement_since_build(int slot) const {
+    return (bodies_.pos[slot] - pos_at_build_[slot]).norm() +
+           std::max(0.0, bodies_.radius[slot] - radius_at_build_[slot]);
+  }
   void rebuild();
   /// Stores the spheres in spatial order (see "storage order"); only while no contact exists.
   void sort_bodies_spatially();

@@ -99,9 +99,9 @@ void Scene::set_clump_state(int c, const Vec3& pos, const Quat& ori, const Vec3&
   clumps_.ori[c] = ori.normalized();
   clumps_.vel[c] = vel;
   clumps_.angvel[c] = angvel;
-  const Mat3 rot = clumps_.ori[c].toRotationMatrix();
+  place_members(c);  // (and the rotation matrix of the new orientation)
+  const Mat3& rot = clumps_.rot[c];
   clumps_.angmom[c] = rot * clumps_.inertia[c].cwiseProduct(rot.transpose() * angvel);
-  place_members(c);
   dirty_ = true;
 }
 

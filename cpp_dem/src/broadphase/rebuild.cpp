@@ -34,8 +34,7 @@ bool Scene::need_rebuild() const {
   Real worst = 0;
 #pragma omp parallel for reduction(max : worst) schedule(static) if (n > kParallelMin)
   for (int b = 0; b < n; ++b) {
-    const Real d = (bodies_.pos[b] - pos_at_build_[b]).norm() + std::max(0.0, bodies_.radius[b] - radius_at_build_[b]);
-    worst = std::max(worst, d);
+    worst = std::max(worst, displacement_since_build(b));
   }
   return worst > half;
 }

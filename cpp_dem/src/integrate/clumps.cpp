@@ -39,10 +39,6 @@ inline Quat quat_rate(const Quat& q, const Vec3& wb) {
 /// leave the product's rounding error as a spurious force).
 [[gnu::noinline]] Vec3 weight(Real m, const Vec3& g) { return m * g; }
 
-}  // namespace
-
-namespace {
-
 inline Quat quat_axpy(const Quat& q, Real h, const Quat& d) {
   return Quat(q.w() + h * d.w(), q.x() + h * d.x(), q.y() + h * d.y(), q.z() + h * d.z());
 }
@@ -68,18 +64,18 @@ void Scene::integrate_clumps_hot(long& err_clump) {
     // weights of their mass shares, which sum to the clump's weight; the weight acts at the
     // centre of mass, so a member's lever arm takes its force without its weight (exactly
     // zero torque in free flight, as the clump's own weight gives).
-    Vec3 f = bodies_.force[clumps_.member[e0]];
-    Vec3 t = bodies_.torque[clumps_.member[e0]];
-    {
-      const int s = clumps_.member[e0];
-      const Vec3 r = rot_old * clumps_.member_local[e0];
-      t += r.cross(bodies_.force[s] - weight(bodies_.mass[s], gravity_));
-    }
-    for (int e = e0 + 1; e < e1; ++e) {
+    // (The sums start from the first member, not from zero: a one-sphere clump's force is
+    // then its member's, bitwise, signed zeros included.)
+    const auto member_torque = [&](int e) {
       const int s = clumps_.member[e];
       const Vec3 r = rot_old * clumps_.member_local[e];
-      f += bodies_.force[s];
-      t += bodies_.torque[s] + r.cross(bodies_.force[s] - weight(bodies_.mass[s], gravity_));
+      return Vec3(bodies_.torque[s] + r.cross(bodies_.force[s] - weight(bodies_.mass[s], gravity_)));
+    };
+    Vec3 f = bodies_.force[clumps_.member[e0]];
+    Vec3 t = member_torque(e0);
+    for (int e = e0 + 1; e < e1; ++e) {
+      f += bodies_.force[clumps_.member[e]];
+      t += member_torque(e);
     }
     const Vec3& fe = clumps_.ext_force[c];
     const Vec3& te = clumps_.ext_torque[c];
@@ -186,11 +182,8 @@ void Scene::integrate_clumps_hot(long& err_clump) {
       continue;
     }
     cpp_dem::place_members(clumps_, bodies_, c);
-    for (int e = e0; e < e1; ++e) {
-      const int s = clumps_.member[e];
-      worst = std::max(worst, (bodies_.pos[s] - pos_at_build_[s]).norm() +
-                                  std::max(0.0, bodies_.radius[s] - radius_at_build_[s]));
-    }
+    for (int e = e0; e < e1; ++e)
+      worst = std::max(worst, displacement_since_build(clumps_.member[e]));
   }
   err_clump = err;
   if (err == std::numeric_limits<long>::max() && disp_valid_) max_disp_ = std::max(max_disp_, worst);

@@ -135,11 +135,6 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
     return std::isfinite(fcheck[0] + fcheck[1] + fcheck[2]);
   };
   const bool wide = use_wide_ops();
-  // The broad phase's displacement check (need_rebuild) for the next step, in this pass.
-  const auto displacement = [&](int b) __attribute__((always_inline)) {
-    return (bodies_.pos[b] - pos_at_build_[b]).norm() +
-           std::max(0.0, bodies_.radius[b] - radius_at_build_[b]);
-  };
 
   if (!energy) {
     // Blocks of bodies, each in three passes while it stays in the L1 cache: forces and
@@ -210,7 +205,7 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
             err = std::min(err, static_cast<long>(b));
             continue;
           }
-          worst = std::max(worst, displacement(b));
+          worst = std::max(worst, displacement_since_build(b));  // (need_rebuild's check)
         }
       }
     }
@@ -253,7 +248,7 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
         err = std::min(err, static_cast<long>(b));
         continue;
       }
-      worst = std::max(worst, displacement(b));
+      worst = std::max(worst, displacement_since_build(b));  // (need_rebuild's check)
     }
   }
   err_body = err;

@@ -82,7 +82,7 @@ Real Scene::critical_dt_body(int* arg_body) const {
   // smallest principal moment (members are fully blocked bodies and set no limit below).
   for (int c = 0; c < clumps_.size(); ++c) {
     Vec3 ktc = Vec3::Zero(), krc = Vec3::Zero();
-    const Mat3 rot = clumps_.ori[c].toRotationMatrix();
+    const Mat3& rot = clumps_.rot[c];
     for (int e = clumps_.member_off[c]; e < clumps_.member_off[c + 1]; ++e) {
       const int s = clumps_.member[e];
       ktc += kt[s];
