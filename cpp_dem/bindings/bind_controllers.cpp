@@ -41,6 +41,9 @@ void bind_controllers(py::module_& m) {
   scene_cls.attr("controller") = py::cpp_function(
       [](const Scene& s, int i) { return s.controller(i); }, py::name("controller"),
       py::is_method(scene_cls), py::arg("index"), "The controller added as number `index`.");
+  scene_cls.attr("clear_controllers") = py::cpp_function(
+      [](Scene& s) { s.clear_controllers(); }, py::name("clear_controllers"),
+      py::is_method(scene_cls), "Removes every controller (e.g. a preparation's).");
   scene_cls.attr("num_controllers") = py::cpp_function(
       [](const Scene& s) { return s.num_controllers(); }, py::name("num_controllers"),
       py::is_method(scene_cls), "Number of controllers.");

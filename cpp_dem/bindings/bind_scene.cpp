@@ -17,23 +17,36 @@ py::dict energies_dict(const Energies& e) {
   d["plastic"] = e.plastic;
   d["wall_work"] = e.wall_work;
   d["external_work"] = e.external_work;
+  d["cell_work"] = e.cell_work;
   d["balance_error"] = e.balance_error;
   d["balance_error_relative"] = e.balance_error_relative;
   return d;
 }
 
 /// Active contacts as arrays: ids (k,2) (wall contacts: body, -1-wall), force on the second
-/// body / on the sphere (k,3) N, normal (k,3), overlap (k,) m, normal force (k,) N.
+/// body / on the sphere (k,3) N, normal (k,3), branch (k,3) m (pairs: from i's centre to j's,
+/// or j's periodic image; walls: zero), overlap (k,) m, normal force (k,) N, elastic shear
+/// force on the second body (k,3) N, tangent stiffnesses kn, ks (k,) N/m, tan_phi (k,) -.
 py::dict contacts_dict(const Scene& s) {
   std::vector<int> ids;
-  std::vector<Vec3> force, normal;
-  std::vector<Real> overlap, fn;
+  std::vector<Vec3> force, normal, branch, fs;
+  std::vector<Real> overlap, fn, kn, ks, tan_phi;
   s.for_each_contact([&](const ContactRecord& c) {
     if (!c.active || c.kind == ContactKind::Grid) return;  // grid: Scene.grid_contacts()
     ids.push_back(s.id_of(c.kind == ContactKind::Pair ? c.body1 : c.body2));
     ids.push_back(c.kind == ContactKind::Pair ? s.id_of(c.body2) : -1 - c.other);
     force.push_back(c.force2);
+    // Pair: x_j (its periodic image) - x_i; wall: zero (see measure.love_weber_stress).
+    branch.push_back(c.kind == ContactKind::Pair
+                         ? Vec3(s.positions()[c.body2] + c.shift2 - s.positions()[c.body1])
+                         : Vec3::Zero());
     normal.push_back(c.state->normal);
+    fs.push_back(c.state->fs);
+    Real k_n, k_s;
+    c.stiffness(k_n, k_s);
+    kn.push_back(k_n);
+    ks.push_back(k_s);
+    tan_phi.push_back(c.phys->tan_phi);
     overlap.push_back(c.state->overlap);
     fn.push_back(c.state->fn);
   });
@@ -43,6 +56,11 @@ py::dict contacts_dict(const Scene& s) {
   d["ids"] = id_arr;
   d["force"] = vec3_array(force);
   d["normal"] = vec3_array(normal);
+  d["branch"] = vec3_array(branch);
+  d["shear_force"] = vec3_array(fs);
+  d["kn"] = real_array(kn);
+  d["ks"] = real_array(ks);
+  d["tan_phi"] = real_array(tan_phi);
   d["overlap"] = real_array(overlap);
   d["normal_force"] = real_array(fn);
   return d;

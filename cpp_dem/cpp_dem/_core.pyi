@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BeamParams', 'BlowUpError', 'ContactModel', 'ContactPhys', 'Controller', 'GEOGRID', 'Material', 'ParameterError', 'RadiusGrowth', 'Scene', 'ServoWall', 'TriaxialController', 'contact_laws', 'get_num_threads', 'mix_materials', 'servo_speed', 'set_num_threads']
+__all__: list[str] = ['BeamParams', 'BlowUpError', 'CellController', 'ContactModel', 'ContactPhys', 'Controller', 'GEOGRID', 'Material', 'ParameterError', 'RadiusGrowth', 'Scene', 'ServoWall', 'TriaxialController', 'contact_laws', 'get_num_threads', 'mix_materials', 'servo_speed', 'set_num_threads']
 class ParameterError(ValueError):
     pass
 class BlowUpError(RuntimeError):
@@ -174,6 +174,8 @@ class Scene:
         ...
     def _set_blocked(self, body: int, mask: int) -> None:
         ...
+    def _set_cell_matrix(self, cell: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], map_bodies: bool) -> None:
+        ...
     def _set_clump_blocked(self, clump: int, mask: int) -> None:
         ...
     def add_controller(self, controller: Controller) -> int:
@@ -195,6 +197,14 @@ class Scene:
     def add_wall(self, *, axis: int, position: float, sense: int, material: int) -> int:
         """
         Adds an axis-aligned one-sided wall: axis 0/1/2 (x/y/z), position along the axis (m), sense +1 if spheres are on its +axis side, -1 otherwise. Returns its index.
+        """
+    def cell_stress(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Love–Weber stress of the pair contacts over the cell volume, Pa, compression positive, not symmetrised (3 x 3).
+        """
+    def clear_controllers(self) -> None:
+        """
+        Removes every controller (e.g. a preparation's).
         """
     def clump_members(self, clump: int) -> list[int]:
         """
@@ -250,6 +260,10 @@ class Scene:
         """
         Sets a body's mass (kg) and inertia (kg m^2).
         """
+    def set_periodic_cell(self, cell: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], periodic: typing.Annotated[collections.abc.Sequence[bool], "FixedSize(3)"] = [True, True, True]) -> None:
+        """
+        Makes the scene periodic along the axes marked in `periodic`, with cell vectors the columns of `cell` (3 x 3, m, det > 0); the cell is cell @ [0,1)^3.
+        """
     def set_wall_position(self, wall: int, position: float) -> None:
         """
         Moves the wall plane to position (m).
@@ -280,6 +294,26 @@ class Scene:
     def body_kinds(self) -> list[int]:
         """
         0 sphere, 1 grid node, per body.
+        """
+    @property
+    def cell_matrix(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Cell vectors as columns, m (3 x 3).
+        """
+    @property
+    def cell_periodic(self) -> typing.Annotated[list[bool], "FixedSize(3)"]:
+        """
+        Which axes repeat (x, y, z).
+        """
+    @property
+    def cell_reference(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        The cell vectors when the cell was set, m (3 x 3).
+        """
+    @property
+    def cell_volume(self) -> float:
+        """
+        Cell volume, m^3.
         """
     @property
     def clump_angular_momenta(self) -> numpy.typing.NDArray[numpy.float64]:
@@ -456,9 +490,19 @@ class Scene:
         True while the bodies are stored in id order.
         """
     @property
+    def images(self) -> numpy.typing.NDArray[numpy.int32]:
+        """
+        Per body: cell vectors it was shifted by when wrapped into the cell (n, 3); the unwrapped position is pos + cell_matrix @ image.
+        """
+    @property
     def inertias(self) -> numpy.typing.NDArray[numpy.float64]:
         """
         Moments of inertia, kg m^2, shape (n,).
+        """
+    @property
+    def is_periodic(self) -> bool:
+        """
+        The scene has a periodic cell.
         """
     @property
     def local_damping(self) -> float:
@@ -491,6 +535,14 @@ class Scene:
         """
     @max_step_ratio.setter
     def max_step_ratio(self, arg1: float) -> None:
+        ...
+    @property
+    def mean_spin(self) -> bool:
+        """
+        Bodies carry the mean spin axial(skew L) (default True; False as Yade).
+        """
+    @mean_spin.setter
+    def mean_spin(self, arg1: bool) -> None:
         ...
     @property
     def num_active_contacts(self) -> int:
@@ -581,6 +633,14 @@ class Scene:
         """
     @velocities.setter
     def velocities(self, arg1: typing.Annotated[numpy.typing.ArrayLike, numpy.float64]) -> None:
+        ...
+    @property
+    def velocity_gradient(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Imposed velocity gradient L of the periodic cell, 1/s (3 x 3).
+        """
+    @velocity_gradient.setter
+    def velocity_gradient(self, arg1: typing.Annotated[numpy.typing.ArrayLike, numpy.float64]) -> None:
         ...
     @property
     def verlet_margin(self) -> float:
@@ -814,6 +874,66 @@ class RadiusGrowth(Controller):
     def total_factor(self) -> float:
         """
         Product of the multipliers applied so far, -.
+        """
+class CellController(Controller):
+    """
+    Mixed stress and strain-rate control of a periodic cell (Yade's PeriTriaxController, PFC's
+    periodic servo). Each component (r, c) of the velocity gradient L is imposed (set_rate, 1/s,
+    tension positive) or servo-controlled (set_stress: the cell stress sigma_rc, Pa, compression
+    positive, reaches the target). The servo's strain correction per call is
+    gain (target - sigma_rc) / C_rc, C_rc the affine stiffness of the contact network, spread over
+    `period` steps and capped to +-max_rate (1/s).
+    """
+    def __init__(self, *, gain: float = 0.3, max_rate: float = 1.0) -> None:
+        ...
+    def clear_limit_report(self) -> None:
+        ...
+    def goal(self, r: int, c: int) -> float:
+        """
+        The imposed rate (1/s) or the stress target (Pa) of component (r, c).
+        """
+    def limit_report(self) -> list:
+        """
+        Components that drifted from their target at the rate cap since the last clear: dicts with component, calls, target_pa, reached_pa, cap_per_s.
+        """
+    def mode(self, r: int, c: int) -> str:
+        ...
+    def set_rate(self, r: int, c: int, rate: float) -> None:
+        """
+        Imposes L_rc = rate (1/s).
+        """
+    def set_stress(self, r: int, c: int, stress: float) -> None:
+        """
+        Servo-controls sigma_rc to `stress` (Pa, compression positive).
+        """
+    @property
+    def gain(self) -> float:
+        ...
+    @gain.setter
+    def gain(self, arg1: float) -> None:
+        ...
+    @property
+    def max_rate(self) -> float:
+        """
+        Cap on |L_rc| of the stress-controlled components, 1/s.
+        """
+    @max_rate.setter
+    def max_rate(self, arg1: float) -> None:
+        ...
+    @property
+    def measured_stress(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Cell stress at the last call, Pa (compression positive).
+        """
+    @property
+    def stiffness(self) -> numpy.typing.NDArray[numpy.float64]:
+        """
+        Affine stiffness C_rc at the last call, Pa.
+        """
+    @property
+    def stress_error(self) -> float:
+        """
+        Largest relative stress error of the stress-controlled components at the last call, -.
         """
 def _checkpoint_load(scene: Scene, blob: bytes) -> None:
     """

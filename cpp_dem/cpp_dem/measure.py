@@ -4,7 +4,10 @@ arrays): the solid volume in a horizontal slab, the interior porosity, the free-
 height. SI units; stresses compressive positive.
 
 ``walls`` is always the list of the six box walls in the order of ``Scene.add_box``
-(x-, x+, y-, y+, z-, z+).
+(x-, x+, y-, y+, z-, z+). In a periodic cell (``Scene.set_periodic_cell``) pass no walls
+(``()``): the box is then the cell, and the "wall" stresses are the cell's normal stresses
+(Love–Weber over the cell, ``Scene.cell_stress``), so the preparation stages of ``prep`` run
+unchanged in a cell.
 """
 
 from __future__ import annotations
@@ -14,24 +17,48 @@ import numpy as np
 from . import _core
 
 
+def _cell(scene, walls) -> bool:
+    """True when the measures are of the periodic cell (no walls given, a periodic scene)."""
+    if len(walls):
+        return False
+    if not scene.is_periodic:
+        raise _core.ParameterError("walls=(): no walls given and the scene has no periodic "
+                                   "cell; pass the six box walls (Scene.add_box)")
+    return True
+
+
 def box_size(scene, walls) -> np.ndarray:
-    """Current box dimensions (x, y, z) from the wall positions, m."""
+    """Current box dimensions (x, y, z) from the wall positions, m; in a periodic cell the
+    cell's thicknesses across its faces (its edge lengths when it is a box)."""
+    if _cell(scene, walls):
+        h = np.asarray(scene.cell_matrix)
+        v = abs(np.linalg.det(h))
+        return np.array([v / np.linalg.norm(np.cross(h[:, (a + 1) % 3], h[:, (a + 2) % 3]))
+                         for a in range(3)])
     return np.asarray(_core.TriaxialController.box_size(scene, list(walls)))
 
 
 def box_volume(scene, walls) -> float:
-    """Current box volume, m^3."""
+    """Current box (or periodic cell) volume, m^3."""
+    if _cell(scene, walls):
+        return float(scene.cell_volume)
     return float(np.prod(box_size(scene, walls)))
 
 
 def wall_stresses(scene, walls) -> np.ndarray:
     """Normal stress on each of the six walls, Pa (compressive positive): force the spheres
-    exert on the wall (last step) over the current face area."""
+    exert on the wall (last step) over the current face area. In a periodic cell: the cell's
+    normal stresses, each twice (x, x, y, y, z, z)."""
+    if _cell(scene, walls):
+        return np.repeat(np.diag(np.asarray(scene.cell_stress())), 2)
     return np.asarray(_core.TriaxialController.wall_stresses(scene, list(walls)))
 
 
 def axis_stresses(scene, walls) -> np.ndarray:
-    """Per-axis boundary stress (mean of the two opposite walls), Pa, shape (3,)."""
+    """Per-axis boundary stress (mean of the two opposite walls), Pa, shape (3,); in a
+    periodic cell the diagonal of the cell stress."""
+    if _cell(scene, walls):
+        return np.diag(np.asarray(scene.cell_stress())).copy()
     return np.asarray(_core.TriaxialController.axis_stresses(scene, list(walls)))
 
 
@@ -133,7 +160,9 @@ def love_weber_stress(scene, volume: float) -> np.ndarray:
     pair = ids[:, 1] >= 0
     s = np.zeros((3, 3))
     if pair.any():
-        l = pos[ids[pair, 1]] - pos[ids[pair, 0]]
+        # (In a periodic cell the branch runs to j's image: the contacts' own branch vectors.)
+        l = (c["branch"][pair] if scene.is_periodic
+             else pos[ids[pair, 1]] - pos[ids[pair, 0]])
         s += np.einsum("ki,kj->ij", f[pair], l)
     wl = ~pair
     if wl.any():

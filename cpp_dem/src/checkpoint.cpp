@@ -74,7 +74,7 @@ std::vector<std::uint64_t> layout() {
   return {sizeof(Real),        sizeof(BodyStore),        sizeof(Vec3),        sizeof(Quat),       sizeof(Material),
           sizeof(Wall),        sizeof(PairContact), sizeof(PairOutput), sizeof(WallContact), sizeof(GridLink),
           sizeof(PFacet),      sizeof(GridContact), sizeof(BreakEvent), sizeof(ContactPhys),
-          sizeof(ContactState), sizeof(PairContactCold)};
+          sizeof(ContactState), sizeof(PairContactCold), sizeof(PeriodicCell)};
 }
 }  // namespace
 
@@ -92,6 +92,8 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.vec(s.pos_at_build_);
   w.vec(s.radius_at_build_);
   w.vec(s.walls_);
+  w.put(s.cell_);
+  w.put(s.max_radius_at_build_);
   // Contacts and adjacency.
   w.vec(s.pairs_);
   w.vec(s.pair_cold_);
@@ -119,6 +121,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.put(s.grid_topology_dirty_);
   w.put(s.grid_wall_contacts_);
   w.vec(s.candidates_);
+  w.vec(s.candidate_images_);
   // Energy bookkeeping.
   w.put(s.dropped_friction_);
   w.put(s.dropped_viscous_);
@@ -200,6 +203,8 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   r.vec(t.pos_at_build_);
   r.vec(t.radius_at_build_);
   r.vec(t.walls_);
+  r.get(t.cell_);
+  r.get(t.max_radius_at_build_);
   r.vec(t.pairs_);
   r.vec(t.pair_cold_);
   r.vec(t.pair_out_);
@@ -225,6 +230,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   r.get(t.grid_topology_dirty_);
   r.get(t.grid_wall_contacts_);
   r.vec(t.candidates_);
+  r.vec(t.candidate_images_);
   r.get(t.dropped_friction_);
   r.get(t.dropped_viscous_);
   r.get(t.energy_reference_);

@@ -85,7 +85,8 @@ void Scene::raise_overlap(long k, bool wall) const {
        << " of its radius (max_overlap_ratio=" << max_overlap_ratio_ << why;
   } else {
     const PairContact& c = pairs_[k];
-    const Real ov = bodies_.radius[c.i] + bodies_.radius[c.j] - (bodies_.pos[c.j] - bodies_.pos[c.i]).norm();
+    const Real ov = bodies_.radius[c.i] + bodies_.radius[c.j] -
+                    (bodies_.pos[c.j] + pair_shift(k) - bodies_.pos[c.i]).norm();
     os << "blow-up at step " << step_ << ": bodies " << id_of(c.i) << " and " << id_of(c.j)
        << " overlap by " << ov / std::min(bodies_.radius[c.i], bodies_.radius[c.j])
        << " of the smaller radius (max_overlap_ratio=" << max_overlap_ratio_ << why;
@@ -145,6 +146,7 @@ void Scene::step() {
     if (c->enabled && step_ % c->period == 0) c->apply(*this);
   if (need_rebuild()) rebuild();
   disp_valid_ = false;  // until this step's integration measures them again
+  if (cell_.on) refresh_image_offsets();
   long err_pair, err_wall, err_body;
   compute_pair_forces(err_pair);
   if (err_pair != std::numeric_limits<long>::max()) raise_overlap(err_pair, false);
@@ -176,6 +178,10 @@ void Scene::step() {
   for (const WallContact& c : wall_contacts_)
     if (c.active) walls_[c.wall].force -= c.force;
   if (track_energy_ && !energy_reference_set_) set_energy_reference();
+  // The mean field's work on the contacts in this step: it moves j relative to i by L l dt
+  // against the force f on j, -dt sum_c f_c . (L l_c).
+  if (cell_.on && track_energy_)
+    cell_.work -= dt_ * (pair_stress_sum().cwiseProduct(cell_.vel_grad)).sum();
   reduce_and_integrate(err_body);
   if (err_body != std::numeric_limits<long>::max()) {
     const int b = static_cast<int>(err_body);
@@ -198,6 +204,7 @@ void Scene::step() {
       throw BlowUpError(os.str());
     }
   }
+  if (cell_.on) apply_mean_field();
   check_tunnelling();
   for (Wall& w : walls_) {
     // Work done by the wall on the spheres: -(force on wall) . v dt.
@@ -240,7 +247,7 @@ void Scene::check_tunnelling() {
     for (size_t k = 0; k < pairs_.size(); ++k) {
       const PairContact& c = pairs_[k];
       if (c.i != b && c.j != b) continue;
-      const Real ov = r[c.i] + r[c.j] - (x[c.j] - x[c.i]).norm();
+      const Real ov = r[c.i] + r[c.j] - (x[c.j] + pair_shift(k) - x[c.i]).norm();
       if (!(ov <= max_overlap_ratio_ * std::min(r[c.i], r[c.j]))) raise_overlap(k, false);
     }
     for (size_t k = 0; k < wall_contacts_.size(); ++k) {

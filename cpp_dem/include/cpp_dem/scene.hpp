@@ -10,6 +10,7 @@
 #include <vector>
 
 #include "cpp_dem/bodies/body_store.hpp"
+#include "cpp_dem/bodies/cell.hpp"
 #include "cpp_dem/bodies/clump.hpp"
 #include "cpp_dem/bodies/geogrid.hpp"
 #include "cpp_dem/bodies/wall.hpp"
@@ -34,6 +35,7 @@ struct Energies {
   Real plastic = 0;            ///< geogrid links: plastic moments and energy lost at breakage
   Real wall_work = 0;          ///< work done by moving walls on the bodies
   Real external_work = 0;      ///< work of external forces and of imposed (blocked) DOFs
+  Real cell_work = 0;          ///< periodic cell: work of the mean field on the contacts
   Real balance_error = 0;      ///< absolute, J
   Real balance_error_relative = 0;  ///< balance_error / sum of |terms|
 };
@@ -140,6 +142,40 @@ class Scene {
   ClumpRotation clump_rotation() const { return clump_rotation_; }
   void set_clump_rotation(ClumpRotation r) { clump_rotation_ = r; }
 
+  // ---- periodic cell (bodies/cell.hpp, docs/periodic.md) ----------------------------------
+  // Supported: spheres in a cell periodic along any axes, and walls normal to the axes that
+  // are not periodic (with a mean field only along the periodic ones). Not yet: clumps and the
+  // geogrid in a periodic cell (ParameterError).
+  /// Makes the scene periodic along the axes marked in `periodic` (at least one), with cell
+  /// vectors the columns of h (m, det h > 0); the cell is H [0,1)^3. Bodies are wrapped into
+  /// it at the next broad-phase build. Resets the velocity gradient to zero.
+  void set_periodic_cell(const Mat3& h, const std::array<bool, 3>& periodic);
+  bool is_periodic() const { return cell_.on; }
+  const PeriodicCell& cell() const { return cell_; }
+  /// The imposed velocity gradient L (1/s): the cell deforms as dH/dt = L H and every body
+  /// carries the mean velocity L x. Rows and columns of axes that are not periodic must be 0.
+  void set_velocity_gradient(const Mat3& l);
+  /// Whether bodies carry the mean spin axial(skew L) (default on: a rigid rotation of the
+  /// cell then turns every grain with it, frame-indifferently; off: as Yade).
+  void set_mean_spin(bool on);
+  /// Sets the cell vectors to h at once (m), mapping every body affinely with the cell when
+  /// map_bodies (x -> h h_old^-1 x); for preparation (not the mean field of a step).
+  void set_cell_matrix(const Mat3& h, bool map_bodies);
+  /// Love–Weber stress of the pair contacts over the cell volume, Pa, compression positive,
+  /// not symmetrised: (1/V) sum_c f_c (x) l_c, f_c the force on j, l_c = x_j + shift - x_i.
+  Mat3 cell_stress() const;
+  /// The shift of pair contact k's second body (its image is x_j + shift), m; zero without
+  /// a cell.
+  Vec3 pair_shift(size_t k) const {
+    if (pairs_[k].image == kNoShift) return Vec3::Zero();
+    Vec3 s;
+    for (int a = 0; a < 3; ++a) s[a] = image_shift(pairs_[k].image, a);
+    return cell_.h * s;
+  }
+  /// Per body (storage order): the cell vectors it was shifted by when wrapped (its
+  /// unwrapped position is pos + H image).
+  const std::vector<std::array<int, 3>>& body_images() const { return bodies_.image; }
+
   int add_wall(int axis, Real position, int sense, int material);
   int num_walls() const { return static_cast<int>(walls_.size()); }
   Wall& wall(int id);
@@ -240,6 +276,8 @@ class Scene {
   /// Adds a controller; returns its index. Controllers run in the order they were added.
   int add_controller(std::shared_ptr<Controller> c);
   int num_controllers() const { return static_cast<int>(controllers_.size()); }
+  /// Removes every controller (e.g. a preparation's, before the scene is used on).
+  void clear_controllers() { controllers_.clear(); }
   std::shared_ptr<Controller> controller(int id) const;
 
   // ---- running -------------------------------------------------------------------------
@@ -316,6 +354,16 @@ class Scene {
   void push_body(const Vec3& x, Real radius, Real mass, Real inertia, int material,
                  std::uint8_t kind);
   bool need_rebuild() const;
+  // Periodic cell (integrate/cell.cpp, broadphase/periodic.cpp).
+  /// The image offsets H s of the 27 image codes, for this step's pair pass.
+  void refresh_image_offsets();
+  /// After the integration: the step of the mean field (bodies and cell by Cayley's map),
+  /// the mean spin on the orientations, and the broad-phase displacement measure.
+  void apply_mean_field();
+  /// Wraps bodies into the cell along its periodic axes (at a build).
+  void wrap_into_cell();
+  /// sum_c f_c (x) l_c over the active pair contacts, N m (the cell stress times V).
+  Mat3 pair_stress_sum() const;
   /// How far body `slot` has moved (m) since the last broad-phase build, plus any growth of
   /// its radius: the Verlet margin's measure (need_rebuild, the integration and clump passes).
   __attribute__((always_inline)) inline Real displacement_since_build(int slot) const {
@@ -387,7 +435,12 @@ class Scene {
   bool spatial_sort_ = true;
   std::vector<Vec3> pos_at_build_;
   std::vector<Real> radius_at_build_;
+  Real max_radius_at_build_ = 0;  // largest radius at the last build, m (need_rebuild)
   std::vector<Wall> walls_;
+  PeriodicCell cell_;
+  // Scratch of the periodic pair pass: H s for each image code, 4 doubles each (lane 3 zero).
+  std::array<std::array<Real, 4>, 27> image_offset_{};
+  std::vector<std::uint8_t> candidate_images_;  // image code of each candidates_ pair
   std::vector<std::shared_ptr<Controller>> controllers_;
   // Contacts and their adjacency (CSR: for body b, entries adj_off[b]..adj_off[b+1]).
   std::vector<PairContact> pairs_;
@@ -482,6 +535,7 @@ void Scene::for_each_contact_of(ContactKind kind, F&& f) const {
       r.phys = &pair_cold_[k].phys;
       scratch = pair_state(k);
       r.force2 = pair_out_[pair_jslot_[k]].force;
+      r.shift2 = pair_shift(k);
       r.arm1 = bodies_.radius[c.i] - 0.5 * c.overlap;
       r.arm2 = bodies_.radius[c.j] - 0.5 * c.overlap;
       f(static_cast<const ContactRecord&>(r));

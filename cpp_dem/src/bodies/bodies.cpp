@@ -91,6 +91,10 @@ int Scene::add_wall(int axis, Real position, int sense, int material) {
                          ": must be +1 (spheres on the +axis side) or -1");
   require(std::isfinite(position), "position", position, "must be finite (m)");
   this->material(material);
+  if (cell_.on && cell_.periodic[axis])
+    throw ParameterError("axis=" + std::to_string(axis) +
+                         ": the periodic cell repeats along this axis; walls may only be "
+                         "normal to axes that are not periodic");
   Wall w;
   w.axis = axis;
   w.sense = sense;

@@ -10,6 +10,9 @@ int Scene::add_clump(const std::vector<Vec3>& local, const std::vector<Real>& ra
                      int material, Real mass, const Vec3& inertia, const Vec3& com,
                      const Quat& ori, Real stiffness_radius) {
   this->material(material);
+  if (cell_.on)
+    throw ParameterError("clumps: the scene has a periodic cell; clumps in a periodic cell are "
+                         "not supported yet");
   if (local.empty()) throw ParameterError("members: empty; a clump needs at least one sphere");
   if (local.size() != radius.size())
     throw ParameterError("radius: has " + std::to_string(radius.size()) + " values for " +

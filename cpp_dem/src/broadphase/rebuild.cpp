@@ -28,10 +28,26 @@ bool Scene::need_rebuild() const {
   const Real half = 0.5 * (margin_ > 0 ? margin_ : default_margin());
   for (const Wall& w : walls_)
     if (w.moved_since_build > half) return true;
+  // A deforming periodic cell changes every branch vector l by (F_b - I) l, F_b = H H_build^-1:
+  // at most |F_b - I| (2 r_max + margin) for a pair that was out of reach at the build.
+  Real cell_part = 0;
+  Mat3 fb = Mat3::Identity();
+  if (cell_.on && cell_.h != cell_.h_at_build) {
+    fb = cell_.h * cell_.h_at_build.inverse();
+    cell_part = 0.5 * (fb - Mat3::Identity()).norm() * (2 * max_radius_at_build_ + 2 * half);
+  }
   // The last integration pass measured the displacements already (nothing moved since).
-  if (disp_valid_) return max_disp_ > half;
+  if (disp_valid_) return max_disp_ + cell_part > half;
   const int n = num_bodies();
   Real worst = 0;
+  if (cell_part > 0) {
+#pragma omp parallel for reduction(max : worst) schedule(static) if (n > kParallelMin)
+    for (int b = 0; b < n; ++b) {
+      worst = std::max(worst, (bodies_.pos[b] - fb * pos_at_build_[b]).norm() +
+                                  std::max(0.0, bodies_.radius[b] - radius_at_build_[b]));
+    }
+    return worst + cell_part > half;
+  }
 #pragma omp parallel for reduction(max : worst) schedule(static) if (n > kParallelMin)
   for (int b = 0; b < n; ++b) {
     worst = std::max(worst, displacement_since_build(b));
@@ -109,8 +125,15 @@ void Scene::rebuild() {
     sort_bodies_spatially();
   const Real margin = margin_ > 0 ? margin_ : default_margin();
   const int n = num_bodies();
-  grid_.build(bodies_.pos, bodies_.radius, bodies_.kind, margin);
-  grid_.find_pairs(bodies_.pos, bodies_.radius, margin, candidates_);
+  if (cell_.on) {
+    wrap_into_cell();
+    find_periodic_pairs(bodies_.pos, bodies_.radius, bodies_.kind, margin, cell_, candidates_,
+                        candidate_images_);
+  } else {
+    grid_.build(bodies_.pos, bodies_.radius, bodies_.kind, margin);
+    grid_.find_pairs(bodies_.pos, bodies_.radius, margin, candidates_);
+    candidate_images_.assign(candidates_.size(), kNoShift);
+  }
   if (has_clumps()) {
     // Two members of one clump never touch.
     const auto& cl = bodies_.clump;
@@ -119,6 +142,7 @@ void Scene::rebuild() {
                                        return cl[p.first] >= 0 && cl[p.first] == cl[p.second];
                                      }),
                       candidates_.end());
+    candidate_images_.assign(candidates_.size(), kNoShift);  // (clumps: never periodic)
   }
   // Merge the new candidate list with the old contacts, keeping history (both sorted).
   std::vector<PairContact> next;
@@ -126,7 +150,8 @@ void Scene::rebuild() {
   next.reserve(candidates_.size());
   next_cold.reserve(candidates_.size());
   size_t k = 0;
-  for (const auto& ij : candidates_) {
+  for (size_t q = 0; q < candidates_.size(); ++q) {
+    const auto& ij = candidates_[q];
     while (k < pairs_.size() && std::make_pair(pairs_[k].i, pairs_[k].j) < ij) {
       drop_dissipation(pair_cold_[k]);
       ++k;
@@ -141,6 +166,8 @@ void Scene::rebuild() {
       next.push_back(c);
       next_cold.emplace_back();
     }
+    // (The image may change for a kept contact: a body was wrapped into the cell.)
+    next.back().image = candidate_images_[q];
   }
   for (; k < pairs_.size(); ++k) {
     drop_dissipation(pair_cold_[k]);
@@ -208,6 +235,9 @@ void Scene::rebuild() {
   }
   pos_at_build_ = bodies_.pos;
   radius_at_build_ = bodies_.radius;
+  cell_.h_at_build = cell_.h;
+  max_radius_at_build_ = 0;
+  for (Real r : bodies_.radius) max_radius_at_build_ = std::max(max_radius_at_build_, r);
   min_radius_ = -1;  // check_tunnelling takes it again
   for (Wall& w : walls_) w.moved_since_build = 0;
   dirty_ = false;

@@ -124,9 +124,9 @@ void ServoWall::apply(Scene& scene) {
 
 TriaxialController::TriaxialController(std::vector<int> walls, Real gain, Real max_speed)
     : walls_(std::move(walls)), gain_(gain), max_speed_(max_speed) {
-  if (walls_.size() != 6)
-    throw ParameterError("walls: expected the 6 walls of a box (x-, x+, y-, y+, z-, z+), got " +
-                         std::to_string(walls_.size()));
+  if (walls_.size() != 6 && !walls_.empty())
+    throw ParameterError("walls: expected the 6 walls of a box (x-, x+, y-, y+, z-, z+), or "
+                         "none in a periodic cell; got " + std::to_string(walls_.size()));
   check_gain(gain);
   check_speed(max_speed);
 }
@@ -262,9 +262,9 @@ RadiusGrowth::RadiusGrowth(std::vector<int> walls, std::vector<int> bodies, Real
                            Real gain, Real max_strain)
     : walls_(std::move(walls)), bodies_(std::move(bodies)), target_(target_stress), gain_(gain),
       max_strain_(max_strain) {
-  if (walls_.size() != 6)
-    throw ParameterError("walls: expected the 6 walls of a box (x-, x+, y-, y+, z-, z+), got " +
-                         std::to_string(walls_.size()));
+  if (walls_.size() != 6 && !walls_.empty())
+    throw ParameterError("walls: expected the 6 walls of a box (x-, x+, y-, y+, z-, z+), or "
+                         "none in a periodic cell; got " + std::to_string(walls_.size()));
   require(std::isfinite(target_stress) && target_stress > 0, "target_stress", target_stress,
           "must be > 0 (Pa, compressive positive)");
   check_gain(gain);
@@ -279,12 +279,20 @@ void RadiusGrowth::set_target_stress(Real sigma) {
 }
 
 void RadiusGrowth::apply(Scene& scene) {
-  const auto st = TriaxialController::wall_stresses(scene, walls_);
-  Real mean = 0;
-  for (Real x : st) mean += x;
-  sigma_ = mean / 6.0;
-  const Vec3 size = TriaxialController::box_size(scene, walls_);
-  const Real volume = size[0] * size[1] * size[2];
+  Real volume;
+  if (walls_.empty()) {
+    if (!scene.is_periodic())
+      throw ParameterError("RadiusGrowth: no walls given and the scene has no periodic cell");
+    sigma_ = scene.cell_stress().trace() / 3.0;
+    volume = scene.cell().volume();
+  } else {
+    const auto st = TriaxialController::wall_stresses(scene, walls_);
+    Real mean = 0;
+    for (Real x : st) mean += x;
+    sigma_ = mean / 6.0;
+    const Vec3 size = TriaxialController::box_size(scene, walls_);
+    volume = size[0] * size[1] * size[2];
+  }
   const auto& r = scene.radii();
   // Stress increase per unit radius strain from the current contacts, Pa.
   Real s = 0;
@@ -334,6 +342,97 @@ void RadiusGrowth::load_state(const std::vector<Real>& s) {
   sigma_ = s[3];
   total_ = s[4];
   last_ = s[5];
+}
+
+// ---- periodic cell ----------------------------------------------------------------------
+
+CellController::CellController(Real gain, Real max_rate) : gain_(gain), max_rate_(max_rate) {
+  check_gain(gain);
+  set_max_rate(max_rate);
+}
+
+void CellController::check_index(int r, int c) const {
+  if (r < 0 || r > 2 || c < 0 || c > 2)
+    throw ParameterError("component=(" + std::to_string(r) + ", " + std::to_string(c) +
+                         "): row and column must be 0, 1 or 2 (x, y, z)");
+}
+
+void CellController::set_rate(int r, int c, Real rate) {
+  check_index(r, c);
+  require(std::isfinite(rate), "rate", rate, "must be finite (1/s)");
+  mode_[3 * r + c] = Mode::Rate;
+  goal_[3 * r + c] = rate;
+}
+
+void CellController::set_stress(int r, int c, Real sigma) {
+  check_index(r, c);
+  require(std::isfinite(sigma), "stress", sigma, "must be finite (Pa, compression positive)");
+  if (r != c && mode_[3 * c + r] == Mode::Stress)
+    throw ParameterError("stress (" + std::to_string(r) + ", " + std::to_string(c) +
+                         "): component (" + std::to_string(c) + ", " + std::to_string(r) +
+                         ") is stress-controlled already; both act on the same shear stress "
+                         "(set one of them to a rate)");
+  mode_[3 * r + c] = Mode::Stress;
+  goal_[3 * r + c] = sigma;
+}
+
+void CellController::set_gain(Real g) {
+  check_gain(g);
+  gain_ = g;
+}
+
+void CellController::set_max_rate(Real v) {
+  require(std::isfinite(v) && v > 0, "max_rate", v, "must be > 0 (1/s)");
+  max_rate_ = v;
+}
+
+void CellController::apply(Scene& scene) {
+  if (!scene.is_periodic())
+    throw ParameterError("CellController: the scene has no periodic cell (set_periodic_cell)");
+  const PeriodicCell& cell = scene.cell();
+  const Real volume = cell.volume();
+  sigma_ = scene.cell_stress();
+  // Affine stiffness of each component, Pa.
+  stiff_.setZero();
+  const auto& x = scene.positions();
+  scene.for_each_contact_of(ContactKind::Pair, [&](const ContactRecord& c) {
+    if (!c.active) return;
+    Real kn, ks;
+    c.stiffness(kn, ks);
+    const Vec3 l = x[c.body2] + c.shift2 - x[c.body1];
+    const Vec3& n = c.state->normal;
+    for (int r = 0; r < 3; ++r) {
+      const Real krr = kn * n[r] * n[r] + ks * (1 - n[r] * n[r]);
+      for (int q = 0; q < 3; ++q) stiff_(r, q) += krr * l[q] * l[q];
+    }
+  });
+  stiff_ /= volume;
+  Mat3 l = cell.vel_grad;
+  const Real span = scene.dt() * period;
+  error_ = 0;
+  for (int r = 0; r < 3; ++r)
+    for (int q = 0; q < 3; ++q) {
+      const int k = 3 * r + q;
+      if (!cell.periodic[r] || !cell.periodic[q]) {
+        l(r, q) = 0;
+        continue;
+      }
+      if (mode_[k] == Mode::Rate) {
+        l(r, q) = goal_[k];
+        continue;
+      }
+      // sigma_rq (compression positive) falls as L_rq extends: d sigma = -C d eps.
+      const Real s = r == q ? sigma_(r, q) : 0.5 * (sigma_(r, q) + sigma_(q, r));
+      const Real miss = goal_[k] - s;
+      error_ = std::max(error_, std::abs(miss) / std::max(std::abs(goal_[k]), 1.0));
+      Real rate;
+      if (stiff_(r, q) > 0) rate = -gain_ * miss / (stiff_(r, q) * span);
+      else rate = miss > 0 ? -max_rate_ : miss < 0 ? max_rate_ : 0.0;
+      rate = std::clamp(rate, -max_rate_, max_rate_);
+      limit_[k].observe(rate, max_rate_, s, goal_[k]);
+      l(r, q) = rate;
+    }
+  scene.set_velocity_gradient(l);
 }
 
 }  // namespace cpp_dem

@@ -20,6 +20,9 @@ int Scene::add_grid_nodes(const std::vector<Vec3>& pos, Real radius,
                           const std::vector<Real>& mass, const std::vector<Real>& inertia,
                           int material) {
   this->material(material);
+  if (cell_.on)
+    throw ParameterError("grid nodes: the scene has a periodic cell; a geogrid in a periodic "
+                         "cell is not supported yet");
   require(std::isfinite(radius) && radius > 0, "radius", radius, "must be > 0 (m)");
   if (mass.size() != pos.size() || inertia.size() != pos.size())
     throw ParameterError("mass, inertia: need one value per node (" +

@@ -141,6 +141,7 @@ Energies Scene::energies() const {
   for (const GridLink& l : links_) e.plastic += l.dissip_plastic;
   e.elastic = stored_elastic_energy();
   for (const Wall& w : walls_) e.wall_work += w.work;
+  e.cell_work = cell_.work;
   if (!track_energy_ || !energy_reference_set_) return e;
   // The potential of gravity is taken at the positions where the kinetic energy was sampled
   // (the start of the last step): move back by v dt.
@@ -149,11 +150,11 @@ Energies Scene::energies() const {
   for (int c = 0; c < clumps_.size(); ++c)
     e.gravity_potential += clumps_.mass[c] * gravity_.dot(clumps_.vel[c]) * dt_;
   const Real now = e.kinetic + e.elastic + e.gravity_potential + e.friction + e.viscous +
-                   e.local_damping + e.plastic - e.wall_work - e.external_work;
+                   e.local_damping + e.plastic - e.wall_work - e.external_work - e.cell_work;
   e.balance_error = now - energy_reference_;
   const Real scale = std::abs(e.kinetic) + std::abs(e.elastic) + std::abs(e.gravity_potential) +
                      e.friction + e.viscous + e.local_damping + e.plastic + std::abs(e.wall_work) +
-                     std::abs(e.external_work) + std::abs(energy_reference_);
+                     std::abs(e.external_work) + std::abs(e.cell_work) + std::abs(energy_reference_);
   e.balance_error_relative = scale > 0 ? std::abs(e.balance_error) / scale : 0.0;
   return e;
 }
@@ -177,6 +178,7 @@ void Scene::reset_energy() {
   for (GridLink& l : links_) l.dissip_plastic = 0;
   dropped_plastic_ = 0;
   for (Wall& w : walls_) w.work = 0;
+  cell_.work = 0;
   // The reference (kinetic + elastic) is taken in the next step, once the contacts of the
   // current positions have been evaluated, so energy stored in initial overlaps counts.
   energy_reference_set_ = false;

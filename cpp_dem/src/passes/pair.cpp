@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <type_traits>
 
 #include "cpp_dem/core/parallel.hpp"
 #include "cpp_dem/core/simd.hpp"
@@ -107,18 +108,25 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
   PairOutput* const out_j = pair_out_.data();
   Real* const out_fi = pair_fi_.data()->data();
   Real* const out_ti = pair_ti_.data()->data();
+  // Periodic cell: j is seen at its image, and the mean field's velocity L d and spin are
+  // added to the stored fluctuations (bodies/cell.hpp).
+  const bool periodic = cell_.on;
+  const Mat3 lgrad = cell_.vel_grad;
+  const Vec3 spin = cell_.spin();
   for (int i = b0; i < b1; ++i) {
     const int k0 = ioff[i], k1 = ioff[i + 1];
     // i's share: -force and torque_i summed over its contacts.
     V fi = ops.zero(), ti = ops.zero();
     if (k0 < k1) {
-      const V xi = ops.load(pos[i]), vi = ops.load(vel[i]), wi = ops.load(angvel[i]);
+      const V xi = ops.load(pos[i]), vi = ops.load(vel[i]);
+      const V wi = periodic ? V(ops.load(angvel[i]) + spin) : ops.load(angvel[i]);
       const Real ri = radius[i];
       for (int k = k0; k < k1; ++k) {
         PairContact& c = pairs[k];
         PairOutput& o = out_j[jslot[k]];
         const int j = c.j;
-        const V d = ops.load(pos[j]) - xi;
+        V d = ops.load(pos[j]) - xi;
+        if (periodic) d += ops.load_padded(image_offset_[c.image].data());
         const Real dist2 = ops.dot(d, d);
         const Real rj = radius[j];
         const Real rsum = ri + rj;
@@ -134,11 +142,14 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
         }
         if (!c.active || c.phys_version != version) update_phys(c, pair_cold_[k]);
         c.active = true;
-        const V wj = ops.load(angvel[j]);
+        V wj = ops.load(angvel[j]), vj = ops.load(vel[j]);
+        if (periodic) {
+          wj += spin;
+          vj += lgrad * d;
+        }
         V n, rel_vel;
         Real li, lj;
-        sphere_sphere_frame<Ops>(d, dist, overlap, ri, rj, vi, ops.load(vel[j]), wi, wj, n, li,
-                                 lj, rel_vel);
+        sphere_sphere_frame<Ops>(d, dist, overlap, ri, rj, vi, vj, wi, wj, n, li, lj, rel_vel);
         if (!c.simple) {
           const auto on_i = general_pair(k, o, ops.vec(n), overlap, li, lj, ops.vec(rel_vel),
                                          ops.vec(wi + wj), ops.vec(wj - wi));
@@ -202,22 +213,33 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   PairOutput* const out_j = pair_out_.data();
   Real* const out_fi = pair_fi_.data()->data();
   Real* const out_ti = pair_ti_.data()->data();
+  // Periodic cell: j is seen at its image, and the mean field's velocity L d and spin are
+  // added to the stored fluctuations (bodies/cell.hpp). The loop is instantiated twice, so
+  // the cell costs the wall-bounded scene nothing.
+  const V4 l0 = v4(cell_.vel_grad.col(0)), l1 = v4(cell_.vel_grad.col(1)),
+           l2 = v4(cell_.vel_grad.col(2)), spin = v4(cell_.spin());
+  const Real* const offsets = image_offset_.data()->data();
 #pragma omp parallel reduction(min : err) if (nc > kParallelMin)
   {
     const auto [t, nt] = thread_and_team();
     const auto [b0, b1] = pair_bodies_of_thread(t, nt);
+    const auto loop = [&](auto periodic_tag) __attribute__((always_inline)) {
+    constexpr bool kPeriodic = decltype(periodic_tag)::value;
     for (int i = b0; i < b1; ++i) {
       const int k0 = ioff[i], k1 = ioff[i + 1];
       // i's share: -force and torque_i summed over its contacts.
       V4 fi = V4{}, ti = V4{};
       if (k0 < k1) {
-        const V4 xi = v4(pos[i]), vi = v4(vel[i]), wi = v4(angvel[i]);
+        const V4 xi = v4(pos[i]), vi = v4(vel[i]);
+        V4 wi = v4(angvel[i]);
+        if constexpr (kPeriodic) wi += spin;
         const Real ri = radius[i];
         for (int k = k0; k < k1; ++k) {
           PairContact& c = pairs[k];
           PairOutput& o = out_j[jslot[k]];
           const int j = c.j;
-          const V4 d = v4(pos[j]) - xi;
+          V4 d = v4(pos[j]) - xi;
+          if constexpr (kPeriodic) d += load4(offsets + 4 * c.image);
           const Real dist2 = dot3(d, d);
           const Real rj = radius[j];
           const Real rsum = ri + rj;
@@ -233,11 +255,15 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           }
           if (!c.active || c.phys_version != version) update_phys(c, pair_cold_[k]);
           c.active = true;
-          const V4 wj = v4(angvel[j]);
+          V4 wj = v4(angvel[j]), vj = v4(vel[j]);
+          if constexpr (kPeriodic) {
+            wj += spin;
+            vj += l0 * d[0] + l1 * d[1] + l2 * d[2];
+          }
           V4 n, rel_vel;
           Real li, lj;
-          sphere_sphere_frame<WideOps>(d, dist, overlap, ri, rj, vi, v4(vel[j]), wi, wj, n, li,
-                                       lj, rel_vel);
+          sphere_sphere_frame<WideOps>(d, dist, overlap, ri, rj, vi, vj, wi, wj, n, li, lj,
+                                       rel_vel);
           if (!c.simple) {
             const auto on_i = general_pair(k, o, vec3(n), overlap, li, lj, vec3(rel_vel),
                                            vec3(wi + wj), vec3(wj - wi));
@@ -265,6 +291,9 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
       store4(out_fi + 4L * i, fi);  // lane 3 is zero: every term had a zero lane 3
       store4(out_ti + 4L * i, ti);
     }
+    };
+    if (cell_.on) loop(std::true_type{});
+    else loop(std::false_type{});
   }
   err_contact = err;
 }

@@ -3,6 +3,7 @@
 // here, to push() and to for_each_array(); the passes read the arrays directly.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <vector>
 
@@ -33,6 +34,9 @@ struct BodyStore {
   std::vector<std::uint8_t> blocked;  ///< blocked DOFs (Dof mask)
   std::vector<std::uint8_t> kind;     ///< BodyKind
   std::vector<int> clump;             ///< index of the clump a member belongs to, -1: free
+  /// Periodic cell: how many cell vectors the body was shifted by when wrapped into the cell
+  /// (its unwrapped position is pos + H image); zero without a cell.
+  std::vector<std::array<int, 3>> image;
   // Energy accumulators per body (written only when the scene tracks energy).
   std::vector<Real> ke;                    ///< kinetic energy at the last step, J
   std::vector<Real> damp_dissip;           ///< dissipated by local damping, J
@@ -58,6 +62,7 @@ struct BodyStore {
     blocked.push_back(DOF_NONE);
     kind.push_back(k);
     clump.push_back(-1);
+    image.push_back({0, 0, 0});
     ke.push_back(0);
     damp_dissip.push_back(0);
     ext_work.push_back(0);
@@ -79,7 +84,7 @@ struct BodyStore {
   static void visit(Self& b, F& f) {
     f(b.pos), f(b.vel), f(b.angvel), f(b.force), f(b.torque), f(b.ext_force), f(b.ext_torque);
     f(b.ori), f(b.radius), f(b.mass), f(b.inertia), f(b.material), f(b.blocked), f(b.kind);
-    f(b.clump);
+    f(b.clump), f(b.image);
     f(b.ke), f(b.damp_dissip), f(b.ext_work), f(b.pos_at_energy_reset);
   }
 

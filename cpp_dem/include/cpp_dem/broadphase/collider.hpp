@@ -5,6 +5,7 @@
 #include <utility>
 #include <vector>
 
+#include "cpp_dem/bodies/cell.hpp"
 #include "cpp_dem/core/types.hpp"
 
 namespace cpp_dem {
@@ -33,5 +34,15 @@ class CellGrid {
   std::vector<int> cell_start_, cell_bodies_, body_cell_;
   std::vector<std::vector<int>> per_body_;  // reused buffers, one per body
 };
+
+/// The broad phase of a periodic cell (broadphase/periodic.cpp): every pair (i < j) of spheres
+/// (skip 0) with |x_j + H s - x_i| < r_i + r_j + margin for an image shift s, sorted by
+/// (i, j), with the image code of s in `image` (one per pair). Bodies are binned by their
+/// reduced coordinates H^-1 x; along a periodic axis the cell must be at least 2 (2 r_max +
+/// margin) thick, so each pair has at most one image in reach (ParameterError otherwise). The result does not depend on the number of threads.
+void find_periodic_pairs(const std::vector<Vec3>& pos, const std::vector<Real>& radius,
+                         const std::vector<std::uint8_t>& skip, Real margin,
+                         const PeriodicCell& cell, std::vector<std::pair<int, int>>& out,
+                         std::vector<std::uint8_t>& image);
 
 }  // namespace cpp_dem

@@ -27,6 +27,9 @@ struct ContactRecord {
   /// a pair contact (stored in a hot and a cold part) a copy valid during the visit.
   const ContactState* state = nullptr;
   Vec3 force2 = Vec3::Zero();  ///< force on side 2 in the last step, N
+  /// A pair contact in a periodic cell: side 2 is seen at its image x_2 + shift (m); zero
+  /// otherwise.
+  Vec3 shift2 = Vec3::Zero();
   Real arm1 = 0;         ///< branch length of side 1, m (a wall: 0; a virtual sphere: R_c - d/2)
   Real arm2 = 0;         ///< branch length of side 2, R - overlap/2, m
 

@@ -2,6 +2,7 @@
 // part, and the per-step output grouped by the second body.
 #pragma once
 
+#include "cpp_dem/bodies/cell.hpp"
 #include "cpp_dem/laws/contact_law.hpp"
 
 namespace cpp_dem {
@@ -17,6 +18,8 @@ struct PairContact {
   /// The law is linear without viscous damping and without rolling resistance: the pair
   /// pass runs the short kernel, which reads only this record.
   bool simple = false;
+  /// The periodic image of j the contact sees (bodies/cell.hpp's image code; kNoShift: j).
+  std::uint8_t image = kNoShift;
   int phys_version = -1;        ///< scene phys version the phys was computed at
   Real kn = 0;                  ///< copy of ContactPhys::kn
   Real ks = 0;                  ///< copy of ContactPhys::ks

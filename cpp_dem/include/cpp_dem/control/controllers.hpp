@@ -189,7 +189,8 @@ class TriaxialController : public Controller, public StatefulController {
 /// 1 + max_strain] per call; with no contact, m = 1 + max_strain. Masses follow the radii.
 class RadiusGrowth : public Controller, public StatefulController {
  public:
-  /// walls: the six box walls; bodies: ids of the spheres that grow (empty: all spheres);
+  /// walls: the six box walls, or none in a periodic cell (the stress is then the mean normal
+  /// stress of the cell, Scene::cell_stress); bodies: ids of the spheres that grow (empty: all spheres);
   /// target_stress Pa (> 0); gain in (0, 1]; max_strain in (0, 0.1].
   RadiusGrowth(std::vector<int> walls, std::vector<int> bodies, Real target_stress, Real gain,
                Real max_strain);
@@ -210,6 +211,55 @@ class RadiusGrowth : public Controller, public StatefulController {
   Real target_, gain_, max_strain_;
   Real sigma_ = 0, total_ = 1, last_ = 1;
   std::vector<Real> radii_;  // scratch
+};
+
+/// Mixed stress and strain-rate control of a periodic cell (as Yade's PeriTriaxController and
+/// PFC's periodic servo): each component (r, c) of the velocity gradient L is either imposed
+/// (a rate, 1/s; tension positive, as L itself) or servo-controlled so that the cell stress
+/// component sigma_rc (Scene::cell_stress, Pa, compression positive) reaches a target. The
+/// servo's correction per call is gain (sigma_target - sigma_rc) / C_rc of strain, C_rc the
+/// affine stiffness (1/V) sum_c l_c,c^2 K_c,rr of the contact network (K_c = k_n n n +
+/// k_s (I - n n)), spread over the `period` steps to the next call and capped to max_rate.
+/// Without contacts a stress-controlled component moves at the cap towards its target.
+class CellController : public Controller {
+ public:
+  enum class Mode : int { Rate = 0, Stress = 1 };
+  /// gain in (0, 1]; max_rate: the cap on |L_rc| of servo-controlled components, 1/s (> 0).
+  /// Every component starts rate-controlled at 0.
+  CellController(Real gain, Real max_rate);
+  void apply(Scene& scene) override;
+  /// Imposes L_rc = rate (1/s; r, c in 0..2).
+  void set_rate(int r, int c, Real rate);
+  /// Servo-controls sigma_rc to sigma (Pa, compression positive) through L_rc. Only one of
+  /// (r, c) and (c, r) may be stress-controlled: both act on the same stress.
+  void set_stress(int r, int c, Real sigma);
+  Mode mode(int r, int c) const { return mode_[3 * r + c]; }
+  Real goal(int r, int c) const { return goal_[3 * r + c]; }
+  void set_gain(Real g);
+  Real gain() const { return gain_; }
+  void set_max_rate(Real v);
+  Real max_rate() const { return max_rate_; }
+  /// Cell stress at the last call, Pa (compression positive, not symmetrised).
+  const Mat3& measured_stress() const { return sigma_; }
+  /// The affine stiffness C_rc at the last call, Pa.
+  const Mat3& stiffness() const { return stiff_; }
+  /// Largest |sigma_rc - target| / max(|target|, 1 Pa) over the stress-controlled
+  /// components at the last call, -.
+  Real stress_error() const { return error_; }
+  /// Per component (3 r + c): calls at the rate cap while drifting from the target.
+  const std::array<LimitWatch, 9>& limits() const { return limit_; }
+  void clear_limits() {
+    for (auto& w : limit_) w.clear();
+  }
+
+ private:
+  void check_index(int r, int c) const;
+  std::array<Mode, 9> mode_{};
+  std::array<Real, 9> goal_{};
+  Real gain_, max_rate_;
+  Mat3 sigma_ = Mat3::Zero(), stiff_ = Mat3::Zero();
+  Real error_ = 0;
+  std::array<LimitWatch, 9> limit_{};
 };
 
 }  // namespace cpp_dem

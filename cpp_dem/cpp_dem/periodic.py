@@ -1,0 +1,208 @@
+"""Periodic cells: packings, preparation and mixed stress/strain control (docs/periodic.md).
+
+A periodic scene (``Scene.set_periodic_cell``) repeats its cell H [0,1)^3 in space; the cell
+deforms under the velocity gradient L (``Scene.velocity_gradient``, 1/s, tension positive)
+and every grain carries the mean field L x. ``CellController`` drives each component of L
+either at an imposed rate or so that a cell stress component reaches a target (Yade's
+PeriTriaxController, PFC's periodic servo).
+
+Stresses here are compression positive (as ``measure``); strains and L tension positive (the
+continuum convention), since they are the cell's kinematics. SI units.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from . import _core, measure, prep
+from ._core import CellController, ParameterError
+from .packing import loose_cloud
+from .scene import Scene
+
+
+def cube_cell(edge: float) -> np.ndarray:
+    """The cell matrix (columns: cell vectors, m) of a cube of edge ``edge`` (m)."""
+    if not (math.isfinite(edge) and edge > 0):
+        raise ParameterError(f"edge={edge}: must be > 0 (m)")
+    return np.eye(3) * float(edge)
+
+
+def periodic_cloud(radii, edge: float, *, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
+    """A loose random cloud of spheres (radii, m) in the cube cell [0, edge)^3 (m), without
+    overlaps, also across the periodic faces (random sequential addition, seeded)."""
+    cube_cell(edge)
+    return loose_cloud(radii, (0.0, 0.0, 0.0), (edge, edge, edge), seed=seed)
+
+
+def periodic_scene(centers, radii, cell, *, material, damping: float = 0.7,
+                   periodic=(True, True, True), dt_safety: float = 0.5,
+                   dt_period: int = 500) -> Scene:
+    """A Scene with the spheres (centres (n, 3) m, radii (n,) m) in the periodic ``cell``
+    (3 x 3, columns the cell vectors, m) along the ``periodic`` axes, Cundall local damping
+    ``damping`` (-) and the automatic time step (safety ``dt_safety``, updated every
+    ``dt_period`` steps). ``material`` is a Material."""
+    s = Scene(local_damping=damping)
+    m = s.add_material(material)
+    s.add_spheres(centers, radii, material=m)
+    s.set_periodic_cell(np.asarray(cell, dtype=float), tuple(bool(p) for p in periodic))
+    s.set_auto_timestep(dt_safety, dt_period)
+    return s
+
+
+def cell_controller(scene, *, gain: float = 0.3, max_rate: float | None = None) -> CellController:
+    """The scene's CellController (the last one added), or a new one added to it. The default
+    rate cap lets the cell strain 1e-4 of a grain radius relative to the cell size per step
+    (quasi-static), as ``prep.default_max_speed`` does for walls."""
+    for i in range(scene.num_controllers() - 1, -1, -1):
+        c = scene.controller(i)
+        if isinstance(c, CellController):
+            return c
+    if max_rate is None:
+        max_rate = default_max_rate(scene)
+    c = CellController(gain=gain, max_rate=max_rate)
+    scene.add_controller(c)
+    return c
+
+
+def default_max_rate(scene, fraction: float = 1e-4) -> float:
+    """A rate cap for the cell servo, 1/s: the cell's smallest thickness changes by at most
+    ``fraction`` of the mean radius per step."""
+    r = float(np.mean(np.asarray(scene.radii)))
+    thick = float(np.min(measure.box_size(scene, ())))
+    return fraction * r / thick / scene.dt
+
+
+def deformation_gradient(scene) -> np.ndarray:
+    """F = H H_ref^-1 (-): the cell's deformation since it was set."""
+    return np.asarray(scene.cell_matrix) @ np.linalg.inv(np.asarray(scene.cell_reference))
+
+
+def small_strain(scene) -> np.ndarray:
+    """The symmetric part of F - I (-, tension positive): the small-strain tensor of the cell
+    since it was set."""
+    f = deformation_gradient(scene) - np.eye(3)
+    return 0.5 * (f + f.T)
+
+
+def drive_cell(scene, *, stress=None, rate=None, tol: float = 0.01, unbalanced: float = 0.01,
+               check_every: int = 200, max_steps: int = 200_000, gain: float = 0.3,
+               max_rate: float | None = None, steps: int | None = None,
+               callback=None) -> prep.StageResult:
+    """Mixed control of the cell. ``stress`` maps components (r, c) to targets (Pa,
+    compression positive), or is a 3-vector of normal stresses (sigma_x, sigma_y, sigma_z);
+    ``rate`` maps components to imposed rates of L (1/s, tension positive). Components named
+    in neither are held (rate 0).
+
+    Without ``steps``: runs until every stress target is within ``tol`` (relative) and the
+    unbalanced force is below ``unbalanced`` (or ``max_steps``). With ``steps``: runs exactly
+    that many steps (a loading stage). Returns a StageResult (``extra['controller']``,
+    ``extra['stress']`` the full cell stress, Pa)."""
+    targets: dict = {}
+    if stress is not None:
+        if isinstance(stress, dict):
+            targets = {tuple(int(i) for i in k): float(v) for k, v in stress.items()}
+        else:
+            t = np.asarray(stress, dtype=float)
+            if t.shape != (3,):
+                raise ParameterError(f"stress={stress!r}: a dict {{(r, c): Pa}} or 3 normal "
+                                     "stresses (Pa)")
+            targets = {(a, a): float(t[a]) for a in range(3)}
+    rates = {tuple(int(i) for i in k): float(v) for k, v in (rate or {}).items()}
+    both = set(targets) & set(rates)
+    if both:
+        raise ParameterError(f"components {sorted(both)}: given both a stress and a rate")
+    c = cell_controller(scene, gain=gain, max_rate=max_rate)
+    if max_rate is not None:
+        c.max_rate = max_rate
+    for r in range(3):
+        for q in range(3):
+            if (r, q) in targets:
+                c.set_stress(r, q, targets[(r, q)])
+            else:
+                c.set_rate(r, q, rates.get((r, q), 0.0))
+    c.enabled = True
+    start = scene.step_count
+    ok = False
+    u = float("nan")
+    while scene.step_count - start < (steps if steps is not None else max_steps):
+        left = (steps if steps is not None else max_steps) - (scene.step_count - start)
+        scene.run(min(check_every, left))
+        u = float(scene.unbalanced_force())
+        if callback is not None:
+            callback(scene)
+        if steps is None:
+            sig = np.asarray(scene.cell_stress())
+            sym = 0.5 * (sig + sig.T)
+            ok = all(abs(sym[k] - v) <= tol * max(abs(v), 1.0) for k, v in targets.items())
+            ok = ok and u < unbalanced
+            if ok:
+                break
+    if steps is not None:
+        ok = True
+    sig = np.asarray(scene.cell_stress())
+    ax = np.diag(sig).copy()
+    return prep.StageResult(ok, scene.step_count - start, ax, float(ax.mean()), u,
+                            measure.porosity(scene, ()), {"controller": c, "stress": sig})
+
+
+def prepare_periodic(n: int, *, material, stress: float, radius_mean: float,
+                     radius_spread: float = 0.2, seed: int = 1, solid_fraction: float = 0.25,
+                     porosity: float | None = None, prep_friction_deg: float | None = None,
+                     damping: float = 0.7, tol: float = 0.01, unbalanced: float = 0.01,
+                     max_steps: int = 200_000, log=None) -> Scene:
+    """A periodic cube of ``n`` spheres (radii uniform in radius_mean (1 +- radius_spread), m)
+    prepared to an isotropic ``stress`` (Pa): a loose cloud at ``solid_fraction``, radius
+    growth to the stress in the fixed cell (at ``prep_friction_deg`` if given, then the
+    material's friction), and an isotropic cell servo to equilibrium. With ``porosity`` (-)
+    REFD (000 §2.3) densifies it to that porosity instead. The preparation's controllers are
+    removed at the end; the scene is at rest at the stress."""
+    if n < 2:
+        raise ParameterError(f"n={n}: need at least 2 spheres")
+    if not (0 < radius_spread < 1):
+        raise ParameterError(f"radius_spread={radius_spread}: must be in (0, 1)")
+    if not (0 < solid_fraction <= 0.3):
+        raise ParameterError(f"solid_fraction={solid_fraction}: must be in (0, 0.3] (random "
+                             "sequential addition jams above it)")
+    rng = np.random.default_rng(seed)
+    radii = radius_mean * (1.0 + radius_spread * (2.0 * rng.random(n) - 1.0))
+    edge = float((np.sum(4.0 / 3.0 * np.pi * radii**3) / solid_fraction) ** (1.0 / 3.0))
+    centers, radii = periodic_cloud(radii, edge, seed=seed)
+    scene = periodic_scene(centers, radii, cube_cell(edge), material=material, damping=damping)
+    if porosity is not None:
+        prep.refd(scene, (), 0, stress=stress, porosity=porosity, tol=tol,
+                  unbalanced=unbalanced, max_steps_per_stage=max_steps, log=log)
+    else:
+        if prep_friction_deg is not None:
+            idx = prep.set_friction(scene, np.arange(n), scene.material(0), prep_friction_deg)
+            r = prep.grow_to_stress(scene, (), stress, tol=tol, unbalanced=unbalanced,
+                                    max_steps=max_steps)
+            if log:
+                log(f"growth at {prep_friction_deg} deg: {r.mean_stress:.4g} Pa, porosity "
+                    f"{r.porosity:.4f}")
+            for b in range(n):
+                scene.set_body_material(b, 0)
+            del idx
+        r = prep.grow_to_stress(scene, (), stress, tol=tol, unbalanced=unbalanced,
+                                max_steps=max_steps)
+        if log:
+            log(f"growth: {r.mean_stress:.4g} Pa, porosity {r.porosity:.4f}")
+    res = drive_cell(scene, stress=(stress, stress, stress), tol=tol, unbalanced=unbalanced,
+                     max_steps=max_steps)
+    if log:
+        log(f"isotropic servo: {res.mean_stress:.4g} Pa, porosity {res.porosity:.4f}, "
+            f"unbalanced {res.unbalanced_force:.3g}, converged {res.converged}")
+    if not res.converged:
+        raise RuntimeError(f"prepare_periodic: the cell did not settle at {stress} Pa in "
+                           f"{max_steps} steps (reached {res.axis_stresses} Pa, unbalanced "
+                           f"{res.unbalanced_force:.3g}); raise max_steps or loosen tol")
+    scene.clear_controllers()
+    scene.velocity_gradient = np.zeros((3, 3))
+    return scene
+
+
+__all__ = ["cube_cell", "periodic_cloud", "periodic_scene", "cell_controller",
+           "default_max_rate", "deformation_gradient", "small_strain", "drive_cell",
+           "prepare_periodic", "CellController"]
+_ = _core  # (the compiled module backs CellController)
