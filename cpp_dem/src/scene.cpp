@@ -204,7 +204,7 @@ void Scene::step() {
       throw BlowUpError(os.str());
     }
   }
-  if (cell_.on) apply_mean_field();
+  if (cell_.on) advance_cell();  // (the bodies took the mean field in the integration)
   check_tunnelling();
   for (Wall& w : walls_) {
     // Work done by the wall on the spheres: -(force on wall) . v dt.

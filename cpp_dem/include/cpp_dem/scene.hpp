@@ -357,9 +357,11 @@ class Scene {
   // Periodic cell (integrate/cell.cpp, broadphase/periodic.cpp).
   /// The image offsets H s of the 27 image codes, for this step's pair pass.
   void refresh_image_offsets();
-  /// After the integration: the step of the mean field (bodies and cell by Cayley's map),
-  /// the mean spin on the orientations, and the broad-phase displacement measure.
-  void apply_mean_field();
+  /// The mean field's map of this step for the integration pass (which applies it to each
+  /// body); advance_cell then moves the cell itself.
+  MeanFieldStep mean_field_step() const;
+  /// After the integration: the cell takes the step's map, H -> A H.
+  void advance_cell();
   /// Wraps bodies into the cell along its periodic axes (at a build).
   void wrap_into_cell();
   /// sum_c f_c (x) l_c over the active pair contacts, N m (the cell stress times V).

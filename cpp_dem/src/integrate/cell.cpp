@@ -130,36 +130,22 @@ Mat3 Scene::cell_stress() const {
   return pair_stress_sum() / cell_.volume();
 }
 
-void Scene::apply_mean_field() {
-  const Mat3 a = cell_.step_map(dt_);
-  const bool moving = !cell_.vel_grad.isZero(0);
-  const int n = num_bodies();
-  // A fixed cell that has not changed since the build: the integration pass measured the
-  // displacements already.
-  if (!moving && cell_.h == cell_.h_at_build) return;
-  if (moving) {
-    cell_.h = a * cell_.h;
-    const Vec3 w = cell_.spin();
-    const Real angle = w.norm() * dt_;
-    const Quat q = angle > 0 ? Quat(Eigen::AngleAxisd(angle, w / w.norm())) : Quat::Identity();
-#pragma omp parallel for schedule(static) if (n > kParallelMin)
-    for (int b = 0; b < n; ++b) {
-      bodies_.pos[b] = a * bodies_.pos[b];
-      if (angle > 0) bodies_.ori[b] = q * bodies_.ori[b];
-    }
+MeanFieldStep Scene::mean_field_step() const {
+  MeanFieldStep m;
+  m.a = cell_.step_map(dt_);
+  m.fb = m.a * cell_.h * cell_.h_at_build.inverse();
+  const Vec3 w = cell_.spin();
+  const Real angle = w.norm() * dt_;
+  if (angle > 0) {
+    m.rotate = true;
+    m.spin = Quat(Eigen::AngleAxisd(angle, w / w.norm()));
   }
-  // The broad phase's measure: how far each body moved since the build beyond the cell's
-  // own deformation, x - F_b x_build with F_b = H H_build^-1 (need_rebuild adds F_b's share).
-  const Mat3 fb = cell_.h * cell_.h_at_build.inverse();
-  Real worst = 0;
-#pragma omp parallel for reduction(max : worst) schedule(static) if (n > kParallelMin)
-  for (int b = 0; b < n; ++b) {
-    const Real d = (bodies_.pos[b] - fb * pos_at_build_[b]).norm() +
-                   std::max(0.0, bodies_.radius[b] - radius_at_build_[b]);
-    worst = std::max(worst, d);
-  }
-  max_disp_ = worst;
-  disp_valid_ = true;
+  return m;
+}
+
+void Scene::advance_cell() {
+  if (cell_.vel_grad.isZero(0)) return;
+  cell_.h = cell_.step_map(dt_) * cell_.h;
 }
 
 }  // namespace cpp_dem

@@ -55,6 +55,17 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
   const bool renormalize = step_ % kRenormalizePeriod == 0;
   long err = std::numeric_limits<long>::max();
   Real worst = 0;
+  // A deforming periodic cell: each body then takes the mean field's map x -> A x (and the
+  // mean spin's rotation) here, while it is in the cache, and the broad phase's measure is
+  // its displacement beyond the cell's, |x - F_b x_build| (integrate/cell.cpp).
+  const bool mean_field = cell_.on && (!cell_.vel_grad.isZero(0) || cell_.h != cell_.h_at_build);
+  MeanFieldStep field;
+  if (mean_field) field = mean_field_step();
+  const auto finish_body = [&](int b) __attribute__((always_inline)) {
+    if (!mean_field) return displacement_since_build(b);
+    return field.apply(bodies_.pos[b], bodies_.ori[b], pos_at_build_[b]) +
+           std::max(0.0, bodies_.radius[b] - radius_at_build_[b]);
+  };
 
   // Reduce the contact forces into body b in a fixed order: the contacts where b is j (in
   // contact order, contiguous in pair_out_), the sum over the contacts where b is i (which
@@ -205,7 +216,7 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
             err = std::min(err, static_cast<long>(b));
             continue;
           }
-          worst = std::max(worst, displacement_since_build(b));  // (need_rebuild's check)
+          worst = std::max(worst, finish_body(b));  // (need_rebuild's check)
         }
       }
     }
@@ -248,7 +259,7 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
         err = std::min(err, static_cast<long>(b));
         continue;
       }
-      worst = std::max(worst, displacement_since_build(b));  // (need_rebuild's check)
+      worst = std::max(worst, finish_body(b));  // (need_rebuild's check)
     }
   }
   err_body = err;

@@ -52,4 +52,20 @@ struct PeriodicCell {
   }
 };
 
+/// One step of the mean field as the integration pass applies it to a body: x -> A x, the
+/// orientation turned by the mean spin, and the broad phase's measure |x - F_b x_build|
+/// (F_b = the cell's deformation since the last build, after this step).
+struct MeanFieldStep {
+  Mat3 a = Mat3::Identity();
+  Mat3 fb = Mat3::Identity();
+  Quat spin = Quat::Identity();
+  bool rotate = false;
+  /// Maps x and q; returns the displacement beyond the cell's since the build, m.
+  Real apply(Vec3& x, Quat& q, const Vec3& x_build) const {
+    x = a * x;
+    if (rotate) q = spin * q;
+    return (x - fb * x_build).norm();
+  }
+};
+
 }  // namespace cpp_dem
