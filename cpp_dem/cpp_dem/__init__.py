@@ -44,10 +44,15 @@ from .checkpoint import load_checkpoint, save_checkpoint  # noqa: F401
 from .scene import (BOX_WALLS, ControllerLimitWarning, Scene, hertz_mindlin_material,  # noqa: F401
                     linear_material)
 
-from . import geogrid, packing  # noqa: F401,E402
+from . import geogrid, packing, periodic  # noqa: F401,E402
+from ._core import CellController  # noqa: F401,E402  (periodic cells)
+from .dem_element import DemElement  # noqa: F401,E402
 
 __all__ = [
     "BeamParams",
+    "CellController",
+    "DemElement",
+    "periodic",
     "geogrid",
     "BOX_WALLS",
     "RadiusGrowth",

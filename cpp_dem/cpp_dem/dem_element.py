@@ -114,6 +114,7 @@ class DemElement:
                                                            max_speed=speed)
                 for a in range(3):
                     self.controller.set_strain_rate(a, 0.0)
+                self.controller.reset_strain(scene)  # strains from the box as it is now
             scene.add_controller(self.controller)
         self.controller.enabled = False
         if self.kind == "periodic":
@@ -147,9 +148,11 @@ class DemElement:
     @classmethod
     def box(cls, n: int = 400, *, material=None, stress: float = 100e3,
             radius_mean: float = 1e-3, radius_spread: float = 0.2, seed: int = 1,
-            damping: float = 0.7, **kw) -> "DemElement":
+            damping: float = 0.7, tol: float = 0.005, unbalanced: float = 1e-4,
+            **kw) -> "DemElement":
         """A box of six frictionless walls around ``n`` spheres, compacted isotropically to
-        ``stress`` (Pa) by radius growth and servo walls."""
+        ``stress`` (Pa) by radius growth and servo walls, ending within ``tol`` of the stress
+        with the unbalanced force below ``unbalanced``."""
         from .packing import loose_cloud
         from .scene import linear_material
 
@@ -169,7 +172,7 @@ class DemElement:
         scene.add_spheres(centers, radii, material=m)
         scene.set_auto_timestep(0.5, 500)
         prep.grow_to_stress(scene, walls, stress)
-        r = prep.compact_isotropic(scene, walls, stress)
+        r = prep.compact_isotropic(scene, walls, stress, tol=tol, unbalanced=unbalanced)
         if not r.converged:
             raise RuntimeError(f"DemElement.box: the box did not settle at {stress} Pa")
         scene.clear_controllers()
@@ -205,7 +208,7 @@ class DemElement:
         of the box dimensions."""
         if self.kind == "periodic":
             return periodic.small_strain(self.scene)
-        l0 = np.asarray(self.controller.reference_lengths())
+        l0 = np.asarray(self.controller.reference_lengths)
         return np.diag(measure.box_size(self.scene, self.walls) / l0 - 1.0)
 
     def contact_count(self) -> int:
@@ -257,7 +260,7 @@ class DemElement:
                 raise ParameterError("de: a wall-bounded element takes normal strains only "
                                      "(the off-diagonal part is not zero); use a periodic "
                                      "element for shear and rotation")
-            l0 = np.asarray(self.controller.reference_lengths())
+            l0 = np.asarray(self.controller.reference_lengths)
             size = measure.box_size(self.scene, self.walls)
             for a in range(3):
                 # engineering strain (L0 - L)/L0, compression positive, at a constant rate
@@ -318,11 +321,11 @@ class DemElement:
         """The tangent from the contact network (Kruyt–Rothenburg type stiffness assembly,
         ``cpp_dem.tangent.network_tangent``): 6 x 6 Voigt, Pa, tension positive, and its info
         dict. Periodic elements only."""
-        from . import tangent
-
         if self.kind != "periodic":
             raise ParameterError("network_tangent: needs a periodic element (the assembly "
                                  "takes the periodic branch vectors); use fd_tangent")
+        from . import tangent
+
         d, info = tangent.network_tangent(**self.network_data(), sliding=sliding,
                                           geometric=geometric, rotations=rotations)
         return tangent.to_voigt(d), info
