@@ -254,3 +254,16 @@ def test_unsupported_combinations_say_so():
     s.set_periodic_cell(np.eye(3) * 4.2e-3)
     with pytest.raises(dem.ParameterError, match="less than 2 interaction ranges"):
         s.run(1)
+
+
+def test_refd_in_a_cell():
+    # REFD (000 §2.3) in a periodic cell: expansion at the grains' friction, then friction
+    # steps until the porosity is reached, friction restored, the isotropic servo at rest.
+    from cpp_dem import measure
+
+    s = periodic.prepare_periodic(200, material=_mat(), stress=100e3, radius_mean=1e-3,
+                                  porosity=0.415, seed=3)
+    assert measure.porosity(s, ()) <= 0.415
+    assert np.diag(s.cell_stress()) == pytest.approx([100e3] * 3, rel=0.01)
+    assert all(m == 0 for m in np.asarray(s.material_ids))  # friction restored
+    assert s.num_controllers() == 0
