@@ -93,8 +93,9 @@ def test_box_element_takes_normal_strains_only():
 
 def test_p_e_curve_follows_the_wall_bounded_sample():
     # Isotropic compression 50 -> 200 kPa: the periodic cube's void ratio against the core of
-    # a box of six walls (away from the wall layers), 2 seeds each; the difference of the
-    # means is within the box's seed scatter (docs/periodic.md has a larger run).
+    # a box of six walls (away from the wall layers), 2 seeds each, both grown slowly alike
+    # (fast growth over-compacts the box, whose walls feel the stress late); the difference
+    # of the means is within the seed scatter (docs/periodic.md has a larger run).
     def core_void_ratio(el):
         s = el.scene
         wp = np.asarray(s.wall_positions)
@@ -105,19 +106,27 @@ def test_p_e_curve_follows_the_wall_bounded_sample():
         n = 1 - np.sum(4 / 3 * np.pi * r[inside] ** 3) / np.prod(hi - lo - 2 * inset)
         return n / (1 - n)
 
+    def void_ratio(el, kind):
+        if kind == "periodic":
+            por = measure.porosity(el.scene, ())
+            return por / (1 - por)
+        return core_void_ratio(el)
+
     e = {"periodic": [], "box": []}
+    de = {"periodic": [], "box": []}  # compression 50 -> 200 kPa
     for seed in (1, 2):
         for kind in e:
             el = (DemElement.periodic if kind == "periodic" else DemElement.box)(
-                500, stress=50e3, seed=seed)
+                500, stress=50e3, seed=seed, growth=(0.1, 1e-4))
+            e50 = void_ratio(el, kind)
             el.apply_stress(-200e3 * np.eye(3), components=VOIGT[:3], unbalanced=1e-3)
-            if kind == "periodic":
-                por = measure.porosity(el.scene, ())
-                e[kind].append(por / (1 - por))
-            else:
-                e[kind].append(core_void_ratio(el))
+            e[kind].append(void_ratio(el, kind))
+            de[kind].append(e[kind][-1] - e50)
     scatter = max(np.ptp(e["box"]), np.ptp(e["periodic"]), 0.01)
     assert abs(np.mean(e["periodic"]) - np.mean(e["box"])) <= 2 * scatter, e
+    # (The compressibility: the periodic cube's is repeatable to 3 %, the box core's is noise
+    # at this size — +0.011 and -0.043 — so it is compared in bench/periodic_pe.py at 2000.)
+    assert np.ptp(de["periodic"]) < 0.1 * abs(np.mean(de["periodic"])), de
 
 
 def test_voigt_strain_components():

@@ -126,12 +126,14 @@ class DemElement:
     def periodic(cls, n: int = 400, *, material=None, stress: float = 100e3,
                  radius_mean: float = 1e-3, radius_spread: float = 0.2, seed: int = 1,
                  porosity: float | None = None, damping: float = 0.7, log=None,
-                 tol: float = 0.005, unbalanced: float = 1e-4, **kw) -> "DemElement":
+                 tol: float = 0.005, unbalanced: float = 1e-4, growth=(0.5, 1e-3),
+                 **kw) -> "DemElement":
         """A periodic cube of ``n`` spheres prepared to the isotropic ``stress`` (Pa,
         compression positive) by ``periodic.prepare_periodic`` (``porosity``: REFD to that
         porosity), ending within ``tol`` of the stress with the unbalanced force below
         ``unbalanced`` (a looser equilibrium relaxes later, at fixed strain: at 1e-2 the
-        stress of a 300-sphere cell fell by a third when the servo stopped).
+        stress of a 300-sphere cell fell by a third when the servo stopped). ``growth`` is
+        RadiusGrowth's (gain, max_strain per call).
         ``material``: a Material (default: a linear law, E = 100 MPa, k_s/k_n 0.3, 30 deg,
         2650 kg/m^3)."""
         from .scene import linear_material
@@ -142,17 +144,22 @@ class DemElement:
         scene = periodic.prepare_periodic(n, material=material, stress=stress,
                                           radius_mean=radius_mean, radius_spread=radius_spread,
                                           seed=seed, porosity=porosity, damping=damping,
-                                          tol=tol, unbalanced=unbalanced, log=log)
+                                          tol=tol, unbalanced=unbalanced,
+                                          growth_gain=growth[0],
+                                          growth_max_strain=growth[1], log=log)
         return cls(scene, **kw)
 
     @classmethod
     def box(cls, n: int = 400, *, material=None, stress: float = 100e3,
             radius_mean: float = 1e-3, radius_spread: float = 0.2, seed: int = 1,
             damping: float = 0.7, tol: float = 0.005, unbalanced: float = 1e-4,
-            **kw) -> "DemElement":
+            growth=(0.5, 1e-3), **kw) -> "DemElement":
         """A box of six frictionless walls around ``n`` spheres, compacted isotropically to
         ``stress`` (Pa) by radius growth and servo walls, ending within ``tol`` of the stress
-        with the unbalanced force below ``unbalanced``."""
+        with the unbalanced force below ``unbalanced``. ``growth`` is RadiusGrowth's (gain,
+        max_strain per call): the growth in a box feels the stress only at the walls, so fast
+        growth overshoots and leaves a denser core than a cell grown alike (docs/periodic.md).
+        """
         from .packing import loose_cloud
         from .scene import linear_material
 
@@ -171,7 +178,10 @@ class DemElement:
         walls = scene.add_box((0, 0, 0), (edge, edge, edge), material=wm)
         scene.add_spheres(centers, radii, material=m)
         scene.set_auto_timestep(0.5, 500)
-        prep.grow_to_stress(scene, walls, stress)
+        # (to equilibrium by growth alone, as the cell: a long servo-wall stage after a loose
+        # growth compacts the box further, from its walls)
+        prep.grow_to_stress(scene, walls, stress, gain=growth[0], max_strain=growth[1],
+                            tol=tol, unbalanced=unbalanced)
         r = prep.compact_isotropic(scene, walls, stress, tol=tol, unbalanced=unbalanced)
         if not r.converged:
             raise RuntimeError(f"DemElement.box: the box did not settle at {stress} Pa")

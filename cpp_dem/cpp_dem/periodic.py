@@ -151,13 +151,16 @@ def prepare_periodic(n: int, *, material, stress: float, radius_mean: float,
                      radius_spread: float = 0.2, seed: int = 1, solid_fraction: float = 0.25,
                      porosity: float | None = None, prep_friction_deg: float | None = None,
                      damping: float = 0.7, tol: float = 0.01, unbalanced: float = 0.01,
-                     max_steps: int = 200_000, log=None) -> Scene:
+                     max_steps: int = 200_000, growth_gain: float = 0.5,
+                     growth_max_strain: float = 1e-3, log=None) -> Scene:
     """A periodic cube of ``n`` spheres (radii uniform in radius_mean (1 +- radius_spread), m)
     prepared to an isotropic ``stress`` (Pa): a loose cloud at ``solid_fraction``, radius
     growth to the stress in the fixed cell (at ``prep_friction_deg`` if given, then the
     material's friction), and an isotropic cell servo to equilibrium. With ``porosity`` (-)
-    REFD (000 §2.3) densifies it to that porosity instead. The preparation's controllers are
-    removed at the end; the scene is at rest at the stress."""
+    REFD (000 §2.3) densifies it to that porosity instead. ``growth_gain`` and
+    ``growth_max_strain`` are RadiusGrowth's (fast growth overshoots and leaves a denser
+    packing: docs/periodic.md). The preparation's controllers are removed at the end; the
+    scene is at rest at the stress."""
     if n < 2:
         raise ParameterError(f"n={n}: need at least 2 spheres")
     if not (0 < radius_spread < 1):
@@ -172,12 +175,14 @@ def prepare_periodic(n: int, *, material, stress: float, radius_mean: float,
     scene = periodic_scene(centers, radii, cube_cell(edge), material=material, damping=damping)
     if porosity is not None:
         prep.refd(scene, (), 0, stress=stress, porosity=porosity, tol=tol,
-                  unbalanced=unbalanced, max_steps_per_stage=max_steps, log=log)
+                  unbalanced=unbalanced, max_steps_per_stage=max_steps, gain=growth_gain,
+                  max_strain=growth_max_strain, log=log)
     else:
         if prep_friction_deg is not None:
             idx = prep.set_friction(scene, np.arange(n), scene.material(0), prep_friction_deg)
             r = prep.grow_to_stress(scene, (), stress, tol=tol, unbalanced=unbalanced,
-                                    max_steps=max_steps)
+                                    max_steps=max_steps, gain=growth_gain,
+                                    max_strain=growth_max_strain)
             if log:
                 log(f"growth at {prep_friction_deg} deg: {r.mean_stress:.4g} Pa, porosity "
                     f"{r.porosity:.4f}")
@@ -185,7 +190,8 @@ def prepare_periodic(n: int, *, material, stress: float, radius_mean: float,
                 scene.set_body_material(b, 0)
             del idx
         r = prep.grow_to_stress(scene, (), stress, tol=tol, unbalanced=unbalanced,
-                                max_steps=max_steps)
+                                max_steps=max_steps, gain=growth_gain,
+                                max_strain=growth_max_strain)
         if log:
             log(f"growth: {r.mean_stress:.4g} Pa, porosity {r.porosity:.4f}")
     res = drive_cell(scene, stress=(stress, stress, stress), tol=tol, unbalanced=unbalanced,
