@@ -3,8 +3,9 @@
 1 and 2 local workers, and Dask's overhead per element call.
 
 ``--elements`` periodic elements of ``--grains`` grains are built on the workers; each load
-step applies one strain increment to every element (a pure shear of ``--strain``, run at
-``--max-strain-per-step`` and relaxed), ``--steps`` load steps after a warm-up step. Per load
+step applies one strain increment to every element (a pure shear of ``--strain`` over
+``--dem-steps`` DEM steps, no relaxation, so all elements do the same work), ``--steps`` load
+steps after a warm-up step. Per load
 step: the wall-clock time of the pool's call, and the DEM CPU time each element reported.
 
 - efficiency on W workers = T(1 worker) / (W T(W workers)), per load step (median);
@@ -35,7 +36,9 @@ from cpp_dem.element_pool import ElementPool, PeriodicFactory  # noqa: E402
 def run(args, workers: int) -> dict:
     incs = [np.array([[0, 0, args.strain], [0, 0, 0], [args.strain, 0, 0]]) * 0.5
             for _ in range(args.elements)]
-    kw = {"max_strain_per_step": args.max_strain_per_step, "unbalanced": 1e-3}
+    # A fixed number of DEM steps per element and no relaxation, so every element does the
+    # same work (with relaxation to a tolerance, one slow element sets the pace).
+    kw = {"steps": args.dem_steps, "max_relax_steps": 0}
     with ElementPool.build(args.elements, PeriodicFactory(n=args.grains), workers=workers) as pool:
         pool.apply_strain(incs, **kw)  # warm-up
         pool.accept()
@@ -61,9 +64,9 @@ def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--elements", type=int, default=4)
-    ap.add_argument("--grains", type=int, default=300)
+    ap.add_argument("--grains", type=int, default=400)
     ap.add_argument("--strain", type=float, default=2e-3, help="shear strain per load step")
-    ap.add_argument("--max-strain-per-step", type=float, default=1e-6)
+    ap.add_argument("--dem-steps", type=int, default=5000, help="DEM steps per increment")
     ap.add_argument("--steps", type=int, default=3, help="load steps timed")
     ap.add_argument("--out", default="results/bench_runs/element_pool.json")
     args = ap.parse_args(argv)

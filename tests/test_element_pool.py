@@ -1,5 +1,5 @@
 """ElementPool (cpp_dem.element_pool): DEM elements held on Dask workers across increments.
-Results are bitwise those of the serial elements for 1 and 2 workers; a rejected increment
+Results are bitwise those of the serial elements for 1, 2 and 4 workers; a rejected increment
 restores every element; a killed worker's elements are rebuilt from their accepted bytes and
 the run ends as an undisturbed one."""
 
@@ -34,7 +34,7 @@ def serial():
     return out
 
 
-@pytest.mark.parametrize("workers", [1, 2])
+@pytest.mark.parametrize("workers", [1, 2, 4])
 def test_pool_gives_the_serial_result_bitwise(serial, workers):
     with ElementPool.build(N, FACTORY, workers=workers) as pool:
         assert len(pool.workers()) == workers
