@@ -95,20 +95,30 @@ class ElementHost:
 class PeriodicFactory:
     """A picklable element maker for ``ElementPool.build``: element k is
     ``DemElement.periodic(n, stress=stress, seed=seed + k, **options)`` (seed + k: distinct
-    packings; give ``same=True`` for one packing everywhere, e.g. a homogeneous field)."""
+    packings; give ``same=True`` for one packing everywhere, e.g. a homogeneous field), with
+    ``isotropic=True`` then servo-controlled in all six components to the isotropic stress."""
 
     n: int = 200
     stress: float = 100e3
     seed: int = 1
     same: bool = False
+    isotropic: bool = False
     options: dict | None = None
 
     def __call__(self, index: int):
+        import numpy as np
+
         from .dem_element import DemElement
 
-        return DemElement.periodic(self.n, stress=self.stress,
-                                   seed=self.seed + (0 if self.same else index),
-                                   **(self.options or {}))
+        el = DemElement.periodic(self.n, stress=self.stress,
+                                 seed=self.seed + (0 if self.same else index),
+                                 **(self.options or {}))
+        if self.isotropic:
+            # every component to the isotropic state, shear included: a packing's fabric
+            # leaves shear stresses of a few per cent, which a FEM's free boundaries cannot
+            # carry at the start
+            el.apply_stress(-self.stress * np.eye(3))
+        return el
 
 
 @dataclass

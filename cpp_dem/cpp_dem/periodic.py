@@ -95,7 +95,8 @@ def drive_cell(scene, *, stress=None, rate=None, tol: float = 0.01, unbalanced: 
     ``rate`` maps components to imposed rates of L (1/s, tension positive). Components named
     in neither are held (rate 0).
 
-    Without ``steps``: runs until every stress target is within ``tol`` (relative) and the
+    Without ``steps``: runs until every stress target is within ``tol`` (relative to the
+    largest target) and the
     unbalanced force is below ``unbalanced`` (or ``max_steps``). With ``steps``: runs exactly
     that many steps (a loading stage). Returns a StageResult (``extra['controller']``,
     ``extra['stress']`` the full cell stress, Pa)."""
@@ -135,7 +136,10 @@ def drive_cell(scene, *, stress=None, rate=None, tol: float = 0.01, unbalanced: 
         if steps is None:
             sig = np.asarray(scene.cell_stress())
             sym = 0.5 * (sig + sig.T)
-            ok = all(abs(sym[k] - v) <= tol * max(abs(v), 1.0) for k, v in targets.items())
+            # (relative to the largest target: a zero shear target is met within tol of the
+            # normal stresses, not of 1 Pa)
+            scale = max([abs(v) for v in targets.values()] + [1.0])
+            ok = all(abs(sym[k] - v) <= tol * scale for k, v in targets.items())
             ok = ok and u < unbalanced
             if ok:
                 break

@@ -1,0 +1,284 @@
+"""Hierarchical FEM x DEM in plane strain: a DEM element at every quadrature point (issue 18,
+second part; docs/multiscale.md).
+
+The FEM is a rectangle ``lx`` x ``ly`` (m) of P1 triangles with one quadrature point each, in
+dolfinx. Each cell owns one persistent ``DemElement`` held by an ``ElementPool`` on Dask
+workers (the pool's element k is cell k). In a load step Newton iterates:
+
+1. the displacement-gradient increment since the start of the step, grad(u) - grad(u_n), at
+   every quadrature point (shear and rotation included; the FEM's (x, y) is the element's
+   (x, z), and its out-of-plane y is held: plane strain);
+2. every element is restored to the start of the step (``pool.reject``: a rejected iterate
+   leaves no trace) and takes that increment; it returns its stress and its network tangent;
+3. the residual and the Jacobian are assembled from them (Voigt xx, yy, xy with engineering
+   shear), and the displacements are corrected.
+
+A converged step is accepted (``pool.accept``: every element's state saved as bytes). The
+Drucker–Prager model of ``femcoupling.elastoplastic`` sits behind the same quadrature-space
+interface there; here the material is the DEM.
+
+Boundary conditions: left u_x = 0, bottom u_y = 0; the top is moved by ``top_displacement``
+(u_y, m); the right is either loaded by a confining pressure (``confining_pa``, compression
+positive: a biaxial test) or moved (``right_displacement``, u_x, m). With both
+``right_displacement`` and ``top_displacement`` and ``homogeneous=True`` every boundary node
+is moved with the homogeneous field, so every element sees the same strain.
+
+Stresses are tension positive here (FEM), Pa. Serial (one MPI rank; the elements are the
+parallel part).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+import time
+from typing import Any
+
+import numpy as np
+
+from femcoupling import _dolfinx
+from femcoupling.geometry import FemInputError
+
+__all__ = ["HierarchicalPlaneStrain", "HierStep"]
+
+_IX = [0, 2, 4]  # DEM Voigt (xx, yy, zz, yz, xz, xy) rows of the FEM's (xx, yy, xy)
+
+
+def dem_increment(g: np.ndarray) -> np.ndarray:
+    """The DEM element's 3 x 3 increment from a FEM 2 x 2 displacement-gradient increment:
+    FEM (x, y) -> element (x, z); the out-of-plane y is held (plane strain)."""
+    de = np.zeros((3, 3))
+    de[0, 0], de[0, 2], de[2, 0], de[2, 2] = g[0, 0], g[0, 1], g[1, 0], g[1, 1]
+    return de
+
+
+def fem_stress(s: np.ndarray) -> np.ndarray:
+    """FEM Voigt stress (xx, yy, xy), Pa, from the element's 3 x 3 stress."""
+    return np.array([s[0, 0], s[2, 2], 0.5 * (s[0, 2] + s[2, 0])])
+
+
+def fem_tangent(d6: np.ndarray) -> np.ndarray:
+    """FEM 3 x 3 tangent (xx, yy, xy; engineering shear) from the element's 6 x 6 Voigt one."""
+    return np.asarray(d6)[np.ix_(_IX, _IX)]
+
+
+@dataclasses.dataclass
+class HierStep:
+    """One converged load step: the top displacement (m), Newton iterations, the residual at
+    the end (relative to the internal force scale), the elements' mean stress sigma_yy
+    (``top_stress_pa``) and mean Voigt stress (xx, yy, xy), tension positive, Pa, the element
+    stresses (n_cells, 3), the DEM seconds (sum over the elements' work), the FEM seconds
+    (the step's wall time outside the pool's calls), the wall seconds, and the elements
+    rebuilt after a lost worker."""
+
+    load: float
+    iterations: int
+    residual: float
+    top_stress_pa: float
+    mean_stress: np.ndarray
+    element_stresses: np.ndarray
+    dem_s: float
+    fem_s: float
+    wall_s: float
+    recovered: list
+    increments: np.ndarray  # (n_cells, 3, 3): each element's increment of the step, -
+
+
+class HierarchicalPlaneStrain:
+    """See the module doc. ``pool``: an ElementPool with one element per cell (cell k ->
+    element k)."""
+
+    def __init__(self, pool, *, lx: float, ly: float, nx: int, ny: int,
+                 confining_pa: float | None = None, homogeneous: bool = False,
+                 newton_rtol: float = 1e-3, max_newton: int = 10, strain_kw: dict | None = None,
+                 verbose: bool = False) -> None:
+        if not (lx > 0 and ly > 0 and math.isfinite(lx) and math.isfinite(ly)):
+            raise FemInputError(f"lx={lx}, ly={ly}: must be > 0 (m)")
+        if nx < 1 or ny < 1:
+            raise FemInputError(f"nx={nx}, ny={ny}: must be >= 1")
+        fx = self._fx = _dolfinx.load()
+        fem, ufl = fx.fem, fx.ufl
+        import basix
+        import basix.ufl
+
+        self.pool, self.lx, self.ly = pool, float(lx), float(ly)
+        self.verbose = verbose
+        self.homogeneous = homogeneous
+        self.confining_pa = confining_pa
+        self.newton_rtol, self.max_newton = newton_rtol, max_newton
+        self.strain_kw = dict(strain_kw or {})
+        comm = fx.MPI.COMM_SELF
+        msh = self.mesh = fx.mesh.create_rectangle(
+            comm, [np.array([0.0, 0.0]), np.array([lx, ly])], [nx, ny],
+            fx.mesh.CellType.triangle)
+        self.n_cells = msh.topology.index_map(2).size_local
+        if pool.n != self.n_cells:
+            raise FemInputError(f"pool: has {pool.n} elements for {self.n_cells} cells "
+                                f"(2 nx ny triangles)")
+        self.V = fem.functionspace(msh, ("Lagrange", 1, (2,)))
+        qe_v = basix.ufl.quadrature_element("triangle", value_shape=(3,), scheme="default",
+                                            degree=1)
+        qe_t = basix.ufl.quadrature_element("triangle", value_shape=(3, 3), scheme="default",
+                                            degree=1)
+        self.Wv, self.Wt = fem.functionspace(msh, qe_v), fem.functionspace(msh, qe_t)
+        pts, _ = basix.make_quadrature(basix.CellType.triangle, 1)
+        if len(pts) != 1:
+            raise RuntimeError("one quadrature point per triangle expected")
+        self.u, self.u_n, self.du = (fem.Function(self.V) for _ in range(3))
+        self.sig_q, self.tan_q = fem.Function(self.Wv), fem.Function(self.Wt)
+        dxq = ufl.Measure("dx", domain=msh, metadata={"quadrature_degree": 1,
+                                                       "quadrature_scheme": "default"})
+        v, dv = ufl.TestFunction(self.V), ufl.TrialFunction(self.V)
+
+        def eps(w):
+            e = ufl.sym(ufl.grad(w))
+            return ufl.as_vector([e[0, 0], e[1, 1], 2 * e[0, 1]])
+
+        fdim = 1
+        right = fx.mesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[0], lx))
+        tags = fx.mesh.meshtags(msh, fdim, np.sort(right), np.full(len(right), 1, np.int32))
+        ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
+        st = fx.PETSc.ScalarType
+        self.traction = fem.Constant(msh, np.zeros(2, dtype=st))
+        f_int = ufl.dot(self.sig_q, eps(v)) * dxq
+        self.form_res = fem.form(f_int - ufl.dot(self.traction, v) * ds(1))
+        self.form_jac = fem.form(ufl.dot(ufl.dot(self.tan_q, eps(dv)), eps(v)) * dxq)
+        self.form_top = None
+        self.expr_grad = fem.Expression(ufl.grad(self.u), pts)
+        self.expr_grad_n = fem.Expression(ufl.grad(self.u_n), pts)
+        # boundary conditions
+        self.top_u = fem.Constant(msh, st(0.0))
+        self.right_u = fem.Constant(msh, st(0.0))
+        V0, V1 = self.V.sub(0), self.V.sub(1)
+
+        def dofs(sub, where):
+            facets = fx.mesh.locate_entities_boundary(msh, fdim, where)
+            return fem.locate_dofs_topological(sub, fdim, facets)
+
+        self.bcs = [fem.dirichletbc(st(0.0), dofs(V0, lambda x: np.isclose(x[0], 0.0)), V0),
+                    fem.dirichletbc(st(0.0), dofs(V1, lambda x: np.isclose(x[1], 0.0)), V1),
+                    fem.dirichletbc(self.top_u, dofs(V1, lambda x: np.isclose(x[1], ly)), V1)]
+        if homogeneous:
+            # every boundary node on the homogeneous field u = (e_x x, e_y y)
+            self._hx = fem.Function(self.V.sub(0).collapse()[0])
+            self._hy = fem.Function(self.V.sub(1).collapse()[0])
+            bnd = lambda x: (np.isclose(x[0], 0) | np.isclose(x[0], lx) |  # noqa: E731
+                             np.isclose(x[1], 0) | np.isclose(x[1], ly))
+            facets = fx.mesh.locate_entities_boundary(msh, fdim, bnd)
+            self._hdofs = [fem.locate_dofs_topological((V0, self._hx.function_space), fdim,
+                                                       facets),
+                           fem.locate_dofs_topological((V1, self._hy.function_space), fdim,
+                                                       facets)]
+            self.bcs = [fem.dirichletbc(self._hx, self._hdofs[0], V0),
+                        fem.dirichletbc(self._hy, self._hdofs[1], V1)]
+        else:
+            self.bcs.append(None)  # placeholder for the right: traction (confining) or u_x
+            if confining_pa is None:
+                self.bcs[-1] = fem.dirichletbc(self.right_u,
+                                               dofs(V0, lambda x: np.isclose(x[0], lx)), V0)
+            else:
+                self.traction.value[:] = [-float(confining_pa), 0.0]
+            self.bcs = [b for b in self.bcs if b is not None]
+        self.top_dofs = dofs(V1, lambda x: np.isclose(x[1], ly))
+        self.A = fx.fem_petsc.create_matrix(self.form_jac)
+        self.b = fx.fem_petsc.create_vector(self.V)
+        self.ksp = fx.PETSc.KSP().create(comm)
+        self.ksp.setOperators(self.A)
+        self.ksp.setType("preonly")
+        self.ksp.getPC().setType("lu")
+        # the elements' current state: stress and tangent at the start
+        self.history: list[HierStep] = []
+        first = pool.apply_strain([np.zeros((3, 3))] * pool.n, tangent="network",
+                                  **self.strain_kw)
+        pool.reject()  # (a zero increment with relaxation: measured, then undone)
+        self._set_q(first.stresses, first.tangents)
+        self.stress_n = np.array([fem_stress(s) for s in first.stresses])
+
+    # ---- quadrature data ----------------------------------------------------------------
+    def _set_q(self, stresses, tangents) -> None:
+        sig = np.array([fem_stress(s) for s in stresses])
+        tan = np.array([fem_tangent(t) for t in tangents])
+        self.sig_q.x.array[:] = sig.reshape(-1)
+        self.tan_q.x.array[:] = tan.reshape(-1)
+        self._sig = sig
+
+    def _grad_increment(self) -> np.ndarray:
+        cells = np.arange(self.n_cells, dtype=np.int32)
+        g = self.expr_grad.eval(self.mesh, cells).reshape(-1, 2, 2)
+        gn = self.expr_grad_n.eval(self.mesh, cells).reshape(-1, 2, 2)
+        return g - gn
+
+    def _evaluate(self, first: bool) -> tuple[float, float, list]:
+        """Stress and tangent of every element for the current iterate; returns the DEM
+        seconds, the wall seconds of the pool call and the recovered elements."""
+        if not first:
+            self.pool.reject()
+        self._increments = np.array([dem_increment(g) for g in self._grad_increment()])
+        step = self.pool.apply_strain(list(self._increments), tangent="network",
+                                      **self.strain_kw)
+        self._set_q(step.stresses, step.tangents)
+        return float(sum(step.cpu_s)), step.wall_s, step.recovered
+
+    def _residual(self) -> float:
+        fx = self._fx
+        with self.b.localForm() as loc:
+            loc.set(0.0)
+        fx.fem_petsc.assemble_vector(self.b, self.form_res)
+        fx.fem_petsc.apply_lifting(self.b, [self.form_jac], bcs=[self.bcs],
+                                   x0=[self.u.x.petsc_vec], alpha=-1.0)
+        self.b.ghostUpdate(addv=fx.PETSc.InsertMode.ADD, mode=fx.PETSc.ScatterMode.REVERSE)
+        fx.fem_petsc.set_bc(self.b, self.bcs, x0=self.u.x.petsc_vec, alpha=-1.0)
+        return self.b.norm()
+
+    def _scale(self) -> float:
+        """|F_int| of the current stresses (the tolerance's scale)."""
+        return float(np.abs(self._sig).max()) * math.sqrt(self.lx * self.ly) + 1e-300
+
+    # ---- a load step -----------------------------------------------------------------------
+    def step(self, *, top_displacement: float, right_displacement: float = 0.0) -> HierStep:
+        """One load step to the given boundary displacements (m, total since the start)."""
+        t0 = time.perf_counter()
+        fx = self._fx
+        self.top_u.value = top_displacement
+        self.right_u.value = right_displacement
+        if self.homogeneous:
+            ex, ey = right_displacement / self.lx, top_displacement / self.ly
+            self._hx.interpolate(lambda x: ex * x[0])
+            self._hy.interpolate(lambda x: ey * x[1])
+        dem_s = pool_s = 0.0
+        recovered: list = []
+        rel = float("inf")
+        its = 0
+        for it in range(self.max_newton + 1):
+            d, w, rec = self._evaluate(first=(it == 0))
+            dem_s, pool_s, recovered = dem_s + d, pool_s + w, recovered + rec
+            rnorm = self._residual()
+            rel = rnorm / self._scale()
+            if self.verbose:
+                print(f"[hier] iteration {it}: residual {rel:.3e}", flush=True)
+            its = it
+            if it > 0 and rel <= self.newton_rtol:
+                break
+            if it == self.max_newton:
+                raise RuntimeError(f"Newton: no convergence in {self.max_newton} iterations "
+                                   f"(residual {rel:.3g} of the internal force scale; asked "
+                                   f"{self.newton_rtol})")
+            self.A.zeroEntries()
+            fx.fem_petsc.assemble_matrix(self.A, self.form_jac, bcs=self.bcs)
+            self.A.assemble()
+            self.ksp.setOperators(self.A)
+            self.ksp.solve(self.b, self.du.x.petsc_vec)
+            self.du.x.scatter_forward()
+            self.u.x.array[:] -= self.du.x.array
+            self.u.x.scatter_forward()
+        self.pool.accept()
+        self.u_n.x.array[:] = self.u.x.array
+        self.stress_n = self._sig.copy()
+        wall = time.perf_counter() - t0
+        r = HierStep(load=top_displacement, iterations=its, residual=rel,
+                     top_stress_pa=float(self._sig[:, 1].mean()),
+                     mean_stress=self._sig.mean(axis=0), element_stresses=self._sig.copy(),
+                     dem_s=dem_s, fem_s=wall - pool_s, wall_s=wall, recovered=recovered,
+                     increments=self._increments.copy())
+        self.history.append(r)
+        return r
