@@ -39,7 +39,7 @@ import numpy as np
 from femcoupling import _dolfinx
 from femcoupling.geometry import FemInputError
 
-__all__ = ["HierarchicalPlaneStrain", "HierStep"]
+__all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure"]
 
 _IX = [0, 2, 4]  # DEM Voigt (xx, yy, zz, yz, xz, xy) rows of the FEM's (xx, yy, xy)
 
@@ -60,6 +60,10 @@ def fem_stress(s: np.ndarray) -> np.ndarray:
 def fem_tangent(d6: np.ndarray) -> np.ndarray:
     """FEM 3 x 3 tangent (xx, yy, xy; engineering shear) from the element's 6 x 6 Voigt one."""
     return np.asarray(d6)[np.ix_(_IX, _IX)]
+
+
+class NewtonFailure(RuntimeError):
+    """Newton did not converge in a load step (even after the step was cut)."""
 
 
 @dataclasses.dataclass
@@ -213,9 +217,14 @@ class HierarchicalPlaneStrain:
         seconds, the wall seconds of the pool call and the recovered elements."""
         if not first:
             self.pool.reject()
+        from cpp_dem.element_pool import ElementError
+
         self._increments = np.array([dem_increment(g) for g in self._grad_increment()])
-        step = self.pool.apply_strain(list(self._increments), tangent="network",
-                                      **self.strain_kw)
+        try:
+            step = self.pool.apply_strain(list(self._increments), tangent="network",
+                                          **self.strain_kw)
+        except ElementError as e:  # an element could not take this iterate: cut the step
+            raise NewtonFailure(f"an element failed on this iterate: {e}") from e
         self._set_q(step.stresses, step.tangents)
         return float(sum(step.cpu_s)), step.wall_s, step.recovered
 
@@ -235,8 +244,30 @@ class HierarchicalPlaneStrain:
         return float(np.abs(self._sig).max()) * math.sqrt(self.lx * self.ly) + 1e-300
 
     # ---- a load step -----------------------------------------------------------------------
-    def step(self, *, top_displacement: float, right_displacement: float = 0.0) -> HierStep:
-        """One load step to the given boundary displacements (m, total since the start)."""
+    def step(self, *, top_displacement: float, right_displacement: float = 0.0,
+             max_cuts: int = 4) -> HierStep:
+        """One load step to the given boundary displacements (m, total since the start). If
+        Newton fails, the step is rolled back (the elements to their accepted state, u to
+        u_n) and taken in two halves, at most ``max_cuts`` times deep; the last half-step's
+        record is returned (all of them are in ``history``)."""
+        try:
+            return self._step(top_displacement, right_displacement)
+        except NewtonFailure:
+            if max_cuts <= 0:
+                raise
+            self.pool.reject()
+            self.u.x.array[:] = self.u_n.x.array
+            self.u.x.scatter_forward()
+            t0, r0 = self._bc_now
+            self.step(top_displacement=0.5 * (t0 + top_displacement),
+                      right_displacement=0.5 * (r0 + right_displacement),
+                      max_cuts=max_cuts - 1)
+            return self.step(top_displacement=top_displacement,
+                             right_displacement=right_displacement, max_cuts=max_cuts - 1)
+
+    _bc_now = (0.0, 0.0)  # the boundary displacements of the last accepted step, m
+
+    def _step(self, top_displacement: float, right_displacement: float) -> HierStep:
         t0 = time.perf_counter()
         fx = self._fx
         self.top_u.value = top_displacement
@@ -259,19 +290,23 @@ class HierarchicalPlaneStrain:
             its = it
             if it > 0 and rel <= self.newton_rtol:
                 break
-            if it == self.max_newton:
-                raise RuntimeError(f"Newton: no convergence in {self.max_newton} iterations "
-                                   f"(residual {rel:.3g} of the internal force scale; asked "
-                                   f"{self.newton_rtol})")
+            if it == self.max_newton or not math.isfinite(rel):
+                raise NewtonFailure(f"Newton: no convergence in {self.max_newton} iterations "
+                                    f"(residual {rel:.3g} of the internal force scale; asked "
+                                    f"{self.newton_rtol})")
             self.A.zeroEntries()
             fx.fem_petsc.assemble_matrix(self.A, self.form_jac, bcs=self.bcs)
             self.A.assemble()
             self.ksp.setOperators(self.A)
             self.ksp.solve(self.b, self.du.x.petsc_vec)
             self.du.x.scatter_forward()
+            if not np.all(np.isfinite(self.du.x.array)):
+                # (a singular Jacobian: softening elements whose tangents lost stiffness)
+                raise NewtonFailure("the Newton correction is not finite (singular Jacobian)")
             self.u.x.array[:] -= self.du.x.array
             self.u.x.scatter_forward()
         self.pool.accept()
+        self._bc_now = (top_displacement, right_displacement)
         self.u_n.x.array[:] = self.u.x.array
         self.stress_n = self._sig.copy()
         wall = time.perf_counter() - t0

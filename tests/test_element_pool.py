@@ -59,3 +59,17 @@ def test_a_killed_worker_does_not_change_the_result(serial):
         st = pool.apply_strain(_increments())
         assert st.recovered  # that worker's elements were rebuilt elsewhere
         assert all(np.array_equal(a, b) for a, b in zip(serial, st.stresses))
+
+
+def test_an_element_failure_is_named_and_the_pool_goes_on(serial):
+    from cpp_dem.element_pool import ElementError
+
+    with ElementPool.build(N, FACTORY, workers=2) as pool:
+        bad = _increments()
+        bad[1] = -2.0 * np.eye(3)  # I + de turns the cell inside out
+        with pytest.raises(ElementError, match="positive determinant"):
+            pool.apply_strain(bad)
+        pool.reject()  # back to the accepted state; the pool is usable
+        pool.apply_strain(_increments())
+        st = pool.apply_strain(_increments())
+        assert all(np.array_equal(a, b) for a, b in zip(serial, st.stresses))

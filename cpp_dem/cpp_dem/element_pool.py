@@ -30,6 +30,11 @@ import numpy as np
 from ._core import ParameterError
 
 
+class ElementError(RuntimeError):
+    """An element failed in its DEM work (its worker is alive): the message names the
+    elements of that worker's call and the cause."""
+
+
 class ElementHost:
     """The actor on one worker: a dict of DemElements by index, and their accepted bytes."""
 
@@ -262,12 +267,22 @@ class ElementPool:
                         ks, [np.asarray(increments[k]) for k in ks], tangent, strain_kw)
                 except Exception:  # noqa: BLE001
                     lost.add(a)
+            errors = {}
             for a, f in futures.items():
                 try:
                     for r in f.result():
                         results[r["index"]] = r
-                except Exception:  # noqa: BLE001 - the worker (and its actor) is gone
+                except Exception as e:  # noqa: BLE001 - the worker is gone, or an element failed
                     lost.add(a)
+                    errors[a] = e
+            alive = set(self.client.scheduler_info()["workers"])
+            for a in list(lost):
+                if a in alive and a in errors:
+                    # The worker is there: an element itself failed (a blow-up, a bad
+                    # increment). The elements of that call are back to their accepted state
+                    # after the caller's reject(); say which and why.
+                    raise ElementError(f"elements {self._by_host(todo).get(a)} on {a}: "
+                                       f"{type(errors[a]).__name__}: {errors[a]}") from errors[a]
             todo = [k for k in range(self.n) if k not in results]
             if not todo:
                 break
@@ -322,4 +337,4 @@ class ElementPool:
         self.close()
 
 
-__all__ = ["ElementPool", "ElementHost", "PeriodicFactory", "PoolStep"]
+__all__ = ["ElementPool", "ElementError", "ElementHost", "PeriodicFactory", "PoolStep"]
