@@ -39,6 +39,10 @@ def main(argv=None) -> int:
     ap.add_argument("--steps", type=int, default=10)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--rtol", type=float, default=5e-3)
+    ap.add_argument("--unbalanced", type=float, default=1e-5,
+                    help="the elements relax to this unbalanced force after each increment")
+    ap.add_argument("--tangent", default="network-elastic",
+                    choices=("network", "network-elastic"))
     ap.add_argument("--out", default="results/bench_runs/fem_dem_biaxial.json")
     args = ap.parse_args(argv)
     lx, ly = 0.02, 0.04
@@ -48,7 +52,10 @@ def main(argv=None) -> int:
     with ElementPool.build(n, PeriodicFactory(n=args.grains, stress=args.pressure,
                                               isotropic=True), workers=args.workers) as pool:
         m = HierarchicalPlaneStrain(pool, lx=lx, ly=ly, nx=args.nx, ny=args.ny,
-                                    confining_pa=args.pressure, newton_rtol=args.rtol)
+                                    confining_pa=args.pressure, newton_rtol=args.rtol,
+                                    tangent=args.tangent,
+                                    strain_kw={"unbalanced": args.unbalanced,
+                                               "max_relax_steps": 100_000})
         print(f"[biaxial] {n} elements of {args.grains} grains ready in "
               f"{time.perf_counter() - t0:.1f} s", flush=True)
         for k in range(1, args.steps + 1):

@@ -95,7 +95,7 @@ class HierarchicalPlaneStrain:
     def __init__(self, pool, *, lx: float, ly: float, nx: int, ny: int,
                  confining_pa: float | None = None, homogeneous: bool = False,
                  newton_rtol: float = 1e-3, max_newton: int = 10, strain_kw: dict | None = None,
-                 verbose: bool = False) -> None:
+                 tangent: str = "network", verbose: bool = False) -> None:
         if not (lx > 0 and ly > 0 and math.isfinite(lx) and math.isfinite(ly)):
             raise FemInputError(f"lx={lx}, ly={ly}: must be > 0 (m)")
         if nx < 1 or ny < 1:
@@ -107,6 +107,11 @@ class HierarchicalPlaneStrain:
 
         self.pool, self.lx, self.ly = pool, float(lx), float(ly)
         self.verbose = verbose
+        if tangent not in ("network", "network-elastic"):
+            raise FemInputError(f"tangent={tangent!r}: 'network' (sliding contacts on the "
+                                "cone: the consistent tangent) or 'network-elastic' (sliding "
+                                "contacts stuck: stiffer, robust past the peak)")
+        self.tangent = tangent
         self.homogeneous = homogeneous
         self.confining_pa = confining_pa
         self.newton_rtol, self.max_newton = newton_rtol, max_newton
@@ -192,7 +197,7 @@ class HierarchicalPlaneStrain:
         self.ksp.getPC().setType("lu")
         # the elements' current state: stress and tangent at the start
         self.history: list[HierStep] = []
-        first = pool.apply_strain([np.zeros((3, 3))] * pool.n, tangent="network",
+        first = pool.apply_strain([np.zeros((3, 3))] * pool.n, tangent=self.tangent,
                                   **self.strain_kw)
         pool.reject()  # (a zero increment with relaxation: measured, then undone)
         self._set_q(first.stresses, first.tangents)
@@ -221,7 +226,7 @@ class HierarchicalPlaneStrain:
 
         self._increments = np.array([dem_increment(g) for g in self._grad_increment()])
         try:
-            step = self.pool.apply_strain(list(self._increments), tangent="network",
+            step = self.pool.apply_strain(list(self._increments), tangent=self.tangent,
                                           **self.strain_kw)
         except ElementError as e:  # an element could not take this iterate: cut the step
             raise NewtonFailure(f"an element failed on this iterate: {e}") from e

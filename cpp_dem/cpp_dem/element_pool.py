@@ -69,6 +69,8 @@ class ElementHost:
             d = None
             if tangent == "network":
                 d = el.network_tangent()[0]
+            elif tangent == "network-elastic":  # sliding contacts taken as stuck: stiffer,
+                d = el.network_tangent(sliding="elastic")[0]  # positive past the peak
             elif tangent == "fd":
                 d = el.fd_tangent(**strain_kw)
             out.append({"index": k, "stress": s, "tangent": d,
@@ -247,13 +249,15 @@ class ElementPool:
     def apply_strain(self, increments, *, tangent: str | None = None,
                      **strain_kw) -> PoolStep:
         """Applies increment ``increments[k]`` (3 x 3 displacement gradient, -) to element k,
-        all in parallel; ``tangent``: None, "network" or "fd". Keyword arguments go to
+        all in parallel; ``tangent``: None, "network" (sliding contacts on the Coulomb cone),
+        "network-elastic" (sliding contacts taken as stuck) or "fd". Keyword arguments go to
         ``DemElement.apply_strain``. A worker lost during the call: its elements are rebuilt
         from their last accepted bytes elsewhere and their increment redone."""
         if len(increments) != self.n:
             raise ParameterError(f"increments: {len(increments)} given for {self.n} elements")
-        if tangent not in (None, "network", "fd"):
-            raise ParameterError(f"tangent={tangent!r}: None, 'network' or 'fd'")
+        if tangent not in (None, "network", "network-elastic", "fd"):
+            raise ParameterError(f"tangent={tangent!r}: None, 'network', 'network-elastic' "
+                                 "or 'fd'")
         t0 = time.perf_counter()
         results: dict = {}
         todo = list(range(self.n))
