@@ -107,6 +107,7 @@ class HierarchicalPlaneStrain:
 
         self.pool, self.lx, self.ly = pool, float(lx), float(ly)
         self.verbose = verbose
+        self.bad_tangents = 0  # element tangents replaced by their last good one
         if tangent not in ("network", "network-elastic"):
             raise FemInputError(f"tangent={tangent!r}: 'network' (sliding contacts on the "
                                 "cone: the consistent tangent) or 'network-elastic' (sliding "
@@ -207,6 +208,20 @@ class HierarchicalPlaneStrain:
     def _set_q(self, stresses, tangents) -> None:
         sig = np.array([fem_stress(s) for s in stresses])
         tan = np.array([fem_tangent(t) for t in tangents])
+        # A tangent far from positive (its smallest eigenvalue below -10 % of its largest) or
+        # not finite is not a softening element but a near-singular network solve: seen as
+        # -730 MPa against +3 MPa, and it sent Newton away. Such an element keeps its last good
+        # tangent for this iterate (counted in bad_tangents).
+        last = getattr(self, "_tan", None)
+        for k, c in enumerate(tan):
+            ok = bool(np.all(np.isfinite(c)))
+            if ok:
+                ev = np.linalg.eigvalsh(0.5 * (c + c.T))
+                ok = ev[0] >= -0.1 * ev[-1]
+            if not ok and last is not None:
+                tan[k] = last[k]
+                self.bad_tangents += 1
+        self._tan = tan
         self.sig_q.x.array[:] = sig.reshape(-1)
         self.tan_q.x.array[:] = tan.reshape(-1)
         self._sig = sig

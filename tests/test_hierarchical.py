@@ -69,3 +69,16 @@ def test_dem_increment_maps_the_plane_to_x_z():
     de = dem_increment(g)
     assert de[0, 0] == 1 and de[0, 2] == 2 and de[2, 0] == 3 and de[2, 2] == 4
     assert np.count_nonzero(de) == 4  # the out-of-plane y is held
+
+
+def test_a_broken_element_tangent_keeps_the_last_good_one():
+    with ElementPool.build(2, PeriodicFactory(n=80, same=True), workers=1) as pool:
+        m = HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1)
+        good = m._tan.copy()
+        stresses = [np.diag([-1e5, -1e5, -1e5])] * 2
+        bad = np.zeros((6, 6))
+        bad[0, 0] = -1e9  # far from positive
+        nan = np.full((6, 6), np.nan)
+        m._set_q(stresses, [bad, nan])
+        assert m.bad_tangents == 2
+        assert np.array_equal(m._tan, good)
