@@ -1,5 +1,5 @@
-"""Shared reporting of the speed-accuracy benches: JSON lines (printed and appended to a file)
-and a Markdown table on stderr."""
+"""Shared reporting of the benches: JSON lines (printed and appended to a file), one JSON
+document per run, and a Markdown table on stderr."""
 
 from __future__ import annotations
 
@@ -15,6 +15,15 @@ def emit(row: dict, out: Path | None) -> None:
     if out is not None:
         with open(out, "a") as f:
             f.write(line + "\n")
+
+
+def write_json(path: str | Path, obj) -> Path:
+    """Writes ``obj`` as one indented JSON document to ``path`` (its folder made if needed);
+    returns the path."""
+    out = Path(path)
+    out.parent.mkdir(parents=True, exist_ok=True)
+    out.write_text(json.dumps(obj, indent=1))
+    return out
 
 
 def markdown_table(rows: list, columns: list) -> None:

@@ -20,12 +20,13 @@ step: the wall-clock time of the pool's call, and the DEM CPU time each element 
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 from pathlib import Path
 
 import numpy as np
+
+from _report import write_json  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "cpp_dem"))
@@ -80,10 +81,7 @@ def main(argv=None) -> int:
     eff = res["workers_1"]["median_wall_s"] / (2 * res["workers_2"]["median_wall_s"])
     res["efficiency_2_workers"] = eff
     print(f"[pool] parallel efficiency on 2 workers: {100 * eff:.1f} %")
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(res, indent=1))
-    print(f"[pool] wrote {out}")
+    print(f"[pool] wrote {write_json(args.out, res)}")
     return 0
 
 

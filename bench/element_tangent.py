@@ -21,12 +21,13 @@ Both are 6 x 6 Voigt (xx, yy, zz, yz, xz, xy; engineering shear), Pa, tension po
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from _report import write_json  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "cpp_dem"))
@@ -127,10 +128,7 @@ def main(argv=None) -> int:
             f"{peak.contact_count()} contacts sliding): network (MPa)\n{d_net_p / 1e6}\n"
             f"fd, one-sided (MPa)\n{d_fd_p / 1e6}\n|network - fd| / |fd| = "
             f"{out['peak']['rel_diff']:.3f}")
-    path = Path(args.out)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    path.write_text(json.dumps(out, indent=1))
-    log(f"wrote {path}")
+    log(f"wrote {write_json(args.out, out)}")
     return 0
 
 

@@ -13,12 +13,13 @@ positive) and the DEM/FEM time split; writes --out (JSON).
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from _report import write_json  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "cpp_dem"))
@@ -70,10 +71,7 @@ def main(argv=None) -> int:
                   f"{r.residual:.1e}), sigma_xx {s[0] / 1e3:.1f} kPa, sigma_yy "
                   f"{s[1] / 1e3:.1f} kPa, DEM {r.dem_s:.1f} s, FEM {r.fem_s:.2f} s, wall "
                   f"{r.wall_s:.1f} s", flush=True)
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"args": vars(args), "rows": rows}, indent=1))
-    print(f"[biaxial] wrote {out}")
+    print(f"[biaxial] wrote {write_json(args.out, {'args': vars(args), 'rows': rows})}")
     return 0
 
 

@@ -23,13 +23,14 @@ walls, so the ratio is also given per contact.
 from __future__ import annotations
 
 import argparse
-import json
 import statistics
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from _report import write_json  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "cpp_dem"))
@@ -98,10 +99,7 @@ def main(argv=None) -> int:
               f"{rec['ratio_per_contact']:.3f}", flush=True)
     res["box_porosity"] = measure.porosity(box.scene, box.walls)
     res["cell_porosity"] = measure.porosity(per.scene, ())
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(res, indent=1))
-    print(f"[cost] wrote {out}")
+    print(f"[cost] wrote {write_json(args.out, res)}")
     return 0
 
 

@@ -24,12 +24,13 @@ and the mean over gamma in [0.10, 0.15]. Results to --out (JSON) and a figure be
 from __future__ import annotations
 
 import argparse
-import json
 import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+from _report import write_json  # noqa: E402
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "cpp_dem"))
@@ -198,9 +199,7 @@ def main(argv=None) -> int:
     for k, v in res["summary"].items():
         log(f"{k}: peak tau/sigma {v['peak']:.3f} at gamma {v['gamma_at_peak']:.3f}, "
             f"gamma 0.10-0.15: {v['critical_mean']:.3f} +- {v['critical_std']:.3f}")
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps(res, indent=1))
+    out = write_json(args.out, res)
     try:
         import matplotlib
 

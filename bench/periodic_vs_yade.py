@@ -33,6 +33,8 @@ from pathlib import Path
 
 import numpy as np
 
+from _report import write_json  # noqa: E402
+
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "cpp_dem"))
 
@@ -170,11 +172,9 @@ def main(argv=None) -> int:
         f"within 0.5 %: {ok}")
     log(f"speed: cpp_dem {1e6 * ours_s / args.steps:.1f} us/step, Yade "
         f"{1e6 * yade['seconds'] / args.steps:.1f} us/step (ratio {yade['seconds'] / ours_s:.1f})")
-    out = Path(args.out)
-    out.parent.mkdir(parents=True, exist_ok=True)
-    out.write_text(json.dumps({"args": vars(args), "dt": dt, "rate": rate, "table": table,
-                               "worst": worst, "within_half_percent": bool(ok),
-                               "ours_s": ours_s, "yade_s": yade["seconds"]}, indent=1))
+    out = write_json(args.out, {"args": vars(args), "dt": dt, "rate": rate, "table": table,
+                                "worst": worst, "within_half_percent": bool(ok),
+                                "ours_s": ours_s, "yade_s": yade["seconds"]})
     log(f"wrote {out}")
     return 0 if ok else 1
 

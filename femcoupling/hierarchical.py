@@ -69,8 +69,8 @@ class NewtonFailure(RuntimeError):
 @dataclasses.dataclass
 class HierStep:
     """One converged load step: the top displacement (m), Newton iterations, the residual at
-    the end (relative to the internal force scale), the elements' mean stress sigma_yy
-    (``top_stress_pa``) and mean Voigt stress (xx, yy, xy), tension positive, Pa, the element
+    the end (relative to the internal force scale), the elements' mean Voigt stress (xx, yy,
+    xy), tension positive, Pa, the element
     stresses (n_cells, 3), the DEM seconds (sum over the elements' work), the FEM seconds
     (the step's wall time outside the pool's calls), the wall seconds, and the elements
     rebuilt after a lost worker."""
@@ -78,7 +78,6 @@ class HierStep:
     load: float
     iterations: int
     residual: float
-    top_stress_pa: float
     mean_stress: np.ndarray
     element_stresses: np.ndarray
     dem_s: float
@@ -153,7 +152,6 @@ class HierarchicalPlaneStrain:
         f_int = ufl.dot(self.sig_q, eps(v)) * dxq
         self.form_res = fem.form(f_int - ufl.dot(self.traction, v) * ds(1))
         self.form_jac = fem.form(ufl.dot(ufl.dot(self.tan_q, eps(dv)), eps(v)) * dxq)
-        self.form_top = None
         self.expr_grad = fem.Expression(ufl.grad(self.u), pts)
         self.expr_grad_n = fem.Expression(ufl.grad(self.u_n), pts)
         # boundary conditions
@@ -175,12 +173,10 @@ class HierarchicalPlaneStrain:
             bnd = lambda x: (np.isclose(x[0], 0) | np.isclose(x[0], lx) |  # noqa: E731
                              np.isclose(x[1], 0) | np.isclose(x[1], ly))
             facets = fx.mesh.locate_entities_boundary(msh, fdim, bnd)
-            self._hdofs = [fem.locate_dofs_topological((V0, self._hx.function_space), fdim,
-                                                       facets),
-                           fem.locate_dofs_topological((V1, self._hy.function_space), fdim,
-                                                       facets)]
-            self.bcs = [fem.dirichletbc(self._hx, self._hdofs[0], V0),
-                        fem.dirichletbc(self._hy, self._hdofs[1], V1)]
+            hdofs = [fem.locate_dofs_topological((V0, self._hx.function_space), fdim, facets),
+                     fem.locate_dofs_topological((V1, self._hy.function_space), fdim, facets)]
+            self.bcs = [fem.dirichletbc(self._hx, hdofs[0], V0),
+                        fem.dirichletbc(self._hy, hdofs[1], V1)]
         else:
             self.bcs.append(None)  # placeholder for the right: traction (confining) or u_x
             if confining_pa is None:
@@ -189,7 +185,6 @@ class HierarchicalPlaneStrain:
             else:
                 self.traction.value[:] = [-float(confining_pa), 0.0]
             self.bcs = [b for b in self.bcs if b is not None]
-        self.top_dofs = dofs(V1, lambda x: np.isclose(x[1], ly))
         self.A = fx.fem_petsc.create_matrix(self.form_jac)
         self.b = fx.fem_petsc.create_vector(self.V)
         self.ksp = fx.PETSc.KSP().create(comm)
@@ -202,7 +197,6 @@ class HierarchicalPlaneStrain:
                                   **self.strain_kw)
         pool.reject()  # (a zero increment with relaxation: measured, then undone)
         self._set_q(first.stresses, first.tangents)
-        self.stress_n = np.array([fem_stress(s) for s in first.stresses])
 
     # ---- quadrature data ----------------------------------------------------------------
     def _set_q(self, stresses, tangents) -> None:
@@ -328,10 +322,8 @@ class HierarchicalPlaneStrain:
         self.pool.accept()
         self._bc_now = (top_displacement, right_displacement)
         self.u_n.x.array[:] = self.u.x.array
-        self.stress_n = self._sig.copy()
         wall = time.perf_counter() - t0
         r = HierStep(load=top_displacement, iterations=its, residual=rel,
-                     top_stress_pa=float(self._sig[:, 1].mean()),
                      mean_stress=self._sig.mean(axis=0), element_stresses=self._sig.copy(),
                      dem_s=dem_s, fem_s=wall - pool_s, wall_s=wall, recovered=recovered,
                      increments=self._increments.copy())

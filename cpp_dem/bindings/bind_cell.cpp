@@ -38,13 +38,6 @@ void bind_cell(py::module_& m) {
              py::arg("periodic") = std::array<bool, 3>{true, true, true},
              "Makes the scene periodic along the axes marked in `periodic`, with cell vectors "
              "the columns of `cell` (3 x 3, m, det > 0); the cell is cell @ [0,1)^3."));
-  method("_set_cell_matrix",
-         py::cpp_function(
-             [](Scene& s, const Array& h, bool map_bodies) {
-               s.set_cell_matrix(to_mat3(h, "cell"), map_bodies);
-             },
-             py::name("_set_cell_matrix"), py::is_method(scene_cls), py::arg("cell"),
-             py::arg("map_bodies")));
   scene_cls.attr("is_periodic") = property(
       py::cpp_function([](const Scene& s) { return s.is_periodic(); }), py::none(), py::none(),
       "The scene has a periodic cell.");

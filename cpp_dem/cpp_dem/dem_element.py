@@ -136,11 +136,8 @@ class DemElement:
         RadiusGrowth's (gain, max_strain per call).
         ``material``: a Material (default: a linear law, E = 100 MPa, k_s/k_n 0.3, 30 deg,
         2650 kg/m^3)."""
-        from .scene import linear_material
-
         if material is None:
-            material = linear_material(density=2650.0, young=100e6, poisson=0.3,
-                                       friction_angle_deg=30.0)
+            material = default_material()
         scene = periodic.prepare_periodic(n, material=material, stress=stress,
                                           radius_mean=radius_mean, radius_spread=radius_spread,
                                           seed=seed, porosity=porosity, damping=damping,
@@ -160,16 +157,9 @@ class DemElement:
         max_strain per call): the growth in a box feels the stress only at the walls, so fast
         growth overshoots and leaves a denser core than a cell grown alike (docs/periodic.md).
         """
-        from .packing import loose_cloud
-        from .scene import linear_material
-
         if material is None:
-            material = linear_material(density=2650.0, young=100e6, poisson=0.3,
-                                       friction_angle_deg=30.0)
-        rng = np.random.default_rng(seed)
-        radii = radius_mean * (1.0 + radius_spread * (2.0 * rng.random(n) - 1.0))
-        edge = float((np.sum(4.0 / 3.0 * np.pi * radii**3) / 0.25) ** (1.0 / 3.0))
-        centers, radii = loose_cloud(radii, (0, 0, 0), (edge, edge, edge), seed=seed)
+            material = default_material()
+        centers, radii, edge = periodic.cube_cloud(n, radius_mean, radius_spread, seed, 0.25)
         scene = Scene(local_damping=damping)
         m = scene.add_material(material)
         wm = scene.add_material(_core.Material(
@@ -431,6 +421,14 @@ class DemElement:
     def clone(self) -> "DemElement":
         """An independent copy (through ``to_bytes``)."""
         return DemElement.from_bytes(self.to_bytes())
+
+
+def default_material():
+    """The elements' default grains: a linear law, E = 100 MPa, k_s/k_n 0.3, 30 deg,
+    2650 kg/m^3."""
+    from .scene import linear_material
+
+    return linear_material(density=2650.0, young=100e6, poisson=0.3, friction_angle_deg=30.0)
 
 
 def _voigt(s: np.ndarray) -> np.ndarray:

@@ -89,14 +89,6 @@ class ElementHost:
         for k in indices:
             self.elements[k] = DemElement.from_bytes(self.accepted[k])
 
-    def drop(self, indices) -> None:
-        for k in indices:
-            self.elements.pop(k, None)
-            self.accepted.pop(k, None)
-
-    def ping(self) -> int:
-        return len(self.elements)
-
 
 @dataclass
 class PeriodicFactory:
@@ -152,6 +144,14 @@ class ElementPool:
 
     def __init__(self, data: Sequence[bytes], *, client=None, workers: int = 2,
                  keep_copies: bool = True) -> None:
+        self._connect(client, workers, keep_copies, len(data))
+        self._bytes = list(data)  # last accepted states, in the client
+        self._start_hosts()
+        self._place(range(self.n))
+
+    def _connect(self, client, workers: int, keep_copies: bool, n: int) -> None:
+        """The client (a LocalCluster of ``workers`` single-threaded processes when none is
+        given) and the empty placement of n elements."""
         self._own_cluster = None
         if client is None:
             from dask.distributed import Client, LocalCluster
@@ -161,14 +161,9 @@ class ElementPool:
             self._own_cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
                                              processes=True, dashboard_address=None)
             client = Client(self._own_cluster)
-        self.client = client
-        self.keep_copies = keep_copies
-        self.n = len(data)
-        self._bytes = list(data)  # last accepted states, in the client
-        self._hosts: dict = {}    # worker address -> actor
-        self._where: dict = {}    # element index -> worker address
-        self._start_hosts()
-        self._place(range(self.n))
+        self.client, self.keep_copies, self.n = client, keep_copies, n
+        self._hosts: dict = {}  # worker address -> actor
+        self._where: dict = {}  # element index -> worker address
 
     @classmethod
     def build(cls, n: int, factory: Callable, *, client=None, workers: int = 2,
@@ -178,15 +173,7 @@ class ElementPool:
         if n < 1:
             raise ParameterError(f"n={n}: need at least one element")
         pool = cls.__new__(cls)
-        pool._own_cluster = None
-        if client is None:
-            from dask.distributed import Client, LocalCluster
-
-            pool._own_cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
-                                             processes=True, dashboard_address=None)
-            client = Client(pool._own_cluster)
-        pool.client, pool.keep_copies, pool.n = client, keep_copies, n
-        pool._hosts, pool._where = {}, {}
+        pool._connect(client, workers, keep_copies, n)
         pool._bytes = [None] * n
         pool._start_hosts()
         addrs = sorted(pool._hosts)

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from . import _core, measure, prep
+from . import measure, prep
 from ._core import CellController, ParameterError
 from .packing import loose_cloud
 from .scene import Scene
@@ -34,6 +34,26 @@ def periodic_cloud(radii, edge: float, *, seed: int = 0) -> tuple[np.ndarray, np
     overlaps, also across the periodic faces (random sequential addition, seeded)."""
     cube_cell(edge)
     return loose_cloud(radii, (0.0, 0.0, 0.0), (edge, edge, edge), seed=seed)
+
+
+def cube_cloud(n: int, radius_mean: float, radius_spread: float, seed: int,
+               solid_fraction: float) -> tuple[np.ndarray, np.ndarray, float]:
+    """n radii uniform in radius_mean (1 +- radius_spread) (m, seeded) placed as a loose cloud
+    (``packing.loose_cloud``, no overlaps with each other or the faces) in the cube [0, edge)^3
+    that they fill at ``solid_fraction`` (-). Returns (centres, radii, edge): the start of a
+    periodic cube and of a box of six walls alike."""
+    if n < 2:
+        raise ParameterError(f"n={n}: need at least 2 spheres")
+    if not (0 < radius_spread < 1):
+        raise ParameterError(f"radius_spread={radius_spread}: must be in (0, 1)")
+    if not (0 < solid_fraction <= 0.3):
+        raise ParameterError(f"solid_fraction={solid_fraction}: must be in (0, 0.3] (random "
+                             "sequential addition jams above it)")
+    rng = np.random.default_rng(seed)
+    radii = radius_mean * (1.0 + radius_spread * (2.0 * rng.random(n) - 1.0))
+    edge = float((np.sum(4.0 / 3.0 * np.pi * radii**3) / solid_fraction) ** (1.0 / 3.0))
+    centers, radii = periodic_cloud(radii, edge, seed=seed)
+    return centers, radii, edge
 
 
 def periodic_scene(centers, radii, cell, *, material, damping: float = 0.7,
@@ -165,17 +185,7 @@ def prepare_periodic(n: int, *, material, stress: float, radius_mean: float,
     ``growth_max_strain`` are RadiusGrowth's (fast growth overshoots and leaves a denser
     packing: docs/periodic.md). The preparation's controllers are removed at the end; the
     scene is at rest at the stress."""
-    if n < 2:
-        raise ParameterError(f"n={n}: need at least 2 spheres")
-    if not (0 < radius_spread < 1):
-        raise ParameterError(f"radius_spread={radius_spread}: must be in (0, 1)")
-    if not (0 < solid_fraction <= 0.3):
-        raise ParameterError(f"solid_fraction={solid_fraction}: must be in (0, 0.3] (random "
-                             "sequential addition jams above it)")
-    rng = np.random.default_rng(seed)
-    radii = radius_mean * (1.0 + radius_spread * (2.0 * rng.random(n) - 1.0))
-    edge = float((np.sum(4.0 / 3.0 * np.pi * radii**3) / solid_fraction) ** (1.0 / 3.0))
-    centers, radii = periodic_cloud(radii, edge, seed=seed)
+    centers, radii, edge = cube_cloud(n, radius_mean, radius_spread, seed, solid_fraction)
     scene = periodic_scene(centers, radii, cube_cell(edge), material=material, damping=damping)
     if porosity is not None:
         prep.refd(scene, (), 0, stress=stress, porosity=porosity, tol=tol,
@@ -183,7 +193,7 @@ def prepare_periodic(n: int, *, material, stress: float, radius_mean: float,
                   max_strain=growth_max_strain, log=log)
     else:
         if prep_friction_deg is not None:
-            idx = prep.set_friction(scene, np.arange(n), scene.material(0), prep_friction_deg)
+            prep.set_friction(scene, np.arange(n), scene.material(0), prep_friction_deg)
             r = prep.grow_to_stress(scene, (), stress, tol=tol, unbalanced=unbalanced,
                                     max_steps=max_steps, gain=growth_gain,
                                     max_strain=growth_max_strain)
@@ -192,7 +202,6 @@ def prepare_periodic(n: int, *, material, stress: float, radius_mean: float,
                     f"{r.porosity:.4f}")
             for b in range(n):
                 scene.set_body_material(b, 0)
-            del idx
         r = prep.grow_to_stress(scene, (), stress, tol=tol, unbalanced=unbalanced,
                                 max_steps=max_steps, gain=growth_gain,
                                 max_strain=growth_max_strain)
@@ -212,7 +221,6 @@ def prepare_periodic(n: int, *, material, stress: float, radius_mean: float,
     return scene
 
 
-__all__ = ["cube_cell", "periodic_cloud", "periodic_scene", "cell_controller",
+__all__ = ["cube_cell", "periodic_cloud", "cube_cloud", "periodic_scene", "cell_controller",
            "default_max_rate", "deformation_gradient", "small_strain", "drive_cell",
            "prepare_periodic", "CellController"]
-_ = _core  # (the compiled module backs CellController)

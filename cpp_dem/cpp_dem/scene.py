@@ -304,17 +304,16 @@ class Scene(_core.Scene):
             c.clear_limit_report()
             for r in rows:
                 if "component" in r:  # CellController: a component of the velocity gradient
-                    msg = (f"controller {i} ({type(c).__name__}, component {r['component']}): at "
-                           f"its rate cap {r['cap_per_s']:.4g} 1/s for {r['calls']} calls while "
-                           f"the stress drifted from the target {r['target_pa']:.6g} Pa to "
-                           f"{r['reached_pa']:.6g} Pa; raise its max_rate or slow the loading")
+                    where, knob = f"component {r['component']}", "max_rate"
+                    cap = f"rate cap {r['cap_per_s']:.4g} 1/s"
                 else:
                     where = (f"axis {r['axis']}, wall {r['wall']}" if "axis" in r
                              else f"wall {r['wall']}")
-                    msg = (f"controller {i} ({type(c).__name__}, {where}): at its speed cap "
-                           f"{r['cap_m_per_s']:.4g} m/s for {r['calls']} calls while the stress "
-                           f"drifted from the target {r['target_pa']:.6g} Pa to "
-                           f"{r['reached_pa']:.6g} Pa; raise its max_speed or slow the loading")
+                    knob, cap = "max_speed", f"speed cap {r['cap_m_per_s']:.4g} m/s"
+                msg = (f"controller {i} ({type(c).__name__}, {where}): at its {cap} for "
+                       f"{r['calls']} calls while the stress drifted from the target "
+                       f"{r['target_pa']:.6g} Pa to {r['reached_pa']:.6g} Pa; raise its {knob} "
+                       "or slow the loading")
                 if self.strict_controllers:
                     raise RuntimeError(msg)
                 warnings.warn(ControllerLimitWarning(msg), stacklevel=3)

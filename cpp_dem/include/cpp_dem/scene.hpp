@@ -158,9 +158,6 @@ class Scene {
   /// Whether bodies carry the mean spin axial(skew L) (default on: a rigid rotation of the
   /// cell then turns every grain with it, frame-indifferently; off: as Yade).
   void set_mean_spin(bool on);
-  /// Sets the cell vectors to h at once (m), mapping every body affinely with the cell when
-  /// map_bodies (x -> h h_old^-1 x); for preparation (not the mean field of a step).
-  void set_cell_matrix(const Mat3& h, bool map_bodies);
   /// Love–Weber stress of the pair contacts over the cell volume, Pa, compression positive,
   /// not symmetrised: (1/V) sum_c f_c (x) l_c, f_c the force on j, l_c = x_j + shift - x_i.
   Mat3 cell_stress() const;
@@ -370,6 +367,13 @@ class Scene {
   /// its radius: the Verlet margin's measure (need_rebuild, the integration and clump passes).
   __attribute__((always_inline)) inline Real displacement_since_build(int slot) const {
     return (bodies_.pos[slot] - pos_at_build_[slot]).norm() +
+           std::max(0.0, bodies_.radius[slot] - radius_at_build_[slot]);
+  }
+  /// The same in a deforming periodic cell: beyond the cell's own deformation since the build
+  /// fb (= H H_build^-1), |x - fb x_build| plus any growth.
+  __attribute__((always_inline)) inline Real displacement_since_build(int slot,
+                                                                       const Mat3& fb) const {
+    return (bodies_.pos[slot] - fb * pos_at_build_[slot]).norm() +
            std::max(0.0, bodies_.radius[slot] - radius_at_build_[slot]);
   }
   void rebuild();

@@ -43,8 +43,7 @@ bool Scene::need_rebuild() const {
   if (cell_part > 0) {
 #pragma omp parallel for reduction(max : worst) schedule(static) if (n > kParallelMin)
     for (int b = 0; b < n; ++b) {
-      worst = std::max(worst, (bodies_.pos[b] - fb * pos_at_build_[b]).norm() +
-                                  std::max(0.0, bodies_.radius[b] - radius_at_build_[b]));
+      worst = std::max(worst, displacement_since_build(b, fb));
     }
     return worst + cell_part > half;
   }

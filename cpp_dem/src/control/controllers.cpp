@@ -124,9 +124,9 @@ void ServoWall::apply(Scene& scene) {
 
 TriaxialController::TriaxialController(std::vector<int> walls, Real gain, Real max_speed)
     : walls_(std::move(walls)), gain_(gain), max_speed_(max_speed) {
-  if (walls_.size() != 6 && !walls_.empty())
-    throw ParameterError("walls: expected the 6 walls of a box (x-, x+, y-, y+, z-, z+), or "
-                         "none in a periodic cell; got " + std::to_string(walls_.size()));
+  if (walls_.size() != 6)
+    throw ParameterError("walls: expected the 6 walls of a box (x-, x+, y-, y+, z-, z+), got " +
+                         std::to_string(walls_.size()));
   check_gain(gain);
   check_speed(max_speed);
 }
@@ -391,8 +391,9 @@ void CellController::apply(Scene& scene) {
     throw ParameterError("CellController: the scene has no periodic cell (set_periodic_cell)");
   const PeriodicCell& cell = scene.cell();
   const Real volume = cell.volume();
-  sigma_ = scene.cell_stress();
-  // Affine stiffness of each component, Pa.
+  // The cell stress (as Scene::cell_stress) and the affine stiffness of each component, Pa,
+  // in one walk of the contacts.
+  sigma_.setZero();
   stiff_.setZero();
   const auto& x = scene.positions();
   scene.for_each_contact_of(ContactKind::Pair, [&](const ContactRecord& c) {
@@ -400,14 +401,16 @@ void CellController::apply(Scene& scene) {
     Real kn, ks;
     c.stiffness(kn, ks);
     const Vec3 l = x[c.body2] + c.shift2 - x[c.body1];
+    sigma_ += c.force2 * l.transpose();
     const Vec3& n = c.state->normal;
     for (int r = 0; r < 3; ++r) {
       const Real krr = kn * n[r] * n[r] + ks * (1 - n[r] * n[r]);
       for (int q = 0; q < 3; ++q) stiff_(r, q) += krr * l[q] * l[q];
     }
   });
+  sigma_ /= volume;
   stiff_ /= volume;
-  Mat3 l = cell.vel_grad;
+  Mat3 l;
   const Real span = scene.dt() * period;
   error_ = 0;
   for (int r = 0; r < 3; ++r)

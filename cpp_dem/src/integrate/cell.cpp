@@ -1,5 +1,6 @@
-// The periodic cell (bodies/cell.hpp): setting it, the mean field's step after the
-// integration, wrapping bodies into the cell, and the cell stress.
+// The periodic cell (bodies/cell.hpp): setting it, the mean field's step (applied to the
+// bodies by the integration pass, to the cell after it), wrapping bodies into the cell, and
+// the cell stress.
 #include <cmath>
 #include <sstream>
 
@@ -45,7 +46,6 @@ void Scene::set_periodic_cell(const Mat3& h, const std::array<bool, 3>& periodic
         throw ParameterError(std::string("periodic[") + axis_name(a) +
                              "]=true: the scene has a wall normal to " + axis_name(a) +
                              "; walls may only be normal to axes that are not periodic");
-    // A periodic axis is one of the cell vectors; the others must not lean into it.
   }
   cell_.on = true;
   cell_.periodic = periodic;
@@ -72,19 +72,6 @@ void Scene::set_velocity_gradient(const Mat3& l) {
 }
 
 void Scene::set_mean_spin(bool on) { cell_.mean_spin = on; }
-
-void Scene::set_cell_matrix(const Mat3& h, bool map_bodies) {
-  if (!cell_.on)
-    throw ParameterError("cell: the scene has no periodic cell (set_periodic_cell first)");
-  if (!h.allFinite() || !(h.determinant() > 0))
-    throw ParameterError("cell=" + mat_str(h) + ": must be finite with det > 0 (m)");
-  if (map_bodies) {
-    const Mat3 f = h * cell_.h.inverse();
-    for (Vec3& x : bodies_.pos) x = f * x;
-  }
-  cell_.h = h;
-  dirty_ = true;
-}
 
 void Scene::refresh_image_offsets() {
   for (int k = 0; k < 27; ++k) {

@@ -63,8 +63,8 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
   if (mean_field) field = mean_field_step();
   const auto finish_body = [&](int b) __attribute__((always_inline)) {
     if (!mean_field) return displacement_since_build(b);
-    return field.apply(bodies_.pos[b], bodies_.ori[b], pos_at_build_[b]) +
-           std::max(0.0, bodies_.radius[b] - radius_at_build_[b]);
+    field.apply(bodies_.pos[b], bodies_.ori[b]);
+    return displacement_since_build(b, field.fb);
   };
 
   // Reduce the contact forces into body b in a fixed order: the contacts where b is j (in

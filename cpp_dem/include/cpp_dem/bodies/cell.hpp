@@ -36,8 +36,6 @@ struct PeriodicCell {
     const Mat3 w = 0.5 * (vel_grad - vel_grad.transpose());
     return Vec3(w(2, 1), w(0, 2), w(1, 0));
   }
-  /// The deformation gradient since the cell was set, F = H H_ref^-1 (-).
-  Mat3 deformation() const { return h * h_ref.inverse(); }
   Real volume() const { return h.determinant(); }
   /// Thickness of the cell across the planes of the two other vectors of axis a, m.
   Real thickness(int a) const {
@@ -52,19 +50,17 @@ struct PeriodicCell {
   }
 };
 
-/// One step of the mean field as the integration pass applies it to a body: x -> A x, the
-/// orientation turned by the mean spin, and the broad phase's measure |x - F_b x_build|
-/// (F_b = the cell's deformation since the last build, after this step).
+/// One step of the mean field as the integration pass applies it to a body: x -> A x and the
+/// orientation turned by the mean spin; fb is the cell's deformation since the last build
+/// after this step (the broad phase's measure, Scene::displacement_since_build).
 struct MeanFieldStep {
   Mat3 a = Mat3::Identity();
   Mat3 fb = Mat3::Identity();
   Quat spin = Quat::Identity();
   bool rotate = false;
-  /// Maps x and q; returns the displacement beyond the cell's since the build, m.
-  Real apply(Vec3& x, Quat& q, const Vec3& x_build) const {
+  void apply(Vec3& x, Quat& q) const {
     x = a * x;
     if (rotate) q = spin * q;
-    return (x - fb * x_build).norm();
   }
 };
 
