@@ -91,7 +91,11 @@ rolling_friction : eta_r, -; |M_r| <= eta_r R* |F_n|.
       .def_readonly("kr", &ContactPhys::kr, "N m/rad")
       .def_readonly("rolling_cap", &ContactPhys::rolling_cap, "m");
 
-  m.def("mix_materials", &mix_materials, py::arg("a"), py::arg("b"), py::arg("r1"),
+  m.def("mix_materials",
+        [](const Material& a, const Material& b, Real r1, Real r2, Real m1, Real m2) {
+          return mix_materials(a, b, r1, r2, m1, m2);
+        },
+        py::arg("a"), py::arg("b"), py::arg("r1"),
         py::arg("r2"), py::arg("m1"), py::arg("m2"),
         "Contact parameters of two materials with radii r1, r2 (m) and masses m1, m2 (kg).");
 }

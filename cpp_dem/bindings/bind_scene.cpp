@@ -74,6 +74,52 @@ void bind_scene(py::module_& m) {
            "Adds a material; returns its index.")
       .def("material", &Scene::material, py::arg("index"), py::return_value_policy::copy)
       .def_property_readonly("num_materials", &Scene::num_materials)
+      .def("set_pair_law",
+           [](Scene& s, int a, int b, std::optional<std::string> model,
+              std::optional<double> kn, std::optional<double> ks, std::optional<double> friction,
+              std::optional<double> damping_normal, std::optional<double> damping_shear) {
+             PairLaw l;
+             if (model) {
+               l.model_set = true;
+               l.model = law_by_name(*model);
+             }
+             const auto set = [](std::optional<double> v, const char* field, Real& out) {
+               if (!v) return;
+               if (!(*v >= 0)) require(false, field, *v, "must be >= 0, or None (unset)");
+               out = *v;
+             };
+             set(kn, "kn", l.kn);
+             set(ks, "ks", l.ks);
+             set(friction, "friction", l.friction);
+             set(damping_normal, "damping_normal", l.damping_normal);
+             set(damping_shear, "damping_shear", l.damping_shear);
+             s.set_pair_law(a, b, l);
+           },
+           py::arg("a"), py::arg("b"), py::kw_only(), py::arg("model") = py::none(),
+           py::arg("kn") = py::none(), py::arg("ks") = py::none(),
+           py::arg("friction") = py::none(), py::arg("damping_normal") = py::none(),
+           py::arg("damping_shear") = py::none(),
+           R"doc(Gives materials a and b their own law over the mixing rules (None keeps the
+mixed value): model (a law of the registry), kn and ks (the linear law's stiffnesses, N/m),
+friction (Coulomb coefficient mu, -), damping_normal and damping_shear (ratios of critical).
+Replaces an earlier law of the pair; contacts take it at their next step.)doc")
+      .def_property_readonly("pair_laws", [](const Scene& s) {
+        py::list out;
+        for (const PairLaw& l : s.pair_laws()) {
+          py::dict d;
+          d["a"] = l.a;
+          d["b"] = l.b;
+          d["model"] = l.model_set ? py::object(py::str(law_info(l.model).name)) : py::object(py::none());
+          const auto opt = [](Real v) { return v >= 0 ? py::object(py::float_(v)) : py::object(py::none()); };
+          d["kn"] = opt(l.kn);
+          d["ks"] = opt(l.ks);
+          d["friction"] = opt(l.friction);
+          d["damping_normal"] = opt(l.damping_normal);
+          d["damping_shear"] = opt(l.damping_shear);
+          out.append(d);
+        }
+        return out;
+      }, "The pair laws set (set_pair_law), one dict per pair of materials.")
       .def("_add_spheres",
            [](Scene& s, const Array& centers, const Array& radii, int material) {
              return s.add_spheres(to_vec3_list(centers, "centers"), to_real_list(radii, "radii"),

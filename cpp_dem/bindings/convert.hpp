@@ -61,5 +61,6 @@ void bind_clumps(py::module_& m);
 void bind_controllers(py::module_& m);  // samples: controllers and checkpoint
 void bind_checkpoint(py::module_& m);
 void bind_cell(py::module_& m);  // after bind_controllers (CellController)
+void bind_bonds(py::module_& m);
 
 }  // namespace cpp_dem::bind

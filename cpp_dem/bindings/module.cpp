@@ -23,4 +23,5 @@ PYBIND11_MODULE(_core, m) {
   cpp_dem::bind::bind_controllers(m);
   cpp_dem::bind::bind_checkpoint(m);
   cpp_dem::bind::bind_cell(m);
+  cpp_dem::bind::bind_bonds(m);
 }

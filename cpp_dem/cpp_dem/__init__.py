@@ -30,6 +30,7 @@ if "OMP_WAIT_POLICY" not in _os.environ:
 from ._core import (  # noqa: F401,E402  (re-exported)
     BeamParams,
     BlowUpError,
+    BondParams,
     ContactModel,
     ContactPhys,
     Material,
@@ -50,6 +51,7 @@ from .dem_element import DemElement  # noqa: F401,E402
 
 __all__ = [
     "BeamParams",
+    "BondParams",
     "CellController",
     "DemElement",
     "periodic",

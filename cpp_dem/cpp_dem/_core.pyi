@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BeamParams', 'BlowUpError', 'CellController', 'ContactModel', 'ContactPhys', 'Controller', 'GEOGRID', 'Material', 'ParameterError', 'RadiusGrowth', 'Scene', 'ServoWall', 'TriaxialController', 'contact_laws', 'get_num_threads', 'mix_materials', 'servo_speed', 'set_num_threads']
+__all__: list[str] = ['BeamParams', 'BlowUpError', 'BondParams', 'CellController', 'ContactModel', 'ContactPhys', 'Controller', 'GEOGRID', 'Material', 'ParameterError', 'RadiusGrowth', 'Scene', 'ServoWall', 'TriaxialController', 'contact_laws', 'get_num_threads', 'mix_materials', 'servo_speed', 'set_num_threads']
 class ParameterError(ValueError):
     pass
 class BlowUpError(RuntimeError):
@@ -176,6 +176,10 @@ class Scene:
         ...
     def _set_clump_blocked(self, clump: int, mask: int) -> None:
         ...
+    def add_bond(self, a: int, b: int, params: BondParams) -> int:
+        """
+        Bonds spheres a and b (ids), unloaded at their present distance; returns the bond's index.
+        """
     def add_controller(self, controller: Controller) -> int:
         """
         Adds a controller (run every controller.period steps, before the forces, in the order added); returns its index. The scene keeps it alive.
@@ -195,6 +199,17 @@ class Scene:
     def add_wall(self, *, axis: int, position: float, sense: int, material: int) -> int:
         """
         Adds an axis-aligned one-sided wall: axis 0/1/2 (x/y/z), position along the axis (m), sense +1 if spheres are on its +axis side, -1 otherwise. Returns its index.
+        """
+    def bond_state(self) -> dict:
+        """
+        Every bond's state, arrays in bond order:
+        contact_bond, parallel_bond: the parts that still hold (bool);
+        normal_force: the linear contact's normal force, N, compression positive; shear_force (n, 3):
+        its shear force on b, N; pb_normal_force: the parallel bond's, N, tension positive;
+        pb_shear_force (n, 3), N; pb_twisting_moment (about the normal), N m; pb_bending_moment (n, 3),
+        N m, all on b; pb_sigma, pb_tau: the parallel bond's rim stresses, Pa (0 once broken);
+        pb_radius: R_bar, m; reference_gap, m; force (n, 3): the bond's total force on b, N (a gets
+        the opposite); normal (n, 3): unit a -> b.
         """
     def cell_stress(self) -> numpy.typing.NDArray[numpy.float64]:
         """
@@ -258,6 +273,13 @@ class Scene:
         """
         Sets a body's mass (kg) and inertia (kg m^2).
         """
+    def set_pair_law(self, a: int, b: int, *, model: str | None = None, kn: float | None = None, ks: float | None = None, friction: float | None = None, damping_normal: float | None = None, damping_shear: float | None = None) -> None:
+        """
+        Gives materials a and b their own law over the mixing rules (None keeps the
+        mixed value): model (a law of the registry), kn and ks (the linear law's stiffnesses, N/m),
+        friction (Coulomb coefficient mu, -), damping_normal and damping_shear (ratios of critical).
+        Replaces an earlier law of the pair; contacts take it at their next step.
+        """
     def set_periodic_cell(self, cell: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], periodic: typing.Annotated[collections.abc.Sequence[bool], "FixedSize(3)"] = [True, True, True]) -> None:
         """
         Makes the scene periodic along the axes marked in `periodic`, with cell vectors the columns of `cell` (3 x 3, m, det > 0); the cell is cell @ [0,1)^3.
@@ -292,6 +314,16 @@ class Scene:
     def body_kinds(self) -> list[int]:
         """
         0 sphere, 1 grid node, per body.
+        """
+    @property
+    def bond_breaks(self) -> list:
+        """
+        Bond parts that broke, in order: step, time (s), bond, mode ('contact_tension', 'contact_shear', 'parallel_tension', 'parallel_shear'), value (N for a contact bond, Pa for a parallel bond).
+        """
+    @property
+    def bond_spheres(self) -> numpy.typing.NDArray[numpy.int32]:
+        """
+        Sphere ids (a, b) of each bond, shape (n_bonds, 2).
         """
     @property
     def cell_matrix(self) -> numpy.typing.NDArray[numpy.float64]:
@@ -549,6 +581,9 @@ class Scene:
     def num_bodies(self) -> int:
         ...
     @property
+    def num_bonds(self) -> int:
+        ...
+    @property
     def num_clumps(self) -> int:
         ...
     @property
@@ -567,6 +602,11 @@ class Scene:
     def orientations(self) -> numpy.typing.NDArray[numpy.float64]:
         """
         Orientation quaternions (w, x, y, z), shape (n, 4).
+        """
+    @property
+    def pair_laws(self) -> list:
+        """
+        The pair laws set (set_pair_law), one dict per pair of materials.
         """
     @property
     def pfacet_nodes(self) -> numpy.typing.NDArray[numpy.int32]:
@@ -933,6 +973,56 @@ class CellController(Controller):
         """
         Largest relative stress error of the stress-controlled components at the last call, -.
         """
+class BondParams:
+    """
+    A bond between two spheres as PFC defines it (linear contact bond and linear parallel bond;
+    Potyondy & Cundall 2004). SI units; a strength of 0 means unbreakable.
+    
+    Linear contact (always): kn, ks (N/m), friction (Coulomb mu, -). It acts when the surface gap
+    is below the gap at bonding (the reference gap).
+    Contact bond (contact_bond=True): the linear contact carries tension and does not slip until
+    its normal force reaches cb_tensile (N) or its shear force cb_shear (N).
+    Parallel bond (pb_kn > 0): a disc of radius R_bar = pb_radius_factor * min(R_a, R_b) with
+    normal and shear stiffness per area pb_kn, pb_ks (Pa/m): axial k = pb_kn A, shear k = pb_ks A,
+    twisting k = pb_ks J, bending k = pb_kn I (A = pi R_bar^2, I = pi R_bar^4/4, J = 2 I).
+    It breaks when sigma = F_n/A + |M_b| R_bar/I >= pb_tensile (Pa) or
+    tau = |F_s|/A + |M_t| R_bar/J >= pb_shear (Pa).
+    """
+    def __init__(self, *, kn: float, ks: float = 0.0, friction: float = 0.0, contact_bond: bool = False, cb_tensile: float = 0.0, cb_shear: float = 0.0, pb_kn: float = 0.0, pb_ks: float = 0.0, pb_radius_factor: float = 1.0, pb_tensile: float = 0.0, pb_shear: float = 0.0) -> None:
+        ...
+    @property
+    def cb_shear(self) -> float:
+        ...
+    @property
+    def cb_tensile(self) -> float:
+        ...
+    @property
+    def contact_bond(self) -> bool:
+        ...
+    @property
+    def friction(self) -> float:
+        ...
+    @property
+    def kn(self) -> float:
+        ...
+    @property
+    def ks(self) -> float:
+        ...
+    @property
+    def pb_kn(self) -> float:
+        ...
+    @property
+    def pb_ks(self) -> float:
+        ...
+    @property
+    def pb_radius_factor(self) -> float:
+        ...
+    @property
+    def pb_shear(self) -> float:
+        ...
+    @property
+    def pb_tensile(self) -> float:
+        ...
 def _checkpoint_load(scene: Scene, blob: bytes) -> None:
     """
     Restores bytes from _checkpoint_save into a scene holding the same controllers.

@@ -74,7 +74,8 @@ std::vector<std::uint64_t> layout() {
   return {sizeof(Real),        sizeof(BodyStore),        sizeof(Vec3),        sizeof(Quat),       sizeof(Material),
           sizeof(Wall),        sizeof(PairContact), sizeof(PairOutput), sizeof(WallContact), sizeof(GridLink),
           sizeof(PFacet),      sizeof(GridContact), sizeof(BreakEvent), sizeof(ContactPhys),
-          sizeof(ContactState), sizeof(PairContactCold), sizeof(PeriodicCell)};
+          sizeof(ContactState), sizeof(PairContactCold), sizeof(PeriodicCell), sizeof(Bond),
+          sizeof(BondBreak), sizeof(PairLaw)};
 }
 }  // namespace
 
@@ -84,6 +85,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.put(kVersion);
   w.vec(layout());
   w.vec(s.materials_);
+  w.vec(s.pair_laws_);
   // Bodies.
   s.bodies_.for_each_array([&](const auto& v) { w.vec(v); });
   s.clumps_.for_each_array([&](const auto& v) { w.vec(v); });
@@ -110,6 +112,8 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.vec(s.facets_);
   w.vec(s.grid_contacts_);
   w.vec(s.breaks_);
+  w.vec(s.bonds_);
+  w.vec(s.bond_breaks_);
   w.put(s.dropped_plastic_);
   w.vec(s.node_link_off_);
   w.vec(s.node_link_);
@@ -175,6 +179,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   // Read everything into a copy first, so a bad blob leaves the scene untouched.
   Scene t;
   r.vec(t.materials_);
+  r.vec(t.pair_laws_);
   t.bodies_.for_each_array([&](auto& v) { r.vec(v); });
   const size_t nb = t.bodies_.pos.size();
   t.bodies_.for_each_array([&](const auto& v) {
@@ -219,6 +224,12 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   r.vec(t.facets_);
   r.vec(t.grid_contacts_);
   r.vec(t.breaks_);
+  r.vec(t.bonds_);
+  r.vec(t.bond_breaks_);
+  for (const Bond& l : t.bonds_)
+    if (l.a < 0 || l.b < 0 || static_cast<size_t>(l.a) >= nb || static_cast<size_t>(l.b) >= nb)
+      throw ParameterError("checkpoint: corrupt bonds");
+  t.bond_topology_dirty_ = true;  // adjacency and pair list are made again from the bonds
   r.get(t.dropped_plastic_);
   r.vec(t.node_link_off_);
   r.vec(t.node_link_);

@@ -173,6 +173,11 @@ void Scene::step() {
       compute_links();
     }
   }
+  if (has_bonds()) {
+    long err_bond;
+    compute_bonds(err_bond);
+    if (err_bond != std::numeric_limits<long>::max()) raise_bond_overlap(err_bond);
+  }
   // Wall forces and work, summed in contact order.
   for (Wall& w : walls_) w.force.setZero();
   for (const WallContact& c : wall_contacts_)

@@ -19,6 +19,7 @@
 #include "cpp_dem/contacts/grid_contact.hpp"
 #include "cpp_dem/contacts/pair_contact.hpp"
 #include "cpp_dem/contacts/wall_contact.hpp"
+#include "cpp_dem/laws/bond.hpp"
 #include "cpp_dem/laws/material.hpp"
 
 namespace cpp_dem {
@@ -32,7 +33,7 @@ struct Energies {
   Real friction = 0;           ///< dissipated by Coulomb and rolling slip
   Real viscous = 0;            ///< dissipated by viscous contact damping
   Real local_damping = 0;      ///< dissipated by Cundall local damping
-  Real plastic = 0;            ///< geogrid links: plastic moments and energy lost at breakage
+  Real plastic = 0;            ///< geogrid links: plastic moments and energy lost at breakage; bonds: energy released when a part breaks
   Real wall_work = 0;          ///< work done by moving walls on the bodies
   Real external_work = 0;      ///< work of external forces and of imposed (blocked) DOFs
   Real cell_work = 0;          ///< periodic cell: work of the mean field on the contacts
@@ -76,6 +77,18 @@ class Scene {
   int add_material(const Material& m);
   const Material& material(int id) const;
   int num_materials() const { return static_cast<int>(materials_.size()); }
+  /// Gives the pair of materials (a, b) its own law over the mixing rules (PairLaw); replaces
+  /// an earlier law of the same pair. Contacts take it at their next step.
+  void set_pair_law(int a, int b, PairLaw law);
+  const std::vector<PairLaw>& pair_laws() const { return pair_laws_; }
+  /// The law of materials a and b, or nullptr when they mix by the rules alone.
+  const PairLaw* pair_law(int a, int b) const {
+    if (pair_laws_.empty()) return nullptr;
+    if (a > b) std::swap(a, b);
+    for (const PairLaw& l : pair_laws_)
+      if (l.a == a && l.b == b) return &l;
+    return nullptr;
+  }
 
   /// Adds spheres; returns the id of the first. pos: n centres, m; radius: n radii, m.
   int add_spheres(const std::vector<Vec3>& pos, const std::vector<Real>& radius, int material);
@@ -141,6 +154,18 @@ class Scene {
   void set_clump_external(int c, const Vec3& force, const Vec3& torque);
   ClumpRotation clump_rotation() const { return clump_rotation_; }
   void set_clump_rotation(ClumpRotation r) { clump_rotation_ = r; }
+
+  // ---- bonds between spheres (laws/bond.hpp, docs/bonds.md) --------------------------------
+  /// Bonds spheres a and b (ids) with a linear contact and, as p asks, a contact bond and a
+  /// parallel bond, formed unloaded at their present distance. The pair pass never sees a
+  /// bonded pair: the bond's record is its contact for good (after both bonds broke, the
+  /// plain frictional linear contact). Returns the bond's index.
+  int add_bond(int a, int b, const BondParams& p);
+  int num_bonds() const { return static_cast<int>(bonds_.size()); }
+  /// The bonds (a, b are slots: see id_of).
+  const std::vector<Bond>& bonds() const { return bonds_; }
+  /// Every break of a bond part so far, in the order they happened.
+  const std::vector<BondBreak>& bond_breaks() const { return bond_breaks_; }
 
   // ---- periodic cell (bodies/cell.hpp, docs/periodic.md) ----------------------------------
   // Supported: spheres in a cell periodic along any axes, and walls normal to the axes that
@@ -427,12 +452,22 @@ class Scene {
   void rebuild_grid_adjacency();
   void compute_grid_contacts(long& err_contact);
   void compute_links();
+  // Bonds (passes/bonds.cpp).
+  void compute_bonds(long& err);
+  void rebuild_bond_adjacency();
+  /// The spatial sort moved bodies: bonds follow (perm[new slot] = old slot).
+  void remap_bonds(const std::vector<int>& perm);
+  /// Removes bonded pairs from the broad phase's candidates.
+  void drop_bonded_candidates();
+  [[noreturn]] void raise_bond_overlap(long k) const;
+  bool has_bonds() const { return !bonds_.empty(); }
   void step();
   void set_energy_reference();
   void raise_overlap(long contact, bool wall) const;
   Real default_margin() const;
 
   std::vector<Material> materials_;
+  std::vector<PairLaw> pair_laws_;
   // Bodies (structure of arrays, storage order).
   BodyStore bodies_;
   ClumpStore clumps_;
@@ -476,12 +511,18 @@ class Scene {
   std::vector<PFacet> facets_;
   std::vector<GridContact> grid_contacts_;
   std::vector<BreakEvent> breaks_;
-  Real dropped_plastic_ = 0;   // dissipated by broken or plastic links, J
+  Real dropped_plastic_ = 0;   // dissipated by broken or plastic links and broken bonds, J
   std::vector<int> node_link_off_, node_link_;     // node -> incident links (all bodies)
   std::vector<int> link_facet_;                     // 2 per link: incident facets (-1: none)
   std::vector<int> sphere_gc_off_, sphere_gc_;      // sphere -> grid contacts
   std::vector<int> node_gc_off_, node_gc_;          // node -> grid contact * 3 + slot
   bool grid_topology_dirty_ = true;
+  // Bonds.
+  std::vector<Bond> bonds_;
+  std::vector<BondBreak> bond_breaks_;
+  std::vector<int> body_bond_off_, body_bond_;     // body slot -> incident bonds (CSR)
+  std::vector<std::pair<int, int>> bond_pairs_;    // (min slot, max slot) of every bond, sorted
+  bool bond_topology_dirty_ = true;
   bool grid_wall_contacts_ = false;
   CellGrid grid_;
   std::vector<std::pair<int, int>> candidates_;

@@ -45,6 +45,31 @@ int Scene::add_material(const Material& m) {
   return static_cast<int>(materials_.size()) - 1;
 }
 
+void Scene::set_pair_law(int a, int b, PairLaw law) {
+  material(a);
+  material(b);
+  law.validate();
+  if (a > b) std::swap(a, b);
+  law.a = a;
+  law.b = b;
+  const Material &ma = materials_[a], &mb = materials_[b];
+  const ContactModel m = law.model_set ? law.model
+                         : ma.model == mb.model ? ma.model
+                                                : ContactModel::Linear;
+  if ((law.kn >= 0 || law.ks >= 0) && m != ContactModel::Linear)
+    throw ParameterError("pair law " + std::to_string(a) + "-" + std::to_string(b) +
+                         ": kn and ks are the linear law's stiffnesses (N/m); this pair's law is '" +
+                         law_info(m).name + "' (give model='linear', or leave kn and ks unset)");
+  for (PairLaw& l : pair_laws_)
+    if (l.a == a && l.b == b) {
+      l = law;
+      ++phys_version_;
+      return;
+    }
+  pair_laws_.push_back(law);
+  ++phys_version_;
+}
+
 const Material& Scene::material(int id) const {
   if (id < 0 || id >= num_materials())
     throw ParameterError("material=" + std::to_string(id) + ": no such material (the scene has " +
@@ -81,6 +106,7 @@ void Scene::push_body(const Vec3& x, Real radius, Real mass, Real inertia, int m
     slot_of_id_.push_back(num_bodies());
   }
   bodies_.push(x, radius, mass, inertia, material, kind);
+  bond_topology_dirty_ = true;  // the bonds' adjacency is per body
 }
 
 int Scene::add_wall(int axis, Real position, int sense, int material) {

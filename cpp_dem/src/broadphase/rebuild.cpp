@@ -108,6 +108,7 @@ void Scene::sort_bodies_spatially() {
   if (identity) return;
   bodies_.permute(perm);
   clumps_.remap_members(perm);
+  remap_bonds(perm);
   // pos_at_build_ and radius_at_build_ are set at the end of the rebuild that called this,
   // pair_fi_ / pair_ti_ by the next pair pass.
   std::vector<int> ids(n);
@@ -143,6 +144,7 @@ void Scene::rebuild() {
                       candidates_.end());
     candidate_images_.assign(candidates_.size(), kNoShift);  // (clumps: never periodic)
   }
+  drop_bonded_candidates();  // a bonded pair is its bond's contact
   // Merge the new candidate list with the old contacts, keeping history (both sorted).
   std::vector<PairContact> next;
   std::vector<PairContactCold> next_cold;

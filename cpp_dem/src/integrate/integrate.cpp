@@ -52,6 +52,7 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
   const Real lambda = local_damping_;
   const bool energy = track_energy_;
   const bool grid = has_grid();  // constant false without the geogrid: the branch vanishes
+  const bool bonded = has_bonds();
   const bool renormalize = step_ % kRenormalizePeriod == 0;
   long err = std::numeric_limits<long>::max();
   Real worst = 0;
@@ -69,7 +70,8 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
 
   // Reduce the contact forces into body b in a fixed order: the contacts where b is j (in
   // contact order, contiguous in pair_out_), the sum over the contacts where b is i (which
-  // the pair pass formed in contact order), walls, then the geogrid's contacts and links.
+  // the pair pass formed in contact order), walls, the geogrid's contacts and links, then
+  // bonds.
   const Real* const fi = pair_fi_.data()->data();
   const Real* const ti = pair_ti_.data()->data();
   // (With the 3-vector operations of `ops`, WideOps or NarrowOps: see the pair pass.)
@@ -109,6 +111,19 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
       for (int e = node_link_off_[b]; e < node_link_off_[b + 1]; ++e) {
         const GridLink& l = links_[node_link_[e]];
         if (l.broken) continue;
+        if (l.b == b) {
+          f += ops.load(l.force_b);
+          t += ops.load(l.torque_b);
+        } else {
+          f -= ops.load(l.force_b);
+          t += ops.load(l.torque_a);
+        }
+      }
+    }
+    if (bonded) {
+      // Bonds, in bond order.
+      for (int e = body_bond_off_[b]; e < body_bond_off_[b + 1]; ++e) {
+        const Bond& l = bonds_[body_bond_[e]];
         if (l.b == b) {
           f += ops.load(l.force_b);
           t += ops.load(l.torque_b);

@@ -66,6 +66,37 @@ ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2
   return p;
 }
 
+void PairLaw::validate() const {
+  require(kn < 0 || std::isfinite(kn), "kn", kn, "must be finite (N/m)");
+  require(ks < 0 || std::isfinite(ks), "ks", ks, "must be finite (N/m)");
+  require(!(kn == 0), "kn", kn, "must be > 0 (N/m), or unset");
+  require(friction < 0 || std::isfinite(friction), "friction", friction,
+          "must be finite (Coulomb coefficient mu), or unset");
+  require(damping_normal < 0 || damping_normal <= 1, "damping_normal", damping_normal,
+          "must be in [0, 1] (ratio of critical), or unset");
+  require(damping_shear < 0 || damping_shear <= 1, "damping_shear", damping_shear,
+          "must be in [0, 1] (ratio of critical), or unset");
+}
+
+ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2, Real m1,
+                          Real m2, const PairLaw* law) {
+  if (!law) return mix_materials(a, b, r1, r2, m1, m2);
+  ContactPhys p;
+  if (law->model_set) {
+    Material a2 = a, b2 = b;
+    a2.model = b2.model = law->model;
+    p = mix_materials(a2, b2, r1, r2, m1, m2);
+  } else {
+    p = mix_materials(a, b, r1, r2, m1, m2);
+  }
+  if (law->kn >= 0) p.kn = law->kn;
+  if (law->ks >= 0) p.ks = law->ks;
+  if (law->friction >= 0) p.tan_phi = law->friction;
+  if (law->damping_normal >= 0) p.beta_n = law->damping_normal;
+  if (law->damping_shear >= 0) p.beta_s = law->damping_shear;
+  return p;
+}
+
 /// Parameters of the geogrid's cohesive beam (grid.hpp); validated here with the other
 /// material parameters so that a build without the geogrid (grid_off.cpp) still checks them.
 void BeamParams::validate() const {

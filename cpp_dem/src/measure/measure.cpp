@@ -65,6 +65,25 @@ Real Scene::critical_dt_body(int* arg_body) const {
       }
     }
   }
+  for (const Bond& l : bonds_) {
+    // The linear contact (when it acts) and the parallel bond, as springs at the contact
+    // point; the parallel bond's twisting and bending springs.
+    const bool linear = l.cb_intact || l.fn > 0;
+    const Real kn = (linear ? l.kn : 0) + (l.pb_intact ? l.pb_kn * l.pb_area : 0);
+    const Real ks = (linear ? l.ks : 0) + (l.pb_intact ? l.pb_ks * l.pb_area : 0);
+    if (!(kn > 0 || ks > 0)) continue;
+    any = true;
+    const Real ktw = l.pb_intact ? l.pb_ks * l.pb_j : 0, kbend = l.pb_intact ? l.pb_kn * l.pb_i : 0;
+    for (int side = 0; side < 2; ++side) {
+      const int b = side ? l.b : l.a;
+      const Real arm = bodies_.radius[b];
+      for (int a = 0; a < 3; ++a) {
+        const Real n2 = l.normal[a] * l.normal[a];
+        kt[b][a] += kn * n2 + ks * (1 - n2);
+        kr[b][a] += kbend * (1 - n2) + ktw * n2 + ks * arm * arm * (1 - n2);
+      }
+    }
+  }
   if (arg_body) *arg_body = -1;
   if (!any) return pwave_dt();
   // A sphere with no (or only soft) contacts may hit something before the next update: its
@@ -139,6 +158,7 @@ Energies Scene::energies() const {
   });
   e.plastic = dropped_plastic_;
   for (const GridLink& l : links_) e.plastic += l.dissip_plastic;
+  for (const Bond& l : bonds_) e.friction += l.dissip_friction;
   e.elastic = stored_elastic_energy();
   for (const Wall& w : walls_) e.wall_work += w.work;
   e.cell_work = cell_.work;
@@ -176,6 +196,7 @@ void Scene::reset_energy() {
   for (WallContact& c : wall_contacts_) c.state.dissip_friction = c.state.dissip_viscous = 0;
   for (GridContact& c : grid_contacts_) c.state.dissip_friction = c.state.dissip_viscous = 0;
   for (GridLink& l : links_) l.dissip_plastic = 0;
+  for (Bond& l : bonds_) l.dissip_friction = 0;
   dropped_plastic_ = 0;
   for (Wall& w : walls_) w.work = 0;
   cell_.work = 0;
@@ -192,6 +213,7 @@ Real Scene::stored_elastic_energy() const {
   });
   for (const GridLink& l : links_)
     if (!l.broken) e += l.elastic_energy();
+  for (const Bond& l : bonds_) e += l.elastic_energy();
   return e;
 }
 

@@ -18,7 +18,8 @@ void Scene::update_phys(GridContact& c) const {
   Real m_virtual = 0;
   for (int i = 0; i < c.nnodes; ++i) m_virtual += c.w[i] * bodies_.mass[c.node[i]];
   c.phys = mix_materials(materials_[bodies_.material[c.node[0]]], materials_[bodies_.material[c.sphere]], c.rc,
-                         stiffness_radius(c.sphere), m_virtual, bodies_.mass[c.sphere]);
+                         stiffness_radius(c.sphere), m_virtual, bodies_.mass[c.sphere],
+                         pair_law(bodies_.material[c.node[0]], bodies_.material[c.sphere]));
   c.phys_version = phys_version_;
 }
 

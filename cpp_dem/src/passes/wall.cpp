@@ -20,7 +20,8 @@ constexpr Real kInf = std::numeric_limits<Real>::infinity();
 void Scene::update_phys(WallContact& c) const {
   // The wall has infinite radius and mass (see mix_materials).
   c.phys = mix_materials(materials_[walls_[c.wall].material], materials_[bodies_.material[c.body]],
-                         kInf, stiffness_radius(c.body), kInf, bodies_.mass[c.body]);
+                         kInf, stiffness_radius(c.body), kInf, bodies_.mass[c.body],
+                         pair_law(walls_[c.wall].material, bodies_.material[c.body]));
   c.simple = short_kernel_applies(c.phys);
   c.phys_version = phys_version_;
 }

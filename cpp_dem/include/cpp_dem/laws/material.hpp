@@ -53,10 +53,31 @@ struct ContactPhys {
   Real rolling_cap = 0; ///< eta_r R*, m (|M_r| <= rolling_cap |F_n|)
 };
 
+/// The law of one pair of materials, over the mixing rules (Scene::set_pair_law): 002 gives
+/// its grains Hertz–Mindlin with mu = 0.8 among themselves, and a linear contact with its own
+/// k_n, k_s and mu = 0.5 against the geogrid. A field left unset (model_set false, or a
+/// negative value) keeps what the mixing rules give.
+struct PairLaw {
+  int a = 0, b = 0;            ///< the two materials (a <= b)
+  bool model_set = false;
+  ContactModel model = ContactModel::Linear;  ///< the law's elastic part (if model_set)
+  Real kn = -1;                ///< linear law: normal stiffness, N/m
+  Real ks = -1;                ///< linear law: shear stiffness, N/m
+  Real friction = -1;          ///< Coulomb friction coefficient mu, -
+  Real damping_normal = -1;    ///< viscous damping, ratio of critical, normal, [0, 1]
+  Real damping_shear = -1;     ///< viscous damping, ratio of critical, shear, [0, 1]
+  /// Throws ParameterError naming the first bad field.
+  void validate() const;
+};
+
 /// Mixes two materials for a contact with radii r1, r2 (m) and masses m1, m2 (kg). A wall
 /// passes infinity for both: R* is then the sphere's radius, and the linear rule (000 eq 4)
 /// uses the sphere's radius on both sides, as Yade does.
 ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2, Real m1,
                           Real m2);
+
+/// mix_materials with the pair law `law` over it (nullptr: none).
+ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2, Real m1,
+                          Real m2, const PairLaw* law);
 
 }  // namespace cpp_dem

@@ -1,0 +1,175 @@
+// The bond pass: contact and parallel bonds between spheres (laws/bond.hpp), their breakage,
+// and the bookkeeping that keeps bonded pairs out of the pair pass.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+
+#include "cpp_dem/laws/bond.hpp"
+#include "cpp_dem/scene.hpp"
+
+namespace cpp_dem {
+
+namespace {
+constexpr long kParallelMinBonds = 256;
+std::pair<int, int> ordered(int a, int b) { return a < b ? std::pair(a, b) : std::pair(b, a); }
+}
+
+void BondParams::validate() const {
+  require(std::isfinite(kn) && kn > 0, "kn", kn, "must be > 0 (N/m)");
+  require(std::isfinite(ks) && ks >= 0, "ks", ks, "must be >= 0 (N/m)");
+  require(std::isfinite(friction) && friction >= 0, "friction", friction,
+          "must be >= 0 (Coulomb coefficient mu)");
+  require(std::isfinite(cb_tensile) && cb_tensile >= 0, "cb_tensile", cb_tensile,
+          "must be >= 0 (N; 0 = unbreakable)");
+  require(std::isfinite(cb_shear) && cb_shear >= 0, "cb_shear", cb_shear,
+          "must be >= 0 (N; 0 = unbreakable)");
+  require(std::isfinite(pb_kn) && pb_kn >= 0, "pb_kn", pb_kn,
+          "must be >= 0 (Pa/m; 0 = no parallel bond)");
+  require(std::isfinite(pb_ks) && pb_ks >= 0, "pb_ks", pb_ks, "must be >= 0 (Pa/m)");
+  require(std::isfinite(pb_radius_factor) && pb_radius_factor > 0, "pb_radius_factor",
+          pb_radius_factor, "must be > 0 (lambda_bar: R_bar = lambda_bar min(R_a, R_b))");
+  require(std::isfinite(pb_tensile) && pb_tensile >= 0, "pb_tensile", pb_tensile,
+          "must be >= 0 (Pa; 0 = unbreakable)");
+  require(std::isfinite(pb_shear) && pb_shear >= 0, "pb_shear", pb_shear,
+          "must be >= 0 (Pa; 0 = unbreakable)");
+}
+
+int Scene::add_bond(int a, int b, const BondParams& p) {
+  check_body(a);
+  check_body(b);
+  if (a == b) throw ParameterError("bond: spheres a and b must differ (got " + std::to_string(a) + ")");
+  p.validate();
+  if (bond_topology_dirty_) rebuild_bond_adjacency();
+  const int sa = slot_of(a), sb = slot_of(b);
+  for (int s : {sa, sb}) {
+    if (bodies_.kind[s] != BODY_SPHERE)
+      throw ParameterError("bond " + std::to_string(a) + "-" + std::to_string(b) + ": body " +
+                           std::to_string(id_of(s)) + " is not a sphere");
+    if (bodies_.clump[s] >= 0)
+      throw ParameterError("bond " + std::to_string(a) + "-" + std::to_string(b) + ": body " +
+                           std::to_string(id_of(s)) + " is a member of clump " +
+                           std::to_string(bodies_.clump[s]) +
+                           " (clump members are rigid: bond the clump's neighbours instead)");
+  }
+  if (cell_.on)
+    throw ParameterError("bond: bonds in a periodic cell are not supported yet");
+  const std::pair<int, int> key = ordered(sa, sb);
+  if (std::binary_search(bond_pairs_.begin(), bond_pairs_.end(), key))
+    throw ParameterError("bond " + std::to_string(a) + "-" + std::to_string(b) +
+                         ": the two spheres are bonded already");
+  const Real dist = (bodies_.pos[sb] - bodies_.pos[sa]).norm();
+  if (!(dist > 0))
+    throw ParameterError("bond " + std::to_string(a) + "-" + std::to_string(b) +
+                         ": the spheres' centres coincide");
+  Bond l;
+  l.a = sa;
+  l.b = sb;
+  bond_setup(p, bodies_.radius[sa], bodies_.radius[sb], dist, l);
+  l.normal = (bodies_.pos[sb] - bodies_.pos[sa]) / dist;
+  bonds_.push_back(l);
+  bond_pairs_.insert(std::upper_bound(bond_pairs_.begin(), bond_pairs_.end(), key), key);
+  bond_topology_dirty_ = true;
+  dirty_ = true;  // the pair pass must forget the pair
+  return static_cast<int>(bonds_.size()) - 1;
+}
+
+void Scene::rebuild_bond_adjacency() {
+  const int n = num_bodies();
+  body_bond_off_.assign(n + 1, 0);
+  for (const Bond& l : bonds_) {
+    body_bond_off_[l.a + 1]++;
+    body_bond_off_[l.b + 1]++;
+  }
+  for (int b = 0; b < n; ++b) body_bond_off_[b + 1] += body_bond_off_[b];
+  body_bond_.resize(body_bond_off_[n]);
+  std::vector<int> fill(body_bond_off_.begin(), body_bond_off_.end() - 1);
+  for (int k = 0; k < num_bonds(); ++k) {
+    body_bond_[fill[bonds_[k].a]++] = k;
+    body_bond_[fill[bonds_[k].b]++] = k;
+  }
+  bond_pairs_.clear();
+  for (const Bond& l : bonds_) bond_pairs_.push_back(ordered(l.a, l.b));
+  std::sort(bond_pairs_.begin(), bond_pairs_.end());
+  bond_topology_dirty_ = false;
+}
+
+void Scene::remap_bonds(const std::vector<int>& perm) {
+  if (bonds_.empty()) return;
+  std::vector<int> new_of_old(perm.size());
+  for (size_t s = 0; s < perm.size(); ++s) new_of_old[perm[s]] = static_cast<int>(s);
+  for (Bond& l : bonds_) {
+    l.a = new_of_old[l.a];
+    l.b = new_of_old[l.b];
+  }
+  bond_topology_dirty_ = true;
+}
+
+void Scene::drop_bonded_candidates() {
+  if (bonds_.empty()) return;
+  if (bond_topology_dirty_) rebuild_bond_adjacency();
+  // Both lists are sorted by (i, j): one merge.
+  size_t q = 0;
+  const auto bonded = [&](const std::pair<int, int>& p) {
+    while (q < bond_pairs_.size() && bond_pairs_[q] < p) ++q;
+    return q < bond_pairs_.size() && bond_pairs_[q] == p;
+  };
+  size_t out = 0;
+  for (size_t k = 0; k < candidates_.size(); ++k) {
+    if (bonded(candidates_[k])) continue;
+    candidates_[out] = candidates_[k];
+    candidate_images_[out] = candidate_images_[k];
+    ++out;
+  }
+  candidates_.resize(out);
+  candidate_images_.resize(out);
+}
+
+void Scene::compute_bonds(long& err) {
+  if (bond_topology_dirty_) rebuild_bond_adjacency();
+  const long nb = static_cast<long>(bonds_.size());
+  const Real dt = dt_;
+  const Real max_ratio = max_overlap_ratio_;
+  long first_bad = std::numeric_limits<long>::max();
+#pragma omp parallel for schedule(static) reduction(min : first_bad) if (nb > kParallelMinBonds)
+  for (long k = 0; k < nb; ++k) {
+    Bond& l = bonds_[k];
+    const Real ra = bodies_.radius[l.a], rb = bodies_.radius[l.b];
+    const Real overlap =
+        bond_step(l, ra, rb, bodies_.pos[l.a], bodies_.pos[l.b], bodies_.vel[l.a],
+                  bodies_.vel[l.b], bodies_.angvel[l.a], bodies_.angvel[l.b], dt);
+    if (!(overlap <= max_ratio * std::min(ra, rb))) first_bad = std::min(first_bad, k);
+  }
+  err = first_bad;
+  // Breakage, in bond order: the part is removed, its energy counted, the event recorded.
+  for (long k = 0; k < nb; ++k) {
+    Bond& l = bonds_[k];
+    if (l.pending_break < 0) continue;
+    BondBreak ev;
+    ev.step = step_;
+    ev.time = time_;
+    ev.bond = static_cast<int>(k);
+    ev.mode = l.pending_break;
+    ev.value = l.pending_value;
+    bond_breaks_.push_back(ev);
+    dropped_plastic_ += bond_release(l, l.pending_break, bodies_.radius[l.a],
+                                     bodies_.radius[l.b], bodies_.pos[l.a], bodies_.pos[l.b]);
+    l.pending_break = -1;
+  }
+}
+
+void Scene::raise_bond_overlap(long k) const {
+  const Bond& l = bonds_[k];
+  const Real gap = (bodies_.pos[l.b] - bodies_.pos[l.a]).norm() - bodies_.radius[l.a] -
+                   bodies_.radius[l.b];
+  std::ostringstream os;
+  os.precision(4);
+  os << "blow-up at step " << step_ << ": bonded spheres " << id_of(l.a) << " and "
+     << id_of(l.b) << " (bond " << k << ") overlap by "
+     << (l.gap0 - gap) / std::min(bodies_.radius[l.a], bodies_.radius[l.b])
+     << " of the smaller radius (max_overlap_ratio=" << max_overlap_ratio_
+     << "); the time step may be too large or the bond's linear contact too soft";
+  throw BlowUpError(os.str());
+}
+
+}  // namespace cpp_dem
