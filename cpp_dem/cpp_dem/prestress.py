@@ -1,0 +1,205 @@
+"""Prestress of geogrid members (002's PRS): tension chosen members to T_p, then lock it in.
+
+:class:`Prestress` grips a geogrid at both ends along the members' direction. It holds one
+end, and pulls the other line by line until each line's members carry the target tension.
+Then it locks the grips (ends held) and reports the locked-in force as the run goes.
+
+- **Which grids.** It works for the woven grids of bonded spheres (cpp_dem.woven) and for the
+  cylinder and PFacet grids (cpp_dem.geogrid). They share the member labels and
+  ``member_axial_forces``.
+- **Line.** A line is the row (longitudinal members) or column (transverse members) of
+  members between the grips. Its force is the mean of its members' mid-section forces.
+- **Target.** Per member, N (``tension_n``), or per metre of width (``tension_per_m``, N/m,
+  times the lines' spacing).
+- **Grips.**
+  - They are the grid's bodies within ``grip_width`` of the grid's two ends along the
+    members' direction.
+  - Each body of the pulled end belongs to the line nearest to it.
+  - All their DOFs are held; the pulled ones move at the servo's velocity.
+- **Servo.**
+  - Every ``period`` steps each line's grip moves at v = gain (T_p - T) / (k period dt).
+  - k is the line's measured secant stiffness.
+  - v is capped at ``max_speed``. The default is 1e-4 of the smallest radius per step.
+- **Lock.** The grips lock when every line has been within ``tolerance`` of the target for
+  ``settle_checks`` checks in a row. A target not reached within the steps allowed raises
+  :class:`PrestressError`, naming the lines and their forces.
+"""
+
+from __future__ import annotations
+
+import math
+import sys
+import time
+
+import numpy as np
+
+from ._core import ParameterError
+from .geogrid import LONGITUDINAL, TRANSVERSE
+
+
+class PrestressError(RuntimeError):
+    """The prestress could not be reached (or was lost): the message names the lines."""
+
+
+def _grid_bodies(grid) -> np.ndarray:
+    return np.asarray(grid.spheres if hasattr(grid, "spheres") else grid.nodes, dtype=int)
+
+
+def _member_bodies(scene, grid, m: int) -> np.ndarray:
+    if hasattr(grid, "member_bonds"):
+        return np.unique(np.asarray(scene.bond_spheres)[grid.member_bonds[m]])
+    return np.unique(np.asarray(scene.grid_link_nodes)[grid.member_links[m]])
+
+
+class Prestress:
+    """Tensions the members of ``direction`` of ``grid`` in ``scene`` (module docstring).
+
+    tension_n : target tension per member, N; or tension_per_m : N per metre of width.
+    grip_width : m; default: the woven grid's member width, or 1e-6 of the grid's extent.
+    tolerance : relative, -. period : steps between servo updates. gain : -, in (0, 1].
+    max_speed : m/s.
+    """
+
+    def __init__(self, scene, grid, *, tension_n: float | None = None,
+                 tension_per_m: float | None = None, direction: str = LONGITUDINAL,
+                 grip_width: float | None = None, tolerance: float = 0.01, period: int = 50,
+                 gain: float = 0.5, settle_checks: int = 5, max_speed: float | None = None):
+        if direction not in (LONGITUDINAL, TRANSVERSE):
+            raise ParameterError(f"direction={direction!r}: must be '{LONGITUDINAL}' or "
+                                 f"'{TRANSVERSE}'")
+        if (tension_n is None) == (tension_per_m is None):
+            raise ParameterError("give one of tension_n (N per member) or tension_per_m (N/m)")
+        for name, v in (("tolerance", tolerance), ("gain", gain)):
+            if not (math.isfinite(v) and 0 < v <= 1):
+                raise ParameterError(f"{name}={v}: must be in (0, 1]")
+        if not (isinstance(period, int) and period >= 1):
+            raise ParameterError(f"period={period!r}: must be an integer >= 1 (steps)")
+        self.scene, self.grid, self.direction = scene, grid, direction
+        self.tolerance, self.period, self.gain = tolerance, period, gain
+        self.settle_checks = settle_checks
+        self.axis = 0 if direction == LONGITUDINAL else 1
+        cross = 1 - self.axis
+        self.members = np.flatnonzero(np.asarray(grid.member_direction) == direction)
+        if len(self.members) == 0:
+            raise ParameterError(f"direction={direction!r}: the grid has no such members")
+        line_of = np.asarray(grid.member_cell)[self.members, 1 if self.axis == 0 else 0]
+        self.lines = np.unique(line_of)
+        self.line_members = [self.members[line_of == ln] for ln in self.lines]
+        pos = np.asarray(scene.positions)
+        self.line_coord = np.array([
+            np.mean(pos[np.concatenate([_member_bodies(scene, grid, m) for m in ms]), cross])
+            for ms in self.line_members])
+        if tension_n is None:
+            if len(self.lines) < 2:
+                raise ParameterError("tension_per_m needs at least two member lines (their "
+                                     "spacing is the width per member); give tension_n")
+            spacing = float(np.median(np.diff(np.sort(self.line_coord))))
+            tension_n = float(tension_per_m) * spacing
+        if not (math.isfinite(tension_n) and tension_n > 0):
+            raise ParameterError(f"tension={tension_n}: must be > 0 (N per member)")
+        self.target_n = float(tension_n)
+        bodies = _grid_bodies(grid)
+        x = pos[bodies, self.axis]
+        lo, hi = x.min(), x.max()
+        if grip_width is None:
+            grip_width = getattr(grid, "member_width", 1e-6 * (hi - lo))
+        if not (math.isfinite(grip_width) and 0 <= grip_width < 0.5 * (hi - lo)):
+            raise ParameterError(f"grip_width={grip_width}: must be in [0, half the grid's "
+                                 f"extent {0.5 * (hi - lo):g} m)")
+        self.held = bodies[x <= lo + grip_width + 1e-12]
+        self.pulled = bodies[x >= hi - grip_width - 1e-12]
+        near = np.argmin(np.abs(pos[self.pulled, cross][:, None] - self.line_coord[None, :]),
+                         axis=1)
+        self.pulled_line = near
+        scene.block_dofs(np.concatenate([self.held, self.pulled]), "all")
+        r = float(np.min(np.asarray(scene.radii)[bodies]))
+        self.max_speed = max_speed if max_speed is not None else 1e-4 * r / scene.dt
+        self.start = pos[self.pulled, self.axis].copy()
+        self.stiffness = np.full(len(self.lines), np.nan)  # N/m per line (secant)
+        self.locked = False
+        self.history: list[dict] = []
+
+    # ---- measuring ------------------------------------------------------------------------
+    def line_forces(self) -> np.ndarray:
+        """Mean tensile force of each line's members, N."""
+        f = self.grid.member_axial_forces(self.scene)
+        return np.array([f[ms].mean() for ms in self.line_members])
+
+    def member_forces(self) -> np.ndarray:
+        """Tensile force of every prestressed member (self.members), N."""
+        return self.grid.member_axial_forces(self.scene)[self.members]
+
+    def record(self) -> dict:
+        """Appends and returns the state now: step, time (s), locked, line forces (N), and
+        their largest deviation from the target (relative)."""
+        f = self.line_forces()
+        row = dict(step=self.scene.step_count, time=self.scene.time, locked=self.locked,
+                   line_forces_n=f, deviation=float(np.max(np.abs(f / self.target_n - 1))))
+        self.history.append(row)
+        return row
+
+    # ---- driving --------------------------------------------------------------------------
+    def _set_speeds(self, speeds: np.ndarray) -> None:
+        v = np.asarray(self.scene.velocities).copy()
+        v[self.pulled] = 0.0
+        v[self.pulled, self.axis] = speeds[self.pulled_line]
+        v[self.held] = 0.0
+        self.scene.velocities = v
+
+    def _update(self) -> bool:
+        f = self.line_forces()
+        disp = np.array([np.mean(np.asarray(self.scene.positions)[self.pulled[self.pulled_line == k],
+                                                                 self.axis]
+                                 - self.start[self.pulled_line == k]) for k in range(len(self.lines))])
+        ok = np.abs(f - self.target_n) <= self.tolerance * self.target_n
+        with np.errstate(divide="ignore", invalid="ignore"):
+            k = np.where((disp > 0) & (f > 0.05 * self.target_n), f / disp, np.nan)
+        self.stiffness = np.where(np.isfinite(k), k, self.stiffness)
+        dt = self.scene.dt
+        speed = np.where(np.isfinite(self.stiffness),
+                         self.gain * (self.target_n - f) / (self.stiffness * self.period * dt),
+                         self.max_speed)
+        self._set_speeds(np.clip(speed, -self.max_speed, self.max_speed))
+        return bool(np.all(ok))
+
+    def tension(self, max_steps: int, *, progress: bool = False) -> dict:
+        """Runs the scene until every line holds the target within the tolerance, then locks
+        the grips; returns the record at locking. Raises PrestressError after ``max_steps``."""
+        if self.locked:
+            raise PrestressError("the prestress is locked already")
+        good, done, t0 = 0, 0, time.perf_counter()
+        while done < max_steps:
+            good = good + 1 if self._update() else 0
+            if good >= self.settle_checks:
+                self._set_speeds(np.zeros(len(self.lines)))
+                self.locked = True
+                return self.record()
+            self.scene.run(self.period)
+            done += self.period
+            if progress and (done // self.period) % 20 == 0:
+                row = self.record()
+                eta = (time.perf_counter() - t0) / done * (max_steps - done)
+                print(f"[prestress] step {done}/{max_steps}: line forces "
+                      f"{np.round(row['line_forces_n'], 3).tolist()} N (target "
+                      f"{self.target_n:g} N), at most {eta:.0f} s left", file=sys.stderr,
+                      flush=True)
+        f = self.line_forces()
+        self._set_speeds(np.zeros(len(self.lines)))
+        bad = [f"line {int(ln)}: {fv:.4g} N" for ln, fv in zip(self.lines, f)
+               if abs(fv - self.target_n) > self.tolerance * self.target_n]
+        raise PrestressError(
+            f"prestress not reached in {max_steps} steps (target {self.target_n:.4g} N per "
+            f"member, tolerance {self.tolerance:g}): {', '.join(bad) or 'not settled'}; "
+            f"the grips stop where they are (max_speed={self.max_speed:.3g} m/s)")
+
+    def check_locked(self, tolerance: float | None = None) -> dict:
+        """Records the locked-in force now; raises PrestressError if a line has left the
+        target by more than ``tolerance`` (default: the tensioning tolerance)."""
+        row = self.record()
+        tol = self.tolerance if tolerance is None else tolerance
+        if row["deviation"] > tol:
+            raise PrestressError(
+                f"the locked-in prestress drifted: line forces "
+                f"{np.round(row['line_forces_n'], 4).tolist()} N against {self.target_n:.4g} N "
+                f"(largest deviation {row['deviation']:.3g} > {tol:g})")
+        return row

@@ -1,0 +1,364 @@
+"""Woven biaxial geogrids of bonded spheres (002 §4, Table 2).
+
+002 builds its woven PET geogrid in PFC3D from single spheres bonded side by side. Here a
+member (a rib between two junctions) is made of ``strands`` single strings of spheres. The
+strings are parallel and ``strand_spacing`` apart (centre to centre), and free of each other
+between junctions, so a grain can enter between them (002's "single string interaction").
+
+- **Strings.** Each string is a chain of touching spheres. Each sphere is bonded to the next
+  with the contact bond and the parallel bond of the preset (docs/bonds.md).
+- **Junctions.** Where a longitudinal and a transverse string cross there is one sphere, shared
+  by both. A junction is the patch of ``strands x strands`` crossings. Its spheres are bonded
+  along both directions, so the strings are tied together there and only there.
+- **Coordinates.** Longitudinal members run along x (the pull direction), transverse ones
+  along y. All spheres lie in the plane z = origin z. The over-and-under of a real weave is
+  not modelled.
+- **Labels.** Members follow the cylinder grids' convention (cpp_dem.geogrid): cell (i, j) has
+  its longitudinal member 'A' on junction row j and its transverse member 'C' on junction
+  column i.
+- **Member force.** A member's tensile force is the sum, over its strings, of the force of the
+  bond that the member's mid-section cuts.
+
+**Presets** (:data:`PRESETS`):
+- 002 Table 2 gives the "detailed" and "standard" sets, with their densities: contact bonds,
+  parallel bonds, and the linear contact between geogrid spheres.
+- 002 gives no dimensions of the grid. The presets choose them, as parameters:
+  - detailed: spheres of radius 1 mm, three strings per member, 2.5 mm apart;
+  - standard: one string of 1.5 mm spheres per member;
+  - both: 20 mm clear apertures.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Sequence
+
+import numpy as np
+
+from ._core import BondParams, ParameterError
+from .geogrid import JUNCTION, LONGITUDINAL, TRANSVERSE
+
+#: 002 Table 2 (the bond and contact parameters, density) and the dimensions chosen here.
+PRESETS = {
+    "detailed": dict(
+        density=1030.0,          # kg/m^3 (002 Table 2)
+        kn=4.0e6, ks=8.5e5,      # linear contact, N/m
+        cb_tensile=5.0e5, cb_shear=5.0e5,  # contact bond strengths, N
+        pb_radius_factor=0.29,   # lambda_bar, -
+        pb_kn=2.8e12, pb_ks=1.8e12,        # parallel bond stiffness, Pa/m
+        pb_tensile=8.0e14, pb_shear=8.0e14,  # parallel bond strengths, Pa
+        friction=0.5,            # mu, -
+        # Dimensions (not in 002; chosen here).
+        sphere_radius=1.0e-3, strands=3, strand_spacing=2.5e-3, aperture=20e-3,
+    ),
+    "standard": dict(
+        density=2060.0,
+        kn=1.3e7, ks=6.0e4,
+        cb_tensile=5.0e5, cb_shear=5.0e5,
+        pb_radius_factor=0.15,
+        pb_kn=1.25e13, pb_ks=3.0e11,
+        pb_tensile=8.0e14, pb_shear=8.0e14,
+        friction=0.5,
+        sphere_radius=1.5e-3, strands=1, strand_spacing=3.0e-3, aperture=20e-3,
+    ),
+}
+
+_BOND_KEYS = ("kn", "ks", "friction", "cb_tensile", "cb_shear", "pb_kn", "pb_ks",
+              "pb_radius_factor", "pb_tensile", "pb_shear")
+_GEOMETRY_KEYS = ("sphere_radius", "strands", "strand_spacing", "aperture")
+
+
+def preset_bond(name: str) -> BondParams:
+    """The bond of preset ``name`` (contact bond and parallel bond, 002 Table 2)."""
+    p = _preset(name)
+    return BondParams(contact_bond=True, **{k: p[k] for k in _BOND_KEYS})
+
+
+def _preset(name: str) -> dict:
+    if name not in PRESETS:
+        raise ParameterError(f"preset={name!r}: must be one of {', '.join(map(repr, PRESETS))}")
+    return PRESETS[name]
+
+
+@dataclasses.dataclass
+class WovenGeogrid:
+    """A woven geogrid of bonded spheres in a scene.
+
+    Attributes
+    ----------
+    spheres : body ids of the grid's spheres.
+    bonds : bond indices of the grid.
+    sphere_kind : per sphere, 'junction', 'longitudinal' or 'transverse'.
+    sphere_strand : per sphere, its string (index into strand_direction); -1 at junctions.
+    strand_direction : per string, 'longitudinal' or 'transverse'.
+    strand_member_line : per string, its junction row (longitudinal) or column (transverse).
+    bond_member : per bond, the member it belongs to (-1 inside a junction).
+    member_direction, member_cell, member_side, member_axis : as cpp_dem.geogrid.Geogrid.
+    member_section_bonds : per member, the bonds its mid-section cuts (one per string).
+    member_bonds : per member, all its bonds.
+    member_width : width of a member, m (from the outer strings' edges).
+    pitch : centre distance of the members, m (x, y).
+    reference_positions : (n, 3) sphere positions when built, m.
+    """
+
+    spheres: np.ndarray
+    bonds: np.ndarray
+    sphere_kind: np.ndarray
+    sphere_strand: np.ndarray
+    strand_direction: np.ndarray
+    strand_member_line: np.ndarray
+    bond_member: np.ndarray
+    member_direction: np.ndarray
+    member_cell: np.ndarray
+    member_side: np.ndarray
+    member_axis: np.ndarray
+    member_section_bonds: list
+    member_bonds: list
+    member_width: float
+    pitch: tuple
+    n_cells: tuple
+    reference_positions: np.ndarray
+
+    @property
+    def n_members(self) -> int:
+        return len(self.member_direction)
+
+    def member_axial_forces(self, scene) -> np.ndarray:
+        """Tensile force of every member, N, tension positive: the sum over the bonds cut by
+        its mid-section of each bond's force along the member axis."""
+        st = scene.bond_state()
+        ab = np.asarray(scene.bond_spheres)
+        pos = np.asarray(scene.positions)
+        out = np.zeros(self.n_members)
+        for m, sec in enumerate(self.member_section_bonds):
+            ax = self.member_axis[m]
+            d = pos[ab[sec, 1]] - pos[ab[sec, 0]]
+            # The force on b pulls it back towards a in tension.
+            out[m] = -np.sum(np.sign(d @ ax) * (st["force"][sec] @ ax))
+        return out
+
+    def members(self, direction: str) -> np.ndarray:
+        """Indices of the members of one direction ('longitudinal' or 'transverse')."""
+        return np.flatnonzero(self.member_direction == direction)
+
+
+def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures_y: int,
+                  material: int, preset: str = "detailed", bond: BondParams | None = None,
+                  sphere_radius: float | None = None, strands: int | None = None,
+                  strand_spacing: float | None = None,
+                  aperture: float | Sequence[float] | None = None) -> WovenGeogrid:
+    """Builds a woven biaxial geogrid of bonded spheres (module docstring) in ``scene``.
+
+    origin : centre of the first junction (m; the grid spans apertures_x x apertures_y cells
+        towards +x and +y).
+    material : the spheres' material (its density is the grid's; see :func:`woven_material`).
+    preset : 'detailed' or 'standard' (002 Table 2); ``bond`` and the geometry arguments
+        override it. sphere_radius (m), strands (per member), strand_spacing (centre to
+        centre, m, >= 2 sphere_radius), aperture (clear opening, m, one value or (x, y)).
+    """
+    p = _preset(preset)
+    r = float(p["sphere_radius"] if sphere_radius is None else sphere_radius)
+    ns = p["strands"] if strands is None else strands
+    sp = float(p["strand_spacing"] if strand_spacing is None else strand_spacing)
+    ap = p["aperture"] if aperture is None else aperture
+    ap = np.broadcast_to(np.asarray(ap, dtype=float), (2,)).copy()
+    bond = preset_bond(preset) if bond is None else bond
+    if not (math.isfinite(r) and r > 0):
+        raise ParameterError(f"sphere_radius={r}: must be > 0 (m)")
+    if not (isinstance(ns, (int, np.integer)) and ns >= 1):
+        raise ParameterError(f"strands={ns!r}: must be an integer >= 1")
+    if ns > 1 and not (math.isfinite(sp) and sp >= 2 * r * (1 - 1e-12)):
+        raise ParameterError(f"strand_spacing={sp}: must be >= 2 x sphere_radius = {2 * r:g} m "
+                             "(strings side by side must not overlap)")
+    for name, v in (("apertures_x", apertures_x), ("apertures_y", apertures_y)):
+        if not (isinstance(v, (int, np.integer)) and v >= 1):
+            raise ParameterError(f"{name}={v!r}: must be an integer >= 1")
+    width = (ns - 1) * sp + 2 * r
+    if not np.all(ap >= 2 * r):
+        raise ParameterError(f"aperture={tuple(ap)}: must be >= 2 x sphere_radius (m)")
+    o = np.asarray(origin, dtype=float).reshape(3)
+    pitch = ap + width
+    offs = (np.arange(ns) - (ns - 1) / 2) * sp
+    # String lines: transverse strings at x = X, longitudinal ones at y = Y.
+    xs = np.array([o[0] + i * pitch[0] + s for i in range(apertures_x + 1) for s in offs])
+    ys = np.array([o[1] + j * pitch[1] + s for j in range(apertures_y + 1) for s in offs])
+    x_line = np.repeat(np.arange(apertures_x + 1), ns)  # column of each transverse string
+    y_line = np.repeat(np.arange(apertures_y + 1), ns)  # row of each longitudinal string
+
+    pts, kind, strand = [], [], []
+    index = {}
+
+    def sphere(key, xyz, k, s):
+        if key not in index:
+            index[key] = len(pts)
+            pts.append(xyz)
+            kind.append(k)
+            strand.append(s)
+        return index[key]
+
+    for a, x in enumerate(xs):
+        for b, y in enumerate(ys):
+            sphere(("J", a, b), (x, y, o[2]), JUNCTION, -1)
+    pairs, pair_member = [], []  # bonds (local sphere indices) and their member keys
+    n_long = len(ys)
+    strand_dir = [LONGITUDINAL] * n_long + [TRANSVERSE] * len(xs)
+    strand_line = list(y_line) + list(x_line)
+
+    def string(sid, along, lines, line_of, fixed, direction):
+        """One string: crossing spheres at `along`, filled with touching spheres between."""
+        prev = None
+        for k in range(len(along)):
+            cur = (index[("J", k, sid)] if direction == LONGITUDINAL
+                   else index[("J", sid - n_long, k)])
+            if prev is not None:
+                g = along[k] - along[k - 1]
+                m = max(1, int(round(g / (2 * r))))
+                same_line = lines[k] == lines[k - 1]
+                key = (None if same_line else
+                       (direction, int(lines[k - 1]), int(line_of)))
+                last = prev
+                for q in range(1, m):
+                    t = along[k - 1] + g * q / m
+                    xyz = (t, fixed, o[2]) if direction == LONGITUDINAL else (fixed, t, o[2])
+                    nxt = sphere(("S", sid, k, q), xyz, direction, sid)
+                    pairs.append((last, nxt))
+                    pair_member.append(key)
+                    last = nxt
+                pairs.append((last, cur))
+                pair_member.append(key)
+            prev = cur
+
+    for b, y in enumerate(ys):
+        string(b, xs, x_line, y_line[b], y, LONGITUDINAL)
+    for a, x in enumerate(xs):
+        string(n_long + a, ys, y_line, x_line[a], x, TRANSVERSE)
+
+    # Members: cell (i, j) has longitudinal member A on row j between columns i and i + 1,
+    # and transverse member C on column i between rows j and j + 1.
+    keys = sorted({k for k in pair_member if k is not None})
+    member_of_key = {k: m for m, k in enumerate(keys)}
+    direction = np.array([k[0] for k in keys])
+    cell = np.array([(k[1], k[2]) if k[0] == LONGITUDINAL else (k[2], k[1]) for k in keys],
+                    dtype=int).reshape(-1, 2)
+    side = np.array(["A" if k[0] == LONGITUDINAL else "C" for k in keys])
+    axis = np.array([(1.0, 0, 0) if k[0] == LONGITUDINAL else (0, 1.0, 0) for k in keys])
+    bond_member = np.array([member_of_key[k] if k is not None else -1 for k in pair_member],
+                           dtype=int)
+
+    # Add to the scene.
+    pts = np.array(pts, dtype=float)
+    ids = np.asarray(scene.add_spheres(pts, np.full(len(pts), r), material=material))
+    first_bond = scene.num_bonds
+    for a, b in pairs:
+        scene.add_bond(int(ids[a]), int(ids[b]), bond)
+    bonds = np.arange(first_bond, first_bond + len(pairs))
+    member_bonds, section = [], []
+    for m, k in enumerate(keys):
+        mb = np.flatnonzero(bond_member == m)
+        member_bonds.append(bonds[mb])
+        # Mid-section of the member: for each string, the bond whose span holds the middle.
+        coord = 0 if k[0] == LONGITUDINAL else 1
+        line = k[1]  # column (longitudinal) or row (transverse) before the member
+        mid = o[coord] + (line + 0.5) * pitch[coord]
+        cut = [bonds[q] for q in mb
+               if min(pts[pairs[q][0], coord], pts[pairs[q][1], coord]) <= mid
+               < max(pts[pairs[q][0], coord], pts[pairs[q][1], coord])]
+        section.append(np.array(cut, dtype=int))
+    return WovenGeogrid(
+        spheres=ids, bonds=bonds, sphere_kind=np.array(kind), sphere_strand=np.array(strand),
+        strand_direction=np.array(strand_dir), strand_member_line=np.array(strand_line),
+        bond_member=bond_member, member_direction=direction, member_cell=cell,
+        member_side=side, member_axis=axis, member_section_bonds=section,
+        member_bonds=member_bonds, member_width=width, pitch=(float(pitch[0]), float(pitch[1])),
+        n_cells=(apertures_x, apertures_y), reference_positions=pts.copy())
+
+
+def woven_material(preset: str = "detailed"):
+    """The material of a woven grid's spheres: the preset's density and friction, linear.
+
+    Its Young's modulus only matters where no pair law is set (:func:`set_grid_laws` sets
+    them for 002)."""
+    from .scene import linear_material
+
+    p = _preset(preset)
+    # The linear law's k_n = E R at contact (000 eq 4 for equal spheres): E = k_n / R.
+    return linear_material(density=p["density"], young=p["kn"] / p["sphere_radius"],
+                           poisson=min(0.5, p["ks"] / p["kn"]),
+                           friction_angle_deg=math.degrees(math.atan(p["friction"])))
+
+
+def set_grid_laws(scene, grid_material: int, grain_material: int | None = None, *,
+                  preset: str = "detailed", grain_kn: float = 3.9e6, grain_ks: float = 9.0e5,
+                  grain_friction: float = 0.5) -> None:
+    """002's contact laws around a woven grid:
+    - between grid spheres that are not bonded: the preset's linear k_n, k_s, mu;
+    - between the grid and grains (if ``grain_material`` is given): a linear contact with
+      002 Table 1's k_n = 3.9e6 N/m and k_s = 9e5 N/m, and mu = 0.5 (the geogrid's)."""
+    p = _preset(preset)
+    scene.set_pair_law(grid_material, grid_material, model="linear", kn=p["kn"], ks=p["ks"],
+                       friction=p["friction"])
+    if grain_material is not None:
+        scene.set_pair_law(grain_material, grid_material, model="linear", kn=grain_kn,
+                           ks=grain_ks, friction=grain_friction)
+
+
+def series_stiffness_per_metre(preset: str = "detailed", **geometry) -> float:
+    """The tensile stiffness per metre of width, N/m, of an endless woven grid of the preset
+    pulled along its longitudinal members, from its bonds in series: every longitudinal
+    string is a chain of bonds of stiffness k_n + k_bar_n A (the contact bond pulls, and the
+    parallel bond's disc beside it), and a pitch holds the member's bonds and the junction's.
+    ``geometry`` overrides the preset's sphere_radius, strands, strand_spacing, aperture."""
+    p = dict(_preset(preset))
+    p.update({k: v for k, v in geometry.items() if v is not None})
+    r, ns, sp = p["sphere_radius"], p["strands"], p["strand_spacing"]
+    ap = np.broadcast_to(np.asarray(p["aperture"], dtype=float), (2,))
+    width = (ns - 1) * sp + 2 * r
+    pitch = ap + width
+    k_bond = p["kn"] + p["pb_kn"] * math.pi * (p["pb_radius_factor"] * r) ** 2
+    span = pitch[0] - (ns - 1) * sp  # from a junction's last string to the next one's first
+    bonds_per_pitch = max(1, int(round(span / (2 * r)))) + (ns - 1) * max(
+        1, int(round(sp / (2 * r))))
+    return ns * k_bond * pitch[0] / bonds_per_pitch / pitch[1]
+
+
+def tensile_test(preset: str = "detailed", *, apertures_x: int = 3, apertures_y: int = 1,
+                 strain: float = 1e-3, load_steps: int = 4000, relax_steps: int = 20000,
+                 **geometry) -> dict:
+    """A quasi-static tensile test of a woven grid sample along its longitudinal members.
+
+    The junction columns at both ends are gripped (all DOFs held). The right grip moves by
+    ``strain`` times the free length in ``load_steps`` steps, then holds while the sample
+    settles (local damping 0.7) for ``relax_steps`` steps. Returns:
+    - force_n: the right grip's reaction, N;
+    - member_forces_n: the longitudinal members' forces at their mid-sections, N;
+    - strain;
+    - stiffness_per_metre: force / (strain x sample width), N/m, the width being a pitch per
+      longitudinal member, (apertures_y + 1) x pitch_y;
+    - series_per_metre: the endless grid's series value (series_stiffness_per_metre).
+    """
+    from .scene import Scene
+
+    s = Scene(local_damping=0.7)
+    m = s.add_material(woven_material(preset))
+    g = woven_geogrid(s, origin=(0, 0, 0), apertures_x=apertures_x, apertures_y=apertures_y,
+                      material=m, preset=preset, **geometry)
+    r = float(s.radii[0])
+    x = np.asarray(s.positions)[:, 0]
+    lo, hi = g.member_width / 2 - r, apertures_x * g.pitch[0] - g.member_width / 2 + r
+    left, right = np.flatnonzero(x <= lo + 1e-9), np.flatnonzero(x >= hi - 1e-9)
+    s.block_dofs(np.concatenate([left, right]), "all")
+    length = hi - lo
+    s.dt = 0.5 * s.critical_dt()
+    v = np.zeros((s.num_bodies, 3))
+    v[right, 0] = strain * length / (load_steps * s.dt)
+    s.velocities = v
+    s.run(load_steps)
+    s.velocities = np.zeros((s.num_bodies, 3))
+    s.run(relax_steps)
+    force = -float(np.asarray(s.forces)[right, 0].sum())
+    done = float(np.asarray(s.positions)[right, 0].mean() - x[right].mean()) / length
+    width = (apertures_y + 1) * g.pitch[1]
+    return dict(force_n=force, member_forces_n=g.member_axial_forces(s)[g.members(LONGITUDINAL)],
+                strain=done, stiffness_per_metre=force / (done * width),
+                series_per_metre=series_stiffness_per_metre(preset, **geometry))

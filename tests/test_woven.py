@@ -1,0 +1,96 @@
+"""The woven biaxial geogrid of bonded spheres (issue 16): structure, labels, presets, and a
+tensile test against its bonds in series."""
+
+import math
+
+import numpy as np
+import pytest
+
+import cpp_dem as cd
+from cpp_dem import woven
+
+
+def _grid(preset="detailed", ax=2, ay=1, **kw):
+    s = cd.Scene()
+    m = s.add_material(woven.woven_material(preset))
+    g = woven.woven_geogrid(s, origin=(0, 0, 0), apertures_x=ax, apertures_y=ay, material=m,
+                            preset=preset, **kw)
+    return s, g, m
+
+
+def test_structure_of_the_detailed_grid():
+    s, g, _ = _grid()
+    ns = 3
+    # Junctions: one sphere per crossing of a longitudinal and a transverse string.
+    assert np.sum(g.sphere_kind == "junction") == (ns * 3) * (ns * 2)
+    # Members: 2 x 2 longitudinal (2 rows, 2 cells each), 3 transverse (3 columns, 1 cell).
+    assert sorted(g.member_cell[g.members("longitudinal")].tolist()) == [[0, 0], [0, 1], [1, 0],
+                                                                          [1, 1]]
+    assert sorted(g.member_cell[g.members("transverse")].tolist()) == [[0, 0], [1, 0], [2, 0]]
+    assert set(g.member_side[g.members("longitudinal")]) == {"A"}
+    # Each member's mid-section cuts one bond per string.
+    assert all(len(sec) == ns for sec in g.member_section_bonds)
+    # Along a member the spheres touch; inside a junction the strings stand 0.5 mm apart.
+    st = s.bond_state()
+    inside = g.bond_member >= 0
+    np.testing.assert_allclose(st["reference_gap"][inside], 0, atol=1e-15)
+    np.testing.assert_allclose(st["reference_gap"][~inside], 0.5e-3, rtol=1e-9)
+    # Every bond has the preset's parameters: R_bar = 0.29 r.
+    np.testing.assert_allclose(st["pb_radius"], 0.29e-3, rtol=1e-12)
+    assert all(st["contact_bond"]) and all(st["parallel_bond"])
+    # Mass from the preset's density.
+    assert s.masses[0] == pytest.approx(1030 * 4 / 3 * math.pi * 1e-3 ** 3, rel=1e-12)
+
+
+def test_strings_of_a_member_are_free_between_junctions():
+    """No bond joins two strings of one member outside the junctions."""
+    s, g, _ = _grid()
+    ab = np.asarray(s.bond_spheres)
+    strand = g.sphere_strand
+    for a, b in ab[g.bond_member >= 0]:
+        sa, sb = strand[a], strand[b]
+        assert sa == -1 or sb == -1 or sa == sb
+
+
+@pytest.mark.parametrize("preset", ["detailed", "standard"])
+def test_tensile_test_is_the_bonds_in_series(preset):
+    """A sample gripped at its end junctions and pulled 0.1 %: each longitudinal string is a
+    chain of n bonds of stiffness k_n + k_bar_n A; the reaction is rows x strings x k / n x
+    the grip displacement (to 1e-6), and every member carries its row's share."""
+    p = woven.PRESETS[preset]
+    r = woven.tensile_test(preset, apertures_x=3, apertures_y=1)
+    ns, rad, sp = p["strands"], p["sphere_radius"], p["strand_spacing"]
+    width = (ns - 1) * sp + 2 * rad
+    pitch = p["aperture"] + width
+    span = pitch - (ns - 1) * sp
+    n_bonds = 3 * max(1, round(span / (2 * rad))) + 2 * (ns - 1) * max(1, round(sp / (2 * rad)))
+    k_bond = p["kn"] + p["pb_kn"] * math.pi * (p["pb_radius_factor"] * rad) ** 2
+    length = 3 * pitch - width + 2 * rad
+    expected = 2 * ns * k_bond / n_bonds * r["strain"] * length
+    assert r["force_n"] == pytest.approx(expected, rel=1e-6)
+    np.testing.assert_allclose(r["member_forces_n"], r["force_n"] / 2, rtol=1e-6)
+    # The endless grid's value differs from the sample's by its grips only (about 1 %).
+    assert r["stiffness_per_metre"] == pytest.approx(r["series_per_metre"], rel=0.02)
+
+
+def test_grid_laws_for_002():
+    s, g, m = _grid()
+    grain = s.add_material(cd.hertz_mindlin_material(density=2640, shear_modulus=3e10,
+                                                     poisson=0.2, friction_coefficient=0.8))
+    woven.set_grid_laws(s, m, grain)
+    laws = {(d["a"], d["b"]): d for d in s.pair_laws}
+    assert laws[(m, m)]["kn"] == 4e6 and laws[(m, m)]["friction"] == 0.5
+    gg = laws[(min(m, grain), max(m, grain))]
+    assert (gg["model"], gg["kn"], gg["ks"], gg["friction"]) == ("linear", 3.9e6, 9e5, 0.5)
+
+
+@pytest.mark.parametrize("kw, field", [
+    (dict(preset="fancy"), "preset"),
+    (dict(strand_spacing=1.5e-3), "strand_spacing"),
+    (dict(sphere_radius=-1.0), "sphere_radius"),
+    (dict(strands=0), "strands"),
+    (dict(ax=0), "apertures_x"),
+])
+def test_bad_input_names_the_field(kw, field):
+    with pytest.raises(cd.ParameterError, match=field):
+        _grid(**kw)
