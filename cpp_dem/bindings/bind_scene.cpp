@@ -261,6 +261,13 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
            "Critical time-step estimate, s: min over bodies and axes of sqrt(2 m / K) from the "
            "current contact stiffnesses; the p-wave estimate before contacts exist; inf when every "
            "body is fully blocked.")
+      .def("critical_dt_body", [](const Scene& s) {
+             int body = -1;
+             const Real dt = s.critical_dt_body(&body);
+             return py::make_tuple(dt, body);
+           },
+           "(critical_dt(), the id of the body that sets it, -1 when no contact or link "
+           "exists): which body limits the time step.")
       .def("pwave_dt", &Scene::pwave_dt, "p-wave time step min R sqrt(rho / E), s.")
       .def("energies", [](const Scene& s) { return energies_dict(s.energies()); },
            "Energy terms, J, and the balance error (needs track_energy).")

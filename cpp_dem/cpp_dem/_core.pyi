@@ -237,6 +237,10 @@ class Scene:
         """
         Critical time-step estimate, s: min over bodies and axes of sqrt(2 m / K) from the current contact stiffnesses; the p-wave estimate before contacts exist; inf when every body is fully blocked.
         """
+    def critical_dt_body(self) -> tuple[float, int]:
+        """
+        (critical_dt(), the id of the body that sets it, -1 when no contact or link exists): which body limits the time step.
+        """
     def energies(self) -> dict:
         """
         Energy terms, J, and the balance error (needs track_energy).

@@ -67,10 +67,12 @@ CASES = {
     "pullout-001": ("pullout_001", "pull-out of 001 (square and triangular grids, Table 5.2)"),
     "triaxial": ("triaxial", "triaxial test of 001 ch. 6, with or without geogrid"),
     "prs-element": ("prs_element", "002's reinforced vs prestressed element from FEM stresses"),
+    "prs-element-002": ("prs_element_002", "002's element rebuilt: clumps, woven bonded grid, "
+                        "RE vs PRS"),
     "deposition": ("deposition", "spheres deposited into a box under gravity"),
 }
 #: Cases whose --threads 0 means one thread rather than all (translated by the command).
-_THREADS_ZERO_IS_ONE = {"prs-element"}
+_THREADS_ZERO_IS_ONE = {"prs-element", "prs-element-002"}
 ROOT = Path(__file__).resolve().parents[2]  # the source tree (for the git commit), if any
 
 

@@ -56,6 +56,15 @@ class ElementParams:
     max_steps: int = 400_000         #: per servo stage
     record_every: int = 200          #: steps between records
     threads: int = 0                 #: OpenMP threads (0: one; see run_element)
+    # --- 002's element: clumps, Hertz–Mindlin, the woven grid of bonded spheres ---
+    grains: str = "spheres"          #: 'spheres', or 'clumps:NAME' (cpp_dem.clumps templates)
+    grain_law: str = "linear"        #: 'linear' (young, poisson), or 'hertz' (002 Table 1)
+    shear_modulus: float = 3e10      #: Hertz–Mindlin G, Pa (002 Table 1)
+    hertz_poisson: float = 0.2       #: Hertz–Mindlin nu, - (002 Table 1)
+    geogrid: str = "square"          #: 'square' (cylinders), 'woven-detailed', 'woven-standard'
+    apertures: int = 3               #: woven grids: apertures per side, -
+    growth_max_strain: float = 1e-4  #: radius growth per step at most, -; woven elements
+                                     #: grow at 10 x this until the grains touch, then at this
 
 
 def grid_spacing(p: ElementParams) -> float:
@@ -66,6 +75,16 @@ def grid_spacing(p: ElementParams) -> float:
 def grid_axial_stiffness(p: ElementParams) -> float:
     """J = E pi R^2 / spacing, N/m: the DEM grid's tensile stiffness per metre width."""
     return p.grid_young * math.pi * p.grid_radius**2 / grid_spacing(p)
+
+
+def grid_stiffness_per_metre(p: ElementParams) -> float:
+    """The element's geogrid tensile stiffness per metre of width, N/m: the square grid's
+    E pi R^2 / spacing, or a woven grid's bonds in series (cpp_dem.woven)."""
+    if p.geogrid.startswith("woven-"):
+        from .woven import series_stiffness_per_metre
+
+        return series_stiffness_per_metre(p.geogrid.split("-", 1)[1])
+    return grid_axial_stiffness(p)
 
 
 def make_element(p: ElementParams, mean_stress: float, prestressed: bool,
@@ -120,18 +139,171 @@ def make_element(p: ElementParams, mean_stress: float, prestressed: bool,
     return sample, grid
 
 
+GEOGRIDS = ("square", "woven-detailed", "woven-standard")
+GRAIN_LAWS = ("linear", "hertz")
+
+
+def check_element_params(p: ElementParams) -> None:
+    """Raises ParameterError naming the first bad choice of grains, law or geogrid."""
+    from ._core import ParameterError
+
+    if p.geogrid not in GEOGRIDS:
+        raise ParameterError(f"geogrid={p.geogrid!r}: must be one of {', '.join(GEOGRIDS)}")
+    if p.grain_law not in GRAIN_LAWS:
+        raise ParameterError(f"grain_law={p.grain_law!r}: must be one of {', '.join(GRAIN_LAWS)}")
+    if p.grains != "spheres":
+        from .clumps import templates_from_spec
+
+        templates_from_spec(p.grains)  # names the bad value
+    if not (isinstance(p.apertures, int) and p.apertures >= 1):
+        raise ParameterError(f"apertures={p.apertures!r}: must be an integer >= 1")
+
+
+def grain_material(p: ElementParams, friction_deg: float):
+    """The grains' material: 002 Table 1's Hertz–Mindlin (G, nu, density) or the linear law."""
+    from .scene import hertz_mindlin_material
+
+    if p.grain_law == "hertz":
+        return hertz_mindlin_material(density=p.density, shear_modulus=p.shear_modulus,
+                                      poisson=p.hertz_poisson,
+                                      friction_coefficient=math.tan(math.radians(friction_deg)))
+    return linear_material(density=p.density, young=p.young, poisson=p.poisson,
+                           friction_angle_deg=friction_deg)
+
+
+def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
+                       log: Callable[[str], None] = _log):
+    """002's element: grains (clumps or spheres; Hertz–Mindlin or linear) in the cube around
+    a woven geogrid of bonded spheres at mid-height (cpp_dem.woven, 'detailed' or 'standard'),
+    with 002's contact laws, radius growth to ``mean_stress`` (Pa; the grid held), then for
+    PRS the grid's longitudinal members tensioned to p.prestress (N/m) and locked
+    (cpp_dem.prestress). Returns (sample, grid, prestress or None)."""
+    from . import woven
+    from .prestress import Prestress
+
+    check_element_params(p)
+    preset = p.geogrid.split("-", 1)[1]
+    rng = np.random.default_rng(p.seed)
+    vol = p.edge**3
+    d_mean = (0.6 * vol / (p.n * math.pi / 6.0)) ** (1.0 / 3.0)
+    diam = d_mean * (1.0 + p.radius_spread * (2.0 * rng.random(p.n) - 1.0))
+    z_grid = mid = 0.5 * p.edge
+    r_grid = woven.PRESETS[preset]["sphere_radius"]
+    clumps = None
+    if p.grains != "spheres":
+        from .clumps import ClumpCloud, bounding_volume_factor, clump_cloud, templates_from_spec
+
+        templates = templates_from_spec(p.grains)
+        shrink = (0.25 / (0.6 * bounding_volume_factor(templates))) ** (1.0 / 3.0)
+        cl = clump_cloud(templates, diam * shrink, (0, 0, 0), (p.edge,) * 3, seed=p.seed)
+        rb = cl.scales * np.array([templates[t].bounding_radius for t in cl.template])
+        keep = np.abs(cl.positions[:, 2] - z_grid) > rb + 1.5 * r_grid
+        clumps = (ClumpCloud(cl.template[keep], cl.positions[keep], cl.orientations[keep],
+                             cl.scales[keep]), templates)
+        c, r = cl.positions[keep], rb[keep]
+    else:
+        shrink = (0.25 / 0.6) ** (1.0 / 3.0)
+        c, r = loose_cloud(0.5 * diam * shrink, (0, 0, 0), (p.edge,) * 3, seed=p.seed)
+        keep = np.abs(c[:, 2] - z_grid) > r + 1.5 * r_grid
+        c, r = c[keep], r[keep]
+    sample = build_box_sample(c, r, (0, 0, 0), (p.edge,) * 3, young=p.young, poisson=p.poisson,
+                              friction_deg=p.prep_friction_deg, density=p.density,
+                              local_damping=p.damping, clumps=clumps,
+                              grain_material=grain_material(p, p.prep_friction_deg))
+    sc = sample.scene
+    grain_bodies = np.arange(sc.num_bodies)
+    gmat = sc.add_material(woven.woven_material(preset))
+    pr = woven.PRESETS[preset]
+    pitch = pr["aperture"] + (pr["strands"] - 1) * pr["strand_spacing"] + 2 * r_grid
+    o = mid - 0.5 * p.apertures * pitch
+    width = pitch - pr["aperture"]
+    if o - 0.5 * width < 0.03 * p.edge:  # room for the walls to move in
+        from ._core import ParameterError
+
+        raise ParameterError(f"apertures={p.apertures}: the {preset} grid ({p.apertures} x "
+                             f"{pitch * 1e3:.1f} mm) does not fit in the {p.edge:g} m element "
+                             "with 3 % of its edge to spare on each side")
+    grid = woven.woven_geogrid(sc, origin=(o, o, z_grid), apertures_x=p.apertures,
+                               apertures_y=p.apertures, material=gmat, preset=preset)
+    # 002's laws: grid-grain and grid-grid linear (Table 1, Table 2); walls frictionless and
+    # as stiff as a grid contact for the grains when they are Hertz–Mindlin.
+    woven.set_grid_laws(sc, gmat, sample.material, preset=preset)
+    wall_mat = sample.wall_material
+    if p.grain_law == "hertz":
+        sc.set_pair_law(sample.material, wall_mat, model="linear", kn=3.9e6, ks=9.0e5,
+                        friction=0.0)
+    sc.set_pair_law(gmat, wall_mat, model="linear", kn=pr["kn"], ks=pr["ks"], friction=0.0)
+    sc.max_overlap_ratio = 0.95
+    sc.block_dofs(grid.spheres, "all")
+    t0 = time.perf_counter()
+    # Radius growth in two phases. A growth servo on the wall stress stops too early in a
+    # loose cloud of clumps: grains that the growth itself presses into the walls show the
+    # target stress while the inside is not yet in contact (measured: 20 kPa at a
+    # coordination number of 0.4). So the grains first grow fast, with no stress feedback,
+    # until contacts form throughout (coordination number 1); then slowly to the target
+    # stress, which must hold at three checks in a row with the grains in contact (two
+    # grain-grain contacts per grain: in a small element the walls and the grid take many
+    # of the contacts) and the unbalanced force below 0.3. The servo stages then bring
+    # the packing to rest (p.unbalanced) at the exact targets; a clump packing creeps, and
+    # growing it to rest as well was measured 10 x slower (150 000 steps, not at rest).
+    from ._core import RadiusGrowth
+
+    fast = RadiusGrowth(walls=list(sample.walls), bodies=[int(b) for b in grain_bodies],
+                        target_stress=1e12, gain=0.5, max_strain=10 * p.growth_max_strain)
+    sc.add_controller(fast)
+    start = sc.step_count
+    while (measure.coordination_number(sc) < 1.0 and
+           measure.wall_stresses(sc, sample.walls).mean() < mean_stress and
+           sc.step_count - start < p.max_steps):
+        sc.run(500)
+    fast.enabled = False
+    fast_steps = sc.step_count - start
+    grow = prep.grow_to_stress(sc, sample.walls, mean_stress, tol=0.05,
+                               unbalanced=max(0.3, p.unbalanced),
+                               max_strain=p.growth_max_strain, max_steps=p.max_steps,
+                               bodies=grain_bodies, checks=3, min_coordination=2.0)
+    if not grow.converged:
+        log(f"WARNING: the growth did not reach {mean_stress / 1e3:.2f} kPa at rest within "
+            f"{p.max_steps} steps (axis stresses {np.round(grow.axis_stresses / 1e3, 2).tolist()}"
+            f" kPa, unbalanced force {grow.unbalanced_force:.3g}); the servo stages go on from "
+            "there")
+    n_grains = measure.grain_of_body(sc)[1]
+    log(f"element: {n_grains} grains ({p.grains}, {p.grain_law}; {len(grain_bodies)} spheres), "
+        f"woven {preset} grid {p.apertures}x{p.apertures} apertures ({len(grid.spheres)} "
+        f"spheres, {len(grid.bonds)} bonds, J = "
+        f"{woven.series_stiffness_per_metre(preset) / 1e3:.0f} kN/m); grown to "
+        f"{grow.mean_stress / 1e3:.2f} kPa in {fast_steps} + {grow.steps} steps, "
+        f"porosity {measure.porosity(sc, sample.walls):.3f}"
+        f" ({time.perf_counter() - t0:.1f} s)")
+    sc.set_pair_law(sample.material, sample.material,
+                    friction=math.tan(math.radians(p.friction_deg)))
+    sc.block_dofs(grid.spheres, "")
+    ps = None
+    if prestressed:
+        ps = Prestress(sc, grid, tension_per_m=p.prestress)
+        t0 = time.perf_counter()
+        row = ps.tension(p.max_steps)
+        log(f"PRS: longitudinal members tensioned to {ps.target_n:.1f} N each (T_p = "
+            f"{p.prestress / 1e3:g} kN/m) and locked at step {row['step']}: line forces "
+            f"{np.round(row['line_forces_n'], 2).tolist()} N ({time.perf_counter() - t0:.1f} s)")
+    return sample, grid, ps
+
+
 SERIES = {"stage": (None, "-"), "step": (None, "-"), "time": (None, "s"),
           "sigma_x": (None, "Pa"), "sigma_y": (None, "Pa"), "sigma_z": (None, "Pa"),
           "target_x": (None, "Pa"), "target_y": (None, "Pa"), "target_z": (None, "Pa"),
           "lx": (None, "m"), "ly": (None, "m"), "lz": (None, "m"),
           "unbalanced_force": (None, "-"), "grid_force_longitudinal_mean": (None, "N"),
-          "grid_force_transverse_mean": (None, "N")}
+          "grid_force_transverse_mean": (None, "N"),
+          "prestress_line_force_mean": (None, "N")}
 
 
 def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
-                log: Callable[[str], None] = _log) -> dict:
+                log: Callable[[str], None] = _log, prestress=None) -> dict:
     """Servo walls to ``targets`` (3,) Pa compression positive: converge within p.tol and
-    p.unbalanced, then hold p.hold_steps steps; returns the max relative error while held."""
+    p.unbalanced, then hold p.hold_steps steps; returns the max relative error while held.
+    With a locked ``prestress`` (cpp_dem.prestress.Prestress) its line forces are recorded
+    too (its history, and the series' prestress_line_force_mean)."""
     sc, walls, ctl = sample.scene, sample.walls, sample.controller
     t = np.asarray(targets, float)
     for a in range(3):
@@ -144,7 +316,9 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
         ax = measure.axis_stresses(sc, walls)
         size = measure.box_size(sc, walls)
         f = grid.member_axial_forces(sc)
-        rec(stage=stage, step=sc.step_count, time=sc.time, sigma_x=ax[0], sigma_y=ax[1],
+        locked = (float(prestress.record()["line_forces_n"].mean()) if prestress is not None
+                  else float("nan"))
+        rec(prestress_line_force_mean=locked, stage=stage, step=sc.step_count, time=sc.time, sigma_x=ax[0], sigma_y=ax[1],
             sigma_z=ax[2], target_x=t[0], target_y=t[1], target_z=t[2], lx=size[0],
             ly=size[1], lz=size[2], unbalanced_force=sc.unbalanced_force(),
             grid_force_longitudinal_mean=float(f[longi].mean()),
@@ -189,15 +363,24 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     # ~1000x slower than 1 thread for this small scene (oversubscription).
     set_num_threads(p.threads if p.threads > 0 else 1)
     (out / "vtk").mkdir(parents=True, exist_ok=True)
-    sample, grid = make_element(p, float(targets[0].mean()), prestressed, log=log)
+    woven_grid = p.geogrid != "square"
+    check_element_params(p)
+    if woven_grid:
+        sample, grid, ps = make_woven_element(p, float(targets[0].mean()), prestressed, log=log)
+    else:
+        sample, grid = make_element(p, float(targets[0].mean()), prestressed, log=log)
+        ps = None
     sc, walls = sample.scene, sample.walls
     meta = {"case": "prs_element", "label": label, "prestressed": prestressed,
             "units": "SI; stresses compression positive"}
-    h5 = H5Recorder(out / f"{label}.h5", series=SERIES, metadata=meta, overwrite=True,
+    # The locked-in prestress is a series of PRS runs only.
+    series = {k: v for k, v in SERIES.items() if ps is not None or k != "prestress_line_force_mean"}
+    h5 = H5Recorder(out / f"{label}.h5", series=series, metadata=meta, overwrite=True,
                     snapshot_fields=("positions", "radii"))
-    csv = CsvRecorder(out / f"{label}.csv", series=SERIES, overwrite=True)
+    csv = CsvRecorder(out / f"{label}.csv", series=series, overwrite=True)
 
     def rec(**row) -> None:
+        row = {k: v for k, v in row.items() if k in series}
         h5.record(**row)
         csv.record(**row)
 
@@ -209,7 +392,7 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
                 ref_pos = sc.positions.copy()
                 size_before = measure.box_size(sc, walls)
                 stress_before = measure.axis_stresses(sc, walls)
-            st = servo_stage(sample, grid, t, k, p, rec, log=log)
+            st = servo_stage(sample, grid, t, k, p, rec, log=log, prestress=ps)
             stages.append(st)
             log(f"{label} stage {k}: walls {np.round(st['wall_stresses_pa'] / 1e3, 3).tolist()} "
                 f"kPa for targets {np.round(t / 1e3, 3).tolist()} kPa in {st['steps']} steps "
@@ -232,13 +415,28 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     longi = grid.member_direction == geogrid.LONGITUDINAL
     write_vtk_spheres(out / "vtk" / f"{label}_spheres.vtp", sc)
     write_vtk_contacts(out / "vtk" / f"{label}_contacts.vtp", sc)
-    geogrid.write_vtk_geogrid(out / "vtk" / f"{label}_geogrid.vtp", sc, grid)
+    extra = {}
+    if woven_grid:
+        from . import interaction
+
+        interaction.write_vtk_woven(out / "vtk" / f"{label}_geogrid.vtp", sc, grid)
+        interaction.plot_views(sc, grid, out / f"{label}_views.png",
+                               title=f"{label}: contact forces and bond tensions")
+        extra["interaction"] = interaction.summary(sc, grid, z_grid=0.5 * p.edge,
+                                                   reference_positions=ref_pos)
+        prof = interaction.member_force_profiles(sc, grid)
+        extra["grid_force_longitudinal_cov_along"] = prof["longitudinal_cov_mean"]
+        if ps is not None:
+            extra["prestress_target_n"] = ps.target_n
+            extra["prestress_locked_final_n"] = ps.line_forces().tolist()
+    else:
+        geogrid.write_vtk_geogrid(out / "vtk" / f"{label}_geogrid.vtp", sc, grid)
     lo = np.array([sc.wall_positions[walls[2 * a]] for a in range(3)])
     write_vtk_box(out / "vtk" / f"{label}_box.vtp", lo, lo + size_after)
     strain_inc = (size_before - size_after) / size_before
     return {
         "label": label, "prestressed": prestressed,
-        "num_grains": int(np.count_nonzero(mask)),
+        "num_grains": int(measure.grain_of_body(sc)[1]),
         "targets_pa": [t.tolist() for t in targets],
         "wall_stresses_pa": [s["wall_stresses_pa"].tolist() for s in stages],
         "converged": [bool(s["converged"]) for s in stages],
@@ -257,4 +455,6 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
         "grid_force_transverse_mean_n": float(f[~longi].mean()),
         "grid_force_longitudinal_cv": float(f[longi].std() / max(abs(f[longi].mean()), 1e-12)),
         "wall_time_s": time.perf_counter() - t_start,
+        "geogrid": p.geogrid, "grains": p.grains, "grain_law": p.grain_law,
+        **extra,
     }

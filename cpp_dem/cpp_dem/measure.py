@@ -63,8 +63,13 @@ def axis_stresses(scene, walls) -> np.ndarray:
 
 
 def sphere_mask(scene) -> np.ndarray:
-    """True for the bodies that are grains (spheres), False for geogrid nodes, (n,)."""
-    return np.asarray(scene.body_kinds) == 0
+    """True for the bodies that are grains (spheres), (n,). False for geogrid nodes and for
+    bonded spheres: the spheres of a bonded structure (a woven geogrid, cpp_dem.woven) are
+    not grains."""
+    m = np.asarray(scene.body_kinds) == 0
+    if scene.num_bonds:
+        m[np.asarray(scene.bond_spheres).ravel()] = False
+    return m
 
 
 def grain_of_body(scene) -> tuple[np.ndarray, int]:

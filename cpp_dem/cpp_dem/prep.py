@@ -147,10 +147,17 @@ def solve_to_equilibrium(scene, *, unbalanced: float = 0.01, check_every: int = 
 def grow_to_stress(scene, walls, stress: float, *, tol: float = 0.01, unbalanced: float = 0.01,
                    gain: float = 0.5, max_strain: float = 1e-3, period: int = 1,
                    check_every: int = 200, max_steps: int = 200_000, bodies=(),
-                   callback=None) -> StageResult:
+                   callback=None, axes_tol: float | None = None, checks: int = 1,
+                   min_coordination: float = 0.0) -> StageResult:
     """Radius expansion with fixed walls until the mean wall stress is within ``tol`` of
     ``stress`` (Pa) and the unbalanced force is below ``unbalanced`` (001 §4.3.1). The
-    RadiusGrowth controller is removed from duty (disabled) at the end."""
+    RadiusGrowth controller is removed from duty (disabled) at the end.
+
+    axes_tol: every axis stress must also be within this (relative) of ``stress``; checks:
+    the criteria must hold at that many checks in a row (a loose sample hit hard by the
+    growth can pass one check in passing); min_coordination: the grains' coordination number
+    (measure.coordination_number, -) must also reach this (a loose cloud whose grains bounce
+    off the walls can show the target stress without carrying it)."""
     _check_target(stress)
     for w in walls:
         scene.set_wall_velocity(int(w), (0.0, 0.0, 0.0))
@@ -159,16 +166,24 @@ def grow_to_stress(scene, walls, stress: float, *, tol: float = 0.01, unbalanced
     g.period = period
     scene.add_controller(g)
     start = scene.step_count
-    ok, u, mean = False, float("nan"), float("nan")
+    ok, u, mean, passed = False, float("nan"), float("nan"), 0
     while scene.step_count - start < max_steps:
         scene.run(check_every)
         mean = float(measure.wall_stresses(scene, walls).mean())
         u = float(scene.unbalanced_force())
         if callback is not None:
             callback(scene)
-        if abs(mean - stress) <= tol * stress and u < unbalanced:
-            ok = True
-            break
+        ax = measure.axis_stresses(scene, walls) if axes_tol is not None else np.array([mean])
+        if (abs(mean - stress) <= tol * stress and u < unbalanced
+                and np.all(np.abs(ax - stress) <= (axes_tol or tol) * stress)
+                and (min_coordination <= 0
+                     or measure.coordination_number(scene) >= min_coordination)):
+            passed += 1
+            if passed >= checks:
+                ok = True
+                break
+        else:
+            passed = 0
     g.enabled = False
     return StageResult(ok, scene.step_count - start, measure.axis_stresses(scene, walls), mean,
                        u, measure.porosity(scene, walls),

@@ -13,7 +13,7 @@ Then it locks the grips (ends held) and reports the locked-in force as the run g
   times the lines' spacing).
 - **Grips.**
   - They are the grid's bodies within ``grip_width`` of the grid's two ends along the
-    members' direction.
+    members' direction: by default the end junctions.
   - Each body of the pulled end belongs to the line nearest to it.
   - All their DOFs are held; the pulled ones move at the servo's velocity.
 - **Servo.**
@@ -55,7 +55,8 @@ class Prestress:
     """Tensions the members of ``direction`` of ``grid`` in ``scene`` (module docstring).
 
     tension_n : target tension per member, N; or tension_per_m : N per metre of width.
-    grip_width : m; default: the woven grid's member width, or 1e-6 of the grid's extent.
+    grip_width : m; default: the end junctions (a woven grid's patch of crossings, a node
+        grid's end nodes).
     tolerance : relative, -. period : steps between servo updates. gain : -, in (0, 1].
     max_speed : m/s.
     """
@@ -102,7 +103,13 @@ class Prestress:
         x = pos[bodies, self.axis]
         lo, hi = x.min(), x.max()
         if grip_width is None:
-            grip_width = getattr(grid, "member_width", 1e-6 * (hi - lo))
+            # The end junctions: a woven grid's patch of crossings (its member width less a
+            # sphere diameter), a node grid's end nodes.
+            if hasattr(grid, "member_width"):
+                r_grid = float(np.asarray(scene.radii)[bodies[0]])
+                grip_width = grid.member_width - 2 * r_grid + 1e-9 * (hi - lo)
+            else:
+                grip_width = 1e-6 * (hi - lo)
         if not (math.isfinite(grip_width) and 0 <= grip_width < 0.5 * (hi - lo)):
             raise ParameterError(f"grip_width={grip_width}: must be in [0, half the grid's "
                                  f"extent {0.5 * (hi - lo):g} m)")

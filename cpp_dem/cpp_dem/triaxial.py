@@ -27,19 +27,24 @@ class TriaxialSample:
     walls: list
     material: int
     controller: object
+    wall_material: int = -1
 
 
 def build_box_sample(centers, radii, lo, hi, *, young: float, poisson: float,
                      friction_deg: float, density: float, local_damping: float,
-                     dt_safety: float = 0.5, gain: float = 0.5, clumps=None) -> TriaxialSample:
+                     dt_safety: float = 0.5, gain: float = 0.5, clumps=None,
+                     grain_material=None) -> TriaxialSample:
     """A scene with the spheres in the box [lo, hi] (m): grains of the linear law (E Pa, nu
     -, phi deg, rho kg/m^3), frictionless walls, Cundall local damping, automatic time step,
     and a TriaxialController on the walls (all axes at zero stress until set).
 
     clumps: (ClumpCloud, templates) to add clumps instead of the spheres (``centers`` and
-    ``radii`` are then ignored; see cpp_dem.clumps.clump_cloud)."""
+    ``radii`` are then ignored; see cpp_dem.clumps.clump_cloud).
+    grain_material: a Material for the grains instead of the linear one (e.g. 002's
+    Hertz–Mindlin); the walls keep the linear law of young and poisson."""
     s = Scene(local_damping=local_damping)
-    mat = s.add_material(_core.Material(model="linear", density=density, young=young,
+    mat = s.add_material(grain_material if grain_material is not None else
+                         _core.Material(model="linear", density=density, young=young,
                                         poisson=poisson, friction_angle_deg=friction_deg))
     wall_mat = s.add_material(_core.Material(model="linear", density=density, young=young,
                                              poisson=poisson, friction_angle_deg=0.0))
@@ -58,7 +63,7 @@ def build_box_sample(centers, radii, lo, hi, *, young: float, poisson: float,
         ctl.set_stress(a, 0.0)
     ctl.enabled = False
     s.add_controller(ctl)
-    return TriaxialSample(s, walls, mat, ctl)
+    return TriaxialSample(s, walls, mat, ctl, wall_mat)
 
 
 def isotropic_stage(sample: TriaxialSample, pressure: float, *, tol: float = 0.01,

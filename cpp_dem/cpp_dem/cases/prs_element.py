@@ -49,7 +49,7 @@ import numpy as np
 from cpp_dem.io.figures import save_figure
 from cpp_dem.rundir import begin_run, check_common_args, end_run
 from cpp_dem import element as _element
-from cpp_dem.element import ElementParams, grid_axial_stiffness
+from cpp_dem.element import ElementParams, grid_axial_stiffness, grid_stiffness_per_metre
 
 ROOT = Path(__file__).resolve().parents[3]  # the source tree (for git), when there is one
 
@@ -153,7 +153,7 @@ def fem_model(p: Params, prestressed: bool):
     from femcoupling.elastoplastic import SoilModel
     from femcoupling.materials import DruckerPrager, GeogridLayerMaterial
 
-    J = grid_axial_stiffness(p)
+    J = grid_stiffness_per_metre(p)
     layer = GeogridLayerMaterial(axial_stiffness_n_per_m=J,
                                  prestress_n_per_m=p.prestress if prestressed else 0.0)
     soil = DruckerPrager(young_pa=p.soil_young, poisson=p.soil_poisson,

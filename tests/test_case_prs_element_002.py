@@ -1,0 +1,59 @@
+"""cases/prs_element_002.py (issue 16): 002's element rebuilt with clumps and the woven grid of
+bonded spheres, detailed and standard, RE against PRS (the smoke run of conftest)."""
+
+import json
+
+import numpy as np
+import pytest
+
+
+@pytest.fixture(scope="module")
+def smoke(case_smoke):
+    return case_smoke("prs_element_002")
+
+
+def test_four_elements_reach_and_hold_the_stresses(smoke):
+    out, proc = smoke
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert sorted(s["elements"]) == ["detailed_PRS", "detailed_RE", "standard_PRS", "standard_RE"]
+    for name, e in s["elements"].items():
+        assert e["grains"] == "clumps:gravel" and e["grain_law"] == "hertz"
+        assert e["num_grains"] > 100, name
+        np.testing.assert_allclose(e["stress_final_pa"], [20e3, 20e3, 40e3], rtol=0.02)
+        # Held within 2 %: the servo's 1 % plus the creep of a small clump packing.
+        assert e["hold_max_rel_error"] <= 0.02, name
+
+
+def test_outputs_for_paraview_and_figures(smoke):
+    out, _ = smoke
+    for name in ("detailed_PRS", "standard_RE"):
+        for f in (f"vtk/{name}_geogrid.vtp", f"vtk/{name}_contacts.vtp",
+                  f"vtk/{name}_spheres.vtp", f"{name}_views.png", f"{name}_views.pdf",
+                  f"{name}.h5", f"{name}.csv"):
+            assert (out / f).is_file() and (out / f).stat().st_size > 0, f
+    report = (out / "report.md").read_text()
+    assert "002's findings" in report and "CoV along the longitudinal members" in report
+    # The locked-in prestress is a series of the PRS runs only.
+    assert "prestress_line_force_mean" in (out / "detailed_PRS.csv").read_text().splitlines()[0]
+    assert "prestress_line_force_mean" not in (out / "detailed_RE.csv").read_text().splitlines()[0]
+
+
+def test_prestress_and_interaction_measures(smoke):
+    out, _ = smoke
+    s = json.loads((out / "summary.json").read_text())
+    el = s["elements"]
+    for grid in ("detailed", "standard"):
+        re_, prs = el[f"{grid}_RE"], el[f"{grid}_PRS"]
+        # PRS: tensioned to T_p x pitch and locked; its members carry far more than RE's.
+        assert prs["prestress_target_n"] > 0 and len(prs["prestress_locked_final_n"]) == 4
+        assert prs["grid_force_longitudinal_mean_n"] > 0.5 * prs["prestress_target_n"]
+        assert abs(re_["grid_force_longitudinal_mean_n"]) < 0.5 * prs["prestress_target_n"]
+        assert "prestress_target_n" not in re_
+        for e in (re_, prs):
+            it = e["interaction"]
+            assert it["contacts"]["contacts"] > 0 and it["contacts"]["grains_touching"] > 0
+            assert it["apertures"]["grains_in_apertures"] >= 0
+            assert it["waviness"]["out_of_plane_longitudinal_mean_m"] > 0
+    assert {f["grid"] for f in s["findings"]} == {"detailed", "standard"}
+    assert all(isinstance(f["agrees"], bool) for f in s["findings"])
