@@ -89,7 +89,9 @@ def grid_stiffness_per_metre(p: ElementParams) -> float:
 
 def make_element(p: ElementParams, mean_stress: float, prestressed: bool,
                  log: Callable[[str], None] = _log):
-    """The element: spheres in the cube, the geogrid, radius growth to ``mean_stress`` (Pa)."""
+    """The element: spheres in the cube, the square geogrid, radius growth to ``mean_stress``
+    (Pa); for PRS the longitudinal members tensioned to p.prestress (N/m) and locked
+    (cpp_dem.prestress). Returns (sample, grid, prestress or None)."""
     rng_r = np.random.default_rng(p.seed)
     vol = p.edge**3
     r_mean = (0.6 * vol / (p.n * 4.0 / 3.0 * math.pi)) ** (1.0 / 3.0)
@@ -125,17 +127,17 @@ def make_element(p: ElementParams, mean_stress: float, prestressed: bool,
     prep.set_friction(sc, np.flatnonzero(measure.sphere_mask(sc)), sc.material(sample.material),
                       p.friction_deg)
     sc.block_dofs(grid.nodes, "")
+    ps = None
     if prestressed:
-        pos = sc.positions[grid.nodes]
-        ext = np.asarray(sc.external_forces).copy()
-        f_end = p.prestress * grid_spacing(p)  # N per longitudinal member
-        lo_end = np.isclose(pos[:, 0], mid - half)
-        hi_end = np.isclose(pos[:, 0], mid + half)
-        ext[grid.nodes[lo_end], 0] -= f_end
-        ext[grid.nodes[hi_end], 0] += f_end
-        sc.external_forces = ext
-        log(f"PRS: end nodes of the {int(lo_end.sum())} longitudinal members pulled by "
-            f"{f_end:.1f} N each (T_p = {p.prestress / 1e3:g} kN/m)")
+        # The library's prestress: tension the longitudinal members to T_p x spacing, lock
+        # (ends held); the force along them is then found, not imposed by end forces.
+        from .prestress import Prestress
+
+        ps = Prestress(sc, grid, tension_per_m=p.prestress)
+        row = ps.tension(p.max_steps)
+        log(f"PRS: {len(ps.lines)} lines of longitudinal members tensioned to {ps.target_n:.1f}"
+            f" N each (T_p = {p.prestress / 1e3:g} kN/m) and locked at step {row['step']}")
+    return sample, grid, ps
     return sample, grid
 
 
@@ -368,8 +370,7 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     if woven_grid:
         sample, grid, ps = make_woven_element(p, float(targets[0].mean()), prestressed, log=log)
     else:
-        sample, grid = make_element(p, float(targets[0].mean()), prestressed, log=log)
-        ps = None
+        sample, grid, ps = make_element(p, float(targets[0].mean()), prestressed, log=log)
     sc, walls = sample.scene, sample.walls
     meta = {"case": "prs_element", "label": label, "prestressed": prestressed,
             "units": "SI; stresses compression positive"}
