@@ -94,3 +94,40 @@ def test_grid_laws_for_002():
 def test_bad_input_names_the_field(kw, field):
     with pytest.raises(cd.ParameterError, match=field):
         _grid(**kw)
+
+
+def test_clump_rests_on_a_woven_grid():
+    """A clump set down on a held woven grid, over the hollow between four spheres of a
+    junction, comes to rest on them: the pair contacts between its member and the grid's
+    spheres carry its weight (within 1 %), with 002's grid-grain law (linear
+    k_n = 3.9e6 N/m). (A clump set down on the side of a string slides off it into the gap
+    between the strings: single-string interaction.)"""
+    from cpp_dem.clumps import ClumpTemplate
+
+    s = cd.Scene(gravity=(0, 0, -9.81), local_damping=0.5)
+    gm = s.add_material(woven.woven_material("detailed"))
+    g = woven.woven_geogrid(s, origin=(0, 0, 0), apertures_x=1, apertures_y=1, material=gm)
+    s.block_dofs(g.spheres, "all")
+    grain = s.add_material(cd.linear_material(density=2640, young=1e8, poisson=0.25,
+                                              friction_angle_deg=38.66))
+    woven.set_grid_laws(s, gm, grain)
+    t = ClumpTemplate.from_spheres([[0.0, 0, 0]], [0.004])
+    # Over the hollow between the junction spheres at (0, 0), (2.5, 0), (0, 2.5), (2.5, 2.5)
+    # mm; touching height sqrt(5^2 - 2 x 1.25^2) mm above the grid's plane.
+    z0 = np.sqrt(5e-3**2 - 2 * 1.25e-3**2) + 1e-4
+    s.add_clumps(t, [[1.25e-3, 1.25e-3, z0]], [[1.0, 0, 0, 0]], material=grain)
+    s.set_auto_timestep(safety=0.5, period=100)
+    s.run(30000)
+    members = set(s.clump_members(0))
+    c = s.contacts()
+    ids = np.asarray(c["ids"])
+    on_grid = np.array([(a in members) != (b in members) and b >= 0 for a, b in ids])
+    assert on_grid.sum() == 4
+    np.testing.assert_allclose(np.asarray(c["kn"])[on_grid], 3.9e6)  # 002's grid-grain law
+    # The force on the clump's member: +force when the member is body 2.
+    f = np.asarray(c["force"])[on_grid]
+    member_is_2 = np.array([b in members for a, b in ids[on_grid]])
+    fz = np.where(member_is_2, f[:, 2], -f[:, 2]).sum()
+    weight = s.clump_masses[0] * 9.81
+    assert abs(fz / weight - 1) < 0.01
+    assert np.linalg.norm(s.clump_velocities[0]) < 1e-4

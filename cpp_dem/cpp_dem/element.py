@@ -254,16 +254,30 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
                         target_stress=1e12, gain=0.5, max_strain=10 * p.growth_max_strain)
     sc.add_controller(fast)
     start = sc.step_count
+    last = [time.perf_counter()]
+
+    def progress(phase: str) -> None:
+        if time.perf_counter() - last[0] > 10:
+            last[0] = time.perf_counter()
+            log(f"  growth ({phase}): step {sc.step_count - start}, walls "
+                f"{np.round(measure.axis_stresses(sc, sample.walls) / 1e3, 2).tolist()} kPa "
+                f"(target {mean_stress / 1e3:.2f}), coordination "
+                f"{measure.coordination_number(sc):.2f}, unbalanced {sc.unbalanced_force():.3g};"
+                f" at most {p.max_steps - (sc.step_count - start)} steps left in this phase")
+
     while (measure.coordination_number(sc) < 1.0 and
            measure.wall_stresses(sc, sample.walls).mean() < mean_stress and
            sc.step_count - start < p.max_steps):
         sc.run(500)
+        progress("fast")
     fast.enabled = False
     fast_steps = sc.step_count - start
+    start = sc.step_count
     grow = prep.grow_to_stress(sc, sample.walls, mean_stress, tol=0.05,
                                unbalanced=max(0.3, p.unbalanced),
                                max_strain=p.growth_max_strain, max_steps=p.max_steps,
-                               bodies=grain_bodies, checks=3, min_coordination=2.0)
+                               bodies=grain_bodies, checks=3, min_coordination=2.0,
+                               callback=lambda _s: progress("to the stress"))
     if not grow.converged:
         log(f"WARNING: the growth did not reach {mean_stress / 1e3:.2f} kPa at rest within "
             f"{p.max_steps} steps (axis stresses {np.round(grow.axis_stresses / 1e3, 2).tolist()}"

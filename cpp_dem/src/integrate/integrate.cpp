@@ -75,6 +75,18 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
   const Real* const fi = pair_fi_.data()->data();
   const Real* const ti = pair_ti_.data()->data();
   // (With the 3-vector operations of `ops`, WideOps or NarrowOps: see the pair pass.)
+  // A two-sided record (a geogrid link, a bond) gives its body b force_b and torque_b, or
+  // its body a -force_b and torque_a.
+  const auto add_two_sided = [](const auto& l, int b, auto& f, auto& t, auto ops)
+      __attribute__((always_inline)) {
+    if (l.b == b) {
+      f += ops.load(l.force_b);
+      t += ops.load(l.torque_b);
+    } else {
+      f -= ops.load(l.force_b);
+      t += ops.load(l.torque_a);
+    }
+  };
   const auto sum_forces = [&](int b, auto& f, auto& t, auto ops) __attribute__((always_inline)) {
     f = ops.load(bodies_.ext_force[b]) + bodies_.mass[b] * ops.load(gravity_);
     t = ops.load(bodies_.ext_torque[b]);
@@ -110,28 +122,13 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
       // Cohesive links.
       for (int e = node_link_off_[b]; e < node_link_off_[b + 1]; ++e) {
         const GridLink& l = links_[node_link_[e]];
-        if (l.broken) continue;
-        if (l.b == b) {
-          f += ops.load(l.force_b);
-          t += ops.load(l.torque_b);
-        } else {
-          f -= ops.load(l.force_b);
-          t += ops.load(l.torque_a);
-        }
+        if (!l.broken) add_two_sided(l, b, f, t, ops);
       }
     }
     if (bonded) {
       // Bonds, in bond order.
-      for (int e = body_bond_off_[b]; e < body_bond_off_[b + 1]; ++e) {
-        const Bond& l = bonds_[body_bond_[e]];
-        if (l.b == b) {
-          f += ops.load(l.force_b);
-          t += ops.load(l.torque_b);
-        } else {
-          f -= ops.load(l.force_b);
-          t += ops.load(l.torque_a);
-        }
-      }
+      for (int e = body_bond_off_[b]; e < body_bond_off_[b + 1]; ++e)
+        add_two_sided(bonds_[body_bond_[e]], b, f, t, ops);
     }
     ops.store(bodies_.force[b], f);
     ops.store(bodies_.torque[b], t);

@@ -90,9 +90,19 @@ Real Scene::critical_dt_body(int* arg_body) const {
   // stiffness per axis is at least that of one contact with an equal sphere, E R (the linear
   // law's k_n). Without this floor the estimate followed only the bodies in contact, and in
   // a 1:20 PSD the first big-big contact lifted dt 36-fold above what a small grain needs.
+  // A pair law's own k_n (Scene::set_pair_law) may be stiffer than E R: the floor of a
+  // body takes the stiffest pair law of its material too (else a grain with no contact yet
+  // took a step that is unstable once it touches, e.g. a soft grain on 002's stiff grid).
+  std::vector<Real> law_kn(materials_.size(), 0.0);
+  for (const PairLaw& l : pair_laws_) {
+    if (!(l.kn > 0)) continue;
+    law_kn[l.a] = std::max(law_kn[l.a], l.kn);
+    law_kn[l.b] = std::max(law_kn[l.b], l.kn);
+  }
   for (int b = 0; b < n; ++b) {
     if (bodies_.kind[b] != BODY_SPHERE) continue;
-    const Real floor_k = materials_[bodies_.material[b]].young * bodies_.radius[b];
+    const int m = bodies_.material[b];
+    const Real floor_k = std::max(materials_[m].young * bodies_.radius[b], law_kn[m]);
     for (int a = 0; a < 3; ++a) kt[b][a] = std::max(kt[b][a], floor_k);
   }
   Real dt = std::numeric_limits<Real>::infinity();

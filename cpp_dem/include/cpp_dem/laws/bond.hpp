@@ -97,24 +97,19 @@ struct Bond {
   /// The parallel bond's normal and shear stresses sigma, tau at its rim, Pa.
   Real pb_sigma() const { return pb_fn / pb_area + pb_mb.norm() * pb_radius / pb_i; }
   Real pb_tau() const { return pb_fs.norm() / pb_area + std::abs(pb_mt) * pb_radius / pb_j; }
-  /// Energy stored in the linear contact's and the intact parallel bond's springs, J.
-  Real elastic_energy() const {
-    Real e = 0;
-    if (fn != 0) e += 0.5 * fn * fn / kn;
-    if (ks > 0) e += 0.5 * fs.squaredNorm() / ks;
-    if (pb_intact) {
-      e += 0.5 * pb_fn * pb_fn / (pb_kn * pb_area) + 0.5 * pb_mb.squaredNorm() / (pb_kn * pb_i);
-      if (pb_ks > 0)
-        e += 0.5 * pb_fs.squaredNorm() / (pb_ks * pb_area) + 0.5 * pb_mt * pb_mt / (pb_ks * pb_j);
-    }
-    return e;
-  }
-  /// Energy stored in the parallel bond alone (released when it breaks), J.
+  /// Energy stored in the intact parallel bond alone (released when it breaks), J.
   Real pb_energy() const {
     if (!pb_intact) return 0;
     Real e = 0.5 * pb_fn * pb_fn / (pb_kn * pb_area) + 0.5 * pb_mb.squaredNorm() / (pb_kn * pb_i);
     if (pb_ks > 0)
       e += 0.5 * pb_fs.squaredNorm() / (pb_ks * pb_area) + 0.5 * pb_mt * pb_mt / (pb_ks * pb_j);
+    return e;
+  }
+  /// Energy stored in the linear contact's and the intact parallel bond's springs, J.
+  Real elastic_energy() const {
+    Real e = pb_energy();
+    if (fn != 0) e += 0.5 * fn * fn / kn;
+    if (ks > 0) e += 0.5 * fs.squaredNorm() / ks;
     return e;
   }
 };
