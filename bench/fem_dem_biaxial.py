@@ -45,6 +45,8 @@ def main(argv=None) -> int:
     ap.add_argument("--tangent", default="network-elastic",
                     choices=("network", "network-elastic"))
     ap.add_argument("--out", default="results/bench_runs/fem_dem_biaxial.json")
+    ap.add_argument("--records", default=None,
+                    help="folder for the run's records: elements.h5, fem.xdmf, steps.csv")
     args = ap.parse_args(argv)
     lx, ly = 0.02, 0.04
     n = 2 * args.nx * args.ny
@@ -54,7 +56,7 @@ def main(argv=None) -> int:
                                               isotropic=True), workers=args.workers) as pool:
         m = HierarchicalPlaneStrain(pool, lx=lx, ly=ly, nx=args.nx, ny=args.ny,
                                     confining_pa=args.pressure, newton_rtol=args.rtol,
-                                    tangent=args.tangent,
+                                    tangent=args.tangent, out=args.records,
                                     strain_kw={"unbalanced": args.unbalanced,
                                                "max_relax_steps": 100_000})
         print(f"[biaxial] {n} elements of {args.grains} grains ready in "

@@ -25,6 +25,12 @@ is moved with the homogeneous field, so every element sees the same strain.
 
 Stresses are tension positive here (FEM), Pa. Serial (one MPI rank; the elements are the
 parallel part).
+
+Records (``out=DIR``), appended and flushed at every accepted step:
+- ``elements.h5``: one row per element per step: step, load, element, increment, stress,
+  tangent, contact count, DEM seconds and steps;
+- ``fem.xdmf``: the displacement and the elements' stresses per cell, at every step;
+- ``steps.csv``: iterations, residual, and the FEM/DEM time split.
 """
 
 from __future__ import annotations
@@ -32,6 +38,7 @@ from __future__ import annotations
 import dataclasses
 import math
 import time
+from pathlib import Path
 from typing import Any
 
 import numpy as np
@@ -94,7 +101,7 @@ class HierarchicalPlaneStrain:
     def __init__(self, pool, *, lx: float, ly: float, nx: int, ny: int,
                  confining_pa: float | None = None, homogeneous: bool = False,
                  newton_rtol: float = 1e-3, max_newton: int = 10, strain_kw: dict | None = None,
-                 tangent: str = "network", verbose: bool = False) -> None:
+                 tangent: str = "network", verbose: bool = False, out=None) -> None:
         if not (lx > 0 and ly > 0 and math.isfinite(lx) and math.isfinite(ly)):
             raise FemInputError(f"lx={lx}, ly={ly}: must be > 0 (m)")
         if nx < 1 or ny < 1:
@@ -105,6 +112,8 @@ class HierarchicalPlaneStrain:
         import basix.ufl
 
         self.pool, self.lx, self.ly = pool, float(lx), float(ly)
+        self.out = None if out is None else Path(out)
+        self._records = None
         self.verbose = verbose
         self.bad_tangents = 0  # element tangents replaced by their last good one
         if tangent not in ("network", "network-elastic"):
@@ -240,6 +249,7 @@ class HierarchicalPlaneStrain:
         except ElementError as e:  # an element could not take this iterate: cut the step
             raise NewtonFailure(f"an element failed on this iterate: {e}") from e
         self._set_q(step.stresses, step.tangents)
+        self._last_pool_step = step
         return float(sum(step.cpu_s)), step.wall_s, step.recovered
 
     def _residual(self) -> float:
@@ -328,4 +338,73 @@ class HierarchicalPlaneStrain:
                      dem_s=dem_s, fem_s=wall - pool_s, wall_s=wall, recovered=recovered,
                      increments=self._increments.copy())
         self.history.append(r)
+        if self.out is not None:
+            self._write_records(r)
         return r
+
+    # ---- records -----------------------------------------------------------------------------
+    def _write_records(self, r: HierStep) -> None:
+        """Appends the accepted step to ``out``: one row per element in ``elements.h5`` (the
+        step, its load, the element, its displacement-gradient increment, stress (tension
+        positive, Pa), tangent (Voigt 6 x 6, Pa), contact count, DEM seconds and steps),
+        flushed; the FEM state in ``fem.xdmf`` (displacement m, the elements' stress Pa per
+        cell, at the load as time); and a line of ``steps.csv`` with the FEM/DEM time split."""
+        import h5py
+
+        self.out.mkdir(parents=True, exist_ok=True)
+        ps = self._last_pool_step
+        n = self.n_cells
+        k = len(self.history) - 1
+        rows = {
+            "step": np.full(n, k, dtype=np.int64),
+            "load_m": np.full(n, r.load),
+            "element": np.arange(n, dtype=np.int64),
+            "increment": np.asarray(r.increments, float).reshape(n, 3, 3),
+            "stress_pa": np.asarray(ps.stresses, float).reshape(n, 3, 3),
+            "tangent_pa": np.array([np.full((6, 6), np.nan) if t is None else t
+                                    for t in ps.tangents], float).reshape(n, 6, 6),
+            "contacts": np.asarray(ps.contacts, dtype=np.int64),
+            "cpu_s": np.asarray(ps.cpu_s, float),
+            "dem_steps": np.asarray(ps.steps, dtype=np.int64),
+        }
+        path = self.out / "elements.h5"
+        with h5py.File(path, "a") as f:
+            if "step" not in f:
+                f.attrs["units"] = ("SI; stress tension positive; increment: displacement-"
+                                    "gradient increment of the step, the element's (x, y, z) "
+                                    "with the FEM's (x, y) as (x, z)")
+                for key, v in rows.items():
+                    f.create_dataset(key, data=v, maxshape=(None,) + v.shape[1:],
+                                     chunks=True)
+            else:
+                for key, v in rows.items():
+                    d = f[key]
+                    d.resize(d.shape[0] + n, axis=0)
+                    d[-n:] = v
+            f.flush()
+        self._write_xdmf(r, append=k > 0)
+        csv = self.out / "steps.csv"
+        new = not csv.exists()
+        with open(csv, "a") as fh:
+            if new:
+                fh.write("step,load_m,iterations,residual,fem_s,dem_s,wall_s,"
+                         "recovered,bad_tangents\n")
+            fh.write(f"{k},{r.load!r},{r.iterations},{r.residual!r},{r.fem_s!r},{r.dem_s!r},"
+                     f"{r.wall_s!r},{len(r.recovered)},{self.bad_tangents}\n")
+
+    def _write_xdmf(self, r: HierStep, append: bool) -> None:
+        fx = self._fx
+        fem = fx.fem
+        import dolfinx.io
+
+        T = fem.functionspace(self.mesh, ("DG", 0, (3, 3)))
+        sig = fem.Function(T, name="stress_pa")
+        st = np.asarray(self._last_pool_step.stresses, float).reshape(self.n_cells, 9)
+        sig.x.array[:] = st.reshape(-1)[: sig.x.array.size]
+        self.u.name = "displacement_m"
+        with dolfinx.io.XDMFFile(self.mesh.comm, str(self.out / "fem.xdmf"),
+                                 "a" if append else "w") as xf:
+            if not append:
+                xf.write_mesh(self.mesh)
+            xf.write_function(self.u, r.load)
+            xf.write_function(sig, r.load)

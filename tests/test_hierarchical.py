@@ -17,17 +17,45 @@ from femcoupling.hierarchical import (HierarchicalPlaneStrain, dem_increment,  #
 FACTORY = PeriodicFactory(n=100, same=True)
 
 
-def _run(workers):
+def _run(workers, out=None):
     with ElementPool.build(8, FACTORY, workers=workers) as pool:
-        m = HierarchicalPlaneStrain(pool, lx=0.02, ly=0.02, nx=2, ny=2, homogeneous=True)
+        m = HierarchicalPlaneStrain(pool, lx=0.02, ly=0.02, nx=2, ny=2, homogeneous=True,
+                                    out=out)
         steps = [m.step(top_displacement=-2e-6 * k, right_displacement=1e-6 * k)
                  for k in (1, 2)]
         return steps, m.u.x.array.copy()
 
 
 @pytest.fixture(scope="module")
-def runs():
-    return {w: _run(w) for w in (1, 2)}
+def records(tmp_path_factory):
+    return tmp_path_factory.mktemp("hier")
+
+
+@pytest.fixture(scope="module")
+def runs(records):
+    return {1: _run(1), 2: _run(2, out=records)}
+
+
+def test_records_one_row_per_element_per_step(runs, records):
+    import h5py
+
+    steps, _ = runs[2]
+    with h5py.File(records / "elements.h5") as f:
+        assert f["stress_pa"].shape == (16, 3, 3) and f["tangent_pa"].shape == (16, 6, 6)
+        assert list(f["step"][:]) == [0] * 8 + [1] * 8
+        assert list(f["element"][:]) == list(range(8)) * 2
+        for k, r in enumerate(steps):
+            rows = slice(8 * k, 8 * k + 1 * 8)
+            assert np.array_equal(np.array([fem_stress(s) for s in f["stress_pa"][rows]]),
+                                  r.element_stresses)
+            assert np.array_equal(f["increment"][rows], r.increments)
+        assert np.all(f["contacts"][:] > 0) and np.all(f["cpu_s"][:] > 0)
+        assert np.all(np.isfinite(f["tangent_pa"][:]))
+    lines = (records / "steps.csv").read_text().splitlines()
+    assert lines[0].startswith("step,load_m,iterations") and len(lines) == 3
+    xdmf = (records / "fem.xdmf").read_text()
+    assert xdmf.count('Attribute Name="stress_pa"') == 2
+    assert xdmf.count('Attribute Name="displacement_m"') == 2
 
 
 def test_homogeneous_field_converges_in_one_iteration(runs):
