@@ -57,3 +57,21 @@ def test_prestress_and_interaction_measures(smoke):
             assert it["waviness"]["out_of_plane_longitudinal_mean_m"] > 0
     assert {f["grid"] for f in s["findings"]} == {"detailed", "standard"}
     assert all(isinstance(f["agrees"], bool) for f in s["findings"])
+
+
+@pytest.mark.parametrize("args, msg", [
+    (["--grids", "fancy"], "--grids='fancy': must be a comma-separated list of detailed, standard"),
+    (["--variants", "RE,XX"], "--variants='RE,XX': must be a comma-separated list of RE, PRS"),
+    (["--grains", "clumps:nosuch"], "grains='clumps:nosuch'"),
+    (["--n", "10"], "--n=10: must be >= 50"),
+    (["--prestress", "-5"], "--prestress=-5.0: must be >= 0 (N/m)"),
+])
+def test_bad_inputs_name_the_option(tmp_path, args, msg):
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    case = Path(__file__).resolve().parents[1] / "cases" / "prs_element_002.py"
+    p = subprocess.run([sys.executable, str(case), "--smoke", "--out", str(tmp_path), *args],
+                       capture_output=True, text=True, timeout=120)
+    assert p.returncode != 0 and msg in p.stderr, p.stderr

@@ -128,7 +128,7 @@ def make_element(p: ElementParams, mean_stress: float, prestressed: bool,
                       p.friction_deg)
     sc.block_dofs(grid.nodes, "")
     ps = None
-    if prestressed:
+    if prestressed and p.prestress > 0:
         # The library's prestress: tension the longitudinal members to T_p x spacing, lock
         # (ends held); the force along them is then found, not imposed by end forces.
         from .prestress import Prestress
@@ -295,7 +295,7 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
                     friction=math.tan(math.radians(p.friction_deg)))
     sc.block_dofs(grid.spheres, "")
     ps = None
-    if prestressed:
+    if prestressed and p.prestress > 0:
         ps = Prestress(sc, grid, tension_per_m=p.prestress)
         t0 = time.perf_counter()
         row = ps.tension(p.max_steps)

@@ -396,6 +396,39 @@ def parse_stresses(text: str, ap) -> list:
     return rows
 
 
+def add_element_args(ap, d, *, smoke: str, out: str) -> None:
+    """The options the element cases share: --smoke, --out, --stresses, --n, --prestress,
+    --footing-pressure, --seed, --threads (defaults from the parameters ``d``)."""
+    ap.add_argument("--smoke", action="store_true", help=f"test-sized run: {smoke}")
+    ap.add_argument("--out", type=Path, default=Path("results") / out)
+    ap.add_argument("--stresses", type=str, default="",
+                    help="DEM-only: 'sx,sy,sz' in Pa (compression positive) or a CSV table "
+                         "(sx,sy,sz or time,sx,sy,sz per row, driven in order)")
+    ap.add_argument("--n", type=int, default=None, help=f"number of grains (default {d.n})")
+    ap.add_argument("--prestress", type=float, default=d.prestress,
+                    help="PRS prestress T_p, N/m (>= 0; 0: PRS is RE)")
+    ap.add_argument("--footing-pressure", type=float, default=d.footing_pressure,
+                    help="FEM footing pressure, Pa (> 0)")
+    ap.add_argument("--seed", type=int, default=d.seed)
+    ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: one thread)")
+
+
+def apply_element_args(ap, a, p):
+    """Checks the shared options (add_element_args) and sets them on ``p``; returns it."""
+    check_common_args(ap, a)
+    if a.n is not None:
+        if a.n < 50:
+            ap.error(f"--n={a.n}: must be >= 50")
+        p.n = a.n
+    if not (math.isfinite(a.prestress) and a.prestress >= 0):
+        ap.error(f"--prestress={a.prestress}: must be >= 0 (N/m)")
+    if not (math.isfinite(a.footing_pressure) and a.footing_pressure > 0):
+        ap.error(f"--footing-pressure={a.footing_pressure}: must be > 0 (Pa)")
+    p.prestress, p.footing_pressure, p.seed, p.threads = (a.prestress, a.footing_pressure,
+                                                           a.seed, a.threads)
+    return p
+
+
 def parse_args(argv=None) -> tuple[Params, Path]:
     ap = argparse.ArgumentParser(
         description="Prestressed reinforced-soil element (002): a 0.1 m cube of grains with "
@@ -404,19 +437,9 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                     "compression positive.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     d = Params()
-    ap.add_argument("--smoke", action="store_true",
-                    help=f"test-sized run: {SMOKE['n']} grains, coarse FEM mesh")
-    ap.add_argument("--out", type=Path, default=Path("results") / "prs_element")
-    ap.add_argument("--stresses", type=str, default="",
-                    help="DEM-only: 'sx,sy,sz' in Pa (compression positive) or a CSV table "
-                         "(sx,sy,sz or time,sx,sy,sz per row, driven in order)")
+    add_element_args(ap, d, smoke=f"{SMOKE['n']} grains, coarse FEM mesh", out="prs_element")
     ap.add_argument("--prs", action="store_true",
                     help="DEM-only: prestress the geogrid by --prestress (default: RE)")
-    ap.add_argument("--n", type=int, default=None, help=f"number of grains (default {d.n})")
-    ap.add_argument("--prestress", type=float, default=d.prestress,
-                    help="PRS prestress T_p, N/m (>= 0)")
-    ap.add_argument("--footing-pressure", type=float, default=d.footing_pressure,
-                    help="FEM footing pressure, Pa (> 0)")
     ap.add_argument("--two-way", action="store_true", help="iterate FEM <-> DEM")
     ap.add_argument("--tol", type=float, default=d.two_way_tol,
                     help="two-way tolerance on the handed-over stresses, relative")
@@ -427,27 +450,14 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                          "(overrides --tol); docs/speed_accuracy.md")
     ap.add_argument("--workers", type=int, default=1,
                     help="processes for the DEM elements of the two-way loop (<= 2 here)")
-    ap.add_argument("--seed", type=int, default=d.seed)
-    ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: one thread)")
     a = ap.parse_args(argv)
-    check_common_args(ap, a)
-    p = Params(**SMOKE) if a.smoke else Params()
-    if a.n is not None:
-        if a.n < 50:
-            ap.error(f"--n={a.n}: must be >= 50")
-        p.n = a.n
-    if not (math.isfinite(a.prestress) and a.prestress >= 0):
-        ap.error(f"--prestress={a.prestress}: must be >= 0 (N/m)")
-    if not (math.isfinite(a.footing_pressure) and a.footing_pressure > 0):
-        ap.error(f"--footing-pressure={a.footing_pressure}: must be > 0 (Pa)")
+    p = apply_element_args(ap, a, Params(**SMOKE) if a.smoke else Params())
     if not a.tol > 0:
         ap.error(f"--tol={a.tol}: must be > 0")
     if a.max_iterations < 2:
         ap.error(f"--max-iterations={a.max_iterations}: must be >= 2")
     if a.workers < 1:
         ap.error(f"--workers={a.workers}: must be >= 1")
-    p.prestress, p.footing_pressure, p.seed, p.threads = (a.prestress, a.footing_pressure,
-                                                           a.seed, a.threads)
     p.two_way, p.two_way_tol, p.max_iterations, p.workers = (a.two_way, a.tol, a.max_iterations,
                                                              a.workers)
     if a.preset:

@@ -37,7 +37,6 @@ from __future__ import annotations
 import argparse
 import contextlib
 import json
-import math
 import sys
 import time
 from dataclasses import asdict, dataclass, replace
@@ -47,7 +46,7 @@ import numpy as np
 
 from cpp_dem.cases import prs_element as _fem_case
 from cpp_dem.element import run_element
-from cpp_dem.rundir import begin_run, check_common_args, end_run
+from cpp_dem.rundir import begin_run, end_run
 
 GRIDS = ("detailed", "standard")
 VARIANTS = ("RE", "PRS")
@@ -235,37 +234,16 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                     "PRS with 002's interaction measures.",
         formatter_class=argparse.ArgumentDefaultsHelpFormatter)
     d = Params()
-    ap.add_argument("--smoke", action="store_true",
-                    help=f"test-sized run: {SMOKE['n']} clumps, coarse FEM mesh")
-    ap.add_argument("--out", type=Path, default=Path("results") / "prs_element_002")
-    ap.add_argument("--stresses", type=str, default="",
-                    help="DEM-only: 'sx,sy,sz' in Pa or a CSV table (rows driven in order)")
+    _fem_case.add_element_args(ap, d, smoke=f"{SMOKE['n']} clumps, coarse FEM mesh",
+                               out="prs_element_002")
     ap.add_argument("--grids", default=",".join(GRIDS), help="woven forms to run")
     ap.add_argument("--variants", default=",".join(VARIANTS), help="RE and/or PRS")
-    ap.add_argument("--n", type=int, default=None, help=f"number of clumps (default {d.n})")
-    ap.add_argument("--prestress", type=float, default=d.prestress,
-                    help="PRS prestress T_p, N per metre of width (> 0)")
-    ap.add_argument("--footing-pressure", type=float, default=d.footing_pressure,
-                    help="FEM footing pressure, Pa (> 0)")
     ap.add_argument("--grains", default=d.grains,
                     help="clumps:NAME (a shipped grain, 'gravel', or a template CSV) or spheres")
-    ap.add_argument("--seed", type=int, default=d.seed)
-    ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: one thread)")
     a = ap.parse_args(argv)
-    check_common_args(ap, a)
-    p = Params(**SMOKE) if a.smoke else Params()
-    if a.n is not None:
-        if a.n < 50:
-            ap.error(f"--n={a.n}: must be >= 50")
-        p.n = a.n
-    if not (math.isfinite(a.prestress) and a.prestress > 0):
-        ap.error(f"--prestress={a.prestress}: must be > 0 (N/m)")
-    if not (math.isfinite(a.footing_pressure) and a.footing_pressure > 0):
-        ap.error(f"--footing-pressure={a.footing_pressure}: must be > 0 (Pa)")
+    p = _fem_case.apply_element_args(ap, a, Params(**SMOKE) if a.smoke else Params())
     p.grids = _names(a.grids, GRIDS, "--grids", ap)
     p.variants = _names(a.variants, VARIANTS, "--variants", ap)
-    p.prestress, p.footing_pressure, p.seed, p.threads = (a.prestress, a.footing_pressure,
-                                                           a.seed, a.threads)
     p.grains = a.grains
     from cpp_dem import ParameterError
     from cpp_dem.element import check_element_params
