@@ -44,6 +44,15 @@ def main(argv=None) -> int:
                     help="the elements relax to this unbalanced force after each increment")
     ap.add_argument("--tangent", default="network-elastic",
                     choices=("network", "network-elastic"))
+    ap.add_argument("--prep-friction", type=float, default=0.0,
+                    help="friction angle (deg) the elements' grains grow at (0: dense; "
+                         "-1: the material's, a loose packing)")
+    ap.add_argument("--max-newton", type=int, default=10)
+    ap.add_argument("--convergence", default="noise", choices=("noise", "tolerance"),
+                    help="--rtol, or within the elements' measured noise when Newton stalls "
+                         "above it; or --rtol only")
+    ap.add_argument("--relaxation", default="aitken",
+                    help="'aitken', 'none' or a fixed factor in (0, 1]")
     ap.add_argument("--out", default="results/bench_runs/fem_dem_biaxial.json")
     ap.add_argument("--records", default=None,
                     help="folder for the run's records: elements.h5, fem.xdmf, steps.csv")
@@ -52,11 +61,16 @@ def main(argv=None) -> int:
     n = 2 * args.nx * args.ny
     t0 = time.perf_counter()
     rows = []
+    opts = {} if args.prep_friction < 0 else {"prep_friction_deg": args.prep_friction}
     with ElementPool.build(n, PeriodicFactory(n=args.grains, stress=args.pressure,
-                                              isotropic=True), workers=args.workers) as pool:
+                                              isotropic=True, options=opts),
+                           workers=args.workers) as pool:
         m = HierarchicalPlaneStrain(pool, lx=lx, ly=ly, nx=args.nx, ny=args.ny,
                                     confining_pa=args.pressure, newton_rtol=args.rtol,
                                     tangent=args.tangent, out=args.records,
+                                    convergence=args.convergence, max_newton=args.max_newton,
+                                    relaxation=(args.relaxation if args.relaxation in
+                                                ("aitken", "none") else float(args.relaxation)),
                                     strain_kw={"unbalanced": args.unbalanced,
                                                "max_relax_steps": 100_000})
         print(f"[biaxial] {n} elements of {args.grains} grains ready in "
@@ -67,10 +81,13 @@ def main(argv=None) -> int:
             s = r.mean_stress
             q = -(s[1] - s[0])
             rows.append({"eps_y": eps, "iterations": r.iterations, "residual": r.residual,
+                         "noise_residual": r.noise_residual,
+                         "converged_on": r.converged_on,
                          "sigma_xx": float(s[0]), "sigma_yy": float(s[1]), "q": float(q),
                          "dem_s": r.dem_s, "fem_s": r.fem_s, "wall_s": r.wall_s})
             print(f"[biaxial] eps_y {eps:.4f}: Newton {r.iterations} (residual "
-                  f"{r.residual:.1e}), sigma_xx {s[0] / 1e3:.1f} kPa, sigma_yy "
+                  f"{r.residual:.1e}, noise {r.noise_residual:.1e}, on "
+                  f"{r.converged_on}), sigma_xx {s[0] / 1e3:.1f} kPa, sigma_yy "
                   f"{s[1] / 1e3:.1f} kPa, DEM {r.dem_s:.1f} s, FEM {r.fem_s:.2f} s, wall "
                   f"{r.wall_s:.1f} s", flush=True)
     print(f"[biaxial] wrote {write_json(args.out, {'args': vars(args), 'rows': rows})}")

@@ -46,7 +46,7 @@ import numpy as np
 from femcoupling import _dolfinx
 from femcoupling.geometry import FemInputError
 
-__all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure"]
+__all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning"]
 
 _IX = [0, 2, 4]  # DEM Voigt (xx, yy, zz, yz, xz, xy) rows of the FEM's (xx, yy, xy)
 
@@ -73,6 +73,12 @@ class NewtonFailure(RuntimeError):
     """Newton did not converge in a load step (even after the step was cut)."""
 
 
+class NoiseWarning(UserWarning):
+    """The tolerance asked for is below what the DEM elements can resolve: re-running them
+    on (to 1e-9) the same increment moves the residual by more, so a load step is converged
+    to that noise instead."""
+
+
 @dataclasses.dataclass
 class HierStep:
     """One converged load step: the top displacement (m), Newton iterations, the residual at
@@ -92,6 +98,26 @@ class HierStep:
     wall_s: float
     recovered: list
     increments: np.ndarray  # (n_cells, 3, 3): each element's increment of the step, -
+    #: the residual the elements' own noise makes (relative to the same scale as
+    #: ``residual``): measured when Newton stalled; NaN if it was not needed
+    noise_residual: float = float("nan")
+    #: what ended Newton: "tolerance" (``newton_rtol``) or "noise" (the residual is within
+    #: the elements' noise: ``NoiseWarning``)
+    converged_on: str = "tolerance"
+    #: (n_cells, 3) each element's stress scatter (xx, yy, xy), Pa: the bootstrap of its
+    #: contact network (``DemElement.stress_scatter``), how far a sample of its size is from
+    #: the material's mean
+    element_scatter: np.ndarray | None = None
+    #: the relaxation factor of each Newton correction (1: plain Newton)
+    relaxation: tuple = ()
+
+
+def _relative_scatter(r: HierStep) -> float:
+    """The elements' mean bootstrap scatter relative to their largest stress component."""
+    if r.element_scatter is None:
+        return float("nan")
+    big = np.abs(r.element_stresses).max(axis=1)
+    return float(np.mean(r.element_scatter.max(axis=1) / np.maximum(big, 1e-300)))
 
 
 class HierarchicalPlaneStrain:
@@ -101,7 +127,9 @@ class HierarchicalPlaneStrain:
     def __init__(self, pool, *, lx: float, ly: float, nx: int, ny: int,
                  confining_pa: float | None = None, homogeneous: bool = False,
                  newton_rtol: float = 1e-3, max_newton: int = 10, strain_kw: dict | None = None,
-                 tangent: str = "network", verbose: bool = False, out=None) -> None:
+                 tangent: str = "network", convergence: str = "noise",
+                 relaxation: str | float = "aitken", noise_factor: float = 2.0,
+                 verbose: bool = False, out=None) -> None:
         if not (lx > 0 and ly > 0 and math.isfinite(lx) and math.isfinite(ly)):
             raise FemInputError(f"lx={lx}, ly={ly}: must be > 0 (m)")
         if nx < 1 or ny < 1:
@@ -121,6 +149,23 @@ class HierarchicalPlaneStrain:
                                 "cone: the consistent tangent) or 'network-elastic' (sliding "
                                 "contacts stuck: stiffer, robust past the peak)")
         self.tangent = tangent
+        if convergence not in ("noise", "tolerance"):
+            raise FemInputError(f"convergence={convergence!r}: 'noise' (newton_rtol, or, "
+                                "when Newton stalls above it, within the elements' measured "
+                                "noise) or 'tolerance' (newton_rtol only)")
+        self.convergence = convergence
+        if not (relaxation in ("aitken", "none") or (
+                isinstance(relaxation, (int, float)) and 0 < float(relaxation) <= 1)):
+            raise FemInputError(f"relaxation={relaxation!r}: 'aitken' (Aitken's dynamic "
+                                "factor on the Newton corrections), 'none', or a fixed "
+                                "factor in (0, 1]")
+        self.relaxation = relaxation
+        if not (noise_factor > 0 and math.isfinite(noise_factor)):
+            raise FemInputError(f"noise_factor={noise_factor}: must be > 0 (a stalled step is "
+                                "converged within this many times the noise's residual)")
+        self.noise_factor = float(noise_factor)
+        #: every warning of the run (also given as ``NoiseWarning``), in order
+        self.warnings: list[str] = []
         self.homogeneous = homogeneous
         self.confining_pa = confining_pa
         self.newton_rtol, self.max_newton = newton_rtol, max_newton
@@ -161,6 +206,9 @@ class HierarchicalPlaneStrain:
         f_int = ufl.dot(self.sig_q, eps(v)) * dxq
         self.form_res = fem.form(f_int - ufl.dot(self.traction, v) * ds(1))
         self.form_jac = fem.form(ufl.dot(ufl.dot(self.tan_q, eps(dv)), eps(v)) * dxq)
+        # the internal force of a stress field alone (the noise's residual)
+        self.sig_noise = fem.Function(self.Wv)
+        self.form_noise = fem.form(ufl.dot(self.sig_noise, eps(v)) * dxq)
         self.expr_grad = fem.Expression(ufl.grad(self.u), pts)
         self.expr_grad_n = fem.Expression(ufl.grad(self.u_n), pts)
         # boundary conditions
@@ -196,6 +244,8 @@ class HierarchicalPlaneStrain:
             self.bcs = [b for b in self.bcs if b is not None]
         self.A = fx.fem_petsc.create_matrix(self.form_jac)
         self.b = fx.fem_petsc.create_vector(self.V)
+        self.b_noise = fx.fem_petsc.create_vector(self.V)
+        self._bc_dofs = np.unique(np.concatenate([b.dof_indices()[0] for b in self.bcs]))
         self.ksp = fx.PETSc.KSP().create(comm)
         self.ksp.setOperators(self.A)
         self.ksp.setType("preonly")
@@ -235,20 +285,25 @@ class HierarchicalPlaneStrain:
         gn = self.expr_grad_n.eval(self.mesh, cells).reshape(-1, 2, 2)
         return g - gn
 
-    def _evaluate(self, first: bool) -> tuple[float, float, list]:
-        """Stress and tangent of every element for the current iterate; returns the DEM
-        seconds, the wall seconds of the pool call and the recovered elements."""
+    def _evaluate(self, first: bool, perturb: float = 0.0) -> tuple[float, float, list]:
+        """Stress and tangent of every element for the current iterate (its increments
+        scaled by 1 + ``perturb``: the noise probe); returns the DEM seconds, the wall
+        seconds of the pool call and the recovered elements."""
         if not first:
             self.pool.reject()
         from cpp_dem.element_pool import ElementError
 
         self._increments = np.array([dem_increment(g) for g in self._grad_increment()])
+        if perturb:
+            self._increments *= 1.0 + perturb
         try:
             step = self.pool.apply_strain(list(self._increments), tangent=self.tangent,
-                                          **self.strain_kw)
+                                          scatter=True, **self.strain_kw)
         except ElementError as e:  # an element could not take this iterate: cut the step
             raise NewtonFailure(f"an element failed on this iterate: {e}") from e
         self._set_q(step.stresses, step.tangents)
+        self._scat = (None if step.scatters is None else
+                      np.array([fem_stress(c) for c in step.scatters]))
         self._last_pool_step = step
         return float(sum(step.cpu_s)), step.wall_s, step.recovered
 
@@ -262,6 +317,34 @@ class HierarchicalPlaneStrain:
         self.b.ghostUpdate(addv=fx.PETSc.InsertMode.ADD, mode=fx.PETSc.ScatterMode.REVERSE)
         fx.fem_petsc.set_bc(self.b, self.bcs, x0=self.u.x.petsc_vec, alpha=-1.0)
         return self.b.norm()
+
+    def _field_residual(self, field: np.ndarray) -> float:
+        """|internal force| (N) of a stress field alone ((n_cells, 3), Pa), Dirichlet rows
+        zeroed: the residual that a change of the element stresses by ``field`` makes."""
+        fx = self._fx
+        self.sig_noise.x.array[:] = np.asarray(field, float).reshape(-1)
+        with self.b_noise.localForm() as loc:
+            loc.set(0.0)
+        fx.fem_petsc.assemble_vector(self.b_noise, self.form_noise)
+        self.b_noise.ghostUpdate(addv=fx.PETSc.InsertMode.ADD,
+                                 mode=fx.PETSc.ScatterMode.REVERSE)
+        fx.fem_petsc.set_bc(self.b_noise, self.bcs, alpha=0.0)
+        return float(self.b_noise.norm())
+
+    def _softest(self, n: int = 3) -> str:
+        """The ``n`` elements of the current iterate with the smallest tangent eigenvalue:
+        index, that eigenvalue (Pa), contacts and mean stress (Pa)."""
+        ev = np.array([np.linalg.eigvalsh(0.5 * (c + c.T))[0] for c in self._tan])
+        contacts = self._last_pool_step.contacts
+        return "; ".join(f"element {k}: smallest tangent eigenvalue {ev[k]:.3g} Pa, "
+                         f"{contacts[k]} contacts, mean stress {self._sig[k][:2].mean():.4g} Pa"
+                         for k in np.argsort(ev)[:n])
+
+    def _warn(self, msg: str) -> None:
+        import warnings
+
+        self.warnings.append(msg)
+        warnings.warn(msg, NoiseWarning, stacklevel=3)
 
     def _scale(self) -> float:
         """|F_int| of the current stresses (the tolerance's scale)."""
@@ -302,22 +385,53 @@ class HierarchicalPlaneStrain:
             self._hy.interpolate(lambda x: ey * x[1])
         dem_s = pool_s = 0.0
         recovered: list = []
-        rel = float("inf")
+        rel = noise_rel = float("nan")
         its = 0
+        omega, d_prev, omegas = 1.0, None, []
+        converged_on = "tolerance"
+        probe = self.convergence == "noise"
+        hist: list[float] = []
         for it in range(self.max_newton + 1):
             d, w, rec = self._evaluate(first=(it == 0))
             dem_s, pool_s, recovered = dem_s + d, pool_s + w, recovered + rec
             rnorm = self._residual()
-            rel = rnorm / self._scale()
+            scale = self._scale()
+            rel = rnorm / scale
+            hist.append(rel)
             if self.verbose:
                 print(f"[hier] iteration {it}: residual {rel:.3e}", flush=True)
             its = it
             if it > 0 and rel <= self.newton_rtol:
+                converged_on = "tolerance"
                 break
+            stalled = it == self.max_newton or (len(hist) >= 3 and rel > 0.5 * hist[-3])
+            if probe and it > 0 and stalled:
+                # Newton stalls above the tolerance: measure the elements' noise. Re-run
+                # every element on its increment scaled by 1 + 1e-9: the deterministic
+                # answer moves by 1e-9, the DEM's by its noise (its relaxation to a
+                # tolerance and the chaos of a granular packing). The residual of that
+                # change is what no Newton iterate can get below.
+                probe = False
+                before = self._sig.copy()
+                d, w, rec = self._evaluate(first=False, perturb=1e-9)
+                dem_s, pool_s, recovered = dem_s + d, pool_s + w, recovered + rec
+                noise_rel = self._field_residual(self._sig - before) / scale
+                rel = self._residual() / scale
+                hist[-1] = rel
+                if self.verbose:
+                    print(f"[hier] noise probe: residual {rel:.3e}, the noise's "
+                          f"{noise_rel:.3e}", flush=True)
+                if rel <= self.newton_rtol:
+                    converged_on = "tolerance"
+                    break
+                if rel <= self.noise_factor * noise_rel:
+                    converged_on = "noise"
+                    break
             if it == self.max_newton or not math.isfinite(rel):
                 raise NewtonFailure(f"Newton: no convergence in {self.max_newton} iterations "
                                     f"(residual {rel:.3g} of the internal force scale; asked "
-                                    f"{self.newton_rtol})")
+                                    f"{self.newton_rtol}; the elements' noise makes "
+                                    f"{noise_rel:.3g})")
             self.A.zeroEntries()
             fx.fem_petsc.assemble_matrix(self.A, self.form_jac, bcs=self.bcs)
             self.A.assemble()
@@ -326,9 +440,33 @@ class HierarchicalPlaneStrain:
             self.du.x.scatter_forward()
             if not np.all(np.isfinite(self.du.x.array)):
                 # (a singular Jacobian: softening elements whose tangents lost stiffness)
-                raise NewtonFailure("the Newton correction is not finite (singular Jacobian)")
-            self.u.x.array[:] -= self.du.x.array
+                raise NewtonFailure("the Newton correction is not finite (singular Jacobian"
+                                    f"; the softest elements: {self._softest()})")
+            dk = -self.du.x.array.copy()  # the full Newton correction
+            if self.relaxation == "aitken":
+                # Aitken's factor from the last two full corrections (Irons & Tuck): it
+                # shrinks when they oscillate (a 2-cycle halves it), grows back to 1 when they
+                # agree; kept in [0.1, 1]
+                if d_prev is not None:
+                    diff = dk - d_prev
+                    den = float(diff @ diff)
+                    if den > 0:
+                        omega = float(np.clip(-omega * float(d_prev @ diff) / den, 0.1, 1.0))
+            elif self.relaxation != "none":
+                omega = float(self.relaxation)
+            # (the first correction of a step is a full one: it also puts u on the boundary
+            # values)
+            w_k = 1.0 if it == 0 else omega
+            omegas.append(w_k)
+            d_prev = dk
+            self.u.x.array[:] += w_k * dk
             self.u.x.scatter_forward()
+        if converged_on == "noise":
+            self._warn(f"load step {len(self.history)} (top {top_displacement:.6g} m): the "
+                       f"tolerance asked (newton_rtol={self.newton_rtol:g}) is below the "
+                       f"elements' noise (a 1e-9 change of their increments moves the "
+                       f"residual by {noise_rel:.3g} of the internal force scale); converged "
+                       f"to the noise at {rel:.3g}")
         self.pool.accept()
         self._bc_now = (top_displacement, right_displacement)
         self.u_n.x.array[:] = self.u.x.array
@@ -336,7 +474,9 @@ class HierarchicalPlaneStrain:
         r = HierStep(load=top_displacement, iterations=its, residual=rel,
                      mean_stress=self._sig.mean(axis=0), element_stresses=self._sig.copy(),
                      dem_s=dem_s, fem_s=wall - pool_s, wall_s=wall, recovered=recovered,
-                     increments=self._increments.copy())
+                     increments=self._increments.copy(), noise_residual=noise_rel,
+                     converged_on=converged_on, relaxation=tuple(omegas),
+                     element_scatter=self._scat.copy())
         self.history.append(r)
         if self.out is not None:
             self._write_records(r)
@@ -346,7 +486,7 @@ class HierarchicalPlaneStrain:
     def _write_records(self, r: HierStep) -> None:
         """Appends the accepted step to ``out``: one row per element in ``elements.h5`` (the
         step, its load, the element, its displacement-gradient increment, stress (tension
-        positive, Pa), tangent (Voigt 6 x 6, Pa), contact count, DEM seconds and steps),
+        positive, Pa), its bootstrap scatter (Pa), tangent (Voigt 6 x 6, Pa), contact count, DEM seconds and steps),
         flushed; the FEM state in ``fem.xdmf`` (displacement m, the elements' stress Pa per
         cell, at the load as time); and a line of ``steps.csv`` with the FEM/DEM time split."""
         import h5py
@@ -363,6 +503,7 @@ class HierarchicalPlaneStrain:
             "stress_pa": np.asarray(ps.stresses, float).reshape(n, 3, 3),
             "tangent_pa": np.array([np.full((6, 6), np.nan) if t is None else t
                                     for t in ps.tangents], float).reshape(n, 6, 6),
+            "scatter_pa": np.asarray(ps.scatters, float).reshape(n, 3, 3),
             "contacts": np.asarray(ps.contacts, dtype=np.int64),
             "cpu_s": np.asarray(ps.cpu_s, float),
             "dem_steps": np.asarray(ps.steps, dtype=np.int64),
@@ -387,10 +528,47 @@ class HierarchicalPlaneStrain:
         new = not csv.exists()
         with open(csv, "a") as fh:
             if new:
-                fh.write("step,load_m,iterations,residual,fem_s,dem_s,wall_s,"
-                         "recovered,bad_tangents\n")
-            fh.write(f"{k},{r.load!r},{r.iterations},{r.residual!r},{r.fem_s!r},{r.dem_s!r},"
-                     f"{r.wall_s!r},{len(r.recovered)},{self.bad_tangents}\n")
+                fh.write("step,load_m,iterations,residual,noise_residual,converged_on,"
+                         "relaxation_min,fem_s,dem_s,wall_s,recovered,bad_tangents\n")
+            fh.write(f"{k},{r.load!r},{r.iterations},{r.residual!r},{r.noise_residual!r},"
+                     f"{r.converged_on},{min(r.relaxation, default=1.0)!r},{r.fem_s!r},"
+                     f"{r.dem_s!r},{r.wall_s!r},{len(r.recovered)},{self.bad_tangents}\n")
+        self._write_report()
+
+    def _write_report(self) -> None:
+        """``report.md``: the run so far: per load step the Newton iterations, residual,
+        noise and what converged it, and the elements' scatter; the FEM/DEM CPU split; and
+        every warning. Rewritten
+        at every accepted step."""
+        h = self.history
+        fem_s = sum(r.fem_s for r in h)
+        dem_s = sum(r.dem_s for r in h)
+        wall_s = sum(r.wall_s for r in h)
+        lines = ["# Hierarchical FEM x DEM run", "",
+                 f"- {self.n_cells} elements, {len(h)} load steps accepted; tangent "
+                 f"`{self.tangent}`, convergence `{self.convergence}` (newton_rtol "
+                 f"{self.newton_rtol:g}, noise factor {self.noise_factor:g}), relaxation "
+                 f"`{self.relaxation}`",
+                 f"- CPU: FEM {fem_s:.2f} s (the wall time outside the element calls), DEM "
+                 f"{dem_s:.2f} s (the elements' work summed over workers), wall {wall_s:.2f} s"
+                 f"; DEM share of the work {dem_s / max(fem_s + dem_s, 1e-300):.1%}",
+                 f"- element tangents replaced by their last good one: {self.bad_tangents}",
+                 "- element scatter: the bootstrap standard deviation of each element's "
+                 "stress over its contacts, as a fraction of its largest stress component, "
+                 "mean over the elements",
+                 "", "| step | top, m | iterations | residual | noise residual | "
+                 "converged on | min relaxation | mean sigma_xx, kPa | mean sigma_yy, kPa | "
+                 "element scatter |",
+                 "|---|---|---|---|---|---|---|---|---|---|"]
+        for k, r in enumerate(h):
+            lines.append(f"| {k} | {r.load:.6g} | {r.iterations} | {r.residual:.3g} | "
+                         f"{r.noise_residual:.3g} | {r.converged_on} | "
+                         f"{min(r.relaxation, default=1.0):.3g} | "
+                         f"{r.mean_stress[0] / 1e3:.2f} | {r.mean_stress[1] / 1e3:.2f} | "
+                         f"{_relative_scatter(r):.3f} |")
+        lines += ["", f"## Warnings ({len(self.warnings)})", ""]
+        lines += [f"- {w}" for w in self.warnings] or ["none"]
+        (self.out / "report.md").write_text("\n".join(lines) + "\n")
 
     def _write_xdmf(self, r: HierStep, append: bool) -> None:
         fx = self._fx

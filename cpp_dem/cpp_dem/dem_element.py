@@ -125,22 +125,26 @@ class DemElement:
     @classmethod
     def periodic(cls, n: int = 400, *, material=None, stress: float = 100e3,
                  radius_mean: float = 1e-3, radius_spread: float = 0.2, seed: int = 1,
-                 porosity: float | None = None, damping: float = 0.7, log=None,
-                 tol: float = 0.005, unbalanced: float = 1e-4, growth=(0.5, 1e-3),
+                 porosity: float | None = None, prep_friction_deg: float | None = None,
+                 damping: float = 0.7, log=None, tol: float = 0.005, unbalanced: float = 1e-4, growth=(0.5, 1e-3),
                  **kw) -> "DemElement":
         """A periodic cube of ``n`` spheres prepared to the isotropic ``stress`` (Pa,
         compression positive) by ``periodic.prepare_periodic`` (``porosity``: REFD to that
         porosity), ending within ``tol`` of the stress with the unbalanced force below
         ``unbalanced`` (a looser equilibrium relaxes later, at fixed strain: at 1e-2 the
         stress of a 300-sphere cell fell by a third when the servo stopped). ``growth`` is
-        RadiusGrowth's (gain, max_strain per call).
+        RadiusGrowth's (gain, max_strain per call). ``prep_friction_deg``: grow the grains
+        at this friction angle first (0: a dense packing, as Yade's and PFC's users do), then
+        at the material's; without it the packing grows at the material's friction and is
+        loose (it can lose all its contacts under a small isochoric shear: docs/multiscale.md).
         ``material``: a Material (default: a linear law, E = 100 MPa, k_s/k_n 0.3, 30 deg,
         2650 kg/m^3)."""
         if material is None:
             material = default_material()
         scene = periodic.prepare_periodic(n, material=material, stress=stress,
                                           radius_mean=radius_mean, radius_spread=radius_spread,
-                                          seed=seed, porosity=porosity, damping=damping,
+                                          seed=seed, porosity=porosity,
+                                          prep_friction_deg=prep_friction_deg, damping=damping,
                                           tol=tol, unbalanced=unbalanced,
                                           growth_gain=growth[0],
                                           growth_max_strain=growth[1], log=log)
@@ -213,6 +217,29 @@ class DemElement:
 
     def contact_count(self) -> int:
         return int(self.scene.num_active_contacts)
+
+    def stress_scatter(self, *, n_boot: int = 64, seed: int = 0) -> np.ndarray:
+        """The element's own scatter of its homogenised stress, Pa (3 x 3, symmetric): the
+        standard deviation of the Love–Weber stress over ``n_boot`` bootstrap resamplings (with
+        replacement, seeded) of its grain–grain contacts. It measures how far the stress of
+        this few-hundred-grain sample is from the mean of samples like it: about the stress
+        times the coefficient of variation of the contacts' f (x) l over sqrt(contacts). The
+        noise floor of a coupled loop (``femcoupling.hierarchical``). Grain–grain contacts
+        only (a box's wall contacts are not resampled)."""
+        if int(n_boot) < 2:
+            raise ParameterError(f"n_boot={n_boot}: must be >= 2")
+        d = self.network_data()
+        m = len(d["fn"])
+        if m == 0:
+            return np.zeros((3, 3))
+        n = d["normal"]
+        f = d["fn"][:, None] * n + d["fs"]
+        fl = -np.einsum("ci,cj->cij", f, d["branch"]) / d["volume"]  # per-contact terms, Pa
+        fl = 0.5 * (fl + fl.transpose(0, 2, 1))
+        rng = np.random.default_rng(seed)
+        picks = rng.integers(0, m, size=(int(n_boot), m))
+        reps = np.array([fl[p].sum(axis=0) for p in picks])
+        return reps.std(axis=0, ddof=1)
 
     # ---- driving ---------------------------------------------------------------------------
     def _steps_for(self, de: np.ndarray, steps: int | None, max_strain_per_step: float) -> int:

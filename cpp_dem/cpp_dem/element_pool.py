@@ -60,7 +60,8 @@ class ElementHost:
         self.accepted[index] = data
         return data
 
-    def apply(self, indices, increments, tangent: str | None, strain_kw: dict) -> list:
+    def apply(self, indices, increments, tangent: str | None, strain_kw: dict,
+              scatter: bool = False) -> list:
         out = []
         for k, de in zip(indices, increments):
             t0 = time.perf_counter()
@@ -75,7 +76,8 @@ class ElementHost:
                 d = el.fd_tangent(**strain_kw)
             out.append({"index": k, "stress": s, "tangent": d,
                         "contacts": el.contact_count(), "cpu_s": time.perf_counter() - t0,
-                        "steps": el.last_report.steps + el.last_report.relax_steps})
+                        "steps": el.last_report.steps + el.last_report.relax_steps,
+                        "scatter": el.stress_scatter() if scatter else None})
         return out
 
     def accept(self, indices) -> dict:
@@ -126,7 +128,7 @@ class PoolStep:
     Pa, tension positive), the tangent (6 x 6, Pa, or None), the contact count, the seconds
     its DEM work took on its worker (``cpu_s``: wall clock there; a worker runs one element
     at a time on one thread) and its DEM steps; and the wall-clock seconds of the whole
-    call."""
+    call; with ``scatter=True`` also each element's stress scatter."""
 
     stresses: list
     tangents: list
@@ -135,6 +137,8 @@ class PoolStep:
     steps: list
     wall_s: float
     recovered: list  # indices rebuilt after a lost worker during this call
+    #: per element its stress scatter (3 x 3, Pa: ``DemElement.stress_scatter``), if asked
+    scatters: list | None = None
 
 
 class ElementPool:
@@ -233,11 +237,12 @@ class ElementPool:
         return moved
 
     # ---- the increment ---------------------------------------------------------------------
-    def apply_strain(self, increments, *, tangent: str | None = None,
+    def apply_strain(self, increments, *, tangent: str | None = None, scatter: bool = False,
                      **strain_kw) -> PoolStep:
         """Applies increment ``increments[k]`` (3 x 3 displacement gradient, -) to element k,
         all in parallel; ``tangent``: None, "network" (sliding contacts on the Coulomb cone),
-        "network-elastic" (sliding contacts taken as stuck) or "fd". Keyword arguments go to
+        "network-elastic" (sliding contacts taken as stuck) or "fd"; ``scatter``: also each
+        element's stress scatter (``DemElement.stress_scatter``). Keyword arguments go to
         ``DemElement.apply_strain``. A worker lost during the call: its elements are rebuilt
         from their last accepted bytes elsewhere and their increment redone."""
         if len(increments) != self.n:
@@ -255,7 +260,8 @@ class ElementPool:
             for a, ks in self._by_host(todo).items():
                 try:  # (an actor whose worker is gone fails here already)
                     futures[a] = self._hosts[a].apply(
-                        ks, [np.asarray(increments[k]) for k in ks], tangent, strain_kw)
+                        ks, [np.asarray(increments[k]) for k in ks], tangent, strain_kw,
+                        scatter)
                 except Exception:  # noqa: BLE001
                     lost.add(a)
             errors = {}
@@ -292,7 +298,8 @@ class ElementPool:
                         [results[k]["contacts"] for k in order],
                         [results[k]["cpu_s"] for k in order],
                         [results[k]["steps"] for k in order],
-                        time.perf_counter() - t0, sorted(recovered))
+                        time.perf_counter() - t0, sorted(recovered),
+                        [results[k]["scatter"] for k in order] if scatter else None)
 
     def accept(self) -> None:
         """Saves every element's current state as its accepted state (on its worker and, with
