@@ -492,6 +492,23 @@ class SoilModel:
         tag_list = [self.body.region_tag(name)] if tags is None else list(tags)
         return self.tag_stress(tag_list)
 
+    def region_strain(self, name: str) -> np.ndarray:
+        """Volume-averaged small strain over the element region ``name`` (its soil cells),
+        3x3 (x, y, z), -, tension positive, from the current displacements (since the mesh's
+        reference state)."""
+        tag = self.body.region_tag(name)
+        cells = np.arange(self.n_cells, dtype=np.int32)
+        eps = self.expr_eps.eval(self.mesh, cells).reshape(self.n_cells, self.nq, self.ncomp)
+        cm = np.einsum("cqi,q->ci", eps, self.qweights)[: self.n_owned]
+        sel = self.cell_tag_of[: self.n_owned] == tag
+        vol = self.cell_volume[: self.n_owned][sel]
+        MPI = self._fx.MPI
+        tot = np.asarray(self.comm.allreduce(np.concatenate([(cm[sel] * vol[:, None]).sum(0),
+                                                             [vol.sum()]]), op=MPI.SUM))
+        if tot[-1] <= 0:
+            raise FemInputError(f"name={name!r}: the region has no cells")
+        return mandel_to_tensor(tot[:-1] / tot[-1])
+
     def tag_stress(self, tags: Sequence[int]) -> np.ndarray:
         """Volume-averaged stress over the cells with any of ``tags``, 3x3, Pa, tension +."""
         sel = np.isin(self.cell_tag_of[: self.n_owned], np.asarray(tags))

@@ -45,8 +45,10 @@ import numpy as np
 
 from femcoupling import _dolfinx
 from femcoupling.geometry import FemInputError
+from femcoupling.relaxation import aitken_factor
 
-__all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning"]
+__all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning",
+           "aitken_factor"]
 
 _IX = [0, 2, 4]  # DEM Voigt (xx, yy, zz, yz, xz, xy) rows of the FEM's (xx, yy, xy)
 
@@ -410,14 +412,15 @@ class HierarchicalPlaneStrain:
                 # every element on its increment scaled by 1 + 1e-9: the deterministic
                 # answer moves by 1e-9, the DEM's by its noise (its relaxation to a
                 # tolerance and the chaos of a granular packing). The residual of that
-                # change is what no Newton iterate can get below.
-                probe = False
+                # change is what no Newton iterate can get below. (The largest of the step's
+                # probes counts; after a probe, two more iterations before the next.)
                 before = self._sig.copy()
                 d, w, rec = self._evaluate(first=False, perturb=1e-9)
                 dem_s, pool_s, recovered = dem_s + d, pool_s + w, recovered + rec
-                noise_rel = self._field_residual(self._sig - before) / scale
+                v = self._field_residual(self._sig - before) / scale
+                noise_rel = v if math.isnan(noise_rel) else max(noise_rel, v)
                 rel = self._residual() / scale
-                hist[-1] = rel
+                hist = [rel]
                 if self.verbose:
                     print(f"[hier] noise probe: residual {rel:.3e}, the noise's "
                           f"{noise_rel:.3e}", flush=True)
@@ -444,14 +447,8 @@ class HierarchicalPlaneStrain:
                                     f"; the softest elements: {self._softest()})")
             dk = -self.du.x.array.copy()  # the full Newton correction
             if self.relaxation == "aitken":
-                # Aitken's factor from the last two full corrections (Irons & Tuck): it
-                # shrinks when they oscillate (a 2-cycle halves it), grows back to 1 when they
-                # agree; kept in [0.1, 1]
                 if d_prev is not None:
-                    diff = dk - d_prev
-                    den = float(diff @ diff)
-                    if den > 0:
-                        omega = float(np.clip(-omega * float(d_prev @ diff) / den, 0.1, 1.0))
+                    omega = aitken_factor(omega, d_prev, dk)
             elif self.relaxation != "none":
                 omega = float(self.relaxation)
             # (the first correction of a step is a full one: it also puts u on the boundary

@@ -13,7 +13,17 @@ Two way (:func:`two_way`): iterate
    (:func:`femcoupling.handover.secant_stiffness`) becomes that region's material;
 
 until the handed-over stresses change by less than ``tol`` (relative, max norm over the
-regions) between two iterations, or ``max_iterations``.
+regions) between two iterations, or ``max_iterations``. Noise-aware: an element that reports
+its stress scatter (``info["stress_scatter_pa"]``, the bootstrap of its contacts:
+``cpp_dem.measure.stress_scatter``) sets a floor; a change within ``scatter_factor`` times
+the relative scatter ends the loop too, and says that ``tol`` was below it. The secant is
+relaxed between iterations (Aitken's factor by default), which damps the 2-cycles a noisy
+element drives.
+
+Every iteration checks what a wall-bounded element can represent (``RegionWarning``, in the
+log, the history and ``TwoWayResult.warnings``): principal axes of the FEM stress turned more
+than ``max_rotation_deg`` from the walls, and an element that strains more than
+``max_strain_ratio`` times its FEM region.
 
 ``element_runner(name, initial, final) -> ElementResponse`` is any picklable callable (a
 module-level function if ``workers > 1``). Under MPI it runs on rank 0 only and its results
@@ -24,6 +34,7 @@ from __future__ import annotations
 
 import concurrent.futures
 import dataclasses
+import math
 import multiprocessing
 from collections.abc import Callable, Sequence
 from pathlib import Path
@@ -33,8 +44,15 @@ import numpy as np
 
 from femcoupling.geometry import FemInputError
 from femcoupling.handover import WallTargets, fem_to_dem, secant_stiffness
+from femcoupling.relaxation import aitken_factor
 
-__all__ = ["ElementResponse", "HandoverHistory", "TwoWayResult", "one_way", "two_way"]
+__all__ = ["ElementResponse", "HandoverHistory", "RegionWarning", "TwoWayResult",
+           "check_region", "one_way", "two_way"]
+
+
+class RegionWarning(UserWarning):
+    """A wall-bounded DEM element misrepresents its FEM region (turned principal axes, a
+    strain far from the region's), or the two-way loop stopped at the elements' scatter."""
 
 
 @dataclasses.dataclass(frozen=True)
@@ -63,16 +81,22 @@ class HandoverHistory:
     (n, 3, compression positive), ``shear_pa`` (n, 3), ``rotation_deg``, ``change``
     (relative change of the handed-over stresses since the previous iteration),
     ``dem_stress_pa`` (n, 3, reached by the walls; NaN in one-way runs without DEM),
-    ``secant_young_pa``, ``secant_poisson``. Written on rank 0 only.
+    ``secant_young_pa``, ``secant_poisson`` (the relaxed secant given to the region),
+    ``fem_strain_increment`` and ``dem_strain_increment`` (n, 3, normal, compression
+    positive), ``strain_ratio`` (DEM / FEM, largest components), ``scatter`` (the element's
+    relative stress scatter) and ``relaxation`` (the factor applied). Written on rank 0 only.
     """
 
     FIELDS = {"iteration": (), "region": (), "fem_stress_pa": (3, 3), "targets_pa": (3,),
               "shear_pa": (3,), "rotation_deg": (), "change": (), "dem_stress_pa": (3,),
-              "secant_young_pa": (), "secant_poisson": ()}
+              "secant_young_pa": (), "secant_poisson": (), "fem_strain_increment": (3,),
+              "dem_strain_increment": (3,), "strain_ratio": (), "scatter": (),
+              "relaxation": ()}
 
     def __init__(self, path: Any, *, regions: Sequence[str], metadata: dict | None = None,
                  rank: int = 0) -> None:
         self.path, self.rank, self.n = Path(path), rank, 0
+        self.regions = list(regions)
         self._f = None
         if rank != 0:
             return
@@ -124,7 +148,9 @@ class TwoWayResult:
         targets: final WallTargets per region.
         initial_targets: WallTargets of the initial state per region.
         responses: last ElementResponse per region.
-        materials: last (E / Pa, nu) per region.
+        materials: last (E / Pa, nu) per region (relaxed).
+        warnings: every RegionWarning message, in order.
+        converged_on: "tol", or "scatter" (the change was within the elements' scatter).
     """
 
     converged: bool
@@ -134,6 +160,43 @@ class TwoWayResult:
     initial_targets: dict
     responses: dict
     materials: dict
+    warnings: list = dataclasses.field(default_factory=list)
+    converged_on: str = "tol"
+
+
+def check_region(name: str, targets: WallTargets, *, fem_strain_increment=None,
+                 dem_strain_increment=None, max_rotation_deg: float = 15.0,
+                 max_strain_ratio: float = 2.0) -> tuple[list, float]:
+    """What a wall-bounded element cannot represent of its FEM region: the principal axes
+    of the handed-over stress turned more than ``max_rotation_deg`` from the walls, and the
+    element's normal strain increment (3,) more than ``max_strain_ratio`` times its region's
+    (both compression positive; largest components compared). Returns the messages and the
+    strain ratio (NaN without both strains)."""
+    msgs = []
+    if targets.rotation_deg > max_rotation_deg:
+        msgs.append(f"region {name}: the FEM stress's principal axes are turned "
+                    f"{targets.rotation_deg:.1f} deg from the element's walls (> "
+                    f"{max_rotation_deg:g}): the walls impose the normal stresses on the wrong "
+                    f"planes and miss the shear {np.round(targets.shear_pa / 1e3, 2).tolist()} "
+                    f"kPa; a periodic element takes the full tensor")
+    ratio = math.nan
+    if fem_strain_increment is not None and dem_strain_increment is not None:
+        fe = float(np.abs(np.asarray(fem_strain_increment, float)).max())
+        de = float(np.abs(np.asarray(dem_strain_increment, float)).max())
+        ratio = de / fe if fe > 0 else math.inf
+        if ratio > max_strain_ratio:
+            msgs.append(f"region {name}: the DEM element strains {ratio:.3g} times its FEM "
+                        f"region (> {max_strain_ratio:g}; DEM "
+                        f"{np.round(dem_strain_increment, 6).tolist()}, FEM "
+                        f"{np.round(fem_strain_increment, 6).tolist()}, compression +): the "
+                        f"two scales do not describe the same soil")
+    return msgs, ratio
+
+
+def _normal_strain(model: Any, region: str) -> np.ndarray | None:
+    """The region's normal strains (3,), compression positive, if the model can say."""
+    f = getattr(model, "region_strain", None)
+    return None if f is None else -np.diag(np.asarray(f(region), float))
 
 
 def one_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any]
@@ -160,7 +223,10 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
             element_runner: Callable[[str, WallTargets, WallTargets], ElementResponse],
             tol: float = 0.02, max_iterations: int = 6, workers: int = 1,
             history: HandoverHistory | None = None,
-            log: Callable[[str], None] | None = None) -> TwoWayResult:
+            log: Callable[[str], None] | None = None, relaxation: str | float = "aitken",
+            scatter_factor: float = 1.0, max_rotation_deg: float = 15.0,
+            max_strain_ratio: float = 2.0,
+            history_names: Sequence[str] | None = None) -> TwoWayResult:
     """The two-way loop (module doc). ``model`` is a SoilModel in its initial state.
 
     Args:
@@ -173,6 +239,12 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
         workers: parallel processes for the DEM elements (1: in this process).
         history: HDF5 record, appended per iteration.
         log: progress line sink (rank 0).
+        relaxation: "aitken" (Aitken's factor on the secant (E, nu) between iterations),
+            "none", or a fixed factor in (0, 1].
+        scatter_factor: the loop also ends when the change is within this many times the
+            elements' relative stress scatter (when they report it), > 0.
+        max_rotation_deg, max_strain_ratio: the limits of :func:`check_region`.
+        history_names: the names the regions have in ``history`` (default: ``regions``).
     """
     if not tol > 0:
         raise FemInputError(f"tol={tol!r}: must be > 0")
@@ -180,22 +252,52 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
         raise FemInputError(f"max_iterations={max_iterations!r}: must be an integer >= 2")
     if not (isinstance(workers, int) and workers >= 1):
         raise FemInputError(f"workers={workers!r}: must be an integer >= 1")
+    if not (relaxation in ("aitken", "none") or (
+            isinstance(relaxation, (int, float)) and 0 < float(relaxation) <= 1)):
+        raise FemInputError(f"relaxation={relaxation!r}: 'aitken', 'none' or a fixed factor "
+                            "in (0, 1]")
+    if not (scatter_factor > 0 and math.isfinite(scatter_factor)):
+        raise FemInputError(f"scatter_factor={scatter_factor!r}: must be > 0")
     regions = list(regions)
+    names = list(history_names) if history_names is not None else regions
+    if len(names) != len(regions):
+        raise FemInputError(f"history_names={names!r}: one per region {regions!r}")
+    hrow = {r: (history.regions.index(n) if history is not None and n in history.regions
+                else j) for j, (r, n) in enumerate(zip(regions, names))}
     comm = model.comm
     rank0 = comm.rank == 0
     say = (log if (log is not None and rank0) else (lambda msg: None))
     state0 = model.save_state()
     initial = {r: fem_to_dem(model.region_stress(r)) for r in regions}
+    strain0 = {r: _normal_strain(model, r) for r in regions}
     prev: dict | None = None
     changes: list = []
     responses: dict = {}
     materials: dict = {}
     final: dict = {}
-    converged = False
+    fem_de: dict = {}
+    warned: list = []
+    converged, converged_on = False, "tol"
+    scatter = 0.0  # the elements' largest relative stress scatter, last iteration
+    # relaxation of the secant: per region the (E, nu) given and the last full update
+    omega = {r: 1.0 for r in regions}
+    last_step: dict = {}
+
+    def warn(msg: str) -> None:
+        import warnings
+
+        warned.append(msg)
+        say("WARNING: " + msg)
+        if rank0:
+            warnings.warn(msg, RegionWarning, stacklevel=3)
+
     for it in range(1, max_iterations + 1):
         model.restore_state(state0)
         load(model)
         final = {r: fem_to_dem(model.region_stress(r)) for r in regions}
+        for r in regions:
+            s1 = _normal_strain(model, r)
+            fem_de[r] = None if s1 is None else s1 - strain0[r]
         if prev is None:
             change = float("inf")
         else:
@@ -204,36 +306,98 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
         changes.append(change)
         for r in regions:
             say(f"iteration {it}, region {r}: {final[r].report()}; change {change:.3g}")
-        if change < tol:
+        stop = change < tol
+        if not stop and change < scatter_factor * scatter:
+            stop, converged_on = True, "scatter"
+            warn(f"two-way: the change {change:.3g} is within the elements' stress scatter "
+                 f"({scatter:.3g} relative, the bootstrap of their contacts) but above "
+                 f"tol={tol:g}: the tolerance asked is below what the elements resolve; "
+                 f"stopped at the scatter")
+        if stop:
             converged = True
-            for j, r in enumerate(regions):
+            for r in regions:
+                msgs, ratio = check_region(
+                    r, final[r], fem_strain_increment=fem_de[r],
+                    dem_strain_increment=(responses[r].strain_increment if r in responses
+                                          else None),
+                    max_rotation_deg=max_rotation_deg, max_strain_ratio=max_strain_ratio)
+                for msg in msgs:
+                    warn(f"iteration {it} (converged): {msg}")
                 if history is not None:
-                    history.append(iteration=it, region=j, fem_stress_pa=final[r].fem_stress_pa,
+                    history.append(iteration=it, region=hrow[r],
+                                   fem_stress_pa=final[r].fem_stress_pa,
                                    targets_pa=final[r].normal_pa, shear_pa=final[r].shear_pa,
-                                   rotation_deg=final[r].rotation_deg, change=change)
+                                   rotation_deg=final[r].rotation_deg, change=change,
+                                   fem_strain_increment=(np.nan if fem_de[r] is None
+                                                         else fem_de[r]),
+                                   strain_ratio=ratio)
             break
         jobs = [(r, initial[r], final[r]) for r in regions]
         out = _run_elements(element_runner, jobs, workers) if rank0 else None
         out = comm.bcast(out, root=0)
-        for j, (r, resp) in enumerate(zip(regions, out)):
+        scatter = 0.0
+        from femcoupling.materials import LinearElastic
+
+        for r, resp in zip(regions, out):
             responses[r] = resp
             dsig = np.asarray(resp.stress_final_pa) - np.asarray(resp.stress_initial_pa)
-            E, nu = secant_stiffness(stress_increment_pa=dsig,
-                                     strain_increment=resp.strain_increment)
+            E_full, nu_full = secant_stiffness(stress_increment_pa=dsig,
+                                               strain_increment=resp.strain_increment)
+            sc = resp.info.get("stress_scatter_pa") if resp.info else None
+            rel = (float(np.abs(np.asarray(sc, float)).max()
+                         / np.abs(np.asarray(resp.stress_final_pa, float)).max())
+                   if sc is not None else 0.0)
+            scatter = max(scatter, rel)
+            # relax the secant: x = (log E, nu), x_new = x + w (x_full - x)
+            if r in materials:
+                x = np.array([math.log(materials[r][0]), materials[r][1]])
+                step = np.array([math.log(E_full), nu_full]) - x
+                if relaxation == "aitken":
+                    if r in last_step:
+                        omega[r] = aitken_factor(omega[r], last_step[r], step)
+                elif relaxation != "none":
+                    omega[r] = float(relaxation)
+                last_step[r] = step
+                xe = x + omega[r] * step
+                E, nu = math.exp(xe[0]), float(xe[1])
+            else:  # the first element answer is taken whole
+                E, nu = E_full, nu_full
             materials[r] = (E, nu)
-            from femcoupling.materials import LinearElastic
-
             model.set_region_material(r, LinearElastic(E, nu))
+            msgs, ratio = check_region(r, final[r], fem_strain_increment=fem_de[r],
+                                       dem_strain_increment=resp.strain_increment,
+                                       max_rotation_deg=max_rotation_deg,
+                                       max_strain_ratio=max_strain_ratio)
+            if it == 1:  # (later iterations: checked again at the end)
+                for msg in msgs:
+                    warn(f"iteration {it}: {msg}")
             say(f"iteration {it}, region {r}: DEM walls reached "
                 f"{np.round(np.asarray(resp.stress_final_pa) / 1e3, 2).tolist()} kPa; secant "
-                f"E = {E / 1e6:.3g} MPa, nu = {nu:.3f}")
+                f"E = {E_full / 1e6:.3g} MPa, nu = {nu_full:.3f}; given E = {E / 1e6:.3g} MPa, "
+                f"nu = {nu:.3f} (relaxation {omega[r]:.3g}); DEM/FEM strain {ratio:.3g}"
+                + (f"; scatter {rel:.3g}" if sc is not None else ""))
             if history is not None:
-                history.append(iteration=it, region=j, fem_stress_pa=final[r].fem_stress_pa,
+                history.append(iteration=it, region=hrow[r],
+                               fem_stress_pa=final[r].fem_stress_pa,
                                targets_pa=final[r].normal_pa, shear_pa=final[r].shear_pa,
                                rotation_deg=final[r].rotation_deg, change=change,
                                dem_stress_pa=resp.stress_final_pa, secant_young_pa=E,
-                               secant_poisson=nu)
+                               secant_poisson=nu,
+                               fem_strain_increment=(np.nan if fem_de[r] is None
+                                                     else fem_de[r]),
+                               dem_strain_increment=resp.strain_increment, strain_ratio=ratio,
+                               scatter=rel if sc is not None else np.nan,
+                               relaxation=omega[r] if r in last_step else 1.0)
         prev = final
+    if not converged:
+        for r in regions:
+            msgs, _ = check_region(r, final[r], fem_strain_increment=fem_de[r],
+                                   dem_strain_increment=(responses[r].strain_increment
+                                                         if r in responses else None),
+                                   max_rotation_deg=max_rotation_deg,
+                                   max_strain_ratio=max_strain_ratio)
+            for msg in msgs:
+                warn(f"not converged after {len(changes)} FEM solves: {msg}")
     return TwoWayResult(converged=converged, iterations=len(changes), changes=changes,
                         targets=final, initial_targets=initial, responses=responses,
-                        materials=materials)
+                        materials=materials, warnings=warned, converged_on=converged_on)

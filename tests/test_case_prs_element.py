@@ -46,6 +46,18 @@ def test_fem_to_dem_smoke_outputs_and_servo_hold(smoke):
     # PRS raises the horizontal x stress of the initial state (the band compresses the soil)
     assert s["fem"]["PRS"]["targets_initial_pa"][0] > s["fem"]["RE"]["targets_initial_pa"][0]
     assert "principal axes turned" in proc.stdout
+    # the element's strain against its FEM region's (issue 18): measured, and the known
+    # mismatch of the one-way element (tens of times) is warned about, not hidden
+    for v in ("RE", "PRS"):
+        e = s["elements"][v]
+        ratio = (np.abs(e["strain_increment"]).max()
+                 / np.abs(s["fem"][v]["strain_increment"]).max())
+        assert e["dem_fem_strain_ratio"] == pytest.approx(ratio)
+        assert (ratio > 2) == any("strains" in w for w in e["warnings"])
+        assert np.abs(e["stress_scatter_pa"]).max() > 0
+    report = (out / "report.md").read_text()
+    assert "## Warnings" in report
+    assert all(w in report for v in ("RE", "PRS") for w in s["elements"][v]["warnings"])
 
 
 DEM_ONLY = """

@@ -1,7 +1,10 @@
-"""The FEM -> DEM handover (plain NumPy) and the two-way loop with a stand-in element.
+"""The FEM -> DEM handover (plain NumPy) and the two-way loop with stand-in elements.
 
 The stand-in element is linear elastic with known (E, nu): the secant fit must return them,
-and the two-way loop must converge with that material in the region.
+and the two-way loop must converge with that material in the region. A softening one drives
+a plain secant iteration into a 2-cycle, which Aitken's relaxation ends; a noisy one that
+reports its scatter stops the loop at the scatter, with a warning; the region checks flag
+turned principal axes and a strain far from the region's.
 """
 
 from __future__ import annotations
@@ -96,3 +99,112 @@ def test_two_way_converges_and_puts_the_element_stiffness_into_the_region(tmp_pa
         assert f["iteration"].shape[0] >= 2 * (res.iterations - 1)
         assert list(f.attrs["regions"]) == ["a", "b"]
         assert np.all(np.isfinite(f["fem_stress_pa"][:]))
+
+
+def _one_region_model():
+    from femcoupling.elastoplastic import SoilModel
+    from femcoupling.geometry import ElementRegion, ReinforcedSoilBody
+    from femcoupling.materials import LinearElastic
+
+    body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5,
+                              regions=(ElementRegion("a", (0.25, 2.7), 0.2),),
+                              mesh_size_m=0.6, fine_size_m=0.06)
+    m = SoilModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1)
+    m.set_geostatic()
+    return m
+
+
+def _footing(model):
+    return model.load_footing(pressure_pa=100e3, steps=1)
+
+
+class SofteningElement:
+    """An element whose secant falls steeply with its vertical stress, E = 10 MPa
+    (sigma_z / ref)^-3: the region then attracts less stress, the element stiffens, and so on;
+    a plain secant iteration falls into a 2-cycle."""
+
+    def __init__(self, ref):
+        self.ref = ref
+
+    def __call__(self, name, initial, final):
+        from femcoupling.twoway import ElementResponse
+
+        ds = final.normal_pa - initial.normal_pa
+        E = 10e6 * (final.fem_stress_pa[2, 2] / self.ref) ** -3
+        return ElementResponse(stress_initial_pa=initial.normal_pa,
+                               stress_final_pa=final.normal_pa,
+                               strain_increment=(ds - 0.25 * (ds.sum() - ds)) / E)
+
+
+class NoisyElement:
+    """A linear element (E = 10 MPa) whose answer scatters by 3 % (seeded) and that reports a
+    5 % stress scatter, as a small DEM element does."""
+
+    def __init__(self):
+        self.rng = np.random.default_rng(7)
+
+    def __call__(self, name, initial, final):
+        from femcoupling.twoway import ElementResponse
+
+        ds = final.normal_pa - initial.normal_pa
+        E = 10e6 * (1 + 0.03 * self.rng.standard_normal())
+        return ElementResponse(stress_initial_pa=initial.normal_pa,
+                               stress_final_pa=final.normal_pa,
+                               strain_increment=(ds - 0.25 * (ds.sum() - ds)) / E,
+                               info={"stress_scatter_pa": 0.05 * np.abs(final.normal_pa)})
+
+
+def test_aitken_relaxation_ends_the_two_cycle():
+    from femcoupling.materials import LinearElastic
+    from femcoupling.twoway import two_way
+
+    m = _one_region_model()
+    m.set_region_material("a", LinearElastic(10e6, 0.25))
+    _footing(m)
+    ref = m.region_stress("a")[2, 2]  # the fixed point: E = 10 MPa gives this stress
+    runs = {}
+    for relax in ("none", "aitken"):
+        m = _one_region_model()
+        runs[relax] = two_way(m, regions=["a"], load=_footing,
+                              element_runner=SofteningElement(ref), tol=1e-3,
+                              max_iterations=10, relaxation=relax)
+    plain = runs["none"]
+    assert not plain.converged
+    assert min(plain.changes[-4:]) > 0.5  # a 2-cycle: it never settles
+    done = runs["aitken"]
+    assert done.converged and done.converged_on == "tol"
+    assert done.materials["a"][0] == pytest.approx(10e6, rel=1e-3)
+
+
+def test_two_way_stops_at_the_elements_scatter_and_says_so(tmp_path):
+    import h5py
+
+    from femcoupling.twoway import HandoverHistory, RegionWarning, two_way
+
+    m = _one_region_model()
+    with HandoverHistory(tmp_path / "h.h5", regions=["x", "a"]) as hist:
+        with pytest.warns(RegionWarning, match="below what the elements resolve"):
+            res = two_way(m, regions=["a"], load=_footing, element_runner=NoisyElement(),
+                          tol=1e-5, max_iterations=8, history=hist, history_names=["a"])
+    assert res.converged and res.converged_on == "scatter"
+    assert 1e-5 < res.changes[-1] < 0.05
+    assert any("below what the elements resolve" in w for w in res.warnings)
+    with h5py.File(tmp_path / "h.h5") as f:
+        # recorded under its own name ("a" is the history's region 1), with its scatter
+        assert set(f["region"][:]) == {1.0}
+        assert np.nanmax(f["scatter"][:]) == pytest.approx(0.05)
+        assert np.all(np.isfinite(f["fem_strain_increment"][:]))
+
+
+def test_check_region_flags_turned_axes_and_strain_far_from_the_region():
+    from femcoupling.twoway import check_region
+
+    t = fem_to_dem(np.array([[-100e3, 0, -40e3], [0, -80e3, 0], [-40e3, 0, -150e3]]))
+    msgs, ratio = check_region("r", t, fem_strain_increment=[1e-4, 0, 2e-4],
+                               dem_strain_increment=[3e-4, 0, 5e-4])
+    assert ratio == pytest.approx(2.5)
+    assert any("turned" in x for x in msgs) and any("strains 2.5 times" in x for x in msgs)
+    ok = fem_to_dem(np.diag([-100e3, -80e3, -150e3]))
+    msgs, ratio = check_region("r", ok, fem_strain_increment=[1e-4, 0, 2e-4],
+                               dem_strain_increment=[1e-4, 0, 3e-4])
+    assert msgs == [] and ratio == pytest.approx(1.5)

@@ -110,3 +110,58 @@ def test_a_broken_element_tangent_keeps_the_last_good_one():
         m._set_q(stresses, [bad, nan])
         assert m.bad_tangents == 2
         assert np.array_equal(m._tan, good)
+
+
+def test_aitken_factor():
+    from femcoupling.hierarchical import aitken_factor
+
+    d = np.array([1.0, -2.0, 0.5])
+    assert aitken_factor(1.0, d, -d) == pytest.approx(0.5)  # a 2-cycle halves it
+    assert aitken_factor(0.4, d, 0.5 * d) == pytest.approx(0.8)  # steady: / (1 - a)
+    assert aitken_factor(0.8, d, 0.5 * d) == 1.0  # ... up to 1
+    assert aitken_factor(0.3, d, d) == 0.3  # equal corrections: unchanged
+    assert aitken_factor(1.0, d, -100 * d) == 0.1  # kept >= 0.1
+
+
+def test_bad_convergence_options_are_refused():
+    from femcoupling.geometry import FemInputError
+
+    with ElementPool.build(2, PeriodicFactory(n=60, same=True), workers=1) as pool:
+        for kw, field in (({"convergence": "loose"}, "convergence"),
+                          ({"relaxation": 1.5}, "relaxation"),
+                          ({"relaxation": "fast"}, "relaxation"),
+                          ({"noise_factor": 0.0}, "noise_factor")):
+            with pytest.raises(FemInputError, match=field):
+                HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, **kw)
+
+
+def test_a_tolerance_below_the_noise_is_said_and_the_step_converged_to_it(tmp_path):
+    """Asked for 1e-9, which the elements' noise does not allow: Newton stalls, measures the
+    noise (the elements re-run on their increments scaled by 1 + 1e-9), converges to it, and
+    says so (NoiseWarning, ``warnings``, report.md). With convergence='tolerance' the same
+    step fails and its error names the residual."""
+    from femcoupling.hierarchical import NewtonFailure, NoiseWarning
+
+    fac = PeriodicFactory(n=80, isotropic=True, options={"prep_friction_deg": 0.0})
+    with ElementPool.build(2, fac, workers=1) as pool:
+        m = HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, confining_pa=100e3,
+                                    newton_rtol=1e-9, max_newton=12, tangent="network-elastic",
+                                    out=tmp_path)
+        with pytest.warns(NoiseWarning, match="below the elements' noise"):
+            r = m.step(top_displacement=-2e-5)
+        assert r.converged_on == "noise"
+        assert 0 < r.noise_residual and r.residual <= 2.0 * r.noise_residual
+        assert r.residual > 1e-9
+        assert len(m.warnings) == 1
+        report = (tmp_path / "report.md").read_text()
+        assert "Warnings (1)" in report and "below the elements' noise" in report
+        assert "| noise |" in report
+        # equilibrium to the noise: the mean lateral stress is the confining pressure
+        assert r.mean_stress[0] == pytest.approx(-100e3, rel=2e-3)
+        pool.reject()
+    with ElementPool.build(2, fac, workers=1) as pool:
+        m = HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, confining_pa=100e3,
+                                    newton_rtol=1e-9, max_newton=6, tangent="network-elastic",
+                                    convergence="tolerance")
+        with pytest.raises(NewtonFailure, match="no convergence in 6 iterations"):
+            m.step(top_displacement=-2e-5, max_cuts=0)

@@ -219,27 +219,11 @@ class DemElement:
         return int(self.scene.num_active_contacts)
 
     def stress_scatter(self, *, n_boot: int = 64, seed: int = 0) -> np.ndarray:
-        """The element's own scatter of its homogenised stress, Pa (3 x 3, symmetric): the
-        standard deviation of the Love–Weber stress over ``n_boot`` bootstrap resamplings (with
-        replacement, seeded) of its grain–grain contacts. It measures how far the stress of
-        this few-hundred-grain sample is from the mean of samples like it: about the stress
-        times the coefficient of variation of the contacts' f (x) l over sqrt(contacts). The
-        noise floor of a coupled loop (``femcoupling.hierarchical``). Grain–grain contacts
-        only (a box's wall contacts are not resampled)."""
-        if int(n_boot) < 2:
-            raise ParameterError(f"n_boot={n_boot}: must be >= 2")
-        d = self.network_data()
-        m = len(d["fn"])
-        if m == 0:
-            return np.zeros((3, 3))
-        n = d["normal"]
-        f = d["fn"][:, None] * n + d["fs"]
-        fl = -np.einsum("ci,cj->cij", f, d["branch"]) / d["volume"]  # per-contact terms, Pa
-        fl = 0.5 * (fl + fl.transpose(0, 2, 1))
-        rng = np.random.default_rng(seed)
-        picks = rng.integers(0, m, size=(int(n_boot), m))
-        reps = np.array([fl[p].sum(axis=0) for p in picks])
-        return reps.std(axis=0, ddof=1)
+        """The element's own scatter of its homogenised stress, Pa (3 x 3, symmetric):
+        ``measure.stress_scatter``, the bootstrap of its contacts' Love–Weber terms. How far
+        the stress of a sample of this size is from the mean of samples like it; the noise
+        floor of a coupled loop (docs/multiscale.md)."""
+        return measure.stress_scatter(self.scene, self.volume(), n_boot=n_boot, seed=seed)
 
     # ---- driving ---------------------------------------------------------------------------
     def _steps_for(self, de: np.ndarray, steps: int | None, max_strain_per_step: float) -> int:

@@ -460,6 +460,10 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
         "stress_initial_pa": stress_before.tolist(),
         "stress_final_pa": stages[-1]["wall_stresses_pa"].tolist(),
         "strain_increment": strain_inc.tolist(),
+        # the walls' stresses' own scatter (the bootstrap of the contacts' Love–Weber
+        # terms), Pa: the noise floor of the two-way loop
+        "stress_scatter_pa": np.diag(measure.stress_scatter(
+            sc, measure.box_volume(sc, walls))).tolist(),
         "porosity_final": measure.porosity(sc, walls),
         "disp_above_grid_mean_m": float(np.linalg.norm(disp[above], axis=1).mean()),
         "disp_below_grid_mean_m": float(np.linalg.norm(disp[below], axis=1).mean()),

@@ -158,17 +158,24 @@ def love_weber_stress(scene, volume: float) -> np.ndarray:
     """
     if not volume > 0:
         raise _core.ParameterError(f"volume={volume}: must be > 0 (m^3)")
+    s = _love_weber_terms(scene).sum(axis=0) / volume
+    return 0.5 * (s + s.T)
+
+
+def _love_weber_terms(scene) -> np.ndarray:
+    """Each contact's term f_c (x) l_c of ``love_weber_stress`` (m, 3, 3), N m, in the scene's
+    contact order (the sum is taken in that fixed order)."""
     c = scene.contacts()
     ids, f, nrm, ov = c["ids"], c["force"], c["normal"], c["overlap"]
     pos = reference_points(scene)
     r = np.asarray(scene.radii)
     pair = ids[:, 1] >= 0
-    s = np.zeros((3, 3))
+    terms = np.zeros((len(ids), 3, 3))
     if pair.any():
         # (In a periodic cell the branch runs to j's image: the contacts' own branch vectors.)
         l = (c["branch"][pair] if scene.is_periodic
              else pos[ids[pair, 1]] - pos[ids[pair, 0]])
-        s += np.einsum("ki,kj->ij", f[pair], l)
+        terms[pair] = np.einsum("ki,kj->kij", f[pair], l)
     wl = ~pair
     if wl.any():
         b = ids[wl, 0]
@@ -178,9 +185,30 @@ def love_weber_stress(scene, volume: float) -> np.ndarray:
         arm = (r[b] - ov[wl])[:, None] * nrm[wl]
         if scene.num_clumps:
             arm += pos[b] - np.asarray(scene.positions)[b]  # member centre -> clump centre
-        s += np.einsum("ki,kj->ij", f[wl], arm)
-    s /= volume
-    return 0.5 * (s + s.T)
+        terms[wl] = np.einsum("ki,kj->kij", f[wl], arm)
+    return terms
+
+
+def stress_scatter(scene, volume: float, *, n_boot: int = 64, seed: int = 0) -> np.ndarray:
+    """The scatter of the Love–Weber stress of a sample, Pa (3 x 3, symmetric): the standard
+    deviation over ``n_boot`` bootstrap resamplings (with replacement, seeded) of its
+    contacts' terms. It says how far the stress of a sample of this size is from the mean of
+    samples like it (about the stress times the contact terms' coefficient of variation over
+    sqrt(contacts)): the noise floor of a coupled loop (``femcoupling``). For a sample in
+    equilibrium between walls the wall contacts are resampled too."""
+    if int(n_boot) < 2:
+        raise _core.ParameterError(f"n_boot={n_boot}: must be >= 2")
+    if not volume > 0:
+        raise _core.ParameterError(f"volume={volume}: must be > 0 (m^3)")
+    t = _love_weber_terms(scene) / volume
+    m = len(t)
+    if m == 0:
+        return np.zeros((3, 3))
+    t = 0.5 * (t + t.transpose(0, 2, 1))
+    rng = np.random.default_rng(seed)
+    picks = rng.integers(0, m, size=(int(n_boot), m))
+    reps = np.array([t[p].sum(axis=0) for p in picks])
+    return reps.std(axis=0, ddof=1)
 
 
 def coordination_number(scene, *, mechanical: bool = False) -> float:

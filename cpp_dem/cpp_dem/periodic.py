@@ -221,6 +221,54 @@ def prepare_periodic(n: int, *, material, stress: float, radius_mean: float,
     return scene
 
 
+def plane_strain_biaxial(scene, *, pressure: float, strain: float,
+                         strain_per_step: float = 5e-7, points: int = 100,
+                         progress=None) -> dict:
+    """A drained plane-strain biaxial test of a periodic cell, the direct-DEM reference of
+    ``femcoupling.hierarchical``'s biaxial: the cell's z is shortened at a constant rate
+    (``strain_per_step`` per step, -) to the axial ``strain`` (-, compression positive); x is
+    servo-controlled to ``pressure`` (Pa, compression positive) with the x–z shear stress at
+    zero; y (out of plane) and the other shears are held. The FEM's (x, y) is the cell's
+    (x, z), as in ``femcoupling.hierarchical.dem_increment``.
+
+    Returns arrays sampled ``points`` times (compression positive): ``axial_strain``,
+    ``volumetric_strain`` (-tr of the small strain since the start), ``sigma_x``,
+    ``sigma_z`` (Pa), and the peak: ``peak_sigma_z`` (Pa), ``peak_axial_strain`` and
+    ``peak_volumetric_strain``. ``progress(fraction)`` is called at every sample."""
+    if not (pressure > 0 and math.isfinite(pressure)):
+        raise ParameterError(f"pressure={pressure}: must be > 0 (Pa)")
+    if not (0 < strain < 0.5):
+        raise ParameterError(f"strain={strain}: the axial strain must be in (0, 0.5) (-)")
+    if not (0 < strain_per_step <= 1e-4):
+        raise ParameterError(f"strain_per_step={strain_per_step}: must be in (0, 1e-4] (-); "
+                             "quasi-static loading needs a small one")
+    if int(points) < 2:
+        raise ParameterError(f"points={points}: must be >= 2")
+    dt = float(scene.dt)
+    steps = int(math.ceil(strain / strain_per_step))
+    every = max(1, steps // int(points))
+    e0 = small_strain(scene)
+    rows = []
+
+    def sample(sc) -> None:
+        st = np.asarray(sc.cell_stress())
+        e = small_strain(sc) - e0
+        rows.append((-e[2, 2], -float(np.trace(e)), st[0, 0], st[2, 2]))
+        if progress is not None:
+            progress(len(rows) * every / steps)
+
+    r = drive_cell(scene, stress={(0, 0): float(pressure), (0, 2): 0.0},
+                   rate={(2, 2): -strain_per_step / dt}, steps=steps, check_every=every,
+                   callback=sample)
+    r.extra["controller"].enabled = False
+    scene.velocity_gradient = np.zeros((3, 3))
+    a = np.array(rows)
+    k = int(np.argmax(a[:, 3]))
+    return {"axial_strain": a[:, 0], "volumetric_strain": a[:, 1], "sigma_x": a[:, 2],
+            "sigma_z": a[:, 3], "peak_sigma_z": float(a[k, 3]),
+            "peak_axial_strain": float(a[k, 0]), "peak_volumetric_strain": float(a[k, 1])}
+
+
 __all__ = ["cube_cell", "periodic_cloud", "cube_cloud", "periodic_scene", "cell_controller",
            "default_max_rate", "deformation_gradient", "small_strain", "drive_cell",
-           "prepare_periodic", "CellController"]
+           "prepare_periodic", "plane_strain_biaxial", "CellController"]

@@ -119,7 +119,8 @@ def element_runner(p_dict: dict, out: str, name: str, initial, final):
     return ElementResponse(stress_initial_pa=np.array(s["stress_initial_pa"]),
                            stress_final_pa=np.array(s["stress_final_pa"]),
                            strain_increment=np.array(s["strain_increment"]),
-                           info={"hold_max_rel_error": s["hold_max_rel_error"]})
+                           info={"hold_max_rel_error": s["hold_max_rel_error"],
+                                 "stress_scatter_pa": np.array(s["stress_scatter_pa"])})
 
 
 class _Runner:
@@ -223,6 +224,7 @@ def run_fem(p: Params, out: Path, variant: str, history) -> tuple:
         + (f", prestress {p.prestress / 1e3:g} kN/m equilibrated: upper layer force "
            f"{m.layer_force_n_per_m(0) / 1e3:.3f} kN/m" if prestressed else ""))
     state0 = m.save_state()
+    strain0 = m.region_strain("element")
 
     def load(model):
         return model.load_footing(pressure_pa=p.footing_pressure, steps=p.fem_steps,
@@ -239,12 +241,19 @@ def run_fem(p: Params, out: Path, variant: str, history) -> tuple:
     m.write_xdmf(out / f"fem_{variant}.xdmf")
     plot_fem(m, out / f"fem_{variant}.png", f"FEM {variant}: sigma_zz under "
              f"{p.footing_pressure / 1e3:g} kPa footing")
-    info = {"cells": int(ncell), "settlement_m": m.footing_settlement_m(),
-            "layer_force_upper_n_per_m": m.layer_force_n_per_m(0),
-            "layer_force_upper_under_footing_n_per_m":
-                m.layer_force_n_per_m(0, x_range_m=(0.0, p.footing_b)),
+    info = {"cells": int(ncell), **fem_state(m),
+            "strain_increment": (-np.diag(m.region_strain("element") - strain0)).tolist(),
             "wall_time_s": time.perf_counter() - t0}
     return ini, fin, m, state0, load, info
+
+
+def fem_state(m) -> dict:
+    """The FEM numbers of the report: settlement, upper layer force (everywhere and under the
+    footing)."""
+    return {"settlement_m": m.footing_settlement_m(),
+            "layer_force_upper_n_per_m": m.layer_force_n_per_m(0),
+            "layer_force_upper_under_footing_n_per_m":
+                m.layer_force_n_per_m(0, x_range_m=(0.0, m.body.footing_half_width_m))}
 
 
 def write_report(out: Path, summary: dict) -> None:
@@ -260,7 +269,9 @@ def write_report(out: Path, summary: dict) -> None:
                   f"{np.round(fin, 2).tolist()} kPa; walls reached "
                   f"{np.round(np.array(e['stress_final_pa']) / 1e3, 2).tolist()} kPa, held "
                   f"within {100 * e['hold_max_rel_error']:.2f} %",
-                  f"- strain increment (x, y, z) {np.round(e['strain_increment'], 5).tolist()}",
+                  f"- strain increment (x, y, z) {np.round(e['strain_increment'], 5).tolist()}"
+                  + (f"; {e['dem_fem_strain_ratio']:.3g} times the FEM region's"
+                     if "dem_fem_strain_ratio" in e else ""),
                   f"- mean |displacement| above / below the geogrid "
                   f"{1e3 * e['disp_above_grid_mean_m']:.3f} / "
                   f"{1e3 * e['disp_below_grid_mean_m']:.3f} mm",
@@ -278,10 +289,13 @@ def write_report(out: Path, summary: dict) -> None:
     if "two_way" in summary:
         lines += ["## Two-way", ""]
         for v, t in summary["two_way"].items():
-            lines.append(f"- {v}: {'converged' if t['converged'] else 'NOT converged'} in "
-                         f"{t['iterations']} FEM solves; changes {t['changes']}; secant "
-                         f"(E, nu) {t['materials']}")
+            lines.append(f"- {v}: {'converged' if t['converged'] else 'NOT converged'} "
+                         f"({t['converged_on']}) in {t['iterations']} FEM solves; changes "
+                         f"{t['changes']}; secant (E, nu) {t['materials']}")
         lines.append("")
+    warns = [w for e in summary["elements"].values() for w in e.get("warnings", [])]
+    warns += [w for t in summary.get("two_way", {}).values() for w in t["warnings"]]
+    lines += [f"## Warnings ({len(warns)})", ""] + [f"- {w}" for w in warns] + [""]
     (out / "report.md").write_text("\n".join(lines) + "\n")
 
 
@@ -295,7 +309,7 @@ def run(p: Params, out: Path) -> dict:
         summary["elements"]["PRS" if p.prs else "RE"] = run_element(
             p, p.stresses, prestressed=p.prs, label="element", out=out)
     else:
-        from femcoupling.twoway import HandoverHistory, two_way
+        from femcoupling.twoway import HandoverHistory, check_region, two_way
 
         summary["mode"] = "FEM -> DEM" + (" (two-way)" if p.two_way else " (one-way)")
         summary["fem"] = {}
@@ -312,17 +326,36 @@ def run(p: Params, out: Path) -> dict:
                     tw = two_way(m, regions=["element"], load=load,
                                  element_runner=_Runner(p, out, variant), tol=p.two_way_tol,
                                  max_iterations=p.max_iterations, workers=p.workers,
-                                 history=hist, log=log)
+                                 history=hist, log=log, history_names=[f"element_{variant}"])
                     fin = tw.targets["element"]
                     summary.setdefault("two_way", {})[variant] = {
-                        "converged": tw.converged, "iterations": tw.iterations,
+                        "converged": tw.converged, "converged_on": tw.converged_on,
+                        "iterations": tw.iterations,
                         "changes": [float(c) for c in tw.changes],
-                        "materials": {k: list(v) for k, v in tw.materials.items()}}
+                        "materials": {k: list(v) for k, v in tw.materials.items()},
+                        "warnings": list(tw.warnings)}
                     log(f"two-way {variant}: {'converged' if tw.converged else 'NOT converged'}"
-                        f" after {tw.iterations} FEM solves, changes {tw.changes}")
+                        f" ({tw.converged_on}) after {tw.iterations} FEM solves, changes "
+                        f"{tw.changes}")
+                    # the report, the summary and the XDMF show the coupled FEM state
+                    info.update(fem_state(m), shear_pa=fin.shear_pa.tolist(),
+                                rotation_deg=fin.rotation_deg,
+                                targets_final_pa=fin.normal_pa.tolist(), state="two-way")
+                    m.write_xdmf(out / f"fem_{variant}.xdmf")
+                    loaded = m.region_strain("element")
+                    m.restore_state(state0)
+                    info["strain_increment"] = (-np.diag(loaded - m.region_strain("element"))
+                                                ).tolist()
                 e = run_element(p, [ini.normal_pa, fin.normal_pa], prestressed=variant == "PRS",
                                 label=f"element_{variant}", out=out)
                 summary["elements"][variant] = e
+                msgs, ratio = check_region(f"element_{variant}", fin,
+                                           fem_strain_increment=info["strain_increment"],
+                                           dem_strain_increment=e["strain_increment"])
+                e["dem_fem_strain_ratio"] = ratio
+                e["warnings"] = msgs
+                for msg in msgs:
+                    log("WARNING: " + msg)
                 hist.append(iteration=0, region=j, fem_stress_pa=fin.fem_stress_pa,
                             targets_pa=fin.normal_pa, shear_pa=fin.shear_pa,
                             rotation_deg=fin.rotation_deg, change=0.0,

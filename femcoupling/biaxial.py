@@ -1,0 +1,124 @@
+"""A plane-strain biaxial test by hierarchical FEM x DEM and by direct DEM of the same grains
+(issue 18, "against direct DEM"; docs/multiscale.md).
+
+- :func:`fem_dem_biaxial`: the rectangle of ``femcoupling.hierarchical`` with a periodic DEM
+  element per cell, the right side at the confining pressure, the top pushed down in equal
+  load steps.
+- :func:`direct_biaxial`: a periodic DEM cell under the same path (x at the pressure, y held,
+  z shortened: ``cpp_dem.periodic.plane_strain_biaxial``). Give it the element factory to run
+  every element alone (what the FEM x DEM must reproduce when the field is near homogeneous),
+  or a bigger cell of all their grains.
+
+Every result is a dict of arrays, **compression positive** (soil mechanics): ``axial_strain``
+(-), ``sigma_axial`` and ``sigma_lateral`` (Pa), ``volumetric_strain`` (-, contraction
+positive), and the peak: ``peak_sigma_axial`` (Pa), ``peak_axial_strain``,
+``peak_volumetric_strain``. :func:`summarise` gives the mean and the standard deviation over
+seeds.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+
+import numpy as np
+
+__all__ = ["fem_dem_biaxial", "direct_biaxial", "summarise", "at_strain"]
+
+
+def _peak(out: dict) -> dict:
+    k = int(np.argmax(out["sigma_axial"]))
+    out["peak_sigma_axial"] = float(out["sigma_axial"][k])
+    out["peak_axial_strain"] = float(out["axial_strain"][k])
+    out["peak_volumetric_strain"] = float(out["volumetric_strain"][k])
+    return out
+
+
+def fem_dem_biaxial(pool, *, lx: float, ly: float, nx: int, ny: int, pressure: float,
+                    strain: float, steps: int, log: Callable | None = print,
+                    **model_kw) -> dict:
+    """Runs the hierarchical biaxial (``pool``: one element per cell, 2 nx ny) to the axial
+    ``strain`` (-) in ``steps`` equal load steps; ``model_kw`` go to
+    ``HierarchicalPlaneStrain``. Besides the curve (see the module doc; the stresses are the
+    elements' means, which in equilibrium are the boundary tractions), ``iterations``,
+    ``residual``, ``converged_on`` per step, ``model`` (the HierarchicalPlaneStrain) and
+    ``wall_s``. Prints progress with an ETA through ``log``."""
+    from femcoupling.hierarchical import HierarchicalPlaneStrain
+
+    t0 = time.perf_counter()
+    m = HierarchicalPlaneStrain(pool, lx=lx, ly=ly, nx=nx, ny=ny, confining_pa=pressure,
+                                **model_kw)
+    rows = []
+    ev = 0.0
+    t1 = time.perf_counter()
+    for k in range(1, steps + 1):
+        eps = strain * k / steps
+        before = len(m.history)
+        r = m.step(top_displacement=-eps * ly)
+        for h in m.history[before:]:  # (a cut step adds its halves)
+            ev -= float(np.mean(h.increments[:, 0, 0] + h.increments[:, 2, 2]))
+        s = r.mean_stress
+        rows.append((eps, -s[1], -s[0], ev, r.iterations, r.residual, r.converged_on))
+        if log is not None:
+            done = time.perf_counter() - t1
+            log(f"[fem x dem] step {k}/{steps}: axial strain {eps:.4f}, sigma_axial "
+                f"{-s[1] / 1e3:.1f} kPa, sigma_lateral {-s[0] / 1e3:.1f} kPa, Newton "
+                f"{r.iterations} ({r.converged_on}), ETA {done / k * (steps - k):.0f} s")
+    out = {"axial_strain": np.array([r[0] for r in rows]),
+           "sigma_axial": np.array([r[1] for r in rows]),
+           "sigma_lateral": np.array([r[2] for r in rows]),
+           "volumetric_strain": np.array([r[3] for r in rows]),
+           "iterations": [r[4] for r in rows], "residual": [r[5] for r in rows],
+           "converged_on": [r[6] for r in rows], "model": m,
+           "wall_s": time.perf_counter() - t0}
+    return _peak(out)
+
+
+def direct_biaxial(make: Callable[[int], object], seeds: Sequence[int], *, pressure: float,
+                   strain: float, strain_per_step: float = 5e-7, points: int = 100,
+                   log: Callable | None = print) -> list[dict]:
+    """The direct DEM: for each k in ``seeds`` the element ``make(k)`` (a periodic
+    ``DemElement``, e.g. a ``PeriodicFactory``: then element k of the FEM x DEM run alone)
+    under ``cpp_dem.periodic.plane_strain_biaxial`` to the axial ``strain``. One result dict
+    per seed (the module doc), with ``grains`` and ``wall_s``."""
+    from cpp_dem import periodic
+
+    out = []
+    t1 = time.perf_counter()
+    for i, k in enumerate(seeds):
+        t0 = time.perf_counter()
+        el = make(k)
+        if getattr(el, "kind", None) != "periodic":
+            raise ValueError(f"make({k}): a periodic DemElement expected, got {el!r}")
+        el.controller.enabled = False
+        r = periodic.plane_strain_biaxial(el.scene, pressure=pressure, strain=strain,
+                                          strain_per_step=strain_per_step, points=points)
+        res = _peak({"axial_strain": r["axial_strain"], "sigma_axial": r["sigma_z"],
+                     "sigma_lateral": r["sigma_x"],
+                     "volumetric_strain": r["volumetric_strain"]})
+        res["grains"] = int(el.scene.num_bodies)
+        res["wall_s"] = time.perf_counter() - t0
+        out.append(res)
+        if log is not None:
+            done = time.perf_counter() - t1
+            log(f"[direct] {i + 1}/{len(seeds)} (make({k}), {res['grains']} grains): peak "
+                f"{res['peak_sigma_axial'] / 1e3:.1f} kPa at {res['peak_axial_strain']:.4f}, "
+                f"ETA {done / (i + 1) * (len(seeds) - i - 1):.0f} s")
+    return out
+
+
+def at_strain(res: dict, strain: float) -> float:
+    """The axial stress (Pa) of a result at an axial strain, linearly interpolated."""
+    return float(np.interp(strain, res["axial_strain"], res["sigma_axial"]))
+
+
+def summarise(results: Sequence[dict], keys=("peak_sigma_axial", "peak_axial_strain",
+                                              "peak_volumetric_strain")) -> dict:
+    """Mean, standard deviation (ddof 1; NaN for one result) and count of each key."""
+    out = {}
+    for key in keys:
+        v = np.array([r[key] for r in results], float)
+        out[key] = {"mean": float(v.mean()),
+                    "std": float(v.std(ddof=1)) if len(v) > 1 else math.nan, "n": len(v)}
+    return out
