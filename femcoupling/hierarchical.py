@@ -131,7 +131,7 @@ class HierarchicalPlaneStrain:
                  newton_rtol: float = 1e-3, max_newton: int = 10, strain_kw: dict | None = None,
                  tangent: str = "network", convergence: str = "noise",
                  relaxation: str | float = "aitken", noise_factor: float = 2.0,
-                 verbose: bool = False, out=None) -> None:
+                 verbose: bool = False, out=None, overwrite: bool = False) -> None:
         if not (lx > 0 and ly > 0 and math.isfinite(lx) and math.isfinite(ly)):
             raise FemInputError(f"lx={lx}, ly={ly}: must be > 0 (m)")
         if nx < 1 or ny < 1:
@@ -143,6 +143,15 @@ class HierarchicalPlaneStrain:
 
         self.pool, self.lx, self.ly = pool, float(lx), float(ly)
         self.out = None if out is None else Path(out)
+        if self.out is not None:
+            old = [f for f in ("elements.h5", "fem.xdmf", "fem.h5", "steps.csv", "report.md")
+                   if (self.out / f).exists()]
+            if old and not overwrite:
+                raise FemInputError(f"out={str(self.out)!r}: holds the records of an earlier "
+                                    f"run ({', '.join(old)}); give a new folder, or "
+                                    "overwrite=True to replace them")
+            for f in old:
+                (self.out / f).unlink()
         self._records = None
         self.verbose = verbose
         self.bad_tangents = 0  # element tangents replaced by their last good one

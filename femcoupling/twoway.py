@@ -166,14 +166,16 @@ class TwoWayResult:
 
 def check_region(name: str, targets: WallTargets, *, fem_strain_increment=None,
                  dem_strain_increment=None, max_rotation_deg: float = 15.0,
-                 max_strain_ratio: float = 2.0) -> tuple[list, float]:
+                 max_strain_ratio: float = 2.0, full_tensor: bool = False
+                 ) -> tuple[list, float]:
     """What a wall-bounded element cannot represent of its FEM region: the principal axes
-    of the handed-over stress turned more than ``max_rotation_deg`` from the walls, and the
-    element's normal strain increment (3,) more than ``max_strain_ratio`` times its region's
-    (both compression positive; largest components compared). Returns the messages and the
-    strain ratio (NaN without both strains)."""
+    of the handed-over stress turned more than ``max_rotation_deg`` from the walls (not
+    checked for an element that takes the ``full_tensor``), and the element's normal strain
+    increment (3,) more than ``max_strain_ratio`` times its region's (both compression
+    positive; largest components compared). Returns the messages and the strain ratio (NaN
+    without both strains)."""
     msgs = []
-    if targets.rotation_deg > max_rotation_deg:
+    if not full_tensor and targets.rotation_deg > max_rotation_deg:
         msgs.append(f"region {name}: the FEM stress's principal axes are turned "
                     f"{targets.rotation_deg:.1f} deg from the element's walls (> "
                     f"{max_rotation_deg:g}): the walls impose the normal stresses on the wrong "
@@ -191,6 +193,11 @@ def check_region(name: str, targets: WallTargets, *, fem_strain_increment=None,
                         f"{np.round(fem_strain_increment, 6).tolist()}, compression +): the "
                         f"two scales do not describe the same soil")
     return msgs, ratio
+
+
+def _full(resp: ElementResponse | None) -> bool:
+    """The element took the full stress tensor (a periodic element), not three walls."""
+    return bool(resp is not None and resp.info and resp.info.get("full_tensor"))
 
 
 def _normal_strain(model: Any, region: str) -> np.ndarray | None:
@@ -320,7 +327,8 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
                     r, final[r], fem_strain_increment=fem_de[r],
                     dem_strain_increment=(responses[r].strain_increment if r in responses
                                           else None),
-                    max_rotation_deg=max_rotation_deg, max_strain_ratio=max_strain_ratio)
+                    max_rotation_deg=max_rotation_deg, max_strain_ratio=max_strain_ratio,
+                    full_tensor=_full(responses.get(r)))
                 for msg in msgs:
                     warn(f"iteration {it} (converged): {msg}")
                 if history is not None:
@@ -340,6 +348,8 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
 
         for r, resp in zip(regions, out):
             responses[r] = resp
+            if resp.info and resp.info.get("message"):
+                warn(f"iteration {it}: {resp.info['message']}")
             dsig = np.asarray(resp.stress_final_pa) - np.asarray(resp.stress_initial_pa)
             E_full, nu_full = secant_stiffness(stress_increment_pa=dsig,
                                                strain_increment=resp.strain_increment)
@@ -367,7 +377,8 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
             msgs, ratio = check_region(r, final[r], fem_strain_increment=fem_de[r],
                                        dem_strain_increment=resp.strain_increment,
                                        max_rotation_deg=max_rotation_deg,
-                                       max_strain_ratio=max_strain_ratio)
+                                       max_strain_ratio=max_strain_ratio,
+                                       full_tensor=_full(resp))
             if it == 1:  # (later iterations: checked again at the end)
                 for msg in msgs:
                     warn(f"iteration {it}: {msg}")
@@ -395,7 +406,8 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
                                    dem_strain_increment=(responses[r].strain_increment
                                                          if r in responses else None),
                                    max_rotation_deg=max_rotation_deg,
-                                   max_strain_ratio=max_strain_ratio)
+                                   max_strain_ratio=max_strain_ratio,
+                                   full_tensor=_full(responses.get(r)))
             for msg in msgs:
                 warn(f"not converged after {len(changes)} FEM solves: {msg}")
     return TwoWayResult(converged=converged, iterations=len(changes), changes=changes,

@@ -165,3 +165,13 @@ def test_a_tolerance_below_the_noise_is_said_and_the_step_converged_to_it(tmp_pa
                                     convergence="tolerance")
         with pytest.raises(NewtonFailure, match="no convergence in 6 iterations"):
             m.step(top_displacement=-2e-5, max_cuts=0)
+
+
+def test_records_of_an_earlier_run_are_not_mixed_in(runs, records):
+    """A second run into the same folder would append to the first's rows: refused, unless
+    asked to replace them."""
+    from femcoupling.geometry import FemInputError
+
+    with ElementPool.build(2, PeriodicFactory(n=60, same=True), workers=1) as pool:
+        with pytest.raises(FemInputError, match="records of an earlier run"):
+            HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, out=records)

@@ -1,0 +1,117 @@
+"""A periodic DEM element for the region mode (issue 18): it takes the FEM region's full
+stress tensor, shear included, where the wall-bounded element takes three normal stresses.
+
+``PeriodicRegionElement`` is an ``element_runner`` for :func:`femcoupling.twoway.two_way`
+(picklable, so it runs in the loop's worker processes). For a region it
+
+1. prepares a periodic ``DemElement`` (``n`` grains, dense: grown frictionless, then at the
+   material's friction) at the initial state's mean stress, and servo-controls all six
+   components to the FEM's initial tensor;
+2. saves that state as bytes in ``cache_dir`` (``<name>_initial.bin``): the next two-way
+   iterations start from it instead of preparing again (the element is kept between
+   iterations, also across processes);
+3. servo-controls all six components to the FEM's final tensor, and returns the normal
+   stresses reached and the normal strain increment (compression positive), with the full
+   strain-increment tensor, the shear reached and its stress scatter (the bootstrap of its
+   contacts) in ``info``. ``info["full_tensor"]`` tells ``two_way`` that turned principal
+   axes are imposed, not lost.
+
+A FEM stress beyond the element's strength (an elastic or cohesive FEM soil can hand over a
+stress ratio no cohesionless packing carries) cannot be reached: the servo is stopped once
+the element has strained ``max_strain`` (any component) on the way, and the state reached is
+returned with ``info["message"]`` saying so; ``two_way`` warns with it. Its secant is then
+the element's answer at its strength.
+
+The element is soil only: a geogrid in the region stays in the FEM's layer band, so the grid is
+counted once. SI units; the FEM tensors are tension positive.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import time
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["PeriodicRegionElement", "servo"]
+
+
+def servo(el, target, *, tol: float, unbalanced: float, chunk_steps: int,
+          max_strain: float) -> tuple[np.ndarray, bool, float]:
+    """Servo-controls all six stress components of the periodic element ``el`` to ``target``
+    (3 x 3, Pa, tension positive) in chunks of ``chunk_steps``, giving up once it has strained
+    more than ``max_strain`` (largest component) on the way: the target is beyond its
+    strength. Returns the stress reached (tension positive), whether the target was reached,
+    and the strain used."""
+    e0 = el.strain()
+    while True:
+        try:
+            s = el.apply_stress(target, tol=tol, unbalanced=unbalanced, max_steps=chunk_steps)
+            return s, True, float(np.abs(el.strain() - e0).max())
+        except RuntimeError:
+            got = float(np.abs(el.strain() - e0).max())
+            if got > max_strain:
+                return el.stress(), False, got
+
+
+@dataclasses.dataclass
+class PeriodicRegionElement:
+    """See the module doc. ``n``: grains; ``seed``: packing seed; ``prep_friction_deg``: the
+    friction angle the grains grow at (0: dense); ``tol``: the servo's relative tolerance;
+    ``options``: more keywords for ``DemElement.periodic``; ``cache_dir``: where the prepared
+    elements are kept (None: prepared in every call)."""
+
+    n: int = 400
+    seed: int = 1
+    prep_friction_deg: float | None = 0.0
+    tol: float = 0.005
+    unbalanced: float = 1e-3
+    max_strain: float = 0.05
+    chunk_steps: int = 2000
+    cache_dir: str | None = None
+    options: dict | None = None
+
+    def _prepared(self, name: str, initial) -> tuple:
+        from cpp_dem.dem_element import DemElement
+
+        path = None if self.cache_dir is None else Path(self.cache_dir) / f"{name}_initial.bin"
+        if path is not None and path.exists():
+            return DemElement.from_bytes(path.read_bytes()), True
+        s0 = np.asarray(initial.fem_stress_pa, float)
+        el = DemElement.periodic(self.n, stress=float(-np.trace(s0) / 3), seed=self.seed,
+                                 prep_friction_deg=self.prep_friction_deg,
+                                 **(self.options or {}))
+        el.apply_stress(s0, tol=self.tol, unbalanced=self.unbalanced)
+        if path is not None:
+            path.parent.mkdir(parents=True, exist_ok=True)
+            tmp = path.with_suffix(".tmp")
+            tmp.write_bytes(el.to_bytes())
+            tmp.replace(path)
+        return el, False
+
+    def __call__(self, name: str, initial, final):
+        from femcoupling.twoway import ElementResponse
+
+        t0 = time.perf_counter()
+        el, cached = self._prepared(name, initial)
+        e0, s_ini = el.strain(), el.stress()
+        target = np.asarray(final.fem_stress_pa, float)
+        s1, ok, got = servo(el, target, tol=self.tol, unbalanced=self.unbalanced,
+                            chunk_steps=self.chunk_steps, max_strain=self.max_strain)
+        message = None if ok else (
+            f"region {name}: the periodic element cannot carry the FEM stress "
+            f"{np.round(-target / 1e3, 2).tolist()} kPa (compression +): it strained {got:.3g}"
+            f" (> max_strain={self.max_strain:g}) and holds "
+            f"{np.round(-s1 / 1e3, 2).tolist()} kPa, its strength; its secant is that of the "
+            "state reached")
+        de = el.strain() - e0  # tension positive
+        scatter = el.stress_scatter()
+        return ElementResponse(
+            stress_initial_pa=-np.diag(s_ini), stress_final_pa=-np.diag(s1),
+            strain_increment=-np.diag(de),
+            info={"full_tensor": True, "strain_increment_tensor": -de,
+                  "shear_final_pa": -np.array([s1[1, 2], s1[0, 2], s1[0, 1]]),
+                  "stress_scatter_pa": np.diag(scatter), "prepared_from_cache": cached,
+                  "contacts": el.contact_count(), "wall_s": time.perf_counter() - t0,
+                  "reached": message is None, **({"message": message} if message else {})})
