@@ -43,7 +43,7 @@ class PathFit:
         t: the path parameters reached (0 first), -.
         stresses_pa: (k, 3, 3) the element's stress at each, tension positive.
         strains: (k, 3, 3) its strain since the initial state, tension positive.
-        failure_stress_pa: (3, 3) the stress it held when it failed (or the last reached).
+        failure_stress_pa: (3, 3) the last stress it carried below failure (tension +).
         strength_reached: the element failed before ``beyond`` (phi is then its strength).
         message: a sentence for the log.
     """
@@ -81,10 +81,12 @@ def friction_angle_deg(stress_pa, cohesion_pa: float = 0.0) -> float:
 def fit_along_path(initial_pa, final_pa, *, n: int = 200, seed: int = 1,
                    prep_friction_deg: float | None = 0.0, beyond: float = 4.0,
                    points: int = 16, max_strain: float = 0.03, cohesion_pa: float = 0.0,
-                   tol: float = 0.01, log=None) -> PathFit:
+                   tol: float = 0.01, unbalanced: float = 1e-3, options: dict | None = None,
+                   log=None) -> PathFit:
     """See the module doc. ``initial_pa``, ``final_pa``: the region's FEM stress tensors
     (3 x 3, Pa, tension positive) before and after the load; ``n``, ``seed``,
-    ``prep_friction_deg``: the element (``PeriodicRegionElement``)."""
+    ``prep_friction_deg``, ``options`` (more ``DemElement.periodic`` keywords: material,
+    radius_mean, ...): the element (``PeriodicRegionElement``)."""
     from femcoupling.region import PeriodicRegionElement, servo
 
     s0, s1 = np.asarray(initial_pa, float), np.asarray(final_pa, float)
@@ -95,23 +97,32 @@ def fit_along_path(initial_pa, final_pa, *, n: int = 200, seed: int = 1,
         raise FemInputError(f"beyond={beyond}, points={points}: beyond >= 1 (the path "
                             "continues past the region's) and points >= 2")
     runner = PeriodicRegionElement(n=n, seed=seed, prep_friction_deg=prep_friction_deg,
-                                   tol=tol)
+                                   tol=tol, unbalanced=unbalanced, options=options)
     el, _ = runner._prepared("fit", fem_to_dem(s0))
     e0 = el.strain()
     ts, stresses, strains = [0.0], [el.stress()], [np.zeros((3, 3))]
     failed = None
-    for k in range(1, int(points) + 1):
-        t = beyond * k / points
-        s, ok, _ = servo(el, s0 + t * (s1 - s0), tol=tol, unbalanced=1e-3,
+    dt = beyond / points
+    t = 0.0
+    halvings = 0
+    while t < beyond - 1e-12:
+        keep = el.clone()  # (the state at t: a failed try restarts from it)
+        t_try = min(t + dt, beyond)
+        s, ok, _ = servo(el, s0 + t_try * (s1 - s0), tol=tol, unbalanced=unbalanced,
                          chunk_steps=2000, max_strain=max_strain)
         if not ok:
-            failed = s
-            break
+            # past the strength: bracket it closer (three halvings of the step), then stop
+            failed = (t_try, s)
+            if halvings == 3:
+                break
+            el, dt, halvings = keep, 0.5 * dt, halvings + 1
+            continue
+        t, failed = t_try, None  # (a failure that a shorter step got past is no failure)
         ts.append(t)
         stresses.append(s)
         strains.append(el.strain() - e0)
         if log is not None:
-            log(f"[fit] t = {t:.3g}: reached, strain {np.abs(strains[-1]).max():.3g}")
+            log(f"[fit] t = {t:.4g}: reached, strain {np.abs(strains[-1]).max():.3g}")
     ts_a, st_a, ep_a = np.array(ts), np.array(stresses), np.array(strains)
     # the secant over the region's own path (t <= 1), or what was reached of it
     j = int(np.searchsorted(ts_a, 1.0 + 1e-12)) - 1
@@ -121,14 +132,18 @@ def fit_along_path(initial_pa, final_pa, *, n: int = 200, seed: int = 1,
                             "element's strength from the start (raise points)")
     E, nu = secant_stiffness(stress_increment_pa=-np.diag(st_a[j] - st_a[0]),
                              strain_increment=-np.diag(ep_a[j]))
-    at = failed if failed is not None else st_a[-1]
+    # the strength: the last state reached below the failing point (the state held after
+    # failing is past the peak: softened), a lower bound within the bracket
+    at = st_a[-1]
     phi = friction_angle_deg(at, cohesion_pa)
     mat = DruckerPrager(young_pa=E, poisson=nu, cohesion_pa=cohesion_pa,
                         friction_deg=max(phi, 1e-6 if cohesion_pa > 0 else 1.0))
     if failed is not None:
+        phi_fail = friction_angle_deg(s0 + failed[0] * (s1 - s0), cohesion_pa)
         msg = (f"fitted along the region's path: E {E / 1e6:.3g} MPa, nu {nu:.3f} (secant to "
-               f"t = {ts_a[j]:.3g}); the element failed at t = {beyond * len(ts) / points:.3g} "
-               f"holding phi = {phi:.1f} deg (c = {cohesion_pa:g} Pa)")
+               f"t = {ts_a[j]:.3g}); the element carried t = {ts_a[-1]:.4g} (phi = {phi:.1f} "
+               f"deg) and failed at t = {failed[0]:.4g} (phi = {phi_fail:.1f} deg), c = "
+               f"{cohesion_pa:g} Pa")
     else:
         msg = (f"fitted along the region's path: E {E / 1e6:.3g} MPa, nu {nu:.3f}; the element "
                f"carried the path to t = {beyond:g} without failing: phi = {phi:.1f} deg is a "

@@ -82,7 +82,13 @@ class PeriodicRegionElement:
         el = DemElement.periodic(self.n, stress=float(-np.trace(s0) / 3), seed=self.seed,
                                  prep_friction_deg=self.prep_friction_deg,
                                  **(self.options or {}))
-        el.apply_stress(s0, tol=self.tol, unbalanced=self.unbalanced)
+        _, ok, got = servo(el, s0, tol=self.tol, unbalanced=self.unbalanced,
+                           chunk_steps=self.chunk_steps, max_strain=self.max_strain)
+        if not ok:
+            raise RuntimeError(f"region {name}: the periodic element cannot hold the FEM's "
+                               f"initial stress {np.round(-s0 / 1e3, 2).tolist()} kPa "
+                               f"(compression +): it strained {got:.3g} on the way; it is "
+                               "beyond the packing's strength")
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
             tmp = path.with_suffix(".tmp")

@@ -81,6 +81,7 @@ class Params(ElementParams):
     two_way_tol: float = 0.02
     max_iterations: int = 8
     workers: int = 1
+    calibrate: bool = False          #: fit the FEM soil to a DEM element along the region's path
     stresses: list = field(default_factory=list)  #: DEM-only targets (rows of 3), Pa
     prs: bool = False                #: DEM-only: prestress the grid (else RE)
 
@@ -147,6 +148,41 @@ def fem_body(p: Params):
     return ReinforcedSoilBody(width_m=p.fem_width, height_m=h, footing_half_width_m=p.footing_b,
                               layers=layers, regions=(region,), mesh_size_m=p.mesh_size,
                               fine_size_m=p.fine_size, fine_radius_m=2 * p.footing_b)
+
+
+def calibrate_soil(p: Params, out: Path, hist) -> tuple[Params, dict]:
+    """Scales that agree (issue 18): the FEM soil fitted to a DEM element along the element
+    region's stress path (``femcoupling.calibration.fit_along_path``). The region's path is
+    the RE one-way FEM's (initial -> loaded); the fitting element is periodic, soil only,
+    with this case's grains (material, size, count), prepared dense (grown frictionless: the
+    case's loose growth friction left a cell that could not hold the region's initial
+    stress). The fill's apparent cohesion (``soil_cohesion``) is kept as given; E, nu and phi
+    are fitted. Returns the parameters with the fitted soil and the record."""
+    from femcoupling.calibration import fit_along_path
+
+    from cpp_dem.scene import linear_material
+
+    t0 = time.perf_counter()
+    ini, fin, _m, _s0, _load, _info = run_fem(p, out, "RE", hist)
+    r_mean = (0.6 * p.edge**3 / (p.n * 4.0 / 3.0 * math.pi)) ** (1.0 / 3.0)
+    mat = linear_material(density=p.density, young=p.young, poisson=p.poisson,
+                          friction_angle_deg=p.friction_deg)
+    fit = fit_along_path(ini.fem_stress_pa, fin.fem_stress_pa, n=p.n, seed=p.seed,
+                         prep_friction_deg=0.0, tol=0.02, unbalanced=1e-2,
+                         cohesion_pa=p.soil_cohesion,
+                         options={"material": mat, "radius_mean": r_mean,
+                                  "radius_spread": p.radius_spread},
+                         log=log)
+    log("calibration: " + fit.message)
+    m = fit.material
+    rec = {"young_pa": m.young_pa, "poisson": m.poisson, "friction_deg": m.friction_deg,
+           "cohesion_pa": m.cohesion_pa, "strength_reached": fit.strength_reached,
+           "path_t_reached": float(fit.t[-1]), "message": fit.message,
+           "before": {"young_pa": p.soil_young, "poisson": p.soil_poisson,
+                      "cohesion_pa": p.soil_cohesion, "friction_deg": p.soil_friction},
+           "wall_time_s": time.perf_counter() - t0}
+    return replace(p, soil_young=m.young_pa, soil_poisson=m.poisson,
+                   soil_friction=m.friction_deg), rec
 
 
 def fem_model(p: Params, prestressed: bool):
@@ -293,6 +329,15 @@ def write_report(out: Path, summary: dict) -> None:
                          f"({t['converged_on']}) in {t['iterations']} FEM solves; changes "
                          f"{t['changes']}; secant (E, nu) {t['materials']}")
         lines.append("")
+    if "calibration" in summary:
+        c = summary["calibration"]
+        b = c["before"]
+        lines += ["## Calibration of the FEM soil", "",
+                  f"- {c['message']}",
+                  f"- FEM soil: E {b['young_pa'] / 1e6:.3g} -> {c['young_pa'] / 1e6:.3g} MPa, "
+                  f"nu {b['poisson']:.3f} -> {c['poisson']:.3f}, c {b['cohesion_pa'] / 1e3:g}"
+                  f" -> {c['cohesion_pa'] / 1e3:g} kPa, phi {b['friction_deg']:.1f} -> "
+                  f"{c['friction_deg']:.1f} deg", ""]
     warns = [w for e in summary["elements"].values() for w in e.get("warnings", [])]
     warns += [w for t in summary.get("two_way", {}).values() for w in t["warnings"]]
     lines += [f"## Warnings ({len(warns)})", ""] + [f"- {w}" for w in warns] + [""]
@@ -315,6 +360,8 @@ def run(p: Params, out: Path) -> dict:
         summary["fem"] = {}
         with HandoverHistory(out / "handover.h5", regions=["element_RE", "element_PRS"],
                              metadata={"case": "prs_element"}) as hist:
+            if p.calibrate:
+                p, summary["calibration"] = calibrate_soil(p, out, hist)
             for j, variant in enumerate(("RE", "PRS")):
                 ini, fin, m, state0, load, info = run_fem(p, out, variant, hist)
                 info.update(shear_pa=fin.shear_pa.tolist(), rotation_deg=fin.rotation_deg,
@@ -483,6 +530,9 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                          "(overrides --tol); docs/speed_accuracy.md")
     ap.add_argument("--workers", type=int, default=1,
                     help="processes for the DEM elements of the two-way loop (<= 2 here)")
+    ap.add_argument("--calibrate", action="store_true",
+                    help="fit the FEM soil (Drucker-Prager/Mohr-Coulomb) to a DEM element of "
+                         "the case's grains along the region's stress path first")
     a = ap.parse_args(argv)
     p = apply_element_args(ap, a, Params(**SMOKE) if a.smoke else Params())
     if not a.tol > 0:
@@ -493,13 +543,14 @@ def parse_args(argv=None) -> tuple[Params, Path]:
         ap.error(f"--workers={a.workers}: must be >= 1")
     p.two_way, p.two_way_tol, p.max_iterations, p.workers = (a.two_way, a.tol, a.max_iterations,
                                                              a.workers)
+    p.calibrate = a.calibrate
     if a.preset:
         if a.stresses:
             ap.error("--preset sets the FEM mesh and the two-way tolerance: not with --stresses")
         p = apply_coupling_preset(p, a.preset)
     if a.stresses:
-        if a.two_way:
-            ap.error("--two-way needs the FEM: not with --stresses")
+        if a.two_way or a.calibrate:
+            ap.error("--two-way and --calibrate need the FEM: not with --stresses")
         p.stresses = parse_stresses(a.stresses, ap)
         p.prs = a.prs
     elif a.prs:
