@@ -103,20 +103,31 @@ def servo_stage(sample, grid, targets, stage: int, p: Params, rec) -> dict:
     return _element.servo_stage(sample, grid, targets, stage, p, rec, log=log)
 
 
-def run_element(p: Params, targets: list, *, prestressed: bool, label: str, out: Path) -> dict:
+def run_element(p: Params, targets: list, *, prestressed: bool, label: str, out: Path,
+                cache: dict | None = None) -> dict:
     """:func:`cpp_dem.element.run_element` with this case's log."""
     return _element.run_element(p, targets, prestressed=prestressed, label=label, out=out,
-                                log=log)
+                                log=log, cache=cache)
+
+
+#: The two-way loop's elements, kept between its iterations in this process (workers = 1;
+#: worker processes are new at every iteration): per (parameters, region) the element
+#: prepared and servoed to the initial targets, which every iteration shares.
+_ELEMENTS: dict = {}
 
 
 def element_runner(p_dict: dict, out: str, name: str, initial, final):
-    """Picklable two-way runner: the element from the initial to the final WallTargets."""
+    """Picklable two-way runner: the element from the initial to the final WallTargets. In
+    one process the element at the initial targets is prepared once and restored for the
+    next iterations (``_ELEMENTS``)."""
     from femcoupling.twoway import ElementResponse
 
     p = Params(**p_dict)
     prestressed = name.endswith("PRS")
+    cache = _ELEMENTS.setdefault((json.dumps(p_dict, sort_keys=True, default=str), out, name),
+                                 {})
     s = run_element(p, [initial.normal_pa, final.normal_pa], prestressed=prestressed,
-                    label=f"twoway_{name}", out=Path(out))
+                    label=f"twoway_{name}", out=Path(out), cache=cache)
     return ElementResponse(stress_initial_pa=np.array(s["stress_initial_pa"]),
                            stress_final_pa=np.array(s["stress_final_pa"]),
                            strain_increment=np.array(s["strain_increment"]),
