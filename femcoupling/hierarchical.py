@@ -492,7 +492,8 @@ class HierarchicalPlaneStrain:
     def _write_records(self, r: HierStep) -> None:
         """Appends the accepted step to ``out``: one row per element in ``elements.h5`` (the
         step, its load, the element, its displacement-gradient increment, stress (tension
-        positive, Pa), its bootstrap scatter (Pa), tangent (Voigt 6 x 6, Pa), contact count, DEM seconds and steps),
+        positive, Pa), its bootstrap scatter (Pa), tangent (Voigt 6 x 6, Pa), contact count,
+        DEM seconds and steps),
         flushed; the FEM state in ``fem.xdmf`` (displacement m, the elements' stress Pa per
         cell, at the load as time); and a line of ``steps.csv`` with the FEM/DEM time split."""
         import h5py

@@ -126,7 +126,8 @@ class DemElement:
     def periodic(cls, n: int = 400, *, material=None, stress: float = 100e3,
                  radius_mean: float = 1e-3, radius_spread: float = 0.2, seed: int = 1,
                  porosity: float | None = None, prep_friction_deg: float | None = None,
-                 damping: float = 0.7, log=None, tol: float = 0.005, unbalanced: float = 1e-4, growth=(0.5, 1e-3),
+                 damping: float = 0.7, log=None, tol: float = 0.005,
+                 unbalanced: float = 1e-4, growth=(0.5, 1e-3),
                  **kw) -> "DemElement":
         """A periodic cube of ``n`` spheres prepared to the isotropic ``stress`` (Pa,
         compression positive) by ``periodic.prepare_periodic`` (``porosity``: REFD to that
