@@ -110,9 +110,9 @@ def run_element(p: Params, targets: list, *, prestressed: bool, label: str, out:
                                 log=log, cache=cache)
 
 
-#: The two-way loop's elements, kept between its iterations in this process (workers = 1;
-#: worker processes are new at every iteration): per (parameters, region) the element
-#: prepared and servoed to the initial targets, which every iteration shares.
+#: The two-way loop's elements, kept between its iterations: per (parameters, region) the
+#: element prepared and servoed to the initial targets, which every iteration shares. (The
+#: case's loop has one region, which ``two_way`` runs in this process whatever ``workers``.)
 _ELEMENTS: dict = {}
 
 
@@ -368,6 +368,11 @@ def run(p: Params, out: Path) -> dict:
         from femcoupling.twoway import HandoverHistory, check_region, two_way
 
         summary["mode"] = "FEM -> DEM" + (" (two-way)" if p.two_way else " (one-way)")
+        if p.workers > 1:
+            log(f"--workers {p.workers}: this case couples one element region per FEM model "
+                "(RE, then PRS), so its two-way loops have one element each and nothing runs "
+                "in parallel; for many elements in parallel see femcoupling.hierarchical "
+                "(docs/multiscale.md)")
         summary["fem"] = {}
         with HandoverHistory(out / "handover.h5", regions=["element_RE", "element_PRS"],
                              metadata={"case": "prs_element"}) as hist:
@@ -540,7 +545,9 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                          "element edge; coarse size 20 x that) and the two-way tolerance "
                          "(overrides --tol); docs/speed_accuracy.md")
     ap.add_argument("--workers", type=int, default=1,
-                    help="processes for the DEM elements of the two-way loop (<= 2 here)")
+                    help="processes for the DEM elements of the two-way loop; this case "
+                         "couples one region per FEM model, so more than 1 runs nothing in "
+                         "parallel (said in the log)")
     ap.add_argument("--calibrate", action="store_true",
                     help="fit the FEM soil (Drucker-Prager/Mohr-Coulomb) to a DEM element of "
                          "the case's grains along the region's stress path first")
