@@ -14,10 +14,7 @@ from __future__ import annotations
 
 import argparse
 import sys
-import time
 from pathlib import Path
-
-import numpy as np
 
 from _report import write_json  # noqa: E402
 
@@ -28,7 +25,7 @@ sys.path.insert(0, str(HERE.parent))
 
 def main(argv=None) -> int:
     from cpp_dem.element_pool import ElementPool, PeriodicFactory
-    from femcoupling.hierarchical import HierarchicalPlaneStrain
+    from femcoupling import biaxial
 
     ap = argparse.ArgumentParser(description=__doc__,
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -59,37 +56,26 @@ def main(argv=None) -> int:
     args = ap.parse_args(argv)
     lx, ly = 0.02, 0.04
     n = 2 * args.nx * args.ny
-    t0 = time.perf_counter()
-    rows = []
     opts = {} if args.prep_friction < 0 else {"prep_friction_deg": args.prep_friction}
     with ElementPool.build(n, PeriodicFactory(n=args.grains, stress=args.pressure,
                                               isotropic=True, options=opts),
                            workers=args.workers) as pool:
-        m = HierarchicalPlaneStrain(pool, lx=lx, ly=ly, nx=args.nx, ny=args.ny,
-                                    confining_pa=args.pressure, newton_rtol=args.rtol,
-                                    tangent=args.tangent, out=args.records,
-                                    convergence=args.convergence, max_newton=args.max_newton,
-                                    relaxation=(args.relaxation if args.relaxation in
-                                                ("aitken", "none") else float(args.relaxation)),
-                                    strain_kw={"unbalanced": args.unbalanced,
-                                               "max_relax_steps": 100_000})
-        print(f"[biaxial] {n} elements of {args.grains} grains ready in "
-              f"{time.perf_counter() - t0:.1f} s", flush=True)
-        for k in range(1, args.steps + 1):
-            eps = args.strain * k / args.steps
-            r = m.step(top_displacement=-eps * ly)
-            s = r.mean_stress
-            q = -(s[1] - s[0])
-            rows.append({"eps_y": eps, "iterations": r.iterations, "residual": r.residual,
-                         "noise_residual": r.noise_residual,
-                         "converged_on": r.converged_on,
-                         "sigma_xx": float(s[0]), "sigma_yy": float(s[1]), "q": float(q),
-                         "dem_s": r.dem_s, "fem_s": r.fem_s, "wall_s": r.wall_s})
-            print(f"[biaxial] eps_y {eps:.4f}: Newton {r.iterations} (residual "
-                  f"{r.residual:.1e}, noise {r.noise_residual:.1e}, on "
-                  f"{r.converged_on}), sigma_xx {s[0] / 1e3:.1f} kPa, sigma_yy "
-                  f"{s[1] / 1e3:.1f} kPa, DEM {r.dem_s:.1f} s, FEM {r.fem_s:.2f} s, wall "
-                  f"{r.wall_s:.1f} s", flush=True)
+        fd = biaxial.fem_dem_biaxial(
+            pool, lx=lx, ly=ly, nx=args.nx, ny=args.ny, pressure=args.pressure,
+            strain=args.strain, steps=args.steps, newton_rtol=args.rtol,
+            tangent=args.tangent, out=args.records, convergence=args.convergence,
+            max_newton=args.max_newton,
+            relaxation=(args.relaxation if args.relaxation in ("aitken", "none")
+                        else float(args.relaxation)),
+            strain_kw={"unbalanced": args.unbalanced, "max_relax_steps": 100_000})
+    rows = []
+    for eps, r in zip(fd["axial_strain"], fd["steps"]):
+        s = r.mean_stress
+        rows.append({"eps_y": float(eps), "iterations": r.iterations, "residual": r.residual,
+                     "noise_residual": r.noise_residual, "converged_on": r.converged_on,
+                     "sigma_xx": float(s[0]), "sigma_yy": float(s[1]),
+                     "q": float(-(s[1] - s[0])), "dem_s": r.dem_s, "fem_s": r.fem_s,
+                     "wall_s": r.wall_s})
     print(f"[biaxial] wrote {write_json(args.out, {'args': vars(args), 'rows': rows})}")
     return 0
 

@@ -112,7 +112,7 @@ def main(argv=None) -> int:
     for ln in lines:
         print("[vs] " + ln, flush=True)
     strip = lambda d: {a: (b.tolist() if isinstance(b, np.ndarray) else b)  # noqa: E731
-                       for a, b in d.items() if a != "model"}
+                       for a, b in d.items() if a not in ("model", "steps")}
     path = write_json(args.out, {"args": vars(args), "fem_dem": strip(fd),
                                  "alone": [strip(r) for r in alone],
                                  "alone_mean_curve": mean_curve.tolist(),

@@ -42,20 +42,22 @@ def fem_dem_biaxial(pool, *, lx: float, ly: float, nx: int, ny: int, pressure: f
     ``strain`` (-) in ``steps`` equal load steps; ``model_kw`` go to
     ``HierarchicalPlaneStrain``. Besides the curve (see the module doc; the stresses are the
     elements' means, which in equilibrium are the boundary tractions), ``iterations``,
-    ``residual``, ``converged_on`` per step, ``model`` (the HierarchicalPlaneStrain) and
-    ``wall_s``. Prints progress with an ETA through ``log``."""
+    ``residual``, ``converged_on`` per step, ``steps`` (the HierStep of each load step),
+    ``model`` (the HierarchicalPlaneStrain) and ``wall_s``. Prints progress with an ETA
+    through ``log``."""
     from femcoupling.hierarchical import HierarchicalPlaneStrain
 
     t0 = time.perf_counter()
     m = HierarchicalPlaneStrain(pool, lx=lx, ly=ly, nx=nx, ny=ny, confining_pa=pressure,
                                 **model_kw)
-    rows = []
+    rows, steps_done = [], []
     ev = 0.0
     t1 = time.perf_counter()
     for k in range(1, steps + 1):
         eps = strain * k / steps
         before = len(m.history)
         r = m.step(top_displacement=-eps * ly)
+        steps_done.append(r)
         for h in m.history[before:]:  # (a cut step adds its halves)
             ev -= float(np.mean(h.increments[:, 0, 0] + h.increments[:, 2, 2]))
         s = r.mean_stress
@@ -64,13 +66,15 @@ def fem_dem_biaxial(pool, *, lx: float, ly: float, nx: int, ny: int, pressure: f
             done = time.perf_counter() - t1
             log(f"[fem x dem] step {k}/{steps}: axial strain {eps:.4f}, sigma_axial "
                 f"{-s[1] / 1e3:.1f} kPa, sigma_lateral {-s[0] / 1e3:.1f} kPa, Newton "
-                f"{r.iterations} ({r.converged_on}), ETA {done / k * (steps - k):.0f} s")
+                f"{r.iterations} (residual {r.residual:.1e}, noise {r.noise_residual:.1e}, "
+                f"on {r.converged_on}), DEM {r.dem_s:.1f} s, FEM {r.fem_s:.2f} s, wall "
+                f"{r.wall_s:.1f} s, ETA {done / k * (steps - k):.0f} s")
     out = {"axial_strain": np.array([r[0] for r in rows]),
            "sigma_axial": np.array([r[1] for r in rows]),
            "sigma_lateral": np.array([r[2] for r in rows]),
            "volumetric_strain": np.array([r[3] for r in rows]),
            "iterations": [r[4] for r in rows], "residual": [r[5] for r in rows],
-           "converged_on": [r[6] for r in rows], "model": m,
+           "converged_on": [r[6] for r in rows], "steps": steps_done, "model": m,
            "wall_s": time.perf_counter() - t0}
     return _peak(out)
 

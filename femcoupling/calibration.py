@@ -43,7 +43,6 @@ class PathFit:
         t: the path parameters reached (0 first), -.
         stresses_pa: (k, 3, 3) the element's stress at each, tension positive.
         strains: (k, 3, 3) its strain since the initial state, tension positive.
-        failure_stress_pa: (3, 3) the last stress it carried below failure (tension +).
         strength_reached: the element failed before ``beyond`` (phi is then its strength).
         message: a sentence for the log.
     """
@@ -52,9 +51,13 @@ class PathFit:
     t: np.ndarray
     stresses_pa: np.ndarray
     strains: np.ndarray
-    failure_stress_pa: np.ndarray
     strength_reached: bool
     message: str
+
+    @property
+    def failure_stress_pa(self) -> np.ndarray:
+        """(3, 3) the last stress the element carried below failure, tension positive."""
+        return self.stresses_pa[-1]
 
 
 def friction_angle_deg(stress_pa, cohesion_pa: float = 0.0) -> float:
@@ -98,10 +101,10 @@ def fit_along_path(initial_pa, final_pa, *, n: int = 200, seed: int = 1,
                             "continues past the region's) and points >= 2")
     runner = PeriodicRegionElement(n=n, seed=seed, prep_friction_deg=prep_friction_deg,
                                    tol=tol, unbalanced=unbalanced, options=options)
-    el, _ = runner._prepared("fit", fem_to_dem(s0))
+    el, _ = runner.prepare("fit", fem_to_dem(s0))
     e0 = el.strain()
     ts, stresses, strains = [0.0], [el.stress()], [np.zeros((3, 3))]
-    failed = None
+    t_failed = None  # the path point the element could not reach
     dt = beyond / points
     t = 0.0
     halvings = 0
@@ -112,12 +115,12 @@ def fit_along_path(initial_pa, final_pa, *, n: int = 200, seed: int = 1,
                          chunk_steps=2000, max_strain=max_strain)
         if not ok:
             # past the strength: bracket it closer (three halvings of the step), then stop
-            failed = (t_try, s)
+            t_failed = t_try
             if halvings == 3:
                 break
             el, dt, halvings = keep, 0.5 * dt, halvings + 1
             continue
-        t, failed = t_try, None  # (a failure that a shorter step got past is no failure)
+        t, t_failed = t_try, None  # (a failure that a shorter step got past is no failure)
         ts.append(t)
         stresses.append(s)
         strains.append(el.strain() - e0)
@@ -134,20 +137,19 @@ def fit_along_path(initial_pa, final_pa, *, n: int = 200, seed: int = 1,
                              strain_increment=-np.diag(ep_a[j]))
     # the strength: the last state reached below the failing point (the state held after
     # failing is past the peak: softened), a lower bound within the bracket
-    at = st_a[-1]
-    phi = friction_angle_deg(at, cohesion_pa)
+    phi = friction_angle_deg(st_a[-1], cohesion_pa)
     mat = DruckerPrager(young_pa=E, poisson=nu, cohesion_pa=cohesion_pa,
                         friction_deg=max(phi, 1e-6 if cohesion_pa > 0 else 1.0))
-    if failed is not None:
-        phi_fail = friction_angle_deg(s0 + failed[0] * (s1 - s0), cohesion_pa)
+    if t_failed is not None:
+        phi_fail = friction_angle_deg(s0 + t_failed * (s1 - s0), cohesion_pa)
         msg = (f"fitted along the region's path: E {E / 1e6:.3g} MPa, nu {nu:.3f} (secant to "
                f"t = {ts_a[j]:.3g}); the element carried t = {ts_a[-1]:.4g} (phi = {phi:.1f} "
-               f"deg) and failed at t = {failed[0]:.4g} (phi = {phi_fail:.1f} deg), c = "
+               f"deg) and failed at t = {t_failed:.4g} (phi = {phi_fail:.1f} deg), c = "
                f"{cohesion_pa:g} Pa")
     else:
         msg = (f"fitted along the region's path: E {E / 1e6:.3g} MPa, nu {nu:.3f}; the element "
                f"carried the path to t = {beyond:g} without failing: phi = {phi:.1f} deg is a "
                "lower bound (raise beyond)")
     return PathFit(material=mat, t=ts_a, stresses_pa=st_a, strains=ep_a,
-                   failure_stress_pa=np.asarray(at), strength_reached=failed is not None,
+                   strength_reached=t_failed is not None,
                    message=msg)

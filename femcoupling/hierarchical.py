@@ -28,9 +28,11 @@ parallel part).
 
 Records (``out=DIR``), appended and flushed at every accepted step:
 - ``elements.h5``: one row per element per step: step, load, element, increment, stress,
-  tangent, contact count, DEM seconds and steps;
+  its bootstrap scatter, tangent, contact count, DEM seconds and steps;
 - ``fem.xdmf``: the displacement and the elements' stresses per cell, at every step;
-- ``steps.csv``: iterations, residual, and the FEM/DEM time split.
+- ``steps.csv``: iterations, residual, the measured noise, what converged the step, and
+  the FEM/DEM time split;
+- ``report.md``: the run so far and every warning.
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ import numpy as np
 
 from femcoupling import _dolfinx
 from femcoupling.geometry import FemInputError
-from femcoupling.relaxation import aitken_factor
+from femcoupling.relaxation import aitken_factor, check_relaxation, next_factor
 
 __all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning",
            "aitken_factor"]
@@ -152,7 +154,6 @@ class HierarchicalPlaneStrain:
                                     "overwrite=True to replace them")
             for f in old:
                 (self.out / f).unlink()
-        self._records = None
         self.verbose = verbose
         self.bad_tangents = 0  # element tangents replaced by their last good one
         if tangent not in ("network", "network-elastic"):
@@ -165,12 +166,7 @@ class HierarchicalPlaneStrain:
                                 "when Newton stalls above it, within the elements' measured "
                                 "noise) or 'tolerance' (newton_rtol only)")
         self.convergence = convergence
-        if not (relaxation in ("aitken", "none") or (
-                isinstance(relaxation, (int, float)) and 0 < float(relaxation) <= 1)):
-            raise FemInputError(f"relaxation={relaxation!r}: 'aitken' (Aitken's dynamic "
-                                "factor on the Newton corrections), 'none', or a fixed "
-                                "factor in (0, 1]")
-        self.relaxation = relaxation
+        self.relaxation = check_relaxation(relaxation)
         if not (noise_factor > 0 and math.isfinite(noise_factor)):
             raise FemInputError(f"noise_factor={noise_factor}: must be > 0 (a stalled step is "
                                 "converged within this many times the noise's residual)")
@@ -256,7 +252,6 @@ class HierarchicalPlaneStrain:
         self.A = fx.fem_petsc.create_matrix(self.form_jac)
         self.b = fx.fem_petsc.create_vector(self.V)
         self.b_noise = fx.fem_petsc.create_vector(self.V)
-        self._bc_dofs = np.unique(np.concatenate([b.dof_indices()[0] for b in self.bcs]))
         self.ksp = fx.PETSc.KSP().create(comm)
         self.ksp.setOperators(self.A)
         self.ksp.setType("preonly")
@@ -455,11 +450,7 @@ class HierarchicalPlaneStrain:
                 raise NewtonFailure("the Newton correction is not finite (singular Jacobian"
                                     f"; the softest elements: {self._softest()})")
             dk = -self.du.x.array.copy()  # the full Newton correction
-            if self.relaxation == "aitken":
-                if d_prev is not None:
-                    omega = aitken_factor(omega, d_prev, dk)
-            elif self.relaxation != "none":
-                omega = float(self.relaxation)
+            omega = next_factor(self.relaxation, omega, d_prev, dk)
             # (the first correction of a step is a full one: it also puts u on the boundary
             # values)
             w_k = 1.0 if it == 0 else omega

@@ -72,7 +72,10 @@ class PeriodicRegionElement:
     cache_dir: str | None = None
     options: dict | None = None
 
-    def _prepared(self, name: str, initial) -> tuple:
+    def prepare(self, name: str, initial) -> tuple:
+        """The element of region ``name`` at the ``initial`` WallTargets' full tensor, from
+        ``cache_dir`` if it is there (else prepared, and kept there); returns (element,
+        whether it came from the cache)."""
         from cpp_dem.dem_element import DemElement
 
         path = None if self.cache_dir is None else Path(self.cache_dir) / f"{name}_initial.bin"
@@ -100,7 +103,7 @@ class PeriodicRegionElement:
         from femcoupling.twoway import ElementResponse
 
         t0 = time.perf_counter()
-        el, cached = self._prepared(name, initial)
+        el, cached = self.prepare(name, initial)
         e0, s_ini = el.strain(), el.stress()
         target = np.asarray(final.fem_stress_pa, float)
         s1, ok, got = servo(el, target, tol=self.tol, unbalanced=self.unbalanced,

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["aitken_factor"]
+__all__ = ["aitken_factor", "check_relaxation", "next_factor"]
 
 
 def aitken_factor(omega: float, d_prev: np.ndarray, d: np.ndarray, lo: float = 0.1,
@@ -19,3 +19,23 @@ def aitken_factor(omega: float, d_prev: np.ndarray, d: np.ndarray, lo: float = 0
     if den == 0.0:
         return float(omega)
     return float(np.clip(-omega * float(np.asarray(d_prev, float) @ diff) / den, lo, hi))
+
+
+def check_relaxation(relaxation) -> str | float:
+    """``relaxation`` if it is "aitken", "none" or a fixed factor in (0, 1]; else a
+    FemInputError naming the value and what is allowed."""
+    from femcoupling.geometry import FemInputError
+
+    if relaxation in ("aitken", "none") or (
+            isinstance(relaxation, (int, float)) and 0 < float(relaxation) <= 1):
+        return relaxation
+    raise FemInputError(f"relaxation={relaxation!r}: 'aitken' (Aitken's dynamic factor on "
+                        "the corrections), 'none', or a fixed factor in (0, 1]")
+
+
+def next_factor(relaxation, omega: float, d_prev, d) -> float:
+    """The relaxation factor for the full correction ``d`` after ``d_prev`` (None for the
+    first): Aitken's update of ``omega``, 1 for "none", or the fixed factor."""
+    if relaxation == "aitken":
+        return omega if d_prev is None else aitken_factor(omega, d_prev, d)
+    return 1.0 if relaxation == "none" else float(relaxation)

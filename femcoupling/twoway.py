@@ -44,7 +44,8 @@ import numpy as np
 
 from femcoupling.geometry import FemInputError
 from femcoupling.handover import WallTargets, fem_to_dem, secant_stiffness
-from femcoupling.relaxation import aitken_factor
+from femcoupling.materials import LinearElastic
+from femcoupling.relaxation import check_relaxation, next_factor
 
 __all__ = ["ElementResponse", "HandoverHistory", "RegionWarning", "TwoWayResult",
            "check_region", "one_way", "two_way"]
@@ -151,6 +152,9 @@ class TwoWayResult:
         materials: last (E / Pa, nu) per region (relaxed).
         warnings: every RegionWarning message, in order.
         converged_on: "tol", or "scatter" (the change was within the elements' scatter).
+        fem_strain_increments: per region its normal strain increment (3,) over the load
+            stage in the last FEM solve, compression positive (None if the model has no
+            ``region_strain``).
     """
 
     converged: bool
@@ -162,6 +166,7 @@ class TwoWayResult:
     materials: dict
     warnings: list = dataclasses.field(default_factory=list)
     converged_on: str = "tol"
+    fem_strain_increments: dict = dataclasses.field(default_factory=dict)
 
 
 def check_region(name: str, targets: WallTargets, *, fem_strain_increment=None,
@@ -259,10 +264,7 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
         raise FemInputError(f"max_iterations={max_iterations!r}: must be an integer >= 2")
     if not (isinstance(workers, int) and workers >= 1):
         raise FemInputError(f"workers={workers!r}: must be an integer >= 1")
-    if not (relaxation in ("aitken", "none") or (
-            isinstance(relaxation, (int, float)) and 0 < float(relaxation) <= 1)):
-        raise FemInputError(f"relaxation={relaxation!r}: 'aitken', 'none' or a fixed factor "
-                            "in (0, 1]")
+    check_relaxation(relaxation)
     if not (scatter_factor > 0 and math.isfinite(scatter_factor)):
         raise FemInputError(f"scatter_factor={scatter_factor!r}: must be > 0")
     regions = list(regions)
@@ -298,6 +300,23 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
         if rank0:
             warnings.warn(msg, RegionWarning, stacklevel=3)
 
+    def check(r: str) -> tuple[list, float]:
+        """check_region of region r: this iteration's FEM state, its last element answer."""
+        resp = responses.get(r)
+        return check_region(r, final[r], fem_strain_increment=fem_de[r],
+                            dem_strain_increment=None if resp is None else resp.strain_increment,
+                            max_rotation_deg=max_rotation_deg,
+                            max_strain_ratio=max_strain_ratio, full_tensor=_full(resp))
+
+    def record(r: str, **row) -> None:
+        """A history row of region r: the FEM side of this iteration and ``row``."""
+        if history is not None:
+            history.append(iteration=it, region=hrow[r], fem_stress_pa=final[r].fem_stress_pa,
+                           targets_pa=final[r].normal_pa, shear_pa=final[r].shear_pa,
+                           rotation_deg=final[r].rotation_deg, change=change,
+                           fem_strain_increment=(np.nan if fem_de[r] is None else fem_de[r]),
+                           **row)
+
     for it in range(1, max_iterations + 1):
         model.restore_state(state0)
         load(model)
@@ -323,29 +342,15 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
         if stop:
             converged = True
             for r in regions:
-                msgs, ratio = check_region(
-                    r, final[r], fem_strain_increment=fem_de[r],
-                    dem_strain_increment=(responses[r].strain_increment if r in responses
-                                          else None),
-                    max_rotation_deg=max_rotation_deg, max_strain_ratio=max_strain_ratio,
-                    full_tensor=_full(responses.get(r)))
+                msgs, ratio = check(r)
                 for msg in msgs:
                     warn(f"iteration {it} (converged): {msg}")
-                if history is not None:
-                    history.append(iteration=it, region=hrow[r],
-                                   fem_stress_pa=final[r].fem_stress_pa,
-                                   targets_pa=final[r].normal_pa, shear_pa=final[r].shear_pa,
-                                   rotation_deg=final[r].rotation_deg, change=change,
-                                   fem_strain_increment=(np.nan if fem_de[r] is None
-                                                         else fem_de[r]),
-                                   strain_ratio=ratio)
+                record(r, strain_ratio=ratio)
             break
         jobs = [(r, initial[r], final[r]) for r in regions]
         out = _run_elements(element_runner, jobs, workers) if rank0 else None
         out = comm.bcast(out, root=0)
         scatter = 0.0
-        from femcoupling.materials import LinearElastic
-
         for r, resp in zip(regions, out):
             responses[r] = resp
             if resp.info and resp.info.get("message"):
@@ -362,11 +367,7 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
             if r in materials:
                 x = np.array([math.log(materials[r][0]), materials[r][1]])
                 step = np.array([math.log(E_full), nu_full]) - x
-                if relaxation == "aitken":
-                    if r in last_step:
-                        omega[r] = aitken_factor(omega[r], last_step[r], step)
-                elif relaxation != "none":
-                    omega[r] = float(relaxation)
+                omega[r] = next_factor(relaxation, omega[r], last_step.get(r), step)
                 last_step[r] = step
                 xe = x + omega[r] * step
                 E, nu = math.exp(xe[0]), float(xe[1])
@@ -374,11 +375,7 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
                 E, nu = E_full, nu_full
             materials[r] = (E, nu)
             model.set_region_material(r, LinearElastic(E, nu))
-            msgs, ratio = check_region(r, final[r], fem_strain_increment=fem_de[r],
-                                       dem_strain_increment=resp.strain_increment,
-                                       max_rotation_deg=max_rotation_deg,
-                                       max_strain_ratio=max_strain_ratio,
-                                       full_tensor=_full(resp))
+            msgs, ratio = check(r)
             if it == 1:  # (later iterations: checked again at the end)
                 for msg in msgs:
                     warn(f"iteration {it}: {msg}")
@@ -387,29 +384,17 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
                 f"E = {E_full / 1e6:.3g} MPa, nu = {nu_full:.3f}; given E = {E / 1e6:.3g} MPa, "
                 f"nu = {nu:.3f} (relaxation {omega[r]:.3g}); DEM/FEM strain {ratio:.3g}"
                 + (f"; scatter {rel:.3g}" if sc is not None else ""))
-            if history is not None:
-                history.append(iteration=it, region=hrow[r],
-                               fem_stress_pa=final[r].fem_stress_pa,
-                               targets_pa=final[r].normal_pa, shear_pa=final[r].shear_pa,
-                               rotation_deg=final[r].rotation_deg, change=change,
-                               dem_stress_pa=resp.stress_final_pa, secant_young_pa=E,
-                               secant_poisson=nu,
-                               fem_strain_increment=(np.nan if fem_de[r] is None
-                                                     else fem_de[r]),
-                               dem_strain_increment=resp.strain_increment, strain_ratio=ratio,
-                               scatter=rel if sc is not None else np.nan,
-                               relaxation=omega[r] if r in last_step else 1.0)
+            record(r, dem_stress_pa=resp.stress_final_pa, secant_young_pa=E,
+                   secant_poisson=nu, dem_strain_increment=resp.strain_increment,
+                   strain_ratio=ratio, scatter=rel if sc is not None else np.nan,
+                   relaxation=omega[r] if r in last_step else 1.0)
         prev = final
     if not converged:
         for r in regions:
-            msgs, _ = check_region(r, final[r], fem_strain_increment=fem_de[r],
-                                   dem_strain_increment=(responses[r].strain_increment
-                                                         if r in responses else None),
-                                   max_rotation_deg=max_rotation_deg,
-                                   max_strain_ratio=max_strain_ratio,
-                                   full_tensor=_full(responses.get(r)))
+            msgs, _ = check(r)
             for msg in msgs:
                 warn(f"not converged after {len(changes)} FEM solves: {msg}")
     return TwoWayResult(converged=converged, iterations=len(changes), changes=changes,
                         targets=final, initial_targets=initial, responses=responses,
-                        materials=materials, warnings=warned, converged_on=converged_on)
+                        materials=materials, warnings=warned, converged_on=converged_on,
+                        fem_strain_increments=dict(fem_de))

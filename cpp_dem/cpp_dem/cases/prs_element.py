@@ -405,10 +405,7 @@ def run(p: Params, out: Path) -> dict:
                                 rotation_deg=fin.rotation_deg,
                                 targets_final_pa=fin.normal_pa.tolist(), state="two-way")
                     m.write_xdmf(out / f"fem_{variant}.xdmf")
-                    loaded = m.region_strain("element")
-                    m.restore_state(state0)
-                    info["strain_increment"] = (-np.diag(loaded - m.region_strain("element"))
-                                                ).tolist()
+                    info["strain_increment"] = tw.fem_strain_increments["element"].tolist()
                 e = run_element(p, [ini.normal_pa, fin.normal_pa], prestressed=variant == "PRS",
                                 label=f"element_{variant}", out=out)
                 summary["elements"][variant] = e
