@@ -77,6 +77,37 @@ def build(args):
     return sc, walls, tpl, (lo, hi)
 
 
+def dense_pack(sc, walls, args):
+    """The dense layout's shared start: the cloud compacted by cpp_dem's servo walls to the
+    isotropic --pressure, frictionless (grains and walls) and without gravity, to an
+    unbalanced force of 1e-3; then a fresh scene with the grain friction on, the walls where
+    the servo left them, and every clump where it rests, at rest. No contact carries shear
+    history, so both codes start with the same contacts in the same state: equal overlaps
+    and zero shear springs. Returns (scene, walls, lo, hi) with lo, hi the box's corners (m)."""
+    from cpp_dem import prep
+
+    sc.gravity = (0, 0, 0)
+    prep.set_friction(sc, range(sc.num_bodies), sc.material(0), 0.0)
+    res = prep.compact_isotropic(sc, walls, args.pressure, unbalanced=1e-3, tol=0.01)
+    if not res.converged:
+        raise SystemExit(f"error: --pressure={args.pressure:g}: the dense pack did not reach "
+                         f"it ({res.axis_stresses} Pa, unbalanced {res.unbalanced_force:.3g})")
+    res.extra["controller"].enabled = False
+    wp = np.asarray(sc.wall_positions)
+    lo = np.array([wp[walls[0]], wp[walls[2]], wp[walls[4]]])
+    hi = np.array([wp[walls[1]], wp[walls[3]], wp[walls[5]]])
+    print(f"dense pack: {sc.num_clumps} clumps at {res.axis_stresses.round(1).tolist()} Pa, "
+          f"porosity {res.porosity:.4f}, unbalanced {res.unbalanced_force:.2e}, box {hi - lo} m")
+    fresh, fw, _, _ = build(argparse.Namespace(**{**vars(args), "layout": "cloud"}))
+    fresh.gravity = (0, 0, 0)
+    for c in range(sc.num_clumps):
+        fresh.set_clump_state(c, sc.clump_positions[c], sc.clump_orientations[c],
+                              [0, 0, 0], [0, 0, 0])
+    for w in range(6):
+        fresh.set_wall_position(fw[w], float(wp[walls[w]]))
+    return fresh, fw, lo, hi
+
+
 def members(sc):
     pos, rad = np.asarray(sc.positions), np.asarray(sc.radii)
     return [[[*pos[m], rad[m]] for m in sc.clump_members(c)] for c in range(sc.num_clumps)]
@@ -101,8 +132,13 @@ def run_ours(sc, walls, stages):
 
 def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--layout", choices=("cloud", "lattice", "settled"), default="cloud",
-                    help="settled: the cloud settled by cpp_dem first, then both codes start "
+    ap.add_argument("--layout", choices=("cloud", "lattice", "settled", "dense"), default="cloud",
+                    help="dense: a dense pack (cpp_dem compacts the cloud by servo walls to "
+                         "--pressure, frictionless and without gravity, so no contact carries "
+                         "shear history); both codes start from it (member positions, walls, "
+                         "overlaps) with friction on and the top wall pressing it slowly, "
+                         "the other walls fixed; settled: the cloud settled by cpp_dem first, "
+                         "then both codes start "
                          "from that pile (positions, orientations; no velocities, no contact "
                          "history) and the top wall presses it quasi-statically; cloud: both "
                          "codes drop the cloud themselves; lattice: no gravity, clumps on a "
@@ -119,6 +155,8 @@ def main() -> int:
     ap.add_argument("--settle", type=int, default=40000, help="stage 1 steps")
     ap.add_argument("--press", type=int, default=20000, help="stage 2 steps")
     ap.add_argument("--speed", type=float, default=0.01, help="top wall speed in stage 2, m/s")
+    ap.add_argument("--pressure", type=float, default=20e3,
+                    help="isotropic stress of the dense pack (dense layout), Pa")
     ap.add_argument("--every", type=int, default=1000)
     ap.add_argument("--seed", type=int, default=3)
     ap.add_argument("--rotation", choices=("fincham", "yade"), default="yade",
@@ -143,10 +181,15 @@ def main() -> int:
         top0 = float((np.asarray(sc.positions)[:, 2] + np.asarray(sc.radii)).max())
         sc = fresh
         args.settle = 0
+    if args.layout == "dense":
+        sc, walls, lo, hi = dense_pack(sc, walls, args)
+        args.settle = 0
     mem = members(sc)
     # Stage 1 settles; stage 2 starts with the top wall just above the highest member.
     if args.layout == "settled":
         pass
+    elif args.layout == "dense":
+        top0 = float(hi[2])
     elif args.layout == "cloud":
         probe, _, _, _ = build(argparse.Namespace(**vars(args)))
         probe.run(args.settle)
