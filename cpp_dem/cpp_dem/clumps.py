@@ -234,8 +234,12 @@ class ClumpTemplate:
 
     @classmethod
     def load(cls, path, name: str | None = None, cells: int = 160) -> "ClumpTemplate":
-        """Reads a template written by :meth:`save` (or any CSV of x, y, z, r in m)."""
-        a = np.loadtxt(path, delimiter=",", ndmin=2)
+        """Reads a template written by :meth:`save` (or any CSV of x, y, z, r in m, with or
+        without one header line)."""
+        try:
+            a = np.loadtxt(path, delimiter=",", ndmin=2)
+        except ValueError:  # a header line such as "x,y,z,r"
+            a = np.loadtxt(path, delimiter=",", ndmin=2, skiprows=1)
         if a.shape[1] != 4:
             raise ParameterError(f"{path}: has {a.shape[1]} columns; a template CSV has 4 (x, y, z, r in m)")
         import os

@@ -16,10 +16,16 @@ is about 1e-7 s. Its node masses are scaled (--node-density-scale, default auto:
 step becomes a quarter of the grains') while its weight stays true; docs/pullout.md gives
 the effect on the results.
 
+--grains clumps:NAME fills the box with rigid clumps (docs/clumps.md) instead of spheres: the
+same radii as equivalent-volume radii, random seeded orientations; NAME as in the triaxial
+case (a shipped grain or a template CSV x,y,z,r in m). --spheres then counts clumps.
+
 Outputs in --out (per run): pullout.h5 (series + snapshots with member forces), pullout.csv,
 pullout_force.png (000 Fig. 5), pullout_members.png (Figs 7-8), vtk/ (spheres, contacts,
-geogrid with member forces, box; PVD series over the snapshots), summary.json. With several
---spheres values: one sub-directory per count and comparison.png + comparison.csv.
+geogrid with member forces, box; PVD series over the snapshots), packing_prepared.csv (the
+grains' spheres after the preparation; with clumps also clumps_prepared.csv), summary.json.
+With several --spheres values: one sub-directory per count and comparison.png +
+comparison.csv.
 """
 
 from __future__ import annotations
@@ -38,7 +44,9 @@ from cpp_dem.io.figures import save_figure
 from cpp_dem.rundir import check_common_args
 import cpp_dem as dem  # noqa: E402
 from cpp_dem import geogrid, prep, presets, pullout  # noqa: E402
-from cpp_dem.cases.pullout_common import make_logger, run_case  # noqa: E402
+from cpp_dem.cases.grains_option import HELP as GRAINS_HELP, check_grains  # noqa: E402
+from cpp_dem.cases.pullout_common import (clump_layers, grain_label, make_logger,  # noqa: E402
+                                          run_case)
 
 ROOT = Path(__file__).resolve().parents[3]  # the source tree (for git), when there is one
 
@@ -47,7 +55,7 @@ ROOT = Path(__file__).resolve().parents[3]  # the source tree (for git), when th
 class Params:
     """Parameters of the 000 pull-out (SI)."""
 
-    spheres: int = 3000                 #: number of grains, -
+    spheres: int = 3000                 #: number of grains (spheres, or clumps), -
     box: tuple = (1.0, 0.5, 0.5)        #: box x (pull), y, z, m (Table 1)
     radius_mean: float = 0.012          #: initial mean radius, m (Table 1)
     radius_dispersion: float = 0.006    #: initial radius spread +-, m (Table 1)
@@ -74,10 +82,13 @@ class Params:
     seed: int = 1
     threads: int = 0
     preset: str = ""                    #: speed-accuracy preset for the pull ('' = none)
+    grains: str = "spheres"             #: spheres, or clumps:NAME (a shipped grain gravel_a ..
+                                        #: gravel_d, 'gravel' for the four mixed, or a
+                                        #: template CSV x,y,z,r in m); the radii are then
+                                        #: the clumps' equivalent-volume radii
 
 
 SMOKE = dict(spheres=375, box=(0.5, 0.25, 0.25), distance=0.01, snapshots=2)
-
 
 def build(p: Params) -> pullout.PulloutSample:
     lo = np.zeros(3)
@@ -87,7 +98,13 @@ def build(p: Params) -> pullout.PulloutSample:
                         p.radius_mean + p.radius_dispersion, p.spheres)
     zg = 0.5 * hi[2]
     rc = 0.5 * p.grid_thickness
-    c, r = pullout.layered_cloud(radii, lo, hi, grid_z=zg, clearance=1.5 * rc, seed=p.seed)
+    clumps = None
+    if p.grains != "spheres":
+        c, r, clumps = clump_layers(p.grains, radii, lo, hi, grid_z=zg, clearance=1.5 * rc,
+                                    seed=p.seed)
+    else:
+        c, r = pullout.layered_cloud(radii, lo, hi, grid_z=zg, clearance=1.5 * rc,
+                                     seed=p.seed)
     pitch = math.sqrt(p.aperture_area) + p.rib_width
     nx = int(math.floor((hi[0] - p.rib_width) / pitch + 1e-9))
     ny = int(math.floor((hi[1] - p.rib_width) / pitch + 1e-9))
@@ -113,13 +130,15 @@ def build(p: Params) -> pullout.PulloutSample:
     return pullout.build_sample(c, r, lo, hi, grain=grain, grid_builder=grid_builder,
                                 grid_z=zg, clamp_depth=p.rib_width, clamp="front",
                                 local_damping=p.damping, dt_safety=p.dt_safety,
-                                max_overlap_ratio=prep.overlap_limit(p.pressure, p.young))
+                                max_overlap_ratio=prep.overlap_limit(p.pressure, p.young),
+                                clumps=clumps)
 
 
 def run(p: Params, out: Path) -> dict:
     if p.threads > 0:
         dem.set_num_threads(p.threads)
-    log = make_logger(f"pullout-000 n={p.spheres}")
+    log = make_logger(f"pullout-000 n={p.spheres}"
+                      + ("" if p.grains == "spheres" else f" {p.grains}"))
     sample = build(p)
     nds = p.node_density_scale if p.node_density_scale == "auto" else float(
         p.node_density_scale)
@@ -140,9 +159,9 @@ def run(p: Params, out: Path) -> dict:
                     velocity=p.velocity, distance=p.distance, record_every=p.record_every,
                     snapshot_displacements=snaps,
                     grain_density=p.unit_weight / geogrid.G_STANDARD, stress=p.pressure,
-                    title=f"000 pull-out, {len(sample.grain_ids)} spheres, "
+                    title=f"000 pull-out, {grain_label(sample)}, "
                           f"{p.pressure / 1e3:g} kPa, {p.velocity:.4g} m/s", log=log,
-                    before_pull=before_pull)
+                    before_pull=before_pull, grains=p.grains)
 
 
 def compare(runs: dict, out: Path) -> None:
@@ -158,7 +177,8 @@ def compare(runs: dict, out: Path) -> None:
     rows = []
     for n, (sub, s) in runs.items():
         rec = read_csv_series(sub / "pullout.csv")
-        ax.plot(1e3 * rec["displacement"], rec["pull_force"], label=f"{n} spheres")
+        ax.plot(1e3 * rec["displacement"], rec["pull_force"],
+                label=f"{n} {'spheres' if s.get('num_clumps', 0) == 0 else 'clumps'}")
         rows.append({"spheres": n, **{k: s[k] for k in (
             "initial_peak_force_N", "initial_peak_displacement_m", "max_force_N",
             "mean_force_N", "cov_force", "transverse_over_longitudinal",
@@ -190,8 +210,10 @@ def parse_args(argv=None) -> tuple[Params, list[int], Path]:
                          f"(0.5 x 0.25 x 0.25 m), pull {SMOKE['distance'] * 1e3:g} mm")
     ap.add_argument("--out", type=Path, default=Path("results") / "pullout_000")
     ap.add_argument("--spheres", type=str, default=None,
-                    help=f"number of spheres, or a comma list (e.g. 3000,6000,9000) to run "
-                         f"each and compare (default {d.spheres})")
+                    help=f"number of grains (spheres, or clumps with --grains clumps:...), or "
+                         f"a comma list (e.g. 3000,6000,9000) to run each and compare "
+                         f"(default {d.spheres})")
+    ap.add_argument("--grains", type=str, default=d.grains, help=GRAINS_HELP)
     ap.add_argument("--pressure", type=float, default=d.pressure,
                     help="confining stress on the top wall, Pa, > 0")
     ap.add_argument("--porosity", type=float, default=d.porosity,
@@ -239,10 +261,11 @@ def parse_args(argv=None) -> tuple[Params, list[int], Path]:
         if not (math.isfinite(s) and s > 0):
             ap.error(f"--node-density-scale={a.node_density_scale!r}: must be a number > 0 "
                      "or 'auto'")
+    check_grains(ap, a.grains)
     p = replace(p, pressure=a.pressure, porosity=a.porosity, velocity=a.velocity,
                 damping=a.damping, dt_safety=a.dt_safety,
                 node_density_scale=a.node_density_scale, seed=a.seed, threads=a.threads,
-                preset=a.preset)
+                preset=a.preset, grains=a.grains)
     if a.distance is not None:
         if not (math.isfinite(a.distance) and a.distance > 0):
             ap.error(f"--distance={a.distance}: must be > 0 (m)")

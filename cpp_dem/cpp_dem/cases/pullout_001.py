@@ -13,6 +13,11 @@ that is the default here (--pull all); --pull front clamps only the front row of
 lets the grid deform. Recorded pull-out force: the sum of the reactions of all pulled nodes;
 001 sums the 10 front nodes only (recorded too, as front_force).
 
+--grains clumps:NAME fills the box with rigid clumps (docs/clumps.md) instead of the lattice
+of spheres: as many clumps as the lattice has spheres, the grain radius as their
+equivalent-volume radius, random seeded orientations in a loose cloud clear of the grid's
+layer; the radius growth then packs them.
+
 With --study the parameter table of 001 (Table 5.2) is run and summarised like Tables 5.3
 (mean pull-out force) and 5.4 (coefficient of variation), beside 001's values: study.csv,
 study.md, study.png.
@@ -36,7 +41,9 @@ from cpp_dem.rundir import check_common_args
 import cpp_dem as dem  # noqa: E402
 from cpp_dem import geogrid, prep, pullout  # noqa: E402
 from cpp_dem.packing import hex_packing  # noqa: E402
-from cpp_dem.cases.pullout_common import make_logger, run_case  # noqa: E402
+from cpp_dem.cases.grains_option import HELP as GRAINS_HELP, check_grains  # noqa: E402
+from cpp_dem.cases.pullout_common import (clump_layers, grain_label, make_logger,  # noqa: E402
+                                          run_case)
 
 ROOT = Path(__file__).resolve().parents[3]  # the source tree (for git), when there is one
 
@@ -79,6 +86,8 @@ class Params:
     snapshots: int = 3
     seed: int = 1
     threads: int = 0
+    grains: str = "spheres"         #: spheres, or clumps:NAME (cases/grains_option.py); the
+                                    #: radius is then the clumps' equivalent-volume radius
 
 
 SMOKE = dict(radius=2.5e-3, box=0.05, distance=0.004, snapshots=1)
@@ -102,6 +111,10 @@ def build(p: Params) -> pullout.PulloutSample:
     zg = 0.5 * p.box
     rc, n_nodes = grid_spec(p)
     c, r = grains(p)
+    clumps = None
+    if p.grains != "spheres":
+        c, r, clumps = clump_layers(p.grains, r, lo, hi, grid_z=zg, clearance=1.5 * rc,
+                                    seed=p.seed)
     grain = dem.linear_material(density=p.density, young=p.young, poisson=p.poisson,
                                 friction_angle_deg=p.phi)
 
@@ -127,13 +140,15 @@ def build(p: Params) -> pullout.PulloutSample:
     return pullout.build_sample(c, r, lo, hi, grain=grain, grid_builder=grid_builder,
                                 grid_z=zg, clamp=p.pull, local_damping=p.damping,
                                 dt_safety=p.dt_safety,
-                                max_overlap_ratio=prep.overlap_limit(p.pressure, p.young))
+                                max_overlap_ratio=prep.overlap_limit(p.pressure, p.young),
+                                clumps=clumps)
 
 
 def run(p: Params, out: Path) -> dict:
     if p.threads > 0:
         dem.set_num_threads(p.threads)
-    tag = f"pullout-001 {p.grid} r={p.radius * 1e3:g}mm P={p.pressure / 1e3:g}kPa"
+    tag = f"pullout-001 {p.grid} r={p.radius * 1e3:g}mm P={p.pressure / 1e3:g}kPa" + (
+        "" if p.grains == "spheres" else f" {p.grains}")
     log = make_logger(tag)
     sample = build(p)
     snaps = np.linspace(0, p.distance, p.snapshots + 1)[1:] if p.snapshots else []
@@ -143,8 +158,9 @@ def run(p: Params, out: Path) -> dict:
                     velocity=p.velocity, distance=p.distance, record_every=p.record_every,
                     snapshot_displacements=snaps, grain_density=p.density,
                     stress=p.pressure,
-                    title=f"001 pull-out, {p.grid} grid, r = {p.radius * 1e3:g} mm, "
-                          f"{p.pressure / 1e3:g} kPa", log=log)
+                    title=f"001 pull-out, {p.grid} grid, {grain_label(sample)}, "
+                          f"r = {p.radius * 1e3:g} mm, {p.pressure / 1e3:g} kPa", log=log,
+                    grains=p.grains)
 
 
 def study(p: Params, out: Path, grids, radii, pressures, radii_given: bool) -> None:
@@ -285,10 +301,12 @@ def parse_args(argv=None):
                          "like Tables 5.3-5.4; --grids, --radius and --pressure select")
     ap.add_argument("--grids", type=str, default="square,triangular",
                     help="grids of the study (comma list)")
+    ap.add_argument("--grains", type=str, default=d.grains, help=GRAINS_HELP)
     ap.add_argument("--seed", type=int, default=d.seed)
     ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: default)")
     a = ap.parse_args(argv)
     check_common_args(ap, a)
+    check_grains(ap, a.grains)
     p = Params(**SMOKE) if a.smoke else Params()
     radii = _floats("--radius", a.radius, ap) if a.radius else [p.radius]
     pressures = _floats("--pressure", a.pressure, ap) if a.pressure else [p.pressure]
@@ -313,7 +331,8 @@ def parse_args(argv=None):
         ap.error(f"--grid-young={a.grid_young}: must be > 0 (Pa)")
     p = replace(p, grid=a.grid, radius=radii[0], pressure=pressures[0], velocity=a.velocity,
                 grid_young=a.grid_young,
-                pull=a.pull, damping=a.damping, seed=a.seed, threads=a.threads)
+                pull=a.pull, damping=a.damping, seed=a.seed, threads=a.threads,
+                grains=a.grains)
     if a.distance is not None:
         if not (math.isfinite(a.distance) and a.distance > 0):
             ap.error(f"--distance={a.distance}: must be > 0 (m)")

@@ -1,6 +1,7 @@
 """What the two pull-out cases (pullout_000.py, pullout_001.py) share: running the stages
 with progress lines, the recorders (HDF5 + CSV, appended and flushed as the run goes), the VTK
-snapshots at chosen displacements, the plots (000 Figs 5, 7, 8) and the summary."""
+snapshots at chosen displacements, the plots (000 Figs 5, 7, 8), the summary, and the grains
+option (--grains spheres | clumps:NAME) with its checks."""
 
 from __future__ import annotations
 
@@ -12,12 +13,85 @@ import numpy as np
 
 from cpp_dem.io.figures import save_figure
 import cpp_dem as dem
-from cpp_dem import geogrid, pullout
+from cpp_dem import geogrid, measure, pullout
+from cpp_dem.cases.grains_option import grain_templates
 from cpp_dem.rundir import begin_run, end_run
 from cpp_dem.output import (CsvRecorder, H5Recorder, PvdWriter, write_vtk_box,
                             write_vtk_contacts, write_vtk_spheres)
 
 SERIES = {k: (None, u) for k, u in pullout.PULL_UNITS.items()}
+
+#: Largest solid fraction of the clumps' bounding spheres in the initial cloud, -: random
+#: sequential addition jams above about 0.3 (cpp_dem.packing.loose_cloud).
+CLUMP_CLOUD_FRACTION = 0.25
+
+
+def clump_layers(spec: str, radii, lo, hi, *, grid_z: float, clearance: float,
+                 seed: int) -> tuple:
+    """The initial cloud of clumps for --grains clumps:NAME: one clump per radius (m, its
+    equivalent-volume radius), random seeded orientations, in the two layers clear of the
+    geogrid plane z = grid_z by ``clearance`` (m) (pullout.layered_clump_cloud). The bounding
+    spheres take more room than the grains, so the cloud is shrunk uniformly to at most
+    CLUMP_CLOUD_FRACTION of the layers' volume; the preparation grows the grains anyway.
+    Returns centres and radii of the bounding spheres (m) and (cloud, templates) for
+    pullout.build_sample(clumps=...)."""
+    from cpp_dem.clumps import bounding_volume_factor
+
+    templates = grain_templates(spec)
+    radii = np.asarray(radii, float)
+    layers = float((hi[0] - lo[0]) * (hi[1] - lo[1]) * (hi[2] - lo[2] - 2.0 * clearance))
+    frac = bounding_volume_factor(templates) * float(np.sum(4 / 3 * np.pi * radii**3)) / layers
+    shrink = min(1.0, (CLUMP_CLOUD_FRACTION / frac) ** (1.0 / 3.0))
+    cloud = pullout.layered_clump_cloud(templates, 2.0 * radii * shrink, lo, hi, grid_z=grid_z,
+                                        clearance=clearance, seed=seed)
+    r = cloud.scales * np.array([templates[t].bounding_radius for t in cloud.template])
+    return cloud.positions, r, (cloud, templates)
+
+
+def grain_label(sample: pullout.PulloutSample) -> str:
+    """'N spheres' or 'N clumps (M spheres)' for titles and logs."""
+    sc = sample.scene
+    n_sph = int(np.count_nonzero(measure.sphere_mask(sc)))
+    if sc.num_clumps:
+        return f"{sc.num_clumps} clumps ({n_sph} spheres)"
+    return f"{n_sph} spheres"
+
+
+def largest_overlaps(scene) -> dict:
+    """The largest overlaps of the active grain contacts, as fractions of the (smaller)
+    sphere's radius, -: 'pair' (grain-grain; for clumps member-member between two clumps, as
+    the core's blow-up check measures them), 'wall' (grain-wall) and 'grid' (grain-geogrid,
+    of the grain's radius)."""
+    c = scene.contacts()
+    ids = np.asarray(c["ids"], dtype=np.int64).reshape(-1, 2)
+    ov = np.asarray(c["overlap"], dtype=float)
+    r = np.asarray(scene.radii, dtype=float)
+    out = {"pair": 0.0, "wall": 0.0, "grid": 0.0}
+    pair = ids[:, 1] >= 0
+    if np.any(pair):
+        out["pair"] = float(np.max(ov[pair] / np.minimum(r[ids[pair, 0]], r[ids[pair, 1]])))
+    if np.any(~pair):
+        out["wall"] = float(np.max(ov[~pair] / r[ids[~pair, 0]]))
+    g = scene.grid_contacts()
+    if len(g.get("overlap", ())):
+        sph = np.asarray(g["sphere"], dtype=np.int64)
+        out["grid"] = float(np.max(np.asarray(g["overlap"], dtype=float) / r[sph]))
+    return out
+
+
+def write_grains_csv(sample: pullout.PulloutSample, out: Path, name: str) -> None:
+    """packing_<name>.csv: the grains' spheres (x, y, z, r in m; clump members included, the
+    geogrid's nodes not); with clumps also clumps_<name>.csv: clump, centre of mass (m),
+    orientation of the principal frame (w, x, y, z), mass (kg), as the triaxial case."""
+    sc = sample.scene
+    grains = measure.sphere_mask(sc)
+    dem.write_packing_csv(out / f"packing_{name}.csv", sc.positions[grains], sc.radii[grains])
+    if sc.num_clumps:
+        np.savetxt(out / f"clumps_{name}.csv",
+                   np.column_stack([np.arange(sc.num_clumps), sc.clump_positions,
+                                    sc.clump_orientations, sc.clump_masses]),
+                   delimiter=",", header="clump,x_m,y_m,z_m,qw,qx,qy,qz,mass_kg", comments="",
+                   fmt=["%d"] + ["%.10g"] * 8)
 
 
 def make_logger(tag: str):
@@ -91,16 +165,25 @@ def plot_pull(rec: dict, png_force: Path, png_members: Path, title: str,
 def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
              prep_kwargs: dict, velocity: float, distance: float, record_every: int,
              snapshot_displacements, grain_density: float, stress: float, title: str,
-             log, before_pull=None) -> dict:
+             log, before_pull=None, grains: str = "spheres") -> dict:
     """Prepares the sample, pulls it, writes every output in ``out``; returns the summary.
     ``before_pull(sample)``, if given, runs between the preparation and the pull (e.g. a
-    speed-accuracy preset that applies to the pull only)."""
+    speed-accuracy preset that applies to the pull only). ``grains``: the --grains value, for
+    the summary. A clump counts as one grain (``num_grains``); ``num_spheres`` counts the
+    spheres (a clump's members)."""
     t_start = time.perf_counter()
     begin_run(out, tag)
     vtk = out / "vtk"
     vtk.mkdir(exist_ok=True)
     sc = sample.scene
-    n_grains = len(sample.grain_ids)
+    n_grains = measure.grain_of_body(sc)[1]  # a clump is one grain
+    n_spheres = int(np.count_nonzero(measure.sphere_mask(sc)))
+    if sc.num_clumps:
+        tpl = sorted({int(n) for n in np.bincount(np.asarray(sc.clump_ids)[
+            np.asarray(sc.clump_ids) >= 0])})
+        log(f"grains: {grains}, {sc.num_clumps} clumps of {'/'.join(map(str, tpl))} spheres "
+            f"({n_spheres} spheres), contact stiffness of the grain's equivalent radius; "
+            f"overlap limit {sc.max_overlap_ratio:.3g} of a member's radius")
     log(f"{n_grains} grains, geogrid of {len(sample.grid.nodes)} nodes / "
         f"{len(sample.grid.links)} links / {len(sample.grid.pfacets)} PFacets / "
         f"{sample.grid.n_members} members; clamp holds {len(sample.clamp_nodes)} nodes "
@@ -112,6 +195,8 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
     if not res.converged:
         log("warning: the sample did not reach the stability criteria; pulling anyway")
     write_vtk_state(sample, vtk, "prepared")
+    write_grains_csv(sample, out, "prepared")
+    ov_prep = largest_overlaps(sc)
     if before_pull is not None:
         before_pull(sample)
     inertial = pullout.inertial_number(velocity, grain_density, stress)
@@ -164,7 +249,12 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
     pull_steps = sc.step_count - steps0
     summ = pullout.summarize(rec)
     plot_pull(rec, out / "pullout_force.png", out / "pullout_members.png", title, summ)
-    summary = {**meta, **summ, "num_grains": n_grains, "grid_nodes": int(len(sample.grid.nodes)),
+    ov_end = largest_overlaps(sc)
+    summary = {**meta, **summ, "grains": grains, "num_grains": n_grains,
+               "num_clumps": int(sc.num_clumps), "num_spheres": n_spheres,
+               "max_overlap_ratio_limit": float(sc.max_overlap_ratio),
+               "largest_overlap_prepared": ov_prep, "largest_overlap_final": ov_end,
+               "grid_nodes": int(len(sample.grid.nodes)),
                "grid_members": int(sample.grid.n_members),
                "apertures": sample.apertures.tolist(),
                "porosity_prepared": res.porosity, "top_stress_prepared_Pa": res.top_stress,
@@ -175,7 +265,7 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
                "top_stress_max_rel_dev": float(np.max(np.abs(rec["top_stress"] / stress - 1))),
                "wall_time_prep_s": t_prep, "wall_time_pull_s": t_pull,
                "wall_time_total_s": time.perf_counter() - t_start,
-               "particle_steps_per_s_pull": n_grains * pull_steps / t_pull if t_pull else 0,
+               "particle_steps_per_s_pull": n_spheres * pull_steps / t_pull if t_pull else 0,
                "threads": dem.get_num_threads()}
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=str) + "\n")
     end_run(out)

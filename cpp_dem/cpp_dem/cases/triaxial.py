@@ -38,6 +38,7 @@ from cpp_dem.rundir import begin_run, check_common_args, end_run
 import cpp_dem as dem
 from cpp_dem import geogrid, measure, prep, psd
 from cpp_dem.checkpoint import save_checkpoint
+from cpp_dem.cases.grains_option import HELP as GRAINS_HELP, check_grains, grain_templates
 from cpp_dem.output import CsvRecorder, H5Recorder, write_vtk_box, write_vtk_spheres
 from cpp_dem.packing import loose_cloud
 from cpp_dem.triaxial import (apply_preset, build_box_sample, deviatoric_stage,
@@ -91,16 +92,6 @@ def smoke_box(p: Params) -> tuple:
     """The box scaled with the grain count (grain sizes kept): (n / 15000)^(1/3) x 0.3 ..."""
     f = (p.n / 15000.0) ** (1.0 / 3.0)
     return tuple(float(x * f) for x in (0.3, 0.3, 0.6))
-
-
-def grain_templates(spec: str) -> list:
-    """The clump templates of a --grains value 'clumps:NAME' (see Params.grains)."""
-    from cpp_dem.clumps import templates_from_spec
-
-    try:
-        return templates_from_spec(spec)
-    except dem.ParameterError as e:
-        raise SystemExit(f"error: --{e}")
 
 
 def make_sample(p: Params, log) -> tuple:
@@ -537,9 +528,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                     help="multiply every grain size by this after the PSD is fitted to --n: "
                     "the same box with about n / scale^3 grains (coarse graining), > 0")
     ap.add_argument("--grains", type=str, default=d.grains,
-                    help="spheres, or clumps:NAME with NAME a shipped grain (gravel_a .. "
-                    "gravel_d; 'gravel' mixes the four) or a clump template CSV (x,y,z,r); the "
-                    "PSD gives equivalent-volume diameters (docs/clumps.md)")
+                    help=GRAINS_HELP + "; the PSD gives equivalent-volume diameters")
     ap.add_argument("--preset", choices=("fast", "balanced", "accurate"), default="",
                     help="speed-accuracy preset of the axial loading (dt safety, local "
                     "damping, strain rate from an inertial number; overrides --strain-rate, "
@@ -562,9 +551,8 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     p.phi, p.density, p.seed, p.threads = a.phi, a.density, a.seed, a.threads
     p.geogrid, p.clear_layer = a.geogrid, a.clear_layer
     p.grain_scale, p.dt_safety, p.preset = a.grain_scale, a.dt_safety, a.preset
+    check_grains(ap, a.grains)
     if a.grains != "spheres":
-        if not a.grains.startswith("clumps:") or not a.grains[7:]:
-            ap.error(f"--grains={a.grains}: must be 'spheres' or 'clumps:NAME'")
         if a.packing:
             ap.error("--grains: clumps are generated; --packing gives spheres")
     p.grains = a.grains

@@ -1,0 +1,42 @@
+"""The cases' --grains option (triaxial, pull-out 000 and 001): 'spheres', or 'clumps:NAME'
+with NAME a shipped grain (gravel_a .. gravel_d), 'gravel' for the four mixed, or a clump
+template CSV (x, y, z, r in m). The case's radii or PSD are then the clumps'
+equivalent-volume radii (docs/clumps.md)."""
+
+from __future__ import annotations
+
+import cpp_dem as dem
+
+ALLOWED = ("'spheres' or 'clumps:NAME' (NAME: a shipped grain gravel_a .. gravel_d, 'gravel' "
+           "for the four mixed, or a clump template CSV x,y,z,r in m)")
+
+HELP = ("spheres, or clumps:NAME with NAME a shipped grain (gravel_a .. gravel_d, 24 spheres "
+        "each; 'gravel' mixes the four) or a clump template CSV (x,y,z,r in m); the case's "
+        "radii are then equivalent-volume radii (docs/clumps.md)")
+
+
+def grain_templates(spec: str) -> list:
+    """The clump templates of a --grains value 'clumps:NAME'
+    (cpp_dem.clumps.templates_from_spec); SystemExit naming --grains, the value and what is
+    allowed when it names none or the template cannot be read."""
+    from cpp_dem.clumps import templates_from_spec
+
+    try:
+        return templates_from_spec(spec)
+    except dem.ParameterError as e:
+        raise SystemExit(f"error: --{e}") from None
+    except (OSError, ValueError) as e:
+        raise SystemExit(f"error: --grains={spec!r}: cannot read the template: {e}") from None
+
+
+def check_grains(ap, value: str) -> None:
+    """argparse check of --grains: 'spheres', or 'clumps:NAME' naming templates that load
+    (ap.error, exit status 2, naming the field, the value and what is allowed)."""
+    if value == "spheres":
+        return
+    if not value.startswith("clumps:") or not value[7:]:
+        ap.error(f"--grains={value}: must be {ALLOWED}")
+    try:
+        grain_templates(value)
+    except SystemExit as e:
+        ap.error(str(e).removeprefix("error: "))
