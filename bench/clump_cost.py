@@ -64,12 +64,45 @@ def settled(n: int, seed: int, free: bool = False):
     return sc, (lo, hi), mat
 
 
-def clone(src, free: bool, hi):
-    """A new scene with src's spheres (positions, velocities, spins), as clumps or free."""
-    sc = dem.Scene(gravity=(0, 0, -9.81), local_damping=0.3)
+def dense(n: int, seed: int, pressure: float):
+    """The clumps compacted by servo walls to the isotropic ``pressure`` (Pa) without gravity
+    and frictionless (so no contact carries shear history), to an unbalanced force of 1e-3;
+    then the grains' friction (30 deg) back on. A confined pack: more contacts per member
+    than the gravity pile."""
+    from cpp_dem import prep
+
+    tpl = template()
+    side = (n * 1.2e-7) ** (1 / 3) * 1.6
+    sc = dem.Scene(local_damping=0.3)
     mat = sc.add_material(dem.linear_material(density=2650, young=5e7, poisson=0.3,
                                               friction_angle_deg=30))
-    sc.add_box((0, 0, 0), hi, material=mat)
+    lo, hi = np.zeros(3), np.array([side, side, 3 * side])
+    walls = sc.add_box(lo, hi, material=mat)
+    cloud = clump_cloud(tpl, np.full(n, tpl.equivalent_diameter), lo, hi, seed=seed)
+    cloud.add_to(sc, tpl, material=mat)
+    sc.set_auto_timestep(safety=0.5, period=100)
+    prep.set_friction(sc, range(sc.num_bodies), sc.material(mat), 0.0)
+    res = prep.compact_isotropic(sc, walls, pressure, unbalanced=1e-3)
+    if not res.converged:
+        raise SystemExit(f"error: --pressure={pressure:g}: not reached ({res.axis_stresses})")
+    res.extra["controller"].enabled = False
+    for b in range(sc.num_bodies):
+        sc.set_body_material(b, mat)
+    return sc, (lo, hi), mat
+
+
+def clone(src, free: bool, hi, hold: bool = False):
+    """A new scene with src's spheres (positions, velocities, spins), as clumps or free, and
+    src's gravity and wall positions. ``hold``: the free spheres 1e6 times denser, so that
+    over a few steps they stay where the clumps held them and keep the clumps' contacts (a
+    free sphere's arithmetic per step does not depend on its mass)."""
+    sc = dem.Scene(gravity=tuple(src.gravity), local_damping=0.3)
+    rho = 2650 * (1e6 if (free and hold) else 1)
+    mat = sc.add_material(dem.linear_material(density=rho, young=5e7, poisson=0.3,
+                                              friction_angle_deg=30))
+    walls = sc.add_box((0, 0, 0), hi, material=mat)
+    for w, x in zip(walls, np.asarray(src.wall_positions)):
+        sc.set_wall_position(int(w), float(x))
     if free:
         sc.add_spheres(src.positions, src.radii, material=mat)
         sc.velocities = src.velocities
@@ -92,6 +125,13 @@ def main() -> int:
     ap.add_argument("--mode", choices=("settled", "same-state"), default="settled",
                     help="settled: each pile settled on its own, timed at rest; same-state: "
                          "both from the clump pile's state, timed over --steps steps")
+    ap.add_argument("--pack", choices=("gravity", "dense"), default="gravity",
+                    help="same-state mode's shared state: the pile settled under gravity, or "
+                         "a dense pack compacted to --pressure by servo walls (no gravity)")
+    ap.add_argument("--pressure", type=float, default=100e3, help="dense pack's stress, Pa")
+    ap.add_argument("--hold", action="store_true",
+                    help="same-state mode: the free spheres 1e6 times denser, so they keep "
+                         "the clumps' contacts over the timed steps (like for like)")
     ap.add_argument("--steps", type=int, default=100)
     ap.add_argument("--warmup", type=int, default=5)
     ap.add_argument("--rounds", type=int, default=6)
@@ -115,11 +155,12 @@ def main() -> int:
                 (ta if sc is a else tb).append((time.process_time() - t0) / args.steps)
                 (ca if sc is a else cb).append(sc.num_active_contacts)
     else:
-        src, (lo, hi), _ = settled(args.clumps, args.seed)
+        src, (lo, hi), _ = (settled(args.clumps, args.seed) if args.pack == "gravity"
+                            else dense(args.clumps, args.seed, args.pressure))
         ta, tb, ca, cb = [], [], [], []
         for k in range(args.rounds):
             for free in ((False, True) if k % 2 == 0 else (True, False)):
-                sc = clone(src, free=free, hi=hi)
+                sc = clone(src, free=free, hi=hi, hold=args.hold)
                 sc.run(args.warmup)  # contacts formed, lists built
                 t0 = time.process_time()
                 sc.run(args.steps)
@@ -128,7 +169,7 @@ def main() -> int:
                 if not free:
                     a = sc
     k_members = a.num_bodies
-    res = {"mode": args.mode, "clumps": a.num_clumps, "spheres": k_members, "threads": args.threads,
+    res = {"mode": args.mode, "pack": args.pack, "hold": args.hold, "clumps": a.num_clumps, "spheres": k_members, "threads": args.threads,
            "steps_per_block": args.steps, "rounds": args.rounds,
            "clump_us_per_step": 1e6 * statistics.median(ta),
            "free_us_per_step": 1e6 * statistics.median(tb),
