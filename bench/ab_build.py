@@ -15,6 +15,9 @@ Scenes (SI units; the same input for both builds):
 - ``hertz``: the same packing with Hertz–Mindlin grains;
 - ``geogrid``: a square geogrid (cohesive beams, grain–cylinder and grain–PFacet contacts)
   between two layers of grains (bench/geogrid_cost.py's scene, small);
+- ``clumps``: the same packing with each sphere replaced by a clump of three members inside
+  its ball (bench/clump_cost.py's template, random seeded orientations), settling under
+  gravity (N clumps, 3 N spheres);
 - ``pullout``: the geogrid pull-out of ``cases/pullout_000.py --smoke`` (N is ignored: 375
   grains and a flat-ribbed biaxial grid of PFacets), prepared untimed (REFD, gravity, top servo)
   and timed while the clamp pulls the grid.
@@ -156,7 +159,18 @@ def make_scene(kind: str, n: int):
                                   friction_angle_deg=cfg.friction_angle_deg, **parts)
     m = scene.add_material(mat)
     scene.add_box(p.lo, p.hi, material=m)
-    scene.add_spheres(p.centers, p.radii, material=m)
+    if kind == "clumps":
+        # Each sphere of the packing replaced by a three-member clump (bench/clump_cost.py's
+        # template) inside its ball, random seeded orientations; they settle under gravity.
+        from clump_cost import template
+
+        from cpp_dem.clumps import random_orientations
+
+        tpl = template()
+        scene.add_clumps(tpl, p.centers, random_orientations(len(p.radii), 1), material=m,
+                         scale=np.asarray(p.radii) / tpl.bounding_radius)
+    else:
+        scene.add_spheres(p.centers, p.radii, material=m)
     scene.verlet_margin = cfg.margin_factor * float(np.mean(p.radii))
     scene.dt = bench_dt(p, cfg)
     return scene
@@ -315,7 +329,8 @@ def main(argv: list[str] | None = None) -> int:
         return 0
     for spec in args.scenes:
         kind, _, n = spec.partition(":")
-        if kind not in ("spheres", "general", "hertz", "geogrid", "pullout") or not n.isdigit():
+        if kind not in ("spheres", "general", "hertz", "geogrid", "pullout",
+                        "clumps") or not n.isdigit():
             raise SystemExit(f"--scenes {spec}: must be KIND:N with KIND spheres, general, "
                              "hertz, geogrid or pullout and N a whole number")
     overlay = build_ref(args.ref, args.jobs)

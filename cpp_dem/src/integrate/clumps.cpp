@@ -36,8 +36,13 @@ inline Quat quat_rate(const Quat& q, const Vec3& wb) {
 
 /// m g, rounded on its own: the integration pass rounded the same product into the member's
 /// force, so force - weight(m, g) is exactly the contact part (a fused multiply-subtract would
-/// leave the product's rounding error as a spurious force).
-[[gnu::noinline]] Vec3 weight(Real m, const Vec3& g) { return m * g; }
+/// leave the product's rounding error as a spurious force). The empty asm makes each product
+/// a value the compiler must produce as it is, so it cannot fuse it, yet the function inlines.
+__attribute__((always_inline)) inline Vec3 weight(Real m, const Vec3& g) {
+  Real x = m * g[0], y = m * g[1], z = m * g[2];
+  asm("" : "+x"(x), "+x"(y), "+x"(z));
+  return Vec3(x, y, z);
+}
 
 inline Quat quat_axpy(const Quat& q, Real h, const Quat& d) {
   return Quat(q.w() + h * d.w(), q.x() + h * d.x(), q.y() + h * d.y(), q.z() + h * d.z());
@@ -66,16 +71,19 @@ void Scene::integrate_clumps_hot(long& err_clump) {
     // zero torque in free flight, as the clump's own weight gives).
     // (The sums start from the first member, not from zero: a one-sphere clump's force is
     // then its member's, bitwise, signed zeros included.)
-    const auto member_torque = [&](int e) {
+    Vec3 f, t;
+    for (int e = e0; e < e1; ++e) {
       const int s = clumps_.member[e];
+      const Vec3 fs = bodies_.force[s];
       const Vec3 r = rot_old * clumps_.member_local[e];
-      return Vec3(bodies_.torque[s] + r.cross(bodies_.force[s] - weight(bodies_.mass[s], gravity_)));
-    };
-    Vec3 f = bodies_.force[clumps_.member[e0]];
-    Vec3 t = member_torque(e0);
-    for (int e = e0 + 1; e < e1; ++e) {
-      f += bodies_.force[clumps_.member[e]];
-      t += member_torque(e);
+      const Vec3 ts = bodies_.torque[s] + r.cross(fs - weight(bodies_.mass[s], gravity_));
+      if (e == e0) {
+        f = fs;
+        t = ts;
+      } else {
+        f += fs;
+        t += ts;
+      }
     }
     const Vec3& fe = clumps_.ext_force[c];
     const Vec3& te = clumps_.ext_torque[c];
@@ -181,7 +189,7 @@ void Scene::integrate_clumps_hot(long& err_clump) {
       err = std::min(err, static_cast<long>(c));
       continue;
     }
-    cpp_dem::place_members(clumps_, bodies_, c);
+    cpp_dem::place_members_inline(clumps_, bodies_, c);
     for (int e = e0; e < e1; ++e)
       worst = std::max(worst, displacement_since_build(clumps_.member[e]));
   }

@@ -157,6 +157,17 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
     }
     return std::isfinite(fcheck[0] + fcheck[1] + fcheck[2]);
   };
+  // Forces of the clump members [b0, b1) only; false if one may be non-finite.
+  const auto member_forces = [&](int b0, int b1, auto ops) __attribute__((always_inline)) {
+    using V = typename decltype(ops)::V;
+    V fcheck = ops.zero();
+    for (int b = b0; b < b1; ++b) {
+      V f, t;
+      sum_forces(b, f, t, ops);
+      fcheck += f + t;
+    }
+    return std::isfinite(fcheck[0] + fcheck[1] + fcheck[2]);
+  };
   const bool wide = use_wide_ops();
 
   if (!energy) {
@@ -173,6 +184,8 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
     const Real* const acc_ang = acc_ang_.data()->data();
     const Real* const mass = bodies_.mass.data();
     const Real* const inertia = bodies_.inertia.data();
+    const bool has_clumps = clumps_.size() > 0;
+    const int* const clump_of = bodies_.clump.data();
     constexpr int kBlock = kBodyBlock;
     const int nblocks = (n + kBlock - 1) / kBlock;
 #pragma omp parallel reduction(min : err) reduction(max : worst) if (n > kParallelMin)
@@ -182,6 +195,20 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
       for (long blk = blocks.first; blk < blocks.second; ++blk) {
         const int b0 = static_cast<int>(blk) * kBlock, b1 = std::min(n, b0 + kBlock);
         const int count = b1 - b0;
+        // A block of clump members only (a scene of clumps, its members stored together):
+        // the clump pass sets their positions, velocities, spins and orientations from their
+        // clump and measures their displacement, so this pass gives them their forces and
+        // nothing more (fully blocked, their velocities would not change here anyway).
+        bool members_only = has_clumps && !mean_field;
+        for (int b = b0; b < b1 && members_only; ++b) members_only = clump_of[b] >= 0;
+        if (members_only) {
+          const bool ok = wide ? member_forces(b0, b1, WideOps()) : member_forces(b0, b1, NarrowOps());
+          if (!ok) {
+            for (int b = b0; b < b1; ++b)
+              if (!forces_finite(b)) err = std::min(err, static_cast<long>(b));
+          }
+          continue;
+        }
         // Inverse masses and inertias of the block (vectorised divisions).
         Real inv_m[kBlock], inv_i[kBlock];
 #pragma omp simd
