@@ -1,7 +1,8 @@
 // The clump pass: runs after the integration pass, only in scenes with clumps. The members'
 // resultant forces (the integration pass summed their contacts, imposed forces and the weight
-// of their mass share, and left them in place as fully blocked bodies) go to their clump; the
-// clump moves by leapfrog in its principal axes; the members take their clump's state.
+// of their mass share; a block of members only gets nothing else there, a member in a mixed
+// block is moved as a fully blocked body) go to their clump; the clump moves by leapfrog in
+// its principal axes; the members take their clump's state, which overwrites any move.
 //
 // Rotation: the leapfrog of Fincham (1992, "Leapfrog rotational algorithms", Mol. Simul. 8)
 // for the angular momentum L and a quaternion, as Yade's NewtonIntegrator applies it to
