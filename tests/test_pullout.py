@@ -258,15 +258,21 @@ def test_case_001_clump_grains_resist_more_than_spheres(case_smoke, tmp_path):
     assert s["mean_force_N"] > 2.0 * ref["mean_force_N"] > 0
 
 
-def test_case_000_clump_grains_from_a_template_csv(tmp_path):
-    # A user's template CSV (with a header line), three overlapping members; REFD grows the
-    # clumps about their centres to 000's porosity, then the pull.
+def test_case_000_clump_grains_from_a_template_csv_in_a_run_file(tmp_path):
+    # A user's template CSV (with a header line), three overlapping members, named by the
+    # run file's grains field (geogrid-dem run); REFD grows the clumps about their centres to
+    # 000's porosity, then the pull.
     tpl = tmp_path / "tri.csv"
     tpl.write_text("x,y,z,r\n-0.5,0,0,0.6\n0.3,0.2,0,0.5\n0.2,-0.3,0.3,0.45\n")
+    run_file = tmp_path / "po.toml"
+    run_file.write_text(f'case = "pullout-000"\n[params]\ngrains = "clumps:{tpl}"\n'
+                        'spheres = 200\nsnapshots = 1\nthreads = 2\n')
     out = tmp_path / "c"
-    r = _run_case("pullout_000.py", out, "--spheres", "200", "--grains", f"clumps:{tpl}",
-                  "--threads", "2", "--snapshots", "1")
+    r = subprocess.run([sys.executable, "-m", "cpp_dem.cli", "run", str(run_file), "--smoke",
+                        "--out", str(out)], capture_output=True, text=True, timeout=600)
+    assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     assert "200 clumps of 3 spheres (600 spheres)" in r.stdout
+    assert f'grains = "clumps:{tpl}"' in (out / "run.toml").read_text()
     s = _clump_outputs_agree(out, 3)
     assert s["grains"] == f"clumps:{tpl}"
     assert s["porosity_prepared"] < 0.36 and s["top_stress_max_rel_dev"] < 0.02
