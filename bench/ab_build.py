@@ -332,7 +332,7 @@ def main(argv: list[str] | None = None) -> int:
         if kind not in ("spheres", "general", "hertz", "geogrid", "pullout",
                         "clumps") or not n.isdigit():
             raise SystemExit(f"--scenes {spec}: must be KIND:N with KIND spheres, general, "
-                             "hertz, geogrid or pullout and N a whole number")
+                             "hertz, geogrid, pullout or clumps and N a whole number")
     overlay = build_ref(args.ref, args.jobs)
     rows = []
     if args.instructions:

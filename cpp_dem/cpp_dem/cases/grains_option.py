@@ -1,11 +1,16 @@
 """The cases' --grains option (triaxial, pull-out 000 and 001): 'spheres', or 'clumps:NAME'
 with NAME a shipped grain (gravel_a .. gravel_d), 'gravel' for the four mixed, or a clump
 template CSV (x, y, z, r in m). The case's radii or PSD are then the clumps'
-equivalent-volume radii (docs/clumps.md)."""
+equivalent-volume radii (docs/clumps.md). Also the grains' CSV output the cases share."""
 
 from __future__ import annotations
 
+from pathlib import Path
+
+import numpy as np
+
 import cpp_dem as dem
+from cpp_dem import measure
 
 ALLOWED = ("'spheres' or 'clumps:NAME' (NAME: a shipped grain gravel_a .. gravel_d, 'gravel' "
            "for the four mixed, or a clump template CSV x,y,z,r in m)")
@@ -40,3 +45,18 @@ def check_grains(ap, value: str) -> None:
         grain_templates(value)
     except SystemExit as e:
         ap.error(str(e).removeprefix("error: "))
+
+
+def write_grains_csv(scene, out: Path, name: str) -> None:
+    """packing_<name>.csv: the grains' spheres (x, y, z, r in m; clump members included, the
+    geogrid's nodes not); with clumps also clumps_<name>.csv: clump, centre of mass (m),
+    orientation of the principal frame (w, x, y, z), mass (kg)."""
+    grains = measure.sphere_mask(scene)
+    dem.write_packing_csv(out / f"packing_{name}.csv", scene.positions[grains],
+                          scene.radii[grains])
+    if scene.num_clumps:
+        np.savetxt(out / f"clumps_{name}.csv",
+                   np.column_stack([np.arange(scene.num_clumps), scene.clump_positions,
+                                    scene.clump_orientations, scene.clump_masses]),
+                   delimiter=",", header="clump,x_m,y_m,z_m,qw,qx,qy,qz,mass_kg", comments="",
+                   fmt=["%d"] + ["%.10g"] * 8)

@@ -161,7 +161,7 @@ def run(p: Params, out: Path) -> dict:
                     grain_density=p.unit_weight / geogrid.G_STANDARD, stress=p.pressure,
                     title=f"000 pull-out, {grain_label(sample)}, "
                           f"{p.pressure / 1e3:g} kPa, {p.velocity:.4g} m/s", log=log,
-                    before_pull=before_pull, grains=p.grains)
+                    before_pull=before_pull)
 
 
 def compare(runs: dict, out: Path) -> None:

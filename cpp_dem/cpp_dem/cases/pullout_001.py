@@ -159,8 +159,7 @@ def run(p: Params, out: Path) -> dict:
                     snapshot_displacements=snaps, grain_density=p.density,
                     stress=p.pressure,
                     title=f"001 pull-out, {p.grid} grid, {grain_label(sample)}, "
-                          f"r = {p.radius * 1e3:g} mm, {p.pressure / 1e3:g} kPa", log=log,
-                    grains=p.grains)
+                          f"r = {p.radius * 1e3:g} mm, {p.pressure / 1e3:g} kPa", log=log)
 
 
 def study(p: Params, out: Path, grids, radii, pressures, radii_given: bool) -> None:

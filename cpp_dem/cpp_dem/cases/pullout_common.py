@@ -1,7 +1,7 @@
 """What the two pull-out cases (pullout_000.py, pullout_001.py) share: running the stages
 with progress lines, the recorders (HDF5 + CSV, appended and flushed as the run goes), the VTK
-snapshots at chosen displacements, the plots (000 Figs 5, 7, 8), the summary, and the grains
-option (--grains spheres | clumps:NAME) with its checks."""
+snapshots at chosen displacements, the plots (000 Figs 5, 7, 8), the summary, and the
+initial cloud of clump grains (--grains clumps:NAME; the option itself: grains_option.py)."""
 
 from __future__ import annotations
 
@@ -14,7 +14,7 @@ import numpy as np
 from cpp_dem.io.figures import save_figure
 import cpp_dem as dem
 from cpp_dem import geogrid, measure, pullout
-from cpp_dem.cases.grains_option import grain_templates
+from cpp_dem.cases.grains_option import grain_templates, write_grains_csv
 from cpp_dem.rundir import begin_run, end_run
 from cpp_dem.output import (CsvRecorder, H5Recorder, PvdWriter, write_vtk_box,
                             write_vtk_contacts, write_vtk_spheres)
@@ -77,21 +77,6 @@ def largest_overlaps(scene) -> dict:
         sph = np.asarray(g["sphere"], dtype=np.int64)
         out["grid"] = float(np.max(np.asarray(g["overlap"], dtype=float) / r[sph]))
     return out
-
-
-def write_grains_csv(sample: pullout.PulloutSample, out: Path, name: str) -> None:
-    """packing_<name>.csv: the grains' spheres (x, y, z, r in m; clump members included, the
-    geogrid's nodes not); with clumps also clumps_<name>.csv: clump, centre of mass (m),
-    orientation of the principal frame (w, x, y, z), mass (kg), as the triaxial case."""
-    sc = sample.scene
-    grains = measure.sphere_mask(sc)
-    dem.write_packing_csv(out / f"packing_{name}.csv", sc.positions[grains], sc.radii[grains])
-    if sc.num_clumps:
-        np.savetxt(out / f"clumps_{name}.csv",
-                   np.column_stack([np.arange(sc.num_clumps), sc.clump_positions,
-                                    sc.clump_orientations, sc.clump_masses]),
-                   delimiter=",", header="clump,x_m,y_m,z_m,qw,qx,qy,qz,mass_kg", comments="",
-                   fmt=["%d"] + ["%.10g"] * 8)
 
 
 def make_logger(tag: str):
@@ -165,12 +150,11 @@ def plot_pull(rec: dict, png_force: Path, png_members: Path, title: str,
 def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
              prep_kwargs: dict, velocity: float, distance: float, record_every: int,
              snapshot_displacements, grain_density: float, stress: float, title: str,
-             log, before_pull=None, grains: str = "spheres") -> dict:
+             log, before_pull=None) -> dict:
     """Prepares the sample, pulls it, writes every output in ``out``; returns the summary.
     ``before_pull(sample)``, if given, runs between the preparation and the pull (e.g. a
-    speed-accuracy preset that applies to the pull only). ``grains``: the --grains value, for
-    the summary. A clump counts as one grain (``num_grains``); ``num_spheres`` counts the
-    spheres (a clump's members)."""
+    speed-accuracy preset that applies to the pull only). A clump counts as one grain
+    (``num_grains``); ``num_spheres`` counts the spheres (a clump's members)."""
     t_start = time.perf_counter()
     begin_run(out, tag)
     vtk = out / "vtk"
@@ -181,7 +165,7 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
     if sc.num_clumps:
         tpl = sorted({int(n) for n in np.bincount(np.asarray(sc.clump_ids)[
             np.asarray(sc.clump_ids) >= 0])})
-        log(f"grains: {grains}, {sc.num_clumps} clumps of {'/'.join(map(str, tpl))} spheres "
+        log(f"grains: {meta['grains']}, {sc.num_clumps} clumps of {'/'.join(map(str, tpl))} spheres "
             f"({n_spheres} spheres), contact stiffness of the grain's equivalent radius; "
             f"overlap limit {sc.max_overlap_ratio:.3g} of a member's radius")
     log(f"{n_grains} grains, geogrid of {len(sample.grid.nodes)} nodes / "
@@ -195,7 +179,7 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
     if not res.converged:
         log("warning: the sample did not reach the stability criteria; pulling anyway")
     write_vtk_state(sample, vtk, "prepared")
-    write_grains_csv(sample, out, "prepared")
+    write_grains_csv(sc, out, "prepared")
     ov_prep = largest_overlaps(sc)
     if before_pull is not None:
         before_pull(sample)
@@ -250,7 +234,7 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
     summ = pullout.summarize(rec)
     plot_pull(rec, out / "pullout_force.png", out / "pullout_members.png", title, summ)
     ov_end = largest_overlaps(sc)
-    summary = {**meta, **summ, "grains": grains, "num_grains": n_grains,
+    summary = {**meta, **summ, "num_grains": n_grains,
                "num_clumps": int(sc.num_clumps), "num_spheres": n_spheres,
                "max_overlap_ratio_limit": float(sc.max_overlap_ratio),
                "largest_overlap_prepared": ov_prep, "largest_overlap_final": ov_end,

@@ -38,7 +38,8 @@ from cpp_dem.rundir import begin_run, check_common_args, end_run
 import cpp_dem as dem
 from cpp_dem import geogrid, measure, prep, psd
 from cpp_dem.checkpoint import save_checkpoint
-from cpp_dem.cases.grains_option import HELP as GRAINS_HELP, check_grains, grain_templates
+from cpp_dem.cases.grains_option import (HELP as GRAINS_HELP, check_grains, grain_templates,
+                                         write_grains_csv)
 from cpp_dem.output import CsvRecorder, H5Recorder, write_vtk_box, write_vtk_spheres
 from cpp_dem.packing import loose_cloud
 from cpp_dem.triaxial import (apply_preset, build_box_sample, deviatoric_stage,
@@ -370,16 +371,7 @@ def run(p: Params, out: Path) -> dict:
         f"{inertial_number(sc, p):.2g} (quasi-static below ~1e-3)")
     state_iso = measure.sample_state(sc, walls)
     save_checkpoint(out / "isotropic.h5", sc, extra={"walls": list(walls)})
-    grains = measure.sphere_mask(sc)  # grains only: never the geogrid's nodes
-    dem.write_packing_csv(out / "packing_isotropic.csv", sc.positions[grains], sc.radii[grains])
-    if sc.num_clumps:
-        # The clumps themselves: centre of mass (m), orientation of the principal frame
-        # (w, x, y, z) and mass (kg); packing_isotropic.csv holds their member spheres.
-        np.savetxt(out / "clumps_isotropic.csv",
-                   np.column_stack([np.arange(sc.num_clumps), sc.clump_positions,
-                                    sc.clump_orientations, sc.clump_masses]),
-                   delimiter=",", header="clump,x_m,y_m,z_m,qw,qx,qy,qz,mass_kg", comments="",
-                   fmt=["%d"] + ["%.10g"] * 8)
+    write_grains_csv(sc, out, "isotropic")  # packing_ (grains only) and clumps_isotropic.csv
     write_vtk_spheres(out / "vtk" / "spheres_isotropic.vtp", sc)
     size = measure.box_size(sc, walls)
     lo_now = np.array([sc.wall_positions[walls[2 * a]] for a in range(3)])

@@ -202,7 +202,7 @@ void Scene::integrate_clumps_hot(long& err_clump) {
       err = std::min(err, static_cast<long>(c));
       continue;
     }
-    cpp_dem::place_members_inline(clumps_, bodies_, c);
+    cpp_dem::place_members(clumps_, bodies_, c);
     for (int e = e0; e < e1; ++e)
       worst = std::max(worst, displacement_since_build(clumps_.member[e]));
   }

@@ -73,9 +73,8 @@ struct ClumpStore {
 
 /// Puts clump c's members at its pose: positions, velocities (v + w x r), spins and
 /// orientations; keeps the rotation matrix of its orientation (cs.rot) for the next step.
-/// (place_members_inline: the same, inlined into the clump pass.)
-__attribute__((always_inline)) inline void place_members_inline(ClumpStore& cs, BodyStore& bs,
-                                                                int c) {
+/// (Always inlined: the clump pass calls it once per clump.)
+__attribute__((always_inline)) inline void place_members(ClumpStore& cs, BodyStore& bs, int c) {
   const Mat3 rot = cs.ori[c].toRotationMatrix();
   cs.rot[c] = rot;
   const Vec3 x = cs.pos[c], v = cs.vel[c], w = cs.angvel[c];
@@ -89,6 +88,5 @@ __attribute__((always_inline)) inline void place_members_inline(ClumpStore& cs, 
     bs.ori[s] = q;
   }
 }
-inline void place_members(ClumpStore& cs, BodyStore& bs, int c) { place_members_inline(cs, bs, c); }
 
 }  // namespace cpp_dem
