@@ -391,7 +391,12 @@ class Scene {
   /// How far body `slot` has moved (m) since the last broad-phase build, plus any growth of
   /// its radius: the Verlet margin's measure (need_rebuild, the integration and clump passes).
   __attribute__((always_inline)) inline Real displacement_since_build(int slot) const {
-    return (bodies_.pos[slot] - pos_at_build_[slot]).norm() +
+    return displacement_since_build(slot, bodies_.pos[slot]);
+  }
+  /// The same for body `slot` at `pos` (m), its position in registers (the clump pass).
+  __attribute__((always_inline)) inline Real displacement_since_build(int slot,
+                                                                       const Vec3& pos) const {
+    return (pos - pos_at_build_[slot]).norm() +
            std::max(0.0, bodies_.radius[slot] - radius_at_build_[slot]);
   }
   /// The same in a deforming periodic cell: beyond the cell's own deformation since the build

@@ -29,11 +29,59 @@ namespace cpp_dem {
 namespace {
 using namespace integrate_terms;
 
-/// dq/dt of orientation q for the body-frame spin wb: q (0, wb) / 2.
-inline Quat quat_rate(const Quat& q, const Vec3& wb) {
-  const Quat p = q * Quat(0, wb[0], wb[1], wb[2]);
-  return Quat(0.5 * p.w(), 0.5 * p.x(), 0.5 * p.y(), 0.5 * p.z());
+/// A quaternion as four scalars (w, x, y, z). With V3 and R3 below, the rotation chain's
+/// types: see the clump pass for why not Eigen's.
+struct Q4 {
+  Real w, x, y, z;
+};
+
+__attribute__((always_inline)) inline Q4 q4(const Quat& q) { return {q.w(), q.x(), q.y(), q.z()}; }
+
+/// A 3-vector as three scalars (see Q4).
+struct V3 {
+  Real x, y, z;
+  V3 operator*(const V3& o) const { return {x * o.x, y * o.y, z * o.z}; }
+};
+__attribute__((always_inline)) inline V3 v3(const Vec3& v) { return {v[0], v[1], v[2]}; }
+__attribute__((always_inline)) inline Vec3 vec(const V3& v) { return Vec3(v.x, v.y, v.z); }
+/// a + h b.
+__attribute__((always_inline)) inline V3 axpy(const V3& a, Real h, const V3& b) {
+  return {a.x + h * b.x, a.y + h * b.y, a.z + h * b.z};
 }
+
+/// q + h dq/dt, where dq/dt = r (0, wb) / 2 is the rate of the orientation r under the
+/// body-frame spin wb (rad/s) and h is in s.
+__attribute__((always_inline)) inline Q4 advance(const Q4& q, Real h, const Q4& r, const V3& wb) {
+  const Real bx = wb.x, by = wb.y, bz = wb.z, k = 0.5 * h;
+  return {q.w + k * (-r.x * bx - r.y * by - r.z * bz), q.x + k * (r.w * bx + r.y * bz - r.z * by),
+          q.y + k * (r.w * by - r.x * bz + r.z * bx), q.z + k * (r.w * bz + r.x * by - r.y * bx)};
+}
+
+/// A rotation matrix as nine scalars: of a unit q (Eigen's toRotationMatrix), or a copy.
+struct R3 {
+  Real xx, xy, xz, yx, yy, yz, zx, zy, zz;
+  explicit R3(const Q4& q) {
+    const Real tx = 2 * q.x, ty = 2 * q.y, tz = 2 * q.z;
+    const Real twx = tx * q.w, twy = ty * q.w, twz = tz * q.w;
+    const Real txx = tx * q.x, txy = ty * q.x, txz = tz * q.x;
+    const Real tyy = ty * q.y, tyz = tz * q.y, tzz = tz * q.z;
+    xx = 1 - (tyy + tzz), xy = txy - twz, xz = txz + twy;
+    yx = txy + twz, yy = 1 - (txx + tzz), yz = tyz - twx;
+    zx = txz - twy, zy = tyz + twx, zz = 1 - (txx + tyy);
+  }
+  explicit R3(const Mat3& m)
+      : xx(m(0, 0)), xy(m(0, 1)), xz(m(0, 2)), yx(m(1, 0)), yy(m(1, 1)), yz(m(1, 2)),
+        zx(m(2, 0)), zy(m(2, 1)), zz(m(2, 2)) {}
+  V3 operator*(const V3& v) const {
+    return {xx * v.x + xy * v.y + xz * v.z, yx * v.x + yy * v.y + yz * v.z,
+            zx * v.x + zy * v.y + zz * v.z};
+  }
+  /// R^T v.
+  V3 back(const V3& v) const {
+    return {xx * v.x + yx * v.y + zx * v.z, xy * v.x + yy * v.y + zy * v.z,
+            xz * v.x + yz * v.y + zz * v.z};
+  }
+};
 
 /// m g, rounded on its own: the integration pass rounded the same product into the member's
 /// force, so force - weight(m, g) is exactly the contact part (a fused multiply-subtract would
@@ -49,15 +97,19 @@ __attribute__((always_inline)) inline Vec3 weight(Real m, const Vec3& g) {
 /// with e of order (w dt)^2): 1/sqrt(1 + e) by its series to e^2 (error 5 e^3 / 16 < 4e-19
 /// for |e| < 1e-6), with no square root and no division on the step's chain of dependent
 /// operations; farther from unit length the exact normalisation.
-__attribute__((always_inline)) inline void normalize_near_unit(Quat& q) {
-  const Real e = q.squaredNorm() - 1.0;
-  if (std::abs(e) < 1e-6) q.coeffs() *= 1.0 - e * (0.5 - 0.375 * e);
-  else q.normalize();
+__attribute__((always_inline)) inline void normalize_near_unit(Q4& q) {
+  const Real n2 = q.w * q.w + q.x * q.x + q.y * q.y + q.z * q.z, e = n2 - 1.0;
+  const Real k = std::abs(e) < 1e-6 ? 1.0 - e * (0.5 - 0.375 * e) : 1.0 / std::sqrt(n2);
+  q = {q.w * k, q.x * k, q.y * k, q.z * k};
 }
 
-inline Quat quat_axpy(const Quat& q, Real h, const Quat& d) {
-  return Quat(q.w() + h * d.w(), q.x() + h * d.x(), q.y() + h * d.y(), q.z() + h * d.z());
+/// Yade's first-order local damping of one torque component t about a spin component w:
+/// t (1 - lambda sign(t w)).
+__attribute__((always_inline)) inline Real damped_torque(Real t, Real w, Real lambda) {
+  const Real p = t * w;
+  return t * (1.0 - lambda * (p > 0 ? 1.0 : p < 0 ? -1.0 : 0.0));
 }
+
 }  // namespace
 
 void Scene::integrate_clumps(long& err_clump) { integrate_clumps_hot(err_clump); }
@@ -75,7 +127,7 @@ void Scene::integrate_clumps_hot(long& err_clump) {
     if (nc > kParallelMin)
   for (int c = 0; c < nc; ++c) {
     const int e0 = clumps_.member_off[c], e1 = clumps_.member_off[c + 1];
-    const Mat3 rot_old = clumps_.rot[c];  // of ori[c], kept by place_members
+    const Mat3& rot_old = clumps_.rot[c];  // of ori[c]; place_members (last) renews it
     // Resultants about the centre of mass, in member order. The members' forces include the
     // weights of their mass shares, which sum to the clump's weight; the weight acts at the
     // centre of mass, so a member's lever arm takes its force without its weight (exactly
@@ -137,57 +189,65 @@ void Scene::integrate_clumps_hot(long& err_clump) {
       rotate_orientation(clumps_.ori[c], w, dt, renormalize);
       if (energy) ke_rot = 0.5 * inertia[0] * (0.5 * (w_old + w)).squaredNorm();
     } else {
-      Vec3 tq = t;
-      if (lambda > 0) {
-        for (int a = 0; a < 3; ++a) {
-          const Real p = tq[a] * w_old[a];
-          tq[a] *= 1.0 - lambda * (p > 0 ? 1.0 : p < 0 ? -1.0 : 0.0);
-        }
-      }
-      for (int a = 0; a < 3; ++a)
-        if (dofs & (DOF_RX << a)) tq[a] = 0;  // fixed below
-      Vec3& L = clumps_.angmom[c];
-      const Quat q = clumps_.ori[c];
-      const Vec3 l_now = L + 0.5 * dt * tq;  // at the start of the step
-      // (1 / I once, off the chain of dependent operations; products on it.)
-      const Vec3 inv_inertia = inertia.cwiseInverse();
-      const Vec3 wb_now = (rot_old.transpose() * l_now).cwiseProduct(inv_inertia);
-      Quat q_half = quat_axpy(q, 0.5 * dt, quat_rate(q, wb_now));
-      L += dt * tq;
-      Vec3 wb_half;
-      Mat3 rot_half;
+      // The chain of dependent operations below is written on scalars (V3, Q4, R3). Eigen's
+      // small vectors and quaternions were built in memory one coefficient at a time and
+      // read back as pairs: a failed store-to-load forwarding at each link. On scalars the
+      // clump pass takes about 30 % less time (perf, 2000 three-member clumps), bitwise
+      // equal.
+      V3 tq = v3(t);
+      if (lambda > 0) tq = {damped_torque(t[0], w_old[0], lambda),
+                            damped_torque(t[1], w_old[1], lambda),
+                            damped_torque(t[2], w_old[2], lambda)};
+      if (dofs & DOF_ROT)  // fixed below
+        tq = {dofs & DOF_RX ? 0.0 : tq.x, dofs & DOF_RY ? 0.0 : tq.y,
+              dofs & DOF_RZ ? 0.0 : tq.z};
+      const V3 l_old = v3(clumps_.angmom[c]);
+      const Q4 q = q4(clumps_.ori[c]);
+      const R3 r_old(rot_old);
+      const V3 l_now = axpy(l_old, 0.5 * dt, tq);  // at the start of the step
+      // (1 / I once, off the chain; products on it.)
+      const V3 inv_i = {1.0 / inertia[0], 1.0 / inertia[1], 1.0 / inertia[2]};
+      const V3 wb_now = r_old.back(l_now) * inv_i;
+      Q4 q_half = advance(q, 0.5 * dt, q, wb_now);
+      const V3 l_new = axpy(l_old, dt, tq);
+      Q4 q_new;
+      V3 wn;
       if (!yade_rotation) {
         // Fincham: the half-step spin in the half step's frame.
         normalize_near_unit(q_half);
-        rot_half = q_half.toRotationMatrix();
-        wb_half = (rot_half.transpose() * L).cwiseProduct(inv_inertia);
-      } else {
-        // Yade (2023): in the start-of-step frame, q_half not normalised.
-        wb_half = (rot_old.transpose() * L).cwiseProduct(inv_inertia);
-      }
-      Quat q_new = quat_axpy(q, dt, quat_rate(q_half, wb_half));
-      if (!yade_rotation) {
+        const R3 r_half(q_half);
+        const V3 wb_half = r_half.back(l_new) * inv_i;
+        q_new = advance(q, dt, q_half, wb_half);
         normalize_near_unit(q_new);
         // The spin at the half step, in the half step's frame (the new frame would tilt it
         // by w dt / 2: an error of first order in the energy).
-        w = rot_half * wb_half;
+        wn = r_half * wb_half;
       } else {
-        w = q_new * wb_half;  // the end-of-step frame, before normalising (as Yade)
-        q_new.normalize();
+        // Yade (2023): the half-step spin in the start-of-step frame, q_half not
+        // normalised; the global spin from the end-of-step frame before normalising.
+        const V3 wb_half = r_old.back(l_new) * inv_i;
+        q_new = advance(q, dt, q_half, wb_half);
+        const Quat qn(q_new.w, q_new.x, q_new.y, q_new.z);
+        wn = v3(qn * vec(wb_half));
+        q_new = q4(qn.normalized());
       }
-      clumps_.ori[c] = q_new;
+      Vec3 L = vec(l_new);
+      w = vec(wn);
+      const Quat ori_new(q_new.w, q_new.x, q_new.y, q_new.z);
+      clumps_.ori[c] = ori_new;
       if (dofs & DOF_ROT) {
-        const Mat3 rot_new = q_new.toRotationMatrix();
+        const Mat3 rot_new = ori_new.toRotationMatrix();
         // Blocked rotations about global axes keep their spin; L follows the spin.
-        for (int a = 0; a < 3; ++a)
-          if (dofs & (DOF_RX << a)) w[a] = w_old[a];
+        w = Vec3(dofs & DOF_RX ? w_old[0] : w[0], dofs & DOF_RY ? w_old[1] : w[1],
+                 dofs & DOF_RZ ? w_old[2] : w[2]);
         L = rot_new * inertia.cwiseProduct(rot_new.transpose() * w);
       }
+      clumps_.angmom[c] = L;
       clumps_.angvel[c] = w;
       if (energy) {
-        const Vec3 w_now = rot_old * wb_now;
-        ke_rot = 0.5 * l_now.dot(w_now);
-        if (lambda > 0) dissip += -(tq - t).dot(w_now) * dt;
+        const Vec3 w_now = rot_old * vec(wb_now);
+        ke_rot = 0.5 * vec(l_now).dot(w_now);
+        if (lambda > 0) dissip += -(vec(tq) - t).dot(w_now) * dt;
         work += te.dot(w_now) * dt;
         for (int a = 0; a < 3; ++a)
           if (dofs & (DOF_RX << a)) work += -t[a] * w_old[a] * dt;
@@ -202,9 +262,11 @@ void Scene::integrate_clumps_hot(long& err_clump) {
       err = std::min(err, static_cast<long>(c));
       continue;
     }
-    cpp_dem::place_members(clumps_, bodies_, c);
-    for (int e = e0; e < e1; ++e)
-      worst = std::max(worst, displacement_since_build(clumps_.member[e]));
+    // (Each member's displacement since the neighbour lists were built is taken as it is
+    // placed, from the position in registers rather than read back from the store.)
+    cpp_dem::place_members(clumps_, bodies_, c, [&](int s, const Vec3& x) {
+      worst = std::max(worst, displacement_since_build(s, x));
+    });
   }
   err_clump = err;
   if (err == std::numeric_limits<long>::max() && disp_valid_) max_disp_ = std::max(max_disp_, worst);

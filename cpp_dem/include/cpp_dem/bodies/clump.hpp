@@ -73,8 +73,14 @@ struct ClumpStore {
 
 /// Puts clump c's members at its pose: positions, velocities (v + w x r), spins and
 /// orientations; keeps the rotation matrix of its orientation (cs.rot) for the next step.
-/// (Always inlined: the clump pass calls it once per clump.)
-__attribute__((always_inline)) inline void place_members(ClumpStore& cs, BodyStore& bs, int c) {
+/// on_member(slot, position) is called for each member as it is placed. (Always inlined: the
+/// clump pass calls it once per clump.)
+struct NoMemberHook {
+  void operator()(int, const Vec3&) const {}
+};
+template <class OnMember = NoMemberHook>
+__attribute__((always_inline)) inline void place_members(ClumpStore& cs, BodyStore& bs, int c,
+                                                         OnMember&& on_member = {}) {
   const Mat3 rot = cs.ori[c].toRotationMatrix();
   cs.rot[c] = rot;
   const Vec3 x = cs.pos[c], v = cs.vel[c], w = cs.angvel[c];
@@ -82,10 +88,12 @@ __attribute__((always_inline)) inline void place_members(ClumpStore& cs, BodySto
   for (int e = cs.member_off[c]; e < cs.member_off[c + 1]; ++e) {
     const int s = cs.member[e];
     const Vec3 r = rot * cs.member_local[e];
-    bs.pos[s] = x + r;
+    const Vec3 p = x + r;
+    bs.pos[s] = p;
     bs.vel[s] = v + w.cross(r);
     bs.angvel[s] = w;
     bs.ori[s] = q;
+    on_member(s, p);
   }
 }
 
