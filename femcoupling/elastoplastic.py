@@ -39,9 +39,9 @@ import numpy.typing as npt
 
 from femcoupling import geometry as geo
 from femcoupling.geometry import FemInputError
-from femcoupling.materials import (DruckerPrager, GeogridLayerMaterial, LinearElastic,
-                                   drucker_prager_return, elastic_tangent, mandel_identity,
-                                   mandel_to_tensor)
+from femcoupling.materials import (AnisotropicElastic, DruckerPrager, GeogridLayerMaterial,
+                                   LinearElastic, drucker_prager_return, elastic_tangent,
+                                   mandel_identity, mandel_to_tensor)
 
 __all__ = ["SoilModel", "StepResult", "NewtonDivergence"]
 
@@ -256,13 +256,23 @@ class SoilModel:
     def _set_material_arrays(self) -> None:
         n = self.n_cells
         K, G, A, B, Kc = (np.zeros(n) for _ in range(5))
+        aniso = []  # (cell mask, stiffness) of AnisotropicElastic materials
         for tag in np.unique(self.cell_tag_of):
             m = self.material_of_tag(int(tag))
             sel = self.cell_tag_of == tag
             K[sel], G[sel] = m.bulk_pa, m.shear_pa
             A[sel], B[sel], Kc[sel] = m.dp_parameters()
+            if isinstance(m, AnisotropicElastic):
+                aniso.append((sel, m.matrix(self.ncomp)))
         rep = lambda a: np.repeat(a, self.nq)  # noqa: E731 - (cell, q) order
         self.K, self.G, self.alpha, self.beta, self.kc = map(rep, (K, G, A, B, Kc))
+        # The elastic stiffness per quadrature point: isotropic from (K, G), replaced where a
+        # region has a full stiffness (those points never yield: k = inf).
+        C = elastic_tangent(self.K, self.G, self.ncomp)
+        for sel, c in aniso:
+            C[rep(sel)] = c
+        self.C = C
+        self._aniso = rep(np.any([sel for sel, _ in aniso], axis=0)) if aniso else None
 
     def set_region_material(self, name: str, material: LinearElastic) -> None:
         """Give the element region ``name`` a new material (two-way coupling)."""
@@ -277,10 +287,11 @@ class SoilModel:
         func.x.scatter_forward()
 
     def _update_tangent_and_stress(self, deps: np.ndarray) -> None:
-        trial = self.sig_n + np.einsum("nij,nj->ni", elastic_tangent(self.K, self.G, self.ncomp),
-                                       deps)
+        trial = self.sig_n + np.einsum("nij,nj->ni", self.C, deps)
         sig, tan, dl = drucker_prager_return(trial, bulk_pa=self.K, shear_pa=self.G,
                                              alpha=self.alpha, beta=self.beta, k_pa=self.kc)
+        if self._aniso is not None:  # elastic there: the return left the trial stress
+            tan[self._aniso] = self.C[self._aniso]
         self.sig_cur, self.dlam = sig, dl
         self._to_q(self.sig_q, sig, self._qdofs, self.ncomp)
         self._to_q(self.tan_q, tan.reshape(len(tan), -1), self._qdofs_t, self.ncomp**2)

@@ -23,7 +23,8 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-__all__ = ["HandoverError", "WallTargets", "fem_to_dem", "secant_stiffness"]
+__all__ = ["HandoverError", "WallTargets", "fem_to_dem", "secant_stiffness",
+           "secant_tangent"]
 
 
 class HandoverError(ValueError):
@@ -127,3 +128,47 @@ def secant_stiffness(*, stress_increment_pa: npt.ArrayLike, strain_increment: np
         raise HandoverError(f"secant stiffness: stress increment {ds.tolist()} Pa and strain "
                             f"increment {de.tolist()} give no positive modulus")
     return float(1.0 / a), float(nu)
+
+
+def secant_tangent(tangent_mandel_pa: npt.ArrayLike, *, strain_increment: npt.ArrayLike,
+                   stress_increment_pa: npt.ArrayLike,
+                   min_eig_fraction: float = 1e-3) -> np.ndarray:
+    """The element's tangent made to reproduce its measured increment: the smallest
+    symmetric change of ``tangent_mandel_pa`` (6 x 6 Mandel, Pa) that maps the strain
+    increment onto the stress increment (both Mandel (6,), the same sign convention), by the
+    BFGS update (Nocedal & Wright, *Numerical Optimization*, 2006, eq. 6.19 with the roles of
+    the step and the gradient change taken by the strain and stress increments):
+
+        C = T - (T de)(T de)^T / (de . T de) + ds ds^T / (ds . de)
+
+    so that C de = ds exactly, C is symmetric, and it keeps T's response to every strain that
+    does no work with T de nor with ds (four of the six directions): a rank-two change. T is
+    made symmetric first (a network tangent with geometric terms is not quite symmetric) and
+    positive definite: eigenvalues below ``min_eig_fraction`` times the largest are raised to
+    it (an element near its strength has sliding contacts and a tangent soft, or negative,
+    in some directions). C is then positive definite whenever ds . de > 0 (the element stored
+    energy over the increment); otherwise a HandoverError names the reason. Returns C (Pa).
+    """
+    t = np.asarray(tangent_mandel_pa, float)
+    de = np.asarray(strain_increment, float)
+    ds = np.asarray(stress_increment_pa, float)
+    if t.shape != (6, 6) or de.shape != (6,) or ds.shape != (6,) or not (
+            np.all(np.isfinite(t)) and np.all(np.isfinite(de)) and np.all(np.isfinite(ds))):
+        raise HandoverError(f"secant_tangent: tangent {t.shape}, strain increment {de.shape}, "
+                            f"stress increment {ds.shape}: must be finite 6 x 6, (6,), (6,)")
+    lam, vec = np.linalg.eigh(0.5 * (t + t.T))
+    if not lam[-1] > 0:
+        raise HandoverError(f"secant_tangent: the tangent has no positive stiffness "
+                            f"(largest eigenvalue {lam[-1]:.3g} Pa)")
+    t = (vec * np.maximum(lam, min_eig_fraction * lam[-1])) @ vec.T
+    td = t @ de
+    curv_t, curv = float(de @ td), float(ds @ de)
+    if not curv_t > 0:  # (only for de = 0)
+        raise HandoverError(f"secant_tangent: no strain increment (de . T de = {curv_t:.3g} "
+                            "Pa)")
+    if not curv > 0:
+        raise HandoverError(f"secant_tangent: the element gave back energy over its increment "
+                            f"(ds . de = {curv:.3g} Pa, strain {np.round(de, 8).tolist()}, "
+                            f"stress {np.round(ds, 1).tolist()} Pa): no positive definite "
+                            "secant exists")
+    return t - np.outer(td, td) / curv_t + np.outer(ds, ds) / curv

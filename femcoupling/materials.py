@@ -30,9 +30,10 @@ import numpy.typing as npt
 
 from femcoupling.geometry import FemInputError, _pos, _real
 
-__all__ = ["LinearElastic", "DruckerPrager", "GeogridLayerMaterial", "elastic_tangent",
+__all__ = ["LinearElastic", "AnisotropicElastic", "DruckerPrager", "GeogridLayerMaterial",
+           "elastic_tangent", "isotropic_projection", "voigt_to_mandel_stiffness",
            "drucker_prager_return", "mandel_identity", "mandel_to_tensor",
-           "tensor_to_mandel"]
+           "tensor_to_mandel", "PLANE_STRAIN_OF_3D"]
 
 SQRT2 = math.sqrt(2.0)
 
@@ -67,6 +68,66 @@ class LinearElastic:
     def dp_parameters(self) -> tuple[float, float, float]:
         """(alpha, beta, k/Pa) of the yield function: never yields (k = inf)."""
         return 0.0, 0.0, math.inf
+
+
+PLANE_STRAIN_OF_3D = (0, 2, 1, 4)
+"""The 3D Mandel components (xx, yy, zz, yz, xz, xy) that make the plane-strain ones
+(xx, zz, yy, xz)."""
+
+
+def isotropic_projection(c_mandel_pa: npt.ArrayLike) -> tuple[float, float]:
+    """The isotropic (K, G) nearest to a 6 x 6 Mandel stiffness (Pa): K = (1 : C : 1) / 9,
+    G = (tr C - 3K) / 10 (the projection on 3K P_vol + 2G P_dev)."""
+    c = np.asarray(c_mandel_pa, float)
+    one = mandel_identity(6)
+    k = float(one @ c @ one) / 9.0
+    return k, (float(np.trace(c)) - 3.0 * k) / 10.0
+
+
+def voigt_to_mandel_stiffness(c_voigt_pa: npt.ArrayLike) -> npt.NDArray[np.float64]:
+    """A 6 x 6 stiffness in Voigt form (stress components by engineering strains, order xx
+    yy zz yz xz xy, as ``DemElement``'s tangents) -> Mandel form (Pa)."""
+    d = np.array([1.0, 1.0, 1.0, SQRT2, SQRT2, SQRT2])
+    return d[:, None] * np.asarray(c_voigt_pa, float) * d[None, :]
+
+
+@dataclasses.dataclass(frozen=True, init=False)
+class AnisotropicElastic(LinearElastic):
+    """Linear elasticity with a full stiffness: ``c_mandel_pa``, 6 x 6 in 3D Mandel form
+    (order xx yy zz yz xz xy, Pa), symmetric positive definite. In plane strain the model
+    takes its (xx, zz, yy, xz) rows and columns (``PLANE_STRAIN_OF_3D``). ``young_pa`` and
+    ``poisson`` are those of its isotropic projection (:func:`isotropic_projection`), for what
+    needs an isotropic value (the at-rest coefficient). It never yields. The two-way loop
+    gives it to a region from the DEM element's tangent (:mod:`femcoupling.twoway`)."""
+
+    c_mandel_pa: tuple = ()
+
+    def __init__(self, c_mandel_pa: npt.ArrayLike) -> None:
+        c = np.asarray(c_mandel_pa, float)
+        if c.shape != (6, 6) or not np.all(np.isfinite(c)):
+            raise FemInputError(f"c_mandel_pa: shape {c.shape}, must be a finite 6 x 6 Mandel "
+                                "stiffness (Pa)")
+        scale = float(np.abs(c).max())
+        if not scale > 0 or float(np.abs(c - c.T).max()) > 1e-9 * scale:
+            raise FemInputError(f"c_mandel_pa: not symmetric (largest |C - C^T| "
+                                f"{float(np.abs(c - c.T).max()):.3g} Pa of {scale:.3g} Pa)")
+        c = 0.5 * (c + c.T)
+        low = float(np.linalg.eigvalsh(c).min())
+        if not low > 0:
+            raise FemInputError(f"c_mandel_pa: not positive definite (smallest eigenvalue "
+                                f"{low:.3g} Pa); a stiffness must store energy")
+        k, g = isotropic_projection(c)
+        object.__setattr__(self, "c_mandel_pa", tuple(map(tuple, c)))
+        object.__setattr__(self, "young_pa", 9.0 * k * g / (3.0 * k + g))
+        object.__setattr__(self, "poisson", (3.0 * k - 2.0 * g) / (2.0 * (3.0 * k + g)))
+
+    def matrix(self, ncomp: int = 6) -> npt.NDArray[np.float64]:
+        """The stiffness for Mandel vectors of length ``ncomp`` (6: 3D, 4: plane strain), Pa."""
+        c = np.array(self.c_mandel_pa)
+        if ncomp == 4:
+            idx = list(PLANE_STRAIN_OF_3D)
+            return c[np.ix_(idx, idx)]
+        return c
 
 
 @dataclasses.dataclass(frozen=True)
