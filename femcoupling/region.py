@@ -14,7 +14,10 @@ stress tensor, shear included, where the wall-bounded element takes three normal
    stresses reached and the normal strain increment (compression positive), with the full
    strain-increment tensor, the shear reached and its stress scatter (the bootstrap of its
    contacts) in ``info``. ``info["full_tensor"]`` tells ``two_way`` that turned principal
-   axes are imposed, not lost.
+   axes are imposed, not lost. ``info["tangent_voigt_pa"]`` is its tangent at the final
+   state from its contact network, with the full stress increment in
+   ``info["stress_increment_tensor"]``: ``two_way`` makes the tangent reproduce the
+   increment and gives it to the region as a full stiffness.
 
 A FEM stress beyond the element's strength (an elastic or cohesive FEM soil can hand over a
 stress ratio no cohesionless packing carries) cannot be reached: the servo is stopped once
@@ -60,7 +63,9 @@ class PeriodicRegionElement:
     """See the module doc. ``n``: grains; ``seed``: packing seed; ``prep_friction_deg``: the
     friction angle the grains grow at (0: dense); ``tol``: the servo's relative tolerance;
     ``options``: more keywords for ``DemElement.periodic``; ``cache_dir``: where the prepared
-    elements are kept (None: prepared in every call)."""
+    elements are kept (None: prepared in every call); ``tangent``: return the element's
+    tangent at the final state (``DemElement.network_tangent``, from its contact network), so
+    that ``two_way`` gives the region a full stiffness instead of an isotropic secant."""
 
     n: int = 400
     seed: int = 1
@@ -71,6 +76,7 @@ class PeriodicRegionElement:
     chunk_steps: int = 2000
     cache_dir: str | None = None
     options: dict | None = None
+    tangent: bool = True
 
     def prepare(self, name: str, initial) -> tuple:
         """The element of region ``name`` at the ``initial`` WallTargets' full tensor, from
@@ -116,10 +122,17 @@ class PeriodicRegionElement:
             "state reached")
         de = el.strain() - e0  # tension positive
         scatter = el.stress_scatter()
+        tangent = None
+        if self.tangent:
+            tangent, _ = el.network_tangent()
+            if not np.all(np.isfinite(tangent)):
+                tangent = None
         return ElementResponse(
             stress_initial_pa=-np.diag(s_ini), stress_final_pa=-np.diag(s1),
             strain_increment=-np.diag(de),
             info={"full_tensor": True, "strain_increment_tensor": -de,
+                  "stress_increment_tensor": -(s1 - s_ini),
+                  **({"tangent_voigt_pa": tangent} if tangent is not None else {}),
                   "shear_final_pa": -np.array([s1[1, 2], s1[0, 2], s1[0, 1]]),
                   "stress_scatter_pa": np.diag(scatter), "prepared_from_cache": cached,
                   "contacts": el.contact_count(), "wall_s": time.perf_counter() - t0,

@@ -9,16 +9,23 @@ Two way (:func:`two_way`): iterate
 1. restore the initial state, solve the load stage, hand over each region's stresses;
 2. run each region's DEM element from the initial targets to the new ones
    (``element_runner``, possibly in parallel processes);
-3. the element's measured secant (E, nu) over the handed-over increment
-   (:func:`femcoupling.handover.secant_stiffness`) becomes that region's material;
+3. the element's stiffness over the handed-over increment becomes that region's material:
+   with ``stiffness="tangent"`` (the default) and an element that returns its tangent (a
+   periodic element: ``info["tangent_voigt_pa"]`` with the full strain and stress increment
+   tensors), the tangent made to reproduce the increment exactly
+   (:func:`femcoupling.handover.secant_tangent`, a BFGS update) as an
+   :class:`~femcoupling.materials.AnisotropicElastic`; otherwise (a wall-bounded element,
+   or ``stiffness="isotropic"``) the isotropic secant (E, nu)
+   (:func:`femcoupling.handover.secant_stiffness`), a least-squares fit of the three normal
+   increments;
 
 until the handed-over stresses change by less than ``tol`` (relative, max norm over the
 regions) between two iterations, or ``max_iterations``. Noise-aware: an element that reports
 its stress scatter (``info["stress_scatter_pa"]``, the bootstrap of its contacts:
 ``cpp_dem.measure.stress_scatter``) sets a floor; a change within ``scatter_factor`` times
 the relative scatter ends the loop too, and says that ``tol`` was below it. The secant is
-relaxed between iterations (Aitken's factor by default), which damps the 2-cycles a noisy
-element drives.
+relaxed between iterations (Aitken's factor by default, on (log E, nu) or on the stiffness
+matrix), which damps the 2-cycles a noisy element drives.
 
 Every iteration checks what a wall-bounded element can represent (``RegionWarning``, in the
 log, the history and ``TwoWayResult.warnings``): principal axes of the FEM stress turned more
@@ -43,12 +50,14 @@ from typing import Any
 import numpy as np
 
 from femcoupling.geometry import FemInputError
-from femcoupling.handover import WallTargets, fem_to_dem, secant_stiffness
-from femcoupling.materials import LinearElastic
+from femcoupling.handover import (HandoverError, WallTargets, fem_to_dem, secant_stiffness,
+                                 secant_tangent)
+from femcoupling.materials import (AnisotropicElastic, LinearElastic, tensor_to_mandel,
+                                   voigt_to_mandel_stiffness)
 from femcoupling.relaxation import check_relaxation, next_factor
 
-__all__ = ["ElementResponse", "HandoverHistory", "RegionWarning", "TwoWayResult",
-           "check_region", "one_way", "two_way"]
+__all__ = ["ElementResponse", "HandoverHistory", "RegionWarning", "STIFFNESS_MODES",
+           "TwoWayResult", "check_region", "element_stiffness", "one_way", "two_way"]
 
 
 class RegionWarning(UserWarning):
@@ -85,14 +94,17 @@ class HandoverHistory:
     ``secant_young_pa``, ``secant_poisson`` (the relaxed secant given to the region),
     ``fem_strain_increment`` and ``dem_strain_increment`` (n, 3, normal, compression
     positive), ``strain_ratio`` (DEM / FEM, largest components), ``scatter`` (the element's
-    relative stress scatter) and ``relaxation`` (the factor applied). Written on rank 0 only.
+    relative stress scatter), ``relaxation`` (the factor applied) and
+    ``stiffness_mandel_pa`` (n, 6, 6: the full stiffness given to the region from the
+    element's tangent; NaN where the region got the isotropic secant, whose isotropic
+    projection the secant fields hold otherwise). Written on rank 0 only.
     """
 
     FIELDS = {"iteration": (), "region": (), "fem_stress_pa": (3, 3), "targets_pa": (3,),
               "shear_pa": (3,), "rotation_deg": (), "change": (), "dem_stress_pa": (3,),
               "secant_young_pa": (), "secant_poisson": (), "fem_strain_increment": (3,),
               "dem_strain_increment": (3,), "strain_ratio": (), "scatter": (),
-              "relaxation": ()}
+              "relaxation": (), "stiffness_mandel_pa": (6, 6)}
 
     def __init__(self, path: Any, *, regions: Sequence[str], metadata: dict | None = None,
                  rank: int = 0) -> None:
@@ -149,7 +161,10 @@ class TwoWayResult:
         targets: final WallTargets per region.
         initial_targets: WallTargets of the initial state per region.
         responses: last ElementResponse per region.
-        materials: last (E / Pa, nu) per region (relaxed).
+        materials: last (E / Pa, nu) per region (relaxed; of the isotropic projection where
+            the region got a full stiffness).
+        stiffnesses: per region the last full stiffness given (6 x 6 Mandel, Pa), or None
+            where the region got the isotropic secant.
         warnings: every RegionWarning message, in order.
         converged_on: "tol", or "scatter" (the change was within the elements' scatter).
         fem_strain_increments: per region its normal strain increment (3,) over the load
@@ -167,6 +182,30 @@ class TwoWayResult:
     warnings: list = dataclasses.field(default_factory=list)
     converged_on: str = "tol"
     fem_strain_increments: dict = dataclasses.field(default_factory=dict)
+    stiffnesses: dict = dataclasses.field(default_factory=dict)
+
+
+STIFFNESS_MODES = ("tangent", "isotropic")
+
+
+def element_stiffness(resp: ElementResponse, mode: str = "tangent"
+                      ) -> tuple[float, float, np.ndarray | None]:
+    """The stiffness of one element answer over its increment: (E / Pa, nu, C) with C the
+    element's tangent made to reproduce the increment (6 x 6 Mandel, Pa) when ``mode`` is
+    "tangent" and the answer carries the tangent and the full increment tensors, else C =
+    None and (E, nu) the isotropic secant of the normal increments."""
+    info = resp.info or {}
+    t = info.get("tangent_voigt_pa")
+    if mode == "tangent" and t is not None:
+        de = tensor_to_mandel(np.asarray(info["strain_increment_tensor"], float), 6)
+        ds = tensor_to_mandel(np.asarray(info["stress_increment_tensor"], float), 6)
+        c = secant_tangent(voigt_to_mandel_stiffness(t), strain_increment=de,
+                           stress_increment_pa=ds)
+        mat = AnisotropicElastic(c)  # (refuses a C that is not positive definite)
+        return mat.young_pa, mat.poisson, np.array(mat.c_mandel_pa)
+    dsig = np.asarray(resp.stress_final_pa) - np.asarray(resp.stress_initial_pa)
+    E, nu = secant_stiffness(stress_increment_pa=dsig, strain_increment=resp.strain_increment)
+    return E, nu, None
 
 
 def check_region(name: str, targets: WallTargets, *, fem_strain_increment=None,
@@ -238,7 +277,8 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
             log: Callable[[str], None] | None = None, relaxation: str | float = "aitken",
             scatter_factor: float = 1.0, max_rotation_deg: float = 15.0,
             max_strain_ratio: float = 2.0,
-            history_names: Sequence[str] | None = None) -> TwoWayResult:
+            history_names: Sequence[str] | None = None,
+            stiffness: str = "tangent") -> TwoWayResult:
     """The two-way loop (module doc). ``model`` is a SoilModel in its initial state.
 
     Args:
@@ -257,6 +297,9 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
             elements' relative stress scatter (when they report it), > 0.
         max_rotation_deg, max_strain_ratio: the limits of :func:`check_region`.
         history_names: the names the regions have in ``history`` (default: ``regions``).
+        stiffness: "tangent" (the element's tangent, made to reproduce its increment, where
+            the element returns one; else the isotropic secant) or "isotropic" (always the
+            isotropic secant of the normal increments).
     """
     if not tol > 0:
         raise FemInputError(f"tol={tol!r}: must be > 0")
@@ -265,6 +308,8 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
     if not (isinstance(workers, int) and workers >= 1):
         raise FemInputError(f"workers={workers!r}: must be an integer >= 1")
     check_relaxation(relaxation)
+    if stiffness not in STIFFNESS_MODES:
+        raise FemInputError(f"stiffness={stiffness!r}: must be one of {STIFFNESS_MODES}")
     if not (scatter_factor > 0 and math.isfinite(scatter_factor)):
         raise FemInputError(f"scatter_factor={scatter_factor!r}: must be > 0")
     regions = list(regions)
@@ -283,6 +328,7 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
     changes: list = []
     responses: dict = {}
     materials: dict = {}
+    stiffnesses: dict = {}
     final: dict = {}
     fem_de: dict = {}
     warned: list = []
@@ -355,39 +401,57 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
             responses[r] = resp
             if resp.info and resp.info.get("message"):
                 warn(f"iteration {it}: {resp.info['message']}")
-            dsig = np.asarray(resp.stress_final_pa) - np.asarray(resp.stress_initial_pa)
-            E_full, nu_full = secant_stiffness(stress_increment_pa=dsig,
-                                               strain_increment=resp.strain_increment)
+            try:
+                E_full, nu_full, c_full = element_stiffness(resp, stiffness)
+            except (HandoverError, FemInputError) as exc:
+                warn(f"iteration {it}, region {r}: the element's tangent gives no stiffness "
+                     f"({exc}); the region takes the isotropic secant")
+                E_full, nu_full, c_full = element_stiffness(resp, "isotropic")
             sc = resp.info.get("stress_scatter_pa") if resp.info else None
             rel = (float(np.abs(np.asarray(sc, float)).max()
                          / np.abs(np.asarray(resp.stress_final_pa, float)).max())
                    if sc is not None else 0.0)
             scatter = max(scatter, rel)
-            # relax the secant: x = (log E, nu), x_new = x + w (x_full - x)
-            if r in materials:
-                x = np.array([math.log(materials[r][0]), materials[r][1]])
-                step = np.array([math.log(E_full), nu_full]) - x
+            # relax: x = (log E, nu), or the stiffness matrix; x_new = x + w (x_full - x)
+            c_prev = stiffnesses.get(r)
+            if r in materials and (c_full is None) == (c_prev is None):
+                if c_full is None:
+                    x = np.array([math.log(materials[r][0]), materials[r][1]])
+                    step = np.array([math.log(E_full), nu_full]) - x
+                else:
+                    x, step = c_prev.ravel(), (c_full - c_prev).ravel()
                 omega[r] = next_factor(relaxation, omega[r], last_step.get(r), step)
                 last_step[r] = step
                 xe = x + omega[r] * step
-                E, nu = math.exp(xe[0]), float(xe[1])
-            else:  # the first element answer is taken whole
-                E, nu = E_full, nu_full
+                E, nu, c = ((math.exp(xe[0]), float(xe[1]), None) if c_full is None
+                            else (math.nan, math.nan, xe.reshape(6, 6)))
+            else:  # the first element answer (of its kind) is taken whole
+                last_step.pop(r, None)
+                E, nu, c = E_full, nu_full, c_full
+            stiffnesses[r] = c
+            if c is None:
+                mat = LinearElastic(E, nu)
+            else:  # (a convex combination of two positive definite matrices is one)
+                mat = AnisotropicElastic(c)
+                E, nu = mat.young_pa, mat.poisson
             materials[r] = (E, nu)
-            model.set_region_material(r, LinearElastic(E, nu))
+            model.set_region_material(r, mat)
             msgs, ratio = check(r)
             if it == 1:  # (later iterations: checked again at the end)
                 for msg in msgs:
                     warn(f"iteration {it}: {msg}")
-            say(f"iteration {it}, region {r}: DEM walls reached "
-                f"{np.round(np.asarray(resp.stress_final_pa) / 1e3, 2).tolist()} kPa; secant "
-                f"E = {E_full / 1e6:.3g} MPa, nu = {nu_full:.3f}; given E = {E / 1e6:.3g} MPa, "
+            kind = "tangent (isotropic part: " if c_full is not None else "secant ("
+            say(f"iteration {it}, region {r}: DEM reached "
+                f"{np.round(np.asarray(resp.stress_final_pa) / 1e3, 2).tolist()} kPa; {kind}"
+                f"E = {E_full / 1e6:.3g} MPa, nu = {nu_full:.3f}); given E = {E / 1e6:.3g} MPa, "
                 f"nu = {nu:.3f} (relaxation {omega[r]:.3g}); DEM/FEM strain {ratio:.3g}"
                 + (f"; scatter {rel:.3g}" if sc is not None else ""))
             record(r, dem_stress_pa=resp.stress_final_pa, secant_young_pa=E,
                    secant_poisson=nu, dem_strain_increment=resp.strain_increment,
                    strain_ratio=ratio, scatter=rel if sc is not None else np.nan,
-                   relaxation=omega[r] if r in last_step else 1.0)
+                   relaxation=omega[r] if r in last_step else 1.0,
+                   stiffness_mandel_pa=(np.nan if stiffnesses[r] is None
+                                        else stiffnesses[r]))
         prev = final
     if not converged:
         for r in regions:
@@ -397,4 +461,4 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
     return TwoWayResult(converged=converged, iterations=len(changes), changes=changes,
                         targets=final, initial_targets=initial, responses=responses,
                         materials=materials, warnings=warned, converged_on=converged_on,
-                        fem_strain_increments=dict(fem_de))
+                        fem_strain_increments=dict(fem_de), stiffnesses=stiffnesses)

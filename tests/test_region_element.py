@@ -64,3 +64,21 @@ def test_two_way_takes_a_full_tensor_element_at_its_word():
     assert msgs == []
     msgs, _ = check_region("r", t)
     assert len(msgs) == 1 and "turned" in msgs[0]
+
+
+def test_the_element_returns_its_tangent_and_the_region_gets_a_full_stiffness(runs):
+    """The network tangent at the final state, made to reproduce the increment exactly, is
+    the region's stiffness (two_way's default), shear included."""
+    from femcoupling.materials import tensor_to_mandel
+    from femcoupling.twoway import element_stiffness
+
+    a, _, _ = runs
+    t = a.info["tangent_voigt_pa"]
+    assert t.shape == (6, 6) and np.all(np.isfinite(t))
+    _, _, c = element_stiffness(a)
+    de = tensor_to_mandel(a.info["strain_increment_tensor"], 6)
+    ds = tensor_to_mandel(a.info["stress_increment_tensor"], 6)
+    assert np.abs(c @ de - ds).max() < 1e-12 * np.abs(ds).max()
+    assert np.linalg.eigvalsh(c).min() > 0
+    # the shear increment (xz) is carried by the full stiffness, as the element carried it
+    assert (c @ de)[4] == pytest.approx(ds[4], rel=1e-12) and abs(ds[4]) > 1e3
