@@ -127,6 +127,8 @@ def test_homogeneous_field_handed_over_reproduces_the_standalone_element(tmp_pat
     (["--stresses", "1e4,1e4,2e4", "--calibrate"], "--calibrate need the FEM"),
     (["--stresses", "1e4,1e4,2e4", "--preset", "fast"], "--preset sets the FEM mesh"),
     (["--preset", "quick"], "invalid choice: 'quick'"),
+    (["--two-way-element", "periodic"], "--two-way-element periodic: the loop's element; "
+                                        "needs --two-way"),
 ])
 def test_bad_inputs(tmp_path, args, msg):
     p = run_case(tmp_path, "--smoke", *args)
@@ -188,3 +190,30 @@ def test_two_way_keeps_the_prepared_element_between_iterations(tmp_path, capsys)
     a, b = runs
     assert np.array_equal(a.stress_final_pa, b.stress_final_pa)
     assert np.array_equal(a.strain_increment, b.strain_increment)
+
+
+def test_two_way_with_the_periodic_element_gives_the_region_its_tangent(tmp_path):
+    """--two-way-element periodic (issue 18): the loop iterates with a dense periodic element
+    of the case's grains (the full FEM tensor; its tangent back as the region's full
+    stiffness), then drives the case's element to the converged targets. Smoke: RE and PRS
+    converge in 6 and 5 FEM solves (measured)."""
+    import h5py
+
+    out = tmp_path / "pe"
+    p = run_case(out, "--smoke", "--two-way", "--two-way-element", "periodic")
+    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+    assert "two-way element: periodic" in p.stdout
+    s = json.loads((out / "summary.json").read_text())
+    for v in ("RE", "PRS"):
+        t = s["two_way"][v]
+        assert t["element"] == "periodic" and t["converged"], t
+        c = np.array(t["stiffness_mandel_pa"])
+        assert c.shape == (6, 6) and np.allclose(c, c.T, rtol=0, atol=1e-9 * np.abs(c).max())
+        assert np.linalg.eigvalsh(c).min() > 0
+        assert s["elements"][v]["strain_increment"]  # the case's element ran after the loop
+    with h5py.File(out / "handover.h5") as f:
+        rows = f["stiffness_mandel_pa"][:]
+        regions = f["region"][:]
+    for j in (0, 1):  # element_RE, element_PRS: full stiffnesses given
+        assert any(np.all(np.isfinite(r)) for r in rows[regions == j])
+    assert "with the periodic element" in (out / "report.md").read_text()

@@ -20,7 +20,10 @@ prestressed reinforced (PRS) soil. Here:
    external force on the end nodes: cpp_dem has no built-in prestress).
 3. **Two-way** (``--two-way``): the element's secant stiffness over the handed-over increment
    goes back to the region's material and the FEM re-solves until the handed-over stresses
-   change by less than ``--tol``.
+   change by less than ``--tol``. ``--two-way-element periodic`` iterates with a dense
+   periodic element of the case's grains instead (soil only: the full FEM tensor, shear
+   included, and its tangent back as the region's full stiffness; the geogrid stays in the
+   FEM's band), then drives the case's element to the converged targets.
 
 DEM-only mode: ``--stresses sx,sy,sz`` (Pa, compression positive) or ``--stresses FILE.csv``
 (columns sx,sy,sz, optionally time first: the element is driven through the rows in order)
@@ -82,6 +85,10 @@ class Params(ElementParams):
     max_iterations: int = 8
     workers: int = 1
     calibrate: bool = False          #: fit the FEM soil to a DEM element along the region's path
+    #: the two-way loop's element: "walls" (the case's element, geogrid included, three
+    #: normal stresses, isotropic secant back) or "periodic" (soil only, the full tensor, its
+    #: tangent back; the case's element is then driven to the converged targets)
+    two_way_element: str = "walls"
     stresses: list = field(default_factory=list)  #: DEM-only targets (rows of 3), Pa
     prs: bool = False                #: DEM-only: prestress the grid (else RE)
 
@@ -161,6 +168,31 @@ def fem_body(p: Params):
                               fine_size_m=p.fine_size, fine_radius_m=2 * p.footing_b)
 
 
+def periodic_options(p: Params) -> dict:
+    """``DemElement.periodic`` keywords for a periodic element of this case's grains: their
+    material and radii (the mean radius of ``p.n`` grains filling the element's cube at a
+    solid fraction of 0.6)."""
+    from cpp_dem.scene import linear_material
+
+    r_mean = (0.6 * p.edge**3 / (p.n * 4.0 / 3.0 * math.pi)) ** (1.0 / 3.0)
+    mat = linear_material(density=p.density, young=p.young, poisson=p.poisson,
+                          friction_angle_deg=p.friction_deg)
+    return {"material": mat, "radius_mean": r_mean, "radius_spread": p.radius_spread}
+
+
+def loop_runner(p: Params, out: Path, variant: str):
+    """The two-way loop's element runner (``p.two_way_element``): the case's element, or a
+    dense periodic element of its grains (``femcoupling.region.PeriodicRegionElement``, kept
+    between iterations in ``out/region_elements/<variant>``)."""
+    if p.two_way_element == "walls":
+        return _Runner(p, out, variant)
+    from femcoupling.region import PeriodicRegionElement
+
+    return PeriodicRegionElement(n=p.n, seed=p.seed, prep_friction_deg=0.0, tol=0.02,
+                                 unbalanced=1e-2, options=periodic_options(p),
+                                 cache_dir=str(out / "region_elements" / variant))
+
+
 def calibrate_soil(p: Params, out: Path, hist) -> tuple[Params, dict]:
     """Scales that agree (issue 18): the FEM soil fitted to a DEM element along the element
     region's stress path (``femcoupling.calibration.fit_along_path``). The region's path is
@@ -175,15 +207,9 @@ def calibrate_soil(p: Params, out: Path, hist) -> tuple[Params, dict]:
 
     t0 = time.perf_counter()
     ini, fin, _m, _s0, _load, _info = run_fem(p, out, "RE", hist)
-    r_mean = (0.6 * p.edge**3 / (p.n * 4.0 / 3.0 * math.pi)) ** (1.0 / 3.0)
-    mat = linear_material(density=p.density, young=p.young, poisson=p.poisson,
-                          friction_angle_deg=p.friction_deg)
     fit = fit_along_path(ini.fem_stress_pa, fin.fem_stress_pa, n=p.n, seed=p.seed,
                          prep_friction_deg=0.0, tol=0.02, unbalanced=1e-2,
-                         cohesion_pa=p.soil_cohesion,
-                         options={"material": mat, "radius_mean": r_mean,
-                                  "radius_spread": p.radius_spread},
-                         log=log)
+                         cohesion_pa=p.soil_cohesion, options=periodic_options(p), log=log)
     log("calibration: " + fit.message)
     m = fit.material
     rec = {"young_pa": m.young_pa, "poisson": m.poisson, "friction_deg": m.friction_deg,
@@ -336,9 +362,12 @@ def write_report(out: Path, summary: dict) -> None:
     if "two_way" in summary:
         lines += ["## Two-way", ""]
         for v, t in summary["two_way"].items():
+            kind = ("the periodic element's tangent (isotropic part E, nu)"
+                    if t.get("stiffness_mandel_pa") else "secant (E, nu)")
             lines.append(f"- {v}: {'converged' if t['converged'] else 'NOT converged'} "
-                         f"({t['converged_on']}) in {t['iterations']} FEM solves; changes "
-                         f"{t['changes']}; secant (E, nu) {t['materials']}")
+                         f"({t['converged_on']}) in {t['iterations']} FEM solves with the "
+                         f"{t.get('element', 'walls')} element; changes {t['changes']}; "
+                         f"{kind} {t['materials']}")
         lines.append("")
     if "calibration" in summary:
         c = summary["calibration"]
@@ -368,6 +397,11 @@ def run(p: Params, out: Path) -> dict:
         from femcoupling.twoway import HandoverHistory, check_region, two_way
 
         summary["mode"] = "FEM -> DEM" + (" (two-way)" if p.two_way else " (one-way)")
+        if p.two_way and p.two_way_element == "periodic":
+            log("two-way element: periodic, soil only (the full FEM tensor, its tangent back "
+                "as the region's stiffness); the geogrid stays in the FEM's layer band, "
+                "counted once; the case's element, geogrid included, is then driven to the "
+                "converged targets")
         if p.workers > 1:
             log(f"--workers {p.workers}: this case couples one element region per FEM model "
                 "(RE, then PRS), so its two-way loops have one element each and nothing runs "
@@ -386,16 +420,25 @@ def run(p: Params, out: Path) -> dict:
                 summary["fem"][variant] = info
                 if p.two_way:
                     m.restore_state(state0)
-                    tw = two_way(m, regions=["element"], load=load,
-                                 element_runner=_Runner(p, out, variant), tol=p.two_way_tol,
-                                 max_iterations=p.max_iterations, workers=p.workers,
-                                 history=hist, log=log, history_names=[f"element_{variant}"])
+                    try:
+                        tw = two_way(m, regions=["element"], load=load,
+                                     element_runner=loop_runner(p, out, variant),
+                                     tol=p.two_way_tol, max_iterations=p.max_iterations,
+                                     workers=p.workers, history=hist, log=log,
+                                     history_names=[f"element_{variant}"])
+                    except RuntimeError as exc:  # (a periodic element that cannot start)
+                        raise SystemExit(f"[prs_element] two-way {variant} with the "
+                                         f"{p.two_way_element} element: {exc}; try "
+                                         "--calibrate, or --two-way-element walls") from exc
                     fin = tw.targets["element"]
+                    c = tw.stiffnesses.get("element")
                     summary.setdefault("two_way", {})[variant] = {
+                        "element": p.two_way_element,
                         "converged": tw.converged, "converged_on": tw.converged_on,
                         "iterations": tw.iterations,
                         "changes": [float(c) for c in tw.changes],
                         "materials": {k: list(v) for k, v in tw.materials.items()},
+                        "stiffness_mandel_pa": None if c is None else c.tolist(),
                         "warnings": list(tw.warnings)}
                     log(f"two-way {variant}: {'converged' if tw.converged else 'NOT converged'}"
                         f" ({tw.converged_on}) after {tw.iterations} FEM solves, changes "
@@ -545,6 +588,10 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                     help="processes for the DEM elements of the two-way loop; this case "
                          "couples one region per FEM model, so more than 1 runs nothing in "
                          "parallel (said in the log)")
+    ap.add_argument("--two-way-element", choices=("walls", "periodic"), default="walls",
+                    help="the two-way loop's element: the case's (walls, geogrid included; "
+                         "an isotropic secant back) or a dense periodic one of its grains "
+                         "(soil only, the full tensor; its tangent back as a full stiffness)")
     ap.add_argument("--calibrate", action="store_true",
                     help="fit the FEM soil (Drucker-Prager/Mohr-Coulomb) to a DEM element of "
                          "the case's grains along the region's stress path first")
@@ -559,6 +606,9 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     p.two_way, p.two_way_tol, p.max_iterations, p.workers = (a.two_way, a.tol, a.max_iterations,
                                                              a.workers)
     p.calibrate = a.calibrate
+    if a.two_way_element != "walls" and not a.two_way:
+        ap.error(f"--two-way-element {a.two_way_element}: the loop's element; needs --two-way")
+    p.two_way_element = a.two_way_element
     if a.preset:
         if a.stresses:
             ap.error("--preset sets the FEM mesh and the two-way tolerance: not with --stresses")
