@@ -28,22 +28,18 @@ import time
 import warnings
 from pathlib import Path
 
+sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
+
 
 def run(mode: str, seed: int, args, cache: str) -> dict:
     import numpy as np
 
-    from femcoupling.elastoplastic import SoilModel
-    from femcoupling.geometry import ElementRegion, ReinforcedSoilBody
-    from femcoupling.materials import LinearElastic
     from femcoupling.region import PeriodicRegionElement
     from femcoupling.twoway import RegionWarning, two_way
 
-    body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5,
-                              regions=(ElementRegion("a", (0.25, 2.7), 0.2),
-                                       ElementRegion("b", (0.75, 2.4), 0.2)),
-                              mesh_size_m=0.6, fine_size_m=0.06)
-    m = SoilModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1)
-    m.set_geostatic()
+    from test_fem_handover import two_region_model  # (the FEM body of the tests)
+
+    m = two_region_model()
     e0 = m.region_strain(args.region)
     runner = PeriodicRegionElement(n=args.grains, seed=seed, cache_dir=cache,
                                    tol=args.servo_tol)

@@ -69,20 +69,29 @@ class ElasticElement:
                                stress_final_pa=final.normal_pa, strain_increment=de)
 
 
-def test_two_way_converges_and_puts_the_element_stiffness_into_the_region(tmp_path):
-    import h5py
-
+def two_region_model(regions=("a", "b")):
+    """The test body (also bench/region_tangent.py's): 4 x 3 m of elastic soil (50 MPa,
+    0.3, 18 kN/m^3) under a 1 m footing, element regions a (under the footing) and b (off
+    its edge, turned principal axes), in its geostatic state."""
     from femcoupling.elastoplastic import SoilModel
     from femcoupling.geometry import ElementRegion, ReinforcedSoilBody
     from femcoupling.materials import LinearElastic
-    from femcoupling.twoway import HandoverHistory, two_way
 
+    where = {"a": (0.25, 2.7), "b": (0.75, 2.4)}
     body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5,
-                              regions=(ElementRegion("a", (0.25, 2.7), 0.2),
-                                       ElementRegion("b", (0.75, 2.4), 0.2)),
+                              regions=tuple(ElementRegion(r, where[r], 0.2) for r in regions),
                               mesh_size_m=0.6, fine_size_m=0.06)
     m = SoilModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1)
     m.set_geostatic()
+    return m
+
+
+def test_two_way_converges_and_puts_the_element_stiffness_into_the_region(tmp_path):
+    import h5py
+
+    from femcoupling.twoway import HandoverHistory, two_way
+
+    m = two_region_model()
     load = lambda model: model.load_footing(pressure_pa=100e3, steps=1)  # noqa: E731
     with HandoverHistory(tmp_path / "h.h5", regions=["a", "b"]) as hist:
         res = two_way(m, regions=["a", "b"], load=load,
@@ -102,16 +111,7 @@ def test_two_way_converges_and_puts_the_element_stiffness_into_the_region(tmp_pa
 
 
 def _one_region_model():
-    from femcoupling.elastoplastic import SoilModel
-    from femcoupling.geometry import ElementRegion, ReinforcedSoilBody
-    from femcoupling.materials import LinearElastic
-
-    body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5,
-                              regions=(ElementRegion("a", (0.25, 2.7), 0.2),),
-                              mesh_size_m=0.6, fine_size_m=0.06)
-    m = SoilModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1)
-    m.set_geostatic()
-    return m
+    return two_region_model(("a",))
 
 
 def _footing(model):
