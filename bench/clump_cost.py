@@ -169,7 +169,8 @@ def main() -> int:
                 if not free:
                     a = sc
     k_members = a.num_bodies
-    res = {"mode": args.mode, "pack": args.pack, "hold": args.hold, "clumps": a.num_clumps, "spheres": k_members, "threads": args.threads,
+    res = {"mode": args.mode, "pack": args.pack, "hold": args.hold, "clumps": a.num_clumps,
+           "spheres": k_members, "threads": args.threads,
            "steps_per_block": args.steps, "rounds": args.rounds,
            "clump_us_per_step": 1e6 * statistics.median(ta),
            "free_us_per_step": 1e6 * statistics.median(tb),

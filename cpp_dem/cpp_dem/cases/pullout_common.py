@@ -165,8 +165,8 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
     if sc.num_clumps:
         tpl = sorted({int(n) for n in np.bincount(np.asarray(sc.clump_ids)[
             np.asarray(sc.clump_ids) >= 0])})
-        log(f"grains: {meta['grains']}, {sc.num_clumps} clumps of {'/'.join(map(str, tpl))} spheres "
-            f"({n_spheres} spheres), contact stiffness of the grain's equivalent radius; "
+        log(f"grains: {meta['grains']}, {sc.num_clumps} clumps of {'/'.join(map(str, tpl))} "
+            f"spheres ({n_spheres} spheres), contact stiffness of the grain's equivalent radius; "
             f"overlap limit {sc.max_overlap_ratio:.3g} of a member's radius")
     log(f"{n_grains} grains, geogrid of {len(sample.grid.nodes)} nodes / "
         f"{len(sample.grid.links)} links / {len(sample.grid.pfacets)} PFacets / "

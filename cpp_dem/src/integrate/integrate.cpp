@@ -202,7 +202,8 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
         bool members_only = has_clumps && !mean_field;
         for (int b = b0; b < b1 && members_only; ++b) members_only = clump_of[b] >= 0;
         if (members_only) {
-          const bool ok = wide ? member_forces(b0, b1, WideOps()) : member_forces(b0, b1, NarrowOps());
+          const bool ok =
+              wide ? member_forces(b0, b1, WideOps()) : member_forces(b0, b1, NarrowOps());
           if (!ok) {
             for (int b = b0; b < b1; ++b)
               if (!forces_finite(b)) err = std::min(err, static_cast<long>(b));
