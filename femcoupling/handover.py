@@ -133,21 +133,21 @@ def secant_stiffness(*, stress_increment_pa: npt.ArrayLike, strain_increment: np
 def secant_tangent(tangent_mandel_pa: npt.ArrayLike, *, strain_increment: npt.ArrayLike,
                    stress_increment_pa: npt.ArrayLike,
                    min_eig_fraction: float = 1e-3) -> np.ndarray:
-    """The element's tangent made to reproduce its measured increment: the smallest
-    symmetric change of ``tangent_mandel_pa`` (6 x 6 Mandel, Pa) that maps the strain
-    increment onto the stress increment (both Mandel (6,), the same sign convention), by the
-    BFGS update (Nocedal & Wright, *Numerical Optimization*, 2006, eq. 6.19 with the roles of
-    the step and the gradient change taken by the strain and stress increments):
+    """The element's tangent made to reproduce its measured increment: a symmetric rank-two
+    change of ``tangent_mandel_pa`` (6 x 6 Mandel, Pa) that maps the strain increment onto
+    the stress increment (both Mandel (6,), the same sign convention), by the BFGS update
+    (Nocedal & Wright, *Numerical Optimization*, 2006, eq. 6.19, with the strain and stress
+    increments in the roles of the step and of the gradient change):
 
         C = T - (T de)(T de)^T / (de . T de) + ds ds^T / (ds . de)
 
     so that C de = ds exactly, C is symmetric, and it keeps T's response to every strain that
-    does no work with T de nor with ds (four of the six directions): a rank-two change. T is
-    made symmetric first (a network tangent with geometric terms is not quite symmetric) and
-    positive definite: eigenvalues below ``min_eig_fraction`` times the largest are raised to
-    it (an element near its strength has sliding contacts and a tangent soft, or negative,
-    in some directions). C is then positive definite whenever ds . de > 0 (the element stored
-    energy over the increment); otherwise a HandoverError names the reason. Returns C (Pa).
+    does no work with T de nor with ds (four of the six directions). T is made symmetric first
+    (a network tangent with geometric terms is not quite symmetric) and positive definite:
+    eigenvalues below ``min_eig_fraction`` times the largest are raised to it (an element near
+    its strength has sliding contacts and a tangent soft, or negative, in some directions). C
+    is then positive definite whenever ds . de > 0 (the element stored energy over the
+    increment); otherwise a HandoverError names the reason. Returns C (Pa).
     """
     t = np.asarray(tangent_mandel_pa, float)
     de = np.asarray(strain_increment, float)

@@ -122,11 +122,8 @@ class PeriodicRegionElement:
             "state reached")
         de = el.strain() - e0  # tension positive
         scatter = el.stress_scatter()
-        tangent = None
-        if self.tangent:
-            tangent, _ = el.network_tangent()
-            if not np.all(np.isfinite(tangent)):
-                tangent = None
+        # (A non-finite tangent is passed on: two_way then says so and takes the secant.)
+        tangent = el.network_tangent()[0] if self.tangent else None
         return ElementResponse(
             stress_initial_pa=-np.diag(s_ini), stress_final_pa=-np.diag(s1),
             strain_increment=-np.diag(de),

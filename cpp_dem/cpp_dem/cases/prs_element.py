@@ -203,8 +203,6 @@ def calibrate_soil(p: Params, out: Path, hist) -> tuple[Params, dict]:
     are fitted. Returns the parameters with the fitted soil and the record."""
     from femcoupling.calibration import fit_along_path
 
-    from cpp_dem.scene import linear_material
-
     t0 = time.perf_counter()
     ini, fin, _m, _s0, _load, _info = run_fem(p, out, "RE", hist)
     fit = fit_along_path(ini.fem_stress_pa, fin.fem_stress_pa, n=p.n, seed=p.seed,
@@ -431,14 +429,14 @@ def run(p: Params, out: Path) -> dict:
                                          f"{p.two_way_element} element: {exc}; try "
                                          "--calibrate, or --two-way-element walls") from exc
                     fin = tw.targets["element"]
-                    c = tw.stiffnesses.get("element")
+                    stiff = tw.stiffnesses.get("element")
                     summary.setdefault("two_way", {})[variant] = {
                         "element": p.two_way_element,
                         "converged": tw.converged, "converged_on": tw.converged_on,
                         "iterations": tw.iterations,
                         "changes": [float(c) for c in tw.changes],
                         "materials": {k: list(v) for k, v in tw.materials.items()},
-                        "stiffness_mandel_pa": None if c is None else c.tolist(),
+                        "stiffness_mandel_pa": None if stiff is None else stiff.tolist(),
                         "warnings": list(tw.warnings)}
                     log(f"two-way {variant}: {'converged' if tw.converged else 'NOT converged'}"
                         f" ({tw.converged_on}) after {tw.iterations} FEM solves, changes "
