@@ -178,3 +178,21 @@ def test_secant_tangent_of_an_indefinite_tangent_is_positive_definite():
     assert np.abs(c @ de - ds).max() <= 1e-12 * np.abs(ds).max()
     assert np.linalg.eigvalsh(c).min() > 0
     AnisotropicElastic(c)  # accepted
+
+
+class NanTangentElement(AnisotropicElement):
+    """The stand-in, but its tangent is not finite (a broken contact network)."""
+
+    def __call__(self, name, initial, final):
+        r = super().__call__(name, initial, final)
+        r.info["tangent_voigt_pa"] = np.full((6, 6), np.nan)
+        return r
+
+
+def test_a_tangent_that_gives_no_stiffness_is_said_and_the_secant_taken():
+    from femcoupling.twoway import RegionWarning, two_way
+
+    with pytest.warns(RegionWarning, match="the element's tangent gives no stiffness"):
+        res = two_way(_one_region_model(), regions=["a"], load=_footing,
+                      element_runner=NanTangentElement(), max_iterations=3)
+    assert res.stiffnesses["a"] is None and res.materials["a"][0] > 0
