@@ -547,6 +547,20 @@ class SoilModel:
         s = self.comm.allreduce(np.array([(cm * vol).sum(), vol.sum()]), op=MPI.SUM)
         return float(s[0] / s[1] * self.body.layers[i].thickness_m) if s[1] > 0 else math.nan
 
+    def region_layer_force(self, name: str) -> float | None:
+        """The geogrid tension across the element region ``name``, N/m, tension positive: the
+        mean axial force per metre width of the layers that cross it
+        (``ReinforcedSoilBody.region_layers``) over the region's x extent, summed over them;
+        None where no layer crosses the region. The two-way coupling hands it to the DEM
+        element's grid ends (``WallTargets.grid_tension_n_per_m``)."""
+        layers = self.body.region_layers(name)
+        if not layers:
+            return None
+        reg = self.body.regions[self.body.region_tag(name) - geo.REGION_TAG0]
+        x = reg.center_m[0]
+        xr = (x - reg.size_m / 2, x + reg.size_m / 2)
+        return float(sum(self.layer_force_n_per_m(i, x_range_m=xr) for i in layers))
+
     def _cell_centres(self) -> np.ndarray:
         g = self.mesh.geometry
         dm = g.dofmaps[0][: self.n_cells]

@@ -191,6 +191,15 @@ class ReinforcedSoilBody:
         raise FemInputError(f"region={name!r}: no such region (have "
                             f"{[r.name for r in self.regions]})")
 
+    def region_layers(self, name: str) -> list[int]:
+        """Indices of the geogrid layers that cross the element region ``name``: their
+        mid-plane lies within its height and their x range overlaps its x range."""
+        reg = self.regions[self.region_tag(name) - REGION_TAG0]
+        h = reg.size_m / 2
+        x, z = reg.center_m[0], reg.center_m[-1]
+        return [i for i, lay in enumerate(self.layers)
+                if abs(lay.z_m - z) < h and lay.x_min_m < x + h and lay.x_max_m > x - h]
+
     def layer_tags(self) -> list[int]:
         """Cell tags of the geogrid layers."""
         return [LAYER_TAG0 + i for i in range(len(self.layers))]

@@ -45,6 +45,9 @@ class WallTargets:
             axis, deg (0 when the principal axes are the wall normals).
         shear_ratio: max |shear| / mean normal stress, -.
         fem_stress_pa: the FEM tensor handed over (tension positive), for the record.
+        grid_tension_n_per_m: the tension of the geogrid layer crossing the region, N/m of
+            width, tension positive, for the element's grid ends; None where no layer
+            crosses it (``femcoupling.twoway.region_targets``).
     """
 
     normal_pa: np.ndarray
@@ -54,13 +57,16 @@ class WallTargets:
     rotation_deg: float
     shear_ratio: float
     fem_stress_pa: np.ndarray
+    grid_tension_n_per_m: float | None = None
 
     def report(self) -> str:
         """One line for the progress log."""
         n, s = self.normal_pa / 1e3, self.shear_pa / 1e3
+        grid = ("" if self.grid_tension_n_per_m is None
+                else f"; geogrid tension {self.grid_tension_n_per_m / 1e3:.4g} kN/m")
         return (f"walls x,y,z {n[0]:.2f}, {n[1]:.2f}, {n[2]:.2f} kPa (compression +); shear "
                 f"yz,xz,xy {s[0]:.2f}, {s[1]:.2f}, {s[2]:.2f} kPa not imposed; principal axes "
-                f"turned {self.rotation_deg:.1f} deg from the walls")
+                f"turned {self.rotation_deg:.1f} deg from the walls{grid}")
 
 
 def _rotation_deg(axes: np.ndarray) -> float:

@@ -6,7 +6,9 @@ FEM stress of the initial state (before the load stage) and after it, as
 
 Two way (:func:`two_way`): iterate
 
-1. restore the initial state, solve the load stage, hand over each region's stresses;
+1. restore the initial state, solve the load stage, hand over each region's stresses and
+   the tension of a geogrid layer that crosses it (:func:`region_targets`; the runner may
+   pull its element's grid ends by it, as the case's element does);
 2. run each region's DEM element from the initial targets to the new ones
    (``element_runner``, possibly in parallel processes);
 3. the element's stiffness over the handed-over increment becomes that region's material:
@@ -57,7 +59,8 @@ from femcoupling.materials import (AnisotropicElastic, LinearElastic, tensor_to_
 from femcoupling.relaxation import check_relaxation, next_factor
 
 __all__ = ["ElementResponse", "HandoverHistory", "RegionWarning", "STIFFNESS_MODES",
-           "TwoWayResult", "check_region", "element_stiffness", "one_way", "two_way"]
+           "TwoWayResult", "check_region", "element_stiffness", "one_way", "region_targets",
+           "two_way"]
 
 
 class RegionWarning(UserWarning):
@@ -97,14 +100,16 @@ class HandoverHistory:
     relative stress scatter), ``relaxation`` (the factor applied) and
     ``stiffness_mandel_pa`` (n, 6, 6: the full stiffness given to the region from the
     element's tangent; NaN where the region got the isotropic secant, whose isotropic
-    projection the secant fields hold otherwise). Written on rank 0 only.
+    projection the secant fields hold otherwise) and ``grid_tension_n_per_m`` (the tension of
+    the geogrid layer crossing the region, handed to the element's grid ends; NaN where none
+    does). Written on rank 0 only.
     """
 
     FIELDS = {"iteration": (), "region": (), "fem_stress_pa": (3, 3), "targets_pa": (3,),
               "shear_pa": (3,), "rotation_deg": (), "change": (), "dem_stress_pa": (3,),
               "secant_young_pa": (), "secant_poisson": (), "fem_strain_increment": (3,),
               "dem_strain_increment": (3,), "strain_ratio": (), "scatter": (),
-              "relaxation": (), "stiffness_mandel_pa": (6, 6)}
+              "relaxation": (), "stiffness_mandel_pa": (6, 6), "grid_tension_n_per_m": ()}
 
     def __init__(self, path: Any, *, regions: Sequence[str], metadata: dict | None = None,
                  rank: int = 0) -> None:
@@ -128,7 +133,7 @@ class HandoverHistory:
         self._f.flush()
 
     def append(self, **row: Any) -> None:
-        """Append one row (missing fields are NaN) and flush."""
+        """Append one row (missing fields, and None, are NaN) and flush."""
         if self._f is None:
             return
         for name, shape in self.FIELDS.items():
@@ -250,15 +255,25 @@ def _normal_strain(model: Any, region: str) -> np.ndarray | None:
     return None if f is None else -np.diag(np.asarray(f(region), float))
 
 
+def region_targets(model: Any, region: str) -> WallTargets:
+    """The WallTargets of ``region``: its soil cells' stress (:func:`fem_to_dem`) and, where a
+    geogrid layer crosses it and the model can say (``region_layer_force``), the layer's
+    tension (``grid_tension_n_per_m``, for the element's grid ends)."""
+    t = fem_to_dem(model.region_stress(region))
+    f = getattr(model, "region_layer_force", None)
+    g = None if f is None else f(region)
+    return t if g is None else dataclasses.replace(t, grid_tension_n_per_m=float(g))
+
+
 def one_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any]
             ) -> tuple[dict, dict]:
     """Initial and final WallTargets per region: the model's current state, then ``load(model)``.
 
     Returns ``(initial, final)`` dicts keyed by region name.
     """
-    initial = {r: fem_to_dem(model.region_stress(r)) for r in regions}
+    initial = {r: region_targets(model, r) for r in regions}
     load(model)
-    final = {r: fem_to_dem(model.region_stress(r)) for r in regions}
+    final = {r: region_targets(model, r) for r in regions}
     return initial, final
 
 
@@ -322,7 +337,7 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
     rank0 = comm.rank == 0
     say = (log if (log is not None and rank0) else (lambda msg: None))
     state0 = model.save_state()
-    initial = {r: fem_to_dem(model.region_stress(r)) for r in regions}
+    initial = {r: region_targets(model, r) for r in regions}
     strain0 = {r: _normal_strain(model, r) for r in regions}
     prev: dict | None = None
     changes: list = []
@@ -360,13 +375,14 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
             history.append(iteration=it, region=hrow[r], fem_stress_pa=final[r].fem_stress_pa,
                            targets_pa=final[r].normal_pa, shear_pa=final[r].shear_pa,
                            rotation_deg=final[r].rotation_deg, change=change,
+                           grid_tension_n_per_m=final[r].grid_tension_n_per_m,
                            fem_strain_increment=(np.nan if fem_de[r] is None else fem_de[r]),
                            **row)
 
     for it in range(1, max_iterations + 1):
         model.restore_state(state0)
         load(model)
-        final = {r: fem_to_dem(model.region_stress(r)) for r in regions}
+        final = {r: region_targets(model, r) for r in regions}
         for r in regions:
             s1 = _normal_strain(model, r)
             fem_de[r] = None if s1 is None else s1 - strain0[r]

@@ -58,6 +58,20 @@ def test_fem_to_dem_smoke_outputs_and_servo_hold(smoke):
     report = (out / "report.md").read_text()
     assert "## Warnings" in report
     assert all(w in report for v in ("RE", "PRS") for w in s["elements"][v]["warnings"])
+    # the FEM layer's tension across the region, handed to the grid ends (issue 18): PRS
+    # near T_p; a layer in compression (RE's initial state, measured -46 N/m) is handed as 0
+    import h5py
+
+    for v in ("RE", "PRS"):
+        fem_t = s["fem"][v]["grid_tension_n_per_m"]
+        e = s["elements"][v]
+        assert e["grid_tension_n_per_m"] == [max(t, 0.0) for t in fem_t]
+        assert e["grid_end_force_n"] == pytest.approx(0.095 / 9 * max(fem_t[1], 0), rel=1e-2)
+    assert 0.8 * 2000 < s["fem"]["PRS"]["grid_tension_n_per_m"][0] < 1.2 * 2000
+    with h5py.File(out / "handover.h5") as f:
+        np.testing.assert_allclose(f["grid_tension_n_per_m"][:],
+                                   [s["fem"][v]["grid_tension_n_per_m"][1] for v in ("RE", "PRS")])
+    assert "handed to the element's grid ends" in report
 
 
 DEM_ONLY = """
@@ -129,6 +143,8 @@ def test_homogeneous_field_handed_over_reproduces_the_standalone_element(tmp_pat
     (["--preset", "quick"], "invalid choice: 'quick'"),
     (["--two-way-element", "periodic"], "--two-way-element periodic: the loop's element; "
                                         "needs --two-way"),
+    (["--stresses", "1e4,1e4,2e4", "--no-grid-handover"], "--no-grid-handover: the grid "
+                                                          "tension comes from the FEM"),
 ])
 def test_bad_inputs(tmp_path, args, msg):
     p = run_case(tmp_path, "--smoke", *args)

@@ -208,3 +208,46 @@ def test_check_region_flags_turned_axes_and_strain_far_from_the_region():
     msgs, ratio = check_region("r", ok, fem_strain_increment=[1e-4, 0, 2e-4],
                                dem_strain_increment=[1e-4, 0, 3e-4])
     assert msgs == [] and ratio == pytest.approx(1.5)
+
+
+def test_region_layers_are_the_layers_that_cross_a_region():
+    from femcoupling.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
+
+    lay = (GeogridLayer(z_m=2.7, x_min_m=0.0, x_max_m=2.0),   # through a
+           GeogridLayer(z_m=2.45, x_min_m=1.0, x_max_m=3.0),  # b's height, not its x
+           GeogridLayer(z_m=2.0, x_min_m=0.0, x_max_m=4.0))   # below both
+    body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5, layers=lay,
+                              regions=(ElementRegion("a", (0.25, 2.7), 0.2),
+                                       ElementRegion("b", (0.75, 2.4), 0.2)))
+    assert body.region_layers("a") == [0]
+    assert body.region_layers("b") == []
+
+
+def test_region_targets_carry_the_tension_of_the_layer_across_the_region():
+    """A prestressed layer (T_p = 2 kN/m) through region a: the handed-over targets carry the
+    layer's mean tension over the region's width (issue 18: for the element's grid ends);
+    region b, which no layer crosses, carries none. Measured 1.95 kN/m (the band loses a
+    little of T_p to the soil it compresses)."""
+    from femcoupling.elastoplastic import SoilModel
+    from femcoupling.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
+    from femcoupling.materials import GeogridLayerMaterial, LinearElastic
+    from femcoupling.twoway import region_targets
+
+    body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5,
+                              layers=(GeogridLayer(z_m=2.7, x_min_m=0.0, x_max_m=2.0,
+                                                   thickness_m=0.02),),
+                              regions=(ElementRegion("a", (0.25, 2.7), 0.2),
+                                       ElementRegion("b", (0.75, 2.4), 0.2)),
+                              mesh_size_m=0.6, fine_size_m=0.06)
+    m = SoilModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1,
+                  layers=[GeogridLayerMaterial(axial_stiffness_n_per_m=3e5,
+                                               prestress_n_per_m=2000.0)])
+    m.set_geostatic()
+    m.apply_prestress(steps=1)
+    t = region_targets(m, "a")
+    assert t.grid_tension_n_per_m == pytest.approx(
+        m.layer_force_n_per_m(0, x_range_m=(0.15, 0.35)), rel=1e-12)
+    assert 0.9 * 2000.0 < t.grid_tension_n_per_m < 2000.0
+    assert "geogrid tension" in t.report()
+    assert region_targets(m, "b").grid_tension_n_per_m is None
+

@@ -92,3 +92,73 @@ def test_bad_input_names_the_field(kw, field):
     s, g = _woven()
     with pytest.raises(cd.ParameterError, match=field):
         Prestress(s, g, **kw)
+
+
+def test_end_tension_pulls_each_line_by_t_times_spacing():
+    """EndTension (issue 18's hand-over of an FEM layer's tension): a free square grid pulled
+    at its ends by T = 1 kN/m. Every longitudinal member then carries T x spacing = 25 N and
+    stretches by F L / (E A); the transverse members carry nothing. Measured: 1.1e-7 and
+    5e-14 relative; asserted 1e-5."""
+    from cpp_dem.prestress import EndTension
+
+    s, g = _cylinders()
+    e = EndTension(s, g)
+    e.set(1000.0)
+    assert e.ends.spacing == pytest.approx(0.025, rel=1e-12)
+    assert e.line_force_n == pytest.approx(25.0, rel=1e-12)
+    ext = np.asarray(s.external_forces)
+    assert np.sum(ext, axis=0) == pytest.approx([0.0, 0.0, 0.0], abs=1e-12)
+    x0 = np.asarray(s.positions)[:, 0].copy()
+    s.run(20000)
+    np.testing.assert_allclose(e.line_forces(), 25.0, rtol=1e-5)
+    f = g.member_axial_forces(s)
+    longi = np.asarray(g.member_direction) == geogrid.LONGITUDINAL
+    assert np.abs(f[~longi]).max() < 1e-5 * 25.0
+    x = np.asarray(s.positions)[:, 0]
+    stretch = (x[e.ends.high] - x0[e.ends.high]).mean() - (x[e.ends.low] - x0[e.ends.low]).mean()
+    assert stretch / 0.1 == pytest.approx(25.0 / (4e9 * np.pi * 1e-6), rel=1e-5)
+    # set() replaces its own forces: back to 0, the ends are free again
+    e.set(0.0)
+    assert np.abs(np.asarray(s.external_forces)).max() == 0.0
+
+
+def test_end_tension_on_a_woven_grid_gives_the_lines_their_mean():
+    """A woven grid's end patch joins its lines through the transverse member, so the lines
+    share the pull unevenly (measured 25.8 / 29.4 / 25.8 N); their mean is T x pitch."""
+    from cpp_dem.prestress import EndTension
+
+    s = cd.Scene(local_damping=0.7)
+    m = s.add_material(woven.woven_material("detailed"))
+    g = woven.woven_geogrid(s, origin=(0, 0, 0), apertures_x=3, apertures_y=2, material=m)
+    s.dt = 0.5 * s.critical_dt()
+    e = EndTension(s, g)
+    e.set(1000.0)
+    s.run(40000)
+    assert e.line_forces().mean() == pytest.approx(1000.0 * g.pitch[1], rel=1e-3)
+
+
+def test_unlocked_prestress_handed_to_end_forces_keeps_its_force():
+    """A locked prestress whose grips let go (Prestress.unlock) with the ends then pulled by
+    the same tension (EndTension) keeps the lines at the target (the PRS element's hand-over
+    of the FEM layer tension)."""
+    from cpp_dem.prestress import EndTension
+
+    s, g = _cylinders()
+    p = Prestress(s, g, tension_per_m=800.0)
+    p.tension(100000)
+    p.unlock()
+    assert not p.locked
+    EndTension(s, g).set(800.0)
+    s.run(20000)
+    np.testing.assert_allclose(p.line_forces(), p.target_n, rtol=1e-5)
+
+
+def test_end_tension_bad_input_names_the_field():
+    from cpp_dem.prestress import EndTension
+
+    s, g = _cylinders()
+    e = EndTension(s, g)
+    with pytest.raises(cd.ParameterError, match="tension_per_m=nan"):
+        e.set(float("nan"))
+    with pytest.raises(cd.ParameterError, match="direction='diagonal'"):
+        EndTension(s, g, direction="diagonal")

@@ -311,17 +311,22 @@ SERIES = {"stage": (None, "-"), "step": (None, "-"), "time": (None, "s"),
           "lx": (None, "m"), "ly": (None, "m"), "lz": (None, "m"),
           "unbalanced_force": (None, "-"), "grid_force_longitudinal_mean": (None, "N"),
           "grid_force_transverse_mean": (None, "N"),
-          "prestress_line_force_mean": (None, "N")}
+          "prestress_line_force_mean": (None, "N"), "grid_end_force": (None, "N")}
 
 
 def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
-                log: Callable[[str], None] = _log, prestress=None) -> dict:
+                log: Callable[[str], None] = _log, prestress=None, ends=None,
+                grid_tension: float | None = None) -> dict:
     """Servo walls to ``targets`` (3,) Pa compression positive: converge within p.tol and
     p.unbalanced, then hold p.hold_steps steps; returns the max relative error while held.
-    With a locked ``prestress`` (cpp_dem.prestress.Prestress) its line forces are recorded
-    too (its history, and the series' prestress_line_force_mean)."""
+    With a ``prestress`` (cpp_dem.prestress.Prestress) its line forces are recorded too (its
+    history, and the series' prestress_line_force_mean). With ``ends``
+    (cpp_dem.prestress.EndTension) the grid's longitudinal ends are pulled by
+    ``grid_tension`` (N/m) during the stage (series grid_end_force: the force per line, N)."""
     sc, walls, ctl = sample.scene, sample.walls, sample.controller
     t = np.asarray(targets, float)
+    if ends is not None:
+        ends.set(grid_tension)
     for a in range(3):
         ctl.set_stress(a, float(t[a]))
     ctl.max_speed = prep.default_max_speed(sc, walls, fraction=4e-4)
@@ -334,9 +339,11 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
         f = grid.member_axial_forces(sc)
         locked = (float(prestress.record()["line_forces_n"].mean()) if prestress is not None
                   else float("nan"))
-        rec(prestress_line_force_mean=locked, stage=stage, step=sc.step_count, time=sc.time, sigma_x=ax[0], sigma_y=ax[1],
-            sigma_z=ax[2], target_x=t[0], target_y=t[1], target_z=t[2], lx=size[0],
-            ly=size[1], lz=size[2], unbalanced_force=sc.unbalanced_force(),
+        rec(prestress_line_force_mean=locked, stage=stage, step=sc.step_count, time=sc.time,
+            grid_end_force=ends.line_force_n if ends is not None else float("nan"),
+            sigma_x=ax[0], sigma_y=ax[1], sigma_z=ax[2], target_x=t[0], target_y=t[1],
+            target_z=t[2], lx=size[0], ly=size[1], lz=size[2],
+            unbalanced_force=sc.unbalanced_force(),
             grid_force_longitudinal_mean=float(f[longi].mean()),
             grid_force_transverse_mean=float(f[~longi].mean()))
         return ax
@@ -368,11 +375,19 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
 
 
 def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: str, out: Path,
-                log: Callable[[str], None] = _log, cache: dict | None = None) -> dict:
+                log: Callable[[str], None] = _log, cache: dict | None = None,
+                grid_tension: list | None = None) -> dict:
     """The DEM element driven through ``targets`` (rows of 3, Pa, compression positive).
 
     Prepared at the first row's mean stress, then servoed to each row in turn. Returns the
     element summary (plain numbers); writes <label>.h5/.csv and the VTK files.
+
+    ``grid_tension`` (one value per row, N/m of width, tension positive; issue 18): the
+    tension an FEM layer carries across the element's faces, handed over. The grid's
+    longitudinal (x) ends are then force-controlled (cpp_dem.prestress.EndTension) at that
+    tension during each row's stage, a PRS grid's grips let go first: the walls then carry
+    the soil's stress alone, as the FEM region's soil cells do, and the grid is counted once.
+    None (the default): the ends are free (RE) or held by the locked grips (PRS).
 
     ``cache`` (a dict the caller keeps; the two-way loop's): the element prepared and servoed
     to the first row is kept there (its objects and its checkpoint bytes), keyed by that row
@@ -387,10 +402,17 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     (out / "vtk").mkdir(parents=True, exist_ok=True)
     woven_grid = p.geogrid != "square"
     check_element_params(p)
-    key = (bool(prestressed), tuple(float(x) for x in targets[0]))
+    if grid_tension is not None:
+        grid_tension = [float(x) for x in grid_tension]
+        if len(grid_tension) != len(targets) or not all(map(math.isfinite, grid_tension)):
+            raise _core.ParameterError(f"grid_tension={grid_tension!r}: must be one finite "
+                                       f"value (N/m) per target row ({len(targets)})")
+    key = (bool(prestressed), tuple(float(x) for x in targets[0]),
+           None if grid_tension is None else grid_tension[0])
     hit = cache.get(key) if cache is not None and len(targets) > 1 else None
+    ends = None
     if hit is not None:
-        sample, grid, ps, blob, first_stage = hit
+        sample, grid, ps, ends, blob, first_stage = hit
         _core._checkpoint_load(sample.scene, blob)
         log(f"{label}: the element at the first targets restored from the cache "
             f"(step {sample.scene.step_count}): no preparation")
@@ -399,10 +421,23 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     else:
         sample, grid, ps = make_element(p, float(targets[0].mean()), prestressed, log=log)
     sc, walls = sample.scene, sample.walls
+    if grid_tension is not None and ends is None:
+        from .prestress import EndTension
+
+        if ps is not None:
+            ps.unlock()
+        ends = EndTension(sc, grid)
+        log(f"{label}: the FEM layer's tension handed over: the grid's longitudinal ends "
+            f"pulled by {np.round(np.array(grid_tension) / 1e3, 4).tolist()} kN/m (x "
+            f"{ends.ends.spacing * 1e3:.2f} mm line spacing)"
+            + ("; the prestress grips let go" if ps is not None else ""))
     meta = {"case": "prs_element", "label": label, "prestressed": prestressed,
             "units": "SI; stresses compression positive"}
-    # The locked-in prestress is a series of PRS runs only.
-    series = {k: v for k, v in SERIES.items() if ps is not None or k != "prestress_line_force_mean"}
+    # The locked-in prestress is a series of PRS runs only; the end force, of handed-over
+    # grid tensions only.
+    absent = ({"prestress_line_force_mean"} if ps is None else set()) | (
+        {"grid_end_force"} if ends is None else set())
+    series = {k: v for k, v in SERIES.items() if k not in absent}
     h5 = H5Recorder(out / f"{label}.h5", series=series, metadata=meta, overwrite=True,
                     snapshot_fields=("positions", "radii"))
     csv = CsvRecorder(out / f"{label}.csv", series=series, overwrite=True)
@@ -422,10 +457,11 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
                 ref_pos = sc.positions.copy()
                 size_before = measure.box_size(sc, walls)
                 stress_before = measure.axis_stresses(sc, walls)
-            st = servo_stage(sample, grid, t, k, p, rec, log=log, prestress=ps)
+            st = servo_stage(sample, grid, t, k, p, rec, log=log, prestress=ps, ends=ends,
+                             grid_tension=None if ends is None else grid_tension[k])
             stages.append(st)
             if k == 0 and cache is not None and len(targets) > 1:
-                cache[key] = (sample, grid, ps, bytes(_core._checkpoint_save(sc)), st)
+                cache[key] = (sample, grid, ps, ends, bytes(_core._checkpoint_save(sc)), st)
             log(f"{label} stage {k}: walls {np.round(st['wall_stresses_pa'] / 1e3, 3).tolist()} "
                 f"kPa for targets {np.round(t / 1e3, 3).tolist()} kPa in {st['steps']} steps "
                 f"({'converged' if st['converged'] else 'NOT converged'}); held within "
@@ -490,6 +526,11 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
         "grid_force_longitudinal_max_n": float(f[longi].max()),
         "grid_force_transverse_mean_n": float(f[~longi].mean()),
         "grid_force_longitudinal_cv": float(f[longi].std() / max(abs(f[longi].mean()), 1e-12)),
+        # the FEM layer's tension handed over per row (N/m) and the force per line (N)
+        "grid_tension_n_per_m": grid_tension,
+        "grid_end_force_n": None if ends is None else ends.line_force_n,
+        "grid_force_end_members_mean_n": (None if ends is None
+                                          else float(ends.end_member_forces().mean())),
         "wall_time_s": time.perf_counter() - t_start,
         "geogrid": p.geogrid, "grains": p.grains, "grain_law": p.grain_law,
         **extra,

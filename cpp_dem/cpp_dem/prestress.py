@@ -14,7 +14,7 @@ Then it locks the grips (ends held) and reports the locked-in force as the run g
 - **Grips.**
   - They are the grid's bodies within ``grip_width`` of the grid's two ends along the
     members' direction: by default the end junctions.
-  - Each body of the pulled end belongs to the line nearest to it.
+  - Each end body belongs to the line nearest to it.
   - All their DOFs are held; the pulled ones move at the servo's velocity.
 - **Servo.**
   - Every ``period`` steps each line's grip moves at v = gain (T_p - T) / (k period dt).
@@ -22,7 +22,11 @@ Then it locks the grips (ends held) and reports the locked-in force as the run g
   - v is capped at ``max_speed``. The default is 1e-4 of the smallest radius per step.
 - **Lock.** The grips lock when every line has been within ``tolerance`` of the target for
   ``settle_checks`` checks in a row. A target not reached within the steps allowed raises
-  :class:`PrestressError`, naming the lines and their forces.
+  :class:`PrestressError`, naming the lines and their forces. :meth:`Prestress.unlock` lets
+  the grips go again.
+- **End forces.** :class:`EndTension` pulls the same ends by given forces instead of moving
+  them: T per metre of width (N/m) times the lines' spacing at each end of every line. The
+  two-way coupling hands an FEM layer's tension to a DEM element this way.
 """
 
 from __future__ import annotations
@@ -51,33 +55,22 @@ def _member_bodies(scene, grid, m: int) -> np.ndarray:
     return np.unique(np.asarray(scene.grid_link_nodes)[grid.member_links[m]])
 
 
-class Prestress:
-    """Tensions the members of ``direction`` of ``grid`` in ``scene`` (module docstring).
+class GridEnds:
+    """The two ends of ``grid`` along its members of ``direction``, line by line: the grips
+    of :class:`Prestress` and the loaded ends of :class:`EndTension` (module docstring:
+    "Line", "Grips").
 
-    tension_n : target tension per member, N; or tension_per_m : N per metre of width.
-    grip_width : m; default: the end junctions (a woven grid's patch of crossings, a node
-        grid's end nodes).
-    tolerance : relative, -. period : steps between servo updates. gain : -, in (0, 1].
-    max_speed : m/s.
+    Attributes: axis (0 for x, 1 for y), members (the members of ``direction``), lines (their
+    line labels), line_members, line_coord (each line's cross coordinate, m), spacing (the
+    lines' median spacing, m; NaN for one line), low and high (the bodies of the two ends)
+    and low_line, high_line (each end body's line: an index into ``lines``).
     """
 
-    def __init__(self, scene, grid, *, tension_n: float | None = None,
-                 tension_per_m: float | None = None, direction: str = LONGITUDINAL,
-                 grip_width: float | None = None, tolerance: float = 0.01, period: int = 50,
-                 gain: float = 0.5, settle_checks: int = 5, max_speed: float | None = None):
+    def __init__(self, scene, grid, direction: str = LONGITUDINAL,
+                 grip_width: float | None = None):
         if direction not in (LONGITUDINAL, TRANSVERSE):
             raise ParameterError(f"direction={direction!r}: must be '{LONGITUDINAL}' or "
                                  f"'{TRANSVERSE}'")
-        if (tension_n is None) == (tension_per_m is None):
-            raise ParameterError("give one of tension_n (N per member) or tension_per_m (N/m)")
-        for name, v in (("tolerance", tolerance), ("gain", gain)):
-            if not (math.isfinite(v) and 0 < v <= 1):
-                raise ParameterError(f"{name}={v}: must be in (0, 1]")
-        if not (isinstance(period, int) and period >= 1):
-            raise ParameterError(f"period={period!r}: must be an integer >= 1 (steps)")
-        self.scene, self.grid, self.direction = scene, grid, direction
-        self.tolerance, self.period, self.gain = tolerance, period, gain
-        self.settle_checks = settle_checks
         self.axis = 0 if direction == LONGITUDINAL else 1
         cross = 1 - self.axis
         self.members = np.flatnonzero(np.asarray(grid.member_direction) == direction)
@@ -90,15 +83,8 @@ class Prestress:
         self.line_coord = np.array([
             np.mean(pos[np.concatenate([_member_bodies(scene, grid, m) for m in ms]), cross])
             for ms in self.line_members])
-        if tension_n is None:
-            if len(self.lines) < 2:
-                raise ParameterError("tension_per_m needs at least two member lines (their "
-                                     "spacing is the width per member); give tension_n")
-            spacing = float(np.median(np.diff(np.sort(self.line_coord))))
-            tension_n = float(tension_per_m) * spacing
-        if not (math.isfinite(tension_n) and tension_n > 0):
-            raise ParameterError(f"tension={tension_n}: must be > 0 (N per member)")
-        self.target_n = float(tension_n)
+        self.spacing = (float(np.median(np.diff(np.sort(self.line_coord))))
+                        if len(self.lines) > 1 else math.nan)
         bodies = _grid_bodies(grid)
         x = pos[bodies, self.axis]
         lo, hi = x.min(), x.max()
@@ -113,12 +99,54 @@ class Prestress:
         if not (math.isfinite(grip_width) and 0 <= grip_width < 0.5 * (hi - lo)):
             raise ParameterError(f"grip_width={grip_width}: must be in [0, half the grid's "
                                  f"extent {0.5 * (hi - lo):g} m)")
-        self.held = bodies[x <= lo + grip_width + 1e-12]
-        self.pulled = bodies[x >= hi - grip_width - 1e-12]
-        near = np.argmin(np.abs(pos[self.pulled, cross][:, None] - self.line_coord[None, :]),
-                         axis=1)
-        self.pulled_line = near
+        self.low = bodies[x <= lo + grip_width + 1e-12]
+        self.high = bodies[x >= hi - grip_width - 1e-12]
+
+        def line_of_body(b: np.ndarray) -> np.ndarray:
+            return np.argmin(np.abs(pos[b, cross][:, None] - self.line_coord[None, :]), axis=1)
+
+        self.low_line, self.high_line = line_of_body(self.low), line_of_body(self.high)
+
+
+class Prestress:
+    """Tensions the members of ``direction`` of ``grid`` in ``scene`` (module docstring).
+
+    tension_n : target tension per member, N; or tension_per_m : N per metre of width.
+    grip_width : m; default: the end junctions (a woven grid's patch of crossings, a node
+        grid's end nodes).
+    tolerance : relative, -. period : steps between servo updates. gain : -, in (0, 1].
+    max_speed : m/s.
+    """
+
+    def __init__(self, scene, grid, *, tension_n: float | None = None,
+                 tension_per_m: float | None = None, direction: str = LONGITUDINAL,
+                 grip_width: float | None = None, tolerance: float = 0.01, period: int = 50,
+                 gain: float = 0.5, settle_checks: int = 5, max_speed: float | None = None):
+        if (tension_n is None) == (tension_per_m is None):
+            raise ParameterError("give one of tension_n (N per member) or tension_per_m (N/m)")
+        for name, v in (("tolerance", tolerance), ("gain", gain)):
+            if not (math.isfinite(v) and 0 < v <= 1):
+                raise ParameterError(f"{name}={v}: must be in (0, 1]")
+        if not (isinstance(period, int) and period >= 1):
+            raise ParameterError(f"period={period!r}: must be an integer >= 1 (steps)")
+        self.scene, self.grid, self.direction = scene, grid, direction
+        self.tolerance, self.period, self.gain = tolerance, period, gain
+        self.settle_checks = settle_checks
+        ends = GridEnds(scene, grid, direction, grip_width)
+        self.axis, self.members, self.lines = ends.axis, ends.members, ends.lines
+        self.line_members, self.line_coord = ends.line_members, ends.line_coord
+        if tension_n is None:
+            if len(self.lines) < 2:
+                raise ParameterError("tension_per_m needs at least two member lines (their "
+                                     "spacing is the width per member); give tension_n")
+            tension_n = float(tension_per_m) * ends.spacing
+        if not (math.isfinite(tension_n) and tension_n > 0):
+            raise ParameterError(f"tension={tension_n}: must be > 0 (N per member)")
+        self.target_n = float(tension_n)
+        self.held, self.pulled, self.pulled_line = ends.low, ends.high, ends.high_line
         scene.block_dofs(np.concatenate([self.held, self.pulled]), "all")
+        bodies = _grid_bodies(grid)
+        pos = np.asarray(scene.positions)
         r = float(np.min(np.asarray(scene.radii)[bodies]))
         self.max_speed = max_speed if max_speed is not None else 1e-4 * r / scene.dt
         self.start = pos[self.pulled, self.axis].copy()
@@ -210,3 +238,65 @@ class Prestress:
                 f"{np.round(row['line_forces_n'], 4).tolist()} N against {self.target_n:.4g} N "
                 f"(largest deviation {row['deviation']:.3g} > {tol:g})")
         return row
+
+    def unlock(self) -> None:
+        """The grips let go: their bodies move freely again. The locked-in force then rests on
+        whatever else holds the ends (an :class:`EndTension`, or nothing)."""
+        self.scene.block_dofs(np.concatenate([self.held, self.pulled]), "")
+        self.locked = False
+
+
+class EndTension:
+    """Force-controlled grid ends: every line of members of ``direction`` is pulled at its two
+    ends by equal and opposite forces T x spacing (T per metre of width, N/m; the spacing of
+    the lines, as for :class:`Prestress`'s ``tension_per_m``), shared equally among the
+    line's end bodies (:class:`GridEnds`). With the ends free otherwise, the members then
+    carry T x spacing where no grains take it up. This is how an FEM layer's tension across
+    the faces of a DEM element is handed over (``cpp_dem.element``, issue 18).
+
+    The forces are the end bodies' external forces (``scene.external_forces``), which this
+    object owns: :meth:`set` replaces them, other bodies' are left alone.
+    """
+
+    def __init__(self, scene, grid, *, direction: str = LONGITUDINAL,
+                 grip_width: float | None = None):
+        self.scene, self.grid = scene, grid
+        self.ends = GridEnds(scene, grid, direction, grip_width)
+        if len(self.ends.lines) < 2:
+            raise ParameterError("EndTension needs at least two member lines (their spacing "
+                                 "is the width each line carries)")
+        self.tension_per_m = 0.0
+
+    @property
+    def line_force_n(self) -> float:
+        """The force applied at each end of every line, N (tension_per_m x spacing)."""
+        return self.tension_per_m * self.ends.spacing
+
+    def set(self, tension_per_m: float) -> None:
+        """Pulls the ends with ``tension_per_m`` (N/m, tension positive; 0 leaves them
+        free)."""
+        t = float(tension_per_m)
+        if not math.isfinite(t):
+            raise ParameterError(f"tension_per_m={tension_per_m!r}: must be finite (N/m)")
+        e = self.ends
+        ext = np.asarray(self.scene.external_forces).copy()
+        for bodies, line, sign in ((e.low, e.low_line, -1.0), (e.high, e.high_line, 1.0)):
+            share = np.bincount(line, minlength=len(e.lines))[line]
+            ext[bodies] = 0.0
+            ext[bodies, e.axis] = sign * t * e.spacing / share
+        self.scene.external_forces = ext
+        self.tension_per_m = t
+
+    def line_forces(self) -> np.ndarray:
+        """Mean tensile force of each line's members, N."""
+        f = self.grid.member_axial_forces(self.scene)
+        return np.array([f[ms].mean() for ms in self.ends.line_members])
+
+    def end_member_forces(self) -> np.ndarray:
+        """Tensile force of the members that hold an end body, N: where the pull enters the
+        grid (the applied line force, less what grains take up within half a member)."""
+        e = self.ends
+        end = np.concatenate([e.low, e.high])
+        m = [k for k in e.members
+             if np.isin(_member_bodies(self.scene, self.grid, k), end).any()]
+        return self.grid.member_axial_forces(self.scene)[m]

@@ -89,6 +89,10 @@ class Params(ElementParams):
     #: normal stresses, isotropic secant back) or "periodic" (soil only, the full tensor, its
     #: tangent back; the case's element is then driven to the converged targets)
     two_way_element: str = "walls"
+    #: hand the FEM layer's tension across the element region to the element's grid ends
+    #: (force-controlled; a PRS grid's grips let go), so the walls carry the soil's stress
+    #: alone and the grid is counted once; False: free ends (RE), locked grips (PRS)
+    grid_handover: bool = True
     stresses: list = field(default_factory=list)  #: DEM-only targets (rows of 3), Pa
     prs: bool = False                #: DEM-only: prestress the grid (else RE)
 
@@ -111,10 +115,25 @@ def servo_stage(sample, grid, targets, stage: int, p: Params, rec) -> dict:
 
 
 def run_element(p: Params, targets: list, *, prestressed: bool, label: str, out: Path,
-                cache: dict | None = None) -> dict:
+                cache: dict | None = None, grid_tension: list | None = None) -> dict:
     """:func:`cpp_dem.element.run_element` with this case's log."""
     return _element.run_element(p, targets, prestressed=prestressed, label=label, out=out,
-                                log=log, cache=cache)
+                                log=log, cache=cache, grid_tension=grid_tension)
+
+
+def handed_tension(p: Params, targets: list, label: str) -> list | None:
+    """The geogrid tensions (N/m) handed to the element's grid ends for these WallTargets
+    (``grid_tension_n_per_m``, the FEM layer across the region): None when
+    ``p.grid_handover`` is off or the FEM has no layer there. A layer in compression is handed
+    over as 0 (free ends: a geogrid carries no compression), and the log says so."""
+    if not p.grid_handover or any(t.grid_tension_n_per_m is None for t in targets):
+        return None
+    ts = [float(t.grid_tension_n_per_m) for t in targets]
+    if min(ts) < 0:
+        log(f"{label}: the FEM layer is in compression across the region "
+            f"({np.round(np.array(ts) / 1e3, 4).tolist()} kN/m): a geogrid carries none, so "
+            "its ends are left free where it is")
+    return [max(t, 0.0) for t in ts]
 
 
 #: The two-way loop's elements, kept between its iterations: per (parameters, region) the
@@ -134,7 +153,8 @@ def element_runner(p_dict: dict, out: str, name: str, initial, final):
     cache = _ELEMENTS.setdefault((json.dumps(p_dict, sort_keys=True, default=str), out, name),
                                  {})
     s = run_element(p, [initial.normal_pa, final.normal_pa], prestressed=prestressed,
-                    label=f"twoway_{name}", out=Path(out), cache=cache)
+                    label=f"twoway_{name}", out=Path(out), cache=cache,
+                    grid_tension=handed_tension(p, [initial, final], f"twoway_{name}"))
     return ElementResponse(stress_initial_pa=np.array(s["stress_initial_pa"]),
                            stress_final_pa=np.array(s["stress_final_pa"]),
                            strain_increment=np.array(s["strain_increment"]),
@@ -313,6 +333,7 @@ def run_fem(p: Params, out: Path, variant: str, history) -> tuple:
     plot_fem(m, out / f"fem_{variant}.png", f"FEM {variant}: sigma_zz under "
              f"{p.footing_pressure / 1e3:g} kPa footing")
     info = {"cells": int(ncell), **fem_state(m),
+            "grid_tension_n_per_m": [ini.grid_tension_n_per_m, fin.grid_tension_n_per_m],
             "strain_increment": (-np.diag(m.region_strain("element") - strain0)).tolist(),
             "wall_time_s": time.perf_counter() - t0}
     return ini, fin, m, state0, load, info
@@ -325,6 +346,24 @@ def fem_state(m) -> dict:
             "layer_force_upper_n_per_m": m.layer_force_n_per_m(0),
             "layer_force_upper_under_footing_n_per_m":
                 m.layer_force_n_per_m(0, x_range_m=(0.0, m.body.footing_half_width_m))}
+
+
+def grid_line(f: dict, e: dict) -> str:
+    """The report's line on the geogrid tension across the region (FEM ``f``, element
+    ``e``)."""
+    t = f.get("grid_tension_n_per_m")
+    if not t or t[0] is None:
+        return "- no FEM geogrid layer crosses the region: the element's grid ends are free"
+    def kn(x: list) -> list:
+        return np.round(np.array(x, float) / 1e3, 4).tolist()
+
+    if e.get("grid_tension_n_per_m") is None:
+        return (f"- FEM geogrid tension across the region {kn(t)} kN/m, not handed over "
+                "(--no-grid-handover): the grid counts in the walls' stress too")
+    return (f"- FEM geogrid tension across the region {kn(t)} kN/m (initial, final), handed "
+            f"to the element's grid ends as {kn(e['grid_tension_n_per_m'])} kN/m: "
+            f"{e['grid_end_force_n']:.2f} N per line at the end; the end members carry "
+            f"{e['grid_force_end_members_mean_n']:.2f} N")
 
 
 def write_report(out: Path, summary: dict) -> None:
@@ -356,7 +395,8 @@ def write_report(out: Path, summary: dict) -> None:
                       f" upper layer force {f['layer_force_upper_n_per_m'] / 1e3:.3f} kN/m; "
                       f"handover shear (yz, xz, xy) "
                       f"{np.round(np.array(f['shear_pa']) / 1e3, 2).tolist()} kPa, principal "
-                      f"axes turned {f['rotation_deg']:.1f} deg from the walls", ""]
+                      f"axes turned {f['rotation_deg']:.1f} deg from the walls",
+                      grid_line(f, e), ""]
     if "two_way" in summary:
         lines += ["## Two-way", ""]
         for v, t in summary["two_way"].items():
@@ -444,13 +484,17 @@ def run(p: Params, out: Path) -> dict:
                     # the report, the summary and the XDMF show the coupled FEM state
                     info.update(fem_state(m), shear_pa=fin.shear_pa.tolist(),
                                 rotation_deg=fin.rotation_deg,
+                                grid_tension_n_per_m=[ini.grid_tension_n_per_m,
+                                                      fin.grid_tension_n_per_m],
                                 targets_final_pa=fin.normal_pa.tolist(), state="two-way")
                     m.write_xdmf(out / f"fem_{variant}.xdmf")
                     info["strain_increment"] = tw.fem_strain_increments["element"].tolist()
+                label = f"element_{variant}"
                 e = run_element(p, [ini.normal_pa, fin.normal_pa], prestressed=variant == "PRS",
-                                label=f"element_{variant}", out=out)
+                                label=label, out=out,
+                                grid_tension=handed_tension(p, [ini, fin], label))
                 summary["elements"][variant] = e
-                msgs, ratio = check_region(f"element_{variant}", fin,
+                msgs, ratio = check_region(label, fin,
                                            fem_strain_increment=info["strain_increment"],
                                            dem_strain_increment=e["strain_increment"])
                 e["dem_fem_strain_ratio"] = ratio
@@ -460,7 +504,8 @@ def run(p: Params, out: Path) -> dict:
                 hist.append(iteration=0, region=j, fem_stress_pa=fin.fem_stress_pa,
                             targets_pa=fin.normal_pa, shear_pa=fin.shear_pa,
                             rotation_deg=fin.rotation_deg, change=0.0,
-                            dem_stress_pa=e["stress_final_pa"])
+                            dem_stress_pa=e["stress_final_pa"],
+                            grid_tension_n_per_m=fin.grid_tension_n_per_m)
     summary["wall_time_total_s"] = time.perf_counter() - t_start
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
     end_run(out)
@@ -590,6 +635,10 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                     help="the two-way loop's element: the case's (walls, geogrid included; "
                          "an isotropic secant back) or a dense periodic one of its grains "
                          "(soil only, the full tensor; its tangent back as a full stiffness)")
+    ap.add_argument("--no-grid-handover", action="store_true",
+                    help="leave the element's grid ends free (RE) or in the locked grips "
+                         "(PRS) instead of pulling them by the FEM layer's tension across the "
+                         "region (then the grid also counts in the walls' stress: twice)")
     ap.add_argument("--calibrate", action="store_true",
                     help="fit the FEM soil (Drucker-Prager/Mohr-Coulomb) to a DEM element of "
                          "the case's grains along the region's stress path first")
@@ -604,6 +653,9 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     p.two_way, p.two_way_tol, p.max_iterations, p.workers = (a.two_way, a.tol, a.max_iterations,
                                                              a.workers)
     p.calibrate = a.calibrate
+    p.grid_handover = not a.no_grid_handover
+    if a.no_grid_handover and a.stresses:
+        ap.error("--no-grid-handover: the grid tension comes from the FEM; not with --stresses")
     if a.two_way_element != "walls" and not a.two_way:
         ap.error(f"--two-way-element {a.two_way_element}: the loop's element; needs --two-way")
     p.two_way_element = a.two_way_element
