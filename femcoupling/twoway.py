@@ -22,7 +22,10 @@ Two way (:func:`two_way`): iterate
    increments;
 
 until the handed-over stresses change by less than ``tol`` (relative, max norm over the
-regions) between two iterations, or ``max_iterations``. Noise-aware: an element that reports
+regions) between two iterations and every element strains within ``max_strain_ratio`` times
+its region (settled stresses with an element straining far more than its region are a
+stall, not convergence: the loop stops, warns and reports ``converged_on="stalled"``), or
+``max_iterations``. Noise-aware: an element that reports
 its stress scatter (``info["stress_scatter_pa"]``, the bootstrap of its contacts:
 ``cpp_dem.measure.stress_scatter``) sets a floor; a change within ``scatter_factor`` times
 the relative scatter ends the loop too, and says that ``tol`` was below it. The secant is
@@ -160,7 +163,9 @@ class TwoWayResult:
     """Outcome of :func:`two_way`.
 
     Attributes:
-        converged: the handed-over stresses changed by less than ``tol``.
+        converged: the handed-over stresses changed by less than ``tol`` (or the elements'
+            scatter) and every element strained within ``max_strain_ratio`` times its
+            region (where both strains are known).
         iterations: number of FEM solves of the load stage.
         changes: relative change after each iteration (the first is inf).
         targets: final WallTargets per region.
@@ -171,7 +176,9 @@ class TwoWayResult:
         stiffnesses: per region the last full stiffness given (6 x 6 Mandel, Pa), or None
             where the region got the isotropic secant.
         warnings: every RegionWarning message, in order.
-        converged_on: "tol", or "scatter" (the change was within the elements' scatter).
+        converged_on: "tol", "scatter" (the change was within the elements' scatter), or
+            "stalled" (it was, but an element strained more than ``max_strain_ratio`` times
+            its region: not converged).
         fem_strain_increments: per region its normal strain increment (3,) over the load
             stage in the last FEM solve, compression positive (None if the model has no
             ``region_strain``).
@@ -394,19 +401,36 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
         changes.append(change)
         for r in regions:
             say(f"iteration {it}, region {r}: {final[r].report()}; change {change:.3g}")
-        stop = change < tol
+        stop, on = change < tol, "tol"
         if not stop and change < scatter_factor * scatter:
-            stop, converged_on = True, "scatter"
-            warn(f"two-way: the change {change:.3g} is within the elements' stress scatter "
-                 f"({scatter:.3g} relative, the bootstrap of their contacts) but above "
-                 f"tol={tol:g}: the tolerance asked is below what the elements resolve; "
-                 f"stopped at the scatter")
+            stop, on = True, "scatter"
         if stop:
-            converged = True
+            # The stresses have settled; the strains must have met too. An element that
+            # strains far more than its region was not given a stiffness that reproduces it
+            # (an element at its strength, answering within its scatter; a secant that cannot
+            # represent it): the loop has stalled, not converged. More iterations do not help
+            # (measured: the periodic smoke element then jumps by 29 %), so it stops and says.
+            far = [(r, ratio) for r in regions for ratio in [check(r)[1]]
+                   if ratio > max_strain_ratio]
+            if far:
+                on = "stalled"
+                within = "tol" if change < tol else "the elements' scatter"
+                warn(f"iteration {it}: the change {change:.3g} is within {within}, but "
+                     + ", ".join(f"region {r}'s element strains {q:.3g} times its region"
+                                 for r, q in far)
+                     + f" (> max_strain_ratio={max_strain_ratio:g}): the scales have not met; "
+                     "stopped, NOT converged (stalled: an element at its strength, or a "
+                     "stiffness that cannot represent it)")
+            elif on == "scatter":
+                warn(f"two-way: the change {change:.3g} is within the elements' stress "
+                     f"scatter ({scatter:.3g} relative, the bootstrap of their contacts) but "
+                     f"above tol={tol:g}: the tolerance asked is below what the elements "
+                     f"resolve; stopped at the scatter")
+            converged, converged_on = on != "stalled", on
             for r in regions:
                 msgs, ratio = check(r)
                 for msg in msgs:
-                    warn(f"iteration {it} (converged): {msg}")
+                    warn(f"iteration {it} ({'converged' if converged else 'stalled'}): {msg}")
                 record(r, strain_ratio=ratio)
             break
         jobs = [(r, initial[r], final[r]) for r in regions]

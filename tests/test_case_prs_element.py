@@ -211,8 +211,9 @@ def test_two_way_keeps_the_prepared_element_between_iterations(tmp_path, capsys)
 def test_two_way_with_the_periodic_element_gives_the_region_its_tangent(tmp_path):
     """--two-way-element periodic (issue 18): the loop iterates with a dense periodic element
     of the case's grains (the full FEM tensor; its tangent back as the region's full
-    stiffness), then drives the case's element to the converged targets. Smoke: RE and PRS
-    converge in 6 and 5 FEM solves (measured)."""
+    stiffness), then drives the case's element to the converged targets. Smoke (measured):
+    RE's stresses settle in 6 FEM solves while its element strains 2.7 times the region, a
+    stall, which the loop says (not converged); PRS converges in 5."""
     import h5py
 
     out = tmp_path / "pe"
@@ -222,7 +223,11 @@ def test_two_way_with_the_periodic_element_gives_the_region_its_tangent(tmp_path
     s = json.loads((out / "summary.json").read_text())
     for v in ("RE", "PRS"):
         t = s["two_way"][v]
-        assert t["element"] == "periodic" and t["converged"], t
+        assert t["element"] == "periodic", t
+        # converged, or stalled and said so (issue 18: settled stresses with the scales apart
+        # are not convergence)
+        assert t["converged"] == (t["converged_on"] in ("tol", "scatter")), t
+        assert t["converged"] or any("the scales have not met" in w for w in t["warnings"])
         c = np.array(t["stiffness_mandel_pa"])
         assert c.shape == (6, 6) and np.allclose(c, c.T, rtol=0, atol=1e-9 * np.abs(c).max())
         assert np.linalg.eigvalsh(c).min() > 0

@@ -251,3 +251,39 @@ def test_region_targets_carry_the_tension_of_the_layer_across_the_region():
     assert "geogrid tension" in t.report()
     assert region_targets(m, "b").grid_tension_n_per_m is None
 
+
+class FlowingElement:
+    """Stand-in for an element at its strength: it shortens vertically as an elastic one
+    (10 MPa, 0.25) but flows sideways six times as much, which no isotropic secant (nu at
+    most 0.45) reproduces: the region, given the secant, strains far less than the element
+    (the loop settles with the element straining 3.5 times its region)."""
+
+    def __call__(self, name, initial, final):
+        from femcoupling.twoway import ElementResponse
+
+        ds = final.normal_pa - initial.normal_pa
+        de = (ds - 0.25 * (ds.sum() - ds)) / 10e6
+        de[0] = de[1] = -6.0 * abs(de[2])
+        return ElementResponse(stress_initial_pa=initial.normal_pa,
+                               stress_final_pa=final.normal_pa, strain_increment=de)
+
+
+def test_settled_stresses_with_strains_apart_are_not_convergence():
+    """Issue 18: a loop whose stresses settle while its element strains far more than its
+    region has stalled (as a DEM element at its strength does), not converged: it stops,
+    says so and reports converged_on="stalled". With the limit raised above the mismatch the
+    same loop converges, after the same FEM solves."""
+    from femcoupling.twoway import RegionWarning, two_way
+
+    def run(limit):
+        return two_way(_one_region_model(), regions=["a"], load=_footing,
+                       element_runner=FlowingElement(), tol=1e-3, max_iterations=8,
+                       max_strain_ratio=limit)
+
+    with pytest.warns(RegionWarning, match="the scales have not met; stopped, NOT converged"):
+        stalled = run(2.0)
+    assert not stalled.converged and stalled.converged_on == "stalled"
+    assert stalled.changes[-1] < 1e-3  # the stresses had settled
+    ok = run(100.0)
+    assert ok.converged and ok.converged_on == "tol" and ok.iterations == stalled.iterations
+    assert not any("have not met" in w for w in ok.warnings)
