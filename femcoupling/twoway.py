@@ -493,7 +493,7 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
                    stiffness_mandel_pa=(np.nan if stiffnesses[r] is None
                                         else stiffnesses[r]))
         prev = final
-    if not converged:
+    if not converged and converged_on != "stalled":
         for r in regions:
             msgs, _ = check(r)
             for msg in msgs:
