@@ -146,6 +146,26 @@ class HandoverHistory:
         self.n += 1
         self._f.flush()
 
+    def append_file(self, path: Any) -> None:
+        """Append every row of another history file (same fields; its region indices are
+        kept, so it must list the same ``regions``) and flush: the record of a part of a run
+        made in another process."""
+        if self._f is None:
+            return
+        import h5py
+
+        with h5py.File(path, "r") as src:
+            if list(src.attrs["regions"]) != self.regions:
+                raise FemInputError(f"path={str(path)!r}: its regions "
+                                    f"{list(src.attrs['regions'])} are not {self.regions}")
+            n = src["iteration"].shape[0]
+            for name in self.FIELDS:
+                d = self._f[name]
+                d.resize(self.n + n, axis=0)
+                d[self.n:] = src[name][:]
+        self.n += n
+        self._f.flush()
+
     def close(self) -> None:
         if self._f is not None:
             self._f.close()

@@ -288,3 +288,25 @@ def test_settled_stresses_with_strains_apart_are_not_convergence():
     ok = run(100.0)
     assert ok.converged and ok.converged_on == "tol" and ok.iterations == stalled.iterations
     assert not any("have not met" in w for w in ok.warnings)
+
+
+def test_history_append_file_keeps_rows_and_refuses_other_regions(tmp_path):
+    import h5py
+
+    from femcoupling.geometry import FemInputError
+    from femcoupling.twoway import HandoverHistory
+
+    with HandoverHistory(tmp_path / "part.h5", regions=["x", "y"]) as part:
+        part.append(iteration=1, region=1, change=0.5)
+        part.append(iteration=2, region=1, change=0.1)
+    with HandoverHistory(tmp_path / "all.h5", regions=["x", "y"]) as h:
+        h.append(iteration=0, region=0)
+        h.append_file(tmp_path / "part.h5")
+        h.append(iteration=3, region=0)
+    with h5py.File(tmp_path / "all.h5") as f:
+        assert f["iteration"][:].tolist() == [0, 1, 2, 3]
+        assert f["region"][:].tolist() == [0, 1, 1, 0]
+        assert f["change"][1:3].tolist() == [0.5, 0.1]
+    with HandoverHistory(tmp_path / "other.h5", regions=["y", "x"]) as h:
+        with pytest.raises(FemInputError, match="regions"):
+            h.append_file(tmp_path / "part.h5")

@@ -138,7 +138,7 @@ def handed_tension(p: Params, targets: list, label: str) -> list | None:
 
 #: The two-way loop's elements, kept between its iterations: per (parameters, region) the
 #: element prepared and servoed to the initial targets, which every iteration shares. (The
-#: case's loop has one region, which ``two_way`` runs in this process whatever ``workers``.)
+#: case's loop has one region, which ``two_way`` runs in the variant's process.)
 _ELEMENTS: dict = {}
 
 
@@ -213,7 +213,7 @@ def loop_runner(p: Params, out: Path, variant: str):
                                  cache_dir=str(out / "region_elements" / variant))
 
 
-def calibrate_soil(p: Params, out: Path, hist) -> tuple[Params, dict]:
+def calibrate_soil(p: Params, out: Path) -> tuple[Params, dict]:
     """Scales that agree (issue 18): the FEM soil fitted to a DEM element along the element
     region's stress path (``femcoupling.calibration.fit_along_path``). The region's path is
     the RE one-way FEM's (initial -> loaded); the fitting element is periodic, soil only,
@@ -224,7 +224,7 @@ def calibrate_soil(p: Params, out: Path, hist) -> tuple[Params, dict]:
     from femcoupling.calibration import fit_along_path
 
     t0 = time.perf_counter()
-    ini, fin, _m, _s0, _load, _info = run_fem(p, out, "RE", hist)
+    ini, fin, _m, _s0, _load, _info = run_fem(p, out, "RE")
     fit = fit_along_path(ini.fem_stress_pa, fin.fem_stress_pa, n=p.n, seed=p.seed,
                          prep_friction_deg=0.0, tol=0.02, unbalanced=1e-2,
                          cohesion_pa=p.soil_cohesion, options=periodic_options(p), log=log)
@@ -302,7 +302,7 @@ def plot_fem(m, png: Path, title: str) -> None:
     plt.close(fig)
 
 
-def run_fem(p: Params, out: Path, variant: str, history) -> tuple:
+def run_fem(p: Params, out: Path, variant: str) -> tuple:
     """FEM of the structure for RE or PRS; returns (initial, final) WallTargets, the model,
     and numbers for the report."""
     from femcoupling.twoway import one_way
@@ -422,6 +422,88 @@ def write_report(out: Path, summary: dict) -> None:
     (out / "report.md").write_text("\n".join(lines) + "\n")
 
 
+VARIANTS = ("RE", "PRS")
+HISTORY_REGIONS = [f"element_{v}" for v in VARIANTS]
+
+
+def run_variant(p: Params, out: Path, variant: str) -> dict:
+    """One variant (RE or PRS) of the FEM mode: its FEM, the two-way loop if asked, then the
+    case's element driven to the (coupled) targets. Its handover rows go to
+    ``out/handover_<variant>.h5`` (``run`` merges them into handover.h5). Returns the
+    summary parts: {"fem": ..., "element": ..., "two_way": ... or None}."""
+    from femcoupling.twoway import HandoverHistory, check_region, two_way
+
+    j = VARIANTS.index(variant)
+    ini, fin, m, state0, load, info = run_fem(p, out, variant)
+    info.update(shear_pa=fin.shear_pa.tolist(), rotation_deg=fin.rotation_deg,
+                targets_initial_pa=ini.normal_pa.tolist(),
+                targets_final_pa=fin.normal_pa.tolist())
+    tws = None
+    with HandoverHistory(out / f"handover_{variant}.h5", regions=HISTORY_REGIONS,
+                         metadata={"case": "prs_element"}) as hist:
+        if p.two_way:
+            m.restore_state(state0)
+            try:
+                tw = two_way(m, regions=["element"], load=load,
+                             element_runner=loop_runner(p, out, variant),
+                             tol=p.two_way_tol, max_iterations=p.max_iterations,
+                             history=hist, log=log, history_names=[f"element_{variant}"])
+            except RuntimeError as exc:  # (a periodic element that cannot start)
+                raise SystemExit(f"[prs_element] two-way {variant} with the "
+                                 f"{p.two_way_element} element: {exc}; try "
+                                 "--calibrate, or --two-way-element walls") from exc
+            fin = tw.targets["element"]
+            stiff = tw.stiffnesses.get("element")
+            tws = {"element": p.two_way_element,
+                   "converged": tw.converged, "converged_on": tw.converged_on,
+                   "iterations": tw.iterations,
+                   "changes": [float(c) for c in tw.changes],
+                   "materials": {k: list(v) for k, v in tw.materials.items()},
+                   "stiffness_mandel_pa": None if stiff is None else stiff.tolist(),
+                   "warnings": list(tw.warnings)}
+            log(f"two-way {variant}: {'converged' if tw.converged else 'NOT converged'}"
+                f" ({tw.converged_on}) after {tw.iterations} FEM solves, changes "
+                f"{tw.changes}")
+            # the report, the summary and the XDMF show the coupled FEM state
+            info.update(fem_state(m), shear_pa=fin.shear_pa.tolist(),
+                        rotation_deg=fin.rotation_deg,
+                        grid_tension_n_per_m=[ini.grid_tension_n_per_m,
+                                              fin.grid_tension_n_per_m],
+                        targets_final_pa=fin.normal_pa.tolist(), state="two-way")
+            m.write_xdmf(out / f"fem_{variant}.xdmf")
+            info["strain_increment"] = tw.fem_strain_increments["element"].tolist()
+        label = f"element_{variant}"
+        e = run_element(p, [ini.normal_pa, fin.normal_pa], prestressed=variant == "PRS",
+                        label=label, out=out, grid_tension=handed_tension(p, [ini, fin], label))
+        msgs, ratio = check_region(label, fin, fem_strain_increment=info["strain_increment"],
+                                   dem_strain_increment=e["strain_increment"])
+        e["dem_fem_strain_ratio"] = ratio
+        e["warnings"] = msgs
+        for msg in msgs:
+            log("WARNING: " + msg)
+        hist.append(iteration=0, region=j, fem_stress_pa=fin.fem_stress_pa,
+                    targets_pa=fin.normal_pa, shear_pa=fin.shear_pa,
+                    rotation_deg=fin.rotation_deg, change=0.0,
+                    dem_stress_pa=e["stress_final_pa"],
+                    grid_tension_n_per_m=fin.grid_tension_n_per_m)
+    return {"fem": info, "element": e, "two_way": tws}
+
+
+def run_variants(p: Params, out: Path) -> list:
+    """RE and PRS (``run_variant``), in two processes with ``p.workers`` >= 2 (spawned: no fork
+    of an MPI/PETSc process; each is the serial run's, so the results are the same)."""
+    if p.workers < 2:
+        return [run_variant(p, out, v) for v in VARIANTS]
+    import concurrent.futures
+    import multiprocessing
+
+    log(f"--workers {p.workers}: RE and PRS run in two processes")
+    ctx = multiprocessing.get_context("spawn")
+    with concurrent.futures.ProcessPoolExecutor(max_workers=2, mp_context=ctx) as ex:
+        return list(ex.map(run_variant, [p] * len(VARIANTS), [out] * len(VARIANTS),
+                           VARIANTS))
+
+
 def run(p: Params, out: Path) -> dict:
     t_start = time.perf_counter()
     begin_run(out, "prs_element", log=log)
@@ -432,7 +514,7 @@ def run(p: Params, out: Path) -> dict:
         summary["elements"]["PRS" if p.prs else "RE"] = run_element(
             p, p.stresses, prestressed=p.prs, label="element", out=out)
     else:
-        from femcoupling.twoway import HandoverHistory, check_region, two_way
+        from femcoupling.twoway import HandoverHistory
 
         summary["mode"] = "FEM -> DEM" + (" (two-way)" if p.two_way else " (one-way)")
         if p.two_way and p.two_way_element == "periodic":
@@ -440,72 +522,20 @@ def run(p: Params, out: Path) -> dict:
                 "as the region's stiffness); the geogrid stays in the FEM's layer band, "
                 "counted once; the case's element, geogrid included, is then driven to the "
                 "converged targets")
-        if p.workers > 1:
-            log(f"--workers {p.workers}: this case couples one element region per FEM model "
-                "(RE, then PRS), so its two-way loops have one element each and nothing runs "
-                "in parallel; for many elements in parallel see femcoupling.hierarchical "
-                "(docs/multiscale.md)")
-        summary["fem"] = {}
-        with HandoverHistory(out / "handover.h5", regions=["element_RE", "element_PRS"],
+        if p.calibrate:
+            p, summary["calibration"] = calibrate_soil(p, out)
+        parts = run_variants(p, out)
+        summary["fem"] = {v: r["fem"] for v, r in zip(VARIANTS, parts)}
+        summary["elements"] = {v: r["element"] for v, r in zip(VARIANTS, parts)}
+        if p.two_way:
+            summary["two_way"] = {v: r["two_way"] for v, r in zip(VARIANTS, parts)}
+        # one handover record, RE's rows then PRS's, whatever ran where
+        with HandoverHistory(out / "handover.h5", regions=HISTORY_REGIONS,
                              metadata={"case": "prs_element"}) as hist:
-            if p.calibrate:
-                p, summary["calibration"] = calibrate_soil(p, out, hist)
-            for j, variant in enumerate(("RE", "PRS")):
-                ini, fin, m, state0, load, info = run_fem(p, out, variant, hist)
-                info.update(shear_pa=fin.shear_pa.tolist(), rotation_deg=fin.rotation_deg,
-                            targets_initial_pa=ini.normal_pa.tolist(),
-                            targets_final_pa=fin.normal_pa.tolist())
-                summary["fem"][variant] = info
-                if p.two_way:
-                    m.restore_state(state0)
-                    try:
-                        tw = two_way(m, regions=["element"], load=load,
-                                     element_runner=loop_runner(p, out, variant),
-                                     tol=p.two_way_tol, max_iterations=p.max_iterations,
-                                     workers=p.workers, history=hist, log=log,
-                                     history_names=[f"element_{variant}"])
-                    except RuntimeError as exc:  # (a periodic element that cannot start)
-                        raise SystemExit(f"[prs_element] two-way {variant} with the "
-                                         f"{p.two_way_element} element: {exc}; try "
-                                         "--calibrate, or --two-way-element walls") from exc
-                    fin = tw.targets["element"]
-                    stiff = tw.stiffnesses.get("element")
-                    summary.setdefault("two_way", {})[variant] = {
-                        "element": p.two_way_element,
-                        "converged": tw.converged, "converged_on": tw.converged_on,
-                        "iterations": tw.iterations,
-                        "changes": [float(c) for c in tw.changes],
-                        "materials": {k: list(v) for k, v in tw.materials.items()},
-                        "stiffness_mandel_pa": None if stiff is None else stiff.tolist(),
-                        "warnings": list(tw.warnings)}
-                    log(f"two-way {variant}: {'converged' if tw.converged else 'NOT converged'}"
-                        f" ({tw.converged_on}) after {tw.iterations} FEM solves, changes "
-                        f"{tw.changes}")
-                    # the report, the summary and the XDMF show the coupled FEM state
-                    info.update(fem_state(m), shear_pa=fin.shear_pa.tolist(),
-                                rotation_deg=fin.rotation_deg,
-                                grid_tension_n_per_m=[ini.grid_tension_n_per_m,
-                                                      fin.grid_tension_n_per_m],
-                                targets_final_pa=fin.normal_pa.tolist(), state="two-way")
-                    m.write_xdmf(out / f"fem_{variant}.xdmf")
-                    info["strain_increment"] = tw.fem_strain_increments["element"].tolist()
-                label = f"element_{variant}"
-                e = run_element(p, [ini.normal_pa, fin.normal_pa], prestressed=variant == "PRS",
-                                label=label, out=out,
-                                grid_tension=handed_tension(p, [ini, fin], label))
-                summary["elements"][variant] = e
-                msgs, ratio = check_region(label, fin,
-                                           fem_strain_increment=info["strain_increment"],
-                                           dem_strain_increment=e["strain_increment"])
-                e["dem_fem_strain_ratio"] = ratio
-                e["warnings"] = msgs
-                for msg in msgs:
-                    log("WARNING: " + msg)
-                hist.append(iteration=0, region=j, fem_stress_pa=fin.fem_stress_pa,
-                            targets_pa=fin.normal_pa, shear_pa=fin.shear_pa,
-                            rotation_deg=fin.rotation_deg, change=0.0,
-                            dem_stress_pa=e["stress_final_pa"],
-                            grid_tension_n_per_m=fin.grid_tension_n_per_m)
+            for v in VARIANTS:
+                part = out / f"handover_{v}.h5"
+                hist.append_file(part)
+                part.unlink()
     summary["wall_time_total_s"] = time.perf_counter() - t_start
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
     end_run(out)
@@ -628,9 +658,8 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                          "element edge; coarse size 20 x that) and the two-way tolerance "
                          "(overrides --tol); docs/speed_accuracy.md")
     ap.add_argument("--workers", type=int, default=1,
-                    help="processes for the DEM elements of the two-way loop; this case "
-                         "couples one region per FEM model, so more than 1 runs nothing in "
-                         "parallel (said in the log)")
+                    help="processes: 2 or more runs RE and PRS (each its FEM, two-way loop "
+                         "and element) side by side, with the same results")
     ap.add_argument("--two-way-element", choices=("walls", "periodic"), default="walls",
                     help="the two-way loop's element: the case's (walls, geogrid included; "
                          "an isotropic secant back) or a dense periodic one of its grains "
