@@ -39,9 +39,10 @@ import numpy.typing as npt
 
 from femcoupling import geometry as geo
 from femcoupling.geometry import FemInputError
-from femcoupling.materials import (AnisotropicElastic, DruckerPrager, GeogridLayerMaterial,
-                                   LinearElastic, drucker_prager_return, elastic_tangent,
-                                   mandel_identity, mandel_to_tensor)
+from femcoupling.materials import (PLANE_STRAIN_OF_3D, AnisotropicElastic, DruckerPrager,
+                                   GeogridLayerMaterial, LinearElastic, drucker_prager_return,
+                                   elastic_tangent, mandel_identity, mandel_to_tensor,
+                                   tensor_to_mandel)
 
 __all__ = ["SoilModel", "StepResult", "NewtonDivergence"]
 
@@ -65,6 +66,10 @@ class StepResult:
             in displacement control; the applied pressure in load control).
         newton_iterations: iterations this step took.
         plastic_points: number of plastic quadrature points (global).
+        converged_on: "tolerance" (``newton_rtol``), or "stall": with DEM region elements,
+            Newton stalled above it at the elements' resolution and the step was taken at
+            its best iterate (said in ``SoilModel.warnings``).
+        noise_residual: that best residual relative to the force scale (NaN otherwise).
     """
 
     stage: str
@@ -73,6 +78,8 @@ class StepResult:
     footing_pressure_pa: float
     newton_iterations: int
     plastic_points: int
+    converged_on: str = "tolerance"
+    noise_residual: float = float("nan")
 
 
 class SoilModel:
@@ -126,6 +133,15 @@ class SoilModel:
 
         self.body, self.soil, self.layers = body, soil, layers
         self.region_materials = region_materials
+        #: element regions whose material is a DEM element (``set_region_element``)
+        self.region_elements: dict = {}
+        #: with region elements: a step whose residual has not halved in this many Newton
+        #: iterations, its best within ``stall_rtol`` of the force scale, is taken there
+        self.stall_iterations = 3
+        self.stall_rtol = 1e-3
+        #: every warning of the run (steps taken at a stall), in order
+        self.warnings: list[str] = []
+        self._step_noise = ("tolerance", float("nan"))
         self.unit_weight_n_m3, self.degree = gamma, degree
         self.newton_rtol, self.max_newton, self.max_cuts = newton_rtol, max_newton, max_cuts
         self.comm = comm if comm is not None else fx.MPI.COMM_WORLD
@@ -282,6 +298,47 @@ class SoilModel:
         self.region_materials[name] = material
         self._set_material_arrays()
 
+    def set_region_element(self, name: str, element: Any) -> None:
+        """The element region ``name`` takes its stress and tangent from a DEM element at
+        every Newton iterate (the hierarchical mode on this body, one element for the
+        region's cells): ``element`` (``femcoupling.region.DemRegionMaterial``) gets the
+        region's volume-mean strain increment since the start of the load step (3 x 3) and
+        returns its stress increment (3 x 3, Pa) and tangent (6 x 6 Mandel, Pa), which every
+        point of the region takes; a converged step commits it. Serial runs only (one MPI
+        rank)."""
+        tag = self.body.region_tag(name)
+        if self.comm.size > 1:
+            raise FemInputError(f"set_region_element({name!r}): serial runs only (this run "
+                                f"has {self.comm.size} MPI ranks)")
+        for k in ("trial", "commit", "state", "set_state"):
+            if not callable(getattr(element, k, None)):
+                raise FemInputError(f"element={element!r}: needs a {k}() method (see "
+                                    "femcoupling.region.DemRegionMaterial)")
+        self.region_elements[name] = element
+        sel = np.repeat(self.cell_tag_of == tag, self.nq)
+        w = (self.cell_volume[:, None] * self.qweights[None, :]).reshape(-1)[sel]
+        self._element_points = getattr(self, "_element_points", {})
+        self._element_points[name] = (sel, w / w.sum())
+
+    def _region_element_answers(self, deps: np.ndarray, sig: np.ndarray,
+                                tan: np.ndarray, dl: np.ndarray) -> None:
+        """Region points with a DEM element (in place): the start-of-step stress plus the
+        element's increment for the region's mean strain increment, plus its tangent times
+        the point's deviation from that mean (so the region's mean stress is the element's,
+        and the pointwise tangent is the consistent Jacobian: with the mean alone every point
+        would depend on every other one, and Newton converged linearly, 15 % per
+        iteration); no plastic multiplier."""
+        idx = list(PLANE_STRAIN_OF_3D) if self.ncomp == 4 else list(range(6))
+        for name, el in self.region_elements.items():
+            sel, w = self._element_points[name]
+            mean = w @ deps[sel]
+            ds, c = el.trial(mandel_to_tensor(mean))
+            c = np.asarray(c)[np.ix_(idx, idx)]
+            sig[sel] = (self.sig_n[sel] + tensor_to_mandel(ds, self.ncomp)
+                        + (deps[sel] - mean) @ c.T)
+            tan[sel] = c
+            dl[sel] = 0.0
+
     def _to_q(self, func: Any, values: np.ndarray, dofs: np.ndarray, size: int) -> None:
         func.x.array.reshape(-1, size)[dofs] = values.reshape(-1, size)
         func.x.scatter_forward()
@@ -292,6 +349,8 @@ class SoilModel:
                                              alpha=self.alpha, beta=self.beta, k_pa=self.kc)
         if self._aniso is not None:  # elastic there: the return left the trial stress
             tan[self._aniso] = self.C[self._aniso]
+        if self.region_elements:
+            self._region_element_answers(deps, sig, tan, dl)
         self.sig_cur, self.dlam = sig, dl
         self._to_q(self.sig_q, sig, self._qdofs, self.ncomp)
         self._to_q(self.tan_q, tan.reshape(len(tan), -1), self._qdofs_t, self.ncomp**2)
@@ -335,10 +394,18 @@ class SoilModel:
         return math.sqrt(self.comm.allreduce(float(own @ own), op=fx.MPI.SUM)) + 1e-300
 
     def _newton(self) -> int:
-        """Newton iterations of the current step; returns their number, or -1 on failure."""
+        """Newton iterations of the current step; returns their number, or -1 on failure.
+
+        With region elements the residual cannot fall below the elements' own resolution (a
+        DEM answer is rough at the scale of Newton's last corrections: measured stalls at
+        1e-5 to 1e-4 of the force scale). A step whose residual has not halved in
+        ``stall_iterations`` iterations, and whose best residual is within ``stall_rtol``
+        of the force scale, is taken at its best iterate ("stall", said in ``warnings``)."""
         fx = self._fx
         bcs = self._active_bcs()
         self._update_tangent_and_stress(self._strain_increment())
+        self._step_noise = ("tolerance", float("nan"))
+        best, best_u, since = math.inf, None, 0
         for it in range(0, self.max_newton + 1):
             rnorm = self._assemble_residual()
             scale = max(self._internal_scale(), self._ext_scale)
@@ -346,6 +413,16 @@ class SoilModel:
                 return -1
             if rnorm <= self.newton_rtol * scale:
                 return it
+            if self.region_elements:
+                since = 0 if rnorm < 0.5 * best else since + 1
+                if rnorm < best:
+                    best, best_u = rnorm, self.u.x.array.copy()
+                if since >= self.stall_iterations and best <= self.stall_rtol * scale:
+                    self.u.x.array[:] = best_u  # (the elements answer it again, bitwise)
+                    self.u.x.scatter_forward()
+                    self._update_tangent_and_stress(self._strain_increment())
+                    self._step_noise = ("stall", best / scale)
+                    return it
             if it == self.max_newton:
                 break
             self.A.zeroEntries()
@@ -362,6 +439,8 @@ class SoilModel:
         return -1
 
     def _commit(self) -> None:
+        for el in self.region_elements.values():
+            el.commit()
         self.sig_n = self.sig_cur.copy()
         self.u_n.x.array[:] = self.u.x.array
         self.u_n.x.scatter_forward()
@@ -397,7 +476,9 @@ class SoilModel:
             if its <= self.max_newton // 2:  # easy step: grow back towards the nominal size
                 dlf = min(2.0 * dlf, 1.0 / steps)
             r = StepResult(stage, lf, self.footing_settlement_m(), self.footing_pressure_pa(),
-                           its, self.plastic_points())
+                           its, self.plastic_points(), *self._step_noise)
+            if r.converged_on == "stall":
+                self._noise_warning(r)
             self.history.append(r)
             out.append(r)
             if callback is not None:
@@ -405,6 +486,18 @@ class SoilModel:
         return out
 
     _ext_scale = 0.0
+
+    def _noise_warning(self, r: StepResult) -> None:
+        import warnings
+
+        from femcoupling.hierarchical import NoiseWarning
+
+        msg = (f"{r.stage} step at load factor {r.load_factor:.4g}: Newton stalled at "
+               f"{r.noise_residual:.3g} of the force scale, above newton_rtol="
+               f"{self.newton_rtol:g}: the DEM region elements do not resolve the tolerance "
+               "asked; the step is taken at its best iterate")
+        self.warnings.append(msg)
+        warnings.warn(msg, NoiseWarning, stacklevel=3)
 
     def set_geostatic(self, *, k0: float | None = None) -> None:
         """K0 initial state from the self-weight (tension positive, see the module doc).
@@ -613,7 +706,8 @@ class SoilModel:
         return {"u": self.u.x.array.copy(), "sig": self.sig_n.copy(),
                 "traction": self.traction.value.copy(), "footing_u": float(self.footing_u.value),
                 "dc": self._displacement_control, "ext": self._ext_scale,
-                "nhist": len(self.history)}
+                "nhist": len(self.history),
+                "elements": {k: el.state() for k, el in self.region_elements.items()}}
 
     def restore_state(self, state: Mapping) -> None:
         """Return to a state saved by :meth:`save_state` (materials are not restored)."""
@@ -628,6 +722,9 @@ class SoilModel:
         self._displacement_control = state["dc"]
         self._ext_scale = state["ext"]
         del self.history[state["nhist"]:]
+        for k, data in state.get("elements", {}).items():
+            if k in self.region_elements:
+                self.region_elements[k].set_state(data)
 
     # ---- output --------------------------------------------------------------------------
 

@@ -24,7 +24,7 @@ import numpy as np
 import numpy.typing as npt
 
 __all__ = ["HandoverError", "WallTargets", "fem_to_dem", "secant_stiffness",
-           "secant_tangent"]
+           "secant_tangent", "spd_floor"]
 
 
 class HandoverError(ValueError):
@@ -136,6 +136,21 @@ def secant_stiffness(*, stress_increment_pa: npt.ArrayLike, strain_increment: np
     return float(1.0 / a), float(nu)
 
 
+def spd_floor(t: npt.ArrayLike, min_eig_fraction: float = 1e-3, *,
+              name: str = "spd_floor") -> np.ndarray:
+    """The symmetric part of ``t`` with its eigenvalues raised to at least
+    ``min_eig_fraction`` times the largest: a positive definite stiffness from a network
+    tangent that is not quite symmetric (geometric terms) and soft or negative in some
+    directions (sliding contacts near the strength). Raises HandoverError if ``t`` has no
+    positive stiffness at all."""
+    t = np.asarray(t, float)
+    lam, vec = np.linalg.eigh(0.5 * (t + t.T))
+    if not lam[-1] > 0:
+        raise HandoverError(f"{name}: the tangent has no positive stiffness "
+                            f"(largest eigenvalue {lam[-1]:.3g} Pa)")
+    return (vec * np.maximum(lam, min_eig_fraction * lam[-1])) @ vec.T
+
+
 def secant_tangent(tangent_mandel_pa: npt.ArrayLike, *, strain_increment: npt.ArrayLike,
                    stress_increment_pa: npt.ArrayLike,
                    min_eig_fraction: float = 1e-3) -> np.ndarray:
@@ -162,11 +177,7 @@ def secant_tangent(tangent_mandel_pa: npt.ArrayLike, *, strain_increment: npt.Ar
             np.all(np.isfinite(t)) and np.all(np.isfinite(de)) and np.all(np.isfinite(ds))):
         raise HandoverError(f"secant_tangent: tangent {t.shape}, strain increment {de.shape}, "
                             f"stress increment {ds.shape}: must be finite 6 x 6, (6,), (6,)")
-    lam, vec = np.linalg.eigh(0.5 * (t + t.T))
-    if not lam[-1] > 0:
-        raise HandoverError(f"secant_tangent: the tangent has no positive stiffness "
-                            f"(largest eigenvalue {lam[-1]:.3g} Pa)")
-    t = (vec * np.maximum(lam, min_eig_fraction * lam[-1])) @ vec.T
+    t = spd_floor(t, min_eig_fraction, name="secant_tangent")
     td = t @ de
     curv_t, curv = float(de @ td), float(ds @ de)
     if not curv_t > 0:  # (only for de = 0)

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["PeriodicRegionElement", "servo"]
+__all__ = ["DemRegionMaterial", "PeriodicRegionElement", "servo"]
 
 
 def servo(el, target, *, tol: float, unbalanced: float, chunk_steps: int,
@@ -134,3 +134,94 @@ class PeriodicRegionElement:
                   "stress_scatter_pa": np.diag(scatter), "prepared_from_cache": cached,
                   "contacts": el.contact_count(), "wall_s": time.perf_counter() - t0,
                   "reached": message is None, **({"message": message} if message else {})})
+
+
+class DemRegionMaterial:
+    """A periodic DEM element as the material of a ``SoilModel`` element region: the
+    hierarchical mode on the reinforced-soil body, one element for the region's tagged group
+    of cells (``SoilModel.set_region_element``). At every Newton iterate the model hands it
+    the region's mean strain increment since the start of the load step (the full tensor,
+    shear included; plane strain holds the out-of-plane strain at zero); the element, restored
+    to the start of the step, takes it and returns its stress increment and its tangent from
+    its contact network. The model adds the increment to every region point's stress of the
+    start of the step and assembles Newton's Jacobian with the tangent. A converged step is
+    committed (``commit``: the element's state kept as bytes); a rejected iterate leaves no
+    trace. So the element strains exactly as its region does: the two scales agree by
+    construction. SI units; tension positive.
+
+    ``element``: a periodic ``cpp_dem.dem_element.DemElement`` in the region's initial state
+    (``prepared`` makes one); ``strain_kw``: keywords for ``DemElement.apply_strain``;
+    ``min_eig_fraction``: the tangent is made symmetric and positive definite, eigenvalues
+    floored at this fraction of the largest (a network near its strength has soft or negative
+    directions).
+    """
+
+    def __init__(self, element, *, strain_kw: dict | None = None,
+                 min_eig_fraction: float = 1e-3) -> None:
+        if getattr(element, "kind", None) != "periodic":
+            raise ValueError(f"element={element!r}: must be a periodic DemElement (it takes "
+                             "the full strain tensor)")
+        self.strain_kw = dict(strain_kw or {})
+        self.min_eig_fraction = float(min_eig_fraction)
+        self.calls = 0            #: element evaluations (DEM runs)
+        self.dem_s = 0.0          #: wall seconds in them
+        self._origin = element.strain()
+        self._set(element)
+
+    def _set(self, element) -> None:
+        from femcoupling.handover import spd_floor
+        from femcoupling.materials import voigt_to_mandel_stiffness
+
+        self.element = element
+        self._committed = element.to_bytes()
+        self._stress0 = element.stress()
+        self._strain0 = element.strain()
+        self._tangent0 = spd_floor(voigt_to_mandel_stiffness(element.network_tangent()[0]),
+                                   self.min_eig_fraction)
+
+    @classmethod
+    def prepared(cls, name: str, stress_fem_pa, runner: "PeriodicRegionElement",
+                 **kw) -> "DemRegionMaterial":
+        """The material of region ``name``: ``runner``'s element (its grains, seed, cache)
+        servo-controlled to ``stress_fem_pa`` (3 x 3, Pa, tension positive: the region's
+        stress where the element takes over)."""
+        from femcoupling.handover import fem_to_dem
+
+        el, _ = runner.prepare(name, fem_to_dem(stress_fem_pa))
+        return cls(el, **kw)
+
+    def trial(self, strain_increment) -> tuple[np.ndarray, np.ndarray]:
+        """The element, from the start of the step, through ``strain_increment`` (3 x 3, -):
+        returns its stress increment (3 x 3, Pa) and its tangent (6 x 6 Mandel, Pa)."""
+        from cpp_dem.dem_element import DemElement
+        from femcoupling.handover import spd_floor
+        from femcoupling.materials import voigt_to_mandel_stiffness
+
+        de = np.asarray(strain_increment, float)
+        if not np.any(de):
+            self.element = DemElement.from_bytes(self._committed)
+            return np.zeros((3, 3)), self._tangent0
+        t0 = time.perf_counter()
+        el = self.element = DemElement.from_bytes(self._committed)
+        ds = el.apply_strain(de, **self.strain_kw) - self._stress0
+        c = spd_floor(voigt_to_mandel_stiffness(el.network_tangent()[0]), self.min_eig_fraction)
+        self.calls += 1
+        self.dem_s += time.perf_counter() - t0
+        return ds, c
+
+    def commit(self) -> None:
+        """The last trial becomes the start of the next step."""
+        self._set(self.element)
+
+    def state(self) -> bytes:
+        """The committed state (``set_state`` returns to it)."""
+        return self._committed
+
+    def set_state(self, data: bytes) -> None:
+        from cpp_dem.dem_element import DemElement
+
+        self._set(DemElement.from_bytes(data))
+
+    def strain_since_start(self) -> np.ndarray:
+        """The element's strain since it took over the region (3 x 3, -, tension +)."""
+        return self.element.strain() - self._origin

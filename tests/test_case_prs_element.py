@@ -137,7 +137,7 @@ def test_homogeneous_field_handed_over_reproduces_the_standalone_element(tmp_pat
     (["--stresses", "1000,-5,3000"], "--stresses: sy=-5.0: must be > 0"),
     (["--stresses", "/nonexistent.csv"], "--stresses=/nonexistent.csv: no such file"),
     (["--prestress", "-1"], "--prestress=-1.0: must be >= 0 (N/m)"),
-    (["--stresses", "1e4,1e4,2e4", "--two-way"], "--two-way and --calibrate need the FEM"),
+    (["--stresses", "1e4,1e4,2e4", "--two-way"], "--two-way, --hierarchical and --calibrate need"),
     (["--stresses", "1e4,1e4,2e4", "--calibrate"], "--calibrate need the FEM"),
     (["--stresses", "1e4,1e4,2e4", "--preset", "fast"], "--preset sets the FEM mesh"),
     (["--preset", "quick"], "invalid choice: 'quick'"),
@@ -145,6 +145,8 @@ def test_homogeneous_field_handed_over_reproduces_the_standalone_element(tmp_pat
                                         "needs --two-way"),
     (["--stresses", "1e4,1e4,2e4", "--no-grid-handover"], "--no-grid-handover: the grid "
                                                           "tension comes from the FEM"),
+    (["--hierarchical", "--two-way"], "--hierarchical: the element is inside the FEM's Newton"),
+    (["--stresses", "1e4,1e4,2e4", "--hierarchical"], "--hierarchical and --calibrate need"),
 ])
 def test_bad_inputs(tmp_path, args, msg):
     p = run_case(tmp_path, "--smoke", *args)
@@ -259,3 +261,27 @@ def test_workers_run_re_and_prs_side_by_side_with_the_same_results(smoke, tmp_pa
         for k in f:
             assert np.array_equal(f[k][:], g[k][:], equal_nan=True), k
     assert not list((tmp_path / "w2").glob("handover_*.h5"))  # the parts are merged
+
+
+def test_hierarchical_region_element_strains_as_its_region(tmp_path):
+    """--hierarchical (issue 18, the hierarchical mode on the reinforced-soil body): the
+    region's material is a dense periodic element of the case's grains inside the FEM's
+    Newton. Its strain increment is the region's (measured to 0.2 %), every load step
+    converges (Newton stalls at the element's resolution, 1e-6 to 3e-5 of the force scale,
+    and says so), and the case's element is then driven to the coupled targets. Run with
+    --workers 2 (RE and PRS side by side)."""
+    out = tmp_path / "h"
+    p = run_case(out, "--smoke", "--hierarchical", "--workers", "2")
+    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    assert s["mode"] == "FEM -> DEM (hierarchical)"
+    for v in ("RE", "PRS"):
+        h = s["hierarchical"][v]
+        fem = np.array(s["fem"][v]["strain_increment"])
+        np.testing.assert_allclose(h["element_strain_increment"], fem, rtol=0,
+                                   atol=0.01 * np.abs(fem).max())
+        assert len(h["newton_iterations"]) == 3 and max(h["newton_iterations"]) <= 25
+        assert len(h["warnings"]) == h["converged_on"].count("stall")
+        assert s["fem"][v]["state"] == "hierarchical"
+        assert s["elements"][v]["strain_increment"]  # the case's element ran after it
+    assert "## Hierarchical" in (out / "report.md").read_text()

@@ -93,6 +93,9 @@ class Params(ElementParams):
     #: (force-controlled; a PRS grid's grips let go), so the walls carry the soil's stress
     #: alone and the grid is counted once; False: free ends (RE), locked grips (PRS)
     grid_handover: bool = True
+    #: hierarchical: the region's material is a dense periodic DEM element of the case's grains
+    #: inside the FEM's Newton (its stress and tangent at every iterate), no two-way loop
+    hierarchical: bool = False
     stresses: list = field(default_factory=list)  #: DEM-only targets (rows of 3), Pa
     prs: bool = False                #: DEM-only: prestress the grid (else RE)
 
@@ -200,17 +203,55 @@ def periodic_options(p: Params) -> dict:
     return {"material": mat, "radius_mean": r_mean, "radius_spread": p.radius_spread}
 
 
+def periodic_runner(p: Params, out: Path, variant: str):
+    """A dense periodic element of this case's grains for the region
+    (``femcoupling.region.PeriodicRegionElement``, kept in ``out/region_elements/<variant>``)."""
+    from femcoupling.region import PeriodicRegionElement
+
+    return PeriodicRegionElement(n=p.n, seed=p.seed, prep_friction_deg=0.0, tol=0.02,
+                                 unbalanced=1e-2, options=periodic_options(p),
+                                 cache_dir=str(out / "region_elements" / variant))
+
+
+def run_hierarchical(p: Params, out: Path, variant: str, m, load) -> dict:
+    """The load stage with the region's material a periodic DEM element inside the FEM's
+    Newton (``SoilModel.set_region_element``, ``femcoupling.region.DemRegionMaterial``),
+    from the model's current (initial) state. Returns the record of the summary."""
+    from femcoupling.region import DemRegionMaterial
+
+    t0 = time.perf_counter()
+    try:
+        mat = DemRegionMaterial.prepared("element", m.region_stress("element"),
+                                         periodic_runner(p, out, variant))
+    except RuntimeError as exc:  # (a periodic element that cannot start)
+        raise SystemExit(f"[prs_element] hierarchical {variant}: {exc}; try --calibrate")
+    m.set_region_element("element", mat)
+    log(f"hierarchical {variant}: the region's material is a periodic element of {p.n} "
+        f"grains, prepared at {np.round(-np.diag(mat.element.stress()) / 1e3, 2).tolist()} kPa"
+        f" ({time.perf_counter() - t0:.1f} s)")
+    n0 = len(m.history)
+    load(m)
+    steps = m.history[n0:]
+    de = mat.strain_since_start()
+    log(f"hierarchical {variant}: {len(steps)} load steps, Newton iterations "
+        f"{[r.newton_iterations for r in steps]}, {mat.calls} element runs "
+        f"({mat.dem_s:.1f} s of DEM)")
+    return {"newton_iterations": [int(r.newton_iterations) for r in steps],
+            "converged_on": [r.converged_on for r in steps], "warnings": list(m.warnings),
+            "element_runs": mat.calls, "dem_s": mat.dem_s,
+            "element_strain_increment": (-np.diag(de)).tolist(),
+            "element_shear_strain_increment": [de[1, 2], de[0, 2], de[0, 1]],
+            "element_stress_final_pa": (-np.diag(mat.element.stress())).tolist(),
+            "wall_time_s": time.perf_counter() - t0}
+
+
 def loop_runner(p: Params, out: Path, variant: str):
     """The two-way loop's element runner (``p.two_way_element``): the case's element, or a
     dense periodic element of its grains (``femcoupling.region.PeriodicRegionElement``, kept
     between iterations in ``out/region_elements/<variant>``)."""
     if p.two_way_element == "walls":
         return _Runner(p, out, variant)
-    from femcoupling.region import PeriodicRegionElement
-
-    return PeriodicRegionElement(n=p.n, seed=p.seed, prep_friction_deg=0.0, tol=0.02,
-                                 unbalanced=1e-2, options=periodic_options(p),
-                                 cache_dir=str(out / "region_elements" / variant))
+    return periodic_runner(p, out, variant)
 
 
 def calibrate_soil(p: Params, out: Path) -> tuple[Params, dict]:
@@ -407,6 +448,16 @@ def write_report(out: Path, summary: dict) -> None:
                          f"{t.get('element', 'walls')} element; changes {t['changes']}; "
                          f"{kind} {t['materials']}")
         lines.append("")
+    if "hierarchical" in summary:
+        lines += ["## Hierarchical", ""]
+        for v, h in summary["hierarchical"].items():
+            lines.append(f"- {v}: the region's material a periodic DEM element inside the "
+                         f"FEM's Newton: iterations per load step {h['newton_iterations']}, "
+                         f"{h['element_runs']} element runs ({h['dem_s']:.1f} s of DEM); its "
+                         f"strain increment (x, y, z) "
+                         f"{np.round(h['element_strain_increment'], 6).tolist()} (the "
+                         "region's, by construction)")
+        lines.append("")
     if "calibration" in summary:
         c = summary["calibration"]
         b = c["before"]
@@ -418,6 +469,7 @@ def write_report(out: Path, summary: dict) -> None:
                   f"{c['friction_deg']:.1f} deg", ""]
     warns = [w for e in summary["elements"].values() for w in e.get("warnings", [])]
     warns += [w for t in summary.get("two_way", {}).values() for w in t["warnings"]]
+    warns += [w for h in summary.get("hierarchical", {}).values() for w in h["warnings"]]
     lines += [f"## Warnings ({len(warns)})", ""] + [f"- {w}" for w in warns] + [""]
     (out / "report.md").write_text("\n".join(lines) + "\n")
 
@@ -431,9 +483,15 @@ def run_variant(p: Params, out: Path, variant: str) -> dict:
     case's element driven to the (coupled) targets. Its handover rows go to
     ``out/handover_<variant>.h5`` (``run`` merges them into handover.h5). Returns the
     summary parts: {"fem": ..., "element": ..., "two_way": ... or None}."""
-    from femcoupling.twoway import HandoverHistory, check_region, two_way
+    from femcoupling.twoway import HandoverHistory, check_region, region_targets, two_way
 
+    from cpp_dem._core import set_num_threads
+
+    # One thread unless asked (as run_element): the periodic elements prepared here before it
+    # ran with OpenMP's default, and two variants side by side then took 23 x longer.
+    set_num_threads(p.threads if p.threads > 0 else 1)
     j = VARIANTS.index(variant)
+    hier = None
     ini, fin, m, state0, load, info = run_fem(p, out, variant)
     info.update(shear_pa=fin.shear_pa.tolist(), rotation_deg=fin.rotation_deg,
                 targets_initial_pa=ini.normal_pa.tolist(),
@@ -472,6 +530,18 @@ def run_variant(p: Params, out: Path, variant: str) -> dict:
                         targets_final_pa=fin.normal_pa.tolist(), state="two-way")
             m.write_xdmf(out / f"fem_{variant}.xdmf")
             info["strain_increment"] = tw.fem_strain_increments["element"].tolist()
+        elif p.hierarchical:
+            m.restore_state(state0)
+            e0 = m.region_strain("element")
+            hier = run_hierarchical(p, out, variant, m, load)
+            fin = region_targets(m, "element")
+            info.update(fem_state(m), shear_pa=fin.shear_pa.tolist(),
+                        rotation_deg=fin.rotation_deg,
+                        grid_tension_n_per_m=[ini.grid_tension_n_per_m,
+                                              fin.grid_tension_n_per_m],
+                        targets_final_pa=fin.normal_pa.tolist(), state="hierarchical")
+            m.write_xdmf(out / f"fem_{variant}.xdmf")
+            info["strain_increment"] = (-np.diag(m.region_strain("element") - e0)).tolist()
         label = f"element_{variant}"
         e = run_element(p, [ini.normal_pa, fin.normal_pa], prestressed=variant == "PRS",
                         label=label, out=out, grid_tension=handed_tension(p, [ini, fin], label))
@@ -486,7 +556,7 @@ def run_variant(p: Params, out: Path, variant: str) -> dict:
                     rotation_deg=fin.rotation_deg, change=0.0,
                     dem_stress_pa=e["stress_final_pa"],
                     grid_tension_n_per_m=fin.grid_tension_n_per_m)
-    return {"fem": info, "element": e, "two_way": tws}
+    return {"fem": info, "element": e, "two_way": tws, "hierarchical": hier}
 
 
 def run_variants(p: Params, out: Path) -> list:
@@ -516,7 +586,8 @@ def run(p: Params, out: Path) -> dict:
     else:
         from femcoupling.twoway import HandoverHistory
 
-        summary["mode"] = "FEM -> DEM" + (" (two-way)" if p.two_way else " (one-way)")
+        summary["mode"] = "FEM -> DEM" + (" (two-way)" if p.two_way else " (hierarchical)"
+                                          if p.hierarchical else " (one-way)")
         if p.two_way and p.two_way_element == "periodic":
             log("two-way element: periodic, soil only (the full FEM tensor, its tangent back "
                 "as the region's stiffness); the geogrid stays in the FEM's layer band, "
@@ -529,6 +600,8 @@ def run(p: Params, out: Path) -> dict:
         summary["elements"] = {v: r["element"] for v, r in zip(VARIANTS, parts)}
         if p.two_way:
             summary["two_way"] = {v: r["two_way"] for v, r in zip(VARIANTS, parts)}
+        if p.hierarchical:
+            summary["hierarchical"] = {v: r["hierarchical"] for v, r in zip(VARIANTS, parts)}
         # one handover record, RE's rows then PRS's, whatever ran where
         with HandoverHistory(out / "handover.h5", regions=HISTORY_REGIONS,
                              metadata={"case": "prs_element"}) as hist:
@@ -664,6 +737,11 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                     help="the two-way loop's element: the case's (walls, geogrid included; "
                          "an isotropic secant back) or a dense periodic one of its grains "
                          "(soil only, the full tensor; its tangent back as a full stiffness)")
+    ap.add_argument("--hierarchical", action="store_true",
+                    help="the region's material is a dense periodic DEM element of the case's "
+                         "grains inside the FEM's Newton (stress and tangent at every "
+                         "iterate; no two-way loop); the case's element is then driven to the "
+                         "coupled targets")
     ap.add_argument("--no-grid-handover", action="store_true",
                     help="leave the element's grid ends free (RE) or in the locked grips "
                          "(PRS) instead of pulling them by the FEM layer's tension across the "
@@ -683,6 +761,9 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                                                              a.workers)
     p.calibrate = a.calibrate
     p.grid_handover = not a.no_grid_handover
+    if a.hierarchical and a.two_way:
+        ap.error("--hierarchical: the element is inside the FEM's Newton; not with --two-way")
+    p.hierarchical = a.hierarchical
     if a.no_grid_handover and a.stresses:
         ap.error("--no-grid-handover: the grid tension comes from the FEM; not with --stresses")
     if a.two_way_element != "walls" and not a.two_way:
@@ -693,8 +774,9 @@ def parse_args(argv=None) -> tuple[Params, Path]:
             ap.error("--preset sets the FEM mesh and the two-way tolerance: not with --stresses")
         p = apply_coupling_preset(p, a.preset)
     if a.stresses:
-        if a.two_way or a.calibrate:
-            ap.error("--two-way and --calibrate need the FEM: not with --stresses")
+        if a.two_way or a.calibrate or a.hierarchical:
+            ap.error("--two-way, --hierarchical and --calibrate need the FEM: not with "
+                     "--stresses")
         p.stresses = parse_stresses(a.stresses, ap)
         p.prs = a.prs
     elif a.prs:
