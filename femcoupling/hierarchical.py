@@ -487,7 +487,7 @@ class HierarchicalPlaneStrain:
         DEM seconds and steps),
         flushed; the FEM state in ``fem.xdmf`` (displacement m, the elements' stress Pa per
         cell, at the load as time); and a line of ``steps.csv`` with the FEM/DEM time split."""
-        import h5py
+        from femcoupling.records import append_rows
 
         self.out.mkdir(parents=True, exist_ok=True)
         ps = self._last_pool_step
@@ -506,21 +506,10 @@ class HierarchicalPlaneStrain:
             "cpu_s": np.asarray(ps.cpu_s, float),
             "dem_steps": np.asarray(ps.steps, dtype=np.int64),
         }
-        path = self.out / "elements.h5"
-        with h5py.File(path, "a") as f:
-            if "step" not in f:
-                f.attrs["units"] = ("SI; stress tension positive; increment: displacement-"
-                                    "gradient increment of the step, the element's (x, y, z) "
-                                    "with the FEM's (x, y) as (x, z)")
-                for key, v in rows.items():
-                    f.create_dataset(key, data=v, maxshape=(None,) + v.shape[1:],
-                                     chunks=True)
-            else:
-                for key, v in rows.items():
-                    d = f[key]
-                    d.resize(d.shape[0] + n, axis=0)
-                    d[-n:] = v
-            f.flush()
+        append_rows(self.out / "elements.h5", rows,
+                    units=("SI; stress tension positive; increment: displacement-gradient "
+                           "increment of the step, the element's (x, y, z) with the FEM's "
+                           "(x, y) as (x, z)"))
         self._write_xdmf(r, append=k > 0)
         csv = self.out / "steps.csv"
         new = not csv.exists()

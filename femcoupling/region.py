@@ -153,16 +153,20 @@ class DemRegionMaterial:
     (``prepared`` makes one); ``strain_kw``: keywords for ``DemElement.apply_strain``;
     ``min_eig_fraction``: the tangent is made symmetric and positive definite, eigenvalues
     floored at this fraction of the largest (a network near its strength has soft or negative
-    directions).
+    directions); ``records``: an HDF5 file that gets a row at every committed step (appended
+    and flushed): step, strain since the element took over (3 x 3), stress (3 x 3, Pa),
+    tangent (6 x 6 Mandel, Pa), contact count, element runs and DEM seconds so far.
     """
 
     def __init__(self, element, *, strain_kw: dict | None = None,
-                 min_eig_fraction: float = 1e-3) -> None:
+                 min_eig_fraction: float = 1e-3, records=None) -> None:
         if getattr(element, "kind", None) != "periodic":
             raise ValueError(f"element={element!r}: must be a periodic DemElement (it takes "
                              "the full strain tensor)")
         self.strain_kw = dict(strain_kw or {})
         self.min_eig_fraction = float(min_eig_fraction)
+        self.records = None if records is None else Path(records)
+        self.steps = 0            #: committed steps
         self.calls = 0            #: element evaluations (DEM runs)
         self.dem_s = 0.0          #: wall seconds in them
         self._origin = element.strain()
@@ -210,8 +214,19 @@ class DemRegionMaterial:
         return ds, c
 
     def commit(self) -> None:
-        """The last trial becomes the start of the next step."""
+        """The last trial becomes the start of the next step (and a row of ``records``)."""
         self._set(self.element)
+        self.steps += 1
+        if self.records is not None:
+            from femcoupling.records import append_rows
+
+            el = self.element
+            append_rows(self.records, {
+                "step": [self.steps], "strain": [el.strain() - self._origin],
+                "stress_pa": [el.stress()], "tangent_mandel_pa": [self._tangent0],
+                "contacts": [el.contact_count()], "element_runs": [self.calls],
+                "dem_s": [self.dem_s]},
+                units="SI; tension positive; strain since the element took over the region")
 
     def state(self) -> bytes:
         """The committed state (``set_state`` returns to it)."""

@@ -270,6 +270,8 @@ def test_hierarchical_region_element_strains_as_its_region(tmp_path):
     converges (Newton stalls at the element's resolution, 1e-6 to 3e-5 of the force scale,
     and says so), and the case's element is then driven to the coupled targets. Run with
     --workers 2 (RE and PRS side by side)."""
+    import h5py
+
     out = tmp_path / "h"
     p = run_case(out, "--smoke", "--hierarchical", "--workers", "2")
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
@@ -283,5 +285,9 @@ def test_hierarchical_region_element_strains_as_its_region(tmp_path):
         assert len(h["newton_iterations"]) == 3 and max(h["newton_iterations"]) <= 25
         assert len(h["warnings"]) == h["converged_on"].count("stall")
         assert s["fem"][v]["state"] == "hierarchical"
+        with h5py.File(out / f"region_element_{v}.h5") as f:  # a row per committed step
+            assert f["step"][:].tolist() == [1, 2, 3]
+            np.testing.assert_allclose(-np.diag(f["strain"][-1]),
+                                       h["element_strain_increment"], rtol=1e-12)
         assert s["elements"][v]["strain_increment"]  # the case's element ran after it
     assert "## Hierarchical" in (out / "report.md").read_text()

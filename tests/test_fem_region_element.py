@@ -63,7 +63,7 @@ def test_region_element_needs_the_interface():
         m.set_region_element("b", LinearStandIn())
 
 
-def test_a_dem_region_element_strains_as_its_region_and_carries_its_stress():
+def test_a_dem_region_element_strains_as_its_region_and_carries_its_stress(tmp_path):
     """A dense periodic element of 150 grains as region a's material under a 20 kPa footing
     (elastic soil around it): it strains as the region does (it is given the region's mean
     strain; measured 7e-4 relative), the region's mean stress increment is the element's
@@ -73,17 +73,17 @@ def test_a_dem_region_element_strains_as_its_region_and_carries_its_stress():
     iterate leaves no trace)."""
     from femcoupling.region import DemRegionMaterial, PeriodicRegionElement
 
-    def run():
+    def run(records=None):
         m = two_region_model(("a",))
         s0, e0 = m.region_stress("a"), m.region_strain("a")
         mat = DemRegionMaterial.prepared("a", s0, PeriodicRegionElement(
-            n=150, seed=3, tol=0.02, unbalanced=1e-2))
+            n=150, seed=3, tol=0.02, unbalanced=1e-2), records=records)
         start = mat.element.stress()
         m.set_region_element("a", mat)
         steps = m.load_footing(pressure_pa=20e3, steps=2)
         return m, mat, s0, e0, start, steps
 
-    m, mat, s0, e0, start, steps = run()
+    m, mat, s0, e0, start, steps = run(tmp_path / "el.h5")
     idx = ([0, 2, 0], [0, 2, 2])  # xx, zz, xz: the plane-strain components
     fem = m.region_strain("a") - e0
     dem = mat.strain_since_start()
@@ -98,3 +98,9 @@ def test_a_dem_region_element_strains_as_its_region_and_carries_its_stress():
     assert sum(r.converged_on == "stall" for r in steps) == len(m.warnings)
     m2, *_ = run()
     assert np.array_equal(m.u.x.array, m2.u.x.array)
+    import h5py
+
+    with h5py.File(tmp_path / "el.h5") as f:  # a row per committed step, flushed
+        assert f["step"][:].tolist() == [1, 2]
+        assert np.array_equal(f["stress_pa"][-1], mat.element.stress())
+        assert np.all(np.linalg.eigvalsh(f["tangent_mandel_pa"][:]) > 0)

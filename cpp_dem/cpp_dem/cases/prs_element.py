@@ -222,7 +222,8 @@ def run_hierarchical(p: Params, out: Path, variant: str, m, load) -> dict:
     t0 = time.perf_counter()
     try:
         mat = DemRegionMaterial.prepared("element", m.region_stress("element"),
-                                         periodic_runner(p, out, variant))
+                                         periodic_runner(p, out, variant),
+                                         records=out / f"region_element_{variant}.h5")
     except RuntimeError as exc:  # (a periodic element that cannot start)
         raise SystemExit(f"[prs_element] hierarchical {variant}: {exc}; try --calibrate")
     m.set_region_element("element", mat)
@@ -474,6 +475,18 @@ def write_report(out: Path, summary: dict) -> None:
     (out / "report.md").write_text("\n".join(lines) + "\n")
 
 
+def coupled_fem_state(m, info: dict, ini, fin, xdmf: Path, state: str,
+                      strain_increment) -> None:
+    """The report, the summary (``info``) and the XDMF show the coupled FEM state (two-way
+    or hierarchical): its numbers, the final targets, and the region's normal strain
+    increment (compression positive)."""
+    info.update(fem_state(m), shear_pa=fin.shear_pa.tolist(), rotation_deg=fin.rotation_deg,
+                grid_tension_n_per_m=[ini.grid_tension_n_per_m, fin.grid_tension_n_per_m],
+                targets_final_pa=fin.normal_pa.tolist(), state=state,
+                strain_increment=np.asarray(strain_increment, float).tolist())
+    m.write_xdmf(xdmf)
+
+
 VARIANTS = ("RE", "PRS")
 HISTORY_REGIONS = [f"element_{v}" for v in VARIANTS]
 
@@ -522,26 +535,15 @@ def run_variant(p: Params, out: Path, variant: str) -> dict:
             log(f"two-way {variant}: {'converged' if tw.converged else 'NOT converged'}"
                 f" ({tw.converged_on}) after {tw.iterations} FEM solves, changes "
                 f"{tw.changes}")
-            # the report, the summary and the XDMF show the coupled FEM state
-            info.update(fem_state(m), shear_pa=fin.shear_pa.tolist(),
-                        rotation_deg=fin.rotation_deg,
-                        grid_tension_n_per_m=[ini.grid_tension_n_per_m,
-                                              fin.grid_tension_n_per_m],
-                        targets_final_pa=fin.normal_pa.tolist(), state="two-way")
-            m.write_xdmf(out / f"fem_{variant}.xdmf")
-            info["strain_increment"] = tw.fem_strain_increments["element"].tolist()
+            coupled_fem_state(m, info, ini, fin, out / f"fem_{variant}.xdmf", "two-way",
+                              tw.fem_strain_increments["element"])
         elif p.hierarchical:
             m.restore_state(state0)
             e0 = m.region_strain("element")
             hier = run_hierarchical(p, out, variant, m, load)
             fin = region_targets(m, "element")
-            info.update(fem_state(m), shear_pa=fin.shear_pa.tolist(),
-                        rotation_deg=fin.rotation_deg,
-                        grid_tension_n_per_m=[ini.grid_tension_n_per_m,
-                                              fin.grid_tension_n_per_m],
-                        targets_final_pa=fin.normal_pa.tolist(), state="hierarchical")
-            m.write_xdmf(out / f"fem_{variant}.xdmf")
-            info["strain_increment"] = (-np.diag(m.region_strain("element") - e0)).tolist()
+            coupled_fem_state(m, info, ini, fin, out / f"fem_{variant}.xdmf", "hierarchical",
+                              -np.diag(m.region_strain("element") - e0))
         label = f"element_{variant}"
         e = run_element(p, [ini.normal_pa, fin.normal_pa], prestressed=variant == "PRS",
                         label=label, out=out, grid_tension=handed_tension(p, [ini, fin], label))
