@@ -304,8 +304,9 @@ class SoilModel:
         region's cells): ``element`` (``femcoupling.region.DemRegionMaterial``) gets the
         region's volume-mean strain increment since the start of the load step (3 x 3) and
         returns its stress increment (3 x 3, Pa) and tangent (6 x 6 Mandel, Pa), which every
-        point of the region takes; a converged step commits it. Serial runs only (one MPI
-        rank)."""
+        point of the region takes; a converged step commits it. The members of one
+        ``femcoupling.region.PoolRegionMaterials`` (several regions' elements on Dask
+        workers) are evaluated at once, in parallel. Serial runs only (one MPI rank)."""
         tag = self.body.region_tag(name)
         if self.comm.size > 1:
             raise FemInputError(f"set_region_element({name!r}): serial runs only (this run "
@@ -329,15 +330,33 @@ class SoilModel:
         would depend on every other one, and Newton converged linearly, 15 % per
         iteration); no plastic multiplier."""
         idx = list(PLANE_STRAIN_OF_3D) if self.ncomp == 4 else list(range(6))
-        for name, el in self.region_elements.items():
-            sel, w = self._element_points[name]
-            mean = w @ deps[sel]
-            ds, c = el.trial(mandel_to_tensor(mean))
+        means = {name: self._element_points[name][1] @ deps[self._element_points[name][0]]
+                 for name in self.region_elements}
+        answers = {}
+        for unit, names in self._element_units():
+            de = {n: mandel_to_tensor(means[n]) for n in names}
+            if hasattr(unit, "trial_many"):  # several regions' elements at once (a pool)
+                answers.update(unit.trial_many(de))
+            else:
+                answers[names[0]] = unit.trial(de[names[0]])
+        for name, mean in means.items():
+            sel = self._element_points[name][0]
+            ds, c = answers[name]
             c = np.asarray(c)[np.ix_(idx, idx)]
             sig[sel] = (self.sig_n[sel] + tensor_to_mandel(ds, self.ncomp)
                         + (deps[sel] - mean) @ c.T)
             tan[sel] = c
             dl[sel] = 0.0
+
+    def _element_units(self) -> list:
+        """(unit, region names): each region element once, except the members of one group
+        (``femcoupling.region.PoolRegionMaterials``: an element's ``group``), which the group
+        evaluates, commits and saves at once."""
+        units: dict = {}
+        for name, el in self.region_elements.items():
+            unit = getattr(el, "group", el)
+            units.setdefault(id(unit), (unit, []))[1].append(name)
+        return list(units.values())
 
     def _to_q(self, func: Any, values: np.ndarray, dofs: np.ndarray, size: int) -> None:
         func.x.array.reshape(-1, size)[dofs] = values.reshape(-1, size)
@@ -439,8 +458,8 @@ class SoilModel:
         return -1
 
     def _commit(self) -> None:
-        for el in self.region_elements.values():
-            el.commit()
+        for unit, _ in self._element_units():
+            unit.commit()
         self.sig_n = self.sig_cur.copy()
         self.u_n.x.array[:] = self.u.x.array
         self.u_n.x.scatter_forward()
@@ -707,7 +726,7 @@ class SoilModel:
                 "traction": self.traction.value.copy(), "footing_u": float(self.footing_u.value),
                 "dc": self._displacement_control, "ext": self._ext_scale,
                 "nhist": len(self.history),
-                "elements": {k: el.state() for k, el in self.region_elements.items()}}
+                "elements": [unit.state() for unit, _ in self._element_units()]}
 
     def restore_state(self, state: Mapping) -> None:
         """Return to a state saved by :meth:`save_state` (materials are not restored)."""
@@ -722,9 +741,8 @@ class SoilModel:
         self._displacement_control = state["dc"]
         self._ext_scale = state["ext"]
         del self.history[state["nhist"]:]
-        for k, data in state.get("elements", {}).items():
-            if k in self.region_elements:
-                self.region_elements[k].set_state(data)
+        for (unit, _), data in zip(self._element_units(), state.get("elements", [])):
+            unit.set_state(data)
 
     # ---- output --------------------------------------------------------------------------
 

@@ -37,7 +37,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["DemRegionMaterial", "PeriodicRegionElement", "servo"]
+__all__ = ["DemRegionMaterial", "PeriodicRegionElement", "PoolRegionMaterials", "servo"]
 
 
 def servo(el, target, *, tol: float, unbalanced: float, chunk_steps: int,
@@ -136,6 +136,18 @@ class PeriodicRegionElement:
                   "reached": message is None, **({"message": message} if message else {})})
 
 
+def network_stiffness(element, min_eig_fraction: float = 1e-3, *,
+                      voigt: np.ndarray | None = None) -> np.ndarray:
+    """A periodic element's tangent from its contact network (or the given 6 x 6 Voigt one),
+    as a 6 x 6 Mandel stiffness made symmetric and positive definite (eigenvalues floored at
+    ``min_eig_fraction`` of the largest), Pa."""
+    from femcoupling.handover import spd_floor
+    from femcoupling.materials import voigt_to_mandel_stiffness
+
+    t = element.network_tangent()[0] if voigt is None else voigt
+    return spd_floor(voigt_to_mandel_stiffness(t), min_eig_fraction)
+
+
 class DemRegionMaterial:
     """A periodic DEM element as the material of a ``SoilModel`` element region: the
     hierarchical mode on the reinforced-soil body, one element for the region's tagged group
@@ -173,15 +185,10 @@ class DemRegionMaterial:
         self._set(element)
 
     def _set(self, element) -> None:
-        from femcoupling.handover import spd_floor
-        from femcoupling.materials import voigt_to_mandel_stiffness
-
         self.element = element
         self._committed = element.to_bytes()
         self._stress0 = element.stress()
-        self._strain0 = element.strain()
-        self._tangent0 = spd_floor(voigt_to_mandel_stiffness(element.network_tangent()[0]),
-                                   self.min_eig_fraction)
+        self._tangent0 = network_stiffness(element, self.min_eig_fraction)
 
     @classmethod
     def prepared(cls, name: str, stress_fem_pa, runner: "PeriodicRegionElement",
@@ -198,8 +205,6 @@ class DemRegionMaterial:
         """The element, from the start of the step, through ``strain_increment`` (3 x 3, -):
         returns its stress increment (3 x 3, Pa) and its tangent (6 x 6 Mandel, Pa)."""
         from cpp_dem.dem_element import DemElement
-        from femcoupling.handover import spd_floor
-        from femcoupling.materials import voigt_to_mandel_stiffness
 
         de = np.asarray(strain_increment, float)
         if not np.any(de):
@@ -208,7 +213,7 @@ class DemRegionMaterial:
         t0 = time.perf_counter()
         el = self.element = DemElement.from_bytes(self._committed)
         ds = el.apply_strain(de, **self.strain_kw) - self._stress0
-        c = spd_floor(voigt_to_mandel_stiffness(el.network_tangent()[0]), self.min_eig_fraction)
+        c = network_stiffness(el, self.min_eig_fraction)
         self.calls += 1
         self.dem_s += time.perf_counter() - t0
         return ds, c
@@ -240,3 +245,105 @@ class DemRegionMaterial:
     def strain_since_start(self) -> np.ndarray:
         """The element's strain since it took over the region (3 x 3, -, tension +)."""
         return self.element.strain() - self._origin
+
+
+class PoolRegionMaterials:
+    """The DEM elements of several element regions on Dask workers
+    (``cpp_dem.element_pool.ElementPool``, one element per region), for
+    ``SoilModel.set_region_element``: the model evaluates them all at once at every Newton
+    iterate (``trial_many``), so the regions' DEM runs in parallel. Each region's element
+    behaves as a ``DemRegionMaterial`` (the same answers, bitwise: every worker runs one
+    element at a time on one thread). ``materials[name]`` is what to give the model.
+
+    Build with ``PoolRegionMaterials.build(stresses, runner, workers=)``: each region's
+    element prepared in this process by ``runner`` (``PeriodicRegionElement``) at its stress,
+    then moved to the workers. ``close()`` stops the pool's own cluster.
+    """
+
+    def __init__(self, pool, names, *, min_eig_fraction: float = 1e-3,
+                 strain_kw: dict | None = None) -> None:
+        from cpp_dem.dem_element import DemElement
+
+        self.pool, self.names = pool, list(names)
+        if pool.n != len(self.names):
+            raise ValueError(f"names={self.names!r}: one per pool element ({pool.n})")
+        self.min_eig_fraction = float(min_eig_fraction)
+        self.strain_kw = dict(strain_kw or {})
+        self.calls, self.dem_s = 0, 0.0
+        self._start(DemElement.from_bytes(b) for b in pool.states())
+        self._last = None
+        self.materials = {n: _PoolMember(self, n) for n in self.names}
+
+    def _start(self, elements) -> None:
+        self._stress0, self._tangent0 = [], []
+        for el in elements:
+            self._stress0.append(el.stress())
+            self._tangent0.append(network_stiffness(el, self.min_eig_fraction))
+
+    @classmethod
+    def build(cls, stresses: dict, runner: "PeriodicRegionElement", *, workers: int = 2,
+              client=None, **kw) -> "PoolRegionMaterials":
+        """``stresses``: region name -> its stress where the element takes over (3 x 3, Pa,
+        tension positive)."""
+        from cpp_dem.element_pool import ElementPool
+        from femcoupling.handover import fem_to_dem
+
+        data = [runner.prepare(n, fem_to_dem(s))[0].to_bytes() for n, s in stresses.items()]
+        return cls(ElementPool(data, client=client, workers=workers), list(stresses), **kw)
+
+    def trial_many(self, increments: dict) -> dict:
+        """Every region's element, from the start of the step, through its increment (name ->
+        3 x 3, -): name -> (stress increment 3 x 3 Pa, tangent 6 x 6 Mandel Pa)."""
+        des = [np.asarray(increments.get(n, np.zeros((3, 3))), float) for n in self.names]
+        self.pool.reject()
+        if not any(np.any(d) for d in des):
+            self._last = None
+            return {n: (np.zeros((3, 3)), self._tangent0[k]) for k, n in enumerate(self.names)}
+        step = self.pool.apply_strain(des, tangent="network", **self.strain_kw)
+        self.calls += 1
+        self.dem_s += float(sum(step.cpu_s))
+        self._last = step
+        return {n: (np.asarray(step.stresses[k]) - self._stress0[k],
+                    network_stiffness(None, self.min_eig_fraction, voigt=step.tangents[k]))
+                for k, n in enumerate(self.names)}
+
+    def commit(self) -> None:
+        """The last trial becomes the start of the next step on every worker."""
+        self.pool.accept()
+        if self._last is not None:
+            self._stress0 = [np.asarray(s) for s in self._last.stresses]
+            self._tangent0 = [network_stiffness(None, self.min_eig_fraction, voigt=t)
+                              for t in self._last.tangents]
+
+    def state(self) -> tuple:
+        return (self.pool.states(), list(self._stress0), list(self._tangent0))
+
+    def set_state(self, data: tuple) -> None:
+        states, self._stress0, self._tangent0 = data[0], list(data[1]), list(data[2])
+        self.pool.load_states(states)
+
+    def close(self) -> None:
+        self.pool.close()
+
+
+class _PoolMember:
+    """One region of a ``PoolRegionMaterials``: what ``SoilModel.set_region_element`` takes
+    (the model finds the ``group`` and evaluates, commits and saves the group once)."""
+
+    def __init__(self, group: PoolRegionMaterials, name: str) -> None:
+        self.group, self.name = group, name
+
+    def trial(self, strain_increment):
+        return self.group.trial_many({n: (strain_increment if n == self.name else
+                                          np.zeros((3, 3))) for n in self.group.names}
+                                     )[self.name]
+
+    def commit(self) -> None:
+        self.group.commit()
+
+    def state(self):
+        return self.group.state()
+
+    def set_state(self, data) -> None:
+        self.group.set_state(data)
+

@@ -321,6 +321,14 @@ class ElementPool:
         """The last accepted bytes of every element (index order)."""
         return list(self._bytes)
 
+    def load_states(self, data: Sequence[bytes]) -> None:
+        """Every element back to the given accepted bytes (index order; ``states()`` of this
+        pool earlier), loaded on the workers."""
+        if len(data) != self.n:
+            raise ParameterError(f"data: {len(data)} states given for {self.n} elements")
+        self._bytes = list(data)
+        self._place(range(self.n))
+
     def close(self) -> None:
         try:
             self.client.close()
