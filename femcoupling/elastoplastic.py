@@ -135,13 +135,14 @@ class SoilModel:
         self.region_materials = region_materials
         #: element regions whose material is a DEM element (``set_region_element``)
         self.region_elements: dict = {}
+        self._element_points: dict = {}
         #: with region elements: a step whose residual has not halved in this many Newton
         #: iterations, its best within ``stall_rtol`` of the force scale, is taken there
         self.stall_iterations = 3
         self.stall_rtol = 1e-3
         #: every warning of the run (steps taken at a stall), in order
         self.warnings: list[str] = []
-        self._step_noise = ("tolerance", float("nan"))
+        self._step_end = ("tolerance", float("nan"))
         self.unit_weight_n_m3, self.degree = gamma, degree
         self.newton_rtol, self.max_newton, self.max_cuts = newton_rtol, max_newton, max_cuts
         self.comm = comm if comm is not None else fx.MPI.COMM_WORLD
@@ -318,8 +319,7 @@ class SoilModel:
         self.region_elements[name] = element
         sel = np.repeat(self.cell_tag_of == tag, self.nq)
         w = (self.cell_volume[:, None] * self.qweights[None, :]).reshape(-1)[sel]
-        self._element_points = getattr(self, "_element_points", {})
-        self._element_points[name] = (sel, w / w.sum())
+        self._element_points[name] = (sel, w / w.sum())  # its points and volume weights
 
     def _region_element_answers(self, deps: np.ndarray, sig: np.ndarray,
                                 tan: np.ndarray, dl: np.ndarray) -> None:
@@ -423,7 +423,7 @@ class SoilModel:
         fx = self._fx
         bcs = self._active_bcs()
         self._update_tangent_and_stress(self._strain_increment())
-        self._step_noise = ("tolerance", float("nan"))
+        self._step_end = ("tolerance", float("nan"))
         best, best_u, since = math.inf, None, 0
         for it in range(0, self.max_newton + 1):
             rnorm = self._assemble_residual()
@@ -440,7 +440,7 @@ class SoilModel:
                     self.u.x.array[:] = best_u  # (the elements answer it again, bitwise)
                     self.u.x.scatter_forward()
                     self._update_tangent_and_stress(self._strain_increment())
-                    self._step_noise = ("stall", best / scale)
+                    self._step_end = ("stall", best / scale)
                     return it
             if it == self.max_newton:
                 break
@@ -495,9 +495,9 @@ class SoilModel:
             if its <= self.max_newton // 2:  # easy step: grow back towards the nominal size
                 dlf = min(2.0 * dlf, 1.0 / steps)
             r = StepResult(stage, lf, self.footing_settlement_m(), self.footing_pressure_pa(),
-                           its, self.plastic_points(), *self._step_noise)
+                           its, self.plastic_points(), *self._step_end)
             if r.converged_on == "stall":
-                self._noise_warning(r)
+                self._stall_warning(r)
             self.history.append(r)
             out.append(r)
             if callback is not None:
@@ -506,7 +506,7 @@ class SoilModel:
 
     _ext_scale = 0.0
 
-    def _noise_warning(self, r: StepResult) -> None:
+    def _stall_warning(self, r: StepResult) -> None:
         import warnings
 
         from femcoupling.hierarchical import NoiseWarning

@@ -430,8 +430,8 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
             # (an element at its strength, answering within its scatter; a secant that cannot
             # represent it): the loop has stalled, not converged. More iterations do not help
             # (measured: the periodic smoke element then jumps by 29 %), so it stops and says.
-            far = [(r, ratio) for r in regions for ratio in [check(r)[1]]
-                   if ratio > max_strain_ratio]
+            checks = {r: check(r) for r in regions}
+            far = [(r, q) for r, (_, q) in checks.items() if q > max_strain_ratio]
             if far:
                 on = "stalled"
                 within = "tol" if change < tol else "the elements' scatter"
@@ -448,7 +448,7 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
                      f"resolve; stopped at the scatter")
             converged, converged_on = on != "stalled", on
             for r in regions:
-                msgs, ratio = check(r)
+                msgs, ratio = checks[r]
                 for msg in msgs:
                     warn(f"iteration {it} ({'converged' if converged else 'stalled'}): {msg}")
                 record(r, strain_ratio=ratio)

@@ -225,7 +225,8 @@ def run_hierarchical(p: Params, out: Path, variant: str, m, load) -> dict:
                                          periodic_runner(p, out, variant),
                                          records=out / f"region_element_{variant}.h5")
     except RuntimeError as exc:  # (a periodic element that cannot start)
-        raise SystemExit(f"[prs_element] hierarchical {variant}: {exc}; try --calibrate")
+        raise SystemExit(f"[prs_element] hierarchical {variant}: {exc}; try --calibrate"
+                         ) from exc
     m.set_region_element("element", mat)
     log(f"hierarchical {variant}: the region's material is a periodic element of {p.n} "
         f"grains, prepared at {np.round(-np.diag(mat.element.stress()) / 1e3, 2).tolist()} kPa"
@@ -241,7 +242,7 @@ def run_hierarchical(p: Params, out: Path, variant: str, m, load) -> dict:
             "converged_on": [r.converged_on for r in steps], "warnings": list(m.warnings),
             "element_runs": mat.calls, "dem_s": mat.dem_s,
             "element_strain_increment": (-np.diag(de)).tolist(),
-            "element_shear_strain_increment": [de[1, 2], de[0, 2], de[0, 1]],
+            "element_shear_strain_increment": [-de[1, 2], -de[0, 2], -de[0, 1]],  # yz xz xy
             "element_stress_final_pa": (-np.diag(mat.element.stress())).tolist(),
             "wall_time_s": time.perf_counter() - t0}
 
@@ -396,6 +397,7 @@ def grid_line(f: dict, e: dict) -> str:
     t = f.get("grid_tension_n_per_m")
     if not t or t[0] is None:
         return "- no FEM geogrid layer crosses the region: the element's grid ends are free"
+
     def kn(x: list) -> list:
         return np.round(np.array(x, float) / 1e3, 4).tolist()
 
@@ -495,10 +497,10 @@ def run_variant(p: Params, out: Path, variant: str) -> dict:
     """One variant (RE or PRS) of the FEM mode: its FEM, the two-way loop if asked, then the
     case's element driven to the (coupled) targets. Its handover rows go to
     ``out/handover_<variant>.h5`` (``run`` merges them into handover.h5). Returns the
-    summary parts: {"fem": ..., "element": ..., "two_way": ... or None}."""
-    from femcoupling.twoway import HandoverHistory, check_region, region_targets, two_way
-
+    summary parts: {"fem": ..., "element": ..., "two_way": ... or None, "hierarchical": ...
+    or None}."""
     from cpp_dem._core import set_num_threads
+    from femcoupling.twoway import HandoverHistory, check_region, region_targets, two_way
 
     # One thread unless asked (as run_element): the periodic elements prepared here before it
     # ran with OpenMP's default, and two variants side by side then took 23 x longer.
