@@ -39,9 +39,9 @@ import numpy.typing as npt
 
 from femcoupling import geometry as geo
 from femcoupling.geometry import FemInputError
-from femcoupling.materials import (PLANE_STRAIN_OF_3D, AnisotropicElastic, DruckerPrager,
-                                   GeogridLayerMaterial, LinearElastic, drucker_prager_return,
-                                   elastic_tangent, mandel_identity, mandel_to_tensor,
+from femcoupling.materials import (AnisotropicElastic, DruckerPrager, GeogridLayerMaterial,
+                                   LinearElastic, drucker_prager_return, elastic_tangent,
+                                   mandel_identity, mandel_to_tensor, stiffness_block,
                                    tensor_to_mandel)
 
 __all__ = ["SoilModel", "StepResult", "NewtonDivergence"]
@@ -329,7 +329,6 @@ class SoilModel:
         and the pointwise tangent is the consistent Jacobian: with the mean alone every point
         would depend on every other one, and Newton converged linearly, 15 % per
         iteration); no plastic multiplier."""
-        idx = list(PLANE_STRAIN_OF_3D) if self.ncomp == 4 else list(range(6))
         means = {name: self._element_points[name][1] @ deps[self._element_points[name][0]]
                  for name in self.region_elements}
         answers = {}
@@ -342,7 +341,7 @@ class SoilModel:
         for name, mean in means.items():
             sel = self._element_points[name][0]
             ds, c = answers[name]
-            c = np.asarray(c)[np.ix_(idx, idx)]
+            c = stiffness_block(c, self.ncomp)
             sig[sel] = (self.sig_n[sel] + tensor_to_mandel(ds, self.ncomp)
                         + (deps[sel] - mean) @ c.T)
             tan[sel] = c

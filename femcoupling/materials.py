@@ -31,7 +31,8 @@ import numpy.typing as npt
 from femcoupling.geometry import FemInputError, _pos, _real
 
 __all__ = ["LinearElastic", "AnisotropicElastic", "DruckerPrager", "GeogridLayerMaterial",
-           "elastic_tangent", "isotropic_projection", "voigt_to_mandel_stiffness",
+           "elastic_tangent", "isotropic_projection", "stiffness_block",
+           "voigt_to_mandel_stiffness",
            "drucker_prager_return", "mandel_identity", "mandel_to_tensor",
            "tensor_to_mandel", "PLANE_STRAIN_OF_3D"]
 
@@ -84,6 +85,16 @@ def isotropic_projection(c_mandel_pa: npt.ArrayLike) -> tuple[float, float]:
     return k, (float(np.trace(c)) - 3.0 * k) / 10.0
 
 
+def stiffness_block(c_mandel_pa: npt.ArrayLike, ncomp: int) -> npt.NDArray[np.float64]:
+    """A 6 x 6 Mandel stiffness (Pa) for Mandel vectors of length ``ncomp``: itself (6, 3D),
+    or its (xx, zz, yy, xz) rows and columns (4, plane strain: ``PLANE_STRAIN_OF_3D``)."""
+    c = np.array(c_mandel_pa, float)
+    if ncomp == 4:
+        idx = list(PLANE_STRAIN_OF_3D)
+        return c[np.ix_(idx, idx)]
+    return c
+
+
 def voigt_to_mandel_stiffness(c_voigt_pa: npt.ArrayLike) -> npt.NDArray[np.float64]:
     """A 6 x 6 stiffness in Voigt form (stress components by engineering strains, order xx
     yy zz yz xz xy, as ``DemElement``'s tangents) -> Mandel form (Pa)."""
@@ -123,11 +134,7 @@ class AnisotropicElastic(LinearElastic):
 
     def matrix(self, ncomp: int = 6) -> npt.NDArray[np.float64]:
         """The stiffness for Mandel vectors of length ``ncomp`` (6: 3D, 4: plane strain), Pa."""
-        c = np.array(self.c_mandel_pa)
-        if ncomp == 4:
-            idx = list(PLANE_STRAIN_OF_3D)
-            return c[np.ix_(idx, idx)]
-        return c
+        return stiffness_block(self.c_mandel_pa, ncomp)
 
 
 @dataclasses.dataclass(frozen=True)

@@ -184,11 +184,15 @@ class DemRegionMaterial:
         self._origin = element.strain()
         self._set(element)
 
-    def _set(self, element) -> None:
+    def _set(self, element, tangent: np.ndarray | None = None) -> None:
+        """``element`` becomes the start of the step; ``tangent``: its stiffness, if known
+        (the last trial's), else assembled from its contact network."""
         self.element = element
         self._committed = element.to_bytes()
         self._stress0 = element.stress()
-        self._tangent0 = network_stiffness(element, self.min_eig_fraction)
+        self._tangent0 = (network_stiffness(element, self.min_eig_fraction) if tangent is None
+                          else tangent)
+        self._trial_tangent = self._tangent0  # (of self.element)
 
     @classmethod
     def prepared(cls, name: str, stress_fem_pa, runner: "PeriodicRegionElement",
@@ -209,18 +213,19 @@ class DemRegionMaterial:
         de = np.asarray(strain_increment, float)
         if not np.any(de):
             self.element = DemElement.from_bytes(self._committed)
+            self._trial_tangent = self._tangent0
             return np.zeros((3, 3)), self._tangent0
         t0 = time.perf_counter()
         el = self.element = DemElement.from_bytes(self._committed)
         ds = el.apply_strain(de, **self.strain_kw) - self._stress0
-        c = network_stiffness(el, self.min_eig_fraction)
+        c = self._trial_tangent = network_stiffness(el, self.min_eig_fraction)
         self.calls += 1
         self.dem_s += time.perf_counter() - t0
         return ds, c
 
     def commit(self) -> None:
         """The last trial becomes the start of the next step (and a row of ``records``)."""
-        self._set(self.element)
+        self._set(self.element, self._trial_tangent)
         self.steps += 1
         if self.records is not None:
             from femcoupling.records import append_rows
@@ -302,18 +307,17 @@ class PoolRegionMaterials:
         step = self.pool.apply_strain(des, tangent="network", **self.strain_kw)
         self.calls += 1
         self.dem_s += float(sum(step.cpu_s))
-        self._last = step
-        return {n: (np.asarray(step.stresses[k]) - self._stress0[k],
-                    network_stiffness(None, self.min_eig_fraction, voigt=step.tangents[k]))
+        self._last = ([np.asarray(s) for s in step.stresses],
+                      [network_stiffness(None, self.min_eig_fraction, voigt=t)
+                       for t in step.tangents])
+        return {n: (self._last[0][k] - self._stress0[k], self._last[1][k])
                 for k, n in enumerate(self.names)}
 
     def commit(self) -> None:
         """The last trial becomes the start of the next step on every worker."""
         self.pool.accept()
-        if self._last is not None:
-            self._stress0 = [np.asarray(s) for s in self._last.stresses]
-            self._tangent0 = [network_stiffness(None, self.min_eig_fraction, voigt=t)
-                              for t in self._last.tangents]
+        if self._last is not None:  # (the last trial's stresses and stiffnesses)
+            self._stress0, self._tangent0 = self._last
 
     def state(self) -> tuple:
         return (self.pool.states(), list(self._stress0), list(self._tangent0))
