@@ -7,9 +7,11 @@ stress tensor, shear included, where the wall-bounded element takes three normal
 1. prepares a periodic ``DemElement`` (``n`` grains, dense: grown frictionless, then at the
    material's friction) at the initial state's mean stress, and servo-controls all six
    components to the FEM's initial tensor;
-2. saves that state as bytes in ``cache_dir`` (``<name>_initial.bin``): the next two-way
-   iterations start from it instead of preparing again (the element is kept between
-   iterations, also across processes);
+2. keeps that state as bytes in the runner's memory (on the Dask worker that runs the
+   region, when ``two_way`` runs on workers: ``femcoupling.runner_pool``) and in
+   ``cache_dir`` (``<name>_initial.bin``, with the tensor it was prepared at in
+   ``<name>_initial.stress.npy``): the next two-way iterations start from it instead of
+   preparing again (the element is kept between iterations, also across processes);
 3. servo-controls all six components to the FEM's final tensor, and returns the normal
    stresses reached and the normal strain increment (compression positive), with the full
    strain-increment tensor, the shear reached and its stress scatter (the bootstrap of its
@@ -63,9 +65,10 @@ class PeriodicRegionElement:
     """See the module doc. ``n``: grains; ``seed``: packing seed; ``prep_friction_deg``: the
     friction angle the grains grow at (0: dense); ``tol``: the servo's relative tolerance;
     ``options``: more keywords for ``DemElement.periodic``; ``cache_dir``: where the prepared
-    elements are kept (None: prepared in every call); ``tangent``: return the element's
-    tangent at the final state (``DemElement.network_tangent``, from its contact network), so
-    that ``two_way`` gives the region a full stiffness instead of an isotropic secant."""
+    elements are also kept on disk (None: in the runner's memory only); ``tangent``: return
+    the element's tangent at the final state (``DemElement.network_tangent``, from its
+    contact network), so that ``two_way`` gives the region a full stiffness instead of an
+    isotropic secant."""
 
     n: int = 400
     seed: int = 1
@@ -77,17 +80,28 @@ class PeriodicRegionElement:
     cache_dir: str | None = None
     options: dict | None = None
     tangent: bool = True
+    #: the prepared elements' bytes by (region, initial tensor): this runner's memory
+    _kept: dict = dataclasses.field(default_factory=dict, init=False, repr=False,
+                                    compare=False)
 
     def prepare(self, name: str, initial) -> tuple:
-        """The element of region ``name`` at the ``initial`` WallTargets' full tensor, from
-        ``cache_dir`` if it is there (else prepared, and kept there); returns (element,
-        whether it came from the cache)."""
+        """The element of region ``name`` at the ``initial`` WallTargets' full tensor: kept in
+        this runner's memory after its first preparation (so in the worker that runs it), or
+        in ``cache_dir``; else prepared (and kept in both). A kept element of a different
+        initial tensor is not taken. Returns (element, whether it was kept)."""
         from cpp_dem.dem_element import DemElement
 
-        path = None if self.cache_dir is None else Path(self.cache_dir) / f"{name}_initial.bin"
-        if path is not None and path.exists():
-            return DemElement.from_bytes(path.read_bytes()), True
         s0 = np.asarray(initial.fem_stress_pa, float)
+        key = (name, s0.tobytes())
+        if key in self._kept:
+            return DemElement.from_bytes(self._kept[key]), True
+        path = None if self.cache_dir is None else Path(self.cache_dir) / f"{name}_initial.bin"
+        spath = None if path is None else path.with_suffix(".stress.npy")
+        if (path is not None and path.exists() and spath.exists()
+                and np.array_equal(np.load(spath), s0)):
+            data = path.read_bytes()
+            self._kept[key] = data
+            return DemElement.from_bytes(data), True
         el = DemElement.periodic(self.n, stress=float(-np.trace(s0) / 3), seed=self.seed,
                                  prep_friction_deg=self.prep_friction_deg,
                                  **(self.options or {}))
@@ -98,11 +112,16 @@ class PeriodicRegionElement:
                                f"initial stress {np.round(-s0 / 1e3, 2).tolist()} kPa "
                                f"(compression +): it strained {got:.3g} on the way; it is "
                                "beyond the packing's strength")
+        data = el.to_bytes()
+        self._kept[key] = data
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
-            tmp = path.with_suffix(".tmp")
-            tmp.write_bytes(el.to_bytes())
-            tmp.replace(path)
+            for dst, write in ((spath, lambda f: np.save(f, s0)),
+                               (path, lambda f: f.write(data))):
+                tmp = dst.with_name(dst.name + ".tmp")
+                with open(tmp, "wb") as f:
+                    write(f)
+                tmp.replace(dst)
         return el, False
 
     def __call__(self, name: str, initial, final):

@@ -10,7 +10,8 @@ Two way (:func:`two_way`): iterate
    the tension of a geogrid layer that crosses it (:func:`region_targets`; the runner may
    pull its element's grid ends by it, as the case's element does);
 2. run each region's DEM element from the initial targets to the new ones
-   (``element_runner``, possibly in parallel processes);
+   (``element_runner``; with ``workers`` > 1 or ``client=`` on Dask workers, each region's
+   runner kept on one worker for the whole loop: :mod:`femcoupling.runner_pool`);
 3. the element's stiffness over the handed-over increment becomes that region's material:
    with ``stiffness="tangent"`` (the default) and an element that returns its tangent (a
    periodic element: ``info["tangent_voigt_pa"]`` with the full strain and stress increment
@@ -37,17 +38,15 @@ log, the history and ``TwoWayResult.warnings``): principal axes of the FEM stres
 than ``max_rotation_deg`` from the walls, and an element that strains more than
 ``max_strain_ratio`` times its FEM region.
 
-``element_runner(name, initial, final) -> ElementResponse`` is any picklable callable (a
-module-level function if ``workers > 1``). Under MPI it runs on rank 0 only and its results
-are broadcast, so the FEM part stays collective.
+``element_runner(name, initial, final) -> ElementResponse`` is any callable (picklable, its
+class or function importable on the workers, if ``workers > 1``). Under MPI it runs on rank 0
+only and its results are broadcast, so the FEM part stays collective.
 """
 
 from __future__ import annotations
 
-import concurrent.futures
 import dataclasses
 import math
-import multiprocessing
 from collections.abc import Callable, Sequence
 from pathlib import Path
 from typing import Any
@@ -304,14 +303,6 @@ def one_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any]
     return initial, final
 
 
-def _run_elements(runner: Callable, jobs: list, workers: int) -> list:
-    if workers <= 1 or len(jobs) <= 1:
-        return [runner(*job) for job in jobs]
-    ctx = multiprocessing.get_context("spawn")  # no fork of an MPI/PETSc process
-    with concurrent.futures.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
-        return list(ex.map(runner, *zip(*jobs)))
-
-
 def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
             element_runner: Callable[[str, WallTargets, WallTargets], ElementResponse],
             tol: float = 0.02, max_iterations: int = 6, workers: int = 1,
@@ -320,7 +311,7 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
             scatter_factor: float = 1.0, max_rotation_deg: float = 15.0,
             max_strain_ratio: float = 2.0,
             history_names: Sequence[str] | None = None,
-            stiffness: str = "tangent") -> TwoWayResult:
+            stiffness: str = "tangent", client: Any = None) -> TwoWayResult:
     """The two-way loop (module doc). ``model`` is a SoilModel in its initial state.
 
     Args:
@@ -330,7 +321,11 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
         element_runner: runs one DEM element (see module doc).
         tol: relative change of the handed-over stresses that ends the loop, -, > 0.
         max_iterations: FEM solves at most, >= 2.
-        workers: parallel processes for the DEM elements (1: in this process).
+        workers: Dask worker processes for the DEM elements (1: in this process; > 1 with
+            several regions: a LocalCluster, each region's runner kept on one worker for the
+            whole loop, :class:`femcoupling.runner_pool.RunnerPool`).
+        client: a ``dask.distributed.Client`` of a running cluster to use instead (the
+            regions' runners are kept on its workers; ``workers`` is then ignored).
         history: HDF5 record, appended per iteration.
         log: progress line sink (rank 0).
         relaxation: "aitken" (Aitken's factor on the secant (E, nu) between iterations),
@@ -406,113 +401,133 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
                            fem_strain_increment=(np.nan if fem_de[r] is None else fem_de[r]),
                            **row)
 
-    for it in range(1, max_iterations + 1):
-        model.restore_state(state0)
-        load(model)
-        final = {r: region_targets(model, r) for r in regions}
-        for r in regions:
-            s1 = _normal_strain(model, r)
-            fem_de[r] = None if s1 is None else s1 - strain0[r]
-        if prev is None:
-            change = float("inf")
-        else:
-            change = max(float(np.abs(final[r].fem_stress_pa - prev[r].fem_stress_pa).max()
-                               / np.abs(prev[r].fem_stress_pa).max()) for r in regions)
-        changes.append(change)
-        for r in regions:
-            say(f"iteration {it}, region {r}: {final[r].report()}; change {change:.3g}")
-        stop, on = change < tol, "tol"
-        if not stop and change < scatter_factor * scatter:
-            stop, on = True, "scatter"
-        if stop:
-            # The stresses have settled; the strains must have met too. An element that
-            # strains far more than its region was not given a stiffness that reproduces it
-            # (an element at its strength, answering within its scatter; a secant that cannot
-            # represent it): the loop has stalled, not converged. More iterations do not help
-            # (measured: the periodic smoke element then jumps by 29 %), so it stops and says.
-            checks = {r: check(r) for r in regions}
-            far = [(r, q) for r, (_, q) in checks.items() if q > max_strain_ratio]
-            if far:
-                on = "stalled"
-                within = "tol" if change < tol else "the elements' scatter"
-                warn(f"iteration {it}: the change {change:.3g} is within {within}, but "
-                     + ", ".join(f"region {r}'s element strains {q:.3g} times its region"
-                                 for r, q in far)
-                     + f" (> max_strain_ratio={max_strain_ratio:g}): the scales have not met; "
-                     "stopped, NOT converged (stalled: an element at its strength, or a "
-                     "stiffness that cannot represent it)")
-            elif on == "scatter":
-                warn(f"two-way: the change {change:.3g} is within the elements' stress "
-                     f"scatter ({scatter:.3g} relative, the bootstrap of their contacts) but "
-                     f"above tol={tol:g}: the tolerance asked is below what the elements "
-                     f"resolve; stopped at the scatter")
-            converged, converged_on = on != "stalled", on
+    pool = None  # the regions' runners on Dask workers, kept for the whole loop
+
+    def run_elements(jobs: list) -> list:
+        nonlocal pool
+        if client is None and (workers <= 1 or len(jobs) <= 1):
+            return [element_runner(*job) for job in jobs]
+        if pool is None:
+            from femcoupling.runner_pool import RunnerPool
+
+            pool = RunnerPool(element_runner, regions, workers=workers, client=client,
+                              log=say)
+            say(f"two-way: the regions' DEM elements on Dask workers {pool.workers()}, each "
+                "kept on its worker between iterations")
+        return pool.run(jobs)
+
+    try:
+        for it in range(1, max_iterations + 1):
+            model.restore_state(state0)
+            load(model)
+            final = {r: region_targets(model, r) for r in regions}
             for r in regions:
-                msgs, ratio = checks[r]
-                for msg in msgs:
-                    warn(f"iteration {it} ({'converged' if converged else 'stalled'}): {msg}")
-                record(r, strain_ratio=ratio)
-            break
-        jobs = [(r, initial[r], final[r]) for r in regions]
-        out = _run_elements(element_runner, jobs, workers) if rank0 else None
-        out = comm.bcast(out, root=0)
-        scatter = 0.0
-        for r, resp in zip(regions, out):
-            responses[r] = resp
-            if resp.info and resp.info.get("message"):
-                warn(f"iteration {it}: {resp.info['message']}")
-            try:
-                E_full, nu_full, c_full = element_stiffness(resp, stiffness)
-            except (HandoverError, FemInputError) as exc:
-                warn(f"iteration {it}, region {r}: the element's tangent gives no stiffness "
-                     f"({exc}); the region takes the isotropic secant")
-                E_full, nu_full, c_full = element_stiffness(resp, "isotropic")
-            sc = resp.info.get("stress_scatter_pa") if resp.info else None
-            rel = (float(np.abs(np.asarray(sc, float)).max()
-                         / np.abs(np.asarray(resp.stress_final_pa, float)).max())
-                   if sc is not None else 0.0)
-            scatter = max(scatter, rel)
-            # relax: x = (log E, nu), or the stiffness matrix; x_new = x + w (x_full - x)
-            c_prev = stiffnesses.get(r)
-            if r in materials and (c_full is None) == (c_prev is None):
-                if c_full is None:
-                    x = np.array([math.log(materials[r][0]), materials[r][1]])
-                    step = np.array([math.log(E_full), nu_full]) - x
-                else:
-                    x, step = c_prev.ravel(), (c_full - c_prev).ravel()
-                omega[r] = next_factor(relaxation, omega[r], last_step.get(r), step)
-                last_step[r] = step
-                xe = x + omega[r] * step
-                E, nu, c = ((math.exp(xe[0]), float(xe[1]), None) if c_full is None
-                            else (math.nan, math.nan, xe.reshape(6, 6)))
-            else:  # the first element answer (of its kind) is taken whole
-                last_step.pop(r, None)
-                E, nu, c = E_full, nu_full, c_full
-            stiffnesses[r] = c
-            if c is None:
-                mat = LinearElastic(E, nu)
-            else:  # (a convex combination of two positive definite matrices is one)
-                mat = AnisotropicElastic(c)
-                E, nu = mat.young_pa, mat.poisson
-            materials[r] = (E, nu)
-            model.set_region_material(r, mat)
-            msgs, ratio = check(r)
-            if it == 1:  # (later iterations: checked again at the end)
-                for msg in msgs:
-                    warn(f"iteration {it}: {msg}")
-            kind = "tangent (isotropic part: " if c_full is not None else "secant ("
-            say(f"iteration {it}, region {r}: DEM reached "
-                f"{np.round(np.asarray(resp.stress_final_pa) / 1e3, 2).tolist()} kPa; {kind}"
-                f"E = {E_full / 1e6:.3g} MPa, nu = {nu_full:.3f}); given E = {E / 1e6:.3g} MPa, "
-                f"nu = {nu:.3f} (relaxation {omega[r]:.3g}); DEM/FEM strain {ratio:.3g}"
-                + (f"; scatter {rel:.3g}" if sc is not None else ""))
-            record(r, dem_stress_pa=resp.stress_final_pa, secant_young_pa=E,
-                   secant_poisson=nu, dem_strain_increment=resp.strain_increment,
-                   strain_ratio=ratio, scatter=rel if sc is not None else np.nan,
-                   relaxation=omega[r] if r in last_step else 1.0,
-                   stiffness_mandel_pa=(np.nan if stiffnesses[r] is None
-                                        else stiffnesses[r]))
-        prev = final
+                s1 = _normal_strain(model, r)
+                fem_de[r] = None if s1 is None else s1 - strain0[r]
+            if prev is None:
+                change = float("inf")
+            else:
+                change = max(float(np.abs(final[r].fem_stress_pa - prev[r].fem_stress_pa).max()
+                                   / np.abs(prev[r].fem_stress_pa).max()) for r in regions)
+            changes.append(change)
+            for r in regions:
+                say(f"iteration {it}, region {r}: {final[r].report()}; change {change:.3g}")
+            stop, on = change < tol, "tol"
+            if not stop and change < scatter_factor * scatter:
+                stop, on = True, "scatter"
+            if stop:
+                # The stresses have settled; the strains must have met too. An element that
+                # strains far more than its region was not given a stiffness that reproduces it
+                # (an element at its strength, answering within its scatter; a secant that cannot
+                # represent it): the loop has stalled, not converged. More iterations do not help
+                # (measured: the periodic smoke element then jumps by 29 %), so it stops and says.
+                checks = {r: check(r) for r in regions}
+                far = [(r, q) for r, (_, q) in checks.items() if q > max_strain_ratio]
+                if far:
+                    on = "stalled"
+                    within = "tol" if change < tol else "the elements' scatter"
+                    warn(f"iteration {it}: the change {change:.3g} is within {within}, but "
+                         + ", ".join(f"region {r}'s element strains {q:.3g} times its region"
+                                     for r, q in far)
+                         + f" (> max_strain_ratio={max_strain_ratio:g}): the scales have not met; "
+                         "stopped, NOT converged (stalled: an element at its strength, or a "
+                         "stiffness that cannot represent it)")
+                elif on == "scatter":
+                    warn(f"two-way: the change {change:.3g} is within the elements' stress "
+                         f"scatter ({scatter:.3g} relative, the bootstrap of their contacts) but "
+                         f"above tol={tol:g}: the tolerance asked is below what the elements "
+                         f"resolve; stopped at the scatter")
+                converged, converged_on = on != "stalled", on
+                for r in regions:
+                    msgs, ratio = checks[r]
+                    for msg in msgs:
+                        warn(f"iteration {it} ({'converged' if converged else 'stalled'}): {msg}")
+                    record(r, strain_ratio=ratio)
+                break
+            jobs = [(r, initial[r], final[r]) for r in regions]
+            out = run_elements(jobs) if rank0 else None
+            out = comm.bcast(out, root=0)
+            scatter = 0.0
+            for r, resp in zip(regions, out):
+                responses[r] = resp
+                if resp.info and resp.info.get("message"):
+                    warn(f"iteration {it}: {resp.info['message']}")
+                try:
+                    E_full, nu_full, c_full = element_stiffness(resp, stiffness)
+                except (HandoverError, FemInputError) as exc:
+                    warn(f"iteration {it}, region {r}: the element's tangent gives no stiffness "
+                         f"({exc}); the region takes the isotropic secant")
+                    E_full, nu_full, c_full = element_stiffness(resp, "isotropic")
+                sc = resp.info.get("stress_scatter_pa") if resp.info else None
+                rel = (float(np.abs(np.asarray(sc, float)).max()
+                             / np.abs(np.asarray(resp.stress_final_pa, float)).max())
+                       if sc is not None else 0.0)
+                scatter = max(scatter, rel)
+                # relax: x = (log E, nu), or the stiffness matrix; x_new = x + w (x_full - x)
+                c_prev = stiffnesses.get(r)
+                if r in materials and (c_full is None) == (c_prev is None):
+                    if c_full is None:
+                        x = np.array([math.log(materials[r][0]), materials[r][1]])
+                        step = np.array([math.log(E_full), nu_full]) - x
+                    else:
+                        x, step = c_prev.ravel(), (c_full - c_prev).ravel()
+                    omega[r] = next_factor(relaxation, omega[r], last_step.get(r), step)
+                    last_step[r] = step
+                    xe = x + omega[r] * step
+                    E, nu, c = ((math.exp(xe[0]), float(xe[1]), None) if c_full is None
+                                else (math.nan, math.nan, xe.reshape(6, 6)))
+                else:  # the first element answer (of its kind) is taken whole
+                    last_step.pop(r, None)
+                    E, nu, c = E_full, nu_full, c_full
+                stiffnesses[r] = c
+                if c is None:
+                    mat = LinearElastic(E, nu)
+                else:  # (a convex combination of two positive definite matrices is one)
+                    mat = AnisotropicElastic(c)
+                    E, nu = mat.young_pa, mat.poisson
+                materials[r] = (E, nu)
+                model.set_region_material(r, mat)
+                msgs, ratio = check(r)
+                if it == 1:  # (later iterations: checked again at the end)
+                    for msg in msgs:
+                        warn(f"iteration {it}: {msg}")
+                kind = "tangent (isotropic part: " if c_full is not None else "secant ("
+                say(f"iteration {it}, region {r}: DEM reached "
+                    f"{np.round(np.asarray(resp.stress_final_pa) / 1e3, 2).tolist()} kPa; {kind}"
+                    f"E = {E_full / 1e6:.3g} MPa, nu = {nu_full:.3f}); given "
+                    f"E = {E / 1e6:.3g} MPa, nu = {nu:.3f} (relaxation {omega[r]:.3g}); "
+                    f"DEM/FEM strain {ratio:.3g}"
+                    + (f"; scatter {rel:.3g}" if sc is not None else ""))
+                record(r, dem_stress_pa=resp.stress_final_pa, secant_young_pa=E,
+                       secant_poisson=nu, dem_strain_increment=resp.strain_increment,
+                       strain_ratio=ratio, scatter=rel if sc is not None else np.nan,
+                       relaxation=omega[r] if r in last_step else 1.0,
+                       stiffness_mandel_pa=(np.nan if stiffnesses[r] is None
+                                            else stiffnesses[r]))
+            prev = final
+    finally:
+        if pool is not None:
+            pool.close()
     if not converged and converged_on != "stalled":
         for r in regions:
             msgs, _ = check(r)

@@ -30,6 +30,18 @@ import numpy as np
 from ._core import ParameterError
 
 
+def local_client(workers: int):
+    """(client, cluster): a ``LocalCluster`` of ``workers`` single-threaded worker processes on
+    this machine (Dask spawns them: no fork of an MPI/PETSc process), no dashboard."""
+    from dask.distributed import Client, LocalCluster
+
+    if not (isinstance(workers, int) and workers >= 1):
+        raise ParameterError(f"workers={workers!r}: must be an integer >= 1")
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           dashboard_address=None)
+    return Client(cluster), cluster
+
+
 class ElementError(RuntimeError):
     """An element failed in its DEM work (its worker is alive): the message names the
     elements of that worker's call and the cause."""
@@ -158,13 +170,7 @@ class ElementPool:
         given) and the empty placement of n elements."""
         self._own_cluster = None
         if client is None:
-            from dask.distributed import Client, LocalCluster
-
-            if workers < 1:
-                raise ParameterError(f"workers={workers}: must be >= 1")
-            self._own_cluster = LocalCluster(n_workers=workers, threads_per_worker=1,
-                                             processes=True, dashboard_address=None)
-            client = Client(self._own_cluster)
+            client, self._own_cluster = local_client(workers)
         self.client, self.keep_copies, self.n = client, keep_copies, n
         self._hosts: dict = {}  # worker address -> actor
         self._where: dict = {}  # element index -> worker address
@@ -343,4 +349,5 @@ class ElementPool:
         self.close()
 
 
-__all__ = ["ElementPool", "ElementError", "ElementHost", "PeriodicFactory", "PoolStep"]
+__all__ = ["ElementPool", "ElementError", "ElementHost", "PeriodicFactory", "PoolStep",
+           "local_client"]
