@@ -8,6 +8,7 @@ positive) and the DEM/FEM time split; writes --out (JSON).
 
     .venv/bin/python bench/fem_dem_biaxial.py                       # 2 x 2 mesh, 8 elements
     .venv/bin/python bench/fem_dem_biaxial.py --nx 4 --ny 4 --grains 200 --strain 0.02
+    .venv/bin/python bench/fem_dem_biaxial.py --scheduler sched.json   # a running cluster
 """
 
 from __future__ import annotations
@@ -24,7 +25,7 @@ sys.path.insert(0, str(HERE.parent))
 
 
 def main(argv=None) -> int:
-    from cpp_dem.element_pool import ElementPool, PeriodicFactory
+    from cpp_dem.element_pool import ElementPool, PeriodicFactory, dask_client
     from femcoupling import biaxial
 
     ap = argparse.ArgumentParser(description=__doc__,
@@ -36,6 +37,9 @@ def main(argv=None) -> int:
     ap.add_argument("--strain", type=float, default=0.01, help="total axial strain, -")
     ap.add_argument("--steps", type=int, default=10)
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--scheduler", default=None,
+                    help="a running Dask scheduler (address or scheduler file) instead of a "
+                         "LocalCluster of --workers")
     ap.add_argument("--rtol", type=float, default=5e-3)
     ap.add_argument("--unbalanced", type=float, default=1e-5,
                     help="the elements relax to this unbalanced force after each increment")
@@ -59,7 +63,8 @@ def main(argv=None) -> int:
     opts = {} if args.prep_friction < 0 else {"prep_friction_deg": args.prep_friction}
     with ElementPool.build(n, PeriodicFactory(n=args.grains, stress=args.pressure,
                                               isotropic=True, options=opts),
-                           workers=args.workers) as pool:
+                           client=dask_client(args.scheduler, args.workers)[0]
+                           if args.scheduler else None, workers=args.workers) as pool:
         fd = biaxial.fem_dem_biaxial(
             pool, lx=lx, ly=ly, nx=args.nx, ny=args.ny, pressure=args.pressure,
             strain=args.strain, steps=args.steps, newton_rtol=args.rtol,

@@ -36,7 +36,7 @@ A **sweep file** adds a table of values, as a product of the lists or row by row
     seed = [1, 2]
 
 Rows run as separate processes on ``dask.distributed`` workers (a ``LocalCluster`` of
-``--workers`` processes by default, or ``--scheduler ADDRESS`` for a cluster), each in
+``--workers`` processes by default, or ``--scheduler ADDRESS|FILE`` for a cluster), each in
 ``OUT/row_NNN/``. A row whose folder holds a ``summary.json`` and a ``run.toml`` with the
 same parameters is finished and skipped, so a sweep resumes where it stopped; a row lost with
 a killed worker is run again by Dask. ``OUT/results.csv`` (and ``results.parquet`` where
@@ -430,7 +430,8 @@ def write_results(out: Path, rows: list[dict[str, Any]]) -> Path:
 @click.argument("file", type=click.Path(path_type=Path))
 @click.option("--workers", type=int, default=2, show_default=True,
               help="processes of the local Dask cluster")
-@click.option("--scheduler", default=None, help="address of a running Dask scheduler")
+@click.option("--scheduler", default=None,
+              help="a running Dask scheduler: its address or its scheduler file")
 @click.option("--threads", type=int, default=1, show_default=True,
               help="OpenMP threads per row (0 = all cores)")
 def sweep_cmd(file: Path, workers: int, scheduler: str | None, threads: int) -> None:
@@ -495,15 +496,15 @@ def _summary_of(row_dir: Path) -> dict[str, Any]:
 
 
 def _dask_client(scheduler: str | None, workers: int):
-    """(client, cluster): the scheduler at ``scheduler``, or a LocalCluster of ``workers``
-    single-threaded processes (cluster None for a given scheduler)."""
-    from dask.distributed import Client, LocalCluster
+    """(client, cluster): the scheduler at ``scheduler`` (an address or a scheduler file), or
+    a LocalCluster of ``workers`` single-threaded processes (cluster None for a scheduler)."""
+    from ._core import ParameterError
+    from .element_pool import dask_client
 
-    if scheduler:
-        return Client(scheduler), None
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=None)
-    return Client(cluster), cluster
+    try:
+        return dask_client(scheduler, workers)
+    except ParameterError as e:
+        raise click.BadParameter(str(e), param_hint="--scheduler") from None
 
 
 def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) -> None:
@@ -556,7 +557,8 @@ def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) 
               help="results folder (default: the file's field 'out')")
 @click.option("--workers", type=int, default=2, show_default=True,
               help="processes of the local Dask cluster (0: run in this process)")
-@click.option("--scheduler", default=None, help="address of a running Dask scheduler")
+@click.option("--scheduler", default=None,
+              help="a running Dask scheduler: its address or its scheduler file")
 @click.option("--threads", type=int, default=1, show_default=True,
               help="OpenMP threads per triaxial run (fixed: the results do not depend on the "
                    "number of workers)")

@@ -23,6 +23,7 @@ from __future__ import annotations
 
 import time
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
@@ -40,6 +41,23 @@ def local_client(workers: int):
     cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
                            dashboard_address=None)
     return Client(cluster), cluster
+
+
+def dask_client(scheduler: str | None, workers: int):
+    """(client, cluster): the running scheduler at ``scheduler`` (an address such as
+    ``tcp://head:8786``, or the path of a scheduler file that ``dask scheduler
+    --scheduler-file``, ``dask-mpi`` or a batch script wrote; cluster None), else
+    ``local_client(workers)``."""
+    from dask.distributed import Client
+
+    if not scheduler:
+        return local_client(workers)
+    if "://" not in scheduler and Path(scheduler).is_file():
+        return Client(scheduler_file=scheduler), None
+    if "://" not in scheduler and ":" not in scheduler:
+        raise ParameterError(f"scheduler={scheduler!r}: neither an address (tcp://host:port) "
+                             "nor an existing scheduler file")
+    return Client(scheduler), None
 
 
 class ElementError(RuntimeError):
@@ -336,11 +354,14 @@ class ElementPool:
         self._place(range(self.n))
 
     def close(self) -> None:
+        """Stops the pool's own LocalCluster and its client; a given ``client=`` stays open
+        (its cluster is the caller's)."""
+        if self._own_cluster is None:
+            return
         try:
             self.client.close()
         finally:
-            if self._own_cluster is not None:
-                self._own_cluster.close()
+            self._own_cluster.close()
 
     def __enter__(self) -> "ElementPool":
         return self
@@ -350,4 +371,4 @@ class ElementPool:
 
 
 __all__ = ["ElementPool", "ElementError", "ElementHost", "PeriodicFactory", "PoolStep",
-           "local_client"]
+           "dask_client", "local_client"]
