@@ -59,3 +59,55 @@ def test_handed_over_grid_tension_pulls_the_grid_ends(tmp_path):
     with pytest.raises(ParameterError, match="grid_tension=.*one finite value"):
         run_element(p, targets, prestressed=False, label="bad", out=tmp_path,
                     grid_tension=[1.0])
+
+
+@pytest.fixture(scope="module")
+def loaded_element():
+    """The case's smoke element (300 grains) servoed to 5/5/8 kPa, then to 5.5/5.2/9.5 kPa
+    (within its strength: ratio 1.7 against about 2.2)."""
+    from cpp_dem.cases.prs_element import SMOKE, Params
+    from cpp_dem.element import make_element, servo_stage
+
+    p = Params(**SMOKE)
+    t0, t1 = np.array([5e3, 5e3, 8e3]), np.array([5.5e3, 5.2e3, 9.5e3])
+    sample, grid, _ = make_element(p, float(t0.mean()), False, log=lambda m: None)
+    for k, t in enumerate((t0, t1)):
+        servo_stage(sample, grid, t, k, p, lambda **row: None, log=lambda m: None)
+    return p, sample, grid, t0, t1
+
+
+def test_probed_tangent_of_the_walls_element(loaded_element):
+    """probe_tangent (issue 18: the wall-bounded element's tangent in place of the isotropic
+    secant): three stress probes, the element's creep at the held state subtracted. Its
+    normal block is symmetric positive definite, each probe shortens its own axis, the shear
+    moduli are the planes' isotropic ones, the tangent is a property of the state (5 % and
+    10 % probes agree within 20 %: measured 13 % on the largest term), and the element is
+    left bitwise where it was."""
+    from cpp_dem.element import probe_tangent
+
+    p, sample, grid, t0, t1 = loaded_element
+    sc = sample.scene
+    pos, step = sc.positions.copy(), sc.step_count
+    c = {}
+    for rel in (0.05, 0.1):
+        pr = probe_tangent(sample, grid, p, t1, rel=rel, signs=t1 - t0, log=lambda m: None)
+        assert pr["converged"] == [True, True, True]
+        assert np.array_equal(sc.positions, pos) and sc.step_count == step
+        n = np.array(pr["normal_pa"])
+        assert np.array_equal(n, n.T) and np.linalg.eigvalsh(n).min() > 0
+        assert np.all(np.diag(np.array(pr["probe_strains"])) > 0)  # compression positive
+        v = np.array(pr["tangent_voigt_pa"])
+        assert np.array_equal(v[:3, :3], n)
+        for k, (i, j) in zip((3, 4, 5), ((1, 2), (0, 2), (0, 1))):
+            assert v[k, k] == pytest.approx((n[i, i] + n[j, j] - 2 * n[i, j]) / 4, rel=1e-12)
+        c[rel] = n
+    assert np.linalg.norm(c[0.1] - c[0.05]) < 0.2 * np.linalg.norm(c[0.05])
+
+
+def test_a_probe_size_outside_its_range_is_refused(loaded_element):
+    from cpp_dem._core import ParameterError
+    from cpp_dem.element import probe_tangent
+
+    p, sample, grid, _, t1 = loaded_element
+    with pytest.raises(ParameterError, match="rel=0.8: the probe's size"):
+        probe_tangent(sample, grid, p, t1, rel=0.8)

@@ -12,7 +12,7 @@ from __future__ import annotations
 
 import math
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
 
@@ -374,9 +374,94 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
             "wall_stresses_pa": ax, "box_size_m": measure.box_size(sc, walls)}
 
 
+def probe_tangent(sample, grid, p: ElementParams, target, *, rel: float, signs=None,
+                  ends=None, grid_tension: float | None = None,
+                  log: Callable[[str], None] = _log) -> dict:
+    """The wall-bounded element's tangent at its current state, held at ``target`` (3,) Pa
+    compression positive, by three stress probes (issue 18: the element's tangent in place of
+    the isotropic secant in region mode). From a checkpoint of the state, probe ``a`` servoes
+    the walls to the target with axis ``a`` changed by ``signs[a] * rel`` times the target's
+    mean (``signs``: +1 or -1 per axis, the handed-over increment's direction; default +1) and
+    measures the box's strain. The three probes give the compliance S (strain per stress, the
+    stress changes being the targets', which the walls hold within ``p.tol``); the normal
+    block is C = S^-1 made symmetric. The walls cannot shear the element, so the shear moduli
+    are those of each plane's normal block as if it were isotropic in that plane, G_ij =
+    (C_ii + C_jj - 2 C_ij) / 4 (exact for an isotropic C). The state is restored after (a
+    PRS grid's grips stay as they are; the probes are not recorded).
+
+    Returns plain numbers: ``tangent_voigt_pa`` (6 x 6, Voigt, order xx yy zz yz xz xy),
+    ``normal_pa`` (3 x 3), ``probe_pa`` (the three stress changes), ``probe_strains`` (3 x 3,
+    column a: probe a's strain, compression positive), ``converged`` per probe, ``steps``.
+    """
+    if not (0 < rel <= 0.5):
+        raise _core.ParameterError(f"rel={rel!r}: the probe's size relative to the mean "
+                                   "stress must be in (0, 0.5]")
+    sc, walls = sample.scene, sample.walls
+    t0 = np.asarray(target, float)
+    signs = np.ones(3) if signs is None else np.where(np.asarray(signs, float) < 0, -1.0, 1.0)
+    blob = bytes(_core._checkpoint_save(sc))
+    size0 = measure.box_size(sc, walls)
+    step0 = sc.step_count
+    # A probe past the element's strength flows on: it stops after 10 holds (its strain then
+    # is the flow's over that time, a soft answer, said), not after the stage's max_steps.
+    pp = replace(p, max_steps=min(p.max_steps, 10 * max(p.hold_steps, p.record_every)))
+    d = rel * float(t0.mean())
+    strains, ok, used = np.zeros((3, 3)), [], []
+    try:
+        for a in range(3):
+            _core._checkpoint_load(sc, blob)
+            t = t0.copy()
+            t[a] += signs[a] * d
+            st = servo_stage(sample, grid, t, -1 - a, pp, lambda **row: None, log=log,
+                             ends=ends, grid_tension=grid_tension)
+            strains[:, a] = (size0 - st["box_size_m"]) / size0
+            ok.append(bool(st["converged"]))
+            used.append(sc.step_count - step0)
+        # The drift: held at the target itself as long as the longest probe, the element
+        # still creeps (near its strength, most of a probe's strain); subtracted at each
+        # probe's step count.
+        _core._checkpoint_load(sc, blob)
+        drift = [(0, np.zeros(3))]
+
+        def rec(**row) -> None:
+            size = np.array([row["lx"], row["ly"], row["lz"]])
+            drift.append((row["step"] - step0, (size0 - size) / size0))
+
+        servo_stage(sample, grid, t0, -4, replace(pp, hold_steps=max(used)), rec, log=log,
+                    ends=ends, grid_tension=grid_tension)
+    finally:
+        _core._checkpoint_load(sc, blob)
+    ds_steps = np.array([k for k, _ in drift], float)
+    ds_strain = np.array([e for _, e in drift])
+    creep = np.array([[np.interp(n, ds_steps, ds_strain[:, i]) for n in used]
+                      for i in range(3)])
+    raw = strains.copy()
+    strains = strains - creep
+    dsig = signs * d
+    compliance = strains / dsig[None, :]  # column a: strain per Pa of probe a
+    with np.errstate(all="ignore"):
+        try:
+            c = np.linalg.inv(compliance)
+        except np.linalg.LinAlgError:
+            c = np.full((3, 3), np.nan)
+    c = 0.5 * (c + c.T)
+    voigt = np.zeros((6, 6))
+    voigt[:3, :3] = c
+    for k, (i, j) in zip((3, 4, 5), ((1, 2), (0, 2), (0, 1))):
+        voigt[k, k] = 0.25 * (c[i, i] + c[j, j] - 2.0 * c[i, j])
+    if not all(ok):
+        log(f"  tangent probes: probe(s) {[a for a in range(3) if not ok[a]]} (x, y, z) did "
+            f"not settle within {pp.max_steps} steps (a probe past the element's strength "
+            "flows): the tangent there is the flow's over that time")
+    return {"tangent_voigt_pa": voigt.tolist(), "normal_pa": c.tolist(),
+            "probe_pa": dsig.tolist(), "probe_strains": strains.tolist(),
+            "probe_strains_raw": raw.tolist(), "converged": ok,
+            "steps": int(sum(used) + max(used))}
+
+
 def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: str, out: Path,
                 log: Callable[[str], None] = _log, cache: dict | None = None,
-                grid_tension: list | None = None) -> dict:
+                grid_tension: list | None = None, probe: float = 0.0) -> dict:
     """The DEM element driven through ``targets`` (rows of 3, Pa, compression positive).
 
     Prepared at the first row's mean stress, then servoed to each row in turn. Returns the
@@ -393,7 +478,12 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     to the first row is kept there (its objects and its checkpoint bytes), keyed by that row
     and ``prestressed``; a later call with the same first row restores it and runs only the
     remaining rows (bitwise the run it would have made; its records then start at the second
-    row). Same ``p`` for every call with one cache."""
+    row). Same ``p`` for every call with one cache.
+
+    ``probe`` (> 0, relative): after the last row, the element's tangent there by three
+    stress probes of that size relative to the mean stress (:func:`probe_tangent`), each in
+    the direction of the last increment on its axis: the summary's ``tangent_voigt_pa`` and
+    ``tangent_probes``. 0 (the default): none."""
     t_start = time.perf_counter()
     targets = [np.asarray(t, float) for t in targets]
     # One thread unless asked: on a shared 2-core machine OpenMP with 2 threads was measured
@@ -502,6 +592,18 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     lo = np.array([sc.wall_positions[walls[2 * a]] for a in range(3)])
     write_vtk_box(out / "vtk" / f"{label}_box.vtp", lo, lo + size_after)
     strain_inc = (size_before - size_after) / size_before
+    if probe > 0:
+        tp = time.perf_counter()
+        pr = probe_tangent(sample, grid, p, targets[-1], rel=probe,
+                           signs=targets[-1] - targets[0] if len(targets) > 1 else None,
+                           ends=ends, log=log,
+                           grid_tension=None if ends is None else grid_tension[-1])
+        pr["wall_time_s"] = time.perf_counter() - tp
+        extra["tangent_voigt_pa"] = pr.pop("tangent_voigt_pa")
+        extra["tangent_probes"] = pr
+        log(f"{label}: tangent by three {100 * probe:g} % stress probes, normal block "
+            f"{np.round(np.array(pr['normal_pa']) / 1e6, 3).tolist()} MPa "
+            f"({pr['steps']} steps, {pr['wall_time_s']:.1f} s)")
     return {
         "label": label, "prestressed": prestressed,
         "num_grains": int(measure.grain_of_body(sc)[1]),

@@ -18,9 +18,11 @@ prestressed reinforced (PRS) soil. Here:
    radius growth, then servo walls to the initial (pre-load) stresses, then to the final ones.
    PRS: the grid's longitudinal (x) members are pulled at their ends by T_p x spacing (an
    external force on the end nodes: cpp_dem has no built-in prestress).
-3. **Two-way** (``--two-way``): the element's secant stiffness over the handed-over increment
-   goes back to the region's material and the FEM re-solves until the handed-over stresses
-   change by less than ``--tol``. ``--two-way-element periodic`` iterates with a dense
+3. **Two-way** (``--two-way``): the element's stiffness goes back to the region's material
+   (its tangent at the final state by three stress probes, ``--tangent-probe``, made to
+   reproduce the handed-over increment; or, with ``--tangent-probe 0``, the isotropic
+   secant) and the FEM re-solves until the handed-over stresses change by less than
+   ``--tol``. ``--two-way-element periodic`` iterates with a dense
    periodic element of the case's grains instead (soil only: the full FEM tensor, shear
    included, and its tangent back as the region's full stiffness; the geogrid stays in the
    FEM's band), then drives the case's element to the converged targets.
@@ -86,9 +88,12 @@ class Params(ElementParams):
     workers: int = 1
     calibrate: bool = False          #: fit the FEM soil to a DEM element along the region's path
     #: the two-way loop's element: "walls" (the case's element, geogrid included, three
-    #: normal stresses, isotropic secant back) or "periodic" (soil only, the full tensor, its
-    #: tangent back; the case's element is then driven to the converged targets)
+    #: normal stresses, its probed tangent back) or "periodic" (soil only, the full tensor, its
+    #: network tangent back; the case's element is then driven to the converged targets)
     two_way_element: str = "walls"
+    #: the walls element's tangent in the two-way loop: three stress probes of this size,
+    #: relative to the mean stress (cpp_dem.element.probe_tangent); 0: the isotropic secant
+    tangent_probe: float = 0.05
     #: hand the FEM layer's tension across the element region to the element's grid ends
     #: (force-controlled; a PRS grid's grips let go), so the walls carry the soil's stress
     #: alone and the grid is counted once; False: free ends (RE), locked grips (PRS)
@@ -118,10 +123,11 @@ def servo_stage(sample, grid, targets, stage: int, p: Params, rec) -> dict:
 
 
 def run_element(p: Params, targets: list, *, prestressed: bool, label: str, out: Path,
-                cache: dict | None = None, grid_tension: list | None = None) -> dict:
+                cache: dict | None = None, grid_tension: list | None = None,
+                probe: float = 0.0) -> dict:
     """:func:`cpp_dem.element.run_element` with this case's log."""
     return _element.run_element(p, targets, prestressed=prestressed, label=label, out=out,
-                                log=log, cache=cache, grid_tension=grid_tension)
+                                log=log, cache=cache, grid_tension=grid_tension, probe=probe)
 
 
 def handed_tension(p: Params, targets: list, label: str) -> list | None:
@@ -157,12 +163,20 @@ def element_runner(p_dict: dict, out: str, name: str, initial, final):
                                  {})
     s = run_element(p, [initial.normal_pa, final.normal_pa], prestressed=prestressed,
                     label=f"twoway_{name}", out=Path(out), cache=cache,
-                    grid_tension=handed_tension(p, [initial, final], f"twoway_{name}"))
+                    grid_tension=handed_tension(p, [initial, final], f"twoway_{name}"),
+                    probe=p.tangent_probe)
+    ds = np.subtract(s["stress_final_pa"], s["stress_initial_pa"])
+    tangent = {} if "tangent_voigt_pa" not in s else {
+        "tangent_voigt_pa": np.array(s["tangent_voigt_pa"]),
+        # (the walls' increments: normal only; the tangent's shear stays the probes')
+        "strain_increment_tensor": np.diag(s["strain_increment"]),
+        "stress_increment_tensor": np.diag(ds), "tangent_probes": s["tangent_probes"]}
     return ElementResponse(stress_initial_pa=np.array(s["stress_initial_pa"]),
                            stress_final_pa=np.array(s["stress_final_pa"]),
                            strain_increment=np.array(s["strain_increment"]),
                            info={"hold_max_rel_error": s["hold_max_rel_error"],
-                                 "stress_scatter_pa": np.array(s["stress_scatter_pa"])})
+                                 "stress_scatter_pa": np.array(s["stress_scatter_pa"]),
+                                 **tangent})
 
 
 class _Runner:
@@ -444,8 +458,10 @@ def write_report(out: Path, summary: dict) -> None:
     if "two_way" in summary:
         lines += ["## Two-way", ""]
         for v, t in summary["two_way"].items():
-            kind = ("the periodic element's tangent (isotropic part E, nu)"
-                    if t.get("stiffness_mandel_pa") else "secant (E, nu)")
+            how = ("its network tangent" if t.get("element") == "periodic"
+                   else "its tangent by stress probes")
+            kind = (f"{how} made to reproduce the increment (isotropic part E, nu)"
+                    if t.get("stiffness_mandel_pa") else "isotropic secant (E, nu)")
             lines.append(f"- {v}: {'converged' if t['converged'] else 'NOT converged'} "
                          f"({t['converged_on']}) in {t['iterations']} FEM solves with the "
                          f"{t.get('element', 'walls')} element; changes {t['changes']}; "
@@ -739,8 +755,12 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                          "and element) side by side, with the same results")
     ap.add_argument("--two-way-element", choices=("walls", "periodic"), default="walls",
                     help="the two-way loop's element: the case's (walls, geogrid included; "
-                         "an isotropic secant back) or a dense periodic one of its grains "
-                         "(soil only, the full tensor; its tangent back as a full stiffness)")
+                         "its tangent by stress probes back) or a dense periodic one of its "
+                         "grains (soil only, the full tensor; its network tangent back)")
+    ap.add_argument("--tangent-probe", type=float, default=d.tangent_probe,
+                    help="the walls element's tangent in the two-way loop: three stress "
+                         "probes of this size relative to the mean stress; 0: the isotropic "
+                         "secant instead")
     ap.add_argument("--hierarchical", action="store_true",
                     help="the region's material is a dense periodic DEM element of the case's "
                          "grains inside the FEM's Newton (stress and tangent at every "
@@ -773,6 +793,10 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     if a.two_way_element != "walls" and not a.two_way:
         ap.error(f"--two-way-element {a.two_way_element}: the loop's element; needs --two-way")
     p.two_way_element = a.two_way_element
+    if not 0 <= a.tangent_probe <= 0.5:
+        ap.error(f"--tangent-probe={a.tangent_probe}: the probe's size relative to the mean "
+                 "stress, in (0, 0.5], or 0 for the isotropic secant")
+    p.tangent_probe = a.tangent_probe
     if a.preset:
         if a.stresses:
             ap.error("--preset sets the FEM mesh and the two-way tolerance: not with --stresses")
