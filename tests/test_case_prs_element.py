@@ -20,6 +20,13 @@ def run_case(out, *args):
                           capture_output=True, text=True, timeout=600, cwd=ROOT)
 
 
+def _xdmf_times(path) -> list:
+    """The distinct times of an XDMF file's series, in order."""
+    import re
+
+    return sorted({float(t) for t in re.findall(r'Time Value="([^"]+)"', path.read_text())})
+
+
 @pytest.fixture(scope="module")
 def smoke(case_smoke):
     return case_smoke("prs_element")  # --smoke (conftest.SMOKE_ARGS)
@@ -34,6 +41,8 @@ def test_fem_to_dem_smoke_outputs_and_servo_hold(smoke):
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
     s = json.loads((out / "summary.json").read_text())
     for v in ("RE", "PRS"):
+        # the FEM state before the footing load and after each of its load steps
+        assert _xdmf_times(out / f"fem_{v}.xdmf") == [0.0, 1 / 3, 2 / 3, 1.0]
         e = s["elements"][v]
         assert e["hold_max_rel_error"] <= 0.01
         np.testing.assert_allclose(e["stress_final_pa"], e["targets_pa"][-1], rtol=0.01)
@@ -238,6 +247,8 @@ def test_two_way_with_the_walls_element_gives_the_region_its_probed_tangent(tmp_
         regions = f["region"][:]
     for j in (0, 1):
         assert any(np.all(np.isfinite(r)) for r in rows[regions == j])
+    for v in ("RE", "PRS"):  # the last (coupled) iteration's load steps
+        assert _xdmf_times(out / f"fem_{v}.xdmf") == [0.0, 1 / 3, 2 / 3, 1.0]
 
 
 def test_two_way_with_the_periodic_element_gives_the_region_its_tangent(tmp_path):
@@ -315,6 +326,7 @@ def test_hierarchical_region_element_strains_as_its_region(tmp_path):
         assert len(h["newton_iterations"]) == 3 and max(h["newton_iterations"]) <= 25
         assert len(h["warnings"]) == h["converged_on"].count("stall")
         assert s["fem"][v]["state"] == "hierarchical"
+        assert _xdmf_times(out / f"fem_{v}.xdmf") == [0.0, 1 / 3, 2 / 3, 1.0]  # coupled steps
         with h5py.File(out / f"region_element_{v}.h5") as f:  # a row per committed step
             assert f["step"][:].tolist() == [1, 2, 3]
             np.testing.assert_allclose(-np.diag(f["strain"][-1]),

@@ -34,7 +34,8 @@ runs the element with no FEM and **without importing dolfinx**.
 Outputs in ``--out``: ``<label>.h5`` / ``<label>.csv`` (wall stresses, targets, box size,
 geogrid forces; appended as the run goes), ``vtk/<label>_{spheres,contacts,geogrid,box}.vtp``
 (contact force network, geogrid tensile forces), ``fem_<RE|PRS>.xdmf`` (displacement, stress,
-cell tags: element region and layers marked), ``fem_<RE|PRS>.png``, ``handover.h5`` (the
+cell tags: element region and layers marked; a time series: the state before the footing
+load and after each load step, the coupled ones in two-way and hierarchical runs), ``fem_<RE|PRS>.png``, ``handover.h5`` (the
 handover history), ``report.md`` and ``summary.json``. SI units. DEM stresses and strains are
 compression positive; FEM stresses tension positive.
 """
@@ -42,6 +43,7 @@ compression positive; FEM stresses tension positive.
 from __future__ import annotations
 
 import argparse
+import functools
 import json
 import math
 import sys
@@ -374,19 +376,27 @@ def run_fem(p: Params, out: Path, variant: str) -> tuple:
     state0 = m.save_state()
     strain0 = m.region_strain("element")
 
-    def load(model):
-        return model.load_footing(pressure_pa=p.footing_pressure, steps=p.fem_steps,
-                                  callback=lambda r: log(
-                                      f"FEM {variant}: footing {r.footing_pressure_pa / 1e3:.1f}"
-                                      f" kPa, settlement {1e3 * r.footing_settlement_m:.2f} mm,"
-                                      f" {r.newton_iterations} Newton its, {r.plastic_points}"
-                                      f" plastic points"))
+    def load(model, xdmf: Path | None = None):
+        """The footing load stage; with ``xdmf`` the state before it (time 0) and after each
+        load step (time = load factor) are written there (ParaView: a time series)."""
+        if xdmf is not None:
+            model.write_xdmf(xdmf)
 
-    initial, final = one_way(m, regions=["element"], load=load)
+        def step(r) -> None:
+            log(f"FEM {variant}: footing {r.footing_pressure_pa / 1e3:.1f} kPa, settlement "
+                f"{1e3 * r.footing_settlement_m:.2f} mm, {r.newton_iterations} Newton its, "
+                f"{r.plastic_points} plastic points")
+            if xdmf is not None:
+                model.write_xdmf(xdmf, time=r.load_factor, append=True)
+
+        return model.load_footing(pressure_pa=p.footing_pressure, steps=p.fem_steps,
+                                  callback=step)
+
+    xdmf = out / f"fem_{variant}.xdmf"
+    initial, final = one_way(m, regions=["element"], load=functools.partial(load, xdmf=xdmf))
     ini, fin = initial["element"], final["element"]
     log(f"FEM {variant} handover, initial: {ini.report()}")
     log(f"FEM {variant} handover, loaded:  {fin.report()}")
-    m.write_xdmf(out / f"fem_{variant}.xdmf")
     plot_fem(m, out / f"fem_{variant}.png", f"FEM {variant}: sigma_zz under "
              f"{p.footing_pressure / 1e3:g} kPa footing")
     info = {"cells": int(ncell), **fem_state(m),
@@ -493,16 +503,14 @@ def write_report(out: Path, summary: dict) -> None:
     (out / "report.md").write_text("\n".join(lines) + "\n")
 
 
-def coupled_fem_state(m, info: dict, ini, fin, xdmf: Path, state: str,
-                      strain_increment) -> None:
-    """The report, the summary (``info``) and the XDMF show the coupled FEM state (two-way
-    or hierarchical): its numbers, the final targets, and the region's normal strain
-    increment (compression positive)."""
+def coupled_fem_state(m, info: dict, ini, fin, state: str, strain_increment) -> None:
+    """The report and the summary (``info``) show the coupled FEM state (two-way or
+    hierarchical): its numbers, the final targets, and the region's normal strain increment
+    (compression positive). (Its XDMF series is written by the coupled load stage.)"""
     info.update(fem_state(m), shear_pa=fin.shear_pa.tolist(), rotation_deg=fin.rotation_deg,
                 grid_tension_n_per_m=[ini.grid_tension_n_per_m, fin.grid_tension_n_per_m],
                 targets_final_pa=fin.normal_pa.tolist(), state=state,
                 strain_increment=np.asarray(strain_increment, float).tolist())
-    m.write_xdmf(xdmf)
 
 
 VARIANTS = ("RE", "PRS")
@@ -524,6 +532,9 @@ def run_variant(p: Params, out: Path, variant: str) -> dict:
     j = VARIANTS.index(variant)
     hier = None
     ini, fin, m, state0, load, info = run_fem(p, out, variant)
+    # The coupled load stage writes the FEM state at every load step (two-way: each
+    # iteration rewrites it, so the file holds the last, coupled one)
+    load = functools.partial(load, xdmf=out / f"fem_{variant}.xdmf")
     info.update(shear_pa=fin.shear_pa.tolist(), rotation_deg=fin.rotation_deg,
                 targets_initial_pa=ini.normal_pa.tolist(),
                 targets_final_pa=fin.normal_pa.tolist())
@@ -553,14 +564,14 @@ def run_variant(p: Params, out: Path, variant: str) -> dict:
             log(f"two-way {variant}: {'converged' if tw.converged else 'NOT converged'}"
                 f" ({tw.converged_on}) after {tw.iterations} FEM solves, changes "
                 f"{tw.changes}")
-            coupled_fem_state(m, info, ini, fin, out / f"fem_{variant}.xdmf", "two-way",
+            coupled_fem_state(m, info, ini, fin, "two-way",
                               tw.fem_strain_increments["element"])
         elif p.hierarchical:
             m.restore_state(state0)
             e0 = m.region_strain("element")
             hier = run_hierarchical(p, out, variant, m, load)
             fin = region_targets(m, "element")
-            coupled_fem_state(m, info, ini, fin, out / f"fem_{variant}.xdmf", "hierarchical",
+            coupled_fem_state(m, info, ini, fin, "hierarchical",
                               -np.diag(m.region_strain("element") - e0))
         label = f"element_{variant}"
         e = run_element(p, [ini.normal_pa, fin.normal_pa], prestressed=variant == "PRS",
