@@ -220,34 +220,45 @@ def test_two_way_keeps_the_prepared_element_between_iterations(tmp_path, capsys)
     assert np.array_equal(a.strain_increment, b.strain_increment)
 
 
+def _two_way_gave_full_stiffnesses(out, element: str) -> dict:
+    """The two-way summary of both variants: the loop's element, converged or stalled and
+    said so (issue 18: settled stresses with the scales apart are not convergence), a
+    symmetric positive definite 6 x 6 stiffness given, in the summary and in handover.h5.
+    Returns the summary."""
+    import h5py
+
+    s = json.loads((out / "summary.json").read_text())
+    for v in ("RE", "PRS"):
+        t = s["two_way"][v]
+        assert t["element"] == element, t
+        assert t["converged"] == (t["converged_on"] in ("tol", "scatter")), t
+        assert t["converged"] or any("the scales have not met" in w for w in t["warnings"])
+        c = np.array(t["stiffness_mandel_pa"])
+        assert c.shape == (6, 6) and np.allclose(c, c.T, rtol=0, atol=1e-9 * np.abs(c).max())
+        assert np.linalg.eigvalsh(c).min() > 0
+    with h5py.File(out / "handover.h5") as f:
+        rows = f["stiffness_mandel_pa"][:]
+        regions = f["region"][:]
+    for j in (0, 1):  # element_RE, element_PRS: full stiffnesses given
+        assert any(np.all(np.isfinite(r)) for r in rows[regions == j])
+    return s
+
+
 def test_two_way_with_the_walls_element_gives_the_region_its_probed_tangent(tmp_path):
     """--two-way (the case's own element; issue 18: its tangent in place of the isotropic
     secant): each iteration probes the element at its final state (three 5 % stress probes)
     and the region gets that tangent made to reproduce the increment, a full stiffness.
     Smoke, seeds 1-3 (measured): both variants converge in 4-8 FEM solves, and the case's
     element then strains 0.90-1.00 times its region."""
-    import h5py
-
     out = tmp_path / "tw"
     p = run_case(out, "--smoke", "--two-way")
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
     assert "tangent by three 5 % stress probes" in p.stdout
-    s = json.loads((out / "summary.json").read_text())
+    s = _two_way_gave_full_stiffnesses(out, "walls")
     for v in ("RE", "PRS"):
-        t = s["two_way"][v]
-        assert t["element"] == "walls", t
-        assert t["converged"] == (t["converged_on"] in ("tol", "scatter")), t
-        assert t["converged"] or any("the scales have not met" in w for w in t["warnings"])
-        c = np.array(t["stiffness_mandel_pa"])
-        assert c.shape == (6, 6) and np.linalg.eigvalsh(c).min() > 0
-        if t["converged"]:  # the scales met: the element strains about as its region
+        if s["two_way"][v]["converged"]:  # the scales met: the element strains as its region
             assert s["elements"][v]["dem_fem_strain_ratio"] < 2.0
-    with h5py.File(out / "handover.h5") as f:
-        rows = f["stiffness_mandel_pa"][:]
-        regions = f["region"][:]
-    for j in (0, 1):
-        assert any(np.all(np.isfinite(r)) for r in rows[regions == j])
-    for v in ("RE", "PRS"):  # the last (coupled) iteration's load steps
+        # the last (coupled) iteration's load steps
         assert _xdmf_times(out / f"fem_{v}.xdmf") == [0.0, 1 / 3, 2 / 3, 1.0]
 
 
@@ -257,29 +268,13 @@ def test_two_way_with_the_periodic_element_gives_the_region_its_tangent(tmp_path
     stiffness), then drives the case's element to the converged targets. Smoke (measured):
     RE's stresses settle in 6 FEM solves while its element strains 2.7 times the region, a
     stall, which the loop says (not converged); PRS converges in 5."""
-    import h5py
-
     out = tmp_path / "pe"
     p = run_case(out, "--smoke", "--two-way", "--two-way-element", "periodic")
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
     assert "two-way element: periodic" in p.stdout
-    s = json.loads((out / "summary.json").read_text())
+    s = _two_way_gave_full_stiffnesses(out, "periodic")
     for v in ("RE", "PRS"):
-        t = s["two_way"][v]
-        assert t["element"] == "periodic", t
-        # converged, or stalled and said so (issue 18: settled stresses with the scales apart
-        # are not convergence)
-        assert t["converged"] == (t["converged_on"] in ("tol", "scatter")), t
-        assert t["converged"] or any("the scales have not met" in w for w in t["warnings"])
-        c = np.array(t["stiffness_mandel_pa"])
-        assert c.shape == (6, 6) and np.allclose(c, c.T, rtol=0, atol=1e-9 * np.abs(c).max())
-        assert np.linalg.eigvalsh(c).min() > 0
         assert s["elements"][v]["strain_increment"]  # the case's element ran after the loop
-    with h5py.File(out / "handover.h5") as f:
-        rows = f["stiffness_mandel_pa"][:]
-        regions = f["region"][:]
-    for j in (0, 1):  # element_RE, element_PRS: full stiffnesses given
-        assert any(np.all(np.isfinite(r)) for r in rows[regions == j])
     assert "with the periodic element" in (out / "report.md").read_text()
 
 

@@ -17,17 +17,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cpp_dem.element_pool import ElementPool, PeriodicFactory, dask_client
 from cpp_dem._core import ParameterError
+from cpp_dem.element_pool import ElementPool, dask_client
+# the same elements and increments as the LocalCluster's tests, and their serial answers
+from test_element_pool import FACTORY, N, _increments, serial  # noqa: F401 (a fixture)
 
 DASK = str(Path(sys.executable).with_name("dask"))
-FACTORY = PeriodicFactory(n=120)
-N = 4
-
-
-def _increments():
-    base = np.array([[0, 0, 2e-4], [0, 0, 0], [0, 0, -1e-4]])
-    return [base * (1 + 0.1 * k) for k in range(N)]
 
 
 @pytest.fixture
@@ -60,16 +55,6 @@ def cluster(tmp_path):
                 p.wait(timeout=10)
             except subprocess.TimeoutExpired:
                 p.kill()
-
-
-@pytest.fixture(scope="module")
-def serial():
-    out = []
-    for k in range(N):
-        el = FACTORY(k)
-        el.apply_strain(_increments()[k])
-        out.append(el.apply_strain(_increments()[k]))
-    return out
 
 
 def test_the_pool_on_a_started_cluster_is_bitwise_serial_and_survives_a_lost_node(cluster,
