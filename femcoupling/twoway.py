@@ -13,12 +13,13 @@ Two way (:func:`two_way`): iterate
    (``element_runner``; with ``workers`` > 1 or ``client=`` on Dask workers, each region's
    runner kept on one worker for the whole loop: :mod:`femcoupling.runner_pool`);
 3. the element's stiffness over the handed-over increment becomes that region's material:
-   with ``stiffness="tangent"`` (the default) and an element that returns its tangent (a
-   periodic element: ``info["tangent_voigt_pa"]`` with the full strain and stress increment
-   tensors), the tangent made to reproduce the increment exactly
+   with ``stiffness="tangent"`` (the default) and an element that returns its tangent
+   (``info["tangent_voigt_pa"]`` with the full strain and stress increment tensors: a
+   periodic element's network tangent, the case's wall-bounded element's tangent by stress
+   probes), the tangent made to reproduce the increment exactly
    (:func:`femcoupling.handover.secant_tangent`, a BFGS update) as an
-   :class:`~femcoupling.materials.AnisotropicElastic`; otherwise (a wall-bounded element,
-   or ``stiffness="isotropic"``) the isotropic secant (E, nu)
+   :class:`~femcoupling.materials.AnisotropicElastic`; otherwise (an element that returns
+   none, or ``stiffness="isotropic"``) the isotropic secant (E, nu)
    (:func:`femcoupling.handover.secant_stiffness`), a least-squares fit of the three normal
    increments;
 

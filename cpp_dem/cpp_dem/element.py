@@ -450,9 +450,10 @@ def probe_tangent(sample, grid, p: ElementParams, target, *, rel: float, signs=N
     for k, (i, j) in zip((3, 4, 5), ((1, 2), (0, 2), (0, 1))):
         voigt[k, k] = 0.25 * (c[i, i] + c[j, j] - 2.0 * c[i, j])
     if not all(ok):
-        log(f"  tangent probes: probe(s) {[a for a in range(3) if not ok[a]]} (x, y, z) did "
-            f"not settle within {pp.max_steps} steps (a probe past the element's strength "
-            "flows): the tangent there is the flow's over that time")
+        axes = ", ".join("xyz"[a] for a in range(3) if not ok[a])
+        log(f"  tangent probes: the {axes} probe(s) did not settle within {pp.max_steps} "
+            "steps (a probe past the element's strength flows): the tangent there is the "
+            "flow's over that time")
     return {"tangent_voigt_pa": voigt.tolist(), "normal_pa": c.tolist(),
             "probe_pa": dsig.tolist(), "probe_strains": strains.tolist(),
             "probe_strains_raw": raw.tolist(), "converged": ok,

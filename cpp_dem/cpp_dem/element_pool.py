@@ -52,8 +52,9 @@ def dask_client(scheduler: str | None, workers: int):
 
     if not scheduler:
         return local_client(workers)
-    if "://" not in scheduler and Path(scheduler).is_file():
-        return Client(scheduler_file=scheduler), None
+    path = Path(scheduler).expanduser()
+    if "://" not in scheduler and path.is_file():
+        return Client(scheduler_file=str(path)), None
     if "://" not in scheduler and ":" not in scheduler:
         raise ParameterError(f"scheduler={scheduler!r}: neither an address (tcp://host:port) "
                              "nor an existing scheduler file")

@@ -35,8 +35,9 @@ Outputs in ``--out``: ``<label>.h5`` / ``<label>.csv`` (wall stresses, targets, 
 geogrid forces; appended as the run goes), ``vtk/<label>_{spheres,contacts,geogrid,box}.vtp``
 (contact force network, geogrid tensile forces), ``fem_<RE|PRS>.xdmf`` (displacement, stress,
 cell tags: element region and layers marked; a time series: the state before the footing
-load and after each load step, the coupled ones in two-way and hierarchical runs), ``fem_<RE|PRS>.png``, ``handover.h5`` (the
-handover history), ``report.md`` and ``summary.json``. SI units. DEM stresses and strains are
+load and after each load step, the coupled ones in two-way and hierarchical runs),
+``fem_<RE|PRS>.png``, ``handover.h5`` (the handover history), ``report.md`` and
+``summary.json``. SI units. DEM stresses and strains are
 compression positive; FEM stresses tension positive.
 """
 
