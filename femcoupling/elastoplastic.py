@@ -133,7 +133,8 @@ class SoilModel:
 
         self.body, self.soil, self.layers = body, soil, layers
         self.region_materials = region_materials
-        #: element regions whose material is a DEM element (``set_region_element``)
+        #: DEM elements as materials, by region (``set_region_element``) or by region cell
+        #: (``set_cell_elements``: "<region>/<cell>")
         self.region_elements: dict = {}
         self._element_points: dict = {}
         #: with region elements: a step whose residual has not halved in this many Newton
@@ -309,17 +310,53 @@ class SoilModel:
         ``femcoupling.region.PoolRegionMaterials`` (several regions' elements on Dask
         workers) are evaluated at once, in parallel. Serial runs only (one MPI rank)."""
         tag = self.body.region_tag(name)
+        self._add_element(name, element, np.repeat(self.cell_tag_of == tag, self.nq))
+
+    def cell_stresses(self, name: str) -> dict:
+        """The converged stress of each cell of element region ``name``, by the key
+        ``set_cell_elements`` gives that cell's element (``"<name>/<cell>"``): 3 x 3, Pa,
+        tension positive (the cell's volume mean; where each cell's element takes over)."""
+        tag = self.body.region_tag(name)
+        cms = self.cell_mean_stress()
+        return {f"{name}/{c}": mandel_to_tensor(cms[c])
+                for c in np.flatnonzero(self.cell_tag_of == tag)}
+
+    def set_cell_elements(self, name: str, group: Any) -> list:
+        """Every cell of element region ``name`` takes its stress and tangent from its own
+        DEM element (the hierarchical mode at the cells' scale; with P1 cells, one
+        quadrature point each, an element per quadrature point). ``group`` holds one element
+        per cell under the keys of :meth:`cell_stresses` (``femcoupling.region.
+        PoolRegionMaterials.build(m.cell_stresses(name), runner, workers=)``: all of them
+        evaluated at once on Dask workers at every Newton iterate); each cell is then what
+        :meth:`set_region_element` makes of a region: its element gets the cell's mean strain
+        increment, and the cell's points take its answer. Returns the keys. Serial runs
+        only."""
+        keys = list(self.cell_stresses(name))
+        members = getattr(group, "materials", None)
+        missing = [k for k in keys if members is None or k not in members]
+        if missing:
+            raise FemInputError(f"group={group!r}: needs an element (in its .materials) for "
+                                f"every cell of region {name!r}; missing {missing[:5]}"
+                                + (" ..." if len(missing) > 5 else ""))
+        for k in keys:
+            cell = int(k.rsplit("/", 1)[1])
+            on = np.zeros(self.n_cells, bool)
+            on[cell] = True
+            self._add_element(k, members[k], np.repeat(on, self.nq))
+        return keys
+
+    def _add_element(self, key: str, element: Any, sel: np.ndarray) -> None:
+        """``element`` answers for the quadrature points ``sel`` (their volume mean strain)."""
         if self.comm.size > 1:
-            raise FemInputError(f"set_region_element({name!r}): serial runs only (this run "
+            raise FemInputError(f"region elements ({key!r}): serial runs only (this run "
                                 f"has {self.comm.size} MPI ranks)")
         for k in ("trial", "commit", "state", "set_state"):
             if not callable(getattr(element, k, None)):
                 raise FemInputError(f"element={element!r}: needs a {k}() method (see "
                                     "femcoupling.region.DemRegionMaterial)")
-        self.region_elements[name] = element
-        sel = np.repeat(self.cell_tag_of == tag, self.nq)
+        self.region_elements[key] = element
         w = (self.cell_volume[:, None] * self.qweights[None, :]).reshape(-1)[sel]
-        self._element_points[name] = (sel, w / w.sum())  # its points and volume weights
+        self._element_points[key] = (sel, w / w.sum())  # its points and volume weights
 
     def _region_element_answers(self, deps: np.ndarray, sig: np.ndarray,
                                 tan: np.ndarray, dl: np.ndarray) -> None:

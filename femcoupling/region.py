@@ -279,13 +279,20 @@ class PoolRegionMaterials:
     behaves as a ``DemRegionMaterial`` (the same answers, bitwise: every worker runs one
     element at a time on one thread). ``materials[name]`` is what to give the model.
 
-    Build with ``PoolRegionMaterials.build(stresses, runner, workers=)``: each region's
-    element prepared in this process by ``runner`` (``PeriodicRegionElement``) at its stress,
-    then moved to the workers. ``close()`` stops the pool's own cluster.
+    Build with ``PoolRegionMaterials.build(stresses, runner, workers=)``: each element
+    prepared on the workers by ``runner`` (``PeriodicRegionElement``) at its stress, all at
+    once. The same group serves ``SoilModel.set_cell_elements`` (one element per cell of a
+    region: ``stresses = model.cell_stresses(name)``). ``close()`` stops the pool's own
+    cluster.
+
+    ``records``: an HDF5 file that gets a row per element at every committed step (appended
+    and flushed): step, element (its index in ``names``, which the file's ``names``
+    attribute lists), strain since the element took over (3 x 3, -), stress (3 x 3, Pa),
+    tangent (6 x 6 Mandel, Pa), contact count, and the DEM seconds of its last run.
     """
 
     def __init__(self, pool, names, *, min_eig_fraction: float = 1e-3,
-                 strain_kw: dict | None = None) -> None:
+                 strain_kw: dict | None = None, records=None) -> None:
         from cpp_dem.dem_element import DemElement
 
         self.pool, self.names = pool, list(names)
@@ -293,8 +300,12 @@ class PoolRegionMaterials:
             raise ValueError(f"names={self.names!r}: one per pool element ({pool.n})")
         self.min_eig_fraction = float(min_eig_fraction)
         self.strain_kw = dict(strain_kw or {})
-        self.calls, self.dem_s = 0, 0.0
-        self._start(DemElement.from_bytes(b) for b in pool.states())
+        self.records = None if records is None else Path(records)
+        self.calls, self.dem_s, self.steps = 0, 0.0, 0
+        elements = [DemElement.from_bytes(b) for b in pool.states()]
+        self._start(elements)
+        self._contacts0 = [el.contact_count() for el in elements]
+        self._strain = [np.zeros((3, 3)) for _ in self.names]  # since they took over
         self._last = None
         self.materials = {n: _PoolMember(self, n) for n in self.names}
 
@@ -306,14 +317,17 @@ class PoolRegionMaterials:
 
     @classmethod
     def build(cls, stresses: dict, runner: "PeriodicRegionElement", *, workers: int = 2,
-              client=None, **kw) -> "PoolRegionMaterials":
-        """``stresses``: region name -> its stress where the element takes over (3 x 3, Pa,
-        tension positive)."""
+              client=None, distinct_seeds: bool = False, **kw) -> "PoolRegionMaterials":
+        """``stresses``: name -> the stress where its element takes over (3 x 3, Pa, tension
+        positive); ``distinct_seeds``: element k packed with seed ``runner.seed + k`` (else
+        every element from ``runner.seed``)."""
         from cpp_dem.element_pool import ElementPool
-        from femcoupling.handover import fem_to_dem
 
-        data = [runner.prepare(n, fem_to_dem(s))[0].to_bytes() for n, s in stresses.items()]
-        return cls(ElementPool(data, client=client, workers=workers), list(stresses), **kw)
+        names = list(stresses)
+        make = _Prepare(runner, names, [np.asarray(stresses[n], float) for n in names],
+                        distinct_seeds)
+        return cls(ElementPool.build(len(names), make, client=client, workers=workers), names,
+                   **kw)
 
     def trial_many(self, increments: dict) -> dict:
         """Every region's element, from the start of the step, through its increment (name ->
@@ -328,25 +342,69 @@ class PoolRegionMaterials:
         self.dem_s += float(sum(step.cpu_s))
         self._last = ([np.asarray(s) for s in step.stresses],
                       [network_stiffness(None, self.min_eig_fraction, voigt=t)
-                       for t in step.tangents])
+                       for t in step.tangents], des, list(step.contacts), list(step.cpu_s))
         return {n: (self._last[0][k] - self._stress0[k], self._last[1][k])
                 for k, n in enumerate(self.names)}
 
     def commit(self) -> None:
-        """The last trial becomes the start of the next step on every worker."""
+        """The last trial becomes the start of the next step on every worker (and rows of
+        ``records``)."""
         self.pool.accept()
-        if self._last is not None:  # (the last trial's stresses and stiffnesses)
-            self._stress0, self._tangent0 = self._last
+        cpu = [0.0] * len(self.names)
+        if self._last is not None:  # (the last trial's stresses, stiffnesses, increments)
+            self._stress0, self._tangent0, des, self._contacts0, cpu = self._last
+            self._strain = [e + d for e, d in zip(self._strain, des)]
+        self.steps += 1
+        if self.records is not None:
+            import h5py
+
+            from femcoupling.records import append_rows
+
+            n = len(self.names)
+            append_rows(self.records, {
+                "step": [self.steps] * n, "element": list(range(n)), "strain": self._strain,
+                "stress_pa": self._stress0, "tangent_mandel_pa": self._tangent0,
+                "contacts": self._contacts0, "dem_s": cpu},
+                units="SI: strain -, stress and tangent Pa (tension positive), dem_s s")
+            with h5py.File(self.records, "a") as f:
+                if "names" not in f.attrs:
+                    f.attrs["names"] = self.names
+
+    def stresses(self) -> list:
+        """The elements' stresses at the start of the step (their last committed state), in
+        ``names`` order: 3 x 3, Pa, tension positive."""
+        return [s.copy() for s in self._stress0]
 
     def state(self) -> tuple:
-        return (self.pool.states(), list(self._stress0), list(self._tangent0))
+        return (self.pool.states(), list(self._stress0), list(self._tangent0),
+                list(self._strain), list(self._contacts0), self.steps)
 
     def set_state(self, data: tuple) -> None:
         states, self._stress0, self._tangent0 = data[0], list(data[1]), list(data[2])
+        self._strain, self._contacts0, self.steps = list(data[3]), list(data[4]), data[5]
         self.pool.load_states(states)
 
     def close(self) -> None:
         self.pool.close()
+
+
+@dataclasses.dataclass
+class _Prepare:
+    """``ElementPool.build``'s factory for a ``PoolRegionMaterials``: element k is
+    ``runner``'s element of ``names[k]`` prepared at ``stresses[k]`` (3 x 3, Pa, tension
+    positive), on the worker."""
+
+    runner: "PeriodicRegionElement"
+    names: list
+    stresses: list
+    distinct_seeds: bool = False
+
+    def __call__(self, k: int):
+        from femcoupling.handover import fem_to_dem
+
+        runner = (dataclasses.replace(self.runner, seed=self.runner.seed + k)
+                  if self.distinct_seeds else self.runner)
+        return runner.prepare(self.names[k], fem_to_dem(self.stresses[k]))[0]
 
 
 class _PoolMember:
