@@ -135,3 +135,28 @@ def test_element_network_tangent_matches_finite_differences_in_the_elastic_range
     rel = np.linalg.norm(d_net - d_fd) / np.linalg.norm(d_fd)
     assert rel < 0.01, (rel, d_net / 1e6, d_fd / 1e6)
     assert np.trace(info["affine_voigt"]) > 1.3 * np.trace(d_net)
+
+
+def test_the_tangent_does_not_depend_on_the_blas_threads():
+    # OpenBLAS splits some kernels of SciPy's sparse LU by thread count: in this sheared
+    # state (a dense element at a K0 stress) the unguarded assembly gave another rounding on
+    # 2 BLAS threads than on 1, and a Dask worker (one thread) another tangent than the
+    # client. network_tangent runs BLAS on one thread, and gives the threads back.
+    from threadpoolctl import threadpool_info, threadpool_limits
+
+    from femcoupling.handover import fem_to_dem
+    from femcoupling.region import PeriodicRegionElement
+
+    k0 = fem_to_dem(np.diag([-2314.285714285711, -2314.285714285711, -5399.999999999994]))
+    el, _ = PeriodicRegionElement(n=100, seed=5, tol=0.02, unbalanced=1e-2).prepare("a", k0)
+    de = np.array([[1e-4, 0, 2e-5], [0, 0, 0], [2e-5, 0, -3e-4]])
+    for k in (3, 6, 9):
+        el.apply_strain(k * de)
+    data = el.network_data()
+    out = []
+    for threads in (1, 2):
+        with threadpool_limits(limits=threads, user_api="blas"):
+            out.append(tangent.network_tangent(**data)[0])
+            assert {i["num_threads"] for i in threadpool_info() if i["user_api"] == "blas"} \
+                == {threads}
+    assert np.array_equal(out[0], out[1])
