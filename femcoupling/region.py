@@ -34,12 +34,30 @@ counted once. SI units; the FEM tensors are tension positive.
 from __future__ import annotations
 
 import dataclasses
+import json
 import time
 from pathlib import Path
 
 import numpy as np
 
 __all__ = ["DemRegionMaterial", "PeriodicRegionElement", "PoolRegionMaterials", "servo"]
+
+
+def _plain(v):
+    """``v`` as JSON values (floats round-trip exactly): an object by its type and public
+    attributes (a ``Material``)."""
+    if v is None or isinstance(v, (bool, int, float, str)):
+        return v
+    if isinstance(v, dict):
+        return {str(k): _plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple, np.ndarray)):
+        return [_plain(x) for x in v]
+    if isinstance(v, np.generic):
+        return v.item()
+    attrs = {a: getattr(v, a) for a in dir(v) if not a.startswith("_")}
+    return {"type": type(v).__name__,
+            **{a: _plain(x) if isinstance(x, (bool, int, float, str, type(None))) else str(x)
+               for a, x in attrs.items() if not callable(x)}}
 
 
 def servo(el, target, *, tol: float, unbalanced: float, chunk_steps: int,
@@ -96,9 +114,10 @@ class PeriodicRegionElement:
         if key in self._kept:
             return DemElement.from_bytes(self._kept[key]), True
         path = None if self.cache_dir is None else Path(self.cache_dir) / f"{name}_initial.bin"
-        spath = None if path is None else path.with_suffix(".stress.npy")
-        if (path is not None and path.exists() and spath.exists()
-                and np.array_equal(np.load(spath), s0)):
+        kpath = None if path is None else path.with_suffix(".key.json")
+        disk_key = {"stress_pa": s0.tolist(), "settings": self._settings()}
+        if (path is not None and path.exists() and kpath.exists()
+                and json.loads(kpath.read_text()) == disk_key):
             data = path.read_bytes()
             self._kept[key] = data
             return DemElement.from_bytes(data), True
@@ -116,13 +135,18 @@ class PeriodicRegionElement:
         self._kept[key] = data
         if path is not None:
             path.parent.mkdir(parents=True, exist_ok=True)
-            for dst, write in ((spath, lambda f: np.save(f, s0)),
-                               (path, lambda f: f.write(data))):
+            for dst, text in ((kpath, json.dumps(disk_key).encode()), (path, data)):
                 tmp = dst.with_name(dst.name + ".tmp")
-                with open(tmp, "wb") as f:
-                    write(f)
+                tmp.write_bytes(text)
                 tmp.replace(dst)
         return el, False
+
+    def _settings(self) -> dict:
+        """What makes the prepared element (grains, seed, preparation, servo, options), as
+        plain JSON values: a kept element prepared otherwise is not taken."""
+        skip = {"cache_dir", "tangent", "_kept"}
+        return {f.name: _plain(getattr(self, f.name)) for f in dataclasses.fields(self)
+                if f.name not in skip}
 
     def __call__(self, name: str, initial, final):
         from femcoupling.twoway import ElementResponse
@@ -369,6 +393,11 @@ class PoolRegionMaterials:
             with h5py.File(self.records, "a") as f:
                 if "names" not in f.attrs:
                     f.attrs["names"] = self.names
+
+    def strains(self) -> list:
+        """The elements' strains since they took over, to their last committed state, in
+        ``names`` order: 3 x 3, -, tension positive."""
+        return [e.copy() for e in self._strain]
 
     def stresses(self) -> list:
         """The elements' stresses at the start of the step (their last committed state), in

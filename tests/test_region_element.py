@@ -46,6 +46,27 @@ def test_the_prepared_element_is_kept_between_iterations(runs):
     assert np.array_equal(a.strain_increment, b.strain_increment)
 
 
+def test_the_disk_copy_is_taken_only_by_a_runner_with_the_same_settings(runs, tmp_path):
+    # A fresh runner (on an earlier run's folder) takes the kept element from cache_dir; one
+    # of other grains, seed or material prepares its own (only the tensor was checked before,
+    # so a rerun with other grains into the same folder took the old element).
+    import shutil
+
+    from cpp_dem.scene import linear_material
+
+    _, _, d = runs
+    same = PeriodicRegionElement(n=100, cache_dir=str(d), tol=0.01)
+    el, kept = same.prepare("r", fem_to_dem(INITIAL))
+    assert kept
+    fresh, kept = PeriodicRegionElement(n=100, tol=0.01).prepare("r", fem_to_dem(INITIAL))
+    assert not kept and np.array_equal(el.stress(), fresh.stress())
+    soft = linear_material(density=2650.0, young=50e6, poisson=0.3, friction_angle_deg=30.0)
+    for k, other in enumerate((dict(n=120), dict(seed=2), dict(options={"material": soft}))):
+        copy = shutil.copytree(d, tmp_path / str(k))
+        runner = PeriodicRegionElement(**{"n": 100, "tol": 0.01, **other}, cache_dir=str(copy))
+        assert not runner.prepare("r", fem_to_dem(INITIAL))[1], other
+
+
 def test_a_stress_beyond_its_strength_is_said(tmp_path):
     el = PeriodicRegionElement(n=100, cache_dir=str(tmp_path), tol=0.01, max_strain=0.01)
     far = np.array([[-10e3, 0.0, -30e3], [0.0, -20e3, 0.0], [-30e3, 0.0, -60e3]])
