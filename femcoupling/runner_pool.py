@@ -54,18 +54,23 @@ class RunnerPool:
 
     def __init__(self, runner: Callable, names: Sequence[str], *, workers: int = 2,
                  client=None, log: Callable[[str], None] | None = None) -> None:
+        from cpp_dem.element_pool import check_sendable, local_client
+
         self.runner, self.names = runner, list(names)
         self.log = log or (lambda msg: None)
+        check_sendable(runner, "element_runner")
         self._cluster = None
         if client is None:
-            from cpp_dem.element_pool import local_client
-
             client, self._cluster = local_client(workers)
         self.client = client
         self._hosts: dict = {}  # worker address -> actor
         self._where: dict = {}  # region name -> worker address
         self.recovered: list = []  # (region, lost worker address), every recovery so far
-        self._start_hosts()
+        try:
+            self._start_hosts()
+        except BaseException:
+            self.close()
+            raise
         addrs = sorted(self._hosts)
         for j, n in enumerate(self.names):
             self._where[n] = addrs[j % len(addrs)]

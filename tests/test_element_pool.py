@@ -73,3 +73,39 @@ def test_an_element_failure_is_named_and_the_pool_goes_on(serial):
         pool.apply_strain(_increments())
         st = pool.apply_strain(_increments())
         assert all(np.array_equal(a, b) for a, b in zip(serial, st.stresses))
+
+
+
+def _never(lock, k):
+    return None
+
+
+def _fails(k):
+    raise RuntimeError(f"element {k} cannot be made")
+
+
+def test_a_pool_that_cannot_start_says_so_and_stops_its_cluster(monkeypatch):
+    # A factory Dask cannot send (it holds a lock) is refused before any cluster starts (the
+    # actor call waited forever before); one that fails on its worker stops the pool's own
+    # LocalCluster (its processes kept the interpreter alive before).
+    import functools
+    import threading
+
+    from cpp_dem import ParameterError
+    from cpp_dem import element_pool as ep
+
+    made = []
+
+    def spy(workers):
+        made.append(real(workers))
+        return made[-1]
+
+    real = ep.local_client
+    monkeypatch.setattr(ep, "local_client", spy)
+    with pytest.raises(ParameterError, match="factory=.*cannot be sent to the Dask workers"):
+        ElementPool.build(2, functools.partial(_never, threading.Lock()), workers=1)
+    assert made == []
+    with pytest.raises(RuntimeError, match="cannot be made"):
+        ElementPool.build(2, _fails, workers=1)
+    client, cluster = made[0]
+    assert client.status == "closed" and cluster.status.name == "closed"

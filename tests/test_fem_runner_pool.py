@@ -115,3 +115,20 @@ def test_periodic_elements_are_prepared_once_on_their_workers():
     assert not here.info["prepared_from_cache"]  # (this process had not prepared it)
     assert np.array_equal(here.stress_final_pa, res.responses["b"].stress_final_pa)
     assert np.array_equal(here.strain_increment, res.responses["b"].strain_increment)
+
+
+def test_a_runner_dask_cannot_send_is_refused_before_a_cluster_starts():
+    import threading
+
+    from cpp_dem import ParameterError
+    from femcoupling.runner_pool import RunnerPool
+
+    class Holds:  # a runner with a lock in it
+        def __init__(self):
+            self.lock = threading.Lock()
+
+        def __call__(self, name, initial, final):
+            return None
+
+    with pytest.raises(ParameterError, match="element_runner=.*cannot be sent"):
+        RunnerPool(Holds(), ["a"], workers=1)

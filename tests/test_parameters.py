@@ -45,6 +45,19 @@ def test_hertz_mindlin_accepts_negative_poisson():
     assert m.poisson == -0.5
 
 
+def test_a_material_pickles_exactly():
+    # (to Dask workers and process pools: a periodic element's options carry one)
+    import pickle
+
+    for m in (mat(friction_angle_deg=38.66, damping_normal=0.1, rolling_stiffness=0.3,
+                  rolling_friction=0.2),
+              mat(model="hertz_mindlin", poisson=0.23, friction_angle_deg=1e-3 * 12345.678)):
+        back = pickle.loads(pickle.dumps(m))
+        names = ("model", "density", "young", "poisson", "friction_angle_deg", "damping_normal",
+                 "damping_shear", "rolling_stiffness", "rolling_friction", "shear_modulus")
+        assert [getattr(back, k) for k in names] == [getattr(m, k) for k in names]
+
+
 def test_scene_validation():
     s = dem.Scene()
     m = s.add_material(mat())

@@ -70,6 +70,29 @@ rolling_friction : eta_r, -; |M_r| <= eta_r R* |F_n|.
       .def_readonly("rolling_stiffness", &Material::rolling_stiffness)
       .def_readonly("rolling_friction", &Material::rolling_friction)
       .def_property_readonly("shear_modulus", &Material::shear_modulus, "Pa")
+      // Pickled exactly (the friction angle in radians, as stored), so that a material
+      // reaches Dask workers and process pools bitwise.
+      .def(py::pickle(
+          [](const Material& s) {
+            return py::make_tuple(std::string(law_info(s.model).name), s.density, s.young,
+                                  s.poisson, s.friction_angle, s.damping_normal,
+                                  s.damping_shear, s.rolling_stiffness, s.rolling_friction);
+          },
+          [](const py::tuple& t) {
+            if (t.size() != 9) throw std::runtime_error("Material: bad pickled state");
+            Material mat;
+            mat.model = law_by_name(t[0].cast<std::string>());
+            mat.density = t[1].cast<double>();
+            mat.young = t[2].cast<double>();
+            mat.poisson = t[3].cast<double>();
+            mat.friction_angle = t[4].cast<double>();
+            mat.damping_normal = t[5].cast<double>();
+            mat.damping_shear = t[6].cast<double>();
+            mat.rolling_stiffness = t[7].cast<double>();
+            mat.rolling_friction = t[8].cast<double>();
+            mat.validate();
+            return mat;
+          }))
       .def("__repr__", [](const Material& s) {
         return std::string("Material(model='") +
                law_info(s.model).name +

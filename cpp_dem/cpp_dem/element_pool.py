@@ -21,6 +21,7 @@ PBSCluster, ``SSHCluster``, ``dask-mpi``: docs/multiscale.md). SI units.
 
 from __future__ import annotations
 
+import contextlib
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -153,6 +154,19 @@ class PeriodicFactory:
         return el
 
 
+def check_sendable(obj, name: str) -> None:
+    """Refuses what Dask cannot send to a worker (an actor call with it would wait forever:
+    the error stays in Dask's communication thread)."""
+    from distributed.protocol import pickle as dask_pickle
+
+    try:
+        dask_pickle.dumps(obj)
+    except Exception as exc:  # noqa: BLE001  (whatever pickling raises)
+        raise ParameterError(f"{name}={obj!r:.200}: cannot be sent to the Dask workers "
+                             f"({type(exc).__name__}: {exc}); every part of it must "
+                             "pickle") from exc
+
+
 @dataclass
 class PoolStep:
     """What one ``apply_strain`` returned: per element (in index order) the stress (3 x 3,
@@ -181,8 +195,19 @@ class ElementPool:
                  keep_copies: bool = True) -> None:
         self._connect(client, workers, keep_copies, len(data))
         self._bytes = list(data)  # last accepted states, in the client
-        self._start_hosts()
-        self._place(range(self.n))
+        with self._closed_on_error():
+            self._start_hosts()
+            self._place(range(self.n))
+
+    @contextlib.contextmanager
+    def _closed_on_error(self):
+        """A failure while the pool starts stops its own cluster (else its worker processes
+        outlive the error and the interpreter does not exit)."""
+        try:
+            yield
+        except BaseException:
+            self.close()
+            raise
 
     def _connect(self, client, workers: int, keep_copies: bool, n: int) -> None:
         """The client (a LocalCluster of ``workers`` single-threaded processes when none is
@@ -201,18 +226,20 @@ class ElementPool:
         returning a DemElement), spread over them; their first states are accepted."""
         if n < 1:
             raise ParameterError(f"n={n}: need at least one element")
+        check_sendable(factory, "factory")
         pool = cls.__new__(cls)
         pool._connect(client, workers, keep_copies, n)
         pool._bytes = [None] * n
-        pool._start_hosts()
-        addrs = sorted(pool._hosts)
-        futures = []
-        for k in range(n):
-            a = addrs[k % len(addrs)]
-            pool._where[k] = a
-            futures.append((k, pool._hosts[a].build(k, factory)))
-        for k, f in futures:
-            pool._bytes[k] = f.result()
+        with pool._closed_on_error():
+            pool._start_hosts()
+            addrs = sorted(pool._hosts)
+            futures = []
+            for k in range(n):
+                a = addrs[k % len(addrs)]
+                pool._where[k] = a
+                futures.append((k, pool._hosts[a].build(k, factory)))
+            for k, f in futures:
+                pool._bytes[k] = f.result()
         return pool
 
     # ---- placement ---------------------------------------------------------------------
