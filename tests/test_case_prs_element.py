@@ -157,6 +157,12 @@ def test_homogeneous_field_handed_over_reproduces_the_standalone_element(tmp_pat
     (["--hierarchical", "--two-way"], "--hierarchical: the element is inside the FEM's Newton"),
     (["--stresses", "1e4,1e4,2e4", "--hierarchical"], "--hierarchical and --calibrate need"),
     (["--two-way", "--tangent-probe", "0.8"], "--tangent-probe=0.8: the probe's size"),
+    (["--cell-elements"], "--cell-elements: elements per cell of the region's material; "
+                          "needs --hierarchical"),
+    (["--hierarchical", "--cell-elements", "--cell-grains", "20"],
+     "--cell-grains=20: must be >= 50"),
+    (["--hierarchical", "--cell-grains", "100"], "--cell-grains=100: the cells' elements; "
+                                                 "needs --cell-elements"),
 ])
 def test_bad_inputs(tmp_path, args, msg):
     p = run_case(tmp_path, "--smoke", *args)
@@ -328,3 +334,34 @@ def test_hierarchical_region_element_strains_as_its_region(tmp_path):
                                        h["element_strain_increment"], rtol=1e-12)
         assert s["elements"][v]["strain_increment"]  # the case's element ran after it
     assert "## Hierarchical" in (out / "report.md").read_text()
+
+
+def test_hierarchical_cell_elements_strain_as_their_cells(tmp_path):
+    """--hierarchical --cell-elements: every cell of the element region its own dense
+    periodic element (100 grains, its own seed, prepared at its cell's stress) on 2 Dask
+    workers. The cells strain differently, their volume mean is the region's strain
+    increment (each element strains as its cell), every cell's element has a records row per
+    load step, and the case's element runs after them."""
+    import h5py
+
+    out = tmp_path / "c"
+    p = run_case(out, "--smoke", "--hierarchical", "--cell-elements", "--cell-grains", "100",
+                 "--workers", "2")
+    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+    s = json.loads((out / "summary.json").read_text())
+    for v in ("RE", "PRS"):
+        h = s["hierarchical"][v]
+        n = h["cells"]
+        assert n > 4 and h["cell_grains"] == 100
+        ez = np.array(h["cell_strain_increments"])[:, 2]
+        assert len(ez) == n and ez.min() > 0 and ez.max() > 1.2 * ez.min()  # a field, not one
+        fem = np.array(s["fem"][v]["strain_increment"])
+        np.testing.assert_allclose(h["element_strain_increment"], fem, rtol=0,
+                                   atol=1e-9 * np.abs(fem).max())  # (measured 2e-16)
+        assert len(h["newton_iterations"]) == 3
+        assert len(h["warnings"]) == h["converged_on"].count("stall")
+        with h5py.File(out / f"region_element_{v}.h5") as f:
+            assert sorted(f["step"][:].tolist()) == sorted([1, 2, 3] * n)
+            assert len(f.attrs["names"]) == n
+        assert s["elements"][v]["strain_increment"]
+    assert "per cell of the region" in (out / "report.md").read_text()

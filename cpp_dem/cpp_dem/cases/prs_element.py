@@ -104,6 +104,11 @@ class Params(ElementParams):
     #: hierarchical: the region's material is a dense periodic DEM element of the case's grains
     #: inside the FEM's Newton (its stress and tangent at every iterate), no two-way loop
     hierarchical: bool = False
+    #: hierarchical: an element per cell of the element region instead of one for the region
+    #: (each prepared at its cell's stress, seed + its index), on ``workers`` Dask workers
+    cell_elements: bool = False
+    #: grains of each cell's element (0: ``n``)
+    cell_grains: int = 0
     stresses: list = field(default_factory=list)  #: DEM-only targets (rows of 3), Pa
     prs: bool = False                #: DEM-only: prestress the grid (else RE)
 
@@ -233,9 +238,12 @@ def periodic_runner(p: Params, out: Path, variant: str):
 def run_hierarchical(p: Params, out: Path, variant: str, m, load) -> dict:
     """The load stage with the region's material a periodic DEM element inside the FEM's
     Newton (``SoilModel.set_region_element``, ``femcoupling.region.DemRegionMaterial``),
-    from the model's current (initial) state. Returns the record of the summary."""
+    from the model's current (initial) state; with ``p.cell_elements`` an element per cell
+    (``run_cell_elements``). Returns the record of the summary."""
     from femcoupling.region import DemRegionMaterial
 
+    if p.cell_elements:
+        return run_cell_elements(p, out, variant, m, load)
     t0 = time.perf_counter()
     try:
         mat = DemRegionMaterial.prepared("element", m.region_stress("element"),
@@ -261,6 +269,58 @@ def run_hierarchical(p: Params, out: Path, variant: str, m, load) -> dict:
             "element_strain_increment": (-np.diag(de)).tolist(),
             "element_shear_strain_increment": [-de[1, 2], -de[0, 2], -de[0, 1]],  # yz xz xy
             "element_stress_final_pa": (-np.diag(mat.element.stress())).tolist(),
+            "wall_time_s": time.perf_counter() - t0}
+
+
+def run_cell_elements(p: Params, out: Path, variant: str, m, load) -> dict:
+    """The load stage with every cell of the element region its own dense periodic element
+    (``SoilModel.set_cell_elements``; ``femcoupling.region.PoolRegionMaterials`` on
+    ``p.workers`` Dask workers, element k packed with seed ``p.seed + k`` at its cell's
+    stress, ``p.cell_grains`` grains each), from the model's current (initial) state.
+    Returns the record of the summary."""
+    from dataclasses import replace
+
+    from femcoupling.region import PoolRegionMaterials
+
+    t0 = time.perf_counter()
+    cells = m.cell_stresses("element")
+    runner = replace(periodic_runner(p, out, variant), cache_dir=None)
+    if p.cell_grains:
+        runner = replace(runner, n=p.cell_grains,
+                         options=periodic_options(replace(p, n=p.cell_grains)))
+    log(f"hierarchical {variant}: preparing {len(cells)} cell elements of {runner.n} grains "
+        f"on {p.workers} Dask worker(s)")
+    try:
+        group = PoolRegionMaterials.build(cells, runner, workers=p.workers,
+                                          distinct_seeds=True,
+                                          records=out / f"region_element_{variant}.h5")
+    except RuntimeError as exc:  # (a cell's periodic element that cannot start)
+        raise SystemExit(f"[prs_element] hierarchical {variant}, cell elements: {exc}; try "
+                         "--calibrate or more --cell-grains") from exc
+    try:
+        m.set_cell_elements("element", group)
+        t_prep = time.perf_counter() - t0
+        log(f"hierarchical {variant}: {len(cells)} cell elements prepared ({t_prep:.1f} s)")
+        n0 = len(m.history)
+        load(m)
+        steps = m.history[n0:]
+        strains = np.array([-np.diag(e) for e in group.strains()])  # compression +
+        stresses = np.array([-np.diag(s) for s in group.stresses()])
+        vol = m.cell_volume[[int(k.rsplit("/", 1)[1]) for k in group.names]]
+    finally:
+        group.close()
+    log(f"hierarchical {variant}: {len(steps)} load steps, Newton iterations "
+        f"{[r.newton_iterations for r in steps]}, {group.calls} evaluations of the "
+        f"{len(cells)} elements ({group.dem_s:.1f} s of DEM); the cells' strain increment z "
+        f"{strains[:, 2].min():.3g} to {strains[:, 2].max():.3g}")
+    return {"newton_iterations": [int(r.newton_iterations) for r in steps],
+            "converged_on": [r.converged_on for r in steps], "warnings": list(m.warnings),
+            "element_runs": group.calls, "dem_s": group.dem_s, "cells": len(cells),
+            # their volume mean: the region's (each cell's element strains as its cell)
+            "element_strain_increment": (vol @ strains / vol.sum()).tolist(),
+            "cell_grains": runner.n, "preparation_s": t_prep,
+            "cell_strain_increments": strains.tolist(),
+            "cell_stresses_final_pa": stresses.tolist(),
             "wall_time_s": time.perf_counter() - t0}
 
 
@@ -481,6 +541,17 @@ def write_report(out: Path, summary: dict) -> None:
     if "hierarchical" in summary:
         lines += ["## Hierarchical", ""]
         for v, h in summary["hierarchical"].items():
+            if "cells" in h:
+                ez = [e[2] for e in h["cell_strain_increments"]]
+                sz = [s[2] for s in h["cell_stresses_final_pa"]]
+                lines.append(f"- {v}: an element of {h['cell_grains']} grains per cell of the "
+                             f"region ({h['cells']} cells) inside the FEM's Newton: "
+                             f"iterations per load step {h['newton_iterations']}, "
+                             f"{h['element_runs']} evaluations ({h['dem_s']:.1f} s of DEM, "
+                             f"preparation {h['preparation_s']:.1f} s); the cells' strain "
+                             f"increment z {min(ez):.3g} to {max(ez):.3g}, stress z "
+                             f"{min(sz) / 1e3:.1f} to {max(sz) / 1e3:.1f} kPa")
+                continue
             lines.append(f"- {v}: the region's material a periodic DEM element inside the "
                          f"FEM's Newton: iterations per load step {h['newton_iterations']}, "
                          f"{h['element_runs']} element runs ({h['dem_s']:.1f} s of DEM); its "
@@ -594,7 +665,7 @@ def run_variant(p: Params, out: Path, variant: str) -> dict:
 def run_variants(p: Params, out: Path) -> list:
     """RE and PRS (``run_variant``), in two processes with ``p.workers`` >= 2 (spawned: no fork
     of an MPI/PETSc process; each is the serial run's, so the results are the same)."""
-    if p.workers < 2:
+    if p.workers < 2 or p.cell_elements:  # (cell elements: the workers are Dask's)
         return [run_variant(p, out, v) for v in VARIANTS]
     import concurrent.futures
     import multiprocessing
@@ -764,7 +835,9 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                          "(overrides --tol); docs/speed_accuracy.md")
     ap.add_argument("--workers", type=int, default=1,
                     help="processes: 2 or more runs RE and PRS (each its FEM, two-way loop "
-                         "and element) side by side, with the same results")
+                         "and element) side by side, with the same results; with "
+                         "--cell-elements, the Dask workers of the cells' elements (RE and "
+                         "PRS one after the other)")
     ap.add_argument("--two-way-element", choices=("walls", "periodic"), default="walls",
                     help="the two-way loop's element: the case's (walls, geogrid included; "
                          "its tangent by stress probes back) or a dense periodic one of its "
@@ -778,6 +851,11 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                          "grains inside the FEM's Newton (stress and tangent at every "
                          "iterate; no two-way loop); the case's element is then driven to the "
                          "coupled targets")
+    ap.add_argument("--cell-elements", action="store_true",
+                    help="with --hierarchical: an element per cell of the element region "
+                         "(each at its cell's stress, its own seed), on --workers Dask workers")
+    ap.add_argument("--cell-grains", type=int, default=0,
+                    help="grains of each cell's element with --cell-elements (default: --n)")
     ap.add_argument("--no-grid-handover", action="store_true",
                     help="leave the element's grid ends free (RE) or in the locked grips "
                          "(PRS) instead of pulling them by the FEM layer's tension across the "
@@ -800,6 +878,14 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     if a.hierarchical and a.two_way:
         ap.error("--hierarchical: the element is inside the FEM's Newton; not with --two-way")
     p.hierarchical = a.hierarchical
+    if a.cell_elements and not a.hierarchical:
+        ap.error("--cell-elements: elements per cell of the region's material; needs "
+                 "--hierarchical")
+    if a.cell_grains and not a.cell_elements:
+        ap.error(f"--cell-grains={a.cell_grains}: the cells' elements; needs --cell-elements")
+    if a.cell_grains and a.cell_grains < 50:
+        ap.error(f"--cell-grains={a.cell_grains}: must be >= 50 (or 0: --n)")
+    p.cell_elements, p.cell_grains = a.cell_elements, a.cell_grains
     if a.no_grid_handover and a.stresses:
         ap.error("--no-grid-handover: the grid tension comes from the FEM; not with --stresses")
     if a.two_way_element != "walls" and not a.two_way:
