@@ -207,3 +207,18 @@ def test_a_rotated_load_gives_the_same_invariants():
     assert np.allclose(invariants(sb), invariants(sa), rtol=1e-3, atol=0)
     assert np.abs(sb - R @ sa @ R.T).max() <= 1e-3 * np.abs(sa).max()
     assert invariants(sa)[1] > 0.5 * 100e3  # (the load did something)
+
+
+def test_a_sheared_apart_element_keeps_a_stable_step():
+    # A loose element (10 kPa, grown at its 30 deg) loses its contacts under shear; with one or
+    # two contacts left its critical step estimate doubled, the next increment took that dt,
+    # and contacts forming again stopped it with BlowUpError (dt 7.80e-6 s against a critical
+    # 7.66e-6 s). The element's dt never exceeds its prepared one (dt_max), saved with it.
+    el = DemElement.periodic(200, stress=10e3, seed=2)
+    de = np.array([[1e-4, 0, 2e-5], [0, 0, 0], [2e-5, 0, -3e-4]])
+    dts = []
+    for k in (3, 6, 9):
+        el.apply_strain(k * de)  # (raised BlowUpError in the third before)
+        dts.append(el.scene.dt)
+    assert max(dts) <= el.dt_max
+    assert DemElement.from_bytes(el.to_bytes()).dt_max == el.dt_max

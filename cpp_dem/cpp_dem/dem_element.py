@@ -119,7 +119,20 @@ class DemElement:
         self.controller.enabled = False
         if self.kind == "periodic":
             scene.velocity_gradient = np.zeros((3, 3))
-        self.scene.set_auto_timestep(self.dt_safety, 0)  # a fixed dt: exact strain increments
+        self.dt_max: float | None = None  # (set by the first _set_dt: the prepared state's)
+        self._set_dt()
+
+    def _set_dt(self) -> None:
+        """A fixed dt for the next stage (exact strain increments): ``dt_safety`` times the
+        critical step of the state as it is, but never more than the step of the element as
+        prepared (``dt_max``, s). A state that has lost its contacts (a loose element sheared
+        apart) gives a large estimate from its few contacts; once contacts form again in the
+        stage, that step is unstable (it stopped an element with BlowUpError)."""
+        self.scene.set_auto_timestep(self.dt_safety, 0)
+        if self.dt_max is None:
+            self.dt_max = float(self.scene.dt)
+        elif self.scene.dt > self.dt_max:
+            self.scene.dt = self.dt_max
 
     # ---- construction ------------------------------------------------------------------
     @classmethod
@@ -260,7 +273,7 @@ class DemElement:
         t0 = time.perf_counter()
         e = _as_tensor(de, "de")
         n = self._steps_for(e, steps, max_strain_per_step)
-        self.scene.set_auto_timestep(self.dt_safety, 0)
+        self._set_dt()
         dt = float(self.scene.dt)
         self.controller.enabled = self.kind == "walls"
         if self.kind == "periodic":
@@ -291,7 +304,7 @@ class DemElement:
         stress (Pa, tension positive)."""
         t0 = time.perf_counter()
         s = _as_tensor(sigma, "sigma")
-        self.scene.set_auto_timestep(self.dt_safety, 0)
+        self._set_dt()
         comps = [tuple(int(i) for i in c) for c in components]
         if self.kind == "walls":
             if any(a != b for a, b in comps):
@@ -394,7 +407,8 @@ class DemElement:
         else:
             cfg = {"gain": ctl.gain, "max_speed": ctl.max_speed}
         return pickle.dumps({"format": _FORMAT, "kind": self.kind, "walls": self.walls,
-                             "gain": self.gain, "dt_safety": self.dt_safety, "controller": cfg,
+                             "gain": self.gain, "dt_safety": self.dt_safety,
+                             "dt_max": self.dt_max, "controller": cfg,
                              "blob": bytes(_core._checkpoint_save(self.scene))},
                             protocol=pickle.HIGHEST_PROTOCOL)
 
@@ -428,6 +442,7 @@ class DemElement:
         el = cls.__new__(cls)
         el.scene, el.walls, el.kind = scene, tuple(d["walls"]), d["kind"]
         el.gain, el.dt_safety, el.controller = d["gain"], d["dt_safety"], ctl
+        el.dt_max = d.get("dt_max")  # (None in bytes saved before it: set by the next stage)
         return el
 
     def clone(self) -> "DemElement":
