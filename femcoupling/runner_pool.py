@@ -54,7 +54,7 @@ class RunnerPool:
 
     def __init__(self, runner: Callable, names: Sequence[str], *, workers: int = 2,
                  client=None, log: Callable[[str], None] | None = None) -> None:
-        from cpp_dem.element_pool import check_sendable, local_client
+        from cpp_dem.element_pool import check_sendable, closed_on_error, local_client
 
         self.runner, self.names = runner, list(names)
         self.log = log or (lambda msg: None)
@@ -66,11 +66,8 @@ class RunnerPool:
         self._hosts: dict = {}  # worker address -> actor
         self._where: dict = {}  # region name -> worker address
         self.recovered: list = []  # (region, lost worker address), every recovery so far
-        try:
+        with closed_on_error(self):
             self._start_hosts()
-        except BaseException:
-            self.close()
-            raise
         addrs = sorted(self._hosts)
         for j, n in enumerate(self.names):
             self._where[n] = addrs[j % len(addrs)]

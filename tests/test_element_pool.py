@@ -75,7 +75,6 @@ def test_an_element_failure_is_named_and_the_pool_goes_on(serial):
         assert all(np.array_equal(a, b) for a, b in zip(serial, st.stresses))
 
 
-
 def _never(lock, k):
     return None
 

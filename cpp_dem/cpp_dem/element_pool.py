@@ -167,6 +167,17 @@ def check_sendable(obj, name: str) -> None:
                              "pickle") from exc
 
 
+@contextlib.contextmanager
+def closed_on_error(pool):
+    """A failure while ``pool`` (anything with ``close()``) starts closes it: its own cluster
+    stops (else its worker processes outlive the error and the interpreter does not exit)."""
+    try:
+        yield
+    except BaseException:
+        pool.close()
+        raise
+
+
 @dataclass
 class PoolStep:
     """What one ``apply_strain`` returned: per element (in index order) the stress (3 x 3,
@@ -195,19 +206,9 @@ class ElementPool:
                  keep_copies: bool = True) -> None:
         self._connect(client, workers, keep_copies, len(data))
         self._bytes = list(data)  # last accepted states, in the client
-        with self._closed_on_error():
+        with closed_on_error(self):
             self._start_hosts()
             self._place(range(self.n))
-
-    @contextlib.contextmanager
-    def _closed_on_error(self):
-        """A failure while the pool starts stops its own cluster (else its worker processes
-        outlive the error and the interpreter does not exit)."""
-        try:
-            yield
-        except BaseException:
-            self.close()
-            raise
 
     def _connect(self, client, workers: int, keep_copies: bool, n: int) -> None:
         """The client (a LocalCluster of ``workers`` single-threaded processes when none is
@@ -230,7 +231,7 @@ class ElementPool:
         pool = cls.__new__(cls)
         pool._connect(client, workers, keep_copies, n)
         pool._bytes = [None] * n
-        with pool._closed_on_error():
+        with closed_on_error(pool):
             pool._start_hosts()
             addrs = sorted(pool._hosts)
             futures = []

@@ -284,10 +284,8 @@ def run_cell_elements(p: Params, out: Path, variant: str, m, load) -> dict:
 
     t0 = time.perf_counter()
     cells = m.cell_stresses("element")
-    runner = replace(periodic_runner(p, out, variant), cache_dir=None)
-    if p.cell_grains:
-        runner = replace(runner, n=p.cell_grains,
-                         options=periodic_options(replace(p, n=p.cell_grains)))
+    runner = replace(periodic_runner(replace(p, n=p.cell_grains or p.n), out, variant),
+                     cache_dir=None)  # (kept in the workers' memory)
     log(f"hierarchical {variant}: preparing {len(cells)} cell elements of {runner.n} grains "
         f"on {p.workers} Dask worker(s)")
     try:
