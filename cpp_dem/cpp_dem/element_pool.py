@@ -67,6 +67,12 @@ class ElementError(RuntimeError):
     elements of that worker's call and the cause."""
 
 
+class ElementLostError(RuntimeError):
+    """Elements whose worker was lost cannot be restarted from their accepted state: with
+    ``keep_copies=False`` that state lived only on the lost worker. The message names the
+    elements, the worker and what the client still holds."""
+
+
 class ElementHost:
     """The actor on one worker: a dict of DemElements by index, and their accepted bytes."""
 
@@ -112,9 +118,14 @@ class ElementHost:
                         "scatter": el.stress_scatter() if scatter else None})
         return out
 
-    def accept(self, indices) -> dict:
+    def accept(self, indices, send: bool = True) -> dict:
+        """Saves the elements' states as accepted; returns their bytes if ``send``."""
         for k in indices:
             self.accepted[k] = self.elements[k].to_bytes()
+        return {k: self.accepted[k] for k in indices} if send else {}
+
+    def saved(self, indices) -> dict:
+        """The accepted bytes of ``indices``."""
         return {k: self.accepted[k] for k in indices}
 
     def reject(self, indices) -> None:
@@ -219,6 +230,10 @@ class ElementPool:
         self.client, self.keep_copies, self.n = client, keep_copies, n
         self._hosts: dict = {}  # worker address -> actor
         self._where: dict = {}  # element index -> worker address
+        # Elements whose accepted state is newer than the client's copy (keep_copies=False
+        # after an accept()): a lost worker's such elements cannot be restarted right.
+        self._stale: set = set()
+        self._accepts = 0  # accept() calls so far
 
     @classmethod
     def build(cls, n: int, factory: Callable, *, client=None, workers: int = 2,
@@ -285,6 +300,17 @@ class ElementPool:
                 self._hosts.pop(a)
         self._start_hosts()
         moved = [k for k, a in self._where.items() if a not in self._hosts]
+        stale = sorted(k for k in moved if k in self._stale)
+        if stale:
+            gone = sorted({self._where[k] for k in stale})
+            raise ElementLostError(
+                f"elements {stale}: lost with worker(s) {gone}; with keep_copies=False their "
+                f"accepted state (after accept() number {self._accepts}) was kept only on "
+                "that worker, and the client holds an older one (built or loaded, before any "
+                "accepted increment): restarting from it would give wrong stresses. Build the "
+                "pool with keep_copies=True (the default) to restart lost elements from their "
+                "accepted state, or restart the run from saved states (states(), "
+                "load_states()).")
         if moved:
             self._place(moved)
         return moved
@@ -297,7 +323,9 @@ class ElementPool:
         "network-elastic" (sliding contacts taken as stuck) or "fd"; ``scatter``: also each
         element's stress scatter (``DemElement.stress_scatter``). Keyword arguments go to
         ``DemElement.apply_strain``. A worker lost during the call: its elements are rebuilt
-        from their last accepted bytes elsewhere and their increment redone."""
+        from their last accepted bytes elsewhere and their increment redone; with
+        ``keep_copies=False`` after an ``accept()`` those bytes were on the lost worker only,
+        and ElementLostError names the elements instead."""
         if len(increments) != self.n:
             raise ParameterError(f"increments: {len(increments)} given for {self.n} elements")
         if tangent not in (None, "network", "network-elastic", "fd"):
@@ -357,12 +385,16 @@ class ElementPool:
     def accept(self) -> None:
         """Saves every element's current state as its accepted state (on its worker and, with
         keep_copies, in the client, which is what a lost worker's elements restart from)."""
-        futures = [self._hosts[a].accept(ks) for a, ks in self._by_host(range(self.n)).items()]
+        futures = [self._hosts[a].accept(ks, self.keep_copies)
+                   for a, ks in self._by_host(range(self.n)).items()]
         for f in futures:
             got = f.result()
             if self.keep_copies:
                 for k, data in got.items():
                     self._bytes[k] = data
+        self._accepts += 1
+        if not self.keep_copies:
+            self._stale = set(range(self.n))
 
     def reject(self) -> None:
         """Restores every element to its last accepted state."""
@@ -371,8 +403,16 @@ class ElementPool:
             f.result()
 
     def states(self) -> list:
-        """The last accepted bytes of every element (index order)."""
-        return list(self._bytes)
+        """The last accepted bytes of every element (index order); with ``keep_copies=False``
+        fetched from the workers."""
+        if not self._stale:
+            return list(self._bytes)
+        out = list(self._bytes)
+        futures = [self._hosts[a].saved(ks) for a, ks in self._by_host(sorted(self._stale)).items()]
+        for f in futures:
+            for k, data in f.result().items():
+                out[k] = data
+        return out
 
     def load_states(self, data: Sequence[bytes]) -> None:
         """Every element back to the given accepted bytes (index order; ``states()`` of this
@@ -380,6 +420,7 @@ class ElementPool:
         if len(data) != self.n:
             raise ParameterError(f"data: {len(data)} states given for {self.n} elements")
         self._bytes = list(data)
+        self._stale = set()
         self._place(range(self.n))
 
     def close(self) -> None:
@@ -399,5 +440,5 @@ class ElementPool:
         self.close()
 
 
-__all__ = ["ElementPool", "ElementError", "ElementHost", "PeriodicFactory", "PoolStep",
+__all__ = ["ElementPool", "ElementError", "ElementHost", "ElementLostError", "PeriodicFactory", "PoolStep",
            "dask_client", "local_client"]
