@@ -187,29 +187,6 @@ except OSError as e:
     assert not list(tmp_path.iterdir()), list(tmp_path.iterdir())
 
 
-def test_a_reused_output_folder_is_cleared_with_a_message_or_refused(tmp_path):
-    """Item 6: the files of the earlier run in --out are removed (with a message), so none is
-    left to be mistaken for this run's; files no completed run recorded make it refuse."""
-    out = tmp_path / "t"
-    first = subprocess.run([sys.executable, str(ROOT / "cases" / "triaxial.py"), "--smoke",
-                            "--out", str(out)], capture_output=True, text=True, timeout=300)
-    assert first.returncode == 0, first.stderr
-    stale = out / "vtk" / "spheres_isotropic.vtp"
-    assert stale.exists()
-    (out / "vtk" / "from_an_old_version.vtp").unlink(missing_ok=True)
-    again = subprocess.run([sys.executable, str(ROOT / "cases" / "triaxial.py"), "--smoke",
-                            "--out", str(out)], capture_output=True, text=True, timeout=300)
-    assert again.returncode == 0, again.stderr
-    assert re.search(r"removed \d+ files of the earlier run", again.stdout)
-    (out / "notes_of_mine.txt").write_text("x")
-    (out / ".geogrid-dem-run.json").unlink()  # as after an interrupted run
-    refused = subprocess.run([sys.executable, str(ROOT / "cases" / "triaxial.py"), "--smoke",
-                              "--out", str(out)], capture_output=True, text=True, timeout=300)
-    assert refused.returncode != 0
-    assert "no completed run recorded" in refused.stderr
-    assert (out / "notes_of_mine.txt").exists()  # nothing of the user's was removed
-
-
 def audit(tmp: Path) -> dict:
     """Tries every case; counts clear / poor / silent / crash (for docs/reliability.md)."""
     counts = {"tried": 0, "clear": 0, "poor": 0, "silent": 0, "crash": 0}

@@ -1,69 +1,389 @@
-"""Checks shared by the cases' command lines: the output folder and the thread count."""
+"""The results folder of a case run, shared by the cases' command lines.
+
+- ``--out DIR`` names the folder. Without it, every run gets a new numbered folder
+  ``results/<case>/run_001``, ``run_002``, ... (created atomically), so no run replaces
+  another.
+- A folder that holds a completed (or an interrupted) run is refused unless ``--overwrite``
+  is given; the folder is checked completely before anything in it is deleted, and only the
+  files that the earlier run recorded are removed (a file it did not record, e.g. one of
+  yours, makes the run refuse and nothing is deleted).
+- While a run writes into a folder, a lock file there (``.geogrid-dem.lock``: pid, host,
+  case, start) refuses a second run into it, naming the holder; the lock of a process that
+  no longer runs is taken over, with a message.
+- The manifest ``.geogrid-dem-run.json`` says what the folder holds: ``status`` ``running``,
+  ``complete``, ``interrupted`` (Ctrl-C / SIGINT) or ``failed`` (an error, a full disk), the
+  reason, and the files written.
+
+:func:`run_main` runs a case's work inside this: an interrupted run closes its files, marks
+the folder ``interrupted``, prints one line saying where the results are and returns 130; a
+full disk or a file-size limit gives one error line naming the file and marks it ``failed``.
+"""
 
 from __future__ import annotations
 
 import argparse
+import datetime as _dt
+import errno as _errno
+import json
+import os
+import re
+import signal
+import socket
+import sys
+import time
+from pathlib import Path
+
+MANIFEST = ".geogrid-dem-run.json"
+LOCK = ".geogrid-dem.lock"
+#: Files a results folder may hold without being an earlier run's: the command's run file,
+#: the manifest and the lock.
+_FREE = {"run.toml", MANIFEST, LOCK}
+#: Exit status of a run stopped by SIGINT (128 + 2, as a shell reports it).
+EXIT_INTERRUPTED = 130
+
+#: Folders this process began (begin_run) and has not ended: marked on an interrupt.
+_ACTIVE: list[Path] = []
+#: --overwrite of this process's command line (run_main sets it for the nested runs too).
+_OVERWRITE = False
+
+
+class RunFolderError(SystemExit):
+    """A results folder that cannot be used (the message names it and says why)."""
+
+    def __init__(self, msg: str) -> None:
+        super().__init__(f"error: {msg}")
+
+
+def add_out_args(ap: argparse.ArgumentParser, case: str, *, help_extra: str = "") -> None:
+    """``--out`` (default: a new numbered folder results/<case>/run_NNN) and ``--overwrite``."""
+    ap.add_argument("--out", type=Path, default=None,
+                    help=f"results folder (default: a new folder results/{case}/run_NNN per "
+                         "run); a folder holding an earlier run is refused without "
+                         f"--overwrite{help_extra}")
+    ap.add_argument("--overwrite", action="store_true",
+                    help="replace the earlier run in --out (only the files it recorded are "
+                         "removed, after the whole folder is checked)")
+
+
+def _writable_or_error(out: Path) -> str | None:
+    """Why ``out`` cannot be the results folder, or None."""
+    if out.exists():
+        if not out.is_dir():
+            return "exists and is not a directory; name a folder (created if missing)"
+        if not os.access(out, os.W_OK | os.X_OK):
+            return "is a folder you cannot write into (permissions); name another folder"
+        return None
+    parent = out.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if parent.exists() and not parent.is_dir():
+        return f"cannot be created: {parent} is a file, not a folder"
+    if not os.access(parent, os.W_OK | os.X_OK):
+        return (f"cannot be created: {parent.resolve()} is not writable (permissions or a "
+                "read-only file system); name a folder you can write into")
+    return None
 
 
 def check_common_args(ap: argparse.ArgumentParser, a: argparse.Namespace) -> None:
     """Refuses (through ``ap.error``, naming the flag and the value) a ``--threads`` below 0 and
-    an ``--out`` that exists and is not a folder."""
+    an ``--out`` that is a file or cannot be written into; records ``--overwrite`` (where the
+    parser has it) for :func:`run_main` and the runs of this process."""
+    global _OVERWRITE
+    _OVERWRITE = bool(getattr(a, "overwrite", False))
     threads = getattr(a, "threads", None)
     if threads is not None and threads < 0:
         ap.error(f"--threads={threads}: must be >= 0 (0 = the default)")
     out = getattr(a, "out", None)
-    if out is not None and out.exists() and not out.is_dir():
-        ap.error(f"--out={out}: exists and is not a directory; name a folder (created if "
-                 "missing)")
+    if out is not None:
+        why = _writable_or_error(Path(out))
+        if why:
+            ap.error(f"--out={out}: {why}")
 
 
-MANIFEST = ".geogrid-dem-run.json"
-#: Files a results folder may hold without being an earlier run's: the command's run file.
-_FREE = {"run.toml", MANIFEST}
+def default_base(case: str) -> Path:
+    """The folder under which runs without --out get their numbered folders."""
+    return Path("results") / case
 
 
-def begin_run(out, case: str, log=print) -> None:
-    """Prepares the results folder ``out`` of a case run, so that no earlier run's file is
-    left in it without a word: a folder written by a completed run (its manifest lists the
-    files) has those files removed, with a message; a folder holding other files (an
-    interrupted run, or files of the user's) is refused, naming it. Creates ``out``."""
-    import json
-    from pathlib import Path
+def numbered_run_dir(base: Path) -> Path:
+    """A new folder ``base/run_NNN`` (NNN one above the highest there), created atomically: two
+    runs started at once get two folders."""
+    why = _writable_or_error(base)
+    if why:
+        raise RunFolderError(f"the default results folder {base} {why}; give --out DIR")
+    base.mkdir(parents=True, exist_ok=True)
+    nums = [int(m.group(1)) for p in base.iterdir()
+            if (m := re.fullmatch(r"run_(\d+)", p.name))]
+    k = max(nums, default=0) + 1
+    while True:
+        d = base / f"run_{k:03d}"
+        try:
+            d.mkdir()
+            return d
+        except FileExistsError:
+            k += 1
 
+
+def _now() -> str:
+    return _dt.datetime.now(_dt.timezone.utc).isoformat(timespec="seconds")
+
+
+def _read_json(path: Path) -> dict | None:
+    try:
+        d = json.loads(path.read_text())
+    except (OSError, ValueError):
+        return None
+    return d if isinstance(d, dict) else None
+
+
+def _pid_alive(pid: int) -> bool:
+    try:
+        os.kill(pid, 0)
+    except ProcessLookupError:
+        return False
+    except PermissionError:
+        return True
+    except OSError:
+        return False
+    return True
+
+
+def _files(out: Path) -> list[Path]:
+    return sorted(p for p in out.rglob("*") if p.is_file() and p.name not in _FREE)
+
+
+def _write_atomic(path: Path, text: str) -> None:
+    tmp = path.with_name(path.name + ".tmp")
+    tmp.write_text(text)
+    tmp.replace(path)
+
+
+def _lock_text(case: str) -> str:
+    return json.dumps({"pid": os.getpid(), "host": socket.gethostname(), "case": case,
+                       "started": _now()}) + "\n"
+
+
+def _holder(lock: dict) -> str:
+    return (f"pid {lock.get('pid')} on {lock.get('host')} ({lock.get('case', '?')}, since "
+            f"{lock.get('started', '?')})")
+
+
+def _ours(lock: dict | None) -> bool:
+    return bool(lock) and lock.get("pid") == os.getpid() and \
+        lock.get("host") == socket.gethostname()
+
+
+def begin_run(out, case: str, log=print, *, overwrite: bool | None = None) -> Path:
+    """Prepares the results folder of a case run and returns it (``out`` None: a new numbered
+    folder ``results/<case>/run_NNN``). Refuses (:class:`RunFolderError`, naming the folder
+    and why) a folder another live run is writing into, a folder holding an earlier run
+    without ``overwrite`` (default: the process's ``--overwrite``), and a folder holding files
+    no run recorded; with ``overwrite`` the earlier run's recorded files are removed, only
+    after the whole folder was checked. Then takes the lock and marks the folder ``running``.
+    A second call from the same process for the same folder returns it unchanged."""
+    if overwrite is None:
+        overwrite = _OVERWRITE
+    if out is None:
+        out = numbered_run_dir(default_base(case))
     out = Path(out)
-    if out.is_dir():
-        files = [p for p in out.rglob("*") if p.is_file() and p.name not in _FREE]
-        manifest = out / MANIFEST
-        if manifest.exists():
+    why = _writable_or_error(out)
+    if why:
+        raise RunFolderError(f"--out={out}: {why}")
+    lock_path, manifest_path = out / LOCK, out / MANIFEST
+    lock = _read_json(lock_path) if lock_path.exists() else None
+    if _ours(lock):
+        return out
+    stale = None
+    if lock_path.exists():
+        if lock and lock.get("host") == socket.gethostname() and \
+                isinstance(lock.get("pid"), int) and not _pid_alive(lock["pid"]):
+            stale = lock
+        else:
+            raise RunFolderError(
+                f"--out={out}: another run is writing into it: "
+                f"{_holder(lock) if lock else 'an unreadable lock file'} (lock file {lock_path}; "
+                "remove it if that run is gone); wait for it to end, or name another folder")
+    manifest = _read_json(manifest_path) if manifest_path.exists() else None
+    files = _files(out) if out.is_dir() else []
+    if files:
+        if manifest is None:
+            raise RunFolderError(
+                f"--out={out}: holds {len(files)} files that no run recorded (e.g. "
+                f"{files[0].relative_to(out)}): files of yours or of an older version; name a "
+                "new or empty folder (nothing was removed)")
+        status = manifest.get("status", "complete")
+        if stale is not None or status == "running":
+            status = "killed"
+        what = {"complete": "a completed run", "interrupted": "an interrupted run",
+                "failed": "a failed run", "killed": "a run that was killed while running"}.get(
+                    status, f"a run ({status})")
+        when = manifest.get("finished") or manifest.get("started") or "?"
+        if not overwrite:
+            raise RunFolderError(
+                f"--out={out}: holds {what} of {manifest.get('case', '?')} ({when}, "
+                f"{len(files)} files); add --overwrite to replace it, or name another folder "
+                "(without --out every run gets its own folder results/<case>/run_NNN)")
+        if status == "killed":
+            # a killed run could not list its files: its files are those written since it
+            # started; an older file is not its
+            t0 = float(manifest.get("started_unix", 0.0))
+            listed = {str(p.relative_to(out)) for p in files if p.stat().st_mtime >= t0 - 1}
+        else:
+            listed = set(manifest.get("files", []))
+        unlisted = [p for p in files if str(p.relative_to(out)) not in listed]
+        if unlisted:
+            raise RunFolderError(
+                f"--out={out}: holds {len(unlisted)} files that the earlier run did not record "
+                f"(e.g. {unlisted[0].relative_to(out)}): files of yours? Nothing was removed; "
+                "move them, or name another folder")
+        for p in files:
+            p.unlink()
+        for d in sorted((p for p in out.rglob("*") if p.is_dir()), reverse=True):
             try:
-                listed = json.loads(manifest.read_text()).get("files", [])
-            except (OSError, ValueError):
-                listed = []
-            removed = 0
-            for rel in listed:
-                p = out / rel
-                if p.is_file():
-                    p.unlink()
-                    removed += 1
-            manifest.unlink()
-            log(f"[{case}] --out {out}: removed {removed} files of the earlier run there")
-            files = [p for p in out.rglob("*") if p.is_file() and p.name not in _FREE]
-        if files:
-            raise SystemExit(
-                f"error: --out={out}: holds {len(files)} files that no completed run recorded "
-                f"(e.g. {files[0].relative_to(out)}): an interrupted run or files of yours; "
-                "name a new or empty folder, or empty this one")
+                d.rmdir()  # the earlier run's folders, where empty now
+            except OSError:
+                pass
+        (out / "run.toml").unlink(missing_ok=True)  # the earlier run's record
+        log(f"[{case}] --out {out}: --overwrite: removed the {len(files)} files of the "
+            f"earlier run ({what}, {when})")
+    if stale is not None:
+        log(f"[{case}] --out {out}: taking over the lock of {_holder(stale)}, which no longer "
+            "runs")
+        lock_path.unlink(missing_ok=True)
     out.mkdir(parents=True, exist_ok=True)
+    try:
+        fd = os.open(lock_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
+    except FileExistsError:
+        lock = _read_json(lock_path)
+        raise RunFolderError(f"--out={out}: another run started writing into it just now: "
+                             f"{_holder(lock) if lock else '?'}; name another folder") from None
+    with os.fdopen(fd, "w") as fh:
+        fh.write(_lock_text(case))
+    _write_atomic(manifest_path, json.dumps({
+        "status": "running", "complete": False, "case": case, "pid": os.getpid(),
+        "host": socket.gethostname(), "started": _now(), "started_unix": time.time()},
+        indent=1) + "\n")
+    if out not in _ACTIVE:
+        _ACTIVE.append(out)
+    return out
 
 
-def end_run(out) -> None:
-    """Records the files of the completed run in ``out`` (the manifest begin_run reads)."""
-    import json
-    from pathlib import Path
-
+def end_run(out, status: str = "complete", reason: str | None = None) -> None:
+    """Records the files in ``out`` and the run's ``status`` (``complete``, ``interrupted`` or
+    ``failed``, with the ``reason``) in the manifest begin_run reads; releases the lock."""
     out = Path(out)
-    files = sorted(str(p.relative_to(out)) for p in out.rglob("*")
-                   if p.is_file() and p.name not in _FREE)
-    tmp = out / (MANIFEST + ".tmp")
-    tmp.write_text(json.dumps({"files": files}, indent=0) + "\n")
-    tmp.replace(out / MANIFEST)
+    manifest_path = out / MANIFEST
+    old = _read_json(manifest_path) or {}
+    files = [str(p.relative_to(out)) for p in _files(out)] if out.is_dir() else []
+    rec = {"status": status, "complete": status == "complete",
+           **{k: old[k] for k in ("case", "host", "started", "started_unix") if k in old},
+           "finished": _now()}
+    if reason:
+        rec["reason"] = reason
+    rec["files"] = files
+    try:
+        _write_atomic(manifest_path, json.dumps(rec, indent=1) + "\n")
+    except OSError:
+        if status == "complete":
+            raise
+    lock_path = out / LOCK
+    if lock_path.exists() and _ours(_read_json(lock_path)):
+        lock_path.unlink(missing_ok=True)
+    if out in _ACTIVE:
+        _ACTIVE.remove(out)
+
+
+def run_status(out) -> dict | None:
+    """The manifest of the results folder ``out`` (status, reason, files), or None."""
+    return _read_json(Path(out) / MANIFEST)
+
+
+def _full_disk(e: BaseException) -> bool:
+    return isinstance(e, OSError) and e.errno in (_errno.ENOSPC, _errno.EFBIG,
+                                                  getattr(_errno, "EDQUOT", -1))
+
+
+def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
+             own_folder: bool = True) -> int:
+    """Runs ``work(out)`` for a case's command line in its results folder (begin_run: ``out``
+    None makes a numbered one; ``overwrite`` None: the ``--overwrite`` that
+    check_common_args recorded) and returns the exit status: 0 when it completed, 130 when it
+    was interrupted (Ctrl-C, SIGINT, SIGTERM), 1 when a file could not be written (a full
+    disk, a file-size limit). On an interrupt or a failure every recorder still open is closed
+    (what was written stays readable), every folder of the run is marked ``interrupted`` or
+    ``failed`` in its manifest, and one line says so and where the results are; any other
+    error is re-raised after that. SIGTERM stops the run as SIGINT does (status 143).
+    ``own_folder`` False: ``out`` is a folder of several runs (each begins its own
+    sub-folder), not locked or recorded itself."""
+    global _OVERWRITE
+    from cpp_dem.io import close_all_writers
+
+    if log is None:
+        def log(msg: str) -> None:
+            print(msg, flush=True)
+    if overwrite is not None:
+        _OVERWRITE = bool(overwrite)
+    if own_folder:
+        out = begin_run(out, case, log=log)
+    else:
+        out = Path(out) if out is not None else default_base(case)
+        out.mkdir(parents=True, exist_ok=True)
+    log(f"[{case}] results in {out}")
+    import threading
+
+    main_thread = threading.current_thread() is threading.main_thread()
+    old_term = signal.getsignal(signal.SIGTERM) if main_thread else None
+    got: list[int] = []
+
+    def _term(sig, _frame):  # a polite kill stops as Ctrl-C does
+        got.append(sig)
+        raise KeyboardInterrupt
+
+    if main_thread and old_term == signal.SIG_DFL:
+        signal.signal(signal.SIGTERM, _term)
+
+    def _mark(status: str, reason: str) -> list[Path]:
+        close_all_writers()
+        folders = list(_ACTIVE) or ([out] if own_folder else [])
+        for d in reversed(folders):
+            end_run(d, status, reason)
+        return folders
+
+    try:
+        work(out)
+    except KeyboardInterrupt:
+        if main_thread:  # a second Ctrl-C does not cut the closing short
+            signal.signal(signal.SIGINT, signal.SIG_IGN)
+        sig = "SIGTERM" if got else "SIGINT / Ctrl-C"
+        folders = _mark("interrupted", f"interrupted ({sig}) before the end")
+        where = ", ".join(str(d) for d in folders) or str(out)
+        print(f"[{case}] interrupted ({sig}): the run is incomplete (marked 'interrupted' in "
+              f"{MANIFEST}); the files written so far are in {where}", file=sys.stderr,
+              flush=True)
+        return 128 + signal.SIGTERM if got else EXIT_INTERRUPTED
+    except OSError as e:
+        if not _full_disk(e):
+            _mark("failed", f"{type(e).__name__}: {e}")
+            raise
+        name = e.filename or "a result file"
+        from cpp_dem.io import ResultWriteError
+
+        msg = str(e) if isinstance(e, ResultWriteError) else \
+            f"{name}: could not be written: {os.strerror(e.errno)} (errno {e.errno})"
+        _mark("failed", msg)
+        print(f"error: {msg}; the run is incomplete (marked 'failed' in {MANIFEST}), the files "
+              f"written before are in {out}", file=sys.stderr, flush=True)
+        return 1
+    except BaseException as e:
+        if isinstance(e, SystemExit) and e.code in (0, None):
+            raise
+        _mark("failed", f"{type(e).__name__}: {e}".split("\n")[0][:500])
+        raise
+    finally:
+        if main_thread and old_term == signal.SIG_DFL:
+            signal.signal(signal.SIGTERM, signal.SIG_DFL)
+    for d in list(_ACTIVE):
+        end_run(d)
+    if own_folder:
+        end_run(out)  # files written after the case's own end_run are listed too
+    return 0

@@ -8,7 +8,7 @@ resistance (so that grains on the free surface stop rolling) and Cundall local d
 time step comes from ``scene.set_auto_timestep``; the run stops once the packing is at rest
 (or at ``--duration``). Energy bookkeeping is on and its balance error is reported.
 
-Outputs in ``--out DIR`` (default ``results/deposition``):
+Outputs in ``--out DIR`` (default a new folder ``results/deposition/run_NNN`` per run):
 
 - ``deposition.h5``  time series (``/series/*``) and snapshots (``/snapshots/NNNNNN``), run
   parameters as root attributes (``cpp_dem.output.H5Recorder``; layout in docs/output.md);
@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from cpp_dem.io.figures import save_figure
-from cpp_dem.rundir import check_common_args
+from cpp_dem.rundir import add_out_args, begin_run, check_common_args, run_main
 import cpp_dem as dem
 from cpp_dem.measure import interior_porosity, slab_solid_volume, surface_height
 from cpp_dem.output import (CsvRecorder, H5Recorder, PvdWriter, read_h5_series,
@@ -240,7 +240,7 @@ def run(p: Params, out: Path) -> dict:
     wall_t0 = time.perf_counter()
     if p.threads > 0:
         dem.set_num_threads(p.threads)
-    out.mkdir(parents=True, exist_ok=True)
+    begin_run(out, "deposition")  # (a no-op when main() began the run)
     if (out / "deposition.h5").exists():
         print(f"[deposition] replacing the outputs of a previous run in {out}", flush=True)
     clean_outputs(out)
@@ -401,8 +401,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     ap.add_argument("--smoke", action="store_true",
                     help=f"test-sized run: {SMOKE['n']} spheres in a "
                          f"{SMOKE['box'][0]} x {SMOKE['box'][1]} x {SMOKE['box'][2]} m box")
-    ap.add_argument("--out", type=Path, default=Path("results") / "deposition",
-                    help="output directory (created; this case's files in it are replaced)")
+    add_out_args(ap, "deposition")
     ap.add_argument("--n", type=int, default=None, help="number of spheres (default 3000, "
                     f"smoke {SMOKE['n']})")
     ap.add_argument("--seed", type=int, default=Params.seed, help="RNG seed")
@@ -439,8 +438,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
 
 def main(argv=None) -> int:
     p, out = parse_args(argv)
-    run(p, out)
-    return 0
+    return run_main("deposition", out, lambda o: run(p, o))
 
 
 if __name__ == "__main__":

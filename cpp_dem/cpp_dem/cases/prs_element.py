@@ -55,7 +55,7 @@ from pathlib import Path
 import numpy as np
 
 from cpp_dem.io.figures import save_figure
-from cpp_dem.rundir import begin_run, check_common_args, end_run
+from cpp_dem.rundir import add_out_args, begin_run, check_common_args, end_run, run_main
 from cpp_dem import element as _element
 from cpp_dem.element import ElementParams, grid_axial_stiffness, grid_stiffness_per_metre
 
@@ -783,7 +783,7 @@ def add_element_args(ap, d, *, smoke: str, out: str) -> None:
     """The options the element cases share: --smoke, --out, --stresses, --n, --prestress,
     --footing-pressure, --seed, --threads (defaults from the parameters ``d``)."""
     ap.add_argument("--smoke", action="store_true", help=f"test-sized run: {smoke}")
-    ap.add_argument("--out", type=Path, default=Path("results") / out)
+    add_out_args(ap, out)
     ap.add_argument("--stresses", type=str, default="",
                     help="DEM-only: 'sx,sy,sz' in Pa (compression positive) or a CSV table "
                          "(sx,sy,sz or time,sx,sy,sz per row, driven in order)")
@@ -910,8 +910,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
 
 def main(argv=None) -> int:
     p, out = parse_args(argv)
-    run(p, out)
-    return 0
+    return run_main("prs_element", out, lambda o: run(p, o))
 
 
 if __name__ == "__main__":

@@ -46,7 +46,7 @@ import numpy as np
 
 from cpp_dem.cases import prs_element as _fem_case
 from cpp_dem.element import run_element
-from cpp_dem.rundir import begin_run, end_run
+from cpp_dem.rundir import begin_run, end_run, run_main
 
 GRIDS = ("detailed", "standard")
 VARIANTS = ("RE", "PRS")
@@ -259,8 +259,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
 
 def main(argv=None) -> int:
     p, out = parse_args(argv)
-    run(p, out)
-    return 0
+    return run_main("prs_element_002", out, lambda o: run(p, o))
 
 
 if __name__ == "__main__":

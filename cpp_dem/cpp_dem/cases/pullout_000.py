@@ -41,7 +41,7 @@ import numpy as np
 
 
 from cpp_dem.io.figures import save_figure
-from cpp_dem.rundir import check_common_args
+from cpp_dem.rundir import add_out_args, check_common_args, run_main
 import cpp_dem as dem  # noqa: E402
 from cpp_dem import geogrid, prep, presets, pullout  # noqa: E402
 from cpp_dem.cases.grains_option import HELP as GRAINS_HELP, check_grains  # noqa: E402
@@ -208,7 +208,8 @@ def parse_args(argv=None) -> tuple[Params, list[int], Path]:
     ap.add_argument("--smoke", action="store_true",
                     help=f"test-sized run: {SMOKE['spheres']} spheres in a half-size box "
                          f"(0.5 x 0.25 x 0.25 m), pull {SMOKE['distance'] * 1e3:g} mm")
-    ap.add_argument("--out", type=Path, default=Path("results") / "pullout_000")
+    add_out_args(ap, "pullout_000", help_extra="; with several --spheres, one sub-folder "
+                 "n<N> each")
     ap.add_argument("--spheres", type=str, default=None,
                     help=f"number of grains (spheres, or clumps with --grains clumps:...), or "
                          f"a comma list (e.g. 3000,6000,9000) to run each and compare "
@@ -279,15 +280,18 @@ def parse_args(argv=None) -> tuple[Params, list[int], Path]:
 
 def main(argv=None) -> int:
     p, counts, out = parse_args(argv)
-    if len(counts) == 1:
-        run(replace(p, spheres=counts[0]), out)
-        return 0
-    runs = {}
-    for n in counts:
-        sub = out / f"n{n}"
-        runs[n] = (sub, run(replace(p, spheres=n), sub))
-    compare(runs, out)
-    return 0
+
+    def work(out: Path) -> None:
+        if len(counts) == 1:
+            run(replace(p, spheres=counts[0]), out)
+            return
+        runs = {}
+        for n in counts:
+            sub = out / f"n{n}"
+            runs[n] = (sub, run(replace(p, spheres=n), sub))
+        compare(runs, out)
+
+    return run_main("pullout_000", out, work)
 
 
 if __name__ == "__main__":

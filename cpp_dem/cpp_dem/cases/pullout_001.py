@@ -37,7 +37,7 @@ import numpy as np
 
 
 from cpp_dem.io.figures import save_figure
-from cpp_dem.rundir import check_common_args
+from cpp_dem.rundir import add_out_args, check_common_args, run_main
 import cpp_dem as dem  # noqa: E402
 from cpp_dem import geogrid, prep, pullout  # noqa: E402
 from cpp_dem.packing import hex_packing  # noqa: E402
@@ -280,7 +280,8 @@ def parse_args(argv=None):
     d = Params()
     ap.add_argument("--smoke", action="store_true",
                     help="test-sized run: r = 2.5 mm in a 5 cm cube, pull 4 mm")
-    ap.add_argument("--out", type=Path, default=Path("results") / "pullout_001")
+    add_out_args(ap, "pullout_001", help_extra="; --study keeps its table in --out and each "
+                 "point in a sub-folder (a point run before needs --overwrite)")
     ap.add_argument("--grid", choices=("square", "triangular"), default=d.grid)
     ap.add_argument("--radius", type=str, default=None,
                     help=f"grain radius, m (default {d.radius}); a comma list with --study")
@@ -342,10 +343,10 @@ def parse_args(argv=None):
 def main(argv=None) -> int:
     p, out, is_study, grids, radii, pressures, radii_given = parse_args(argv)
     if is_study:
-        study(p, out, grids, radii, pressures, radii_given)
-    else:
-        run(p, out)
-    return 0
+        return run_main("pullout_001", out,
+                        lambda o: study(p, o, grids, radii, pressures, radii_given),
+                        own_folder=False)
+    return run_main("pullout_001", out, lambda o: run(p, o))
 
 
 if __name__ == "__main__":

@@ -34,7 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from cpp_dem.io.figures import save_figure
-from cpp_dem.rundir import begin_run, check_common_args, end_run
+from cpp_dem.rundir import add_out_args, begin_run, check_common_args, end_run, run_main
 import cpp_dem as dem
 from cpp_dem import geogrid, measure, prep, psd
 from cpp_dem.checkpoint import save_checkpoint
@@ -479,8 +479,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     ap.add_argument("--smoke", action="store_true",
                     help=f"test-sized run: {SMOKE['n']} grains in a box scaled down with the "
                          "count, faster loading, stop at 4 %% axial strain")
-    ap.add_argument("--out", type=Path, default=Path("results") / "triaxial",
-                    help="output directory")
+    add_out_args(ap, "triaxial")
     ap.add_argument("--packing", type=str, default="",
                     help="start from these spheres (m), in the box they span or --box")
     ap.add_argument("--packing-format", choices=("csv", "yade", "liggghts", "pfc"),
@@ -589,8 +588,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
 
 def main(argv=None) -> int:
     p, out = parse_args(argv)
-    run(p, out)
-    return 0
+    return run_main("triaxial", out, lambda o: run(p, o))
 
 
 if __name__ == "__main__":

@@ -26,12 +26,17 @@ Recorders (append as the run goes, flush after every record):
 - :func:`standard_series` — the usual scene series (time, step, energies, unbalanced force,
   wall forces) with their units; :func:`read_h5_series`, :func:`read_h5_snapshot`,
   :func:`read_csv_series` read the files back.
+
+A write that fails (a full disk, a file-size limit) raises :class:`ResultWriteError` (an
+``OSError``) naming the file and closes it; :func:`close_all_writers` flushes and closes the
+recorders still open (what an interrupted case run does before it exits).
 """
 
 from . import foreign  # noqa: F401  (Yade, LIGGGHTS, PFC packing files)
 from .csvfile import CsvRecorder, read_csv_series
 from .hdf5 import H5Recorder, read_h5_series, read_h5_snapshot
 from .series import SNAPSHOT_FIELDS, NonFiniteValueError, standard_series
+from ._files import ResultWriteError, close_all_writers
 from .figures import save_figure
 from .foreign import (read_liggghts_box, read_liggghts_data, read_pfc_balls, read_yade_text,
                       write_liggghts_data, write_pfc_balls, write_yade_text)
@@ -43,6 +48,8 @@ __all__ = [
     "CsvRecorder",
     "H5Recorder",
     "PvdWriter",
+    "ResultWriteError",
+    "close_all_writers",
     "read_csv_series",
     "read_liggghts_box",
     "read_liggghts_data",

@@ -8,7 +8,7 @@ from typing import Any
 
 import numpy as np
 
-from ._files import PathLike, _ClosesOnExit
+from ._files import PathLike, _ClosesOnExit, write_error
 from .series import Series, _check_overwrite, _evaluate, _series_for
 
 
@@ -55,14 +55,35 @@ class CsvRecorder(_ClosesOnExit):
             self._fh = open(self.path, "a", encoding="utf-8", newline="")
         else:
             self._fh = open(self.path, "w" if mode == "w" else "x", encoding="utf-8", newline="")
+        self._register()
 
     def _flush(self) -> None:
         self._fh.flush()
         if self.fsync:
             os.fsync(self._fh.fileno())
 
+    def _abandon(self) -> None:
+        """Closes the file without raising (after a failed write)."""
+        fh, self._fh = self._fh, None
+        if fh is not None:
+            try:
+                fh.close()
+            except OSError:
+                pass
+
     def record(self, scene=None, **values: Any) -> None:
-        """Appends one row (series evaluated as in :meth:`H5Recorder.record`) and flushes."""
+        """Appends one row (series evaluated as in :meth:`H5Recorder.record`) and flushes. A
+        failed write (disk full, a file-size limit) raises :class:`ResultWriteError` naming
+        the file, and closes it: the rows flushed before stay readable."""
+        n = self.num_records
+        try:
+            self._record(scene, **values)
+        except OSError as e:
+            self._abandon()
+            raise write_error(self.path, e, f"closed after {n} rows (they stay readable)") \
+                from None
+
+    def _record(self, scene=None, **values: Any) -> None:
         if self._fh is None:
             raise ValueError(f"{self.path}: recorder is closed")
         sc = scene if scene is not None else self.scene
@@ -96,8 +117,13 @@ class CsvRecorder(_ClosesOnExit):
     def close(self) -> None:
         """Flushes and closes the file. Idempotent."""
         if self._fh is not None:
-            self._fh.flush()
-            self._fh.close()
+            try:
+                self._fh.flush()
+                self._fh.close()
+            except OSError as e:
+                n = self.num_records
+                self._abandon()
+                raise write_error(self.path, e, f"closed after {n} rows") from None
             self._fh = None
 
 

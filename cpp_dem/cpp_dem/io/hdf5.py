@@ -10,7 +10,8 @@ from typing import Any, Mapping, Sequence
 
 import numpy as np
 
-from ._files import PathLike, _ClosesOnExit
+from ._files import (PathLike, _ClosesOnExit, _DeallocErrors, _quiet_unraisable,
+                     is_write_failure, write_error)
 from .series import (CLUMP_SNAPSHOT_FIELDS, SNAPSHOT_FIELDS, Series, _check_overwrite,
                      _evaluate, _metadata_attr,
                      _series_for)
@@ -81,9 +82,17 @@ class H5Recorder(_ClosesOnExit):
         self._file = h5py.File(self.path, mode)
         try:
             self._open(mode, metadata or {})
-        except BaseException:
-            self._file.close()
+        except BaseException as e:
+            f, self._file = self._file, None
+            with _quiet_unraisable():
+                try:
+                    f.close()
+                except Exception:  # noqa: BLE001  (the file could not be written)
+                    pass
+            if isinstance(e, (OSError, RuntimeError)) and is_write_failure(e):
+                raise write_error(self.path, e, "the file could not be started") from None
             raise
+        self._register()
 
     def _open(self, mode: str, metadata: Mapping[str, Any]) -> None:
         f = self._file
@@ -137,7 +146,104 @@ class H5Recorder(_ClosesOnExit):
         f.attrs["parameters_json"] = json.dumps(dict(metadata), default=str, sort_keys=True)
 
     # -- writing -------------------------------------------------------------------------------
+    def _failed(self, e: BaseException) -> Exception:
+        """The error to raise for ``e`` from a write: a ResultWriteError naming the file (which
+        is then closed) when the file could not be written, else ``e`` itself."""
+        if not (isinstance(e, (OSError, RuntimeError)) and is_write_failure(e)):
+            return e
+        kept = (f"closed after {self.num_records} records and {self.num_snapshots} snapshots "
+                "(the records flushed before stay readable)")
+        err = write_error(self.path, e, kept)
+        with _quiet_unraisable():
+            e.__traceback__ = None  # frees the failed write's HDF5 objects before the close
+            self._abandon()
+        return err
+
+    def _abandon(self) -> None:
+        """Closes the file without raising (after a failed write). HDF5 can crash when it
+        closes a file whose writes failed (it flushes its cache again): the file's descriptor
+        is pointed at /dev/null first, so what HDF5 writes on closing goes nowhere and the
+        file on disk keeps what was written before."""
+        f, self._file = self._file, None
+        if f is not None:
+            import os
+
+            try:
+                fd = f.id.get_vfd_handle()
+                null = os.open(os.devnull, os.O_WRONLY)
+                os.dup2(null, fd)
+                os.close(null)
+            except Exception:  # noqa: BLE001  (another driver: close as it is)
+                pass
+            with _quiet_unraisable():
+                try:
+                    f.close()
+                except Exception:  # noqa: BLE001
+                    pass
+
     def record(self, scene=None, **values: Any) -> None:
+        """Appends one row to every series and flushes the file (see :meth:`_record`). A
+        failed write (disk full, a file-size limit) raises :class:`ResultWriteError` naming
+        the file, and closes it."""
+        try:
+            self._guarded(lambda: self._record(scene, **values))
+        except (OSError, RuntimeError) as e:
+            err = self._failed(e)
+            if err is e:
+                raise
+            raise err from None
+
+    def snapshot(self, scene=None, *, fields: Sequence[str] | None = None,
+                 extra: Mapping[str, tuple[Any, str]] | None = None) -> str:
+        """Stores per-body arrays in a new group (see :meth:`_snapshot`); a failed write raises
+        :class:`ResultWriteError` naming the file, and closes it."""
+        try:
+            return self._guarded(lambda: self._snapshot(scene, fields=fields, extra=extra))
+        except (OSError, RuntimeError) as e:
+            err = self._failed(e)
+            if err is e:
+                raise
+            raise err from None
+
+    #: Room kept free beyond a write's data for HDF5's own metadata, bytes.
+    ROOM_MARGIN = 256 * 1024
+
+    def _check_room(self, nbytes: int) -> None:
+        """Refuses a write of about ``nbytes`` that the disk or the file-size limit has no room
+        for (with ROOM_MARGIN for the metadata) before HDF5 starts it: HDF5 recovers badly
+        from a write that fails inside its cache (it can crash when the file is closed)."""
+        import errno
+        import os
+        import resource
+
+        need = int(nbytes) + self.ROOM_MARGIN
+        try:
+            size = os.path.getsize(self.path)
+            st = os.statvfs(self.path.parent)
+        except OSError:
+            return
+        soft = resource.getrlimit(resource.RLIMIT_FSIZE)[0]
+        if soft != resource.RLIM_INFINITY and size + need > soft:
+            raise OSError(errno.EFBIG, os.strerror(errno.EFBIG), str(self.path))
+        if st.f_bavail * st.f_frsize < need:
+            raise OSError(errno.ENOSPC, os.strerror(errno.ENOSPC), str(self.path))
+
+    def _guarded(self, body):
+        """Runs ``body`` (which writes), then flushes the file; a write failure that HDF5
+        reports only through an object's destructor is raised (and the file not flushed)."""
+        with _DeallocErrors() as caught:
+            result = body()
+        failed = caught.failure()
+        if failed is not None:
+            raise failed
+        with _DeallocErrors() as caught:
+            self._file.flush()
+        failed = caught.failure()
+        if failed is not None:
+            raise failed
+        return result
+
+    def _record(self, scene=None, **values: Any) -> None:
         """Appends one row to every series and flushes the file.
 
         Each series is evaluated as ``callable(scene)`` (``scene`` defaults to the recorder's
@@ -147,6 +253,7 @@ class H5Recorder(_ClosesOnExit):
             raise ValueError(f"{self.path}: recorder is closed")
         sc = scene if scene is not None else self.scene
         row = _evaluate(self.series, sc, values)
+        self._check_room(sum(self.chunk_rows * a.nbytes for a in row.values()))
         g = self._file["series"]
         k = self.num_records
         for name, a in row.items():
@@ -167,10 +274,9 @@ class H5Recorder(_ClosesOnExit):
             ds[k] = a
         g.attrs["num_records"] = k + 1
         self.num_records = k + 1
-        self._file.flush()
 
-    def snapshot(self, scene=None, *, fields: Sequence[str] | None = None,
-                 extra: Mapping[str, tuple[Any, str]] | None = None) -> str:
+    def _snapshot(self, scene=None, *, fields: Sequence[str] | None = None,
+                  extra: Mapping[str, tuple[Any, str]] | None = None) -> str:
         """Stores per-body arrays in a new group ``/snapshots/NNNNNN``; returns its name.
 
         ``fields`` defaults to the recorder's ``snapshot_fields`` (with clumps in the scene,
@@ -201,24 +307,36 @@ class H5Recorder(_ClosesOnExit):
                     items.append((fld, np.asarray(getattr(sc, fld)), SNAPSHOT_FIELDS[fld]))
         for k, (arr, units) in (extra or {}).items():
             items.append((k, arr, units))
+        self._check_room(sum(np.asarray(arr).nbytes for _k, arr, _u in items))
         for k, arr, units in items:
             ds = g.create_dataset(k, data=np.asarray(arr), compression=self.compression)
             ds.attrs["units"] = units
         g.attrs["complete"] = True
         self.num_snapshots += 1
-        self._file.flush()
         return name
 
     def flush(self) -> None:
         """Flushes the HDF5 file (done after every record and snapshot anyway)."""
         if self._file is not None:
-            self._file.flush()
+            try:
+                self._file.flush()
+            except (OSError, RuntimeError) as e:
+                err = self._failed(e)
+                if err is e:
+                    raise
+                raise err from None
 
     def close(self) -> None:
         """Flushes and closes the file. Idempotent."""
         if self._file is not None:
-            self._file.flush()
-            self._file.close()
+            try:
+                self._file.flush()
+                self._file.close()
+            except (OSError, RuntimeError) as e:
+                err = self._failed(e)
+                if err is e:
+                    raise
+                raise err from None
             self._file = None
 
     @property
