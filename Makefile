@@ -6,9 +6,11 @@ setup:
 	@bash scripts/setup.sh
 
 # The main demo: a small geogrid pull-out (000 set-up, half-size box, 375 spheres, 50 mm),
-# ending in its force-displacement plot results/demo_pullout/pullout_force.png.
+# ending in its force-displacement plot results/demo_pullout/pullout_force.png. A second
+# `make demo` replaces the demo's own earlier run there (--overwrite: only the files that run
+# recorded; a file of yours in the folder stops it, and nothing is removed).
 demo: setup
-	$(PY) cases/pullout_000.py --smoke --distance 0.05 --snapshots 5 --out results/demo_pullout
+	$(PY) cases/pullout_000.py --smoke --distance 0.05 --snapshots 5 --out results/demo_pullout --overwrite
 	@echo "force-displacement plot: results/demo_pullout/pullout_force.png"
 
 test: setup

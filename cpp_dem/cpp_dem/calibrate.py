@@ -305,12 +305,46 @@ class Config:
         for k in ("out", *KEYS):
             if k in fixed:
                 raise ValueError(f"{src}: field 'params.{k}': set by the calibration")
-        mis, opt = d.get("misfit", {}), d.get("optimiser", {})
+        mis = _section(d, "misfit", src, {"points": (int, 2, 100_000, "a whole number in "
+                                                            "[2, 100000]"),
+                                          "w_q": (float, 0.0, 1.0, "in [0, 1] (the weight of q; "
+                                                  "1 - w_q is eps_v's)")})
+        opt = _section(d, "optimiser", src, {
+            "maxfev": (int, 0, 100_000, "a whole number in [0, 100000] (0: the grid only)"),
+            "step": (float, 1e-6, 1.0, "in (0, 1] (in the box scaled to [0, 1])"),
+            "xatol": (float, 0.0, 1.0, "in [0, 1]"),
+            "fatol": (float, 0.0, math.inf, "a finite number >= 0")})
         return cls(out=Path(d["out"]), fixed=fixed,
                    grid={k: [float(x) for x in grid[k]] for k in KEYS}, reference=dict(ref),
-                   points=int(mis.get("points", 50)), w_q=float(mis.get("w_q", 0.5)),
-                   maxfev=int(opt.get("maxfev", 20)), step=float(opt.get("step", 0.15)),
-                   xatol=float(opt.get("xatol", 0.01)), fatol=float(opt.get("fatol", 1e-4)))
+                   points=mis.get("points", 50), w_q=mis.get("w_q", 0.5),
+                   maxfev=opt.get("maxfev", 20), step=opt.get("step", 0.15),
+                   xatol=opt.get("xatol", 0.01), fatol=opt.get("fatol", 1e-4))
+
+
+def _section(d: dict, name: str, src: str, spec: dict) -> dict:
+    """The table ``name`` of a calibration file, each key checked against ``spec`` (key ->
+    (type, lo, hi, what is allowed)): an unknown key is refused with a did-you-mean, a value
+    of the wrong type or out of range names the field, the value and the range."""
+    import difflib
+
+    sec = d.get(name, {})
+    if not isinstance(sec, dict):
+        raise ValueError(f"{src}: field {name!r}={sec!r}: must be a table [{name}]")
+    out: dict[str, Any] = {}
+    for k, v in sec.items():
+        if k not in spec:
+            near = difflib.get_close_matches(k, list(spec), n=1)
+            hint = f" (did you mean {near[0]}?)" if near else ""
+            raise ValueError(f"{src}: field '{name}.{k}': not known{hint}; allowed: "
+                             f"{', '.join(spec)}")
+        typ, lo, hi, allowed = spec[k]
+        ok_type = isinstance(v, (int, float)) and not isinstance(v, bool) and (
+            typ is float or float(v).is_integer())
+        if not ok_type or not math.isfinite(float(v)) or not lo <= float(v) <= hi \
+                or (k == "step" and not float(v) > 0):
+            raise ValueError(f"{src}: field '{name}.{k}'={v!r}: must be {allowed}")
+        out[k] = typ(v)
+    return out
 
 
 def calibrate(cfg: Config, *, client=None, threads: int = 1,

@@ -22,7 +22,13 @@ becomes a comma list::
     out = "results/tri_100k"
 
 Every results folder gets ``run.toml``: the case, the parameters, the package version, the
-git commit and the date, so ``geogrid-dem run DIR/run.toml`` runs it again.
+git commit and the date, so ``geogrid-dem run DIR/run.toml --out NEW`` runs it again (the
+last ``--out`` wins, as for the case itself, and the run file goes where the results go).
+Without ``--out`` every run gets a new folder ``results/<case>/run_NNN``; a folder that holds
+an earlier run is refused unless ``--overwrite`` is given. A run file's parameters are checked
+against the case's own flags before the case starts (a misspelt flag, a switch given a value).
+Ctrl-C stops the case: its files are closed, its folder is marked interrupted and the command
+exits with status 130.
 
 A **sweep file** adds a table of values, as a product of the lists or row by row::
 
@@ -42,16 +48,26 @@ same parameters is finished and skipped, so a sweep resumes where it stopped; a 
 a killed worker is run again by Dask. ``OUT/results.csv`` (and ``results.parquet`` where
 pyarrow is installed) gathers one line per row: its parameters, status, wall time and the
 scalar numbers of its ``summary.json``; the CSV is rewritten after every finished row.
+Every row's parameters are checked against the case's flags before Dask starts; a sweep of
+more than ``--max-rows`` rows (10 000 by default) is refused with its size.
 """
 
 from __future__ import annotations
 
+import argparse
+import contextlib
 import csv
 import datetime as _dt
+import difflib
+import functools
+import importlib
+import io
 import itertools
 import json
+import math
 import os
 import shutil
+import signal
 import subprocess
 import sys
 import time
@@ -112,6 +128,77 @@ def git_commit() -> str:
 
 # ---- parameters -> the case's flags -----------------------------------------------------------
 
+class _Parser(Exception):
+    """Carries the parser out of a case's parse_args (case_parser)."""
+
+
+@functools.lru_cache(maxsize=None)
+def case_parser(case: str) -> argparse.ArgumentParser:
+    """The argparse parser of case ``case`` (its module's parse_args, stopped where it parses)."""
+    mod = importlib.import_module(f"cpp_dem.cases.{CASES[case][0]}")
+    orig = argparse.ArgumentParser.parse_args
+
+    def grab(self, *_a, **_k):
+        raise _Parser(self)
+
+    argparse.ArgumentParser.parse_args = grab
+    try:
+        mod.parse_args([])
+    except _Parser as e:
+        return e.args[0]
+    finally:
+        argparse.ArgumentParser.parse_args = orig
+    raise RuntimeError(f"case {case!r}: its parse_args did not build a parser")
+
+
+def _flags(case: str) -> dict[str, argparse.Action]:
+    return {o: a for a in case_parser(case)._actions for o in a.option_strings
+            if o.startswith("--")}
+
+
+def check_params(case: str, params: dict[str, Any], *, source: str) -> None:
+    """Refuses a parameter that is not a flag of the case (with a did-you-mean), a switch
+    given a value other than true/false, and a flag that takes a value given true/false."""
+    flags = _flags(case)
+    for key, value in params.items():
+        if not isinstance(key, str) or not key or key.startswith("-"):
+            raise RunFileError(f"{source}: field {key!r}: write the flag's name without dashes")
+        flag = "--" + key.replace("_", "-")
+        act = flags.get(flag)
+        if act is None:
+            names = sorted({f[2:] for f in flags if f not in ("--help",)})
+            near = difflib.get_close_matches(key.replace("_", "-"), names, n=1)
+            hint = f" (did you mean {near[0]}?)" if near else ""
+            raise RunFileError(f"{source}: field {key!r}: not a parameter of the case {case!r}"
+                               f"{hint}; allowed: {', '.join(names)}")
+        switch = act.nargs == 0
+        if switch and not isinstance(value, bool):
+            raise RunFileError(f"{source}: field {key}={value!r}: must be true or false (a "
+                               "switch)")
+        if not switch and isinstance(value, bool):
+            raise RunFileError(f"{source}: field {key}={str(value).lower()}: takes a value "
+                               f"({act.help or 'see the case --help'}), not true/false")
+
+
+def check_argv(case: str, argv: list[str], *, source: str) -> None:
+    """Parses ``argv`` with the case's own parse_args in this process (nothing is run), so a
+    value the case refuses is reported against ``source`` before any work starts."""
+    if "--help" in argv or "-h" in argv:
+        return
+    mod = importlib.import_module(f"cpp_dem.cases.{CASES[case][0]}")
+    err = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            mod.parse_args(list(argv))
+    except SystemExit as e:
+        if e.code in (0, None):
+            return
+        lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
+        detail = lines[-1].split(": error: ", 1)[-1] if lines else f"exit status {e.code}"
+        raise RunFileError(f"{source}: the case {case!r} refuses its parameters: {detail} "
+                           f"(geogrid-dem run {case} --help lists them)") from None
+
+
 def params_to_argv(params: dict[str, Any], *, source: str) -> list[str]:
     """The case's command-line flags from a table of parameters (keys without dashes)."""
     argv: list[str] = []
@@ -134,10 +221,12 @@ def params_to_argv(params: dict[str, Any], *, source: str) -> list[str]:
 
 
 def shared_argv(case: str, out: str | None, seed: int | None, threads: int | None,
-                preset: str | None, smoke: bool) -> list[str]:
+                preset: str | None, smoke: bool, overwrite: bool = False) -> list[str]:
     argv: list[str] = []
     if smoke:
         argv.append("--smoke")
+    if overwrite:
+        argv.append("--overwrite")
     if out is not None:
         argv += ["--out", str(out)]
     if seed is not None:
@@ -154,12 +243,14 @@ def shared_argv(case: str, out: str | None, seed: int | None, threads: int | Non
 
 
 def out_of(argv: list[str]) -> Path | None:
+    """The results folder of ``argv``: its last --out, as argparse takes it."""
+    found = None
     for k, a in enumerate(argv):
         if a == "--out" and k + 1 < len(argv):
-            return Path(argv[k + 1])
-        if a.startswith("--out="):
-            return Path(a.split("=", 1)[1])
-    return None
+            found = Path(argv[k + 1])
+        elif a.startswith("--out="):
+            found = Path(a.split("=", 1)[1])
+    return found
 
 
 def write_run_file(out: Path, case: str, params: dict[str, Any]) -> None:
@@ -246,14 +337,32 @@ def run_case(case: str, argv: list[str], *, source: str | None = None) -> int:
     """Runs the case's script in a fresh interpreter with `argv` (its output passes through as
     it comes); an argparse rejection (exit 2) of a run file's parameters is reported against
     the run file. Returns the exit status."""
+    # its own process group: a Ctrl-C reaches it once, forwarded from here (not also from the
+    # terminal), and a SIGINT or SIGTERM sent to this command is passed on, not left behind
     proc = subprocess.Popen([*case_command(case), *argv], stderr=subprocess.PIPE, text=True,
-                            bufsize=1)
+                            bufsize=1, process_group=0)
+
+    def forward(sig, _frame):
+        try:
+            proc.send_signal(sig)
+        except ProcessLookupError:
+            pass
+
+    import threading
+
+    main_thread = threading.current_thread() is threading.main_thread()
+    old = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM)} \
+        if main_thread else {}
     tail: list[str] = []
-    for line in proc.stderr:
-        sys.stderr.write(line)
-        sys.stderr.flush()
-        tail = (tail + [line.rstrip()])[-5:]
-    status = proc.wait()
+    try:
+        for line in proc.stderr:
+            sys.stderr.write(line)
+            sys.stderr.flush()
+            tail = (tail + [line.rstrip()])[-5:]
+        status = proc.wait()
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
     if status == 2 and source is not None:
         detail = next((t for t in reversed(tail) if t.strip()), "")
         raise RunFileError(f"{source}: the case {case!r} rejected its parameters: {detail}; "
@@ -279,7 +388,10 @@ def list_cases() -> None:
 
 _SHARED = [
     click.option("--out", type=click.Path(path_type=Path), default=None,
-                 help="results folder"),
+                 help="results folder (default: a new folder results/<case>/run_NNN per run); "
+                      "one holding an earlier run needs --overwrite"),
+    click.option("--overwrite", is_flag=True,
+                 help="replace the earlier run in --out (only the files it recorded)"),
     click.option("--seed", type=int, default=None, help="random seed"),
     click.option("--threads", type=int, default=None, help="OpenMP threads, 0 = all cores"),
     click.option("--preset", type=click.Choice(["fast", "balanced", "accurate"]), default=None,
@@ -299,36 +411,64 @@ def _shared(f):
 @click.argument("target")
 @_shared
 @click.pass_context
-def run_cmd(ctx, target: str, out, seed, threads, preset, smoke) -> None:
+def run_cmd(ctx, target: str, out, overwrite, seed, threads, preset, smoke) -> None:
     """Runs a case (TARGET = its name, then its own flags) or a run file (TARGET.toml)."""
+    from cpp_dem import rundir
+
     extra = list(ctx.args)
+    source = None
     if target.endswith(".toml"):
         path = Path(target)
+        source = str(path)
         data = load_toml(path, "run")
         case = data["case"]
         params = dict(data.get("params", {}))
         if "out" in data and "out" not in params:
             params["out"] = data["out"]
-        argv = params_to_argv(params, source=str(path))
-        argv += shared_argv(case, out, seed, threads, preset, smoke) + extra
-        status = run_case(case, argv, source=str(path))
+        check_params(case, params, source=source)
+        argv = params_to_argv(params, source=source)
+        argv += shared_argv(case, out, seed, threads, preset, smoke, overwrite) + extra
+        check_argv(case, argv, source=source)
     else:
         if target in ("-h", "--help"):
             click.echo(ctx.get_help())
             return
         case = target
         case_command(case, field="case")
-        argv = shared_argv(case, out, seed, threads, preset, smoke) + extra
-        status = run_case(case, argv)
+        argv = shared_argv(case, out, seed, threads, preset, smoke, overwrite) + extra
+    helping = "--help" in argv or "-h" in argv
+    valid = True
+    if source is None and not helping:
+        try:
+            check_argv(case, argv, source=case)
+        except RunFileError:
+            valid = False  # the case itself says why (argparse, exit status 2)
+    if out_of(argv) is None and not helping and valid:
+        # the case's default, made here so that run.toml goes into the same new folder
+        argv += ["--out", str(rundir.numbered_run_dir(rundir.default_base(CASES[case][0])))]
+    status = run_case(case, argv, source=source)
+    dest = out_of(argv)
+    if dest is not None and not helping:
+        state = (rundir.run_status(dest) or {}).get("status")
+        if status == 0 or (status == rundir.EXIT_INTERRUPTED and state == "interrupted"):
+            params = argv_to_params(argv)
+            params.pop("overwrite", None)  # a run file never replaces a run by itself
+            write_run_file(dest, case, params)
+        if status == rundir.EXIT_INTERRUPTED:
+            click.echo(f"[geogrid-dem] {case} interrupted: results so far in {dest}; run it "
+                       f"again with geogrid-dem run {dest / 'run.toml'} --overwrite", err=True)
     if status != 0:
         sys.exit(status)
-    dest = out_of(argv)
-    if dest is not None and "--help" not in argv and "-h" not in argv:
-        write_run_file(dest, case, argv_to_params(argv))
 
 
-def sweep_rows(data: dict[str, Any], source: str) -> list[dict[str, Any]]:
-    """The parameter table of a sweep file: one dict of varied parameters per row."""
+#: The largest sweep run without --max-rows.
+MAX_ROWS = 10_000
+
+
+def sweep_rows(data: dict[str, Any], source: str,
+               max_rows: int = MAX_ROWS) -> list[dict[str, Any]]:
+    """The parameter table of a sweep file: one dict of varied parameters per row. A table of
+    more than ``max_rows`` rows is refused (before it is built) with its size."""
     sweep = data.get("sweep")
     if not isinstance(sweep, dict) or not sweep:
         raise RunFileError(f"{source}: field 'sweep' is missing: a [sweep] table with lists of "
@@ -343,6 +483,15 @@ def sweep_rows(data: dict[str, Any], source: str) -> list[dict[str, Any]]:
     if not values:
         raise RunFileError(f"{source}: [sweep] has no parameter lists")
     keys = list(values)
+    n_rows = math.prod(len(v) for v in values.values()) if mode == "product" else \
+        max(len(v) for v in values.values())
+    if n_rows > max_rows:
+        shape = " x ".join(f"{len(v)} {k}" for k, v in values.items())
+        raise RunFileError(
+            f"{source}: field 'sweep' makes {n_rows} rows ({shape}, mode {mode!r}): more than "
+            f"the cap of {max_rows}. That is {n_rows} case runs and folders; at even 10 s a "
+            f"row (a smoke run) on 10 workers about {n_rows * 10 / 10 / 86400:.3g} days. "
+            "Shrink the table, or raise the cap with --max-rows N")
     if mode == "product":
         return [dict(zip(keys, combo)) for combo in itertools.product(*values.values())]
     lengths = {k: len(v) for k, v in values.items()}
@@ -434,8 +583,14 @@ def write_results(out: Path, rows: list[dict[str, Any]]) -> Path:
               help="a running Dask scheduler: its address or its scheduler file")
 @click.option("--threads", type=int, default=1, show_default=True,
               help="OpenMP threads per row (0 = all cores)")
-def sweep_cmd(file: Path, workers: int, scheduler: str | None, threads: int) -> None:
-    """Runs a sweep file's rows on Dask, skipping finished rows; gathers OUT/results.csv."""
+@click.option("--max-rows", type=int, default=MAX_ROWS, show_default=True,
+              help="the largest table run; a larger one is refused with its size")
+def sweep_cmd(file: Path, workers: int, scheduler: str | None, threads: int,
+              max_rows: int) -> None:
+    """Runs a sweep file's rows on Dask, skipping finished rows; gathers OUT/results.csv.
+    Every row is checked against the case's flags before Dask starts."""
+    from cpp_dem import rundir
+
     data = load_toml(file, "sweep")
     case = data["case"]
     if "out" not in data:
@@ -444,22 +599,36 @@ def sweep_cmd(file: Path, workers: int, scheduler: str | None, threads: int) -> 
         raise click.BadParameter(f"--workers={workers}: must be >= 1")
     if threads < 0:
         raise click.BadParameter(f"--threads={threads}: must be >= 0 (0 = all cores)")
+    if max_rows < 1:
+        raise click.BadParameter(f"--max-rows={max_rows}: must be >= 1")
+    if not isinstance(data["out"], str) or not data["out"]:
+        raise RunFileError(f"{file}: field 'out'={data['out']!r}: must be a folder's path")
     out = Path(data["out"])
+    why = rundir._writable_or_error(out)
+    if why:
+        raise RunFileError(f"{file}: field 'out'={data['out']!r}: {why}")
     fixed = dict(data.get("params", {}))
     for k in ("out",):
         if k in fixed:
             raise RunFileError(f"{file}: field 'params.{k}': set the sweep's folder with the "
                                "top-level field 'out' (each row writes in OUT/row_NNN)")
-    rows = sweep_rows(data, str(file))
+    rows = sweep_rows(data, str(file), max_rows)
     script = case_command(case)
-    out.mkdir(parents=True, exist_ok=True)
     if threads == 0 and case in _THREADS_ZERO_IS_ONE:
         threads = os.cpu_count() or 1
-    todo, results = [], [None] * len(rows)
+    checked: list[tuple[int, Path, dict, list[str]]] = []
     for i, row in enumerate(rows):
         row_dir = out / f"row_{i:03d}"
         params = _row_params(fixed, row, row_dir, threads)
-        argv = params_to_argv(params, source=str(file))
+        src = f"{file}: row {i} ({', '.join(f'{k}={v!r}' for k, v in row.items())})"
+        check_params(case, params, source=src)
+        argv = params_to_argv(params, source=src)
+        check_argv(case, argv, source=src)
+        checked.append((i, row_dir, params, argv))
+    out.mkdir(parents=True, exist_ok=True)
+    todo, results = [], [None] * len(rows)
+    for i, row_dir, params, argv in checked:
+        row = rows[i]
         base = {"row": i, **{f"param.{k}": v for k, v in row.items()}}
         if _row_finished(row_dir, case, params):
             results[i] = {**base, "status": "done (earlier run)", **_summary_of(row_dir)}
@@ -468,8 +637,12 @@ def sweep_cmd(file: Path, workers: int, scheduler: str | None, threads: int) -> 
     click.echo(f"[sweep] {case}: {len(rows)} rows, {len(rows) - len(todo)} finished before, "
                f"{len(todo)} to run on "
                + (f"the scheduler at {scheduler}" if scheduler else f"{workers} local workers"))
+    interrupted = False
     if todo:
-        _run_on_dask(todo, results, script, case, scheduler, workers, threads, out)
+        try:
+            _run_on_dask(todo, results, script, case, scheduler, workers, threads, out)
+        except KeyboardInterrupt:
+            interrupted = True
     done = [r for r in results if r is not None]
     path = write_results(out, done)
     try:
@@ -481,6 +654,11 @@ def sweep_cmd(file: Path, workers: int, scheduler: str | None, threads: int) -> 
     except ImportError:
         pass
     failed = [r for r in done if r["status"] == "failed"]
+    if interrupted:
+        click.echo(f"[sweep] interrupted: {len(done)} of {len(rows)} rows finished, their "
+                   f"results in {path}; the same command again runs the rest (finished rows "
+                   "are skipped)", err=True)
+        sys.exit(rundir.EXIT_INTERRUPTED)
     click.echo(f"[sweep] results: {path} ({len(done)} rows, {len(failed)} failed)")
     if failed:
         sys.exit(1)
@@ -505,6 +683,15 @@ def _dask_client(scheduler: str | None, workers: int):
         return dask_client(scheduler, workers)
     except ParameterError as e:
         raise click.BadParameter(str(e), param_hint="--scheduler") from None
+    except Exception as e:  # noqa: BLE001  (unreachable, refused, a bad scheduler file ...)
+        if not scheduler:
+            raise click.ClickException(f"--workers={workers}: the local Dask cluster did not "
+                                       f"start: {type(e).__name__}: {e}") from None
+        raise click.BadParameter(
+            f"{scheduler!r}: could not connect to a Dask scheduler there "
+            f"({type(e).__name__}: {str(e).splitlines()[0] if str(e) else 'no detail'}); is "
+            "it running, and is the address (tcp://host:port) or the scheduler file right?",
+            param_hint="--scheduler") from None
 
 
 def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) -> None:
@@ -578,6 +765,25 @@ def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | N
         cfg.out = out
     if workers < 0 or threads < 0:
         raise click.BadParameter("--workers and --threads must be >= 0")
+    # every triaxial run's flags checked before any work: the fixed ones, the reference's
+    # and the grid's corners
+    src = f"calibration file {file}"
+    check_params("triaxial", cfg.fixed, source=f"{src}: [params]")
+    ref_extra = {k: v for k, v in cfg.reference.items() if k not in (*cal.KEYS, "csv")}
+    check_params("triaxial", ref_extra, source=f"{src}: [reference]")
+    corners = [[min(cfg.grid[k]) for k in cal.KEYS], [max(cfg.grid[k]) for k in cal.KEYS]]
+    for where, extra, pts in (("[params]/[grid]", {}, corners),
+                              ("[reference]", ref_extra,
+                               [[cfg.reference[k] for k in cal.KEYS]]
+                               if all(k in cfg.reference for k in cal.KEYS) else [])):
+        for pt in pts:
+            runner = cal.Runner(cfg.out, {**cfg.fixed, **extra}, threads=threads)
+            check_argv("triaxial", params_to_argv(runner.params(pt), source=src),
+                       source=f"{src}: {where} at young={pt[0]:g}, poisson={pt[1]:g}, "
+                              f"phi={pt[2]:g}")
+    why = __import__("cpp_dem.rundir", fromlist=["x"])._writable_or_error(Path(cfg.out))
+    if why:
+        raise RunFileError(f"{src}: out={str(cfg.out)!r}: {why}")
     client = cluster = None
     if scheduler or workers > 0:
         client, cluster = _dask_client(scheduler, workers)
@@ -585,6 +791,11 @@ def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | N
         cal.calibrate(cfg, client=client, threads=threads, log=click.echo)
     except RuntimeError as e:
         raise click.ClickException(str(e)) from None
+    except KeyboardInterrupt:
+        click.echo(f"[calibrate] interrupted: the points finished so far are in "
+                   f"{cfg.out / 'runs'} and are reused when the same command runs again",
+                   err=True)
+        sys.exit(130)
     finally:
         if client is not None:
             client.close()

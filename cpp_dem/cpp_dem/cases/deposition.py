@@ -395,6 +395,10 @@ def run(p: Params, out: Path) -> dict:
     return summary
 
 
+#: The most steps a deposition run may ask for (about 1e5 settle the default packing).
+MAX_STEPS = 1e8
+
+
 def parse_args(argv=None) -> tuple[Params, Path]:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0],
                                  formatter_class=argparse.ArgumentDefaultsHelpFormatter)
@@ -431,8 +435,17 @@ def parse_args(argv=None) -> tuple[Params, Path]:
         p.settled_speed = -1.0
     if p.n < 1:
         ap.error(f"--n={p.n}: must be >= 1")
-    if not p.duration > 0:
-        ap.error(f"--duration={p.duration}: must be > 0 (s)")
+    if not (math.isfinite(p.duration) and p.duration > 0):
+        ap.error(f"--duration={p.duration}: must be a finite number > 0 (s)")
+    # steps at the p-wave step of the smallest grain (dt = dt_safety x r_min sqrt(rho / E),
+    # as scene.pwave_dt()): a request beyond MAX_STEPS is refused with the estimate
+    if 0 < p.dt_safety and p.young > 0:
+        steps = p.duration / (p.dt_safety * p.r_min * math.sqrt(p.density / p.young))
+        if steps > MAX_STEPS:
+            ap.error(f"--duration={p.duration}: about {steps:.3g} steps of dt "
+                     f"{p.duration / steps:.3g} s ({steps * p.n:.3g} particle-steps); more "
+                     f"than the {MAX_STEPS:.0e} steps this case runs (the packing settles in "
+                     "about 1 s; the run stops once settled)")
     return p, a.out
 
 

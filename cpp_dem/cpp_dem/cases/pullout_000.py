@@ -270,6 +270,10 @@ def parse_args(argv=None) -> tuple[Params, list[int], Path]:
     if a.distance is not None:
         if not (math.isfinite(a.distance) and a.distance > 0):
             ap.error(f"--distance={a.distance}: must be > 0 (m)")
+        if a.distance >= p.box[0]:
+            ap.error(f"--distance={a.distance}: must be < the box length {p.box[0]} m (the "
+                     "geogrid would be pulled out of the box); at --velocity "
+                     f"{p.velocity:g} m/s that is {a.distance / p.velocity:.3g} s of pull")
         p = replace(p, distance=a.distance)
     if a.snapshots is not None:
         if a.snapshots < 0:

@@ -336,6 +336,10 @@ def parse_args(argv=None):
     if a.distance is not None:
         if not (math.isfinite(a.distance) and a.distance > 0):
             ap.error(f"--distance={a.distance}: must be > 0 (m)")
+        if a.distance >= p.box:
+            ap.error(f"--distance={a.distance}: must be < the box side {p.box} m (the grid "
+                     f"would leave the box); at --velocity {a.velocity:g} m/s that is "
+                     f"{a.distance / a.velocity:.3g} s of pull")
         p = replace(p, distance=a.distance)
     return p, a.out, a.study, grids, radii, pressures, bool(a.radius)
 

@@ -75,13 +75,16 @@ class CsvRecorder(_ClosesOnExit):
         """Appends one row (series evaluated as in :meth:`H5Recorder.record`) and flushes. A
         failed write (disk full, a file-size limit) raises :class:`ResultWriteError` naming
         the file, and closes it: the rows flushed before stay readable."""
+        if getattr(self, "_error", None) is not None:
+            raise self._error  # an earlier write failed: the file is closed for good
         n = self.num_records
         try:
             self._record(scene, **values)
         except OSError as e:
             self._abandon()
-            raise write_error(self.path, e, f"closed after {n} rows (they stay readable)") \
-                from None
+            self._error = write_error(self.path, e, f"closed after {n} rows (they stay "
+                                      "readable)")
+            raise self._error from None
 
     def _record(self, scene=None, **values: Any) -> None:
         if self._fh is None:

@@ -154,6 +154,7 @@ class H5Recorder(_ClosesOnExit):
         kept = (f"closed after {self.num_records} records and {self.num_snapshots} snapshots "
                 "(the records flushed before stay readable)")
         err = write_error(self.path, e, kept)
+        self._error = err  # raised again by a later write: the file is closed for good
         with _quiet_unraisable():
             e.__traceback__ = None  # frees the failed write's HDF5 objects before the close
             self._abandon()
@@ -185,6 +186,8 @@ class H5Recorder(_ClosesOnExit):
         """Appends one row to every series and flushes the file (see :meth:`_record`). A
         failed write (disk full, a file-size limit) raises :class:`ResultWriteError` naming
         the file, and closes it."""
+        if getattr(self, "_error", None) is not None:
+            raise self._error
         try:
             self._guarded(lambda: self._record(scene, **values))
         except (OSError, RuntimeError) as e:
@@ -197,6 +200,8 @@ class H5Recorder(_ClosesOnExit):
                  extra: Mapping[str, tuple[Any, str]] | None = None) -> str:
         """Stores per-body arrays in a new group (see :meth:`_snapshot`); a failed write raises
         :class:`ResultWriteError` naming the file, and closes it."""
+        if getattr(self, "_error", None) is not None:
+            raise self._error
         try:
             return self._guarded(lambda: self._snapshot(scene, fields=fields, extra=extra))
         except (OSError, RuntimeError) as e:
