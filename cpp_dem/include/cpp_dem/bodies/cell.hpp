@@ -24,6 +24,7 @@ struct PeriodicCell {
   bool on = false;                 ///< the scene is periodic along `periodic` axes
   bool mean_spin = true;           ///< bodies carry the mean spin axial(skew L)
   std::array<bool, 3> periodic{};  ///< which axes repeat
+  std::uint8_t pad_[3] = {};       ///< zero (explicit padding: checkpoints are byte-identical)
   Mat3 h = Mat3::Identity();       ///< cell vectors as columns, m
   Mat3 h_ref = Mat3::Identity();   ///< h when the cell was set (reference of the strain)
   Mat3 h_at_build = Mat3::Identity();  ///< h at the last broad-phase build

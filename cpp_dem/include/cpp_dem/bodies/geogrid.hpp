@@ -11,6 +11,7 @@ struct PFacet {
   int n[3] = {0, 0, 0};     ///< node body ids
   int link[3] = {-1, -1, -1};  ///< connections (n0 n1), (n1 n2), (n2 n0)
   int material = 0;
+  int pad_ = 0;             ///< zero (explicit padding: checkpoints are byte-identical)
   Real radius = 0;          ///< R_c, m
 };
 

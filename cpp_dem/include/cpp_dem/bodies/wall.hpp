@@ -13,6 +13,7 @@ struct Wall {
   Real position = 0;            ///< plane coordinate along axis, m
   Vec3 velocity = Vec3::Zero(); ///< imposed velocity, m/s (the axis component moves it)
   int material = 0;             ///< material index
+  int pad_ = 0;                 ///< zero (explicit padding: checkpoints are byte-identical)
   Vec3 force = Vec3::Zero();    ///< force exerted by the spheres on the wall (last step), N
   Real work = 0;                ///< work done by the wall on the spheres, cumulative, J
   Real moved_since_build = 0;   ///< |displacement| since the last broad-phase build, m

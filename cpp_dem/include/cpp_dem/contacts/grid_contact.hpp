@@ -15,10 +15,13 @@ enum class GridPrimitive : std::uint8_t { Node = 0, Connection = 1, Facet = 2 };
 struct GridContact {
   int sphere = 0;
   GridPrimitive kind = GridPrimitive::Node;
+  std::uint8_t pad_kind_[3] = {};  ///< zero (explicit padding: checkpoints are byte-identical)
   int prim = 0;                ///< node body id, link index or facet index
   bool active = false;
   bool owner = false;          ///< owns the contact this step
+  std::uint8_t pad_owner_[2] = {};  ///< zero (explicit padding)
   int phys_version = -1;
+  int pad_version_ = 0;        ///< zero (explicit padding)
   Real rc = 0;                 ///< radius of the virtual sphere R_c, m
   int nnodes = 0;              ///< 1, 2 or 3
   int node[3] = {0, 0, 0};

@@ -20,6 +20,7 @@ struct PairContact {
   bool simple = false;
   /// The periodic image of j the contact sees (bodies/cell.hpp's image code; kNoShift: j).
   std::uint8_t image = kNoShift;
+  std::uint8_t pad_ = 0;        ///< zero (explicit padding: checkpoints are byte-identical)
   int phys_version = -1;        ///< scene phys version the phys was computed at
   Real kn = 0;                  ///< copy of ContactPhys::kn
   Real ks = 0;                  ///< copy of ContactPhys::ks

@@ -12,6 +12,7 @@ struct WallContact {
   /// Linear law without viscous damping and rolling resistance: the wall pass runs its
   /// short kernel (the same operations as apply_law).
   bool simple = false;
+  std::uint8_t pad_[2] = {};    ///< zero (explicit padding: checkpoints are byte-identical)
   int phys_version = -1;
   ContactPhys phys;
   ContactState state;

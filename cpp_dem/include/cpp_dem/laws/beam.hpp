@@ -23,6 +23,7 @@ struct BeamParams {
 struct GridLink {
   int a = 0, b = 0;           ///< node body ids
   int material = 0;           ///< material for grain contacts
+  int pad_material_ = 0;      ///< zero (explicit padding: checkpoints are byte-identical)
   Real radius = 0;            ///< R_c, m
   Real length0 = 0;           ///< initial length L_c, m
   Real kn = 0, ks = 0;        ///< N/m, 000 eqs (7), (8)
@@ -30,6 +31,7 @@ struct GridLink {
   Real fn_max = 0, fs_max = 0;    ///< breakage forces, N (0: unbreakable)
   Real mr_max = 0, mtw_max = 0;   ///< elastic limits of the moments, N m (0: no limit)
   bool broken = false;
+  std::uint8_t pad_broken_[7] = {};  ///< zero (explicit padding)
   // History.
   Vec3 normal = Vec3::Zero();  ///< unit a -> b at the last step
   Vec3 fs = Vec3::Zero();      ///< shear force on b, N
@@ -38,6 +40,7 @@ struct GridLink {
   Real fn = 0;                 ///< axial force, N, tension positive
   Real dissip_plastic = 0;     ///< dissipated by capped moments, J
   int pending_break = -1;      ///< set during a step: 0 tension, 1 shear
+  int pad_pending_ = 0;        ///< zero (explicit padding)
   // Output of the last step.
   Vec3 force_b = Vec3::Zero();   ///< total force on b (a gets the opposite), N
   Vec3 torque_a = Vec3::Zero(), torque_b = Vec3::Zero();  ///< N m

@@ -77,6 +77,7 @@ struct Bond {
   Real gap0 = 0;
   bool cb_intact = false;       ///< the contact bond holds
   bool pb_intact = false;       ///< the parallel bond holds
+  std::uint8_t pad_intact_[6] = {};  ///< zero (explicit padding: checkpoints are byte-identical)
   // History.
   Vec3 normal = Vec3::Zero();   ///< unit a -> b at the last step
   Real fn = 0;                  ///< linear contact's normal force, N, compression positive
@@ -87,6 +88,7 @@ struct Bond {
   Vec3 pb_mb = Vec3::Zero();    ///< parallel bond's bending moment on b, N m
   Real dissip_friction = 0;     ///< dissipated by the linear contact's slip, J
   int pending_break = -1;       ///< set during a step: a BondBreakMode
+  int pad_pending_ = 0;         ///< zero (explicit padding)
   Real pending_value = 0;       ///< the value that reached the strength
   // Output of the last step.
   Vec3 force_b = Vec3::Zero();  ///< total force on b (a gets the opposite), N

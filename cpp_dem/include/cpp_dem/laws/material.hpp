@@ -19,6 +19,7 @@ namespace cpp_dem {
 ///    grains against a linear geogrid, as 002 §2.3).
 struct Material {
   ContactModel model = ContactModel::Linear;  ///< the law's elastic part (laws/law_list.hpp)
+  std::uint8_t pad_[7] = {};      ///< zero (explicit padding: checkpoints are byte-identical)
   Real density = 2650.0;          ///< mass density, kg/m^3
   Real young = 1e7;               ///< Young's modulus E, Pa
   /// Poisson's ratio nu, -. For the linear law this is the ratio k_s / k_n entering 000 eq (5)
@@ -43,6 +44,7 @@ struct Material {
 /// (and again when radii change). Plain values; the law kernels read only these.
 struct ContactPhys {
   ContactModel model = ContactModel::Linear;
+  std::uint8_t pad_[7] = {};  ///< zero (explicit padding: checkpoints are byte-identical)
   Real kn = 0;          ///< linear: normal stiffness N/m; Hertz: K in F = K delta^1.5, N/m^1.5
   Real ks = 0;          ///< linear: shear stiffness N/m; Mindlin: C in k_t = C delta^0.5, N/m^1.5
   Real tan_phi = 0;     ///< Coulomb friction coefficient, -
@@ -61,6 +63,7 @@ struct PairLaw {
   int a = 0, b = 0;            ///< the two materials (a <= b)
   bool model_set = false;
   ContactModel model = ContactModel::Linear;  ///< the law's elastic part (if model_set)
+  std::uint8_t pad_[6] = {};   ///< zero (explicit padding: checkpoints are byte-identical)
   Real kn = -1;                ///< linear law: normal stiffness, N/m
   Real ks = -1;                ///< linear law: shear stiffness, N/m
   Real friction = -1;          ///< Coulomb friction coefficient mu, -
