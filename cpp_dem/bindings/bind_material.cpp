@@ -37,26 +37,35 @@ damping_normal, damping_shear : viscous contact damping, ratio of critical, in [
 rolling_stiffness : beta_r, -; k_r = beta_r k_s R*^2 (0: no rolling resistance).
 rolling_friction : eta_r, -; |M_r| <= eta_r R* |F_n|.
 )doc")
-      .def(py::init([](const std::string& model, double density, double young, double poisson,
-                       double friction_angle_deg, double damping_normal, double damping_shear,
-                       double rolling_stiffness, double rolling_friction) {
+      // The arguments as Python objects, so that a string or a bool is refused naming the
+      // parameter (not with pybind11's list of signatures).
+      .def(py::init([](const py::object& model, const py::object& density,
+                       const py::object& young, const py::object& poisson,
+                       const py::object& friction_angle_deg, const py::object& damping_normal,
+                       const py::object& damping_shear, const py::object& rolling_stiffness,
+                       const py::object& rolling_friction) {
+             if (!py::isinstance<py::str>(model))
+               throw ParameterError("model=" + py::repr(model).cast<std::string>() +
+                                    ": must be the name of a law (cpp_dem.contact_laws())");
              Material mat;
-             mat.model = law_by_name(model);
-             mat.density = density;
-             mat.young = young;
-             mat.poisson = poisson;
-             mat.friction_angle = friction_angle_deg * M_PI / 180.0;
-             mat.damping_normal = damping_normal;
-             mat.damping_shear = damping_shear;
-             mat.rolling_stiffness = rolling_stiffness;
-             mat.rolling_friction = rolling_friction;
+             mat.model = law_by_name(model.cast<std::string>());
+             mat.density = number_arg(density, "density", "kg/m^3");
+             mat.young = number_arg(young, "young", "Pa");
+             mat.poisson = number_arg(poisson, "poisson", "-");
+             mat.friction_angle =
+                 number_arg(friction_angle_deg, "friction_angle_deg", "degrees") * M_PI / 180.0;
+             mat.damping_normal = number_arg(damping_normal, "damping_normal", "ratio of critical");
+             mat.damping_shear = number_arg(damping_shear, "damping_shear", "ratio of critical");
+             mat.rolling_stiffness = number_arg(rolling_stiffness, "rolling_stiffness", "-");
+             mat.rolling_friction = number_arg(rolling_friction, "rolling_friction", "-");
              mat.validate();
              return mat;
            }),
-           py::kw_only(), py::arg("model") = "linear", py::arg("density"), py::arg("young"),
-           py::arg("poisson"), py::arg("friction_angle_deg"), py::arg("damping_normal") = 0.0,
-           py::arg("damping_shear") = 0.0, py::arg("rolling_stiffness") = 0.0,
-           py::arg("rolling_friction") = 0.0)
+           py::kw_only(), py::arg("model") = py::str("linear"), py::arg("density"),
+           py::arg("young"), py::arg("poisson"), py::arg("friction_angle_deg"),
+           py::arg("damping_normal") = py::float_(0.0), py::arg("damping_shear") = py::float_(0.0),
+           py::arg("rolling_stiffness") = py::float_(0.0),
+           py::arg("rolling_friction") = py::float_(0.0))
       .def_property_readonly("model", [](const Material& s) {
         return law_info(s.model).name;
       })

@@ -27,6 +27,28 @@ py::dict energies_dict(const Energies& e) {
 /// body / on the sphere (k,3) N, normal (k,3), branch (k,3) m (pairs: from i's centre to j's,
 /// or j's periodic image; walls: zero), overlap (k,) m, normal force (k,) N, elastic shear
 /// force on the second body (k,3) N, tangent stiffnesses kn, ks (k,) N/m, tan_phi (k,) -.
+/// Scene::run without the GIL, asking Python about pending signals about every 0.1 s when on
+/// the main thread (the only one where Python runs signal handlers): a handler's exception
+/// (KeyboardInterrupt for Ctrl-C) stops the run after the step in progress, with step_count
+/// and time those of the steps done, and is raised here.
+void run_interruptible(Scene& s, long steps) {
+  static const unsigned long main_thread =
+      py::module_::import("threading").attr("main_thread")().attr("ident").cast<unsigned long>();
+  bool raised = false;
+  std::function<bool()> ask;
+  if (PyThread_get_thread_ident() == main_thread)
+    ask = [&raised] {
+      py::gil_scoped_acquire gil;
+      raised = PyErr_CheckSignals() != 0;  // the exception stays set in this thread's state
+      return raised;
+    };
+  {
+    py::gil_scoped_release nogil;
+    s.run(steps, ask);
+  }
+  if (raised) throw py::error_already_set();
+}
+
 py::dict contacts_dict(const Scene& s) {
   std::vector<int> ids;
   std::vector<Vec3> force, normal, branch, fs;
@@ -70,8 +92,16 @@ py::dict contacts_dict(const Scene& s) {
 void bind_scene(py::module_& m) {
   py::class_<Scene>(m, "Scene", "DEM scene (compiled part; see cpp_dem.Scene).")
       .def(py::init<>())
-      .def("add_material", &Scene::add_material, py::arg("material"),
-           "Adds a material; returns its index.")
+      .def("add_material",
+           [](Scene& s, const py::object& material) {
+             if (!py::isinstance<Material>(material))
+               throw ParameterError(
+                   "material=" + py::repr(material).cast<std::string>() +
+                   ": must be a Material (cpp_dem.linear_material(...), "
+                   "cpp_dem.hertz_mindlin_material(...) or cpp_dem.Material(...))");
+             return s.add_material(material.cast<const Material&>());
+           },
+           py::arg("material"), "Adds a material; returns its index.")
       .def("material", &Scene::material, py::arg("index"), py::return_value_policy::copy)
       .def_property_readonly("num_materials", &Scene::num_materials)
       .def("set_pair_law",
@@ -254,7 +284,9 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
       .def_property("dt_check_period", &Scene::dt_check_period, &Scene::set_dt_check_period,
                     "Without the automatic time step: every this many steps (0 = off) a dt "
                     "above critical_dt() stops the run with BlowUpError.")
-      .def("_run", &Scene::run, py::arg("steps"), py::call_guard<py::gil_scoped_release>())
+      .def("_run", &run_interruptible, py::arg("steps"),
+           "Runs `steps` steps in C++ without the GIL; a signal (Ctrl-C) raises its exception "
+           "(KeyboardInterrupt) within about 0.1 s, after the step in progress.")
       .def_property_readonly("step_count", &Scene::step_count)
       .def_property_readonly("time", &Scene::time, "Simulated time, s.")
       .def("critical_dt", &Scene::critical_dt,

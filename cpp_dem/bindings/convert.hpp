@@ -54,6 +54,19 @@ inline Vec3 to_vec3(const Array& a, const char* field) {
   return Vec3(a.at(0), a.at(1), a.at(2));
 }
 
+/// A number argument (a Python int or float, or a NumPy scalar; not a bool or a string), or
+/// ParameterError "<field>=<value>: must be a number (<unit>)".
+inline double number_arg(const py::handle& v, const char* field, const char* unit) {
+  if (!py::isinstance<py::bool_>(v) && !py::isinstance<py::str>(v) &&
+      !py::isinstance<py::bytes>(v)) {
+    const double x = PyFloat_AsDouble(v.ptr());
+    if (!(x == -1.0 && PyErr_Occurred())) return x;
+    PyErr_Clear();
+  }
+  throw ParameterError(std::string(field) + "=" + py::repr(v).cast<std::string>() +
+                       ": must be a number (" + unit + ")");
+}
+
 void bind_material(py::module_& m);
 void bind_scene(py::module_& m);
 void bind_grid(py::module_& m);

@@ -444,9 +444,16 @@ def polyline(scene, points, *, params: BeamParams, material: int,
              node_density_scale: float = 1.0) -> Geogrid:
     """A chain of grid nodes at ``points`` (n, 3), m, joined by cohesive links (a beam, a
     cable, a single rib). Every link is a member of its own, direction 'longitudinal'."""
-    pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    try:
+        pts = np.asarray(points, dtype=float).reshape(-1, 3)
+    except (TypeError, ValueError):
+        raise ParameterError(f"points={points!r}: must be (n, 3) numbers (m)") from None
     if len(pts) < 2:
         raise ParameterError(f"points: need at least 2, got {len(pts)}")
+    bad = ~np.isfinite(pts).all(axis=1)
+    if bad.any():
+        k = int(np.argmax(bad))
+        raise ParameterError(f"points[{k}]={pts[k].tolist()}: must be 3 finite numbers (m)")
     _check_positive("node_density_scale", node_density_scale)
     b = _Builder(params, _density(unit_weight, density))
     ids = [b.node(k, p) for k, p in enumerate(pts)]

@@ -13,6 +13,8 @@ from . import _core
 from ._core import Material, ParameterError
 
 _DOF_BITS = {"x": 1, "y": 2, "z": 4, "rx": 8, "ry": 16, "rz": 32}
+#: The most steps one call of Scene.run takes (the core counts steps in a signed 64-bit integer).
+_MAX_STEPS = 2**63 - 1
 
 #: Wall order of :meth:`Scene.add_box`.
 BOX_WALLS = ("x-", "x+", "y-", "y+", "z-", "z+")
@@ -53,6 +55,11 @@ def hertz_mindlin_material(*, density: float, shear_modulus: float, poisson: flo
     density: kg/m^3. Young's modulus is E = 2 G (1 + nu).
     """
     _check_parts(parts)
+    for key, value, unit in (("density", density, "kg/m^3"), ("shear_modulus", shear_modulus, "Pa"),
+                             ("poisson", poisson, "-"),
+                             ("friction_coefficient", friction_coefficient, "-")):
+        if isinstance(value, (bool, str, bytes)) or not isinstance(value, (int, float, np.number)):
+            raise ParameterError(f"{key}={value!r}: must be a number ({unit})")
     if not (math.isfinite(poisson) and -1 < poisson <= 0.5):
         raise ParameterError(f"poisson={poisson}: must be in (-1, 0.5]")
     if not (friction_coefficient >= 0 and math.isfinite(friction_coefficient)):
@@ -228,6 +235,11 @@ class Scene(_core.Scene):
         x = np.atleast_2d(_numbers(positions, "positions", "m"))
         if x.shape[1] != 3:
             raise ParameterError(f"positions: shape {x.shape}; must be (n, 3) centres of mass, m")
+        bad = ~np.isfinite(x).all(axis=1)
+        if bad.any():
+            k = int(np.argmax(bad))
+            raise ParameterError(f"positions[{k}]={x[k].tolist()}: must be 3 finite numbers (m, "
+                                 "the clump's centre of mass)")
         n = len(x)
         if orientations is None:
             q = np.tile([1.0, 0.0, 0.0, 0.0], (n, 1))
@@ -324,11 +336,16 @@ class Scene(_core.Scene):
         If ``every`` > 0, the loop returns to Python every ``every`` steps to call
         ``callback(scene)`` (never per contact) and, with ``progress``, to print a line.
         """
-        if isinstance(steps, bool) or not float(steps).is_integer():
+        if (isinstance(steps, (bool, str, bytes))
+                or not isinstance(steps, (int, float, np.integer, np.floating))
+                or not float(steps).is_integer()):
             raise ParameterError(f"steps={steps!r}: must be a whole number of steps")
         steps = int(steps)
         if steps < 0:
             raise ParameterError(f"steps={steps}: must be >= 0")
+        if steps > _MAX_STEPS:
+            raise ParameterError(f"steps={steps}: must be <= {_MAX_STEPS} (2**63 - 1) in one "
+                                 "call")
         if every <= 0:
             self._run(steps)
             self._check_controller_limits()

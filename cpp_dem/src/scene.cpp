@@ -5,6 +5,7 @@
 #include "cpp_dem/geometry/sphere_wall.hpp"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <limits>
 #include <sstream>
@@ -76,6 +77,7 @@ void Scene::raise_overlap(long k, bool wall) const {
                         ? "); the initial configuration overlaps this much: move the bodies "
                           "apart or relax the overlaps first (cpp_dem.prep.relax_overlaps)"
                         : "); the time step may be too large or the contact too soft";
+  int body = -1;
   if (wall) {
     const WallContact& c = wall_contacts_[k];
     const Wall& w = walls_[c.wall];
@@ -83,6 +85,7 @@ void Scene::raise_overlap(long k, bool wall) const {
     os << "blow-up at step " << step_ << ": body " << id_of(c.body) << " overlaps wall " << c.wall
        << " by " << (bodies_.radius[c.body] - s) / bodies_.radius[c.body]
        << " of its radius (max_overlap_ratio=" << max_overlap_ratio_ << why;
+    body = c.body;
   } else {
     const PairContact& c = pairs_[k];
     const Real ov = bodies_.radius[c.i] + bodies_.radius[c.j] -
@@ -91,7 +94,9 @@ void Scene::raise_overlap(long k, bool wall) const {
        << " overlap by " << ov / std::min(bodies_.radius[c.i], bodies_.radius[c.j])
        << " of the smaller radius (max_overlap_ratio=" << max_overlap_ratio_ << why;
     if (!std::isfinite(ov)) os << " (non-finite position)";
+    body = bodies_.radius[c.j] < bodies_.radius[c.i] ? c.j : c.i;
   }
+  if (step_ > 0) os << blow_up_hint(body);
   throw BlowUpError(os.str());
 }
 
@@ -124,24 +129,101 @@ std::string non_finite_quantity(const Vec3& f, const Vec3& t, const Vec3& v, con
 }
 }  // namespace
 
+void Scene::note_formed_contact(const ContactPhys& p, int b1, int b2) const {
+  // The mass that the contact's spring moves: a clump member's clump; a fully blocked body
+  // (or clump) moves none.
+  const auto free_mass = [this](int b) {
+    if (b < 0) return std::numeric_limits<Real>::infinity();
+    const int c = bodies_.clump[b];
+    if (c >= 0)
+      return (clumps_.blocked[c] & DOF_ALL) == DOF_ALL ? std::numeric_limits<Real>::infinity()
+                                                        : clumps_.mass[c];
+    return (bodies_.blocked[b] & DOF_ALL) == DOF_ALL ? std::numeric_limits<Real>::infinity()
+                                                      : bodies_.mass[b];
+  };
+  const Real m1 = free_mass(b1), m2 = free_mass(b2);
+  const int b = m2 <= m1 ? b2 : b1;
+  const Real m = std::min(m1, m2);
+  if (b < 0 || !(m < std::numeric_limits<Real>::infinity())) return;
+  // The law's stiffness as the contact forms (the linear law's k_n; a Hertz contact's is
+  // ~0 at first, and the grains' stiffness floor in check_dt bounds it).
+  Real kn, ks;
+  tangent_stiffness(p, 0, kn, ks);
+  const Real q = std::isfinite(kn) && kn > 0 ? kn / m : 0;
+  if (q <= formed_.stiffness_per_mass.load(std::memory_order_relaxed)) return;
+  std::lock_guard<std::mutex> hold(formed_.lock);
+  if (q <= formed_.stiffness_per_mass.load(std::memory_order_relaxed)) return;
+  formed_.body = id_of(b);
+  formed_.stiffness_per_mass.store(q, std::memory_order_relaxed);
+}
+
+void Scene::check_dt() {
+  // The contacts active now (critical_dt_body), and those that formed and perhaps opened
+  // again since the last check: bouncing grains may have no contact at the moment of the
+  // check. Such a contact gives every grain its stiffness floor (as any active contact does)
+  // and its own single-contact estimate sqrt(2 m / k_n), m the lighter free body's mass.
+  const Real q = formed_.stiffness_per_mass.load(std::memory_order_relaxed);
+  const int q_body = formed_.body;
+  const long since = formed_.since;
+  formed_.stiffness_per_mass.store(-1, std::memory_order_relaxed);
+  formed_.body = -1;
+  formed_.since = step_;
+  int body = -1;
+  Real est = critical_dt_body(&body, q >= 0);
+  bool formed = false;
+  if (q > 0) {
+    const Real est_formed = std::sqrt(2 / q);
+    if (est_formed < est) {
+      est = est_formed;
+      body = q_body;
+      formed = true;
+    }
+  }
+  if (body < 0 || !(dt_ > est * (1 + 1e-12))) return;
+  std::ostringstream os;
+  os.precision(4);
+  os << "blow-up at step " << step_ << ": the time step dt=" << dt_
+     << " s exceeds the critical estimate " << est << " s (" << dt_ / est << " x; set by body "
+     << body;
+  if (formed) os << ", in a contact that formed after step " << since;
+  else if (q >= 0) os << "; contacts formed after step " << since;
+  os << "); leapfrog may be unstable and results would be wrong: lower dt or use "
+        "set_auto_timestep(safety <= 1)";
+  throw BlowUpError(os.str());
+}
+
+std::string Scene::blow_up_hint(int b) const {
+  std::ostringstream os;
+  os.precision(3);
+  int body = -1;
+  const Real est = critical_dt_body(&body, true);
+  if (std::isfinite(est) && est > 0) {
+    os << "; dt=" << dt_ << " s is " << dt_ / est << " x the critical estimate " << est << " s";
+    if (dt_ > est) os << " (lower dt or use set_auto_timestep(safety <= 1))";
+  }
+  if (b >= 0 && b < num_bodies() && bodies_.kind[b] == BODY_SPHERE) {
+    // How deep the grain's own weight alone would press one contact of the linear law's
+    // stiffness E R, in radii: well below 1e-3 for sand-like moduli (E 1e7-1e10 Pa).
+    const int mi = bodies_.material[b];
+    const Material& m = materials_[mi];
+    const Real r = bodies_.radius[b], k = m.young * r;
+    const Real sink = bodies_.mass[b] * gravity_.norm() / k / r;
+    if (sink > 0.01)
+      os << "; material " << mi << " is very soft for these grains: its young=" << m.young
+         << " Pa gives a contact stiffness E R = " << k << " N/m, and a grain's own weight alone "
+         << "would press one contact " << sink << " of its radius deep (sand-like grains: "
+         << "young 1e7-1e10 Pa); raise young";
+  }
+  return os.str();
+}
+
 void Scene::step() {
   if (ts_period_ > 0 && step_ % ts_period_ == 0 && step_ > 0) {
     const Real est = critical_dt();
     if (std::isfinite(est)) dt_ = ts_safety_ * est;  // nothing free: keep dt
   }
-  if (ts_period_ == 0 && dt_check_period_ > 0 && step_ > 0 && step_ % dt_check_period_ == 0) {
-    int body = -1;
-    const Real est = critical_dt_body(&body);
-    if (body >= 0 && dt_ > est * (1 + 1e-12)) {
-      std::ostringstream os;
-      os.precision(4);
-      os << "blow-up at step " << step_ << ": the time step dt=" << dt_
-         << " s exceeds the critical estimate " << est << " s (set by body " << body
-         << "); leapfrog may be unstable and results would be wrong: lower dt or use "
-            "set_auto_timestep(safety <= 1)";
-      throw BlowUpError(os.str());
-    }
-  }
+  if (ts_period_ == 0 && dt_check_period_ > 0 && step_ > 0 && step_ % dt_check_period_ == 0)
+    check_dt();
   for (const auto& c : controllers_)
     if (c->enabled && step_ % c->period == 0) c->apply(*this);
   if (need_rebuild()) rebuild();
@@ -167,7 +249,8 @@ void Scene::step() {
                                                      : "pfacet ")
            << c.prim << ") by " << c.geom.overlap / bodies_.radius[c.sphere]
            << " of the grain radius (max_overlap_ratio=" << max_overlap_ratio_
-           << "); the time step may be too large or the contact too soft";
+           << "); the time step may be too large or the contact too soft"
+           << blow_up_hint(c.sphere);
         throw BlowUpError(os.str());
       }
       compute_links();
@@ -270,16 +353,42 @@ void Scene::check_tunnelling() {
        << " s), more than max_step_ratio=" << max_step_ratio_ << " of "
        << (bodies_.kind[b] == BODY_SPHERE ? "its radius " : "its radius plus the smallest grain's ")
        << allowed << " m: it can pass through a wall, a grain or a geogrid member without touching it "
-          "(tunnelling); the time step may be too large, or an imposed velocity or force too big";
+          "(tunnelling); the time step may be too large, or an imposed velocity or force too big"
+       << blow_up_hint(b);
     throw BlowUpError(os.str());
   }
 }
 
-void Scene::run(long n) {
+long Scene::run(long n, const std::function<bool()>& interrupted) {
   if (n < 0) throw ParameterError("n=" + std::to_string(n) + ": must be >= 0 steps");
   if (num_bodies() > 0 && margin_ <= 0 && default_margin() <= 0)
     throw ParameterError("verlet_margin: could not derive a default");
-  for (long k = 0; k < n; ++k) step();
+  if (!interrupted) {
+    for (long k = 0; k < n; ++k) step();
+    return n;
+  }
+  // Steps in batches whose length follows the cost of a step, so that the clock is read
+  // about every millisecond (not every step: a step of a few grains costs less than a read),
+  // and `interrupted` is asked about every 0.1 s of wall time.
+  using Clock = std::chrono::steady_clock;
+  constexpr double kRead = 1e-3, kAsk = 0.1;  // s
+  Clock::time_point last_read = Clock::now(), last_ask = last_read;
+  long batch = 1;
+  for (long k = 0; k < n;) {
+    const long m = std::min(batch, n - k);
+    for (long j = 0; j < m; ++j) step();
+    k += m;
+    const Clock::time_point now = Clock::now();
+    const double took = std::chrono::duration<double>(now - last_read).count();
+    last_read = now;
+    if (took < 0.5 * kRead && batch < (1L << 30)) batch *= 2;
+    else if (took > 2 * kRead && batch > 1) batch /= 2;
+    if (std::chrono::duration<double>(now - last_ask).count() >= kAsk) {
+      last_ask = now;
+      if (k < n && interrupted()) return k;
+    }
+  }
+  return n;
 }
 
 int Scene::num_active_contacts() const {

@@ -4,7 +4,10 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
+#include <functional>
 #include <memory>
+#include <mutex>
 #include <string>
 #include <utility>
 #include <vector>
@@ -303,8 +306,10 @@ class Scene {
   std::shared_ptr<Controller> controller(int id) const;
 
   // ---- running -------------------------------------------------------------------------
-  /// Runs n steps in C++.
-  void run(long n);
+  /// Runs n steps in C++. With `interrupted`, asks it about every 0.1 s of wall time
+  /// (between steps, never inside one) whether to stop; returns the steps done, n unless it
+  /// said yes.
+  long run(long n, const std::function<bool()>& interrupted = {});
   long step_count() const { return step_; }
   Real time() const { return time_; }
 
@@ -313,10 +318,14 @@ class Scene {
   /// (min over bodies and axes of sqrt(2 m / K_axis), translational and rotational); the
   /// p-wave estimate when no contact is active.
   Real critical_dt() const;
-  /// critical_dt() and the body that sets it (-1 when no contact or link exists).
-  Real critical_dt_body(int* body) const;
+  /// critical_dt() and the body that sets it (-1 when no contact or link exists). With
+  /// `contact_seen`, the estimate a contact anywhere gives (every grain's stiffness floor)
+  /// even when none is active now.
+  Real critical_dt_body(int* body, bool contact_seen = false) const;
   /// Every `period` steps (0 = off) a run without the automatic time step checks that dt does
-  /// not exceed critical_dt() and throws BlowUpError naming the step and body if it does.
+  /// not exceed the critical estimate of the contacts active now and of every contact that
+  /// formed since the last check (check_dt), and throws BlowUpError naming the step, dt, the
+  /// estimate and the body if it does.
   void set_dt_check_period(int period);
   int dt_check_period() const { return dt_check_period_; }
   /// p-wave estimate min_b R_b sqrt(rho_b / E_b), s.
@@ -553,6 +562,29 @@ class Scene {
   Real ts_safety_ = 0.8;
   int ts_period_ = 0;
   int dt_check_period_ = 100;
+  /// The stiffest contact that formed since the last dt check: the passes note every contact
+  /// that takes its parameters (update_phys: a contact forms, or its materials changed) with
+  /// its k_n over the mass of its lighter free body (1/s^2; -1: none formed) and that body.
+  /// Written by the passes' threads only when a contact forms; read and cleared by check_dt.
+  /// Not saved, and not copied with the scene.
+  struct FormedContacts {
+    std::atomic<Real> stiffness_per_mass{-1};
+    int body = -1;
+    long since = 0;  // the step of the last check
+    std::mutex lock;
+    FormedContacts() = default;
+    FormedContacts(const FormedContacts&) {}
+    FormedContacts& operator=(const FormedContacts&) { return *this; }
+  };
+  mutable FormedContacts formed_;
+  /// Notes a contact between bodies b1 and b2 (-1: a wall, or a grid node whose links bound
+  /// its step) that took the parameters p (see formed_).
+  void note_formed_contact(const ContactPhys& p, int b1, int b2) const;
+  /// The dt check (set_dt_check_period).
+  void check_dt();
+  /// The end of a blow-up's message (overlap, tunnelling) of body b: dt against the critical
+  /// estimate and, when b's material is soft against its weight, that material's modulus.
+  std::string blow_up_hint(int b) const;
   long step_ = 0;
   Real time_ = 0;
   int phys_version_ = 0;

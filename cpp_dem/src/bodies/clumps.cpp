@@ -1,5 +1,6 @@
 // The clump API of the scene: adding clumps, their state setters, and placing the members.
 #include <cmath>
+#include <sstream>
 #include <string>
 
 #include "cpp_dem/scene.hpp"
@@ -26,7 +27,12 @@ int Scene::add_clump(const std::vector<Vec3>& local, const std::vector<Real>& ra
   for (int a = 0; a < 3; ++a)
     require(std::isfinite(inertia[a]) && inertia[a] > 0, "inertia", inertia[a],
             "principal moments must be > 0 (kg m^2)");
-  if (!com.allFinite()) throw ParameterError("com: must be finite (m)");
+  if (!com.allFinite()) {
+    std::ostringstream os;
+    os << "position=(" << com[0] << ", " << com[1] << ", " << com[2]
+       << ") of the clump (its centre of mass): must be 3 finite numbers (m)";
+    throw ParameterError(os.str());
+  }
   require(std::isfinite(stiffness_radius) && stiffness_radius >= 0, "stiffness_radius",
           stiffness_radius, "must be >= 0 (m; 0: the members' own radii)");
   const Real qn = ori.norm();

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <sstream>
 #include <tuple>
 
 #include "cpp_dem/geometry/sphere_grid.hpp"
@@ -28,11 +29,16 @@ int Scene::add_grid_nodes(const std::vector<Vec3>& pos, Real radius,
     throw ParameterError("mass, inertia: need one value per node (" +
                          std::to_string(pos.size()) + ")");
   for (size_t k = 0; k < pos.size(); ++k) {
+    // The position first: a non-finite node also makes its lumped mass non-finite.
+    if (!pos[k].allFinite()) {
+      std::ostringstream os;
+      os << "positions[" << k << "]=(" << pos[k][0] << ", " << pos[k][1] << ", " << pos[k][2]
+         << ") of a grid node: must be 3 finite numbers (m)";
+      throw ParameterError(os.str());
+    }
     require(std::isfinite(mass[k]) && mass[k] > 0, "mass", mass[k], "must be > 0 (kg)");
     require(std::isfinite(inertia[k]) && inertia[k] > 0, "inertia", inertia[k],
             "must be > 0 (kg m^2)");
-    if (!pos[k].allFinite())
-      throw ParameterError("position of node " + std::to_string(k) + ": must be finite");
   }
   const int first = num_bodies();
   for (size_t k = 0; k < pos.size(); ++k) push_body(pos[k], radius, mass[k], inertia[k], material, BODY_GRID_NODE);

@@ -21,14 +21,14 @@ Real Scene::pwave_dt() const {
 
 Real Scene::critical_dt() const { return critical_dt_body(nullptr); }
 
-Real Scene::critical_dt_body(int* arg_body) const {
+Real Scene::critical_dt_body(int* arg_body, bool contact_seen) const {
   // Per body and axis, the summed contact stiffness K_a (translation) and K_a^rot; the
   // estimate sqrt(2 m / K_a) is a Gershgorin bound on 2 / omega_max for the assembled
   // system: exact for two equal spheres in contact, sqrt(2) below the exact value for a
   // sphere against a rigid wall.
   const int n = num_bodies();
   std::vector<Vec3> kt(n, Vec3::Zero()), kr(n, Vec3::Zero());
-  bool any = false;
+  bool any = contact_seen;
   auto add = [&](int b, const Vec3& nrm, Real kn, Real ks, Real arm, Real krol) {
     for (int a = 0; a < 3; ++a) {
       const Real n2 = nrm[a] * nrm[a];

@@ -21,6 +21,7 @@ void Scene::update_phys(GridContact& c) const {
                          stiffness_radius(c.sphere), m_virtual, bodies_.mass[c.sphere],
                          pair_law(bodies_.material[c.node[0]], bodies_.material[c.sphere]));
   c.phys_version = phys_version_;
+  note_formed_contact(c.phys, c.sphere, -1);  // (the nodes' links bound their own step)
 }
 
 // ---- grain–geogrid contacts -------------------------------------------------------------------

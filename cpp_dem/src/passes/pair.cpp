@@ -24,6 +24,7 @@ void Scene::update_phys(PairContact& c, PairContactCold& cold) const {
   c.tan_phi = p.tan_phi;
   c.simple = short_kernel_applies(p);
   c.phys_version = phys_version_;
+  note_formed_contact(p, c.i, c.j);
 }
 
 

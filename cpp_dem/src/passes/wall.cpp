@@ -24,6 +24,7 @@ void Scene::update_phys(WallContact& c) const {
                          pair_law(walls_[c.wall].material, bodies_.material[c.body]));
   c.simple = short_kernel_applies(c.phys);
   c.phys_version = phys_version_;
+  note_formed_contact(c.phys, c.body, -1);
 }
 
 namespace {
