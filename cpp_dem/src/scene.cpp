@@ -183,12 +183,10 @@ void Scene::check_dt() {
   std::ostringstream os;
   os.precision(4);
   os << "blow-up at step " << step_ << ": the time step dt=" << dt_
-     << " s exceeds the critical estimate " << est << " s (" << dt_ / est << " x; set by body "
-     << body;
+     << " s exceeds the critical estimate " << est << " s (set by body " << body;
   if (formed) os << ", in a contact that formed after step " << since;
-  else if (q >= 0) os << "; contacts formed after step " << since;
-  os << "); leapfrog may be unstable and results would be wrong: lower dt or use "
-        "set_auto_timestep(safety <= 1)";
+  os << ") " << dt_ / est << " x; leapfrog may be unstable and results would be wrong: lower "
+        "dt or use set_auto_timestep(safety <= 1)";
   throw BlowUpError(os.str());
 }
 
