@@ -36,7 +36,7 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from femcoupling._checks import _pos, _real
+from femcoupling._checks import _CELLS_PER_SIZE, _check_cells, _pos, _real
 
 __all__ = ["ElasticBlockResult", "solve_elastic_block"]
 
@@ -90,6 +90,7 @@ def _validate(
     top_traction_pa: Any,
     mesh_size_m: Any,
     degree: Any,
+    max_cells: Any = None,
 ) -> tuple[float, float, float, float, float, float, float, int]:
     """Check every input of :func:`solve_elastic_block`; errors name the field and value."""
     lx = _pos("lx_m", lx_m)
@@ -103,6 +104,7 @@ def _validate(
     h = _pos("mesh_size_m", mesh_size_m)
     if isinstance(degree, bool) or not isinstance(degree, (int, np.integer)) or degree not in (1, 2):
         raise ValueError(f"degree={degree!r}: must be 1 or 2")
+    _check_cells(f"mesh_size_m={h!r}", _CELLS_PER_SIZE[3] * lx * ly * lz / h**3, max_cells, 3)
     return lx, ly, lz, young, nu, traction, h, int(degree)
 
 
@@ -193,6 +195,7 @@ def solve_elastic_block(
     mesh_size_m: float,
     degree: int = 1,
     comm: Any = None,
+    max_cells: int | None = None,
 ) -> ElasticBlockResult:
     """Solve a linear-elastic box on rollers under a uniform normal top traction.
 
@@ -219,6 +222,9 @@ def solve_elastic_block(
         degree: displacement polynomial degree, 1 or 2.
         comm: mpi4py communicator; ``MPI.COMM_WORLD`` if None. Collective: every
             rank of ``comm`` must call this; gmsh runs on rank 0 only.
+        max_cells: the most tetrahedra the mesh may have, estimated before meshing
+            (4.63 per mesh_size_m^3 of volume); None is the default cap, 150 000
+            (femcoupling.geometry.ReinforcedSoilBody.max_cells).
 
     Returns:
         An :class:`ElasticBlockResult` (stresses tension-positive), the same on
@@ -229,7 +235,7 @@ def solve_elastic_block(
         TypeError: an input is not a real number.
     """
     lx, ly, lz, young, nu, traction, h, degree = _validate(
-        lx_m, ly_m, lz_m, young_pa, poisson, top_traction_pa, mesh_size_m, degree
+        lx_m, ly_m, lz_m, young_pa, poisson, top_traction_pa, mesh_size_m, degree, max_cells
     )
 
     from femcoupling import _dolfinx

@@ -36,7 +36,9 @@ import math
 from collections.abc import Sequence
 from typing import Any
 
-from femcoupling._checks import FemInputError, _pos, _real  # noqa: F401  (re-exported)
+import numpy as np
+
+from femcoupling._checks import _CELLS_PER_SIZE, FemInputError, _check_cells, _pos, _real  # noqa: F401
 from femcoupling.elastic import _gmsh_model
 
 __all__ = [
@@ -126,6 +128,15 @@ class ReinforcedSoilBody:
         fine_radius_m: distance from the footing edge within which ``fine_size_m`` applies;
             the size grows linearly to ``mesh_size_m`` over 4 x this distance, m. Default
             (0) means 2 b.
+        max_cells: the most cells the mesh may have (estimated before gmsh meshes:
+            :meth:`estimated_cells`); a body above it is refused. None (the default) is
+            900 000 in 2D and 150 000 in 3D: about 12 GiB each for a Drucker-Prager
+            :class:`~femcoupling.elastoplastic.SoilModel` with P2 elements (13 KiB per
+            triangle, 79 KiB per tetrahedron measured, docs/fem.md), half of a 24 GiB
+            machine; raise it to mesh more on a bigger one.
+
+    Geogrid layers must not overlap (nor coincide), nor element regions: each cell carries
+    one layer's or one region's tag.
     """
 
     width_m: float
@@ -138,6 +149,7 @@ class ReinforcedSoilBody:
     mesh_size_m: float = 0.5
     fine_size_m: float = 0.05
     fine_radius_m: float = 0.0
+    max_cells: int | None = None
 
     def __post_init__(self) -> None:
         w = _pos("width_m", self.width_m)
@@ -182,6 +194,78 @@ class ReinforcedSoilBody:
                 if c - reg.size_m / 2 < 0 or c + reg.size_m / 2 > e:
                     raise FemInputError(f"regions[{j}].center_m[{k}]={c!r}: the region "
                                         f"(size {reg.size_m}) must lie inside [0, {e}]")
+        self._check_overlaps()
+        _check_cells(f"mesh_size_m={self.mesh_size_m!r}, fine_size_m={self.fine_size_m!r}",
+                     self.estimated_cells(), self.max_cells, self.dim)
+
+    def _check_overlaps(self) -> None:
+        """Refuses geogrid layers that overlap (or coincide) and element regions that
+        overlap, naming both and their extents."""
+        def span(lay):
+            return (lay.z_m - lay.thickness_m / 2, lay.z_m + lay.thickness_m / 2)
+
+        tol = 1e-9 * max(self.width_m, self.height_m)  # touching by construction is allowed
+        for i, a in enumerate(self.layers):
+            for k in range(i):
+                b = self.layers[k]
+                (a0, a1), (b0, b1) = span(a), span(b)
+                if (a0 < b1 - tol and b0 < a1 - tol and a.x_min_m < b.x_max_m - tol
+                        and b.x_min_m < a.x_max_m - tol):
+                    raise FemInputError(
+                        f"layers[{i}] (z {a0:g}..{a1:g} m, x {a.x_min_m:g}..{a.x_max_m:g} m) "
+                        f"overlaps layers[{k}] (z {b0:g}..{b1:g} m, x {b.x_min_m:g}.."
+                        f"{b.x_max_m:g} m): geogrid layers must not overlap or coincide (a "
+                        "cell carries one layer); merge them into one, or move one")
+        for j, a in enumerate(self.regions):
+            for k in range(j):
+                b = self.regions[k]
+                if all(abs(ca - cb) < (a.size_m + b.size_m) / 2 - tol
+                       for ca, cb in zip(a.center_m, b.center_m)):
+                    raise FemInputError(
+                        f"regions[{j}] {a.name!r} ({_box_text(a)}) overlaps regions[{k}] "
+                        f"{b.name!r} ({_box_text(b)}): element regions must not overlap (a "
+                        "cell belongs to one region)")
+
+    def estimated_cells(self) -> float:
+        """The number of cells gmsh will make, estimated from the body's size and the mesh
+        size field (coarse everywhere, fine in the regions and along the layers with their
+        transition, graded about the footing edge), without meshing. Overlapping refinements
+        are counted twice, so it errs high; measured against gmsh within a factor of 2
+        (docs/fem.md)."""
+        d = self.dim
+        w, h, b, ly = self.width_m, self.height_m, self.footing_half_width_m, self.length_m
+        fine, coarse = self.fine_size_m, self.mesh_size_m
+        per = _CELLS_PER_SIZE[d]  # cells per h^d of volume at a uniform size h
+        depth = 1.0 if d == 2 else ly  # the 2D figures times the extent in y
+
+        def extra(size):  # cells per m^d at `size`, above the coarse background
+            return per * (size ** -d - coarse ** -d)
+
+        n = per * w * h * depth / coarse ** d
+        # The element regions and the layers: fine inside, through half of the 4 x fine
+        # transition about them.
+        boxes = [(reg.size_m, reg.size_m, reg.size_m if d == 3 else 1.0)
+                 for reg in self.regions]
+        boxes += [(lay.x_max_m - lay.x_min_m, lay.thickness_m, ly if d == 3 else 1.0)
+                  for lay in self.layers]
+        for bx in boxes:
+            vol = (bx[0] + 4 * fine) * (bx[1] + 4 * fine)
+            vol *= (min(bx[2] + 4 * fine, ly) if d == 3 else 1.0)
+            n += vol * extra(fine)
+        # The footing edge: fine within R of it, graded to coarse over R..5R (integrated on a
+        # grid of the cross-section (x, z) near it; in 3D along the edge's length).
+        r = self.fine_radius_m or 2.0 * b
+        x0, x1 = max(0.0, b - 5 * r), min(w, b + 5 * r)
+        z0 = max(0.0, h - 5 * r)
+        m = 200
+        hx, hz = (x1 - x0) / m, (h - z0) / m
+        x = x0 + (np.arange(m) + 0.5) * hx
+        z = z0 + (np.arange(m) + 0.5) * hz
+        dist = np.hypot(x[:, None] - b, z[None, :] - h)
+        size = fine + (coarse - fine) * np.clip((dist - r) / (4 * r), 0.0, 1.0)
+        total = float(extra(size).sum())
+        n += total * hx * hz * depth
+        return n
 
     def region_tag(self, name: str) -> int:
         """Cell tag of the element region called ``name``."""
@@ -203,6 +287,12 @@ class ReinforcedSoilBody:
     def layer_tags(self) -> list[int]:
         """Cell tags of the geogrid layers."""
         return [LAYER_TAG0 + i for i in range(len(self.layers))]
+
+
+def _box_text(reg: ElementRegion) -> str:
+    s = reg.size_m / 2
+    return ", ".join(f"{'xyz'[k] if len(reg.center_m) == 3 else 'xz'[k]} {c - s:g}..{c + s:g} m"
+                     for k, c in enumerate(reg.center_m))
 
 
 @dataclasses.dataclass
