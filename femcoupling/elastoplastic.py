@@ -599,8 +599,17 @@ class SoilModel:
             raise FemInputError("load_footing: give exactly one of pressure_pa, settlement_m")
         if pressure_pa is not None:
             p = geo._real("pressure_pa", pressure_pa)
-            self._displacement_control = False
             t0 = float(self.traction.value[self.zc])
+            if p - t0 < 0 and self._cohesionless_under_footing():
+                raise FemInputError(
+                    f"pressure_pa={p!r}: a tensile footing load (the footing pressure, "
+                    f"compression positive, would go from {0.0 - t0:g} to {p - t0:g} Pa); the "
+                    "soil is a cohesionless Drucker-Prager (cohesion_pa="
+                    f"{self.soil.cohesion_pa!r}), which carries no tension, so no load step "
+                    "could converge. Load in compression (pressure_pa > 0), unload by at most "
+                    f"the current footing pressure ({0.0 - t0:g} Pa), or give the soil "
+                    "cohesion")
+            self._displacement_control = False
 
             def apply(lf: float) -> None:
                 self.traction.value[self.zc] = t0 - lf * p
@@ -612,7 +621,25 @@ class SoilModel:
 
             def apply(lf: float) -> None:
                 self.footing_u.value = u0 - lf * d
-        return self._run_stage("footing", apply, steps, callback)
+        try:
+            return self._run_stage("footing", apply, steps, callback)
+        except NewtonDivergence as e:
+            if settlement_m is not None and d < 0 and self._cohesionless_under_footing():
+                raise NewtonDivergence(
+                    f"{e}; settlement_m={d!r} lifts the footing, and the soil is a "
+                    f"cohesionless Drucker-Prager (cohesion_pa={self.soil.cohesion_pa!r}), "
+                    "which carries no tension") from e
+            raise
+
+    def _cohesionless_under_footing(self) -> bool:
+        """The soil under the footing carries no tension: a Drucker-Prager soil without
+        cohesion, and no element region (whose material may carry tension) reaching the top
+        under the footing."""
+        b, h = self.body.footing_half_width_m, self.body.height_m
+        regions_on_top = any(r.center_m[-1] + r.size_m / 2 >= h - 1e-9 * h
+                             and r.center_m[0] - r.size_m / 2 < b for r in self.body.regions)
+        return (isinstance(self.soil, DruckerPrager) and self.soil.cohesion_pa == 0
+                and not regions_on_top)
 
     # ---- measurements (NumPy out, identical on every rank) -------------------------------
 
