@@ -132,3 +132,144 @@ def test_elements_without_copies_give_their_accepted_states_and_recover_before_a
         # states() are the accepted states (fetched from the workers), not the built ones
         got = [DemElement.from_bytes(b).stress() for b in pool.states()]
         assert all(np.array_equal(a, el.stress()) for a, el in zip(got, serial))
+
+
+# ---- the FEM side ----------------------------------------------------------------------------
+
+def _body(**kw):
+    from femcoupling.geometry import ReinforcedSoilBody
+
+    return ReinforcedSoilBody(**{"width_m": 4.0, "height_m": 3.0, "footing_half_width_m": 0.5,
+                                 **kw})
+
+
+def test_a_0_1_mm_fem_mesh_is_refused_with_its_estimate_before_gmsh():
+    from femcoupling import solve_elastic_block
+    from femcoupling.geometry import FemInputError
+
+    with pytest.raises(FemInputError, match=r"mesh_size_m=0.0001, fine_size_m=0.0001: about "
+                       r"2.8e\+09 cells .* GiB .* above max_cells=900000 \(the default"):
+        _body(mesh_size_m=1e-4, fine_size_m=1e-4)
+    with pytest.raises(FemInputError, match=r"about 6.9\de\+06 cells .*max_cells=150000"):
+        _body(dim=3, mesh_size_m=0.02, fine_size_m=0.02)
+    with pytest.raises(FemInputError, match=r"mesh_size_m=0.0001: about 4.63e\+12 cells"):
+        solve_elastic_block(lx_m=1, ly_m=1, lz_m=1, young_pa=1e7, poisson=0.3,
+                            top_traction_pa=1e3, mesh_size_m=1e-4)
+    # the cap is a parameter
+    assert _body(mesh_size_m=2e-3, fine_size_m=2e-3, max_cells=10**7).estimated_cells() > 9e5
+    with pytest.raises(FemInputError, match=r"max_cells=0: must be a whole number >= 1"):
+        _body(max_cells=0)
+
+
+def test_the_cell_estimate_is_within_a_factor_of_two_of_gmsh():
+    pytest.importorskip("gmsh")
+    from femcoupling.elastic import _gmsh_model
+    from femcoupling.geometry import ElementRegion, GeogridLayer, _build
+
+    bodies = [
+        _body(layers=(GeogridLayer(z_m=2.7, x_min_m=0.0, x_max_m=2.0, thickness_m=0.02),),
+              regions=(ElementRegion("a", (0.25, 2.7), 0.2), ElementRegion("b", (0.75, 2.4), 0.2))),
+        _body(width_m=12.0, height_m=6.0, footing_half_width_m=1.0, mesh_size_m=1.0,
+              fine_size_m=0.05, fine_radius_m=0.5),
+        _body(width_m=2.0, height_m=1.5, footing_half_width_m=0.3, dim=3, length_m=0.5,
+              layers=(GeogridLayer(z_m=1.2, x_min_m=0, x_max_m=1.5, thickness_m=0.02),),
+              regions=(ElementRegion("c", (0.3, 0.25, 1.0), 0.2),), mesh_size_m=0.3),
+    ]
+    for body in bodies:
+        with _gmsh_model("estimate") as gmsh:
+            _build(gmsh, body)
+            cells = sum(len(t) for t in gmsh.model.mesh.getElements(body.dim)[1])
+        assert 0.5 < body.estimated_cells() / cells < 2.0, (body, cells)
+
+
+def test_fem_layers_that_overlap_or_coincide_are_refused_naming_both():
+    from femcoupling.geometry import ElementRegion, FemInputError, GeogridLayer
+
+    with pytest.raises(FemInputError, match=r"layers\[1\] \(z 0.995..1.005 m, x 0..2 m\) overlaps "
+                       r"layers\[0\] \(z 0.995..1.005 m, x 0..2 m\)"):
+        _body(layers=(GeogridLayer(1.0, 0.0, 2.0), GeogridLayer(1.0, 0.0, 2.0)))
+    with pytest.raises(FemInputError, match=r"layers\[1\] \(z 1..1.01 m, x 1.5..3 m\) overlaps "
+                       r"layers\[0\] \(z 0.99..1.01 m, x 0..2 m\)"):
+        _body(layers=(GeogridLayer(1.0, 0.0, 2.0, 0.02), GeogridLayer(1.005, 1.5, 3.0)))
+    with pytest.raises(FemInputError, match=r"regions\[1\] 'b' \(x 0.3..0.5 m, z 2.55..2.75 m\) "
+                       r"overlaps regions\[0\] 'a' \(x 0.15..0.35 m, z 2.6..2.8 m\)"):
+        _body(regions=(ElementRegion("a", (0.25, 2.7), 0.2), ElementRegion("b", (0.4, 2.65), 0.2)))
+    with pytest.raises(FemInputError, match=r"regions\[1\] 'b' .*overlaps regions\[0\] 'a'"):
+        _body(dim=3, regions=(ElementRegion("a", (0.25, 0.5, 2.7), 0.2),
+                              ElementRegion("b", (0.25, 0.5, 2.7), 0.1)))
+    # touching is allowed: side by side, and stacked bands
+    _body(regions=(ElementRegion("a", (0.25, 2.7), 0.2), ElementRegion("b", (0.45, 2.7), 0.2)),
+          layers=(GeogridLayer(1.0, 0.0, 2.0, 0.02), GeogridLayer(1.02, 0.0, 3.0, 0.02),
+                  GeogridLayer(1.0, 2.0, 4.0, 0.02)))
+
+
+def test_a_tensile_footing_load_on_a_cohesionless_soil_says_why():
+    pytest.importorskip("dolfinx_solver")  # the FEM stack, as tests/test_fem_dem_biaxial.py
+    from femcoupling.elastoplastic import SoilModel
+    from femcoupling.geometry import FemInputError
+    from femcoupling.materials import DruckerPrager
+
+    body = _body(mesh_size_m=1.0, fine_size_m=0.1)
+    m = SoilModel(body, soil=DruckerPrager(young_pa=1e8, poisson=0.3, cohesion_pa=0.0,
+                                           friction_deg=30.0),
+                  unit_weight_n_m3=18e3, degree=1)
+    m.set_geostatic()
+    # was: NewtonDivergence "Newton failed at load factor 0.0322 after 6 step cuts"
+    with pytest.raises(FemInputError, match=r"pressure_pa=-20000.0: a tensile footing load .* "
+                       r"from 0 to -20000 Pa.*cohesionless Drucker-Prager \(cohesion_pa=0.0\), "
+                       r"which carries no tension"):
+        m.load_footing(pressure_pa=-20e3, steps=2)
+    # unloading a compressed footing by less than its pressure is fine
+    m.load_footing(pressure_pa=20e3, steps=1)
+    assert m.load_footing(pressure_pa=-10e3, steps=1)[-1].footing_pressure_pa == \
+        pytest.approx(10e3)
+    with pytest.raises(FemInputError, match=r"from 10000 to -10000 Pa"):
+        m.load_footing(pressure_pa=-20e3, steps=1)
+
+
+# ---- grids -----------------------------------------------------------------------------------
+
+def _grid_scene():
+    s = dem.Scene()
+    m = s.add_material(dem.linear_material(density=1000, young=1e8, poisson=0.3,
+                                           friction_angle_deg=20))
+    return s, m
+
+
+def test_a_10_to_the_10_node_grid_is_refused_before_it_is_built():
+    from cpp_dem import geogrid
+
+    s, m = _grid_scene()
+    beam = dem.BeamParams(young=1e8, poisson=0.3, radius=0.001)
+    kw = dict(params=beam, material=m, density=1000, origin=(0, 0, 0))
+    with pytest.raises(dem.ParameterError, match=r"nodes_x=100000, nodes_y=100000: 1e\+10 grid "
+                       r"nodes \(about 2.4\de\+04 GiB .*above max_nodes=2000000 \(the default\)"):
+        geogrid.square_grid(s, length=1e3, width=1e3, nodes_x=10**5, nodes_y=10**5, **kw)
+    with pytest.raises(dem.ParameterError, match=r"side=0.01 on 1000.0 x 1000.0 m: 1.15e\+10"):
+        geogrid.triangular_grid(s, length=1e3, width=1e3, side=0.01, **kw)
+    with pytest.raises(dem.ParameterError, match=r"apertures_x=100000, apertures_y=100000, "
+                       r"segments_per_rib=2: 9e\+10 grid nodes"):
+        geogrid.biaxial_geogrid(s, apertures_x=10**5, apertures_y=10**5, **kw)
+    # the cap is a parameter, and it counts the nodes the builder makes
+    with pytest.raises(dem.ParameterError, match=r"nodes_x=10, nodes_y=10: 100 grid nodes"):
+        geogrid.square_grid(s, length=0.1, width=0.1, nodes_x=10, nodes_y=10, max_nodes=99, **kw)
+    g = geogrid.square_grid(s, length=0.1, width=0.1, nodes_x=10, nodes_y=10, max_nodes=100, **kw)
+    assert len(g.nodes) == 100
+    assert s.num_bodies == 100  # nothing was added by the refused calls
+
+
+def test_a_woven_grid_beyond_its_cap_is_refused_with_its_exact_sphere_count():
+    from cpp_dem import woven
+
+    s = dem.Scene()
+    m = s.add_material(woven.woven_material())
+    g = woven.woven_geogrid(s, origin=(0, 0, 0), apertures_x=5, apertures_y=7, material=m)
+    n = len(g.spheres)
+    with pytest.raises(dem.ParameterError, match=rf"about {n / 1e3:.3g}e\+03 spheres .* above "
+                       rf"max_spheres={n - 1}"):
+        woven.woven_geogrid(s, origin=(0, 0, 0), apertures_x=5, apertures_y=7, material=m,
+                            max_spheres=n - 1)
+    with pytest.raises(dem.ParameterError, match=r"about 6.9e\+11 spheres .*max_spheres=100000 "
+                       r"\(the default\)"):
+        woven.woven_geogrid(s, origin=(0, 0, 0), apertures_x=10**5, apertures_y=10**5,
+                            material=m)
