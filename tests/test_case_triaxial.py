@@ -141,22 +141,35 @@ def test_preset_sets_the_loading(tmp_path):
 def test_a_state_is_continued_as_it_is_with_skip_isotropic(smoke, tmp_path):
     """Issue 19: a packing with given wall planes (here our own isotropic state: its CSV and
     the wall planes of its checkpoint) continues without a new isotropic stage; the given state
-    is at the cell pressure and the loading gives the same peak within the 2 % that the lost
-    shear-spring history costs."""
+    is the saved one (same porosity, same wall stresses) and the loading gives a peak within
+    the scatter that the lost shear-spring history causes."""
     import h5py
 
     out, proc = smoke
     assert proc.returncode == 0, proc.stderr
     w = h5py.File(out / "isotropic.h5", "r")["readable/wall_positions"][()]
     box = ",".join(repr(float(v)) for v in (w[0], w[2], w[4], w[1], w[3], w[5]))
+    # "--box=...": a first wall plane below 0 (it is, for some seeds or machines) would be taken
+    # by argparse for an option after a separate "--box".
     r = run_case(tmp_path / "cont", "--smoke", "--threads", "2", "--packing",
-                 str(out / "packing_isotropic.csv"), "--box", box, "--skip-isotropic")
+                 str(out / "packing_isotropic.csv"), f"--box={box}", "--skip-isotropic")
     assert r.returncode == 0, r.stderr
     assert "isotropic stage skipped" in r.stdout
     first = json.loads((out / "summary.json").read_text())
     cont = json.loads((tmp_path / "cont" / "summary.json").read_text())
-    assert cont["q_peak_Pa"] == pytest.approx(first["q_peak_Pa"], rel=0.02)
-    bad = run_case(tmp_path / "bad", "--smoke", "--box", box)
+    # The very grains and walls (the CSV keeps every digit): the same porosity, bitwise, and the
+    # same wall stresses but for the shear springs the CSV does not keep (over seeds 1-25 of
+    # this smoke: at most 2.6e-4 apart).
+    assert cont["porosity_isotropic"] == first["porosity_isotropic"]
+    np.testing.assert_allclose(cont["isotropic_axis_stresses_Pa"],
+                               first["isotropic_axis_stresses_Pa"], rtol=1e-3)
+    # The peak is a chaotic result of 300 grains: over seeds 1-25 of this smoke the continued
+    # run's q_peak differed from the first run's by -9.2 % to +14.4 % (mean +2.1 %, standard
+    # deviation 5.0 %; q_peak itself varies by 11.8 % from seed to seed). 20 % is about the
+    # mean + 3.5 standard deviations. (A 2 % bound passed at seed 1 here, +1.4 %, and failed on
+    # another machine, +2.6 %.)
+    assert cont["q_peak_Pa"] == pytest.approx(first["q_peak_Pa"], rel=0.2)
+    bad = run_case(tmp_path / "bad", "--smoke", f"--box={box}")
     assert bad.returncode != 0 and "--box: goes with --packing" in bad.stderr
 
 
