@@ -54,7 +54,8 @@ def test_run_a_case_writes_a_rerunnable_run_file(tmp_path):
     ('case = "triax"\n', "case='triax': no such case; allowed: pullout-000"),
     ('case = "triaxial"\nsmoke = true\n', "field 'smoke' is not known"),
     ('case = "triaxial"\n[params]\nsmoke = true\ncel-pressure = 1e5\n',
-     "rejected its parameters: .*unrecognized arguments: --cel-pressure"),
+     r"field 'cel-pressure': not a parameter of the case 'triaxial' \(did you mean "
+     r"cell-pressure\?\)"),
     ('case = "triaxial"\n[params]\nsmoke = {a = 1}\n', "field 'smoke'="),
     ('case = "triaxial"\n[params\n', "not valid TOML"),
 ])

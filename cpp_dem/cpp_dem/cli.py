@@ -171,6 +171,11 @@ def check_params(case: str, params: dict[str, Any], *, source: str) -> None:
             hint = f" (did you mean {near[0]}?)" if near else ""
             raise RunFileError(f"{source}: field {key!r}: not a parameter of the case {case!r}"
                                f"{hint}; allowed: {', '.join(names)}")
+        scalar = isinstance(value, (bool, int, float, str))
+        if not scalar and not (isinstance(value, list) and all(
+                isinstance(v, (int, float, str)) and not isinstance(v, bool) for v in value)):
+            raise RunFileError(f"{source}: field {key!r}={value!r}: must be a number, a "
+                               "string, true/false or a list of numbers or strings")
         switch = act.nargs == 0
         if switch and not isinstance(value, bool):
             raise RunFileError(f"{source}: field {key}={value!r}: must be true or false (a "

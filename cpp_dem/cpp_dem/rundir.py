@@ -149,7 +149,10 @@ def _pid_alive(pid: int) -> bool:
 
 
 def _files(out: Path) -> list[Path]:
-    return sorted(p for p in out.rglob("*") if p.is_file() and p.name not in _FREE)
+    """The files of ``out`` but its own run file, manifest and lock (those of sub-folders, a
+    run of several, count as files of the run)."""
+    return sorted(p for p in out.rglob("*")
+                  if p.is_file() and not (p.parent == out and p.name in _FREE))
 
 
 def _write_atomic(path: Path, text: str) -> None:
