@@ -351,3 +351,20 @@ def test_calibration_params_are_checked_against_the_triaxial_case(tmp_path):
     assert p.returncode == 1
     assert "--stop-strain=2.0: must be in (0, 0.5)" in p.stderr
     assert not (tmp_path / "cal").exists()
+
+
+def test_ctrl_c_stops_a_sweep_with_130_and_says_how_to_continue(tmp_path):
+    f = _toml(tmp_path / "s.toml", 'case = "deposition"\nout = "sw"\n[params]\nsmoke = true\n'
+              'duration = 100\n[sweep]\nseed = [1, 2]\n')
+    proc = subprocess.Popen([*CLI, "sweep", str(f), "--workers", "2"], cwd=tmp_path,
+                            stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    for line in proc.stdout:
+        if "to run on" in line:  # the cluster is starting: a Ctrl-C is held until it is up
+            time.sleep(1.0)
+            proc.send_signal(signal.SIGINT)
+            break
+    _out, err = proc.communicate(timeout=120)
+    assert proc.returncode == 130, err
+    assert "[sweep] interrupted: 0 of 2 rows finished" in err
+    assert "the same command again runs the rest" in err
+    assert "Traceback" not in err

@@ -699,12 +699,48 @@ def _dask_client(scheduler: str | None, workers: int):
             param_hint="--scheduler") from None
 
 
+def _started_client(scheduler: str | None, workers: int):
+    """_dask_client with a Ctrl-C during the start held back until the cluster is up (a
+    cluster stopped half-started is not closed cleanly); returns (client, cluster,
+    interrupted)."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return (*_dask_client(scheduler, workers), False)
+    held: list[int] = []
+    old = signal.signal(signal.SIGINT, lambda *_: held.append(1))
+    try:
+        client, cluster = _dask_client(scheduler, workers)
+    finally:
+        signal.signal(signal.SIGINT, old)
+    return client, cluster, bool(held)
+
+
+def _close_client(client, cluster) -> None:
+    """Closes the client and the local cluster; a second Ctrl-C does not cut it short."""
+    import threading
+
+    old = None
+    if threading.current_thread() is threading.main_thread():
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
+
+
 def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) -> None:
     from dask.distributed import as_completed
 
-    client, cluster = _dask_client(scheduler, workers)
+    client, cluster, interrupted = _started_client(scheduler, workers)
     env = {"OMP_NUM_THREADS": str(threads or (os.cpu_count() or 1))}
     try:
+        if interrupted:
+            raise KeyboardInterrupt
         futures = {}
         for i, row_dir, params, argv, base in todo:
             if row_dir.exists():
@@ -738,9 +774,7 @@ def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) 
             if not ok:
                 click.echo(f"[sweep] row {i:03d}: {r['stderr_tail']}", err=True)
     finally:
-        client.close()
-        if cluster is not None:
-            cluster.close()
+        _close_client(client, cluster)
 
 
 @main.command("calibrate")
@@ -790,9 +824,12 @@ def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | N
     if why:
         raise RunFileError(f"{src}: out={str(cfg.out)!r}: {why}")
     client = cluster = None
+    interrupted = False
     if scheduler or workers > 0:
-        client, cluster = _dask_client(scheduler, workers)
+        client, cluster, interrupted = _started_client(scheduler, workers)
     try:
+        if interrupted:
+            raise KeyboardInterrupt
         cal.calibrate(cfg, client=client, threads=threads, log=click.echo)
     except RuntimeError as e:
         raise click.ClickException(str(e)) from None
@@ -802,10 +839,7 @@ def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | N
                    err=True)
         sys.exit(130)
     finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        _close_client(client, cluster)
 
 
 if __name__ == "__main__":
