@@ -368,3 +368,22 @@ def test_ctrl_c_stops_a_sweep_with_130_and_says_how_to_continue(tmp_path):
     assert "[sweep] interrupted: 0 of 2 rows finished" in err
     assert "the same command again runs the rest" in err
     assert "Traceback" not in err
+
+
+@pytest.mark.parametrize("args, message", [
+    (["--local-damping", "nan"], "--local-damping=nan: must be in [0, 1)"),
+    (["--damping-normal", "inf"], "--damping-normal=inf: must be in [0, 1]"),
+    (["--dt-safety", "inf"], "--dt-safety=inf: must be in (0, 1]"),
+])
+def test_deposition_refuses_non_finite_damping_and_safety(args, message):
+    p = run([*DEPOSITION, *args])
+    assert p.returncode == 2 and message in p.stderr, p.stderr
+
+
+def test_a_two_way_tolerance_that_accepts_anything_is_refused():
+    from cpp_dem.cases import prs_element
+
+    for tol in ("inf", "1", "nan"):
+        with pytest.raises(SystemExit) as ei:
+            prs_element.parse_args(["--smoke", "--two-way", "--tol", tol])
+        assert ei.value.code == 2

@@ -435,6 +435,13 @@ def parse_args(argv=None) -> tuple[Params, Path]:
         p.settled_speed = -1.0
     if p.n < 1:
         ap.error(f"--n={p.n}: must be >= 1")
+    for name, v, ok, allowed in (
+            ("--local-damping", p.local_damping, 0 <= p.local_damping < 1, "in [0, 1)"),
+            ("--damping-normal", p.damping_normal, 0 <= p.damping_normal <= 1,
+             "in [0, 1] (a damping ratio)"),
+            ("--dt-safety", p.dt_safety, 0 < p.dt_safety <= 1, "in (0, 1]")):
+        if not (math.isfinite(v) and ok):
+            ap.error(f"{name}={v}: must be {allowed}")
     if not (math.isfinite(p.duration) and p.duration > 0):
         ap.error(f"--duration={p.duration}: must be a finite number > 0 (s)")
     # steps at the p-wave step of the smallest grain (dt = dt_safety x r_min sqrt(rho / E),

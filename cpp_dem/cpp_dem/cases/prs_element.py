@@ -863,8 +863,9 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                          "the case's grains along the region's stress path first")
     a = ap.parse_args(argv)
     p = apply_element_args(ap, a, Params(**SMOKE) if a.smoke else Params())
-    if not a.tol > 0:
-        ap.error(f"--tol={a.tol}: must be > 0")
+    if not (math.isfinite(a.tol) and 0 < a.tol < 1):
+        ap.error(f"--tol={a.tol}: must be in (0, 1): the relative change of the handed-over "
+                 "stresses that ends the two-way loop (1 or more would accept any change)")
     if a.max_iterations < 2:
         ap.error(f"--max-iterations={a.max_iterations}: must be >= 2")
     if a.workers < 1:
