@@ -34,10 +34,18 @@ void bind_controllers(py::module_& m) {
   // Scene.add_controller lives here (the Controller type is bound in this file).
   py::object scene_cls = py::type::of<Scene>();
   scene_cls.attr("add_controller") = py::cpp_function(
-      [](Scene& s, std::shared_ptr<Controller> c) { return s.add_controller(std::move(c)); },
+      [](Scene& s, std::shared_ptr<Controller> c) {
+        if (c) check_new_controller(s, *c);
+        return s.add_controller(std::move(c));
+      },
       py::name("add_controller"), py::is_method(scene_cls), py::arg("controller"),
       "Adds a controller (run every controller.period steps, before the forces, in the order "
-      "added); returns its index. The scene keeps it alive.");
+      "added); returns its index. The scene keeps it alive. Refused (ParameterError) when it "
+      "is in the scene already, or when it and another enabled controller move one wall.");
+  scene_cls.attr("_check_controllers") = py::cpp_function(
+      [](const Scene& s) { check_enabled_controllers(s); }, py::name("_check_controllers"),
+      py::is_method(scene_cls),
+      "ParameterError when two enabled controllers move the same wall (before a run).");
   scene_cls.attr("controller") = py::cpp_function(
       [](const Scene& s, int i) { return s.controller(i); }, py::name("controller"),
       py::is_method(scene_cls), py::arg("index"), "The controller added as number `index`.");
@@ -78,6 +86,27 @@ when `box_walls` (the six walls of Scene.add_box) are given.
          "(off by more than 5 % and growing): a list with one dict (wall, calls, target_pa, "
          "reached_pa, cap_m_per_s), or empty.")
       .def("clear_limit_report", &ServoWall::clear_limit)
+      .def("target_report", [](const ServoWall& c) {
+        py::list out;
+        const LimitWatch& l = c.limit();
+        if (l.unmet()) {
+          py::dict d;
+          d["wall"] = c.wall();
+          d["target_pa"] = c.target_stress();
+          d["reached_pa"] = l.last_sigma;
+          d["calls"] = l.run_calls;
+          d["calls_at_cap"] = l.run_cap_calls;
+          d["cap_m_per_s"] = l.last_cap;
+          out.append(d);
+        }
+        return out;
+      }, "The target not reached: when the stress has not been within 5 % of the current "
+         "target at any call since it was set, and the target was not reported yet, a list "
+         "with one dict (wall, target_pa, reached_pa: the stress at the last call, calls and "
+         "calls_at_cap since the last clear_target_report, cap_m_per_s); else empty.")
+      .def("clear_target_report", &ServoWall::clear_target_watch, py::arg("reported") = false,
+           "Starts the count of calls over; reported=True: the unmet target was reported "
+           "(it is not reported again until a new target is set).")
       .def_property_readonly("wall", &ServoWall::wall)
       .def_property_readonly("area", &ServoWall::area, "Area at the last call, m^2.")
       .def_property_readonly("measured_stress", &ServoWall::measured_stress,

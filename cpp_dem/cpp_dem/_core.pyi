@@ -771,6 +771,14 @@ class ServoWall(Controller):
         """
         Calls since the last clear at the speed cap while drifting from the target stress (off by more than 5 % and growing): a list with one dict (wall, calls, target_pa, reached_pa, cap_m_per_s), or empty.
         """
+    def clear_target_report(self, reported: bool = False) -> None:
+        """
+        Starts the count of calls over; reported=True: the unmet target was reported (it is not reported again until a new target is set).
+        """
+    def target_report(self) -> list:
+        """
+        The target not reached: when the stress has not been within 5 % of the current target at any call since it was set, and the target was not reported yet, a list with one dict (wall, target_pa, reached_pa: the stress at the last call, calls and calls_at_cap since the last clear_target_report, cap_m_per_s); else empty.
+        """
     @property
     def area(self) -> float:
         """

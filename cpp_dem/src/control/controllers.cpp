@@ -256,6 +256,70 @@ void TriaxialController::load_state(const std::vector<Real>& s) {
   max_speed_ = s[11];
 }
 
+// ---- which controller moves which wall -------------------------------------------------------
+
+std::vector<int> controlled_walls(const Controller& c) {
+  if (const auto* s = dynamic_cast<const ServoWall*>(&c)) return {s->wall()};
+  if (const auto* t = dynamic_cast<const TriaxialController*>(&c)) return t->walls();
+  return {};
+}
+
+namespace {
+std::string controller_name(const Controller& c) {
+  if (dynamic_cast<const ServoWall*>(&c)) return "ServoWall";
+  if (dynamic_cast<const TriaxialController*>(&c)) return "TriaxialController";
+  if (dynamic_cast<const RadiusGrowth*>(&c)) return "RadiusGrowth";
+  if (dynamic_cast<const CellController*>(&c)) return "CellController";
+  return "Controller";
+}
+}  // namespace
+
+namespace {
+/// The first wall both controllers move, or -1.
+int shared_wall(const Controller& a, const Controller& b) {
+  const std::vector<int> wa = controlled_walls(a);
+  for (int w : controlled_walls(b))
+    if (std::find(wa.begin(), wa.end(), w) != wa.end()) return w;
+  return -1;
+}
+}  // namespace
+
+void check_new_controller(const Scene& s, const Controller& c) {
+  for (int i = 0; i < s.num_controllers(); ++i) {
+    const auto other = s.controller(i);
+    if (other.get() == &c)
+      throw ParameterError("controller: this " + controller_name(c) +
+                           " is controller " + std::to_string(i) +
+                           " of the scene already (it would run twice per step)");
+    if (!c.enabled || !other->enabled) continue;
+    const int w = shared_wall(c, *other);
+    if (w >= 0)
+      throw ParameterError(
+          "controller (" + controller_name(c) + "): wall " + std::to_string(w) +
+          " is moved by controller " + std::to_string(i) + " (" + controller_name(*other) +
+          ") already; two controllers would set its velocity in turn. Disable one "
+          "(controller.enabled = False) or remove them (scene.clear_controllers())");
+  }
+}
+
+void check_enabled_controllers(const Scene& s) {
+  for (int i = 0; i < s.num_controllers(); ++i) {
+    const auto a = s.controller(i);
+    if (!a->enabled) continue;
+    for (int j = i + 1; j < s.num_controllers(); ++j) {
+      const auto b = s.controller(j);
+      if (!b->enabled) continue;
+      const int w = shared_wall(*a, *b);
+      if (w >= 0)
+        throw ParameterError(
+            "controllers " + std::to_string(i) + " (" + controller_name(*a) + ") and " +
+            std::to_string(j) + " (" + controller_name(*b) + ") are both enabled and both "
+            "move wall " + std::to_string(w) + "; they would set its velocity in turn. "
+            "Disable one (controller.enabled = False) before running");
+    }
+  }
+}
+
 // ---- RadiusGrowth ---------------------------------------------------------------------------
 
 RadiusGrowth::RadiusGrowth(std::vector<int> walls, std::vector<int> bodies, Real target_stress,
@@ -367,6 +431,12 @@ void CellController::set_rate(int r, int c, Real rate) {
 void CellController::set_stress(int r, int c, Real sigma) {
   check_index(r, c);
   require(std::isfinite(sigma), "stress", sigma, "must be finite (Pa, compression positive)");
+  if (r == c && sigma < 0)
+    throw ParameterError(
+        "stress (" + std::to_string(r) + ", " + std::to_string(c) + ")=" + fmt_real(sigma) +
+        " Pa: a tensile normal stress; a periodic cell of cohesionless grains cannot hold "
+        "tension (the servo would stretch it without end; bonds are not supported in a "
+        "periodic cell): give a normal stress >= 0 (Pa, compression positive)");
   if (r != c && mode_[3 * c + r] == Mode::Stress)
     throw ParameterError("stress (" + std::to_string(r) + ", " + std::to_string(c) +
                          "): component (" + std::to_string(c) + ", " + std::to_string(r) +

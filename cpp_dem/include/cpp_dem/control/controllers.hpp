@@ -56,17 +56,30 @@ struct LimitWatch {
   bool held = false;     ///< the stress has been within tolerance of the current target
   Real goal_seen = -1;   ///< the target the watch follows, Pa
   Real episode_error = -1;  ///< |sigma - goal| when the current episode began, Pa (-1: none)
+  // A target never reached (ServoWall): calls and calls at the cap since clear_run(), the
+  // stress and cap at the last call, and whether the current target was reported unmet.
+  long run_calls = 0;      ///< calls since the last clear_run
+  long run_cap_calls = 0;  ///< of those, calls at the cap
+  Real last_sigma = 0;     ///< Pa, at the last call
+  Real last_cap = 0;       ///< m/s (or 1/s), at the last call
+  bool unmet_told = false; ///< the current target was reported as not reached
   /// Records one call: v the servo's speed (m/s), cap (m/s), sigma and goal (Pa).
   void observe(Real v, Real cap_speed, Real sigma, Real goal) {
     if (goal != goal_seen) {  // a new target: start over
       goal_seen = goal;
       held = false;
       episode_error = -1;
+      unmet_told = false;
     }
     const Real err = std::abs(sigma - goal);
     const Real band = tolerance * std::max(std::abs(goal), 1.0);
     if (err <= band) held = true;
-    if (!(std::abs(v) >= cap_speed * (1 - 1e-12))) {
+    const bool at_cap = std::abs(v) >= cap_speed * (1 - 1e-12);
+    ++run_calls;
+    if (at_cap) ++run_cap_calls;
+    last_sigma = sigma;
+    last_cap = cap_speed;
+    if (!at_cap) {
       episode_error = -1;  // below the cap: the episode ends
       return;
     }
@@ -79,6 +92,15 @@ struct LimitWatch {
     }
   }
   void clear() { count = 0; }
+  /// The current target has not been within `tolerance` of the stress at any call since it
+  /// was set, and calls ran since clear_run(), and it was not reported yet.
+  bool unmet() const { return run_calls > 0 && !held && !unmet_told; }
+  /// Starts the count of calls over (after each run); `told`: the unmet target was reported.
+  void clear_run(bool told) {
+    run_calls = 0;
+    run_cap_calls = 0;
+    if (told) unmet_told = true;
+  }
 };
 
 /// One wall driven to a target normal stress by its velocity (the other walls are not
@@ -109,6 +131,8 @@ class ServoWall : public Controller {
   /// Calls at the speed cap while off the target (see LimitWatch).
   const LimitWatch& limit() const { return limit_; }
   void clear_limit() { limit_.clear(); }
+  /// Starts the count of calls towards a target not yet reached over (LimitWatch::clear_run).
+  void clear_target_watch(bool told) { limit_.clear_run(told); }
 
  private:
   LimitWatch limit_;
@@ -180,6 +204,19 @@ class TriaxialController : public Controller, public StatefulController {
   std::array<LimitWatch, 6> limit_{};
 };
 
+/// The walls a controller moves: a ServoWall's wall, a TriaxialController's six; none for
+/// the others (RadiusGrowth reads the walls but does not move them).
+std::vector<int> controlled_walls(const Controller& c);
+
+/// Refuses (ParameterError) a controller `c` about to be added to `s` that is in `s` already,
+/// or that is enabled and moves a wall that an enabled controller of `s` moves already (the
+/// two would set the wall's velocity in turn); names the wall and the first controller.
+void check_new_controller(const Scene& s, const Controller& c);
+
+/// Refuses (ParameterError) two enabled controllers of `s` that move the same wall (one may
+/// have been enabled after both were added), naming both and the wall. Before a run.
+void check_enabled_controllers(const Scene& s);
+
 /// Radius growth under stress control (001 §4.3.1; the expansion of REFD, 000 §2.3): every
 /// call multiplies the radii of the controlled spheres by m = 1 + gain (sigma_t - sigma) / S,
 /// where sigma is the mean normal stress of the box walls (Pa) and
@@ -231,7 +268,9 @@ class CellController : public Controller {
   /// Imposes L_rc = rate (1/s; r, c in 0..2).
   void set_rate(int r, int c, Real rate);
   /// Servo-controls sigma_rc to sigma (Pa, compression positive) through L_rc. Only one of
-  /// (r, c) and (c, r) may be stress-controlled: both act on the same stress.
+  /// (r, c) and (c, r) may be stress-controlled: both act on the same stress. A normal
+  /// component (r == c) must be >= 0: a cell of cohesionless grains cannot hold tension (the
+  /// servo would stretch it without end; bonds are not supported in a periodic cell).
   void set_stress(int r, int c, Real sigma);
   Mode mode(int r, int c) const { return mode_[3 * r + c]; }
   Real goal(int r, int c) const { return goal_[3 * r + c]; }
