@@ -139,6 +139,12 @@ class ControllerLimitWarning(UserWarning):
     ``scene.strict_controllers = True``."""
 
 
+class TargetNotMetWarning(UserWarning):
+    """A preparation ended away from a target it was given (e.g. a porosity the sample was
+    already denser than): the message names the target, what was reached and why. Make it an
+    error with ``warnings.simplefilter("error", cpp_dem.TargetNotMetWarning)``."""
+
+
 class Scene(_core.Scene):
     """A DEM scene: spheres, walls, materials, contacts and the step loop (in C++).
 
@@ -195,6 +201,16 @@ class Scene(_core.Scene):
         for a in range(3):
             if not hi_a[a] > lo_a[a]:
                 raise ParameterError(f"hi[{a}]={hi_a[a]}: must be > lo[{a}]={lo_a[a]} (m)")
+        if self.num_walls:
+            # One-sided walls: the box's walls would bound sides that walls bound already (a
+            # second box, or a box over a floor), and grains between two walls of one side
+            # are behind one of them.
+            axis, sense = int(self.wall_axes[0]), int(self.wall_senses[0])
+            name = BOX_WALLS[2 * axis + (0 if sense > 0 else 1)]
+            raise ParameterError(
+                f"add_box(lo={lo_a.tolist()}, hi={hi_a.tolist()}): the scene has walls "
+                f"already (wall 0, {name} at {float(self.wall_positions[0]):g} m); a box is "
+                "added once, to a scene without walls (move a wall with set_wall_position)")
         ids = []
         for a in range(3):
             ids.append(self.add_wall(axis=a, position=float(lo_a[a]), sense=+1, material=material))
@@ -296,18 +312,85 @@ class Scene(_core.Scene):
         mask = self._blocked[body]
         return " ".join(k for k, bit in _DOF_BITS.items() if mask & bit)
 
+    # ---- geometry against the walls ---------------------------------------------------------
+    @property
+    def positions(self):
+        """Body centres, m, shape (n, 3) (by id). Setting them is checked against the walls
+        at the next run."""
+        return _core.Scene.positions.fget(self)
+
+    @positions.setter
+    def positions(self, value) -> None:
+        _core.Scene.positions.fset(self, value)
+        self.__dict__["_geometry_version"] = self.__dict__.get("_geometry_version", 0) + 1
+
+    def _check_geometry(self) -> None:
+        """Before the first step, and at the first run after bodies or walls were added or
+        positions set: every body's centre (spheres, clump members, and before the first
+        step geogrid nodes) must be on the inner side of every wall (one pass over the
+        bodies). A body behind a wall is never touched by it (the walls are one-sided):
+        ParameterError naming the body, its position and the wall."""
+        key = (self.num_bodies, self.num_walls, self.__dict__.get("_geometry_version", 0))
+        if self.__dict__.get("_geometry_checked") == key and self.step_count > 0:
+            return
+        self.__dict__["_geometry_checked"] = key
+        if not (self.num_walls and self.num_bodies):
+            return
+        x = np.asarray(self.positions)
+        pos = np.asarray(self.wall_positions)
+        axes, senses = list(self.wall_axes), list(self.wall_senses)
+        # After the first step a geogrid may have left the box legitimately (pulled out
+        # through the front wall, then saved and loaded): its nodes are checked at step 0.
+        check = (np.ones(len(x), bool) if self.step_count == 0
+                 else np.asarray(self.body_kinds) != 1)
+        for w in range(self.num_walls):
+            axis, sense = int(axes[w]), int(senses[w])
+            tol = 1e-12 + 1e-9 * abs(float(pos[w]))
+            behind = check & (sense * (x[:, axis] - pos[w]) < -tol)
+            if not behind.any():
+                continue
+            k = int(np.flatnonzero(behind)[0])
+            kind = "geogrid node" if int(self.body_kinds[k]) == 1 else "sphere"
+            clump = int(np.asarray(self.clump_ids)[k]) if self.num_clumps else -1
+            if clump >= 0:
+                kind = f"member of clump {clump}"
+            self.__dict__["_geometry_checked"] = None  # refused: check again next time
+            raise ParameterError(
+                f"body {k} ({kind}) at [{', '.join(f'{v:.6g}' for v in x[k])}] m: behind "
+                f"wall {w} ({'xyz'[axis]} "
+                f"{'>=' if sense > 0 else '<='} {pos[w]:g} m is inside), outside the walls "
+                f"({int(behind.sum())} of the bodies); the wall would never touch it: move it "
+                "inside, or build the walls around it")
+
     # ---- running ---------------------------------------------------------------------------
     #: Raise ControllerLimitWarning as an error (see :meth:`_check_controller_limits`).
     strict_controllers: bool = False
 
-    def _check_controller_limits(self) -> None:
+    def _check_controller_limits(self, end: bool = True) -> None:
         """Says which stress-controlled walls drifted from their targets at their speed caps
         during the steps just run (ControllerLimitWarning; an error with
-        ``strict_controllers``); the watch then starts again."""
+        ``strict_controllers``); the watch then starts again. At the ``end`` of a run, also
+        which ServoWall has not reached its target at all (once per target)."""
         import warnings
 
         for i in range(self.num_controllers()):
             c = self.controller(i)
+            if end and hasattr(c, "target_report"):
+                for r in c.target_report():
+                    at_cap = r["calls_at_cap"] == r["calls"]
+                    why = (f"it ran at its speed cap {r['cap_m_per_s']:.4g} m/s for all "
+                           f"{r['calls']} calls: raise its max_speed or run longer" if at_cap
+                           else f"at its speed cap for {r['calls_at_cap']} of {r['calls']} "
+                           "calls: run longer, raise its gain or max_speed, or check that "
+                           "grains are in front of the wall")
+                    msg = (f"controller {i} ({type(c).__name__}, wall {r['wall']}): has not "
+                           f"reached its target {r['target_pa']:.6g} Pa (within 5 %) in this "
+                           f"run; the stress is {r['reached_pa']:.6g} Pa; {why}")
+                    c.clear_target_report(True)
+                    if self.strict_controllers:
+                        raise RuntimeError(msg)
+                    warnings.warn(ControllerLimitWarning(msg), stacklevel=3)
+                c.clear_target_report(False)
             if not hasattr(c, "limit_report"):
                 continue
             rows = c.limit_report()
@@ -346,6 +429,8 @@ class Scene(_core.Scene):
         if steps > _MAX_STEPS:
             raise ParameterError(f"steps={steps}: must be <= {_MAX_STEPS} (2**63 - 1) in one "
                                  "call")
+        self._check_geometry()
+        self._check_controllers()
         if every <= 0:
             self._run(steps)
             self._check_controller_limits()
@@ -355,7 +440,7 @@ class Scene(_core.Scene):
         while done < steps:
             n = min(every, steps - done)
             self._run(n)
-            self._check_controller_limits()
+            self._check_controller_limits(end=done + n >= steps)
             done += n
             if callback is not None:
                 callback(self)

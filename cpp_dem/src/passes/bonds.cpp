@@ -27,8 +27,10 @@ void BondParams::validate() const {
   require(std::isfinite(pb_kn) && pb_kn >= 0, "pb_kn", pb_kn,
           "must be >= 0 (Pa/m; 0 = no parallel bond)");
   require(std::isfinite(pb_ks) && pb_ks >= 0, "pb_ks", pb_ks, "must be >= 0 (Pa/m)");
-  require(std::isfinite(pb_radius_factor) && pb_radius_factor > 0, "pb_radius_factor",
-          pb_radius_factor, "must be > 0 (lambda_bar: R_bar = lambda_bar min(R_a, R_b))");
+  require(std::isfinite(pb_radius_factor) && pb_radius_factor > 0 && pb_radius_factor <= 1,
+          "pb_radius_factor", pb_radius_factor,
+          "must be in (0, 1] (lambda_bar: R_bar = lambda_bar min(R_a, R_b); a cement disc "
+          "wider than the smaller sphere is not a parallel bond)");
   require(std::isfinite(pb_tensile) && pb_tensile >= 0, "pb_tensile", pb_tensile,
           "must be >= 0 (Pa; 0 = unbreakable)");
   require(std::isfinite(pb_shear) && pb_shear >= 0, "pb_shear", pb_shear,
@@ -62,6 +64,17 @@ int Scene::add_bond(int a, int b, const BondParams& p) {
   if (!(dist > 0))
     throw ParameterError("bond " + std::to_string(a) + "-" + std::to_string(b) +
                          ": the spheres' centres coincide");
+  {
+    // A bond stands for cement between neighbours: the surface gap may be at most the
+    // smaller radius (a bond across a wider gap spans where a third grain could sit).
+    const Real ra = bodies_.radius[sa], rb = bodies_.radius[sb];
+    const Real gap = dist - ra - rb, allowed = std::min(ra, rb);
+    if (gap > allowed)
+      throw ParameterError("bond " + std::to_string(a) + "-" + std::to_string(b) +
+                           ": surface gap " + fmt_real(gap) + " m; must be <= " +
+                           fmt_real(allowed) + " m (the smaller radius): bond neighbours "
+                           "that touch or nearly touch");
+  }
   Bond l;
   l.a = sa;
   l.b = sb;
