@@ -183,8 +183,13 @@ def test_dense_preparation_holds_an_isochoric_shear():
 def test_a_rotated_load_gives_the_same_invariants():
     """Invariance (issue 18): element B is element A turned rigidly by R (an increment
     F = R, exact in the cell's map); B's stress is then R sigma_A R^T, and the load R dE R^T
-    on B gives A's answer to dE, turned: the same invariants. Tolerances: 1e-3, ten times
-    the measured 8e-5 (the two frames round differently and the relaxation amplifies it)."""
+    on B gives A's answer to dE, turned: the same invariants. The two frames round
+    differently and the relaxation amplifies it, a chaotic difference; its scatter over seeds
+    1-30 of this element (seed 3 is the test's): the rigid turn alone at most 2.6e-5 of the
+    stress (asserted 1e-4); after the loads the invariants at most 3.75e-3 apart (median
+    1.9e-4; above 1e-3 at 3 of 30 seeds; asserted 1e-2) and the turned tensor at most 1.86e-3
+    of the stress (median 8.7e-5; asserted 5e-3). (The earlier bound 1e-3 was ten times one
+    seed's 8e-5.)"""
     from scipy.spatial.transform import Rotation
 
     def invariants(s):
@@ -204,8 +209,8 @@ def test_a_rotated_load_gives_the_same_invariants():
     for _ in range(3):
         sa = a.apply_strain(de, unbalanced=1e-5, max_relax_steps=100_000)
         sb = b.apply_strain(R @ de @ R.T, unbalanced=1e-5, max_relax_steps=100_000)
-    assert np.allclose(invariants(sb), invariants(sa), rtol=1e-3, atol=0)
-    assert np.abs(sb - R @ sa @ R.T).max() <= 1e-3 * np.abs(sa).max()
+    assert np.allclose(invariants(sb), invariants(sa), rtol=1e-2, atol=0)
+    assert np.abs(sb - R @ sa @ R.T).max() <= 5e-3 * np.abs(sa).max()
     assert invariants(sa)[1] > 0.5 * 100e3  # (the load did something)
 
 
