@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
 """A/B of two builds of the DEM core on the same scenes, in one run (issue 14: "no slower").
 
-The *new* build is the installed one (the working tree, after ``make setup``); the *old* one
+The *new* build is the installed one (the working tree, after ``make setup``), or with
+``--new-ref`` one built from that revision like the old; the *old* one
 is built here from a git revision (``--ref``, default ``HEAD``) into ``build/ab/<sha>/``
 (CMake, Release, the same compiler as the installed build; cached), with an overlay package
 made of that revision's own Python sources and its ``_core``, so each build runs with the
@@ -248,7 +249,7 @@ def run_block(cfg: dict, prefix: list[str] | None = None) -> dict:
     return out
 
 
-def count_instructions(scene: str, n: int, args, overlay: Path, tmp: Path) -> dict:
+def count_instructions(scene: str, n: int, args, overlays: dict, tmp: Path) -> dict:
     """Instructions per step of each build, 1 thread, from two callgrind runs per build."""
     valgrind = shutil.which("valgrind")
     if valgrind is None:
@@ -262,7 +263,7 @@ def count_instructions(scene: str, n: int, args, overlay: Path, tmp: Path) -> di
         for steps in (lo, hi):
             cfg = {"variant": variant, "scene": scene, "n": n, "threads": 1, "steps": steps,
                    "warmup": 50, "dump": str(tmp / f"cg_{variant}.npy"),
-                   "overlay": str(overlay) if variant == "old" else ""}
+                   "overlay": str(overlays[variant])}
             r = run_block(cfg, prefix)
             counts[steps], done[steps] = r["instructions"], r["steps_done"]
         per_step[variant] = (counts[hi] - counts[lo]) / (done[hi] - done[lo])
@@ -274,7 +275,7 @@ def count_instructions(scene: str, n: int, args, overlay: Path, tmp: Path) -> di
     return rec
 
 
-def compare(scene: str, n: int, threads: int, args, overlay: Path, tmp: Path) -> dict:
+def compare(scene: str, n: int, threads: int, args, overlays: dict, tmp: Path) -> dict:
     import numpy as np
 
     steps = args.steps or max(100, math.ceil(args.particle_steps / n))
@@ -286,7 +287,7 @@ def compare(scene: str, n: int, threads: int, args, overlay: Path, tmp: Path) ->
             dump = tmp / f"{scene}_{n}_{threads}_{variant}.npy"
             cfg = {"variant": variant, "scene": scene, "n": n, "threads": threads,
                    "steps": steps, "warmup": args.warmup, "dump": str(dump),
-                   "overlay": str(overlay) if variant == "old" else ""}
+                   "overlay": str(overlays[variant])}
             r = run_block(cfg)
             cpu[variant].append(r["cpu_s"] / r["steps_done"])
             hashes[variant].add(r["state_sha256"])
@@ -312,6 +313,10 @@ def main(argv: list[str] | None = None) -> int:
                                  formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--worker", help=argparse.SUPPRESS)
     ap.add_argument("--ref", default="HEAD", help="git revision of the old build (HEAD)")
+    ap.add_argument("--new-ref", default="",
+                    help="git revision of the new build, built like the old one (default: the "
+                         "installed build of the working tree); for an A/B of one commit "
+                         "while the working tree holds other, unfinished changes")
     ap.add_argument("--scenes", nargs="+", default=list(DEFAULT_SCENES),
                     help="KIND:N, KIND one of spheres, general, hertz, geogrid")
     ap.add_argument("--threads", nargs="+", type=int, default=[1, 2])
@@ -333,13 +338,14 @@ def main(argv: list[str] | None = None) -> int:
                         "clumps") or not n.isdigit():
             raise SystemExit(f"--scenes {spec}: must be KIND:N with KIND spheres, general, "
                              "hertz, geogrid, pullout or clumps and N a whole number")
-    overlay = build_ref(args.ref, args.jobs)
+    overlays = {"old": build_ref(args.ref, args.jobs),
+                "new": build_ref(args.new_ref, args.jobs) if args.new_ref else ""}
     rows = []
     if args.instructions:
         with tempfile.TemporaryDirectory() as tmp:
             for spec in args.scenes:
                 kind, _, n = spec.partition(":")
-                rows.append(count_instructions(kind, int(n), args, overlay, Path(tmp)))
+                rows.append(count_instructions(kind, int(n), args, overlays, Path(tmp)))
         print("\n| scene | N | old instr./step | new instr./step | old/new |", file=sys.stderr)
         print("|---|---|---|---|---|", file=sys.stderr)
         for r in rows:
@@ -351,7 +357,7 @@ def main(argv: list[str] | None = None) -> int:
         for spec in args.scenes:
             kind, _, n = spec.partition(":")
             for t in args.threads:
-                rows.append(compare(kind, int(n), t, args, overlay, Path(tmp)))
+                rows.append(compare(kind, int(n), t, args, overlays, Path(tmp)))
     print("\n| scene | bodies | threads | old us/step | new us/step | new/old p-steps/s (min-max)"
           " | bitwise |", file=sys.stderr)
     print("|---|---|---|---|---|---|---|", file=sys.stderr)
