@@ -17,6 +17,8 @@ from pathlib import Path
 
 import pytest
 
+sys.path.insert(0, str(Path(__file__).resolve().parent))
+
 ROOT = Path(__file__).resolve().parents[1]
 PY = sys.executable
 DEPOSITION = [PY, str(ROOT / "cases" / "deposition.py"), "--smoke", "--threads", "1"]
@@ -387,3 +389,39 @@ def test_a_two_way_tolerance_that_accepts_anything_is_refused():
         with pytest.raises(SystemExit) as ei:
             prs_element.parse_args(["--smoke", "--two-way", "--tol", tol])
         assert ei.value.code == 2
+
+
+def test_triaxial_resume_continues_from_its_checkpoint_as_the_run_would_have(tmp_path,
+                                                                             case_smoke):
+    """Ctrl-C in the deviatoric stage, then --resume: the state after the isotropic stage is
+    loaded from isotropic.h5 and the deviatoric stage runs again; its curve is the very one
+    of the uninterrupted smoke (same engine, parameters and threads: bitwise)."""
+    from conftest import SMOKE_ARGS
+
+    ref_out, ref = case_smoke("triaxial")
+    assert ref.returncode == 0, ref.stderr
+    out = tmp_path / "t"
+    args = [PY, str(ROOT / "cases" / "triaxial.py"), "--smoke", "--out", str(out),
+            *SMOKE_ARGS["triaxial"]]
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    for line in proc.stdout:
+        if "axial loading at" in line:  # the checkpoint follows at once
+            break
+    t0 = time.time()
+    while not (out / "triaxial.csv").exists() and time.time() - t0 < 120:
+        time.sleep(0.05)  # the deviatoric stage has begun: isotropic.h5 is complete
+    time.sleep(0.3)
+    proc.send_signal(signal.SIGINT)
+    _o, err = proc.communicate(timeout=300)
+    assert proc.returncode == 130, err
+    assert manifest(out)["status"] == "interrupted"
+    p = run([*args, "--resume"], timeout=900)
+    assert p.returncode == 0, p.stderr
+    assert "--resume: kept isotropic.h5" in p.stdout
+    assert (out / "triaxial.csv").read_bytes() == (ref_out / "triaxial.csv").read_bytes()
+    s, r = (json.loads((d / "summary.json").read_text()) for d in (out, ref_out))
+    assert s["q_peak_Pa"] == r["q_peak_Pa"] and s["porosity_isotropic"] == \
+        r["porosity_isotropic"]
+    # nothing to resume in a completed run
+    p = run([*args, "--resume"])
+    assert p.returncode != 0 and "--resume: holds a completed run" in p.stderr

@@ -32,6 +32,7 @@ import socket
 import sys
 import time
 from pathlib import Path
+from typing import Sequence
 
 MANIFEST = ".geogrid-dem-run.json"
 LOCK = ".geogrid-dem.lock"
@@ -176,14 +177,17 @@ def _ours(lock: dict | None) -> bool:
         lock.get("host") == socket.gethostname()
 
 
-def begin_run(out, case: str, log=print, *, overwrite: bool | None = None) -> Path:
+def begin_run(out, case: str, log=print, *, overwrite: bool | None = None,
+              keep: Sequence[str] | None = None) -> Path:
     """Prepares the results folder of a case run and returns it (``out`` None: a new numbered
     folder ``results/<case>/run_NNN``). Refuses (:class:`RunFolderError`, naming the folder
     and why) a folder another live run is writing into, a folder holding an earlier run
     without ``overwrite`` (default: the process's ``--overwrite``), and a folder holding files
     no run recorded; with ``overwrite`` the earlier run's recorded files are removed, only
     after the whole folder was checked. Then takes the lock and marks the folder ``running``.
-    A second call from the same process for the same folder returns it unchanged."""
+    A second call from the same process for the same folder returns it unchanged.
+    ``keep`` (a case's --resume): the folder must hold an unfinished run of ``case`` with the
+    files ``keep`` (its checkpoint first); they are kept and the run's other files removed."""
     if overwrite is None:
         overwrite = _OVERWRITE
     if out is None:
@@ -208,6 +212,37 @@ def begin_run(out, case: str, log=print, *, overwrite: bool | None = None) -> Pa
                 "remove it if that run is gone); wait for it to end, or name another folder")
     manifest = _read_json(manifest_path) if manifest_path.exists() else None
     files = _files(out) if out.is_dir() else []
+    if keep is not None:
+        status = (manifest or {}).get("status")
+        if status == "running" or stale is not None:
+            status = "killed"
+        if manifest is None or manifest.get("case") != case or status == "complete":
+            what = ("no run" if manifest is None else
+                    f"a run of {manifest.get('case')}" if manifest.get("case") != case else
+                    "a completed run")
+            raise RunFolderError(f"--out={out}: --resume: holds {what}; --resume continues an "
+                                 f"interrupted or failed run of {case}")
+        missing = [k for k in keep[:1] if not (out / k).is_file()]
+        if missing:
+            raise RunFolderError(f"--out={out}: --resume: {missing[0]} is not there (the run "
+                                 "stopped before its checkpoint); run it again with "
+                                 "--overwrite")
+        if status == "killed":
+            t0 = float(manifest.get("started_unix", 0.0))
+            listed = {str(p.relative_to(out)) for p in files if p.stat().st_mtime >= t0 - 1}
+        else:
+            listed = set(manifest.get("files", []))
+        unlisted = [p for p in files if str(p.relative_to(out)) not in listed]
+        if unlisted:
+            raise RunFolderError(
+                f"--out={out}: holds {len(unlisted)} files that the earlier run did not record "
+                f"(e.g. {unlisted[0].relative_to(out)}); nothing was removed")
+        drop = [p for p in files if str(p.relative_to(out)) not in set(keep)]
+        for p in drop:
+            p.unlink()
+        log(f"[{case}] --out {out}: --resume: kept {', '.join(k for k in keep if (out / k).is_file())}"
+            f"; removed the {len(drop)} other files of the {status} run")
+        files = []
     if files:
         if manifest is None:
             raise RunFolderError(
@@ -307,7 +342,7 @@ def _full_disk(e: BaseException) -> bool:
 
 
 def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
-             own_folder: bool = True) -> int:
+             own_folder: bool = True, keep: Sequence[str] | None = None) -> int:
     """Runs ``work(out)`` for a case's command line in its results folder (begin_run: ``out``
     None makes a numbered one; ``overwrite`` None: the ``--overwrite`` that
     check_common_args recorded) and returns the exit status: 0 when it completed, 130 when it
@@ -317,7 +352,7 @@ def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
     ``failed`` in its manifest, and one line says so and where the results are; any other
     error is re-raised after that. SIGTERM stops the run as SIGINT does (status 143).
     ``own_folder`` False: ``out`` is a folder of several runs (each begins its own
-    sub-folder), not locked or recorded itself."""
+    sub-folder), not locked or recorded itself. ``keep``: a --resume (see begin_run)."""
     global _OVERWRITE
     from cpp_dem.io import close_all_writers
 
@@ -327,7 +362,7 @@ def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
     if overwrite is not None:
         _OVERWRITE = bool(overwrite)
     if own_folder:
-        out = begin_run(out, case, log=log)
+        out = begin_run(out, case, log=log, keep=keep)
     else:
         out = Path(out) if out is not None else default_base(case)
         out.mkdir(parents=True, exist_ok=True)

@@ -19,6 +19,10 @@ volumetric_strain, deviatoric_stress, ...), triaxial.png and .pdf (eps_v-eps_a, 
 eps_v-time), isotropic.h5 (checkpoint after stage 1), packing_isotropic.csv (grains only),
 vtk/ (spheres and box at the end of each stage), summary.json. SI units; stresses and
 strains compression positive; q = sigma_z - (sigma_x + sigma_y) / 2.
+
+--resume continues an interrupted (or failed) run in --out from its checkpoint isotropic.h5:
+the sample is rebuilt from the same parameters, the state after stage 1 loaded (bitwise), and
+stage 2 runs again from its start; the checkpoint is kept, the other files replaced.
 """
 
 from __future__ import annotations
@@ -37,7 +41,7 @@ from cpp_dem.io.figures import save_figure
 from cpp_dem.rundir import add_out_args, begin_run, check_common_args, end_run, run_main
 import cpp_dem as dem
 from cpp_dem import geogrid, measure, prep, psd
-from cpp_dem.checkpoint import save_checkpoint
+from cpp_dem.checkpoint import load_checkpoint, save_checkpoint
 from cpp_dem.cases.grains_option import (HELP as GRAINS_HELP, check_grains, grain_templates,
                                          write_grains_csv)
 from cpp_dem.output import CsvRecorder, H5Recorder, write_vtk_box, write_vtk_spheres
@@ -250,10 +254,10 @@ class Prepared:
     t_iso: float            #: wall time of the isotropic stage, s
 
 
-def prepare(p: Params, log) -> Prepared:
-    """Stages 0 and 1: the sample (or the given packing), the geogrid layer if any, the
-    expansion to the cell pressure, the isotropic stage; progress lines go to ``log``.
-    Raises SystemExit if the isotropic stage does not converge."""
+def build(p: Params, log) -> tuple:
+    """Stage 0 without running: the sample (or the given packing) in its box with its walls
+    and controller, and the geogrid layer if any; returns (sample, grid, layer, n_grains,
+    psd_info)."""
     c, r, lo, hi, psd_info, clumps = make_sample(p, log)
     layer = grid_layer(p, lo, hi)
     if layer is not None and (p.clear_layer or p.geogrid != "none"):
@@ -290,6 +294,57 @@ def prepare(p: Params, log) -> Prepared:
             else f"{n_grains} grains")
     log(f"{what}, box {np.round(measure.box_size(sc, walls), 4)} m, "
         f"{dem.get_num_threads()} threads, dt {sc.dt:.3g} s")
+    return sample, grid, layer, n_grains, psd_info
+
+
+#: The file --resume keeps and starts from (the other files of stage 1 are written again
+#: from the loaded state, the same bytes).
+RESUME_KEEP = ("isotropic.h5",)
+
+
+def restore(p: Params, out: Path, log) -> Prepared:
+    """The state after stage 1 of an earlier run of the same parameters, from its checkpoint
+    ``out/isotropic.h5`` (--resume): the sample is rebuilt and the checkpoint loaded into it
+    (its controllers' state included), so stage 2 runs as it did."""
+    sample, grid, _layer, n_grains, psd_info = build(p, log)
+    sc = sample.scene
+    growth = None
+    if not p.packing and not p.skip_isotropic:
+        # the expansion's controller, as prepare() left it (disabled): the checkpoint holds
+        # the state of the same controllers in the same order
+        growth = dem.RadiusGrowth(walls=list(sample.walls), bodies=[],
+                                  target_stress=p.cell_pressure, gain=0.5, max_strain=1e-4)
+        sc.add_controller(growth)
+    extra = load_checkpoint(out / "isotropic.h5", sc)
+    if growth is not None:
+        growth.enabled = False
+    if not p.packing and p.prep_friction != p.phi:
+        prep.set_friction(sc, np.flatnonzero(measure.sphere_mask(sc)),
+                          sc.material(sample.material), p.phi)
+    if grid is not None:
+        sc.block_dofs(grid.nodes, "")
+    st = extra.get("isotropic")
+    if not isinstance(st, dict):
+        raise SystemExit(f"error: --resume: {out / 'isotropic.h5'} has no record of the "
+                         "isotropic stage (written by an older version); run again with "
+                         "--overwrite")
+    iso = prep.StageResult(True, int(st["steps"]), np.asarray(st["axis_stresses"], float),
+                           float(st["mean_stress"]), float(st["unbalanced_force"]),
+                           float(st["porosity"]), dict(st.get("extra", {})))
+    gf = extra.get("growth_factor")
+    grow = prep.StageResult(True, 0, iso.axis_stresses, iso.mean_stress, 0.0, 0.0,
+                            {"growth_factor": gf}) if gf is not None else None
+    log(f"--resume: the state after the isotropic stage loaded from {out / 'isotropic.h5'} "
+        f"(step {sc.step_count}, t = {sc.time:.4g} s); the deviatoric stage runs again")
+    return Prepared(sample, grid, n_grains, psd_info, grow, iso, float(st.get("wall_s", 0.0)))
+
+
+def prepare(p: Params, log) -> Prepared:
+    """Stages 0 and 1: the sample (or the given packing), the geogrid layer if any, the
+    expansion to the cell pressure, the isotropic stage; progress lines go to ``log``.
+    Raises SystemExit if the isotropic stage does not converge."""
+    sample, grid, layer, n_grains, psd_info = build(p, log)
+    sc, walls = sample.scene, sample.walls
 
     def progress(s) -> None:
         if s.step_count % 2000 == 0:
@@ -348,17 +403,18 @@ def inertial_number(sc, p: Params) -> float:
     return p.strain_rate * d_mean * math.sqrt(p.density / p.cell_pressure)
 
 
-def run(p: Params, out: Path) -> dict:
+def run(p: Params, out: Path, *, resume: bool = False) -> dict:
+    """Runs the case into ``out``; ``resume``: from the checkpoint of stage 1 there."""
     t_start = time.perf_counter()
     if p.threads > 0:
         dem.set_num_threads(p.threads)
-    begin_run(out, "triaxial")
+    begin_run(out, "triaxial", keep=RESUME_KEEP if resume else None)
     (out / "vtk").mkdir(exist_ok=True)
 
     def log(msg: str) -> None:
         print(f"[triaxial] {msg}", flush=True)
 
-    prepared = prepare(p, log)
+    prepared = restore(p, out, log) if resume else prepare(p, log)
     sample, grid, n_grains, iso, t_iso = (prepared.sample, prepared.grid, prepared.n_grains,
                                           prepared.iso, prepared.t_iso)
     sc, walls, grow, psd_info = sample.scene, sample.walls, prepared.grow, prepared.psd_info
@@ -370,7 +426,14 @@ def run(p: Params, out: Path) -> dict:
     log(f"axial loading at {p.strain_rate:g} 1/s: inertial number "
         f"{inertial_number(sc, p):.2g} (quasi-static below ~1e-3)")
     state_iso = measure.sample_state(sc, walls)
-    save_checkpoint(out / "isotropic.h5", sc, extra={"walls": list(walls)})
+    if not resume:
+        save_checkpoint(out / "isotropic.h5", sc, extra={
+            "walls": list(walls), "growth_factor": grow.extra["growth_factor"] if grow else None,
+            "isotropic": {"steps": iso.steps, "axis_stresses": np.asarray(
+                iso.axis_stresses, float).tolist(), "mean_stress": float(iso.mean_stress),
+                "unbalanced_force": float(iso.unbalanced_force),
+                "porosity": float(iso.porosity), "wall_s": t_iso,
+                "extra": json.loads(json.dumps(iso.extra, default=str))}})
     write_grains_csv(sc, out, "isotropic")  # packing_ (grains only) and clumps_isotropic.csv
     write_vtk_spheres(out / "vtk" / "spheres_isotropic.vtp", sc)
     size = measure.box_size(sc, walls)
@@ -488,6 +551,9 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     ap.add_argument("--box", type=str, default="",
                     help="wall planes x0,y0,z0,x1,y1,z1 (m) of the --packing (default: its "
                          "bounding box, or a LIGGGHTS file's box)")
+    ap.add_argument("--resume", action="store_true",
+                    help="continue the interrupted run in --out (same parameters) from its "
+                         "checkpoint isotropic.h5: stage 2 runs again from its start")
     ap.add_argument("--skip-isotropic", action="store_true",
                     help="with --packing: take its state as it is (walls at --box, no growth, "
                          "no isotropic stage) and go straight to the axial loading")
@@ -583,12 +649,20 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     if a.skip_isotropic and not a.packing:
         ap.error("--skip-isotropic: goes with --packing (the state to continue)")
     p.skip_isotropic = a.skip_isotropic
+    if a.resume:
+        if a.out is None:
+            ap.error("--resume: name the folder of the interrupted run with --out")
+        if a.overwrite:
+            ap.error("--resume and --overwrite: choose one (--resume keeps stage 1's files)")
+    p.resume = a.resume
     return p, a.out
 
 
 def main(argv=None) -> int:
     p, out = parse_args(argv)
-    return run_main("triaxial", out, lambda o: run(p, o))
+    resume = p.__dict__.pop("resume", False)
+    return run_main("triaxial", out, lambda o: run(p, o, resume=resume),
+                    keep=RESUME_KEEP if resume else None)
 
 
 if __name__ == "__main__":
