@@ -347,11 +347,14 @@ def run_case(case: str, argv: list[str], *, source: str | None = None) -> int:
     proc = subprocess.Popen([*case_command(case), *argv], stderr=subprocess.PIPE, text=True,
                             bufsize=1, process_group=0)
 
-    def forward(sig, _frame):
-        try:
-            proc.send_signal(sig)
-        except ProcessLookupError:
-            pass
+    def forward(sig, _frame):  # to the case's whole group (its worker processes too), as a
+        try:                     # terminal's Ctrl-C would
+            os.killpg(proc.pid, sig)
+        except (ProcessLookupError, PermissionError):
+            try:
+                proc.send_signal(sig)
+            except ProcessLookupError:
+                pass
 
     import threading
 
