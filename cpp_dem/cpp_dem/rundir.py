@@ -37,8 +37,8 @@ from typing import Sequence
 MANIFEST = ".geogrid-dem-run.json"
 LOCK = ".geogrid-dem.lock"
 #: Files a results folder may hold without being an earlier run's: the command's run file,
-#: the manifest and the lock.
-_FREE = {"run.toml", MANIFEST, LOCK}
+#: the manifest (and its temporary) and the lock.
+_FREE = {"run.toml", MANIFEST, LOCK, MANIFEST + ".tmp"}
 #: Exit status of a run stopped by SIGINT (128 + 2, as a shell reports it).
 EXIT_INTERRUPTED = 130
 
