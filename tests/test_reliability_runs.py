@@ -1,7 +1,8 @@
 """Results folders, run files, sweeps and interrupted runs at the case level.
 
-Each test runs the deposition case (its smoke, ~7 s) or only parses arguments, so the module
-stays short. docs/reliability.md, "Results folders and interrupted runs".
+Most tests run a tiny deposition (20 spheres, about a second), interrupt a deposition smoke
+early, or only parse arguments; one resumes the triaxial smoke (shared with the session's
+case_smoke). docs/reliability.md, "Results folders and interrupted runs".
 """
 
 from __future__ import annotations
@@ -24,6 +25,8 @@ PY = sys.executable
 DEPOSITION = [PY, str(ROOT / "cases" / "deposition.py"), "--smoke", "--threads", "1"]
 CLI = [PY, "-m", "cpp_dem.cli"]
 MANIFEST = ".geogrid-dem-run.json"
+#: A deposition of 20 spheres for 0.01 s: every file of the case, in about a second.
+TINY = ["--n", "20", "--duration", "0.01"]
 
 
 def manifest(out: Path) -> dict:
@@ -38,9 +41,9 @@ def run(args, cwd=None, timeout=300, **kw):
 
 @pytest.fixture(scope="module")
 def first_run(tmp_path_factory):
-    """One completed deposition smoke in a folder of its own."""
+    """One completed (tiny) deposition in a folder of its own."""
     out = tmp_path_factory.mktemp("dep") / "out"
-    p = run([*DEPOSITION, "--out", str(out)])
+    p = run([*DEPOSITION, *TINY, "--out", str(out)])
     assert p.returncode == 0, p.stderr
     return out
 
@@ -54,7 +57,7 @@ def test_a_completed_run_is_never_replaced_without_overwrite(first_run):
     assert m["status"] == "complete" and m["complete"] is True and m["files"]
     assert not (first_run / ".geogrid-dem.lock").exists()
     before = _snapshot(first_run)
-    again = run([*DEPOSITION, "--out", str(first_run)])
+    again = run([*DEPOSITION, *TINY, "--out", str(first_run)])
     assert again.returncode != 0
     assert f"--out={first_run}: holds a completed run of deposition" in again.stderr
     assert "--overwrite" in again.stderr
@@ -68,7 +71,7 @@ def test_a_foreign_file_refuses_the_overwrite_before_anything_is_deleted(first_r
     mine.write_text("mine")
     try:
         before = _snapshot(first_run)
-        p = run([*DEPOSITION, "--out", str(first_run), "--overwrite"])
+        p = run([*DEPOSITION, *TINY, "--out", str(first_run), "--overwrite"])
         assert p.returncode != 0
         assert "did not record (e.g. vtk/notes_of_mine.txt)" in p.stderr
         assert "Nothing was removed" in p.stderr
@@ -79,10 +82,10 @@ def test_a_foreign_file_refuses_the_overwrite_before_anything_is_deleted(first_r
 
 def test_overwrite_replaces_only_the_recorded_files(tmp_path):
     out = tmp_path / "o"
-    assert run([*DEPOSITION, "--out", str(out)]).returncode == 0
+    assert run([*DEPOSITION, *TINY, "--out", str(out)]).returncode == 0
     old = manifest(out)["started"]
     time.sleep(1.1)
-    p = run([*DEPOSITION, "--out", str(out), "--overwrite"])
+    p = run([*DEPOSITION, *TINY, "--out", str(out), "--overwrite"])
     assert p.returncode == 0, p.stderr
     assert "--overwrite: removed the" in p.stdout
     m = manifest(out)
@@ -91,7 +94,7 @@ def test_overwrite_replaces_only_the_recorded_files(tmp_path):
 
 def test_without_out_every_run_gets_a_new_numbered_folder(tmp_path):
     for _ in range(2):
-        p = run([*DEPOSITION, "--n", "20", "--duration", "0.01"], cwd=tmp_path)
+        p = run([*DEPOSITION, *TINY], cwd=tmp_path)
         assert p.returncode == 0, p.stderr
     base = tmp_path / "results" / "deposition"
     assert sorted(d.name for d in base.iterdir()) == ["run_001", "run_002"]
@@ -108,7 +111,7 @@ def test_a_live_lock_refuses_a_second_run_naming_the_holder(tmp_path):
         (out / ".geogrid-dem.lock").write_text(json.dumps(
             {"pid": holder.pid, "host": socket.gethostname(), "case": "triaxial",
              "started": "2026-01-01T00:00:00+00:00"}))
-        p = run([*DEPOSITION, "--out", str(out)])
+        p = run([*DEPOSITION, *TINY, "--out", str(out)])
         assert p.returncode != 0
         assert f"another run is writing into it: pid {holder.pid} on {socket.gethostname()}" \
             in p.stderr
@@ -116,7 +119,7 @@ def test_a_live_lock_refuses_a_second_run_naming_the_holder(tmp_path):
         holder.kill()
         holder.wait()
     # the holder is gone: its lock is stale and taken over, with a message
-    p = run([*DEPOSITION, "--n", "20", "--duration", "0.01", "--out", str(out)])
+    p = run([*DEPOSITION, *TINY, "--out", str(out)])
     assert p.returncode == 0, p.stderr
     assert f"taking over the lock of pid {holder.pid}" in p.stdout
     assert manifest(out)["status"] == "complete"
@@ -178,7 +181,7 @@ def test_sigint_in_the_middle_of_a_case_closes_its_files_and_marks_it_interrupte
     assert len(h5["time"]) >= 1 and len(csv["time"]) >= 1
     assert not (out / "summary.json").exists()
     # an interrupted run is not replaced silently either
-    p = run([*DEPOSITION, "--out", str(out)])
+    p = run([*DEPOSITION, *TINY, "--out", str(out)])
     assert p.returncode != 0 and "holds an interrupted run of deposition" in p.stderr
 
 
@@ -249,7 +252,7 @@ def test_a_misspelt_parameter_gets_a_did_you_mean_before_the_case_starts(tmp_pat
 
 def test_the_run_file_goes_where_the_results_go(tmp_path):
     a, b = tmp_path / "A", tmp_path / "B"
-    tiny = ["--n", "20", "--duration", "0.01", "--threads", "1"]
+    tiny = [*TINY, "--threads", "1"]
     assert run([*CLI, "run", "deposition", *tiny, "--out", str(a)], cwd=tmp_path).returncode == 0
     record_a = (a / "run.toml").read_text()
     p = run([*CLI, "run", str(a / "run.toml"), "--out", str(b)], cwd=tmp_path)
