@@ -131,6 +131,11 @@ def test_an_unwritable_or_file_out_is_a_clear_error(tmp_path):
     p = run([*DEPOSITION, "--out", str(f / "sub")])
     assert p.returncode == 2 and f"--out={f / 'sub'}: cannot be created: {f} is a file" \
         in p.stderr, p.stderr
+    # a place nobody can create folders in (root included): /proc
+    p = run([*DEPOSITION, *TINY, "--out", "/proc/geogrid_dem_no_such/x"])
+    assert p.returncode == 1, p.stderr
+    assert "--out=/proc/geogrid_dem_no_such/x: cannot be written into" in p.stderr
+    assert "Traceback" not in p.stderr
     if os.geteuid() != 0:
         ro = tmp_path / "ro"
         ro.mkdir()

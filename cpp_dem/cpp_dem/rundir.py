@@ -112,7 +112,11 @@ def numbered_run_dir(base: Path) -> Path:
     why = _writable_or_error(base)
     if why:
         raise RunFolderError(f"the default results folder {base} {why}; give --out DIR")
-    base.mkdir(parents=True, exist_ok=True)
+    try:
+        base.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise RunFolderError(f"the default results folder {base} cannot be made: {e.strerror}; "
+                             "give --out DIR") from None
     nums = [int(m.group(1)) for p in base.iterdir()
             if (m := re.fullmatch(r"run_(\d+)", p.name))]
     k = max(nums, default=0) + 1
@@ -288,13 +292,17 @@ def begin_run(out, case: str, log=print, *, overwrite: bool | None = None,
         log(f"[{case}] --out {out}: taking over the lock of {_holder(stale)}, which no longer "
             "runs")
         lock_path.unlink(missing_ok=True)
-    out.mkdir(parents=True, exist_ok=True)
     try:
+        out.mkdir(parents=True, exist_ok=True)
         fd = os.open(lock_path, os.O_WRONLY | os.O_CREAT | os.O_EXCL, 0o644)
     except FileExistsError:
         lock = _read_json(lock_path)
         raise RunFolderError(f"--out={out}: another run started writing into it just now: "
                              f"{_holder(lock) if lock else '?'}; name another folder") from None
+    except OSError as e:
+        raise RunFolderError(f"--out={out}: cannot be written into: {e.strerror} "
+                             f"({e.filename or out}); name a folder you can write into") \
+            from None
     with os.fdopen(fd, "w") as fh:
         fh.write(_lock_text(case))
     _write_atomic(manifest_path, json.dumps({
