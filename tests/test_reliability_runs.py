@@ -316,6 +316,10 @@ def test_a_sweep_into_a_file_or_to_an_unreachable_scheduler_is_one_clear_error(t
     p = _sweep(tmp_path, 'case = "deposition"\nout = "afile"\n[sweep]\nseed = [1]\n')
     assert p.returncode == 1 and "field 'out'='afile': exists and is not a directory" \
         in p.stderr and "Traceback" not in p.stderr
+    p = _sweep(tmp_path, 'case = "deposition"\nout = "/proc/geogrid_dem_no/x"\n[sweep]\n'
+               'seed = [1]\n')
+    assert p.returncode == 1 and "field 'out'='/proc/geogrid_dem_no/x': cannot be created" \
+        in p.stderr and "Traceback" not in p.stderr
     p = _sweep(tmp_path, 'case = "deposition"\nout = "sw"\n[params]\nsmoke = true\n'
                '[sweep]\nseed = [1]\n', "--scheduler", "tcp://127.0.0.1:9",
                env={"DASK_DISTRIBUTED__COMM__TIMEOUTS__CONNECT": "3s"})

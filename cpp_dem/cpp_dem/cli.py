@@ -646,7 +646,11 @@ def sweep_cmd(file: Path, workers: int, scheduler: str | None, threads: int,
             check_params(case, params, source=src)
             check_argv(case, argv, source=src)
         checked.append((i, row_dir, params, argv))
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as e:
+        raise RunFileError(f"{file}: field 'out'={data['out']!r}: cannot be created: "
+                           f"{e.strerror}") from None
     todo, results = [], [None] * len(rows)
     for i, row_dir, params, argv in checked:
         row = rows[i]
@@ -837,6 +841,11 @@ def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | N
                        source=f"{src}: {where} at young={pt[0]:g}, poisson={pt[1]:g}, "
                               f"phi={pt[2]:g}")
     why = __import__("cpp_dem.rundir", fromlist=["x"])._writable_or_error(Path(cfg.out))
+    if not why:
+        try:
+            Path(cfg.out).mkdir(parents=True, exist_ok=True)
+        except OSError as e:
+            why = f"cannot be created: {e.strerror}"
     if why:
         raise RunFileError(f"{src}: out={str(cfg.out)!r}: {why}")
     client = cluster = None
