@@ -43,7 +43,8 @@ from .packing import read_packing_csv, write_packing_csv  # noqa: F401
 from ._core import RadiusGrowth, ServoWall, TriaxialController  # noqa: F401  (samples)
 from .checkpoint import load_checkpoint, save_checkpoint  # noqa: F401
 from .scene import (BOX_WALLS, ControllerLimitWarning, Scene, hertz_mindlin_material,  # noqa: F401
-                    linear_material)
+                    TargetNotMetWarning, linear_material)
+from .inertial import InertialNumberWarning  # noqa: F401,E402
 
 from . import geogrid, packing, periodic  # noqa: F401,E402
 from ._core import CellController  # noqa: F401,E402  (periodic cells)
@@ -67,6 +68,8 @@ __all__ = [
     "BlowUpError",
     "ContactModel",
     "ControllerLimitWarning",
+    "InertialNumberWarning",
+    "TargetNotMetWarning",
     "ContactPhys",
     "Material",
     "ParameterError",

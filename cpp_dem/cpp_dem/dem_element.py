@@ -32,7 +32,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _core, measure, periodic, prep
+from . import _core, inertial, measure, periodic, prep
 from ._core import CellController, ParameterError
 from .scene import Scene
 
@@ -275,6 +275,7 @@ class DemElement:
         n = self._steps_for(e, steps, max_strain_per_step)
         self._set_dt()
         dt = float(self.scene.dt)
+        self._check_rate(float(np.abs(e).max()) / (n * dt))
         self.controller.enabled = self.kind == "walls"
         if self.kind == "periodic":
             self.scene.velocity_gradient = _rate_for(e, n, dt)
@@ -294,6 +295,29 @@ class DemElement:
         relax, u, ok = self._relax(unbalanced, max_relax_steps)
         self.last_report = IncrementReport(n, relax, u, ok, time.perf_counter() - t0)
         return self.stress()
+
+    def _check_rate(self, rate: float) -> None:
+        """Warns (cpp_dem.InertialNumberWarning) when a strain increment at ``rate`` (1/s,
+        the largest component over the steps) is not quasi-static: I = rate d /
+        sqrt(p / rho), d the mean grain diameter, p the mean stress now, rho the grains'
+        density (their mass over their volume). Once per element object (a coupled run
+        calls it for every increment and iteration)."""
+        if self.__dict__.get("_rate_warned"):
+            return
+        sc = self.scene
+        grains = measure.sphere_mask(sc)
+        r = np.asarray(sc.radii)[grains]
+        p = abs(float(np.trace(self._raw_stress()))) / 3.0
+        if not (rate > 0 and p > 0 and len(r)):
+            return
+        rho = float(np.asarray(sc.masses)[grains].sum() / (4.0 / 3.0 * math.pi * np.sum(r**3)))
+        if not (math.isfinite(rho) and rho > 0):
+            return  # (members of clumps carry no mass of their own)
+        d = float(2.0 * r.mean())
+        self.__dict__["_rate_warned"] = inertial.check_quasi_static(
+            inertial.inertial_number(rate, d, p, rho),
+            f"DemElement ({self.kind}) strain increment (this element's later increments are "
+            "not reported)", rate=rate, diameter=d, pressure=p, density=rho, stacklevel=3)
 
     def apply_stress(self, sigma, *, components=VOIGT, tol: float = 0.005,
                      unbalanced: float = 1e-3, max_steps: int = 200_000) -> np.ndarray:

@@ -18,7 +18,7 @@ from typing import Callable
 
 import numpy as np
 
-from . import _core, geogrid, measure, prep
+from . import _core, geogrid, inertial, measure, prep
 from ._core import BeamParams, set_num_threads
 from .output import CsvRecorder, H5Recorder, write_vtk_box, write_vtk_contacts, write_vtk_spheres
 from .packing import loose_cloud
@@ -349,6 +349,7 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
         return ax
 
     start, last = sc.step_count, time.perf_counter()
+    size0, t0 = measure.box_size(sc, walls), sc.time
     ok = False
     while sc.step_count - start < p.max_steps:
         sc.run(p.record_every)
@@ -363,6 +364,7 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
             ok = True
             break
     steps = sc.step_count - start
+    _check_stage_rate(sc, walls, size0, t0, t, stage, sc.material(sample.material).density)
     hold_err = 0.0
     held = 0
     while held < p.hold_steps:
@@ -372,6 +374,24 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
     ax = measure.axis_stresses(sc, walls)
     return {"converged": ok, "steps": steps, "hold_max_rel_error": hold_err,
             "wall_stresses_pa": ax, "box_size_m": measure.box_size(sc, walls)}
+
+
+def _check_stage_rate(sc, walls, size0, t0: float, targets, stage: int,
+                      rho: float) -> None:
+    """Warns (cpp_dem.InertialNumberWarning) when a servo stage deformed the element faster
+    than quasi-statically: the rate is the largest mean strain rate of the box's axes over the
+    stage (|dL / L0| / dt, 1/s), the pressure the mean target, d the grains' mean diameter,
+    rho (kg/m^3) their density."""
+    dt = sc.time - t0
+    d = measure.grain_diameters(sc)
+    pressure = float(np.mean(targets))
+    if not (dt > 0 and pressure > 0 and len(d)):
+        return
+    rate = float(np.max(np.abs(measure.box_size(sc, walls) - size0) / size0)) / dt
+    d_mean = float(np.mean(d))
+    inertial.check_quasi_static(inertial.inertial_number(rate, d_mean, pressure, rho),
+                                f"element servo stage {stage}", rate=rate, diameter=d_mean,
+                                pressure=pressure, density=rho, stacklevel=3)
 
 
 def probe_tangent(sample, grid, p: ElementParams, target, *, rel: float, signs=None,

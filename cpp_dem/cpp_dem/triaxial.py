@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _core, measure, prep
+from . import _core, inertial, measure, prep
 from .scene import Scene
 
 
@@ -105,6 +105,14 @@ def deviatoric_stage(sample: TriaxialSample, pressure: float, strain_rate: float
     if not (0 < stop_strain < 0.5):
         raise _core.ParameterError(f"stop_strain={stop_strain}: must be in (0, 0.5)")
     sc, walls, ctl = sample.scene, sample.walls, sample.controller
+    d = measure.grain_diameters(sc)
+    if pressure > 0 and len(d):
+        d_mean = float(np.mean(d))
+        rho = float(sc.material(sample.material).density)
+        inertial.check_quasi_static(
+            inertial.inertial_number(strain_rate, d_mean, pressure, rho),
+            "triaxial deviatoric stage", rate=strain_rate, diameter=d_mean,
+            pressure=pressure, density=rho, stacklevel=2)
     ctl.reset_strain(sc)
     l0 = np.asarray(ctl.reference_lengths)
     v0 = float(np.prod(l0))
