@@ -202,6 +202,36 @@ class RefdResult:
     stages: list
 
 
+#: The loosest porosity target REFD takes, -. No cohesionless packing under stress is that
+#: loose: random loose packing of frictional spheres has a porosity of about 0.45 (Onoda &
+#: Liniger 1990), and the loosest stable packings of angular or elongated grains of moderate
+#: aspect ratio stay below 0.6.
+POROSITY_MAX = 0.6
+#: The densest packing of equal spheres (Kepler; Hales 2005): porosity 1 - pi / (3 sqrt 2), -.
+POROSITY_EQUAL_SPHERES_MIN = 1.0 - math.pi / (3.0 * math.sqrt(2.0))
+#: A porosity reached this far (absolute, -) below a target taken as a maximum is reported.
+POROSITY_MISS = 0.02
+
+
+def check_porosity_target(porosity: float, radii=None) -> None:
+    """Refuses a porosity target (-) that no packing reaches: outside (0, POROSITY_MAX], or,
+    for grains of one size (``radii``, m), below the densest packing of equal spheres. (A
+    polydisperse sample packs denser; REFD then says what it reached when it cannot.)"""
+    if not (isinstance(porosity, (int, float)) and math.isfinite(porosity)
+            and 0 < porosity <= POROSITY_MAX):
+        raise ParameterError(
+            f"porosity={porosity}: must be in (0, {POROSITY_MAX}] (-); no cohesionless "
+            f"packing under stress is looser than about {POROSITY_MAX} (random loose packing "
+            "of frictional spheres: about 0.45)")
+    if radii is not None and len(radii):
+        r = np.asarray(radii, dtype=float)
+        if r.max() - r.min() <= 1e-9 * r.max() and porosity < POROSITY_EQUAL_SPHERES_MIN:
+            raise ParameterError(
+                f"porosity={porosity}: below {POROSITY_EQUAL_SPHERES_MIN:.4f}, the densest "
+                f"packing of equal spheres (these {len(r)} grains have one radius, "
+                f"{r[0]:g} m); no packing of them reaches it")
+
+
 def refd(scene, walls, material_id: int, *, stress: float, porosity: float,
          friction_steps_deg=(20.0, 10.0, 5.0, 2.0, 0.0), tol: float = 0.01,
          unbalanced: float = 0.01, max_steps_per_stage: int = 100_000, gain: float = 0.5,
@@ -216,10 +246,9 @@ def refd(scene, walls, material_id: int, *, stress: float, porosity: float,
     friction (the message gives the porosity reached). With ``accept_denser`` a sample already
     at or below the target after stage 1 is accepted as it is (the target is a maximum)."""
     _check_target(stress)
-    if not (0 < porosity < 1):
-        raise ParameterError(f"porosity={porosity}: must be in (0, 1)")
-    mat = scene.material(material_id)
     spheres = np.flatnonzero(measure.sphere_mask(scene))  # grains only, not geogrid nodes
+    check_porosity_target(porosity, np.asarray(scene.radii)[spheres])
+    mat = scene.material(material_id)
     stages = []
     r1 = grow_to_stress(scene, walls, stress, tol=tol, unbalanced=unbalanced, gain=gain,
                         max_strain=max_strain, check_every=check_every,
@@ -231,6 +260,17 @@ def refd(scene, walls, material_id: int, *, stress: float, porosity: float,
         if log:
             log(f"REFD: porosity {r1.porosity:.4f} after expansion is already at or below "
                 f"the target {porosity}; no friction decrease needed")
+        if r1.porosity < porosity - POROSITY_MISS:
+            import warnings
+
+            from .scene import TargetNotMetWarning
+
+            warnings.warn(TargetNotMetWarning(
+                f"porosity={porosity}: not met; the expansion to {stress:g} Pa already packed "
+                f"the sample to porosity {r1.porosity:.4f}, denser than the target, and REFD "
+                "only densifies (accept_denser takes the target as a maximum); ask for a "
+                f"porosity of at most {r1.porosity + POROSITY_MISS:.3f}, or grow the sample "
+                "at a higher friction for a looser one"), stacklevel=2)
         return RefdResult(r1.mean_stress, r1.porosity, mat.friction_angle_deg, r1.steps, stages)
     if r1.porosity <= porosity:
         raise ParameterError(f"porosity={porosity}: the sample is already denser (porosity "

@@ -90,6 +90,9 @@ class Params:
                                      #: CSV x,y,z,r); sizes are equivalent-volume diameters
 
 
+#: The fewest grains a sample may have, from a packing or a PSD, -.
+MIN_GRAINS = 10
+
 SMOKE = dict(n=300, strain_rate=0.5, stop_strain=0.04, record_every=50)
 
 
@@ -109,6 +112,11 @@ def make_sample(p: Params, log) -> tuple:
         readers = {"csv": dem.read_packing_csv, "yade": foreign.read_yade_text,
                    "liggghts": foreign.read_liggghts_data, "pfc": foreign.read_pfc_balls}
         c, r = readers[p.packing_format](p.packing)
+        if len(r) < MIN_GRAINS:
+            raise SystemExit(f"error: --packing={p.packing}: {len(r)} "
+                             f"sphere{'' if len(r) == 1 else 's'}; a triaxial sample needs at "
+                             f"least {MIN_GRAINS} grains (its stress is a mean over the grain "
+                             "contacts)")
         if p.box:
             lo, hi = np.asarray(p.box[:3], float), np.asarray(p.box[3:], float)
         elif p.packing_format == "liggghts":
@@ -131,9 +139,10 @@ def make_sample(p: Params, log) -> tuple:
         d = d * p.grain_scale
         log(f"grain sizes x {p.grain_scale:g} (--grain-scale)")
     n = int(round(psd.expected_count(d, pc, vol_solid, by="mass")))
-    if n < 10:
+    if n < MIN_GRAINS:
         raise SystemExit(f"error: --grain-scale={p.grain_scale:g}: leaves {n} grains in the "
-                         f"{np.round(box, 4).tolist()} m box (at least 10 are needed); use a "
+                         f"{np.round(box, 4).tolist()} m box (at least {MIN_GRAINS} are "
+                         "needed); use a "
                          "smaller factor or a larger box")
     radii = psd.radii_from_psd(d, pc, n, by="mass", seed=p.seed)
     info = {"d_min_m": d_min * p.grain_scale, "sizes_m": d.tolist(),
