@@ -719,21 +719,23 @@ def _dask_client(scheduler: str | None, workers: int):
             param_hint="--scheduler") from None
 
 
-def _started_client(scheduler: str | None, workers: int):
+def _started_client(scheduler: str | None, workers: int, box: list) -> bool:
     """_dask_client with a Ctrl-C during the start held back until the cluster is up (a
-    cluster stopped half-started is not closed cleanly); returns (client, cluster,
-    interrupted)."""
+    cluster stopped half-started is not closed cleanly). Puts (client, cluster) into ``box``
+    before Ctrl-C is let through again (the caller closes what is in it, in a ``finally``
+    around this call); returns whether a Ctrl-C came during the start."""
     import threading
 
     if threading.current_thread() is not threading.main_thread():
-        return (*_dask_client(scheduler, workers), False)
+        box.extend(_dask_client(scheduler, workers))
+        return False
     held: list[int] = []
     old = signal.signal(signal.SIGINT, lambda *_: held.append(1))
     try:
-        client, cluster = _dask_client(scheduler, workers)
+        box.extend(_dask_client(scheduler, workers))
     finally:
         signal.signal(signal.SIGINT, old)
-    return client, cluster, bool(held)
+    return bool(held)
 
 
 def _close_client(client, cluster) -> None:
@@ -756,11 +758,12 @@ def _close_client(client, cluster) -> None:
 def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) -> None:
     from dask.distributed import as_completed
 
-    client, cluster, interrupted = _started_client(scheduler, workers)
     env = {"OMP_NUM_THREADS": str(threads or (os.cpu_count() or 1))}
+    box: list = []
     try:
-        if interrupted:
+        if _started_client(scheduler, workers, box):
             raise KeyboardInterrupt
+        client = box[0]
         futures = {}
         for i, row_dir, params, argv, base in todo:
             if row_dir.exists():
@@ -794,7 +797,8 @@ def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) 
             if not ok:
                 click.echo(f"[sweep] row {i:03d}: {r['stderr_tail']}", err=True)
     finally:
-        _close_client(client, cluster)
+        if box:
+            _close_client(*box)
 
 
 @main.command("calibrate")
@@ -848,14 +852,11 @@ def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | N
             why = f"cannot be created: {e.strerror}"
     if why:
         raise RunFileError(f"{src}: out={str(cfg.out)!r}: {why}")
-    client = cluster = None
-    interrupted = False
-    if scheduler or workers > 0:
-        client, cluster, interrupted = _started_client(scheduler, workers)
+    box: list = []
     try:
-        if interrupted:
+        if (scheduler or workers > 0) and _started_client(scheduler, workers, box):
             raise KeyboardInterrupt
-        cal.calibrate(cfg, client=client, threads=threads, log=click.echo)
+        cal.calibrate(cfg, client=box[0] if box else None, threads=threads, log=click.echo)
     except RuntimeError as e:
         raise click.ClickException(str(e)) from None
     except KeyboardInterrupt:
@@ -864,7 +865,8 @@ def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | N
                    err=True)
         sys.exit(130)
     finally:
-        _close_client(client, cluster)
+        if box:
+            _close_client(*box)
 
 
 if __name__ == "__main__":
