@@ -124,9 +124,12 @@ def test_p_e_curve_follows_the_wall_bounded_sample():
             de[kind].append(e[kind][-1] - e50)
     scatter = max(np.ptp(e["box"]), np.ptp(e["periodic"]), 0.01)
     assert abs(np.mean(e["periodic"]) - np.mean(e["box"])) <= 2 * scatter, e
-    # (The compressibility: the periodic cube's is repeatable to 3 %, the box core's is noise
-    # at this size — +0.011 and -0.043 — so it is compared in bench/periodic_pe.py at 2000.)
-    assert np.ptp(de["periodic"]) < 0.1 * abs(np.mean(de["periodic"])), de
+    # (The compressibility: the periodic cube's is repeatable, the box core's is noise at this
+    # size — +0.011 and -0.043 — so it is compared in bench/periodic_pe.py at 2000.) The
+    # periodic cube's de over seeds 1-12: -0.0268 to -0.0311 (sd 4.8 % of the mean); two seeds
+    # differ by at most 14.6 % of their mean over the 66 pairs (above the earlier bound 10 % at
+    # 13 of them; 2.9 % for seeds 1 and 2 here). Asserted: 25 %, about 3.7 sd of a difference.
+    assert np.ptp(de["periodic"]) < 0.25 * abs(np.mean(de["periodic"])), de
 
 
 def test_voigt_strain_components():
@@ -168,7 +171,9 @@ def test_dense_preparation_holds_an_isochoric_shear():
     """Grown at zero friction (prep_friction_deg=0) the packing is dense and dilatant: under
     an isochoric shear its mean stress rises. Grown at its own friction (30 deg) the same
     grains make a loose packing whose mean stress falls (seed 2: it loses every contact by
-    2e-3; docs/multiscale.md)."""
+    2e-3; docs/multiscale.md). How far is chaotic: over seeds 1-12 after the two increments,
+    dense 100.8 to 104.9 kPa, loose 18 to 98 kPa (below 50 kPa at seeds 2 and 4 only; the
+    earlier bound p_loose < 50 kPa held at seed 2 by chance). Asserted: the signs."""
     de = np.diag([1e-3, 0.0, -1e-3])
     p = {}
     for pf in (0.0, None):
@@ -177,7 +182,7 @@ def test_dense_preparation_holds_an_isochoric_shear():
         for _ in range(2):
             s = el.apply_strain(de, unbalanced=1e-4, max_relax_steps=50_000)
         p[pf] = -np.trace(s) / 3
-    assert p[0.0] > 100e3 and p[None] < 0.5 * 100e3
+    assert p[0.0] > 100e3 and p[None] < 100e3
 
 
 def test_a_rotated_load_gives_the_same_invariants():
