@@ -37,7 +37,7 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from . import _core, measure, prep
+from . import _core, inertial, measure, prep
 from ._core import Material, ParameterError
 from .geogrid import Geogrid
 from .packing import loose_cloud
@@ -405,6 +405,25 @@ def inertial_number(velocity: float, density: float, stress: float) -> float:
     return float(velocity * math.sqrt(density / stress))
 
 
+def _check_pull_rate(sample: PulloutSample, velocity: float) -> None:
+    """Warns (cpp_dem.InertialNumberWarning) when the pull is not quasi-static: the shear
+    zone on the geogrid is one mean grain diameter d thick, so its rate is v / d and
+    I = (v / d) d / sqrt(sigma / rho) (cpp_dem.inertial), sigma the top wall's target (or its
+    stress now without a servo)."""
+    sc = sample.scene
+    stress = (float(sample.top_servo.target_stress) if sample.top_servo is not None
+              else sample.top_stress())
+    d = measure.grain_diameters(sc)
+    if not (stress > 0 and len(d)):
+        return  # unconfined, or no grains: no inertial number
+    d_mean = float(np.mean(d))
+    rho = float(sc.material(sample.grain_material).density)
+    value = inertial.inertial_number(velocity / d_mean, d_mean, stress, rho)
+    inertial.check_quasi_static(value, "pull-out", rate=velocity, rate_name="pull velocity",
+                                rate_unit="m/s", diameter=d_mean, pressure=stress,
+                                density=rho, stacklevel=3)
+
+
 def pull_record(sample: PulloutSample, x_ref: float, members: dict) -> dict:
     """One row of the pull-out record (SI)."""
     sc = sample.scene
@@ -453,6 +472,7 @@ def pull(sample: PulloutSample, *, velocity: float, distance: float, record_ever
         raise ParameterError(f"record_every={record_every}: must be >= 1")
     sc = sample.scene
     servo = sample.top_servo
+    _check_pull_rate(sample, velocity)
     if servo is not None and servo.max_speed < velocity:
         # The soil above the geogrid settles or dilates at a rate of the order of the pull
         # velocity; the preparation's quasi-static cap (prep.default_max_speed) can be far
