@@ -576,6 +576,7 @@ class Scene {
     FormedContacts(const FormedContacts&) {}
     FormedContacts& operator=(const FormedContacts&) { return *this; }
   };
+  mutable FormedContacts formed_;
   /// Notes a contact between bodies b1 and b2 (-1: a wall, or a grid node whose links bound
   /// its step) that took the parameters p (see formed_).
   void note_formed_contact(const ContactPhys& p, int b1, int b2) const;
@@ -593,8 +594,6 @@ class Scene {
   // nothing else moved bodies or changed radii since); not saved in checkpoints.
   Real max_disp_ = 0;
   bool disp_valid_ = false;
-  // Last, so that the members the hot loops read keep their places (and cache lines).
-  mutable FormedContacts formed_;
 };
 
 template <class F>
