@@ -181,6 +181,18 @@ def _ours(lock: dict | None) -> bool:
         lock.get("host") == socket.gethostname()
 
 
+
+def _unrecorded(out, files, manifest, status):
+    """The files of ``files`` that the earlier run of ``manifest`` did not write: a run that
+    completed, failed or was interrupted lists its files; a killed run could not, so its files
+    are those written since it started (an older file is not its)."""
+    if status == "killed":
+        t0 = float(manifest.get("started_unix", 0.0))
+        listed = {str(p.relative_to(out)) for p in files if p.stat().st_mtime >= t0 - 1}
+    else:
+        listed = set(manifest.get("files", []))
+    return [p for p in files if str(p.relative_to(out)) not in listed]
+
 def begin_run(out, case: str, log=print, *, overwrite: bool | None = None,
               keep: Sequence[str] | None = None) -> Path:
     """Prepares the results folder of a case run and returns it (``out`` None: a new numbered
@@ -231,12 +243,7 @@ def begin_run(out, case: str, log=print, *, overwrite: bool | None = None,
             raise RunFolderError(f"--out={out}: --resume: {missing[0]} is not there (the run "
                                  "stopped before its checkpoint); run it again with "
                                  "--overwrite")
-        if status == "killed":
-            t0 = float(manifest.get("started_unix", 0.0))
-            listed = {str(p.relative_to(out)) for p in files if p.stat().st_mtime >= t0 - 1}
-        else:
-            listed = set(manifest.get("files", []))
-        unlisted = [p for p in files if str(p.relative_to(out)) not in listed]
+        unlisted = _unrecorded(out, files, manifest, status)
         if unlisted:
             raise RunFolderError(
                 f"--out={out}: holds {len(unlisted)} files that the earlier run did not record "
@@ -265,14 +272,7 @@ def begin_run(out, case: str, log=print, *, overwrite: bool | None = None,
                 f"--out={out}: holds {what} of {manifest.get('case', '?')} ({when}, "
                 f"{len(files)} files); add --overwrite to replace it, or name another folder "
                 "(without --out every run gets its own folder results/<case>/run_NNN)")
-        if status == "killed":
-            # a killed run could not list its files: its files are those written since it
-            # started; an older file is not its
-            t0 = float(manifest.get("started_unix", 0.0))
-            listed = {str(p.relative_to(out)) for p in files if p.stat().st_mtime >= t0 - 1}
-        else:
-            listed = set(manifest.get("files", []))
-        unlisted = [p for p in files if str(p.relative_to(out)) not in listed]
+        unlisted = _unrecorded(out, files, manifest, status)
         if unlisted:
             raise RunFolderError(
                 f"--out={out}: holds {len(unlisted)} files that the earlier run did not record "
