@@ -14,7 +14,7 @@ demo: setup
 	@echo "force-displacement plot: results/demo_pullout/pullout_force.png"
 
 test: setup
-	$(PY) -m pytest -q tests
+	$(PY) -m pytest -q --durations=15 tests
 
 bench: setup
 	$(PY) bench/throughput.py
