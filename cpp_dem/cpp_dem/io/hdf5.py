@@ -146,6 +146,17 @@ class H5Recorder(_ClosesOnExit):
         f.attrs["parameters_json"] = json.dumps(dict(metadata), default=str, sort_keys=True)
 
     # -- writing -------------------------------------------------------------------------------
+    def _writing(self, write):
+        """Runs ``write`` and returns its result; a write failure (disk full, a file-size
+        limit) is raised as the ResultWriteError of :meth:`_failed`, other errors as they are."""
+        try:
+            return write()
+        except (OSError, RuntimeError) as e:
+            err = self._failed(e)
+            if err is e:
+                raise
+            raise err from None
+
     def _failed(self, e: BaseException) -> Exception:
         """The error to raise for ``e`` from a write: a ResultWriteError naming the file (which
         is then closed) when the file could not be written, else ``e`` itself."""
@@ -188,13 +199,7 @@ class H5Recorder(_ClosesOnExit):
         the file, and closes it."""
         if getattr(self, "_error", None) is not None:
             raise self._error
-        try:
-            self._guarded(lambda: self._record(scene, **values))
-        except (OSError, RuntimeError) as e:
-            err = self._failed(e)
-            if err is e:
-                raise
-            raise err from None
+        self._writing(lambda: self._guarded(lambda: self._record(scene, **values)))
 
     def snapshot(self, scene=None, *, fields: Sequence[str] | None = None,
                  extra: Mapping[str, tuple[Any, str]] | None = None) -> str:
@@ -202,13 +207,8 @@ class H5Recorder(_ClosesOnExit):
         :class:`ResultWriteError` naming the file, and closes it."""
         if getattr(self, "_error", None) is not None:
             raise self._error
-        try:
-            return self._guarded(lambda: self._snapshot(scene, fields=fields, extra=extra))
-        except (OSError, RuntimeError) as e:
-            err = self._failed(e)
-            if err is e:
-                raise
-            raise err from None
+        return self._writing(
+            lambda: self._guarded(lambda: self._snapshot(scene, fields=fields, extra=extra)))
 
     #: Room kept free beyond a write's data for HDF5's own metadata, bytes.
     ROOM_MARGIN = 256 * 1024
@@ -323,25 +323,13 @@ class H5Recorder(_ClosesOnExit):
     def flush(self) -> None:
         """Flushes the HDF5 file (done after every record and snapshot anyway)."""
         if self._file is not None:
-            try:
-                self._file.flush()
-            except (OSError, RuntimeError) as e:
-                err = self._failed(e)
-                if err is e:
-                    raise
-                raise err from None
+            self._writing(self._file.flush)
 
     def close(self) -> None:
         """Flushes and closes the file. Idempotent."""
         if self._file is not None:
-            try:
-                self._file.flush()
-                self._file.close()
-            except (OSError, RuntimeError) as e:
-                err = self._failed(e)
-                if err is e:
-                    raise
-                raise err from None
+            f = self._file
+            self._writing(lambda: (f.flush(), f.close()))
             self._file = None
 
     @property
