@@ -274,6 +274,25 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
                     "step raises BlowUpError (tunnelling).")
       .def_property("max_overlap_ratio", &Scene::max_overlap_ratio, &Scene::set_max_overlap_ratio,
                     "Overlap / smaller radius above which a step raises BlowUpError (default 0.5).")
+      .def_property(
+          "shear_kinematics",
+          [](const Scene& s) {
+            return s.shear_kinematics() == ShearKinematics::Yade ? "yade" : "contact_point";
+          },
+          [](Scene& s, const std::string& v) {
+            if (v == "contact_point") s.set_shear_kinematics(ShearKinematics::ContactPoint);
+            else if (v == "yade") s.set_shear_kinematics(ShearKinematics::Yade);
+            else
+              throw ParameterError("shear_kinematics='" + v + "': must be 'contact_point' "
+                                   "(default) or 'yade' (Yade's avoidGranularRatcheting)");
+          },
+          "Relative velocity at a sphere-sphere contact that grows the shear spring. "
+          "'contact_point' (default): the bodies' velocities at the contact point, "
+          "v_j - v_i - (l_j w_j + l_i w_i) x n with branch lengths l = r - overlap/2. "
+          "'yade': Yade's ScGeom with avoidGranularRatcheting, alpha (v_j - v_i) - "
+          "(r_j w_j + r_i w_i) x n with alpha = (r_i + r_j) / (r_i + r_j - overlap), for "
+          "comparisons with Yade (see docs/core.md). Sphere-sphere contacts only (clump members "
+          "included; not walls, the geogrid or bonds); kept in checkpoints.")
       .def_property("track_energy", &Scene::track_energy, &Scene::set_track_energy,
                     "Energy bookkeeping on/off (turning it on restarts the balance).")
       .def("set_auto_timestep", &Scene::set_auto_timestep, py::arg("safety") = 0.8,

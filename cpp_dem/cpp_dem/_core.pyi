@@ -634,6 +634,14 @@ class Scene:
     def radii(self, arg1: typing.Annotated[numpy.typing.ArrayLike, numpy.float64]) -> None:
         ...
     @property
+    def shear_kinematics(self) -> str:
+        """
+        Relative velocity at a sphere-sphere contact that grows the shear spring. 'contact_point' (default): the bodies' velocities at the contact point, v_j - v_i - (l_j w_j + l_i w_i) x n with branch lengths l = r - overlap/2. 'yade': Yade's ScGeom with avoidGranularRatcheting, alpha (v_j - v_i) - (r_j w_j + r_i w_i) x n with alpha = (r_i + r_j) / (r_i + r_j - overlap), for comparisons with Yade (see docs/core.md). Sphere-sphere contacts only (clump members included; not walls, the geogrid or bonds); kept in checkpoints.
+        """
+    @shear_kinematics.setter
+    def shear_kinematics(self, arg1: str) -> None:
+        ...
+    @property
     def spatial_sort(self) -> bool:
         """
         Store the spheres in spatial order at the first broad-phase build (default True; ids and every array seen from Python are unchanged).

@@ -141,6 +141,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.put(s.dt_check_period_);
   w.put(s.track_energy_);
   w.put(s.clump_rotation_);
+  w.put(s.shear_kinematics_);
   w.put(s.ts_safety_);
   w.put(s.ts_period_);
   w.put(s.step_);
@@ -168,9 +169,9 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   if (std::memcmp(magic, kMagic, sizeof(kMagic)) != 0)
     throw ParameterError("checkpoint: not a cpp_dem checkpoint blob (bad magic)");
   const auto version = r.get<std::uint32_t>();
-  if (version != kVersion)
+  if (version != kVersion && version != 8)
     throw ParameterError("checkpoint: format version " + std::to_string(version) +
-                         ", this build reads version " + std::to_string(kVersion));
+                         ", this build reads versions 8 and " + std::to_string(kVersion));
   std::vector<std::uint64_t> lay;
   r.vec(lay);
   if (lay != layout())
@@ -255,6 +256,12 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   r.get(t.dt_check_period_);
   r.get(t.track_energy_);
   r.get(t.clump_rotation_);
+  // Version 8 had no shear kinematics: its scenes ran the default (t's own).
+  if (version >= 9) {
+    r.get(t.shear_kinematics_);
+    if (static_cast<std::uint8_t>(t.shear_kinematics_) > 1)
+      throw ParameterError("checkpoint: corrupt shear kinematics");
+  }
   r.get(t.ts_safety_);
   r.get(t.ts_period_);
   r.get(t.step_);

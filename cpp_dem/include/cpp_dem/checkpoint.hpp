@@ -18,8 +18,9 @@ class Checkpoint {
   /// 2: pair contacts split hot / cold; 3: pair outputs grouped by j without i's torque,
   /// the bodies' storage order; 4: pair outputs padded to 4 doubles per vector; 5: the
   /// body store's arrays together (BodyStore::for_each_array); 6: clumps; 7: the periodic
-  /// cell, pair contacts' image codes, bodies' image counters.
-  static constexpr std::uint32_t kVersion = 8;
+  /// cell, pair contacts' image codes, bodies' image counters; 9: the shear kinematics
+  /// (Scene::shear_kinematics). load also reads version 8 (with the default kinematics).
+  static constexpr std::uint32_t kVersion = 9;
   /// The whole state of `scene` as bytes. Controllers are code, not data: the blob holds
   /// their count, `period`, `enabled` and, for StatefulController ones, their state.
   static std::vector<std::uint8_t> save(const Scene& scene);

@@ -60,6 +60,16 @@ enum class ClumpRotation : std::uint8_t {
   Yade = 1,     ///< Yade 2023's variant of it, first order: for comparisons with Yade
 };
 
+/// The relative velocity at a sphere–sphere contact from which the shear spring grows
+/// (geometry/sphere_sphere.hpp, docs/core.md "Yade's shear kinematics").
+enum class ShearKinematics : std::uint8_t {
+  /// Rigid-body velocities at the contact point, branch lengths r - overlap/2 (default).
+  ContactPoint = 0,
+  /// Yade's ScGeom with avoidGranularRatcheting: the translational part scaled by
+  /// alpha = (r_i + r_j) / (r_i + r_j - overlap), the spins times the full radii.
+  Yade = 1,
+};
+
 /// A controller (servo wall, radius growth, clamp, ...) runs every `period` steps, at the start
 /// of a step, before the contact forces: it sees the forces of the previous step and touches
 /// only what it owns (its walls, its bodies).
@@ -157,6 +167,11 @@ class Scene {
   void set_clump_external(int c, const Vec3& force, const Vec3& torque);
   ClumpRotation clump_rotation() const { return clump_rotation_; }
   void set_clump_rotation(ClumpRotation r) { clump_rotation_ = r; }
+
+  /// Kinematics of the sphere–sphere shear spring (ShearKinematics; default ContactPoint).
+  /// Only the pair pass reads it (not walls, the geogrid or bonds); it may change at any step.
+  ShearKinematics shear_kinematics() const { return shear_kinematics_; }
+  void set_shear_kinematics(ShearKinematics k) { shear_kinematics_ = k; }
 
   // ---- bonds between spheres (laws/bond.hpp, docs/bonds.md) --------------------------------
   /// Bonds spheres a and b (ids) with a linear contact and, as p asks, a contact bond and a
@@ -425,6 +440,8 @@ class Scene {
   CPP_DEM_HOT void compute_pair_forces_hot(long& err_contact);
   // The pair pass without AVX2 (scene.cpp, pair_bodies_narrow) and its threads' bodies.
   void compute_pair_forces_narrow(long& err_contact);
+  // kYadeShear: ShearKinematics::Yade (chosen once per pass, not per contact).
+  template <bool kYadeShear>
   void pair_bodies_narrow(int b0, int b1, long& err);
   std::pair<int, int> pair_bodies_of_thread(long t, long nt) const;
   // The pair pass's cold paths (both forms): a contact opened; a law without short kernel.
@@ -558,6 +575,7 @@ class Scene {
   /// broad-phase build says one may have).
   void check_tunnelling();
   bool track_energy_ = false;
+  ShearKinematics shear_kinematics_ = ShearKinematics::ContactPoint;
   ClumpRotation clump_rotation_ = ClumpRotation::Fincham;
   Real ts_safety_ = 0.8;
   int ts_period_ = 0;

@@ -89,7 +89,8 @@ std::pair<int, int> Scene::pair_bodies_of_thread(long t, long nt) const {
 /// arithmetic as the loop in compute_pair_forces, which is written out there with 4-lane
 /// registers: instantiated from one template with WideOps it ran 12 % slower at 1e3 (same
 /// instructions, measured 0.070 against 0.063 ms per step, not understood), so the loop is
-/// written twice.
+/// written twice. kYadeShear: ShearKinematics::Yade (sphere_sphere_frame).
+template <bool kYadeShear>
 void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
   using Ops = NarrowOps;
   using V = Ops::V;
@@ -151,7 +152,8 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
         }
         V n, rel_vel;
         Real li, lj;
-        sphere_sphere_frame<Ops>(d, dist, overlap, ri, rj, vi, vj, wi, wj, n, li, lj, rel_vel);
+        sphere_sphere_frame<Ops, kYadeShear>(d, dist, overlap, ri, rj, vi, vj, wi, wj, n, li, lj,
+                                             rel_vel);
         if (!c.simple) {
           const auto on_i = general_pair(k, o, ops.vec(n), overlap, li, lj, ops.vec(rel_vel),
                                          ops.vec(wi + wj), ops.vec(wj - wi));
@@ -216,8 +218,9 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   Real* const out_fi = pair_fi_.data()->data();
   Real* const out_ti = pair_ti_.data()->data();
   // Periodic cell: j is seen at its image, and the mean field's velocity L d and spin are
-  // added to the stored fluctuations (bodies/cell.hpp). The loop is instantiated twice, so
-  // the cell costs the wall-bounded scene nothing.
+  // added to the stored fluctuations (bodies/cell.hpp). The loop is instantiated for each
+  // combination of the cell and the shear kinematics (ShearKinematics), so neither costs the
+  // default scene anything.
   const V4 l0 = v4(cell_.vel_grad.col(0)), l1 = v4(cell_.vel_grad.col(1)),
            l2 = v4(cell_.vel_grad.col(2)), spin = v4(cell_.spin());
   const Real* const offsets = image_offset_.data()->data();
@@ -227,8 +230,10 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
     const auto [b0, b1] = pair_bodies_of_thread(t, nt);
     // (Captured by value: the pointers stay in registers; by reference they were taken as
     // addresses the loop's stores might alias, and reloaded, 14 % more instructions.)
-    const auto loop = [=, &err](auto periodic_tag) __attribute__((always_inline)) {
+    const auto loop = [=, &err](auto periodic_tag, auto yade_shear_tag)
+                          __attribute__((always_inline)) {
     constexpr bool kPeriodic = decltype(periodic_tag)::value;
+    constexpr bool kYadeShear = decltype(yade_shear_tag)::value;
     for (int i = b0; i < b1; ++i) {
       const int k0 = ioff[i], k1 = ioff[i + 1];
       // i's share: -force and torque_i summed over its contacts.
@@ -266,8 +271,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           }
           V4 n, rel_vel;
           Real li, lj;
-          sphere_sphere_frame<WideOps>(d, dist, overlap, ri, rj, vi, vj, wi, wj, n, li, lj,
-                                       rel_vel);
+          sphere_sphere_frame<WideOps, kYadeShear>(d, dist, overlap, ri, rj, vi, vj, wi, wj, n,
+                                                   li, lj, rel_vel);
           if (!c.simple) {
             const auto on_i = general_pair(k, o, vec3(n), overlap, li, lj, vec3(rel_vel),
                                            vec3(wi + wj), vec3(wj - wi));
@@ -296,8 +301,13 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
       store4(out_ti + 4L * i, ti);
     }
     };
-    if (cell_.on) loop(std::true_type{});
-    else loop(std::false_type{});
+    if (shear_kinematics_ == ShearKinematics::Yade) {
+      if (cell_.on) loop(std::true_type{}, std::true_type{});
+      else loop(std::false_type{}, std::true_type{});
+    } else {
+      if (cell_.on) loop(std::true_type{}, std::false_type{});
+      else loop(std::false_type{}, std::false_type{});
+    }
   }
   err_contact = err;
 }
@@ -309,7 +319,10 @@ void Scene::compute_pair_forces_narrow(long& err_contact) {
   {
     const auto [t, nt] = thread_and_team();
     const auto bodies = pair_bodies_of_thread(t, nt);
-    pair_bodies_narrow(bodies.first, bodies.second, err);
+    if (shear_kinematics_ == ShearKinematics::Yade)
+      pair_bodies_narrow<true>(bodies.first, bodies.second, err);
+    else
+      pair_bodies_narrow<false>(bodies.first, bodies.second, err);
   }
   err_contact = err;
 }

@@ -12,14 +12,26 @@ namespace cpp_dem {
 /// li = ri - overlap/2 and lj (the contact point sits in the middle of the overlap, 000 eq 6;
 /// branch vectors li n and -lj n), and the velocity of j relative to i at the contact point,
 /// v_j + w_j x (-lj n) - (v_i + w_i x li n) (m/s), with one cross product.
-template <class Ops, class V>
+/// kYadeShear (ShearKinematics::Yade): instead the relative velocity of Yade's ScGeom with
+/// avoidGranularRatcheting, alpha (v_j - v_i) - (rj w_j + ri w_i) x n with
+/// alpha = (ri + rj) / (ri + rj - overlap): the centres' relative velocity is scaled up by
+/// the ratio of the undeformed to the present centre distance and the spins act on the full
+/// radii, so a closed cycle of normal approach and rotation leaves no shear (no ratcheting).
+/// The branch lengths li, lj (for the moments) are the same in both.
+template <class Ops, bool kYadeShear = false, class V>
 ALWAYS_INLINE void sphere_sphere_frame(const V& d, Real dist, Real overlap, Real ri, Real rj,
                                        const V& vi, const V& vj, const V& wi, const V& wj, V& n,
                                        Real& li, Real& lj, V& rel_vel) {
   n = dist > 0 ? V(d * (1.0 / dist)) : Ops::unit_z();
   li = ri - 0.5 * overlap;
   lj = rj - 0.5 * overlap;
-  rel_vel = (vj - vi) - Ops::cross(lj * wj + li * wi, n);
+  if constexpr (kYadeShear) {
+    const Real rsum = ri + rj;
+    const Real alpha = rsum / (rsum - overlap);  // rsum - overlap is the distance, > 0 here
+    rel_vel = alpha * (vj - vi) - Ops::cross(rj * wj + ri * wi, n);
+  } else {
+    rel_vel = (vj - vi) - Ops::cross(lj * wj + li * wi, n);
+  }
 }
 
 /// The ContactGeometry record of a sphere–sphere contact from its frame (sphere_sphere_frame)

@@ -1,0 +1,235 @@
+"""Scene.shear_kinematics: the relative velocity that grows a sphere–sphere shear spring.
+
+'contact_point' (default): v_j - v_i - (l_j w_j + l_i w_i) x n, l = r - overlap/2.
+'yade' (Yade's ScGeom with avoidGranularRatcheting): alpha (v_j - v_i) - (r_j w_j + r_i w_i) x n,
+alpha = (r_i + r_j) / (r_i + r_j - overlap).
+
+After the first step of a new contact the linear law's shear force is -k_s dt v_t, v_t the
+tangential part of that velocity, so one step checks the formula exactly."""
+
+import os
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+import cpp_dem as cd
+
+R1, R2 = 1.0e-3, 1.5e-3  # m (unequal, so the radii and branch lengths differ per side)
+OVERLAP = 2.0e-5  # m
+DT = 1e-7  # s
+
+
+def _pair(kinematics, vel_i=(0, 0, 0), vel_j=(0, 0, 0), spin_i=(0, 0, 0), spin_j=(0, 0, 0)):
+    """Two spheres touching along x with the given velocities (m/s) and spins (rad/s), every
+    DOF blocked (they keep them); returns (scene, shear force on j after one step in N, k_s)."""
+    s = cd.Scene()
+    if kinematics is not None:
+        s.shear_kinematics = kinematics
+    m = s.add_material(cd.linear_material(density=2650, young=1e8, poisson=0.3,
+                                          friction_angle_deg=80.0))
+    s.add_spheres([[0, 0, 0], [R1 + R2 - OVERLAP, 0, 0]], [R1, R2], material=m)
+    s.dt = DT
+    s.velocities = np.array([vel_i, vel_j], dtype=float)
+    s.angular_velocities = np.array([spin_i, spin_j], dtype=float)
+    s.block_dofs([0, 1], "all")
+    s.run(1)
+    c = s.contacts()
+    assert len(c["ids"]) == 1
+    return s, np.asarray(c["shear_force"][0]), float(c["ks"][0])
+
+
+def _expected(kinematics, vel_i, vel_j, spin_i, spin_j, ks):
+    n = np.array([1.0, 0, 0])
+    dv = np.subtract(vel_j, vel_i)
+    if kinematics == "yade":
+        alpha = (R1 + R2) / (R1 + R2 - OVERLAP)
+        rel = alpha * dv - np.cross(R2 * np.asarray(spin_j) + R1 * np.asarray(spin_i), n)
+    else:
+        li, lj = R1 - 0.5 * OVERLAP, R2 - 0.5 * OVERLAP
+        rel = dv - np.cross(lj * np.asarray(spin_j) + li * np.asarray(spin_i), n)
+    vt = rel - rel.dot(n) * n
+    return -ks * DT * vt
+
+
+def test_default_is_contact_point():
+    assert cd.Scene().shear_kinematics == "contact_point"
+
+
+def test_translation_is_scaled_by_alpha_only_with_yade_kinematics():
+    alpha = (R1 + R2) / (R1 + R2 - OVERLAP)
+    kw = dict(vel_i=(0, 0, 2e-4), vel_j=(3e-5, 1e-3, 0))  # tangential and a little normal
+    _, f_off, ks = _pair(None, **kw)
+    _, f_on, ks_on = _pair("yade", **kw)
+    assert ks == ks_on
+    vt = np.array([0, 1e-3, -2e-4])
+    np.testing.assert_allclose(f_off, -ks * DT * vt, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(f_on, -ks * DT * alpha * vt, rtol=1e-12, atol=0)
+    # alpha - 1 = overlap / distance = 8e-3: the two differ far beyond round-off.
+    ratio = f_on[1] / f_off[1]
+    assert ratio == pytest.approx(alpha, rel=1e-13)
+    assert abs(ratio - 1) > 7e-3
+
+
+def test_spins_act_on_the_full_radii_with_yade_kinematics():
+    kw = dict(vel_i=(0, 2e-4, 0), vel_j=(0, 0, -1e-4), spin_i=(0.1, 0.3, -0.2),
+              spin_j=(0.05, -0.4, 0.25))
+    for kin in ("contact_point", "yade"):
+        _, f, ks = _pair(kin, **kw)
+        np.testing.assert_allclose(f, _expected(kin, ks=ks, **kw), rtol=1e-12, atol=1e-30)
+    # Spins alone: the spin term is (r_j w_j + r_i w_i) x n against (l_j w_j + l_i w_i) x n.
+    spins = dict(spin_i=(0, 0, 0.3), spin_j=(0, 0, 0.3))
+    _, f_off, _ = _pair(None, **spins)
+    _, f_on, _ = _pair("yade", **spins)
+    ratio = f_on[1] / f_off[1]
+    assert ratio == pytest.approx((R1 + R2) / (R1 + R2 - OVERLAP), rel=1e-13)
+
+
+def test_periodic_cell_mean_field_is_scaled_too():
+    """In a periodic cell j's mean-field velocity L d is part of v_j - v_i, so Yade's alpha
+    scales it as well (its shiftVel is multiplied by alpha)."""
+    rate = 2.0  # 1/s, v_y = rate x
+    out = {}
+    for kin in ("contact_point", "yade"):
+        s = cd.Scene()
+        s.shear_kinematics = kin
+        m = s.add_material(cd.linear_material(density=2650, young=1e8, poisson=0.3,
+                                              friction_angle_deg=80.0))
+        s.add_spheres([[4e-3, 5e-3, 5e-3], [4e-3 + R1 + R2 - OVERLAP, 5e-3, 5e-3]], [R1, R2],
+                      material=m)
+        s.set_periodic_cell(np.diag([1e-2, 1e-2, 1e-2]))
+        s.mean_spin = False
+        s.velocity_gradient = np.array([[0, 0, 0], [rate, 0, 0], [0, 0, 0]])
+        s.dt = DT
+        s.block_dofs([0, 1], "all")
+        s.run(1)
+        c = s.contacts()
+        out[kin] = (np.asarray(c["shear_force"][0]), float(c["ks"][0]))
+    f_off, ks = out["contact_point"]
+    f_on, _ = out["yade"]
+    vy = rate * (R1 + R2 - OVERLAP)
+    assert f_off[1] == pytest.approx(-ks * DT * vy, rel=1e-12)
+    assert f_on[1] / f_off[1] == pytest.approx((R1 + R2) / (R1 + R2 - OVERLAP), rel=1e-12)
+
+
+def _sheared_packing(kinematics, steps=400):
+    """A lattice of 125 overlapping spheres with random velocities and spins pushing itself
+    apart in a box that just holds it, under gravity (many sliding and rolling contacts);
+    returns positions, spins and the contacts after `steps` steps."""
+    rng = np.random.default_rng(5)
+    s = cd.Scene(local_damping=0.1, gravity=(0, 0, -9.81))
+    if kinematics is not None:
+        s.shear_kinematics = kinematics
+    m = s.add_material(cd.linear_material(density=2650, young=5e7, poisson=0.3,
+                                          friction_angle_deg=30.0))
+    g = np.stack(np.meshgrid(*[np.arange(5)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    centres = 2.0e-3 * (g + 0.5) + rng.uniform(-1e-4, 1e-4, g.shape)
+    radii = rng.uniform(1.0e-3, 1.15e-3, len(g))
+    s.add_spheres(centres, radii, material=m)
+    s.add_box([0, 0, 0], [0.01, 0.01, 0.01], material=m)
+    s.velocities = rng.uniform(-0.05, 0.05, (len(g), 3))
+    s.angular_velocities = rng.uniform(-20, 20, (len(g), 3))
+    s.dt = 0.3 * s.critical_dt()
+    s.run(steps)
+    c = s.contacts()
+    return np.asarray(s.positions), np.asarray(s.angular_velocities), c
+
+
+def test_default_unchanged_and_yade_differs():
+    pos0, w0, c0 = _sheared_packing(None)
+    pos1, w1, c1 = _sheared_packing("contact_point")
+    # Setting the default explicitly is the default, bitwise.
+    assert np.array_equal(pos0, pos1) and np.array_equal(w0, w1)
+    assert np.array_equal(np.asarray(c0["shear_force"]), np.asarray(c1["shear_force"]))
+    assert len(c0["ids"]) > 20
+    # The Yade kinematics change the run (otherwise the tests above would prove little).
+    pos2, _, _ = _sheared_packing("yade")
+    assert not np.array_equal(pos0, pos2)
+
+
+def test_switching_back_restores_the_default_path():
+    s = cd.Scene()
+    s.shear_kinematics = "yade"
+    s.shear_kinematics = "contact_point"
+    assert s.shear_kinematics == "contact_point"
+    with pytest.raises(cd.ParameterError, match="shear_kinematics='Yade'.*contact_point"):
+        s.shear_kinematics = "Yade"
+
+
+def test_kept_in_checkpoints(tmp_path):
+    from cpp_dem import checkpoint
+
+    s = cd.Scene()
+    s.shear_kinematics = "yade"
+    m = s.add_material(cd.linear_material(density=2650, young=1e8, poisson=0.3,
+                                          friction_angle_deg=30.0))
+    s.add_spheres([[0, 0, 0], [R1 + R2 - OVERLAP, 0, 0]], [R1, R2], material=m)
+    s.dt = DT
+    s.run(2)
+    path = tmp_path / "c.h5"
+    checkpoint.save_checkpoint(path, s)
+    t = cd.Scene()
+    assert t.shear_kinematics == "contact_point"
+    checkpoint.load_checkpoint(path, t)
+    assert t.shear_kinematics == "yade"
+
+
+_NARROW = """
+import sys
+sys.path.insert(0, {tests!r})
+import numpy as np
+import test_yade_kinematics as t
+kw = dict(vel_i=(0, 2e-4, 0), vel_j=(0, 0, -1e-4), spin_i=(0.1, 0.3, -0.2), spin_j=(0.05, -0.4, 0.25))
+for kin in ("contact_point", "yade"):
+    _, f, ks = t._pair(kin, **kw)
+    print(kin, repr(f.tolist()))
+"""
+
+
+def test_both_vector_forms_agree():
+    """The pair pass without AVX2 (CPP_DEM_NARROW=1) computes the same forces."""
+    code = _NARROW.format(tests=os.path.dirname(__file__))
+    outs = []
+    for narrow in ("0", "1"):
+        env = dict(os.environ, CPP_DEM_NARROW=narrow)
+        p = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True,
+                           text=True, timeout=300)
+        assert p.returncode == 0, p.stderr[-2000:]
+        outs.append(p.stdout)
+    lines = [o.splitlines() for o in outs]
+    assert len(lines[0]) == 2
+    for a, b in zip(*lines):
+        fa = np.array(eval(a.split(" ", 1)[1]))
+        fb = np.array(eval(b.split(" ", 1)[1]))
+        np.testing.assert_allclose(fa, fb, rtol=1e-12, atol=0)
+    assert lines[0][0] != lines[0][1]
+
+
+def test_checkpoints_of_the_format_before_still_load():
+    """Format 8 had no shear kinematics: such a blob loads, with the default kinematics."""
+    from cpp_dem import _core
+
+    blobs = {}
+    for kin in ("contact_point", "yade"):
+        s = cd.Scene()
+        s.shear_kinematics = kin
+        m = s.add_material(cd.linear_material(density=2650, young=1e8, poisson=0.3,
+                                              friction_angle_deg=30.0))
+        s.add_spheres([[0, 0, 0], [R1 + R2 - OVERLAP, 0, 0]], [R1, R2], material=m)
+        s.dt = DT
+        s.run(2)
+        blobs[kin] = bytes(_core._checkpoint_save(s))
+    a, b = blobs["contact_point"], blobs["yade"]
+    assert len(a) == len(b)
+    diff = [k for k in range(len(a)) if a[k] != b[k]]
+    assert len(diff) == 1 and (a[diff[0]], b[diff[0]]) == (0, 1)  # the one byte of the option
+    assert int.from_bytes(b[8:12], "little") == 9
+    old = b[:8] + (8).to_bytes(4, "little") + b[12:diff[0]] + b[diff[0] + 1:]
+    t = cd.Scene()
+    t.shear_kinematics = "yade"
+    _core._checkpoint_load(t, old)
+    assert t.shear_kinematics == "contact_point"
+    assert t.step_count == 2
+    with pytest.raises(cd.ParameterError, match="version 7"):
+        _core._checkpoint_load(t, b[:8] + (7).to_bytes(4, "little") + b[12:])
