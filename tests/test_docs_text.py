@@ -4,7 +4,8 @@ Checked for README.md and docs/*.md:
 
 - no work-log words: "session", "issue N", "#N", "last time";
 - no commit hashes (runs of 7-40 hex digits with both a digit and a letter);
-- every markdown link to a local file resolves (relative to the page);
+- every markdown link to a local file resolves (relative to the page), and an anchor in it
+  names a heading of that page (GitHub's heading ids);
 - every citation key ``[@key]`` in docs/references.md has an entry in docs/references.bib.
 
 Pages being rewritten by others are listed in PENDING and skipped until they land.
@@ -45,6 +46,22 @@ def _page_id(p: Path) -> str:
     return p.relative_to(ROOT).as_posix()
 
 
+def heading_ids(page: Path) -> set[str]:
+    """GitHub's ids of the page's headings: lower case, punctuation dropped, spaces to '-'."""
+    ids, seen = set(), {}
+    in_code = False
+    for line in page.read_text(encoding="utf-8").splitlines():
+        if line.startswith("```"):
+            in_code = not in_code
+        if in_code or not re.match(r"^#{1,6} ", line):
+            continue
+        slug = re.sub(r"[^\w\- ]", "", line.lstrip("#").strip().lower()).replace(" ", "-")
+        n = seen.get(slug, 0)
+        seen[slug] = n + 1
+        ids.add(slug if n == 0 else f"{slug}-{n}")
+    return ids
+
+
 def work_log_hits(text: str) -> list[str]:
     """Work-log phrases and commit ids found in ``text`` (empty when clean)."""
     hits = [m.group(0) for pat in WORK_LOG for m in pat.finditer(text)]
@@ -74,10 +91,14 @@ def test_local_links_resolve(page: Path):
     for target in LINK.findall(page.read_text(encoding="utf-8")):
         if re.match(r"^[a-z][a-z0-9+.-]*:", target) or target.startswith("#"):
             continue  # a URL (http:, mailto:) or an anchor on the same page
-        path = target.split("#", 1)[0]
-        if not (page.parent / path).exists():
+        path, _, anchor = target.partition("#")
+        file = page.parent / path
+        if not file.exists():
             missing.append(target)
-    assert not missing, f"{_page_id(page)} links to missing files: {missing}"
+        elif anchor and file.suffix == ".md" and file.resolve().relative_to(ROOT).as_posix() not in PENDING:
+            if anchor not in heading_ids(file):
+                missing.append(target)
+    assert not missing, f"{_page_id(page)} links to missing files or headings: {missing}"
 
 
 def test_references_cite_only_keys_in_the_bib():
