@@ -165,7 +165,7 @@ def make_scene(kind: str, n: int):
         # template) inside its ball, random seeded orientations; they settle under gravity.
         from clump_cost import template
 
-        from cpp_dem.clumps import random_orientations
+        from cpp_dem.build.clumps import random_orientations
 
         tpl = template()
         scene.add_clumps(tpl, p.centers, random_orientations(len(p.radii), 1), material=m,
@@ -182,7 +182,7 @@ def pullout_scene(root: Path = ROOT):
     case), prepared; returns (scene, pull)."""
     import importlib.util
 
-    from cpp_dem import pullout
+    from cpp_dem.protocols import pullout
 
     spec = importlib.util.spec_from_file_location("pullout_000", root / "cases" / "pullout_000.py")
     case = importlib.util.module_from_spec(spec)

@@ -25,7 +25,7 @@ import time
 import numpy as np
 
 import cpp_dem as dem
-from cpp_dem.clumps import ClumpTemplate, clump_cloud
+from cpp_dem.build.clumps import ClumpTemplate, clump_cloud
 
 
 def template():
@@ -69,7 +69,7 @@ def dense(n: int, seed: int, pressure: float):
     and frictionless (so no contact carries shear history), to an unbalanced force of 1e-3;
     then the grains' friction (30 deg) back on. A confined pack: more contacts per member
     than the gravity pile."""
-    from cpp_dem import prep
+    from cpp_dem.protocols import prep
 
     tpl = template()
     side = (n * 1.2e-7) ** (1 / 3) * 1.6

@@ -32,7 +32,7 @@ from pathlib import Path
 import numpy as np
 
 import cpp_dem as dem
-from cpp_dem.clumps import ClumpTemplate, clump_cloud, random_orientations
+from cpp_dem.build.clumps import ClumpTemplate, clump_cloud, random_orientations
 
 HERE = Path(__file__).resolve().parent
 
@@ -84,7 +84,7 @@ def dense_pack(sc, walls, args):
     the servo left them, and every clump where it rests, at rest. No contact carries shear
     history, so both codes start with the same contacts in the same state: equal overlaps
     and zero shear springs. Returns (scene, walls, lo, hi) with lo, hi the box's corners (m)."""
-    from cpp_dem import prep
+    from cpp_dem.protocols import prep
 
     sc.gravity = (0, 0, 0)
     prep.set_friction(sc, range(sc.num_bodies), sc.material(0), 0.0)

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""DEM elements on Dask workers (``cpp_dem.element_pool``, issue 18): parallel efficiency on
+"""DEM elements on Dask workers (``cpp_dem.elements.pool``, issue 18): parallel efficiency on
 1 and 2 local workers, and Dask's overhead per element call.
 
 ``--elements`` periodic elements of ``--grains`` grains are built on the workers; each load
@@ -31,7 +31,7 @@ from _report import write_json  # noqa: E402
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "cpp_dem"))
 
-from cpp_dem.element_pool import ElementPool, PeriodicFactory  # noqa: E402
+from cpp_dem.elements.pool import ElementPool, PeriodicFactory  # noqa: E402
 
 
 def run(args, workers: int) -> dict:

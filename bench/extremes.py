@@ -22,9 +22,10 @@ from pathlib import Path
 import numpy as np
 
 import cpp_dem as dem
-from cpp_dem import measure, prep
-from cpp_dem.packing import loose_cloud
-from cpp_dem.triaxial import build_box_sample, deviatoric_stage, isotropic_stage
+from cpp_dem import measure
+from cpp_dem.protocols import prep
+from cpp_dem.build.packing import loose_cloud
+from cpp_dem.protocols.triaxial import build_box_sample, deviatoric_stage, isotropic_stage
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -148,7 +149,7 @@ def tiny_grains():
 def stiffness_ratio():
     sys.path.insert(0, str(ROOT / "cases"))
     import pullout_000 as case  # noqa: E402
-    from cpp_dem import pullout
+    from cpp_dem.protocols import pullout
 
     for ratio in (4e3, 1e5):
         p = replace(case.Params(**case.SMOKE), grid_young=1e6 * ratio)

@@ -25,7 +25,8 @@ sys.path.insert(0, str(HERE.parent))
 
 
 def main(argv=None) -> int:
-    from cpp_dem.element_pool import ElementPool, PeriodicFactory, dask_client
+    from cpp_dem.elements.pool import ElementPool, PeriodicFactory
+    from cpp_dem.elements.cluster import dask_client
     from femcoupling import biaxial
 
     ap = argparse.ArgumentParser(description=__doc__,

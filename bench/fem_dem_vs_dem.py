@@ -34,7 +34,7 @@ sys.path.insert(0, str(HERE.parent))
 
 
 def main(argv=None) -> int:
-    from cpp_dem.element_pool import ElementPool, PeriodicFactory
+    from cpp_dem.elements.pool import ElementPool, PeriodicFactory
     from femcoupling import biaxial
 
     ap = argparse.ArgumentParser(description=__doc__,

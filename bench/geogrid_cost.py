@@ -18,7 +18,7 @@ import time
 import numpy as np
 
 import cpp_dem as dem
-from cpp_dem import geogrid
+from cpp_dem.build import geogrid
 
 
 def build(n_grains: int, nodes: int, with_grid: bool, seed: int = 1):

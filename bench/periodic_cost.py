@@ -37,7 +37,7 @@ sys.path.insert(0, str(HERE.parent / "cpp_dem"))
 
 import cpp_dem as dem  # noqa: E402
 from cpp_dem import measure  # noqa: E402
-from cpp_dem.dem_element import DemElement  # noqa: E402
+from cpp_dem.elements.periodic import DemElement  # noqa: E402
 
 
 def main(argv=None) -> int:

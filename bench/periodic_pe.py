@@ -17,8 +17,10 @@ import sys, time
 import numpy as np
 
 import cpp_dem as dem  # noqa: F401
-from cpp_dem.dem_element import DemElement
-from cpp_dem import measure, prep, periodic
+from cpp_dem.elements.periodic import DemElement
+from cpp_dem import measure
+from cpp_dem.protocols import prep
+from cpp_dem.protocols import periodic
 n = int(sys.argv[1]) if len(sys.argv) > 1 else 400
 # RadiusGrowth (gain, max strain per call), the same for both: slow, since a box feels the
 # stress only at its walls and fast growth overshoots (core e 0.695 at (0.5, 1e-3), 0.725 at

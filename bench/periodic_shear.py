@@ -36,8 +36,9 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "cpp_dem"))
 
 import cpp_dem as dem  # noqa: E402
-from cpp_dem import periodic, prep  # noqa: E402
-from cpp_dem.packing import loose_cloud  # noqa: E402
+from cpp_dem.protocols import periodic  # noqa: E402
+from cpp_dem.protocols import prep
+from cpp_dem.build.packing import loose_cloud  # noqa: E402
 
 
 def log(msg: str) -> None:

@@ -39,7 +39,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "cpp_dem"))
 
 import cpp_dem as dem  # noqa: E402
-from cpp_dem import periodic  # noqa: E402
+from cpp_dem.protocols import periodic  # noqa: E402
 
 
 def log(msg: str) -> None:

@@ -34,7 +34,7 @@ sys.path.insert(0, str(ROOT / "bench"))
 import cpp_dem as dem  # noqa: E402
 from _report import emit, markdown_table, pct  # noqa: E402
 import pullout_000 as case  # noqa: E402
-from cpp_dem import pullout  # noqa: E402
+from cpp_dem.protocols import pullout  # noqa: E402
 
 #: knob -> (values, index of the reference value, Params field or None)
 KNOBS = {

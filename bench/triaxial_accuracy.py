@@ -38,7 +38,7 @@ import cpp_dem as dem  # noqa: E402
 from _report import emit, markdown_table, pct  # noqa: E402
 import triaxial as case  # noqa: E402
 from cpp_dem import _core  # noqa: E402
-from cpp_dem.triaxial import apply_preset, build_box_sample, deviatoric_stage  # noqa: E402
+from cpp_dem.protocols.triaxial import apply_preset, build_box_sample, deviatoric_stage  # noqa: E402
 
 #: knob -> (values, index of the reference value)
 KNOBS = {

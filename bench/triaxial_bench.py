@@ -30,8 +30,9 @@ ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "cases"))
 
 import cpp_dem as dem  # noqa: E402
-from cpp_dem import measure, prep  # noqa: E402
-from cpp_dem.triaxial import build_box_sample, isotropic_stage  # noqa: E402
+from cpp_dem import measure  # noqa: E402
+from cpp_dem.protocols import prep
+from cpp_dem.protocols.triaxial import build_box_sample, isotropic_stage  # noqa: E402
 
 YOUNG, POISSON, PHI, RHO, DAMPING = 4.5e6, 0.33, 32.0, 2650.0, 0.2
 

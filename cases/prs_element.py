@@ -1,10 +1,10 @@
-"""The prs_element case (its code: cpp_dem/cpp_dem/cases/prs_element.py; also
-``geogrid-dem run prs-element`` and ``python -m cpp_dem.cases.prs_element``). Run it with
+"""The prs_element case (its code: geogrid_dem/cases/prs_element.py; also
+``geogrid-dem run prs-element`` and ``python -m geogrid_dem.cases.prs_element``). Run it with
 --smoke or --help; imported, this module offers everything the case module has."""
 
 import sys
 
-from cpp_dem.cases import prs_element as _case
+from geogrid_dem.cases import prs_element as _case
 
 globals().update({k: v for k, v in vars(_case).items() if not k.startswith("__")})
 

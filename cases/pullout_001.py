@@ -1,10 +1,10 @@
-"""The pullout_001 case (its code: cpp_dem/cpp_dem/cases/pullout_001.py; also
-``geogrid-dem run pullout-001`` and ``python -m cpp_dem.cases.pullout_001``). Run it with
+"""The pullout_001 case (its code: geogrid_dem/cases/pullout_001.py; also
+``geogrid-dem run pullout-001`` and ``python -m geogrid_dem.cases.pullout_001``). Run it with
 --smoke or --help; imported, this module offers everything the case module has."""
 
 import sys
 
-from cpp_dem.cases import pullout_001 as _case
+from geogrid_dem.cases import pullout_001 as _case
 
 globals().update({k: v for k, v in vars(_case).items() if not k.startswith("__")})
 

@@ -1,5 +1,5 @@
-"""Shared code of the pull-out cases (its code: cpp_dem/cpp_dem/cases/pullout_common.py)."""
+"""Shared code of the pull-out cases (its code: geogrid_dem/cases/pullout_common.py)."""
 
-from cpp_dem.cases import pullout_common as _case
+from geogrid_dem.cases import pullout_common as _case
 
 globals().update({k: v for k, v in vars(_case).items() if not k.startswith("__")})

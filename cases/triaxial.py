@@ -1,10 +1,10 @@
-"""The triaxial case (its code: cpp_dem/cpp_dem/cases/triaxial.py; also
-``geogrid-dem run triaxial`` and ``python -m cpp_dem.cases.triaxial``). Run it with
+"""The triaxial case (its code: geogrid_dem/cases/triaxial.py; also
+``geogrid-dem run triaxial`` and ``python -m geogrid_dem.cases.triaxial``). Run it with
 --smoke or --help; imported, this module offers everything the case module has."""
 
 import sys
 
-from cpp_dem.cases import triaxial as _case
+from geogrid_dem.cases import triaxial as _case
 
 globals().update({k: v for k, v in vars(_case).items() if not k.startswith("__")})
 

@@ -5,7 +5,7 @@
   element per cell, the right side at the confining pressure, the top pushed down in equal
   load steps.
 - :func:`direct_biaxial`: a periodic DEM cell under the same path (x at the pressure, y held,
-  z shortened: ``cpp_dem.periodic.plane_strain_biaxial``). Give it the element factory to run
+  z shortened: ``cpp_dem.protocols.periodic.plane_strain_biaxial``). Give it the element factory to run
   every element alone (what the FEM x DEM must reproduce when the field is near homogeneous),
   or a bigger cell of all their grains.
 
@@ -84,9 +84,9 @@ def direct_biaxial(make: Callable[[int], object], seeds: Sequence[int], *, press
                    log: Callable | None = print) -> list[dict]:
     """The direct DEM: for each k in ``seeds`` the element ``make(k)`` (a periodic
     ``DemElement``, e.g. a ``PeriodicFactory``: then element k of the FEM x DEM run alone)
-    under ``cpp_dem.periodic.plane_strain_biaxial`` to the axial ``strain``. One result dict
+    under ``cpp_dem.protocols.periodic.plane_strain_biaxial`` to the axial ``strain``. One result dict
     per seed (the module doc), with ``grains`` and ``wall_s``."""
-    from cpp_dem import periodic
+    from cpp_dem.protocols import periodic
 
     out = []
     t1 = time.perf_counter()

@@ -297,7 +297,7 @@ class HierarchicalPlaneStrain:
         seconds of the pool call and the recovered elements."""
         if not first:
             self.pool.reject()
-        from cpp_dem.element_pool import ElementError
+        from cpp_dem.elements.pool import ElementError
 
         self._increments = np.array([dem_increment(g) for g in self._grad_increment()])
         if perturb:

@@ -107,7 +107,7 @@ class PeriodicRegionElement:
         this runner's memory after its first preparation (so in the worker that runs it), or
         in ``cache_dir``; else prepared (and kept in both). A kept element of a different
         initial tensor is not taken. Returns (element, whether it was kept)."""
-        from cpp_dem.dem_element import DemElement
+        from cpp_dem.elements.periodic import DemElement
 
         s0 = np.asarray(initial.fem_stress_pa, float)
         key = (name, s0.tobytes())
@@ -204,7 +204,7 @@ class DemRegionMaterial:
     trace. So the element strains exactly as its region does: the two scales agree by
     construction. SI units; tension positive.
 
-    ``element``: a periodic ``cpp_dem.dem_element.DemElement`` in the region's initial state
+    ``element``: a periodic ``cpp_dem.elements.periodic.DemElement`` in the region's initial state
     (``prepared`` makes one); ``strain_kw``: keywords for ``DemElement.apply_strain``;
     ``min_eig_fraction``: the tangent is made symmetric and positive definite, eigenvalues
     floored at this fraction of the largest (a network near its strength has soft or negative
@@ -251,7 +251,7 @@ class DemRegionMaterial:
     def trial(self, strain_increment) -> tuple[np.ndarray, np.ndarray]:
         """The element, from the start of the step, through ``strain_increment`` (3 x 3, -):
         returns its stress increment (3 x 3, Pa) and its tangent (6 x 6 Mandel, Pa)."""
-        from cpp_dem.dem_element import DemElement
+        from cpp_dem.elements.periodic import DemElement
 
         de = np.asarray(strain_increment, float)
         if not np.any(de):
@@ -286,7 +286,7 @@ class DemRegionMaterial:
         return self._committed
 
     def set_state(self, data: bytes) -> None:
-        from cpp_dem.dem_element import DemElement
+        from cpp_dem.elements.periodic import DemElement
 
         self._set(DemElement.from_bytes(data))
 
@@ -297,7 +297,7 @@ class DemRegionMaterial:
 
 class PoolRegionMaterials:
     """The DEM elements of several element regions on Dask workers
-    (``cpp_dem.element_pool.ElementPool``, one element per region), for
+    (``cpp_dem.elements.pool.ElementPool``, one element per region), for
     ``SoilModel.set_region_element``: the model evaluates them all at once at every Newton
     iterate (``trial_many``), so the regions' DEM runs in parallel. Each region's element
     behaves as a ``DemRegionMaterial`` (the same answers, bitwise: every worker runs one
@@ -317,7 +317,7 @@ class PoolRegionMaterials:
 
     def __init__(self, pool, names, *, min_eig_fraction: float = 1e-3,
                  strain_kw: dict | None = None, records=None) -> None:
-        from cpp_dem.dem_element import DemElement
+        from cpp_dem.elements.periodic import DemElement
 
         self.pool, self.names = pool, list(names)
         if pool.n != len(self.names):
@@ -345,7 +345,7 @@ class PoolRegionMaterials:
         """``stresses``: name -> the stress where its element takes over (3 x 3, Pa, tension
         positive); ``distinct_seeds``: element k packed with seed ``runner.seed + k`` (else
         every element from ``runner.seed``)."""
-        from cpp_dem.element_pool import ElementPool
+        from cpp_dem.elements.pool import ElementPool
 
         names = list(stresses)
         make = _Prepare(runner, names, [np.asarray(stresses[n], float) for n in names],

@@ -54,7 +54,7 @@ class RunnerPool:
 
     def __init__(self, runner: Callable, names: Sequence[str], *, workers: int = 2,
                  client=None, log: Callable[[str], None] | None = None) -> None:
-        from cpp_dem.element_pool import check_sendable, closed_on_error, local_client
+        from cpp_dem.elements.cluster import check_sendable, closed_on_error, local_client
 
         self.runner, self.names = runner, list(names)
         self.log = log or (lambda msg: None)

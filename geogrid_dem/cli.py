@@ -77,7 +77,9 @@ from typing import Any
 
 import click
 
-#: The cases: command name -> (module in cpp_dem.cases, one line).
+from geogrid_dem.provenance import git_commit, version
+
+#: The cases: command name -> (module in geogrid_dem.cases, one line).
 CASES = {
     "pullout-000": ("pullout_000", "geogrid pull-out of 000 (Yade, 3000-9000 spheres)"),
     "pullout-001": ("pullout_001", "pull-out of 001 (square and triangular grids, Table 5.2)"),
@@ -89,7 +91,6 @@ CASES = {
 }
 #: Cases whose --threads 0 means one thread rather than all (translated by the command).
 _THREADS_ZERO_IS_ONE = {"prs-element", "prs-element-002"}
-ROOT = Path(__file__).resolve().parents[2]  # the source tree (for the git commit), if any
 
 
 class RunFileError(click.ClickException):
@@ -97,33 +98,10 @@ class RunFileError(click.ClickException):
 
 
 def case_command(name: str, *, field: str = "case") -> list[str]:
-    """The interpreter command that runs case `name` (its module in cpp_dem.cases)."""
+    """The interpreter command that runs case `name` (its module in geogrid_dem.cases)."""
     if name not in CASES:
         raise RunFileError(f"{field}={name!r}: no such case; allowed: {', '.join(CASES)}")
-    return [sys.executable, "-m", f"cpp_dem.cases.{CASES[name][0]}"]
-
-
-def version() -> str:
-    try:
-        from importlib.metadata import version as _v
-
-        return _v("geogrid-dem")
-    except Exception:  # noqa: BLE001  (not installed as a distribution)
-        return "unknown"
-
-
-def git_commit() -> str:
-    try:
-        out = subprocess.run(["git", "-C", str(ROOT), "rev-parse", "HEAD"], capture_output=True,
-                             text=True, timeout=10)
-        if out.returncode == 0:
-            dirty = subprocess.run(["git", "-C", str(ROOT), "status", "--porcelain",
-                                    "--untracked-files=no"], capture_output=True, text=True,
-                                   timeout=10).stdout.strip()
-            return out.stdout.strip() + ("+dirty" if dirty else "")
-    except (OSError, subprocess.SubprocessError):
-        pass
-    return "unknown"
+    return [sys.executable, "-m", f"geogrid_dem.cases.{CASES[name][0]}"]
 
 
 # ---- parameters -> the case's flags -----------------------------------------------------------
@@ -135,7 +113,7 @@ class _Parser(Exception):
 @functools.lru_cache(maxsize=None)
 def case_parser(case: str) -> argparse.ArgumentParser:
     """The argparse parser of case ``case`` (its module's parse_args, stopped where it parses)."""
-    mod = importlib.import_module(f"cpp_dem.cases.{CASES[case][0]}")
+    mod = importlib.import_module(f"geogrid_dem.cases.{CASES[case][0]}")
     orig = argparse.ArgumentParser.parse_args
 
     def grab(self, *_a, **_k):
@@ -190,7 +168,7 @@ def check_argv(case: str, argv: list[str], *, source: str) -> None:
     value the case refuses is reported against ``source`` before any work starts."""
     if "--help" in argv or "-h" in argv:
         return
-    mod = importlib.import_module(f"cpp_dem.cases.{CASES[case][0]}")
+    mod = importlib.import_module(f"geogrid_dem.cases.{CASES[case][0]}")
     err = io.StringIO()
     try:
         with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
@@ -421,7 +399,7 @@ def _shared(f):
 @click.pass_context
 def run_cmd(ctx, target: str, out, overwrite, seed, threads, preset, smoke) -> None:
     """Runs a case (TARGET = its name, then its own flags) or a run file (TARGET.toml)."""
-    from cpp_dem import rundir
+    from geogrid_dem import rundir
 
     extra = list(ctx.args)
     source = None
@@ -597,7 +575,7 @@ def sweep_cmd(file: Path, workers: int, scheduler: str | None, threads: int,
               max_rows: int) -> None:
     """Runs a sweep file's rows on Dask, skipping finished rows; gathers OUT/results.csv.
     Every row is checked against the case's flags before Dask starts."""
-    from cpp_dem import rundir
+    from geogrid_dem import rundir
 
     data = load_toml(file, "sweep")
     case = data["case"]
@@ -701,8 +679,8 @@ def _summary_of(row_dir: Path) -> dict[str, Any]:
 def _dask_client(scheduler: str | None, workers: int):
     """(client, cluster): the scheduler at ``scheduler`` (an address or a scheduler file), or
     a LocalCluster of ``workers`` single-threaded processes (cluster None for a scheduler)."""
-    from ._core import ParameterError
-    from .element_pool import dask_client
+    from cpp_dem import ParameterError
+    from cpp_dem.elements.cluster import dask_client
 
     try:
         return dask_client(scheduler, workers)
@@ -816,7 +794,7 @@ def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | N
                   threads: int) -> None:
     """Fits E, nu and phi of the triaxial case to a reference curve (001 §6.1, Table 6.1):
     a grid on Dask, then Nelder-Mead; writes OUT/grid.csv, best.json, misfit.png/.pdf."""
-    from cpp_dem import calibrate as cal
+    from geogrid_dem import calibrate as cal
 
     try:
         cfg = cal.Config.load(file)
@@ -844,7 +822,7 @@ def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | N
             check_argv("triaxial", params_to_argv(runner.params(pt), source=src),
                        source=f"{src}: {where} at young={pt[0]:g}, poisson={pt[1]:g}, "
                               f"phi={pt[2]:g}")
-    why = __import__("cpp_dem.rundir", fromlist=["x"])._writable_or_error(Path(cfg.out))
+    why = __import__("geogrid_dem.rundir", fromlist=["x"])._writable_or_error(Path(cfg.out))
     if not why:
         try:
             Path(cfg.out).mkdir(parents=True, exist_ok=True)

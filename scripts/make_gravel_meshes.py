@@ -12,7 +12,7 @@ binary STL. Templates are scaled at placement (``template.scaled(d)`` gives a gr
 equivalent mesh diameter d in m).
 
 The template of each grain (``<name>.csv``, ``ClumpTemplate.save``: x, y, z, r in m) is filled
-from the float32 vertices as stored, by :func:`cpp_dem.clump_mesh.fill_mesh` with the settings
+from the float32 vertices as stored, by :func:`cpp_dem.build.clump_mesh.fill_mesh` with the settings
 in ``FILL``. Everything is deterministic for a given ``--seed`` (default 20240611).
 
 Run (writes cpp_dem/cpp_dem/data/grains/gravel_*.stl and .csv and prints a summary)::
@@ -28,7 +28,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cpp_dem import clump_mesh as cm
+from cpp_dem.build import clump_mesh as cm
 
 ROOT = Path(__file__).resolve().parents[1]
 

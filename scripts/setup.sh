@@ -45,10 +45,13 @@ if [ ! -f "$REQ_STAMP" ] || [ "$(cat "$REQ_STAMP")" != "$REQ_HASH" ]; then
 fi
 
 # 4. Editable build of the C++ core (re-run only when C++/build files change).
-SRC_HASH=$(cat CMakeLists.txt pyproject.toml $(find cpp_dem/include cpp_dem/src cpp_dem/bindings -type f | sort) | sha256sum | cut -d' ' -f1)
+# The editable install maps each Python module to its file: the list of modules is part of the
+# hash, so a moved or added module re-installs.
+SRC_HASH=$( (cat CMakeLists.txt pyproject.toml $(find cpp_dem/include cpp_dem/src cpp_dem/bindings -type f | sort);
+             find cpp_dem/cpp_dem femcoupling geogrid_dem -name '*.py' | sort) | sha256sum | cut -d' ' -f1)
 BUILD_STAMP="$VENV/.build-stamp"
 if [ ! -f "$BUILD_STAMP" ] || [ "$(cat "$BUILD_STAMP")" != "$SRC_HASH" ] || \
-   ! "$PY" -c "import cpp_dem._core as c; assert c.GEOGRID" >/dev/null 2>&1; then
+   ! "$PY" -c "import cpp_dem._core as c, geogrid_dem; assert c.GEOGRID" >/dev/null 2>&1; then
   # The default build (with the geogrid): a lean build installed by hand
   # (-DCPP_DEM_GEOGRID=OFF, docs/lean_build.md) is replaced, the CMake cache keeps options.
   say "building the C++ core (editable install)"

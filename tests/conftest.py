@@ -48,7 +48,7 @@ SMOKE_ARGS: dict[str, tuple[str, ...]] = {
 
 def case_names() -> list[str]:
     """The runnable cases: cases/*.py that run as a script (the thin wrappers of
-    cpp_dem.cases; helpers such as pullout_common.py do not)."""
+    geogrid_dem.cases; helpers such as pullout_common.py do not)."""
     return sorted(p.stem for p in (ROOT / "cases").glob("*.py")
                   if '__name__ == "__main__"' in p.read_text())
 

@@ -11,7 +11,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cpp_dem.calibrate import Runner, TABLE_6_1, misfit, nelder_mead, rounded
+from geogrid_dem.calibrate import Runner, TABLE_6_1, misfit, nelder_mead, rounded
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -92,7 +92,7 @@ def test_a_tiny_calibration_recovers_the_synthetic_truth_and_beats_a_wrong_start
     f = tmp_path / "cal.toml"
     out = tmp_path / "cal"
     f.write_text(TINY.format(out=out, E=truth[0], nu=truth[1], phi=truth[2]))
-    r = subprocess.run([sys.executable, "-m", "cpp_dem.cli", "calibrate", str(f),
+    r = subprocess.run([sys.executable, "-m", "geogrid_dem.cli", "calibrate", str(f),
                         "--workers", "2"], capture_output=True, text=True, cwd=ROOT,
                        env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert r.returncode == 0, r.stderr[-3000:] + r.stdout[-2000:]

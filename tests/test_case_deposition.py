@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem.output import read_csv_series, read_h5_series, read_h5_snapshot
+from cpp_dem.io import read_csv_series, read_h5_series, read_h5_snapshot
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE = ROOT / "cases" / "deposition.py"

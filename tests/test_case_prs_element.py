@@ -211,7 +211,7 @@ def test_two_way_keeps_the_prepared_element_between_iterations(tmp_path, capsys)
     as a fresh element would."""
     from dataclasses import asdict
 
-    from cpp_dem.cases import prs_element as pe
+    from geogrid_dem.cases import prs_element as pe
     from femcoupling.handover import fem_to_dem
 
     p = pe.Params(**pe.SMOKE)

@@ -10,7 +10,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from cpp_dem.output import read_csv_series, read_h5_series
+from cpp_dem.io import read_csv_series, read_h5_series
 
 ROOT = Path(__file__).resolve().parents[1]
 CASE = ROOT / "cases" / "triaxial.py"

@@ -16,7 +16,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 def cli(*args, cwd=None):
     exe = shutil.which("geogrid-dem", path=str(Path(sys.executable).parent))
-    cmd = [exe] if exe else [sys.executable, "-m", "cpp_dem.cli"]
+    cmd = [exe] if exe else [sys.executable, "-m", "geogrid_dem.cli"]
     return subprocess.run([*cmd, *map(str, args)], capture_output=True, text=True,
                           cwd=cwd or ROOT, env={**os.environ, "OMP_NUM_THREADS": "1"})
 

@@ -1,4 +1,4 @@
-"""Clump templates from closed surface meshes (cpp_dem.clump_mesh).
+"""Clump templates from closed surface meshes (cpp_dem.build.clump_mesh).
 
 Mass properties of meshes against analytic values; fills of a cube and an ellipsoid against the
 analytic values within the stated fill errors (docs/clump_templates.md), decreasing with the
@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import clump_mesh as cm
-from cpp_dem.clumps import ClumpTemplate
+from cpp_dem.build import clump_mesh as cm
+from cpp_dem.build.clumps import ClumpTemplate
 
 from conftest import ROOT
 

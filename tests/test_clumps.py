@@ -1,7 +1,7 @@
 """Clumps (issue 15): the rigid body of member spheres, verified against analytic solutions.
 
 Tolerances are stated per test; the mass properties of a union of spheres are integrated to
-the template's stated fill accuracy (cpp_dem.clumps, 2e-4 at 160 cells)."""
+the template's stated fill accuracy (cpp_dem.build.clumps, 2e-4 at 160 cells)."""
 
 import math
 
@@ -11,7 +11,7 @@ import pytest
 import cpp_dem as dem
 from cpp_dem import _core
 from cpp_dem.checkpoint import load_checkpoint, save_checkpoint
-from cpp_dem.clumps import ClumpTemplate, random_orientations, union_mass_properties
+from cpp_dem.build.clumps import ClumpTemplate, random_orientations, union_mass_properties
 
 RHO = 2650.0
 
@@ -382,7 +382,7 @@ def test_grain_stiffness_takes_the_equivalent_radius():
 def test_clump_rests_on_a_geogrid_of_cylinders():
     # A clump dropped on a held square geogrid comes to rest on its cylinders: the grid
     # contacts of its members carry its weight (within 1 %), none of its members falls through.
-    from cpp_dem import geogrid
+    from cpp_dem.build import geogrid
 
     s = dem.Scene(gravity=(0, 0, -9.81), local_damping=0.5)
     mat = material(s)
@@ -411,14 +411,14 @@ def test_clump_rests_on_a_geogrid_of_cylinders():
 def test_refd_densifies_a_clump_sample():
     # REFD (000 §2.3) on clumps: expansion about the centres of mass, friction lowered step by
     # step on the members (a material of the same density), restored at the end.
-    from cpp_dem import prep
+    from cpp_dem.protocols import prep
 
     s = dem.Scene(local_damping=0.3)
     mat = material(s)
     wmat = s.add_material(dem.linear_material(density=RHO, young=1e7, poisson=0.3,
                                               friction_angle_deg=0))
     walls = s.add_box((0, 0, 0), (0.05, 0.05, 0.05), material=wmat)
-    from cpp_dem.clumps import clump_cloud
+    from cpp_dem.build.clumps import clump_cloud
 
     t = _asymmetric()
     cloud = clump_cloud(t, np.full(60, 0.35 * t.equivalent_diameter), (0, 0, 0),
@@ -437,7 +437,7 @@ def test_refd_densifies_a_clump_sample():
 
 
 def test_layered_clump_cloud_keeps_the_geogrid_plane_clear():
-    from cpp_dem import pullout
+    from cpp_dem.protocols import pullout
 
     t = _asymmetric()
     d = np.linspace(0.5, 0.7, 80) * t.equivalent_diameter
@@ -477,7 +477,7 @@ def test_moving_a_member_by_hand_is_refused():
 
 
 def test_clump_output_vtk_and_hdf5(tmp_path):
-    from cpp_dem.output import H5Recorder, read_h5_snapshot, write_vtk_spheres
+    from cpp_dem.io import H5Recorder, read_h5_snapshot, write_vtk_spheres
 
     s = dem.Scene()
     mat = material(s)

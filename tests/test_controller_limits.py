@@ -9,9 +9,10 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import _core, prep
-from cpp_dem.packing import loose_cloud
-from cpp_dem.triaxial import build_box_sample
+from cpp_dem import _core
+from cpp_dem.protocols import prep
+from cpp_dem.build.packing import loose_cloud
+from cpp_dem.protocols.triaxial import build_box_sample
 
 
 def isotropic_sample(stress=20e3):

@@ -18,7 +18,8 @@ import numpy as np
 import pytest
 
 from cpp_dem._core import ParameterError
-from cpp_dem.element_pool import ElementPool, dask_client
+from cpp_dem.elements.pool import ElementPool
+from cpp_dem.elements.cluster import dask_client
 # the same elements and increments as the LocalCluster's tests, and their serial answers
 from test_element_pool import FACTORY, N, _increments, serial  # noqa: F401 (a fixture)
 

@@ -8,8 +8,9 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import DemElement, measure
-from cpp_dem.dem_element import VOIGT, voigt_strain
+from cpp_dem import DemElement
+from cpp_dem import measure
+from cpp_dem.elements.periodic import VOIGT, voigt_strain
 
 
 @pytest.fixture(scope="module")
@@ -143,7 +144,7 @@ def test_stress_scatter_is_the_bootstrap_of_the_contact_sum(element_blob):
     """The bootstrap standard deviation of a sum of m contact terms is sqrt(m) times their
     standard deviation (the closed form); seeded, so repeatable; and it leaves the element
     as it was."""
-    from cpp_dem import tangent
+    from cpp_dem.measure import network_tangent as tangent
 
     el = DemElement.from_bytes(element_blob)
     d = el.network_data()

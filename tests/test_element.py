@@ -1,4 +1,4 @@
-"""cpp_dem.element, the servo-walled DEM element of 002 as a library API (moved out of
+"""cpp_dem.elements.box, the servo-walled DEM element of 002 as a library API (moved out of
 cases/prs_element.py): driven from ElementParams alone, it reaches and holds the given wall
 stresses and writes its records, without importing dolfinx."""
 
@@ -8,7 +8,7 @@ import sys
 import numpy as np
 import pytest
 
-from cpp_dem.element import ElementParams, grid_axial_stiffness, run_element
+from cpp_dem.elements.box import ElementParams, grid_axial_stiffness, run_element
 
 
 def test_element_from_its_own_parameters_holds_the_targets(tmp_path):
@@ -28,7 +28,7 @@ def test_element_from_its_own_parameters_holds_the_targets(tmp_path):
 
 
 def test_importing_the_element_imports_no_dolfinx():
-    code = "import sys, cpp_dem.element; print('dolfinx' in sys.modules)"
+    code = "import sys, cpp_dem.elements.box; print('dolfinx' in sys.modules)"
     out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True)
     assert out.returncode == 0, out.stderr
     assert out.stdout.strip() == "False"
@@ -41,7 +41,7 @@ def test_handed_over_grid_tension_pulls_the_grid_ends(tmp_path):
     take up within half a member (measured 1.1 % less at 1.8 kN/m; asserted 5 %), and the
     walls still hold their targets."""
     from cpp_dem._core import ParameterError
-    from cpp_dem.element import grid_spacing
+    from cpp_dem.elements.box import grid_spacing
 
     p = ElementParams(n=200, hold_steps=400, max_steps=200_000, unbalanced=0.05, tol=0.01,
                       record_every=100, threads=1, prestress=2000.0)
@@ -65,8 +65,8 @@ def test_handed_over_grid_tension_pulls_the_grid_ends(tmp_path):
 def loaded_element():
     """The case's smoke element (300 grains) servoed to 5/5/8 kPa, then to 5.5/5.2/9.5 kPa
     (within its strength: ratio 1.7 against about 2.2)."""
-    from cpp_dem.cases.prs_element import SMOKE, Params
-    from cpp_dem.element import make_element, servo_stage
+    from geogrid_dem.cases.prs_element import SMOKE, Params
+    from cpp_dem.elements.box import make_element, servo_stage
 
     p = Params(**SMOKE)
     t0, t1 = np.array([5e3, 5e3, 8e3]), np.array([5.5e3, 5.2e3, 9.5e3])
@@ -83,7 +83,7 @@ def test_probed_tangent_of_the_walls_element(loaded_element):
     moduli are the planes' isotropic ones, the tangent is a property of the state (5 % and
     10 % probes agree within 20 %: measured 13 % on the largest term), and the element is
     left bitwise where it was."""
-    from cpp_dem.element import probe_tangent
+    from cpp_dem.elements.box import probe_tangent
 
     p, sample, grid, t0, t1 = loaded_element
     sc = sample.scene
@@ -106,7 +106,7 @@ def test_probed_tangent_of_the_walls_element(loaded_element):
 
 def test_a_probe_size_outside_its_range_is_refused(loaded_element):
     from cpp_dem._core import ParameterError
-    from cpp_dem.element import probe_tangent
+    from cpp_dem.elements.box import probe_tangent
 
     p, sample, grid, _, t1 = loaded_element
     with pytest.raises(ParameterError, match="rel=0.8: the probe's size"):

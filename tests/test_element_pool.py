@@ -1,4 +1,4 @@
-"""ElementPool (cpp_dem.element_pool): DEM elements held on Dask workers across increments.
+"""ElementPool (cpp_dem.elements.pool): DEM elements held on Dask workers across increments.
 Results are bitwise those of the serial elements for 1, 2 and 4 workers; a rejected increment
 restores every element; a killed worker's elements are rebuilt from their accepted bytes and
 the run ends as an undisturbed one."""
@@ -12,7 +12,7 @@ import time
 import numpy as np
 import pytest
 
-from cpp_dem.element_pool import ElementPool, PeriodicFactory
+from cpp_dem.elements.pool import ElementPool, PeriodicFactory
 
 FACTORY = PeriodicFactory(n=120)
 N = 4
@@ -62,7 +62,7 @@ def test_a_killed_worker_does_not_change_the_result(serial):
 
 
 def test_an_element_failure_is_named_and_the_pool_goes_on(serial):
-    from cpp_dem.element_pool import ElementError
+    from cpp_dem.elements.pool import ElementError
 
     with ElementPool.build(N, FACTORY, workers=2) as pool:
         bad = _increments()
@@ -91,7 +91,7 @@ def test_a_pool_that_cannot_start_says_so_and_stops_its_cluster(monkeypatch):
     import threading
 
     from cpp_dem import ParameterError
-    from cpp_dem import element_pool as ep
+    from cpp_dem.elements import pool as ep
 
     made = []
 

@@ -10,7 +10,8 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import packing, prep
+from cpp_dem.build import packing
+from cpp_dem.protocols import prep
 
 R = 0.01       # m
 E = 1e7        # Pa, k_n = E R = 1e5 N/m

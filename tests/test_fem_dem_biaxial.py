@@ -19,7 +19,7 @@ import pytest
 
 pytest.importorskip("dolfinx_solver")
 
-from cpp_dem.element_pool import ElementPool, PeriodicFactory  # noqa: E402
+from cpp_dem.elements.pool import ElementPool, PeriodicFactory  # noqa: E402
 from femcoupling import biaxial  # noqa: E402
 
 P, STRAIN = 100e3, 0.03

@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import geogrid
+from cpp_dem.build import geogrid
 
 E_GRID = 1e8       # Pa (softer than 000's 4 GPa so the verification runs are short)
 NU_GRID = 0.3
@@ -428,7 +428,7 @@ def test_triaxial_case_with_geogrid_layers_smoke(tmp_path):
     _, radii = dem.read_packing_csv(tmp_path / "square" / "packing_isotropic.csv")
     assert len(radii) == out["square"]["num_grains"]
     # The HDF5 series carry the member forces with every record.
-    from cpp_dem.output import read_h5_series
+    from cpp_dem.io import read_h5_series
 
     series = read_h5_series(tmp_path / "square" / "triaxial.h5")
     assert series["member_axial_force"].shape == (len(series["time"]),

@@ -10,7 +10,7 @@ import pytest
 
 pytest.importorskip("dolfinx_solver")
 
-from cpp_dem.element_pool import ElementPool, PeriodicFactory  # noqa: E402
+from cpp_dem.elements.pool import ElementPool, PeriodicFactory  # noqa: E402
 from femcoupling.hierarchical import (HierarchicalPlaneStrain, dem_increment,  # noqa: E402
                                       fem_stress)
 

@@ -1,10 +1,11 @@
-"""The interaction measures of cpp_dem.interaction on hand-placed grains (issue 16)."""
+"""The interaction measures of cpp_dem.measure.grid_soil on hand-placed grains (issue 16)."""
 
 import numpy as np
 import pytest
 
 import cpp_dem as cd
-from cpp_dem import interaction, woven
+from cpp_dem.measure import grid_soil as interaction
+from cpp_dem.build import woven
 
 
 def _grid_and_grain():
@@ -63,7 +64,7 @@ def test_a_grain_in_the_aperture_is_counted():
 
 
 def test_force_profile_of_a_prestressed_grid_is_uniform():
-    from cpp_dem.prestress import Prestress
+    from cpp_dem.protocols.prestress import Prestress
 
     s = cd.Scene(local_damping=0.7)
     m = s.add_material(woven.woven_material("detailed"))

@@ -4,7 +4,8 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import _core, measure
+from cpp_dem import _core
+from cpp_dem import measure
 
 
 def test_love_weber_single_confined_sphere_equals_wall_stress():

@@ -1,4 +1,4 @@
-"""Result files of cpp_dem.output: VTK PolyData / PVD well-formed, HDF5 and CSV recorders
+"""Result files of cpp_dem.io: VTK PolyData / PVD well-formed, HDF5 and CSV recorders
 append, flush, survive a crash and never replace a file silently."""
 
 from __future__ import annotations
@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem.output import (CsvRecorder, H5Recorder, PvdWriter, read_csv_series,
+from cpp_dem.io import (CsvRecorder, H5Recorder, PvdWriter, read_csv_series,
                             read_h5_series, read_h5_snapshot, standard_series, write_vtk_box,
                             write_vtk_contacts, write_vtk_spheres, write_vtp)
 
@@ -321,7 +321,7 @@ def test_h5_recorder_is_readable_while_open(tmp_path, scene):
     with H5Recorder(path, scene) as rec:
         for _ in range(3):
             rec.record()
-        code = ("from cpp_dem.output import read_h5_series; "
+        code = ("from cpp_dem.io import read_h5_series; "
                 f"s = read_h5_series({str(path)!r}); print(len(s['time']), s['step'][-1])")
         out = subprocess.run([PYTHON, "-c", code], capture_output=True, text=True, timeout=60)
         assert out.returncode == 0, out.stderr
@@ -334,7 +334,7 @@ def test_h5_recorder_survives_a_crash(tmp_path):
     path = tmp_path / "crash.h5"
     code = textwrap.dedent(f"""
         import os, signal
-        from cpp_dem.output import H5Recorder
+        from cpp_dem.io import H5Recorder
         rec = H5Recorder({str(path)!r}, None, series={{"t": (None, "s"), "v": (None, "m/s")}},
                          metadata={{"case": "crash"}})
         for k in range(5):

@@ -4,7 +4,10 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import measure, packing, psd
+from cpp_dem import measure
+from cpp_dem.build import packing
+from cpp_dem.build import psd
+from cpp_dem.protocols import prep
 
 
 def _overlaps(c, r, chunk=512):
@@ -71,7 +74,7 @@ def test_porosity_of_a_simple_cubic_lattice():
 def test_gravity_deposition_settles():
     mat = dem.linear_material(density=2650, young=1e6, poisson=0.3, friction_angle_deg=30)
     r = psd.radii_uniform(0.004, 0.001, 60, seed=2)
-    c, rr, info = packing.gravity_deposition(r, (0, 0, 0), (0.05, 0.05, 0.1), material=mat,
+    c, rr, info = prep.gravity_deposition(r, (0, 0, 0), (0.05, 0.05, 0.1), material=mat,
                                              seed=2, max_time=1.5, settled_speed=5e-3)
     assert info["settled"], info
     assert c[:, 2].max() < 0.05  # the cloud filled the box; the deposit sits in its lower half

@@ -97,7 +97,7 @@ def test_time_step_floor_takes_the_pair_law_stiffness():
     pair law in the critical time step: a soft grain (E R = 4e5 N/m) above 002's grid
     (grid-grain k_n = 3.9e6 N/m) gets a step that stays stable when it lands. (Measured
     before: 3 x too large a step, and the grain bounced off the grid at 4 m/s.)"""
-    from cpp_dem import woven
+    from cpp_dem.build import woven
 
     s = cd.Scene()
     gm = s.add_material(woven.woven_material("detailed"))

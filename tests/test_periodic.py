@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import periodic
+from cpp_dem.protocols import periodic
 from cpp_dem._core import CellController
 
 E, NU, RHO = 1e8, 0.3, 2650.0

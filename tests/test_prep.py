@@ -4,9 +4,11 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import measure, prep, psd
-from cpp_dem.packing import loose_cloud
-from cpp_dem.triaxial import build_box_sample
+from cpp_dem import measure
+from cpp_dem.protocols import prep
+from cpp_dem.build import psd
+from cpp_dem.build.packing import loose_cloud
+from cpp_dem.protocols.triaxial import build_box_sample
 
 
 def sample(seed=4):
@@ -48,9 +50,10 @@ def test_wrong_sign_stress_refused():
 
 def test_drive_to_stresses_reaches_an_anisotropic_state_and_solve_to_equilibrium_settles():
     import cpp_dem as dem
-    from cpp_dem import measure, prep
-    from cpp_dem.packing import loose_cloud
-    from cpp_dem.triaxial import build_box_sample
+    from cpp_dem import measure
+    from cpp_dem.protocols import prep
+    from cpp_dem.build.packing import loose_cloud
+    from cpp_dem.protocols.triaxial import build_box_sample
 
     c, r = loose_cloud(np.full(150, 0.003), (0, 0, 0), (0.05, 0.05, 0.05), seed=4)
     sample = build_box_sample(c, r * 1.2, (0, 0, 0), (0.05, 0.05, 0.05), young=5e7, poisson=0.3,

@@ -4,8 +4,9 @@ import numpy as np
 import pytest
 
 import cpp_dem as cd
-from cpp_dem import geogrid, woven
-from cpp_dem.prestress import Prestress, PrestressError
+from cpp_dem.build import geogrid
+from cpp_dem.build import woven
+from cpp_dem.protocols.prestress import Prestress, PrestressError
 
 
 def _woven():
@@ -99,7 +100,7 @@ def test_end_tension_pulls_each_line_by_t_times_spacing():
     at its ends by T = 1 kN/m. Every longitudinal member then carries T x spacing = 25 N and
     stretches by F L / (E A); the transverse members carry nothing. Measured: 1.1e-7 and
     5e-14 relative; asserted 1e-5."""
-    from cpp_dem.prestress import EndTension
+    from cpp_dem.protocols.prestress import EndTension
 
     s, g = _cylinders()
     e = EndTension(s, g)
@@ -125,7 +126,7 @@ def test_end_tension_pulls_each_line_by_t_times_spacing():
 def test_end_tension_on_a_woven_grid_gives_the_lines_their_mean():
     """A woven grid's end patch joins its lines through the transverse member, so the lines
     share the pull unevenly (measured 25.8 / 29.4 / 25.8 N); their mean is T x pitch."""
-    from cpp_dem.prestress import EndTension
+    from cpp_dem.protocols.prestress import EndTension
 
     s = cd.Scene(local_damping=0.7)
     m = s.add_material(woven.woven_material("detailed"))
@@ -141,7 +142,7 @@ def test_unlocked_prestress_handed_to_end_forces_keeps_its_force():
     """A locked prestress whose grips let go (Prestress.unlock) with the ends then pulled by
     the same tension (EndTension) keeps the lines at the target (the PRS element's hand-over
     of the FEM layer tension)."""
-    from cpp_dem.prestress import EndTension
+    from cpp_dem.protocols.prestress import EndTension
 
     s, g = _cylinders()
     p = Prestress(s, g, tension_per_m=800.0)
@@ -154,7 +155,7 @@ def test_unlocked_prestress_handed_to_end_forces_keeps_its_force():
 
 
 def test_end_tension_bad_input_names_the_field():
-    from cpp_dem.prestress import EndTension
+    from cpp_dem.protocols.prestress import EndTension
 
     s, g = _cylinders()
     e = EndTension(s, g)

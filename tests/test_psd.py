@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import psd
+from cpp_dem.build import psd
 
 
 def test_mass_sampling_follows_the_curve():

@@ -1,4 +1,4 @@
-"""Pull-out machinery (cpp_dem.pullout) and the two pull-out cases as smoke tests."""
+"""Pull-out machinery (cpp_dem.protocols.pullout) and the two pull-out cases as smoke tests."""
 
 from __future__ import annotations
 
@@ -12,8 +12,10 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import geogrid, prep, pullout
-from cpp_dem.output import read_csv_series, read_h5_series, read_h5_snapshot
+from cpp_dem.build import geogrid
+from cpp_dem.protocols import prep
+from cpp_dem.protocols import pullout
+from cpp_dem.io import read_csv_series, read_h5_series, read_h5_snapshot
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -268,7 +270,7 @@ def test_case_000_clump_grains_from_a_template_csv_in_a_run_file(tmp_path):
     run_file.write_text(f'case = "pullout-000"\n[params]\ngrains = "clumps:{tpl}"\n'
                         'spheres = 200\nsnapshots = 1\nthreads = 2\n')
     out = tmp_path / "c"
-    r = subprocess.run([sys.executable, "-m", "cpp_dem.cli", "run", str(run_file), "--smoke",
+    r = subprocess.run([sys.executable, "-m", "geogrid_dem.cli", "run", str(run_file), "--smoke",
                         "--out", str(out)], capture_output=True, text=True, timeout=600)
     assert r.returncode == 0, r.stdout[-3000:] + r.stderr[-3000:]
     assert "200 clumps of 3 spheres (600 spheres)" in r.stdout

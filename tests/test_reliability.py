@@ -22,7 +22,7 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import geogrid
+from cpp_dem.build import geogrid
 
 ROOT = Path(__file__).resolve().parents[1]
 

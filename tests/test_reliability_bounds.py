@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import clumps
-from cpp_dem.clumps import ClumpTemplate
+from cpp_dem.build import clumps
+from cpp_dem.build.clumps import ClumpTemplate
 
 
 # ---- clumps ----------------------------------------------------------------------------------
@@ -98,7 +98,7 @@ def test_elements_lost_without_copies_are_named_not_restarted_from_their_build_s
     # keep_copies=False: after accept() the accepted state lives on the workers only. A lost
     # worker's elements were restarted from their build state (sigma_zz 132 kPa against
     # 228 kPa), flagged only in PoolStep.recovered; now that is an error naming them.
-    from cpp_dem.element_pool import ElementLostError, ElementPool, PeriodicFactory
+    from cpp_dem.elements.pool import ElementLostError, ElementPool, PeriodicFactory
 
     fac = PeriodicFactory(n=120)
     with ElementPool.build(4, fac, workers=2, keep_copies=False) as pool:
@@ -112,8 +112,8 @@ def test_elements_lost_without_copies_are_named_not_restarted_from_their_build_s
 
 
 def test_elements_without_copies_give_their_accepted_states_and_recover_before_any_accept():
-    from cpp_dem.dem_element import DemElement
-    from cpp_dem.element_pool import ElementPool, PeriodicFactory
+    from cpp_dem.elements.periodic import DemElement
+    from cpp_dem.elements.pool import ElementPool, PeriodicFactory
 
     fac = PeriodicFactory(n=120)
     serial = []
@@ -237,7 +237,7 @@ def _grid_scene():
 
 
 def test_a_10_to_the_10_node_grid_is_refused_before_it_is_built():
-    from cpp_dem import geogrid
+    from cpp_dem.build import geogrid
 
     s, m = _grid_scene()
     beam = dem.BeamParams(young=1e8, poisson=0.3, radius=0.001)
@@ -259,7 +259,7 @@ def test_a_10_to_the_10_node_grid_is_refused_before_it_is_built():
 
 
 def test_a_woven_grid_beyond_its_cap_is_refused_with_its_exact_sphere_count():
-    from cpp_dem import woven
+    from cpp_dem.build import woven
 
     s = dem.Scene()
     m = s.add_material(woven.woven_material())

@@ -16,10 +16,13 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import _core, geogrid, periodic, psd
+from cpp_dem import _core
+from cpp_dem.build import geogrid
+from cpp_dem.protocols import periodic
+from cpp_dem.build import psd
 from cpp_dem.checkpoint import FORMAT, load_checkpoint, save_checkpoint
-from cpp_dem.packing import loose_cloud
-from cpp_dem.triaxial import build_box_sample
+from cpp_dem.build.packing import loose_cloud
+from cpp_dem.protocols.triaxial import build_box_sample
 
 ROOT = Path(__file__).resolve().parents[1]
 

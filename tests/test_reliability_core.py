@@ -15,8 +15,8 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import geogrid
-from cpp_dem.clumps import ClumpTemplate
+from cpp_dem.build import geogrid
+from cpp_dem.build.clumps import ClumpTemplate
 
 E, RHO, R = 1e7, 2650.0, 0.005  # Pa, kg/m^3, m
 

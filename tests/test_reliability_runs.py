@@ -23,7 +23,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))
 ROOT = Path(__file__).resolve().parents[1]
 PY = sys.executable
 DEPOSITION = [PY, str(ROOT / "cases" / "deposition.py"), "--smoke", "--threads", "1"]
-CLI = [PY, "-m", "cpp_dem.cli"]
+CLI = [PY, "-m", "geogrid_dem.cli"]
 MANIFEST = ".geogrid-dem-run.json"
 #: A deposition of 20 spheres for 0.01 s: every file of the case, in about a second.
 TINY = ["--n", "20", "--duration", "0.01"]
@@ -206,7 +206,7 @@ import resource, signal, sys
 signal.signal(signal.SIGXFSZ, signal.SIG_IGN)   # as a full disk: the write fails with EFBIG
 resource.setrlimit(resource.RLIMIT_FSIZE, (700_000, 700_000))  # the h5 ends near 1 MB
 sys.argv = ["deposition", *sys.argv[1:]]
-from cpp_dem.cases import deposition
+from geogrid_dem.cases import deposition
 sys.exit(deposition.main())
 """
 
@@ -395,7 +395,7 @@ def test_deposition_refuses_non_finite_damping_and_safety(args, message):
 
 
 def test_a_two_way_tolerance_that_accepts_anything_is_refused():
-    from cpp_dem.cases import prs_element
+    from geogrid_dem.cases import prs_element
 
     for tol in ("inf", "1", "nan"):
         with pytest.raises(SystemExit) as ei:

@@ -9,10 +9,15 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import _core, inertial, periodic, prep, pullout, psd
-from cpp_dem.clumps import ClumpTemplate
-from cpp_dem.packing import loose_cloud
-from cpp_dem.triaxial import build_box_sample
+from cpp_dem import _core
+from cpp_dem.measure import inertial
+from cpp_dem.protocols import periodic
+from cpp_dem.protocols import prep
+from cpp_dem.protocols import pullout
+from cpp_dem.build import psd
+from cpp_dem.build.clumps import ClumpTemplate
+from cpp_dem.build.packing import loose_cloud
+from cpp_dem.protocols.triaxial import build_box_sample
 
 
 def _mat(scene, young=1e7):
@@ -122,7 +127,7 @@ def test_a_tensile_normal_stress_target_on_a_periodic_cell_is_refused():
 
 
 def test_a_triaxial_from_a_packing_of_one_sphere_is_refused(tmp_path):
-    from cpp_dem.cases import triaxial as case
+    from geogrid_dem.cases import triaxial as case
 
     f = tmp_path / "one.csv"
     dem.write_packing_csv(f, np.array([[0.05, 0.05, 0.05]]), np.array([0.01]))
@@ -173,7 +178,7 @@ def test_a_triaxial_loading_above_the_quasi_static_inertial_number_warns():
         warnings.simplefilter("error", dem.InertialNumberWarning)
         with pytest.raises(dem.InertialNumberWarning,
                            match=r"triaxial deviatoric stage: inertial number I = 0.5 "):
-            from cpp_dem.triaxial import deviatoric_stage
+            from cpp_dem.protocols.triaxial import deviatoric_stage
 
             deviatoric_stage(sample, 75e3, rate, 0.01)
 

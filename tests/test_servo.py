@@ -5,7 +5,9 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import _core, measure, prep
+from cpp_dem import _core
+from cpp_dem import measure
+from cpp_dem.protocols import prep
 
 
 def one_sphere(young, gap=1e-4):

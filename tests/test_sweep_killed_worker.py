@@ -13,7 +13,7 @@ from pathlib import Path
 import psutil
 
 ROOT = Path(__file__).resolve().parents[1]
-CASE = "cpp_dem.cases.triaxial"
+CASE = "geogrid_dem.cases.triaxial"
 
 
 def _sweep_file(tmp_path, name):
@@ -25,7 +25,7 @@ def _sweep_file(tmp_path, name):
 
 
 def _cmd(f):
-    return [sys.executable, "-m", "cpp_dem.cli", "sweep", str(f), "--workers", "2"]
+    return [sys.executable, "-m", "geogrid_dem.cli", "sweep", str(f), "--workers", "2"]
 
 
 def _numbers(out):

@@ -1,4 +1,4 @@
-"""The network tangent (cpp_dem.tangent): a simple cubic lattice against its analytic moduli,
+"""The network tangent (cpp_dem.measure.network_tangent): a simple cubic lattice against its analytic moduli,
 objectivity under a rigid spin, the symmetries of an elastic network, and the DEM element's
 network tangent against finite differences of its cloned states in the elastic range."""
 
@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 
 import cpp_dem as dem
-from cpp_dem import tangent
-from cpp_dem.dem_element import DemElement
+from cpp_dem.measure import network_tangent as tangent
+from cpp_dem.elements.periodic import DemElement
 
 
 def _cubic(nc=3, d=2e-3, kn=1e6, ks=3e5, fn=1.0):
@@ -89,7 +89,7 @@ def test_elastic_network_is_symmetric_positive_and_softer_than_affine():
 def elastic_element():
     """A periodic element at rest at 100 kPa with the grains' friction raised so that no
     contact slides (bytes)."""
-    from cpp_dem import prep
+    from cpp_dem.protocols import prep
 
     el = DemElement.periodic(300, stress=100e3, seed=2)
     s = el.scene

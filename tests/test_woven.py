@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 import cpp_dem as cd
-from cpp_dem import woven
+from cpp_dem.build import woven
 
 
 def _grid(preset="detailed", ax=2, ay=1, **kw):
@@ -102,7 +102,7 @@ def test_clump_rests_on_a_woven_grid():
     spheres carry its weight (within 1 %), with 002's grid-grain law (linear
     k_n = 3.9e6 N/m). (A clump set down on the side of a string slides off it into the gap
     between the strings: single-string interaction.)"""
-    from cpp_dem.clumps import ClumpTemplate
+    from cpp_dem.build.clumps import ClumpTemplate
 
     s = cd.Scene(gravity=(0, 0, -9.81), local_damping=0.5)
     gm = s.add_material(woven.woven_material("detailed"))

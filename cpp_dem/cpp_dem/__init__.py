@@ -27,7 +27,7 @@ import os as _os
 if "OMP_WAIT_POLICY" not in _os.environ:
     _os.environ.setdefault("GOMP_SPINCOUNT", "20000")
 
-from ._core import (  # noqa: F401,E402  (re-exported)
+from cpp_dem._core import (  # noqa: F401,E402  (re-exported)
     BeamParams,
     BlowUpError,
     BondParams,
@@ -39,16 +39,18 @@ from ._core import (  # noqa: F401,E402  (re-exported)
     mix_materials,
     set_num_threads,
 )
-from .packing import read_packing_csv, write_packing_csv  # noqa: F401
-from ._core import RadiusGrowth, ServoWall, TriaxialController  # noqa: F401  (samples)
-from .checkpoint import load_checkpoint, save_checkpoint  # noqa: F401
-from .scene import (BOX_WALLS, ControllerLimitWarning, Scene, hertz_mindlin_material,  # noqa: F401
+from cpp_dem.build.packing import read_packing_csv, write_packing_csv  # noqa: F401
+from cpp_dem._core import RadiusGrowth, ServoWall, TriaxialController  # noqa: F401  (samples)
+from cpp_dem.checkpoint import load_checkpoint, save_checkpoint  # noqa: F401
+from cpp_dem.scene import (BOX_WALLS, ControllerLimitWarning, Scene, hertz_mindlin_material,  # noqa: F401
                     TargetNotMetWarning, linear_material)
-from .inertial import InertialNumberWarning  # noqa: F401,E402
+from cpp_dem.measure.inertial import InertialNumberWarning  # noqa: F401,E402
 
-from . import geogrid, packing, periodic  # noqa: F401,E402
-from ._core import CellController  # noqa: F401,E402  (periodic cells)
-from .dem_element import DemElement  # noqa: F401,E402
+from cpp_dem.build import geogrid  # noqa: F401,E402
+from cpp_dem.build import packing
+from cpp_dem.protocols import periodic
+from cpp_dem._core import CellController  # noqa: F401,E402  (periodic cells)
+from cpp_dem.elements.periodic import DemElement  # noqa: F401,E402
 
 __all__ = [
     "BeamParams",

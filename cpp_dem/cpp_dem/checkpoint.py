@@ -24,7 +24,7 @@ import warnings
 
 import numpy as np
 
-from . import _core
+from cpp_dem import _core
 
 FORMAT = "cpp_dem.checkpoint/2"
 #: Checkpoints written before checksums were added: still read, with a warning.

@@ -6,8 +6,8 @@ velocity follows from the scene: v = I sqrt(sigma / rho)); for coupled runs also
 mesh size (relative to the DEM element's edge) and the two-way tolerance. Their measured cost and error are in
 docs/speed_accuracy.md (`bench/speed_accuracy.py --presets` on the 000 pull-out,
 `bench/triaxial_accuracy.py --presets` on the triaxial test, `bench/coupled_accuracy.py
---study presets` on the coupled PRS element). Applied by ``cpp_dem.pullout.apply_preset``,
-``cpp_dem.triaxial.apply_preset`` and ``cases/prs_element.py --preset``.
+--study presets` on the coupled PRS element). Applied by ``cpp_dem.protocols.pullout.apply_preset``,
+``cpp_dem.protocols.triaxial.apply_preset`` and ``cases/prs_element.py --preset``.
 """
 
 from __future__ import annotations
@@ -15,7 +15,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass
 
-from ._core import ParameterError
+from cpp_dem._core import ParameterError
 
 
 @dataclass(frozen=True)

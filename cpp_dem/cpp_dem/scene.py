@@ -9,8 +9,8 @@ from typing import Callable, Iterable, Sequence
 
 import numpy as np
 
-from . import _core
-from ._core import Material, ParameterError
+from cpp_dem import _core
+from cpp_dem._core import Material, ParameterError
 
 _DOF_BITS = {"x": 1, "y": 2, "z": 4, "rx": 8, "ry": 16, "rz": 32}
 #: The most steps one call of Scene.run takes (the core counts steps in a signed 64-bit integer).
@@ -228,11 +228,11 @@ class Scene(_core.Scene):
     # ---- clumps ----------------------------------------------------------------------------
     def add_clumps(self, template, positions, orientations=None, *, material: int,
                    scale=1.0, stiffness: str = "member") -> np.ndarray:
-        """Adds rigid clumps, copies of a :class:`cpp_dem.clumps.ClumpTemplate`.
+        """Adds rigid clumps, copies of a :class:`cpp_dem.build.clumps.ClumpTemplate`.
 
         positions: (n, 3) centres of mass, m. orientations: (n, 4) unit quaternions (w, x, y,
         z) turning the template frame into the global one (None: all identity; see
-        :func:`cpp_dem.clumps.random_orientations`). scale: one factor or n factors (> 0)
+        :func:`cpp_dem.build.clumps.random_orientations`). scale: one factor or n factors (> 0)
         scaling the template about its centre of mass. The mass and inertia are the union's
         (template.props) times the material's density. Returns the clump indices; the
         members' body ids are ``clump_members(c)``.
@@ -243,11 +243,11 @@ class Scene(_core.Scene):
         as its equivalent sphere whatever the number of members, so a small member at a
         grain's corner does not sink deep into what it touches).
         """
-        from .clumps import ClumpTemplate
+        from cpp_dem.build.clumps import ClumpTemplate
 
         if not isinstance(template, ClumpTemplate):
             raise ParameterError(f"template={type(template).__name__}: must be a ClumpTemplate "
-                                 "(cpp_dem.clumps.ClumpTemplate.from_spheres)")
+                                 "(cpp_dem.build.clumps.ClumpTemplate.from_spheres)")
         x = np.atleast_2d(_numbers(positions, "positions", "m"))
         if x.shape[1] != 3:
             raise ParameterError(f"positions: shape {x.shape}; must be (n, 3) centres of mass, m")

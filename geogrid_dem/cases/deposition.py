@@ -11,8 +11,8 @@ time step comes from ``scene.set_auto_timestep``; the run stops once the packing
 Outputs in ``--out DIR`` (default a new folder ``results/deposition/run_NNN`` per run):
 
 - ``deposition.h5``  time series (``/series/*``) and snapshots (``/snapshots/NNNNNN``), run
-  parameters as root attributes (``cpp_dem.output.H5Recorder``; layout in docs/output.md);
-- ``deposition.csv`` the same time series as CSV (``cpp_dem.output.CsvRecorder``);
+  parameters as root attributes (``cpp_dem.io.H5Recorder``; layout in docs/output.md);
+- ``deposition.csv`` the same time series as CSV (``cpp_dem.io.CsvRecorder``);
 - ``vtk/spheres_NNNN.vtp``, ``vtk/contacts_NNNN.vtp`` per snapshot, ``vtk/box.vtp``, and the
   ParaView time series ``deposition.pvd`` (spheres) and ``contacts.pvd`` (force network);
 - ``energies.png``   energy terms and balance error over time;
@@ -39,14 +39,14 @@ from pathlib import Path
 import numpy as np
 
 from cpp_dem.io.figures import save_figure
-from cpp_dem.rundir import add_out_args, begin_run, check_common_args, run_main
+from geogrid_dem.provenance import git_revision
+from geogrid_dem.rundir import add_out_args, begin_run, check_common_args, run_main
 import cpp_dem as dem
 from cpp_dem.measure import interior_porosity, slab_solid_volume, surface_height
-from cpp_dem.output import (CsvRecorder, H5Recorder, PvdWriter, read_h5_series,
+from cpp_dem.io import (CsvRecorder, H5Recorder, PvdWriter, read_h5_series,
                             standard_series, write_vtk_box, write_vtk_contacts,
                             write_vtk_spheres)
 
-ROOT = Path(__file__).resolve().parents[3]  # the source tree (for git), when there is one
 
 
 @dataclass
@@ -152,15 +152,6 @@ def _json_safe(x):
     if isinstance(x, (np.integer, np.bool_)):
         return x.item()
     return x
-
-
-def git_revision() -> str:
-    try:
-        out = subprocess.run(["git", "-C", str(ROOT), "describe", "--always", "--dirty"],
-                             capture_output=True, text=True, timeout=5)
-        return out.stdout.strip() or "unknown"
-    except Exception:
-        return "unknown"
 
 
 # ---------------------------------------------------------------------------------------------

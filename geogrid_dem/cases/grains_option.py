@@ -22,9 +22,9 @@ HELP = ("spheres, or clumps:NAME with NAME a shipped grain (gravel_a .. gravel_d
 
 def grain_templates(spec: str) -> list:
     """The clump templates of a --grains value 'clumps:NAME'
-    (cpp_dem.clumps.templates_from_spec); SystemExit naming --grains, the value and what is
+    (cpp_dem.build.clump_mesh.templates_from_spec); SystemExit naming --grains, the value and what is
     allowed when it names none or the template cannot be read."""
-    from cpp_dem.clumps import templates_from_spec
+    from cpp_dem.build.clump_mesh import templates_from_spec
 
     try:
         return templates_from_spec(spec)

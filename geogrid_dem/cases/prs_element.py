@@ -55,16 +55,15 @@ from pathlib import Path
 import numpy as np
 
 from cpp_dem.io.figures import save_figure
-from cpp_dem.rundir import add_out_args, begin_run, check_common_args, end_run, run_main
-from cpp_dem import element as _element
-from cpp_dem.element import ElementParams, grid_axial_stiffness, grid_stiffness_per_metre
+from geogrid_dem.rundir import add_out_args, begin_run, check_common_args, end_run, run_main
+from cpp_dem.elements import box as _element
+from cpp_dem.elements.box import ElementParams, grid_axial_stiffness, grid_stiffness_per_metre
 
-ROOT = Path(__file__).resolve().parents[3]  # the source tree (for git), when there is one
 
 
 @dataclass
 class Params(ElementParams):
-    """Parameters of the PRS element case (SI): the DEM element's (cpp_dem.element.
+    """Parameters of the PRS element case (SI): the DEM element's (cpp_dem.elements.box.
     ElementParams: grains, geogrid, servo) and the FEM structure's and coupling's below."""
 
     # --- FEM structure (plane strain) ---
@@ -95,7 +94,7 @@ class Params(ElementParams):
     #: network tangent back; the case's element is then driven to the converged targets)
     two_way_element: str = "walls"
     #: the walls element's tangent in the two-way loop: three stress probes of this size,
-    #: relative to the mean stress (cpp_dem.element.probe_tangent); 0: the isotropic secant
+    #: relative to the mean stress (cpp_dem.elements.box.probe_tangent); 0: the isotropic secant
     tangent_probe: float = 0.05
     #: hand the FEM layer's tension across the element region to the element's grid ends
     #: (force-controlled; a PRS grid's grips let go), so the walls carry the soil's stress
@@ -122,7 +121,7 @@ def log(msg: str) -> None:
 
 
 def make_element(p: Params, mean_stress: float, prestressed: bool):
-    """The DEM element of :mod:`cpp_dem.element` with this case's parameters and log."""
+    """The DEM element of :mod:`cpp_dem.elements.box` with this case's parameters and log."""
     return _element.make_element(p, mean_stress, prestressed, log=log)
 
 
@@ -133,7 +132,7 @@ def servo_stage(sample, grid, targets, stage: int, p: Params, rec) -> dict:
 def run_element(p: Params, targets: list, *, prestressed: bool, label: str, out: Path,
                 cache: dict | None = None, grid_tension: list | None = None,
                 probe: float = 0.0) -> dict:
-    """:func:`cpp_dem.element.run_element` with this case's log."""
+    """:func:`cpp_dem.elements.box.run_element` with this case's log."""
     return _element.run_element(p, targets, prestressed=prestressed, label=label, out=out,
                                 log=log, cache=cache, grid_tension=grid_tension, probe=probe)
 

@@ -2,9 +2,9 @@
 """002's prestressed reinforced-soil element, rebuilt with 002's own parts.
 
 The element:
-- a 0.1 m cube of clumps (the shipped gravel templates, cpp_dem.clumps) with 002 Table 1's
+- a 0.1 m cube of clumps (the shipped gravel templates, cpp_dem.build.clumps) with 002 Table 1's
   Hertz–Mindlin material: G = 30 GPa, nu = 0.2, mu = 0.8, 2640 kg/m^3;
-- at mid-height, the woven geogrid of bonded spheres (cpp_dem.woven), in 002 Table 2's
+- at mid-height, the woven geogrid of bonded spheres (cpp_dem.build.woven), in 002 Table 2's
   "detailed" and "standard" forms, with 002's linear grid–grain contact (k_n = 3.9e6 N/m,
   k_s = 9e5 N/m, mu = 0.5);
 - six servo walls driven to the stresses of a FEM analysis. The FEM is the
@@ -14,7 +14,7 @@ The element:
 The variants:
 - RE: the grid lies free in the soil;
 - PRS: its longitudinal members are tensioned to T_p (--prestress, N/m) after the sample is
-  grown, and locked in with the ends held (cpp_dem.prestress). The locked-in force is
+  grown, and locked in with the ends held (cpp_dem.protocols.prestress). The locked-in force is
   recorded as the run goes.
 
 Outputs in --out, per element `<grid>_<RE|PRS>`:
@@ -44,9 +44,9 @@ from pathlib import Path
 
 import numpy as np
 
-from cpp_dem.cases import prs_element as _fem_case
-from cpp_dem.element import run_element
-from cpp_dem.rundir import begin_run, end_run, run_main
+from geogrid_dem.cases import prs_element as _fem_case
+from cpp_dem.elements.box import run_element
+from geogrid_dem.rundir import begin_run, end_run, run_main
 
 GRIDS = ("detailed", "standard")
 VARIANTS = ("RE", "PRS")
@@ -246,7 +246,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     p.variants = _names(a.variants, VARIANTS, "--variants", ap)
     p.grains = a.grains
     from cpp_dem import ParameterError
-    from cpp_dem.element import check_element_params
+    from cpp_dem.elements.box import check_element_params
 
     try:
         check_element_params(p)

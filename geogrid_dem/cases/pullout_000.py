@@ -41,14 +41,16 @@ import numpy as np
 
 
 from cpp_dem.io.figures import save_figure
-from cpp_dem.rundir import add_out_args, check_common_args, run_main
+from geogrid_dem.rundir import add_out_args, check_common_args, run_main
 import cpp_dem as dem  # noqa: E402
-from cpp_dem import geogrid, prep, presets, pullout  # noqa: E402
-from cpp_dem.cases.grains_option import HELP as GRAINS_HELP, check_grains  # noqa: E402
-from cpp_dem.cases.pullout_common import (clump_layers, grain_label, make_logger,  # noqa: E402
+from cpp_dem import presets  # noqa: E402
+from cpp_dem.build import geogrid
+from cpp_dem.protocols import prep
+from cpp_dem.protocols import pullout
+from geogrid_dem.cases.grains_option import HELP as GRAINS_HELP, check_grains  # noqa: E402
+from geogrid_dem.cases.pullout_common import (clump_layers, grain_label, make_logger,  # noqa: E402
                                           run_case)
 
-ROOT = Path(__file__).resolve().parents[3]  # the source tree (for git), when there is one
 
 
 @dataclass
@@ -171,7 +173,7 @@ def compare(runs: dict, out: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    from cpp_dem.output import read_csv_series
+    from cpp_dem.io import read_csv_series
 
     fig, ax = plt.subplots(figsize=(7, 4.2))
     rows = []

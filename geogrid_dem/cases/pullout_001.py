@@ -37,15 +37,16 @@ import numpy as np
 
 
 from cpp_dem.io.figures import save_figure
-from cpp_dem.rundir import add_out_args, check_common_args, run_main
+from geogrid_dem.rundir import add_out_args, check_common_args, run_main
 import cpp_dem as dem  # noqa: E402
-from cpp_dem import geogrid, prep, pullout  # noqa: E402
-from cpp_dem.packing import hex_packing  # noqa: E402
-from cpp_dem.cases.grains_option import HELP as GRAINS_HELP, check_grains  # noqa: E402
-from cpp_dem.cases.pullout_common import (clump_layers, grain_label, make_logger,  # noqa: E402
+from cpp_dem.build import geogrid  # noqa: E402
+from cpp_dem.protocols import prep
+from cpp_dem.protocols import pullout
+from cpp_dem.build.packing import hex_packing  # noqa: E402
+from geogrid_dem.cases.grains_option import HELP as GRAINS_HELP, check_grains  # noqa: E402
+from geogrid_dem.cases.pullout_common import (clump_layers, grain_label, make_logger,  # noqa: E402
                                           run_case)
 
-ROOT = Path(__file__).resolve().parents[3]  # the source tree (for git), when there is one
 
 #: 001 Table 5.3 (mean pull-out force, N) and 5.4 (coefficient of variation), by
 #: (grid, radius m, pressure Pa). Table 5.4 gives no triangular values.

@@ -13,16 +13,18 @@ import numpy as np
 
 from cpp_dem.io.figures import save_figure
 import cpp_dem as dem
-from cpp_dem import geogrid, measure, pullout
-from cpp_dem.cases.grains_option import grain_templates, write_grains_csv
-from cpp_dem.rundir import begin_run, end_run
-from cpp_dem.output import (CsvRecorder, H5Recorder, PvdWriter, write_vtk_box,
+from cpp_dem.build import geogrid
+from cpp_dem import measure
+from cpp_dem.protocols import pullout
+from geogrid_dem.cases.grains_option import grain_templates, write_grains_csv
+from geogrid_dem.rundir import begin_run, end_run
+from cpp_dem.io import (CsvRecorder, H5Recorder, PvdWriter, write_vtk_box,
                             write_vtk_contacts, write_vtk_spheres)
 
 SERIES = {k: (None, u) for k, u in pullout.PULL_UNITS.items()}
 
 #: Largest solid fraction of the clumps' bounding spheres in the initial cloud, -: random
-#: sequential addition jams above about 0.3 (cpp_dem.packing.loose_cloud).
+#: sequential addition jams above about 0.3 (cpp_dem.build.packing.loose_cloud).
 CLUMP_CLOUD_FRACTION = 0.25
 
 
@@ -35,7 +37,7 @@ def clump_layers(spec: str, radii, lo, hi, *, grid_z: float, clearance: float,
     CLUMP_CLOUD_FRACTION of the layers' volume; the preparation grows the grains anyway.
     Returns centres and radii of the bounding spheres (m) and (cloud, templates) for
     pullout.build_sample(clumps=...)."""
-    from cpp_dem.clumps import bounding_volume_factor
+    from cpp_dem.build.clumps import bounding_volume_factor
 
     templates = grain_templates(spec)
     radii = np.asarray(radii, float)

@@ -38,18 +38,20 @@ from pathlib import Path
 import numpy as np
 
 from cpp_dem.io.figures import save_figure
-from cpp_dem.rundir import add_out_args, begin_run, check_common_args, end_run, run_main
+from geogrid_dem.rundir import add_out_args, begin_run, check_common_args, end_run, run_main
 import cpp_dem as dem
-from cpp_dem import geogrid, measure, prep, psd
+from cpp_dem.build import geogrid
+from cpp_dem import measure
+from cpp_dem.protocols import prep
+from cpp_dem.build import psd
 from cpp_dem.checkpoint import load_checkpoint, save_checkpoint
-from cpp_dem.cases.grains_option import (HELP as GRAINS_HELP, check_grains, grain_templates,
+from geogrid_dem.cases.grains_option import (HELP as GRAINS_HELP, check_grains, grain_templates,
                                          write_grains_csv)
-from cpp_dem.output import CsvRecorder, H5Recorder, write_vtk_box, write_vtk_spheres
-from cpp_dem.packing import loose_cloud
-from cpp_dem.triaxial import (apply_preset, build_box_sample, deviatoric_stage,
+from cpp_dem.io import CsvRecorder, H5Recorder, write_vtk_box, write_vtk_spheres
+from cpp_dem.build.packing import loose_cloud
+from cpp_dem.protocols.triaxial import (apply_preset, build_box_sample, deviatoric_stage,
                               isotropic_stage)
 
-ROOT = Path(__file__).resolve().parents[3]  # the source tree (for git), when there is one
 
 
 @dataclass
@@ -152,10 +154,10 @@ def make_sample(p: Params, log) -> tuple:
     if p.grains != "spheres":
         # Clumps of the template(s) at the PSD's equivalent-volume diameters, random seeded
         # orientations; their bounding spheres are placed, loose enough to be placed at random.
-        from cpp_dem.clumps import clump_cloud
+        from cpp_dem.build.clumps import clump_cloud
 
         templates = grain_templates(p.grains)
-        from cpp_dem.clumps import bounding_volume_factor
+        from cpp_dem.build.clumps import bounding_volume_factor
 
         k = bounding_volume_factor(templates)
         shrink = (p.cloud_fraction / (p.solid_fraction * k)) ** (1.0 / 3.0)
@@ -254,7 +256,7 @@ SERIES = {"time": (None, "s"), "step": (None, "-"), "axial_strain": (None, "-"),
 class Prepared:
     """A sample after the isotropic stage (stages 0 and 1)."""
 
-    sample: object          #: cpp_dem.triaxial.TriaxialSample
+    sample: object          #: cpp_dem.protocols.triaxial.TriaxialSample
     grid: object            #: geogrid.Geogrid or None
     n_grains: int
     psd_info: dict
@@ -275,7 +277,7 @@ def build(p: Params, log) -> tuple:
             f"({'with' if p.geogrid != 'none' else 'without'} a geogrid)")
         c, r = c[keep], r[keep]
         if clumps is not None:
-            from cpp_dem.clumps import ClumpCloud
+            from cpp_dem.build.clumps import ClumpCloud
 
             cl, tpl = clumps
             clumps = (ClumpCloud(cl.template[keep], cl.positions[keep], cl.orientations[keep],

@@ -70,7 +70,7 @@ def _grains(scene, mat: int) -> None:
 def build(law: str):
     """The scene of `law`: linear, linear_parts, hertz_mindlin, geogrid_contact, beam."""
     import cpp_dem as dem
-    from cpp_dem import geogrid
+    from cpp_dem.build import geogrid
 
     s = dem.Scene(gravity=(0.0, 0.0, -9.81))
     s.spatial_sort = False

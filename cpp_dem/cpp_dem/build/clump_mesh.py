@@ -1,7 +1,7 @@
 """Clump templates from closed triangle surface meshes (STL, OBJ, PLY).
 
 A grain given as a closed, consistently oriented triangle surface (vertices in m) becomes a
-:class:`~cpp_dem.clumps.ClumpTemplate` of overlapping spheres:
+:class:`~cpp_dem.build.clumps.ClumpTemplate` of overlapping spheres:
 
 - :func:`read_surface_mesh` reads STL (ascii and binary), OBJ and PLY with ``meshio`` and checks
   that the surface is closed and consistently oriented (outward normals; a globally inverted
@@ -71,7 +71,7 @@ grid (grid = 30), it left -25 % (cube) and -19 % (ellipsoid 1 : 0.75 : 0.5) of t
 32 spheres with overlap 0.6 (-21 % and -13 % with 0.9), against -16 % and -5 % for greedy
 coverage, so it is not used.
 
-Measured trade (``python -m cpp_dem.clump_mesh report cube`` etc.; the tables are in
+Measured trade (``python -m cpp_dem.build.clump_mesh report cube`` etc.; the tables are in
 docs/clump_templates.md).
 """
 
@@ -85,10 +85,11 @@ from typing import NamedTuple
 
 import numpy as np
 
-from ._core import ParameterError
-from .clumps import ClumpTemplate, MassProperties, _principal
+from cpp_dem._core import ParameterError
+from cpp_dem.build.clumps import ClumpTemplate, MassProperties, _principal
 
 __all__ = [
+    "templates_from_spec",
     "read_surface_mesh",
     "check_closed_mesh",
     "mesh_mass_properties",
@@ -735,12 +736,12 @@ def shipped_mesh(name: str) -> tuple[np.ndarray, np.ndarray]:
 
 
 # --------------------------------------------------------------------------------------------
-# Command line: python -m cpp_dem.clump_mesh report cube|ellipsoid|<shipped name>|<mesh file>
+# Command line: python -m cpp_dem.build.clump_mesh report cube|ellipsoid|<shipped name>|<mesh file>
 # --------------------------------------------------------------------------------------------
 
 def _main(argv=None) -> int:
     import argparse
-    ap = argparse.ArgumentParser(prog="python -m cpp_dem.clump_mesh",
+    ap = argparse.ArgumentParser(prog="python -m cpp_dem.build.clump_mesh",
                                  description="Sphere-filling trade of a closed surface mesh.")
     sub = ap.add_subparsers(dest="cmd", required=True)
     rp = sub.add_parser("report", help="print sphere count vs volume error and surface deviation")
@@ -770,3 +771,24 @@ def _main(argv=None) -> int:
 
 if __name__ == "__main__":  # pragma: no cover
     raise SystemExit(_main())
+
+
+def templates_from_spec(spec: str) -> list:
+    """The clump templates a case's ``--grains clumps:NAME`` names: a shipped grain
+    (shipped_templates: gravel_a .. gravel_d), ``gravel`` for all of them,
+    or a template CSV (x, y, z, r in m; ClumpTemplate.load). Raises ParameterError naming the
+    value and what is allowed."""
+    name = spec.split(":", 1)[1] if spec.startswith("clumps:") else ""
+    if not name:
+        raise ParameterError(f"grains={spec!r}: must be 'spheres' or 'clumps:NAME' (NAME: a "
+                             f"shipped grain {sorted(shipped_templates())}, 'gravel', or a "
+                             "template CSV)")
+    if name == "gravel":
+        return list(shipped_templates().values())
+    if os.path.isfile(name):
+        return [ClumpTemplate.load(name)]
+    try:
+        return [shipped_template(name)]
+    except ParameterError as e:
+        raise ParameterError(f"grains={spec!r}: {e} (or 'gravel' for all of them, or a "
+                             "template CSV x,y,z,r)") from None

@@ -28,7 +28,8 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from ._core import ParameterError
+from cpp_dem._core import ParameterError
+from cpp_dem.build.packing import loose_cloud
 
 __all__ = ["ClumpTemplate", "ClumpCloud", "MassProperties", "clump_cloud", "union_mass_properties",
            "random_orientations"]
@@ -336,13 +337,11 @@ def _templates(templates) -> list:
 
 def clump_cloud(templates, diameters, lo, hi, *, seed: int = 0, max_tries: int = 2000) -> ClumpCloud:
     """Clumps placed at random, without overlap, in the box [lo, hi] (m): one per entry of
-    ``diameters`` (equivalent-volume diameters, m, e.g. from cpp_dem.psd.radii_from_psd
+    ``diameters`` (equivalent-volume diameters, m, e.g. from cpp_dem.build.psd.radii_from_psd
     times 2), each a copy of one of ``templates`` (chosen at random, seeded) scaled to that
     diameter, at a uniformly random orientation (seeded). Placement is random sequential
-    addition of the clumps' bounding spheres (cpp_dem.packing.loose_cloud), so the cloud is
+    addition of the clumps' bounding spheres (cpp_dem.build.packing.loose_cloud), so the cloud is
     loose (compact it with radius growth or the servo walls)."""
-    from .packing import loose_cloud
-
     ts = _templates(templates)
     d = np.asarray(diameters, dtype=float).ravel()
     if len(d) == 0 or not np.all(np.isfinite(d) & (d > 0)):
@@ -358,31 +357,6 @@ def clump_cloud(templates, diameters, lo, hi, *, seed: int = 0, max_tries: int =
     order = np.argsort(rb_key)
     idx = order[np.searchsorted(rb_key[order], rr)]
     return ClumpCloud(which[idx], pos, random_orientations(len(d), seed + 1), scale[idx])
-
-
-def templates_from_spec(spec: str) -> list:
-    """The clump templates a case's ``--grains clumps:NAME`` names: a shipped grain
-    (cpp_dem.clump_mesh.shipped_templates: gravel_a .. gravel_d), ``gravel`` for all of them,
-    or a template CSV (x, y, z, r in m; ClumpTemplate.load). Raises ParameterError naming the
-    value and what is allowed."""
-    import os
-
-    from .clump_mesh import shipped_template, shipped_templates
-
-    name = spec.split(":", 1)[1] if spec.startswith("clumps:") else ""
-    if not name:
-        raise ParameterError(f"grains={spec!r}: must be 'spheres' or 'clumps:NAME' (NAME: a "
-                             f"shipped grain {sorted(shipped_templates())}, 'gravel', or a "
-                             "template CSV)")
-    if name == "gravel":
-        return list(shipped_templates().values())
-    if os.path.isfile(name):
-        return [ClumpTemplate.load(name)]
-    try:
-        return [shipped_template(name)]
-    except ParameterError as e:
-        raise ParameterError(f"grains={spec!r}: {e} (or 'gravel' for all of them, or a "
-                             "template CSV x,y,z,r)") from None
 
 
 def bounding_volume_factor(templates) -> float:

@@ -30,7 +30,7 @@ from typing import Sequence
 
 import numpy as np
 
-from ._core import BeamParams, ParameterError
+from cpp_dem._core import BeamParams, ParameterError
 
 G_STANDARD = 9.81  # m/s^2, to turn unit weights into densities
 
@@ -506,8 +506,8 @@ def write_vtk_geogrid(path, scene, grid: Geogrid, *, reference_positions=None) -
       ``kind`` (0 link, 1 pfacet);
     - point data: ``node_id`` and ``displacement`` (m) from ``reference_positions`` (default:
       the positions when the grid was built, ``grid.reference_positions``)."""
-    from .io.vtk import _time_field
-    from .output import write_vtp
+    from cpp_dem.io.vtk import _time_field
+    from cpp_dem.io import write_vtp
 
     pos = scene.positions
     nodes = grid.nodes

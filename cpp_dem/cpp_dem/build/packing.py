@@ -7,7 +7,7 @@ import os
 
 import numpy as np
 
-from ._core import ParameterError
+from cpp_dem._core import ParameterError
 
 CSV_HEADER = "x,y,z,r"
 
@@ -172,33 +172,6 @@ def hex_packing(lo, hi, radius: float, *, gap: float = 0.0) -> tuple[np.ndarray,
         raise ParameterError("hex_packing: no sphere fits in the box")
     c = np.asarray(pts, dtype=float)
     return c, np.full(len(c), float(radius))
-
-
-def gravity_deposition(radii, lo, hi, *, material, seed: int = 0, gravity: float = 9.81,
-                       local_damping: float = 0.3, max_time: float = 2.0,
-                       settled_speed: float = 1e-3, check_every: int = 500,
-                       dt_safety: float = 0.3) -> tuple[np.ndarray, np.ndarray, dict]:
-    """Deposits the spheres into the box [lo, hi] (m) under gravity (-z): a loose cloud
-    (``loose_cloud``) in the box settles until max |v| < ``settled_speed`` (m/s) or
-    ``max_time`` (s). ``material`` is a cpp_dem.Material. Returns (centres, radii, info) with
-    info: time (s), steps, settled (bool), max_speed (m/s)."""
-    from .scene import Scene
-
-    c, r = loose_cloud(radii, lo, hi, seed=seed)
-    s = Scene(gravity=(0.0, 0.0, -gravity), local_damping=local_damping)
-    m = s.add_material(material)
-    s.add_box(lo, hi, material=m)
-    s.add_spheres(c, r, material=m)
-    s.set_auto_timestep(safety=dt_safety, period=100)
-    vmax = float("inf")
-    while s.time < max_time:
-        s.run(check_every)
-        vmax = float(np.sqrt((s.velocities**2).sum(1).max()))
-        if vmax < settled_speed and s.time > 0.05:
-            break
-    info = {"time": s.time, "steps": s.step_count, "settled": vmax < settled_speed,
-            "max_speed": vmax}
-    return s.positions, s.radii, info
 
 
 def spatial_order(centers, radii, *, cell_radii: float = 4.0) -> np.ndarray:

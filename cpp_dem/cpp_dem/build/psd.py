@@ -19,7 +19,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ._core import ParameterError
+from cpp_dem._core import ParameterError
 
 #: 001 Appendix B sieve curve: diameters (m) and cumulative mass fractions passing.
 APPENDIX_B_SIZES = (0.000074, 0.00015, 0.0004, 0.002, 0.004, 0.007, 0.01, 0.02, 0.025)

@@ -13,7 +13,7 @@ between junctions, so a grain can enter between them (002's "single string inter
 - **Coordinates.** Longitudinal members run along x (the pull direction), transverse ones
   along y. All spheres lie in the plane z = origin z. The over-and-under of a real weave is
   not modelled.
-- **Labels.** Members follow the cylinder grids' convention (cpp_dem.geogrid): cell (i, j) has
+- **Labels.** Members follow the cylinder grids' convention (cpp_dem.build.geogrid): cell (i, j) has
   its longitudinal member 'A' on junction row j and its transverse member 'C' on junction
   column i.
 - **Member force.** A member's tensile force is the sum, over its strings, of the force of the
@@ -36,8 +36,8 @@ from typing import Sequence
 
 import numpy as np
 
-from ._core import BondParams, ParameterError
-from .geogrid import JUNCTION, LONGITUDINAL, TRANSVERSE
+from cpp_dem._core import BondParams, ParameterError
+from cpp_dem.build.geogrid import JUNCTION, LONGITUDINAL, TRANSVERSE
 
 #: 002 Table 2 (the bond and contact parameters, density) and the dimensions chosen here.
 PRESETS = {
@@ -94,7 +94,7 @@ class WovenGeogrid:
     strand_direction : per string, 'longitudinal' or 'transverse'.
     strand_member_line : per string, its junction row (longitudinal) or column (transverse).
     bond_member : per bond, the member it belongs to (-1 inside a junction).
-    member_direction, member_cell, member_side, member_axis : as cpp_dem.geogrid.Geogrid.
+    member_direction, member_cell, member_side, member_axis : as cpp_dem.build.geogrid.Geogrid.
     member_section_bonds : per member, the bonds its mid-section cuts (one per string).
     member_bonds : per member, all its bonds.
     member_width : width of a member, m (from the outer strings' edges).
@@ -312,7 +312,7 @@ def woven_material(preset: str = "detailed"):
 
     Its Young's modulus only matters where no pair law is set (:func:`set_grid_laws` sets
     them for 002)."""
-    from .scene import linear_material
+    from cpp_dem.scene import linear_material
 
     p = _preset(preset)
     # The linear law's k_n = E R at contact (000 eq 4 for equal spheres): E = k_n / R.
@@ -370,7 +370,7 @@ def tensile_test(preset: str = "detailed", *, apertures_x: int = 3, apertures_y:
       longitudinal member, (apertures_y + 1) x pitch_y;
     - series_per_metre: the endless grid's series value (series_stiffness_per_metre).
     """
-    from .scene import Scene
+    from cpp_dem.scene import Scene
 
     s = Scene(local_damping=0.7)
     m = s.add_material(woven_material(preset))

@@ -18,12 +18,16 @@ from typing import Callable
 
 import numpy as np
 
-from . import _core, geogrid, inertial, measure, prep
-from ._core import BeamParams, set_num_threads
-from .output import CsvRecorder, H5Recorder, write_vtk_box, write_vtk_contacts, write_vtk_spheres
-from .packing import loose_cloud
-from .scene import linear_material
-from .triaxial import build_box_sample
+from cpp_dem import _core
+from cpp_dem.build import geogrid
+from cpp_dem.measure import inertial
+from cpp_dem import measure
+from cpp_dem.protocols import prep
+from cpp_dem._core import BeamParams, set_num_threads
+from cpp_dem.io import CsvRecorder, H5Recorder, write_vtk_box, write_vtk_contacts, write_vtk_spheres
+from cpp_dem.build.packing import loose_cloud
+from cpp_dem.scene import linear_material
+from cpp_dem.protocols.triaxial import build_box_sample
 
 
 def _log(msg: str) -> None:
@@ -57,7 +61,7 @@ class ElementParams:
     record_every: int = 200          #: steps between records
     threads: int = 0                 #: OpenMP threads (0: one; see run_element)
     # --- 002's element: clumps, Hertz–Mindlin, the woven grid of bonded spheres ---
-    grains: str = "spheres"          #: 'spheres', or 'clumps:NAME' (cpp_dem.clumps templates)
+    grains: str = "spheres"          #: 'spheres', or 'clumps:NAME' (cpp_dem.build.clumps templates)
     grain_law: str = "linear"        #: 'linear' (young, poisson), or 'hertz' (002 Table 1)
     shear_modulus: float = 3e10      #: Hertz–Mindlin G, Pa (002 Table 1)
     hertz_poisson: float = 0.2       #: Hertz–Mindlin nu, - (002 Table 1)
@@ -79,9 +83,9 @@ def grid_axial_stiffness(p: ElementParams) -> float:
 
 def grid_stiffness_per_metre(p: ElementParams) -> float:
     """The element's geogrid tensile stiffness per metre of width, N/m: the square grid's
-    E pi R^2 / spacing, or a woven grid's bonds in series (cpp_dem.woven)."""
+    E pi R^2 / spacing, or a woven grid's bonds in series (cpp_dem.build.woven)."""
     if p.geogrid.startswith("woven-"):
-        from .woven import series_stiffness_per_metre
+        from cpp_dem.build.woven import series_stiffness_per_metre
 
         return series_stiffness_per_metre(p.geogrid.split("-", 1)[1])
     return grid_axial_stiffness(p)
@@ -91,7 +95,7 @@ def make_element(p: ElementParams, mean_stress: float, prestressed: bool,
                  log: Callable[[str], None] = _log):
     """The element: spheres in the cube, the square geogrid, radius growth to ``mean_stress``
     (Pa); for PRS the longitudinal members tensioned to p.prestress (N/m) and locked
-    (cpp_dem.prestress). Returns (sample, grid, prestress or None)."""
+    (cpp_dem.protocols.prestress). Returns (sample, grid, prestress or None)."""
     rng_r = np.random.default_rng(p.seed)
     vol = p.edge**3
     r_mean = (0.6 * vol / (p.n * 4.0 / 3.0 * math.pi)) ** (1.0 / 3.0)
@@ -131,7 +135,7 @@ def make_element(p: ElementParams, mean_stress: float, prestressed: bool,
     if prestressed and p.prestress > 0:
         # The library's prestress: tension the longitudinal members to T_p x spacing, lock
         # (ends held); the force along them is then found, not imposed by end forces.
-        from .prestress import Prestress
+        from cpp_dem.protocols.prestress import Prestress
 
         ps = Prestress(sc, grid, tension_per_m=p.prestress)
         row = ps.tension(p.max_steps)
@@ -147,14 +151,14 @@ GRAIN_LAWS = ("linear", "hertz")
 
 def check_element_params(p: ElementParams) -> None:
     """Raises ParameterError naming the first bad choice of grains, law or geogrid."""
-    from ._core import ParameterError
+    from cpp_dem._core import ParameterError
 
     if p.geogrid not in GEOGRIDS:
         raise ParameterError(f"geogrid={p.geogrid!r}: must be one of {', '.join(GEOGRIDS)}")
     if p.grain_law not in GRAIN_LAWS:
         raise ParameterError(f"grain_law={p.grain_law!r}: must be one of {', '.join(GRAIN_LAWS)}")
     if p.grains != "spheres":
-        from .clumps import templates_from_spec
+        from cpp_dem.build.clump_mesh import templates_from_spec
 
         templates_from_spec(p.grains)  # names the bad value
     if not (isinstance(p.apertures, int) and p.apertures >= 1):
@@ -163,7 +167,7 @@ def check_element_params(p: ElementParams) -> None:
 
 def grain_material(p: ElementParams, friction_deg: float):
     """The grains' material: 002 Table 1's Hertz–Mindlin (G, nu, density) or the linear law."""
-    from .scene import hertz_mindlin_material
+    from cpp_dem.scene import hertz_mindlin_material
 
     if p.grain_law == "hertz":
         return hertz_mindlin_material(density=p.density, shear_modulus=p.shear_modulus,
@@ -176,12 +180,12 @@ def grain_material(p: ElementParams, friction_deg: float):
 def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
                        log: Callable[[str], None] = _log):
     """002's element: grains (clumps or spheres; Hertz–Mindlin or linear) in the cube around
-    a woven geogrid of bonded spheres at mid-height (cpp_dem.woven, 'detailed' or 'standard'),
+    a woven geogrid of bonded spheres at mid-height (cpp_dem.build.woven, 'detailed' or 'standard'),
     with 002's contact laws, radius growth to ``mean_stress`` (Pa; the grid held), then for
     PRS the grid's longitudinal members tensioned to p.prestress (N/m) and locked
-    (cpp_dem.prestress). Returns (sample, grid, prestress or None)."""
-    from . import woven
-    from .prestress import Prestress
+    (cpp_dem.protocols.prestress). Returns (sample, grid, prestress or None)."""
+    from cpp_dem.build import woven
+    from cpp_dem.protocols.prestress import Prestress
 
     check_element_params(p)
     preset = p.geogrid.split("-", 1)[1]
@@ -193,7 +197,8 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
     r_grid = woven.PRESETS[preset]["sphere_radius"]
     clumps = None
     if p.grains != "spheres":
-        from .clumps import ClumpCloud, bounding_volume_factor, clump_cloud, templates_from_spec
+        from cpp_dem.build.clump_mesh import templates_from_spec
+        from cpp_dem.build.clumps import ClumpCloud, bounding_volume_factor, clump_cloud
 
         templates = templates_from_spec(p.grains)
         shrink = (0.25 / (0.6 * bounding_volume_factor(templates))) ** (1.0 / 3.0)
@@ -220,7 +225,7 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
     o = mid - 0.5 * p.apertures * pitch
     width = pitch - pr["aperture"]
     if o - 0.5 * width < 0.03 * p.edge:  # room for the walls to move in
-        from ._core import ParameterError
+        from cpp_dem._core import ParameterError
 
         raise ParameterError(f"apertures={p.apertures}: the {preset} grid ({p.apertures} x "
                              f"{pitch * 1e3:.1f} mm) does not fit in the {p.edge:g} m element "
@@ -248,7 +253,7 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
     # of the contacts) and the unbalanced force below 0.3. The servo stages then bring
     # the packing to rest (p.unbalanced) at the exact targets; a clump packing creeps, and
     # growing it to rest as well was measured 10 x slower (150 000 steps, not at rest).
-    from ._core import RadiusGrowth
+    from cpp_dem._core import RadiusGrowth
 
     fast = RadiusGrowth(walls=list(sample.walls), bodies=[int(b) for b in grain_bodies],
                         target_stress=1e12, gain=0.5, max_strain=10 * p.growth_max_strain)
@@ -319,9 +324,9 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
                 grid_tension: float | None = None) -> dict:
     """Servo walls to ``targets`` (3,) Pa compression positive: converge within p.tol and
     p.unbalanced, then hold p.hold_steps steps; returns the max relative error while held.
-    With a ``prestress`` (cpp_dem.prestress.Prestress) its line forces are recorded too (its
+    With a ``prestress`` (cpp_dem.protocols.prestress.Prestress) its line forces are recorded too (its
     history, and the series' prestress_line_force_mean). With ``ends``
-    (cpp_dem.prestress.EndTension) the grid's longitudinal ends are pulled by
+    (cpp_dem.protocols.prestress.EndTension) the grid's longitudinal ends are pulled by
     ``grid_tension`` (N/m) during the stage (series grid_end_force: the force per line, N)."""
     sc, walls, ctl = sample.scene, sample.walls, sample.controller
     t = np.asarray(targets, float)
@@ -490,7 +495,7 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
 
     ``grid_tension`` (one value per row, N/m of width, tension positive; issue 18): the
     tension an FEM layer carries across the element's faces, handed over. The grid's
-    longitudinal (x) ends are then force-controlled (cpp_dem.prestress.EndTension) at that
+    longitudinal (x) ends are then force-controlled (cpp_dem.protocols.prestress.EndTension) at that
     tension during each row's stage, a PRS grid's grips let go first: the walls then carry
     the soil's stress alone, as the FEM region's soil cells do, and the grid is counted once.
     None (the default): the ends are free (RE) or held by the locked grips (PRS).
@@ -533,7 +538,7 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
         sample, grid, ps = make_element(p, float(targets[0].mean()), prestressed, log=log)
     sc, walls = sample.scene, sample.walls
     if grid_tension is not None and ends is None:
-        from .prestress import EndTension
+        from cpp_dem.protocols.prestress import EndTension
 
         if ps is not None:
             ps.unlock()
@@ -596,7 +601,7 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     write_vtk_contacts(out / "vtk" / f"{label}_contacts.vtp", sc)
     extra = {}
     if woven_grid:
-        from . import interaction
+        from cpp_dem.measure import grid_soil as interaction
 
         interaction.write_vtk_woven(out / "vtk" / f"{label}_geogrid.vtp", sc, grid)
         interaction.plot_views(sc, grid, out / f"{label}_views.png",

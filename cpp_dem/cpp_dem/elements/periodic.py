@@ -13,7 +13,7 @@ Two kinds:
 
 - **periodic** (``DemElement.periodic`` or a periodic Scene): any dE (shear and rotation
   included), mixed stress control of every component, and the tangent both from the contact
-  network (``cpp_dem.tangent``) and by finite differences of cloned states;
+  network (``cpp_dem.measure.network_tangent``) and by finite differences of cloned states;
 - **walls** (a box of six servo walls, ``DemElement.box``): normal strains and normal stresses
   only (a shear or rotation raises ParameterError), and the finite-difference tangent of the
   normal block.
@@ -32,9 +32,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _core, inertial, measure, periodic, prep
-from ._core import CellController, ParameterError
-from .scene import Scene
+from cpp_dem import _core
+from cpp_dem.measure import inertial
+from cpp_dem import measure
+from cpp_dem.protocols import periodic
+from cpp_dem.protocols import prep
+from cpp_dem._core import CellController, ParameterError
+from cpp_dem.scene import Scene
 
 #: Voigt order of the tangents: (row, column) of each of the 6 components.
 VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
@@ -368,12 +372,12 @@ class DemElement:
     def network_tangent(self, *, sliding: str = "plastic", geometric: bool = True,
                         rotations: bool = True) -> tuple[np.ndarray, dict]:
         """The tangent from the contact network (Kruyt–Rothenburg type stiffness assembly,
-        ``cpp_dem.tangent.network_tangent``): 6 x 6 Voigt, Pa, tension positive, and its info
+        ``cpp_dem.measure.network_tangent.network_tangent``): 6 x 6 Voigt, Pa, tension positive, and its info
         dict. Periodic elements only."""
         if self.kind != "periodic":
             raise ParameterError("network_tangent: needs a periodic element (the assembly "
                                  "takes the periodic branch vectors); use fd_tangent")
-        from . import tangent
+        from cpp_dem.measure import network_tangent as tangent
 
         d, info = tangent.network_tangent(**self.network_data(), sliding=sliding,
                                           geometric=geometric, rotations=rotations)
@@ -477,7 +481,7 @@ class DemElement:
 def default_material():
     """The elements' default grains: a linear law, E = 100 MPa, k_s/k_n 0.3, 30 deg,
     2650 kg/m^3."""
-    from .scene import linear_material
+    from cpp_dem.scene import linear_material
 
     return linear_material(density=2650.0, young=100e6, poisson=0.3, friction_angle_deg=30.0)
 

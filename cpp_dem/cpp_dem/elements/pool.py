@@ -21,45 +21,14 @@ PBSCluster, ``SSHCluster``, ``dask-mpi``: docs/multiscale.md). SI units.
 
 from __future__ import annotations
 
-import contextlib
 import time
 from dataclasses import dataclass
-from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
 
-from ._core import ParameterError
-
-
-def local_client(workers: int):
-    """(client, cluster): a ``LocalCluster`` of ``workers`` single-threaded worker processes on
-    this machine (Dask spawns them: no fork of an MPI/PETSc process), no dashboard."""
-    from dask.distributed import Client, LocalCluster
-
-    if not (isinstance(workers, int) and workers >= 1):
-        raise ParameterError(f"workers={workers!r}: must be an integer >= 1")
-    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
-                           dashboard_address=None)
-    return Client(cluster), cluster
-
-
-def dask_client(scheduler: str | None, workers: int):
-    """(client, cluster): the running scheduler at ``scheduler`` (an address such as
-    ``tcp://head:8786``, or the path of a scheduler file that ``dask scheduler
-    --scheduler-file``, ``dask-mpi`` or a batch script wrote; cluster None), else
-    ``local_client(workers)``."""
-    from dask.distributed import Client
-
-    if not scheduler:
-        return local_client(workers)
-    path = Path(scheduler).expanduser()
-    if "://" not in scheduler and path.is_file():
-        return Client(scheduler_file=str(path)), None
-    if "://" not in scheduler and ":" not in scheduler:
-        raise ParameterError(f"scheduler={scheduler!r}: neither an address (tcp://host:port) "
-                             "nor an existing scheduler file")
-    return Client(scheduler), None
+from cpp_dem._core import ParameterError
+from cpp_dem.elements.cluster import check_sendable, closed_on_error, local_client
 
 
 class ElementError(RuntimeError):
@@ -77,14 +46,14 @@ class ElementHost:
     """The actor on one worker: a dict of DemElements by index, and their accepted bytes."""
 
     def __init__(self) -> None:
-        from . import set_num_threads
+        from cpp_dem import set_num_threads
 
         set_num_threads(1)  # one element at a time per worker process: results as serial
         self.elements: dict = {}
         self.accepted: dict = {}
 
     def add(self, index: int, data: bytes) -> int:
-        from .dem_element import DemElement
+        from cpp_dem.elements.periodic import DemElement
 
         self.elements[index] = DemElement.from_bytes(data)
         self.accepted[index] = data
@@ -129,7 +98,7 @@ class ElementHost:
         return {k: self.accepted[k] for k in indices}
 
     def reject(self, indices) -> None:
-        from .dem_element import DemElement
+        from cpp_dem.elements.periodic import DemElement
 
         for k in indices:
             self.elements[k] = DemElement.from_bytes(self.accepted[k])
@@ -152,7 +121,7 @@ class PeriodicFactory:
     def __call__(self, index: int):
         import numpy as np
 
-        from .dem_element import DemElement
+        from cpp_dem.elements.periodic import DemElement
 
         el = DemElement.periodic(self.n, stress=self.stress,
                                  seed=self.seed + (0 if self.same else index),
@@ -163,30 +132,6 @@ class PeriodicFactory:
             # carry at the start
             el.apply_stress(-self.stress * np.eye(3))
         return el
-
-
-def check_sendable(obj, name: str) -> None:
-    """Refuses what Dask cannot send to a worker (an actor call with it would wait forever:
-    the error stays in Dask's communication thread)."""
-    from distributed.protocol import pickle as dask_pickle
-
-    try:
-        dask_pickle.dumps(obj)
-    except Exception as exc:  # noqa: BLE001  (whatever pickling raises)
-        raise ParameterError(f"{name}={obj!r:.200}: cannot be sent to the Dask workers "
-                             f"({type(exc).__name__}: {exc}); every part of it must "
-                             "pickle") from exc
-
-
-@contextlib.contextmanager
-def closed_on_error(pool):
-    """A failure while ``pool`` (anything with ``close()``) starts closes it: its own cluster
-    stops (else its worker processes outlive the error and the interpreter does not exit)."""
-    try:
-        yield
-    except BaseException:
-        pool.close()
-        raise
 
 
 @dataclass
@@ -440,5 +385,4 @@ class ElementPool:
         self.close()
 
 
-__all__ = ["ElementPool", "ElementError", "ElementHost", "ElementLostError", "PeriodicFactory", "PoolStep",
-           "dask_client", "local_client"]
+__all__ = ["ElementPool", "ElementError", "ElementHost", "ElementLostError", "PeriodicFactory", "PoolStep"]

@@ -14,7 +14,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from . import _core
+from cpp_dem import _core
 
 
 def _cell(scene, walls) -> bool:
@@ -64,7 +64,7 @@ def axis_stresses(scene, walls) -> np.ndarray:
 
 def sphere_mask(scene) -> np.ndarray:
     """True for the bodies that are grains (spheres), (n,). False for geogrid nodes and for
-    bonded spheres: the spheres of a bonded structure (a woven geogrid, cpp_dem.woven) are
+    bonded spheres: the spheres of a bonded structure (a woven geogrid, cpp_dem.build.woven) are
     not grains."""
     m = np.asarray(scene.body_kinds) == 0
     if scene.num_bonds:
@@ -303,3 +303,6 @@ def surface_height(pos: np.ndarray, radii: np.ndarray, box, cells: int = 5) -> f
         if not h <= top[i, j]:
             top[i, j] = h
     return float(np.nanmean(top))
+
+
+__all__ = ["axis_stresses","box_size","box_volume","coordination_number","grain_diameters","grain_of_body","interior_porosity","love_weber_stress","porosity","reference_points","sample_state","slab_solid_volume","solid_volume","sphere_mask","stress_scatter","surface_height","void_ratio","wall_stresses"]

@@ -1,4 +1,4 @@
-"""002's soil–geogrid interaction measures for woven grids of bonded spheres (cpp_dem.woven).
+"""002's soil–geogrid interaction measures for woven grids of bonded spheres (cpp_dem.build.woven).
 
 002 §6 names three effects. Each is compared between the reinforced (RE) and the prestressed
 (PRS) element.
@@ -32,8 +32,8 @@ from pathlib import Path
 
 import numpy as np
 
-from . import measure
-from .geogrid import JUNCTION, LONGITUDINAL, TRANSVERSE
+from cpp_dem import measure
+from cpp_dem.build.geogrid import JUNCTION, LONGITUDINAL, TRANSVERSE
 
 
 def _bond_tension(scene) -> np.ndarray:
@@ -280,7 +280,7 @@ def write_vtk_woven(path, scene, grid) -> Path:
     """The woven grid as a .vtp for ParaView: spheres as points (radius, kind, string,
     displacement from the built positions) and bonds as lines (tension N, parallel-bond
     sigma and tau Pa, member, the parts still intact)."""
-    from .io.vtk import _time_field, write_vtp
+    from cpp_dem.io.vtk import _time_field, write_vtp
 
     pos = np.asarray(scene.positions)[grid.spheres]
     first = int(grid.spheres[0])
@@ -312,7 +312,7 @@ def plot_views(scene, grid, png, *, title: str = "") -> tuple:
     import matplotlib.pyplot as plt
     from matplotlib.collections import LineCollection
 
-    from .io.figures import save_figure
+    from cpp_dem.io.figures import save_figure
 
     c = scene.contacts()
     ids = np.asarray(c["ids"])

@@ -23,7 +23,7 @@ from __future__ import annotations
 import math
 import warnings
 
-from ._core import ParameterError
+from cpp_dem._core import ParameterError
 
 #: Inertial number above which a quasi-static loading is reported, -.
 QUASI_STATIC_LIMIT = 1e-2
@@ -33,7 +33,7 @@ QUASI_STATIC_STRICT = 1e-3
 
 class InertialNumberWarning(UserWarning):
     """A loading meant to be quasi-static runs at an inertial number above
-    ``cpp_dem.inertial.QUASI_STATIC_LIMIT`` (the message names the stage, the value, and
+    ``cpp_dem.measure.inertial.QUASI_STATIC_LIMIT`` (the message names the stage, the value, and
     the rate, grain size, pressure and density it comes from). Make it an error with
     ``warnings.simplefilter("error", cpp_dem.InertialNumberWarning)``."""
 

@@ -49,7 +49,7 @@ import time
 
 import numpy as np
 
-from ._core import ParameterError
+from cpp_dem._core import ParameterError
 
 #: Voigt order of the 6 x 6 tangents.
 VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))

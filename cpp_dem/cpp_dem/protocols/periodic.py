@@ -16,10 +16,11 @@ import math
 
 import numpy as np
 
-from . import measure, prep
-from ._core import CellController, ParameterError
-from .packing import loose_cloud
-from .scene import Scene
+from cpp_dem import measure
+from cpp_dem.protocols import prep
+from cpp_dem._core import CellController, ParameterError
+from cpp_dem.build.packing import loose_cloud
+from cpp_dem.scene import Scene
 
 
 def cube_cell(edge: float) -> np.ndarray:

@@ -10,8 +10,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from . import _core, measure
-from ._core import Material, ParameterError
+from cpp_dem import _core
+from cpp_dem import measure
+from cpp_dem._core import Material, ParameterError
+from cpp_dem.build.packing import loose_cloud
+from cpp_dem.scene import Scene, TargetNotMetWarning
 
 
 def default_max_speed(scene, walls, fraction: float = 1e-4) -> float:
@@ -263,8 +266,6 @@ def refd(scene, walls, material_id: int, *, stress: float, porosity: float,
         if r1.porosity < porosity - POROSITY_MISS:
             import warnings
 
-            from .scene import TargetNotMetWarning
-
             warnings.warn(TargetNotMetWarning(
                 f"porosity={porosity}: not met; the expansion to {stress:g} Pa already packed "
                 f"the sample to porosity {r1.porosity:.4f}, denser than the target, and REFD "
@@ -447,3 +448,28 @@ def relax_overlaps(scene, walls=(), *, target_ratio: float = 0.01, steps: int = 
     scene.angular_velocities = w
     after = overlap_report(scene, walls)
     return {"before": before, "after": after, "shrink": s, "steps": steps + steps // chunks}
+
+
+def gravity_deposition(radii, lo, hi, *, material, seed: int = 0, gravity: float = 9.81,
+                       local_damping: float = 0.3, max_time: float = 2.0,
+                       settled_speed: float = 1e-3, check_every: int = 500,
+                       dt_safety: float = 0.3) -> tuple[np.ndarray, np.ndarray, dict]:
+    """Deposits the spheres into the box [lo, hi] (m) under gravity (-z): a loose cloud
+    (``cpp_dem.build.packing.loose_cloud``) in the box settles until max |v| < ``settled_speed`` (m/s) or
+    ``max_time`` (s). ``material`` is a cpp_dem.Material. Returns (centres, radii, info) with
+    info: time (s), steps, settled (bool), max_speed (m/s)."""
+    c, r = loose_cloud(radii, lo, hi, seed=seed)
+    s = Scene(gravity=(0.0, 0.0, -gravity), local_damping=local_damping)
+    m = s.add_material(material)
+    s.add_box(lo, hi, material=m)
+    s.add_spheres(c, r, material=m)
+    s.set_auto_timestep(safety=dt_safety, period=100)
+    vmax = float("inf")
+    while s.time < max_time:
+        s.run(check_every)
+        vmax = float(np.sqrt((s.velocities**2).sum(1).max()))
+        if vmax < settled_speed and s.time > 0.05:
+            break
+    info = {"time": s.time, "steps": s.step_count, "settled": vmax < settled_speed,
+            "max_speed": vmax}
+    return s.positions, s.radii, info

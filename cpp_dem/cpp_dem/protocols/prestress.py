@@ -4,8 +4,8 @@
 end, and pulls the other line by line until each line's members carry the target tension.
 Then it locks the grips (ends held) and reports the locked-in force as the run goes.
 
-- **Which grids.** It works for the woven grids of bonded spheres (cpp_dem.woven) and for the
-  cylinder and PFacet grids (cpp_dem.geogrid). They share the member labels and
+- **Which grids.** It works for the woven grids of bonded spheres (cpp_dem.build.woven) and for the
+  cylinder and PFacet grids (cpp_dem.build.geogrid). They share the member labels and
   ``member_axial_forces``.
 - **Line.** A line is the row (longitudinal members) or column (transverse members) of
   members between the grips. Its force is the mean of its members' mid-section forces.
@@ -37,8 +37,8 @@ import time
 
 import numpy as np
 
-from ._core import ParameterError
-from .geogrid import LONGITUDINAL, TRANSVERSE
+from cpp_dem._core import ParameterError
+from cpp_dem.build.geogrid import LONGITUDINAL, TRANSVERSE
 
 
 class PrestressError(RuntimeError):
@@ -252,7 +252,7 @@ class EndTension:
     the lines, as for :class:`Prestress`'s ``tension_per_m``), shared equally among the
     line's end bodies (:class:`GridEnds`). With the ends free otherwise, the members then
     carry T x spacing where no grains take it up. This is how an FEM layer's tension across
-    the faces of a DEM element is handed over (``cpp_dem.element``, issue 18).
+    the faces of a DEM element is handed over (``cpp_dem.elements.box``, issue 18).
 
     The forces are the end bodies' external forces (``scene.external_forces``), which this
     object owns: :meth:`set` replaces them, other bodies' are left alone.

@@ -37,11 +37,14 @@ from typing import Callable, Sequence
 
 import numpy as np
 
-from . import _core, inertial, measure, prep
-from ._core import Material, ParameterError
-from .geogrid import Geogrid
-from .packing import loose_cloud
-from .scene import ControllerLimitWarning, Scene
+from cpp_dem import _core
+from cpp_dem.measure import inertial
+from cpp_dem import measure
+from cpp_dem.protocols import prep
+from cpp_dem._core import Material, ParameterError
+from cpp_dem.build.geogrid import Geogrid
+from cpp_dem.build.packing import loose_cloud
+from cpp_dem.scene import ControllerLimitWarning, Scene
 
 #: Box wall order of Scene.add_box.
 X_MINUS, X_PLUS, Y_MINUS, Y_PLUS, Z_MINUS, Z_PLUS = range(6)
@@ -54,7 +57,7 @@ class PulloutSample:
     Attributes
     ----------
     scene, walls : the scene and its wall ids (x-, x+, y-, y+, z-, z+).
-    grid : the geogrid (members labelled, see cpp_dem.geogrid).
+    grid : the geogrid (members labelled, see cpp_dem.build.geogrid).
     grain_material : material index of the grains.
     grid_z : height of the geogrid plane, m.
     clamp_nodes : body ids of the nodes the clamp holds and pulls.
@@ -149,9 +152,9 @@ def _deal_layers(r, lo, hi, grid_z: float, clearance: float) -> np.ndarray:
 def layered_clump_cloud(templates, diameters, lo, hi, *, grid_z: float, clearance: float,
                         seed: int = 0):
     """:func:`layered_cloud` for clumps: equivalent-volume diameters (m) dealt to the two
-    layers the same way, each layer a :func:`cpp_dem.clumps.clump_cloud` (bounding spheres
+    layers the same way, each layer a :func:`cpp_dem.build.clumps.clump_cloud` (bounding spheres
     clear of the geogrid plane by ``clearance``). Returns one ClumpCloud."""
-    from .clumps import ClumpCloud, clump_cloud
+    from cpp_dem.build.clumps import ClumpCloud, clump_cloud
 
     lo, hi = _layer_box(lo, hi, grid_z, clearance)
     d = np.sort(np.asarray(diameters, float).reshape(-1))[::-1]
@@ -408,7 +411,7 @@ def inertial_number(velocity: float, density: float, stress: float) -> float:
 def _check_pull_rate(sample: PulloutSample, velocity: float) -> None:
     """Warns (cpp_dem.InertialNumberWarning) when the pull is not quasi-static: the shear
     zone on the geogrid is one mean grain diameter d thick, so its rate is v / d and
-    I = (v / d) d / sqrt(sigma / rho) (cpp_dem.inertial), sigma the top wall's target (or its
+    I = (v / d) d / sqrt(sigma / rho) (cpp_dem.measure.inertial), sigma the top wall's target (or its
     stress now without a servo)."""
     sc = sample.scene
     stress = (float(sample.top_servo.target_stress) if sample.top_servo is not None
@@ -587,7 +590,7 @@ def summarize(rec: dict, *, mobilised_from: float = 0.0) -> dict:
 def read_record(path) -> dict | None:
     """A pull-out record from its CSV (as written by the cases, flushed row by row, so a run
     that stopped early leaves the rows up to the stop); None if the file does not exist."""
-    from .output import read_csv_series
+    from cpp_dem.io import read_csv_series
 
     try:
         return read_csv_series(path)
@@ -600,7 +603,7 @@ def apply_preset(sample: PulloutSample, preset) -> None:
     stage of a prepared sample: time-step safety, geogrid node density scale and local
     damping; dt is reset at once. (The loading velocity is the preset's inertial number:
     Preset.velocity.)"""
-    from .presets import preset as by_name
+    from cpp_dem.presets import preset as by_name
 
     ps = by_name(preset) if isinstance(preset, str) else preset
     sc = sample.scene

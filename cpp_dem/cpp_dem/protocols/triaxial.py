@@ -15,8 +15,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from . import _core, inertial, measure, prep
-from .scene import Scene
+from cpp_dem import _core
+from cpp_dem.measure import inertial
+from cpp_dem import measure
+from cpp_dem.protocols import prep
+from cpp_dem.scene import Scene
 
 
 @dataclass
@@ -39,7 +42,7 @@ def build_box_sample(centers, radii, lo, hi, *, young: float, poisson: float,
     and a TriaxialController on the walls (all axes at zero stress until set).
 
     clumps: (ClumpCloud, templates) to add clumps instead of the spheres (``centers`` and
-    ``radii`` are then ignored; see cpp_dem.clumps.clump_cloud).
+    ``radii`` are then ignored; see cpp_dem.build.clumps.clump_cloud).
     grain_material: a Material for the grains instead of the linear one (e.g. 002's
     Hertz–Mindlin); the walls keep the linear law of young and poisson."""
     s = Scene(local_damping=local_damping)
@@ -82,7 +85,7 @@ def apply_preset(sample: TriaxialSample, preset, *, pressure: float, density: fl
     of a prepared sample: time-step safety (dt reset at once) and local damping. Returns the
     preset's axial strain rate, 1/s, for the mean grain diameter, ``density`` (kg/m^3) and the
     cell ``pressure`` (Pa)."""
-    from .presets import preset as by_name
+    from cpp_dem.presets import preset as by_name
 
     ps = by_name(preset) if isinstance(preset, str) else preset
     sc = sample.scene

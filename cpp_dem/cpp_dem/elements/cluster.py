@@ -1,0 +1,64 @@
+"""The Dask plumbing shared by the element pool (`cpp_dem.elements.pool`) and the FEM side's
+runner pool (`femcoupling.runner_pool`): a local cluster, a client for a running scheduler, a
+check that an object can be sent to the workers, and closing a pool that fails while starting."""
+
+from __future__ import annotations
+
+import contextlib
+from pathlib import Path
+
+from cpp_dem._core import ParameterError
+
+def local_client(workers: int):
+    """(client, cluster): a ``LocalCluster`` of ``workers`` single-threaded worker processes on
+    this machine (Dask spawns them: no fork of an MPI/PETSc process), no dashboard."""
+    from dask.distributed import Client, LocalCluster
+
+    if not (isinstance(workers, int) and workers >= 1):
+        raise ParameterError(f"workers={workers!r}: must be an integer >= 1")
+    cluster = LocalCluster(n_workers=workers, threads_per_worker=1, processes=True,
+                           dashboard_address=None)
+    return Client(cluster), cluster
+
+
+def dask_client(scheduler: str | None, workers: int):
+    """(client, cluster): the running scheduler at ``scheduler`` (an address such as
+    ``tcp://head:8786``, or the path of a scheduler file that ``dask scheduler
+    --scheduler-file``, ``dask-mpi`` or a batch script wrote; cluster None), else
+    ``local_client(workers)``."""
+    from dask.distributed import Client
+
+    if not scheduler:
+        return local_client(workers)
+    path = Path(scheduler).expanduser()
+    if "://" not in scheduler and path.is_file():
+        return Client(scheduler_file=str(path)), None
+    if "://" not in scheduler and ":" not in scheduler:
+        raise ParameterError(f"scheduler={scheduler!r}: neither an address (tcp://host:port) "
+                             "nor an existing scheduler file")
+    return Client(scheduler), None
+
+
+def check_sendable(obj, name: str) -> None:
+    """Refuses what Dask cannot send to a worker (an actor call with it would wait forever:
+    the error stays in Dask's communication thread)."""
+    from distributed.protocol import pickle as dask_pickle
+
+    try:
+        dask_pickle.dumps(obj)
+    except Exception as exc:  # noqa: BLE001  (whatever pickling raises)
+        raise ParameterError(f"{name}={obj!r:.200}: cannot be sent to the Dask workers "
+                             f"({type(exc).__name__}: {exc}); every part of it must "
+                             "pickle") from exc
+
+
+@contextlib.contextmanager
+def closed_on_error(pool):
+    """A failure while ``pool`` (anything with ``close()``) starts closes it: its own cluster
+    stops (else its worker processes outlive the error and the interpreter does not exit)."""
+    try:
+        yield
+    except BaseException:
+        pool.close()
+        raise
+__all__ = ["check_sendable", "closed_on_error", "dask_client", "local_client"]
