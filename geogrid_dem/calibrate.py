@@ -39,13 +39,15 @@ import itertools
 import json
 import math
 import os
-import sys
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import Any, Callable, Sequence
 
 import numpy as np
+
+from cpp_dem.io import read_csv_series
+from geogrid_dem.runs import _run_row, case_command, params_to_argv
 
 #: Table 6.1 of 001 (E in Pa, nu, phi in deg).
 TABLE_6_1 = {
@@ -89,8 +91,6 @@ def misfit(run: dict[str, np.ndarray], ref: dict[str, np.ndarray], *, points: in
 
 def read_curve(path: Path) -> dict[str, np.ndarray]:
     """axial_strain, deviatoric_stress, volumetric_strain of a triaxial.csv."""
-    from cpp_dem.io import read_csv_series
-
     d = read_csv_series(path)
     missing = [k for k in ("axial_strain", "deviatoric_stress", "volumetric_strain")
                if k not in d]
@@ -147,8 +147,6 @@ class Runner:
     def run(self, points: Sequence[Sequence[float]], *, label: str = "runs") -> list[float]:
         """Runs the points not run before (in parallel on the client); returns the wall time
         of each point (0 for a reused one). Raises RuntimeError naming a failed point."""
-        from geogrid_dem.cli import _run_row, case_command, params_to_argv
-
         pts = [rounded(p) for p in points]
         todo = [p for p in dict.fromkeys(pts) if p not in self.curves and not self._finished(p)]
         for p in dict.fromkeys(pts):

@@ -3,6 +3,7 @@ folder) and sweeps on Dask (results table, resume)."""
 
 import csv
 import os
+import re
 import shutil
 import subprocess
 import sys
@@ -114,3 +115,63 @@ def test_scene_run_progress_prints_an_eta(capsys):
     s.run(100, every=50, progress=True, label="demo")
     out = capsys.readouterr().out
     assert "[demo] step 50/100" in out and "ETA" in out
+
+
+# ---- one command-line style ----------------------------------------------------------------
+
+def _option_helps(text: str) -> dict[str, str]:
+    """An argparse --help text's options and their (joined) help lines."""
+    helps, cur = {}, None
+    for line in text.splitlines():
+        m = re.match(r"^  (-\S.*?)(?:\s{2,}(.*))?$", line)
+        if m:
+            cur = m.group(1).split(", ")[0].split()[0]
+            helps[cur] = (m.group(2) or "").strip()
+        elif cur and line.startswith("      "):
+            helps[cur] += " " + line.strip()
+        elif not line.strip():
+            cur = None
+    return helps
+
+
+def _doubled(helps: dict[str, str]) -> list[str]:
+    return [k for k, h in helps.items()
+            if len(re.findall(r"\(default", h)) > 1 or "(default: None)" in h
+            or "(default: )" in h]
+
+
+def test_the_help_checker_finds_a_doubled_default():
+    text = ("options:\n  --tol TOL   tolerance (default 0.1) (default: None)\n"
+            "  --n N       grains (default: 3)\n")
+    helps = _option_helps(text)
+    assert helps["--n"] == "grains (default: 3)"
+    assert _doubled(helps) == ["--tol"]
+
+
+@pytest.mark.parametrize("case", ["pullout-000", "pullout-001", "triaxial", "prs-element",
+                                  "prs-element-002", "deposition"])
+def test_every_case_has_one_help_style(case):
+    r = cli("run", case, "--help")
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith(f"usage: geogrid-dem run {case} ")
+    helps = _option_helps(r.stdout)
+    assert not _doubled(helps), _doubled(helps)
+    for flag in ("--smoke", "--out", "--overwrite", "--seed", "--threads"):
+        assert helps.get(flag), f"{case}: {flag} has no help line"
+    # --threads means the same everywhere: 0 is OpenMP's default (every core)
+    assert "0: OpenMP's default (every core" in helps["--threads"]
+    from geogrid_dem.cases import CASES
+
+    if CASES[case].study:  # the study is named by its title, not a number
+        assert CASES[case].study.split()[0] in r.stdout
+    assert not re.search(r"\b00[012]\b", r.stdout.replace(case, "")), r.stdout
+
+
+def test_the_case_scripts_parse_with_the_same_parser():
+    from geogrid_dem.cases import CASES
+    from geogrid_dem.runs import case_parser
+
+    for name, case in CASES.items():
+        r = subprocess.run([sys.executable, str(ROOT / "cases" / f"{case.module}.py"), "--help"],
+                           capture_output=True, text=True)
+        assert r.returncode == 0 and r.stdout == case_parser(name).format_help(), name

@@ -14,7 +14,8 @@ Outputs in ``--out DIR`` (default a new folder ``results/deposition/run_NNN`` pe
   parameters as root attributes (``cpp_dem.io.H5Recorder``; layout in docs/output.md);
 - ``deposition.csv`` the same time series as CSV (``cpp_dem.io.CsvRecorder``);
 - ``vtk/spheres_NNNN.vtp``, ``vtk/contacts_NNNN.vtp`` per snapshot, ``vtk/box.vtp``, and the
-  ParaView time series ``deposition.pvd`` (spheres) and ``contacts.pvd`` (force network);
+  ParaView time series ``deposition.pvd`` (spheres), ``contacts.pvd`` (force network) and
+  ``box.pvd`` (the walls, which do not move here: one entry);
 - ``energies.png``   energy terms and balance error over time;
 - ``packing.csv``    the settled packing, columns x,y,z,r (m) (``cpp_dem.write_packing_csv``);
 - ``summary.json``   the numbers printed at the end.
@@ -25,12 +26,9 @@ seconds). SI units throughout.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
-import os
 import platform
-import subprocess
 import sys
 import time
 from dataclasses import asdict, dataclass
@@ -40,7 +38,9 @@ import numpy as np
 
 from cpp_dem.io.figures import save_figure
 from geogrid_dem.provenance import git_revision
-from geogrid_dem.rundir import add_out_args, begin_run, check_common_args, run_main
+from geogrid_dem.cases import describe
+from geogrid_dem.options import apply_threads, case_parser, check_common_args
+from geogrid_dem.rundir import begin_run, run_main
 import cpp_dem as dem
 from cpp_dem.measure import interior_porosity, slab_solid_volume, surface_height
 from cpp_dem.io import (CsvRecorder, H5Recorder, PvdWriter, read_h5_series,
@@ -76,7 +76,7 @@ class Params:
     settled_speed: float = 0.005     #: stop once max |v| is below this, m/s ...
     settled_unbalanced: float = 0.01  #: ... and the unbalanced force below this, -
     settled_hold: float = 0.05       #: ... over this long (consecutive records), s
-    threads: int = 0                 #: OpenMP threads (0: the library default), -
+    threads: int = 0                 #: OpenMP threads (0: OpenMP's default, every core), -
 
 
 SMOKE = dict(n=400, box=(0.06, 0.06, 0.12), duration=1.0, snapshot_interval=0.05)
@@ -216,7 +216,7 @@ def plot_energies(h5_path: Path, png_path: Path) -> None:
 
 def clean_outputs(out: Path) -> None:
     """Removes the files a previous run of this case wrote in ``out`` (only those)."""
-    for name in ("deposition.h5", "deposition.csv", "deposition.pvd", "contacts.pvd",
+    for name in ("deposition.h5", "deposition.csv", "deposition.pvd", "contacts.pvd", "box.pvd",
                  "energies.png", "energies.pdf", "packing.csv", "summary.json"):
         (out / name).unlink(missing_ok=True)
     vtk = out / "vtk"
@@ -229,8 +229,7 @@ def clean_outputs(out: Path) -> None:
 def run(p: Params, out: Path) -> dict:
     """Runs the deposition, writes the outputs in ``out``; returns the summary."""
     wall_t0 = time.perf_counter()
-    if p.threads > 0:
-        dem.set_num_threads(p.threads)
+    apply_threads(p.threads)
     begin_run(out, "deposition")  # (a no-op when main() began the run)
     if (out / "deposition.h5").exists():
         print(f"[deposition] replacing the outputs of a previous run in {out}", flush=True)
@@ -255,7 +254,9 @@ def run(p: Params, out: Path) -> dict:
     csv = CsvRecorder(out / "deposition.csv", scene, series=series, overwrite=True)
     pvd_spheres = PvdWriter(out / "deposition.pvd", overwrite=True)
     pvd_contacts = PvdWriter(out / "contacts.pvd", overwrite=True)
-    write_vtk_box(out / "vtk" / "box.vtp", (0, 0, 0), p.box)
+    # The walls do not move in this case: box.pvd lists the one box file, at the start.
+    f_box = write_vtk_box(out / "vtk" / "box.vtp", (0, 0, 0), p.box, time=scene.time)
+    PvdWriter(out / "box.pvd", overwrite=True).add(scene.time, f_box.relative_to(out))
 
     last_snapshot_step = [-1]
 
@@ -390,18 +391,13 @@ def run(p: Params, out: Path) -> dict:
 MAX_STEPS = 1e8
 
 
-def parse_args(argv=None) -> tuple[Params, Path]:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n")[0],
-                                 formatter_class=argparse.ArgumentDefaultsHelpFormatter)
-    ap.add_argument("--smoke", action="store_true",
-                    help=f"test-sized run: {SMOKE['n']} spheres in a "
-                         f"{SMOKE['box'][0]} x {SMOKE['box'][1]} x {SMOKE['box'][2]} m box")
-    add_out_args(ap, "deposition")
+def build_parser():
+    """The case's parser: the shared options (geogrid_dem.options) and its own."""
+    ap = case_parser("deposition", describe("deposition", __doc__.split("\n")[0]),
+                     smoke=f"{SMOKE['n']} spheres in a {SMOKE['box'][0]} x {SMOKE['box'][1]} x "
+                           f"{SMOKE['box'][2]} m box", seed=Params.seed)
     ap.add_argument("--n", type=int, default=None, help="number of spheres (default 3000, "
                     f"smoke {SMOKE['n']})")
-    ap.add_argument("--seed", type=int, default=Params.seed, help="RNG seed")
-    ap.add_argument("--threads", type=int, default=0,
-                    help="OpenMP threads (0: library default)")
     ap.add_argument("--duration", type=float, default=None,
                     help=f"maximum simulated time, s (default {Params.duration}, smoke "
                          f"{SMOKE['duration']}); the run stops earlier once settled")
@@ -413,6 +409,11 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                     help="dt = safety x scene.critical_dt(), -")
     ap.add_argument("--no-early-stop", action="store_true",
                     help="run the full duration even once settled")
+    return ap
+
+
+def parse_args(argv=None) -> tuple[Params, Path]:
+    ap = build_parser()
     a = ap.parse_args(argv)
     check_common_args(ap, a)
     p = Params(**SMOKE) if a.smoke else Params()

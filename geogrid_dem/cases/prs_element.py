@@ -43,7 +43,6 @@ compression positive; FEM stresses tension positive.
 
 from __future__ import annotations
 
-import argparse
 import functools
 import json
 import math
@@ -55,7 +54,9 @@ from pathlib import Path
 import numpy as np
 
 from cpp_dem.io.figures import save_figure
-from geogrid_dem.rundir import add_out_args, begin_run, check_common_args, end_run, run_main
+from geogrid_dem.cases import describe
+from geogrid_dem.options import apply_threads, case_parser, check_common_args
+from geogrid_dem.rundir import begin_run, end_run, run_main
 from cpp_dem.elements import box as _element
 from cpp_dem.elements.box import ElementParams, grid_axial_stiffness, grid_stiffness_per_metre
 
@@ -592,12 +593,11 @@ def run_variant(p: Params, out: Path, variant: str) -> dict:
     ``out/handover_<variant>.h5`` (``run`` merges them into handover.h5). Returns the
     summary parts: {"fem": ..., "element": ..., "two_way": ... or None, "hierarchical": ...
     or None}."""
-    from cpp_dem._core import set_num_threads
     from femcoupling.twoway import HandoverHistory, check_region, region_targets, two_way
 
     # One thread unless asked (as run_element): the periodic elements prepared here before it
     # ran with OpenMP's default, and two variants side by side then took 23 x longer.
-    set_num_threads(p.threads if p.threads > 0 else 1)
+    apply_threads(p.threads)
     j = VARIANTS.index(variant)
     hier = None
     ini, fin, m, state0, load, info = run_fem(p, out, variant)
@@ -778,11 +778,13 @@ def parse_stresses(text: str, ap) -> list:
     return rows
 
 
-def add_element_args(ap, d, *, smoke: str, out: str) -> None:
-    """The options the element cases share: --smoke, --out, --stresses, --n, --prestress,
-    --footing-pressure, --seed, --threads (defaults from the parameters ``d``)."""
-    ap.add_argument("--smoke", action="store_true", help=f"test-sized run: {smoke}")
-    add_out_args(ap, out)
+def element_parser(name: str, description: str, d, *, smoke: str, preset: str | None = None):
+    """The parser of an element case (``name``: its command name) with the options the
+    element cases share: the common ones (geogrid_dem.options.case_parser; one thread by
+    default), --stresses, --n, --prestress and --footing-pressure (defaults from the
+    parameters ``d``)."""
+    ap = case_parser(name, describe(name, description), smoke=smoke, seed=d.seed,
+                     threads=d.threads, preset=preset)
     ap.add_argument("--stresses", type=str, default="",
                     help="DEM-only: 'sx,sy,sz' in Pa (compression positive) or a CSV table "
                          "(sx,sy,sz or time,sx,sy,sz per row, driven in order)")
@@ -791,12 +793,11 @@ def add_element_args(ap, d, *, smoke: str, out: str) -> None:
                     help="PRS prestress T_p, N/m (>= 0; 0: PRS is RE)")
     ap.add_argument("--footing-pressure", type=float, default=d.footing_pressure,
                     help="FEM footing pressure, Pa (> 0)")
-    ap.add_argument("--seed", type=int, default=d.seed)
-    ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: one thread)")
+    return ap
 
 
 def apply_element_args(ap, a, p):
-    """Checks the shared options (add_element_args) and sets them on ``p``; returns it."""
+    """Checks the shared options (element_parser) and sets them on ``p``; returns it."""
     check_common_args(ap, a)
     if a.n is not None:
         if a.n < 50:
@@ -811,25 +812,23 @@ def apply_element_args(ap, a, p):
     return p
 
 
-def parse_args(argv=None) -> tuple[Params, Path]:
-    ap = argparse.ArgumentParser(
-        description="Prestressed reinforced-soil element (002): a 0.1 m cube of grains with "
-                    "a geogrid, servo walls driven to FEM stresses (RE and PRS), or to given "
-                    "stresses (--stresses, DEM only, no dolfinx). z is vertical; DEM stresses "
-                    "compression positive.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+def build_parser():
+    """The case's parser: the shared options (geogrid_dem.options) and its own."""
     d = Params()
-    add_element_args(ap, d, smoke=f"{SMOKE['n']} grains, coarse FEM mesh", out="prs_element")
+    ap = element_parser(
+        "prs-element", "Reinforced (RE) and prestressed (PRS) soil element: a 0.1 m cube of "
+        "grains with a geogrid, servo walls driven to FEM stresses, or to given stresses "
+        "(--stresses, DEM only, no dolfinx). z is vertical; DEM stresses compression "
+        "positive.", d, smoke=f"{SMOKE['n']} grains, coarse FEM mesh",
+        preset="of the coupling: fine FEM mesh size (x the element edge; coarse size 20 x "
+               "that) and the two-way tolerance (overrides --tol)")
     ap.add_argument("--prs", action="store_true",
                     help="DEM-only: prestress the geogrid by --prestress (default: RE)")
     ap.add_argument("--two-way", action="store_true", help="iterate FEM <-> DEM")
     ap.add_argument("--tol", type=float, default=d.two_way_tol,
                     help="two-way tolerance on the handed-over stresses, relative")
-    ap.add_argument("--max-iterations", type=int, default=d.max_iterations)
-    ap.add_argument("--preset", choices=("fast", "balanced", "accurate"), default="",
-                    help="speed-accuracy preset of the coupling: fine FEM mesh size (x the "
-                         "element edge; coarse size 20 x that) and the two-way tolerance "
-                         "(overrides --tol); docs/speed_accuracy.md")
+    ap.add_argument("--max-iterations", type=int, default=d.max_iterations,
+                    help="most FEM <-> DEM iterations of the two-way loop")
     ap.add_argument("--workers", type=int, default=1,
                     help="processes: 2 or more runs RE and PRS (each its FEM, two-way loop "
                          "and element) side by side, with the same results; with "
@@ -860,6 +859,11 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     ap.add_argument("--calibrate", action="store_true",
                     help="fit the FEM soil (Drucker-Prager/Mohr-Coulomb) to a DEM element of "
                          "the case's grains along the region's stress path first")
+    return ap
+
+
+def parse_args(argv=None) -> tuple[Params, Path]:
+    ap = build_parser()
     a = ap.parse_args(argv)
     p = apply_element_args(ap, a, Params(**SMOKE) if a.smoke else Params())
     if not (math.isfinite(a.tol) and 0 < a.tol < 1):

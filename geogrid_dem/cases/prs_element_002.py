@@ -34,7 +34,6 @@ SI units. DEM stresses compression positive.
 
 from __future__ import annotations
 
-import argparse
 import contextlib
 import json
 import sys
@@ -180,7 +179,7 @@ def run(p: Params, out: Path) -> dict:
                 fem_out = out / f"fem_{g}"
                 fem_out.mkdir(parents=True, exist_ok=True)
                 ini, fin, _m, _s0, _load, info = _fem_case.run_fem(
-                    replace(p, geogrid=f"woven-{g}"), fem_out, v, hist)
+                    replace(p, geogrid=f"woven-{g}"), fem_out, v)
                 info.update(targets_initial_pa=ini.normal_pa.tolist(),
                             targets_final_pa=fin.normal_pa.tolist(),
                             shear_pa=fin.shear_pa.tolist(), rotation_deg=fin.rotation_deg)
@@ -226,20 +225,24 @@ def _names(text: str, allowed: tuple, flag: str, ap) -> tuple:
     return names
 
 
-def parse_args(argv=None) -> tuple[Params, Path]:
-    ap = argparse.ArgumentParser(
-        description="002's prestressed reinforced-soil element rebuilt: clumps with Hertz-"
-                    "Mindlin (Table 1), the woven geogrid of bonded spheres (Table 2, detailed "
-                    "and standard), servo walls to FEM stresses or to --stresses; RE against "
-                    "PRS with 002's interaction measures.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+def build_parser():
+    """The case's parser: the shared options (geogrid_dem.options) and its own."""
     d = Params()
-    _fem_case.add_element_args(ap, d, smoke=f"{SMOKE['n']} clumps, coarse FEM mesh",
-                               out="prs_element_002")
+    ap = _fem_case.element_parser(
+        "prs-element-002", "The prestressed reinforced-soil element rebuilt from the paper's "
+        "parts: clumps with Hertz-Mindlin (its Table 1), the woven geogrid of bonded spheres "
+        "(its Table 2, detailed and standard), servo walls to FEM stresses or to --stresses; "
+        "RE against PRS with the paper's interaction measures.", d,
+        smoke=f"{SMOKE['n']} clumps, coarse FEM mesh")
     ap.add_argument("--grids", default=",".join(GRIDS), help="woven forms to run")
     ap.add_argument("--variants", default=",".join(VARIANTS), help="RE and/or PRS")
     ap.add_argument("--grains", default=d.grains,
                     help="clumps:NAME (a shipped grain, 'gravel', or a template CSV) or spheres")
+    return ap
+
+
+def parse_args(argv=None) -> tuple[Params, Path]:
+    ap = build_parser()
     a = ap.parse_args(argv)
     p = _fem_case.apply_element_args(ap, a, Params(**SMOKE) if a.smoke else Params())
     p.grids = _names(a.grids, GRIDS, "--grids", ap)

@@ -30,7 +30,6 @@ comparison.csv.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 import sys
@@ -41,7 +40,9 @@ import numpy as np
 
 
 from cpp_dem.io.figures import save_figure
-from geogrid_dem.rundir import add_out_args, check_common_args, run_main
+from geogrid_dem.cases import describe
+from geogrid_dem.options import apply_threads, case_parser, check_common_args
+from geogrid_dem.rundir import run_main
 import cpp_dem as dem  # noqa: E402
 from cpp_dem import presets  # noqa: E402
 from cpp_dem.build import geogrid
@@ -137,8 +138,7 @@ def build(p: Params) -> pullout.PulloutSample:
 
 
 def run(p: Params, out: Path) -> dict:
-    if p.threads > 0:
-        dem.set_num_threads(p.threads)
+    apply_threads(p.threads)
     log = make_logger(f"pullout-000 n={p.spheres}"
                       + ("" if p.grains == "spheres" else f" {p.grains}"))
     sample = build(p)
@@ -201,17 +201,18 @@ def compare(runs: dict, out: Path) -> None:
                                            f"{k}={v}" for k, v in r.items()), flush=True)
 
 
-def parse_args(argv=None) -> tuple[Params, list[int], Path]:
-    ap = argparse.ArgumentParser(
-        description="Geogrid pull-out of 000 (Table 1). x is the pull direction (the clamp "
-                    "moves towards -x); SI units.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+def build_parser():
+    """The case's parser: the shared options (geogrid_dem.options) and its own."""
     d = Params()
-    ap.add_argument("--smoke", action="store_true",
-                    help=f"test-sized run: {SMOKE['spheres']} spheres in a half-size box "
-                         f"(0.5 x 0.25 x 0.25 m), pull {SMOKE['distance'] * 1e3:g} mm")
-    add_out_args(ap, "pullout_000", help_extra="; with several --spheres, one sub-folder "
-                 "n<N> each")
+    ap = case_parser(
+        "pullout-000", describe("pullout-000", "Geogrid pull-out with the paper's Table 1 "
+                                "parameters. x is the pull direction (the clamp moves towards "
+                                "-x); SI units."),
+        smoke=f"{SMOKE['spheres']} spheres in a half-size box (0.5 x 0.25 x 0.25 m), pull "
+              f"{SMOKE['distance'] * 1e3:g} mm", seed=d.seed,
+        preset="for the pull (dt safety, node density scale, damping, rate as an inertial "
+               "number; overrides --velocity)",
+        out_help="; with several --spheres, one sub-folder n<N> each")
     ap.add_argument("--spheres", type=str, default=None,
                     help=f"number of grains (spheres, or clumps with --grains clumps:...), or "
                          f"a comma list (e.g. 3000,6000,9000) to run each and compare "
@@ -231,12 +232,11 @@ def parse_args(argv=None) -> tuple[Params, list[int], Path]:
                     help="geogrid node mass factor (>= 1), or 'auto'")
     ap.add_argument("--snapshots", type=int, default=None,
                     help=f"VTK/HDF5 snapshots over the pull (default {d.snapshots})")
-    ap.add_argument("--preset", choices=("fast", "balanced", "accurate"), default="",
-                    help="speed-accuracy preset for the pull (dt safety, node density scale, "
-                         "damping, rate as an inertial number; overrides --velocity): see "
-                         "docs/speed_accuracy.md")
-    ap.add_argument("--seed", type=int, default=d.seed)
-    ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: default)")
+    return ap
+
+
+def parse_args(argv=None) -> tuple[Params, list[int], Path]:
+    ap = build_parser()
     a = ap.parse_args(argv)
     check_common_args(ap, a)
     p = Params(**SMOKE) if a.smoke else Params()

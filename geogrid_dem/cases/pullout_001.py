@@ -25,7 +25,6 @@ study.md, study.png.
 
 from __future__ import annotations
 
-import argparse
 import csv
 import math
 import sys
@@ -37,7 +36,9 @@ import numpy as np
 
 
 from cpp_dem.io.figures import save_figure
-from geogrid_dem.rundir import add_out_args, check_common_args, run_main
+from geogrid_dem.cases import describe
+from geogrid_dem.options import apply_threads, case_parser, check_common_args
+from geogrid_dem.rundir import run_main
 import cpp_dem as dem  # noqa: E402
 from cpp_dem.build import geogrid  # noqa: E402
 from cpp_dem.protocols import prep
@@ -146,8 +147,7 @@ def build(p: Params) -> pullout.PulloutSample:
 
 
 def run(p: Params, out: Path) -> dict:
-    if p.threads > 0:
-        dem.set_num_threads(p.threads)
+    apply_threads(p.threads)
     tag = f"pullout-001 {p.grid} r={p.radius * 1e3:g}mm P={p.pressure / 1e3:g}kPa" + (
         "" if p.grains == "spheres" else f" {p.grains}")
     log = make_logger(tag)
@@ -273,17 +273,18 @@ def _floats(name, s, ap, lo=0.0):
     return v
 
 
-def parse_args(argv=None):
-    ap = argparse.ArgumentParser(
-        description="Geogrid pull-out of 001 (ch. 5, App. A). x is the pull direction; SI "
-                    "units; stresses compressive positive.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+def build_parser():
+    """The case's parser: the shared options (geogrid_dem.options) and its own."""
     d = Params()
-    ap.add_argument("--smoke", action="store_true",
-                    help="test-sized run: r = 2.5 mm in a 5 cm cube, pull 4 mm")
-    add_out_args(ap, "pullout_001", help_extra="; --study keeps its table in --out and each "
-                 "point in a sub-folder (a point run before needs --overwrite)")
-    ap.add_argument("--grid", choices=("square", "triangular"), default=d.grid)
+    ap = case_parser(
+        "pullout-001", describe("pullout-001", "Geogrid pull-out of the thesis's chapter 5 "
+                                "(its Appendix A script). x is the pull direction; SI units; "
+                                "stresses compressive positive."),
+        smoke="r = 2.5 mm in a 5 cm cube, pull 4 mm", seed=d.seed,
+        out_help="; --study keeps its table in --out and each point in a sub-folder (a point "
+                 "run before needs --overwrite)")
+    ap.add_argument("--grid", choices=("square", "triangular"), default=d.grid,
+                    help="geogrid shape")
     ap.add_argument("--radius", type=str, default=None,
                     help=f"grain radius, m (default {d.radius}); a comma list with --study")
     ap.add_argument("--pressure", type=str, default=None,
@@ -292,10 +293,10 @@ def parse_args(argv=None):
     ap.add_argument("--distance", type=float, default=None,
                     help=f"pull distance, m (default {d.distance})")
     ap.add_argument("--pull", choices=("all", "front"), default=d.pull,
-                    help="pull every grid node (001 App. A) or only the front row")
+                    help="pull every grid node (as the thesis's Appendix A) or only the front row")
     ap.add_argument("--damping", type=float, default=d.damping, help="local damping, [0, 1)")
     ap.add_argument("--grid-young", type=float, default=d.grid_young,
-                    help="E of the grid material, Pa (Table 5.1: 5e6, as the grains); with "
+                    help="E of the grid material, Pa (the thesis's Table 5.1: 5e6, as the grains); with "
                          "the rigid pull it only sets the grain-grid contact stiffness")
     ap.add_argument("--study", action="store_true",
                     help="run the grid x radius x pressure table (Table 5.2) and summarise it "
@@ -303,8 +304,11 @@ def parse_args(argv=None):
     ap.add_argument("--grids", type=str, default="square,triangular",
                     help="grids of the study (comma list)")
     ap.add_argument("--grains", type=str, default=d.grains, help=GRAINS_HELP)
-    ap.add_argument("--seed", type=int, default=d.seed)
-    ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: default)")
+    return ap
+
+
+def parse_args(argv=None):
+    ap = build_parser()
     a = ap.parse_args(argv)
     check_common_args(ap, a)
     check_grains(ap, a.grains)

@@ -90,7 +90,8 @@ def make_logger(tag: str):
 def write_vtk_state(sample: pullout.PulloutSample, vtk_dir: Path, name: str,
                     pvds: dict | None = None) -> None:
     """Spheres, contact network, geogrid (member forces) and box as .vtp files; adds them to
-    the PVD collections in ``pvds`` (keys 'spheres', 'contacts', 'geogrid') when given."""
+    the PVD collections in ``pvds`` (keys 'spheres', 'contacts', 'geogrid', 'box') when
+    given."""
     sc = sample.scene
     files = {"spheres": write_vtk_spheres(vtk_dir / f"spheres_{name}.vtp", sc),
              "contacts": write_vtk_contacts(vtk_dir / f"contacts_{name}.vtp", sc)}
@@ -98,7 +99,7 @@ def write_vtk_state(sample: pullout.PulloutSample, vtk_dir: Path, name: str,
     geogrid.write_vtk_geogrid(gpath, sc, sample.grid)
     files["geogrid"] = gpath
     lo, hi = sample.box_lo_hi()
-    write_vtk_box(vtk_dir / f"box_{name}.vtp", lo, hi)
+    files["box"] = write_vtk_box(vtk_dir / f"box_{name}.vtp", lo, hi, time=sc.time)
     if pvds is not None:
         for k, f in files.items():
             pvds[k].add(sc.time, Path(f).name)
@@ -180,7 +181,10 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
     t_prep = time.perf_counter() - t0
     if not res.converged:
         log("warning: the sample did not reach the stability criteria; pulling anyway")
-    write_vtk_state(sample, vtk, "prepared")
+    # The series (vtk/{spheres,contacts,geogrid,box}.pvd) start at the prepared state.
+    pvds = {k: PvdWriter(vtk / f"{k}.pvd", overwrite=True)
+            for k in ("spheres", "contacts", "geogrid", "box")}
+    write_vtk_state(sample, vtk, "prepared", pvds)
     write_grains_csv(sc, out, "prepared")
     ov_prep = largest_overlaps(sc)
     if before_pull is not None:
@@ -193,8 +197,6 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
                                                "forces tension/resistance positive"},
                     snapshot_fields=("positions", "velocities", "radii"))
     csv = CsvRecorder(out / "pullout.csv", series=SERIES, overwrite=True)
-    pvds = {k: PvdWriter(vtk / f"{k}.pvd", overwrite=True)
-            for k in ("spheres", "contacts", "geogrid")}
     last = [time.perf_counter()]
     t_pull0 = time.perf_counter()
 

@@ -27,7 +27,6 @@ stage 2 runs again from its start; the checkpoint is kept, the other files repla
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import sys
@@ -38,7 +37,9 @@ from pathlib import Path
 import numpy as np
 
 from cpp_dem.io.figures import save_figure
-from geogrid_dem.rundir import add_out_args, begin_run, check_common_args, end_run, run_main
+from geogrid_dem.cases import describe
+from geogrid_dem.options import apply_threads, case_parser, check_common_args
+from geogrid_dem.rundir import begin_run, end_run, run_main
 import cpp_dem as dem
 from cpp_dem.build import geogrid
 from cpp_dem import measure
@@ -47,7 +48,7 @@ from cpp_dem.build import psd
 from cpp_dem.checkpoint import load_checkpoint, save_checkpoint
 from geogrid_dem.cases.grains_option import (HELP as GRAINS_HELP, check_grains, grain_templates,
                                          write_grains_csv)
-from cpp_dem.io import CsvRecorder, H5Recorder, write_vtk_box, write_vtk_spheres
+from cpp_dem.io import CsvRecorder, H5Recorder, PvdWriter, write_vtk_box, write_vtk_spheres
 from cpp_dem.build.packing import loose_cloud
 from cpp_dem.protocols.triaxial import (apply_preset, build_box_sample, deviatoric_stage,
                               isotropic_stage)
@@ -417,8 +418,7 @@ def inertial_number(sc, p: Params) -> float:
 def run(p: Params, out: Path, *, resume: bool = False) -> dict:
     """Runs the case into ``out``; ``resume``: from the checkpoint of stage 1 there."""
     t_start = time.perf_counter()
-    if p.threads > 0:
-        dem.set_num_threads(p.threads)
+    apply_threads(p.threads)
     begin_run(out, "triaxial", keep=RESUME_KEEP if resume else None)
     (out / "vtk").mkdir(exist_ok=True)
 
@@ -446,10 +446,19 @@ def run(p: Params, out: Path, *, resume: bool = False) -> dict:
                 "porosity": float(iso.porosity), "wall_s": t_iso,
                 "extra": json.loads(json.dumps(iso.extra, default=str))}})
     write_grains_csv(sc, out, "isotropic")  # packing_ (grains only) and clumps_isotropic.csv
-    write_vtk_spheres(out / "vtk" / "spheres_isotropic.vtp", sc)
-    size = measure.box_size(sc, walls)
-    lo_now = np.array([sc.wall_positions[walls[2 * a]] for a in range(3)])
-    write_vtk_box(out / "vtk" / "box_isotropic.vtp", lo_now, lo_now + size)
+    # The series vtk/spheres.pvd and vtk/box.pvd: the isotropic (prepared) state, then the end.
+    pvds = {k: PvdWriter(out / "vtk" / f"{k}.pvd", overwrite=True) for k in ("spheres", "box")}
+
+    def write_vtk_stage(name: str) -> None:
+        size = measure.box_size(sc, walls)
+        lo_now = np.array([sc.wall_positions[walls[2 * a]] for a in range(3)])
+        files = {"spheres": write_vtk_spheres(out / "vtk" / f"spheres_{name}.vtp", sc),
+                 "box": write_vtk_box(out / "vtk" / f"box_{name}.vtp", lo_now, lo_now + size,
+                                      time=sc.time)}
+        for k, f in files.items():
+            pvds[k].add(sc.time, f.name)
+
+    write_vtk_stage("isotropic")
 
     meta = {**asdict(p), "case": "triaxial", "axial_axis": "z", "psd": psd_info,
             "units": "SI; stresses and strains compression positive"}
@@ -482,7 +491,7 @@ def run(p: Params, out: Path, *, resume: bool = False) -> dict:
         csv.close()
     t_dev = time.perf_counter() - t0
     dev_steps = sc.step_count - steps0
-    write_vtk_spheres(out / "vtk" / "spheres_final.vtp", sc)
+    write_vtk_stage("final")
     if grid is not None:
         geogrid.write_vtk_geogrid(out / "vtk" / "geogrid_final.vtp", sc, grid)
     plot(rows, out / "triaxial.png", p)
@@ -544,16 +553,17 @@ def _positive(name: str, ap):
     return conv
 
 
-def parse_args(argv=None) -> tuple[Params, Path]:
-    ap = argparse.ArgumentParser(
-        description="Triaxial test (001 ch. 6, App. B). The AXIAL axis is z; x and y are "
-                    "held at the cell pressure. Stresses and strains compression positive.",
-        formatter_class=argparse.ArgumentDefaultsHelpFormatter)
+def build_parser():
+    """The case's parser: the shared options (geogrid_dem.options) and its own."""
     d = Params()
-    ap.add_argument("--smoke", action="store_true",
-                    help=f"test-sized run: {SMOKE['n']} grains in a box scaled down with the "
-                         "count, faster loading, stop at 4 %% axial strain")
-    add_out_args(ap, "triaxial")
+    ap = case_parser(
+        "triaxial", describe("triaxial", "Triaxial test of the thesis's chapter 6 (its "
+                             "Appendix B script). The AXIAL axis is z; x and y are held at "
+                             "the cell pressure. Stresses and strains compression positive."),
+        smoke=f"{SMOKE['n']} grains in a box scaled down with the count, faster loading, stop "
+              "at 4 %% axial strain", seed=d.seed,
+        preset="of the axial loading (dt safety, local damping, strain rate from an inertial "
+               "number; overrides --strain-rate, --damping, --dt-safety for that stage)")
     ap.add_argument("--packing", type=str, default="",
                     help="start from these spheres (m), in the box they span or --box")
     ap.add_argument("--packing-format", choices=("csv", "yade", "liggghts", "pfc"),
@@ -588,7 +598,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     ap.add_argument("--density", type=_positive("--density", ap), default=d.density,
                     help="grain density, kg/m^3")
     ap.add_argument("--geogrid", choices=("none", "square", "triangular"), default="none",
-                    help="geogrid layer at mid-height (001 §6.3, grids of §5.1)")
+                    help="geogrid layer at mid-height (the thesis's §6.3, its grids of §5.1)")
     ap.add_argument("--clear-layer", action="store_true",
                     help="remove the grains of the geogrid layer even without a geogrid, so "
                     "that runs with and without one start from the same packing")
@@ -597,14 +607,13 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                     "the same box with about n / scale^3 grains (coarse graining), > 0")
     ap.add_argument("--grains", type=str, default=d.grains,
                     help=GRAINS_HELP + "; the PSD gives equivalent-volume diameters")
-    ap.add_argument("--preset", choices=("fast", "balanced", "accurate"), default="",
-                    help="speed-accuracy preset of the axial loading (dt safety, local "
-                    "damping, strain rate from an inertial number; overrides --strain-rate, "
-                    "--damping, --dt-safety for that stage; docs/speed_accuracy.md)")
     ap.add_argument("--dt-safety", type=float, default=d.dt_safety,
                     help="time step = safety x critical estimate, (0, 1]")
-    ap.add_argument("--seed", type=int, default=d.seed)
-    ap.add_argument("--threads", type=int, default=0, help="OpenMP threads (0: default)")
+    return ap
+
+
+def parse_args(argv=None) -> tuple[Params, Path]:
+    ap = build_parser()
     a = ap.parse_args(argv)
     check_common_args(ap, a)
     p = Params(**SMOKE) if a.smoke else Params()

@@ -24,7 +24,8 @@ from cpp_dem.measure import inertial
 from cpp_dem import measure
 from cpp_dem.protocols import prep
 from cpp_dem._core import BeamParams, set_num_threads
-from cpp_dem.io import CsvRecorder, H5Recorder, write_vtk_box, write_vtk_contacts, write_vtk_spheres
+from cpp_dem.io import (CsvRecorder, H5Recorder, PvdWriter, write_vtk_box, write_vtk_contacts,
+                        write_vtk_spheres)
 from cpp_dem.build.packing import loose_cloud
 from cpp_dem.scene import linear_material
 from cpp_dem.protocols.triaxial import build_box_sample
@@ -59,7 +60,7 @@ class ElementParams:
     hold_steps: int = 2000           #: steps the walls then hold the targets
     max_steps: int = 400_000         #: per servo stage
     record_every: int = 200          #: steps between records
-    threads: int = 0                 #: OpenMP threads (0: one; see run_element)
+    threads: int = 1                 #: OpenMP threads (0: OpenMP's default, every core; see run_element)
     # --- 002's element: clumps, Hertz–Mindlin, the woven grid of bonded spheres ---
     grains: str = "spheres"          #: 'spheres', or 'clumps:NAME' (cpp_dem.build.clumps templates)
     grain_law: str = "linear"        #: 'linear' (young, poisson), or 'hertz' (002 Table 1)
@@ -514,7 +515,8 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     targets = [np.asarray(t, float) for t in targets]
     # One thread unless asked: on a shared 2-core machine OpenMP with 2 threads was measured
     # ~1000x slower than 1 thread for this small scene (oversubscription).
-    set_num_threads(p.threads if p.threads > 0 else 1)
+    if p.threads > 0:
+        set_num_threads(p.threads)
     (out / "vtk").mkdir(parents=True, exist_ok=True)
     woven_grid = p.geogrid != "square"
     check_element_params(p)
@@ -563,6 +565,16 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
         h5.record(**row)
         csv.record(**row)
 
+    # The series vtk/<label>_spheres.pvd and <label>_box.pvd: the state this call starts from
+    # (the prepared element, or the one restored from the cache), then the end.
+    vtk_pvds = {k: PvdWriter(out / "vtk" / f"{label}_{k}.pvd", overwrite=True)
+                for k in ("spheres", "box")}
+    lo0 = np.array([sc.wall_positions[walls[2 * a]] for a in range(3)])
+    vtk_pvds["spheres"].add(sc.time, write_vtk_spheres(
+        out / "vtk" / f"{label}_spheres_prepared.vtp", sc).name)
+    vtk_pvds["box"].add(sc.time, write_vtk_box(
+        out / "vtk" / f"{label}_box_prepared.vtp", lo0, lo0 + measure.box_size(sc, walls),
+        time=sc.time).name)
     stages = [] if hit is None else [first_stage]
     try:
         ref_pos = None
@@ -597,7 +609,8 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     below = mask & (z0 < zg)
     f = grid.member_axial_forces(sc)
     longi = grid.member_direction == geogrid.LONGITUDINAL
-    write_vtk_spheres(out / "vtk" / f"{label}_spheres.vtp", sc)
+    vtk_pvds["spheres"].add(sc.time, write_vtk_spheres(
+        out / "vtk" / f"{label}_spheres.vtp", sc).name)
     write_vtk_contacts(out / "vtk" / f"{label}_contacts.vtp", sc)
     extra = {}
     if woven_grid:
@@ -616,7 +629,8 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     else:
         geogrid.write_vtk_geogrid(out / "vtk" / f"{label}_geogrid.vtp", sc, grid)
     lo = np.array([sc.wall_positions[walls[2 * a]] for a in range(3)])
-    write_vtk_box(out / "vtk" / f"{label}_box.vtp", lo, lo + size_after)
+    vtk_pvds["box"].add(sc.time, write_vtk_box(out / "vtk" / f"{label}_box.vtp", lo,
+                                               lo + size_after, time=sc.time).name)
     strain_inc = (size_before - size_after) / size_before
     if probe > 0:
         tp = time.perf_counter()

@@ -1,0 +1,493 @@
+"""Run files, parameter rows and sweeps of the cases (the machinery behind ``geogrid-dem run``,
+``geogrid-dem sweep`` and ``geogrid-dem calibrate``; docs/cli.md).
+
+A run file's or a sweep row's parameters are a case's flags without their dashes. They are
+checked against the case's own parser (geogrid_dem.options) before anything runs; a case runs
+in its own interpreter (``python -m geogrid_dem.cases.MODULE``) so that Ctrl-C, a crash or a
+killed Dask worker never takes the caller down with it.
+"""
+
+from __future__ import annotations
+
+import argparse
+import contextlib
+import csv
+import datetime as _dt
+import difflib
+import functools
+import importlib
+import io
+import itertools
+import json
+import math
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+import tomllib
+from pathlib import Path
+from typing import Any
+
+from geogrid_dem.cases import CASES
+from geogrid_dem.provenance import git_commit, version
+
+
+class RunFileError(Exception):
+    """A run, sweep or calibration file (or a row of one) names a bad field; the message says
+    which, its value and why. The command prints it and exits with status 1."""
+
+
+class UsageError(RunFileError):
+    """A command-line option of ``geogrid-dem`` itself has a bad value (exit status 2)."""
+
+    def __init__(self, message: str, option: str | None = None):
+        super().__init__(f"Invalid value for {option}: {message}" if option else message)
+
+
+def case_command(name: str, *, field: str = "case") -> list[str]:
+    """The interpreter command that runs case `name` (its module in geogrid_dem.cases)."""
+    if name not in CASES:
+        raise RunFileError(f"{field}={name!r}: no such case; allowed: {', '.join(CASES)}")
+    return [sys.executable, "-m", f"geogrid_dem.cases.{CASES[name].module}"]
+
+
+@functools.lru_cache(maxsize=None)
+def case_parser(case: str) -> argparse.ArgumentParser:
+    """The argparse parser of case ``case``: the one its ``build_parser`` makes (the same one
+    ``geogrid-dem run CASE`` and the case's script parse with)."""
+    mod = importlib.import_module(f"geogrid_dem.cases.{CASES[case].module}")
+    return mod.build_parser()
+
+
+def _flags(case: str) -> dict[str, argparse.Action]:
+    return {o: a for a in case_parser(case)._actions for o in a.option_strings
+            if o.startswith("--")}
+
+
+def check_params(case: str, params: dict[str, Any], *, source: str) -> None:
+    """Refuses a parameter that is not a flag of the case (with a did-you-mean), a switch
+    given a value other than true/false, and a flag that takes a value given true/false."""
+    flags = _flags(case)
+    for key, value in params.items():
+        if not isinstance(key, str) or not key or key.startswith("-"):
+            raise RunFileError(f"{source}: field {key!r}: write the flag's name without dashes")
+        flag = "--" + key.replace("_", "-")
+        act = flags.get(flag)
+        if act is None:
+            names = sorted({f[2:] for f in flags if f not in ("--help",)})
+            near = difflib.get_close_matches(key.replace("_", "-"), names, n=1)
+            hint = f" (did you mean {near[0]}?)" if near else ""
+            raise RunFileError(f"{source}: field {key!r}: not a parameter of the case {case!r}"
+                               f"{hint}; allowed: {', '.join(names)}")
+        scalar = isinstance(value, (bool, int, float, str))
+        if not scalar and not (isinstance(value, list) and all(
+                isinstance(v, (int, float, str)) and not isinstance(v, bool) for v in value)):
+            raise RunFileError(f"{source}: field {key!r}={value!r}: must be a number, a "
+                               "string, true/false or a list of numbers or strings")
+        switch = act.nargs == 0
+        if switch and not isinstance(value, bool):
+            raise RunFileError(f"{source}: field {key}={value!r}: must be true or false (a "
+                               "switch)")
+        if not switch and isinstance(value, bool):
+            raise RunFileError(f"{source}: field {key}={str(value).lower()}: takes a value "
+                               f"({act.help or 'see the case --help'}), not true/false")
+
+
+def check_argv(case: str, argv: list[str], *, source: str) -> None:
+    """Parses ``argv`` with the case's own parse_args in this process (nothing is run), so a
+    value the case refuses is reported against ``source`` before any work starts."""
+    if "--help" in argv or "-h" in argv:
+        return
+    mod = importlib.import_module(f"geogrid_dem.cases.{CASES[case].module}")
+    err = io.StringIO()
+    try:
+        with contextlib.redirect_stderr(err), contextlib.redirect_stdout(io.StringIO()):
+            mod.parse_args(list(argv))
+    except SystemExit as e:
+        if e.code in (0, None):
+            return
+        lines = [ln for ln in err.getvalue().splitlines() if ln.strip()]
+        detail = lines[-1].split(": error: ", 1)[-1] if lines else f"exit status {e.code}"
+        raise RunFileError(f"{source}: the case {case!r} refuses its parameters: {detail} "
+                           f"(geogrid-dem run {case} --help lists them)") from None
+
+
+def params_to_argv(params: dict[str, Any], *, source: str) -> list[str]:
+    """The case's command-line flags from a table of parameters (keys without dashes)."""
+    argv: list[str] = []
+    for key, value in params.items():
+        if not isinstance(key, str) or not key or key.startswith("-"):
+            raise RunFileError(f"{source}: field {key!r}: write the flag's name without dashes")
+        flag = "--" + key.replace("_", "-")
+        if isinstance(value, bool):
+            if value:
+                argv.append(flag)
+        elif isinstance(value, (int, float, str)):
+            argv += [flag, str(value)]
+        elif isinstance(value, list) and all(isinstance(v, (int, float, str)) and
+                                             not isinstance(v, bool) for v in value):
+            argv += [flag, ",".join(str(v) for v in value)]
+        else:
+            raise RunFileError(f"{source}: field {key!r}={value!r}: must be a number, a string, "
+                               "true/false or a list of numbers or strings")
+    return argv
+
+
+def out_of(argv: list[str]) -> Path | None:
+    """The results folder of ``argv``: its last --out, as argparse takes it."""
+    found = None
+    for k, a in enumerate(argv):
+        if a == "--out" and k + 1 < len(argv):
+            found = Path(argv[k + 1])
+        elif a.startswith("--out="):
+            found = Path(a.split("=", 1)[1])
+    return found
+
+
+def write_run_file(out: Path, case: str, params: dict[str, Any]) -> None:
+    """OUT/run.toml: the case, its parameters and where they came from (rerunnable)."""
+    lines = ["# Written by geogrid-dem; `geogrid-dem run` this file to run it again.",
+             f"case = {json.dumps(case)}", "", "[params]"]
+    for key, value in params.items():
+        lines.append(f"{key} = {_toml_value(value)}")
+    lines += ["", "[provenance]", f"version = {json.dumps(version())}",
+              f"commit = {json.dumps(git_commit())}",
+              f"date = {json.dumps(_dt.datetime.now(_dt.timezone.utc).isoformat())}",
+              f"python = {json.dumps(sys.version.split()[0])}", ""]
+    out.mkdir(parents=True, exist_ok=True)
+    tmp = out / ".run.toml.tmp"
+    tmp.write_text("\n".join(lines))
+    tmp.replace(out / "run.toml")
+
+
+def _toml_value(v: Any) -> str:
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, (int, float)):
+        return repr(v)
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return json.dumps(str(v))
+
+
+def argv_to_params(argv: list[str]) -> dict[str, Any]:
+    """The flags given on the command line as run-file parameters (for OUT/run.toml)."""
+    params: dict[str, Any] = {}
+    k = 0
+    while k < len(argv):
+        a = argv[k]
+        if not a.startswith("--"):
+            k += 1
+            continue
+        key, _, inline = a[2:].partition("=")
+        if inline:
+            params[key] = _number_or_string(inline)
+        elif k + 1 < len(argv) and not argv[k + 1].startswith("--"):
+            params[key] = _number_or_string(argv[k + 1])
+            k += 1
+        else:
+            params[key] = True
+        k += 1
+    return params
+
+
+def _number_or_string(s: str) -> Any:
+    for cast in (int, float):
+        try:
+            return cast(s)
+        except ValueError:
+            pass
+    return s
+
+
+def load_toml(path: Path, kind: str) -> dict[str, Any]:
+    try:
+        with open(path, "rb") as f:
+            data = tomllib.load(f)
+    except FileNotFoundError:
+        raise RunFileError(f"{kind} file {path}: not found") from None
+    except tomllib.TOMLDecodeError as e:
+        raise RunFileError(f"{kind} file {path}: not valid TOML: {e}") from None
+    if "case" not in data:
+        raise RunFileError(f"{kind} file {path}: field 'case' is missing; allowed: "
+                           f"{', '.join(CASES)}")
+    params = data.get("params", {})
+    if not isinstance(params, dict):
+        raise RunFileError(f"{kind} file {path}: field 'params' must be a table ([params])")
+    known = {"case", "params", "provenance", "out", "sweep"}
+    for key in data:
+        if key not in known:
+            raise RunFileError(f"{kind} file {path}: field {key!r} is not known; allowed at the "
+                               f"top: {', '.join(sorted(known))} (a case's parameters go in "
+                               "[params])")
+    case_command(data["case"], field=f"{path}: case")
+    return data
+
+
+def run_case(case: str, argv: list[str], *, source: str | None = None) -> int:
+    """Runs the case's script in a fresh interpreter with `argv` (its output passes through as
+    it comes); an argparse rejection (exit 2) of a run file's parameters is reported against
+    the run file. Returns the exit status."""
+    # its own process group: a Ctrl-C reaches it once, forwarded from here (not also from the
+    # terminal), and a SIGINT or SIGTERM sent to this command is passed on, not left behind
+    proc = subprocess.Popen([*case_command(case), *argv], stderr=subprocess.PIPE, text=True,
+                            bufsize=1, process_group=0)
+
+    def forward(sig, _frame):  # to the case's whole group (its worker processes too), as a
+        try:                     # terminal's Ctrl-C would
+            os.killpg(proc.pid, sig)
+        except (ProcessLookupError, PermissionError):
+            try:
+                proc.send_signal(sig)
+            except ProcessLookupError:
+                pass
+
+    import threading
+
+    main_thread = threading.current_thread() is threading.main_thread()
+    old = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM)} \
+        if main_thread else {}
+    tail: list[str] = []
+    try:
+        for line in proc.stderr:
+            sys.stderr.write(line)
+            sys.stderr.flush()
+            tail = (tail + [line.rstrip()])[-5:]
+        status = proc.wait()
+    finally:
+        for s, h in old.items():
+            signal.signal(s, h)
+    if status == 2 and source is not None:
+        detail = next((t for t in reversed(tail) if t.strip()), "")
+        raise RunFileError(f"{source}: the case {case!r} rejected its parameters: {detail}; "
+                           f"a field `name` is the case's flag --name (geogrid-dem run {case} "
+                           "--help lists them)")
+    return status
+
+
+#: The largest sweep run without --max-rows.
+MAX_ROWS = 10_000
+
+
+def sweep_rows(data: dict[str, Any], source: str,
+               max_rows: int = MAX_ROWS) -> list[dict[str, Any]]:
+    """The parameter table of a sweep file: one dict of varied parameters per row. A table of
+    more than ``max_rows`` rows is refused (before it is built) with its size."""
+    sweep = data.get("sweep")
+    if not isinstance(sweep, dict) or not sweep:
+        raise RunFileError(f"{source}: field 'sweep' is missing: a [sweep] table with lists of "
+                           "values per parameter")
+    mode = sweep.get("mode", "product")
+    values = {k: v for k, v in sweep.items() if k != "mode"}
+    if mode not in ("product", "list"):
+        raise RunFileError(f"{source}: field 'sweep.mode'={mode!r}: must be 'product' or 'list'")
+    for key, v in values.items():
+        if not isinstance(v, list) or not v:
+            raise RunFileError(f"{source}: field 'sweep.{key}'={v!r}: must be a non-empty list")
+    if not values:
+        raise RunFileError(f"{source}: [sweep] has no parameter lists")
+    keys = list(values)
+    n_rows = math.prod(len(v) for v in values.values()) if mode == "product" else \
+        max(len(v) for v in values.values())
+    if n_rows > max_rows:
+        shape = " x ".join(f"{len(v)} {k}" for k, v in values.items())
+        raise RunFileError(
+            f"{source}: field 'sweep' makes {n_rows} rows ({shape}, mode {mode!r}): more than "
+            f"the cap of {max_rows}. That is {n_rows} case runs and folders; at even 10 s a "
+            f"row (a smoke run) on 10 workers about {n_rows * 10 / 10 / 86400:.3g} days. "
+            "Shrink the table, or raise the cap with --max-rows N")
+    if mode == "product":
+        return [dict(zip(keys, combo)) for combo in itertools.product(*values.values())]
+    lengths = {k: len(v) for k, v in values.items()}
+    if len(set(lengths.values())) != 1:
+        raise RunFileError(f"{source}: field 'sweep' (mode 'list'): the lists must have equal "
+                           f"lengths, got {lengths}")
+    n = next(iter(lengths.values()))
+    return [{k: values[k][i] for k in keys} for i in range(n)]
+
+
+def _row_params(fixed: dict[str, Any], row: dict[str, Any], row_dir: Path,
+                threads: int) -> dict[str, Any]:
+    params = {**fixed, **row, "out": str(row_dir)}
+    params.setdefault("threads", threads)
+    return params
+
+
+def _row_finished(row_dir: Path, case: str, params: dict[str, Any]) -> bool:
+    run_file = row_dir / "run.toml"
+    if not (row_dir / "summary.json").exists() or not run_file.exists():
+        return False
+    try:
+        with open(run_file, "rb") as f:
+            old = tomllib.load(f)
+    except (OSError, tomllib.TOMLDecodeError):
+        return False
+    return old.get("case") == case and old.get("params") == json.loads(json.dumps(params))
+
+
+#: Run before the case, in a fresh interpreter (no threads): asks Linux to SIGKILL this
+#: process when the worker thread that started it dies (PR_SET_PDEATHSIG, kept across exec),
+#: then becomes the case. A killed Dask worker so leaves no orphan writing into the row's
+#: folder while Dask runs the row again elsewhere. (A preexec_fn would run in the forked
+#: child of a threaded worker, which is not safe.)
+_DIE_WITH_PARENT = ("import ctypes, os, signal, sys\n"
+                    "try:\n"
+                    "    ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))\n"
+                    "except Exception:\n"
+                    "    pass\n"
+                    "os.execv(sys.argv[1], sys.argv[1:])\n")
+
+
+def _run_row(command: list[str], argv: list[str], env: dict[str, str]) -> dict[str, Any]:
+    """One row, on a Dask worker: the case in its own interpreter. A row run again after a
+    killed worker starts from an empty folder (the lost attempt's files are removed)."""
+    dest = out_of(argv)
+    if dest is not None and dest.exists():
+        shutil.rmtree(dest, ignore_errors=True)
+    t0 = time.perf_counter()
+    wrap = [sys.executable, "-c", _DIE_WITH_PARENT] if sys.platform.startswith("linux") else []
+    proc = subprocess.run([*wrap, *command, *argv], capture_output=True, text=True,
+                          env={**os.environ, **env})
+    return {"returncode": proc.returncode, "wall_s": time.perf_counter() - t0,
+            "stderr_tail": "\n".join((proc.stderr or "").strip().splitlines()[-5:])}
+
+
+def _flatten(prefix: str, obj: Any, out: dict[str, Any]) -> None:
+    if isinstance(obj, dict):
+        for k, v in obj.items():
+            _flatten(f"{prefix}.{k}" if prefix else str(k), v, out)
+    elif isinstance(obj, (int, float, str, bool)) or obj is None:
+        out[prefix] = obj
+
+
+def write_results(out: Path, rows: list[dict[str, Any]]) -> Path:
+    """OUT/results.csv (rewritten atomically), and results.parquet where pyarrow is."""
+    columns: list[str] = []
+    for r in rows:
+        for k in r:
+            if k not in columns:
+                columns.append(k)
+    tmp = out / ".results.csv.tmp"
+    with open(tmp, "w", newline="") as f:
+        w = csv.DictWriter(f, fieldnames=columns)
+        w.writeheader()
+        for r in rows:
+            w.writerow(r)
+        f.flush()
+        os.fsync(f.fileno())
+    tmp.replace(out / "results.csv")
+    return out / "results.csv"
+
+
+def _summary_of(row_dir: Path) -> dict[str, Any]:
+    flat: dict[str, Any] = {}
+    try:
+        _flatten("", json.loads((row_dir / "summary.json").read_text()), flat)
+    except (OSError, json.JSONDecodeError):
+        pass
+    return {f"summary.{k}": v for k, v in flat.items()}
+
+
+def _dask_client(scheduler: str | None, workers: int):
+    """(client, cluster): the scheduler at ``scheduler`` (an address or a scheduler file), or
+    a LocalCluster of ``workers`` single-threaded processes (cluster None for a scheduler)."""
+    from cpp_dem import ParameterError
+    from cpp_dem.elements.cluster import dask_client
+
+    try:
+        return dask_client(scheduler, workers)
+    except ParameterError as e:
+        raise UsageError(str(e), option="--scheduler") from None
+    except Exception as e:  # noqa: BLE001  (unreachable, refused, a bad scheduler file ...)
+        if not scheduler:
+            raise RunFileError(f"--workers={workers}: the local Dask cluster did not "
+                               f"start: {type(e).__name__}: {e}") from None
+        raise UsageError(
+            f"{scheduler!r}: could not connect to a Dask scheduler there "
+            f"({type(e).__name__}: {str(e).splitlines()[0] if str(e) else 'no detail'}); is "
+            "it running, and is the address (tcp://host:port) or the scheduler file right?",
+            option="--scheduler") from None
+
+
+def _started_client(scheduler: str | None, workers: int, box: list) -> bool:
+    """_dask_client with a Ctrl-C during the start held back until the cluster is up (a
+    cluster stopped half-started is not closed cleanly). Puts (client, cluster) into ``box``
+    before Ctrl-C is let through again (the caller closes what is in it, in a ``finally``
+    around this call); returns whether a Ctrl-C came during the start."""
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        box.extend(_dask_client(scheduler, workers))
+        return False
+    held: list[int] = []
+    old = signal.signal(signal.SIGINT, lambda *_: held.append(1))
+    try:
+        box.extend(_dask_client(scheduler, workers))
+    finally:
+        signal.signal(signal.SIGINT, old)
+    return bool(held)
+
+
+def _close_client(client, cluster) -> None:
+    """Closes the client and the local cluster; a second Ctrl-C does not cut it short."""
+    import threading
+
+    old = None
+    if threading.current_thread() is threading.main_thread():
+        old = signal.signal(signal.SIGINT, signal.SIG_IGN)
+    try:
+        if client is not None:
+            client.close()
+        if cluster is not None:
+            cluster.close()
+    finally:
+        if old is not None:
+            signal.signal(signal.SIGINT, old)
+
+
+def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) -> None:
+    from dask.distributed import as_completed
+
+    env = {"OMP_NUM_THREADS": str(threads or (os.cpu_count() or 1))}
+    box: list = []
+    try:
+        if _started_client(scheduler, workers, box):
+            raise KeyboardInterrupt
+        client = box[0]
+        futures = {}
+        for i, row_dir, params, argv, base in todo:
+            if row_dir.exists():
+                # An unfinished row of an earlier run: its files are incomplete.
+                shutil.rmtree(row_dir)
+            # retries: a row whose worker died is run again (Dask itself reschedules a task
+            # lost with its worker up to distributed.scheduler.allowed-failures times; a
+            # KilledWorker after that, or any error, makes the row 'failed', not the sweep).
+            fut = client.submit(_run_row, script, argv, env, pure=False, key=f"row-{i:03d}",
+                                retries=2)
+            futures[fut] = (i, row_dir, params, base)
+        t0 = time.perf_counter()
+        for n_done, fut in enumerate(as_completed(futures), start=1):
+            i, row_dir, params, base = futures[fut]
+            try:
+                r = fut.result()
+            except Exception as e:  # noqa: BLE001  (KilledWorker, a lost scheduler ...)
+                r = {"returncode": -1, "wall_s": 0.0,
+                     "stderr_tail": f"{type(e).__name__}: {e}"}
+            ok = r["returncode"] == 0
+            if ok:
+                write_run_file(row_dir, case, params)
+            results[i] = {**base, "status": "ok" if ok else "failed",
+                          "wall_s": round(r["wall_s"], 3),
+                          **(_summary_of(row_dir) if ok else {"error": r["stderr_tail"]})}
+            write_results(out, [x for x in results if x is not None])
+            el = time.perf_counter() - t0
+            eta = el / n_done * (len(todo) - n_done)
+            print(f"[sweep] row {i:03d} {'ok' if ok else 'FAILED'} in {r['wall_s']:.1f} s "
+                       f"({n_done}/{len(todo)}, elapsed {el:.0f} s, ETA {eta:.0f} s)")
+            if not ok:
+                print(f"[sweep] row {i:03d}: {r['stderr_tail']}", file=sys.stderr, flush=True)
+    finally:
+        if box:
+            _close_client(*box)
