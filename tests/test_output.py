@@ -121,7 +121,8 @@ def test_vtk_spheres_counts_arrays_and_values(tmp_path, scene, encoding):
     n = scene.num_bodies
     assert d["counts"]["Points"] == n and d["counts"]["Verts"] == n
     assert set(d["point_data"]) == {"radius", "velocity", "angular_velocity", "force",
-                                    "orientation", "id", "coordination"}
+                                    "orientation", "id", "kind", "coordination"}
+    np.testing.assert_array_equal(d["point_data"]["kind"], np.zeros(n))  # all grain spheres
     # Binary is bitwise; ASCII uses %.17g, which round-trips doubles exactly as well.
     np.testing.assert_array_equal(d["points"], scene.positions)
     np.testing.assert_array_equal(d["point_data"]["radius"], scene.radii)

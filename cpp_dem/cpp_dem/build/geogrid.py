@@ -496,7 +496,7 @@ def polyline(scene, points, *, params: BeamParams, material: int,
                              -np.ones((n, 2), dtype=int), [""] * n, axis, params.radius)
 
 
-def write_vtk_geogrid(path, scene, grid: Geogrid, *, reference_positions=None) -> None:
+def write_vtk_geogrid(path, scene, grid: Geogrid, *, reference_positions=None):
     """Writes the geogrid as a .vtp file for ParaView: links as lines and PFacets as triangles
     at the nodes' current positions, with the scene's time (``TimeValue``, s) and
 
@@ -505,7 +505,10 @@ def write_vtk_geogrid(path, scene, grid: Geogrid, *, reference_positions=None) -
       ``twisting_moment`` (N m), ``member`` (index, -1 for junction links), ``broken``,
       ``kind`` (0 link, 1 pfacet);
     - point data: ``node_id`` and ``displacement`` (m) from ``reference_positions`` (default:
-      the positions when the grid was built, ``grid.reference_positions``)."""
+      the positions when the grid was built, ``grid.reference_positions``).
+
+    The nodes are also points of the spheres file (:func:`cpp_dem.io.write_vtk_spheres`), with
+    ``kind`` 2 there. Returns the path written (a ``pathlib.Path``)."""
     from cpp_dem.io.vtk import _time_field
     from cpp_dem.io import write_vtp
 
@@ -536,5 +539,5 @@ def write_vtk_geogrid(path, scene, grid: Geogrid, *, reference_positions=None) -
     point_data = {"node_id": nodes.astype(float)}
     if ref is not None:
         point_data["displacement"] = np.asarray(pos)[nodes] - np.asarray(ref, dtype=float)
-    write_vtp(path, points=pos[nodes], lines=lines, polys=polys, point_data=point_data,
-              cell_data=cell_data, field_data=_time_field(scene))
+    return write_vtp(path, points=pos[nodes], lines=lines, polys=polys, point_data=point_data,
+                     cell_data=cell_data, field_data=_time_field(scene))

@@ -7,13 +7,14 @@ VTK (XML PolyData, ``.vtp``; open in ParaView, see ``docs/output.md``):
 
 - :func:`write_vtk_spheres` — one point per sphere (centre, m) with point data ``radius`` (m),
   ``velocity`` (m/s), ``angular_velocity`` (rad/s), ``force`` (N), ``orientation`` (quaternion
-  w, x, y, z) and ``id``; render with the Glyph filter (sphere glyph, scale by ``radius``,
+  w, x, y, z), ``id`` and ``kind`` (:data:`SPHERE_KINDS`: 0 grain sphere, 1 clump member,
+  2 geogrid node, 3 bonded sphere; :func:`sphere_kinds`); render with the Glyph filter (sphere glyph, scale by ``radius``,
   scale factor 2 since a glyph of size 1 has diameter 1).
 - :func:`write_vtk_contacts` — the contact force network: one line per active sphere–sphere
   contact (between the two centres), cell data ``normal_force`` (N), ``force`` (N, on the
   second sphere), ``normal``, ``overlap`` (m).
 - :func:`write_vtk_box` — the six faces of an axis-aligned box (walls), optionally with the
-  wall forces (N) as cell data.
+  wall forces (N) as cell data; a ``.pvd`` of them over time is the box as it moves.
 - :class:`PvdWriter` — a ``.pvd`` collection (time → file) rewritten atomically after every
   entry, so a crashed run leaves a valid index of the files written so far.
 
@@ -40,10 +41,12 @@ from ._files import ResultWriteError, close_all_writers
 from .figures import save_figure
 from .foreign import (read_liggghts_box, read_liggghts_data, read_pfc_balls, read_yade_text,
                       write_liggghts_data, write_pfc_balls, write_yade_text)
-from .vtk import PvdWriter, write_vtk_box, write_vtk_contacts, write_vtk_spheres, write_vtp
+from .vtk import (SPHERE_KINDS, PvdWriter, sphere_kinds, write_vtk_box, write_vtk_contacts,
+                  write_vtk_spheres, write_vtp)
 
 __all__ = [
     "SNAPSHOT_FIELDS",
+    "SPHERE_KINDS",
     "NonFiniteValueError",
     "CsvRecorder",
     "H5Recorder",
@@ -61,6 +64,7 @@ __all__ = [
     "write_yade_text",
     "read_h5_series",
     "read_h5_snapshot",
+    "sphere_kinds",
     "standard_series",
     "write_vtk_box",
     "write_vtk_contacts",

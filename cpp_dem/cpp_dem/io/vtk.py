@@ -86,7 +86,10 @@ def write_vtp(path: PathLike, points, *, verts: bool = False, lines=None, polys=
     field_data : name -> 1-D array of whole-dataset values (e.g. ``TimeValue``, s).
     encoding : ``"binary"`` (inline base64, compact and lossless) or ``"ascii"``.
 
-    Returns the path written.
+    Returns
+    -------
+    Path
+        The path written.
     """
     path = Path(path)
     if path.suffix != ".vtp":
@@ -150,6 +153,33 @@ def _time_field(scene) -> dict[str, np.ndarray]:
 # VTK writers
 # ---------------------------------------------------------------------------------------------
 
+#: The legend of the ``kind`` point-data array of :func:`write_vtk_spheres` (value -> what the
+#: point is). A body is counted in the first of these that applies: geogrid node, bonded
+#: sphere, clump member, free sphere.
+SPHERE_KINDS: dict[int, str] = {
+    0: "grain sphere (a free sphere, not in a clump)",
+    1: "clump member (a sphere of a clumped grain)",
+    2: "geogrid node (a node of a beam/PFacet geogrid, cpp_dem.build.geogrid)",
+    3: "bonded sphere (a sphere of a bonded structure such as a woven geogrid)",
+    -1: "a body kind this writer does not know (a newer core)",
+}
+
+
+def sphere_kinds(scene) -> np.ndarray:
+    """Per body, the code of :data:`SPHERE_KINDS` (int64, (n,)), from what the scene knows:
+    ``body_kinds`` (1 = geogrid node), ``bond_spheres`` (the spheres of a bond) and
+    ``clump_ids`` (>= 0 for a clump member)."""
+    n = int(scene.num_bodies)
+    bk = np.asarray(scene.body_kinds, dtype=np.int64).reshape(n)
+    kind = np.zeros(n, dtype=np.int64)
+    if getattr(scene, "num_clumps", 0):
+        kind[np.asarray(scene.clump_ids, dtype=np.int64).reshape(n) >= 0] = 1
+    if getattr(scene, "num_bonds", 0):
+        kind[np.asarray(scene.bond_spheres, dtype=np.int64).ravel()] = 3
+    kind[bk == 1] = 2
+    kind[(bk != 0) & (bk != 1)] = -1
+    return kind
+
 
 def write_vtk_spheres(path: PathLike, scene, *, extra_point_data: Mapping[str, Any] | None = None,
                       encoding: str = "binary") -> Path:
@@ -159,6 +189,10 @@ def write_vtk_spheres(path: PathLike, scene, *, extra_point_data: Mapping[str, A
     ``angular_velocity`` (rad/s), ``force`` (resultant at the last step, N), ``orientation``
     (unit quaternion w, x, y, z, -), ``id`` (body index, -), plus ``extra_point_data``
     (name -> (n,) or (n, k) array). Field data ``TimeValue`` holds the scene time (s).
+    ``kind`` (-) tells what each point is (:data:`SPHERE_KINDS`: 0 grain sphere, 1 clump
+    member, 2 geogrid node, 3 bonded sphere): a Threshold on ``kind`` shows the grains alone
+    (0-1) or hides the geogrid nodes, which are bodies too (so that ``id`` is the body index
+    and the contact file's point indices match) but are drawn by the geogrid's own file.
     With clumps in the scene, the members are the points, with ``clump_id`` (the clump's
     index, -1 for a free sphere) and ``clump_orientation`` (its clump's principal frame,
     w, x, y, z; the free spheres' own orientation); colour by ``clump_id`` to see grains.
@@ -174,6 +208,7 @@ def write_vtk_spheres(path: PathLike, scene, *, extra_point_data: Mapping[str, A
         "force": scene.forces,
         "orientation": scene.orientations,
         "id": np.arange(n, dtype=np.int64),
+        "kind": sphere_kinds(scene),
     }
     if getattr(scene, "num_clumps", 0):
         cid = np.asarray(scene.clump_ids, dtype=np.int64)
