@@ -14,6 +14,7 @@ from cpp_dem import _core
 from cpp_dem import measure
 from cpp_dem._core import Material, ParameterError
 from cpp_dem.build.packing import loose_cloud
+from cpp_dem.progress import Progress
 from cpp_dem.scene import Scene, TargetNotMetWarning
 
 
@@ -114,6 +115,7 @@ def drive_to_stresses(scene, walls, stresses, *, controller=None, tol: float = 0
     controller.enabled = True
     start = scene.step_count
     ok, ax, u = False, None, float("nan")
+    bar = Progress("servo stage")
     while scene.step_count - start < max_steps:
         scene.run(check_every)
         ok, ax, u = _stable(scene, walls, t, tol, unbalanced)
@@ -121,6 +123,9 @@ def drive_to_stresses(scene, walls, stresses, *, controller=None, tol: float = 0
             callback(scene)
         if ok:
             break
+        bar.update(None, f"step {scene.step_count - start} of at most {max_steps}, stresses "
+                         f"{', '.join(f'{x / 1e3:.4g}' for x in ax)} kPa (targets "
+                         f"{', '.join(f'{x / 1e3:.4g}' for x in t)}), unbalanced {u:.3g}")
     return StageResult(ok, scene.step_count - start, ax, float(ax.mean()), u,
                        measure.porosity(scene, walls), {"controller": controller})
 

@@ -42,6 +42,7 @@ from cpp_dem.measure import inertial
 from cpp_dem import measure
 from cpp_dem.protocols import prep
 from cpp_dem._core import Material, ParameterError
+from cpp_dem.progress import Progress
 from cpp_dem.build.geogrid import Geogrid
 from cpp_dem.build.packing import loose_cloud
 from cpp_dem.scene import ControllerLimitWarning, Scene
@@ -508,9 +509,13 @@ def pull(sample: PulloutSample, *, velocity: float, distance: float, record_ever
 
     take()
     k0 = sc.step_count
+    bar = Progress("pull-out")
     while rows[-1]["displacement"] < distance and sc.step_count - k0 < max_steps:
         sc.run(record_every)
-        take()
+        r = take()
+        bar.update(r["displacement"] / distance,
+                   f"{r['displacement'] * 1e3:.3g} of {distance * 1e3:.3g} mm, "
+                   f"pull force {r['pull_force']:.4g} N")
     return {k: np.array([r[k] for r in rows]) for k in rows[0]}
 
 

@@ -19,6 +19,7 @@ from cpp_dem import _core
 from cpp_dem.measure import inertial
 from cpp_dem import measure
 from cpp_dem.protocols import prep
+from cpp_dem.progress import Progress
 from cpp_dem.scene import Scene
 
 
@@ -146,8 +147,12 @@ def deviatoric_stage(sample: TriaxialSample, pressure: float, strain_rate: float
 
     row()
     steps = 0
+    bar = Progress("triaxial deviatoric stage")
     while rows[-1]["axial_strain"] < stop_strain and steps < max_steps:
         sc.run(record_every)
         steps += record_every
-        row()
+        r = row()
+        bar.update(r["axial_strain"] / stop_strain,
+                   f"axial strain {100 * r['axial_strain']:.3g} of {100 * stop_strain:.3g} %, "
+                   f"q {r['deviatoric_stress'] / 1e3:.4g} kPa")
     return {k: np.array([r[k] for r in rows]) for k in rows[0]}
