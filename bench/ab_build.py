@@ -120,6 +120,12 @@ def build_ref(ref: str, jobs: int) -> Path:
         shutil.rmtree(pkg)
     shutil.copytree(src / "cpp_dem" / "cpp_dem", pkg, symlinks=True)
     (pkg / so.name).symlink_to(so)
+    # the revision's other packages (the cases import them), where it has them
+    for other in ("geogrid_dem", "femcoupling"):
+        if (overlay / other).exists():
+            shutil.rmtree(overlay / other)
+        if (src / other).is_dir():
+            shutil.copytree(src / other, overlay / other, symlinks=True)
     return overlay
 
 
@@ -165,7 +171,10 @@ def make_scene(kind: str, n: int):
         # template) inside its ball, random seeded orientations; they settle under gravity.
         from clump_cost import template
 
-        from cpp_dem.build.clumps import random_orientations
+        try:  # the layout of the revision under test
+            from cpp_dem.build.clumps import random_orientations
+        except ImportError:  # revisions before the build/protocols/... layout
+            from cpp_dem.clumps import random_orientations
 
         tpl = template()
         scene.add_clumps(tpl, p.centers, random_orientations(len(p.radii), 1), material=m,
@@ -182,7 +191,10 @@ def pullout_scene(root: Path = ROOT):
     case), prepared; returns (scene, pull)."""
     import importlib.util
 
-    from cpp_dem.protocols import pullout
+    try:  # the layout of the revision under test
+        from cpp_dem.protocols import pullout
+    except ImportError:  # revisions before the build/protocols/... layout
+        from cpp_dem import pullout
 
     spec = importlib.util.spec_from_file_location("pullout_000", root / "cases" / "pullout_000.py")
     case = importlib.util.module_from_spec(spec)
