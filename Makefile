@@ -1,5 +1,5 @@
 # Two entry points (see README): `make demo` and `make test`. Both set everything up first.
-.PHONY: setup demo test bench clean
+.PHONY: setup demo test bench docs clean
 PY := .venv/bin/python
 
 setup:
@@ -18,6 +18,12 @@ test: setup
 
 bench: setup
 	$(PY) bench/throughput.py
+
+# The API reference of cpp_dem (with cpp_dem._core), femcoupling and geogrid_dem from their
+# docstrings (MkDocs + mkdocstrings, docs/api.md); a warning or a module that fails to import fails it.
+docs: setup
+	$(PY) -m mkdocs build --strict --clean
+	@echo "API reference: open build/docs/html/index.html"
 
 clean:
 	rm -rf build results .pytest_cache
