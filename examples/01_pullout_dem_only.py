@@ -34,6 +34,8 @@ ap.add_argument("--smoke", action="store_true", help="300 spheres, half-size box
 ap.add_argument("--out", type=Path, default=Path("results/examples/01_pullout_dem_only"))
 args = ap.parse_args()
 args.out.mkdir(parents=True, exist_ok=True)
+if args.smoke:
+    dem.set_num_threads(1)  # a small scene: on a shared machine a second thread mostly waits
 
 n, box, distance = (300, (0.5, 0.25, 0.25), 0.005) if args.smoke else (3000, (1.0, 0.5, 0.5), 0.05)
 stress, velocity = 25e3, 0.01     # confining stress on the top wall (Pa), pull velocity (m/s)

@@ -18,7 +18,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cpp_dem import measure
+from cpp_dem import measure, set_num_threads
 from cpp_dem.build.clump_mesh import shipped_templates
 from cpp_dem.build.clumps import bounding_volume_factor, clump_cloud
 from cpp_dem.protocols import prep, triaxial
@@ -33,6 +33,8 @@ ap.add_argument("--smoke", action="store_true", help="200 clumps, to 4 % axial s
 ap.add_argument("--out", type=Path, default=Path("results/examples/02_triaxial_clumps"))
 args = ap.parse_args()
 args.out.mkdir(parents=True, exist_ok=True)
+if args.smoke:
+    set_num_threads(1)  # a small scene: on a shared machine a second thread mostly waits
 
 n, rate, stop = (200, 0.5, 0.04) if args.smoke else (1000, 0.2, 0.10)  # -, 1/s, -
 pressure, young, friction = 75e3, 4.5e6, 32.0    # cell pressure Pa, grain E Pa, friction deg
