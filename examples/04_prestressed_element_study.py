@@ -11,8 +11,9 @@ alignment (grain contacts per metre, out-of-plane waviness), the uniformity of t
 force along the members and the displacement above against below the grid.
 
 Run:   .venv/bin/python examples/04_prestressed_element_study.py [--smoke] [--out DIR]
-       (--smoke: DEM only, given stresses, the standard grid form; the full run takes the
-       stresses from the FEM and runs both grid forms with 2000 clumps: hours)
+       (--smoke: DEM only, given stresses, the standard grid form, about a minute; the full
+       run takes the stresses from the FEM and runs both grid forms with 2000 clumps: up to
+       about four hours on one core, docs/prs_element_002.md)
 Writes (in --out): measures.csv and measures.png (RE against PRS), and in case/ the study's
 own outputs: report.md, summary.json, <grid>_<RE|PRS>_views.png, vtk/.
 """
