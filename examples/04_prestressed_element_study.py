@@ -30,7 +30,8 @@ OUTPUTS = ["measures.csv", "measures.png", "case/report.md"]
 
 ap = argparse.ArgumentParser(description=__doc__.splitlines()[1])
 ap.add_argument("--smoke", action="store_true", help="DEM only, standard grid, 150 clumps")
-ap.add_argument("--out", type=Path, default=Path("results/examples/04_prestressed_element"))
+ap.add_argument("--out", type=Path,
+                default=Path("results/examples/04_prestressed_element_study"))
 args = ap.parse_args()
 args.out.mkdir(parents=True, exist_ok=True)
 
