@@ -16,6 +16,10 @@ member radius, per record.
 
     .venv/bin/python bench/clump_vs_yade.py                      # default scene
     .venv/bin/python bench/clump_vs_yade.py --clumps 40 --out results/bench_runs/clump_vs_yade.json
+
+``--shear-kinematics yade`` runs cpp_dem with Yade's sphere–sphere shear kinematics
+(``Scene.shear_kinematics``; Yade's ``Ig2_Sphere_Sphere_ScGeom`` has avoidGranularRatcheting
+on by default), so that the two codes integrate the same contact law.
 """
 from __future__ import annotations
 
@@ -74,6 +78,7 @@ def build(args):
     sc.dt = args.dt
     sc.verlet_margin = args.verlet
     sc.clump_rotation = args.rotation
+    sc.shear_kinematics = args.shear_kinematics
     return sc, walls, tpl, (lo, hi)
 
 
@@ -162,6 +167,10 @@ def main() -> int:
     ap.add_argument("--rotation", choices=("fincham", "yade"), default="yade",
                     help="cpp_dem's clump rotation update: Yade's own variant (the same "
                          "arithmetic) or Fincham's second-order leapfrog (the default in cpp_dem)")
+    ap.add_argument("--shear-kinematics", choices=("contact_point", "yade"),
+                    default="contact_point",
+                    help="cpp_dem's sphere-sphere shear kinematics (Scene.shear_kinematics): its default, "
+                         "or Yade's avoidGranularRatcheting formula, which the Yade side uses")
     ap.add_argument("--yade", default="yade")
     ap.add_argument("--dump-contacts-at", type=int, default=0, help=argparse.SUPPRESS)
     ap.add_argument("--out", type=Path, default=None)
@@ -243,7 +252,7 @@ def main() -> int:
                       "bottom_force_ours_N": o["bottom_force"], "bottom_force_yade_N": y["bottom_force"],
                       "bottom_rel_diff": fb, "centre_diff_over_rbar": float(dc)})
     press = [t for t in table if t["step"] > args.settle and abs(t["top_force_yade_N"]) > 0]
-    summary = {"rotation": args.rotation, "clumps": args.clumps, "members": sc.num_bodies, "dt": args.dt,
+    summary = {"rotation": args.rotation, "shear_kinematics": args.shear_kinematics, "clumps": args.clumps, "members": sc.num_bodies, "dt": args.dt,
                "mass_rel_diff": mass_diff, "inertia_rel_diff": inertia_diff,
                "weight_N": float(m_ours.sum() * 9.81),
                "settle_bottom_rel_diff_max": max((t["bottom_rel_diff"] for t in table if args.settle // 2 <= t["step"] <= args.settle), default=float("nan")),

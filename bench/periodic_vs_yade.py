@@ -18,6 +18,11 @@ relative differences of sigma_zz, sigma_xx, p and q, each relative to |p| at tha
 
     .venv/bin/python bench/periodic_vs_yade.py --quick
     .venv/bin/python bench/periodic_vs_yade.py                 # n 500, 1e5 steps
+    .venv/bin/python bench/periodic_vs_yade.py --shear-kinematics yade
+
+``--shear-kinematics yade`` runs cpp_dem with Yade's sphere–sphere shear kinematics
+(``Scene.shear_kinematics``; Yade's ``Ig2_Sphere_Sphere_ScGeom`` has avoidGranularRatcheting
+on by default), so that the two codes integrate the same contact law.
 """
 
 from __future__ import annotations
@@ -68,6 +73,10 @@ def main(argv=None) -> int:
                     help="grain friction while the packing is grown, deg (0: dense)")
     ap.add_argument("--shear", action="store_true", help="pure shear in x-z instead")
     ap.add_argument("--quick", action="store_true", help="n 200, 10000 steps")
+    ap.add_argument("--shear-kinematics", choices=("contact_point", "yade"),
+                    default="contact_point",
+                    help="cpp_dem's sphere-sphere shear kinematics (Scene.shear_kinematics): its default, "
+                         "or Yade's avoidGranularRatcheting formula, which the Yade side uses")
     ap.add_argument("--yade", default="yade")
     ap.add_argument("--out", default="results/bench_runs/periodic_vs_yade.json")
     args = ap.parse_args(argv)
@@ -104,6 +113,7 @@ def main(argv=None) -> int:
     s.dt = dt
     s.verlet_margin = verlet
     s.mean_spin = False
+    s.shear_kinematics = args.shear_kinematics
     s.velocity_gradient = L
     ours = []
 
@@ -119,7 +129,8 @@ def main(argv=None) -> int:
         s.run(min(args.every, args.steps - s.step_count))
         record()
     ours_s = time.perf_counter() - t
-    log(f"cpp_dem: {args.steps} steps in {ours_s:.1f} s")
+    log(f"cpp_dem: {args.steps} steps in {ours_s:.1f} s (shear kinematics "
+        f"{args.shear_kinematics})")
 
     # ---- Yade ---------------------------------------------------------------------------
     cfg = {"hsize": h.tolist(), "velgrad": L.tolist(), "centres": centres.tolist(),
