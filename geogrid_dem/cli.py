@@ -279,6 +279,14 @@ def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | N
             _close_client(*box)
 
 
+def _dask_options(p: argparse.ArgumentParser, *, workers: str, threads: str) -> None:
+    """--workers, --scheduler and --threads of a command that runs cases on Dask."""
+    p.add_argument("--workers", type=int, default=2, help=workers)
+    p.add_argument("--scheduler", default=None,
+                   help="a running Dask scheduler: its address or its scheduler file")
+    p.add_argument("--threads", type=int, default=1, help=threads)
+
+
 def _parser() -> argparse.ArgumentParser:
     ap = argparse.ArgumentParser(
         prog="geogrid-dem", formatter_class=HelpFormatter,
@@ -303,11 +311,8 @@ def _parser() -> argparse.ArgumentParser:
                                     "gathers OUT/results.csv. Every row is checked against the "
                                     "case's flags before Dask starts.")
     sw.add_argument("file", type=Path, help="the sweep file (TOML)")
-    sw.add_argument("--workers", type=int, default=2, help="processes of the local Dask cluster")
-    sw.add_argument("--scheduler", default=None,
-                    help="a running Dask scheduler: its address or its scheduler file")
-    sw.add_argument("--threads", type=int, default=1,
-                    help="OpenMP threads per row; 0: OpenMP's default (every core)")
+    _dask_options(sw, workers="processes of the local Dask cluster",
+                  threads="OpenMP threads per row; 0: OpenMP's default (every core)")
     sw.add_argument("--max-rows", type=int, default=MAX_ROWS,
                     help="the largest table run; a larger one is refused with its size")
     cal = sub.add_parser("calibrate", help="fit the triaxial case's E, nu, phi to a curve",
@@ -318,12 +323,8 @@ def _parser() -> argparse.ArgumentParser:
     cal.add_argument("file", type=Path, help="the calibration file (TOML)")
     cal.add_argument("--out", type=Path, default=None,
                      help="results folder (default: the file's field 'out')")
-    cal.add_argument("--workers", type=int, default=2,
-                     help="processes of the local Dask cluster (0: run in this process)")
-    cal.add_argument("--scheduler", default=None,
-                     help="a running Dask scheduler: its address or its scheduler file")
-    cal.add_argument("--threads", type=int, default=1,
-                     help="OpenMP threads per triaxial run; the results do not depend on it "
+    _dask_options(cal, workers="processes of the local Dask cluster (0: run in this process)",
+                  threads="OpenMP threads per triaxial run; the results do not depend on it "
                           "or on the number of workers")
     return ap
 

@@ -18,10 +18,11 @@ default is empty) gets nothing added; any other gets ``(default: X)``.
 from __future__ import annotations
 
 import argparse
+import re
 
 from geogrid_dem.rundir import add_out_args, check_common_args
 
-__all__ = ["HelpFormatter", "apply_threads", "case_parser", "check_common_args"]
+__all__ = ["HelpFormatter", "apply_threads", "case_parser", "check_common_args", "parse_checked"]
 
 PRESETS = ("fast", "balanced", "accurate")
 
@@ -40,8 +41,8 @@ class HelpFormatter(argparse.HelpFormatter):
 
     def _get_help_string(self, action):
         text = action.help or ""
-        if "default" in text.lower() or "%(default)" in text:
-            return text
+        if re.search(r"\(default\b|\bdefault[:=]|%\(default\)", text, re.IGNORECASE):
+            return text  # the help names its default already
         d = action.default
         if d is None or d is False or d is argparse.SUPPRESS or (isinstance(d, str) and not d) \
                 or action.nargs == 0:
@@ -65,7 +66,7 @@ def case_parser(name: str, description: str, *, smoke: str, seed: int, threads: 
     ap.add_argument("--seed", type=int, default=seed, help="random seed of the packing")
     ap.add_argument("--threads", type=int, default=threads,
                     help="OpenMP threads of this run; 0: OpenMP's default (every core, or "
-                         f"OMP_NUM_THREADS); results do not depend on it (default: {threads})")
+                         "OMP_NUM_THREADS); results do not depend on it")
     if preset is not None:
         ap.add_argument("--preset", choices=PRESETS, default="",
                         help=f"speed-accuracy preset {preset} (docs/speed_accuracy.md)")
@@ -79,3 +80,11 @@ def apply_threads(threads: int) -> None:
         from cpp_dem import set_num_threads
 
         set_num_threads(threads)
+
+
+def parse_checked(ap: argparse.ArgumentParser, argv) -> argparse.Namespace:
+    """``ap.parse_args(argv)`` with the shared options checked (a negative ``--threads``, an
+    ``--out`` that cannot be written: ``ap.error`` naming the flag and the value)."""
+    a = ap.parse_args(argv)
+    check_common_args(ap, a)
+    return a

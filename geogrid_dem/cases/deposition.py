@@ -39,7 +39,7 @@ import numpy as np
 from cpp_dem.io.figures import save_figure
 from geogrid_dem.provenance import git_revision
 from geogrid_dem.cases import describe
-from geogrid_dem.options import apply_threads, case_parser, check_common_args
+from geogrid_dem.options import apply_threads, case_parser, parse_checked
 from geogrid_dem.rundir import begin_run, run_main
 import cpp_dem as dem
 from cpp_dem.measure import interior_porosity, slab_solid_volume, surface_height
@@ -414,8 +414,7 @@ def build_parser():
 
 def parse_args(argv=None) -> tuple[Params, Path]:
     ap = build_parser()
-    a = ap.parse_args(argv)
-    check_common_args(ap, a)
+    a = parse_checked(ap, argv)
     p = Params(**SMOKE) if a.smoke else Params()
     if a.n is not None:
         p.n = a.n

@@ -40,8 +40,8 @@ import numpy as np
 
 
 from cpp_dem.io.figures import save_figure
-from geogrid_dem.cases import describe
-from geogrid_dem.options import apply_threads, case_parser, check_common_args
+from geogrid_dem.cases import PULLOUT_PAPER, describe
+from geogrid_dem.options import apply_threads, case_parser, parse_checked
 from geogrid_dem.rundir import run_main
 import cpp_dem as dem  # noqa: E402
 from cpp_dem import presets  # noqa: E402
@@ -156,12 +156,13 @@ def run(p: Params, out: Path) -> dict:
 
         def before_pull(sample):
             pullout.apply_preset(sample, p.preset)
-    return run_case(sample, out, tag="pullout-000", meta={**asdict(p), "case": "000"},
+    return run_case(sample, out, tag="pullout-000",
+                    meta={**asdict(p), "case": "000", "study": PULLOUT_PAPER},
                     prep_kwargs={"porosity": p.porosity, "node_density_scale": nds},
                     velocity=p.velocity, distance=p.distance, record_every=p.record_every,
                     snapshot_displacements=snaps,
                     grain_density=p.unit_weight / geogrid.G_STANDARD, stress=p.pressure,
-                    title=f"000 pull-out, {grain_label(sample)}, "
+                    title=f"{PULLOUT_PAPER}: {grain_label(sample)}, "
                           f"{p.pressure / 1e3:g} kPa, {p.velocity:.4g} m/s", log=log,
                     before_pull=before_pull)
 
@@ -237,8 +238,7 @@ def build_parser():
 
 def parse_args(argv=None) -> tuple[Params, list[int], Path]:
     ap = build_parser()
-    a = ap.parse_args(argv)
-    check_common_args(ap, a)
+    a = parse_checked(ap, argv)
     p = Params(**SMOKE) if a.smoke else Params()
     counts = [p.spheres]
     if a.spheres is not None:

@@ -36,8 +36,8 @@ import numpy as np
 
 
 from cpp_dem.io.figures import save_figure
-from geogrid_dem.cases import describe
-from geogrid_dem.options import apply_threads, case_parser, check_common_args
+from geogrid_dem.cases import THESIS, describe
+from geogrid_dem.options import apply_threads, case_parser, parse_checked
 from geogrid_dem.rundir import run_main
 import cpp_dem as dem  # noqa: E402
 from cpp_dem.build import geogrid  # noqa: E402
@@ -153,13 +153,14 @@ def run(p: Params, out: Path) -> dict:
     log = make_logger(tag)
     sample = build(p)
     snaps = np.linspace(0, p.distance, p.snapshots + 1)[1:] if p.snapshots else []
-    return run_case(sample, out, tag="pullout-001", meta={**asdict(p), "case": "001"},
+    return run_case(sample, out, tag="pullout-001", meta={**asdict(p), "case": "001",
+                                                         "study": THESIS},
                     prep_kwargs={"porosity": None, "growth_stress": p.growth_stress,
                                  "max_expansion_strain": 1e-4},
                     velocity=p.velocity, distance=p.distance, record_every=p.record_every,
                     snapshot_displacements=snaps, grain_density=p.density,
                     stress=p.pressure,
-                    title=f"001 pull-out, {p.grid} grid, {grain_label(sample)}, "
+                    title=f"{THESIS}: pull-out, {p.grid} grid, {grain_label(sample)}, "
                           f"r = {p.radius * 1e3:g} mm, {p.pressure / 1e3:g} kPa", log=log)
 
 
@@ -220,8 +221,8 @@ def write_study(rows: list, out: Path) -> None:
         w = csv.DictWriter(f, fieldnames=list(rows[0]))
         w.writeheader()
         w.writerows(rows)
-    lines = ["| grid | r (mm) | P (kPa) | grains | pulled (mm) | mean F (N) | 001 T5.3 (N) | "
-             "CoV | 001 T5.4 | mean F, front row only (N) | wall time (s) | status |",
+    lines = ["| grid | r (mm) | P (kPa) | grains | pulled (mm) | mean F (N) | thesis T5.3 (N) | "
+             "CoV | thesis T5.4 | mean F, front row only (N) | wall time (s) | status |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         def f(v, fmt):
@@ -246,11 +247,11 @@ def write_study(rows: list, out: Path) -> None:
         ln = ax[0].plot(P, [r["mean_force_N"] for r in sel], "o-", label=lab)[0]
         ref = [r["mean_force_001_N"] for r in sel]
         if all(v is not None for v in ref):
-            ax[0].plot(P, ref, "x--", color=ln.get_color(), label=lab + " (001)")
+            ax[0].plot(P, ref, "x--", color=ln.get_color(), label=lab + " (thesis)")
         ax[1].plot(P, [r["cov_force"] for r in sel], "o-", color=ln.get_color(), label=lab)
         ref = [r["cov_001"] for r in sel]
         if all(v is not None for v in ref):
-            ax[1].plot(P, ref, "x--", color=ln.get_color(), label=lab + " (001)")
+            ax[1].plot(P, ref, "x--", color=ln.get_color(), label=lab + " (thesis)")
     ax[0].set_ylabel("mean pull-out force (N)")
     ax[1].set_ylabel("coefficient of variation (-)")
     for a in ax:
@@ -309,8 +310,7 @@ def build_parser():
 
 def parse_args(argv=None):
     ap = build_parser()
-    a = ap.parse_args(argv)
-    check_common_args(ap, a)
+    a = parse_checked(ap, argv)
     check_grains(ap, a.grains)
     p = Params(**SMOKE) if a.smoke else Params()
     radii = _floats("--radius", a.radius, ap) if a.radius else [p.radius]

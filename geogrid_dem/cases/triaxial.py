@@ -38,7 +38,7 @@ import numpy as np
 
 from cpp_dem.io.figures import save_figure
 from geogrid_dem.cases import describe
-from geogrid_dem.options import apply_threads, case_parser, check_common_args
+from geogrid_dem.options import apply_threads, case_parser, parse_checked
 from geogrid_dem.rundir import begin_run, end_run, run_main
 import cpp_dem as dem
 from cpp_dem.build import geogrid
@@ -614,8 +614,7 @@ def build_parser():
 
 def parse_args(argv=None) -> tuple[Params, Path]:
     ap = build_parser()
-    a = ap.parse_args(argv)
-    check_common_args(ap, a)
+    a = parse_checked(ap, argv)
     p = Params(**SMOKE) if a.smoke else Params()
     if a.n is not None:
         if a.n < 10:
