@@ -23,13 +23,15 @@ depend on how many workers there are or in which order the points finish. A poin
 ``OUT/runs/E..._nu..._phi...`` that holds ``triaxial.csv``, ``summary.json`` and a
 ``point.json`` with the same parameters is finished and reused (resume).
 
-**Optimiser.** A deterministic Nelder-Mead (no random numbers; standard coefficients 1, 2,
-1/2, 1/2) on u = the bounded parameters (log10 E, nu, phi) scaled to [0, 1] by the grid's
-bounds (points are clipped into the box), starting from the best grid point with the initial
-steps ``step`` in u toward the inside of the box. Evaluated parameters are rounded (E to
-100 Pa, nu to 1e-4, phi to 1e-3 deg) so that a point is one folder. It stops after ``maxfev``
-new evaluations or when the simplex is smaller than ``xatol`` in u and its misfits within
-``fatol``.
+**Optimiser.** The Nelder-Mead of ``scipy.optimize.minimize`` (deterministic: no random
+numbers; standard coefficients 1, 2, 1/2, 1/2) on u = the bounded parameters (log10 E, nu, phi)
+scaled to [0, 1] by the grid's bounds (``bounds``: SciPy clips every trial point into the box),
+starting from the best grid point with the initial simplex u0, u0 + ``step`` e_i (toward the
+inside of the box), whose points run at once. Evaluated parameters are rounded (E to 100 Pa, nu
+to 1e-4, phi to 1e-3 deg) so that a point is one folder, and a point's misfit is computed once
+(a point already run, in this call or an earlier one, is read from its folder). It stops after
+``maxfev`` evaluations beyond the initial simplex or when every vertex is within ``xatol`` of
+the best in u and every misfit within ``fatol`` of the best.
 """
 
 from __future__ import annotations
@@ -42,7 +44,7 @@ import os
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Any, Callable, Sequence
+from typing import Any, Callable, Hashable, Sequence
 
 import numpy as np
 
@@ -188,66 +190,88 @@ class Runner:
 
 # ---- the optimiser ----------------------------------------------------------------------------
 
-def nelder_mead(f: Callable[[np.ndarray], float], x0: np.ndarray, *, step: float = 0.15,
-                maxfev: int = 20, xatol: float = 0.01, fatol: float = 1e-4,
+def nelder_mead(f: Callable[[np.ndarray], float] | None, x0: Sequence[float], *,
+                step: float = 0.15, maxfev: int = 20, xatol: float = 0.01,
+                fatol: float = 1e-4,
                 batch: Callable[[list[np.ndarray]], list[float]] | None = None,
-                lo: float = 0.0, hi: float = 1.0) -> dict[str, Any]:
-    """Deterministic Nelder-Mead in the box [lo, hi]^n (points clipped into it). The initial
-    simplex is x0 and x0 +- step e_i (toward the inside of the box); `batch` evaluates a list
-    of points at once (the initial simplex, in parallel). Returns x, fun, nfev, history
-    (list of (x, f) in evaluation order) and the stop reason."""
+                key: Callable[[np.ndarray], Hashable] | None = None,
+                cache: dict | None = None, lo: float = 0.0,
+                hi: float = 1.0) -> dict[str, Any]:
+    """Nelder-Mead of ``scipy.optimize.minimize`` in the box [lo, hi]^n (SciPy clips every
+    trial point into it), deterministic: no random numbers, standard coefficients.
+
+    The initial simplex is x0 and x0 + step e_i, or x0 - step e_i where + would leave the
+    box. ``maxfev`` counts the evaluations after the initial simplex (SciPy's own limit is
+    maxfev + n + 1, never exceeded); the search stops earlier when every vertex is within
+    ``xatol`` of the best (max norm) and every misfit within ``fatol`` of the best.
+
+    ``f`` evaluates one point, ``batch`` a list of points at once (given alone, it serves for
+    single points too); the initial simplex goes to ``batch`` in one call (in parallel on
+    Dask). Values are memoised by ``key(x)`` (default: the exact coordinates) in ``cache``
+    (a dict, also passed back), so a point SciPy asks for again, or one that ``key`` maps to
+    a point already evaluated, is not evaluated again. Returns x and fun (the best point
+    evaluated), nfev (SciPy's evaluations, cached or not), new (the evaluations that called
+    f or batch), history (list of (x, f) in SciPy's order) and the stop reason ("converged"
+    or "maxfev")."""
+    from scipy.optimize import Bounds, minimize
+
+    if f is None and batch is None:
+        raise ValueError("nelder_mead: give f or batch")
+    if f is None:
+        f = lambda x: batch([x])[0]  # noqa: E731
+    keyf = key if key is not None else (lambda x: tuple(float(v) for v in x))
+    cache = {} if cache is None else cache
     x0 = np.clip(np.asarray(x0, float), lo, hi)
     n = len(x0)
-    history: list[tuple[np.ndarray, float]] = []
-
-    def ev(xs: list[np.ndarray]) -> list[float]:
-        xs = [np.clip(x, lo, hi) for x in xs]
-        fs = batch(xs) if batch is not None else [f(x) for x in xs]
-        history.extend(zip(xs, fs))
-        return fs
-
     simplex = [x0]
     for i in range(n):
         x = x0.copy()
         x[i] += step if x0[i] + step <= hi else -step
-        simplex.append(x)
-    fs = ev(simplex)
-    simplex = [np.clip(x, lo, hi) for x in simplex]
-    reason = "maxfev"
-    while len(history) < maxfev + 1 + n:  # the start and the initial steps are not counted
-        order = np.argsort(fs, kind="stable")
-        simplex = [simplex[k] for k in order]
-        fs = [fs[k] for k in order]
-        size = max(float(np.max(np.abs(x - simplex[0]))) for x in simplex[1:])
-        if size < xatol and fs[-1] - fs[0] < fatol:
-            reason = "converged"
-            break
-        c = np.mean(simplex[:-1], axis=0)
-        xr = np.clip(c + (c - simplex[-1]), lo, hi)
-        (fr,) = ev([xr])
-        if fs[0] <= fr < fs[-2]:
-            simplex[-1], fs[-1] = xr, fr
-        elif fr < fs[0]:
-            xe = np.clip(c + 2.0 * (c - simplex[-1]), lo, hi)
-            (fe,) = ev([xe])
-            simplex[-1], fs[-1] = (xe, fe) if fe < fr else (xr, fr)
-        else:
-            if fr < fs[-1]:  # outside contraction
-                xc = np.clip(c + 0.5 * (xr - c), lo, hi)
-            else:            # inside contraction
-                xc = np.clip(c + 0.5 * (simplex[-1] - c), lo, hi)
-            (fc,) = ev([xc])
-            if fc < min(fr, fs[-1]):
-                simplex[-1], fs[-1] = xc, fc
-            else:            # shrink toward the best
-                new = [simplex[0] + 0.5 * (x - simplex[0]) for x in simplex[1:]]
-                simplex = [simplex[0]] + [np.clip(x, lo, hi) for x in new]
-                fs = [fs[0]] + ev(simplex[1:])
-    k = int(np.argmin(fs))
-    best_h = min(range(len(history)), key=lambda j: (history[j][1], j))
-    x, fun = (simplex[k], fs[k]) if fs[k] <= history[best_h][1] else history[best_h]
-    return {"x": x, "fun": float(fun), "nfev": len(history), "history": history,
-            "reason": reason}
+        simplex.append(np.clip(x, lo, hi))
+    history: list[tuple[np.ndarray, float]] = []
+    new = [0]
+
+    todo = list({keyf(x): x for x in simplex if keyf(x) not in cache}.items())
+    if todo and batch is not None:
+        for (k, _), v in zip(todo, batch([x for _, x in todo])):
+            cache[k] = float(v)
+        new[0] += len(todo)
+
+    def fun(x: np.ndarray) -> float:
+        k = keyf(x)
+        if k not in cache:
+            cache[k] = float(f(x))
+            new[0] += 1
+        history.append((np.array(x, float), cache[k]))
+        return cache[k]
+
+    res = minimize(fun, x0, method="Nelder-Mead", bounds=Bounds(np.full(n, lo), np.full(n, hi)),
+                   options={"initial_simplex": np.array(simplex), "maxfev": maxfev + n + 1,
+                            "xatol": xatol, "fatol": fatol, "adaptive": False})
+    # SciPy's x is the best vertex of the last simplex; a point evaluated in an iteration that
+    # maxfev cut short is not in it, so the best is taken over every evaluation (first wins).
+    best = min(range(len(history)), key=lambda j: (history[j][1], j))
+    return {"x": history[best][0], "fun": history[best][1], "nfev": int(res.nfev),
+            "new": new[0], "history": history,
+            "reason": "converged" if res.status == 0 else "maxfev"}
+
+
+def scaling(grid: dict[str, list[float]]) -> tuple[Callable, Callable]:
+    """(to_p, to_u) for the optimiser's box: u = (log10 E, nu, phi) scaled to [0, 1] by the
+    smallest and largest value of each of the grid's lists (E in Pa, phi in deg); to_p(u)
+    gives the rounded point (E, nu, phi) (one folder), to_u(p) its u."""
+    lo = np.array([math.log10(min(grid["young"])), min(grid["poisson"]), min(grid["phi"])])
+    hi = np.array([math.log10(max(grid["young"])), max(grid["poisson"]), max(grid["phi"])])
+    span = np.where(hi > lo, hi - lo, 1.0)
+
+    def to_p(u) -> tuple[float, float, float]:
+        x = lo + np.asarray(u, float) * span
+        return rounded((10.0 ** x[0], x[1], x[2]))
+
+    def to_u(p) -> np.ndarray:
+        return (np.array([math.log10(p[0]), p[1], p[2]]) - lo) / span
+
+    return to_p, to_u
 
 
 # ---- the whole calibration ---------------------------------------------------------------------
@@ -387,18 +411,7 @@ def calibrate(cfg: Config, *, client=None, threads: int = 1,
         f"phi = {gbest_p[2]:g} deg, misfit {gbest['misfit']:.4g}")
 
     # -- optimiser in u = (log10 E, nu, phi) scaled by the grid's bounds
-    lo = np.array([math.log10(min(cfg.grid["young"])), min(cfg.grid["poisson"]),
-                   min(cfg.grid["phi"])])
-    hi = np.array([math.log10(max(cfg.grid["young"])), max(cfg.grid["poisson"]),
-                   max(cfg.grid["phi"])])
-    span = np.where(hi > lo, hi - lo, 1.0)
-
-    def to_p(u):
-        x = lo + np.asarray(u) * span
-        return rounded((10.0 ** x[0], x[1], x[2]))
-
-    def to_u(p):
-        return (np.array([math.log10(p[0]), p[1], p[2]]) - lo) / span
+    to_p, to_u = scaling(cfg.grid)
 
     def batch(us):
         ps = [to_p(u) for u in us]
@@ -407,7 +420,7 @@ def calibrate(cfg: Config, *, client=None, threads: int = 1,
 
     t0 = time.perf_counter()
     res = nelder_mead(None, to_u(gbest_p), step=cfg.step, maxfev=cfg.maxfev, xatol=cfg.xatol,
-                      fatol=cfg.fatol, batch=batch) if cfg.maxfev > 0 else None
+                      fatol=cfg.fatol, batch=batch, key=to_p) if cfg.maxfev > 0 else None
     t_opt = time.perf_counter() - t0
     opt_rows = []
     if res is not None:
@@ -431,8 +444,10 @@ def calibrate(cfg: Config, *, client=None, threads: int = 1,
                   {"young_Pa": truth[0], "poisson": truth[1], "phi_deg": truth[2]}),
         "grid": {k: cfg.grid[k] for k in KEYS}, "grid_points": len(grid),
         "optimiser": None if res is None else {
-            "method": "Nelder-Mead (deterministic) on (log10 E, nu, phi) scaled to [0, 1]",
-            "evaluations": res["nfev"], "stop": res["reason"], "maxfev": cfg.maxfev},
+            "method": "Nelder-Mead of scipy.optimize.minimize on (log10 E, nu, phi) scaled "
+                      "to [0, 1]",
+            "evaluations": res["nfev"], "distinct_points": res["new"], "stop": res["reason"],
+            "maxfev": cfg.maxfev, "step": cfg.step, "xatol": cfg.xatol, "fatol": cfg.fatol},
         "misfit_definition": "sqrt(w_q mean((q-q_ref)^2)/max|q_ref|^2 + (1-w_q) "
                              "mean((ev-ev_ref)^2)/max|ev_ref|^2) on a common eps_a grid",
         "misfit_points": cfg.points, "w_q": cfg.w_q, "fixed": cfg.fixed, "threads": threads,
