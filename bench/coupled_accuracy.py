@@ -47,6 +47,7 @@ sys.path.insert(0, str(ROOT / "cases"))
 sys.path.insert(0, str(ROOT / "bench"))
 
 import prs_element as case  # noqa: E402
+from femcoupling.drivers import prs_element as drv  # noqa: E402
 from _report import emit, markdown_table, pct  # noqa: E402
 
 
@@ -78,7 +79,7 @@ def fem_handover(p: case.Params, variant: str) -> dict:
     from femcoupling.twoway import one_way
 
     c0 = time.process_time()
-    m = case.fem_model(p, variant == "PRS")
+    m = drv.fem_model(p, variant == "PRS")
     c1 = time.process_time()
     ini, fin = one_way(m, regions=["element"], load=footing_load(p))
     c2 = time.process_time()
@@ -137,10 +138,10 @@ def two_way_run(p: case.Params, tol: float, max_iterations: int, workdir: Path, 
     from femcoupling.twoway import two_way
 
     c0 = time.process_time()
-    m = case.fem_model(p, False)
+    m = drv.fem_model(p, False)
     state0 = m.save_state()
     load = Timed(footing_load(p))
-    runner = Timed(case._Runner(p, workdir, "RE"))
+    runner = Timed(drv._Runner(p, workdir, "RE"))
     m.restore_state(state0)
     tw = two_way(m, regions=["element"], load=load, element_runner=runner, tol=tol,
                  max_iterations=max_iterations, log=log)
@@ -225,7 +226,7 @@ def fem_time_study(holds: list, out, log) -> list:
     for hold in holds:
         p = smoke_params(hold_steps=hold)
         c0 = time.process_time()
-        m = case.fem_model(p, False)
+        m = drv.fem_model(p, False)
         load = Timed(footing_load(p))
         ini, fin = one_way(m, regions=["element"], load=load)
         c_fem = time.process_time() - c0

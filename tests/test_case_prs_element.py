@@ -211,13 +211,14 @@ def test_two_way_keeps_the_prepared_element_between_iterations(tmp_path, capsys)
     as a fresh element would."""
     from dataclasses import asdict
 
-    from geogrid_dem.cases import prs_element as pe
+    from femcoupling.drivers.prs_element import element_runner
     from femcoupling.handover import fem_to_dem
+    from geogrid_dem.cases import prs_element as pe
 
     p = pe.Params(**pe.SMOKE)
     ini = fem_to_dem(-np.diag([2.3e3, 2.3e3, 5.4e3]))
-    runs = [pe.element_runner(asdict(p), str(tmp_path), "element_RE", ini,
-                              fem_to_dem(-np.diag([10e3, 9e3, s]))) for s in (20e3, 20e3)]
+    runs = [element_runner(type(p), asdict(p), str(tmp_path), "element_RE", ini,
+                           fem_to_dem(-np.diag([10e3, 9e3, s]))) for s in (20e3, 20e3)]
     log = capsys.readouterr().out
     assert log.count("restored from the cache") == 1
     assert log.count("grown to") == 1  # one preparation

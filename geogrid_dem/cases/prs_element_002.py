@@ -45,6 +45,8 @@ import numpy as np
 
 from geogrid_dem.cases import prs_element as _fem_case
 from cpp_dem.elements.box import run_element
+from femcoupling.drivers.prs_element import run_fem
+from geogrid_dem.cases import PRESTRESS_PAPER
 from geogrid_dem.rundir import begin_run, end_run, run_main
 
 GRIDS = ("detailed", "standard")
@@ -108,7 +110,8 @@ def findings(elements: dict) -> list[dict]:
 
 def write_report(out: Path, summary: dict) -> None:
     el = summary["elements"]
-    lines = ["# 002 element (clumps, woven grid): report", "",
+    lines = ["# The prestressed reinforced-soil element (clumps, woven grid): report", "",
+             f'Source: "{PRESTRESS_PAPER}".', "",
              f"Mode: {summary['mode']}. Stresses in kPa, compression positive.", ""]
     rows = [("grains", lambda e: f"{e['num_grains']}"),
             ("walls reached (kPa)", lambda e: str(np.round(np.array(e["stress_final_pa"]) / 1e3,
@@ -141,7 +144,7 @@ def write_report(out: Path, summary: dict) -> None:
     lines += ["| | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
     for label, f in rows:
         lines.append(f"| {label} | " + " | ".join(f(el[n]) for n in names) + " |")
-    lines += ["", "## 002's findings", ""]
+    lines += ["", "## The paper's findings", ""]
     for f in summary["findings"]:
         lines.append(f"- {f['grid']}: {f['finding']}: {f['here']}: "
                      f"{'agrees' if f['agrees'] else 'does NOT agree'}.")
@@ -178,7 +181,7 @@ def run(p: Params, out: Path) -> dict:
                 # The FEM layer has the grid form's tensile stiffness (and T_p for PRS).
                 fem_out = out / f"fem_{g}"
                 fem_out.mkdir(parents=True, exist_ok=True)
-                ini, fin, _m, _s0, _load, info = _fem_case.run_fem(
+                ini, fin, _m, _s0, _load, info = run_fem(
                     replace(p, geogrid=f"woven-{g}"), fem_out, v)
                 info.update(targets_initial_pa=ini.normal_pa.tolist(),
                             targets_final_pa=fin.normal_pa.tolist(),
@@ -212,7 +215,7 @@ def run(p: Params, out: Path) -> dict:
     end_run(out)
     for f in summary["findings"]:
         log(f"{f['grid']}: {f['finding']}: {f['here']} "
-            f"({'agrees' if f['agrees'] else 'does NOT agree'} with 002)")
+            f"({'agrees' if f['agrees'] else 'does NOT agree'} with the paper)")
     log(f"done in {summary['wall_time_total_s']:.1f} s; report in {out / 'report.md'}")
     return summary
 

@@ -1,0 +1,479 @@
+"""The FEM side of the reinforced-soil element case (``geogrid-dem run prs-element``, and
+``prs-element-002`` which builds on it): the FEM model of the structure, one-way and two-way
+runs of its element region, the region's material as a DEM element inside the FEM's Newton
+(hierarchical, one element or one per cell), and the calibration of the FEM soil to the
+element's grains.
+
+``p`` is the case's parameter object: a ``cpp_dem.elements.box.ElementParams`` with the FEM
+fields of ``geogrid_dem.cases.prs_element.Params`` (structure, soil, layers, coupling). The
+element itself is ``cpp_dem.elements.box``'s; this module only drives it. SI units; FEM
+stresses tension positive, DEM stresses compression positive.
+"""
+
+from __future__ import annotations
+
+import functools
+import json
+import math
+import time
+from dataclasses import asdict, replace
+from pathlib import Path
+
+import numpy as np
+
+from cpp_dem.elements import box as _element
+from cpp_dem.elements.box import ElementParams, grid_stiffness_per_metre
+from cpp_dem.io.figures import save_figure
+
+
+def log(msg: str) -> None:
+    print(f"[prs_element] {msg}", flush=True)
+
+
+def apply_threads(threads: int) -> None:
+    """OpenMP threads of this process: n > 0, or 0 for OpenMP's default (every core)."""
+    if threads > 0:
+        from cpp_dem import set_num_threads
+
+        set_num_threads(threads)
+
+
+def make_element(p: ElementParams, mean_stress: float, prestressed: bool):
+    """The DEM element of :mod:`cpp_dem.elements.box` with this case's parameters and log."""
+    return _element.make_element(p, mean_stress, prestressed, log=log)
+
+
+def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec) -> dict:
+    return _element.servo_stage(sample, grid, targets, stage, p, rec, log=log)
+
+
+def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: str, out: Path,
+                cache: dict | None = None, grid_tension: list | None = None,
+                probe: float = 0.0) -> dict:
+    """:func:`cpp_dem.elements.box.run_element` with this case's log."""
+    return _element.run_element(p, targets, prestressed=prestressed, label=label, out=out,
+                                log=log, cache=cache, grid_tension=grid_tension, probe=probe)
+
+
+def handed_tension(p: ElementParams, targets: list, label: str) -> list | None:
+    """The geogrid tensions (N/m) handed to the element's grid ends for these WallTargets
+    (``grid_tension_n_per_m``, the FEM layer across the region): None when
+    ``p.grid_handover`` is off or the FEM has no layer there. A layer in compression is handed
+    over as 0 (free ends: a geogrid carries no compression), and the log says so."""
+    if not p.grid_handover or any(t.grid_tension_n_per_m is None for t in targets):
+        return None
+    ts = [float(t.grid_tension_n_per_m) for t in targets]
+    if min(ts) < 0:
+        log(f"{label}: the FEM layer is in compression across the region "
+            f"({np.round(np.array(ts) / 1e3, 4).tolist()} kN/m): a geogrid carries none, so "
+            "its ends are left free where it is")
+    return [max(t, 0.0) for t in ts]
+
+
+#: The two-way loop's elements, kept between its iterations: per (parameters, region) the
+#: element prepared and servoed to the initial targets, which every iteration shares. (The
+#: case's loop has one region, which ``two_way`` runs in the variant's process.)
+_ELEMENTS: dict = {}
+
+
+def element_runner(cls, p_dict: dict, out: str, name: str, initial, final):
+    """Picklable two-way runner: the element (parameters ``cls(**p_dict)``, ``cls`` the
+    case's parameter class) from the initial to the final WallTargets. In
+    one process the element at the initial targets is prepared once and restored for the
+    next iterations (``_ELEMENTS``)."""
+    from femcoupling.twoway import ElementResponse
+
+    p = cls(**p_dict)
+    prestressed = name.endswith("PRS")
+    cache = _ELEMENTS.setdefault((json.dumps(p_dict, sort_keys=True, default=str), out, name),
+                                 {})
+    s = run_element(p, [initial.normal_pa, final.normal_pa], prestressed=prestressed,
+                    label=f"twoway_{name}", out=Path(out), cache=cache,
+                    grid_tension=handed_tension(p, [initial, final], f"twoway_{name}"),
+                    probe=p.tangent_probe)
+    ds = np.subtract(s["stress_final_pa"], s["stress_initial_pa"])
+    tangent = {} if "tangent_voigt_pa" not in s else {
+        "tangent_voigt_pa": np.array(s["tangent_voigt_pa"]),
+        # (the walls' increments: normal only; the tangent's shear stays the probes')
+        "strain_increment_tensor": np.diag(s["strain_increment"]),
+        "stress_increment_tensor": np.diag(ds), "tangent_probes": s["tangent_probes"]}
+    return ElementResponse(stress_initial_pa=np.array(s["stress_initial_pa"]),
+                           stress_final_pa=np.array(s["stress_final_pa"]),
+                           strain_increment=np.array(s["strain_increment"]),
+                           info={"hold_max_rel_error": s["hold_max_rel_error"],
+                                 "stress_scatter_pa": np.array(s["stress_scatter_pa"]),
+                                 **tangent})
+
+
+class _Runner:
+    """Binds the case parameters to :func:`element_runner` (picklable)."""
+
+    def __init__(self, p: ElementParams, out: Path, variant: str):
+        self.cls, self.p, self.out, self.variant = type(p), asdict(p), str(out), variant
+
+    def __call__(self, name, initial, final):
+        return element_runner(self.cls, self.p, self.out, f"{name}_{self.variant}", initial,
+                              final)
+
+
+# ---- FEM structure ---------------------------------------------------------------------------
+
+
+def fem_body(p: ElementParams):
+    from femcoupling.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
+
+    h = p.fem_height
+    layers = tuple(GeogridLayer(z_m=h - d, x_min_m=0.0, x_max_m=p.layer_length,
+                                thickness_m=p.layer_thickness, name=f"geogrid_{k}")
+                   for k, d in enumerate(p.layer_depths))
+    region = ElementRegion("element", (p.region_x, h - p.layer_depths[0]), p.edge)
+    return ReinforcedSoilBody(width_m=p.fem_width, height_m=h, footing_half_width_m=p.footing_b,
+                              layers=layers, regions=(region,), mesh_size_m=p.mesh_size,
+                              fine_size_m=p.fine_size, fine_radius_m=2 * p.footing_b)
+
+
+def periodic_options(p: ElementParams) -> dict:
+    """``DemElement.periodic`` keywords for a periodic element of this case's grains: their
+    material and radii (the mean radius of ``p.n`` grains filling the element's cube at a
+    solid fraction of 0.6)."""
+    from cpp_dem.scene import linear_material
+
+    r_mean = (0.6 * p.edge**3 / (p.n * 4.0 / 3.0 * math.pi)) ** (1.0 / 3.0)
+    mat = linear_material(density=p.density, young=p.young, poisson=p.poisson,
+                          friction_angle_deg=p.friction_deg)
+    return {"material": mat, "radius_mean": r_mean, "radius_spread": p.radius_spread}
+
+
+def periodic_runner(p: ElementParams, out: Path, variant: str):
+    """A dense periodic element of this case's grains for the region
+    (``femcoupling.region.PeriodicRegionElement``, kept in ``out/region_elements/<variant>``)."""
+    from femcoupling.region import PeriodicRegionElement
+
+    return PeriodicRegionElement(n=p.n, seed=p.seed, prep_friction_deg=0.0, tol=0.02,
+                                 unbalanced=1e-2, options=periodic_options(p),
+                                 cache_dir=str(out / "region_elements" / variant))
+
+
+def run_hierarchical(p: ElementParams, out: Path, variant: str, m, load) -> dict:
+    """The load stage with the region's material a periodic DEM element inside the FEM's
+    Newton (``SoilModel.set_region_element``, ``femcoupling.region.DemRegionMaterial``),
+    from the model's current (initial) state; with ``p.cell_elements`` an element per cell
+    (``run_cell_elements``). Returns the record of the summary."""
+    from femcoupling.region import DemRegionMaterial
+
+    if p.cell_elements:
+        return run_cell_elements(p, out, variant, m, load)
+    t0 = time.perf_counter()
+    try:
+        mat = DemRegionMaterial.prepared("element", m.region_stress("element"),
+                                         periodic_runner(p, out, variant),
+                                         records=out / f"region_element_{variant}.h5")
+    except RuntimeError as exc:  # (a periodic element that cannot start)
+        raise SystemExit(f"[prs_element] hierarchical {variant}: {exc}; try --calibrate"
+                         ) from exc
+    m.set_region_element("element", mat)
+    log(f"hierarchical {variant}: the region's material is a periodic element of {p.n} "
+        f"grains, prepared at {np.round(-np.diag(mat.element.stress()) / 1e3, 2).tolist()} kPa"
+        f" ({time.perf_counter() - t0:.1f} s)")
+    n0 = len(m.history)
+    load(m)
+    steps = m.history[n0:]
+    de = mat.strain_since_start()
+    log(f"hierarchical {variant}: {len(steps)} load steps, Newton iterations "
+        f"{[r.newton_iterations for r in steps]}, {mat.calls} element runs "
+        f"({mat.dem_s:.1f} s of DEM)")
+    return {"newton_iterations": [int(r.newton_iterations) for r in steps],
+            "converged_on": [r.converged_on for r in steps], "warnings": list(m.warnings),
+            "element_runs": mat.calls, "dem_s": mat.dem_s,
+            "element_strain_increment": (-np.diag(de)).tolist(),
+            "element_shear_strain_increment": [-de[1, 2], -de[0, 2], -de[0, 1]],  # yz xz xy
+            "element_stress_final_pa": (-np.diag(mat.element.stress())).tolist(),
+            "wall_time_s": time.perf_counter() - t0}
+
+
+def run_cell_elements(p: ElementParams, out: Path, variant: str, m, load) -> dict:
+    """The load stage with every cell of the element region its own dense periodic element
+    (``SoilModel.set_cell_elements``; ``femcoupling.region.PoolRegionMaterials`` on
+    ``p.workers`` Dask workers, element k packed with seed ``p.seed + k`` at its cell's
+    stress, ``p.cell_grains`` grains each), from the model's current (initial) state.
+    Returns the record of the summary."""
+    from dataclasses import replace
+
+    from femcoupling.region import PoolRegionMaterials
+
+    t0 = time.perf_counter()
+    cells = m.cell_stresses("element")
+    runner = replace(periodic_runner(replace(p, n=p.cell_grains or p.n), out, variant),
+                     cache_dir=None)  # (kept in the workers' memory)
+    log(f"hierarchical {variant}: preparing {len(cells)} cell elements of {runner.n} grains "
+        f"on {p.workers} Dask worker(s)")
+    try:
+        group = PoolRegionMaterials.build(cells, runner, workers=p.workers,
+                                          distinct_seeds=True,
+                                          records=out / f"region_element_{variant}.h5")
+    except RuntimeError as exc:  # (a cell's periodic element that cannot start)
+        raise SystemExit(f"[prs_element] hierarchical {variant}, cell elements: {exc}; try "
+                         "--calibrate or more --cell-grains") from exc
+    try:
+        m.set_cell_elements("element", group)
+        t_prep = time.perf_counter() - t0
+        log(f"hierarchical {variant}: {len(cells)} cell elements prepared ({t_prep:.1f} s)")
+        n0 = len(m.history)
+        load(m)
+        steps = m.history[n0:]
+        strains = np.array([-np.diag(e) for e in group.strains()])  # compression +
+        stresses = np.array([-np.diag(s) for s in group.stresses()])
+        vol = m.cell_volume[[int(k.rsplit("/", 1)[1]) for k in group.names]]
+    finally:
+        group.close()
+    log(f"hierarchical {variant}: {len(steps)} load steps, Newton iterations "
+        f"{[r.newton_iterations for r in steps]}, {group.calls} evaluations of the "
+        f"{len(cells)} elements ({group.dem_s:.1f} s of DEM); the cells' strain increment z "
+        f"{strains[:, 2].min():.3g} to {strains[:, 2].max():.3g}")
+    return {"newton_iterations": [int(r.newton_iterations) for r in steps],
+            "converged_on": [r.converged_on for r in steps], "warnings": list(m.warnings),
+            "element_runs": group.calls, "dem_s": group.dem_s, "cells": len(cells),
+            # their volume mean: the region's (each cell's element strains as its cell)
+            "element_strain_increment": (vol @ strains / vol.sum()).tolist(),
+            "cell_grains": runner.n, "preparation_s": t_prep,
+            "cell_strain_increments": strains.tolist(),
+            "cell_stresses_final_pa": stresses.tolist(),
+            "wall_time_s": time.perf_counter() - t0}
+
+
+def loop_runner(p: ElementParams, out: Path, variant: str):
+    """The two-way loop's element runner (``p.two_way_element``): the case's element, or a
+    dense periodic element of its grains (``femcoupling.region.PeriodicRegionElement``, kept
+    between iterations in ``out/region_elements/<variant>``)."""
+    if p.two_way_element == "walls":
+        return _Runner(p, out, variant)
+    return periodic_runner(p, out, variant)
+
+
+def calibrate_soil(p: ElementParams, out: Path) -> tuple[ElementParams, dict]:
+    """Scales that agree (issue 18): the FEM soil fitted to a DEM element along the element
+    region's stress path (``femcoupling.calibration.fit_along_path``). The region's path is
+    the RE one-way FEM's (initial -> loaded); the fitting element is periodic, soil only,
+    with this case's grains (material, size, count), prepared dense (grown frictionless: the
+    case's loose growth friction left a cell that could not hold the region's initial
+    stress). The fill's apparent cohesion (``soil_cohesion``) is kept as given; E, nu and phi
+    are fitted. Returns the parameters with the fitted soil and the record."""
+    from femcoupling.calibration import fit_along_path
+
+    t0 = time.perf_counter()
+    ini, fin, _m, _s0, _load, _info = run_fem(p, out, "RE")
+    fit = fit_along_path(ini.fem_stress_pa, fin.fem_stress_pa, n=p.n, seed=p.seed,
+                         prep_friction_deg=0.0, tol=0.02, unbalanced=1e-2,
+                         cohesion_pa=p.soil_cohesion, options=periodic_options(p), log=log)
+    log("calibration: " + fit.message)
+    m = fit.material
+    rec = {"young_pa": m.young_pa, "poisson": m.poisson, "friction_deg": m.friction_deg,
+           "cohesion_pa": m.cohesion_pa, "strength_reached": fit.strength_reached,
+           "path_t_reached": float(fit.t[-1]), "message": fit.message,
+           "before": {"young_pa": p.soil_young, "poisson": p.soil_poisson,
+                      "cohesion_pa": p.soil_cohesion, "friction_deg": p.soil_friction},
+           "wall_time_s": time.perf_counter() - t0}
+    return replace(p, soil_young=m.young_pa, soil_poisson=m.poisson,
+                   soil_friction=m.friction_deg), rec
+
+
+def fem_model(p: ElementParams, prestressed: bool):
+    """The FEM model of the structure in its initial state (geostatic, then the prestress)."""
+    from femcoupling.elastoplastic import SoilModel
+    from femcoupling.materials import DruckerPrager, GeogridLayerMaterial
+
+    J = grid_stiffness_per_metre(p)
+    layer = GeogridLayerMaterial(axial_stiffness_n_per_m=J,
+                                 prestress_n_per_m=p.prestress if prestressed else 0.0)
+    soil = DruckerPrager(young_pa=p.soil_young, poisson=p.soil_poisson,
+                         cohesion_pa=p.soil_cohesion, friction_deg=p.soil_friction)
+    m = SoilModel(fem_body(p), soil=soil, layers=[layer] * len(p.layer_depths),
+                  unit_weight_n_m3=p.unit_weight, newton_rtol=1e-6)
+    m.set_geostatic()
+    if prestressed:
+        m.apply_prestress(steps=2)
+    return m
+
+
+def plot_fem(m, png: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    from matplotlib.collections import PolyCollection
+
+    from femcoupling.materials import mandel_to_tensor
+
+    g = m.mesh.geometry
+    cells = g.dofmaps[0][: m.n_owned]
+    xy = g.x[:, :2][cells[:, :3]]
+    szz = mandel_to_tensor(m.cell_mean_stress()[: m.n_owned])[:, 2, 2]
+    fig, ax = plt.subplots(figsize=(9, 5))
+    pc = PolyCollection(xy, array=szz / 1e3, cmap="viridis", edgecolors="none")
+    ax.add_collection(pc)
+    fig.colorbar(pc, ax=ax, label="sigma_zz (kPa, tension +)")
+    tags = m.cell_tag_of[: m.n_owned]
+    for tag, col in ((200, "red"),):
+        sel = tags == tag
+        if sel.any():
+            ax.add_collection(PolyCollection(xy[sel], facecolors="none", edgecolors=col, lw=0.3))
+    for k in range(len(m.layers)):
+        sel = tags == 100 + k
+        ax.add_collection(PolyCollection(xy[sel], facecolors="white", edgecolors="white",
+                                         lw=0.2))
+    r = m.body.regions[0]
+    s = r.size_m / 2
+    ax.plot([r.center_m[0] - s, r.center_m[0] + s, r.center_m[0] + s, r.center_m[0] - s,
+             r.center_m[0] - s], [r.center_m[1] - s, r.center_m[1] - s, r.center_m[1] + s,
+                                  r.center_m[1] + s, r.center_m[1] - s], "r-", lw=1.5,
+            label="DEM element region")
+    ax.set_xlim(0, min(m.body.width_m, 2.5))
+    ax.set_ylim(m.body.height_m - 1.5, m.body.height_m)
+    ax.set_aspect("equal")
+    ax.set_xlabel("x (m)")
+    ax.set_ylabel("z (m)")
+    ax.legend(loc="lower right")
+    ax.set_title(title)
+    fig.tight_layout()
+    save_figure(fig, png)
+    plt.close(fig)
+
+
+def run_fem(p: ElementParams, out: Path, variant: str) -> tuple:
+    """FEM of the structure for RE or PRS; returns (initial, final) WallTargets, the model,
+    and numbers for the report."""
+    from femcoupling.twoway import one_way
+
+    t0 = time.perf_counter()
+    prestressed = variant == "PRS"
+    m = fem_model(p, prestressed)
+    ncell = m.mesh.topology.index_map(m.tdim).size_global
+    log(f"FEM {variant}: {ncell} cells (P2, plane strain), K0 state"
+        + (f", prestress {p.prestress / 1e3:g} kN/m equilibrated: upper layer force "
+           f"{m.layer_force_n_per_m(0) / 1e3:.3f} kN/m" if prestressed else ""))
+    state0 = m.save_state()
+    strain0 = m.region_strain("element")
+
+    def load(model, xdmf: Path | None = None):
+        """The footing load stage; with ``xdmf`` the state before it (time 0) and after each
+        load step (time = load factor) are written there (ParaView: a time series)."""
+        if xdmf is not None:
+            model.write_xdmf(xdmf)
+
+        def step(r) -> None:
+            log(f"FEM {variant}: footing {r.footing_pressure_pa / 1e3:.1f} kPa, settlement "
+                f"{1e3 * r.footing_settlement_m:.2f} mm, {r.newton_iterations} Newton its, "
+                f"{r.plastic_points} plastic points")
+            if xdmf is not None:
+                model.write_xdmf(xdmf, time=r.load_factor, append=True)
+
+        return model.load_footing(pressure_pa=p.footing_pressure, steps=p.fem_steps,
+                                  callback=step)
+
+    xdmf = out / f"fem_{variant}.xdmf"
+    initial, final = one_way(m, regions=["element"], load=functools.partial(load, xdmf=xdmf))
+    ini, fin = initial["element"], final["element"]
+    log(f"FEM {variant} handover, initial: {ini.report()}")
+    log(f"FEM {variant} handover, loaded:  {fin.report()}")
+    plot_fem(m, out / f"fem_{variant}.png", f"FEM {variant}: sigma_zz under "
+             f"{p.footing_pressure / 1e3:g} kPa footing")
+    info = {"cells": int(ncell), **fem_state(m),
+            "grid_tension_n_per_m": [ini.grid_tension_n_per_m, fin.grid_tension_n_per_m],
+            "strain_increment": (-np.diag(m.region_strain("element") - strain0)).tolist(),
+            "wall_time_s": time.perf_counter() - t0}
+    return ini, fin, m, state0, load, info
+
+
+def fem_state(m) -> dict:
+    """The FEM numbers of the report: settlement, upper layer force (everywhere and under the
+    footing)."""
+    return {"settlement_m": m.footing_settlement_m(),
+            "layer_force_upper_n_per_m": m.layer_force_n_per_m(0),
+            "layer_force_upper_under_footing_n_per_m":
+                m.layer_force_n_per_m(0, x_range_m=(0.0, m.body.footing_half_width_m))}
+
+
+def coupled_fem_state(m, info: dict, ini, fin, state: str, strain_increment) -> None:
+    """The report and the summary (``info``) show the coupled FEM state (two-way or
+    hierarchical): its numbers, the final targets, and the region's normal strain increment
+    (compression positive). (Its XDMF series is written by the coupled load stage.)"""
+    info.update(fem_state(m), shear_pa=fin.shear_pa.tolist(), rotation_deg=fin.rotation_deg,
+                grid_tension_n_per_m=[ini.grid_tension_n_per_m, fin.grid_tension_n_per_m],
+                targets_final_pa=fin.normal_pa.tolist(), state=state,
+                strain_increment=np.asarray(strain_increment, float).tolist())
+
+
+VARIANTS = ("RE", "PRS")
+HISTORY_REGIONS = [f"element_{v}" for v in VARIANTS]
+
+
+def run_variant(p: ElementParams, out: Path, variant: str) -> dict:
+    """One variant (RE or PRS) of the FEM mode: its FEM, the two-way loop if asked, then the
+    case's element driven to the (coupled) targets. Its handover rows go to
+    ``out/handover_<variant>.h5`` (``run`` merges them into handover.h5). Returns the
+    summary parts: {"fem": ..., "element": ..., "two_way": ... or None, "hierarchical": ...
+    or None}."""
+    from femcoupling.twoway import HandoverHistory, check_region, region_targets, two_way
+
+    # One thread unless asked (as run_element): the periodic elements prepared here before it
+    # ran with OpenMP's default, and two variants side by side then took 23 x longer.
+    apply_threads(p.threads)
+    j = VARIANTS.index(variant)
+    hier = None
+    ini, fin, m, state0, load, info = run_fem(p, out, variant)
+    # The coupled load stage writes the FEM state at every load step (two-way: each
+    # iteration rewrites it, so the file holds the last, coupled one)
+    load = functools.partial(load, xdmf=out / f"fem_{variant}.xdmf")
+    info.update(shear_pa=fin.shear_pa.tolist(), rotation_deg=fin.rotation_deg,
+                targets_initial_pa=ini.normal_pa.tolist(),
+                targets_final_pa=fin.normal_pa.tolist())
+    tws = None
+    with HandoverHistory(out / f"handover_{variant}.h5", regions=HISTORY_REGIONS,
+                         metadata={"case": "prs_element"}) as hist:
+        if p.two_way:
+            m.restore_state(state0)
+            try:
+                tw = two_way(m, regions=["element"], load=load,
+                             element_runner=loop_runner(p, out, variant),
+                             tol=p.two_way_tol, max_iterations=p.max_iterations,
+                             history=hist, log=log, history_names=[f"element_{variant}"])
+            except RuntimeError as exc:  # (a periodic element that cannot start)
+                raise SystemExit(f"[prs_element] two-way {variant} with the "
+                                 f"{p.two_way_element} element: {exc}; try "
+                                 "--calibrate, or --two-way-element walls") from exc
+            fin = tw.targets["element"]
+            stiff = tw.stiffnesses.get("element")
+            tws = {"element": p.two_way_element,
+                   "converged": tw.converged, "converged_on": tw.converged_on,
+                   "iterations": tw.iterations,
+                   "changes": [float(c) for c in tw.changes],
+                   "materials": {k: list(v) for k, v in tw.materials.items()},
+                   "stiffness_mandel_pa": None if stiff is None else stiff.tolist(),
+                   "warnings": list(tw.warnings)}
+            log(f"two-way {variant}: {'converged' if tw.converged else 'NOT converged'}"
+                f" ({tw.converged_on}) after {tw.iterations} FEM solves, changes "
+                f"{tw.changes}")
+            coupled_fem_state(m, info, ini, fin, "two-way",
+                              tw.fem_strain_increments["element"])
+        elif p.hierarchical:
+            m.restore_state(state0)
+            e0 = m.region_strain("element")
+            hier = run_hierarchical(p, out, variant, m, load)
+            fin = region_targets(m, "element")
+            coupled_fem_state(m, info, ini, fin, "hierarchical",
+                              -np.diag(m.region_strain("element") - e0))
+        label = f"element_{variant}"
+        e = run_element(p, [ini.normal_pa, fin.normal_pa], prestressed=variant == "PRS",
+                        label=label, out=out, grid_tension=handed_tension(p, [ini, fin], label))
+        msgs, ratio = check_region(label, fin, fem_strain_increment=info["strain_increment"],
+                                   dem_strain_increment=e["strain_increment"])
+        e["dem_fem_strain_ratio"] = ratio
+        e["warnings"] = msgs
+        for msg in msgs:
+            log("WARNING: " + msg)
+        hist.append(iteration=0, region=j, fem_stress_pa=fin.fem_stress_pa,
+                    targets_pa=fin.normal_pa, shear_pa=fin.shear_pa,
+                    rotation_deg=fin.rotation_deg, change=0.0,
+                    dem_stress_pa=e["stress_final_pa"],
+                    grid_tension_n_per_m=fin.grid_tension_n_per_m)
+    return {"fem": info, "element": e, "two_way": tws, "hierarchical": hier}
