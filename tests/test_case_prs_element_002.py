@@ -33,7 +33,7 @@ def test_outputs_for_paraview_and_figures(smoke):
                   f"{name}.h5", f"{name}.csv"):
             assert (out / f).is_file() and (out / f).stat().st_size > 0, f
     report = (out / "report.md").read_text()
-    assert "002's findings" in report and "CoV along the longitudinal members" in report
+    assert "The paper's findings" in report and "Microscopic interaction effects" in report and "CoV along the longitudinal members" in report
     # The locked-in prestress is a series of the PRS runs only.
     assert "prestress_line_force_mean" in (out / "detailed_PRS.csv").read_text().splitlines()[0]
     assert "prestress_line_force_mean" not in (out / "detailed_RE.csv").read_text().splitlines()[0]
