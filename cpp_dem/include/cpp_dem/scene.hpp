@@ -437,6 +437,9 @@ class Scene {
   // its multiversioned body (CPP_DEM_HOT), which only its own unit calls: GCC emits the
   // clones of a target_clones function as local symbols of the unit that defines it.
   void compute_pair_forces(long& err_contact);
+  // kYadeShear: ShearKinematics::Yade. One function per kinematics, so the default's code is
+  // what it was before the option existed.
+  template <bool kYadeShear>
   CPP_DEM_HOT void compute_pair_forces_hot(long& err_contact);
   // The pair pass without AVX2 (scene.cpp, pair_bodies_narrow) and its threads' bodies.
   void compute_pair_forces_narrow(long& err_contact);

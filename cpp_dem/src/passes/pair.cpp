@@ -183,8 +183,12 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
   err_out = err;
 }
 
-void Scene::compute_pair_forces(long& err_contact) { compute_pair_forces_hot(err_contact); }
+void Scene::compute_pair_forces(long& err_contact) {
+  if (shear_kinematics_ == ShearKinematics::Yade) compute_pair_forces_hot<true>(err_contact);
+  else compute_pair_forces_hot<false>(err_contact);
+}
 
+template <bool kYadeShear>
 void Scene::compute_pair_forces_hot(long& err_contact) {
   // Body-major: body i and its contacts (i, j), j > i, which are contiguous in pairs_ (sorted
   // by (i, j)). i's position, velocities and radius are loaded once; i's share of the forces
@@ -218,9 +222,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   Real* const out_fi = pair_fi_.data()->data();
   Real* const out_ti = pair_ti_.data()->data();
   // Periodic cell: j is seen at its image, and the mean field's velocity L d and spin are
-  // added to the stored fluctuations (bodies/cell.hpp). The loop is instantiated for each
-  // combination of the cell and the shear kinematics (ShearKinematics), so neither costs the
-  // default scene anything.
+  // added to the stored fluctuations (bodies/cell.hpp). The loop is instantiated twice, so
+  // the cell costs the wall-bounded scene nothing.
   const V4 l0 = v4(cell_.vel_grad.col(0)), l1 = v4(cell_.vel_grad.col(1)),
            l2 = v4(cell_.vel_grad.col(2)), spin = v4(cell_.spin());
   const Real* const offsets = image_offset_.data()->data();
@@ -230,10 +233,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
     const auto [b0, b1] = pair_bodies_of_thread(t, nt);
     // (Captured by value: the pointers stay in registers; by reference they were taken as
     // addresses the loop's stores might alias, and reloaded, 14 % more instructions.)
-    const auto loop = [=, &err](auto periodic_tag, auto yade_shear_tag)
-                          __attribute__((always_inline)) {
+    const auto loop = [=, &err](auto periodic_tag) __attribute__((always_inline)) {
     constexpr bool kPeriodic = decltype(periodic_tag)::value;
-    constexpr bool kYadeShear = decltype(yade_shear_tag)::value;
     for (int i = b0; i < b1; ++i) {
       const int k0 = ioff[i], k1 = ioff[i + 1];
       // i's share: -force and torque_i summed over its contacts.
@@ -301,13 +302,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
       store4(out_ti + 4L * i, ti);
     }
     };
-    if (shear_kinematics_ == ShearKinematics::Yade) {
-      if (cell_.on) loop(std::true_type{}, std::true_type{});
-      else loop(std::false_type{}, std::true_type{});
-    } else {
-      if (cell_.on) loop(std::true_type{}, std::false_type{});
-      else loop(std::false_type{}, std::false_type{});
-    }
+    if (cell_.on) loop(std::true_type{});
+    else loop(std::false_type{});
   }
   err_contact = err;
 }
