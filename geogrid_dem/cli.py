@@ -271,8 +271,8 @@ def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | N
         raise RunFileError(str(e)) from None
     except KeyboardInterrupt:
         print(f"[calibrate] interrupted: the points finished so far are in "
-                   f"{cfg.out / 'runs'} and are reused when the same command runs again",
-                   err=True)
+              f"{cfg.out / 'runs'} and are reused when the same command runs again",
+              file=sys.stderr, flush=True)
         sys.exit(130)
     finally:
         if box:

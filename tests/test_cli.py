@@ -175,3 +175,36 @@ def test_the_case_scripts_parse_with_the_same_parser():
         r = subprocess.run([sys.executable, str(ROOT / "cases" / f"{case.module}.py"), "--help"],
                            capture_output=True, text=True)
         assert r.returncode == 0 and r.stdout == case_parser(name).format_help(), name
+
+
+def test_ctrl_c_in_each_command_exits_130_with_one_line(tmp_path, monkeypatch, capsys):
+    """A KeyboardInterrupt inside calibrate and sweep ends the command with status 130 and one
+    line on stderr (no traceback): the message is printed the way the command prints."""
+    from geogrid_dem import calibrate as cal
+    from geogrid_dem import cli
+
+    f = tmp_path / "c.toml"
+    f.write_text('out = "cal"\n[params]\nsmoke = true\n[reference]\nyoung = 4200e3\n'
+                 'poisson = 0.31\nphi = 31.5\n[grid]\nyoung = [4000e3]\npoisson = [0.3]\n'
+                 'phi = [31.0]\n')
+    monkeypatch.chdir(tmp_path)
+
+    def interrupted(*_a, **_k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(cal, "calibrate", interrupted)
+    with pytest.raises(SystemExit) as e:
+        cli.main(["calibrate", str(f), "--workers", "0"])
+    assert e.value.code == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("[calibrate] interrupted"), err
+
+    s = tmp_path / "s.toml"
+    s.write_text('case = "deposition"\nout = "sw"\n[params]\nsmoke = true\n[sweep]\n'
+                 'seed = [1, 2]\n')
+    monkeypatch.setattr(cli, "_run_on_dask", interrupted)
+    with pytest.raises(SystemExit) as e:
+        cli.main(["sweep", str(s)])
+    assert e.value.code == 130
+    err = capsys.readouterr().err.strip().splitlines()
+    assert len(err) == 1 and err[0].startswith("[sweep] interrupted"), err
