@@ -25,7 +25,10 @@ import time
 import numpy as np
 
 import cpp_dem as dem
-from cpp_dem.build.clumps import ClumpTemplate, clump_cloud
+try:  # the package layout of the revision under test (bench/ab_build.py runs older ones too)
+    from cpp_dem.build.clumps import ClumpTemplate, clump_cloud
+except ImportError:
+    from cpp_dem.clumps import ClumpTemplate, clump_cloud
 
 
 def template():
