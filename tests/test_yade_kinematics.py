@@ -21,14 +21,16 @@ OVERLAP = 2.0e-5  # m
 DT = 1e-7  # s
 
 
-def _pair(kinematics, vel_i=(0, 0, 0), vel_j=(0, 0, 0), spin_i=(0, 0, 0), spin_j=(0, 0, 0)):
+def _pair(kinematics, vel_i=(0, 0, 0), vel_j=(0, 0, 0), spin_i=(0, 0, 0), spin_j=(0, 0, 0),
+          **parts):
     """Two spheres touching along x with the given velocities (m/s) and spins (rad/s), every
-    DOF blocked (they keep them); returns (scene, shear force on j after one step in N, k_s)."""
+    DOF blocked (they keep them); returns (scene, shear force on j after one step in N, k_s).
+    parts: law parts of the material (rolling resistance takes the composed law's path)."""
     s = cd.Scene()
     if kinematics is not None:
         s.shear_kinematics = kinematics
     m = s.add_material(cd.linear_material(density=2650, young=1e8, poisson=0.3,
-                                          friction_angle_deg=80.0))
+                                          friction_angle_deg=80.0, **parts))
     s.add_spheres([[0, 0, 0], [R1 + R2 - OVERLAP, 0, 0]], [R1, R2], material=m)
     s.dt = DT
     s.velocities = np.array([vel_i, vel_j], dtype=float)
@@ -72,16 +74,18 @@ def test_translation_is_scaled_by_alpha_only_with_yade_kinematics():
     assert abs(ratio - 1) > 7e-3
 
 
-def test_spins_act_on_the_full_radii_with_yade_kinematics():
+@pytest.mark.parametrize("parts", [{}, {"rolling_stiffness": 1.0, "rolling_friction": 0.1}],
+                         ids=["short-kernel", "composed-law"])
+def test_spins_act_on_the_full_radii_with_yade_kinematics(parts):
     kw = dict(vel_i=(0, 2e-4, 0), vel_j=(0, 0, -1e-4), spin_i=(0.1, 0.3, -0.2),
               spin_j=(0.05, -0.4, 0.25))
     for kin in ("contact_point", "yade"):
-        _, f, ks = _pair(kin, **kw)
+        _, f, ks = _pair(kin, **kw, **parts)
         np.testing.assert_allclose(f, _expected(kin, ks=ks, **kw), rtol=1e-12, atol=1e-30)
     # Spins alone: the spin term is (r_j w_j + r_i w_i) x n against (l_j w_j + l_i w_i) x n.
     spins = dict(spin_i=(0, 0, 0.3), spin_j=(0, 0, 0.3))
-    _, f_off, _ = _pair(None, **spins)
-    _, f_on, _ = _pair("yade", **spins)
+    _, f_off, _ = _pair(None, **spins, **parts)
+    _, f_on, _ = _pair("yade", **spins, **parts)
     ratio = f_on[1] / f_off[1]
     assert ratio == pytest.approx((R1 + R2) / (R1 + R2 - OVERLAP), rel=1e-13)
 
