@@ -258,7 +258,7 @@ def test_two_way_with_the_walls_element_gives_the_region_its_probed_tangent(tmp_
     Smoke, seeds 1-3 (measured): both variants converge in 4-8 FEM solves, and the case's
     element then strains 0.90-1.00 times its region."""
     out = tmp_path / "tw"
-    p = run_case(out, "--smoke", "--two-way")
+    p = run_case(out, "--smoke", "--two-way", "--workers", "2")  # RE and PRS side by side
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
     assert "tangent by three 5 % stress probes" in p.stdout
     s = _two_way_gave_full_stiffnesses(out, "walls")
@@ -276,7 +276,7 @@ def test_two_way_with_the_periodic_element_gives_the_region_its_tangent(tmp_path
     RE's stresses settle in 6 FEM solves while its element strains 2.7 times the region, a
     stall, which the loop says (not converged); PRS converges in 5."""
     out = tmp_path / "pe"
-    p = run_case(out, "--smoke", "--two-way", "--two-way-element", "periodic")
+    p = run_case(out, "--smoke", "--two-way", "--two-way-element", "periodic", "--workers", "2")
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
     assert "two-way element: periodic" in p.stdout
     s = _two_way_gave_full_stiffnesses(out, "periodic")

@@ -75,3 +75,27 @@ def test_bad_inputs_name_the_option(tmp_path, args, msg):
     p = subprocess.run([sys.executable, str(case), "--smoke", "--out", str(tmp_path), *args],
                        capture_output=True, text=True, timeout=120)
     assert p.returncode != 0 and msg in p.stderr, p.stderr
+
+
+def test_elements_side_by_side_give_the_serial_results(smoke, tmp_path):
+    """The smoke run puts its four elements on two processes (--workers 2, conftest); one of
+    them run alone in this process's way (serially) gives the same numbers, bitwise."""
+    import subprocess
+    import sys
+
+    from conftest import ROOT, SMOKE_ARGS
+
+    out, proc = smoke
+    assert "--workers" in SMOKE_ARGS["prs_element_002"] and "2 at a time" in proc.stdout
+    args = [a for a in SMOKE_ARGS["prs_element_002"]]
+    k = args.index("--workers")
+    del args[k:k + 2]
+    alone = tmp_path / "alone"
+    r = subprocess.run([sys.executable, str(ROOT / "cases" / "prs_element_002.py"), "--smoke",
+                        "--out", str(alone), *args, "--grids", "standard", "--variants", "RE"],
+                       capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    a = json.loads((alone / "summary.json").read_text())["elements"]["standard_RE"]
+    b = json.loads((out / "summary.json").read_text())["elements"]["standard_RE"]
+    for key in ("stress_final_pa", "stress_initial_pa", "strain_increment", "num_grains"):
+        assert a[key] == b[key], key

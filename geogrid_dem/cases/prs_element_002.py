@@ -34,7 +34,9 @@ SI units. DEM stresses compression positive.
 
 from __future__ import annotations
 
+import concurrent.futures
 import contextlib
+import multiprocessing
 import json
 import sys
 import time
@@ -190,14 +192,22 @@ def run(p: Params, out: Path) -> dict:
                 targets[(g, v)] = [ini.normal_pa, fin.normal_pa]
                 handed[(g, v)] = fin
         t_dem = time.perf_counter()
-        for k, (g, v) in enumerate(jobs):
-            if k:
-                left = (time.perf_counter() - t_dem) / k * (len(jobs) - k)
-                log(f"element {k + 1}/{len(jobs)} ({g} {v}); about {left:.0f} s left")
-            else:
-                log(f"element 1/{len(jobs)} ({g} {v})")
-            e = run_element(replace(p, geogrid=f"woven-{g}"), targets[(g, v)],
-                            prestressed=v == "PRS", label=f"{g}_{v}", out=out, log=log)
+        args = [(replace(p, geogrid=f"woven-{g}"), targets[(g, v)], v == "PRS", f"{g}_{v}",
+                 out) for g, v in jobs]
+        if p.workers > 1 and len(jobs) > 1:
+            # Elements side by side in spawned processes (one thread each): each element's
+            # arithmetic is the serial run's, so the results are the same.
+            n_proc = min(p.workers, len(jobs))
+            log(f"--workers {p.workers}: {len(jobs)} elements, {n_proc} at a time")
+            ex = stack.enter_context(concurrent.futures.ProcessPoolExecutor(
+                max_workers=n_proc, mp_context=multiprocessing.get_context("spawn")))
+            results = ex.map(_element_job, *zip(*args))
+        else:
+            results = (_element_job(*a) for a in args)
+        for k, ((g, v), e) in enumerate(zip(jobs, results)):
+            left = (time.perf_counter() - t_dem) / (k + 1) * (len(jobs) - k - 1)
+            log(f"element {k + 1}/{len(jobs)} ({g} {v}) done"
+                + (f"; about {left:.0f} s left" if k + 1 < len(jobs) else ""))
             summary["elements"][f"{g}_{v}"] = e
             if hist is not None:
                 fin = handed[(g, v)]
@@ -220,6 +230,11 @@ def run(p: Params, out: Path) -> dict:
     return summary
 
 
+def _element_job(p: Params, targets, prestressed: bool, label: str, out: Path) -> dict:
+    """One element of the run (picklable: ``--workers`` runs them in other processes)."""
+    return run_element(p, targets, prestressed=prestressed, label=label, out=out, log=log)
+
+
 def _names(text: str, allowed: tuple, flag: str, ap) -> tuple:
     names = tuple(t.strip() for t in text.split(",") if t.strip())
     bad = [n for n in names if n not in allowed]
@@ -239,6 +254,9 @@ def build_parser():
         smoke=f"{SMOKE['n']} clumps, coarse FEM mesh")
     ap.add_argument("--grids", default=",".join(GRIDS), help="woven forms to run")
     ap.add_argument("--variants", default=",".join(VARIANTS), help="RE and/or PRS")
+    ap.add_argument("--workers", type=int, default=1,
+                    help="processes: 2 or more run the elements side by side (one thread "
+                         "each), with the same results")
     ap.add_argument("--grains", default=d.grains,
                     help="clumps:NAME (a shipped grain, 'gravel', or a template CSV) or spheres")
     return ap
@@ -251,6 +269,9 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     p.grids = _names(a.grids, GRIDS, "--grids", ap)
     p.variants = _names(a.variants, VARIANTS, "--variants", ap)
     p.grains = a.grains
+    if a.workers < 1:
+        ap.error(f"--workers={a.workers}: must be >= 1")
+    p.workers = a.workers
     from cpp_dem import ParameterError
     from cpp_dem.elements.box import check_element_params
 
