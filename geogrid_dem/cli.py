@@ -287,7 +287,9 @@ def _dask_options(p: argparse.ArgumentParser, *, workers: str, threads: str) -> 
     p.add_argument("--threads", type=int, default=1, help=threads)
 
 
-def _parser() -> argparse.ArgumentParser:
+def _parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
+    """The command's parser and its ``run`` subparser (whose help ``geogrid-dem run --help``
+    prints: everything after ``run`` goes to the case's own parser)."""
     ap = argparse.ArgumentParser(
         prog="geogrid-dem", formatter_class=HelpFormatter,
         description="Coupled DEM-FEM for geogrid-reinforced soil: run the cases of the source "
@@ -326,19 +328,19 @@ def _parser() -> argparse.ArgumentParser:
     _dask_options(cal, workers="processes of the local Dask cluster (0: run in this process)",
                   threads="OpenMP threads per triaxial run; the results do not depend on it "
                           "or on the number of workers")
-    return ap
+    return ap, run
 
 
 def main(argv: list[str] | None = None) -> None:
     """The ``geogrid-dem`` command."""
     argv = list(sys.argv[1:] if argv is None else argv)
-    ap = _parser()
+    ap, run_parser = _parser()
     try:
         if argv[:1] == ["run"]:
             # everything after the target belongs to the case's own parser, --help included
             rest = argv[1:]
             if not rest or rest[0] in ("-h", "--help"):
-                ap._subparsers._group_actions[0].choices["run"].print_help()
+                run_parser.print_help()
                 return
             run_cmd(rest[0], rest[1:])
             return

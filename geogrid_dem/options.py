@@ -20,9 +20,10 @@ from __future__ import annotations
 import argparse
 import re
 
+from geogrid_dem.cases import CASES
 from geogrid_dem.rundir import add_out_args, check_common_args
 
-__all__ = ["HelpFormatter", "apply_threads", "case_parser", "check_common_args", "parse_checked"]
+__all__ = ["HelpFormatter", "case_parser", "check_common_args", "parse_checked"]
 
 PRESETS = ("fast", "balanced", "accurate")
 
@@ -57,8 +58,6 @@ def case_parser(name: str, description: str, *, smoke: str, seed: int, threads: 
     ``--overwrite`` (``out_help`` adds to the help of ``--out``), ``--seed`` (default
     ``seed``), ``--threads`` (default ``threads``; 0 = OpenMP's default) and, when ``preset``
     is given (its help text), ``--preset``. The case adds its own options to it."""
-    from geogrid_dem.cases import CASES
-
     ap = argparse.ArgumentParser(prog=f"geogrid-dem run {name}", description=description,
                                  formatter_class=HelpFormatter)
     ap.add_argument("--smoke", action="store_true", help=f"test-sized run: {smoke}")
@@ -71,15 +70,6 @@ def case_parser(name: str, description: str, *, smoke: str, seed: int, threads: 
         ap.add_argument("--preset", choices=PRESETS, default="",
                         help=f"speed-accuracy preset {preset} (docs/speed_accuracy.md)")
     return ap
-
-
-def apply_threads(threads: int) -> None:
-    """Sets the OpenMP threads of this process (``--threads``): n > 0 threads, 0 leaves
-    OpenMP's default."""
-    if threads > 0:
-        from cpp_dem import set_num_threads
-
-        set_num_threads(threads)
 
 
 def parse_checked(ap: argparse.ArgumentParser, argv) -> argparse.Namespace:

@@ -42,7 +42,8 @@ from cpp_dem._core import (  # noqa: F401,E402  (re-exported)
 from cpp_dem.build.packing import read_packing_csv, write_packing_csv  # noqa: F401
 from cpp_dem._core import RadiusGrowth, ServoWall, TriaxialController  # noqa: F401  (samples)
 from cpp_dem.checkpoint import load_checkpoint, save_checkpoint  # noqa: F401
-from cpp_dem.scene import (BOX_WALLS, ControllerLimitWarning, Scene, hertz_mindlin_material,  # noqa: F401
+from cpp_dem.scene import (BOX_WALLS, ControllerLimitWarning, Scene, apply_threads,
+                           hertz_mindlin_material,  # noqa: F401
                     TargetNotMetWarning, linear_material)
 from cpp_dem.measure.inertial import InertialNumberWarning  # noqa: F401,E402
 
@@ -60,6 +61,7 @@ __all__ = [
     "periodic",
     "geogrid",
     "BOX_WALLS",
+    "apply_threads",
     "RadiusGrowth",
     "ServoWall",
     "TriaxialController",

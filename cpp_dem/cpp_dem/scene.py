@@ -12,6 +12,14 @@ import numpy as np
 from cpp_dem import _core
 from cpp_dem._core import Material, ParameterError
 
+def apply_threads(threads: int) -> None:
+    """Sets this process's OpenMP threads the way every ``--threads`` option means it: n > 0
+    threads, 0 leaves OpenMP's default (every core, or ``OMP_NUM_THREADS``). Results do not
+    depend on it."""
+    if threads > 0:
+        _core.set_num_threads(int(threads))
+
+
 _DOF_BITS = {"x": 1, "y": 2, "z": 4, "rx": 8, "ry": 16, "rz": 32}
 #: The most steps one call of Scene.run takes (the core counts steps in a signed 64-bit integer).
 _MAX_STEPS = 2**63 - 1

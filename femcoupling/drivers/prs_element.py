@@ -21,6 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
+from cpp_dem import apply_threads
 from cpp_dem.elements import box as _element
 from cpp_dem.elements.box import ElementParams, grid_stiffness_per_metre
 from cpp_dem.io.figures import save_figure
@@ -28,23 +29,6 @@ from cpp_dem.io.figures import save_figure
 
 def log(msg: str) -> None:
     print(f"[prs_element] {msg}", flush=True)
-
-
-def apply_threads(threads: int) -> None:
-    """OpenMP threads of this process: n > 0, or 0 for OpenMP's default (every core)."""
-    if threads > 0:
-        from cpp_dem import set_num_threads
-
-        set_num_threads(threads)
-
-
-def make_element(p: ElementParams, mean_stress: float, prestressed: bool):
-    """The DEM element of :mod:`cpp_dem.elements.box` with this case's parameters and log."""
-    return _element.make_element(p, mean_stress, prestressed, log=log)
-
-
-def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec) -> dict:
-    return _element.servo_stage(sample, grid, targets, stage, p, rec, log=log)
 
 
 def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: str, out: Path,

@@ -39,7 +39,8 @@ import numpy as np
 from cpp_dem.io.figures import save_figure
 from geogrid_dem.provenance import git_revision
 from geogrid_dem.cases import describe
-from geogrid_dem.options import apply_threads, case_parser, parse_checked
+from cpp_dem import apply_threads
+from geogrid_dem.options import case_parser, parse_checked
 from geogrid_dem.rundir import begin_run, run_main
 import cpp_dem as dem
 from cpp_dem.measure import interior_porosity, slab_solid_volume, surface_height

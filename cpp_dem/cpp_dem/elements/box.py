@@ -23,11 +23,11 @@ from cpp_dem.build import geogrid
 from cpp_dem.measure import inertial
 from cpp_dem import measure
 from cpp_dem.protocols import prep
-from cpp_dem._core import BeamParams, set_num_threads
+from cpp_dem._core import BeamParams
 from cpp_dem.io import (CsvRecorder, H5Recorder, PvdWriter, write_vtk_box, write_vtk_contacts,
                         write_vtk_spheres)
 from cpp_dem.build.packing import loose_cloud
-from cpp_dem.scene import linear_material
+from cpp_dem.scene import apply_threads, linear_material
 from cpp_dem.protocols.triaxial import build_box_sample
 
 
@@ -513,10 +513,9 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     ``tangent_probes``. 0 (the default): none."""
     t_start = time.perf_counter()
     targets = [np.asarray(t, float) for t in targets]
-    # One thread unless asked: on a shared 2-core machine OpenMP with 2 threads was measured
-    # ~1000x slower than 1 thread for this small scene (oversubscription).
-    if p.threads > 0:
-        set_num_threads(p.threads)
+    # One thread by default (ElementParams.threads): on a shared 2-core machine OpenMP with 2
+    # threads was measured ~1000x slower than 1 thread for this small scene (oversubscription).
+    apply_threads(p.threads)
     (out / "vtk").mkdir(parents=True, exist_ok=True)
     woven_grid = p.geogrid != "square"
     check_element_params(p)
