@@ -12,6 +12,8 @@ A grain given as a closed, consistently oriented triangle surface (vertices in m
   surface deviation of the filled template.
 - :func:`shipped_templates` / :func:`shipped_template` load the angular gravel grains shipped in
   ``cpp_dem/data/grains`` (made by ``scripts/make_gravel_meshes.py``).
+- :func:`shipped_fill` fills the same shipped meshes with another number of spheres (the
+  cases' ``--grains clumps:gravel@N``, :func:`templates_from_spec`).
 
 Mass properties of a polyhedron
 -------------------------------
@@ -77,8 +79,10 @@ docs/clump_templates.md).
 
 from __future__ import annotations
 
+import functools
 import math
 import os
+import re
 import warnings
 from pathlib import Path
 from typing import NamedTuple
@@ -104,7 +108,11 @@ __all__ = [
     "shipped_templates",
     "shipped_template",
     "shipped_mesh",
+    "shipped_fill",
     "GRAIN_DIR",
+    "SHIPPED_FILL",
+    "SHIPPED_SPHERES",
+    "MAX_SPHERES",
 ]
 
 #: Folder of the shipped grain meshes (STL) and their templates (CSV).
@@ -773,22 +781,85 @@ if __name__ == "__main__":  # pragma: no cover
     raise SystemExit(_main())
 
 
+#: The fill_mesh settings the shipped gravel templates were made with
+#: (scripts/make_gravel_meshes.py: ``FILL`` and ``SEED``); filling a shipped mesh with these and
+#: ``max_spheres = SHIPPED_SPHERES`` gives its CSV bit for bit (tests/test_clump_resolution.py).
+SHIPPED_FILL = dict(min_radius_ratio=0.2, grid=24, seed=20240611)
+#: Spheres per shipped template (``gravel_a.csv`` etc.).
+SHIPPED_SPHERES = 24
+#: The largest resolution ``clumps:NAME@N`` accepts. With SHIPPED_FILL every shipped grain gets
+#: exactly N spheres for N up to this (the greedy fill runs out of candidates that add volume
+#: at 296 to 337 spheres on the grid-24 sample, so no shipped grain is cut short below it).
+MAX_SPHERES = 256
+
+
+def shipped_fill(name: str, spheres: int) -> ClumpTemplate:
+    """The shipped grain ``name`` (e.g. ``"gravel_a"``) filled with ``spheres`` spheres: its
+    shipped surface mesh (:func:`shipped_mesh`: volume-equivalent diameter 1 m, centroid at the
+    origin, principal axes along x, y, z) filled by :func:`fill_mesh` with the shipped
+    settings (SHIPPED_FILL) and ``max_spheres = spheres``, named ``<name>_<spheres>``.
+    ``spheres = SHIPPED_SPHERES`` (24) returns the shipped CSV itself (:func:`shipped_template`,
+    named ``<name>``), which that fill reproduces bit for bit. The greedy fill is sequential,
+    so the template of n spheres is the first n spheres of any larger one: the resolutions
+    nest. Fills are cached in the process (about a second per grain).
+
+    name: a shipped grain. spheres: an integer in [1, MAX_SPHERES]."""
+    if not (isinstance(spheres, (int, np.integer)) and not isinstance(spheres, bool)
+            and 1 <= spheres <= MAX_SPHERES):
+        raise ParameterError(f"spheres={spheres!r}: must be an integer in [1, {MAX_SPHERES}]")
+    if int(spheres) == SHIPPED_SPHERES:
+        return shipped_template(name)
+    return _shipped_fill(name, int(spheres))
+
+
+@functools.lru_cache(maxsize=None)
+def _shipped_fill(name: str, spheres: int) -> ClumpTemplate:
+    v, t = shipped_mesh(name)
+    return fill_mesh(v, t, max_spheres=spheres, name=f"{name}_{spheres}", **SHIPPED_FILL)
+
+
+def _resolution(spec: str, text: str) -> int:
+    """The N of a ``@N`` suffix, checked (ParameterError naming grains, the value and what is
+    allowed)."""
+    if not (re.fullmatch(r"[0-9]+", text) and 1 <= int(text) <= MAX_SPHERES):
+        raise ParameterError(f"grains={spec!r}: the resolution {text!r} after '@' must be an "
+                             f"integer in [1, {MAX_SPHERES}] (spheres per grain, e.g. "
+                             f"'clumps:gravel@12'; without '@N' the shipped "
+                             f"{SHIPPED_SPHERES}-sphere templates)")
+    return int(text)
+
+
 def templates_from_spec(spec: str) -> list:
     """The clump templates a case's ``--grains clumps:NAME`` names: a shipped grain
     (shipped_templates: gravel_a .. gravel_d), ``gravel`` for all of them,
-    or a template CSV (x, y, z, r in m; ClumpTemplate.load). Raises ParameterError naming the
-    value and what is allowed."""
+    or a template CSV (x, y, z, r in m; ClumpTemplate.load).
+
+    ``clumps:NAME@N`` (NAME a shipped grain or ``gravel``; N an integer in [1, MAX_SPHERES]):
+    the same grains filled with N spheres each (:func:`shipped_fill`: the same meshes and fill
+    settings as the shipped 24-sphere CSVs; ``@24`` is the shipped CSV itself, bit for bit the
+    spec without ``@N``). Raises ParameterError naming the value and what is allowed."""
     name = spec.split(":", 1)[1] if spec.startswith("clumps:") else ""
     if not name:
         raise ParameterError(f"grains={spec!r}: must be 'spheres' or 'clumps:NAME' (NAME: a "
                              f"shipped grain {sorted(shipped_templates())}, 'gravel', or a "
-                             "template CSV)")
+                             "template CSV; 'NAME@N' for a shipped grain filled with N spheres)")
     if name == "gravel":
         return list(shipped_templates().values())
     if os.path.isfile(name):
         return [ClumpTemplate.load(name)]
+    base, at, res = name.rpartition("@")
+    if at:
+        n = _resolution(spec, res)
+        if base == "gravel":
+            return [shipped_fill(g, n) for g in _shipped_names()]
+        if base not in _shipped_names():
+            raise ParameterError(
+                f"grains={spec!r}: '@N' needs a shipped grain before it "
+                f"({', '.join(_shipped_names()) or '(none)'}) or 'gravel'; a template CSV "
+                "keeps its own spheres")
+        return [shipped_fill(base, n)]
     try:
         return [shipped_template(name)]
     except ParameterError as e:
         raise ParameterError(f"grains={spec!r}: {e} (or 'gravel' for all of them, or a "
-                             "template CSV x,y,z,r)") from None
+                             "template CSV x,y,z,r; 'NAME@N' for N spheres per grain)") from None
