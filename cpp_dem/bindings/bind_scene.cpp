@@ -298,6 +298,46 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
       .def("set_auto_timestep", &Scene::set_auto_timestep, py::arg("safety") = 0.8,
            py::arg("period") = 100,
            "Every `period` steps set dt = safety x critical_dt() (period 0 switches it off).")
+      .def("set_density_scaling", &Scene::set_density_scaling, py::arg("target_dt"),
+           py::arg("safety") = 0.5, py::arg("period") = 1,
+           "Density scaling for quasi-static stages: dt = target_dt (s), and every `period` "
+           "steps each free body and clump takes the inertia factor s = max(1, (target_dt / "
+           "(safety x its own critical step))^2), its critical step from its active contacts, "
+           "bonds and links (updated just before the bodies move; a factor falls at most by "
+           "half per update; a body that never touched keeps 1). Weight and gravity stay the "
+           "true ones; "
+           "velocities are kept when a factor changes. While on, the automatic time step is "
+           "not applied and critical_dt() takes the scaled inertia. Kept in checkpoints. See "
+           "cpp_dem.protocols.quasi_static and docs/quasi_static.md.")
+      .def("clear_density_scaling", &Scene::clear_density_scaling,
+           "Switches density scaling off: every inertia factor back to 1 (dt is kept).")
+      .def_property_readonly("density_scaling", &Scene::density_scaling,
+                             "Whether density scaling is on.")
+      .def_property_readonly("density_scaling_target_dt", &Scene::density_scaling_target_dt,
+                             "Density scaling's target time step, s.")
+      .def_property_readonly("density_scaling_safety", &Scene::density_scaling_safety,
+                             "Density scaling's safety factor, -.")
+      .def_property_readonly("density_scaling_period", &Scene::density_scaling_period,
+                             "Steps between updates of the inertia factors.")
+      .def("density_scaling_stats", [](const Scene& s) {
+             const Scene::DensityScalingStats st = s.density_scaling_stats();
+             py::dict d;
+             d["max_factor"] = st.max_factor;
+             d["mean_factor"] = st.mean_factor;
+             d["scaled_share"] = st.scaled_share;
+             d["scaled"] = st.scaled;
+             d["movable"] = st.movable;
+             d["inertial_number"] = st.inertial_number;
+             return d;
+           },
+           "What density scaling does now: max_factor and mean_factor (mass-weighted) of the "
+           "inertia factors, -; scaled_share, the share of free bodies and clumps with a "
+           "factor above 1 (scaled of movable); inertial_number, the sample's with the scaled "
+           "inertia, sqrt(sum rho_c |dv_c|^2 / sum |f_c| / d_c^2) over the active pair "
+           "contacts (dv_c the centres' relative velocity, f_c the force, d_c the sum of the "
+           "radii, rho_c the bodies' density times their factor), -.")
+      .def("inertia_scale", &Scene::inertia_scale, py::arg("body"),
+           "The density-scaling inertia factor of a body (its clump's for a member), -.")
       .def_property_readonly("timestep_safety", &Scene::timestep_safety)
       .def_property_readonly("timestep_period", &Scene::timestep_period)
       .def_property("dt_check_period", &Scene::dt_check_period, &Scene::set_dt_check_period,
@@ -312,13 +352,15 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
            "Critical time-step estimate, s: min over bodies and axes of sqrt(2 m / K) from the "
            "current contact stiffnesses; the p-wave estimate before contacts exist; inf when every "
            "body is fully blocked.")
-      .def("critical_dt_body", [](const Scene& s) {
+      .def("critical_dt_body", [](const Scene& s, bool contact_seen) {
              int body = -1;
-             const Real dt = s.critical_dt_body(&body);
+             const Real dt = s.critical_dt_body(&body, contact_seen);
              return py::make_tuple(dt, body);
-           },
+           }, py::arg("contact_seen") = false,
            "(critical_dt(), the id of the body that sets it, -1 when no contact or link "
-           "exists): which body limits the time step.")
+           "exists): which body limits the time step. With contact_seen, the estimate of a "
+           "packing in contact even when nothing touches yet (every grain's stiffness floor; "
+           "not with density scaling on).")
       .def("pwave_dt", &Scene::pwave_dt, "p-wave time step min R sqrt(rho / E), s.")
       .def("energies", [](const Scene& s) { return energies_dict(s.energies()); },
            "Energy terms, J, and the balance error (needs track_energy).")

@@ -75,9 +75,13 @@ class Material:
     rolling_stiffness : beta_r, -; k_r = beta_r k_s R*^2 (0: no rolling resistance).
     rolling_friction : eta_r, -; |M_r| <= eta_r R* |F_n|.
     """
-    def __init__(self, *, model: str = 'linear', density: float, young: float, poisson: float, friction_angle_deg: float, damping_normal: float = 0.0, damping_shear: float = 0.0, rolling_stiffness: float = 0.0, rolling_friction: float = 0.0) -> None:
+    def __getstate__(self) -> tuple[str, float, float, float, float, float, float, float, float]:
+        ...
+    def __init__(self, *, model: typing.Any = 'linear', density: typing.Any, young: typing.Any, poisson: typing.Any, friction_angle_deg: typing.Any, damping_normal: typing.Any = 0.0, damping_shear: typing.Any = 0.0, rolling_stiffness: typing.Any = 0.0, rolling_friction: typing.Any = 0.0) -> None:
         ...
     def __repr__(self) -> str:
+        ...
+    def __setstate__(self, arg0: tuple) -> None:
         ...
     @property
     def damping_normal(self) -> float:
@@ -170,8 +174,14 @@ class Scene:
         ...
     def _add_spheres(self, centers: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], radii: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], material: int) -> int:
         ...
+    def _check_controllers(self) -> None:
+        """
+        ParameterError when two enabled controllers move the same wall (before a run).
+        """
     def _run(self, steps: int) -> None:
-        ...
+        """
+        Runs `steps` steps in C++ without the GIL; a signal (Ctrl-C) raises its exception (KeyboardInterrupt) within about 0.1 s, after the step in progress.
+        """
     def _set_blocked(self, body: int, mask: int) -> None:
         ...
     def _set_clump_blocked(self, clump: int, mask: int) -> None:
@@ -182,13 +192,13 @@ class Scene:
         """
     def add_controller(self, controller: Controller) -> int:
         """
-        Adds a controller (run every controller.period steps, before the forces, in the order added); returns its index. The scene keeps it alive.
+        Adds a controller (run every controller.period steps, before the forces, in the order added); returns its index. The scene keeps it alive. Refused (ParameterError) when it is in the scene already, or when it and another enabled controller move one wall.
         """
     def add_grid_link(self, a: int, b: int, params: BeamParams, material: int) -> int:
         """
         Cohesive link + connection cylinder between nodes a and b.
         """
-    def add_material(self, material: Material) -> int:
+    def add_material(self, material: typing.Any) -> int:
         """
         Adds a material; returns its index.
         """
@@ -219,6 +229,10 @@ class Scene:
         """
         Removes every controller (e.g. a preparation's).
         """
+    def clear_density_scaling(self) -> None:
+        """
+        Switches density scaling off: every inertia factor back to 1 (dt is kept).
+        """
     def clump_members(self, clump: int) -> list[int]:
         """
         Body ids of a clump's member spheres.
@@ -237,9 +251,13 @@ class Scene:
         """
         Critical time-step estimate, s: min over bodies and axes of sqrt(2 m / K) from the current contact stiffnesses; the p-wave estimate before contacts exist; inf when every body is fully blocked.
         """
-    def critical_dt_body(self) -> tuple[float, int]:
+    def critical_dt_body(self, contact_seen: bool = False) -> tuple[float, int]:
         """
-        (critical_dt(), the id of the body that sets it, -1 when no contact or link exists): which body limits the time step.
+        (critical_dt(), the id of the body that sets it, -1 when no contact or link exists): which body limits the time step. With contact_seen, the estimate of a packing in contact even when nothing touches yet (every grain's stiffness floor; not with density scaling on).
+        """
+    def density_scaling_stats(self) -> dict:
+        """
+        What density scaling does now: max_factor and mean_factor (mass-weighted) of the inertia factors, -; scaled_share, the share of free bodies and clumps with a factor above 1 (scaled of movable); inertial_number, the sample's with the scaled inertia, sqrt(sum rho_c |dv_c|^2 / sum |f_c| / d_c^2) over the active pair contacts (dv_c the centres' relative velocity, f_c the force, d_c the sum of the radii, rho_c the bodies' density times their factor), -.
         """
     def energies(self) -> dict:
         """
@@ -248,6 +266,10 @@ class Scene:
     def grid_contacts(self) -> dict:
         """
         Active grain–geogrid contacts: sphere, kind (0 node, 1 connection, 2 pfacet), primitive index, force on the grain (N), normal, overlap (m).
+        """
+    def inertia_scale(self, body: int) -> float:
+        """
+        The density-scaling inertia factor of a body (its clump's for a member), -.
         """
     def material(self, index: int) -> Material:
         ...
@@ -273,6 +295,10 @@ class Scene:
         """
     def set_clump_state(self, clump: int, position: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], orientation: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], velocity: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], angular_velocity: typing.Annotated[numpy.typing.ArrayLike, numpy.float64]) -> None:
         ...
+    def set_density_scaling(self, target_dt: float, safety: float = 0.5, period: int = 1) -> None:
+        """
+        Density scaling for quasi-static stages: dt = target_dt (s), and every `period` steps each free body and clump takes the inertia factor s = max(1, (target_dt / (safety x its own critical step))^2), its critical step from its active contacts, bonds and links (updated just before the bodies move; a factor falls at most by half per update; a body that never touched keeps 1). Weight and gravity stay the true ones; velocities are kept when a factor changes. While on, the automatic time step is not applied and critical_dt() takes the scaled inertia. Kept in checkpoints. See cpp_dem.protocols.quasi_static and docs/quasi_static.md.
+        """
     def set_mass_inertia(self, body: int, mass: float, inertia: float) -> None:
         """
         Sets a body's mass (kg) and inertia (kg m^2).
@@ -416,6 +442,26 @@ class Scene:
     def clump_velocities(self) -> numpy.typing.NDArray[numpy.float64]:
         """
         Clump velocities (last half step), m/s, shape (c, 3).
+        """
+    @property
+    def density_scaling(self) -> bool:
+        """
+        Whether density scaling is on.
+        """
+    @property
+    def density_scaling_period(self) -> int:
+        """
+        Steps between updates of the inertia factors.
+        """
+    @property
+    def density_scaling_safety(self) -> float:
+        """
+        Density scaling's safety factor, -.
+        """
+    @property
+    def density_scaling_target_dt(self) -> float:
+        """
+        Density scaling's target time step, s.
         """
     @property
     def dt(self) -> float:
@@ -775,13 +821,13 @@ class ServoWall(Controller):
         ...
     def clear_limit_report(self) -> None:
         ...
-    def limit_report(self) -> list:
-        """
-        Calls since the last clear at the speed cap while drifting from the target stress (off by more than 5 % and growing): a list with one dict (wall, calls, target_pa, reached_pa, cap_m_per_s), or empty.
-        """
     def clear_target_report(self, reported: bool = False) -> None:
         """
         Starts the count of calls over; reported=True: the unmet target was reported (it is not reported again until a new target is set).
+        """
+    def limit_report(self) -> list:
+        """
+        Calls since the last clear at the speed cap while drifting from the target stress (off by more than 5 % and growing): a list with one dict (wall, calls, target_pa, reached_pa, cap_m_per_s), or empty.
         """
     def target_report(self) -> list:
         """

@@ -70,8 +70,10 @@ class Reader {
 };
 
 /// Sizes of every record type, in a fixed order: the layout fingerprint.
-std::vector<std::uint64_t> layout() {
-  return {sizeof(Real),        sizeof(BodyStore),        sizeof(Vec3),        sizeof(Quat),       sizeof(Material),
+/// (Before version 10 the body store had one array fewer, inertia_scale.)
+std::vector<std::uint64_t> layout(std::uint32_t version = Checkpoint::kVersion) {
+  const std::uint64_t body_store = sizeof(BodyStore) - (version < 10 ? sizeof(std::vector<Real>) : 0);
+  return {sizeof(Real),        body_store,        sizeof(Vec3),        sizeof(Quat),       sizeof(Material),
           sizeof(Wall),        sizeof(PairContact), sizeof(PairOutput), sizeof(WallContact), sizeof(GridLink),
           sizeof(PFacet),      sizeof(GridContact), sizeof(BreakEvent), sizeof(ContactPhys),
           sizeof(ContactState), sizeof(PairContactCold), sizeof(PeriodicCell), sizeof(Bond),
@@ -144,6 +146,10 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.put(s.shear_kinematics_);
   w.put(s.ts_safety_);
   w.put(s.ts_period_);
+  w.put(s.ds_on_);
+  w.put(s.ds_target_dt_);
+  w.put(s.ds_safety_);
+  w.put(s.ds_period_);
   w.put(s.step_);
   w.put(s.time_);
   w.put(s.phys_version_);
@@ -169,24 +175,33 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   if (std::memcmp(magic, kMagic, sizeof(kMagic)) != 0)
     throw ParameterError("checkpoint: not a cpp_dem checkpoint blob (bad magic)");
   const auto version = r.get<std::uint32_t>();
-  if (version != kVersion && version != 8)
+  if (version < 8 || version > kVersion)
     throw ParameterError("checkpoint: format version " + std::to_string(version) +
-                         ", this build reads versions 8 and " + std::to_string(kVersion));
+                         ", this build reads versions 8 to " + std::to_string(kVersion));
   std::vector<std::uint64_t> lay;
   r.vec(lay);
-  if (lay != layout())
+  if (lay != layout(version))
     throw ParameterError("checkpoint: written by a build with other record layouts (struct "
                          "sizes differ); restart with the build that wrote it");
   // Read everything into a copy first, so a bad blob leaves the scene untouched.
   Scene t;
   r.vec(t.materials_);
   r.vec(t.pair_laws_);
-  t.bodies_.for_each_array([&](auto& v) { r.vec(v); });
+  // (The inertia factors, the last arrays of both stores, from version 10 on; before, 1.)
+  t.bodies_.for_each_array([&](auto& v) {
+    if (version >= 10 || static_cast<const void*>(&v) != &t.bodies_.inertia_scale) r.vec(v);
+  });
   const size_t nb = t.bodies_.pos.size();
+  if (version < 10) t.bodies_.inertia_scale.assign(nb, 1.0);
   t.bodies_.for_each_array([&](const auto& v) {
     if (v.size() != nb) throw ParameterError("checkpoint: corrupt body arrays");
   });
-  t.clumps_.for_each_array([&](auto& v) { r.vec(v); });
+  t.clumps_.for_each_array([&](auto& v) {
+    if (version >= 10 || static_cast<const void*>(&v) != &t.clumps_.inertia_scale) r.vec(v);
+  });
+  if (version < 10) t.clumps_.inertia_scale.assign(t.clumps_.pos.size(), 1.0);
+  if (t.clumps_.inertia_scale.size() != t.clumps_.pos.size())
+    throw ParameterError("checkpoint: corrupt clump arrays");
   {
     const size_t ncl = t.clumps_.pos.size(), nm = t.clumps_.member.size();
     bool ok = t.clumps_.member_off.size() == (ncl ? ncl + 1 : 0) && t.clumps_.member_local.size() == nm;
@@ -264,6 +279,14 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   }
   r.get(t.ts_safety_);
   r.get(t.ts_period_);
+  if (version >= 10) {
+    r.get(t.ds_on_);
+    r.get(t.ds_target_dt_);
+    r.get(t.ds_safety_);
+    r.get(t.ds_period_);
+    if (t.ds_on_ && !(t.ds_target_dt_ > 0 && t.ds_safety_ > 0 && t.ds_period_ >= 1))
+      throw ParameterError("checkpoint: corrupt density scaling");
+  }
   r.get(t.step_);
   r.get(t.time_);
   r.get(t.phys_version_);

@@ -57,10 +57,42 @@ void Scene::set_auto_timestep(Real safety, int period) {
     throw ParameterError("timestep_period=" + std::to_string(period) + ": must be >= 0 (0 = off)");
   ts_safety_ = safety;
   ts_period_ = period;
+  if (ds_on_) return;  // density scaling keeps dt at its target
   // Period 0: dt is set once, now, and not updated during the run (the dt check still
   // watches it); a positive period also sets it now and then every `period` steps.
   const Real est = critical_dt();
   if (std::isfinite(est)) set_dt(safety * est);
+}
+
+void Scene::set_density_scaling(Real target_dt, Real safety, int period) {
+  require(std::isfinite(target_dt) && target_dt > 0, "target_dt", target_dt, "must be > 0 (s)");
+  require(std::isfinite(safety) && safety > 0 && safety <= 1, "safety", safety,
+          "must be in (0, 1]: each body's scaled critical step is target_dt / safety");
+  if (period < 1)
+    throw ParameterError("period=" + std::to_string(period) +
+                         ": must be >= 1 (steps between updates of the inertia factors)");
+  ds_on_ = true;
+  ds_target_dt_ = target_dt;
+  ds_safety_ = safety;
+  ds_period_ = period;
+  dt_ = target_dt;
+  update_density_scaling();
+}
+
+void Scene::clear_density_scaling() {
+  ds_on_ = false;
+  for (int c = 0; c < clumps_.size(); ++c) set_clump_scale(c, 1.0);
+  std::fill(bodies_.inertia_scale.begin(), bodies_.inertia_scale.end(), 1.0);
+}
+
+void Scene::set_clump_scale(int c, Real s) {
+  Real& old = clumps_.inertia_scale[c];
+  if (s == old) return;
+  // The spin is kept: L = R I R^T w grows with the factor; so does the kinetic energy, and
+  // the energy balance books the change as external work.
+  clumps_.angmom[c] *= s / old;
+  if (track_energy_) clumps_.ext_work[c] += clumps_.ke[c] * (s / old - 1);
+  old = s;
 }
 
 void Scene::set_dt_check_period(int period) {
@@ -137,9 +169,9 @@ void Scene::note_formed_contact(const ContactPhys& p, int b1, int b2) const {
     const int c = bodies_.clump[b];
     if (c >= 0)
       return (clumps_.blocked[c] & DOF_ALL) == DOF_ALL ? std::numeric_limits<Real>::infinity()
-                                                        : clumps_.mass[c];
+                                                        : clumps_.mass[c] * clumps_.inertia_scale[c];
     return (bodies_.blocked[b] & DOF_ALL) == DOF_ALL ? std::numeric_limits<Real>::infinity()
-                                                      : bodies_.mass[b];
+                                                      : bodies_.mass[b] * bodies_.inertia_scale[b];
   };
   const Real m1 = free_mass(b1), m2 = free_mass(b2);
   const int b = m2 <= m1 ? b2 : b1;
@@ -162,7 +194,10 @@ void Scene::check_dt() {
   // again since the last check: bouncing grains may have no contact at the moment of the
   // check. Such a contact gives every grain its stiffness floor (as any active contact does)
   // and its own single-contact estimate sqrt(2 m / k_n), m the lighter free body's mass.
-  const Real q = formed_.stiffness_per_mass.load(std::memory_order_relaxed);
+  // With density scaling the factors follow the contacts themselves (each update takes the
+  // contacts of its step before the bodies move), so a contact that formed and opened again
+  // needs no check of its own: only the active ones are checked, with the scaled inertia.
+  const Real q = ds_on_ ? -1 : formed_.stiffness_per_mass.load(std::memory_order_relaxed);
   const int q_body = formed_.body;
   const long since = formed_.since;
   formed_.stiffness_per_mass.store(-1, std::memory_order_relaxed);
@@ -185,8 +220,12 @@ void Scene::check_dt() {
   os << "blow-up at step " << step_ << ": the time step dt=" << dt_
      << " s exceeds the critical estimate " << est << " s (set by body " << body;
   if (formed) os << ", in a contact that formed after step " << since;
-  os << ") " << dt_ / est << " x; leapfrog may be unstable and results would be wrong: lower "
-        "dt or use set_auto_timestep(safety <= 1)";
+  os << ") " << dt_ / est << " x; leapfrog may be unstable and results would be wrong: ";
+  if (ds_on_)
+    os << "density scaling is on and its factors did not catch up; lower its target_dt or "
+          "safety, or update them more often (period)";
+  else
+    os << "lower dt or use set_auto_timestep(safety <= 1)";
   throw BlowUpError(os.str());
 }
 
@@ -216,11 +255,12 @@ std::string Scene::blow_up_hint(int b) const {
 }
 
 void Scene::step() {
-  if (ts_period_ > 0 && step_ % ts_period_ == 0 && step_ > 0) {
+  if (!ds_on_ && ts_period_ > 0 && step_ % ts_period_ == 0 && step_ > 0) {
     const Real est = critical_dt();
     if (std::isfinite(est)) dt_ = ts_safety_ * est;  // nothing free: keep dt
   }
-  if (ts_period_ == 0 && dt_check_period_ > 0 && step_ > 0 && step_ % dt_check_period_ == 0)
+  if ((ds_on_ || ts_period_ == 0) && dt_check_period_ > 0 && step_ > 0 &&
+      step_ % dt_check_period_ == 0)
     check_dt();
   for (const auto& c : controllers_)
     if (c->enabled && step_ % c->period == 0) c->apply(*this);
@@ -268,6 +308,9 @@ void Scene::step() {
   // against the force f on j, -dt sum_c f_c . (L l_c).
   if (cell_.on && track_energy_)
     cell_.work -= dt_ * (pair_stress_sum().cwiseProduct(cell_.vel_grad)).sum();
+  // Density scaling: the factors from the contacts of this step's forces, before they move
+  // the bodies (a contact that formed in this step counts at once).
+  if (ds_on_ && step_ % ds_period_ == 0) update_density_scaling();
   reduce_and_integrate(err_body);
   if (err_body != std::numeric_limits<long>::max()) {
     const int b = static_cast<int>(err_body);

@@ -421,7 +421,10 @@ def _check_pull_rate(sample: PulloutSample, velocity: float) -> None:
     if not (stress > 0 and len(d)):
         return  # unconfined, or no grains: no inertial number
     d_mean = float(np.mean(d))
-    rho = float(sc.material(sample.grain_material).density)
+    # (With density scaling the grains are heavier to the pull: the scaled density.)
+    from cpp_dem.protocols.quasi_static import effective_density
+
+    rho = effective_density(sc, float(sc.material(sample.grain_material).density))
     value = inertial.inertial_number(velocity / d_mean, d_mean, stress, rho)
     inertial.check_quasi_static(value, "pull-out", rate=velocity, rate_name="pull velocity",
                                 rate_unit="m/s", diameter=d_mean, pressure=stress,

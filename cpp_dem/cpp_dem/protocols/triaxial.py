@@ -11,7 +11,7 @@ porosity, unbalanced force.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -32,6 +32,9 @@ class TriaxialSample:
     material: int
     controller: object
     wall_material: int = -1
+    #: Rows of the preparation's history (phase, step, time_s, coordination, porosity,
+    #: wall_stress_pa, unbalanced_force, dt_s), for those preparations that keep one.
+    growth_history: list = field(default_factory=list)
 
 
 def build_box_sample(centers, radii, lo, hi, *, young: float, poisson: float,
@@ -112,7 +115,9 @@ def deviatoric_stage(sample: TriaxialSample, pressure: float, strain_rate: float
     d = measure.grain_diameters(sc)
     if pressure > 0 and len(d):
         d_mean = float(np.mean(d))
-        rho = float(sc.material(sample.material).density)
+        from cpp_dem.protocols.quasi_static import effective_density
+
+        rho = effective_density(sc, float(sc.material(sample.material).density))
         inertial.check_quasi_static(
             inertial.inertial_number(strain_rate, d_mean, pressure, rho),
             "triaxial deviatoric stage", rate=strain_rate, diameter=d_mean,

@@ -19,8 +19,10 @@ class Checkpoint {
   /// the bodies' storage order; 4: pair outputs padded to 4 doubles per vector; 5: the
   /// body store's arrays together (BodyStore::for_each_array); 6: clumps; 7: the periodic
   /// cell, pair contacts' image codes, bodies' image counters; 9: the shear kinematics
-  /// (Scene::shear_kinematics). load also reads version 8 (with the default kinematics).
-  static constexpr std::uint32_t kVersion = 9;
+  /// (Scene::shear_kinematics); 10: density scaling (its parameters, and the bodies' and
+  /// clumps' inertia factors). load also reads versions 8 (with the default kinematics) and
+  /// 9 (scaling off).
+  static constexpr std::uint32_t kVersion = 10;
   /// The whole state of `scene` as bytes. Controllers are code, not data: the blob holds
   /// their count, `period`, `enabled` and, for StatefulController ones, their state.
   static std::vector<std::uint8_t> save(const Scene& scene);

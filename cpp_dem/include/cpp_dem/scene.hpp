@@ -311,6 +311,42 @@ class Scene {
   void set_auto_timestep(Real safety, int period);
   Real timestep_safety() const { return ts_safety_; }
   int timestep_period() const { return ts_period_; }
+  /// Density scaling for quasi-static stages (off by default). Sets dt = target_dt (s) and,
+  /// now and every `period` steps, gives each free body and each clump the inertia factor
+  /// s = max(1, (target_dt / (safety x its own critical step))^2), its critical step taken
+  /// from the stiffness of its active contacts, bonds and links (sqrt(2 m / K) per axis, as
+  /// critical_dt, without the stiffness floor of a grain with no contact), updated just
+  /// before the bodies move (a contact formed in the step counts at once). A factor falls
+  /// at most by half per update; a body that never touched keeps s = 1. Weight and gravity
+  /// stay the true ones (mass x g). Velocities are
+  /// kept when a factor changes (a clump's angular momentum follows its spin). While it is
+  /// on, the automatic time step is not applied, and critical_dt and the dt check take the
+  /// scaled inertia. safety in (0, 1], period >= 1.
+  void set_density_scaling(Real target_dt, Real safety, int period);
+  /// Switches density scaling off: every factor back to 1 (velocities kept).
+  void clear_density_scaling();
+  bool density_scaling() const { return ds_on_; }
+  Real density_scaling_target_dt() const { return ds_target_dt_; }
+  Real density_scaling_safety() const { return ds_safety_; }
+  int density_scaling_period() const { return ds_period_; }
+  /// What density scaling does now (all from the current factors and state).
+  struct DensityScalingStats {
+    Real max_factor = 1;        ///< largest inertia factor, -
+    Real mean_factor = 1;       ///< mass-weighted mean factor of the free bodies and clumps, -
+    Real scaled_share = 0;      ///< share of free bodies and clumps with a factor above 1, -
+    int scaled = 0;             ///< how many, -
+    int movable = 0;            ///< free (not fully blocked) bodies and clumps, -
+    /// The sample's inertial number with the scaled inertia, -: sqrt(sum_c rho_c |dv_c|^2 /
+    /// sum_c (|f_c| / d_c^2)) over the active pair contacts, dv_c the relative velocity of
+    /// the two centres (the image's in a periodic cell), f_c the contact force, d_c the sum
+    /// of the radii and rho_c the two bodies' mean density times their factor: gamma_dot d /
+    /// sqrt(p / rho) with gamma_dot d the neighbours' relative speed and p ~ f / d^2. 0
+    /// when no pair contact carries a force.
+    Real inertial_number = 0;
+  };
+  DensityScalingStats density_scaling_stats() const;
+  /// The inertia factor of a body (its clump's for a clump member), -.
+  Real inertia_scale(int id) const;
 
   // ---- controllers ---------------------------------------------------------------------
   /// Adds a controller; returns its index. Controllers run in the order they were added.
@@ -582,6 +618,25 @@ class Scene {
   ClumpRotation clump_rotation_ = ClumpRotation::Fincham;
   Real ts_safety_ = 0.8;
   int ts_period_ = 0;
+  // Density scaling (set_density_scaling).
+  bool ds_on_ = false;
+  Real ds_target_dt_ = 0;
+  Real ds_safety_ = 0.5;
+  int ds_period_ = 1;
+  /// Renews the inertia factors (set_density_scaling).
+  void update_density_scaling();
+  /// Sets clump c's factor to s, its angular momentum following its spin.
+  void set_clump_scale(int c, Real s);
+  /// Per body and axis, the summed translational (kt) and rotational (kr) stiffness of the
+  /// active contacts, links and bonds, N/m and N m/rad; false when none is active.
+  bool assemble_stiffness(std::vector<Vec3>& kt, std::vector<Vec3>& kr) const;
+  /// The critical step of clump c and of free body b from the stiffnesses (inertia times
+  /// its factor when `scaled`), s; infinite when unconstrained or fully blocked.
+  Real clump_critical_dt(int c, const std::vector<Vec3>& kt, const std::vector<Vec3>& kr,
+                         bool scaled) const;
+  Real body_critical_dt(int b, const std::vector<Vec3>& kt, const std::vector<Vec3>& kr,
+                        bool scaled) const;
+  mutable std::vector<Vec3> ds_kt_, ds_kr_;  // scratch of update_density_scaling
   int dt_check_period_ = 100;
   /// The stiffest contact that formed since the last dt check: the passes note every contact
   /// that takes its parameters (update_phys: a contact forms, or its materials changed) with

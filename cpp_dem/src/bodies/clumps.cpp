@@ -58,6 +58,7 @@ int Scene::add_clump(const std::vector<Vec3>& local, const std::vector<Real>& ra
   clumps_.damp_dissip.push_back(0);
   clumps_.ext_work.push_back(0);
   clumps_.pos_at_energy_reset.push_back(com);
+  clumps_.inertia_scale.push_back(1.0);
   // Members: spheres whose masses share the clump's by volume (they carry its weight in the
   // integration pass; the clump pass applies it at the centre of mass).
   Real vsum = 0;

@@ -159,8 +159,11 @@ void Scene::integrate_clumps_hot(long& err_clump) {
       continue;
     }
     const std::uint8_t dofs = clumps_.blocked[c];
-    const Real m = clumps_.mass[c];
-    const Vec3& inertia = clumps_.inertia[c];
+    // (Density scaling: the inertia times the clump's factor; the members' weights above
+    // are the true ones.)
+    const Real ds = clumps_.inertia_scale[c];
+    const Real m = ds == 1.0 ? clumps_.mass[c] : clumps_.mass[c] * ds;
+    const Vec3 inertia = ds == 1.0 ? clumps_.inertia[c] : Vec3(clumps_.inertia[c] * ds);
     // Translation: the spheres' leapfrog.
     const Real inv_m = 1.0 / m;
     const Vec3 v_old = clumps_.vel[c];

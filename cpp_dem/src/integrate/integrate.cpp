@@ -184,6 +184,7 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
     const Real* const acc_ang = acc_ang_.data()->data();
     const Real* const mass = bodies_.mass.data();
     const Real* const inertia = bodies_.inertia.data();
+    const Real* const scale = ds_on_ ? bodies_.inertia_scale.data() : nullptr;
     const bool has_clumps = clumps_.size() > 0;
     const int* const clump_of = bodies_.clump.data();
     constexpr int kBlock = kBodyBlock;
@@ -212,10 +213,19 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
         }
         // Inverse masses and inertias of the block (vectorised divisions).
         Real inv_m[kBlock], inv_i[kBlock];
+        if (scale) {
+          // Density scaling: the inertia times the body's factor (the weight above is not).
 #pragma omp simd
-        for (int q = 0; q < count; ++q) {
-          inv_m[q] = 1.0 / mass[b0 + q];
-          inv_i[q] = 1.0 / inertia[b0 + q];
+          for (int q = 0; q < count; ++q) {
+            inv_m[q] = 1.0 / (mass[b0 + q] * scale[b0 + q]);
+            inv_i[q] = 1.0 / (inertia[b0 + q] * scale[b0 + q]);
+          }
+        } else {
+#pragma omp simd
+          for (int q = 0; q < count; ++q) {
+            inv_m[q] = 1.0 / mass[b0 + q];
+            inv_i[q] = 1.0 / inertia[b0 + q];
+          }
         }
         const bool forces_ok =
             wide ? block_forces(b0, b1, inv_m, inv_i, WideOps())
@@ -276,7 +286,8 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
       }
       const std::uint8_t dofs = bodies_.blocked[b];
       const Vec3 v_old = bodies_.vel[b], w_old = bodies_.angvel[b];
-      const Real m = bodies_.mass[b], inertia = bodies_.inertia[b];
+      const Real ds = ds_on_ ? bodies_.inertia_scale[b] : 1.0;  // density scaling
+      const Real m = bodies_.mass[b] * ds, inertia = bodies_.inertia[b] * ds;
       const Real inv_m = 1.0 / m, inv_i = 1.0 / inertia;
       Real dissip = 0, work = 0;
       // (Imposed velocity: the constraint supplies -f[a]; its work is -f[a] v dt.)

@@ -21,14 +21,12 @@ Real Scene::pwave_dt() const {
 
 Real Scene::critical_dt() const { return critical_dt_body(nullptr); }
 
-Real Scene::critical_dt_body(int* arg_body, bool contact_seen) const {
-  // Per body and axis, the summed contact stiffness K_a (translation) and K_a^rot; the
-  // estimate sqrt(2 m / K_a) is a Gershgorin bound on 2 / omega_max for the assembled
-  // system: exact for two equal spheres in contact, sqrt(2) below the exact value for a
-  // sphere against a rigid wall.
+bool Scene::assemble_stiffness(std::vector<Vec3>& kt, std::vector<Vec3>& kr) const {
+  // Per body and axis, the summed contact stiffness K_a (translation) and K_a^rot.
   const int n = num_bodies();
-  std::vector<Vec3> kt(n, Vec3::Zero()), kr(n, Vec3::Zero());
-  bool any = contact_seen;
+  kt.assign(n, Vec3::Zero());
+  kr.assign(n, Vec3::Zero());
+  bool any = false;
   auto add = [&](int b, const Vec3& nrm, Real kn, Real ks, Real arm, Real krol) {
     for (int a = 0; a < 3; ++a) {
       const Real n2 = nrm[a] * nrm[a];
@@ -84,6 +82,51 @@ Real Scene::critical_dt_body(int* arg_body, bool contact_seen) const {
       }
     }
   }
+  return any;
+}
+
+Real Scene::clump_critical_dt(int c, const std::vector<Vec3>& kt, const std::vector<Vec3>& kr,
+                              bool scaled) const {
+  // The members' stiffnesses summed (translation), and for rotation each member's largest
+  // translational stiffness at its lever arm plus its rotational one, against the smallest
+  // principal moment.
+  Vec3 ktc = Vec3::Zero(), krc = Vec3::Zero();
+  const Mat3& rot = clumps_.rot[c];
+  for (int e = clumps_.member_off[c]; e < clumps_.member_off[c + 1]; ++e) {
+    const int s = clumps_.member[e];
+    ktc += kt[s];
+    const Real arm2 = (rot * clumps_.member_local[e]).squaredNorm();
+    krc += kr[s] + Vec3::Constant(kt[s].maxCoeff() * arm2);
+  }
+  const Real f = scaled ? clumps_.inertia_scale[c] : 1.0;
+  const Real m = clumps_.mass[c] * f, imin = clumps_.inertia[c].minCoeff() * f;
+  Real d = std::numeric_limits<Real>::infinity();
+  for (int a = 0; a < 3; ++a) {
+    if (ktc[a] > 0 && !(clumps_.blocked[c] & (DOF_X << a))) d = std::min(d, std::sqrt(2 * m / ktc[a]));
+    if (krc[a] > 0 && !(clumps_.blocked[c] & (DOF_RX << a))) d = std::min(d, std::sqrt(2 * imin / krc[a]));
+  }
+  return d;
+}
+
+Real Scene::body_critical_dt(int b, const std::vector<Vec3>& kt, const std::vector<Vec3>& kr,
+                             bool scaled) const {
+  const Real f = scaled ? bodies_.inertia_scale[b] : 1.0;
+  const Real m = bodies_.mass[b] * f, inertia = bodies_.inertia[b] * f;
+  Real d = std::numeric_limits<Real>::infinity();
+  for (int a = 0; a < 3; ++a) {
+    if (kt[b][a] > 0 && !(bodies_.blocked[b] & (DOF_X << a))) d = std::min(d, std::sqrt(2 * m / kt[b][a]));
+    if (kr[b][a] > 0 && !(bodies_.blocked[b] & (DOF_RX << a))) d = std::min(d, std::sqrt(2 * inertia / kr[b][a]));
+  }
+  return d;
+}
+
+Real Scene::critical_dt_body(int* arg_body, bool contact_seen) const {
+  // Per body and axis the estimate sqrt(2 m / K_a) is a Gershgorin bound on 2 / omega_max
+  // for the assembled system: exact for two equal spheres in contact, sqrt(2) below the
+  // exact value for a sphere against a rigid wall.
+  const int n = num_bodies();
+  std::vector<Vec3> kt, kr;
+  const bool any = assemble_stiffness(kt, kr) || contact_seen;
   if (arg_body) *arg_body = -1;
   if (!any) return pwave_dt();
   // A sphere with no (or only soft) contacts may hit something before the next update: its
@@ -93,55 +136,112 @@ Real Scene::critical_dt_body(int* arg_body, bool contact_seen) const {
   // A pair law's own k_n (Scene::set_pair_law) may be stiffer than E R: the floor of a
   // body takes the stiffest pair law of its material too (else a grain with no contact yet
   // took a step that is unstable once it touches, e.g. a soft grain on 002's stiff grid).
-  std::vector<Real> law_kn(materials_.size(), 0.0);
-  for (const PairLaw& l : pair_laws_) {
-    if (!(l.kn > 0)) continue;
-    law_kn[l.a] = std::max(law_kn[l.a], l.kn);
-    law_kn[l.b] = std::max(law_kn[l.b], l.kn);
-  }
-  for (int b = 0; b < n; ++b) {
-    if (bodies_.kind[b] != BODY_SPHERE) continue;
-    const int m = bodies_.material[b];
-    const Real floor_k = std::max(materials_[m].young * bodies_.radius[b], law_kn[m]);
-    for (int a = 0; a < 3; ++a) kt[b][a] = std::max(kt[b][a], floor_k);
+  // With density scaling the floor is left out: the scaling follows each body's own
+  // contacts (set_density_scaling), and the estimate is that of the scaled inertia.
+  if (!ds_on_) {
+    std::vector<Real> law_kn(materials_.size(), 0.0);
+    for (const PairLaw& l : pair_laws_) {
+      if (!(l.kn > 0)) continue;
+      law_kn[l.a] = std::max(law_kn[l.a], l.kn);
+      law_kn[l.b] = std::max(law_kn[l.b], l.kn);
+    }
+    for (int b = 0; b < n; ++b) {
+      if (bodies_.kind[b] != BODY_SPHERE) continue;
+      const int m = bodies_.material[b];
+      const Real floor_k = std::max(materials_[m].young * bodies_.radius[b], law_kn[m]);
+      for (int a = 0; a < 3; ++a) kt[b][a] = std::max(kt[b][a], floor_k);
+    }
   }
   Real dt = std::numeric_limits<Real>::infinity();
-  // A clump: its members' stiffnesses summed (translation), and for rotation each member's
-  // largest translational stiffness at its lever arm plus its rotational one, against the
-  // smallest principal moment (members are fully blocked bodies and set no limit below).
+  // Clump members are fully blocked bodies and set no limit below.
   for (int c = 0; c < clumps_.size(); ++c) {
-    Vec3 ktc = Vec3::Zero(), krc = Vec3::Zero();
-    const Mat3& rot = clumps_.rot[c];
-    for (int e = clumps_.member_off[c]; e < clumps_.member_off[c + 1]; ++e) {
-      const int s = clumps_.member[e];
-      ktc += kt[s];
-      const Real arm2 = (rot * clumps_.member_local[e]).squaredNorm();
-      krc += kr[s] + Vec3::Constant(kt[s].maxCoeff() * arm2);
-    }
-    const Real imin = clumps_.inertia[c].minCoeff();
-    for (int a = 0; a < 3; ++a) {
-      Real d = std::numeric_limits<Real>::infinity();
-      if (ktc[a] > 0 && !(clumps_.blocked[c] & (DOF_X << a))) d = std::sqrt(2 * clumps_.mass[c] / ktc[a]);
-      if (krc[a] > 0 && !(clumps_.blocked[c] & (DOF_RX << a))) d = std::min(d, std::sqrt(2 * imin / krc[a]));
-      if (d < dt) {
-        dt = d;
-        if (arg_body) *arg_body = id_of(clumps_.member[clumps_.member_off[c]]);
-      }
+    const Real d = clump_critical_dt(c, kt, kr, ds_on_);
+    if (d < dt) {
+      dt = d;
+      if (arg_body) *arg_body = id_of(clumps_.member[clumps_.member_off[c]]);
     }
   }
   for (int b = 0; b < n; ++b) {
-    for (int a = 0; a < 3; ++a) {
-      Real d = std::numeric_limits<Real>::infinity();
-      if (kt[b][a] > 0 && !(bodies_.blocked[b] & (DOF_X << a))) d = std::sqrt(2 * bodies_.mass[b] / kt[b][a]);
-      if (kr[b][a] > 0 && !(bodies_.blocked[b] & (DOF_RX << a)))
-        d = std::min(d, std::sqrt(2 * bodies_.inertia[b] / kr[b][a]));
-      if (d < dt) {
-        dt = d;
-        if (arg_body) *arg_body = id_of(b);
-      }
+    const Real d = body_critical_dt(b, kt, kr, ds_on_);
+    if (d < dt) {
+      dt = d;
+      if (arg_body) *arg_body = id_of(b);
     }
   }
   return std::isfinite(dt) ? dt : pwave_dt();
+}
+
+void Scene::update_density_scaling() {
+  assemble_stiffness(ds_kt_, ds_kr_);  // (zero for a body with nothing active: factor 1)
+  const Real h = ds_target_dt_ / ds_safety_;  // the critical step every body must reach, s
+  // A factor rises at once to what the contacts need, and falls at most by half per
+  // update: a body that bounces off a contact keeps its inertia for the next touch (which
+  // may come before the next update), and a body that has left its contacts for good is back
+  // at 1 within a few updates.
+  const auto factor = [h](Real d, Real old) {
+    const Real need = std::isfinite(d) && d < h ? (h / d) * (h / d) : 1.0;
+    return std::max(need, std::max(1.0, 0.5 * old));
+  };
+  for (int c = 0; c < clumps_.size(); ++c)
+    set_clump_scale(c, factor(clump_critical_dt(c, ds_kt_, ds_kr_, false), clumps_.inertia_scale[c]));
+  const int n = num_bodies();
+  for (int b = 0; b < n; ++b) {
+    const Real s = bodies_.clump[b] >= 0
+                       ? 1.0
+                       : factor(body_critical_dt(b, ds_kt_, ds_kr_, false), bodies_.inertia_scale[b]);
+    Real& old = bodies_.inertia_scale[b];
+    // (The kinetic energy changes with the factor; the balance books it as external work.)
+    if (track_energy_ && s != old) bodies_.ext_work[b] += bodies_.ke[b] * (s / old - 1);
+    old = s;
+  }
+}
+
+Scene::DensityScalingStats Scene::density_scaling_stats() const {
+  DensityScalingStats st;
+  Real mass = 0, scaled_mass = 0;
+  const auto count = [&](Real m, Real f, std::uint8_t blocked) {
+    if ((blocked & DOF_ALL) == DOF_ALL) return;
+    ++st.movable;
+    mass += m;
+    scaled_mass += f * m;
+    st.max_factor = std::max(st.max_factor, f);
+    if (f > 1) ++st.scaled;
+  };
+  for (int c = 0; c < clumps_.size(); ++c)
+    count(clumps_.mass[c], clumps_.inertia_scale[c], clumps_.blocked[c]);
+  for (int b = 0; b < num_bodies(); ++b)
+    if (bodies_.clump[b] < 0) count(bodies_.mass[b], bodies_.inertia_scale[b], bodies_.blocked[b]);
+  st.mean_factor = mass > 0 ? scaled_mass / mass : 1.0;
+  st.scaled_share = st.movable > 0 ? static_cast<Real>(st.scaled) / st.movable : 0.0;
+  // The inertial number over the active pair contacts, in contact order.
+  Real num = 0, den = 0;
+  const bool cell = cell_.on;
+  for_each_contact_of(ContactKind::Pair, [&](const ContactRecord& c) {
+    if (!c.active) return;
+    const Real f = c.force2.norm();
+    if (!(f > 0)) return;
+    const int i = c.body1, j = c.body2;
+    Vec3 dv = bodies_.vel[j] - bodies_.vel[i];
+    if (cell) dv += cell_.vel_grad * c.shift2;
+    const Real d = bodies_.radius[i] + bodies_.radius[j];
+    const auto factor = [this](int b) {
+      const int k = bodies_.clump[b];
+      return k >= 0 ? clumps_.inertia_scale[k] : bodies_.inertia_scale[b];
+    };
+    const Real rho = 0.5 * (materials_[bodies_.material[i]].density * factor(i) +
+                            materials_[bodies_.material[j]].density * factor(j));
+    num += rho * dv.squaredNorm();
+    den += f / (d * d);
+  });
+  st.inertial_number = den > 0 ? std::sqrt(num / den) : 0.0;
+  return st;
+}
+
+Real Scene::inertia_scale(int id) const {
+  check_body(id);
+  const int b = slot_of(id);
+  const int c = bodies_.clump[b];
+  return c >= 0 ? clumps_.inertia_scale[c] : bodies_.inertia_scale[b];
 }
 
 Energies Scene::energies() const {

@@ -42,6 +42,10 @@ struct BodyStore {
   std::vector<Real> damp_dissip;           ///< dissipated by local damping, J
   std::vector<Real> ext_work;              ///< work of external forces and imposed DOFs, J
   std::vector<Vec3> pos_at_energy_reset;   ///< m
+  /// Density scaling (Scene::set_density_scaling): the factor s >= 1 of the body's inertia;
+  /// it moves as a body of mass s x mass and moment s x inertia, while its weight stays
+  /// mass x g. 1 when scaling is off, and for a clump member (its clump carries the factor).
+  std::vector<Real> inertia_scale;
 
   int size() const { return static_cast<int>(pos.size()); }
 
@@ -67,6 +71,7 @@ struct BodyStore {
     damp_dissip.push_back(0);
     ext_work.push_back(0);
     pos_at_energy_reset.push_back(x);
+    inertia_scale.push_back(1.0);
   }
 
   /// Calls f(array) for every per-body array, in a fixed order (the checkpoint's).
@@ -86,6 +91,7 @@ struct BodyStore {
     f(b.ori), f(b.radius), f(b.mass), f(b.inertia), f(b.material), f(b.blocked), f(b.kind);
     f(b.clump), f(b.image);
     f(b.ke), f(b.damp_dissip), f(b.ext_work), f(b.pos_at_energy_reset);
+    f(b.inertia_scale);  // (last: checkpoints before version 10 end before it)
   }
 
  public:

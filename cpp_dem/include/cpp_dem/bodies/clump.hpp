@@ -37,6 +37,9 @@ struct ClumpStore {
   // Energy accumulators (written when the scene tracks energy).
   std::vector<Real> ke, damp_dissip, ext_work;
   std::vector<Vec3> pos_at_energy_reset;
+  /// Density scaling: the factor s >= 1 of the clump's mass and principal moments (see
+  /// BodyStore::inertia_scale).
+  std::vector<Real> inertia_scale;
   // Per member (index e in member_off order).
   std::vector<int> member;        ///< slot of the member sphere
   std::vector<Vec3> member_local; ///< member centre in the principal frame, m
@@ -68,6 +71,7 @@ struct ClumpStore {
     f(s.ext_force), f(s.ext_torque), f(s.mass), f(s.inertia), f(s.stiffness_radius), f(s.blocked);
     f(s.member_off), f(s.ke), f(s.damp_dissip), f(s.ext_work), f(s.pos_at_energy_reset);
     f(s.member), f(s.member_local);
+    f(s.inertia_scale);  // (last: checkpoints before version 10 end before it)
   }
 };
 
