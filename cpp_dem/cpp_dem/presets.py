@@ -29,6 +29,9 @@ class Preset:
     inertial_number: float      #: loading rate as I = v sqrt(rho / sigma), -
     fem_size_per_element: float = 0.25  #: coupled runs: fine FEM mesh size / element edge, -
     two_way_tol: float = 0.02   #: coupled runs: two-way tolerance on the handed-over stress, -
+    #: element tests (prs-element-002): density scaling of the growth and servo stages, the
+    #: target dt over the unscaled one (cpp_dem.protocols.quasi_static); 0: off, -
+    density_scaling: float = 0.0
 
     def velocity(self, *, density: float, stress: float) -> float:
         """Loading velocity, m/s, for grains of ``density`` (kg/m^3) under ``stress`` (Pa)."""
@@ -46,10 +49,11 @@ class Preset:
 
 PRESETS = {
     "fast": Preset("fast", dt_safety=0.8, node_density_scale=1e5, local_damping=0.2,
-                   inertial_number=6.4e-3, fem_size_per_element=0.5, two_way_tol=0.1),
+                   inertial_number=6.4e-3, fem_size_per_element=0.5, two_way_tol=0.1,
+                   density_scaling=16.0),
     "balanced": Preset("balanced", dt_safety=0.5, node_density_scale="auto",
                        local_damping=0.2, inertial_number=3.2e-3, fem_size_per_element=0.25,
-                       two_way_tol=0.02),
+                       two_way_tol=0.02, density_scaling=8.0),
     "accurate": Preset("accurate", dt_safety=0.35, node_density_scale=3e3,
                        local_damping=0.05, inertial_number=8e-4, fem_size_per_element=0.125,
                        two_way_tol=0.005),

@@ -349,6 +349,11 @@ def element_parser(name: str, description: str, d, *, smoke: str, preset: str | 
                     help="PRS prestress T_p, N/m (>= 0; 0: PRS is RE)")
     ap.add_argument("--footing-pressure", type=float, default=d.footing_pressure,
                     help="FEM footing pressure, Pa (> 0)")
+    ap.add_argument("--density-scaling", type=float, default=None,
+                    help="density scaling of the element's growth and servo stages: the "
+                         f"target time step over the unscaled one (>= 1; 0: off; default "
+                         f"{d.density_scaling:g}, or the --preset's where the case has one; "
+                         "docs/quasi_static.md)")
     return ap
 
 
@@ -363,8 +368,14 @@ def apply_element_args(ap, a, p):
         ap.error(f"--prestress={a.prestress}: must be >= 0 (N/m)")
     if not (math.isfinite(a.footing_pressure) and a.footing_pressure > 0):
         ap.error(f"--footing-pressure={a.footing_pressure}: must be > 0 (Pa)")
+    if a.density_scaling is not None and not (
+            math.isfinite(a.density_scaling) and (a.density_scaling == 0 or a.density_scaling >= 1)):
+        ap.error(f"--density-scaling={a.density_scaling}: must be 0 (off) or >= 1 (the target "
+                 "time step over the unscaled one)")
     p.prestress, p.footing_pressure, p.seed, p.threads = (a.prestress, a.footing_pressure,
                                                            a.seed, a.threads)
+    if a.density_scaling is not None:
+        p.density_scaling = a.density_scaling
     return p
 
 

@@ -141,6 +141,15 @@ def write_report(out: Path, summary: dict) -> None:
             ("locked-in prestress at the end (N per member)",
              lambda e: (str(np.round(e["prestress_locked_final_n"], 1).tolist())
                         if "prestress_locked_final_n" in e else "-")),
+            ("porosity at the end", lambda e: f"{e['porosity_final']:.3f}"),
+            ("time step (s)", lambda e: f"{e['density_scaling']['dt_s']:.3g}"),
+            ("density scaling: largest factor, bodies scaled",
+             lambda e: (f"{e['density_scaling']['max_factor']:.3g}, "
+                        f"{100 * e['density_scaling']['scaled_share']:.0f} %"
+                        if e["density_scaling"]["target_dt_s"] else "off")),
+            ("wall time: preparation, stages (s)",
+             lambda e: f"{e['preparation_wall_time_s']:.0f}, "
+                       + ", ".join(f"{t:.0f}" for t in e["stage_wall_time_s"])),
             ("wall time (s)", lambda e: f"{e['wall_time_s']:.0f}")]
     names = list(el)
     lines += ["| | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
@@ -251,7 +260,9 @@ def build_parser():
         "parts: clumps with Hertz-Mindlin (its Table 1), the woven geogrid of bonded spheres "
         "(its Table 2, detailed and standard), servo walls to FEM stresses or to --stresses; "
         "RE against PRS with the paper's interaction measures.", d,
-        smoke=f"{SMOKE['n']} clumps, coarse FEM mesh")
+        smoke=f"{SMOKE['n']} clumps, coarse FEM mesh",
+        preset="of the element: density scaling of its growth and servo stages "
+               "(--density-scaling overrides it)")
     ap.add_argument("--grids", default=",".join(GRIDS), help="woven forms to run")
     ap.add_argument("--variants", default=",".join(VARIANTS), help="RE and/or PRS")
     ap.add_argument("--workers", type=int, default=1,
@@ -269,6 +280,10 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     p.grids = _names(a.grids, GRIDS, "--grids", ap)
     p.variants = _names(a.variants, VARIANTS, "--variants", ap)
     p.grains = a.grains
+    if a.preset and a.density_scaling is None:
+        from cpp_dem.presets import preset
+
+        p.density_scaling = preset(a.preset).density_scaling
     if a.workers < 1:
         ap.error(f"--workers={a.workers}: must be >= 1")
     p.workers = a.workers

@@ -22,7 +22,7 @@ from cpp_dem import _core
 from cpp_dem.build import geogrid
 from cpp_dem.measure import inertial
 from cpp_dem import measure
-from cpp_dem.protocols import prep
+from cpp_dem.protocols import prep, quasi_static
 from cpp_dem._core import BeamParams
 from cpp_dem.io import (CsvRecorder, H5Recorder, PvdWriter, write_vtk_box, write_vtk_contacts,
                         write_vtk_spheres)
@@ -70,6 +70,9 @@ class ElementParams:
     apertures: int = 3               #: woven grids: apertures per side, -
     growth_max_strain: float = 1e-4  #: radius growth per step at most, -; woven elements
                                      #: grow at 10 x this until the grains touch, then at this
+    density_scaling: float = 0.0     #: target dt / unscaled dt of the growth and servo stages
+                                     #: with density scaling (cpp_dem.protocols.quasi_static),
+                                     #: -; 0: off
 
 
 def grid_spacing(p: ElementParams) -> float:
@@ -122,9 +125,10 @@ def make_element(p: ElementParams, mean_stress: float, prestressed: bool,
                                params=beam, material=gmat, density=p.grid_density)
     sc.max_overlap_ratio = 0.95
     sc.block_dofs(grid.nodes, "all")
+    _start_scaling(sc, p, log)
     t0 = time.perf_counter()
     grow = prep.grow_to_stress(sc, sample.walls, mean_stress, tol=0.05, unbalanced=0.05,
-                               max_strain=1e-4, max_steps=p.max_steps)
+                               max_strain=1e-4 * _rate_factor(sc, p), max_steps=p.max_steps)
     log(f"element: {len(r)} grains (r_mean {r_mean * 1e3:.2f} mm), geogrid {p.grid_nodes}x"
         f"{p.grid_nodes} nodes, J = {grid_axial_stiffness(p) / 1e3:.0f} kN/m; grown to "
         f"{grow.mean_stress / 1e3:.2f} kPa in {grow.steps} steps, porosity {grow.porosity:.3f}"
@@ -164,6 +168,28 @@ def check_element_params(p: ElementParams) -> None:
         templates_from_spec(p.grains)  # names the bad value
     if not (isinstance(p.apertures, int) and p.apertures >= 1):
         raise ParameterError(f"apertures={p.apertures!r}: must be an integer >= 1")
+    if not (math.isfinite(p.density_scaling) and (p.density_scaling == 0 or p.density_scaling >= 1)):
+        raise ParameterError(f"density_scaling={p.density_scaling!r}: must be 0 (off) or >= 1 "
+                             "(the target time step over the unscaled one, -)")
+
+
+def _rate_factor(sc, p: ElementParams) -> float:
+    """How much farther the element's per-step limits (growth strain, wall speed) reach per
+    step with density scaling on: p.density_scaling, the dt over the unscaled reference, so
+    that the loading keeps its physical rate (1/s, m/s) and takes that many times fewer
+    steps; 1 without scaling."""
+    return p.density_scaling if sc.density_scaling else 1.0
+
+
+def _start_scaling(sc, p: ElementParams, log: Callable[[str], None]) -> None:
+    """Density scaling on for the element's quasi-static stages (p.density_scaling > 0)."""
+    if p.density_scaling > 0:
+        ref = quasi_static.reference_dt(sc)
+        # (Every 10 steps: the grains' Hertz contacts form soft, and the linear wall and
+        # grid contacts are far softer than a grain's mass allows at this dt.)
+        target = quasi_static.enable(sc, p.density_scaling, period=10)
+        log(f"density scaling: dt {target:.3g} s, {p.density_scaling:g} x the unscaled "
+            f"{ref:.3g} s (each body's inertia raised where its contacts need it)")
 
 
 def grain_material(p: ElementParams, friction_deg: float):
@@ -243,24 +269,41 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
     sc.set_pair_law(gmat, wall_mat, model="linear", kn=pr["kn"], ks=pr["ks"], friction=0.0)
     sc.max_overlap_ratio = 0.95
     sc.block_dofs(grid.spheres, "all")
+    _start_scaling(sc, p, log)
     t0 = time.perf_counter()
     # Radius growth in two phases. A growth servo on the wall stress stops too early in a
     # loose cloud of clumps: grains that the growth itself presses into the walls show the
     # target stress while the inside is not yet in contact (measured: 20 kPa at a
     # coordination number of 0.4). So the grains first grow fast, with no stress feedback,
-    # until contacts form throughout (coordination number 1); then slowly to the target
-    # stress, which must hold at three checks in a row with the grains in contact (two
-    # grain-grain contacts per grain: in a small element the walls and the grid take many
-    # of the contacts) and the unbalanced force below 0.3. The servo stages then bring
-    # the packing to rest (p.unbalanced) at the exact targets; a clump packing creeps, and
-    # growing it to rest as well was measured 10 x slower (150 000 steps, not at rest).
+    # until contacts form throughout (coordination number 1). The wall stress is only a
+    # ceiling there: above the target the growth pauses until the grains it pressed into the
+    # walls have moved into the loose inside, and goes on (ending the phase on such a spike
+    # left coordination numbers of 0.02-0.07, and the packing sprang apart). The phase also
+    # ends when the growth stays paused with the packing at rest: it is jammed, in contact
+    # throughout. Then the grains grow slowly to the target stress, which must hold at three
+    # checks in a row with the grains in contact (two grain-grain contacts per grain: in a
+    # small element the walls and the grid take many of the contacts) and the unbalanced
+    # force below 0.3. The servo stages then bring the packing to rest (p.unbalanced) at the
+    # exact targets; a clump packing creeps, and growing it to rest as well was measured
+    # 10 x slower (150 000 steps, not at rest).
     from cpp_dem._core import RadiusGrowth
 
+    rate = _rate_factor(sc, p)
     fast = RadiusGrowth(walls=list(sample.walls), bodies=[int(b) for b in grain_bodies],
-                        target_stress=1e12, gain=0.5, max_strain=10 * p.growth_max_strain)
+                        target_stress=1e12, gain=0.5, max_strain=10 * p.growth_max_strain * rate)
     sc.add_controller(fast)
     start = sc.step_count
     last = [time.perf_counter()]
+    history = sample.growth_history
+
+    def note(phase: str) -> dict:
+        row = {"phase": phase, "step": sc.step_count, "time_s": sc.time,
+               "coordination": measure.coordination_number(sc),
+               "porosity": measure.porosity(sc, sample.walls),
+               "wall_stress_pa": float(measure.wall_stresses(sc, sample.walls).mean()),
+               "unbalanced_force": float(sc.unbalanced_force()), "dt_s": sc.dt}
+        history.append(row)
+        return row
 
     def progress(phase: str) -> None:
         if time.perf_counter() - last[0] > 10:
@@ -268,22 +311,42 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
             log(f"  growth ({phase}): step {sc.step_count - start}, walls "
                 f"{np.round(measure.axis_stresses(sc, sample.walls) / 1e3, 2).tolist()} kPa "
                 f"(target {mean_stress / 1e3:.2f}), coordination "
-                f"{measure.coordination_number(sc):.2f}, unbalanced {sc.unbalanced_force():.3g};"
+                f"{measure.coordination_number(sc):.2f}, unbalanced {sc.unbalanced_force():.3g},"
+                f" {quasi_static.describe(quasi_static.report(sc))};"
                 f" at most {p.max_steps - (sc.step_count - start)} steps left in this phase")
 
-    while (measure.coordination_number(sc) < 1.0 and
-           measure.wall_stresses(sc, sample.walls).mean() < mean_stress and
-           sc.step_count - start < p.max_steps):
+    paused_at_rest = 0
+    row = note("fast")
+    while row["coordination"] < 1.0 and sc.step_count - start < p.max_steps:
+        # The ceiling: pause above the target, go on below it.
+        fast.enabled = row["wall_stress_pa"] < mean_stress
+        paused_at_rest = (paused_at_rest + 1 if not fast.enabled and
+                          row["unbalanced_force"] < 0.3 else 0)
+        if paused_at_rest >= 3:
+            break
         sc.run(500)
+        row = note("fast")
         progress("fast")
     fast.enabled = False
     fast_steps = sc.step_count - start
+    fast_end = ("coordination 1" if row["coordination"] >= 1.0 else
+                "jammed at the ceiling" if paused_at_rest >= 3 else "step limit")
     start = sc.step_count
+
+    calls = [0]
+
+    def slow(_s) -> None:  # (called every 200 steps; the history every 2000)
+        calls[0] += 1
+        if calls[0] % 10 == 0:
+            note("slow")
+        progress("to the stress")
+
     grow = prep.grow_to_stress(sc, sample.walls, mean_stress, tol=0.05,
                                unbalanced=max(0.3, p.unbalanced),
-                               max_strain=p.growth_max_strain, max_steps=p.max_steps,
+                               max_strain=p.growth_max_strain * rate, max_steps=p.max_steps,
                                bodies=grain_bodies, checks=3, min_coordination=2.0,
-                               callback=lambda _s: progress("to the stress"))
+                               callback=slow)
+    note("slow")
     if not grow.converged:
         log(f"WARNING: the growth did not reach {mean_stress / 1e3:.2f} kPa at rest within "
             f"{p.max_steps} steps (axis stresses {np.round(grow.axis_stresses / 1e3, 2).tolist()}"
@@ -294,7 +357,8 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
         f"woven {preset} grid {p.apertures}x{p.apertures} apertures ({len(grid.spheres)} "
         f"spheres, {len(grid.bonds)} bonds, J = "
         f"{woven.series_stiffness_per_metre(preset) / 1e3:.0f} kN/m); grown to "
-        f"{grow.mean_stress / 1e3:.2f} kPa in {fast_steps} + {grow.steps} steps, "
+        f"{grow.mean_stress / 1e3:.2f} kPa in {fast_steps} (fast, to {fast_end}) + "
+        f"{grow.steps} steps, "
         f"porosity {measure.porosity(sc, sample.walls):.3f}"
         f" ({time.perf_counter() - t0:.1f} s)")
     sc.set_pair_law(sample.material, sample.material,
@@ -335,7 +399,7 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
         ends.set(grid_tension)
     for a in range(3):
         ctl.set_stress(a, float(t[a]))
-    ctl.max_speed = prep.default_max_speed(sc, walls, fraction=4e-4)
+    ctl.max_speed = prep.default_max_speed(sc, walls, fraction=4e-4 * _rate_factor(sc, p))
     ctl.enabled = True
     longi = grid.member_direction == geogrid.LONGITUDINAL
 
@@ -355,8 +419,10 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
         return ax
 
     start, last = sc.step_count, time.perf_counter()
+    wall0 = last
     size0, t0 = measure.box_size(sc, walls), sc.time
     ok = False
+    quasi_static_warned = False
     while sc.step_count - start < p.max_steps:
         sc.run(p.record_every)
         ax = record()
@@ -365,12 +431,19 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
             last = time.perf_counter()
             log(f"  stage {stage}: step {sc.step_count - start}, walls "
                 f"{np.round(ax / 1e3, 2).tolist()} kPa (targets {np.round(t / 1e3, 2).tolist()}),"
-                f" unbalanced {sc.unbalanced_force():.3g}")
+                f" unbalanced {sc.unbalanced_force():.3g}, "
+                f"{quasi_static.describe(quasi_static.report(sc))}")
+            quasi_static_warned = quasi_static_warned or quasi_static.check(
+                sc, f"element servo stage {stage}", stacklevel=2)
         if np.all(err <= p.tol) and sc.unbalanced_force() < p.unbalanced:
             ok = True
             break
     steps = sc.step_count - start
-    _check_stage_rate(sc, walls, size0, t0, t, stage, sc.material(sample.material).density)
+    # (The density under scaling: the mass-weighted mean factor raises the inertia.)
+    _check_stage_rate(sc, walls, size0, t0, t, stage, quasi_static.effective_density(
+        sc, sc.material(sample.material).density))
+    if not quasi_static_warned:
+        quasi_static.check(sc, f"element servo stage {stage}", stacklevel=2)
     hold_err = 0.0
     held = 0
     while held < p.hold_steps:
@@ -379,7 +452,46 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
         hold_err = max(hold_err, float(np.max(np.abs(record() - t) / t)))
     ax = measure.axis_stresses(sc, walls)
     return {"converged": ok, "steps": steps, "hold_max_rel_error": hold_err,
+            "density_scaling": quasi_static.report(sc),
+            "wall_time_s": time.perf_counter() - wall0,
             "wall_stresses_pa": ax, "box_size_m": measure.box_size(sc, walls)}
+
+
+GROWTH_COLUMNS = ("phase", "step", "time_s", "coordination", "porosity", "wall_stress_pa",
+                  "unbalanced_force", "dt_s")
+
+
+def write_growth_history(out: Path, label: str, history: list) -> None:
+    """The preparation's history (TriaxialSample.growth_history rows) as <label>_growth.csv
+    and a figure <label>_growth.png: coordination number, porosity and mean wall stress
+    against the step, the fast phase shaded."""
+    import csv as _csv
+
+    with open(out / f"{label}_growth.csv", "w", newline="") as fh:
+        w = _csv.DictWriter(fh, fieldnames=GROWTH_COLUMNS)
+        w.writeheader()
+        for row in history:
+            w.writerow({k: row[k] for k in GROWTH_COLUMNS})
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    step = np.array([r["step"] for r in history], float)
+    fast = np.array([r["phase"] == "fast" for r in history])
+    fig, axes = plt.subplots(3, 1, figsize=(6.0, 6.5), sharex=True, constrained_layout=True)
+    for ax, key, scale, name in ((axes[0], "coordination", 1.0, "coordination number, -"),
+                                 (axes[1], "porosity", 1.0, "porosity, -"),
+                                 (axes[2], "wall_stress_pa", 1e-3, "mean wall stress, kPa")):
+        ax.plot(step, [r[key] * scale for r in history], "k.-", ms=3, lw=0.8)
+        if fast.any():
+            ax.axvspan(step[0], step[fast][-1], color="0.9", zorder=0)
+        ax.set_ylabel(name)
+    axes[0].set_title(f"{label}: preparation (grey: fast growth, then growth to the stress)",
+                      fontsize=9)
+    axes[2].set_xlabel("step")
+    fig.savefig(out / f"{label}_growth.png", dpi=120)
+    plt.close(fig)
 
 
 def _check_stage_rate(sc, walls, size0, t0: float, targets, stage: int,
@@ -538,6 +650,9 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     else:
         sample, grid, ps = make_element(p, float(targets[0].mean()), prestressed, log=log)
     sc, walls = sample.scene, sample.walls
+    t_prepared = time.perf_counter()
+    if hit is None and sample.growth_history:
+        write_growth_history(out, label, sample.growth_history)
     if grid_tension is not None and ends is None:
         from cpp_dem.protocols.prestress import EndTension
 
@@ -646,6 +761,10 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     return {
         "label": label, "prestressed": prestressed,
         "num_grains": int(measure.grain_of_body(sc)[1]),
+        "num_spheres": int(sc.num_bodies),
+        "preparation_wall_time_s": t_prepared - t_start,
+        "stage_wall_time_s": [s.get("wall_time_s") for s in stages],
+        "density_scaling": quasi_static.report(sc),
         "targets_pa": [t.tolist() for t in targets],
         "wall_stresses_pa": [s["wall_stresses_pa"].tolist() for s in stages],
         "converged": [bool(s["converged"]) for s in stages],
