@@ -56,7 +56,7 @@ PRESETS = {
                        two_way_tol=0.02, density_scaling=8.0),
     "accurate": Preset("accurate", dt_safety=0.35, node_density_scale=3e3,
                        local_damping=0.05, inertial_number=8e-4, fem_size_per_element=0.125,
-                       two_way_tol=0.005),
+                       two_way_tol=0.005, density_scaling=4.0),
 }
 
 

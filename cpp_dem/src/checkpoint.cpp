@@ -150,6 +150,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.put(s.ds_target_dt_);
   w.put(s.ds_safety_);
   w.put(s.ds_period_);
+  w.put(s.ds_stale_);
   w.put(s.step_);
   w.put(s.time_);
   w.put(s.phys_version_);
@@ -284,6 +285,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
     r.get(t.ds_target_dt_);
     r.get(t.ds_safety_);
     r.get(t.ds_period_);
+    r.get(t.ds_stale_);
     if (t.ds_on_ && !(t.ds_target_dt_ > 0 && t.ds_safety_ > 0 && t.ds_period_ >= 1))
       throw ParameterError("checkpoint: corrupt density scaling");
   }

@@ -81,6 +81,7 @@ void Scene::set_density_scaling(Real target_dt, Real safety, int period) {
 
 void Scene::clear_density_scaling() {
   ds_on_ = false;
+  ds_stale_ = false;
   for (int c = 0; c < clumps_.size(); ++c) set_clump_scale(c, 1.0);
   std::fill(bodies_.inertia_scale.begin(), bodies_.inertia_scale.end(), 1.0);
 }
@@ -255,6 +256,7 @@ std::string Scene::blow_up_hint(int b) const {
 }
 
 void Scene::step() {
+  if (ds_stale_) update_density_scaling();  // (clears it)
   if (!ds_on_ && ts_period_ > 0 && step_ % ts_period_ == 0 && step_ > 0) {
     const Real est = critical_dt();
     if (std::isfinite(est)) dt_ = ts_safety_ * est;  // nothing free: keep dt

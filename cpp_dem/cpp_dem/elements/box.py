@@ -129,6 +129,9 @@ def make_element(p: ElementParams, mean_stress: float, prestressed: bool,
     t0 = time.perf_counter()
     grow = prep.grow_to_stress(sc, sample.walls, mean_stress, tol=0.05, unbalanced=0.05,
                                max_strain=1e-4 * _rate_factor(sc, p), max_steps=p.max_steps)
+    if sc.density_scaling:  # (the target again, for the grown grains)
+        quasi_static.disable(sc)
+        _start_scaling(sc, p, log)
     log(f"element: {len(r)} grains (r_mean {r_mean * 1e3:.2f} mm), geogrid {p.grid_nodes}x"
         f"{p.grid_nodes} nodes, J = {grid_axial_stiffness(p) / 1e3:.0f} kN/m; grown to "
         f"{grow.mean_stress / 1e3:.2f} kPa in {grow.steps} steps, porosity {grow.porosity:.3f}"
@@ -279,7 +282,7 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
     # ceiling there: above the target the growth pauses until the grains it pressed into the
     # walls have moved into the loose inside, and goes on (ending the phase on such a spike
     # left coordination numbers of 0.02-0.07, and the packing sprang apart). The phase also
-    # ends when the growth stays paused with the packing at rest: it is jammed, in contact
+    # ends when the growth stays paused for 10 000 steps: the packing is jammed, in contact
     # throughout. Then the grains grow slowly to the target stress, which must hold at three
     # checks in a row with the grains in contact (two grain-grain contacts per grain: in a
     # small element the walls and the grid take many of the contacts) and the unbalanced
@@ -315,14 +318,15 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
                 f" {quasi_static.describe(quasi_static.report(sc))};"
                 f" at most {p.max_steps - (sc.step_count - start)} steps left in this phase")
 
-    paused_at_rest = 0
+    paused = 0
     row = note("fast")
     while row["coordination"] < 1.0 and sc.step_count - start < p.max_steps:
-        # The ceiling: pause above the target, go on below it.
+        # The ceiling: pause above the target, go on below it. Paused for 20 checks in a
+        # row (10 000 steps), the grains pressed into the walls have not found room inside:
+        # the packing is jammed.
         fast.enabled = row["wall_stress_pa"] < mean_stress
-        paused_at_rest = (paused_at_rest + 1 if not fast.enabled and
-                          row["unbalanced_force"] < 0.3 else 0)
-        if paused_at_rest >= 3:
+        paused = paused + 1 if not fast.enabled else 0
+        if paused >= 20:
             break
         sc.run(500)
         row = note("fast")
@@ -330,7 +334,7 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
     fast.enabled = False
     fast_steps = sc.step_count - start
     fast_end = ("coordination 1" if row["coordination"] >= 1.0 else
-                "jammed at the ceiling" if paused_at_rest >= 3 else "step limit")
+                "jammed at the ceiling" if paused >= 20 else "step limit")
     start = sc.step_count
 
     calls = [0]
@@ -352,6 +356,11 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
             f"{p.max_steps} steps (axis stresses {np.round(grow.axis_stresses / 1e3, 2).tolist()}"
             f" kPa, unbalanced force {grow.unbalanced_force:.3g}); the servo stages go on from "
             "there")
+    # The grains are now at their size: density scaling's target again from the unscaled
+    # step of the grown packing (it grew about 1.4 x in radius since the target was set).
+    if sc.density_scaling:
+        quasi_static.disable(sc)
+        _start_scaling(sc, p, log)
     n_grains = measure.grain_of_body(sc)[1]
     log(f"element: {n_grains} grains ({p.grains}, {p.grain_law}; {len(grain_bodies)} spheres), "
         f"woven {preset} grid {p.apertures}x{p.apertures} apertures ({len(grid.spheres)} "

@@ -623,8 +623,13 @@ class Scene {
   Real ds_target_dt_ = 0;
   Real ds_safety_ = 0.5;
   int ds_period_ = 1;
+  /// Blocked DOFs changed since the last update: the factors are renewed at the next step's
+  /// start (before the dt check), whatever the period.
+  bool ds_stale_ = false;
   /// Renews the inertia factors (set_density_scaling).
   void update_density_scaling();
+  /// Per material, the largest k_n of the linear pair laws it takes part in, N/m (0: none).
+  std::vector<Real> stiffest_pair_law() const;
   /// Sets clump c's factor to s, its angular momentum following its spin.
   void set_clump_scale(int c, Real s);
   /// Per body and axis, the summed translational (kt) and rotational (kr) stiffness of the

@@ -219,6 +219,7 @@ void Scene::set_blocked(int body, std::uint8_t mask) {
   if (mask > DOF_ALL)
     throw ParameterError("blocked=" + std::to_string(mask) + ": must be a mask of x y z rx ry rz");
   bodies_.blocked[slot_of(body)] = mask;
+  ds_stale_ = ds_on_;  // (its inertia factor follows at the next step's start)
 }
 void Scene::set_external_forces(const std::vector<Vec3>& f) {
   require_size(f, bodies_.pos.size(), "external_forces");

@@ -120,6 +120,7 @@ void Scene::set_clump_blocked(int c, std::uint8_t mask) {
   if (mask > DOF_ALL)
     throw ParameterError("blocked=" + std::to_string(mask) + ": must be a mask of x y z rx ry rz");
   clumps_.blocked[c] = mask;
+  ds_stale_ = ds_on_;  // (its inertia factor follows at the next step's start)
 }
 
 void Scene::set_clump_external(int c, const Vec3& force, const Vec3& torque) {

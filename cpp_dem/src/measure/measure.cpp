@@ -139,12 +139,7 @@ Real Scene::critical_dt_body(int* arg_body, bool contact_seen) const {
   // With density scaling the floor is left out: the scaling follows each body's own
   // contacts (set_density_scaling), and the estimate is that of the scaled inertia.
   if (!ds_on_) {
-    std::vector<Real> law_kn(materials_.size(), 0.0);
-    for (const PairLaw& l : pair_laws_) {
-      if (!(l.kn > 0)) continue;
-      law_kn[l.a] = std::max(law_kn[l.a], l.kn);
-      law_kn[l.b] = std::max(law_kn[l.b], l.kn);
-    }
+    const std::vector<Real> law_kn = stiffest_pair_law();
     for (int b = 0; b < n; ++b) {
       if (bodies_.kind[b] != BODY_SPHERE) continue;
       const int m = bodies_.material[b];
@@ -171,8 +166,28 @@ Real Scene::critical_dt_body(int* arg_body, bool contact_seen) const {
   return std::isfinite(dt) ? dt : pwave_dt();
 }
 
+std::vector<Real> Scene::stiffest_pair_law() const {
+  std::vector<Real> law_kn(materials_.size(), 0.0);
+  for (const PairLaw& l : pair_laws_) {
+    if (!(l.kn > 0)) continue;
+    law_kn[l.a] = std::max(law_kn[l.a], l.kn);
+    law_kn[l.b] = std::max(law_kn[l.b], l.kn);
+  }
+  return law_kn;
+}
+
 void Scene::update_density_scaling() {
+  ds_stale_ = false;
   assemble_stiffness(ds_kt_, ds_kr_);  // (zero for a body with nothing active: factor 1)
+  // A single body already in contact (not a clump member) is scaled for one more contact of
+  // the stiffest linear pair law of its material as well: such a contact acts at full
+  // stiffness the step it forms, which may come between two updates (a light bonded grid
+  // sphere touched by a grain). A body with nothing active keeps 1 (it falls at g).
+  const std::vector<Real> law_kn = stiffest_pair_law();
+  for (int b = 0; b < num_bodies(); ++b) {
+    const Real k = law_kn[bodies_.material[b]];
+    if (k > 0 && bodies_.clump[b] < 0 && ds_kt_[b].maxCoeff() > 0) ds_kt_[b].array() += k;
+  }
   const Real h = ds_target_dt_ / ds_safety_;  // the critical step every body must reach, s
   // A factor rises at once to what the contacts need, and falls at most by half per
   // update: a body that bounces off a contact keeps its inertia for the next touch (which
