@@ -61,6 +61,15 @@ def test_a_free_body_falls_at_g_and_a_settled_column_presses_its_true_weight():
     assert st["max_factor"] == pytest.approx(max(s.inertia_scale(i) for i in range(5)))
 
 
+def test_a_run_with_progress_reports_the_scaling(capsys):
+    s = column(free=False)
+    s.run(2000)
+    s.set_density_scaling(target_dt=10 * s.dt, safety=0.5, period=1)
+    s.run(200, every=100, progress=True, label="settle")
+    out = capsys.readouterr().out
+    assert "density scaling: largest factor" in out and "% scaled, I=" in out
+
+
 def test_the_factor_brings_each_critical_step_to_the_target():
     s = column()
     s.run(2000)

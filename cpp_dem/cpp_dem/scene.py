@@ -455,7 +455,13 @@ class Scene(_core.Scene):
             if progress:
                 el = _time.perf_counter() - t0
                 eta = el / done * (steps - done)
+                scaled = ""
+                if self.density_scaling:
+                    st = self.density_scaling_stats()
+                    scaled = (f"density scaling: largest factor {st['max_factor']:.3g}, "
+                              f"{100 * st['scaled_share']:.0f} % scaled, "
+                              f"I={st['inertial_number']:.2g}  ")
                 print(f"[{label}] step {done}/{steps}  t={self.time:.4g} s  dt={self.dt:.3g} s  "
                       f"contacts={self.num_active_contacts}  "
-                      f"unbalanced={self.unbalanced_force():.3g}  wall {el:.1f} s  "
+                      f"unbalanced={self.unbalanced_force():.3g}  {scaled}wall {el:.1f} s  "
                       f"ETA {eta:.1f} s", file=sys.stdout, flush=True)

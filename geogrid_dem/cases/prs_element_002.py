@@ -64,6 +64,7 @@ class Params(_fem_case.Params):
     grain_law: str = "hertz"
     geogrid: str = "woven-detailed"
     growth_max_strain: float = 3e-6      #: -, per step (x 10 until the grains touch)
+    servo_integral: bool = True          #: the creeping clump packing needs it (servo_stage)
     prep_friction_deg: float = 20.0      #: deg, during growth
     grids: tuple = GRIDS                 #: woven forms to run
     variants: tuple = VARIANTS           #: RE and/or PRS

@@ -70,6 +70,8 @@ class ElementParams:
     apertures: int = 3               #: woven grids: apertures per side, -
     growth_max_strain: float = 1e-4  #: radius growth per step at most, -; woven elements
                                      #: grow at 10 x this until the grains touch, then at this
+    servo_integral: bool = False     #: servo stages: integral correction of the set points
+                                     #: near the targets (servo_stage); 002's clump element
     density_scaling: float = 0.0     #: target dt / unscaled dt of the growth and servo stages
                                      #: with density scaling (cpp_dem.protocols.quasi_static),
                                      #: -; 0: off
@@ -398,19 +400,27 @@ SERIES = {"stage": (None, "-"), "step": (None, "-"), "time": (None, "s"),
 
 def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
                 log: Callable[[str], None] = _log, prestress=None, ends=None,
-                grid_tension: float | None = None) -> dict:
+                grid_tension: float | None = None, integral: bool | None = None,
+                bias=None) -> dict:
     """Servo walls to ``targets`` (3,) Pa compression positive: converge within p.tol and
     p.unbalanced, then hold p.hold_steps steps; returns the max relative error while held.
     With a ``prestress`` (cpp_dem.protocols.prestress.Prestress) its line forces are recorded too (its
     history, and the series' prestress_line_force_mean). With ``ends``
     (cpp_dem.protocols.prestress.EndTension) the grid's longitudinal ends are pulled by
-    ``grid_tension`` (N/m) during the stage (series grid_end_force: the force per line, N)."""
+    ``grid_tension`` (N/m) during the stage (series grid_end_force: the force per line, N).
+    ``integral`` (default p.servo_integral): the set points take an integral correction near
+    the targets (see below); off, they keep ``bias`` (Pa per axis, default 0) added to the
+    targets: the tangent probes keep the held state's correction fixed, as their creep
+    subtraction assumes."""
+    if integral is None:
+        integral = p.servo_integral
     sc, walls, ctl = sample.scene, sample.walls, sample.controller
     t = np.asarray(targets, float)
+    bias = np.zeros(3) if bias is None else np.asarray(bias, float).copy()
     if ends is not None:
         ends.set(grid_tension)
     for a in range(3):
-        ctl.set_stress(a, float(t[a]))
+        ctl.set_stress(a, float(t[a] + bias[a]))
     ctl.max_speed = prep.default_max_speed(sc, walls, fraction=4e-4 * _rate_factor(sc, p))
     ctl.enabled = True
     longi = grid.member_direction == geogrid.LONGITUDINAL
@@ -441,13 +451,12 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
     # 12 % at the FEM's 2.3/2.3/5.4 kPa, against the 0.5 % tolerance). Within 20 % of a
     # target each record moves its set point by a quarter of the remaining error, at most
     # 25 % of the target; the set points stay for the hold.
-    bias = np.zeros(3)
     while sc.step_count - start < p.max_steps:
         sc.run(p.record_every)
         ax = record()
         err = np.abs(ax - t) / t
         near = err < 0.2
-        if near.any():
+        if integral and near.any():
             bias = np.where(near, np.clip(bias + 0.25 * (t - ax), -0.25 * t, 0.25 * t), bias)
             for a in range(3):
                 ctl.set_stress(a, float(t[a] + bias[a]))
@@ -564,6 +573,8 @@ def probe_tangent(sample, grid, p: ElementParams, target, *, rel: float, signs=N
     blob = bytes(_core._checkpoint_save(sc))
     size0 = measure.box_size(sc, walls)
     step0 = sc.step_count
+    # The held state's set-point correction (servo_stage's integral action), kept fixed.
+    held = np.array([sample.controller.goal(a) for a in range(3)]) - t0
     # A probe past the element's strength flows on: it stops after 10 holds (its strain then
     # is the flow's over that time, a soft answer, said), not after the stage's max_steps.
     pp = replace(p, max_steps=min(p.max_steps, 10 * max(p.hold_steps, p.record_every)))
@@ -575,7 +586,7 @@ def probe_tangent(sample, grid, p: ElementParams, target, *, rel: float, signs=N
             t = t0.copy()
             t[a] += signs[a] * d
             st = servo_stage(sample, grid, t, -1 - a, pp, lambda **row: None, log=log,
-                             ends=ends, grid_tension=grid_tension)
+                             ends=ends, grid_tension=grid_tension, integral=False, bias=held)
             strains[:, a] = (size0 - st["box_size_m"]) / size0
             ok.append(bool(st["converged"]))
             used.append(sc.step_count - step0)
@@ -590,7 +601,7 @@ def probe_tangent(sample, grid, p: ElementParams, target, *, rel: float, signs=N
             drift.append((row["step"] - step0, (size0 - size) / size0))
 
         servo_stage(sample, grid, t0, -4, replace(pp, hold_steps=max(used)), rec, log=log,
-                    ends=ends, grid_tension=grid_tension)
+                    ends=ends, grid_tension=grid_tension, integral=False, bias=held)
     finally:
         _core._checkpoint_load(sc, blob)
     ds_steps = np.array([k for k, _ in drift], float)
