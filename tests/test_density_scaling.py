@@ -293,3 +293,30 @@ def test_a_scaled_triaxial_path_follows_the_unscaled_one_from_the_same_state():
     # (measured: 0.6 % rms, 6120 against 1540 steps)
     assert np.sqrt(np.mean((sa - sb) ** 2) / np.mean(sa ** 2)) < 0.02
     assert nb < 0.4 * na
+
+
+def test_the_beam_geogrid_nodes_are_scaled_by_their_links():
+    # A chain of beam links (the cylinder-and-PFacet geogrid's): the free nodes take factors
+    # from their links, the anchored one none; pulled, it stays finite and the bar's force
+    # goes to its static value E A dL / L.
+    from cpp_dem.build import geogrid
+
+    s = dem.Scene(local_damping=0.5)
+    m = s.add_material(_mat(young=1e9))
+    xs = np.linspace(0.0, 0.4, 5)
+    beam = dem.BeamParams(young=1e9, poisson=0.3, radius=1e-3, normal_cohesion=0.0,
+                          shear_cohesion=0.0)
+    g = geogrid.polyline(s, np.column_stack([xs, np.zeros(5), np.zeros(5)]), params=beam,
+                         material=m, density=1000)
+    s.block_dofs(int(g.nodes[0]), "all")
+    s.dt = 0.5 * s.critical_dt()
+    s.set_density_scaling(target_dt=8 * s.dt, safety=0.5, period=1)
+    assert s.inertia_scale(int(g.nodes[0])) == 1.0
+    assert all(s.inertia_scale(int(n)) > 1 for n in g.nodes[1:])
+    f = np.zeros((s.num_bodies, 3))
+    f[int(g.nodes[-1])] = (10.0, 0, 0)
+    s.external_forces = f
+    s.run(20000)
+    assert np.all(np.isfinite(s.positions))
+    ea_over_l = 1e9 * math.pi * 1e-6 / 0.4
+    assert s.positions[int(g.nodes[-1])][0] - 0.4 == pytest.approx(10.0 / ea_over_l, rel=0.02)
