@@ -39,7 +39,7 @@ SAFETY = 0.5
 #: Default steps between updates of the inertia factors: every step, so that a contact that
 #: forms at full stiffness (the linear law) is covered in the step it forms. A scene whose new
 #: contacts form soft (Hertz–Mindlin) or stiff only against heavy bodies may update less often
-#: (the 002 element: every 10 steps; an update costs about a fifth of a step there).
+#: (the 002 element: every 10 steps; an update costs a fifth to a half of a step there).
 PERIOD = 1
 
 
