@@ -13,11 +13,12 @@ import cpp_dem as dem
 from cpp_dem import measure
 
 ALLOWED = ("'spheres' or 'clumps:NAME' (NAME: a shipped grain gravel_a .. gravel_d, 'gravel' "
-           "for the four mixed, or a clump template CSV x,y,z,r in m)")
+           "for the four mixed, either with @N for N spheres each, or a clump template CSV "
+           "x,y,z,r in m)")
 
 HELP = ("spheres, or clumps:NAME with NAME a shipped grain (gravel_a .. gravel_d, 24 spheres "
-        "each; 'gravel' mixes the four) or a clump template CSV (x,y,z,r in m); the case's "
-        "radii are then equivalent-volume radii (docs/clumps.md)")
+        "each, or N with NAME@N; 'gravel' mixes the four) or a clump template CSV (x,y,z,r in "
+        "m); the case's radii are then equivalent-volume radii (docs/clumps.md)")
 
 
 def grain_templates(spec: str) -> list:
