@@ -15,7 +15,7 @@ The template of each grain (``<name>.csv``, ``ClumpTemplate.save``: x, y, z, r i
 from the float32 vertices as stored, by :func:`cpp_dem.build.clump_mesh.fill_mesh` with the settings
 in ``FILL``. Everything is deterministic for a given ``--seed`` (default 20240611).
 
-Run (writes cpp_dem/cpp_dem/data/grains/gravel_*.stl and .csv and prints a summary)::
+Run (writes cpp_dem/cpp_dem/build/data/grains/gravel_*.stl and .csv and prints a summary)::
 
     .venv/bin/python scripts/make_gravel_meshes.py
 """
@@ -42,7 +42,7 @@ GRAINS = {
 }
 #: fill_mesh settings of the shipped templates.
 FILL = dict(max_spheres=24, min_radius_ratio=0.2, grid=24)
-OUT = ROOT / "cpp_dem" / "cpp_dem" / "data" / "grains"
+OUT = ROOT / "cpp_dem" / "cpp_dem" / "build" / "data" / "grains"
 
 
 def make_grain(name: str, seed: int = SEED) -> tuple[np.ndarray, np.ndarray]:

@@ -11,7 +11,7 @@ A grain given as a closed, consistently oriented triangle surface (vertices in m
 - :func:`fill_report` measures the trade between the sphere count, the volume error and the
   surface deviation of the filled template.
 - :func:`shipped_templates` / :func:`shipped_template` load the angular gravel grains shipped in
-  ``cpp_dem/data/grains`` (made by ``scripts/make_gravel_meshes.py``).
+  ``cpp_dem/build/data/grains`` (made by ``scripts/make_gravel_meshes.py``).
 - :func:`shipped_fill` fills the same shipped meshes with another number of spheres (the
   cases' ``--grains clumps:gravel@N``, :func:`templates_from_spec`).
 
