@@ -379,6 +379,7 @@ def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
 
     main_thread = threading.current_thread() is threading.main_thread()
     old_term = signal.getsignal(signal.SIGTERM) if main_thread else None
+    old_int = signal.getsignal(signal.SIGINT) if main_thread else None
     got: list[int] = []
 
     def _term(sig, _frame):  # a polite kill stops as Ctrl-C does
@@ -428,6 +429,11 @@ def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
     finally:
         if main_thread and old_term == signal.SIG_DFL:
             signal.signal(signal.SIGTERM, signal.SIG_DFL)
+        if main_thread and old_int is not None:
+            # (Ctrl-C was ignored while an interrupted run closed its files; a script or
+            # session that called run_main gets its own handler back, and the processes it
+            # starts do not inherit the ignore.)
+            signal.signal(signal.SIGINT, old_int)
     for d in list(_ACTIVE):
         end_run(d)
     if own_folder:

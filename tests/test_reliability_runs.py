@@ -437,3 +437,19 @@ def test_triaxial_resume_continues_from_its_checkpoint_as_the_run_would_have(tmp
     # nothing to resume in a completed run
     p = run([*args, "--resume"])
     assert p.returncode != 0 and "--resume: holds a completed run" in p.stderr
+
+
+def test_an_interrupted_run_in_process_gives_ctrl_c_back(tmp_path):
+    """run_main ignores a second Ctrl-C while an interrupted run closes its files, then puts
+    the caller's handler back: a script or session that called it can be interrupted again,
+    and the processes it starts do not inherit the ignore (which once left the rest of the
+    test session's subprocesses deaf to SIGINT)."""
+    from geogrid_dem.rundir import run_main
+
+    before = signal.getsignal(signal.SIGINT)
+
+    def work(_out):
+        raise KeyboardInterrupt
+
+    assert run_main("deposition", tmp_path / "r", work) == 130
+    assert signal.getsignal(signal.SIGINT) is before

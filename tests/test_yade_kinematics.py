@@ -210,8 +210,46 @@ def test_both_vector_forms_agree():
     assert lines[0][0] != lines[0][1]
 
 
-def test_checkpoints_of_the_format_before_still_load():
-    """Format 8 had no shear kinematics: such a blob loads, with the default kinematics."""
+def _older_format(blob: bytes, nbodies: int, kinematics_at: int, version: int) -> bytes:
+    """A blob of format 10 (two bodies, no clump, no controller) rewritten as format 9 (no
+    density scaling: its two inertia-factor arrays and its parameters gone, the body store
+    one vector smaller in the layout) or 8 (no shear kinematics either)."""
+    import struct
+
+    b = bytearray(blob)
+    b[8:12] = version.to_bytes(4, "little")
+    n_layout = struct.unpack_from("<Q", b, 12)[0]
+    lay = list(struct.unpack_from(f"<{n_layout}Q", b, 20))
+    b[20 + 8:20 + 16] = struct.pack("<Q", lay[1] - 24)  # sizeof(BodyStore) without one vector
+    size = {"Real": lay[0], "Vec3": lay[2], "Quat": lay[3], "Material": lay[4],
+            "PairLaw": lay[-1]}
+    at = 20 + 8 * n_layout
+
+    def skip_vec(at, elem):
+        n = struct.unpack_from("<Q", b, at)[0]
+        return at + 8 + n * elem
+
+    at = skip_vec(at, size["Material"])
+    at = skip_vec(at, size["PairLaw"])
+    v3, q, r = size["Vec3"], size["Quat"], size["Real"]
+    for elem in (v3,) * 7 + (q, r, r, r, 4, 1, 1, 4, 12, r, r, r, v3):
+        at = skip_vec(at, elem)
+    assert struct.unpack_from("<Q", b, at)[0] == nbodies  # the bodies' inertia factors
+    cut = [(at, at + 8 + 8 * nbodies)]
+    clumps = at + 8 + 8 * nbodies
+    cut.append((clumps + 21 * 8, clumps + 22 * 8))  # the clumps' (empty) inertia factors
+    tail = 8 + 8 + 4 + 1 + 8 + 8  # step, time, phys version, dirty, builds, no controller
+    cut.append((len(b) - tail - 22, len(b) - tail))  # on, target, safety, period, stale
+    if version == 8:
+        cut.append((kinematics_at, kinematics_at + 1))
+    for lo, hi in sorted(cut, reverse=True):
+        del b[lo:hi]
+    return bytes(b)
+
+
+def test_checkpoints_of_the_formats_before_still_load():
+    """Format 8 had no shear kinematics and 9 no density scaling: such blobs load, with the
+    default kinematics (8) and scaling off (8 and 9)."""
     from cpp_dem import _core
 
     blobs = {}
@@ -228,12 +266,14 @@ def test_checkpoints_of_the_format_before_still_load():
     assert len(a) == len(b)
     diff = [k for k in range(len(a)) if a[k] != b[k]]
     assert len(diff) == 1 and (a[diff[0]], b[diff[0]]) == (0, 1)  # the one byte of the option
-    assert int.from_bytes(b[8:12], "little") == 9
-    old = b[:8] + (8).to_bytes(4, "little") + b[12:diff[0]] + b[diff[0] + 1:]
-    t = cd.Scene()
-    t.shear_kinematics = "yade"
-    _core._checkpoint_load(t, old)
-    assert t.shear_kinematics == "contact_point"
-    assert t.step_count == 2
+    assert int.from_bytes(b[8:12], "little") == 10
+    for version, kinematics in ((9, "yade"), (8, "contact_point")):
+        t = cd.Scene()
+        t.shear_kinematics = "yade" if version == 8 else "contact_point"
+        _core._checkpoint_load(t, _older_format(b, 2, diff[0], version))
+        assert t.shear_kinematics == kinematics
+        assert t.step_count == 2 and not t.density_scaling
+        assert t.inertia_scale(0) == 1.0 and t.inertia_scale(1) == 1.0
+        t.run(3)  # it runs on
     with pytest.raises(cd.ParameterError, match="version 7"):
         _core._checkpoint_load(t, b[:8] + (7).to_bytes(4, "little") + b[12:])
