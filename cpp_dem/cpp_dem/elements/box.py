@@ -340,6 +340,10 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
     fast_steps = sc.step_count - start
     fast_end = ("coordination 1" if row["coordination"] >= 1.0 else
                 "jammed at the ceiling" if paused >= 20 else "step limit")
+    if fast_end == "step limit":
+        log(f"WARNING: the fast growth reached its {p.max_steps} steps at coordination "
+            f"{row['coordination']:.2f} (not 1): the grains are not in contact throughout; the "
+            "slow growth goes on from there")
     start = sc.step_count
 
     calls = [0]
