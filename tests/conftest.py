@@ -3,12 +3,19 @@
 from __future__ import annotations
 
 import math
+import signal
 import subprocess
 import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+
+# A suite started in the background of a non-interactive shell (`cmd &`, as a CI runner without
+# job control may) inherits SIGINT ignored, and so would every case it starts: the Ctrl-C tests
+# would then see their runs finish instead of stopping. The suite tests Ctrl-C itself, so it
+# takes Python's own handler back, which the processes it starts inherit as the default.
+signal.signal(signal.SIGINT, signal.default_int_handler)
 
 ROOT = Path(__file__).resolve().parents[1]
 PYTHON = sys.executable
