@@ -170,9 +170,9 @@ void Scene::note_formed_contact(const ContactPhys& p, int b1, int b2) const {
     const int c = bodies_.clump[b];
     if (c >= 0)
       return (clumps_.blocked[c] & DOF_ALL) == DOF_ALL ? std::numeric_limits<Real>::infinity()
-                                                        : clumps_.mass[c] * clumps_.inertia_scale[c];
+                                                        : clumps_.mass[c];
     return (bodies_.blocked[b] & DOF_ALL) == DOF_ALL ? std::numeric_limits<Real>::infinity()
-                                                      : bodies_.mass[b] * bodies_.inertia_scale[b];
+                                                      : bodies_.mass[b];
   };
   const Real m1 = free_mass(b1), m2 = free_mass(b2);
   const int b = m2 <= m1 ? b2 : b1;

@@ -630,6 +630,8 @@ class Scene {
   void update_density_scaling();
   /// Per material, the largest k_n of the linear pair laws it takes part in, N/m (0: none).
   std::vector<Real> stiffest_pair_law() const;
+  /// The inertia factor of the body in storage slot b (its clump's for a member), -.
+  Real slot_inertia_scale(int b) const;
   /// Sets clump c's factor to s, its angular momentum following its spin.
   void set_clump_scale(int c, Real s);
   /// Per body and axis, the summed translational (kt) and rotational (kr) stiffness of the

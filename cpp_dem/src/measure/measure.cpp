@@ -239,12 +239,8 @@ Scene::DensityScalingStats Scene::density_scaling_stats() const {
     Vec3 dv = bodies_.vel[j] - bodies_.vel[i];
     if (cell) dv += cell_.vel_grad * c.shift2;
     const Real d = bodies_.radius[i] + bodies_.radius[j];
-    const auto factor = [this](int b) {
-      const int k = bodies_.clump[b];
-      return k >= 0 ? clumps_.inertia_scale[k] : bodies_.inertia_scale[b];
-    };
-    const Real rho = 0.5 * (materials_[bodies_.material[i]].density * factor(i) +
-                            materials_[bodies_.material[j]].density * factor(j));
+    const Real rho = 0.5 * (materials_[bodies_.material[i]].density * slot_inertia_scale(i) +
+                            materials_[bodies_.material[j]].density * slot_inertia_scale(j));
     num += rho * dv.squaredNorm();
     den += f / (d * d);
   });
@@ -252,11 +248,14 @@ Scene::DensityScalingStats Scene::density_scaling_stats() const {
   return st;
 }
 
-Real Scene::inertia_scale(int id) const {
-  check_body(id);
-  const int b = slot_of(id);
+Real Scene::slot_inertia_scale(int b) const {
   const int c = bodies_.clump[b];
   return c >= 0 ? clumps_.inertia_scale[c] : bodies_.inertia_scale[b];
+}
+
+Real Scene::inertia_scale(int id) const {
+  check_body(id);
+  return slot_inertia_scale(slot_of(id));
 }
 
 Energies Scene::energies() const {
