@@ -108,5 +108,5 @@ def test_time_step_floor_takes_the_pair_law_stiffness():
     s.add_spheres([[0.0, 0.0, 0.01]], [0.004], material=soft)
     m = s.masses[-1]
     assert s.critical_dt() == pytest.approx(math.sqrt(2 * m / (1e8 * 0.004)), rel=1e-12)
-    woven.set_grid_laws(s, gm, soft)
+    woven.set_grid_laws(s, gm, soft, convention="contact")  # Table 1's 3.9e6 as the contact's
     assert s.critical_dt() == pytest.approx(math.sqrt(2 * m / 3.9e6), rel=1e-12)

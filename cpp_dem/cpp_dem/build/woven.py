@@ -23,9 +23,45 @@ between junctions, so a grain can enter between them (002's "single string inter
 - 002 Table 2 gives the "detailed" and "standard" sets, with their densities: contact bonds,
   parallel bonds, and the linear contact between geogrid spheres.
 - 002 gives no dimensions of the grid. The presets choose them, as parameters:
-  - detailed: spheres of radius 1 mm, three strings per member, 2.5 mm apart;
-  - standard: one string of 1.5 mm spheres per member;
-  - both: 20 mm clear apertures.
+  - detailed: spheres of radius 1 mm, three strings per member, 4.5 mm apart centre to
+    centre (a 2.5 mm clear gap between adjacent strings), 16 mm clear apertures;
+  - standard: one string of 1.5 mm spheres per member, 20 mm clear apertures.
+  Both keep a 27 mm pitch (aperture + (strands - 1) x strand_spacing + 2 x sphere_radius),
+  so the element's 3 x 3 apertures fit its 0.1 m box (cpp_dem.elements.box).
+
+**Why 4.5 mm between the detailed strings.** 002 sees grains enter between the single
+strings of the detailed grid (its Fig. 4b). With 1 mm spheres 2.5 mm apart (the earlier
+preset) the clear gap was 0.5 mm and no grain sphere could enter. The grains' member spheres:
+in the element (cpp_dem.elements.box.make_woven_element) the grains have the mean diameter
+d = (0.6 x 0.1^3 / (n pi / 6))^(1/3) = 8.3 mm at n = 2000 (full size) and 19.7 mm at n = 150
+(smoke), spread +-20 %; the gravel clump templates ("clumps:gravel") have member spheres of
+0.125-0.41 x the clump's equivalent diameter. So at full size the member-sphere radii run from
+0.83 mm (median about 2 mm), at smoke size from 2.0 mm. The spacing 4.5 mm:
+- leaves a 2.5 mm gap: about 7 % of the full-size grains' member spheres (radius < 1.25 mm)
+  pass into it freely, and larger ones enter by spreading the strings, which are free of
+  each other between junctions (at smoke size no member sphere fits without spreading them);
+- keeps the 27 mm pitch with a 16 mm aperture (about 2 grain diameters at full size, so the
+  grains still enter the apertures) and an 11 mm member width, which leaves the element's walls
+  4 mm of room (box.py asks 3 % of the 0.1 m edge, 3 mm; 5.5 mm spacing would leave exactly
+  3 mm);
+- makes the member's strings exact chains of touching spheres (the 18 mm between the
+  junctions' outer strings is 9 x 2 mm), and keeps every span/2r away from a rounding tie
+  (inside a junction the 4.5 mm is 2 bonds of 2.25 mm, a 0.25 mm reference gap).
+
+**Stiffness convention.** 002 gives k_n, k_s (Table 2, and Table 1's grain values) as PFC 4
+*ball* properties. PFC 4's linear contact model combines the two balls' values in series,
+k = k1 k2 / (k1 + k2). So a contact between two detailed grid balls (k_n = 4e6 N/m each) had
+k_n = 2e6 N/m in 002, and a clump-grid contact had k_n = 3.9e6 x 4e6 / 7.9e6 = 1.97e6 N/m and
+k_s = 9e5 x 8.5e5 / 1.75e6 = 4.37e5 N/m. The ``convention`` parameter of :func:`contact_stiffness`,
+:func:`preset_bond`, :func:`woven_geogrid`, :func:`set_grid_laws`,
+:func:`series_stiffness_per_metre` and :func:`tensile_test` says how the Table values are read:
+- "series" (the default): they are ball properties, combined in series as PFC 4 did. This is
+  what 002's grid was calibrated with (its tensile tests were back-analysed in PFC 4 with
+  these numbers), so it is the default;
+- "contact": they are the contacts' own stiffnesses (the behaviour before this parameter).
+The contact bond's k_n, k_s (the linear contact's springs that the contact bond holds in
+tension) follow the convention. The parallel bonds' k_bar_n, k_bar_s (Pa/m) are bond
+properties, not ball ones, and are used as given in both conventions.
 """
 
 from __future__ import annotations
@@ -50,7 +86,9 @@ PRESETS = {
         pb_tensile=8.0e14, pb_shear=8.0e14,  # parallel bond strengths, Pa
         friction=0.5,            # mu, -
         # Dimensions (not in 002; chosen here).
-        sphere_radius=1.0e-3, strands=3, strand_spacing=2.5e-3, aperture=20e-3,
+        # 27 mm pitch: 16 + 2 x 4.5 + 2 x 1 mm; a 2.5 mm clear gap between the strings
+        # (module docstring: why).
+        sphere_radius=1.0e-3, strands=3, strand_spacing=4.5e-3, aperture=16e-3,
     ),
     "standard": dict(
         density=2060.0,
@@ -69,10 +107,50 @@ _BOND_KEYS = ("kn", "ks", "friction", "cb_tensile", "cb_shear", "pb_kn", "pb_ks"
 _GEOMETRY_KEYS = ("sphere_radius", "strands", "strand_spacing", "aperture")
 
 
-def preset_bond(name: str) -> BondParams:
-    """The bond of preset ``name`` (contact bond and parallel bond, 002 Table 2)."""
+#: How 002's k_n, k_s are read (module docstring): 'series' (ball properties combined in
+#: series, as PFC 4 did; the default) or 'contact' (the contacts' own stiffnesses).
+CONVENTIONS = ("series", "contact")
+
+
+def _convention(convention: str) -> str:
+    if convention not in CONVENTIONS:
+        raise ParameterError(f"convention={convention!r}: must be one of "
+                             f"{', '.join(map(repr, CONVENTIONS))}")
+    return convention
+
+
+def contact_stiffness(preset: str = "detailed", other_kn: float | None = None,
+                      other_ks: float | None = None, convention: str = "series") -> tuple:
+    """(k_n, k_s), N/m, of a linear contact between a grid sphere of ``preset`` and another
+    body whose 002 values are ``other_kn``, ``other_ks`` (N/m; None: another sphere of the
+    same grid, i.e. the preset's Table 2 values).
+
+    - convention 'series' (default): the values are ball properties, combined in series as
+      PFC 4's linear model did: k = k_grid k_other / (k_grid + k_other). Grid-grid (detailed):
+      (2e6, 4.25e5); grid-grain with 002 Table 1's 3.9e6, 9e5: (1.975e6, 4.371e5).
+    - convention 'contact': the other body's values are the contact's own: (other_kn,
+      other_ks), or the preset's (k_n, k_s) when the other is a grid sphere.
+    """
+    p = _preset(preset)
+    _convention(convention)
+    okn = p["kn"] if other_kn is None else float(other_kn)
+    oks = p["ks"] if other_ks is None else float(other_ks)
+    for name, v in (("other_kn", okn), ("other_ks", oks)):
+        if not (math.isfinite(v) and v > 0):
+            raise ParameterError(f"{name}={v}: must be > 0 (N/m)")
+    if convention == "contact":
+        return okn, oks
+    return p["kn"] * okn / (p["kn"] + okn), p["ks"] * oks / (p["ks"] + oks)
+
+
+def preset_bond(name: str, convention: str = "series") -> BondParams:
+    """The bond of preset ``name`` (contact bond and parallel bond, 002 Table 2). The contact
+    bond's k_n, k_s are those of a grid-grid contact under ``convention``
+    (:func:`contact_stiffness`); the parallel bond's values are used as given."""
     p = _preset(name)
-    return BondParams(contact_bond=True, **{k: p[k] for k in _BOND_KEYS})
+    kw = {k: p[k] for k in _BOND_KEYS}
+    kw["kn"], kw["ks"] = contact_stiffness(name, None, None, convention)
+    return BondParams(contact_bond=True, **kw)
 
 
 def _preset(name: str) -> dict:
@@ -156,7 +234,7 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
                   sphere_radius: float | None = None, strands: int | None = None,
                   strand_spacing: float | None = None,
                   aperture: float | Sequence[float] | None = None,
-                  max_spheres: int | None = None) -> WovenGeogrid:
+                  max_spheres: int | None = None, convention: str = "series") -> WovenGeogrid:
     """Builds a woven biaxial geogrid of bonded spheres (module docstring) in ``scene``.
 
     origin : centre of the first junction (m; the grid spans apertures_x x apertures_y cells
@@ -167,6 +245,8 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
         centre, m, >= 2 sphere_radius), aperture (clear opening, m, one value or (x, y)).
     max_spheres : the most spheres the grid may have, counted before anything is built; None
         is MAX_WOVEN_SPHERES.
+    convention : how the preset's k_n, k_s make the contact bonds' stiffness, 'series'
+        (default) or 'contact' (module docstring); ignored when ``bond`` is given.
     """
     p = _preset(preset)
     r = float(p["sphere_radius"] if sphere_radius is None else sphere_radius)
@@ -174,7 +254,7 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
     sp = float(p["strand_spacing"] if strand_spacing is None else strand_spacing)
     ap = p["aperture"] if aperture is None else aperture
     ap = np.broadcast_to(np.asarray(ap, dtype=float), (2,)).copy()
-    bond = preset_bond(preset) if bond is None else bond
+    bond = preset_bond(preset, convention) if bond is None else bond
     if not (math.isfinite(r) and r > 0):
         raise ParameterError(f"sphere_radius={r}: must be > 0 (m)")
     if not (isinstance(ns, (int, np.integer)) and ns >= 1):
@@ -323,27 +403,38 @@ def woven_material(preset: str = "detailed"):
 
 def set_grid_laws(scene, grid_material: int, grain_material: int | None = None, *,
                   preset: str = "detailed", grain_kn: float = 3.9e6, grain_ks: float = 9.0e5,
-                  grain_friction: float = 0.5) -> None:
-    """002's contact laws around a woven grid:
-    - between grid spheres that are not bonded: the preset's linear k_n, k_s, mu;
-    - between the grid and grains (if ``grain_material`` is given): a linear contact with
-      002 Table 1's k_n = 3.9e6 N/m and k_s = 9e5 N/m, and mu = 0.5 (the geogrid's)."""
+                  grain_friction: float = 0.5, convention: str = "series") -> None:
+    """002's contact laws around a woven grid, linear, with the stiffnesses of
+    :func:`contact_stiffness` under ``convention``:
+    - between grid spheres that are not bonded: the preset's k_n, k_s (in series with
+      themselves for 'series': half of them), and its mu;
+    - between the grid and grains (if ``grain_material`` is given): 002 Table 1's grain
+      k_n = 3.9e6 N/m, k_s = 9e5 N/m with the grid's (in series for 'series':
+      1.975e6, 4.37e5 N/m with the detailed grid; as given for 'contact'), and mu = 0.5
+      (the geogrid's)."""
     p = _preset(preset)
-    scene.set_pair_law(grid_material, grid_material, model="linear", kn=p["kn"], ks=p["ks"],
+    kn, ks = contact_stiffness(preset, None, None, convention)
+    scene.set_pair_law(grid_material, grid_material, model="linear", kn=kn, ks=ks,
                        friction=p["friction"])
     if grain_material is not None:
-        scene.set_pair_law(grain_material, grid_material, model="linear", kn=grain_kn,
-                           ks=grain_ks, friction=grain_friction)
+        kn, ks = contact_stiffness(preset, grain_kn, grain_ks, convention)
+        scene.set_pair_law(grain_material, grid_material, model="linear", kn=kn, ks=ks,
+                           friction=grain_friction)
 
 
-def series_stiffness_per_metre(preset: str = "detailed", **geometry) -> float:
+def series_stiffness_per_metre(preset: str = "detailed", *, convention: str = "series",
+                               **geometry) -> float:
     """The tensile stiffness per metre of width, N/m, of an endless woven grid of the preset
     pulled along its longitudinal members, from its bonds in series: every longitudinal
-    string is a chain of bonds of stiffness k_n + k_bar_n A (the contact bond pulls, and the
-    parallel bond's disc beside it), and a pitch holds the member's bonds and the junction's.
-    ``geometry`` overrides the preset's sphere_radius, strands, strand_spacing, aperture."""
+    string is a chain of bonds of stiffness k_n + k_bar_n A (the contact bond pulls, with the
+    grid-grid k_n of ``convention``, :func:`contact_stiffness`: half the Table's for
+    'series'; and the parallel bond's disc beside it), and a pitch holds the member's bonds
+    and the junction's. ``geometry`` overrides the preset's sphere_radius, strands,
+    strand_spacing, aperture."""
+    kn, _ = contact_stiffness(preset, None, None, convention)
     p = dict(_preset(preset))
     p.update({k: v for k, v in geometry.items() if v is not None})
+    p["kn"] = kn
     r, ns, sp = p["sphere_radius"], p["strands"], p["strand_spacing"]
     ap = np.broadcast_to(np.asarray(p["aperture"], dtype=float), (2,))
     width = (ns - 1) * sp + 2 * r
@@ -357,12 +448,13 @@ def series_stiffness_per_metre(preset: str = "detailed", **geometry) -> float:
 
 def tensile_test(preset: str = "detailed", *, apertures_x: int = 3, apertures_y: int = 1,
                  strain: float = 1e-3, load_steps: int = 4000, relax_steps: int = 20000,
-                 **geometry) -> dict:
+                 convention: str = "series", **geometry) -> dict:
     """A quasi-static tensile test of a woven grid sample along its longitudinal members.
 
     The junction columns at both ends are gripped (all DOFs held). The right grip moves by
     ``strain`` times the free length in ``load_steps`` steps, then holds while the sample
-    settles (local damping 0.7) for ``relax_steps`` steps. Returns:
+    settles (local damping 0.7) for ``relax_steps`` steps. The grid's bonds follow
+    ``convention`` (:func:`contact_stiffness`). Returns:
     - force_n: the right grip's reaction, N;
     - member_forces_n: the longitudinal members' forces at their mid-sections, N;
     - strain;
@@ -375,7 +467,7 @@ def tensile_test(preset: str = "detailed", *, apertures_x: int = 3, apertures_y:
     s = Scene(local_damping=0.7)
     m = s.add_material(woven_material(preset))
     g = woven_geogrid(s, origin=(0, 0, 0), apertures_x=apertures_x, apertures_y=apertures_y,
-                      material=m, preset=preset, **geometry)
+                      material=m, preset=preset, convention=convention, **geometry)
     r = float(s.radii[0])
     x = np.asarray(s.positions)[:, 0]
     lo, hi = g.member_width / 2 - r, apertures_x * g.pitch[0] - g.member_width / 2 + r
@@ -394,4 +486,5 @@ def tensile_test(preset: str = "detailed", *, apertures_x: int = 3, apertures_y:
     width = (apertures_y + 1) * g.pitch[1]
     return dict(force_n=force, member_forces_n=g.member_axial_forces(s)[g.members(LONGITUDINAL)],
                 strain=done, stiffness_per_metre=force / (done * width),
-                series_per_metre=series_stiffness_per_metre(preset, **geometry))
+                series_per_metre=series_stiffness_per_metre(preset, convention=convention,
+                                                            **geometry))
