@@ -36,22 +36,31 @@ def test_waviness_is_the_rms_deviation_from_the_string_chord():
     assert w["out_of_plane_m"][m] == pytest.approx(1e-4 / np.sqrt(n), rel=1e-9)
 
 
-def test_a_grain_between_two_strings_is_counted():
+def test_a_grain_resting_on_two_strings_touches_both_but_has_not_entered():
+    """A 2 mm grain resting on two strings 4.5 mm apart (1 um overlap): two grid contacts,
+    counted per metre of longitudinal member, but not a single-string entry; pushed 1 mm
+    deeper (the strings spread to make room) it has entered."""
     s, g, grain = _grid_and_grain()
     m = int(g.members("longitudinal")[0])
     strings = interaction._strings_of_member(g, s, m)
     a, b = strings[0][5], strings[1][5]
     pa, pb = s.positions[a], s.positions[b]
-    # A 1 mm grain resting on the gap between two strings 2.5 mm apart, touching both.
-    c = 0.5 * (pa + pb) + [0, 0, 1.5e-3]
-    s.add_spheres([c], [1e-3], material=grain)
+    h = np.sqrt((2e-3 + 1e-3) ** 2 - (0.5 * np.linalg.norm(pb - pa)) ** 2) - 1e-6
+    s.add_spheres([0.5 * (pa + pb) + [0, 0, h]], [2e-3], material=grain)
     s.dt = 1e-8
     s.run(1)
     r = interaction.grains_between_strings(s, g)
-    assert r["grains_touching_two_strings"] == 1
+    assert r["grains"] == 0 and r["spheres"] == 0
     c2 = interaction.grid_contacts_per_metre(s, g)
     assert c2["contacts"] == 2 and c2["grains_touching"] == 1
     assert c2["longitudinal_per_m"] == pytest.approx(2 / interaction.member_lengths(g)["longitudinal"])
+    pos = s.positions
+    pos[strings[0][1:-1], 1] -= 0.7e-3
+    pos[strings[1][1:-1], 1] += 0.7e-3
+    pos[-1, 2] -= 1e-3
+    s.positions = pos
+    r = interaction.grains_between_strings(s, g)
+    assert r["longitudinal_grains"] == 1 and r["longitudinal_spheres"] == 1
 
 
 def test_a_grain_in_the_aperture_is_counted():

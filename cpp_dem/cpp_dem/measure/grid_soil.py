@@ -1,29 +1,50 @@
 """002's soil–geogrid interaction measures for woven grids of bonded spheres (cpp_dem.build.woven).
 
-002 §6 names three effects. Each is compared between the reinforced (RE) and the prestressed
-(PRS) element.
+002 §5–§6 names three effects, compared between the reinforced (RE) and the prestressed
+(PRS) element, and two observations beside them. Every measure below returns plain numbers
+(per direction 'longitudinal' / 'transverse' where it applies) and has a test in
+tests/test_grid_soil_measures.py with a scene where its effect is present and one where it
+is absent. "Grain spheres" are the spheres of the grains (free spheres and clump members);
+the grid's bonded spheres are never grains. SI units: m, N.
 
-- **Interlocking**: grains enter the apertures, and the members are pushed sideways.
-  - :func:`grains_in_apertures`: grains whose centre lies over an aperture and whose body
-    reaches the grid's plane.
-  - :func:`member_waviness`: the in-plane ("sideways") deviation of each member's strings from
-    the straight line between its ends.
-- **Single-string interaction**: grains enter between the strings of a member.
-  - :func:`grains_between_strings`: grains touching two strings of one member, and grain
-    spheres whose centre lies in the gap between two strings.
-- **Alignment**: the grid wraps around the grains.
-  - :func:`grid_contacts_per_metre`: grain–geogrid contacts per metre of member.
-  - :func:`member_waviness`: the out-of-plane deviation of the strings from the straight line
-    between their ends.
+- **Interlocking** (grains enter the apertures and push the members sideways):
+  - :func:`grains_in_apertures`: grains whose reference point (centre, or clump centre of
+    mass) lies over a clear aperture (between the members' built edges) and one of whose
+    spheres crosses the grid's plane z_grid (|z - z_grid| < its radius).
+  - :func:`member_sideways_displacement`: the rms in-plane displacement of the members'
+    string spheres perpendicular to their member's axis, from the grid as built, after
+    subtracting the motion of the member's ends (the linear interpolation between the mean
+    displacements of its strings' end crossings, which belong to the junctions): a rigid
+    shift, a rotation or a stretch of the grid gives zero, a member bowed sideways does not.
+- **Single-string interaction** (grains enter between the strings of a member):
+  - :func:`single_string_entries` (:func:`grains_between_strings` is the same): grain spheres
+    whose centre lies laterally between the axes of two adjacent strings of a member, within
+    its clear span between the junctions, and whose lowest point (grain above the strings;
+    highest point for a grain below) has gone past the strings' top (bottom) by more than a
+    sphere of its radius resting on both strings at their as-built spacing can, plus
+    0.1 string radius. A sphere resting on two strings does not count; one pushed into
+    the gap, or small enough to pass into it, does.
+  - :func:`string_gaps`: the clear gap between adjacent strings of each member (centre
+    distance minus the two spheres' radii), as built and now: how far the strings stand
+    apart and how they spread under load.
+- **Alignment** (the grid wraps around the grains):
+  - :func:`grid_contacts_per_metre`: active grain–grid-sphere contacts per metre of clear
+    member length, per direction (contacts at junction spheres counted apart).
+  - :func:`member_waviness`: the rms out-of-plane (z) deviation of each member's string
+    spheres from the straight chord between each string's two ends, per direction (and
+    the in-plane one).
+- **Tensile force along the members** (002: "more uniform along prestressed members"):
+  - :func:`member_force_profiles`: at every position along a member, the sum of its strings'
+    bond tensions (N); its coefficient of variation along the members.
+  - :func:`tension_variation`: the same profiles' variation in newtons: the std and the
+    range (max - min) along each member, the std across the members of their means, and the
+    mean above the locked-in force.
+- **Displacement above and below the grid** (002: larger above):
+  :func:`displacement_above_below`.
 
-Beside them:
-- :func:`member_force_profiles`: the tensile force along every member. Its coefficient of
-  variation is 002's "more uniform along prestressed members".
-- :func:`displacement_above_below`: the grains' mean displacement above against below the grid.
-- :func:`write_vtk_woven` and :func:`plot_views`: the contact force network and the grid's
-  tensile forces, as VTK and as figures in plan, side and front view (002 Figs 3–4).
-
-SI units. Positions and displacements are in m, forces in N.
+:func:`summary` gathers them all; :func:`history_row` is a flat row of scalars cheap enough to
+write every few thousand steps. :func:`write_vtk_woven` and :func:`plot_views` draw the grid
+and the contact network (002 Figs 3–4).
 """
 
 from __future__ import annotations
@@ -35,6 +56,11 @@ import numpy as np
 from cpp_dem import measure
 from cpp_dem.build.geogrid import JUNCTION, LONGITUDINAL, TRANSVERSE
 
+_DIRECTIONS = (LONGITUDINAL, TRANSVERSE)
+
+#: Single-string interaction: the depth margin beyond the resting depth, in string radii.
+ENTRY_MARGIN = 0.1
+
 
 def _bond_tension(scene) -> np.ndarray:
     """Per bond: its tensile force along its axis, N (tension positive)."""
@@ -43,7 +69,9 @@ def _bond_tension(scene) -> np.ndarray:
 
 
 def _strings_of_member(grid, scene, m: int) -> list[np.ndarray]:
-    """The spheres of each string of member m, ordered along the member (ends included)."""
+    """The spheres of each string of member m, ordered along the member (ends included: the
+    two end spheres are the crossings at the junctions' edges), the strings in order across
+    the member (as built)."""
     ab = np.asarray(scene.bond_spheres)[grid.member_bonds[m]]
     ax = int(np.argmax(np.abs(grid.member_axis[m])))
     pos = np.asarray(grid.reference_positions)
@@ -56,19 +84,27 @@ def _strings_of_member(grid, scene, m: int) -> list[np.ndarray]:
     for s in sorted(strings):
         ids = np.array(sorted(strings[s]))
         out.append(ids[np.argsort(pos[ids - first, ax])])
+    cross = 1 - ax
+    out.sort(key=lambda ids: float(np.mean(pos[ids - first, cross])))
     return out
+
+
+def _axes(grid, m: int) -> tuple[int, int]:
+    ax = int(np.argmax(np.abs(grid.member_axis[m])))
+    return ax, 1 - ax
 
 
 def member_waviness(scene, grid) -> dict:
     """For each member, the RMS deviation of its strings' spheres from the straight line
-    between each string's two ends, m: out of plane (z) and in plane (sideways). Returns
-    per-direction means and the per-member arrays."""
+    between each string's two ends, m: out of plane (z; alignment) and in plane (sideways).
+
+    Returns the per-member arrays 'out_of_plane_m', 'sideways_m' and, per direction d,
+    'out_of_plane_{d}_mean_m' and 'sideways_{d}_mean_m' (means over the members, m)."""
     pos = np.asarray(scene.positions)
     out_of_plane = np.zeros(grid.n_members)
     sideways = np.zeros(grid.n_members)
     for m in range(grid.n_members):
-        ax = int(np.argmax(np.abs(grid.member_axis[m])))
-        cross = 1 - ax
+        ax, cross = _axes(grid, m)
         dz, dy = [], []
         for ids in _strings_of_member(grid, scene, m):
             p = pos[ids]
@@ -79,10 +115,51 @@ def member_waviness(scene, grid) -> dict:
         out_of_plane[m] = np.sqrt(np.mean(np.concatenate(dz) ** 2))
         sideways[m] = np.sqrt(np.mean(np.concatenate(dy) ** 2))
     res = {"out_of_plane_m": out_of_plane, "sideways_m": sideways}
-    for d in (LONGITUDINAL, TRANSVERSE):
+    for d in _DIRECTIONS:
         sel = grid.member_direction == d
-        res[f"out_of_plane_{d}_mean_m"] = float(out_of_plane[sel].mean())
-        res[f"sideways_{d}_mean_m"] = float(sideways[sel].mean())
+        res[f"out_of_plane_{d}_mean_m"] = float(out_of_plane[sel].mean()) if sel.any() else 0.0
+        res[f"sideways_{d}_mean_m"] = float(sideways[sel].mean()) if sel.any() else 0.0
+    return res
+
+
+def member_sideways_displacement(scene, grid) -> dict:
+    """Interlocking: how far the members were pushed sideways, m.
+
+    For every string sphere of a member (its end crossings, which belong to the junctions,
+    left out): its displacement from the grid as built (grid.reference_positions), minus
+    the motion of the member's ends there (the linear interpolation, along the member,
+    between the mean displacements of the strings' two end crossings), and of that its
+    in-plane component perpendicular to the member's axis. A rigid shift of the grid, a
+    stretch along the member, or (to first order) a rotation gives zero; a member bowed
+    sideways between its junctions does not.
+
+    Returns per direction d: '{d}_rms_m' (rms over the direction's member spheres, m) and
+    '{d}_max_m' (largest magnitude, m), and 'per_member_rms_m' (array)."""
+    pos = np.asarray(scene.positions)
+    ref = np.asarray(grid.reference_positions)
+    first = int(grid.spheres[0])
+    per = np.zeros(grid.n_members)
+    vals: dict[str, list] = {d: [] for d in _DIRECTIONS}
+    for m in range(grid.n_members):
+        ax, cross = _axes(grid, m)
+        strings = _strings_of_member(grid, scene, m)
+        ends0 = np.array([s[0] for s in strings])
+        ends1 = np.array([s[-1] for s in strings])
+        u0 = (pos[ends0] - ref[ends0 - first]).mean(axis=0)
+        u1 = (pos[ends1] - ref[ends1 - first]).mean(axis=0)
+        a0 = ref[ends0 - first, ax].mean()
+        a1 = ref[ends1 - first, ax].mean()
+        inner = np.concatenate([s[1:-1] for s in strings])
+        t = (ref[inner - first, ax] - a0) / (a1 - a0)
+        u = pos[inner] - ref[inner - first] - (u0 + np.outer(t, u1 - u0))
+        side = u[:, cross]
+        per[m] = float(np.sqrt(np.mean(side ** 2))) if len(side) else 0.0
+        vals[grid.member_direction[m]].append(side)
+    res = {"per_member_rms_m": per}
+    for dname in _DIRECTIONS:
+        v = np.concatenate(vals[dname]) if vals[dname] else np.zeros(0)
+        res[f"{dname}_rms_m"] = float(np.sqrt(np.mean(v ** 2))) if len(v) else 0.0
+        res[f"{dname}_max_m"] = float(np.max(np.abs(v))) if len(v) else 0.0
     return res
 
 
@@ -123,12 +200,16 @@ def member_lengths(grid) -> dict:
     """Total clear length of the members of each direction, m (between junctions)."""
     return {d: float(np.sum(grid.member_direction == d)) * (grid.pitch[0 if d == LONGITUDINAL
                                                                     else 1] - grid.member_width)
-            for d in (LONGITUDINAL, TRANSVERSE)}
+            for d in _DIRECTIONS}
 
 
 def grid_contacts_per_metre(scene, grid) -> dict:
-    """Grain–geogrid contacts per metre of member (alignment), by member direction, and the
-    number of distinct grains touching the grid."""
+    """Alignment: active grain–grid-sphere contacts per metre of clear member length.
+
+    Returns 'contacts' (all grain–grid contacts), 'grains_touching' (distinct grains touching
+    the grid), 'junction_contacts' (contacts at junction spheres, not in the per-metre
+    values) and per direction d '{d}_per_m' (contacts with the string spheres of the
+    direction's members / their total clear length, 1/m)."""
     grain, sphere, _ = _grid_contacts(scene, grid)
     first = int(grid.spheres[0])
     sm = _sphere_member(scene, grid)
@@ -137,56 +218,165 @@ def grid_contacts_per_metre(scene, grid) -> dict:
     g_of_b, _ = measure.grain_of_body(scene)
     res = {"contacts": int(len(grain)), "grains_touching": int(len(np.unique(g_of_b[grain]))),
            "junction_contacts": int(np.sum(member < 0))}
-    for d in (LONGITUDINAL, TRANSVERSE):
+    for d in _DIRECTIONS:
         on = (member >= 0) & (grid.member_direction[np.maximum(member, 0)] == d)
         res[f"{d}_per_m"] = float(np.sum(on) / lengths[d])
     return res
 
 
-def grains_between_strings(scene, grid, *, z_grid: float | None = None) -> dict:
-    """Single-string interaction: grains touching two or more strings of one member, and
-    grain spheres whose centre lies between two strings of a member (in the member's span,
-    within a grain radius of the grid's plane)."""
-    grain, sphere, _ = _grid_contacts(scene, grid)
-    first = int(grid.spheres[0])
-    sm = _sphere_member(scene, grid)
-    strand = grid.sphere_strand
-    g_of_b, _ = measure.grain_of_body(scene)
-    touching: dict[tuple, set] = {}
-    for gb, s in zip(g_of_b[grain], sphere - first):
-        if sm[s] >= 0:
-            touching.setdefault((int(gb), int(sm[s])), set()).add(int(strand[s]))
-    two = {g for (g, m), ss in touching.items() if len(ss) >= 2}
-    # Geometry: centres in the gaps between adjacent strings.
+def resting_depth(sphere_radius: float, string_radius: float, half_spacing) -> np.ndarray:
+    """How far below the top of two parallel strings (spheres of ``string_radius``, centres
+    2 ``half_spacing`` apart in one plane) the lowest point of a sphere of ``sphere_radius``
+    resting on both (touching both, no overlap) lies, m: R + r - sqrt((R + r)^2 - s^2).
+    A sphere with R + r <= s fits between the strings and cannot rest on both: 0 (any dip
+    below their top is a way into the gap)."""
+    rr = np.asarray(sphere_radius, float) + string_radius
+    s = np.asarray(half_spacing, float)
+    return np.where(rr > s, rr - np.sqrt(np.maximum(rr ** 2 - s ** 2, 0.0)), 0.0)
+
+
+def single_string_entries(scene, grid, *, margin: float = ENTRY_MARGIN) -> dict:
+    """Single-string interaction: the grain spheres that have entered between two adjacent
+    strings of a member.
+
+    A grain sphere (centre c, radius R) is tested against each pair of adjacent strings of
+    each member, at its position along the member. The strings there: each string's centre
+    line interpolated at c's coordinate along the member, now (their spacing 2 s_now, their
+    mean height z_s); their spheres' radius r; their as-built half spacing s. It counts when
+    - c lies laterally between the two strings' axes, and along the member within its clear
+      span (between the end crossings, one string radius in from each), and
+    - its lowest point (grain reference point above z_s; for a grain below, its highest
+      point, mirrored) lies below the strings' top z_s + r by a depth
+      depth > resting_depth(R, r, s) + margin x r.
+
+    Why this depth: resting_depth(R, r, s) is exactly how deep a sphere of radius R dips
+    between the strings while it rests on both at their as-built spacing (touching, no
+    overlap), so a resting sphere never counts, whatever its size; a sphere gets deeper only
+    by spreading the strings apart, or by being small enough to fit between them (R + r <=
+    s: it cannot rest on both, and any dip below their top beyond the margin counts). The
+    margin (0.1 r =
+    0.1 mm for the detailed grid) stands above the contact overlaps (micrometres at 002's
+    stiffnesses and the element's stresses) and the strings' own local sag. With the detailed
+    grid (r = 1 mm, s = 2.25 mm), a 2 mm member sphere resting on two strings dips
+    3 - sqrt(3^2 - 2.25^2) = 1.02 mm below their top; it counts beyond 1.12 mm. A member
+    sphere of radius < 1.25 mm fits the 2.5 mm gap and counts once 0.1 mm below the top.
+
+    Returns per direction d: '{d}_grains' (distinct grains with an entered sphere),
+    '{d}_spheres' (entered grain spheres, counted once per string pair), '{d}_depth_max_m'
+    (the largest depth below the strings' top reached by an entered sphere, 0 if none), and
+    in total 'grains', 'spheres'."""
     pos = np.asarray(scene.positions)
+    ref_g = np.asarray(grid.reference_positions)
+    first = int(grid.spheres[0])
     rad = np.asarray(scene.radii)
     gmask = measure.sphere_mask(scene)
-    zg = float(np.mean(pos[grid.spheres, 2])) if z_grid is None else z_grid
-    near = gmask & (np.abs(pos[:, 2] - zg) < rad)
-    inside = 0
-    grains_inside = set()
+    gidx = np.flatnonzero(gmask)
+    gp, gr = pos[gidx], rad[gidx]
+    gref = measure.reference_points(scene)[gidx]
+    g_of_b, _ = measure.grain_of_body(scene)
+    r_max = float(gr.max()) if len(gr) else 0.0
+    grains: dict[str, set] = {d: set() for d in _DIRECTIONS}
+    spheres = {d: 0 for d in _DIRECTIONS}
+    depth_max = {d: 0.0 for d in _DIRECTIONS}
     for m in range(grid.n_members):
         strings = _strings_of_member(grid, scene, m)
-        if len(strings) < 2:
+        if len(strings) < 2 or not len(gidx):
             continue
-        ax = int(np.argmax(np.abs(grid.member_axis[m])))
-        cross = 1 - ax
-        lo_ax = max(pos[s[0], ax] for s in strings)
-        hi_ax = min(pos[s[-1], ax] for s in strings)
-        cs = sorted(float(np.mean(pos[s, cross])) for s in strings)
-        x = pos[:, ax]
-        y = pos[:, cross]
-        for c0, c1 in zip(cs[:-1], cs[1:]):
-            sel = near & (x > lo_ax) & (x < hi_ax) & (y > c0) & (y < c1)
-            inside += int(np.sum(sel))
-            grains_inside.update(int(g) for g in g_of_b[sel])
-    return {"grains_touching_two_strings": len(two), "grain_spheres_between_strings": inside,
-            "grains_between_strings": len(grains_inside)}
+        d = grid.member_direction[m]
+        ax, cross = _axes(grid, m)
+        r = float(rad[strings[0][0]])
+        lo = max(pos[s[0], ax] for s in strings) + r
+        hi = min(pos[s[-1], ax] for s in strings) - r
+        allp = pos[np.concatenate(strings)]
+        c_lo, c_hi = allp[:, cross].min(), allp[:, cross].max()
+        z_lo, z_hi = allp[:, 2].min() - r - 2 * r_max, allp[:, 2].max() + r + 2 * r_max
+        near = ((gp[:, ax] > lo) & (gp[:, ax] < hi) & (gp[:, cross] > c_lo)
+                & (gp[:, cross] < c_hi) & (gp[:, 2] > z_lo) & (gp[:, 2] < z_hi))
+        if not near.any():
+            continue
+        k = np.flatnonzero(near)
+        x = gp[k, ax]
+        lines = []
+        for s in strings:
+            p = pos[s]
+            o = np.argsort(p[:, ax])
+            lines.append((np.interp(x, p[o, ax], p[o, cross]), np.interp(x, p[o, ax], p[o, 2])))
+        for i in range(len(strings) - 1):
+            (c0, z0), (c1, z1) = lines[i], lines[i + 1]
+            between = (gp[k, cross] > np.minimum(c0, c1)) & (gp[k, cross] < np.maximum(c0, c1))
+            zs = 0.5 * (z0 + z1)
+            above = gref[k, 2] > zs
+            depth = np.where(above, (zs + r) - (gp[k, 2] - gr[k]), (gp[k, 2] + gr[k]) - (zs - r))
+            s_built = 0.5 * abs(float(np.mean(ref_g[strings[i + 1] - first, cross])
+                                      - np.mean(ref_g[strings[i] - first, cross])))
+            entered = between & (depth > resting_depth(gr[k], r, s_built) + margin * r)
+            if entered.any():
+                spheres[d] += int(entered.sum())
+                grains[d].update(int(g) for g in g_of_b[gidx[k[entered]]])
+                depth_max[d] = max(depth_max[d], float(depth[entered].max()))
+    res = {}
+    for d in _DIRECTIONS:
+        res[f"{d}_grains"] = len(grains[d])
+        res[f"{d}_spheres"] = spheres[d]
+        res[f"{d}_depth_max_m"] = depth_max[d]
+    res["grains"] = len(grains[LONGITUDINAL] | grains[TRANSVERSE])
+    res["spheres"] = spheres[LONGITUDINAL] + spheres[TRANSVERSE]
+    return res
+
+
+def grains_between_strings(scene, grid, *, z_grid: float | None = None) -> dict:
+    """Single-string interaction: :func:`single_string_entries` (``z_grid`` is not used: the
+    strings' height is taken where each grain sphere is)."""
+    del z_grid
+    return single_string_entries(scene, grid)
+
+
+def string_gaps(scene, grid) -> dict:
+    """The clear gap between adjacent strings of each member, m: for each pair of adjacent
+    strings and each position along the member (the k-th string sphere of one against the
+    k-th of the other, end crossings left out), the centre distance minus the two spheres'
+    radii. As built (grid.reference_positions) and now: how far the strings stand apart and
+    how they spread under load.
+
+    Returns per direction d: '{d}_built_mean_m', '{d}_mean_m', '{d}_min_m', '{d}_max_m'
+    (over all positions of the direction's members, now), '{d}_spread_mean_m' (now - built,
+    mean) and '{d}_spread_max_m' (largest widening). NaN for single-string members."""
+    pos = np.asarray(scene.positions)
+    ref = np.asarray(grid.reference_positions)
+    rad = np.asarray(scene.radii)
+    first = int(grid.spheres[0])
+    now: dict[str, list] = {d: [] for d in _DIRECTIONS}
+    built: dict[str, list] = {d: [] for d in _DIRECTIONS}
+    for m in range(grid.n_members):
+        strings = _strings_of_member(grid, scene, m)
+        d = grid.member_direction[m]
+        for a, b in zip(strings[:-1], strings[1:]):
+            a, b = a[1:-1], b[1:-1]
+            n = min(len(a), len(b))
+            a, b = a[:n], b[:n]
+            rr = rad[a] + rad[b]
+            now[d].append(np.linalg.norm(pos[a] - pos[b], axis=1) - rr)
+            built[d].append(np.linalg.norm(ref[a - first] - ref[b - first], axis=1) - rr)
+    res = {}
+    for d in _DIRECTIONS:
+        if now[d]:
+            g, g0 = np.concatenate(now[d]), np.concatenate(built[d])
+            res.update({f"{d}_built_mean_m": float(g0.mean()), f"{d}_mean_m": float(g.mean()),
+                        f"{d}_min_m": float(g.min()), f"{d}_max_m": float(g.max()),
+                        f"{d}_spread_mean_m": float((g - g0).mean()),
+                        f"{d}_spread_max_m": float((g - g0).max())})
+        else:
+            res.update({f"{d}_{k}": float("nan") for k in ("built_mean_m", "mean_m", "min_m",
+                                                           "max_m", "spread_mean_m",
+                                                           "spread_max_m")})
+    return res
 
 
 def grains_in_apertures(scene, grid, *, z_grid: float | None = None) -> dict:
     """Interlocking: grains whose reference point (centre, or clump centre of mass) lies over
-    an aperture and whose spheres reach the grid's plane; the count and per aperture."""
+    a clear aperture (between the members' built edges) and one of whose spheres crosses the
+    grid's plane (|z - z_grid| < its radius; z_grid: the grid spheres' mean height if None).
+    Returns 'grains_in_apertures' (count) and 'per_aperture' (counts, cells x by y)."""
     pos = np.asarray(scene.positions)
     rad = np.asarray(scene.radii)
     gmask = measure.sphere_mask(scene)
@@ -197,10 +387,8 @@ def grains_in_apertures(scene, grid, *, z_grid: float | None = None) -> dict:
     crosses = gmask & (np.abs(pos[:, 2] - zg) < rad)
     reach[g_of_b[crosses]] = True
     # Aperture (i, j): between the members' edges.
-    o = np.asarray(grid.reference_positions)[0, :2]  # a corner junction sphere
     x0 = np.min(np.asarray(grid.reference_positions)[:, 0])
     y0 = np.min(np.asarray(grid.reference_positions)[:, 1])
-    del o
     w = grid.member_width
     r_g = float(rad[grid.spheres[0]])
     per = np.zeros(grid.n_cells, int)
@@ -216,16 +404,14 @@ def grains_in_apertures(scene, grid, *, z_grid: float | None = None) -> dict:
     return {"grains_in_apertures": int(per.sum()), "per_aperture": per.tolist()}
 
 
-def member_force_profiles(scene, grid) -> dict:
-    """The tensile force along each member, N: at every position along it, the sum of its
-    strings' bond tensions. Returns the profiles and, per direction, the mean coefficient of
-    variation along the members (std / |mean|) and the mean force."""
+def _profiles(scene, grid) -> list[np.ndarray]:
+    """Per member, its tensile force profile, N: at every position along it crossed by all its
+    strings, the sum of the strings' bond tensions there."""
     tension = _bond_tension(scene)
     ab = np.asarray(scene.bond_spheres)
     pos = np.asarray(grid.reference_positions)
     first = int(grid.spheres[0])
     profiles = []
-    cov = np.zeros(grid.n_members)
     for m in range(grid.n_members):
         bonds = np.asarray(grid.member_bonds[m])
         ax = int(np.argmax(np.abs(grid.member_axis[m])))
@@ -236,44 +422,140 @@ def member_force_profiles(scene, grid) -> dict:
         prof = np.zeros(len(u))
         np.add.at(prof, inv, tension[bonds])
         n_str = np.bincount(inv)
-        prof = prof[n_str == n_str.max()]  # positions crossed by every string
-        profiles.append(prof)
-        cov[m] = float(np.std(prof) / max(abs(np.mean(prof)), 1e-12))
+        profiles.append(prof[n_str == n_str.max()])  # positions crossed by every string
+    return profiles
+
+
+def member_force_profiles(scene, grid) -> dict:
+    """The tensile force along each member, N: at every position along it, the sum of its
+    strings' bond tensions. Returns the profiles ('profiles_n'), per member the coefficient
+    of variation along it ('cov', std / |mean|) and, per direction d, '{d}_cov_mean' (mean
+    over the members) and '{d}_force_mean_n' (mean force, N)."""
+    profiles = _profiles(scene, grid)
+    cov = np.array([float(np.std(p) / max(abs(np.mean(p)), 1e-12)) for p in profiles])
     res = {"profiles_n": profiles, "cov": cov}
-    for d in (LONGITUDINAL, TRANSVERSE):
+    for d in _DIRECTIONS:
         sel = grid.member_direction == d
         res[f"{d}_cov_mean"] = float(cov[sel].mean())
         res[f"{d}_force_mean_n"] = float(np.mean([profiles[m].mean() for m in np.flatnonzero(sel)]))
     return res
 
 
+def tension_variation(scene, grid, locked_n=None) -> dict:
+    """How the tensile force varies along and across the members, N (not a ratio).
+
+    The profiles are those of :func:`member_force_profiles` (at each position along a member,
+    its strings' bond tensions summed). ``locked_n``: the locked-in force, N, one value or
+    one per member (default 0). Returns per direction d:
+    - '{d}_std_along_n': the mean over the members of the std of the force along each, N;
+    - '{d}_range_along_n': the mean over the members of (max - min) along each, N;
+    - '{d}_std_across_n': the std across the members of their mean forces, N;
+    - '{d}_mean_above_locked_n': the mean over the members of (mean force - locked_n), N."""
+    return _tension_variation(grid, _profiles(scene, grid), locked_n)
+
+
+def _tension_variation(grid, profiles, locked_n) -> dict:
+    locked = np.broadcast_to(np.asarray(0.0 if locked_n is None else locked_n, float),
+                             (grid.n_members,))
+    means = np.array([p.mean() for p in profiles])
+    res = {}
+    for d in _DIRECTIONS:
+        sel = np.flatnonzero(grid.member_direction == d)
+        res[f"{d}_std_along_n"] = float(np.mean([np.std(profiles[m]) for m in sel]))
+        res[f"{d}_range_along_n"] = float(np.mean([np.ptp(profiles[m]) for m in sel]))
+        res[f"{d}_std_across_n"] = float(np.std(means[sel]))
+        res[f"{d}_mean_above_locked_n"] = float(np.mean(means[sel] - locked[sel]))
+    return res
+
+
 def displacement_above_below(scene, reference_positions, z_grid: float) -> dict:
-    """Mean displacement magnitude and mean vertical displacement of the grain bodies whose
-    reference position is above against below the grid's plane, m."""
+    """The grain spheres' displacement from ``reference_positions`` (all bodies, m), split by
+    whether their reference position is above or below the grid's plane z_grid: mean
+    magnitude ('above_mean_m', 'below_mean_m') and mean vertical component ('above_z_mean_m',
+    'below_z_mean_m'), m. (Clump members count one by one.)"""
     pos = np.asarray(scene.positions)
     ref = np.asarray(reference_positions)
     g = measure.sphere_mask(scene)
     d = pos - ref
     above, below = g & (ref[:, 2] > z_grid), g & (ref[:, 2] < z_grid)
-    return {"above_mean_m": float(np.linalg.norm(d[above], axis=1).mean()),
-            "below_mean_m": float(np.linalg.norm(d[below], axis=1).mean()),
-            "above_z_mean_m": float(d[above, 2].mean()),
-            "below_z_mean_m": float(d[below, 2].mean())}
+
+    def mean(x):
+        return float(x.mean()) if len(x) else float("nan")
+
+    return {"above_mean_m": mean(np.linalg.norm(d[above], axis=1)),
+            "below_mean_m": mean(np.linalg.norm(d[below], axis=1)),
+            "above_z_mean_m": mean(d[above, 2]),
+            "below_z_mean_m": mean(d[below, 2])}
 
 
-def summary(scene, grid, *, z_grid: float, reference_positions=None) -> dict:
-    """All the measures above as plain numbers (the per-member arrays left out)."""
+def summary(scene, grid, *, z_grid: float, reference_positions=None, locked_n=None) -> dict:
+    """All the measures above as plain numbers (the per-member arrays left out): 'contacts',
+    'between_strings' (:func:`single_string_entries`), 'apertures', 'waviness', 'force',
+    'tension_variation', 'string_gaps', 'sideways_displacement', and 'displacement' when
+    ``reference_positions`` (all bodies, m) is given."""
     w = member_waviness(scene, grid)
     f = member_force_profiles(scene, grid)
+    sd = member_sideways_displacement(scene, grid)
     out = {"contacts": grid_contacts_per_metre(scene, grid),
-           "between_strings": grains_between_strings(scene, grid, z_grid=z_grid),
+           "between_strings": single_string_entries(scene, grid),
            "apertures": grains_in_apertures(scene, grid, z_grid=z_grid),
            "waviness": {k: v for k, v in w.items() if k.endswith("_m") and "mean" in k},
            "force": {k: v for k, v in f.items() if k.endswith(("_mean", "_n"))
-                     and not isinstance(v, list)}}
+                     and not isinstance(v, list)},
+           "tension_variation": tension_variation(scene, grid, locked_n),
+           "string_gaps": string_gaps(scene, grid),
+           "sideways_displacement": {k: v for k, v in sd.items() if not k.startswith("per_")}}
     if reference_positions is not None:
         out["displacement"] = displacement_above_below(scene, reference_positions, z_grid)
     return out
+
+
+def history_row(scene, grid, *, z_grid: float, locked_n=None, reference_positions=None) -> dict:
+    """A flat dict of the scalar measures (a CSV row over the loading); the suffix says the
+    unit (_n N, _m m, _per_m 1/m; no suffix: a count). Keys, d in longitudinal/transverse:
+    grid_contacts, grains_touching_grid, junction_contacts, {d}_contacts_per_m;
+    {d}_entered_grains, {d}_entered_spheres, {d}_entry_depth_max_m; grains_in_apertures;
+    {d}_out_of_plane_mean_m, {d}_sideways_chord_mean_m (waviness);
+    {d}_sideways_displacement_rms_m, {d}_sideways_displacement_max_m;
+    {d}_string_gap_mean_m, _min_m, _max_m, {d}_string_gap_spread_mean_m;
+    {d}_force_mean_n, {d}_tension_std_along_n, {d}_tension_range_along_n,
+    {d}_tension_std_across_n, {d}_tension_mean_above_locked_n; and with
+    ``reference_positions``: disp_above_mean_m, disp_below_mean_m, disp_z_above_mean_m,
+    disp_z_below_mean_m."""
+    row: dict = {}
+    c = grid_contacts_per_metre(scene, grid)
+    row.update(grid_contacts=c["contacts"], grains_touching_grid=c["grains_touching"],
+               junction_contacts=c["junction_contacts"])
+    e = single_string_entries(scene, grid)
+    a = grains_in_apertures(scene, grid, z_grid=z_grid)
+    w = member_waviness(scene, grid)
+    sd = member_sideways_displacement(scene, grid)
+    g = string_gaps(scene, grid)
+    profiles = _profiles(scene, grid)
+    t = _tension_variation(grid, profiles, locked_n)
+    for d in _DIRECTIONS:
+        row[f"{d}_contacts_per_m"] = c[f"{d}_per_m"]
+        row[f"{d}_entered_grains"] = e[f"{d}_grains"]
+        row[f"{d}_entered_spheres"] = e[f"{d}_spheres"]
+        row[f"{d}_entry_depth_max_m"] = e[f"{d}_depth_max_m"]
+    row["grains_in_apertures"] = a["grains_in_apertures"]
+    for d in _DIRECTIONS:
+        row[f"{d}_out_of_plane_mean_m"] = w[f"out_of_plane_{d}_mean_m"]
+        row[f"{d}_sideways_chord_mean_m"] = w[f"sideways_{d}_mean_m"]
+        row[f"{d}_sideways_displacement_rms_m"] = sd[f"{d}_rms_m"]
+        row[f"{d}_sideways_displacement_max_m"] = sd[f"{d}_max_m"]
+        for k in ("mean", "min", "max", "spread_mean"):
+            row[f"{d}_string_gap_{k}_m"] = g[f"{d}_{k}_m"]
+        sel = np.flatnonzero(grid.member_direction == d)
+        row[f"{d}_force_mean_n"] = float(np.mean([profiles[m].mean() for m in sel]))
+        for k in ("std_along", "range_along", "std_across", "mean_above_locked"):
+            row[f"{d}_tension_{k}_n"] = t[f"{d}_{k}_n"]
+    if reference_positions is not None:
+        dab = displacement_above_below(scene, reference_positions, z_grid)
+        row.update(disp_above_mean_m=dab["above_mean_m"], disp_below_mean_m=dab["below_mean_m"],
+                   disp_z_above_mean_m=dab["above_z_mean_m"],
+                   disp_z_below_mean_m=dab["below_z_mean_m"])
+    return row
 
 
 def write_vtk_woven(path, scene, grid) -> Path:
