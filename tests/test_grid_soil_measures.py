@@ -102,7 +102,8 @@ def test_a_grain_resting_on_two_strings_has_not_entered(radius):
     s.add_spheres([c + [0, 0, h]], [radius], material=grain)
     s.add_spheres([c + [0, 0, -h]], [radius], material=grain)  # and one resting from below
     r = gs.single_string_entries(s, g)
-    assert r["grains"] == 0 and r["spheres"] == 0 and r["longitudinal_depth_max_m"] == 0
+    assert r["grains_entered"] == 0 and r["spheres_entered"] == 0
+    assert r["longitudinal_depth_max_m"] == 0
 
 
 def test_a_sphere_in_the_gap_has_entered():
@@ -134,7 +135,7 @@ def test_a_large_sphere_that_spread_the_strings_has_entered():
     s2, g2, grain2 = _scene()
     j = np.asarray(g2.reference_positions)[0]
     s2.add_spheres([j + [HALF, HALF, 0.8e-3]], [2e-3], material=grain2)
-    assert gs.single_string_entries(s2, g2)["spheres"] == 0
+    assert gs.single_string_entries(s2, g2)["spheres_entered"] == 0
 
 
 # --- string gaps -----------------------------------------------------------------------
@@ -144,8 +145,8 @@ def test_string_gaps_as_built():
     r = gs.string_gaps(s, g)
     for d in ("longitudinal", "transverse"):
         assert r[f"{d}_built_mean_m"] == pytest.approx(2.5e-3, rel=1e-9)
-        assert r[f"{d}_min_m"] == pytest.approx(2.5e-3, rel=1e-9)
-        assert r[f"{d}_max_m"] == pytest.approx(2.5e-3, rel=1e-9)
+        assert r[f"{d}_now_min_m"] == pytest.approx(2.5e-3, rel=1e-9)
+        assert r[f"{d}_now_max_m"] == pytest.approx(2.5e-3, rel=1e-9)
         assert abs(r[f"{d}_spread_max_m"]) < 1e-12
 
 
@@ -155,8 +156,8 @@ def test_string_gaps_spread():
     _move(s, st[0][1:-1], [0, -0.65e-3, 0])
     _move(s, st[1][1:-1], [0, 0.65e-3, 0])
     r = gs.string_gaps(s, g)
-    assert r["longitudinal_max_m"] == pytest.approx(2.5e-3 + 1.3e-3, rel=1e-9)
-    assert r["longitudinal_min_m"] == pytest.approx(2.5e-3 - 0.65e-3, rel=1e-9)
+    assert r["longitudinal_now_max_m"] == pytest.approx(2.5e-3 + 1.3e-3, rel=1e-9)
+    assert r["longitudinal_now_min_m"] == pytest.approx(2.5e-3 - 0.65e-3, rel=1e-9)
     assert r["longitudinal_spread_max_m"] == pytest.approx(1.3e-3, rel=1e-9)
     assert abs(r["transverse_spread_max_m"]) < 1e-12
 
@@ -166,8 +167,8 @@ def test_string_gaps_of_a_single_string_grid_are_nan():
     m = s.add_material(woven.woven_material("standard"))
     g = woven.woven_geogrid(s, origin=(0, 0, 0), apertures_x=1, apertures_y=1, material=m,
                             preset="standard")
-    assert math.isnan(gs.string_gaps(s, g)["longitudinal_mean_m"])
-    assert gs.single_string_entries(s, g)["spheres"] == 0
+    assert math.isnan(gs.string_gaps(s, g)["longitudinal_now_mean_m"])
+    assert gs.single_string_entries(s, g)["spheres_entered"] == 0
 
 
 # --- interlocking: sideways displacement --------------------------------------------------

@@ -50,7 +50,7 @@ def test_a_grain_resting_on_two_strings_touches_both_but_has_not_entered():
     s.dt = 1e-8
     s.run(1)
     r = interaction.grains_between_strings(s, g)
-    assert r["grains"] == 0 and r["spheres"] == 0
+    assert r["grains_entered"] == 0 and r["spheres_entered"] == 0
     c2 = interaction.grid_contacts_per_metre(s, g)
     assert c2["contacts"] == 2 and c2["grains_touching"] == 1
     assert c2["longitudinal_per_m"] == pytest.approx(2 / interaction.member_lengths(g)["longitudinal"])

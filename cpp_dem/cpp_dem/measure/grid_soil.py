@@ -264,7 +264,7 @@ def single_string_entries(scene, grid, *, margin: float = ENTRY_MARGIN) -> dict:
     Returns per direction d: '{d}_grains' (distinct grains with an entered sphere),
     '{d}_spheres' (entered grain spheres, counted once per string pair), '{d}_depth_max_m'
     (the largest depth below the strings' top reached by an entered sphere, 0 if none), and
-    in total 'grains', 'spheres'."""
+    in total 'grains_entered', 'spheres_entered'."""
     pos = np.asarray(scene.positions)
     ref_g = np.asarray(grid.reference_positions)
     first = int(grid.spheres[0])
@@ -319,8 +319,8 @@ def single_string_entries(scene, grid, *, margin: float = ENTRY_MARGIN) -> dict:
         res[f"{d}_grains"] = len(grains[d])
         res[f"{d}_spheres"] = spheres[d]
         res[f"{d}_depth_max_m"] = depth_max[d]
-    res["grains"] = len(grains[LONGITUDINAL] | grains[TRANSVERSE])
-    res["spheres"] = spheres[LONGITUDINAL] + spheres[TRANSVERSE]
+    res["grains_entered"] = len(grains[LONGITUDINAL] | grains[TRANSVERSE])
+    res["spheres_entered"] = spheres[LONGITUDINAL] + spheres[TRANSVERSE]
     return res
 
 
@@ -338,8 +338,8 @@ def string_gaps(scene, grid) -> dict:
     radii. As built (grid.reference_positions) and now: how far the strings stand apart and
     how they spread under load.
 
-    Returns per direction d: '{d}_built_mean_m', '{d}_mean_m', '{d}_min_m', '{d}_max_m'
-    (over all positions of the direction's members, now), '{d}_spread_mean_m' (now - built,
+    Returns per direction d: '{d}_built_mean_m', and now '{d}_now_mean_m', '{d}_now_min_m',
+    '{d}_now_max_m' (over all positions of the direction's members), '{d}_spread_mean_m' (now - built,
     mean) and '{d}_spread_max_m' (largest widening). NaN for single-string members."""
     pos = np.asarray(scene.positions)
     ref = np.asarray(grid.reference_positions)
@@ -361,14 +361,15 @@ def string_gaps(scene, grid) -> dict:
     for d in _DIRECTIONS:
         if now[d]:
             g, g0 = np.concatenate(now[d]), np.concatenate(built[d])
-            res.update({f"{d}_built_mean_m": float(g0.mean()), f"{d}_mean_m": float(g.mean()),
-                        f"{d}_min_m": float(g.min()), f"{d}_max_m": float(g.max()),
+            res.update({f"{d}_built_mean_m": float(g0.mean()),
+                        f"{d}_now_mean_m": float(g.mean()),
+                        f"{d}_now_min_m": float(g.min()), f"{d}_now_max_m": float(g.max()),
                         f"{d}_spread_mean_m": float((g - g0).mean()),
                         f"{d}_spread_max_m": float((g - g0).max())})
         else:
-            res.update({f"{d}_{k}": float("nan") for k in ("built_mean_m", "mean_m", "min_m",
-                                                           "max_m", "spread_mean_m",
-                                                           "spread_max_m")})
+            res.update({f"{d}_{k}": float("nan") for k in ("built_mean_m", "now_mean_m",
+                                                           "now_min_m", "now_max_m",
+                                                           "spread_mean_m", "spread_max_m")})
     return res
 
 
@@ -544,8 +545,8 @@ def history_row(scene, grid, *, z_grid: float, locked_n=None, reference_position
         row[f"{d}_sideways_chord_mean_m"] = w[f"sideways_{d}_mean_m"]
         row[f"{d}_sideways_displacement_rms_m"] = sd[f"{d}_rms_m"]
         row[f"{d}_sideways_displacement_max_m"] = sd[f"{d}_max_m"]
-        for k in ("mean", "min", "max", "spread_mean"):
-            row[f"{d}_string_gap_{k}_m"] = g[f"{d}_{k}_m"]
+        for k in ("now_mean", "now_min", "now_max", "spread_mean"):
+            row[f"{d}_string_gap_{k.replace('now_', '')}_m"] = g[f"{d}_{k}_m"]
         sel = np.flatnonzero(grid.member_direction == d)
         row[f"{d}_force_mean_n"] = float(np.mean([profiles[m].mean() for m in sel]))
         for k in ("std_along", "range_along", "std_across", "mean_above_locked"):
