@@ -47,9 +47,10 @@ SMOKE_ARGS: dict[str, tuple[str, ...]] = {
     "triaxial": ("--threads", "2"),
     "pullout_000": ("--threads", "2"),
     "prs_element": (),
-    # DEM-only (its FEM is prs_element's, run by that case's smoke): four small elements,
-    # two at a time (test_case_prs_element_002 checks one against a serial run).
-    "prs_element_002": ("--stresses", "20000,20000,40000", "--workers", "2"),
+    # The documented smoke, FEM path included: two seeds, RE and PRS on each seed's packing,
+    # the two packings side by side (test_case_prs_element_002 checks one against a serial
+    # run).
+    "prs_element_002": ("--workers", "2"),
     "pullout_001": (),
 }
 

@@ -1,10 +1,17 @@
-"""cases/prs_element_002.py (issue 16): 002's element rebuilt with clumps and the woven grid of
-bonded spheres, detailed and standard, RE against PRS (the smoke run of conftest)."""
+"""cases/prs_element_002.py (issues 16, 35): 002's element with clumps and the woven grid of
+bonded spheres, RE against PRS on paired seeds, driven by the FEM (the documented smoke run
+of conftest: the detailed grid, seeds 1 and 2)."""
 
+import csv
 import json
+import math
 
 import numpy as np
 import pytest
+
+from geogrid_dem.cases import prs_element_002 as case
+
+LABELS = ["detailed_PRS_s1", "detailed_PRS_s2", "detailed_RE_s1", "detailed_RE_s2"]
 
 
 @pytest.fixture(scope="module")
@@ -12,51 +19,137 @@ def smoke(case_smoke):
     return case_smoke("prs_element_002")
 
 
-def test_four_elements_reach_and_hold_the_stresses(smoke):
+def test_the_documented_smoke_runs_the_fem_path_on_two_seeds(smoke):
     out, proc = smoke
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     s = json.loads((out / "summary.json").read_text())
-    assert sorted(s["elements"]) == ["detailed_PRS", "detailed_RE", "standard_PRS", "standard_RE"]
+    assert s["mode"] == "FEM -> DEM (one-way)" and s["seeds"] == [1, 2]
+    assert sorted(s["elements"]) == LABELS
     for name, e in s["elements"].items():
-        assert e["grains"] == "clumps:gravel" and e["grain_law"] == "hertz"
-        assert e["num_grains"] > 100, name
-        np.testing.assert_allclose(e["stress_final_pa"], [20e3, 20e3, 40e3], rtol=0.02)
-        # Held within 2 %: the servo's 1 % plus the creep of a small clump packing.
-        assert e["hold_max_rel_error"] <= 0.02, name
+        assert e["grains"] == "clumps:gravel" and e["grain_law"] == "hertz", name
+        assert e["num_grains"] > 50, name
+        # Driven to the FEM's stresses, two rows (before and after the footing load).
+        v = "PRS" if "PRS" in name else "RE"
+        fem = s["fem"][f"detailed_{v}"]
+        assert e["targets_pa"] == [fem["targets_initial_pa"], fem["targets_final_pa"]]
+        assert len(e["converged"]) == 2
 
 
-def test_outputs_for_paraview_and_figures(smoke):
-    out, _ = smoke
-    for name in ("detailed_PRS", "standard_RE"):
-        for f in (f"vtk/{name}_geogrid.vtp", f"vtk/{name}_contacts.vtp",
-                  f"vtk/{name}_spheres.vtp", f"{name}_views.png", f"{name}_views.pdf",
-                  f"{name}.h5", f"{name}.csv"):
-            assert (out / f).is_file() and (out / f).stat().st_size > 0, f
-    report = (out / "report.md").read_text()
-    assert "The paper's findings" in report and "Microscopic interaction effects" in report and "CoV along the longitudinal members" in report
-    # The locked-in prestress is a series of the PRS runs only.
-    assert "prestress_line_force_mean" in (out / "detailed_PRS.csv").read_text().splitlines()[0]
-    assert "prestress_line_force_mean" not in (out / "detailed_RE.csv").read_text().splitlines()[0]
-
-
-def test_prestress_and_interaction_measures(smoke):
+def test_re_and_prs_share_each_seeds_grown_packing(smoke):
     out, _ = smoke
     s = json.loads((out / "summary.json").read_text())
     el = s["elements"]
-    for grid in ("detailed", "standard"):
-        re_, prs = el[f"{grid}_RE"], el[f"{grid}_PRS"]
-        # PRS: tensioned to T_p x pitch and locked; its members carry far more than RE's.
-        assert prs["prestress_target_n"] > 0 and len(prs["prestress_locked_final_n"]) == 4
-        assert prs["grid_force_longitudinal_mean_n"] > 0.5 * prs["prestress_target_n"]
-        assert abs(re_["grid_force_longitudinal_mean_n"]) < 0.5 * prs["prestress_target_n"]
-        assert "prestress_target_n" not in re_
-        for e in (re_, prs):
-            it = e["interaction"]
-            assert it["contacts"]["contacts"] > 0 and it["contacts"]["grains_touching"] > 0
-            assert it["apertures"]["grains_in_apertures"] >= 0
-            assert it["waviness"]["out_of_plane_longitudinal_mean_m"] > 0
-    assert {f["grid"] for f in s["findings"]} == {"detailed", "standard"}
-    assert all(isinstance(f["agrees"], bool) for f in s["findings"])
+    for seed in (1, 2):
+        a, b = el[f"detailed_RE_s{seed}"], el[f"detailed_PRS_s{seed}"]
+        assert a["prepared_sha256"] == b["prepared_sha256"] is not None
+        assert (out / f"detailed_s{seed}_growth.csv").is_file()
+    assert el["detailed_RE_s1"]["prepared_sha256"] != el["detailed_RE_s2"]["prepared_sha256"]
+    # The same end conditions: both variants' ends are pulled (PRS by T_p, RE by 0).
+    prs, re_ = el["detailed_PRS_s1"], el["detailed_RE_s1"]
+    assert prs["grid_tension_n_per_m"] == [s["params"]["prestress"]] * 2
+    assert re_["grid_tension_n_per_m"] == [0.0, 0.0]
+    assert prs["grid_tension_n_per_m"][0] > 0 and prs["grid_end_force_n"] > 0
+
+
+def test_findings_have_the_schema_and_verdicts_follow_their_numbers(smoke):
+    out, _ = smoke
+    s = json.loads((out / "summary.json").read_text())
+    keys = {"name", "expected_sign", "re_mean", "re_sd", "prs_mean", "prs_sd", "diff_mean",
+            "diff_se", "n", "verdict"}
+    assert len(s["findings"]) == len(case.FINDINGS)
+    el = s["elements"]
+    for f in s["findings"]:
+        assert keys <= set(f) and f["n"] == 2 and f["expected_sign"] in (-1, 1)
+        assert f["verdict"] == case.verdict(f["diff_mean"], f["diff_se"], f["n"],
+                                            f["expected_sign"])
+        if f["verdict"] == "agrees":
+            assert np.sign(f["diff_mean"]) == f["expected_sign"]
+            assert abs(f["diff_mean"]) > 2 * f["diff_se"]
+        # The paired difference, recomputed from the elements.
+        value = next(v for n, _s, c, v in case.FINDINGS if n == f["name"])
+        prs = [value(el[f"detailed_PRS_s{k}"]) for k in (1, 2)]
+        re_ = [value(el[f"detailed_RE_s{k}"]) for k in (1, 2)]
+        d = np.array(prs) - np.array(re_) if f["compare"] == "PRS - RE" else np.array(prs)
+        assert f["diff_mean"] == pytest.approx(d.mean())
+        assert f["diff_se"] == pytest.approx(d.std(ddof=1) / math.sqrt(2))
+    report = (out / "report.md").read_text()
+    assert "002's findings, paired over the seeds" in report
+    assert "Microscopic interaction effects" in report
+
+
+@pytest.mark.parametrize("diff, se, n, sign, expected", [
+    (-5.0, 1.0, 3, -1, "agrees"),          # 002's sign, beyond 2 se
+    (5.0, 1.0, 3, -1, "opposes"),          # the other sign, beyond 2 se
+    (-1.5, 1.0, 3, -1, "not resolved"),    # within 2 se
+    (1.5, 1.0, 3, 1, "not resolved"),
+    (-5.0, float("nan"), 1, -1, "not resolved"),  # one seed: no standard error
+    (0.0, 0.0, 4, 1, "not resolved"),
+])
+def test_verdict_needs_the_sign_beyond_two_standard_errors(diff, se, n, sign, expected):
+    assert case.verdict(diff, se, n, sign) == expected
+
+
+def test_paired_statistics_on_synthetic_elements():
+    # PRS lower than RE by 1 on every seed, with seed scatter 10: the pairing resolves it.
+    rng = np.random.default_rng(0)
+    base = rng.normal(50, 10, 4)
+    el = {}
+    for k, b in enumerate(base):
+        el[f"detailed_RE_s{k}"] = {"x": b}
+        el[f"detailed_PRS_s{k}"] = {"x": b - 1.0 + 0.01 * k}
+    st = case.paired(el, "detailed", range(4), lambda e: e["x"])
+    assert st["n"] == 4 and st["diff_mean"] == pytest.approx(-0.985)
+    assert st["diff_se"] < 0.01
+    assert case.verdict(st["diff_mean"], st["diff_se"], st["n"], -1) == "agrees"
+    # No effect: the differences are noise of the same size as their se.
+    for k, b in enumerate(base):
+        el[f"detailed_PRS_s{k}"] = {"x": b + (0.3 if k % 2 else -0.3)}
+    st = case.paired(el, "detailed", range(4), lambda e: e["x"])
+    assert case.verdict(st["diff_mean"], st["diff_se"], st["n"], -1) == "not resolved"
+
+
+def test_figures_on_shared_scales_measures_and_paraview_files(smoke):
+    out, _ = smoke
+    for seed in (1, 2):
+        for kind in ("views", "grid", "rose"):
+            for ext in ("png", "pdf"):
+                f = out / f"detailed_s{seed}_{kind}.{ext}"
+                assert f.is_file() and f.stat().st_size > 0, f
+    for name in LABELS:
+        for f in (f"vtk/{name}_geogrid.vtp", f"vtk/{name}_contacts.vtp",
+                  f"vtk/{name}_spheres.vtp", f"{name}.h5", f"{name}.csv",
+                  f"{name}_figure.npz"):
+            assert (out / f).is_file() and (out / f).stat().st_size > 0, f
+        rows = list(csv.DictReader(open(out / f"{name}_measures.csv")))
+        assert len(rows) >= 2, name  # histories over the loading, not only the end
+        assert {"stage", "step", "sigma_z_pa"} <= set(rows[0])
+        assert {int(r["stage"]) for r in rows} == {0, 1}
+
+
+def test_elements_side_by_side_give_the_serial_results(smoke, tmp_path):
+    """The smoke run puts its two packings on two processes (--workers 2, conftest); seed 2
+    run alone, serially, gives the same numbers, bitwise."""
+    import subprocess
+    import sys
+
+    from conftest import ROOT, SMOKE_ARGS
+
+    out, proc = smoke
+    assert "--workers" in SMOKE_ARGS["prs_element_002"] and "2 at a time" in proc.stdout
+    alone = tmp_path / "alone"
+    r = subprocess.run([sys.executable, str(ROOT / "cases" / "prs_element_002.py"), "--smoke",
+                        "--out", str(alone), "--seeds", "2-2"],
+                       capture_output=True, text=True, timeout=900)
+    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
+    a = json.loads((alone / "summary.json").read_text())["elements"]
+    b = json.loads((out / "summary.json").read_text())["elements"]
+    for label in ("detailed_RE_s2", "detailed_PRS_s2"):
+        for key in ("stress_final_pa", "stress_initial_pa", "strain_increment", "num_grains",
+                    "prepared_sha256"):
+            assert a[label][key] == b[label][key], (label, key)
+    # One seed: no verdict is possible.
+    f = json.loads((alone / "summary.json").read_text())["findings"]
+    assert f and all(x["verdict"] == "not resolved" and x["n"] == 1 for x in f)
 
 
 @pytest.mark.parametrize("args, msg", [
@@ -65,59 +158,41 @@ def test_prestress_and_interaction_measures(smoke):
     (["--grains", "clumps:nosuch"], "grains='clumps:nosuch'"),
     (["--n", "10"], "--n=10: must be >= 50"),
     (["--prestress", "-5"], "--prestress=-5.0: must be >= 0 (N/m)"),
+    (["--seeds", "3-1"], "--seeds='3-1': must be 'A-B' (A <= B)"),
+    (["--fixed-walls", "z-,z+"], "--fixed-walls='z-,z+': both z walls fixed"),
+    (["--resume"], "--resume: give --out"),
 ])
 def test_bad_inputs_name_the_option(tmp_path, args, msg):
     import subprocess
     import sys
     from pathlib import Path
 
-    case = Path(__file__).resolve().parents[1] / "cases" / "prs_element_002.py"
-    p = subprocess.run([sys.executable, str(case), "--smoke", "--out", str(tmp_path), *args],
+    case_py = Path(__file__).resolve().parents[1] / "cases" / "prs_element_002.py"
+    out = [] if args == ["--resume"] else ["--out", str(tmp_path)]
+    p = subprocess.run([sys.executable, str(case_py), "--smoke", *out, *args],
                        capture_output=True, text=True, timeout=120)
     assert p.returncode != 0 and msg in p.stderr, p.stderr
 
 
-def test_elements_side_by_side_give_the_serial_results(smoke, tmp_path):
-    """The smoke run puts its four elements on two processes (--workers 2, conftest); one of
-    them run alone in this process's way (serially) gives the same numbers, bitwise."""
-    import subprocess
-    import sys
-
-    from conftest import ROOT, SMOKE_ARGS
-
-    out, proc = smoke
-    assert "--workers" in SMOKE_ARGS["prs_element_002"] and "2 at a time" in proc.stdout
-    args = [a for a in SMOKE_ARGS["prs_element_002"]]
-    k = args.index("--workers")
-    del args[k:k + 2]
-    alone = tmp_path / "alone"
-    r = subprocess.run([sys.executable, str(ROOT / "cases" / "prs_element_002.py"), "--smoke",
-                        "--out", str(alone), *args, "--grids", "standard", "--variants", "RE"],
-                       capture_output=True, text=True, timeout=900)
-    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
-    a = json.loads((alone / "summary.json").read_text())["elements"]["standard_RE"]
-    b = json.loads((out / "summary.json").read_text())["elements"]["standard_RE"]
-    for key in ("stress_final_pa", "stress_initial_pa", "strain_increment", "num_grains"):
-        assert a[key] == b[key], key
+def test_resume_keeps_the_finished_packings(smoke, tmp_path):
+    # The files --resume keeps: each finished (grid, seed) pair's summary first, then its
+    # elements' and its packing's files.
+    out, _ = smoke
+    keep = case.resume_keep(out)
+    assert keep[0] == "jobs/detailed_s1.json" and "jobs/detailed_s2.json" in keep
+    assert "detailed_RE_s1_figure.npz" in keep and "detailed_s1_growth.csv" in keep
+    assert not any(k.startswith("fem_") or k == "summary.json" for k in keep)
+    assert case.resume_keep(tmp_path) == []
 
 
 def test_the_preparation_grows_in_contact_and_does_not_start_over(smoke):
-    # The growth history of each element: the fast phase ends in contact (coordination 1, or
-    # jammed at the ceiling), and the slow phase never loosens the packing by more than
-    # 0.02 of porosity (a fast phase ended on a wall-stress spike left coordination 0.02-0.07
-    # and the packing sprang apart, porosity up by 0.05-0.1, before growing again).
-    import csv
-
     out, _ = smoke
-    for name in ("detailed_RE", "detailed_PRS", "standard_RE", "standard_PRS"):
-        rows = list(csv.DictReader(open(out / f"{name}_growth.csv")))
-        assert (out / f"{name}_growth.png").stat().st_size > 0
+    for seed in (1, 2):
+        rows = list(csv.DictReader(open(out / f"detailed_s{seed}_growth.csv")))
+        assert (out / f"detailed_s{seed}_growth.png").stat().st_size > 0
         fast = [r for r in rows if r["phase"] == "fast"]
         slow = [r for r in rows if r["phase"] == "slow"]
-        assert fast and slow, name
-        assert float(fast[-1]["coordination"]) >= 1.0 or len(fast) > 20, name
+        assert fast and slow, seed
+        assert float(fast[-1]["coordination"]) >= 1.0 or len(fast) > 20, seed
         por = np.array([float(r["porosity"]) for r in slow])
-        assert np.all(np.diff(por) < 0.02), (name, por)
-        s = json.loads((out / "summary.json").read_text())["elements"][name]
-        assert s["preparation_wall_time_s"] > 0 and len(s["stage_wall_time_s"]) == 1
-        assert s["density_scaling"]["target_dt_s"] == 0.0  # (off unless asked for)
+        assert np.all(np.diff(por) < 0.02), (seed, por)

@@ -1,33 +1,27 @@
 #!/usr/bin/env python3
-"""002's prestressed reinforced-soil element, rebuilt with 002's own parts.
+"""002's prestressed reinforced-soil element, rebuilt with 002's own parts, RE against PRS on
+paired seeds (docs/prs_element_002.md; its table "How 002 is read" states every reading).
 
 The element:
 - a 0.1 m cube of clumps (the shipped gravel templates, cpp_dem.build.clumps) with 002 Table 1's
   Hertz–Mindlin material: G = 30 GPa, nu = 0.2, mu = 0.8, 2640 kg/m^3;
 - at mid-height, the woven geogrid of bonded spheres (cpp_dem.build.woven), in 002 Table 2's
-  "detailed" and "standard" forms, with 002's linear grid–grain contact (k_n = 3.9e6 N/m,
-  k_s = 9e5 N/m, mu = 0.5);
-- six servo walls driven to the stresses of a FEM analysis. The FEM is the
-  prs_element case's plane-strain fill under a footing, with the grid form's tensile
-  stiffness; or the stresses are given with --stresses (DEM only, no dolfinx).
+  "detailed" and "standard" forms, its k_n, k_s read as PFC 4 ball properties in series
+  (--convention);
+- servo walls driven to the stresses of a FEM analysis (the prs_element case's plane-strain
+  fill under a footing, with the grid form's tensile stiffness), or to --stresses (DEM only,
+  no dolfinx); --fixed-walls holds some walls (002 Fig. 1).
 
-The variants:
-- RE: the grid lies free in the soil;
-- PRS: its longitudinal members are tensioned to T_p (--prestress, N/m) after the sample is
-  grown, and locked in with the ends held (cpp_dem.protocols.prestress). The locked-in force is
-  recorded as the run goes.
+Per grid form and seed (--seeds), one grown packing; from it:
+- RE: the grid's longitudinal ends free;
+- PRS: the same ends pulled by T_p (--prestress, N/m) throughout (--grid-ends grips: tensioned,
+  then locked; RE then held by the same grips).
 
-Outputs in --out, per element `<grid>_<RE|PRS>`:
-- `.h5` / `.csv`: wall stresses, targets, box, grid forces, locked-in prestress;
-- `vtk/`: spheres, contact force network, the grid's bonds with their tensions, the box;
-- `_views.png/.pdf`: contact forces and bond tensions in plan, side and front view, as 002
-  Figs 3–4.
-
-And for the whole run:
-- `summary.json`;
-- `report.md`, which compares RE against PRS on 002's three effects (interlocking,
-  single-string interaction, alignment), on the tensile force along the longitudinal
-  members, and on the displacement above against below the grid, and checks 002's findings.
+Outputs in --out, per element `<grid>_<RE|PRS>_s<seed>`: `.h5`/`.csv` series, `_measures.csv`
+(002's measures over the loading), `_figure.npz`, `vtk/`; per grid and seed the figures
+`<grid>_s<seed>_views/_grid/_rose` (.png, .pdf; RE and PRS on shared scales) and the growth
+history; for the run `summary.json` ("findings": paired differences PRS - RE with verdicts)
+and `report.md`. `jobs/` holds each finished packing's summary (--resume keeps them).
 
 SI units. DEM stresses compression positive.
 """
@@ -38,6 +32,7 @@ import concurrent.futures
 import contextlib
 import multiprocessing
 import json
+import math
 import sys
 import time
 from dataclasses import asdict, dataclass, replace
@@ -47,7 +42,6 @@ import numpy as np
 
 from geogrid_dem.cases import prs_element as _fem_case
 from cpp_dem.elements.box import run_element
-from femcoupling.drivers.prs_element import run_fem
 from geogrid_dem.cases import PRESTRESS_PAPER
 from geogrid_dem.rundir import begin_run, end_run, run_main
 
@@ -57,7 +51,8 @@ VARIANTS = ("RE", "PRS")
 
 @dataclass
 class Params(_fem_case.Params):
-    """The 002 element: prs_element's parameters with 002's grains, law and woven grid."""
+    """The 002 element: prs_element's parameters with 002's grains, law, woven grid,
+    boundaries, gravity and damping stages (docs/prs_element_002.md, "How 002 is read")."""
 
     n: int = 2000                        #: clumps, before the grid's layer is cleared, -
     grains: str = "clumps:gravel"
@@ -66,131 +61,261 @@ class Params(_fem_case.Params):
     growth_max_strain: float = 3e-6      #: -, per step (x 10 until the grains touch)
     servo_integral: bool = True          #: the creeping clump packing needs it (servo_stage)
     prep_friction_deg: float = 20.0      #: deg, during growth
+    # How the element is held and damped (docs/prs_element_002.md, "How 002 is read"): 002's
+    # fixed walls (--fixed-walls x-,y-,z-), gravity (--gravity 9.81) and filling damping
+    # (fill_viscous 0.97, fill_local_damping 0) are options, not yet the default: measured at
+    # smoke size, the fixed-wall element did not come to rest (its fixed walls 7-18 % off
+    # their servo walls after 150 000 steps) and the viscous filling grew more slowly.
+    grid_ends: str = "tension"           #: PRS pulled by T_p, RE free: the same end conditions
+    grid_convention: str = "series"      #: 002's k_n, k_s as PFC 4 ball properties
     grids: tuple = GRIDS                 #: woven forms to run
     variants: tuple = VARIANTS           #: RE and/or PRS
+    seeds: tuple = (1, 2)                #: packings; RE and PRS share each seed's
 
 
-SMOKE = dict(_fem_case.SMOKE, n=150, hold_steps=400, max_steps=150_000, unbalanced=0.1)
+SMOKE = dict(_fem_case.SMOKE, n=150, hold_steps=400, max_steps=150_000, unbalanced=0.1,
+             grids=("detailed",))
 
 
 def log(msg: str) -> None:
     print(f"[prs_element_002] {msg}", flush=True)
 
 
-# ---- comparison with 002's findings ------------------------------------------------------------
+# ---- 002's findings, RE against PRS over paired seeds ------------------------------------------
+
+def _get(e: dict, *path):
+    for k in path:
+        e = e[k]
+    return None if e is None else float(e)
 
 
-def findings(elements: dict) -> list[dict]:
-    """002's findings, RE against PRS for each grid form: what 002 reports, the numbers here,
-    and whether they agree."""
-    out = []
-    for grid in GRIDS:
-        re_, prs = elements.get(f"{grid}_RE"), elements.get(f"{grid}_PRS")
-        if prs is not None:
-            d = prs["interaction"]["displacement"]
-            out.append({
-                "grid": grid, "finding": "larger displacements above the grid than below (PRS)",
-                "here": f"{1e3 * d['above_mean_m']:.3f} mm above, {1e3 * d['below_mean_m']:.3f} "
-                        "mm below", "agrees": bool(d["above_mean_m"] > d["below_mean_m"])})
+#: 002's findings with a direction (PRS - RE, paired per seed; "PRS": PRS's own value):
+#: (name, expected_sign, compare, value of an element summary).
+FINDINGS = (
+    ("tension varies less along the prestressed longitudinal members (std along, N)", -1,
+     "PRS - RE", lambda e: _get(e, "interaction", "tension_variation",
+                                "longitudinal_std_along_n")),
+    ("the longitudinal members align less with prestress: out-of-plane deflection (m)", -1,
+     "PRS - RE", lambda e: _get(e, "interaction", "waviness",
+                                "out_of_plane_longitudinal_mean_m")),
+    ("the longitudinal members align less with prestress: grain contacts per m", -1,
+     "PRS - RE", lambda e: _get(e, "interaction", "contacts", "longitudinal_per_m")),
+    ("less vertical strain for the same load with prestress (strain per Pa of the last "
+     "stage's vertical load)", -1, "PRS - RE",
+     lambda e: _get(e, "vertical_compliance_per_pa")),
+    ("displacements above the grid larger than below, PRS (mean |u| above - below, m)", +1,
+     "PRS", lambda e: _get(e, "interaction", "displacement", "above_mean_m")
+     - _get(e, "interaction", "displacement", "below_mean_m")),
+)
+
+#: Measures reported RE against PRS without a direction from 002 (no verdict).
+MEASURES = (
+    ("transverse members: grain contacts per m (002: they still align under PRS)",
+     lambda e: _get(e, "interaction", "contacts", "transverse_per_m")),
+    ("transverse members: out-of-plane deflection (m)",
+     lambda e: _get(e, "interaction", "waviness", "out_of_plane_transverse_mean_m")),
+    ("tension varies along the transverse members (std along, N)",
+     lambda e: _get(e, "interaction", "tension_variation", "transverse_std_along_n")),
+    ("longitudinal tension across members (std of the member means, N)",
+     lambda e: _get(e, "interaction", "tension_variation", "longitudinal_std_across_n")),
+    ("grains in apertures (interlocking)",
+     lambda e: _get(e, "interaction", "apertures", "grains_in_apertures")),
+    ("members' sideways displacement, longitudinal (m)",
+     lambda e: _get(e, "interaction", "sideways_displacement", "longitudinal_rms_m")),
+    ("grains entered between strings (single-string interaction)",
+     lambda e: _get(e, "interaction", "between_strings", "grains_entered")),
+    ("clear gap between strings at the end, mean (m)",
+     lambda e: _get(e, "interaction", "string_gaps", "longitudinal_now_mean_m")),
+    ("porosity at the end", lambda e: _get(e, "porosity_final")),
+)
+
+
+def verdict(diff_mean: float, diff_se: float, n: int, expected_sign: int) -> str:
+    """'agrees' when the paired difference has 002's sign and exceeds 2 standard errors,
+    'opposes' when it has the other sign beyond 2 standard errors, else 'not resolved' (also
+    with fewer than 2 seeds: no standard error)."""
+    if n < 2 or not (math.isfinite(diff_mean) and math.isfinite(diff_se)):
+        return "not resolved"
+    if abs(diff_mean) <= 2.0 * diff_se or diff_mean == 0:
+        return "not resolved"
+    return "agrees" if np.sign(diff_mean) == expected_sign else "opposes"
+
+
+def _stats(x: list) -> tuple[float, float]:
+    a = np.asarray(x, float)
+    return float(a.mean()), (float(a.std(ddof=1)) if len(a) > 1 else float("nan"))
+
+
+def paired(elements: dict, grid: str, seeds, value) -> dict | None:
+    """RE and PRS values of ``value`` over the seeds with both, and their paired difference
+    (PRS - RE): means, sds, the difference's mean and standard error, n."""
+    re_v, prs_v = [], []
+    for s in seeds:
+        re_, prs = elements.get(f"{grid}_RE_s{s}"), elements.get(f"{grid}_PRS_s{s}")
         if re_ is None or prs is None:
             continue
-        cr, cp = re_["grid_force_longitudinal_cov_along"], prs["grid_force_longitudinal_cov_along"]
-        out.append({"grid": grid,
-                    "finding": "tensile force more uniform along prestressed longitudinal members",
-                    "here": f"CoV along the members {cr:.3f} (RE) against {cp:.3f} (PRS)",
-                    "agrees": bool(cp < cr)})
-        ar = re_["interaction"]["contacts"]["longitudinal_per_m"]
-        ap = prs["interaction"]["contacts"]["longitudinal_per_m"]
-        wr = re_["interaction"]["waviness"]["out_of_plane_longitudinal_mean_m"]
-        wp = prs["interaction"]["waviness"]["out_of_plane_longitudinal_mean_m"]
-        out.append({"grid": grid, "finding": "less alignment of the longitudinal members with "
-                    "prestress (fewer grain contacts, less out-of-plane deflection)",
-                    "here": f"contacts {ar:.1f} against {ap:.1f} per m; out-of-plane "
-                            f"{1e6 * wr:.1f} against {1e6 * wp:.1f} um (RE against PRS)",
-                    "agrees": bool(ap <= ar and wp <= wr)})
+        a, b = value(re_), value(prs)
+        if a is None or b is None or not (math.isfinite(a) and math.isfinite(b)):
+            continue
+        re_v.append(a)
+        prs_v.append(b)
+    if not re_v:
+        return None
+    n = len(re_v)
+    d = np.asarray(prs_v) - np.asarray(re_v)
+    rm, rs = _stats(re_v)
+    pm, ps = _stats(prs_v)
+    dm, dsd = _stats(d)
+    return {"re_mean": rm, "re_sd": rs, "prs_mean": pm, "prs_sd": ps, "diff_mean": dm,
+            "diff_se": dsd / math.sqrt(n) if n > 1 else float("nan"), "n": n,
+            "re_values": re_v, "prs_values": prs_v}
+
+
+def findings(elements: dict, seeds=(1,), grids=GRIDS) -> list[dict]:
+    """002's findings per grid form: RE and PRS means and sds over the seeds, the paired
+    difference PRS - RE (mean and standard error; for a finding about PRS alone, PRS's own
+    mean and standard error), and the verdict (:func:`verdict`)."""
+    out = []
+    for grid in grids:
+        for name, sign, compare, value in FINDINGS:
+            st = paired(elements, grid, seeds, value)
+            if st is None:
+                continue
+            if compare == "PRS":
+                n = st["n"]
+                st["diff_mean"] = st["prs_mean"]
+                st["diff_se"] = st["prs_sd"] / math.sqrt(n) if n > 1 else float("nan")
+            out.append({"grid": grid, "name": name, "expected_sign": sign, "compare": compare,
+                        **{k: st[k] for k in ("re_mean", "re_sd", "prs_mean", "prs_sd",
+                                              "diff_mean", "diff_se", "n")},
+                        "verdict": verdict(st["diff_mean"], st["diff_se"], st["n"], sign)})
     return out
+
+
+def measures_table(elements: dict, seeds=(1,), grids=GRIDS) -> list[dict]:
+    """The measures without a direction from 002: RE and PRS over the seeds, paired
+    difference; no verdict."""
+    out = []
+    for grid in grids:
+        for name, value in MEASURES:
+            st = paired(elements, grid, seeds, value)
+            if st is not None:
+                out.append({"grid": grid, "name": name,
+                            **{k: st[k] for k in ("re_mean", "re_sd", "prs_mean", "prs_sd",
+                                                  "diff_mean", "diff_se", "n")}})
+    return out
+
+
+def _fmt(x) -> str:
+    return "-" if x is None or not math.isfinite(x) else f"{x:.4g}"
+
+
+def findings_table(rows: list[dict], *, with_verdict: bool = True) -> list[str]:
+    """The markdown table of findings (or measures) rows."""
+    head = "| grid | finding | RE mean ± sd | PRS mean ± sd | PRS − RE ± se | n |"
+    lines = [head + (" 002 | verdict |" if with_verdict else ""),
+             "|---|---|---|---|---|---|" + ("---|---|" if with_verdict else "")]
+    for f in rows:
+        line = (f"| {f['grid']} | {f['name']} | {_fmt(f['re_mean'])} ± {_fmt(f['re_sd'])} | "
+                f"{_fmt(f['prs_mean'])} ± {_fmt(f['prs_sd'])} | {_fmt(f['diff_mean'])} ± "
+                f"{_fmt(f['diff_se'])} | {f['n']} |")
+        if with_verdict:
+            line += f" {'+' if f['expected_sign'] > 0 else '−'} | {f['verdict']} |"
+        lines.append(line)
+    return lines
 
 
 def write_report(out: Path, summary: dict) -> None:
     el = summary["elements"]
     lines = ["# The prestressed reinforced-soil element (clumps, woven grid): report", "",
              f'Source: "{PRESTRESS_PAPER}".', "",
-             f"Mode: {summary['mode']}. Stresses in kPa, compression positive.", ""]
+             f"Mode: {summary['mode']}. Seeds: {summary['seeds']} (RE and PRS on each seed's "
+             "grown packing). Stresses in kPa, compression positive.", "",
+             "## 002's findings, paired over the seeds", "",
+             "The difference is PRS − RE per seed (for a finding about PRS alone, PRS's own "
+             "value). `agrees`: 002's sign beyond 2 standard errors; `opposes`: the other sign "
+             "beyond 2 standard errors; else `not resolved`.", ""]
+    lines += findings_table(summary["findings"])
+    lines += ["", "## Other measures (no direction from 002)", ""]
+    lines += findings_table(summary["measures"], with_verdict=False)
     rows = [("grains", lambda e: f"{e['num_grains']}"),
             ("walls reached (kPa)", lambda e: str(np.round(np.array(e["stress_final_pa"]) / 1e3,
                                                             2).tolist())),
+            ("converged", lambda e: str(e["converged"])),
             ("held within (%)", lambda e: f"{100 * e['hold_max_rel_error']:.2f}"),
             ("longitudinal member force, mean (N)",
              lambda e: f"{e['grid_force_longitudinal_mean_n']:.2f}"),
-            ("CoV along the longitudinal members",
-             lambda e: f"{e['grid_force_longitudinal_cov_along']:.3f}"),
-            ("grains in apertures (interlocking)",
-             lambda e: f"{e['interaction']['apertures']['grains_in_apertures']}"),
-            ("sideways waviness, longitudinal (um)",
-             lambda e: f"{1e6 * e['interaction']['waviness']['sideways_longitudinal_mean_m']:.1f}"),
-            ("grains touching two strings (single-string)",
-             lambda e: f"{e['interaction']['between_strings']['grains_touching_two_strings']}"),
-            ("grain spheres between strings",
-             lambda e: f"{e['interaction']['between_strings']['grain_spheres_between_strings']}"),
-            ("grain contacts per m, longitudinal (alignment)",
-             lambda e: f"{e['interaction']['contacts']['longitudinal_per_m']:.1f}"),
-            ("out-of-plane waviness, longitudinal (um)",
-             lambda e: f"{1e6 * e['interaction']['waviness']['out_of_plane_longitudinal_mean_m']:.1f}"),
-            ("mean |u| above / below the grid (mm)",
-             lambda e: f"{1e3 * e['interaction']['displacement']['above_mean_m']:.3f} / "
-                       f"{1e3 * e['interaction']['displacement']['below_mean_m']:.3f}"),
-            ("locked-in prestress at the end (N per member)",
-             lambda e: (str(np.round(e["prestress_locked_final_n"], 1).tolist())
-                        if "prestress_locked_final_n" in e else "-")),
             ("porosity at the end", lambda e: f"{e['porosity_final']:.3f}"),
             ("time step (s)", lambda e: f"{e['density_scaling']['dt_s']:.3g}"),
-            ("density scaling: largest factor, bodies scaled",
-             lambda e: (f"{e['density_scaling']['max_factor']:.3g}, "
-                        f"{100 * e['density_scaling']['scaled_share']:.0f} %"
-                        if e["density_scaling"]["target_dt_s"] else "off")),
             ("wall time: preparation, stages (s)",
              lambda e: f"{e['preparation_wall_time_s']:.0f}, "
                        + ", ".join(f"{t:.0f}" for t in e["stage_wall_time_s"])),
             ("wall time (s)", lambda e: f"{e['wall_time_s']:.0f}")]
     names = list(el)
-    lines += ["| | " + " | ".join(names) + " |", "|---|" + "---|" * len(names)]
+    lines += ["", "## The elements", "", "| | " + " | ".join(names) + " |",
+              "|---|" + "---|" * len(names)]
     for label, f in rows:
         lines.append(f"| {label} | " + " | ".join(f(el[n]) for n in names) + " |")
-    lines += ["", "## The paper's findings", ""]
-    for f in summary["findings"]:
-        lines.append(f"- {f['grid']}: {f['finding']}: {f['here']}: "
-                     f"{'agrees' if f['agrees'] else 'does NOT agree'}.")
-    lines += ["", "Figures: `<element>_views.png` (plan, side, front); VTK in `vtk/`.", ""]
+    lines += ["", "Figures: `<grid>_s<seed>_views`, `_grid`, `_rose` (.png, .pdf: RE and PRS on "
+              "shared scales); histories of the measures: `<element>_measures.csv`; VTK in "
+              "`vtk/`.", ""]
     (out / "report.md").write_text("\n".join(lines) + "\n")
 
 
 # ---- the run -----------------------------------------------------------------------------------
 
+JOBS = "jobs"  #: the folder of the finished (grid, seed) pairs' summaries (--resume keeps them)
 
-def run(p: Params, out: Path) -> dict:
+
+def _job_file(grid: str, seed: int) -> str:
+    return f"{JOBS}/{grid}_s{seed}.json"
+
+
+def resume_keep(out: Path) -> list[str]:
+    """The files of the finished (grid, seed) pairs in ``out`` (their summaries first), which
+    --resume keeps; an empty list when none finished."""
+    out = Path(out)
+    done = sorted((out / JOBS).glob("*.json")) if (out / JOBS).is_dir() else []
+    keep = [str(f.relative_to(out)) for f in done]
+    for f in done:
+        for e in json.loads(f.read_text())["labels"]:
+            keep += [str(g.relative_to(out)) for g in sorted(out.rglob(f"{e}*"))
+                     if g.is_file() and str(g.relative_to(out)) not in keep]
+        stem = f.stem
+        keep += [str(g.relative_to(out)) for g in sorted(out.glob(f"{stem}_*")) if g.is_file()]
+    return keep
+
+
+def run(p: Params, out: Path, *, resume: bool = False) -> dict:
     t_start = time.perf_counter()
-    begin_run(out, "prs_element_002", log=log)
+    keep = resume_keep(out) if resume else None
+    if resume and not keep:
+        keep = [_job_file(p.grids[0], p.seeds[0])]  # (begin_run names it as missing)
+    begin_run(out, "prs_element_002", log=log, keep=keep)
+    (out / JOBS).mkdir(parents=True, exist_ok=True)
     summary: dict = {"params": {k: (list(v) if isinstance(v, tuple) else v)
-                                for k, v in asdict(p).items()}, "elements": {}}
-    jobs = [(g, v) for g in p.grids for v in p.variants]
+                                for k, v in asdict(p).items()},
+                     "seeds": list(p.seeds), "elements": {}}
     targets: dict = {}
     with contextlib.ExitStack() as stack:
         hist = None
         if p.stresses:
             summary["mode"] = "DEM-only (stresses given)"
-            for job in jobs:
-                targets[job] = [np.asarray(r, float) for r in p.stresses]
+            for g in p.grids:
+                for v in p.variants:
+                    targets[(g, v)] = [np.asarray(r, float) for r in p.stresses]
         else:
+            from femcoupling.drivers.prs_element import run_fem
             from femcoupling.twoway import HandoverHistory
 
             summary["mode"] = "FEM -> DEM (one-way)"
             summary["fem"] = {}
             hist = stack.enter_context(HandoverHistory(
-                out / "handover.h5", regions=[f"{g}_{v}" for g, v in jobs],
+                out / "handover.h5", regions=[f"{g}_{v}" for g in p.grids for v in p.variants],
                 metadata={"case": "prs_element_002"}))
-            handed = {}
-            for g, v in jobs:
-                # The FEM layer has the grid form's tensile stiffness (and T_p for PRS).
+            for k, (g, v) in enumerate((g, v) for g in p.grids for v in p.variants):
+                # The FEM layer has the grid form's tensile stiffness (and T_p for PRS); the
+                # same for every seed.
                 fem_out = out / f"fem_{g}"
                 fem_out.mkdir(parents=True, exist_ok=True)
                 ini, fin, _m, _s0, _load, info = run_fem(
@@ -200,49 +325,85 @@ def run(p: Params, out: Path) -> dict:
                             shear_pa=fin.shear_pa.tolist(), rotation_deg=fin.rotation_deg)
                 summary["fem"][f"{g}_{v}"] = info
                 targets[(g, v)] = [ini.normal_pa, fin.normal_pa]
-                handed[(g, v)] = fin
-        t_dem = time.perf_counter()
-        args = [(replace(p, geogrid=f"woven-{g}"), targets[(g, v)], v == "PRS", f"{g}_{v}",
-                 out) for g, v in jobs]
-        if p.workers > 1 and len(jobs) > 1:
-            # Elements side by side in spawned processes (one thread each): each element's
-            # arithmetic is the serial run's, so the results are the same.
-            n_proc = min(p.workers, len(jobs))
-            log(f"--workers {p.workers}: {len(jobs)} elements, {n_proc} at a time")
-            ex = stack.enter_context(concurrent.futures.ProcessPoolExecutor(
-                max_workers=n_proc, mp_context=multiprocessing.get_context("spawn")))
-            results = ex.map(_element_job, *zip(*args))
-        else:
-            results = (_element_job(*a) for a in args)
-        for k, ((g, v), e) in enumerate(zip(jobs, results)):
-            left = (time.perf_counter() - t_dem) / (k + 1) * (len(jobs) - k - 1)
-            log(f"element {k + 1}/{len(jobs)} ({g} {v}) done"
-                + (f"; about {left:.0f} s left" if k + 1 < len(jobs) else ""))
-            summary["elements"][f"{g}_{v}"] = e
-            if hist is not None:
-                fin = handed[(g, v)]
                 hist.append(iteration=0, region=k, fem_stress_pa=fin.fem_stress_pa,
                             targets_pa=fin.normal_pa, shear_pa=fin.shear_pa,
                             rotation_deg=fin.rotation_deg, change=0.0,
-                            dem_stress_pa=e["stress_final_pa"])
-            # Written as the run goes: a stopped run keeps the elements it finished.
+                            dem_stress_pa=np.full(3, np.nan))
+        jobs = [(g, s) for g in p.grids for s in p.seeds]
+        todo = [(g, s) for g, s in jobs if not (out / _job_file(g, s)).is_file()]
+        for g, s in jobs:
+            if (g, s) not in todo:
+                log(f"--resume: {g} seed {s} kept from the earlier run")
+                summary["elements"].update(json.loads((out / _job_file(g, s)).read_text())
+                                           ["elements"])
+        t_dem = time.perf_counter()
+        args = [(replace(p, geogrid=f"woven-{g}", seed=s), g, s,
+                 {v: targets[(g, v)] for v in p.variants}, out) for g, s in todo]
+        if p.workers > 1 and len(todo) > 1:
+            # (grid, seed) pairs side by side in spawned processes (one thread each): each
+            # pair's arithmetic is the serial run's, so the results are the same.
+            n_proc = min(p.workers, len(todo))
+            log(f"--workers {p.workers}: {len(todo)} packings (RE and PRS on each), {n_proc} "
+                "at a time")
+            ex = stack.enter_context(concurrent.futures.ProcessPoolExecutor(
+                max_workers=n_proc, mp_context=multiprocessing.get_context("spawn")))
+            results = ex.map(_pair_job, *zip(*args))
+        else:
+            results = (_pair_job(*a) for a in args)
+        for k, ((g, s), res) in enumerate(zip(todo, results)):
+            left = (time.perf_counter() - t_dem) / (k + 1) * (len(todo) - k - 1)
+            log(f"packing {k + 1}/{len(todo)} ({g}, seed {s}) done"
+                + (f"; about {left:.0f} s left" if k + 1 < len(todo) else ""))
+            summary["elements"].update(res["elements"])
+            # Written as the run goes: a stopped run keeps (and --resume reuses) the pairs
+            # it finished.
             (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float)
                                               + "\n")
-    summary["findings"] = findings(summary["elements"])
+    _draw_pairs(p, out)
+    summary["findings"] = findings(summary["elements"], p.seeds, p.grids)
+    summary["measures"] = measures_table(summary["elements"], p.seeds, p.grids)
     summary["wall_time_total_s"] = time.perf_counter() - t_start
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
     write_report(out, summary)
     end_run(out)
     for f in summary["findings"]:
-        log(f"{f['grid']}: {f['finding']}: {f['here']} "
-            f"({'agrees' if f['agrees'] else 'does NOT agree'} with the paper)")
+        log(f"{f['grid']}: {f['name']}: PRS - RE {_fmt(f['diff_mean'])} ± "
+            f"{_fmt(f['diff_se'])} (n = {f['n']}): {f['verdict']}")
     log(f"done in {summary['wall_time_total_s']:.1f} s; report in {out / 'report.md'}")
     return summary
 
 
-def _element_job(p: Params, targets, prestressed: bool, label: str, out: Path) -> dict:
-    """One element of the run (picklable: ``--workers`` runs them in other processes)."""
-    return run_element(p, targets, prestressed=prestressed, label=label, out=out, log=log)
+def _draw_pairs(p: Params, out: Path) -> None:
+    """RE against PRS per grid and seed on shared scales (cpp_dem.measure.grid_figures)."""
+    from cpp_dem.measure import grid_figures
+
+    for g in p.grids:
+        for s in p.seeds:
+            files = {v: out / f"{g}_{v}_s{s}_figure.npz" for v in p.variants}
+            if all(f.is_file() for f in files.values()):
+                grid_figures.draw_all({v: grid_figures.load_figure_data(f)
+                                       for v, f in files.items()}, out, f"{g}_s{s}")
+
+
+def _pair_job(p: Params, grid: str, seed: int, targets: dict, out: Path) -> dict:
+    """RE and PRS on one grown packing (picklable: ``--workers`` runs them in other
+    processes). Writes jobs/<grid>_s<seed>.json when both are done."""
+    prepared: dict = {}
+    grow = float(np.mean([np.mean(t[0]) for t in targets.values()]))
+    res = {"grid": grid, "seed": seed, "elements": {}, "labels": []}
+    for v, t in targets.items():
+        label = f"{grid}_{v}_s{seed}"
+        res["elements"][label] = run_element(p, t, prestressed=v == "PRS", label=label,
+                                             out=out, log=log, prepared=prepared,
+                                             grow_stress=grow, prep_label=f"{grid}_s{seed}",
+                                             draw_figures=False)
+        res["elements"][label]["seed"] = seed
+        res["labels"].append(label)
+    res["preparation_wall_time_s"] = prepared.get("wall_time_s")
+    tmp = out / (_job_file(grid, seed) + ".tmp")
+    tmp.write_text(json.dumps(res, indent=2, default=float) + "\n")
+    tmp.replace(out / _job_file(grid, seed))
+    return res
 
 
 def _names(text: str, allowed: tuple, flag: str, ap) -> tuple:
@@ -264,23 +425,66 @@ def build_parser():
         smoke=f"{SMOKE['n']} clumps, coarse FEM mesh",
         preset="of the element: density scaling of its growth and servo stages "
                "(--density-scaling overrides it)")
-    ap.add_argument("--grids", default=",".join(GRIDS), help="woven forms to run")
+    ap.add_argument("--grids", default=None,
+                    help=f"woven forms to run (default {','.join(GRIDS)}; --smoke: detailed)")
     ap.add_argument("--variants", default=",".join(VARIANTS), help="RE and/or PRS")
     ap.add_argument("--workers", type=int, default=1,
                     help="processes: 2 or more run the elements side by side (one thread "
                          "each), with the same results")
     ap.add_argument("--grains", default=d.grains,
                     help="clumps:NAME (a shipped grain, 'gravel', or a template CSV) or spheres")
+    ap.add_argument("--seeds", default=None,
+                    help="packings 'A-B' or 'A,B,...': RE and PRS on each seed's grown packing, "
+                         "findings paired over them (default: --seed and the next one; at "
+                         "least 2 for a verdict)")
+    ap.add_argument("--fixed-walls", default=d.fixed_walls,
+                    help="walls that stay put, comma-separated of x-,x+,y-,y+,z-,z+ (at most one "
+                         "per axis). Default: none, all six servo about the centre; the prestressed-"
+                         "element paper's Fig. 1 fixes some, e.g. x-,y-,z-")
+    ap.add_argument("--gravity", type=float, default=d.gravity, help="m/s^2 along -z")
+    ap.add_argument("--convention", choices=("series", "contact"), default=d.grid_convention,
+                    help="the paper's k_n, k_s: PFC 4 ball properties combined in series "
+                         "(as PFC 4 used them, the default), or the contacts' stiffnesses")
+    ap.add_argument("--grid-ends", choices=("tension", "grips"), default=d.grid_ends,
+                    help="how the grid's longitudinal ends are held: 'tension' (PRS pulled by "
+                         "T_p throughout, RE free) or 'grips' (PRS tensioned then locked in "
+                         "place, RE held by the same grips untensioned)")
+    ap.add_argument("--resume", action="store_true",
+                    help="continue an interrupted run in --out: the (grid, seed) pairs it "
+                         "finished are kept, the others run")
     return ap
+
+
+def parse_seeds(text: str, ap) -> tuple[int, ...]:
+    """'1-3' -> (1, 2, 3); '1,4' -> (1, 4)."""
+    try:
+        if "-" in text.strip().lstrip("-"):
+            a, b = text.split("-", 1)
+            seeds = tuple(range(int(a), int(b) + 1))
+        else:
+            seeds = tuple(int(t) for t in text.split(",") if t.strip())
+    except ValueError:
+        seeds = ()
+    if not seeds or any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds):
+        ap.error(f"--seeds={text!r}: must be 'A-B' (A <= B) or a comma-separated list of "
+                 "distinct integers >= 0")
+    return seeds
 
 
 def parse_args(argv=None) -> tuple[Params, Path]:
     ap = build_parser()
     a = ap.parse_args(argv)
     p = _fem_case.apply_element_args(ap, a, Params(**SMOKE) if a.smoke else Params())
-    p.grids = _names(a.grids, GRIDS, "--grids", ap)
+    if a.grids is not None:
+        p.grids = _names(a.grids, GRIDS, "--grids", ap)
     p.variants = _names(a.variants, VARIANTS, "--variants", ap)
     p.grains = a.grains
+    p.seeds = parse_seeds(a.seeds, ap) if a.seeds else (p.seed, p.seed + 1)
+    p.fixed_walls, p.grid_convention, p.grid_ends = a.fixed_walls, a.convention, a.grid_ends
+    p.re_grips = p.grid_ends == "grips"
+    if not (math.isfinite(a.gravity) and a.gravity >= 0):
+        ap.error(f"--gravity={a.gravity}: must be >= 0 (m/s^2)")
+    p.gravity = a.gravity
     if a.preset and a.density_scaling is None:
         from cpp_dem.presets import preset
 
@@ -294,15 +498,18 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     try:
         check_element_params(p)
     except ParameterError as e:
-        ap.error(str(e))
+        ap.error(str(e).replace("fixed_walls=", "--fixed-walls="))
     if a.stresses:
         p.stresses = _fem_case.parse_stresses(a.stresses, ap)
+    if a.resume and a.out is None:
+        ap.error("--resume: give --out, the folder of the run to continue")
+    p.resume = a.resume
     return p, a.out
 
 
 def main(argv=None) -> int:
     p, out = parse_args(argv)
-    return run_main("prs_element_002", out, lambda o: run(p, o))
+    return run_main("prs_element_002", out, lambda o: run(p, o, resume=p.resume))
 
 
 if __name__ == "__main__":

@@ -10,6 +10,7 @@ The functions take a parameter object with the fields of :class:`ElementParams` 
 
 from __future__ import annotations
 
+import hashlib
 import math
 import time
 from dataclasses import dataclass, replace
@@ -75,6 +76,20 @@ class ElementParams:
     density_scaling: float = 0.0     #: target dt / unscaled dt of the growth and servo stages
                                      #: with density scaling (cpp_dem.protocols.quasi_static),
                                      #: -; 0: off
+    # --- 002's boundaries, gravity and damping stages (the defaults keep the older element) ---
+    gravity: float = 0.0             #: gravity along -z, m/s^2 (002: 9.81)
+    fixed_walls: str = ""            #: walls that stay put, e.g. 'x-,y-,z-' (elements.boundaries);
+                                     #: '' : all six servo about the centre
+    fill_viscous: float = 0.0        #: viscous contact damping of the grains (normal and shear,
+                                     #: ratio of critical) during the preparation (002: 0.97)
+    fill_local_damping: float = -1.0  #: local damping during the preparation, -; < 0: damping
+    re_grips: bool = False           #: RE: the grid's longitudinal ends held by the grips that
+                                     #: hold PRS's (the same end conditions for both)
+    grid_ends: str = "grips"         #: woven grids: PRS's prestress held by 'grips' (tensioned,
+                                     #: then locked in place), or by 'tension': the ends pulled
+                                     #: by T_p throughout (EndTension), RE's by 0 (free)
+    grid_convention: str = "contact"  #: woven grids: 002's k_n, k_s as 'series' (PFC 4 ball
+                                     #: properties, combined in series) or 'contact' stiffnesses
 
 
 def grid_spacing(p: ElementParams) -> float:
@@ -93,7 +108,8 @@ def grid_stiffness_per_metre(p: ElementParams) -> float:
     if p.geogrid.startswith("woven-"):
         from cpp_dem.build.woven import series_stiffness_per_metre
 
-        return series_stiffness_per_metre(p.geogrid.split("-", 1)[1])
+        return series_stiffness_per_metre(p.geogrid.split("-", 1)[1],
+                                          convention=p.grid_convention)
     return grid_axial_stiffness(p)
 
 
@@ -157,6 +173,11 @@ def make_element(p: ElementParams, mean_stress: float, prestressed: bool,
 
 GEOGRIDS = ("square", "woven-detailed", "woven-standard")
 GRAIN_LAWS = ("linear", "hertz")
+#: How 002's k_n, k_s are read (cpp_dem.build.woven): PFC 4 ball properties in series, or the
+#: contacts' own stiffnesses.
+GRID_CONVENTIONS = ("series", "contact")
+#: How the grid's longitudinal ends are held (ElementParams.grid_ends).
+GRID_ENDS = ("grips", "tension")
 
 
 def check_element_params(p: ElementParams) -> None:
@@ -176,6 +197,22 @@ def check_element_params(p: ElementParams) -> None:
     if not (math.isfinite(p.density_scaling) and (p.density_scaling == 0 or p.density_scaling >= 1)):
         raise ParameterError(f"density_scaling={p.density_scaling!r}: must be 0 (off) or >= 1 "
                              "(the target time step over the unscaled one, -)")
+    if not (math.isfinite(p.gravity) and p.gravity >= 0):
+        raise ParameterError(f"gravity={p.gravity!r}: must be >= 0 (m/s^2, along -z)")
+    from cpp_dem.elements.boundaries import parse_fixed_walls
+
+    parse_fixed_walls(p.fixed_walls)
+    if not (math.isfinite(p.fill_viscous) and 0 <= p.fill_viscous <= 1):
+        raise ParameterError(f"fill_viscous={p.fill_viscous!r}: must be in [0, 1] (ratio of "
+                             "critical damping)")
+    if not (math.isfinite(p.fill_local_damping) and p.fill_local_damping < 1):
+        raise ParameterError(f"fill_local_damping={p.fill_local_damping!r}: must be in [0, 1) "
+                             "(local damping), or < 0 for the loading's damping")
+    if p.grid_ends not in GRID_ENDS:
+        raise ParameterError(f"grid_ends={p.grid_ends!r}: must be one of {', '.join(GRID_ENDS)}")
+    if p.grid_convention not in GRID_CONVENTIONS:
+        raise ParameterError(f"grid_convention={p.grid_convention!r}: must be one of "
+                             f"{', '.join(GRID_CONVENTIONS)}")
 
 
 def _rate_factor(sc, p: ElementParams) -> float:
@@ -211,13 +248,42 @@ def grain_material(p: ElementParams, friction_deg: float):
 
 def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
                        log: Callable[[str], None] = _log):
-    """002's element: grains (clumps or spheres; Hertz–Mindlin or linear) in the cube around
-    a woven geogrid of bonded spheres at mid-height (cpp_dem.build.woven, 'detailed' or 'standard'),
-    with 002's contact laws, radius growth to ``mean_stress`` (Pa; the grid held), then for
-    PRS the grid's longitudinal members tensioned to p.prestress (N/m) and locked
-    (cpp_dem.protocols.prestress). Returns (sample, grid, prestress or None)."""
+    """002's element: :func:`prepare_woven_element`, then :func:`load_variant` (RE or PRS).
+    Returns (sample, grid, prestress or None)."""
+    sample, grid = prepare_woven_element(p, mean_stress, log=log)
+    return sample, grid, load_variant(sample, grid, p, prestressed, log=log)
+
+
+def _grain_damping(sc, sample, p: ElementParams, friction_deg: float, viscous: float) -> None:
+    """The grains' pair laws with viscous contact damping ``viscous`` (normal and shear, ratio
+    of critical): grain–grain (Coulomb friction ``friction_deg``), and the grain–wall and
+    grain–grid laws set before, each kept as it is but for its damping."""
+    mu = math.tan(math.radians(friction_deg))
+    if viscous == 0 and p.fill_viscous == 0:
+        sc.set_pair_law(sample.material, sample.material, friction=mu)
+        return
+    sc.set_pair_law(sample.material, sample.material, friction=mu, damping_normal=viscous,
+                    damping_shear=viscous)
+    for law in sc.pair_laws:
+        a, b = int(law["a"]), int(law["b"])
+        if sample.material not in (a, b) or a == b:
+            continue
+        keep = {k: law[k] for k in ("model", "kn", "ks", "friction") if law[k] is not None}
+        sc.set_pair_law(a, b, **keep, damping_normal=viscous, damping_shear=viscous)
+
+
+def prepare_woven_element(p: ElementParams, mean_stress: float,
+                          log: Callable[[str], None] = _log):
+    """002's element prepared: grains (clumps or spheres; Hertz–Mindlin or linear) in the
+    cube around a woven geogrid of bonded spheres at mid-height (cpp_dem.build.woven,
+    'detailed' or 'standard'), with 002's contact laws, grown to ``mean_stress`` (Pa; the grid
+    held) under p.gravity with the preparation's damping (p.fill_viscous,
+    p.fill_local_damping), then the loading's damping (p.damping, no viscous) and friction.
+    Fixed walls (p.fixed_walls): ``sample.controller`` is a
+    :class:`cpp_dem.elements.boundaries.WallServos` and ``sample.fixed`` names them.
+    Returns (sample, grid)."""
     from cpp_dem.build import woven
-    from cpp_dem.protocols.prestress import Prestress
+    from cpp_dem.elements.boundaries import WallServos, parse_fixed_walls
 
     check_element_params(p)
     preset = p.geogrid.split("-", 1)[1]
@@ -263,16 +329,31 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
                              f"{pitch * 1e3:.1f} mm) does not fit in the {p.edge:g} m element "
                              "with 3 % of its edge to spare on each side")
     grid = woven.woven_geogrid(sc, origin=(o, o, z_grid), apertures_x=p.apertures,
-                               apertures_y=p.apertures, material=gmat, preset=preset)
-    # 002's laws: grid-grain and grid-grid linear (Table 1, Table 2); walls frictionless and
-    # as stiff as a grid contact for the grains when they are Hertz–Mindlin.
-    woven.set_grid_laws(sc, gmat, sample.material, preset=preset)
+                               apertures_y=p.apertures, material=gmat, preset=preset,
+                               convention=p.grid_convention)
+    # 002's laws: grid-grain and grid-grid linear (Table 1, Table 2; p.grid_convention); walls
+    # frictionless, and for Hertz–Mindlin grains linear with 002's grain k_n, k_s as the
+    # contact's (002 gives no wall stiffness).
+    woven.set_grid_laws(sc, gmat, sample.material, preset=preset, convention=p.grid_convention)
     wall_mat = sample.wall_material
     if p.grain_law == "hertz":
         sc.set_pair_law(sample.material, wall_mat, model="linear", kn=3.9e6, ks=9.0e5,
                         friction=0.0)
     sc.set_pair_law(gmat, wall_mat, model="linear", kn=pr["kn"], ks=pr["ks"], friction=0.0)
     sc.max_overlap_ratio = 0.95
+    sample.fixed = parse_fixed_walls(p.fixed_walls)
+    if sample.fixed:
+        # (The box's TriaxialController stays, disabled: it moves both walls of an axis.)
+        sample.controller = WallServos(sc, sample.walls, sample.fixed,
+                                       max_speed=prep.default_max_speed(sc, sample.walls))
+    if p.gravity > 0:
+        sc.gravity = (0.0, 0.0, -p.gravity)
+    # The preparation's damping (002: a filling with viscous damping 0.97 and no local
+    # damping); the loading's (p.damping) after it.
+    if p.fill_local_damping >= 0:
+        sc.local_damping = p.fill_local_damping
+    if p.fill_viscous > 0:
+        _grain_damping(sc, sample, p, p.prep_friction_deg, p.fill_viscous)
     sc.block_dofs(grid.spheres, "all")
     _start_scaling(sc, p, log)
     t0 = time.perf_counter()
@@ -374,15 +455,44 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
     log(f"element: {n_grains} grains ({p.grains}, {p.grain_law}; {len(grain_bodies)} spheres), "
         f"woven {preset} grid {p.apertures}x{p.apertures} apertures ({len(grid.spheres)} "
         f"spheres, {len(grid.bonds)} bonds, J = "
-        f"{woven.series_stiffness_per_metre(preset) / 1e3:.0f} kN/m); grown to "
+        f"{grid_stiffness_per_metre(p) / 1e3:.0f} kN/m, {p.grid_convention} stiffnesses); grown to "
         f"{grow.mean_stress / 1e3:.2f} kPa in {fast_steps} (fast, to {fast_end}) + "
         f"{grow.steps} steps, "
         f"porosity {measure.porosity(sc, sample.walls):.3f}"
         f" ({time.perf_counter() - t0:.1f} s)")
-    sc.set_pair_law(sample.material, sample.material,
-                    friction=math.tan(math.radians(p.friction_deg)))
+    _grain_damping(sc, sample, p, p.friction_deg, 0.0)
+    sc.local_damping = p.damping
     sc.block_dofs(grid.spheres, "")
-    ps = None
+    return sample, grid
+
+
+class Grips:
+    """RE's grips: the grid's longitudinal end junctions held in all six DOFs where the
+    prepared packing left them, as PRS's grips hold its ends once the prestress is locked
+    (cpp_dem.protocols.prestress.GridEnds: the same bodies)."""
+
+    def __init__(self, scene, grid):
+        from cpp_dem.protocols.prestress import GridEnds
+
+        ends = GridEnds(scene, grid)
+        self.held = np.concatenate([ends.low, ends.high])
+        scene.block_dofs(self.held, "all")
+        v = np.asarray(scene.velocities).copy()
+        v[self.held] = 0.0
+        scene.velocities = v
+
+
+def load_variant(sample, grid, p: ElementParams, prestressed: bool,
+                 log: Callable[[str], None] = _log):
+    """The variant on the prepared element: PRS tensions the grid's longitudinal members to
+    p.prestress (N/m) and locks them (cpp_dem.protocols.prestress), its end junctions then held;
+    RE with p.re_grips holds the same end junctions untensioned (:class:`Grips`), else leaves
+    the grid free. Returns the Prestress, or None."""
+    from cpp_dem.protocols.prestress import Prestress
+
+    sc = sample.scene
+    if p.grid_ends == "tension":
+        return None  # (run_element pulls the ends: EndTension at T_p for PRS, 0 for RE)
     if prestressed and p.prestress > 0:
         ps = Prestress(sc, grid, tension_per_m=p.prestress)
         t0 = time.perf_counter()
@@ -390,7 +500,12 @@ def make_woven_element(p: ElementParams, mean_stress: float, prestressed: bool,
         log(f"PRS: longitudinal members tensioned to {ps.target_n:.1f} N each (T_p = "
             f"{p.prestress / 1e3:g} kN/m) and locked at step {row['step']}: line forces "
             f"{np.round(row['line_forces_n'], 2).tolist()} N ({time.perf_counter() - t0:.1f} s)")
-    return sample, grid, ps
+        return ps
+    if p.re_grips:
+        g = Grips(sc, grid)
+        log(f"RE: the grid's longitudinal end junctions held by the grips ({len(g.held)} "
+            "spheres), untensioned")
+    return None
 
 
 SERIES = {"stage": (None, "-"), "step": (None, "-"), "time": (None, "s"),
@@ -400,6 +515,14 @@ SERIES = {"stage": (None, "-"), "step": (None, "-"), "time": (None, "s"),
           "unbalanced_force": (None, "-"), "grid_force_longitudinal_mean": (None, "N"),
           "grid_force_transverse_mean": (None, "N"),
           "prestress_line_force_mean": (None, "N"), "grid_end_force": (None, "N")}
+
+
+def held_stresses(sample) -> np.ndarray:
+    """Per axis, the stress the element holds, Pa: the mean of the axis's stress-controlled
+    walls (both, unless one is fixed: cpp_dem.elements.boundaries)."""
+    from cpp_dem.elements.boundaries import axis_stresses
+
+    return axis_stresses(sample.scene, sample.walls, getattr(sample, "fixed", ()))
 
 
 def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
@@ -430,7 +553,7 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
     longi = grid.member_direction == geogrid.LONGITUDINAL
 
     def record() -> np.ndarray:
-        ax = measure.axis_stresses(sc, walls)
+        ax = held_stresses(sample)
         size = measure.box_size(sc, walls)
         f = grid.member_axial_forces(sc)
         locked = (float(prestress.record()["line_forces_n"].mean()) if prestress is not None
@@ -443,6 +566,19 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
             grid_force_longitudinal_mean=float(f[longi].mean()),
             grid_force_transverse_mean=float(f[~longi].mean()))
         return ax
+
+    fixed = getattr(sample, "fixed", ())
+
+    def balanced() -> bool:
+        # With fixed walls: each carries its opposite servo wall's stress (and the bottom
+        # the weight too) within boundaries.BALANCE_TOL of the target.
+        if not fixed:
+            return True
+        from cpp_dem.elements import boundaries
+
+        w = boundaries.weight_stress(sc, walls, p.gravity, sc.material(sample.material).density)
+        return bool(np.all(boundaries.imbalance(sc, walls, fixed, t, w)
+                           <= boundaries.BALANCE_TOL))
 
     start, last = sc.step_count, time.perf_counter()
     wall0 = last
@@ -472,7 +608,7 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
                 f"{quasi_static.describe(quasi_static.report(sc))}")
             quasi_static_warned = quasi_static_warned or quasi_static.check(
                 sc, f"element servo stage {stage}", stacklevel=2)
-        if np.all(err <= p.tol) and sc.unbalanced_force() < p.unbalanced:
+        if np.all(err <= p.tol) and sc.unbalanced_force() < p.unbalanced and balanced():
             ok = True
             break
     steps = sc.step_count - start
@@ -487,7 +623,7 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
         sc.run(p.record_every)
         held += p.record_every
         hold_err = max(hold_err, float(np.max(np.abs(record() - t) / t)))
-    ax = measure.axis_stresses(sc, walls)
+    ax = held_stresses(sample)
     return {"converged": ok, "steps": steps, "hold_max_rel_error": hold_err,
             "density_scaling": quasi_static.report(sc),
             "wall_time_s": time.perf_counter() - wall0,
@@ -639,7 +775,9 @@ def probe_tangent(sample, grid, p: ElementParams, target, *, rel: float, signs=N
 
 def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: str, out: Path,
                 log: Callable[[str], None] = _log, cache: dict | None = None,
-                grid_tension: list | None = None, probe: float = 0.0) -> dict:
+                grid_tension: list | None = None, probe: float = 0.0,
+                prepared: dict | None = None, grow_stress: float | None = None,
+                prep_label: str | None = None, draw_figures: bool = True) -> dict:
     """The DEM element driven through ``targets`` (rows of 3, Pa, compression positive).
 
     Prepared at the first row's mean stress, then servoed to each row in turn. Returns the
@@ -657,6 +795,17 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     and ``prestressed``; a later call with the same first row restores it and runs only the
     remaining rows (bitwise the run it would have made; its records then start at the second
     row). Same ``p`` for every call with one cache.
+
+    ``prepared`` (a dict the caller keeps; woven grids): RE and PRS on one grown packing. The
+    first call prepares the element (:func:`prepare_woven_element`, to ``grow_stress``, Pa,
+    default the first row's mean) and keeps it there with its checkpoint bytes; a later call
+    restores that state and only loads its own variant (:func:`load_variant`), bitwise the
+    run it would have made from its own preparation. ``prep_label``: the name of the
+    preparation's files (``<prep_label>_growth.csv/.png``; default ``label``).
+
+    ``draw_figures``: woven grids draw this element's figures alone (cpp_dem.measure.grid_figures;
+    a caller that draws several elements on shared scales from ``<label>_figure.npz`` says
+    False).
 
     ``probe`` (> 0, relative): after the last row, the element's tangent there by three
     stress probes of that size relative to the mean stress (:func:`probe_tangent`), each in
@@ -684,21 +833,51 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
         _core._checkpoint_load(sample.scene, blob)
         log(f"{label}: the element at the first targets restored from the cache "
             f"(step {sample.scene.step_count}): no preparation")
+    elif woven_grid and prepared is not None:
+        if "state" in prepared:
+            sample, grid, blob = prepared["state"]
+            _core._checkpoint_load(sample.scene, blob)
+            log(f"{label}: the prepared packing of {prepared['label']} restored (step "
+                f"{sample.scene.step_count})")
+        else:
+            sample, grid = prepare_woven_element(
+                p, float(targets[0].mean()) if grow_stress is None else float(grow_stress),
+                log=log)
+            blob = bytes(_core._checkpoint_save(sample.scene))
+            prepared["state"] = (sample, grid, blob)
+            prepared["sha256"] = hashlib.sha256(blob).hexdigest()
+            prepared["label"] = prep_label or label
+            prepared["wall_time_s"] = time.perf_counter() - t_start
+        ps = load_variant(sample, grid, p, prestressed, log=log)
     elif woven_grid:
-        sample, grid, ps = make_woven_element(p, float(targets[0].mean()), prestressed, log=log)
+        sample, grid, ps = make_woven_element(
+            p, float(targets[0].mean()) if grow_stress is None else float(grow_stress),
+            prestressed, log=log)
     else:
         sample, grid, ps = make_element(p, float(targets[0].mean()), prestressed, log=log)
     sc, walls = sample.scene, sample.walls
     t_prepared = time.perf_counter()
-    if hit is None and sample.growth_history:
-        write_growth_history(out, label, sample.growth_history)
+    if woven_grid and p.grid_ends == "tension" and grid_tension is None:
+        # PRS's prestress as a force at the grid's ends throughout, RE's ends free: the same
+        # end conditions, and no grip holds the grid in place.
+        grid_tension = [p.prestress if prestressed else 0.0] * len(targets)
+        ends_by_prestress = True
+    else:
+        ends_by_prestress = False
+    if hit is None and sample.growth_history and not (prepared and prepared.get("written")):
+        write_growth_history(out, prep_label or label, sample.growth_history)
+        if prepared is not None:
+            prepared["written"] = True
     if grid_tension is not None and ends is None:
         from cpp_dem.protocols.prestress import EndTension
 
         if ps is not None:
             ps.unlock()
         ends = EndTension(sc, grid)
-        log(f"{label}: the FEM layer's tension handed over: the grid's longitudinal ends "
+        log(f"{label}: the grid's longitudinal ends pulled by T_p = {grid_tension[0] / 1e3:g} "
+            f"kN/m throughout (x {ends.ends.spacing * 1e3:.2f} mm line spacing)"
+            if ends_by_prestress else
+            f"{label}: the FEM layer's tension handed over: the grid's longitudinal ends "
             f"pulled by {np.round(np.array(grid_tension) / 1e3, 4).tolist()} kN/m (x "
             f"{ends.ends.spacing * 1e3:.2f} mm line spacing)"
             + ("; the prestress grips let go" if ps is not None else ""))
@@ -713,7 +892,34 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
                     snapshot_fields=("positions", "radii"))
     csv = CsvRecorder(out / f"{label}.csv", series=series, overwrite=True)
 
+    # 002's measures over the loading, every 10th record (woven grids): <label>_measures.csv,
+    # appended and flushed row by row.
+    measures = {"n": 0, "fh": None, "writer": None}
+    locked_n = (float(np.mean(ps.history[0]["line_forces_n"])) if ps is not None else
+                grid_tension[-1] * ends.ends.spacing if ends is not None else 0.0)
+    ref_measures = sc.positions.copy()
+
+    def measure_row(row: dict) -> None:
+        import csv as _csv
+        from cpp_dem.measure import grid_soil
+
+        zg = float(np.mean(np.asarray(sc.positions)[grid.spheres, 2]))
+        m = {"stage": row["stage"], "step": row["step"], "time_s": row["time"],
+             "sigma_z_pa": row["sigma_z"], "lz_m": row["lz"],
+             **grid_soil.history_row(sc, grid, z_grid=zg, locked_n=locked_n,
+                                     reference_positions=ref_measures)}
+        if measures["fh"] is None:
+            measures["fh"] = open(out / f"{label}_measures.csv", "w", newline="")
+            measures["writer"] = _csv.DictWriter(measures["fh"], fieldnames=list(m))
+            measures["writer"].writeheader()
+        measures["writer"].writerow(m)
+        measures["fh"].flush()
+
     def rec(**row) -> None:
+        if woven_grid and row.get("stage", -1) >= 0:
+            if measures["n"] % 10 == 0:
+                measure_row(row)
+            measures["n"] += 1
         row = {k: v for k, v in row.items() if k in series}
         h5.record(**row)
         csv.record(**row)
@@ -737,7 +943,7 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
             if k == len(targets) - 1:
                 ref_pos = sc.positions.copy()
                 size_before = measure.box_size(sc, walls)
-                stress_before = measure.axis_stresses(sc, walls)
+                stress_before = held_stresses(sample)
             st = servo_stage(sample, grid, t, k, p, rec, log=log, prestress=ps, ends=ends,
                              grid_tension=None if ends is None else grid_tension[k])
             stages.append(st)
@@ -751,6 +957,8 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     finally:
         h5.close()
         csv.close()
+        if measures["fh"] is not None:
+            measures["fh"].close()
     size_after = measure.box_size(sc, walls)
     # Displacement above vs below the geogrid over the last stage (002 §6), m, from the
     # element centre's frame (the walls move symmetrically about it).
@@ -769,13 +977,19 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     if woven_grid:
         from cpp_dem.measure import grid_soil as interaction
 
+        from cpp_dem.measure import grid_figures
+
         interaction.write_vtk_woven(out / "vtk" / f"{label}_geogrid.vtp", sc, grid)
-        interaction.plot_views(sc, grid, out / f"{label}_views.png",
-                               title=f"{label}: contact forces and bond tensions")
-        extra["interaction"] = interaction.summary(sc, grid, z_grid=0.5 * p.edge,
-                                                   reference_positions=ref_pos)
-        prof = interaction.member_force_profiles(sc, grid)
-        extra["grid_force_longitudinal_cov_along"] = prof["longitudinal_cov_mean"]
+        # The figures' data: the case draws RE against PRS on shared scales from these.
+        fig_data = grid_figures.figure_data(sc, grid, reference_positions=ref_pos)
+        grid_figures.save_figure_data(out / f"{label}_figure.npz", fig_data)
+        if draw_figures:
+            grid_figures.draw_all({label: fig_data}, out, label)
+        zg_now = float(np.mean(np.asarray(sc.positions)[grid.spheres, 2]))
+        extra["interaction"] = interaction.summary(sc, grid, z_grid=zg_now,
+                                                   reference_positions=ref_pos,
+                                                   locked_n=locked_n)
+        extra["locked_in_n"] = locked_n
         if ps is not None:
             extra["prestress_target_n"] = ps.target_n
             extra["prestress_locked_final_n"] = ps.line_forces().tolist()
@@ -785,6 +999,14 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     vtk_pvds["box"].add(sc.time, write_vtk_box(out / "vtk" / f"{label}_box.vtp", lo,
                                                lo + size_after, time=sc.time).name)
     strain_inc = (size_before - size_after) / size_before
+    # Load–settlement: the vertical strain of the last stage (compression positive) for its
+    # vertical stress increment.
+    d_sigma_z = float(targets[-1][2] - stress_before[2])
+    extra["vertical_strain_last_stage"] = float(strain_inc[2])
+    extra["vertical_stress_increment_pa"] = d_sigma_z
+    extra["vertical_compliance_per_pa"] = (float(strain_inc[2] / d_sigma_z)
+                                           if abs(d_sigma_z) > 0.01 * abs(targets[-1][2])
+                                           else None)
     if probe > 0:
         tp = time.perf_counter()
         pr = probe_tangent(sample, grid, p, targets[-1], rel=probe,
@@ -831,6 +1053,8 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
         "grid_force_end_members_mean_n": (None if ends is None
                                           else float(ends.end_member_forces().mean())),
         "wall_time_s": time.perf_counter() - t_start,
+        # the prepared packing's state (its checkpoint's SHA-256), shared by RE and PRS
+        "prepared_sha256": prepared.get("sha256") if prepared else None,
         "geogrid": p.geogrid, "grains": p.grains, "grain_law": p.grain_law,
         **extra,
     }
