@@ -40,7 +40,7 @@ args.out.mkdir(parents=True, exist_ok=True)
 # (replaced on a rerun).
 argv = ["--out", str(args.out / "case"), "--overwrite"]
 if args.smoke:
-    argv += ["--smoke", "--stresses", "20000,20000,40000", "--n", "60", "--workers", "2"]
+    argv += ["--smoke", "--stresses", "20000,20000,40000", "--n", "60"]
 code = study.main(argv)
 if code:
     raise SystemExit(f"the study stopped with exit status {code}")
