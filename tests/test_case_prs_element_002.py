@@ -33,6 +33,12 @@ def test_the_documented_smoke_runs_the_fem_path_on_two_seeds(smoke):
         fem = s["fem"][f"detailed_{v}"]
         assert e["targets_pa"] == [fem["targets_initial_pa"], fem["targets_final_pa"]]
         assert len(e["converged"]) == 2
+        # 002's gravity and damping stages, as run (docs/prs_element_002.md)
+        c = e["conditions"]
+        assert c["gravity_m_per_s2"] == pytest.approx(9.81)
+        assert c["fill_viscous"] == 0.97 and c["fill_local_damping"] == 0.0
+        assert c["local_damping_loading"] == pytest.approx(0.9)
+        assert c["grid_ends"] == "tension" and c["grid_convention"] == "series"
 
 
 def test_re_and_prs_share_each_seeds_grown_packing(smoke):
@@ -196,3 +202,36 @@ def test_the_preparation_grows_in_contact_and_does_not_start_over(smoke):
         assert float(fast[-1]["coordination"]) >= 1.0 or len(fast) > 20, seed
         por = np.array([float(r["porosity"]) for r in slow])
         assert np.all(np.diff(por) < 0.02), (seed, por)
+
+
+def test_ctrl_c_then_resume_keeps_the_finished_packing(tmp_path):
+    """Ctrl-C after seed 1's packing, then --resume: seed 1 is kept (its job file unchanged),
+    seed 2 runs, and the findings are over both."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from conftest import ROOT
+
+    out = tmp_path / "r"
+    args = [sys.executable, str(ROOT / "cases" / "prs_element_002.py"), "--smoke", "--out",
+            str(out), "--stresses", "20000,20000,40000", "--n", "50", "--seeds", "1-2"]
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    job = out / "jobs" / "detailed_s1.json"
+    t0 = time.time()
+    while not job.exists() and time.time() - t0 < 600 and proc.poll() is None:
+        time.sleep(0.05)
+    assert job.exists(), proc.communicate()[1][-2000:]
+    before = job.read_bytes()
+    proc.send_signal(signal.SIGINT)
+    _o, err = proc.communicate(timeout=300)
+    assert proc.returncode == 130, err[-2000:]
+    assert not (out / "jobs" / "detailed_s2.json").exists()
+    p = subprocess.run([*args, "--resume"], capture_output=True, text=True, timeout=900)
+    assert p.returncode == 0, p.stderr[-2000:]
+    assert "--resume: detailed seed 1 kept from the earlier run" in p.stdout
+    assert job.read_bytes() == before
+    s = json.loads((out / "summary.json").read_text())
+    assert sorted(s["elements"]) == LABELS
+    assert all(f["n"] == 2 for f in s["findings"])

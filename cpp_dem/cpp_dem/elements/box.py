@@ -85,6 +85,9 @@ class ElementParams:
     fill_local_damping: float = -1.0  #: local damping during the preparation, -; < 0: damping
     re_grips: bool = False           #: RE: the grid's longitudinal ends held by the grips that
                                      #: hold PRS's (the same end conditions for both)
+    grid_held: str = "growth"        #: woven grids: the grid held in place for the whole
+                                     #: 'growth', or only its 'fast' phase (free while the
+                                     #: grains grow to the stress)
     grid_ends: str = "grips"         #: woven grids: PRS's prestress held by 'grips' (tensioned,
                                      #: then locked in place), or by 'tension': the ends pulled
                                      #: by T_p throughout (EndTension), RE's by 0 (free)
@@ -208,6 +211,8 @@ def check_element_params(p: ElementParams) -> None:
     if not (math.isfinite(p.fill_local_damping) and p.fill_local_damping < 1):
         raise ParameterError(f"fill_local_damping={p.fill_local_damping!r}: must be in [0, 1) "
                              "(local damping), or < 0 for the loading's damping")
+    if p.grid_held not in ("growth", "fast"):
+        raise ParameterError(f"grid_held={p.grid_held!r}: must be 'growth' or 'fast'")
     if p.grid_ends not in GRID_ENDS:
         raise ParameterError(f"grid_ends={p.grid_ends!r}: must be one of {', '.join(GRID_ENDS)}")
     if p.grid_convention not in GRID_CONVENTIONS:
@@ -425,6 +430,11 @@ def prepare_woven_element(p: ElementParams, mean_stress: float,
         log(f"WARNING: the fast growth reached its {p.max_steps} steps at coordination "
             f"{row['coordination']:.2f} (not 1): the grains are not in contact throughout; the "
             "slow growth goes on from there")
+    if p.grid_held == "fast":
+        # The grid free for the slow growth: held to the end, it propped the packing (the
+        # walls' forces then summed to 290 N in x at smoke size, carried by the held grid)
+        # and the packing fell away from the walls as soon as it was let go.
+        sc.block_dofs(grid.spheres, "")
     start = sc.step_count
 
     calls = [0]
@@ -1055,6 +1065,15 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
         "wall_time_s": time.perf_counter() - t_start,
         # the prepared packing's state (its checkpoint's SHA-256), shared by RE and PRS
         "prepared_sha256": prepared.get("sha256") if prepared else None,
+        # how the element was held and damped, as run (docs/prs_element_002.md)
+        "conditions": {"fixed_walls": list(getattr(sample, "fixed", ())),
+                       "gravity_m_per_s2": float(-np.asarray(sc.gravity)[2]),
+                       "local_damping_loading": float(sc.local_damping),
+                       "fill_viscous": p.fill_viscous,
+                       "fill_local_damping": (p.fill_local_damping if p.fill_local_damping >= 0
+                                              else p.damping),
+                       "grid_held": p.grid_held, "grid_ends": p.grid_ends,
+                       "grid_convention": p.grid_convention},
         "geogrid": p.geogrid, "grains": p.grains, "grain_law": p.grain_law,
         **extra,
     }
