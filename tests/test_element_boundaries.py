@@ -82,3 +82,17 @@ def test_weight_stress_is_the_solid_weight_over_the_base():
     w = boundaries.weight_stress(s.scene, s.walls, 9.81, 2600.0)
     assert w == pytest.approx(4 / 3 * np.pi * r**3 * 2600 * 9.81 / (0.02 * 0.02))
     assert boundaries.weight_stress(s.scene, s.walls, 0.0, 2600.0) == 0.0
+
+
+def test_a_stage_at_its_unbalanced_floor_is_found_and_a_slow_descent_is_not():
+    from cpp_dem.elements.box import at_floor
+
+    rng = np.random.default_rng(1)
+    floor = list(0.08 + 0.005 * rng.random(60))          # noise about a floor
+    assert at_floor(floor, 20)
+    descent = list(0.08 * 0.99 ** np.arange(60))          # 1 % per record: 18 % per window
+    assert not at_floor(descent, 20)
+    off = floor[:-1] + [float("inf")]                      # the walls off target at the end
+    assert not at_floor(off, 20)
+    assert not at_floor(floor[:40], 20)                    # too short to tell
+    assert not at_floor(floor, 0)

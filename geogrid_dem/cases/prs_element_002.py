@@ -75,6 +75,11 @@ class Params(_fem_case.Params):
     # steps, the walls on target within 0.2 %, inertial number 4e-4-1e-3), so 0.02 would run
     # every stage to its max_steps.
     unbalanced: float = 0.05             #: -
+    # ... and where it stays above that, the stage ends NOT converged after 250 records
+    # (50 000 steps) without a 5 % improvement, instead of at max_steps. (Full size, standard
+    # PRS at 3.8/2.7/5.4 kPa: 0.073-0.083 from 200 000 to 310 000 steps, then 0.054 at
+    # 337 000: a shorter window would have called a slow descent a floor.)
+    plateau_records: int = 250           #: -
     grid_ends: str = "tension"           #: PRS pulled by T_p, RE free: the same end conditions
     grid_convention: str = "series"      #: 002's k_n, k_s as PFC 4 ball properties
     grids: tuple = GRIDS                 #: woven forms to run

@@ -85,6 +85,9 @@ class ElementParams:
     fill_local_damping: float = -1.0  #: local damping during the preparation, -; < 0: damping
     re_grips: bool = False           #: RE: the grid's longitudinal ends held by the grips that
                                      #: hold PRS's (the same end conditions for both)
+    plateau_records: int = 0         #: servo stages end, not converged, when on target with
+                                     #: the unbalanced force at a floor for this many records
+                                     #: (servo_stage); 0: they run to max_steps
     grid_held: str = "growth"        #: woven grids: the grid held in place for the whole
                                      #: 'growth', or only its 'fast' phase (free while the
                                      #: grains grow to the stress)
@@ -200,6 +203,8 @@ def check_element_params(p: ElementParams) -> None:
     if not (math.isfinite(p.density_scaling) and (p.density_scaling == 0 or p.density_scaling >= 1)):
         raise ParameterError(f"density_scaling={p.density_scaling!r}: must be 0 (off) or >= 1 "
                              "(the target time step over the unscaled one, -)")
+    if not (isinstance(p.plateau_records, int) and p.plateau_records >= 0):
+        raise ParameterError(f"plateau_records={p.plateau_records!r}: must be an integer >= 0")
     if not (math.isfinite(p.gravity) and p.gravity >= 0):
         raise ParameterError(f"gravity={p.gravity!r}: must be >= 0 (m/s^2, along -z)")
     from cpp_dem.elements.boundaries import parse_fixed_walls
@@ -527,6 +532,18 @@ SERIES = {"stage": (None, "-"), "step": (None, "-"), "time": (None, "s"),
           "prestress_line_force_mean": (None, "N"), "grid_end_force": (None, "N")}
 
 
+def at_floor(unbalanced: list, records: int, improvement: float = 0.05) -> bool:
+    """Whether a stage's unbalanced force (one value per record, inf where the walls were off
+    target) has reached a floor: the last ``records`` values all on target, and their least
+    no lower than (1 - improvement) x the least of the at least ``records`` values before
+    them."""
+    if records <= 0 or len(unbalanced) <= 2 * records:
+        return False
+    recent = unbalanced[-records:]
+    return (all(math.isfinite(u) for u in recent)
+            and min(recent) >= (1.0 - improvement) * min(unbalanced[:-records]))
+
+
 def held_stresses(sample) -> np.ndarray:
     """Per axis, the stress the element holds, Pa: the mean of the axis's stress-controlled
     walls (both, unless one is fixed: cpp_dem.elements.boundaries)."""
@@ -594,6 +611,8 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
     wall0 = last
     size0, t0 = measure.box_size(sc, walls), sc.time
     ok = False
+    window: list = []  # the unbalanced force per record while on target (inf off it)
+    plateau = None
     quasi_static_warned = False
     # Integral action on the set points: the walls' servo is proportional (it moves a wall by
     # gain x error x area / wall-contact stiffness per step), so a packing that creeps under
@@ -618,8 +637,21 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
                 f"{quasi_static.describe(quasi_static.report(sc))}")
             quasi_static_warned = quasi_static_warned or quasi_static.check(
                 sc, f"element servo stage {stage}", stacklevel=2)
-        if np.all(err <= p.tol) and sc.unbalanced_force() < p.unbalanced and balanced():
+        unb = sc.unbalanced_force()
+        on_target = bool(np.all(err <= p.tol))
+        if on_target and unb < p.unbalanced and balanced():
             ok = True
+            break
+        # The unbalanced force at a floor (p.plateau_records > 0): on target for the last
+        # plateau_records records, and their least unbalanced force no lower than 0.95 x the
+        # least before them. The stage ends, not converged, and says so.
+        window.append(unb if on_target else math.inf)
+        if p.plateau_records and at_floor(window, p.plateau_records):
+            plateau = min(window[-p.plateau_records:])
+            log(f"  stage {stage}: the walls on target, but the unbalanced force has stayed "
+                f"at {plateau:.3g} (> {p.unbalanced:g}) for {p.plateau_records} records "
+                f"({p.plateau_records * p.record_every} steps): ends NOT converged, at its "
+                "floor")
             break
     steps = sc.step_count - start
     # (The density under scaling: the mass-weighted mean factor raises the inertia.)
@@ -635,6 +667,7 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
         hold_err = max(hold_err, float(np.max(np.abs(record() - t) / t)))
     ax = held_stresses(sample)
     return {"converged": ok, "steps": steps, "hold_max_rel_error": hold_err,
+            "unbalanced_floor": plateau, "unbalanced_final": float(sc.unbalanced_force()),
             "density_scaling": quasi_static.report(sc),
             "wall_time_s": time.perf_counter() - wall0,
             "wall_stresses_pa": ax, "box_size_m": measure.box_size(sc, walls)}
@@ -1039,6 +1072,8 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
         "targets_pa": [t.tolist() for t in targets],
         "wall_stresses_pa": [s["wall_stresses_pa"].tolist() for s in stages],
         "converged": [bool(s["converged"]) for s in stages],
+        "unbalanced_final": [s.get("unbalanced_final") for s in stages],
+        "unbalanced_floor": [s.get("unbalanced_floor") for s in stages],
         "servo_steps": [int(s["steps"]) for s in stages],
         "hold_max_rel_error": max(s["hold_max_rel_error"] for s in stages),
         "stress_initial_pa": stress_before.tolist(),
