@@ -935,7 +935,8 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
                     snapshot_fields=("positions", "radii"))
     csv = CsvRecorder(out / f"{label}.csv", series=series, overwrite=True)
 
-    # 002's measures over the loading, every 10th record (woven grids): <label>_measures.csv,
+    # 002's measures over the loading, every 10th record and the first of each stage (woven
+    # grids): <label>_measures.csv,
     # appended and flushed row by row.
     measures = {"n": 0, "fh": None, "writer": None}
     locked_n = (float(np.mean(ps.history[0]["line_forces_n"])) if ps is not None else
@@ -960,8 +961,11 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
 
     def rec(**row) -> None:
         if woven_grid and row.get("stage", -1) >= 0:
-            if measures["n"] % 10 == 0:
+            # (every 10th record, and the first of each stage)
+            if measures["n"] % 10 == 0 or row["stage"] != measures.get("stage"):
                 measure_row(row)
+                measures["n"] = 0
+                measures["stage"] = row["stage"]
             measures["n"] += 1
         row = {k: v for k, v in row.items() if k in series}
         h5.record(**row)
