@@ -596,23 +596,24 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
 
     fixed = getattr(sample, "fixed", ())
 
-    def balanced() -> bool:
-        # With fixed walls: each carries its opposite servo wall's stress (and the bottom
-        # the weight too) within boundaries.BALANCE_TOL of the target.
+    def imbalance_ratio() -> float:
+        # With fixed walls: each must carry its opposite servo wall's stress (and the bottom
+        # the weight too) within boundaries.BALANCE_TOL of the target; the largest
+        # imbalance over that tolerance (<= 1: balanced). 0 without fixed walls.
         if not fixed:
-            return True
+            return 0.0
         from cpp_dem.elements import boundaries
 
         w = boundaries.weight_stress(sc, walls, p.gravity, sc.material(sample.material).density)
-        return bool(np.all(boundaries.imbalance(sc, walls, fixed, t, w)
-                           <= boundaries.BALANCE_TOL))
+        return float(np.max(boundaries.imbalance(sc, walls, fixed, t, w))
+                     / boundaries.BALANCE_TOL)
 
     start, last = sc.step_count, time.perf_counter()
     wall0 = last
     size0, t0 = measure.box_size(sc, walls), sc.time
     ok = False
     window: list = []  # the unbalanced force per record while on target (inf off it)
-    plateau = None
+    stall = None
     quasi_static_warned = False
     # Integral action on the set points: the walls' servo is proportional (it moves a wall by
     # gain x error x area / wall-contact stiffness per step), so a packing that creeps under
@@ -639,19 +640,27 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
                 sc, f"element servo stage {stage}", stacklevel=2)
         unb = sc.unbalanced_force()
         on_target = bool(np.all(err <= p.tol))
-        if on_target and unb < p.unbalanced and balanced():
+        r_unb, r_bal = unb / p.unbalanced, imbalance_ratio()
+        if on_target and r_unb < 1 and r_bal <= 1:
             ok = True
             break
-        # The unbalanced force at a floor (p.plateau_records > 0): on target for the last
-        # plateau_records records, and their least unbalanced force no lower than 0.95 x the
-        # least before them. The stage ends, not converged, and says so.
-        window.append(unb if on_target else math.inf)
+        # A stall (p.plateau_records > 0): on target for the last plateau_records records,
+        # and the criterion that fails (the unbalanced force, or with fixed walls their
+        # imbalance, each over its tolerance) no lower than 0.95 x its least before them. The
+        # stage ends, not converged, and says which criterion stalled.
+        window.append(max(r_unb, r_bal) if on_target else math.inf)
         if p.plateau_records and at_floor(window, p.plateau_records):
-            plateau = min(window[-p.plateau_records:])
-            log(f"  stage {stage}: the walls on target, but the unbalanced force has stayed "
-                f"at {plateau:.3g} (> {p.unbalanced:g}) for {p.plateau_records} records "
-                f"({p.plateau_records * p.record_every} steps): ends NOT converged, at its "
-                "floor")
+            ratio = min(window[-p.plateau_records:])
+            what, tol = (("unbalanced force", p.unbalanced) if r_unb >= r_bal else
+                         ("fixed walls' imbalance", 0.0))
+            if tol == 0.0:
+                from cpp_dem.elements import boundaries
+
+                tol = boundaries.BALANCE_TOL
+            stall = {"criterion": what, "value": ratio * tol, "tolerance": tol}
+            log(f"  stage {stage}: the walls on target, but the {what} has stayed at "
+                f"{ratio * tol:.3g} (> {tol:g}) for {p.plateau_records} records "
+                f"({p.plateau_records * p.record_every} steps): ends NOT converged")
             break
     steps = sc.step_count - start
     # (The density under scaling: the mass-weighted mean factor raises the inertia.)
@@ -667,7 +676,7 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
         hold_err = max(hold_err, float(np.max(np.abs(record() - t) / t)))
     ax = held_stresses(sample)
     return {"converged": ok, "steps": steps, "hold_max_rel_error": hold_err,
-            "unbalanced_floor": plateau, "unbalanced_final": float(sc.unbalanced_force()),
+            "stall": stall, "unbalanced_final": float(sc.unbalanced_force()),
             "density_scaling": quasi_static.report(sc),
             "wall_time_s": time.perf_counter() - wall0,
             "wall_stresses_pa": ax, "box_size_m": measure.box_size(sc, walls)}
@@ -1077,7 +1086,7 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
         "wall_stresses_pa": [s["wall_stresses_pa"].tolist() for s in stages],
         "converged": [bool(s["converged"]) for s in stages],
         "unbalanced_final": [s.get("unbalanced_final") for s in stages],
-        "unbalanced_floor": [s.get("unbalanced_floor") for s in stages],
+        "stall": [s.get("stall") for s in stages],
         "servo_steps": [int(s["steps"]) for s in stages],
         "hold_max_rel_error": max(s["hold_max_rel_error"] for s in stages),
         "stress_initial_pa": stress_before.tolist(),
