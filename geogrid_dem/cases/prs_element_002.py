@@ -160,6 +160,10 @@ def _stats(x: list) -> tuple[float, float]:
     return float(a.mean()), (float(a.std(ddof=1)) if len(a) > 1 else float("nan"))
 
 
+#: The statistics of a finding or measure row (paired's keys but the per-seed values).
+STAT_KEYS = ("re_mean", "re_sd", "prs_mean", "prs_sd", "diff_mean", "diff_se", "n")
+
+
 def paired(elements: dict, grid: str, seeds, value) -> dict | None:
     """RE and PRS values of ``value`` over the seeds with both, and their paired difference
     (PRS - RE): means, sds, the difference's mean and standard error, n."""
@@ -200,8 +204,7 @@ def findings(elements: dict, seeds=(1,), grids=GRIDS) -> list[dict]:
                 st["diff_mean"] = st["prs_mean"]
                 st["diff_se"] = st["prs_sd"] / math.sqrt(n) if n > 1 else float("nan")
             out.append({"grid": grid, "name": name, "expected_sign": sign, "compare": compare,
-                        **{k: st[k] for k in ("re_mean", "re_sd", "prs_mean", "prs_sd",
-                                              "diff_mean", "diff_se", "n")},
+                        **{k: st[k] for k in STAT_KEYS},
                         "verdict": verdict(st["diff_mean"], st["diff_se"], st["n"], sign)})
     return out
 
@@ -215,8 +218,7 @@ def measures_table(elements: dict, seeds=(1,), grids=GRIDS) -> list[dict]:
             st = paired(elements, grid, seeds, value)
             if st is not None:
                 out.append({"grid": grid, "name": name,
-                            **{k: st[k] for k in ("re_mean", "re_sd", "prs_mean", "prs_sd",
-                                                  "diff_mean", "diff_se", "n")}})
+                            **{k: st[k] for k in STAT_KEYS}})
     return out
 
 

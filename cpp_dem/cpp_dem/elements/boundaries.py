@@ -136,10 +136,15 @@ def imbalance(scene, walls, fixed, targets, weight_stress_pa: float = 0.0) -> np
     return out
 
 
-def weight_stress(scene, walls, gravity: float, density: float) -> float:
-    """The weight of the grains and the grid per bottom area, Pa: the solid volume (m^3)
-    times ``density`` (kg/m^3) times ``gravity`` (m/s^2) over the box's x-y area."""
+def weight(scene, gravity: float, density: float) -> float:
+    """The weight of the grains and the grid, N: the solid volume (m^3) times ``density``
+    (kg/m^3) times ``gravity`` (m/s^2)."""
     if gravity <= 0:
         return 0.0
+    return measure.solid_volume(scene) * density * gravity
+
+
+def weight_stress(scene, walls, gravity: float, density: float) -> float:
+    """:func:`weight` per the box's x-y (bottom) area, Pa."""
     size = measure.box_size(scene, walls)
-    return measure.solid_volume(scene) * density * gravity / float(size[0] * size[1])
+    return weight(scene, gravity, density) / float(size[0] * size[1])

@@ -28,6 +28,7 @@ from cpp_dem._core import BeamParams
 from cpp_dem.io import (CsvRecorder, H5Recorder, PvdWriter, write_vtk_box, write_vtk_contacts,
                         write_vtk_spheres)
 from cpp_dem.build.packing import loose_cloud
+from cpp_dem.elements import boundaries
 from cpp_dem.scene import apply_threads, linear_material
 from cpp_dem.protocols.triaxial import build_box_sample
 
@@ -179,9 +180,6 @@ def make_element(p: ElementParams, mean_stress: float, prestressed: bool,
 
 GEOGRIDS = ("square", "woven-detailed", "woven-standard")
 GRAIN_LAWS = ("linear", "hertz")
-#: How 002's k_n, k_s are read (cpp_dem.build.woven): PFC 4 ball properties in series, or the
-#: contacts' own stiffnesses.
-GRID_CONVENTIONS = ("series", "contact")
 #: How the grid's longitudinal ends are held (ElementParams.grid_ends).
 GRID_ENDS = ("grips", "tension")
 
@@ -207,9 +205,7 @@ def check_element_params(p: ElementParams) -> None:
         raise ParameterError(f"plateau_records={p.plateau_records!r}: must be an integer >= 0")
     if not (math.isfinite(p.gravity) and p.gravity >= 0):
         raise ParameterError(f"gravity={p.gravity!r}: must be >= 0 (m/s^2, along -z)")
-    from cpp_dem.elements.boundaries import parse_fixed_walls
-
-    parse_fixed_walls(p.fixed_walls)
+    boundaries.parse_fixed_walls(p.fixed_walls)
     if not (math.isfinite(p.fill_viscous) and 0 <= p.fill_viscous <= 1):
         raise ParameterError(f"fill_viscous={p.fill_viscous!r}: must be in [0, 1] (ratio of "
                              "critical damping)")
@@ -220,9 +216,11 @@ def check_element_params(p: ElementParams) -> None:
         raise ParameterError(f"grid_held={p.grid_held!r}: must be 'growth' or 'fast'")
     if p.grid_ends not in GRID_ENDS:
         raise ParameterError(f"grid_ends={p.grid_ends!r}: must be one of {', '.join(GRID_ENDS)}")
-    if p.grid_convention not in GRID_CONVENTIONS:
+    from cpp_dem.build.woven import CONVENTIONS
+
+    if p.grid_convention not in CONVENTIONS:
         raise ParameterError(f"grid_convention={p.grid_convention!r}: must be one of "
-                             f"{', '.join(GRID_CONVENTIONS)}")
+                             f"{', '.join(CONVENTIONS)}")
 
 
 def _rate_factor(sc, p: ElementParams) -> float:
@@ -293,7 +291,6 @@ def prepare_woven_element(p: ElementParams, mean_stress: float,
     :class:`cpp_dem.elements.boundaries.WallServos` and ``sample.fixed`` names them.
     Returns (sample, grid)."""
     from cpp_dem.build import woven
-    from cpp_dem.elements.boundaries import WallServos, parse_fixed_walls
 
     check_element_params(p)
     preset = p.geogrid.split("-", 1)[1]
@@ -351,10 +348,10 @@ def prepare_woven_element(p: ElementParams, mean_stress: float,
                         friction=0.0)
     sc.set_pair_law(gmat, wall_mat, model="linear", kn=pr["kn"], ks=pr["ks"], friction=0.0)
     sc.max_overlap_ratio = 0.95
-    sample.fixed = parse_fixed_walls(p.fixed_walls)
+    sample.fixed = boundaries.parse_fixed_walls(p.fixed_walls)
     if sample.fixed:
         # (The box's TriaxialController stays, disabled: it moves both walls of an axis.)
-        sample.controller = WallServos(sc, sample.walls, sample.fixed,
+        sample.controller = boundaries.WallServos(sc, sample.walls, sample.fixed,
                                        max_speed=prep.default_max_speed(sc, sample.walls))
     if p.gravity > 0:
         sc.gravity = (0.0, 0.0, -p.gravity)
@@ -547,9 +544,7 @@ def at_floor(unbalanced: list, records: int, improvement: float = 0.05) -> bool:
 def held_stresses(sample) -> np.ndarray:
     """Per axis, the stress the element holds, Pa: the mean of the axis's stress-controlled
     walls (both, unless one is fixed: cpp_dem.elements.boundaries)."""
-    from cpp_dem.elements.boundaries import axis_stresses
-
-    return axis_stresses(sample.scene, sample.walls, getattr(sample, "fixed", ()))
+    return boundaries.axis_stresses(sample.scene, sample.walls, getattr(sample, "fixed", ()))
 
 
 def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
@@ -596,16 +591,19 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
 
     fixed = getattr(sample, "fixed", ())
 
+    # (The weight on the bottom, N: the solid volume does not change in a stage.)
+    weight_n = (boundaries.weight(sc, p.gravity, sc.material(sample.material).density)
+                if fixed else 0.0)
+
     def imbalance_ratio() -> float:
         # With fixed walls: each must carry its opposite servo wall's stress (and the bottom
         # the weight too) within boundaries.BALANCE_TOL of the target; the largest
         # imbalance over that tolerance (<= 1: balanced). 0 without fixed walls.
         if not fixed:
             return 0.0
-        from cpp_dem.elements import boundaries
-
-        w = boundaries.weight_stress(sc, walls, p.gravity, sc.material(sample.material).density)
-        return float(np.max(boundaries.imbalance(sc, walls, fixed, t, w))
+        size = measure.box_size(sc, walls)
+        return float(np.max(boundaries.imbalance(sc, walls, fixed, t,
+                                                 weight_n / float(size[0] * size[1])))
                      / boundaries.BALANCE_TOL)
 
     start, last = sc.step_count, time.perf_counter()
@@ -652,11 +650,7 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
         if p.plateau_records and at_floor(window, p.plateau_records):
             ratio = min(window[-p.plateau_records:])
             what, tol = (("unbalanced force", p.unbalanced) if r_unb >= r_bal else
-                         ("fixed walls' imbalance", 0.0))
-            if tol == 0.0:
-                from cpp_dem.elements import boundaries
-
-                tol = boundaries.BALANCE_TOL
+                         ("fixed walls' imbalance", boundaries.BALANCE_TOL))
             stall = {"criterion": what, "value": ratio * tol, "tolerance": tol}
             log(f"  stage {stage}: the walls on target, but the {what} has stayed at "
                 f"{ratio * tol:.3g} (> {tol:g}) for {p.plateau_records} records "

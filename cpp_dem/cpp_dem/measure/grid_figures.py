@@ -92,6 +92,7 @@ def figure_data(scene, grid, *, reference_positions=None, walls=None) -> dict[st
     - time (): the scene's time, s.
     """
     from cpp_dem import measure
+    from cpp_dem.measure.grid_soil import _bond_tension
 
     pos = np.asarray(scene.positions, float)
     gids = np.asarray(grid.spheres, int)
@@ -126,8 +127,7 @@ def figure_data(scene, grid, *, reference_positions=None, walls=None) -> dict[st
 
     # Bonds.
     ab = np.asarray(scene.bond_spheres, int)[np.asarray(grid.bonds, int)] - first
-    st = scene.bond_state()
-    tension = -np.einsum("ij,ij->i", st["force"], st["normal"])[np.asarray(grid.bonds, int)]
+    tension = _bond_tension(scene)[np.asarray(grid.bonds, int)]
     member = np.asarray(grid.bond_member, int)
     mdir = np.asarray(grid.member_direction)
     direction = np.array([0 if m < 0 else DIRECTION_CODES[str(mdir[m])] for m in member],
