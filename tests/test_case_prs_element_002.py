@@ -66,8 +66,11 @@ def test_findings_have_the_schema_and_verdicts_follow_their_numbers(smoke):
     el = s["elements"]
     for f in s["findings"]:
         assert keys <= set(f) and f["n"] == 2 and f["expected_sign"] in (-1, 1)
-        assert f["verdict"] == case.verdict(f["diff_mean"], f["diff_se"], f["n"],
-                                            f["expected_sign"])
+        assert f["verdict"] == (case.verdict(f["diff_mean"], f["diff_se"], f["n"],
+                                             f["expected_sign"])
+                                if not f["unconverged"] else "not resolved")
+        assert f["unconverged"] == [k for k in sorted(el) if not all(el[k]["converged"])
+                                    and k in f["unconverged"]]
         if f["verdict"] == "agrees":
             assert np.sign(f["diff_mean"]) == f["expected_sign"]
             assert abs(f["diff_mean"]) > 2 * f["diff_se"]
@@ -112,6 +115,31 @@ def test_paired_statistics_on_synthetic_elements():
         el[f"detailed_PRS_s{k}"] = {"x": b + (0.3 if k % 2 else -0.3)}
     st = case.paired(el, "detailed", range(4), lambda e: e["x"])
     assert case.verdict(st["diff_mean"], st["diff_se"], st["n"], -1) == "not resolved"
+
+
+def test_a_verdict_needs_every_element_at_rest():
+    """The same resolved difference is 'not resolved' when a stage of one element behind it
+    did not converge (its walls off target, or the packing not at rest: a stall)."""
+    def element(deflection_m):
+        return {"converged": [True, True], "vertical_compliance_per_pa": 1e-8,
+                "interaction": {"waviness": {"out_of_plane_longitudinal_mean_m": deflection_m},
+                                "tension_variation": {"longitudinal_std_along_n": 1.0},
+                                "contacts": {"longitudinal_per_m": 100.0},
+                                "displacement": {"above_mean_m": 1e-4, "below_mean_m": 1e-4}}}
+
+    el = {}
+    for k in range(4):
+        el[f"detailed_RE_s{k}"] = element(1e-3 + 1e-5 * k)
+        el[f"detailed_PRS_s{k}"] = element(5e-4 + 1e-5 * k)
+    name = "the longitudinal members align less with prestress: out-of-plane deflection (m)"
+
+    def row():
+        return next(f for f in case.findings(el, range(4), ("detailed",)) if f["name"] == name)
+
+    assert row()["verdict"] == "agrees" and row()["unconverged"] == []
+    el["detailed_PRS_s2"]["converged"] = [True, False]
+    assert row()["verdict"] == "not resolved"
+    assert row()["unconverged"] == ["detailed_PRS_s2"]
 
 
 def test_figures_on_shared_scales_measures_and_paraview_files(smoke):
@@ -167,6 +195,7 @@ def test_elements_side_by_side_give_the_serial_results(smoke, tmp_path):
     (["--seeds", "3-1"], "--seeds='3-1': must be 'A-B' (A <= B)"),
     (["--fixed-walls", "z-,z+"], "--fixed-walls='z-,z+': both z walls fixed"),
     (["--resume"], "--resume: give --out"),
+    (["--max-steps", "0"], "--max-steps=0: must be >= 1"),
 ])
 def test_bad_inputs_name_the_option(tmp_path, args, msg):
     import subprocess
@@ -235,3 +264,47 @@ def test_ctrl_c_then_resume_keeps_the_finished_packing(tmp_path):
     s = json.loads((out / "summary.json").read_text())
     assert sorted(s["elements"]) == LABELS
     assert all(f["n"] == 2 for f in s["findings"])
+
+
+def _make_recipe(target: str) -> list[list[str]]:
+    """The command lines of a Makefile target's recipe, $(PY) left as the word '$(PY)'."""
+    import shlex
+    from pathlib import Path
+
+    lines = (Path(__file__).resolve().parents[1] / "Makefile").read_text().splitlines()
+    k = lines.index(next(ln for ln in lines if ln.startswith(f"{target}:")))
+    out = []
+    for ln in lines[k + 1:]:
+        if not ln.startswith("\t"):
+            break
+        if not ln.lstrip().startswith("@"):
+            out.append(shlex.split(ln.strip()))
+    return out
+
+
+def test_make_demo_is_the_tested_smoke_and_names_its_outputs(smoke):
+    """`make demo` (the README's first command) runs this file's documented smoke: the same
+    script and flags, --out and --overwrite aside; the files it points the user to are made
+    by that run."""
+    from conftest import SMOKE_ARGS
+
+    (cmd,) = _make_recipe("demo")
+    assert cmd[:2] == ["$(PY)", "cases/prs_element_002.py"], cmd
+    args = cmd[2:]
+    k = args.index("--out")
+    demo_out = args[k + 1]
+    rest = [a for i, a in enumerate(args) if i not in (k, k + 1) and a != "--overwrite"]
+    assert rest == ["--smoke", *SMOKE_ARGS["prs_element_002"]], rest
+    out, proc = smoke
+    assert proc.returncode == 0
+    from pathlib import Path
+    text = Path(__file__).resolve().parents[1].joinpath("Makefile").read_text()
+    for name in ("report.md", "detailed_s1_views.png"):
+        assert f"{demo_out}/{name}" in text, name
+        assert (out / name).is_file(), name
+    # ... ending in the findings table: the report holds it, one row per finding
+    report = (out / "report.md").read_text()
+    assert "| grid | finding |" in report
+    for f in json.loads((out / "summary.json").read_text())["findings"]:
+        row = next(ln for ln in report.splitlines() if f"| {f['name']} |" in ln)
+        assert row.rstrip().endswith(f"{f['verdict']} |"), row

@@ -63,6 +63,11 @@ def test_imbalance_sees_a_fixed_wall_that_carries_less():
     w = 0.1 * st[5]
     assert boundaries.imbalance(sc, s.walls, ("z-",), target, w)[2] == pytest.approx(0.1)
     assert boundaries.imbalance(sc, s.walls, ("z+",), target, w)[2] == pytest.approx(0.1)
+    # Signed: the fixed bottom carries less than it should (-); a fixed top more (+).
+    assert boundaries.imbalance(sc, s.walls, ("z-",), target, w,
+                                signed=True)[2] == pytest.approx(-0.1)
+    assert boundaries.imbalance(sc, s.walls, ("z+",), target, w,
+                                signed=True)[2] == pytest.approx(0.1)
 
 
 @pytest.mark.parametrize("text, msg", [
@@ -96,3 +101,16 @@ def test_a_stage_at_its_unbalanced_floor_is_found_and_a_slow_descent_is_not():
     assert not at_floor(off, 20)
     assert not at_floor(floor[:40], 20)                    # too short to tell
     assert not at_floor(floor, 0)
+
+
+def test_balance_is_judged_on_the_mean_over_a_window():
+    """Wall forces that fluctuate by +-8 % about a balance pass once the window is full; a
+    fixed wall that carries 10 % less throughout (a creeping packing) does not, whatever its
+    fluctuation."""
+    rng = np.random.default_rng(3)
+    w = boundaries.BalanceWindow(records=25, tol=0.05)
+    ratios = [w.add([rng.uniform(-0.08, 0.08), 0.0, 0.0]) for _ in range(60)]
+    assert all(np.isinf(r) for r in ratios[:24]) and max(ratios[24:]) <= 1.0
+    w = boundaries.BalanceWindow(records=25, tol=0.05)
+    ratios = [w.add([0.0, 0.0, -0.1 + rng.uniform(-0.08, 0.08)]) for _ in range(60)]
+    assert min(ratios[24:]) > 1.5

@@ -166,8 +166,9 @@ STAT_KEYS = ("re_mean", "re_sd", "prs_mean", "prs_sd", "diff_mean", "diff_se", "
 
 def paired(elements: dict, grid: str, seeds, value) -> dict | None:
     """RE and PRS values of ``value`` over the seeds with both, and their paired difference
-    (PRS - RE): means, sds, the difference's mean and standard error, n."""
-    re_v, prs_v = [], []
+    (PRS - RE): means, sds, the difference's mean and standard error, n; 'unconverged': the
+    labels of those elements with a stage that did not converge."""
+    re_v, prs_v, unconverged = [], [], []
     for s in seeds:
         re_, prs = elements.get(f"{grid}_RE_s{s}"), elements.get(f"{grid}_PRS_s{s}")
         if re_ is None or prs is None:
@@ -177,6 +178,8 @@ def paired(elements: dict, grid: str, seeds, value) -> dict | None:
             continue
         re_v.append(a)
         prs_v.append(b)
+        unconverged += [f"{grid}_{v}_s{s}" for v, e in (("RE", re_), ("PRS", prs))
+                        if not all(e.get("converged", [True]))]
     if not re_v:
         return None
     n = len(re_v)
@@ -186,13 +189,15 @@ def paired(elements: dict, grid: str, seeds, value) -> dict | None:
     dm, dsd = _stats(d)
     return {"re_mean": rm, "re_sd": rs, "prs_mean": pm, "prs_sd": ps, "diff_mean": dm,
             "diff_se": dsd / math.sqrt(n) if n > 1 else float("nan"), "n": n,
-            "re_values": re_v, "prs_values": prs_v}
+            "re_values": re_v, "prs_values": prs_v, "unconverged": unconverged}
 
 
 def findings(elements: dict, seeds=(1,), grids=GRIDS) -> list[dict]:
     """002's findings per grid form: RE and PRS means and sds over the seeds, the paired
     difference PRS - RE (mean and standard error; for a finding about PRS alone, PRS's own
-    mean and standard error), and the verdict (:func:`verdict`)."""
+    mean and standard error), and the verdict (:func:`verdict`). A verdict rests on elements
+    at rest: when a stage of one of them did not converge ('unconverged' names them) it is
+    'not resolved', whatever the numbers."""
     out = []
     for grid in grids:
         for name, sign, compare, value in FINDINGS:
@@ -203,9 +208,10 @@ def findings(elements: dict, seeds=(1,), grids=GRIDS) -> list[dict]:
                 n = st["n"]
                 st["diff_mean"] = st["prs_mean"]
                 st["diff_se"] = st["prs_sd"] / math.sqrt(n) if n > 1 else float("nan")
+            v = verdict(st["diff_mean"], st["diff_se"], st["n"], sign)
             out.append({"grid": grid, "name": name, "expected_sign": sign, "compare": compare,
-                        **{k: st[k] for k in STAT_KEYS},
-                        "verdict": verdict(st["diff_mean"], st["diff_se"], st["n"], sign)})
+                        **{k: st[k] for k in STAT_KEYS}, "unconverged": st["unconverged"],
+                        "verdict": "not resolved" if st["unconverged"] else v})
     return out
 
 
@@ -250,8 +256,13 @@ def write_report(out: Path, summary: dict) -> None:
              "## 002's findings, paired over the seeds", "",
              "The difference is PRS − RE per seed (for a finding about PRS alone, PRS's own "
              "value). `agrees`: 002's sign beyond 2 standard errors; `opposes`: the other sign "
-             "beyond 2 standard errors; else `not resolved`.", ""]
+             "beyond 2 standard errors; else `not resolved` (also when an element behind "
+             "it did not come to rest in a stage).", ""]
     lines += findings_table(summary["findings"])
+    stalled = sorted({k for f in summary["findings"] for k in f.get("unconverged", [])})
+    if stalled:
+        lines += ["", f"**Not at rest:** {', '.join(stalled)} ended a stage NOT converged "
+                  "(the elements' `stall`): the findings that rest on them are `not resolved`."]
     lines += ["", "## Other measures (no direction from 002)", ""]
     lines += findings_table(summary["measures"], with_verdict=False)
     rows = [("grains", lambda e: f"{e['num_grains']}"),
@@ -259,6 +270,10 @@ def write_report(out: Path, summary: dict) -> None:
                                                             2).tolist())),
             ("converged", lambda e: str(e["converged"])),
             ("held within (%)", lambda e: f"{100 * e['hold_max_rel_error']:.2f}"),
+            ("vertical strain per stage; in its hold (creep)",
+             lambda e: "; ".join(f"{a[2]:.2e}, {b[2]:.2e}" for a, b in
+                                 zip(e.get("strain_stage", []), e.get("strain_hold", [])))
+             or "-"),
             ("longitudinal member force, mean (N)",
              lambda e: f"{e['grid_force_longitudinal_mean_n']:.2f}"),
             ("porosity at the end", lambda e: f"{e['porosity_final']:.3f}"),
@@ -464,6 +479,10 @@ def build_parser():
                     help="how the grid's longitudinal ends are held: 'tension' (PRS pulled by "
                          "T_p throughout, RE free) or 'grips' (PRS tensioned then locked in "
                          "place, RE held by the same grips untensioned)")
+    ap.add_argument("--max-steps", type=int, default=None,
+                    help=f"a servo stage's step limit (default {d.max_steps}; --smoke: "
+                         f"{SMOKE['max_steps']}): a stage still off its criteria then ends NOT "
+                         "converged")
     ap.add_argument("--resume", action="store_true",
                     help="continue an interrupted run in --out: the (grid, seed) pairs it "
                          "finished are kept, the others run")
@@ -506,6 +525,10 @@ def parse_args(argv=None) -> tuple[Params, Path]:
         p.density_scaling = preset(a.preset).density_scaling
     if a.workers < 1:
         ap.error(f"--workers={a.workers}: must be >= 1")
+    if a.max_steps is not None:
+        if a.max_steps < 1:
+            ap.error(f"--max-steps={a.max_steps}: must be >= 1 (steps per servo stage)")
+        p.max_steps = a.max_steps
     p.workers = a.workers
     from cpp_dem import ParameterError
     from cpp_dem.elements.box import check_element_params

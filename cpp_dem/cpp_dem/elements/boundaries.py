@@ -117,23 +117,49 @@ def axis_stresses(scene, walls, fixed=()) -> np.ndarray:
 
 #: A box with fixed walls is at rest only when each fixed wall carries what its opposite
 #: stress-controlled wall does (plus, at the bottom, the weight above it): within this share
-#: of the axis's target stress, -.
+#: of the axis's target stress, -, ...
 BALANCE_TOL = 0.05
+#: ... averaged over this many records (the walls' forces fluctuate from record to record
+#: by several % at a few kPa; the mean is what a creeping packing moves).
+BALANCE_RECORDS = 25
 
 
-def imbalance(scene, walls, fixed, targets, weight_stress_pa: float = 0.0) -> np.ndarray:
+def imbalance(scene, walls, fixed, targets, weight_stress_pa: float = 0.0, *,
+              signed: bool = False) -> np.ndarray:
     """Per axis with a fixed wall, |sigma_fixed - sigma_free - w| / target, -: how far the
     packing is from carrying the servo wall's stress through to the fixed one. ``w`` is
     ``weight_stress_pa`` (the weight of what lies on the bottom wall per its area, Pa) for a
-    fixed z- wall, minus it for a fixed z+ wall, 0 for x and y. Axes without a fixed wall: 0."""
+    fixed z- wall, minus it for a fixed z+ wall, 0 for x and y. Axes without a fixed wall: 0.
+    ``signed``: without the absolute value (negative: the fixed wall carries less).
+
+    A packing that creeps towards its fixed walls is not at rest, and under local damping the
+    damping forces then carry part of the load: the fixed wall carries less than the servo
+    wall, by a share that falls with the creep (docs/prs_element_002.md)."""
     s = measure.wall_stresses(scene, walls)
     out = np.zeros(3)
     for a in range(3):
         for k, other in ((2 * a, 2 * a + 1), (2 * a + 1, 2 * a)):
             if WALL_NAMES[k] in fixed:
                 w = 0.0 if a < 2 else (weight_stress_pa if k == 4 else -weight_stress_pa)
-                out[a] = abs(s[k] - s[other] - w) / abs(float(targets[a]))
-    return out
+                out[a] = (s[k] - s[other] - w) / abs(float(targets[a]))
+    return out if signed else np.abs(out)
+
+
+class BalanceWindow:
+    """The fixed walls' imbalance over the last :data:`BALANCE_RECORDS` records: ``add`` one
+    record's signed imbalance (:func:`imbalance` with signed=True, per axis, -) and get the
+    largest |mean| over :data:`BALANCE_TOL` (<= 1: balanced; inf until the window is full)."""
+
+    def __init__(self, records: int = BALANCE_RECORDS, tol: float = BALANCE_TOL):
+        self.records, self.tol = int(records), float(tol)
+        self._rows: list = []
+
+    def add(self, signed_imbalance) -> float:
+        self._rows.append(np.asarray(signed_imbalance, float))
+        del self._rows[:-self.records]
+        if len(self._rows) < self.records:
+            return float("inf")
+        return float(np.max(np.abs(np.mean(self._rows, axis=0)))) / self.tol
 
 
 def weight(scene, gravity: float, density: float) -> float:

@@ -595,16 +595,18 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
     weight_n = (boundaries.weight(sc, p.gravity, sc.material(sample.material).density)
                 if fixed else 0.0)
 
+    balance = boundaries.BalanceWindow()
+
     def imbalance_ratio() -> float:
         # With fixed walls: each must carry its opposite servo wall's stress (and the bottom
-        # the weight too) within boundaries.BALANCE_TOL of the target; the largest
-        # imbalance over that tolerance (<= 1: balanced). 0 without fixed walls.
+        # the weight too) within boundaries.BALANCE_TOL of the target, in the mean over the
+        # last BALANCE_RECORDS records (a single record's fluctuates by several %): <= 1
+        # balanced. 0 without fixed walls.
         if not fixed:
             return 0.0
         size = measure.box_size(sc, walls)
-        return float(np.max(boundaries.imbalance(sc, walls, fixed, t,
-                                                 weight_n / float(size[0] * size[1])))
-                     / boundaries.BALANCE_TOL)
+        return balance.add(boundaries.imbalance(
+            sc, walls, fixed, t, weight_n / float(size[0] * size[1]), signed=True))
 
     start, last = sc.step_count, time.perf_counter()
     wall0 = last
@@ -628,17 +630,19 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
             bias = np.where(near, np.clip(bias + 0.25 * (t - ax), -0.25 * t, 0.25 * t), bias)
             for a in range(3):
                 ctl.set_stress(a, float(t[a] + bias[a]))
+        unb = sc.unbalanced_force()
+        on_target = bool(np.all(err <= p.tol))
+        r_unb, r_bal = unb / p.unbalanced, imbalance_ratio()
         if time.perf_counter() - last > 5:
             last = time.perf_counter()
             log(f"  stage {stage}: step {sc.step_count - start}, walls "
                 f"{np.round(ax / 1e3, 2).tolist()} kPa (targets {np.round(t / 1e3, 2).tolist()}),"
-                f" unbalanced {sc.unbalanced_force():.3g}, "
-                f"{quasi_static.describe(quasi_static.report(sc))}")
+                f" unbalanced {unb:.3g}, "
+                + (f"fixed walls' imbalance {r_bal * boundaries.BALANCE_TOL:.3g}, "
+                   if fixed and math.isfinite(r_bal) else "")
+                + f"{quasi_static.describe(quasi_static.report(sc))}")
             quasi_static_warned = quasi_static_warned or quasi_static.check(
                 sc, f"element servo stage {stage}", stacklevel=2)
-        unb = sc.unbalanced_force()
-        on_target = bool(np.all(err <= p.tol))
-        r_unb, r_bal = unb / p.unbalanced, imbalance_ratio()
         if on_target and r_unb < 1 and r_bal <= 1:
             ok = True
             break
@@ -664,12 +668,18 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
         quasi_static.check(sc, f"element servo stage {stage}", stacklevel=2)
     hold_err = 0.0
     held = 0
+    size_end = measure.box_size(sc, walls)
     while held < p.hold_steps:
         sc.run(p.record_every)
         held += p.record_every
         hold_err = max(hold_err, float(np.max(np.abs(record() - t) / t)))
     ax = held_stresses(sample)
+    size_held = measure.box_size(sc, walls)
     return {"converged": ok, "steps": steps, "hold_max_rel_error": hold_err,
+            # The box's strain (per axis, extension +) over the stage up to its end, and
+            # over the hold after it: a packing at rest holds its size; a creeping one not.
+            "strain_stage": ((size_end - size0) / size0).tolist(),
+            "strain_hold": ((size_held - size_end) / size0).tolist(),
             "stall": stall, "unbalanced_final": float(sc.unbalanced_force()),
             "density_scaling": quasi_static.report(sc),
             "wall_time_s": time.perf_counter() - wall0,
@@ -1081,6 +1091,9 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
         "converged": [bool(s["converged"]) for s in stages],
         "unbalanced_final": [s.get("unbalanced_final") for s in stages],
         "stall": [s.get("stall") for s in stages],
+        "strain_stage": [s.get("strain_stage") for s in stages],
+        "strain_hold": [s.get("strain_hold") for s in stages],
+        "hold_steps": p.hold_steps,
         "servo_steps": [int(s["steps"]) for s in stages],
         "hold_max_rel_error": max(s["hold_max_rel_error"] for s in stages),
         "stress_initial_pa": stress_before.tolist(),
