@@ -19,6 +19,8 @@ Scenes (SI units; the same input for both builds):
 - ``clumps``: the same packing with each sphere replaced by a clump of three members inside
   its ball (bench/clump_cost.py's template, random seeded orientations), settling under
   gravity (N clumps, 3 N spheres);
+- ``bonds``: the ``spheres`` packing with every pair closer than 0.2 of the smaller radius
+  bonded (contact and parallel bonds, unbreakable; dt at most 0.5 x the critical step);
 - ``pullout``: the geogrid pull-out of ``cases/pullout_000.py --smoke`` (N is ignored: 375
   grains and a flat-ribbed biaxial grid of PFacets), prepared untimed (REFD, gravity, top servo)
   and timed while the clamp pulls the grid.
@@ -180,9 +182,21 @@ def make_scene(kind: str, n: int):
         scene.add_clumps(tpl, p.centers, random_orientations(len(p.radii), 1), material=m,
                          scale=np.asarray(p.radii) / tpl.bounding_radius)
     else:
-        scene.add_spheres(p.centers, p.radii, material=m)
+        ids = scene.add_spheres(p.centers, p.radii, material=m)
+    if kind == "bonds":
+        # Every pair of the packing closer than 0.2 of the smaller radius, bonded (contact
+        # and parallel bonds, unbreakable): the bond pass's load, beside the pair pass's.
+        x, r = np.asarray(p.centers), np.asarray(p.radii)
+        bp = dem.BondParams(kn=1e5, ks=1e5, friction=0.5, contact_bond=True, pb_kn=1e10,
+                            pb_ks=1e10)
+        for i in range(len(r)):
+            gap = np.linalg.norm(x[i + 1:] - x[i], axis=1) - r[i + 1:] - r[i]
+            for j in np.nonzero(gap < 0.2 * np.minimum(r[i + 1:], r[i]))[0]:
+                scene.add_bond(int(ids[i]), int(ids[i + 1 + j]), bp)
     scene.verlet_margin = cfg.margin_factor * float(np.mean(p.radii))
     scene.dt = bench_dt(p, cfg)
+    if kind == "bonds":
+        scene.dt = min(scene.dt, 0.5 * scene.critical_dt())
     return scene
 
 
@@ -347,9 +361,9 @@ def main(argv: list[str] | None = None) -> int:
     for spec in args.scenes:
         kind, _, n = spec.partition(":")
         if kind not in ("spheres", "general", "hertz", "geogrid", "pullout",
-                        "clumps") or not n.isdigit():
+                        "clumps", "bonds") or not n.isdigit():
             raise SystemExit(f"--scenes {spec}: must be KIND:N with KIND spheres, general, "
-                             "hertz, geogrid, pullout or clumps and N a whole number")
+                             "hertz, geogrid, pullout, clumps or bonds and N a whole number")
     overlays = {"old": build_ref(args.ref, args.jobs),
                 "new": build_ref(args.new_ref, args.jobs) if args.new_ref else ""}
     rows = []

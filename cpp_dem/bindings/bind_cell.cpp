@@ -66,7 +66,7 @@ void bind_cell(py::module_& m) {
   method("cell_stress",
          py::cpp_function([](const Scene& s) { return mat3_array(s.cell_stress()); },
                           py::name("cell_stress"), py::is_method(scene_cls),
-                          "Love–Weber stress of the pair contacts over the cell volume, Pa, "
+                          "Love–Weber stress of the pair contacts and the bonds over the cell volume, Pa, "
                           "compression positive, not symmetrised (3 x 3)."));
   scene_cls.attr("images") = property(
       py::cpp_function([](const Scene& s) {

@@ -223,7 +223,7 @@ class Scene:
         """
     def cell_stress(self) -> numpy.typing.NDArray[numpy.float64]:
         """
-        Love–Weber stress of the pair contacts over the cell volume, Pa, compression positive, not symmetrised (3 x 3).
+        Love–Weber stress of the pair contacts and the bonds over the cell volume, Pa, compression positive, not symmetrised (3 x 3).
         """
     def clear_controllers(self) -> None:
         """

@@ -446,7 +446,8 @@ class Scene {
   void advance_cell();
   /// Wraps bodies into the cell along its periodic axes (at a build).
   void wrap_into_cell();
-  /// sum_c f_c (x) l_c over the active pair contacts, N m (the cell stress times V).
+  /// sum_c f_c (x) l_c over the active pair contacts and the bonds, N m (the cell stress
+  /// times V).
   Mat3 pair_stress_sum() const;
   /// How far body `slot` has moved (m) since the last broad-phase build, plus any growth of
   /// its radius: the Verlet margin's measure (need_rebuild, the integration and clump passes).
@@ -530,6 +531,15 @@ class Scene {
   /// Removes bonded pairs from the broad phase's candidates.
   void drop_bonded_candidates();
   [[noreturn]] void raise_bond_overlap(long k) const;
+  /// Where bond l sees its sphere b relative to b's stored position: H times the bond's
+  /// image shift in a periodic cell (Bond::cell_shift), zero without one, m.
+  Vec3 bond_shift(const Bond& l) const {
+    if (!cell_.on) return Vec3::Zero();
+    Vec3 s;
+    for (int a = 0; a < 3; ++a)
+      s[a] = l.cell_shift[a] + bodies_.image[l.b][a] - bodies_.image[l.a][a];
+    return cell_.h * s;
+  }
   bool has_bonds() const { return !bonds_.empty(); }
   void step();
   void set_energy_reference();

@@ -107,6 +107,12 @@ Mat3 Scene::pair_stress_sum() const {
     const Vec3 l = bodies_.pos[c.j] + pair_shift(k) - bodies_.pos[c.i];
     s += pair_out_[pair_jslot_[k]].force * l.transpose();
   }
+  // Bonds (contact and parallel bonds: a geogrid of bonded spheres in the cell), b at the
+  // image the bond sees.
+  for (const Bond& b : bonds_) {
+    const Vec3 l = bodies_.pos[b.b] + bond_shift(b) - bodies_.pos[b.a];
+    s += b.force_b * l.transpose();
+  }
   return s;
 }
 

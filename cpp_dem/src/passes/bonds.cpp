@@ -54,13 +54,34 @@ int Scene::add_bond(int a, int b, const BondParams& p) {
                            std::to_string(bodies_.clump[s]) +
                            " (clump members are rigid: bond the clump's neighbours instead)");
   }
-  if (cell_.on)
-    throw ParameterError("bond: bonds in a periodic cell are not supported yet");
   const std::pair<int, int> key = ordered(sa, sb);
   if (std::binary_search(bond_pairs_.begin(), bond_pairs_.end(), key))
     throw ParameterError("bond " + std::to_string(a) + "-" + std::to_string(b) +
                          ": the two spheres are bonded already");
-  const Real dist = (bodies_.pos[sb] - bodies_.pos[sa]).norm();
+  // In a periodic cell the bond joins a to the nearest image of b (across a face when the
+  // two lie on either side of it): its shift, kept relative to the bodies' wrap counts.
+  int shift[3] = {0, 0, 0};
+  if (cell_.on) {
+    const Vec3 f = cell_.h.inverse() * (bodies_.pos[sb] - bodies_.pos[sa]);
+    for (int ax = 0; ax < 3; ++ax) {
+      if (!cell_.periodic[ax]) continue;
+      const long rel = -std::lround(f[ax]) -
+                       (bodies_.image[sb][ax] - bodies_.image[sa][ax]);
+      if (rel < std::numeric_limits<std::int16_t>::min() ||
+          rel > std::numeric_limits<std::int16_t>::max())
+        throw ParameterError("bond " + std::to_string(a) + "-" + std::to_string(b) +
+                             ": the spheres' images are " + std::to_string(rel) +
+                             " cells apart; at most 32767 (wrap counts this far apart "
+                             "are not a neighbour pair)");
+      shift[ax] = static_cast<int>(rel);
+    }
+  }
+  Bond l;
+  for (int ax = 0; ax < 3; ++ax) l.cell_shift[ax] = static_cast<std::int16_t>(shift[ax]);
+  l.a = sa;
+  l.b = sb;
+  const Vec3 branch = bodies_.pos[sb] + bond_shift(l) - bodies_.pos[sa];
+  const Real dist = branch.norm();
   if (!(dist > 0))
     throw ParameterError("bond " + std::to_string(a) + "-" + std::to_string(b) +
                          ": the spheres' centres coincide");
@@ -75,11 +96,8 @@ int Scene::add_bond(int a, int b, const BondParams& p) {
                            fmt_real(allowed) + " m (the smaller radius): bond neighbours "
                            "that touch or nearly touch");
   }
-  Bond l;
-  l.a = sa;
-  l.b = sb;
   bond_setup(p, bodies_.radius[sa], bodies_.radius[sb], dist, l);
-  l.normal = (bodies_.pos[sb] - bodies_.pos[sa]) / dist;
+  l.normal = branch / dist;
   bonds_.push_back(l);
   bond_pairs_.insert(std::upper_bound(bond_pairs_.begin(), bond_pairs_.end(), key), key);
   bond_topology_dirty_ = true;
@@ -144,13 +162,26 @@ void Scene::compute_bonds(long& err) {
   const Real dt = dt_;
   const Real max_ratio = max_overlap_ratio_;
   long first_bad = std::numeric_limits<long>::max();
+  // Periodic cell: b at its image, with the mean field's velocity L d and spin added to the
+  // stored fluctuations, as the pair pass sees a contact's j (passes/pair.cpp).
+  const bool periodic = cell_.on;
+  const Mat3 lgrad = cell_.vel_grad;
+  const Vec3 spin = periodic ? cell_.spin() : Vec3::Zero();
 #pragma omp parallel for schedule(static) reduction(min : first_bad) if (nb > kParallelMinBonds)
   for (long k = 0; k < nb; ++k) {
     Bond& l = bonds_[k];
     const Real ra = bodies_.radius[l.a], rb = bodies_.radius[l.b];
-    const Real overlap =
-        bond_step(l, ra, rb, bodies_.pos[l.a], bodies_.pos[l.b], bodies_.vel[l.a],
-                  bodies_.vel[l.b], bodies_.angvel[l.a], bodies_.angvel[l.b], dt);
+    Real overlap;
+    if (!periodic) {
+      overlap = bond_step(l, ra, rb, bodies_.pos[l.a], bodies_.pos[l.b], bodies_.vel[l.a],
+                          bodies_.vel[l.b], bodies_.angvel[l.a], bodies_.angvel[l.b], dt);
+    } else {
+      const Vec3 xb = bodies_.pos[l.b] + bond_shift(l);
+      const Vec3 vb = bodies_.vel[l.b] + lgrad * (xb - bodies_.pos[l.a]);
+      overlap = bond_step(l, ra, rb, bodies_.pos[l.a], xb, bodies_.vel[l.a], vb,
+                          Vec3(bodies_.angvel[l.a] + spin), Vec3(bodies_.angvel[l.b] + spin),
+                          dt);
+    }
     if (!(overlap <= max_ratio * std::min(ra, rb))) first_bad = std::min(first_bad, k);
   }
   err = first_bad;
@@ -166,15 +197,16 @@ void Scene::compute_bonds(long& err) {
     ev.value = l.pending_value;
     bond_breaks_.push_back(ev);
     dropped_plastic_ += bond_release(l, l.pending_break, bodies_.radius[l.a],
-                                     bodies_.radius[l.b], bodies_.pos[l.a], bodies_.pos[l.b]);
+                                     bodies_.radius[l.b], bodies_.pos[l.a],
+                                     Vec3(bodies_.pos[l.b] + bond_shift(l)));
     l.pending_break = -1;
   }
 }
 
 void Scene::raise_bond_overlap(long k) const {
   const Bond& l = bonds_[k];
-  const Real gap = (bodies_.pos[l.b] - bodies_.pos[l.a]).norm() - bodies_.radius[l.a] -
-                   bodies_.radius[l.b];
+  const Real gap = (bodies_.pos[l.b] + bond_shift(l) - bodies_.pos[l.a]).norm() -
+                   bodies_.radius[l.a] - bodies_.radius[l.b];
   std::ostringstream os;
   os.precision(4);
   os << "blow-up at step " << step_ << ": bonded spheres " << id_of(l.a) << " and "

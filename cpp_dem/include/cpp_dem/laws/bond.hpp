@@ -17,6 +17,7 @@
 #pragma once
 
 #include <cmath>
+#include <cstdint>
 
 #include "cpp_dem/laws/tangential.hpp"
 
@@ -77,7 +78,11 @@ struct Bond {
   Real gap0 = 0;
   bool cb_intact = false;       ///< the contact bond holds
   bool pb_intact = false;       ///< the parallel bond holds
-  std::uint8_t pad_intact_[6] = {};  ///< zero (explicit padding: checkpoints are byte-identical)
+  /// Periodic cell: b is seen at its image pos_b + H (cell_shift + image_b - image_a), with
+  /// image_a, image_b the bodies' wrap counts (body_store.hpp), so that the bond follows its
+  /// spheres through the cell's faces. Zero without a cell. (It fills what was padding: the
+  /// record's size and a checkpoint's bytes without a cell are unchanged.)
+  std::int16_t cell_shift[3] = {0, 0, 0};
   // History.
   Vec3 normal = Vec3::Zero();   ///< unit a -> b at the last step
   Real fn = 0;                  ///< linear contact's normal force, N, compression positive
