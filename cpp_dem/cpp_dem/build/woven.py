@@ -206,12 +206,11 @@ class WovenGeogrid:
         """Tensile force of every member, N, tension positive: the sum over the bonds cut by
         its mid-section of each bond's force along the member axis."""
         st = scene.bond_state()
-        ab = np.asarray(scene.bond_spheres)
-        pos = np.asarray(scene.positions)
+        normal = np.asarray(st["normal"])  # (a -> b: also across a periodic cell's faces)
         out = np.zeros(self.n_members)
         for m, sec in enumerate(self.member_section_bonds):
             ax = self.member_axis[m]
-            d = pos[ab[sec, 1]] - pos[ab[sec, 0]]
+            d = normal[sec]
             # The force on b pulls it back towards a in tension.
             out[m] = -np.sum(np.sign(d @ ax) * (st["force"][sec] @ ax))
         return out
@@ -234,7 +233,8 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
                   sphere_radius: float | None = None, strands: int | None = None,
                   strand_spacing: float | None = None,
                   aperture: float | Sequence[float] | None = None,
-                  max_spheres: int | None = None, convention: str = "series") -> WovenGeogrid:
+                  max_spheres: int | None = None, convention: str = "series",
+                  periodic: bool = False) -> WovenGeogrid:
     """Builds a woven biaxial geogrid of bonded spheres (module docstring) in ``scene``.
 
     origin : centre of the first junction (m; the grid spans apertures_x x apertures_y cells
@@ -247,6 +247,11 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
         is MAX_WOVEN_SPHERES.
     convention : how the preset's k_n, k_s make the contact bonds' stiffness, 'series'
         (default) or 'contact' (module docstring); ignored when ``bond`` is given.
+    periodic : an endless sheet in the scene's periodic cell (Scene.set_periodic_cell first,
+        periodic along x and y, its x and y cell vectors apertures_x x pitch_x and
+        apertures_y x pitch_y along the axes): the last junction column and row are the
+        first ones' images, and the strings close through the cell's faces (bonds in a
+        periodic cell: docs/bonds.md). A reinforced-soil RVE's sheet.
     """
     p = _preset(preset)
     r = float(p["sphere_radius"] if sphere_radius is None else sphere_radius)
@@ -270,6 +275,8 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
         raise ParameterError(f"aperture={tuple(ap)}: must be >= 2 x sphere_radius (m)")
     o = np.asarray(origin, dtype=float).reshape(3)
     pitch = ap + width
+    if periodic:
+        _check_periodic_sheet(scene, apertures_x * pitch[0], apertures_y * pitch[1])
     # Spheres: the crossings, and the strings filled with touching spheres between them.
     n_lines = (float(apertures_x) + 1) * ns, (float(apertures_y) + 1) * ns
 
@@ -301,8 +308,15 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
 
     pts, kind, strand = [], [], []
     index = {}
+    # (periodic: the last junction column and row are the first ones', one cell on)
+    n_x, n_y = ns * apertures_x, ns * apertures_y
+
+    def jkey(a, b):
+        return ("J", a % n_x, b % n_y) if periodic else ("J", a, b)
 
     def sphere(key, xyz, k, s):
+        if key[0] == "J":
+            key = jkey(key[1], key[2])
         if key not in index:
             index[key] = len(pts)
             pts.append(xyz)
@@ -314,6 +328,7 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
         for b, y in enumerate(ys):
             sphere(("J", a, b), (x, y, o[2]), JUNCTION, -1)
     pairs, pair_member = [], []  # bonds (local sphere indices) and their member keys
+    pair_along = []  # per bond, its two ends' coordinates along its string (unwrapped), m
     n_long = len(ys)
     strand_dir = [LONGITUDINAL] * n_long + [TRANSVERSE] * len(xs)
     strand_line = list(y_line) + list(x_line)
@@ -321,31 +336,38 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
     def string(sid, along, lines, line_of, fixed, direction):
         """One string: crossing spheres at `along`, filled with touching spheres between."""
         prev = None
+        n_along = n_x if direction == LONGITUDINAL else n_y
         for k in range(len(along)):
-            cur = (index[("J", k, sid)] if direction == LONGITUDINAL
-                   else index[("J", sid - n_long, k)])
-            if prev is not None:
+            cur = (index[jkey(k, sid)] if direction == LONGITUDINAL
+                   else index[jkey(sid - n_long, k)])
+            # (periodic: the last junction is the first's image; the string inside it is
+            # the first junction's, built already)
+            if prev is not None and not (periodic and k - 1 >= n_along):
                 g = along[k] - along[k - 1]
                 m = max(1, int(round(g / (2 * r))))
                 same_line = lines[k] == lines[k - 1]
                 key = (None if same_line else
                        (direction, int(lines[k - 1]), int(line_of)))
-                last = prev
+                last, t_last = prev, along[k - 1]
                 for q in range(1, m):
                     t = along[k - 1] + g * q / m
                     xyz = (t, fixed, o[2]) if direction == LONGITUDINAL else (fixed, t, o[2])
                     nxt = sphere(("S", sid, k, q), xyz, direction, sid)
                     pairs.append((last, nxt))
                     pair_member.append(key)
-                    last = nxt
+                    pair_along.append((t_last, t))
+                    last, t_last = nxt, t
                 pairs.append((last, cur))
                 pair_member.append(key)
+                pair_along.append((t_last, along[k]))
             prev = cur
 
     for b, y in enumerate(ys):
-        string(b, xs, x_line, y_line[b], y, LONGITUDINAL)
+        if not (periodic and b >= n_y):  # (periodic: the last row is the first's image)
+            string(b, xs, x_line, y_line[b], y, LONGITUDINAL)
     for a, x in enumerate(xs):
-        string(n_long + a, ys, y_line, x_line[a], x, TRANSVERSE)
+        if not (periodic and a >= n_x):
+            string(n_long + a, ys, y_line, x_line[a], x, TRANSVERSE)
 
     # Members: cell (i, j) has longitudinal member A on row j between columns i and i + 1,
     # and transverse member C on column i between rows j and j + 1.
@@ -375,8 +397,7 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
         line = k[1]  # column (longitudinal) or row (transverse) before the member
         mid = o[coord] + (line + 0.5) * pitch[coord]
         cut = [bonds[q] for q in mb
-               if min(pts[pairs[q][0], coord], pts[pairs[q][1], coord]) <= mid
-               < max(pts[pairs[q][0], coord], pts[pairs[q][1], coord])]
+               if min(pair_along[q]) <= mid < max(pair_along[q])]
         section.append(np.array(cut, dtype=int))
     return WovenGeogrid(
         spheres=ids, bonds=bonds, sphere_kind=np.array(kind), sphere_strand=np.array(strand),
@@ -385,6 +406,35 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
         member_side=side, member_axis=axis, member_section_bonds=section,
         member_bonds=member_bonds, member_width=width, pitch=(float(pitch[0]), float(pitch[1])),
         n_cells=(apertures_x, apertures_y), reference_positions=pts.copy())
+
+
+def preset_pitch(preset: str = "detailed", **geometry) -> tuple[float, float]:
+    """The centre distance of the preset's members, m (x, y): aperture + member width.
+    ``geometry`` overrides the preset's sphere_radius, strands, strand_spacing, aperture."""
+    p = dict(_preset(preset))
+    p.update({k: v for k, v in geometry.items() if v is not None})
+    ap = np.broadcast_to(np.asarray(p["aperture"], dtype=float), (2,))
+    width = (p["strands"] - 1) * p["strand_spacing"] + 2 * p["sphere_radius"]
+    return float(ap[0] + width), float(ap[1] + width)
+
+
+def _check_periodic_sheet(scene, lx: float, ly: float) -> None:
+    """A periodic sheet needs the scene's cell periodic along x and y with its x and y cell
+    vectors (lx, 0, 0) and (0, ly, 0), m."""
+    if not scene.is_periodic:
+        raise ParameterError("periodic=True: the scene has no periodic cell; set it first "
+                             f"(Scene.set_periodic_cell), with x and y cell vectors ({lx:.6g}, "
+                             f"0, 0) and (0, {ly:.6g}, 0) m: apertures x pitch")
+    h = np.asarray(scene.cell_matrix)
+    per = scene.cell_periodic
+    want = np.array([lx, ly])
+    ok = (per[0] and per[1] and np.allclose(np.diag(h)[:2], want, rtol=1e-9, atol=0)
+          and abs(h[1, 0]) + abs(h[2, 0]) + abs(h[0, 1]) + abs(h[2, 1]) <= 1e-12 * lx)
+    if not ok:
+        raise ParameterError(f"periodic=True: the cell's x and y vectors are "
+                             f"{h[:, 0].tolist()} and {h[:, 1].tolist()} m (periodic "
+                             f"{list(per)}); the sheet needs ({lx:.6g}, 0, 0) and (0, "
+                             f"{ly:.6g}, 0), periodic along x and y: apertures x pitch")
 
 
 def woven_material(preset: str = "detailed"):
