@@ -56,7 +56,7 @@ class NewtonDivergence(RuntimeError):
 
 @dataclasses.dataclass(frozen=True)
 class StepResult:
-    """One converged load step.
+    """One accepted load step.
 
     Attributes:
         stage: 'geostatic', 'prestress' or 'footing'.
@@ -69,7 +69,19 @@ class StepResult:
         converged_on: "tolerance" (``newton_rtol``), or "stall": with DEM region elements,
             Newton stalled above it at the elements' resolution and the step was taken at
             its best iterate (said in ``SoilModel.warnings``).
-        noise_residual: that best residual relative to the force scale (NaN otherwise).
+        noise_residual: that best residual relative to the whole body's force scale (NaN
+            otherwise).
+        status: "converged" (``newton_rtol`` met) or "stalled" (taken at a stall: its best
+            residual within ``SoilModel.stall_rtol`` of the DEM regions' own internal force,
+            above the tolerance) (:mod:`femcoupling.status`).
+        residual: the accepted residual relative to the force scale it is judged against:
+            the DEM regions' own internal force where the model has region elements, else
+            the body's, -.
+        tol: ``newton_rtol`` on that same scale, -; ``status`` is "converged" when
+            ``residual <= tol``.
+        residual_pa: the accepted residual in stress units, Pa: ``residual`` times the
+            largest stress magnitude of the points of that scale (the regions' with region
+            elements, else the body's).
     """
 
     stage: str
@@ -80,6 +92,10 @@ class StepResult:
     plastic_points: int
     converged_on: str = "tolerance"
     noise_residual: float = float("nan")
+    status: str = "converged"
+    residual: float = float("nan")
+    tol: float = float("nan")
+    residual_pa: float = float("nan")
 
 
 class SoilModel:
@@ -138,12 +154,16 @@ class SoilModel:
         self.region_elements: dict = {}
         self._element_points: dict = {}
         #: with region elements: a step whose residual has not halved in this many Newton
-        #: iterations, its best within ``stall_rtol`` of the force scale, is taken there
+        #: iterations, its best within ``stall_rtol`` of the DEM regions' own internal force
+        #: (not the body's: a 0.1 m region in a 4 x 3 m body carries a small share of it), is
+        #: taken there, as "stalled". 1e-2: the equilibrium the region elements are relaxed
+        #: to (their unbalanced-force ratio, 1e-2 in the region elements of this package)
         self.stall_iterations = 3
-        self.stall_rtol = 1e-3
+        self.stall_rtol = 1e-2
         #: every warning of the run (steps taken at a stall), in order
         self.warnings: list[str] = []
-        self._step_end = ("tolerance", float("nan"))
+        self._step_end: dict = {}
+        self._region_form = None  # the DEM regions' internal force (built on demand)
         self.unit_weight_n_m3, self.degree = gamma, degree
         self.newton_rtol, self.max_newton, self.max_cuts = newton_rtol, max_newton, max_cuts
         self.comm = comm if comm is not None else fx.MPI.COMM_WORLD
@@ -355,6 +375,7 @@ class SoilModel:
                 raise FemInputError(f"element={element!r}: needs a {k}() method (see "
                                     "femcoupling.region.DemRegionMaterial)")
         self.region_elements[key] = element
+        self._region_form = None  # (the regions' cells changed)
         w = (self.cell_volume[:, None] * self.qweights[None, :]).reshape(-1)[sel]
         self._element_points[key] = (sel, w / w.sum())  # its points and volume weights
 
@@ -448,35 +469,85 @@ class SoilModel:
         own = vec.array[: self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs]
         return math.sqrt(self.comm.allreduce(float(own @ own), op=fx.MPI.SUM)) + 1e-300
 
+    def _region_points(self) -> np.ndarray:
+        """(n_qp,) the quadrature points that take their stress from a region element."""
+        on = np.zeros(self.n_cells * self.nq, bool)
+        for sel, _ in self._element_points.values():
+            on |= sel
+        return on
+
+    def _region_scale(self) -> float:
+        """|F_int| of the DEM region elements' cells alone (the stall's scale): the internal
+        force vector of their stress, assembled over those cells only, >= tiny."""
+        fx = self._fx
+        fem, ufl = fx.fem, fx.ufl
+        if self._region_form is None:
+            chi = fem.Function(fem.functionspace(self.mesh, ("DG", 0)))
+            cells = self._region_points().reshape(self.n_cells, self.nq).any(axis=1)
+            chi.x.array[:] = cells[: chi.x.array.size].astype(float)
+            v = ufl.TestFunction(self.V)
+            self._region_form = fem.form(chi * ufl.dot(self.sig_q, self._eps(v)) * self.dxq)
+        vec = fem.assemble_vector(self._region_form)
+        vec.scatter_reverse(fx.dolfinx.la.InsertMode.add)
+        own = vec.array[: self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs]
+        return math.sqrt(self.comm.allreduce(float(own @ own), op=fx.MPI.SUM)) + 1e-300
+
+    def _largest_stress(self, points: np.ndarray | None) -> float:
+        """The largest stress magnitude (the largest absolute eigenvalue of the tensor) of
+        the current stress at ``points`` (all points if None), Pa."""
+        sig = self.sig_cur if points is None else self.sig_cur[points]
+        if len(sig) == 0:
+            return 0.0
+        ev = np.linalg.eigvalsh(mandel_to_tensor(sig))
+        return float(np.abs(ev).max())
+
+    def _end_step(self, rnorm: float, scale: float, rscale: float | None, *,
+                  stall: bool) -> None:
+        """The step's end (``StepResult``'s converged_on, noise_residual, status, residual,
+        tol, residual_pa): ``rnorm`` the accepted residual's norm, ``scale`` the body's force
+        scale, ``rscale`` the DEM regions' own (None without region elements)."""
+        on = rscale if rscale is not None else scale
+        pts = self._region_points() if rscale is not None else None
+        rel = rnorm / on
+        self._step_end = {"converged_on": "stall" if stall else "tolerance",
+                          "noise_residual": rnorm / scale if stall else float("nan"),
+                          "status": "stalled" if stall else "converged",
+                          "residual": rel, "tol": self.newton_rtol * scale / on,
+                          "residual_pa": rel * self._largest_stress(pts)}
+
     def _newton(self) -> int:
         """Newton iterations of the current step; returns their number, or -1 on failure.
 
         With region elements the residual cannot fall below the elements' own resolution (a
         DEM answer is rough at the scale of Newton's last corrections: measured stalls at
-        1e-5 to 1e-4 of the force scale). A step whose residual has not halved in
-        ``stall_iterations`` iterations, and whose best residual is within ``stall_rtol``
-        of the force scale, is taken at its best iterate ("stall", said in ``warnings``)."""
+        1e-4 to 2e-3 of the region's own internal force). A step whose residual has not
+        halved in ``stall_iterations`` iterations, and whose best residual is within
+        ``stall_rtol`` of the DEM regions' own internal force (``_region_scale``), is taken at
+        its best iterate ("stall", status "stalled", said in ``warnings``); above it Newton
+        goes on to ``max_newton``, and the step is cut."""
         fx = self._fx
         bcs = self._active_bcs()
         self._update_tangent_and_stress(self._strain_increment())
-        self._step_end = ("tolerance", float("nan"))
-        best, best_u, since = math.inf, None, 0
+        self._step_end = {}
+        best, best_u, best_scales, since = math.inf, None, None, 0
         for it in range(0, self.max_newton + 1):
             rnorm = self._assemble_residual()
             scale = max(self._internal_scale(), self._ext_scale)
             if not np.isfinite(rnorm):
                 return -1
+            rscale = self._region_scale() if self.region_elements else None
             if rnorm <= self.newton_rtol * scale:
+                self._end_step(rnorm, scale, rscale, stall=False)
                 return it
             if self.region_elements:
                 since = 0 if rnorm < 0.5 * best else since + 1
                 if rnorm < best:
-                    best, best_u = rnorm, self.u.x.array.copy()
-                if since >= self.stall_iterations and best <= self.stall_rtol * scale:
+                    best, best_u, best_scales = rnorm, self.u.x.array.copy(), (scale, rscale)
+                if since >= self.stall_iterations and best <= self.stall_rtol * best_scales[1]:
                     self.u.x.array[:] = best_u  # (the elements answer it again, bitwise)
                     self.u.x.scatter_forward()
                     self._update_tangent_and_stress(self._strain_increment())
-                    self._step_end = ("stall", best / scale)
+                    self._end_step(best, *best_scales, stall=True)
                     return it
             if it == self.max_newton:
                 break
@@ -531,7 +602,7 @@ class SoilModel:
             if its <= self.max_newton // 2:  # easy step: grow back towards the nominal size
                 dlf = min(2.0 * dlf, 1.0 / steps)
             r = StepResult(stage, lf, self.footing_settlement_m(), self.footing_pressure_pa(),
-                           its, self.plastic_points(), *self._step_end)
+                           its, self.plastic_points(), **self._step_end)
             if r.converged_on == "stall":
                 self._stall_warning(r)
             self.history.append(r)
@@ -548,9 +619,12 @@ class SoilModel:
         from femcoupling.hierarchical import NoiseWarning
 
         msg = (f"{r.stage} step at load factor {r.load_factor:.4g}: Newton stalled at "
-               f"{r.noise_residual:.3g} of the force scale, above newton_rtol="
-               f"{self.newton_rtol:g}: the DEM region elements do not resolve the tolerance "
-               "asked; the step is taken at its best iterate")
+               f"{r.residual:.3g} of the DEM regions' own internal force ({r.residual_pa:.3g} "
+               f"Pa; {r.noise_residual:.3g} of the body's force scale), above the tolerance "
+               f"newton_rtol={self.newton_rtol:g} ({r.tol:.3g} of the regions' force) and "
+               f"within stall_rtol={self.stall_rtol:g}: the DEM region elements do not resolve "
+               "the tolerance asked; the step is taken at its best iterate (stalled, not "
+               "converged)")
         self.warnings.append(msg)
         warnings.warn(msg, NoiseWarning, stacklevel=3)
 

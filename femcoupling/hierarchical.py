@@ -13,7 +13,17 @@ workers (the pool's element k is cell k). In a load step Newton iterates:
 3. the residual and the Jacobian are assembled from them (Voigt xx, yy, xy with engineering
    shear), and the displacements are corrected.
 
-A converged step is accepted (``pool.accept``: every element's state saved as bytes). The
+An accepted step is saved (``pool.accept``: every element's state saved as bytes). Each
+step ends in a status (:mod:`femcoupling.status`): ``converged`` (the residual within
+``newton_rtol``) or ``stopped_at_scatter`` (``convergence="noise"``: Newton stalled above
+``newton_rtol`` with the residual within ``noise_factor`` times the elements' measured noise
+and within the ``noise_ceiling``, 10 x ``newton_rtol`` by default). A step whose residual is
+within the noise but above the ceiling is not accepted: it is cut, as a step Newton fails
+(``NewtonFailure``; a step that still fails after its cuts raises it, the run has
+``failed``). The residual is relative to the internal force scale (the largest element
+stress times the square root of the domain's area) and also given in stress units
+(``HierStep.residual_pa``, Pa: that relative residual times the largest element stress).
+The
 Drucker–Prager model of ``femcoupling.elastoplastic`` sits behind the same quadrature-space
 interface there; here the material is the DEM.
 
@@ -30,8 +40,8 @@ Records (``out=DIR``), appended and flushed at every accepted step:
 - ``elements.h5``: one row per element per step: step, load, element, increment, stress,
   its bootstrap scatter, tangent, contact count, DEM seconds and steps;
 - ``fem.xdmf``: the displacement and the elements' stresses per cell, at every step;
-- ``steps.csv``: iterations, residual, the measured noise, what converged the step, and
-  the FEM/DEM time split;
+- ``steps.csv``: iterations, residual (relative and in Pa), the measured noise, what ended
+  the step and its status, and the FEM/DEM time split;
 - ``report.md``: the run so far and every warning.
 """
 
@@ -48,6 +58,7 @@ import numpy as np
 from femcoupling import _dolfinx
 from femcoupling.geometry import FemInputError
 from femcoupling.relaxation import aitken_factor, check_relaxation, next_factor
+from femcoupling.status import newton_acceptance, worst
 
 __all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning",
            "aitken_factor"]
@@ -79,15 +90,15 @@ class NewtonFailure(RuntimeError):
 
 class NoiseWarning(UserWarning):
     """The tolerance asked for is below what the DEM elements can resolve: re-running them
-    on (to 1e-9) the same increment moves the residual by more, so a load step is converged
-    to that noise instead."""
+    on (to 1e-9) the same increment moves the residual by more, so a load step is accepted at
+    that noise instead (below the ceiling: stopped_at_scatter, not converged)."""
 
 
 @dataclasses.dataclass
 class HierStep:
-    """One converged load step: the top displacement (m), Newton iterations, the residual at
-    the end (relative to the internal force scale), the elements' mean Voigt stress (xx, yy,
-    xy), tension positive, Pa, the element
+    """One accepted load step: the top displacement (m), Newton iterations, the residual at
+    the end (relative to the internal force scale; in Pa: ``residual_pa``), the elements'
+    mean Voigt stress (xx, yy, xy), tension positive, Pa, the element
     stresses (n_cells, 3), the DEM seconds (sum over the elements' work), the FEM seconds
     (the step's wall time outside the pool's calls), the wall seconds, and the elements
     rebuilt after a lost worker."""
@@ -106,8 +117,16 @@ class HierStep:
     #: ``residual``): measured when Newton stalled; NaN if it was not needed
     noise_residual: float = float("nan")
     #: what ended Newton: "tolerance" (``newton_rtol``) or "noise" (the residual is within
-    #: the elements' noise: ``NoiseWarning``)
+    #: the elements' noise and the ceiling: ``NoiseWarning``)
     converged_on: str = "tolerance"
+    #: the step's status (femcoupling.status): "converged" (``newton_rtol`` met) or
+    #: "stopped_at_scatter" (accepted within the elements' noise, above ``newton_rtol``)
+    status: str = "converged"
+    #: the accepted residual in stress units, Pa: ``residual`` times the largest element
+    #: stress (the residual force over the square root of the domain's area)
+    residual_pa: float = float("nan")
+    #: the noise's residual in the same units, Pa (NaN if it was not measured)
+    noise_residual_pa: float = float("nan")
     #: (n_cells, 3) each element's stress scatter (xx, yy, xy), Pa: the bootstrap of its
     #: contact network (``DemElement.stress_scatter``), how far a sample of its size is from
     #: the material's mean
@@ -126,13 +145,18 @@ def _relative_scatter(r: HierStep) -> float:
 
 class HierarchicalPlaneStrain:
     """See the module doc. ``pool``: an ElementPool with one element per cell (cell k ->
-    element k)."""
+    element k). ``newton_rtol``: the residual's tolerance relative to the internal force
+    scale, -; ``noise_factor``: with ``convergence="noise"``, a stalled step is accepted
+    within this many times the elements' measured noise ...; ``noise_ceiling``: ... and only
+    up to this residual (relative, like ``newton_rtol``; default 10 x ``newton_rtol``), above
+    which the step is cut."""
 
     def __init__(self, pool, *, lx: float, ly: float, nx: int, ny: int,
                  confining_pa: float | None = None, homogeneous: bool = False,
                  newton_rtol: float = 1e-3, max_newton: int = 10, strain_kw: dict | None = None,
                  tangent: str = "network", convergence: str = "noise",
                  relaxation: str | float = "aitken", noise_factor: float = 2.0,
+                 noise_ceiling: float | None = None,
                  verbose: bool = False, out=None, overwrite: bool = False) -> None:
         if not (lx > 0 and ly > 0 and math.isfinite(lx) and math.isfinite(ly)):
             raise FemInputError(f"lx={lx}, ly={ly}: must be > 0 (m)")
@@ -169,8 +193,18 @@ class HierarchicalPlaneStrain:
         self.relaxation = check_relaxation(relaxation)
         if not (noise_factor > 0 and math.isfinite(noise_factor)):
             raise FemInputError(f"noise_factor={noise_factor}: must be > 0 (a stalled step is "
-                                "converged within this many times the noise's residual)")
+                                "accepted within this many times the noise's residual)")
         self.noise_factor = float(noise_factor)
+        if not (newton_rtol > 0 and math.isfinite(newton_rtol)):
+            raise FemInputError(f"newton_rtol={newton_rtol!r}: must be > 0 (relative to the "
+                                "internal force scale)")
+        ceiling = 10.0 * newton_rtol if noise_ceiling is None else noise_ceiling
+        if not (math.isfinite(ceiling) and ceiling >= newton_rtol):
+            raise FemInputError(f"noise_ceiling={noise_ceiling!r}: must be >= newton_rtol="
+                                f"{newton_rtol!r} and finite (the largest residual, relative "
+                                "to the internal force scale, a step may be accepted at "
+                                "within the elements' noise; default 10 x newton_rtol)")
+        self.noise_ceiling = float(ceiling)
         #: every warning of the run (also given as ``NoiseWarning``), in order
         self.warnings: list[str] = []
         self.homogeneous = homogeneous
@@ -356,6 +390,12 @@ class HierarchicalPlaneStrain:
         """|F_int| of the current stresses (the tolerance's scale)."""
         return float(np.abs(self._sig).max()) * math.sqrt(self.lx * self.ly) + 1e-300
 
+    @property
+    def status(self) -> str:
+        """The run's status so far: the worst of its accepted steps' ("converged" before
+        any). A step that could not be accepted raised ``NewtonFailure``: the run failed."""
+        return worst(r.status for r in self.history)
+
     # ---- a load step -----------------------------------------------------------------------
     def step(self, *, top_displacement: float, right_displacement: float = 0.0,
              max_cuts: int = 4) -> HierStep:
@@ -428,12 +468,23 @@ class HierarchicalPlaneStrain:
                 if self.verbose:
                     print(f"[hier] noise probe: residual {rel:.3e}, the noise's "
                           f"{noise_rel:.3e}", flush=True)
-                if rel <= self.newton_rtol:
+                accept = newton_acceptance(rel, rtol=self.newton_rtol,
+                                           noise_residual=noise_rel,
+                                           noise_factor=self.noise_factor,
+                                           ceiling=self.noise_ceiling)
+                if accept == "converged":
                     converged_on = "tolerance"
                     break
-                if rel <= self.noise_factor * noise_rel:
+                if accept == "stopped_at_scatter":
                     converged_on = "noise"
                     break
+                if rel <= self.noise_factor * noise_rel:
+                    # within the noise but above the ceiling: not accepted; cut the step
+                    raise NewtonFailure(
+                        f"Newton stalled at {rel:.3g} of the internal force scale, within "
+                        f"the elements' noise ({noise_rel:.3g}) but above the ceiling "
+                        f"noise_ceiling={self.noise_ceiling:g} (asked newton_rtol="
+                        f"{self.newton_rtol:g}): the step is cut")
             if it == self.max_newton or not math.isfinite(rel):
                 raise NewtonFailure(f"Newton: no convergence in {self.max_newton} iterations "
                                     f"(residual {rel:.3g} of the internal force scale; asked "
@@ -458,12 +509,14 @@ class HierarchicalPlaneStrain:
             d_prev = dk
             self.u.x.array[:] += w_k * dk
             self.u.x.scatter_forward()
+        stress_of_scale = scale / math.sqrt(self.lx * self.ly)  # Pa: the largest stress
         if converged_on == "noise":
             self._warn(f"load step {len(self.history)} (top {top_displacement:.6g} m): the "
                        f"tolerance asked (newton_rtol={self.newton_rtol:g}) is below the "
                        f"elements' noise (a 1e-9 change of their increments moves the "
-                       f"residual by {noise_rel:.3g} of the internal force scale); converged "
-                       f"to the noise at {rel:.3g}")
+                       f"residual by {noise_rel:.3g} of the internal force scale); stopped "
+                       f"at the noise at {rel:.3g} ({rel * stress_of_scale:.3g} Pa; ceiling "
+                       f"{self.noise_ceiling:g}): stopped_at_scatter, not converged")
         self.pool.accept()
         self._bc_now = (top_displacement, right_displacement)
         self.u_n.x.array[:] = self.u.x.array
@@ -473,7 +526,10 @@ class HierarchicalPlaneStrain:
                      dem_s=dem_s, fem_s=wall - pool_s, wall_s=wall, recovered=recovered,
                      increments=self._increments.copy(), noise_residual=noise_rel,
                      converged_on=converged_on, relaxation=tuple(omegas),
-                     element_scatter=self._scat.copy())
+                     element_scatter=self._scat.copy(),
+                     status="converged" if converged_on == "tolerance" else "stopped_at_scatter",
+                     residual_pa=rel * stress_of_scale,
+                     noise_residual_pa=noise_rel * stress_of_scale)
         self.history.append(r)
         if self.out is not None:
             self._write_records(r)
@@ -516,10 +572,12 @@ class HierarchicalPlaneStrain:
         with open(csv, "a") as fh:
             if new:
                 fh.write("step,load_m,iterations,residual,noise_residual,converged_on,"
-                         "relaxation_min,fem_s,dem_s,wall_s,recovered,bad_tangents\n")
+                         "relaxation_min,fem_s,dem_s,wall_s,recovered,bad_tangents,status,"
+                         "residual_pa,noise_residual_pa\n")
             fh.write(f"{k},{r.load!r},{r.iterations},{r.residual!r},{r.noise_residual!r},"
                      f"{r.converged_on},{min(r.relaxation, default=1.0)!r},{r.fem_s!r},"
-                     f"{r.dem_s!r},{r.wall_s!r},{len(r.recovered)},{self.bad_tangents}\n")
+                     f"{r.dem_s!r},{r.wall_s!r},{len(r.recovered)},{self.bad_tangents},"
+                     f"{r.status},{r.residual_pa!r},{r.noise_residual_pa!r}\n")
         self._write_report()
 
     def _write_report(self) -> None:
@@ -532,10 +590,13 @@ class HierarchicalPlaneStrain:
         dem_s = sum(r.dem_s for r in h)
         wall_s = sum(r.wall_s for r in h)
         lines = ["# Hierarchical FEM x DEM run", "",
+                 f"- status: **{self.status}** (the worst of the steps'; converged: every "
+                 f"step's residual within newton_rtol; stopped_at_scatter: a step accepted "
+                 f"within the elements' noise, above newton_rtol)",
                  f"- {self.n_cells} elements, {len(h)} load steps accepted; tangent "
                  f"`{self.tangent}`, convergence `{self.convergence}` (newton_rtol "
-                 f"{self.newton_rtol:g}, noise factor {self.noise_factor:g}), relaxation "
-                 f"`{self.relaxation}`",
+                 f"{self.newton_rtol:g}, noise factor {self.noise_factor:g}, noise ceiling "
+                 f"{self.noise_ceiling:g}), relaxation `{self.relaxation}`",
                  f"- CPU: FEM {fem_s:.2f} s (the wall time outside the element calls), DEM "
                  f"{dem_s:.2f} s (the elements' work summed over workers), wall {wall_s:.2f} s"
                  f"; DEM share of the work {dem_s / max(fem_s + dem_s, 1e-300):.1%}",
@@ -543,13 +604,14 @@ class HierarchicalPlaneStrain:
                  "- element scatter: the bootstrap standard deviation of each element's "
                  "stress over its contacts, as a fraction of its largest stress component, "
                  "mean over the elements",
-                 "", "| step | top, m | iterations | residual | noise residual | "
-                 "converged on | min relaxation | mean sigma_xx, kPa | mean sigma_yy, kPa | "
-                 "element scatter |",
-                 "|---|---|---|---|---|---|---|---|---|---|"]
+                 "", "| step | top, m | iterations | residual | residual, Pa | noise residual "
+                 "| status | converged on | min relaxation | mean sigma_xx, kPa | mean "
+                 "sigma_yy, kPa | element scatter |",
+                 "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for k, r in enumerate(h):
             lines.append(f"| {k} | {r.load:.6g} | {r.iterations} | {r.residual:.3g} | "
-                         f"{r.noise_residual:.3g} | {r.converged_on} | "
+                         f"{r.residual_pa:.3g} | {r.noise_residual:.3g} | {r.status} | "
+                         f"{r.converged_on} | "
                          f"{min(r.relaxation, default=1.0):.3g} | "
                          f"{r.mean_stress[0] / 1e3:.2f} | {r.mean_stress[1] / 1e3:.2f} | "
                          f"{_relative_scatter(r):.3f} |")

@@ -24,20 +24,28 @@ Two way (:func:`two_way`): iterate
    increments;
 
 until the handed-over stresses change by less than ``tol`` (relative, max norm over the
-regions) between two iterations and every element strains within ``max_strain_ratio`` times
-its region (settled stresses with an element straining far more than its region are a
-stall, not convergence: the loop stops, warns and reports ``converged_on="stalled"``), or
-``max_iterations``. Noise-aware: an element that reports
+regions) between two iterations, or ``max_iterations``. Noise-aware: an element that reports
 its stress scatter (``info["stress_scatter_pa"]``, the bootstrap of its contacts:
 ``cpp_dem.measure.stress_scatter``) sets a floor; a change within ``scatter_factor`` times
 the relative scatter ends the loop too, and says that ``tol`` was below it. The secant is
 relaxed between iterations (Aitken's factor by default, on (log E, nu) or on the stiffness
 matrix), which damps the 2-cycles a noisy element drives.
 
+The loop ends in one status per region and the worst of them for the loop
+(:mod:`femcoupling.status`; ``TwoWayResult.status``, ``.regions``):
+``converged`` (the change within ``tol``, the principal axes within ``max_rotation_deg`` of
+a walled element's walls, the element straining within [1 / ``max_strain_ratio``,
+``max_strain_ratio``] times its region), ``stopped_at_scatter`` (every check held but the
+change was only within the elements' scatter: the loop's map is deterministic, so that is
+not convergence), ``stalled`` (the change settled, but the axes or the strains failed their
+check: an element at its strength, a stiffness that cannot represent it, walls that miss
+the shear; iterating on does not help, so the loop stops and says so) or ``failed`` (no
+settling in ``max_iterations``).
+
 Every iteration checks what a wall-bounded element can represent (``RegionWarning``, in the
 log, the history and ``TwoWayResult.warnings``): principal axes of the FEM stress turned more
 than ``max_rotation_deg`` from the walls, and an element that strains more than
-``max_strain_ratio`` times its FEM region.
+``max_strain_ratio`` times its FEM region, or less than its inverse.
 
 ``element_runner(name, initial, final) -> ElementResponse`` is any callable (picklable, its
 class or function importable on the workers, if ``workers > 1``). Under MPI it runs on rank 0
@@ -60,6 +68,7 @@ from femcoupling.handover import (HandoverError, WallTargets, fem_to_dem, secant
 from femcoupling.materials import (AnisotropicElastic, LinearElastic, tensor_to_mandel,
                                    voigt_to_mandel_stiffness)
 from femcoupling.relaxation import check_relaxation, next_factor
+from femcoupling.status import CouplingStatus, judge_region, worst
 
 __all__ = ["ElementResponse", "HandoverHistory", "RegionWarning", "STIFFNESS_MODES",
            "TwoWayResult", "check_region", "element_stiffness", "one_way", "region_targets",
@@ -183,11 +192,14 @@ class TwoWayResult:
     """Outcome of :func:`two_way`.
 
     Attributes:
-        converged: the handed-over stresses changed by less than ``tol`` (or the elements'
-            scatter) and every element strained within ``max_strain_ratio`` times its
-            region (where both strains are known).
+        status: how the loop ended, the worst of its regions' (:mod:`femcoupling.status`):
+            "converged", "stopped_at_scatter", "stalled" or "failed".
+        reason: one line per region that is not converged ("region: reason"), or that every
+            check held.
+        regions: per region its :class:`~femcoupling.status.CouplingStatus` (status, reason,
+            final_change, tol, axes_rotation_deg, dem_fem_strain_ratio, checks).
         iterations: number of FEM solves of the load stage.
-        changes: relative change after each iteration (the first is inf).
+        changes: relative change after each iteration (the first is inf; max over regions).
         targets: final WallTargets per region.
         initial_targets: WallTargets of the initial state per region.
         responses: last ElementResponse per region.
@@ -196,15 +208,13 @@ class TwoWayResult:
         stiffnesses: per region the last full stiffness given (6 x 6 Mandel, Pa), or None
             where the region got the isotropic secant.
         warnings: every RegionWarning message, in order.
-        converged_on: "tol", "scatter" (the change was within the elements' scatter), or
-            "stalled" (it was, but an element strained more than ``max_strain_ratio`` times
-            its region: not converged).
         fem_strain_increments: per region its normal strain increment (3,) over the load
             stage in the last FEM solve, compression positive (None if the model has no
             ``region_strain``).
+        tol: the tolerance the loop was given, -.
     """
 
-    converged: bool
+    status: str
     iterations: int
     changes: list
     targets: dict
@@ -212,9 +222,28 @@ class TwoWayResult:
     responses: dict
     materials: dict
     warnings: list = dataclasses.field(default_factory=list)
-    converged_on: str = "tol"
     fem_strain_increments: dict = dataclasses.field(default_factory=dict)
     stiffnesses: dict = dataclasses.field(default_factory=dict)
+    regions: dict = dataclasses.field(default_factory=dict)
+    reason: str = ""
+    tol: float = math.nan
+
+    @property
+    def converged(self) -> bool:
+        """``status == "converged"`` (every check held)."""
+        return self.status == "converged"
+
+    @property
+    def converged_on(self) -> str:
+        """The older name of what ended the loop: "tol" (converged), "scatter"
+        (stopped_at_scatter), "stalled" or "max_iterations" (failed). Read ``status``."""
+        return {"converged": "tol", "stopped_at_scatter": "scatter", "stalled": "stalled",
+                "failed": "max_iterations"}[self.status]
+
+    @property
+    def final_change(self) -> float:
+        """The last relative change of the handed-over stresses (max over regions), -."""
+        return float(self.changes[-1]) if self.changes else math.inf
 
 
 STIFFNESS_MODES = ("tangent", "isotropic")
@@ -247,9 +276,9 @@ def check_region(name: str, targets: WallTargets, *, fem_strain_increment=None,
     """What a wall-bounded element cannot represent of its FEM region: the principal axes
     of the handed-over stress turned more than ``max_rotation_deg`` from the walls (not
     checked for an element that takes the ``full_tensor``), and the element's normal strain
-    increment (3,) more than ``max_strain_ratio`` times its region's (both compression
-    positive; largest components compared). Returns the messages and the strain ratio (NaN
-    without both strains)."""
+    increment (3,) outside [1 / ``max_strain_ratio``, ``max_strain_ratio``] times its
+    region's (both compression positive; largest components compared). Returns the messages
+    and the strain ratio (NaN without both strains)."""
     msgs = []
     if not full_tensor and targets.rotation_deg > max_rotation_deg:
         msgs.append(f"region {name}: the FEM stress's principal axes are turned "
@@ -262,9 +291,11 @@ def check_region(name: str, targets: WallTargets, *, fem_strain_increment=None,
         fe = float(np.abs(np.asarray(fem_strain_increment, float)).max())
         de = float(np.abs(np.asarray(dem_strain_increment, float)).max())
         ratio = de / fe if fe > 0 else math.inf
-        if ratio > max_strain_ratio:
+        if not 1.0 / max_strain_ratio <= ratio <= max_strain_ratio:
+            side = (f"> {max_strain_ratio:g}" if ratio > max_strain_ratio
+                    else f"< 1/{max_strain_ratio:g}")
             msgs.append(f"region {name}: the DEM element strains {ratio:.3g} times its FEM "
-                        f"region (> {max_strain_ratio:g}; DEM "
+                        f"region ({side}; DEM "
                         f"{np.round(dem_strain_increment, 6).tolist()}, FEM "
                         f"{np.round(fem_strain_increment, 6).tolist()}, compression +): the "
                         f"two scales do not describe the same soil")
@@ -333,7 +364,8 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
             "none", or a fixed factor in (0, 1].
         scatter_factor: the loop also ends when the change is within this many times the
             elements' relative stress scatter (when they report it), > 0.
-        max_rotation_deg, max_strain_ratio: the limits of :func:`check_region`.
+        max_rotation_deg, max_strain_ratio: the limits of :func:`check_region` (and of the
+            status: :func:`femcoupling.status.judge_region`), deg and -, > 0 and > 1.
         history_names: the names the regions have in ``history`` (default: ``regions``).
         stiffness: "tangent" (the element's tangent, made to reproduce its increment, where
             the element returns one; else the isotropic secant) or "isotropic" (always the
@@ -350,6 +382,11 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
         raise FemInputError(f"stiffness={stiffness!r}: must be one of {STIFFNESS_MODES}")
     if not (scatter_factor > 0 and math.isfinite(scatter_factor)):
         raise FemInputError(f"scatter_factor={scatter_factor!r}: must be > 0")
+    if not (max_rotation_deg > 0 and math.isfinite(max_rotation_deg)):
+        raise FemInputError(f"max_rotation_deg={max_rotation_deg!r}: must be > 0 (deg)")
+    if not (max_strain_ratio > 1 and math.isfinite(max_strain_ratio)):
+        raise FemInputError(f"max_strain_ratio={max_strain_ratio!r}: must be > 1 (the element "
+                            "and its region strain within that factor of each other)")
     regions = list(regions)
     names = list(history_names) if history_names is not None else regions
     if len(names) != len(regions):
@@ -370,7 +407,8 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
     final: dict = {}
     fem_de: dict = {}
     warned: list = []
-    converged, converged_on = False, "tol"
+    statuses: dict = {}  # per region its CouplingStatus, once the loop has ended
+    rchange = {r: math.inf for r in regions}  # per region its last change
     scatter = 0.0  # the elements' largest relative stress scatter, last iteration
     # relaxation of the secant: per region the (E, nu) given and the last full update
     omega = {r: 1.0 for r in regions}
@@ -391,6 +429,15 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
                             dem_strain_increment=None if resp is None else resp.strain_increment,
                             max_rotation_deg=max_rotation_deg,
                             max_strain_ratio=max_strain_ratio, full_tensor=_full(resp))
+
+    def judge(r: str, settled: bool, ratio: float) -> CouplingStatus:
+        """Region r's status (femcoupling.status.judge_region) at the loop's end."""
+        return judge_region(settled=settled, final_change=rchange[r], tol=tol,
+                            walled=not _full(responses.get(r)),
+                            axes_rotation_deg=final[r].rotation_deg,
+                            dem_fem_strain_ratio=ratio, scatter=scatter_factor * scatter,
+                            max_rotation_deg=max_rotation_deg,
+                            max_strain_ratio=max_strain_ratio, iterations=len(changes))
 
     def record(r: str, **row) -> None:
         """A history row of region r: the FEM side of this iteration and ``row``."""
@@ -428,8 +475,9 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
             if prev is None:
                 change = float("inf")
             else:
-                change = max(float(np.abs(final[r].fem_stress_pa - prev[r].fem_stress_pa).max()
-                                   / np.abs(prev[r].fem_stress_pa).max()) for r in regions)
+                rchange = {r: float(np.abs(final[r].fem_stress_pa - prev[r].fem_stress_pa).max()
+                                    / np.abs(prev[r].fem_stress_pa).max()) for r in regions}
+                change = max(rchange.values())
             changes.append(change)
             for r in regions:
                 say(f"iteration {it}, region {r}: {final[r].report()}; change {change:.3g}")
@@ -437,32 +485,32 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
             if not stop and change < scatter_factor * scatter:
                 stop, on = True, "scatter"
             if stop:
-                # The stresses have settled; the strains must have met too. An element that
-                # strains far more than its region was not given a stiffness that reproduces it
-                # (an element at its strength, answering within its scatter; a secant that cannot
-                # represent it): the loop has stalled, not converged. More iterations do not help
-                # (measured: the periodic smoke element then jumps by 29 %), so it stops and says.
+                # The stresses have settled; the coupled state must hold too: the strains met
+                # (an element that strains far more than its region was not given a stiffness
+                # that reproduces it: an element at its strength answering within its scatter, a
+                # secant that cannot represent it) and a walled element's axes within the walls'
+                # limit. Otherwise the loop has stalled, not converged. More iterations do not
+                # help (measured: the periodic smoke element then jumps by 29 %), so it stops
+                # and says so. A change within the scatter but above tol is not convergence
+                # either: the loop's map is deterministic.
                 checks = {r: check(r) for r in regions}
-                far = [(r, q) for r, (_, q) in checks.items() if q > max_strain_ratio]
-                if far:
-                    on = "stalled"
-                    within = "tol" if change < tol else "the elements' scatter"
+                statuses = {r: judge(r, True, checks[r][1]) for r in regions}
+                within = "tol" if change < tol else "the elements' scatter"
+                bad = {r: st for r, st in statuses.items() if st.status == "stalled"}
+                if bad:
                     warn(f"iteration {it}: the change {change:.3g} is within {within}, but "
-                         + ", ".join(f"region {r}'s element strains {q:.3g} times its region"
-                                     for r, q in far)
-                         + f" (> max_strain_ratio={max_strain_ratio:g}): the scales have not met; "
-                         "stopped, NOT converged (stalled: an element at its strength, or a "
-                         "stiffness that cannot represent it)")
-                elif on == "scatter":
+                         + "; ".join(f"region {r}: {'; '.join(st.failures)}"
+                                     for r, st in bad.items())
+                         + ": stopped, NOT converged (stalled)")
+                if on == "scatter":
                     warn(f"two-way: the change {change:.3g} is within the elements' stress "
                          f"scatter ({scatter:.3g} relative, the bootstrap of their contacts) but "
                          f"above tol={tol:g}: the tolerance asked is below what the elements "
                          f"resolve; stopped at the scatter")
-                converged, converged_on = on != "stalled", on
                 for r in regions:
                     msgs, ratio = checks[r]
                     for msg in msgs:
-                        warn(f"iteration {it} ({'converged' if converged else 'stalled'}): {msg}")
+                        warn(f"iteration {it} ({statuses[r].status}): {msg}")
                     record(r, strain_ratio=ratio)
                 break
             jobs = [(r, initial[r], final[r]) for r in regions]
@@ -529,12 +577,22 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
     finally:
         if pool is not None:
             pool.close()
-    if not converged and converged_on != "stalled":
+    if not statuses:  # (no settling in max_iterations)
         for r in regions:
-            msgs, _ = check(r)
+            msgs, ratio = check(r)
+            statuses[r] = judge(r, False, ratio)
             for msg in msgs:
                 warn(f"not converged after {len(changes)} FEM solves: {msg}")
-    return TwoWayResult(converged=converged, iterations=len(changes), changes=changes,
-                        targets=final, initial_targets=initial, responses=responses,
-                        materials=materials, warnings=warned, converged_on=converged_on,
-                        fem_strain_increments=dict(fem_de), stiffnesses=stiffnesses)
+    status = worst(st.status for st in statuses.values())
+    for r in regions:
+        say(f"two-way, region {statuses[r].line(r)}")
+    reason = ("; ".join(f"region {r}: {st.reason}" for r, st in statuses.items()
+                        if st.status != "converged")
+              or f"every check held in every region after {len(changes)} FEM solves")
+    say(f"two-way: {status} after {len(changes)} FEM solves"
+        + ("" if status == "converged" else " (NOT converged)"))
+    return TwoWayResult(status=status, reason=reason, regions=statuses, tol=float(tol),
+                        iterations=len(changes), changes=changes, targets=final,
+                        initial_targets=initial, responses=responses, materials=materials,
+                        warnings=warned, fem_strain_increments=dict(fem_de),
+                        stiffnesses=stiffnesses)

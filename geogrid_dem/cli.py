@@ -116,7 +116,10 @@ def run_cmd(target: str, extra: list[str]) -> None:
     dest = out_of(argv)
     if dest is not None and not helping:
         state = (rundir.run_status(dest) or {}).get("status")
-        if status == 0 or (status == rundir.EXIT_INTERRUPTED and state == "interrupted"):
+        # (a completed run that exits non-zero says how its coupling ended: its results and
+        # run file are kept as a converged run's)
+        if (status == 0 or state == "complete"
+                or (status == rundir.EXIT_INTERRUPTED and state == "interrupted")):
             params = argv_to_params(argv)
             params.pop("overwrite", None)  # a run file never replaces a run by itself
             write_run_file(dest, case, params)

@@ -475,16 +475,25 @@ def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) 
             except Exception as e:  # noqa: BLE001  (KilledWorker, a lost scheduler ...)
                 r = {"returncode": -1, "wall_s": 0.0,
                      "stderr_tail": f"{type(e).__name__}: {e}"}
-            ok = r["returncode"] == 0
+            # A row that completed but exits non-zero (a coupled run that did not converge:
+            # femcoupling.status.EXIT_CODES) keeps its results: 'completed', with its code.
+            from geogrid_dem import rundir
+
+            done = ((rundir.run_status(row_dir) or {}).get("status") == "complete"
+                    if row_dir.is_dir() else False)
+            ok = r["returncode"] == 0 or done
             if ok:
                 write_run_file(row_dir, case, params)
-            results[i] = {**base, "status": "ok" if ok else "failed",
-                          "wall_s": round(r["wall_s"], 3),
+            results[i] = {**base, "status": ("ok" if r["returncode"] == 0 else
+                                             "completed" if ok else "failed"),
+                          "exit_code": r["returncode"], "wall_s": round(r["wall_s"], 3),
                           **(_summary_of(row_dir) if ok else {"error": r["stderr_tail"]})}
             write_results(out, [x for x in results if x is not None])
             el = time.perf_counter() - t0
             eta = el / n_done * (len(todo) - n_done)
-            print(f"[sweep] row {i:03d} {'ok' if ok else 'FAILED'} in {r['wall_s']:.1f} s "
+            said = results[i]["status"].upper() if not ok else (
+                "ok" if r["returncode"] == 0 else f"completed (exit {r['returncode']})")
+            print(f"[sweep] row {i:03d} {said} in {r['wall_s']:.1f} s "
                        f"({n_done}/{len(todo)}, elapsed {el:.0f} s, ETA {eta:.0f} s)")
             if not ok:
                 print(f"[sweep] row {i:03d}: {r['stderr_tail']}", file=sys.stderr, flush=True)

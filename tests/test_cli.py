@@ -208,3 +208,32 @@ def test_ctrl_c_in_each_command_exits_130_with_one_line(tmp_path, monkeypatch, c
     assert e.value.code == 130
     err = capsys.readouterr().err.strip().splitlines()
     assert len(err) == 1 and err[0].startswith("[sweep] interrupted"), err
+
+
+def test_a_completed_run_that_exits_with_a_coupling_status_keeps_its_run_file(tmp_path,
+                                                                               monkeypatch):
+    """A coupled case that completes but did not converge exits 3, 4 or 5
+    (femcoupling.status.EXIT_CODES): its folder still gets run.toml, as a converged run's;
+    a run that failed gets none."""
+    from geogrid_dem import cli as gcli
+    from geogrid_dem import rundir
+
+    def completed(case, argv, source=None, code=4, state="complete"):
+        out = Path(argv[argv.index("--out") + 1])
+        rundir.begin_run(out, case, log=lambda m: None)
+        (out / "summary.json").write_text("{}\n")
+        rundir.end_run(out, state)
+        return code
+
+    out = tmp_path / "stalled"
+    monkeypatch.setattr(gcli, "run_case", completed)
+    with pytest.raises(SystemExit) as e:
+        gcli.run_cmd("triaxial", ["--smoke", "--out", str(out)])
+    assert e.value.code == 4
+    assert (out / "run.toml").is_file()
+    out = tmp_path / "failed"
+    monkeypatch.setattr(gcli, "run_case",
+                        lambda c, a, source=None: completed(c, a, code=1, state="failed"))
+    with pytest.raises(SystemExit):
+        gcli.run_cmd("triaxial", ["--smoke", "--out", str(out)])
+    assert not (out / "run.toml").exists()

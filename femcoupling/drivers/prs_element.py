@@ -138,6 +138,35 @@ def periodic_runner(p: ElementParams, out: Path, variant: str):
                                  cache_dir=str(out / "region_elements" / variant))
 
 
+def step_statuses(steps) -> dict:
+    """Per load step of the FEM's Newton (``StepResult``): its status, its accepted residual
+    (relative to the DEM region's own internal force), the tolerance on that scale and the
+    residual in Pa: the summary's record."""
+    return {"step_statuses": [r.status for r in steps],
+            "step_residuals": [float(r.residual) for r in steps],
+            "step_tols": [float(r.tol) for r in steps],
+            "step_residuals_pa": [float(r.residual_pa) for r in steps]}
+
+
+def hierarchical_status(hier: dict, fem_strain_increment, rotation_deg: float):
+    """The status of a hierarchical load stage (``femcoupling.status.judge_steps``) from its
+    record (``run_hierarchical``): its steps' statuses and residuals, and the element's (or
+    the cells' volume mean) strain increment against its FEM region's (compression
+    positive). The periodic elements take the full tensor: the axes are reported, not
+    checked."""
+    from types import SimpleNamespace
+
+    from femcoupling.status import judge_steps
+
+    steps = [SimpleNamespace(status=st, residual=r, tol=t) for st, r, t in
+             zip(hier["step_statuses"], hier["step_residuals"], hier["step_tols"])]
+    fe = float(np.abs(np.asarray(fem_strain_increment, float)).max())
+    de = float(np.abs(np.asarray(hier["element_strain_increment"], float)).max())
+    ratio = de / fe if fe > 0 else math.inf
+    return judge_steps(steps, dem_fem_strain_ratio=ratio, walled=False,
+                       axes_rotation_deg=rotation_deg)
+
+
 def run_hierarchical(p: ElementParams, out: Path, variant: str, m, load) -> dict:
     """The load stage with the region's material a periodic DEM element inside the FEM's
     Newton (``SoilModel.set_region_element``, ``femcoupling.region.DemRegionMaterial``),
@@ -168,6 +197,7 @@ def run_hierarchical(p: ElementParams, out: Path, variant: str, m, load) -> dict
         f"({mat.dem_s:.1f} s of DEM)")
     return {"newton_iterations": [int(r.newton_iterations) for r in steps],
             "converged_on": [r.converged_on for r in steps], "warnings": list(m.warnings),
+            **step_statuses(steps),
             "element_runs": mat.calls, "dem_s": mat.dem_s,
             "element_strain_increment": (-np.diag(de)).tolist(),
             "element_shear_strain_increment": [-de[1, 2], -de[0, 2], -de[0, 1]],  # yz xz xy
@@ -216,6 +246,7 @@ def run_cell_elements(p: ElementParams, out: Path, variant: str, m, load) -> dic
         f"{strains[:, 2].min():.3g} to {strains[:, 2].max():.3g}")
     return {"newton_iterations": [int(r.newton_iterations) for r in steps],
             "converged_on": [r.converged_on for r in steps], "warnings": list(m.warnings),
+            **step_statuses(steps),
             "element_runs": group.calls, "dem_s": group.dem_s, "cells": len(cells),
             # their volume mean: the region's (each cell's element strains as its cell)
             "element_strain_increment": (vol @ strains / vol.sum()).tolist(),
@@ -427,16 +458,17 @@ def run_variant(p: ElementParams, out: Path, variant: str) -> dict:
                                  "--calibrate, or --two-way-element walls") from exc
             fin = tw.targets["element"]
             stiff = tw.stiffnesses.get("element")
-            tws = {"element": p.two_way_element,
-                   "converged": tw.converged, "converged_on": tw.converged_on,
+            st = tw.regions["element"]
+            # status, reason, final_change, tol, axes_rotation_deg, dem_fem_strain_ratio,
+            # checks: the loop's element against its region (femcoupling.status)
+            tws = {"element": p.two_way_element, **st.as_dict(),
                    "iterations": tw.iterations,
                    "changes": [float(c) for c in tw.changes],
                    "materials": {k: list(v) for k, v in tw.materials.items()},
                    "stiffness_mandel_pa": None if stiff is None else stiff.tolist(),
                    "warnings": list(tw.warnings)}
-            log(f"two-way {variant}: {'converged' if tw.converged else 'NOT converged'}"
-                f" ({tw.converged_on}) after {tw.iterations} FEM solves, changes "
-                f"{tw.changes}")
+            log(f"two-way {variant}: {st.line('status')} ({tw.iterations} FEM solves, "
+                f"changes {np.round(tw.changes, 4).tolist()})")
             coupled_fem_state(m, info, ini, fin, "two-way",
                               tw.fem_strain_increments["element"])
         elif p.hierarchical:
@@ -446,6 +478,9 @@ def run_variant(p: ElementParams, out: Path, variant: str) -> dict:
             fin = region_targets(m, "element")
             coupled_fem_state(m, info, ini, fin, "hierarchical",
                               -np.diag(m.region_strain("element") - e0))
+            st = hierarchical_status(hier, info["strain_increment"], fin.rotation_deg)
+            hier.update(st.as_dict())
+            log(f"hierarchical {variant}: {st.line('status')}")
         label = f"element_{variant}"
         e = run_element(p, [ini.normal_pa, fin.normal_pa], prestressed=variant == "PRS",
                         label=label, out=out, grid_tension=handed_tension(p, [ini, fin], label))

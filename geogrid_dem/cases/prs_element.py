@@ -39,6 +39,15 @@ load and after each load step, the coupled ones in two-way and hierarchical runs
 ``fem_<RE|PRS>.png``, ``handover.h5`` (the handover history), ``report.md`` and
 ``summary.json``. SI units. DEM stresses and strains are
 compression positive; FEM stresses tension positive.
+
+A coupled run (``--two-way``, ``--hierarchical``) ends each variant in a status
+(``femcoupling.status``): ``converged``, ``stopped_at_scatter``, ``stalled`` or ``failed``,
+with its checks (summary ``two_way.<RE|PRS>`` or ``hierarchical.<RE|PRS>``: ``status``,
+``reason``, ``final_change``, ``tol``, ``axes_rotation_deg``, ``dem_fem_strain_ratio``;
+``coupling`` the worst of them). Exit status: 0 when the run completed and the coupling asked
+for (if any) converged; 3 ``stopped_at_scatter``, 4 ``stalled``, 5 ``failed`` (the worst
+variant's; the results are written all the same, and one line on stderr says it); 1 an
+error, 2 bad arguments, 130 / 143 interrupted.
 """
 
 from __future__ import annotations
@@ -135,6 +144,36 @@ def grid_line(f: dict, e: dict) -> str:
             f"{e['grid_force_end_members_mean_n']:.2f} N")
 
 
+def status_checks(t: dict) -> str:
+    """The report's words on a coupled variant's checks (its summary record ``t``): the final
+    change against its tolerance, the principal axes, the DEM/FEM strain ratio."""
+    def g(x, fmt: str) -> str:
+        return "unknown" if x is None else format(x, fmt)
+
+    axes = t.get("checks", {}).get("axes")
+    limit = (" (not checked: the element takes the full tensor)" if axes is None else
+             " (the walls' limit 15 deg: " + ("held" if axes else "NOT held") + ")")
+    return (f"final change {g(t['final_change'], '.3g')} (tol {g(t['tol'], '.3g')}), principal "
+            f"axes {g(t['axes_rotation_deg'], '.1f')} deg{limit}, DEM/FEM strain ratio "
+            f"{g(t['dem_fem_strain_ratio'], '.3g')} (within [0.5, 2]: "
+            + ("held" if t.get("checks", {}).get("strain_ratio") else "NOT held") + ")")
+
+
+def coupling_summary(summary: dict) -> dict | None:
+    """The summary's ``coupling`` record of a coupled run (two-way or hierarchical): the mode,
+    each variant's status, the worst of them and its exit status (femcoupling.status); None
+    for a run without coupling."""
+    from femcoupling.status import exit_code, worst
+
+    for mode, key in (("two-way", "two_way"), ("hierarchical", "hierarchical")):
+        if key in summary:
+            variants = {v: t["status"] for v, t in summary[key].items()}
+            status = worst(variants.values())
+            return {"mode": mode, "status": status, "exit_code": exit_code(status),
+                    "variants": variants}
+    return None
+
+
 def write_report(out: Path, summary: dict) -> None:
     lines = ["# PRS element: report", ""]
     mode = summary["mode"]
@@ -166,6 +205,11 @@ def write_report(out: Path, summary: dict) -> None:
                       f"{np.round(np.array(f['shear_pa']) / 1e3, 2).tolist()} kPa, principal "
                       f"axes turned {f['rotation_deg']:.1f} deg from the walls",
                       grid_line(f, e), ""]
+    if "coupling" in summary:
+        c = summary["coupling"]
+        lines += ["## Coupling status", "",
+                  f"- {c['mode']}: **{c['status']}** (exit status {c['exit_code']}): "
+                  + ", ".join(f"{v} {st}" for v, st in c["variants"].items()), ""]
     if "two_way" in summary:
         lines += ["## Two-way", ""]
         for v, t in summary["two_way"].items():
@@ -173,10 +217,9 @@ def write_report(out: Path, summary: dict) -> None:
                    else "its tangent by stress probes")
             kind = (f"{how} made to reproduce the increment (isotropic part E, nu)"
                     if t.get("stiffness_mandel_pa") else "isotropic secant (E, nu)")
-            lines.append(f"- {v}: {'converged' if t['converged'] else 'NOT converged'} "
-                         f"({t['converged_on']}) in {t['iterations']} FEM solves with the "
-                         f"{t.get('element', 'walls')} element; changes {t['changes']}; "
-                         f"{kind} {t['materials']}")
+            lines.append(f"- {v}: **{t['status']}** in {t['iterations']} FEM solves with the "
+                         f"{t.get('element', 'walls')} element: {status_checks(t)}; "
+                         f"{t['reason']}; changes {t['changes']}; {kind} {t['materials']}")
         lines.append("")
     if "hierarchical" in summary:
         lines += ["## Hierarchical", ""]
@@ -186,6 +229,7 @@ def write_report(out: Path, summary: dict) -> None:
                 sz = [s[2] for s in h["cell_stresses_final_pa"]]
                 lines.append(f"- {v}: an element of {h['cell_grains']} grains per cell of the "
                              f"region ({h['cells']} cells) inside the FEM's Newton: "
+                             f"**{h['status']}** ({status_checks(h)}; {h['reason']}); "
                              f"iterations per load step {h['newton_iterations']}, "
                              f"{h['element_runs']} evaluations ({h['dem_s']:.1f} s of DEM, "
                              f"preparation {h['preparation_s']:.1f} s); the cells' strain "
@@ -193,7 +237,8 @@ def write_report(out: Path, summary: dict) -> None:
                              f"{min(sz) / 1e3:.1f} to {max(sz) / 1e3:.1f} kPa")
                 continue
             lines.append(f"- {v}: the region's material a periodic DEM element inside the "
-                         f"FEM's Newton: iterations per load step {h['newton_iterations']}, "
+                         f"FEM's Newton: **{h['status']}** ({status_checks(h)}; "
+                         f"{h['reason']}); iterations per load step {h['newton_iterations']}, "
                          f"{h['element_runs']} element runs ({h['dem_s']:.1f} s of DEM); its "
                          f"strain increment (x, y, z) "
                          f"{np.round(h['element_strain_increment'], 6).tolist()} (the "
@@ -258,6 +303,9 @@ def run(p: Params, out: Path) -> dict:
             summary["two_way"] = {v: r["two_way"] for v, r in zip(VARIANTS, parts)}
         if p.hierarchical:
             summary["hierarchical"] = {v: r["hierarchical"] for v, r in zip(VARIANTS, parts)}
+        coupling = coupling_summary(summary)
+        if coupling is not None:
+            summary["coupling"] = coupling
         # one handover record, RE's rows then PRS's, whatever ran where
         with HandoverHistory(out / "handover.h5", regions=HISTORY_REGIONS,
                              metadata={"case": "prs_element"}) as hist:
@@ -273,6 +321,10 @@ def run(p: Params, out: Path) -> dict:
         log(f"{v}: walls held within {100 * e['hold_max_rel_error']:.2f} %; |u| above/below "
             f"grid {1e3 * e['disp_above_grid_mean_m']:.3f}/{1e3 * e['disp_below_grid_mean_m']:.3f}"
             f" mm; longitudinal grid force {e['grid_force_longitudinal_mean_n']:.2f} N")
+    if "coupling" in summary:
+        c = summary["coupling"]
+        log(f"{c['mode']} coupling: {c['status']} ("
+            + ", ".join(f"{v} {st}" for v, st in c["variants"].items()) + ")")
     log(f"done in {summary['wall_time_total_s']:.1f} s; report in {out / 'report.md'}")
     return summary
 
@@ -479,9 +531,30 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     return p, a.out
 
 
+def coupling_exit(summary: dict | None, status: int, out) -> int:
+    """The exit status of a completed run (``status`` 0 from run_main) whose coupling did not
+    converge: its code (femcoupling.status.EXIT_CODES), said in one line on stderr; any
+    other status unchanged."""
+    c = None if summary is None else summary.get("coupling")
+    if status != 0 or c is None or c["status"] == "converged":
+        return status
+    print(f"[prs_element] the {c['mode']} coupling did not converge: "
+          + ", ".join(f"{v} {st}" for v, st in c["variants"].items())
+          + f" (exit status {c['exit_code']}; the results are in {out}, the checks in "
+          "report.md)", file=sys.stderr, flush=True)
+    return c["exit_code"]
+
+
 def main(argv=None) -> int:
     p, out = parse_args(argv)
-    return run_main("prs_element", out, lambda o: run(p, o))
+    done: dict = {}
+
+    def work(o):
+        done["out"] = o
+        done["summary"] = run(p, o)
+
+    status = run_main("prs_element", out, work)
+    return coupling_exit(done.get("summary"), status, done.get("out", out))
 
 
 if __name__ == "__main__":
