@@ -35,7 +35,7 @@ from collections.abc import Iterable
 
 from femcoupling.geometry import FemInputError
 
-__all__ = ["EXIT_CODES", "STATUSES", "CouplingStatus", "exit_code", "judge_region",
+__all__ = ["EXIT_CODES", "STATUSES", "CouplingStatus", "check_limits", "exit_code", "judge_region",
            "judge_steps", "newton_acceptance", "worst"]
 
 #: the statuses, best first
@@ -128,6 +128,16 @@ class CouplingStatus:
                 f"strain {g(self.dem_fem_strain_ratio, '.3g')}): {self.reason}")
 
 
+def check_limits(max_rotation_deg: float, max_strain_ratio: float) -> None:
+    """The checks' limits: ``max_rotation_deg`` > 0 (deg), ``max_strain_ratio`` > 1 (-);
+    raises FemInputError naming the field and the value."""
+    if not (max_rotation_deg > 0 and math.isfinite(max_rotation_deg)):
+        raise FemInputError(f"max_rotation_deg={max_rotation_deg!r}: must be > 0 (deg)")
+    if not (max_strain_ratio > 1 and math.isfinite(max_strain_ratio)):
+        raise FemInputError(f"max_strain_ratio={max_strain_ratio!r}: must be > 1 (the element "
+                            "and its region strain within that factor of each other)")
+
+
 def judge_region(*, settled: bool, final_change: float, tol: float, walled: bool,
                  axes_rotation_deg: float = math.nan, dem_fem_strain_ratio: float = math.nan,
                  scatter: float = 0.0, max_rotation_deg: float = 15.0,
@@ -152,11 +162,7 @@ def judge_region(*, settled: bool, final_change: float, tol: float, walled: bool
     """
     if not (tol > 0 and math.isfinite(tol)):
         raise FemInputError(f"tol={tol!r}: must be > 0 (relative)")
-    if not (max_rotation_deg > 0 and math.isfinite(max_rotation_deg)):
-        raise FemInputError(f"max_rotation_deg={max_rotation_deg!r}: must be > 0 (deg)")
-    if not (max_strain_ratio > 1 and math.isfinite(max_strain_ratio)):
-        raise FemInputError(f"max_strain_ratio={max_strain_ratio!r}: must be > 1 (the strains "
-                            "within that factor of each other)")
+    check_limits(max_rotation_deg, max_strain_ratio)
     change, rot, q = _num(final_change), _num(axes_rotation_deg), _num(dem_fem_strain_ratio)
     checks: dict = {"tolerance": bool(change <= tol)}
     fails = []

@@ -68,7 +68,7 @@ from femcoupling.handover import (HandoverError, WallTargets, fem_to_dem, secant
 from femcoupling.materials import (AnisotropicElastic, LinearElastic, tensor_to_mandel,
                                    voigt_to_mandel_stiffness)
 from femcoupling.relaxation import check_relaxation, next_factor
-from femcoupling.status import CouplingStatus, judge_region, worst
+from femcoupling.status import CouplingStatus, check_limits, judge_region, worst
 
 __all__ = ["ElementResponse", "HandoverHistory", "RegionWarning", "STIFFNESS_MODES",
            "TwoWayResult", "check_region", "element_stiffness", "one_way", "region_targets",
@@ -382,11 +382,7 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
         raise FemInputError(f"stiffness={stiffness!r}: must be one of {STIFFNESS_MODES}")
     if not (scatter_factor > 0 and math.isfinite(scatter_factor)):
         raise FemInputError(f"scatter_factor={scatter_factor!r}: must be > 0")
-    if not (max_rotation_deg > 0 and math.isfinite(max_rotation_deg)):
-        raise FemInputError(f"max_rotation_deg={max_rotation_deg!r}: must be > 0 (deg)")
-    if not (max_strain_ratio > 1 and math.isfinite(max_strain_ratio)):
-        raise FemInputError(f"max_strain_ratio={max_strain_ratio!r}: must be > 1 (the element "
-                            "and its region strain within that factor of each other)")
+    check_limits(max_rotation_deg, max_strain_ratio)
     regions = list(regions)
     names = list(history_names) if history_names is not None else regions
     if len(names) != len(regions):
