@@ -71,6 +71,7 @@ def test_the_pool_on_a_started_cluster_is_bitwise_serial_and_survives_a_lost_nod
     assert st.recovered  # its elements rebuilt on the other worker
     assert len(pool.workers()) == 1
     assert all(np.array_equal(a, b) for a, b in zip(serial, st.stresses))
+    pool.close()  # (its spill files; the cluster is the fixture's)
 
 
 def test_two_way_runs_its_regions_on_a_started_cluster(cluster):

@@ -1,7 +1,8 @@
 """ElementPool (cpp_dem.elements.pool): DEM elements held on Dask workers across increments.
 Results are bitwise those of the serial elements for 1, 2 and 4 workers; a rejected increment
-restores every element; a killed worker's elements are rebuilt from their accepted bytes and
-the run ends as an undisturbed one."""
+restores every element; a killed worker's elements are rebuilt from their accepted bytes (its
+spill files) and the run ends as an undisturbed one. Late workers, the bytes through the client
+and recovery without copies: test_pool_scaling.py."""
 
 from __future__ import annotations
 
@@ -57,7 +58,9 @@ def test_a_killed_worker_does_not_change_the_result(serial):
         os.kill(sorted(pids.items())[0][1], signal.SIGKILL)
         time.sleep(0.5)
         st = pool.apply_strain(_increments())
-        assert st.recovered  # that worker's elements were rebuilt elsewhere
+        # that worker's elements were rebuilt elsewhere, from the spill files it wrote in
+        # this machine's temporary directory (the client keeps no copy by default)
+        assert st.recovered
         assert all(np.array_equal(a, b) for a, b in zip(serial, st.stresses))
 
 

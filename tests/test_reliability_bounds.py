@@ -6,6 +6,7 @@ why it cannot be carried (docs/reliability.md, "Requests without bounds, and the
 from __future__ import annotations
 
 import math
+import pathlib
 import tracemalloc
 
 import numpy as np
@@ -106,6 +107,8 @@ def test_elements_lost_without_copies_are_named_not_restarted_from_their_build_s
         pool.accept()
         addr = _kill_one_worker(pool)
         lost = sorted(k for k, a in pool._where.items() if a == addr)
+        for k in lost:  # their spill files gone with the node (its local disk)
+            pathlib.Path(pool.saved_states()[k].spill).unlink()
         with pytest.raises(ElementLostError, match=r"keep_copies=True") as e:
             pool.apply_strain(_pool_increments(4))
         assert f"elements {lost}" in str(e.value) and addr in str(e.value)

@@ -1,6 +1,7 @@
 """The Dask plumbing shared by the element pool (`cpp_dem.elements.pool`) and the FEM side's
-runner pool (`femcoupling.runner_pool`): a local cluster, a client for a running scheduler, a
-check that an object can be sent to the workers, and closing a pool that fails while starting."""
+runner pool (`femcoupling.runner_pool`): a local cluster, a client for a running scheduler, the
+workers there now and waiting for a number of them, a check that an object can be sent to the
+workers, and closing a pool that fails while starting."""
 
 from __future__ import annotations
 
@@ -39,6 +40,25 @@ def dask_client(scheduler: str | None, workers: int):
     return Client(scheduler), None
 
 
+def alive_workers(client) -> list:
+    """The addresses of the workers the scheduler has now, sorted (one small message: the
+    scheduler's thread count per worker, not its whole worker table)."""
+    return sorted(client.nthreads())
+
+
+def wait_for_workers(client, n: int, timeout_s: float) -> None:
+    """Waits until the cluster of ``client`` has at least ``n`` workers (a batch system's
+    jobs start when the queue lets them); after ``timeout_s`` seconds raises a RuntimeError
+    saying how many came."""
+    if not (isinstance(n, int) and n >= 1):
+        raise ParameterError(f"min_workers={n!r}: an integer >= 1")
+    try:
+        client.wait_for_workers(n, timeout=timeout_s)
+    except TimeoutError as e:
+        raise RuntimeError(f"min_workers={n}: only {len(alive_workers(client))} worker(s) "
+                           f"joined within timeout_s={timeout_s:g} s") from e
+
+
 def check_sendable(obj, name: str) -> None:
     """Refuses what Dask cannot send to a worker (an actor call with it would wait forever:
     the error stays in Dask's communication thread)."""
@@ -61,4 +81,5 @@ def closed_on_error(pool):
     except BaseException:
         pool.close()
         raise
-__all__ = ["check_sendable", "closed_on_error", "dask_client", "local_client"]
+__all__ = ["alive_workers", "check_sendable", "closed_on_error", "dask_client", "local_client",
+           "wait_for_workers"]

@@ -1,4 +1,4 @@
-"""Persistent DEM elements on ``dask.distributed`` workers (issue 18, first part).
+"""Persistent DEM elements on ``dask.distributed`` workers (issues 18 and 37).
 
 An ``ElementPool`` holds many ``DemElement``s (docs/periodic.md) in the memory of Dask
 workers, as actors: one actor per worker holds that worker's elements across load steps and
@@ -6,13 +6,28 @@ Newton iterations, so an element is never rebuilt between calls. The pool
 
 - applies one strain increment per element (``apply_strain``), all workers at once, and
   returns the stresses (Pa, tension positive) and, if asked, the tangents (6 x 6 Voigt, Pa);
-- ``accept()`` saves every element's state as bytes (on the workers and, by default, a copy
-  in the client), ``reject()`` restores every element to the last accepted state (a rejected
-  Newton iteration);
-- survives a lost worker: the lost elements are rebuilt on the other workers from their last
-  accepted bytes and the increment in flight is redone, so the result is the same as an
-  undisturbed run (each element's arithmetic does not depend on where it runs: one thread
-  per worker, fixed-order sums).
+- ``accept()`` saves every element's state as bytes **on its worker**: kept in the worker's
+  memory (for ``reject()``) and written to a spill file, in the worker's local temporary
+  directory or in ``state_dir`` (a directory every worker sees: shared storage). The client
+  receives only each element's digest and size (tens of bytes), not its state; with
+  ``keep_copies=True`` (opt-in) it also keeps a copy of every element's bytes;
+- ``reject()`` restores every element to the last accepted state (a rejected Newton
+  iteration);
+- gives elements to workers that join after it was built: at the next boundary (the first
+  ``apply_strain`` after a build, ``accept``, ``reject`` or ``load_states``, when every element
+  is at its accepted state) elements move from the busiest hosts, by their accepted bytes, to
+  the new workers' hosts, worker to worker (or through their spill files in ``state_dir``);
+  ``min_workers=`` waits for that many workers before the elements are built;
+- survives a lost worker: its elements are rebuilt on the other workers from their accepted
+  state, read from the spill file where a surviving worker can reach it (``state_dir``, or
+  the same machine), else from the client's copy (``keep_copies=True``), each checked
+  against its digest; the calls since the last accept are redone, so the result is the same
+  as an undisturbed run. Where neither is there, ``ElementLostError`` names the elements:
+  the pool never restarts an element from a wrong state.
+
+Each element's arithmetic does not depend on where it runs (one thread per worker,
+fixed-order sums, the state restored bitwise from its bytes), so the results are bitwise the
+same for any number of workers, with late or lost workers.
 
 The default cluster is a ``LocalCluster`` of single-threaded worker processes on this
 machine; pass ``client=`` to use any Dask cluster (``dask-jobqueue``'s SLURMCluster or
@@ -21,14 +36,26 @@ PBSCluster, ``SSHCluster``, ``dask-mpi``: docs/multiscale.md). SI units.
 
 from __future__ import annotations
 
+import hashlib
+import os
+import pickle
+import shutil
+import tempfile
 import time
+import uuid
+import weakref
 from dataclasses import dataclass
+from pathlib import Path
 from typing import Callable, Sequence
 
 import numpy as np
 
 from cpp_dem._core import ParameterError
-from cpp_dem.elements.cluster import check_sendable, closed_on_error, local_client
+from cpp_dem.elements.cluster import (alive_workers, check_sendable, closed_on_error,
+                                      local_client, wait_for_workers)
+
+#: Seconds to wait for an actor to start on a worker, or for a worker-to-worker move.
+START_TIMEOUT_S = 120.0
 
 
 class ElementError(RuntimeError):
@@ -37,36 +64,166 @@ class ElementError(RuntimeError):
 
 
 class ElementLostError(RuntimeError):
-    """Elements whose worker was lost cannot be restarted from their accepted state: with
-    ``keep_copies=False`` that state lived only on the lost worker. The message names the
-    elements, the worker and what the client still holds."""
+    """Elements whose worker was lost cannot be restarted from their accepted state: no
+    surviving worker could read their spill file (or it did not match the accepted state's
+    digest), and the client holds no copy (``keep_copies=False``). The message names the
+    elements, the worker, the files tried and what would have recovered them."""
+
+
+def state_digest(data: bytes) -> str:
+    """The digest that identifies an element's saved state (BLAKE2b, 16 bytes, hex)."""
+    return hashlib.blake2b(data, digest_size=16).hexdigest()
+
+
+def _spill_root(state_dir: str | None, pool_id: str) -> Path:
+    """The pool's spill directory on this machine: ``state_dir/pool-<id>`` when shared, else
+    ``<Dask's temporary-directory or the system's>/cpp_dem-pool-<id>``."""
+    if state_dir is not None:
+        return Path(state_dir) / f"pool-{pool_id}"
+    import dask
+
+    base = dask.config.get("temporary-directory", None) or tempfile.gettempdir()
+    return Path(base) / f"cpp_dem-pool-{pool_id}"
+
+
+def _payload_bytes(obj) -> int:
+    """The bytes of the data in ``obj`` (bytes, arrays, strings, numbers, nested in dicts,
+    lists and tuples): what a message carrying it weighs, less the framing."""
+    if obj is None:
+        return 0
+    if isinstance(obj, (bytes, bytearray, memoryview)):
+        return len(obj)
+    if isinstance(obj, np.ndarray):
+        return obj.nbytes
+    if isinstance(obj, str):
+        return len(obj)
+    if isinstance(obj, dict):
+        return sum(_payload_bytes(k) + _payload_bytes(v) for k, v in obj.items())
+    if isinstance(obj, (list, tuple)):
+        return sum(_payload_bytes(v) for v in obj)
+    if isinstance(obj, (int, float, np.number, bool)):
+        return 8
+    return len(pickle.dumps(obj))
 
 
 class ElementHost:
-    """The actor on one worker: a dict of DemElements by index, and their accepted bytes."""
+    """The actor on one worker: a dict of DemElements by index, their accepted bytes (in
+    memory) and their spill files (the accepted bytes on disk, the last two accepts).
 
-    def __init__(self) -> None:
+    ``spill_dir``: the pool's shared spill directory (``shared=True``: files named by element
+    and generation, the same path whichever worker writes them), or None for this worker's
+    local temporary directory (a folder of its own under the pool's)."""
+
+    def __init__(self, spill_dir: str | None, pool_id: str) -> None:
         from cpp_dem import set_num_threads
 
         set_num_threads(1)  # one element at a time per worker process: results as serial
         self.elements: dict = {}
         self.accepted: dict = {}
+        self.shared = spill_dir is not None
+        self.host_id = uuid.uuid4().hex[:10]
+        root = _spill_root(spill_dir, pool_id)
+        self.dir = root if self.shared else root / f"host-{self.host_id}"
+        self.dir.mkdir(parents=True, exist_ok=True)
+        self.files: dict = {}  # element index -> [(generation, path)] written by this host
 
-    def add(self, index: int, data: bytes) -> int:
+    # ---- the spill ---------------------------------------------------------------------
+    def _path(self, k: int, generation: int) -> Path:
+        return self.dir / f"element-{k:06d}.g{generation}.bin"
+
+    def _spill(self, k: int, data: bytes, generation: int) -> tuple:
+        """Writes the accepted bytes of element k (accept number ``generation``) to its spill
+        file (atomically: a reader sees the old file or the whole new one) and removes its
+        files older than the previous accept (which stays, in case this accept does not
+        complete). Returns (digest, size in bytes, path)."""
+        path = self._path(k, generation)
+        tmp = path.with_name(f"{path.name}.{self.host_id}.tmp")
+        with open(tmp, "wb") as f:
+            f.write(data)
+        os.replace(tmp, path)
+        keep = []
+        for g, p in self.files.get(k, []):
+            if g < generation - 1:
+                p.unlink(missing_ok=True)
+            elif p != path:
+                keep.append((g, p))
+        if self.shared and generation >= 2:  # (written by whichever host had k then)
+            self._path(k, generation - 2).unlink(missing_ok=True)
+        self.files[k] = keep + [(generation, path)]
+        return state_digest(data), len(data), str(path)
+
+    def _set(self, k: int, data: bytes, generation: int, path: str | None = None) -> tuple:
+        """Element k restored from its accepted bytes, kept and spilled (not written again
+        when ``path`` is already this host's file for that generation)."""
         from cpp_dem.elements.periodic import DemElement
 
-        self.elements[index] = DemElement.from_bytes(data)
-        self.accepted[index] = data
-        return index
+        self.elements[k] = DemElement.from_bytes(data)
+        self.accepted[k] = data
+        if path is not None and Path(path) == self._path(k, generation):
+            self.files.setdefault(k, []).append((generation, Path(path)))
+            return state_digest(data), len(data), path
+        return self._spill(k, data, generation)
 
-    def build(self, index: int, factory: Callable) -> bytes:
-        """Builds element ``index`` with ``factory(index)`` (a DemElement); returns its bytes."""
+    # ---- placing elements --------------------------------------------------------------
+    def build(self, index: int, factory: Callable, generation: int, send: bool) -> dict:
+        """Builds element ``index`` with ``factory(index)`` (a DemElement); keeps and spills
+        its bytes; returns its record (and the bytes if ``send``)."""
         el = factory(index)
         data = el.to_bytes()
         self.elements[index] = el
         self.accepted[index] = data
-        return data
+        return {"record": self._spill(index, data, generation),
+                "bytes": data if send else None}
 
+    def add(self, index: int, data: bytes, generation: int, digest: str | None = None) -> tuple:
+        """Element ``index`` from bytes the client sent; returns its record."""
+        if digest is not None and state_digest(data) != digest:
+            raise ValueError(f"element {index}: the bytes sent do not match the digest "
+                             f"{digest} of its accepted state")
+        return self._set(index, data, generation)
+
+    def load(self, items: list, generation: int) -> dict:
+        """Restores elements from their spill files: ``items`` is [(index, path, digest)].
+        Returns index -> record, or index -> the reason (a string) the file could not be
+        used (missing here, unreadable, or not the accepted state)."""
+        out = {}
+        for k, path, digest in items:
+            try:
+                data = Path(path).read_bytes()
+            except OSError as e:
+                out[k] = f"{path}: {e.strerror or e} on this worker"
+                continue
+            if state_digest(data) != digest:
+                out[k] = f"{path}: not the accepted state (its digest differs)"
+                continue
+            out[k] = self._set(k, data, generation, path)
+        return out
+
+    def take(self, indices: list, source: tuple, digests: dict, generation: int) -> dict:
+        """Moves elements from another host to this one, worker to worker: ``source`` is that
+        host's (worker address, actor key). Returns index -> record."""
+        from distributed.actor import Actor
+
+        other = Actor(ElementHost, source[0], source[1])
+        got = other.saved(indices).result(timeout=START_TIMEOUT_S)
+        out = {}
+        for k in indices:
+            if state_digest(got[k]) != digests[k]:
+                raise ValueError(f"element {k}: the bytes moved from {source[0]} do not match "
+                                 "the digest of its accepted state")
+            out[k] = self._set(k, got[k], generation)
+        return out
+
+    def drop(self, indices) -> None:
+        """Forgets elements moved to another host (and their local spill files)."""
+        for k in indices:
+            self.elements.pop(k, None)
+            self.accepted.pop(k, None)
+            for _g, p in self.files.pop(k, []):
+                if not self.shared:  # (a shared file is the new host's now)
+                    p.unlink(missing_ok=True)
+
+    # ---- the increment -----------------------------------------------------------------
     def apply(self, indices, increments, tangent: str | None, strain_kw: dict,
               scatter: bool = False) -> list:
         out = []
@@ -87,11 +244,16 @@ class ElementHost:
                         "scatter": el.stress_scatter() if scatter else None})
         return out
 
-    def accept(self, indices, send: bool = True) -> dict:
-        """Saves the elements' states as accepted; returns their bytes if ``send``."""
+    def accept(self, indices, generation: int, send: bool = False) -> dict:
+        """Saves the elements' states as accepted (in memory and spilled); returns their
+        records (digest, size, path) and, if ``send``, their bytes."""
+        records, sent = {}, {}
         for k in indices:
-            self.accepted[k] = self.elements[k].to_bytes()
-        return {k: self.accepted[k] for k in indices} if send else {}
+            data = self.accepted[k] = self.elements[k].to_bytes()
+            records[k] = self._spill(k, data, generation)
+            if send:
+                sent[k] = data
+        return {"records": records, "bytes": sent if send else None}
 
     def saved(self, indices) -> dict:
         """The accepted bytes of ``indices``."""
@@ -102,6 +264,32 @@ class ElementHost:
 
         for k in indices:
             self.elements[k] = DemElement.from_bytes(self.accepted[k])
+
+    def memory(self) -> dict:
+        """This worker's elements and their accepted bytes: {"elements", "accepted_bytes",
+        "rss_bytes" (the worker process's resident memory)}."""
+        import psutil
+
+        return {"elements": len(self.elements),
+                "accepted_bytes": sum(len(b) for b in self.accepted.values()),
+                "rss_bytes": psutil.Process().memory_info().rss}
+
+    def close(self) -> None:
+        """Drops the elements and removes this host's spill files."""
+        self.drop(list(self.elements))
+        for files in self.files.values():
+            for _g, p in files:
+                p.unlink(missing_ok=True)
+        self.files = {}
+        if self.shared:
+            for p in self.dir.glob(f"*.{self.host_id}.tmp"):
+                p.unlink(missing_ok=True)
+        else:
+            shutil.rmtree(self.dir, ignore_errors=True)
+        try:
+            (self.dir if self.shared else self.dir.parent).rmdir()  # (if it is empty now)
+        except OSError:
+            pass
 
 
 @dataclass
@@ -153,77 +341,171 @@ class PoolStep:
     scatters: list | None = None
 
 
+@dataclass(frozen=True)
+class SavedState:
+    """What the client knows of an element's accepted state (its bytes stay on the workers):
+    ``generation`` (the number of accepts and loads before it; 0: built or given),
+    ``digest`` (``state_digest`` of its bytes), ``size_bytes`` and ``spill`` (the file its
+    worker wrote)."""
+
+    generation: int
+    digest: str
+    size_bytes: int
+    spill: str
+
+
 class ElementPool:
     """Many DemElements on Dask workers. Build it with ``ElementPool.build(n, factory)``
     (each element made on a worker by ``factory(index)``) or from saved bytes
-    (``ElementPool(data_list)``)."""
+    (``ElementPool(data_list)``).
+
+    Options (``build`` and the constructor):
+
+    - ``client``: a Dask client (any cluster; it stays open at ``close()``), else a
+      ``LocalCluster`` of ``workers`` single-threaded processes of the pool's own;
+    - ``keep_copies``: also keep every element's accepted bytes in the client (what a lost
+      worker's elements restart from when no surviving worker can read their spill file;
+      costs the elements' whole state through the client at every ``accept``). Default
+      False: the client keeps only digests and sizes;
+    - ``state_dir``: a directory every worker can reach (a shared filesystem; a relative
+      path is taken from the client's working directory), where the accepted states are
+      spilled (``state_dir/pool-<id>/``, the last two accepts); default
+      None: each worker's local temporary directory (Dask's ``temporary-directory``, else
+      the system's), reachable after a loss only by workers of the same machine;
+    - ``min_workers``: wait until the cluster has this many workers (at most ``timeout_s``
+      seconds) before placing the elements;
+    - ``rebalance``: give elements to workers that joined after the pool was built (default
+      True).
+
+    ``close()`` removes the spill files and stops the pool's own cluster."""
 
     def __init__(self, data: Sequence[bytes], *, client=None, workers: int = 2,
-                 keep_copies: bool = True) -> None:
-        self._connect(client, workers, keep_copies, len(data))
-        self._bytes = list(data)  # last accepted states, in the client
+                 keep_copies: bool = False, state_dir: str | os.PathLike | None = None,
+                 min_workers: int | None = None, timeout_s: float = 600.0,
+                 rebalance: bool = True) -> None:
+        data = list(data)
+        for k, d in enumerate(data):
+            if not isinstance(d, (bytes, bytearray)):
+                raise ParameterError(f"data[{k}]: {type(d).__name__}, expected the bytes of a "
+                                     "saved DemElement (DemElement.to_bytes)")
+        self._connect(client, workers, keep_copies, len(data), state_dir, min_workers,
+                      timeout_s, rebalance)
         with closed_on_error(self):
-            self._start_hosts()
-            self._place(range(self.n))
+            self._start_hosts(self._alive())
+            addrs = sorted(self._hosts)
+            self._where = {k: addrs[k % len(addrs)] for k in range(self.n)}
+            self._send(range(self.n), data, 0)
 
-    def _connect(self, client, workers: int, keep_copies: bool, n: int) -> None:
-        """The client (a LocalCluster of ``workers`` single-threaded processes when none is
-        given) and the empty placement of n elements."""
+    def _connect(self, client, workers, keep_copies, n, state_dir, min_workers, timeout_s,
+                 rebalance) -> None:
+        """Checks the options, connects (a LocalCluster of ``workers`` single-threaded
+        processes when no client is given), waits for ``min_workers`` and sets up the empty
+        placement of n elements."""
+        if n < 1:
+            raise ParameterError(f"n={n}: need at least one element")
+        for name, v in (("keep_copies", keep_copies), ("rebalance", rebalance)):
+            if not isinstance(v, bool):
+                raise ParameterError(f"{name}={v!r}: must be True or False")
+        if state_dir is not None and not isinstance(state_dir, (str, os.PathLike)):
+            raise ParameterError(f"state_dir={state_dir!r}: a directory path (str or Path) "
+                                 "that every worker can reach, or None for the workers' "
+                                 "local temporary directories")
+        if not (isinstance(timeout_s, (int, float)) and timeout_s > 0):
+            raise ParameterError(f"timeout_s={timeout_s!r}: seconds, > 0")
+        if min_workers is not None:
+            if not (isinstance(min_workers, int) and min_workers >= 1):
+                raise ParameterError(f"min_workers={min_workers!r}: an integer >= 1, or None")
+            if client is None and min_workers > workers:
+                raise ParameterError(f"min_workers={min_workers} > workers={workers}: the "
+                                     "pool's own LocalCluster never grows; pass client= for "
+                                     "a cluster whose workers join later")
+        self.keep_copies, self.rebalance, self.n = keep_copies, rebalance, n
+        # (a relative state_dir is taken from the client's working directory)
+        self.state_dir = (None if state_dir is None
+                          else str(Path(state_dir).expanduser().absolute()))
+        self.timeout_s = float(timeout_s)
+        self.pool_id = uuid.uuid4().hex[:12]
+        # The spill files this machine can see go with the pool: at close(), or when the
+        # pool is collected or the client exits without it.
+        self._remove_spill = weakref.finalize(
+            self, shutil.rmtree, str(_spill_root(self.state_dir, self.pool_id)), True)
+        self._hosts: dict = {}  # worker address -> actor
+        self._where: dict = {}  # element index -> worker address
+        self._saved: list = [None] * n  # SavedState per element
+        self._copies: list | None = [None] * n if keep_copies else None
+        self._generation = 0  # accepts and loads so far
+        self._accepts = 0
+        self._log: list = []  # the apply_strain calls since the last accept or reject
+        self._clean = True  # every element at its accepted state (a placement boundary)
+        self._received: dict = {}  # what the client received, by call: bytes
+        self.moves: list = []  # (element, from worker, to worker), every rebalance move
         self._own_cluster = None
         if client is None:
             client, self._own_cluster = local_client(workers)
-        self.client, self.keep_copies, self.n = client, keep_copies, n
-        self._hosts: dict = {}  # worker address -> actor
-        self._where: dict = {}  # element index -> worker address
-        # Elements whose accepted state is newer than the client's copy (keep_copies=False
-        # after an accept()): a lost worker's such elements cannot be restarted right.
-        self._stale: set = set()
-        self._accepts = 0  # accept() calls so far
+        self.client = client
+        if min_workers is not None:
+            with closed_on_error(self):
+                wait_for_workers(client, min_workers, self.timeout_s)
 
     @classmethod
     def build(cls, n: int, factory: Callable, *, client=None, workers: int = 2,
-              keep_copies: bool = True) -> "ElementPool":
+              keep_copies: bool = False, state_dir: str | os.PathLike | None = None,
+              min_workers: int | None = None, timeout_s: float = 600.0,
+              rebalance: bool = True) -> "ElementPool":
         """n elements made on the workers by ``factory(index)`` (a picklable callable
-        returning a DemElement), spread over them; their first states are accepted."""
-        if n < 1:
-            raise ParameterError(f"n={n}: need at least one element")
+        returning a DemElement), spread over them; their first states are accepted. Options:
+        see the class."""
+        if not (isinstance(n, int) and n >= 1):
+            raise ParameterError(f"n={n!r}: need at least one element")
         check_sendable(factory, "factory")
         pool = cls.__new__(cls)
-        pool._connect(client, workers, keep_copies, n)
-        pool._bytes = [None] * n
+        pool._connect(client, workers, keep_copies, n, state_dir, min_workers, timeout_s,
+                      rebalance)
         with closed_on_error(pool):
-            pool._start_hosts()
+            pool._start_hosts(pool._alive())
             addrs = sorted(pool._hosts)
             futures = []
             for k in range(n):
-                a = addrs[k % len(addrs)]
-                pool._where[k] = a
-                futures.append((k, pool._hosts[a].build(k, factory)))
+                a = pool._where[k] = addrs[k % len(addrs)]
+                futures.append((k, pool._hosts[a].build(k, factory, 0, keep_copies)))
             for k, f in futures:
-                pool._bytes[k] = f.result()
+                got = f.result()
+                pool._count("build", got)
+                pool._record(k, 0, got["record"], got["bytes"])
         return pool
 
-    # ---- placement ---------------------------------------------------------------------
-    def _start_hosts(self) -> None:
-        addrs = sorted(self.client.scheduler_info()["workers"])
-        if not addrs:
-            raise RuntimeError("ElementPool: the Dask cluster has no workers")
-        for a in addrs:
-            if a in self._hosts:
-                continue
-            fut = self.client.submit(ElementHost, actor=True, workers=[a], pure=False)
-            self._hosts[a] = fut.result()
+    # ---- bookkeeping -------------------------------------------------------------------
+    def _count(self, kind: str, obj) -> None:
+        self._received[kind] = self._received.get(kind, 0) + _payload_bytes(obj)
 
-    def _place(self, indices) -> None:
-        """Loads the accepted bytes of ``indices`` onto hosts, spread round-robin."""
-        addrs = sorted(self._hosts)
-        futures = []
-        for j, k in enumerate(sorted(indices)):
-            a = addrs[j % len(addrs)]
-            self._where[k] = a
-            futures.append(self._hosts[a].add(k, self._bytes[k]))
-        for f in futures:
-            f.result()
+    def received_bytes(self) -> dict:
+        """The bytes the client has received from the workers so far, by kind of call
+        ("build", "apply", "accept", "states", "move", "recover"): the payload (states,
+        arrays, digests), less the messages' framing."""
+        return dict(self._received)
+
+    def held_bytes(self) -> int:
+        """The bytes of element data the pool keeps in the client: the records of the
+        accepted states (digests, sizes, file names), the client's copies
+        (``keep_copies``), the increments of the calls since the last accept (kept to redo
+        them after a loss) and the log of moves."""
+        return _payload_bytes([[(s.digest, s.size_bytes, s.spill, s.generation)
+                                for s in self._saved if s is not None],
+                               self._copies, self._log, self.moves])
+
+    def _record(self, k: int, generation: int, rec: tuple, data: bytes | None = None) -> None:
+        digest, size, path = rec
+        self._saved[k] = SavedState(generation, digest, int(size), path)
+        if self._copies is not None and data is not None:
+            self._copies[k] = data
+
+    def saved_states(self) -> list:
+        """What the client knows of every element's accepted state (index order): a
+        ``SavedState`` each (digest, size, spill file); the bytes are on the workers."""
+        return list(self._saved)
+
+    def _alive(self) -> list:
+        return alive_workers(self.client)
 
     def workers(self) -> list:
         """The addresses of the workers holding elements."""
@@ -235,70 +517,257 @@ class ElementPool:
             groups.setdefault(self._where[k], []).append(k)
         return groups
 
+    def _loads(self) -> dict:
+        """Worker address -> the accepted bytes of the elements it holds (every host)."""
+        load = {a: 0 for a in self._hosts}
+        for k, a in self._where.items():
+            if a in load:
+                load[a] += self._saved[k].size_bytes if self._saved[k] else 0
+        return load
+
+    # ---- placement ---------------------------------------------------------------------
+    def _start_hosts(self, addrs) -> list:
+        """An ElementHost on every worker of ``addrs`` that has none; returns the new ones
+        (a worker that leaves meanwhile is skipped)."""
+        new = [a for a in sorted(addrs) if a not in self._hosts]
+        futures = {a: self.client.submit(ElementHost, self.state_dir, self.pool_id, actor=True,
+                                         workers=[a], pure=False) for a in new}
+        started = []
+        for a, fut in futures.items():
+            try:
+                self._hosts[a] = fut.result(timeout=START_TIMEOUT_S)
+                started.append(a)
+            except Exception as e:  # noqa: BLE001
+                fut.cancel()
+                if a in self._alive():  # (else that worker left meanwhile: not a host)
+                    raise RuntimeError(f"ElementPool: no element host could start on worker "
+                                       f"{a} (state_dir={self.state_dir!r}): "
+                                       f"{type(e).__name__}: {e}") from e
+        if not self._hosts:
+            raise RuntimeError("ElementPool: the Dask cluster has no workers")
+        return started
+
+    def _send(self, indices, data, generation: int) -> None:
+        """Sends the given bytes of ``indices`` (index order) to their hosts in ``_where``."""
+        futures = []
+        for k, d in zip(indices, data):
+            d = bytes(d)
+            futures.append((k, d, self._hosts[self._where[k]].add(k, d, generation,
+                                                                   state_digest(d))))
+        for k, d, f in futures:
+            rec = f.result()
+            self._count("load", rec)
+            self._record(k, generation, rec, d)
+        self._generation = generation
+
+    def _check_workers(self) -> list:
+        """At a boundary (every element at its accepted state): elements of workers gone
+        meanwhile are recovered (their indices returned), and workers that joined get
+        elements (``rebalance``)."""
+        before = set(self._hosts)
+        alive = self._alive()
+        gone = [a for a in self._hosts if a not in alive]
+        recovered = self._recover(set(gone)) if gone else []  # (starts hosts where needed)
+        if self.rebalance:
+            self._start_hosts(alive)
+            new = sorted(a for a in self._hosts if a not in before)
+            if new:
+                self._rebalance(new)
+        return recovered
+
+    def _plan(self, new: list) -> list:
+        """Moves (element, from, to) that even out the accepted bytes per host, from the
+        busiest hosts to the new ones: each move takes the largest element of the busiest
+        host that is smaller than the gap to the lightest new host (so the spread shrinks;
+        ties by index and address: the same cluster gives the same plan)."""
+        load = self._loads()
+        held: dict = {a: [] for a in self._hosts}
+        for k in sorted(self._where):
+            held[self._where[k]].append(k)
+        size = {k: (self._saved[k].size_bytes if self._saved[k] else 1) for k in self._where}
+        moves = []
+        while True:
+            dst = min(new, key=lambda a: (load[a], a))
+            src = max(self._hosts, key=lambda a: (load[a], a))
+            gap = load[src] - load[dst]
+            fits = [k for k in held[src] if size[k] < gap]
+            if src == dst or not fits:
+                return moves
+            k = max(fits, key=lambda j: (size[j], -j))
+            held[src].remove(k)
+            held[dst].append(k)
+            load[src] -= size[k]
+            load[dst] += size[k]
+            moves.append((k, src, dst))
+
+    def _rebalance(self, new: list) -> None:
+        """Carries out ``_plan(new)``: through the spill files in ``state_dir`` when there is
+        one, else worker to worker (the new host fetches the bytes from the old one), else
+        (that failing) through the client. Each element's bytes are checked against its
+        digest; an element whose move fails stays where it was."""
+        groups: dict = {}
+        for k, src, dst in self._plan(new):
+            groups.setdefault((src, dst), []).append(k)
+        g = self._generation
+        got: dict = {}  # element -> its record on the new host
+
+        def collect(futures: dict) -> None:
+            for (src, dst), f in futures.items():
+                try:
+                    res = f.result(timeout=START_TIMEOUT_S)
+                except Exception:  # noqa: BLE001 - tried again the next way
+                    continue
+                self._count("move", res)
+                got.update({k: r for k, r in res.items() if not isinstance(r, str)})
+
+        if self.state_dir is not None:  # (the spill files: no transfer between workers)
+            collect({(src, dst): self._hosts[dst].load(
+                [(k, self._saved[k].spill, self._saved[k].digest) for k in ks], g)
+                for (src, dst), ks in groups.items()})
+        rest = {sd: [k for k in ks if k not in got] for sd, ks in groups.items()}
+        collect({(src, dst): self._hosts[dst].take(
+            ks, (src, self._hosts[src].key), {k: self._saved[k].digest for k in ks}, g)
+            for (src, dst), ks in rest.items() if ks})
+        for (src, dst), ks in sorted(groups.items()):
+            ks_left = [k for k in ks if k not in got]
+            if ks_left:  # no worker-to-worker link: through the client
+                try:
+                    data = self._hosts[src].saved(ks_left).result(timeout=START_TIMEOUT_S)
+                    self._count("move", data)
+                    for k in ks_left:
+                        got[k] = self._hosts[dst].add(k, data[k], g,
+                                                      self._saved[k].digest).result()
+                except Exception:  # noqa: BLE001 - they stay on src (or are recovered later)
+                    pass
+        drops = []
+        for (src, dst), ks in sorted(groups.items()):
+            done = [k for k in ks if k in got]
+            try:
+                drops.append(self._hosts[src].drop(done))
+            except Exception:  # noqa: BLE001 - src gone: nothing to drop
+                pass
+            for k in done:
+                self._where[k] = dst
+                self._record(k, g, got[k])
+                self.moves.append((k, src, dst))
+        for f in drops:
+            try:
+                f.result(timeout=START_TIMEOUT_S)
+            except Exception:  # noqa: BLE001
+                pass
+
     def _recover(self, lost: set) -> list:
-        """Rebuilds the elements of the lost workers on the others; returns their indices."""
+        """Rebuilds the elements of the lost workers on the others from their accepted
+        states, then redoes the calls since the last accept; returns their indices."""
         for a in lost:
             self._hosts.pop(a, None)
-        alive = set(self.client.scheduler_info()["workers"])
+        alive = []
+        for _ in range(100):  # (a LocalCluster restarts a killed worker: wait for one)
+            alive = self._alive()
+            if alive:
+                break
+            time.sleep(0.1)
         for a in list(self._hosts):
             if a not in alive:
                 self._hosts.pop(a)
-        self._start_hosts()
-        moved = [k for k, a in self._where.items() if a not in self._hosts]
-        stale = sorted(k for k in moved if k in self._stale)
-        if stale:
-            gone = sorted({self._where[k] for k in stale})
+        self._start_hosts(alive)
+        moved = sorted(k for k, a in self._where.items() if a not in self._hosts)
+        if not moved:
+            return []
+        gone = {k: self._where[k] for k in moved}
+        load = self._loads()
+        for k in moved:  # the lightest host each, by accepted bytes (ties by address)
+            a = min(load, key=lambda h: (load[h], h))
+            self._where[k] = a
+            load[a] += self._saved[k].size_bytes
+        why: dict = {}
+        futures = {a: self._hosts[a].load([(k, self._saved[k].spill, self._saved[k].digest)
+                                           for k in ks], self._saved[ks[0]].generation)
+                   for a, ks in self._by_host(moved).items()}
+        for a, f in futures.items():
+            res = f.result()
+            self._count("recover", res)
+            for k, r in res.items():
+                if isinstance(r, str):
+                    why[k] = r
+                else:
+                    self._record(k, self._saved[k].generation, r)
+        if why and self._copies is not None:
+            fs = {k: self._hosts[self._where[k]].add(k, self._copies[k],
+                                                      self._saved[k].generation,
+                                                      self._saved[k].digest) for k in why}
+            for k, f in fs.items():
+                self._record(k, self._saved[k].generation, f.result())
+            why = {}
+        if why:
+            bad = sorted(why)
+            workers = sorted({gone[k] for k in bad})
+            for k in bad:  # (still lost: the next call tries again, and says so again)
+                self._where[k] = gone[k]
             raise ElementLostError(
-                f"elements {stale}: lost with worker(s) {gone}; with keep_copies=False their "
-                f"accepted state (after accept() number {self._accepts}) was kept only on "
-                "that worker, and the client holds an older one (built or loaded, before any "
-                "accepted increment): restarting from it would give wrong stresses. Build the "
-                "pool with keep_copies=True (the default) to restart lost elements from their "
-                "accepted state, or restart the run from saved states (states(), "
-                "load_states()).")
-        if moved:
-            self._place(moved)
+                f"elements {bad}: lost with worker(s) {workers}, and their accepted state "
+                f"(after accept() number {self._accepts}) is not reachable: "
+                + "; ".join(f"element {k}: {why[k]}" for k in bad[:5])
+                + (" ..." if len(bad) > 5 else "")
+                + ". The client keeps no copy (keep_copies=False), and restarting from "
+                "another state would give wrong stresses. Give state_dir= a directory every "
+                "worker sees (a shared filesystem), or build the pool with keep_copies=True, "
+                "to restart lost elements from their accepted state; or restart the run from "
+                "saved states (states(), load_states()).")
+        self._replay(moved)
         return moved
 
-    # ---- the increment ---------------------------------------------------------------------
+    def _replay(self, indices) -> None:
+        """Redoes the logged ``apply_strain`` calls since the last accept on ``indices``."""
+        for increments, tangent, scatter, strain_kw in self._log:
+            futures = [self._hosts[a].apply(ks, [increments[k] for k in ks], tangent,
+                                            strain_kw, scatter)
+                       for a, ks in self._by_host(indices).items()]
+            for f in futures:
+                f.result()
+
+    # ---- the increment -----------------------------------------------------------------
     def apply_strain(self, increments, *, tangent: str | None = None, scatter: bool = False,
                      **strain_kw) -> PoolStep:
         """Applies increment ``increments[k]`` (3 x 3 displacement gradient, -) to element k,
         all in parallel; ``tangent``: None, "network" (sliding contacts on the Coulomb cone),
         "network-elastic" (sliding contacts taken as stuck) or "fd"; ``scatter``: also each
         element's stress scatter (``DemElement.stress_scatter``). Keyword arguments go to
-        ``DemElement.apply_strain``. A worker lost during the call: its elements are rebuilt
-        from their last accepted bytes elsewhere and their increment redone; with
-        ``keep_copies=False`` after an ``accept()`` those bytes were on the lost worker only,
-        and ElementLostError names the elements instead."""
+        ``DemElement.apply_strain``. Called at a boundary (after a build, accept, reject or
+        load), it first gives elements to workers that joined. A worker lost during the call:
+        its elements are rebuilt elsewhere from their accepted states and the calls since
+        the last accept redone (``ElementLostError`` where no accepted state is reachable)."""
         if len(increments) != self.n:
             raise ParameterError(f"increments: {len(increments)} given for {self.n} elements")
         if tangent not in (None, "network", "network-elastic", "fd"):
             raise ParameterError(f"tangent={tangent!r}: None, 'network', 'network-elastic' "
                                  "or 'fd'")
+        increments = [np.array(d, copy=True) for d in increments]  # (kept for a replay)
         t0 = time.perf_counter()
+        recovered: list = self._check_workers() if self._clean else []
+        self._clean = False
         results: dict = {}
         todo = list(range(self.n))
-        recovered: list = []
         for _attempt in range(3):
             futures = {}
             lost = set()
             for a, ks in self._by_host(todo).items():
                 try:  # (an actor whose worker is gone fails here already)
-                    futures[a] = self._hosts[a].apply(
-                        ks, [np.asarray(increments[k]) for k in ks], tangent, strain_kw,
-                        scatter)
+                    futures[a] = self._hosts[a].apply(ks, [increments[k] for k in ks], tangent,
+                                                      strain_kw, scatter)
                 except Exception:  # noqa: BLE001
                     lost.add(a)
             errors = {}
             for a, f in futures.items():
                 try:
-                    for r in f.result():
+                    got = f.result()
+                    self._count("apply", got)
+                    for r in got:
                         results[r["index"]] = r
                 except Exception as e:  # noqa: BLE001 - the worker is gone, or an element failed
                     lost.add(a)
                     errors[a] = e
-            alive = set(self.client.scheduler_info()["workers"])
+            alive = set(self._alive()) if lost else set()
             for a in list(lost):
                 if a in alive and a in errors:
                     # The worker is there: an element itself failed (a blow-up, a bad
@@ -309,8 +778,8 @@ class ElementPool:
             todo = [k for k in range(self.n) if k not in results]
             if not todo:
                 break
-            # (The elements of a lost host restart from their accepted state, as do the
-            # results it had not returned.)
+            # (The elements of a lost host restart from their accepted state and redo the
+            # calls since the last accept, then this one.)
             moved = self._recover(lost)
             recovered += moved
             for k in todo:
@@ -318,6 +787,7 @@ class ElementPool:
                     raise RuntimeError(f"element {k}: no result and its worker is alive")
         if todo:
             raise RuntimeError(f"elements {todo}: lost three times; giving up")
+        self._log.append((increments, tangent, scatter, dict(strain_kw)))
         order = range(self.n)
         return PoolStep([results[k]["stress"] for k in order],
                         [results[k]["tangent"] for k in order],
@@ -328,50 +798,131 @@ class ElementPool:
                         [results[k]["scatter"] for k in order] if scatter else None)
 
     def accept(self) -> None:
-        """Saves every element's current state as its accepted state (on its worker and, with
-        keep_copies, in the client, which is what a lost worker's elements restart from)."""
-        futures = [self._hosts[a].accept(ks, self.keep_copies)
-                   for a, ks in self._by_host(range(self.n)).items()]
-        for f in futures:
-            got = f.result()
-            if self.keep_copies:
-                for k, data in got.items():
-                    self._bytes[k] = data
+        """Saves every element's current state as its accepted state, on its worker (in
+        memory, and spilled to disk); the client receives each element's digest and size
+        only (and, with ``keep_copies``, its bytes). A worker lost meanwhile: its elements
+        are recovered (their accepted state, and the calls since) and then accepted."""
+        g = self._generation + 1
+        todo = list(range(self.n))
+        pending: dict = {}  # (the records stay the previous accept's until all have saved)
+        for _attempt in range(3):
+            futures, lost, errors = {}, set(), {}
+            for a, ks in self._by_host(todo).items():
+                try:
+                    futures[a] = self._hosts[a].accept(ks, g, self.keep_copies)
+                except Exception:  # noqa: BLE001 - its worker is gone
+                    lost.add(a)
+            done = set()
+            for a, f in futures.items():
+                try:
+                    got = f.result()
+                except Exception as e:  # noqa: BLE001 - its worker is gone, or its disk failed
+                    lost.add(a)
+                    errors[a] = e
+                    continue
+                self._count("accept", got)
+                for k, rec in got["records"].items():
+                    done.add(k)
+                    pending[k] = (rec, (got["bytes"] or {}).get(k))
+            todo = [k for k in todo if k not in done]
+            if not todo:
+                break
+            alive = self._alive()
+            for a in sorted(lost):
+                if a in alive:  # (the worker is there: saving or spilling failed)
+                    e = errors.get(a)
+                    raise RuntimeError(f"accept: elements {self._by_host(todo).get(a)} on {a}: "
+                                       f"{type(e).__name__}: {e}") from e
+            self._recover(lost)
+        if todo:
+            raise RuntimeError(f"elements {todo}: lost three times while accepting; giving up")
+        for k, (rec, data) in pending.items():
+            self._record(k, g, rec, data)
+        self._generation = g
         self._accepts += 1
-        if not self.keep_copies:
-            self._stale = set(range(self.n))
+        self._log = []
+        self._clean = True
 
     def reject(self) -> None:
         """Restores every element to its last accepted state."""
-        futures = [self._hosts[a].reject(ks) for a, ks in self._by_host(range(self.n)).items()]
-        for f in futures:
-            f.result()
+        self._log = []
+        for _attempt in range(3):
+            futures, lost, errors = {}, set(), {}
+            for a, ks in self._by_host(range(self.n)).items():
+                try:
+                    futures[a] = self._hosts[a].reject(ks)
+                except Exception:  # noqa: BLE001 - its worker is gone
+                    lost.add(a)
+            for a, f in futures.items():
+                try:
+                    f.result()
+                except Exception as e:  # noqa: BLE001
+                    lost.add(a)
+                    errors[a] = e
+            if not lost:
+                break
+            alive = self._alive()
+            for a in sorted(lost):
+                if a in alive:
+                    e = errors.get(a)
+                    raise RuntimeError(f"reject: elements {self._by_host(range(self.n))[a]} on "
+                                       f"{a}: {type(e).__name__}: {e}") from e
+            self._recover(lost)  # (restored at their accepted state: the rejection itself)
+        self._clean = True
 
     def states(self) -> list:
-        """The last accepted bytes of every element (index order); with ``keep_copies=False``
-        fetched from the workers."""
-        if not self._stale:
-            return list(self._bytes)
-        out = list(self._bytes)
-        futures = [self._hosts[a].saved(ks) for a, ks in self._by_host(sorted(self._stale)).items()]
+        """The last accepted bytes of every element (index order): the client's copies with
+        ``keep_copies``, else fetched from the workers now (the elements' whole state
+        through the client: an explicit call, for saving a run)."""
+        if self._copies is not None:
+            return list(self._copies)
+        out: list = [None] * self.n
+        futures = [self._hosts[a].saved(ks) for a, ks in self._by_host(range(self.n)).items()]
         for f in futures:
-            for k, data in f.result().items():
+            got = f.result()
+            self._count("states", got)
+            for k, data in got.items():
                 out[k] = data
         return out
 
     def load_states(self, data: Sequence[bytes]) -> None:
         """Every element back to the given accepted bytes (index order; ``states()`` of this
-        pool earlier), loaded on the workers."""
+        pool earlier), loaded on the workers (and spilled there)."""
+        data = list(data)
         if len(data) != self.n:
             raise ParameterError(f"data: {len(data)} states given for {self.n} elements")
-        self._bytes = list(data)
-        self._stale = set()
-        self._place(range(self.n))
+        for k, d in enumerate(data):
+            if not isinstance(d, (bytes, bytearray)):
+                raise ParameterError(f"data[{k}]: {type(d).__name__}, expected the bytes of a "
+                                     "saved DemElement (DemElement.to_bytes)")
+        self._log = []
+        self._send(range(self.n), data, self._generation + 1)
+        self._clean = True
+
+    def memory(self) -> dict:
+        """Worker address -> {"elements", "accepted_bytes", "rss_bytes"} of every host."""
+        futures = {a: h.memory() for a, h in self._hosts.items()}
+        return {a: f.result() for a, f in sorted(futures.items())}
 
     def close(self) -> None:
-        """Stops the pool's own LocalCluster and its client; a given ``client=`` stays open
-        (its cluster is the caller's)."""
-        if self._own_cluster is None:
+        """Removes the spill files, drops the elements from the workers and stops the pool's
+        own LocalCluster and its client; a given ``client=`` stays open (its cluster is the
+        caller's)."""
+        hosts, self._hosts = getattr(self, "_hosts", {}), {}
+        futures = []
+        for h in hosts.values():
+            try:
+                futures.append(h.close())
+            except Exception:  # noqa: BLE001 - a worker gone: nothing to close there
+                pass
+        for f in futures:
+            try:
+                f.result(timeout=30)
+            except Exception:  # noqa: BLE001
+                pass
+        if hasattr(self, "_remove_spill"):  # (lost workers' files here, the shared dir)
+            self._remove_spill()
+        if getattr(self, "_own_cluster", None) is None:
             return
         try:
             self.client.close()
@@ -385,4 +936,5 @@ class ElementPool:
         self.close()
 
 
-__all__ = ["ElementPool", "ElementError", "ElementHost", "ElementLostError", "PeriodicFactory", "PoolStep"]
+__all__ = ["ElementPool", "ElementError", "ElementHost", "ElementLostError", "PeriodicFactory",
+           "PoolStep", "SavedState", "state_digest"]
