@@ -106,9 +106,11 @@ def write_vtk_state(sample: pullout.PulloutSample, vtk_dir: Path, name: str,
 
 
 def plot_pull(rec: dict, png_force: Path, png_members: Path, title: str,
-              summary: dict | None = None) -> None:
+              summary: dict | None = None, more_forces: dict | None = None) -> None:
     """Force-displacement with the top-wall stress (000 Fig. 5) and the axial stresses of
-    members A and C in apertures 1 and 2 (000 Figs 7 and 8)."""
+    members A and C in apertures 1 and 2 (000 Figs 7 and 8). ``more_forces``: series name ->
+    legend label of further forces (N) of ``rec``, drawn on a right-hand axis of the
+    force-displacement plot."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -124,7 +126,16 @@ def plot_pull(rec: dict, png_force: Path, png_members: Path, title: str,
                    else "largest force so far (no peak yet)")
     ax[0].set_xlabel("front displacement (mm)")
     ax[0].set_ylabel("pull-out force (N)")
-    ax[0].legend()
+    if more_forces:
+        right = ax[0].twinx()
+        for k, (name, label) in enumerate(more_forces.items()):
+            right.plot(d_mm, rec[name], color=f"C{4 + k}", lw=0.8, label=label)
+        right.set_ylabel("force (N), right-hand axis")
+        h0, l0 = ax[0].get_legend_handles_labels()
+        h1, l1 = right.get_legend_handles_labels()
+        ax[0].legend(h0 + h1, l0 + l1, fontsize=8)
+    else:
+        ax[0].legend()
     ax[1].plot(d_mm, rec["top_stress"] / 1e3, color="C2")
     ax[1].set_xlabel("front displacement (mm)")
     ax[1].set_ylabel("top-wall normal stress (kPa)")
@@ -153,11 +164,18 @@ def plot_pull(rec: dict, png_force: Path, png_members: Path, title: str,
 def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
              prep_kwargs: dict, velocity: float, distance: float, record_every: int,
              snapshot_displacements, grain_density: float, stress: float, title: str,
-             log, before_pull=None) -> dict:
+             log, before_pull=None, extra_series: dict | None = None,
+             extra_summary=None) -> dict:
     """Prepares the sample, pulls it, writes every output in ``out``; returns the summary.
     ``before_pull(sample)``, if given, runs between the preparation and the pull (e.g. a
     speed-accuracy preset that applies to the pull only). A clump counts as one grain
-    (``num_grains``); ``num_spheres`` counts the spheres (a clump's members)."""
+    (``num_grains``); ``num_spheres`` counts the spheres (a clump's members).
+
+    ``extra_series``: name -> (fn(sample) -> float, unit, legend label): more columns of the
+    record, each evaluated at every record (after pullout.pull_record, on the same state) and
+    written to pullout.h5/.csv beside the standard ones; the returned record holds them too,
+    and pullout_force.png draws them on a right-hand axis.
+    ``extra_summary(rec) -> dict``: more entries of summary.json, from the whole record."""
     t_start = time.perf_counter()
     begin_run(out, tag)
     vtk = out / "vtk"
@@ -192,15 +210,32 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
     inertial = pullout.inertial_number(velocity, grain_density, stress)
     log(f"preparation {t_prep:.1f} s; pulling at {velocity} m/s to {distance * 1e3:g} mm "
         f"(inertial number I = v sqrt(rho/sigma) = {inertial:.2g}), dt {sc.dt:.3g} s")
-    h5 = H5Recorder(out / "pullout.h5", series=SERIES, overwrite=True,
+    extra_series = dict(extra_series or {})
+    # A member the grid does not have (index -1, e.g. the transverse members C of a grid of
+    # triangles) has NaN in pullout.pull_record; its series are not recorded (the recorders
+    # write no NaN).
+    absent = {f"{q}_{k}" for k, m in sample.aperture_members().items() if m < 0
+              for q in ("force", "stress")}
+    series = {**{k: v for k, v in SERIES.items() if k not in absent},
+              **{k: (None, e[1]) for k, e in extra_series.items()}}
+    extra_values: dict[str, list] = {k: [] for k in extra_series}
+    h5 = H5Recorder(out / "pullout.h5", series=series, overwrite=True,
                     metadata={**meta, "units": "SI; pull towards -x; pull-out force and member "
                                                "forces tension/resistance positive"},
                     snapshot_fields=("positions", "velocities", "radii"))
-    csv = CsvRecorder(out / "pullout.csv", series=SERIES, overwrite=True)
+    csv = CsvRecorder(out / "pullout.csv", series=series, overwrite=True)
     last = [time.perf_counter()]
     t_pull0 = time.perf_counter()
+    nan = float("nan")
 
     def on_record(row: dict) -> None:
+        if extra_series:
+            more = {k: float(e[0](sample)) for k, e in extra_series.items()}
+            for k, v in more.items():
+                extra_values[k].append(v)
+            row = {**row, **more}
+        if absent:
+            row = {k: v for k, v in row.items() if k not in absent}
         h5.record(**row)
         csv.record(**row)
         if time.perf_counter() - last[0] > 5:
@@ -208,8 +243,9 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
             frac = row["displacement"] / distance
             el = time.perf_counter() - t_pull0
             eta = el * (1 - frac) / frac if frac > 0.01 else float("nan")
+            a1, c1 = row.get("force_A1", nan), row.get("force_C1", nan)
             log(f"d {1e3 * row['displacement']:7.2f} mm  F {row['pull_force']:9.2f} N  "
-                f"A1 {row['force_A1']:8.2f} N  C1 {row['force_C1']:8.2f} N  top "
+                f"A1 {a1:8.2f} N  C1 {c1:8.2f} N  top "
                 f"{row['top_stress'] / 1e3:6.2f} kPa  ({100 * frac:.0f} %, ~{eta:.0f} s left)")
 
     def on_snapshot(d: float) -> None:
@@ -235,8 +271,12 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
             p.close()
     t_pull = time.perf_counter() - t_pull0
     pull_steps = sc.step_count - steps0
+    rec = {**rec, **{k: np.asarray(v, float) for k, v in extra_values.items()}}
     summ = pullout.summarize(rec)
-    plot_pull(rec, out / "pullout_force.png", out / "pullout_members.png", title, summ)
+    if extra_summary is not None:
+        summ = {**summ, **extra_summary(rec)}
+    plot_pull(rec, out / "pullout_force.png", out / "pullout_members.png", title, summ,
+              {k: e[2] for k, e in extra_series.items()} or None)
     ov_end = largest_overlaps(sc)
     summary = {**meta, **summ, "num_grains": n_grains,
                "num_clumps": int(sc.num_clumps), "num_spheres": n_spheres,
