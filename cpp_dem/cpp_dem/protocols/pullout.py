@@ -62,7 +62,8 @@ class PulloutSample:
     grain_material : material index of the grains.
     grid_z : height of the geogrid plane, m.
     clamp_nodes : body ids of the nodes the clamp holds and pulls.
-    front_nodes : body ids of the nodes of the front edge (x = min), where 001 measures.
+    front_nodes : body ids of the nodes of the front edge (x = min). (001's App. A sums the
+        back row instead: geogrid_dem.cases.pullout_001, force_001.)
     node_density_scale : the factor on the grid node masses (1 = true masses).
     true_node_masses : the unscaled node masses, kg (their weight is what gravity applies).
     apertures : (2, 2) cells (i, j) of apertures 1 and 2 (see the module docstring).
