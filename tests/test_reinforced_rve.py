@@ -1,7 +1,7 @@
-"""The reinforced-soil RVE (issue 38): a periodic cell of grains around an endless woven
-sheet (cpp_dem.elements.reinforced). The sheet alone gives its tensile stiffness per metre
-(the series value of its bonds, woven.series_stiffness_per_metre); a prestress is locked into
-it; the grains around it make a DemElement that saves and restores bitwise."""
+"""The reinforced-soil RVE's sheet (issue 38): an endless woven sheet in a periodic cell
+(cpp_dem.elements.reinforced). Alone, it gives its tensile stiffness per metre (the series
+value of its bonds, woven.series_stiffness_per_metre); a prestress is locked into it. (The
+grains around it: not yet, docs/periodic.md.)"""
 
 import numpy as np
 import pytest
@@ -11,14 +11,6 @@ from cpp_dem.build import woven
 from cpp_dem.elements import reinforced
 
 
-def _stretch_and_relax(s, eps, steps=2000):
-    rate = np.log1p(eps) / (steps * s.dt)
-    s.velocity_gradient = np.diag([rate, 0.0, 0.0])
-    s.run(steps)
-    s.velocity_gradient = np.zeros((3, 3))
-    s.run(4 * steps)
-
-
 @pytest.mark.parametrize("preset", ["detailed", "standard"])
 def test_the_sheet_alone_gives_its_series_stiffness_per_metre(preset):
     s, g, _, _, lz = reinforced.sheet_cell(preset=preset, apertures=(2, 1))
@@ -26,7 +18,7 @@ def test_the_sheet_alone_gives_its_series_stiffness_per_metre(preset):
     assert lx0 == pytest.approx(2 * woven.preset_pitch(preset)[0])
     s.run(10)
     assert np.abs(np.asarray(s.bond_state()["force"])).max() < 1e-9  # closed, unloaded
-    _stretch_and_relax(s, 1e-4)
+    reinforced.stretch_x(s, 1e-4, 2000)
     eps = float(np.asarray(s.cell_matrix)[0, 0]) / lx0 - 1
     tx, ty = reinforced.sheet_tension_per_metre(s, lz)
     j = woven.series_stiffness_per_metre(preset)

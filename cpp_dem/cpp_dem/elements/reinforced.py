@@ -26,7 +26,7 @@ from cpp_dem.build import woven
 from cpp_dem.scene import Scene
 
 
-def _stretch_x(scene, strain: float, steps: int) -> None:
+def stretch_x(scene, strain: float, steps: int) -> None:
     """Stretches the cell along x by ``strain`` (-) in ``steps`` steps at a constant rate, then
     relaxes the bodies at that size."""
     if strain == 0:
@@ -83,11 +83,11 @@ def sheet_cell(*, preset: str = "detailed", apertures=(1, 1), height: float | No
     s.dt = 0.5 * s.critical_dt()
     if prestress > 0:
         eps = prestress / woven.series_stiffness_per_metre(preset, convention=convention)
-        _stretch_x(s, eps, 4000)
+        stretch_x(s, eps, 4000)
         if log:
             log(f"sheet prestressed to {sheet_tension_per_metre(s, lz)[0]:.4g} N/m (target "
                 f"{prestress:.4g}): cell stretched by {eps:.3g} along x")
     return s, g, mg, ms, lz
 
 
-__all__ = ["sheet_cell", "sheet_tension_per_metre"]
+__all__ = ["sheet_cell", "sheet_tension_per_metre", "stretch_x"]
