@@ -20,8 +20,11 @@ demo-pullout: setup
 	$(PY) cases/pullout_000.py --smoke --distance 0.05 --snapshots 5 --out results/demo_pullout --overwrite
 	@echo "force-displacement plot: results/demo_pullout/pullout_force.png"
 
+# The suite runs in TEST_JOBS processes (pytest-xdist; a file's tests stay together, so its
+# fixtures run once), each test on one OpenMP thread unless it asks for more.
+TEST_JOBS ?= 2
 test: setup
-	$(PY) -m pytest -q --durations=15 tests
+	OMP_NUM_THREADS=1 $(PY) -m pytest -q -n $(TEST_JOBS) --dist loadfile --durations=25 tests
 
 bench: setup
 	$(PY) bench/throughput.py

@@ -63,18 +63,35 @@ def case_names() -> list[str]:
 
 
 @pytest.fixture(scope="session")
-def case_smoke(tmp_path_factory):
+def case_smoke(tmp_path_factory, worker_id):
     """case_smoke(name) -> (out folder, CompletedProcess) of ``cases/<name>.py --smoke`` with
-    its SMOKE_ARGS, run once per session."""
+    its SMOKE_ARGS, run once per session: under pytest-xdist (``make test``) the first worker
+    to ask runs it under a file lock in the folder the workers share, and the others read its
+    outputs and its recorded process."""
+    import fcntl
+    import json
+
+    base = tmp_path_factory.getbasetemp()
+    shared = base if worker_id == "master" else base.parent
     runs: dict[str, tuple[Path, subprocess.CompletedProcess]] = {}
 
     def run(name: str):
-        if name not in runs:
-            out = tmp_path_factory.mktemp(f"smoke_{name}")
-            proc = subprocess.run([PYTHON, str(ROOT / "cases" / f"{name}.py"), "--smoke",
-                                   "--out", str(out), *SMOKE_ARGS.get(name, ())],
-                                  capture_output=True, text=True, timeout=900, cwd=ROOT)
-            runs[name] = (out, proc)
+        if name in runs:
+            return runs[name]
+        out = shared / f"smoke_{name}"
+        record = shared / f"smoke_{name}.json"
+        with open(shared / f"smoke_{name}.lock", "w") as lock:
+            fcntl.flock(lock, fcntl.LOCK_EX)
+            if not record.exists():
+                out.mkdir(parents=True, exist_ok=True)
+                cmd = [PYTHON, str(ROOT / "cases" / f"{name}.py"), "--smoke",
+                       "--out", str(out), *SMOKE_ARGS.get(name, ())]
+                p = subprocess.run(cmd, capture_output=True, text=True, timeout=900, cwd=ROOT)
+                record.write_text(json.dumps({"args": cmd, "returncode": p.returncode,
+                                              "stdout": p.stdout, "stderr": p.stderr}))
+            r = json.loads(record.read_text())
+        runs[name] = (out, subprocess.CompletedProcess(r["args"], r["returncode"],
+                                                       r["stdout"], r["stderr"]))
         return runs[name]
 
     return run
