@@ -164,6 +164,8 @@ def test_study_cells_mean_sd_and_within():
     (["--study", "--seeds", "1,x", "--jitter", "0.1"], "--seeds='1,x'"),
     (["--jitter", "1.5"], "--jitter=1.5"),
     (["--record-every", "0"], "--record-every=0"),
+    (["--cov-window", "0.03"], "needs --study"),
+    (["--study", "--cov-window", "-1"], "--cov-window=-1.0"),
 ])
 def test_bad_study_options_are_named(argv, match, capsys):
     with pytest.raises(SystemExit):
@@ -172,10 +174,81 @@ def test_bad_study_options_are_named(argv, match, capsys):
 
 
 def test_seeds_option():
-    p, *_rest, seeds, _ow = case.parse_args(["--study", "--seeds", "2-4", "--jitter", "0.001"])
-    assert seeds == [2, 3, 4] and p.seed == 2 and p.jitter == 0.001
-    assert case.parse_args(["--study", "--seeds", "5,1", "--jitter", "1"])[-2] == [5, 1]
-    assert case.parse_args([])[-2] == [1]
+    p, *_rest, seeds, _ow, win = case.parse_args(["--study", "--seeds", "2-4", "--jitter",
+                                                  "0.001"])
+    assert seeds == [2, 3, 4] and p.seed == 2 and p.jitter == 0.001 and win is None
+    assert case.parse_args(["--study", "--seeds", "5,1", "--jitter", "1"])[7] == [5, 1]
+    assert case.parse_args([])[7] == [1]
+    assert case.parse_args(["--study", "--cov-window", "0.03"])[-1] == 0.03
     got = case.parse_args(["--study", "--grids", "square", "--radius", "0.0025,0.0015",
                            "--pressure", "75e3", "--seeds", "1-2", "--jitter", "0.01"])
     assert got[3:6] == (["square"], [0.0025, 0.0015], [75e3])
+
+
+def _record(path, d, f, f001):
+    path.mkdir(parents=True, exist_ok=True)
+    with open(path / "pullout.csv", "w") as fh:
+        fh.write("displacement,pull_force,force_001,front_force\n")
+        for row in zip(d, f, f001, 0.01 * np.asarray(f)):
+            fh.write(",".join(map(repr, map(float, row))) + "\n")
+
+
+def test_cov_window_compares_runs_over_the_pull_they_share(tmp_path):
+    """Runs that stopped at different distances are compared over the shortest pull: what a
+    longer run did after it is left out, and a CoV that falls within the window is seen."""
+    rng = np.random.default_rng(5)
+    rows = []
+    for n, (r, spread, pulled) in enumerate([(2.5e-3, 0.6, 0.095), (1.5e-3, 0.2, 0.04)]):
+        for seed in (1, 2, 3):
+            d = np.linspace(0, pulled, int(pulled / 1e-4) + 1)
+            f = 100 * (1 + spread * rng.uniform(-1, 1, len(d)))
+            f[d > 0.04] = 1e6 * (1 + rng.uniform(-1, 1, np.count_nonzero(d > 0.04)))
+            row = _row(seed, 1.0, 0.1, 1.0, 0.1, r=r, status="ok" if pulled > 0.09 else "x")
+            row["pulled_m"] = pulled
+            row["run"] = f"r{n}_s{seed}"
+            _record(tmp_path / row["run"], d, f, 0.1 * f)
+            rows.append(row)
+    wt = case.window_trend(rows, tmp_path)
+    assert [c["radius_m"] for c in wt] == [2.5e-3, 1.5e-3]
+    assert all(c["window_m"] == pytest.approx(0.04) and c["runs"] == 3 for c in wt)
+    big, small = wt
+    # uniform on +-spread: CoV = spread / sqrt(3); the 1e6 records after 40 mm are left out
+    assert big["cov_force"] == pytest.approx(0.6 / 3**0.5, rel=0.1)
+    assert big["mean_force_N"] == pytest.approx(100, rel=0.05)
+    assert small["cov_001"] == pytest.approx(0.2 / 3**0.5, rel=0.1)
+    assert small["cov_force_step"] == "falls" and small["cov_001_step"] == "falls"
+    # a window the user gives shortens it further; the lines say the window
+    wt2 = case.window_trend(rows, tmp_path, window_m=0.01)
+    assert all(c["window_m"] == 0.01 for c in wt2)
+    line, = case.window_lines(wt)
+    assert "over the first 40.0 mm" in line and "falls" in line
+    # the same spread at both radii: no step
+    for row in rows[3:]:
+        d = np.linspace(0, 0.04, 401)
+        _record(tmp_path / row["run"], d, 100 * (1 + 0.6 * rng.uniform(-1, 1, 401)),
+                10 * (1 + 0.6 * rng.uniform(-1, 1, 401)))
+    assert case.window_trend(rows, tmp_path)[1]["cov_force_step"] == "stays within the scatter"
+
+
+def test_an_interrupted_study_run_keeps_its_row_and_runs_again(tmp_path, monkeypatch):
+    calls = []
+
+    def fake_run(q, sub):
+        calls.append(q.seed)
+        _record(sub, np.linspace(0, 0.01, 11), np.full(11, 50.0), np.full(11, 5.0))
+        if len(calls) == 1:
+            raise KeyboardInterrupt
+
+    monkeypatch.setattr(case, "run", fake_run)
+    p = case.Params(radius=2.5e-3, box=0.05, jitter=0.001)
+    with pytest.raises(KeyboardInterrupt):
+        case.study(p, tmp_path, ["square"], [2.5e-3], [75e3], True, seeds=[1])
+    row, = case.read_rows(tmp_path)
+    assert row["status"].startswith("interrupted") and row["pulled_m"] == pytest.approx(0.01)
+    assert "interrupted" in (tmp_path / "study.md").read_text()
+    case.study(p, tmp_path, ["square"], [2.5e-3], [75e3], True, seeds=[1])  # runs it again
+    assert calls == [1, 1]
+    row, = case.read_rows(tmp_path)
+    assert row["status"] == "ok"
+    case.study(p, tmp_path, ["square"], [2.5e-3], [75e3], True, seeds=[1])  # done: skipped
+    assert calls == [1, 1]

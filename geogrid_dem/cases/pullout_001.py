@@ -278,6 +278,22 @@ def stats_001(rec: dict) -> dict:
             "records_001": int(np.count_nonzero(sel))}
 
 
+def window_stats(rec: dict, d_max: float) -> dict:
+    """Mean (N) and CoV (-) of the whole resistance (``pull_force``) and of 001's measure
+    (``force_001``) over the records with a displacement in (0, d_max] m: the statistics of a
+    pull window that runs of different lengths share."""
+    d = np.asarray(rec["displacement"], float)
+    sel = (d > 0) & (d <= d_max * (1 + 1e-12))
+    out = {"records": int(np.count_nonzero(sel))}
+    for key, m_name, c_name in (("pull_force", "mean_force_N", "cov_force"),
+                                ("force_001", "mean_force_001_N", "cov_001")):
+        f = np.asarray(rec[key], float)[sel]
+        m = float(f.mean()) if len(f) else float("nan")
+        out[m_name] = m
+        out[c_name] = float(f.std() / m) if len(f) and m > 0 else float("nan")
+    return out
+
+
 def build(p: Params) -> pullout.PulloutSample:
     lo, hi = np.zeros(3), np.full(3, p.box)
     zg = 0.5 * p.box
@@ -394,7 +410,7 @@ def run_row(q: Params, sub: Path, status: str, wall_time: float) -> dict:
     st = pullout.summarize({k: rec[k] for k in ("displacement", "pull_force")}) \
         if rec is not None else {"mean_force_N": nan, "cov_force": nan}
     s1 = stats_001(rec) if rec is not None else {"mean_force_001_N": nan, "cov_001": nan}
-    return {"grid": q.grid, "radius_m": q.radius, "pressure_Pa": q.pressure,
+    return {"run": sub.name, "grid": q.grid, "radius_m": q.radius, "pressure_Pa": q.pressure,
             "grid_young_Pa": q.grid_young, "grains": q.grains, "jitter": q.jitter,
             "seed": q.seed, "num_grains": int(len(grains(q)[1])),
             "pulled_m": float(rec["displacement"][-1]) if rec is not None else 0.0,
@@ -405,6 +421,17 @@ def run_row(q: Params, sub: Path, status: str, wall_time: float) -> dict:
             "wall_time_s": float(wall_time), "status": status}
 
 
+def row_run_dir(out: Path, row: dict) -> Path:
+    """The folder of a study row's run in the study folder ``out`` (rows written before they
+    named it: rebuilt by run_name with the default grain modulus)."""
+    if "run" in row:
+        return out / row["run"]
+    q = replace(Params(), grid=row["grid"], radius=row["radius_m"],
+                pressure=row["pressure_Pa"], grid_young=row["grid_young_Pa"],
+                grains=row["grains"], jitter=row["jitter"], seed=row["seed"])
+    return out / run_name(q)
+
+
 def _write_atomic(path: Path, text: str) -> None:
     tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")  # one per process: runs in parallel
     tmp.write_text(text)
@@ -412,7 +439,7 @@ def _write_atomic(path: Path, text: str) -> None:
 
 
 def study(p: Params, out: Path, grids, radii, pressures, radii_given: bool,
-          seeds=(1,), overwrite: bool = False) -> None:
+          seeds=(1,), overwrite: bool = False, window_m: float | None = None) -> None:
     """Runs the cells grid x radius x pressure, each once per seed, into sub-folders of
     ``out`` (run_name); each run leaves its row in out/rows/<run>.json, and study.csv,
     study.md and study.png are rebuilt from every row there after each run. A run whose row
@@ -429,7 +456,8 @@ def study(p: Params, out: Path, grids, radii, pressures, radii_given: bool,
                     q = replace(p, grid=g, radius=r, pressure=P, seed=seed)
                     sub = out / run_name(q)
                     row_file = rows_dir / f"{sub.name}.json"
-                    if row_file.is_file() and not overwrite:
+                    if row_file.is_file() and not overwrite and not json.loads(
+                            row_file.read_text())["status"].startswith("interrupted"):
                         print(f"[pullout-001] {sub.name}: in the study already "
                               f"({row_file}); --overwrite runs it again", flush=True)
                         continue
@@ -448,12 +476,18 @@ def study(p: Params, out: Path, grids, radii, pressures, radii_given: bool,
                         status = str(e).split(";")[0]
                         print(f"[pullout-001] {sub.name} STOPPED: {e}", flush=True)
                         end_run(sub, "failed", f"BlowUpError: {e}")
+                    except KeyboardInterrupt:
+                        # what it pulled stays in the study, marked; a new study runs it again
+                        row = run_row(q, sub, "interrupted (Ctrl-C)", time.perf_counter() - t0)
+                        _write_atomic(row_file, json.dumps(row, indent=1) + "\n")
+                        write_study(read_rows(out), out, window_m)
+                        raise
                     row = run_row(q, sub, status, time.perf_counter() - t0)
                     _write_atomic(row_file, json.dumps(row, indent=1) + "\n")
-                    write_study(read_rows(out), out)
+                    write_study(read_rows(out), out, window_m)
     rows = read_rows(out)
     if rows:
-        write_study(rows, out)
+        write_study(rows, out, window_m)
 
 
 def read_rows(out: Path) -> list[dict]:
@@ -525,6 +559,87 @@ def study_cells(rows: list[dict]) -> list[dict]:
                                         c["grid_young_Pa"], c["grains"], c["jitter"]))
 
 
+def _steps(cs: list[dict], k: str, sdk: str) -> list[str]:
+    """Each step of ``k`` from one entry of ``cs`` to the next: "falls" or "rises" when it
+    exceeds WITHIN_SD combined standard deviations (``sdk``), else "stays within the
+    scatter"; "not known (one seed)" without a scatter."""
+    steps = []
+    for a, b in zip(cs, cs[1:]):
+        d = b[k] - a[k]
+        lim = WITHIN_SD * math.hypot(a[sdk], b[sdk])
+        steps.append("not known (one seed)" if not math.isfinite(lim) else
+                     "falls" if d < -lim else "rises" if d > lim else
+                     "stays within the scatter")
+    return steps
+
+
+def window_trend(rows: list[dict], out: Path, window_m: float | None = None) -> list[dict]:
+    """The CoV against the grain size over a pull window every run shares: for every grid,
+    pressure and material with runs at two or more radii, the window is the shortest pull of
+    those runs (stopped ones included; at most ``window_m``, m), and each radius gets the mean
+    ± sd over its seeds of window_stats of its runs, read back from their records. So runs
+    that stopped at different distances are compared over the same pull. One dict per
+    (group, radius), with the window (m) and the steps from the radius before."""
+    groups: dict = {}
+    for r in rows:
+        if r["pulled_m"] > 0:
+            k = (r["grid"], r["pressure_Pa"], r["grid_young_Pa"], r["grains"], r["jitter"])
+            groups.setdefault(k, []).append(r)
+    result = []
+    for (g, P, eg, gr, j), rs in sorted(groups.items()):
+        radii = sorted({r["radius_m"] for r in rs}, reverse=True)
+        if len(radii) < 2:
+            continue
+        d_max = min(r["pulled_m"] for r in rs)
+        if window_m is not None:
+            d_max = min(d_max, window_m)
+        cs = []
+        for rad in radii:
+            stats = []
+            for r in (r for r in rs if math.isclose(r["radius_m"], rad)):
+                rec = pullout.read_record(row_run_dir(out, r) / "pullout.csv")
+                if rec is not None and len(rec.get("pull_force", ())) >= 3:
+                    stats.append(window_stats(rec, d_max))
+            if not stats:
+                continue
+            c = {"grid": g, "pressure_Pa": P, "grid_young_Pa": eg, "grains": gr, "jitter": j,
+                 "radius_m": rad, "window_m": d_max, "runs": len(stats)}
+            for k in ("mean_force_N", "cov_force", "mean_force_001_N", "cov_001"):
+                c[k], c["sd_" + k] = _mean_sd(st[k] for st in stats)
+            c["thesis_cov"] = thesis_value(T54, g, rad, P)
+            cs.append(c)
+        for k, sdk in (("cov_001", "sd_cov_001"), ("cov_force", "sd_cov_force")):
+            for c, step in zip(cs, ["—", *_steps(cs, k, sdk)]):
+                c[f"{k}_step"] = step
+        result += cs
+    return result
+
+
+def window_lines(wt: list[dict]) -> list[str]:
+    """study.md's lines on window_trend's result, one per group."""
+    groups: dict = {}
+    for c in wt:
+        groups.setdefault((c["grid"], c["pressure_Pa"], c["grid_young_Pa"], c["grains"],
+                           c["jitter"]), []).append(c)
+    lines = []
+    for (g, P, eg, gr, j), cs in groups.items():
+        if len(cs) < 2:
+            continue
+        parts = []
+        for name, k in (("001's measure", "cov_001"), ("whole resistance", "cov_force")):
+            vals = ", ".join(f"{c[k]:.3f} ± {c['sd_' + k]:.3f} (r = {c['radius_m'] * 1e3:g} mm, "
+                             f"{c['runs']} runs)" for c in cs)
+            parts.append(f"{name} {vals}: {', then '.join(c[k + '_step'] for c in cs[1:])}")
+        thesis = [c["thesis_cov"] for c in cs]
+        ref = ("; the thesis (its whole pull): " + ", ".join(f"{v:.3f}" for v in thesis)
+               if all(v is not None for v in thesis) else "")
+        lines.append(f"- {g}, {P / 1e3:g} kPa, grid E {eg:g} Pa"
+                     + ("" if gr == "spheres" else f", {gr}")
+                     + f", over the first {cs[0]['window_m'] * 1e3:.1f} mm: CoV of "
+                     + "; ".join(parts) + ref + ".")
+    return lines
+
+
 def cov_trend(cells: list[dict]) -> list[str]:
     """Lines on the CoV against the grain size (001, Table 5.4: it falls with smaller grains):
     for every grid, pressure and material with completed cells at two or more radii, the CoV
@@ -546,14 +661,7 @@ def cov_trend(cells: list[dict]) -> list[str]:
                              ("whole resistance", "cov_force", "sd_cov_force")):
             vals = ", ".join(f"{c[k]:.3f} ± {c[sdk]:.3f} (r = {c['radius_m'] * 1e3:g} mm)"
                              for c in cs)
-            steps = []
-            for a, b in zip(cs, cs[1:]):
-                d = b[k] - a[k]
-                lim = WITHIN_SD * math.hypot(a[sdk], b[sdk])
-                steps.append("not known (one seed)" if not math.isfinite(lim) else
-                             "falls" if d < -lim else "rises" if d > lim else
-                             "stays within the scatter")
-            parts.append(f"{name} {vals}: {', then '.join(steps)}")
+            parts.append(f"{name} {vals}: {', then '.join(_steps(cs, k, sdk))}")
         thesis = [thesis_value(T54, g, c["radius_m"], P) for c in cs]
         ref = ("; the thesis: " + ", ".join(f"{v:.3f}" for v in thesis)
                if all(v is not None for v in thesis) else "")
@@ -563,9 +671,10 @@ def cov_trend(cells: list[dict]) -> list[str]:
     return out
 
 
-def write_study(rows: list, out: Path) -> None:
+def write_study(rows: list, out: Path, window_m: float | None = None) -> None:
     """study.csv (one row per cell, study_cells), study.md (the table and the CoV trend with
-    the grain size) and study.png (Tables 5.3 and 5.4 against ours) in ``out``."""
+    the grain size, over the whole pull and over the window every run shares: window_trend,
+    also as study_window.csv) and study.png (Tables 5.3 and 5.4 against ours) in ``out``."""
     cells = study_cells(rows)
     if not cells:
         return
@@ -620,8 +729,21 @@ def write_study(rows: list, out: Path) -> None:
             f"{' (statistics over the stopped runs)' if c['basis'] == 'partial' else ''} |")
     trend = cov_trend(cells)
     if trend:
-        lines += ["", "CoV against the grain size (a step \"falls\" or \"rises\" when it "
-                  f"exceeds {WITHIN_SD:g} combined sd):", "", *trend]
+        lines += ["", "CoV against the grain size over the whole pull, completed cells (a step "
+                  f"\"falls\" or \"rises\" when it exceeds {WITHIN_SD:g} combined sd):", "",
+                  *trend]
+    wt = window_trend(rows, out, window_m)
+    if wt:
+        buf = io.StringIO()
+        w = csv.DictWriter(buf, fieldnames=list(wt[0]))
+        w.writeheader()
+        w.writerows(wt)
+        _write_atomic(out / "study_window.csv", buf.getvalue())
+        wl = window_lines(wt)
+        if wl:
+            lines += ["", "CoV against the grain size over the pull every run of the "
+                      "compared radii reached, stopped runs included (study_window.csv; the "
+                      "same steps rule):", "", *wl]
     _write_atomic(out / "study.md", "\n".join(lines) + "\n")
     plot_study(cells, out / "study.png")
 
@@ -761,6 +883,10 @@ def build_parser():
     ap.add_argument("--record-every", type=int, default=d.record_every,
                     help="steps between two records of the pull (the thesis's script records "
                          "every step: 1)")
+    ap.add_argument("--cov-window", type=float, default=None,
+                    help="with --study: the longest pull, m, over which the CoV against the "
+                         "grain size is compared (default: the shortest pull of the compared "
+                         "runs)")
     ap.add_argument("--grains", type=str, default=d.grains, help=GRAINS_HELP)
     return ap
 
@@ -814,15 +940,22 @@ def parse_args(argv=None):
                      f"would leave the box); at --velocity {a.velocity:g} m/s that is "
                      f"{a.distance / a.velocity:.3g} s of pull")
         p = replace(p, distance=a.distance)
-    return p, a.out, a.study, grids, radii, pressures, bool(a.radius), seeds, a.overwrite
+    if a.cov_window is not None:
+        if not a.study:
+            ap.error(f"--cov-window={a.cov_window}: needs --study")
+        if not (math.isfinite(a.cov_window) and a.cov_window > 0):
+            ap.error(f"--cov-window={a.cov_window}: must be > 0 (m)")
+    return (p, a.out, a.study, grids, radii, pressures, bool(a.radius), seeds, a.overwrite,
+            a.cov_window)
 
 
 def main(argv=None) -> int:
-    p, out, is_study, grids, radii, pressures, radii_given, seeds, overwrite = parse_args(argv)
+    (p, out, is_study, grids, radii, pressures, radii_given, seeds, overwrite,
+     window) = parse_args(argv)
     if is_study:
         return run_main("pullout_001", out,
                         lambda o: study(p, o, grids, radii, pressures, radii_given, seeds,
-                                        overwrite),
+                                        overwrite, window),
                         own_folder=False)
     return run_main("pullout_001", out, lambda o: run(p, o))
 
