@@ -21,10 +21,11 @@ demo-pullout: setup
 	@echo "force-displacement plot: results/demo_pullout/pullout_force.png"
 
 # The suite runs in TEST_JOBS processes (pytest-xdist; a file's tests stay together, so its
-# fixtures run once), each test on one OpenMP thread unless it asks for more.
+# fixtures run once), each test on one OpenMP thread unless it asks for more; waiting OpenMP
+# threads sleep instead of spinning, so a two-thread test does not starve the other process.
 TEST_JOBS ?= 2
 test: setup
-	OMP_NUM_THREADS=1 $(PY) -m pytest -q -n $(TEST_JOBS) --dist loadfile --durations=25 tests
+	OMP_NUM_THREADS=1 OMP_WAIT_POLICY=passive $(PY) -m pytest -q -n $(TEST_JOBS) --dist loadfile --durations=25 tests
 
 bench: setup
 	$(PY) bench/throughput.py
