@@ -44,8 +44,10 @@ def main(argv=None) -> int:
     ap.add_argument("--rtol", type=float, default=5e-3)
     ap.add_argument("--unbalanced", type=float, default=1e-5,
                     help="the elements relax to this unbalanced force after each increment")
-    ap.add_argument("--tangent", default="network-elastic",
-                    choices=("network", "network-elastic"))
+    ap.add_argument("--tangent", default="network",
+                    choices=("network", "network-elastic", "secant"),
+                    help="the elements' tangent in the Jacobian (femcoupling.hierarchical."
+                         "TANGENTS)")
     ap.add_argument("--prep-friction", type=float, default=0.0,
                     help="friction angle (deg) the elements' grains grow at (0: dense; "
                          "-1: the material's, a loose packing)")
@@ -79,10 +81,20 @@ def main(argv=None) -> int:
         s = r.mean_stress
         rows.append({"eps_y": float(eps), "iterations": r.iterations, "residual": r.residual,
                      "noise_residual": r.noise_residual, "converged_on": r.converged_on,
+                     "status": r.status,
                      "sigma_xx": float(s[0]), "sigma_yy": float(s[1]),
                      "q": float(-(s[1] - s[0])), "dem_s": r.dem_s, "fem_s": r.fem_s,
                      "wall_s": r.wall_s})
-    print(f"[biaxial] wrote {write_json(args.out, {'args': vars(args), 'rows': rows})}")
+    m = fd["model"]
+    totals = {"newton_iterations": int(sum(h.iterations for h in m.history)),
+              "accepted_steps": len(m.history), "load_steps": len(rows),
+              "stopped_at_scatter": sum(h.status != "converged" for h in m.history),
+              "secants_used": m.secants_used, "bad_tangents": m.bad_tangents,
+              "peak_sigma_axial_pa": float(fd["peak_sigma_axial"]) if "peak_sigma_axial" in fd
+              else None, "wall_s": fd["wall_s"]}
+    print(f"[biaxial] tangent {args.tangent}: {totals['newton_iterations']} Newton iterations "
+          f"over {totals['accepted_steps']} accepted steps ({totals['load_steps']} load steps)")
+    print(f"[biaxial] wrote {write_json(args.out, {'args': vars(args), 'totals': totals, 'rows': rows})}")
     return 0
 
 

@@ -85,7 +85,8 @@ def direct_biaxial(make: Callable[[int], object], seeds: Sequence[int], *, press
     """The direct DEM: for each k in ``seeds`` the element ``make(k)`` (a periodic
     ``DemElement``, e.g. a ``PeriodicFactory``: then element k of the FEM x DEM run alone)
     under ``cpp_dem.protocols.periodic.plane_strain_biaxial`` to the axial ``strain``. One result dict
-    per seed (the module doc), with ``grains`` and ``wall_s``."""
+    per seed (the module doc), with ``grains``, ``porosity_initial`` (-, before the shear)
+    and ``wall_s``."""
     from cpp_dem.protocols import periodic
 
     out = []
@@ -96,12 +97,16 @@ def direct_biaxial(make: Callable[[int], object], seeds: Sequence[int], *, press
         if getattr(el, "kind", None) != "periodic":
             raise ValueError(f"make({k}): a periodic DemElement expected, got {el!r}")
         el.controller.enabled = False
+        from cpp_dem import measure
+
+        phi0 = float(measure.porosity(el.scene, ()))
         r = periodic.plane_strain_biaxial(el.scene, pressure=pressure, strain=strain,
                                           strain_per_step=strain_per_step, points=points)
         res = _peak({"axial_strain": r["axial_strain"], "sigma_axial": r["sigma_z"],
                      "sigma_lateral": r["sigma_x"],
                      "volumetric_strain": r["volumetric_strain"]})
         res["grains"] = int(el.scene.num_bodies)
+        res["porosity_initial"] = phi0  # before the shear, -
         res["wall_s"] = time.perf_counter() - t0
         out.append(res)
         if log is not None:

@@ -60,8 +60,8 @@ from femcoupling.geometry import FemInputError
 from femcoupling.relaxation import aitken_factor, check_relaxation, next_factor
 from femcoupling.status import newton_acceptance, worst
 
-__all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning",
-           "aitken_factor"]
+__all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning", "TANGENTS",
+           "aitken_factor", "secant_update"]
 
 _IX = [0, 2, 4]  # DEM Voigt (xx, yy, zz, yz, xz, xy) rows of the FEM's (xx, yy, xy)
 
@@ -82,6 +82,41 @@ def fem_stress(s: np.ndarray) -> np.ndarray:
 def fem_tangent(d6: np.ndarray) -> np.ndarray:
     """FEM 3 x 3 tangent (xx, yy, xy; engineering shear) from the element's 6 x 6 Voigt one."""
     return np.asarray(d6)[np.ix_(_IX, _IX)]
+
+
+#: The element tangents the FEM's Jacobian can be built from.
+TANGENTS = {
+    "network": "the contact network's stiffness at the relaxed state: contacts on their "
+               "friction cone there slide, the others stick (relaxation leaves few on the "
+               "cone, so it is close to the elastic network tangent, and equal to it where "
+               "none is)",
+    "network-elastic": "the contact network's stiffness with every contact stuck: the "
+                       "elastic network tangent",
+    "secant": "the network tangent changed (BFGS, rank two) to reproduce the element's "
+              "stress increment over the step's strain increment so far: it sees the "
+              "sliding of the increment; the network tangent where the increment is zero "
+              "or the element gave back energy",
+}
+
+
+def secant_update(tangent: np.ndarray, strain: np.ndarray, stress: np.ndarray,
+                  min_eig_fraction: float = 1e-3) -> np.ndarray | None:
+    """The FEM tangent (3 x 3, Voigt xx, yy, xy with engineering shear, Pa) changed to map
+    the strain increment ``strain`` (3,) onto the stress increment ``stress`` (3,), both
+    tension positive: T - (T de)(T de)^T / (de . T de) + ds ds^T / (ds . de) on the
+    symmetric, positive part of ``tangent`` (eigenvalues raised to ``min_eig_fraction`` of the
+    largest). None where no positive secant exists (ds . de <= 0: the element gave back
+    energy) or the increment is zero."""
+    t = 0.5 * (tangent + tangent.T)
+    lam, vec = np.linalg.eigh(t)
+    if not lam[-1] > 0:
+        return None
+    t = (vec * np.maximum(lam, min_eig_fraction * lam[-1])) @ vec.T
+    td = t @ strain
+    curv_t, curv = float(strain @ td), float(stress @ strain)
+    if not (curv_t > 0 and curv > 1e-12 * curv_t):
+        return None
+    return t - np.outer(td, td) / curv_t + np.outer(stress, stress) / curv
 
 
 class NewtonFailure(RuntimeError):
@@ -180,11 +215,13 @@ class HierarchicalPlaneStrain:
                 (self.out / f).unlink()
         self.verbose = verbose
         self.bad_tangents = 0  # element tangents replaced by their last good one
-        if tangent not in ("network", "network-elastic"):
-            raise FemInputError(f"tangent={tangent!r}: 'network' (sliding contacts on the "
-                                "cone: the consistent tangent) or 'network-elastic' (sliding "
-                                "contacts stuck: stiffer, robust past the peak)")
+        if tangent not in TANGENTS:
+            raise FemInputError(f"tangent={tangent!r}: one of " + "; ".join(
+                f"'{k}' ({v})" for k, v in TANGENTS.items()))
         self.tangent = tangent
+        #: what the elements are asked for (the secant is built here from the network one)
+        self._element_tangent = "network" if tangent == "secant" else tangent
+        self.secants_used = 0  # element tangents replaced by their secant (tangent="secant")
         if convergence not in ("noise", "tolerance"):
             raise FemInputError(f"convergence={convergence!r}: 'noise' (newton_rtol, or, "
                                 "when Newton stalls above it, within the elements' measured "
@@ -292,15 +329,25 @@ class HierarchicalPlaneStrain:
         self.ksp.getPC().setType("lu")
         # the elements' current state: stress and tangent at the start
         self.history: list[HierStep] = []
-        first = pool.apply_strain([np.zeros((3, 3))] * pool.n, tangent=self.tangent,
+        first = pool.apply_strain([np.zeros((3, 3))] * pool.n, tangent=self._element_tangent,
                                   **self.strain_kw)
         pool.reject()  # (a zero increment with relaxation: measured, then undone)
+        self._increments = np.zeros((pool.n, 3, 3))
         self._set_q(first.stresses, first.tangents)
+        self._sig_start = self._sig.copy()  # the element stresses at the step's start
 
     # ---- quadrature data ----------------------------------------------------------------
     def _set_q(self, stresses, tangents) -> None:
         sig = np.array([fem_stress(s) for s in stresses])
         tan = np.array([fem_tangent(t) for t in tangents])
+        if self.tangent == "secant" and hasattr(self, "_sig_start"):
+            for k, g in enumerate(self._increments):
+                de = np.array([g[0, 0], g[2, 2], g[0, 2] + g[2, 0]])  # (FEM x, y = DEM x, z)
+                if np.any(de != 0):
+                    c = secant_update(tan[k], de, sig[k] - self._sig_start[k])
+                    if c is not None:
+                        tan[k] = c
+                        self.secants_used += 1
         # A tangent far from positive (its smallest eigenvalue below -10 % of its largest) or
         # not finite is not a softening element but a near-singular network solve: seen as
         # -730 MPa against +3 MPa, and it sent Newton away. Such an element keeps its last good
@@ -337,8 +384,9 @@ class HierarchicalPlaneStrain:
         if perturb:
             self._increments *= 1.0 + perturb
         try:
-            step = self.pool.apply_strain(list(self._increments), tangent=self.tangent,
-                                          scatter=True, **self.strain_kw)
+            step = self.pool.apply_strain(list(self._increments),
+                                          tangent=self._element_tangent, scatter=True,
+                                          **self.strain_kw)
         except ElementError as e:  # an element could not take this iterate: cut the step
             raise NewtonFailure(f"an element failed on this iterate: {e}") from e
         self._set_q(step.stresses, step.tangents)
@@ -518,6 +566,7 @@ class HierarchicalPlaneStrain:
                        f"at the noise at {rel:.3g} ({rel * stress_of_scale:.3g} Pa; ceiling "
                        f"{self.noise_ceiling:g}): stopped_at_scatter, not converged")
         self.pool.accept()
+        self._sig_start = self._sig.copy()
         self._bc_now = (top_displacement, right_displacement)
         self.u_n.x.array[:] = self.u.x.array
         wall = time.perf_counter() - t0

@@ -201,3 +201,46 @@ def test_records_of_an_earlier_run_are_not_mixed_in(runs, records):
     with ElementPool.build(2, PeriodicFactory(n=60, same=True), workers=1) as pool:
         with pytest.raises(FemInputError, match="records of an earlier run"):
             HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, out=records)
+
+
+def test_secant_update_maps_the_increment_and_stays_positive():
+    from femcoupling.hierarchical import secant_update
+
+    rng = np.random.default_rng(4)
+    for _ in range(20):
+        a = rng.normal(size=(3, 3))
+        t = a @ a.T + 0.1 * np.eye(3)
+        de = rng.normal(size=3)
+        ds = t @ de * rng.uniform(0.2, 1.0) + 0.05 * rng.normal(size=3) * np.abs(t @ de).max()
+        if ds @ de <= 0:
+            assert secant_update(t, de, ds) is None
+            continue
+        c = secant_update(t, de, ds)
+        assert np.allclose(c @ de, ds, rtol=1e-10, atol=1e-12 * np.abs(ds).max())
+        assert np.allclose(c, c.T) and np.linalg.eigvalsh(c)[0] > 0
+    t = np.diag([3.0, 2.0, 1.0])
+    assert secant_update(t, np.zeros(3), np.ones(3)) is None  # no increment
+    assert secant_update(t, np.array([1e-3, 0, 0]), np.array([-1.0, 0, 0])) is None  # gave back
+
+
+def test_the_secant_tangent_reaches_the_network_tangents_solution():
+    """A confined element pair sheared in two load steps: Newton with the secant tangent
+    converges to the state the network tangent's Newton reaches (within the tolerance), and
+    the secant was used; an unknown tangent is refused with the list."""
+    from femcoupling.geometry import FemInputError
+
+    res = {}
+    for tangent in ("network", "secant"):
+        with ElementPool.build(2, PeriodicFactory(n=100, stress=100e3, isotropic=True,
+                                                  options={"prep_friction_deg": 0.0}),
+                               workers=1) as pool:
+            m = HierarchicalPlaneStrain(pool, lx=0.02, ly=0.02, nx=1, ny=1,
+                                        confining_pa=100e3, newton_rtol=1e-3,
+                                        tangent=tangent, convergence="tolerance")
+            steps = [m.step(top_displacement=-2e-5 * k) for k in (1, 2)]
+            res[tangent] = (steps[-1].mean_stress, m.secants_used)
+            with pytest.raises(FemInputError, match="'secant'"):
+                HierarchicalPlaneStrain(pool, lx=0.02, ly=0.02, nx=1, ny=1, tangent="x")
+    (s_net, used_net), (s_sec, used_sec) = res["network"], res["secant"]
+    assert used_net == 0 and used_sec > 0
+    assert np.abs(s_sec - s_net).max() < 5e-3 * np.abs(s_net).max()
