@@ -37,15 +37,17 @@ def _peak(out: dict) -> dict:
 
 def fem_dem_biaxial(pool, *, lx: float, ly: float, nx: int, ny: int, pressure: float,
                     strain: float, steps: int, log: Callable | None = print,
-                    **model_kw) -> dict:
+                    stop_on_failure: bool = False, **model_kw) -> dict:
     """Runs the hierarchical biaxial (``pool``: one element per cell, 2 nx ny) to the axial
     ``strain`` (-) in ``steps`` equal load steps; ``model_kw`` go to
     ``HierarchicalPlaneStrain``. Besides the curve (see the module doc; the stresses are the
     elements' means, which in equilibrium are the boundary tractions), ``iterations``,
     ``residual``, ``converged_on`` per step, ``steps`` (the HierStep of each load step),
     ``model`` (the HierarchicalPlaneStrain) and ``wall_s``. Prints progress with an ETA
-    through ``log``."""
-    from femcoupling.hierarchical import HierarchicalPlaneStrain
+    through ``log``. A load step that fails (``NewtonFailure``) raises, or with
+    ``stop_on_failure`` ends the run there: ``failed`` then gives its axial strain and the
+    reason (None for a run that reached ``strain``), and the curve is the steps before."""
+    from femcoupling.hierarchical import HierarchicalPlaneStrain, NewtonFailure
 
     t0 = time.perf_counter()
     m = HierarchicalPlaneStrain(pool, lx=lx, ly=ly, nx=nx, ny=ny, confining_pa=pressure,
@@ -53,10 +55,20 @@ def fem_dem_biaxial(pool, *, lx: float, ly: float, nx: int, ny: int, pressure: f
     rows, steps_done = [], []
     ev = 0.0
     t1 = time.perf_counter()
+    failed = None
     for k in range(1, steps + 1):
         eps = strain * k / steps
         before = len(m.history)
-        r = m.step(top_displacement=-eps * ly)
+        try:
+            r = m.step(top_displacement=-eps * ly)
+        except NewtonFailure as e:
+            if not stop_on_failure:
+                raise
+            failed = {"axial_strain": eps, "reason": str(e)}
+            if log is not None:
+                log(f"[fem x dem] step {k}/{steps}: FAILED at axial strain {eps:.4f}: {e}; "
+                    "the run ends here")
+            break
         steps_done.append(r)
         for h in m.history[before:]:  # (a cut step adds its halves)
             ev -= float(np.mean(h.increments[:, 0, 0] + h.increments[:, 2, 2]))
@@ -75,7 +87,7 @@ def fem_dem_biaxial(pool, *, lx: float, ly: float, nx: int, ny: int, pressure: f
            "volumetric_strain": np.array([r[3] for r in rows]),
            "iterations": [r[4] for r in rows], "residual": [r[5] for r in rows],
            "converged_on": [r[6] for r in rows], "steps": steps_done, "model": m,
-           "wall_s": time.perf_counter() - t0}
+           "wall_s": time.perf_counter() - t0, "failed": failed}
     return _peak(out)
 
 

@@ -705,6 +705,84 @@ class SoilModel:
                     "which carries no tension") from e
             raise
 
+    def load_footing_to_pressure(self, pressure_pa: float, *, steps: int = 10,
+                                 callback: Any = None, tol: float = 0.01,
+                                 max_steps_factor: int = 4) -> list[StepResult]:
+        """Push the footing down as a rigid smooth footing (displacement control) until its
+        mean pressure (the reaction, Pa, compression positive) has risen by ``pressure_pa``
+        from the current state, within ``tol`` (relative). For a cohesionless soil, whose
+        surface carries no flexible pressure at the footing's edge (with a Drucker–Prager
+        soil without cohesion, a pressure load failed at 19 % of 100 kPa).
+
+        A first small settlement gives the elastic slope; then settlement steps, each aimed
+        at the target over the steps left by the last step's secant slope (from half to four
+        times the last step), until the pressure reaches the target. A step that passes it
+        beyond ``tol`` is taken again, shortened by linear interpolation. The results' ``load_factor`` is the pressure's fraction of the
+        target; ``callback(r)`` is called for each accepted step. Raises NewtonDivergence if
+        the pressure has not reached the target after ``max_steps_factor`` x ``steps``
+        steps (the soil's bearing capacity is below it)."""
+        target = geo._real("pressure_pa", pressure_pa)
+        if not target > 0:
+            raise FemInputError(f"pressure_pa={pressure_pa!r}: must be > 0 (Pa, compression "
+                                "positive)")
+        if not isinstance(steps, int) or steps < 1:
+            raise FemInputError(f"steps={steps!r}: must be an integer >= 1")
+        self._displacement_control = True
+        u_start = float(self.footing_u.value)
+        p0 = self.footing_pressure_pa()
+        done: list[StepResult] = []
+        d = 0.0
+
+        def go(d_to: float) -> None:
+            d_from = d
+
+            def apply(lf: float) -> None:
+                self.footing_u.value = u_start - (d_from + lf * (d_to - d_from))
+
+            for r in self._run_stage("footing", apply, 1):
+                r2 = dataclasses.replace(r, load_factor=(r.footing_pressure_pa - p0) / target)
+                self.history[self.history.index(r)] = r2
+                done.append(r2)
+
+        def rise() -> float:
+            return self.footing_pressure_pa() - p0
+
+        d1 = 1e-6 * self.body.height_m
+        go(d1)
+        d = d1
+        slope = rise() / d1
+        if not slope > 0:
+            raise NewtonDivergence(f"footing: a settlement of {d1:.3g} m gave no pressure "
+                                   f"({rise():.3g} Pa)")
+        dd = max((target - rise()) / slope / steps, d1)
+        taken = 0
+        while rise() < target * (1.0 - tol):
+            if taken >= max_steps_factor * steps:
+                raise NewtonDivergence(
+                    f"footing: the pressure rose by {rise():.4g} Pa after a settlement of "
+                    f"{d:.4g} m in {taken} steps, short of pressure_pa={target:g}: the soil's "
+                    "bearing capacity is below it")
+            state, n_done, p_now = self.save_state(), len(done), rise()
+            go(d + dd)
+            p_new = rise()
+            if p_new > target * (1.0 + tol):
+                self.restore_state(state)
+                del done[n_done:]
+                dd *= (target - p_now) / (p_new - p_now)
+                continue
+            d += dd
+            taken += 1
+            # the next step from the last one's secant slope, aiming at the target over the
+            # steps left (at most 4 x longer, at least half as long as this one)
+            slope = (p_new - p_now) / dd
+            want = ((target - p_new) / slope / max(1, steps - taken) if slope > 0
+                    else 4.0 * dd)
+            dd = min(max(want, 0.5 * dd), 4.0 * dd)
+        for r in done:
+            if callback is not None:
+                callback(r)
+        return done
+
     def _cohesionless_under_footing(self) -> bool:
         """The soil under the footing carries no tension: a Drucker-Prager soil without
         cohesion, and no element region (whose material may carry tension) reaching the top
@@ -873,6 +951,8 @@ class SoilModel:
         self.u_n.x.scatter_forward()
         self.sig_n = state["sig"].copy()
         self.sig_cur = self.sig_n.copy()
+        # (the quadrature stress too: the reaction, and so the footing pressure, reads it)
+        self._to_q(self.sig_q, self.sig_n, self._qdofs, self.ncomp)
         self.traction.value[:] = state["traction"]
         self.footing_u.value = state["footing_u"]
         self._displacement_control = state["dc"]

@@ -41,15 +41,19 @@ def test_fem_to_dem_smoke_outputs_and_servo_hold(smoke):
         assert (out / name).is_file() and (out / name).stat().st_size > 0, name
     s = json.loads((out / "summary.json").read_text())
     for v in ("RE", "PRS"):
-        # the FEM state before the footing load and after each of its load steps
-        assert _xdmf_times(out / f"fem_{v}.xdmf") == [0.0, 1 / 3, 2 / 3, 1.0]
+        # the FEM state before the footing load and after each of its load steps (the
+        # calibrated soil has no cohesion: a rigid footing pushed down to the pressure, its
+        # times the pressure's fraction of the footing's, ending within 1 %)
+        times = _xdmf_times(out / f"fem_{v}.xdmf")
+        assert times[0] == 0.0 and len(times) > 4 and times[-1] == pytest.approx(1.0, abs=0.01)
         e = s["elements"][v]
         assert e["hold_max_rel_error"] <= 0.01
         np.testing.assert_allclose(e["stress_final_pa"], e["targets_pa"][-1], rtol=0.01)
         np.testing.assert_allclose(e["targets_pa"][-1], s["fem"][v]["targets_final_pa"])
     # the prestress is there on both sides: FEM layer force ~ T_p, DEM grid in tension
     assert s["fem"]["PRS"]["layer_force_upper_n_per_m"] > 0.8 * 2000.0
-    assert abs(s["fem"]["RE"]["layer_force_upper_n_per_m"]) < 0.2 * 2000.0
+    assert (s["fem"]["PRS"]["layer_force_upper_n_per_m"]
+            - s["fem"]["RE"]["layer_force_upper_n_per_m"]) > 0.6 * 2000.0
     assert (s["elements"]["PRS"]["grid_force_longitudinal_mean_n"]
             > s["elements"]["RE"]["grid_force_longitudinal_mean_n"])
     # PRS raises the horizontal x stress of the initial state (the band compresses the soil)
@@ -147,8 +151,10 @@ def test_homogeneous_field_handed_over_reproduces_the_standalone_element(tmp_pat
     (["--stresses", "1000,-5,3000"], "--stresses: sy=-5.0: must be > 0"),
     (["--stresses", "/nonexistent.csv"], "--stresses=/nonexistent.csv: no such file"),
     (["--prestress", "-1"], "--prestress=-1.0: must be >= 0 (N/m)"),
-    (["--stresses", "1e4,1e4,2e4", "--two-way"], "--two-way, --hierarchical and --calibrate need"),
-    (["--stresses", "1e4,1e4,2e4", "--calibrate"], "--calibrate need the FEM"),
+    (["--stresses", "1e4,1e4,2e4", "--two-way"], "--two-way and --hierarchical need"),
+    (["--stresses", "1e4,1e4,2e4", "--soil", "given"], "--soil=given: the FEM soil; not with"),
+    (["--soil", "1e6,0.6,30,0"], "--soil='1e6,0.6,30,0': NU=0.6 must be in [0, 0.5)"),
+    (["--soil", "soft"], "--soil='soft': 'calibrated', 'given' or four numbers"),
     (["--stresses", "1e4,1e4,2e4", "--preset", "fast"], "--preset sets the FEM mesh"),
     (["--preset", "quick"], "invalid choice: 'quick'"),
     (["--two-way-element", "periodic"], "--two-way-element periodic: the loop's element; "
@@ -156,7 +162,7 @@ def test_homogeneous_field_handed_over_reproduces_the_standalone_element(tmp_pat
     (["--stresses", "1e4,1e4,2e4", "--no-grid-handover"], "--no-grid-handover: the grid "
                                                           "tension comes from the FEM"),
     (["--hierarchical", "--two-way"], "--hierarchical: the element is inside the FEM's Newton"),
-    (["--stresses", "1e4,1e4,2e4", "--hierarchical"], "--hierarchical and --calibrate need"),
+    (["--stresses", "1e4,1e4,2e4", "--hierarchical"], "--two-way and --hierarchical need"),
     (["--two-way", "--tangent-probe", "0.8"], "--tangent-probe=0.8: the probe's size"),
     (["--cell-elements"], "--cell-elements: elements per cell of the region's material; "
                           "needs --hierarchical"),
@@ -185,24 +191,40 @@ def test_preset_sets_the_fem_mesh_and_the_two_way_tolerance(name, h, tol):
     assert (p.n, p.damping, p.hold_steps) == (d.n, d.damping, d.hold_steps)
 
 
-def test_calibrated_fem_soil_brings_the_scales_together(smoke, tmp_path):
-    """--calibrate (issue 18, scales that agree): the FEM soil fitted to a DEM element of the
-    case's grains along the region's path. The element then strains about as much as its FEM
-    region: measured 1.4 x (RE) and 2.0 x (PRS) against 67 x and 97 x uncalibrated; asserted:
-    below a tenth of the uncalibrated ratio."""
-    out0, _ = smoke
-    plain = json.loads((out0 / "summary.json").read_text())
-    p = subprocess.run([sys.executable, str(CASE), "--smoke", "--calibrate", "--out",
-                        str(tmp_path / "cal")], capture_output=True, text=True, timeout=600,
-                       cwd=ROOT)
-    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
-    s = json.loads((tmp_path / "cal" / "summary.json").read_text())
+def test_one_soil_on_both_scales_by_default(smoke, tmp_path):
+    """The default FEM soil is calibrated on the case's own element (issue 37): by passes,
+    the element driven along its region's path until it strains within [1/2, 2] times its
+    FEM region (smoke, measured: 112 x with the given soil, then 0.20 x, then 0.98 x: three
+    passes); no cohesion, nu set to its limit where the secant's is above it, said. The run
+    then holds: RE and PRS elements within 2 x their regions (measured 0.98 and 1.59). The
+    given soil (--soil given, 50 MPa) leaves the element straining over 50 x its region."""
+    out, proc = smoke
+    assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
+    s = json.loads((out / "summary.json").read_text())
     c = s["calibration"]
-    assert 0 < c["young_pa"] < c["before"]["young_pa"] and 20 < c["friction_deg"] < 50
+    assert c["converged"] and len(c["passes"]) >= 2
+    assert c["passes"][0]["soil_young_pa"] == 50e6 and c["passes"][0]["dem_fem_strain_ratio"] > 10
+    assert 0.5 <= c["passes"][-1]["dem_fem_strain_ratio"] <= 2.0
+    assert s["soil"] == {"source": "calibrated", "young_pa": c["young_pa"],
+                         "poisson": c["poisson"], "cohesion_pa": 0.0, "friction_deg": 35.0,
+                         "footing": s["soil"]["footing"]}
+    assert 0 < c["young_pa"] < 50e6 and 0 <= c["poisson"] <= 0.45
+    # a clipped Poisson's ratio is said
+    clipped = [r for r in c["passes"] if r["secant_poisson_fitted"] > 0.45]
+    assert len(c["warnings"]) == len(clipped)
+    assert all(w in proc.stdout for w in c["warnings"])
     for v in ("RE", "PRS"):
-        assert s["elements"][v]["dem_fem_strain_ratio"] < \
-            0.1 * plain["elements"][v]["dem_fem_strain_ratio"]
-    assert "## Calibration of the FEM soil" in (tmp_path / "cal" / "report.md").read_text()
+        assert 0.5 <= s["elements"][v]["dem_fem_strain_ratio"] <= 2.0
+    assert (out / "calibration.json").is_file()
+    assert "## Calibration of the FEM soil" in (out / "report.md").read_text()
+    p = run_case(tmp_path / "given", "--smoke", "--soil", "given")
+    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+    g = json.loads((tmp_path / "given" / "summary.json").read_text())
+    assert "calibration" not in g and g["soil"]["young_pa"] == 50e6
+    assert g["soil"]["cohesion_pa"] == 10e3
+    for v in ("RE", "PRS"):
+        assert g["elements"][v]["dem_fem_strain_ratio"] > 10
+        assert any("strains" in w for w in g["elements"][v]["warnings"])
 
 
 def test_two_way_keeps_the_prepared_element_between_iterations(tmp_path, capsys):
@@ -288,7 +310,8 @@ def test_two_way_with_the_walls_element_gives_the_region_its_probed_tangent(tmp_
     strains 0.90-1.00 times its region; each ends in the status its checks give (issue 37:
     the principal axes turned past the walls' 15 deg, a stop at the scatter)."""
     out = tmp_path / "tw"
-    p = run_case(out, "--smoke", "--two-way", "--workers", "2")  # RE and PRS side by side
+    p = run_case(out, "--smoke", "--two-way", "--workers", "2",  # RE and PRS side by side
+                 "--soil", "given")
     assert p.returncode in (0, 3, 4, 5), p.stdout[-3000:] + p.stderr[-3000:]
     assert "tangent by three 5 % stress probes" in p.stdout
     _coupling_status_said(out, p, "two_way")
@@ -308,7 +331,8 @@ def test_two_way_with_the_periodic_element_gives_the_region_its_tangent(tmp_path
     RE's stresses settle in 6 FEM solves while its element strains 2.7 times the region, a
     stall, which the loop says (not converged); PRS settles in 5."""
     out = tmp_path / "pe"
-    p = run_case(out, "--smoke", "--two-way", "--two-way-element", "periodic", "--workers", "2")
+    p = run_case(out, "--smoke", "--two-way", "--two-way-element", "periodic", "--workers", "2",
+                 "--soil", "given")
     assert p.returncode in (0, 3, 4, 5), p.stdout[-3000:] + p.stderr[-3000:]
     assert "two-way element: periodic" in p.stdout
     _coupling_status_said(out, p, "two_way")
@@ -319,13 +343,16 @@ def test_two_way_with_the_periodic_element_gives_the_region_its_tangent(tmp_path
     assert "with the periodic element" in (out / "report.md").read_text()
 
 
-def test_workers_run_re_and_prs_side_by_side_with_the_same_results(smoke, tmp_path):
+def test_workers_run_re_and_prs_side_by_side_with_the_same_results(tmp_path):
     """--workers 2: RE and PRS each in its own process (FEM, loop, element); the elements'
-    answers and the merged handover record are bitwise the serial run's."""
+    answers and the merged handover record are bitwise the serial run's (the given soil:
+    the calibration runs before the variants, in the main process)."""
     import h5py
 
-    out0, _ = smoke
-    p = run_case(tmp_path / "w2", "--smoke", "--workers", "2")
+    out0 = tmp_path / "w1"
+    p = run_case(out0, "--smoke", "--soil", "given")
+    assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
+    p = run_case(tmp_path / "w2", "--smoke", "--workers", "2", "--soil", "given")
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
     assert "RE and PRS run in two processes" in p.stdout
     a = json.loads((out0 / "summary.json").read_text())
@@ -350,7 +377,7 @@ def test_hierarchical_region_element_strains_as_its_region(tmp_path):
     import h5py
 
     out = tmp_path / "h"
-    p = run_case(out, "--smoke", "--hierarchical", "--workers", "2")
+    p = run_case(out, "--smoke", "--hierarchical", "--workers", "2", "--soil", "given")
     assert p.returncode in (0, 4), p.stdout[-3000:] + p.stderr[-3000:]
     s = _coupling_status_said(out, p, "hierarchical")
     assert s["mode"] == "FEM -> DEM (hierarchical)"
@@ -385,7 +412,7 @@ def test_hierarchical_cell_elements_strain_as_their_cells(tmp_path):
 
     out = tmp_path / "c"
     p = run_case(out, "--smoke", "--hierarchical", "--cell-elements", "--cell-grains", "100",
-                 "--workers", "2")
+                 "--workers", "2", "--soil", "given")
     assert p.returncode in (0, 4), p.stdout[-3000:] + p.stderr[-3000:]
     s = _coupling_status_said(out, p, "hierarchical")
     for v in ("RE", "PRS"):

@@ -182,8 +182,8 @@ def run_hierarchical(p: ElementParams, out: Path, variant: str, m, load) -> dict
                                          periodic_runner(p, out, variant),
                                          records=out / f"region_element_{variant}.h5")
     except RuntimeError as exc:  # (a periodic element that cannot start)
-        raise SystemExit(f"[prs_element] hierarchical {variant}: {exc}; try --calibrate"
-                         ) from exc
+        raise SystemExit(f"[prs_element] hierarchical {variant}: {exc}; try more grains "
+                         "(--n)") from exc
     m.set_region_element("element", mat)
     log(f"hierarchical {variant}: the region's material is a periodic element of {p.n} "
         f"grains, prepared at {np.round(-np.diag(mat.element.stress()) / 1e3, 2).tolist()} kPa"
@@ -227,7 +227,7 @@ def run_cell_elements(p: ElementParams, out: Path, variant: str, m, load) -> dic
                                           records=out / f"region_element_{variant}.h5")
     except RuntimeError as exc:  # (a cell's periodic element that cannot start)
         raise SystemExit(f"[prs_element] hierarchical {variant}, cell elements: {exc}; try "
-                         "--calibrate or more --cell-grains") from exc
+                         "more --cell-grains") from exc
     try:
         m.set_cell_elements("element", group)
         t_prep = time.perf_counter() - t0
@@ -265,31 +265,115 @@ def loop_runner(p: ElementParams, out: Path, variant: str):
     return periodic_runner(p, out, variant)
 
 
-def calibrate_soil(p: ElementParams, out: Path) -> tuple[ElementParams, dict]:
-    """Scales that agree (issue 18): the FEM soil fitted to a DEM element along the element
-    region's stress path (``femcoupling.calibration.fit_along_path``). The region's path is
-    the RE one-way FEM's (initial -> loaded); the fitting element is periodic, soil only,
-    with this case's grains (material, size, count), prepared dense (grown frictionless: the
-    case's loose growth friction left a cell that could not hold the region's initial
-    stress). The fill's apparent cohesion (``soil_cohesion``) is kept as given; E, nu and phi
-    are fitted. Returns the parameters with the fitted soil and the record."""
-    from femcoupling.calibration import fit_along_path
+#: The largest Poisson's ratio the FEM soil takes (Drucker–Prager; near 0.5 it locks): a
+#: larger fitted value is set to it, and the calibration record and the log say so.
+POISSON_MAX = 0.45
+
+
+def _element_secant(e: dict) -> tuple[float, float, float]:
+    """(E Pa, nu fitted, nu) of an element summary's secant over its last stage (nu at most
+    POISSON_MAX, E refitted then)."""
+    from femcoupling.handover import secant_stiffness
+
+    ds = np.subtract(e["stress_final_pa"], e["stress_initial_pa"])  # compression positive
+    de = np.asarray(e["strain_increment"], float)
+    E, nu_raw = secant_stiffness(stress_increment_pa=ds, strain_increment=de,
+                                 poisson_bounds=(0.0, 0.4999))
+    nu = min(nu_raw, POISSON_MAX)
+    if nu < nu_raw:
+        E, _ = secant_stiffness(stress_increment_pa=ds, strain_increment=de,
+                                poisson_bounds=(nu, nu))
+    return E, nu_raw, nu
+
+
+def calibrate_soil(p: ElementParams, out: Path, *, max_passes: int = 4
+                   ) -> tuple[ElementParams, dict]:
+    """One soil on both scales (the default of the FEM modes): the FEM soil set to the case's
+    own element, by passes. Each pass solves the RE FEM with the current soil, drives the
+    case's element (the same grains, preparation and seed as the run's, so the same
+    porosity; the geogrid's ends take the FEM layer's tension, so the walls carry the soil
+    alone) along the element region's stress path (initial -> loaded), and compares the two:
+
+    - if the element strains within [1/2, 2] times its FEM region (the largest normal
+      strains, ``twoway.check_region``), the current soil is the element's along its own
+      path: the calibration has converged and keeps it;
+    - otherwise the soil takes the element's secant over that path (E, nu: least squares
+      on the three normal components, ``handover.secant_stiffness``; nu above POISSON_MAX is
+      set to it, said) and the next pass starts.
+
+    The first pass starts from the given soil. The calibrated soil has no cohesion (the grains
+    have none; the FEM then loads the footing as a rigid smooth footing to its pressure,
+    ``SoilModel.load_footing_to_pressure``) and the given phi (the element is not taken to
+    its strength here; the record gives the friction it mobilised at the path's end).
+    After ``max_passes`` without convergence the last secant is kept and the record says
+    ``converged`` False. Returns the parameters with that soil and the record (also
+    ``calibration.json``)."""
+    from femcoupling.calibration import friction_angle_deg
+    from femcoupling.twoway import check_region
 
     t0 = time.perf_counter()
-    ini, fin, _m, _s0, _load, _info = run_fem(p, out, "RE")
-    fit = fit_along_path(ini.fem_stress_pa, fin.fem_stress_pa, n=p.n, seed=p.seed,
-                         prep_friction_deg=0.0, tol=0.02, unbalanced=1e-2,
-                         cohesion_pa=p.soil_cohesion, options=periodic_options(p), log=log)
-    log("calibration: " + fit.message)
-    m = fit.material
-    rec = {"young_pa": m.young_pa, "poisson": m.poisson, "friction_deg": m.friction_deg,
-           "cohesion_pa": m.cohesion_pa, "strength_reached": fit.strength_reached,
-           "path_t_reached": float(fit.t[-1]), "message": fit.message,
+    q = p
+    passes, warnings = [], []
+    converged = False
+    cache: dict = {}  # the element at the initial targets, prepared once for every pass
+    for k in range(1, max_passes + 1):
+        ini, fin, _m, _s0, _load, info = run_fem(q, out, "RE")
+        label = f"calibration_RE_{k}"
+        e = run_element(q, [ini.normal_pa, fin.normal_pa], prestressed=False, label=label,
+                        out=out, grid_tension=handed_tension(q, [ini, fin], label),
+                        cache=cache)
+        _msgs, ratio = check_region(label, fin, fem_strain_increment=info["strain_increment"],
+                                    dem_strain_increment=e["strain_increment"])
+        E, nu_raw, nu = _element_secant(e)
+        row = {"pass": k, "soil_young_pa": q.soil_young, "soil_poisson": q.soil_poisson,
+               "soil_cohesion_pa": q.soil_cohesion, "dem_fem_strain_ratio": ratio,
+               "secant_young_pa": E, "secant_poisson_fitted": nu_raw, "secant_poisson": nu,
+               "rotation_deg": fin.rotation_deg,
+               "path_initial_pa": ini.normal_pa.tolist(), "path_final_pa": fin.normal_pa.tolist(),
+               "element_strain_increment": e["strain_increment"],
+               "fem_strain_increment": info["strain_increment"],
+               "porosity_element": e["porosity_final"],
+               "friction_mobilised_deg": friction_angle_deg(-np.diag(e["stress_final_pa"]))}
+        passes.append(row)
+        log(f"calibration pass {k}: soil E {q.soil_young / 1e6:.4g} MPa, nu "
+            f"{q.soil_poisson:.3f}: the element strains {ratio:.3g} x its FEM region; its "
+            f"secant along that path: E {E / 1e6:.4g} MPa, nu {nu_raw:.3f}")
+        if k > 1 and 0.5 <= ratio <= 2.0:
+            converged = True
+            break
+        if nu < nu_raw:
+            warnings.append(f"calibration pass {k}: the element's secant Poisson's ratio "
+                            f"{nu_raw:.3f} is above the FEM soil's limit {POISSON_MAX}: nu = "
+                            f"{POISSON_MAX} (E refitted: {E / 1e6:.4g} MPa)")
+            log("WARNING: " + warnings[-1])
+        q = replace(q, soil_young=E, soil_poisson=nu, soil_cohesion=0.0)
+    last = passes[-1]
+    rec = {"method": "the case's element along the RE region's path, by passes",
+           "converged": converged, "passes": passes,
+           "young_pa": q.soil_young, "poisson": q.soil_poisson, "cohesion_pa": 0.0,
+           "friction_deg": p.soil_friction, "friction_source": "given",
+           "friction_mobilised_deg": last["friction_mobilised_deg"],
+           "dem_fem_strain_ratio": last["dem_fem_strain_ratio"] if converged else None,
+           "porosity_element": last["porosity_element"],
            "before": {"young_pa": p.soil_young, "poisson": p.soil_poisson,
                       "cohesion_pa": p.soil_cohesion, "friction_deg": p.soil_friction},
-           "wall_time_s": time.perf_counter() - t0}
-    return replace(p, soil_young=m.young_pa, soil_poisson=m.poisson,
-                   soil_friction=m.friction_deg), rec
+           "warnings": warnings, "wall_time_s": time.perf_counter() - t0}
+    if not converged:
+        warnings.append(f"calibration: no soil within {max_passes} passes made the element "
+                        f"strain within [1/2, 2] x its FEM region (last "
+                        f"{last['dem_fem_strain_ratio']:.3g}); the last secant is kept")
+        log("WARNING: " + warnings[-1])
+    rec["message"] = (f"{'converged' if converged else 'NOT converged'} in {len(passes)} "
+                      f"passes: E {q.soil_young / 1e6:.4g} MPa, nu {q.soil_poisson:.3f}, c = 0 "
+                      f"(no cohesion in the grains), phi {p.soil_friction:g} deg as given (the "
+                      f"element mobilised {last['friction_mobilised_deg']:.1f} deg at the "
+                      f"path's end); element strain / FEM region strain by pass "
+                      + ", ".join(f"{r['dem_fem_strain_ratio']:.3g}" for r in passes)
+                      + f"; element porosity {last['porosity_element']:.4f}; "
+                      f"{rec['wall_time_s']:.1f} s")
+    log("calibration: " + rec["message"])
+    (out / "calibration.json").write_text(json.dumps(rec, indent=2, default=float) + "\n")
+    return replace(q, soil_friction=p.soil_friction, soil_cohesion=0.0), rec
 
 
 def fem_model(p: ElementParams, prestressed: bool):
@@ -382,6 +466,11 @@ def run_fem(p: ElementParams, out: Path, variant: str) -> tuple:
             if xdmf is not None:
                 model.write_xdmf(xdmf, time=r.load_factor, append=True)
 
+        if p.soil_cohesion == 0:
+            # (a pressure on a cohesionless surface fails at the footing's edge: the footing
+            # is a rigid smooth one, pushed down until it carries the pressure)
+            return model.load_footing_to_pressure(p.footing_pressure, steps=p.fem_steps,
+                                                  callback=step)
         return model.load_footing(pressure_pa=p.footing_pressure, steps=p.fem_steps,
                                   callback=step)
 
@@ -455,7 +544,7 @@ def run_variant(p: ElementParams, out: Path, variant: str) -> dict:
             except RuntimeError as exc:  # (a periodic element that cannot start)
                 raise SystemExit(f"[prs_element] two-way {variant} with the "
                                  f"{p.two_way_element} element: {exc}; try "
-                                 "--calibrate, or --two-way-element walls") from exc
+                                 "--two-way-element walls") from exc
             fin = tw.targets["element"]
             stiff = tw.stiffnesses.get("element")
             st = tw.regions["element"]

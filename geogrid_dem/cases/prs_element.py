@@ -27,6 +27,12 @@ prestressed reinforced (PRS) soil. Here:
    included, and its tangent back as the region's full stiffness; the geogrid stays in the
    FEM's band), then drives the case's element to the converged targets.
 
+The FEM soil (``--soil``): by default calibrated on the case's own element, by passes (the
+element driven along its region's path; the soil its secant E and nu, until the element
+strains within 2 x its FEM region; no cohesion, the footing then a rigid smooth one pushed to
+its pressure; ``femcoupling.drivers.prs_element.calibrate_soil``). ``--soil given`` keeps the
+fill of the paper's set-up (``soil_*``); ``--soil E,NU,PHI,C`` gives one.
+
 DEM-only mode: ``--stresses sx,sy,sz`` (Pa, compression positive) or ``--stresses FILE.csv``
 (columns sx,sy,sz, optionally time first: the element is driven through the rows in order)
 runs the element with no FEM and **without importing dolfinx**.
@@ -52,6 +58,7 @@ error, 2 bad arguments, 130 / 143 interrupted.
 
 from __future__ import annotations
 
+import argparse
 import json
 import math
 import sys
@@ -97,7 +104,9 @@ class Params(ElementParams):
     two_way_tol: float = 0.02
     max_iterations: int = 8
     workers: int = 1
-    calibrate: bool = False          #: fit the FEM soil to a DEM element along the region's path
+    #: the FEM soil: "calibrated" (the default: set to the case's own element along the
+    #: region's path, cohesion 0; drivers.calibrate_soil) or "given" (the soil_* fields)
+    soil: str = "calibrated"
     #: the two-way loop's element: "walls" (the case's element, geogrid included, three
     #: normal stresses, its probed tangent back) or "periodic" (soil only, the full tensor, its
     #: network tangent back; the case's element is then driven to the converged targets)
@@ -294,8 +303,15 @@ def run(p: Params, out: Path) -> dict:
                 "as the region's stiffness); the geogrid stays in the FEM's layer band, "
                 "counted once; the case's element, geogrid included, is then driven to the "
                 "converged targets")
-        if p.calibrate:
+        if p.soil == "calibrated":
             p, summary["calibration"] = calibrate_soil(p, out)
+        summary["soil"] = {"source": p.soil, "young_pa": p.soil_young,
+                           "poisson": p.soil_poisson, "cohesion_pa": p.soil_cohesion,
+                           "friction_deg": p.soil_friction,
+                           "footing": ("rigid smooth, pushed to the pressure (a cohesionless "
+                                       "soil)" if p.soil_cohesion == 0 else "a pressure")}
+        log(f"FEM soil ({p.soil}): E {p.soil_young / 1e6:.4g} MPa, nu {p.soil_poisson:.3f}, "
+            f"c {p.soil_cohesion / 1e3:g} kPa, phi {p.soil_friction:g} deg")
         parts = run_variants(p, out)
         summary["fem"] = {v: r["fem"] for v, r in zip(VARIANTS, parts)}
         summary["elements"] = {v: r["element"] for v, r in zip(VARIANTS, parts)}
@@ -475,9 +491,14 @@ def build_parser():
                     help="leave the element's grid ends free (RE) or in the locked grips "
                          "(PRS) instead of pulling them by the FEM layer's tension across the "
                          "region (then the grid also counts in the walls' stress: twice)")
-    ap.add_argument("--calibrate", action="store_true",
-                    help="fit the FEM soil (Drucker-Prager/Mohr-Coulomb) to a DEM element of "
-                         "the case's grains along the region's stress path first")
+    ap.add_argument("--soil", type=str, default=None,
+                    help="the FEM soil (Drucker-Prager matched to Mohr-Coulomb): 'calibrated' "
+                         "(the default: E and nu the case's own element's secant along the "
+                         "element region's stress path, no cohesion, phi as given), 'given' "
+                         f"(E {d.soil_young:g} Pa, nu {d.soil_poisson:g}, phi "
+                         f"{d.soil_friction:g} deg, c {d.soil_cohesion:g} Pa), or "
+                         "E,NU,PHI,C (Pa, -, deg, Pa)")
+    ap.add_argument("--calibrate", action="store_true", help=argparse.SUPPRESS)
     return ap
 
 
@@ -494,7 +515,25 @@ def parse_args(argv=None) -> tuple[Params, Path]:
         ap.error(f"--workers={a.workers}: must be >= 1")
     p.two_way, p.two_way_tol, p.max_iterations, p.workers = (a.two_way, a.tol, a.max_iterations,
                                                              a.workers)
-    p.calibrate = a.calibrate
+    if a.soil is not None and a.stresses:
+        ap.error(f"--soil={a.soil}: the FEM soil; not with --stresses (no FEM)")
+    soil = a.soil or "calibrated"
+    if soil in ("calibrated", "given"):
+        p.soil = soil
+    else:
+        try:
+            E, nu, phi, c = (float(x) for x in soil.split(","))
+        except ValueError:
+            ap.error(f"--soil={soil!r}: 'calibrated', 'given' or four numbers E,NU,PHI,C "
+                     "(Pa, -, deg, Pa)")
+        for name, v, ok, allowed in (("E", E, E > 0, "> 0 Pa"),
+                                     ("NU", nu, 0 <= nu < 0.5, "in [0, 0.5)"),
+                                     ("PHI", phi, 0 < phi < 90, "in (0, 90) deg"),
+                                     ("C", c, c >= 0, ">= 0 Pa")):
+            if not (math.isfinite(v) and ok):
+                ap.error(f"--soil={soil!r}: {name}={v:g} must be {allowed}")
+        p.soil = "given"
+        p.soil_young, p.soil_poisson, p.soil_friction, p.soil_cohesion = E, nu, phi, c
     p.grid_handover = not a.no_grid_handover
     if a.hierarchical and a.two_way:
         ap.error("--hierarchical: the element is inside the FEM's Newton; not with --two-way")
@@ -521,9 +560,8 @@ def parse_args(argv=None) -> tuple[Params, Path]:
             ap.error("--preset sets the FEM mesh and the two-way tolerance: not with --stresses")
         p = apply_coupling_preset(p, a.preset)
     if a.stresses:
-        if a.two_way or a.calibrate or a.hierarchical:
-            ap.error("--two-way, --hierarchical and --calibrate need the FEM: not with "
-                     "--stresses")
+        if a.two_way or a.hierarchical:
+            ap.error("--two-way and --hierarchical need the FEM: not with --stresses")
         p.stresses = parse_stresses(a.stresses, ap)
         p.prs = a.prs
     elif a.prs:
