@@ -176,7 +176,15 @@ class PeriodicRegionElement:
                   "shear_final_pa": -np.array([s1[1, 2], s1[0, 2], s1[0, 1]]),
                   "stress_scatter_pa": np.diag(scatter), "prepared_from_cache": cached,
                   "contacts": el.contact_count(), "wall_s": time.perf_counter() - t0,
+                  "porosity": _porosity(el),
                   "reached": message is None, **({"message": message} if message else {})})
+
+
+def _porosity(el) -> float:
+    """The porosity of a periodic element's cell, -."""
+    from cpp_dem import measure
+
+    return float(measure.porosity(el.scene, ()))
 
 
 def network_stiffness(element, min_eig_fraction: float = 1e-3, *,

@@ -340,7 +340,10 @@ def test_two_way_with_the_periodic_element_gives_the_region_its_tangent(tmp_path
     for v in ("RE", "PRS"):
         assert s["two_way"][v]["checks"]["axes"] is None  # (the full tensor: not checked)
         assert s["elements"][v]["strain_increment"]  # the case's element ran after the loop
-    assert "with the periodic element" in (out / "report.md").read_text()
+        # both porosities reported: the dense loop element's and the case's element's
+        assert 0.3 < s["two_way"][v]["porosity_loop_element"] < s["elements"][v]["porosity_final"]
+    report = (out / "report.md").read_text()
+    assert "with the periodic element (porosity" in report
 
 
 def test_workers_run_re_and_prs_side_by_side_with_the_same_results(tmp_path):

@@ -550,7 +550,12 @@ def run_variant(p: ElementParams, out: Path, variant: str) -> dict:
             st = tw.regions["element"]
             # status, reason, final_change, tol, axes_rotation_deg, dem_fem_strain_ratio,
             # checks: the loop's element against its region (femcoupling.status)
+            resp = tw.responses.get("element")
             tws = {"element": p.two_way_element, **st.as_dict(),
+                   # the loop element's porosity (periodic: dense; the case's element's is
+                   # the element summary's porosity_final)
+                   "porosity_loop_element": (resp.info or {}).get("porosity")
+                   if resp is not None else None,
                    "iterations": tw.iterations,
                    "changes": [float(c) for c in tw.changes],
                    "materials": {k: list(v) for k, v in tw.materials.items()},
@@ -577,6 +582,10 @@ def run_variant(p: ElementParams, out: Path, variant: str) -> dict:
                                    dem_strain_increment=e["strain_increment"])
         e["dem_fem_strain_ratio"] = ratio
         e["warnings"] = msgs
+        if tws is not None and tws.get("porosity_loop_element") is not None:
+            log(f"two-way {variant}: porosity of the loop's periodic element "
+                f"{tws['porosity_loop_element']:.4f}, of the case's element "
+                f"{e['porosity_final']:.4f}")
         for msg in msgs:
             log("WARNING: " + msg)
         hist.append(iteration=0, region=j, fem_stress_pa=fin.fem_stress_pa,

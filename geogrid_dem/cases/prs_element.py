@@ -226,8 +226,12 @@ def write_report(out: Path, summary: dict) -> None:
                    else "its tangent by stress probes")
             kind = (f"{how} made to reproduce the increment (isotropic part E, nu)"
                     if t.get("stiffness_mandel_pa") else "isotropic secant (E, nu)")
+            por = ""
+            if t.get("porosity_loop_element") is not None:
+                por = (f" (porosity {t['porosity_loop_element']:.4f}; the case's element's "
+                       f"{summary['elements'][v]['porosity_final']:.4f})")
             lines.append(f"- {v}: **{t['status']}** in {t['iterations']} FEM solves with the "
-                         f"{t.get('element', 'walls')} element: {status_checks(t)}; "
+                         f"{t.get('element', 'walls')} element{por}: {status_checks(t)}; "
                          f"{t['reason']}; changes {t['changes']}; {kind} {t['materials']}")
         lines.append("")
     if "hierarchical" in summary:
