@@ -24,81 +24,37 @@ Extraction: :meth:`SoilModel.region_stress` (volume average over a tagged region
 :meth:`SoilModel.point_stress` (from a local L2 projection onto DG1) return NumPy 3x3
 tensors ordered (x, y, z), **tension positive** (in 2D y is the out-of-plane direction).
 Every method is collective under MPI and returns the same values on every rank.
+
+The class is split by role: this module holds the mesh, the spaces, the material arrays,
+Newton and the state; :mod:`femcoupling.soil_loading` the load stages,
+:mod:`femcoupling.soil_regions` the regions with a material or DEM element of their own,
+:mod:`femcoupling.soil_measures` what the model gives out (settlement, stresses, forces,
+XDMF), and :mod:`femcoupling.soil_steps` a step's record.
 """
 
 from __future__ import annotations
 
-import dataclasses
-import itertools
 import math
 from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
-import numpy.typing as npt
 
 from femcoupling import geometry as geo
 from femcoupling.geometry import FemInputError
-from femcoupling.materials import (AnisotropicElastic, DruckerPrager, GeogridLayerMaterial,
-                                   LinearElastic, drucker_prager_return, elastic_tangent,
-                                   mandel_identity, mandel_to_tensor, stiffness_block,
-                                   tensor_to_mandel)
+from femcoupling.materials import (AnisotropicElastic, GeogridLayerMaterial, LinearElastic,
+                                   drucker_prager_return, elastic_tangent, mandel_to_tensor)
+from femcoupling.soil_loading import LoadingStages
+from femcoupling.soil_measures import SoilMeasures
+from femcoupling.soil_regions import RegionMaterials
+from femcoupling.soil_steps import NewtonDivergence, StepResult
 
 __all__ = ["SoilModel", "StepResult", "NewtonDivergence"]
 
-_counter = itertools.count()
 SQRT2 = math.sqrt(2.0)
 
 
-class NewtonDivergence(RuntimeError):
-    """Newton did not converge even after the step was cut ``max_cuts`` times."""
-
-
-@dataclasses.dataclass(frozen=True)
-class StepResult:
-    """One accepted load step.
-
-    Attributes:
-        stage: 'geostatic', 'prestress' or 'footing'.
-        load_factor: fraction of the stage's load applied, -.
-        footing_settlement_m: mean downward displacement of the footing, m (positive down).
-        footing_pressure_pa: mean footing pressure, Pa, **compression positive** (the reaction
-            in displacement control; the applied pressure in load control).
-        newton_iterations: iterations this step took.
-        plastic_points: number of plastic quadrature points (global).
-        converged_on: "tolerance" (``newton_rtol``), or "stall": with DEM region elements,
-            Newton stalled above it at the elements' resolution and the step was taken at
-            its best iterate (said in ``SoilModel.warnings``).
-        noise_residual: that best residual relative to the whole body's force scale (NaN
-            otherwise).
-        status: "converged" (``newton_rtol`` met) or "stalled" (taken at a stall: its best
-            residual within ``SoilModel.stall_rtol`` of the DEM regions' own internal force,
-            above the tolerance) (:mod:`femcoupling.status`).
-        residual: the accepted residual relative to the force scale it is judged against:
-            the DEM regions' own internal force where the model has region elements, else
-            the body's, -.
-        tol: ``newton_rtol`` on that same scale, -; ``status`` is "converged" when
-            ``residual <= tol``.
-        residual_pa: the accepted residual in stress units, Pa: ``residual`` times the
-            largest stress magnitude of the points of that scale (the regions' with region
-            elements, else the body's).
-    """
-
-    stage: str
-    load_factor: float
-    footing_settlement_m: float
-    footing_pressure_pa: float
-    newton_iterations: int
-    plastic_points: int
-    converged_on: str = "tolerance"
-    noise_residual: float = float("nan")
-    status: str = "converged"
-    residual: float = float("nan")
-    tol: float = float("nan")
-    residual_pa: float = float("nan")
-
-
-class SoilModel:
+class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
     """A reinforced soil body in dolfinx; see the module doc. Collective on ``comm``.
 
     Args:
@@ -311,109 +267,6 @@ class SoilModel:
             C[rep(sel)] = c
         self.C = C
         self._aniso = rep(np.any([sel for sel, _ in aniso], axis=0)) if aniso else None
-
-    def set_region_material(self, name: str, material: LinearElastic) -> None:
-        """Give the element region ``name`` a new material (two-way coupling)."""
-        self.body.region_tag(name)
-        if not isinstance(material, LinearElastic):
-            raise FemInputError(f"material={material!r}: must be a LinearElastic")
-        self.region_materials[name] = material
-        self._set_material_arrays()
-
-    def set_region_element(self, name: str, element: Any) -> None:
-        """The element region ``name`` takes its stress and tangent from a DEM element at
-        every Newton iterate (the hierarchical mode on this body, one element for the
-        region's cells): ``element`` (``femcoupling.region.DemRegionMaterial``) gets the
-        region's volume-mean strain increment since the start of the load step (3 x 3) and
-        returns its stress increment (3 x 3, Pa) and tangent (6 x 6 Mandel, Pa), which every
-        point of the region takes; a converged step commits it. The members of one
-        ``femcoupling.region.PoolRegionMaterials`` (several regions' elements on Dask
-        workers) are evaluated at once, in parallel. Serial runs only (one MPI rank)."""
-        tag = self.body.region_tag(name)
-        self._add_element(name, element, np.repeat(self.cell_tag_of == tag, self.nq))
-
-    def cell_stresses(self, name: str) -> dict:
-        """The converged stress of each cell of element region ``name``, by the key
-        ``set_cell_elements`` gives that cell's element (``"<name>/<cell>"``): 3 x 3, Pa,
-        tension positive (the cell's volume mean; where each cell's element takes over)."""
-        tag = self.body.region_tag(name)
-        cms = self.cell_mean_stress()
-        return {f"{name}/{c}": mandel_to_tensor(cms[c])
-                for c in np.flatnonzero(self.cell_tag_of == tag)}
-
-    def set_cell_elements(self, name: str, group: Any) -> list:
-        """Every cell of element region ``name`` takes its stress and tangent from its own
-        DEM element (the hierarchical mode at the cells' scale; with P1 cells, one
-        quadrature point each, an element per quadrature point). ``group`` holds one element
-        per cell under the keys of :meth:`cell_stresses` (``femcoupling.region.
-        PoolRegionMaterials.build(m.cell_stresses(name), runner, workers=)``: all of them
-        evaluated at once on Dask workers at every Newton iterate); each cell is then what
-        :meth:`set_region_element` makes of a region: its element gets the cell's mean strain
-        increment, and the cell's points take its answer. Returns the keys. Serial runs
-        only."""
-        keys = list(self.cell_stresses(name))
-        members = getattr(group, "materials", None)
-        missing = [k for k in keys if members is None or k not in members]
-        if missing:
-            raise FemInputError(f"group={group!r}: needs an element (in its .materials) for "
-                                f"every cell of region {name!r}; missing {missing[:5]}"
-                                + (" ..." if len(missing) > 5 else ""))
-        for k in keys:
-            cell = int(k.rsplit("/", 1)[1])
-            on = np.zeros(self.n_cells, bool)
-            on[cell] = True
-            self._add_element(k, members[k], np.repeat(on, self.nq))
-        return keys
-
-    def _add_element(self, key: str, element: Any, sel: np.ndarray) -> None:
-        """``element`` answers for the quadrature points ``sel`` (their volume mean strain)."""
-        if self.comm.size > 1:
-            raise FemInputError(f"region elements ({key!r}): serial runs only (this run "
-                                f"has {self.comm.size} MPI ranks)")
-        for k in ("trial", "commit", "state", "set_state"):
-            if not callable(getattr(element, k, None)):
-                raise FemInputError(f"element={element!r}: needs a {k}() method (see "
-                                    "femcoupling.region.DemRegionMaterial)")
-        self.region_elements[key] = element
-        self._region_form = None  # (the regions' cells changed)
-        w = (self.cell_volume[:, None] * self.qweights[None, :]).reshape(-1)[sel]
-        self._element_points[key] = (sel, w / w.sum())  # its points and volume weights
-
-    def _region_element_answers(self, deps: np.ndarray, sig: np.ndarray,
-                                tan: np.ndarray, dl: np.ndarray) -> None:
-        """Region points with a DEM element (in place): the start-of-step stress plus the
-        element's increment for the region's mean strain increment, plus its tangent times
-        the point's deviation from that mean (so the region's mean stress is the element's,
-        and the pointwise tangent is the consistent Jacobian: with the mean alone every point
-        would depend on every other one, and Newton converged linearly, 15 % per
-        iteration); no plastic multiplier."""
-        means = {name: self._element_points[name][1] @ deps[self._element_points[name][0]]
-                 for name in self.region_elements}
-        answers = {}
-        for unit, names in self._element_units():
-            de = {n: mandel_to_tensor(means[n]) for n in names}
-            if hasattr(unit, "trial_many"):  # several regions' elements at once (a pool)
-                answers.update(unit.trial_many(de))
-            else:
-                answers[names[0]] = unit.trial(de[names[0]])
-        for name, mean in means.items():
-            sel = self._element_points[name][0]
-            ds, c = answers[name]
-            c = stiffness_block(c, self.ncomp)
-            sig[sel] = (self.sig_n[sel] + tensor_to_mandel(ds, self.ncomp)
-                        + (deps[sel] - mean) @ c.T)
-            tan[sel] = c
-            dl[sel] = 0.0
-
-    def _element_units(self) -> list:
-        """(unit, region names): each region element once, except the members of one group
-        (``femcoupling.region.PoolRegionMaterials``: an element's ``group``), which the group
-        evaluates, commits and saves at once."""
-        units: dict = {}
-        for name, el in self.region_elements.items():
-            unit = getattr(el, "group", el)
-            units.setdefault(id(unit), (unit, []))[1].append(name)
-        return list(units.values())
 
     def _to_q(self, func: Any, values: np.ndarray, dofs: np.ndarray, size: int) -> None:
         func.x.array.reshape(-1, size)[dofs] = values.reshape(-1, size)
@@ -628,311 +481,6 @@ class SoilModel:
         self.warnings.append(msg)
         warnings.warn(msg, NoiseWarning, stacklevel=3)
 
-    def set_geostatic(self, *, k0: float | None = None) -> None:
-        """K0 initial state from the self-weight (tension positive, see the module doc).
-
-        ``k0`` (-, > 0) defaults to the soil's: 1 - sin(phi) for Drucker–Prager, nu / (1 - nu)
-        for an elastic soil. The state is in equilibrium with the body force; a check solve is
-        run (it must converge in 0 or 1 iterations).
-        """
-        k0 = self.soil.k0() if k0 is None else geo._pos("k0", k0)
-        fx = self._fx
-        x = fx.fem.Expression(fx.ufl.SpatialCoordinate(self.mesh), self.qpoints)
-        xq = x.eval(self.mesh, np.arange(self.n_cells, dtype=np.int32)).reshape(-1, self.tdim)
-        sv = -self.unit_weight_n_m3 * (self.body.height_m - xq[:, self.zc])
-        sig = np.zeros((len(sv), self.ncomp))
-        sig[:, :3] = k0 * sv[:, None]
-        sig[:, self.zc] = sv
-        self.sig_n = sig
-        self._ext_scale = self.unit_weight_n_m3 * self.body.height_m * self.footing_area
-        self._run_stage("geostatic", lambda lf: None, 1)
-
-    def apply_prestress(self, *, steps: int = 1) -> list[StepResult]:
-        """Add each layer's prestress T_p / t (tension along x) and equilibrate (PRS, 002)."""
-        add = np.zeros_like(self.sig_n)
-        for i, lm in enumerate(self.layers):
-            sel = np.repeat(self.cell_tag_of == geo.LAYER_TAG0 + i, self.nq)
-            add[sel, 0] = lm.prestress_n_per_m / self.body.layers[i].thickness_m
-        base = self.sig_n.copy()
-        done = [0.0]
-
-        def apply(lf: float) -> None:
-            self.sig_n = self.sig_n + (lf - done[0]) * add
-            done[0] = lf
-
-        del base
-        return self._run_stage("prestress", apply, steps)
-
-    def load_footing(self, *, pressure_pa: float | None = None,
-                     settlement_m: float | None = None, steps: int = 10,
-                     callback: Any = None) -> list[StepResult]:
-        """Load the footing by a pressure (Pa, compression positive; load control) or a
-        settlement (m, downward positive; displacement control of a smooth footing), from the
-        current state, in ``steps`` equal increments. Returns the converged steps."""
-        if (pressure_pa is None) == (settlement_m is None):
-            raise FemInputError("load_footing: give exactly one of pressure_pa, settlement_m")
-        if pressure_pa is not None:
-            p = geo._real("pressure_pa", pressure_pa)
-            t0 = float(self.traction.value[self.zc])
-            if p - t0 < 0 and self._cohesionless_under_footing():
-                raise FemInputError(
-                    f"pressure_pa={p!r}: a tensile footing load (the footing pressure, "
-                    f"compression positive, would go from {0.0 - t0:g} to {p - t0:g} Pa); the "
-                    "soil is a cohesionless Drucker-Prager (cohesion_pa="
-                    f"{self.soil.cohesion_pa!r}), which carries no tension, so no load step "
-                    "could converge. Load in compression (pressure_pa > 0), unload by at most "
-                    f"the current footing pressure ({0.0 - t0:g} Pa), or give the soil "
-                    "cohesion")
-            self._displacement_control = False
-
-            def apply(lf: float) -> None:
-                self.traction.value[self.zc] = t0 - lf * p
-            self._ext_scale = max(self._ext_scale, abs(p) * self.footing_area)
-        else:
-            d = geo._real("settlement_m", settlement_m)
-            self._displacement_control = True
-            u0 = -self.footing_settlement_m()
-
-            def apply(lf: float) -> None:
-                self.footing_u.value = u0 - lf * d
-        try:
-            return self._run_stage("footing", apply, steps, callback)
-        except NewtonDivergence as e:
-            if settlement_m is not None and d < 0 and self._cohesionless_under_footing():
-                raise NewtonDivergence(
-                    f"{e}; settlement_m={d!r} lifts the footing, and the soil is a "
-                    f"cohesionless Drucker-Prager (cohesion_pa={self.soil.cohesion_pa!r}), "
-                    "which carries no tension") from e
-            raise
-
-    def load_footing_to_pressure(self, pressure_pa: float, *, steps: int = 10,
-                                 callback: Any = None, tol: float = 0.01,
-                                 max_steps_factor: int = 4) -> list[StepResult]:
-        """Push the footing down as a rigid smooth footing (displacement control) until its
-        mean pressure (the reaction, Pa, compression positive) has risen by ``pressure_pa``
-        from the current state, within ``tol`` (relative). For a cohesionless soil, whose
-        surface carries no flexible pressure at the footing's edge (with a Drucker–Prager
-        soil without cohesion, a pressure load failed at 19 % of 100 kPa).
-
-        A first small settlement gives the elastic slope; then settlement steps, each aimed
-        at the target over the steps left by the last step's secant slope (from half to four
-        times the last step), until the pressure reaches the target. A step that passes it
-        beyond ``tol`` is taken again, shortened by linear interpolation. The results' ``load_factor`` is the pressure's fraction of the
-        target; ``callback(r)`` is called for each accepted step. Raises NewtonDivergence if
-        the pressure has not reached the target after ``max_steps_factor`` x ``steps``
-        steps (the soil's bearing capacity is below it)."""
-        target = geo._real("pressure_pa", pressure_pa)
-        if not target > 0:
-            raise FemInputError(f"pressure_pa={pressure_pa!r}: must be > 0 (Pa, compression "
-                                "positive)")
-        if not isinstance(steps, int) or steps < 1:
-            raise FemInputError(f"steps={steps!r}: must be an integer >= 1")
-        self._displacement_control = True
-        u_start = float(self.footing_u.value)
-        p0 = self.footing_pressure_pa()
-        done: list[StepResult] = []
-        d = 0.0
-
-        def go(d_to: float) -> None:
-            d_from = d
-
-            def apply(lf: float) -> None:
-                self.footing_u.value = u_start - (d_from + lf * (d_to - d_from))
-
-            for r in self._run_stage("footing", apply, 1):
-                r2 = dataclasses.replace(r, load_factor=(r.footing_pressure_pa - p0) / target)
-                self.history[self.history.index(r)] = r2
-                done.append(r2)
-
-        def rise() -> float:
-            return self.footing_pressure_pa() - p0
-
-        d1 = 1e-6 * self.body.height_m
-        go(d1)
-        d = d1
-        slope = rise() / d1
-        if not slope > 0:
-            raise NewtonDivergence(f"footing: a settlement of {d1:.3g} m gave no pressure "
-                                   f"({rise():.3g} Pa)")
-        dd = max((target - rise()) / slope / steps, d1)
-        taken = 0
-        while rise() < target * (1.0 - tol):
-            if taken >= max_steps_factor * steps:
-                raise NewtonDivergence(
-                    f"footing: the pressure rose by {rise():.4g} Pa after a settlement of "
-                    f"{d:.4g} m in {taken} steps, short of pressure_pa={target:g}: the soil's "
-                    "bearing capacity is below it")
-            state, n_done, p_now = self.save_state(), len(done), rise()
-            go(d + dd)
-            p_new = rise()
-            if p_new > target * (1.0 + tol):
-                self.restore_state(state)
-                del done[n_done:]
-                dd *= (target - p_now) / (p_new - p_now)
-                continue
-            d += dd
-            taken += 1
-            # the next step from the last one's secant slope, aiming at the target over the
-            # steps left (at most 4 x longer, at least half as long as this one)
-            slope = (p_new - p_now) / dd
-            want = ((target - p_new) / slope / max(1, steps - taken) if slope > 0
-                    else 4.0 * dd)
-            dd = min(max(want, 0.5 * dd), 4.0 * dd)
-        for r in done:
-            if callback is not None:
-                callback(r)
-        return done
-
-    def _cohesionless_under_footing(self) -> bool:
-        """The soil under the footing carries no tension: a Drucker-Prager soil without
-        cohesion, and no element region (whose material may carry tension) reaching the top
-        under the footing."""
-        b, h = self.body.footing_half_width_m, self.body.height_m
-        regions_on_top = any(r.center_m[-1] + r.size_m / 2 >= h - 1e-9 * h
-                             and r.center_m[0] - r.size_m / 2 < b for r in self.body.regions)
-        return (isinstance(self.soil, DruckerPrager) and self.soil.cohesion_pa == 0
-                and not regions_on_top)
-
-    # ---- measurements (NumPy out, identical on every rank) -------------------------------
-
-    def footing_settlement_m(self) -> float:
-        """Mean downward displacement of the footing, m."""
-        s = self._fx.fem.assemble_scalar(self.form_settle)
-        return float(self.comm.allreduce(s, op=self._fx.MPI.SUM) / self.footing_area)
-
-    def footing_pressure_pa(self) -> float:
-        """Mean footing pressure, Pa, compression positive: from the reaction at the footing's
-        constrained dofs in displacement control, the applied traction otherwise."""
-        fx = self._fx
-        if not self._displacement_control:
-            return float(-self.traction.value[self.zc])
-        vec = fx.fem.assemble_vector(self.form_react)
-        vec.scatter_reverse(fx.dolfinx.la.InsertMode.add)
-        n_own = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-        d = self.footing_dofs[self.footing_dofs < n_own]
-        f = self.comm.allreduce(float(vec.array[d].sum()), op=fx.MPI.SUM)
-        return float(-f / self.footing_area)
-
-    def plastic_points(self) -> int:
-        """Number of quadrature points that yielded in the last converged step (global)."""
-        own = self.n_owned * self.nq
-        return int(self.comm.allreduce(int(np.count_nonzero(self.dlam[:own])),
-                                       op=self._fx.MPI.SUM))
-
-    def cell_mean_stress(self) -> np.ndarray:
-        """(n_cells, ncomp) cell averages of the converged stress (Mandel), Pa."""
-        s = self.sig_n.reshape(self.n_cells, self.nq, self.ncomp)
-        return np.einsum("cqi,q->ci", s, self.qweights)
-
-    def region_stress(self, name: str, *, tags: Sequence[int] | None = None) -> np.ndarray:
-        """Volume-averaged stress over the element region ``name`` (its soil cells), 3x3 (x, y,
-        z), Pa, tension positive. ``tags`` overrides the cell tags averaged over."""
-        tag_list = [self.body.region_tag(name)] if tags is None else list(tags)
-        return self.tag_stress(tag_list)
-
-    def region_strain(self, name: str) -> np.ndarray:
-        """Volume-averaged small strain over the element region ``name`` (its soil cells),
-        3x3 (x, y, z), -, tension positive, from the current displacements (since the mesh's
-        reference state)."""
-        tag = self.body.region_tag(name)
-        cells = np.arange(self.n_cells, dtype=np.int32)
-        eps = self.expr_eps.eval(self.mesh, cells).reshape(self.n_cells, self.nq, self.ncomp)
-        cm = np.einsum("cqi,q->ci", eps, self.qweights)[: self.n_owned]
-        sel = self.cell_tag_of[: self.n_owned] == tag
-        vol = self.cell_volume[: self.n_owned][sel]
-        MPI = self._fx.MPI
-        tot = np.asarray(self.comm.allreduce(np.concatenate([(cm[sel] * vol[:, None]).sum(0),
-                                                             [vol.sum()]]), op=MPI.SUM))
-        if tot[-1] <= 0:
-            raise FemInputError(f"name={name!r}: the region has no cells")
-        return mandel_to_tensor(tot[:-1] / tot[-1])
-
-    def tag_stress(self, tags: Sequence[int]) -> np.ndarray:
-        """Volume-averaged stress over the cells with any of ``tags``, 3x3, Pa, tension +."""
-        sel = np.isin(self.cell_tag_of[: self.n_owned], np.asarray(tags))
-        cm = self.cell_mean_stress()[: self.n_owned][sel]
-        vol = self.cell_volume[: self.n_owned][sel]
-        MPI = self._fx.MPI
-        tot = np.asarray(self.comm.allreduce(np.concatenate([(cm * vol[:, None]).sum(0),
-                                                             [vol.sum()]]), op=MPI.SUM))
-        if tot[-1] <= 0:
-            raise FemInputError(f"tags={list(tags)}: no cells carry these tags")
-        return mandel_to_tensor(tot[:-1] / tot[-1])
-
-    def layer_force_n_per_m(self, i: int, *, x_range_m: tuple[float, float] | None = None
-                            ) -> float:
-        """Mean axial force per metre width in geogrid layer ``i`` (sigma_xx t), N/m, tension
-        positive; over the cells whose centre lies in ``x_range_m`` if given."""
-        tag = geo.LAYER_TAG0 + i
-        sel = self.cell_tag_of[: self.n_owned] == tag
-        if x_range_m is not None:
-            xc = self._cell_centres()[: self.n_owned, 0]
-            sel &= (xc >= x_range_m[0]) & (xc <= x_range_m[1])
-        cm = self.cell_mean_stress()[: self.n_owned][sel, 0]
-        vol = self.cell_volume[: self.n_owned][sel]
-        MPI = self._fx.MPI
-        s = self.comm.allreduce(np.array([(cm * vol).sum(), vol.sum()]), op=MPI.SUM)
-        return float(s[0] / s[1] * self.body.layers[i].thickness_m) if s[1] > 0 else math.nan
-
-    def region_layer_force(self, name: str) -> float | None:
-        """The geogrid tension across the element region ``name``, N/m, tension positive: the
-        mean axial force per metre width of the layers that cross it
-        (``ReinforcedSoilBody.region_layers``) over the region's x extent, summed over them;
-        None where no layer crosses the region. The two-way coupling hands it to the DEM
-        element's grid ends (``WallTargets.grid_tension_n_per_m``)."""
-        layers = self.body.region_layers(name)
-        if not layers:
-            return None
-        reg = self.body.regions[self.body.region_tag(name) - geo.REGION_TAG0]
-        x = reg.center_m[0]
-        xr = (x - reg.size_m / 2, x + reg.size_m / 2)
-        return float(sum(self.layer_force_n_per_m(i, x_range_m=xr) for i in layers))
-
-    def _cell_centres(self) -> np.ndarray:
-        g = self.mesh.geometry
-        dm = g.dofmaps[0][: self.n_cells]
-        return g.x[dm].mean(axis=1)
-
-    def point_stress(self, points_m: npt.ArrayLike) -> np.ndarray:
-        """Stress at points (n, dim) m: the converged quadrature stress L2-projected onto DG1
-        per cell (exact for a P2 elastic field), evaluated at the points. (n, 3, 3) Pa, tension
-        positive (x, y, z). Points outside the body raise FemInputError."""
-        fx = self._fx
-        fem, ufl = fx.fem, fx.ufl
-        import dolfinx.geometry as dg
-
-        pts = np.atleast_2d(np.asarray(points_m, float))
-        if pts.shape[1] != self.tdim:
-            raise FemInputError(f"points_m: shape {pts.shape}, need (n, {self.tdim})")
-        p3 = np.zeros((len(pts), 3))
-        p3[:, : self.tdim] = pts
-        D = fem.functionspace(self.mesh, ("DG", 1, (self.ncomp,)))
-        t, s = ufl.TrialFunction(D), ufl.TestFunction(D)
-        self._to_q(self.sig_q, self.sig_n, self._qdofs, self.ncomp)
-        prob = fx.fem_petsc.LinearProblem(
-            ufl.inner(t, s) * self.dxq, ufl.inner(self.sig_q, s) * self.dxq,
-            petsc_options_prefix=f"femcoupling_proj_{next(_counter)}_",
-            petsc_options={"ksp_type": "preonly", "pc_type": "lu",
-                           "pc_factor_mat_solver_type": "mumps"})
-        sh = prob.solve()
-        tree = dg.bb_tree(self.mesh, self.tdim)
-        cand = dg.compute_collisions_points(tree, p3)
-        coll = dg.compute_colliding_cells(self.mesh, cand, p3)
-        vals = np.zeros((len(pts), self.ncomp))
-        found = np.zeros(len(pts))
-        for i in range(len(pts)):
-            cells = coll.links(i)
-            cells = cells[cells < self.n_owned]
-            if len(cells):
-                vals[i] = sh.eval(p3[i], cells[:1])
-                found[i] = 1.0
-        MPI = fx.MPI
-        fnd = np.asarray(self.comm.allreduce(found, op=MPI.SUM))
-        tot = np.asarray(self.comm.allreduce(vals, op=MPI.SUM))
-        if np.any(fnd == 0):
-            raise FemInputError(f"points_m: {pts[fnd == 0].tolist()} lie outside the body")
-        return mandel_to_tensor(tot / fnd[:, None])
-
     # ---- state ---------------------------------------------------------------------------
 
     def save_state(self) -> dict:
@@ -960,34 +508,3 @@ class SoilModel:
         del self.history[state["nhist"]:]
         for (unit, _), data in zip(self._element_units(), state.get("elements", [])):
             unit.set_state(data)
-
-    # ---- output --------------------------------------------------------------------------
-
-    def write_xdmf(self, path: Any, *, time: float = 0.0, append: bool = False) -> None:
-        """Write the mesh with its cell tags (element regions and layers marked), the
-        displacement (P1 interpolation, m) and the cell-mean stress (3x3 (x, y, z), Pa,
-        tension positive) to an XDMF/HDF5 pair; ``append`` adds a time to an existing file."""
-        fx = self._fx
-        fem = fx.fem
-        import dolfinx.io
-
-        P1 = fem.functionspace(self.mesh, ("Lagrange", 1, (self.tdim,)))
-        u1 = fem.Function(P1, name="displacement_m")
-        u1.interpolate(self.u)
-        T = fem.functionspace(self.mesh, ("DG", 0, (3, 3)))
-        sig = fem.Function(T, name="stress_pa")
-        sig.x.array[:] = mandel_to_tensor(self.cell_mean_stress()).reshape(-1)[
-            : sig.x.array.size]
-        sig.x.scatter_forward()
-        pl = fem.Function(fem.functionspace(self.mesh, ("DG", 0)), name="plastic_fraction")
-        pl.x.array[:] = (self.dlam.reshape(self.n_cells, self.nq) != 0).mean(1)
-        tagf = fem.Function(fem.functionspace(self.mesh, ("DG", 0)), name="cell_tag")
-        tagf.x.array[:] = self.cell_tag_of
-        mode = "a" if append else "w"
-        with dolfinx.io.XDMFFile(self.comm, str(path), mode) as xf:
-            if not append:
-                xf.write_mesh(self.mesh)
-                self.cell_tags.name = "cell_tags"
-                xf.write_meshtags(self.cell_tags, self.mesh.geometry)
-            for f in (u1, sig, pl, tagf):
-                xf.write_function(f, time)

@@ -1,0 +1,185 @@
+"""The load stages of :class:`femcoupling.elastoplastic.SoilModel`: the K0 initial state, the
+prestress of the geogrid layers, and the footing (a pressure, a settlement, or a rigid
+footing pushed to a pressure). A mixin of ``SoilModel``: each stage runs its equilibrium
+steps through ``SoilModel._run_stage``."""
+
+from __future__ import annotations
+
+import dataclasses
+from typing import Any
+
+import numpy as np
+
+from femcoupling import geometry as geo
+from femcoupling.geometry import FemInputError
+from femcoupling.materials import DruckerPrager
+from femcoupling.soil_steps import NewtonDivergence, StepResult
+
+
+class LoadingStages:
+    """See the module doc."""
+
+    def set_geostatic(self, *, k0: float | None = None) -> None:
+        """K0 initial state from the self-weight (tension positive, see the module doc).
+
+        ``k0`` (-, > 0) defaults to the soil's: 1 - sin(phi) for Drucker–Prager, nu / (1 - nu)
+        for an elastic soil. The state is in equilibrium with the body force; a check solve is
+        run (it must converge in 0 or 1 iterations).
+        """
+        k0 = self.soil.k0() if k0 is None else geo._pos("k0", k0)
+        fx = self._fx
+        x = fx.fem.Expression(fx.ufl.SpatialCoordinate(self.mesh), self.qpoints)
+        xq = x.eval(self.mesh, np.arange(self.n_cells, dtype=np.int32)).reshape(-1, self.tdim)
+        sv = -self.unit_weight_n_m3 * (self.body.height_m - xq[:, self.zc])
+        sig = np.zeros((len(sv), self.ncomp))
+        sig[:, :3] = k0 * sv[:, None]
+        sig[:, self.zc] = sv
+        self.sig_n = sig
+        self._ext_scale = self.unit_weight_n_m3 * self.body.height_m * self.footing_area
+        self._run_stage("geostatic", lambda lf: None, 1)
+
+    def apply_prestress(self, *, steps: int = 1) -> list[StepResult]:
+        """Add each layer's prestress T_p / t (tension along x) and equilibrate (PRS, 002)."""
+        add = np.zeros_like(self.sig_n)
+        for i, lm in enumerate(self.layers):
+            sel = np.repeat(self.cell_tag_of == geo.LAYER_TAG0 + i, self.nq)
+            add[sel, 0] = lm.prestress_n_per_m / self.body.layers[i].thickness_m
+        base = self.sig_n.copy()
+        done = [0.0]
+
+        def apply(lf: float) -> None:
+            self.sig_n = self.sig_n + (lf - done[0]) * add
+            done[0] = lf
+
+        del base
+        return self._run_stage("prestress", apply, steps)
+
+    def load_footing(self, *, pressure_pa: float | None = None,
+                     settlement_m: float | None = None, steps: int = 10,
+                     callback: Any = None) -> list[StepResult]:
+        """Load the footing by a pressure (Pa, compression positive; load control) or a
+        settlement (m, downward positive; displacement control of a smooth footing), from the
+        current state, in ``steps`` equal increments. Returns the converged steps."""
+        if (pressure_pa is None) == (settlement_m is None):
+            raise FemInputError("load_footing: give exactly one of pressure_pa, settlement_m")
+        if pressure_pa is not None:
+            p = geo._real("pressure_pa", pressure_pa)
+            t0 = float(self.traction.value[self.zc])
+            if p - t0 < 0 and self._cohesionless_under_footing():
+                raise FemInputError(
+                    f"pressure_pa={p!r}: a tensile footing load (the footing pressure, "
+                    f"compression positive, would go from {0.0 - t0:g} to {p - t0:g} Pa); the "
+                    "soil is a cohesionless Drucker-Prager (cohesion_pa="
+                    f"{self.soil.cohesion_pa!r}), which carries no tension, so no load step "
+                    "could converge. Load in compression (pressure_pa > 0), unload by at most "
+                    f"the current footing pressure ({0.0 - t0:g} Pa), or give the soil "
+                    "cohesion")
+            self._displacement_control = False
+
+            def apply(lf: float) -> None:
+                self.traction.value[self.zc] = t0 - lf * p
+            self._ext_scale = max(self._ext_scale, abs(p) * self.footing_area)
+        else:
+            d = geo._real("settlement_m", settlement_m)
+            self._displacement_control = True
+            u0 = -self.footing_settlement_m()
+
+            def apply(lf: float) -> None:
+                self.footing_u.value = u0 - lf * d
+        try:
+            return self._run_stage("footing", apply, steps, callback)
+        except NewtonDivergence as e:
+            if settlement_m is not None and d < 0 and self._cohesionless_under_footing():
+                raise NewtonDivergence(
+                    f"{e}; settlement_m={d!r} lifts the footing, and the soil is a "
+                    f"cohesionless Drucker-Prager (cohesion_pa={self.soil.cohesion_pa!r}), "
+                    "which carries no tension") from e
+            raise
+
+    def load_footing_to_pressure(self, pressure_pa: float, *, steps: int = 10,
+                                 callback: Any = None, tol: float = 0.01,
+                                 max_steps_factor: int = 4) -> list[StepResult]:
+        """Push the footing down as a rigid smooth footing (displacement control) until its
+        mean pressure (the reaction, Pa, compression positive) has risen by ``pressure_pa``
+        from the current state, within ``tol`` (relative). For a cohesionless soil, whose
+        surface carries no flexible pressure at the footing's edge (with a Drucker–Prager
+        soil without cohesion, a pressure load failed at 19 % of 100 kPa).
+
+        A first small settlement gives the elastic slope; then settlement steps, each aimed
+        at the target over the steps left by the last step's secant slope (from half to four
+        times the last step), until the pressure reaches the target. A step that passes it
+        beyond ``tol`` is taken again, shortened by linear interpolation. The results' ``load_factor`` is the pressure's fraction of the
+        target; ``callback(r)`` is called for each accepted step. Raises NewtonDivergence if
+        the pressure has not reached the target after ``max_steps_factor`` x ``steps``
+        steps (the soil's bearing capacity is below it)."""
+        target = geo._real("pressure_pa", pressure_pa)
+        if not target > 0:
+            raise FemInputError(f"pressure_pa={pressure_pa!r}: must be > 0 (Pa, compression "
+                                "positive)")
+        if not isinstance(steps, int) or steps < 1:
+            raise FemInputError(f"steps={steps!r}: must be an integer >= 1")
+        self._displacement_control = True
+        u_start = float(self.footing_u.value)
+        p0 = self.footing_pressure_pa()
+        done: list[StepResult] = []
+        d = 0.0
+
+        def go(d_to: float) -> None:
+            d_from = d
+
+            def apply(lf: float) -> None:
+                self.footing_u.value = u_start - (d_from + lf * (d_to - d_from))
+
+            for r in self._run_stage("footing", apply, 1):
+                r2 = dataclasses.replace(r, load_factor=(r.footing_pressure_pa - p0) / target)
+                self.history[self.history.index(r)] = r2
+                done.append(r2)
+
+        def rise() -> float:
+            return self.footing_pressure_pa() - p0
+
+        d1 = 1e-6 * self.body.height_m
+        go(d1)
+        d = d1
+        slope = rise() / d1
+        if not slope > 0:
+            raise NewtonDivergence(f"footing: a settlement of {d1:.3g} m gave no pressure "
+                                   f"({rise():.3g} Pa)")
+        dd = max((target - rise()) / slope / steps, d1)
+        taken = 0
+        while rise() < target * (1.0 - tol):
+            if taken >= max_steps_factor * steps:
+                raise NewtonDivergence(
+                    f"footing: the pressure rose by {rise():.4g} Pa after a settlement of "
+                    f"{d:.4g} m in {taken} steps, short of pressure_pa={target:g}: the soil's "
+                    "bearing capacity is below it")
+            state, n_done, p_now = self.save_state(), len(done), rise()
+            go(d + dd)
+            p_new = rise()
+            if p_new > target * (1.0 + tol):
+                self.restore_state(state)
+                del done[n_done:]
+                dd *= (target - p_now) / (p_new - p_now)
+                continue
+            d += dd
+            taken += 1
+            # the next step from the last one's secant slope, aiming at the target over the
+            # steps left (at most 4 x longer, at least half as long as this one)
+            slope = (p_new - p_now) / dd
+            want = ((target - p_new) / slope / max(1, steps - taken) if slope > 0
+                    else 4.0 * dd)
+            dd = min(max(want, 0.5 * dd), 4.0 * dd)
+        for r in done:
+            if callback is not None:
+                callback(r)
+        return done
+
+    def _cohesionless_under_footing(self) -> bool:
+        """The soil under the footing carries no tension: a Drucker-Prager soil without
+        cohesion, and no element region (whose material may carry tension) reaching the top
+        under the footing."""
+        b, h = self.body.footing_half_width_m, self.body.height_m
+        regions_on_top = any(r.center_m[-1] + r.size_m / 2 >= h - 1e-9 * h
+                             and r.center_m[0] - r.size_m / 2 < b for r in self.body.regions)
+        return (isinstance(self.soil, DruckerPrager) and self.soil.cohesion_pa == 0
+                and not regions_on_top)

@@ -1,0 +1,121 @@
+"""The regions of :class:`femcoupling.elastoplastic.SoilModel` with a material of their own: an
+elastic or anisotropic material, one DEM element for a region (its mean strain in, its
+stress and tangent out), or an element per cell. A mixin of ``SoilModel``: the methods use its
+mesh, spaces and state."""
+
+from __future__ import annotations
+
+from typing import Any
+
+import numpy as np
+
+from femcoupling.geometry import FemInputError
+from femcoupling.materials import (LinearElastic, mandel_to_tensor, stiffness_block,
+                                   tensor_to_mandel)
+
+
+class RegionMaterials:
+    """See the module doc."""
+
+    def set_region_material(self, name: str, material: LinearElastic) -> None:
+        """Give the element region ``name`` a new material (two-way coupling)."""
+        self.body.region_tag(name)
+        if not isinstance(material, LinearElastic):
+            raise FemInputError(f"material={material!r}: must be a LinearElastic")
+        self.region_materials[name] = material
+        self._set_material_arrays()
+
+    def set_region_element(self, name: str, element: Any) -> None:
+        """The element region ``name`` takes its stress and tangent from a DEM element at
+        every Newton iterate (the hierarchical mode on this body, one element for the
+        region's cells): ``element`` (``femcoupling.region.DemRegionMaterial``) gets the
+        region's volume-mean strain increment since the start of the load step (3 x 3) and
+        returns its stress increment (3 x 3, Pa) and tangent (6 x 6 Mandel, Pa), which every
+        point of the region takes; a converged step commits it. The members of one
+        ``femcoupling.region.PoolRegionMaterials`` (several regions' elements on Dask
+        workers) are evaluated at once, in parallel. Serial runs only (one MPI rank)."""
+        tag = self.body.region_tag(name)
+        self._add_element(name, element, np.repeat(self.cell_tag_of == tag, self.nq))
+
+    def cell_stresses(self, name: str) -> dict:
+        """The converged stress of each cell of element region ``name``, by the key
+        ``set_cell_elements`` gives that cell's element (``"<name>/<cell>"``): 3 x 3, Pa,
+        tension positive (the cell's volume mean; where each cell's element takes over)."""
+        tag = self.body.region_tag(name)
+        cms = self.cell_mean_stress()
+        return {f"{name}/{c}": mandel_to_tensor(cms[c])
+                for c in np.flatnonzero(self.cell_tag_of == tag)}
+
+    def set_cell_elements(self, name: str, group: Any) -> list:
+        """Every cell of element region ``name`` takes its stress and tangent from its own
+        DEM element (the hierarchical mode at the cells' scale; with P1 cells, one
+        quadrature point each, an element per quadrature point). ``group`` holds one element
+        per cell under the keys of :meth:`cell_stresses` (``femcoupling.region.
+        PoolRegionMaterials.build(m.cell_stresses(name), runner, workers=)``: all of them
+        evaluated at once on Dask workers at every Newton iterate); each cell is then what
+        :meth:`set_region_element` makes of a region: its element gets the cell's mean strain
+        increment, and the cell's points take its answer. Returns the keys. Serial runs
+        only."""
+        keys = list(self.cell_stresses(name))
+        members = getattr(group, "materials", None)
+        missing = [k for k in keys if members is None or k not in members]
+        if missing:
+            raise FemInputError(f"group={group!r}: needs an element (in its .materials) for "
+                                f"every cell of region {name!r}; missing {missing[:5]}"
+                                + (" ..." if len(missing) > 5 else ""))
+        for k in keys:
+            cell = int(k.rsplit("/", 1)[1])
+            on = np.zeros(self.n_cells, bool)
+            on[cell] = True
+            self._add_element(k, members[k], np.repeat(on, self.nq))
+        return keys
+
+    def _add_element(self, key: str, element: Any, sel: np.ndarray) -> None:
+        """``element`` answers for the quadrature points ``sel`` (their volume mean strain)."""
+        if self.comm.size > 1:
+            raise FemInputError(f"region elements ({key!r}): serial runs only (this run "
+                                f"has {self.comm.size} MPI ranks)")
+        for k in ("trial", "commit", "state", "set_state"):
+            if not callable(getattr(element, k, None)):
+                raise FemInputError(f"element={element!r}: needs a {k}() method (see "
+                                    "femcoupling.region.DemRegionMaterial)")
+        self.region_elements[key] = element
+        self._region_form = None  # (the regions' cells changed)
+        w = (self.cell_volume[:, None] * self.qweights[None, :]).reshape(-1)[sel]
+        self._element_points[key] = (sel, w / w.sum())  # its points and volume weights
+
+    def _region_element_answers(self, deps: np.ndarray, sig: np.ndarray,
+                                tan: np.ndarray, dl: np.ndarray) -> None:
+        """Region points with a DEM element (in place): the start-of-step stress plus the
+        element's increment for the region's mean strain increment, plus its tangent times
+        the point's deviation from that mean (so the region's mean stress is the element's,
+        and the pointwise tangent is the consistent Jacobian: with the mean alone every point
+        would depend on every other one, and Newton converged linearly, 15 % per
+        iteration); no plastic multiplier."""
+        means = {name: self._element_points[name][1] @ deps[self._element_points[name][0]]
+                 for name in self.region_elements}
+        answers = {}
+        for unit, names in self._element_units():
+            de = {n: mandel_to_tensor(means[n]) for n in names}
+            if hasattr(unit, "trial_many"):  # several regions' elements at once (a pool)
+                answers.update(unit.trial_many(de))
+            else:
+                answers[names[0]] = unit.trial(de[names[0]])
+        for name, mean in means.items():
+            sel = self._element_points[name][0]
+            ds, c = answers[name]
+            c = stiffness_block(c, self.ncomp)
+            sig[sel] = (self.sig_n[sel] + tensor_to_mandel(ds, self.ncomp)
+                        + (deps[sel] - mean) @ c.T)
+            tan[sel] = c
+            dl[sel] = 0.0
+
+    def _element_units(self) -> list:
+        """(unit, region names): each region element once, except the members of one group
+        (``femcoupling.region.PoolRegionMaterials``: an element's ``group``), which the group
+        evaluates, commits and saves at once."""
+        units: dict = {}
+        for name, el in self.region_elements.items():
+            unit = getattr(el, "group", el)
+            units.setdefault(id(unit), (unit, []))[1].append(name)
+        return list(units.values())

@@ -1,0 +1,54 @@
+"""What a load step of :class:`femcoupling.elastoplastic.SoilModel` ends in: its record
+(:class:`StepResult`) or :class:`NewtonDivergence`."""
+
+from __future__ import annotations
+
+import dataclasses
+
+
+class NewtonDivergence(RuntimeError):
+    """Newton did not converge even after the step was cut ``max_cuts`` times."""
+
+
+@dataclasses.dataclass(frozen=True)
+class StepResult:
+    """One accepted load step.
+
+    Attributes:
+        stage: 'geostatic', 'prestress' or 'footing'.
+        load_factor: fraction of the stage's load applied, -.
+        footing_settlement_m: mean downward displacement of the footing, m (positive down).
+        footing_pressure_pa: mean footing pressure, Pa, **compression positive** (the reaction
+            in displacement control; the applied pressure in load control).
+        newton_iterations: iterations this step took.
+        plastic_points: number of plastic quadrature points (global).
+        converged_on: "tolerance" (``newton_rtol``), or "stall": with DEM region elements,
+            Newton stalled above it at the elements' resolution and the step was taken at
+            its best iterate (said in ``SoilModel.warnings``).
+        noise_residual: that best residual relative to the whole body's force scale (NaN
+            otherwise).
+        status: "converged" (``newton_rtol`` met) or "stalled" (taken at a stall: its best
+            residual within ``SoilModel.stall_rtol`` of the DEM regions' own internal force,
+            above the tolerance) (:mod:`femcoupling.status`).
+        residual: the accepted residual relative to the force scale it is judged against:
+            the DEM regions' own internal force where the model has region elements, else
+            the body's, -.
+        tol: ``newton_rtol`` on that same scale, -; ``status`` is "converged" when
+            ``residual <= tol``.
+        residual_pa: the accepted residual in stress units, Pa: ``residual`` times the
+            largest stress magnitude of the points of that scale (the regions' with region
+            elements, else the body's).
+    """
+
+    stage: str
+    load_factor: float
+    footing_settlement_m: float
+    footing_pressure_pa: float
+    newton_iterations: int
+    plastic_points: int
+    converged_on: str = "tolerance"
+    noise_residual: float = float("nan")
+    status: str = "converged"
+    residual: float = float("nan")
+    tol: float = float("nan")
+    residual_pa: float = float("nan")
