@@ -252,3 +252,16 @@ def test_an_interrupted_study_run_keeps_its_row_and_runs_again(tmp_path, monkeyp
     assert row["status"] == "ok"
     case.study(p, tmp_path, ["square"], [2.5e-3], [75e3], True, seeds=[1])  # done: skipped
     assert calls == [1, 1]
+
+
+def test_summarize_takes_a_record_without_transverse_members():
+    """A grid of triangles records longitudinal member forces but no transverse ones: the
+    summary has no transverse ratio instead of a KeyError."""
+    from cpp_dem.protocols import pullout
+
+    d = np.linspace(0, 0.01, 11)
+    rec = {"displacement": d, "pull_force": 10 + d, "force_A1": 1 + d, "force_A2": 2 + d}
+    st = pullout.summarize(rec)
+    assert st["mean_force_N"] > 0 and "transverse_over_longitudinal" not in st
+    rec.update(force_C1=0.5 + d, force_C2=0.5 + d)
+    assert pullout.summarize(rec)["transverse_over_longitudinal"] > 0

@@ -583,7 +583,8 @@ def summarize(rec: dict, *, mobilised_from: float = 0.0) -> dict:
         if key in rec:
             out[f"mean_{key}_N"] = float(rec[key][sel].mean())
             out[f"max_{key}_N"] = float(rec[key][sel].max())
-    if "force_A1" in rec:
+    if all(k in rec for k in ("force_A1", "force_A2", "force_C1", "force_C2")):
+        # (a grid without transverse members, e.g. of triangles, records none: no ratio)
         # Magnitudes: a transverse rib may carry compression as well as tension.
         a = np.abs(np.concatenate([rec["force_A1"][sel], rec["force_A2"][sel]]))
         c = np.abs(np.concatenate([rec["force_C1"][sel], rec["force_C2"][sel]]))
