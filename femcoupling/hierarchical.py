@@ -107,11 +107,12 @@ def secant_update(tangent: np.ndarray, strain: np.ndarray, stress: np.ndarray,
     symmetric, positive part of ``tangent`` (eigenvalues raised to ``min_eig_fraction`` of the
     largest). None where no positive secant exists (ds . de <= 0: the element gave back
     energy) or the increment is zero."""
-    t = 0.5 * (tangent + tangent.T)
-    lam, vec = np.linalg.eigh(t)
-    if not lam[-1] > 0:
+    from femcoupling.handover import HandoverError, spd_floor
+
+    try:
+        t = spd_floor(tangent, min_eig_fraction, name="secant_update")
+    except HandoverError:  # (no positive stiffness at all)
         return None
-    t = (vec * np.maximum(lam, min_eig_fraction * lam[-1])) @ vec.T
     td = t @ strain
     curv_t, curv = float(strain @ td), float(stress @ strain)
     if not (curv_t > 0 and curv > 1e-12 * curv_t):
@@ -340,7 +341,7 @@ class HierarchicalPlaneStrain:
     def _set_q(self, stresses, tangents) -> None:
         sig = np.array([fem_stress(s) for s in stresses])
         tan = np.array([fem_tangent(t) for t in tangents])
-        if self.tangent == "secant" and hasattr(self, "_sig_start"):
+        if self.tangent == "secant":  # (the first call's increments are zero)
             for k, g in enumerate(self._increments):
                 de = np.array([g[0, 0], g[2, 2], g[0, 2] + g[2, 0]])  # (FEM x, y = DEM x, z)
                 if np.any(de != 0):

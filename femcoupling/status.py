@@ -128,6 +128,12 @@ class CouplingStatus:
                 f"strain {g(self.dem_fem_strain_ratio, '.3g')}): {self.reason}")
 
 
+def strain_ratio_held(ratio: float, max_strain_ratio: float = 2.0) -> bool:
+    """Whether the DEM/FEM strain ratio is within [1 / max_strain_ratio, max_strain_ratio]
+    (False for NaN: the strains were not both measured)."""
+    return bool(1.0 / max_strain_ratio <= ratio <= max_strain_ratio)
+
+
 def check_limits(max_rotation_deg: float, max_strain_ratio: float) -> None:
     """The checks' limits: ``max_rotation_deg`` > 0 (deg), ``max_strain_ratio`` > 1 (-);
     raises FemInputError naming the field and the value."""
@@ -176,7 +182,7 @@ def judge_region(*, settled: bool, final_change: float, tol: float, walled: bool
     else:
         checks["axes"] = None  # (the element takes the full tensor: nothing is lost)
     lo, hi = 1.0 / max_strain_ratio, max_strain_ratio
-    checks["strain_ratio"] = bool(lo <= q <= hi)
+    checks["strain_ratio"] = strain_ratio_held(q, max_strain_ratio)
     if not checks["strain_ratio"]:
         fails.append(f"the element strains {q:.3g} times its FEM region (outside [{lo:g}, "
                      f"{hi:g}]: the scales have not met)" if math.isfinite(q) or q == math.inf
@@ -267,7 +273,7 @@ def judge_steps(steps, *, dem_fem_strain_ratio: float = math.nan, walled: bool =
     else:
         checks["axes"] = None
     lo, hi = 1.0 / max_strain_ratio, max_strain_ratio
-    checks["strain_ratio"] = bool(lo <= q <= hi)
+    checks["strain_ratio"] = strain_ratio_held(q, max_strain_ratio)
     if not checks["strain_ratio"]:
         fails.append(f"the element strains {q:.3g} times its FEM region (outside [{lo:g}, "
                      f"{hi:g}])" if not math.isnan(q) else

@@ -68,7 +68,8 @@ from femcoupling.handover import (HandoverError, WallTargets, fem_to_dem, secant
 from femcoupling.materials import (AnisotropicElastic, LinearElastic, tensor_to_mandel,
                                    voigt_to_mandel_stiffness)
 from femcoupling.relaxation import check_relaxation, next_factor
-from femcoupling.status import CouplingStatus, check_limits, judge_region, worst
+from femcoupling.status import (CouplingStatus, check_limits, judge_region, strain_ratio_held,
+                                worst)
 
 __all__ = ["ElementResponse", "HandoverHistory", "RegionWarning", "STIFFNESS_MODES",
            "TwoWayResult", "check_region", "element_stiffness", "one_way", "region_targets",
@@ -291,7 +292,7 @@ def check_region(name: str, targets: WallTargets, *, fem_strain_increment=None,
         fe = float(np.abs(np.asarray(fem_strain_increment, float)).max())
         de = float(np.abs(np.asarray(dem_strain_increment, float)).max())
         ratio = de / fe if fe > 0 else math.inf
-        if not 1.0 / max_strain_ratio <= ratio <= max_strain_ratio:
+        if not strain_ratio_held(ratio, max_strain_ratio):
             side = (f"> {max_strain_ratio:g}" if ratio > max_strain_ratio
                     else f"< 1/{max_strain_ratio:g}")
             msgs.append(f"region {name}: the DEM element strains {ratio:.3g} times its FEM "

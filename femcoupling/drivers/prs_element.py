@@ -309,6 +309,7 @@ def calibrate_soil(p: ElementParams, out: Path, *, max_passes: int = 4
     ``converged`` False. Returns the parameters with that soil and the record (also
     ``calibration.json``)."""
     from femcoupling.calibration import friction_angle_deg
+    from femcoupling.status import strain_ratio_held
     from femcoupling.twoway import check_region
 
     t0 = time.perf_counter()
@@ -338,7 +339,7 @@ def calibrate_soil(p: ElementParams, out: Path, *, max_passes: int = 4
         log(f"calibration pass {k}: soil E {q.soil_young / 1e6:.4g} MPa, nu "
             f"{q.soil_poisson:.3f}: the element strains {ratio:.3g} x its FEM region; its "
             f"secant along that path: E {E / 1e6:.4g} MPa, nu {nu_raw:.3f}")
-        if k > 1 and 0.5 <= ratio <= 2.0:
+        if k > 1 and strain_ratio_held(ratio):
             converged = True
             break
         if nu < nu_raw:
