@@ -42,8 +42,7 @@ import numpy as np
 
 from femcoupling import geometry as geo
 from femcoupling.geometry import FemInputError
-from femcoupling.materials import (AnisotropicElastic, GeogridLayerMaterial, LinearElastic,
-                                   drucker_prager_return, elastic_tangent, mandel_to_tensor)
+from femcoupling.materials import GeogridLayerMaterial, LinearElastic, mandel_to_tensor
 from femcoupling.soil_loading import LoadingStages
 from femcoupling.soil_measures import SoilMeasures
 from femcoupling.soil_regions import RegionMaterials
@@ -100,22 +99,21 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
 
         fx = self._fx = _dolfinx.load()
         fem, ufl = fx.fem, fx.ufl
-        import basix
-        import basix.ufl
-
         self.body, self.soil, self.layers = body, soil, layers
         self.region_materials = region_materials
         #: DEM elements as materials, by region (``set_region_element``) or by region cell
         #: (``set_cell_elements``: "<region>/<cell>")
         self.region_elements: dict = {}
         self._element_points: dict = {}
-        #: with region elements: a step whose residual has not halved in this many Newton
-        #: iterations, its best within ``stall_rtol`` of the DEM regions' own internal force
-        #: (not the body's: a 0.1 m region in a 4 x 3 m body carries a small share of it), is
-        #: taken there, as "stalled". 1e-2: the equilibrium the region elements are relaxed
-        #: to (their unbalanced-force ratio, 1e-2 in the region elements of this package)
-        self.stall_iterations = 3
-        self.stall_rtol = 1e-2
+        #: with region elements, where Newton stalls (femcoupling.quadrature.newton_solve): a
+        #: step within ``noise_factor`` times the elements' measured noise and within
+        #: ``noise_ceiling`` of the DEM regions' own internal force (not the body's: a 0.1 m
+        #: region in a 4 x 3 m body carries a small share of it) is stopped_at_scatter. 1e-2:
+        #: the equilibrium the region elements are relaxed to (their unbalanced-force ratio,
+        #: 1e-2 in the region elements of this package)
+        self.noise_factor = 2.0
+        self.noise_ceiling = 1e-2
+        self.last_failure = ""  #: why the last failed Newton failed
         #: every warning of the run (steps taken at a stall), in order
         self.warnings: list[str] = []
         self._step_end: dict = {}
@@ -136,57 +134,46 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         self.n_owned = cmap.size_local
         self.n_cells = cmap.size_local + cmap.num_ghosts
 
-        # --- spaces ---
-        self.V = fem.functionspace(msh, ("Lagrange", degree, (tdim,)))
+        # --- spaces, forms and solver (femcoupling.quadrature.QuadratureSystem) ---
+        from femcoupling.quadrature import QuadratureSystem
+
         qdeg = max(1, 2 * (degree - 1))
         self.qdeg = qdeg
-        cell = msh.basix_cell()
-        qe_v = basix.ufl.quadrature_element(cell, value_shape=(self.ncomp,), scheme="default",
-                                            degree=qdeg)
-        qe_t = basix.ufl.quadrature_element(cell, value_shape=(self.ncomp, self.ncomp),
-                                            scheme="default", degree=qdeg)
-        self.Wv = fem.functionspace(msh, qe_v)
-        self.Wt = fem.functionspace(msh, qe_t)
-        pts, wts = basix.make_quadrature(cell, qdeg)
-        self.qpoints, self.qweights = pts, wts / wts.sum()
-        self.nq = len(wts)
-        self._qdofs = self.Wv.dofmap.list.reshape(-1)  # (cell, q) -> quadrature dof (block)
-        self._qdofs_t = self.Wt.dofmap.list.reshape(-1)
-
-        self.u = fem.Function(self.V, name="displacement")
-        self.u_n = fem.Function(self.V)
-        self.du = fem.Function(self.V)
-        self.sig_q = fem.Function(self.Wv)      # current stress at the quadrature points
-        self.tan_q = fem.Function(self.Wt)      # consistent tangent
-        n_qp = self.n_cells * self.nq
-        self.sig_n = np.zeros((n_qp, self.ncomp))  # converged stress, (cell, q) order
-        self.sig_cur = np.zeros((n_qp, self.ncomp))
-        self.dlam = np.zeros(n_qp)
-
-        # --- per-quadrature-point material parameters ---
-        self.cell_tag_of = np.full(self.n_cells, geo.SOIL_TAG, dtype=np.int32)
-        self.cell_tag_of[self.cell_tags.indices] = self.cell_tags.values
-        self._set_material_arrays()
-
-        # --- forms ---
-        v, dv = ufl.TestFunction(self.V), ufl.TrialFunction(self.V)
-        self.dxq = ufl.Measure("dx", domain=msh, metadata={"quadrature_degree": qdeg,
-                                                           "quadrature_scheme": "default"})
-        ds = ufl.Measure("ds", domain=msh, subdomain_data=self.facet_tags)
-        dx = ufl.Measure("dx", domain=msh)
         st = fx.PETSc.ScalarType
         self.traction = fem.Constant(msh, np.zeros(tdim, dtype=st))
         grav = np.zeros(tdim, dtype=st)
         grav[self.zc] = -gamma
         self.body_force = fem.Constant(msh, grav)
+        ds = ufl.Measure("ds", domain=msh, subdomain_data=self.facet_tags)
+        dx = ufl.Measure("dx", domain=msh)
         self._eps = self._mandel_strain
-        f_int = ufl.dot(self.sig_q, self._eps(v)) * self.dxq
+        sysq = self.system = QuadratureSystem(
+            msh, degree=degree, qdeg=qdeg, ncomp=self.ncomp, strain=self._eps, lu="mumps",
+            loads=lambda v: (ufl.dot(self.body_force, v) * dx,
+                             ufl.dot(self.traction, v) * ds(geo.FOOTING)))
+        self.V, self.Wv, self.Wt, self.dxq = sysq.V, sysq.Wv, sysq.Wt, sysq.dxq
+        self.qpoints, self.qweights = sysq.qpoints, sysq.qweights
+        self.nq = len(self.qweights)
+        self._qdofs = self.Wv.dofmap.list.reshape(-1)  # (cell, q) -> quadrature dof (block)
+        self._qdofs_t = self.Wt.dofmap.list.reshape(-1)
+        self.u, self.u_n, self.du = sysq.u, sysq.u_n, sysq.du
+        self.u.name = "displacement"
+        self.sig_q, self.tan_q = sysq.sig_q, sysq.tan_q  # stress and tangent at the points
+        n_qp = self.n_cells * self.nq
+        self.sig_cur = np.zeros((n_qp, self.ncomp))  # the last trial's stress, (cell, q)
+        self.dlam = np.zeros(n_qp)
+
+        # --- the materials at the quadrature points (femcoupling.quadrature) ---
+        self.cell_tag_of = np.full(self.n_cells, geo.SOIL_TAG, dtype=np.int32)
+        self.cell_tag_of[self.cell_tags.indices] = self.cell_tags.values
+        self._point_sets: list = []
+        self._set_material_arrays(np.zeros((n_qp, self.ncomp)))
+
+        # --- forms ---
+        v = ufl.TestFunction(self.V)
         f_body = ufl.dot(self.body_force, v) * dx
-        f_trac = ufl.dot(self.traction, v) * ds(geo.FOOTING)
-        self.form_res = fem.form(f_int - f_body - f_trac)
-        self.form_react = fem.form(f_int - f_body)
-        self.form_jac = fem.form(ufl.dot(ufl.dot(self.tan_q, self._eps(dv)), self._eps(v))
-                                 * self.dxq)
+        self.form_res, self.form_jac = sysq.form_res, sysq.form_jac
+        self.form_react = fem.form(sysq.f_int - f_body)
         self.expr_eps = fem.Expression(self._eps(self.u), self.qpoints)
         one = fem.Constant(msh, st(1.0))
         self.footing_area = self.comm.allreduce(
@@ -217,14 +204,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         self.footing_bc = fem.dirichletbc(self.footing_u, self.footing_dofs, self.V.sub(self.zc))
         self._displacement_control = False
 
-        self.A = fx.fem_petsc.create_matrix(self.form_jac)
-        self.b = fx.fem_petsc.create_vector(self.V)
-        self.ksp = fx.PETSc.KSP().create(self.comm)
-        self.ksp.setOperators(self.A)
-        self.ksp.setType("preonly")
-        pc = self.ksp.getPC()
-        pc.setType("lu")
-        pc.setFactorSolverType("mumps")
+        self.A, self.b, self.ksp = sysq.A, sysq.b, sysq.ksp
         self._update_tangent_and_stress(np.zeros((n_qp, self.ncomp)))
 
     # ---- helpers -------------------------------------------------------------------------
@@ -247,39 +227,65 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         name = self.body.regions[tag - geo.REGION_TAG0].name
         return self.region_materials.get(name, self.soil)
 
-    def _set_material_arrays(self) -> None:
-        n = self.n_cells
-        K, G, A, B, Kc = (np.zeros(n) for _ in range(5))
-        aniso = []  # (cell mask, stiffness) of AnisotropicElastic materials
+    def _set_material_arrays(self, stress_pa: np.ndarray | None = None) -> None:
+        """The quadrature points' materials (``femcoupling.quadrature.QuadratureMaterial``):
+        the points of each cell tag without a region element take their tag's material
+        (``material_of_tag(tag).at_points``); the points of a region element, its
+        :class:`~femcoupling.soil_regions.RegionPoints`. The committed stress carries over
+        (``stress_pa`` where given)."""
+        from femcoupling.soil_regions import RegionPoints
+
+        sig = self.sig_n if stress_pa is None else stress_pa
+        taken = self._region_points()
+        sets = []
         for tag in np.unique(self.cell_tag_of):
-            m = self.material_of_tag(int(tag))
-            sel = self.cell_tag_of == tag
-            K[sel], G[sel] = m.bulk_pa, m.shear_pa
-            A[sel], B[sel], Kc[sel] = m.dp_parameters()
-            if isinstance(m, AnisotropicElastic):
-                aniso.append((sel, m.matrix(self.ncomp)))
-        rep = lambda a: np.repeat(a, self.nq)  # noqa: E731 - (cell, q) order
-        self.K, self.G, self.alpha, self.beta, self.kc = map(rep, (K, G, A, B, Kc))
-        # The elastic stiffness per quadrature point: isotropic from (K, G), replaced where a
-        # region has a full stiffness (those points never yield: k = inf).
-        C = elastic_tangent(self.K, self.G, self.ncomp)
-        for sel, c in aniso:
-            C[rep(sel)] = c
-        self.C = C
-        self._aniso = rep(np.any([sel for sel, _ in aniso], axis=0)) if aniso else None
+            sel = np.repeat(self.cell_tag_of == tag, self.nq) & ~taken
+            idx = np.flatnonzero(sel)
+            if idx.size:
+                sets.append((idx, self.material_of_tag(int(tag)).at_points(sig[idx])))
+        for key, (sel, w) in self._element_points.items():
+            idx = np.flatnonzero(sel)
+            sets.append((idx, RegionPoints(self.region_elements[key], w, sig[idx],
+                                           self.ncomp, key)))
+        self._point_sets = sets
+
+    @property
+    def sig_n(self) -> np.ndarray:
+        """The committed stress at every quadrature point, (cell, q) order, Mandel, Pa (a
+        copy: set it whole)."""
+        out = np.zeros((self.n_cells * self.nq, self.ncomp))
+        for idx, m in self._point_sets:
+            out[idx] = m.stress_n
+        return out
+
+    @sig_n.setter
+    def sig_n(self, value: np.ndarray) -> None:
+        value = np.asarray(value, float)
+        for idx, m in self._point_sets:
+            m.set_state(value[idx])
 
     def _to_q(self, func: Any, values: np.ndarray, dofs: np.ndarray, size: int) -> None:
         func.x.array.reshape(-1, size)[dofs] = values.reshape(-1, size)
         func.x.scatter_forward()
 
     def _update_tangent_and_stress(self, deps: np.ndarray) -> None:
-        trial = self.sig_n + np.einsum("nij,nj->ni", self.C, deps)
-        sig, tan, dl = drucker_prager_return(trial, bulk_pa=self.K, shear_pa=self.G,
-                                             alpha=self.alpha, beta=self.beta, k_pa=self.kc)
-        if self._aniso is not None:  # elastic there: the return left the trial stress
-            tan[self._aniso] = self.C[self._aniso]
-        if self.region_elements:
-            self._region_element_answers(deps, sig, tan, dl)
+        """Every point set's trial for the strain increments ``deps`` (n_qp, ncomp); the
+        members of one DEM pool (``trial_many``) at once."""
+        from femcoupling.soil_regions import RegionPoints
+
+        n = len(deps)
+        sig = np.empty((n, self.ncomp))
+        tan = np.empty((n, self.ncomp, self.ncomp))
+        dl = np.zeros(n)
+        region = []
+        for idx, m in self._point_sets:
+            if isinstance(m, RegionPoints):
+                region.append((idx, m))
+                continue
+            sig[idx], tan[idx] = m.trial(deps[idx])
+            dl[idx] = m.plastic
+        if region:
+            RegionPoints.trial_all(region, deps, sig, tan)
         self.sig_cur, self.dlam = sig, dl
         self._to_q(self.sig_q, sig, self._qdofs, self.ncomp)
         self._to_q(self.tan_q, tan.reshape(len(tan), -1), self._qdofs_t, self.ncomp**2)
@@ -299,20 +305,8 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         return self.bcs + ([self.footing_bc] if self._displacement_control else [])
 
     def _assemble_residual(self) -> float:
-        """b = R(u) lifted by J (g - u) at the constrained dofs (the predictor of the
-        prescribed increment), b = u - g there; returns |b| (dolfinx's Newton convention:
-        solve J dx = b, u <- u - dx)."""
-        fx = self._fx
-        PETSc = fx.PETSc
-        bcs = self._active_bcs()
-        with self.b.localForm() as loc:
-            loc.set(0.0)
-        fx.fem_petsc.assemble_vector(self.b, self.form_res)
-        fx.fem_petsc.apply_lifting(self.b, [self.form_jac], bcs=[bcs], x0=[self.u.x.petsc_vec],
-                                   alpha=-1.0)
-        self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
-        fx.fem_petsc.set_bc(self.b, bcs, x0=self.u.x.petsc_vec, alpha=-1.0)
-        return self.b.norm()
+        """|R| of the current iterate, Dirichlet rows lifted (``QuadratureSystem.residual``)."""
+        return self.system.residual(self._active_bcs())
 
     def _internal_scale(self) -> float:
         """|F_int| over all dofs (the Newton tolerance's scale), >= tiny."""
@@ -354,73 +348,51 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         ev = np.linalg.eigvalsh(mandel_to_tensor(sig))
         return float(np.abs(ev).max())
 
-    def _end_step(self, rnorm: float, scale: float, rscale: float | None, *,
-                  stall: bool) -> None:
+    def _end_step(self, out: Any) -> None:
         """The step's end (``StepResult``'s converged_on, noise_residual, status, residual,
-        tol, residual_pa): ``rnorm`` the accepted residual's norm, ``scale`` the body's force
-        scale, ``rscale`` the DEM regions' own (None without region elements)."""
-        on = rscale if rscale is not None else scale
+        tol, residual_pa) from its ``femcoupling.quadrature.NewtonOutcome``: the residual is
+        judged on the DEM regions' own force scale where the model has region elements, else
+        on the body's."""
+        rscale = self._region_scale() if self.region_elements else None
+        on = rscale if rscale is not None else out.scale
         pts = self._region_points() if rscale is not None else None
-        rel = rnorm / on
-        self._step_end = {"converged_on": "stall" if stall else "tolerance",
-                          "noise_residual": rnorm / scale if stall else float("nan"),
-                          "status": "stalled" if stall else "converged",
-                          "residual": rel, "tol": self.newton_rtol * scale / on,
+        rel = out.residual * out.scale / on
+        self._step_end = {"converged_on": out.converged_on,
+                          "noise_residual": out.noise_residual, "status": out.status,
+                          "residual": rel, "tol": self.newton_rtol * out.scale / on,
                           "residual_pa": rel * self._largest_stress(pts)}
 
     def _newton(self) -> int:
-        """Newton iterations of the current step; returns their number, or -1 on failure.
+        """Newton iterations of the current step (``femcoupling.quadrature.newton_solve``,
+        the hierarchical mode's Newton and its rules); returns their number, or -1 on
+        failure (the reason in ``last_failure``).
 
         With region elements the residual cannot fall below the elements' own resolution (a
         DEM answer is rough at the scale of Newton's last corrections: measured stalls at
-        1e-4 to 2e-3 of the region's own internal force). A step whose residual has not
-        halved in ``stall_iterations`` iterations, and whose best residual is within
-        ``stall_rtol`` of the DEM regions' own internal force (``_region_scale``), is taken at
-        its best iterate ("stall", status "stalled", said in ``warnings``); above it Newton
-        goes on to ``max_newton``, and the step is cut."""
-        fx = self._fx
-        bcs = self._active_bcs()
-        self._update_tangent_and_stress(self._strain_increment())
+        1e-4 to 2e-3 of the region's own internal force). Where Newton stalls, the elements'
+        noise is measured; a step within ``noise_factor`` times it and within
+        ``noise_ceiling`` of the DEM regions' own internal force (``_region_scale``) is
+        stopped_at_scatter (said in ``warnings``); above the ceiling, or never within the
+        noise, the step is cut."""
+        from femcoupling.quadrature import NewtonFailure, NewtonRules, newton_solve
+
+        rules = NewtonRules(rtol=self.newton_rtol, max_newton=self.max_newton,
+                            noise_factor=self.noise_factor, ceiling=self.noise_ceiling,
+                            probe=bool(self.region_elements), probe_size="correction")
         self._step_end = {}
-        best, best_u, best_scales, since = math.inf, None, None, 0
-        for it in range(0, self.max_newton + 1):
-            rnorm = self._assemble_residual()
-            scale = max(self._internal_scale(), self._ext_scale)
-            if not np.isfinite(rnorm):
-                return -1
-            rscale = self._region_scale() if self.region_elements else None
-            if rnorm <= self.newton_rtol * scale:
-                self._end_step(rnorm, scale, rscale, stall=False)
-                return it
-            if self.region_elements:
-                since = 0 if rnorm < 0.5 * best else since + 1
-                if rnorm < best:
-                    best, best_u, best_scales = rnorm, self.u.x.array.copy(), (scale, rscale)
-                if since >= self.stall_iterations and best <= self.stall_rtol * best_scales[1]:
-                    self.u.x.array[:] = best_u  # (the elements answer it again, bitwise)
-                    self.u.x.scatter_forward()
-                    self._update_tangent_and_stress(self._strain_increment())
-                    self._end_step(best, *best_scales, stall=True)
-                    return it
-            if it == self.max_newton:
-                break
-            self.A.zeroEntries()
-            fx.fem_petsc.assemble_matrix(self.A, self.form_jac, bcs=bcs)
-            self.A.assemble()
-            self.ksp.setOperators(self.A)
-            self.ksp.solve(self.b, self.du.x.petsc_vec)
-            if self.ksp.getConvergedReason() <= 0:
-                return -1
-            self.du.x.scatter_forward()
-            self.u.x.array[:] -= self.du.x.array
-            self.u.x.scatter_forward()
-            self._update_tangent_and_stress(self._strain_increment())
-        return -1
+        try:
+            out = newton_solve(_SoilNewton(self), rules)
+        except NewtonFailure as e:
+            self.last_failure = str(e)
+            return -1
+        self._end_step(out)
+        return out.iterations
 
     def _commit(self) -> None:
         for unit, _ in self._element_units():
             unit.commit()
-        self.sig_n = self.sig_cur.copy()
+        for _, m in self._point_sets:
+            m.commit()
         self.u_n.x.array[:] = self.u.x.array
         self.u_n.x.scatter_forward()
 
@@ -456,8 +428,8 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
                 dlf = min(2.0 * dlf, 1.0 / steps)
             r = StepResult(stage, lf, self.footing_settlement_m(), self.footing_pressure_pa(),
                            its, self.plastic_points(), **self._step_end)
-            if r.converged_on == "stall":
-                self._stall_warning(r)
+            if r.converged_on == "noise":
+                self._noise_warning(r)
             self.history.append(r)
             out.append(r)
             if callback is not None:
@@ -466,18 +438,19 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
 
     _ext_scale = 0.0
 
-    def _stall_warning(self, r: StepResult) -> None:
+    def _noise_warning(self, r: StepResult) -> None:
         import warnings
 
         from femcoupling.hierarchical import NoiseWarning
 
         msg = (f"{r.stage} step at load factor {r.load_factor:.4g}: Newton stalled at "
                f"{r.residual:.3g} of the DEM regions' own internal force ({r.residual_pa:.3g} "
-               f"Pa; {r.noise_residual:.3g} of the body's force scale), above the tolerance "
-               f"newton_rtol={self.newton_rtol:g} ({r.tol:.3g} of the regions' force) and "
-               f"within stall_rtol={self.stall_rtol:g}: the DEM region elements do not resolve "
-               "the tolerance asked; the step is taken at its best iterate (stalled, not "
-               "converged)")
+               f"Pa), above the tolerance newton_rtol={self.newton_rtol:g} ({r.tol:.3g} of "
+               f"the regions' force), within {self.noise_factor:g} x the elements' noise "
+               f"({r.noise_residual:.3g} of the body's force scale) and within "
+               f"noise_ceiling={self.noise_ceiling:g}: the DEM region elements do not "
+               "resolve the tolerance asked; the step stopped at their scatter "
+               "(stopped_at_scatter, not converged)")
         self.warnings.append(msg)
         warnings.warn(msg, NoiseWarning, stacklevel=3)
 
@@ -508,3 +481,48 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         del self.history[state["nhist"]:]
         for (unit, _), data in zip(self._element_units(), state.get("elements", [])):
             unit.set_state(data)
+
+
+class _SoilNewton:
+    """``SoilModel`` as ``femcoupling.quadrature.newton_solve``'s problem."""
+
+    def __init__(self, m: SoilModel) -> None:
+        self.m, self.bcs = m, m._active_bcs()
+
+    def evaluate(self, first: bool, perturb: float = 0.0) -> None:
+        deps = self.m._strain_increment()
+        self.m._update_tangent_and_stress(deps * (1.0 + perturb) if perturb else deps)
+
+    def residual(self) -> float:
+        return self.m.system.residual(self.bcs)
+
+    def force_scale(self) -> float:
+        return max(self.m._internal_scale(), self.m._ext_scale)
+
+    def noise_scale(self) -> float:
+        return self.m._region_scale()
+
+    def stresses(self) -> np.ndarray:
+        return self.m.sig_cur.copy()
+
+    def stress_change_residual(self, before: np.ndarray) -> float:
+        m = self.m
+        return m.system.change_residual(
+            m.sig_cur - before, self.bcs,
+            lambda f, v: m._to_q(f, v, m._qdofs, m.ncomp))
+
+    def predicted_change(self, perturb: float) -> np.ndarray:
+        m = self.m
+        deps = m._strain_increment()
+        tan = m.tan_q.x.array.reshape(-1, m.ncomp, m.ncomp)[m._qdofs_t]
+        return perturb * np.einsum("nij,nj->ni", tan, deps)
+
+    def increment_norm(self) -> float:
+        m = self.m
+        return float(np.linalg.norm(m.u.x.array - m.u_n.x.array))
+
+    def correction(self) -> np.ndarray:
+        return self.m.system.correction(self.bcs)
+
+    def move(self, correction: np.ndarray, factor: float) -> None:
+        self.m.system.move(correction, factor)

@@ -51,14 +51,14 @@ import dataclasses
 import math
 import time
 from pathlib import Path
-from typing import Any
 
 import numpy as np
 
 from femcoupling import _dolfinx
 from femcoupling.geometry import FemInputError
-from femcoupling.relaxation import aitken_factor, check_relaxation, next_factor
-from femcoupling.status import newton_acceptance, worst
+from femcoupling.quadrature import NewtonFailure, NewtonRules, QuadratureSystem, newton_solve
+from femcoupling.relaxation import aitken_factor, check_relaxation
+from femcoupling.status import worst
 
 __all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning", "TANGENTS",
            "aitken_factor", "secant_update"]
@@ -118,10 +118,6 @@ def secant_update(tangent: np.ndarray, strain: np.ndarray, stress: np.ndarray,
     if not (curv_t > 0 and curv > 1e-12 * curv_t):
         return None
     return t - np.outer(td, td) / curv_t + np.outer(stress, stress) / curv
-
-
-class NewtonFailure(RuntimeError):
-    """Newton did not converge in a load step (even after the step was cut)."""
 
 
 class NoiseWarning(UserWarning):
@@ -200,8 +196,6 @@ class HierarchicalPlaneStrain:
             raise FemInputError(f"nx={nx}, ny={ny}: must be >= 1")
         fx = self._fx = _dolfinx.load()
         fem, ufl = fx.fem, fx.ufl
-        import basix
-        import basix.ufl
 
         self.pool, self.lx, self.ly = pool, float(lx), float(ly)
         self.out = None if out is None else Path(out)
@@ -215,14 +209,10 @@ class HierarchicalPlaneStrain:
             for f in old:
                 (self.out / f).unlink()
         self.verbose = verbose
-        self.bad_tangents = 0  # element tangents replaced by their last good one
         if tangent not in TANGENTS:
             raise FemInputError(f"tangent={tangent!r}: one of " + "; ".join(
                 f"'{k}' ({v})" for k, v in TANGENTS.items()))
         self.tangent = tangent
-        #: what the elements are asked for (the secant is built here from the network one)
-        self._element_tangent = "network" if tangent == "secant" else tangent
-        self.secants_used = 0  # element tangents replaced by their secant (tangent="secant")
         if convergence not in ("noise", "tolerance"):
             raise FemInputError(f"convergence={convergence!r}: 'noise' (newton_rtol, or, "
                                 "when Newton stalls above it, within the elements' measured "
@@ -257,20 +247,6 @@ class HierarchicalPlaneStrain:
         if pool.n != self.n_cells:
             raise FemInputError(f"pool: has {pool.n} elements for {self.n_cells} cells "
                                 f"(2 nx ny triangles)")
-        self.V = fem.functionspace(msh, ("Lagrange", 1, (2,)))
-        qe_v = basix.ufl.quadrature_element("triangle", value_shape=(3,), scheme="default",
-                                            degree=1)
-        qe_t = basix.ufl.quadrature_element("triangle", value_shape=(3, 3), scheme="default",
-                                            degree=1)
-        self.Wv, self.Wt = fem.functionspace(msh, qe_v), fem.functionspace(msh, qe_t)
-        pts, _ = basix.make_quadrature(basix.CellType.triangle, 1)
-        if len(pts) != 1:
-            raise RuntimeError("one quadrature point per triangle expected")
-        self.u, self.u_n, self.du = (fem.Function(self.V) for _ in range(3))
-        self.sig_q, self.tan_q = fem.Function(self.Wv), fem.Function(self.Wt)
-        dxq = ufl.Measure("dx", domain=msh, metadata={"quadrature_degree": 1,
-                                                       "quadrature_scheme": "default"})
-        v, dv = ufl.TestFunction(self.V), ufl.TrialFunction(self.V)
 
         def eps(w):
             e = ufl.sym(ufl.grad(w))
@@ -282,14 +258,17 @@ class HierarchicalPlaneStrain:
         ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
         st = fx.PETSc.ScalarType
         self.traction = fem.Constant(msh, np.zeros(2, dtype=st))
-        f_int = ufl.dot(self.sig_q, eps(v)) * dxq
-        self.form_res = fem.form(f_int - ufl.dot(self.traction, v) * ds(1))
-        self.form_jac = fem.form(ufl.dot(ufl.dot(self.tan_q, eps(dv)), eps(v)) * dxq)
-        # the internal force of a stress field alone (the noise's residual)
-        self.sig_noise = fem.Function(self.Wv)
-        self.form_noise = fem.form(ufl.dot(self.sig_noise, eps(v)) * dxq)
-        self.expr_grad = fem.Expression(ufl.grad(self.u), pts)
-        self.expr_grad_n = fem.Expression(ufl.grad(self.u_n), pts)
+        # spaces, forms and solver: the same as the FEM soil's (femcoupling.quadrature)
+        sysq = self.system = QuadratureSystem(
+            msh, degree=1, qdeg=1, ncomp=3, strain=eps,
+            loads=lambda v: (ufl.dot(self.traction, v) * ds(1),))
+        if len(sysq.qweights) != 1:
+            raise RuntimeError("one quadrature point per triangle expected")
+        self.V, self.Wv, self.Wt = sysq.V, sysq.Wv, sysq.Wt
+        self.u, self.u_n, self.du = sysq.u, sysq.u_n, sysq.du
+        self.sig_q, self.tan_q = sysq.sig_q, sysq.tan_q
+        self.expr_grad = fem.Expression(ufl.grad(self.u), sysq.qpoints)
+        self.expr_grad_n = fem.Expression(ufl.grad(self.u_n), sysq.qpoints)
         # boundary conditions
         self.top_u = fem.Constant(msh, st(0.0))
         self.right_u = fem.Constant(msh, st(0.0))
@@ -321,51 +300,37 @@ class HierarchicalPlaneStrain:
             else:
                 self.traction.value[:] = [-float(confining_pa), 0.0]
             self.bcs = [b for b in self.bcs if b is not None]
-        self.A = fx.fem_petsc.create_matrix(self.form_jac)
-        self.b = fx.fem_petsc.create_vector(self.V)
-        self.b_noise = fx.fem_petsc.create_vector(self.V)
-        self.ksp = fx.PETSc.KSP().create(comm)
-        self.ksp.setOperators(self.A)
-        self.ksp.setType("preonly")
-        self.ksp.getPC().setType("lu")
-        # the elements' current state: stress and tangent at the start
         self.history: list[HierStep] = []
-        first = pool.apply_strain([np.zeros((3, 3))] * pool.n, tangent=self._element_tangent,
-                                  **self.strain_kw)
-        pool.reject()  # (a zero increment with relaxation: measured, then undone)
-        self._increments = np.zeros((pool.n, 3, 3))
-        self._set_q(first.stresses, first.tangents)
-        self._sig_start = self._sig.copy()  # the element stresses at the step's start
+        #: the elements as the quadrature points' material (femcoupling.quadrature)
+        self.material = ElementPoolMaterial(pool, tangent=tangent, strain_kw=self.strain_kw)
+        self._set_q(self.material.stress, self.material.tangent)
 
-    # ---- quadrature data ----------------------------------------------------------------
-    def _set_q(self, stresses, tangents) -> None:
-        sig = np.array([fem_stress(s) for s in stresses])
-        tan = np.array([fem_tangent(t) for t in tangents])
-        if self.tangent == "secant":  # (the first call's increments are zero)
-            for k, g in enumerate(self._increments):
-                de = np.array([g[0, 0], g[2, 2], g[0, 2] + g[2, 0]])  # (FEM x, y = DEM x, z)
-                if np.any(de != 0):
-                    c = secant_update(tan[k], de, sig[k] - self._sig_start[k])
-                    if c is not None:
-                        tan[k] = c
-                        self.secants_used += 1
-        # A tangent far from positive (its smallest eigenvalue below -10 % of its largest) or
-        # not finite is not a softening element but a near-singular network solve: seen as
-        # -730 MPa against +3 MPa, and it sent Newton away. Such an element keeps its last good
-        # tangent for this iterate (counted in bad_tangents).
-        last = getattr(self, "_tan", None)
-        for k, c in enumerate(tan):
-            ok = bool(np.all(np.isfinite(c)))
-            if ok:
-                ev = np.linalg.eigvalsh(0.5 * (c + c.T))
-                ok = ev[0] >= -0.1 * ev[-1]
-            if not ok and last is not None:
-                tan[k] = last[k]
-                self.bad_tangents += 1
-        self._tan = tan
+    # ---- the elements' material ---------------------------------------------------------
+    @property
+    def bad_tangents(self) -> int:
+        """Element tangents replaced by their last good one (``ElementPoolMaterial``)."""
+        return self.material.bad_tangents
+
+    @property
+    def secants_used(self) -> int:
+        """Element tangents replaced by their secant (tangent="secant")."""
+        return self.material.secants_used
+
+    @property
+    def _sig(self) -> np.ndarray:
+        return self.material.stress
+
+    @property
+    def _tan(self) -> np.ndarray:
+        return self.material.tangent
+
+    @property
+    def _last_pool_step(self):
+        return self.material.last_step
+
+    def _set_q(self, sig: np.ndarray, tan: np.ndarray) -> None:
         self.sig_q.x.array[:] = sig.reshape(-1)
         self.tan_q.x.array[:] = tan.reshape(-1)
-        self._sig = sig
 
     def _grad_increment(self) -> np.ndarray:
         cells = np.arange(self.n_cells, dtype=np.int32)
@@ -373,52 +338,11 @@ class HierarchicalPlaneStrain:
         gn = self.expr_grad_n.eval(self.mesh, cells).reshape(-1, 2, 2)
         return g - gn
 
-    def _evaluate(self, first: bool, perturb: float = 0.0) -> tuple[float, float, list]:
+    def _evaluate(self, first: bool, perturb: float = 0.0) -> None:
         """Stress and tangent of every element for the current iterate (its increments
-        scaled by 1 + ``perturb``: the noise probe); returns the DEM seconds, the wall
-        seconds of the pool call and the recovered elements."""
-        if not first:
-            self.pool.reject()
-        from cpp_dem.elements.pool import ElementError
-
-        self._increments = np.array([dem_increment(g) for g in self._grad_increment()])
-        if perturb:
-            self._increments *= 1.0 + perturb
-        try:
-            step = self.pool.apply_strain(list(self._increments),
-                                          tangent=self._element_tangent, scatter=True,
-                                          **self.strain_kw)
-        except ElementError as e:  # an element could not take this iterate: cut the step
-            raise NewtonFailure(f"an element failed on this iterate: {e}") from e
-        self._set_q(step.stresses, step.tangents)
-        self._scat = (None if step.scatters is None else
-                      np.array([fem_stress(c) for c in step.scatters]))
-        self._last_pool_step = step
-        return float(sum(step.cpu_s)), step.wall_s, step.recovered
-
-    def _residual(self) -> float:
-        fx = self._fx
-        with self.b.localForm() as loc:
-            loc.set(0.0)
-        fx.fem_petsc.assemble_vector(self.b, self.form_res)
-        fx.fem_petsc.apply_lifting(self.b, [self.form_jac], bcs=[self.bcs],
-                                   x0=[self.u.x.petsc_vec], alpha=-1.0)
-        self.b.ghostUpdate(addv=fx.PETSc.InsertMode.ADD, mode=fx.PETSc.ScatterMode.REVERSE)
-        fx.fem_petsc.set_bc(self.b, self.bcs, x0=self.u.x.petsc_vec, alpha=-1.0)
-        return self.b.norm()
-
-    def _field_residual(self, field: np.ndarray) -> float:
-        """|internal force| (N) of a stress field alone ((n_cells, 3), Pa), Dirichlet rows
-        zeroed: the residual that a change of the element stresses by ``field`` makes."""
-        fx = self._fx
-        self.sig_noise.x.array[:] = np.asarray(field, float).reshape(-1)
-        with self.b_noise.localForm() as loc:
-            loc.set(0.0)
-        fx.fem_petsc.assemble_vector(self.b_noise, self.form_noise)
-        self.b_noise.ghostUpdate(addv=fx.PETSc.InsertMode.ADD,
-                                 mode=fx.PETSc.ScatterMode.REVERSE)
-        fx.fem_petsc.set_bc(self.b_noise, self.bcs, alpha=0.0)
-        return float(self.b_noise.norm())
+        scaled by 1 + ``perturb``: the noise probe)."""
+        g = self._grad_increment()
+        self._set_q(*self.material.trial(g * (1.0 + perturb) if perturb else g))
 
     def _softest(self, n: int = 3) -> str:
         """The ``n`` elements of the current iterate with the smallest tangent eigenvalue:
@@ -457,7 +381,7 @@ class HierarchicalPlaneStrain:
         except NewtonFailure:
             if max_cuts <= 0:
                 raise
-            self.pool.reject()
+            self.material.reject()
             self.u.x.array[:] = self.u_n.x.array
             self.u.x.scatter_forward()
             t0, r0 = self._bc_now
@@ -471,119 +395,45 @@ class HierarchicalPlaneStrain:
 
     def _step(self, top_displacement: float, right_displacement: float) -> HierStep:
         t0 = time.perf_counter()
-        fx = self._fx
         self.top_u.value = top_displacement
         self.right_u.value = right_displacement
         if self.homogeneous:
             ex, ey = right_displacement / self.lx, top_displacement / self.ly
             self._hx.interpolate(lambda x: ex * x[0])
             self._hy.interpolate(lambda x: ey * x[1])
-        dem_s = pool_s = 0.0
-        recovered: list = []
-        rel = noise_rel = float("nan")
-        its = 0
-        omega, d_prev, omegas = 1.0, None, []
-        converged_on = "tolerance"
-        probe = self.convergence == "noise"
-        hist: list[float] = []
-        for it in range(self.max_newton + 1):
-            d, w, rec = self._evaluate(first=(it == 0))
-            dem_s, pool_s, recovered = dem_s + d, pool_s + w, recovered + rec
-            rnorm = self._residual()
-            scale = self._scale()
-            rel = rnorm / scale
-            hist.append(rel)
-            if self.verbose:
-                print(f"[hier] iteration {it}: residual {rel:.3e}", flush=True)
-            its = it
-            if it > 0 and rel <= self.newton_rtol:
-                converged_on = "tolerance"
-                break
-            stalled = it == self.max_newton or (len(hist) >= 3 and rel > 0.5 * hist[-3])
-            if probe and it > 0 and stalled:
-                # Newton stalls above the tolerance: measure the elements' noise. Re-run
-                # every element on its increment scaled by 1 + 1e-9: the deterministic
-                # answer moves by 1e-9, the DEM's by its noise (its relaxation to a
-                # tolerance and the chaos of a granular packing). The residual of that
-                # change is what no Newton iterate can get below. (The largest of the step's
-                # probes counts; after a probe, two more iterations before the next.)
-                before = self._sig.copy()
-                d, w, rec = self._evaluate(first=False, perturb=1e-9)
-                dem_s, pool_s, recovered = dem_s + d, pool_s + w, recovered + rec
-                v = self._field_residual(self._sig - before) / scale
-                noise_rel = v if math.isnan(noise_rel) else max(noise_rel, v)
-                rel = self._residual() / scale
-                hist = [rel]
-                if self.verbose:
-                    print(f"[hier] noise probe: residual {rel:.3e}, the noise's "
-                          f"{noise_rel:.3e}", flush=True)
-                accept = newton_acceptance(rel, rtol=self.newton_rtol,
-                                           noise_residual=noise_rel,
-                                           noise_factor=self.noise_factor,
-                                           ceiling=self.noise_ceiling)
-                if accept == "converged":
-                    converged_on = "tolerance"
-                    break
-                if accept == "stopped_at_scatter":
-                    converged_on = "noise"
-                    break
-                if rel <= self.noise_factor * noise_rel:
-                    # within the noise but above the ceiling: not accepted; cut the step
-                    raise NewtonFailure(
-                        f"Newton stalled at {rel:.3g} of the internal force scale, within "
-                        f"the elements' noise ({noise_rel:.3g}) but above the ceiling "
-                        f"noise_ceiling={self.noise_ceiling:g} (asked newton_rtol="
-                        f"{self.newton_rtol:g}): the step is cut")
-            if it == self.max_newton or not math.isfinite(rel):
-                raise NewtonFailure(f"Newton: no convergence in {self.max_newton} iterations "
-                                    f"(residual {rel:.3g} of the internal force scale; asked "
-                                    f"{self.newton_rtol}; the elements' noise makes "
-                                    f"{noise_rel:.3g})")
-            self.A.zeroEntries()
-            fx.fem_petsc.assemble_matrix(self.A, self.form_jac, bcs=self.bcs)
-            self.A.assemble()
-            self.ksp.setOperators(self.A)
-            self.ksp.solve(self.b, self.du.x.petsc_vec)
-            self.du.x.scatter_forward()
-            if not np.all(np.isfinite(self.du.x.array)):
-                # (a singular Jacobian: softening elements whose tangents lost stiffness)
-                raise NewtonFailure("the Newton correction is not finite (singular Jacobian"
-                                    f"; the softest elements: {self._softest()})")
-            dk = -self.du.x.array.copy()  # the full Newton correction
-            omega = next_factor(self.relaxation, omega, d_prev, dk)
-            # (the first correction of a step is a full one: it also puts u on the boundary
-            # values)
-            w_k = 1.0 if it == 0 else omega
-            omegas.append(w_k)
-            d_prev = dk
-            self.u.x.array[:] += w_k * dk
-            self.u.x.scatter_forward()
-        stress_of_scale = scale / math.sqrt(self.lx * self.ly)  # Pa: the largest stress
-        if converged_on == "noise":
+        mat = self.material
+        mat.new_step_counters()
+        rules = NewtonRules(rtol=self.newton_rtol, max_newton=self.max_newton,
+                            noise_factor=self.noise_factor, ceiling=self.noise_ceiling,
+                            probe=self.convergence == "noise")
+        log = (lambda msg: print(f"[hier] {msg}", flush=True)) if self.verbose else None
+        out = newton_solve(_HierNewton(self), rules, relaxation=self.relaxation, log=log)
+        rel, noise_rel, its = out.residual, out.noise_residual, out.iterations
+        stress_of_scale = out.scale / math.sqrt(self.lx * self.ly)  # Pa: the largest stress
+        if out.converged_on == "noise":
             self._warn(f"load step {len(self.history)} (top {top_displacement:.6g} m): the "
                        f"tolerance asked (newton_rtol={self.newton_rtol:g}) is below the "
                        f"elements' noise (a 1e-9 change of their increments moves the "
                        f"residual by {noise_rel:.3g} of the internal force scale); stopped "
                        f"at the noise at {rel:.3g} ({rel * stress_of_scale:.3g} Pa; ceiling "
                        f"{self.noise_ceiling:g}): stopped_at_scatter, not converged")
-        self.pool.accept()
-        self._sig_start = self._sig.copy()
+        mat.commit()
         self._bc_now = (top_displacement, right_displacement)
         self.u_n.x.array[:] = self.u.x.array
         wall = time.perf_counter() - t0
         r = HierStep(load=top_displacement, iterations=its, residual=rel,
                      mean_stress=self._sig.mean(axis=0), element_stresses=self._sig.copy(),
-                     dem_s=dem_s, fem_s=wall - pool_s, wall_s=wall, recovered=recovered,
-                     increments=self._increments.copy(), noise_residual=noise_rel,
-                     converged_on=converged_on, relaxation=tuple(omegas),
-                     element_scatter=self._scat.copy(),
-                     status="converged" if converged_on == "tolerance" else "stopped_at_scatter",
-                     residual_pa=rel * stress_of_scale,
+                     dem_s=mat.step_dem_s, fem_s=wall - mat.step_pool_s, wall_s=wall,
+                     recovered=mat.step_recovered, increments=mat.increments.copy(),
+                     noise_residual=noise_rel, converged_on=out.converged_on,
+                     relaxation=out.relaxation, element_scatter=mat.scatter.copy(),
+                     status=out.status, residual_pa=rel * stress_of_scale,
                      noise_residual_pa=noise_rel * stress_of_scale)
         self.history.append(r)
         if self.out is not None:
             self._write_records(r)
         return r
+
 
     # ---- records -----------------------------------------------------------------------------
     def _write_records(self, r: HierStep) -> None:
@@ -685,3 +535,141 @@ class HierarchicalPlaneStrain:
                 xf.write_mesh(self.mesh)
             xf.write_function(self.u, r.load)
             xf.write_function(sig, r.load)
+
+class _HierNewton:
+    """``HierarchicalPlaneStrain`` as ``femcoupling.quadrature.newton_solve``'s problem."""
+
+    def __init__(self, m: "HierarchicalPlaneStrain") -> None:
+        self.m = m
+
+    def evaluate(self, first: bool, perturb: float = 0.0) -> None:
+        self.m._evaluate(first, perturb)
+
+    def residual(self) -> float:
+        return self.m.system.residual(self.m.bcs)
+
+    def force_scale(self) -> float:
+        return self.m._scale()
+
+    noise_scale = force_scale  # (every point is a DEM element)
+
+    def stresses(self) -> np.ndarray:
+        return self.m._sig.copy()
+
+    def stress_change_residual(self, before: np.ndarray) -> float:
+        def put(f, v):
+            f.x.array[:] = np.asarray(v, float).reshape(-1)
+
+        return self.m.system.change_residual(self.m._sig - before, self.m.bcs, put)
+
+    def correction(self) -> np.ndarray:
+        return self.m.system.correction(self.m.bcs, describe=lambda: (
+            f"softening elements whose tangents lost stiffness; the softest elements: "
+            f"{self.m._softest()}"))
+
+    def move(self, correction: np.ndarray, factor: float) -> None:
+        self.m.system.move(correction, factor)
+
+
+class ElementPoolMaterial:
+    """The DEM elements of an ``ElementPool`` as the material of the hierarchical mode's
+    quadrature points (a ``femcoupling.quadrature.QuadratureMaterial``; element k is point k).
+
+    ``trial(g)``: ``g`` (n, 2, 2) the displacement-gradient increments since the last commit
+    (shear and rotation included; FEM (x, y) is the element's (x, z), its y held: plane
+    strain); every element, restored to its committed state if an earlier trial moved it
+    (``pool.reject``: a rejected iterate leaves no trace), takes its increment and returns
+    its stress and ``tangent``; returns the FEM Voigt stresses (n, 3), Pa, tension positive,
+    and tangents (n, 3, 3: xx, yy, xy with engineering shear), Pa. A tangent far from
+    positive (its smallest eigenvalue below -10 % of its largest) or not finite is not a
+    softening element but a near-singular network solve (seen as -730 MPa against +3 MPa, it
+    sent Newton away): such an element keeps its last good tangent for the iterate
+    (``bad_tangents`` counts them). With tangent="secant" the network tangent is changed to
+    map the increment onto the stress increment (``secant_update``; ``secants_used``).
+    ``commit`` accepts (``pool.accept``: the states saved on the workers); ``state`` and
+    ``set_state`` are the pool's accepted states (bytes per element)."""
+
+    def __init__(self, pool, *, tangent: str = "network", strain_kw: dict | None = None) -> None:
+        from cpp_dem.elements.pool import ElementError
+
+        self._element_error = ElementError
+        self.pool, self.tangent_kind = pool, tangent
+        self.strain_kw = dict(strain_kw or {})
+        #: what the elements are asked for (the secant is built here from the network one)
+        self._element_tangent = "network" if tangent == "secant" else tangent
+        self.bad_tangents = 0
+        self.secants_used = 0
+        self.tangent = None
+        first = pool.apply_strain([np.zeros((3, 3))] * pool.n, tangent=self._element_tangent,
+                                  **self.strain_kw)
+        pool.reject()  # (a zero increment with relaxation: measured, then undone)
+        self._pending = False
+        self.increments = np.zeros((pool.n, 3, 3))
+        self.stress, self.tangent = self._fem_answers(first.stresses, first.tangents)
+        self.stress_start = self.stress.copy()  # the element stresses at the step's start
+        self.last_step = first
+        self.scatter = None
+        self.new_step_counters()
+
+    def new_step_counters(self) -> None:
+        """Zero the step's DEM seconds, pool seconds and recovered elements."""
+        self.step_dem_s = self.step_pool_s = 0.0
+        self.step_recovered: list = []
+
+    def _fem_answers(self, stresses, tangents) -> tuple[np.ndarray, np.ndarray]:
+        sig = np.array([fem_stress(s) for s in stresses])
+        tan = np.array([fem_tangent(t) for t in tangents])
+        if self.tangent_kind == "secant":  # (the first call's increments are zero)
+            for k, g in enumerate(self.increments):
+                de = np.array([g[0, 0], g[2, 2], g[0, 2] + g[2, 0]])  # (FEM x, y = DEM x, z)
+                if np.any(de != 0):
+                    c = secant_update(tan[k], de, sig[k] - self.stress_start[k])
+                    if c is not None:
+                        tan[k] = c
+                        self.secants_used += 1
+        last = self.tangent
+        for k, c in enumerate(tan):
+            ok = bool(np.all(np.isfinite(c)))
+            if ok:
+                ev = np.linalg.eigvalsh(0.5 * (c + c.T))
+                ok = ev[0] >= -0.1 * ev[-1]
+            if not ok and last is not None:
+                tan[k] = last[k]
+                self.bad_tangents += 1
+        return sig, tan
+
+    def trial(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        if self._pending:
+            self.pool.reject()
+        self.increments = np.array([dem_increment(x) for x in g])
+        self._pending = True
+        try:
+            step = self.pool.apply_strain(list(self.increments), tangent=self._element_tangent,
+                                          scatter=True, **self.strain_kw)
+        except self._element_error as e:  # an element could not take this iterate: cut
+            raise NewtonFailure(f"an element failed on this iterate: {e}") from e
+        self.stress, self.tangent = self._fem_answers(step.stresses, step.tangents)
+        self.scatter = (None if step.scatters is None else
+                        np.array([fem_stress(c) for c in step.scatters]))
+        self.last_step = step
+        self.step_dem_s += float(sum(step.cpu_s))
+        self.step_pool_s += step.wall_s
+        self.step_recovered = self.step_recovered + step.recovered
+        return self.stress, self.tangent
+
+    def reject(self) -> None:
+        """Back to the committed state (the last trial leaves no trace)."""
+        self.pool.reject()
+        self._pending = False
+
+    def commit(self) -> None:
+        self.pool.accept()
+        self._pending = False
+        self.stress_start = self.stress.copy()
+
+    def state(self) -> list:
+        return self.pool.states()
+
+    def set_state(self, data) -> None:
+        self.pool.load_states(data)
+        self._pending = False

@@ -70,6 +70,16 @@ class LinearElastic:
         """(alpha, beta, k/Pa) of the yield function: never yields (k = inf)."""
         return 0.0, 0.0, math.inf
 
+    def at_points(self, stress_pa: npt.ArrayLike):
+        """This material at quadrature points whose committed stress is ``stress_pa``
+        ((n, ncomp) Mandel, Pa): a ``femcoupling.quadrature.QuadratureMaterial``
+        (``DruckerPragerPoints`` on this material's cone; an elastic one never yields)."""
+        from femcoupling.quadrature import DruckerPragerPoints
+
+        a, b, k = self.dp_parameters()
+        return DruckerPragerPoints(bulk_pa=self.bulk_pa, shear_pa=self.shear_pa, alpha=a,
+                                   beta=b, k_pa=k, stress_pa=stress_pa)
+
 
 PLANE_STRAIN_OF_3D = (0, 2, 1, 4)
 """The 3D Mandel components (xx, yy, zz, yz, xz, xy) that make the plane-strain ones
@@ -131,6 +141,16 @@ class AnisotropicElastic(LinearElastic):
         object.__setattr__(self, "c_mandel_pa", tuple(map(tuple, c)))
         object.__setattr__(self, "young_pa", 9.0 * k * g / (3.0 * k + g))
         object.__setattr__(self, "poisson", (3.0 * k - 2.0 * g) / (2.0 * (3.0 * k + g)))
+
+    def at_points(self, stress_pa: npt.ArrayLike):
+        """This material at quadrature points whose committed stress is ``stress_pa``
+        ((n, ncomp) Mandel, Pa): ``femcoupling.quadrature.ElasticPoints`` with the full
+        stiffness (never yields)."""
+        from femcoupling.quadrature import ElasticPoints
+
+        stress = np.asarray(stress_pa, float)
+        c = self.matrix(stress.shape[1])
+        return ElasticPoints(np.repeat(c[None], len(stress), axis=0), stress)
 
     def matrix(self, ncomp: int = 6) -> npt.NDArray[np.float64]:
         """The stiffness for Mandel vectors of length ``ncomp`` (6: 3D, 4: plane strain), Pa."""

@@ -378,6 +378,11 @@ class PoolRegionMaterials:
         return {n: (self._last[0][k] - self._stress0[k], self._last[1][k])
                 for k, n in enumerate(self.names)}
 
+    def trial(self, increments: dict) -> dict:
+        """``trial_many``: the group as one ``femcoupling.quadrature.QuadratureMaterial``
+        whose increment is the regions' (name -> 3 x 3)."""
+        return self.trial_many(increments)
+
     def commit(self) -> None:
         """The last trial becomes the start of the next step on every worker (and rows of
         ``records``)."""

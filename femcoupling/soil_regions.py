@@ -14,6 +14,74 @@ from femcoupling.materials import (LinearElastic, mandel_to_tensor, stiffness_bl
                                    tensor_to_mandel)
 
 
+class RegionPoints:
+    """The quadrature points of one element region (or cell) whose stress a DEM element gives
+    (a ``femcoupling.quadrature.QuadratureMaterial`` on those points): ``element`` (a
+    ``femcoupling.region.DemRegionMaterial``, or a member of a ``PoolRegionMaterials``, whose
+    ``group`` evaluates, commits and saves its members at once) gets the points' volume-mean
+    strain increment (``weights``, summing to 1); each point takes its committed stress
+    (``stress_pa``) plus the element's stress increment, plus the element's tangent times the
+    point's deviation from that mean (so the region's mean stress is the element's, and the
+    pointwise tangent is the consistent Jacobian: with the mean alone every point would depend
+    on every other one, and Newton converged linearly, 15 % per iteration); ``key``: the
+    model's name of the element (a group's member key). The points never
+    yield (``plastic`` is 0). ``commit``, ``state`` and ``set_state`` are those of the points'
+    stress; the model commits and saves the element (or its group) once."""
+
+    def __init__(self, element: Any, weights: np.ndarray, stress_pa: np.ndarray,
+                 ncomp: int, key: str = "") -> None:
+        self.element, self.weights, self.ncomp, self.key = element, weights, ncomp, key
+        self.stress_n = np.array(stress_pa, float)
+        self.stress = self.stress_n.copy()
+        self.plastic = np.zeros(len(self.stress_n))
+
+    def mean(self, increment: np.ndarray) -> np.ndarray:
+        """The points' volume-mean strain increment (ncomp,)."""
+        return self.weights @ increment
+
+    def _answer(self, increment: np.ndarray, mean: np.ndarray, answer: tuple):
+        ds, c = answer
+        c = stiffness_block(c, self.ncomp)
+        self.stress = (self.stress_n + tensor_to_mandel(ds, self.ncomp)
+                       + (increment - mean) @ c.T)
+        return self.stress, np.broadcast_to(c, (len(self.stress),) + c.shape)
+
+    def trial(self, increment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The points' stress and tangent for their strain increments ((n, ncomp))."""
+        mean = self.mean(increment)
+        return self._answer(increment, mean, self.element.trial(mandel_to_tensor(mean)))
+
+    @staticmethod
+    def trial_all(sets: list, deps: np.ndarray, sig: np.ndarray, tan: np.ndarray) -> None:
+        """The trial of every ``(indices, RegionPoints)`` of ``sets`` for the model's
+        increments ``deps``, written into ``sig`` and ``tan`` (in place): the members of one
+        group (``trial_many``) are evaluated at once."""
+        means = [m.mean(deps[idx]) for idx, m in sets]
+        answers: dict = {}
+        units: dict = {}
+        for k, (_, m) in enumerate(sets):
+            unit = getattr(m.element, "group", None)
+            if unit is None:
+                answers[k] = m.element.trial(mandel_to_tensor(means[k]))
+            else:
+                units.setdefault(id(unit), (unit, []))[1].append(k)
+        for unit, ks in units.values():
+            got = unit.trial_many({sets[k][1].key: mandel_to_tensor(means[k]) for k in ks})
+            answers.update({k: got[sets[k][1].key] for k in ks})
+        for k, (idx, m) in enumerate(sets):
+            sig[idx], tan[idx] = m._answer(deps[idx], means[k], answers[k])
+
+    def commit(self) -> None:
+        self.stress_n = self.stress.copy()
+
+    def state(self) -> np.ndarray:
+        return self.stress_n.copy()
+
+    def set_state(self, data: np.ndarray) -> None:
+        self.stress_n = np.array(data, float)
+        self.stress = self.stress_n.copy()
+
+
 class RegionMaterials:
     """See the module doc."""
 
@@ -83,32 +151,7 @@ class RegionMaterials:
         self._region_form = None  # (the regions' cells changed)
         w = (self.cell_volume[:, None] * self.qweights[None, :]).reshape(-1)[sel]
         self._element_points[key] = (sel, w / w.sum())  # its points and volume weights
-
-    def _region_element_answers(self, deps: np.ndarray, sig: np.ndarray,
-                                tan: np.ndarray, dl: np.ndarray) -> None:
-        """Region points with a DEM element (in place): the start-of-step stress plus the
-        element's increment for the region's mean strain increment, plus its tangent times
-        the point's deviation from that mean (so the region's mean stress is the element's,
-        and the pointwise tangent is the consistent Jacobian: with the mean alone every point
-        would depend on every other one, and Newton converged linearly, 15 % per
-        iteration); no plastic multiplier."""
-        means = {name: self._element_points[name][1] @ deps[self._element_points[name][0]]
-                 for name in self.region_elements}
-        answers = {}
-        for unit, names in self._element_units():
-            de = {n: mandel_to_tensor(means[n]) for n in names}
-            if hasattr(unit, "trial_many"):  # several regions' elements at once (a pool)
-                answers.update(unit.trial_many(de))
-            else:
-                answers[names[0]] = unit.trial(de[names[0]])
-        for name, mean in means.items():
-            sel = self._element_points[name][0]
-            ds, c = answers[name]
-            c = stiffness_block(c, self.ncomp)
-            sig[sel] = (self.sig_n[sel] + tensor_to_mandel(ds, self.ncomp)
-                        + (deps[sel] - mean) @ c.T)
-            tan[sel] = c
-            dl[sel] = 0.0
+        self._set_material_arrays()  # (its points leave their tag's material)
 
     def _element_units(self) -> list:
         """(unit, region names): each region element once, except the members of one group

@@ -22,14 +22,14 @@ class StepResult:
             in displacement control; the applied pressure in load control).
         newton_iterations: iterations this step took.
         plastic_points: number of plastic quadrature points (global).
-        converged_on: "tolerance" (``newton_rtol``), or "stall": with DEM region elements,
-            Newton stalled above it at the elements' resolution and the step was taken at
-            its best iterate (said in ``SoilModel.warnings``).
-        noise_residual: that best residual relative to the whole body's force scale (NaN
-            otherwise).
-        status: "converged" (``newton_rtol`` met) or "stalled" (taken at a stall: its best
-            residual within ``SoilModel.stall_rtol`` of the DEM regions' own internal force,
-            above the tolerance) (:mod:`femcoupling.status`).
+        converged_on: "tolerance" (``newton_rtol``), or "noise": with DEM region elements,
+            Newton stalled above the tolerance within the elements' measured noise
+            (``femcoupling.quadrature.newton_solve``; said in ``SoilModel.warnings``).
+        noise_residual: that noise, relative to the whole body's force scale (NaN where it
+            was not measured).
+        status: "converged" (``newton_rtol`` met) or "stopped_at_scatter" (within
+            ``SoilModel.noise_factor`` times the noise and ``SoilModel.noise_ceiling`` of the
+            DEM regions' own internal force, above the tolerance) (:mod:`femcoupling.status`).
         residual: the accepted residual relative to the force scale it is judged against:
             the DEM regions' own internal force where the model has region elements, else
             the body's, -.

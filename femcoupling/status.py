@@ -239,12 +239,13 @@ def judge_steps(steps, *, dem_fem_strain_ratio: float = math.nan, walled: bool =
                 max_strain_ratio: float = 2.0) -> CouplingStatus:
     """The status of a region coupled inside the FEM's Newton (the region mode's hierarchical
     load stage) over its accepted load ``steps`` (each with ``status``, ``residual`` and
-    ``tol``, as ``femcoupling.elastoplastic.StepResult``): the worst of the steps' statuses
-    ("converged": every residual within its tolerance; "stalled": a step taken at a stall),
-    and "stalled" too where the element's strain is not within [1 / ``max_strain_ratio``,
-    ``max_strain_ratio``] of its region's or, for a ``walled`` element, the axes are past
-    ``max_rotation_deg``; "failed" without a step. ``final_change`` and ``tol`` are those of
-    the step furthest above its tolerance (the last step if none is)."""
+    ``tol``, as ``femcoupling.elastoplastic.StepResult``): "stalled" where a check of the
+    coupled state fails (the element's strain not within [1 / ``max_strain_ratio``,
+    ``max_strain_ratio``] of its region's or, for a ``walled`` element, the axes past
+    ``max_rotation_deg``; or a step taken at a stall); else "stopped_at_scatter" where a step
+    stopped within the elements' noise above its tolerance; else "converged"; "failed"
+    without a step. ``final_change`` and ``tol`` are those of the step furthest above its
+    tolerance (the last step if none is)."""
     if not (max_strain_ratio > 1 and math.isfinite(max_strain_ratio)):
         raise FemInputError(f"max_strain_ratio={max_strain_ratio!r}: must be > 1")
     steps = list(steps)
@@ -254,16 +255,18 @@ def judge_steps(steps, *, dem_fem_strain_ratio: float = math.nan, walled: bool =
                               {"tolerance": False})
     for k, r in enumerate(steps):
         _check_status(r.status)
-        if r.status not in ("converged", "stalled"):
-            raise FemInputError(f"steps[{k}].status={r.status!r}: a Newton step of the region "
-                                "mode is 'converged' or 'stalled'")
+        if r.status == "failed":
+            raise FemInputError(f"steps[{k}].status={r.status!r}: an accepted Newton step of "
+                                "the region mode is 'converged', 'stopped_at_scatter' or "
+                                "'stalled'")
     res = [_num(r.residual) for r in steps]
     tols = [_num(r.tol) for r in steps]
     k = max(range(len(steps)), key=lambda i: (res[i] / tols[i]
                                               if tols[i] > 0 and math.isfinite(res[i])
                                               else math.inf, i))
     stalled = [i for i, r in enumerate(steps) if r.status == "stalled"]
-    checks: dict = {"tolerance": not stalled}
+    scatter = [i for i, r in enumerate(steps) if r.status == "stopped_at_scatter"]
+    checks: dict = {"tolerance": not stalled and not scatter}
     fails = []
     if walled:
         checks["axes"] = bool(rot <= max_rotation_deg)
@@ -285,6 +288,12 @@ def judge_steps(steps, *, dem_fem_strain_ratio: float = math.nan, walled: bool =
     if fails:
         return CouplingStatus("stalled", "; ".join(fails), res[k], tols[k], rot, q, checks,
                               tuple(fails))
+    if scatter:
+        why = (f"{len(scatter)} of {len(steps)} load steps stopped within the DEM elements' "
+               f"noise above newton_rtol (the largest residual {res[k]:.3g} of the region's "
+               f"own internal force, tol {tols[k]:.3g}); the axes and the strain ratio "
+               f"{q:.3g} held")
+        return CouplingStatus("stopped_at_scatter", why, res[k], tols[k], rot, q, checks)
     return CouplingStatus("converged", f"every check held: all {len(steps)} load steps within "
                           f"newton_rtol (the largest residual {res[k]:.3g}, tol {tols[k]:.3g})"
                           f", the strain ratio {q:.3g} within [{lo:g}, {hi:g}]", res[k],

@@ -119,7 +119,7 @@ def test_hierarchical_region_element_strains_as_its_region(tmp_path):
 
     out = tmp_path / "h"
     p = run_case(out, "--smoke", "--hierarchical", "--workers", "2", "--soil", "given")
-    assert p.returncode in (0, 4), p.stdout[-3000:] + p.stderr[-3000:]
+    assert p.returncode in (0, 3, 4), p.stdout[-3000:] + p.stderr[-3000:]
     s = _coupling_status_said(out, p, "hierarchical")
     assert s["mode"] == "FEM -> DEM (hierarchical)"
     for v in ("RE", "PRS"):
@@ -128,11 +128,13 @@ def test_hierarchical_region_element_strains_as_its_region(tmp_path):
         np.testing.assert_allclose(h["element_strain_increment"], fem, rtol=0,
                                    atol=0.01 * np.abs(fem).max())
         assert len(h["newton_iterations"]) == 3 and max(h["newton_iterations"]) <= 25
-        assert len(h["warnings"]) == h["converged_on"].count("stall")
-        assert h["step_statuses"].count("stalled") == h["converged_on"].count("stall")
-        assert (h["status"] == "stalled") == ("stalled" in h["step_statuses"])
+        assert len(h["warnings"]) == h["converged_on"].count("noise")
+        assert h["step_statuses"].count("stopped_at_scatter") == h["converged_on"].count("noise")
+        # (the strain ratio and the axes hold: a step within the noise is stopped_at_scatter)
+        assert (h["status"] == "stopped_at_scatter") == ("stopped_at_scatter"
+                                                        in h["step_statuses"])
         assert h["checks"]["axes"] is None and 0.9 < h["dem_fem_strain_ratio"] < 1.1
-        assert all(r <= 1e-2 for r in h["step_residuals"])  # (stall_rtol, the region's)
+        assert all(r <= 1e-2 for r in h["step_residuals"])  # (noise_ceiling, the region's)
         assert s["fem"][v]["state"] == "hierarchical"
         assert _xdmf_times(out / f"fem_{v}.xdmf") == [0.0, 1 / 3, 2 / 3, 1.0]  # coupled steps
         with h5py.File(out / f"region_element_{v}.h5") as f:  # a row per committed step
@@ -154,7 +156,7 @@ def test_hierarchical_cell_elements_strain_as_their_cells(tmp_path):
     out = tmp_path / "c"
     p = run_case(out, "--smoke", "--hierarchical", "--cell-elements", "--cell-grains", "100",
                  "--workers", "2", "--soil", "given")
-    assert p.returncode in (0, 4), p.stdout[-3000:] + p.stderr[-3000:]
+    assert p.returncode in (0, 3, 4), p.stdout[-3000:] + p.stderr[-3000:]
     s = _coupling_status_said(out, p, "hierarchical")
     for v in ("RE", "PRS"):
         h = s["hierarchical"][v]
@@ -166,7 +168,7 @@ def test_hierarchical_cell_elements_strain_as_their_cells(tmp_path):
         np.testing.assert_allclose(h["element_strain_increment"], fem, rtol=0,
                                    atol=1e-9 * np.abs(fem).max())  # (measured 2e-16)
         assert len(h["newton_iterations"]) == 3
-        assert len(h["warnings"]) == h["converged_on"].count("stall")
+        assert len(h["warnings"]) == h["converged_on"].count("noise")
         with h5py.File(out / f"region_element_{v}.h5") as f:
             assert sorted(f["step"][:].tolist()) == sorted([1, 2, 3] * n)
             assert len(f.attrs["names"]) == n

@@ -67,9 +67,10 @@ def test_a_dem_region_element_strains_as_its_region_and_carries_its_stress(tmp_p
     """A dense periodic element of 150 grains as region a's material under a 20 kPa footing
     (elastic soil around it): it strains as the region does (it is given the region's mean
     strain; measured 7e-4 relative), the region's mean stress increment is the element's
-    (to round-off); Newton's residual stalls at the element's resolution (measured 4.8e-5
-    and 4.9e-6 of the force scale after 6 and 11 iterations, against newton_rtol 1e-8), and
-    the step is taken there and said; the same run again is bitwise the same (a rejected
+    (to round-off); Newton's residual stalls at the element's resolution (measured 5.0e-6
+    and 5.1e-6 of the force scale after 8 and 10 iterations, against newton_rtol 1e-8, within
+    the noise measured at the scale of Newton's corrections), and the step is taken there,
+    stopped_at_scatter, and said; the same run again is bitwise the same (a rejected
     iterate leaves no trace)."""
     from femcoupling.region import DemRegionMaterial, PeriodicRegionElement
 
@@ -92,10 +93,15 @@ def test_a_dem_region_element_strains_as_its_region_and_carries_its_stress(tmp_p
     ds_dem = mat.element.stress() - start
     assert np.abs(ds_fem[idx] - ds_dem[idx]).max() < 1e-9 * np.abs(ds_fem).max()
     assert np.abs(ds_fem).max() > 1e3  # (the footing did load the region: Pa)
-    assert all(r.converged_on in ("tolerance", "stall") for r in steps)
+    assert all(r.converged_on in ("tolerance", "noise") for r in steps)
     assert all(r.newton_iterations <= 15 for r in steps)
-    assert all(r.noise_residual < 1e-4 for r in steps if r.converged_on == "stall")
-    assert sum(r.converged_on == "stall" for r in steps) == len(m.warnings)
+    # a step taken within the elements' noise: its residual within 2 x that noise (both on
+    # the body's scale here) and the ceiling (on the region's)
+    for r in steps:
+        if r.converged_on == "noise":
+            assert r.status == "stopped_at_scatter" and r.residual <= m.noise_ceiling
+            assert r.noise_residual > 0
+    assert sum(r.converged_on == "noise" for r in steps) == len(m.warnings)
     m2, *_ = run()
     assert np.array_equal(m.u.x.array, m2.u.x.array)
     import h5py
@@ -205,8 +211,8 @@ def test_an_element_per_cell_on_dask_workers(tmp_path):
         steps = m.load_footing(pressure_pa=20e3, steps=1)
     finally:
         group.close()
-    assert all(r.converged_on in ("tolerance", "stall") for r in steps)
-    assert sum(r.converged_on == "stall" for r in steps) == len(m.warnings)
+    assert all(r.converged_on in ("tolerance", "noise") for r in steps)
+    assert sum(r.converged_on == "noise" for r in steps) == len(m.warnings)
     with h5py.File(tmp_path / "cells.h5") as f:
         assert list(f.attrs["names"]) == list(stresses)
         assert f["step"][:].tolist() == [1] * len(stresses)

@@ -1,0 +1,445 @@
+"""One material interface and one Newton for every quadrature-point model of this package.
+
+Two models solve equilibrium with a stress and a tangent at quadrature points: the FEM soil
+(:class:`femcoupling.elastoplastic.SoilModel`: elastic, anisotropic elastic and
+Drucker–Prager points, and DEM elements for element regions or cells) and the hierarchical
+FEM x DEM (:class:`femcoupling.hierarchical.HierarchicalPlaneStrain`: a DEM element at every
+quadrature point). Both use what this module gives:
+
+:class:`QuadratureMaterial`
+    the protocol of a material at a set of quadrature points: ``trial(increment)`` returns
+    the stress and tangent of the points after ``increment`` (since the last commit),
+    ``commit()`` keeps the last trial, ``state()``/``set_state(data)`` save and restore the
+    committed state (bitwise), and optionally ``trial_many`` evaluates several members at once
+    (a Dask pool of DEM elements). :class:`ElasticPoints` (isotropic or anisotropic),
+    :class:`DruckerPragerPoints` (``LinearElastic.at_points``, ``AnisotropicElastic.
+    at_points``, ``DruckerPrager.at_points``), ``femcoupling.region.DemRegionMaterial``,
+    ``femcoupling.region.PoolRegionMaterials`` and ``femcoupling.hierarchical.
+    ElementPoolMaterial`` implement it.
+:class:`QuadratureSystem`
+    the dolfinx side: displacement and quadrature spaces, the internal force and Jacobian
+    forms of a stress and a tangent at the points, the residual with lifted Dirichlet values,
+    and the LU solve of a Newton correction.
+:func:`newton_solve` with :class:`NewtonRules`
+    the Newton iteration of one load step and its acceptance rules, the same for both models:
+
+    - ``converged``: the residual within ``rtol`` of the model's force scale;
+    - when Newton stalls (the residual has not halved in two iterations, or the last
+      iteration is reached) and the model's materials are noisy (DEM elements), the noise is
+      measured: every point is evaluated again on its increment scaled by 1 + 1e-9 (the
+      elements' chaos), or by 1 + the size of Newton's last correction with the change the
+      tangents predict taken off (``probe_size="correction"``: the elements' roughness at
+      the scale Newton works at), and the residual of that change of the stresses is what
+      no iterate can get below. The step is
+      then ``stopped_at_scatter`` if its residual is within ``noise_factor`` times that noise
+      and within ``ceiling`` of the noisy points' own force scale; within the noise but above
+      the ceiling it is cut (:class:`NewtonFailure`);
+    - otherwise Newton goes on, and a step that reaches ``max_newton``, or whose residual or
+      correction is not finite, or whose linear solve fails, is cut (:class:`NewtonFailure`).
+
+    The caller cuts a failed step (halves it) as its loading asks.
+
+SI units: stresses in Pa, forces in N; tension positive.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import math
+from typing import Any, Protocol, runtime_checkable
+
+import numpy as np
+
+__all__ = ["QuadratureMaterial", "ElasticPoints", "DruckerPragerPoints", "NewtonRules",
+           "NewtonOutcome", "NewtonFailure", "QuadratureSystem", "check_material",
+           "newton_solve", "NOISE_PROBE"]
+
+#: the relative change of every increment that measures the elements' noise
+NOISE_PROBE = 1e-9
+
+
+class NewtonFailure(RuntimeError):
+    """Newton did not converge in a load step (the caller cuts the step)."""
+
+
+@runtime_checkable
+class QuadratureMaterial(Protocol):
+    """A material at a set of quadrature points (see the module doc). ``trial`` takes the
+    increment since the last commit (the model's kinematic increment at its points: a Mandel
+    strain increment for the FEM soil, a displacement-gradient increment for the hierarchical
+    mode, a 3 x 3 mean strain increment for a region element) and returns the points' stress
+    (or stress increment, for a region element) and tangent; a rejected trial leaves no trace:
+    the next ``trial`` starts again from the committed state."""
+
+    def trial(self, increment: Any) -> tuple[Any, Any]: ...
+
+    def commit(self) -> None: ...
+
+    def state(self) -> Any: ...
+
+    def set_state(self, data: Any) -> None: ...
+
+
+def check_material(material: Any, name: str) -> Any:
+    """``material`` if it implements :class:`QuadratureMaterial`; else a ValueError naming
+    ``name`` and the missing methods."""
+    missing = [k for k in ("trial", "commit", "state", "set_state")
+               if not callable(getattr(material, k, None))]
+    if missing:
+        from femcoupling.geometry import FemInputError
+
+        raise FemInputError(f"{name}={material!r}: not a quadrature material (femcoupling."
+                            f"quadrature.QuadratureMaterial): no {', '.join(missing)}()")
+    return material
+
+
+class _StressPoints:
+    """The committed and trial stress of ``n`` continuum points (Mandel, Pa)."""
+
+    plastic: np.ndarray
+
+    def __init__(self, stress_pa: np.ndarray) -> None:
+        self.stress_n = np.array(stress_pa, float)
+        if self.stress_n.ndim != 2:
+            raise ValueError(f"stress_pa: shape {self.stress_n.shape}; (n, ncomp) expected")
+        self.stress = self.stress_n.copy()  #: the last trial's stress
+        self.plastic = np.zeros(len(self.stress_n))
+
+    @property
+    def n(self) -> int:
+        return len(self.stress_n)
+
+    def commit(self) -> None:
+        """The last trial's stress becomes the committed one."""
+        self.stress_n = self.stress.copy()
+
+    def state(self) -> np.ndarray:
+        """The committed stress, (n, ncomp), Pa."""
+        return self.stress_n.copy()
+
+    def set_state(self, data: np.ndarray) -> None:
+        """Return to a committed stress ``data`` ((n, ncomp), Pa)."""
+        data = np.array(data, float)
+        if data.shape != self.stress_n.shape:
+            raise ValueError(f"set_state: shape {data.shape}; {self.stress_n.shape} expected")
+        self.stress_n, self.stress = data, data.copy()
+
+
+class ElasticPoints(_StressPoints):
+    """Linear elastic points: ``stiffness_pa`` (n, ncomp, ncomp) Mandel (isotropic or full
+    anisotropic), committed stress ``stress_pa`` (n, ncomp). ``trial(strain increment
+    (n, ncomp))`` gives sigma_n + C d_eps and C."""
+
+    def __init__(self, stiffness_pa: np.ndarray, stress_pa: np.ndarray) -> None:
+        super().__init__(stress_pa)
+        self.C = np.ascontiguousarray(stiffness_pa, dtype=float)
+        if self.C.shape != (self.n,) + (self.stress_n.shape[1],) * 2:
+            raise ValueError(f"stiffness_pa: shape {self.C.shape}; (n, ncomp, ncomp) expected")
+
+    def trial(self, increment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        self.stress = self.stress_n + np.einsum("nij,nj->ni", self.C, increment)
+        return self.stress, self.C.copy()
+
+
+class DruckerPragerPoints(_StressPoints):
+    """Drucker–Prager points (``femcoupling.materials.drucker_prager_return``): moduli
+    ``bulk_pa``, ``shear_pa`` and cone ``alpha``, ``beta``, ``k_pa`` ((n,) or scalars; k = inf
+    never yields), committed stress ``stress_pa`` (n, ncomp). ``trial`` gives the returned
+    stress and the consistent tangent; ``plastic`` is the last trial's plastic multiplier per
+    point (0 elastic, -1 apex)."""
+
+    def __init__(self, *, bulk_pa, shear_pa, alpha, beta, k_pa, stress_pa) -> None:
+        from femcoupling.materials import elastic_tangent
+
+        super().__init__(stress_pa)
+        full = lambda a: np.array(np.broadcast_to(np.asarray(a, float), (self.n,)))  # noqa: E731
+        self.K, self.G = full(bulk_pa), full(shear_pa)
+        self.alpha, self.beta, self.k = full(alpha), full(beta), full(k_pa)
+        self.C = elastic_tangent(self.K, self.G, self.stress_n.shape[1])
+
+    def trial(self, increment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        from femcoupling.materials import drucker_prager_return
+
+        sig_tr = self.stress_n + np.einsum("nij,nj->ni", self.C, increment)
+        sig, tan, dl = drucker_prager_return(sig_tr, bulk_pa=self.K, shear_pa=self.G,
+                                             alpha=self.alpha, beta=self.beta, k_pa=self.k)
+        self.stress, self.plastic = sig, dl
+        return sig, tan
+
+
+# ---- Newton ----------------------------------------------------------------------------------
+
+@dataclasses.dataclass(frozen=True)
+class NewtonRules:
+    """The acceptance rules of a load step (module doc). ``rtol``: the tolerance relative to
+    the model's force scale, -; ``max_newton``: the last iteration; ``noise_factor``: a
+    stalled step within this many times the measured noise ...; ``ceiling``: ... and within
+    this fraction of the noisy points' own force scale is stopped_at_scatter (inf: no
+    ceiling); ``probe``: measure the noise when Newton stalls (the model has DEM points)."""
+
+    rtol: float
+    max_newton: int
+    noise_factor: float = 2.0
+    ceiling: float = math.inf
+    probe: bool = False
+    #: the noise probe's relative change of the increments: a number (``NOISE_PROBE``, 1e-9:
+    #: the elements' chaos), or "correction": the size of Newton's last correction relative
+    #: to the step's displacement increment (at least 1e-9), with the change the points'
+    #: tangents predict taken off (the elements' roughness at the scale Newton works at)
+    probe_size: float | str = NOISE_PROBE
+
+    def __post_init__(self) -> None:
+        from femcoupling.geometry import FemInputError
+
+        if not (self.probe_size == "correction" or (isinstance(self.probe_size, float)
+                                                    and 0 < self.probe_size < 1)):
+            raise FemInputError(f"probe_size={self.probe_size!r}: a relative change in (0, "
+                                "1), or 'correction'")
+
+
+@dataclasses.dataclass
+class NewtonOutcome:
+    """An accepted load step's Newton: ``iterations``; ``residual`` relative to ``scale``
+    (the force scale, N, at the end); ``noise_residual``: the measured noise on the same
+    scale (NaN if not measured); ``noise_scale``: the noisy points' own force scale, N;
+    ``converged_on``: "tolerance" or "noise"; ``status``: "converged" or
+    "stopped_at_scatter"; ``relaxation``: the factor of each correction."""
+
+    iterations: int
+    residual: float
+    scale: float
+    noise_residual: float
+    noise_scale: float
+    converged_on: str
+    status: str
+    relaxation: tuple
+
+
+class NewtonProblem(Protocol):
+    """What :func:`newton_solve` asks of a model."""
+
+    def evaluate(self, first: bool, perturb: float = 0.0) -> None:
+        """Every material's trial at the current iterate (increments x (1 + perturb))."""
+
+    def residual(self) -> float:
+        """|R| (N) of the current iterate, Dirichlet rows lifted."""
+
+    def force_scale(self) -> float:
+        """The tolerance's force scale, N (> 0)."""
+
+    def noise_scale(self) -> float:
+        """The noisy (DEM) points' own force scale, N (> 0): the ceiling's."""
+
+    def stresses(self) -> np.ndarray:
+        """A copy of the current stresses at the points."""
+
+    def stress_change_residual(self, before: np.ndarray) -> float:
+        """|internal force| (N) of the stress change since ``before``, Dirichlet rows
+        zeroed."""
+
+    def predicted_change(self, perturb: float) -> np.ndarray:
+        """The stress change the points' current tangents predict for their increments
+        scaled by 1 + ``perturb`` (only with ``probe_size="correction"``)."""
+
+    def increment_norm(self) -> float:
+        """|u - u_n|: the step's displacement increment so far (only with
+        ``probe_size="correction"``)."""
+
+    def correction(self) -> np.ndarray:
+        """The full Newton correction of the displacement (raises NewtonFailure)."""
+
+    def move(self, correction: np.ndarray, factor: float) -> None:
+        """u += factor * correction."""
+
+
+def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any = "none",
+                 log: Any = None) -> NewtonOutcome:
+    """The Newton iteration of a load step on ``problem`` under ``rules`` (module doc);
+    ``relaxation`` of the corrections ("none", "aitken" or a factor: ``femcoupling.
+    relaxation``; the first correction of a step is always a full one, as it also puts the
+    displacement on its new boundary values); ``log(msg)`` gets a line per iteration. Returns
+    the accepted step's :class:`NewtonOutcome`, or raises :class:`NewtonFailure`."""
+    from femcoupling.relaxation import next_factor
+    from femcoupling.status import newton_acceptance
+
+    rel = noise_rel = float("nan")
+    nscale = float("nan")
+    omega, d_prev, omegas = 1.0, None, []
+    hist: list[float] = []
+    for it in range(rules.max_newton + 1):
+        problem.evaluate(first=(it == 0))
+        rnorm = problem.residual()
+        scale = problem.force_scale()
+        rel = rnorm / scale
+        hist.append(rel)
+        if log is not None:
+            log(f"iteration {it}: residual {rel:.3e}")
+        if not math.isfinite(rel):
+            raise NewtonFailure(f"Newton: the residual is not finite at iteration {it}")
+        if rel <= rules.rtol:
+            return NewtonOutcome(it, rel, scale, noise_rel, nscale, "tolerance", "converged",
+                                 tuple(omegas))
+        stalled = it == rules.max_newton or (len(hist) >= 3 and rel > 0.5 * hist[-3])
+        if rules.probe and it > 0 and stalled:
+            # Newton stalls above the tolerance: the noise (the largest of the step's probes
+            # counts; after a probe, two more iterations before the next)
+            before = problem.stresses()
+            if rules.probe_size == "correction":
+                last = 0.0 if d_prev is None else omegas[-1] * float(np.linalg.norm(d_prev))
+                size = max(NOISE_PROBE, last / max(problem.increment_norm(), 1e-300))
+                before = before + problem.predicted_change(size)
+            else:
+                size = rules.probe_size
+            problem.evaluate(first=False, perturb=size)
+            v = problem.stress_change_residual(before) / scale
+            noise_rel = v if math.isnan(noise_rel) else max(noise_rel, v)
+            if rules.probe_size == "correction":
+                # back on the iterate: the state a step accepts is the iterate's (a 1e-9 probe
+                # is within the noise of it, and is kept)
+                problem.evaluate(first=False)
+            rnorm = problem.residual()
+            rel = rnorm / scale
+            hist = [rel]
+            nscale = problem.noise_scale()
+            if log is not None:
+                log(f"noise probe: residual {rel:.3e}, the noise's {noise_rel:.3e}")
+            accept = newton_acceptance(rel, rtol=rules.rtol, noise_residual=noise_rel,
+                                       noise_factor=rules.noise_factor,
+                                       ceiling=rules.ceiling * nscale / scale)
+            if accept is not None:
+                return NewtonOutcome(it, rel, scale, noise_rel, nscale,
+                                     "tolerance" if accept == "converged" else "noise",
+                                     accept, tuple(omegas))
+            if rel <= rules.noise_factor * noise_rel:
+                raise NewtonFailure(
+                    f"Newton stalled at {rel:.3g} of the force scale, within the elements' "
+                    f"noise ({noise_rel:.3g}) but above the ceiling noise_ceiling="
+                    f"{rules.ceiling:g} of the DEM points' own force ("
+                    f"{rules.ceiling * nscale / scale:.3g} of the force scale; asked "
+                    f"newton_rtol={rules.rtol:g}): the step is cut")
+        if it == rules.max_newton:
+            raise NewtonFailure(f"Newton: no convergence in {rules.max_newton} iterations "
+                                f"(residual {rel:.3g} of the force scale; asked "
+                                f"newton_rtol={rules.rtol:g}"
+                                + (f"; the elements' noise makes {noise_rel:.3g}"
+                                   if rules.probe else "") + ")")
+        dk = problem.correction()
+        omega = next_factor(relaxation, omega, d_prev, dk)
+        w_k = 1.0 if it == 0 else omega
+        omegas.append(w_k)
+        d_prev = dk
+        problem.move(dk, w_k)
+    raise AssertionError("unreachable")
+
+
+# ---- the dolfinx side ------------------------------------------------------------------------
+
+class QuadratureSystem:
+    """Spaces, forms and solver of a quadrature-point model on ``mesh`` (module doc).
+
+    ``degree``: the displacement's Lagrange degree; ``qdeg``: the quadrature degree (default
+    scheme); ``ncomp``: the stress vector's length; ``strain(w)``: the UFL strain vector of a
+    displacement ``w`` that pairs with the stress (Mandel for the soil; Voigt with engineering
+    shear for the hierarchical mode); ``loads(v)``: the external virtual work terms (UFL
+    forms), each subtracted in turn from the internal one; ``lu``: the LU package ("mumps",
+    or None for PETSc's own)."""
+
+    def __init__(self, mesh, *, degree: int, qdeg: int, ncomp: int, strain, loads=None,
+                 lu: str | None = None) -> None:
+        from femcoupling import _dolfinx
+
+        fx = self._fx = _dolfinx.load()
+        fem, ufl = fx.fem, fx.ufl
+        import basix
+        import basix.ufl
+
+        self.mesh, self.ncomp, self.qdeg, self.strain = mesh, ncomp, qdeg, strain
+        cell = mesh.basix_cell()
+        self.V = fem.functionspace(mesh, ("Lagrange", degree, (mesh.topology.dim,)))
+        qe_v = basix.ufl.quadrature_element(cell, value_shape=(ncomp,), scheme="default",
+                                            degree=qdeg)
+        qe_t = basix.ufl.quadrature_element(cell, value_shape=(ncomp, ncomp),
+                                            scheme="default", degree=qdeg)
+        self.Wv, self.Wt = fem.functionspace(mesh, qe_v), fem.functionspace(mesh, qe_t)
+        pts, wts = basix.make_quadrature(cell, qdeg)
+        self.qpoints, self.qweights = pts, wts / wts.sum()
+        self.u, self.u_n, self.du = (fem.Function(self.V) for _ in range(3))
+        self.sig_q = fem.Function(self.Wv)  # the points' current stress
+        self.tan_q = fem.Function(self.Wt)  # and tangent
+        self.dxq = ufl.Measure("dx", domain=mesh, metadata={"quadrature_degree": qdeg,
+                                                             "quadrature_scheme": "default"})
+        v, dv = ufl.TestFunction(self.V), ufl.TrialFunction(self.V)
+        self.f_int = ufl.dot(self.sig_q, strain(v)) * self.dxq
+        res = self.f_int
+        for term in (loads(v) if loads is not None else ()):
+            res = res - term
+        self.form_res = fem.form(res)
+        self.form_jac = fem.form(ufl.dot(ufl.dot(self.tan_q, strain(dv)), strain(v))
+                                 * self.dxq)
+        # the internal force of a stress field alone (the noise's residual)
+        self.sig_change = fem.Function(self.Wv)
+        self.form_change = fem.form(ufl.dot(self.sig_change, strain(v)) * self.dxq)
+        self.A = fx.fem_petsc.create_matrix(self.form_jac)
+        self.b = fx.fem_petsc.create_vector(self.V)
+        self.b_change = fx.fem_petsc.create_vector(self.V)
+        self.ksp = fx.PETSc.KSP().create(mesh.comm)
+        self.ksp.setOperators(self.A)
+        self.ksp.setType("preonly")
+        pc = self.ksp.getPC()
+        pc.setType("lu")
+        if lu is not None:
+            pc.setFactorSolverType(lu)
+
+    def residual(self, bcs: list) -> float:
+        """b = R(u) lifted by J (g - u) at the constrained dofs (the predictor of the
+        prescribed increment), b = u - g there; returns |b| (dolfinx's Newton convention:
+        solve J dx = b, u <- u - dx)."""
+        fx = self._fx
+        PETSc = fx.PETSc
+        with self.b.localForm() as loc:
+            loc.set(0.0)
+        fx.fem_petsc.assemble_vector(self.b, self.form_res)
+        fx.fem_petsc.apply_lifting(self.b, [self.form_jac], bcs=[bcs], x0=[self.u.x.petsc_vec],
+                                   alpha=-1.0)
+        self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
+        fx.fem_petsc.set_bc(self.b, bcs, x0=self.u.x.petsc_vec, alpha=-1.0)
+        return self.b.norm()
+
+    def change_residual(self, field: np.ndarray, bcs: list, set_field) -> float:
+        """|internal force| (N) of a stress field alone (``set_field(function, field)`` puts
+        it at the points), Dirichlet rows zeroed."""
+        fx = self._fx
+        set_field(self.sig_change, field)
+        with self.b_change.localForm() as loc:
+            loc.set(0.0)
+        fx.fem_petsc.assemble_vector(self.b_change, self.form_change)
+        self.b_change.ghostUpdate(addv=fx.PETSc.InsertMode.ADD,
+                                  mode=fx.PETSc.ScatterMode.REVERSE)
+        fx.fem_petsc.set_bc(self.b_change, bcs, alpha=0.0)
+        return float(self.b_change.norm())
+
+    def correction(self, bcs: list, describe=None) -> np.ndarray:
+        """The full Newton correction -du of J du = b (``residual`` first), as an array;
+        :class:`NewtonFailure` if the solve fails or gives a value that is not finite
+        (``describe()`` adds what the model knows of why)."""
+        fx = self._fx
+        self.A.zeroEntries()
+        fx.fem_petsc.assemble_matrix(self.A, self.form_jac, bcs=bcs)
+        self.A.assemble()
+        self.ksp.setOperators(self.A)
+        self.ksp.solve(self.b, self.du.x.petsc_vec)
+        reason = self.ksp.getConvergedReason()
+        self.du.x.scatter_forward()
+        if reason <= 0 or not np.all(np.isfinite(self.du.x.array)):
+            why = "" if describe is None else f"; {describe()}"
+            raise NewtonFailure(f"the Newton correction failed (linear solve reason {reason}"
+                                f", or not finite: a singular Jacobian{why})")
+        return -self.du.x.array.copy()
+
+    def move(self, correction: np.ndarray, factor: float) -> None:
+        """u += factor * correction."""
+        if factor == 1.0:
+            self.u.x.array[:] += correction
+        else:
+            self.u.x.array[:] += factor * correction
+        self.u.x.scatter_forward()

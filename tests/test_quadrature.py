@@ -1,0 +1,182 @@
+"""One material interface and one Newton (femcoupling.quadrature, issue 37 item 3).
+
+- Every material implements ``QuadratureMaterial``: the continuum ones at points
+  (``at_points``), the DEM region elements, their Dask group, and the hierarchical mode's pool.
+- Point materials: a rejected trial leaves no trace, state/set_state restore bitwise, and
+  Drucker–Prager points are the return mapping of ``femcoupling.materials``.
+- ``newton_solve``'s rules on a synthetic one-unknown problem with a seeded noise: converged,
+  stopped_at_scatter within the noise and the ceiling, cut above the ceiling, cut at
+  ``max_newton``, and a correction that is not finite.
+- The FEM soil and the hierarchical mode run the same ``newton_solve``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from femcoupling.materials import (AnisotropicElastic, DruckerPrager, LinearElastic,
+                                   drucker_prager_return)
+from femcoupling.quadrature import (DruckerPragerPoints, ElasticPoints, NewtonFailure,
+                                    NewtonRules, QuadratureMaterial, newton_solve)
+
+
+def _stress(n: int, ncomp: int = 4) -> np.ndarray:
+    s = np.zeros((n, ncomp))
+    s[:, :3] = -50e3
+    return s
+
+
+def test_every_material_implements_the_interface():
+    from femcoupling.hierarchical import ElementPoolMaterial
+    from femcoupling.region import DemRegionMaterial, PoolRegionMaterials
+    from femcoupling.soil_regions import RegionPoints
+
+    s = _stress(3)
+    c = np.diag([3e6, 3e6, 3e6, 2e6, 2e6, 2e6])
+    pts = [LinearElastic(10e6, 0.3).at_points(s),
+           DruckerPrager(10e6, 0.3, cohesion_pa=0.0, friction_deg=30).at_points(s),
+           AnisotropicElastic(c).at_points(s)]
+    assert [type(p) for p in pts] == [DruckerPragerPoints, DruckerPragerPoints, ElasticPoints]
+    for p in pts:
+        assert isinstance(p, QuadratureMaterial)
+    for cls in (DemRegionMaterial, PoolRegionMaterials, ElementPoolMaterial, RegionPoints):
+        for k in ("trial", "commit", "state", "set_state"):
+            assert callable(getattr(cls, k, None)), (cls, k)
+    assert callable(PoolRegionMaterials.trial_many)
+    assert not isinstance(object(), QuadratureMaterial)
+
+
+@pytest.mark.parametrize("material", [
+    LinearElastic(10e6, 0.3),
+    DruckerPrager(10e6, 0.3, cohesion_pa=1e3, friction_deg=30),
+    AnisotropicElastic(np.diag([3e6, 4e6, 5e6, 2e6, 2e6, 2e6])),
+])
+def test_a_rejected_trial_leaves_no_trace_and_states_restore_bitwise(material):
+    rng = np.random.default_rng(1)
+    m = material.at_points(_stress(5))
+    de = 1e-3 * rng.standard_normal((5, 4))
+    s1, t1 = (a.copy() for a in m.trial(de))
+    m.trial(10 * de)  # rejected
+    s2, t2 = m.trial(de)
+    assert np.array_equal(s1, s2) and np.array_equal(t1, t2)
+    saved = m.state()
+    m.commit()
+    assert np.array_equal(m.state(), s1)
+    m.trial(de)
+    m.commit()
+    assert not np.array_equal(m.state(), s1)
+    m.set_state(saved)
+    assert np.array_equal(m.trial(de)[0], s1)
+    with pytest.raises(ValueError, match="shape"):
+        m.set_state(np.zeros((4, 4)))
+
+
+def test_drucker_prager_points_are_the_return_mapping():
+    rng = np.random.default_rng(2)
+    dp = DruckerPrager(20e6, 0.3, cohesion_pa=2e3, friction_deg=35)
+    s0 = _stress(50)
+    m = dp.at_points(s0)
+    de = 2e-3 * rng.standard_normal((50, 4))
+    sig, tan = m.trial(de)
+    a, b, k = dp.dp_parameters()
+    C = m.C
+    ref = drucker_prager_return(s0 + np.einsum("nij,nj->ni", C, de), bulk_pa=dp.bulk_pa,
+                                shear_pa=dp.shear_pa, alpha=a, beta=b, k_pa=k)
+    assert np.array_equal(sig, ref[0]) and np.array_equal(tan, ref[1])
+    assert np.array_equal(m.plastic, ref[2]) and np.count_nonzero(m.plastic) > 0
+    # an elastic material never yields
+    el = LinearElastic(20e6, 0.3).at_points(s0)
+    el.trial(100 * de)
+    assert not np.any(el.plastic)
+
+
+class _Spring:
+    """One unknown u under a load f: internal force k u + a u^3 (the stress at one point)
+    plus a seeded random error of size ``noise`` at every evaluation (a DEM element's
+    roughness). The tangent is k + 3 a u^2."""
+
+    def __init__(self, *, noise: float = 0.0, k: float = 1.0, a: float = 0.5, f: float = 2.0,
+                 bad_correction: bool = False) -> None:
+        self.noise, self.k, self.a, self.f = noise, k, a, f
+        self.u, self.rng, self.bad = 0.0, np.random.default_rng(3), bad_correction
+        self.sig = 0.0
+
+    def evaluate(self, first, perturb=0.0):
+        u = self.u * (1.0 + perturb)
+        self.sig = self.k * u + self.a * u**3 + self.noise * self.rng.standard_normal()
+
+    def residual(self):
+        return abs(self.sig - self.f)
+
+    def force_scale(self):
+        return self.f
+
+    def noise_scale(self):
+        return self.f
+
+    def stresses(self):
+        return np.array([self.sig])
+
+    def stress_change_residual(self, before):
+        return float(abs(self.sig - before[0]))
+
+    def correction(self):
+        if self.bad:
+            raise NewtonFailure("the Newton correction failed (linear solve reason -11)")
+        return np.array([-(self.sig - self.f) / (self.k + 3 * self.a * self.u**2)])
+
+    def move(self, d, w):
+        self.u += w * float(d[0])
+
+
+def test_newton_rules_on_a_synthetic_problem():
+    # smooth: converged within rtol, quadratically
+    p = _Spring()
+    out = newton_solve(p, NewtonRules(rtol=1e-12, max_newton=20))
+    assert out.status == "converged" and out.converged_on == "tolerance"
+    assert out.residual <= 1e-12 and out.iterations <= 8
+    assert p.k * p.u + p.a * p.u**3 == pytest.approx(2.0, rel=1e-12)
+    assert math.isnan(out.noise_residual)
+    # noisy, tolerance below the noise: without a probe, cut at max_newton
+    with pytest.raises(NewtonFailure, match="no convergence in 12 iterations"):
+        newton_solve(_Spring(noise=1e-4), NewtonRules(rtol=1e-9, max_newton=12))
+    # with the probe and a ceiling above the noise: stopped_at_scatter, not converged
+    out = newton_solve(_Spring(noise=1e-4),
+                       NewtonRules(rtol=1e-9, max_newton=12, probe=True, ceiling=1e-2))
+    assert out.status == "stopped_at_scatter" and out.converged_on == "noise"
+    assert 1e-9 < out.residual <= 2 * out.noise_residual and out.residual <= 1e-2
+    assert 1e-6 < out.noise_residual < 1e-3  # (the noise, 1e-4 over a force of 2)
+    # the same with a ceiling below the residual: the step is cut
+    with pytest.raises(NewtonFailure, match="within the elements' noise .* above the ceiling"):
+        newton_solve(_Spring(noise=1e-4),
+                     NewtonRules(rtol=1e-9, max_newton=12, probe=True, ceiling=1e-7))
+    # a failed linear solve is a failure
+    with pytest.raises(NewtonFailure, match="reason -11"):
+        newton_solve(_Spring(bad_correction=True), NewtonRules(rtol=1e-9, max_newton=5))
+    # the rules check what they are given
+    from femcoupling.geometry import FemInputError
+
+    with pytest.raises(FemInputError, match="probe_size"):
+        NewtonRules(rtol=1e-3, max_newton=5, probe_size=2.0)
+
+
+def test_the_soil_body_and_the_hierarchical_mode_share_one_newton(monkeypatch):
+    from femcoupling import hierarchical, quadrature
+    from test_fem_handover import two_region_model
+
+    assert hierarchical.newton_solve is quadrature.newton_solve
+    calls = []
+    orig = quadrature.newton_solve
+
+    def counting(problem, rules, **kw):
+        calls.append(type(problem).__name__)
+        return orig(problem, rules, **kw)
+
+    monkeypatch.setattr(quadrature, "newton_solve", counting)
+    m = two_region_model(("a",))
+    calls.clear()  # (the model's K0 stage)
+    (r,) = m.load_footing(pressure_pa=10e3, steps=1)
+    assert r.status == "converged" and calls == ["_SoilNewton"]
