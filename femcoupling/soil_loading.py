@@ -118,8 +118,10 @@ class LoadingStages:
                                 "positive)")
         if not isinstance(steps, int) or steps < 1:
             raise FemInputError(f"steps={steps!r}: must be an integer >= 1")
+        # (from the footing's current mean settlement, as ``load_footing(settlement_m=)``:
+        # after a prestress stage the surface has moved, and the footing starts there)
+        u_start = -self.footing_settlement_m()
         self._displacement_control = True
-        u_start = float(self.footing_u.value)
         p0 = self.footing_pressure_pa()
         done: list[StepResult] = []
         d = 0.0
@@ -130,9 +132,9 @@ class LoadingStages:
             def apply(lf: float) -> None:
                 self.footing_u.value = u_start - (d_from + lf * (d_to - d_from))
 
-            for r in self._run_stage("footing", apply, 1):
+            for r in self._run_stage("footing", apply, 1):  # (one step: the history's last)
                 r2 = dataclasses.replace(r, load_factor=(r.footing_pressure_pa - p0) / target)
-                self.history[self.history.index(r)] = r2
+                self.history[-1] = r2
                 done.append(r2)
 
         def rise() -> float:

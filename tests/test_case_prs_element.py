@@ -196,7 +196,7 @@ def test_one_soil_on_both_scales_by_default(smoke, tmp_path):
     the element driven along its region's path until it strains within [1/2, 2] times its
     FEM region (smoke, measured: 112 x with the given soil, then 0.20 x, then 0.98 x: three
     passes); no cohesion, nu set to its limit where the secant's is above it, said. The run
-    then holds: RE and PRS elements within 2 x their regions (measured 0.98 and 1.59). The
+    then holds: RE and PRS elements within 2 x their regions (measured 0.98 and 1.58). The
     given soil (--soil given, 50 MPa) leaves the element straining over 50 x its region."""
     out, proc = smoke
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
