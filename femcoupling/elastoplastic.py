@@ -517,6 +517,9 @@ class _SoilNewton:
         tan = m.tan_q.x.array.reshape(-1, m.ncomp, m.ncomp)[m._qdofs_t]
         return perturb * np.einsum("nij,nj->ni", tan, deps)
 
+    def at_boundary_values(self) -> bool:
+        return self.m.system.at_boundary_values(self.bcs)
+
     def increment_norm(self) -> float:
         m = self.m
         return float(np.linalg.norm(m.u.x.array - m.u_n.x.array))

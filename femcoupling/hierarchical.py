@@ -24,8 +24,9 @@ within the noise but above the ceiling is not accepted: it is cut, as a step New
 stress times the square root of the domain's area) and also given in stress units
 (``HierStep.residual_pa``, Pa: that relative residual times the largest element stress).
 The
-Drucker–Prager model of ``femcoupling.elastoplastic`` sits behind the same quadrature-space
-interface there; here the material is the DEM.
+elements are the points' material (``ElementPoolMaterial``, a ``femcoupling.quadrature.
+QuadratureMaterial``), and Newton and its rules are ``femcoupling.quadrature.newton_solve``,
+the same as the Drucker–Prager soil body's of ``femcoupling.elastoplastic``.
 
 Boundary conditions: left u_x = 0, bottom u_y = 0; the top is moved by ``top_displacement``
 (u_y, m); the right is either loaded by a confining pressure (``confining_pa``, compression
@@ -77,6 +78,13 @@ def dem_increment(g: np.ndarray) -> np.ndarray:
 def fem_stress(s: np.ndarray) -> np.ndarray:
     """FEM Voigt stress (xx, yy, xy), Pa, from the element's 3 x 3 stress."""
     return np.array([s[0, 0], s[2, 2], 0.5 * (s[0, 2] + s[2, 0])])
+
+
+def voigt_stress(s: np.ndarray) -> np.ndarray:
+    """Voigt stress (xx, yy, zz, yz, xz, xy), Pa, from a 3 x 3 stress (its symmetric part)."""
+    s = np.asarray(s, float)
+    return np.array([s[0, 0], s[1, 1], s[2, 2], 0.5 * (s[1, 2] + s[2, 1]),
+                     0.5 * (s[0, 2] + s[2, 0]), 0.5 * (s[0, 1] + s[1, 0])])
 
 
 def fem_tangent(d6: np.ndarray) -> np.ndarray:
@@ -332,10 +340,13 @@ class HierarchicalPlaneStrain:
         self.sig_q.x.array[:] = sig.reshape(-1)
         self.tan_q.x.array[:] = tan.reshape(-1)
 
+    gdim = 2  #: the FEM's dimension
+
     def _grad_increment(self) -> np.ndarray:
         cells = np.arange(self.n_cells, dtype=np.int32)
-        g = self.expr_grad.eval(self.mesh, cells).reshape(-1, 2, 2)
-        gn = self.expr_grad_n.eval(self.mesh, cells).reshape(-1, 2, 2)
+        d = self.gdim
+        g = self.expr_grad.eval(self.mesh, cells).reshape(-1, d, d)
+        gn = self.expr_grad_n.eval(self.mesh, cells).reshape(-1, d, d)
         return g - gn
 
     def _evaluate(self, first: bool, perturb: float = 0.0) -> None:
@@ -359,9 +370,14 @@ class HierarchicalPlaneStrain:
         self.warnings.append(msg)
         warnings.warn(msg, NoiseWarning, stacklevel=3)
 
+    def _scale_length(self) -> float:
+        """The force scale over the largest stress: the square root of the domain's area, m
+        (3D: its volume to the power 2/3, m^2)."""
+        return math.sqrt(self.lx * self.ly)
+
     def _scale(self) -> float:
         """|F_int| of the current stresses (the tolerance's scale)."""
-        return float(np.abs(self._sig).max()) * math.sqrt(self.lx * self.ly) + 1e-300
+        return float(np.abs(self._sig).max()) * self._scale_length() + 1e-300
 
     @property
     def status(self) -> str:
@@ -393,14 +409,17 @@ class HierarchicalPlaneStrain:
 
     _bc_now = (0.0, 0.0)  # the boundary displacements of the last accepted step, m
 
-    def _step(self, top_displacement: float, right_displacement: float) -> HierStep:
-        t0 = time.perf_counter()
+    def _set_boundary(self, top_displacement: float, right_displacement: float) -> None:
         self.top_u.value = top_displacement
         self.right_u.value = right_displacement
         if self.homogeneous:
             ex, ey = right_displacement / self.lx, top_displacement / self.ly
             self._hx.interpolate(lambda x: ex * x[0])
             self._hy.interpolate(lambda x: ey * x[1])
+
+    def _step(self, top_displacement: float, right_displacement: float) -> HierStep:
+        t0 = time.perf_counter()
+        self._set_boundary(top_displacement, right_displacement)
         mat = self.material
         mat.new_step_counters()
         rules = NewtonRules(rtol=self.newton_rtol, max_newton=self.max_newton,
@@ -409,7 +428,7 @@ class HierarchicalPlaneStrain:
         log = (lambda msg: print(f"[hier] {msg}", flush=True)) if self.verbose else None
         out = newton_solve(_HierNewton(self), rules, relaxation=self.relaxation, log=log)
         rel, noise_rel, its = out.residual, out.noise_residual, out.iterations
-        stress_of_scale = out.scale / math.sqrt(self.lx * self.ly)  # Pa: the largest stress
+        stress_of_scale = out.scale / self._scale_length()  # Pa: the largest stress
         if out.converged_on == "noise":
             self._warn(f"load step {len(self.history)} (top {top_displacement:.6g} m): the "
                        f"tolerance asked (newton_rtol={self.newton_rtol:g}) is below the "
@@ -551,6 +570,9 @@ class _HierNewton:
     def force_scale(self) -> float:
         return self.m._scale()
 
+    def at_boundary_values(self) -> bool:
+        return self.m.system.at_boundary_values(self.m.bcs)
+
     noise_scale = force_scale  # (every point is a DEM element)
 
     def stresses(self) -> np.ndarray:
@@ -589,9 +611,14 @@ class ElementPoolMaterial:
     ``commit`` accepts (``pool.accept``: the states saved on the workers); ``state`` and
     ``set_state`` are the pool's accepted states (bytes per element)."""
 
-    def __init__(self, pool, *, tangent: str = "network", strain_kw: dict | None = None) -> None:
+    def __init__(self, pool, *, tangent: str = "network", strain_kw: dict | None = None,
+                 dim: int = 2) -> None:
         from cpp_dem.elements.pool import ElementError
 
+        if dim not in (2, 3) or (dim == 3 and tangent == "secant"):
+            raise FemInputError(f"dim={dim!r}, tangent={tangent!r}: dim 2 (plane strain) or 3; "
+                                "the secant tangent in 2D only")
+        self.dim = dim
         self._element_error = ElementError
         self.pool, self.tangent_kind = pool, tangent
         self.strain_kw = dict(strain_kw or {})
@@ -617,8 +644,12 @@ class ElementPoolMaterial:
         self.step_recovered: list = []
 
     def _fem_answers(self, stresses, tangents) -> tuple[np.ndarray, np.ndarray]:
-        sig = np.array([fem_stress(s) for s in stresses])
-        tan = np.array([fem_tangent(t) for t in tangents])
+        if self.dim == 3:  # (the element's own Voigt order and engineering shear)
+            sig = np.array([voigt_stress(s) for s in stresses])
+            tan = np.array([np.asarray(t, float) for t in tangents])
+        else:
+            sig = np.array([fem_stress(s) for s in stresses])
+            tan = np.array([fem_tangent(t) for t in tangents])
         if self.tangent_kind == "secant":  # (the first call's increments are zero)
             for k, g in enumerate(self.increments):
                 de = np.array([g[0, 0], g[2, 2], g[0, 2] + g[2, 0]])  # (FEM x, y = DEM x, z)
@@ -641,7 +672,8 @@ class ElementPoolMaterial:
     def trial(self, g: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         if self._pending:
             self.pool.reject()
-        self.increments = np.array([dem_increment(x) for x in g])
+        self.increments = (np.array(g, float) if self.dim == 3 else
+                           np.array([dem_increment(x) for x in g]))
         self._pending = True
         try:
             step = self.pool.apply_strain(list(self.increments), tangent=self._element_tangent,
@@ -649,8 +681,9 @@ class ElementPoolMaterial:
         except self._element_error as e:  # an element could not take this iterate: cut
             raise NewtonFailure(f"an element failed on this iterate: {e}") from e
         self.stress, self.tangent = self._fem_answers(step.stresses, step.tangents)
+        to_fem = voigt_stress if self.dim == 3 else fem_stress
         self.scatter = (None if step.scatters is None else
-                        np.array([fem_stress(c) for c in step.scatters]))
+                        np.array([to_fem(c) for c in step.scatters]))
         self.last_step = step
         self.step_dem_s += float(sum(step.cpu_s))
         self.step_pool_s += step.wall_s

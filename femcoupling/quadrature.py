@@ -245,6 +245,10 @@ class NewtonProblem(Protocol):
         """|u - u_n|: the step's displacement increment so far (only with
         ``probe_size="correction"``)."""
 
+    def at_boundary_values(self) -> bool:
+        """Whether the displacement is on its Dirichlet values (a step may then be accepted
+        before any correction)."""
+
     def correction(self) -> np.ndarray:
         """The full Newton correction of the displacement (raises NewtonFailure)."""
 
@@ -276,7 +280,9 @@ def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any 
             log(f"iteration {it}: residual {rel:.3e}")
         if not math.isfinite(rel):
             raise NewtonFailure(f"Newton: the residual is not finite at iteration {it}")
-        if rel <= rules.rtol:
+        # (before any correction the displacement may be off its new Dirichlet values: their
+        # rows hold the gap in metres, which a force tolerance does not see)
+        if rel <= rules.rtol and (it > 0 or problem.at_boundary_values()):
             return NewtonOutcome(it, rel, scale, noise_rel, nscale, "tolerance", "converged",
                                  tuple(omegas))
         stalled = it == rules.max_newton or (len(hist) >= 3 and rel > 0.5 * hist[-3])
@@ -404,6 +410,16 @@ class QuadratureSystem:
         self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         fx.fem_petsc.set_bc(self.b, bcs, x0=self.u.x.petsc_vec, alpha=-1.0)
         return self.b.norm()
+
+    def at_boundary_values(self, bcs: list) -> bool:
+        """Whether u equals its Dirichlet values ``bcs`` at every constrained dof."""
+        fx = self._fx
+        v = self.u.x.petsc_vec.copy()
+        fx.fem_petsc.set_bc(v, bcs)
+        v.axpy(-1.0, self.u.x.petsc_vec)
+        gap = v.norm(fx.PETSc.NormType.NORM_INFINITY)
+        v.destroy()
+        return gap == 0.0
 
     def change_residual(self, field: np.ndarray, bcs: list, set_field) -> float:
         """|internal force| (N) of a stress field alone (``set_field(function, field)`` puts

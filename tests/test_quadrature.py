@@ -114,6 +114,9 @@ class _Spring:
     def force_scale(self):
         return self.f
 
+    def at_boundary_values(self):
+        return True
+
     def noise_scale(self):
         return self.f
 
