@@ -155,6 +155,8 @@ def test_homogeneous_field_handed_over_reproduces_the_standalone_element(tmp_pat
     (["--stresses", "1e4,1e4,2e4", "--soil", "given"], "--soil=given: the FEM soil; not with"),
     (["--soil", "1e6,0.6,30,0"], "--soil='1e6,0.6,30,0': NU=0.6 must be in [0, 0.5)"),
     (["--soil", "soft"], "--soil='soft': 'calibrated', 'given' or four numbers"),
+    (["--calibrate", "--soil", "given"], "--calibrate (kept for older run files: it means "
+                                         "--soil calibrated) with --soil='given'"),
     (["--stresses", "1e4,1e4,2e4", "--preset", "fast"], "--preset sets the FEM mesh"),
     (["--preset", "quick"], "invalid choice: 'quick'"),
     (["--two-way-element", "periodic"], "--two-way-element periodic: the loop's element; "

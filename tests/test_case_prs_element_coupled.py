@@ -167,10 +167,11 @@ def test_hierarchical_cell_elements_strain_as_their_cells(tmp_path):
         fem = np.array(s["fem"][v]["strain_increment"])
         np.testing.assert_allclose(h["element_strain_increment"], fem, rtol=0,
                                    atol=1e-9 * np.abs(fem).max())  # (measured 2e-16)
-        assert len(h["newton_iterations"]) == 3
+        k = len(h["newton_iterations"])
+        assert k >= 3  # three load steps; more where Newton's rules cut one
         assert len(h["warnings"]) == h["converged_on"].count("noise")
         with h5py.File(out / f"region_element_{v}.h5") as f:
-            assert sorted(f["step"][:].tolist()) == sorted([1, 2, 3] * n)
+            assert sorted(f["step"][:].tolist()) == sorted(list(range(1, k + 1)) * n)
             assert len(f.attrs["names"]) == n
         assert s["elements"][v]["strain_increment"]
     assert "per cell of the region" in (out / "report.md").read_text()

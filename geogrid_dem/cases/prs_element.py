@@ -522,6 +522,9 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     if a.soil is not None and a.stresses:
         ap.error(f"--soil={a.soil}: the FEM soil; not with --stresses (no FEM)")
     soil = a.soil or "calibrated"
+    if a.calibrate and soil != "calibrated":
+        ap.error(f"--calibrate (kept for older run files: it means --soil calibrated) with "
+                 f"--soil={soil!r}: give one of them")
     if soil in ("calibrated", "given"):
         p.soil = soil
     else:
