@@ -206,43 +206,10 @@ class HierarchicalPlaneStrain:
         fem, ufl = fx.fem, fx.ufl
 
         self.pool, self.lx, self.ly = pool, float(lx), float(ly)
-        self.out = None if out is None else Path(out)
-        if self.out is not None:
-            old = [f for f in ("elements.h5", "fem.xdmf", "fem.h5", "steps.csv", "report.md")
-                   if (self.out / f).exists()]
-            if old and not overwrite:
-                raise FemInputError(f"out={str(self.out)!r}: holds the records of an earlier "
-                                    f"run ({', '.join(old)}); give a new folder, or "
-                                    "overwrite=True to replace them")
-            for f in old:
-                (self.out / f).unlink()
-        self.verbose = verbose
-        if tangent not in TANGENTS:
-            raise FemInputError(f"tangent={tangent!r}: one of " + "; ".join(
-                f"'{k}' ({v})" for k, v in TANGENTS.items()))
-        self.tangent = tangent
-        if convergence not in ("noise", "tolerance"):
-            raise FemInputError(f"convergence={convergence!r}: 'noise' (newton_rtol, or, "
-                                "when Newton stalls above it, within the elements' measured "
-                                "noise) or 'tolerance' (newton_rtol only)")
-        self.convergence = convergence
-        self.relaxation = check_relaxation(relaxation)
-        if not (noise_factor > 0 and math.isfinite(noise_factor)):
-            raise FemInputError(f"noise_factor={noise_factor}: must be > 0 (a stalled step is "
-                                "accepted within this many times the noise's residual)")
-        self.noise_factor = float(noise_factor)
-        if not (newton_rtol > 0 and math.isfinite(newton_rtol)):
-            raise FemInputError(f"newton_rtol={newton_rtol!r}: must be > 0 (relative to the "
-                                "internal force scale)")
-        ceiling = 10.0 * newton_rtol if noise_ceiling is None else noise_ceiling
-        if not (math.isfinite(ceiling) and ceiling >= newton_rtol):
-            raise FemInputError(f"noise_ceiling={noise_ceiling!r}: must be >= newton_rtol="
-                                f"{newton_rtol!r} and finite (the largest residual, relative "
-                                "to the internal force scale, a step may be accepted at "
-                                "within the elements' noise; default 10 x newton_rtol)")
-        self.noise_ceiling = float(ceiling)
-        #: every warning of the run (also given as ``NoiseWarning``), in order
-        self.warnings: list[str] = []
+        self._options(out=out, overwrite=overwrite, verbose=verbose, tangent=tangent,
+                      tangents=tuple(TANGENTS), convergence=convergence, relaxation=relaxation,
+                      noise_factor=noise_factor, noise_ceiling=noise_ceiling,
+                      newton_rtol=newton_rtol)
         self.homogeneous = homogeneous
         self.confining_pa = confining_pa
         self.newton_rtol, self.max_newton = newton_rtol, max_newton
@@ -312,6 +279,49 @@ class HierarchicalPlaneStrain:
         #: the elements as the quadrature points' material (femcoupling.quadrature)
         self.material = ElementPoolMaterial(pool, tangent=tangent, strain_kw=self.strain_kw)
         self._set_q(self.material.stress, self.material.tangent)
+
+    def _options(self, *, out, overwrite: bool, verbose: bool, tangent: str, tangents: tuple,
+                 convergence: str, relaxation, noise_factor: float,
+                 noise_ceiling: float | None, newton_rtol: float) -> None:
+        """Checks and keeps the options both dimensions share (``out`` cleared of an
+        earlier run's records only with ``overwrite``)."""
+        self.out = None if out is None else Path(out)
+        if self.out is not None:
+            old = [f for f in ("elements.h5", "fem.xdmf", "fem.h5", "steps.csv", "report.md")
+                   if (self.out / f).exists()]
+            if old and not overwrite:
+                raise FemInputError(f"out={str(self.out)!r}: holds the records of an earlier "
+                                    f"run ({', '.join(old)}); give a new folder, or "
+                                    "overwrite=True to replace them")
+            for f in old:
+                (self.out / f).unlink()
+        self.verbose = verbose
+        if tangent not in tangents:
+            raise FemInputError(f"tangent={tangent!r}: one of " + "; ".join(
+                f"'{k}' ({TANGENTS[k]})" for k in tangents))
+        self.tangent = tangent
+        if convergence not in ("noise", "tolerance"):
+            raise FemInputError(f"convergence={convergence!r}: 'noise' (newton_rtol, or, "
+                                "when Newton stalls above it, within the elements' measured "
+                                "noise) or 'tolerance' (newton_rtol only)")
+        self.convergence = convergence
+        self.relaxation = check_relaxation(relaxation)
+        if not (noise_factor > 0 and math.isfinite(noise_factor)):
+            raise FemInputError(f"noise_factor={noise_factor}: must be > 0 (a stalled step is "
+                                "accepted within this many times the noise's residual)")
+        self.noise_factor = float(noise_factor)
+        if not (newton_rtol > 0 and math.isfinite(newton_rtol)):
+            raise FemInputError(f"newton_rtol={newton_rtol!r}: must be > 0 (relative to the "
+                                "internal force scale)")
+        ceiling = 10.0 * newton_rtol if noise_ceiling is None else noise_ceiling
+        if not (math.isfinite(ceiling) and ceiling >= newton_rtol):
+            raise FemInputError(f"noise_ceiling={noise_ceiling!r}: must be >= newton_rtol="
+                                f"{newton_rtol!r} and finite (the largest residual, relative "
+                                "to the internal force scale, a step may be accepted at "
+                                "within the elements' noise; default 10 x newton_rtol)")
+        self.noise_ceiling = float(ceiling)
+        #: every warning of the run (also given as ``NoiseWarning``), in order
+        self.warnings: list[str] = []
 
     # ---- the elements' material ---------------------------------------------------------
     @property

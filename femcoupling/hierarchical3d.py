@@ -27,15 +27,13 @@ parallel part). The secant tangent is plane strain only.
 from __future__ import annotations
 
 import math
-from pathlib import Path
 
 import numpy as np
 
 from femcoupling import _dolfinx
 from femcoupling.geometry import FemInputError
-from femcoupling.hierarchical import TANGENTS, ElementPoolMaterial, HierarchicalPlaneStrain
+from femcoupling.hierarchical import ElementPoolMaterial, HierarchicalPlaneStrain
 from femcoupling.quadrature import QuadratureSystem
-from femcoupling.relaxation import check_relaxation
 
 __all__ = ["Hierarchical3D"]
 
@@ -59,37 +57,16 @@ class Hierarchical3D(HierarchicalPlaneStrain):
         for name, v in (("nx", nx), ("ny", ny), ("nz", nz)):
             if not (isinstance(v, int) and v >= 1):
                 raise FemInputError(f"{name}={v!r}: must be an integer >= 1")
-        if tangent not in TANGENTS or tangent == "secant":
-            raise FemInputError(f"tangent={tangent!r}: 'network' or 'network-elastic' in 3D")
-        if convergence not in ("noise", "tolerance"):
-            raise FemInputError(f"convergence={convergence!r}: 'noise' or 'tolerance'")
         if not homogeneous and confining_pa is None:
             raise FemInputError("confining_pa=None: a triaxial test needs the confining "
                                 "pressure (Pa, compression positive), or homogeneous=True")
-        if not (newton_rtol > 0 and math.isfinite(newton_rtol)):
-            raise FemInputError(f"newton_rtol={newton_rtol!r}: must be > 0")
-        if not (noise_factor > 0 and math.isfinite(noise_factor)):
-            raise FemInputError(f"noise_factor={noise_factor!r}: must be > 0")
-        ceiling = 10.0 * newton_rtol if noise_ceiling is None else noise_ceiling
-        if not (math.isfinite(ceiling) and ceiling >= newton_rtol):
-            raise FemInputError(f"noise_ceiling={noise_ceiling!r}: must be >= newton_rtol")
         fx = self._fx = _dolfinx.load()
         fem, ufl = fx.fem, fx.ufl
         self.pool, self.lx, self.ly, self.lz = pool, float(lx), float(ly), float(lz)
-        self.out = None if out is None else Path(out)
-        if self.out is not None:
-            old = [f for f in ("elements.h5", "fem.xdmf", "fem.h5", "steps.csv", "report.md")
-                   if (self.out / f).exists()]
-            if old and not overwrite:
-                raise FemInputError(f"out={str(self.out)!r}: holds the records of an earlier "
-                                    f"run ({', '.join(old)}); give a new folder, or "
-                                    "overwrite=True to replace them")
-            for f in old:
-                (self.out / f).unlink()
-        self.verbose, self.tangent, self.convergence = verbose, tangent, convergence
-        self.relaxation = check_relaxation(relaxation)
-        self.noise_factor, self.noise_ceiling = float(noise_factor), float(ceiling)
-        self.warnings: list[str] = []
+        self._options(out=out, overwrite=overwrite, verbose=verbose, tangent=tangent,
+                      tangents=("network", "network-elastic"), convergence=convergence,
+                      relaxation=relaxation, noise_factor=noise_factor,
+                      noise_ceiling=noise_ceiling, newton_rtol=newton_rtol)
         self.homogeneous, self.confining_pa = homogeneous, confining_pa
         self.newton_rtol, self.max_newton = newton_rtol, max_newton
         self.strain_kw = dict(strain_kw or {})
