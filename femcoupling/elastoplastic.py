@@ -114,7 +114,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         self.noise_factor = 2.0
         self.noise_ceiling = 1e-2
         self.last_failure = ""  #: why the last failed Newton failed
-        #: every warning of the run (steps taken at a stall), in order
+        #: every warning of the run (steps stopped within the elements' noise), in order
         self.warnings: list[str] = []
         self._step_end: dict = {}
         self._region_form = None  # the DEM regions' internal force (built on demand)
