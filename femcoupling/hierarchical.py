@@ -1,9 +1,11 @@
 """Hierarchical FEM x DEM in plane strain: a DEM element at every quadrature point (issue 18,
 second part; docs/multiscale.md).
 
-The FEM is a rectangle ``lx`` x ``ly`` (m) of P1 triangles with one quadrature point each, in
-dolfinx. Each cell owns one persistent ``DemElement`` held by an ``ElementPool`` on Dask
-workers (the pool's element k is cell k). In a load step Newton iterates:
+The FEM is a rectangle ``lx`` x ``ly`` (m) of P1 triangles with one quadrature point each
+(``degree=2``: P2 triangles with three points each, which do not lock under isochoric or
+dilatant flow as constant-strain triangles do), in dolfinx. Each quadrature point owns one
+persistent ``DemElement`` held by an ``ElementPool`` on Dask workers (the pool's element k is
+cell k // nq, point k % nq; with P1, cell k). In a load step Newton iterates:
 
 1. the displacement-gradient increment since the start of the step, grad(u) - grad(u_n), at
    every quadrature point (shear and rotation included; the FEM's (x, y) is the element's
@@ -196,8 +198,11 @@ class HierarchicalPlaneStrain:
                  newton_rtol: float = 1e-3, max_newton: int = 10, strain_kw: dict | None = None,
                  tangent: str = "network", convergence: str = "noise",
                  relaxation: str | float = "aitken", noise_factor: float = 2.0,
-                 noise_ceiling: float | None = None,
+                 noise_ceiling: float | None = None, degree: int = 1,
                  verbose: bool = False, out=None, overwrite: bool = False) -> None:
+        if degree not in (1, 2):
+            raise FemInputError(f"degree={degree!r}: 1 (P1 triangles, one point each) or 2 (P2 "
+                                "triangles, three points each: no volumetric locking)")
         if not (lx > 0 and ly > 0 and math.isfinite(lx) and math.isfinite(ly)):
             raise FemInputError(f"lx={lx}, ly={ly}: must be > 0 (m)")
         if nx < 1 or ny < 1:
@@ -219,9 +224,10 @@ class HierarchicalPlaneStrain:
             comm, [np.array([0.0, 0.0]), np.array([lx, ly])], [nx, ny],
             fx.mesh.CellType.triangle)
         self.n_cells = msh.topology.index_map(2).size_local
-        if pool.n != self.n_cells:
-            raise FemInputError(f"pool: has {pool.n} elements for {self.n_cells} cells "
-                                f"(2 nx ny triangles)")
+        nq = 1 if degree == 1 else 3
+        if pool.n != self.n_cells * nq:
+            raise FemInputError(f"pool: has {pool.n} elements for {self.n_cells * nq} "
+                                f"quadrature points (2 nx ny triangles, {nq} point(s) each)")
 
         def eps(w):
             e = ufl.sym(ufl.grad(w))
@@ -235,11 +241,11 @@ class HierarchicalPlaneStrain:
         self.traction = fem.Constant(msh, np.zeros(2, dtype=st))
         # spaces, forms and solver: the same as the FEM soil's (femcoupling.quadrature)
         sysq = self.system = QuadratureSystem(
-            msh, degree=1, qdeg=1, ncomp=3, strain=eps,
+            msh, degree=degree, qdeg=1 if degree == 1 else 2, ncomp=3, strain=eps,
             loads=lambda v: (ufl.dot(self.traction, v) * ds(1),))
-        if len(sysq.qweights) != 1:
-            raise RuntimeError("one quadrature point per triangle expected")
         self.V, self.Wv, self.Wt = sysq.V, sysq.Wv, sysq.Wt
+        self.degree = degree
+        self._points(nq)
         self.u, self.u_n, self.du = sysq.u, sysq.u_n, sysq.du
         self.sig_q, self.tan_q = sysq.sig_q, sysq.tan_q
         self.expr_grad = fem.Expression(ufl.grad(self.u), sysq.qpoints)
@@ -345,6 +351,15 @@ class HierarchicalPlaneStrain:
     @property
     def _last_pool_step(self):
         return self.material.last_step
+
+    def _points(self, nq: int) -> None:
+        """The quadrature points: ``nq`` per cell, element k at cell k // nq, point k % nq (the
+        quadrature spaces' own order, checked)."""
+        if len(self.system.qweights) != nq:
+            raise RuntimeError(f"{nq} quadrature point(s) per cell expected")
+        self.nq, self.n_points = nq, self.n_cells * nq
+        if not np.array_equal(self.Wv.dofmap.list.reshape(-1), np.arange(self.n_points)):
+            raise RuntimeError("the quadrature space's points are not in (cell, point) order")
 
     def _set_q(self, sig: np.ndarray, tan: np.ndarray) -> None:
         self.sig_q.x.array[:] = sig.reshape(-1)
@@ -476,7 +491,7 @@ class HierarchicalPlaneStrain:
 
         self.out.mkdir(parents=True, exist_ok=True)
         ps = self._last_pool_step
-        n = self.n_cells
+        n = self.n_points
         k = len(self.history) - 1
         rows = {
             "step": np.full(n, k, dtype=np.int64),
@@ -522,7 +537,7 @@ class HierarchicalPlaneStrain:
                  f"- status: **{self.status}** (the worst of the steps'; converged: every "
                  f"step's residual within newton_rtol; stopped_at_scatter: a step accepted "
                  f"within the elements' noise, above newton_rtol)",
-                 f"- {self.n_cells} elements, {len(h)} load steps accepted; tangent "
+                 f"- {self.n_points} elements, {len(h)} load steps accepted; tangent "
                  f"`{self.tangent}`, convergence `{self.convergence}` (newton_rtol "
                  f"{self.newton_rtol:g}, noise factor {self.noise_factor:g}, noise ceiling "
                  f"{self.noise_ceiling:g}), relaxation `{self.relaxation}`",
@@ -555,7 +570,8 @@ class HierarchicalPlaneStrain:
 
         T = fem.functionspace(self.mesh, ("DG", 0, (3, 3)))
         sig = fem.Function(T, name="stress_pa")
-        st = np.asarray(self._last_pool_step.stresses, float).reshape(self.n_cells, 9)
+        st = np.asarray(self._last_pool_step.stresses, float).reshape(self.n_cells, self.nq, 9)
+        st = st[:, 0] if self.nq == 1 else st.mean(axis=1)  # (a cell's points: their mean)
         sig.x.array[:] = st.reshape(-1)[: sig.x.array.size]
         self.u.name = "displacement_m"
         with dolfinx.io.XDMFFile(self.mesh.comm, str(self.out / "fem.xdmf"),

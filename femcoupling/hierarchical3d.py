@@ -99,9 +99,8 @@ class Hierarchical3D(HierarchicalPlaneStrain):
             msh, degree=1, qdeg=1, ncomp=6, strain=eps,
             loads=lambda v: (ufl.dot(self.traction_x, v) * ds(1),
                              ufl.dot(self.traction_y, v) * ds(2)))
-        if len(sysq.qweights) != 1:
-            raise RuntimeError("one quadrature point per tetrahedron expected")
         self.V, self.Wv, self.Wt = sysq.V, sysq.Wv, sysq.Wt
+        self._points(1)
         self.u, self.u_n, self.du = sysq.u, sysq.u_n, sysq.du
         self.sig_q, self.tan_q = sysq.sig_q, sysq.tan_q
         self.expr_grad = fem.Expression(ufl.grad(self.u), sysq.qpoints)

@@ -244,3 +244,40 @@ def test_the_secant_tangent_reaches_the_network_tangents_solution():
     (s_net, used_net), (s_sec, used_sec) = res["network"], res["secant"]
     assert used_net == 0 and used_sec > 0
     assert np.abs(s_sec - s_net).max() < 5e-3 * np.abs(s_net).max()
+
+
+def test_quadratic_triangles_three_elements_each_give_the_homogeneous_response():
+    """degree=2: P2 triangles with three quadrature points, an element at each (issue 38: no
+    volumetric locking). In a homogeneous field every point's element sees the field's
+    increment and answers as the stand-alone element; 1 and 2 workers give the same run."""
+    def run(workers):
+        with ElementPool.build(6, FACTORY, workers=workers) as pool:
+            m = HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, homogeneous=True,
+                                        degree=2)
+            assert (m.n_cells, m.nq, m.n_points) == (2, 3, 6)
+            return [m.step(top_displacement=-1e-6 * k, right_displacement=0.5e-6 * k)
+                    for k in (1, 2)], m.u.x.array.copy()
+
+    (s1, u1), (s2, u2) = run(1), run(2)
+    assert np.array_equal(u1, u2)
+    for a, b in zip(s1, s2):
+        assert np.array_equal(a.element_stresses, b.element_stresses)
+    for r in s2:
+        assert r.iterations == 1
+        assert np.allclose(r.increments, r.increments[0], rtol=0, atol=1e-3 * 1e-4)
+        # (to 4e-4: the diagonal's mid-node is free, and the elements' relaxation to a
+        # tolerance moves it, as the interior node of the P1 test above)
+        assert r.increments[0][2, 2] == pytest.approx(-1e-6 / 0.01, rel=1e-3)
+    for k in range(6):
+        el = FACTORY(k)
+        for r in s2:
+            s = el.apply_strain(r.increments[k])
+        assert np.array_equal(fem_stress(s), s2[-1].element_stresses[k])
+    from femcoupling.geometry import FemInputError
+
+    with ElementPool.build(2, FACTORY, workers=1) as pool:
+        with pytest.raises(FemInputError, match="pool: has 2 elements for 6 quadrature"):
+            HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, homogeneous=True,
+                                    degree=2)
+        with pytest.raises(FemInputError, match="degree=3"):
+            HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, degree=3)
