@@ -167,7 +167,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         self.cell_tag_of = np.full(self.n_cells, geo.SOIL_TAG, dtype=np.int32)
         self.cell_tag_of[self.cell_tags.indices] = self.cell_tags.values
         self._point_sets: list = []
-        self._set_material_arrays(np.zeros((n_qp, self.ncomp)))
+        self._set_point_materials(np.zeros((n_qp, self.ncomp)))
 
         # --- forms ---
         v = ufl.TestFunction(self.V)
@@ -227,7 +227,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         name = self.body.regions[tag - geo.REGION_TAG0].name
         return self.region_materials.get(name, self.soil)
 
-    def _set_material_arrays(self, stress_pa: np.ndarray | None = None) -> None:
+    def _set_point_materials(self, stress_pa: np.ndarray | None = None) -> None:
         """The quadrature points' materials (``femcoupling.quadrature.QuadratureMaterial``):
         the points of each cell tag without a region element take their tag's material
         (``material_of_tag(tag).at_points``); the points of a region element, its

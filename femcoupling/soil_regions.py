@@ -91,7 +91,7 @@ class RegionMaterials:
         if not isinstance(material, LinearElastic):
             raise FemInputError(f"material={material!r}: must be a LinearElastic")
         self.region_materials[name] = material
-        self._set_material_arrays()
+        self._set_point_materials()
 
     def set_region_element(self, name: str, element: Any) -> None:
         """The element region ``name`` takes its stress and tangent from a DEM element at
@@ -151,7 +151,7 @@ class RegionMaterials:
         self._region_form = None  # (the regions' cells changed)
         w = (self.cell_volume[:, None] * self.qweights[None, :]).reshape(-1)[sel]
         self._element_points[key] = (sel, w / w.sum())  # its points and volume weights
-        self._set_material_arrays()  # (its points leave their tag's material)
+        self._set_point_materials()  # (its points leave their tag's material)
 
     def _element_units(self) -> list:
         """(unit, region names): each region element once, except the members of one group
