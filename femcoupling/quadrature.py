@@ -81,15 +81,17 @@ class QuadratureMaterial(Protocol):
 
 
 def check_material(material: Any, name: str) -> Any:
-    """``material`` if it implements :class:`QuadratureMaterial`; else a ValueError naming
-    ``name`` and the missing methods."""
+    """``material`` if it implements :class:`QuadratureMaterial`; else a FemInputError (a
+    ValueError) naming ``name`` and the missing methods."""
     missing = [k for k in ("trial", "commit", "state", "set_state")
                if not callable(getattr(material, k, None))]
     if missing:
         from femcoupling.geometry import FemInputError
 
-        raise FemInputError(f"{name}={material!r}: not a quadrature material (femcoupling."
-                            f"quadrature.QuadratureMaterial): no {', '.join(missing)}()")
+        raise FemInputError(f"{name}={material!r}: needs a "
+                            f"{', '.join(k + '()' for k in missing)} method (a femcoupling."
+                            "quadrature.QuadratureMaterial, as femcoupling.region."
+                            "DemRegionMaterial)")
     return material
 
 

@@ -12,6 +12,7 @@ import numpy as np
 from femcoupling.geometry import FemInputError
 from femcoupling.materials import (LinearElastic, mandel_to_tensor, stiffness_block,
                                    tensor_to_mandel)
+from femcoupling.quadrature import check_material
 
 
 class RegionPoints:
@@ -143,10 +144,7 @@ class RegionMaterials:
         if self.comm.size > 1:
             raise FemInputError(f"region elements ({key!r}): serial runs only (this run "
                                 f"has {self.comm.size} MPI ranks)")
-        for k in ("trial", "commit", "state", "set_state"):
-            if not callable(getattr(element, k, None)):
-                raise FemInputError(f"element={element!r}: needs a {k}() method (see "
-                                    "femcoupling.region.DemRegionMaterial)")
+        check_material(element, "element")
         self.region_elements[key] = element
         self._region_form = None  # (the regions' cells changed)
         w = (self.cell_volume[:, None] * self.qweights[None, :]).reshape(-1)[sel]
