@@ -490,7 +490,7 @@ class _SoilNewton:
         self.m, self.bcs = m, m._active_bcs()
 
     def evaluate(self, first: bool, perturb: float = 0.0) -> None:
-        deps = self.m._strain_increment()
+        deps = self._deps = self.m._strain_increment()  # (the iterate's; kept for the probe)
         self.m._update_tangent_and_stress(deps * (1.0 + perturb) if perturb else deps)
 
     def residual(self) -> float:
@@ -513,9 +513,8 @@ class _SoilNewton:
 
     def predicted_change(self, perturb: float) -> np.ndarray:
         m = self.m
-        deps = m._strain_increment()
         tan = m.tan_q.x.array.reshape(-1, m.ncomp, m.ncomp)[m._qdofs_t]
-        return perturb * np.einsum("nij,nj->ni", tan, deps)
+        return perturb * np.einsum("nij,nj->ni", tan, self._deps)
 
     def at_boundary_values(self) -> bool:
         return self.m.system.at_boundary_values(self.bcs)

@@ -422,9 +422,7 @@ class HierarchicalPlaneStrain:
         except NewtonFailure:
             if max_cuts <= 0:
                 raise
-            self.material.reject()
-            self.u.x.array[:] = self.u_n.x.array
-            self.u.x.scatter_forward()
+            self._rollback()
             t0, r0 = self._bc_now
             self.step(top_displacement=0.5 * (t0 + top_displacement),
                       right_displacement=0.5 * (r0 + right_displacement),
@@ -433,6 +431,12 @@ class HierarchicalPlaneStrain:
                              right_displacement=right_displacement, max_cuts=max_cuts - 1)
 
     _bc_now = (0.0, 0.0)  # the boundary displacements of the last accepted step, m
+
+    def _rollback(self) -> None:
+        """Back to the last accepted step: the elements to their accepted state, u to u_n."""
+        self.material.reject()
+        self.u.x.array[:] = self.u_n.x.array
+        self.u.x.scatter_forward()
 
     def _set_boundary(self, top_displacement: float, right_displacement: float) -> None:
         self.top_u.value = top_displacement

@@ -164,9 +164,7 @@ class Hierarchical3D(HierarchicalPlaneStrain):
         except NewtonFailure:
             if max_cuts <= 0:
                 raise
-            self.material.reject()
-            self.u.x.array[:] = self.u_n.x.array
-            self.u.x.scatter_forward()
+            self._rollback()
             now = self._gradient if self.homogeneous else self._bc_now[0]
             self._cut_steps(0.5 * (now + target), max_cuts - 1)
             return self._cut_steps(target, max_cuts - 1)
