@@ -162,6 +162,17 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
            "Adds an axis-aligned one-sided wall: axis 0/1/2 (x/y/z), position along the axis (m), "
            "sense +1 if spheres are on its +axis side, -1 otherwise. Returns its index.")
       .def_property_readonly("num_walls", &Scene::num_walls)
+      .def("set_wall_opening", &Scene::set_wall_opening, py::arg("wall"), py::kw_only(),
+           py::arg("axis"), py::arg("lo") = 0.0, py::arg("hi") = 0.0,
+           "Opens the wall for bodies whose centre lies in (lo, hi) (m) along axis 0/1/2 (not "
+           "the wall's own axis): they pass it without contact, as through a pull-out box's "
+           "slot. axis=-1 closes it.")
+      .def("wall_opening",
+           [](const Scene& s, int id) {
+             const WallOpening& o = s.wall_opening(id);
+             return py::make_tuple(o.axis, o.lo, o.hi);
+           },
+           py::arg("wall"), "(axis, lo, hi) of the wall's opening, m; axis -1: closed.")
       .def("set_wall_velocity",
            [](Scene& s, int id, const Array& v) {
              const Vec3 vel = to_vec3(v, "velocity");

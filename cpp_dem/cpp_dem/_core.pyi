@@ -314,6 +314,10 @@ class Scene:
         """
         Makes the scene periodic along the axes marked in `periodic`, with cell vectors the columns of `cell` (3 x 3, m, det > 0); the cell is cell @ [0,1)^3.
         """
+    def set_wall_opening(self, wall: int, *, axis: int, lo: float = 0.0, hi: float = 0.0) -> None:
+        """
+        Opens the wall for bodies whose centre lies in (lo, hi) (m) along axis 0/1/2 (not the wall's own axis): they pass it without contact, as through a pull-out box's slot. axis=-1 closes it.
+        """
     def set_wall_position(self, wall: int, position: float) -> None:
         """
         Moves the wall plane to position (m).
@@ -325,6 +329,10 @@ class Scene:
     def unbalanced_force(self) -> float:
         """
         Mean resultant force on free bodies / mean contact force, - (NaN without contacts).
+        """
+    def wall_opening(self, wall: int) -> tuple[int, float, float]:
+        """
+        (axis, lo, hi) of the wall's opening, m; axis -1: closed.
         """
     @property
     def _blocked(self) -> list[int]:

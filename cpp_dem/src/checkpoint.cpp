@@ -73,11 +73,14 @@ class Reader {
 /// (Before version 10 the body store had one array fewer, inertia_scale.)
 std::vector<std::uint64_t> layout(std::uint32_t version = Checkpoint::kVersion) {
   const std::uint64_t body_store = sizeof(BodyStore) - (version < 10 ? sizeof(std::vector<Real>) : 0);
-  return {sizeof(Real),        body_store,        sizeof(Vec3),        sizeof(Quat),       sizeof(Material),
+  std::vector<std::uint64_t> l = {sizeof(Real),        body_store,        sizeof(Vec3),        sizeof(Quat),       sizeof(Material),
           sizeof(Wall),        sizeof(PairContact), sizeof(PairOutput), sizeof(WallContact), sizeof(GridLink),
           sizeof(PFacet),      sizeof(GridContact), sizeof(BreakEvent), sizeof(ContactPhys),
           sizeof(ContactState), sizeof(PairContactCold), sizeof(PeriodicCell), sizeof(Bond),
           sizeof(BondBreak), sizeof(PairLaw)};
+  // (Version 11 added the wall openings.)
+  if (version >= 11) l.push_back(sizeof(WallOpening));
+  return l;
 }
 }  // namespace
 
@@ -96,6 +99,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.vec(s.pos_at_build_);
   w.vec(s.radius_at_build_);
   w.vec(s.walls_);
+  w.vec(s.wall_openings_);
   w.put(s.cell_);
   w.put(s.max_radius_at_build_);
   // Contacts and adjacency.
@@ -225,6 +229,14 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   r.vec(t.pos_at_build_);
   r.vec(t.radius_at_build_);
   r.vec(t.walls_);
+  if (version >= 11)
+    r.vec(t.wall_openings_);
+  else
+    t.wall_openings_.assign(t.walls_.size(), WallOpening{});
+  if (t.wall_openings_.size() != t.walls_.size())
+    throw ParameterError("checkpoint: corrupt wall openings");
+  for (const WallOpening& o : t.wall_openings_)
+    if (o.axis < -1 || o.axis > 2) throw ParameterError("checkpoint: corrupt wall openings");
   r.get(t.cell_);
   r.get(t.max_radius_at_build_);
   r.vec(t.pairs_);

@@ -20,9 +20,9 @@ class Checkpoint {
   /// body store's arrays together (BodyStore::for_each_array); 6: clumps; 7: the periodic
   /// cell, pair contacts' image codes, bodies' image counters; 9: the shear kinematics
   /// (Scene::shear_kinematics); 10: density scaling (its parameters, and the bodies' and
-  /// clumps' inertia factors). load also reads versions 8 (with the default kinematics) and
-  /// 9 (scaling off).
-  static constexpr std::uint32_t kVersion = 10;
+  /// clumps' inertia factors); 11: the walls' openings (WallOpening). load also reads
+  /// versions 8 (with the default kinematics), 9 (scaling off) and 10 (walls closed).
+  static constexpr std::uint32_t kVersion = 11;
   /// The whole state of `scene` as bytes. Controllers are code, not data: the blob holds
   /// their count, `period`, `enabled` and, for StatefulController ones, their state.
   static std::vector<std::uint8_t> save(const Scene& scene);

@@ -217,6 +217,10 @@ class Scene {
   const std::vector<std::array<int, 3>>& body_images() const { return bodies_.image; }
 
   int add_wall(int axis, Real position, int sense, int material);
+  /// Opens wall `id` for bodies whose centre lies in (lo, hi) along `axis` (WallOpening);
+  /// axis = -1 closes it again.
+  void set_wall_opening(int id, int axis, Real lo, Real hi);
+  const WallOpening& wall_opening(int id) const;
   int num_walls() const { return static_cast<int>(walls_.size()); }
   Wall& wall(int id);
   const Wall& wall(int id) const;
@@ -558,6 +562,7 @@ class Scene {
   std::vector<Real> radius_at_build_;
   Real max_radius_at_build_ = 0;  // largest radius at the last build, m (need_rebuild)
   std::vector<Wall> walls_;
+  std::vector<WallOpening> wall_openings_;  // one per wall (axis -1: closed)
   PeriodicCell cell_;
   // Scratch of the periodic pair pass: H s for each image code, 4 doubles each (lane 3 zero).
   std::array<std::array<Real, 4>, 27> image_offset_{};

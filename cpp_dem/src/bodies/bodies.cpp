@@ -127,8 +127,34 @@ int Scene::add_wall(int axis, Real position, int sense, int material) {
   w.position = position;
   w.material = material;
   walls_.push_back(w);
+  wall_openings_.emplace_back();
   dirty_ = true;
   return num_walls() - 1;
+}
+
+void Scene::set_wall_opening(int id, int axis, Real lo, Real hi) {
+  const Wall& w = wall(id);
+  if (axis == -1) {
+    wall_openings_[id] = WallOpening{};
+    return;
+  }
+  if (axis < 0 || axis > 2 || axis == w.axis)
+    throw ParameterError("axis=" + std::to_string(axis) + " (opening of wall " +
+                         std::to_string(id) + "): must be 0 (x), 1 (y) or 2 (z) and not the "
+                         "wall's own axis " + std::to_string(w.axis) + ", or -1 to close it");
+  require(std::isfinite(lo), "lo", lo, "must be finite (m)");
+  const std::string above = "must be finite and above lo=" + fmt_real(lo) + " (m)";
+  require(std::isfinite(hi) && hi > lo, "hi", hi, above.c_str());
+  WallOpening o;
+  o.axis = axis;
+  o.lo = lo;
+  o.hi = hi;
+  wall_openings_[id] = o;
+}
+
+const WallOpening& Scene::wall_opening(int id) const {
+  (void)wall(id);  // checks id
+  return wall_openings_[id];
 }
 
 Wall& Scene::wall(int id) {

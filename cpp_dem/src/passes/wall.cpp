@@ -110,6 +110,9 @@ void Scene::compute_wall_forces_hot(long& err_contact) {
   const Vec3* const vel = bodies_.vel.data();
   const Vec3* const angvel = bodies_.angvel.data();
   const Real* const radius = bodies_.radius.data();
+  const WallOpening* const openings = wall_openings_.data();
+  bool any_opening = false;
+  for (const WallOpening& o : wall_openings_) any_opening = any_opening || o.axis >= 0;
   long err = std::numeric_limits<long>::max();
   // (err is an argument: inside the parallel loop it is the thread's reduction copy.)
   const auto one = [&](long k, long& err, auto axis) __attribute__((always_inline)) {
@@ -119,7 +122,12 @@ void Scene::compute_wall_forces_hot(long& err_contact) {
     const int b = c.body;
     const Real r = radius[b];
     const Real s = w.sense * (pos[b][AX] - w.position);  // wall_distance, AX constant
-    if (s >= r || s <= -r) {
+    // (An opening: a centre within it passes the wall, and one beyond the plane is outside
+    // the box; WallOpening.)
+    const bool open = any_opening && openings[c.wall].axis >= 0 &&
+                      (s <= 0 || (pos[b][openings[c.wall].axis] > openings[c.wall].lo &&
+                                  pos[b][openings[c.wall].axis] < openings[c.wall].hi));
+    if (s >= r || s <= -r || open) {
       if (c.active) {
         c.active = false;
         c.state.clear_history();

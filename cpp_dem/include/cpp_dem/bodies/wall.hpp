@@ -24,4 +24,17 @@ struct Wall {
   }
 };
 
+/// An opening in a wall: the wall is open (no contact) for a body whose centre's coordinate
+/// along `axis` lies strictly between `lo` and `hi` (m), as a pull-out box's slot lets the
+/// geogrid and the grains next to it leave through the front wall; and for a body whose
+/// centre is beyond the plane (it left through the opening: it is outside the box, which
+/// the wall no longer bounds). A body reaches the plane elsewhere only with an overlap of
+/// its radius, which the overlap check stops. axis = -1: closed (the plain one-sided wall).
+struct WallOpening {
+  int axis = -1;  ///< 0, 1 or 2 (not the wall's own axis); -1: the wall has no opening
+  int pad_ = 0;   ///< zero (explicit padding: checkpoints are byte-identical)
+  Real lo = 0;    ///< lower bound of the opening along axis, m
+  Real hi = 0;    ///< upper bound of the opening along axis, m
+};
+
 }  // namespace cpp_dem
