@@ -88,3 +88,25 @@ def test_bad_openings_are_refused_by_name(kw, match):
         sc.set_wall_opening(w, **kw)
     with pytest.raises(_core.ParameterError, match="wall"):
         sc.set_wall_opening(7, axis=0, lo=0.0, hi=1.0)
+
+
+def test_a_centre_beyond_the_plane_is_outside_an_opened_wall_only():
+    """A grain that left through the opening and moved sideways, its centre half a radius
+    beyond the plane outside the opening, is outside the box: an opened wall leaves it alone.
+    A closed wall refuses a body there before the run."""
+    for opening in ((0, 10 * R, 11 * R), None):
+        sc = dem.Scene()
+        m = sc.add_material(dem.linear_material(density=2000, young=E, poisson=0.3,
+                                                friction_angle_deg=30))
+        sc.add_spheres([[0, 0, -0.5 * R]], [R], material=m)  # (before the wall: it is
+        w = sc.add_wall(axis=2, position=0.0, sense=1, material=m)  # behind it)
+        if opening is not None:
+            sc.set_wall_opening(w, axis=opening[0], lo=opening[1], hi=opening[2])
+        sc.dt = 0.2 * sc.critical_dt()
+        if opening is None:
+            with pytest.raises(dem.ParameterError, match="body 0 .* behind wall 0"):
+                sc.run(10)
+            continue
+        sc.run(100)
+        assert np.array_equal(np.asarray(sc.positions)[0], [0, 0, -0.5 * R])
+        assert np.all(np.asarray(sc.wall_forces)[w] == 0)

@@ -335,8 +335,8 @@ class Scene(_core.Scene):
     def _check_geometry(self) -> None:
         """Before the first step, and at the first run after bodies or walls were added or
         positions set: every body's centre (spheres, clump members, and before the first
-        step geogrid nodes) must be on the inner side of every wall (one pass over the
-        bodies). A body behind a wall is never touched by it (the walls are one-sided):
+        step geogrid nodes) must be on the inner side of every wall but an opened one
+        (one pass over the bodies; what is beyond an opened wall left through it). A body behind a wall is never touched by it (the walls are one-sided):
         ParameterError naming the body, its position and the wall."""
         key = (self.num_bodies, self.num_walls, self.__dict__.get("_geometry_version", 0))
         if self.__dict__.get("_geometry_checked") == key and self.step_count > 0:
@@ -352,6 +352,8 @@ class Scene(_core.Scene):
         check = (np.ones(len(x), bool) if self.step_count == 0
                  else np.asarray(self.body_kinds) != 1)
         for w in range(self.num_walls):
+            if self.wall_opening(w)[0] >= 0:
+                continue  # an opened wall: what is beyond it left through it (set_wall_opening)
             axis, sense = int(axes[w]), int(senses[w])
             tol = 1e-12 + 1e-9 * abs(float(pos[w]))
             behind = check & (sense * (x[:, axis] - pos[w]) < -tol)
