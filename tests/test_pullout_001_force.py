@@ -265,3 +265,43 @@ def test_summarize_takes_a_record_without_transverse_members():
     assert st["mean_force_N"] > 0 and "transverse_over_longitudinal" not in st
     rec.update(force_C1=0.5 + d, force_C2=0.5 + d)
     assert pullout.summarize(rec)["transverse_over_longitudinal"] > 0
+
+
+def test_front_slot_is_its_own_cell_and_bad_values_are_named(capsys):
+    """--front-slot opens the front wall during the pull: a run with it is a cell of its own
+    (its run folder and study row say so), and a row written before the option existed is a
+    closed-wall row."""
+    p = case.parse_args(["--front-slot", "0.5"])[0]
+    assert p.front_slot == 0.5 and case.parse_args([])[0].front_slot == 0.0
+    assert case.run_name(p).endswith("_slot0.5_s1")
+    assert "_slot" not in case.run_name(case.Params())
+    for bad in ("-0.1", "2.5", "nan"):
+        with pytest.raises(SystemExit):
+            case.parse_args(["--front-slot", bad])
+        assert f"--front-slot={float(bad)}" in capsys.readouterr().err
+    closed = [_row(s, 20.0 + s, 0.5, 300.0, 0.3) for s in (1, 2)]  # no front_slot key
+    slot = [{**_row(s, 10.0 + s, 0.4, 200.0, 0.3), "front_slot": 0.5} for s in (1, 2)]
+    cells = case.study_cells(closed + slot)
+    assert sorted(c["front_slot"] for c in cells) == [0.0, 0.5]
+    by = {c["front_slot"]: c for c in cells}
+    assert by[0.0]["mean_force_001_N"] == pytest.approx(21.5)
+    assert by[0.5]["mean_force_001_N"] == pytest.approx(11.5)
+    assert "front slot 0.5" in case.material_label(*case.material_of(by[0.5]))
+
+
+def test_open_front_slot_opens_the_front_wall_around_the_grid_plane():
+    from cpp_dem.protocols import pullout
+
+    q = case.Params(**case.SMOKE)
+    sample = case.build(q)
+    front = sample.walls[pullout.X_MINUS]
+    assert sample.scene.wall_opening(front)[0] == -1  # built closed
+    pullout.open_front_slot(sample, 0.004)
+    axis, lo, hi = sample.scene.wall_opening(front)
+    assert axis == 2 and (lo, hi) == pytest.approx((sample.grid_z - 0.004,
+                                                    sample.grid_z + 0.004))
+    for w in sample.walls[1:]:
+        assert sample.scene.wall_opening(w)[0] == -1  # the other walls stay closed
+    for bad in (0.0, -1e-3, float("inf"), q.box):
+        with pytest.raises(dem.ParameterError, match="half_height="):
+            pullout.open_front_slot(sample, bad)

@@ -103,6 +103,10 @@ class Params:
     threads: int = 0
     grains: str = "spheres"         #: spheres, or clumps:NAME (cases/grains_option.py); the
                                     #: radius is then the clumps' equivalent-volume radius
+    front_slot: float = 0.0         #: the front wall's slot during the pull: open for grain
+                                    #: centres within front_slot x (rc + r) of the grid plane
+                                    #: (rc + r: a grain touching a bar), -; 0 = closed, as
+                                    #: App. A's box (pullout.open_front_slot)
 
 
 SMOKE = dict(radius=2.5e-3, box=0.05, distance=0.004, snapshots=1)
@@ -254,6 +258,13 @@ def force_bodies_001(grid_kind: str, node_ids, positions, *, tol: float = 1e-6) 
     raise ValueError(f"grid_kind={grid_kind!r}: must be 'square' or 'triangular'")
 
 
+def grains_out(sample: pullout.PulloutSample) -> float:
+    """How many grains have left the box through the front slot: grain centres beyond the
+    front wall's plane (x below it)."""
+    x0 = float(np.asarray(sample.scene.wall_positions)[sample.walls[pullout.X_MINUS]])
+    return float(np.count_nonzero(np.asarray(sample.scene.positions)[sample.grain_ids, 0] < x0))
+
+
 def force_001(scene, nodes) -> float:
     """001's pull-out force, N: the sum over ``nodes`` (body ids) of |x force| at the last
     step, as App. A sums |O.forces.f(id)[0]| (a node's resultant: the soil's contact forces
@@ -346,10 +357,18 @@ def run(p: Params, out: Path) -> dict:
     log(f"001's pull-out force (force_001): sum of |x force| on {sel.rule}"
         + (f"; App. A's ids {', '.join(map(str, sel.yade_ids))}" if sel.yade_ids else ""))
     snaps = np.linspace(0, p.distance, p.snapshots + 1)[1:] if p.snapshots else []
+    slot_half_m = p.front_slot * (grid_spec(p)[0] + p.radius)
+
+    def before_pull(s: pullout.PulloutSample) -> None:
+        if slot_half_m > 0:  # opened after the preparation: the same sample as a closed box
+            pullout.open_front_slot(s, slot_half_m)
+            log(f"front wall: slot open for grain centres within {slot_half_m * 1e3:.3g} mm "
+                f"of the grid plane ({p.front_slot:g} x (bar radius + grain radius))")
+
     meta = {**asdict(p), "case": "001", "study": THESIS,
             "force_001_nodes": sel.nodes.tolist(), "force_001_yade_ids": list(sel.yade_ids),
             "force_001_zero_connections": [list(z) for z in sel.zero_ids],
-            "force_001_rule": sel.rule}
+            "force_001_rule": sel.rule, "front_slot_half_height_m": slot_half_m}
     summary = run_case(
         sample, out, tag="pullout-001", meta=meta,
         prep_kwargs={"porosity": None, "growth_stress": p.growth_stress,
@@ -359,8 +378,12 @@ def run(p: Params, out: Path) -> dict:
         title=f"{THESIS}: pull-out, {p.grid} grid, {grain_label(sample)}, "
               f"r = {p.radius * 1e3:g} mm, {p.pressure / 1e3:g} kPa", log=log,
         extra_series={"force_001": (lambda s: force_001(s.scene, sel.nodes), "N",
-                                    "001's measure: back-row nodes, sum |x force|")},
-        extra_summary=stats_001)
+                                    "001's measure: back-row nodes, sum |x force|"),
+                      **({"grains_out": (grains_out, "-", "grains out through the slot")}
+                         if slot_half_m > 0 else {})},
+        extra_summary=lambda rec: {**stats_001(rec), **(
+            {"grains_out_end": float(rec["grains_out"][-1])} if "grains_out" in rec else {})},
+        before_pull=before_pull)
     log(f"001's measure (force_001): mean {summary['mean_force_001_N']:.3f} N, CoV "
         f"{summary['cov_001']:.3f}; whole resistance (pull_force): mean "
         f"{summary['mean_force_N']:.2f} N, CoV {summary['cov_force']:.3f}")
@@ -372,7 +395,22 @@ def run(p: Params, out: Path) -> dict:
 WITHIN_SD = 2.0
 
 #: What identifies a study cell (the seeds of a cell are its runs).
-CELL_KEY = ("grid", "radius_m", "pressure_Pa", "grid_young_Pa", "grains", "jitter")
+MATERIAL_KEY = ("grid_young_Pa", "grains", "jitter", "front_slot")
+CELL_KEY = ("grid", "radius_m", "pressure_Pa", *MATERIAL_KEY)
+
+
+def material_of(c: dict) -> tuple:
+    """A row's or cell's material and set-up (MATERIAL_KEY): what, beside the grid, the grain
+    radius and the pressure, tells its cells apart. A row written before the front slot
+    existed ran with the wall closed (front_slot 0)."""
+    return tuple(c.get(k, 0.0) if k == "front_slot" else c[k] for k in MATERIAL_KEY)
+
+
+def material_label(eg: float, gr: str, jit: float, slot: float) -> str:
+    """The words for a material_of tuple (study.md, study.png)."""
+    return (f"grid E {eg:g} Pa" + ("" if gr == "spheres" else f", {gr}")
+            + (f", jitter {jit:g}" if jit else "")
+            + (f", front slot {slot:g}" if slot else ""))
 
 
 def thesis_value(table: dict, grid: str, radius: float, pressure: float):
@@ -387,7 +425,7 @@ def thesis_value(table: dict, grid: str, radius: float, pressure: float):
 def run_name(q: Params) -> str:
     """The sub-folder of one study run: grid, radius, pressure; the grid's Young's modulus
     where it differs from the grains' (Table 5.1: the same), the grains where not spheres,
-    the jitter where not 0; the seed."""
+    the jitter and the front slot where not 0; the seed."""
     name = f"{q.grid}_r{q.radius * 1e3:g}mm_P{q.pressure / 1e3:g}kPa"
     if q.grid_young != q.young:
         name += f"_Eg{q.grid_young:g}"
@@ -395,6 +433,8 @@ def run_name(q: Params) -> str:
         name += "_" + "".join(ch if ch.isalnum() or ch in "._-" else "-" for ch in q.grains)
     if q.jitter > 0:
         name += f"_j{q.jitter:g}"
+    if q.front_slot > 0:
+        name += f"_slot{q.front_slot:g}"
     return f"{name}_s{q.seed}"
 
 
@@ -412,12 +452,14 @@ def run_row(q: Params, sub: Path, status: str, wall_time: float) -> dict:
     s1 = stats_001(rec) if rec is not None else {"mean_force_001_N": nan, "cov_001": nan}
     return {"run": sub.name, "grid": q.grid, "radius_m": q.radius, "pressure_Pa": q.pressure,
             "grid_young_Pa": q.grid_young, "grains": q.grains, "jitter": q.jitter,
-            "seed": q.seed, "num_grains": int(len(grains(q)[1])),
+            "front_slot": q.front_slot, "seed": q.seed, "num_grains": int(len(grains(q)[1])),
             "pulled_m": float(rec["displacement"][-1]) if rec is not None else 0.0,
             "mean_force_N": st["mean_force_N"], "cov_force": st["cov_force"],
             "mean_force_001_N": s1["mean_force_001_N"], "cov_001": s1["cov_001"],
             "mean_front_force_N": float(np.mean(rec["front_force"][1:])) if rec is not None
             else nan,
+            "grains_out_end": float(rec["grains_out"][-1]) if rec is not None
+            and "grains_out" in rec else 0.0,
             "wall_time_s": float(wall_time), "status": status}
 
 
@@ -428,7 +470,8 @@ def row_run_dir(out: Path, row: dict) -> Path:
         return out / row["run"]
     q = replace(Params(), grid=row["grid"], radius=row["radius_m"],
                 pressure=row["pressure_Pa"], grid_young=row["grid_young_Pa"],
-                grains=row["grains"], jitter=row["jitter"], seed=row["seed"])
+                grains=row["grains"], jitter=row["jitter"],
+                front_slot=row.get("front_slot", 0.0), seed=row["seed"])
     return out / run_name(q)
 
 
@@ -521,7 +564,8 @@ def study_cells(rows: list[dict]) -> list[dict]:
     "within")."""
     groups: dict = {}
     for r in rows:
-        groups.setdefault(tuple(r[k] for k in CELL_KEY), []).append(r)
+        groups.setdefault((r["grid"], r["radius_m"], r["pressure_Pa"], *material_of(r)),
+                          []).append(r)
     cells = []
     for key, rs in groups.items():
         rs = sorted(rs, key=lambda r: r["seed"])
@@ -556,7 +600,7 @@ def study_cells(rows: list[dict]) -> list[dict]:
                   "status": "ok" if not stopped else "; ".join(stopped)})
         cells.append(c)
     return sorted(cells, key=lambda c: (c["grid"] != "square", -c["radius_m"], c["pressure_Pa"],
-                                        c["grid_young_Pa"], c["grains"], c["jitter"]))
+                                        *material_of(c)))
 
 
 def _steps(cs: list[dict], k: str, sdk: str) -> list[str]:
@@ -583,10 +627,9 @@ def window_trend(rows: list[dict], out: Path, window_m: float | None = None) -> 
     groups: dict = {}
     for r in rows:
         if r["pulled_m"] > 0:
-            k = (r["grid"], r["pressure_Pa"], r["grid_young_Pa"], r["grains"], r["jitter"])
-            groups.setdefault(k, []).append(r)
+            groups.setdefault((r["grid"], r["pressure_Pa"], *material_of(r)), []).append(r)
     result = []
-    for (g, P, eg, gr, j), rs in sorted(groups.items()):
+    for (g, P, *mat), rs in sorted(groups.items()):
         radii = sorted({r["radius_m"] for r in rs}, reverse=True)
         if len(radii) < 2:
             continue
@@ -602,7 +645,7 @@ def window_trend(rows: list[dict], out: Path, window_m: float | None = None) -> 
                     stats.append(window_stats(rec, d_max))
             if not stats:
                 continue
-            c = {"grid": g, "pressure_Pa": P, "grid_young_Pa": eg, "grains": gr, "jitter": j,
+            c = {"grid": g, "pressure_Pa": P, **dict(zip(MATERIAL_KEY, mat)),
                  "radius_m": rad, "window_m": d_max, "runs": len(stats)}
             for k in ("mean_force_N", "cov_force", "mean_force_001_N", "cov_001"):
                 c[k], c["sd_" + k] = _mean_sd(st[k] for st in stats)
@@ -619,10 +662,9 @@ def window_lines(wt: list[dict]) -> list[str]:
     """study.md's lines on window_trend's result, one per group."""
     groups: dict = {}
     for c in wt:
-        groups.setdefault((c["grid"], c["pressure_Pa"], c["grid_young_Pa"], c["grains"],
-                           c["jitter"]), []).append(c)
+        groups.setdefault((c["grid"], c["pressure_Pa"], *material_of(c)), []).append(c)
     lines = []
-    for (g, P, eg, gr, j), cs in groups.items():
+    for (g, P, *mat), cs in groups.items():
         if len(cs) < 2:
             continue
         parts = []
@@ -633,8 +675,7 @@ def window_lines(wt: list[dict]) -> list[str]:
         thesis = [c["thesis_cov"] for c in cs]
         ref = ("; the thesis (its whole pull): " + ", ".join(f"{v:.3f}" for v in thesis)
                if all(v is not None for v in thesis) else "")
-        lines.append(f"- {g}, {P / 1e3:g} kPa, grid E {eg:g} Pa"
-                     + ("" if gr == "spheres" else f", {gr}")
+        lines.append(f"- {g}, {P / 1e3:g} kPa, {material_label(*mat)}"
                      + f", over the first {cs[0]['window_m'] * 1e3:.1f} mm: CoV of "
                      + "; ".join(parts) + ref + ".")
     return lines
@@ -650,9 +691,8 @@ def cov_trend(cells: list[dict]) -> list[str]:
     groups: dict = {}
     for c in cells:
         if c["completed"]:
-            k = (c["grid"], c["pressure_Pa"], c["grid_young_Pa"], c["grains"], c["jitter"])
-            groups.setdefault(k, []).append(c)
-    for (g, P, eg, gr, j), cs in sorted(groups.items()):
+            groups.setdefault((c["grid"], c["pressure_Pa"], *material_of(c)), []).append(c)
+    for (g, P, *mat), cs in sorted(groups.items()):
         if len(cs) < 2:
             continue
         cs = sorted(cs, key=lambda c: -c["radius_m"])
@@ -665,8 +705,7 @@ def cov_trend(cells: list[dict]) -> list[str]:
         thesis = [thesis_value(T54, g, c["radius_m"], P) for c in cs]
         ref = ("; the thesis: " + ", ".join(f"{v:.3f}" for v in thesis)
                if all(v is not None for v in thesis) else "")
-        out.append(f"- {g}, {P / 1e3:g} kPa, grid E {eg:g} Pa"
-                   + ("" if gr == "spheres" else f", {gr}") + f": CoV of {'; '.join(parts)}"
+        out.append(f"- {g}, {P / 1e3:g} kPa, {material_label(*mat)}: CoV of {'; '.join(parts)}"
                    + ref + ".")
     return out
 
@@ -715,8 +754,9 @@ def write_study(rows: list, out: Path, window_m: float | None = None) -> None:
              "wall time per run (s) | status |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for c in cells:
+        slot = f", front slot {c['front_slot']:g}" if c["front_slot"] else ""
         lines.append(
-            f"| {c['grid']}{'' if c['grains'] == 'spheres' else ' ' + c['grains']} | "
+            f"| {c['grid']}{'' if c['grains'] == 'spheres' else ' ' + c['grains']}{slot} | "
             f"{c['radius_m'] * 1e3:g} | {c['pressure_Pa'] / 1e3:g} | {c['grid_young_Pa']:g} | "
             f"{c['seeds']} ({c['completed']}) | {f(c['thesis_mean_force_N'], '.2f')} | "
             f"{pm(c['mean_force_001_N'], c['sd_mean_force_001_N'], '.2f')} | "
@@ -759,15 +799,15 @@ def plot_study(cells: list[dict], png: Path) -> None:
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
 
-    mats = sorted({(c["grid_young_Pa"], c["grains"], c["jitter"]) for c in cells})
+    mats = sorted({material_of(c) for c in cells})
     kinds = sorted({(c["grid"], c["radius_m"]) for c in cells},
                    key=lambda k: (k[0] != "square", -k[1]))
     colour = {k: f"C{n}" for n, k in enumerate(kinds)}
     fig, axes = plt.subplots(len(mats), 2, figsize=(12, 4.2 * len(mats)), squeeze=False)
-    for row, (eg, gr, jit) in zip(axes, mats):
+    for row, mat_key in zip(axes, mats):
         for n, kind in enumerate(kinds):
             sel = sorted((c for c in cells if (c["grid"], c["radius_m"]) == kind
-                          and (c["grid_young_Pa"], c["grains"], c["jitter"]) == (eg, gr, jit)),
+                          and material_of(c) == mat_key),
                          key=lambda c: c["pressure_Pa"])
             if not sel:
                 continue
@@ -795,8 +835,7 @@ def plot_study(cells: list[dict], png: Path) -> None:
                 ref = [(c["pressure_Pa"] / 1e3, c[kt]) for c in sel if c[kt] is not None]
                 if ref:
                     a.plot(*zip(*ref), "x:", color=col, ms=9, mew=2, label=f"{lab}: thesis")
-        mat = (f"grid E {eg:.0e} Pa" + (" (Table 5.1)" if eg == 5e6 else " (stiff bars)")
-               + ("" if gr == "spheres" else f", {gr}") + (f", jitter {jit:g}" if jit else ""))
+        mat = material_label(*mat_key) + (" (Table 5.1)" if mat_key[0] == 5e6 else " (stiff bars)")
         row[0].set_yscale("log")
         row[0].set_ylabel("mean pull-out force (N)")
         row[0].set_title(f"Table 5.3 and ours; {mat}", fontsize=9)
@@ -887,6 +926,12 @@ def build_parser():
                     help="with --study: the longest pull, m, over which the CoV against the "
                          "grain size is compared (default: the shortest pull of the compared "
                          "runs)")
+    ap.add_argument("--front-slot", type=float, default=d.front_slot,
+                    help="a slot in the front wall during the pull, as a real pull-out box "
+                         "has: grains whose centre lies within FRONT_SLOT x (bar radius + "
+                         "grain radius) of the grid plane pass the wall; 0.7 lets through the "
+                         "grains a bar pushes head-on (within 45 deg of its pull); in [0, 2]; "
+                         "0, the default, is the thesis's closed box")
     ap.add_argument("--grains", type=str, default=d.grains, help=GRAINS_HELP)
     return ap
 
@@ -920,6 +965,9 @@ def parse_args(argv=None):
     if not (math.isfinite(a.jitter) and 0 <= a.jitter <= 1):
         ap.error(f"--jitter={a.jitter}: must be in [0, 1] (a fraction of half the lattice "
                  "gap; above 1 two grains could start in contact)")
+    if not (math.isfinite(a.front_slot) and 0 <= a.front_slot <= 2):
+        ap.error(f"--front-slot={a.front_slot}: must be in [0, 2], a fraction of the bar "
+                 "radius + the grain radius (0: the wall closed)")
     if a.record_every < 1:
         ap.error(f"--record-every={a.record_every}: must be a whole number of steps >= 1")
     seeds = _seeds(a.seeds, ap) if a.seeds is not None else [a.seed]
@@ -931,7 +979,8 @@ def parse_args(argv=None):
     p = replace(p, grid=a.grid, radius=radii[0], pressure=pressures[0], velocity=a.velocity,
                 grid_young=a.grid_young,
                 pull=a.pull, damping=a.damping, seed=seeds[0], threads=a.threads,
-                grains=a.grains, jitter=a.jitter, record_every=a.record_every)
+                grains=a.grains, jitter=a.jitter, record_every=a.record_every,
+                front_slot=a.front_slot)
     if a.distance is not None:
         if not (math.isfinite(a.distance) and a.distance > 0):
             ap.error(f"--distance={a.distance}: must be > 0 (m)")

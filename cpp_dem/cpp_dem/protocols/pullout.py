@@ -403,6 +403,25 @@ def prepare(sample: PulloutSample, *, stress: float, porosity: float | None = No
     return res
 
 
+def open_front_slot(sample: PulloutSample, half_height: float) -> None:
+    """Opens the front wall (x-, where the grid leaves the box) for grains whose centre lies
+    within ``half_height`` (m) of the grid plane z = grid_z: they pass the wall without
+    contact (``Scene.set_wall_opening``), as through a pull-out box's slot, instead of being
+    squeezed between a transverse bar and the wall. Grains that leave stay in the scene,
+    beyond the wall. The rest of the wall holds as before; a grain that moves sideways out
+    of the slot while crossing the plane is stopped with the overlap error."""
+    if not (math.isfinite(half_height) and half_height > 0):
+        raise ParameterError(f"half_height={half_height}: must be > 0 (m)")
+    lo, hi = sample.box_lo_hi()
+    if sample.grid_z - half_height <= lo[2] or sample.grid_z + half_height >= hi[2]:
+        raise ParameterError(f"half_height={half_height}: the slot must lie inside the box, "
+                             f"z in ({lo[2]:g}, {hi[2]:g}) m, around the grid plane "
+                             f"z = {sample.grid_z:g} m")
+    sample.scene.set_wall_opening(sample.walls[X_MINUS], axis=2,
+                                  lo=sample.grid_z - half_height,
+                                  hi=sample.grid_z + half_height)
+
+
 def inertial_number(velocity: float, density: float, stress: float) -> float:
     """Inertial number of the pull, I = gamma_dot d sqrt(rho / sigma) with the shear rate
     gamma_dot = v / d of a shear zone one grain thick on the geogrid: I = v sqrt(rho / sigma)
