@@ -8,7 +8,9 @@ stress tensor, shear included, where the wall-bounded element takes three normal
    material's friction) at the initial state's mean stress, and servo-controls all six
    components to the FEM's initial tensor;
 2. keeps that state as bytes in the runner's memory (on the Dask worker that runs the
-   region, when ``two_way`` runs on workers: ``femcoupling.runner_pool``) and in
+   region, when ``two_way`` runs on workers: ``cpp_dem.elements.pool.ElementPool.runners``;
+   ``state()``/``set_state()`` carry those bytes, so the pool restores a region moved to a
+   late worker or recovered from a lost one with its prepared element) and in
    ``cache_dir`` (``<name>_initial.bin``, with the tensor it was prepared at in
    ``<name>_initial.stress.npy``): the next two-way iterations start from it instead of
    preparing again (the element is kept between iterations, also across processes);
@@ -140,6 +142,26 @@ class PeriodicRegionElement:
                 tmp.write_bytes(text)
                 tmp.replace(dst)
         return el, False
+
+    def state(self) -> bytes:
+        """The elements this runner prepared (its memory: bytes by region and initial
+        tensor), as bytes (``cpp_dem.elements.interface``: a runner's byte state)."""
+        import pickle
+
+        return pickle.dumps(self._kept, protocol=pickle.HIGHEST_PROTOCOL)
+
+    def set_state(self, data: bytes) -> None:
+        """The prepared elements of ``state()`` back in this runner's memory."""
+        import pickle
+
+        if not isinstance(data, (bytes, bytearray)):
+            raise ValueError(f"data: {type(data).__name__}, expected the bytes of "
+                             "PeriodicRegionElement.state()")
+        kept = pickle.loads(data)
+        if not (isinstance(kept, dict) and all(isinstance(v, bytes) for v in kept.values())):
+            raise ValueError("data: not a PeriodicRegionElement.state() (a dict of the "
+                             "prepared elements' bytes)")
+        self._kept = kept
 
     def _settings(self) -> dict:
         """What makes the prepared element (grains, seed, preparation, servo, options), as

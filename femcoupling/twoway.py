@@ -10,8 +10,10 @@ Two way (:func:`two_way`): iterate
    the tension of a geogrid layer that crosses it (:func:`region_targets`; the runner may
    pull its element's grid ends by it, as the case's element does);
 2. run each region's DEM element from the initial targets to the new ones
-   (``element_runner``; with ``workers`` > 1 or ``client=`` on Dask workers, each region's
-   runner kept on one worker for the whole loop: :mod:`femcoupling.runner_pool`);
+   (``element_runner``; with ``workers`` > 1 or ``client=`` on Dask workers: each region an
+   element of the one pool, ``cpp_dem.elements.pool.ElementPool.runners``, kept on its worker
+   for the whole loop, saved there after every iteration, given to workers that join late
+   and recovered after a lost worker: ``cpp_dem.elements.interface``);
 3. the element's stiffness over the handed-over increment becomes that region's material:
    with ``stiffness="tangent"`` (the default) and an element that returns its tangent
    (``info["tangent_voigt_pa"]`` with the full strain and stress increment tensors: a
@@ -355,8 +357,9 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
         tol: relative change of the handed-over stresses that ends the loop, -, > 0.
         max_iterations: FEM solves at most, >= 2.
         workers: Dask worker processes for the DEM elements (1: in this process; > 1 with
-            several regions: a LocalCluster, each region's runner kept on one worker for the
-            whole loop, :class:`femcoupling.runner_pool.RunnerPool`).
+            several regions: a LocalCluster, each region's runner an element of
+            ``cpp_dem.elements.pool.ElementPool.runners``, kept on one worker for the whole
+            loop).
         client: a ``dask.distributed.Client`` of a running cluster to use instead (the
             regions' runners are kept on its workers; ``workers`` is then ignored).
         history: HDF5 record, appended per iteration.
@@ -446,20 +449,27 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
                            fem_strain_increment=(np.nan if fem_de[r] is None else fem_de[r]),
                            **row)
 
-    pool = None  # the regions' runners on Dask workers, kept for the whole loop
+    pool = None  # the regions' runners as elements of the Dask pool, kept for the whole loop
 
     def run_elements(jobs: list) -> list:
         nonlocal pool
         if client is None and (workers <= 1 or len(jobs) <= 1):
             return [element_runner(*job) for job in jobs]
         if pool is None:
-            from femcoupling.runner_pool import RunnerPool
+            from cpp_dem.elements.pool import ElementPool
 
-            pool = RunnerPool(element_runner, regions, workers=workers, client=client,
-                              log=say)
+            pool = ElementPool.runners(element_runner, list(regions), workers=workers,
+                                       client=client, log=say)
             say(f"two-way: the regions' DEM elements on Dask workers {pool.workers()}, each "
                 "kept on its worker between iterations")
-        return pool.run(jobs)
+        calls: list = [None] * len(regions)
+        for name, ini, fin in jobs:
+            calls[list(regions).index(name)] = (ini, fin)
+        out = pool.run(calls)
+        # Every iteration ends at a boundary: its state saved on the workers (a lost worker's
+        # regions restart from it), and workers that joined meanwhile get regions next time.
+        pool.accept()
+        return [out[list(regions).index(name)] for name, _, _ in jobs]
 
     try:
         for it in range(1, max_iterations + 1):

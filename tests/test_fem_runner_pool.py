@@ -1,7 +1,9 @@
-"""The two-way loop's elements on Dask workers (femcoupling.runner_pool; issue 18): each
-region's runner is kept on one worker for the whole loop (what it keeps in memory reaches
-every iteration), the results are bitwise the serial loop's, and a worker killed mid-loop
-costs a rerun of its region, not the run."""
+"""The two-way loop's elements on Dask workers (issues 18 and 37): each region is an element
+of the one pool (``ElementPool.runners``), its runner kept on one worker for the whole loop
+(what it keeps in memory reaches every iteration); the results are bitwise the serial loop's;
+a worker killed mid-loop costs a rerun of its region, not the run (from the runner's state at
+the last iteration when it has ``state()``, else from the runner as sent); a worker that joins
+mid-loop receives regions."""
 
 from __future__ import annotations
 
@@ -40,12 +42,27 @@ class CountingElement:
                                info={"calls": self.calls[name], "pid": os.getpid()})
 
 
-def _loop(runner, workers, log=None):
+class StatefulCounting(CountingElement):
+    """CountingElement with a byte state (its counts): the pool saves it after every
+    iteration and restores it after a loss or a move."""
+
+    def state(self) -> bytes:
+        import json
+
+        return json.dumps(self.calls).encode()
+
+    def set_state(self, data: bytes) -> None:
+        import json
+
+        self.calls = json.loads(data)
+
+
+def _loop(runner, workers, log=None, client=None, load=_footing):
     from femcoupling.twoway import two_way
 
-    return two_way(two_region_model(), regions=["a", "b"], load=_footing,
+    return two_way(two_region_model(), regions=["a", "b"], load=load,
                    element_runner=runner, tol=1e-6, max_iterations=4, workers=workers,
-                   relaxation="none", log=log)
+                   relaxation="none", log=log, client=client)
 
 
 def _same(r1, r2):
@@ -81,12 +98,56 @@ def test_a_killed_worker_costs_a_rerun_of_its_region_not_the_run(serial, tmp_pat
     par = _loop(CountingElement(kill_flag=str(flag)), 2, log=lines.append)
     assert flag.exists()  # a worker was killed (SIGKILL) in iteration 2
     _same(serial, par)
-    assert any("region b: its worker" in s and "was lost" in s for s in lines)
+    assert any("region b: its worker" in s and "was lost" in s and "as it was sent" in s
+               for s in lines)
     # b's runner started again from the runner as sent: its count restarted
     assert par.responses["b"].info["calls"] < par.responses["a"].info["calls"]
 
 
+def test_a_killed_worker_restarts_a_runner_with_state_from_its_last_iteration(serial,
+                                                                            tmp_path):
+    lines: list = []
+    flag = tmp_path / "killed"
+    par = _loop(StatefulCounting(kill_flag=str(flag)), 2, log=lines.append)
+    assert flag.exists()  # a worker was killed (SIGKILL) in iteration 2
+    _same(serial, par)
+    assert any("region b: its worker" in s and "was lost" in s and "state at the last accept"
+               in s for s in lines)
+    # b restarted from its state after iteration 1, not from the runner as sent: its count
+    # went on, and it ran on a worker other than the killed one
+    for r in ("a", "b"):
+        assert par.responses[r].info["calls"] == par.iterations - 1
+
+
+def test_a_worker_that_joins_mid_loop_receives_a_region(serial):
+    """The loop starts on one worker; the cluster grows during iteration 2's FEM solve (as a
+    batch job starting late): at that iteration's element runs one region moves to the new
+    worker, with its state, and the results stay bitwise the serial loop's."""
+    from dask.distributed import Client, LocalCluster
+
+    with LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                      dashboard_address=None) as cluster, Client(cluster) as client:
+        loads = []
+
+        def load(model):
+            loads.append(1)
+            if len(loads) == 2:
+                cluster.scale(2)
+                client.wait_for_workers(2, timeout=120)
+            return _footing(model)
+
+        lines: list = []
+        par = _loop(StatefulCounting(), 1, log=lines.append, client=client, load=load)
+    _same(serial, par)
+    pids = {r: par.responses[r].info["pid"] for r in ("a", "b")}
+    assert pids["a"] != pids["b"]  # (both ran on the one worker in iteration 1)
+    for r in ("a", "b"):  # the moved region kept its count: moved with its state
+        assert par.responses[r].info["calls"] == par.iterations - 1
+    assert any("on Dask workers" in s and s.count("tcp://") == 1 for s in lines)
+
+
 def test_a_failing_element_names_its_region():
+    from cpp_dem import ParameterError
     from femcoupling.runner_pool import RunnerPool
 
     def bad(name, initial, final):
@@ -95,6 +156,11 @@ def test_a_failing_element_names_its_region():
     with RunnerPool(bad, ["a", "b"], workers=2) as pool:
         with pytest.raises(RuntimeError, match="region a: its DEM element failed.*no packing"):
             pool.run([("a", None, None), ("b", None, None)])
+        with pytest.raises(ParameterError, match="region 'c' is not one of"):
+            pool.run([("c", None, None)])
+        with pytest.raises(ParameterError, match="apply_strain: this pool's elements are "
+                           "TargetElements.*drive them with run"):
+            pool.pool.apply_strain([np.zeros((3, 3))] * 2)
 
 
 def test_periodic_elements_are_prepared_once_on_their_workers():

@@ -1,5 +1,5 @@
-"""The Dask plumbing shared by the element pool (`cpp_dem.elements.pool`) and the FEM side's
-runner pool (`femcoupling.runner_pool`): a local cluster, a client for a running scheduler, the
+"""The Dask plumbing of the element pool (`cpp_dem.elements.pool`, which also hosts the
+two-way loop's regions): a local cluster, a client for a running scheduler, the
 workers there now and waiting for a number of them, a check that an object can be sent to the
 workers, and closing a pool that fails while starting."""
 

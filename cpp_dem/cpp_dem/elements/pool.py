@@ -1,11 +1,15 @@
-"""Persistent DEM elements on ``dask.distributed`` workers (issues 18 and 37).
+"""Persistent DEM elements on ``dask.distributed`` workers: the one pool (issues 18 and 37).
 
-An ``ElementPool`` holds many ``DemElement``s (docs/periodic.md) in the memory of Dask
-workers, as actors: one actor per worker holds that worker's elements across load steps and
-Newton iterations, so an element is never rebuilt between calls. The pool
+An ``ElementPool`` holds many elements (``cpp_dem.elements.interface``: strain-driven
+``DemElement``s, docs/periodic.md, or the two-way loop's regions as target-driven
+``RunnerElement``s) in the memory of Dask workers, as actors: one actor per worker holds
+that worker's elements across load steps, Newton iterations and two-way iterations, so an
+element is never rebuilt between calls. The pool
 
 - applies one strain increment per element (``apply_strain``), all workers at once, and
   returns the stresses (Pa, tension positive) and, if asked, the tangents (6 x 6 Voigt, Pa);
+  or runs every region's element from its initial to its final FEM state (``run``, pools
+  made by ``ElementPool.runners``) and returns the answers;
 - ``accept()`` saves every element's state as bytes **on its worker**: kept in the worker's
   memory (for ``reject()``) and written to a spill file, in the worker's local temporary
   directory or in ``state_dir`` (a directory every worker sees: shared storage). The client
@@ -106,18 +110,35 @@ def _payload_bytes(obj) -> int:
     return len(pickle.dumps(obj))
 
 
+def _kind(element_type: type) -> type:
+    """The interface an element class is driven through: ``TargetElement`` (it has
+    ``run``), else ``StrainElement``."""
+    from cpp_dem.elements.interface import StrainElement, TargetElement
+
+    return TargetElement if callable(getattr(element_type, "run", None)) else StrainElement
+
+
 class ElementHost:
-    """The actor on one worker: a dict of DemElements by index, their accepted bytes (in
-    memory) and their spill files (the accepted bytes on disk, the last two accepts).
+    """The actor on one worker: a dict of elements by index (``element_type``: a
+    ``cpp_dem.elements.interface.PoolElement`` class, None for ``DemElement``), their accepted
+    bytes (in memory) and their spill files (the accepted bytes on disk, the last two
+    accepts).
 
     ``spill_dir``: the pool's shared spill directory (``shared=True``: files named by element
     and generation, the same path whichever worker writes them), or None for this worker's
     local temporary directory (a folder of its own under the pool's)."""
 
-    def __init__(self, spill_dir: str | None, pool_id: str) -> None:
+    def __init__(self, spill_dir: str | None, pool_id: str, element_type: type | None = None
+                 ) -> None:
         from cpp_dem import set_num_threads
 
         set_num_threads(1)  # one element at a time per worker process: results as serial
+        if element_type is None:
+            from cpp_dem.elements.periodic import DemElement
+
+            element_type = DemElement
+        self.element_type = element_type
+        self.kind = _kind(element_type)
         self.elements: dict = {}
         self.accepted: dict = {}
         self.shared = spill_dir is not None
@@ -155,9 +176,7 @@ class ElementHost:
     def _set(self, k: int, data: bytes, generation: int, path: str | None = None) -> tuple:
         """Element k restored from its accepted bytes, kept and spilled (not written again
         when ``path`` is already this host's file for that generation)."""
-        from cpp_dem.elements.periodic import DemElement
-
-        self.elements[k] = DemElement.from_bytes(data)
+        self.elements[k] = self.element_type.from_bytes(data)
         self.accepted[k] = data
         if path is not None and Path(path) == self._path(k, generation):
             self.files.setdefault(k, []).append((generation, Path(path)))
@@ -166,9 +185,12 @@ class ElementHost:
 
     # ---- placing elements --------------------------------------------------------------
     def build(self, index: int, factory: Callable, generation: int, send: bool) -> dict:
-        """Builds element ``index`` with ``factory(index)`` (a DemElement); keeps and spills
-        its bytes; returns its record (and the bytes if ``send``)."""
-        el = factory(index)
+        """Builds element ``index`` with ``factory(index)`` (an element of the pool's
+        ``element_type``, checked by ``interface.check_element``); keeps and spills its
+        bytes; returns its record (and the bytes if ``send``)."""
+        from cpp_dem.elements.interface import check_element
+
+        el = check_element(factory(index), self.kind, f"factory({index})")
         data = el.to_bytes()
         self.elements[index] = el
         self.accepted[index] = data
@@ -244,6 +266,20 @@ class ElementHost:
                         "scatter": el.stress_scatter() if scatter else None})
         return out
 
+    def run(self, indices, calls) -> list:
+        """Target-driven elements: ``run(*calls[j])`` on element ``indices[j]``. Returns per
+        element its answer, or the error it raised (as text: the pool names the element)."""
+        out = []
+        for k, args in zip(indices, calls):
+            t0 = time.perf_counter()
+            try:
+                answer, error = self.elements[k].run(*args), None
+            except Exception as e:  # noqa: BLE001 - reported by the pool, naming the element
+                answer, error = None, f"{type(e).__name__}: {e}"
+            out.append({"index": k, "answer": answer, "error": error,
+                        "cpu_s": time.perf_counter() - t0})
+        return out
+
     def accept(self, indices, generation: int, send: bool = False) -> dict:
         """Saves the elements' states as accepted (in memory and spilled); returns their
         records (digest, size, path) and, if ``send``, their bytes."""
@@ -260,10 +296,8 @@ class ElementHost:
         return {k: self.accepted[k] for k in indices}
 
     def reject(self, indices) -> None:
-        from cpp_dem.elements.periodic import DemElement
-
         for k in indices:
-            self.elements[k] = DemElement.from_bytes(self.accepted[k])
+            self.elements[k] = self.element_type.from_bytes(self.accepted[k])
 
     def memory(self) -> dict:
         """This worker's elements and their accepted bytes: {"elements", "accepted_bytes",
@@ -355,9 +389,14 @@ class SavedState:
 
 
 class ElementPool:
-    """Many DemElements on Dask workers. Build it with ``ElementPool.build(n, factory)``
-    (each element made on a worker by ``factory(index)``) or from saved bytes
-    (``ElementPool(data_list)``).
+    """Many elements on Dask workers (the one pool of ``cpp_dem.elements.interface``'s
+    elements). Build it with ``ElementPool.build(n, factory)`` (each element made on a worker
+    by ``factory(index)``), from saved bytes (``ElementPool(data_list)``), or for the two-way
+    loop's regions with ``ElementPool.runners(runner, names)``. Strain-driven elements
+    (``DemElement``, the default ``element_type``) are driven by ``apply_strain``,
+    target-driven ones (``interface.RunnerElement``) by ``run``; both are saved by
+    ``accept()``, restored by ``reject()``, moved to late workers and recovered after a lost
+    worker the same way.
 
     Options (``build`` and the constructor):
 
@@ -375,21 +414,27 @@ class ElementPool:
     - ``min_workers``: wait until the cluster has this many workers (at most ``timeout_s``
       seconds) before placing the elements;
     - ``rebalance``: give elements to workers that joined after the pool was built (default
-      True).
+      True);
+    - ``element_type``: the elements' class (its ``from_bytes`` restores them; None:
+      ``DemElement``);
+    - ``labels``: the elements' names in messages (default ``element <k>``);
+    - ``log``: gets a line per element recovered after a lost worker.
 
     ``close()`` removes the spill files and stops the pool's own cluster."""
 
     def __init__(self, data: Sequence[bytes], *, client=None, workers: int = 2,
                  keep_copies: bool = False, state_dir: str | os.PathLike | None = None,
                  min_workers: int | None = None, timeout_s: float = 600.0,
-                 rebalance: bool = True) -> None:
+                 rebalance: bool = True, element_type: type | None = None,
+                 labels: Sequence[str] | None = None,
+                 log: Callable[[str], None] | None = None) -> None:
         data = list(data)
         for k, d in enumerate(data):
             if not isinstance(d, (bytes, bytearray)):
                 raise ParameterError(f"data[{k}]: {type(d).__name__}, expected the bytes of a "
                                      "saved DemElement (DemElement.to_bytes)")
         self._connect(client, workers, keep_copies, len(data), state_dir, min_workers,
-                      timeout_s, rebalance)
+                      timeout_s, rebalance, element_type, labels, log)
         with closed_on_error(self):
             self._start_hosts(self._alive())
             addrs = sorted(self._hosts)
@@ -397,12 +442,25 @@ class ElementPool:
             self._send(range(self.n), data, 0)
 
     def _connect(self, client, workers, keep_copies, n, state_dir, min_workers, timeout_s,
-                 rebalance) -> None:
+                 rebalance, element_type=None, labels=None, log=None) -> None:
         """Checks the options, connects (a LocalCluster of ``workers`` single-threaded
         processes when no client is given), waits for ``min_workers`` and sets up the empty
         placement of n elements."""
         if n < 1:
             raise ParameterError(f"n={n}: need at least one element")
+        if element_type is not None:
+            from cpp_dem.elements.interface import check_element
+
+            if not isinstance(element_type, type):
+                raise ParameterError(f"element_type={element_type!r}: a class (DemElement, "
+                                     "interface.RunnerElement), or None for DemElement")
+            check_element(element_type, _kind(element_type), "element_type")
+        if labels is not None:
+            labels = list(labels)
+            if len(labels) != n or not all(isinstance(x, str) for x in labels):
+                raise ParameterError(f"labels={labels!r:.200}: one string per element ({n})")
+        if log is not None and not callable(log):
+            raise ParameterError(f"log={log!r}: a callable taking a line of text, or None")
         for name, v in (("keep_copies", keep_copies), ("rebalance", rebalance)):
             if not isinstance(v, bool):
                 raise ParameterError(f"{name}={v!r}: must be True or False")
@@ -420,6 +478,12 @@ class ElementPool:
                                      "pool's own LocalCluster never grows; pass client= for "
                                      "a cluster whose workers join later")
         self.keep_copies, self.rebalance, self.n = keep_copies, rebalance, n
+        self.element_type = element_type
+        self.kind = _kind(element_type) if element_type is not None else None
+        self.labels = labels or [f"element {k}" for k in range(n)]
+        self.log = log or (lambda line: None)
+        #: how a lost element restarts, said in the log line (``runners`` says it per runner)
+        self.restart_note = "its accepted state, and the calls since then redone"
         # (a relative state_dir is taken from the client's working directory)
         self.state_dir = (None if state_dir is None
                           else str(Path(state_dir).expanduser().absolute()))
@@ -439,6 +503,7 @@ class ElementPool:
         self._clean = True  # every element at its accepted state (a placement boundary)
         self._received: dict = {}  # what the client received, by call: bytes
         self.moves: list = []  # (element, from worker, to worker), every rebalance move
+        self.recoveries: list = []  # (element, lost worker, new worker), every recovery
         self._own_cluster = None
         if client is None:
             client, self._own_cluster = local_client(workers)
@@ -451,16 +516,18 @@ class ElementPool:
     def build(cls, n: int, factory: Callable, *, client=None, workers: int = 2,
               keep_copies: bool = False, state_dir: str | os.PathLike | None = None,
               min_workers: int | None = None, timeout_s: float = 600.0,
-              rebalance: bool = True) -> "ElementPool":
+              rebalance: bool = True, element_type: type | None = None,
+              labels: Sequence[str] | None = None,
+              log: Callable[[str], None] | None = None) -> "ElementPool":
         """n elements made on the workers by ``factory(index)`` (a picklable callable
-        returning a DemElement), spread over them; their first states are accepted. Options:
-        see the class."""
+        returning an element of ``element_type``: a DemElement by default), spread over
+        them; their first states are accepted. Options: see the class."""
         if not (isinstance(n, int) and n >= 1):
             raise ParameterError(f"n={n!r}: need at least one element")
         check_sendable(factory, "factory")
         pool = cls.__new__(cls)
         pool._connect(client, workers, keep_copies, n, state_dir, min_workers, timeout_s,
-                      rebalance)
+                      rebalance, element_type, labels, log)
         with closed_on_error(pool):
             pool._start_hosts(pool._alive())
             addrs = sorted(pool._hosts)
@@ -474,13 +541,39 @@ class ElementPool:
                 pool._record(k, 0, got["record"], got["bytes"])
         return pool
 
+    @classmethod
+    def runners(cls, runner: Callable, names: Sequence[str], **options) -> "ElementPool":
+        """The two-way loop's regions as target-driven elements: element k is
+        ``interface.RunnerElement(runner, names[k])``, its own copy of ``runner`` made on its
+        worker, driven by ``run``; labelled ``region <name>`` in messages. A runner with
+        ``state()``/``set_state(bytes)`` restarts from its state at the last ``accept()``
+        after a lost worker or a move; one without restarts from the runner as it was sent
+        (``interface``'s module doc). Options: see the class."""
+        from cpp_dem.elements.interface import RunnerElement, RunnerFactory, check_runner
+
+        check_runner(runner)
+        check_sendable(runner, "element_runner")  # (before any cluster starts)
+        names = list(names) if not isinstance(names, str) else names
+        if (not isinstance(names, list) or not names
+                or not all(isinstance(x, str) and x for x in names)
+                or len(set(names)) != len(names)):
+            raise ParameterError(f"names={names!r:.200}: the regions' names, a non-empty list "
+                                 "of distinct non-empty strings")
+        pool = cls.build(len(names), RunnerFactory(runner, names), element_type=RunnerElement,
+                         labels=[f"region {x}" for x in names], **options)
+        pool.restart_note = ("its state at the last accept (the runner's state())"
+                             if callable(getattr(runner, "state", None)) else
+                             "the runner as it was sent (it keeps no byte state: what the "
+                             "lost worker kept is prepared again)")
+        return pool
+
     # ---- bookkeeping -------------------------------------------------------------------
     def _count(self, kind: str, obj) -> None:
         self._received[kind] = self._received.get(kind, 0) + _payload_bytes(obj)
 
     def received_bytes(self) -> dict:
         """The bytes the client has received from the workers so far, by kind of call
-        ("build", "apply", "accept", "states", "move", "recover"): the payload (states,
+        ("build", "apply", "run", "accept", "states", "move", "recover"): the payload (states,
         arrays, digests), less the messages' framing."""
         return dict(self._received)
 
@@ -530,8 +623,9 @@ class ElementPool:
         """An ElementHost on every worker of ``addrs`` that has none; returns the new ones
         (a worker that leaves meanwhile is skipped)."""
         new = [a for a in sorted(addrs) if a not in self._hosts]
-        futures = {a: self.client.submit(ElementHost, self.state_dir, self.pool_id, actor=True,
-                                         workers=[a], pure=False) for a in new}
+        futures = {a: self.client.submit(ElementHost, self.state_dir, self.pool_id,
+                                         self.element_type, actor=True, workers=[a],
+                                         pure=False) for a in new}
         started = []
         for a, fut in futures.items():
             try:
@@ -714,54 +808,48 @@ class ElementPool:
                 "worker sees (a shared filesystem), or build the pool with keep_copies=True, "
                 "to restart lost elements from their accepted state; or restart the run from "
                 "saved states (states(), load_states()).")
+        for k in moved:
+            self.recoveries.append((k, gone[k], self._where[k]))
+            self.log(f"{self.labels[k]}: its worker {gone[k]} was lost; it runs on "
+                     f"{self._where[k]} from {self.restart_note}")
         self._replay(moved)
         return moved
 
     def _replay(self, indices) -> None:
-        """Redoes the logged ``apply_strain`` calls since the last accept on ``indices``."""
-        for increments, tangent, scatter, strain_kw in self._log:
-            futures = [self._hosts[a].apply(ks, [increments[k] for k in ks], tangent,
-                                            strain_kw, scatter)
-                       for a, ks in self._by_host(indices).items()]
+        """Redoes the logged calls (``apply_strain``, ``run``) since the last accept on
+        ``indices``."""
+        for method, payload, extra in self._log:
+            futures = [getattr(self._hosts[a], method)(ks, [payload[k] for k in ks], *extra)
+                       for a, ks in self._by_host(k for k in indices if k in payload).items()]
             for f in futures:
                 f.result()
 
-    # ---- the increment -----------------------------------------------------------------
-    def apply_strain(self, increments, *, tangent: str | None = None, scatter: bool = False,
-                     **strain_kw) -> PoolStep:
-        """Applies increment ``increments[k]`` (3 x 3 displacement gradient, -) to element k,
-        all in parallel; ``tangent``: None, "network" (sliding contacts on the Coulomb cone),
-        "network-elastic" (sliding contacts taken as stuck) or "fd"; ``scatter``: also each
-        element's stress scatter (``DemElement.stress_scatter``). Keyword arguments go to
-        ``DemElement.apply_strain``. Called at a boundary (after a build, accept, reject or
-        load), it first gives elements to workers that joined. A worker lost during the call:
-        its elements are rebuilt elsewhere from their accepted states and the calls since
-        the last accept redone (``ElementLostError`` where no accepted state is reachable)."""
-        if len(increments) != self.n:
-            raise ParameterError(f"increments: {len(increments)} given for {self.n} elements")
-        if tangent not in (None, "network", "network-elastic", "fd"):
-            raise ParameterError(f"tangent={tangent!r}: None, 'network', 'network-elastic' "
-                                 "or 'fd'")
-        increments = [np.array(d, copy=True) for d in increments]  # (kept for a replay)
-        t0 = time.perf_counter()
+    def _dispatch(self, method: str, payload: dict, extra: tuple) -> tuple[dict, list]:
+        """Calls host ``method(indices, [payload[k] ...], *extra)`` for every element of
+        ``payload`` (index -> its part of the call), all workers at once. Called at a
+        boundary (after a build, accept, reject or load), it first gives elements to workers
+        that joined. A worker lost during the call: its elements are rebuilt elsewhere from
+        their accepted states and the calls since the last accept redone
+        (``ElementLostError`` where no accepted state is reachable). Returns (index -> the
+        host's record, the indices recovered); the call is logged for a later replay."""
         recovered: list = self._check_workers() if self._clean else []
         self._clean = False
         results: dict = {}
-        todo = list(range(self.n))
+        todo = sorted(payload)
         for _attempt in range(3):
             futures = {}
             lost = set()
             for a, ks in self._by_host(todo).items():
                 try:  # (an actor whose worker is gone fails here already)
-                    futures[a] = self._hosts[a].apply(ks, [increments[k] for k in ks], tangent,
-                                                      strain_kw, scatter)
+                    futures[a] = getattr(self._hosts[a], method)(ks, [payload[k] for k in ks],
+                                                                 *extra)
                 except Exception:  # noqa: BLE001
                     lost.add(a)
             errors = {}
             for a, f in futures.items():
                 try:
                     got = f.result()
-                    self._count("apply", got)
+                    self._count(method, got)
                     for r in got:
                         results[r["index"]] = r
                 except Exception as e:  # noqa: BLE001 - the worker is gone, or an element failed
@@ -775,7 +863,7 @@ class ElementPool:
                     # after the caller's reject(); say which and why.
                     raise ElementError(f"elements {self._by_host(todo).get(a)} on {a}: "
                                        f"{type(errors[a]).__name__}: {errors[a]}") from errors[a]
-            todo = [k for k in range(self.n) if k not in results]
+            todo = [k for k in sorted(payload) if k not in results]
             if not todo:
                 break
             # (The elements of a lost host restart from their accepted state and redo the
@@ -787,7 +875,42 @@ class ElementPool:
                     raise RuntimeError(f"element {k}: no result and its worker is alive")
         if todo:
             raise RuntimeError(f"elements {todo}: lost three times; giving up")
-        self._log.append((increments, tangent, scatter, dict(strain_kw)))
+        self._log.append((method, payload, extra))
+        return results, recovered
+
+    def _require(self, kind_name: str, call: str) -> None:
+        """Refuses ``call`` on a pool whose elements are not driven that way."""
+        from cpp_dem.elements.interface import StrainElement
+
+        kind = self.kind or StrainElement
+        if kind.__name__ != kind_name:
+            other = "run()" if call == "apply_strain" else "apply_strain()"
+            raise ParameterError(f"{call}: this pool's elements are {kind.__name__}s "
+                                 f"({getattr(self.element_type, '__name__', 'DemElement')}); "
+                                 f"drive them with {other}")
+
+    # ---- the increment -----------------------------------------------------------------
+    def apply_strain(self, increments, *, tangent: str | None = None, scatter: bool = False,
+                     **strain_kw) -> PoolStep:
+        """Applies increment ``increments[k]`` (3 x 3 displacement gradient, -) to element k,
+        all in parallel; ``tangent``: None, "network" (sliding contacts on the Coulomb cone),
+        "network-elastic" (sliding contacts taken as stuck) or "fd"; ``scatter``: also each
+        element's stress scatter (``DemElement.stress_scatter``). Keyword arguments go to
+        ``DemElement.apply_strain``. Called at a boundary (after a build, accept, reject or
+        load), it first gives elements to workers that joined. A worker lost during the call:
+        its elements are rebuilt elsewhere from their accepted states and the calls since
+        the last accept redone (``ElementLostError`` where no accepted state is reachable)."""
+        self._require("StrainElement", "apply_strain")
+        if len(increments) != self.n:
+            raise ParameterError(f"increments: {len(increments)} given for {self.n} elements")
+        if tangent not in (None, "network", "network-elastic", "fd"):
+            raise ParameterError(f"tangent={tangent!r}: None, 'network', 'network-elastic' "
+                                 "or 'fd'")
+        # (the increments are kept for a replay)
+        increments = {k: np.array(d, copy=True) for k, d in enumerate(increments)}
+        t0 = time.perf_counter()
+        results, recovered = self._dispatch("apply", increments,
+                                            (tangent, dict(strain_kw), scatter))
         order = range(self.n)
         return PoolStep([results[k]["stress"] for k in order],
                         [results[k]["tangent"] for k in order],
@@ -796,6 +919,36 @@ class ElementPool:
                         [results[k]["steps"] for k in order],
                         time.perf_counter() - t0, sorted(recovered),
                         [results[k]["scatter"] for k in order] if scatter else None)
+
+    def run(self, calls: Sequence[tuple | None]) -> list:
+        """Target-driven elements (``ElementPool.runners``): ``calls[k]`` is the arguments
+        of element k's ``run`` (``(initial, final)`` for a region), or None to leave it out;
+        all in parallel. Returns the answers in index order (None where left out). Late
+        and lost workers as ``apply_strain``. An element that raises on a live worker stops
+        the call with an ``ElementError`` naming it (its label) and the cause."""
+        self._require("TargetElement", "run")
+        calls = list(calls)
+        if len(calls) != self.n:
+            raise ParameterError(f"calls: {len(calls)} given for {self.n} elements (None "
+                                 "for an element left out)")
+        payload = {}
+        for k, c in enumerate(calls):
+            if c is not None:
+                if not isinstance(c, tuple):
+                    raise ParameterError(f"calls[{k}]: {type(c).__name__}, expected a tuple "
+                                         "of run()'s arguments, or None")
+                payload[k] = c
+        if not payload:
+            return [None] * self.n
+        t0 = time.perf_counter()
+        results, _ = self._dispatch("run", payload, ())
+        for k in sorted(results):
+            if results[k]["error"] is not None:
+                self._log.pop()  # (not a call to redo: the caller stops or rejects)
+                raise ElementError(f"{self.labels[k]}: its DEM element failed on "
+                                   f"{self._where[k]}: {results[k]['error']}")
+        self.last_run_s = time.perf_counter() - t0
+        return [results[k]["answer"] if k in results else None for k in range(self.n)]
 
     def accept(self) -> None:
         """Saves every element's current state as its accepted state, on its worker (in
