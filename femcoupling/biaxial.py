@@ -18,13 +18,47 @@ seeds.
 
 from __future__ import annotations
 
+import dataclasses
 import math
 import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
 
-__all__ = ["fem_dem_biaxial", "direct_biaxial", "summarise", "at_strain"]
+__all__ = ["fem_dem_biaxial", "direct_biaxial", "summarise", "at_strain", "WeakZoneFactory",
+           "weak_zone"]
+
+
+@dataclasses.dataclass(frozen=True)
+class WeakZoneFactory:
+    """An imperfection for a shear band (issue 38): a picklable element maker for
+    ``ElementPool.build`` that makes element k with ``base`` (e.g. a ``PeriodicFactory``),
+    except the elements in ``weak``, which ``base`` makes with ``weak_options`` laid over its
+    options (e.g. ``{"prep_friction_deg": None}``: grown at the material's friction, a looser
+    and weaker packing than the dense default). Every element keeps its own seed (base.seed +
+    k), so the field is also a seeded random field of packings."""
+
+    base: object
+    weak: tuple = ()
+    weak_options: dict = dataclasses.field(default_factory=dict)
+
+    def __call__(self, index: int):
+        if index in self.weak:
+            opts = {**(getattr(self.base, "options", None) or {}), **self.weak_options}
+            return dataclasses.replace(self.base, options=opts)(index)
+        return self.base(index)
+
+
+def weak_zone(points: np.ndarray, centre, radius: float) -> tuple:
+    """The elements whose quadrature point (``points``, m, shape (n, 2): from
+    ``femcoupling.hierarchical.quadrature_points``) lies within ``radius`` (m) of ``centre``
+    (m): the weaker zone of a ``WeakZoneFactory``. Raises ValueError when none does."""
+    d = np.linalg.norm(np.asarray(points, float) - np.asarray(centre, float)[None, :], axis=1)
+    k = tuple(int(i) for i in np.flatnonzero(d <= radius))
+    if not k:
+        raise ValueError(f"weak_zone(centre={list(centre)}, radius={radius}): no quadrature "
+                         f"point lies within it (the nearest is {d.min():.3g} m away)")
+    return k
 
 
 def _peak(out: dict) -> dict:

@@ -30,9 +30,13 @@ elements are the points' material (``ElementPoolMaterial``, a ``femcoupling.quad
 QuadratureMaterial``), and Newton and its rules are ``femcoupling.quadrature.newton_solve``,
 the same as the Drucker–Prager soil body's of ``femcoupling.elastoplastic``.
 
-Boundary conditions: left u_x = 0, bottom u_y = 0; the top is moved by ``top_displacement``
-(u_y, m); the right is either loaded by a confining pressure (``confining_pa``, compression
-positive: a biaxial test) or moved (``right_displacement``, u_x, m). With both
+Boundary conditions (``platens="smooth"``, the default): left u_x = 0, bottom u_y = 0; the
+top is moved by ``top_displacement`` (u_y, m); the right is either loaded by a confining
+pressure (``confining_pa``, compression positive: a biaxial test) or moved
+(``right_displacement``, u_x, m). ``platens="rough"`` (a biaxial test whose platens grip the
+sample, the usual set-up for shear bands): the bottom is held (u_x = u_y = 0), the top moves
+down without sliding (u_x = 0, u_y = ``top_displacement``), and both sides carry the
+confining pressure; no symmetry plane forces the band's shape. With both
 ``right_displacement`` and ``top_displacement`` and ``homogeneous=True`` every boundary node
 is moved with the homogeneous field, so every element sees the same strain.
 
@@ -64,9 +68,27 @@ from femcoupling.relaxation import aitken_factor, check_relaxation
 from femcoupling.status import worst
 
 __all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning", "TANGENTS",
-           "aitken_factor", "secant_update"]
+           "aitken_factor", "quadrature_points", "secant_update"]
 
 _IX = [0, 2, 4]  # DEM Voigt (xx, yy, zz, yz, xz, xy) rows of the FEM's (xx, yy, xy)
+
+
+def quadrature_points(lx: float, ly: float, nx: int, ny: int, degree: int = 1) -> np.ndarray:
+    """The coordinates (m, shape (n, 2)) of the quadrature points of a
+    ``HierarchicalPlaneStrain(lx=, ly=, nx=, ny=, degree=)``, in its elements' order (element
+    k at cell k // nq, point k % nq), without building the model: to choose elements by
+    place before the pool is built (a weaker zone: ``femcoupling.biaxial.WeakZoneFactory``)."""
+    import basix
+
+    fx = _dolfinx.load()
+    msh = fx.mesh.create_rectangle(fx.MPI.COMM_SELF, [np.array([0.0, 0.0]),
+                                                      np.array([lx, ly])], [nx, ny],
+                                   fx.mesh.CellType.triangle)
+    pts, _ = basix.make_quadrature(basix.CellType.triangle, 1 if degree == 1 else 2)
+    x = msh.geometry.x[:, :2][msh.geometry.dofmap.reshape(-1, 3)]  # (cells, 3 vertices, 2)
+    a, e1, e2 = x[:, 0], x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]
+    return (a[:, None, :] + pts[None, :, 0:1] * e1[:, None, :]
+            + pts[None, :, 1:2] * e2[:, None, :]).reshape(-1, 2)
 
 
 def dem_increment(g: np.ndarray) -> np.ndarray:
@@ -199,7 +221,16 @@ class HierarchicalPlaneStrain:
                  tangent: str = "network", convergence: str = "noise",
                  relaxation: str | float = "aitken", noise_factor: float = 2.0,
                  noise_ceiling: float | None = None, degree: int = 1,
+                 platens: str = "smooth",
                  verbose: bool = False, out=None, overwrite: bool = False) -> None:
+        if platens not in ("smooth", "rough"):
+            raise FemInputError(f"platens={platens!r}: 'smooth' (left and bottom on rollers) "
+                                "or 'rough' (bottom held, top without sliding, confining "
+                                "pressure on both sides)")
+        if platens == "rough" and (homogeneous or confining_pa is None):
+            raise FemInputError("platens='rough': needs confining_pa (Pa) on both sides, and "
+                                "not homogeneous=True")
+        self.platens = platens
         if degree not in (1, 2):
             raise FemInputError(f"degree={degree!r}: 1 (P1 triangles, one point each) or 2 (P2 "
                                 "triangles, three points each: no volumetric locking)")
@@ -235,14 +266,24 @@ class HierarchicalPlaneStrain:
 
         fdim = 1
         right = fx.mesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[0], lx))
-        tags = fx.mesh.meshtags(msh, fdim, np.sort(right), np.full(len(right), 1, np.int32))
-        ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
         st = fx.PETSc.ScalarType
         self.traction = fem.Constant(msh, np.zeros(2, dtype=st))
+        if platens == "rough":  # the confining pressure on both sides: -p n
+            sides = fx.mesh.locate_entities_boundary(
+                msh, fdim, lambda x: np.isclose(x[0], lx) | np.isclose(x[0], 0.0))
+            tags = fx.mesh.meshtags(msh, fdim, np.sort(sides), np.full(len(sides), 1, np.int32))
+            ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
+            self._pressure = fem.Constant(msh, st(float(confining_pa)))
+            n_out = ufl.FacetNormal(msh)
+            loads = lambda v: (-self._pressure * ufl.dot(n_out, v) * ds(1),)  # noqa: E731
+        else:
+            tags = fx.mesh.meshtags(msh, fdim, np.sort(right), np.full(len(right), 1, np.int32))
+            ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
+            loads = lambda v: (ufl.dot(self.traction, v) * ds(1),)  # noqa: E731
         # spaces, forms and solver: the same as the FEM soil's (femcoupling.quadrature)
         sysq = self.system = QuadratureSystem(
             msh, degree=degree, qdeg=1 if degree == 1 else 2, ncomp=3, strain=eps,
-            loads=lambda v: (ufl.dot(self.traction, v) * ds(1),))
+            loads=loads)
         self.V, self.Wv, self.Wt = sysq.V, sysq.Wv, sysq.Wt
         self.degree = degree
         self._points(nq)
@@ -262,7 +303,13 @@ class HierarchicalPlaneStrain:
         self.bcs = [fem.dirichletbc(st(0.0), dofs(V0, lambda x: np.isclose(x[0], 0.0)), V0),
                     fem.dirichletbc(st(0.0), dofs(V1, lambda x: np.isclose(x[1], 0.0)), V1),
                     fem.dirichletbc(self.top_u, dofs(V1, lambda x: np.isclose(x[1], ly)), V1)]
-        if homogeneous:
+        if platens == "rough":
+            ends = lambda x: np.isclose(x[1], 0.0) | np.isclose(x[1], ly)  # noqa: E731
+            self.bcs = [fem.dirichletbc(st(0.0), dofs(V0, ends), V0),
+                        fem.dirichletbc(st(0.0), dofs(V1, lambda x: np.isclose(x[1], 0.0)), V1),
+                        fem.dirichletbc(self.top_u, dofs(V1, lambda x: np.isclose(x[1], ly)),
+                                        V1)]
+        elif homogeneous:
             # every boundary node on the homogeneous field u = (e_x x, e_y y)
             self._hx = fem.Function(self.V.sub(0).collapse()[0])
             self._hy = fem.Function(self.V.sub(1).collapse()[0])
@@ -366,6 +413,14 @@ class HierarchicalPlaneStrain:
         self.tan_q.x.array[:] = tan.reshape(-1)
 
     gdim = 2  #: the FEM's dimension
+
+    @property
+    def point_coordinates(self) -> np.ndarray:
+        """The quadrature points' coordinates, m, shape (n_points, gdim), in element order."""
+        fx = self._fx
+        cells = np.arange(self.n_cells, dtype=np.int32)
+        expr = fx.fem.Expression(fx.ufl.SpatialCoordinate(self.mesh), self.system.qpoints)
+        return expr.eval(self.mesh, cells).reshape(-1, self.gdim)
 
     def _grad_increment(self) -> np.ndarray:
         cells = np.arange(self.n_cells, dtype=np.int32)
@@ -577,12 +632,19 @@ class HierarchicalPlaneStrain:
         st = np.asarray(self._last_pool_step.stresses, float).reshape(self.n_cells, self.nq, 9)
         st = st[:, 0] if self.nq == 1 else st.mean(axis=1)  # (a cell's points: their mean)
         sig.x.array[:] = st.reshape(-1)[: sig.x.array.size]
-        self.u.name = "displacement_m"
+        u = self.u
+        if getattr(self, "degree", 1) != 1:  # XDMF holds the mesh's degree: P2 at the vertices (P1)
+            if not hasattr(self, "_u_out"):
+                self._u_out = fem.Function(fem.functionspace(self.mesh, ("Lagrange", 1,
+                                                                         (self.gdim,))))
+            self._u_out.interpolate(self.u)
+            u = self._u_out
+        u.name = "displacement_m"
         with dolfinx.io.XDMFFile(self.mesh.comm, str(self.out / "fem.xdmf"),
                                  "a" if append else "w") as xf:
             if not append:
                 xf.write_mesh(self.mesh)
-            xf.write_function(self.u, r.load)
+            xf.write_function(u, r.load)
             xf.write_function(sig, r.load)
 
 class _HierNewton:

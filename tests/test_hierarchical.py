@@ -255,6 +255,10 @@ def test_quadratic_triangles_three_elements_each_give_the_homogeneous_response()
             m = HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, homogeneous=True,
                                         degree=2)
             assert (m.n_cells, m.nq, m.n_points) == (2, 3, 6)
+            from femcoupling.hierarchical import quadrature_points
+
+            assert np.allclose(m.point_coordinates, quadrature_points(0.01, 0.01, 1, 1, 2),
+                               rtol=0, atol=1e-15)
             return [m.step(top_displacement=-1e-6 * k, right_displacement=0.5e-6 * k)
                     for k in (1, 2)], m.u.x.array.copy()
 
@@ -281,3 +285,37 @@ def test_quadratic_triangles_three_elements_each_give_the_homogeneous_response()
                                     degree=2)
         with pytest.raises(FemInputError, match="degree=3"):
             HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, degree=3)
+
+
+def test_rough_platens_grip_the_ends_and_quadrature_points_are_in_element_order():
+    """platens="rough" (issue 38, shear bands): the ends do not slide (u_x = 0 on the top and
+    the bottom), the sides carry the confining pressure on both sides and bulge outwards at
+    mid-height. ``quadrature_points`` gives the model's points in its elements' order before
+    the model is built."""
+    from femcoupling.geometry import FemInputError
+    from femcoupling.hierarchical import quadrature_points
+
+    fac = PeriodicFactory(n=80, stress=100e3, isotropic=True, same=True,
+                          options={"prep_friction_deg": 0.0})
+    with ElementPool.build(4, fac, workers=1) as pool:
+        m = HierarchicalPlaneStrain(pool, lx=0.01, ly=0.02, nx=1, ny=2, confining_pa=100e3,
+                                    platens="rough", newton_rtol=5e-3)
+        assert np.allclose(m.point_coordinates, quadrature_points(0.01, 0.02, 1, 2, degree=1),
+                           rtol=0, atol=1e-15)
+        r = m.step(top_displacement=-2e-5)
+        assert r.status in ("converged", "stopped_at_scatter")
+        x = m.V.tabulate_dof_coordinates()
+        ux = m.u.x.array.reshape(-1, 2)[:, 0]
+        ends = np.isclose(x[:, 1], 0.0) | np.isclose(x[:, 1], 0.02)
+        assert np.all(ux[ends] == 0.0)
+        mid = np.isclose(x[:, 1], 0.01)
+        left, right = mid & np.isclose(x[:, 0], 0.0), mid & np.isclose(x[:, 0], 0.01)
+        assert ux[left].item() < 0 < ux[right].item()  # both sides bulge out
+        with pytest.raises(FemInputError, match="platens='sticky'"):
+            HierarchicalPlaneStrain(pool, lx=0.01, ly=0.02, nx=1, ny=2, confining_pa=1e5,
+                                    platens="sticky")
+        with pytest.raises(FemInputError, match="platens='rough': needs confining_pa"):
+            HierarchicalPlaneStrain(pool, lx=0.01, ly=0.02, nx=1, ny=2, platens="rough")
+    p2 = quadrature_points(0.02, 0.04, 2, 3, degree=2)
+    assert p2.shape == (2 * 2 * 3 * 3, 2)
+    assert np.all((p2 > 0) & (p2 < [0.02, 0.04]))

@@ -1,0 +1,263 @@
+#!/usr/bin/env python3
+"""A shear band in a plane-strain biaxial test by hierarchical FEM x DEM (issue 38): the field's
+standard demonstration (Guo & Zhao, IJNME 2014; Shahin et al., IJNME 2016), with a periodic
+DEM element (RVE) at every quadrature point, held on Dask workers.
+
+- Elements that do not lock: quadratic triangles (``--degree 2``, P2, three points and three
+  RVEs per cell). Constant-strain P1 triangles lock under the isochoric or dilatant flow of a
+  band; P2's strain varies linearly in a cell, so a band can cross it.
+- Rough platens: the bottom is held, the top moves down without sliding, both sides carry the
+  confining pressure (``HierarchicalPlaneStrain(platens="rough")``).
+- An imperfection: the RVEs within ``--weak-radius`` of ``--weak-at`` are grown loose (at the
+  material's friction, ``WeakZoneFactory``), the others dense; every RVE has its own seed.
+
+At the end, the equivalent shear strain eps_q = sqrt(2/3 e:e) (e the deviatoric part of the
+total strain, plane strain) at every point gives the localization index (its largest over its
+mean). The band: the points above the 85th percentile of eps_q, their principal direction
+(weighted by eps_q above that percentile), as an angle from the horizontal (the minor
+principal stress's direction). Beside it, the band angles the RVEs predict: Mohr-Coulomb
+45 + phi/2, Roscoe 45 + psi/2 and Arthur 45 + (phi + psi)/4, with phi the peak friction angle
+and psi the dilatancy angle at the peak of two RVEs run alone in the same plane-strain path
+(``femcoupling.biaxial.direct_biaxial``).
+
+Writes in --out: ``strain.xdmf`` (eps_q per cell, the cell's mean, and the displacement; open
+in ParaView), ``shear_band.png`` (eps_q at the points, the band's line, the load curve),
+``shear_band.json``, and the model's records (``records/``: elements.h5, fem.xdmf, steps.csv).
+Prints progress with an ETA, and a final JSON line with "elements", "localization_index" and
+the angles. SI units; compression positive in the printed stresses.
+
+    .venv/bin/python bench/shear_band.py --nx 4 --ny 9 --grains 80 --out DIR   # 216 RVEs
+    .venv/bin/python bench/shear_band.py --nx 3 --ny 6 --grains 80 --out DIR2  # the coarser mesh
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import math
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "cpp_dem"))
+sys.path.insert(0, str(HERE.parent))
+
+from _report import write_json  # noqa: E402
+
+
+def equivalent_shear_strain(grad: np.ndarray) -> np.ndarray:
+    """eps_q = sqrt(2/3 e:e) of plane-strain displacement gradients (n, 2, 2), -: e the
+    deviatoric part of the small strain, the out-of-plane strain zero."""
+    g = np.asarray(grad, float)
+    eps = np.zeros((len(g), 3, 3))
+    eps[:, :2, :2] = 0.5 * (g + np.transpose(g, (0, 2, 1)))
+    tr = np.trace(eps, axis1=1, axis2=2)
+    dev = eps - tr[:, None, None] / 3.0 * np.eye(3)
+    return np.sqrt(2.0 / 3.0 * np.einsum("nij,nij->n", dev, dev))
+
+
+def band_direction(points: np.ndarray, eq: np.ndarray, percentile: float = 85.0) -> dict:
+    """The band as the principal direction of the points whose eps_q is above its
+    ``percentile``, each weighted by its excess: its angle from the horizontal (deg, in
+    [0, 90]: the band's inclination, whichever way it leans), its centre (m), the points used
+    and how elongated they are (the ratio of the two principal spreads, 1 for a round
+    cloud: no band)."""
+    thr = float(np.percentile(eq, percentile))
+    sel = eq > thr
+    w = eq[sel] - thr
+    if sel.sum() < 3 or w.sum() <= 0:
+        return {"angle_deg": float("nan"), "elongation": float("nan"), "points": int(sel.sum())}
+    p = points[sel]
+    c = (w[:, None] * p).sum(0) / w.sum()
+    cov = (w[:, None, None] * np.einsum("ni,nj->nij", p - c, p - c)).sum(0) / w.sum()
+    val, vec = np.linalg.eigh(cov)
+    d = vec[:, 1]
+    angle = math.degrees(math.atan2(abs(d[1]), abs(d[0])))
+    return {"angle_deg": angle, "elongation": float(math.sqrt(val[1] / max(val[0], 1e-300))),
+            "centre_m": c.tolist(), "points": int(sel.sum()), "threshold": thr,
+            "leans": "right" if d[0] * d[1] > 0 else "left"}
+
+
+def rve_angles(res: dict) -> dict:
+    """phi (peak friction angle, deg) and psi (dilatancy angle at the peak, deg) of one RVE's
+    plane-strain biaxial (``direct_biaxial``'s dict, compression positive): sin phi =
+    (s1 - s3)/(s1 + s3) at the peak; sin psi = -d eps_v / d gamma, gamma = eps_1 - eps_3 =
+    2 eps_1 - eps_v, the slope over the records within 0.5 % axial strain of the peak."""
+    s1, s3 = np.asarray(res["sigma_axial"]), np.asarray(res["sigma_lateral"])
+    e1, ev = np.asarray(res["axial_strain"]), np.asarray(res["volumetric_strain"])
+    k = int(np.argmax(s1))
+    phi = math.degrees(math.asin((s1[k] - s3[k]) / (s1[k] + s3[k])))
+    near = np.abs(e1 - e1[k]) <= 0.005
+    gam = 2 * e1 - ev
+    slope = np.polyfit(gam[near], ev[near], 1)[0] if near.sum() >= 3 else float("nan")
+    psi = math.degrees(math.asin(float(np.clip(-slope, -1, 1))))
+    return {"phi_peak_deg": phi, "psi_deg": psi, "peak_axial_strain": float(e1[k])}
+
+
+def write_strain_xdmf(model, eq: np.ndarray, path: Path) -> None:
+    """eps_q per cell (the mean of its points) and the displacement, in one XDMF file."""
+    fx = model._fx
+    V0 = fx.fem.functionspace(model.mesh, ("DG", 0))
+    f = fx.fem.Function(V0, name="eps_q")
+    f.x.array[:] = eq.reshape(model.n_cells, model.nq).mean(axis=1)
+    # (the displacement at the vertices: XDMF holds the mesh's degree, P1)
+    u1 = fx.fem.Function(fx.fem.functionspace(model.mesh, ("Lagrange", 1, (2,))),
+                         name="displacement_m")
+    u1.interpolate(model.u)
+    import dolfinx.io
+
+    with dolfinx.io.XDMFFile(model.mesh.comm, str(path), "w") as xf:
+        xf.write_mesh(model.mesh)
+        xf.write_function(f)
+        xf.write_function(u1)
+
+
+def plot(points, eq, band, fd, lx, ly, png: Path, title: str) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from cpp_dem.io.figures import save_figure
+
+    fig, (a, b) = plt.subplots(1, 2, figsize=(10, 5.5), gridspec_kw={"width_ratios": [1, 1.3]})
+    sc = a.scatter(points[:, 0], points[:, 1], c=eq, s=30, cmap="viridis")
+    fig.colorbar(sc, ax=a, label="equivalent shear strain eps_q (-)")
+    if math.isfinite(band["angle_deg"]):
+        c = np.asarray(band["centre_m"])
+        t = math.radians(band["angle_deg"]) * (1 if band["leans"] == "right" else -1)
+        s = np.linspace(-2, 2, 2) * max(lx, ly)
+        a.plot(c[0] + s * math.cos(t), c[1] + s * math.sin(t), "r--",
+               label=f"band {band['angle_deg']:.0f} deg")
+        a.legend(loc="upper right", fontsize=8)
+    a.set_xlim(0, lx)
+    a.set_ylim(0, ly)
+    a.set_aspect("equal")
+    a.set_xlabel("x (m)")
+    a.set_ylabel("y (m)")
+    b.plot(100 * fd["axial_strain"], np.asarray(fd["sigma_axial"]) / 1e3, "o-",
+           label="sigma_axial")
+    b.plot(100 * fd["axial_strain"], np.asarray(fd["sigma_lateral"]) / 1e3, "s-",
+           label="sigma_lateral")
+    b.set_xlabel("axial strain (%)")
+    b.set_ylabel("mean element stress (kPa, compression positive)")
+    b.grid(alpha=0.3)
+    b.legend()
+    fig.suptitle(title, fontsize=9)
+    fig.tight_layout()
+    save_figure(fig, png)
+    plt.close(fig)
+
+
+def main(argv=None) -> int:
+
+    from cpp_dem.elements.pool import ElementPool, PeriodicFactory
+    from femcoupling import biaxial
+    from femcoupling.hierarchical import quadrature_points
+
+    ap = argparse.ArgumentParser(description=__doc__,
+                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--nx", type=int, default=4, help="cells across (x2 triangles)")
+    ap.add_argument("--ny", type=int, default=9, help="cells up")
+    ap.add_argument("--degree", type=int, default=2, choices=(1, 2),
+                    help="2: P2 triangles, 3 RVEs each (no locking); 1: P1, 1 RVE each")
+    ap.add_argument("--lx", type=float, default=0.05, help="width, m")
+    ap.add_argument("--ly", type=float, default=0.10, help="height, m")
+    ap.add_argument("--grains", type=int, default=80, help="grains per RVE")
+    ap.add_argument("--pressure", type=float, default=100e3, help="confining, Pa")
+    ap.add_argument("--strain", type=float, default=0.06, help="total axial strain, -")
+    ap.add_argument("--steps", type=int, default=24)
+    ap.add_argument("--weak-at", type=str, default="0.25,0.3",
+                    help="the weak zone's centre as fractions of (lx, ly)")
+    ap.add_argument("--weak-radius", type=float, default=0.12,
+                    help="its radius as a fraction of lx; 0: no weak zone")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--rtol", type=float, default=5e-3)
+    ap.add_argument("--max-newton", type=int, default=12)
+    ap.add_argument("--unbalanced", type=float, default=1e-4,
+                    help="the RVEs relax to this unbalanced force after each increment")
+    ap.add_argument("--rve-seeds", type=int, default=2,
+                    help="RVEs run alone for phi and psi (0: skip)")
+    ap.add_argument("--out", default="results/bench_runs/shear_band")
+    args = ap.parse_args(argv)
+    for name in ("nx", "ny", "grains", "steps", "workers"):
+        if getattr(args, name) < 1:
+            ap.error(f"--{name}={getattr(args, name)}: must be >= 1")
+    if not (0 <= args.weak_radius < 1):
+        ap.error(f"--weak-radius={args.weak_radius}: must be in [0, 1) (a fraction of lx)")
+    try:
+        wx, wy = (float(v) for v in args.weak_at.split(","))
+    except ValueError:
+        ap.error(f"--weak-at={args.weak_at!r}: two fractions, x,y")
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    t0 = time.perf_counter()
+    nq = 3 if args.degree == 2 else 1
+    n = 2 * args.nx * args.ny * nq
+    base = PeriodicFactory(n=args.grains, stress=args.pressure, isotropic=True,
+                           options={"prep_friction_deg": 0.0})
+    pts = quadrature_points(args.lx, args.ly, args.nx, args.ny, args.degree)
+    weak = () if args.weak_radius == 0 else biaxial.weak_zone(
+        pts, (wx * args.lx, wy * args.ly), args.weak_radius * args.lx)
+    factory = biaxial.WeakZoneFactory(base, weak, {"prep_friction_deg": None})
+    print(f"[shear band] {n} RVEs of {args.grains} grains ({args.nx} x {args.ny} cells, "
+          f"P{args.degree}), {len(weak)} weak; building them on {args.workers} workers",
+          flush=True)
+    with ElementPool.build(n, factory, workers=args.workers) as pool:
+        t_build = time.perf_counter() - t0
+        print(f"[shear band] built in {t_build:.0f} s", flush=True)
+        fd = biaxial.fem_dem_biaxial(
+            pool, lx=args.lx, ly=args.ly, nx=args.nx, ny=args.ny, pressure=args.pressure,
+            strain=args.strain, steps=args.steps, newton_rtol=args.rtol,
+            max_newton=args.max_newton, degree=args.degree, platens="rough",
+            out=out / "records", overwrite=True, stop_on_failure=True,
+            strain_kw={"unbalanced": args.unbalanced, "max_relax_steps": 100_000})
+        m = fd["model"]
+        cells = np.arange(m.n_cells, dtype=np.int32)
+        grad = m.expr_grad.eval(m.mesh, cells).reshape(-1, 2, 2)
+        eq = equivalent_shear_strain(grad)
+        write_strain_xdmf(m, eq, out / "strain.xdmf")
+        statuses = {s: sum(h.status == s for h in m.history)
+                    for s in sorted({h.status for h in m.history})}
+        iterations = int(sum(h.iterations for h in m.history))
+    band = band_direction(pts, eq)
+    li = float(eq.max() / eq.mean()) if eq.mean() > 0 else float("nan")
+    rves = []
+    if args.rve_seeds:
+        runs = biaxial.direct_biaxial(base, list(range(args.rve_seeds)),
+                                      pressure=args.pressure, strain=args.strain,
+                                      strain_per_step=1e-6, log=None)
+        rves = [rve_angles(r) for r in runs]
+    phi = float(np.mean([r["phi_peak_deg"] for r in rves])) if rves else float("nan")
+    psi = float(np.mean([r["psi_deg"] for r in rves])) if rves else float("nan")
+    row = {"elements": n, "mesh": f"{args.nx}x{args.ny}", "degree": args.degree,
+           "grains_per_element": args.grains, "weak_elements": len(weak),
+           "axial_strain_reached": float(fd["axial_strain"][-1]) if len(fd["axial_strain"])
+           else 0.0, "failed": fd["failed"], "statuses": statuses,
+           "newton_iterations": iterations,
+           "localization_index": li, "eps_q_mean": float(eq.mean()), "eps_q_max": float(eq.max()),
+           "band_angle_deg": band["angle_deg"], "band_elongation": band["elongation"],
+           "band_leans": band.get("leans"),
+           "phi_peak_deg": phi, "psi_deg": psi,
+           "mohr_coulomb_deg": 45 + phi / 2, "roscoe_deg": 45 + psi / 2,
+           "arthur_deg": 45 + (phi + psi) / 4, "rves": rves,
+           "peak_sigma_axial_pa": float(fd["peak_sigma_axial"]) if len(fd["axial_strain"])
+           else float("nan"),
+           "build_s": t_build, "wall_s": time.perf_counter() - t0}
+    plot(pts, eq, band, fd, args.lx, args.ly, out / "shear_band.png",
+         f"{n} RVEs, {args.nx} x {args.ny} P{args.degree}; localization index {li:.2f}; band "
+         f"{band['angle_deg']:.0f} deg (Mohr-Coulomb {45 + phi / 2:.0f}, Roscoe "
+         f"{45 + psi / 2:.0f})")
+    write_json(out / "shear_band.json", {"args": vars(args), **row,
+                                         "axial_strain": fd["axial_strain"].tolist(),
+                                         "sigma_axial": np.asarray(fd["sigma_axial"]).tolist(),
+                                         "eps_q": eq.tolist(), "points": pts.tolist()})
+    print(json.dumps(row, default=float), flush=True)
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

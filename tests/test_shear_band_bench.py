@@ -1,0 +1,81 @@
+"""bench/shear_band.py (issue 38): its measures on synthetic fields (they can fail), and the
+bench itself at a tiny size (the documented command's code path)."""
+
+from __future__ import annotations
+
+import importlib.util
+import json
+import math
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def _bench():
+    sys.path.insert(0, str(ROOT / "bench"))
+    spec = importlib.util.spec_from_file_location("shear_band", ROOT / "bench" / "shear_band.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_equivalent_shear_strain_of_simple_shear_and_of_isotropic_strain():
+    sb = _bench()
+    g = 1e-2
+    shear = np.array([[[0.0, g], [0.0, 0.0]]])  # simple shear: e_xy = g/2
+    assert sb.equivalent_shear_strain(shear)[0] == pytest.approx(g / math.sqrt(3), rel=1e-12)
+    # plane-strain isotropic in-plane strain still has a deviator (e_zz = 0): 2/3 sqrt(...)
+    iso = np.array([np.eye(2) * 1e-3])
+    assert sb.equivalent_shear_strain(iso)[0] == pytest.approx(2e-3 / 3, rel=1e-12)
+
+
+@pytest.mark.parametrize("angle", [30.0, 55.0, 120.0])
+def test_band_direction_finds_a_synthetic_band_and_not_a_round_spot(angle):
+    sb = _bench()
+    rng = np.random.default_rng(3)
+    pts = rng.uniform(0, 1, (2000, 2))
+    t = math.radians(angle)
+    d = np.abs(-(pts[:, 0] - 0.5) * math.sin(t) + (pts[:, 1] - 0.5) * math.cos(t))
+    eq = 0.01 + 0.1 * np.exp(-(d / 0.03) ** 2)  # a band through the centre
+    b = sb.band_direction(pts, eq)
+    expect = angle if angle <= 90 else 180 - angle
+    assert b["angle_deg"] == pytest.approx(expect, abs=2.0)
+    assert b["leans"] == ("right" if angle <= 90 else "left")
+    assert b["elongation"] > 5
+    spot = 0.01 + 0.1 * np.exp(-(np.linalg.norm(pts - 0.5, axis=1) / 0.1) ** 2)
+    assert sb.band_direction(pts, spot)["elongation"] < 1.5  # round: no band
+
+
+def test_rve_angles_of_a_synthetic_curve():
+    sb = _bench()
+    e1 = np.linspace(0, 0.05, 101)
+    s3 = np.full_like(e1, 100e3)
+    s1 = 100e3 * (1 + 2.0 * np.minimum(e1 / 0.02, 1.0))  # peak 300 kPa from 2 %
+    s1[e1 > 0.02] -= 1e3 * (e1[e1 > 0.02] - 0.02) / 0.03  # then softening
+    psi = math.radians(10.0)
+    # eps_v = -sin(psi) gamma with gamma = 2 e1 - eps_v: eps_v = -2 sin(psi) e1 / (1 - sin psi)
+    ev = -2 * math.sin(psi) * e1 / (1 - math.sin(psi))
+    r = sb.rve_angles({"sigma_axial": s1, "sigma_lateral": s3, "axial_strain": e1,
+                       "volumetric_strain": ev})
+    assert r["phi_peak_deg"] == pytest.approx(math.degrees(math.asin(0.5)), abs=1e-9)
+    assert r["psi_deg"] == pytest.approx(10.0, abs=1e-6)
+
+
+def test_the_bench_runs_at_a_tiny_size(tmp_path, capsys):
+    pytest.importorskip("dolfinx_solver")
+    sb = _bench()
+    assert sb.main(["--nx", "1", "--ny", "2", "--degree", "2", "--grains", "40", "--strain",
+                    "0.004", "--steps", "2", "--workers", "1", "--rve-seeds", "1",
+                    "--weak-radius", "0.3", "--out", str(tmp_path)]) == 0
+    row = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert row["elements"] == 12 and row["weak_elements"] >= 1
+    assert row["localization_index"] >= 1.0 and row["axial_strain_reached"] == 0.004
+    assert set(row["statuses"]) <= {"converged", "stopped_at_scatter"}
+    for f in ("strain.xdmf", "shear_band.png", "shear_band.json", "records/fem.xdmf"):
+        assert (tmp_path / f).is_file(), f
+    with pytest.raises(SystemExit):
+        sb.main(["--weak-radius", "1.5", "--out", str(tmp_path / "x")])
