@@ -296,6 +296,8 @@ def test_open_front_slot_opens_the_front_wall_around_the_grid_plane():
     sample = case.build(q)
     front = sample.walls[pullout.X_MINUS]
     assert sample.scene.wall_opening(front)[0] == -1  # built closed
+    with pytest.raises(dem.ParameterError, match="must exceed the largest grain radius"):
+        pullout.open_front_slot(sample, 0.9 * q.radius)  # no grain fits
     pullout.open_front_slot(sample, 0.004)
     axis, lo, hi = sample.scene.wall_opening(front)
     assert axis == 2 and (lo, hi) == pytest.approx((sample.grid_z - 0.004,

@@ -110,3 +110,45 @@ def test_a_centre_beyond_the_plane_is_outside_an_opened_wall_only():
         sc.run(100)
         assert np.array_equal(np.asarray(sc.positions)[0], [0, 0, -0.5 * R])
         assert np.all(np.asarray(sc.wall_forces)[w] == 0)
+
+
+def test_an_edge_of_the_opening_pushes_like_the_plane_along_its_own_normal():
+    """A sphere in the opening, its centre on the wall's plane half a radius from the edge
+    x = R: the edge (a line across the wall) pushes it with the plane's law and overlap
+    (R/2), along the edge's normal -x; a closed wall at the same overlap pushes along +z."""
+    forces = []
+    for opening in ((0, -R, R), None):
+        sc = dem.Scene()
+        m = sc.add_material(dem.linear_material(density=2000, young=E, poisson=0.3,
+                                                friction_angle_deg=30))
+        x = [0.5 * R, 0, 0] if opening else [0, 0, 0.5 * R]
+        sc.add_spheres([x], [R], material=m)
+        w = sc.add_wall(axis=2, position=0.0, sense=1, material=m)
+        if opening:
+            sc.set_wall_opening(w, axis=opening[0], lo=opening[1], hi=opening[2])
+        sc.dt = 0.01 * sc.critical_dt()
+        sc.run(1)
+        forces.append(np.asarray(sc.wall_forces)[w].copy())
+    edge, plane = forces
+    assert plane[2] < 0 and np.allclose(plane[:2], 0)  # the sphere pushes the floor down
+    assert edge[0] > 0 and edge[1] == 0 and abs(edge[2]) < 1e-9 * edge[0]
+    assert edge[0] == pytest.approx(-plane[2], rel=1e-12)
+
+
+def test_a_sphere_that_leaves_the_opening_sideways_meets_its_edge_not_the_plane():
+    """A sphere half through the opening is pushed towards the opening's middle by the edge
+    it drifts against, without the plane's one-sided jump (an overlap of R at once)."""
+    sc = dem.Scene()
+    m = sc.add_material(dem.linear_material(density=2000, young=E, poisson=0.3,
+                                            friction_angle_deg=30))
+    sc.add_spheres([[0, 0, 0]], [R], material=m)
+    w = sc.add_wall(axis=2, position=0.0, sense=1, material=m)
+    sc.set_wall_opening(w, axis=0, lo=-1.5 * R, hi=1.5 * R)
+    sc.velocities = [[0.5, 0, 0]]  # m/s, towards the edge at x = 1.5 R
+    sc.dt = 0.05 * sc.critical_dt()
+    xs = []
+    for _ in range(400):
+        sc.run(5)
+        xs.append(float(np.asarray(sc.positions)[0, 0]))
+    assert max(xs) < 1.5 * R  # held by the edge: the centre never leaves the opening
+    assert xs[-1] < max(xs)  # and sent back

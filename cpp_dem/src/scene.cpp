@@ -114,9 +114,13 @@ void Scene::raise_overlap(long k, bool wall) const {
   if (wall) {
     const WallContact& c = wall_contacts_[k];
     const Wall& w = walls_[c.wall];
-    const Real s = w.sense * (bodies_.pos[c.body][w.axis] - w.position);
+    Real s = w.sense * (bodies_.pos[c.body][w.axis] - w.position);
+    Vec3 d;
+    const bool edge = opening_edge(w, wall_openings_[c.wall], bodies_.pos[c.body], d);
+    if (edge) s = d.norm();  // (against an edge of the wall's opening)
     os << "blow-up at step " << step_ << ": body " << id_of(c.body) << " overlaps wall " << c.wall
-       << " by " << (bodies_.radius[c.body] - s) / bodies_.radius[c.body]
+       << (edge ? " (an edge of its opening)" : "") << " by "
+       << (bodies_.radius[c.body] - s) / bodies_.radius[c.body]
        << " of its radius (max_overlap_ratio=" << max_overlap_ratio_ << why;
     body = c.body;
   } else {

@@ -103,10 +103,10 @@ class Params:
     threads: int = 0
     grains: str = "spheres"         #: spheres, or clumps:NAME (cases/grains_option.py); the
                                     #: radius is then the clumps' equivalent-volume radius
-    front_slot: float = 0.0         #: the front wall's slot during the pull: open for grain
-                                    #: centres within front_slot x (rc + r) of the grid plane
-                                    #: (rc + r: a grain touching a bar), -; 0 = closed, as
-                                    #: App. A's box (pullout.open_front_slot)
+    front_slot: float = 0.0         #: the front wall's slot during the pull: its half-height
+                                    #: is front_slot x (rc + r) (rc + r: a grain touching a
+                                    #: bar; 1 lets a grain pass beside a bar), -; 0 = closed,
+                                    #: as App. A's box (pullout.open_front_slot)
 
 
 SMOKE = dict(radius=2.5e-3, box=0.05, distance=0.004, snapshots=1)
@@ -362,8 +362,8 @@ def run(p: Params, out: Path) -> dict:
     def before_pull(s: pullout.PulloutSample) -> None:
         if slot_half_m > 0:  # opened after the preparation: the same sample as a closed box
             pullout.open_front_slot(s, slot_half_m)
-            log(f"front wall: slot open for grain centres within {slot_half_m * 1e3:.3g} mm "
-                f"of the grid plane ({p.front_slot:g} x (bar radius + grain radius))")
+            log(f"front wall: a slot {2 * slot_half_m * 1e3:.3g} mm high about the grid "
+                f"plane ({p.front_slot:g} x (bar radius + grain radius) each side)")
 
     meta = {**asdict(p), "case": "001", "study": THESIS,
             "force_001_nodes": sel.nodes.tolist(), "force_001_yade_ids": list(sel.yade_ids),
@@ -928,10 +928,11 @@ def build_parser():
                          "runs)")
     ap.add_argument("--front-slot", type=float, default=d.front_slot,
                     help="a slot in the front wall during the pull, as a real pull-out box "
-                         "has: grains whose centre lies within FRONT_SLOT x (bar radius + "
-                         "grain radius) of the grid plane pass the wall; 0.7 lets through the "
-                         "grains a bar pushes head-on (within 45 deg of its pull); in [0, 2]; "
-                         "0, the default, is the thesis's closed box")
+                         "has: its half-height is FRONT_SLOT x (bar radius + grain radius) "
+                         "about the grid plane (1: a grain a bar pushes head-on leaves the "
+                         "box); grains in it meet only its edges; in [0, 2], above grain "
+                         "radius / (bar radius + grain radius); 0, the default, is the "
+                         "thesis's closed box")
     ap.add_argument("--grains", type=str, default=d.grains, help=GRAINS_HELP)
     return ap
 

@@ -404,14 +404,20 @@ def prepare(sample: PulloutSample, *, stress: float, porosity: float | None = No
 
 
 def open_front_slot(sample: PulloutSample, half_height: float) -> None:
-    """Opens the front wall (x-, where the grid leaves the box) for grains whose centre lies
-    within ``half_height`` (m) of the grid plane z = grid_z: they pass the wall without
-    contact (``Scene.set_wall_opening``), as through a pull-out box's slot, instead of being
-    squeezed between a transverse bar and the wall. Grains that leave stay in the scene,
-    beyond the wall. The rest of the wall holds as before; a grain that moves sideways out
-    of the slot while crossing the plane is stopped with the overlap error."""
+    """Opens a slot in the front wall (x-, where the grid leaves the box): z within
+    ``half_height`` (m) of the grid plane z = grid_z (``Scene.set_wall_opening``), as a
+    pull-out box's slot. A grain whose centre is in the slot meets only the slot's edges
+    (lines across the wall), so a grain a transverse bar pushes head-on leaves the box
+    instead of being squeezed against the wall; grains that leave stay in the scene, beyond
+    the wall. The slot must be wider than every grain (half_height above the largest grain
+    radius): a grain that fits in no slot touches both its edges."""
     if not (math.isfinite(half_height) and half_height > 0):
         raise ParameterError(f"half_height={half_height}: must be > 0 (m)")
+    r_max = float(np.max(np.asarray(sample.scene.radii)[sample.grain_ids])) \
+        if len(sample.grain_ids) else 0.0
+    if half_height <= r_max:
+        raise ParameterError(f"half_height={half_height}: must exceed the largest grain "
+                             f"radius {r_max:g} m (a narrower slot lets no grain through)")
     lo, hi = sample.box_lo_hi()
     if sample.grid_z - half_height <= lo[2] or sample.grid_z + half_height >= hi[2]:
         raise ParameterError(f"half_height={half_height}: the slot must lie inside the box, "

@@ -27,4 +27,19 @@ inline ContactGeometry sphere_wall_geometry(const Wall& w, const Vec3& x, Real r
   return g;
 }
 
+/// The same for a contact whose unit normal n (from the wall to the sphere) is not the
+/// wall's: a sphere against an edge of the wall's opening (WallOpening).
+inline ContactGeometry sphere_wall_geometry(const Wall& w, const Vec3& n, const Vec3& x, Real r,
+                                            const Vec3& v, const Vec3& om, Real overlap) {
+  ContactGeometry g;
+  g.overlap = overlap;
+  g.normal = n;
+  g.branch2 = -(r - 0.5 * g.overlap) * g.normal;
+  g.branch1 = x + g.branch2;  // unused by the law (the wall does not rotate)
+  g.rel_vel = (v + om.cross(g.branch2)) - w.velocity;
+  g.angvel_sum = om;
+  g.rel_angvel = om;
+  return g;
+}
+
 }  // namespace cpp_dem
