@@ -223,6 +223,21 @@ def main(argv=None) -> int:
         statuses = {s: sum(h.status == s for h in m.history)
                     for s in sorted({h.status for h in m.history})}
         iterations = int(sum(h.iterations for h in m.history))
+        # the scale (issue 38 item 5): worker memory, what the client received per
+        # accepted step, the time per Newton iteration
+        mem = pool.memory()
+        received = pool.received_bytes()
+        scale = {
+            "workers": len(mem),
+            "worker_rss_bytes": int(sum(v["rss_bytes"] for v in mem.values())),
+            "accepted_state_bytes": int(sum(v["accepted_bytes"] for v in mem.values())),
+            "client_received_bytes": {k: int(v) for k, v in received.items()},
+            "client_bytes_per_accepted_step": (
+                sum(v for k, v in received.items() if k != "build") / max(len(m.history), 1)),
+            "client_held_bytes": int(pool.held_bytes()),
+            "newton_iteration_s": float(sum(h.wall_s for h in m.history) / max(iterations, 1)),
+            "dem_s_per_element_evaluation": float(
+                sum(h.dem_s for h in m.history) / max(iterations, 1) / n)}
     band = band_direction(pts, eq)
     li = float(eq.max() / eq.mean()) if eq.mean() > 0 else float("nan")
     rves = []
@@ -246,7 +261,7 @@ def main(argv=None) -> int:
            "arthur_deg": 45 + (phi + psi) / 4, "rves": rves,
            "peak_sigma_axial_pa": float(fd["peak_sigma_axial"]) if len(fd["axial_strain"])
            else float("nan"),
-           "build_s": t_build, "wall_s": time.perf_counter() - t0}
+           "scale": scale, "build_s": t_build, "wall_s": time.perf_counter() - t0}
     plot(pts, eq, band, fd, args.lx, args.ly, out / "shear_band.png",
          f"{n} RVEs, {args.nx} x {args.ny} P{args.degree}; localization index {li:.2f}; band "
          f"{band['angle_deg']:.0f} deg (Mohr-Coulomb {45 + phi / 2:.0f}, Roscoe "

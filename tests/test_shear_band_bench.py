@@ -75,6 +75,9 @@ def test_the_bench_runs_at_a_tiny_size(tmp_path, capsys):
     assert row["elements"] == 12 and row["weak_elements"] >= 1
     assert row["localization_index"] >= 1.0 and row["axial_strain_reached"] == 0.004
     assert set(row["statuses"]) <= {"converged", "stopped_at_scatter"}
+    sc = row["scale"]
+    assert sc["workers"] == 1 and sc["worker_rss_bytes"] > sc["accepted_state_bytes"] > 0
+    assert 0 < sc["client_bytes_per_accepted_step"] < sc["accepted_state_bytes"]
     for f in ("strain.xdmf", "shear_band.png", "shear_band.json", "records/fem.xdmf"):
         assert (tmp_path / f).is_file(), f
     with pytest.raises(SystemExit):
