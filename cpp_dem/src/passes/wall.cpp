@@ -115,51 +115,20 @@ void Scene::compute_wall_forces_hot(long& err_contact) {
   for (const WallOpening& o : wall_openings_) any_opening = any_opening || o.axis >= 0;
   long err = std::numeric_limits<long>::max();
   // (err is an argument: inside the parallel loop it is the thread's reduction copy.)
-  const auto one = [&](long k, long& err, auto axis, auto with_openings)
-                       __attribute__((always_inline)) {
+  const auto one = [&](long k, long& err, auto axis) __attribute__((always_inline)) {
     constexpr int AX = decltype(axis)::value;
     WallContact& c = contacts[k];
     const Wall& w = walls[c.wall];
     const int b = c.body;
     const Real r = radius[b];
     const Real s = w.sense * (pos[b][AX] - w.position);  // wall_distance, AX constant
-    const auto release = [&]() {
+    if (s >= r || s <= -r) {
       if (c.active) {
         c.active = false;
         c.state.clear_history();
         c.force.setZero();
         c.torque.setZero();
       }
-    };
-    // An opening (WallOpening; a scene without openings compiles this out): a centre within
-    // it, or beyond the plane, meets the wall only at the nearer edge of the opening, a line
-    // across the wall; the normal then turns in the plane of the wall's and the opening's
-    // axes, so the general law takes it.
-    if constexpr (decltype(with_openings)::value) {
-      Vec3 d;
-      if (opening_edge(w, openings[c.wall], pos[b], d)) {
-        const Real dist = d.norm();
-        if (dist >= r) {
-          release();
-          return;
-        }
-        const Real overlap = r - dist;
-        if (!(overlap <= max_ratio * r)) {
-          err = std::min(err, k);
-          return;
-        }
-        if (!c.active || c.phys_version != version) update_phys(c);
-        c.active = true;
-        const ContactGeometry g =
-            sphere_wall_geometry(w, d / dist, pos[b], r, vel[b], angvel[b], overlap);
-        const LawOutput out = apply_law(c.phys, g, dt, c.state);
-        c.force = out.force2;
-        c.torque = g.branch2.cross(out.force2) + out.moment2;
-        return;
-      }
-    }
-    if (s >= r || s <= -r) {
-      release();
       return;
     }
     const Real overlap = r - s;
@@ -180,25 +149,59 @@ void Scene::compute_wall_forces_hot(long& err_contact) {
     c.force = out.force2;
     c.torque = g.branch2.cross(out.force2) + out.moment2;
   };
-  const auto pass = [&](auto with_openings) {
+  // An opening (WallOpening): a centre within it, or beyond the plane, meets the wall only
+  // at the nearer edge of the opening, a line across the wall (d: from the edge to the
+  // centre); the normal then turns in the plane of the wall's and the opening's axes, so the
+  // general law takes it.
+  const auto edge = [&](long k, long& err, const Vec3& d) {
+    WallContact& c = contacts[k];
+    const Wall& w = walls[c.wall];
+    const int b = c.body;
+    const Real r = radius[b];
+    const Real dist = d.norm();
+    if (dist >= r) {
+      if (c.active) {
+        c.active = false;
+        c.state.clear_history();
+        c.force.setZero();
+        c.torque.setZero();
+      }
+      return;
+    }
+    const Real overlap = r - dist;
+    if (!(overlap <= max_ratio * r)) {
+      err = std::min(err, k);
+      return;
+    }
+    if (!c.active || c.phys_version != version) update_phys(c);
+    c.active = true;
+    const ContactGeometry g =
+        sphere_wall_geometry(w, d / dist, pos[b], r, vel[b], angvel[b], overlap);
+    const LawOutput out = apply_law(c.phys, g, dt, c.state);
+    c.force = out.force2;
+    c.torque = g.branch2.cross(out.force2) + out.moment2;
+  };
 #pragma omp parallel reduction(min : err) if (nc > kParallelMin)
-    {
-      const auto [t, nt] = thread_and_team();
-      const auto blocks = thread_share(nblocks, t, nt);
-      for (long p = block_off[blocks.first]; p < block_off[blocks.second]; ++p) {
-        const long k = order[p];
-        switch (walls[contacts[k].wall].axis) {
-          case 0: one(k, err, std::integral_constant<int, 0>(), with_openings); break;
-          case 1: one(k, err, std::integral_constant<int, 1>(), with_openings); break;
-          default: one(k, err, std::integral_constant<int, 2>(), with_openings);
+  {
+    const auto [t, nt] = thread_and_team();
+    const auto blocks = thread_share(nblocks, t, nt);
+    for (long p = block_off[blocks.first]; p < block_off[blocks.second]; ++p) {
+      const long k = order[p];
+      if (any_opening) {  // (loop-invariant: a scene without openings skips it)
+        Vec3 d;
+        if (opening_edge(walls[contacts[k].wall], openings[contacts[k].wall],
+                         pos[contacts[k].body], d)) {
+          edge(k, err, d);
+          continue;
         }
       }
+      switch (walls[contacts[k].wall].axis) {
+        case 0: one(k, err, std::integral_constant<int, 0>()); break;
+        case 1: one(k, err, std::integral_constant<int, 1>()); break;
+        default: one(k, err, std::integral_constant<int, 2>());
+      }
     }
-  };
-  if (any_opening)
-    pass(std::true_type());
-  else
-    pass(std::false_type());
+  }
   err_contact = err;
 }
 
