@@ -28,6 +28,16 @@ void Scene::update_phys(WallContact& c) const {
 }
 
 namespace {
+/// A wall contact out of touch: its history and its force go.
+inline void release(WallContact& c) {
+  if (c.active) {
+    c.active = false;
+    c.state.clear_history();
+    c.force.setZero();
+    c.torque.setZero();
+  }
+}
+
 /// The short kernel of a wall contact: apply_law for a linear law without viscous damping and
 /// rolling resistance. The wall's normal n = sense e_AX never turns, so the frame rotation of
 /// the stored shear force is the twist about n alone (000 eqs 1-3, 6). v, om: the sphere's
@@ -123,12 +133,7 @@ void Scene::compute_wall_forces_hot(long& err_contact) {
     const Real r = radius[b];
     const Real s = w.sense * (pos[b][AX] - w.position);  // wall_distance, AX constant
     if (s >= r || s <= -r) {
-      if (c.active) {
-        c.active = false;
-        c.state.clear_history();
-        c.force.setZero();
-        c.torque.setZero();
-      }
+      release(c);
       return;
     }
     const Real overlap = r - s;
@@ -160,12 +165,7 @@ void Scene::compute_wall_forces_hot(long& err_contact) {
     const Real r = radius[b];
     const Real dist = d.norm();
     if (dist >= r) {
-      if (c.active) {
-        c.active = false;
-        c.state.clear_history();
-        c.force.setZero();
-        c.torque.setZero();
-      }
+      release(c);
       return;
     }
     const Real overlap = r - dist;

@@ -12,23 +12,9 @@ inline Real wall_distance(const Wall& w, const Vec3& x) {
 }
 
 /// The ContactGeometry record of a sphere (centre x, radius r, m; velocity v, m/s; spin om,
-/// rad/s) overlapping wall w by `overlap` (m). Side 1 is the wall (it does not rotate), side
-/// 2 the sphere; the contact point sits in the middle of the overlap.
-inline ContactGeometry sphere_wall_geometry(const Wall& w, const Vec3& x, Real r, const Vec3& v,
-                                            const Vec3& om, Real overlap) {
-  ContactGeometry g;
-  g.overlap = overlap;
-  g.normal = w.normal();
-  g.branch2 = -(r - 0.5 * g.overlap) * g.normal;
-  g.branch1 = x + g.branch2;  // unused by the law (the wall does not rotate)
-  g.rel_vel = (v + om.cross(g.branch2)) - w.velocity;
-  g.angvel_sum = om;
-  g.rel_angvel = om;
-  return g;
-}
-
-/// The same for a contact whose unit normal n (from the wall to the sphere) is not the
-/// wall's: a sphere against an edge of the wall's opening (WallOpening).
+/// rad/s) overlapping wall w by `overlap` (m), along the unit normal n (from the wall to the
+/// sphere: the wall's own, or an edge's of its opening, WallOpening). Side 1 is the wall (it
+/// does not rotate), side 2 the sphere; the contact point sits in the middle of the overlap.
 inline ContactGeometry sphere_wall_geometry(const Wall& w, const Vec3& n, const Vec3& x, Real r,
                                             const Vec3& v, const Vec3& om, Real overlap) {
   ContactGeometry g;
@@ -40,6 +26,12 @@ inline ContactGeometry sphere_wall_geometry(const Wall& w, const Vec3& n, const 
   g.angvel_sum = om;
   g.rel_angvel = om;
   return g;
+}
+
+/// The same against the wall's plane (its normal).
+inline ContactGeometry sphere_wall_geometry(const Wall& w, const Vec3& x, Real r, const Vec3& v,
+                                            const Vec3& om, Real overlap) {
+  return sphere_wall_geometry(w, w.normal(), x, r, v, om, overlap);
 }
 
 }  // namespace cpp_dem
