@@ -119,6 +119,47 @@ def test_a_killed_worker_restarts_a_runner_with_state_from_its_last_iteration(se
         assert par.responses[r].info["calls"] == par.iterations - 1
 
 
+def _stale_scheduler(monkeypatch, flag: Path, calls: int) -> None:
+    """The scheduler slow to notice a killed worker: after ``flag`` appears, the pool's next
+    ``calls`` looks at the workers still list every worker it listed before."""
+    from cpp_dem.elements import pool as poolmod
+
+    real = poolmod.ElementPool._alive
+    seen: dict = {"before": set(), "stale": 0}
+
+    def alive(self):
+        now = set(real(self))
+        if not flag.exists():
+            seen["before"] |= now
+            return sorted(now)
+        if seen["stale"] < calls:
+            seen["stale"] += 1
+            return sorted(now | seen["before"])
+        return sorted(now)
+
+    monkeypatch.setattr(poolmod.ElementPool, "_alive", alive)
+
+
+def test_a_killed_worker_the_scheduler_still_lists_is_not_taken_for_a_failed_element(
+        serial, tmp_path, monkeypatch):
+    """A worker killed during its call fails the actor call with a communication error
+    before the scheduler drops it: the pool waits for the scheduler (COMM_LOSS_WAIT_S) and
+    recovers the region, instead of calling it a failed element. Without the wait, the same
+    stale view stops the loop."""
+    from cpp_dem.elements import pool as poolmod
+
+    flag = tmp_path / "killed"
+    _stale_scheduler(monkeypatch, flag, calls=3)
+    par = _loop(StatefulCounting(kill_flag=str(flag)), 2)
+    assert flag.exists()
+    _same(serial, par)
+    flag2 = tmp_path / "killed2"
+    _stale_scheduler(monkeypatch, flag2, calls=3)
+    monkeypatch.setattr(poolmod, "COMM_LOSS_WAIT_S", 0.0)
+    with pytest.raises(Exception, match="Unable to contact|CommClosed|failed"):
+        _loop(StatefulCounting(kill_flag=str(flag2)), 2)
+
+
 def test_a_worker_that_joins_mid_loop_receives_a_region(serial):
     """The loop starts on one worker; the cluster grows during iteration 2's FEM solve (as a
     batch job starting late): at that iteration's element runs one region moves to the new

@@ -210,6 +210,69 @@ def test_both_vector_forms_agree():
     assert lines[0][0] != lines[0][1]
 
 
+def _format_10(blob: bytes) -> bytes:
+    """A blob of format 11 rewritten as format 10: no wall openings (their vector, after the
+    walls', and their size, the layout's last entry, gone). No clumps."""
+    import struct
+
+    b = bytearray(blob)
+    assert int.from_bytes(b[8:12], "little") == 11
+    b[8:12] = (10).to_bytes(4, "little")
+    n_layout = struct.unpack_from("<Q", b, 12)[0]
+    lay = list(struct.unpack_from(f"<{n_layout}Q", b, 20))
+    real, v3, q, wall, opening = lay[0], lay[2], lay[3], lay[5], lay[20]
+    at = 20 + 8 * n_layout
+
+    def skip_vec(at, elem):
+        n = struct.unpack_from("<Q", b, at)[0]
+        return at + 8 + n * elem
+
+    at = skip_vec(at, lay[4])  # materials
+    at = skip_vec(at, lay[19])  # pair laws
+    for elem in (v3,) * 7 + (q, real, real, real, 4, 1, 1, 4, 12, real, real, real, v3, real):
+        at = skip_vec(at, elem)  # the body store
+    for _ in range(22):
+        at = skip_vec(at, 0)  # the clump store, empty
+    at = skip_vec(at, 4)  # id_of_slot
+    at += 1  # spatial_sort
+    at = skip_vec(at, v3)  # pos_at_build
+    at = skip_vec(at, real)  # radius_at_build
+    at = skip_vec(at, wall)
+    end = skip_vec(at, opening)  # the openings: cut
+    del b[at:end]
+    del b[20 + 8 * (n_layout - 1):20 + 8 * n_layout]  # the layout's last size
+    b[12:20] = struct.pack("<Q", n_layout - 1)
+    return bytes(b)
+
+
+def test_a_checkpoint_of_format_10_loads_with_its_walls_closed():
+    """Format 10 had no wall openings: such a blob loads, every wall closed, and runs on as
+    the scene it was."""
+    from cpp_dem import _core
+
+    s = cd.Scene(gravity=(0, 0, -9.81))
+    m = s.add_material(cd.linear_material(density=2650, young=1e8, poisson=0.3,
+                                          friction_angle_deg=30.0))
+    s.add_spheres([[0, 0, R1], [3 * R1, 0, R1]], [R1, R1], material=m)
+    w = s.add_wall(axis=2, position=0.0, sense=1, material=m)
+    s.dt = DT
+    s.run(2)
+    closed = bytes(_core._checkpoint_save(s))
+    s.set_wall_opening(w, axis=0, lo=2 * R1, hi=4 * R1)
+    opened = bytes(_core._checkpoint_save(s))
+    assert len(opened) == len(closed) and opened != closed  # one record per wall, either way
+    for blob in (closed, opened):
+        t = cd.Scene(gravity=(0, 0, -9.81))
+        t.add_material(cd.linear_material(density=2650, young=1e8, poisson=0.3,
+                                          friction_angle_deg=30.0))
+        _core._checkpoint_load(t, _format_10(blob))
+        assert t.wall_opening(0)[0] == -1 and t.step_count == 2
+        t.run(3)
+    u = cd.Scene()
+    _core._checkpoint_load(u, opened)
+    assert u.wall_opening(0) == (0, 2 * R1, 4 * R1)
+
+
 def _older_format(blob: bytes, nbodies: int, kinematics_at: int, version: int) -> bytes:
     """A blob of format 10 (two bodies, no clump, no controller) rewritten as format 9 (no
     density scaling: its two inertia-factor arrays and its parameters gone, the body store
@@ -249,7 +312,8 @@ def _older_format(blob: bytes, nbodies: int, kinematics_at: int, version: int) -
 
 def test_checkpoints_of_the_formats_before_still_load():
     """Format 8 had no shear kinematics and 9 no density scaling: such blobs load, with the
-    default kinematics (8) and scaling off (8 and 9)."""
+    default kinematics (8) and scaling off (8 and 9). (The blobs are written as format 11 and
+    rewritten as 10, then as 9 and 8.)"""
     from cpp_dem import _core
 
     blobs = {}
@@ -262,7 +326,8 @@ def test_checkpoints_of_the_formats_before_still_load():
         s.dt = DT
         s.run(2)
         blobs[kin] = bytes(_core._checkpoint_save(s))
-    a, b = blobs["contact_point"], blobs["yade"]
+    assert int.from_bytes(blobs["yade"][8:12], "little") == 11
+    a, b = _format_10(blobs["contact_point"]), _format_10(blobs["yade"])
     assert len(a) == len(b)
     diff = [k for k in range(len(a)) if a[k] != b[k]]
     assert len(diff) == 1 and (a[diff[0]], b[diff[0]]) == (0, 1)  # the one byte of the option

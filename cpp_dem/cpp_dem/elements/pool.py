@@ -74,6 +74,22 @@ class ElementLostError(RuntimeError):
     elements, the worker, the files tried and what would have recovered them."""
 
 
+#: Seconds to wait for the scheduler to drop a worker whose actor call failed with a
+#: communication error (a killed worker), before the failure is taken as the element's.
+COMM_LOSS_WAIT_S = 15.0
+
+
+def _comm_error(e: BaseException) -> bool:
+    """Whether ``e`` says the worker could not be reached (rather than that its element
+    failed): distributed's CommClosedError, or an OSError such as "Unable to contact
+    Actor's worker"."""
+    try:
+        from distributed.comm.core import CommClosedError
+    except ImportError:  # pragma: no cover
+        CommClosedError = OSError
+    return isinstance(e, (CommClosedError, OSError))
+
+
 def state_digest(data: bytes) -> str:
     """The digest that identifies an element's saved state (BLAKE2b, 16 bytes, hex)."""
     return hashlib.blake2b(data, digest_size=16).hexdigest()
@@ -856,6 +872,13 @@ class ElementPool:
                     lost.add(a)
                     errors[a] = e
             alive = set(self._alive()) if lost else set()
+            # A worker killed during the call fails its actor's call with a communication
+            # error before the scheduler has dropped it: wait for the scheduler's word.
+            comm = {a for a in lost if a in alive and a in errors and _comm_error(errors[a])}
+            deadline = time.monotonic() + COMM_LOSS_WAIT_S
+            while comm & alive and time.monotonic() < deadline:
+                time.sleep(0.1)
+                alive = set(self._alive())
             for a in list(lost):
                 if a in alive and a in errors:
                     # The worker is there: an element itself failed (a blow-up, a bad
