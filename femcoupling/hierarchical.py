@@ -73,6 +73,27 @@ __all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning
 _IX = [0, 2, 4]  # DEM Voigt (xx, yy, zz, yz, xz, xy) rows of the FEM's (xx, yy, xy)
 
 
+def _rectangle(fx, lx: float, ly: float, nx: int, ny: int):
+    """The plane-strain model's mesh: [0, lx] x [0, ly] (m) in 2 nx ny triangles, serial."""
+    return fx.mesh.create_rectangle(fx.MPI.COMM_SELF, [np.array([0.0, 0.0]),
+                                                       np.array([lx, ly])], [nx, ny],
+                                    fx.mesh.CellType.triangle)
+
+
+def _qdeg(degree: int) -> int:
+    """The quadrature degree of the elements' points: one point (P1) or three (P2)."""
+    return 1 if degree == 1 else 2
+
+
+def _coordinates(fx, mesh, qpoints: np.ndarray) -> np.ndarray:
+    """The coordinates (m, shape (points, gdim)) of the reference points ``qpoints`` in every
+    cell of ``mesh``, in (cell, point) order: the elements' order."""
+    gdim = mesh.geometry.dim
+    cells = np.arange(mesh.topology.index_map(mesh.topology.dim).size_local, dtype=np.int32)
+    expr = fx.fem.Expression(fx.ufl.SpatialCoordinate(mesh), qpoints)
+    return expr.eval(mesh, cells).reshape(-1, gdim)
+
+
 def quadrature_points(lx: float, ly: float, nx: int, ny: int, degree: int = 1) -> np.ndarray:
     """The coordinates (m, shape (n, 2)) of the quadrature points of a
     ``HierarchicalPlaneStrain(lx=, ly=, nx=, ny=, degree=)``, in its elements' order (element
@@ -81,14 +102,8 @@ def quadrature_points(lx: float, ly: float, nx: int, ny: int, degree: int = 1) -
     import basix
 
     fx = _dolfinx.load()
-    msh = fx.mesh.create_rectangle(fx.MPI.COMM_SELF, [np.array([0.0, 0.0]),
-                                                      np.array([lx, ly])], [nx, ny],
-                                   fx.mesh.CellType.triangle)
-    pts, _ = basix.make_quadrature(basix.CellType.triangle, 1 if degree == 1 else 2)
-    x = msh.geometry.x[:, :2][msh.geometry.dofmap.reshape(-1, 3)]  # (cells, 3 vertices, 2)
-    a, e1, e2 = x[:, 0], x[:, 1] - x[:, 0], x[:, 2] - x[:, 0]
-    return (a[:, None, :] + pts[None, :, 0:1] * e1[:, None, :]
-            + pts[None, :, 1:2] * e2[:, None, :]).reshape(-1, 2)
+    pts, _ = basix.make_quadrature(basix.CellType.triangle, _qdeg(degree))
+    return _coordinates(fx, _rectangle(fx, lx, ly, nx, ny), pts)
 
 
 def dem_increment(g: np.ndarray) -> np.ndarray:
@@ -250,10 +265,7 @@ class HierarchicalPlaneStrain:
         self.confining_pa = confining_pa
         self.newton_rtol, self.max_newton = newton_rtol, max_newton
         self.strain_kw = dict(strain_kw or {})
-        comm = fx.MPI.COMM_SELF
-        msh = self.mesh = fx.mesh.create_rectangle(
-            comm, [np.array([0.0, 0.0]), np.array([lx, ly])], [nx, ny],
-            fx.mesh.CellType.triangle)
+        msh = self.mesh = _rectangle(fx, lx, ly, nx, ny)
         self.n_cells = msh.topology.index_map(2).size_local
         nq = 1 if degree == 1 else 3
         if pool.n != self.n_cells * nq:
@@ -265,24 +277,23 @@ class HierarchicalPlaneStrain:
             return ufl.as_vector([e[0, 0], e[1, 1], 2 * e[0, 1]])
 
         fdim = 1
-        right = fx.mesh.locate_entities_boundary(msh, fdim, lambda x: np.isclose(x[0], lx))
+        # the loaded sides: the right (smooth platens), or both (rough: -p n on each)
+        loaded = fx.mesh.locate_entities_boundary(
+            msh, fdim, (lambda x: np.isclose(x[0], lx) | np.isclose(x[0], 0.0))
+            if platens == "rough" else (lambda x: np.isclose(x[0], lx)))
+        tags = fx.mesh.meshtags(msh, fdim, np.sort(loaded), np.full(len(loaded), 1, np.int32))
+        ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
         st = fx.PETSc.ScalarType
         self.traction = fem.Constant(msh, np.zeros(2, dtype=st))
-        if platens == "rough":  # the confining pressure on both sides: -p n
-            sides = fx.mesh.locate_entities_boundary(
-                msh, fdim, lambda x: np.isclose(x[0], lx) | np.isclose(x[0], 0.0))
-            tags = fx.mesh.meshtags(msh, fdim, np.sort(sides), np.full(len(sides), 1, np.int32))
-            ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
+        if platens == "rough":
             self._pressure = fem.Constant(msh, st(float(confining_pa)))
             n_out = ufl.FacetNormal(msh)
             loads = lambda v: (-self._pressure * ufl.dot(n_out, v) * ds(1),)  # noqa: E731
         else:
-            tags = fx.mesh.meshtags(msh, fdim, np.sort(right), np.full(len(right), 1, np.int32))
-            ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
             loads = lambda v: (ufl.dot(self.traction, v) * ds(1),)  # noqa: E731
         # spaces, forms and solver: the same as the FEM soil's (femcoupling.quadrature)
         sysq = self.system = QuadratureSystem(
-            msh, degree=degree, qdeg=1 if degree == 1 else 2, ncomp=3, strain=eps,
+            msh, degree=degree, qdeg=_qdeg(degree), ncomp=3, strain=eps,
             loads=loads)
         self.V, self.Wv, self.Wt = sysq.V, sysq.Wv, sysq.Wt
         self.degree = degree
@@ -413,14 +424,12 @@ class HierarchicalPlaneStrain:
         self.tan_q.x.array[:] = tan.reshape(-1)
 
     gdim = 2  #: the FEM's dimension
+    degree = 1  #: the displacement's degree (``Hierarchical3D``: P1)
 
     @property
     def point_coordinates(self) -> np.ndarray:
         """The quadrature points' coordinates, m, shape (n_points, gdim), in element order."""
-        fx = self._fx
-        cells = np.arange(self.n_cells, dtype=np.int32)
-        expr = fx.fem.Expression(fx.ufl.SpatialCoordinate(self.mesh), self.system.qpoints)
-        return expr.eval(self.mesh, cells).reshape(-1, self.gdim)
+        return _coordinates(self._fx, self.mesh, self.system.qpoints)
 
     def _grad_increment(self) -> np.ndarray:
         cells = np.arange(self.n_cells, dtype=np.int32)
@@ -633,7 +642,7 @@ class HierarchicalPlaneStrain:
         st = st[:, 0] if self.nq == 1 else st.mean(axis=1)  # (a cell's points: their mean)
         sig.x.array[:] = st.reshape(-1)[: sig.x.array.size]
         u = self.u
-        if getattr(self, "degree", 1) != 1:  # XDMF holds the mesh's degree: P2 at the vertices (P1)
+        if self.degree != 1:  # XDMF holds the mesh's degree: P2 at the vertices (P1)
             if not hasattr(self, "_u_out"):
                 self._u_out = fem.Function(fem.functionspace(self.mesh, ("Lagrange", 1,
                                                                          (self.gdim,))))
