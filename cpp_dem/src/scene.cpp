@@ -114,7 +114,7 @@ void Scene::raise_overlap(long k, bool wall) const {
   if (wall) {
     const WallContact& c = wall_contacts_[k];
     const Wall& w = walls_[c.wall];
-    Real s = w.sense * (bodies_.pos[c.body][w.axis] - w.position);
+    Real s = wall_distance(w, bodies_.pos[c.body]);
     Vec3 d;
     const bool edge = opening_edge(w, wall_openings_[c.wall], bodies_.pos[c.body], d);
     if (edge) s = d.norm();  // (against an edge of the wall's opening)

@@ -24,33 +24,17 @@ struct Wall {
   }
 };
 
-/// An opening in a wall: the wall is open (no contact) for a body whose centre's coordinate
-/// along `axis` lies strictly between `lo` and `hi` (m), as a pull-out box's slot lets the
-/// geogrid and the grains next to it leave through the front wall; and for a body whose
-/// centre is beyond the plane (it left through the opening: it is outside the box, which
-/// the wall no longer bounds). A body reaches the plane elsewhere only with an overlap of
-/// its radius, which the overlap check stops. axis = -1: closed (the plain one-sided wall).
+/// An opening in a wall (Scene::set_wall_opening): a body whose centre's coordinate along
+/// `axis` lies strictly between `lo` and `hi` (m), or whose centre is beyond the plane (it
+/// left through the opening), meets the wall only at the opening's nearer edge, a line across
+/// the wall (opening_edge, geometry/sphere_wall.hpp), as a pull-out box's slot lets the
+/// geogrid and the grains next to it leave through the front wall. axis = -1: closed (the
+/// plain one-sided wall).
 struct WallOpening {
   int axis = -1;  ///< 0, 1 or 2 (not the wall's own axis); -1: the wall has no opening
   int pad_ = 0;   ///< zero (explicit padding: checkpoints are byte-identical)
   Real lo = 0;    ///< lower bound of the opening along axis, m
   Real hi = 0;    ///< upper bound of the opening along axis, m
 };
-
-/// Whether a body centred at x (m) meets wall w, whose opening is o, at an edge of the
-/// opening rather than on its plane: so when o is open and the centre lies in the opening
-/// or beyond the plane. Then d is the vector from the nearer edge (a line across the wall,
-/// at w.position along w.axis and lo or hi along o.axis) to x, m.
-inline bool opening_edge(const Wall& w, const WallOpening& o, const Vec3& x, Vec3& d) {
-  if (o.axis < 0) return false;
-  const Real z = x[o.axis];
-  const bool in_band = z > o.lo && z < o.hi;
-  if (!in_band && w.sense * (x[w.axis] - w.position) > 0) return false;
-  const Real edge = in_band ? (z - o.lo < o.hi - z ? o.lo : o.hi) : (z <= o.lo ? o.lo : o.hi);
-  d = Vec3::Zero();
-  d[w.axis] = x[w.axis] - w.position;
-  d[o.axis] = z - edge;
-  return true;
-}
 
 }  // namespace cpp_dem

@@ -11,6 +11,22 @@ inline Real wall_distance(const Wall& w, const Vec3& x) {
   return w.sense * (x[w.axis] - w.position);
 }
 
+/// Whether a body centred at x (m) meets wall w, whose opening is o, at an edge of the
+/// opening rather than on its plane: so when o is open and the centre lies in the opening
+/// or beyond the plane. Then d is the vector from the nearer edge (a line across the wall,
+/// at w.position along w.axis and lo or hi along o.axis) to x, m.
+inline bool opening_edge(const Wall& w, const WallOpening& o, const Vec3& x, Vec3& d) {
+  if (o.axis < 0) return false;
+  const Real z = x[o.axis];
+  const bool in_band = z > o.lo && z < o.hi;
+  if (!in_band && wall_distance(w, x) > 0) return false;
+  const Real edge = in_band ? (z - o.lo < o.hi - z ? o.lo : o.hi) : (z <= o.lo ? o.lo : o.hi);
+  d = Vec3::Zero();
+  d[w.axis] = x[w.axis] - w.position;
+  d[o.axis] = z - edge;
+  return true;
+}
+
 /// The ContactGeometry record of a sphere (centre x, radius r, m; velocity v, m/s; spin om,
 /// rad/s) overlapping wall w by `overlap` (m), along the unit normal n (from the wall to the
 /// sphere: the wall's own, or an edge's of its opening, WallOpening). Side 1 is the wall (it
