@@ -336,8 +336,9 @@ class Scene(_core.Scene):
         """Before the first step, and at the first run after bodies or walls were added or
         positions set: every body's centre (spheres, clump members, and before the first
         step geogrid nodes) must be on the inner side of every wall but an opened one
-        (one pass over the bodies; what is beyond an opened wall left through it). A body behind a wall is never touched by it (the walls are one-sided):
-        ParameterError naming the body, its position and the wall."""
+        (one pass over the bodies; what is beyond an opened wall left through it). A body
+        behind a wall is never touched by it (the walls are one-sided): ParameterError
+        naming the body, its position and the wall."""
         key = (self.num_bodies, self.num_walls, self.__dict__.get("_geometry_version", 0))
         if self.__dict__.get("_geometry_checked") == key and self.step_count > 0:
             return

@@ -93,8 +93,8 @@ def element_methods(kind: type) -> tuple:
 
 def check_element(obj: Any, kind: type, field: str) -> Any:
     """``obj`` (an element, or an element class) if it has every method of ``kind``
-    (``StrainElement`` or ``TargetElement``; ``from_bytes`` looked up on its class); else a ParameterError naming ``field``, the
-    object's type and the missing methods."""
+    (``StrainElement`` or ``TargetElement``; ``from_bytes`` looked up on its class); else a
+    ParameterError naming ``field``, the object's type and the missing methods."""
     if kind not in _METHODS:
         raise ParameterError(f"kind={kind!r}: StrainElement or TargetElement")
     cls = obj if isinstance(obj, type) else type(obj)  # (a class: checked on the class)
