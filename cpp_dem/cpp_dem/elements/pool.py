@@ -268,14 +268,17 @@ class ElementHost:
         for k, de in zip(indices, increments):
             t0 = time.perf_counter()
             el = self.elements[k]
-            s = el.apply_strain(np.asarray(de), **strain_kw)
-            d = None
-            if tangent == "network":
-                d = el.network_tangent()[0]
-            elif tangent == "network-elastic":  # sliding contacts taken as stuck: stiffer,
-                d = el.network_tangent(sliding="elastic")[0]  # positive past the peak
-            elif tangent == "fd":
-                d = el.fd_tangent(**strain_kw)
+            try:  # (the pool's ElementError then names the element that failed)
+                s = el.apply_strain(np.asarray(de), **strain_kw)
+                d = None
+                if tangent == "network":
+                    d = el.network_tangent()[0]
+                elif tangent == "network-elastic":  # sliding contacts taken as stuck:
+                    d = el.network_tangent(sliding="elastic")[0]  # stiffer, positive past the peak
+                elif tangent == "fd":
+                    d = el.fd_tangent(**strain_kw)
+            except Exception as e:  # noqa: BLE001
+                raise RuntimeError(f"element {k}: {type(e).__name__}: {e}") from e
             out.append({"index": k, "stress": s, "tangent": d,
                         "contacts": el.contact_count(), "cpu_s": time.perf_counter() - t0,
                         "steps": el.last_report.steps + el.last_report.relax_steps,
