@@ -231,12 +231,21 @@ def run_case(case: str, argv: list[str], *, source: str | None = None) -> int:
     it comes); an argparse rejection (exit 2) of a run file's parameters is reported against
     the run file. Returns the exit status."""
     # its own process group: a Ctrl-C reaches it once, forwarded from here (not also from the
-    # terminal), and a SIGINT or SIGTERM sent to this command is passed on, not left behind
-    proc = subprocess.Popen([*case_command(case), *argv], stderr=subprocess.PIPE, text=True,
-                            bufsize=1, process_group=0)
+    # terminal), and a SIGINT or SIGTERM sent to this command is passed on, not left behind.
+    # The handler is installed before the case starts: a caught signal is reset to its default
+    # in the new program, where an ignored one (this command started with SIGINT ignored, as a
+    # shell's background job or a test runner's worker is) would stay ignored in the case, and
+    # the forwarded Ctrl-C would be lost.
+    import threading
+
+    proc = None
+    pending: list[int] = []
 
     def forward(sig, _frame):  # to the case's whole group (its worker processes too), as a
-        try:                     # terminal's Ctrl-C would
+        if proc is None:         # terminal's Ctrl-C would
+            pending.append(sig)
+            return
+        try:
             os.killpg(proc.pid, sig)
         except (ProcessLookupError, PermissionError):
             try:
@@ -244,11 +253,18 @@ def run_case(case: str, argv: list[str], *, source: str | None = None) -> int:
             except ProcessLookupError:
                 pass
 
-    import threading
-
     main_thread = threading.current_thread() is threading.main_thread()
     old = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM)} \
         if main_thread else {}
+    try:
+        proc = subprocess.Popen([*case_command(case), *argv], stderr=subprocess.PIPE,
+                                text=True, bufsize=1, process_group=0)
+    except BaseException:
+        for s, h in old.items():
+            signal.signal(s, h)
+        raise
+    for sig in pending:
+        forward(sig, None)
     tail: list[str] = []
     try:
         for line in proc.stderr:

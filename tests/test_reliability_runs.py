@@ -201,6 +201,20 @@ def test_geogrid_dem_run_passes_130_on_and_forwards_sigint_to_the_case(tmp_path)
     assert 'case = "deposition"' in (out / "run.toml").read_text()
 
 
+def test_geogrid_dem_run_forwards_sigint_when_started_with_it_ignored(tmp_path):
+    """Started with SIGINT ignored (a shell's background job, a test runner's worker), the
+    command still catches and forwards it, and the case it starts does not inherit the ignore:
+    the forwarded Ctrl-C interrupts the case (it ran to its end, exit 0, when the command
+    started the case before installing its handler)."""
+    out = tmp_path / "c"
+    rc, so, se = _interrupt_after([*CLI, "run", "deposition", "--smoke", "--threads", "1",
+                                   "--duration", "100", "--out", str(out)], "[deposition] t=",
+                                  cwd=tmp_path,
+                                  preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    assert rc == 130, se
+    assert manifest(out)["status"] == "interrupted"
+
+
 _FSIZE = """
 import resource, signal, sys
 signal.signal(signal.SIGXFSZ, signal.SIG_IGN)   # as a full disk: the write fails with EFBIG
