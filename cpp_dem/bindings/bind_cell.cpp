@@ -86,7 +86,8 @@ periodic servo). Each component (r, c) of the velocity gradient L is imposed (se
 tension positive) or servo-controlled (set_stress: the cell stress sigma_rc, Pa, compression
 positive, reaches the target). The servo's strain correction per call is
 gain (target - sigma_rc) / C_rc, C_rc the affine stiffness of the contact network, spread over
-`period` steps and capped to +-max_rate (1/s).
+`period` steps and capped to +-max_rate (1/s). Bonds in the cell (a sheet of bonded spheres)
+count in sigma_rc and C_rc as in Scene.cell_stress.
 )doc")
       .def(py::init<Real, Real>(), py::kw_only(), py::arg("gain") = 0.3,
            py::arg("max_rate") = 1.0)
@@ -100,6 +101,10 @@ gain (target - sigma_rc) / C_rc, C_rc the affine stiffness of the contact networ
       .def("goal", &CellController::goal, py::arg("r"), py::arg("c"),
            "The imposed rate (1/s) or the stress target (Pa) of component (r, c).")
       .def_property("gain", &CellController::gain, &CellController::set_gain)
+      .def_property("allow_tension", &CellController::allow_tension,
+                    &CellController::set_allow_tension,
+                    "Tensile normal stress targets allowed (off by default): a cell whose "
+                    "bonds hold the tension.")
       .def_property("max_rate", &CellController::max_rate, &CellController::set_max_rate,
                     "Cap on |L_rc| of the stress-controlled components, 1/s.")
       .def_property_readonly("measured_stress",

@@ -173,11 +173,23 @@ compression positive, from the box size when the controller first ran (or reset_
 Radius growth under stress control (001 §4.3.1; the expansion of REFD, 000 §2.3): each call
 multiplies the radii by m = 1 + gain (sigma_t - sigma) / S, sigma the mean stress of the six
 box walls (Pa), S = (1/V) sum_c k_n l_c^2 (Pa) from the current contacts; m is capped to
-[1 - max_strain, 1 + max_strain]. Masses follow the radii.
+[1 - max_strain, 1 + max_strain]. Masses follow the radii. grown_only (off by default):
+sigma and S count only the contacts touching a growing sphere and no bonds (in a periodic
+cell sigma is then those grains' mean normal stress; with walls only S changes), so a
+sheet of bonded spheres among the grains does not offset the target.
 )doc")
-      .def(py::init<std::vector<int>, std::vector<int>, Real, Real, Real>(), py::kw_only(),
-           py::arg("walls"), py::arg("bodies") = std::vector<int>{}, py::arg("target_stress"),
-           py::arg("gain") = 0.5, py::arg("max_strain") = 1e-3)
+      .def(py::init([](std::vector<int> walls, std::vector<int> bodies, Real target,
+                       Real gain, Real max_strain, bool grown_only) {
+             auto g = std::make_shared<RadiusGrowth>(std::move(walls), std::move(bodies),
+                                                     target, gain, max_strain);
+             g->set_grown_only(grown_only);
+             return g;
+           }),
+           py::kw_only(), py::arg("walls"), py::arg("bodies") = std::vector<int>{},
+           py::arg("target_stress"), py::arg("gain") = 0.5, py::arg("max_strain") = 1e-3,
+           py::arg("grown_only") = false)
+      .def_property("grown_only", &RadiusGrowth::grown_only, &RadiusGrowth::set_grown_only,
+                    "Count only the contacts touching a growing sphere, and no bonds.")
       .def_property("target_stress", &RadiusGrowth::target_stress,
                     &RadiusGrowth::set_target_stress, "Target mean wall stress, Pa.")
       .def_property_readonly("measured_stress", &RadiusGrowth::measured_stress,

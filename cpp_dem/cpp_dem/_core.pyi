@@ -962,9 +962,20 @@ class RadiusGrowth(Controller):
     Radius growth under stress control (001 §4.3.1; the expansion of REFD, 000 §2.3): each call
     multiplies the radii by m = 1 + gain (sigma_t - sigma) / S, sigma the mean stress of the six
     box walls (Pa), S = (1/V) sum_c k_n l_c^2 (Pa) from the current contacts; m is capped to
-    [1 - max_strain, 1 + max_strain]. Masses follow the radii.
+    [1 - max_strain, 1 + max_strain]. Masses follow the radii. grown_only (off by default):
+    sigma and S count only the contacts touching a growing sphere and no bonds (in a periodic
+    cell sigma is then those grains' mean normal stress; with walls only S changes), so a
+    sheet of bonded spheres among the grains does not offset the target.
     """
-    def __init__(self, *, walls: collections.abc.Sequence[int], bodies: collections.abc.Sequence[int] = [], target_stress: float, gain: float = 0.5, max_strain: float = 0.001) -> None:
+    def __init__(self, *, walls: collections.abc.Sequence[int], bodies: collections.abc.Sequence[int] = [], target_stress: float, gain: float = 0.5, max_strain: float = 0.001, grown_only: bool = False) -> None:
+        ...
+    @property
+    def grown_only(self) -> bool:
+        """
+        Count only the contacts touching a growing sphere, and no bonds.
+        """
+    @grown_only.setter
+    def grown_only(self, arg1: bool) -> None:
         ...
     @property
     def last_factor(self) -> float:
@@ -994,7 +1005,8 @@ class CellController(Controller):
     tension positive) or servo-controlled (set_stress: the cell stress sigma_rc, Pa, compression
     positive, reaches the target). The servo's strain correction per call is
     gain (target - sigma_rc) / C_rc, C_rc the affine stiffness of the contact network, spread over
-    `period` steps and capped to +-max_rate (1/s).
+    `period` steps and capped to +-max_rate (1/s). Bonds in the cell (a sheet of bonded spheres)
+    count in sigma_rc and C_rc as in Scene.cell_stress.
     """
     def __init__(self, *, gain: float = 0.3, max_rate: float = 1.0) -> None:
         ...
@@ -1018,6 +1030,14 @@ class CellController(Controller):
         """
         Servo-controls sigma_rc to `stress` (Pa, compression positive).
         """
+    @property
+    def allow_tension(self) -> bool:
+        """
+        Tensile normal stress targets allowed (off by default): a cell whose bonds hold the tension.
+        """
+    @allow_tension.setter
+    def allow_tension(self, arg1: bool) -> None:
+        ...
     @property
     def gain(self) -> float:
         ...

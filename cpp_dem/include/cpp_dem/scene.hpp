@@ -182,6 +182,15 @@ class Scene {
   int num_bonds() const { return static_cast<int>(bonds_.size()); }
   /// The bonds (a, b are slots: see id_of).
   const std::vector<Bond>& bonds() const { return bonds_; }
+  /// Where bond l sees its sphere b relative to b's stored position: H times the bond's
+  /// image shift in a periodic cell (Bond::cell_shift), zero without one, m.
+  Vec3 bond_shift(const Bond& l) const {
+    if (!cell_.on) return Vec3::Zero();
+    Vec3 s;
+    for (int a = 0; a < 3; ++a)
+      s[a] = l.cell_shift[a] + bodies_.image[l.b][a] - bodies_.image[l.a][a];
+    return cell_.h * s;
+  }
   /// Every break of a bond part so far, in the order they happened.
   const std::vector<BondBreak>& bond_breaks() const { return bond_breaks_; }
 
@@ -535,15 +544,6 @@ class Scene {
   /// Removes bonded pairs from the broad phase's candidates.
   void drop_bonded_candidates();
   [[noreturn]] void raise_bond_overlap(long k) const;
-  /// Where bond l sees its sphere b relative to b's stored position: H times the bond's
-  /// image shift in a periodic cell (Bond::cell_shift), zero without one, m.
-  Vec3 bond_shift(const Bond& l) const {
-    if (!cell_.on) return Vec3::Zero();
-    Vec3 s;
-    for (int a = 0; a < 3; ++a)
-      s[a] = l.cell_shift[a] + bodies_.image[l.b][a] - bodies_.image[l.a][a];
-    return cell_.h * s;
-  }
   bool has_bonds() const { return !bonds_.empty(); }
   void step();
   void set_energy_reference();

@@ -343,12 +343,40 @@ void RadiusGrowth::set_target_stress(Real sigma) {
 }
 
 void RadiusGrowth::apply(Scene& scene) {
+  const auto& r = scene.radii();
+  const auto& kind = scene.body_kinds();
+  if (grown_only_) {
+    grows_.assign(r.size(), 0);
+    if (bodies_.empty()) {
+      for (size_t b = 0; b < r.size(); ++b) grows_[b] = kind[b] == 0;
+    } else {
+      for (int b : bodies_)
+        if (b >= 0 && b < static_cast<int>(r.size())) grows_[scene.slot_of(b)] = 1;
+    }
+  }
+  // A contact counts unless grown_only and neither side grows (a wall contact: its sphere).
+  const auto counts = [&](const ContactRecord& c) {
+    return !grown_only_ || (c.body1 >= 0 && grows_[c.body1]) || grows_[c.body2];
+  };
   Real volume;
   if (walls_.empty()) {
     if (!scene.is_periodic())
       throw ParameterError("RadiusGrowth: no walls given and the scene has no periodic cell");
-    sigma_ = scene.cell_stress().trace() / 3.0;
     volume = scene.cell().volume();
+    if (!grown_only_) {
+      sigma_ = scene.cell_stress().trace() / 3.0;
+    } else {
+      // The grains' mean normal stress, the trace of (1/V) sum f l^T over their pair
+      // contacts (no bonds) over 3: summed as Scene::cell_stress sums, so that with every
+      // sphere growing and no bonds it is the cell's, bitwise.
+      const auto& x = scene.positions();
+      Mat3 fl = Mat3::Zero();
+      scene.for_each_contact_of(ContactKind::Pair, [&](const ContactRecord& c) {
+        if (c.active && counts(c))
+          fl += c.force2 * (x[c.body2] + c.shift2 - x[c.body1]).transpose();
+      });
+      sigma_ = (fl / volume).trace() / 3.0;
+    }
   } else {
     const auto st = TriaxialController::wall_stresses(scene, walls_);
     Real mean = 0;
@@ -357,18 +385,17 @@ void RadiusGrowth::apply(Scene& scene) {
     const Vec3 size = TriaxialController::box_size(scene, walls_);
     volume = size[0] * size[1] * size[2];
   }
-  const auto& r = scene.radii();
   // Stress increase per unit radius strain from the current contacts, Pa.
   Real s = 0;
   scene.for_each_contact_of(ContactKind::Pair, [&](const ContactRecord& c) {
-    if (!c.active) return;
+    if (!c.active || !counts(c)) return;
     Real kn, ks;
     c.stiffness(kn, ks);
     const Real l = r[c.body1] + r[c.body2];
     s += kn * l * l;
   });
   scene.for_each_contact_of(ContactKind::Wall, [&](const ContactRecord& c) {
-    if (!c.active) return;
+    if (!c.active || !counts(c)) return;
     Real kn, ks;
     c.stiffness(kn, ks);
     s += kn * r[c.body2] * r[c.body2];
@@ -380,7 +407,6 @@ void RadiusGrowth::apply(Scene& scene) {
   if (m == 1.0) return;
   total_ *= m;
   radii_ = r;
-  const auto& kind = scene.body_kinds();
   if (bodies_.empty()) {
     for (size_t b = 0; b < radii_.size(); ++b)
       if (kind[b] == 0) radii_[b] *= m;
@@ -394,18 +420,22 @@ void RadiusGrowth::apply(Scene& scene) {
 }
 
 std::vector<Real> RadiusGrowth::save_state() const {
-  return {target_, gain_, max_strain_, sigma_, total_, last_};
+  std::vector<Real> s{target_, gain_, max_strain_, sigma_, total_, last_};
+  if (grown_only_) s.push_back(1.0);  // (without it: the six values of the older format)
+  return s;
 }
 
 void RadiusGrowth::load_state(const std::vector<Real>& s) {
-  if (s.size() != 6)
-    throw ParameterError("RadiusGrowth state: expected 6 values, got " + std::to_string(s.size()));
+  if (s.size() != 6 && s.size() != 7)
+    throw ParameterError("RadiusGrowth state: expected 6 or 7 values, got " +
+                         std::to_string(s.size()));
   target_ = s[0];
   gain_ = s[1];
   max_strain_ = s[2];
   sigma_ = s[3];
   total_ = s[4];
   last_ = s[5];
+  grown_only_ = s.size() == 7 && s[6] != 0;
 }
 
 // ---- periodic cell ----------------------------------------------------------------------
@@ -431,12 +461,12 @@ void CellController::set_rate(int r, int c, Real rate) {
 void CellController::set_stress(int r, int c, Real sigma) {
   check_index(r, c);
   require(std::isfinite(sigma), "stress", sigma, "must be finite (Pa, compression positive)");
-  if (r == c && sigma < 0)
+  if (r == c && sigma < 0 && !allow_tension_)
     throw ParameterError(
         "stress (" + std::to_string(r) + ", " + std::to_string(c) + ")=" + fmt_real(sigma) +
         " Pa: a tensile normal stress; a periodic cell of cohesionless grains cannot hold "
-        "tension (the servo would stretch it without end; bonds are not supported in a "
-        "periodic cell): give a normal stress >= 0 (Pa, compression positive)");
+        "tension (the servo would stretch it without end): give a normal stress >= 0 (Pa, "
+        "compression positive), or set allow_tension for a cell whose bonds hold it");
   if (r != c && mode_[3 * c + r] == Mode::Stress)
     throw ParameterError("stress (" + std::to_string(r) + ", " + std::to_string(c) +
                          "): component (" + std::to_string(c) + ", " + std::to_string(r) +
@@ -478,6 +508,17 @@ void CellController::apply(Scene& scene) {
       for (int q = 0; q < 3; ++q) stiff_(r, q) += krr * l[q] * l[q];
     }
   });
+  // Bonds, as in Scene::cell_stress (b at the image the bond sees), with their springs.
+  for (const Bond& b : scene.bonds()) {
+    Real kn, ks;
+    b.stiffness(kn, ks);
+    const Vec3 l = x[b.b] + scene.bond_shift(b) - x[b.a];
+    sigma_ += b.force_b * l.transpose();
+    for (int r = 0; r < 3; ++r) {
+      const Real krr = kn * b.normal[r] * b.normal[r] + ks * (1 - b.normal[r] * b.normal[r]);
+      for (int q = 0; q < 3; ++q) stiff_(r, q) += krr * l[q] * l[q];
+    }
+  }
   sigma_ /= volume;
   stiff_ /= volume;
   Mat3 l;

@@ -66,9 +66,8 @@ bool Scene::assemble_stiffness(std::vector<Vec3>& kt, std::vector<Vec3>& kr) con
   for (const Bond& l : bonds_) {
     // The linear contact (when it acts) and the parallel bond, as springs at the contact
     // point; the parallel bond's twisting and bending springs.
-    const bool linear = l.cb_intact || l.fn > 0;
-    const Real kn = (linear ? l.kn : 0) + (l.pb_intact ? l.pb_kn * l.pb_area : 0);
-    const Real ks = (linear ? l.ks : 0) + (l.pb_intact ? l.pb_ks * l.pb_area : 0);
+    Real kn, ks;
+    l.stiffness(kn, ks);
     if (!(kn > 0 || ks > 0)) continue;
     any = true;
     const Real ktw = l.pb_intact ? l.pb_ks * l.pb_j : 0, kbend = l.pb_intact ? l.pb_kn * l.pb_i : 0;

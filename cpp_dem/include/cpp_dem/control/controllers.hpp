@@ -224,6 +224,14 @@ void check_enabled_controllers(const Scene& s);
 /// the current contacts (l_c the branch length: r_i + r_j for a pair, r for a sphere on a
 /// wall) — an adaptive form of 001's fixed constant K. m is capped to [1 - max_strain,
 /// 1 + max_strain] per call; with no contact, m = 1 + max_strain. Masses follow the radii.
+///
+/// grown_only (opt-in, off by default): sigma and S count only the contacts that touch a
+/// growing sphere, and no bonds: the stress of the grains that grow, not of the bodies held
+/// among them. In a periodic cell sigma is then the mean normal stress of those pair contacts
+/// (Love–Weber, 1/V sum f . l / 3); with walls it stays the walls' stress and only S changes.
+/// A reinforced cell's sheet (bonded spheres) carries tension that the grains' growth puts in
+/// it (they wedge into its apertures and stretch it): counted in sigma, it offsets the target,
+/// and the grains end far above it (docs/periodic.md).
 class RadiusGrowth : public Controller, public StatefulController {
  public:
   /// walls: the six box walls, or none in a periodic cell (the stress is then the mean normal
@@ -240,6 +248,10 @@ class RadiusGrowth : public Controller, public StatefulController {
   Real total_factor() const { return total_; }
   /// Multiplier of the last call, -.
   Real last_factor() const { return last_; }
+  /// Count only the contacts touching a growing sphere (see the class).
+  void set_grown_only(bool on) { grown_only_ = on; }
+  bool grown_only() const { return grown_only_; }
+  /// Six values (the format before grown_only) while grown_only is off, seven with it.
   std::vector<Real> save_state() const override;
   void load_state(const std::vector<Real>& st) override;
 
@@ -247,7 +259,9 @@ class RadiusGrowth : public Controller, public StatefulController {
   std::vector<int> walls_, bodies_;
   Real target_, gain_, max_strain_;
   Real sigma_ = 0, total_ = 1, last_ = 1;
+  bool grown_only_ = false;
   std::vector<Real> radii_;  // scratch
+  std::vector<char> grows_;  // scratch: per storage slot, the sphere grows
 };
 
 /// Mixed stress and strain-rate control of a periodic cell (as Yade's PeriTriaxController and
@@ -258,6 +272,10 @@ class RadiusGrowth : public Controller, public StatefulController {
 /// affine stiffness (1/V) sum_c l_c,c^2 K_c,rr of the contact network (K_c = k_n n n +
 /// k_s (I - n n)), spread over the `period` steps to the next call and capped to max_rate.
 /// Without contacts a stress-controlled component moves at the cap towards its target.
+/// Bonds (a sheet of bonded spheres in the cell) count in both, as in the cell stress, with
+/// their springs (Bond::stiffness): a sheet in the x–y plane stiffens C_xx, C_yy and C_xy,
+/// which it resists, and adds nothing to C_rz (its bonds' l_z is zero), so the servo of z is
+/// the grains'.
 class CellController : public Controller {
  public:
   enum class Mode : int { Rate = 0, Stress = 1 };
@@ -270,8 +288,12 @@ class CellController : public Controller {
   /// Servo-controls sigma_rc to sigma (Pa, compression positive) through L_rc. Only one of
   /// (r, c) and (c, r) may be stress-controlled: both act on the same stress. A normal
   /// component (r == c) must be >= 0: a cell of cohesionless grains cannot hold tension (the
-  /// servo would stretch it without end; bonds are not supported in a periodic cell).
+  /// servo would stretch it without end), unless allow_tension (a cell whose bonds hold it).
   void set_stress(int r, int c, Real sigma);
+  /// Tensile normal targets allowed (off by default): for a cell with a sheet of bonded
+  /// spheres that carries the tension (a prestressed reinforced cell).
+  void set_allow_tension(bool on) { allow_tension_ = on; }
+  bool allow_tension() const { return allow_tension_; }
   Mode mode(int r, int c) const { return mode_[3 * r + c]; }
   Real goal(int r, int c) const { return goal_[3 * r + c]; }
   void set_gain(Real g);
@@ -296,6 +318,7 @@ class CellController : public Controller {
   std::array<Mode, 9> mode_{};
   std::array<Real, 9> goal_{};
   Real gain_, max_rate_;
+  bool allow_tension_ = false;
   Mat3 sigma_ = Mat3::Zero(), stiff_ = Mat3::Zero();
   Real error_ = 0;
   std::array<LimitWatch, 9> limit_{};

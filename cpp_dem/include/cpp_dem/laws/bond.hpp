@@ -104,6 +104,14 @@ struct Bond {
   /// The parallel bond's normal and shear stresses sigma, tau at its rim, Pa.
   Real pb_sigma() const { return pb_fn / pb_area + pb_mb.norm() * pb_radius / pb_i; }
   Real pb_tau() const { return pb_fs.norm() / pb_area + std::abs(pb_mt) * pb_radius / pb_j; }
+  /// Its springs acting along and across the normal at the contact point, N/m: the linear
+  /// contact's (when it acts: bonded, or in compression) and the intact parallel bond's
+  /// (k_bar A).
+  void stiffness(Real& k_normal, Real& k_shear) const {
+    const bool linear = cb_intact || fn > 0;
+    k_normal = (linear ? kn : 0) + (pb_intact ? pb_kn * pb_area : 0);
+    k_shear = (linear ? ks : 0) + (pb_intact ? pb_ks * pb_area : 0);
+  }
   /// Energy stored in the intact parallel bond alone (released when it breaks), J.
   Real pb_energy() const {
     if (!pb_intact) return 0;
