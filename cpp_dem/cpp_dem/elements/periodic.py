@@ -111,6 +111,8 @@ class DemElement:
             if self.kind == "periodic":
                 rate = max_rate if max_rate is not None else periodic.default_max_rate(scene)
                 self.controller = CellController(gain=gain, max_rate=rate)
+                # (a cell with bonds, a reinforced one, holds tensile targets: its sheet)
+                self.controller.allow_tension = scene.num_bonds > 0
             else:
                 speed = max_rate if max_rate is not None else prep.default_max_speed(scene,
                                                                                      self.walls)
@@ -279,10 +281,15 @@ class DemElement:
         n = self._steps_for(e, steps, max_strain_per_step)
         self._set_dt()
         dt = float(self.scene.dt)
-        self._check_rate(float(np.abs(e).max()) / (n * dt))
+        if self.kind == "periodic":
+            # (the strain rate: the symmetric part of L; a rigid rotation strains nothing)
+            lg = _rate_for(e, n, dt)
+            self._check_rate(float(np.abs(0.5 * (lg + lg.T)).max()))
+        else:
+            self._check_rate(float(np.abs(e).max()) / (n * dt))
         self.controller.enabled = self.kind == "walls"
         if self.kind == "periodic":
-            self.scene.velocity_gradient = _rate_for(e, n, dt)
+            self.scene.velocity_gradient = lg
             self.scene.run(n)
             self.scene.velocity_gradient = np.zeros((3, 3))
         else:
@@ -377,6 +384,10 @@ class DemElement:
         if self.kind != "periodic":
             raise ParameterError("network_tangent: needs a periodic element (the assembly "
                                  "takes the periodic branch vectors); use fd_tangent")
+        if self.scene.num_bonds:
+            raise ParameterError(f"network_tangent: the cell has {self.scene.num_bonds} bonds "
+                                 "(a reinforced cell's sheet) and the assembly takes pair "
+                                 "contacts only; use fd_tangent")
         from cpp_dem.measure import network_tangent as tangent
 
         d, info = tangent.network_tangent(**self.network_data(), sliding=sliding,
@@ -430,6 +441,7 @@ class DemElement:
         ctl = self.controller
         if self.kind == "periodic":
             cfg = {"gain": ctl.gain, "max_rate": ctl.max_rate,
+                   "allow_tension": ctl.allow_tension,
                    "modes": [[ctl.mode(r, c) for c in range(3)] for r in range(3)],
                    "goals": [[ctl.goal(r, c) for c in range(3)] for r in range(3)]}
         else:
@@ -456,6 +468,7 @@ class DemElement:
         cfg = d["controller"]
         if d["kind"] == "periodic":
             ctl = CellController(gain=cfg["gain"], max_rate=cfg["max_rate"])
+            ctl.allow_tension = bool(cfg.get("allow_tension", False))  # (older bytes: off)
             for r in range(3):
                 for c in range(3):
                     if cfg["modes"][r][c] == "stress":

@@ -1,5 +1,6 @@
-"""The reinforced-soil RVE's sheet (issue 38, first part; docs/periodic.md "A woven sheet in
-a periodic cell"): an endless woven geogrid of bonded spheres in a periodic cell.
+"""The reinforced-soil RVE (issue 38; docs/periodic.md "A reinforced-soil RVE"): a periodic
+cell holding an endless woven geogrid of bonded spheres and grains around it, as a
+``DemElement``.
 
 The cell is periodic along x, y and z. The sheet (cpp_dem.build.woven, ``periodic=True``) lies
 in the plane z = height / 2 and closes through the x and y faces, so it is continuous through
@@ -8,11 +9,13 @@ are whole numbers of the grid's pitch. A prestress (PRS) is locked in by stretch
 along the longitudinal (x) members by T_p / J, J the sheet's series stiffness per metre
 (woven.series_stiffness_per_metre).
 
-Not yet: the grains around it. Grown or servoed with the sheet in the cell, the preparation's
-controllers stall: their stiffness estimate counts the sheet's stiff bonds, so once the grains
-lose contact the growth rate and the cell's strain rate fall to nothing (docs/periodic.md).
+``reinforced_element`` adds the grains: a loose cloud above and below the sheet, grown (the
+grains alone, counting their own contacts: RadiusGrowth.grown_only) to the target stress in
+the fixed cell, then the cell servo takes the whole cell's stress (grains and bonds) to
+(p - T_p / height, p, p) in equilibrium, which leaves the grains near p and the sheet near
+T_p. The element's stress is the whole cell's: the homogenised reinforced layer.
 
-SI units; stresses compression positive in the scene.
+SI units; stresses compression positive in the scene, tension positive from the element.
 """
 
 from __future__ import annotations
@@ -23,6 +26,9 @@ import numpy as np
 
 from cpp_dem._core import ParameterError
 from cpp_dem.build import woven
+from cpp_dem.build.packing import loose_cloud
+from cpp_dem.elements.periodic import DemElement, default_material
+from cpp_dem.protocols import periodic
 from cpp_dem.scene import Scene
 
 
@@ -38,10 +44,11 @@ def stretch_x(scene, strain: float, steps: int) -> None:
     scene.run(4 * steps)
 
 
-def sheet_tension_per_metre(scene, height: float) -> tuple[float, float]:
+def sheet_tension_per_metre(scene, height: float | None = None) -> tuple[float, float]:
     """The sheet's tension per metre of width along x and along y, N/m (tension positive):
     minus its bonds' Love–Weber stress (the sum over the bonds of force x branch over the cell
-    volume) times the cell's ``height`` (m), the spacing of the sheets in the stack."""
+    volume) times the cell's ``height`` (m), the spacing of the sheets in the stack (default:
+    the cell's now, its volume over its x–y face)."""
     f = np.asarray(scene.bond_state()["force"])
     ab = np.asarray(scene.bond_spheres)
     # the branch a -> b, to b's nearest image (bonds are shorter than half the cell)
@@ -50,6 +57,8 @@ def sheet_tension_per_metre(scene, height: float) -> tuple[float, float]:
     d = x[ab[:, 1]] - x[ab[:, 0]]
     d -= np.round(np.linalg.solve(h, d.T).T) @ h.T
     s = np.einsum("ki,kj->ij", f, d) / float(np.linalg.det(h))
+    if height is None:
+        height = float(np.linalg.det(h)) / float(np.linalg.norm(np.cross(h[:, 0], h[:, 1])))
     return -float(s[0, 0]) * height, -float(s[1, 1]) * height
 
 
@@ -90,4 +99,87 @@ def sheet_cell(*, preset: str = "detailed", apertures=(1, 1), height: float | No
     return s, g, mg, ms, lz
 
 
-__all__ = ["sheet_cell", "sheet_tension_per_metre", "stretch_x"]
+def reinforced_element(n: int = 150, *, stress: float = 50e3, prestress: float = 0.0,
+                       preset: str | None = "detailed", apertures=(1, 1),
+                       height: float | None = None, radius_mean: float | None = None,
+                       radius_spread: float = 0.2, seed: int = 1, material=None,
+                       damping: float = 0.7, tol: float = 0.005, unbalanced: float = 1e-4,
+                       growth=(0.5, 1e-3), max_steps: int = 200_000, log=None,
+                       **element_kw) -> DemElement:
+    """A reinforced-soil RVE: a ``DemElement`` whose periodic cell holds the woven sheet of
+    ``sheet_cell(preset, apertures, height, prestress)`` and ``n`` grains of ``material``
+    (default: the soil element's, periodic.default_material) at the isotropic ``stress``
+    (Pa, compression positive), the sheet at ``prestress`` (N/m along x).
+
+    The grains: radii uniform in radius_mean (1 +- radius_spread) (m; seeded), half of them
+    as a loose cloud below the sheet and half above it (cpp_dem.build.packing.loose_cloud);
+    without ``radius_mean`` they fill a quarter of the cell's volume beside the sheet's
+    layer. They grow in the fixed cell to ``stress`` counting their own contacts only
+    (``growth`` is RadiusGrowth's (gain, max_strain per call)); then the cell servo takes
+    the cell stress to (stress - prestress / height, stress, stress) within ``tol`` and the
+    unbalanced force below ``unbalanced`` (periodic.settle_grains).
+
+    ``preset=None``: no sheet, the soil alone: the soil element's cube of ``n`` grains
+    (periodic.cube_cloud, ``radius_mean`` default 1 mm) by the same stages, bitwise
+    ``DemElement.periodic`` with the same arguments. ``element_kw`` go to ``DemElement``."""
+    if int(n) != n or n < 2:
+        raise ParameterError(f"n={n}: the number of grains, a whole number >= 2")
+    n = int(n)
+    if not (math.isfinite(stress) and stress > 0):
+        raise ParameterError(f"stress={stress}: must be > 0 (Pa, compression positive)")
+    if not (0 < radius_spread < 1):
+        raise ParameterError(f"radius_spread={radius_spread}: must be in (0, 1)")
+    if radius_mean is not None and not (math.isfinite(radius_mean) and radius_mean > 0):
+        raise ParameterError(f"radius_mean={radius_mean}: must be > 0 (m) or None")
+    if material is None:
+        material = default_material()
+    gain, max_strain = growth
+    stages = dict(tol=tol, unbalanced=unbalanced, max_steps=max_steps, growth_gain=gain,
+                  growth_max_strain=max_strain, log=log)
+    if preset is None:
+        if prestress != 0:
+            raise ParameterError(f"prestress={prestress}: there is no sheet (preset=None) to "
+                                 "hold it; give a preset ('detailed' or 'standard')")
+        centers, radii, edge = periodic.cube_cloud(
+            n, 1e-3 if radius_mean is None else radius_mean, radius_spread, seed, 0.25)
+        s = periodic.periodic_scene(centers, radii, periodic.cube_cell(edge),
+                                    material=material, damping=damping)
+        periodic.settle_grains(s, stress=stress, grains=np.arange(n), **stages)
+        return DemElement(s, **element_kw)
+    s, _, _, ms, lz = sheet_cell(preset=preset, apertures=apertures, height=height,
+                                 prestress=prestress, damping=damping,
+                                 grain_material=material, log=log)
+    centers, radii = _grains_beside_sheet(s, n, woven.PRESETS[preset]["sphere_radius"], radius_mean,
+                                          radius_spread, seed)
+    ids = s.add_spheres(centers, radii, material=ms)
+    s.set_auto_timestep(0.5, 500)
+    periodic.settle_grains(s, stress=stress, grains=ids, grain_material=ms,
+                           targets=(stress - prestress / lz, stress, stress), **stages)
+    if log:
+        tx, ty = sheet_tension_per_metre(s)
+        log(f"reinforced cell: sheet tension {tx:.4g} N/m along x (prestress {prestress:.4g}),"
+            f" {ty:.4g} N/m along y")
+    return DemElement(s, **element_kw)
+
+
+def _grains_beside_sheet(scene, n: int, sheet_radius: float, radius_mean, spread: float,
+                         seed: int) -> tuple[np.ndarray, np.ndarray]:
+    """n radii uniform in radius_mean (1 +- spread) (m, seeded; without radius_mean scaled to
+    fill 0.25 of the room beside the sheet) as two loose clouds, below and above the sheet's
+    layer (z = height / 2 +- sheet_radius) of the scene's cell (diagonal, m)."""
+    lx, ly, lz = np.diag(np.asarray(scene.cell_matrix))
+    below, above = 0.5 * lz - sheet_radius, 0.5 * lz + sheet_radius
+    rng = np.random.default_rng(seed)
+    radii = 1.0 + spread * (2.0 * rng.random(n) - 1.0)
+    room = lx * ly * (lz - 2 * sheet_radius)
+    if radius_mean is None:
+        radii *= (0.25 * room / np.sum(4.0 / 3.0 * np.pi * radii**3)) ** (1.0 / 3.0)
+    else:
+        radii *= radius_mean
+    seeds = rng.integers(0, 2**31, size=2)
+    c1, r1 = loose_cloud(radii[0::2], (0.0, 0.0, 0.0), (lx, ly, below), seed=int(seeds[0]))
+    c2, r2 = loose_cloud(radii[1::2], (0.0, 0.0, above), (lx, ly, lz), seed=int(seeds[1]))
+    return np.vstack([c1, c2]), np.concatenate([r1, r2])
+
+
+__all__ = ["reinforced_element", "sheet_cell", "sheet_tension_per_metre", "stretch_x"]

@@ -110,11 +110,12 @@ def small_strain(scene) -> np.ndarray:
 def drive_cell(scene, *, stress=None, rate=None, tol: float = 0.01, unbalanced: float = 0.01,
                check_every: int = 200, max_steps: int = 200_000, gain: float = 0.3,
                max_rate: float | None = None, steps: int | None = None,
-               callback=None) -> prep.StageResult:
+               callback=None, allow_tension: bool | None = None) -> prep.StageResult:
     """Mixed control of the cell. ``stress`` maps components (r, c) to targets (Pa,
     compression positive), or is a 3-vector of normal stresses (sigma_x, sigma_y, sigma_z);
     ``rate`` maps components to imposed rates of L (1/s, tension positive). Components named
-    in neither are held (rate 0).
+    in neither are held (rate 0). ``allow_tension``: sets CellController.allow_tension
+    (tensile normal targets, for a cell whose bonds hold them; None leaves it as it is).
 
     Without ``steps``: runs until every stress target is within ``tol`` (relative to the
     largest target) and the
@@ -138,6 +139,8 @@ def drive_cell(scene, *, stress=None, rate=None, tol: float = 0.01, unbalanced: 
     c = cell_controller(scene, gain=gain, max_rate=max_rate)
     if max_rate is not None:
         c.max_rate = max_rate
+    if allow_tension is not None:
+        c.allow_tension = bool(allow_tension)
     for r in range(3):
         for q in range(3):
             if (r, q) in targets:
@@ -188,38 +191,67 @@ def prepare_periodic(n: int, *, material, stress: float, radius_mean: float,
     scene is at rest at the stress."""
     centers, radii, edge = cube_cloud(n, radius_mean, radius_spread, seed, solid_fraction)
     scene = periodic_scene(centers, radii, cube_cell(edge), material=material, damping=damping)
+    settle_grains(scene, stress=stress, porosity=porosity,
+                  prep_friction_deg=prep_friction_deg, tol=tol, unbalanced=unbalanced,
+                  max_steps=max_steps, growth_gain=growth_gain,
+                  growth_max_strain=growth_max_strain, log=log)
+    return scene
+
+
+def settle_grains(scene, *, stress: float, grains=None, grain_material: int = 0,
+                  targets=None, porosity: float | None = None, prep_friction_deg: float | None = None,
+                  tol: float = 0.01, unbalanced: float = 0.01, max_steps: int = 200_000,
+                  growth_gain: float = 0.5, growth_max_strain: float = 1e-3,
+                  log=None) -> None:
+    """The stages of ``prepare_periodic`` after the cloud: the grains grow in the fixed cell
+    to ``stress`` (Pa; at ``prep_friction_deg`` first if given; REFD to ``porosity``
+    instead), then the cell servo takes the cell stress to ``targets`` (the normal stresses
+    (sigma_x, sigma_y, sigma_z), Pa, compression positive; default ``stress`` on each) in
+    equilibrium, and the controllers are removed.
+
+    ``grains``: the ids of the growing spheres, all of material ``grain_material`` (default:
+    every body, numbered from 0). Given, the growth counts only their contacts and no
+    bonds (RadiusGrowth.grown_only), so the stress it reaches is theirs; the servo's targets
+    are the whole cell's (tensile ones allowed when the cell has bonds)."""
+    n = scene.num_bodies if grains is None else len(grains)
+    ids = np.arange(n) if grains is None else np.asarray(grains, dtype=int)
+    only = {} if grains is None else {"bodies": ids, "grown_only": True}
     if porosity is not None:
+        if grains is not None:
+            raise ParameterError("porosity: REFD to a porosity needs a cell of grains alone "
+                                 "(grains=None)")
         prep.refd(scene, (), 0, stress=stress, porosity=porosity, tol=tol,
                   unbalanced=unbalanced, max_steps_per_stage=max_steps, gain=growth_gain,
                   max_strain=growth_max_strain, log=log)
     else:
         if prep_friction_deg is not None:
-            prep.set_friction(scene, np.arange(n), scene.material(0), prep_friction_deg)
+            m = int(grain_material)
+            prep.set_friction(scene, ids, scene.material(m), prep_friction_deg)
             r = prep.grow_to_stress(scene, (), stress, tol=tol, unbalanced=unbalanced,
                                     max_steps=max_steps, gain=growth_gain,
-                                    max_strain=growth_max_strain)
+                                    max_strain=growth_max_strain, **only)
             if log:
                 log(f"growth at {prep_friction_deg} deg: {r.mean_stress:.4g} Pa, porosity "
                     f"{r.porosity:.4f}")
-            for b in range(n):
-                scene.set_body_material(b, 0)
+            for b in ids:
+                scene.set_body_material(int(b), m)
         r = prep.grow_to_stress(scene, (), stress, tol=tol, unbalanced=unbalanced,
                                 max_steps=max_steps, gain=growth_gain,
-                                max_strain=growth_max_strain)
+                                max_strain=growth_max_strain, **only)
         if log:
             log(f"growth: {r.mean_stress:.4g} Pa, porosity {r.porosity:.4f}")
-    res = drive_cell(scene, stress=(stress, stress, stress), tol=tol, unbalanced=unbalanced,
-                     max_steps=max_steps)
+    goal = (stress, stress, stress) if targets is None else tuple(float(x) for x in targets)
+    res = drive_cell(scene, stress=goal, tol=tol, unbalanced=unbalanced, max_steps=max_steps,
+                     allow_tension=True if scene.num_bonds else None)
     if log:
-        log(f"isotropic servo: {res.mean_stress:.4g} Pa, porosity {res.porosity:.4f}, "
+        log(f"servo: {res.axis_stresses} Pa, porosity {res.porosity:.4f}, "
             f"unbalanced {res.unbalanced_force:.3g}, converged {res.converged}")
     if not res.converged:
-        raise RuntimeError(f"prepare_periodic: the cell did not settle at {stress} Pa in "
+        raise RuntimeError(f"prepare_periodic: the cell did not settle at {goal} Pa in "
                            f"{max_steps} steps (reached {res.axis_stresses} Pa, unbalanced "
                            f"{res.unbalanced_force:.3g}); raise max_steps or loosen tol")
     scene.clear_controllers()
     scene.velocity_gradient = np.zeros((3, 3))
-    return scene
 
 
 def plane_strain_biaxial(scene, *, pressure: float, strain: float,
@@ -272,4 +304,4 @@ def plane_strain_biaxial(scene, *, pressure: float, strain: float,
 
 __all__ = ["cube_cell", "periodic_cloud", "cube_cloud", "periodic_scene", "cell_controller",
            "default_max_rate", "deformation_gradient", "small_strain", "drive_cell",
-           "prepare_periodic", "plane_strain_biaxial", "CellController"]
+           "prepare_periodic", "settle_grains", "plane_strain_biaxial", "CellController"]
