@@ -136,6 +136,26 @@ def test_the_reinforced_element_restores_bitwise(prs):
         prs.scene)[0]
 
 
+def test_the_sheet_adds_its_stiffness_per_metre_over_the_height_along_x(prs):
+    # A central difference of 1e-5 along x: the bonds' part of the cell's stiffness, times
+    # the height, is the sheet's tensile stiffness per metre -- at most its straight strings'
+    # affine value (1.004 J), less where the grains have bent them (measured 0.90-0.99 J in
+    # six cells, bench/reinforced_rve.py).
+    j = woven.series_stiffness_per_metre("detailed")
+    lz = float(np.asarray(prs.scene.cell_matrix)[2, 2])
+    out = []
+    for h in (1e-5, -1e-5):
+        el = prs.clone()
+        de = np.zeros((3, 3))
+        de[0, 0] = h
+        total = el.apply_strain(de)[0, 0]
+        out.append((total, -bond_stress(el.scene)[0, 0]))
+    d_total = (out[0][0] - out[1][0]) / 2e-5
+    d_bonds = (out[0][1] - out[1][1]) / 2e-5
+    assert 0.85 * j < d_bonds * lz < 1.005 * j
+    assert d_total > d_bonds  # and the grains add theirs
+
+
 def test_a_rigidly_rotated_reinforced_cell_gives_the_rotated_stress(prs):
     # A quarter turn about z (x -> y, y -> -x) as one increment I + dE = R, at 157 rad/s: the
     # sheet, its bonds through the faces and the grains turn with the cell. Tolerance: the
@@ -212,3 +232,20 @@ def test_growth_around_a_sheet_reaches_the_grains_stress_with_grown_only(prs):
     back.add_controller(h)
     _core._checkpoint_load(back, blob)
     assert h.grown_only
+
+
+def test_the_documented_example_runs(prs):
+    # docs/periodic.md, "A reinforced-soil RVE": its code block, run as shown; it builds
+    # the same element as the fixture (same arguments): bitwise.
+    from pathlib import Path
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "periodic.md").read_text()
+    section = text[text.index("### A reinforced-soil RVE"):]
+    code = section[section.index("```python") + len("```python"):]
+    code = code[:code.index("```")]
+    ns: dict = {}
+    exec(compile(code, "docs/periodic.md", "exec"), ns)
+    assert ns["back"].to_bytes() == ns["el"].to_bytes()
+    assert ns["tx"] == pytest.approx(reinforced.sheet_tension_per_metre(prs.scene)[0],
+                                     rel=1e-12)
+    assert ns["sigma"][0, 0] > prs.stress()[0, 0]  # stretched along the sheet
