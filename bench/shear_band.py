@@ -81,22 +81,6 @@ def band_direction(points: np.ndarray, eq: np.ndarray, percentile: float = 85.0)
             "leans": "right" if d[0] * d[1] > 0 else "left"}
 
 
-def rve_angles(res: dict) -> dict:
-    """phi (peak friction angle, deg) and psi (dilatancy angle at the peak, deg) of one RVE's
-    plane-strain biaxial (``direct_biaxial``'s dict, compression positive): sin phi =
-    (s1 - s3)/(s1 + s3) at the peak; sin psi = -d eps_v / d gamma, gamma = eps_1 - eps_3 =
-    2 eps_1 - eps_v, the slope over the records within 0.5 % axial strain of the peak."""
-    s1, s3 = np.asarray(res["sigma_axial"]), np.asarray(res["sigma_lateral"])
-    e1, ev = np.asarray(res["axial_strain"]), np.asarray(res["volumetric_strain"])
-    k = int(np.argmax(s1))
-    phi = math.degrees(math.asin((s1[k] - s3[k]) / (s1[k] + s3[k])))
-    near = np.abs(e1 - e1[k]) <= 0.005
-    gam = 2 * e1 - ev
-    slope = np.polyfit(gam[near], ev[near], 1)[0] if near.sum() >= 3 else float("nan")
-    psi = math.degrees(math.asin(float(np.clip(-slope, -1, 1))))
-    return {"phi_peak_deg": phi, "psi_deg": psi, "peak_axial_strain": float(e1[k])}
-
-
 def write_strain_xdmf(model, eq: np.ndarray, path: Path) -> None:
     """eps_q per cell (the mean of its points) and the displacement, in one XDMF file."""
     fx = model._fx
@@ -245,7 +229,7 @@ def main(argv=None) -> int:
         runs = biaxial.direct_biaxial(base, list(range(args.rve_seeds)),
                                       pressure=args.pressure, strain=args.strain,
                                       strain_per_step=1e-6, log=None)
-        rves = [rve_angles(r) for r in runs]
+        rves = [biaxial.rve_angles(r) for r in runs]
     phi = float(np.mean([r["phi_peak_deg"] for r in rves])) if rves else float("nan")
     psi = float(np.mean([r["psi_deg"] for r in rves])) if rves else float("nan")
     row = {"elements": n, "mesh": f"{args.nx}x{args.ny}", "degree": args.degree,

@@ -25,8 +25,8 @@ from collections.abc import Callable, Sequence
 
 import numpy as np
 
-__all__ = ["fem_dem_biaxial", "direct_biaxial", "summarise", "at_strain", "WeakZoneFactory",
-           "weak_zone"]
+__all__ = ["fem_dem_biaxial", "direct_biaxial", "summarise", "at_strain", "rve_angles",
+           "WeakZoneFactory", "weak_zone"]
 
 
 @dataclasses.dataclass(frozen=True)
@@ -166,6 +166,22 @@ def direct_biaxial(make: Callable[[int], object], seeds: Sequence[int], *, press
 def at_strain(res: dict, strain: float) -> float:
     """The axial stress (Pa) of a result at an axial strain, linearly interpolated."""
     return float(np.interp(strain, res["axial_strain"], res["sigma_axial"]))
+
+
+def rve_angles(res: dict) -> dict:
+    """phi (peak friction angle, deg) and psi (dilatancy angle at the peak, deg) of one RVE's
+    plane-strain biaxial (``direct_biaxial``'s dict, compression positive): sin phi =
+    (s1 - s3)/(s1 + s3) at the peak; sin psi = -d eps_v / d gamma, gamma = eps_1 - eps_3 =
+    2 eps_1 - eps_v, the slope over the records within 0.5 % axial strain of the peak."""
+    s1, s3 = np.asarray(res["sigma_axial"]), np.asarray(res["sigma_lateral"])
+    e1, ev = np.asarray(res["axial_strain"]), np.asarray(res["volumetric_strain"])
+    k = int(np.argmax(s1))
+    phi = math.degrees(math.asin((s1[k] - s3[k]) / (s1[k] + s3[k])))
+    near = np.abs(e1 - e1[k]) <= 0.005
+    gam = 2 * e1 - ev
+    slope = np.polyfit(gam[near], ev[near], 1)[0] if near.sum() >= 3 else float("nan")
+    psi = math.degrees(math.asin(float(np.clip(-slope, -1, 1))))
+    return {"phi_peak_deg": phi, "psi_deg": psi, "peak_axial_strain": float(e1[k])}
 
 
 def summarise(results: Sequence[dict], keys=("peak_sigma_axial", "peak_axial_strain",

@@ -418,7 +418,9 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
                 cuts += 1
                 if cuts > self.max_cuts:
                     raise NewtonDivergence(f"stage {stage!r}: Newton failed at load factor "
-                                           f"{lf:.6g} after {self.max_cuts} step cuts")
+                                           f"{lf:.6g} after {self.max_cuts} step cuts"
+                                           + (f" (the last: {self.last_failure})"
+                                              if self.last_failure else ""))
                 dlf /= 2.0
                 continue
             self._commit()

@@ -395,10 +395,27 @@ class PoolRegionMaterials:
         self.calls += 1
         self.dem_s += float(sum(step.cpu_s))
         self._last = ([np.asarray(s) for s in step.stresses],
-                      [network_stiffness(None, self.min_eig_fraction, voigt=t)
-                       for t in step.tangents], des, list(step.contacts), list(step.cpu_s))
+                      [self._stiffness(k, t, des[k], c)
+                       for k, (t, c) in enumerate(zip(step.tangents, step.contacts))],
+                      des, list(step.contacts), list(step.cpu_s))
         return {n: (self._last[0][k] - self._stress0[k], self._last[1][k])
                 for k, n in enumerate(self.names)}
+
+    def _stiffness(self, k: int, voigt, increment, contacts: int) -> np.ndarray:
+        """Element k's tangent as a Mandel stiffness (``network_stiffness``). An element
+        that has no stiffness left at this trial (its contacts opened: a cohesionless
+        element stretched past its confinement) fails the Newton iterate
+        (``NewtonFailure``: the model cuts the step and tries a shorter one), naming it."""
+        from femcoupling.handover import HandoverError
+        from femcoupling.quadrature import NewtonFailure
+
+        try:
+            return network_stiffness(None, self.min_eig_fraction, voigt=voigt)
+        except HandoverError as exc:
+            raise NewtonFailure(
+                f"element {self.names[k]}: no stiffness left at this iterate ({contacts} "
+                f"contacts; strain increment {np.round(np.asarray(increment), 7).tolist()}): "
+                f"{exc}") from exc
 
     def trial(self, increments: dict) -> dict:
         """``trial_many``: the group as one ``femcoupling.quadrature.QuadratureMaterial``

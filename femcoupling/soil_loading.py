@@ -98,7 +98,8 @@ class LoadingStages:
 
     def load_footing_to_pressure(self, pressure_pa: float, *, steps: int = 10,
                                  callback: Any = None, tol: float = 0.01,
-                                 max_steps_factor: int = 4) -> list[StepResult]:
+                                 max_steps_factor: int = 4,
+                                 slope_pa_per_m: float | None = None) -> list[StepResult]:
         """Push the footing down as a rigid smooth footing (displacement control) until its
         mean pressure (the reaction, Pa, compression positive) has risen by ``pressure_pa``
         from the current state, within ``tol`` (relative). For a cohesionless soil, whose
@@ -111,7 +112,13 @@ class LoadingStages:
         beyond ``tol`` is taken again, shortened by linear interpolation. The results' ``load_factor`` is the pressure's fraction of the
         target; ``callback(r)`` is called for each accepted step. Raises NewtonDivergence if
         the pressure has not reached the target after ``max_steps_factor`` x ``steps``
-        steps (the soil's bearing capacity is below it)."""
+        steps (the soil's bearing capacity is below it).
+
+        ``slope_pa_per_m`` (Pa/m, > 0): a known pressure–settlement slope to start from
+        instead of the first small settlement (1e-6 of the body's height). With DEM region
+        elements that first settlement raises the pressure by less than the elements' own
+        scatter, so its slope can be anything, and the step it sizes can tear the elements
+        apart; give the slope of a previous stage or of the continuum model then."""
         target = geo._real("pressure_pa", pressure_pa)
         if not target > 0:
             raise FemInputError(f"pressure_pa={pressure_pa!r}: must be > 0 (Pa, compression "
@@ -141,12 +148,17 @@ class LoadingStages:
             return self.footing_pressure_pa() - p0
 
         d1 = 1e-6 * self.body.height_m
-        go(d1)
-        d = d1
-        slope = rise() / d1
-        if not slope > 0:
-            raise NewtonDivergence(f"footing: a settlement of {d1:.3g} m gave no pressure "
-                                   f"({rise():.3g} Pa)")
+        if slope_pa_per_m is None:
+            go(d1)
+            d = d1
+            slope = rise() / d1
+            if not slope > 0:
+                raise NewtonDivergence(f"footing: a settlement of {d1:.3g} m gave no pressure "
+                                       f"({rise():.3g} Pa)")
+        else:
+            slope = geo._real("slope_pa_per_m", slope_pa_per_m)
+            if not slope > 0:
+                raise FemInputError(f"slope_pa_per_m={slope_pa_per_m!r}: must be > 0 (Pa/m)")
         dd = max((target - rise()) / slope / steps, d1)
         taken = 0
         while rise() < target * (1.0 - tol):

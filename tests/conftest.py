@@ -52,6 +52,7 @@ SMOKE_ARGS: dict[str, tuple[str, ...]] = {
     # run).
     "prs_element_002": ("--workers", "2"),
     "pullout_001": (),
+    "footing_multiscale": (),
 }
 
 

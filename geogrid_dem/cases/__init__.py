@@ -8,7 +8,8 @@ The source studies (docs/references.md):
 - "Discrete Element Modeling of Soil-Geogrid Interactions" (a thesis, Yade): ``pullout-001``
   and ``triaxial``;
 - "Microscopic interaction effects of prestressed geogrids in a reinforced soil element" (a
-  journal paper, PFC3D): ``prs-element`` and ``prs-element-002``.
+  journal paper, PFC3D): ``prs-element`` and ``prs-element-002``, and its question at the
+  scale of a structure, ``footing-multiscale``.
 """
 
 from __future__ import annotations
@@ -52,6 +53,9 @@ CASES: dict[str, Case] = {
     "prs-element-002": Case("prs_element_002", PRESTRESS_PAPER,
                             "the element rebuilt from the paper's parts: gravel clumps, the "
                             "woven bonded grid, RE vs PRS"),
+    "footing-multiscale": Case("footing_multiscale", PRESTRESS_PAPER,
+                               "strip footing on unreinforced, RE and PRS soil, a DEM element "
+                               "at every cell of the zone under it"),
     "deposition": Case("deposition", "", "spheres deposited into a box under gravity"),
 }
 

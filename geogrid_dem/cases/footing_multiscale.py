@@ -1,0 +1,164 @@
+#!/usr/bin/env python3
+"""A strip footing on geogrid-reinforced soil, multiscale: a DEM element at every cell of the
+zone under the footing, Drucker–Prager calibrated on the same grains around it.
+
+Plane strain, the half next to the symmetry plane (z up). Three variants on the same seeds:
+unreinforced, RE (one geogrid layer, an elastic band of stiffness J) and PRS (the same layer
+prestressed by T_p). Each is seated to --seat with the fitted Drucker–Prager everywhere;
+then every soil cell of the b x b zone under the footing takes its own dense periodic DEM
+element at its cell's stress (on --workers Dask workers), and the footing is pushed to
+--levels equal pressure rises up to --pressure. The same body with the fitted
+Drucker–Prager everywhere is run for each variant too. This is the prestressed-element
+study's question at the scale of the structure: does prestress improve the
+load–settlement behaviour? (femcoupling.drivers.footing_multiscale; docs/multiscale.md.)
+
+Outputs in --out: load_settlement.csv (a row per level of every run, appended as it
+runs), summary.json (settlement per variant and level: seed mean, sd, each seed, the
+Drucker–Prager body; paired differences between variants over the seeds with their
+standard errors; the coupling statuses; the cost), calibration.json,
+load_settlement.png, fem_<variant>_seed<s>.xdmf (the FEM state at the takeover and at
+each level: ParaView), zone_elements_<variant>_seed<s>.h5 (each element per load step).
+SI units; pressures and settlements compression / downward positive.
+
+The exit status is 0 when every load step of every run converged, else the coupling's
+(3: stopped within the elements' scatter; femcoupling.status).
+"""
+
+from __future__ import annotations
+
+import sys
+from dataclasses import replace
+
+from geogrid_dem.cases import describe
+from geogrid_dem.options import case_parser, parse_checked
+from geogrid_dem.rundir import run_main
+
+#: The test-sized run: a coarse mesh (14-20 zone cells), 80 grains an element, one load
+#: level, two seeds.
+SMOKE = dict(width=2.0, height=1.5, mesh_size=0.5, fine_size=0.35, cell_grains=80, levels=1,
+             fit_points=4, pressure_pa=40e3)
+
+
+def log(msg: str) -> None:
+    print(f"[footing_multiscale] {msg}", flush=True)
+
+
+def build_parser():
+    """The case's parser: the shared options (geogrid_dem.options) and its own."""
+    from femcoupling.drivers.footing_multiscale import VARIANTS, FootingParams
+
+    d = FootingParams()
+    ap = case_parser("footing-multiscale", describe("footing-multiscale",
+                                                    __doc__.split("\n\n")[0]),
+                     smoke=f"coarse mesh, {SMOKE['cell_grains']} grains an element, "
+                           f"{SMOKE['levels']} level to {SMOKE['pressure_pa'] / 1e3:g} kPa, "
+                           "2 seeds", seed=1, threads=1)
+    ap.add_argument("--seeds", type=int, default=None,
+                    help="runs per variant, the zone's elements from seeds --seed, --seed + "
+                         "1, ...; 2 or more give the seed scatter and paired differences "
+                         "(default 3, smoke 2)")
+    ap.add_argument("--variants", default=",".join(VARIANTS),
+                    help=f"comma-separated selection of {', '.join(VARIANTS)}")
+    ap.add_argument("--pressure", type=float, default=None,
+                    help=f"largest footing pressure, Pa (default {d.pressure_pa:g}, smoke "
+                         f"{SMOKE['pressure_pa']:g})")
+    ap.add_argument("--seat", type=float, default=d.seat_pa,
+                    help="seating pressure before the DEM zone takes over, Pa")
+    ap.add_argument("--levels", type=int, default=None,
+                    help=f"equal pressure rises from --seat to --pressure (default {d.levels}, "
+                         f"smoke {SMOKE['levels']})")
+    ap.add_argument("--footing-half-width", type=float, default=d.footing_b,
+                    help="footing half width b, m; the DEM zone is b x b under it")
+    ap.add_argument("--layer-depth", type=float, default=d.layer_depth,
+                    help="the geogrid layer's depth, m")
+    ap.add_argument("--grid-stiffness", type=float, default=d.grid_stiffness,
+                    help="the geogrid's axial stiffness J, N/m (default: the prestressed-"
+                         "element study's woven grid)")
+    ap.add_argument("--prestress", type=float, default=d.prestress,
+                    help="PRS prestress T_p, N/m")
+    ap.add_argument("--fine-size", type=float, default=None,
+                    help=f"FEM cell size in the zone and along the layer, m (default "
+                         f"{d.fine_size:g}, smoke {SMOKE['fine_size']:g})")
+    ap.add_argument("--cell-grains", type=int, default=None,
+                    help=f"grains of each zone cell's element (default {d.cell_grains}, smoke "
+                         f"{SMOKE['cell_grains']}; at least 50)")
+    ap.add_argument("--workers", type=int, default=d.workers,
+                    help="Dask workers of the zone's elements (a LocalCluster)")
+    return ap
+
+
+def parse_args(argv=None):
+    from femcoupling.drivers.footing_multiscale import VARIANTS, FootingParams
+
+    ap = build_parser()
+    a = parse_checked(ap, argv)
+    p = FootingParams(**SMOKE) if a.smoke else FootingParams()
+    seeds = a.seeds if a.seeds is not None else (2 if a.smoke else 3)
+    if seeds < 1:
+        ap.error(f"--seeds={seeds}: must be >= 1")
+    if a.seed < 0:
+        ap.error(f"--seed={a.seed}: must be >= 0")
+    variants = tuple(v.strip() for v in a.variants.split(",") if v.strip())
+    bad = [v for v in variants if v not in VARIANTS]
+    if bad or not variants:
+        ap.error(f"--variants={a.variants!r}: a comma-separated selection of "
+                 f"{', '.join(VARIANTS)}")
+    p = replace(p, seeds=tuple(range(a.seed, a.seed + seeds)),
+                variants=variants, seat_pa=a.seat, footing_b=a.footing_half_width,
+                layer_depth=a.layer_depth, grid_stiffness=a.grid_stiffness,
+                prestress=a.prestress, workers=a.workers)
+    for flag, field in (("--pressure", "pressure_pa"), ("--levels", "levels"),
+                        ("--fine-size", "fine_size"), ("--cell-grains", "cell_grains")):
+        v = getattr(a, flag[2:].replace("-", "_"))
+        if v is not None:
+            p = replace(p, **{field: v})
+    from femcoupling.geometry import FemInputError
+
+    flags = {"pressure_pa": "--pressure", "seat_pa": "--seat", "levels": "--levels",
+             "footing_b": "--footing-half-width", "layer_depth": "--layer-depth",
+             "grid_stiffness": "--grid-stiffness", "prestress": "--prestress",
+             "fine_size": "--fine-size", "cell_grains": "--cell-grains",
+             "workers": "--workers"}
+    try:
+        p.check()
+    except FemInputError as e:
+        field = str(e).split("=", 1)[0]
+        ap.error(f"{flags.get(field, field)}: {e}")
+    return replace(p, threads=a.threads), a.out
+
+
+def main(argv=None) -> int:
+    from cpp_dem import apply_threads
+    from cpp_dem.progress import Progress
+    from femcoupling.drivers.footing_multiscale import run
+
+    p, out = parse_args(argv)
+    done: dict = {}
+
+    def work(o):
+        apply_threads(p.threads)
+        bar = Progress("footing_multiscale")
+        done["summary"] = run(p, o, log, lambda f, detail: bar.update(f, detail))
+        s = done["summary"]
+        for v, pr in s["settlement_m"].items():
+            log(f"{v}: settlement at {[round(x / 1e3, 1) for x in s['pressures_pa']]} kPa: "
+                f"{[round(1e3 * x, 3) for x in pr]} mm (seed mean)")
+        for k, d in s["paired_settlement_differences"].items():
+            se = d["se_m"]
+            log(f"{k}: {[round(1e3 * x, 4) for x in d['mean_m']]} mm"
+                + ("" if se is None else f" +- {[round(1e3 * x, 4) for x in se]} (SE over "
+                   f"{d['seeds']} seeds)"))
+
+    status = run_main("footing_multiscale", out, work)
+    c = done.get("summary", {}).get("coupling")
+    if status != 0 or c is None or c["status"] == "converged":
+        return status
+    print("[footing_multiscale] the coupling did not converge at every step: "
+          + ", ".join(f"{v} {st}" for v, st in c["variants"].items())
+          + f" (exit status {c['exit_code']}; the statuses per step are in summary.json)",
+          file=sys.stderr, flush=True)
+    return c["exit_code"]
+
+
+if __name__ == "__main__":
+    sys.exit(main())

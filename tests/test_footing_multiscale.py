@@ -1,0 +1,151 @@
+"""footing-multiscale: the paired statistic, bad input, the pool's element without
+stiffness, the footing's given first slope, and the smoke run's load-settlement (shared with
+tests/test_cases_smoke.py)."""
+
+from __future__ import annotations
+
+import csv
+import json
+import math
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+ROOT = Path(__file__).resolve().parents[1]
+
+
+def test_paired_differences_over_seeds():
+    from femcoupling.drivers.footing_multiscale import paired
+
+    a = np.array([[1.0, 2.0], [1.2, 2.6], [0.8, 2.3]])
+    b = np.array([[0.5, 1.0], [0.5, 1.0], [0.5, 1.0]])
+    d = paired(a, b)
+    assert d["seeds"] == 3
+    assert d["mean_m"] == pytest.approx([0.5, 1.3])
+    # the differences 0.5, 0.7, 0.3 and 1.0, 1.6, 1.3: sd 0.2 and 0.3, over sqrt(3)
+    assert d["se_m"] == pytest.approx([0.2 / math.sqrt(3), 0.3 / math.sqrt(3)])
+    assert paired(a[:1], b[:1])["se_m"] is None  # one seed: no scatter
+
+
+@pytest.mark.parametrize("field, value, words", [
+    ("levels", 0, "levels=0: must be an integer >= 1"),
+    ("cell_grains", 20, "cell_grains=20: must be an integer >= 50"),
+    ("pressure_pa", 5e3, "pressure_pa=5000.0: must be > seat_pa"),
+    ("seeds", (1, 1), "seeds=(1, 1): must be distinct whole numbers"),
+    ("variants", ("RE", "xx"), "variants=('RE', 'xx'): must be a non-empty selection"),
+    ("footing_b", -1.0, "footing_b=-1.0: must be a finite number > 0"),
+])
+def test_bad_parameters_are_named(field, value, words):
+    from dataclasses import replace
+
+    from femcoupling.drivers.footing_multiscale import FootingParams
+    from femcoupling.geometry import FemInputError
+
+    with pytest.raises(FemInputError, match=words.replace("(", r"\(").replace(")", r"\)")):
+        replace(FootingParams(), **{field: value}).check()
+
+
+def test_the_command_refuses_bad_flags_by_name():
+    for argv, words in ((["--variants", "RE,foo"], "--variants='RE,foo': a comma-separated"),
+                        (["--levels", "0"], "--levels: levels=0: must be an integer >= 1"),
+                        (["--seeds", "0"], "--seeds=0: must be >= 1")):
+        r = subprocess.run([sys.executable, "-m", "geogrid_dem.cases.footing_multiscale",
+                            "--smoke", *argv], capture_output=True, text=True, cwd=ROOT)
+        assert r.returncode == 2 and words in r.stderr, r.stderr
+
+
+def test_an_element_without_stiffness_fails_the_newton_iterate_by_name():
+    """A trial that opens every contact of an element (no stiffness left) is a failed
+    Newton iterate (the model cuts the step), not an error that ends the run."""
+    from femcoupling.quadrature import NewtonFailure
+    from femcoupling.region import PoolRegionMaterials
+
+    g = PoolRegionMaterials.__new__(PoolRegionMaterials)
+    g.names, g.min_eig_fraction = ["zone/7", "zone/9"], 1e-3
+    ok = g._stiffness(0, np.eye(6) * 1e6, np.zeros((3, 3)), 40)
+    assert np.linalg.eigvalsh(ok).min() > 0
+    with pytest.raises(NewtonFailure, match=r"element zone/9: no stiffness left .*0 contacts"):
+        g._stiffness(1, np.zeros((6, 6)), np.eye(3) * 1e-4, 0)
+
+
+@pytest.fixture(scope="module")
+def dp_model():
+    pytest.importorskip("dolfinx_solver")
+    from femcoupling.drivers.footing_multiscale import FootingParams, model
+    from femcoupling.materials import DruckerPrager
+
+    p = FootingParams(width=2.0, height=1.5, mesh_size=0.5, fine_size=0.25)
+    soil = DruckerPrager(young_pa=10e6, poisson=0.3, cohesion_pa=0.0, friction_deg=37.0)
+    return lambda variant="unreinforced": model(p, variant, soil)
+
+
+def test_a_given_first_slope_reaches_the_pressure_as_the_small_first_step_does(dp_model):
+    """``load_footing_to_pressure(slope_pa_per_m=)`` starts from the given slope instead of a
+    first settlement of 1e-6 of the height: both reach the pressure within its 1 %, at
+    settlements within 1 % of each other (the same elastoplastic soil, other steps)."""
+    from femcoupling.geometry import FemInputError
+
+    a, b = dp_model(), dp_model()
+    p0 = a.footing_pressure_pa()
+    ra = a.load_footing_to_pressure(20e3, steps=2)
+    slope = (ra[-1].footing_pressure_pa - p0) / (a.footing_settlement_m()
+                                                 - b.footing_settlement_m())
+    rb = b.load_footing_to_pressure(20e3, steps=2, slope_pa_per_m=slope)
+    for m in (a, b):
+        assert m.footing_pressure_pa() - p0 == pytest.approx(20e3, rel=0.011)
+    assert b.footing_settlement_m() == pytest.approx(a.footing_settlement_m(), rel=0.01)
+    assert len(rb) < len(ra)  # the probe step is not taken
+    with pytest.raises(FemInputError, match="slope_pa_per_m=-1.0: must be > 0"):
+        b.load_footing_to_pressure(1e3, slope_pa_per_m=-1.0)
+
+
+def test_the_prestress_is_in_the_prs_layer_only(dp_model):
+    """The variants' models: RE's layer is unstressed before the footing, PRS's carries T_p
+    (within the FEM's equilibrium: the band's mean force), the unreinforced body has none."""
+    from femcoupling.drivers.footing_multiscale import FootingParams
+
+    T = FootingParams().prestress
+    assert len(dp_model("unreinforced").layers) == 0
+    re, prs = dp_model("RE"), dp_model("PRS")
+    assert abs(re.layer_force_n_per_m(0)) < 0.2 * T  # seated: the footing's pull only
+    assert prs.layer_force_n_per_m(0) - re.layer_force_n_per_m(0) > 0.5 * T
+
+
+def test_the_smoke_gives_load_settlement_for_each_variant(case_smoke):
+    out, proc = case_smoke("footing_multiscale")
+    s = json.loads((out / "summary.json").read_text())
+    assert set(s["variants"]) == {"unreinforced", "RE", "PRS"}
+    levels = len(s["pressures_pa"])
+    seeds = s["params"]["seeds"]
+    assert len(seeds) == 2
+    for v, r in s["variants"].items():
+        ms, dp = r["multiscale"], r["drucker_prager"]
+        assert ms["status"] in ("converged", "stopped_at_scatter"), (v, ms)
+        for seed in seeds:
+            run = ms["runs"][str(seed)]
+            # every level reached within the 1 % of load_footing_to_pressure
+            assert run["pressure_pa"] == pytest.approx(s["pressures_pa"], rel=0.011)
+            assert np.all(np.diff([dp["seated_settlement_m"], *run["settlement_m"]]) > 0)
+            assert run["cells"] >= 10 and run["element_evaluations"] > 0
+        # the zone's elements and the Drucker-Prager fitted on the same grains: within 30 %
+        # (they differ by the zone's network against the continuum's secant)
+        assert np.asarray(ms["settlement_mean_m"]) == pytest.approx(dp["settlement_m"],
+                                                                      rel=0.3)
+        assert s["settlement_m"][v] == ms["settlement_mean_m"]
+    for k in ("RE-unreinforced", "PRS-RE", "PRS-unreinforced"):
+        d = s["paired_settlement_differences"][k]
+        assert d["seeds"] == 2 and len(d["mean_m"]) == levels and len(d["se_m"]) == levels
+    assert s["calibration"]["young_pa"] > 0 and 20 < s["calibration"]["friction_deg"] < 60
+    assert s["cost"]["element_evaluations"] > 0 and s["cost"]["wall_time_s"] > 0
+    # the rows as they were reached: every run's levels, the continuum's and each seed's
+    with (out / "load_settlement.csv").open() as f:
+        rows = list(csv.DictReader(f))
+    assert len(rows) == 3 * (len(seeds) + 1) * levels
+    for v in ("unreinforced", "RE", "PRS"):
+        assert (out / f"fem_{v}_seed{seeds[0]}.xdmf").exists()
+        assert (out / f"zone_elements_{v}_seed{seeds[0]}.h5").exists()
+    assert (out / "load_settlement.png").stat().st_size > 1000
+    assert "ETA" in proc.stdout
