@@ -45,18 +45,6 @@ def log(msg: str) -> None:
     print(f"[reinforced] {msg}", flush=True)
 
 
-def bond_stress(scene) -> np.ndarray:
-    """The bonds' part of the cell stress, Pa, compression positive."""
-    f = np.asarray(scene.bond_state()["force"])
-    if len(f) == 0:
-        return np.zeros((3, 3))
-    ab = np.asarray(scene.bond_spheres)
-    x, h = np.asarray(scene.positions), np.asarray(scene.cell_matrix)
-    d = x[ab[:, 1]] - x[ab[:, 0]]
-    d -= np.round(np.linalg.solve(h, d.T).T) @ h.T
-    return np.einsum("ki,kj->ij", f, d) / float(np.linalg.det(h))
-
-
 def growth(n: int, stress: float, grown_only: bool, max_steps: int) -> dict:
     s, _, _, ms, _ = reinforced.sheet_cell(preset="detailed", grain_material=default_material())
     c, r = reinforced._grains_beside_sheet(s, n, woven.PRESETS["detailed"]["sphere_radius"],
@@ -72,7 +60,7 @@ def growth(n: int, stress: float, grown_only: bool, max_steps: int) -> dict:
         s.run(200)
         done = abs(g.measured_stress - stress) <= 0.01 * stress and s.unbalanced_force() < 0.01
     cell = -np.asarray(s.cell_stress())
-    grains = np.asarray(s.cell_stress()) - bond_stress(s)
+    grains = np.asarray(s.cell_stress()) - reinforced.bond_stress(s)
     return {"grown_only": grown_only, "reached": done, "steps": s.step_count,
             "cpu_s": time.process_time() - t0,
             "grains_mean_pa": float(np.trace(grains)) / 3,
@@ -88,7 +76,7 @@ def stiffness_xx(el: DemElement, h: float) -> tuple[float, float]:
         de = np.zeros((3, 3))
         de[0, 0] = sign * h
         total = c.apply_strain(de)[0, 0]
-        out.append((total, -bond_stress(c.scene)[0, 0]))
+        out.append((total, -reinforced.bond_stress(c.scene)[0, 0]))
     return ((out[0][0] - out[1][0]) / (2 * h), (out[0][1] - out[1][1]) / (2 * h))
 
 

@@ -77,16 +77,6 @@ def prs():
     return reinforced.reinforced_element(150, stress=P, prestress=T_P, seed=1)
 
 
-def bond_stress(scene) -> np.ndarray:
-    """The bonds' part of the cell stress, Pa, compression positive."""
-    f = np.asarray(scene.bond_state()["force"])
-    ab = np.asarray(scene.bond_spheres)
-    x, h = np.asarray(scene.positions), np.asarray(scene.cell_matrix)
-    d = x[ab[:, 1]] - x[ab[:, 0]]
-    d -= np.round(np.linalg.solve(h, d.T).T) @ h.T
-    return np.einsum("ki,kj->ij", f, d) / float(np.linalg.det(h))
-
-
 def test_the_soil_alone_is_the_soil_element():
     # Without a sheet the reinforced RVE's stages (the growth counting the grains' own
     # contacts, the servo on the whole cell) are the soil element's, summed alike: bitwise.
@@ -107,8 +97,8 @@ def test_a_prestress_stays_locked_in_with_grains_around_the_sheet(prs):
     # The cell's sigma_xx is the grains' plus the sheet's, so the sheet is off T_P by what
     # the grains are off P along x, times the height (to the servo's tolerance):
     tx, ty = reinforced.sheet_tension_per_metre(prs.scene)
-    assert tx == pytest.approx(-bond_stress(prs.scene)[0, 0] * lz, rel=1e-9)
-    grains = s - bond_stress(prs.scene)
+    assert tx == pytest.approx(-reinforced.bond_stress(prs.scene)[0, 0] * lz, rel=1e-9)
+    grains = s - reinforced.bond_stress(prs.scene)
     assert tx - T_P == pytest.approx((grains[0, 0] - P) * lz, abs=0.005 * P * lz)
     # The grains grown around the sheet press into its apertures, more along the sheet than
     # across it: measured in 150-grain cells, the grains 0-30 % above P in the plane and the
@@ -149,7 +139,7 @@ def test_the_sheet_adds_its_stiffness_per_metre_over_the_height_along_x(prs):
         de = np.zeros((3, 3))
         de[0, 0] = h
         total = el.apply_strain(de)[0, 0]
-        out.append((total, -bond_stress(el.scene)[0, 0]))
+        out.append((total, -reinforced.bond_stress(el.scene)[0, 0]))
     d_total = (out[0][0] - out[1][0]) / 2e-5
     d_bonds = (out[0][1] - out[1][1]) / 2e-5
     assert 0.85 * j < d_bonds * lz < 1.005 * j
@@ -221,7 +211,7 @@ def test_growth_around_a_sheet_reaches_the_grains_stress_with_grown_only(prs):
     g = _core.RadiusGrowth(walls=[], bodies=ids, target_stress=P, grown_only=True)
     sc.add_controller(g)
     sc.run(1)
-    grains = -prs.stress() - bond_stress(prs.scene)
+    grains = -prs.stress() - reinforced.bond_stress(prs.scene)
     assert g.measured_stress == pytest.approx(np.trace(grains) / 3, rel=0.01)
     cell = float(np.trace(-prs.stress())) / 3
     assert abs(cell - g.measured_stress) > 0.1 * P  # (what counting the bonds would see)

@@ -44,20 +44,28 @@ def stretch_x(scene, strain: float, steps: int) -> None:
     scene.run(4 * steps)
 
 
-def sheet_tension_per_metre(scene, height: float | None = None) -> tuple[float, float]:
-    """The sheet's tension per metre of width along x and along y, N/m (tension positive):
-    minus its bonds' Love–Weber stress (the sum over the bonds of force x branch over the cell
-    volume) times the cell's ``height`` (m), the spacing of the sheets in the stack (default:
-    the cell's now, its volume over its x–y face)."""
-    f = np.asarray(scene.bond_state()["force"])
-    ab = np.asarray(scene.bond_spheres)
-    # the branch a -> b, to b's nearest image (bonds are shorter than half the cell)
+def bond_stress(scene) -> np.ndarray:
+    """The bonds' part of the cell stress (Love–Weber: the sum over the bonds of force x
+    branch, over the cell volume), Pa, compression positive, 3 x 3. The cell stress less it
+    is the grains'."""
+    f = np.asarray(scene.bond_state()["force"]).reshape(-1, 3)
+    ab = np.asarray(scene.bond_spheres, dtype=int).reshape(-1, 2)
     x = np.asarray(scene.positions)
     h = np.asarray(scene.cell_matrix)
+    # the branch a -> b, to b's nearest image (bonds are shorter than half the cell)
     d = x[ab[:, 1]] - x[ab[:, 0]]
     d -= np.round(np.linalg.solve(h, d.T).T) @ h.T
-    s = np.einsum("ki,kj->ij", f, d) / float(np.linalg.det(h))
+    return np.einsum("ki,kj->ij", f, d) / float(np.linalg.det(h))
+
+
+def sheet_tension_per_metre(scene, height: float | None = None) -> tuple[float, float]:
+    """The sheet's tension per metre of width along x and along y, N/m (tension positive):
+    minus its bonds' Love–Weber stress (``bond_stress``) times the cell's ``height`` (m), the
+    spacing of the sheets in the stack (default: the cell's now, its volume over its x–y
+    face)."""
+    s = bond_stress(scene)
     if height is None:
+        h = np.asarray(scene.cell_matrix)
         height = float(np.linalg.det(h)) / float(np.linalg.norm(np.cross(h[:, 0], h[:, 1])))
     return -float(s[0, 0]) * height, -float(s[1, 1]) * height
 
@@ -182,4 +190,4 @@ def _grains_beside_sheet(scene, n: int, sheet_radius: float, radius_mean, spread
     return np.vstack([c1, c2]), np.concatenate([r1, r2])
 
 
-__all__ = ["reinforced_element", "sheet_cell", "sheet_tension_per_metre", "stretch_x"]
+__all__ = ["bond_stress", "reinforced_element", "sheet_cell", "sheet_tension_per_metre", "stretch_x"]
