@@ -90,25 +90,35 @@ def test_the_soil_alone_is_the_soil_element():
 
 
 def test_a_prestress_stays_locked_in_with_grains_around_the_sheet(prs):
-    lz = float(np.asarray(prs.scene.cell_matrix)[2, 2])
-    s = -prs.stress()  # compression positive
-    # the cell is at its targets: sigma_xx is the grains' P less the sheet's T_P / height
-    assert np.diag(s) == pytest.approx([P - T_P / lz, P, P], abs=0.005 * P)
-    # The cell's sigma_xx is the grains' plus the sheet's, so the sheet is off T_P by what
-    # the grains are off P along x, times the height (to the servo's tolerance):
+    lz = reinforced.cell_height(prs.scene)
+    band = 0.005 * P  # the preparation's tolerance
+    # the sheet at T_P along x and unloaded along y, to the tolerance times the height
     tx, ty = reinforced.sheet_tension_per_metre(prs.scene)
-    assert tx == pytest.approx(-reinforced.bond_stress(prs.scene)[0, 0] * lz, rel=1e-9)
+    assert abs(tx - T_P) <= band * lz and abs(ty) <= band * lz
+    # the grains at P on average, sigma_zz at P; the cell's sigma_xx is the grains' less
+    # T_P / height (the grains' own split between x and y is theirs: measured 46.6 and
+    # 52.7 kPa)
+    s = -prs.stress()  # compression positive
     grains = s - reinforced.bond_stress(prs.scene)
-    assert tx - T_P == pytest.approx((grains[0, 0] - P) * lz, abs=0.005 * P * lz)
-    # The grains grown around the sheet press into its apertures, more along the sheet than
-    # across it: measured in 150-grain cells, the grains 0-30 % above P in the plane and the
-    # sheet at 1981 and 2279 N/m (seeds 2, 1), 23-134 N/m without the prestress.
-    assert abs(tx - T_P) < 0.2 * T_P
-    assert abs(ty) < 0.25 * T_P
+    assert np.trace(grains) / 3 == pytest.approx(P, abs=2 * band)
+    assert s[2, 2] == pytest.approx(P, abs=band)
+    assert s[0, 0] == pytest.approx(grains[0, 0] - T_P / lz, abs=band)
+    assert abs(grains[0, 0] - grains[1, 1]) < 0.3 * P
     # and it stays: held at this strain, the sheet keeps its tension
     el = prs.clone()
     el.scene.run(20000)
     assert reinforced.sheet_tension_per_metre(el.scene)[0] == pytest.approx(tx, rel=0.01)
+
+
+def test_an_unreinforced_sheet_ends_unloaded_with_large_grains():
+    # 80 grains (6.1 mm across against the 16 mm apertures) press the sheet's strands apart;
+    # a servo of the whole cell to an isotropic stress left this sheet at -195 N/m, in
+    # compression. Following the sheet instead, it ends unloaded (its strands still bent:
+    # 0.48 J along x, docs/periodic.md).
+    el = reinforced.reinforced_element(80, stress=P, seed=1)
+    lz = reinforced.cell_height(el.scene)
+    tx, ty = reinforced.sheet_tension_per_metre(el.scene)
+    assert abs(tx) <= 0.005 * P * lz and abs(ty) <= 0.005 * P * lz
 
 
 def test_the_reinforced_element_restores_bitwise(prs):
@@ -126,39 +136,42 @@ def test_the_reinforced_element_restores_bitwise(prs):
         prs.scene)[0]
 
 
-def test_the_sheet_adds_its_stiffness_per_metre_over_the_height_along_x(prs):
-    # A central difference of 1e-5 along x: the bonds' part of the cell's stiffness, times
-    # the height, is the sheet's tensile stiffness per metre -- at most its straight strings'
-    # affine value (1.004 J), less where the grains have bent them (measured 0.90-0.99 J in
-    # six cells, bench/reinforced_rve.py).
-    j = woven.series_stiffness_per_metre("detailed")
-    lz = float(np.asarray(prs.scene.cell_matrix)[2, 2])
+def sheet_stiffness_x(el) -> float:
+    """The bonds' part of the element's stiffness along x, Pa: a central difference of
+    1e-5 on clones."""
     out = []
     for h in (1e-5, -1e-5):
-        el = prs.clone()
+        c = el.clone()
         de = np.zeros((3, 3))
         de[0, 0] = h
-        total = el.apply_strain(de)[0, 0]
-        out.append((total, -reinforced.bond_stress(el.scene)[0, 0]))
-    d_total = (out[0][0] - out[1][0]) / 2e-5
-    d_bonds = (out[0][1] - out[1][1]) / 2e-5
-    assert 0.85 * j < d_bonds * lz < 1.005 * j
-    assert d_total > d_bonds  # and the grains add theirs
+        c.apply_strain(de)
+        out.append(-reinforced.bond_stress(c.scene)[0, 0])
+    return (out[0] - out[1]) / 2e-5
+
+
+def test_the_sheet_adds_its_stiffness_per_metre_over_the_height_along_x(prs):
+    # The bonds' part of the cell's stiffness along x, times the height, is the sheet's
+    # tensile stiffness per metre: at most its straight strings' affine value (1.004 J),
+    # less where the grains have bent them (bench/reinforced_rve.py).
+    j = woven.series_stiffness_per_metre("detailed")
+    assert 0.85 * j < sheet_stiffness_x(prs) * reinforced.cell_height(prs.scene) < 1.005 * j
 
 
 def test_a_rigidly_rotated_reinforced_cell_gives_the_rotated_stress(prs):
     # A quarter turn about z (x -> y, y -> -x) as one increment I + dE = R, at 157 rad/s: the
     # sheet, its bonds through the faces and the grains turn with the cell. Tolerance: the
-    # soil element's (2e-3 of |sigma|, docs/periodic.md); measured 7e-4 here.
+    # soil element's (2e-3 of |sigma|, docs/periodic.md); measured 4e-5 here.
     el = prs.clone()
+    el.scene.run(20000)  # (at rest first: a loose packing creeps, 0.2 % of its stress)
     s0 = el.stress()
+    tx, ty = reinforced.sheet_tension_per_metre(el.scene)
     rot = np.array([[0.0, -1.0, 0.0], [1.0, 0.0, 0.0], [0.0, 0.0, 1.0]])
     s1 = el.apply_strain(rot - np.eye(3), steps=20000, unbalanced=1e-4)
     assert np.allclose(s1, rot @ s0 @ rot.T, atol=2e-3 * np.linalg.norm(s0))
     # the sheet's tension that was along x is now along y, and the other way round
-    tx, ty = reinforced.sheet_tension_per_metre(prs.scene)
     assert reinforced.sheet_tension_per_metre(el.scene) == pytest.approx((ty, tx),
                                                                           abs=1e-3 * tx)
+    assert abs(ty) < 10.0 and tx > 0.99 * T_P
 
 
 @pytest.mark.parametrize("kw, msg", [

@@ -10,10 +10,11 @@ along the longitudinal (x) members by T_p / J, J the sheet's series stiffness pe
 (woven.series_stiffness_per_metre).
 
 ``reinforced_element`` adds the grains: a loose cloud above and below the sheet, grown (the
-grains alone, counting their own contacts: RadiusGrowth.grown_only) to the target stress in
-the fixed cell, then the cell servo takes the whole cell's stress (grains and bonds) to
-(p - T_p / height, p, p) in equilibrium, which leaves the grains near p and the sheet near
-T_p. The element's stress is the whole cell's: the homogenised reinforced layer.
+grains alone, counting their own contacts: RadiusGrowth.grown_only) to the target stress p in
+the fixed cell; then (``hold_sheet``) the cell's x and y edges follow the sheet until it
+carries T_p along x and nothing along y, while the grains keep their mean stress at p and the
+cell servo holds sigma_zz at p. The element's stress is the whole cell's: the homogenised
+reinforced layer.
 
 SI units; stresses compression positive in the scene, tension positive from the element.
 """
@@ -65,9 +66,14 @@ def sheet_tension_per_metre(scene, height: float | None = None) -> tuple[float, 
     face)."""
     s = bond_stress(scene)
     if height is None:
-        h = np.asarray(scene.cell_matrix)
-        height = float(np.linalg.det(h)) / float(np.linalg.norm(np.cross(h[:, 0], h[:, 1])))
+        height = cell_height(scene)
     return -float(s[0, 0]) * height, -float(s[1, 1]) * height
+
+
+def cell_height(scene) -> float:
+    """The cell's height, m: its volume over its x–y face (the spacing of the sheets)."""
+    h = np.asarray(scene.cell_matrix)
+    return float(np.linalg.det(h)) / float(np.linalg.norm(np.cross(h[:, 0], h[:, 1])))
 
 
 def sheet_cell(*, preset: str = "detailed", apertures=(1, 1), height: float | None = None,
@@ -123,9 +129,11 @@ def reinforced_element(n: int = 150, *, stress: float = 50e3, prestress: float =
     as a loose cloud below the sheet and half above it (cpp_dem.build.packing.loose_cloud);
     without ``radius_mean`` they fill a quarter of the cell's volume beside the sheet's
     layer. They grow in the fixed cell to ``stress`` counting their own contacts only
-    (``growth`` is RadiusGrowth's (gain, max_strain per call)); then the cell servo takes
-    the cell stress to (stress - prestress / height, stress, stress) within ``tol`` and the
-    unbalanced force below ``unbalanced`` (periodic.settle_grains).
+    (periodic.grow_grains; ``growth`` is RadiusGrowth's (gain, max_strain per call)); then
+    ``hold_sheet`` brings the sheet to ``prestress`` along x and 0 along y, the grains' mean
+    stress and the cell's sigma_zz to ``stress``, within ``tol`` and with the unbalanced
+    force below ``unbalanced``. At rest the cell's sigma_xx and sigma_yy are the grains'
+    (their split is theirs) less the sheet's prestress / height along x.
 
     ``preset=None``: no sheet, the soil alone: the soil element's cube of ``n`` grains
     (periodic.cube_cloud, ``radius_mean`` default 1 mm) by the same stages, bitwise
@@ -154,20 +162,78 @@ def reinforced_element(n: int = 150, *, stress: float = 50e3, prestress: float =
                                     material=material, damping=damping)
         periodic.settle_grains(s, stress=stress, grains=np.arange(n), **stages)
         return DemElement(s, **element_kw)
-    s, _, _, ms, lz = sheet_cell(preset=preset, apertures=apertures, height=height,
+    s, _, _, ms, _ = sheet_cell(preset=preset, apertures=apertures, height=height,
                                  prestress=prestress, damping=damping,
                                  grain_material=material, log=log)
     centers, radii = _grains_beside_sheet(s, n, woven.PRESETS[preset]["sphere_radius"], radius_mean,
                                           radius_spread, seed)
     ids = s.add_spheres(centers, radii, material=ms)
     s.set_auto_timestep(0.5, 500)
-    periodic.settle_grains(s, stress=stress, grains=ids, grain_material=ms,
-                           targets=(stress - prestress / lz, stress, stress), **stages)
-    if log:
-        tx, ty = sheet_tension_per_metre(s)
-        log(f"reinforced cell: sheet tension {tx:.4g} N/m along x (prestress {prestress:.4g}),"
-            f" {ty:.4g} N/m along y")
+    periodic.grow_grains(s, stress=stress, grains=ids, grain_material=ms, **stages)
+    hold_sheet(s, ids, stress=stress, prestress=prestress,
+               stiffness=woven.series_stiffness_per_metre(preset), tol=tol,
+               unbalanced=unbalanced, max_steps=max_steps, log=log)
     return DemElement(s, **element_kw)
+
+
+def hold_sheet(scene, grains, *, stress: float, prestress: float, stiffness: float,
+               tol: float = 0.005, unbalanced: float = 1e-4, max_steps: int = 200_000,
+               check_every: int = 200, checks: int = 5, gain: float = 0.3, log=None) -> int:
+    """The last stage of a reinforced cell: together until all hold,
+    - the ``grains`` keep growing (slowly) to their mean normal stress ``stress`` (Pa),
+      counting their own contacts (RadiusGrowth.grown_only);
+    - the cell servo holds the cell's sigma_zz at ``stress``;
+    - the cell's x and y edges follow the sheet: every ``check_every`` steps the rate of each
+      is set to take the sheet's tension per metre (``sheet_tension_per_metre``) to
+      ``prestress`` along x and 0 along y, a ``gain`` of the miss over the sheet's
+      ``stiffness`` per metre (N/m) per check, capped as the servo;
+    within ``tol`` x ``stress`` (x the height for the tensions) and with the unbalanced force
+    below ``unbalanced``, at ``checks`` checks in a row (a loose packing passes one check in
+    passing and creeps on: 0.5 % of its stress in 20 000 steps after one). The grains' own
+    split between x and y is left free. The controllers are removed at the end; returns the
+    steps run."""
+    from cpp_dem import _core
+
+    ids = [int(b) for b in grains]
+    growth = _core.RadiusGrowth(walls=[], bodies=ids, target_stress=stress, gain=0.2,
+                                max_strain=1e-4, grown_only=True)
+    scene.add_controller(growth)
+    servo = periodic.cell_controller(scene)
+    servo.allow_tension = True
+    servo.set_stress(2, 2, stress)
+    servo.enabled = True
+    start = scene.step_count
+    ok, passed = False, 0
+    while not ok and scene.step_count - start < max_steps:
+        height = cell_height(scene)
+        span = check_every * float(scene.dt)
+        miss = np.array(sheet_tension_per_metre(scene)) - (prestress, 0.0)
+        for a in (0, 1):
+            rate = -gain * float(miss[a]) / (stiffness * span)
+            servo.set_rate(a, a, float(np.clip(rate, -servo.max_rate, servo.max_rate)))
+        scene.run(check_every)
+        band = tol * stress
+        held = (np.all(np.abs(np.array(sheet_tension_per_metre(scene)) - (prestress, 0.0))
+                       <= band * height)
+                and abs(growth.measured_stress - stress) <= band
+                and abs(float(np.asarray(scene.cell_stress())[2, 2]) - stress) <= band
+                and float(scene.unbalanced_force()) < unbalanced)
+        passed = passed + 1 if held else 0
+        ok = passed >= checks
+    tx, ty = sheet_tension_per_metre(scene)
+    if log:
+        log(f"sheet held: {tx:.4g}, {ty:.4g} N/m (x, y), the grains at "
+            f"{growth.measured_stress:.4g} Pa, in {scene.step_count - start} steps")
+    if not ok:
+        raise RuntimeError(f"reinforced_element: the cell did not settle in {max_steps} steps: "
+                           f"the sheet at {tx:.4g}, {ty:.4g} N/m (targets {prestress:.4g}, 0),"
+                           f" the grains at {growth.measured_stress:.4g} Pa and sigma_zz at "
+                           f"{float(np.asarray(scene.cell_stress())[2, 2]):.4g} Pa (target "
+                           f"{stress:.4g}), unbalanced {float(scene.unbalanced_force()):.3g}; "
+                           "raise max_steps or loosen tol")
+    scene.clear_controllers()
+    scene.velocity_gradient = np.zeros((3, 3))
+    return scene.step_count - start
 
 
 def _grains_beside_sheet(scene, n: int, sheet_radius: float, radius_mean, spread: float,
@@ -190,4 +256,4 @@ def _grains_beside_sheet(scene, n: int, sheet_radius: float, radius_mean, spread
     return np.vstack([c1, c2]), np.concatenate([r1, r2])
 
 
-__all__ = ["bond_stress", "reinforced_element", "sheet_cell", "sheet_tension_per_metre", "stretch_x"]
+__all__ = ["bond_stress", "hold_sheet", "reinforced_element", "sheet_cell", "sheet_tension_per_metre", "stretch_x"]

@@ -198,21 +198,39 @@ def prepare_periodic(n: int, *, material, stress: float, radius_mean: float,
     return scene
 
 
-def settle_grains(scene, *, stress: float, grains=None, grain_material: int = 0,
-                  targets=None, porosity: float | None = None, prep_friction_deg: float | None = None,
-                  tol: float = 0.01, unbalanced: float = 0.01, max_steps: int = 200_000,
-                  growth_gain: float = 0.5, growth_max_strain: float = 1e-3,
-                  log=None) -> None:
-    """The stages of ``prepare_periodic`` after the cloud: the grains grow in the fixed cell
-    to ``stress`` (Pa; at ``prep_friction_deg`` first if given; REFD to ``porosity``
-    instead), then the cell servo takes the cell stress to ``targets`` (the normal stresses
-    (sigma_x, sigma_y, sigma_z), Pa, compression positive; default ``stress`` on each) in
-    equilibrium, and the controllers are removed.
+def settle_grains(scene, *, stress: float, porosity: float | None = None,
+                  prep_friction_deg: float | None = None, tol: float = 0.01,
+                  unbalanced: float = 0.01, max_steps: int = 200_000, log=None,
+                  **grow) -> None:
+    """The stages of ``prepare_periodic`` after the cloud: ``grow_grains`` (``grow``: its
+    grains, grain_material, growth_gain, growth_max_strain), then the isotropic cell servo
+    to ``stress`` (Pa) in equilibrium, and the controllers are removed."""
+    grow_grains(scene, stress=stress, porosity=porosity, prep_friction_deg=prep_friction_deg,
+                tol=tol, unbalanced=unbalanced, max_steps=max_steps, log=log, **grow)
+    res = drive_cell(scene, stress=(stress, stress, stress), tol=tol, unbalanced=unbalanced,
+                     max_steps=max_steps)
+    if log:
+        log(f"isotropic servo: {res.mean_stress:.4g} Pa, porosity {res.porosity:.4f}, "
+            f"unbalanced {res.unbalanced_force:.3g}, converged {res.converged}")
+    if not res.converged:
+        raise RuntimeError(f"prepare_periodic: the cell did not settle at {stress} Pa in "
+                           f"{max_steps} steps (reached {res.axis_stresses} Pa, unbalanced "
+                           f"{res.unbalanced_force:.3g}); raise max_steps or loosen tol")
+    scene.clear_controllers()
+    scene.velocity_gradient = np.zeros((3, 3))
+
+
+def grow_grains(scene, *, stress: float, grains=None, grain_material: int = 0,
+                porosity: float | None = None, prep_friction_deg: float | None = None,
+                tol: float = 0.01, unbalanced: float = 0.01, max_steps: int = 200_000,
+                growth_gain: float = 0.5, growth_max_strain: float = 1e-3,
+                log=None) -> None:
+    """The grains grow in the fixed cell to ``stress`` (Pa): at ``prep_friction_deg`` first if
+    given, then at their material's friction; REFD (000 §2.3) to ``porosity`` instead.
 
     ``grains``: the ids of the growing spheres, all of material ``grain_material`` (default:
-    every body, numbered from 0). Given, the growth counts only their contacts and no
-    bonds (RadiusGrowth.grown_only), so the stress it reaches is theirs; the servo's targets
-    are the whole cell's (tensile ones allowed when the cell has bonds)."""
+    every body, numbered from 0). Given, the growth counts only their contacts and no bonds
+    (RadiusGrowth.grown_only), so the stress it reaches is theirs, not the cell's."""
     n = scene.num_bodies if grains is None else len(grains)
     ids = np.arange(n) if grains is None else np.asarray(grains, dtype=int)
     only = {} if grains is None else {"bodies": ids, "grown_only": True}
@@ -223,35 +241,23 @@ def settle_grains(scene, *, stress: float, grains=None, grain_material: int = 0,
         prep.refd(scene, (), 0, stress=stress, porosity=porosity, tol=tol,
                   unbalanced=unbalanced, max_steps_per_stage=max_steps, gain=growth_gain,
                   max_strain=growth_max_strain, log=log)
-    else:
-        if prep_friction_deg is not None:
-            m = int(grain_material)
-            prep.set_friction(scene, ids, scene.material(m), prep_friction_deg)
-            r = prep.grow_to_stress(scene, (), stress, tol=tol, unbalanced=unbalanced,
-                                    max_steps=max_steps, gain=growth_gain,
-                                    max_strain=growth_max_strain, **only)
-            if log:
-                log(f"growth at {prep_friction_deg} deg: {r.mean_stress:.4g} Pa, porosity "
-                    f"{r.porosity:.4f}")
-            for b in ids:
-                scene.set_body_material(int(b), m)
+        return
+    if prep_friction_deg is not None:
+        m = int(grain_material)
+        prep.set_friction(scene, ids, scene.material(m), prep_friction_deg)
         r = prep.grow_to_stress(scene, (), stress, tol=tol, unbalanced=unbalanced,
                                 max_steps=max_steps, gain=growth_gain,
                                 max_strain=growth_max_strain, **only)
         if log:
-            log(f"growth: {r.mean_stress:.4g} Pa, porosity {r.porosity:.4f}")
-    goal = (stress, stress, stress) if targets is None else tuple(float(x) for x in targets)
-    res = drive_cell(scene, stress=goal, tol=tol, unbalanced=unbalanced, max_steps=max_steps,
-                     allow_tension=True if scene.num_bonds else None)
+            log(f"growth at {prep_friction_deg} deg: {r.mean_stress:.4g} Pa, porosity "
+                f"{r.porosity:.4f}")
+        for b in ids:
+            scene.set_body_material(int(b), m)
+    r = prep.grow_to_stress(scene, (), stress, tol=tol, unbalanced=unbalanced,
+                            max_steps=max_steps, gain=growth_gain,
+                            max_strain=growth_max_strain, **only)
     if log:
-        log(f"servo: {res.axis_stresses} Pa, porosity {res.porosity:.4f}, "
-            f"unbalanced {res.unbalanced_force:.3g}, converged {res.converged}")
-    if not res.converged:
-        raise RuntimeError(f"prepare_periodic: the cell did not settle at {goal} Pa in "
-                           f"{max_steps} steps (reached {res.axis_stresses} Pa, unbalanced "
-                           f"{res.unbalanced_force:.3g}); raise max_steps or loosen tol")
-    scene.clear_controllers()
-    scene.velocity_gradient = np.zeros((3, 3))
+        log(f"growth: {r.mean_stress:.4g} Pa, porosity {r.porosity:.4f}")
 
 
 def plane_strain_biaxial(scene, *, pressure: float, strain: float,
@@ -304,4 +310,4 @@ def plane_strain_biaxial(scene, *, pressure: float, strain: float,
 
 __all__ = ["cube_cell", "periodic_cloud", "cube_cloud", "periodic_scene", "cell_controller",
            "default_max_rate", "deformation_gradient", "small_strain", "drive_cell",
-           "prepare_periodic", "settle_grains", "plane_strain_biaxial", "CellController"]
+           "prepare_periodic", "settle_grains", "grow_grains", "plane_strain_biaxial", "CellController"]
