@@ -115,6 +115,8 @@ def main(argv=None) -> int:
                    "bonds_j_ratio": d_bonds * lz / j if kind != "soil" else None}
             if kind != "soil":
                 row["sheet_tension_n_per_m"] = reinforced.sheet_tension_per_metre(el.scene)
+                g = -el.stress() - reinforced.bond_stress(el.scene)
+                row["grains_normal_pa"] = np.diag(g).tolist()  # compression positive
             if kind == "PRS":
                 el.apply_stress(-a.stress * np.eye(3), components=((0, 0), (1, 1), (2, 2)))
                 row["released_sheet_tension_n_per_m"] = reinforced.sheet_tension_per_metre(

@@ -152,7 +152,8 @@ def sheet_stiffness_x(el) -> float:
 def test_the_sheet_adds_its_stiffness_per_metre_over_the_height_along_x(prs):
     # The bonds' part of the cell's stiffness along x, times the height, is the sheet's
     # tensile stiffness per metre: at most its straight strings' affine value (1.004 J),
-    # less where the grains have bent them (bench/reinforced_rve.py).
+    # less where the grains have bent them (PRS 0.96-0.99 J, RE 0.73-0.94 J:
+    # bench/reinforced_rve.py).
     j = woven.series_stiffness_per_metre("detailed")
     assert 0.85 * j < sheet_stiffness_x(prs) * reinforced.cell_height(prs.scene) < 1.005 * j
 

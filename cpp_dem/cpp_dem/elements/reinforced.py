@@ -256,4 +256,5 @@ def _grains_beside_sheet(scene, n: int, sheet_radius: float, radius_mean, spread
     return np.vstack([c1, c2]), np.concatenate([r1, r2])
 
 
-__all__ = ["bond_stress", "hold_sheet", "reinforced_element", "sheet_cell", "sheet_tension_per_metre", "stretch_x"]
+__all__ = ["bond_stress", "cell_height", "hold_sheet", "reinforced_element", "sheet_cell",
+           "sheet_tension_per_metre", "stretch_x"]

@@ -310,4 +310,5 @@ def plane_strain_biaxial(scene, *, pressure: float, strain: float,
 
 __all__ = ["cube_cell", "periodic_cloud", "cube_cloud", "periodic_scene", "cell_controller",
            "default_max_rate", "deformation_gradient", "small_strain", "drive_cell",
-           "prepare_periodic", "settle_grains", "grow_grains", "plane_strain_biaxial", "CellController"]
+           "prepare_periodic", "settle_grains", "grow_grains", "plane_strain_biaxial",
+           "CellController"]
