@@ -253,3 +253,11 @@ def test_the_documented_example_runs(prs):
     assert ns["tx"] == pytest.approx(reinforced.sheet_tension_per_metre(prs.scene)[0],
                                      rel=1e-12)
     assert ns["sigma"][0, 0] > prs.stress()[0, 0]  # stretched along the sheet
+
+
+@pytest.mark.filterwarnings("ignore::cpp_dem.ControllerLimitWarning")  # (2000 steps: at the cap)
+def test_a_cell_that_does_not_settle_says_what_it_missed():
+    with pytest.raises(RuntimeError, match=r"reinforced_element: the cell did not settle in "
+                                           r"2000 steps: the sheet at .* N/m \(targets 500, 0\), "
+                                           r"the grains at .* Pa and sigma_zz at"):
+        reinforced.reinforced_element(60, stress=P, prestress=500.0, max_steps=2000)
