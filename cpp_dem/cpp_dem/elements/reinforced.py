@@ -136,8 +136,9 @@ def reinforced_element(n: int = 150, *, stress: float = 50e3, prestress: float =
     (their split is theirs) less the sheet's prestress / height along x.
 
     ``preset=None``: no sheet, the soil alone: the soil element's cube of ``n`` grains
-    (periodic.cube_cloud, ``radius_mean`` default 1 mm) by the same stages, bitwise
-    ``DemElement.periodic`` with the same arguments. ``element_kw`` go to ``DemElement``."""
+    (periodic.cube_cloud, ``radius_mean`` default 1 mm) by its stages (periodic.settle_grains)
+    with the growth counting the grains' own contacts: bitwise ``DemElement.periodic`` with
+    the same arguments. ``element_kw`` go to ``DemElement``."""
     if int(n) != n or n < 2:
         raise ParameterError(f"n={n}: the number of grains, a whole number >= 2")
     n = int(n)
