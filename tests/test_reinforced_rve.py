@@ -261,3 +261,21 @@ def test_a_cell_that_does_not_settle_says_what_it_missed():
                                            r"2000 steps: the sheet at .* N/m \(targets 500, 0\), "
                                            r"the grains at .* Pa and sigma_zz at"):
         reinforced.reinforced_element(60, stress=P, prestress=500.0, max_steps=2000)
+
+
+def test_the_reinforced_element_is_bitwise_on_one_and_two_threads(prs):
+    import cpp_dem
+
+    de = np.zeros((3, 3))
+    de[0, 0], de[1, 2] = 1e-4, 5e-5
+    out = []
+    before = cpp_dem.get_num_threads()
+    try:
+        for threads in (1, 2):
+            cpp_dem.set_num_threads(threads)
+            el = prs.clone()
+            el.apply_strain(de)
+            out.append(el.to_bytes())
+    finally:
+        cpp_dem.set_num_threads(before)
+    assert out[0] == out[1]
