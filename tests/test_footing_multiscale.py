@@ -149,3 +149,44 @@ def test_the_smoke_gives_load_settlement_for_each_variant(case_smoke):
         assert (out / f"zone_elements_{v}_seed{seeds[0]}.h5").exists()
     assert (out / "load_settlement.png").stat().st_size > 1000
     assert "ETA" in proc.stdout
+
+
+def test_a_failed_run_is_kept_and_left_out_of_the_statistics(tmp_path, monkeypatch):
+    """A run that fails is kept in its record with its status; the means and the paired
+    differences are over the seeds whose runs completed in every variant, and the coupling's
+    status (and exit status) is 'failed'."""
+    from femcoupling.drivers import footing_multiscale as fm
+
+    p = fm.FootingParams(seeds=(1, 2, 3), levels=2)
+    monkeypatch.setattr(fm, "calibrate", lambda p, log: (None, {"young_pa": 1.0}))
+    monkeypatch.setattr("cpp_dem.elements.cluster.local_client", lambda n: (_Closable(), None))
+    monkeypatch.setattr(fm, "run_continuum", lambda p, v, soil, on_level: {
+        "pressure_pa": p.pressures_pa, "settlement_m": [0.01, 0.02],
+        "seated_settlement_m": 0.005})
+    monkeypatch.setattr(fm, "figure", lambda s, png: None)
+    offset = {"unreinforced": 0.0, "RE": -0.001, "PRS": -0.002}
+
+    def fake(p, v, seed, soil, client, out, log, on_level, first_slope):
+        if v == "RE" and seed == 2:
+            return {"status": "failed", "reason": "level 2: ...", "settlement_m": [0.01],
+                    "cells": 4, "element_evaluations": 1, "dem_s": 1.0}
+        return {"status": "stopped_at_scatter", "settlement_m":
+                [0.01 + offset[v] + 1e-4 * seed, 0.02 + offset[v] + 2e-4 * seed],
+                "cells": 4, "element_evaluations": 1, "dem_s": 1.0}
+
+    monkeypatch.setattr(fm, "run_multiscale", fake)
+    s = fm.run(p, tmp_path, lambda m: None)
+    assert s["coupling"]["status"] == "failed" and s["coupling"]["exit_code"] == 5
+    assert s["variants"]["RE"]["multiscale"]["runs"]["2"]["status"] == "failed"
+    for v in ("unreinforced", "RE", "PRS"):
+        assert s["variants"][v]["multiscale"]["seeds_used"] == [1, 3]
+    d = s["paired_settlement_differences"]["PRS-RE"]
+    assert d["seeds"] == 2 and d["mean_m"] == pytest.approx([-0.001, -0.001])
+    assert d["se_m"] == pytest.approx([0.0, 0.0], abs=1e-15)
+    assert s["settlement_m"]["RE"] == pytest.approx([0.009 + 2e-4, 0.019 + 4e-4])
+    assert json.loads((tmp_path / "summary.json").read_text())["coupling"]["status"] == "failed"
+
+
+class _Closable:
+    def close(self):
+        pass

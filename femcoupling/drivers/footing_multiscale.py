@@ -53,7 +53,7 @@ class FootingParams:
     layer_thickness: float = 0.02   #: the layer's band thickness, m
     grid_stiffness: float = 632257.0  #: J, N/m (002's woven grid, detailed, in series)
     prestress: float = 2000.0       #: PRS: T_p, N/m (002's)
-    seat_pa: float = 10e3           #: seating pressure before the DEM zone takes over, Pa
+    seat_pa: float = 20e3           #: seating pressure before the DEM zone takes over, Pa
     pressure_pa: float = 100e3      #: the largest footing pressure, Pa
     levels: int = 4                 #: load levels from the seating to ``pressure_pa``
     steps_per_level: int = 2        #: FEM load steps aimed at per level
@@ -249,6 +249,7 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
     where the footing's first step is sized from."""
     from femcoupling.drivers.prs_element import hierarchical_status, step_statuses
     from femcoupling.region import PeriodicRegionElement, PoolRegionMaterials
+    from femcoupling.soil_steps import NewtonDivergence
 
     t0 = time.perf_counter()
     m = model(p, variant, soil)
@@ -292,18 +293,28 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
                          [r.status for r in got]))
             on_level(variant, "multiscale", seed, k, rows[-1])
 
-        steps = load_levels(p, m, level, first_slope)
+        n0, failed = len(m.history), None
+        try:
+            load_levels(p, m, level, first_slope)
+        except NewtonDivergence as exc:  # (the run stops; the others go on: see run)
+            failed = f"level {len(rows) + 1}: {exc}"
+            log(f"{tag}: FAILED at {failed}")
+        steps = [r for r in m.history[n0:] if r.stage == "footing"]
         strains = np.array([-np.diag(e) for e in group.strains()])  # compression +
         vol = m.cell_volume[[int(k.rsplit("/", 1)[1]) for k in group.names]]
         calls, dem_s = group.calls, group.dem_s
     finally:
         group.close()
-    hier = {**step_statuses(steps),
-            "element_strain_increment": (vol @ strains / vol.sum()).tolist()}
-    st = hierarchical_status(hier, -np.diag(m.region_strain("zone") - e0), math.nan)
+    if failed is None:
+        hier = {**step_statuses(steps),
+                "element_strain_increment": (vol @ strains / vol.sum()).tolist()}
+        st = hierarchical_status(hier, -np.diag(m.region_strain("zone") - e0), math.nan)
+        status, reason = st.status, st.reason
+    else:
+        status, reason = "failed", failed
     return {"pressure_pa": [r[0] for r in rows], "settlement_m": [r[1] for r in rows],
             "newton_iterations": [r[2] for r in rows], "level_statuses": [r[3] for r in rows],
-            "status": st.status, "reason": st.reason, "cells": len(cells),
+            "status": status, "reason": reason, "cells": len(cells),
             "element_seed_base": base, "preparation_failures": failures,
             "element_evaluations": calls, "dem_s": dem_s, "preparation_s": t_prep,
             "wall_time_s": time.perf_counter() - t0, "warnings": list(m.warnings),
@@ -351,6 +362,8 @@ def figure(summary: dict, png: Path) -> None:
         ms = r["multiscale"]
         p = np.array(summary["pressures_pa"]) / 1e3
         sd = ms["settlement_sd_m"]
+        if ms["settlement_mean_m"] is None:  # (no seed completed)
+            continue
         ax.errorbar(1e3 * np.array(ms["settlement_mean_m"]), p,
                     xerr=None if sd is None else 1e3 * np.array(sd), color=col, marker="o",
                     capsize=3, label=f"{v}: DEM zone ({ms['seeds']} seeds)")
@@ -406,25 +419,33 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
                                                            - dp["seated_settlement_m"])
             runs = {s: run_multiscale(p, v, s, soil, client, out, log, on_level, slope)
                     for s in p.seeds}
-            settle = np.array([runs[s]["settlement_m"] for s in p.seeds])
-            variants[v] = {
-                "multiscale": {
-                    "seeds": len(p.seeds),
-                    "settlement_mean_m": settle.mean(axis=0).tolist(),
-                    "settlement_sd_m": settle.std(axis=0, ddof=1).tolist()
-                    if len(p.seeds) > 1 else None,
-                    "status": worst(r["status"] for r in runs.values()),
-                    "runs": {str(s): r for s, r in runs.items()}},
-                "drucker_prager": dp}
+            variants[v] = {"multiscale": {"status": worst(r["status"] for r in runs.values()),
+                                          "runs": {str(s): r for s, r in runs.items()}},
+                           "drucker_prager": dp}
     finally:
         client.close()
         if cluster is not None:
             cluster.close()
+    # the statistics over the seeds whose runs reached every level in every variant (a
+    # failed run is kept in its record, with how far it got, and named here)
+    done_seeds = [s for s in p.seeds if all(r["multiscale"]["runs"][str(s)]["status"]
+                                            != "failed" for r in variants.values())]
+    for v, r in variants.items():
+        ms = r["multiscale"]
+        settle = np.array([ms["runs"][str(s)]["settlement_m"] for s in done_seeds]
+                          ).reshape(len(done_seeds), -1)
+        ms.update(seeds=len(done_seeds), seeds_used=done_seeds,
+                  settlement_mean_m=settle.mean(axis=0).tolist() if done_seeds else None,
+                  settlement_sd_m=settle.std(axis=0, ddof=1).tolist()
+                  if len(done_seeds) > 1 else None)
+    if len(done_seeds) < len(p.seeds):
+        log(f"WARNING: the statistics are over seeds {done_seeds}: the runs of the other "
+            "seeds failed in a variant (summary.json: variants.<v>.multiscale.runs)")
     diffs = {}
     for a, b in (("RE", "unreinforced"), ("PRS", "RE"), ("PRS", "unreinforced")):
-        if a in variants and b in variants:
+        if a in variants and b in variants and done_seeds:
             sa, sb = (np.array([variants[v]["multiscale"]["runs"][str(s)]["settlement_m"]
-                                for s in p.seeds]) for v in (a, b))
+                                for s in done_seeds]) for v in (a, b))
             diffs[f"{a}-{b}"] = paired(sa, sb)
     status = worst(r["multiscale"]["status"] for r in variants.values())
     summary = {

@@ -141,6 +141,9 @@ def main(argv=None) -> int:
         done["summary"] = run(p, o, log, lambda f, detail: bar.update(f, detail))
         s = done["summary"]
         for v, pr in s["settlement_m"].items():
+            if pr is None:
+                log(f"{v}: no seed reached every level (summary.json: the runs' records)")
+                continue
             log(f"{v}: settlement at {[round(x / 1e3, 1) for x in s['pressures_pa']]} kPa: "
                 f"{[round(1e3 * x, 3) for x in pr]} mm (seed mean)")
         for k, d in s["paired_settlement_differences"].items():
