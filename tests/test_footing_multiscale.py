@@ -137,7 +137,8 @@ def test_the_smoke_gives_load_settlement_for_each_variant(case_smoke):
         assert s["settlement_m"][v] == ms["settlement_mean_m"]
     for k in ("RE-unreinforced", "PRS-RE", "PRS-unreinforced"):
         d = s["paired_settlement_differences"][k]
-        assert d["seeds"] == 2 and len(d["mean_m"]) == levels and len(d["se_m"]) == levels
+        assert d["seeds"] == [2] * levels and len(d["mean_m"]) == levels
+        assert all(x is not None for x in d["se_m"])
     assert s["calibration"]["young_pa"] > 0 and 20 < s["calibration"]["friction_deg"] < 60
     assert s["cost"]["element_evaluations"] > 0 and s["cost"]["wall_time_s"] > 0
     # the rows as they were reached: every run's levels, the continuum's and each seed's
@@ -151,10 +152,10 @@ def test_the_smoke_gives_load_settlement_for_each_variant(case_smoke):
     assert "ETA" in proc.stdout
 
 
-def test_a_failed_run_is_kept_and_left_out_of_the_statistics(tmp_path, monkeypatch):
-    """A run that fails is kept in its record with its status; the means and the paired
-    differences are over the seeds whose runs completed in every variant, and the coupling's
-    status (and exit status) is 'failed'."""
+def test_a_failed_run_is_kept_and_left_out_of_the_levels_it_did_not_reach(tmp_path, monkeypatch):
+    """A run that fails is kept in its record with its status; each level's means and paired
+    differences are over the seeds whose runs reached it in every variant, and the
+    coupling's status (and exit status) is 'failed'."""
     from femcoupling.drivers import footing_multiscale as fm
 
     p = fm.FootingParams(seeds=(1, 2, 3), levels=2)
@@ -168,7 +169,7 @@ def test_a_failed_run_is_kept_and_left_out_of_the_statistics(tmp_path, monkeypat
 
     def fake(p, v, seed, soil, client, out, log, on_level, first_slope):
         if v == "RE" and seed == 2:
-            return {"status": "failed", "reason": "level 2: ...", "settlement_m": [0.01],
+            return {"status": "failed", "reason": "level 2: ...", "settlement_m": [0.0092],
                     "cells": 4, "element_evaluations": 1, "dem_s": 1.0}
         return {"status": "stopped_at_scatter", "settlement_m":
                 [0.01 + offset[v] + 1e-4 * seed, 0.02 + offset[v] + 2e-4 * seed],
@@ -178,12 +179,14 @@ def test_a_failed_run_is_kept_and_left_out_of_the_statistics(tmp_path, monkeypat
     s = fm.run(p, tmp_path, lambda m: None)
     assert s["coupling"]["status"] == "failed" and s["coupling"]["exit_code"] == 5
     assert s["variants"]["RE"]["multiscale"]["runs"]["2"]["status"] == "failed"
+    # level 1: every seed reached it; level 2: seed 2's RE run did not
     for v in ("unreinforced", "RE", "PRS"):
-        assert s["variants"][v]["multiscale"]["seeds_used"] == [1, 3]
+        assert s["variants"][v]["multiscale"]["seeds_used"] == [[1, 2, 3], [1, 3]]
     d = s["paired_settlement_differences"]["PRS-RE"]
-    assert d["seeds"] == 2 and d["mean_m"] == pytest.approx([-0.001, -0.001])
+    assert d["seeds"] == [3, 2] and d["mean_m"] == pytest.approx([-0.001, -0.001])
     assert d["se_m"] == pytest.approx([0.0, 0.0], abs=1e-15)
     assert s["settlement_m"]["RE"] == pytest.approx([0.009 + 2e-4, 0.019 + 4e-4])
+    assert s["variants"]["RE"]["multiscale"]["settlement_sd_m"][0] == pytest.approx(1e-4)
     assert json.loads((tmp_path / "summary.json").read_text())["coupling"]["status"] == "failed"
 
 

@@ -347,6 +347,42 @@ def paired(a: np.ndarray, b: np.ndarray) -> dict:
     return {"mean_m": d.mean(axis=0).tolist(), "se_m": se, "seeds": n}
 
 
+def statistics(variants: dict, seeds, levels: int) -> dict:
+    """The statistics of the run, level by level over the seeds whose runs reached that
+    level in every variant (a run that failed keeps the levels it reached): each variant's
+    ``multiscale`` record gets ``seeds_used`` (per level, the seeds), ``settlement_mean_m``
+    and ``settlement_sd_m`` (per level; None where no seed, or one, is left). Returns the
+    paired differences RE - unreinforced, PRS - RE and PRS - unreinforced (``paired`` per
+    level: ``mean_m``, ``se_m`` and ``seeds``, lists over the levels)."""
+    def reached(s, k):
+        return all(len(r["multiscale"]["runs"][str(s)]["settlement_m"]) > k
+                   for r in variants.values())
+
+    used = [[s for s in seeds if reached(s, k)] for k in range(levels)]
+
+    def column(v, k):
+        return np.array([variants[v]["multiscale"]["runs"][str(s)]["settlement_m"][k]
+                         for s in used[k]])
+
+    for v, r in variants.items():
+        cols = [column(v, k) for k in range(levels)]
+        r["multiscale"].update(
+            seeds_used=used, seeds=[len(u) for u in used],
+            settlement_mean_m=[float(c.mean()) if len(c) else None for c in cols],
+            settlement_sd_m=[float(c.std(ddof=1)) if len(c) > 1 else None for c in cols])
+    diffs = {}
+    for a, b in (("RE", "unreinforced"), ("PRS", "RE"), ("PRS", "unreinforced")):
+        if a not in variants or b not in variants:
+            continue
+        per = [paired(column(a, k)[:, None], column(b, k)[:, None]) if used[k] else None
+               for k in range(levels)]
+        diffs[f"{a}-{b}"] = {
+            "mean_m": [d["mean_m"][0] if d else None for d in per],
+            "se_m": [d["se_m"][0] if d and d["se_m"] else None for d in per],
+            "seeds": [len(u) for u in used]}
+    return diffs
+
+
 def figure(summary: dict, png: Path) -> None:
     """Load–settlement: the multiscale runs' seed mean (bars: the seeds' sd) and the
     Drucker–Prager-only body, per variant."""
@@ -361,12 +397,10 @@ def figure(summary: dict, png: Path) -> None:
     for (v, r), col in zip(summary["variants"].items(), ("k", "tab:blue", "tab:red")):
         ms = r["multiscale"]
         p = np.array(summary["pressures_pa"]) / 1e3
-        sd = ms["settlement_sd_m"]
-        if ms["settlement_mean_m"] is None:  # (no seed completed)
-            continue
-        ax.errorbar(1e3 * np.array(ms["settlement_mean_m"]), p,
-                    xerr=None if sd is None else 1e3 * np.array(sd), color=col, marker="o",
-                    capsize=3, label=f"{v}: DEM zone ({ms['seeds']} seeds)")
+        mean = np.array([np.nan if x is None else x for x in ms["settlement_mean_m"]])
+        sd = np.array([0.0 if x is None else x for x in ms["settlement_sd_m"]])
+        ax.errorbar(1e3 * mean, p, xerr=1e3 * sd, color=col, marker="o", capsize=3,
+                    label=f"{v}: DEM zone (seeds per level {ms['seeds']})")
         ax.plot(1e3 * np.array(r["drucker_prager"]["settlement_m"]),
                 np.array(r["drucker_prager"]["pressure_pa"]) / 1e3, color=col, ls="--",
                 label=f"{v}: Drucker-Prager only")
@@ -426,27 +460,13 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
         client.close()
         if cluster is not None:
             cluster.close()
-    # the statistics over the seeds whose runs reached every level in every variant (a
-    # failed run is kept in its record, with how far it got, and named here)
-    done_seeds = [s for s in p.seeds if all(r["multiscale"]["runs"][str(s)]["status"]
-                                            != "failed" for r in variants.values())]
-    for v, r in variants.items():
-        ms = r["multiscale"]
-        settle = np.array([ms["runs"][str(s)]["settlement_m"] for s in done_seeds]
-                          ).reshape(len(done_seeds), -1)
-        ms.update(seeds=len(done_seeds), seeds_used=done_seeds,
-                  settlement_mean_m=settle.mean(axis=0).tolist() if done_seeds else None,
-                  settlement_sd_m=settle.std(axis=0, ddof=1).tolist()
-                  if len(done_seeds) > 1 else None)
-    if len(done_seeds) < len(p.seeds):
-        log(f"WARNING: the statistics are over seeds {done_seeds}: the runs of the other "
-            "seeds failed in a variant (summary.json: variants.<v>.multiscale.runs)")
-    diffs = {}
-    for a, b in (("RE", "unreinforced"), ("PRS", "RE"), ("PRS", "unreinforced")):
-        if a in variants and b in variants and done_seeds:
-            sa, sb = (np.array([variants[v]["multiscale"]["runs"][str(s)]["settlement_m"]
-                                for s in done_seeds]) for v in (a, b))
-            diffs[f"{a}-{b}"] = paired(sa, sb)
+    diffs = statistics(variants, p.seeds, p.levels)
+    short = {v: [s for s in p.seeds if r["multiscale"]["runs"][str(s)]["status"] == "failed"]
+             for v, r in variants.items()}
+    if any(short.values()):
+        log("WARNING: runs failed before the last level (" + ", ".join(
+            f"{v} seeds {x}" for v, x in short.items() if x) + "): each level's statistics "
+            "are over the seeds that reached it in every variant (summary.json: seeds_used)")
     status = worst(r["multiscale"]["status"] for r in variants.values())
     summary = {
         "case": "footing_multiscale", "pressures_pa": p.pressures_pa, "seat_pa": p.seat_pa,

@@ -140,17 +140,15 @@ def main(argv=None) -> int:
         bar = Progress("footing_multiscale")
         done["summary"] = run(p, o, log, lambda f, detail: bar.update(f, detail))
         s = done["summary"]
+        def mm(xs, nd):
+            return [None if x is None else round(1e3 * x, nd) for x in xs]
+
         for v, pr in s["settlement_m"].items():
-            if pr is None:
-                log(f"{v}: no seed reached every level (summary.json: the runs' records)")
-                continue
             log(f"{v}: settlement at {[round(x / 1e3, 1) for x in s['pressures_pa']]} kPa: "
-                f"{[round(1e3 * x, 3) for x in pr]} mm (seed mean)")
+                f"{mm(pr, 3)} mm (seed mean)")
         for k, d in s["paired_settlement_differences"].items():
-            se = d["se_m"]
-            log(f"{k}: {[round(1e3 * x, 4) for x in d['mean_m']]} mm"
-                + ("" if se is None else f" +- {[round(1e3 * x, 4) for x in se]} (SE over "
-                   f"{d['seeds']} seeds)"))
+            log(f"{k}: {mm(d['mean_m'], 4)} mm +- {mm(d['se_m'], 4)} (SE over "
+                f"{d['seeds']} seeds)")
 
     status = run_main("footing_multiscale", out, work)
     c = done.get("summary", {}).get("coupling")
