@@ -256,17 +256,12 @@ def run_case(case: str, argv: list[str], *, source: str | None = None) -> int:
     main_thread = threading.current_thread() is threading.main_thread()
     old = {s: signal.signal(s, forward) for s in (signal.SIGINT, signal.SIGTERM)} \
         if main_thread else {}
+    tail: list[str] = []
     try:
         proc = subprocess.Popen([*case_command(case), *argv], stderr=subprocess.PIPE,
                                 text=True, bufsize=1, process_group=0)
-    except BaseException:
-        for s, h in old.items():
-            signal.signal(s, h)
-        raise
-    for sig in pending:
-        forward(sig, None)
-    tail: list[str] = []
-    try:
+        for sig in pending:
+            forward(sig, None)
         for line in proc.stderr:
             sys.stderr.write(line)
             sys.stderr.flush()
