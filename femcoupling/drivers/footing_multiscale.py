@@ -216,22 +216,19 @@ def calibrate(p: FootingParams, log) -> tuple:
     return mat, rec
 
 
-def load_levels(p: FootingParams, m, on_level, first_slope: float | None = None) -> list:
+def load_levels(p: FootingParams, m, on_level, first_slope: float | None = None) -> None:
     """Pushes the footing to each of ``p.pressures_pa`` in turn; ``on_level(k, steps)`` after
-    each (its accepted StepResults). Each level after the first starts from the last level's
-    secant slope, the first from ``first_slope`` (Pa/m; None: the model's small first
-    settlement, ``load_footing_to_pressure``). Returns every accepted step."""
-    steps = []
+    each (its accepted StepResults; every step is also in ``m.history``). Each level after the
+    first starts from the last level's secant slope, the first from ``first_slope`` (Pa/m;
+    None: the model's small first settlement, ``load_footing_to_pressure``)."""
     slope = first_slope
     for k, target in enumerate(p.pressures_pa):
         p0, s0 = m.footing_pressure_pa(), m.footing_settlement_m()
         got = m.load_footing_to_pressure(target - p0, steps=p.steps_per_level,
                                          slope_pa_per_m=slope)
-        steps += got
         rise = m.footing_settlement_m() - s0
         slope = (m.footing_pressure_pa() - p0) / rise if rise > 0 else None
         on_level(k, got)
-    return steps
 
 
 #: Preparations of a run's zone elements: a small dense element servoed from its isotropic
