@@ -87,6 +87,13 @@ def build_parser():
     return ap
 
 
+#: The flags that set a FootingParams field one to one: flag -> field.
+FLAGS = {"--pressure": "pressure_pa", "--seat": "seat_pa", "--levels": "levels",
+         "--footing-half-width": "footing_b", "--layer-depth": "layer_depth",
+         "--grid-stiffness": "grid_stiffness", "--prestress": "prestress",
+         "--fine-size": "fine_size", "--cell-grains": "cell_grains", "--workers": "workers"}
+
+
 def parse_args(argv=None):
     from femcoupling.drivers.footing_multiscale import VARIANTS, FootingParams
 
@@ -103,27 +110,19 @@ def parse_args(argv=None):
     if bad or not variants:
         ap.error(f"--variants={a.variants!r}: a comma-separated selection of "
                  f"{', '.join(VARIANTS)}")
-    p = replace(p, seeds=tuple(range(a.seed, a.seed + seeds)),
-                variants=variants, seat_pa=a.seat, footing_b=a.footing_half_width,
-                layer_depth=a.layer_depth, grid_stiffness=a.grid_stiffness,
-                prestress=a.prestress, workers=a.workers)
-    for flag, field in (("--pressure", "pressure_pa"), ("--levels", "levels"),
-                        ("--fine-size", "fine_size"), ("--cell-grains", "cell_grains")):
+    p = replace(p, seeds=tuple(range(a.seed, a.seed + seeds)), variants=variants)
+    for flag, field in FLAGS.items():  # (None: the smoke's or the full run's default)
         v = getattr(a, flag[2:].replace("-", "_"))
         if v is not None:
             p = replace(p, **{field: v})
     from femcoupling.geometry import FemInputError
 
-    flags = {"pressure_pa": "--pressure", "seat_pa": "--seat", "levels": "--levels",
-             "footing_b": "--footing-half-width", "layer_depth": "--layer-depth",
-             "grid_stiffness": "--grid-stiffness", "prestress": "--prestress",
-             "fine_size": "--fine-size", "cell_grains": "--cell-grains",
-             "workers": "--workers"}
     try:
         p.check()
     except FemInputError as e:
         field = str(e).split("=", 1)[0]
-        ap.error(f"{flags.get(field, field)}: {e}")
+        flag = next((f for f, name in FLAGS.items() if name == field), field)
+        ap.error(f"{flag}: {e}")
     return replace(p, threads=a.threads), a.out
 
 
