@@ -42,7 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["DemRegionMaterial", "PeriodicRegionElement", "PoolRegionMaterials", "servo"]
+__all__ = ["DemRegionMaterial", "PeriodicRegionElement", "PoolRegionMaterials", "servo",
+           "trial_stiffness"]
 
 
 def _plain(v):
@@ -221,6 +222,24 @@ def network_stiffness(element, min_eig_fraction: float = 1e-3, *,
     return spd_floor(voigt_to_mandel_stiffness(t), min_eig_fraction)
 
 
+def trial_stiffness(label: str, voigt, min_eig_fraction: float, increment,
+                    contacts: int) -> np.ndarray:
+    """``network_stiffness`` of an element's 6 x 6 Voigt network tangent at a Newton trial.
+    An element with no stiffness left at the trial (its
+    contacts opened: a cohesionless element stretched past its confinement) fails the Newton
+    iterate (``NewtonFailure``: the model cuts the step and tries a shorter one), naming it
+    by ``label``, its ``contacts`` and its strain ``increment``."""
+    from femcoupling.handover import HandoverError
+    from femcoupling.quadrature import NewtonFailure
+
+    try:
+        return network_stiffness(None, min_eig_fraction, voigt=voigt)
+    except HandoverError as exc:
+        raise NewtonFailure(
+            f"{label}: no stiffness left at this iterate ({contacts} contacts; strain "
+            f"increment {np.round(np.asarray(increment), 7).tolist()}): {exc}") from exc
+
+
 class DemRegionMaterial:
     """A periodic DEM element as the material of a ``SoilModel`` element region: the
     hierarchical mode on the reinforced-soil body, one element for the region's tagged group
@@ -291,7 +310,10 @@ class DemRegionMaterial:
         t0 = time.perf_counter()
         el = self.element = DemElement.from_bytes(self._committed)
         ds = el.apply_strain(de, **self.strain_kw) - self._stress0
-        c = self._trial_tangent = network_stiffness(el, self.min_eig_fraction)
+        c = self._trial_tangent = trial_stiffness("the region's element",
+                                                  el.network_tangent()[0],
+                                                  self.min_eig_fraction, de,
+                                                  el.contact_count())
         self.calls += 1
         self.dem_s += time.perf_counter() - t0
         return ds, c
@@ -395,27 +417,12 @@ class PoolRegionMaterials:
         self.calls += 1
         self.dem_s += float(sum(step.cpu_s))
         self._last = ([np.asarray(s) for s in step.stresses],
-                      [self._stiffness(k, t, des[k], c)
+                      [trial_stiffness(f"element {self.names[k]}", t,
+                                       self.min_eig_fraction, des[k], c)
                        for k, (t, c) in enumerate(zip(step.tangents, step.contacts))],
                       des, list(step.contacts), list(step.cpu_s))
         return {n: (self._last[0][k] - self._stress0[k], self._last[1][k])
                 for k, n in enumerate(self.names)}
-
-    def _stiffness(self, k: int, voigt, increment, contacts: int) -> np.ndarray:
-        """Element k's tangent as a Mandel stiffness (``network_stiffness``). An element
-        that has no stiffness left at this trial (its contacts opened: a cohesionless
-        element stretched past its confinement) fails the Newton iterate
-        (``NewtonFailure``: the model cuts the step and tries a shorter one), naming it."""
-        from femcoupling.handover import HandoverError
-        from femcoupling.quadrature import NewtonFailure
-
-        try:
-            return network_stiffness(None, self.min_eig_fraction, voigt=voigt)
-        except HandoverError as exc:
-            raise NewtonFailure(
-                f"element {self.names[k]}: no stiffness left at this iterate ({contacts} "
-                f"contacts; strain increment {np.round(np.asarray(increment), 7).tolist()}): "
-                f"{exc}") from exc
 
     def trial(self, increments: dict) -> dict:
         """``trial_many``: the group as one ``femcoupling.quadrature.QuadratureMaterial``
