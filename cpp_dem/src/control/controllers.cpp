@@ -496,28 +496,25 @@ void CellController::apply(Scene& scene) {
   sigma_.setZero();
   stiff_.setZero();
   const auto& x = scene.positions();
-  scene.for_each_contact_of(ContactKind::Pair, [&](const ContactRecord& c) {
-    if (!c.active) return;
-    Real kn, ks;
-    c.stiffness(kn, ks);
-    const Vec3 l = x[c.body2] + c.shift2 - x[c.body1];
-    sigma_ += c.force2 * l.transpose();
-    const Vec3& n = c.state->normal;
+  // One spring of force f on branch l (from side 1 to side 2), normal n, stiffnesses kn, ks.
+  const auto add = [&](const Vec3& f, const Vec3& l, const Vec3& n, Real kn, Real ks) {
+    sigma_ += f * l.transpose();
     for (int r = 0; r < 3; ++r) {
       const Real krr = kn * n[r] * n[r] + ks * (1 - n[r] * n[r]);
       for (int q = 0; q < 3; ++q) stiff_(r, q) += krr * l[q] * l[q];
     }
+  };
+  scene.for_each_contact_of(ContactKind::Pair, [&](const ContactRecord& c) {
+    if (!c.active) return;
+    Real kn, ks;
+    c.stiffness(kn, ks);
+    add(c.force2, x[c.body2] + c.shift2 - x[c.body1], c.state->normal, kn, ks);
   });
   // Bonds, as in Scene::cell_stress (b at the image the bond sees), with their springs.
   for (const Bond& b : scene.bonds()) {
     Real kn, ks;
     b.stiffness(kn, ks);
-    const Vec3 l = x[b.b] + scene.bond_shift(b) - x[b.a];
-    sigma_ += b.force_b * l.transpose();
-    for (int r = 0; r < 3; ++r) {
-      const Real krr = kn * b.normal[r] * b.normal[r] + ks * (1 - b.normal[r] * b.normal[r]);
-      for (int q = 0; q < 3; ++q) stiff_(r, q) += krr * l[q] * l[q];
-    }
+    add(b.force_b, x[b.b] + scene.bond_shift(b) - x[b.a], b.normal, kn, ks);
   }
   sigma_ /= volume;
   stiff_ /= volume;
