@@ -279,3 +279,74 @@ def test_the_reinforced_element_is_bitwise_on_one_and_two_threads(prs):
     finally:
         cpp_dem.set_num_threads(before)
     assert out[0] == out[1]
+
+
+# ---- the RVE as a continuum's geogrid band (DemElement.set_band_thickness) -------------------
+
+
+def test_a_band_counts_the_sheet_once_per_band_thickness(prs):
+    # The cell holds one sheet per height h; as a band of thickness t the same force per
+    # metre is spread over t: the grains' stress as it is, the bonds' times h / t.
+    el = prs.clone()
+    h = reinforced.cell_height(el.scene)
+    cell, bonds = el.stress(), -reinforced.bond_stress(el.scene)  # tension positive
+    t = 0.02
+    el.set_band_thickness(t)
+    band = el.stress()
+    bonds_sym = 0.5 * (bonds + bonds.T)  # (the element's stress is symmetrised)
+    assert np.allclose(band, cell + (h / t - 1) * bonds_sym, rtol=0, atol=1e-9 * P)
+    # the band's force per metre along x less its grains' is the sheet's tension
+    tx = reinforced.sheet_tension_per_metre(el.scene)[0]
+    assert t * (band[0, 0] - (cell - bonds)[0, 0]) == pytest.approx(tx, rel=1e-12)
+    assert tx == pytest.approx(T_P, abs=0.005 * P * h)
+    # a band as thick as the cell is the cell
+    el.set_band_thickness(h)
+    assert np.allclose(el.stress(), cell, rtol=0, atol=1e-9 * P)
+    el.set_band_thickness(None)
+    assert np.array_equal(el.stress(), cell)
+
+
+def test_a_band_element_restores_with_its_thickness_and_answers_in_its_scale(prs):
+    el = prs.clone()
+    el.set_band_thickness(0.02)
+    back = DemElement.from_bytes(el.to_bytes())
+    assert back.band_thickness == 0.02 and np.array_equal(back.stress(), el.stress())
+    # a stretch along x: the band's stress rise is the grains' plus the sheet's h / t times
+    de = np.zeros((3, 3))
+    de[0, 0] = 1e-4
+    cell = prs.clone()
+    d_cell = cell.apply_strain(de) - prs.stress()
+    d_band = back.apply_strain(de) - el.stress()
+    h = reinforced.cell_height(cell.scene)
+    d_bonds = -reinforced.bond_stress(cell.scene) + reinforced.bond_stress(prs.scene)
+    assert d_band[0, 0] == pytest.approx(d_cell[0, 0] + (h / 0.02 - 1) * d_bonds[0, 0],
+                                         rel=1e-6)
+    assert d_band[0, 0] > d_cell[0, 0]  # (h = 27 mm against t = 20 mm: more sheet)
+    # the soil element's bytes carry no band thickness (unchanged format)
+    assert b"band_thickness" not in DemElement.periodic(40, stress=P, seed=2).to_bytes()
+
+
+def test_bad_band_thicknesses_are_named(prs):
+    el = prs.clone()
+    for bad in (0.0, -0.02, float("nan"), "x"):
+        with pytest.raises(ParameterError, match="must be > 0"):
+            el.set_band_thickness(bad)
+    soil = DemElement.periodic(40, stress=P, seed=2)
+    with pytest.raises(ParameterError, match="needs a periodic element with bonds"):
+        soil.set_band_thickness(0.02)
+    el.set_band_thickness(0.02)
+    with pytest.raises(ParameterError, match="apply_stress: this element stands for a band"):
+        el.apply_stress(-P * np.eye(3))
+
+
+def test_given_radii_get_a_cell_tall_enough_for_their_clouds():
+    # 3 mm grains, 80 of them: the default height (the pitch, 27 mm) would fill 0.5 of the
+    # room and the loose clouds jam; the cell is made taller (a quarter filled)
+    from cpp_dem.elements.reinforced import woven
+
+    el = reinforced.reinforced_element(80, stress=20e3, radius_mean=0.003, seed=3)
+    px, py = woven.preset_pitch("detailed")
+    assert reinforced.cell_height(el.scene) > 1.5 * px
+    tx, ty = reinforced.sheet_tension_per_metre(el.scene)
+    h = reinforced.cell_height(el.scene)
+    assert abs(tx) <= 0.005 * 20e3 * h and abs(ty) <= 0.005 * 20e3 * h

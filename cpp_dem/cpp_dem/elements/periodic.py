@@ -126,6 +126,7 @@ class DemElement:
         if self.kind == "periodic":
             scene.velocity_gradient = np.zeros((3, 3))
         self.dt_max: float | None = None  # (set by the first _set_dt: the prepared state's)
+        self.band_thickness: float | None = None  # (see set_band_thickness)
         self._set_dt()
 
     def _set_dt(self) -> None:
@@ -214,9 +215,38 @@ class DemElement:
         return measure.love_weber_stress(self.scene, self.volume())
 
     def stress(self) -> np.ndarray:
-        """The homogenised stress (Love–Weber), Pa, **tension positive**, symmetrised, 3 x 3."""
+        """The homogenised stress (Love–Weber), Pa, **tension positive**, symmetrised, 3 x 3.
+        With a band thickness (:meth:`set_band_thickness`), the band's stress: the grains'
+        part as it is, the bonds' part times the cell's height over the band's thickness."""
         s = -self._raw_stress()
+        if self.band_thickness is not None:
+            from cpp_dem.elements.reinforced import bond_stress, cell_height
+
+            s = s - (cell_height(self.scene) / self.band_thickness - 1.0) * bond_stress(
+                self.scene)
         return 0.5 * (s + s.T)
+
+    def set_band_thickness(self, thickness: float | None) -> None:
+        """The element stands for a band of soil ``thickness`` m thick holding one sheet (a
+        continuum's geogrid band; None: the cell itself, the default). A reinforced cell of
+        height h holds one sheet per h, so its bonds' stress is the sheet's force per metre
+        over h; as a band of thickness t the same force is spread over t. :meth:`stress` then
+        gives the grains' part unchanged and the bonds' part times h / t (h the cell's height
+        now, ``reinforced.cell_height``): the band's force per metre along x is t sigma_xx.
+        Everything that reads :meth:`stress` follows (``apply_strain``'s answer,
+        ``fd_tangent``); the DEM and its servo are unchanged, so :meth:`apply_stress` is
+        refused. Kept by ``to_bytes``. A cell without bonds is refused."""
+        if thickness is not None:
+            if self.kind != "periodic" or not self.scene.num_bonds:
+                raise ParameterError(f"thickness={thickness!r}: a band thickness needs a "
+                                     "periodic element with bonds (a reinforced cell, "
+                                     "cpp_dem.elements.reinforced); this one has "
+                                     f"{self.scene.num_bonds} bonds")
+            if not (isinstance(thickness, (int, float)) and math.isfinite(thickness)
+                    and thickness > 0):
+                raise ParameterError(f"thickness={thickness!r}: must be > 0 (m) or None")
+            thickness = float(thickness)
+        self.band_thickness = thickness
 
     def stress_asymmetry(self) -> float:
         """|skew(sigma)| / |sigma| of the Love–Weber sum (-): zero in equilibrium; reported,
@@ -339,6 +369,11 @@ class DemElement:
         stress (Pa, tension positive)."""
         t0 = time.perf_counter()
         s = _as_tensor(sigma, "sigma")
+        if self.band_thickness is not None:
+            raise ParameterError(f"apply_stress: this element stands for a band of "
+                                 f"{self.band_thickness} m (set_band_thickness), whose stress "
+                                 "is not the cell's its servo holds; set_band_thickness(None) "
+                                 "first")
         self._set_dt()
         comps = [tuple(int(i) for i in c) for c in components]
         if self.kind == "walls":
@@ -446,11 +481,13 @@ class DemElement:
                    "goals": [[ctl.goal(r, c) for c in range(3)] for r in range(3)]}
         else:
             cfg = {"gain": ctl.gain, "max_speed": ctl.max_speed}
-        return pickle.dumps({"format": _FORMAT, "kind": self.kind, "walls": self.walls,
-                             "gain": self.gain, "dt_safety": self.dt_safety,
-                             "dt_max": self.dt_max, "controller": cfg,
-                             "blob": bytes(_core._checkpoint_save(self.scene))},
-                            protocol=pickle.HIGHEST_PROTOCOL)
+        d = {"format": _FORMAT, "kind": self.kind, "walls": self.walls,
+             "gain": self.gain, "dt_safety": self.dt_safety,
+             "dt_max": self.dt_max, "controller": cfg,
+             "blob": bytes(_core._checkpoint_save(self.scene))}
+        if self.band_thickness is not None:  # (absent otherwise: older bytes unchanged)
+            d["band_thickness"] = self.band_thickness
+        return pickle.dumps(d, protocol=pickle.HIGHEST_PROTOCOL)
 
     @classmethod
     def from_bytes(cls, data: bytes) -> "DemElement":
@@ -484,6 +521,7 @@ class DemElement:
         el.scene, el.walls, el.kind = scene, tuple(d["walls"]), d["kind"]
         el.gain, el.dt_safety, el.controller = d["gain"], d["dt_safety"], ctl
         el.dt_max = d.get("dt_max")  # (None in bytes saved before it: set by the next stage)
+        el.band_thickness = d.get("band_thickness")
         return el
 
     def clone(self) -> "DemElement":

@@ -128,7 +128,8 @@ def reinforced_element(n: int = 150, *, stress: float = 50e3, prestress: float =
     The grains: radii uniform in radius_mean (1 +- radius_spread) (m; seeded), half of them
     as a loose cloud below the sheet and half above it (cpp_dem.build.packing.loose_cloud);
     without ``radius_mean`` they fill a quarter of the cell's volume beside the sheet's
-    layer. They grow in the fixed cell to ``stress`` counting their own contacts only
+    layer; with it, and no ``height``, the cell is made taller than its default where the
+    clouds would fill more than a quarter of it. They grow in the fixed cell to ``stress`` counting their own contacts only
     (periodic.grow_grains; ``growth`` is RadiusGrowth's (gain, max_strain per call)); then
     ``hold_sheet`` brings the sheet to ``prestress`` along x and 0 along y, the grains' mean
     stress and the cell's sigma_zz to ``stress``, within ``tol`` and with the unbalanced
@@ -163,6 +164,15 @@ def reinforced_element(n: int = 150, *, stress: float = 50e3, prestress: float =
                                     material=material, damping=damping)
         periodic.settle_grains(s, stress=stress, grains=np.arange(n), **stages)
         return DemElement(s, **element_kw)
+    if height is None and radius_mean is not None:
+        # (the loose clouds of given radii need room: a quarter of it filled, as without
+        # radius_mean; random sequential addition jams from about 0.3)
+        px, py = woven.preset_pitch(preset)
+        room = n * 4.0 / 3.0 * math.pi * radius_mean**3 * (1.0 + radius_spread**2)
+        need = room / (0.25 * int(apertures[0]) * px * int(apertures[1]) * py) \
+            + 2.0 * woven.PRESETS[preset]["sphere_radius"]
+        if need > 0.5 * (int(apertures[0]) * px + int(apertures[1]) * py):
+            height = need
     s, _, _, ms, _ = sheet_cell(preset=preset, apertures=apertures, height=height,
                                  prestress=prestress, damping=damping,
                                  grain_material=material, log=log)
