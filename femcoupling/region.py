@@ -358,8 +358,14 @@ class PoolRegionMaterials:
     Build with ``PoolRegionMaterials.build(stresses, runner, workers=)``: each element
     prepared on the workers by ``runner`` (``PeriodicRegionElement``) at its stress, all at
     once. The same group serves ``SoilModel.set_cell_elements`` (one element per cell of a
-    region: ``stresses = model.cell_stresses(name)``). ``close()`` stops the pool's own
-    cluster.
+    region: ``stresses = model.cell_stresses(name)``), and can also hold reinforced RVEs for
+    the cells of a geogrid band (``build(band=)``, ``ReinforcedBandElement``). The elements'
+    tangents (Newton's Jacobian) are from their contact networks at every trial (the
+    pool's ``tangent="auto"``), except for an element with bonds (those RVEs), whose
+    bonds the network's assembly does not take: its tangent is by forward differences
+    of the Voigt components ``fd_components`` at every trial (one run of the element
+    each; plane strain in x-z needs (0, 2, 4)), the others filled (``_filled``).
+    ``close()`` stops the pool's own cluster.
 
     ``records``: an HDF5 file that gets a row per element at every committed step (appended
     and flushed): step, element (its index in ``names``, which the file's ``names``
@@ -368,7 +374,8 @@ class PoolRegionMaterials:
     """
 
     def __init__(self, pool, names, *, min_eig_fraction: float = 1e-3,
-                 strain_kw: dict | None = None, records=None) -> None:
+                 strain_kw: dict | None = None, records=None,
+                 fd_components=tuple(range(6))) -> None:
         from cpp_dem.elements.periodic import DemElement
 
         self.pool, self.names = pool, list(names)
@@ -378,7 +385,11 @@ class PoolRegionMaterials:
         self.strain_kw = dict(strain_kw or {})
         self.records = None if records is None else Path(records)
         self.calls, self.dem_s, self.steps = 0, 0.0, 0
+        self.fd_components = tuple(int(c) for c in fd_components)
+        if not self.fd_components or any(not 0 <= c < 6 for c in self.fd_components):
+            raise ValueError(f"fd_components={fd_components!r}: Voigt components 0..5")
         elements = [DemElement.from_bytes(b) for b in pool.states()]
+        self._bonded = {k for k, el in enumerate(elements) if el.scene.num_bonds}
         self._start(elements)
         self._contacts0 = [el.contact_count() for el in elements]
         self._strain = [np.zeros((3, 3)) for _ in self.names]  # since they took over
@@ -387,21 +398,52 @@ class PoolRegionMaterials:
 
     def _start(self, elements) -> None:
         self._stress0, self._tangent0 = [], []
-        for el in elements:
+        for k, el in enumerate(elements):
             self._stress0.append(el.stress())
-            self._tangent0.append(network_stiffness(el, self.min_eig_fraction))
+            voigt = None
+            if k in self._bonded:  # (the pool's "auto" for an element with bonds)
+                voigt = self._filled(el.fd_tangent(components=self.fd_components,
+                                                   central=False, **self.strain_kw))
+            self._tangent0.append(network_stiffness(el, self.min_eig_fraction, voigt=voigt))
+
+    def _filled(self, voigt) -> np.ndarray:
+        """A finite-difference tangent of ``fd_components`` only, made whole: each column
+        not computed is the transpose of its row where that is known (a symmetric
+        tangent), with the computed diagonal's mean on the diagonal. Those components are
+        ones the model does not strain (plane strain's yy, yz, xy), so they only keep the
+        6 x 6 tangent's algebra whole."""
+        d = np.array(voigt, float)
+        done = list(self.fd_components)
+        rest = [c for c in range(6) if c not in done]
+        if not rest:
+            return d
+        for c in rest:
+            d[:, c] = 0.0
+            d[done, c] = d[c, done]
+            d[c, c] = float(np.mean(np.diag(d)[done]))
+        return d
 
     @classmethod
     def build(cls, stresses: dict, runner: "PeriodicRegionElement", *, workers: int = 2,
-              client=None, distinct_seeds: bool = False, **kw) -> "PoolRegionMaterials":
+              client=None, distinct_seeds: bool = False,
+              band: "tuple[ReinforcedBandElement, dict] | None" = None,
+              **kw) -> "PoolRegionMaterials":
         """``stresses``: name -> the stress where its element takes over (3 x 3, Pa, tension
         positive); ``distinct_seeds``: element k packed with seed ``runner.seed + k`` (else
-        every element from ``runner.seed``)."""
+        every element from ``runner.seed``). ``band``: (a ``ReinforcedBandElement``, name ->
+        (the grains' pressure, Pa, compression positive; the sheet's tension, N/m)): more
+        members, reinforced cells of a geogrid band (``SoilModel.band_cell_stresses``),
+        after the soil's; band element j packed with seed ``band[0].seed + j``."""
         from cpp_dem.elements.pool import ElementPool
 
         names = list(stresses)
         make = _Prepare(runner, names, [np.asarray(stresses[n], float) for n in names],
                         distinct_seeds)
+        if band is not None:
+            brunner, states = band
+            make = _Concat(((len(names), make),
+                            (len(states), _PrepareBand(brunner, list(states.values())))))
+            names += list(states)
         return cls(ElementPool.build(len(names), make, client=client, workers=workers), names,
                    **kw)
 
@@ -413,11 +455,13 @@ class PoolRegionMaterials:
         if not any(np.any(d) for d in des):
             self._last = None
             return {n: (np.zeros((3, 3)), self._tangent0[k]) for k, n in enumerate(self.names)}
-        step = self.pool.apply_strain(des, tangent="network", **self.strain_kw)
+        step = self.pool.apply_strain(des, tangent="auto", fd_components=self.fd_components,
+                                      **self.strain_kw)
         self.calls += 1
         self.dem_s += float(sum(step.cpu_s))
         self._last = ([np.asarray(s) for s in step.stresses],
-                      [trial_stiffness(f"element {self.names[k]}", t,
+                      [trial_stiffness(f"element {self.names[k]}",
+                                       self._filled(t) if k in self._bonded else t,
                                        self.min_eig_fraction, des[k], c)
                        for k, (t, c) in enumerate(zip(step.tangents, step.contacts))],
                       des, list(step.contacts), list(step.cpu_s))
@@ -493,6 +537,79 @@ class _Prepare:
         runner = (dataclasses.replace(self.runner, seed=self.runner.seed + k)
                   if self.distinct_seeds else self.runner)
         return runner.prepare(self.names[k], fem_to_dem(self.stresses[k]))[0]
+
+
+@dataclasses.dataclass
+class ReinforcedBandElement:
+    """The element of a cell of a continuum's geogrid band: the reinforced-soil RVE
+    (``cpp_dem.elements.reinforced.reinforced_element``: ``n`` grains around the woven
+    sheet in a periodic cell) standing for a band ``band_thickness_m`` thick
+    (``DemElement.set_band_thickness``: its stress is the grains' plus the sheet's force per
+    metre over the band's thickness). ``element(grains_pa, tension_n_per_m)`` prepares it
+    with its grains at that mean pressure (Pa, compression positive) and its sheet at that
+    tension along x (N/m; a band in compression is prepared with an unloaded sheet, the
+    sheet not being able to hold a thrust); ``options``: more keywords for
+    ``reinforced_element`` (``material``, ``radius_mean``, ``radius_spread``, ``preset``,
+    ``tol``, ...). After that preparation the cell, held, relaxes until the unbalanced
+    force is below ``unbalanced`` (a sheet left at hold_sheet's looser tolerance creeps:
+    at 1e-2, an 80-grain cell's stress under a strain increment of 1e-4 drifted by 0.3 kPa
+    with the increment or without it; relaxed to 1e-4, by less than 1 Pa). Its tangent is by
+    finite differences (``fd_tangent``: the contact network's assembly takes no bonds).
+    SI units."""
+
+    n: int = 80
+    seed: int = 1
+    band_thickness_m: float = 0.02
+    options: dict | None = None
+    unbalanced: float = 1e-4
+    max_relax_steps: int = 400_000
+
+    def element(self, grains_pa: float, tension_n_per_m: float, seed: int | None = None):
+        from cpp_dem.elements.reinforced import reinforced_element
+
+        el = reinforced_element(self.n, stress=float(grains_pa),
+                                prestress=max(float(tension_n_per_m), 0.0),
+                                seed=self.seed if seed is None else int(seed),
+                                **(self.options or {}))
+        el.apply_strain(np.zeros((3, 3)), unbalanced=self.unbalanced,
+                        max_relax_steps=self.max_relax_steps)
+        if not el.last_report.relaxed:
+            raise RuntimeError(f"a band cell's reinforced RVE (seed {seed}) did not relax to "
+                               f"an unbalanced force of {self.unbalanced} in "
+                               f"{self.max_relax_steps} steps (at "
+                               f"{el.last_report.unbalanced_force:.3g})")
+        el.set_band_thickness(self.band_thickness_m)
+        return el
+
+
+@dataclasses.dataclass
+class _PrepareBand:
+    """``ElementPool.build``'s factory of band elements: element j is ``runner``'s at
+    ``states[j]`` (grains' pressure, Pa; sheet's tension, N/m), packed with seed
+    ``runner.seed + j``."""
+
+    runner: ReinforcedBandElement
+    states: list
+
+    def __call__(self, j: int):
+        p, t = self.states[j]
+        return self.runner.element(p, t, seed=self.runner.seed + j)
+
+
+@dataclasses.dataclass
+class _Concat:
+    """Factories one after another: ``parts`` is ((count, factory), ...); element k is made
+    by the part it falls in, with its index within that part."""
+
+    parts: tuple
+
+    def __call__(self, k: int):
+        j = k
+        for count, make in self.parts:
+            if j < count:
+                return make(j)
+            j -= count
+        raise IndexError(f"element {k} beyond the factories' {sum(c for c, _ in self.parts)}")
 
 
 class _PoolMember:

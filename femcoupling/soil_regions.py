@@ -9,6 +9,7 @@ from typing import Any
 
 import numpy as np
 
+from femcoupling import geometry as geo
 from femcoupling.geometry import FemInputError
 from femcoupling.materials import (LinearElastic, mandel_to_tensor, stiffness_block,
                                    tensor_to_mandel)
@@ -115,7 +116,48 @@ class RegionMaterials:
         return {f"{name}/{c}": mandel_to_tensor(cms[c])
                 for c in np.flatnonzero(self.cell_tag_of == tag)}
 
-    def set_cell_elements(self, name: str, group: Any) -> list:
+    def band_cells(self, name: str) -> dict:
+        """The cells of the geogrid layers' bands inside element region ``name`` (their
+        centres in its square, or cube), by the key ``set_cell_elements(band=True)`` gives
+        their elements, ``"<name>-<layer name>/<cell>"`` -> the layer's index. (The bands'
+        cells are not the region's: a layer's tag comes first.)"""
+        reg = self.body.regions[self.body.region_tag(name) - geo.REGION_TAG0]
+        lo = np.asarray(reg.center_m, float) - reg.size_m / 2
+        hi = lo + reg.size_m
+        centres = self._cell_centres()[:, : len(lo)]
+        inside = np.all((centres >= lo - 1e-12) & (centres <= hi + 1e-12), axis=1)
+        out = {}
+        for i, layer in enumerate(self.body.layers):
+            label = layer.name or f"layer{i}"
+            for c in np.flatnonzero(inside & (self.cell_tag_of == geo.LAYER_TAG0 + i)):
+                out[f"{name}-{label}/{c}"] = i
+        return out
+
+    def band_cell_states(self, name: str, reach_m: float) -> dict:
+        """Where a reinforced RVE of each cell of :meth:`band_cells` (``name``) starts
+        (``femcoupling.region.ReinforcedBandElement``): key -> (the grains' pressure, Pa,
+        compression positive: the volume mean of -tr(sigma)/3 over the region's soil cells
+        whose centres are within ``reach_m`` (m) of the band cell's; the band's tension
+        along x, N/m: the layer's thickness times the cell's sigma_xx)."""
+        if not (isinstance(reach_m, (int, float)) and np.isfinite(reach_m) and reach_m > 0):
+            raise FemInputError(f"reach_m={reach_m!r}: must be > 0 (m)")
+        cms = self.cell_mean_stress()
+        centres = self._cell_centres()[:, : self.tdim]
+        soil = np.flatnonzero(self.cell_tag_of == self.body.region_tag(name))
+        pressure = -cms[:, :3].sum(axis=1) / 3.0
+        out = {}
+        for key, i in self.band_cells(name).items():
+            c = int(key.rsplit("/", 1)[1])
+            near = soil[np.linalg.norm(centres[soil] - centres[c], axis=1) <= reach_m]
+            if not near.size:
+                raise FemInputError(f"reach_m={reach_m!r}: no soil cell of region {name!r} "
+                                    f"within it of band cell {c}; give a larger reach")
+            w = self.cell_volume[near]
+            out[key] = (float(w @ pressure[near] / w.sum()),
+                        float(self.body.layers[i].thickness_m * cms[c, 0]))
+        return out
+
+    def set_cell_elements(self, name: str, group: Any, *, band: bool = False) -> list:
         """Every cell of element region ``name`` takes its stress and tangent from its own
         DEM element (the hierarchical mode at the cells' scale; with P1 cells, one
         quadrature point each, an element per quadrature point). ``group`` holds one element
@@ -123,14 +165,17 @@ class RegionMaterials:
         PoolRegionMaterials.build(m.cell_stresses(name), runner, workers=)``: all of them
         evaluated at once on Dask workers at every Newton iterate); each cell is then what
         :meth:`set_region_element` makes of a region: its element gets the cell's mean strain
-        increment, and the cell's points take its answer. Returns the keys. Serial runs
-        only."""
-        keys = list(self.cell_stresses(name))
+        increment, and the cell's points take its answer. ``band``: the geogrid bands' cells
+        inside the region too (:meth:`band_cells`; their elements reinforced RVEs,
+        ``PoolRegionMaterials.build(band=)``). Returns the keys. Serial runs only."""
+        keys = list(self.cell_stresses(name)) + (list(self.band_cells(name)) if band else [])
         members = getattr(group, "materials", None)
         missing = [k for k in keys if members is None or k not in members]
         if missing:
             raise FemInputError(f"group={group!r}: needs an element (in its .materials) for "
-                                f"every cell of region {name!r}; missing {missing[:5]}"
+                                f"every cell of region {name!r}"
+                                + (" and of its bands" if band else "")
+                                + f"; missing {missing[:5]}"
                                 + (" ..." if len(missing) > 5 else ""))
         for k in keys:
             cell = int(k.rsplit("/", 1)[1])

@@ -228,3 +228,43 @@ def test_an_element_per_cell_on_dask_workers(tmp_path):
     ds_el = np.einsum("k,kij->ij", w, stress - start)
     ds_fem = m.region_stress("a") - s0
     assert np.abs(ds_fem[idx] - ds_el[idx]).max() < 1e-6 * np.abs(ds_fem).max()
+
+
+def test_a_band_member_on_the_pool_answers_as_its_element_alone():
+    """PoolRegionMaterials.build(band=): a reinforced RVE of a band cell beside a soil
+    element on one Dask worker. Its trial is the element run alone (bitwise), its stress in
+    the band's scale, its tangent the forward differences of the components asked (the
+    others filled by symmetry); the soil element's tangent is its network's."""
+    from cpp_dem.elements.periodic import DemElement
+    from femcoupling.region import (PeriodicRegionElement, PoolRegionMaterials,
+                                    ReinforcedBandElement, network_stiffness)
+
+    runner = PeriodicRegionElement(n=40, seed=3, tol=0.02, unbalanced=1e-2)
+    band = ReinforcedBandElement(n=50, seed=11, band_thickness_m=0.02)
+    s0 = -12e3 * np.eye(3)
+    group = PoolRegionMaterials.build({"zone/0": s0}, runner, workers=1,
+                                      band=(band, {"zone-geogrid/1": (12e3, 400.0)}),
+                                      fd_components=(0, 2, 4))
+    try:
+        assert group.names == ["zone/0", "zone-geogrid/1"]
+        de = np.zeros((3, 3))
+        de[0, 0], de[2, 2], de[0, 2] = 5e-5, -1e-4, 2e-5
+        got = group.trial_many({"zone/0": de, "zone-geogrid/1": de})
+        alone = band.element(12e3, 400.0, seed=11)
+        assert alone.band_thickness == 0.02
+        before = alone.stress()
+        after = alone.apply_strain(de)
+        fd = alone.fd_tangent(components=(0, 2, 4), central=False)
+        assert np.isnan(fd[:, 1]).all() and not np.isnan(fd[:, [0, 2, 4]]).any()
+        whole = group._filled(fd)
+        assert not np.isnan(whole).any()
+        assert np.array_equal(whole[:, [0, 2, 4]], fd[:, [0, 2, 4]])
+        assert whole[0, 1] == fd[1, 0] and whole[3, 3] == np.mean(np.diag(fd)[[0, 2, 4]])
+        ds, tangent = got["zone-geogrid/1"]
+        assert np.array_equal(ds, after - before)
+        assert np.array_equal(tangent, network_stiffness(None, 1e-3, voigt=whole))
+        soil = DemElement.from_bytes(group.pool.states()[0])
+        soil.apply_strain(de)
+        assert np.array_equal(got["zone/0"][1], network_stiffness(soil, 1e-3))
+    finally:
+        group.close()

@@ -263,7 +263,7 @@ class ElementHost:
 
     # ---- the increment -----------------------------------------------------------------
     def apply(self, indices, increments, tangent: str | None, strain_kw: dict,
-              scatter: bool = False) -> list:
+              scatter: bool = False, fd_components=None) -> list:
         out = []
         for k, de in zip(indices, increments):
             t0 = time.perf_counter()
@@ -271,12 +271,19 @@ class ElementHost:
             try:  # (the pool's ElementError then names the element that failed)
                 s = el.apply_strain(np.asarray(de), **strain_kw)
                 d = None
-                if tangent == "network":
+                mode = tangent
+                if mode == "auto":  # (a cell with bonds has no network tangent)
+                    mode = "fd-forward" if getattr(el.scene, "num_bonds", 0) else "network"
+                if mode == "network":
                     d = el.network_tangent()[0]
-                elif tangent == "network-elastic":  # sliding contacts taken as stuck:
+                elif mode == "network-elastic":  # sliding contacts taken as stuck:
                     d = el.network_tangent(sliding="elastic")[0]  # stiffer, positive past the peak
-                elif tangent == "fd":
+                elif mode == "fd":
                     d = el.fd_tangent(**strain_kw)
+                elif mode == "fd-forward":
+                    d = el.fd_tangent(components=(range(6) if fd_components is None
+                                                  else fd_components),
+                                      central=False, **strain_kw)
             except Exception as e:  # noqa: BLE001
                 raise RuntimeError(f"element {k}: {type(e).__name__}: {e}") from e
             out.append({"index": k, "stress": s, "tangent": d,
@@ -917,10 +924,13 @@ class ElementPool:
 
     # ---- the increment -----------------------------------------------------------------
     def apply_strain(self, increments, *, tangent: str | None = None, scatter: bool = False,
-                     **strain_kw) -> PoolStep:
+                     fd_components=None, **strain_kw) -> PoolStep:
         """Applies increment ``increments[k]`` (3 x 3 displacement gradient, -) to element k,
         all in parallel; ``tangent``: None, "network" (sliding contacts on the Coulomb cone),
-        "network-elastic" (sliding contacts taken as stuck) or "fd"; ``scatter``: also each
+        "network-elastic" (sliding contacts taken as stuck), "fd", or "auto" ("network" for
+        an element without bonds; for one with, a reinforced cell, whose bonds the
+        network's assembly does not take, forward differences of the Voigt components
+        ``fd_components`` (default all six; the others NaN)); ``scatter``: also each
         element's stress scatter (``DemElement.stress_scatter``). Keyword arguments go to
         ``DemElement.apply_strain``. Called at a boundary (after a build, accept, reject or
         load), it first gives elements to workers that joined. A worker lost during the call:
@@ -929,14 +939,16 @@ class ElementPool:
         self._require("StrainElement", "apply_strain")
         if len(increments) != self.n:
             raise ParameterError(f"increments: {len(increments)} given for {self.n} elements")
-        if tangent not in (None, "network", "network-elastic", "fd"):
-            raise ParameterError(f"tangent={tangent!r}: None, 'network', 'network-elastic' "
-                                 "or 'fd'")
+        if tangent not in (None, "network", "network-elastic", "fd", "auto"):
+            raise ParameterError(f"tangent={tangent!r}: None, 'network', 'network-elastic', "
+                                 "'fd' or 'auto'")
         # (the increments are kept for a replay)
         increments = {k: np.array(d, copy=True) for k, d in enumerate(increments)}
         t0 = time.perf_counter()
-        results, recovered = self._dispatch("apply", increments,
-                                            (tangent, dict(strain_kw), scatter))
+        extra = (tangent, dict(strain_kw), scatter)
+        if fd_components is not None:  # (the host's default otherwise: the call as before)
+            extra += (tuple(int(c) for c in fd_components),)
+        results, recovered = self._dispatch("apply", increments, extra)
         order = range(self.n)
         return PoolStep([results[k]["stress"] for k in order],
                         [results[k]["tangent"] for k in order],
