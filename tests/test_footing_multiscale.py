@@ -37,6 +37,8 @@ def test_paired_differences_over_seeds():
     ("seeds", (1, 1), "seeds=(1, 1): must be distinct whole numbers"),
     ("variants", ("RE", "xx"), "variants=('RE', 'xx'): must be a non-empty selection"),
     ("footing_b", -1.0, "footing_b=-1.0: must be a finite number > 0"),
+    ("band_grains", 20, "band_grains=20: must be 0 (the layer's cells stay the FEM's band) "
+                        "or an integer >= 50"),
 ])
 def test_bad_parameters_are_named(field, value, words):
     from dataclasses import replace
@@ -51,7 +53,8 @@ def test_bad_parameters_are_named(field, value, words):
 def test_the_command_refuses_bad_flags_by_name():
     for argv, words in ((["--variants", "RE,foo"], "--variants='RE,foo': a comma-separated"),
                         (["--levels", "0"], "--levels: levels=0: must be an integer >= 1"),
-                        (["--seeds", "0"], "--seeds=0: must be >= 1")):
+                        (["--seeds", "0"], "--seeds=0: must be >= 1"),
+                        (["--band-grains", "10"], "--band-grains: band_grains=10: must be 0")):
         r = subprocess.run([sys.executable, "-m", "geogrid_dem.cases.footing_multiscale",
                             "--smoke", *argv], capture_output=True, text=True, cwd=ROOT)
         assert r.returncode == 2 and words in r.stderr, r.stderr
@@ -67,6 +70,32 @@ def test_an_element_without_stiffness_fails_the_newton_iterate_by_name():
     assert np.linalg.eigvalsh(ok).min() > 0
     with pytest.raises(NewtonFailure, match=r"element zone/9: no stiffness left .*0 contacts"):
         trial_stiffness("element zone/9", np.zeros((6, 6)), 1e-3, np.eye(3) * 1e-4, 0)
+
+
+def test_a_band_cells_rve_starts_at_its_state_and_relaxed():
+    """``ReinforcedBandElement``: the sheet at the band's tension (a thrust: unloaded), the
+    grains' sigma_zz at their pressure, relaxed, standing for the band; the pool's factory
+    of soil and band elements hands each index to its part."""
+    from cpp_dem.elements.reinforced import cell_height, sheet_tension_per_metre
+    from femcoupling.drivers.footing_multiscale import FootingParams, band_options
+    from femcoupling.region import ReinforcedBandElement, _Concat
+
+    p = FootingParams()
+    r = ReinforcedBandElement(n=60, seed=7, band_thickness_m=0.02, options=band_options(p))
+    el = r.element(12e3, 300.0)
+    h = cell_height(el.scene)
+    assert el.band_thickness == 0.02
+    assert sheet_tension_per_metre(el.scene)[0] == pytest.approx(300.0, abs=0.005 * 12e3 * h)
+    assert el.last_report.relaxed and el.last_report.unbalanced_force < 1e-4
+    grains = -(el.stress()[2, 2])  # (the bonds carry nothing along z)
+    assert grains == pytest.approx(12e3, rel=0.02)
+    slack = r.element(12e3, -150.0, seed=8)  # a band in compression: the sheet unloaded
+    assert abs(sheet_tension_per_metre(slack.scene)[0]) <= 0.005 * 12e3 * cell_height(slack.scene)
+    make = _Concat(((2, lambda k: ("soil", k)), (3, lambda k: ("band", k))))
+    assert [make(k) for k in range(5)] == [("soil", 0), ("soil", 1), ("band", 0), ("band", 1),
+                                           ("band", 2)]
+    with pytest.raises(IndexError, match="element 5 beyond the factories' 5"):
+        make(5)
 
 
 @pytest.fixture(scope="module")
@@ -110,6 +139,40 @@ def test_the_prestress_is_in_the_prs_layer_only(dp_model):
     re, prs = dp_model("RE"), dp_model("PRS")
     assert abs(re.layer_force_n_per_m(0)) < 0.2 * T  # seated: the footing's pull only
     assert prs.layer_force_n_per_m(0) - re.layer_force_n_per_m(0) > 0.5 * T
+
+
+def test_the_layer_cells_in_the_zone_and_where_their_rves_start(dp_model):
+    """``band_cells``: exactly the layer's cells whose centres are in the zone;
+    ``band_cell_states``: the band's tension (its thickness times sigma_xx) and the grains'
+    pressure around it (the zone's soil cells within the reach)."""
+    from femcoupling import geometry as geo
+    from femcoupling.geometry import FemInputError
+
+    m = dp_model("PRS")
+    cells = m.band_cells("zone")
+    idx = sorted(int(k.rsplit("/", 1)[1]) for k in cells)
+    assert idx and set(cells.values()) == {0}
+    centres = m._cell_centres()
+    layer = np.flatnonzero(m.cell_tag_of == geo.LAYER_TAG0)
+    b, h = 0.5, 1.5  # the fixture's footing half width and height: the zone x < b, z > h - b
+    assert idx == sorted(c for c in layer if centres[c, 0] <= b and centres[c, 1] >= h - b)
+    assert len(idx) < len(layer)  # (the layer runs on beyond the zone)
+    cms = m.cell_mean_stress()
+    zone = np.flatnonzero(m.cell_tag_of == m.body.region_tag("zone"))
+    pz = -cms[zone, :3].sum(axis=1) / 3
+    states = m.band_cell_states("zone", 0.4)
+    assert set(states) == set(cells)
+    for key, (pressure, tension) in states.items():
+        c = int(key.rsplit("/", 1)[1])
+        assert tension == pytest.approx(0.02 * cms[c, 0], rel=1e-12)
+        assert pz.min() <= pressure <= pz.max()
+    # PRS's band carries its prestress, less what the soil took at the lock-in
+    assert np.mean([t for _, t in states.values()]) > 0.5 * 2000.0
+    assert dp_model("unreinforced").band_cells("zone") == {}
+    with pytest.raises(FemInputError, match="reach_m=0: must be > 0"):
+        m.band_cell_states("zone", 0)
+    with pytest.raises(FemInputError, match="no soil cell of region 'zone' within it"):
+        m.band_cell_states("zone", 1e-4)
 
 
 def test_the_smoke_gives_load_settlement_for_each_variant(case_smoke):

@@ -16,8 +16,12 @@ a square zone of edge b (the footing's half width) right under the footing. The 
    soil cell of the zone takes its own dense periodic DEM element, prepared at that cell's
    stress (``SoilModel.set_cell_elements``, ``femcoupling.region.PoolRegionMaterials`` on
    Dask workers: element k of seed s packed with seed ``1000 s + k``). The layer's cells
-   inside the zone stay the FEM band (the reinforced RVE with its sheet is not coupled
-   here). The footing is then pushed to each load level in turn
+   inside the zone stay the FEM band, or, with ``band_grains`` > 0, each gets a reinforced
+   RVE (``femcoupling.region.ReinforcedBandElement``: the woven sheet and grains, the sheet
+   at the band cell's tension, the grains at the pressure of the zone's soil cells around
+   it; band element j packed with seed ``1000 s + 500 + j``, 100 further at each new
+   preparation attempt) in the same pool. The footing
+   is then pushed to each load level in turn
    (``load_footing_to_pressure``); the settlement at each level is recorded.
 3. **The same body with the fitted Drucker–Prager everywhere** (the zone too), for each
    variant: the continuum answer the DEM zone is compared with.
@@ -60,6 +64,8 @@ class FootingParams:
     mesh_size: float = 0.5          #: FEM cell size far from the footing, m
     fine_size: float = 0.125        #: FEM cell size in the zone and along the layer, m
     cell_grains: int = 80           #: grains of each cell's periodic element
+    band_grains: int = 0            #: grains of the reinforced RVE of each of the layer's
+                                    #: cells in the zone (0: they stay the FEM's band)
     radius_mean: float = 0.003      #: the grains' mean radius, m
     radius_spread: float = 0.2      #: radii uniform in r_mean (1 +- spread), -
     young: float = 50e6             #: grain Young's modulus (linear law), Pa
@@ -103,6 +109,9 @@ class FootingParams:
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= lo):
                 bad(name, f"an integer >= {lo}")
+        if not (isinstance(self.band_grains, int)
+                and (self.band_grains == 0 or self.band_grains >= 50)):
+            bad("band_grains", "0 (the layer's cells stay the FEM's band) or an integer >= 50")
         if not (0 <= self.poisson and 0 <= self.radius_spread < 1
                 and 0 < self.friction_deg < 90 and 0 <= self.soil_poisson < 0.5
                 and 0 < self.soil_friction < 90):
@@ -166,6 +175,24 @@ def grain_options(p: FootingParams) -> dict:
     mat = linear_material(density=p.density, young=p.young, poisson=p.poisson,
                           friction_angle_deg=p.friction_deg)
     return {"material": mat, "radius_mean": p.radius_mean, "radius_spread": p.radius_spread}
+
+
+def band_options(p: FootingParams) -> dict:
+    """``reinforced_element`` keywords of the layer's RVEs: the zone's grains, held to its
+    own tolerances (0.5 % of the stress, unbalanced force 1e-4). At the zone elements'
+    looser ones (2 %, 1e-2) the held state is not an equilibrium: released, a smoke run's
+    cells lost 45-100 % of their sigma_zz and their sheets went to +-150 N/m."""
+    return {**grain_options(p), "max_steps": 400_000}
+
+
+def band_sheet_tensions(group, first: int) -> list:
+    """The sheet's tension along x (N/m) in each band element of ``group`` (the members from
+    index ``first`` on), in their committed states."""
+    from cpp_dem.elements.periodic import DemElement
+    from cpp_dem.elements.reinforced import sheet_tension_per_metre
+
+    return [sheet_tension_per_metre(DemElement.from_bytes(b).scene)[0]
+            for b in group.pool.states()[first:]]
 
 
 def calibrate(p: FootingParams, log) -> tuple:
@@ -245,13 +272,17 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
     ``first_slope``: the continuum's pressure–settlement slope over the first level (Pa/m),
     where the footing's first step is sized from."""
     from femcoupling.drivers.prs_element import hierarchical_status, step_statuses
-    from femcoupling.region import PeriodicRegionElement, PoolRegionMaterials
+    from femcoupling.region import (PeriodicRegionElement, PoolRegionMaterials,
+                                    ReinforcedBandElement)
     from femcoupling.soil_steps import NewtonDivergence
 
     t0 = time.perf_counter()
     m = model(p, variant, soil)
     e0 = m.region_strain("zone")
     cells = m.cell_stresses("zone")
+    # (the grains around a band cell: the zone's soil cells within 1.5 fine cells of it)
+    bands = (m.band_cell_states("zone", 1.5 * p.fine_size)
+             if p.band_grains and variant != "unreinforced" else {})
     tag = f"{variant}_seed{seed}"
     group, failures = None, []
     for attempt in range(PREPARATION_ATTEMPTS):
@@ -259,9 +290,15 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
         runner = PeriodicRegionElement(n=p.cell_grains, seed=base, prep_friction_deg=0.0,
                                        tol=0.02, unbalanced=1e-2, max_strain=0.15,
                                        options=grain_options(p))
+        band = None
+        if bands:  # (the layer's cells in the zone: reinforced RVEs, seeds base + 500 + j)
+            band = (ReinforcedBandElement(n=p.band_grains, seed=base + 500,
+                                          band_thickness_m=p.layer_thickness,
+                                          options=band_options(p)), bands)
         try:
             group = PoolRegionMaterials.build(cells, runner, client=client,
-                                              distinct_seeds=True,
+                                              distinct_seeds=True, band=band,
+                                              fd_components=(0, 2, 4),  # (x-z plane)
                                               records=out / f"zone_elements_{tag}.h5")
             break
         except RuntimeError as exc:
@@ -276,10 +313,13 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
                          "more --cell-grains or a larger --seat")
     xdmf = out / f"fem_{tag}.xdmf"
     try:
-        m.set_cell_elements("zone", group)
+        m.set_cell_elements("zone", group, band=bool(bands))
         t_prep = time.perf_counter() - t0
-        log(f"{tag}: {len(cells)} cell elements of {runner.n} grains prepared "
-            f"({t_prep:.1f} s)")
+        log(f"{tag}: {len(cells)} cell elements of {runner.n} grains prepared"
+            + (f", and {len(bands)} reinforced RVEs of {p.band_grains} grains in the layer's "
+               f"cells (sheets at {[round(t) for _, t in bands.values()]} N/m)"
+               if bands else "") + f" ({t_prep:.1f} s)")
+        sheets = [band_sheet_tensions(group, len(cells))] if bands else []
         m.write_xdmf(xdmf, time=m.footing_pressure_pa() / 1e3)
         rows = []
 
@@ -288,6 +328,8 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
             rows.append((m.footing_pressure_pa(), m.footing_settlement_m(),
                          sum(r.newton_iterations for r in got),
                          [r.status for r in got]))
+            if bands:
+                sheets.append(band_sheet_tensions(group, len(cells)))
             on_level(variant, "multiscale", seed, k, rows[-1])
 
         n0, failed = len(m.history), None
@@ -312,6 +354,8 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
     return {"pressure_pa": [r[0] for r in rows], "settlement_m": [r[1] for r in rows],
             "newton_iterations": [r[2] for r in rows], "level_statuses": [r[3] for r in rows],
             "status": status, "reason": reason, "cells": len(cells),
+            "band_cells": len(bands),
+            "band_sheet_tension_n_per_m": sheets,
             "element_seed_base": base, "preparation_failures": failures,
             "element_evaluations": calls, "dem_s": dem_s, "preparation_s": t_prep,
             "wall_time_s": time.perf_counter() - t0, "warnings": list(m.warnings),

@@ -6,7 +6,9 @@ Plane strain, the half next to the symmetry plane (z up). Three variants on the 
 unreinforced, RE (one geogrid layer, an elastic band of stiffness J) and PRS (the same layer
 prestressed by T_p). Each is seated to --seat with the fitted Drucker–Prager everywhere;
 then every soil cell of the b x b zone under the footing takes its own dense periodic DEM
-element at its cell's stress (on --workers Dask workers), and the footing is pushed to
+element at its cell's stress, and every cell of the layer's band in the zone a reinforced
+RVE (the woven sheet and grains, the sheet at the band's tension; --band-grains), all on
+--workers Dask workers, and the footing is pushed to
 --levels equal pressure rises up to --pressure. The same body with the fitted
 Drucker–Prager everywhere is run for each variant too. This is the prestressed-element
 study's question at the scale of the structure: does prestress improve the
@@ -82,6 +84,10 @@ def build_parser():
     ap.add_argument("--cell-grains", type=int, default=None,
                     help=f"grains of each zone cell's element (default {d.cell_grains}, smoke "
                          f"{SMOKE['cell_grains']}; at least 50)")
+    ap.add_argument("--band-grains", type=int, default=None,
+                    help=f"grains of the reinforced RVE (woven sheet and grains) of each of "
+                         f"the layer's cells in the zone (default {d.band_grains}; 0: those "
+                         "cells stay the FEM's elastic band)")
     ap.add_argument("--workers", type=int, default=d.workers,
                     help="Dask workers of the zone's elements (a LocalCluster)")
     return ap
@@ -91,7 +97,8 @@ def build_parser():
 FLAGS = {"--pressure": "pressure_pa", "--seat": "seat_pa", "--levels": "levels",
          "--footing-half-width": "footing_b", "--layer-depth": "layer_depth",
          "--grid-stiffness": "grid_stiffness", "--prestress": "prestress",
-         "--fine-size": "fine_size", "--cell-grains": "cell_grains", "--workers": "workers"}
+         "--fine-size": "fine_size", "--cell-grains": "cell_grains",
+         "--band-grains": "band_grains", "--workers": "workers"}
 
 
 def parse_args(argv=None):
