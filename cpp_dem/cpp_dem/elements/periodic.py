@@ -220,10 +220,8 @@ class DemElement:
         part as it is, the bonds' part times the cell's height over the band's thickness."""
         s = -self._raw_stress()
         if self.band_thickness is not None:
-            from cpp_dem.elements.reinforced import bond_stress, cell_height
-
-            s = s - (cell_height(self.scene) / self.band_thickness - 1.0) * bond_stress(
-                self.scene)
+            s = s - (periodic.cell_height(self.scene) / self.band_thickness - 1.0) * \
+                periodic.bond_stress(self.scene)
         return 0.5 * (s + s.T)
 
     def set_band_thickness(self, thickness: float | None) -> None:

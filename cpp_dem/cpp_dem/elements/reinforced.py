@@ -30,6 +30,7 @@ from cpp_dem.build import woven
 from cpp_dem.build.packing import loose_cloud
 from cpp_dem.elements.periodic import DemElement, default_material
 from cpp_dem.protocols import periodic
+from cpp_dem.protocols.periodic import bond_stress, cell_height
 from cpp_dem.scene import Scene
 
 
@@ -45,20 +46,6 @@ def stretch_x(scene, strain: float, steps: int) -> None:
     scene.run(4 * steps)
 
 
-def bond_stress(scene) -> np.ndarray:
-    """The bonds' part of the cell stress (Love–Weber: the sum over the bonds of force x
-    branch, over the cell volume), Pa, compression positive, 3 x 3. The cell stress less it
-    is the grains'."""
-    f = np.asarray(scene.bond_state()["force"]).reshape(-1, 3)
-    ab = np.asarray(scene.bond_spheres, dtype=int).reshape(-1, 2)
-    x = np.asarray(scene.positions)
-    h = np.asarray(scene.cell_matrix)
-    # the branch a -> b, to b's nearest image (bonds are shorter than half the cell)
-    d = x[ab[:, 1]] - x[ab[:, 0]]
-    d -= np.round(np.linalg.solve(h, d.T).T) @ h.T
-    return np.einsum("ki,kj->ij", f, d) / float(np.linalg.det(h))
-
-
 def sheet_tension_per_metre(scene, height: float | None = None) -> tuple[float, float]:
     """The sheet's tension per metre of width along x and along y, N/m (tension positive):
     minus its bonds' Love–Weber stress (``bond_stress``) times the cell's ``height`` (m), the
@@ -68,12 +55,6 @@ def sheet_tension_per_metre(scene, height: float | None = None) -> tuple[float, 
     if height is None:
         height = cell_height(scene)
     return -float(s[0, 0]) * height, -float(s[1, 1]) * height
-
-
-def cell_height(scene) -> float:
-    """The cell's height, m: its volume over its x–y face (the spacing of the sheets)."""
-    h = np.asarray(scene.cell_matrix)
-    return float(np.linalg.det(h)) / float(np.linalg.norm(np.cross(h[:, 0], h[:, 1])))
 
 
 def sheet_cell(*, preset: str = "detailed", apertures=(1, 1), height: float | None = None,

@@ -308,7 +308,27 @@ def plane_strain_biaxial(scene, *, pressure: float, strain: float,
             "peak_axial_strain": float(a[k, 0]), "peak_volumetric_strain": float(a[k, 1])}
 
 
+def bond_stress(scene) -> np.ndarray:
+    """The bonds' part of the cell stress (Love–Weber: the sum over the bonds of force x
+    branch, over the cell volume), Pa, compression positive, 3 x 3. The cell stress less it
+    is the grains'."""
+    f = np.asarray(scene.bond_state()["force"]).reshape(-1, 3)
+    ab = np.asarray(scene.bond_spheres, dtype=int).reshape(-1, 2)
+    x = np.asarray(scene.positions)
+    h = np.asarray(scene.cell_matrix)
+    # the branch a -> b, to b's nearest image (bonds are shorter than half the cell)
+    d = x[ab[:, 1]] - x[ab[:, 0]]
+    d -= np.round(np.linalg.solve(h, d.T).T) @ h.T
+    return np.einsum("ki,kj->ij", f, d) / float(np.linalg.det(h))
+
+
+def cell_height(scene) -> float:
+    """The cell's height, m: its volume over its x–y face (the spacing of the sheets)."""
+    h = np.asarray(scene.cell_matrix)
+    return float(np.linalg.det(h)) / float(np.linalg.norm(np.cross(h[:, 0], h[:, 1])))
+
+
 __all__ = ["cube_cell", "periodic_cloud", "cube_cloud", "periodic_scene", "cell_controller",
            "default_max_rate", "deformation_gradient", "small_strain", "drive_cell",
            "prepare_periodic", "settle_grains", "grow_grains", "plane_strain_biaxial",
-           "CellController"]
+           "bond_stress", "cell_height", "CellController"]
