@@ -398,13 +398,14 @@ class PoolRegionMaterials:
 
     def _start(self, elements) -> None:
         self._stress0, self._tangent0 = [], []
-        for k, el in enumerate(elements):
+        from cpp_dem.elements.pool import element_tangent
+
+        for k, el in enumerate(elements):  # (as a trial's: the pool's "auto")
             self._stress0.append(el.stress())
-            voigt = None
-            if k in self._bonded:  # (the pool's "auto" for an element with bonds)
-                voigt = self._filled(el.fd_tangent(components=self.fd_components,
-                                                   central=False, **self.strain_kw))
-            self._tangent0.append(network_stiffness(el, self.min_eig_fraction, voigt=voigt))
+            voigt = element_tangent(el, "auto", self.strain_kw, self.fd_components)
+            self._tangent0.append(network_stiffness(
+                None, self.min_eig_fraction,
+                voigt=self._filled(voigt) if k in self._bonded else voigt))
 
     def _filled(self, voigt) -> np.ndarray:
         """A finite-difference tangent of ``fd_components`` only, made whole: each column
@@ -432,7 +433,7 @@ class PoolRegionMaterials:
         positive); ``distinct_seeds``: element k packed with seed ``runner.seed + k`` (else
         every element from ``runner.seed``). ``band``: (a ``ReinforcedBandElement``, name ->
         (the grains' pressure, Pa, compression positive; the sheet's tension, N/m)): more
-        members, reinforced cells of a geogrid band (``SoilModel.band_cell_stresses``),
+        members, reinforced cells of a geogrid band (``SoilModel.band_cell_states``),
         after the soil's; band element j packed with seed ``band[0].seed + j``."""
         from cpp_dem.elements.pool import ElementPool
 

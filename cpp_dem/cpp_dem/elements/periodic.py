@@ -230,7 +230,7 @@ class DemElement:
         height h holds one sheet per h, so its bonds' stress is the sheet's force per metre
         over h; as a band of thickness t the same force is spread over t. :meth:`stress` then
         gives the grains' part unchanged and the bonds' part times h / t (h the cell's height
-        now, ``reinforced.cell_height``): the band's force per metre along x is t sigma_xx.
+        now, ``periodic.cell_height``): the band's force per metre along x is t sigma_xx.
         Everything that reads :meth:`stress` follows (``apply_strain``'s answer,
         ``fd_tangent``); the DEM and its servo are unchanged, so :meth:`apply_stress` is
         refused. Kept by ``to_bytes``. A cell without bonds is refused."""

@@ -134,6 +134,24 @@ def _kind(element_type: type) -> type:
     return TargetElement if callable(getattr(element_type, "run", None)) else StrainElement
 
 
+def element_tangent(el, tangent: str | None, strain_kw: dict, fd_components=None):
+    """An element's 6 x 6 Voigt tangent (Pa) as ``ElementPool.apply_strain``'s ``tangent``
+    names it (None: none); "auto" is "network" for an element without bonds and forward
+    differences of ``fd_components`` (default all six; the others NaN) for one with."""
+    if tangent == "auto":  # (a cell with bonds has no network tangent)
+        if not getattr(el.scene, "num_bonds", 0):
+            return el.network_tangent()[0]
+        return el.fd_tangent(components=range(6) if fd_components is None else fd_components,
+                             central=False, **strain_kw)
+    if tangent == "network":
+        return el.network_tangent()[0]
+    if tangent == "network-elastic":  # sliding contacts taken as stuck:
+        return el.network_tangent(sliding="elastic")[0]  # stiffer, positive past the peak
+    if tangent == "fd":
+        return el.fd_tangent(**strain_kw)
+    return None
+
+
 class ElementHost:
     """The actor on one worker: a dict of elements by index (``element_type``: a
     ``cpp_dem.elements.interface.PoolElement`` class, None for ``DemElement``), their accepted
@@ -270,20 +288,7 @@ class ElementHost:
             el = self.elements[k]
             try:  # (the pool's ElementError then names the element that failed)
                 s = el.apply_strain(np.asarray(de), **strain_kw)
-                d = None
-                mode = tangent
-                if mode == "auto":  # (a cell with bonds has no network tangent)
-                    mode = "fd-forward" if getattr(el.scene, "num_bonds", 0) else "network"
-                if mode == "network":
-                    d = el.network_tangent()[0]
-                elif mode == "network-elastic":  # sliding contacts taken as stuck:
-                    d = el.network_tangent(sliding="elastic")[0]  # stiffer, positive past the peak
-                elif mode == "fd":
-                    d = el.fd_tangent(**strain_kw)
-                elif mode == "fd-forward":
-                    d = el.fd_tangent(components=(range(6) if fd_components is None
-                                                  else fd_components),
-                                      central=False, **strain_kw)
+                d = element_tangent(el, tangent, strain_kw, fd_components)
             except Exception as e:  # noqa: BLE001
                 raise RuntimeError(f"element {k}: {type(e).__name__}: {e}") from e
             out.append({"index": k, "stress": s, "tangent": d,

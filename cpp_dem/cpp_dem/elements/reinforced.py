@@ -110,9 +110,9 @@ def reinforced_element(n: int = 150, *, stress: float = 50e3, prestress: float =
     as a loose cloud below the sheet and half above it (cpp_dem.build.packing.loose_cloud);
     without ``radius_mean`` they fill a quarter of the cell's volume beside the sheet's
     layer; with it, and no ``height``, the cell is made taller than its default where the
-    clouds would fill more than a quarter of it. They grow in the fixed cell to ``stress`` counting their own contacts only
-    (periodic.grow_grains; ``growth`` is RadiusGrowth's (gain, max_strain per call)); then
-    ``hold_sheet`` brings the sheet to ``prestress`` along x and 0 along y, the grains' mean
+    clouds would fill more than a quarter of it. They grow in the fixed cell to ``stress``
+    counting their own contacts only (periodic.grow_grains; ``growth`` is RadiusGrowth's
+    (gain, max_strain per call)); then ``hold_sheet`` brings the sheet to ``prestress`` along x and 0 along y, the grains' mean
     stress and the cell's sigma_zz to ``stress``, within ``tol`` and with the unbalanced
     force below ``unbalanced``. At rest the cell's sigma_xx and sigma_yy are the grains'
     (their split is theirs) less the sheet's prestress / height along x.
