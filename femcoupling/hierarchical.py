@@ -40,8 +40,10 @@ confining pressure; no symmetry plane forces the band's shape. With both
 ``right_displacement`` and ``top_displacement`` and ``homogeneous=True`` every boundary node
 is moved with the homogeneous field, so every element sees the same strain.
 
-Stresses are tension positive here (FEM), Pa. Serial (one MPI rank; the elements are the
-parallel part).
+Stresses are tension positive here (FEM), Pa. The FEM is serial, or, with ``comm`` (an
+mpi4py communicator, ``mpiexec -n N``), split over its ranks with the elements' pool on rank 0
+(``pool=None`` on the others; :mod:`femcoupling.mpi_points`): element k is the same place on
+any number of ranks.
 
 Records (``out=DIR``), appended and flushed at every accepted step:
 - ``elements.h5``: one row per element per step: step, load, element, increment, stress,
@@ -73,10 +75,11 @@ __all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning
 _IX = [0, 2, 4]  # DEM Voigt (xx, yy, zz, yz, xz, xy) rows of the FEM's (xx, yy, xy)
 
 
-def _rectangle(fx, lx: float, ly: float, nx: int, ny: int):
-    """The plane-strain model's mesh: [0, lx] x [0, ly] (m) in 2 nx ny triangles, serial."""
-    return fx.mesh.create_rectangle(fx.MPI.COMM_SELF, [np.array([0.0, 0.0]),
-                                                       np.array([lx, ly])], [nx, ny],
+def _rectangle(fx, lx: float, ly: float, nx: int, ny: int, comm=None):
+    """The plane-strain model's mesh: [0, lx] x [0, ly] (m) in 2 nx ny triangles, on ``comm``
+    (None: serial)."""
+    return fx.mesh.create_rectangle(fx.MPI.COMM_SELF if comm is None else comm,
+                                    [np.array([0.0, 0.0]), np.array([lx, ly])], [nx, ny],
                                     fx.mesh.CellType.triangle)
 
 
@@ -236,7 +239,7 @@ class HierarchicalPlaneStrain:
                  tangent: str = "network", convergence: str = "noise",
                  relaxation: str | float = "aitken", noise_factor: float = 2.0,
                  noise_ceiling: float | None = None, degree: int = 1,
-                 platens: str = "smooth",
+                 platens: str = "smooth", comm=None,
                  verbose: bool = False, out=None, overwrite: bool = False) -> None:
         if platens not in ("smooth", "rough"):
             raise FemInputError(f"platens={platens!r}: 'smooth' (left and bottom on rollers) "
@@ -257,6 +260,8 @@ class HierarchicalPlaneStrain:
         fem, ufl = fx.fem, fx.ufl
 
         self.pool, self.lx, self.ly = pool, float(lx), float(ly)
+        self.nx, self.ny = nx, ny
+        self.comm = comm
         self._options(out=out, overwrite=overwrite, verbose=verbose, tangent=tangent,
                       tangents=tuple(TANGENTS), convergence=convergence, relaxation=relaxation,
                       noise_factor=noise_factor, noise_ceiling=noise_ceiling,
@@ -265,12 +270,11 @@ class HierarchicalPlaneStrain:
         self.confining_pa = confining_pa
         self.newton_rtol, self.max_newton = newton_rtol, max_newton
         self.strain_kw = dict(strain_kw or {})
-        msh = self.mesh = _rectangle(fx, lx, ly, nx, ny)
-        self.n_cells = msh.topology.index_map(2).size_local
+        msh = self.mesh = _rectangle(fx, lx, ly, nx, ny, comm)
+        self.n_cells = msh.topology.index_map(2).size_local  # (this rank's)
         nq = 1 if degree == 1 else 3
-        if pool.n != self.n_cells * nq:
-            raise FemInputError(f"pool: has {pool.n} elements for {self.n_cells * nq} "
-                                f"quadrature points (2 nx ny triangles, {nq} point(s) each)")
+        self._check_pool(pool, 2 * nx * ny * nq,
+                         f"quadrature points (2 nx ny triangles, {nq} point(s) each)")
 
         def eps(w):
             e = ufl.sym(ufl.grad(w))
@@ -294,7 +298,7 @@ class HierarchicalPlaneStrain:
         # spaces, forms and solver: the same as the FEM soil's (femcoupling.quadrature)
         sysq = self.system = QuadratureSystem(
             msh, degree=degree, qdeg=_qdeg(degree), ncomp=3, strain=eps,
-            loads=loads)
+            loads=loads, lu="mumps" if self._parallel else None)
         self.V, self.Wv, self.Wt = sysq.V, sysq.Wv, sysq.Wt
         self.degree = degree
         self._points(nq)
@@ -341,8 +345,45 @@ class HierarchicalPlaneStrain:
             self.bcs = [b for b in self.bcs if b is not None]
         self.history: list[HierStep] = []
         #: the elements as the quadrature points' material (femcoupling.quadrature)
-        self.material = ElementPoolMaterial(pool, tangent=tangent, strain_kw=self.strain_kw)
-        self._set_q(self.material.stress, self.material.tangent)
+        self._material(pool, tangent=tangent, strain_kw=self.strain_kw)
+
+    @property
+    def _parallel(self) -> bool:
+        """Whether the FEM is split over more than one MPI rank."""
+        return self.comm is not None and self.comm.size > 1
+
+    @property
+    def _root(self) -> bool:
+        """Whether this is the rank that writes the records (rank 0; serial: True)."""
+        return self.comm is None or self.comm.rank == 0
+
+    def _check_pool(self, pool, n: int, what: str) -> None:
+        """The pool (rank 0's under MPI) holds one element per quadrature point."""
+        if self._parallel:
+            from femcoupling.mpi_points import check_on_root
+
+            check_on_root(self.comm, pool)
+            have = self.comm.bcast(pool.n if self._root else None, root=0)
+        else:
+            have = pool.n
+        if have != n:
+            raise FemInputError(f"pool: has {have} elements for {n} {what}")
+
+    def _serial_mesh(self):
+        """The model's mesh on one rank (the elements' numbering: PointPartition)."""
+        return _rectangle(self._fx, self.lx, self.ly, self.nx, self.ny)
+
+    def _material(self, pool, **kw) -> None:
+        """The elements as the points' material: ``ElementPoolMaterial`` (under MPI on rank 0,
+        seen by every rank: ``femcoupling.mpi_points.RootMaterial``)."""
+        mat = ElementPoolMaterial(pool, **kw) if pool is not None else None
+        if self._parallel:
+            from femcoupling.mpi_points import RootMaterial
+
+            mat = RootMaterial(self.comm, mat)
+        #: the elements as the quadrature points' material (femcoupling.quadrature)
+        self.material = mat
+        self._set_q(mat.stress, mat.tangent)
 
     def _options(self, *, out, overwrite: bool, verbose: bool, tangent: str, tangents: tuple,
                  convergence: str, relaxation, noise_factor: float,
@@ -357,8 +398,11 @@ class HierarchicalPlaneStrain:
                 raise FemInputError(f"out={str(self.out)!r}: holds the records of an earlier "
                                     f"run ({', '.join(old)}); give a new folder, or "
                                     "overwrite=True to replace them")
-            for f in old:
-                (self.out / f).unlink()
+            if self._root:
+                for f in old:
+                    (self.out / f).unlink()
+            if self._parallel:
+                self.comm.barrier()
         self.verbose = verbose
         if tangent not in tangents:
             raise FemInputError(f"tangent={tangent!r}: one of " + "; ".join(
@@ -412,31 +456,64 @@ class HierarchicalPlaneStrain:
 
     def _points(self, nq: int) -> None:
         """The quadrature points: ``nq`` per cell, element k at cell k // nq, point k % nq (the
-        quadrature spaces' own order, checked)."""
+        quadrature spaces' own order, checked). Under MPI a rank's points are the elements
+        at their places in the serial mesh (``femcoupling.mpi_points.PointPartition``)."""
         if len(self.system.qweights) != nq:
             raise RuntimeError(f"{nq} quadrature point(s) per cell expected")
-        self.nq, self.n_points = nq, self.n_cells * nq
-        if not np.array_equal(self.Wv.dofmap.list.reshape(-1), np.arange(self.n_points)):
+        self.nq, self.n_local_points = nq, self.n_cells * nq
+        if not np.array_equal(self.Wv.dofmap.list[: self.n_cells].reshape(-1),
+                              np.arange(self.n_local_points)):
             raise RuntimeError("the quadrature space's points are not in (cell, point) order")
+        self.partition = None
+        self.n_points = self.n_local_points
+        if self._parallel:
+            from femcoupling.mpi_points import PointPartition
+
+            size = max(self.lx, self.ly, getattr(self, "lz", 0.0))
+            serial = _coordinates(self._fx, self._serial_mesh(), self.system.qpoints)
+            self.partition = PointPartition(self.comm, self._local_coordinates(), serial, size)
+            self.n_points = self.partition.n
+
+    def _local(self, values: np.ndarray) -> np.ndarray:
+        """This rank's rows of a per-element array (serial: all of it)."""
+        return values if self.partition is None else self.partition.local(values)
+
+    def _put(self, f, values: np.ndarray) -> None:
+        """A quadrature function ``f`` at this rank's points from a per-element array."""
+        if self.partition is None:
+            f.x.array[:] = values.reshape(-1)
+            return
+        v = np.asarray(self._local(values), float).reshape(-1)
+        f.x.array[: v.size] = v
+        f.x.scatter_forward()
 
     def _set_q(self, sig: np.ndarray, tan: np.ndarray) -> None:
-        self.sig_q.x.array[:] = sig.reshape(-1)
-        self.tan_q.x.array[:] = tan.reshape(-1)
+        self._put(self.sig_q, sig)
+        self._put(self.tan_q, tan)
 
+    comm = None  #: the FEM's MPI communicator (None: serial)
+    partition = None  #: each rank's points as elements under MPI (mpi_points.PointPartition)
     gdim = 2  #: the FEM's dimension
     degree = 1  #: the displacement's degree (``Hierarchical3D``: P1)
 
-    @property
-    def point_coordinates(self) -> np.ndarray:
-        """The quadrature points' coordinates, m, shape (n_points, gdim), in element order."""
+    def _local_coordinates(self) -> np.ndarray:
         return _coordinates(self._fx, self.mesh, self.system.qpoints)
 
+    @property
+    def point_coordinates(self) -> np.ndarray:
+        """The quadrature points' coordinates, m, shape (n_points, gdim), in element order (on
+        every rank)."""
+        x = self._local_coordinates()
+        return x if self.partition is None else self.partition.gather(x)
+
     def _grad_increment(self) -> np.ndarray:
+        """Every element's displacement-gradient increment since the step's start (under MPI
+        gathered from the ranks, on every rank), (n_points, gdim, gdim), -."""
         cells = np.arange(self.n_cells, dtype=np.int32)
         d = self.gdim
         g = self.expr_grad.eval(self.mesh, cells).reshape(-1, d, d)
         gn = self.expr_grad_n.eval(self.mesh, cells).reshape(-1, d, d)
-        return g - gn
+        return g - gn if self.partition is None else self.partition.gather(g - gn)
 
     def _evaluate(self, first: bool, perturb: float = 0.0) -> None:
         """Stress and tangent of every element for the current iterate (its increments
@@ -457,7 +534,8 @@ class HierarchicalPlaneStrain:
         import warnings
 
         self.warnings.append(msg)
-        warnings.warn(msg, NoiseWarning, stacklevel=3)
+        if self._root:
+            warnings.warn(msg, NoiseWarning, stacklevel=3)
 
     def _scale_length(self) -> float:
         """The force scale over the largest stress: the square root of the domain's area, m
@@ -518,7 +596,8 @@ class HierarchicalPlaneStrain:
         rules = NewtonRules(rtol=self.newton_rtol, max_newton=self.max_newton,
                             noise_factor=self.noise_factor, ceiling=self.noise_ceiling,
                             probe=self.convergence == "noise")
-        log = (lambda msg: print(f"[hier] {msg}", flush=True)) if self.verbose else None
+        log = ((lambda msg: print(f"[hier] {msg}", flush=True))
+               if self.verbose and self._root else None)
         out = newton_solve(_HierNewton(self), rules, relaxation=self.relaxation, log=log)
         rel, noise_rel, its = out.residual, out.noise_residual, out.iterations
         stress_of_scale = out.scale / self._scale_length()  # Pa: the largest stress
@@ -557,10 +636,16 @@ class HierarchicalPlaneStrain:
         cell, at the load as time); and a line of ``steps.csv`` with the FEM/DEM time split."""
         from femcoupling.records import append_rows
 
-        self.out.mkdir(parents=True, exist_ok=True)
+        k = len(self.history) - 1
+        if self._root:
+            self.out.mkdir(parents=True, exist_ok=True)
+        if self._parallel:
+            self.comm.barrier()
+        self._write_xdmf(r, append=k > 0)  # (collective under MPI)
+        if not self._root:
+            return
         ps = self._last_pool_step
         n = self.n_points
-        k = len(self.history) - 1
         rows = {
             "step": np.full(n, k, dtype=np.int64),
             "load_m": np.full(n, r.load),
@@ -578,7 +663,6 @@ class HierarchicalPlaneStrain:
                     units=("SI; stress tension positive; increment: displacement-gradient "
                            "increment of the step, the element's (x, y, z) with the FEM's "
                            "(x, y) as (x, z)"))
-        self._write_xdmf(r, append=k > 0)
         csv = self.out / "steps.csv"
         new = not csv.exists()
         with open(csv, "a") as fh:
@@ -638,9 +722,14 @@ class HierarchicalPlaneStrain:
 
         T = fem.functionspace(self.mesh, ("DG", 0, (3, 3)))
         sig = fem.Function(T, name="stress_pa")
-        st = np.asarray(self._last_pool_step.stresses, float).reshape(self.n_cells, self.nq, 9)
+        st = self._local(np.asarray(self._last_pool_step.stresses, float))
+        st = st.reshape(self.n_cells, self.nq, 9)
         st = st[:, 0] if self.nq == 1 else st.mean(axis=1)  # (a cell's points: their mean)
-        sig.x.array[:] = st.reshape(-1)[: sig.x.array.size]
+        if self.partition is None:
+            sig.x.array[:] = st.reshape(-1)[: sig.x.array.size]
+        else:
+            sig.x.array[: st.size] = st.reshape(-1)
+            sig.x.scatter_forward()
         u = self.u
         if self.degree != 1:  # XDMF holds the mesh's degree: P2 at the vertices (P1)
             if not hasattr(self, "_u_out"):
@@ -680,10 +769,7 @@ class _HierNewton:
         return self.m._sig.copy()
 
     def stress_change_residual(self, before: np.ndarray) -> float:
-        def put(f, v):
-            f.x.array[:] = np.asarray(v, float).reshape(-1)
-
-        return self.m.system.change_residual(self.m._sig - before, self.m.bcs, put)
+        return self.m.system.change_residual(self.m._sig - before, self.m.bcs, self.m._put)
 
     def correction(self) -> np.ndarray:
         return self.m.system.correction(self.m.bcs, describe=lambda: (

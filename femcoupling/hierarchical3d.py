@@ -20,8 +20,9 @@ Loading (``step``):
   by ``confining_pa`` (Pa, compression positive).
 
 The force scale of the tolerance is the largest element stress times the box's volume to the
-power 2/3. Stresses are tension positive, Pa. Serial FEM (one MPI rank; the elements are the
-parallel part). The secant tangent is plane strain only.
+power 2/3. Stresses are tension positive, Pa. The FEM is serial, or split over the ranks of
+``comm`` with the elements' pool on rank 0 (as the plane-strain mode's;
+:mod:`femcoupling.mpi_points`). The secant tangent is plane strain only.
 """
 
 from __future__ import annotations
@@ -32,7 +33,7 @@ import numpy as np
 
 from femcoupling import _dolfinx
 from femcoupling.geometry import FemInputError
-from femcoupling.hierarchical import ElementPoolMaterial, HierarchicalPlaneStrain
+from femcoupling.hierarchical import HierarchicalPlaneStrain
 from femcoupling.quadrature import QuadratureSystem
 
 __all__ = ["Hierarchical3D"]
@@ -49,7 +50,7 @@ class Hierarchical3D(HierarchicalPlaneStrain):
                  newton_rtol: float = 1e-3, max_newton: int = 10,
                  strain_kw: dict | None = None, tangent: str = "network",
                  convergence: str = "noise", relaxation: str | float = "aitken",
-                 noise_factor: float = 2.0, noise_ceiling: float | None = None,
+                 noise_factor: float = 2.0, noise_ceiling: float | None = None, comm=None,
                  verbose: bool = False, out=None, overwrite: bool = False) -> None:
         for name, v in (("lx", lx), ("ly", ly), ("lz", lz)):
             if not (math.isfinite(v) and v > 0):
@@ -63,6 +64,8 @@ class Hierarchical3D(HierarchicalPlaneStrain):
         fx = self._fx = _dolfinx.load()
         fem, ufl = fx.fem, fx.ufl
         self.pool, self.lx, self.ly, self.lz = pool, float(lx), float(ly), float(lz)
+        self.nx, self.ny, self.nz = nx, ny, nz
+        self.comm = comm
         self._options(out=out, overwrite=overwrite, verbose=verbose, tangent=tangent,
                       tangents=("network", "network-elastic"), convergence=convergence,
                       relaxation=relaxation, noise_factor=noise_factor,
@@ -70,13 +73,9 @@ class Hierarchical3D(HierarchicalPlaneStrain):
         self.homogeneous, self.confining_pa = homogeneous, confining_pa
         self.newton_rtol, self.max_newton = newton_rtol, max_newton
         self.strain_kw = dict(strain_kw or {})
-        msh = self.mesh = fx.mesh.create_box(
-            fx.MPI.COMM_SELF, [np.zeros(3), np.array([lx, ly, lz])], [nx, ny, nz],
-            fx.mesh.CellType.tetrahedron)
-        self.n_cells = msh.topology.index_map(3).size_local
-        if pool.n != self.n_cells:
-            raise FemInputError(f"pool: has {pool.n} elements for {self.n_cells} cells "
-                                f"(6 nx ny nz tetrahedra)")
+        msh = self.mesh = self._box(comm)
+        self.n_cells = msh.topology.index_map(3).size_local  # (this rank's)
+        self._check_pool(pool, 6 * nx * ny * nz, "cells (6 nx ny nz tetrahedra)")
 
         def eps(w):  # Voigt xx, yy, zz, yz, xz, xy with engineering shear (the element's)
             e = ufl.sym(ufl.grad(w))
@@ -98,7 +97,8 @@ class Hierarchical3D(HierarchicalPlaneStrain):
         sysq = self.system = QuadratureSystem(
             msh, degree=1, qdeg=1, ncomp=6, strain=eps,
             loads=lambda v: (ufl.dot(self.traction_x, v) * ds(1),
-                             ufl.dot(self.traction_y, v) * ds(2)))
+                             ufl.dot(self.traction_y, v) * ds(2)),
+            lu="mumps" if self._parallel else None)
         self.V, self.Wv, self.Wt = sysq.V, sysq.Wv, sysq.Wt
         self._points(1)
         self.u, self.u_n, self.du = sysq.u, sysq.u_n, sysq.du
@@ -127,10 +127,17 @@ class Hierarchical3D(HierarchicalPlaneStrain):
             self.traction_x.value[:] = [-p, 0.0, 0.0]
             self.traction_y.value[:] = [0.0, -p, 0.0]
         self.history = []
-        self.material = ElementPoolMaterial(pool, tangent=tangent, strain_kw=self.strain_kw,
-                                            dim=3)
-        self._set_q(self.material.stress, self.material.tangent)
+        self._material(pool, tangent=tangent, strain_kw=self.strain_kw, dim=3)
         self._gradient = np.zeros((3, 3))
+
+    def _box(self, comm=None):
+        """The box of tetrahedra on ``comm`` (None: serial)."""
+        fx = self._fx
+        return fx.mesh.create_box(fx.MPI.COMM_SELF if comm is None else comm,
+                                  [np.zeros(3), np.array([self.lx, self.ly, self.lz])],
+                                  [self.nx, self.ny, self.nz], fx.mesh.CellType.tetrahedron)
+
+    _serial_mesh = _box
 
     def _scale_length(self) -> float:
         return (self.lx * self.ly * self.lz) ** (2.0 / 3.0)

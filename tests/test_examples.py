@@ -1,6 +1,7 @@
 """The tutorial scripts examples/*.py, each run at smoke size (``--smoke --out DIR``) in a
 subprocess: it must exit 0 and write the files it declares in its module-level ``OUTPUTS``
-(read with ast, the script is not imported), each non-empty. A script that declares
+(read with ast, the script is not imported), each non-empty; a script that declares
+``RUN_BY`` is run by that test instead (examples/05 runs under mpiexec). A script that declares
 ``DEM_ONLY = True`` must not import dolfinx (nor gmsh, ufl, PETSc). docs/fem.md shows the
 middle of examples/03_fem_driven_element.py; the page's code must be that part, line for line.
 """
@@ -55,7 +56,19 @@ def test_there_are_examples_and_each_declares_its_outputs():
         assert lines <= 110, f"{path.name}: {lines} lines; a tutorial script stays short"
 
 
-@pytest.mark.parametrize("path", EXAMPLES, ids=lambda p: p.stem)
+def test_an_example_run_by_another_test_is_run_there():
+    """An example that declares ``RUN_BY`` (a test that runs it in its own way, e.g. under
+    mpiexec) is run by that test: it names the script and checks its OUTPUTS."""
+    for path in EXAMPLES:
+        by = declared(path, "RUN_BY")
+        if by is None:
+            continue
+        text = (ROOT / by).read_text()
+        assert path.name in text and "OUTPUTS" in text, f"{path.name}: {by} does not run it"
+
+
+@pytest.mark.parametrize("path", [p for p in EXAMPLES if declared(p, "RUN_BY") is None],
+                         ids=lambda p: p.stem)
 def test_example_runs_at_smoke_size(path: Path, tmp_path: Path):
     out = tmp_path / "out"
     code = RUNNER.format(path=str(path), out=str(out), fem=FEM_MODULES)

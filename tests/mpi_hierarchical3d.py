@@ -1,0 +1,35 @@
+"""A 3D hierarchical triaxial step under MPI, run by tests/test_hierarchical_mpi.py as
+``mpiexec -n N python tests/mpi_hierarchical3d.py OUT``: one hexahedron of 6 tetrahedra, each
+with a periodic element of 40 grains (its own packing), one load step. Rank 0 saves the
+points (m) and the element stresses (Pa) in OUT/points.npy and OUT/stresses.npy and prints
+the status."""
+
+import sys
+
+import numpy as np
+
+
+def main(out: str) -> None:
+    from cpp_dem.elements.pool import ElementPool, PeriodicFactory
+    from femcoupling.hierarchical3d import Hierarchical3D
+    from femcoupling.mpi_points import on_root, world
+
+    comm = world()
+    pool = on_root(comm, lambda: ElementPool.build(6, PeriodicFactory(n=40, seed=3),
+                                                   workers=1))
+    try:
+        m = Hierarchical3D(pool, lx=0.02, ly=0.02, lz=0.02, nx=1, ny=1, nz=1,
+                           confining_pa=100e3, comm=comm, out=out, overwrite=True)
+        r = m.step(top_displacement=-2e-5)
+        xyz = m.point_coordinates  # (collective)
+    finally:
+        if pool is not None:
+            pool.close()
+    if comm.rank == 0:
+        np.save(f"{out}/points.npy", xyz)
+        np.save(f"{out}/stresses.npy", r.element_stresses)
+        print(f"status {m.status} on {comm.size} rank(s)", flush=True)
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])

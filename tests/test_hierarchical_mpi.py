@@ -1,0 +1,147 @@
+"""The hierarchical FEM under MPI (femcoupling.mpi_points; docs/multiscale.md, "Under MPI").
+
+examples/05_hierarchical_mpi.py runs on 2 ranks (MPICH's mpiexec of the venv) and on 1: every
+element is at the serial model's place, and the two runs agree within the Newton tolerance
+(the FEM's sums run in another order on 2 ranks; the DEM elements turn that rounding into
+differences of about 1e-3 of the stress, as they do for any change of their increments at
+1e-16). The point matching is also tested without MPI, on one rank's shuffled points.
+"""
+
+from __future__ import annotations
+
+import csv
+import subprocess
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+from test_examples import declared
+
+pytest.importorskip("dolfinx_solver")
+
+ROOT = Path(__file__).resolve().parents[1]
+EXAMPLE = ROOT / "examples" / "05_hierarchical_mpi.py"
+MPIEXEC = Path(sys.executable).parent / "mpiexec"
+
+
+def _rows(path: Path) -> list[dict]:
+    with open(path) as fh:
+        return list(csv.DictReader(fh))
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    if not MPIEXEC.exists():
+        pytest.skip(f"no mpiexec beside {sys.executable}")
+    out = {}
+    for ranks in (1, 2):
+        d = tmp_path_factory.mktemp(f"ranks{ranks}")
+        p = subprocess.run([str(MPIEXEC), "-n", str(ranks), sys.executable, str(EXAMPLE),
+                            "--smoke", "--out", str(d)], capture_output=True, text=True,
+                           timeout=600, cwd=ROOT)
+        assert p.returncode == 0, f"{ranks} rank(s):\n{p.stdout[-2000:]}\n{p.stderr[-4000:]}"
+        assert f"{ranks} rank(s): status" in p.stdout
+        for name in declared(EXAMPLE, "OUTPUTS"):  # (the example's RUN_BY names this test)
+            assert (d / name).stat().st_size > 0, name
+        out[ranks] = d
+    return out
+
+
+def test_every_element_is_at_the_serial_models_place(runs):
+    from femcoupling.hierarchical import quadrature_points
+
+    serial = quadrature_points(0.04, 0.08, 2, 2)
+    for ranks, d in runs.items():
+        rows = _rows(d / "elements.csv")
+        xy = np.array([[float(r["x_m"]), float(r["y_m"])] for r in rows])
+        assert [int(r["element"]) for r in rows] == list(range(8))
+        assert np.abs(xy - serial).max() < 1e-12, ranks
+
+
+def test_two_ranks_give_the_one_rank_run_within_the_newton_tolerance(runs):
+    one, two = (_rows(runs[k] / "biaxial.csv") for k in (1, 2))
+    assert len(one) == len(two) == 2
+    for a, b in zip(one, two):
+        assert {a["status"], b["status"]} <= {"converged", "stopped_at_scatter"}
+        for c in ("sigma_axial_pa", "sigma_lateral_pa"):
+            assert float(b[c]) == pytest.approx(float(a[c]), rel=5e-3), c
+    cols = ("sigma_xx_pa", "sigma_yy_pa", "sigma_xy_pa")
+    s1, s2 = (np.array([[float(r[c]) for c in cols] for r in _rows(runs[k] / "elements.csv")])
+              for k in (1, 2))
+    # (measured: 0.4 % of the largest stress at most; distinct packings: a swapped element
+    # would differ by its own packing's scatter, about 10 %)
+    assert np.abs(s2 - s1).max() < 0.02 * np.abs(s1).max()
+    assert np.abs(s1[:, 0] - s1[:, 0].mean()).max() > 0.02 * np.abs(s1).max()
+
+
+def test_the_records_are_written_once_by_rank_0(runs):
+    import h5py
+
+    d = runs[2]
+    steps = len((d / "steps.csv").read_text().splitlines()) - 1  # (a cut step: its halves)
+    assert steps >= 2
+    with h5py.File(d / "elements.h5") as f:
+        assert list(f["step"][:]) == [k for k in range(steps) for _ in range(8)]
+        assert list(f["element"][:]) == list(range(8)) * steps
+    assert (d / "fem.xdmf").read_text().count('Attribute Name="stress_pa"') == steps
+
+
+def _partition(local, serial, size=1.0):
+    from femcoupling.mpi_points import PointPartition, world
+
+    return PointPartition(world().Split(world().rank), local, serial, size)
+
+
+def test_points_are_matched_to_the_serial_numbering_by_place():
+    rng = np.random.default_rng(1)
+    serial = rng.random((20, 2))
+    order = rng.permutation(20)
+    part = _partition(serial[order] + 1e-12, serial)
+    assert np.array_equal(part.ids, order)
+    values = rng.random((20, 3))
+    assert np.array_equal(part.gather(values[order]), values)
+    assert np.array_equal(part.local(values), values[order])
+
+
+def test_a_point_off_the_serial_mesh_or_matched_twice_is_refused():
+    serial = np.array([[0.0, 0.0], [1.0, 0.0], [0.0, 1.0]])
+    with pytest.raises(RuntimeError, match="not the serial model's"):
+        _partition(serial + [[0.0, 0.0], [0.0, 0.0], [1e-6, 0.0]], serial)
+    with pytest.raises(RuntimeError, match="not the serial model's"):
+        _partition(serial[[0, 1, 1]], serial)
+
+
+def test_the_pool_must_be_on_rank_0_only():
+    from femcoupling.geometry import FemInputError
+    from femcoupling.mpi_points import RootMaterial, world
+
+    with pytest.raises(FemInputError, match="rank 0 only"):
+        RootMaterial(world().Split(world().rank), None)
+
+
+def test_a_3d_box_on_two_ranks_is_the_serial_box(tmp_path):
+    """The 3D model under MPI: its 6 elements at the serial box's places, the step accepted,
+    the faces' confining pressure carried (the elements' mean lateral stress within 5 %)."""
+    from femcoupling import _dolfinx
+    from femcoupling.hierarchical import _coordinates
+
+    if not MPIEXEC.exists():
+        pytest.skip(f"no mpiexec beside {sys.executable}")
+    p = subprocess.run([str(MPIEXEC), "-n", "2", sys.executable,
+                        str(ROOT / "tests" / "mpi_hierarchical3d.py"), str(tmp_path)],
+                       capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert p.returncode == 0, f"{p.stdout[-2000:]}\n{p.stderr[-4000:]}"
+    assert "on 2 rank(s)" in p.stdout
+    assert p.stdout.split("status ")[1].split()[0] in ("converged", "stopped_at_scatter")
+    import basix
+
+    fx = _dolfinx.load()
+    box = fx.mesh.create_box(fx.MPI.COMM_SELF, [np.zeros(3), np.full(3, 0.02)], [1, 1, 1],
+                             fx.mesh.CellType.tetrahedron)
+    pts, _ = basix.make_quadrature(basix.CellType.tetrahedron, 1)
+    serial = _coordinates(fx, box, pts)
+    assert np.abs(np.load(tmp_path / "points.npy") - serial).max() < 1e-12
+    s = np.load(tmp_path / "stresses.npy")  # (Voigt xx, yy, zz, yz, xz, xy, tension +)
+    assert s.shape == (6, 6)
+    assert -s[:, :2].mean() == pytest.approx(100e3, rel=0.05)
