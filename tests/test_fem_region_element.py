@@ -253,6 +253,9 @@ def test_a_band_member_on_the_pool_answers_as_its_element_alone():
         alone = band.element(12e3, 400.0, seed=11)
         assert alone.band_thickness == 0.02
         before = alone.stress()
+        from cpp_dem.elements.reinforced import sheet_tension_per_metre
+
+        sheet = sheet_tension_per_metre(alone.scene)[0]  # (N/m, as prepared)
         after = alone.apply_strain(de)
         fd = alone.fd_tangent(components=(0, 2, 4), central=False)
         assert np.isnan(fd[:, 1]).all() and not np.isnan(fd[:, [0, 2, 4]]).any()
@@ -266,5 +269,9 @@ def test_a_band_member_on_the_pool_answers_as_its_element_alone():
         soil = DemElement.from_bytes(group.pool.states()[0])
         soil.apply_strain(de)
         assert np.array_equal(got["zone/0"][1], network_stiffness(soil, 1e-3))
+        # the footing's record of the band's sheets: the band members' committed states
+        from femcoupling.drivers.footing_multiscale import band_sheet_tensions
+
+        assert band_sheet_tensions(group, 1) == [sheet]
     finally:
         group.close()

@@ -123,6 +123,23 @@ def test_the_client_receives_digests_not_states(client):
         assert pool.received_bytes()["accept"] >= state and pool.held_bytes() >= state
 
 
+def test_states_of_some_elements_fetch_only_those(client):
+    """``states(indices)``: those elements' accepted bytes, in the order asked, and only
+    their bytes through the client; an index outside the pool is refused."""
+    with ElementPool.build(N, FACTORY, client=client) as pool:
+        pool.apply_strain(_increments(), **KW)
+        pool.accept()
+        every = pool.states()
+        before = pool.received_bytes()["states"]
+        some = pool.states([3, 1])
+        assert some == [every[3], every[1]]
+        assert pool.received_bytes()["states"] - before < len(every[3]) + len(every[1]) + 1024
+        with pytest.raises(ParameterError, match=r"indices: \[4\] outside"):
+            pool.states([0, 4])
+    with ElementPool.build(N, FACTORY, client=client, keep_copies=True) as pool:
+        assert pool.states([2]) == [pool.states()[2]]
+
+
 def test_a_lost_worker_without_copies_recovers_from_the_spill_or_refuses(client, serial,
                                                                           tmp_path):
     with ElementPool.build(N, FACTORY, client=client, state_dir=tmp_path) as pool:

@@ -191,8 +191,9 @@ def band_sheet_tensions(group, first: int) -> list:
     from cpp_dem.elements.periodic import DemElement
     from cpp_dem.elements.reinforced import sheet_tension_per_metre
 
+    pool = group.pool
     return [sheet_tension_per_metre(DemElement.from_bytes(b).scene)[0]
-            for b in group.pool.states()[first:]]
+            for b in pool.states(range(first, pool.n))]
 
 
 def calibrate(p: FootingParams, log) -> tuple:

@@ -1066,20 +1066,24 @@ class ElementPool:
             self._recover(lost)  # (restored at their accepted state: the rejection itself)
         self._clean = True
 
-    def states(self) -> list:
-        """The last accepted bytes of every element (index order): the client's copies with
-        ``keep_copies``, else fetched from the workers now (the elements' whole state
-        through the client: an explicit call, for saving a run)."""
+    def states(self, indices: Sequence[int] | None = None) -> list:
+        """The last accepted bytes of every element (index order), or of the elements
+        ``indices`` (in that order): the client's copies with ``keep_copies``, else fetched
+        from the workers now (the elements' whole state through the client: an explicit
+        call, for saving a run)."""
+        ks = list(range(self.n)) if indices is None else [int(k) for k in indices]
+        bad = [k for k in ks if not 0 <= k < self.n]
+        if bad:
+            raise ParameterError(f"indices: {bad[:5]} outside the pool's elements 0..{self.n - 1}")
         if self._copies is not None:
-            return list(self._copies)
-        out: list = [None] * self.n
-        futures = [self._hosts[a].saved(ks) for a, ks in self._by_host(range(self.n)).items()]
+            return [self._copies[k] for k in ks]
+        got_all: dict = {}
+        futures = [self._hosts[a].saved(g) for a, g in self._by_host(sorted(set(ks))).items()]
         for f in futures:
             got = f.result()
             self._count("states", got)
-            for k, data in got.items():
-                out[k] = data
-        return out
+            got_all.update(got)
+        return [got_all[k] for k in ks]
 
     def load_states(self, data: Sequence[bytes]) -> None:
         """Every element back to the given accepted bytes (index order; ``states()`` of this
