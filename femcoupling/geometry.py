@@ -275,10 +275,14 @@ class ReinforcedSoilBody:
         raise FemInputError(f"region={name!r}: no such region (have "
                             f"{[r.name for r in self.regions]})")
 
+    def region(self, name: str) -> ElementRegion:
+        """The element region called ``name``."""
+        return self.regions[self.region_tag(name) - REGION_TAG0]
+
     def region_layers(self, name: str) -> list[int]:
         """Indices of the geogrid layers that cross the element region ``name``: their
         mid-plane lies within its height and their x range overlaps its x range."""
-        reg = self.regions[self.region_tag(name) - REGION_TAG0]
+        reg = self.region(name)
         h = reg.size_m / 2
         x, z = reg.center_m[0], reg.center_m[-1]
         return [i for i, lay in enumerate(self.layers)

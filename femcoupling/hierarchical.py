@@ -479,10 +479,8 @@ class HierarchicalPlaneStrain:
         return values if self.partition is None else self.partition.local(values)
 
     def _put(self, f, values: np.ndarray) -> None:
-        """A quadrature function ``f`` at this rank's points from a per-element array."""
-        if self.partition is None:
-            f.x.array[:] = values.reshape(-1)
-            return
+        """A quadrature function ``f`` at this rank's points from a per-element array (its
+        ghost points, under MPI, from their owners)."""
         v = np.asarray(self._local(values), float).reshape(-1)
         f.x.array[: v.size] = v
         f.x.scatter_forward()
@@ -725,11 +723,8 @@ class HierarchicalPlaneStrain:
         st = self._local(np.asarray(self._last_pool_step.stresses, float))
         st = st.reshape(self.n_cells, self.nq, 9)
         st = st[:, 0] if self.nq == 1 else st.mean(axis=1)  # (a cell's points: their mean)
-        if self.partition is None:
-            sig.x.array[:] = st.reshape(-1)[: sig.x.array.size]
-        else:
-            sig.x.array[: st.size] = st.reshape(-1)
-            sig.x.scatter_forward()
+        sig.x.array[: st.size] = st.reshape(-1)  # (the owned cells; ghosts from their owners)
+        sig.x.scatter_forward()
         u = self.u
         if self.degree != 1:  # XDMF holds the mesh's degree: P2 at the vertices (P1)
             if not hasattr(self, "_u_out"):

@@ -78,7 +78,6 @@ class PointPartition:
                                f"point {far:.3g} m from the nearest (allowed {tol:.3g} m), or "
                                "points missing or matched twice")
         self.ids = np.asarray(ids, np.int64)
-        self._counts = comm.allgather(len(self.ids))
         self._all_ids = np.concatenate(comm.allgather(self.ids))
 
     def gather(self, local: np.ndarray) -> np.ndarray:

@@ -110,7 +110,7 @@ class SoilMeasures:
         layers = self.body.region_layers(name)
         if not layers:
             return None
-        reg = self.body.regions[self.body.region_tag(name) - geo.REGION_TAG0]
+        reg = self.body.region(name)
         x = reg.center_m[0]
         xr = (x - reg.size_m / 2, x + reg.size_m / 2)
         return float(sum(self.layer_force_n_per_m(i, x_range_m=xr) for i in layers))

@@ -121,7 +121,7 @@ class RegionMaterials:
         centres in its square, or cube), by the key ``set_cell_elements(band=True)`` gives
         their elements, ``"<name>-<layer name>/<cell>"`` -> the layer's index. (The bands'
         cells are not the region's: a layer's tag comes first.)"""
-        reg = self.body.regions[self.body.region_tag(name) - geo.REGION_TAG0]
+        reg = self.body.region(name)
         lo = np.asarray(reg.center_m, float) - reg.size_m / 2
         hi = lo + reg.size_m
         centres = self._cell_centres()[:, : len(lo)]
