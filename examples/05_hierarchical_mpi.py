@@ -26,7 +26,7 @@ OUTPUTS = ["biaxial.csv", "elements.csv", "biaxial.png", "report.md"]
 RUN_BY = "tests/test_hierarchical_mpi.py"
 
 ap = argparse.ArgumentParser(description=__doc__.splitlines()[1])
-ap.add_argument("--smoke", action="store_true", help="8 elements of 60 grains, 2 load steps")
+ap.add_argument("--smoke", action="store_true", help="8 elements of 60 grains, 1 load step")
 ap.add_argument("--out", type=Path, default=Path("results/examples/05_hierarchical_mpi"))
 args = ap.parse_args()
 
@@ -38,13 +38,13 @@ from femcoupling.mpi_points import on_root, world  # noqa: E402
 def main(out: Path, smoke: bool) -> None:
     comm = world()
     root = comm.rank == 0
-    nx, ny, grains, steps = (2, 2, 60, 2) if smoke else (4, 8, 150, 6)
+    nx, ny, grains, steps = (2, 2, 60, 1) if smoke else (4, 8, 150, 6)
     factory = PeriodicFactory(n=grains, stress=100e3, seed=1)
     # the pool, and its Dask client, on rank 0 only (None on the others)
     pool = on_root(comm, lambda: ElementPool.build(2 * nx * ny, factory, workers=2))
     try:
         res = fem_dem_biaxial(pool, lx=0.04, ly=0.08, nx=nx, ny=ny, pressure=100e3,
-                              strain=0.002 if smoke else 0.01, steps=steps,
+                              strain=0.001 if smoke else 0.01, steps=steps,
                               log=print if root else None, comm=comm, out=out,
                               overwrite=True)
     finally:

