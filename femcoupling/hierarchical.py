@@ -36,7 +36,12 @@ pressure (``confining_pa``, compression positive: a biaxial test) or moved
 (``right_displacement``, u_x, m). ``platens="rough"`` (a biaxial test whose platens grip the
 sample, the usual set-up for shear bands): the bottom is held (u_x = u_y = 0), the top moves
 down without sliding (u_x = 0, u_y = ``top_displacement``), and both sides carry the
-confining pressure; no symmetry plane forces the band's shape. With both
+confining pressure; no symmetry plane forces the band's shape. ``platens="footing"`` (a
+rigid smooth strip footing of half width ``footing_b``, m, beside its symmetry plane): the
+left and right on rollers (u_x = 0), the bottom u_y = 0, the top moved by
+``top_displacement`` over 0 <= x <= ``footing_b`` (u_y; u_x free: smooth) and loaded by the
+surcharge ``confining_pa`` beyond it; ``footing_pressure()`` is the footing's mean pressure
+from its reaction. With both
 ``right_displacement`` and ``top_displacement`` and ``homogeneous=True`` every boundary node
 is moved with the homogeneous field, so every element sees the same strain.
 
@@ -81,6 +86,22 @@ def _rectangle(fx, lx: float, ly: float, nx: int, ny: int, comm=None):
     return fx.mesh.create_rectangle(fx.MPI.COMM_SELF if comm is None else comm,
                                     [np.array([0.0, 0.0]), np.array([lx, ly])], [nx, ny],
                                     fx.mesh.CellType.triangle)
+
+
+def _check_footing(platens: str, footing_b, lx: float, nx: int) -> None:
+    """``footing_b`` (m) is given with, and only with, ``platens="footing"``, inside the top
+    edge and on one of the mesh's vertical lines (the footing's edge is a node)."""
+    if platens != "footing":
+        if footing_b is not None:
+            raise FemInputError(f"footing_b={footing_b!r}: only with platens='footing'")
+        return
+    if footing_b is None or not (0 < footing_b < lx and math.isfinite(footing_b)):
+        raise FemInputError(f"footing_b={footing_b!r}: the footing's half width, m, "
+                            f"0 < footing_b < lx ({lx} m)")
+    cells = footing_b * nx / lx
+    if abs(cells - round(cells)) > 1e-9 * nx:
+        raise FemInputError(f"footing_b={footing_b!r}: must end on a mesh line, a multiple of "
+                            f"lx / nx = {lx / nx:g} m (the footing's edge is a node)")
 
 
 def _qdeg(degree: int) -> int:
@@ -239,16 +260,19 @@ class HierarchicalPlaneStrain:
                  tangent: str = "network", convergence: str = "noise",
                  relaxation: str | float = "aitken", noise_factor: float = 2.0,
                  noise_ceiling: float | None = None, degree: int = 1,
-                 platens: str = "smooth", comm=None,
+                 platens: str = "smooth", footing_b: float | None = None, comm=None,
                  verbose: bool = False, out=None, overwrite: bool = False) -> None:
-        if platens not in ("smooth", "rough"):
+        if platens not in ("smooth", "rough", "footing"):
             raise FemInputError(f"platens={platens!r}: 'smooth' (left and bottom on rollers) "
-                                "or 'rough' (bottom held, top without sliding, confining "
-                                "pressure on both sides)")
-        if platens == "rough" and (homogeneous or confining_pa is None):
-            raise FemInputError("platens='rough': needs confining_pa (Pa) on both sides, and "
-                                "not homogeneous=True")
-        self.platens = platens
+                                ", 'rough' (bottom held, top without sliding, confining "
+                                "pressure on both sides) or 'footing' (a smooth strip footing "
+                                "of half width footing_b, the surcharge confining_pa beside it)")
+        if platens in ("rough", "footing") and (homogeneous or confining_pa is None):
+            raise FemInputError(f"platens={platens!r}: needs confining_pa (Pa; 'rough': on "
+                                "both sides, 'footing': the surcharge), and not "
+                                "homogeneous=True")
+        _check_footing(platens, footing_b, lx, nx)
+        self.platens, self.footing_b = platens, footing_b
         if degree not in (1, 2):
             raise FemInputError(f"degree={degree!r}: 1 (P1 triangles, one point each) or 2 (P2 "
                                 "triangles, three points each: no volumetric locking)")
@@ -281,10 +305,13 @@ class HierarchicalPlaneStrain:
             return ufl.as_vector([e[0, 0], e[1, 1], 2 * e[0, 1]])
 
         fdim = 1
-        # the loaded sides: the right (smooth platens), or both (rough: -p n on each)
+        # the loaded sides: the right (smooth platens), or both (rough: -p n on each), or the
+        # top beside the footing (its facets' midpoints beyond footing_b)
+        tol_x = 1e-9 * lx
+        beside = lambda x: np.isclose(x[1], ly) & (x[0] >= footing_b - tol_x)  # noqa: E731
         loaded = fx.mesh.locate_entities_boundary(
-            msh, fdim, (lambda x: np.isclose(x[0], lx) | np.isclose(x[0], 0.0))
-            if platens == "rough" else (lambda x: np.isclose(x[0], lx)))
+            msh, fdim, {"rough": lambda x: np.isclose(x[0], lx) | np.isclose(x[0], 0.0),
+                        "footing": beside}.get(platens, lambda x: np.isclose(x[0], lx)))
         tags = fx.mesh.meshtags(msh, fdim, np.sort(loaded), np.full(len(loaded), 1, np.int32))
         ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
         st = fx.PETSc.ScalarType
@@ -318,7 +345,15 @@ class HierarchicalPlaneStrain:
         self.bcs = [fem.dirichletbc(st(0.0), dofs(V0, lambda x: np.isclose(x[0], 0.0)), V0),
                     fem.dirichletbc(st(0.0), dofs(V1, lambda x: np.isclose(x[1], 0.0)), V1),
                     fem.dirichletbc(self.top_u, dofs(V1, lambda x: np.isclose(x[1], ly)), V1)]
-        if platens == "rough":
+        if platens == "footing":
+            under = lambda x: np.isclose(x[1], ly) & (x[0] <= footing_b + tol_x)  # noqa: E731
+            self._footing_dofs = dofs(V1, under)
+            self.bcs = [self.bcs[0], self.bcs[1],
+                        fem.dirichletbc(self.top_u, self._footing_dofs, V1),
+                        fem.dirichletbc(st(0.0), dofs(V0, lambda x: np.isclose(x[0], lx)), V0)]
+            self.traction.value[:] = [0.0, -float(confining_pa)]
+            self._form_reaction = fem.form(self.system.res)
+        elif platens == "rough":
             ends = lambda x: np.isclose(x[1], 0.0) | np.isclose(x[1], ly)  # noqa: E731
             self.bcs = [fem.dirichletbc(st(0.0), dofs(V0, ends), V0),
                         fem.dirichletbc(st(0.0), dofs(V1, lambda x: np.isclose(x[1], 0.0)), V1),
@@ -578,7 +613,29 @@ class HierarchicalPlaneStrain:
         self.u.x.array[:] = self.u_n.x.array
         self.u.x.scatter_forward()
 
+    def footing_pressure(self) -> float:
+        """The footing's mean pressure, Pa, compression positive (``platens="footing"``): the
+        reaction at its vertical displacement dofs (the internal force of the points' current
+        stresses less the surcharge's share of the edge node) over its half width; summed in
+        dof order on each rank, then over the ranks."""
+        if self.platens != "footing":
+            raise FemInputError(f"footing_pressure(): only with platens='footing' (this "
+                                f"model's platens={self.platens!r})")
+        fx = self._fx
+        vec = fx.fem.assemble_vector(self._form_reaction)
+        vec.scatter_reverse(fx.dolfinx.la.InsertMode.add)
+        imap = self.V.dofmap.index_map
+        n_owned = imap.size_local * self.V.dofmap.index_map_bs
+        owned = self._footing_dofs[self._footing_dofs < n_owned]
+        total = float(np.sum(vec.array[np.sort(owned)]))
+        if self._parallel:
+            total = self.comm.allreduce(total)
+        return -total / self.footing_b
+
     def _set_boundary(self, top_displacement: float, right_displacement: float) -> None:
+        if self.platens == "footing" and right_displacement != 0.0:
+            raise FemInputError(f"right_displacement={right_displacement!r}: the footing's "
+                                "right side is on rollers (0 only)")
         self.top_u.value = top_displacement
         self.right_u.value = right_displacement
         if self.homogeneous:

@@ -381,6 +381,7 @@ class QuadratureSystem:
         res = self.f_int
         for term in (loads(v) if loads is not None else ()):
             res = res - term
+        self.res = res  # (UFL: the internal minus the external virtual work)
         self.form_res = fem.form(res)
         self.form_jac = fem.form(ufl.dot(ufl.dot(self.tan_q, strain(dv)), strain(v))
                                  * self.dxq)

@@ -1,0 +1,244 @@
+#!/usr/bin/env python3
+"""A small strip footing by hierarchical FEM x DEM against a direct DEM of the same grains
+(issue 38, item 2; docs/multiscale.md, "A small footing against direct DEM").
+
+The body is plane strain, the half beside the footing's symmetry plane, small enough for a
+direct DEM on this machine: ``--length`` by ``--depth`` (m), the footing's half width ``--b``
+on the top, the surcharge ``--surcharge`` (Pa) beside it, smooth sides and bottom, no
+gravity. For each seed s:
+
+1. **Direct DEM** (``cpp_dem.protocols.footing``): a box of the grains between smooth walls,
+   ``--thickness`` deep out of plane, grown frictionless then at the grains' friction
+   (dense) to the isotropic q; the top wall is split into the footing and the surcharge, and
+   the footing is pushed to each settlement and held until the grains are at rest.
+2. **FEM x DEM** (``femcoupling.footing_dem``): the same rectangle in ``--nx`` by ``--ny``
+   cells of triangles (``--degree 2``: P2, three quadrature points each, which do not lock
+   under dilatant flow; ``--degree 1``: P1, one), a periodic element of ``--cell-grains``
+   of the same grains (material, radii, preparation) at each point, prepared at q (element
+   k from packing seed 1000 s + k), on ``--workers`` Dask workers; the footing pushed to
+   the same settlements.
+
+The footing pressures are paired over the seeds at each settlement both reached: FEM x DEM
+minus direct DEM, the mean and its standard error (``femcoupling.footing_dem.
+paired_pressures``).
+
+Writes in --out: ``footing_direct_dem.json`` (every run, the porosities, the paired
+differences, the cost), ``load_settlement.csv`` (a row per run and settlement, appended as
+they are reached), ``load_settlement.png``, and each run's records (``dem_seed<s>/``,
+``fem_dem_seed<s>/``). Prints progress with an ETA and a final JSON line. SI units;
+pressures compression positive.
+
+    .venv/bin/python bench/footing_direct_dem.py --smoke --out DIR          # about 30 s
+    .venv/bin/python bench/footing_direct_dem.py --seeds 3 --out DIR        # the measured run
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE.parent / "cpp_dem"))
+sys.path.insert(0, str(HERE.parent))
+
+from _report import write_json  # noqa: E402
+
+FULL = dict(length=0.15, depth=0.10, thickness=0.03, b=0.03, nx=5, ny=4, cell_grains=60,
+            settlements=(0.05e-3, 0.1e-3, 0.2e-3, 0.3e-3, 0.45e-3, 0.6e-3, 0.8e-3, 1.0e-3,
+                         1.25e-3, 1.5e-3))
+SMOKE = dict(length=0.06, depth=0.04, thickness=0.03, b=0.03, nx=2, ny=2, cell_grains=50,
+             settlements=(0.05e-3, 0.1e-3, 0.2e-3))
+
+
+def parse(argv=None) -> argparse.Namespace:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--smoke", action="store_true",
+                    help="test size: a box of about 390 grains, 24 elements of 50, 1 seed")
+    ap.add_argument("--out", type=Path, default=Path("results/bench/footing_direct_dem"))
+    ap.add_argument("--seeds", type=int, default=None, help="seeds 1..N (default 3; smoke 1)")
+    ap.add_argument("--surcharge", type=float, default=20e3, help="surcharge q, Pa")
+    ap.add_argument("--workers", type=int, default=2, help="Dask workers of the elements")
+    ap.add_argument("--degree", type=int, choices=(1, 2), default=2,
+                    help="the FEM's triangles: 2 (P2, three elements per triangle: no "
+                         "volumetric locking; default) or 1 (P1, one: locks under dilatant "
+                         "flow)")
+    for k in ("length", "depth", "thickness", "b"):
+        ap.add_argument(f"--{k}", type=float, default=None, help=f"m (default {FULL[k]})")
+    for k in ("nx", "ny", "cell_grains"):
+        ap.add_argument(f"--{k.replace('_', '-')}", dest=k, type=int, default=None,
+                        help=f"default {FULL[k]}")
+    ap.add_argument("--settlements-mm", type=str, default=None,
+                    help="comma-separated settlements, mm (default "
+                         + ",".join(f"{1e3 * s:g}" for s in FULL["settlements"]) + ")")
+    a = ap.parse_args(argv)
+    base = SMOKE if a.smoke else FULL
+    for k in ("length", "depth", "thickness", "b", "nx", "ny", "cell_grains"):
+        if getattr(a, k) is None:
+            setattr(a, k, base[k])
+    a.settlements = (tuple(float(v) * 1e-3 for v in a.settlements_mm.split(","))
+                     if a.settlements_mm else base["settlements"])
+    if a.seeds is None:
+        a.seeds = 1 if a.smoke else 3
+    if a.seeds < 1:
+        ap.error(f"--seeds={a.seeds}: must be >= 1")
+    return a
+
+
+def _element_grains(pool) -> tuple[list[float], float]:
+    """Each element's porosity (1 - the spheres' volume over the cell's, -) and the elements'
+    mean grain radius, m."""
+    from cpp_dem.elements.periodic import DemElement
+    from cpp_dem.measure.box import solid_volume
+
+    porosity, radii = [], []
+    for data in pool.states():
+        el = DemElement.from_bytes(data)
+        porosity.append(1.0 - solid_volume(el.scene) / el.volume())
+        radii.extend(np.asarray(el.scene.radii).tolist())
+    return porosity, float(np.mean(radii))
+
+
+def _interior_porosity(state, inset: float, spacing: float) -> float:
+    """The box's porosity away from its walls, -: the share of a grid of points (``spacing``,
+    m) ``inset`` (m) or more inside every wall that no sphere covers (sampled: unbiased by
+    the layering of the grains along the walls, which a count of the centres in a region
+    is not)."""
+    from scipy.spatial import cKDTree
+
+    sc = state.scene
+    w = np.asarray(sc.wall_positions)[state.walls]
+    lo, hi = w[[0, 2, 4]] + inset, w[[1, 3, 5]] - inset
+    ids = np.asarray(state.grain_ids)
+    c, r = np.asarray(sc.positions)[ids], np.asarray(sc.radii)[ids]
+    axes = [np.arange(lo[k] + 0.5 * spacing, hi[k], spacing) for k in range(3)]
+    pts = np.stack(np.meshgrid(*axes, indexing="ij"), axis=-1).reshape(-1, 3)
+    d, j = cKDTree(c).query(pts, k=8, distance_upper_bound=float(r.max()))
+    covered = np.zeros(len(pts), bool)
+    for col in range(d.shape[1]):
+        ok = np.isfinite(d[:, col])
+        covered[ok] |= d[ok, col] < r[j[ok, col]]
+    return 1.0 - float(covered.mean())
+
+
+def _append_csv(path: Path, model: str, seed: int, res: dict) -> None:
+    new = not path.exists()
+    with open(path, "a") as fh:
+        if new:
+            fh.write("model,seed,settlement_m,footing_pressure_pa\n")
+        for s, p in zip(res["settlement_m"], res["footing_pressure_pa"]):
+            fh.write(f"{model},{seed},{float(s)!r},{float(p)!r}\n")
+
+
+def _figure(path: Path, runs: dict, b: float) -> None:
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    fig, ax = plt.subplots(figsize=(5.5, 4))
+    for s, r in runs.items():
+        for key, style, label in (("dem", "k-o", "direct DEM"), ("fem_dem", "C0-s",
+                                                                   "FEM x DEM")):
+            x = 100 * np.asarray(r[key]["settlement_m"]) / b
+            ax.plot(x, np.asarray(r[key]["footing_pressure_pa"]) / 1e3, style, ms=3,
+                    label=f"{label}, seed {s}")
+    ax.set(xlabel="settlement / half width b, %", ylabel="footing pressure, kPa",
+           title="small strip footing: FEM x DEM against direct DEM")
+    ax.legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=120)
+    plt.close(fig)
+
+
+def main(argv=None) -> dict:
+    a = parse(argv)
+    from cpp_dem.elements.pool import ElementPool
+    from cpp_dem.protocols.footing import (StripFootingBox, load_strip_footing,
+                                           prepare_footing_box)
+    from femcoupling.footing_dem import element_factory, fem_dem_footing, paired_pressures
+
+    out = Path(a.out)
+    out.mkdir(parents=True, exist_ok=True)
+    csv = out / "load_settlement.csv"
+    if csv.exists():
+        raise SystemExit(f"--out {out}: holds an earlier run ({csv.name}); give a new folder")
+    t0 = time.perf_counter()
+    runs: dict = {}
+    seeds = list(range(1, a.seeds + 1))
+    for i, s in enumerate(seeds):
+        box = StripFootingBox(footing_b=a.b, length=a.length, depth=a.depth,
+                              thickness=a.thickness, surcharge_pa=a.surcharge, seed=s)
+        box.check()
+        t = time.perf_counter()
+        state = prepare_footing_box(box, log=print)
+        prep_s = time.perf_counter() - t
+        inner = _interior_porosity(state, 2 * box.radius_mean, box.radius_mean / 6)
+        print(f"[footing vs dem] seed {s}: the box's porosity {state.porosity:.4f}, "
+              f"{inner:.4f} two radii in from its walls", flush=True)
+        dem = load_strip_footing(state, box, a.settlements, log=print, out=out / f"dem_seed{s}")
+        dem_s = time.perf_counter() - t
+        _append_csv(csv, "dem", s, dem)
+        t = time.perf_counter()
+        n_el = 2 * a.nx * a.ny * (3 if a.degree == 2 else 1)
+        fac = element_factory(box, grains=a.cell_grains, seed=1000 * s)
+        with ElementPool.build(n_el, fac, workers=a.workers) as pool:
+            pool_s = time.perf_counter() - t
+            porosities, r_el = _element_grains(pool)
+            fd = fem_dem_footing(pool, length=a.length, depth=a.depth, nx=a.nx, ny=a.ny,
+                                 footing_b=a.b, surcharge_pa=a.surcharge,
+                                 settlements_m=a.settlements, log=print,
+                                 out=out / f"fem_dem_seed{s}", degree=a.degree)
+            model = fd.pop("model")
+            fd["status_worst"] = model.status if fd["failed"] is None else "failed"
+        _append_csv(csv, "fem_dem", s, fd)
+        runs[s] = {"dem": {**{k: np.asarray(v).tolist() if isinstance(v, (list, np.ndarray))
+                              else v for k, v in dem.items()},
+                           "grains": int(state.grains), "porosity": float(state.porosity),
+                           "interior_porosity": float(inner),
+                           "radius_mean_m": float(np.mean(np.asarray(state.scene.radii)[
+                               np.asarray(state.grain_ids)])),
+                           "preparation_s": prep_s, "wall_s": dem_s},
+                   "fem_dem": {**{k: np.asarray(v).tolist() if isinstance(v, np.ndarray)
+                                  else v for k, v in fd.items()},
+                               "elements": n_el, "grains": n_el * a.cell_grains,
+                               "element_porosity_mean": float(np.mean(porosities)),
+                               "element_porosity_sd": float(np.std(porosities, ddof=1)),
+                               "radius_mean_m": r_el,
+                               "preparation_s": pool_s,
+                               "wall_s": time.perf_counter() - t}}
+        done = time.perf_counter() - t0
+        print(f"[footing vs dem] seed {s} ({i + 1}/{len(seeds)}) done, {done:.0f} s; ETA "
+              f"{done / (i + 1) * (len(seeds) - i - 1):.0f} s", flush=True)
+    d = paired_pressures([runs[s]["fem_dem"] for s in seeds], [runs[s]["dem"] for s in seeds])
+    summary = {
+        "geometry_m": {"length": a.length, "depth": a.depth, "thickness": a.thickness,
+                       "footing_b": a.b},
+        "surcharge_pa": a.surcharge, "mesh": {"nx": a.nx, "ny": a.ny, "degree": a.degree,
+                                              "elements": n_el, "cell_grains": a.cell_grains},
+        "seeds": seeds, "runs": {str(s): r for s, r in runs.items()},
+        "paired": {k: np.asarray(v).tolist() if isinstance(v, np.ndarray) else v
+                   for k, v in d.items()},
+        "wall_s": time.perf_counter() - t0,
+    }
+    write_json(out / "footing_direct_dem.json", summary)
+    _figure(out / "load_settlement.png", runs, a.b)
+    for k, s in enumerate(d["settlement_m"]):
+        print(f"[footing vs dem] settlement {1e3 * s:.3f} mm: FEM x DEM "
+              f"{d['fem_dem_pa'][k] / 1e3:.1f} kPa, direct DEM {d['dem_pa'][k] / 1e3:.1f} kPa, "
+              f"difference {d['difference_pa'][k] / 1e3:+.1f} +- {d['se_pa'][k] / 1e3:.1f} kPa "
+              f"({d['seeds']} seeds)")
+    last = {"settlement_m": float(d["settlement_m"][-1]),
+            "fem_dem_pa": float(d["fem_dem_pa"][-1]), "dem_pa": float(d["dem_pa"][-1]),
+            "difference_pa": float(d["difference_pa"][-1]), "se_pa": float(d["se_pa"][-1]),
+            "seeds": d["seeds"], "wall_s": summary["wall_s"]}
+    print(json.dumps(last))
+    return summary
+
+
+if __name__ == "__main__":  # (Dask spawns its workers: the guard is needed)
+    main()

@@ -1,0 +1,174 @@
+"""A strip footing by hierarchical FEM x DEM (femcoupling.footing_dem; the model's
+platens="footing"): it starts at the surcharge, its pressure is its reaction (the body is in
+equilibrium with it: footing plus surcharge equal the bottom's reaction), it stiffens as it
+settles, and bad input is refused by name."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+pytest.importorskip("dolfinx_solver")
+
+from cpp_dem.elements.pool import ElementPool  # noqa: E402
+from cpp_dem.protocols.footing import StripFootingBox  # noqa: E402
+from femcoupling.footing_dem import (element_factory, fem_dem_footing,  # noqa: E402
+                                     paired_pressures)
+from femcoupling.geometry import FemInputError  # noqa: E402
+
+Q = 20e3
+BOX = StripFootingBox(footing_b=0.02, length=0.08, depth=0.04, thickness=0.03,
+                      surcharge_pa=Q)
+SETTLEMENTS = (2e-5, 5e-5, 1e-4)
+
+
+@pytest.fixture(scope="module")
+def run(tmp_path_factory):
+    out = tmp_path_factory.mktemp("footing")
+    with ElementPool.build(16, element_factory(BOX, grains=60, seed=1), workers=2) as pool:
+        res = fem_dem_footing(pool, length=BOX.length, depth=BOX.depth, nx=4, ny=2,
+                              footing_b=BOX.footing_b, surcharge_pa=Q,
+                              settlements_m=SETTLEMENTS, out=out, log=None)
+        yield res, out
+
+
+def _bottom_and_top_reactions(m):
+    """The vertical reactions (N/m) of the bottom and of the whole top (the footing's dofs and
+    the surcharge's load) from the residual's assembly at the model's state."""
+    fx = m._fx
+    vec = fx.fem.assemble_vector(m._form_reaction)
+    vec.scatter_reverse(fx.dolfinx.la.InsertMode.add)
+    f_int = fx.fem.assemble_vector(fx.fem.form(m.system.f_int))
+    f_int.scatter_reverse(fx.dolfinx.la.InsertMode.add)
+
+    def dofs(where):
+        facets = fx.mesh.locate_entities_boundary(m.mesh, 1, where)
+        return fx.fem.locate_dofs_topological(m.V.sub(1), 1, facets)
+
+    bottom = float(np.sum(vec.array[dofs(lambda x: np.isclose(x[1], 0.0))]))
+    top = float(np.sum(f_int.array[dofs(lambda x: np.isclose(x[1], m.ly))]))
+    return bottom, top
+
+
+def test_the_footing_starts_at_the_surcharge_and_stiffens(run):
+    res, _ = run
+    p = res["footing_pressure_pa"]
+    assert res["failed"] is None and len(p) == 1 + len(SETTLEMENTS)
+    # the elements are servoed to the isotropic q within their tolerance (0.5 %); the
+    # reaction of a uniform -q I is q b exactly (measured: 20000.001 Pa)
+    assert p[0] == pytest.approx(Q, rel=5e-3)
+    assert np.all(np.diff(p) > 0) and p[-1] > 2 * Q
+    assert set(res["status"][1:]) <= {"converged", "stopped_at_scatter"}
+
+
+def test_the_footing_and_the_surcharge_are_the_bottoms_reaction(run):
+    res, _ = run
+    m = res["model"]
+    bottom, top = _bottom_and_top_reactions(m)
+    footing = res["footing_pressure_pa"][-1] * BOX.footing_b
+    surcharge = Q * (BOX.length - BOX.footing_b)
+    # the top's internal force is the footing's reaction plus the surcharge; the body in
+    # equilibrium (to Newton's tolerance, 1e-3 of the force scale) carries it to the bottom
+    assert -top == pytest.approx(footing + surcharge, rel=2e-3)
+    assert bottom == pytest.approx(footing + surcharge, rel=2e-3)
+
+
+def test_the_records_are_a_row_per_settlement(run):
+    res, out = run
+    rows = (out / "footing_fem_dem.csv").read_text().splitlines()
+    assert rows[0] == "settlement_m,footing_pressure_pa,status,iterations,wall_s"
+    assert len(rows) == 2 + len(SETTLEMENTS)
+    assert float(rows[-1].split(",")[1]) == res["footing_pressure_pa"][-1]
+    assert (out / "records" / "elements.h5").exists()
+
+
+def test_paired_pressures_pairs_by_seed_and_refuses_mismatches():
+    s = np.array([0.0, 1e-4, 2e-4])
+    a = [{"settlement_m": s, "footing_pressure_pa": np.array([20e3, 50e3, 70e3]) + k}
+         for k in (0.0, 2e3)]
+    b = [{"settlement_m": s[:2], "footing_pressure_pa": np.array([20e3, 40e3]) + k}
+         for k in (0.0, 1e3)]
+    d = paired_pressures(a, b)
+    assert d["seeds"] == 2 and len(d["settlement_m"]) == 2  # (what both reached)
+    assert d["difference_pa"][1] == pytest.approx(10.5e3)
+    assert d["se_pa"][1] == pytest.approx(500.0)
+    with pytest.raises(ValueError, match="one of each per seed"):
+        paired_pressures(a, b[:1])
+    with pytest.raises(ValueError, match="settlements differ"):
+        paired_pressures(a, [{**b[0], "settlement_m": s[:2] * 2}, b[1]])
+
+
+def test_bad_footing_input_is_refused_by_name():
+    from femcoupling.hierarchical import HierarchicalPlaneStrain
+
+    kw = dict(lx=0.08, ly=0.04, nx=4, ny=2, confining_pa=Q, platens="footing")
+    with pytest.raises(FemInputError, match="footing_b=0.03: must end on a mesh line"):
+        HierarchicalPlaneStrain(None, footing_b=0.03, **kw)
+    with pytest.raises(FemInputError, match="footing_b=0.08: the footing's half width"):
+        HierarchicalPlaneStrain(None, footing_b=0.08, **kw)
+    with pytest.raises(FemInputError, match="footing_b=0.02: only with platens='footing'"):
+        HierarchicalPlaneStrain(None, **{**kw, "platens": "smooth"}, footing_b=0.02)
+    with pytest.raises(FemInputError, match="needs confining_pa"):
+        HierarchicalPlaneStrain(None, **{**kw, "confining_pa": None}, footing_b=0.02)
+    with pytest.raises(ValueError, match="settlements_m=.*increasing"):
+        fem_dem_footing(None, length=0.08, depth=0.04, nx=4, ny=2, footing_b=0.02,
+                        surcharge_pa=Q, settlements_m=(2e-5, 1e-5))
+
+
+def test_a_footing_model_refuses_a_side_displacement(run):
+    res, _ = run
+    with pytest.raises(FemInputError, match="right_displacement=1e-06"):
+        res["model"]._set_boundary(-1e-4, 1e-6)
+
+
+def _bench():
+    import importlib.util
+    import sys
+    from pathlib import Path
+
+    root = Path(__file__).resolve().parents[1]
+    sys.path.insert(0, str(root / "bench"))
+    spec = importlib.util.spec_from_file_location("footing_direct_dem",
+                                                  root / "bench" / "footing_direct_dem.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_the_interior_porosity_of_a_simple_cubic_lattice():
+    from types import SimpleNamespace
+
+    r, n = 1e-3, 6
+    g = (np.arange(n) + 0.5) * 2 * r
+    pos = np.stack(np.meshgrid(g, g, g, indexing="ij"), axis=-1).reshape(-1, 3)
+    edge = 2 * r * n
+    scene = SimpleNamespace(wall_positions=np.array([0, edge, 0, edge, 0, edge]),
+                            positions=pos, radii=np.full(len(pos), r))
+    state = SimpleNamespace(scene=scene, walls=list(range(6)), grain_ids=np.arange(len(pos)))
+    est = _bench()._interior_porosity(state, 2 * r, r / 6)
+    assert est == pytest.approx(1 - np.pi / 6, abs=0.01)  # 0.476
+    scene.radii = np.full(len(pos), 0.5 * r)  # (the same centres, an eighth of the solid)
+    assert _bench()._interior_porosity(state, 2 * r, r / 12) == pytest.approx(
+        1 - np.pi / 48, abs=0.01)  # (a sphere 6 grid spacings across, as in the bench)
+
+
+def test_the_bench_runs_at_smoke_size(tmp_path, capsys):
+    import json
+
+    bench = _bench()
+    summary = bench.main(["--smoke", "--out", str(tmp_path)])
+    row = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert row["seeds"] == 1 and row["settlement_m"] == pytest.approx(0.2e-3)
+    run = summary["runs"]["1"]
+    assert run["dem"]["footing_pressure_pa"][-1] > run["dem"]["footing_pressure_pa"][0]
+    assert run["fem_dem"]["footing_pressure_pa"][0] == pytest.approx(20e3, rel=5e-3)
+    assert run["fem_dem"]["elements"] == 24 and run["fem_dem"]["failed"] is None
+    # the same grains: the elements' radii are the box's, their porosity its inside's
+    assert run["fem_dem"]["radius_mean_m"] == pytest.approx(run["dem"]["radius_mean_m"],
+                                                            rel=0.06)
+    assert abs(run["fem_dem"]["element_porosity_mean"] - run["dem"]["interior_porosity"]) < 0.03
+    for f in ("footing_direct_dem.json", "load_settlement.csv", "load_settlement.png",
+              "dem_seed1/footing_dem.csv", "fem_dem_seed1/footing_fem_dem.csv"):
+        assert (tmp_path / f).is_file(), f
+    with pytest.raises(SystemExit, match="holds an earlier run"):
+        bench.main(["--smoke", "--out", str(tmp_path)])
