@@ -147,21 +147,21 @@ def test_hierarchical_region_element_strains_as_its_region(tmp_path):
 
 def test_hierarchical_cell_elements_strain_as_their_cells(tmp_path):
     """--hierarchical --cell-elements: every cell of the element region its own dense
-    periodic element (100 grains, its own seed, prepared at its cell's stress) on 2 Dask
+    periodic element (60 grains, its own seed, prepared at its cell's stress) on 2 Dask
     workers. The cells strain differently, their volume mean is the region's strain
     increment (each element strains as its cell), every cell's element has a records row per
     load step, and the case's element runs after them."""
     import h5py
 
     out = tmp_path / "c"
-    p = run_case(out, "--smoke", "--hierarchical", "--cell-elements", "--cell-grains", "100",
+    p = run_case(out, "--smoke", "--hierarchical", "--cell-elements", "--cell-grains", "60",
                  "--workers", "2", "--soil", "given")
     assert p.returncode in (0, 3, 4), p.stdout[-3000:] + p.stderr[-3000:]
     s = _coupling_status_said(out, p, "hierarchical")
     for v in ("RE", "PRS"):
         h = s["hierarchical"][v]
         n = h["cells"]
-        assert n > 4 and h["cell_grains"] == 100
+        assert n > 4 and h["cell_grains"] == 60
         ez = np.array(h["cell_strain_increments"])[:, 2]
         assert len(ez) == n and ez.min() > 0 and ez.max() > 1.2 * ez.min()  # a field, not one
         fem = np.array(s["fem"][v]["strain_increment"])
