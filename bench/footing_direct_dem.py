@@ -20,7 +20,9 @@ gravity. For each seed s:
 
 The footing pressures are paired over the seeds at each settlement both reached: FEM x DEM
 minus direct DEM, the mean and its standard error (``femcoupling.footing_dem.
-paired_pressures``).
+paired_pressures``). With ``--oedometer`` the box (prepared again: the same) and the first 8
+elements of each seed also go through the same oedometric path from q, which compares the
+material itself (``oedometric_moduli``).
 
 Writes in --out: ``footing_direct_dem.json`` (every run, the porosities, the paired
 differences, the cost), ``load_settlement.csv`` (a row per run and settlement, appended as
@@ -30,6 +32,7 @@ pressures compression positive.
 
     .venv/bin/python bench/footing_direct_dem.py --smoke --out DIR          # about 30 s
     .venv/bin/python bench/footing_direct_dem.py --seeds 3 --out DIR        # the measured run
+    .venv/bin/python bench/footing_direct_dem.py --oedometer --out DIR     # and the material
 """
 
 from __future__ import annotations
@@ -72,6 +75,10 @@ def parse(argv=None) -> argparse.Namespace:
     for k in ("nx", "ny", "cell_grains"):
         ap.add_argument(f"--{k.replace('_', '-')}", dest=k, type=int, default=None,
                         help=f"default {FULL[k]}")
+    ap.add_argument("--oedometer", action="store_true",
+                    help="also take the box (prepared again, the same) and its first 8 "
+                         "elements through the same oedometric path from q (z shortened, x "
+                         "and y held): their constrained moduli, Pa")
     ap.add_argument("--settlements-mm", type=str, default=None,
                     help="comma-separated settlements, mm (default "
                          + ",".join(f"{1e3 * s:g}" for s in FULL["settlements"]) + ")")
@@ -123,6 +130,38 @@ def _interior_porosity(state, inset: float, spacing: float) -> float:
         ok = np.isfinite(d[:, col])
         covered[ok] |= d[ok, col] < r[j[ok, col]]
     return 1.0 - float(covered.mean())
+
+
+#: the oedometric path's axial strains (-, cumulative, shortening)
+OEDOMETER_STRAINS = (1e-4, 2e-4, 5e-4, 1e-3, 2e-3)
+
+
+def oedometric_moduli(box, factory, n_elements: int = 8) -> dict:
+    """The constrained modulus (Pa) of the footing's box (``prepare_footing_box(box)``, as a
+    wall-bounded ``DemElement``: its Love-Weber stress over its volume) and of elements
+    0..``n_elements`` - 1 of ``factory``, each shortened along z to each of
+    OEDOMETER_STRAINS with x and y held and relaxed (unbalanced force 1e-4): the secant
+    -(sigma_zz - sigma_zz0) / eps_zz at each. The like-for-like check of the material: the
+    same grains, from the same q, along the same path."""
+    from cpp_dem.elements.periodic import DemElement
+    from cpp_dem.protocols.footing import prepare_footing_box
+
+    def moduli(el) -> list[float]:
+        s0, prev, out = float(el.stress()[2, 2]), 0.0, []
+        for e in OEDOMETER_STRAINS:
+            sig = el.apply_strain(np.diag([0.0, 0.0, -(e - prev)]), unbalanced=1e-4,
+                                  max_relax_steps=200_000)
+            out.append(-(float(sig[2, 2]) - s0) / e)
+            prev = e
+        return out
+
+    state = prepare_footing_box(box)
+    box_m = moduli(DemElement(state.scene, walls=state.walls))
+    el_m = np.array([moduli(factory(k)) for k in range(n_elements)])
+    return {"strain": list(OEDOMETER_STRAINS), "box_pa": box_m,
+            "elements_pa": el_m.mean(axis=0).tolist(),
+            "elements_sd_pa": el_m.std(axis=0, ddof=1).tolist(),
+            "ratio": (el_m.mean(axis=0) / np.array(box_m)).tolist()}
 
 
 def _append_csv(path: Path, model: str, seed: int, res: dict) -> None:
@@ -211,6 +250,11 @@ def main(argv=None) -> dict:
                                "radius_mean_m": r_el,
                                "preparation_s": pool_s,
                                "wall_s": time.perf_counter() - t}}
+        if a.oedometer:
+            runs[s]["oedometer"] = o = oedometric_moduli(box, fac)
+            print(f"[footing vs dem] seed {s}: constrained modulus at eps_zz "
+                  f"{o['strain'][-1]:g}: box {o['box_pa'][-1] / 1e6:.2f} MPa, elements "
+                  f"{o['elements_pa'][-1] / 1e6:.2f} MPa", flush=True)
         done = time.perf_counter() - t0
         print(f"[footing vs dem] seed {s} ({i + 1}/{len(seeds)}) done, {done:.0f} s; ETA "
               f"{done / (i + 1) * (len(seeds) - i - 1):.0f} s", flush=True)
@@ -225,6 +269,12 @@ def main(argv=None) -> dict:
                    for k, v in d.items()},
         "wall_s": time.perf_counter() - t0,
     }
+    if a.oedometer:
+        r = np.array([runs[s]["oedometer"]["ratio"] for s in seeds])
+        summary["oedometer_ratio"] = {
+            "strain": list(OEDOMETER_STRAINS), "mean": r.mean(axis=0).tolist(),
+            "se": (r.std(axis=0, ddof=1) / np.sqrt(len(r)) if len(r) > 1
+                   else np.full(r.shape[1], np.nan)).tolist()}
     write_json(out / "footing_direct_dem.json", summary)
     _figure(out / "load_settlement.png", runs, a.b)
     for k, s in enumerate(d["settlement_m"]):

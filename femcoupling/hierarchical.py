@@ -263,8 +263,8 @@ class HierarchicalPlaneStrain:
                  platens: str = "smooth", footing_b: float | None = None, comm=None,
                  verbose: bool = False, out=None, overwrite: bool = False) -> None:
         if platens not in ("smooth", "rough", "footing"):
-            raise FemInputError(f"platens={platens!r}: 'smooth' (left and bottom on rollers) "
-                                ", 'rough' (bottom held, top without sliding, confining "
+            raise FemInputError(f"platens={platens!r}: 'smooth' (left and bottom on rollers), "
+                                "'rough' (bottom held, top without sliding, confining "
                                 "pressure on both sides) or 'footing' (a smooth strip footing "
                                 "of half width footing_b, the surcharge confining_pa beside it)")
         if platens in ("rough", "footing") and (homogeneous or confining_pa is None):

@@ -156,7 +156,7 @@ def test_the_bench_runs_at_smoke_size(tmp_path, capsys):
     import json
 
     bench = _bench()
-    summary = bench.main(["--smoke", "--out", str(tmp_path)])
+    summary = bench.main(["--smoke", "--oedometer", "--out", str(tmp_path)])
     row = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert row["seeds"] == 1 and row["settlement_m"] == pytest.approx(0.2e-3)
     run = summary["runs"]["1"]
@@ -167,6 +167,10 @@ def test_the_bench_runs_at_smoke_size(tmp_path, capsys):
     assert run["fem_dem"]["radius_mean_m"] == pytest.approx(run["dem"]["radius_mean_m"],
                                                             rel=0.06)
     assert abs(run["fem_dem"]["element_porosity_mean"] - run["dem"]["interior_porosity"]) < 0.03
+    o = run["oedometer"]  # (the same path for both: their constrained moduli, > 0)
+    assert len(o["box_pa"]) == len(o["elements_pa"]) == len(bench.OEDOMETER_STRAINS)
+    assert min(o["box_pa"]) > 0 and min(o["elements_pa"]) > 0
+    assert np.isnan(summary["oedometer_ratio"]["se"][0])  # (one seed: no standard error)
     for f in ("footing_direct_dem.json", "load_settlement.csv", "load_settlement.png",
               "dem_seed1/footing_dem.csv", "fem_dem_seed1/footing_fem_dem.csv"):
         assert (tmp_path / f).is_file(), f
