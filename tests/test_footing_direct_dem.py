@@ -172,3 +172,19 @@ def test_an_unrelaxed_level_says_so():
         rows = ft.load_strip_footing(st, p, [5e-5], relax_max_steps=1, check_every=1,
                                      relax_unbalanced=1e-12)
     assert rows["relaxed"] == [False, False] and rows["steps"][0] == 1
+
+
+def test_a_long_growth_prints_progress(monkeypatch):
+    import io
+
+    from cpp_dem import progress
+
+    out = io.StringIO()
+    monkeypatch.setattr(progress, "FIRST_AFTER_S", 0.0)  # (a line at every check: 200 steps)
+    monkeypatch.setattr(progress, "EVERY_S", 0.0)
+    monkeypatch.setattr(progress, "_stream", out)  # (as set_progress(out); undone after)
+    ft.prepare_footing_box(ft.StripFootingBox(footing_b=0.008, length=0.016, depth=0.008,
+                                              thickness=0.0145, surcharge_pa=Q,
+                                              radius_mean=0.0015))
+    lines = [ln for ln in out.getvalue().splitlines() if ln.startswith("[footing box growth")]
+    assert lines and "of at most 400000" in lines[0] and "(target 20000)" in lines[-1]

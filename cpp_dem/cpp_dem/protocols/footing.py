@@ -45,6 +45,7 @@ from cpp_dem import _core
 from cpp_dem import measure
 from cpp_dem._core import Material, ParameterError
 from cpp_dem.build.packing import loose_cloud
+from cpp_dem.progress import Progress
 from cpp_dem.protocols import prep
 from cpp_dem.scene import Scene
 
@@ -254,8 +255,15 @@ def prepare_footing_box(p: StripFootingBox, log=None, *, max_steps: int = 400_00
         else:
             for b in grains:
                 scene.set_body_material(int(b), gm)
+        bar, k1 = Progress(f"footing box growth at {phi:g} deg"), scene.step_count
+
+        def tick(sc, bar=bar, k1=k1) -> None:  # (reads the scene only)
+            bar.update(None, f"step {sc.step_count - k1} of at most {max_steps}, mean wall "
+                             f"stress {float(np.mean(measure.wall_stresses(sc, walls))):.4g} "
+                             f"Pa (target {q:g}), unbalanced {float(sc.unbalanced_force()):.3g}")
+
         g = prep.grow_to_stress(scene, walls, q, tol=p.tol, unbalanced=p.unbalanced,
-                                max_steps=max_steps, check_every=check_every)
+                                max_steps=max_steps, check_every=check_every, callback=tick)
         stages.append((f"growth at {phi:g} deg", g))
         _say(log, f"growth at {phi:g} deg: {g.steps} steps, mean wall stress "
                   f"{g.mean_stress:.5g} Pa, porosity {g.porosity:.4f}, unbalanced "
