@@ -1,6 +1,6 @@
 """A 3D hierarchical triaxial step under MPI, run by tests/test_hierarchical_mpi.py as
 ``mpiexec -n N python tests/mpi_hierarchical3d.py OUT``: one hexahedron of 6 tetrahedra, each
-with a periodic element of 40 grains (its own packing), one load step. Rank 0 saves the
+with a periodic element of 40 grains (its own packing), two load steps. Rank 0 saves the
 points (m) and the element stresses (Pa) in OUT/points.npy and OUT/stresses.npy and prints
 the status."""
 
@@ -20,6 +20,7 @@ def main(out: str) -> None:
     try:
         m = Hierarchical3D(pool, lx=0.02, ly=0.02, lz=0.02, nx=1, ny=1, nz=1,
                            confining_pa=100e3, comm=comm, out=out, overwrite=True)
+        m.step(top_displacement=-1e-5)  # (two steps: the records appended under MPI)
         r = m.step(top_displacement=-2e-5)
         xyz = m.point_coordinates  # (collective)
     finally:

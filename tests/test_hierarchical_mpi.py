@@ -121,8 +121,9 @@ def test_the_pool_must_be_on_rank_0_only():
 
 
 def test_a_3d_box_on_two_ranks_is_the_serial_box(tmp_path):
-    """The 3D model under MPI: its 6 elements at the serial box's places, the step accepted,
-    the faces' confining pressure carried (the elements' mean lateral stress within 5 %)."""
+    """The 3D model under MPI: its 6 elements at the serial box's places, the steps accepted,
+    the faces' confining pressure carried (the elements' mean lateral stress within 5 %), a
+    records row per element and step."""
     from femcoupling import _dolfinx
     from femcoupling.hierarchical import _coordinates
 
@@ -145,3 +146,11 @@ def test_a_3d_box_on_two_ranks_is_the_serial_box(tmp_path):
     s = np.load(tmp_path / "stresses.npy")  # (Voigt xx, yy, zz, yz, xz, xy, tension +)
     assert s.shape == (6, 6)
     assert -s[:, :2].mean() == pytest.approx(100e3, rel=0.05)
+    # the records of every step, written once by rank 0 (examples/05's smoke has one step)
+    import h5py
+
+    steps = len((tmp_path / "steps.csv").read_text().splitlines()) - 1  # (cuts: halves)
+    assert steps >= 2
+    with h5py.File(tmp_path / "elements.h5") as f:
+        assert list(f["step"][:]) == [k for k in range(steps) for _ in range(6)]
+        assert list(f["element"][:]) == list(range(6)) * steps
