@@ -200,6 +200,7 @@ def main(argv=None) -> dict:
     from cpp_dem.protocols.footing import (StripFootingBox, load_strip_footing,
                                            prepare_footing_box)
     from femcoupling.footing_dem import element_factory, fem_dem_footing, paired_pressures
+    from femcoupling.hierarchical import quadrature_points
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -223,7 +224,7 @@ def main(argv=None) -> dict:
         dem_s = time.perf_counter() - t
         _append_csv(csv, "dem", s, dem)
         t = time.perf_counter()
-        n_el = 2 * a.nx * a.ny * (3 if a.degree == 2 else 1)
+        n_el = len(quadrature_points(a.length, a.depth, a.nx, a.ny, a.degree))  # (the model's)
         fac = element_factory(box, grains=a.cell_grains, seed=1000 * s)
         with ElementPool.build(n_el, fac, workers=a.workers) as pool:
             pool_s = time.perf_counter() - t
