@@ -341,12 +341,12 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
 
     def _largest_stress(self, points: np.ndarray | None) -> float:
         """The largest stress magnitude (the largest absolute eigenvalue of the tensor) of
-        the current stress at ``points`` (all points if None), Pa."""
+        the current stress at ``points`` (all points if None), Pa; the largest over the MPI
+        ranks."""
         sig = self.sig_cur if points is None else self.sig_cur[points]
-        if len(sig) == 0:
-            return 0.0
-        ev = np.linalg.eigvalsh(mandel_to_tensor(sig))
-        return float(np.abs(ev).max())
+        own = (float(np.abs(np.linalg.eigvalsh(mandel_to_tensor(sig))).max()) if len(sig)
+               else 0.0)
+        return self.comm.allreduce(own, op=self._fx.MPI.MAX) if self.comm.size > 1 else own
 
     def _end_step(self, out: Any) -> None:
         """The step's end (``StepResult``'s converged_on, noise_residual, status, residual,
@@ -403,31 +403,40 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
     # ---- stages --------------------------------------------------------------------------
 
     def _run_stage(self, stage: str, apply: Any, steps: int, callback: Any = None) -> list:
-        """Apply ``apply(load_factor)`` in ``steps`` equal increments, Newton at each."""
+        """Apply ``apply(load_factor)`` in ``steps`` equal increments, Newton at each.
+
+        A step Newton fails is rolled back and halved; an easy step (at most half of
+        ``max_newton`` iterations) doubles the next one back towards the nominal size. The
+        step is never smaller than the nominal one over ``2**max_cuts``: a step that fails at
+        that size raises :class:`NewtonDivergence`, and so does a step that would need to be
+        cut below it (near a limit load a stage would otherwise creep on, ever shorter)."""
         if not isinstance(steps, int) or steps < 1:
             raise FemInputError(f"steps={steps!r}: must be an integer >= 1")
         out = []
         lf_done, dlf = 0.0, 1.0 / steps
-        cuts = 0
+        depth = 0  # halvings of the step below its nominal size
         while lf_done < 1.0 - 1e-12:
             lf = min(1.0, lf_done + dlf)
             apply(lf)
             its = self._newton()
             if its < 0:
                 self._rollback()
-                cuts += 1
-                if cuts > self.max_cuts:
-                    raise NewtonDivergence(f"stage {stage!r}: Newton failed at load factor "
-                                           f"{lf:.6g} after {self.max_cuts} step cuts"
-                                           + (f" (the last: {self.last_failure})"
-                                              if self.last_failure else ""))
+                depth += 1
+                if depth > self.max_cuts:
+                    apply(lf_done)
+                    raise NewtonDivergence(
+                        f"stage {stage!r}: Newton failed at load factor {lf:.6g} with the "
+                        f"step cut {self.max_cuts} times (to 1/{2 ** self.max_cuts} of its "
+                        f"nominal size); the stage stopped at load factor {lf_done:.6g}"
+                        + (f" (the last failure: {self.last_failure})"
+                           if self.last_failure else ""))
                 dlf /= 2.0
                 continue
             self._commit()
             lf_done = lf
-            cuts = 0
-            if its <= self.max_newton // 2:  # easy step: grow back towards the nominal size
-                dlf = min(2.0 * dlf, 1.0 / steps)
+            if its <= self.max_newton // 2 and depth > 0:  # easy: grow back towards nominal
+                dlf *= 2.0
+                depth -= 1
             r = StepResult(stage, lf, self.footing_settlement_m(), self.footing_pressure_pa(),
                            its, self.plastic_points(), **self._step_end)
             if r.converged_on == "noise":

@@ -94,6 +94,12 @@ class LoadingStages:
                     f"{e}; settlement_m={d!r} lifts the footing, and the soil is a "
                     f"cohesionless Drucker-Prager (cohesion_pa={self.soil.cohesion_pa!r}), "
                     "which carries no tension") from e
+            if pressure_pa is not None:
+                raise NewtonDivergence(
+                    f"{e}; the footing carries {self.footing_pressure_pa():.6g} Pa of "
+                    f"pressure_pa={p:g}. A uniform (flexible) pressure is limited by the "
+                    "soil yielding at its edge, often far below what a rigid footing carries: "
+                    "push the footing by settlement_m, or use load_footing_to_pressure") from e
             raise
 
     def load_footing_to_pressure(self, pressure_pa: float, *, steps: int = 10,

@@ -230,6 +230,84 @@ def test_a_tensile_footing_load_on_a_cohesionless_soil_says_why():
         m.load_footing(pressure_pa=-20e3, steps=1)
 
 
+class _CreepingStage:
+    """A stand-in for SoilModel's stage loop: Newton converges (slowly: no step growth) only
+    on steps that end at most halfway to the load factor 0.6, so the stage can creep
+    towards 0.6 on ever shorter steps and never reach 1 (a load it cannot carry)."""
+
+    def __init__(self):
+        from femcoupling.soil_steps import StepResult
+
+        self._step = StepResult
+        self.max_newton, self.max_cuts, self.last_failure = 25, 6, ""
+        self.history, self.lf_done, self.lf, self.trials = [], 0.0, 0.0, 0
+        self._step_end = {}
+
+    def apply(self, lf):
+        self.lf = lf
+
+    def _newton(self):
+        self.trials += 1
+        if self.trials > 10_000:  # (the old loop: it would creep on forever)
+            raise AssertionError("the stage crept on without stopping")
+        ok = self.lf <= self.lf_done + 0.5 * (0.6 - self.lf_done)
+        return 20 if ok else -1
+
+    def _rollback(self):
+        pass
+
+    def _commit(self):
+        self.lf_done = self.lf
+
+    def footing_settlement_m(self):
+        return 0.0
+
+    def footing_pressure_pa(self):
+        return 0.0
+
+    def plastic_points(self):
+        return 0
+
+
+def test_a_stage_never_cuts_its_step_below_the_nominal_over_2_to_the_max_cuts():
+    pytest.importorskip("dolfinx_solver")
+    from femcoupling.elastoplastic import NewtonDivergence, SoilModel
+
+    fake = _CreepingStage()
+    with pytest.raises(NewtonDivergence, match=r"Newton failed at load factor 0.5\d+ with the "
+                       r"step cut 6 times \(to 1/64 of its nominal size\); the stage stopped "
+                       r"at load factor 0.5\d+"):
+        SoilModel._run_stage(fake, "footing", fake.apply, 4)
+    assert 0.5 < fake.lf_done < 0.6
+    assert fake.lf == fake.lf_done  # the load is put back where the stage stopped
+    assert fake.trials < 100
+
+
+def test_a_flexible_load_the_soil_cannot_carry_stops_and_says_so():
+    """A flexible pressure of 300 kPa on a weak Drucker-Prager soil (c = 2 kPa): Newton fails
+    near 180 kPa. The stage used to creep on towards it with ever shorter steps (it had not
+    stopped after 60 s); now it stops at the step floor, says how far it got, and leaves the
+    model at its last converged state, from which a settlement can push further."""
+    pytest.importorskip("dolfinx_solver")
+    from femcoupling.elastoplastic import NewtonDivergence, SoilModel
+    from femcoupling.materials import DruckerPrager
+
+    body = _body(width_m=3.0, height_m=2.0, mesh_size_m=0.5, fine_size_m=0.1,
+                 fine_radius_m=0.3)
+    m = SoilModel(body, soil=DruckerPrager(young_pa=30e6, poisson=0.3, cohesion_pa=2e3,
+                                           friction_deg=35.0), unit_weight_n_m3=18e3)
+    m.set_geostatic()
+    with pytest.raises(NewtonDivergence, match=r"step cut 6 times .* the footing carries "
+                       r"1\d{5}(\.\d+)? Pa of pressure_pa=300000\. A uniform \(flexible\) "
+                       r"pressure .* push the footing by settlement_m"):
+        m.load_footing(pressure_pa=300e3, steps=3)
+    reached = m.history[-1].footing_pressure_pa
+    assert 100e3 < reached < 300e3
+    assert m.footing_pressure_pa() == reached
+    r = m.load_footing(settlement_m=0.01, steps=2)
+    assert r[-1].footing_pressure_pa > reached
+
+
 # ---- grids -----------------------------------------------------------------------------------
 
 def _grid_scene():

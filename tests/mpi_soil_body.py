@@ -1,0 +1,55 @@
+"""The reinforced soil body (``femcoupling.elastoplastic.SoilModel``) under MPI, run by
+tests/test_soil_body_mpi.py as ``mpiexec -n N python tests/mpi_soil_body.py OUT``.
+
+A Drucker-Prager soil with its self-weight, a prestressed geogrid layer and an element region:
+geostatic stress, prestress (2 steps), a footing pressure of 100 kPa (4 steps), then a
+settlement of 10 mm (4 steps). Rank 0 writes OUT/result.json: each step's settlement (m),
+pressure (Pa), Newton iterations, status and residual (Pa), and at the end the plastic points,
+the region's stress (Pa), the layer's force (N/m) and the stress at a point (Pa); and whether
+every rank returned the same values (``same_on_every_rank``)."""
+
+import json
+import sys
+
+
+def main(out: str) -> None:
+    from femcoupling.elastoplastic import SoilModel
+    from femcoupling.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
+    from femcoupling.materials import DruckerPrager, GeogridLayerMaterial
+    from femcoupling.mpi_points import world
+
+    comm = world()
+    body = ReinforcedSoilBody(
+        width_m=3.0, height_m=2.0, footing_half_width_m=0.5,
+        layers=(GeogridLayer(z_m=1.7, x_min_m=0.0, x_max_m=2.0, thickness_m=0.02),),
+        regions=(ElementRegion("el", (0.3, 1.5), 0.2),),
+        mesh_size_m=0.4, fine_size_m=0.05, fine_radius_m=0.3)
+    m = SoilModel(body, soil=DruckerPrager(young_pa=30e6, poisson=0.3, cohesion_pa=2e3,
+                                           friction_deg=35.0),
+                  layers=[GeogridLayerMaterial(500e3, prestress_n_per_m=10e3)],
+                  unit_weight_n_m3=18e3, comm=comm)
+    m.set_geostatic()
+    steps = m.apply_prestress(steps=2)
+    steps += m.load_footing(pressure_pa=100e3, steps=4)
+    steps += m.load_footing(settlement_m=0.01, steps=4)
+    res = {"ranks": comm.size,
+           "settlement_m": [r.footing_settlement_m for r in steps],
+           "pressure_pa": [r.footing_pressure_pa for r in steps],
+           "newton": [r.newton_iterations for r in steps],
+           "status": [r.status for r in steps],
+           "residual_pa": [r.residual_pa for r in steps],
+           "plastic_points": m.plastic_points(),
+           "region_stress_pa": m.region_stress("el").tolist(),
+           "layer_force_n_per_m": m.layer_force_n_per_m(0),
+           "point_stress_pa": m.point_stress([[0.0, 1.0]])[0].tolist()}
+    every = comm.gather(res, root=0)
+    if comm.rank == 0:
+        res["same_on_every_rank"] = all(r == res for r in every)
+        with open(f"{out}/result.json", "w") as fh:
+            json.dump(res, fh)
+        print(f"on {comm.size} rank(s): {len(steps)} steps, settlement "
+              f"{res['settlement_m'][-1]:.6g} m")
+
+
+if __name__ == "__main__":
+    main(sys.argv[1])
