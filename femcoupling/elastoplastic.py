@@ -285,7 +285,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
             sig[idx], tan[idx] = m.trial(deps[idx])
             dl[idx] = m.plastic
         if region:
-            RegionPoints.trial_all(region, deps, sig, tan)
+            RegionPoints.trial_all(region, deps, sig, tan, self.comm)
         self.sig_cur, self.dlam = sig, dl
         self._to_q(self.sig_q, sig, self._qdofs, self.ncomp)
         self._to_q(self.tan_q, tan.reshape(len(tan), -1), self._qdofs_t, self.ncomp**2)

@@ -121,9 +121,11 @@ class SoilMeasures:
         return g.x[dm].mean(axis=1)
 
     def point_stress(self, points_m: npt.ArrayLike) -> np.ndarray:
-        """Stress at points (n, dim) m: the converged quadrature stress L2-projected onto DG1
-        per cell (exact for a P2 elastic field), evaluated at the points. (n, 3, 3) Pa, tension
-        positive (x, y, z). Points outside the body raise FemInputError."""
+        """Stress at points (n, dim) m: the converged quadrature stress L2-projected per cell
+        onto DG of one degree below the displacements' (DG1 for P2, exact for an elastic P2
+        field; DG0 for P1, one quadrature point per cell: its stress), evaluated at the
+        points. (n, 3, 3) Pa, tension positive (x, y, z). Points outside the body raise
+        FemInputError."""
         fx = self._fx
         fem, ufl = fx.fem, fx.ufl
         import dolfinx.geometry as dg
@@ -133,7 +135,9 @@ class SoilMeasures:
             raise FemInputError(f"points_m: shape {pts.shape}, need (n, {self.tdim})")
         p3 = np.zeros((len(pts), 3))
         p3[:, : self.tdim] = pts
-        D = fem.functionspace(self.mesh, ("DG", 1, (self.ncomp,)))
+        # (the quadrature, of degree 2 (degree - 1), integrates this space's mass matrix
+        # exactly; DG1 on P1's one point per cell was singular: NaN)
+        D = fem.functionspace(self.mesh, ("DG", self.degree - 1, (self.ncomp,)))
         t, s = ufl.TrialFunction(D), ufl.TestFunction(D)
         self._to_q(self.sig_q, self.sig_n, self._qdofs, self.ncomp)
         prob = fx.fem_petsc.LinearProblem(

@@ -54,11 +54,10 @@ class RegionPoints:
         return self._answer(increment, mean, self.element.trial(mandel_to_tensor(mean)))
 
     @staticmethod
-    def trial_all(sets: list, deps: np.ndarray, sig: np.ndarray, tan: np.ndarray) -> None:
-        """The trial of every ``(indices, RegionPoints)`` of ``sets`` for the model's
-        increments ``deps``, written into ``sig`` and ``tan`` (in place): the members of one
-        group (``trial_many``) are evaluated at once."""
-        means = [m.mean(deps[idx]) for idx, m in sets]
+    def _evaluate(sets: list, means: list) -> dict:
+        """The elements' answers (stress increment, tangent) for the mean strain increments
+        ``means`` of ``sets``, by set index: the members of one group (``trial_many``) at
+        once."""
         answers: dict = {}
         units: dict = {}
         for k, (_, m) in enumerate(sets):
@@ -70,6 +69,36 @@ class RegionPoints:
         for unit, ks in units.values():
             got = unit.trial_many({sets[k][1].key: mandel_to_tensor(means[k]) for k in ks})
             answers.update({k: got[sets[k][1].key] for k in ks})
+        return answers
+
+    @staticmethod
+    def trial_all(sets: list, deps: np.ndarray, sig: np.ndarray, tan: np.ndarray,
+                  comm: Any = None) -> None:
+        """The trial of every ``(indices, RegionPoints)`` of ``sets`` for the model's
+        increments ``deps``, written into ``sig`` and ``tan`` (in place): the members of one
+        group (``trial_many``) are evaluated at once.
+
+        Under MPI (``comm`` of more than one rank) every rank holds a set for every element,
+        in the same order, with its own points (the weights of its owned points; none on a
+        rank without them): the means are summed over the ranks, the elements (on rank 0)
+        answer, and their answers (or the ``NewtonFailure`` of one) reach every rank."""
+        means = [m.mean(deps[idx]) for idx, m in sets]
+        if comm is None or comm.size == 1:
+            answers = RegionPoints._evaluate(sets, means)
+        else:
+            from femcoupling.quadrature import NewtonFailure
+
+            total = comm.allreduce(np.array(means).reshape(len(sets), -1))
+            means = list(total)
+            answers, err = None, None
+            if comm.rank == 0:
+                try:
+                    answers = RegionPoints._evaluate(sets, means)
+                except NewtonFailure as e:
+                    err = str(e)
+            answers, err = comm.bcast((answers, err), root=0)
+            if err is not None:
+                raise NewtonFailure(err)
         for k, (idx, m) in enumerate(sets):
             sig[idx], tan[idx] = m._answer(deps[idx], means[k], answers[k])
 
@@ -103,18 +132,67 @@ class RegionMaterials:
         returns its stress increment (3 x 3, Pa) and tangent (6 x 6 Mandel, Pa), which every
         point of the region takes; a converged step commits it. The members of one
         ``femcoupling.region.PoolRegionMaterials`` (several regions' elements on Dask
-        workers) are evaluated at once, in parallel. Serial runs only (one MPI rank)."""
+        workers) are evaluated at once, in parallel. Under MPI the element lives on rank 0
+        (``element=None`` on the others: ``femcoupling.mpi_points.on_root``); the region's
+        mean is taken over all ranks. Collective."""
         tag = self.body.region_tag(name)
         self._add_element(name, element, np.repeat(self.cell_tag_of == tag, self.nq))
+
+    # ---- the cells in the serial model's numbering (the same keys on any number of ranks)
+
+    def _serial_cells(self) -> np.ndarray:
+        """(n_cells,) each local cell's number in the serial model's mesh (its cell there at
+        the same place; the serial mesh is built again on rank 0 under MPI). Serial: the
+        local numbering. Raises RuntimeError if the ranks' cells are not the serial mesh's."""
+        got = getattr(self, "_serial_cell_ids", None)
+        if got is not None:
+            return got
+        if self.comm.size == 1:
+            self._serial_cell_ids = np.arange(self.n_cells)
+            return self._serial_cell_ids
+        from scipy.spatial import cKDTree
+
+        serial = None
+        if self.comm.rank == 0:
+            fx = self._fx
+            mb = geo.build_mesh(self.body, comm=fx.MPI.COMM_SELF)
+            g, n = mb.mesh.geometry, mb.mesh.topology.index_map(self.tdim).size_local
+            serial = g.x[g.dofmaps[0][:n]].mean(axis=1)
+        serial = self.comm.bcast(serial, root=0)
+        dist, ids = cKDTree(serial).query(self._cell_centres())
+        tol = 1e-9 * max(self.body.width_m, self.body.height_m)
+        owned = np.sort(np.concatenate(self.comm.allgather(ids[: self.n_owned])))
+        bad = self.comm.allreduce(int(float(np.max(dist, initial=0.0)) > tol))
+        if bad or not np.array_equal(owned, np.arange(len(serial))):
+            raise RuntimeError("the ranks' cells are not the serial mesh's: a cell centre "
+                               f"farther than {tol:.3g} m from the nearest, or cells missing "
+                               "or owned twice")
+        self._serial_cell_ids = np.asarray(ids, np.int64)
+        return self._serial_cell_ids
+
+    def _serial_cell_data(self, *arrays: np.ndarray) -> list:
+        """Per-cell arrays (leading axis: the local cells) in the serial numbering, every
+        serial cell once (from its owner), on every rank. Serial: the arrays themselves."""
+        if self.comm.size == 1:
+            return [np.asarray(a) for a in arrays]
+        ids = self._serial_cells()[: self.n_owned]
+        parts = self.comm.allgather((ids, [np.asarray(a)[: self.n_owned] for a in arrays]))
+        n = sum(len(p[0]) for p in parts)
+        out = []
+        for k, a in enumerate(arrays):
+            full = np.empty((n,) + np.shape(a)[1:], dtype=np.asarray(a).dtype)
+            for pid, pdata in parts:
+                full[pid] = pdata[k]
+            out.append(full)
+        return out
 
     def cell_stresses(self, name: str) -> dict:
         """The converged stress of each cell of element region ``name``, by the key
         ``set_cell_elements`` gives that cell's element (``"<name>/<cell>"``): 3 x 3, Pa,
         tension positive (the cell's volume mean; where each cell's element takes over)."""
         tag = self.body.region_tag(name)
-        cms = self.cell_mean_stress()
-        return {f"{name}/{c}": mandel_to_tensor(cms[c])
-                for c in np.flatnonzero(self.cell_tag_of == tag)}
+        tags, cms = self._serial_cell_data(self.cell_tag_of, self.cell_mean_stress())
+        return {f"{name}/{c}": mandel_to_tensor(cms[c]) for c in np.flatnonzero(tags == tag)}
 
     def band_cells(self, name: str) -> dict:
         """The cells of the geogrid layers' bands inside element region ``name`` (their
@@ -124,12 +202,13 @@ class RegionMaterials:
         reg = self.body.region(name)
         lo = np.asarray(reg.center_m, float) - reg.size_m / 2
         hi = lo + reg.size_m
-        centres = self._cell_centres()[:, : len(lo)]
+        tags, centres = self._serial_cell_data(self.cell_tag_of, self._cell_centres())
+        centres = centres[:, : len(lo)]
         inside = np.all((centres >= lo - 1e-12) & (centres <= hi + 1e-12), axis=1)
         out = {}
         for i, layer in enumerate(self.body.layers):
             label = layer.name or f"layer{i}"
-            for c in np.flatnonzero(inside & (self.cell_tag_of == geo.LAYER_TAG0 + i)):
+            for c in np.flatnonzero(inside & (tags == geo.LAYER_TAG0 + i)):
                 out[f"{name}-{label}/{c}"] = i
         return out
 
@@ -141,9 +220,10 @@ class RegionMaterials:
         along x, N/m: the layer's thickness times the cell's sigma_xx)."""
         if not (isinstance(reach_m, (int, float)) and np.isfinite(reach_m) and reach_m > 0):
             raise FemInputError(f"reach_m={reach_m!r}: must be > 0 (m)")
-        cms = self.cell_mean_stress()
-        centres = self._cell_centres()[:, : self.tdim]
-        soil = np.flatnonzero(self.cell_tag_of == self.body.region_tag(name))
+        tags, cms, centres, volume = self._serial_cell_data(
+            self.cell_tag_of, self.cell_mean_stress(), self._cell_centres(), self.cell_volume)
+        centres = centres[:, : self.tdim]
+        soil = np.flatnonzero(tags == self.body.region_tag(name))
         pressure = -cms[:, :3].sum(axis=1) / 3.0
         out = {}
         for key, i in self.band_cells(name).items():
@@ -152,7 +232,7 @@ class RegionMaterials:
             if not near.size:
                 raise FemInputError(f"reach_m={reach_m!r}: no soil cell of region {name!r} "
                                     f"within it of band cell {c}; give a larger reach")
-            w = self.cell_volume[near]
+            w = volume[near]
             out[key] = (float(w @ pressure[near] / w.sum()),
                         float(self.body.layers[i].thickness_m * cms[c, 0]))
         return out
@@ -167,39 +247,69 @@ class RegionMaterials:
         :meth:`set_region_element` makes of a region: its element gets the cell's mean strain
         increment, and the cell's points take its answer. ``band``: the geogrid bands' cells
         inside the region too (:meth:`band_cells`; their elements reinforced RVEs,
-        ``PoolRegionMaterials.build(band=)``). Returns the keys. Serial runs only."""
+        ``PoolRegionMaterials.build(band=)``). Returns the keys.
+
+        Under MPI the keys are the serial model's (``<cell>`` numbers the serial mesh's cell
+        at the same place), so each cell gets the same element, and seed, on any number of
+        ranks; ``group`` lives on rank 0 (None on the others). Collective."""
         keys = list(self.cell_stresses(name)) + (list(self.band_cells(name)) if band else [])
+        on_root = self.comm.size == 1 or self.comm.rank == 0
+        if self.comm.size > 1:
+            from femcoupling.mpi_points import check_on_root
+
+            check_on_root(self.comm, group)
         members = getattr(group, "materials", None)
-        missing = [k for k in keys if members is None or k not in members]
+        missing = [k for k in keys if members is None or k not in members] if on_root else []
+        if self.comm.size > 1:
+            missing = self.comm.bcast(missing, root=0)
         if missing:
             raise FemInputError(f"group={group!r}: needs an element (in its .materials) for "
                                 f"every cell of region {name!r}"
                                 + (" and of its bands" if band else "")
                                 + f"; missing {missing[:5]}"
                                 + (" ..." if len(missing) > 5 else ""))
+        serial = self._serial_cells()
         for k in keys:
-            cell = int(k.rsplit("/", 1)[1])
-            on = np.zeros(self.n_cells, bool)
-            on[cell] = True
-            self._add_element(k, members[k], np.repeat(on, self.nq))
+            on = serial == int(k.rsplit("/", 1)[1])
+            self._add_element(k, members[k] if on_root else None, np.repeat(on, self.nq),
+                              _checked=True)
+        self._set_point_materials()
         return keys
 
-    def _add_element(self, key: str, element: Any, sel: np.ndarray) -> None:
-        """``element`` answers for the quadrature points ``sel`` (their volume mean strain)."""
-        if self.comm.size > 1:
-            raise FemInputError(f"region elements ({key!r}): serial runs only (this run "
-                                f"has {self.comm.size} MPI ranks)")
-        check_material(element, "element")
+    def _add_element(self, key: str, element: Any, sel: np.ndarray, *,
+                     _checked: bool = False) -> None:
+        """``element`` answers for the quadrature points ``sel`` (their volume mean strain:
+        the weights of the owned points, summed to 1 over the ranks; a ghost point takes the
+        answer with a weight of 0). ``_checked``: the caller checked the element's rank and
+        sets the points' materials once for all its elements."""
+        if self.comm.size > 1 and not _checked:
+            from femcoupling.mpi_points import check_on_root
+
+            check_on_root(self.comm, element)
+        if element is not None or self.comm.size == 1:
+            check_material(element, "element")
         self.region_elements[key] = element
         self._region_form = None  # (the regions' cells changed)
         w = (self.cell_volume[:, None] * self.qweights[None, :]).reshape(-1)[sel]
-        self._element_points[key] = (sel, w / w.sum())  # its points and volume weights
-        self._set_point_materials()  # (its points leave their tag's material)
+        if self.comm.size == 1:
+            total = w.sum()
+        else:
+            owned = np.repeat(np.arange(self.n_cells) < self.n_owned, self.nq)[sel]
+            w = np.where(owned, w, 0.0)
+            total = self.comm.allreduce(float(w.sum()))
+        if not total > 0:
+            raise FemInputError(f"region element {key!r}: its cells have no volume")
+        self._element_points[key] = (sel, w / total)  # its points and volume weights
+        if not _checked:
+            self._set_point_materials()  # (its points leave their tag's material)
 
     def _element_units(self) -> list:
         """(unit, region names): each region element once, except the members of one group
         (``femcoupling.region.PoolRegionMaterials``: an element's ``group``), which the group
-        evaluates, commits and saves at once."""
+        evaluates, commits and saves at once. Under MPI, the elements on rank 0 (none on
+        the others)."""
+        if self.comm.size > 1 and self.comm.rank != 0:
+            return []
         units: dict = {}
         for name, el in self.region_elements.items():
             unit = getattr(el, "group", el)

@@ -136,3 +136,29 @@ def test_bad_material_is_named():
         DruckerPrager(young_pa=1e7, poisson=0.3, cohesion_pa=1.0, friction_deg=70.0)
     with pytest.raises(FemInputError, match=r"^poisson=0.5: must be in \(-1, 0.5\)$"):
         LinearElastic(1e7, 0.5)
+
+
+def test_point_stress_on_p1_is_the_cells_stress():
+    """P1 cells have one quadrature point: point_stress projects on DG0 and gives that
+    point's stress (it projected on DG1, whose mass matrix one point cannot integrate, and
+    returned NaN and inf)."""
+    body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5,
+                              mesh_size_m=0.6, fine_size_m=0.1)
+    m = SoilModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1)
+    m.set_geostatic()
+    m.load_footing(pressure_pa=100e3, steps=1)
+    import dolfinx.geometry as dg
+
+    pts = np.array([[0.25, 2.7], [1.3, 1.1]])
+    got = m.point_stress(pts)
+    assert np.all(np.isfinite(got))
+    p3 = np.c_[pts, np.zeros(2)]
+    tree = dg.bb_tree(m.mesh, 2)
+    coll = dg.compute_colliding_cells(m.mesh, dg.compute_collisions_points(tree, p3), p3)
+    cms = m.cell_mean_stress()
+    from femcoupling.materials import mandel_to_tensor
+
+    for i in range(2):
+        want = mandel_to_tensor(cms[coll.links(i)[0]])
+        np.testing.assert_allclose(got[i], want, rtol=0, atol=1e-9 * np.abs(want).max())
+    assert got[0, 2, 2] < -50e3  # under the footing

@@ -1,9 +1,17 @@
 """The reinforced soil body (femcoupling.elastoplastic.SoilModel) on 2 MPI ranks is the serial
-body (docs/fem.md, "Verification"): tests/mpi_soil_body.py (a Drucker-Prager soil with its
-self-weight, a prestressed geogrid layer, a footing loaded by pressure and then by settlement)
-run under MPICH's mpiexec of the venv on 1 and on 2 ranks. The FEM adds a node's
-contributions in another order on 2 ranks, and Newton stops at 1e-8 of the force scale, so
-the runs agree to that tolerance, not bitwise (measured: within 4e-10 relative)."""
+body (docs/fem.md, "Verification"; docs/multiscale.md, "Under MPI").
+
+- tests/mpi_soil_body.py: a Drucker-Prager soil with its self-weight, a prestressed geogrid
+  layer, a footing loaded by pressure and then by settlement, run under MPICH's mpiexec of
+  the venv on 1 and on 2 ranks. The FEM adds a node's contributions in another order on 2
+  ranks, and Newton stops at 1e-8 of the force scale, so the runs agree to that tolerance,
+  not bitwise (measured: within 4e-10 relative).
+- tests/mpi_soil_regions.py: DEM region elements on rank 0 (an element per cell of one
+  region, one element for another). With linear stand-ins whose stiffness depends on the
+  cell number they are given, 2 ranks give the serial run to 1e-14: each cell has the serial
+  model's key and so its element. With periodic DEM elements on Dask, the keys and records
+  are the serial run's and the stresses agree within the elements' relaxation noise (0.3 %
+  of the largest, measured; the FEM's rounding is their input)."""
 
 from __future__ import annotations
 
@@ -54,3 +62,63 @@ def test_two_ranks_give_the_serial_body_within_the_newton_tolerance(runs):
     assert one["pressure_pa"][5] == pytest.approx(100e3)
     assert one["pressure_pa"][-1] > 2 * one["pressure_pa"][5]
     assert one["layer_force_n_per_m"] > 0
+
+
+def _run(script: str, ranks: int, d: Path, *extra: str) -> dict:
+    p = subprocess.run([str(MPIEXEC), "-n", str(ranks), sys.executable,
+                        str(ROOT / "tests" / script), str(d), *extra],
+                       capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert p.returncode == 0, f"{ranks} rank(s):\n{p.stdout[-2000:]}\n{p.stderr[-4000:]}"
+    assert f"on {ranks} rank(s): " in p.stdout
+    return json.loads((d / "result.json").read_text())
+
+
+@pytest.fixture(scope="module")
+def regions(tmp_path_factory):
+    if not MPIEXEC.exists():
+        pytest.skip(f"no mpiexec beside {sys.executable}")
+    return {(ranks, mode): _run("mpi_soil_regions.py", ranks,
+                                tmp_path_factory.mktemp(f"regions{ranks}{mode}"), mode)
+            for mode in ("linear", "dem") for ranks in (1, 2)}
+
+
+def _rel(a, b) -> float:
+    a, b = np.asarray(a, float), np.asarray(b, float)
+    return float(np.abs(a - b).max() / np.abs(a).max())
+
+
+def test_region_elements_on_two_ranks_have_the_serial_keys_and_run(regions):
+    for mode in ("linear", "dem"):
+        one, two = regions[1, mode], regions[2, mode]
+        assert two["same_on_every_rank"] is True, mode
+        assert len(one["keys"]) > 5
+        assert two["keys"] == one["keys"], mode  # the serial model's cell numbers
+        assert np.all(np.isfinite(two["point_stress_pa"]))
+    # the cells' starting stresses, gathered from their owners, are the serial ones
+    assert _rel(regions[1, "dem"]["cell_stresses_pa"], regions[2, "dem"]["cell_stresses_pa"]) \
+        < 1e-12
+
+
+def test_linear_stand_ins_on_two_ranks_are_the_serial_run(regions):
+    one, two = regions[1, "linear"], regions[2, "linear"]
+    assert one["status"] == two["status"] == ["converged"] * 2
+    assert one["newton"] == two["newton"]
+    assert one["group_commits"] == two["group_commits"] == 2
+    for key in ("settlement_m", "region_a_pa", "region_b_pa", "cell_stresses_after_pa",
+                "point_stress_pa"):
+        assert _rel(one[key], two[key]) < 1e-10, key
+    # the stiffness depends on the cell: the cells do not all carry the same stress
+    after = np.asarray(one["cell_stresses_after_pa"])
+    assert np.ptp(after[:, 2, 2]) > 0.05 * np.abs(after[:, 2, 2]).max()
+
+
+def test_dem_cell_elements_on_two_ranks_agree_within_their_noise(regions):
+    one, two = regions[1, "dem"], regions[2, "dem"]
+    for r in (one, two):
+        assert r["status"][0] in ("converged", "stopped_at_scatter")
+    assert _rel(one["element_stresses_pa"], two["element_stresses_pa"]) < 0.02
+    for r in (one, two):  # a records row per element, written once (by rank 0)
+        assert r["records"]["names"] == one["keys"]
+        assert r["records"]["step"] == [1] * len(one["keys"])
+    assert _rel(one["region_a_pa"], two["region_a_pa"]) < 0.01
+    assert _rel(one["settlement_m"], two["settlement_m"]) < 1e-3
