@@ -71,26 +71,16 @@ class StandInGroup:
         pass
 
 
-class StandIn:
-    """One linear element (``femcoupling.region.DemRegionMaterial``'s interface)."""
+class StandIn(StandInGroup):
+    """One linear element (``femcoupling.region.DemRegionMaterial``'s interface: no
+    ``group``, evaluated alone)."""
 
     def __init__(self, key):
-        self.key, self.commits = key, 0
+        super().__init__([key])
+        self.key = key
 
     def trial(self, de):
-        from femcoupling.materials import mandel_to_tensor, tensor_to_mandel
-
-        c = _stiffness(self.key)
-        return mandel_to_tensor(c @ tensor_to_mandel(de, 6)), c
-
-    def commit(self):
-        self.commits += 1
-
-    def state(self):
-        return b""
-
-    def set_state(self, data):
-        pass
+        return self.trial_many({self.key: de})[self.key]
 
 
 def main(out: str, dem: bool) -> None:

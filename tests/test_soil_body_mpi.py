@@ -29,20 +29,21 @@ ROOT = Path(__file__).resolve().parents[1]
 MPIEXEC = Path(sys.executable).parent / "mpiexec"
 
 
+def _run(script: str, ranks: int, d: Path, *extra: str) -> dict:
+    p = subprocess.run([str(MPIEXEC), "-n", str(ranks), sys.executable,
+                        str(ROOT / "tests" / script), str(d), *extra],
+                       capture_output=True, text=True, timeout=600, cwd=ROOT)
+    assert p.returncode == 0, f"{ranks} rank(s):\n{p.stdout[-2000:]}\n{p.stderr[-4000:]}"
+    assert f"on {ranks} rank(s): " in p.stdout
+    return json.loads((d / "result.json").read_text())
+
+
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     if not MPIEXEC.exists():
         pytest.skip(f"no mpiexec beside {sys.executable}")
-    out = {}
-    for ranks in (1, 2):
-        d = tmp_path_factory.mktemp(f"soil{ranks}")
-        p = subprocess.run([str(MPIEXEC), "-n", str(ranks), sys.executable,
-                            str(ROOT / "tests" / "mpi_soil_body.py"), str(d)],
-                           capture_output=True, text=True, timeout=600, cwd=ROOT)
-        assert p.returncode == 0, f"{ranks} rank(s):\n{p.stdout[-2000:]}\n{p.stderr[-4000:]}"
-        assert f"on {ranks} rank(s): 10 steps" in p.stdout
-        out[ranks] = json.loads((d / "result.json").read_text())
-    return out
+    return {ranks: _run("mpi_soil_body.py", ranks, tmp_path_factory.mktemp(f"soil{ranks}"))
+            for ranks in (1, 2)}
 
 
 def test_every_rank_returns_the_same_values(runs):
@@ -62,15 +63,6 @@ def test_two_ranks_give_the_serial_body_within_the_newton_tolerance(runs):
     assert one["pressure_pa"][5] == pytest.approx(100e3)
     assert one["pressure_pa"][-1] > 2 * one["pressure_pa"][5]
     assert one["layer_force_n_per_m"] > 0
-
-
-def _run(script: str, ranks: int, d: Path, *extra: str) -> dict:
-    p = subprocess.run([str(MPIEXEC), "-n", str(ranks), sys.executable,
-                        str(ROOT / "tests" / script), str(d), *extra],
-                       capture_output=True, text=True, timeout=600, cwd=ROOT)
-    assert p.returncode == 0, f"{ranks} rank(s):\n{p.stdout[-2000:]}\n{p.stderr[-4000:]}"
-    assert f"on {ranks} rank(s): " in p.stdout
-    return json.loads((d / "result.json").read_text())
 
 
 @pytest.fixture(scope="module")
