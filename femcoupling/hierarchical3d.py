@@ -1,5 +1,7 @@
 """Hierarchical FEM x DEM in 3D: a periodic DEM element at the quadrature point of every
-tetrahedron (docs/multiscale.md, "Hierarchical mode in 3D").
+tetrahedron (docs/multiscale.md, "Hierarchical mode in 3D"), in a box
+(:class:`Hierarchical3D`) or a cylindrical triaxial specimen (:class:`HierarchicalCylinder`,
+meshed by gmsh; the box's geometry is a set of hooks the cylinder replaces).
 
 The FEM is a box ``lx`` x ``ly`` x ``lz`` (m) of P1 tetrahedra (dolfinx's ``create_box``: six
 per hexahedron of an ``nx`` x ``ny`` x ``nz`` grid), one quadrature point each; the pool's
@@ -27,6 +29,7 @@ power 2/3. Stresses are tension positive, Pa. The FEM is serial, or split over t
 
 from __future__ import annotations
 
+import itertools
 import math
 
 import numpy as np
@@ -36,7 +39,7 @@ from femcoupling.geometry import FemInputError
 from femcoupling.hierarchical import HierarchicalPlaneStrain
 from femcoupling.quadrature import QuadratureSystem
 
-__all__ = ["Hierarchical3D"]
+__all__ = ["Hierarchical3D", "HierarchicalCylinder", "cylinder_cells"]
 
 
 class Hierarchical3D(HierarchicalPlaneStrain):
@@ -58,13 +61,26 @@ class Hierarchical3D(HierarchicalPlaneStrain):
         for name, v in (("nx", nx), ("ny", ny), ("nz", nz)):
             if not (isinstance(v, int) and v >= 1):
                 raise FemInputError(f"{name}={v!r}: must be an integer >= 1")
+        self.lx, self.ly, self.lz = float(lx), float(ly), float(lz)
+        self.nx, self.ny, self.nz = nx, ny, nz
+        self._setup(pool, homogeneous=homogeneous, confining_pa=confining_pa,
+                    newton_rtol=newton_rtol, max_newton=max_newton, strain_kw=strain_kw,
+                    tangent=tangent, convergence=convergence, relaxation=relaxation,
+                    noise_factor=noise_factor, noise_ceiling=noise_ceiling, comm=comm,
+                    verbose=verbose, out=out, overwrite=overwrite)
+
+    def _setup(self, pool, *, homogeneous, confining_pa, newton_rtol, max_newton, strain_kw,
+               tangent, convergence, relaxation, noise_factor, noise_ceiling, comm, verbose,
+               out, overwrite) -> None:
+        """Everything but the geometry's own arguments: the mesh (``_mesh``), the pool's
+        check (``_cells``), the spaces, the boundary (``_confinement``, ``_confine``,
+        ``_triaxial_bcs``) and the elements as the points' material."""
         if not homogeneous and confining_pa is None:
             raise FemInputError("confining_pa=None: a triaxial test needs the confining "
                                 "pressure (Pa, compression positive), or homogeneous=True")
         fx = self._fx = _dolfinx.load()
         fem, ufl = fx.fem, fx.ufl
-        self.pool, self.lx, self.ly, self.lz = pool, float(lx), float(ly), float(lz)
-        self.nx, self.ny, self.nz = nx, ny, nz
+        self.pool = pool
         self.comm = comm
         self._options(out=out, overwrite=overwrite, verbose=verbose, tangent=tangent,
                       tangents=("network", "network-elastic"), convergence=convergence,
@@ -73,9 +89,9 @@ class Hierarchical3D(HierarchicalPlaneStrain):
         self.homogeneous, self.confining_pa = homogeneous, confining_pa
         self.newton_rtol, self.max_newton = newton_rtol, max_newton
         self.strain_kw = dict(strain_kw or {})
-        msh = self.mesh = self._box(comm)
+        msh = self.mesh = self._mesh(comm)
         self.n_cells = msh.topology.index_map(3).size_local  # (this rank's)
-        self._check_pool(pool, 6 * nx * ny * nz, "cells (6 nx ny nz tetrahedra)")
+        self._check_pool(pool, *self._cells())
 
         def eps(w):  # Voigt xx, yy, zz, yz, xz, xy with engineering shear (the element's)
             e = ufl.sym(ufl.grad(w))
@@ -84,20 +100,9 @@ class Hierarchical3D(HierarchicalPlaneStrain):
 
         fdim = 2
         st = fx.PETSc.ScalarType
-        at = lambda c, v: (lambda x: np.isclose(x[c], v))  # noqa: E731
-        right = np.sort(fx.mesh.locate_entities_boundary(msh, fdim, at(0, lx)))
-        back = np.sort(fx.mesh.locate_entities_boundary(msh, fdim, at(1, ly)))
-        both = np.concatenate([right, back])
-        order = np.argsort(both, kind="stable")
-        tags = fx.mesh.meshtags(msh, fdim, both[order], np.concatenate(
-            [np.full(len(right), 1, np.int32), np.full(len(back), 2, np.int32)])[order])
-        ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
-        self.traction_x = fem.Constant(msh, np.zeros(3, dtype=st))
-        self.traction_y = fem.Constant(msh, np.zeros(3, dtype=st))
+        loads = self._confinement(msh)
         sysq = self.system = QuadratureSystem(
-            msh, degree=1, qdeg=1, ncomp=6, strain=eps,
-            loads=lambda v: (ufl.dot(self.traction_x, v) * ds(1),
-                             ufl.dot(self.traction_y, v) * ds(2)),
+            msh, degree=1, qdeg=1, ncomp=6, strain=eps, loads=loads,
             lu="mumps" if self._parallel else None)
         self.V, self.Wv, self.Wt = sysq.V, sysq.Wv, sysq.Wt
         self._points(1)
@@ -113,22 +118,62 @@ class Hierarchical3D(HierarchicalPlaneStrain):
             self.bcs = [fem.dirichletbc(self._h, fem.locate_dofs_topological(
                 self.V, fdim, facets))]
         else:
-            def fixed(c, where):
-                sub = self.V.sub(c)
-                dofs = fem.locate_dofs_topological(
-                    sub, fdim, fx.mesh.locate_entities_boundary(msh, fdim, where))
-                return dofs, sub
-
-            self.bcs = [fem.dirichletbc(st(0.0), *fixed(0, at(0, 0.0))),
-                        fem.dirichletbc(st(0.0), *fixed(1, at(1, 0.0))),
-                        fem.dirichletbc(st(0.0), *fixed(2, at(2, 0.0))),
-                        fem.dirichletbc(self.top_u, *fixed(2, at(2, lz)))]
-            p = float(confining_pa)
-            self.traction_x.value[:] = [-p, 0.0, 0.0]
-            self.traction_y.value[:] = [0.0, -p, 0.0]
+            self.bcs = self._triaxial_bcs(msh)
+            self._confine(float(confining_pa))
         self.history = []
         self._material(pool, tangent=tangent, strain_kw=self.strain_kw, dim=3)
         self._gradient = np.zeros((3, 3))
+
+    # ---- the box's geometry (the hooks a body of another shape replaces) -----------------
+
+    def _mesh(self, comm):
+        """The model's mesh on ``comm`` (None: serial)."""
+        return self._box(comm)
+
+    def _cells(self) -> tuple[int, str]:
+        """The elements the pool must hold, and what they are (for its error)."""
+        return 6 * self.nx * self.ny * self.nz, "cells (6 nx ny nz tetrahedra)"
+
+    def _fixed(self, msh, c: int, where, value):
+        """The Dirichlet condition u_c = ``value`` on the boundary facets where ``where(x)``."""
+        fx = self._fx
+        sub = self.V.sub(c)
+        dofs = fx.fem.locate_dofs_topological(
+            sub, 2, fx.mesh.locate_entities_boundary(msh, 2, where))
+        return fx.fem.dirichletbc(value, dofs, sub)
+
+    def _confinement(self, msh):
+        """The confining loads (``v`` -> the forms of their work): the faces x = lx and
+        y = ly under the tractions ``traction_x`` and ``traction_y``."""
+        fx = self._fx
+        fem, ufl = fx.fem, fx.ufl
+        st = fx.PETSc.ScalarType
+        at = lambda c, v: (lambda x: np.isclose(x[c], v))  # noqa: E731
+        right = np.sort(fx.mesh.locate_entities_boundary(msh, 2, at(0, self.lx)))
+        back = np.sort(fx.mesh.locate_entities_boundary(msh, 2, at(1, self.ly)))
+        both = np.concatenate([right, back])
+        order = np.argsort(both, kind="stable")
+        tags = fx.mesh.meshtags(msh, 2, both[order], np.concatenate(
+            [np.full(len(right), 1, np.int32), np.full(len(back), 2, np.int32)])[order])
+        ds = ufl.Measure("ds", domain=msh, subdomain_data=tags)
+        self.traction_x = fem.Constant(msh, np.zeros(3, dtype=st))
+        self.traction_y = fem.Constant(msh, np.zeros(3, dtype=st))
+        return lambda v: (ufl.dot(self.traction_x, v) * ds(1),
+                          ufl.dot(self.traction_y, v) * ds(2))
+
+    def _confine(self, p: float) -> None:
+        """The confining pressure ``p`` (Pa, compression positive) on the loaded faces."""
+        self.traction_x.value[:] = [-p, 0.0, 0.0]
+        self.traction_y.value[:] = [0.0, -p, 0.0]
+
+    def _triaxial_bcs(self, msh) -> list:
+        """u_x = 0 on x = 0, u_y = 0 on y = 0, u_z = 0 on z = 0, u_z = ``top_u`` on top."""
+        st = self._fx.PETSc.ScalarType
+        at = lambda c, v: (lambda x: np.isclose(x[c], v))  # noqa: E731
+        return [self._fixed(msh, 0, at(0, 0.0), st(0.0)),
+                self._fixed(msh, 1, at(1, 0.0), st(0.0)),
+                self._fixed(msh, 2, at(2, 0.0), st(0.0)),
+                self._fixed(msh, 2, at(2, self.lz), self.top_u)]
 
     def _box(self, comm=None):
         """The box of tetrahedra on ``comm`` (None: serial)."""
@@ -190,3 +235,164 @@ class Hierarchical3D(HierarchicalPlaneStrain):
             self._h.interpolate(lambda x: g @ x)
         else:
             self.top_u.value = top_displacement
+
+
+_names = itertools.count()
+
+#: Facet tags of the quarter cylinder (``HierarchicalCylinder``).
+CYL_BOTTOM, CYL_TOP, CYL_X0, CYL_Y0, CYL_SIDE = 1, 2, 3, 4, 5
+
+
+def _quarter_cylinder(fx, radius: float, height: float, size: float, comm):
+    """A quarter cylinder x, y >= 0, x^2 + y^2 <= radius^2, 0 <= z <= height (m) of P1
+    tetrahedra about ``size`` (m) across, meshed by gmsh on rank 0 of ``comm`` (None:
+    serial) and distributed: (mesh, facet tags ``CYL_*``)."""
+    import contextlib
+
+    from femcoupling.elastic import _gmsh_model
+
+    comm = fx.MPI.COMM_SELF if comm is None else comm
+    name = comm.bcast(f"femcoupling_cylinder_{next(_names)}", root=0)
+    with contextlib.ExitStack() as stack:
+        model, err = None, ""
+        if comm.rank == 0:
+            try:
+                gmsh = stack.enter_context(_gmsh_model(name))
+                occ = gmsh.model.occ
+                cyl = occ.addCylinder(0, 0, 0, 0, 0, height, radius)
+                box = occ.addBox(0, 0, 0, radius, radius, height)
+                vols, _ = occ.intersect([(3, cyl)], [(3, box)])
+                occ.synchronize()
+                tol = 1e-6 * max(radius, height)
+                groups: dict = {}
+                for _, tag in gmsh.model.getEntities(2):
+                    c = occ.getCenterOfMass(2, tag)
+                    kind = (CYL_BOTTOM if abs(c[2]) < tol else CYL_TOP
+                            if abs(c[2] - height) < tol else CYL_X0 if abs(c[0]) < tol
+                            else CYL_Y0 if abs(c[1]) < tol else CYL_SIDE)
+                    groups.setdefault(kind, []).append(tag)
+                if sorted(groups) != [CYL_BOTTOM, CYL_TOP, CYL_X0, CYL_Y0, CYL_SIDE]:
+                    raise RuntimeError(f"the quarter cylinder's faces: {groups}")
+                for kind, tags in groups.items():
+                    gmsh.model.addPhysicalGroup(2, tags, kind)
+                gmsh.model.addPhysicalGroup(3, [v[1] for v in vols], 1)
+                gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+                gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * size)
+                gmsh.model.mesh.generate(3)
+                model = gmsh.model
+            except Exception as exc:  # reported on every rank so that none hangs
+                err = f"{type(exc).__name__}: {exc}"
+        err = comm.bcast(err, root=0)
+        if err:
+            raise RuntimeError(f"gmsh failed to mesh the cylinder: {err}")
+        data = fx.io_gmsh.model_to_mesh(model, comm, 0, gdim=3)
+    return data.mesh, data.facet_tags
+
+
+def cylinder_cells(radius_m: float, height_m: float, size_m: float) -> int:
+    """The tetrahedra, and so the elements, of :class:`HierarchicalCylinder`'s quarter
+    cylinder (meshed serially: the pool is built before the model)."""
+    _check_cylinder(radius_m, height_m, size_m)
+    fx = _dolfinx.load()
+    mesh, _ = _quarter_cylinder(fx, radius_m, height_m, size_m, None)
+    return mesh.topology.index_map(3).size_global
+
+
+def _check_cylinder(radius_m, height_m, size_m) -> None:
+    for name, v in (("radius_m", radius_m), ("height_m", height_m), ("size_m", size_m)):
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+            raise FemInputError(f"{name}={v!r}: must be > 0 (m)")
+    if size_m > 2 * max(radius_m, height_m):
+        raise FemInputError(f"size_m={size_m!r}: must be <= 2 max(radius_m, height_m) = "
+                            f"{2 * max(radius_m, height_m)!r} (m)")
+
+
+class HierarchicalCylinder(Hierarchical3D):
+    """A triaxial specimen: a cylinder of ``radius_m`` and ``height_m`` (m), modelled as the
+    quarter x, y >= 0 (its symmetry planes: u_x = 0 on x = 0, u_y = 0 on y = 0), P1
+    tetrahedra about ``size_m`` across (gmsh), a periodic DEM element at the quadrature
+    point of each (``pool`` holds :func:`cylinder_cells` elements, element k at the serial
+    mesh's cell k). Smooth platens: u_z = 0 at the bottom, u_z = ``step(top_displacement=)``
+    (m) at the top, free radially; the curved face under the confining pressure
+    ``confining_pa`` (Pa, compression positive, normal to the face). ``homogeneous=True``
+    puts every boundary node on u = G x instead. The other arguments, the steps and the
+    records are :class:`Hierarchical3D`'s. Stresses tension positive, Pa."""
+
+    def __init__(self, pool, *, radius_m: float, height_m: float, size_m: float,
+                 homogeneous: bool = False, confining_pa: float | None = None,
+                 newton_rtol: float = 1e-3, max_newton: int = 10,
+                 strain_kw: dict | None = None, tangent: str = "network",
+                 convergence: str = "noise", relaxation: str | float = "aitken",
+                 noise_factor: float = 2.0, noise_ceiling: float | None = None, comm=None,
+                 verbose: bool = False, out=None, overwrite: bool = False) -> None:
+        _check_cylinder(radius_m, height_m, size_m)
+        self.radius_m, self.height_m, self.size_m = (float(radius_m), float(height_m),
+                                                     float(size_m))
+        # (the box's sizes, as the matching's scale and the records' geometry)
+        self.lx = self.ly = self.radius_m
+        self.lz = self.height_m
+        self._setup(pool, homogeneous=homogeneous, confining_pa=confining_pa,
+                    newton_rtol=newton_rtol, max_newton=max_newton, strain_kw=strain_kw,
+                    tangent=tangent, convergence=convergence, relaxation=relaxation,
+                    noise_factor=noise_factor, noise_ceiling=noise_ceiling, comm=comm,
+                    verbose=verbose, out=out, overwrite=overwrite)
+
+    def _mesh(self, comm):
+        mesh, self._facets = _quarter_cylinder(self._fx, self.radius_m, self.height_m,
+                                               self.size_m, comm)
+        return mesh
+
+    def _serial_mesh(self):
+        return _quarter_cylinder(self._fx, self.radius_m, self.height_m, self.size_m,
+                                 None)[0]
+
+    def _cells(self) -> tuple[int, str]:
+        return (self.mesh.topology.index_map(3).size_global,
+                f"tetrahedra (cylinder_cells({self.radius_m:g}, {self.height_m:g}, "
+                f"{self.size_m:g}))")
+
+    def _scale_length(self) -> float:
+        return (0.25 * math.pi * self.radius_m ** 2 * self.height_m) ** (2.0 / 3.0)
+
+    def _confinement(self, msh):
+        """The confining pressure normal to the curved face (``pressure``, Pa)."""
+        fx = self._fx
+        fem, ufl = fx.fem, fx.ufl
+        ds = ufl.Measure("ds", domain=msh, subdomain_data=self._facets)
+        n = ufl.FacetNormal(msh)
+        self.pressure = fem.Constant(msh, fx.PETSc.ScalarType(0.0))
+        return lambda v: (-self.pressure * ufl.dot(n, v) * ds(CYL_SIDE),)
+
+    def _confine(self, p: float) -> None:
+        self.pressure.value = p
+
+    def _triaxial_bcs(self, msh) -> list:
+        fem = self._fx.fem
+        st = self._fx.PETSc.ScalarType
+
+        def on(tag, c, value):
+            sub = self.V.sub(c)
+            dofs = fem.locate_dofs_topological(sub, 2, self._facets.find(tag))
+            return fem.dirichletbc(value, dofs, sub)
+
+        return [on(CYL_X0, 0, st(0.0)), on(CYL_Y0, 1, st(0.0)), on(CYL_BOTTOM, 2, st(0.0)),
+                on(CYL_TOP, 2, self.top_u)]
+
+    @property
+    def element_volumes(self) -> np.ndarray:
+        """(n,) each element's tetrahedron's volume (m^3), in element order (collective under
+        MPI): the weights of the specimen's mean stress."""
+        fx = self._fx
+        fem, ufl = fx.fem, fx.ufl
+        dg0 = fem.functionspace(self.mesh, ("DG", 0))
+        vol = fem.assemble_vector(fem.form(ufl.TestFunction(dg0) * ufl.dx)).array
+        own = np.asarray(vol[: self.n_cells], float)
+        return own if self.partition is None else self.partition.gather(own)
+
+    def volume_mean_stress(self, step=None) -> np.ndarray:
+        """The specimen's volume-mean stress of a step (the last if None): Voigt xx, yy, zz,
+        yz, xz, xy, tension positive, Pa. (``HierStep.mean_stress`` is the elements'
+        unweighted mean.)"""
+        r = self.history[-1] if step is None else step
+        w = self.element_volumes
+        return w @ np.asarray(r.element_stresses) / w.sum()
