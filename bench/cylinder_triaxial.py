@@ -4,7 +4,8 @@ FEM x DEM with a periodic DEM element at the quadrature point of every tetrahedr
 specimen (``femcoupling.hierarchical3d.HierarchicalCylinder``), held on Dask workers.
 
 The specimen is the quarter x, y >= 0 of a cylinder ``--radius`` by ``--height`` (m), with
-smooth platens: the bottom held vertically, the top moved down in ``--steps`` equal steps to
+smooth platens (``--platens rough``: the ends also held radially): the bottom held
+vertically, the top moved down in ``--steps`` equal steps to
 the axial strain ``--strain``, the curved face under the confining pressure ``--pressure``
 (Pa). Every element is its own packing of ``--grains`` grains (seed + k), prepared to the
 isotropic confining stress, dense (grown frictionless, then at their friction: the shear
@@ -55,16 +56,20 @@ def _invariants(stress_voigt: np.ndarray) -> tuple[float, float]:
     return float(-stress_voigt[2] - radial), radial
 
 
-def run_alone(factory, indices, path: list, strain_kw: dict) -> np.ndarray:
-    """Each element ``indices`` of ``factory`` run alone along the strain increments
-    ``path`` (3 x 3 each); returns (len(indices), len(path), 6) Voigt stresses, Pa."""
+def run_alone(factory, n: int, path: list, strain_kw: dict, workers: int) -> np.ndarray:
+    """Elements 0 .. n-1 of ``factory``, fresh, run alone along the strain increments
+    ``path`` (3 x 3 each), in parallel on a pool of ``workers``; returns (n, len(path), 6)
+    Voigt stresses, Pa."""
+    from cpp_dem.elements.pool import ElementPool
     from femcoupling.hierarchical import voigt_stress
 
-    out = []
-    for k in indices:
-        el = factory(k)
-        out.append([voigt_stress(el.apply_strain(de, **strain_kw)) for de in path])
-    return np.asarray(out)
+    out = np.zeros((n, len(path), 6))
+    with ElementPool.build(n, factory, workers=workers) as pool:
+        for j, de in enumerate(path):
+            st = pool.apply_strain([de] * n, **strain_kw)
+            pool.accept()
+            out[:, j] = [voigt_stress(s) for s in st.stresses]
+    return out
 
 
 def plot(rows, q_alone, n_alone: int, path: Path, title: str) -> None:
@@ -107,6 +112,8 @@ def main(argv=None) -> int:
     ap.add_argument("--strain", type=float, default=0.01, help="final axial strain, -")
     ap.add_argument("--steps", type=int, default=10)
     ap.add_argument("--seed", type=int, default=1, help="element k's packing: seed + k")
+    ap.add_argument("--platens", default="smooth", choices=("smooth", "rough"),
+                    help="rough: the ends held radially too")
     ap.add_argument("--alone", type=int, default=-1,
                     help="elements also run alone on the mean strain path (the first N; "
                          "0: none; -1, the default: all)")
@@ -151,7 +158,8 @@ def main(argv=None) -> int:
         writer.writeheader()
         fh.flush()
         m = HierarchicalCylinder(pool, radius_m=args.radius, height_m=args.height,
-                                 size_m=args.size, confining_pa=args.pressure,
+                                 size_m=args.size, platens=args.platens,
+                                 confining_pa=args.pressure,
                                  newton_rtol=args.rtol, max_newton=args.max_newton,
                                  strain_kw=strain_kw, out=out / "records", overwrite=True)
         w = m.element_volumes
@@ -180,8 +188,8 @@ def main(argv=None) -> int:
             bar.update(k / args.steps, f"step {k} of {args.steps}: axial strain {ea:.4g}, "
                                       f"q {q / 1e3:.4g} kPa, {r.status}")
     k_alone = n if args.alone == -1 else min(args.alone, n)
-    alone = run_alone(factory, range(k_alone), path, strain_kw) if path and k_alone else \
-        np.zeros((0, 0, 6))
+    alone = (run_alone(factory, k_alone, path, strain_kw, args.workers) if path and k_alone
+             else np.zeros((0, 0, 6)))
     statuses = {s: sum(h.status == s for h in m.history)
                 for s in sorted({h.status for h in m.history})}
     last = rows[-1] if rows else {}

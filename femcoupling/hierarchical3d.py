@@ -316,9 +316,13 @@ class HierarchicalCylinder(Hierarchical3D):
     (m) at the top, free radially; the curved face under the confining pressure
     ``confining_pa`` (Pa, compression positive, normal to the face). ``homogeneous=True``
     puts every boundary node on u = G x instead. The other arguments, the steps and the
-    records are :class:`Hierarchical3D`'s. Stresses tension positive, Pa."""
+    records are :class:`Hierarchical3D`'s. Stresses tension positive, Pa.
+
+    ``platens="rough"``: the platens hold the specimen's ends radially too (u_x = u_y = 0 at
+    the bottom and the top), as end friction does in a test without lubricated ends."""
 
     def __init__(self, pool, *, radius_m: float, height_m: float, size_m: float,
+                 platens: str = "smooth",
                  homogeneous: bool = False, confining_pa: float | None = None,
                  newton_rtol: float = 1e-3, max_newton: int = 10,
                  strain_kw: dict | None = None, tangent: str = "network",
@@ -326,6 +330,9 @@ class HierarchicalCylinder(Hierarchical3D):
                  noise_factor: float = 2.0, noise_ceiling: float | None = None, comm=None,
                  verbose: bool = False, out=None, overwrite: bool = False) -> None:
         _check_cylinder(radius_m, height_m, size_m)
+        if platens not in ("smooth", "rough"):
+            raise FemInputError(f"platens={platens!r}: 'smooth' or 'rough'")
+        self.platens = platens
         self.radius_m, self.height_m, self.size_m = (float(radius_m), float(height_m),
                                                      float(size_m))
         # (the box's sizes, as the matching's scale and the records' geometry)
@@ -375,8 +382,11 @@ class HierarchicalCylinder(Hierarchical3D):
             dofs = fem.locate_dofs_topological(sub, 2, self._facets.find(tag))
             return fem.dirichletbc(value, dofs, sub)
 
-        return [on(CYL_X0, 0, st(0.0)), on(CYL_Y0, 1, st(0.0)), on(CYL_BOTTOM, 2, st(0.0)),
-                on(CYL_TOP, 2, self.top_u)]
+        bcs = [on(CYL_X0, 0, st(0.0)), on(CYL_Y0, 1, st(0.0)), on(CYL_BOTTOM, 2, st(0.0)),
+               on(CYL_TOP, 2, self.top_u)]
+        if self.platens == "rough":
+            bcs += [on(tag, c, st(0.0)) for tag in (CYL_BOTTOM, CYL_TOP) for c in (0, 1)]
+        return bcs
 
     @property
     def element_volumes(self) -> np.ndarray:
