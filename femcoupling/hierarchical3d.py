@@ -69,9 +69,12 @@ class Hierarchical3D(HierarchicalPlaneStrain):
                     noise_factor=noise_factor, noise_ceiling=noise_ceiling, comm=comm,
                     verbose=verbose, out=out, overwrite=overwrite)
 
-    def _setup(self, pool, *, homogeneous, confining_pa, newton_rtol, max_newton, strain_kw,
-               tangent, convergence, relaxation, noise_factor, noise_ceiling, comm, verbose,
-               out, overwrite) -> None:
+    def _setup(self, pool, *, homogeneous: bool = False, confining_pa: float | None = None,
+               newton_rtol: float = 1e-3, max_newton: int = 10,
+               strain_kw: dict | None = None, tangent: str = "network",
+               convergence: str = "noise", relaxation: str | float = "aitken",
+               noise_factor: float = 2.0, noise_ceiling: float | None = None, comm=None,
+               verbose: bool = False, out=None, overwrite: bool = False) -> None:
         """Everything but the geometry's own arguments: the mesh (``_mesh``), the pool's
         check (``_cells``), the spaces, the boundary (``_confinement``, ``_confine``,
         ``_triaxial_bcs``) and the elements as the points' material."""
@@ -315,20 +318,15 @@ class HierarchicalCylinder(Hierarchical3D):
     mesh's cell k). Smooth platens: u_z = 0 at the bottom, u_z = ``step(top_displacement=)``
     (m) at the top, free radially; the curved face under the confining pressure
     ``confining_pa`` (Pa, compression positive, normal to the face). ``homogeneous=True``
-    puts every boundary node on u = G x instead. The other arguments, the steps and the
-    records are :class:`Hierarchical3D`'s. Stresses tension positive, Pa.
+    puts every boundary node on u = G x instead. The other keyword arguments
+    (``options``: ``confining_pa``, ``homogeneous``, ``newton_rtol``, ``comm``, ``out``, ...),
+    the steps and the records are :class:`Hierarchical3D`'s. Stresses tension positive, Pa.
 
     ``platens="rough"``: the platens hold the specimen's ends radially too (u_x = u_y = 0 at
     the bottom and the top), as end friction does in a test without lubricated ends."""
 
     def __init__(self, pool, *, radius_m: float, height_m: float, size_m: float,
-                 platens: str = "smooth",
-                 homogeneous: bool = False, confining_pa: float | None = None,
-                 newton_rtol: float = 1e-3, max_newton: int = 10,
-                 strain_kw: dict | None = None, tangent: str = "network",
-                 convergence: str = "noise", relaxation: str | float = "aitken",
-                 noise_factor: float = 2.0, noise_ceiling: float | None = None, comm=None,
-                 verbose: bool = False, out=None, overwrite: bool = False) -> None:
+                 platens: str = "smooth", **options) -> None:
         _check_cylinder(radius_m, height_m, size_m)
         if platens not in ("smooth", "rough"):
             raise FemInputError(f"platens={platens!r}: 'smooth' or 'rough'")
@@ -338,11 +336,7 @@ class HierarchicalCylinder(Hierarchical3D):
         # (the box's sizes, as the matching's scale and the records' geometry)
         self.lx = self.ly = self.radius_m
         self.lz = self.height_m
-        self._setup(pool, homogeneous=homogeneous, confining_pa=confining_pa,
-                    newton_rtol=newton_rtol, max_newton=max_newton, strain_kw=strain_kw,
-                    tangent=tangent, convergence=convergence, relaxation=relaxation,
-                    noise_factor=noise_factor, noise_ceiling=noise_ceiling, comm=comm,
-                    verbose=verbose, out=out, overwrite=overwrite)
+        self._setup(pool, **options)
 
     def _mesh(self, comm):
         mesh, self._facets = _quarter_cylinder(self._fx, self.radius_m, self.height_m,
