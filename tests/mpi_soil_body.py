@@ -1,12 +1,16 @@
 """The reinforced soil body (``femcoupling.elastoplastic.SoilModel``) under MPI, run by
 tests/test_soil_body_mpi.py as ``mpiexec -n N python tests/mpi_soil_body.py OUT``.
 
-A Drucker-Prager soil with its self-weight, a prestressed geogrid layer and an element region:
+A Drucker-Prager soil (max_newton=60: no step is cut, so every rank count takes the same
+steps) with its self-weight, a prestressed geogrid layer and two element
+regions (b across the layer):
 geostatic stress, prestress (2 steps), a footing pressure of 100 kPa (4 steps), then a
 settlement of 10 mm (4 steps). Rank 0 writes OUT/result.json: each step's settlement (m),
 pressure (Pa), Newton iterations, status and residual (Pa), and at the end the plastic points,
-the region's stress (Pa), the layer's force (N/m) and the stress at a point (Pa); and whether
-every rank returned the same values (``same_on_every_rank``)."""
+the region's stress (Pa), the layer's force (N/m) and the stress at a point (Pa); after the
+prestress, region b's cells and band cells by their keys (``cell_stresses``, ``band_cells``,
+``band_cell_states``); and whether every rank returned the same values
+(``same_on_every_rank``)."""
 
 import json
 import sys
@@ -22,14 +26,17 @@ def main(out: str) -> None:
     body = ReinforcedSoilBody(
         width_m=3.0, height_m=2.0, footing_half_width_m=0.5,
         layers=(GeogridLayer(z_m=1.7, x_min_m=0.0, x_max_m=2.0, thickness_m=0.02),),
-        regions=(ElementRegion("el", (0.3, 1.5), 0.2),),
+        regions=(ElementRegion("el", (0.3, 1.5), 0.2), ElementRegion("b", (0.3, 1.7), 0.2)),
         mesh_size_m=0.4, fine_size_m=0.05, fine_radius_m=0.3)
     m = SoilModel(body, soil=DruckerPrager(young_pa=30e6, poisson=0.3, cohesion_pa=2e3,
                                            friction_deg=35.0),
                   layers=[GeogridLayerMaterial(500e3, prestress_n_per_m=10e3)],
-                  unit_weight_n_m3=18e3, comm=comm)
+                  unit_weight_n_m3=18e3, max_newton=60, comm=comm)
     m.set_geostatic()
     steps = m.apply_prestress(steps=2)
+    # the cells of region b and of the layer's band in it, by the serial model's keys
+    cells = {"cell_stresses": {k: v.tolist() for k, v in m.cell_stresses("b").items()},
+             "band_cells": m.band_cells("b"), "band_cell_states": m.band_cell_states("b", 0.05)}
     steps += m.load_footing(pressure_pa=100e3, steps=4)
     steps += m.load_footing(settlement_m=0.01, steps=4)
     res = {"ranks": comm.size,
@@ -41,7 +48,7 @@ def main(out: str) -> None:
            "plastic_points": m.plastic_points(),
            "region_stress_pa": m.region_stress("el").tolist(),
            "layer_force_n_per_m": m.layer_force_n_per_m(0),
-           "point_stress_pa": m.point_stress([[0.0, 1.0]])[0].tolist()}
+           "point_stress_pa": m.point_stress([[0.0, 1.0]])[0].tolist(), **cells}
     every = comm.gather(res, root=0)
     if comm.rank == 0:
         res["same_on_every_rank"] = all(r == res for r in every)
