@@ -117,6 +117,8 @@ def main(out: str, dem: bool) -> None:
         assert m.set_cell_elements("a", group) == keys
         if not dem:
             m.set_region_element("b", on_root(comm, lambda: StandIn("b")))
+        elif comm.rank == 0:  # (the elements as prepared: the same seeds, the same packings)
+            res["start_stresses_pa"] = [np.asarray(s).tolist() for s in group.stresses()]
         s0 = m.region_stress("a")
         steps = m.load_footing(**load)
         res.update(
@@ -140,7 +142,7 @@ def main(out: str, dem: bool) -> None:
         with h5py.File(f"{out}/cells.h5") as f:  # (the records, written by rank 0)
             res["records"] = {"names": [str(n) for n in f.attrs["names"]],
                               "step": f["step"][:].tolist()}
-    root_only = ("group_commits", "element_stresses_pa", "records")
+    root_only = ("group_commits", "element_stresses_pa", "records", "start_stresses_pa")
     every = comm.gather({k: v for k, v in res.items() if k not in root_only}, root=0)
     if comm.rank == 0:
         res["same_on_every_rank"] = all(

@@ -10,8 +10,9 @@ body (docs/fem.md, "Verification"; docs/multiscale.md, "Under MPI").
   region, one element for another). With linear stand-ins whose stiffness depends on the
   cell number they are given, 2 ranks give the serial run to 1e-14: each cell has the serial
   model's key and so its element. With periodic DEM elements on Dask, the keys and records
-  are the serial run's and the stresses agree within the elements' relaxation noise (0.3 %
-  of the largest, measured; the FEM's rounding is their input)."""
+  are the serial run's, the prepared elements are bitwise the same, and after a load step
+  the stresses agree within the elements' noise (0.3 % of the largest on a quiet machine;
+  2.2 % in a CI run where 2 ranks cut the step and 1 did not)."""
 
 from __future__ import annotations
 
@@ -121,12 +122,20 @@ def test_linear_stand_ins_on_two_ranks_are_the_serial_run(regions):
 
 
 def test_dem_cell_elements_on_two_ranks_agree_within_their_noise(regions):
+    """Each cell gets the serial run's element: prepared, the elements are bitwise the same
+    on 1 and 2 ranks (the same seeds; distinct packings differ by 3.6 % or more, measured).
+    After the load step they differ by the FEM's rounding turned into the elements' noise,
+    and by the path where one rank count cuts the step and the other does not (measured in
+    a CI run: a cut on 2 ranks, one element 2.2 % apart, the region's mean 0.16 %, the
+    settlement 1.3e-4)."""
     one, two = regions[1, "dem"], regions[2, "dem"]
+    assert one["start_stresses_pa"] == two["start_stresses_pa"]
     for r in (one, two):
-        assert r["status"][0] in ("converged", "stopped_at_scatter")
-    assert _rel(one["element_stresses_pa"], two["element_stresses_pa"]) < 0.02
-    for r in (one, two):  # a records row per element, written once (by rank 0)
+        assert set(r["status"]) <= {"converged", "stopped_at_scatter"}
+    assert _rel(one["element_stresses_pa"], two["element_stresses_pa"]) < 0.05
+    for r in (one, two):  # a records row per element and accepted step, written once (rank 0)
+        steps = len(r["status"])
         assert r["records"]["names"] == one["keys"]
-        assert r["records"]["step"] == [1] * len(one["keys"])
+        assert r["records"]["step"] == [k + 1 for k in range(steps) for _ in one["keys"]]
     assert _rel(one["region_a_pa"], two["region_a_pa"]) < 0.01
     assert _rel(one["settlement_m"], two["settlement_m"]) < 1e-3
