@@ -54,10 +54,22 @@ def test_the_command_refuses_bad_flags_by_name():
     for argv, words in ((["--variants", "RE,foo"], "--variants='RE,foo': a comma-separated"),
                         (["--levels", "0"], "--levels: levels=0: must be an integer >= 1"),
                         (["--seeds", "0"], "--seeds=0: must be >= 1"),
-                        (["--band-grains", "10"], "--band-grains: band_grains=10: must be 0")):
+                        (["--band-grains", "10"], "--band-grains: band_grains=10: must be 0"),
+                        (["--layer-thickness", "-1"],
+                         "--layer-thickness: layer_thickness=-1.0: must be a finite number")):
         r = subprocess.run([sys.executable, "-m", "geogrid_dem.cases.footing_multiscale",
                             "--smoke", *argv], capture_output=True, text=True, cwd=ROOT)
         assert r.returncode == 2 and words in r.stderr, r.stderr
+
+
+def test_the_layer_thickness_flag_sets_the_band_thickness():
+    """``--layer-thickness`` is the FEM band's t (a band RVE's stress is its grains' plus its
+    sheet's force per metre over t): h / t = 1 for a band as thick as the RVE."""
+    from geogrid_dem.cases.footing_multiscale import parse_args
+
+    p, _ = parse_args(["--smoke", "--layer-thickness", "0.054", "--band-grains", "80"])
+    assert (p.layer_thickness, p.band_grains) == (0.054, 80)
+    assert parse_args(["--smoke"])[0].layer_thickness == 0.02
 
 
 def test_an_element_without_stiffness_fails_the_newton_iterate_by_name():

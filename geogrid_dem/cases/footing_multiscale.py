@@ -73,6 +73,10 @@ def build_parser():
                     help="footing half width b, m; the DEM zone is b x b under it")
     ap.add_argument("--layer-depth", type=float, default=d.layer_depth,
                     help="the geogrid layer's depth, m")
+    ap.add_argument("--layer-thickness", type=float, default=d.layer_thickness,
+                    help="the geogrid layer's band thickness t in the FEM, m; with "
+                         "--band-grains, each band RVE's stress is its grains' plus its "
+                         "sheet's force per metre over t")
     ap.add_argument("--grid-stiffness", type=float, default=d.grid_stiffness,
                     help="the geogrid's axial stiffness J, N/m (default: the prestressed-"
                          "element study's woven grid)")
@@ -96,6 +100,7 @@ def build_parser():
 #: The flags that set a FootingParams field one to one: flag -> field.
 FLAGS = {"--pressure": "pressure_pa", "--seat": "seat_pa", "--levels": "levels",
          "--footing-half-width": "footing_b", "--layer-depth": "layer_depth",
+         "--layer-thickness": "layer_thickness",
          "--grid-stiffness": "grid_stiffness", "--prestress": "prestress",
          "--fine-size": "fine_size", "--cell-grains": "cell_grains",
          "--band-grains": "band_grains", "--workers": "workers"}
