@@ -146,6 +146,32 @@ def _gmsh_model(name: str) -> Iterator[Any]:
                     gmsh.model.setCurrent(previous_model)
 
 
+def gmsh_mesh_on_root(comm: Any, name: str, build: Any, *, gdim: int, what: str) -> Any:
+    """A dolfinx mesh built by gmsh on one rank and distributed: ``build(gmsh)`` makes the
+    geometry, physical groups and mesh in a fresh gmsh model ``name`` (rank 0's name is used
+    by every rank) on rank 0 of ``comm``; ``model_to_mesh`` distributes it. Returns its
+    ``MeshData`` (mesh, cell_tags, facet_tags). An exception in ``build`` raises
+    ``RuntimeError("gmsh failed to <what>: ...")`` on every rank, so that none hangs.
+    Collective."""
+    from femcoupling import _dolfinx
+
+    fx = _dolfinx.load()
+    name = comm.bcast(name, root=_GMSH_RANK)
+    with contextlib.ExitStack() as stack:
+        model, err = None, ""
+        if comm.rank == _GMSH_RANK:
+            try:
+                gmsh = stack.enter_context(_gmsh_model(name))
+                build(gmsh)
+                model = gmsh.model
+            except Exception as exc:  # reported on every rank so that none hangs
+                err = f"{type(exc).__name__}: {exc}"
+        err = comm.bcast(err, root=_GMSH_RANK)
+        if err:
+            raise RuntimeError(f"gmsh failed to {what}: {err}")
+        return fx.io_gmsh.model_to_mesh(model, comm, _GMSH_RANK, gdim=gdim)
+
+
 def _build_box(gmsh: Any, lx_m: float, ly_m: float, lz_m: float, mesh_size_m: float) -> None:
     """Mesh the box [0,lx]x[0,ly]x[0,lz] with tetrahedra of size ~mesh_size_m, tagged."""
     # Clamp the size field from both sides: with only a maximum, gmsh's default
@@ -202,7 +228,8 @@ def solve_elastic_block(
     The box ``[0, lx_m] x [0, ly_m] x [0, lz_m]`` is built and meshed by gmsh
     (physical groups: volume ``block``; faces ``bottom``, ``top``, ``x_min``,
     ``y_min``), converted by :func:`dolfinx.io.gmsh.model_to_mesh`, and solved
-    with vector Lagrange elements and a direct LU solver (MUMPS). The bottom
+    with vector Lagrange elements and a direct LU solver (MUMPS; on more than one
+    rank ``femcoupling.quadrature.PARALLEL_LU``). The bottom
     face and the planes x = 0, y = 0 are rollers (zero normal displacement);
     the top face carries the traction ``-top_traction_pa * n``.
 
@@ -239,6 +266,7 @@ def solve_elastic_block(
     )
 
     from femcoupling import _dolfinx
+    from femcoupling.quadrature import lu_package
 
     fx = _dolfinx.load()
     fem, ufl, PETSc, MPI = fx.fem, fx.ufl, fx.PETSc, fx.MPI
@@ -249,20 +277,8 @@ def solve_elastic_block(
     # Rank 0's name for everyone: the PETSc options prefix must agree across ranks.
     model_name = comm.bcast(f"femcoupling_elastic_block_{next(_problem_counter)}", root=_GMSH_RANK)
     petsc_prefix = f"{model_name}_"
-    with contextlib.ExitStack() as stack:
-        gmsh_model = None
-        build_error = ""
-        if comm.rank == _GMSH_RANK:
-            try:
-                gmsh = stack.enter_context(_gmsh_model(model_name))
-                _build_box(gmsh, lx, ly, lz, h)
-                gmsh_model = gmsh.model
-            except Exception as exc:  # reported on every rank below, so none hangs
-                build_error = f"{type(exc).__name__}: {exc}"
-        build_error = comm.bcast(build_error, root=_GMSH_RANK)
-        if build_error:
-            raise RuntimeError(f"gmsh failed to build the block: {build_error}")
-        mesh_data = fx.io_gmsh.model_to_mesh(gmsh_model, comm, _GMSH_RANK, gdim=3)
+    mesh_data = gmsh_mesh_on_root(comm, model_name, lambda gmsh: _build_box(gmsh, lx, ly, lz, h),
+                                  gdim=3, what="build the block")
     msh = mesh_data.mesh
     facet_tags = mesh_data.facet_tags
     assert facet_tags is not None, "model_to_mesh returned no facet tags"
@@ -299,7 +315,7 @@ def solve_elastic_block(
         petsc_options={
             "ksp_type": "preonly",
             "pc_type": "lu",
-            "pc_factor_mat_solver_type": "mumps",
+            "pc_factor_mat_solver_type": lu_package(comm, "mumps"),
             "ksp_error_if_not_converged": True,
         },
     )

@@ -4,7 +4,8 @@
 P2 (default) displacements, and a stress history at the quadrature points (a quadrature
 space; the return mapping is the NumPy kernel
 :func:`femcoupling.materials.drucker_prager_return`). Loading is incremental with a full
-Newton iteration on the consistent tangent at each step (MUMPS LU).
+Newton iteration on the consistent tangent at each step (LU: MUMPS on one rank,
+``femcoupling.quadrature.PARALLEL_LU`` on more).
 
 Stages (each one a sequence of equilibrium steps):
 
@@ -135,7 +136,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         self.n_cells = cmap.size_local + cmap.num_ghosts
 
         # --- spaces, forms and solver (femcoupling.quadrature.QuadratureSystem) ---
-        from femcoupling.quadrature import QuadratureSystem
+        from femcoupling.quadrature import QuadratureSystem, lu_package
 
         qdeg = max(1, 2 * (degree - 1))
         self.qdeg = qdeg
@@ -148,7 +149,8 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         dx = ufl.Measure("dx", domain=msh)
         self._eps = self._mandel_strain
         sysq = self.system = QuadratureSystem(
-            msh, degree=degree, qdeg=qdeg, ncomp=self.ncomp, strain=self._eps, lu="mumps",
+            msh, degree=degree, qdeg=qdeg, ncomp=self.ncomp, strain=self._eps,
+            lu=lu_package(self.comm, "mumps"),
             loads=lambda v: (ufl.dot(self.body_force, v) * dx,
                              ufl.dot(self.traction, v) * ds(geo.FOOTING)))
         self.V, self.Wv, self.Wt, self.dxq = sysq.V, sysq.Wv, sysq.Wt, sysq.dxq

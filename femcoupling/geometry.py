@@ -29,7 +29,6 @@ plain Python so that they can be pickled and validated without the FEM stack.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import itertools
 import math
@@ -39,7 +38,7 @@ from typing import Any
 import numpy as np
 
 from femcoupling._checks import _CELLS_PER_SIZE, FemInputError, _check_cells, _pos, _real  # noqa: F401
-from femcoupling.elastic import _gmsh_model
+from femcoupling.elastic import gmsh_mesh_on_root
 
 __all__ = [
     "SOIL_TAG", "LAYER_TAG0", "REGION_TAG0", "BOTTOM", "TOP", "X_MIN", "X_MAX", "FOOTING",
@@ -56,7 +55,6 @@ REGION_TAG0 = 200
 BOTTOM, TOP, X_MIN, X_MAX, FOOTING, Y_MIN, Y_MAX = 1, 2, 3, 4, 5, 6, 7
 """Facet tags (see the module doc)."""
 
-_GMSH_RANK = 0
 _counter = itertools.count()
 
 
@@ -452,19 +450,8 @@ def build_mesh(body: ReinforcedSoilBody, *, comm: Any = None) -> MeshBundle:
         comm = fx.MPI.COMM_WORLD
     if not isinstance(body, ReinforcedSoilBody):
         raise FemInputError(f"body={body!r}: must be a ReinforcedSoilBody")
-    name = comm.bcast(f"femcoupling_body_{next(_counter)}", root=_GMSH_RANK)
-    with contextlib.ExitStack() as stack:
-        model, err = None, ""
-        if comm.rank == _GMSH_RANK:
-            try:
-                gmsh = stack.enter_context(_gmsh_model(name))
-                _build(gmsh, body)
-                model = gmsh.model
-            except Exception as exc:  # reported on every rank so that none hangs
-                err = f"{type(exc).__name__}: {exc}"
-        err = comm.bcast(err, root=_GMSH_RANK)
-        if err:
-            raise RuntimeError(f"gmsh failed to build the body: {err}")
-        data = fx.io_gmsh.model_to_mesh(model, comm, _GMSH_RANK, gdim=body.dim)
+    data = gmsh_mesh_on_root(comm, f"femcoupling_body_{next(_counter)}",
+                             lambda gmsh: _build(gmsh, body), gdim=body.dim,
+                             what="build the body")
     return MeshBundle(mesh=data.mesh, cell_tags=data.cell_tags, facet_tags=data.facet_tags,
                       body=body)

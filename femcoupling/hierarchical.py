@@ -70,7 +70,8 @@ import numpy as np
 
 from femcoupling import _dolfinx
 from femcoupling.geometry import FemInputError
-from femcoupling.quadrature import NewtonFailure, NewtonRules, QuadratureSystem, newton_solve
+from femcoupling.quadrature import (NewtonFailure, NewtonRules, QuadratureSystem, lu_package,
+                                    newton_solve)
 from femcoupling.relaxation import aitken_factor, check_relaxation
 from femcoupling.status import worst
 
@@ -325,7 +326,7 @@ class HierarchicalPlaneStrain:
         # spaces, forms and solver: the same as the FEM soil's (femcoupling.quadrature)
         sysq = self.system = QuadratureSystem(
             msh, degree=degree, qdeg=_qdeg(degree), ncomp=3, strain=eps,
-            loads=loads, lu="mumps" if self._parallel else None)
+            loads=loads, lu=lu_package(self.comm, None))
         self.V, self.Wv, self.Wt = sysq.V, sysq.Wv, sysq.Wt
         self.degree = degree
         self._points(nq)

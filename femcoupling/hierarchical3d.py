@@ -37,7 +37,7 @@ import numpy as np
 from femcoupling import _dolfinx
 from femcoupling.geometry import FemInputError
 from femcoupling.hierarchical import HierarchicalPlaneStrain
-from femcoupling.quadrature import QuadratureSystem
+from femcoupling.quadrature import QuadratureSystem, lu_package
 
 __all__ = ["Hierarchical3D", "HierarchicalCylinder", "cylinder_cells"]
 
@@ -106,7 +106,7 @@ class Hierarchical3D(HierarchicalPlaneStrain):
         loads = self._confinement(msh)
         sysq = self.system = QuadratureSystem(
             msh, degree=1, qdeg=1, ncomp=6, strain=eps, loads=loads,
-            lu="mumps" if self._parallel else None)
+            lu=lu_package(self.comm, None))
         self.V, self.Wv, self.Wt = sysq.V, sysq.Wv, sysq.Wt
         self._points(1)
         self.u, self.u_n, self.du = sysq.u, sysq.u_n, sysq.du
@@ -137,13 +137,11 @@ class Hierarchical3D(HierarchicalPlaneStrain):
         """The elements the pool must hold, and what they are (for its error)."""
         return 6 * self.nx * self.ny * self.nz, "cells (6 nx ny nz tetrahedra)"
 
-    def _fixed(self, msh, c: int, where, value):
-        """The Dirichlet condition u_c = ``value`` on the boundary facets where ``where(x)``."""
-        fx = self._fx
+    def _fixed(self, c: int, facets, value):
+        """The Dirichlet condition u_c = ``value`` on the boundary ``facets`` (their indices)."""
+        fem = self._fx.fem
         sub = self.V.sub(c)
-        dofs = fx.fem.locate_dofs_topological(
-            sub, 2, fx.mesh.locate_entities_boundary(msh, 2, where))
-        return fx.fem.dirichletbc(value, dofs, sub)
+        return fem.dirichletbc(value, fem.locate_dofs_topological(sub, 2, facets), sub)
 
     def _confinement(self, msh):
         """The confining loads (``v`` -> the forms of their work): the faces x = lx and
@@ -171,12 +169,12 @@ class Hierarchical3D(HierarchicalPlaneStrain):
 
     def _triaxial_bcs(self, msh) -> list:
         """u_x = 0 on x = 0, u_y = 0 on y = 0, u_z = 0 on z = 0, u_z = ``top_u`` on top."""
-        st = self._fx.PETSc.ScalarType
-        at = lambda c, v: (lambda x: np.isclose(x[c], v))  # noqa: E731
-        return [self._fixed(msh, 0, at(0, 0.0), st(0.0)),
-                self._fixed(msh, 1, at(1, 0.0), st(0.0)),
-                self._fixed(msh, 2, at(2, 0.0), st(0.0)),
-                self._fixed(msh, 2, at(2, self.lz), self.top_u)]
+        fx = self._fx
+        st = fx.PETSc.ScalarType
+        at = lambda c, v: fx.mesh.locate_entities_boundary(  # noqa: E731
+            msh, 2, lambda x: np.isclose(x[c], v))
+        return [self._fixed(0, at(0, 0.0), st(0.0)), self._fixed(1, at(1, 0.0), st(0.0)),
+                self._fixed(2, at(2, 0.0), st(0.0)), self._fixed(2, at(2, self.lz), self.top_u)]
 
     def _box(self, comm=None):
         """The box of tetrahedra on ``comm`` (None: serial)."""
@@ -250,45 +248,35 @@ def _quarter_cylinder(fx, radius: float, height: float, size: float, comm):
     """A quarter cylinder x, y >= 0, x^2 + y^2 <= radius^2, 0 <= z <= height (m) of P1
     tetrahedra about ``size`` (m) across, meshed by gmsh on rank 0 of ``comm`` (None:
     serial) and distributed: (mesh, facet tags ``CYL_*``)."""
-    import contextlib
-
-    from femcoupling.elastic import _gmsh_model
+    from femcoupling.elastic import gmsh_mesh_on_root
 
     comm = fx.MPI.COMM_SELF if comm is None else comm
-    name = comm.bcast(f"femcoupling_cylinder_{next(_names)}", root=0)
-    with contextlib.ExitStack() as stack:
-        model, err = None, ""
-        if comm.rank == 0:
-            try:
-                gmsh = stack.enter_context(_gmsh_model(name))
-                occ = gmsh.model.occ
-                cyl = occ.addCylinder(0, 0, 0, 0, 0, height, radius)
-                box = occ.addBox(0, 0, 0, radius, radius, height)
-                vols, _ = occ.intersect([(3, cyl)], [(3, box)])
-                occ.synchronize()
-                tol = 1e-6 * max(radius, height)
-                groups: dict = {}
-                for _, tag in gmsh.model.getEntities(2):
-                    c = occ.getCenterOfMass(2, tag)
-                    kind = (CYL_BOTTOM if abs(c[2]) < tol else CYL_TOP
-                            if abs(c[2] - height) < tol else CYL_X0 if abs(c[0]) < tol
-                            else CYL_Y0 if abs(c[1]) < tol else CYL_SIDE)
-                    groups.setdefault(kind, []).append(tag)
-                if sorted(groups) != [CYL_BOTTOM, CYL_TOP, CYL_X0, CYL_Y0, CYL_SIDE]:
-                    raise RuntimeError(f"the quarter cylinder's faces: {groups}")
-                for kind, tags in groups.items():
-                    gmsh.model.addPhysicalGroup(2, tags, kind)
-                gmsh.model.addPhysicalGroup(3, [v[1] for v in vols], 1)
-                gmsh.option.setNumber("Mesh.MeshSizeMax", size)
-                gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * size)
-                gmsh.model.mesh.generate(3)
-                model = gmsh.model
-            except Exception as exc:  # reported on every rank so that none hangs
-                err = f"{type(exc).__name__}: {exc}"
-        err = comm.bcast(err, root=0)
-        if err:
-            raise RuntimeError(f"gmsh failed to mesh the cylinder: {err}")
-        data = fx.io_gmsh.model_to_mesh(model, comm, 0, gdim=3)
+
+    def build(gmsh) -> None:
+        occ = gmsh.model.occ
+        cyl = occ.addCylinder(0, 0, 0, 0, 0, height, radius)
+        box = occ.addBox(0, 0, 0, radius, radius, height)
+        vols, _ = occ.intersect([(3, cyl)], [(3, box)])
+        occ.synchronize()
+        tol = 1e-6 * max(radius, height)
+        groups: dict = {}
+        for _, tag in gmsh.model.getEntities(2):
+            c = occ.getCenterOfMass(2, tag)
+            kind = (CYL_BOTTOM if abs(c[2]) < tol else CYL_TOP
+                    if abs(c[2] - height) < tol else CYL_X0 if abs(c[0]) < tol
+                    else CYL_Y0 if abs(c[1]) < tol else CYL_SIDE)
+            groups.setdefault(kind, []).append(tag)
+        if sorted(groups) != [CYL_BOTTOM, CYL_TOP, CYL_X0, CYL_Y0, CYL_SIDE]:
+            raise RuntimeError(f"the quarter cylinder's faces: {groups}")
+        for kind, tags in groups.items():
+            gmsh.model.addPhysicalGroup(2, tags, kind)
+        gmsh.model.addPhysicalGroup(3, [v[1] for v in vols], 1)
+        gmsh.option.setNumber("Mesh.MeshSizeMax", size)
+        gmsh.option.setNumber("Mesh.MeshSizeMin", 0.5 * size)
+        gmsh.model.mesh.generate(3)
+
+    data = gmsh_mesh_on_root(comm, f"femcoupling_cylinder_{next(_names)}", build, gdim=3,
+                             what="mesh the cylinder")
     return data.mesh, data.facet_tags
 
 
@@ -368,14 +356,8 @@ class HierarchicalCylinder(Hierarchical3D):
         self.pressure.value = p
 
     def _triaxial_bcs(self, msh) -> list:
-        fem = self._fx.fem
         st = self._fx.PETSc.ScalarType
-
-        def on(tag, c, value):
-            sub = self.V.sub(c)
-            dofs = fem.locate_dofs_topological(sub, 2, self._facets.find(tag))
-            return fem.dirichletbc(value, dofs, sub)
-
+        on = lambda tag, c, value: self._fixed(c, self._facets.find(tag), value)  # noqa: E731
         bcs = [on(CYL_X0, 0, st(0.0)), on(CYL_Y0, 1, st(0.0)), on(CYL_BOTTOM, 2, st(0.0)),
                on(CYL_TOP, 2, self.top_u)]
         if self.platens == "rough":

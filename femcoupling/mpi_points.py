@@ -3,9 +3,10 @@ through rank 0 (issue 38, item 5; docs/multiscale.md, "Under MPI").
 
 A hierarchical model (:class:`femcoupling.hierarchical.HierarchicalPlaneStrain`,
 :class:`femcoupling.hierarchical3d.Hierarchical3D`) given ``comm=MPI.COMM_WORLD`` builds its
-mesh on that communicator: each rank assembles and solves its part (PETSc, MUMPS's parallel
-LU). The elements stay where they are without MPI: in one ``ElementPool`` whose Dask client
-lives on rank 0 (the other ranks pass ``pool=None``). Two pieces join the two:
+mesh on that communicator: each rank assembles and solves its part (PETSc, SuperLU_DIST's
+parallel LU: ``femcoupling.quadrature.PARALLEL_LU``). The elements stay where they are
+without MPI: in one ``ElementPool`` whose Dask client lives on rank 0 (the other ranks pass
+``pool=None``). Two pieces join the two:
 
 - :class:`PointPartition`: which element each of a rank's quadrature points is. The serial
   model numbers its points (cell, point) in the serial mesh's order; a rank's point is given
@@ -60,9 +61,12 @@ class PointPartition:
     """A rank's quadrature points as elements (module doc). ``local_xy`` (m, (n_local,
     gdim)): the rank's points in its (cell, point) order; ``serial_xy`` (m, (n, gdim)): the
     serial model's points, in element order; ``size`` (m): the domain's size, the matching's
-    scale. ``ids[k]`` is the element of the rank's point k; ``n`` the elements in all."""
+    scale; ``what``: the points' name in the error (the soil body matches its owned cells'
+    centres the same way). ``ids[k]`` is the element of the rank's point k; ``n`` the
+    elements in all."""
 
-    def __init__(self, comm, local_xy: np.ndarray, serial_xy: np.ndarray, size: float) -> None:
+    def __init__(self, comm, local_xy: np.ndarray, serial_xy: np.ndarray, size: float,
+                 what: str = "quadrature points") -> None:
         from scipy.spatial import cKDTree
 
         self.comm = comm
@@ -74,9 +78,9 @@ class PointPartition:
         every = np.sort(np.concatenate(comm.allgather(np.asarray(ids, np.int64))))
         bad = comm.allreduce(int(far > tol))  # (a sum: the ranks with a far point)
         if bad or not np.array_equal(every, np.arange(self.n)):
-            raise RuntimeError(f"the ranks' quadrature points are not the serial model's: a "
-                               f"point {far:.3g} m from the nearest (allowed {tol:.3g} m), or "
-                               "points missing or matched twice")
+            raise RuntimeError(f"the ranks' {what} are not the serial model's: one "
+                               f"{far:.3g} m from the nearest (allowed {tol:.3g} m), or "
+                               f"{what} missing or matched twice")
         self.ids = np.asarray(ids, np.int64)
         self._all_ids = np.concatenate(comm.allgather(self.ids))
 

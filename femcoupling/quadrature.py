@@ -19,7 +19,7 @@ quadrature point). Both use what this module gives:
 :class:`QuadratureSystem`
     the dolfinx side: displacement and quadrature spaces, the internal force and Jacobian
     forms of a stress and a tangent at the points, the residual with lifted Dirichlet values,
-    and the LU solve of a Newton correction.
+    and the LU solve of a Newton correction (:func:`lu_package`: which LU, by rank count).
 :func:`newton_solve` with :class:`NewtonRules`
     the Newton iteration of one load step and its acceptance rules, the same for both models:
 
@@ -52,10 +52,24 @@ import numpy as np
 
 __all__ = ["QuadratureMaterial", "ElasticPoints", "DruckerPragerPoints", "NewtonRules",
            "NewtonOutcome", "NewtonFailure", "QuadratureSystem", "check_material",
-           "newton_solve", "NOISE_PROBE"]
+           "newton_solve", "lu_package", "NOISE_PROBE", "PARALLEL_LU"]
 
 #: the relative change of every increment that measures the elements' noise
 NOISE_PROBE = 1e-9
+
+#: The LU package of the FEM's solves on more than one MPI rank (PETSc's name). SuperLU_DIST
+#: gives the same output for the same input: tests/mpi_soil_body.py on 2 ranks, with two
+#: busy processes beside it, was bitwise the same in 12 runs of 12. With MUMPS's parallel LU
+#: 5 runs of 15 ended in other last bits, and one took 11 load steps where the others took 10
+#: (docs/fem.md, "Under MPI"). "mumps" may be set here; bench/parallel_lu.py measures both.
+PARALLEL_LU = "superlu_dist"
+
+
+def lu_package(comm: Any, serial: str | None) -> str | None:
+    """The LU package of a linear solve on ``comm`` (an mpi4py communicator, or None: one
+    rank): ``serial`` on one rank ("mumps", or None for PETSc's own LU), else
+    :data:`PARALLEL_LU`."""
+    return serial if comm is None or comm.size == 1 else PARALLEL_LU
 
 
 class NewtonFailure(RuntimeError):

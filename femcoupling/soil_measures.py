@@ -130,6 +130,8 @@ class SoilMeasures:
         fem, ufl = fx.fem, fx.ufl
         import dolfinx.geometry as dg
 
+        from femcoupling.quadrature import lu_package
+
         pts = np.atleast_2d(np.asarray(points_m, float))
         if pts.shape[1] != self.tdim:
             raise FemInputError(f"points_m: shape {pts.shape}, need (n, {self.tdim})")
@@ -144,7 +146,7 @@ class SoilMeasures:
             ufl.inner(t, s) * self.dxq, ufl.inner(self.sig_q, s) * self.dxq,
             petsc_options_prefix=f"femcoupling_proj_{next(_counter)}_",
             petsc_options={"ksp_type": "preonly", "pc_type": "lu",
-                           "pc_factor_mat_solver_type": "mumps"})
+                           "pc_factor_mat_solver_type": lu_package(self.comm, "mumps")})
         sh = prob.solve()
         tree = dg.bb_tree(self.mesh, self.tdim)
         cand = dg.compute_collisions_points(tree, p3)

@@ -152,6 +152,8 @@ class RegionMaterials:
             return self._serial_cell_ids
         from scipy.spatial import cKDTree
 
+        from femcoupling.mpi_points import PointPartition
+
         serial = None
         if self.comm.rank == 0:
             fx = self._fx
@@ -159,15 +161,17 @@ class RegionMaterials:
             g, n = mb.mesh.geometry, mb.mesh.topology.index_map(self.tdim).size_local
             serial = g.x[g.dofmaps[0][:n]].mean(axis=1)
         serial = self.comm.bcast(serial, root=0)
-        dist, ids = cKDTree(serial).query(self._cell_centres())
-        tol = 1e-9 * max(self.body.width_m, self.body.height_m)
-        owned = np.sort(np.concatenate(self.comm.allgather(ids[: self.n_owned])))
-        bad = self.comm.allreduce(int(float(np.max(dist, initial=0.0)) > tol))
-        if bad or not np.array_equal(owned, np.arange(len(serial))):
-            raise RuntimeError("the ranks' cells are not the serial mesh's: a cell centre "
-                               f"farther than {tol:.3g} m from the nearest, or cells missing "
-                               "or owned twice")
-        self._serial_cell_ids = np.asarray(ids, np.int64)
+        centres = self._cell_centres()
+        size = max(self.body.width_m, self.body.height_m)
+        # the owned cells: each serial cell exactly once; the ghosts: at a serial cell's place
+        self._cell_partition = PointPartition(self.comm, centres[: self.n_owned], serial, size,
+                                              what="cells")
+        dist, ghosts = cKDTree(serial).query(centres[self.n_owned:])
+        if self.comm.allreduce(int(float(np.max(dist, initial=0.0)) > 1e-9 * size)):
+            raise RuntimeError("the ranks' ghost cells are not the serial mesh's: a cell "
+                               f"centre farther than {1e-9 * size:.3g} m from the nearest")
+        self._serial_cell_ids = np.concatenate([self._cell_partition.ids,
+                                                np.asarray(ghosts, np.int64)])
         return self._serial_cell_ids
 
     def _serial_cell_data(self, *arrays: np.ndarray) -> list:
@@ -175,16 +179,8 @@ class RegionMaterials:
         serial cell once (from its owner), on every rank. Serial: the arrays themselves."""
         if self.comm.size == 1:
             return [np.asarray(a) for a in arrays]
-        ids = self._serial_cells()[: self.n_owned]
-        parts = self.comm.allgather((ids, [np.asarray(a)[: self.n_owned] for a in arrays]))
-        n = sum(len(p[0]) for p in parts)
-        out = []
-        for k, a in enumerate(arrays):
-            full = np.empty((n,) + np.shape(a)[1:], dtype=np.asarray(a).dtype)
-            for pid, pdata in parts:
-                full[pid] = pdata[k]
-            out.append(full)
-        return out
+        self._serial_cells()
+        return [self._cell_partition.gather(np.asarray(a)[: self.n_owned]) for a in arrays]
 
     def cell_stresses(self, name: str) -> dict:
         """The converged stress of each cell of element region ``name``, by the key
