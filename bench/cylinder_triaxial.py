@@ -3,8 +3,8 @@
 FEM x DEM with a periodic DEM element at the quadrature point of every tetrahedron of the
 specimen (``femcoupling.hierarchical3d.HierarchicalCylinder``), held on Dask workers.
 
-The specimen is the quarter x, y >= 0 of a cylinder ``--radius`` by ``--height`` (m), with
-smooth platens (``--platens rough``: the ends also held radially): the bottom held
+The specimen is the quarter x, y >= 0 of a cylinder ``--radius`` by ``--height`` (m)
+(``--section full``: the whole cylinder, no symmetry planes), with smooth platens (``--platens rough``: the ends also held radially): the bottom held
 vertically, the top moved down in ``--steps`` equal steps to
 the axial strain ``--strain``, the curved face under the confining pressure ``--pressure``
 (Pa). Every element is its own packing of ``--grains`` grains (seed + k), prepared to the
@@ -26,6 +26,7 @@ with an ETA and a final JSON line.
 
     .venv/bin/python bench/cylinder_triaxial.py --out DIR            # 52 elements of 60 grains
     .venv/bin/python bench/cylinder_triaxial.py --smoke --out DIR    # 52 elements of 30 grains, 2 steps
+    .venv/bin/python bench/cylinder_triaxial.py --section full --size 0.035 --out DIR  # 192
 """
 
 from __future__ import annotations
@@ -114,6 +115,8 @@ def main(argv=None) -> int:
     ap.add_argument("--seed", type=int, default=1, help="element k's packing: seed + k")
     ap.add_argument("--platens", default="smooth", choices=("smooth", "rough"),
                     help="rough: the ends held radially too")
+    ap.add_argument("--section", default="quarter", choices=("quarter", "full"),
+                    help="the quarter with its two symmetry planes, or the whole cylinder")
     ap.add_argument("--alone", type=int, default=-1,
                     help="elements also run alone on the mean strain path (the first N; "
                          "0: none; -1, the default: all)")
@@ -139,13 +142,13 @@ def main(argv=None) -> int:
     if table.exists():
         ap.error(f"--out={args.out}: holds a cylinder_triaxial.csv already; give a new folder")
     t0 = time.perf_counter()
-    n = cylinder_cells(args.radius, args.height, args.size)
+    n = cylinder_cells(args.radius, args.height, args.size, args.section)
     # (dense elements, grown frictionless, as the shear band's: loose ones are rough at the
     # scale of Newton's corrections, and a first 0.1 % step stalled above the ceiling)
     factory = PeriodicFactory(n=args.grains, stress=args.pressure, seed=args.seed,
                               isotropic=True, options={"prep_friction_deg": 0.0})
     strain_kw = {"unbalanced": 1e-4, "max_relax_steps": 100_000}
-    print(f"[cylinder] {n} elements of {args.grains} grains (a quarter of a "
+    print(f"[cylinder] {n} elements of {args.grains} grains (the {args.section} of a "
           f"{2 * args.radius:g} x {args.height:g} m specimen); building them on "
           f"{args.workers} workers", flush=True)
     rows, path = [], []
@@ -159,6 +162,7 @@ def main(argv=None) -> int:
         fh.flush()
         m = HierarchicalCylinder(pool, radius_m=args.radius, height_m=args.height,
                                  size_m=args.size, platens=args.platens,
+                                 section=args.section,
                                  confining_pa=args.pressure,
                                  newton_rtol=args.rtol, max_newton=args.max_newton,
                                  strain_kw=strain_kw, out=out / "records", overwrite=True)
@@ -198,7 +202,8 @@ def main(argv=None) -> int:
         alone[:, :, 0] + alone[:, :, 1])) / w[: len(alone)].sum() if len(alone)
         else np.zeros(0))
     q_alone = float(q_alone_path[-1]) if len(q_alone_path) and rows else float("nan")
-    summary = {"elements": n, "grains_per_element": args.grains, "steps_done": len(rows),
+    summary = {"elements": n, "section": args.section, "grains_per_element": args.grains,
+               "steps_done": len(rows),
                "failed": failed, "statuses": statuses,
                "axial_strain": last.get("axial_strain", 0.0), "q_pa": last.get("q_pa"),
                "radial_pa": last.get("radial_pa"),

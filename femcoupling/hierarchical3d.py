@@ -39,7 +39,7 @@ from femcoupling.geometry import FemInputError
 from femcoupling.hierarchical import HierarchicalPlaneStrain
 from femcoupling.quadrature import QuadratureSystem, lu_package
 
-__all__ = ["Hierarchical3D", "HierarchicalCylinder", "cylinder_cells"]
+__all__ = ["Hierarchical3D", "HierarchicalCylinder", "cylinder_cells", "SECTIONS"]
 
 
 class Hierarchical3D(HierarchicalPlaneStrain):
@@ -244,30 +244,46 @@ _names = itertools.count()
 CYL_BOTTOM, CYL_TOP, CYL_X0, CYL_Y0, CYL_SIDE = 1, 2, 3, 4, 5
 
 
-def _quarter_cylinder(fx, radius: float, height: float, size: float, comm):
-    """A quarter cylinder x, y >= 0, x^2 + y^2 <= radius^2, 0 <= z <= height (m) of P1
-    tetrahedra about ``size`` (m) across, meshed by gmsh on rank 0 of ``comm`` (None:
-    serial) and distributed: (mesh, facet tags ``CYL_*``)."""
+#: The cylinder's sections (``HierarchicalCylinder(section=)``): the quarter x, y >= 0 with
+#: its two symmetry planes, or the whole cylinder.
+SECTIONS = ("quarter", "full")
+
+
+def _cylinder_mesh(fx, radius: float, height: float, size: float, comm,
+                   section: str = "quarter"):
+    """The ``section`` of a cylinder x^2 + y^2 <= radius^2, 0 <= z <= height (m): the
+    quarter x, y >= 0 or the full cylinder (a node embedded at the bottom's centre, for its
+    rigid-body constraints), of P1 tetrahedra about ``size`` (m) across, meshed by gmsh on
+    rank 0 of ``comm`` (None: serial) and distributed: (mesh, facet tags ``CYL_*``)."""
     from femcoupling.elastic import gmsh_mesh_on_root
 
     comm = fx.MPI.COMM_SELF if comm is None else comm
+    kinds = ([CYL_BOTTOM, CYL_TOP, CYL_X0, CYL_Y0, CYL_SIDE] if section == "quarter"
+             else [CYL_BOTTOM, CYL_TOP, CYL_SIDE])
 
     def build(gmsh) -> None:
         occ = gmsh.model.occ
         cyl = occ.addCylinder(0, 0, 0, 0, 0, height, radius)
-        box = occ.addBox(0, 0, 0, radius, radius, height)
-        vols, _ = occ.intersect([(3, cyl)], [(3, box)])
+        if section == "quarter":
+            box = occ.addBox(0, 0, 0, radius, radius, height)
+            vols, _ = occ.intersect([(3, cyl)], [(3, box)])
+        else:
+            vols = [(3, cyl)]
+            centre = occ.addPoint(0, 0, 0)
         occ.synchronize()
         tol = 1e-6 * max(radius, height)
         groups: dict = {}
         for _, tag in gmsh.model.getEntities(2):
             c = occ.getCenterOfMass(2, tag)
             kind = (CYL_BOTTOM if abs(c[2]) < tol else CYL_TOP
-                    if abs(c[2] - height) < tol else CYL_X0 if abs(c[0]) < tol
-                    else CYL_Y0 if abs(c[1]) < tol else CYL_SIDE)
+                    if abs(c[2] - height) < tol else CYL_SIDE if section == "full"
+                    else CYL_X0 if abs(c[0]) < tol else CYL_Y0 if abs(c[1]) < tol
+                    else CYL_SIDE)
             groups.setdefault(kind, []).append(tag)
-        if sorted(groups) != [CYL_BOTTOM, CYL_TOP, CYL_X0, CYL_Y0, CYL_SIDE]:
-            raise RuntimeError(f"the quarter cylinder's faces: {groups}")
+        if sorted(groups) != kinds:
+            raise RuntimeError(f"the {section} cylinder's faces: {groups}")
+        if section == "full":
+            gmsh.model.mesh.embed(0, [centre], 2, groups[CYL_BOTTOM][0])
         for kind, tags in groups.items():
             gmsh.model.addPhysicalGroup(2, tags, kind)
         gmsh.model.addPhysicalGroup(3, [v[1] for v in vols], 1)
@@ -280,16 +296,19 @@ def _quarter_cylinder(fx, radius: float, height: float, size: float, comm):
     return data.mesh, data.facet_tags
 
 
-def cylinder_cells(radius_m: float, height_m: float, size_m: float) -> int:
-    """The tetrahedra, and so the elements, of :class:`HierarchicalCylinder`'s quarter
-    cylinder (meshed serially: the pool is built before the model)."""
-    _check_cylinder(radius_m, height_m, size_m)
+def cylinder_cells(radius_m: float, height_m: float, size_m: float,
+                   section: str = "quarter") -> int:
+    """The tetrahedra, and so the elements, of :class:`HierarchicalCylinder`'s ``section``
+    ("quarter" or "full"; meshed serially: the pool is built before the model)."""
+    _check_cylinder(radius_m, height_m, size_m, section)
     fx = _dolfinx.load()
-    mesh, _ = _quarter_cylinder(fx, radius_m, height_m, size_m, None)
+    mesh, _ = _cylinder_mesh(fx, radius_m, height_m, size_m, None, section)
     return mesh.topology.index_map(3).size_global
 
 
-def _check_cylinder(radius_m, height_m, size_m) -> None:
+def _check_cylinder(radius_m, height_m, size_m, section="quarter") -> None:
+    if section not in SECTIONS:
+        raise FemInputError(f"section={section!r}: one of {', '.join(map(repr, SECTIONS))}")
     for name, v in (("radius_m", radius_m), ("height_m", height_m), ("size_m", size_m)):
         if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
             raise FemInputError(f"{name}={v!r}: must be > 0 (m)")
@@ -300,10 +319,13 @@ def _check_cylinder(radius_m, height_m, size_m) -> None:
 
 class HierarchicalCylinder(Hierarchical3D):
     """A triaxial specimen: a cylinder of ``radius_m`` and ``height_m`` (m), modelled as the
-    quarter x, y >= 0 (its symmetry planes: u_x = 0 on x = 0, u_y = 0 on y = 0), P1
+    quarter x, y >= 0 (``section="quarter"``; its symmetry planes: u_x = 0 on x = 0,
+    u_y = 0 on y = 0) or whole (``section="full"``: no symmetry imposed, so elements whose
+    tangent couples shear and normal strains can shear; the rigid-body motions are held at
+    the bottom's centre, u_x = u_y = 0, and at its point (radius, 0, 0), u_y = 0), P1
     tetrahedra about ``size_m`` across (gmsh), a periodic DEM element at the quadrature
-    point of each (``pool`` holds :func:`cylinder_cells` elements, element k at the serial
-    mesh's cell k). Smooth platens: u_z = 0 at the bottom, u_z = ``step(top_displacement=)``
+    point of each (``pool`` holds :func:`cylinder_cells` elements of the section, element k
+    at the serial mesh's cell k). Smooth platens: u_z = 0 at the bottom, u_z = ``step(top_displacement=)``
     (m) at the top, free radially; the curved face under the confining pressure
     ``confining_pa`` (Pa, compression positive, normal to the face). ``homogeneous=True``
     puts every boundary node on u = G x instead. The other keyword arguments
@@ -314,11 +336,11 @@ class HierarchicalCylinder(Hierarchical3D):
     the bottom and the top), as end friction does in a test without lubricated ends."""
 
     def __init__(self, pool, *, radius_m: float, height_m: float, size_m: float,
-                 platens: str = "smooth", **options) -> None:
-        _check_cylinder(radius_m, height_m, size_m)
+                 platens: str = "smooth", section: str = "quarter", **options) -> None:
+        _check_cylinder(radius_m, height_m, size_m, section)
         if platens not in ("smooth", "rough"):
             raise FemInputError(f"platens={platens!r}: 'smooth' or 'rough'")
-        self.platens = platens
+        self.platens, self.section = platens, section
         self.radius_m, self.height_m, self.size_m = (float(radius_m), float(height_m),
                                                      float(size_m))
         # (the box's sizes, as the matching's scale and the records' geometry)
@@ -327,21 +349,22 @@ class HierarchicalCylinder(Hierarchical3D):
         self._setup(pool, **options)
 
     def _mesh(self, comm):
-        mesh, self._facets = _quarter_cylinder(self._fx, self.radius_m, self.height_m,
-                                               self.size_m, comm)
+        mesh, self._facets = _cylinder_mesh(self._fx, self.radius_m, self.height_m,
+                                            self.size_m, comm, self.section)
         return mesh
 
     def _serial_mesh(self):
-        return _quarter_cylinder(self._fx, self.radius_m, self.height_m, self.size_m,
-                                 None)[0]
+        return _cylinder_mesh(self._fx, self.radius_m, self.height_m, self.size_m, None,
+                              self.section)[0]
 
     def _cells(self) -> tuple[int, str]:
         return (self.mesh.topology.index_map(3).size_global,
                 f"tetrahedra (cylinder_cells({self.radius_m:g}, {self.height_m:g}, "
-                f"{self.size_m:g}))")
+                f"{self.size_m:g}, {self.section!r}))")
 
     def _scale_length(self) -> float:
-        return (0.25 * math.pi * self.radius_m ** 2 * self.height_m) ** (2.0 / 3.0)
+        part = 0.25 if self.section == "quarter" else 1.0
+        return (part * math.pi * self.radius_m ** 2 * self.height_m) ** (2.0 / 3.0)
 
     def _confinement(self, msh):
         """The confining pressure normal to the curved face (``pressure``, Pa)."""
@@ -356,10 +379,29 @@ class HierarchicalCylinder(Hierarchical3D):
         self.pressure.value = p
 
     def _triaxial_bcs(self, msh) -> list:
-        st = self._fx.PETSc.ScalarType
+        fx = self._fx
+        st = fx.PETSc.ScalarType
         on = lambda tag, c, value: self._fixed(c, self._facets.find(tag), value)  # noqa: E731
-        bcs = [on(CYL_X0, 0, st(0.0)), on(CYL_Y0, 1, st(0.0)), on(CYL_BOTTOM, 2, st(0.0)),
-               on(CYL_TOP, 2, self.top_u)]
+        bcs = [on(CYL_BOTTOM, 2, st(0.0)), on(CYL_TOP, 2, self.top_u)]
+        if self.section == "quarter":
+            bcs += [on(CYL_X0, 0, st(0.0)), on(CYL_Y0, 1, st(0.0))]
+        elif self.platens == "smooth":  # (rough platens hold the rigid-body motions already)
+            tol = 1e-9 * max(self.radius_m, self.height_m)
+
+            def node(x0, c):
+                sub = self.V.sub(c)
+                v, _ = sub.collapse()
+                dofs = fx.fem.locate_dofs_geometrical(
+                    (sub, v), lambda x: np.linalg.norm(x - np.reshape(x0, (3, 1)), axis=0)
+                    < tol)
+                found = self.comm.allreduce(len(dofs[0])) if self.comm is not None \
+                    else len(dofs[0])
+                if found < 1:
+                    raise RuntimeError(f"the full cylinder has no node at {x0} (m)")
+                return fx.fem.dirichletbc(st(0.0), dofs[0], sub)
+
+            bcs += [node((0.0, 0.0, 0.0), 0), node((0.0, 0.0, 0.0), 1),
+                    node((self.radius_m, 0.0, 0.0), 1)]
         if self.platens == "rough":
             bcs += [on(tag, c, st(0.0)) for tag in (CYL_BOTTOM, CYL_TOP) for c in (0, 1)]
         return bcs

@@ -1,6 +1,7 @@
 """A 3D hierarchical triaxial specimen beyond a box (femcoupling.hierarchical3d.
 HierarchicalCylinder; docs/multiscale.md, "A cylindrical triaxial specimen"): a quarter
-cylinder of P1 tetrahedra (gmsh), an element at each quadrature point.
+cylinder of P1 tetrahedra (gmsh), or the whole cylinder, an element at each quadrature
+point.
 
 With linear elastic elements (cpp_dem.elements.linear.LinearElement, E = 50 MPa, nu = 0.25,
 at 100 kPa) the specimen is an elastic continuum with closed-form answers:
@@ -13,7 +14,8 @@ at 100 kPa) the specimen is an elastic continuum with closed-form answers:
   element's axial strain is within 3 % of the top's (the facets' normals lean off the
   horizontal, so the pressure has a small vertical part: measured 2 %);
 - on 2 MPI ranks every element is at the serial mesh's place and the answers are the
-  serial run's to 1e-10.
+  serial run's to 1e-10 (the whole cylinder);
+- the whole cylinder (section="full", no symmetry planes) gives the same answers.
 With periodic DEM elements (40 grains, distinct packings) a step is accepted with a status
 and the specimen carries its confining pressure within 5 %.
 """
@@ -41,11 +43,11 @@ E, NU, P0 = 50e6, 0.25, 100e3
 K = E / (3 * (1 - 2 * NU))
 
 
-def _linear(**kw):
-    n = cylinder_cells(R, H, SIZE)
+def _linear(section="quarter", **kw):
+    n = cylinder_cells(R, H, SIZE, section)
     pool = ElementPool.build(n, LinearFactory(E, NU, P0), workers=1, element_type=LinearElement)
     return pool, HierarchicalCylinder(pool, radius_m=R, height_m=H, size_m=SIZE,
-                                      newton_rtol=1e-10, **kw)
+                                      newton_rtol=1e-10, section=section, **kw)
 
 
 def test_an_isotropic_step_is_homogeneous_to_rounding():
@@ -78,6 +80,32 @@ def test_a_triaxial_step_gives_the_elastic_answer():
     assert np.abs(w @ zz / w.sum() - 1) < 1e-3
     lateral = r.increments[:, 0, 0] / ez
     assert w @ lateral / w.sum() == pytest.approx(-NU, rel=1e-2)
+
+
+def test_the_full_cylinder_gives_the_elastic_answers():
+    """section="full": the whole cylinder, no symmetry planes; its rigid-body motions are
+    held at the bottom's centre (u_x = u_y = 0) and at (R, 0, 0) (u_y = 0). Those holds are
+    compatible with every homogeneous field of these tests, so they carry no load: an
+    isotropic step is homogeneous to rounding (measured 4e-14), and a triaxial step's
+    volume-mean stress is the elastic answer within 1e-4 (measured 7e-6), with no shear
+    (measured 2e-16 of p). A hold that fought the field (u_x at (R, 0, 0)) would break both."""
+    eps = -20e3 / (3 * K)
+    pool, m = _linear("full", confining_pa=P0 + 20e3)
+    with pool:
+        r = m.step(top_displacement=eps * H)
+        w = m.element_volumes
+    assert r.status == "converged" and len(r.increments) > 400
+    assert w.sum() == pytest.approx(np.pi * R**2 * H, rel=0.05)  # (faceted: 2.9 % less)
+    np.testing.assert_allclose(r.increments, np.broadcast_to(eps * np.eye(3), r.increments.shape),
+                               rtol=0, atol=1e-9 * abs(eps))
+    ez = -1e-3
+    pool, m = _linear("full", confining_pa=P0)
+    with pool:
+        r = m.step(top_displacement=ez * H)
+        s = m.volume_mean_stress()
+    assert r.status == "converged"
+    np.testing.assert_allclose(s[:3], [-P0, -P0, -P0 + E * ez], rtol=1e-4)
+    assert np.abs(s[3:]).max() < 1e-6 * P0
 
 
 def test_rough_platens_restrain_the_ends():
@@ -117,9 +145,12 @@ def test_bad_input_is_refused():
         cylinder_cells(-0.1, H, SIZE)
     with pytest.raises(FemInputError, match=r"size_m=1.0: must be <= 2 max"):
         cylinder_cells(R, H, 1.0)
+    with pytest.raises(FemInputError, match=r"section='half': one of 'quarter', 'full'"):
+        cylinder_cells(R, H, SIZE, "half")
     with ElementPool.build(3, LinearFactory(), workers=1, element_type=LinearElement) as pool:
         with pytest.raises(FemInputError, match=r"pool: has 3 elements for 205 tetrahedra "
-                                                r"\(cylinder_cells\(0.025, 0.1, 0.025\)\)"):
+                                                r"\(cylinder_cells\(0.025, 0.1, 0.025, "
+                                                r"'quarter'\)\)"):
             HierarchicalCylinder(pool, radius_m=R, height_m=H, size_m=SIZE, confining_pa=1e5)
         with pytest.raises(FemInputError, match="confining_pa=None"):
             HierarchicalCylinder(pool, radius_m=R, height_m=H, size_m=SIZE)
@@ -129,6 +160,10 @@ def test_bad_input_is_refused():
 
 
 def test_two_mpi_ranks_give_the_serial_specimen(tmp_path):
+    """The whole cylinder (its rigid-body holds at two nodes, found on whichever rank owns
+    them, and the facet tags of the quarter's faces but its symmetry planes) on 2 ranks:
+    every element at its serial place, the answers the serial run's to 1e-10 (measured
+    3e-14)."""
     if not MPIEXEC.exists():
         pytest.skip(f"no mpiexec beside {sys.executable}")
     out = {}
@@ -136,7 +171,7 @@ def test_two_mpi_ranks_give_the_serial_specimen(tmp_path):
         d = tmp_path / f"r{ranks}"
         d.mkdir()
         p = subprocess.run([str(MPIEXEC), "-n", str(ranks), sys.executable,
-                            str(ROOT / "tests" / "mpi_cylinder.py"), str(d)],
+                            str(ROOT / "tests" / "mpi_cylinder.py"), str(d), "full"],
                            capture_output=True, text=True, timeout=600, cwd=ROOT)
         assert p.returncode == 0, f"{p.stdout[-2000:]}\n{p.stderr[-4000:]}"
         out[ranks] = json.loads((d / "result.json").read_text())
