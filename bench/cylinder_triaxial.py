@@ -4,12 +4,12 @@ FEM x DEM with a periodic DEM element at the quadrature point of every tetrahedr
 specimen (``femcoupling.hierarchical3d.HierarchicalCylinder``), held on Dask workers.
 
 The specimen is the quarter x, y >= 0 of a cylinder ``--radius`` by ``--height`` (m)
-(``--section full``: the whole cylinder, no symmetry planes), with smooth platens (``--platens rough``: the ends also held radially): the bottom held
-vertically, the top moved down in ``--steps`` equal steps to
-the axial strain ``--strain``, the curved face under the confining pressure ``--pressure``
-(Pa). Every element is its own packing of ``--grains`` grains (seed + k), prepared to the
-isotropic confining stress, dense (grown frictionless, then at their friction: the shear
-band's elements).
+(``--section full``: the whole cylinder, no symmetry planes), with smooth platens
+(``--platens rough``: the ends also held radially): the bottom held vertically, the top
+moved down in ``--steps`` equal steps to the axial strain ``--strain``, the curved face
+under the confining pressure ``--pressure`` (Pa). Every element is its own packing of
+``--grains`` grains (seed + k), prepared to the isotropic confining stress, dense (grown
+frictionless, then at their friction: the shear band's elements).
 
 Beside the specimen, its elements (``--alone``: all by default) are run on their own along
 the specimen's mean strain path (each step's volume-mean strain increment given to each):

@@ -325,12 +325,13 @@ class HierarchicalCylinder(Hierarchical3D):
     the bottom's centre, u_x = u_y = 0, and at its point (radius, 0, 0), u_y = 0), P1
     tetrahedra about ``size_m`` across (gmsh), a periodic DEM element at the quadrature
     point of each (``pool`` holds :func:`cylinder_cells` elements of the section, element k
-    at the serial mesh's cell k). Smooth platens: u_z = 0 at the bottom, u_z = ``step(top_displacement=)``
-    (m) at the top, free radially; the curved face under the confining pressure
-    ``confining_pa`` (Pa, compression positive, normal to the face). ``homogeneous=True``
-    puts every boundary node on u = G x instead. The other keyword arguments
-    (``options``: ``confining_pa``, ``homogeneous``, ``newton_rtol``, ``comm``, ``out``, ...),
-    the steps and the records are :class:`Hierarchical3D`'s. Stresses tension positive, Pa.
+    at the serial mesh's cell k). Smooth platens: u_z = 0 at the bottom,
+    u_z = ``step(top_displacement=)`` (m) at the top, free radially; the curved face under
+    the confining pressure ``confining_pa`` (Pa, compression positive, normal to the face).
+    ``homogeneous=True`` puts every boundary node on u = G x instead. The other keyword
+    arguments (``options``: ``confining_pa``, ``homogeneous``, ``newton_rtol``, ``comm``,
+    ``out``, ...), the steps and the records are :class:`Hierarchical3D`'s. Stresses tension
+    positive, Pa.
 
     ``platens="rough"``: the platens hold the specimen's ends radially too (u_x = u_y = 0 at
     the bottom and the top), as end friction does in a test without lubricated ends."""
