@@ -1,6 +1,7 @@
 """The cylindrical triaxial specimen under MPI, run by tests/test_hierarchical_cylinder.py
-as ``mpiexec -n N python tests/mpi_cylinder.py OUT [quarter|full]``: linear elastic elements
-(the section given, the quarter by default; exact, so the
+as ``mpiexec -n N python tests/mpi_cylinder.py OUT [quarter|full [SIZE]]``: linear elastic
+elements (the section given, the quarter by default; tetrahedra SIZE m across, 0.025 by
+default; exact, so the
 ranks' runs can be compared to rounding), one triaxial step. Rank 0 writes OUT/result.json:
 the points (m), the element stresses and the specimen's volume-mean stress (Voigt, Pa), the
 increments (-)."""
@@ -9,18 +10,18 @@ import json
 import sys
 
 
-def main(out: str, section: str = "quarter") -> None:
+def main(out: str, section: str = "quarter", size: str = "0.025") -> None:
     from cpp_dem.elements.linear import LinearElement, LinearFactory
     from cpp_dem.elements.pool import ElementPool
     from femcoupling.hierarchical3d import HierarchicalCylinder, cylinder_cells
     from femcoupling.mpi_points import on_root, world
 
     comm = world()
-    n = cylinder_cells(0.025, 0.1, 0.025, section)
+    n = cylinder_cells(0.025, 0.1, float(size), section)
     pool = on_root(comm, lambda: ElementPool.build(n, LinearFactory(), workers=1,
                                                    element_type=LinearElement))
     try:
-        m = HierarchicalCylinder(pool, radius_m=0.025, height_m=0.1, size_m=0.025,
+        m = HierarchicalCylinder(pool, radius_m=0.025, height_m=0.1, size_m=float(size),
                                  confining_pa=100e3, newton_rtol=1e-10, comm=comm,
                                  section=section)
         r = m.step(top_displacement=-1e-4)
@@ -37,4 +38,4 @@ def main(out: str, section: str = "quarter") -> None:
 
 
 if __name__ == "__main__":
-    main(*sys.argv[1:3])
+    main(*sys.argv[1:4])

@@ -64,12 +64,12 @@ def test_3d_cell_elements_of_a_linear_stand_in_are_the_material():
 
 
 def test_3d_cell_elements_on_dask_workers(tmp_path):
-    """A dense periodic element (80 grains of the footing case, distinct seeds) at every
-    cell of the zone, on a 2-worker pool, the footing from 10 to 20 kPa in one step. The
+    """A dense periodic element (60 grains of the footing case's material, distinct seeds)
+    at every cell of the zone, on a 2-worker pool, the footing from 10 to 20 kPa in one step. The
     step is accepted (converged, or stopped within the elements' scatter: said); every
     element strains as its cell (their volume mean is the zone's strain increment, all six
-    components, to round-off); the cells strain differently (measured zz -2.8e-4 to
-    -8.9e-4 over the 36 cells); some strain along y; the zone's stress increment is
+    components, to round-off); the cells strain differently (measured zz -2.5e-4 to
+    -8.8e-4 over the 36 cells); some strain along y; the zone's stress increment is
     the elements' volume mean; the records hold a row per element."""
     import h5py
 
@@ -79,7 +79,7 @@ def test_3d_cell_elements_on_dask_workers(tmp_path):
     m = _body_3d(0.2)
     stresses = m.cell_stresses("zone")
     group = PoolRegionMaterials.build(
-        stresses, PeriodicRegionElement(n=80, seed=3, tol=0.02, unbalanced=1e-2,
+        stresses, PeriodicRegionElement(n=60, seed=3, tol=0.02, unbalanced=1e-2,
                                         options=grain_options(FootingParams())),
         workers=2, distinct_seeds=True, records=tmp_path / "cells.h5")
     try:
@@ -104,13 +104,9 @@ def test_3d_cell_elements_on_dask_workers(tmp_path):
     zz = strain[:, 2, 2]
     assert zz.max() - zz.min() > 0.2 * abs(zz.mean())  # not one strain for all
     # out of the x-z plane: the y faces are rollers, the cells inside strain along y too
-    # (measured: 0.054 of the largest zz)
+    # (measured: 0.068 of the largest zz)
     assert np.abs(strain[:, 1, 1]).max() > 0.02 * np.abs(zz).max()
     ds_el = np.einsum("k,kij->ij", w, stress - start)
     ds_fem = m.region_stress("zone") - s0
     assert np.abs(ds_fem - ds_el).max() < 1e-6 * np.abs(ds_fem).max()
     assert ds_fem[2, 2] < 0  # the footing's load compresses the zone vertically
-    print(f"3D zone: {len(cells)} cells, {[(r.status, r.newton_iterations) for r in steps]}, "
-          f"zz {zz.min():.3g} to {zz.max():.3g}, |yy| max {np.abs(strain[:, 1, 1]).max():.3g}, "
-          f"dsigma {np.round(ds_fem / 1e3, 2).tolist()} kPa, settlement "
-          f"{m.footing_settlement_m():.4g} m")
