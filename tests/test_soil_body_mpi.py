@@ -57,17 +57,15 @@ def test_two_ranks_give_the_serial_body_within_the_newton_tolerance(runs):
     7e-10): the FEM adds a node's contributions in another order on 2 ranks, and Newton
     stops at 1e-8 of the force scale."""
     one, two = runs[1], runs[2]
-    for r in (one, two):
-        assert set(r["status"]) == {"converged"} and len(r["status"]) >= 10
-    assert len(one["status"]) == len(two["status"])
+    assert one["status"] == two["status"] == ["converged"] * 10
     for key in ("settlement_m", "pressure_pa", "region_stress_pa", "point_stress_pa"):
         a, b = np.asarray(one[key]), np.asarray(two[key])
         assert np.abs(a - b).max() <= 1e-6 * np.abs(a).max(), key
     assert two["layer_force_n_per_m"] == pytest.approx(one["layer_force_n_per_m"], rel=1e-6)
     assert one["plastic_points"] == two["plastic_points"] > 0
     # the body is loaded: the settlement stage pushed past the 100 kPa pressure stage
-    assert 100e3 in one["pressure_pa"] and 100e3 in two["pressure_pa"]
-    assert one["pressure_pa"][-1] > 2 * 100e3
+    assert one["pressure_pa"][5] == two["pressure_pa"][5] == pytest.approx(100e3)
+    assert one["pressure_pa"][-1] > 2 * one["pressure_pa"][5]
     assert one["layer_force_n_per_m"] > 0
 
 
@@ -156,7 +154,7 @@ def test_dem_cell_elements_on_two_ranks_agree_within_their_noise(regions):
     assert one["start_stresses_pa"] == two["start_stresses_pa"]
     for r in (one, two):
         assert set(r["status"]) <= {"converged", "stopped_at_scatter"}
-    assert _rel(one["element_stresses_pa"], two["element_stresses_pa"]) < 0.05
+    assert _rel(one["element_stresses_pa"], two["element_stresses_pa"]) < 0.03
     for r in (one, two):  # a records row per element and accepted step, written once (rank 0)
         steps = len(r["status"])
         assert r["records"]["names"] == one["keys"]
