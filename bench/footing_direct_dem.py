@@ -8,9 +8,11 @@ on the top, the surcharge ``--surcharge`` (Pa) beside it, smooth sides and botto
 gravity. For each seed s:
 
 1. **Direct DEM** (``cpp_dem.protocols.footing``): a box of the grains between smooth walls,
-   ``--thickness`` deep out of plane, grown frictionless then at the grains' friction
-   (dense) to the isotropic q; the top wall is split into the footing and the surcharge, and
-   the footing is pushed to each settlement and held until the grains are at rest.
+   ``--thickness`` deep out of plane (``--out-of-plane periodic``: periodic along y instead,
+   no y walls; ``both``: each box in turn, from the same seed), grown frictionless then at
+   the grains' friction (dense) to the isotropic q; the top wall is split into the footing
+   and the surcharge, and the footing is pushed to each settlement and held until the
+   grains are at rest.
 2. **FEM x DEM** (``femcoupling.footing_dem``): the same rectangle in ``--nx`` by ``--ny``
    cells of triangles (``--degree 2``: P2, three quadrature points each, which do not lock
    under dilatant flow; ``--degree 1``: P1, one), a periodic element of ``--cell-grains``
@@ -20,7 +22,8 @@ gravity. For each seed s:
 
 The footing pressures are paired over the seeds at each settlement both reached: FEM x DEM
 minus direct DEM, the mean and its standard error (``femcoupling.footing_dem.
-paired_pressures``). With ``--oedometer`` the box (prepared again: the same) and the first 8
+paired_pressures``); with ``both``, FEM x DEM minus each box, and the periodic box minus the
+walled one. With ``--oedometer`` the box (prepared again: the same) and the first 8
 elements of each seed also go through the same oedometric path from q, which compares the
 material itself (``oedometric_moduli``).
 
@@ -33,6 +36,7 @@ pressures compression positive.
     .venv/bin/python bench/footing_direct_dem.py --smoke --out DIR          # about 30 s
     .venv/bin/python bench/footing_direct_dem.py --seeds 3 --out DIR        # the measured run
     .venv/bin/python bench/footing_direct_dem.py --oedometer --out DIR     # and the material
+    .venv/bin/python bench/footing_direct_dem.py --out-of-plane both --out DIR  # and periodic
 """
 
 from __future__ import annotations
@@ -51,6 +55,9 @@ sys.path.insert(0, str(HERE.parent))
 
 from _report import write_json  # noqa: E402
 
+#: The direct DEM's boxes of each --out-of-plane choice: (its key in the runs, periodic_y).
+BOXES = {"walls": (("dem", False),), "periodic": (("dem_periodic", True),),
+         "both": (("dem", False), ("dem_periodic", True))}
 FULL = dict(length=0.15, depth=0.10, thickness=0.03, b=0.03, nx=5, ny=4, cell_grains=60,
             settlements=(0.05e-3, 0.1e-3, 0.2e-3, 0.3e-3, 0.45e-3, 0.6e-3, 0.8e-3, 1.0e-3,
                          1.25e-3, 1.5e-3))
@@ -75,6 +82,9 @@ def parse(argv=None) -> argparse.Namespace:
     for k in ("nx", "ny", "cell_grains"):
         ap.add_argument(f"--{k.replace('_', '-')}", dest=k, type=int, default=None,
                         help=f"default {FULL[k]}")
+    ap.add_argument("--out-of-plane", choices=tuple(BOXES), default="walls",
+                    help="the direct DEM's box out of plane (y): between two smooth walls, "
+                         "periodic, or both in turn (default walls)")
     ap.add_argument("--oedometer", action="store_true",
                     help="also take the box (prepared again, the same) and its first 8 "
                          "elements through the same oedometric path from q (z shortened, x "
@@ -93,6 +103,9 @@ def parse(argv=None) -> argparse.Namespace:
         a.seeds = 1 if a.smoke else 3
     if a.seeds < 1:
         ap.error(f"--seeds={a.seeds}: must be >= 1")
+    if a.oedometer and a.out_of_plane != "walls":
+        ap.error(f"--oedometer with --out-of-plane {a.out_of_plane}: the oedometer takes the "
+                 "box between its six walls; run it with --out-of-plane walls")
     return a
 
 
@@ -117,9 +130,15 @@ def _interior_porosity(state, inset: float, spacing: float) -> float:
     is not)."""
     from scipy.spatial import cKDTree
 
+    from cpp_dem.protocols.footing import box_extents
+
     sc = state.scene
     w = np.asarray(sc.wall_positions)[state.walls]
-    lo, hi = w[[0, 2, 4]] + inset, w[[1, 3, 5]] - inset
+    if len(w) == 6:
+        lo, hi = w[[0, 2, 4]] + inset, w[[1, 3, 5]] - inset
+    else:  # periodic along y: inset from the cell's faces too, where the KD-tree sees no image
+        lo = np.array([w[0], 0.0, w[2]]) + inset
+        hi = lo - 2 * inset + box_extents(sc, state.walls)
     ids = np.asarray(state.grain_ids)
     c, r = np.asarray(sc.positions)[ids], np.asarray(sc.radii)[ids]
     axes = [np.arange(lo[k] + 0.5 * spacing, hi[k], spacing) for k in range(3)]
@@ -181,8 +200,11 @@ def _figure(path: Path, runs: dict, b: float) -> None:
 
     fig, ax = plt.subplots(figsize=(5.5, 4))
     for s, r in runs.items():
-        for key, style, label in (("dem", "k-o", "direct DEM"), ("fem_dem", "C0-s",
-                                                                   "FEM x DEM")):
+        for key, style, label in (("dem", "k-o", "direct DEM"),
+                                  ("dem_periodic", "C1-^", "direct DEM, periodic in y"),
+                                  ("fem_dem", "C0-s", "FEM x DEM")):
+            if key not in r:
+                continue
             x = 100 * np.asarray(r[key]["settlement_m"]) / b
             ax.plot(x, np.asarray(r[key]["footing_pressure_pa"]) / 1e3, style, ms=3,
                     label=f"{label}, seed {s}")
@@ -211,18 +233,28 @@ def main(argv=None) -> dict:
     runs: dict = {}
     seeds = list(range(1, a.seeds + 1))
     for i, s in enumerate(seeds):
-        box = StripFootingBox(footing_b=a.b, length=a.length, depth=a.depth,
-                              thickness=a.thickness, surcharge_pa=a.surcharge, seed=s)
-        box.check()
-        t = time.perf_counter()
-        state = prepare_footing_box(box, log=print)
-        prep_s = time.perf_counter() - t
-        inner = _interior_porosity(state, 2 * box.radius_mean, box.radius_mean / 6)
-        print(f"[footing vs dem] seed {s}: the box's porosity {state.porosity:.4f}, "
-              f"{inner:.4f} two radii in from its walls", flush=True)
-        dem = load_strip_footing(state, box, a.settlements, log=print, out=out / f"dem_seed{s}")
-        dem_s = time.perf_counter() - t
-        _append_csv(csv, "dem", s, dem)
+        runs[s] = {}
+        for key, periodic in BOXES[a.out_of_plane]:
+            box = StripFootingBox(footing_b=a.b, length=a.length, depth=a.depth,
+                                  thickness=a.thickness, surcharge_pa=a.surcharge, seed=s,
+                                  periodic_y=periodic)
+            box.check()
+            t = time.perf_counter()
+            state = prepare_footing_box(box, log=print)
+            prep_s = time.perf_counter() - t
+            inner = _interior_porosity(state, 2 * box.radius_mean, box.radius_mean / 6)
+            print(f"[footing vs dem] seed {s}, {key}: the box's porosity {state.porosity:.4f}, "
+                  f"{inner:.4f} two radii in from its walls", flush=True)
+            sub = out / (f"dem_seed{s}" if key == "dem" else f"{key}_seed{s}")
+            dem = load_strip_footing(state, box, a.settlements, log=print, out=sub)
+            _append_csv(csv, key, s, dem)
+            runs[s][key] = {**{k: np.asarray(v).tolist() if isinstance(v, (list, np.ndarray))
+                               else v for k, v in dem.items()},
+                            "grains": int(state.grains), "porosity": float(state.porosity),
+                            "interior_porosity": float(inner),
+                            "radius_mean_m": float(np.mean(np.asarray(state.scene.radii)[
+                                np.asarray(state.grain_ids)])),
+                            "preparation_s": prep_s, "wall_s": time.perf_counter() - t}
         t = time.perf_counter()
         n_el = len(quadrature_points(a.length, a.depth, a.nx, a.ny, a.degree))  # (the model's)
         fac = element_factory(box, grains=a.cell_grains, seed=1000 * s)
@@ -236,21 +268,14 @@ def main(argv=None) -> dict:
             model = fd.pop("model")
             fd["status_worst"] = model.status if fd["failed"] is None else "failed"
         _append_csv(csv, "fem_dem", s, fd)
-        runs[s] = {"dem": {**{k: np.asarray(v).tolist() if isinstance(v, (list, np.ndarray))
-                              else v for k, v in dem.items()},
-                           "grains": int(state.grains), "porosity": float(state.porosity),
-                           "interior_porosity": float(inner),
-                           "radius_mean_m": float(np.mean(np.asarray(state.scene.radii)[
-                               np.asarray(state.grain_ids)])),
-                           "preparation_s": prep_s, "wall_s": dem_s},
-                   "fem_dem": {**{k: np.asarray(v).tolist() if isinstance(v, np.ndarray)
+        runs[s]["fem_dem"] = {**{k: np.asarray(v).tolist() if isinstance(v, np.ndarray)
                                   else v for k, v in fd.items()},
                                "elements": n_el, "grains": n_el * a.cell_grains,
                                "element_porosity_mean": float(np.mean(porosities)),
                                "element_porosity_sd": float(np.std(porosities, ddof=1)),
                                "radius_mean_m": r_el,
                                "preparation_s": pool_s,
-                               "wall_s": time.perf_counter() - t}}
+                               "wall_s": time.perf_counter() - t}
         if a.oedometer:
             runs[s]["oedometer"] = o = oedometric_moduli(box, fac)
             print(f"[footing vs dem] seed {s}: constrained modulus at eps_zz "
@@ -259,15 +284,23 @@ def main(argv=None) -> dict:
         done = time.perf_counter() - t0
         print(f"[footing vs dem] seed {s} ({i + 1}/{len(seeds)}) done, {done:.0f} s; ETA "
               f"{done / (i + 1) * (len(seeds) - i - 1):.0f} s", flush=True)
-    d = paired_pressures([runs[s]["fem_dem"] for s in seeds], [runs[s]["dem"] for s in seeds])
+    keys = [k for k, _ in BOXES[a.out_of_plane]]
+    fd_runs = [runs[s]["fem_dem"] for s in seeds]
+    d = paired_pressures(fd_runs, [runs[s][keys[0]] for s in seeds])
+    extra = {}
+    if len(keys) == 2:  # (both: FEM x DEM - the periodic box, and periodic - walls)
+        extra["paired_periodic"] = paired_pressures(fd_runs, [runs[s][keys[1]] for s in seeds])
+        extra["periodic_minus_walls"] = paired_pressures([runs[s][keys[1]] for s in seeds],
+                                                         [runs[s][keys[0]] for s in seeds])
     summary = {
         "geometry_m": {"length": a.length, "depth": a.depth, "thickness": a.thickness,
                        "footing_b": a.b},
         "surcharge_pa": a.surcharge, "mesh": {"nx": a.nx, "ny": a.ny, "degree": a.degree,
                                               "elements": n_el, "cell_grains": a.cell_grains},
         "seeds": seeds, "runs": {str(s): r for s, r in runs.items()},
-        "paired": {k: np.asarray(v).tolist() if isinstance(v, np.ndarray) else v
-                   for k, v in d.items()},
+        "direct_dem": keys,
+        **{name: {k: np.asarray(v).tolist() if isinstance(v, np.ndarray) else v
+                  for k, v in dd.items()} for name, dd in (("paired", d), *extra.items())},
         "wall_s": time.perf_counter() - t0,
     }
     if a.oedometer:
@@ -280,9 +313,16 @@ def main(argv=None) -> dict:
     _figure(out / "load_settlement.png", runs, a.b)
     for k, s in enumerate(d["settlement_m"]):
         print(f"[footing vs dem] settlement {1e3 * s:.3f} mm: FEM x DEM "
-              f"{d['fem_dem_pa'][k] / 1e3:.1f} kPa, direct DEM {d['dem_pa'][k] / 1e3:.1f} kPa, "
-              f"difference {d['difference_pa'][k] / 1e3:+.1f} +- {d['se_pa'][k] / 1e3:.1f} kPa "
-              f"({d['seeds']} seeds)")
+              f"{d['fem_dem_pa'][k] / 1e3:.1f} kPa, direct DEM ({keys[0]}) "
+              f"{d['dem_pa'][k] / 1e3:.1f} kPa, difference {d['difference_pa'][k] / 1e3:+.1f} "
+              f"+- {d['se_pa'][k] / 1e3:.1f} kPa ({d['seeds']} seeds)")
+    if extra:
+        pw = extra["periodic_minus_walls"]
+        for k, s in enumerate(pw["settlement_m"]):
+            print(f"[footing vs dem] settlement {1e3 * s:.3f} mm: periodic box "
+                  f"{pw['fem_dem_pa'][k] / 1e3:.1f} kPa, walled box {pw['dem_pa'][k] / 1e3:.1f} "
+                  f"kPa, difference {pw['difference_pa'][k] / 1e3:+.1f} +- "
+                  f"{pw['se_pa'][k] / 1e3:.1f} kPa ({pw['seeds']} seeds)")
     last = {"settlement_m": float(d["settlement_m"][-1]),
             "fem_dem_pa": float(d["fem_dem_pa"][-1]), "dem_pa": float(d["dem_pa"][-1]),
             "difference_pa": float(d["difference_pa"][-1]), "se_pa": float(d["se_pa"][-1]),

@@ -150,6 +150,21 @@ def test_the_interior_porosity_of_a_simple_cubic_lattice():
     scene.radii = np.full(len(pos), 0.5 * r)  # (the same centres, an eighth of the solid)
     assert _bench()._interior_porosity(state, 2 * r, r / 12) == pytest.approx(
         1 - np.pi / 48, abs=0.01)  # (a sphere 6 grid spacings across, as in the bench)
+    # Periodic along y (--periodic-y): the four walls x-, x+, z-, z+ and the cell's y extent.
+    scene.radii = np.full(len(pos), r)
+    scene.wall_positions, scene.cell_matrix = np.array([0, edge, 0, edge]), np.eye(3) * edge
+    state.walls = list(range(4))
+    assert _bench()._interior_porosity(state, 2 * r, r / 6) == pytest.approx(est, abs=1e-12)
+
+
+def test_the_bench_takes_a_box_periodic_out_of_plane_and_refuses_it_for_the_oedometer(capsys):
+    bench = _bench()
+    assert bench.parse(["--smoke", "--out-of-plane", "both"]).out_of_plane == "both"
+    assert bench.parse(["--smoke"]).out_of_plane == "walls"
+    assert [p for _, p in bench.BOXES["both"]] == [False, True]
+    with pytest.raises(SystemExit):
+        bench.parse(["--smoke", "--out-of-plane", "periodic", "--oedometer"])
+    assert "--oedometer with --out-of-plane periodic" in capsys.readouterr().err
 
 
 def test_the_bench_runs_at_smoke_size(tmp_path, capsys):

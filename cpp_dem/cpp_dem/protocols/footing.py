@@ -9,7 +9,10 @@ Geometry (SI units, z up, stresses and pressures compression positive, settlemen
 positive):
 
 - x from 0 (the symmetry plane: a smooth fixed wall) to ``length`` (a smooth fixed wall);
-- y from 0 to ``thickness``: two smooth fixed walls (plane strain);
+- y from 0 to ``thickness``: two smooth fixed walls (plane strain), or, with
+  ``periodic_y``, a periodic cell along y (``Scene.set_periodic_cell(h, (False, True,
+  False))``): no wall out of the plane, the grains meet their own images there, and y is
+  held during the load (plane strain without the walls' loose layers);
 - z from 0 (a smooth fixed bottom wall) to ``depth`` (the top);
 - on the top, the footing over 0 <= x <= ``footing_b`` (the half width b) and the surcharge
   ``surcharge_pa`` over b < x <= ``length``.
@@ -80,7 +83,9 @@ class StripFootingBox:
     grows them at ``prep_friction_deg`` (0: frictionless, a dense packing, as the periodic
     cells of the FEM x DEM are grown), then at ``friction_deg``, and servos the six smooth
     walls to ``surcharge_pa`` until every wall is within ``tol`` (relative) of it and the
-    unbalanced force is below ``unbalanced``."""
+    unbalanced force is below ``unbalanced``. With ``periodic_y`` the box has no y walls:
+    it is periodic along y, and the cell's sigma_yy is servoed to ``surcharge_pa`` with the
+    four walls (:func:`prepare_footing_box`)."""
 
     footing_b: float                  #: footing half width b, m (0 <= x <= b)
     length: float                     #: box length from the symmetry plane, m (x)
@@ -98,6 +103,7 @@ class StripFootingBox:
     seed: int = 1                     #: seed of the radii and of the cloud
     tol: float = 0.005                #: relative tolerance of the wall stresses, -
     unbalanced: float = 1e-4          #: unbalanced force of an equilibrium, -
+    periodic_y: bool = False          #: periodic along y instead of the two y walls
 
     @property
     def largest_diameter(self) -> float:
@@ -140,6 +146,8 @@ class StripFootingBox:
         if not (isinstance(self.seed, (int, np.integer)) and not isinstance(self.seed, bool)
                 and self.seed >= 0):
             bad("seed", "an integer >= 0")
+        if not isinstance(self.periodic_y, (bool, np.bool_)):
+            bad("periodic_y", "True or False")
         d = self.largest_diameter
         if not self.footing_b < self.length:
             bad("footing_b", f"< length ({self.length:g} m)")
@@ -181,10 +189,12 @@ class StripFootingBox:
 @dataclass
 class FootingBoxState:
     """A prepared footing box. ``walls``: the six box walls (x-, x+, y-, y+, z-, z+, the
-    ``Scene.add_box`` order); ``wall_stresses``: their normal stresses at the end of the
-    preparation, Pa, compression positive. After :func:`load_strip_footing`, ``footing_wall``
-    is the footing base's wall id, ``footing_side`` its side's and ``servo`` the surcharge's
-    ServoWall (walls[5] is then the surcharge)."""
+    ``Scene.add_box`` order), or with ``periodic_y`` the four (x-, x+, z-, z+);
+    ``wall_stresses``: the normal stresses at the end of the preparation, Pa, compression
+    positive, one per wall of ``walls`` (x-, x+, y, y, z-, z+ with ``periodic_y``: the cell's
+    sigma_yy twice). ``walls[-1]`` is the top. After :func:`load_strip_footing`,
+    ``footing_wall`` is the footing base's wall id, ``footing_side`` its side's and ``servo``
+    the surcharge's ServoWall (``walls[-1]`` is then the surcharge)."""
 
     scene: Scene
     walls: list
@@ -196,6 +206,7 @@ class FootingBoxState:
     grain_material: int               #: material index at friction_deg
     wall_material: int                #: material index of the smooth walls
     top: float                        #: the top wall's position at the end, m
+    thickness: float = 0.0            #: the box's extent along y at the end, m
     steps: int = 0                    #: steps of the preparation
     wall_s: float = 0.0               #: wall-clock seconds of the preparation
     stages: list = field(default_factory=list)  #: (name, prep.StageResult)
@@ -239,7 +250,13 @@ def prepare_footing_box(p: StripFootingBox, log=None, *, max_steps: int = 400_00
     gm = scene.add_material(mat)
     wm = scene.add_material(Material(model="linear", density=p.density, young=p.young,
                                      poisson=p.poisson, friction_angle_deg=0.0))
-    walls = scene.add_box((0.0, 0.0, 0.0), hi, material=wm)
+    if p.periodic_y:
+        scene.set_periodic_cell(np.diag(hi), (False, True, False))
+        walls = [int(scene.add_wall(axis=a, position=x, sense=sense, material=wm))
+                 for a, x, sense in ((0, 0.0, 1), (0, hi[0], -1), (2, 0.0, 1),
+                                     (2, hi[2], -1))]
+    else:
+        walls = scene.add_box((0.0, 0.0, 0.0), hi, material=wm)
     grains = scene.add_spheres(centers, r0, material=gm)
     scene.set_auto_timestep(0.5, 500)
     _say(log, f"footing box {p.length:g} x {p.thickness:g} x {p.depth:g} m: {n} grains, "
@@ -259,18 +276,26 @@ def prepare_footing_box(p: StripFootingBox, log=None, *, max_steps: int = 400_00
 
         def tick(sc, bar=bar, k1=k1) -> None:  # (reads the scene only)
             bar.update(None, f"step {sc.step_count - k1} of at most {max_steps}, mean wall "
-                             f"stress {float(np.mean(measure.wall_stresses(sc, walls))):.4g} "
+                             f"stress {float(np.mean(box_stresses(sc, walls))):.4g} "
                              f"Pa (target {q:g}), unbalanced {float(sc.unbalanced_force()):.3g}")
 
-        g = prep.grow_to_stress(scene, walls, q, tol=p.tol, unbalanced=p.unbalanced,
-                                max_steps=max_steps, check_every=check_every, callback=tick)
+        # (periodic_y: the growth reads the cell's stress, its contacts between grains over
+        # the box's volume, and the servo below brings every axis to q)
+        g = prep.grow_to_stress(scene, [] if p.periodic_y else walls, q, tol=p.tol,
+                                unbalanced=p.unbalanced, max_steps=max_steps,
+                                check_every=check_every, callback=tick)
         stages.append((f"growth at {phi:g} deg", g))
         _say(log, f"growth at {phi:g} deg: {g.steps} steps, mean wall stress "
                   f"{g.mean_stress:.5g} Pa, porosity {g.porosity:.4f}, unbalanced "
                   f"{g.unbalanced_force:.3g}" + ("" if g.converged else " (not converged)"))
     # Servo walls to the stress on every axis.
     ok, r, ctl = False, None, None
-    for _ in range(3):  # (equal axis stresses can hide unequal opposite walls: re-check)
+    if p.periodic_y:
+        r = _servo_periodic_y(scene, walls, q, p, max_steps, check_every)
+        ok = r.converged
+        stages.append(("isotropic servo", r))
+    for _ in range(0 if p.periodic_y else 3):
+        # (equal axis stresses can hide unequal opposite walls: re-check)
         r = prep.compact_isotropic(scene, walls, q, controller=ctl, tol=p.tol,
                                    unbalanced=p.unbalanced, max_steps=max_steps,
                                    check_every=check_every)
@@ -280,7 +305,7 @@ def prepare_footing_box(p: StripFootingBox, log=None, *, max_steps: int = 400_00
         stages.append(("isotropic servo", r))
         if ok or not r.converged:
             break
-    st = measure.wall_stresses(scene, walls)
+    st = box_stresses(scene, walls)
     u = float(scene.unbalanced_force())
     _say(log, f"isotropic servo: {r.steps} steps, wall stresses "
               f"{', '.join(f'{s:.5g}' for s in st)} Pa, unbalanced {u:.3g}")
@@ -293,15 +318,86 @@ def prepare_footing_box(p: StripFootingBox, log=None, *, max_steps: int = 400_00
     scene.clear_controllers()
     for w in walls:
         scene.set_wall_velocity(int(w), (0.0, 0.0, 0.0))
+    if p.periodic_y:
+        scene.velocity_gradient = np.zeros((3, 3))  # (y held from here: plane strain)
+    size = box_extents(scene, walls)
     state = FootingBoxState(
-        scene=scene, walls=list(walls), grains=n, porosity=measure.porosity(scene, walls),
+        scene=scene, walls=list(walls), grains=n,
+        porosity=(1.0 - measure.solid_volume(scene) / float(np.prod(size)) if p.periodic_y
+                  else measure.porosity(scene, walls)),
         wall_stresses=st, unbalanced=u, grain_ids=np.asarray(grains), grain_material=gm,
-        wall_material=wm, top=float(scene.wall_positions[walls[Z_PLUS]]),
-        steps=scene.step_count - k0, wall_s=time.perf_counter() - t0, stages=stages)
+        wall_material=wm, top=float(scene.wall_positions[walls[-1]]),
+        thickness=float(size[1]), steps=scene.step_count - k0,
+        wall_s=time.perf_counter() - t0, stages=stages)
     _say(log, f"prepared: porosity {state.porosity:.4f}, mean radius "
               f"{float(np.mean(scene.radii)):.4g} m, {state.steps} steps, "
               f"{state.wall_s:.1f} s")
     return state
+
+
+def box_extents(scene, walls) -> np.ndarray:
+    """The box's extents along x, y and z, m (3,): from its walls' positions, and along y
+    from the periodic cell when ``walls`` are the four of a box periodic along y."""
+    pos = np.asarray(scene.wall_positions, float)[list(walls)]
+    if len(walls) == 4:
+        return np.array([pos[1] - pos[0], float(np.asarray(scene.cell_matrix)[1, 1]),
+                         pos[3] - pos[2]])
+    return pos[1::2] - pos[0::2]
+
+
+def box_stresses(scene, walls) -> np.ndarray:
+    """The normal stress on each wall of the box, Pa, compression positive (6,): the force of
+    the grains over the face's area (``wall_pressure``), in the order x-, x+, y-, y+, z-, z+.
+    With the four walls of a box periodic along y, y's two entries are the cell's sigma_yy:
+    the contacts' forces times their branch vectors over the box's volume (its smooth walls
+    push along x and z only, so they add nothing to it)."""
+    if len(walls) != 4:
+        return np.asarray(measure.wall_stresses(scene, walls))
+    size = box_extents(scene, walls)
+    areas = [size[1] * size[2], size[0] * size[2], size[0] * size[1]]
+    h = np.asarray(scene.cell_matrix)
+    syy = float(np.asarray(scene.cell_stress())[1, 1]) * abs(np.linalg.det(h)) / np.prod(size)
+    x = [wall_pressure(scene, w, areas[0]) for w in walls[:2]]
+    z = [wall_pressure(scene, w, areas[2]) for w in walls[2:]]
+    return np.array([*x, syy, syy, *z])
+
+
+def _servo_periodic_y(scene, walls, q: float, p: StripFootingBox, max_steps: int,
+                      check_every: int) -> prep.StageResult:
+    """Servo of a box periodic along y to the isotropic stress q (Pa): a ServoWall on each of
+    the four walls and the cell's sigma_yy by a CellController. Their own readings take a
+    fixed area (the walls') and the cell's volume (its x and z extents as built); between
+    checks each target is scaled so that the box's own stresses (``box_stresses``: the
+    walls' forces over the current faces, sigma_yy over the box's volume) reach q. Ends when
+    every stress is within ``p.tol`` of q and the unbalanced force below ``p.unbalanced``."""
+    size = box_extents(scene, walls)
+    vmax = prep.default_max_speed(scene, walls)
+    area0 = [size[1] * size[2]] * 2 + [size[0] * size[1]] * 2
+    servos = [_core.ServoWall(wall=int(w), target_stress=q, area=a, gain=0.5, max_speed=vmax)
+              for w, a in zip(walls, area0)]
+    for s in servos:
+        scene.add_controller(s)
+    cell = _core.CellController(gain=0.3, max_rate=vmax / float(size[1]))
+    cell.set_stress(1, 1, q)
+    scene.add_controller(cell)
+    start = scene.step_count
+    ok, u, st = False, float("nan"), box_stresses(scene, walls)
+    while scene.step_count - start < max_steps:
+        size = box_extents(scene, walls)
+        faces = [size[1] * size[2]] * 2 + [size[0] * size[1]] * 2
+        for s, a0, a in zip(servos, area0, faces):  # F / a0 = q a / a0 <=> F / a = q
+            s.target_stress = q * a / a0
+        h = np.asarray(scene.cell_matrix)
+        cell.set_stress(1, 1, q * float(np.prod(size)) / abs(np.linalg.det(h)))
+        scene.run(check_every)
+        st, u = box_stresses(scene, walls), float(scene.unbalanced_force())
+        if np.all(np.abs(st - q) <= p.tol * q) and u < p.unbalanced:
+            ok = True
+            break
+    axes = np.array([st[:2].mean(), st[2], st[4:].mean()])
+    return prep.StageResult(ok, scene.step_count - start, axes, float(axes.mean()), u,
+                            1.0 - measure.solid_volume(scene) / float(np.prod(size)),
+                            {"controller": cell})
 
 
 def wall_pressure(scene, wall: int, area: float) -> float:
@@ -408,14 +504,17 @@ def load_strip_footing(state: FootingBoxState, p: StripFootingBox, settlements_m
     radii = np.asarray(sc.radii)[state.grain_ids]
     r_mean, r_max = float(np.mean(radii)), float(np.max(radii))
     per_step = speed_fraction * r_mean  # the footing's move per step at most, m
-    top = float(sc.wall_positions[walls[Z_PLUS]])
+    top = float(sc.wall_positions[walls[-1]])
     sc.clear_controllers()
     for w in walls:
         sc.set_wall_velocity(int(w), (0.0, 0.0, 0.0))
     # The surcharge: the old top wall, open where the footing is, held at q by a servo.
-    surcharge = int(walls[Z_PLUS])
+    surcharge = int(walls[-1])
     sc.set_wall_opening(surcharge, axis=0, lo=-1.0, hi=b)
-    area_s = (p.length - b) * p.thickness
+    # The faces' extent along y: the periodic cell's (held through the load), or as given
+    # between walls (they moved by the preparation's servo strain only).
+    thick = state.thickness if p.periodic_y else p.thickness
+    area_s = (p.length - b) * thick
     servo = _core.ServoWall(wall=surcharge, target_stress=q, area=area_s, gain=0.5,
                             max_speed=SURCHARGE_SPEED * per_step / sc.dt)
     sc.add_controller(servo)
@@ -431,7 +530,7 @@ def load_strip_footing(state: FootingBoxState, p: StripFootingBox, settlements_m
 
     open_side()
     state.footing_wall, state.footing_side, state.servo = footing, side, servo
-    area_f = b * p.thickness
+    area_f = b * thick
 
     def footing_pressure() -> float:
         f = np.asarray(sc.wall_forces)
@@ -512,5 +611,5 @@ def load_strip_footing(state: FootingBoxState, p: StripFootingBox, settlements_m
 
 
 __all__ = ["StripFootingBox", "FootingBoxState", "prepare_footing_box", "load_strip_footing",
-           "wall_pressure", "check_settlements", "CLOUD_SOLID_FRACTION", "PACKED_POROSITY",
-           "CSV_NAME", "COLUMNS"]
+           "wall_pressure", "box_extents", "box_stresses", "check_settlements",
+           "CLOUD_SOLID_FRACTION", "PACKED_POROSITY", "CSV_NAME", "COLUMNS"]
