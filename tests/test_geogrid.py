@@ -476,3 +476,36 @@ def test_geogrid_vtk_has_time_forces_moments_and_displacements(tmp_path):
     # The clamped node has not moved; the loaded tip has, downwards.
     disp = np.asarray(s.positions)[g.nodes] - g.reference_positions
     assert np.all(disp[0] == 0) and disp[-1, 2] < 0
+
+
+@pytest.mark.parametrize("kind", ["square", "triangular", "biaxial"])
+def test_member_forces_are_the_loop_over_members_bitwise(kind):
+    """``member_axial_forces`` sums every member's section links in one pass; it gives the
+    loop over the members it replaced (``bench/member_forces.py``) bitwise: one link per
+    section (square), axes off x and y (triangular), three links per section (biaxial)."""
+    import importlib.util
+    from pathlib import Path
+
+    path = Path(__file__).resolve().parents[1] / "bench" / "member_forces.py"
+    spec = importlib.util.spec_from_file_location("member_forces", path)
+    bench = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(bench)
+    s = dem.Scene(local_damping=0.7)
+    m = s.add_material(dem.linear_material(density=1000, young=1e8, poisson=0.3,
+                                           friction_angle_deg=30))
+    p = dem.BeamParams(young=1e8, poisson=0.3, radius=1.5e-3)
+    kw = dict(origin=(0, 0, 0), params=p, material=m, density=1000)
+    g = {"square": lambda: geogrid.square_grid(s, length=0.1, width=0.1, nodes_x=5, nodes_y=4,
+                                               **kw),
+         "triangular": lambda: geogrid.triangular_grid(s, length=0.1, width=0.1, side=0.02,
+                                                       **kw),
+         "biaxial": lambda: geogrid.biaxial_geogrid(s, apertures_x=2, apertures_y=2, **kw)}[kind]()
+    s.set_auto_timestep(0.5, 100)
+    ext = np.zeros((s.num_bodies, 3))
+    ext[g.nodes] = np.random.default_rng(1).normal(0, 1e-2, (len(g.nodes), 3))
+    s.external_forces = ext
+    s.run(300)
+    new, old = g.member_axial_forces(s), bench.loop_forces(g, s)
+    assert np.count_nonzero(old) == g.n_members
+    np.testing.assert_array_equal(new, old)
+    assert bench.main(["--smoke", "--nodes", "4"])["bitwise_equal"]
