@@ -232,6 +232,12 @@ def prepare_footing_box(p: StripFootingBox, log=None, *, max_steps: int = 400_00
     ``p.unbalanced``. ``max_steps``: the step budget of each stage. The controllers are
     removed at the end and the walls stopped.
 
+    With ``p.periodic_y`` the box is a cell periodic along y with the four walls x-, x+, z-,
+    z+ (``FootingBoxState.walls``). The growth reads the cell's stress (its grains' contacts
+    over the box's volume); then a servo brings the four walls and the cell's sigma_yy to the
+    stress (``box_stresses``: sigma_yy from the contacts' forces and branch vectors over the
+    box's volume, to which the smooth walls add nothing). The cell's y extent is then held.
+
     Raises RuntimeError when the box does not settle in the budget (with what it reached).
     ``log(msg)`` gets a line per stage."""
     p.check()
@@ -279,11 +285,12 @@ def prepare_footing_box(p: StripFootingBox, log=None, *, max_steps: int = 400_00
                              f"stress {float(np.mean(box_stresses(sc, walls))):.4g} "
                              f"Pa (target {q:g}), unbalanced {float(sc.unbalanced_force()):.3g}")
 
-        # (periodic_y: the growth reads the cell's stress, its contacts between grains over
-        # the box's volume, and the servo below brings every axis to q)
-        g = prep.grow_to_stress(scene, [] if p.periodic_y else walls, q, tol=p.tol,
-                                unbalanced=p.unbalanced, max_steps=max_steps,
-                                check_every=check_every, callback=tick)
+        if p.periodic_y:
+            g = _grow_periodic_y(scene, walls, q, p, max_steps, check_every, tick)
+        else:
+            g = prep.grow_to_stress(scene, walls, q, tol=p.tol, unbalanced=p.unbalanced,
+                                    max_steps=max_steps, check_every=check_every,
+                                    callback=tick)
         stages.append((f"growth at {phi:g} deg", g))
         _say(log, f"growth at {phi:g} deg: {g.steps} steps, mean wall stress "
                   f"{g.mean_stress:.5g} Pa, porosity {g.porosity:.4f}, unbalanced "
@@ -360,6 +367,41 @@ def box_stresses(scene, walls) -> np.ndarray:
     x = [wall_pressure(scene, w, areas[0]) for w in walls[:2]]
     z = [wall_pressure(scene, w, areas[2]) for w in walls[2:]]
     return np.array([*x, syy, syy, *z])
+
+
+def _grow_periodic_y(scene, walls, q: float, p: StripFootingBox, max_steps: int,
+                     check_every: int, callback) -> prep.StageResult:
+    """Radius growth of a box periodic along y (its four walls fixed) until the box's mean
+    stress (``box_stresses``) is within ``p.tol`` of q (Pa) and the unbalanced force below
+    ``p.unbalanced``, as ``prep.grow_to_stress`` grows a walled box to its walls' mean. The
+    growth controller reads the cell's stress, its grain contacts alone over the cell's
+    volume; between checks its target is scaled by that reading over the box's mean stress
+    (the walls' contacts add 4-6 % at these sizes), so that it aims at the box's stress.
+    Aiming at its own reading instead, the growth held the box 3.5 % above q, kept the
+    frictionless grains flowing three times as long and packed them denser inside (porosity
+    0.358 against the walled box's and the elements' 0.370)."""
+    g = _core.RadiusGrowth(walls=[], target_stress=q, gain=0.5, max_strain=1e-3)
+    scene.add_controller(g)
+    start = scene.step_count
+    ok, u, mean = False, float("nan"), float("nan")
+    while scene.step_count - start < max_steps:
+        scene.run(check_every)
+        mean = float(box_stresses(scene, walls).mean())
+        own = float(np.trace(np.asarray(scene.cell_stress()))) / 3.0
+        if mean > 0 and own > 0:
+            g.target_stress = q * own / mean
+        u = float(scene.unbalanced_force())
+        callback(scene)
+        if abs(mean - q) <= p.tol * q and u < p.unbalanced:
+            ok = True
+            break
+    g.enabled = False
+    st = box_stresses(scene, walls)
+    size = box_extents(scene, walls)
+    return prep.StageResult(ok, scene.step_count - start,
+                            np.array([st[:2].mean(), st[2], st[4:].mean()]), mean, u,
+                            1.0 - measure.solid_volume(scene) / float(np.prod(size)),
+                            {"growth_factor": g.total_factor, "controller": g})
 
 
 def _servo_periodic_y(scene, walls, q: float, p: StripFootingBox, max_steps: int,
