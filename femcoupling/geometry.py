@@ -7,8 +7,9 @@ x = 0 under a footing:
   y is the out-of-plane direction. Stresses reported as 3x3 tensors are ordered (x, y, z).
 - **3D**: ``[0, width_m] x [0, length_m] x [0, height_m]`` in (x, y, z), z up; the footing is
   a strip ``[0, footing_half_width_m] x [0, length_m]`` on the top (y = 0 and y = length_m
-  are rollers, i.e. a slab of a plane-strain strip; a square footing would need only the
-  footing patch to change).
+  are rollers, i.e. a slab of a plane-strain strip), or with ``footing_length_m`` the
+  rectangle ``[0, footing_half_width_m] x [0, footing_length_m]``: a quarter of a footing
+  2 b x 2 l, x = 0 and y = 0 its planes of symmetry.
 
 Physical groups (cell tags and facet tags are separate namespaces):
 
@@ -120,6 +121,9 @@ class ReinforcedSoilBody:
         regions: DEM element regions (each must lie inside the body).
         dim: 2 (plane strain) or 3.
         length_m: extent in y for dim = 3, m (ignored in 2D).
+        footing_length_m: dim = 3 only: the footing's extent in y from the symmetry plane
+            y = 0, m (< length_m: a rectangular footing, a quarter of it; ``footing_half_width_m``
+            for a square one). None (the default): the whole length, a strip.
         mesh_size_m: element size far from the footing, m.
         fine_size_m: element size at the footing edge, in the element regions and along the
             layers, m.
@@ -148,6 +152,7 @@ class ReinforcedSoilBody:
     fine_size_m: float = 0.05
     fine_radius_m: float = 0.0
     max_cells: int | None = None
+    footing_length_m: float | None = None
 
     def __post_init__(self) -> None:
         w = _pos("width_m", self.width_m)
@@ -159,6 +164,13 @@ class ReinforcedSoilBody:
         if self.dim not in (2, 3):
             raise FemInputError(f"dim={self.dim!r}: must be 2 or 3")
         _pos("length_m", self.length_m)
+        if self.footing_length_m is not None:
+            if self.dim != 3:
+                raise FemInputError(f"footing_length_m={self.footing_length_m!r}: only for "
+                                    "dim = 3 (in 2D the footing is a plane-strain strip)")
+            if _pos("footing_length_m", self.footing_length_m) > self.length_m:
+                raise FemInputError(f"footing_length_m={self.footing_length_m!r}: must be <= "
+                                    f"length_m={self.length_m!r} (= length_m: a strip)")
         _pos("mesh_size_m", self.mesh_size_m)
         _pos("fine_size_m", self.fine_size_m)
         if self.fine_size_m > self.mesh_size_m:
@@ -262,8 +274,15 @@ class ReinforcedSoilBody:
         dist = np.hypot(x[:, None] - b, z[None, :] - h)
         size = fine + (coarse - fine) * np.clip((dist - r) / (4 * r), 0.0, 1.0)
         total = float(extra(size).sum())
-        n += total * hx * hz * depth
+        # (a rectangular footing: its two edges, x = b and y = its length, on the top)
+        edge = depth if d == 2 else self.footing_y_m + (b if self.footing_y_m < ly else 0.0)
+        n += total * hx * hz * edge
         return n
+
+    @property
+    def footing_y_m(self) -> float:
+        """The footing's extent in y, m (3D; the whole length for a strip)."""
+        return self.length_m if self.footing_length_m is None else self.footing_length_m
 
     def region_tag(self, name: str) -> int:
         """Cell tag of the element region called ``name``."""
@@ -322,7 +341,10 @@ def _build(gmsh: Any, body: ReinforcedSoilBody) -> None:
         if b < w:
             pieces.append((2, occ.addRectangle(b, 0, 0, w - b, h)))
     else:
-        pieces.append((3, occ.addBox(0, 0, 0, b, ly, h)))
+        lf = body.footing_y_m
+        pieces.append((3, occ.addBox(0, 0, 0, b, lf, h)))
+        if lf < ly:  # (a rectangular footing: the soil beside it along y)
+            pieces.append((3, occ.addBox(0, lf, 0, b, ly - lf, h)))
         if b < w:
             pieces.append((3, occ.addBox(b, 0, 0, w - b, ly, h)))
     layer_boxes = []
@@ -381,7 +403,8 @@ def _build(gmsh: Any, body: ReinforcedSoilBody) -> None:
         if abs(c[zc]) < tol:
             t = BOTTOM
         elif abs(c[zc] - h) < tol:
-            t = FOOTING if c[0] < b + tol else TOP
+            on = c[0] < b + tol and (dim == 2 or c[1] < body.footing_y_m + tol)
+            t = FOOTING if on else TOP
         elif abs(c[0]) < tol:
             t = X_MIN
         elif abs(c[0] - w) < tol:
@@ -404,10 +427,13 @@ def _build(gmsh: Any, body: ReinforcedSoilBody) -> None:
     f = gmsh.model.mesh.field
     e = 1e-6 * max(w, h)
     edge_dim = 0 if dim == 2 else 1
-    hi_y = 0.0 if dim == 2 else ly
+    hi_y = 0.0 if dim == 2 else body.footing_y_m
     zlo = (b - e, -e, h - e) if dim == 3 else (b - e, h - e, -e)
     zhi = (b + e, hi_y + e, h + e) if dim == 3 else (b + e, h + e, e)
     edge = [t for _, t in gmsh.model.getEntitiesInBoundingBox(*zlo, *zhi, dim=edge_dim)]
+    if dim == 3 and hi_y < ly:  # (a rectangular footing: and its edge y = hi_y, x <= b)
+        edge += [t for _, t in gmsh.model.getEntitiesInBoundingBox(
+            -e, hi_y - e, h - e, b + e, hi_y + e, h + e, dim=edge_dim) if t not in edge]
     if not edge:
         raise RuntimeError("gmsh: footing edge not found")
     dist = f.add("Distance")

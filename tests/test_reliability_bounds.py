@@ -177,6 +177,9 @@ def test_the_cell_estimate_is_within_a_factor_of_two_of_gmsh():
         _body(width_m=2.0, height_m=1.5, footing_half_width_m=0.3, dim=3, length_m=0.5,
               layers=(GeogridLayer(z_m=1.2, x_min_m=0, x_max_m=1.5, thickness_m=0.02),),
               regions=(ElementRegion("c", (0.3, 0.25, 1.0), 0.2),), mesh_size_m=0.3),
+        # a rectangular footing: the estimate counts its two edges
+        _body(width_m=2.0, height_m=1.5, footing_half_width_m=0.3, dim=3, length_m=1.0,
+              footing_length_m=0.1, mesh_size_m=0.3),
     ]
     for body in bodies:
         with _gmsh_model("estimate") as gmsh:
