@@ -191,3 +191,23 @@ def test_the_bench_runs_at_smoke_size(tmp_path, capsys):
         assert (tmp_path / f).is_file(), f
     with pytest.raises(SystemExit, match="holds an earlier run"):
         bench.main(["--smoke", "--out", str(tmp_path)])
+
+
+def test_the_bench_runs_both_boxes_at_smoke_size(tmp_path):
+    """--out-of-plane both (the documented command at smoke size): each seed's walled and
+    periodic boxes from the same grains, FEM x DEM paired with each, and the periodic box
+    with the walled one."""
+    bench = _bench()
+    s = bench.main(["--smoke", "--out-of-plane", "both", "--settlements-mm", "0.05,0.1",
+                    "--out", str(tmp_path)])
+    run = s["runs"]["1"]
+    assert s["direct_dem"] == ["dem", "dem_periodic"]
+    assert run["dem"]["grains"] == run["dem_periodic"]["grains"]
+    assert run["dem_periodic"]["porosity"] < run["dem"]["porosity"]  # (no y walls' layers)
+    pw = s["periodic_minus_walls"]
+    assert pw["settlement_m"] == pytest.approx([0.0, 0.05e-3, 0.1e-3])
+    assert pw["fem_dem_pa"] == pytest.approx(run["dem_periodic"]["footing_pressure_pa"])
+    assert s["paired_periodic"]["dem_pa"] == pw["fem_dem_pa"]
+    assert (tmp_path / "dem_periodic_seed1" / "footing_dem.csv").is_file()
+    rows = (tmp_path / "load_settlement.csv").read_text().splitlines()
+    assert sum(r.startswith("dem_periodic,") for r in rows) == 3
