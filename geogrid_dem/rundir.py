@@ -85,11 +85,36 @@ def _writable_or_error(out: Path) -> str | None:
     return None
 
 
+#: Environment variables an MPI launcher sets to the number of ranks (MPICH's and Intel's
+#: Hydra, Open MPI, PMIx).
+MPI_SIZE_VARS = ("PMI_SIZE", "OMPI_COMM_WORLD_SIZE", "PMIX_SIZE")
+
+
+def mpi_ranks() -> int:
+    """The number of MPI ranks this process was started among (1 outside ``mpiexec``), read
+    from the launcher's environment, without starting MPI."""
+    import os
+
+    for name in MPI_SIZE_VARS:
+        v = os.environ.get(name, "")
+        if v.isdigit() and int(v) > 0:
+            return int(v)
+    return 1
+
+
 def check_common_args(ap: argparse.ArgumentParser, a: argparse.Namespace) -> None:
     """Refuses (through ``ap.error``, naming the flag and the value) a ``--threads`` below 0 and
-    an ``--out`` that is a file or cannot be written into; records ``--overwrite`` (where the
-    parser has it) for :func:`run_main` and the runs of this process."""
+    an ``--out`` that is a file or cannot be written into, and a start as more than one MPI
+    rank (:func:`mpi_ranks`); records ``--overwrite`` (where the parser has it) for
+    :func:`run_main` and the runs of this process."""
     global _OVERWRITE
+    ranks = mpi_ranks()
+    if ranks > 1:
+        ap.error(f"started as {ranks} MPI ranks (mpiexec -n {ranks}): a case runs as one "
+                 f"process, so each rank would run it whole and the {ranks} would write the "
+                 "same results; run it without mpiexec (a case's DEM elements run on Dask "
+                 "workers: --workers), or drive femcoupling's models from your own script "
+                 "under mpiexec (docs/fem.md, \"Under MPI\")")
     _OVERWRITE = bool(getattr(a, "overwrite", False))
     threads = getattr(a, "threads", None)
     if threads is not None and threads < 0:

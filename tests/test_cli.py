@@ -237,3 +237,23 @@ def test_a_completed_run_that_exits_with_a_coupling_status_keeps_its_run_file(tm
     with pytest.raises(SystemExit):
         gcli.run_cmd("triaxial", ["--smoke", "--out", str(out)])
     assert not (out / "run.toml").exists()
+
+
+@pytest.mark.parametrize("var", ["PMI_SIZE", "OMPI_COMM_WORLD_SIZE"])
+def test_a_case_started_as_several_mpi_ranks_is_refused(tmp_path, monkeypatch, capsys, var):
+    """Under ``mpiexec -n 2`` every rank would run a case whole and write the same results:
+    each case refuses it before it starts (its launcher's environment, read without MPI)."""
+    from geogrid_dem.cases import footing_multiscale, triaxial
+    from geogrid_dem.rundir import mpi_ranks
+
+    assert mpi_ranks() == 1
+    monkeypatch.setenv(var, "2")
+    assert mpi_ranks() == 2
+    for mod in (triaxial, footing_multiscale):
+        with pytest.raises(SystemExit) as e:
+            mod.main(["--smoke", "--out", str(tmp_path / mod.__name__)])
+        assert e.value.code == 2
+        assert "started as 2 MPI ranks (mpiexec -n 2)" in capsys.readouterr().err
+        assert not (tmp_path / mod.__name__).exists()
+    monkeypatch.setenv(var, "1")
+    assert mpi_ranks() == 1
