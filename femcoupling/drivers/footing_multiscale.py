@@ -1,8 +1,12 @@
 """The FEM side of ``geogrid-dem run footing-multiscale``: a strip footing on geogrid-reinforced
-soil in plane strain, with a DEM element at every cell of the zone under the footing.
+soil in plane strain, with a DEM element at every cell of the zone under the footing; or, with
+``dim = 3``, a square footing in 3D.
 
 The body (``femcoupling.geometry``: the half next to the symmetry plane x = 0, z up) has
-a square zone of edge b (the footing's half width) right under the footing. The run:
+a square zone of edge b (the footing's half width) right under the footing. In 3D the body is
+the quarter next to the planes x = 0 and y = 0 under a square footing 2b x 2b, ``width`` in x
+and in y, and the zone a cube of edge b under it; the layer covers the body across y. The
+run:
 
 1. **Calibration.** The Drucker–Prager soil outside the zone is fitted on an element of the
    zone's own grains: E and nu its secant along the zone's mean stress path in a first FEM
@@ -42,6 +46,9 @@ from pathlib import Path
 import numpy as np
 
 VARIANTS = ("unreinforced", "RE", "PRS")
+#: The Voigt components of the elements' finite-difference tangents: the x-z plane's in plane
+#: strain (xx, zz, xz), all six in 3D.
+FD_COMPONENTS = {2: (0, 2, 4), 3: (0, 1, 2, 3, 4, 5)}
 
 
 @dataclasses.dataclass
@@ -81,6 +88,7 @@ class FootingParams:
     variants: tuple = VARIANTS      #: which variants to run
     threads: int = 1                #: OpenMP threads of this process (the FEM; the elements
                                     #: run one thread each on their workers)
+    dim: int = 2                    #: 2: a strip footing in plane strain; 3: a square one
 
     def check(self) -> None:
         """Refuses a bad value, naming the field, the value and what is allowed."""
@@ -123,6 +131,11 @@ class FootingParams:
             bad("seeds", "distinct whole numbers >= 0")
         if not self.variants or any(v not in VARIANTS for v in self.variants):
             bad("variants", f"a non-empty selection of {', '.join(VARIANTS)}")
+        if self.dim not in (2, 3):
+            bad("dim", "2 (a strip footing, plane strain) or 3 (a square footing)")
+        if self.dim == 3 and self.band_grains:
+            bad("band_grains", "0 in 3D (the layer's cells stay the FEM's band: the reinforced "
+                               "RVEs are verified in plane strain only)")
 
     @property
     def pressures_pa(self) -> list:
@@ -135,18 +148,21 @@ class FootingParams:
 
 
 def body(p: FootingParams, reinforced: bool):
-    """The plane-strain body: the zone ``"zone"`` (edge b, under the footing, from the
-    surface down) and, ``reinforced``, one geogrid layer ``layer_depth`` below the surface."""
+    """The body: the zone ``"zone"`` (edge b, under the footing, from the surface down) and,
+    ``reinforced``, one geogrid layer ``layer_depth`` below the surface; plane strain, or
+    (``p.dim`` 3) the quarter of a square footing, the body ``width`` in x and in y."""
     from femcoupling.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
 
     b, h = p.footing_b, p.height
     layers = (GeogridLayer(z_m=h - p.layer_depth, x_min_m=0.0, x_max_m=p.layer_length,
                            thickness_m=p.layer_thickness, name="geogrid"),) if reinforced \
         else ()
-    zone = ElementRegion("zone", (0.5 * b, h - 0.5 * b), b)
+    centre = (0.5 * b, h - 0.5 * b) if p.dim == 2 else (0.5 * b, 0.5 * b, h - 0.5 * b)
+    square = dict(dim=3, length_m=p.width, footing_length_m=b) if p.dim == 3 else {}
     return ReinforcedSoilBody(width_m=p.width, height_m=h, footing_half_width_m=b,
-                              layers=layers, regions=(zone,), mesh_size_m=p.mesh_size,
-                              fine_size_m=p.fine_size, fine_radius_m=b)
+                              layers=layers, regions=(ElementRegion("zone", centre, b),),
+                              mesh_size_m=p.mesh_size, fine_size_m=p.fine_size,
+                              fine_radius_m=b, **square)
 
 
 def model(p: FootingParams, variant: str, soil):
@@ -299,7 +315,7 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
         try:
             group = PoolRegionMaterials.build(cells, runner, client=client,
                                               distinct_seeds=True, band=band,
-                                              fd_components=(0, 2, 4),  # (x-z plane)
+                                              fd_components=FD_COMPONENTS[p.dim],
                                               records=out / f"zone_elements_{tag}.h5")
             break
         except RuntimeError as exc:

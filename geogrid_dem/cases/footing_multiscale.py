@@ -2,7 +2,8 @@
 """A strip footing on geogrid-reinforced soil, multiscale: a DEM element at every cell of the
 zone under the footing, Drucker–Prager calibrated on the same grains around it.
 
-Plane strain, the half next to the symmetry plane (z up). Three variants on the same seeds:
+Plane strain, the half next to the symmetry plane (z up); with --dim 3 a square footing in
+3D, the quarter next to its two planes of symmetry. Three variants on the same seeds:
 unreinforced, RE (one geogrid layer, an elastic band of stiffness J) and PRS (the same layer
 prestressed by T_p). Each is seated to --seat with the fitted Drucker–Prager everywhere;
 then every soil cell of the b x b zone under the footing takes its own dense periodic DEM
@@ -39,6 +40,9 @@ from geogrid_dem.rundir import run_main
 #: level, two seeds.
 SMOKE = dict(width=2.0, height=1.5, mesh_size=0.5, fine_size=0.35, cell_grains=80, levels=1,
              fit_points=4, pressure_pa=40e3)
+#: The smoke in 3D (--dim 3), over SMOKE: coarser zone cells and smaller elements (a zone
+#: of 0.35 m cells has 93 tetrahedra unreinforced, 140 with the layer).
+SMOKE_3D = dict(fine_size=0.5, cell_grains=50)
 
 
 def log(msg: str) -> None:
@@ -94,6 +98,11 @@ def build_parser():
                          "cells stay the FEM's elastic band)")
     ap.add_argument("--workers", type=int, default=d.workers,
                     help="Dask workers of the zone's elements (a LocalCluster)")
+    ap.add_argument("--dim", type=int, choices=(2, 3), default=d.dim,
+                    help="2: a strip footing in plane strain; 3: a square footing 2b x 2b in "
+                         "3D, a quarter of it modelled (the body as wide in y as in x, the "
+                         f"zone a cube of edge b; smoke: --fine-size {SMOKE_3D['fine_size']:g}"
+                         f", --cell-grains {SMOKE_3D['cell_grains']})")
     return ap
 
 
@@ -103,7 +112,7 @@ FLAGS = {"--pressure": "pressure_pa", "--seat": "seat_pa", "--levels": "levels",
          "--layer-thickness": "layer_thickness",
          "--grid-stiffness": "grid_stiffness", "--prestress": "prestress",
          "--fine-size": "fine_size", "--cell-grains": "cell_grains",
-         "--band-grains": "band_grains", "--workers": "workers"}
+         "--band-grains": "band_grains", "--workers": "workers", "--dim": "dim"}
 
 
 def parse_args(argv=None):
@@ -112,6 +121,8 @@ def parse_args(argv=None):
     ap = build_parser()
     a = parse_checked(ap, argv)
     p = FootingParams(**SMOKE) if a.smoke else FootingParams()
+    if a.smoke and a.dim == 3:
+        p = replace(p, **SMOKE_3D)
     seeds = a.seeds if a.seeds is not None else (2 if a.smoke else 3)
     if seeds < 1:
         ap.error(f"--seeds={seeds}: must be >= 1")
