@@ -23,7 +23,7 @@ gravity. For each seed s:
 The footing pressures are paired over the seeds at each settlement both reached: FEM x DEM
 minus direct DEM, the mean and its standard error (``femcoupling.footing_dem.
 paired_pressures``); with ``both``, FEM x DEM minus each box, and the periodic box minus the
-walled one. With ``--oedometer`` the box (prepared again: the same) and the first 8
+walled one. With ``--oedometer`` the walled box (prepared again: the same) and the first 8
 elements of each seed also go through the same oedometric path from q, which compares the
 material itself (``oedometric_moduli``).
 
@@ -43,6 +43,7 @@ from __future__ import annotations
 
 import argparse
 import json
+from dataclasses import replace
 import sys
 import time
 from pathlib import Path
@@ -103,9 +104,9 @@ def parse(argv=None) -> argparse.Namespace:
         a.seeds = 1 if a.smoke else 3
     if a.seeds < 1:
         ap.error(f"--seeds={a.seeds}: must be >= 1")
-    if a.oedometer and a.out_of_plane != "walls":
-        ap.error(f"--oedometer with --out-of-plane {a.out_of_plane}: the oedometer takes the "
-                 "box between its six walls; run it with --out-of-plane walls")
+    if a.oedometer and a.out_of_plane == "periodic":
+        ap.error("--oedometer with --out-of-plane periodic: the oedometer takes the box between "
+                 "its six walls; run it with --out-of-plane walls or both")
     return a
 
 
@@ -276,8 +277,8 @@ def main(argv=None) -> dict:
                                "radius_mean_m": r_el,
                                "preparation_s": pool_s,
                                "wall_s": time.perf_counter() - t}
-        if a.oedometer:
-            runs[s]["oedometer"] = o = oedometric_moduli(box, fac)
+        if a.oedometer:  # (the walled box)
+            runs[s]["oedometer"] = o = oedometric_moduli(replace(box, periodic_y=False), fac)
             print(f"[footing vs dem] seed {s}: constrained modulus at eps_zz "
                   f"{o['strain'][-1]:g}: box {o['box_pa'][-1] / 1e6:.2f} MPa, elements "
                   f"{o['elements_pa'][-1] / 1e6:.2f} MPa", flush=True)

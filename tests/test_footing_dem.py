@@ -157,7 +157,7 @@ def test_the_interior_porosity_of_a_simple_cubic_lattice():
     assert _bench()._interior_porosity(state, 2 * r, r / 6) == pytest.approx(est, abs=1e-12)
 
 
-def test_the_bench_takes_a_box_periodic_out_of_plane_and_refuses_it_for_the_oedometer(capsys):
+def test_the_bench_takes_a_periodic_box_and_refuses_the_oedometer_on_it_alone(capsys):
     bench = _bench()
     assert bench.parse(["--smoke", "--out-of-plane", "both"]).out_of_plane == "both"
     assert bench.parse(["--smoke"]).out_of_plane == "walls"
@@ -165,13 +165,15 @@ def test_the_bench_takes_a_box_periodic_out_of_plane_and_refuses_it_for_the_oedo
     with pytest.raises(SystemExit):
         bench.parse(["--smoke", "--out-of-plane", "periodic", "--oedometer"])
     assert "--oedometer with --out-of-plane periodic" in capsys.readouterr().err
+    assert bench.parse(["--smoke", "--out-of-plane", "both", "--oedometer"]).oedometer
 
 
 def test_the_bench_runs_at_smoke_size(tmp_path, capsys):
     import json
 
     bench = _bench()
-    summary = bench.main(["--smoke", "--oedometer", "--out", str(tmp_path)])
+    summary = bench.main(["--smoke", "--oedometer", "--out-of-plane", "both", "--out",
+                          str(tmp_path)])
     row = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert row["seeds"] == 1 and row["settlement_m"] == pytest.approx(0.2e-3)
     run = summary["runs"]["1"]
@@ -189,25 +191,18 @@ def test_the_bench_runs_at_smoke_size(tmp_path, capsys):
     for f in ("footing_direct_dem.json", "load_settlement.csv", "load_settlement.png",
               "dem_seed1/footing_dem.csv", "fem_dem_seed1/footing_fem_dem.csv"):
         assert (tmp_path / f).is_file(), f
-    with pytest.raises(SystemExit, match="holds an earlier run"):
-        bench.main(["--smoke", "--out", str(tmp_path)])
-
-
-def test_the_bench_runs_both_boxes_at_smoke_size(tmp_path):
-    """--out-of-plane both (the documented command at smoke size): each seed's walled and
-    periodic boxes from the same grains, FEM x DEM paired with each, and the periodic box
-    with the walled one."""
-    bench = _bench()
-    s = bench.main(["--smoke", "--out-of-plane", "both", "--settlements-mm", "0.05,0.1",
-                    "--out", str(tmp_path)])
-    run = s["runs"]["1"]
-    assert s["direct_dem"] == ["dem", "dem_periodic"]
-    assert run["dem"]["grains"] == run["dem_periodic"]["grains"]
-    assert run["dem_periodic"]["porosity"] < run["dem"]["porosity"]  # (no y walls' layers)
-    pw = s["periodic_minus_walls"]
-    assert pw["settlement_m"] == pytest.approx([0.0, 0.05e-3, 0.1e-3])
-    assert pw["fem_dem_pa"] == pytest.approx(run["dem_periodic"]["footing_pressure_pa"])
-    assert s["paired_periodic"]["dem_pa"] == pw["fem_dem_pa"]
+    # --out-of-plane both: each seed's periodic box from the same grains, FEM x DEM paired
+    # with each box, and the periodic box with the walled one
+    assert summary["direct_dem"] == ["dem", "dem_periodic"]
+    per = run["dem_periodic"]
+    assert per["grains"] == run["dem"]["grains"]
+    assert per["porosity"] < run["dem"]["porosity"]  # (no y walls' loose layers)
+    pw = summary["periodic_minus_walls"]
+    assert pw["fem_dem_pa"] == pytest.approx(per["footing_pressure_pa"])
+    assert pw["dem_pa"] == pytest.approx(run["dem"]["footing_pressure_pa"])
+    assert summary["paired_periodic"]["dem_pa"] == pw["fem_dem_pa"]
     assert (tmp_path / "dem_periodic_seed1" / "footing_dem.csv").is_file()
     rows = (tmp_path / "load_settlement.csv").read_text().splitlines()
-    assert sum(r.startswith("dem_periodic,") for r in rows) == 3
+    assert sum(r.startswith("dem_periodic,") for r in rows) == len(per["settlement_m"])
+    with pytest.raises(SystemExit, match="holds an earlier run"):
+        bench.main(["--smoke", "--out", str(tmp_path)])
