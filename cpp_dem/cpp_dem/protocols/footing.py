@@ -233,10 +233,11 @@ def prepare_footing_box(p: StripFootingBox, log=None, *, max_steps: int = 400_00
     removed at the end and the walls stopped.
 
     With ``p.periodic_y`` the box is a cell periodic along y with the four walls x-, x+, z-,
-    z+ (``FootingBoxState.walls``). The growth reads the cell's stress (its grains' contacts
-    over the box's volume); then a servo brings the four walls and the cell's sigma_yy to the
-    stress (``box_stresses``: sigma_yy from the contacts' forces and branch vectors over the
-    box's volume, to which the smooth walls add nothing). The cell's y extent is then held.
+    z+ (``FootingBoxState.walls``). The growth aims at the box's own mean stress
+    (``box_stresses``: the walls' forces over their faces, and sigma_yy from the contacts'
+    forces and branch vectors over the box's volume, to which the smooth walls add nothing);
+    then a servo brings the four walls and sigma_yy to the stress. The cell's y extent is
+    then held.
 
     Raises RuntimeError when the box does not settle in the budget (with what it reached).
     ``log(msg)`` gets a line per stage."""
