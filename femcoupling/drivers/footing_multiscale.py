@@ -70,7 +70,7 @@ class FootingParams:
     steps_per_level: int = 2        #: FEM load steps aimed at per level
     mesh_size: float = 0.5          #: FEM cell size far from the footing, m
     fine_size: float = 0.125        #: FEM cell size in the zone and along the layer, m
-    cell_grains: int = 80           #: grains of each cell's periodic element
+    cell_grains: int = 150          #: grains of each cell's periodic element
     band_grains: int = 0            #: grains of the reinforced RVE of each of the layer's
                                     #: cells in the zone (0: they stay the FEM's band)
     radius_mean: float = 0.003      #: the grains' mean radius, m
