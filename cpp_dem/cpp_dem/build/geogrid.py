@@ -25,6 +25,7 @@ changes nothing in a quasi-static equilibrium but slows the grid's dynamic respo
 from __future__ import annotations
 
 import dataclasses
+import functools
 import math
 from typing import Sequence
 
@@ -78,7 +79,7 @@ class Geogrid:
         """Axial force of every member, N, tension positive: the sum over the links cut by the
         member's mid-section of the link axial force projected on the member axis (each
         member's links summed in their order: :func:`section_sums`)."""
-        links, member, starts = section_index(self, self.member_section_links)
+        links, member, starts = self._section_index
         nodes = np.asarray(scene.grid_link_nodes)[links]
         pos = np.asarray(scene.positions)
         d = pos[nodes[:, 1]] - pos[nodes[:, 0]]
@@ -88,6 +89,19 @@ class Geogrid:
         proj = np.abs(np.matmul(d[:, None, :], self.member_axis[member][:, :, None])[:, 0, 0])
         terms = np.asarray(scene.grid_link_axial_forces)[links] * proj
         return section_sums(terms, starts, self.n_members)
+
+    @functools.cached_property
+    def _section_index(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """The members' section links flattened, computed once (a grid's sections do not
+        change after it is built): (the links in member order, each one's member, where each
+        member's run starts)."""
+        lens = [len(sec) for sec in self.member_section_links]
+        flat = (np.concatenate([np.asarray(sec, dtype=np.int64)
+                                for sec in self.member_section_links])
+                if sum(lens) else np.zeros(0, dtype=np.int64))
+        member = np.repeat(np.arange(len(lens)), lens)
+        starts = np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64)
+        return flat, member, starts
 
     def member_axial_stresses(self, scene) -> np.ndarray:
         """Axial stress of every member, Pa, tension positive (force / cross-section area)."""
@@ -129,27 +143,11 @@ class Geogrid:
 # ---- helpers -------------------------------------------------------------------------------
 
 
-def section_index(owner, sections: list) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The members' section lists flattened: (the links or bonds in member order, each one's
-    member, where each member's run starts), kept on ``owner`` (a grid: its sections do not
-    change after it is built)."""
-    hit = owner.__dict__.get("_section_index")
-    if hit is not None and hit[0] is sections:
-        return hit[1]
-    lens = [len(sec) for sec in sections]
-    flat = (np.concatenate([np.asarray(sec, dtype=np.int64) for sec in sections])
-            if sum(lens) else np.zeros(0, dtype=np.int64))
-    member = np.repeat(np.arange(len(lens)), lens)
-    starts = np.concatenate([[0], np.cumsum(lens)[:-1]]).astype(np.int64)
-    owner.__dict__["_section_index"] = (sections, (flat, member, starts))
-    return flat, member, starts
-
-
 def section_sums(terms: np.ndarray, starts: np.ndarray, n: int) -> np.ndarray:
     """Each member's terms summed, (n,): the contiguous run of ``terms`` from each of
-    ``starts`` (``section_index``), added one after the other from 0 as ``np.sum`` adds a
-    short run (so bitwise its sum; ``np.add.reduceat`` adds in another order); 0 for a
-    member without any."""
+    ``starts`` (``Geogrid._section_index``), added one after the other from 0 as ``np.sum``
+    adds a short run (so bitwise its sum; ``np.add.reduceat`` adds in another order); 0 for
+    a member without any."""
     out = np.zeros(n)
     lens = np.diff(np.append(starts, len(terms)))
     for k in range(int(lens.max()) if n else 0):  # (a section has a few links at most)
