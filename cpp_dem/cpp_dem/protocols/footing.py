@@ -69,8 +69,6 @@ CSV_NAME = "footing_dem.csv"
 #: Columns of each load level (the CSV header and the keys of the returned dict).
 COLUMNS = ("settlement_m", "footing_pressure_pa", "surcharge_pa", "unbalanced", "steps",
            "relaxed", "wall_s")
-#: Wall ids of the box in ``Scene.add_box`` order.
-X_MINUS, X_PLUS, Y_MINUS, Y_PLUS, Z_MINUS, Z_PLUS = range(6)
 
 
 @dataclass
@@ -328,14 +326,12 @@ def prepare_footing_box(p: StripFootingBox, log=None, *, max_steps: int = 400_00
         scene.set_wall_velocity(int(w), (0.0, 0.0, 0.0))
     if p.periodic_y:
         scene.velocity_gradient = np.zeros((3, 3))  # (y held from here: plane strain)
-    size = box_extents(scene, walls)
+    porosity = (_box_porosity if p.periodic_y else measure.porosity)(scene, walls)
     state = FootingBoxState(
-        scene=scene, walls=list(walls), grains=n,
-        porosity=(1.0 - measure.solid_volume(scene) / float(np.prod(size)) if p.periodic_y
-                  else measure.porosity(scene, walls)),
+        scene=scene, walls=list(walls), grains=n, porosity=porosity,
         wall_stresses=st, unbalanced=u, grain_ids=np.asarray(grains), grain_material=gm,
         wall_material=wm, top=float(scene.wall_positions[walls[-1]]),
-        thickness=float(size[1]), steps=scene.step_count - k0,
+        thickness=float(box_extents(scene, walls)[1]), steps=scene.step_count - k0,
         wall_s=time.perf_counter() - t0, stages=stages)
     _say(log, f"prepared: porosity {state.porosity:.4f}, mean radius "
               f"{float(np.mean(scene.radii)):.4g} m, {state.steps} steps, "
@@ -362,12 +358,26 @@ def box_stresses(scene, walls) -> np.ndarray:
     if len(walls) != 4:
         return np.asarray(measure.wall_stresses(scene, walls))
     size = box_extents(scene, walls)
-    areas = [size[1] * size[2], size[0] * size[2], size[0] * size[1]]
     h = np.asarray(scene.cell_matrix)
     syy = float(np.asarray(scene.cell_stress())[1, 1]) * abs(np.linalg.det(h)) / np.prod(size)
-    x = [wall_pressure(scene, w, areas[0]) for w in walls[:2]]
-    z = [wall_pressure(scene, w, areas[2]) for w in walls[2:]]
-    return np.array([*x, syy, syy, *z])
+    x0, x1, z0, z1 = (wall_pressure(scene, w, a) for w, a in zip(walls, _faces(size)))
+    return np.array([x0, x1, syy, syy, z0, z1])
+
+
+def _faces(size) -> list[float]:
+    """The areas of the four walls x-, x+, z-, z+ of a box periodic along y, m^2."""
+    return [size[1] * size[2]] * 2 + [size[0] * size[1]] * 2
+
+
+def _box_porosity(scene, walls) -> float:
+    """Porosity of a box periodic along y (its four walls), -: ``measure.porosity``'s, over
+    the box's volume (the walls' positions and the cell's y extent)."""
+    return 1.0 - measure.solid_volume(scene) / float(np.prod(box_extents(scene, walls)))
+
+
+def _axes(st: np.ndarray) -> np.ndarray:
+    """The box's axis stresses (3,), Pa, from ``box_stresses``' six."""
+    return np.array([st[:2].mean(), st[2], st[4:].mean()])
 
 
 def _grow_periodic_y(scene, walls, q: float, p: StripFootingBox, max_steps: int,
@@ -378,9 +388,9 @@ def _grow_periodic_y(scene, walls, q: float, p: StripFootingBox, max_steps: int,
     growth controller reads the cell's stress, its grain contacts alone over the cell's
     volume; between checks its target is scaled by that reading over the box's mean stress
     (the walls' contacts add 4-6 % at these sizes), so that it aims at the box's stress.
-    Aiming at its own reading instead, the growth held the box 3.5 % above q, kept the
-    frictionless grains flowing three times as long and packed them denser inside (porosity
-    0.358 against the walled box's and the elements' 0.370)."""
+    Aiming at its own reading instead, the growth held the box 3.5 % above q (and at the
+    bench's size took 199 400 steps against 128 000; both end denser inside than the walled
+    box, docs/multiscale.md)."""
     g = _core.RadiusGrowth(walls=[], target_stress=q, gain=0.5, max_strain=1e-3)
     scene.add_controller(g)
     start = scene.step_count
@@ -397,11 +407,8 @@ def _grow_periodic_y(scene, walls, q: float, p: StripFootingBox, max_steps: int,
             ok = True
             break
     g.enabled = False
-    st = box_stresses(scene, walls)
-    size = box_extents(scene, walls)
-    return prep.StageResult(ok, scene.step_count - start,
-                            np.array([st[:2].mean(), st[2], st[4:].mean()]), mean, u,
-                            1.0 - measure.solid_volume(scene) / float(np.prod(size)),
+    return prep.StageResult(ok, scene.step_count - start, _axes(box_stresses(scene, walls)),
+                            mean, u, _box_porosity(scene, walls),
                             {"growth_factor": g.total_factor, "controller": g})
 
 
@@ -415,7 +422,7 @@ def _servo_periodic_y(scene, walls, q: float, p: StripFootingBox, max_steps: int
     every stress is within ``p.tol`` of q and the unbalanced force below ``p.unbalanced``."""
     size = box_extents(scene, walls)
     vmax = prep.default_max_speed(scene, walls)
-    area0 = [size[1] * size[2]] * 2 + [size[0] * size[1]] * 2
+    area0 = _faces(size)
     servos = [_core.ServoWall(wall=int(w), target_stress=q, area=a, gain=0.5, max_speed=vmax)
               for w, a in zip(walls, area0)]
     for s in servos:
@@ -427,8 +434,7 @@ def _servo_periodic_y(scene, walls, q: float, p: StripFootingBox, max_steps: int
     ok, u, st = False, float("nan"), box_stresses(scene, walls)
     while scene.step_count - start < max_steps:
         size = box_extents(scene, walls)
-        faces = [size[1] * size[2]] * 2 + [size[0] * size[1]] * 2
-        for s, a0, a in zip(servos, area0, faces):  # F / a0 = q a / a0 <=> F / a = q
+        for s, a0, a in zip(servos, area0, _faces(size)):  # F / a0 = q a / a0 <=> F / a = q
             s.target_stress = q * a / a0
         h = np.asarray(scene.cell_matrix)
         cell.set_stress(1, 1, q * float(np.prod(size)) / abs(np.linalg.det(h)))
@@ -437,10 +443,9 @@ def _servo_periodic_y(scene, walls, q: float, p: StripFootingBox, max_steps: int
         if np.all(np.abs(st - q) <= p.tol * q) and u < p.unbalanced:
             ok = True
             break
-    axes = np.array([st[:2].mean(), st[2], st[4:].mean()])
+    axes = _axes(st)
     return prep.StageResult(ok, scene.step_count - start, axes, float(axes.mean()), u,
-                            1.0 - measure.solid_volume(scene) / float(np.prod(size)),
-                            {"controller": cell})
+                            _box_porosity(scene, walls), {"controller": cell})
 
 
 def wall_pressure(scene, wall: int, area: float) -> float:
