@@ -217,6 +217,16 @@ def _figure(path: Path, runs: dict, b: float) -> None:
     plt.close(fig)
 
 
+def _print_pairs(d: dict, first: str, second: str) -> None:
+    """A line per settlement of a ``paired_pressures`` result: each side's mean pressure and
+    their paired difference with its standard error."""
+    for k, s in enumerate(d["settlement_m"]):
+        print(f"[footing vs dem] settlement {1e3 * s:.3f} mm: {first} "
+              f"{d['fem_dem_pa'][k] / 1e3:.1f} kPa, {second} {d['dem_pa'][k] / 1e3:.1f} kPa, "
+              f"difference {d['difference_pa'][k] / 1e3:+.1f} +- {d['se_pa'][k] / 1e3:.1f} kPa "
+              f"({d['seeds']} seeds)")
+
+
 def main(argv=None) -> dict:
     a = parse(argv)
     from cpp_dem.elements.pool import ElementPool
@@ -312,18 +322,9 @@ def main(argv=None) -> dict:
                    else np.full(r.shape[1], np.nan)).tolist()}
     write_json(out / "footing_direct_dem.json", summary)
     _figure(out / "load_settlement.png", runs, a.b)
-    for k, s in enumerate(d["settlement_m"]):
-        print(f"[footing vs dem] settlement {1e3 * s:.3f} mm: FEM x DEM "
-              f"{d['fem_dem_pa'][k] / 1e3:.1f} kPa, direct DEM ({keys[0]}) "
-              f"{d['dem_pa'][k] / 1e3:.1f} kPa, difference {d['difference_pa'][k] / 1e3:+.1f} "
-              f"+- {d['se_pa'][k] / 1e3:.1f} kPa ({d['seeds']} seeds)")
+    _print_pairs(d, "FEM x DEM", f"direct DEM ({keys[0]})")
     if extra:
-        pw = extra["periodic_minus_walls"]
-        for k, s in enumerate(pw["settlement_m"]):
-            print(f"[footing vs dem] settlement {1e3 * s:.3f} mm: periodic box "
-                  f"{pw['fem_dem_pa'][k] / 1e3:.1f} kPa, walled box {pw['dem_pa'][k] / 1e3:.1f} "
-                  f"kPa, difference {pw['difference_pa'][k] / 1e3:+.1f} +- "
-                  f"{pw['se_pa'][k] / 1e3:.1f} kPa ({pw['seeds']} seeds)")
+        _print_pairs(extra["periodic_minus_walls"], "periodic box", "walled box")
     last = {"settlement_m": float(d["settlement_m"][-1]),
             "fem_dem_pa": float(d["fem_dem_pa"][-1]), "dem_pa": float(d["dem_pa"][-1]),
             "difference_pa": float(d["difference_pa"][-1]), "se_pa": float(d["se_pa"][-1]),
