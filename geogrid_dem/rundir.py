@@ -374,6 +374,19 @@ def _full_disk(e: BaseException) -> bool:
                                                   getattr(_errno, "EDQUOT", -1))
 
 
+def _from_interrupt(e: BaseException) -> bool:
+    """True when ``e`` was raised because of a KeyboardInterrupt (in its chain of causes and
+    contexts): a Ctrl-C that arrived while a C extension initialised (matplotlib's
+    ``ft2font`` gives ``ImportError: initialization failed``, caused by it)."""
+    seen = set()
+    while e is not None and id(e) not in seen:
+        if isinstance(e, KeyboardInterrupt):
+            return True
+        seen.add(id(e))
+        e = e.__cause__ or e.__context__
+    return False
+
+
 def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
              own_folder: bool = True, keep: Sequence[str] | None = None) -> int:
     """Runs ``work(out)`` for a case's command line in its results folder (begin_run: ``out``
@@ -422,7 +435,12 @@ def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
         return folders
 
     try:
-        work(out)
+        try:
+            work(out)
+        except Exception as e:  # (Ctrl-C inside an import: CPython raises ImportError from it)
+            if _from_interrupt(e):
+                raise KeyboardInterrupt from e
+            raise
     except KeyboardInterrupt:
         if main_thread:  # a second Ctrl-C does not cut the closing short
             signal.signal(signal.SIGINT, signal.SIG_IGN)

@@ -467,3 +467,28 @@ def test_an_interrupted_run_in_process_gives_ctrl_c_back(tmp_path):
 
     assert run_main("deposition", tmp_path / "r", work) == 130
     assert signal.getsignal(signal.SIGINT) is before
+
+
+def test_a_ctrl_c_inside_an_import_is_an_interrupt(tmp_path):
+    """A Ctrl-C that arrives while a C extension initialises surfaces as an ImportError caused
+    by the KeyboardInterrupt (seen in CI: the triaxial smoke interrupted in matplotlib's
+    ft2font). run_main takes it as the interrupt it is: exit status 130 and the folder marked
+    interrupted; an error not caused by one is still an error."""
+    import json
+
+    from geogrid_dem.rundir import MANIFEST, run_main
+
+    def work(_out):
+        try:
+            raise KeyboardInterrupt
+        except KeyboardInterrupt as k:
+            raise ImportError("initialization failed") from k
+
+    assert run_main("deposition", tmp_path / "r", work) == 130
+    assert json.loads((tmp_path / "r" / MANIFEST).read_text())["status"] == "interrupted"
+
+    def broken(_out):
+        raise ImportError("no such module")
+
+    with pytest.raises(ImportError, match="no such module"):
+        run_main("deposition", tmp_path / "s", broken)
