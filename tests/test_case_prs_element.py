@@ -32,6 +32,14 @@ def smoke(case_smoke):
     return case_smoke("prs_element")  # --smoke (conftest.SMOKE_ARGS)
 
 
+@pytest.fixture(scope="module")
+def given_smoke(tmp_path_factory):
+    """The serial ``--smoke --soil given`` run (its folder and process), shared by the tests
+    that need one."""
+    out = tmp_path_factory.mktemp("given") / "w1"
+    return out, run_case(out, "--smoke", "--soil", "given")
+
+
 def test_fem_to_dem_smoke_outputs_and_servo_hold(smoke):
     out, proc = smoke
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
@@ -193,7 +201,7 @@ def test_preset_sets_the_fem_mesh_and_the_two_way_tolerance(name, h, tol):
     assert (p.n, p.damping, p.hold_steps) == (d.n, d.damping, d.hold_steps)
 
 
-def test_one_soil_on_both_scales_by_default(smoke, tmp_path):
+def test_one_soil_on_both_scales_by_default(smoke, given_smoke):
     """The default FEM soil is calibrated on the case's own element (issue 37): by passes,
     the element driven along its region's path until it strains within [1/2, 2] times its
     FEM region (smoke, measured: 112 x with the given soil, then 0.20 x, then 0.98 x: three
@@ -219,9 +227,9 @@ def test_one_soil_on_both_scales_by_default(smoke, tmp_path):
         assert 0.5 <= s["elements"][v]["dem_fem_strain_ratio"] <= 2.0
     assert (out / "calibration.json").is_file()
     assert "## Calibration of the FEM soil" in (out / "report.md").read_text()
-    p = run_case(tmp_path / "given", "--smoke", "--soil", "given")
+    given, p = given_smoke
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
-    g = json.loads((tmp_path / "given" / "summary.json").read_text())
+    g = json.loads((given / "summary.json").read_text())
     assert "calibration" not in g and g["soil"]["young_pa"] == 50e6
     assert g["soil"]["cohesion_pa"] == 10e3
     for v in ("RE", "PRS"):
@@ -252,14 +260,13 @@ def test_two_way_keeps_the_prepared_element_between_iterations(tmp_path, capsys)
     assert np.array_equal(a.strain_increment, b.strain_increment)
 
 
-def test_workers_run_re_and_prs_side_by_side_with_the_same_results(tmp_path):
+def test_workers_run_re_and_prs_side_by_side_with_the_same_results(given_smoke, tmp_path):
     """--workers 2: RE and PRS each in its own process (FEM, loop, element); the elements'
     answers and the merged handover record are bitwise the serial run's (the given soil:
     the calibration runs before the variants, in the main process)."""
     import h5py
 
-    out0 = tmp_path / "w1"
-    p = run_case(out0, "--smoke", "--soil", "given")
+    out0, p = given_smoke
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]
     p = run_case(tmp_path / "w2", "--smoke", "--workers", "2", "--soil", "given")
     assert p.returncode == 0, p.stdout[-3000:] + p.stderr[-3000:]

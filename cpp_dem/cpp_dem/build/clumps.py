@@ -146,6 +146,13 @@ def _chord_moments(Y: np.ndarray, Z: np.ndarray, c: np.ndarray, r: np.ndarray):
     return m0, m1, m2
 
 
+#: union_mass_properties's results by their exact input (the members' bytes and the grid):
+#: a case loads the same shipped templates several times (about 0.3 s each), and the same
+#: input gives the same output, so a repeat is answered from here (as copies) bit for bit.
+_MASS_MEMO: dict[tuple, MassProperties] = {}
+_MASS_MEMO_SIZE = 64
+
+
 def union_mass_properties(centres, radii, cells: int = 160) -> MassProperties:
     """Volume, centroid and inertia of the union of spheres (unit density; see the module
     docstring for the method and its accuracy). cells: (y, z) grid points across the bounding
@@ -153,6 +160,18 @@ def union_mass_properties(centres, radii, cells: int = 160) -> MassProperties:
     c, r = _as_spheres(centres, radii)
     if not (isinstance(cells, (int, np.integer)) and cells >= 8):
         raise ParameterError(f"cells={cells!r}: must be an integer >= 8")
+    key = (c.tobytes(), r.tobytes(), int(cells))
+    if key not in _MASS_MEMO:
+        if len(_MASS_MEMO) >= _MASS_MEMO_SIZE:
+            _MASS_MEMO.pop(next(iter(_MASS_MEMO)))  # the oldest
+        _MASS_MEMO[key] = _union_mass_properties(c, r, int(cells))
+    m = _MASS_MEMO[key]
+    return MassProperties(m.volume, m.centroid.copy(), m.inertia.copy(), m.principal.copy(),
+                          m.axes.copy())
+
+
+def _union_mass_properties(c: np.ndarray, r: np.ndarray, cells: int) -> MassProperties:
+    """union_mass_properties's computation, on checked members."""
     if len(r) == 1:
         # Exact; the same arithmetic as the core's sphere mass (density 4/3 pi r^3).
         vol = 4.0 / 3.0 * math.pi * r[0] * r[0] * r[0]
