@@ -48,6 +48,25 @@ def test_union_disjoint_spheres_inertia_is_parallel_axis():
     assert abs(abs(p.axes[0, 0]) - 1) < 1e-9  # the smallest moment is about the x axis
 
 
+def test_a_repeated_template_gets_the_computed_properties_as_its_own_copies():
+    """union_mass_properties answers a repeat of an exact input from its memo: bit for bit
+    what a fresh computation gives, as arrays of its own (changing them changes no later
+    answer); another input is computed."""
+    from cpp_dem.build import clumps
+
+    c, r = [[0, 0, 0], [0.7, 0.1, 0], [0.2, 0.8, 0.3]], [0.5, 0.4, 0.45]
+    fresh = clumps._union_mass_properties(np.array(c, float), np.array(r, float), 40)
+    a = union_mass_properties(c, r, 40)
+    a.centroid[:] = 99.0
+    a.inertia[:] = 99.0
+    b = union_mass_properties(c, r, 40)
+    for k in ("centroid", "inertia", "principal", "axes"):
+        assert np.array_equal(getattr(b, k), getattr(fresh, k)), k
+    assert b.volume == fresh.volume
+    other = union_mass_properties(c, [0.5, 0.4, 0.46], 40)
+    assert other.volume > b.volume
+
+
 def test_one_sphere_template_is_exact():
     t = ClumpTemplate.from_spheres([[0.1, 0.2, 0.3]], [0.01])
     assert t.fill_accuracy == 0
