@@ -86,6 +86,10 @@ def parse(argv=None) -> argparse.Namespace:
     ap.add_argument("--out-of-plane", choices=tuple(BOXES), default="walls",
                     help="the direct DEM's box out of plane (y): between two smooth walls, "
                          "periodic, or both in turn (default walls)")
+    ap.add_argument("--periodic-prep-friction", type=float, default=0.0,
+                    help="the periodic box's friction of its first growth, deg (default 0: "
+                         "frictionless, as the walled box and the elements; a few degrees "
+                         "grow it looser, to the elements' porosity)")
     ap.add_argument("--oedometer", action="store_true",
                     help="also take the box (prepared again, the same) and its first 8 "
                          "elements through the same oedometric path from q (z shortened, x "
@@ -104,6 +108,15 @@ def parse(argv=None) -> argparse.Namespace:
         a.seeds = 1 if a.smoke else 3
     if a.seeds < 1:
         ap.error(f"--seeds={a.seeds}: must be >= 1")
+    from cpp_dem.protocols.footing import StripFootingBox
+
+    phi = StripFootingBox.__dataclass_fields__["friction_deg"].default
+    if not 0.0 <= a.periodic_prep_friction < phi:
+        ap.error(f"--periodic-prep-friction={a.periodic_prep_friction}: must be >= 0 and "
+                 f"below the grains' friction angle, {phi:g} deg")
+    if a.periodic_prep_friction and a.out_of_plane == "walls":
+        ap.error("--periodic-prep-friction: the periodic box's growth; needs --out-of-plane "
+                 "periodic or both")
     if a.oedometer and a.out_of_plane == "periodic":
         ap.error("--oedometer with --out-of-plane periodic: the oedometer takes the box between "
                  "its six walls; run it with --out-of-plane walls or both")
@@ -248,7 +261,9 @@ def main(argv=None) -> dict:
         for key, periodic in BOXES[a.out_of_plane]:
             box = StripFootingBox(footing_b=a.b, length=a.length, depth=a.depth,
                                   thickness=a.thickness, surcharge_pa=a.surcharge, seed=s,
-                                  periodic_y=periodic)
+                                  periodic_y=periodic,
+                                  prep_friction_deg=a.periodic_prep_friction if periodic
+                                  else 0.0)
             box.check()
             t = time.perf_counter()
             state = prepare_footing_box(box, log=print)
@@ -309,7 +324,7 @@ def main(argv=None) -> dict:
         "surcharge_pa": a.surcharge, "mesh": {"nx": a.nx, "ny": a.ny, "degree": a.degree,
                                               "elements": n_el, "cell_grains": a.cell_grains},
         "seeds": seeds, "runs": {str(s): r for s, r in runs.items()},
-        "direct_dem": keys,
+        "direct_dem": keys, "periodic_prep_friction_deg": a.periodic_prep_friction,
         **{name: {k: np.asarray(v).tolist() if isinstance(v, np.ndarray) else v
                   for k, v in dd.items()} for name, dd in (("paired", d), *extra.items())},
         "wall_s": time.perf_counter() - t0,

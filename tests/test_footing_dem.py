@@ -166,6 +166,17 @@ def test_the_bench_takes_a_periodic_box_and_refuses_the_oedometer_on_it_alone(ca
         bench.parse(["--smoke", "--out-of-plane", "periodic", "--oedometer"])
     assert "--oedometer with --out-of-plane periodic" in capsys.readouterr().err
     assert bench.parse(["--smoke", "--out-of-plane", "both", "--oedometer"]).oedometer
+    # the periodic box's first growth at a small friction (looser: the elements' porosity)
+    assert bench.parse(["--smoke", "--out-of-plane", "both", "--periodic-prep-friction",
+                        "1"]).periodic_prep_friction == 1.0
+    assert bench.parse(["--smoke"]).periodic_prep_friction == 0.0
+    for args, msg in ((["--periodic-prep-friction", "1"], "needs --out-of-plane periodic"),
+                      (["--out-of-plane", "both", "--periodic-prep-friction", "40"],
+                       "--periodic-prep-friction=40.0: must be >= 0 and below the grains' "
+                       "friction angle, 38.66 deg")):
+        with pytest.raises(SystemExit):
+            bench.parse(["--smoke", *args])
+        assert msg in capsys.readouterr().err
 
 
 def test_the_bench_runs_at_smoke_size(tmp_path, capsys):
@@ -194,6 +205,7 @@ def test_the_bench_runs_at_smoke_size(tmp_path, capsys):
     # --out-of-plane both: each seed's periodic box from the same grains, FEM x DEM paired
     # with each box, and the periodic box with the walled one
     assert summary["direct_dem"] == ["dem", "dem_periodic"]
+    assert summary["periodic_prep_friction_deg"] == 0.0  # (frictionless, as the walled box)
     per = run["dem_periodic"]
     assert per["grains"] == run["dem"]["grains"]
     assert per["porosity"] < run["dem"]["porosity"]  # (no y walls' loose layers)
