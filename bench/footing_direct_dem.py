@@ -240,10 +240,20 @@ def _print_pairs(d: dict, first: str, second: str) -> None:
               f"({d['seeds']} seeds)")
 
 
+def walled_box(a: argparse.Namespace, seed: int):
+    """Seed ``seed``'s box between six walls, grown frictionless first (dense): the direct DEM
+    of ``--out-of-plane walls``, and the grains and preparation of the FEM x DEM's elements
+    and of the oedometer, whatever the periodic box's ``--periodic-prep-friction``."""
+    from cpp_dem.protocols.footing import StripFootingBox
+
+    return StripFootingBox(footing_b=a.b, length=a.length, depth=a.depth,
+                           thickness=a.thickness, surcharge_pa=a.surcharge, seed=seed)
+
+
 def main(argv=None) -> dict:
     a = parse(argv)
     from cpp_dem.elements.pool import ElementPool
-    from cpp_dem.protocols.footing import (StripFootingBox, load_strip_footing,
+    from cpp_dem.protocols.footing import (load_strip_footing,
                                            prepare_footing_box)
     from femcoupling.footing_dem import element_factory, fem_dem_footing, paired_pressures
     from femcoupling.hierarchical import quadrature_points
@@ -258,12 +268,10 @@ def main(argv=None) -> dict:
     seeds = list(range(1, a.seeds + 1))
     for i, s in enumerate(seeds):
         runs[s] = {}
+        walled = walled_box(a, s)
         for key, periodic in BOXES[a.out_of_plane]:
-            box = StripFootingBox(footing_b=a.b, length=a.length, depth=a.depth,
-                                  thickness=a.thickness, surcharge_pa=a.surcharge, seed=s,
-                                  periodic_y=periodic,
-                                  prep_friction_deg=a.periodic_prep_friction if periodic
-                                  else 0.0)
+            box = (replace(walled, periodic_y=True, prep_friction_deg=a.periodic_prep_friction)
+                   if periodic else walled)
             box.check()
             t = time.perf_counter()
             state = prepare_footing_box(box, log=print)
@@ -283,7 +291,7 @@ def main(argv=None) -> dict:
                             "preparation_s": prep_s, "wall_s": time.perf_counter() - t}
         t = time.perf_counter()
         n_el = len(quadrature_points(a.length, a.depth, a.nx, a.ny, a.degree))  # (the model's)
-        fac = element_factory(box, grains=a.cell_grains, seed=1000 * s)
+        fac = element_factory(walled, grains=a.cell_grains, seed=1000 * s)
         with ElementPool.build(n_el, fac, workers=a.workers) as pool:
             pool_s = time.perf_counter() - t
             porosities, r_el = _element_grains(pool)
@@ -303,7 +311,7 @@ def main(argv=None) -> dict:
                                "preparation_s": pool_s,
                                "wall_s": time.perf_counter() - t}
         if a.oedometer:  # (the walled box)
-            runs[s]["oedometer"] = o = oedometric_moduli(replace(box, periodic_y=False), fac)
+            runs[s]["oedometer"] = o = oedometric_moduli(walled, fac)
             print(f"[footing vs dem] seed {s}: constrained modulus at eps_zz "
                   f"{o['strain'][-1]:g}: box {o['box_pa'][-1] / 1e6:.2f} MPa, elements "
                   f"{o['elements_pa'][-1] / 1e6:.2f} MPa", flush=True)

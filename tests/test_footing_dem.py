@@ -179,12 +179,21 @@ def test_the_bench_takes_a_periodic_box_and_refuses_the_oedometer_on_it_alone(ca
         assert msg in capsys.readouterr().err
 
 
-def test_the_bench_runs_at_smoke_size(tmp_path, capsys):
+def test_the_bench_runs_at_smoke_size(tmp_path, capsys, monkeypatch):
     import json
 
+    import femcoupling.footing_dem as fdm
+
     bench = _bench()
-    summary = bench.main(["--smoke", "--oedometer", "--out-of-plane", "both", "--out",
-                          str(tmp_path)])
+    given = []  # the boxes the elements are made from
+    real = fdm.element_factory
+    monkeypatch.setattr(fdm, "element_factory", lambda box, **kw: given.append(box) or
+                        real(box, **kw))
+    summary = bench.main(["--smoke", "--oedometer", "--out-of-plane", "both",
+                          "--periodic-prep-friction", "1", "--out", str(tmp_path)])
+    # the elements (and the oedometer) take the walled box's frictionless growth, whatever
+    # the periodic box's
+    assert [(b.periodic_y, b.prep_friction_deg) for b in given] == [(False, 0.0)]
     row = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert row["seeds"] == 1 and row["settlement_m"] == pytest.approx(0.2e-3)
     run = summary["runs"]["1"]
@@ -205,7 +214,7 @@ def test_the_bench_runs_at_smoke_size(tmp_path, capsys):
     # --out-of-plane both: each seed's periodic box from the same grains, FEM x DEM paired
     # with each box, and the periodic box with the walled one
     assert summary["direct_dem"] == ["dem", "dem_periodic"]
-    assert summary["periodic_prep_friction_deg"] == 0.0  # (frictionless, as the walled box)
+    assert summary["periodic_prep_friction_deg"] == 1.0
     per = run["dem_periodic"]
     assert per["grains"] == run["dem"]["grains"]
     assert per["porosity"] < run["dem"]["porosity"]  # (no y walls' loose layers)
