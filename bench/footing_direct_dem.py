@@ -10,7 +10,8 @@ gravity. For each seed s:
 1. **Direct DEM** (``cpp_dem.protocols.footing``): a box of the grains between smooth walls,
    ``--thickness`` deep out of plane (``--out-of-plane periodic``: periodic along y instead,
    no y walls; ``both``: each box in turn, from the same seed), grown frictionless then at
-   the grains' friction (dense) to the isotropic q; the top wall is split into the footing
+   the grains' friction (dense) to the isotropic q (the periodic box's first growth at
+   ``--periodic-prep-friction`` degrees: 1 puts it at the elements' porosity); the top wall is split into the footing
    and the surcharge, and the footing is pushed to each settlement and held until the
    grains are at rest.
 2. **FEM x DEM** (``femcoupling.footing_dem``): the same rectangle in ``--nx`` by ``--ny``
@@ -37,6 +38,8 @@ pressures compression positive.
     .venv/bin/python bench/footing_direct_dem.py --seeds 3 --out DIR        # the measured run
     .venv/bin/python bench/footing_direct_dem.py --oedometer --out DIR     # and the material
     .venv/bin/python bench/footing_direct_dem.py --out-of-plane both --out DIR  # and periodic
+    .venv/bin/python bench/footing_direct_dem.py --out-of-plane both \
+        --periodic-prep-friction 1 --out DIR   # the periodic box at the elements' porosity
 """
 
 from __future__ import annotations
