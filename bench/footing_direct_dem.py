@@ -11,9 +11,9 @@ gravity. For each seed s:
    ``--thickness`` deep out of plane (``--out-of-plane periodic``: periodic along y instead,
    no y walls; ``both``: each box in turn, from the same seed), grown frictionless then at
    the grains' friction (dense) to the isotropic q (the periodic box's first growth at
-   ``--periodic-prep-friction`` degrees: 1 puts it at the elements' porosity); the top wall is split into the footing
-   and the surcharge, and the footing is pushed to each settlement and held until the
-   grains are at rest.
+   ``--periodic-prep-friction`` degrees: 1 puts it at the elements' porosity); the top
+   wall is split into the footing and the surcharge, and the footing is pushed to each
+   settlement and held until the grains are at rest.
 2. **FEM x DEM** (``femcoupling.footing_dem``): the same rectangle in ``--nx`` by ``--ny``
    cells of triangles (``--degree 2``: P2, three quadrature points each, which do not lock
    under dilatant flow; ``--degree 1``: P1, one), a periodic element of ``--cell-grains``
