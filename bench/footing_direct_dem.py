@@ -113,7 +113,7 @@ def parse(argv=None) -> argparse.Namespace:
         ap.error(f"--seeds={a.seeds}: must be >= 1")
     from cpp_dem.protocols.footing import StripFootingBox
 
-    phi = StripFootingBox.__dataclass_fields__["friction_deg"].default
+    phi = StripFootingBox.friction_deg  # (the grains' friction angle, deg: its default)
     if not 0.0 <= a.periodic_prep_friction < phi:
         ap.error(f"--periodic-prep-friction={a.periodic_prep_friction}: must be >= 0 and "
                  f"below the grains' friction angle, {phi:g} deg")

@@ -23,6 +23,7 @@ and PFC do for any clump, so a one-sphere clump is the sphere itself.
 
 from __future__ import annotations
 
+import functools
 import math
 from dataclasses import dataclass, field
 
@@ -146,13 +147,6 @@ def _chord_moments(Y: np.ndarray, Z: np.ndarray, c: np.ndarray, r: np.ndarray):
     return m0, m1, m2
 
 
-#: union_mass_properties's results by their exact input (the members' bytes and the grid):
-#: a case loads the same shipped templates several times (about 0.3 s each), and the same
-#: input gives the same output, so a repeat is answered from here (as copies) bit for bit.
-_MASS_MEMO: dict[tuple, MassProperties] = {}
-_MASS_MEMO_SIZE = 64
-
-
 def union_mass_properties(centres, radii, cells: int = 160) -> MassProperties:
     """Volume, centroid and inertia of the union of spheres (unit density; see the module
     docstring for the method and its accuracy). cells: (y, z) grid points across the bounding
@@ -160,14 +154,19 @@ def union_mass_properties(centres, radii, cells: int = 160) -> MassProperties:
     c, r = _as_spheres(centres, radii)
     if not (isinstance(cells, (int, np.integer)) and cells >= 8):
         raise ParameterError(f"cells={cells!r}: must be an integer >= 8")
-    key = (c.tobytes(), r.tobytes(), int(cells))
-    if key not in _MASS_MEMO:
-        if len(_MASS_MEMO) >= _MASS_MEMO_SIZE:
-            _MASS_MEMO.pop(next(iter(_MASS_MEMO)))  # the oldest
-        _MASS_MEMO[key] = _union_mass_properties(c, r, int(cells))
-    m = _MASS_MEMO[key]
+    m = _memo(c.tobytes(), r.tobytes(), int(cells))
     return MassProperties(m.volume, m.centroid.copy(), m.inertia.copy(), m.principal.copy(),
                           m.axes.copy())
+
+
+@functools.lru_cache(maxsize=64)
+def _memo(centres: bytes, radii: bytes, cells: int) -> MassProperties:
+    """union_mass_properties's results by their exact input (the members' bytes and the
+    grid): a case loads the same shipped templates several times (about 0.3 s each), and the
+    same input gives the same output, so a repeat is answered from here (the caller hands
+    out copies) bit for bit."""
+    return _union_mass_properties(np.frombuffer(centres).reshape(-1, 3), np.frombuffer(radii),
+                                  cells)
 
 
 def _union_mass_properties(c: np.ndarray, r: np.ndarray, cells: int) -> MassProperties:
