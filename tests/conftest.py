@@ -26,6 +26,21 @@ def sphere_mass(density: float, radius: float) -> float:
     return density * 4.0 / 3.0 * math.pi * radius**3
 
 
+@pytest.fixture(autouse=True)
+def _dem_threads_restored():
+    """Every test leaves the DEM core's thread count as it found it (OMP_NUM_THREADS under
+    `make test`: 1). A test that sets it and leaves 2 makes every later DEM run of its pytest
+    worker two-threaded: on this machine's two cores, beside the other worker, that cost the
+    suite's worker a futex sleep and wake-up per parallel region (a test's system time rose
+    from 1 to 20 s)."""
+    import cpp_dem
+
+    before = cpp_dem.get_num_threads()
+    yield
+    if cpp_dem.get_num_threads() != before:
+        cpp_dem.set_num_threads(before)
+
+
 @pytest.fixture
 def linear_mat():
     import cpp_dem as dem

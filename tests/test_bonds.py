@@ -259,12 +259,16 @@ def _grid_of_bonds(sort):
 
 def test_storage_order_and_threads_do_not_change_results():
     runs = []
-    for sort, threads in ((False, 1), (True, 1), (True, 2)):
-        cd.set_num_threads(threads)
-        s = _grid_of_bonds(sort)
-        s.run(3000)
-        runs.append((s.positions.copy(), s.bond_state()["force"].copy(), len(s.bond_breaks)))
-    cd.set_num_threads(2)
+    before = cd.get_num_threads()
+    try:
+        for sort, threads in ((False, 1), (True, 1), (True, 2)):
+            cd.set_num_threads(threads)
+            s = _grid_of_bonds(sort)
+            s.run(3000)
+            runs.append((s.positions.copy(), s.bond_state()["force"].copy(),
+                         len(s.bond_breaks)))
+    finally:
+        cd.set_num_threads(before)
     assert runs[0][0].shape == runs[1][0].shape
     for p, f, nb in runs[1:]:
         assert np.array_equal(p, runs[0][0])

@@ -179,6 +179,7 @@ def test_restart_is_bitwise(packed):
 
 def test_results_do_not_depend_on_the_thread_count(packed):
     out = []
+    before = dem.get_num_threads()
     for t in (1, 2):
         dem.set_num_threads(t)
         try:
@@ -187,7 +188,7 @@ def test_results_do_not_depend_on_the_thread_count(packed):
             s.run(1000)
             out.append((np.asarray(s.positions), np.asarray(s.cell_stress())))
         finally:
-            dem.set_num_threads(2)
+            dem.set_num_threads(before)
     assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
 
 

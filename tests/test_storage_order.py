@@ -177,6 +177,7 @@ def test_sorting_off_keeps_storage_in_id_order_and_threads_agree():
     assert s.identity_order
     # Sorted runs on 1 and 2 threads are bitwise equal.
     out = []
+    before = dem.get_num_threads()
     try:
         for t in (1, 2):
             dem.set_num_threads(t)
@@ -184,7 +185,7 @@ def test_sorting_off_keeps_storage_in_id_order_and_threads_agree():
             a.run(1000)
             out.append((a.positions, a.forces))
     finally:
-        dem.set_num_threads(2)
+        dem.set_num_threads(before)
     assert np.array_equal(out[0][0], out[1][0]) and np.array_equal(out[0][1], out[1][1])
 
 

@@ -314,11 +314,12 @@ def test_one_and_two_threads_bitwise_identical(energy):
         s.run(3000)
         return s.positions, s.velocities, s.forces, s.wall_forces, s.energies()
 
+    before = dem.get_num_threads()
     try:
         a = run(1)
         b = run(2)
     finally:
-        dem.set_num_threads(2)
+        dem.set_num_threads(before)
     for x, y in zip(a[:4], b[:4]):
         assert np.array_equal(x, y)
     assert a[4] == b[4]
