@@ -286,8 +286,8 @@ def _element_secant(e: dict) -> tuple[float, float, float]:
     return E, nu_raw, nu
 
 
-def calibrate_soil(p: ElementParams, out: Path, *, max_passes: int = 4
-                   ) -> tuple[ElementParams, dict]:
+def calibrate_soil(p: ElementParams, out: Path, *, max_passes: int = 4,
+                   keep: dict | None = None) -> tuple[ElementParams, dict]:
     """One soil on both scales (the default of the FEM modes): the FEM soil set to the case's
     own element, by passes. Each pass solves the RE FEM with the current soil, drives the
     case's element (the same grains, preparation and seed as the run's, so the same
@@ -307,7 +307,9 @@ def calibrate_soil(p: ElementParams, out: Path, *, max_passes: int = 4
     its strength here; the record gives the friction it mobilised at the path's end).
     After ``max_passes`` without convergence the last secant is kept and the record says
     ``converged`` False. Returns the parameters with that soil and the record (also
-    ``calibration.json``)."""
+    ``calibration.json``). With ``keep`` (a dict) and a converged calibration, keep["RE"] is
+    the last pass's ``run_fem`` result: the RE FEM with the returned soil, already solved
+    (``run_variant(fem=)`` takes it instead of solving it again)."""
     from femcoupling.calibration import friction_angle_deg
     from femcoupling.status import strain_ratio_held
     from femcoupling.twoway import check_region
@@ -318,7 +320,8 @@ def calibrate_soil(p: ElementParams, out: Path, *, max_passes: int = 4
     converged = False
     cache: dict = {}  # the element at the initial targets, prepared once for every pass
     for k in range(1, max_passes + 1):
-        ini, fin, _m, _s0, _load, info = run_fem(q, out, "RE")
+        fem = run_fem(q, out, "RE")
+        ini, fin, _m, _s0, _load, info = fem
         label = f"calibration_RE_{k}"
         e = run_element(q, [ini.normal_pa, fin.normal_pa], prestressed=False, label=label,
                         out=out, grid_tension=handed_tension(q, [ini, fin], label),
@@ -341,6 +344,8 @@ def calibrate_soil(p: ElementParams, out: Path, *, max_passes: int = 4
             f"secant along that path: E {E / 1e6:.4g} MPa, nu {nu_raw:.3f}")
         if k > 1 and strain_ratio_held(ratio):
             converged = True
+            if keep is not None:  # (this pass's soil is the one returned)
+                keep["RE"] = fem
             break
         if nu < nu_raw:
             warnings.append(f"calibration pass {k}: the element's secant Poisson's ratio "
@@ -512,9 +517,10 @@ VARIANTS = ("RE", "PRS")
 HISTORY_REGIONS = [f"element_{v}" for v in VARIANTS]
 
 
-def run_variant(p: ElementParams, out: Path, variant: str) -> dict:
-    """One variant (RE or PRS) of the FEM mode: its FEM, the two-way loop if asked, then the
-    case's element driven to the (coupled) targets. Its handover rows go to
+def run_variant(p: ElementParams, out: Path, variant: str, fem: tuple | None = None) -> dict:
+    """One variant (RE or PRS) of the FEM mode: its FEM (``fem``: a ``run_fem`` result of this
+    variant with ``p``'s soil, already solved: the calibration's last pass), the two-way loop
+    if asked, then the case's element driven to the (coupled) targets. Its handover rows go to
     ``out/handover_<variant>.h5`` (``run`` merges them into handover.h5). Returns the
     summary parts: {"fem": ..., "element": ..., "two_way": ... or None, "hierarchical": ...
     or None}."""
@@ -525,7 +531,11 @@ def run_variant(p: ElementParams, out: Path, variant: str) -> dict:
     apply_threads(p.threads)
     j = VARIANTS.index(variant)
     hier = None
-    ini, fin, m, state0, load, info = run_fem(p, out, variant)
+    if fem is None:
+        fem = run_fem(p, out, variant)
+    else:
+        log(f"FEM {variant}: the calibration's last pass, with this soil (not solved again)")
+    ini, fin, m, state0, load, info = fem
     # The coupled load stage writes the FEM state at every load step (two-way: each
     # iteration rewrites it, so the file holds the last, coupled one)
     load = functools.partial(load, xdmf=out / f"fem_{variant}.xdmf")

@@ -273,11 +273,14 @@ def write_report(out: Path, summary: dict) -> None:
     (out / "report.md").write_text("\n".join(lines) + "\n")
 
 
-def run_variants(p: Params, out: Path) -> list:
+def run_variants(p: Params, out: Path, fems: dict | None = None) -> list:
     """RE and PRS (``run_variant``), in two processes with ``p.workers`` >= 2 (spawned: no fork
-    of an MPI/PETSc process; each is the serial run's, so the results are the same)."""
+    of an MPI/PETSc process; each is the serial run's, so the results are the same). ``fems``:
+    a variant's FEM already solved with ``p``'s soil (the calibration's last pass), taken by
+    the serial path; the processes solve their own."""
+    fems = fems or {}
     if p.workers < 2 or p.cell_elements:  # (cell elements: the workers are Dask's)
-        return [run_variant(p, out, v) for v in VARIANTS]
+        return [run_variant(p, out, v, fem=fems.get(v)) for v in VARIANTS]
     import concurrent.futures
     import multiprocessing
 
@@ -307,8 +310,9 @@ def run(p: Params, out: Path) -> dict:
                 "as the region's stiffness); the geogrid stays in the FEM's layer band, "
                 "counted once; the case's element, geogrid included, is then driven to the "
                 "converged targets")
+        fems: dict = {}  # (the calibration's last RE FEM, solved with the soil it returns)
         if p.soil == "calibrated":
-            p, summary["calibration"] = calibrate_soil(p, out)
+            p, summary["calibration"] = calibrate_soil(p, out, keep=fems)
         summary["soil"] = {"source": p.soil, "young_pa": p.soil_young,
                            "poisson": p.soil_poisson, "cohesion_pa": p.soil_cohesion,
                            "friction_deg": p.soil_friction,
@@ -316,7 +320,8 @@ def run(p: Params, out: Path) -> dict:
                                        "soil)" if p.soil_cohesion == 0 else "a pressure")}
         log(f"FEM soil ({p.soil}): E {p.soil_young / 1e6:.4g} MPa, nu {p.soil_poisson:.3f}, "
             f"c {p.soil_cohesion / 1e3:g} kPa, phi {p.soil_friction:g} deg")
-        parts = run_variants(p, out)
+        parts = run_variants(p, out, fems)
+        fems.clear()
         summary["fem"] = {v: r["fem"] for v, r in zip(VARIANTS, parts)}
         summary["elements"] = {v: r["element"] for v, r in zip(VARIANTS, parts)}
         if p.two_way:
