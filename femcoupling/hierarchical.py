@@ -396,10 +396,10 @@ class HierarchicalPlaneStrain:
     def _check_pool(self, pool, n: int, what: str) -> None:
         """The pool (rank 0's under MPI) holds one element per quadrature point."""
         if self._parallel:
-            from femcoupling.mpi_points import check_on_root
+            from femcoupling.mpi_points import bcast_from_root, check_on_root
 
             check_on_root(self.comm, pool)
-            have = self.comm.bcast(pool.n if self._root else None, root=0)
+            have = bcast_from_root(self.comm, pool.n if self._root else None)
         else:
             have = pool.n
         if have != n:

@@ -31,7 +31,11 @@ import numpy as np
 from femcoupling.geometry import FemInputError
 from femcoupling.quadrature import NewtonFailure
 
-__all__ = ["PointPartition", "RootMaterial", "check_on_root", "on_root", "world"]
+__all__ = ["PointPartition", "RootMaterial", "bcast_from_root", "check_on_root", "on_root",
+           "wait_for_root", "world"]
+
+#: The longest sleep (s) between two polls of a rank that waits for rank 0 (wait_for_root).
+IDLE_POLL_MAX_S = 2e-3
 
 
 def world():
@@ -42,10 +46,40 @@ def world():
     return _dolfinx.load().MPI.COMM_WORLD
 
 
+def wait_for_root(comm) -> None:
+    """A barrier of ``comm`` at which the ranks that arrive first sleep between polls (from
+    10 us, doubling, to IDLE_POLL_MAX_S) instead of spinning in MPI's progress loop.
+
+    Rank 0 runs the elements (on Dask) while the other ranks wait, for seconds to minutes.
+    MPICH's blocking calls spin while they wait: on one machine each waiting rank then
+    holds a core that the Dask workers need. So every wait for rank 0's elements goes
+    through here, and what rank 0 then sends arrives at once (``bcast_from_root``).
+    None or one rank: returns at once."""
+    import time
+
+    if comm is None or comm.size == 1:
+        return
+    req = comm.Ibarrier()
+    delay = 1e-5
+    while not req.Test():
+        time.sleep(delay)
+        delay = min(2.0 * delay, IDLE_POLL_MAX_S)
+
+
+def bcast_from_root(comm, obj):
+    """``comm.bcast(obj, root=0)``, the ranks that wait for rank 0 idle (``wait_for_root``)
+    until it is ready to send."""
+    wait_for_root(comm)
+    return comm.bcast(obj, root=0)
+
+
 def on_root(comm, make):
     """``make()`` on rank 0 of ``comm`` (an mpi4py communicator, or None: serial), None on the
-    other ranks: the element pool, whose Dask client lives on rank 0."""
-    return make() if comm is None or comm.rank == 0 else None
+    other ranks: the element pool, whose Dask client lives on rank 0. Every rank returns
+    when rank 0 has made it (the others idle meanwhile: ``wait_for_root``)."""
+    out = make() if comm is None or comm.rank == 0 else None
+    wait_for_root(comm)
+    return out
 
 
 def check_on_root(comm, pool) -> None:
@@ -124,7 +158,7 @@ class RootMaterial:
                 out = getattr(self._m, name)(*args)
             except NewtonFailure as e:
                 err = str(e)
-        err = self.comm.bcast(err, root=0)
+        err = bcast_from_root(self.comm, err)
         self._sync()
         if err is not None:
             raise NewtonFailure(err)

@@ -86,6 +86,7 @@ class RegionPoints:
         if comm is None or comm.size == 1:
             answers = RegionPoints._evaluate(sets, means)
         else:
+            from femcoupling.mpi_points import bcast_from_root
             from femcoupling.quadrature import NewtonFailure
 
             total = comm.allreduce(np.array(means).reshape(len(sets), -1))
@@ -96,7 +97,7 @@ class RegionPoints:
                     answers = RegionPoints._evaluate(sets, means)
                 except NewtonFailure as e:
                     err = str(e)
-            answers, err = comm.bcast((answers, err), root=0)
+            answers, err = bcast_from_root(comm, (answers, err))
             if err is not None:
                 raise NewtonFailure(err)
         for k, (idx, m) in enumerate(sets):

@@ -393,6 +393,8 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
         raise FemInputError(f"history_names={names!r}: one per region {regions!r}")
     hrow = {r: (history.regions.index(n) if history is not None and n in history.regions
                 else j) for j, (r, n) in enumerate(zip(regions, names))}
+    from femcoupling.mpi_points import bcast_from_root
+
     comm = model.comm
     rank0 = comm.rank == 0
     say = (log if (log is not None and rank0) else (lambda msg: None))
@@ -522,7 +524,7 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
                 break
             jobs = [(r, initial[r], final[r]) for r in regions]
             out = run_elements(jobs) if rank0 else None
-            out = comm.bcast(out, root=0)
+            out = bcast_from_root(comm, out)
             scatter = 0.0
             for r, resp in zip(regions, out):
                 responses[r] = resp
