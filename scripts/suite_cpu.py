@@ -50,9 +50,8 @@ def main(argv=None) -> int:
            "SUITE_CPU_OUT": str(out),
            "PYTHONPATH": os.pathsep.join([str(ROOT / "scripts"),
                                           os.environ.get("PYTHONPATH", "")]).rstrip(os.pathsep)}
-    cmd = [sys.executable, "-m", "pytest", "-q", "-p", "suite_cpu_plugin", *a.paths]
-    if a.jobs > 1:
-        cmd[4:4] = ["-n", str(a.jobs), "--dist", "loadfile"]
+    workers = ["-n", str(a.jobs), "--dist", "loadfile"] if a.jobs > 1 else []
+    cmd = [sys.executable, "-m", "pytest", "-q", *workers, "-p", "suite_cpu_plugin", *a.paths]
     code = subprocess.call(cmd, cwd=ROOT, env=env)
     rows = [json.loads(ln) for ln in out.read_text().splitlines() if ln.strip()]
     t = totals(rows)
