@@ -136,6 +136,31 @@ def test_the_reinforced_element_restores_bitwise(prs):
         prs.scene)[0]
 
 
+def test_the_quasi_static_check_takes_the_grains_pressure_not_the_sheets_tension(prs):
+    """A too fast increment of a reinforced cell is reported with the grains' own mean
+    stress (the fixture's P), not the cell's, which the prestressed sheet's tension along x
+    takes down by T_P / (3 h)."""
+    import re
+    import warnings
+
+    from cpp_dem.measure.inertial import InertialNumberWarning
+    from cpp_dem.protocols.periodic import cell_height
+
+    cell_p = float(np.trace(prs.scene.cell_stress())) / 3.0  # (Pa, compression positive)
+    assert cell_p < 0.8 * P  # (the measure below can fail: the cell's pressure is not P)
+    fast = DemElement.from_bytes(prs.to_bytes())
+    de = np.zeros((3, 3))
+    de[2, 2] = -1e-3
+    with warnings.catch_warnings(record=True) as got:
+        warnings.simplefilter("always", InertialNumberWarning)
+        fast.apply_strain(de, steps=10, max_relax_steps=0)
+    said = [str(w.message) for w in got if issubclass(w.category, InertialNumberWarning)]
+    assert len(said) == 1, said
+    pressure = float(re.search(r"pressure ([0-9.e+-]+) Pa", said[0]).group(1))
+    assert abs(pressure - P) < 0.05 * P, (pressure, cell_p)
+    assert abs(cell_p - (P - T_P / (3.0 * cell_height(prs.scene)))) < 0.05 * P
+
+
 def sheet_stiffness_x(el) -> float:
     """The bonds' part of the element's stiffness along x, Pa: a central difference of
     1e-5 on clones."""

@@ -338,15 +338,19 @@ class DemElement:
     def _check_rate(self, rate: float) -> None:
         """Warns (cpp_dem.InertialNumberWarning) when a strain increment at ``rate`` (1/s,
         the largest component over the steps) is not quasi-static: I = rate d /
-        sqrt(p / rho), d the mean grain diameter, p the mean stress now, rho the grains'
-        density (their mass over their volume). Once per element object (a coupled run
+        sqrt(p / rho), d the mean grain diameter, p the grains' mean stress now (in a
+        reinforced cell, without its bonds' part), rho the grains' density (their mass over
+        their volume). Once per element object (a coupled run
         calls it for every increment and iteration)."""
         if self.__dict__.get("_rate_warned"):
             return
         sc = self.scene
         grains = measure.sphere_mask(sc)
         r = np.asarray(sc.radii)[grains]
-        p = abs(float(np.trace(self._raw_stress()))) / 3.0
+        raw = self._raw_stress()
+        if self.kind == "periodic" and sc.num_bonds:  # (the grains' own: a sheet's tension
+            raw = raw - periodic.bond_stress(sc)   # is not the grains' confinement)
+        p = abs(float(np.trace(raw))) / 3.0
         if not (rate > 0 and p > 0 and len(r)):
             return
         rho = float(np.asarray(sc.masses)[grains].sum() / (4.0 / 3.0 * math.pi * np.sum(r**3)))
