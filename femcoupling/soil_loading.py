@@ -118,7 +118,9 @@ class LoadingStages:
         beyond ``tol`` is taken again, shortened by linear interpolation. The results' ``load_factor`` is the pressure's fraction of the
         target; ``callback(r)`` is called for each accepted step. Raises NewtonDivergence if
         the pressure has not reached the target after ``max_steps_factor`` x ``steps``
-        steps (the soil's bearing capacity is below it).
+        steps (the soil's bearing capacity is below it), or if a step fails after its cuts
+        (its message then says how far the pressure rose, and at what settlement; the model
+        is left at the last accepted step).
 
         ``slope_pa_per_m`` (Pa/m, > 0): a known pressure–settlement slope to start from
         instead of the first small settlement (1e-6 of the body's height). With DEM region
@@ -174,7 +176,16 @@ class LoadingStages:
                     f"{d:.4g} m in {taken} steps, short of pressure_pa={target:g}: the soil's "
                     "bearing capacity is below it")
             state, n_done, p_now = self.save_state(), len(done), rise()
-            go(d + dd)
+            try:
+                go(d + dd)
+            except NewtonDivergence as exc:
+                # (back to the last accepted step: its stresses, not the failed iterate's)
+                self.restore_state(state)
+                del done[n_done:]
+                raise NewtonDivergence(
+                    f"{exc}; the footing stopped where its pressure had risen by "
+                    f"{p_now:.4g} Pa of pressure_pa={target:g}, at a settlement of "
+                    f"{self.footing_settlement_m():.4g} m (the model is left there)") from exc
             p_new = rise()
             if p_new > target * (1.0 + tol):
                 self.restore_state(state)

@@ -30,6 +30,68 @@ def test_paired_differences_over_seeds():
     assert paired(a[:1], b[:1])["se_m"] is None  # one seed: no scatter
 
 
+def test_a_continuum_that_does_not_converge_stops_the_run_saying_which(tmp_path):
+    """A Drucker–Prager FEM that does not converge (here the calibration's first, with a
+    starting soil of 5 degrees that cannot carry the seating pressure) stops the run with a
+    message naming that FEM, its soil and Newton's failure, not with a traceback."""
+    from femcoupling.drivers.footing_multiscale import FootingParams, run
+    from geogrid_dem.cases.footing_multiscale import SMOKE
+
+    p = FootingParams(**{**SMOKE, "soil_friction": 5.0})
+    with pytest.raises(SystemExit) as got:
+        run(p, tmp_path, log=lambda msg: None)
+    msg = str(got.value.code)
+    assert msg.startswith("[footing_multiscale] the calibration's first FEM (the unreinforced "
+                          "body with the starting soil: E 20 MPa, nu 0.3, phi 5 deg, no "
+                          "cohesion): the Drucker–Prager FEM did not converge: stage 'footing'")
+    assert "Newton" in msg and "bearing capacity" in msg
+    assert not (tmp_path / "calibration.json").exists()
+
+
+def test_a_footing_that_stops_short_says_where_and_is_left_at_its_last_step():
+    """``load_footing_to_pressure`` on a soil whose bearing capacity is below the target
+    (25 degrees, 40 kPa more than the seating's 20): the failure says how far the pressure
+    rose and at what settlement, and the model is back at its last accepted step (its
+    reaction is that step's, not the failed iterate's)."""
+    from femcoupling.drivers.footing_multiscale import FootingParams, model
+    from femcoupling.materials import DruckerPrager
+    from femcoupling.soil_steps import NewtonDivergence
+    from geogrid_dem.cases.footing_multiscale import SMOKE
+
+    p = FootingParams(**SMOKE)
+    m = model(p, "unreinforced", DruckerPrager(young_pa=20e6, poisson=0.3, cohesion_pa=0.0,
+                                               friction_deg=25.0))
+    seated = m.footing_pressure_pa()
+    with pytest.raises(NewtonDivergence, match=r"its pressure had risen by [0-9.e+]+ Pa of "
+                       r"pressure_pa=40000, at a settlement of [0-9.e+-]+ m") as got:
+        m.load_footing_to_pressure(40e3, steps=4)
+    last = m.history[-1]
+    assert m.footing_pressure_pa() == pytest.approx(last.footing_pressure_pa, rel=1e-9)
+    assert m.footing_settlement_m() == pytest.approx(last.footing_settlement_m, rel=1e-9)
+    rose = float(str(got.value).split("risen by ")[1].split(" Pa")[0])
+    assert rose == pytest.approx(m.footing_pressure_pa() - seated, rel=1e-3)
+    assert 0.2 * 40e3 < rose < 40e3
+
+
+def test_the_calibration_takes_the_path_as_far_as_the_starting_soil_carried():
+    """The calibration's first FEM whose starting soil (25 degrees) stops between half and
+    all of the rise asked (to 60 kPa): the zone's path to there, the record and the log
+    saying so; below half the rise, the run stops (the test above)."""
+    from femcoupling.drivers.footing_multiscale import PATH_SHORT_MIN, FootingParams, calibrate
+    from geogrid_dem.cases.footing_multiscale import SMOKE
+
+    said = []
+    p = FootingParams(**{**SMOKE, "pressure_pa": 60e3, "levels": 4, "soil_friction": 25.0})
+    soil, rec = calibrate(p, said.append)
+    reached = rec["path_footing_pressure_pa"]
+    assert PATH_SHORT_MIN * (60e3 - 20e3) <= reached - 20e3 < 60e3 - 20e3
+    assert rec["path_stopped"].startswith(
+        f"the first FEM with the starting soil stopped at a footing pressure of "
+        f"{reached / 1e3:.1f} kPa of 60")
+    assert any(m.startswith("calibration: WARNING: the first FEM") for m in said)
+    assert soil.young_pa > 0 and soil.friction_deg > 25.0
+
+
 @pytest.mark.parametrize("field, value, words", [
     ("levels", 0, "levels=0: must be an integer >= 1"),
     ("cell_grains", 20, "cell_grains=20: must be an integer >= 50"),
