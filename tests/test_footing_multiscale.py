@@ -276,6 +276,10 @@ def test_the_smoke_gives_load_settlement_for_each_variant(case_smoke):
         assert d["seeds"] == [2] * levels and len(d["mean_m"]) == levels
         assert all(x is not None for x in d["se_m"])
     assert s["calibration"]["young_pa"] > 0 and 20 < s["calibration"]["friction_deg"] < 60
+    # (the starting soil's body reached the pressure: the path is whole)
+    assert s["calibration"]["path_stopped"] is None
+    assert s["calibration"]["path_footing_pressure_pa"] == pytest.approx(s["pressures_pa"][-1],
+                                                                         rel=0.011)
     assert s["cost"]["element_evaluations"] > 0 and s["cost"]["wall_time_s"] > 0
     # the rows as they were reached: every run's levels, the continuum's and each seed's
     with (out / "load_settlement.csv").open() as f:
