@@ -73,6 +73,25 @@ def test_a_footing_that_stops_short_says_where_and_is_left_at_its_last_step():
     assert 0.2 * 40e3 < rose < 40e3
 
 
+def test_a_drucker_prager_body_that_stops_after_its_first_level_is_recorded_so():
+    """The continuum body of a variant whose soil (25 degrees) carries the first level
+    (40 kPa) but not the second (60 kPa): its record keeps the level it reached and says why;
+    the run goes on (the multiscale runs need only its first level)."""
+    from femcoupling.drivers.footing_multiscale import FootingParams, run_continuum
+    from femcoupling.materials import DruckerPrager
+    from geogrid_dem.cases.footing_multiscale import SMOKE
+
+    p = FootingParams(**{**SMOKE, "pressure_pa": 60e3, "levels": 2})
+    soil = DruckerPrager(young_pa=20e6, poisson=0.3, cohesion_pa=0.0, friction_deg=25.0)
+    rows = []
+    dp = run_continuum(p, "unreinforced", soil, lambda *a: rows.append(a))
+    assert dp["levels_reached"] == 1 == len(rows) == len(dp["settlement_m"])
+    assert dp["pressure_pa"][0] == pytest.approx(40e3, rel=0.011)
+    assert "its pressure had risen by" in dp["failure"]
+    whole = run_continuum(FootingParams(**SMOKE), "unreinforced", soil, lambda *a: None)
+    assert whole["failure"] is None and whole["levels_reached"] == 1
+
+
 def test_the_calibration_takes_the_path_as_far_as_the_starting_soil_carried():
     """The calibration's first FEM whose starting soil (25 degrees) stops between half and
     all of the rise asked (to 60 kPa): the zone's path to there, the record and the log
@@ -260,6 +279,7 @@ def test_the_smoke_gives_load_settlement_for_each_variant(case_smoke):
     for v, r in s["variants"].items():
         ms, dp = r["multiscale"], r["drucker_prager"]
         assert ms["status"] in ("converged", "stopped_at_scatter"), (v, ms)
+        assert dp["failure"] is None and dp["levels_reached"] == levels
         for seed in seeds:
             run = ms["runs"][str(seed)]
             # every level reached within the 1 % of load_footing_to_pressure
@@ -303,7 +323,7 @@ def test_a_failed_run_is_kept_and_left_out_of_the_levels_it_did_not_reach(tmp_pa
     monkeypatch.setattr("cpp_dem.elements.cluster.local_client", lambda n: (_Closable(), None))
     monkeypatch.setattr(fm, "run_continuum", lambda p, v, soil, on_level: {
         "pressure_pa": p.pressures_pa, "settlement_m": [0.01, 0.02],
-        "seated_settlement_m": 0.005})
+        "seated_settlement_m": 0.005, "levels_reached": 2, "failure": None})
     monkeypatch.setattr(fm, "figure", lambda s, png: None)
     offset = {"unreinforced": 0.0, "RE": -0.001, "PRS": -0.002}
 

@@ -420,7 +420,12 @@ def continuum(what: str, fn, *args):
 
 
 def run_continuum(p: FootingParams, variant: str, soil, on_level) -> dict:
-    """Step 3 of the module doc for one variant."""
+    """Step 3 of the module doc for one variant. A body that stops after its first level
+    (near its bearing capacity) is recorded with the levels it reached (``levels_reached``)
+    and why (``failure``; None when it reached every level); one that stops before raises
+    its NewtonDivergence (the multiscale runs start from its first level's slope)."""
+    from femcoupling.soil_steps import NewtonDivergence
+
     t0 = time.perf_counter()
     m = model(p, variant, soil)
     seated = m.footing_settlement_m()
@@ -431,9 +436,16 @@ def run_continuum(p: FootingParams, variant: str, soil, on_level) -> dict:
                      sum(r.newton_iterations for r in got), [r.status for r in got]))
         on_level(variant, "drucker_prager", None, k, rows[-1])
 
-    load_levels(p, m, level)
+    failure = None
+    try:
+        load_levels(p, m, level)
+    except NewtonDivergence as exc:
+        if not rows:
+            raise
+        failure = str(exc)
     return {"pressure_pa": [r[0] for r in rows], "settlement_m": [r[1] for r in rows],
-            "seated_settlement_m": seated, "wall_time_s": time.perf_counter() - t0}
+            "seated_settlement_m": seated, "levels_reached": len(rows), "failure": failure,
+            "wall_time_s": time.perf_counter() - t0}
 
 
 def paired(a: np.ndarray, b: np.ndarray) -> dict:
@@ -550,6 +562,10 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
         for v in p.variants:
             dp = continuum(f"{v}: the Drucker–Prager body", run_continuum, p, v, soil,
                            on_level)
+            if dp["failure"] is not None:
+                log(f"WARNING: {v}: the Drucker–Prager body stopped after level "
+                    f"{dp['levels_reached']} of {p.levels} (near its bearing capacity?): "
+                    f"{dp['failure']}")
             slope = (dp["pressure_pa"][0] - p.seat_pa) / (dp["settlement_m"][0]
                                                            - dp["seated_settlement_m"])
             runs = {s: run_multiscale(p, v, s, soil, client, out, log, on_level, slope)
