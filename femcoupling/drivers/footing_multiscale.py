@@ -45,6 +45,8 @@ from pathlib import Path
 
 import numpy as np
 
+from femcoupling.soil_steps import NewtonDivergence
+
 VARIANTS = ("unreinforced", "RE", "PRS")
 #: The Voigt components of the elements' finite-difference tangents: the x-z plane's in plane
 #: strain (xx, zz, xz), all six in 3D.
@@ -227,7 +229,6 @@ def calibrate(p: FootingParams, log) -> tuple:
     from femcoupling import biaxial
     from femcoupling.calibration import fit_along_path
     from femcoupling.materials import DruckerPrager
-    from femcoupling.soil_steps import NewtonDivergence
 
     t0 = time.perf_counter()
     soil0 = DruckerPrager(young_pa=p.soil_young, poisson=p.soil_poisson, cohesion_pa=0.0,
@@ -310,7 +311,6 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
     from femcoupling.drivers.prs_element import hierarchical_status, step_statuses
     from femcoupling.region import (PeriodicRegionElement, PoolRegionMaterials,
                                     ReinforcedBandElement)
-    from femcoupling.soil_steps import NewtonDivergence
 
     t0 = time.perf_counter()
     m = continuum(f"{variant} seed {seed}: the seating before the DEM zone takes over",
@@ -399,24 +399,18 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
             **step_statuses(steps)}
 
 
-def continuum_failure(what: str, exc: Exception) -> str:
-    """The message of a run stopped because a Drucker–Prager FEM (``what``: the calibration's
-    first FEM, a variant's continuum body or the seating of its DEM zone) did not converge
-    (``exc``: its NewtonDivergence)."""
-    return (f"[footing_multiscale] {what}: the Drucker–Prager FEM did not converge: {exc}. "
-            "A body whose settlement grows fast before it stops is near its bearing capacity: "
-            "a lower --pressure stays below it")
-
-
 def continuum(what: str, fn, *args):
-    """``fn(*args)``; a Drucker–Prager FEM inside it that does not converge stops the run
-    with :func:`continuum_failure`'s message (SystemExit) instead of a traceback."""
-    from femcoupling.soil_steps import NewtonDivergence
-
+    """``fn(*args)``; a Drucker–Prager FEM inside it (``what``: the calibration's first FEM,
+    a variant's continuum body or the seating of its DEM zone) that does not converge stops
+    the run with a message naming it and Newton's failure (SystemExit) instead of a
+    traceback."""
     try:
         return fn(*args)
     except NewtonDivergence as exc:
-        raise SystemExit(continuum_failure(what, exc)) from exc
+        raise SystemExit(
+            f"[footing_multiscale] {what}: the Drucker–Prager FEM did not converge: {exc}. A "
+            "body whose settlement grows fast before it stops is near its bearing capacity: a "
+            "lower --pressure stays below it") from exc
 
 
 def run_continuum(p: FootingParams, variant: str, soil, on_level) -> dict:
@@ -424,8 +418,6 @@ def run_continuum(p: FootingParams, variant: str, soil, on_level) -> dict:
     (near its bearing capacity) is recorded with the levels it reached (``levels_reached``)
     and why (``failure``; None when it reached every level); one that stops before raises
     its NewtonDivergence (the multiscale runs start from its first level's slope)."""
-    from femcoupling.soil_steps import NewtonDivergence
-
     t0 = time.perf_counter()
     m = model(p, variant, soil)
     seated = m.footing_settlement_m()
