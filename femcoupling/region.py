@@ -360,11 +360,12 @@ class PoolRegionMaterials:
     once. The same group serves ``SoilModel.set_cell_elements`` (one element per cell of a
     region: ``stresses = model.cell_stresses(name)``), and can also hold reinforced RVEs for
     the cells of a geogrid band (``build(band=)``, ``ReinforcedBandElement``). The elements'
-    tangents (Newton's Jacobian) are from their contact networks at every trial (the
-    pool's ``tangent="auto"``), except for an element with bonds (those RVEs), whose
-    bonds the network's assembly does not take: its tangent is by forward differences
-    of the Voigt components ``fd_components`` at every trial (one run of the element
-    each; plane strain in x-z needs (0, 2, 4)), the others filled (``_filled``).
+    tangents (Newton's Jacobian) are from their contact networks at every trial, the
+    reinforced RVEs' with their sheets' bonds. ``band_tangent`` is the reinforced RVEs'
+    (the pool's names): "network" (the default), "network-elastic" (sliding contacts taken
+    as stuck), or "fd-forward": forward differences of the Voigt components
+    ``fd_components`` at every trial (one run of the element each; plane strain in x-z
+    needs (0, 2, 4)), the others filled (``_filled``).
     ``close()`` stops the pool's own cluster.
 
     ``records``: an HDF5 file that gets a row per element at every committed step (appended
@@ -375,7 +376,7 @@ class PoolRegionMaterials:
 
     def __init__(self, pool, names, *, min_eig_fraction: float = 1e-3,
                  strain_kw: dict | None = None, records=None,
-                 fd_components=tuple(range(6))) -> None:
+                 fd_components=tuple(range(6)), band_tangent: str = "network") -> None:
         from cpp_dem.elements.periodic import DemElement
 
         self.pool, self.names = pool, list(names)
@@ -385,6 +386,10 @@ class PoolRegionMaterials:
         self.strain_kw = dict(strain_kw or {})
         self.records = None if records is None else Path(records)
         self.calls, self.dem_s, self.steps = 0, 0.0, 0
+        if band_tangent not in ("network", "network-elastic", "fd-forward"):
+            raise ValueError(f"band_tangent={band_tangent!r}: 'network', 'network-elastic' "
+                             "or 'fd-forward'")
+        self.band_tangent = band_tangent
         self.fd_components = tuple(int(c) for c in fd_components)
         if not self.fd_components or any(not 0 <= c < 6 for c in self.fd_components):
             raise ValueError(f"fd_components={fd_components!r}: Voigt components 0..5")
@@ -400,9 +405,10 @@ class PoolRegionMaterials:
         self._stress0, self._tangent0 = [], []
         from cpp_dem.elements.pool import element_tangent
 
-        for k, el in enumerate(elements):  # (as a trial's: the pool's "auto")
+        for k, el in enumerate(elements):  # (as a trial's)
             self._stress0.append(el.stress())
-            voigt = element_tangent(el, "auto", self.strain_kw, self.fd_components)
+            voigt = element_tangent(el, ("network", self.band_tangent), self.strain_kw,
+                                    self.fd_components)
             self._tangent0.append(network_stiffness(
                 None, self.min_eig_fraction,
                 voigt=self._filled(voigt) if k in self._bonded else voigt))
@@ -414,6 +420,8 @@ class PoolRegionMaterials:
         ones the model does not strain (plane strain's yy, yz, xy), so they only keep the
         6 x 6 tangent's algebra whole."""
         d = np.array(voigt, float)
+        if not np.isnan(d).any():  # (a whole tangent: the network's)
+            return d
         done = list(self.fd_components)
         rest = [c for c in range(6) if c not in done]
         if not rest:
@@ -456,7 +464,8 @@ class PoolRegionMaterials:
         if not any(np.any(d) for d in des):
             self._last = None
             return {n: (np.zeros((3, 3)), self._tangent0[k]) for k, n in enumerate(self.names)}
-        step = self.pool.apply_strain(des, tangent="auto", fd_components=self.fd_components,
+        step = self.pool.apply_strain(des, tangent=("network", self.band_tangent),
+                                      fd_components=self.fd_components,
                                       **self.strain_kw)
         self.calls += 1
         self.dem_s += float(sum(step.cpu_s))
@@ -554,9 +563,8 @@ class ReinforcedBandElement:
     ``tol``, ...). After that preparation the cell, held, relaxes until the unbalanced
     force is below ``unbalanced`` (a sheet left at hold_sheet's looser tolerance creeps:
     at 1e-2, an 80-grain cell's stress under a strain increment of 1e-4 drifted by 0.3 kPa
-    with the increment or without it; relaxed to 1e-4, by less than 1 Pa). Its tangent is by
-    finite differences (``fd_tangent``: the contact network's assembly takes no bonds).
-    SI units."""
+    with the increment or without it; relaxed to 1e-4, by less than 1 Pa). Its tangent is its
+    network's, the sheet's bonds in it (``DemElement.network_tangent``). SI units."""
 
     n: int = 80
     seed: int = 1

@@ -233,8 +233,9 @@ def test_an_element_per_cell_on_dask_workers(tmp_path):
 def test_a_band_member_on_the_pool_answers_as_its_element_alone():
     """PoolRegionMaterials.build(band=): a reinforced RVE of a band cell beside a soil
     element on one Dask worker. Its trial is the element run alone (bitwise), its stress in
-    the band's scale, its tangent the forward differences of the components asked (the
-    others filled by symmetry); the soil element's tangent is its network's."""
+    the band's scale, its tangent its network's with the sheet's bonds; with
+    ``band_tangent="fd-forward"`` the forward differences of the components asked (the others
+    filled by symmetry). The soil element's tangent is its network's."""
     from cpp_dem.elements.periodic import DemElement
     from femcoupling.region import (PeriodicRegionElement, PoolRegionMaterials,
                                     ReinforcedBandElement, network_stiffness)
@@ -257,15 +258,26 @@ def test_a_band_member_on_the_pool_answers_as_its_element_alone():
 
         sheet = sheet_tension_per_metre(alone.scene)[0]  # (N/m, as prepared)
         after = alone.apply_strain(de)
+        ds, tangent = got["zone-geogrid/1"]
+        assert np.array_equal(ds, after - before)
+        net = alone.network_tangent()[0]
+        assert np.array_equal(group._filled(net), net)  # (a whole tangent stays)
+        assert np.array_equal(tangent, network_stiffness(None, 1e-3, voigt=net))
         fd = alone.fd_tangent(components=(0, 2, 4), central=False)
         assert np.isnan(fd[:, 1]).all() and not np.isnan(fd[:, [0, 2, 4]]).any()
         whole = group._filled(fd)
         assert not np.isnan(whole).any()
         assert np.array_equal(whole[:, [0, 2, 4]], fd[:, [0, 2, 4]])
         assert whole[0, 1] == fd[1, 0] and whole[3, 3] == np.mean(np.diag(fd)[[0, 2, 4]])
-        ds, tangent = got["zone-geogrid/1"]
-        assert np.array_equal(ds, after - before)
-        assert np.array_equal(tangent, network_stiffness(None, 1e-3, voigt=whole))
+        group.band_tangent = "fd-forward"  # (the same trial again, from the step's start)
+        both = group.trial_many({"zone/0": de, "zone-geogrid/1": de})
+        again = both["zone-geogrid/1"]
+        assert np.array_equal(both["zone/0"][1], got["zone/0"][1])  # (the soil's: network)
+        assert np.array_equal(again[0], ds)
+        assert np.array_equal(again[1], network_stiffness(None, 1e-3, voigt=whole))
+        group.band_tangent = "network"
+        with pytest.raises(ValueError, match="band_tangent='fd': 'network', "):
+            PoolRegionMaterials(group.pool, group.names, band_tangent="fd")
         soil = DemElement.from_bytes(group.pool.states()[0])
         soil.apply_strain(de)
         assert np.array_equal(got["zone/0"][1], network_stiffness(soil, 1e-3))

@@ -121,6 +121,8 @@ def test_the_calibration_takes_the_path_as_far_as_the_starting_soil_carried():
     ("band_grains", 20, "band_grains=20: must be 0 (the layer's cells stay the FEM's band) "
                         "or an integer >= 50"),
     ("dim", 1, "dim=1: must be 2 (a strip footing, plane strain) or 3 (a square footing)"),
+    ("band_tangent", "fd", "band_tangent='fd': must be one of 'network', 'network-elastic', "
+                           "'fd-forward'"),
 ])
 def test_bad_parameters_are_named(field, value, words):
     from dataclasses import replace
@@ -149,9 +151,11 @@ def test_the_layer_thickness_flag_sets_the_band_thickness():
     sheet's force per metre over t): h / t = 1 for a band as thick as the RVE."""
     from geogrid_dem.cases.footing_multiscale import parse_args
 
-    p, _ = parse_args(["--smoke", "--layer-thickness", "0.054", "--band-grains", "80"])
-    assert (p.layer_thickness, p.band_grains) == (0.054, 80)
+    p, _ = parse_args(["--smoke", "--layer-thickness", "0.054", "--band-grains", "80",
+                       "--band-tangent", "fd-forward"])
+    assert (p.layer_thickness, p.band_grains, p.band_tangent) == (0.054, 80, "fd-forward")
     assert parse_args(["--smoke"])[0].layer_thickness == 0.02
+    assert parse_args(["--smoke"])[0].band_tangent == "network"
 
 
 def test_an_element_without_stiffness_fails_the_newton_iterate_by_name():

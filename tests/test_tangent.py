@@ -111,6 +111,43 @@ def test_rigid_spin_rotates_the_stress_objectively(elastic_element):
     assert np.allclose(ds, W @ sig - sig @ W, rtol=0, atol=1e-4 * np.abs(sig).max())
 
 
+def _string(tension=10.0, k=1e6, cell=(0.02, 0.01, 0.01)):
+    """A straight bonded string along x through a periodic cell: grains 0 and 1 half a cell
+    apart, bonded to each other and to the next cell's image, in tension (N)."""
+    lx = cell[0]
+    l = np.array([[lx / 2, 0.0, 0.0]] * 2)
+    return dict(i=np.array([0, 1]), j=np.array([1, 0]), branch=l, normal=l / (lx / 2),
+                li=np.full(2, lx / 4), lj=np.full(2, lx / 4), kn=np.full(2, k),
+                ks=np.full(2, k / 2), fn=np.full(2, -tension), fs=np.zeros((2, 3)),
+                tan_phi=np.full(2, 0.5), volume=float(np.prod(cell)), n_bodies=2,
+                bonded=np.ones(2, bool), k_bend=np.full(2, 1e-3), k_twist=np.full(2, 1e-3))
+
+
+def test_a_bonded_string_in_tension_keeps_its_springs_and_turns_objectively():
+    # Two springs k in series along the cell: d sigma_xx / d E_xx = k lx / (2 A). With the
+    # geometric terms the tension's own part cancels (T lx / V from the stretched branch, less
+    # the volume's), so that holds in tension too. A rigid spin turns its stress.
+    k, T, cell = 1e6, 10.0, (0.02, 0.01, 0.01)
+    net = _string(T, k, cell)
+    for geometric in (False, True):
+        D, info = tangent.network_tangent(**net, geometric=geometric)
+        assert info["n_contacts_used"] == 2 and info["n_sliding"] == 0
+        assert D[0, 0, 0, 0] == pytest.approx(k * cell[0] / (2 * cell[1] * cell[2]),
+                                              rel=1e-9)
+    sig = tangent.stress_from_contacts(branch=net["branch"], fn=net["fn"], fs=net["fs"],
+                                       volume=net["volume"])
+    assert sig[0, 0] == pytest.approx(T * cell[0] / net["volume"])  # (tension positive)
+    W = np.array([[0, -1.0, 0.5], [1.0, 0, -0.2], [-0.5, 0.2, 0]])
+    ds = np.einsum("ijkl,kl->ij", D, W)
+    assert np.allclose(ds, W @ sig - sig @ W, rtol=0, atol=1e-9 * sig[0, 0])
+    # weights count the rows in the stress: all rows twice is twice the tangent
+    D2, _ = tangent.network_tangent(**net, weights=np.full(2, 2.0))
+    assert np.allclose(D2, 2 * D, rtol=1e-12, atol=0)
+    # the same rows as contacts are dropped in tension: nothing is left
+    D0, info0 = tangent.network_tangent(**{**net, "bonded": None})
+    assert info0["n_contacts_used"] == 0 and not D0.any()
+
+
 def test_bad_input_names_the_field():
     net = _cubic()
     with pytest.raises(dem.ParameterError, match="volume"):
@@ -121,6 +158,10 @@ def test_bad_input_names_the_field():
         tangent.network_tangent(**net, sliding="maybe")
     with pytest.raises(dem.ParameterError, match="body indices"):
         tangent.network_tangent(**{**net, "n_bodies": 3})
+    with pytest.raises(dem.ParameterError, match="bonded"):
+        tangent.network_tangent(**net, bonded=np.ones(2, bool))
+    with pytest.raises(dem.ParameterError, match="weights"):
+        tangent.network_tangent(**net, weights=np.ones(2))
 
 
 def test_element_network_tangent_matches_finite_differences_in_the_elastic_range(

@@ -79,6 +79,7 @@ tau = |F_s|/A + |M_t| R_bar/J >= pb_shear (Pa).
         const auto& bs = s.bonds();
         const size_t n = bs.size();
         std::vector<Real> fn(n), pb_fn(n), pb_mt(n), sigma(n), tau(n), rbar(n), gap0(n);
+        std::vector<Real> k_normal(n), k_shear(n), k_bend(n), k_twist(n), friction(n);
         std::vector<Vec3> fs(n), pb_fs(n), pb_mb(n), force(n), normal(n);
         std::vector<bool> cb(n), pb(n);
         for (size_t k = 0; k < n; ++k) {
@@ -97,6 +98,10 @@ tau = |F_s|/A + |M_t| R_bar/J >= pb_shear (Pa).
           normal[k] = l.normal;
           cb[k] = l.cb_intact;
           pb[k] = l.pb_intact;
+          l.stiffness(k_normal[k], k_shear[k]);
+          k_bend[k] = l.pb_intact ? l.pb_kn * l.pb_i : 0.0;
+          k_twist[k] = l.pb_intact ? l.pb_ks * l.pb_j : 0.0;
+          friction[k] = l.tan_phi;
         }
         py::dict d;
         d["contact_bond"] = cb;
@@ -113,6 +118,11 @@ tau = |F_s|/A + |M_t| R_bar/J >= pb_shear (Pa).
         d["reference_gap"] = real_array(gap0);
         d["force"] = vec3_array(force);
         d["normal"] = vec3_array(normal);
+        d["normal_stiffness"] = real_array(k_normal);
+        d["shear_stiffness"] = real_array(k_shear);
+        d["bending_stiffness"] = real_array(k_bend);
+        d["twisting_stiffness"] = real_array(k_twist);
+        d["friction"] = real_array(friction);
         return d;
       }, R"doc(Every bond's state, arrays in bond order:
 contact_bond, parallel_bond: the parts that still hold (bool);
@@ -121,7 +131,11 @@ its shear force on b, N; pb_normal_force: the parallel bond's, N, tension positi
 pb_shear_force (n, 3), N; pb_twisting_moment (about the normal), N m; pb_bending_moment (n, 3),
 N m, all on b; pb_sigma, pb_tau: the parallel bond's rim stresses, Pa (0 once broken);
 pb_radius: R_bar, m; reference_gap, m; force (n, 3): the bond's total force on b, N (a gets
-the opposite); normal (n, 3): unit a -> b.)doc")
+the opposite); normal (n, 3): unit a -> b; normal_stiffness, shear_stiffness: the springs
+acting now along and across the normal at the contact point, N/m (the linear contact's, when
+bonded or pressed, plus the intact parallel bond's k_bar A); bending_stiffness,
+twisting_stiffness: the intact parallel bond's k_bar_n I and k_bar_s J, N m/rad (0 once
+broken); friction: the linear contact's Coulomb mu, -.)doc")
       .def_property_readonly("bond_breaks", [](const Scene& s) {
         py::list out;
         for (const BondBreak& e : s.bond_breaks()) {

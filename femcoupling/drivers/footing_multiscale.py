@@ -51,6 +51,8 @@ VARIANTS = ("unreinforced", "RE", "PRS")
 #: The Voigt components of the elements' finite-difference tangents: the x-z plane's in plane
 #: strain (xx, zz, xz), all six in 3D.
 FD_COMPONENTS = {2: (0, 2, 4), 3: (0, 1, 2, 3, 4, 5)}
+#: The band RVEs' tangents (``PoolRegionMaterials(band_tangent=)``).
+BAND_TANGENTS = ("network", "network-elastic", "fd-forward")
 #: The calibration's first FEM (the starting soil) that stops short of the largest pressure
 #: gives the zone's path as far as it went if the footing's pressure rose by at least this
 #: fraction of what was asked (in 3D with 0.35 and 0.25 m zone cells, the 35-degree starting
@@ -80,6 +82,8 @@ class FootingParams:
     cell_grains: int = 150          #: grains of each cell's periodic element
     band_grains: int = 0            #: grains of the reinforced RVE of each of the layer's
                                     #: cells in the zone (0: they stay the FEM's band)
+    band_tangent: str = "network"   #: their tangent: "network" (with the sheet's bonds),
+                                    #: "network-elastic" or "fd-forward" (region.py)
     radius_mean: float = 0.003      #: the grains' mean radius, m
     radius_spread: float = 0.2      #: radii uniform in r_mean (1 +- spread), -
     young: float = 50e6             #: grain Young's modulus (linear law), Pa
@@ -127,6 +131,8 @@ class FootingParams:
         if not (isinstance(self.band_grains, int)
                 and (self.band_grains == 0 or self.band_grains >= 50)):
             bad("band_grains", "0 (the layer's cells stay the FEM's band) or an integer >= 50")
+        if self.band_tangent not in BAND_TANGENTS:
+            bad("band_tangent", "one of " + ", ".join(map(repr, BAND_TANGENTS)))
         if not (0 <= self.poisson and 0 <= self.radius_spread < 1
                 and 0 < self.friction_deg < 90 and 0 <= self.soil_poisson < 0.5
                 and 0 < self.soil_friction < 90):
@@ -336,6 +342,7 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
             group = PoolRegionMaterials.build(cells, runner, client=client,
                                               distinct_seeds=True, band=band,
                                               fd_components=FD_COMPONENTS[p.dim],
+                                              band_tangent=p.band_tangent,
                                               records=out / f"zone_elements_{tag}.h5")
             break
         except RuntimeError as exc:

@@ -51,7 +51,7 @@ def log(msg: str) -> None:
 
 def build_parser():
     """The case's parser: the shared options (geogrid_dem.options) and its own."""
-    from femcoupling.drivers.footing_multiscale import VARIANTS, FootingParams
+    from femcoupling.drivers.footing_multiscale import BAND_TANGENTS, VARIANTS, FootingParams
 
     d = FootingParams()
     ap = case_parser("footing-multiscale", describe("footing-multiscale",
@@ -96,6 +96,11 @@ def build_parser():
                     help=f"grains of the reinforced RVE (woven sheet and grains) of each of "
                          f"the layer's cells in the zone (default {d.band_grains}; 0: those "
                          "cells stay the FEM's elastic band)")
+    ap.add_argument("--band-tangent", choices=BAND_TANGENTS, default=d.band_tangent,
+                    help="the band RVEs' tangent: their contact network with the sheet's "
+                         "bonds (network), the same with sliding contacts taken as stuck "
+                         "(network-elastic), or forward differences of the plane's "
+                         "components, three more runs of each RVE a trial (fd-forward)")
     ap.add_argument("--workers", type=int, default=d.workers,
                     help="Dask workers of the zone's elements (a LocalCluster)")
     ap.add_argument("--dim", type=int, choices=(2, 3), default=d.dim,
@@ -112,7 +117,8 @@ FLAGS = {"--pressure": "pressure_pa", "--seat": "seat_pa", "--levels": "levels",
          "--layer-thickness": "layer_thickness",
          "--grid-stiffness": "grid_stiffness", "--prestress": "prestress",
          "--fine-size": "fine_size", "--cell-grains": "cell_grains",
-         "--band-grains": "band_grains", "--workers": "workers", "--dim": "dim"}
+         "--band-grains": "band_grains", "--band-tangent": "band_tangent",
+         "--workers": "workers", "--dim": "dim"}
 
 
 def parse_args(argv=None):

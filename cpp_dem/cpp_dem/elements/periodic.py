@@ -416,36 +416,78 @@ class DemElement:
     def network_tangent(self, *, sliding: str = "plastic", geometric: bool = True,
                         rotations: bool = True) -> tuple[np.ndarray, dict]:
         """The tangent from the contact network (Kruyt–Rothenburg type stiffness assembly,
-        ``cpp_dem.measure.network_tangent.network_tangent``): 6 x 6 Voigt, Pa, tension positive, and its info
-        dict. Periodic elements only."""
+        ``cpp_dem.measure.network_tangent.network_tangent``): 6 x 6 Voigt, Pa, tension
+        positive, and its info dict. Periodic elements only.
+
+        A reinforced cell's bonds (its sheet) are in the network: each bond a spring pair
+        along and across its normal, in tension too, that does not slide, with its parallel
+        bond's bending and twisting springs. With a band thickness
+        (:meth:`set_band_thickness`) the tangent is the band's stress's: the bonds' rows
+        count h / t times, and h / t grows with the strain normal to the sheet (d ln h =
+        n . dE n, n the normal of the cell's x–y face), which adds h / t times the bonds'
+        stress to that column."""
         if self.kind != "periodic":
             raise ParameterError("network_tangent: needs a periodic element (the assembly "
                                  "takes the periodic branch vectors); use fd_tangent")
-        if self.scene.num_bonds:
-            raise ParameterError(f"network_tangent: the cell has {self.scene.num_bonds} bonds "
-                                 "(a reinforced cell's sheet) and the assembly takes pair "
-                                 "contacts only; use fd_tangent")
         from cpp_dem.measure import network_tangent as tangent
 
         d, info = tangent.network_tangent(**self.network_data(), sliding=sliding,
                                           geometric=geometric, rotations=rotations)
+        if self.band_thickness is not None:
+            h = np.asarray(self.scene.cell_matrix)
+            normal = np.cross(h[:, 0], h[:, 1])
+            normal /= np.linalg.norm(normal)
+            ratio = periodic.cell_height(self.scene) / self.band_thickness
+            d = d + np.einsum("ij,k,m->ijkm", -ratio * periodic.bond_stress(self.scene),
+                              normal, normal)
         return tangent.to_voigt(d), info
 
     def network_data(self) -> dict:
-        """The active pair contacts as the arrays ``tangent.network_tangent`` takes."""
+        """The active pair contacts, and a reinforced cell's bonds after them, as the arrays
+        ``tangent.network_tangent`` takes (with ``bonded``, ``k_bend``, ``k_twist`` and
+        ``weights``: 1, and h / t for the bonds' rows of a band, :meth:`network_tangent`)."""
         c = self.scene.contacts()
         ids = np.asarray(c["ids"])
         pair = ids[:, 1] >= 0
         r = np.asarray(self.scene.radii)
         i, j = ids[pair, 0], ids[pair, 1]
         ov = np.asarray(c["overlap"])[pair]
-        return dict(i=i, j=j, branch=np.asarray(c["branch"])[pair],
-                    normal=np.asarray(c["normal"])[pair], li=r[i] - 0.5 * ov,
+        npair = int(pair.sum())
+        rows = dict(i=i, j=j, branch=np.asarray(c["branch"])[pair].reshape(-1, 3),
+                    normal=np.asarray(c["normal"])[pair].reshape(-1, 3), li=r[i] - 0.5 * ov,
                     lj=r[j] - 0.5 * ov, kn=np.asarray(c["kn"])[pair],
                     ks=np.asarray(c["ks"])[pair], fn=np.asarray(c["normal_force"])[pair],
-                    fs=np.asarray(c["shear_force"])[pair],
-                    tan_phi=np.asarray(c["tan_phi"])[pair], volume=self.volume(),
-                    n_bodies=int(self.scene.num_bodies))
+                    fs=np.asarray(c["shear_force"])[pair].reshape(-1, 3),
+                    tan_phi=np.asarray(c["tan_phi"])[pair], bonded=np.zeros(npair, bool),
+                    k_bend=np.zeros(npair), k_twist=np.zeros(npair), weights=np.ones(npair))
+        if self.scene.num_bonds:
+            rows = {k: np.concatenate([v, self._bond_rows()[k]]) for k, v in rows.items()}
+        return dict(rows, volume=self.volume(), n_bodies=int(self.scene.num_bodies))
+
+    def _bond_rows(self) -> dict:
+        """The bonds as network rows: a -> b's nearest image (bonds are shorter than half
+        the cell), the contact point in the middle of the gap, the total force on b split
+        into its normal part (repulsive positive) and its shear part."""
+        st = self.scene.bond_state()
+        ab = np.asarray(self.scene.bond_spheres, dtype=int).reshape(-1, 2)
+        x = np.asarray(self.scene.positions)
+        h = np.asarray(self.scene.cell_matrix)
+        d = x[ab[:, 1]] - x[ab[:, 0]]
+        d -= np.round(np.linalg.solve(h, d.T).T) @ h.T
+        r = np.asarray(self.scene.radii)
+        gap = np.linalg.norm(d, axis=1) - r[ab[:, 0]] - r[ab[:, 1]]
+        n = np.asarray(st["normal"]).reshape(-1, 3)
+        f = np.asarray(st["force"]).reshape(-1, 3)
+        fn = np.einsum("ci,ci->c", f, n)
+        bonded = np.asarray(st["contact_bond"], bool) | np.asarray(st["parallel_bond"], bool)
+        return dict(i=ab[:, 0], j=ab[:, 1], branch=d, normal=n, li=r[ab[:, 0]] + 0.5 * gap,
+                    lj=r[ab[:, 1]] + 0.5 * gap, kn=np.asarray(st["normal_stiffness"]),
+                    ks=np.asarray(st["shear_stiffness"]), fn=fn, fs=f - fn[:, None] * n,
+                    tan_phi=np.asarray(st["friction"]), bonded=bonded,
+                    k_bend=np.asarray(st["bending_stiffness"]),
+                    k_twist=np.asarray(st["twisting_stiffness"]),
+                    weights=np.full(len(ab), 1.0 if self.band_thickness is None else
+                                    periodic.cell_height(self.scene) / self.band_thickness))
 
     def fd_tangent(self, *, h: float = 1e-5, components=range(6), central: bool = True,
                    **strain_kw) -> np.ndarray:

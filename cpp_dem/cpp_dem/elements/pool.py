@@ -136,14 +136,16 @@ def _kind(element_type: type) -> type:
 
 def element_tangent(el, tangent: str | None, strain_kw: dict, fd_components=None):
     """An element's 6 x 6 Voigt tangent (Pa) as ``ElementPool.apply_strain``'s ``tangent``
-    names it (None: none); "auto" is "network" for an element without bonds and forward
-    differences of ``fd_components`` (default all six; the others NaN) for one with."""
-    if tangent == "auto":  # (a cell with bonds has no network tangent)
-        if not getattr(el.scene, "num_bonds", 0):
-            return el.network_tangent()[0]
+    names it (None: none); "auto" is "network" (a reinforced cell's too: its sheet's bonds
+    are in the network); "fd-forward": forward differences of ``fd_components`` (default
+    all six; the others NaN), the band RVEs' tangent before the network took bonds. A pair
+    of names: the first for an element without bonds, the second for one with."""
+    if isinstance(tangent, tuple):
+        tangent = tangent[1 if getattr(el.scene, "num_bonds", 0) else 0]
+    if tangent == "fd-forward":
         return el.fd_tangent(components=range(6) if fd_components is None else fd_components,
                              central=False, **strain_kw)
-    if tangent == "network":
+    if tangent in ("auto", "network"):
         return el.network_tangent()[0]
     if tangent == "network-elastic":  # sliding contacts taken as stuck:
         return el.network_tangent(sliding="elastic")[0]  # stiffer, positive past the peak
@@ -931,11 +933,12 @@ class ElementPool:
     def apply_strain(self, increments, *, tangent: str | None = None, scatter: bool = False,
                      fd_components=None, **strain_kw) -> PoolStep:
         """Applies increment ``increments[k]`` (3 x 3 displacement gradient, -) to element k,
-        all in parallel; ``tangent``: None, "network" (sliding contacts on the Coulomb cone),
-        "network-elastic" (sliding contacts taken as stuck), "fd", or "auto" ("network" for
-        an element without bonds; for one with, a reinforced cell, whose bonds the
-        network's assembly does not take, forward differences of the Voigt components
-        ``fd_components`` (default all six; the others NaN)); ``scatter``: also each
+        all in parallel; ``tangent``: None, "network" (sliding contacts on the Coulomb cone;
+        a reinforced cell's bonds in the network too), "network-elastic" (sliding contacts
+        taken as stuck), "fd" (central differences), "fd-forward" (forward differences of
+        the Voigt components ``fd_components``, default all six, the others NaN) or "auto"
+        (as "network"), or a pair of these: the first for the elements without bonds, the
+        second for those with (reinforced cells); ``scatter``: also each
         element's stress scatter (``DemElement.stress_scatter``). Keyword arguments go to
         ``DemElement.apply_strain``. Called at a boundary (after a build, accept, reject or
         load), it first gives elements to workers that joined. A worker lost during the call:
@@ -944,9 +947,12 @@ class ElementPool:
         self._require("StrainElement", "apply_strain")
         if len(increments) != self.n:
             raise ParameterError(f"increments: {len(increments)} given for {self.n} elements")
-        if tangent not in (None, "network", "network-elastic", "fd", "auto"):
+        names = (None, "network", "network-elastic", "fd", "fd-forward", "auto")
+        if not (tangent in names or (isinstance(tangent, tuple) and len(tangent) == 2
+                                     and all(t in names for t in tangent))):
             raise ParameterError(f"tangent={tangent!r}: None, 'network', 'network-elastic', "
-                                 "'fd' or 'auto'")
+                                 "'fd', 'fd-forward' or 'auto', or a pair of them (without "
+                                 "bonds, with bonds)")
         # (the increments are kept for a replay)
         increments = {k: np.array(d, copy=True) for k, d in enumerate(increments)}
         t0 = time.perf_counter()

@@ -115,7 +115,8 @@ def _blas_controller():
 @_one_blas_thread
 def network_tangent(*, i, j, branch, normal, li, lj, kn, ks, fn, fs, tan_phi, volume: float,
                     n_bodies: int, rotations: bool = True, sliding: str = "plastic",
-                    geometric: bool = True) -> tuple[np.ndarray, dict]:
+                    geometric: bool = True, bonded=None, k_bend=None, k_twist=None,
+                    weights=None) -> tuple[np.ndarray, dict]:
     """The tangent D (3, 3, 3, 3), Pa, tension positive, of the contact network (see the module
     doc), and an info dict: ``n_contacts_used``, ``n_sliding``, ``n_rattlers`` (grains with
     fewer than 2 contacts), ``residual`` (of the solved equilibrium, relative), ``affine`` (D
@@ -124,6 +125,18 @@ def network_tangent(*, i, j, branch, normal, li, lj, kn, ks, fn, fs, tan_phi, vo
     ``sliding``: "plastic" (contacts at the Coulomb limit slide on the cone) or "elastic";
     ``rotations``: False holds the grains' rotations at zero; ``geometric``: include the turn
     of the contact frame, of the branch vectors and of the lever arms, and the volume change.
+
+    Bonds (a sheet's, ``cpp_dem.laws`` bond records) enter as more rows of the same arrays:
+    ``bonded`` (C,) bool marks them. A bonded row is kept in tension (``fn`` < 0) and never
+    slides; its ``kn``, ``ks`` are its springs along and across the normal (the linear
+    contact's plus the parallel bond's k_bar A). ``k_bend``, ``k_twist`` (C,), N m/rad: the
+    parallel bond's rotational springs on the relative rotation of its two spheres, across
+    and about the normal (0 for a contact; default none). Their moments do not enter the
+    Love–Weber stress; they hold the grains' rotations. The turn of a bond's stored moment
+    with its frame is left out (a second-order term for the moments a sheet carries).
+    ``weights`` (C,): each row's weight in the stress sum (default 1): the stress of a
+    continuum that counts a part of the network more than once (a band's sheet,
+    ``DemElement.set_band_thickness``). The grains' equilibrium does not depend on them.
     """
     import scipy.sparse as sp
     import scipy.sparse.linalg as spla
@@ -148,13 +161,20 @@ def network_tangent(*, i, j, branch, normal, li, lj, kn, ks, fn, fs, tan_phi, vo
     arrays = {k: _arr(v, k) for k, v in (("li", li), ("lj", lj), ("kn", kn), ("ks", ks),
                                          ("fn", fn), ("tan_phi", tan_phi))}
     f_s = _arr(fs, "fs", (3,))
+    for k, v in (("k_bend", k_bend), ("k_twist", k_twist), ("weights", weights)):
+        arrays[k] = np.zeros(C) if v is None and k != "weights" else (
+            np.ones(C) if v is None else _arr(v, k))
+    bond = np.zeros(C, bool) if bonded is None else np.asarray(bonded, dtype=bool)
+    if bond.shape != (C,):
+        raise ParameterError(f"bonded: expected shape ({C},), got {bond.shape}")
     for k, a in list(arrays.items()) + [("branch", l), ("normal", n), ("fs", f_s)]:
         if len(a) != C:
             raise ParameterError(f"{k}: has {len(a)} entries for {C} contacts")
-    use = arrays["fn"] > 0
-    I, J, l, n, f_s = I[use], J[use], l[use], n[use], f_s[use]
-    a_li, a_lj, k_n, k_s, f_n, mu = (arrays[k][use] for k in ("li", "lj", "kn", "ks", "fn",
-                                                                "tan_phi"))
+    use = (arrays["fn"] > 0) | bond
+    I, J, l, n, f_s, bond = I[use], J[use], l[use], n[use], f_s[use], bond[use]
+    a_li, a_lj, k_n, k_s, f_n, mu, k_b, k_t, wt = (
+        arrays[k][use] for k in ("li", "lj", "kn", "ks", "fn", "tan_phi", "k_bend", "k_twist",
+                                 "weights"))
     C = len(I)
     eye = np.eye(3)
     nn = np.einsum("ca,cb->cab", n, n)
@@ -162,7 +182,7 @@ def network_tangent(*, i, j, branch, normal, li, lj, kn, ks, fn, fs, tan_phi, vo
     fs_norm = np.linalg.norm(f_s, axis=1)
     slide = np.zeros(C, bool)
     if sliding == "plastic":
-        slide = (fs_norm >= mu * f_n * (1 - 1e-9)) & (fs_norm > 0)
+        slide = (fs_norm >= mu * f_n * (1 - 1e-9)) & (fs_norm > 0) & ~bond
         if slide.any():
             t = f_s[slide] / fs_norm[slide, None]
             tt = np.einsum("ca,cb->cab", t, t)
@@ -205,6 +225,13 @@ def network_tangent(*, i, j, branch, normal, li, lj, kn, ks, fn, fs, tan_phi, vo
         f = f_n[:, None] * n + f_s
     # Global system: sum_c (G^T S - T H) q = sum_c (T - G^T R) E l.
     blocks = np.einsum("cai,caj->cij", G, S) - np.einsum("cia,caj->cij", T, H)
+    if rotations and (np.any(k_b) or np.any(k_t)):
+        # a bond's rotational springs: moment on j -Kr (th_j - th_i), on i the opposite
+        kr = k_b[:, None, None] * (eye - nn) + k_t[:, None, None] * nn
+        blocks[:, 3:6, 3:6] += kr
+        blocks[:, 9:12, 9:12] += kr
+        blocks[:, 3:6, 9:12] -= kr
+        blocks[:, 9:12, 3:6] -= kr
     dofs = np.concatenate([6 * I[:, None] + np.arange(6), 6 * J[:, None] + np.arange(6)], axis=1)
     rows = np.repeat(dofs, 12, axis=1).ravel()
     cols = np.tile(dofs, (1, 12)).ravel()
@@ -247,7 +274,7 @@ def network_tangent(*, i, j, branch, normal, li, lj, kn, ks, fn, fs, tan_phi, vo
     q += q_spin
     res = kg @ q - rhs
     residual = float(np.linalg.norm(res) / max(np.linalg.norm(rhs), 1e-300))
-    sigma = -np.einsum("ci,cj->ij", f, l) / volume
+    sigma = -np.einsum("ci,cj->ij", wt[:, None] * f, l) / volume
     D = np.zeros((3, 3, 3, 3))
     A = np.zeros((3, 3, 3, 3))
     for k in range(3):
@@ -257,10 +284,10 @@ def network_tangent(*, i, j, branch, normal, li, lj, kn, ks, fn, fs, tan_phi, vo
             qc = q[dofs, 3 * k + m]  # (C, 12)
             for target, qq in ((D, qc), (A, np.zeros_like(qc))):
                 df = -(np.einsum("caj,cj->ca", S, qq) + np.einsum("cab,cb->ca", R, El))
-                ds = -np.einsum("ci,cj->ij", df, l) / volume
+                ds = -np.einsum("ci,cj->ij", wt[:, None] * df, l) / volume
                 if geometric:
                     dl = np.einsum("caj,cj->ca", H, qq) + El
-                    ds += -np.einsum("ci,cj->ij", f, dl) / volume
+                    ds += -np.einsum("ci,cj->ij", wt[:, None] * f, dl) / volume
                     if k == m:
                         ds -= sigma
                 target[:, :, k, m] = ds
