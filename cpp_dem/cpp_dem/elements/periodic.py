@@ -465,15 +465,12 @@ class DemElement:
         return dict(rows, volume=self.volume(), n_bodies=int(self.scene.num_bodies))
 
     def _bond_rows(self) -> dict:
-        """The bonds as network rows: a -> b's nearest image (bonds are shorter than half
-        the cell), the contact point in the middle of the gap, the total force on b split
-        into its normal part (repulsive positive) and its shear part."""
+        """The bonds as network rows: a -> b's nearest image (``periodic.bond_branches``),
+        the contact point in the middle of the gap, the total force on b split into its
+        normal part (repulsive positive) and its shear part."""
         st = self.scene.bond_state()
         ab = np.asarray(self.scene.bond_spheres, dtype=int).reshape(-1, 2)
-        x = np.asarray(self.scene.positions)
-        h = np.asarray(self.scene.cell_matrix)
-        d = x[ab[:, 1]] - x[ab[:, 0]]
-        d -= np.round(np.linalg.solve(h, d.T).T) @ h.T
+        d = periodic.bond_branches(self.scene)
         r = np.asarray(self.scene.radii)
         gap = np.linalg.norm(d, axis=1) - r[ab[:, 0]] - r[ab[:, 1]]
         n = np.asarray(st["normal"]).reshape(-1, 3)

@@ -308,18 +308,23 @@ def plane_strain_biaxial(scene, *, pressure: float, strain: float,
             "peak_axial_strain": float(a[k, 0]), "peak_volumetric_strain": float(a[k, 1])}
 
 
+def bond_branches(scene) -> np.ndarray:
+    """Each bond's branch a -> b, to b's nearest image (bonds are shorter than half the
+    cell), m, shape (n_bonds, 3)."""
+    ab = np.asarray(scene.bond_spheres, dtype=int).reshape(-1, 2)
+    x = np.asarray(scene.positions)
+    h = np.asarray(scene.cell_matrix)
+    d = x[ab[:, 1]] - x[ab[:, 0]]
+    return d - np.round(np.linalg.solve(h, d.T).T) @ h.T
+
+
 def bond_stress(scene) -> np.ndarray:
     """The bonds' part of the cell stress (Love–Weber: the sum over the bonds of force x
     branch, over the cell volume), Pa, compression positive, 3 x 3. The cell stress less it
     is the grains'."""
     f = np.asarray(scene.bond_state()["force"]).reshape(-1, 3)
-    ab = np.asarray(scene.bond_spheres, dtype=int).reshape(-1, 2)
-    x = np.asarray(scene.positions)
     h = np.asarray(scene.cell_matrix)
-    # the branch a -> b, to b's nearest image (bonds are shorter than half the cell)
-    d = x[ab[:, 1]] - x[ab[:, 0]]
-    d -= np.round(np.linalg.solve(h, d.T).T) @ h.T
-    return np.einsum("ki,kj->ij", f, d) / float(np.linalg.det(h))
+    return np.einsum("ki,kj->ij", f, bond_branches(scene)) / float(np.linalg.det(h))
 
 
 def cell_height(scene) -> float:
@@ -331,4 +336,4 @@ def cell_height(scene) -> float:
 __all__ = ["cube_cell", "periodic_cloud", "cube_cloud", "periodic_scene", "cell_controller",
            "default_max_rate", "deformation_gradient", "small_strain", "drive_cell",
            "prepare_periodic", "settle_grains", "grow_grains", "plane_strain_biaxial",
-           "bond_stress", "cell_height", "CellController"]
+           "bond_branches", "bond_stress", "cell_height", "CellController"]
