@@ -141,7 +141,7 @@ def element_tangent(el, tangent: str | None, strain_kw: dict, fd_components=None
     all six; the others NaN), the band RVEs' tangent before the network took bonds. A pair
     of names: the first for an element without bonds, the second for one with."""
     if isinstance(tangent, tuple):
-        tangent = tangent[1 if getattr(el.scene, "num_bonds", 0) else 0]
+        tangent = tangent[1 if getattr(getattr(el, "scene", None), "num_bonds", 0) else 0]
     if tangent == "fd-forward":
         return el.fd_tangent(components=range(6) if fd_components is None else fd_components,
                              central=False, **strain_kw)
