@@ -354,6 +354,44 @@ def test_a_failed_run_is_kept_and_left_out_of_the_levels_it_did_not_reach(tmp_pa
     assert json.loads((tmp_path / "summary.json").read_text())["coupling"]["status"] == "failed"
 
 
+def test_a_zone_that_cannot_be_prepared_fails_its_run_and_says_why(tmp_path, monkeypatch):
+    """A run whose zone elements cannot be prepared in PREPARATION_ATTEMPTS (a cell's element
+    strains past its limit on its way to the cell's stress: seeds 2 and 3 of the 3D footing
+    on 0.35 m cells with 80 grains) is a failed run before its first level, recorded with
+    the attempts' failures, so the run's other variants and seeds go on (before, it stopped
+    the whole run)."""
+    from femcoupling.drivers import footing_multiscale as fm
+    from femcoupling.region import PoolRegionMaterials
+
+    class Body:
+        warnings = []
+
+        def region_strain(self, name):
+            return np.zeros((3, 3))
+
+        def cell_stresses(self, name):
+            return {"zone/7": -1e4 * np.eye(3)}
+
+    monkeypatch.setattr(fm, "continuum", lambda what, fn, *a: Body())
+    seeds = []
+
+    def refuse(cells, runner, **kw):
+        seeds.append(runner.seed)
+        raise RuntimeError("region zone/7: the periodic element cannot hold the FEM's "
+                           "initial stress")
+
+    monkeypatch.setattr(PoolRegionMaterials, "build", staticmethod(refuse))
+    lines = []
+    r = fm.run_multiscale(fm.FootingParams(), "RE", 2, None, None, tmp_path, lines.append,
+                          lambda *a: None, 1e6)
+    assert seeds == [2000, 2100, 2200]
+    assert r["status"] == "failed" and r["pressure_pa"] == [] and r["cells"] == 1
+    assert r["reason"].startswith("preparation: the zone's elements could not be prepared "
+                                  "in 3 attempts: packing seeds 2200 + k: region zone/7")
+    assert len(r["preparation_failures"]) == 3
+    assert any("RE_seed2: FAILED at preparation" in x for x in lines)
+
+
 class _Closable:
     def close(self):
         pass

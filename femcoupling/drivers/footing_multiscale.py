@@ -351,10 +351,19 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
                 log(f"{tag}: a cell's element could not be brought to its cell's stress "
                     f"({exc}); attempt {attempt + 2} of {PREPARATION_ATTEMPTS} with seeds "
                     f"{base + 100} + k")
-    if group is None:
-        raise SystemExit(f"[footing_multiscale] {tag}: the zone's elements could not be "
-                         f"prepared in {PREPARATION_ATTEMPTS} attempts: {failures[-1]}; try "
-                         "more --cell-grains or a larger --seat")
+    if group is None:  # (the run fails before its first level; the others go on: see run)
+        reason = (f"preparation: the zone's elements could not be prepared in "
+                  f"{PREPARATION_ATTEMPTS} attempts: {failures[-1]}; try more --cell-grains "
+                  "or a larger --seat")
+        log(f"{tag}: FAILED at {reason}")
+        return {"pressure_pa": [], "settlement_m": [], "newton_iterations": [],
+                "level_statuses": [], "status": "failed", "reason": reason,
+                "cells": len(cells), "band_cells": len(bands),
+                "band_sheet_tension_n_per_m": [], "element_seed_base": base,
+                "preparation_failures": failures, "element_evaluations": 0, "dem_s": 0.0,
+                "preparation_s": time.perf_counter() - t0,
+                "wall_time_s": time.perf_counter() - t0, "warnings": list(m.warnings),
+                **step_statuses([])}
     xdmf = out / f"fem_{tag}.xdmf"
     try:
         m.set_cell_elements("zone", group, band=bool(bands))
