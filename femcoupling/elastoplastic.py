@@ -524,6 +524,19 @@ class _SoilNewton:
             m.sig_cur - before, self.bcs,
             lambda f, v: m._to_q(f, v, m._qdofs, m.ncomp))
 
+    def noisiest(self, before: np.ndarray, count: int = 3) -> str:
+        """The region elements whose points' stresses moved most off ``before`` (the noise
+        probe's): each element's volume-weighted rms of the points' change (Pa, the Mandel
+        norm), the largest ``count``. Empty under MPI (each rank holds its own points)."""
+        m = self.m
+        if m.comm.size > 1 or not m._element_points:
+            return ""
+        change = np.linalg.norm(np.asarray(m.sig_cur) - before, axis=1)
+        rms = {k: float(np.sqrt(w @ change[sel] ** 2))
+               for k, (sel, w) in m._element_points.items()}
+        top = sorted(rms, key=lambda k: (-rms[k], k))[:count]
+        return ", ".join(f"{k} {rms[k]:.3g} Pa" for k in top)
+
     def predicted_change(self, perturb: float) -> np.ndarray:
         m = self.m
         tan = m.tan_q.x.array.reshape(-1, m.ncomp, m.ncomp)[m._qdofs_t]

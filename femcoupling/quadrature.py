@@ -232,7 +232,9 @@ class NewtonOutcome:
 
 
 class NewtonProblem(Protocol):
-    """What :func:`newton_solve` asks of a model."""
+    """What :func:`newton_solve` asks of a model. It may also have
+    ``noisiest(before) -> str``: which elements moved most at a noise probe, named in the
+    message of a step cut above the ceiling (``SoilModel``'s region elements)."""
 
     def evaluate(self, first: bool, perturb: float = 0.0) -> None:
         """Every material's trial at the current iterate (increments x (1 + perturb))."""
@@ -314,6 +316,8 @@ def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any 
                 size = rules.probe_size
             problem.evaluate(first=False, perturb=size)
             v = problem.stress_change_residual(before) / scale
+            noisiest = getattr(problem, "noisiest", None)
+            where = noisiest(before) if noisiest is not None else ""
             noise_rel = v if math.isnan(noise_rel) else max(noise_rel, v)
             if rules.probe_size == "correction":
                 # back on the iterate: the state a step accepts is the iterate's (a 1e-9 probe
@@ -338,7 +342,9 @@ def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any 
                     f"noise ({noise_rel:.3g}) but above the ceiling noise_ceiling="
                     f"{rules.ceiling:g} of the DEM points' own force ("
                     f"{rules.ceiling * nscale / scale:.3g} of the force scale; asked "
-                    f"newton_rtol={rules.rtol:g}): the step is cut")
+                    f"newton_rtol={rules.rtol:g}): the step is cut"
+                    + (f" (the elements that moved most at the probe: {where})"
+                       if where else ""))
         if it == rules.max_newton:
             raise NewtonFailure(f"Newton: no convergence in {rules.max_newton} iterations "
                                 f"(residual {rel:.3g} of the force scale; asked "

@@ -221,6 +221,27 @@ def _rough_model(amp_pa: float):
     return m
 
 
+def test_a_step_cut_at_the_ceiling_names_the_element_that_moved_most():
+    """Two region elements, a rough one (2000 Pa, ``_rough_stand_in``) and a smooth one
+    (the same stand-in without roughness): the message of the step cut above the ceiling
+    names the rough one first, with how far its points moved at the probe (Pa)."""
+    import re
+
+    from femcoupling.elastoplastic import NewtonDivergence
+    from test_fem_handover import two_region_model
+
+    m = two_region_model(("a", "b"))
+    m.set_region_element("a", _rough_stand_in(0.0))
+    m.set_region_element("b", _rough_stand_in(2000.0))
+    m.max_cuts, m.max_newton = 0, 8
+    with pytest.raises(NewtonDivergence):
+        m.load_footing(pressure_pa=20e3, steps=1)
+    got = re.search(r"the elements that moved most at the probe: b ([0-9.e+-]+) Pa, "
+                    r"a ([0-9.e+-]+) Pa", m.last_failure)
+    assert got, m.last_failure
+    assert float(got[1]) > 100 * max(float(got[2]), 1e-12)  # (a's: its tangent's own)
+
+
 def test_region_mode_stall_is_judged_against_the_regions_own_forces():
     """Region a (0.2 m) of the 4 x 3 m test body under a 20 kPa footing, its material a rough
     stand-in. The region's own internal force is about 29 times smaller than the body's
