@@ -173,7 +173,10 @@ def test_an_element_without_stiffness_fails_the_newton_iterate_by_name():
 def test_a_band_cells_rve_starts_at_its_state_and_relaxed():
     """``ReinforcedBandElement``: the sheet at the band's tension (a thrust: unloaded), the
     grains' sigma_zz at their pressure, relaxed, standing for the band; the pool's factory
-    of soil and band elements hands each index to its part."""
+    of soil and band elements hands each index to its part. Its grains are grown
+    frictionless first, as the zone's soil elements (``band_options``): porosity 0.41
+    beside the sheet and D_zz 11.5 MPa (network, the cell's scale); grown at their
+    friction they were at 0.47 and 5.1 MPa."""
     from cpp_dem.elements.reinforced import cell_height, sheet_tension_per_metre
     from femcoupling.drivers.footing_multiscale import FootingParams, band_options
     from femcoupling.region import ReinforcedBandElement, _Concat
@@ -187,6 +190,14 @@ def test_a_band_cells_rve_starts_at_its_state_and_relaxed():
     assert el.last_report.relaxed and el.last_report.unbalanced_force < 1e-4
     grains = -(el.stress()[2, 2])  # (the bonds carry nothing along z)
     assert grains == pytest.approx(12e3, rel=0.02)
+    assert band_options(p)["prep_friction_deg"] == 0.0
+    sheet = np.unique(np.asarray(el.scene.bond_spheres))
+    solid = 4.0 / 3.0 * np.pi * np.asarray(el.scene.radii) ** 3
+    beside = el.volume() - solid[sheet].sum()
+    assert 1 - (solid.sum() - solid[sheet].sum()) / beside < 0.44  # (0.47 grown at friction)
+    cell = el.clone()
+    cell.set_band_thickness(None)
+    assert cell.network_tangent()[0][2, 2] > 8e6  # Pa (5.1 MPa grown at friction)
     slack = r.element(12e3, -150.0, seed=8)  # a band in compression: the sheet unloaded
     assert abs(sheet_tension_per_metre(slack.scene)[0]) <= 0.005 * 12e3 * cell_height(slack.scene)
     make = _Concat(((2, lambda k: ("soil", k)), (3, lambda k: ("band", k))))

@@ -232,6 +232,7 @@ def test_the_network_tangent_takes_the_sheet_as_the_finite_differences_do(prs):
     (dict(preset=None, prestress=100.0), "prestress=100.0: there is no sheet"),
     (dict(preset="coarse"), "preset='coarse': must be one of 'detailed', 'standard'"),
     (dict(prestress=-1.0), "prestress=-1.0: must be >= 0"),
+    (dict(prep_friction_deg=-3.0), "prep_friction_deg=-3.0: must be in "),
 ])
 def test_bad_reinforced_elements_are_named(kw, msg):
     with pytest.raises(ParameterError, match=msg.replace("(", r"\(").replace(")", r"\)")):

@@ -100,6 +100,7 @@ def reinforced_element(n: int = 150, *, stress: float = 50e3, prestress: float =
                        radius_spread: float = 0.2, seed: int = 1, material=None,
                        damping: float = 0.7, tol: float = 0.005, unbalanced: float = 1e-4,
                        growth=(0.5, 1e-3), max_steps: int = 200_000, log=None,
+                       prep_friction_deg: float | None = None,
                        **element_kw) -> DemElement:
     """A reinforced-soil RVE: a ``DemElement`` whose periodic cell holds the woven sheet of
     ``sheet_cell(preset, apertures, height, prestress)`` and ``n`` grains of ``material``
@@ -120,7 +121,11 @@ def reinforced_element(n: int = 150, *, stress: float = 50e3, prestress: float =
     ``preset=None``: no sheet, the soil alone: the soil element's cube of ``n`` grains
     (periodic.cube_cloud, ``radius_mean`` default 1 mm) by its stages (periodic.settle_grains)
     with the growth counting the grains' own contacts: bitwise ``DemElement.periodic`` with
-    the same arguments. ``element_kw`` go to ``DemElement``."""
+    the same arguments. ``prep_friction_deg``: the grains grow at this friction angle
+    first (0: dense, as the soil element's ``DemElement.periodic(prep_friction_deg=0)``),
+    then at their material's; without it they grow at their material's and are loose
+    (80 of the footing's 3 mm grains at 12 kPa: porosity 0.47 beside the sheet, against
+    0.36 for the soil element grown frictionless). ``element_kw`` go to ``DemElement``."""
     if int(n) != n or n < 2:
         raise ParameterError(f"n={n}: the number of grains, a whole number >= 2")
     n = int(n)
@@ -133,8 +138,12 @@ def reinforced_element(n: int = 150, *, stress: float = 50e3, prestress: float =
     if material is None:
         material = default_material()
     gain, max_strain = growth
+    if prep_friction_deg is not None and not (math.isfinite(prep_friction_deg)
+                                              and 0 <= prep_friction_deg < 90):
+        raise ParameterError(f"prep_friction_deg={prep_friction_deg}: must be in [0, 90) "
+                             "(deg) or None")
     stages = dict(tol=tol, unbalanced=unbalanced, max_steps=max_steps, growth_gain=gain,
-                  growth_max_strain=max_strain, log=log)
+                  growth_max_strain=max_strain, log=log, prep_friction_deg=prep_friction_deg)
     if preset is None:
         if prestress != 0:
             raise ParameterError(f"prestress={prestress}: there is no sheet (preset=None) to "
