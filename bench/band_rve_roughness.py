@@ -15,6 +15,7 @@ Prints one JSON line at the end. SI units; stresses of the cell (not the band's 
 
     OMP_NUM_THREADS=1 .venv/bin/python bench/band_rve_roughness.py            # about 25 s
     OMP_NUM_THREADS=1 .venv/bin/python bench/band_rve_roughness.py --smoke    # about 10 s
+    OMP_NUM_THREADS=1 .venv/bin/python bench/band_rve_roughness.py --loose    # as before
 """
 
 from __future__ import annotations
@@ -27,7 +28,7 @@ import numpy as np
 
 
 def roughness(*, grains: int, seed: int, pressure_pa: float, tension_n_per_m: float,
-              increment, probe: float, unbalanced: list) -> dict:
+              increment, probe: float, unbalanced: list, loose: bool = False) -> dict:
     """The band RVE's answers to ``increment`` (3 x 3, -) and to it plus ``probe`` in zz,
     at each relaxation level: relative differences (total, grains', bonds')."""
     from cpp_dem import DemElement
@@ -36,8 +37,10 @@ def roughness(*, grains: int, seed: int, pressure_pa: float, tension_n_per_m: fl
     from femcoupling.region import ReinforcedBandElement
 
     t0 = time.perf_counter()
-    el = ReinforcedBandElement(n=grains, seed=seed,
-                               options=fm.band_options(fm.FootingParams())).element(
+    options = fm.band_options(fm.FootingParams())
+    if loose:  # (grown at the grains' friction, as the band RVEs were before)
+        options.pop("prep_friction_deg")
+    el = ReinforcedBandElement(n=grains, seed=seed, options=options).element(
         pressure_pa, tension_n_per_m)
     el.set_band_thickness(None)  # (the cell's own stress)
     blob = el.to_bytes()
@@ -63,7 +66,7 @@ def roughness(*, grains: int, seed: int, pressure_pa: float, tension_n_per_m: fl
                      "bitwise_equal": bool(np.array_equal(sa, sb)),
                      "repeat_bitwise_equal": bool(np.array_equal(sa, again)),
                      "stress_norm_pa": size})
-    return {"grains": grains, "seed": seed, "pressure_pa": pressure_pa,
+    return {"grains": grains, "seed": seed, "loose": loose, "pressure_pa": pressure_pa,
             "tension_n_per_m": tension_n_per_m, "probe": probe, "preparation_s": prep_s,
             "rows": rows}
 
@@ -77,6 +80,9 @@ def main(argv=None) -> dict:
     ap.add_argument("--pressure", type=float, default=10e3, help="the grains' pressure, Pa")
     ap.add_argument("--tension", type=float, default=1900.0, help="the sheet's tension, N/m")
     ap.add_argument("--probe", type=float, default=1e-9, help="more zz compression, -")
+    ap.add_argument("--loose", action="store_true",
+                    help="grow the grains at their friction (loose), as the footing's band "
+                         "RVEs were before; default: frictionless first, dense")
     ap.add_argument("--unbalanced", default="1e-3,1e-4,1e-5,1e-6",
                     help="comma-separated relaxation levels (unbalanced force)")
     a = ap.parse_args(argv)
@@ -97,7 +103,8 @@ def main(argv=None) -> dict:
     de[0, 0], de[2, 2] = 1e-4, -3e-4
     de[0, 2] = de[2, 0] = 2.5e-5
     r = roughness(grains=a.grains, seed=a.seed, pressure_pa=a.pressure,
-                  tension_n_per_m=a.tension, increment=de, probe=a.probe, unbalanced=levels)
+                  tension_n_per_m=a.tension, increment=de, probe=a.probe, unbalanced=levels,
+                  loose=a.loose)
     for row in r["rows"]:
         print(f"unbalanced {row['unbalanced']:g}: |ds| / |s| {row['total']:.2e} (grains "
               f"{row['grains']:.2e}, bonds {row['bonds']:.2e}), {row['relax_steps']} "

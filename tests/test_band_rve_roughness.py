@@ -21,8 +21,9 @@ def test_the_roughness_bench_runs_and_its_measure_can_tell():
     (row,) = r["rows"]
     assert row["repeat_bitwise_equal"] and not row["bitwise_equal"]
     # a 1e-9 probe moves it by far more than a linear response would (1e-9 of a 10 MPa
-    # stiffness is 1e-2 Pa, 3e-7 of the stress): measured 1.4e-3, most of it the grains'
-    assert 1e-5 < row["total"] < 0.05
+    # stiffness is 1e-2 Pa, 3e-7 of the stress): measured 1.2e-5 (1.4e-3 grown loose), most
+    # of it the grains'
+    assert 3e-6 < row["total"] < 0.05
     assert row["grains"] > row["bonds"]
 
 
