@@ -42,8 +42,8 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["DemRegionMaterial", "PeriodicRegionElement", "PoolRegionMaterials", "servo",
-           "trial_stiffness"]
+__all__ = ["BAND_TANGENTS", "DemRegionMaterial", "PeriodicRegionElement",
+           "PoolRegionMaterials", "servo", "trial_stiffness"]
 
 
 def _plain(v):
@@ -347,6 +347,10 @@ class DemRegionMaterial:
         return self.element.strain() - self._origin
 
 
+#: The reinforced RVEs' tangents in a ``PoolRegionMaterials`` (``band_tangent``).
+BAND_TANGENTS = ("network", "network-elastic", "fd-forward")
+
+
 class PoolRegionMaterials:
     """The DEM elements of several element regions on Dask workers
     (``cpp_dem.elements.pool.ElementPool``, one element per region), for
@@ -386,7 +390,7 @@ class PoolRegionMaterials:
         self.strain_kw = dict(strain_kw or {})
         self.records = None if records is None else Path(records)
         self.calls, self.dem_s, self.steps = 0, 0.0, 0
-        if band_tangent not in ("network", "network-elastic", "fd-forward"):
+        if band_tangent not in BAND_TANGENTS:
             raise ValueError(f"band_tangent={band_tangent!r}: 'network', 'network-elastic' "
                              "or 'fd-forward'")
         self.band_tangent = band_tangent

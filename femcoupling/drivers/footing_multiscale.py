@@ -45,14 +45,13 @@ from pathlib import Path
 
 import numpy as np
 
+from femcoupling.region import BAND_TANGENTS
 from femcoupling.soil_steps import NewtonDivergence
 
 VARIANTS = ("unreinforced", "RE", "PRS")
 #: The Voigt components of the elements' finite-difference tangents: the x-z plane's in plane
 #: strain (xx, zz, xz), all six in 3D.
 FD_COMPONENTS = {2: (0, 2, 4), 3: (0, 1, 2, 3, 4, 5)}
-#: The band RVEs' tangents (``PoolRegionMaterials(band_tangent=)``).
-BAND_TANGENTS = ("network", "network-elastic", "fd-forward")
 #: The calibration's first FEM (the starting soil) that stops short of the largest pressure
 #: gives the zone's path as far as it went if the footing's pressure rose by at least this
 #: fraction of what was asked (in 3D with 0.35 and 0.25 m zone cells, the 35-degree starting
