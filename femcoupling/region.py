@@ -391,8 +391,8 @@ class PoolRegionMaterials:
         self.records = None if records is None else Path(records)
         self.calls, self.dem_s, self.steps = 0, 0.0, 0
         if band_tangent not in BAND_TANGENTS:
-            raise ValueError(f"band_tangent={band_tangent!r}: 'network', 'network-elastic' "
-                             "or 'fd-forward'")
+            raise ValueError(f"band_tangent={band_tangent!r}: "
+                             + ", ".join(map(repr, BAND_TANGENTS)))
         self.band_tangent = band_tangent
         self.fd_components = tuple(int(c) for c in fd_components)
         if not self.fd_components or any(not 0 <= c < 6 for c in self.fd_components):

@@ -353,19 +353,28 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
                 log(f"{tag}: a cell's element could not be brought to its cell's stress "
                     f"({exc}); attempt {attempt + 2} of {PREPARATION_ATTEMPTS} with seeds "
                     f"{base + 100} + k")
+
+    def record(status, reason, rows=(), sheets=(), calls=0, dem_s=0.0, t_prep=None,
+               steps=()) -> dict:
+        """The run's record: its levels ``rows`` (pressure, settlement, Newton iterations,
+        statuses) and how it ended."""
+        return {"pressure_pa": [r[0] for r in rows], "settlement_m": [r[1] for r in rows],
+                "newton_iterations": [r[2] for r in rows],
+                "level_statuses": [r[3] for r in rows], "status": status, "reason": reason,
+                "cells": len(cells), "band_cells": len(bands),
+                "band_sheet_tension_n_per_m": list(sheets), "element_seed_base": base,
+                "preparation_failures": failures, "element_evaluations": calls,
+                "dem_s": dem_s,
+                "preparation_s": time.perf_counter() - t0 if t_prep is None else t_prep,
+                "wall_time_s": time.perf_counter() - t0, "warnings": list(m.warnings),
+                **step_statuses(list(steps))}
+
     if group is None:  # (the run fails before its first level; the others go on: see run)
         reason = (f"preparation: the zone's elements could not be prepared in "
                   f"{PREPARATION_ATTEMPTS} attempts: {failures[-1]}; try more --cell-grains "
                   "or a larger --seat")
         log(f"{tag}: FAILED at {reason}")
-        return {"pressure_pa": [], "settlement_m": [], "newton_iterations": [],
-                "level_statuses": [], "status": "failed", "reason": reason,
-                "cells": len(cells), "band_cells": len(bands),
-                "band_sheet_tension_n_per_m": [], "element_seed_base": base,
-                "preparation_failures": failures, "element_evaluations": 0, "dem_s": 0.0,
-                "preparation_s": time.perf_counter() - t0,
-                "wall_time_s": time.perf_counter() - t0, "warnings": list(m.warnings),
-                **step_statuses([])}
+        return record("failed", reason)
     xdmf = out / f"fem_{tag}.xdmf"
     try:
         m.set_cell_elements("zone", group, band=bool(bands))
@@ -406,15 +415,7 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
         status, reason = st.status, st.reason
     else:
         status, reason = "failed", failed
-    return {"pressure_pa": [r[0] for r in rows], "settlement_m": [r[1] for r in rows],
-            "newton_iterations": [r[2] for r in rows], "level_statuses": [r[3] for r in rows],
-            "status": status, "reason": reason, "cells": len(cells),
-            "band_cells": len(bands),
-            "band_sheet_tension_n_per_m": sheets,
-            "element_seed_base": base, "preparation_failures": failures,
-            "element_evaluations": calls, "dem_s": dem_s, "preparation_s": t_prep,
-            "wall_time_s": time.perf_counter() - t0, "warnings": list(m.warnings),
-            **step_statuses(steps)}
+    return record(status, reason, rows, sheets, calls, dem_s, t_prep, steps)
 
 
 def continuum(what: str, fn, *args):
