@@ -4,8 +4,9 @@ Checked for README.md and docs/*.md:
 
 - no work-log words: "session", "issue N", "#N", "last time";
 - no commit hashes (runs of 7-40 hex digits with both a digit and a letter);
-- every markdown link to a local file resolves (relative to the page), and an anchor in it
-  names a heading of that page (GitHub's heading ids);
+- every markdown link to a local file resolves (relative to the page), and an anchor in it,
+  or one on the same page, names a heading of that page (GitHub's heading ids);
+- bench/README.md's index names every benchmark script of bench/;
 - every citation key ``[@key]`` in docs/references.md has an entry in docs/references.bib.
 
 Pages being rewritten by others are listed in PENDING and skipped until they land.
@@ -85,20 +86,51 @@ def test_page_has_no_work_log_words_or_commit_ids(page: Path):
     assert not bad, f"{_page_id(page)} reads like a work log: " + "; ".join(bad[:20])
 
 
-@pytest.mark.parametrize("page", _pages(), ids=_page_id)
-def test_local_links_resolve(page: Path):
+def broken_links(page: Path) -> list[str]:
+    """The page's links to a missing local file, or to a heading its target page lacks."""
     missing = []
     for target in LINK.findall(page.read_text(encoding="utf-8")):
-        if re.match(r"^[a-z][a-z0-9+.-]*:", target) or target.startswith("#"):
-            continue  # a URL (http:, mailto:) or an anchor on the same page
+        if re.match(r"^[a-z][a-z0-9+.-]*:", target):
+            continue  # a URL (http:, mailto:)
         path, _, anchor = target.partition("#")
-        file = page.parent / path
+        file = page.parent / path if path else page
         if not file.exists():
             missing.append(target)
         elif anchor and file.suffix == ".md" and _page_id(file.resolve()) not in PENDING:
             if anchor not in heading_ids(file):
                 missing.append(target)
+    return missing
+
+
+def test_the_link_checker_finds_a_missing_heading_and_file(tmp_path: Path):
+    page = tmp_path / "p.md"
+    page.write_text("# Top part\n[a](#top-part) [b](#no-such) [c](gone.md) [d](p.md#top-part)\n")
+    assert broken_links(page) == ["#no-such", "gone.md"]
+
+
+@pytest.mark.parametrize("page", [*_pages(), ROOT / "bench" / "README.md"], ids=_page_id)
+def test_local_links_resolve(page: Path):
+    missing = broken_links(page)
     assert not missing, f"{_page_id(page)} links to missing files or headings: {missing}"
+
+
+def bench_scripts_missing_from_index(readme: str, scripts: list[str]) -> list[str]:
+    """The benchmark scripts that bench/README.md's "Every benchmark" tables do not name."""
+    index = readme.partition("## Every benchmark")[2].partition("\n## ")[0]
+    return [s for s in scripts if f"`{s}`" not in index]
+
+
+def test_the_bench_index_names_every_benchmark():
+    scripts = sorted(
+        p.name
+        for p in (ROOT / "bench").iterdir()
+        if p.suffix in (".py", ".sh", ".cpp") and not p.name.startswith(("_", "yade_"))
+    )
+    readme = (ROOT / "bench" / "README.md").read_text(encoding="utf-8")
+    assert len(scripts) > 20
+    assert bench_scripts_missing_from_index(readme, scripts) == []
+    # The measure can fail: a script that is not in the tables is reported.
+    assert bench_scripts_missing_from_index(readme, [*scripts, "new_bench.py"]) == ["new_bench.py"]
 
 
 def test_references_cite_only_keys_in_the_bib():
