@@ -123,6 +123,11 @@ def test_the_calibration_takes_the_path_as_far_as_the_starting_soil_carried():
     ("dim", 1, "dim=1: must be 2 (a strip footing, plane strain) or 3 (a square footing)"),
     ("band_tangent", "fd", "band_tangent='fd': must be one of 'network', 'network-elastic', "
                            "'fd-forward'"),
+    ({"band_grains": 80, "layer_depth": 0.6}, None,
+     "band_grains=80: must be 0 when the layer is below the DEM zone (layer_depth 0.6 m >= "
+     "the zone's depth, footing_b 0.5 m)"),
+    ({"band_grains": 80, "variants": ("unreinforced",)}, None,
+     "band_grains=80: must be 0 with variants ('unreinforced',) alone"),
 ])
 def test_bad_parameters_are_named(field, value, words):
     from dataclasses import replace
@@ -130,8 +135,12 @@ def test_bad_parameters_are_named(field, value, words):
     from femcoupling.drivers.footing_multiscale import FootingParams
     from femcoupling.geometry import FemInputError
 
+    change = field if isinstance(field, dict) else {field: value}
     with pytest.raises(FemInputError, match=words.replace("(", r"\(").replace(")", r"\)")):
-        replace(FootingParams(), **{field: value}).check()
+        replace(FootingParams(), **change).check()
+    if isinstance(field, dict):  # (each value alone is allowed: it is the pair that is not)
+        for k, v in change.items():
+            replace(FootingParams(), **{k: v}).check()
 
 
 def test_the_command_refuses_bad_flags_by_name():

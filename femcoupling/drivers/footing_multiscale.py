@@ -145,6 +145,13 @@ class FootingParams:
             bad("variants", f"a non-empty selection of {', '.join(VARIANTS)}")
         if self.dim not in (2, 3):
             bad("dim", "2 (a strip footing, plane strain) or 3 (a square footing)")
+        if self.band_grains and not self.layer_depth < self.footing_b:
+            bad("band_grains", f"0 when the layer is below the DEM zone (layer_depth "
+                               f"{self.layer_depth} m >= the zone's depth, footing_b "
+                               f"{self.footing_b} m): its RVEs are the layer's cells in the zone")
+        if self.band_grains and set(self.variants) == {"unreinforced"}:
+            bad("band_grains", "0 with variants ('unreinforced',) alone: the RVEs are the "
+                               "layer's, and RE and PRS have the layer")
         if self.dim == 3 and self.band_grains:
             bad("band_grains", "0 in 3D (the layer's cells stay the FEM's band: the reinforced "
                                "RVEs are verified in plane strain only)")
@@ -328,6 +335,11 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
     # (the grains around a band cell: the zone's soil cells within 1.5 fine cells of it)
     bands = (m.band_cell_states("zone", 1.5 * p.fine_size)
              if p.band_grains and variant != "unreinforced" else {})
+    if p.band_grains and variant != "unreinforced" and not bands:
+        raise SystemExit(f"[footing_multiscale] --band-grains {p.band_grains}: the layer "
+                         f"(depth {p.layer_depth} m) has no cell in the DEM zone of this mesh, "
+                         "so no cell gets a reinforced RVE; a layer higher in the zone, a "
+                         "finer --fine-size, or --band-grains 0")
     tag = f"{variant}_seed{seed}"
     group, failures = None, []
     for attempt in range(PREPARATION_ATTEMPTS):
