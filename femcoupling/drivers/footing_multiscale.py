@@ -393,7 +393,8 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
         t_prep = time.perf_counter() - t0
         log(f"{tag}: {len(cells)} cell elements of {runner.n} grains prepared"
             + (f", and {len(bands)} reinforced RVEs of {p.band_grains} grains in the layer's "
-               f"cells (sheets at {[round(t) for _, t in bands.values()]} N/m)"
+               f"cells (the band cells' tension {[round(t) for _, t in bands.values()]} "
+               f"N/m; a sheet in compression starts unloaded)"
                if bands else "") + f" ({t_prep:.1f} s)")
         sheets = [band_sheet_tensions(group, len(cells))] if bands else []
         m.write_xdmf(xdmf, time=m.footing_pressure_pa() / 1e3)
