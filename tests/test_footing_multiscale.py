@@ -310,6 +310,13 @@ def test_the_smoke_gives_load_settlement_for_each_variant(case_smoke):
             assert run["pressure_pa"] == pytest.approx(s["pressures_pa"], rel=0.011)
             assert np.all(np.diff([dp["seated_settlement_m"], *run["settlement_m"]]) > 0)
             assert run["cells"] >= 10 and run["element_evaluations"] > 0
+            # the settlement at the level's pressure: within 1 % of the level's rise of
+            # where the footing stopped (the pressure's tolerance)
+            rise = np.diff([dp["seated_settlement_m"], *run["settlement_m"]])
+            moved = np.abs(np.subtract(run["settlement_at_level_m"], run["settlement_m"]))
+            assert np.all(moved <= 0.011 * rise)
+        assert ms["settlement_mean_m"] == pytest.approx(np.mean(
+            [ms["runs"][str(x)]["settlement_at_level_m"] for x in seeds], axis=0), rel=1e-12)
         # the zone's elements and the Drucker-Prager fitted on the same grains: within 30 %
         # (they differ by the zone's network against the continuum's secant)
         assert np.asarray(ms["settlement_mean_m"]) == pytest.approx(dp["settlement_m"],
@@ -353,10 +360,14 @@ def test_a_failed_run_is_kept_and_left_out_of_the_levels_it_did_not_reach(tmp_pa
 
     def fake(p, v, seed, soil, client, out, log, on_level, first_slope):
         if v == "RE" and seed == 2:
-            return {"status": "failed", "reason": "level 2: ...", "settlement_m": [0.0092],
-                    "cells": 4, "element_evaluations": 1, "dem_s": 1.0}
-        return {"status": "stopped_at_scatter", "settlement_m":
-                [0.01 + offset[v] + 1e-4 * seed, 0.02 + offset[v] + 2e-4 * seed],
+            return {"status": "failed", "reason": "level 2: ...", "settlement_m": [0.0093],
+                    "settlement_at_level_m": [0.0092], "cells": 4, "element_evaluations": 1,
+                    "dem_s": 1.0}
+        at = [0.01 + offset[v] + 1e-4 * seed, 0.02 + offset[v] + 2e-4 * seed]
+        # (where each stopped differs from the level's pressure by seed and variant: the
+        # statistics are of the settlements at the level's pressure)
+        return {"status": "stopped_at_scatter", "settlement_at_level_m": at,
+                "settlement_m": [x + 3e-5 * seed * (1 + offset[v]) for x in at],
                 "cells": 4, "element_evaluations": 1, "dem_s": 1.0}
 
     monkeypatch.setattr(fm, "run_multiscale", fake)
@@ -372,6 +383,38 @@ def test_a_failed_run_is_kept_and_left_out_of_the_levels_it_did_not_reach(tmp_pa
     assert s["settlement_m"]["RE"] == pytest.approx([0.009 + 2e-4, 0.019 + 4e-4])
     assert s["variants"]["RE"]["multiscale"]["settlement_sd_m"][0] == pytest.approx(1e-4)
     assert json.loads((tmp_path / "summary.json").read_text())["coupling"]["status"] == "failed"
+
+
+def test_levels_are_compared_at_their_own_pressure_not_where_the_footing_stopped():
+    """``load_levels`` gives each level's settlement at the level's pressure, along the
+    level's secant: on a body whose pressure is linear in the settlement it is the exact
+    one, though the footing stops up to 1 % of the rise away from it (a stand-in that
+    overshoots by 0.8 %); the settlement where it stopped differs by 0.8 % of the rise over
+    the slope."""
+    from femcoupling.drivers.footing_multiscale import FootingParams, at_level, load_levels
+
+    class Linear:  # (pressure = 20 kPa + k s; each rise stops 0.8 % past its target)
+        k, s = 4e6, 0.0
+
+        def footing_pressure_pa(self):
+            return 20e3 + self.k * self.s
+
+        def footing_settlement_m(self):
+            return self.s
+
+        def load_footing_to_pressure(self, rise, steps, slope_pa_per_m):
+            self.s += 1.008 * rise / self.k
+            return []
+
+    p = FootingParams(levels=4)
+    got = []
+    m = Linear()
+    load_levels(p, m, lambda k, steps, at: got.append((at, m.footing_settlement_m())))
+    exact = [(x - 20e3) / Linear.k for x in p.pressures_pa]
+    assert [a for a, _ in got] == pytest.approx(exact, rel=1e-12)
+    stopped = np.array([s for _, s in got])
+    assert not np.allclose(stopped, exact, rtol=1e-3)  # (the measure can fail)
+    assert at_level(100e3, 80e3, 0.006, 80e3, 0.006) == 0.006  # (no rise: where it stopped)
 
 
 def test_a_zone_that_cannot_be_prepared_fails_its_run_and_says_why(tmp_path, monkeypatch):

@@ -26,12 +26,13 @@ run:
    it; band element j packed with seed ``1000 s + 500 + j``, 100 further at each new
    preparation attempt) in the same pool. The footing
    is then pushed to each load level in turn
-   (``load_footing_to_pressure``); the settlement at each level is recorded.
+   (``load_footing_to_pressure``); the settlement at each level is recorded where the
+   footing stopped and at the level's own pressure (``at_level``).
 3. **The same body with the fitted Drucker–Prager everywhere** (the zone too), for each
    variant: the continuum answer the DEM zone is compared with.
 
 Every variant runs the same seeds, so the differences between variants are paired over
-seeds (mean and standard error). SI units; FEM stresses tension positive; pressures and
+seeds (mean and standard error), at each level's pressure. SI units; FEM stresses tension positive; pressures and
 settlements compression / downward positive.
 """
 
@@ -295,19 +296,29 @@ def calibrate(p: FootingParams, log) -> tuple:
     return mat, rec
 
 
+def at_level(target: float, p0: float, s0: float, p1: float, s1: float) -> float:
+    """The settlement (m) at the level's pressure ``target`` (Pa), along the level's secant
+    from its start (p0, s0) to where it stopped (p1, s1). ``load_footing_to_pressure``
+    stops within 1 % of the level's rise (0.2 kPa of 20 kPa: about 0.02 mm at the full
+    run's 100 kPa, the size of the variants' differences), so runs are compared here, at
+    the same pressure, and not where each happened to stop."""
+    return s1 + (target - p1) * (s1 - s0) / (p1 - p0) if p1 != p0 else s1
+
+
 def load_levels(p: FootingParams, m, on_level, first_slope: float | None = None) -> None:
-    """Pushes the footing to each of ``p.pressures_pa`` in turn; ``on_level(k, steps)`` after
-    each (its accepted StepResults; every step is also in ``m.history``). Each level after the
-    first starts from the last level's secant slope, the first from ``first_slope`` (Pa/m;
-    None: the model's small first settlement, ``load_footing_to_pressure``)."""
+    """Pushes the footing to each of ``p.pressures_pa`` in turn; ``on_level(k, steps, at)``
+    after each (its accepted StepResults, every step also in ``m.history``; ``at``: the
+    settlement at the level's pressure, ``at_level``). Each level after the first starts
+    from the last level's secant slope, the first from ``first_slope`` (Pa/m; None: the
+    model's small first settlement, ``load_footing_to_pressure``)."""
     slope = first_slope
     for k, target in enumerate(p.pressures_pa):
         p0, s0 = m.footing_pressure_pa(), m.footing_settlement_m()
         got = m.load_footing_to_pressure(target - p0, steps=p.steps_per_level,
                                          slope_pa_per_m=slope)
-        rise = m.footing_settlement_m() - s0
-        slope = (m.footing_pressure_pa() - p0) / rise if rise > 0 else None
-        on_level(k, got)
+        p1, s1 = m.footing_pressure_pa(), m.footing_settlement_m()
+        slope = (p1 - p0) / (s1 - s0) if s1 > s0 else None
+        on_level(k, got, at_level(target, p0, s0, p1, s1))
 
 
 #: Preparations of a run's zone elements: a small dense element servoed from its isotropic
@@ -371,6 +382,7 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
         """The run's record: its levels ``rows`` (pressure, settlement, Newton iterations,
         statuses) and how it ended."""
         return {"pressure_pa": [r[0] for r in rows], "settlement_m": [r[1] for r in rows],
+                "settlement_at_level_m": [r[4] for r in rows],
                 "newton_iterations": [r[2] for r in rows],
                 "level_statuses": [r[3] for r in rows], "status": status, "reason": reason,
                 "cells": len(cells), "band_cells": len(bands),
@@ -400,11 +412,11 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
         m.write_xdmf(xdmf, time=m.footing_pressure_pa() / 1e3)
         rows = []
 
-        def level(k, got):
+        def level(k, got, at):
             m.write_xdmf(xdmf, time=m.footing_pressure_pa() / 1e3, append=True)
             rows.append((m.footing_pressure_pa(), m.footing_settlement_m(),
                          sum(r.newton_iterations for r in got),
-                         [r.status for r in got]))
+                         [r.status for r in got], at))
             if bands:
                 sheets.append(band_sheet_tensions(group, len(cells)))
             on_level(variant, "multiscale", seed, k, rows[-1])
@@ -455,9 +467,9 @@ def run_continuum(p: FootingParams, variant: str, soil, on_level) -> dict:
     seated = m.footing_settlement_m()
     rows = []
 
-    def level(k, got):
+    def level(k, got, at):
         rows.append((m.footing_pressure_pa(), m.footing_settlement_m(),
-                     sum(r.newton_iterations for r in got), [r.status for r in got]))
+                     sum(r.newton_iterations for r in got), [r.status for r in got], at))
         on_level(variant, "drucker_prager", None, k, rows[-1])
 
     failure = None
@@ -468,7 +480,7 @@ def run_continuum(p: FootingParams, variant: str, soil, on_level) -> dict:
             raise
         failure = str(exc)
     return {"pressure_pa": [r[0] for r in rows], "settlement_m": [r[1] for r in rows],
-            "seated_settlement_m": seated, "levels_reached": len(rows), "failure": failure,
+            "settlement_at_level_m": [r[4] for r in rows], "seated_settlement_m": seated, "levels_reached": len(rows), "failure": failure,
             "wall_time_s": time.perf_counter() - t0}
 
 
@@ -485,7 +497,8 @@ def statistics(variants: dict, seeds, levels: int) -> dict:
     """The statistics of the run, level by level over the seeds whose runs reached that
     level in every variant (a run that failed keeps the levels it reached): each variant's
     ``multiscale`` record gets ``seeds_used`` (per level, the seeds), ``settlement_mean_m``
-    and ``settlement_sd_m`` (per level; None where no seed, or one, is left). Returns the
+    and ``settlement_sd_m`` (per level, of the settlements at the level's pressure,
+    ``settlement_at_level_m``; None where no seed, or one, is left). Returns the
     paired differences RE - unreinforced, PRS - RE and PRS - unreinforced (``paired`` per
     level: ``mean_m``, ``se_m`` and ``seeds``, lists over the levels)."""
     def reached(s, k):
@@ -494,8 +507,8 @@ def statistics(variants: dict, seeds, levels: int) -> dict:
 
     used = [[s for s in seeds if reached(s, k)] for k in range(levels)]
 
-    def column(v, k):
-        return np.array([variants[v]["multiscale"]["runs"][str(s)]["settlement_m"][k]
+    def column(v, k):  # (at the level's pressure: see at_level)
+        return np.array([variants[v]["multiscale"]["runs"][str(s)]["settlement_at_level_m"][k]
                          for s in used[k]])
 
     for v, r in variants.items():
@@ -558,17 +571,17 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
     p.check()
     t0 = time.perf_counter()
     csv = out / "load_settlement.csv"
-    csv.write_text("variant,model,seed,level,pressure_pa,settlement_m,newton_iterations,"
-                   "statuses\n")
+    csv.write_text("variant,model,seed,level,pressure_pa,settlement_m,"
+                   "settlement_at_level_m,newton_iterations,statuses\n")
     # (the progress counts the DEM zone's levels: the continuum's take seconds)
     n_units = len(p.variants) * len(p.seeds) * p.levels
     done = [0]
 
     def on_level(variant, kind, seed, k, row):
-        pres, settle, its, statuses = row
+        pres, settle, its, statuses, at = row
         with csv.open("a") as f:
             f.write(f"{variant},{kind},{'' if seed is None else seed},{k + 1},{pres:.6g},"
-                    f"{settle:.6g},{its},{' '.join(statuses)}\n")
+                    f"{settle:.6g},{at:.6g},{its},{' '.join(statuses)}\n")
             f.flush()
         done[0] += kind == "multiscale"
         log(f"{variant} {kind}{'' if seed is None else f' seed {seed}'}: level {k + 1}/"
