@@ -32,8 +32,8 @@ run:
    variant: the continuum answer the DEM zone is compared with.
 
 Every variant runs the same seeds, so the differences between variants are paired over
-seeds (mean and standard error), at each level's pressure. SI units; FEM stresses tension positive; pressures and
-settlements compression / downward positive.
+seeds (mean and standard error), at each level's pressure. SI units; FEM stresses tension
+positive; pressures and settlements compression / downward positive.
 """
 
 from __future__ import annotations
@@ -380,7 +380,7 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
     def record(status, reason, rows=(), sheets=(), calls=0, dem_s=0.0, t_prep=None,
                steps=()) -> dict:
         """The run's record: its levels ``rows`` (pressure, settlement, Newton iterations,
-        statuses) and how it ended."""
+        statuses, settlement at the level's pressure) and how it ended."""
         return {"pressure_pa": [r[0] for r in rows], "settlement_m": [r[1] for r in rows],
                 "settlement_at_level_m": [r[4] for r in rows],
                 "newton_iterations": [r[2] for r in rows],
@@ -480,7 +480,8 @@ def run_continuum(p: FootingParams, variant: str, soil, on_level) -> dict:
             raise
         failure = str(exc)
     return {"pressure_pa": [r[0] for r in rows], "settlement_m": [r[1] for r in rows],
-            "settlement_at_level_m": [r[4] for r in rows], "seated_settlement_m": seated, "levels_reached": len(rows), "failure": failure,
+            "settlement_at_level_m": [r[4] for r in rows], "seated_settlement_m": seated,
+            "levels_reached": len(rows), "failure": failure,
             "wall_time_s": time.perf_counter() - t0}
 
 
