@@ -235,7 +235,9 @@ def test_rose_reports_the_main_directions_per_element(datas, tmp_path):
     for name in datas:  # grain–grain normals at +-45 deg in x-z, nothing in y-z
         assert out["directions_deg"][name]["xz"] == [pytest.approx(-45, abs=1),
                                                      pytest.approx(45, abs=1)]
-        assert out["inclined_pair"][name]["xz"]
+        # Six contacts are too few to stand out of an isotropic fabric's noise at 1e-3
+        # (main_directions: p = 2 exp(-6) = 0.005): the peaks are drawn, not called a pair.
+        assert not out["inclined_pair"][name]["xz"]
         assert out["directions_deg"][name]["yz"] == [pytest.approx(90, abs=1)]
     assert out["overlaps"] == []
     assert all(p.stat().st_size > 1_000 for p in out["files"])

@@ -34,7 +34,9 @@ def _move(s, ids, delta):
 
 
 def _member(g, direction, k=0):
-    return int(g.members(direction)[k])
+    """The k-th member of ``direction`` that the measures take (transverse: an interior one;
+    the grid's two end transverse members are left out)."""
+    return int(gs.measured_members(g, direction)[k])
 
 
 def _strings(s, g, m):
@@ -141,7 +143,7 @@ def test_a_large_sphere_that_spread_the_strings_has_entered():
 # --- string gaps -----------------------------------------------------------------------
 
 def test_string_gaps_as_built():
-    s, g, _ = _scene()
+    s, g, _ = _scene(ax=2)  # two apertures long: one interior transverse member
     r = gs.string_gaps(s, g)
     for d in ("longitudinal", "transverse"):
         assert r[f"{d}_built_mean_m"] == pytest.approx(2.5e-3, rel=1e-9)
@@ -151,7 +153,7 @@ def test_string_gaps_as_built():
 
 
 def test_string_gaps_spread():
-    s, g, _ = _scene()
+    s, g, _ = _scene(ax=2)
     m, st, _ = _gap_point(s, g)
     _move(s, st[0][1:-1], [0, -0.65e-3, 0])
     _move(s, st[1][1:-1], [0, 0.65e-3, 0])
@@ -232,14 +234,14 @@ def test_waviness_of_a_wavy_member_against_a_straight_one(direction):
         s.positions = p
     w = gs.member_waviness(s, g)
     other = "transverse" if direction == "longitudinal" else "longitudinal"
-    assert w[f"out_of_plane_{direction}_mean_m"] > 0.2e-3 / len(g.members(direction))
+    assert w[f"out_of_plane_{direction}_mean_m"] > 0.2e-3 / len(gs.measured_members(g, direction))
     assert w[f"out_of_plane_{other}_mean_m"] < 1e-15
 
 
 @pytest.mark.parametrize("direction", ["longitudinal", "transverse"])
 def test_contacts_per_metre_by_direction(direction):
     def grain_on_string(gap):
-        s, g, grain = _scene()
+        s, g, grain = _scene(ax=2)  # an interior transverse member
         m = _member(g, direction)
         top = s.positions[_strings(s, g, m)[0][5]]
         s.add_spheres([top + [0, 0, R_STRING + 2e-3 + gap]], [2e-3], material=grain)
@@ -292,7 +294,7 @@ def test_displacement_larger_above_the_grid():
 # --- summary and the history row -----------------------------------------------------------
 
 def test_summary_and_history_row_are_plain_numbers():
-    s, g, grain = _scene()
+    s, g, grain = _scene(ax=2)
     _, _, c = _gap_point(s, g)
     s.add_spheres([c + [0, 0, 0.2e-3]], [1e-3], material=grain)  # entered
     ref = s.positions.copy()
@@ -300,14 +302,47 @@ def test_summary_and_history_row_are_plain_numbers():
     out = gs.summary(s, g, z_grid=0.0, reference_positions=ref, locked_n=5.0)
     assert set(out) == {"contacts", "between_strings", "apertures", "waviness", "force",
                         "displacement", "tension_variation", "string_gaps",
-                        "sideways_displacement"}
+                        "sideways_displacement", "interfriction", "gaps", "member_strain"}
     assert out["between_strings"]["longitudinal_grains"] == 1
+    for part in out.values():
+        assert all(isinstance(v, (int, float)) and not isinstance(v, bool)
+                   for v in part.values() if not isinstance(v, list))
     row = gs.history_row(s, g, z_grid=0.0, locked_n=5.0, reference_positions=ref)
     assert all(isinstance(v, (int, float)) and not isinstance(v, bool) for v in row.values())
     assert all(k.endswith(("_n", "_m", "_per_m", "_grains", "_spheres", "contacts",
-                           "_grid", "_apertures")) for k in row)
+                           "_grid", "_apertures", "_ratio", "_fraction", "_strain"))
+               for k in row)
     assert row["longitudinal_entered_grains"] == 1
     assert row["longitudinal_string_gap_mean_m"] == pytest.approx(2.5e-3, rel=1e-6)
+    assert row["transverse_string_gap_mean_m"] == pytest.approx(2.5e-3, rel=1e-6)
     assert row["longitudinal_tension_mean_above_locked_n"] == pytest.approx(
         row["longitudinal_force_mean_n"] - 5.0)
     assert "disp_above_mean_m" in row
+    for k in ("interfriction_contacts", "interfriction_mean_ratio",
+              "interfriction_sliding_fraction", "gap_above_mean_m", "gap_below_mean_m",
+              "unsupported_above_fraction", "unsupported_below_fraction"):
+        assert k in row
+        for d in ("longitudinal", "transverse"):
+            assert f"{d}_{k}" in row
+    assert row["longitudinal_mean_axial_strain"] == pytest.approx(0.0, abs=1e-12)
+    assert row["transverse_mean_axial_strain"] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_a_grid_one_aperture_long_has_no_transverse_values():
+    """One aperture along x: both transverse members are end members, so every transverse
+    value is NaN (entries: 0), and nothing warns."""
+    import warnings
+
+    s, g, grain = _scene()
+    _settle(s)
+    assert len(gs.measured_members(g, "transverse")) == 0
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        row = gs.history_row(s, g, z_grid=0.0)
+    for k in ("transverse_contacts_per_m", "transverse_out_of_plane_mean_m",
+              "transverse_sideways_displacement_rms_m", "transverse_string_gap_mean_m",
+              "transverse_force_mean_n", "transverse_tension_std_along_n",
+              "transverse_mean_axial_strain", "transverse_gap_above_mean_m"):
+        assert math.isnan(row[k]), k
+    assert row["transverse_entered_grains"] == 0
+    assert row["longitudinal_force_mean_n"] == pytest.approx(0.0, abs=1e-9)

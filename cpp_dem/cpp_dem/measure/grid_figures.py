@@ -14,7 +14,8 @@ Each element may run in its own process, so the figures are drawn afterwards fro
    - :func:`plot_contact_rose`: roses of the contact normals weighted by force, in the planes
      x-z, y-z and x-y, with the main directions of load transfer
      (:func:`principal_directions`; 002 §5's "two main directions ... inclined with regard to
-     the longitudinal and transverse members").
+     the longitudinal and transverse members"; :func:`main_directions` adds whether they
+     stand out of an isotropic fabric's noise).
    :func:`draw_all` draws all three.
 
 Every figure is saved as a 300 dpi PNG and a PDF (cpp_dem.io.figures.save_figure).
@@ -588,6 +589,60 @@ def is_inclined_pair(angles, *, min_inclination_deg: float = 15.0) -> bool:
                                for x in a)
 
 
+#: :func:`main_directions`: the probability, under an isotropic fabric, below which the
+#: anisotropy counts as significant.
+ISOTROPY_ALPHA = 1e-3
+
+
+def main_directions(normals, weights, plane: str, *, threshold: float = 1.5,
+                    smoothing_deg: float = 10.0, alpha: float = ISOTROPY_ALPHA,
+                    min_inclination_deg: float = 15.0) -> dict:
+    """The main directions of load transfer in ``plane`` and whether they are significant,
+    as a pure function of the normals (k, 3) and their weights (k,) (e.g. contact forces).
+
+    The directions are :func:`principal_directions` (peaks of the smoothed force-weighted
+    density at ``threshold`` times its mean). Their significance is a test against an
+    isotropic fabric, on the plane's projected normals (angle phi, weight w_k times the
+    squared length of the projection, as in :func:`fabric_tensor`):
+
+    - the rose's anisotropy of order 2 and 4: a_m = |sum w e^{i m phi}| / sum w, m = 2, 4.
+      a_2 is the fabric tensor's deviator (the difference of its eigenvalues, trace 1); a_4
+      sees what a_2 cannot: two equal families at +-45 deg (a_2 = 0, a_4 = 1 for sharp ones).
+      Any one direction or any pair of directions has a_2 > 0 or a_4 > 0.
+    - n_eff = (sum w)^2 / sum w^2, the weights' effective number of normals. For an
+      isotropic fabric (phi uniform, independent of w) n_eff a_m^2 is about exponential
+      with mean 1 (Rayleigh's test), so P(a_m >= x) = exp(-n_eff x^2).
+    - p_isotropic = min(1, 2 min_m exp(-n_eff a_m^2)) (both orders, Bonferroni): the
+      probability that an isotropic fabric of n_eff normals is at least this anisotropic.
+      'significant' when p_isotropic < ``alpha`` (default 1e-3, i.e. a_m above about
+      sqrt(7.6 / n_eff)).
+
+    Returns 'directions_deg' (:func:`principal_directions`), 'peak_density' (the density at
+    each, relative to its mean), 'anisotropy_2', 'anisotropy_4', 'n_eff', 'p_isotropic',
+    'significant' and 'inclined_pair' (:func:`is_inclined_pair` of the directions, and
+    significant: 002's "two main directions" that an isotropic sample does not show)."""
+    phi, w = _plane_angles(normals, weights, plane)
+    total = float(w.sum())
+    if total <= 0:
+        return {"directions_deg": [], "peak_density": [], "anisotropy_2": float("nan"),
+                "anisotropy_4": float("nan"), "n_eff": 0.0, "p_isotropic": 1.0,
+                "significant": False, "inclined_pair": False}
+    n_eff = total ** 2 / float(np.sum(w ** 2))
+    a2 = float(abs(np.sum(w * np.exp(2j * phi))) / total)
+    a4 = float(abs(np.sum(w * np.exp(4j * phi))) / total)
+    p = min(1.0, 2.0 * math.exp(-n_eff * max(a2, a4) ** 2))
+    dirs = principal_directions(normals, weights, plane, threshold=threshold,
+                                smoothing_deg=smoothing_deg)
+    ang, dens = direction_density(normals, weights, plane, smoothing_deg=smoothing_deg)
+    peak = [float(np.interp(np.mod(a, 180.0), ang, dens)) for a in dirs]
+    significant = bool(p < alpha)
+    return {"directions_deg": dirs, "peak_density": peak, "anisotropy_2": a2,
+            "anisotropy_4": a4, "n_eff": float(n_eff), "p_isotropic": float(p),
+            "significant": significant,
+            "inclined_pair": significant and is_inclined_pair(
+                dirs, min_inclination_deg=min_inclination_deg)}
+
+
 def _rose_source(d, contacts: str):
     if contacts == "grain":
         return d["grain_normal"], d["grain_force_n"]
@@ -622,7 +677,7 @@ def plot_contact_rose(datas: dict, png, *, planes=("xz", "yz", "xy"), contacts: 
     (grain–grid) or 'all'. Saves png and pdf.
 
     Returns radial_max_percent, directions_deg ({element: {plane: angles}}), inclined_pair
-    ({element: {plane: bool}}, :func:`is_inclined_pair`), overlaps (:func:`label_overlaps`) and
+    ({element: {plane: bool}}, :func:`main_directions`: significant against isotropy), overlaps (:func:`label_overlaps`) and
     files."""
     plt = _pyplot()
     datas = _as_datas(datas)
@@ -631,7 +686,9 @@ def plot_contact_rose(datas: dict, png, *, planes=("xz", "yz", "xy"), contacts: 
         n, w = _rose_source(d, contacts)
         hists[name] = {p: rose_histogram(n, w, p, bins=bins) for p in planes}
         dirs[name] = {p: principal_directions(n, w, p, threshold=threshold) for p in planes}
-        pairs[name] = {p: is_inclined_pair(dirs[name][p]) for p in planes}
+        # (an inclined pair that an isotropic fabric of as many contacts would not show)
+        pairs[name] = {p: main_directions(n, w, p, threshold=threshold)["inclined_pair"]
+                       for p in planes}
     rmax = max(float(np.max(h[1], initial=0.0)) for hs in hists.values() for h in hs.values())
     rmax = rmax * 1.08 if rmax > 0 else 1.0
     nr, nc = len(datas), len(planes)
