@@ -36,5 +36,10 @@ docs: setup
 	$(PY) -m mkdocs build --strict --clean
 	@echo "API reference: open build/docs/html/index.html"
 
+# Every marked results table of the docs rewritten from its data file (docs/developing.md,
+# "Adding a results table"); the suite checks them (tests/test_docs_tables.py).
+docs-tables:
+	$(PY) scripts/docs_tables.py render docs/*.md
+
 clean:
 	rm -rf build results .pytest_cache
