@@ -81,6 +81,10 @@ def servo(el, target, *, tol: float, unbalanced: float, chunk_steps: int,
                 return el.stress(), False, got
 
 
+#: The kind of PeriodicRegionElement.state() bytes (cpp_dem.elements.state_format).
+_KEPT_KIND = "femcoupling.PeriodicRegionElement.state"
+
+
 @dataclasses.dataclass
 class PeriodicRegionElement:
     """See the module doc. ``n``: grains; ``seed``: packing seed; ``prep_friction_deg``: the
@@ -122,8 +126,13 @@ class PeriodicRegionElement:
         if (path is not None and path.exists() and kpath.exists()
                 and json.loads(kpath.read_text()) == disk_key):
             data = path.read_bytes()
+            try:
+                el = DemElement.from_bytes(data)
+            except ValueError as e:  # (ParameterError: not an element's bytes of this version)
+                raise type(e)(f"{path}: {e}; remove it (a cache written by an older version, "
+                              "or changed since) to prepare the element again") from None
             self._kept[key] = data
-            return DemElement.from_bytes(data), True
+            return el, True
         el = DemElement.periodic(self.n, stress=float(-np.trace(s0) / 3), seed=self.seed,
                                  prep_friction_deg=self.prep_friction_deg,
                                  **(self.options or {}))
@@ -146,22 +155,29 @@ class PeriodicRegionElement:
 
     def state(self) -> bytes:
         """The elements this runner prepared (its memory: bytes by region and initial
-        tensor), as bytes (``cpp_dem.elements.interface``: a runner's byte state)."""
-        import pickle
+        tensor), as bytes (``cpp_dem.elements.interface``: a runner's byte state) of
+        cpp_dem's element format (``cpp_dem.elements.state_format``: nothing pickled)."""
+        from cpp_dem.elements import state_format
 
-        return pickle.dumps(self._kept, protocol=pickle.HIGHEST_PROTOCOL)
+        keys = [[name, s0.hex()] for name, s0 in self._kept]
+        return state_format.pack(_KEPT_KIND, {"keys": keys},
+                                 {str(k): v for k, v in enumerate(self._kept.values())})
 
     def set_state(self, data: bytes) -> None:
         """The prepared elements of ``state()`` back in this runner's memory."""
-        import pickle
+        from cpp_dem.elements import state_format
 
         if not isinstance(data, (bytes, bytearray)):
             raise ValueError(f"data: {type(data).__name__}, expected the bytes of "
                              "PeriodicRegionElement.state()")
-        kept = pickle.loads(data)
-        if not (isinstance(kept, dict) and all(isinstance(v, bytes) for v in kept.values())):
-            raise ValueError("data: not a PeriodicRegionElement.state() (a dict of the "
-                             "prepared elements' bytes)")
+        fields, parts = state_format.unpack(data, _KEPT_KIND)
+        keys = fields.get("keys")
+        try:
+            kept = {(name, bytes.fromhex(s0)): parts[str(k)]
+                    for k, (name, s0) in enumerate(keys)}
+        except (TypeError, ValueError, KeyError):
+            raise ValueError("data: not a PeriodicRegionElement.state() (its keys and "
+                             "parts do not match)") from None
         self._kept = kept
 
     def _settings(self) -> dict:

@@ -211,12 +211,13 @@ def test_both_vector_forms_agree():
 
 
 def _format_10(blob: bytes) -> bytes:
-    """A blob of format 11 rewritten as format 10: no wall openings (their vector, after the
-    walls', and their size, the layout's last entry, gone). No clumps."""
+    """A blob of format 12 rewritten as format 10: no wall openings (their vector, after the
+    walls', and their size, the layout's last entry, gone). No clumps, no controller (whose
+    kinds format 12 added)."""
     import struct
 
     b = bytearray(blob)
-    assert int.from_bytes(b[8:12], "little") == 11
+    assert int.from_bytes(b[8:12], "little") == 12
     b[8:12] = (10).to_bytes(4, "little")
     n_layout = struct.unpack_from("<Q", b, 12)[0]
     lay = list(struct.unpack_from(f"<{n_layout}Q", b, 20))
@@ -312,7 +313,7 @@ def _older_format(blob: bytes, nbodies: int, kinematics_at: int, version: int) -
 
 def test_checkpoints_of_the_formats_before_still_load():
     """Format 8 had no shear kinematics and 9 no density scaling: such blobs load, with the
-    default kinematics (8) and scaling off (8 and 9). (The blobs are written as format 11 and
+    default kinematics (8) and scaling off (8 and 9). (The blobs are written as format 12 and
     rewritten as 10, then as 9 and 8.)"""
     from cpp_dem import _core
 
@@ -326,7 +327,7 @@ def test_checkpoints_of_the_formats_before_still_load():
         s.dt = DT
         s.run(2)
         blobs[kin] = bytes(_core._checkpoint_save(s))
-    assert int.from_bytes(blobs["yade"][8:12], "little") == 11
+    assert int.from_bytes(blobs["yade"][8:12], "little") == 12
     a, b = _format_10(blobs["contact_point"]), _format_10(blobs["yade"])
     assert len(a) == len(b)
     diff = [k for k in range(len(a)) if a[k] != b[k]]

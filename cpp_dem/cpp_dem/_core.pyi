@@ -1117,9 +1117,9 @@ class BondParams:
     @property
     def pb_tensile(self) -> float:
         ...
-def _checkpoint_load(scene: Scene, blob: bytes) -> None:
+def _checkpoint_load(scene: Scene, blob: bytes, *, replace: bool = False) -> None:
     """
-    Restores bytes from _checkpoint_save into a scene holding the same controllers.
+    Restores bytes from _checkpoint_save into the scene they came from (or a blank one), holding the same controllers; replace=True lets them replace another scene.
     """
 def _checkpoint_save(scene: Scene) -> bytes:
     """

@@ -3,9 +3,12 @@
 ``save_checkpoint(path, scene)`` writes the whole state of the scene and of its controllers
 (the binary blob of the C++ ``Checkpoint``, dataset ``/checkpoint/blob``) plus readable copies
 of the main arrays (positions, velocities, radii, walls) and ``extra`` metadata.
-``load_checkpoint(path, scene)`` restores it into a scene that holds the same controllers
-(same number and kinds, added in the same order — they are code, the checkpoint restores their
-state); running n steps after loading gives bitwise the same state as running on.
+``load_checkpoint(path, scene)`` restores it into the scene it came from — the same kind
+(periodic or not), bodies (count, each one's kind and clump), clumps and walls (count, axis and
+side) — or into a new, empty ``Scene()``; ``replace=True`` lets it replace another scene. The
+scene must hold the same controllers (same number and kinds, added in the same order — they are
+code, the checkpoint restores their state), and the stored values must pass the checks of the
+API's setters. Running n steps after loading gives bitwise the same state as running on.
 
 Every dataset carries the SHA-256 of its bytes (attribute ``sha256``), and the file the SHA-256
 of its header (format, step, time and ``extra_json``: attribute ``header_sha256``).
@@ -127,12 +130,19 @@ def _checked(path: str, f, name: str, *, required: bool) -> np.ndarray | None:
     return None
 
 
-def load_checkpoint(path: str | os.PathLike, scene) -> dict:
+def load_checkpoint(path: str | os.PathLike, scene, *, replace: bool = False) -> dict:
     """Restores the state saved in ``path`` into ``scene``; returns the ``extra`` dict.
 
+    ``scene`` is the scene the checkpoint came from (rebuilt the same way: its kind, bodies,
+    clumps, walls and controllers) or a new, empty ``Scene()`` holding the same controllers;
+    ``replace=True`` lets the checkpoint replace a scene of another kind or size.
+
     Every problem of the file (not a checkpoint, a missing part, a checksum that does not match,
-    unreadable ``extra_json``, another build's layout, other controllers) raises a
-    ``ParameterError`` naming the file and leaves ``scene`` as it was."""
+    unreadable ``extra_json``, another build's layout, other controllers, another scene without
+    ``replace``, a stored value the API's setters refuse) raises a ``ParameterError`` naming
+    the file and leaves ``scene`` as it was."""
+    if not isinstance(replace, bool):
+        raise _core.ParameterError(f"replace={replace!r}: must be True or False")
     import h5py
 
     path = os.fspath(path)
@@ -182,7 +192,7 @@ def load_checkpoint(path: str | os.PathLike, scene) -> dict:
         for name in _READABLE:  # not used by the restart: a damaged copy is only reported
             _checked(path, f, f"readable/{name}", required=False)
     try:
-        _core._checkpoint_load(scene, blob)
+        _core._checkpoint_load(scene, blob, replace=replace)
     except _core.ParameterError as e:
         raise _core.ParameterError(f"{path}: {e}") from None
     return extra

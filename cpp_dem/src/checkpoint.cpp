@@ -1,8 +1,13 @@
 #include "cpp_dem/checkpoint.hpp"
 
+#include <cxxabi.h>
+
+#include <cstdlib>
 #include <cstring>
+#include <memory>
 #include <string>
 #include <type_traits>
+#include <typeinfo>
 
 #include "cpp_dem/control/controllers.hpp"
 
@@ -82,7 +87,172 @@ std::vector<std::uint64_t> layout(std::uint32_t version = Checkpoint::kVersion) 
   if (version >= 11) l.push_back(sizeof(WallOpening));
   return l;
 }
+
+/// A controller's kind as the blob stores it: its C++ type's (mangled) name.
+std::vector<char> controller_kind(const Controller& c) {
+  const char* n = typeid(c).name();
+  return std::vector<char>(n, n + std::strlen(n));
+}
+
+/// The readable name of a stored kind ("cpp_dem::ServoWall" -> "ServoWall").
+std::string kind_name(const std::vector<char>& kind) {
+  const std::string mangled(kind.begin(), kind.end());
+  int status = 0;
+  char* d = abi::__cxa_demangle(mangled.c_str(), nullptr, nullptr, &status);
+  std::string out = status == 0 && d ? d : mangled;
+  std::free(d);
+  const auto colon = out.rfind("::");
+  return colon == std::string::npos ? out : out.substr(colon + 2);
+}
+
+/// A controller that does nothing: its period goes through Scene::add_controller's check.
+class PeriodProbe final : public Controller {
+ public:
+  void apply(Scene&) override {}
+};
+
+const char* kSameScene =
+    "; load a checkpoint into the scene it came from (or into a new, empty Scene), or pass "
+    "replace=True to replace this scene with the saved one";
+
+std::string body_kind_text(std::uint8_t kind, int clump) {
+  const std::string k = kind == BODY_SPHERE ? "sphere" : kind == BODY_GRID_NODE ? "grid node"
+                                                                                  : "body";
+  return clump >= 0 ? "member of clump " + std::to_string(clump) : "free " + k;
+}
 }  // namespace
+
+void Checkpoint::check_values(const Scene& t) {
+  Scene v;  // scratch: the stored values go through the API's own setters
+  const auto stored = [](const std::string& what, auto&& set) {
+    try {
+      set();
+    } catch (const ParameterError& e) {
+      throw ParameterError("checkpoint: stored " + what + ": " + e.what() +
+                           " (the API refuses this value; the file is corrupt or was edited)");
+    }
+  };
+  for (size_t k = 0; k < t.materials_.size(); ++k)
+    stored("material " + std::to_string(k), [&] { v.add_material(t.materials_[k]); });
+  for (const PairLaw& l : t.pair_laws_)
+    stored("pair law " + std::to_string(l.a) + "-" + std::to_string(l.b),
+           [&] { v.set_pair_law(l.a, l.b, l); });
+  stored("parameters", [&] {
+    v.set_dt(t.dt_);
+    v.set_gravity(t.gravity_);
+    v.set_local_damping(t.local_damping_);
+    v.set_verlet_margin(t.margin_);
+    v.set_max_overlap_ratio(t.max_overlap_ratio_);
+    v.set_max_step_ratio(t.max_step_ratio_);
+    v.set_dt_check_period(t.dt_check_period_);
+    v.set_auto_timestep(t.ts_safety_, t.ts_period_);  // (v has no body: dt is kept)
+    if (t.ds_on_) v.set_density_scaling(t.ds_target_dt_, t.ds_safety_, t.ds_period_);
+  });
+  if (t.cell_.on)
+    stored("periodic cell", [&] {
+      v.set_periodic_cell(t.cell_.h, t.cell_.periodic);
+      v.set_velocity_gradient(t.cell_.vel_grad);
+    });
+  for (size_t k = 0; k < t.walls_.size(); ++k)
+    stored("wall " + std::to_string(k), [&] {
+      const Wall& w = t.walls_[k];
+      const WallOpening& o = t.wall_openings_[k];
+      const int id = v.add_wall(w.axis, w.position, w.sense, w.material);
+      v.set_wall_opening(id, o.axis, o.lo, o.hi);
+    });
+  const int n = t.num_bodies();
+  if (n > 0)
+    stored("bodies", [&] { v.add_spheres(t.by_id(t.bodies_.pos), t.by_id(t.bodies_.radius), 0); });
+  const int ncl = t.clumps_.size();
+  for (int id = 0; id < n; ++id) {
+    const int s = t.slot_of(id);
+    const std::uint8_t kind = t.bodies_.kind[s];
+    const int clump = t.bodies_.clump[s];
+    if (kind != BODY_SPHERE && kind != BODY_GRID_NODE)
+      throw ParameterError("checkpoint: stored body " + std::to_string(id) + ": kind " +
+                           std::to_string(kind) + ", allowed 0 (sphere) or 1 (grid node); the "
+                           "file is corrupt");
+    if (clump < -1 || clump >= ncl)
+      throw ParameterError("checkpoint: stored body " + std::to_string(id) + ": clump " +
+                           std::to_string(clump) + ", allowed -1 (free) to " +
+                           std::to_string(ncl - 1) + "; the file is corrupt");
+    stored("body " + std::to_string(id), [&] {
+      v.set_body_material(id, t.bodies_.material[s]);
+      v.set_mass_inertia(id, t.bodies_.mass[s], t.bodies_.inertia[s]);
+      v.set_blocked(id, t.bodies_.blocked[s]);
+    });
+  }
+  const ClumpStore& cs = t.clumps_;
+  for (int c = 0; c < ncl; ++c) {
+    const int e0 = cs.member_off[c], e1 = cs.member_off[c + 1];
+    if (e0 < 0 || e1 <= e0 || e1 > static_cast<int>(cs.member.size()) || (c == 0 && e0 != 0) ||
+        (c == ncl - 1 && e1 != static_cast<int>(cs.member.size())))
+      throw ParameterError("checkpoint: stored clump " + std::to_string(c) +
+                           ": corrupt member list; the file is corrupt");
+    std::vector<Vec3> local;
+    std::vector<Real> radius;
+    for (int e = e0; e < e1; ++e) {
+      if (t.bodies_.clump[cs.member[e]] != c)
+        throw ParameterError("checkpoint: stored clump " + std::to_string(c) + ": member body " +
+                             std::to_string(t.id_of(cs.member[e])) + " is not marked as its "
+                             "member; the file is corrupt");
+      local.push_back(cs.member_local[e]);
+      radius.push_back(t.bodies_.radius[cs.member[e]]);
+    }
+    stored("clump " + std::to_string(c), [&] {
+      const int vc = v.add_clump(local, radius, t.bodies_.material[cs.member[e0]], cs.mass[c],
+                                 cs.inertia[c], cs.pos[c], cs.ori[c], cs.stiffness_radius[c]);
+      v.set_clump_blocked(vc, cs.blocked[c]);
+    });
+  }
+}
+
+void Checkpoint::check_same_scene(const Scene& s, const Scene& t) {
+  if (s.num_bodies() == 0 && s.walls_.empty() && !s.cell_.on) return;  // blank: nothing to replace
+  const auto axes = [](const PeriodicCell& c) {
+    std::string a;
+    for (int k = 0; k < 3; ++k)
+      if (c.periodic[k]) a += "xyz"[k];
+    return a;
+  };
+  if (t.cell_.on != s.cell_.on || (t.cell_.on && t.cell_.periodic != s.cell_.periodic)) {
+    const auto what = [&](const PeriodicCell& c) {
+      return c.on ? "a periodic cell (periodic along " + axes(c) + ")"
+                  : std::string("not periodic");
+    };
+    throw ParameterError("checkpoint: the saved scene is " + what(t.cell_) + ", this scene is " +
+                         what(s.cell_) + kSameScene);
+  }
+  if (t.num_bodies() != s.num_bodies())
+    throw ParameterError("checkpoint: the saved scene has " + std::to_string(t.num_bodies()) +
+                         " bodies, this scene has " + std::to_string(s.num_bodies()) + kSameScene);
+  if (t.clumps_.size() != s.clumps_.size())
+    throw ParameterError("checkpoint: the saved scene has " + std::to_string(t.clumps_.size()) +
+                         " clumps, this scene has " + std::to_string(s.clumps_.size()) +
+                         kSameScene);
+  for (int id = 0; id < s.num_bodies(); ++id) {
+    const int a = t.slot_of(id), b = s.slot_of(id);
+    if (t.bodies_.kind[a] != s.bodies_.kind[b] || t.bodies_.clump[a] != s.bodies_.clump[b])
+      throw ParameterError("checkpoint: body " + std::to_string(id) + " is a " +
+                           body_kind_text(t.bodies_.kind[a], t.bodies_.clump[a]) +
+                           " in the saved scene, a " +
+                           body_kind_text(s.bodies_.kind[b], s.bodies_.clump[b]) +
+                           " in this one" + kSameScene);
+  }
+  if (t.walls_.size() != s.walls_.size())
+    throw ParameterError("checkpoint: the saved scene has " + std::to_string(t.walls_.size()) +
+                         " walls, this scene has " + std::to_string(s.walls_.size()) + kSameScene);
+  for (size_t k = 0; k < s.walls_.size(); ++k) {
+    const Wall &a = t.walls_[k], &b = s.walls_[k];
+    if (a.axis != b.axis || a.sense != b.sense) {
+      const auto side = [](const Wall& w) {
+        return std::string(w.sense > 0 ? "+" : "-") + "xyz"[w.axis];
+      };
+      throw ParameterError("checkpoint: wall " + std::to_string(k) + " faces " + side(a) +
+                           " in the saved scene, " + side(b) + " in this one" + kSameScene);
+    }
+  }
+}
 
 std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   Writer w;
@@ -164,6 +334,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   const std::uint64_t nc = s.controllers_.size();
   w.put(nc);
   for (const auto& c : s.controllers_) {
+    w.vec(controller_kind(*c));
     w.put(c->period);
     w.put(c->enabled);
     const auto* st = dynamic_cast<const StatefulController*>(c.get());
@@ -173,7 +344,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   return std::move(w.buf);
 }
 
-void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
+void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool replace) {
   Reader r(blob);
   char magic[8];
   r.raw(magic, sizeof(magic));
@@ -313,6 +484,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
                          " controllers, this scene has " + std::to_string(s.controllers_.size()) +
                          "; add the same controllers, in the same order, before loading");
   struct Ctl {
+    std::vector<char> kind;
     int period;
     bool enabled;
     bool stateful;
@@ -320,14 +492,22 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   };
   std::vector<Ctl> ctl(nc);
   for (std::uint64_t k = 0; k < nc; ++k) {
+    if (version >= 12) r.vec(ctl[k].kind);
     r.get(ctl[k].period);
     r.get(ctl[k].enabled);
     ctl[k].stateful = r.get<std::uint8_t>() != 0;
     if (ctl[k].stateful) r.vec(ctl[k].state);
-    const bool here = dynamic_cast<StatefulController*>(s.controllers_[k].get()) != nullptr;
-    if (here != ctl[k].stateful)
-      throw ParameterError("checkpoint: controller " + std::to_string(k) +
-                           " is of another kind than the saved one");
+    const Controller& here = *s.controllers_[k];
+    const bool same = version >= 12
+                          ? ctl[k].kind == controller_kind(here)
+                          : (dynamic_cast<const StatefulController*>(&here) != nullptr) ==
+                                ctl[k].stateful;
+    if (!same)
+      throw ParameterError(
+          "checkpoint: controller " + std::to_string(k) + " is a " +
+          kind_name(controller_kind(here)) + " in this scene, " +
+          (version >= 12 ? "a " + kind_name(ctl[k].kind) : std::string("of another kind")) +
+          " in the saved one; add the same controllers, in the same order, before loading");
   }
   if (r.at != blob.size())
     throw ParameterError("checkpoint: " + std::to_string(blob.size() - r.at) +
@@ -335,11 +515,39 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob) {
   if (!kGeogridBuilt && (t.num_nodes_ > 0 || !t.links_.empty()))
     throw ParameterError("checkpoint: the saved scene has a geogrid; this build has no geogrid "
                          "support (built with -DCPP_DEM_GEOGRID=OFF)");
-  for (std::uint64_t k = 0; k < nc; ++k) {
-    if (ctl[k].stateful)
-      dynamic_cast<StatefulController*>(s.controllers_[k].get())->load_state(ctl[k].state);
-    s.controllers_[k]->period = ctl[k].period;
-    s.controllers_[k]->enabled = ctl[k].enabled;
+  if (!replace) check_same_scene(s, t);
+  check_values(t);
+  Scene probes;  // scratch: the periods go through Scene::add_controller's check
+  for (std::uint64_t k = 0; k < nc; ++k)
+    try {
+      auto probe = std::make_shared<PeriodProbe>();
+      probe->period = ctl[k].period;
+      probes.add_controller(probe);
+    } catch (const ParameterError& e) {
+      throw ParameterError("checkpoint: stored controller " + std::to_string(k) + ": " +
+                           e.what() + " (the API refuses this value; the file is corrupt or "
+                           "was edited)");
+    }
+  // The controllers' states last, all or none: a state its controller refuses puts back the
+  // ones loaded before it.
+  std::vector<std::vector<Real>> before(nc);
+  std::uint64_t k = 0;
+  try {
+    for (; k < nc; ++k) {
+      if (!ctl[k].stateful) continue;
+      auto* st = dynamic_cast<StatefulController*>(s.controllers_[k].get());
+      before[k] = st->save_state();
+      st->load_state(ctl[k].state);
+    }
+  } catch (const ParameterError& e) {
+    for (std::uint64_t j = 0; j < k; ++j)
+      if (ctl[j].stateful)
+        dynamic_cast<StatefulController*>(s.controllers_[j].get())->load_state(before[j]);
+    throw ParameterError("checkpoint: stored controller " + std::to_string(k) + ": " + e.what());
+  }
+  for (std::uint64_t j = 0; j < nc; ++j) {
+    s.controllers_[j]->period = ctl[j].period;
+    s.controllers_[j]->enabled = ctl[j].enabled;
   }
   t.controllers_ = std::move(s.controllers_);
   // The cell grid is scratch of the broad phase (rebuilt from scratch at every build).

@@ -27,6 +27,13 @@ It is driven in one of two ways (one family, two ways in):
   tensor (``femcoupling.region.PeriodicRegionElement``). The two-way loop drives these
   (``ElementPool.runners`` / ``run``).
 
+**A RunnerElement's bytes hold code** (its runner, pickled as Dask sends it), so they are
+restored only in the session that made them: ``to_bytes`` signs them (HMAC-SHA-256) with the
+key of the client process that made the runner (``RunnerFactory``, or this process), which
+the pool's hosts on the workers are given; ``from_bytes`` checks the signature before it
+unpickles anything, and refuses bytes of another session or of a file (``ParameterError``).
+The rest is cpp_dem's element format (``cpp_dem.elements.state_format``).
+
 **A runner's byte state is optional.** A runner with ``state() -> bytes`` and
 ``set_state(bytes)`` (``PeriodicRegionElement``: the elements it prepared) is saved with its
 element at every ``accept()`` and, after a lost worker or a move to a late worker, restored
@@ -41,9 +48,12 @@ name, before it reaches a worker.
 
 from __future__ import annotations
 
+import hmac
+import secrets
 from typing import Any, Protocol, runtime_checkable
 
 from cpp_dem._core import ParameterError
+from cpp_dem.elements import state_format
 
 __all__ = ["PoolElement", "RunnerElement", "RunnerFactory", "StrainElement", "TargetElement",
            "check_element", "check_runner", "element_methods"]
@@ -139,21 +149,52 @@ def _loads(data: bytes) -> Any:
     return dask_pickle.loads(data)
 
 
-_FORMAT = "cpp_dem.RunnerElement/1"
+#: The kind of a RunnerElement's bytes (cpp_dem.elements.state_format).
+_KIND = "cpp_dem.RunnerElement"
+#: This process's key for the runners it pickles (made at import, never written anywhere).
+_SESSION_KEY = secrets.token_bytes(32)
+#: The keys whose signatures this process accepts: its own, and those of the clients whose
+#: pools it hosts elements for (``trust_runner_key``).
+_TRUSTED_KEYS: list[bytes] = [_SESSION_KEY]
+
+
+def session_key() -> bytes:
+    """This process's key for the RunnerElement bytes it signs (kept in memory only)."""
+    return _SESSION_KEY
+
+
+def trust_runner_key(key: bytes) -> None:
+    """Accepts RunnerElement bytes signed with ``key`` in this process (a pool's host on a
+    worker is given its client's key)."""
+    if not (isinstance(key, bytes) and len(key) == 32):
+        raise ParameterError("key: must be 32 bytes (interface.session_key())")
+    if key not in _TRUSTED_KEYS:
+        _TRUSTED_KEYS.append(key)
+
+
+def _signature(key: bytes, name: str, has_state: bool, parts: dict) -> str:
+    unsigned = state_format.pack(_KIND, {"name": name, "has_state": has_state}, parts)
+    return hmac.new(key, unsigned, "sha256").hexdigest()
 
 
 class RunnerElement:
     """A target-driven element: region ``name`` of a two-way ``runner``. ``run(initial,
     final)`` is ``runner(name, initial, final)``. Its bytes are the runner as it was sent
     (pickled when this element was made, before any run) and, if the runner has
-    ``state()``, that state now; ``from_bytes`` unpickles the runner as sent and gives it the
-    state with ``set_state``."""
+    ``state()``, that state now, signed with ``key`` (default: this process's
+    ``session_key()``); ``from_bytes`` checks the signature against the keys this process
+    trusts, then unpickles the runner as sent and gives it the state with ``set_state``."""
 
-    def __init__(self, runner: Any, name: str, *, sent: bytes | None = None) -> None:
+    #: what its bytes hold, for cpp_dem.elements.state_format
+    STATE_KIND = _KIND
+
+    def __init__(self, runner: Any, name: str, *, sent: bytes | None = None,
+                 key: bytes | None = None) -> None:
         check_runner(runner)
         self.runner, self.name = runner, name
         self.sent = _dumps(runner) if sent is None else sent
         self.has_state = callable(getattr(runner, "state", None))
+        self.key = _SESSION_KEY if key is None else key
 
     def run(self, initial: Any, final: Any) -> Any:
         return self.runner(self.name, initial, final)
@@ -163,32 +204,46 @@ class RunnerElement:
         if state is not None and not isinstance(state, (bytes, bytearray)):
             raise ParameterError(f"{type(self.runner).__name__}.state(): returned "
                                  f"{type(state).__name__}, expected bytes")
-        return _dumps({"format": _FORMAT, "name": self.name, "runner": self.sent,
-                       "state": None if state is None else bytes(state)})
+        parts = {"runner": bytes(self.sent), "state": b"" if state is None else bytes(state)}
+        has = state is not None
+        return state_format.pack(_KIND, {"name": self.name, "has_state": has,
+                                         "signature": _signature(self.key, self.name, has,
+                                                                 parts)}, parts)
 
     @classmethod
     def from_bytes(cls, data: bytes) -> "RunnerElement":
-        try:
-            d = _loads(data)
-        except Exception as e:  # noqa: BLE001 - any unpickling failure is bad input
-            raise ParameterError(f"data: not a saved RunnerElement ({e})") from None
-        if not isinstance(d, dict) or d.get("format") != _FORMAT:
-            raise ParameterError("data: not a saved RunnerElement (format "
-                                 f"{d.get('format') if isinstance(d, dict) else None!r}, "
-                                 f"expected {_FORMAT!r})")
-        runner = _loads(d["runner"])
-        if d["state"] is not None:
-            runner.set_state(d["state"])
-        return cls(runner, d["name"], sent=d["runner"])
+        """The element of ``to_bytes``, if its signature is one of this session's (else a
+        ParameterError, before anything in the bytes is unpickled)."""
+        d, parts = state_format.unpack(data, _KIND)
+        name, has, sig = d.get("name"), d.get("has_state"), d.get("signature")
+        if not (isinstance(name, str) and isinstance(has, bool) and isinstance(sig, str)
+                and set(parts) == {"runner", "state"}):
+            raise ParameterError("data: a saved RunnerElement without its fields name, "
+                                 "has_state, signature and parts runner, state")
+        key = next((k for k in _TRUSTED_KEYS
+                    if hmac.compare_digest(_signature(k, name, has, parts), sig)), None)
+        if key is None:
+            raise ParameterError(
+                "data: a saved RunnerElement not signed in this session (its signature "
+                "matches none of this process's keys): its bytes hold code (the runner), so "
+                "they are restored only in the session and pool that made them, never from "
+                "elsewhere (a file, another run)")
+        runner = _loads(parts["runner"])
+        if has:
+            runner.set_state(parts["state"])
+        return cls(runner, name, sent=parts["runner"], key=key)
 
 
 class RunnerFactory:
     """A picklable element maker for ``ElementPool.build``: element k is
-    ``RunnerElement(runner, names[k])`` (its own copy of the runner, made on its worker)."""
+    ``RunnerElement(runner, names[k])`` (its own copy of the runner, made on its worker),
+    signing its bytes with the key of the process that made this factory."""
 
     def __init__(self, runner: Any, names: list) -> None:
         self.runner, self.names = runner, list(names)
+        self.key = _SESSION_KEY
 
     def __call__(self, index: int) -> RunnerElement:
+        trust_runner_key(self.key)
         sent = _dumps(self.runner)  # (a copy of its own, whatever Dask shares between calls)
-        return RunnerElement(_loads(sent), self.names[index], sent=sent)
+        return RunnerElement(_loads(sent), self.names[index], sent=sent, key=self.key)

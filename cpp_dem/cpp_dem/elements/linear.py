@@ -12,15 +12,18 @@ zz, yz, xz, xy with engineering shear strains."""
 
 from __future__ import annotations
 
-import pickle
 from dataclasses import dataclass
 from types import SimpleNamespace
 
 import numpy as np
 
 from cpp_dem._core import ParameterError
+from cpp_dem.elements import state_format
 
 __all__ = ["LinearElement", "LinearFactory"]
+
+#: The kind of a LinearElement's bytes (cpp_dem.elements.state_format).
+_KIND = "cpp_dem.LinearElement"
 
 
 class LinearElement:
@@ -28,6 +31,9 @@ class LinearElement:
     ``poisson`` (-), the initial stress ``stress`` (3 x 3, Pa, tension positive).
     ``apply_strain(de)`` adds C : sym(de) (de the displacement-gradient increment, -) and
     returns the stress."""
+
+    #: what its bytes hold, for cpp_dem.elements.state_format
+    STATE_KIND = _KIND
 
     def __init__(self, young: float, poisson: float, stress=None) -> None:
         if not (np.isfinite(young) and young > 0):
@@ -80,12 +86,23 @@ class LinearElement:
         return self.tangent
 
     def to_bytes(self) -> bytes:
-        return pickle.dumps((self.young, self.poisson, self._stress))
+        """Young's modulus, Poisson's ratio and the stress in cpp_dem's element format
+        (``cpp_dem.elements.state_format``: JSON, exact, with its checksum)."""
+        return state_format.pack(_KIND, {"young": self.young, "poisson": self.poisson,
+                                         "stress": self._stress.tolist()})
 
     @classmethod
     def from_bytes(cls, data: bytes) -> "LinearElement":
-        young, poisson, stress = pickle.loads(data)
-        return cls(young, poisson, stress)
+        """The element of ``to_bytes``; other bytes (a pickle included: nothing in them runs)
+        and values the constructor refuses raise a ParameterError."""
+        d, _ = state_format.unpack(data, _KIND)
+        try:
+            return cls(float(d["young"]), float(d["poisson"]), d["stress"])
+        except KeyError as e:
+            raise ParameterError(f"data: a saved LinearElement without its field {e}") from None
+        except (TypeError, ValueError) as e:
+            raise ParameterError(f"data: a saved LinearElement with a malformed field: {e}") \
+                from None
 
 
 @dataclass

@@ -126,6 +126,27 @@ def _payload_bytes(obj) -> int:
     return len(pickle.dumps(obj))
 
 
+def _check_states(data: list, element_type: type | None) -> None:
+    """Refuses, naming ``data[k]``, an element's bytes that are not bytes or, for the
+    elements of cpp_dem's element format (``STATE_KIND``: DemElement, LinearElement,
+    RunnerElement), not of that format (a pickle, another kind, a checksum that does not
+    match): parsed here, nothing in them is run."""
+    from cpp_dem.elements import state_format
+
+    if element_type is None:
+        from cpp_dem.elements.periodic import DemElement
+
+        element_type = DemElement
+    kind = getattr(element_type, "STATE_KIND", None)
+    name = getattr(element_type, "__name__", "element")
+    for k, d in enumerate(data):
+        if not isinstance(d, (bytes, bytearray)):
+            raise ParameterError(f"data[{k}]: {type(d).__name__}, expected the bytes of a "
+                                 f"saved {name} ({name}.to_bytes)")
+        if kind is not None:
+            state_format.unpack(d, kind, field=f"data[{k}]")
+
+
 def _kind(element_type: type) -> type:
     """The interface an element class is driven through: ``TargetElement`` (it has
     ``run``), else ``StrainElement``."""
@@ -164,11 +185,14 @@ class ElementHost:
     and generation, the same path whichever worker writes them), or None for this worker's
     local temporary directory (a folder of its own under the pool's)."""
 
-    def __init__(self, spill_dir: str | None, pool_id: str, element_type: type | None = None
-                 ) -> None:
+    def __init__(self, spill_dir: str | None, pool_id: str, element_type: type | None = None,
+                 runner_key: bytes | None = None) -> None:
         from cpp_dem import set_num_threads
+        from cpp_dem.elements.interface import trust_runner_key
 
         set_num_threads(1)  # one element at a time per worker process: results as serial
+        if runner_key is not None:  # (the client's: RunnerElement bytes signed there restore)
+            trust_runner_key(runner_key)
         if element_type is None:
             from cpp_dem.elements.periodic import DemElement
 
@@ -462,12 +486,8 @@ class ElementPool:
                  labels: Sequence[str] | None = None,
                  log: Callable[[str], None] | None = None) -> None:
         data = list(data)
-        for k, d in enumerate(data):
-            if not isinstance(d, (bytes, bytearray)):
-                raise ParameterError(f"data[{k}]: {type(d).__name__}, expected the bytes of a "
-                                     "saved DemElement (DemElement.to_bytes)")
         self._connect(client, workers, keep_copies, len(data), state_dir, min_workers,
-                      timeout_s, rebalance, element_type, labels, log)
+                      timeout_s, rebalance, element_type, labels, log, states=data)
         with closed_on_error(self):
             self._start_hosts(self._alive())
             addrs = sorted(self._hosts)
@@ -475,10 +495,10 @@ class ElementPool:
             self._send(range(self.n), data, 0)
 
     def _connect(self, client, workers, keep_copies, n, state_dir, min_workers, timeout_s,
-                 rebalance, element_type=None, labels=None, log=None) -> None:
-        """Checks the options, connects (a LocalCluster of ``workers`` single-threaded
-        processes when no client is given), waits for ``min_workers`` and sets up the empty
-        placement of n elements."""
+                 rebalance, element_type=None, labels=None, log=None, states=None) -> None:
+        """Checks the options (and the elements' bytes ``states``, if given), connects (a
+        LocalCluster of ``workers`` single-threaded processes when no client is given), waits
+        for ``min_workers`` and sets up the empty placement of n elements."""
         if n < 1:
             raise ParameterError(f"n={n}: need at least one element")
         if element_type is not None:
@@ -510,6 +530,8 @@ class ElementPool:
                 raise ParameterError(f"min_workers={min_workers} > workers={workers}: the "
                                      "pool's own LocalCluster never grows; pass client= for "
                                      "a cluster whose workers join later")
+        if states is not None:
+            _check_states(states, element_type)
         self.keep_copies, self.rebalance, self.n = keep_copies, rebalance, n
         self.element_type = element_type
         self.kind = _kind(element_type) if element_type is not None else None
@@ -656,9 +678,11 @@ class ElementPool:
         """An ElementHost on every worker of ``addrs`` that has none; returns the new ones
         (a worker that leaves meanwhile is skipped)."""
         new = [a for a in sorted(addrs) if a not in self._hosts]
+        from cpp_dem.elements.interface import session_key
+
         futures = {a: self.client.submit(ElementHost, self.state_dir, self.pool_id,
-                                         self.element_type, actor=True, workers=[a],
-                                         pure=False) for a in new}
+                                         self.element_type, session_key(), actor=True,
+                                         workers=[a], pure=False) for a in new}
         started = []
         for a, fut in futures.items():
             try:
@@ -1097,10 +1121,7 @@ class ElementPool:
         data = list(data)
         if len(data) != self.n:
             raise ParameterError(f"data: {len(data)} states given for {self.n} elements")
-        for k, d in enumerate(data):
-            if not isinstance(d, (bytes, bytearray)):
-                raise ParameterError(f"data[{k}]: {type(d).__name__}, expected the bytes of a "
-                                     "saved DemElement (DemElement.to_bytes)")
+        _check_states(data, self.element_type)
         self._log = []
         self._send(range(self.n), data, self._generation + 1)
         self._clean = True
