@@ -292,12 +292,30 @@ class Config:
     fatol: float = 1e-4
 
     @classmethod
-    def load(cls, path: Path) -> "Config":
+    def load(cls, path: Path, *, allow_large: bool = False) -> "Config":
+        """Reads and checks a calibration file: every bad field is a ValueError of one line
+        naming the file, the field, its value and what is allowed (FileNotFoundError when
+        there is no such file). A grid of more than ``CAPS["grid points"]`` points
+        (geogrid_dem.options) is refused unless ``allow_large`` (--allow-large)."""
         import tomllib
 
-        with open(path, "rb") as f:
-            d = tomllib.load(f)
+        from geogrid_dem.options import ALLOW_LARGE, CAPS
+
         src = str(path)
+        try:
+            with open(path, "rb") as f:
+                d = tomllib.load(f)
+        except FileNotFoundError:
+            raise
+        except IsADirectoryError:
+            raise ValueError(f"{src}: is a folder, not a calibration file (TOML)") from None
+        except OSError as e:
+            raise ValueError(f"{src}: cannot be read: {e.strerror}") from None
+        except UnicodeDecodeError as e:
+            raise ValueError(f"{src}: not UTF-8 text (byte {e.start}); a calibration file is "
+                             "TOML") from None
+        except tomllib.TOMLDecodeError as e:
+            raise ValueError(f"{src}: not valid TOML: {e}") from None
         known = {"out", "params", "grid", "reference", "misfit", "optimiser"}
         for k in d:
             if k not in known:
@@ -305,24 +323,69 @@ class Config:
                                  f"{', '.join(sorted(known))}")
         if "out" not in d:
             raise ValueError(f"{src}: field 'out' is missing: the calibration's folder")
+        if not isinstance(d["out"], str) or not d["out"].strip():
+            raise ValueError(f"{src}: field 'out'={d['out']!r}: must be a folder name (a "
+                             "non-empty string)")
+        for name in ("params", "grid", "reference"):
+            if not isinstance(d.get(name, {}), dict):
+                raise ValueError(f"{src}: field {name!r}={d[name]!r}: must be a table "
+                                 f"[{name}]")
         grid = d.get("grid", {})
-        for k in KEYS:
-            v = grid.get(k)
-            if not isinstance(v, list) or not v or not all(
-                    isinstance(x, (int, float)) and not isinstance(x, bool) for x in v):
-                raise ValueError(f"{src}: field 'grid.{k}'={v!r}: must be a non-empty list "
-                                 "of numbers")
         for k in grid:
             if k not in KEYS:
-                raise ValueError(f"{src}: field 'grid.{k}': allowed: {', '.join(KEYS)}")
-        bad = [x for x in grid["poisson"] if not 0 < x <= 0.5]
-        if bad:
-            raise ValueError(f"{src}: field 'grid.poisson' has {bad}: k_s/k_n of the linear "
-                             "law must be in (0, 0.5]")
+                raise ValueError(f"{src}: field 'grid.{k}': not known; allowed: "
+                                 f"{', '.join(KEYS)}")
+        for k in KEYS:
+            v = grid.get(k)
+            if v is None:
+                raise ValueError(f"{src}: field 'grid.{k}' is missing: a non-empty list of "
+                                 f"{_ALLOWED[k]}")
+            if not isinstance(v, list) or not v:
+                raise ValueError(f"{src}: field 'grid.{k}'={v!r}: must be a non-empty list of "
+                                 f"{_ALLOWED[k]}")
+            seen: set = set()
+            for x in v:
+                if not _ok(k, x):
+                    raise ValueError(f"{src}: field 'grid.{k}' has {x!r}: each must be "
+                                     f"{_ONE[k]}")
+                if float(x) in seen:
+                    raise ValueError(f"{src}: field 'grid.{k}' lists {x!r} twice: list each "
+                                     "value once")
+                seen.add(float(x))
+        n_points = math.prod(len(grid[k]) for k in KEYS)
+        if n_points > CAPS["grid points"] and not allow_large:
+            raise ValueError(
+                f"{src}: field 'grid': {' x '.join(str(len(grid[k])) for k in KEYS)} = "
+                f"{n_points} points (a triaxial run each), more than the cap of "
+                f"{CAPS['grid points']} grid points; add {ALLOW_LARGE} to run it")
         ref = d.get("reference", {})
-        if "csv" not in ref and not all(k in ref for k in KEYS):
+        if "csv" in ref:
+            extra = [k for k in ref if k != "csv"]
+            if extra:
+                raise ValueError(f"{src}: field 'reference.{extra[0]}': has no effect with "
+                                 "reference.csv (the curve is given, nothing is run); leave "
+                                 "it out, or drop csv for a synthetic truth")
+            c = ref["csv"]
+            if not isinstance(c, str) or not c:
+                raise ValueError(f"{src}: field 'reference.csv'={c!r}: must be the path of a "
+                                 "triaxial.csv (a string)")
+            try:
+                read_curve(Path(c))
+            except FileNotFoundError:
+                raise ValueError(f"{src}: field 'reference.csv'={c!r}: no such file") from None
+            except (OSError, ValueError, KeyError, IndexError) as e:
+                why = (str(e).splitlines() or [type(e).__name__])[0]
+                raise ValueError(f"{src}: field 'reference.csv'={c!r}: cannot be read as a "
+                                 "triaxial curve (columns axial_strain, deviatoric_stress, "
+                                 f"volumetric_strain): {why}") from None
+        elif not all(k in ref for k in KEYS):
             raise ValueError(f"{src}: field 'reference': give csv = 'triaxial.csv' or the "
                              "synthetic truth young, poisson, phi")
+        else:
+            for k in KEYS:
+                if not _ok(k, ref[k]):
+                    raise ValueError(f"{src}: field 'reference.{k}'={ref[k]!r}: must be "
+                                     f"{_ONE[k]}")
         fixed = dict(d.get("params", {}))
         for k in ("out", *KEYS):
             if k in fixed:
@@ -341,6 +404,22 @@ class Config:
                    points=mis.get("points", 50), w_q=mis.get("w_q", 0.5),
                    maxfev=opt.get("maxfev", 20), step=opt.get("step", 0.15),
                    xatol=opt.get("xatol", 0.01), fatol=opt.get("fatol", 1e-4))
+
+
+#: What the grid's values (_ALLOWED) and each of them (_ONE) may be, per key.
+_ALLOWED = {"young": "finite numbers > 0 (Pa)",
+            "poisson": "numbers in (0, 0.5] (k_s/k_n of the linear law)",
+            "phi": "numbers in (0, 90) (deg)"}
+_ONE = {"young": "a finite number > 0 (Pa)",
+        "poisson": "a number in (0, 0.5] (k_s/k_n of the linear law)",
+        "phi": "a number in (0, 90) (deg)"}
+
+
+def _ok(key: str, x) -> bool:
+    """Whether ``x`` may be a value of ``key`` (young, poisson, phi) of a grid or reference."""
+    if isinstance(x, bool) or not isinstance(x, (int, float)) or not math.isfinite(x):
+        return False
+    return {"young": x > 0, "poisson": 0 < x <= 0.5, "phi": 0 < x < 90}[key]
 
 
 def _section(d: dict, name: str, src: str, spec: dict) -> dict:

@@ -10,6 +10,14 @@ declared here, once, with one meaning each:
   machine, or ``OMP_NUM_THREADS`` when set). Results do not depend on it.
 - ``--out DIR``: the results folder (a new ``results/<case>/run_NNN`` when omitted); a folder
   that holds an earlier run needs ``--overwrite``.
+- ``--allow-large``: lifts the caps (:data:`CAPS`) on the work one run may start: the count
+  of seeds, of grains of a sample or element, of DEM elements or runs, of calibration grid
+  points. Without it a case refuses a count above its cap, naming the count, the cap and the
+  flag (:func:`check_cap`), before anything runs.
+
+An option whose value would have no effect given the others is refused by name too
+(:func:`given_options` tells the options given from those left at their default;
+:func:`refuse_unused`).
 
 Help shows each default once: an option whose help text already names its default (or whose
 default is empty) gets nothing added; any other gets ``(default: X)``.
@@ -23,9 +31,16 @@ import re
 from geogrid_dem.cases import CASES
 from geogrid_dem.rundir import add_out_args, check_common_args
 
-__all__ = ["HelpFormatter", "case_parser", "check_common_args", "parse_checked"]
+__all__ = ["CAPS", "HelpFormatter", "add_allow_large", "case_parser", "check_cap",
+           "check_common_args", "distinct", "given_options", "parse_checked", "refuse_unused"]
 
 PRESETS = ("fast", "balanced", "accurate")
+
+#: The most work one run starts without ``--allow-large`` (docs/cli.md, "Caps"): seeds
+#: (packings of a study), grains of one sample or element (a clump counts as one), DEM
+#: elements or runs of one command, points of a calibration grid.
+CAPS = {"seeds": 100, "grains": 200_000, "elements or runs": 10_000, "grid points": 1_000}
+ALLOW_LARGE = "--allow-large"
 
 
 class HelpFormatter(argparse.HelpFormatter):
@@ -69,7 +84,86 @@ def case_parser(name: str, description: str, *, smoke: str, seed: int, threads: 
     if preset is not None:
         ap.add_argument("--preset", choices=PRESETS, default="",
                         help=f"speed-accuracy preset {preset} (docs/speed_accuracy.md)")
+    add_allow_large(ap)
     return ap
+
+
+def add_allow_large(ap: argparse.ArgumentParser) -> None:
+    """``--allow-large``, the one flag that lifts the caps of :data:`CAPS` (the cases' parsers
+    and ``geogrid-dem calibrate``)."""
+    caps = ", ".join(f"{v} {k}" for k, v in CAPS.items())
+    ap.add_argument(ALLOW_LARGE, action="store_true",
+                    help=f"run work above the caps ({caps}; docs/cli.md), which are refused "
+                         "without it")
+
+
+def _num(x: float) -> str:
+    return f"{int(x)}" if float(x).is_integer() and abs(x) < 1e15 else f"{x:.3g}"
+
+
+def cap_error(flag: str, value, count: float, kind: str, what: str = "",
+              estimate: bool = False) -> str | None:
+    """The refusal of ``count`` (``what``, default ``kind``) above the cap ``CAPS[kind]``, or
+    None within it: names the flag and its value, the count, the cap and --allow-large."""
+    cap = CAPS[kind]
+    if not count > cap:
+        return None
+    return (f"{flag}={value}: {'about ' if estimate else ''}{_num(count)} {what or kind}, "
+            f"more than the cap of {cap} {kind}; add {ALLOW_LARGE} to run it")
+
+
+def check_cap(ap: argparse.ArgumentParser, a: argparse.Namespace, flag: str, value,
+              count: float, kind: str, what: str = "", *, estimate: bool = False) -> None:
+    """``ap.error`` (exit status 2) when ``count`` passes the cap ``CAPS[kind]`` and
+    ``--allow-large`` was not given (see :func:`cap_error` for the words)."""
+    msg = cap_error(flag, value, count, kind, what, estimate)
+    if msg and not getattr(a, "allow_large", False):
+        ap.error(msg)
+
+
+_UNSET = object()
+
+
+def given_options(ap: argparse.ArgumentParser, argv=None) -> frozenset[str]:
+    """The dests of the options ``argv`` gives (None: ``sys.argv[1:]``), as opposed to those
+    left at their default: parses ``argv`` again into a namespace whose every dest holds a
+    marker, which argparse leaves where nothing was given. Call it after a parse that
+    succeeded (the values are checked there)."""
+    ns = argparse.Namespace(**{act.dest: _UNSET for act in ap._actions
+                               if act.dest is not argparse.SUPPRESS})
+    ns, _ = ap.parse_known_args(argv, ns)
+    return frozenset(k for k, v in vars(ns).items() if v is not _UNSET)
+
+
+def _flag(ap: argparse.ArgumentParser, dest: str) -> str:
+    for act in ap._actions:
+        if act.dest == dest:
+            return next((o for o in act.option_strings if o.startswith("--")),
+                        act.option_strings[0] if act.option_strings else dest)
+    return "--" + dest.replace("_", "-")
+
+
+def refuse_unused(ap: argparse.ArgumentParser, a: argparse.Namespace, given, dest: str,
+                  why: str, fix: str = "") -> None:
+    """``ap.error`` when the option ``dest`` was given (``given``: :func:`given_options`) but
+    has no effect ``why`` (e.g. "without a PRS variant (--variants RE)"): names the flag, its
+    value, why, and ``fix`` (what would make it count) or leaving it out."""
+    if dest not in given:
+        return
+    flag = _flag(ap, dest)
+    v = getattr(a, dest, None)
+    shown = flag if isinstance(v, bool) else f"{flag}={v}"
+    ap.error(f"{shown}: has no effect {why}; {fix + ', or ' if fix else ''}leave {flag} out")
+
+
+def distinct(ap: argparse.ArgumentParser, flag: str, text, items) -> None:
+    """``ap.error`` when ``items`` (the parsed values of ``flag``, given as ``text``) list one
+    twice: a value listed twice would run twice, or once and say nothing."""
+    seen: set = set()
+    for x in items:
+        if x in seen:
+            ap.error(f"{flag}={text}: {x} is listed twice; list each once")
+        seen.add(x)
 
 
 def parse_checked(ap: argparse.ArgumentParser, argv) -> argparse.Namespace:

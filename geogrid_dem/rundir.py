@@ -12,7 +12,13 @@
   no longer runs is taken over, with a message.
 - The manifest ``.geogrid-dem-run.json`` says what the folder holds: ``status`` ``running``,
   ``complete``, ``interrupted`` (Ctrl-C / SIGINT) or ``failed`` (an error, a full disk), the
-  reason, and the files written.
+  reason, and the files written; for a case that resumes, also its parameters (``params``:
+  the case's Params as plain values, those in :data:`RESUME_FREE` left out) and the SHA-256
+  of each checkpoint it wrote (``checkpoints``, recorded as they are written).
+- ``--resume`` continues the same run or refuses: the parameters must be the recorded ones
+  (the first that differs is named with both values), each checkpoint kept must be the very
+  file the run wrote (its SHA-256), and a completed run is left as it is ("already
+  complete", exit status 0).
 
 :func:`run_main` runs a case's work inside this: an interrupted run closes its files, marks
 the folder ``interrupted``, prints one line saying where the results are and returns 130; a
@@ -22,14 +28,18 @@ full disk or a file-size limit gives one error line naming the file and marks it
 from __future__ import annotations
 
 import argparse
+import dataclasses
 import datetime as _dt
 import errno as _errno
+import fnmatch
+import hashlib
 import json
 import os
 import re
 import signal
 import socket
 import sys
+import threading
 import time
 from pathlib import Path
 from typing import Sequence
@@ -53,6 +63,143 @@ class RunFolderError(SystemExit):
 
     def __init__(self, msg: str) -> None:
         super().__init__(f"error: {msg}")
+
+
+class RunComplete(SystemExit):
+    """``--resume`` of a run that completed: nothing to do (exit status 0; begin_run has said
+    so)."""
+
+    def __init__(self) -> None:
+        super().__init__(0)
+
+
+#: Parameters that may differ between a run and its --resume (they do not change what the run
+#: computes): left out of the recorded fingerprint.
+RESUME_FREE = ("resume", "workers", "threads", "overwrite", "allow_large", "out")
+#: Guards the manifest of this process's runs (the checkpoint recorder writes it from its own
+#: thread).
+_MANIFEST_LOCK = threading.RLock()
+
+
+def plain(v):
+    """``v`` as plain JSON values: a dataclass as the dict of its fields, tuples as lists,
+    paths as strings, NumPy arrays and scalars as lists and numbers."""
+    if dataclasses.is_dataclass(v) and not isinstance(v, type):
+        return {f.name: plain(getattr(v, f.name)) for f in dataclasses.fields(v)}
+    if isinstance(v, dict):
+        return {str(k): plain(x) for k, x in v.items()}
+    if isinstance(v, (list, tuple)):
+        return [plain(x) for x in v]
+    if isinstance(v, Path):
+        return str(v)
+    if hasattr(v, "tolist"):  # NumPy arrays and scalars
+        return plain(v.tolist())
+    if v is None or isinstance(v, (bool, int, float, str)):
+        return v
+    return repr(v)
+
+
+def params_record(params) -> dict:
+    """The fingerprint of a run's parameters: ``params`` (a dataclass or a dict) as plain
+    values, without the :data:`RESUME_FREE` ones, as JSON reads it back."""
+    d = plain(params)
+    if not isinstance(d, dict):
+        raise TypeError(f"params: a dataclass or a dict, not {type(params).__name__}")
+    return json.loads(json.dumps({k: v for k, v in d.items() if k not in RESUME_FREE}))
+
+
+def _short(v) -> str:
+    t = json.dumps(v)
+    return t if len(t) <= 120 else t[:117] + "..."
+
+
+def params_difference(old: dict, new: dict) -> str | None:
+    """The first parameter (in ``new``'s order) whose recorded value ``old`` differs, said
+    with both values; None when they are the same."""
+    for k in list(new) + [k for k in old if k not in new]:
+        if k not in old:
+            return f"the parameter {k} = {_short(new[k])} is not in the earlier run's record"
+        if k not in new:
+            return f"the earlier run's parameter {k} = {_short(old[k])} is not one of this run"
+        if json.dumps(old[k]) != json.dumps(new[k]):
+            return (f"the parameter {k} differs: {_short(old[k])} in the earlier run, "
+                    f"{_short(new[k])} now")
+    return None
+
+
+def sha256_file(path) -> str:
+    """The SHA-256 of a file's bytes (hex)."""
+    h = hashlib.sha256()
+    with open(path, "rb") as f:
+        for block in iter(lambda: f.read(1 << 20), b""):
+            h.update(block)
+    return h.hexdigest()
+
+
+def _matches(rel: str, patterns) -> bool:
+    return any(fnmatch.fnmatchcase(rel, pat) for pat in patterns)
+
+
+def _scan_checkpoints(out: Path, manifest: dict) -> bool:
+    """Records in ``manifest`` (in place) the SHA-256, size and mtime of each file of ``out``
+    matching its ``checkpoint_patterns`` that is new or changed since last recorded; True
+    when something changed."""
+    pats = manifest.get("checkpoint_patterns") or []
+    rec = manifest.setdefault("checkpoints", {})
+    changed = False
+    for pat in pats:
+        for p in sorted(out.glob(pat)):
+            try:
+                st = p.stat()
+                if not p.is_file():
+                    continue
+                rel = p.relative_to(out).as_posix()
+                old = rec.get(rel)
+                if old and old.get("size") == st.st_size and \
+                        old.get("mtime_ns") == st.st_mtime_ns:
+                    continue
+                rec[rel] = {"sha256": sha256_file(p), "size": st.st_size,
+                            "mtime_ns": st.st_mtime_ns}
+                changed = True
+            except OSError:
+                continue  # (being replaced just now: the next pass takes it)
+    return changed
+
+
+def record_checkpoints(out) -> None:
+    """Records the SHA-256 of the checkpoints in ``out`` written since the last call (the
+    files matching the patterns begin_run was given) in its manifest. run_main calls it about
+    once a second while the case runs, and end_run once more; a case may call it right after
+    writing a checkpoint."""
+    out = Path(out)
+    with _MANIFEST_LOCK:
+        manifest = _read_json(out / MANIFEST)
+        if manifest is None or not manifest.get("checkpoint_patterns"):
+            return
+        if _scan_checkpoints(out, manifest):
+            _write_atomic(out / MANIFEST, json.dumps(manifest, indent=1) + "\n")
+
+
+class _CheckpointRecorder(threading.Thread):
+    """Calls record_checkpoints(out) every ``period_s`` until stopped: a checkpoint's SHA-256
+    is in the manifest within about a second of its writing, so a run killed after it can
+    still be resumed from it."""
+
+    def __init__(self, out: Path, period_s: float = 1.0) -> None:
+        super().__init__(name="geogrid-dem checkpoint recorder", daemon=True)
+        self.out, self.period_s, self._stop_event = out, period_s, threading.Event()
+
+    def run(self) -> None:
+        while not self._stop_event.wait(self.period_s):
+            try:
+                record_checkpoints(self.out)
+            except Exception:  # noqa: BLE001  (end_run records them all the same)
+                pass
+
+    def stop(self) -> None:
+        self._stop_event.set()
+        if self.ident is not None:  # (started)
+            self.join()
 
 
 def add_out_args(ap: argparse.ArgumentParser, case: str, *, help_extra: str = "") -> None:
@@ -119,6 +266,15 @@ def check_common_args(ap: argparse.ArgumentParser, a: argparse.Namespace) -> Non
     threads = getattr(a, "threads", None)
     if threads is not None and threads < 0:
         ap.error(f"--threads={threads}: must be >= 0 (0 = the default)")
+    for dest, v in vars(a).items():
+        # (a name that is not UTF-8 text, from a file system's bytes, cannot be written into
+        # the run file or the manifest)
+        if isinstance(v, (str, Path)):
+            try:
+                str(v).encode("utf-8")
+            except UnicodeEncodeError:
+                ap.error(f"--{dest.replace('_', '-')}={str(v)!r}: not valid UTF-8 text; give "
+                         "a name in UTF-8 (the run file and the manifest record it)")
     out = getattr(a, "out", None)
     if out is not None:
         why = _writable_or_error(Path(out))
@@ -186,9 +342,10 @@ def _files(out: Path) -> list[Path]:
 
 
 def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(path.name + ".tmp")
-    tmp.write_text(text)
-    tmp.replace(path)
+    with _MANIFEST_LOCK:
+        tmp = path.with_name(path.name + ".tmp")
+        tmp.write_text(text, encoding="utf-8")
+        tmp.replace(path)
 
 
 def _lock_text(case: str) -> str:
@@ -218,8 +375,80 @@ def _unrecorded(out, files, manifest, status):
         listed = set(manifest.get("files", []))
     return [p for p in files if str(p.relative_to(out)) not in listed]
 
+
+def _code() -> dict:
+    from geogrid_dem.provenance import git_commit, version
+
+    return {"version": version(), "commit": git_commit()}
+
+
+def _check_resume(out: Path, case: str, manifest: dict | None, status: str | None,
+                  keep: Sequence[str], params, checkpoints: Sequence[str], log) -> dict:
+    """The checks of a --resume (see begin_run); returns the recorded checkpoints of the files
+    kept (carried into the new manifest). Raises RunFolderError naming what differs, or
+    RunComplete (having said so) for a completed run of the same parameters."""
+    if manifest is None or manifest.get("case") != case:
+        what = "no run" if manifest is None else f"a run of {manifest.get('case')}"
+        raise RunFolderError(f"--out={out}: --resume: holds {what}; --resume continues an "
+                             f"interrupted or failed run of {case}")
+    if params is not None:
+        old = manifest.get("params")
+        if not isinstance(old, dict):
+            raise RunFolderError(
+                f"--out={out}: --resume: the earlier run recorded no parameters (an older "
+                "version wrote it), so it cannot be told to be the same run; run it again with "
+                "--overwrite (nothing was removed)")
+        diff = params_difference(old, params_record(params))
+        if diff:
+            raise RunFolderError(
+                f"--out={out}: --resume: {diff}; a resume continues the same run: give the "
+                "earlier run's parameters, or run again with --overwrite (nothing was removed)")
+    if status == "complete":
+        log(f"[{case}] --out {out}: --resume: the run is already complete (finished "
+            f"{manifest.get('finished', '?')}); nothing to do")
+        raise RunComplete
+    missing = [k for k in keep[:1] if not (out / k).is_file()]
+    if missing:
+        raise RunFolderError(f"--out={out}: --resume: {missing[0]} is not there (the run "
+                             "stopped before its checkpoint); run it again with "
+                             "--overwrite")
+    pats = list(manifest.get("checkpoint_patterns") or []) + \
+        [c for c in checkpoints if c not in (manifest.get("checkpoint_patterns") or [])]
+    recorded = manifest.get("checkpoints") or {}
+    carried = {}
+    for k in keep:
+        rel = Path(k).as_posix()
+        if not _matches(rel, pats) or not (out / k).is_file():
+            continue
+        rec = recorded.get(rel)
+        if not isinstance(rec, dict) or "sha256" not in rec:
+            raise RunFolderError(
+                f"--out={out}: --resume: {rel} has no SHA-256 in the run's record (an older "
+                "version, or the run was killed as it wrote it), so it cannot be told to be "
+                "this run's checkpoint; run it again with --overwrite (nothing was removed)")
+        now = sha256_file(out / k)
+        if now != rec["sha256"]:
+            raise RunFolderError(
+                f"--out={out}: --resume: {rel} is not the file this run wrote (SHA-256 "
+                f"{now[:12]}..., recorded {rec['sha256'][:12]}...): a checkpoint of another run "
+                "or sample? Nothing was removed; put the run's own file back, or run again "
+                "with --overwrite")
+        st = (out / k).stat()
+        carried[rel] = dict(rec, size=st.st_size, mtime_ns=st.st_mtime_ns)
+    code = manifest.get("code")
+    if params is not None and isinstance(code, dict) and code.get("commit") not in (
+            None, "unknown"):
+        now_code = _code()
+        if now_code["commit"] not in ("unknown", code.get("commit")):
+            log(f"[{case}] --out {out}: --resume: note: the code changed since the earlier "
+                f"run ({code.get('commit')}, now {now_code['commit']}): the rest runs with "
+                "the new code")
+    return carried
+
+
 def begin_run(out, case: str, log=print, *, overwrite: bool | None = None,
-              keep: Sequence[str] | None = None) -> Path:
+              keep: Sequence[str] | None = None, params=None,
+              checkpoints: Sequence[str] = ()) -> Path:
     """Prepares the results folder of a case run and returns it (``out`` None: a new numbered
     folder ``results/<case>/run_NNN``). Refuses (:class:`RunFolderError`, naming the folder
     and why) a folder another live run is writing into, a folder holding an earlier run
@@ -228,7 +457,14 @@ def begin_run(out, case: str, log=print, *, overwrite: bool | None = None,
     after the whole folder was checked. Then takes the lock and marks the folder ``running``.
     A second call from the same process for the same folder returns it unchanged.
     ``keep`` (a case's --resume): the folder must hold an unfinished run of ``case`` with the
-    files ``keep`` (its checkpoint first); they are kept and the run's other files removed."""
+    files ``keep`` (its checkpoint first); they are kept and the run's other files removed.
+    ``params`` (the case's Params, or a dict): recorded in the manifest (params_record); on a
+    --resume they must equal the recorded ones, or the first that differs is named. A --resume
+    of a completed run with the same parameters says "already complete" and raises
+    RunComplete (exit status 0). ``checkpoints``: glob patterns (relative to the folder) of
+    the files the run writes to resume from; their SHA-256 goes into the manifest as they are
+    written (record_checkpoints), and a --resume keeps one only when its bytes are the
+    recorded ones."""
     if overwrite is None:
         overwrite = _OVERWRITE
     if out is None:
@@ -253,21 +489,12 @@ def begin_run(out, case: str, log=print, *, overwrite: bool | None = None,
                 "remove it if that run is gone); wait for it to end, or name another folder")
     manifest = _read_json(manifest_path) if manifest_path.exists() else None
     files = _files(out) if out.is_dir() else []
+    carried: dict = {}
     if keep is not None:
         status = (manifest or {}).get("status")
         if status == "running" or stale is not None:
             status = "killed"
-        if manifest is None or manifest.get("case") != case or status == "complete":
-            what = ("no run" if manifest is None else
-                    f"a run of {manifest.get('case')}" if manifest.get("case") != case else
-                    "a completed run")
-            raise RunFolderError(f"--out={out}: --resume: holds {what}; --resume continues an "
-                                 f"interrupted or failed run of {case}")
-        missing = [k for k in keep[:1] if not (out / k).is_file()]
-        if missing:
-            raise RunFolderError(f"--out={out}: --resume: {missing[0]} is not there (the run "
-                                 "stopped before its checkpoint); run it again with "
-                                 "--overwrite")
+        carried = _check_resume(out, case, manifest, status, keep, params, checkpoints, log)
         unlisted = _unrecorded(out, files, manifest, status)
         if unlisted:
             raise RunFolderError(
@@ -330,10 +557,15 @@ def begin_run(out, case: str, log=print, *, overwrite: bool | None = None,
             from None
     with os.fdopen(fd, "w") as fh:
         fh.write(_lock_text(case))
-    _write_atomic(manifest_path, json.dumps({
-        "status": "running", "complete": False, "case": case, "pid": os.getpid(),
-        "host": socket.gethostname(), "started": _now(), "started_unix": time.time()},
-        indent=1) + "\n")
+    rec = {"status": "running", "complete": False, "case": case, "pid": os.getpid(),
+           "host": socket.gethostname(), "started": _now(), "started_unix": time.time()}
+    if params is not None:
+        rec["params"] = params_record(params)
+        rec["code"] = _code()
+    if checkpoints:
+        rec["checkpoint_patterns"] = list(checkpoints)
+        rec["checkpoints"] = carried
+    _write_atomic(manifest_path, json.dumps(rec, indent=1) + "\n")
     if out not in _ACTIVE:
         _ACTIVE.append(out)
     return out
@@ -344,19 +576,28 @@ def end_run(out, status: str = "complete", reason: str | None = None) -> None:
     ``failed``, with the ``reason``) in the manifest begin_run reads; releases the lock."""
     out = Path(out)
     manifest_path = out / MANIFEST
-    old = _read_json(manifest_path) or {}
-    files = [str(p.relative_to(out)) for p in _files(out)] if out.is_dir() else []
-    rec = {"status": status, "complete": status == "complete",
-           **{k: old[k] for k in ("case", "host", "started", "started_unix") if k in old},
-           "finished": _now()}
-    if reason:
-        rec["reason"] = reason
-    rec["files"] = files
-    try:
-        _write_atomic(manifest_path, json.dumps(rec, indent=1) + "\n")
-    except OSError:
-        if status == "complete":
-            raise
+    with _MANIFEST_LOCK:
+        old = _read_json(manifest_path) or {}
+        files = [str(p.relative_to(out)) for p in _files(out)] if out.is_dir() else []
+        rec = {"status": status, "complete": status == "complete",
+               **{k: old[k] for k in ("case", "host", "started", "started_unix") if k in old},
+               "finished": _now()}
+        if reason:
+            rec["reason"] = reason
+        rec["files"] = files
+        for k in ("params", "code", "checkpoint_patterns", "checkpoints"):
+            if k in old:
+                rec[k] = old[k]
+        if rec.get("checkpoint_patterns") and out.is_dir():
+            try:
+                _scan_checkpoints(out, rec)  # (the last ones written)
+            except OSError:
+                pass
+        try:
+            _write_atomic(manifest_path, json.dumps(rec, indent=1) + "\n")
+        except OSError:
+            if status == "complete":
+                raise
     lock_path = out / LOCK
     if lock_path.exists() and _ours(_read_json(lock_path)):
         lock_path.unlink(missing_ok=True)
@@ -388,7 +629,8 @@ def _from_interrupt(e: BaseException) -> bool:
 
 
 def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
-             own_folder: bool = True, keep: Sequence[str] | None = None) -> int:
+             own_folder: bool = True, keep: Sequence[str] | None = None, params=None,
+             checkpoints: Sequence[str] = ()) -> int:
     """Runs ``work(out)`` for a case's command line in its results folder (begin_run: ``out``
     None makes a numbered one; ``overwrite`` None: the ``--overwrite`` that
     check_common_args recorded) and returns the exit status: 0 when it completed, 130 when it
@@ -398,7 +640,10 @@ def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
     ``failed`` in its manifest, and one line says so and where the results are; any other
     error is re-raised after that. SIGTERM stops the run as SIGINT does (status 143).
     ``own_folder`` False: ``out`` is a folder of several runs (each begins its own
-    sub-folder), not locked or recorded itself. ``keep``: a --resume (see begin_run)."""
+    sub-folder), not locked or recorded itself. ``keep``: a --resume (see begin_run; one of a
+    completed run returns 0 without running ``work``). ``params``, ``checkpoints``: the run's
+    parameters and the patterns of its checkpoints (begin_run), whose SHA-256 is recorded
+    about once a second while ``work`` runs and once more at its end."""
     global _OVERWRITE
     from cpp_dem.io import close_all_writers
 
@@ -408,7 +653,11 @@ def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
     if overwrite is not None:
         _OVERWRITE = bool(overwrite)
     if own_folder:
-        out = begin_run(out, case, log=log, keep=keep)
+        try:
+            out = begin_run(out, case, log=log, keep=keep, params=params,
+                            checkpoints=checkpoints)
+        except RunComplete:
+            return 0
     else:
         out = Path(out) if out is not None else default_base(case)
         out.mkdir(parents=True, exist_ok=True)
@@ -434,13 +683,19 @@ def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
             end_run(d, status, reason)
         return folders
 
+    recorder = _CheckpointRecorder(out) if (own_folder and checkpoints) else None
     try:
         try:
+            if recorder is not None:
+                recorder.start()
             work(out)
         except Exception as e:  # (Ctrl-C inside an import: CPython raises ImportError from it)
             if _from_interrupt(e):
                 raise KeyboardInterrupt from e
             raise
+        finally:
+            if recorder is not None:
+                recorder.stop()
     except KeyboardInterrupt:
         if main_thread:  # a second Ctrl-C does not cut the closing short
             signal.signal(signal.SIGINT, signal.SIG_IGN)

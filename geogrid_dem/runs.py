@@ -21,7 +21,6 @@ import itertools
 import json
 import math
 import os
-import shutil
 import signal
 import subprocess
 import sys
@@ -115,8 +114,17 @@ def check_argv(case: str, argv: list[str], *, source: str) -> None:
 
 
 def params_to_argv(params: dict[str, Any], *, source: str) -> list[str]:
-    """The case's command-line flags from a table of parameters (keys without dashes)."""
+    """The case's command-line flags from a table of parameters (keys without dashes). A value
+    that starts with '-' (a negative number, a box below 0) is passed as ``--flag=value``, so
+    that argparse does not take it for an option."""
     argv: list[str] = []
+
+    def add(flag: str, text: str) -> None:
+        if text.startswith("-"):
+            argv.append(f"{flag}={text}")
+        else:
+            argv.extend((flag, text))
+
     for key, value in params.items():
         if not isinstance(key, str) or not key or key.startswith("-"):
             raise RunFileError(f"{source}: field {key!r}: write the flag's name without dashes")
@@ -125,10 +133,10 @@ def params_to_argv(params: dict[str, Any], *, source: str) -> list[str]:
             if value:
                 argv.append(flag)
         elif isinstance(value, (int, float, str)):
-            argv += [flag, str(value)]
+            add(flag, str(value))
         elif isinstance(value, list) and all(isinstance(v, (int, float, str)) and
                                              not isinstance(v, bool) for v in value):
-            argv += [flag, ",".join(str(v) for v in value)]
+            add(flag, ",".join(str(v) for v in value))
         else:
             raise RunFileError(f"{source}: field {key!r}={value!r}: must be a number, a string, "
                                "true/false or a list of numbers or strings")
@@ -147,29 +155,73 @@ def out_of(argv: list[str]) -> Path | None:
 
 
 def write_run_file(out: Path, case: str, params: dict[str, Any]) -> None:
-    """OUT/run.toml: the case, its parameters and where they came from (rerunnable)."""
+    """OUT/run.toml: the case, its parameters and where they came from (rerunnable). Always
+    valid TOML (UTF-8; keys and strings quoted and escaped as TOML has them, so that any text,
+    an emoji in --out included, reads back as it was given). ``resume`` is not written (a run
+    file runs the whole run; --resume is given on the command line), nor ``overwrite``. A
+    value that is not text (a file name of bytes that are not UTF-8) is a RunFileError."""
+    params = {k: v for k, v in params.items() if k not in ("resume", "overwrite")}
     lines = ["# Written by geogrid-dem; `geogrid-dem run` this file to run it again.",
-             f"case = {json.dumps(case)}", "", "[params]"]
+             f"case = {_toml_str(case)}", "", "[params]"]
     for key, value in params.items():
-        lines.append(f"{key} = {_toml_value(value)}")
-    lines += ["", "[provenance]", f"version = {json.dumps(version())}",
-              f"commit = {json.dumps(git_commit())}",
-              f"date = {json.dumps(_dt.datetime.now(_dt.timezone.utc).isoformat())}",
-              f"python = {json.dumps(sys.version.split()[0])}", ""]
+        lines.append(f"{_toml_key(str(key))} = {_toml_value(value, key)}")
+    lines += ["", "[provenance]", f"version = {_toml_str(version())}",
+              f"commit = {_toml_str(git_commit())}",
+              f"date = {_toml_str(_dt.datetime.now(_dt.timezone.utc).isoformat())}",
+              f"python = {_toml_str(sys.version.split()[0])}", ""]
+    text = "\n".join(lines)
+    try:
+        tomllib.loads(text)  # (written only when it reads back)
+    except tomllib.TOMLDecodeError as e:
+        raise RunFileError(f"{out / 'run.toml'}: would not be valid TOML ({e}); not "
+                           "written") from None
     out.mkdir(parents=True, exist_ok=True)
     tmp = out / ".run.toml.tmp"
-    tmp.write_text("\n".join(lines))
+    tmp.write_text(text, encoding="utf-8")
     tmp.replace(out / "run.toml")
 
 
-def _toml_value(v: Any) -> str:
+#: TOML's escapes of a basic string; other control characters are written \uXXXX.
+_TOML_ESCAPES = {"\\": "\\\\", '"': '\\"', "\b": "\\b", "\t": "\\t", "\n": "\\n",
+                 "\f": "\\f", "\r": "\\r"}
+
+
+def _toml_str(s: str, key: str = "") -> str:
+    """``s`` as a TOML basic string (UTF-8 text as it is; backslash, quote and control
+    characters escaped)."""
+    try:
+        s.encode("utf-8")
+    except UnicodeEncodeError:
+        raise RunFileError(f"run.toml: field {key or '?'!r}={s!r}: not valid UTF-8 text, "
+                           "which a run file (TOML) cannot hold") from None
+    out = []
+    for ch in s:
+        if ch in _TOML_ESCAPES:
+            out.append(_TOML_ESCAPES[ch])
+        elif ord(ch) < 0x20 or ord(ch) == 0x7F:
+            out.append(f"\\u{ord(ch):04X}")
+        else:
+            out.append(ch)
+    return '"' + "".join(out) + '"'
+
+
+def _toml_key(key: str) -> str:
+    """A TOML key: bare where it may be (letters, digits, '-', '_'), else quoted."""
+    import re
+
+    return key if re.fullmatch(r"[A-Za-z0-9_-]+", key) else _toml_str(key, key)
+
+
+def _toml_value(v: Any, key: str = "") -> str:
     if isinstance(v, bool):
         return "true" if v else "false"
-    if isinstance(v, (int, float)):
+    if isinstance(v, int) and -2**63 <= v < 2**63:
         return repr(v)
+    if isinstance(v, float):
+        return repr(v)  # (nan, inf and -inf are TOML's too)
     if isinstance(v, list):
-        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
-    return json.dumps(str(v))
+        return "[" + ", ".join(_toml_value(x, key) for x in v) + "]"
+    return _toml_str(str(v), key)  # (an integer beyond TOML's 64 bits as its digits)
 
 
 def argv_to_params(argv: list[str]) -> dict[str, Any]:
@@ -327,6 +379,10 @@ def _row_params(fixed: dict[str, Any], row: dict[str, Any], row_dir: Path,
 
 
 def _row_finished(row_dir: Path, case: str, params: dict[str, Any]) -> bool:
+    """The row's folder holds its finished run: a summary.json, a run.toml of the same case
+    and parameters, and no manifest saying the run did not complete."""
+    from geogrid_dem import rundir
+
     run_file = row_dir / "run.toml"
     if not (row_dir / "summary.json").exists() or not run_file.exists():
         return False
@@ -335,7 +391,113 @@ def _row_finished(row_dir: Path, case: str, params: dict[str, Any]) -> bool:
             old = tomllib.load(f)
     except (OSError, tomllib.TOMLDecodeError):
         return False
+    manifest = rundir.run_status(row_dir)
+    if manifest is not None and manifest.get("status", "complete") != "complete":
+        return False
     return old.get("case") == case and old.get("params") == json.loads(json.dumps(params))
+
+
+#: Row parameters that do not make a row another sweep's: its folder (a sweep folder that was
+#: moved) and its threads (they do not change what it computes).
+_ROW_FREE = ("out", "threads")
+
+
+def _links_in(folder: Path) -> list[Path]:
+    """The symbolic links in ``folder`` and below (links to folders are not followed)."""
+    found = []
+    for here, dirs, files in os.walk(folder, followlinks=False):
+        found += [Path(here) / n for n in dirs + files if os.path.islink(os.path.join(here, n))]
+    return sorted(found)
+
+
+def _row_unrecorded(row_dir: Path) -> list[Path]:
+    """The files in ``row_dir`` (and below) that no run recorded: every run folder in it (the
+    row's own, or the sub-runs of a study) lists what it wrote in its manifest (a killed run:
+    what it wrote since it started, geogrid_dem.rundir); run.toml, manifests and locks are
+    the sweep's and the runs' own."""
+    from geogrid_dem import rundir
+
+    recorded: set[Path] = set()
+    for m in row_dir.rglob(rundir.MANIFEST):
+        d = m.parent
+        manifest = rundir.run_status(d) or {}
+        status = manifest.get("status")
+        if status == "running":
+            status = "killed"
+        files = rundir._files(d)
+        bad = set(rundir._unrecorded(d, files, manifest, status))
+        recorded |= {p for p in files if p not in bad}
+    free = set(rundir._FREE) | {".run.toml.tmp"}
+    return sorted(p for p in row_dir.rglob("*")
+                  if p.is_file() and p.name not in free and p not in recorded)
+
+
+def check_row_folder(row_dir: Path, case: str, params: dict[str, Any], *, source: str) -> None:
+    """Refuses (RunFileError, one line naming the row's folder) a row folder that the sweep
+    may not write into: a symbolic link, or a link inside it; a folder that holds another
+    sweep's row (its run.toml names another case or other parameters; ``out`` and
+    ``threads`` aside); files without a run.toml (not a sweep's row); a row another live
+    process is writing into; files that its earlier run did not record (yours?). A row of this
+    sweep that did not finish passes: the case replaces only the files its earlier run
+    recorded (``--overwrite``, added by the row). Nothing is removed here."""
+    from geogrid_dem import rundir
+
+    if row_dir.is_symlink():
+        raise RunFileError(f"{source}: {row_dir} is a symbolic link (to {os.readlink(row_dir)}); "
+                           "a sweep writes each row into a folder of its own and follows no "
+                           "link: remove the link, or name another 'out'")
+    if not row_dir.exists():
+        return
+    if not row_dir.is_dir():
+        raise RunFileError(f"{source}: {row_dir} exists and is not a folder; move it, or name "
+                           "another 'out'")
+    links = _links_in(row_dir)
+    if links:
+        raise RunFileError(f"{source}: {row_dir} holds {len(links)} symbolic links (e.g. "
+                           f"{links[0].relative_to(row_dir)}); a sweep follows no link in a "
+                           "results folder: remove them, or name another 'out'")
+    run_file = row_dir / "run.toml"
+    if not run_file.is_file():
+        held = sorted(row_dir.iterdir())
+        if held:
+            raise RunFileError(f"{source}: {row_dir} holds {len(held)} entries but no run.toml "
+                               f"(e.g. {held[0].name}): not a row of a sweep (files of yours, "
+                               "or of another run); nothing was removed: move them, or name "
+                               "another 'out'")
+        return
+    try:
+        with open(run_file, "rb") as f:
+            old = tomllib.load(f)
+    except (OSError, tomllib.TOMLDecodeError) as e:
+        raise RunFileError(f"{source}: {run_file} cannot be read ({e}); nothing was removed: "
+                           "move that folder, or name another 'out'") from None
+    mine = json.loads(json.dumps(params))
+    theirs = old.get("params") if isinstance(old.get("params"), dict) else {}
+    if old.get("case") != case:
+        diff = f"case={old.get('case')!r} there, {case!r} here"
+    else:
+        keys = [k for k in {**theirs, **mine} if k not in _ROW_FREE
+                and theirs.get(k, "(unset)") != mine.get(k, "(unset)")]
+        diff = (f"{keys[0]}={theirs.get(keys[0], '(unset)')!r} there, "
+                f"{mine.get(keys[0], '(unset)')!r} here") if keys else None
+    if diff:
+        raise RunFileError(f"{source}: {row_dir} holds a row of another sweep ({diff}); a sweep "
+                           "replaces only its own rows: nothing was removed; name another "
+                           "'out', or move that folder")
+    lock = rundir._read_json(row_dir / rundir.LOCK) if (row_dir / rundir.LOCK).exists() else None
+    import socket
+
+    if lock and isinstance(lock.get("pid"), int) and (
+            lock.get("host") != socket.gethostname() or rundir._pid_alive(lock["pid"])):
+        raise RunFileError(f"{source}: {row_dir}: another run is writing into it (pid "
+                           f"{lock.get('pid')} on {lock.get('host')}); wait for it to end, or "
+                           "name another 'out'")
+    unrecorded = _row_unrecorded(row_dir)
+    if unrecorded:
+        raise RunFileError(f"{source}: {row_dir} holds {len(unrecorded)} files that its earlier "
+                           f"run did not record (e.g. {unrecorded[0].relative_to(row_dir)}): "
+                           "files of yours? Nothing was removed; move them, or name another "
+                           "'out'")
 
 
 #: Run before the case, in a fresh interpreter (no threads): asks Linux to SIGKILL this
@@ -352,11 +514,17 @@ _DIE_WITH_PARENT = ("import ctypes, os, signal, sys\n"
 
 
 def _run_row(command: list[str], argv: list[str], env: dict[str, str]) -> dict[str, Any]:
-    """One row, on a Dask worker: the case in its own interpreter. A row run again after a
-    killed worker starts from an empty folder (the lost attempt's files are removed)."""
+    """One row, on a Dask worker: the case in its own interpreter. A row whose folder holds an
+    earlier attempt (a row that did not finish, or one run again after a killed worker) is
+    given ``--overwrite``: the case removes the files that attempt recorded, and only those
+    (geogrid_dem.rundir); nothing else in the folder is removed."""
+    from geogrid_dem import rundir
+
     dest = out_of(argv)
-    if dest is not None and dest.exists():
-        shutil.rmtree(dest, ignore_errors=True)
+    if (dest is not None and dest.is_dir() and not dest.is_symlink()
+            and "--overwrite" not in argv and "--resume" not in argv
+            and any(dest.rglob(rundir.MANIFEST))):
+        argv = [*argv, "--overwrite"]
     t0 = time.perf_counter()
     wrap = [sys.executable, "-c", _DIE_WITH_PARENT] if sys.platform.startswith("linux") else []
     proc = subprocess.run([*wrap, *command, *argv], capture_output=True, text=True,
@@ -469,9 +637,9 @@ def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) 
         client = box[0]
         futures = {}
         for i, row_dir, params, argv, base in todo:
-            if row_dir.exists():
-                # An unfinished row of an earlier run: its files are incomplete.
-                shutil.rmtree(row_dir)
+            # The row's run.toml first: its folder is this sweep's row from now on (an
+            # unfinished row's files are replaced by the case, those it recorded only).
+            write_run_file(row_dir, case, params)
             # retries: a row whose worker died is run again (Dask itself reschedules a task
             # lost with its worker up to distributed.scheduler.allowed-failures times; a
             # KilledWorker after that, or any error, makes the row 'failed', not the sweep).

@@ -40,7 +40,7 @@ from cpp_dem.io.figures import save_figure
 from geogrid_dem.provenance import git_revision
 from geogrid_dem.cases import describe
 from cpp_dem import apply_threads
-from geogrid_dem.options import case_parser, parse_checked
+from geogrid_dem.options import case_parser, check_cap, parse_checked
 from geogrid_dem.rundir import begin_run, run_main
 import cpp_dem as dem
 from cpp_dem.measure import interior_porosity, slab_solid_volume, surface_height
@@ -427,6 +427,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
         p.settled_speed = -1.0
     if p.n < 1:
         ap.error(f"--n={p.n}: must be >= 1")
+    check_cap(ap, a, "--n", p.n, p.n, "grains")
     for name, v, ok, allowed in (
             ("--local-damping", p.local_damping, 0 <= p.local_damping < 1, "in [0, 1)"),
             ("--damping-normal", p.damping_normal, 0 <= p.damping_normal <= 1,

@@ -33,7 +33,8 @@ import sys
 from dataclasses import replace
 
 from geogrid_dem.cases import describe
-from geogrid_dem.options import case_parser, parse_checked
+from geogrid_dem.options import (case_parser, check_cap, distinct, given_options,
+                                 parse_checked, refuse_unused)
 from geogrid_dem.rundir import run_main
 
 #: The test-sized run: a coarse mesh (14-20 zone cells), 80 grains an element, one load
@@ -126,12 +127,14 @@ def parse_args(argv=None):
 
     ap = build_parser()
     a = parse_checked(ap, argv)
+    given = given_options(ap, argv)
     p = FootingParams(**SMOKE) if a.smoke else FootingParams()
     if a.smoke and a.dim == 3:
         p = replace(p, **SMOKE_3D)
     seeds = a.seeds if a.seeds is not None else (2 if a.smoke else 3)
     if seeds < 1:
         ap.error(f"--seeds={seeds}: must be >= 1")
+    check_cap(ap, a, "--seeds", seeds, seeds, "seeds", "seeds (runs per variant)")
     if a.seed < 0:
         ap.error(f"--seed={a.seed}: must be >= 0")
     variants = tuple(v.strip() for v in a.variants.split(",") if v.strip())
@@ -139,6 +142,22 @@ def parse_args(argv=None):
     if bad or not variants:
         ap.error(f"--variants={a.variants!r}: a comma-separated selection of "
                  f"{', '.join(VARIANTS)}")
+    distinct(ap, "--variants", repr(a.variants), variants)
+    for flag in ("--cell-grains", "--band-grains"):
+        v = getattr(a, flag[2:].replace("-", "_"))
+        if v is not None:
+            check_cap(ap, a, flag, v, v, "grains", "grains an element")
+    # options that would have no effect given the others (docs/cli.md)
+    if not {"RE", "PRS"} & set(variants):
+        for dest in ("grid_stiffness", "layer_depth", "layer_thickness", "band_tangent"):
+            refuse_unused(ap, a, given, dest, f"without a reinforced variant (--variants "
+                          f"{','.join(variants)}: no geogrid layer)", "add RE or PRS")
+    if "PRS" not in variants:
+        refuse_unused(ap, a, given, "prestress", f"without the PRS variant (--variants "
+                      f"{','.join(variants)})", "add PRS")
+    if not (a.band_grains if a.band_grains is not None else p.band_grains):
+        refuse_unused(ap, a, given, "band_tangent", "without band RVEs (--band-grains 0: the "
+                      "layer's cells stay the FEM's elastic band)", "give --band-grains N")
     p = replace(p, seeds=tuple(range(a.seed, a.seed + seeds)), variants=variants)
     for flag, field in FLAGS.items():  # (None: the smoke's or the full run's default)
         v = getattr(a, flag[2:].replace("-", "_"))

@@ -69,7 +69,8 @@ from pathlib import Path
 import numpy as np
 
 from geogrid_dem.cases import describe
-from geogrid_dem.options import case_parser, check_common_args
+from geogrid_dem.options import (case_parser, check_cap, check_common_args, given_options,
+                                 refuse_unused)
 from geogrid_dem.rundir import begin_run, end_run, run_main
 from cpp_dem.elements.box import ElementParams
 from femcoupling.drivers.prs_element import (HISTORY_REGIONS, VARIANTS, calibrate_soil, log,
@@ -434,13 +435,19 @@ def element_parser(name: str, description: str, d, *, smoke: str, preset: str | 
     return ap
 
 
-def apply_element_args(ap, a, p):
-    """Checks the shared options (element_parser) and sets them on ``p``; returns it."""
+def apply_element_args(ap, a, p, given=frozenset()):
+    """Checks the shared options (element_parser) and sets them on ``p``; returns it.
+    ``given``: the options given (geogrid_dem.options.given_options), for the refusal of one
+    that has no effect (--footing-pressure with --stresses)."""
     check_common_args(ap, a)
     if a.n is not None:
         if a.n < 50:
             ap.error(f"--n={a.n}: must be >= 50")
+        check_cap(ap, a, "--n", a.n, a.n, "grains")
         p.n = a.n
+    if a.stresses:
+        refuse_unused(ap, a, given, "footing_pressure",
+                      "with --stresses (no FEM: the stresses are given)")
     if not (math.isfinite(a.prestress) and a.prestress >= 0):
         ap.error(f"--prestress={a.prestress}: must be >= 0 (N/m)")
     if not (math.isfinite(a.footing_pressure) and a.footing_pressure > 0):
@@ -514,7 +521,8 @@ def build_parser():
 def parse_args(argv=None) -> tuple[Params, Path]:
     ap = build_parser()
     a = ap.parse_args(argv)
-    p = apply_element_args(ap, a, Params(**SMOKE) if a.smoke else Params())
+    given = given_options(ap, argv)
+    p = apply_element_args(ap, a, Params(**SMOKE) if a.smoke else Params(), given)
     if not (math.isfinite(a.tol) and 0 < a.tol < 1):
         ap.error(f"--tol={a.tol}: must be in (0, 1): the relative change of the handed-over "
                  "stresses that ends the two-way loop (1 or more would accept any change)")
@@ -557,6 +565,8 @@ def parse_args(argv=None) -> tuple[Params, Path]:
         ap.error(f"--cell-grains={a.cell_grains}: the cells' elements; needs --cell-elements")
     if a.cell_grains and a.cell_grains < 50:
         ap.error(f"--cell-grains={a.cell_grains}: must be >= 50 (or 0: --n)")
+    check_cap(ap, a, "--cell-grains", a.cell_grains, a.cell_grains, "grains",
+              "grains an element")
     p.cell_elements, p.cell_grains = a.cell_elements, a.cell_grains
     if a.no_grid_handover and a.stresses:
         ap.error("--no-grid-handover: the grid tension comes from the FEM; not with --stresses")
@@ -570,6 +580,8 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     if a.preset:
         if a.stresses:
             ap.error("--preset sets the FEM mesh and the two-way tolerance: not with --stresses")
+        refuse_unused(ap, a, given, "tol",
+                      f"with --preset {a.preset} (the preset sets the two-way tolerance)")
         p = apply_coupling_preset(p, a.preset)
     if a.stresses:
         if a.two_way or a.hierarchical:
@@ -578,6 +590,19 @@ def parse_args(argv=None) -> tuple[Params, Path]:
         p.prs = a.prs
     elif a.prs:
         ap.error("--prs is for DEM-only runs (--stresses); the FEM mode runs RE and PRS")
+    # options that would have no effect given the others (docs/cli.md)
+    if a.stresses:
+        if not a.prs:
+            refuse_unused(ap, a, given, "prestress", "with --stresses and no --prs (the "
+                          "element is RE)", "add --prs")
+        refuse_unused(ap, a, given, "workers", "with --stresses (one element runs)")
+    if not a.two_way:
+        for dest in ("tol", "max_iterations", "tangent_probe"):
+            refuse_unused(ap, a, given, dest, "without --two-way (the two-way loop's)",
+                          "add --two-way")
+    elif a.two_way_element != "walls":
+        refuse_unused(ap, a, given, "tangent_probe", "with --two-way-element "
+                      f"{a.two_way_element} (the walls element's tangent)")
     return p, a.out
 
 

@@ -42,7 +42,8 @@ import numpy as np
 from cpp_dem.io.figures import save_figure
 from geogrid_dem.cases import PULLOUT_PAPER, describe
 from cpp_dem import apply_threads
-from geogrid_dem.options import case_parser, parse_checked
+from geogrid_dem.options import (case_parser, check_cap, distinct, given_options,
+                                 parse_checked, refuse_unused)
 from geogrid_dem.rundir import run_main
 import cpp_dem as dem  # noqa: E402
 from cpp_dem import presets  # noqa: E402
@@ -240,6 +241,7 @@ def build_parser():
 def parse_args(argv=None) -> tuple[Params, list[int], Path]:
     ap = build_parser()
     a = parse_checked(ap, argv)
+    given = given_options(ap, argv)
     p = Params(**SMOKE) if a.smoke else Params()
     counts = [p.spheres]
     if a.spheres is not None:
@@ -249,6 +251,14 @@ def parse_args(argv=None) -> tuple[Params, list[int], Path]:
             ap.error(f"--spheres={a.spheres!r}: expected an integer or a comma list")
         if any(n < 50 for n in counts):
             ap.error(f"--spheres={a.spheres}: each count must be >= 50")
+        # (each count runs into its folder n<N>: one listed twice would run over itself)
+        distinct(ap, "--spheres", a.spheres, counts)
+        check_cap(ap, a, "--spheres", a.spheres, max(counts), "grains",
+                  "grains in the largest run")
+        check_cap(ap, a, "--spheres", a.spheres, len(counts), "elements or runs", "runs")
+    if a.preset:
+        refuse_unused(ap, a, given, "velocity", f"with --preset {a.preset} (the preset sets "
+                      "the pull velocity from its inertial number)")
     checks = [("--pressure", a.pressure, a.pressure > 0, "> 0 (Pa)"),
               ("--porosity", a.porosity, 0 < a.porosity < 1, "in (0, 1)"),
               ("--velocity", a.velocity, a.velocity > 0, "> 0 (m/s)"),

@@ -48,7 +48,8 @@ import numpy as np
 from cpp_dem.io.figures import save_figure
 from geogrid_dem.cases import THESIS, describe
 from cpp_dem import apply_threads
-from geogrid_dem.options import case_parser, parse_checked
+from geogrid_dem.options import (case_parser, check_cap, distinct, given_options,
+                                 parse_checked, refuse_unused)
 from geogrid_dem.rundir import end_run, run_main, run_status
 import cpp_dem as dem  # noqa: E402
 from cpp_dem.build import geogrid  # noqa: E402
@@ -863,16 +864,20 @@ def _floats(name, s, ap, lo=0.0):
     return v
 
 
-def _seeds(text: str, ap) -> list[int]:
-    """The seeds of --seeds: 'A-B' (A to B) or a comma list of whole numbers."""
+def _seeds(text: str, ap, a=None) -> list[int]:
+    """The seeds of --seeds: 'A-B' (A to B) or a comma list of whole numbers; more than the
+    cap of seeds is refused without --allow-large (``a``: the parsed namespace) before the
+    list is made."""
     try:
         if "-" in text.strip().lstrip("-"):
             lo, hi = (int(x) for x in text.split("-", 1))
+            check_cap(ap, a, "--seeds", repr(text), hi - lo + 1, "seeds")
             seeds = list(range(lo, hi + 1))
         else:
             seeds = [int(x) for x in text.split(",")]
     except ValueError:
         ap.error(f"--seeds={text!r}: expected A-B (e.g. 1-3) or a comma list of whole numbers")
+    check_cap(ap, a, "--seeds", repr(text), len(seeds), "seeds")
     if not seeds:
         ap.error(f"--seeds={text!r}: A-B needs A <= B")
     if len(set(seeds)) != len(seeds):
@@ -940,10 +945,15 @@ def build_parser():
 def parse_args(argv=None):
     ap = build_parser()
     a = parse_checked(ap, argv)
+    given = given_options(ap, argv)
     check_grains(ap, a.grains)
     p = Params(**SMOKE) if a.smoke else Params()
-    radii = _floats("--radius", a.radius, ap) if a.radius else [p.radius]
-    pressures = _floats("--pressure", a.pressure, ap) if a.pressure else [p.pressure]
+    # (an empty list is refused by _floats, not replaced by the default)
+    radii = _floats("--radius", a.radius, ap) if a.radius is not None else [p.radius]
+    pressures = _floats("--pressure", a.pressure, ap) if a.pressure is not None else \
+        [p.pressure]
+    distinct(ap, "--radius", a.radius, radii)
+    distinct(ap, "--pressure", a.pressure, pressures)
     if not a.study and (len(radii) > 1 or len(pressures) > 1):
         ap.error("--radius/--pressure: lists need --study")
     if a.study and not a.radius:
@@ -957,6 +967,7 @@ def parse_args(argv=None):
     for g in grids:
         if g not in ("square", "triangular"):
             ap.error(f"--grids: {g!r} is not square or triangular")
+    distinct(ap, "--grids", a.grids, grids)
     if not (math.isfinite(a.velocity) and a.velocity > 0):
         ap.error(f"--velocity={a.velocity}: must be > 0 (m/s)")
     if not (0 <= a.damping < 1):
@@ -971,9 +982,32 @@ def parse_args(argv=None):
                  "radius + the grain radius (0: the wall closed)")
     if a.record_every < 1:
         ap.error(f"--record-every={a.record_every}: must be a whole number of steps >= 1")
-    seeds = _seeds(a.seeds, ap) if a.seeds is not None else [a.seed]
     if a.seeds is not None and not a.study:
         ap.error(f"--seeds={a.seeds}: needs --study (a single run takes --seed)")
+    seeds = _seeds(a.seeds, ap, a) if a.seeds is not None else [a.seed]
+    # options that would have no effect given the others (docs/cli.md)
+    if a.seeds is not None:
+        refuse_unused(ap, a, given, "seed", f"with --seeds {a.seeds} (each run takes its seed "
+                      "from --seeds)")
+    if a.study:
+        refuse_unused(ap, a, given, "grid", "with --study (the study runs the grids of "
+                      "--grids)", "give --grids")
+    else:
+        refuse_unused(ap, a, given, "grids", "without --study (a single run takes --grid)",
+                      "add --study")
+    if a.grains != "spheres":
+        refuse_unused(ap, a, given, "jitter", f"with --grains {a.grains} (it moves the "
+                      "spheres' lattice sites; clumps are placed at random)")
+    for r in radii:
+        # App. A's lattice (gap r/2): about sqrt(2) (box / 2.5 r)^3 sites in the box
+        check_cap(ap, a, "--radius", r, math.sqrt(2.0) * (p.box / (2.5 * r)) ** 3, "grains",
+                  estimate=True)
+    if a.study:
+        runs = sum(len(radii if g == "square" or a.radius is not None else [2.5e-3])
+                   for g in grids) * len(pressures) * len(seeds)
+        check_cap(ap, a, "--grids/--radius/--pressure/--seeds",
+                  f"{a.grids}/{a.radius}/{a.pressure}/{a.seeds}", runs, "elements or runs",
+                  "runs of the study")
     if len(seeds) > 1 and a.grains == "spheres" and a.jitter == 0:
         ap.error(f"--seeds={a.seeds}: with sphere grains and --jitter 0 (App. A's exact "
                  "lattice) every seed gives the same run; give --jitter > 0 (e.g. 0.1)")

@@ -39,7 +39,8 @@ import numpy as np
 from cpp_dem.io.figures import save_figure
 from geogrid_dem.cases import describe
 from cpp_dem import apply_threads
-from geogrid_dem.options import case_parser, parse_checked
+from geogrid_dem.options import (case_parser, check_cap, given_options, parse_checked,
+                                 refuse_unused)
 from geogrid_dem.rundir import begin_run, end_run, run_main
 import cpp_dem as dem
 from cpp_dem.build import geogrid
@@ -616,6 +617,7 @@ def build_parser():
 def parse_args(argv=None) -> tuple[Params, Path]:
     ap = build_parser()
     a = parse_checked(ap, argv)
+    given = given_options(ap, argv)
     p = Params(**SMOKE) if a.smoke else Params()
     if a.n is not None:
         if a.n < 10:
@@ -669,6 +671,25 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     if a.skip_isotropic and not a.packing:
         ap.error("--skip-isotropic: goes with --packing (the state to continue)")
     p.skip_isotropic = a.skip_isotropic
+    # options that would have no effect given the others (docs/cli.md)
+    if a.packing:
+        for dest in ("n", "grain_scale", "seed"):
+            refuse_unused(ap, a, given, dest, "with --packing (its spheres are the sample)")
+        refuse_unused(ap, a, given, "prep_friction",
+                      "with --packing (no expansion: the packing is given)")
+    else:
+        refuse_unused(ap, a, given, "packing_format", "without --packing",
+                      "give the --packing it reads")
+    if a.preset:
+        refuse_unused(ap, a, given, "strain_rate",
+                      f"with --preset {a.preset} (the preset sets the axial strain rate)")
+    if a.geogrid != "none":
+        refuse_unused(ap, a, given, "clear_layer",
+                      f"with --geogrid {a.geogrid} (its layer is cleared anyway)")
+    if not a.packing:
+        check_cap(ap, a, "--n" if p.grain_scale == 1.0 else "--n/--grain-scale",
+                  p.n if p.grain_scale == 1.0 else f"{p.n}/{p.grain_scale:g}",
+                  p.n / p.grain_scale ** 3, "grains", estimate=p.grain_scale != 1.0)
     if a.resume:
         if a.out is None:
             ap.error("--resume: name the folder of the interrupted run with --out")
@@ -681,8 +702,10 @@ def parse_args(argv=None) -> tuple[Params, Path]:
 def main(argv=None) -> int:
     p, out = parse_args(argv)
     resume = p.__dict__.pop("resume", False)
+    # (the parameters and isotropic.h5's SHA-256 go into the manifest: --resume continues
+    # the same run or refuses, rundir.begin_run)
     return run_main("triaxial", out, lambda o: run(p, o, resume=resume),
-                    keep=RESUME_KEEP if resume else None)
+                    keep=RESUME_KEEP if resume else None, params=p, checkpoints=RESUME_KEEP)
 
 
 if __name__ == "__main__":
