@@ -5,6 +5,7 @@
     geogrid-dem run my_run.toml                        # a run file (TOML)
     geogrid-dem sweep my_sweep.toml --workers 2        # a parameter table, on Dask
     geogrid-dem calibrate cases/calibrate_triaxial.toml  # fit E, nu, phi of the triaxial
+    geogrid-dem continue results/p detailed_RE_s1 --steps 20000  # cycle an element on
 
 Every case parses its flags with one parser (geogrid_dem.options): the shared ones have the
 same names, units and meaning everywhere (``--smoke``, ``--out DIR``, ``--overwrite``,
@@ -46,7 +47,11 @@ Rows run as separate processes on ``dask.distributed`` workers (a ``LocalCluster
 ``--workers`` processes by default, or ``--scheduler ADDRESS|FILE`` for a cluster), each in
 ``OUT/row_NNN/``. A row whose folder holds a ``summary.json`` and a ``run.toml`` with the
 same parameters is finished and skipped, so a sweep resumes where it stopped; a row lost with
-a killed worker is run again by Dask. ``OUT/results.csv`` (and ``results.parquet`` where
+a killed worker is run again by Dask. A sweep writes a row's ``run.toml`` before the row runs
+and removes only what its rows' runs recorded (a row run again replaces its earlier attempt's
+recorded files); before anything is written it refuses, naming the row, a row folder that is
+a symbolic link or holds one, another sweep's row (another case or other parameters), or
+files no run of the row recorded (yours). ``OUT/results.csv`` (and ``results.parquet`` where
 pyarrow is installed) gathers one line per row: its parameters, status, wall time and the
 scalar numbers of its ``summary.json``; the CSV is rewritten after every finished row.
 Every row's parameters are checked against the case's flags before Dask starts; a sweep of
@@ -63,11 +68,12 @@ from pathlib import Path
 
 from geogrid_dem import rundir
 from geogrid_dem.cases import CASES
-from geogrid_dem.options import HelpFormatter
+from geogrid_dem.options import HelpFormatter, add_allow_large
 from geogrid_dem.provenance import version
 from geogrid_dem.runs import (MAX_ROWS, RunFileError, UsageError, _close_client, _row_finished,
                               _row_params, _run_on_dask, _started_client, _summary_of,
                               argv_to_params, case_command, check_argv, check_params,
+                              check_row_folder,
                               load_toml, out_of, params_to_argv, run_case, sweep_rows,
                               write_results, write_run_file)
 
@@ -186,13 +192,26 @@ def sweep_cmd(file: Path, workers: int, scheduler: str | None, threads: int,
     except OSError as e:
         raise RunFileError(f"{file}: field 'out'={data['out']!r}: cannot be created: "
                            f"{e.strerror}") from None
+    # Every row folder is checked before anything is written or removed: a symbolic link
+    # (a row, results.csv or .parquet) is refused, and so is a row folder the sweep did not
+    # write (another sweep's row, files of yours); a row of this sweep that did not finish
+    # is run again, its case replacing only the files it recorded.
+    for name in ("results.csv", "results.parquet"):
+        if (out / name).is_symlink():
+            raise RunFileError(f"{file}: field 'out': {out / name} is a symbolic link; a sweep "
+                               "follows no link in its results folder: remove it, or name "
+                               "another 'out'")
     todo, results = [], [None] * len(rows)
     for i, row_dir, params, argv in checked:
         row = rows[i]
+        src = f"{file}: row {i}"
         base = {"row": i, **{f"param.{k}": v for k, v in row.items()}}
+        if row_dir.is_symlink():
+            check_row_folder(row_dir, case, params, source=src)  # (refuses it, naming it)
         if _row_finished(row_dir, case, params):
             results[i] = {**base, "status": "done (earlier run)", **_summary_of(row_dir)}
         else:
+            check_row_folder(row_dir, case, params, source=src)
             todo.append((i, row_dir, params, argv, base))
     print(f"[sweep] {case}: {len(rows)} rows, {len(rows) - len(todo)} finished before, "
                f"{len(todo)} to run on "
@@ -225,14 +244,14 @@ def sweep_cmd(file: Path, workers: int, scheduler: str | None, threads: int,
 
 
 def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | None,
-                  threads: int) -> None:
+                  threads: int, allow_large: bool = False) -> None:
     """Fits E, nu and phi of the triaxial case to a reference curve (the thesis's §6.1,
     Table 6.1): a grid on Dask, then a local optimiser; writes OUT/grid.csv, best.json,
     misfit.png/.pdf."""
     from geogrid_dem import calibrate as cal
 
     try:
-        cfg = cal.Config.load(file)
+        cfg = cal.Config.load(file, allow_large=allow_large)
     except FileNotFoundError:
         raise RunFileError(f"calibration file {file}: not found") from None
     except (ValueError, tomllib.TOMLDecodeError) as e:
@@ -296,7 +315,8 @@ def _parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     ap = argparse.ArgumentParser(
         prog="geogrid-dem", formatter_class=HelpFormatter,
         description="Coupled DEM-FEM for geogrid-reinforced soil: run the cases of the source "
-                    "studies, run files and sweeps, and calibrate a case's parameters.",
+                    "studies, run files and sweeps, calibrate a case's parameters, and "
+                    "continue a finished element.",
         epilog="`geogrid-dem run NAME --help` lists a case's own flags; docs/cli.md has the "
                "run and sweep file formats.")
     ap.add_argument("--version", action="version", version=f"geogrid-dem, version {version()}")
@@ -331,6 +351,30 @@ def _parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     _dask_options(cal, workers="processes of the local Dask cluster (0: run in this process)",
                   threads="OpenMP threads per triaxial run; the results do not depend on it "
                           "or on the number of workers")
+    add_allow_large(cal)
+    from geogrid_dem.continue_run import MAX_STEPS
+
+    co = sub.add_parser("continue", help="cycle a finished prs-element-002 element on: N steps "
+                                         "at its final targets, one JSON line",
+                        formatter_class=HelpFormatter,
+                        description="Restores an element of a prs-element-002 run from its "
+                                    "final state (RUN_DIR/LABEL_final.h5) with its walls "
+                                    "servoing at their final set points and its grid's end "
+                                    "conditions, runs N steps and prints one JSON line: "
+                                    "label, steps, added_strain [x, y, z] (compression "
+                                    "positive), stress_pa [x, y, z], inertial_number. Writes "
+                                    "nothing into RUN_DIR (docs/prs_element_002.md, "
+                                    "\"Continuing an element\").")
+    co.add_argument("run_dir", metavar="RUN_DIR", help="the --out of a prs-element-002 run")
+    co.add_argument("label", metavar="LABEL",
+                    help="the element, e.g. detailed_RE_s1 (a LABEL_final.h5 in RUN_DIR)")
+    co.add_argument("--steps", required=True, metavar="N",
+                    help=f"steps to run, 1 to {MAX_STEPS}")
+    co.add_argument("--out", type=Path, default=None,
+                    help="a folder for the continued state (LABEL_final.h5, which can be "
+                         "continued in turn) and LABEL_continue.json; default: write nothing")
+    co.add_argument("--overwrite", action="store_true",
+                    help="replace an earlier continuation of LABEL in --out")
     return ap, run
 
 
@@ -353,7 +397,11 @@ def main(argv: list[str] | None = None) -> None:
         elif a.command == "sweep":
             sweep_cmd(a.file, a.workers, a.scheduler, a.threads, a.max_rows)
         elif a.command == "calibrate":
-            calibrate_cmd(a.file, a.out, a.workers, a.scheduler, a.threads)
+            calibrate_cmd(a.file, a.out, a.workers, a.scheduler, a.threads, a.allow_large)
+        elif a.command == "continue":
+            from geogrid_dem.continue_run import main_continue
+
+            main_continue(a.run_dir, a.label, a.steps, a.out, a.overwrite)
     except UsageError as e:
         print(f"Error: {e}", file=sys.stderr)
         sys.exit(2)

@@ -41,7 +41,7 @@ from pathlib import Path
 import numpy as np
 
 from geogrid_dem.cases import prs_element as _fem_case
-from cpp_dem.elements.box import run_element
+from cpp_dem.elements.box import GRID_ENDS, KINEMATICS, run_element
 from geogrid_dem.cases import PRESTRESS_PAPER
 from geogrid_dem.rundir import begin_run, end_run, run_main
 
@@ -60,7 +60,6 @@ class Params(_fem_case.Params):
     geogrid: str = "woven-detailed"
     growth_max_strain: float = 3e-6      #: -, per step (x 10 until the grains touch)
     servo_integral: bool = True          #: the creeping clump packing needs it (servo_stage)
-    prep_friction_deg: float = 20.0      #: deg, during growth
     # 002's gravity and damping (Table 1: filling with viscous 0.97 and no local damping,
     # loading with local 0.9); the grid free while the grains grow to the stress. 002's fixed
     # walls (Fig. 1d) are an option (--fixed-walls x-,y-,z-): at smoke size their stage took
@@ -69,7 +68,7 @@ class Params(_fem_case.Params):
     fill_viscous: float = 0.97           #: -, ratio of critical
     fill_local_damping: float = 0.0      #: -
     damping: float = 0.9                 #: local damping while loading, -
-    grid_held: str = "fast"
+    grid_held: str = "growth"
     # The servo stages' rest criterion: a clump packing's unbalanced-force ratio levels off at
     # 0.02-0.05 at the FEM's 2-5 kPa (600 clumps, 002's damping: 0.024-0.045 after 140 000
     # steps, the walls on target within 0.2 %, inertial number 4e-4-1e-3), so 0.02 would run
@@ -80,15 +79,30 @@ class Params(_fem_case.Params):
     # PRS at 3.8/2.7/5.4 kPa: 0.073-0.083 from 200 000 to 310 000 steps, then 0.054 at
     # 337 000: a shorter window would have called a slow descent a floor.)
     plateau_records: int = 250           #: -
-    grid_ends: str = "tension"           #: PRS pulled by T_p, RE free: the same end conditions
+    grid_ends: str = "lock"              #: PRS tensioned, then released: the grains lock it in
+    # The element at rest on its FEM region's path (docs/prs_element_002.md, "Rest"): the
+    # loading ramps at a bounded inertial number and holds until the motion stops; the out-of-
+    # plane axis is held (the FEM is plane strain) and x follows the FEM region's strain.
+    ramp: bool = True
+    kinematics: str = "fem-strain"       #: with --stresses (no FEM path): 'stress'
+    # A dense fill (002: compacted): the grains grow frictionless, then take mu = 0.8.
+    prep_friction_deg: float = 0.0       #: deg, during growth
     grid_convention: str = "series"      #: 002's k_n, k_s as PFC 4 ball properties
     grids: tuple = GRIDS                 #: woven forms to run
     variants: tuple = VARIANTS           #: RE and/or PRS
     seeds: tuple = (1, 2)                #: packings; RE and PRS share each seed's
+    smoke: bool = False                  #: test-sized (--smoke): the report says so
 
 
-SMOKE = dict(_fem_case.SMOKE, n=150, hold_steps=400, max_steps=150_000, unbalanced=0.1,
-             grids=("detailed",))
+# The smoke's grains are smaller than the apertures too (SMOKE_N: aperture / mean diameter
+# >= APERTURE_RATIO_MIN, checked in check_grain_size).
+# Test-sized: the gravel's shapes filled with 6 spheres each (not 24) and density scaling
+# S = 8 for the preparation (the loading's rate is bounded on the scaled inertia, so it takes
+# as many steps as without).
+SMOKE = dict(_fem_case.SMOKE, smoke=True, n=500, hold_steps=2000, max_steps=150_000, unbalanced=0.1,
+             grids=("detailed",), grains="clumps:gravel@6", density_scaling=8.0)
+#: The grains pass through the apertures: aperture / mean grain diameter at least this, -.
+APERTURE_RATIO_MIN = 1.2
 
 
 def log(msg: str) -> None:
@@ -103,27 +117,49 @@ def _get(e: dict, *path):
     return None if e is None else float(e)
 
 
+def _change(e: dict, *path):
+    """A measure's change over the loading: its value at rest after the loading less its value
+    where the loading started (the element's ``interaction`` against ``interaction_start``);
+    None for an element without the start (run before the loading was measured)."""
+    if "interaction_start" not in e:
+        return None
+    a, b = _get(e, "interaction", *path), _get(e, "interaction_start", *path)
+    return None if a is None or b is None else a - b
+
+
 #: 002's findings with a direction (PRS - RE, paired per seed; "PRS": PRS's own value):
-#: (name, expected_sign, compare, value of an element summary).
+#: (name, expected_sign, compare, value of an element summary). Each is what the loading does
+#: (its change from the start of the loading to rest): what the preparation or the pull
+#: decided before the load cannot decide a verdict (the end values are among the MEASURES).
 FINDINGS = (
-    ("tension varies less along the prestressed longitudinal members (std along, N)", -1,
-     "PRS - RE", lambda e: _get(e, "interaction", "tension_variation",
-                                "longitudinal_std_along_n")),
-    ("the longitudinal members align less with prestress: out-of-plane deflection (m)", -1,
-     "PRS - RE", lambda e: _get(e, "interaction", "waviness",
-                                "out_of_plane_longitudinal_mean_m")),
-    ("the longitudinal members align less with prestress: grain contacts per m", -1,
-     "PRS - RE", lambda e: _get(e, "interaction", "contacts", "longitudinal_per_m")),
-    ("less vertical strain for the same load with prestress (strain per Pa of the last "
-     "stage's vertical load)", -1, "PRS - RE",
+    ("tension varies less along the prestressed longitudinal members: change of the std "
+     "along over the loading (N)", -1, "PRS - RE",
+     lambda e: _change(e, "tension_variation", "longitudinal_std_along_n")),
+    ("the longitudinal members align less with prestress: change of the out-of-plane "
+     "deflection over the loading (m)", -1, "PRS - RE",
+     lambda e: _change(e, "waviness", "out_of_plane_longitudinal_mean_m")),
+    ("the longitudinal members align less with prestress: change of the grain contacts per m "
+     "over the loading", -1, "PRS - RE",
+     lambda e: _change(e, "contacts", "longitudinal_per_m")),
+    ("less vertical strain for the same load with prestress (strain per Pa of the loading's "
+     "vertical load)", -1, "PRS - RE",
      lambda e: _get(e, "vertical_compliance_per_pa")),
-    ("displacements above the grid larger than below, PRS (mean |u| above - below, m)", +1,
-     "PRS", lambda e: _get(e, "interaction", "displacement", "above_mean_m")
+    ("displacements above the grid larger than below over the loading, PRS (mean |u| above "
+     "- below, m)", +1, "PRS",
+     lambda e: _get(e, "interaction", "displacement", "above_mean_m")
      - _get(e, "interaction", "displacement", "below_mean_m")),
 )
 
 #: Measures reported RE against PRS without a direction from 002 (no verdict).
 MEASURES = (
+    ("tension std along the longitudinal members at rest (N)",
+     lambda e: _get(e, "interaction", "tension_variation", "longitudinal_std_along_n")),
+    ("out-of-plane deflection of the longitudinal members at rest (m)",
+     lambda e: _get(e, "interaction", "waviness", "out_of_plane_longitudinal_mean_m")),
+    ("grain contacts per m of the longitudinal members at rest",
+     lambda e: _get(e, "interaction", "contacts", "longitudinal_per_m")),
+    ("prestress held by the grains where the loading starts, per line (N)",
+     lambda e: _get(e, "prestress_at_loading_n")),
     ("transverse members: grain contacts per m (002: they still align under PRS)",
      lambda e: _get(e, "interaction", "contacts", "transverse_per_m")),
     ("transverse members: out-of-plane deflection (m)",
@@ -141,16 +177,40 @@ MEASURES = (
     ("clear gap between strings at the end, mean (m)",
      lambda e: _get(e, "interaction", "string_gaps", "longitudinal_now_mean_m")),
     ("porosity at the end", lambda e: _get(e, "porosity_final")),
+    ("interfriction: mobilised friction at grain–grid contacts, mean |F_t| / (mu F_n)",
+     lambda e: _get(e, "interaction", "interfriction", "mean_ratio")),
+    ("interfriction: grain–grid contacts sliding (fraction)",
+     lambda e: _get(e, "interaction", "interfriction", "sliding_fraction")),
+    ("gap between the grid and the grains below, mean (m)",
+     lambda e: _get(e, "interaction", "gaps", "below_mean_m")),
+    ("grid spheres unsupported from below (fraction)",
+     lambda e: _get(e, "interaction", "gaps", "unsupported_below_fraction")),
+    ("transverse members' longitudinal (axial) strain, interior members, mean (-)",
+     lambda e: _get(e, "interaction", "member_strain", "transverse_mean")),
 )
 
 
+#: Below this many seeds a report's verdicts check the machinery; they are not findings.
+SEEDS_FOR_FINDINGS = 6
+
+
+def t_critical(n: int, level: float = 0.95) -> float:
+    """Student's t at (1 + level) / 2 with n - 1 degrees of freedom (two-sided ``level``), -;
+    NaN below 2 seeds."""
+    if n < 2:
+        return float("nan")
+    from scipy.stats import t as student_t
+
+    return float(student_t.ppf(0.5 * (1.0 + level), n - 1))
+
+
 def verdict(diff_mean: float, diff_se: float, n: int, expected_sign: int) -> str:
-    """'agrees' when the paired difference has 002's sign and exceeds 2 standard errors,
-    'opposes' when it has the other sign beyond 2 standard errors, else 'not resolved' (also
-    with fewer than 2 seeds: no standard error)."""
+    """At 95 % by Student's t over the n paired seeds: 'agrees' when the paired difference has
+    002's sign and |d| > t(0.975, n - 1) x se, 'opposes' when it has the other sign beyond
+    that, else 'not resolved' (also with fewer than 2 seeds: no standard error)."""
     if n < 2 or not (math.isfinite(diff_mean) and math.isfinite(diff_se)):
         return "not resolved"
-    if abs(diff_mean) <= 2.0 * diff_se or diff_mean == 0:
+    if abs(diff_mean) <= t_critical(n) * diff_se or diff_mean == 0:
         return "not resolved"
     return "agrees" if np.sign(diff_mean) == expected_sign else "opposes"
 
@@ -164,14 +224,24 @@ def _stats(x: list) -> tuple[float, float]:
 STAT_KEYS = ("re_mean", "re_sd", "prs_mean", "prs_sd", "diff_mean", "diff_se", "n")
 
 
+def at_strength(e: dict) -> bool:
+    """Whether an element did not come to rest at its targets (its ``rest`` status is
+    'at_strength'): it is never measured mid-flow."""
+    return (e.get("rest") or {}).get("status") == "at_strength"
+
+
 def paired(elements: dict, grid: str, seeds, value) -> dict | None:
     """RE and PRS values of ``value`` over the seeds with both, and their paired difference
     (PRS - RE): means, sds, the difference's mean and standard error, n; 'unconverged': the
-    labels of those elements with a stage that did not converge."""
-    re_v, prs_v, unconverged = [], [], []
+    labels of those elements with a stage that did not converge; 'pairs_left_out': the
+    labels of the pairs left out because an element of theirs is at_strength."""
+    re_v, prs_v, unconverged, left_out = [], [], [], []
     for s in seeds:
         re_, prs = elements.get(f"{grid}_RE_s{s}"), elements.get(f"{grid}_PRS_s{s}")
         if re_ is None or prs is None:
+            continue
+        if at_strength(re_) or at_strength(prs):
+            left_out.append(f"{grid}_s{s}")
             continue
         a, b = value(re_), value(prs)
         if a is None or b is None or not (math.isfinite(a) and math.isfinite(b)):
@@ -181,7 +251,10 @@ def paired(elements: dict, grid: str, seeds, value) -> dict | None:
         unconverged += [f"{grid}_{v}_s{s}" for v, e in (("RE", re_), ("PRS", prs))
                         if not all(e.get("converged", [True]))]
     if not re_v:
-        return None
+        return None if not left_out else {
+            "re_mean": math.nan, "re_sd": math.nan, "prs_mean": math.nan, "prs_sd": math.nan,
+            "diff_mean": math.nan, "diff_se": math.nan, "n": 0, "re_values": [],
+            "prs_values": [], "unconverged": [], "pairs_left_out": left_out}
     n = len(re_v)
     d = np.asarray(prs_v) - np.asarray(re_v)
     rm, rs = _stats(re_v)
@@ -189,7 +262,8 @@ def paired(elements: dict, grid: str, seeds, value) -> dict | None:
     dm, dsd = _stats(d)
     return {"re_mean": rm, "re_sd": rs, "prs_mean": pm, "prs_sd": ps, "diff_mean": dm,
             "diff_se": dsd / math.sqrt(n) if n > 1 else float("nan"), "n": n,
-            "re_values": re_v, "prs_values": prs_v, "unconverged": unconverged}
+            "re_values": re_v, "prs_values": prs_v, "unconverged": unconverged,
+            "pairs_left_out": left_out}
 
 
 def findings(elements: dict, seeds=(1,), grids=GRIDS) -> list[dict]:
@@ -211,6 +285,8 @@ def findings(elements: dict, seeds=(1,), grids=GRIDS) -> list[dict]:
             v = verdict(st["diff_mean"], st["diff_se"], st["n"], sign)
             out.append({"grid": grid, "name": name, "expected_sign": sign, "compare": compare,
                         **{k: st[k] for k in STAT_KEYS}, "unconverged": st["unconverged"],
+                        "t_critical": t_critical(st["n"]),
+                        "pairs_left_out": st["pairs_left_out"],
                         "verdict": "not resolved" if st["unconverged"] else v})
     return out
 
@@ -235,15 +311,16 @@ def _fmt(x) -> str:
 def findings_table(rows: list[dict], *, with_verdict: bool = True) -> list[str]:
     """The markdown table of findings (or measures) rows."""
     head = "| grid | finding | RE mean ± sd | PRS mean ± sd | PRS − RE ± se | n |"
-    lines = [head + (" 002 | verdict |" if with_verdict else ""),
-             "|---|---|---|---|---|---|" + ("---|---|" if with_verdict else "")]
+    lines = [head + (" t crit | 002 | verdict | pairs left out |" if with_verdict else ""),
+             "|---|---|---|---|---|---|" + ("---|---|---|---|" if with_verdict else "")]
     for f in rows:
         line = (f"| {f['grid']} | {f['name']} | {_fmt(f['re_mean'])} ± {_fmt(f['re_sd'])} | "
                 f"{_fmt(f['prs_mean'])} ± {_fmt(f['prs_sd'])} | {_fmt(f['diff_mean'])} ± "
                 f"{_fmt(f['diff_se'])} | {f['n']} |")
         if with_verdict:
-            line += f" {'+' if f['expected_sign'] > 0 else '−'} | {f['verdict']} |"
-        lines.append(line)
+            line += (f" {_fmt(f.get('t_critical'))} | {'+' if f['expected_sign'] > 0 else '−'}"
+                     f" | {f['verdict']} | {', '.join(f.get('pairs_left_out') or []) or '-'} |")
+        lines.append(line.replace("|u|", "\\|u\\|"))
     return lines
 
 
@@ -253,11 +330,19 @@ def write_report(out: Path, summary: dict) -> None:
              f'Source: "{PRESTRESS_PAPER}".', "",
              f"Mode: {summary['mode']}. Seeds: {summary['seeds']} (RE and PRS on each seed's "
              "grown packing). Stresses in kPa, compression positive.", "",
-             "## 002's findings, paired over the seeds", "",
-             "The difference is PRS − RE per seed (for a finding about PRS alone, PRS's own "
-             "value). `agrees`: 002's sign beyond 2 standard errors; `opposes`: the other sign "
-             "beyond 2 standard errors; else `not resolved` (also when an element behind "
-             "it did not come to rest in a stage).", ""]
+             "## 002's findings, paired over the seeds", ""]
+    n_seeds = len(summary["seeds"])
+    if n_seeds < SEEDS_FOR_FINDINGS:
+        lines += [f"**{n_seeds} seed(s), fewer than {SEEDS_FOR_FINDINGS}: these verdicts check "
+                  "the machinery; they are not findings.**", ""]
+    if summary.get("smoke"):
+        lines += ["**Smoke size** (test-sized grains and element): not 002's element.", ""]
+    lines += ["The difference is PRS − RE per seed, of what the loading does (a measure's change "
+              "from the start of the loading to rest; for a finding about PRS alone, PRS's own "
+              "value). At 95 % by Student's t over the n pairs: `agrees`: 002's sign with "
+              "|d| > t crit × se; `opposes`: the other sign beyond it; else `not resolved` "
+              "(also when an element behind it did not converge). A pair with an element "
+              "`at_strength` (not at rest at its targets) is left out and named.", ""]
     lines += findings_table(summary["findings"])
     stalled = sorted({k for f in summary["findings"] for k in f.get("unconverged", [])})
     if stalled:
@@ -269,6 +354,14 @@ def write_report(out: Path, summary: dict) -> None:
             ("walls reached (kPa)", lambda e: str(np.round(np.array(e["stress_final_pa"]) / 1e3,
                                                             2).tolist())),
             ("converged", lambda e: str(e["converged"])),
+            ("rest (max inertial number loading / end of hold)",
+             lambda e: (f"{e['rest']['status']} ({_fmt(e['rest'].get('loading_inertial_number_max'))}"
+                        f" / {_fmt(e['rest']['inertial_number_end'])})") if e.get("rest") else "-"),
+            ("loading strain x, y, z", lambda e: ", ".join(
+                f"{x:.3g}" for x in e["loading_strain"]) if e.get("loading_strain") else "-"),
+            ("strain / FEM region x, y, z", lambda e: ", ".join(
+                _fmt(x) for x in e["strain_ratio_to_fem"]) if e.get("strain_ratio_to_fem")
+             else "-"),
             ("held within (%)", lambda e: f"{100 * e['hold_max_rel_error']:.2f}"),
             ("vertical strain per stage; in its hold (creep)",
              lambda e: "; ".join(f"{a[2]:.2e}, {b[2]:.2e}" for a, b in
@@ -308,12 +401,19 @@ def resume_keep(out: Path) -> list[str]:
     out = Path(out)
     done = sorted((out / JOBS).glob("*.json")) if (out / JOBS).is_dir() else []
     keep = [str(f.relative_to(out)) for f in done]
+    seen = set(keep)
     for f in done:
-        for e in json.loads(f.read_text())["labels"]:
+        try:
+            labels = [str(e) for e in json.loads(f.read_text())["labels"]]
+        except (OSError, ValueError, KeyError, TypeError):
+            continue  # (not a job file this run wrote: begin_run refuses it by its SHA-256)
+        for e in labels:
             keep += [str(g.relative_to(out)) for g in sorted(out.rglob(f"{e}*"))
-                     if g.is_file() and str(g.relative_to(out)) not in keep]
+                     if g.is_file() and str(g.relative_to(out)) not in seen]
+            seen.update(keep)
         stem = f.stem
         keep += [str(g.relative_to(out)) for g in sorted(out.glob(f"{stem}_*")) if g.is_file()]
+        seen.update(keep)
     return keep
 
 
@@ -325,7 +425,7 @@ def run(p: Params, out: Path) -> dict:
     (out / JOBS).mkdir(parents=True, exist_ok=True)
     summary: dict = {"params": {k: (list(v) if isinstance(v, tuple) else v)
                                 for k, v in asdict(p).items()},
-                     "seeds": list(p.seeds), "elements": {}}
+                     "seeds": list(p.seeds), "smoke": bool(p.smoke), "elements": {}}
     targets: dict = {}
     with contextlib.ExitStack() as stack:
         hist = None
@@ -333,7 +433,8 @@ def run(p: Params, out: Path) -> dict:
             summary["mode"] = "DEM-only (stresses given)"
             for g in p.grids:
                 for v in p.variants:
-                    targets[(g, v)] = [np.asarray(r, float) for r in p.stresses]
+                    targets[(g, v)] = {"rows": [np.asarray(r, float) for r in p.stresses],
+                                       "tension": None, "strain": None}
         else:
             from femcoupling.drivers.prs_element import run_fem
             from femcoupling.twoway import HandoverHistory
@@ -352,9 +453,15 @@ def run(p: Params, out: Path) -> dict:
                     replace(p, geogrid=f"woven-{g}"), fem_out, v)
                 info.update(targets_initial_pa=ini.normal_pa.tolist(),
                             targets_final_pa=fin.normal_pa.tolist(),
-                            shear_pa=fin.shear_pa.tolist(), rotation_deg=fin.rotation_deg)
+                            shear_pa=fin.shear_pa.tolist(), rotation_deg=fin.rotation_deg,
+                            shear_omitted=shear_omitted(fin))
+                so = info["shear_omitted"]
+                log(f"FEM {v}: the walls cannot shear the element: the FEM's principal "
+                    f"stresses mobilise {so['friction_principal_deg']:.1f} deg, the diagonal "
+                    f"handed over {so['friction_diagonal_deg']:.1f} deg (the omission: "
+                    f"{so['friction_omitted_deg']:.1f} deg)")
                 summary["fem"][f"{g}_{v}"] = info
-                targets[(g, v)] = [ini.normal_pa, fin.normal_pa]
+                targets[(g, v)] = handover(p, ini, fin, info)
                 hist.append(iteration=0, region=k, fem_stress_pa=fin.fem_stress_pa,
                             targets_pa=fin.normal_pa, shear_pa=fin.shear_pa,
                             rotation_deg=fin.rotation_deg, change=0.0,
@@ -415,18 +522,51 @@ def _draw_pairs(p: Params, out: Path) -> None:
                                        for v, f in files.items()}, out, f"{g}_s{s}")
 
 
+def shear_omitted(fin) -> dict:
+    """The bound on what the walls leave out: they impose the FEM region's normal stresses (the
+    diagonal) and cannot shear the element. The friction angle the full FEM stress mobilises
+    (its largest and least principal stresses) against the diagonal's (deg), their difference,
+    and the shear and rotation themselves (Pa, deg)."""
+    from cpp_dem.elements.box import mobilised_friction_deg
+
+    full = mobilised_friction_deg(fin.principal_pa)
+    diag = mobilised_friction_deg(fin.normal_pa)
+    return {"shear_pa": [float(x) for x in fin.shear_pa], "rotation_deg": float(fin.rotation_deg),
+            "principal_pa": [float(x) for x in fin.principal_pa],
+            "friction_principal_deg": full, "friction_diagonal_deg": diag,
+            "friction_omitted_deg": full - diag}
+
+
+def handover(p: Params, ini, fin, info: dict) -> dict:
+    """What the FEM hands to a variant's element: the wall targets before and after the
+    footing (``rows``, Pa); with the prestress locked in (grid_ends 'lock') the FEM layer's
+    tension across the region before and after the footing (``tension``, N/m), which the
+    grid's ends carry: the structure's fill holds the layer's prestress (the FEM tensions its
+    layer and lets the soil take it up), and the element is a piece of it; and the FEM
+    region's strain over the loading (``strain``, 3, compression positive), which the
+    element's strain-controlled axes follow."""
+    tension = None
+    t0, t1 = ini.grid_tension_n_per_m, fin.grid_tension_n_per_m
+    if p.grid_ends == "lock" and t0 is not None and t1 is not None:
+        tension = [float(t0), float(t1)]
+    return {"rows": [ini.normal_pa, fin.normal_pa], "tension": tension,
+            "strain": [float(x) for x in info["strain_increment"]]}
+
+
 def _pair_job(p: Params, grid: str, seed: int, targets: dict, out: Path) -> dict:
     """RE and PRS on one grown packing (picklable: ``--workers`` runs them in other
-    processes). Writes jobs/<grid>_s<seed>.json when both are done."""
+    processes); ``targets``: per variant, :func:`handover`'s dict. Writes
+    jobs/<grid>_s<seed>.json when both are done."""
     prepared: dict = {}
-    grow = float(np.mean([np.mean(t[0]) for t in targets.values()]))
+    grow = float(np.mean([np.mean(t["rows"][0]) for t in targets.values()]))
     res = {"grid": grid, "seed": seed, "elements": {}, "labels": []}
     for v, t in targets.items():
         label = f"{grid}_{v}_s{seed}"
-        res["elements"][label] = run_element(p, t, prestressed=v == "PRS", label=label,
+        res["elements"][label] = run_element(p, t["rows"], prestressed=v == "PRS", label=label,
                                              out=out, log=log, prepared=prepared,
                                              grow_stress=grow, prep_label=f"{grid}_s{seed}",
-                                             draw_figures=False)
+                                             draw_figures=False, grid_tension=t["tension"],
+                                             fem_strain_increment=t["strain"])
         res["elements"][label]["seed"] = seed
         res["labels"].append(label)
     res["preparation_wall_time_s"] = prepared.get("wall_time_s")
@@ -436,11 +576,37 @@ def _pair_job(p: Params, grid: str, seed: int, targets: dict, out: Path) -> dict
     return res
 
 
+def _grain_diameter(p: Params, n: int) -> float:
+    """The grains' mean diameter that the preparation grows n of them to, m (their solid
+    volume 0.6 of the element's: cpp_dem.elements.box.prepare_woven_element)."""
+    return (0.6 * p.edge**3 / (n * math.pi / 6.0)) ** (1.0 / 3.0)
+
+
+def aperture_ratio(p: Params, grid: str) -> float:
+    """The woven grid's aperture over the grains' mean diameter, -."""
+    from cpp_dem.build.woven import PRESETS
+
+    return PRESETS[grid]["aperture"] / _grain_diameter(p, p.n)
+
+
+def min_grains(p: Params, grid: str) -> int:
+    """The least grain count whose grains pass the grid's apertures (APERTURE_RATIO_MIN)."""
+    from cpp_dem.build.woven import PRESETS
+
+    d = PRESETS[grid]["aperture"] / APERTURE_RATIO_MIN
+    return int(math.ceil(0.6 * p.edge**3 / (math.pi / 6.0 * d**3)))
+
+
 def _names(text: str, allowed: tuple, flag: str, ap) -> tuple:
+    """The names of a comma list ``text`` of ``flag``, each one of ``allowed`` and listed
+    once (ap.error naming the flag, the value and what is allowed)."""
+    from geogrid_dem.options import distinct
+
     names = tuple(t.strip() for t in text.split(",") if t.strip())
     bad = [n for n in names if n not in allowed]
     if bad or not names:
         ap.error(f"{flag}={text!r}: must be a comma-separated list of {', '.join(allowed)}")
+    distinct(ap, flag, repr(text), names)
     return names
 
 
@@ -461,8 +627,10 @@ def build_parser():
     ap.add_argument("--workers", type=int, default=1,
                     help="processes: 2 or more run the elements side by side (one thread "
                          "each), with the same results")
-    ap.add_argument("--grains", default=d.grains,
-                    help="clumps:NAME (a shipped grain, 'gravel', or a template CSV) or spheres")
+    ap.add_argument("--grains", default=None,
+                    help=f"clumps:NAME (a shipped grain, 'gravel', or a template CSV; NAME@N: "
+                         f"filled with N spheres) or spheres (default {d.grains}; --smoke: "
+                         f"{SMOKE['grains']})")
     ap.add_argument("--seeds", default=None,
                     help="packings 'A-B' or 'A,B,...': RE and PRS on each seed's grown packing, "
                          "findings paired over them (default: --seed and the next one; at "
@@ -475,10 +643,19 @@ def build_parser():
     ap.add_argument("--convention", choices=("series", "contact"), default=d.grid_convention,
                     help="the paper's k_n, k_s: PFC 4 ball properties combined in series "
                          "(as PFC 4 used them, the default), or the contacts' stiffnesses")
-    ap.add_argument("--grid-ends", choices=("tension", "grips"), default=d.grid_ends,
-                    help="how the grid's longitudinal ends are held: 'tension' (PRS pulled by "
-                         "T_p throughout, RE free) or 'grips' (PRS tensioned then locked in "
-                         "place, RE held by the same grips untensioned)")
+    ap.add_argument("--grid-ends", choices=GRID_ENDS, default=d.grid_ends,
+                    help="how the grid's longitudinal ends are held: 'lock' (the default: PRS "
+                         "tensioned to T_p by grips, which are then released, so the grains "
+                         "hold the prestress; RE untouched; both ends then take the FEM "
+                         "layer's tension increment), 'tension' (PRS pulled by T_p throughout, "
+                         "RE free: a dead load) or 'grips' (PRS tensioned then held in place, "
+                         "RE held by the same grips untensioned)")
+    ap.add_argument("--kinematics", choices=tuple(KINEMATICS), default=None,
+                    help="the loading's walls: 'fem-strain' (the default with the FEM: y "
+                         "held as the plane-strain FEM, x following the FEM region's strain, "
+                         "z servoed to the FEM's stress), 'plane-strain' (y held, x and z "
+                         "servoed) or 'stress' (every axis servoed; the default with "
+                         "--stresses)")
     ap.add_argument("--max-steps", type=int, default=None,
                     help=f"a servo stage's step limit (default {d.max_steps}; --smoke: "
                          f"{SMOKE['max_steps']}): a stage still off its criteria then ends NOT "
@@ -489,33 +666,66 @@ def build_parser():
     return ap
 
 
-def parse_seeds(text: str, ap) -> tuple[int, ...]:
-    """'1-3' -> (1, 2, 3); '1,4' -> (1, 4)."""
+def parse_seeds(text: str, ap, args=None) -> tuple[int, ...]:
+    """'1-3' -> (1, 2, 3); '1,4' -> (1, 4). An empty text, a seed listed twice and more seeds
+    than the cap (without --allow-large in ``args``, the parsed namespace; checked before
+    the list is made) are refused, naming --seeds."""
+    from geogrid_dem.options import check_cap, distinct
+
     try:
         if "-" in text.strip().lstrip("-"):
             a, b = text.split("-", 1)
+            check_cap(ap, args, "--seeds", repr(text), int(b) - int(a) + 1, "seeds")
             seeds = tuple(range(int(a), int(b) + 1))
         else:
             seeds = tuple(int(t) for t in text.split(",") if t.strip())
     except ValueError:
         seeds = ()
-    if not seeds or any(s < 0 for s in seeds) or len(set(seeds)) != len(seeds):
+    if not seeds or any(s < 0 for s in seeds):
         ap.error(f"--seeds={text!r}: must be 'A-B' (A <= B) or a comma-separated list of "
                  "distinct integers >= 0")
+    distinct(ap, "--seeds", repr(text), seeds)
+    check_cap(ap, args, "--seeds", repr(text), len(seeds), "seeds")
     return seeds
 
 
 def parse_args(argv=None) -> tuple[Params, Path]:
+    from geogrid_dem.options import check_cap, given_options, refuse_unused
+
     ap = build_parser()
     a = ap.parse_args(argv)
-    p = _fem_case.apply_element_args(ap, a, Params(**SMOKE) if a.smoke else Params())
+    given = given_options(ap, argv)
+    p = _fem_case.apply_element_args(ap, a, Params(**SMOKE) if a.smoke else Params(), given)
     if a.grids is not None:
         p.grids = _names(a.grids, GRIDS, "--grids", ap)
     p.variants = _names(a.variants, VARIANTS, "--variants", ap)
-    p.grains = a.grains
-    p.seeds = parse_seeds(a.seeds, ap) if a.seeds else (p.seed, p.seed + 1)
+    p.grains = a.grains or p.grains
+    # (an empty --seeds is refused by parse_seeds, not replaced by the default)
+    p.seeds = parse_seeds(a.seeds, ap, a) if a.seeds is not None else (p.seed, p.seed + 1)
+    n_elements = len(p.grids) * len(p.variants) * len(p.seeds)
+    check_cap(ap, a, "--grids/--variants/--seeds",
+              f"{','.join(p.grids)}/{','.join(p.variants)}/{a.seeds}", n_elements,
+              "elements or runs", "elements")
+    # options that would have no effect given the others (docs/cli.md)
+    if "PRS" not in p.variants:
+        refuse_unused(ap, a, given, "prestress", f"without the PRS variant (--variants "
+                      f"{','.join(p.variants)})", "add PRS to --variants")
+    if a.seeds is not None:
+        refuse_unused(ap, a, given, "seed", f"with --seeds {a.seeds} (the packings' seeds)")
+    if a.workers > 1 and len(p.grids) * len(p.seeds) < 2:
+        refuse_unused(ap, a, given, "workers", f"with one packing (grid {p.grids[0]}, seed "
+                      f"{p.seeds[0]}): the workers run packings side by side",
+                      "give more --seeds or --grids")
+    if a.density_scaling is not None and a.preset:
+        ap.error(f"--preset {a.preset} with --density-scaling={a.density_scaling}: the preset "
+                 "sets only the density scaling here, which --density-scaling overrides; give "
+                 "one of them")
     p.fixed_walls, p.grid_convention, p.grid_ends = a.fixed_walls, a.convention, a.grid_ends
     p.re_grips = p.grid_ends == "grips"
+    if a.kinematics == "fem-strain" and a.stresses:
+        ap.error("--kinematics=fem-strain: needs the FEM's strain path; with --stresses use "
+                 "'stress' or 'plane-strain'")
+    p.kinematics = a.kinematics or ("stress" if a.stresses else p.kinematics)
     if not (math.isfinite(a.gravity) and a.gravity >= 0):
         ap.error(f"--gravity={a.gravity}: must be >= 0 (m/s^2)")
     p.gravity = a.gravity
@@ -537,10 +747,20 @@ def parse_args(argv=None) -> tuple[Params, Path]:
         check_element_params(p)
     except ParameterError as e:
         ap.error(str(e).replace("fixed_walls=", "--fixed-walls="))
+    for g in p.grids:
+        ratio = aperture_ratio(p, g)
+        if ratio < APERTURE_RATIO_MIN:
+            ap.error(f"--n={p.n}: the {g} grid's apertures are {ratio:.2f} x the mean grain "
+                     f"diameter; they must be at least {APERTURE_RATIO_MIN:g} x (grains "
+                     f"that pass through them, as in 002): give --n >= "
+                     f"{min_grains(p, g)}")
     if a.stresses:
         p.stresses = _fem_case.parse_stresses(a.stresses, ap)
     if a.resume and a.out is None:
         ap.error("--resume: give --out, the folder of the run to continue")
+    if a.resume and a.overwrite:
+        ap.error("--resume and --overwrite: choose one (--resume keeps the finished packings' "
+                 "files)")
     p.resume = a.resume
     return p, a.out
 
@@ -550,7 +770,10 @@ def main(argv=None) -> int:
     keep = None
     if p.resume:
         keep = resume_keep(out) or [_job_file(p.grids[0], p.seeds[0])]  # (named as missing)
-    return run_main("prs_element_002", out, lambda o: run(p, o), keep=keep)
+    # (the parameters and each job file's SHA-256 go into the manifest: --resume continues
+    # the same run or refuses, rundir.begin_run)
+    return run_main("prs_element_002", out, lambda o: run(p, o), keep=keep, params=p,
+                    checkpoints=(f"{JOBS}/*.json",))
 
 
 if __name__ == "__main__":

@@ -72,6 +72,13 @@ class WallServos:
         """The target stress of ``axis``, Pa."""
         return float(self._goal[axis])
 
+    def mode(self, axis: int) -> str:
+        """How ``axis`` is controlled, in TriaxialController.mode's words: always 'stress'
+        (the element's final state records it: box.save_final_state)."""
+        if axis not in (0, 1, 2):
+            raise _core.ParameterError(f"axis={axis!r}: must be 0 (x), 1 (y) or 2 (z)")
+        return "stress"
+
     @property
     def max_speed(self) -> float:
         return next(iter(self.servos.values())).max_speed

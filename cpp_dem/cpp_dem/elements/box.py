@@ -10,9 +10,11 @@ The functions take a parameter object with the fields of :class:`ElementParams` 
 
 from __future__ import annotations
 
+import functools
 import hashlib
 import math
 import time
+import warnings
 from dataclasses import dataclass, replace
 from pathlib import Path
 from typing import Callable
@@ -29,7 +31,7 @@ from cpp_dem.io import (CsvRecorder, H5Recorder, PvdWriter, write_vtk_box, write
                         write_vtk_spheres)
 from cpp_dem.build.packing import loose_cloud
 from cpp_dem.elements import boundaries
-from cpp_dem.scene import apply_threads, linear_material
+from cpp_dem.scene import ControllerLimitWarning, apply_threads, linear_material
 from cpp_dem.protocols.triaxial import build_box_sample
 
 
@@ -97,6 +99,21 @@ class ElementParams:
                                      #: by T_p throughout (EndTension), RE's by 0 (free)
     grid_convention: str = "contact"  #: woven grids: 002's k_n, k_s as 'series' (PFC 4 ball
                                      #: properties, combined in series) or 'contact' stiffnesses
+    # --- the loading at a bounded rate, and rest shown by motion (loading_stage, rest_hold) ---
+    ramp: bool = False               #: stages after the first load along a ramp of the set
+                                     #: points at a bounded inertial number (loading_stage),
+                                     #: then hold until at rest (rest_hold); False: servo_stage
+    load_inertial: float = 3e-4      #: the ramp caps the box's strain rate at this inertial
+                                     #: number (the check is QUASI_STATIC_STRICT, 1e-3), -
+    rest_inertial: float = 1e-4      #: at rest: the hold's strain rate at most this inertial
+                                     #: number, -
+    rest_unbalanced: float = 0.01    #: at rest: the unbalanced-force ratio at most this, -
+    rest_max_holds: int = 12         #: holds of hold_steps before an element that does not come
+                                     #: to rest is reported at_strength, -
+    kinematics: str = "stress"       #: the loading's walls: 'stress' (every axis servoed to its
+                                     #: target), 'plane-strain' (y held, x and z servoed), or
+                                     #: 'fem-strain' (y held, x following the FEM region's
+                                     #: strain, z servoed): see KINEMATICS
 
 
 def grid_spacing(p: ElementParams) -> float:
@@ -179,9 +196,18 @@ def make_element(p: ElementParams, mean_stress: float, prestressed: bool,
 
 
 GEOGRIDS = ("square", "woven-detailed", "woven-standard")
+#: How the walls follow the loading stage (ElementParams.kinematics): per axis x, y, z
+#: 'stress' (servoed to the target) or 'strain' (the walls move to a strain path; a held axis
+#: follows the path 0).
+KINEMATICS = {"stress": ("stress", "stress", "stress"),
+              "plane-strain": ("stress", "strain", "stress"),
+              "fem-strain": ("strain", "strain", "stress")}
 GRAIN_LAWS = ("linear", "hertz")
-#: How the grid's longitudinal ends are held (ElementParams.grid_ends).
-GRID_ENDS = ("grips", "tension")
+#: How the grid's longitudinal ends are held (ElementParams.grid_ends): 'lock' (PRS
+#: tensioned by the grips, then released: the soil locks what it holds; RE untouched),
+#: 'grips' (tensioned and held by the grips; RE by the same grips with p.re_grips),
+#: 'tension' (PRS pulled by T_p throughout, RE free).
+GRID_ENDS = ("lock", "grips", "tension")
 
 
 def check_element_params(p: ElementParams) -> None:
@@ -214,6 +240,19 @@ def check_element_params(p: ElementParams) -> None:
                              "(local damping), or < 0 for the loading's damping")
     if p.grid_held not in ("growth", "fast"):
         raise ParameterError(f"grid_held={p.grid_held!r}: must be 'growth' or 'fast'")
+    if p.kinematics not in KINEMATICS:
+        raise ParameterError(f"kinematics={p.kinematics!r}: must be one of "
+                             f"{', '.join(KINEMATICS)}")
+    if p.kinematics != "stress" and p.fixed_walls:
+        raise ParameterError(f"kinematics={p.kinematics!r} with fixed_walls="
+                             f"{p.fixed_walls!r}: held axes need the box's own controller; "
+                             "use kinematics='stress' with fixed walls")
+    for name in ("load_inertial", "rest_inertial", "rest_unbalanced"):
+        v = getattr(p, name)
+        if not (isinstance(v, (int, float)) and math.isfinite(v) and 0 < v < 1):
+            raise ParameterError(f"{name}={v!r}: must be in (0, 1) (-)")
+    if not (isinstance(p.rest_max_holds, int) and p.rest_max_holds >= 1):
+        raise ParameterError(f"rest_max_holds={p.rest_max_holds!r}: must be an integer >= 1")
     if p.grid_ends not in GRID_ENDS:
         raise ParameterError(f"grid_ends={p.grid_ends!r}: must be one of {', '.join(GRID_ENDS)}")
     from cpp_dem.build.woven import CONVENTIONS
@@ -281,7 +320,7 @@ def _grain_damping(sc, sample, p: ElementParams, friction_deg: float, viscous: f
 
 
 def prepare_woven_element(p: ElementParams, mean_stress: float,
-                          log: Callable[[str], None] = _log):
+                          log: Callable[[str], None] = _log, *, build_only: bool = False):
     """002's element prepared: grains (clumps or spheres; Hertz–Mindlin or linear) in the
     cube around a woven geogrid of bonded spheres at mid-height (cpp_dem.build.woven,
     'detailed' or 'standard'), with 002's contact laws, grown to ``mean_stress`` (Pa; the grid
@@ -289,7 +328,13 @@ def prepare_woven_element(p: ElementParams, mean_stress: float,
     p.fill_local_damping), then the loading's damping (p.damping, no viscous) and friction.
     Fixed walls (p.fixed_walls): ``sample.controller`` is a
     :class:`cpp_dem.elements.boundaries.WallServos` and ``sample.fixed`` names them.
-    Returns (sample, grid)."""
+    Returns (sample, grid).
+
+    ``build_only``: the element's skeleton, for a checkpoint of it to be loaded into
+    (cpp_dem.checkpoint.load_checkpoint; ``geogrid-dem continue``): the same bodies, materials,
+    laws, walls and controllers, in the same order (the box's servo, the fast growth's
+    RadiusGrowth and the slow growth's, both disabled), but no step is run: the grains keep
+    their initial size and place until the checkpoint's state replaces them."""
     from cpp_dem.build import woven
 
     check_element_params(p)
@@ -385,6 +430,20 @@ def prepare_woven_element(p: ElementParams, mean_stress: float,
     fast = RadiusGrowth(walls=list(sample.walls), bodies=[int(b) for b in grain_bodies],
                         target_stress=1e12, gain=0.5, max_strain=10 * p.growth_max_strain * rate)
     sc.add_controller(fast)
+    if build_only:
+        # The slow growth's controller as prep.grow_to_stress adds it (same kind, walls,
+        # bodies and settings), disabled as it leaves it; the loading's damping and friction.
+        fast.enabled = False
+        slow = RadiusGrowth(walls=list(sample.walls), bodies=[int(b) for b in grain_bodies],
+                            target_stress=mean_stress, gain=0.5,
+                            max_strain=p.growth_max_strain * rate)
+        slow.period = 1
+        sc.add_controller(slow)
+        slow.enabled = False
+        _grain_damping(sc, sample, p, p.friction_deg, 0.0)
+        sc.local_damping = p.damping
+        sc.block_dofs(grid.spheres, "")
+        return sample, grid
     start = sc.step_count
     last = [time.perf_counter()]
     history = sample.growth_history
@@ -495,16 +554,29 @@ class Grips:
 
 
 def load_variant(sample, grid, p: ElementParams, prestressed: bool,
-                 log: Callable[[str], None] = _log):
+                 log: Callable[[str], None] = _log, *, build_only: bool = False):
     """The variant on the prepared element: PRS tensions the grid's longitudinal members to
-    p.prestress (N/m) and locks them (cpp_dem.protocols.prestress), its end junctions then held;
-    RE with p.re_grips holds the same end junctions untensioned (:class:`Grips`), else leaves
-    the grid free. Returns the Prestress, or None."""
+    p.prestress (N/m) and locks them (cpp_dem.protocols.prestress), its end junctions then held
+    (p.grid_ends 'grips') or released so that the grains hold the prestress ('lock'); RE with
+    p.re_grips holds the same end junctions untensioned (:class:`Grips`), else leaves the grid
+    free. Returns the Prestress (its line forces recorded as the run goes), or None.
+
+    ``build_only``: the variant's objects on a restored element (``geogrid-dem continue``;
+    call it after loading the state, whose positions find the grid's ends): PRS's Prestress
+    with its grips as ``p.grid_ends`` leaves them (locked for 'grips', released for 'lock'),
+    not tensioned (no step). It adds no controller; the grips' held DOFs and velocities it
+    sets are the scene's, which the checkpoint loaded after it restores."""
     from cpp_dem.protocols.prestress import Prestress
 
     sc = sample.scene
     if p.grid_ends == "tension":
         return None  # (run_element pulls the ends: EndTension at T_p for PRS, 0 for RE)
+    if prestressed and p.prestress > 0 and build_only:
+        ps = Prestress(sc, grid, tension_per_m=p.prestress)
+        ps.locked = True
+        if p.grid_ends == "lock":
+            ps.unlock()
+        return ps
     if prestressed and p.prestress > 0:
         ps = Prestress(sc, grid, tension_per_m=p.prestress)
         t0 = time.perf_counter()
@@ -512,6 +584,12 @@ def load_variant(sample, grid, p: ElementParams, prestressed: bool,
         log(f"PRS: longitudinal members tensioned to {ps.target_n:.1f} N each (T_p = "
             f"{p.prestress / 1e3:g} kN/m) and locked at step {row['step']}: line forces "
             f"{np.round(row['line_forces_n'], 2).tolist()} N ({time.perf_counter() - t0:.1f} s)")
+        if p.grid_ends == "lock":
+            # 002's concept: the grid tensioned in the fill, then its ends released; the
+            # grains hold what they can (the first stage's rest hold lets the grid settle).
+            ps.unlock()
+            log("PRS: the grips released: the grains (and an FEM layer's tension at the "
+                "ends, where one is handed over) hold the prestress")
         return ps
     if p.re_grips:
         g = Grips(sc, grid)
@@ -547,6 +625,31 @@ def held_stresses(sample) -> np.ndarray:
     return boundaries.axis_stresses(sample.scene, sample.walls, getattr(sample, "fixed", ()))
 
 
+def _recorder(sample, grid, stage: int, rec, prestress=None, ends=None):
+    """A function ``record(targets)`` that writes one row of the element's series (SERIES)
+    through ``rec`` (the stresses held, the targets, the box, the member forces) and returns
+    the stresses held per axis, Pa."""
+    sc, walls = sample.scene, sample.walls
+    longi = grid.member_direction == geogrid.LONGITUDINAL
+
+    def record(t) -> np.ndarray:
+        ax = held_stresses(sample)
+        size = measure.box_size(sc, walls)
+        f = grid.member_axial_forces(sc)
+        locked = (float(prestress.record()["line_forces_n"].mean()) if prestress is not None
+                  else float("nan"))
+        rec(prestress_line_force_mean=locked, stage=stage, step=sc.step_count, time=sc.time,
+            grid_end_force=ends.line_force_n if ends is not None else float("nan"),
+            sigma_x=ax[0], sigma_y=ax[1], sigma_z=ax[2], target_x=t[0], target_y=t[1],
+            target_z=t[2], lx=size[0], ly=size[1], lz=size[2],
+            unbalanced_force=sc.unbalanced_force(),
+            grid_force_longitudinal_mean=float(f[longi].mean()),
+            grid_force_transverse_mean=float(f[~longi].mean()))
+        return ax
+
+    return record
+
+
 def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
                 log: Callable[[str], None] = _log, prestress=None, ends=None,
                 grid_tension: float | None = None, integral: bool | None = None,
@@ -572,22 +675,7 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
         ctl.set_stress(a, float(t[a] + bias[a]))
     ctl.max_speed = prep.default_max_speed(sc, walls, fraction=4e-4 * _rate_factor(sc, p))
     ctl.enabled = True
-    longi = grid.member_direction == geogrid.LONGITUDINAL
-
-    def record() -> np.ndarray:
-        ax = held_stresses(sample)
-        size = measure.box_size(sc, walls)
-        f = grid.member_axial_forces(sc)
-        locked = (float(prestress.record()["line_forces_n"].mean()) if prestress is not None
-                  else float("nan"))
-        rec(prestress_line_force_mean=locked, stage=stage, step=sc.step_count, time=sc.time,
-            grid_end_force=ends.line_force_n if ends is not None else float("nan"),
-            sigma_x=ax[0], sigma_y=ax[1], sigma_z=ax[2], target_x=t[0], target_y=t[1],
-            target_z=t[2], lx=size[0], ly=size[1], lz=size[2],
-            unbalanced_force=sc.unbalanced_force(),
-            grid_force_longitudinal_mean=float(f[longi].mean()),
-            grid_force_transverse_mean=float(f[~longi].mean()))
-        return ax
+    record = _recorder(sample, grid, stage, rec, prestress, ends)
 
     fixed = getattr(sample, "fixed", ())
 
@@ -623,7 +711,7 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
     # 25 % of the target; the set points stay for the hold.
     while sc.step_count - start < p.max_steps:
         sc.run(p.record_every)
-        ax = record()
+        ax = record(t)
         err = np.abs(ax - t) / t
         near = err < 0.2
         if integral and near.any():
@@ -672,7 +760,7 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
     while held < p.hold_steps:
         sc.run(p.record_every)
         held += p.record_every
-        hold_err = max(hold_err, float(np.max(np.abs(record() - t) / t)))
+        hold_err = max(hold_err, float(np.max(np.abs(record(t) - t) / t)))
     ax = held_stresses(sample)
     size_held = measure.box_size(sc, walls)
     return {"converged": ok, "steps": steps, "hold_max_rel_error": hold_err,
@@ -684,6 +772,269 @@ def servo_stage(sample, grid, targets, stage: int, p: ElementParams, rec,
             "density_scaling": quasi_static.report(sc),
             "wall_time_s": time.perf_counter() - wall0,
             "wall_stresses_pa": ax, "box_size_m": measure.box_size(sc, walls)}
+
+
+class _Rate:
+    """The inertial number of the box's deformation over a window: the largest axis strain
+    rate |d(L) / L0| / dt (1/s) times the grains' mean diameter over sqrt(p / rho), with p the
+    mean of the stresses held (Pa, at least 1 Pa) and rho the grains' density as the loading
+    sees it (density scaling included), -."""
+
+    def __init__(self, sample):
+        sc = sample.scene
+        self.sample = sample
+        self.d = float(np.mean(measure.grain_diameters(sc)))
+        self.rho = quasi_static.effective_density(sc, sc.material(sample.material).density)
+        self.mark()
+
+    def mark(self) -> None:
+        sc = self.sample.scene
+        self.size, self.time = measure.box_size(sc, self.sample.walls), sc.time
+
+    def strain_rate(self, size0) -> float:
+        """The largest axis strain rate since the last mark, 1/s (strains on ``size0``)."""
+        sc = self.sample.scene
+        dt = sc.time - self.time
+        if not dt > 0:
+            return 0.0
+        return float(np.max(np.abs(measure.box_size(sc, self.sample.walls) - self.size)
+                            / size0)) / dt
+
+    def inertial(self, rate: float, pressure: float) -> float:
+        return inertial.inertial_number(rate, self.d, max(abs(pressure), 1.0), self.rho)
+
+    def rate_cap(self, inertial_number: float, pressure: float) -> float:
+        """The strain rate at ``inertial_number`` under ``pressure`` (Pa), 1/s."""
+        return inertial_number * math.sqrt(max(abs(pressure), 1.0) / self.rho) / self.d
+
+
+def strain_ratios(element, fem, zero: float = 1e-12) -> list:
+    """The element's strain over its FEM region's, per component (-): 1.0 where both are
+    within ``zero`` of 0 (a held axis of a plane-strain region), None where only the FEM's
+    is."""
+    out = []
+    for e, f in zip(np.asarray(element, float), np.asarray(fem, float)):
+        if abs(f) > zero:
+            out.append(float(e / f))
+        else:
+            out.append(1.0 if abs(e) <= zero else None)
+    return out
+
+
+def mobilised_friction_deg(stresses) -> float:
+    """The friction angle the walls mobilise, deg: asin((s1 - s3) / (s1 + s3)) of the largest
+    and least normal stresses held (Pa, compression positive; NaN without compression)."""
+    s = np.asarray(stresses, float)
+    hi, lo = float(s.max()), float(s.min())
+    if not (hi + lo > 0 and lo >= 0):
+        return float("nan")
+    return math.degrees(math.asin(min(1.0, (hi - lo) / (hi + lo))))
+
+
+def loading_stage(sample, grid, targets, stage: int, p: ElementParams, rec, *,
+                  log: Callable[[str], None] = _log, prestress=None, ends=None,
+                  tension=None, strain_path=None) -> dict:
+    """The element loaded from the stresses it holds to ``targets`` (3,) Pa compression
+    positive at a bounded rate, then held until it is at rest (:func:`rest_hold`).
+
+    The stress-controlled axes (p.kinematics, KINEMATICS) follow set points that ramp from the
+    stresses held to the targets, s(l) = s0 + l (s1 - s0); the strain-controlled axes follow
+    l x ``strain_path`` (3,, compression positive, on the stage's start size; 0 where not
+    given: a held axis). The ramp's l advances by dl a record while every stress axis is
+    within 2 % of its set point; dl (from 1/100, at most 1/20) halves after a record whose
+    box moved faster than p.load_inertial and grows by 1/4 while it stays under half that, so
+    the box's inertial number, measured over each record, stays near p.load_inertial
+    (reported: ``inertial_number_max``, against QUASI_STATIC_STRICT = 1e-3). With ``ends`` the
+    grid's end tension ramps along, ``tension`` = (from, to) N/m. After the ramp the set
+    points take servo_stage's integral correction until the stress axes are within p.tol
+    (p.max_steps at most), then :func:`rest_hold`."""
+    sc, walls, ctl = sample.scene, sample.walls, sample.controller
+    modes = KINEMATICS[p.kinematics]
+    stress_axes = [a for a in range(3) if modes[a] == "stress"]
+    strain_axes = [a for a in range(3) if modes[a] == "strain"]
+    s1 = np.asarray(targets, float)
+    s0 = held_stresses(sample)
+    path = np.zeros(3) if strain_path is None else np.asarray(strain_path, float)
+    t_from, t_to = (None, None) if tension is None else (float(tension[0]), float(tension[1]))
+    record = _recorder(sample, grid, stage, rec, prestress, ends)
+    rate = _Rate(sample)
+    size0, start, wall0 = measure.box_size(sc, walls), sc.step_count, time.perf_counter()
+    dt_rec = p.record_every * sc.dt
+    ctl.enabled = True
+    lam, dlam, bias, at_cap = 0.0, 0.01, np.zeros(3), 0
+    i_max, last, windows, ok = 0.0, time.perf_counter(), 0, False
+
+    def set_points(lam: float) -> np.ndarray:
+        sp = s0 + lam * (s1 - s0)
+        return np.where([m == "stress" for m in modes], sp, s1)
+
+    while sc.step_count - start < p.max_steps:
+        sp = set_points(lam)
+        pressure = float(np.mean(np.abs(held_stresses(sample))))
+        cap = rate.rate_cap(p.load_inertial, pressure)
+        # Each wall servoes on its own stress, so under gravity the bottom one (carrying the
+        # weight too) backs off while the top one pushes: at a common speed cap the box would
+        # only translate. The cap is 4 x the rate's; the ramp's pace bounds the rate (below),
+        # and the strain axes are driven towards their path at most at half the rate.
+        ctl.max_speed = 4.0 * cap * 0.5 * float(np.min(measure.box_size(sc, walls)))
+        for a in stress_axes:
+            ctl.set_stress(a, float(sp[a] + bias[a]))
+        eps = (size0 - measure.box_size(sc, walls)) / size0
+        for a in strain_axes:
+            ctl.set_strain_rate(a, float(np.clip((lam * path[a] - eps[a]) / dt_rec,
+                                                 -0.5 * cap, 0.5 * cap)))
+        if ends is not None:
+            ends.set(t_from + lam * (t_to - t_from))
+        rate.mark()
+        with warnings.catch_warnings(record=True) as caught:
+            # (a wall at this stage's low cap while its stress trails the set point is how
+            # the ramp waits: counted and said once, below, not warned per record)
+            warnings.simplefilter("always", ControllerLimitWarning)
+            sc.run(p.record_every)
+        at_cap += sum(isinstance(w.message, ControllerLimitWarning) for w in caught)
+        for w in caught:
+            if not isinstance(w.message, ControllerLimitWarning):
+                warnings.warn_explicit(w.message, w.category, w.filename, w.lineno)
+        ax = record(sp)
+        windows += 1
+        i_now = rate.inertial(rate.strain_rate(size0), pressure)
+        i_max = max(i_max, i_now)
+        near = all(abs(ax[a] - sp[a]) <= 0.02 * max(abs(s0[a]), abs(s1[a])) for a in stress_axes)
+        if lam < 1.0:
+            # The ramp's pace: halved when a record's inertial number passed the bound,
+            # raised (to 1/20 a record at most) while well under it.
+            if i_now > p.load_inertial:
+                dlam *= 0.5
+            elif i_now < 0.5 * p.load_inertial:
+                dlam = min(0.05, 1.25 * dlam)
+            if near:
+                lam = min(1.0, lam + dlam)
+        else:
+            err = np.array([abs(ax[a] - s1[a]) / abs(s1[a]) for a in stress_axes])
+            if p.servo_integral:
+                for a in stress_axes:
+                    if abs(ax[a] - s1[a]) < 0.2 * abs(s1[a]):
+                        bias[a] = float(np.clip(bias[a] + 0.25 * (s1[a] - ax[a]),
+                                                -0.25 * abs(s1[a]), 0.25 * abs(s1[a])))
+            strain_err = max((abs(eps[a] - path[a]) for a in strain_axes), default=0.0)
+            if np.all(err <= p.tol) and strain_err <= max(1e-6, 0.02 * np.max(np.abs(path))):
+                ok = True
+                break
+        if time.perf_counter() - last > 5:
+            last = time.perf_counter()
+            log(f"  stage {stage}: ramp {100 * lam:.0f} %, step {sc.step_count - start}, walls "
+                f"{np.round(ax / 1e3, 2).tolist()} kPa (set points "
+                f"{np.round(sp / 1e3, 2).tolist()}), inertial number {i_now:.2g}")
+    for a in strain_axes:
+        ctl.set_strain_rate(a, 0.0)  # (held where the path ends)
+    steps = sc.step_count - start
+    size_end = measure.box_size(sc, walls)
+    if at_cap:
+        log(f"  stage {stage}: a wall trailed its set point at the ramp's speed cap in "
+            f"{at_cap} of {windows} records (the ramp waited for it)")
+    if not ok:
+        log(f"  stage {stage}: the walls did not reach the targets within {p.max_steps} steps "
+            f"(walls {np.round(held_stresses(sample) / 1e3, 2).tolist()} kPa)")
+    rest = rest_hold(sample, s1, p, lambda: record(s1), stress_axes, bias, rate, log=log,
+                     stage=stage)
+    ax = held_stresses(sample)
+    size_held = measure.box_size(sc, walls)
+    return {"converged": ok, "steps": steps, "hold_max_rel_error": rest["hold_max_rel_error"],
+            "strain_stage": ((size_end - size0) / size0).tolist(),
+            "strain_hold": ((size_held - size_end) / size0).tolist(),
+            "stall": None, "unbalanced_final": float(sc.unbalanced_force()),
+            "density_scaling": quasi_static.report(sc),
+            "wall_time_s": time.perf_counter() - wall0, "wall_stresses_pa": ax,
+            "box_size_m": size_held, "box_size_start_m": size0,
+            "inertial_number_max": i_max, "ramp_records": windows,
+            "records_at_speed_cap": at_cap, "rest": rest}
+
+
+def rest_hold(sample, targets, p: ElementParams, record, stress_axes, bias, rate: "_Rate", *,
+              log: Callable[[str], None] = _log, stage: int = 0) -> dict:
+    """Holds the element (the stress axes at ``targets`` + ``bias``, the strain axes where
+    they are) in holds of p.hold_steps until it is at rest: over one whole hold the box's
+    strain rate gives an inertial number at most p.rest_inertial, the unbalanced-force ratio
+    at its end is at most p.rest_unbalanced, and the stress axes held their targets within
+    p.tol in the mean over the hold (one record's wall stress scatters by about 1 % at a few
+    kPa; ``hold_max_rel_error`` reports the largest). After p.rest_max_holds holds without that the element is ``at_strength``: it
+    flows (or creeps) under its targets; the friction angle its walls mobilise is given.
+    Returns {"status", "inertial_number_max" (over the holds), "inertial_number_end" (the
+    last hold's), "unbalanced_end", "hold_steps" (all holds), "holds", "hold_max_rel_error",
+    "mobilised_friction_deg", "failed" (the checks the last hold failed)}."""
+    sc, ctl = sample.scene, sample.controller
+    t = np.asarray(targets, float)
+    for a in stress_axes:
+        ctl.set_stress(a, float(t[a] + bias[a]))
+    size0 = measure.box_size(sc, sample.walls)
+    n_rec = max(1, int(math.ceil(p.hold_steps / p.record_every)))
+    inertials, status, failed, err_all = [], "at_strength", [], 0.0
+    steps0 = sc.step_count
+    for _k in range(p.rest_max_holds):
+        rate.mark()
+        off = np.zeros((n_rec, len(stress_axes)))  # (signed, relative to the target)
+        for k in range(n_rec):
+            sc.run(p.record_every)
+            ax = record()
+            off[k] = [(ax[a] - t[a]) / abs(t[a]) for a in stress_axes]
+        err_all = max(err_all, float(np.max(np.abs(off), initial=0.0)))
+        err = float(np.max(np.abs(off.mean(axis=0)), initial=0.0))
+        if p.servo_integral and err > 0.5 * p.tol:
+            # (the proportional servo holds a creeping packing a steady error off: the next
+            # hold's set points take half the mean error back, at most 25 % of the target)
+            bias = np.array(bias, float)
+            for i, a in enumerate(stress_axes):
+                bias[a] = float(np.clip(bias[a] - 0.5 * off[:, i].mean() * abs(t[a]),
+                                        -0.25 * abs(t[a]), 0.25 * abs(t[a])))
+                ctl.set_stress(a, float(t[a] + bias[a]))
+        pressure = float(np.mean(np.abs(ax)))
+        i_hold = rate.inertial(rate.strain_rate(size0), pressure)
+        inertials.append(i_hold)
+        unb = float(sc.unbalanced_force())
+        failed = ([f"inertial number {i_hold:.3g} > {p.rest_inertial:g}"]
+                  if i_hold > p.rest_inertial else []) + (
+                 [f"unbalanced force {unb:.3g} > {p.rest_unbalanced:g}"]
+                 if unb > p.rest_unbalanced else []) + (
+                 [f"walls {100 * err:.2f} % off their targets in the mean > {100 * p.tol:g} %"]
+                 if err > p.tol else [])
+        if not failed:
+            status = "at_rest"
+            break
+    ax = held_stresses(sample)
+    out = {"status": status, "inertial_number_max": float(max(inertials)),
+           "inertial_number_end": float(inertials[-1]), "unbalanced_end": unb,
+           "hold_steps": int(sc.step_count - steps0), "holds": len(inertials),
+           "hold_max_rel_error": err_all, "mobilised_friction_deg": mobilised_friction_deg(ax),
+           "failed": failed}
+    log(f"  stage {stage}: {status} after {len(inertials)} hold(s) of {n_rec * p.record_every} "
+        f"steps (inertial number {inertials[-1]:.2g}, unbalanced {unb:.3g}"
+        + (f"; not at rest: {'; '.join(failed)}; the walls mobilise "
+           f"{out['mobilised_friction_deg']:.1f} deg" if failed else "") + ")")
+    return out
+
+
+def save_final_state(path: Path, sample, p: ElementParams, targets, *, prestressed: bool,
+                     label: str, ends=None, prestress=None) -> None:
+    """The element's final state, to be continued (``geogrid-dem continue``): the scene's
+    checkpoint (cpp_dem.checkpoint.save_checkpoint) with, as its extra JSON, the element's
+    parameters, its label and variant, the targets (Pa), the controller's set points and axis
+    modes, and the grid's end conditions (the end tension, N/m; the prestress grips locked or
+    not)."""
+    from dataclasses import asdict
+
+    from cpp_dem.checkpoint import save_checkpoint
+
+    ctl = sample.controller
+    import json
+
+    params = json.loads(json.dumps(asdict(p), default=lambda o: np.asarray(o).tolist()))
+    save_checkpoint(path, sample.scene, extra={
+        "kind": "prs_element_002 element", "label": label, "prestressed": bool(prestressed),
+        "params": params, "targets_pa": [float(x) for x in targets],
+        "set_points": [float(ctl.goal(a)) for a in range(3)],
+        "modes": [ctl.mode(a) for a in range(3)],
+        "grid_end_tension_n_per_m": None if ends is None else float(ends.tension_per_m),
+        "prestress_locked": bool(prestress is not None and prestress.locked)})
 
 
 GROWTH_COLUMNS = ("phase", "step", "time_s", "coordination", "porosity", "wall_stress_pa",
@@ -833,7 +1184,8 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
                 log: Callable[[str], None] = _log, cache: dict | None = None,
                 grid_tension: list | None = None, probe: float = 0.0,
                 prepared: dict | None = None, grow_stress: float | None = None,
-                prep_label: str | None = None, draw_figures: bool = True) -> dict:
+                prep_label: str | None = None, draw_figures: bool = True,
+                fem_strain_increment=None) -> dict:
     """The DEM element driven through ``targets`` (rows of 3, Pa, compression positive).
 
     Prepared at the first row's mean stress, then servoed to each row in turn. Returns the
@@ -862,6 +1214,16 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     ``draw_figures``: woven grids draw this element's figures alone (cpp_dem.measure.grid_figures;
     a caller that draws several elements on shared scales from ``<label>_figure.npz`` says
     False).
+
+    ``p.ramp``: every row after the first is a :func:`loading_stage` (a ramp at a bounded
+    inertial number, then held until at rest), and the first row's stage is held until at
+    rest too (:func:`rest_hold`), so the loading starts from rest. ``fem_strain_increment``
+    (3,, compression positive): the FEM region's strain over the last row's loading; the
+    strain-controlled axes of p.kinematics follow it, and the summary gives
+    ``strain_ratio_to_fem`` (the element's ``loading_strain`` over it, per axis; 1 where
+    both are 0). The summary's ``rest`` is the last stage's (status at_rest or at_strength,
+    with ``rest_initial`` the first's), and ``interaction_start`` the measures at the start
+    of the loading (woven grids).
 
     ``probe`` (> 0, relative): after the last row, the element's tangent there by three
     stress probes of that size relative to the mean stress (:func:`probe_tangent`), each in
@@ -1004,8 +1366,30 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
                 ref_pos = sc.positions.copy()
                 size_before = measure.box_size(sc, walls)
                 stress_before = held_stresses(sample)
-            st = servo_stage(sample, grid, t, k, p, rec, log=log, prestress=ps, ends=ends,
-                             grid_tension=None if ends is None else grid_tension[k])
+                prestress_at_loading = (float(ps.line_forces().mean()) if ps is not None
+                                        else None)
+                if woven_grid:
+                    # 002's measures where the loading starts: the summary's change over it
+                    from cpp_dem.measure import grid_soil
+
+                    interaction_start = grid_soil.summary(
+                        sc, grid, z_grid=float(np.mean(np.asarray(sc.positions)[grid.spheres, 2])),
+                        locked_n=locked_n)
+            if p.ramp and k > 0:
+                st = loading_stage(
+                    sample, grid, t, k, p, rec, log=log, prestress=ps, ends=ends,
+                    tension=None if ends is None else (grid_tension[k - 1], grid_tension[k]),
+                    strain_path=(fem_strain_increment if k == len(targets) - 1 else None))
+            else:
+                st = servo_stage(sample, grid, t, k, p, rec, log=log, prestress=ps, ends=ends,
+                                 grid_tension=None if ends is None else grid_tension[k])
+                if p.ramp:
+                    # (the loading starts from rest: held at the first targets until then)
+                    st["rest"] = rest_hold(
+                        sample, t, p, functools.partial(_recorder(
+                            sample, grid, k, rec, ps, ends), t),
+                        range(3), np.array([sample.controller.goal(a) for a in range(3)]) - t,
+                        _Rate(sample), log=log, stage=k)
             stages.append(st)
             if k == 0 and cache is not None and len(targets) > 1:
                 cache[key] = (sample, grid, ps, ends, bytes(_core._checkpoint_save(sc)), st)
@@ -1014,6 +1398,9 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
                 f"({'converged' if st['converged'] else 'NOT converged'}); held within "
                 f"{100 * st['hold_max_rel_error']:.2f} % over {p.hold_steps} steps")
         h5.snapshot(sc)
+        if woven_grid:
+            save_final_state(out / f"{label}_final.h5", sample, p, targets[-1],
+                             prestressed=prestressed, label=label, ends=ends, prestress=ps)
     finally:
         h5.close()
         csv.close()
@@ -1050,6 +1437,9 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
                                                    reference_positions=ref_pos,
                                                    locked_n=locked_n)
         extra["locked_in_n"] = locked_n
+        # (PRS: the members' mean line force where the loading starts, N: with the ends
+        # released, what the grains hold of the prestress)
+        extra["prestress_at_loading_n"] = prestress_at_loading
         if ps is not None:
             extra["prestress_target_n"] = ps.target_n
             extra["prestress_locked_final_n"] = ps.line_forces().tolist()
@@ -1059,6 +1449,24 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     vtk_pvds["box"].add(sc.time, write_vtk_box(out / "vtk" / f"{label}_box.vtp", lo,
                                                lo + size_after, time=sc.time).name)
     strain_inc = (size_before - size_after) / size_before
+    if "rest" in stages[-1]:
+        # Rest shown by motion (rest_hold): the last stage's, and the strain from the start of
+        # the loading to the end of its rest hold (compression positive).
+        r = stages[-1]["rest"]
+        extra["rest"] = {k: r[k] for k in ("status", "inertial_number_max",
+                                           "inertial_number_end", "hold_steps",
+                                           "unbalanced_end", "mobilised_friction_deg",
+                                           "failed")}
+        extra["rest"]["loading_inertial_number_max"] = stages[-1].get("inertial_number_max")
+        if "rest" in stages[0] and len(stages) > 1:
+            extra["rest_initial"] = {k: stages[0]["rest"][k] for k in (
+                "status", "inertial_number_end", "unbalanced_end", "hold_steps", "failed")}
+        extra["loading_strain"] = strain_inc.tolist()
+        if woven_grid:
+            extra["interaction_start"] = interaction_start
+    if fem_strain_increment is not None:
+        extra["fem_strain_increment"] = [float(x) for x in fem_strain_increment]
+        extra["strain_ratio_to_fem"] = strain_ratios(strain_inc, fem_strain_increment)
     # Load–settlement: the vertical strain of the last stage (compression positive) for its
     # vertical stress increment.
     d_sigma_z = float(targets[-1][2] - stress_before[2])
