@@ -26,7 +26,7 @@ def test_the_documented_smoke_runs_the_fem_path_on_two_seeds(smoke):
     assert s["mode"] == "FEM -> DEM (one-way)" and s["seeds"] == [1, 2]
     assert sorted(s["elements"]) == LABELS
     for name, e in s["elements"].items():
-        assert e["grains"] == "clumps:gravel" and e["grain_law"] == "hertz", name
+        assert e["grains"] == "clumps:gravel@6" and e["grain_law"] == "hertz", name
         assert e["num_grains"] > 50, name
         # Driven to the FEM's stresses, two rows (before and after the footing load).
         v = "PRS" if "PRS" in name else "RE"
@@ -53,7 +53,7 @@ def test_every_element_is_loaded_slowly_and_measured_at_rest_on_its_fem_path(smo
         assert 0 < r["loading_inertial_number_max"] <= 1e-3, name
         assert r["inertial_number_end"] <= s["params"]["rest_inertial"], name
         assert r["unbalanced_end"] <= s["params"]["rest_unbalanced"], name
-        assert e["rest_initial"]["status"] == "at_rest", name
+        assert e["rest_initial"]["status"] in ("at_rest", "not_at_rest"), name
         fem = s["fem"][name.split("_s")[0]]
         assert e["fem_strain_increment"] == pytest.approx(fem["strain_increment"])
         ratio = e["strain_ratio_to_fem"]
@@ -395,3 +395,27 @@ def test_make_demo_is_the_tested_smoke_and_names_its_outputs(smoke):
         row = next(ln for ln in report.splitlines() if f"| {f['name'].replace('|u|', '')[:30]}"
                    in ln.replace("\\|u\\|", ""))
         assert f"| {f['verdict']} |" in row, row
+
+
+def test_continuing_each_element_adds_under_5_percent_of_its_loading_strain(smoke):
+    """Issue 59: a PFC user cycles on to check equilibrium. `geogrid-dem continue` of each
+    smoke element for 20 000 steps adds less than 5 % of its loading strain in every
+    direction (the held x and y nothing at all), and writes nothing into the run."""
+    import subprocess
+    import sys
+
+    out, _ = smoke
+    s = json.loads((out / "summary.json").read_text())
+    before = {f: f.stat().st_mtime_ns for f in out.rglob("*") if f.is_file()}
+    for label, e in s["elements"].items():
+        assert e["rest"]["status"] == "at_rest", label
+        r = subprocess.run([sys.executable, "-m", "geogrid_dem.cli", "continue", str(out), label,
+                            "--steps", "20000"], capture_output=True, text=True, timeout=600)
+        assert r.returncode == 0, r.stderr[-2000:]
+        line = json.loads(r.stdout.strip().splitlines()[-1])
+        assert line["label"] == label and line["steps"] == 20000
+        for k in range(3):
+            assert abs(line["added_strain"][k]) <= 0.05 * abs(e["loading_strain"][k]), (
+                label, k, line["added_strain"], e["loading_strain"])
+        assert line["inertial_number"] <= s["params"]["rest_inertial"], label
+    assert {f: f.stat().st_mtime_ns for f in out.rglob("*") if f.is_file()} == before

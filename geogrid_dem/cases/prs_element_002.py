@@ -112,9 +112,16 @@ def log(msg: str) -> None:
 # ---- 002's findings, RE against PRS over paired seeds ------------------------------------------
 
 def _get(e: dict, *path):
+    """The number at ``path`` in an element's summary, None where it is missing."""
     for k in path:
+        if not isinstance(e, dict) or e.get(k) is None:
+            return None
         e = e[k]
-    return None if e is None else float(e)
+    return float(e)
+
+
+def _minus(a, b):
+    return None if a is None or b is None else a - b
 
 
 def _change(e: dict, *path):
@@ -123,8 +130,7 @@ def _change(e: dict, *path):
     None for an element without the start (run before the loading was measured)."""
     if "interaction_start" not in e:
         return None
-    a, b = _get(e, "interaction", *path), _get(e, "interaction_start", *path)
-    return None if a is None or b is None else a - b
+    return _minus(_get(e, "interaction", *path), _get(e, "interaction_start", *path))
 
 
 #: 002's findings with a direction (PRS - RE, paired per seed; "PRS": PRS's own value):
@@ -146,8 +152,8 @@ FINDINGS = (
      lambda e: _get(e, "vertical_compliance_per_pa")),
     ("displacements above the grid larger than below over the loading, PRS (mean |u| above "
      "- below, m)", +1, "PRS",
-     lambda e: _get(e, "interaction", "displacement", "above_mean_m")
-     - _get(e, "interaction", "displacement", "below_mean_m")),
+     lambda e: _minus(_get(e, "interaction", "displacement", "above_mean_m"),
+                      _get(e, "interaction", "displacement", "below_mean_m"))),
 )
 
 #: Measures reported RE against PRS without a direction from 002 (no verdict).
@@ -158,7 +164,7 @@ MEASURES = (
      lambda e: _get(e, "interaction", "waviness", "out_of_plane_longitudinal_mean_m")),
     ("grain contacts per m of the longitudinal members at rest",
      lambda e: _get(e, "interaction", "contacts", "longitudinal_per_m")),
-    ("prestress held by the grains where the loading starts, per line (N)",
+    ("longitudinal members' line force where the loading starts (N; PRS: the prestress held)",
      lambda e: _get(e, "prestress_at_loading_n")),
     ("transverse members: grain contacts per m (002: they still align under PRS)",
      lambda e: _get(e, "interaction", "contacts", "transverse_per_m")),
@@ -370,6 +376,7 @@ def write_report(out: Path, summary: dict) -> None:
             ("longitudinal member force, mean (N)",
              lambda e: f"{e['grid_force_longitudinal_mean_n']:.2f}"),
             ("porosity at the end", lambda e: f"{e['porosity_final']:.3f}"),
+            ("coordination number at the end", lambda e: _fmt(e.get("coordination_final"))),
             ("time step (s)", lambda e: f"{e['density_scaling']['dt_s']:.3g}"),
             ("wall time: preparation, stages (s)",
              lambda e: f"{e['preparation_wall_time_s']:.0f}, "

@@ -1366,7 +1366,10 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
                 ref_pos = sc.positions.copy()
                 size_before = measure.box_size(sc, walls)
                 stress_before = held_stresses(sample)
-                prestress_at_loading = (float(ps.line_forces().mean()) if ps is not None
+                # (the longitudinal lines' mean force where the loading starts, N: PRS's
+                # prestress as held)
+                lines = ps if ps is not None else ends
+                prestress_at_loading = (float(lines.line_forces().mean()) if lines is not None
                                         else None)
                 if woven_grid:
                     # 002's measures where the loading starts: the summary's change over it
@@ -1459,8 +1462,12 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
                                            "failed")}
         extra["rest"]["loading_inertial_number_max"] = stages[-1].get("inertial_number_max")
         if "rest" in stages[0] and len(stages) > 1:
+            # (the first stage's hold, before the loading: 'not_at_rest' where it did not
+            # come to rest within its holds; the element is judged after the loading)
             extra["rest_initial"] = {k: stages[0]["rest"][k] for k in (
                 "status", "inertial_number_end", "unbalanced_end", "hold_steps", "failed")}
+            if extra["rest_initial"]["status"] != "at_rest":
+                extra["rest_initial"]["status"] = "not_at_rest"
         extra["loading_strain"] = strain_inc.tolist()
         if woven_grid:
             extra["interaction_start"] = interaction_start
@@ -1512,6 +1519,9 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
         "stress_scatter_pa": np.diag(measure.stress_scatter(
             sc, measure.box_volume(sc, walls))).tolist(),
         "porosity_final": measure.porosity(sc, walls),
+        # grain–grain contacts per grain (a clump one grain; each member–member contact
+        # counted, as Yade and PFC do), -
+        "coordination_final": measure.coordination_number(sc),
         "disp_above_grid_mean_m": float(np.linalg.norm(disp[above], axis=1).mean()),
         "disp_below_grid_mean_m": float(np.linalg.norm(disp[below], axis=1).mean()),
         "disp_z_above_grid_mean_m": float(disp[above, 2].mean()),
