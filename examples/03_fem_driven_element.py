@@ -10,14 +10,15 @@ spheres around a square geogrid) is servo-controlled to those stresses.
 Run:   .venv/bin/python examples/03_fem_driven_element.py [--smoke] [--out DIR]
 Needs: dolfinx (the `fem` extra; `make setup` installs it).
 Writes (in --out): handover.csv (FEM targets and the stresses the element reached, Pa),
-element.csv (the element's wall stresses as it runs), element_stresses.png, vtk/ (ParaView).
+element.csv (the element's wall stresses as it runs), element_stresses.png, element.h5
+(the element's record) and vtk/ (ParaView).
 """
 
 import argparse
 from pathlib import Path
 
 #: Files this script writes in --out (tests/test_examples.py checks them).
-OUTPUTS = ["handover.csv", "element.csv", "element_stresses.png"]
+OUTPUTS = ["handover.csv", "element.csv", "element_stresses.png", "element.h5"]
 
 ap = argparse.ArgumentParser(description=__doc__.splitlines()[1])
 ap.add_argument("--smoke", action="store_true", help="coarse FEM mesh, 300 grains (seconds)")

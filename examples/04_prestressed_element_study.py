@@ -28,7 +28,8 @@ from pathlib import Path
 from geogrid_dem.cases import prs_element_002 as study
 
 #: Files this script writes in --out (tests/test_examples.py checks them).
-OUTPUTS = ["findings.csv", "findings.png", "case/report.md"]
+OUTPUTS = ["findings.csv", "findings.png", "case/report.md", "case/summary.json",
+           "case/standard_s1_views.png"]
 
 ap = argparse.ArgumentParser(description=__doc__.splitlines()[1])
 ap.add_argument("--smoke", action="store_true", help="DEM only, standard grid, 250 clumps")

@@ -21,7 +21,8 @@ import argparse
 from pathlib import Path
 
 #: Files this script writes in --out (tests/test_examples.py checks them).
-OUTPUTS = ["biaxial.csv", "elements.csv", "biaxial.png", "report.md"]
+OUTPUTS = ["biaxial.csv", "elements.csv", "biaxial.png", "report.md", "elements.h5", "fem.xdmf",
+           "steps.csv"]
 #: The test that runs this script (on 1 and 2 ranks, under mpiexec), not tests/test_examples.py.
 RUN_BY = "tests/test_hierarchical_mpi.py"
 

@@ -25,8 +25,10 @@ becomes a comma list::
 
 Every results folder gets ``run.toml``: the case, the parameters, the package version, the
 git commit and the date, so ``geogrid-dem run DIR/run.toml --out NEW`` runs it again (the
-last ``--out`` wins, as for the case itself, and the run file goes where the results go).
-Without ``--out`` every run gets a new folder ``results/<case>/run_NNN``; a folder that holds
+last ``--out`` wins, as for the case itself, and the run file goes where the results go). It
+keeps ``out`` as given (a relative one stays relative to where the command runs); without
+``--out`` every run gets a new folder ``results/<case>/run_NNN``, which the run file leaves
+out, so that it reruns into a new folder of its own. A folder that holds
 an earlier run is refused unless ``--overwrite`` is given. A run file's parameters are checked
 against the case's own flags before the case starts (a misspelt flag, a switch given a value).
 Ctrl-C stops the case: its files are closed, its folder is marked interrupted and the command
@@ -84,9 +86,10 @@ def _echo(msg: str) -> None:
 
 def list_cases() -> None:
     """Lists the cases, each with the study it comes from."""
+    width = max(map(len, CASES)) + 2  # every summary starts in one column
     for name, case in CASES.items():
         src = f'  ("{case.study}")' if case.study else ""
-        print(f"{name:16s} {case.summary}{src}")
+        print(f"{name:{width}s}{case.summary}{src}")
 
 
 def run_cmd(target: str, extra: list[str]) -> None:
@@ -115,7 +118,8 @@ def run_cmd(target: str, extra: list[str]) -> None:
             check_argv(case, argv, source=case)
         except RunFileError:
             valid = False  # the case itself says why (argparse, exit status 2)
-    if out_of(argv) is None and not helping and valid:
+    numbered = out_of(argv) is None and not helping and valid
+    if numbered:
         # the case's default, made here so that run.toml goes into the same new folder
         argv += ["--out", str(rundir.numbered_run_dir(rundir.default_base(CASES[case].folder)))]
     status = run_case(case, argv, source=source)
@@ -128,10 +132,14 @@ def run_cmd(target: str, extra: list[str]) -> None:
                 or (status == rundir.EXIT_INTERRUPTED and state == "interrupted")):
             params = argv_to_params(argv)
             params.pop("overwrite", None)  # a run file never replaces a run by itself
+            if numbered:  # (its copy reruns into a new numbered folder of its own)
+                params.pop("out", None)
             write_run_file(dest, case, params)
         if status == rundir.EXIT_INTERRUPTED:
+            again = f" --out {dest}" if numbered else ""
             print(f"[geogrid-dem] {case} interrupted: results so far in {dest}; run it "
-                       f"again with geogrid-dem run {dest / 'run.toml'} --overwrite", file=sys.stderr, flush=True)
+                  f"again with geogrid-dem run {dest / 'run.toml'}{again} --overwrite",
+                  file=sys.stderr, flush=True)
     if status != 0:
         sys.exit(status)
 
@@ -379,7 +387,15 @@ def _parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
 
 
 def main(argv: list[str] | None = None) -> None:
-    """The ``geogrid-dem`` command."""
+    """The ``geogrid-dem`` command. Warnings are shown one line each, a repeated one once and
+    then counted (geogrid_dem.warnings_display)."""
+    from geogrid_dem.warnings_display import shown_once
+
+    with shown_once():
+        _main(argv)
+
+
+def _main(argv: list[str] | None) -> None:
     argv = list(sys.argv[1:] if argv is None else argv)
     ap, run_parser = _parser()
     try:

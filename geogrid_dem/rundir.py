@@ -643,7 +643,16 @@ def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
     sub-folder), not locked or recorded itself. ``keep``: a --resume (see begin_run; one of a
     completed run returns 0 without running ``work``). ``params``, ``checkpoints``: the run's
     parameters and the patterns of its checkpoints (begin_run), whose SHA-256 is recorded
-    about once a second while ``work`` runs and once more at its end."""
+    about once a second while ``work`` runs and once more at its end. Warnings are shown one
+    line each, a repeated one once and then counted (geogrid_dem.warnings_display)."""
+    from geogrid_dem.warnings_display import shown_once
+
+    with shown_once():
+        return _run_main(case, out, work, overwrite=overwrite, log=log, own_folder=own_folder,
+                         keep=keep, params=params, checkpoints=checkpoints)
+
+
+def _run_main(case, out, work, *, overwrite, log, own_folder, keep, params, checkpoints) -> int:
     global _OVERWRITE
     from cpp_dem.io import close_all_writers
 

@@ -257,3 +257,48 @@ def test_a_case_started_as_several_mpi_ranks_is_refused(tmp_path, monkeypatch, c
         assert not (tmp_path / mod.__name__).exists()
     monkeypatch.setenv(var, "1")
     assert mpi_ranks() == 1
+
+
+def test_the_cases_table_starts_every_summary_in_one_column(capsys):
+    """`geogrid-dem cases`: whatever the length of a case's name, its summary starts in the
+    same column as every other's."""
+    from geogrid_dem import cli as cli_mod
+    from geogrid_dem.cases import CASES
+
+    cli_mod.list_cases()
+    rows = capsys.readouterr().out.splitlines()
+    assert len(rows) == len(CASES)
+    columns = set()
+    for row, (name, case) in zip(rows, CASES.items()):
+        assert row.startswith(name + " "), row
+        columns.add(row.index(case.summary))
+    assert len(columns) == 1, rows
+
+
+def test_a_run_file_keeps_out_as_given_or_leaves_the_numbered_folder_out(tmp_path, monkeypatch):
+    """run.toml keeps a relative --out relative (as given), and leaves out the default
+    numbered folder: copied elsewhere, the run file reruns into a new folder of its own."""
+    from geogrid_dem import cli as cli_mod
+
+    ran = []
+    monkeypatch.setattr(cli_mod, "run_case",
+                        lambda case, argv, source=None: ran.append(list(argv)) or 0)
+    monkeypatch.chdir(tmp_path)
+
+    def params(path):
+        with open(path, "rb") as f:
+            return tomllib.load(f)["params"]
+
+    cli_mod.run_cmd("triaxial", ["--smoke", "--out", "rel/t1"])
+    assert params(tmp_path / "rel" / "t1" / "run.toml")["out"] == "rel/t1"
+
+    cli_mod.run_cmd("triaxial", ["--smoke"])  # the default: results/triaxial/run_001
+    first = tmp_path / "results" / "triaxial" / "run_001"
+    assert "out" not in params(first / "run.toml")
+    copy = tmp_path / "elsewhere" / "run.toml"
+    copy.parent.mkdir()
+    shutil.copy(first / "run.toml", copy)
+    cli_mod.run_cmd(str(copy), [])
+    second = tmp_path / "results" / "triaxial" / "run_002"
+    assert ran[-1][-2:] == ["--out", str(Path("results/triaxial/run_002"))]
+    assert params(second / "run.toml") == params(first / "run.toml") == {"smoke": True}

@@ -78,7 +78,6 @@ def test_the_checker_finds_a_synthetic_hash_and_work_log_words():
     assert work_log_hits("1000000 steps, 1.54e7 p-steps/s, deadline, [x](a.md#storage-order)") == []
 
 
-@pytest.mark.parametrize("page", _pages(), ids=_page_id)
 def _generated_lines(text: str) -> set[int]:
     """The lines of the page that scripts/docs_tables.py writes from committed data (their
     provenance names a commit on purpose; tests/test_docs_tables.py checks them)."""
@@ -91,6 +90,7 @@ def _generated_lines(text: str) -> set[int]:
     return mod.generated_lines(text)
 
 
+@pytest.mark.parametrize("page", _pages(), ids=_page_id)
 def test_page_has_no_work_log_words_or_commit_ids(page: Path):
     bad = []
     text = page.read_text(encoding="utf-8")

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import ast
 import json
+import re
 import subprocess
 import sys
 from pathlib import Path
@@ -116,3 +117,55 @@ def test_fem_page_shows_the_example_code():
     assert shown in _code_blocks(ROOT / "docs" / "fem.md"), (
         "docs/fem.md: no python block equals the part of examples/03_fem_driven_element.py "
         "between its markers; paste that part again")
+
+
+#: The page that walks through the examples, and how it says their number.
+START_PAGE = ROOT / "docs" / "start_here.md"
+NUMBERS = {"one": 1, "two": 2, "three": 3, "four": 4, "five": 5, "six": 6, "seven": 7,
+           "eight": 8, "nine": 9, "ten": 10}
+#: A file name the page gives: a stem (templates such as <grid> allowed) and an extension.
+FILE_NAME = re.compile(r"[\w<>|/.-]*[\w>]\.(?:csv|png|pdf|h5|md|json|xdmf|npz|vtp|pvd|toml)")
+
+
+def _names_match(named: str, output: str) -> bool:
+    """``named`` (a name on the page, maybe a template: <A|B> for A or B, <x> for one part
+    without '_' or '/') is ``output`` (an OUTPUTS entry) or its file name."""
+
+    def part(p: str) -> str:
+        if not p.startswith("<"):
+            return re.escape(p)
+        alts = p[1:-1].split("|")
+        return "(?:" + "|".join(map(re.escape, alts)) + ")" if len(alts) > 1 else "[^/_]+"
+
+    pattern = "".join(map(part, re.split(r"(<[^>]*>)", named)))
+    return any(re.fullmatch(pattern, o) for o in (output, output.rsplit("/", 1)[-1]))
+
+
+def test_the_start_page_names_every_example_and_only_files_they_write():
+    """docs/start_here.md (and README.md's link to it): the number of examples, a section for
+    each script, and in each section's "Writes." paragraph the files of that script's OUTPUTS
+    and no other."""
+    text = START_PAGE.read_text()
+    first = re.search(r"(\w+) complete scripts in", text)
+    assert first and NUMBERS.get(first.group(1).lower()) == len(EXAMPLES), \
+        f"the page says {first and first.group(1)!r} scripts; there are {len(EXAMPLES)}"
+    readme = re.search(r"then the (\w+) examples in order", (ROOT / "README.md").read_text())
+    assert readme and NUMBERS.get(readme.group(1).lower()) == len(EXAMPLES), \
+        f"README.md says {readme and readme.group(1)!r} examples; there are {len(EXAMPLES)}"
+    sections = re.split(r"\n## ", text)
+    for path in EXAMPLES:
+        link = f"(../examples/{path.name})"
+        own = [s for s in sections if link in s.split("\n\n", 2)[1]]
+        assert len(own) == 1, f"{path.name}: no section of the page links it first"
+        writes = re.search(r"\*\*Writes\.\*\*(.*?)(?:\n\n|$)", own[0], re.DOTALL)
+        assert writes, f"{path.name}: its section has no **Writes.** paragraph"
+        outputs = declared(path, "OUTPUTS")
+        named = [n for span in re.findall(r"`([^`]+)`", writes.group(1))
+                 for n in FILE_NAME.findall(span) if not n.startswith(".")]
+        assert named, f"{path.name}: its **Writes.** paragraph names no file"
+        for n in named:
+            assert any(_names_match(n, o) for o in outputs), \
+                f"{path.name}: the page says it writes {n}; its OUTPUTS are {outputs}"
+        for o in outputs:  # and every declared output is on the page
+            assert any(_names_match(n, o) for n in named), \
+                f"{path.name}: writes {o} (OUTPUTS), which the page does not name"

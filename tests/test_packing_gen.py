@@ -78,3 +78,18 @@ def test_gravity_deposition_settles():
                                              seed=2, max_time=1.5, settled_speed=5e-3)
     assert info["settled"], info
     assert c[:, 2].max() < 0.05  # the cloud filled the box; the deposit sits in its lower half
+
+
+def test_a_builder_placing_fewer_grains_than_asked_says_so_and_records_both():
+    lines = []
+    rec = packing.placed_count(300, 255, "cleared from the grid's layer", log=lines.append)
+    assert lines == ["300 grains asked, 255 placed: 45 cleared from the grid's layer"]
+    assert rec == {"grains_asked": 300, "grains_placed": 255}
+    lines.clear()
+    assert packing.placed_count(60, 60, "-", log=lines.append, what="clumps") == \
+        {"grains_asked": 60, "grains_placed": 60}
+    assert lines == []  # as asked: nothing to say
+    packing.placed_count(60, 47, "did not fit", log=lines.append, what="clumps")
+    assert lines == ["60 clumps asked, 47 placed: 13 did not fit"]
+    with pytest.raises(dem.ParameterError, match="placed=61"):
+        packing.placed_count(60, 61, "-")

@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import io
 import os
+from typing import Callable
 
 import numpy as np
 
@@ -135,6 +136,25 @@ def loose_cloud(radii, lo, hi, *, seed: int = 0, max_tries: int = 2000
     # Number the spheres in space order (the placement order is random): faster scenes.
     order = spatial_order(pos, r)
     return pos[order], r[order]
+
+
+def placed_count(asked: int, placed: int, why: str, *, log: Callable[[str], None] = print,
+                 what: str = "grains") -> dict:
+    """The counts of a builder that may place fewer grains than asked (one that clears the
+    grains a grid layer would cut, say): returns ``{"grains_asked": asked, "grains_placed":
+    placed}`` for the run's summary and, when ``placed`` < ``asked``, first logs one line
+    saying so, ``why`` saying what became of the rest::
+
+        300 grains asked, 255 placed: 45 cleared from the grid's layer
+
+    ``what`` names the grains in that line (e.g. "clumps"). Raises ParameterError when
+    ``placed`` is not in [0, ``asked``]."""
+    asked, placed = int(asked), int(placed)
+    if not 0 <= placed <= asked:
+        raise ParameterError(f"placed={placed}: must be in [0, asked={asked}]")
+    if placed < asked:
+        log(f"{asked} {what} asked, {placed} placed: {asked - placed} {why}")
+    return {"grains_asked": asked, "grains_placed": placed}
 
 
 def hex_packing(lo, hi, radius: float, *, gap: float = 0.0) -> tuple[np.ndarray, np.ndarray]:

@@ -29,7 +29,7 @@ from cpp_dem.protocols import prep, quasi_static
 from cpp_dem._core import BeamParams
 from cpp_dem.io import (CsvRecorder, H5Recorder, PvdWriter, write_vtk_box, write_vtk_contacts,
                         write_vtk_spheres)
-from cpp_dem.build.packing import loose_cloud
+from cpp_dem.build.packing import loose_cloud, placed_count
 from cpp_dem.elements import boundaries
 from cpp_dem.scene import ControllerLimitWarning, apply_threads, linear_material
 from cpp_dem.protocols.triaxial import build_box_sample
@@ -154,9 +154,11 @@ def make_element(p: ElementParams, mean_stress: float, prestressed: bool,
     over = (np.all(np.abs(c[:, :2] - mid) < half + r[:, None], axis=1)
             & (np.abs(c[:, 2] - z_grid) < r + p.grid_radius))
     c, r = c[~over], r[~over]
+    counts = placed_count(p.n, len(r), "cleared from the grid's layer", log=log)
     sample = build_box_sample(c, r, (0, 0, 0), (p.edge,) * 3, young=p.young,
                               poisson=p.poisson, friction_deg=p.prep_friction_deg,
                               density=p.density, local_damping=p.damping)
+    sample.counts = counts
     sc = sample.scene
     gmat = sc.add_material(linear_material(density=p.grid_density, young=p.young,
                                                poisson=p.poisson, friction_angle_deg=26.57))
@@ -363,10 +365,14 @@ def prepare_woven_element(p: ElementParams, mean_stress: float,
         c, r = loose_cloud(0.5 * diam * shrink, (0, 0, 0), (p.edge,) * 3, seed=p.seed)
         keep = np.abs(c[:, 2] - z_grid) > r + 1.5 * r_grid
         c, r = c[keep], r[keep]
+    counts = placed_count(p.n, len(r), "cleared from the grid's layer",
+                          log=(lambda m: None) if build_only else log,
+                          what="grains" if clumps is None else "clumps")
     sample = build_box_sample(c, r, (0, 0, 0), (p.edge,) * 3, young=p.young, poisson=p.poisson,
                               friction_deg=p.prep_friction_deg, density=p.density,
                               local_damping=p.damping, clumps=clumps,
                               grain_material=grain_material(p, p.prep_friction_deg))
+    sample.counts = counts
     sc = sample.scene
     grain_bodies = np.arange(sc.num_bodies)
     gmat = sc.add_material(woven.woven_material(preset))
@@ -1497,6 +1503,8 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     return {
         "label": label, "prestressed": prestressed,
         "num_grains": int(measure.grain_of_body(sc)[1]),
+        # the grains (or clumps) asked and placed: those a grid's layer would cut are cleared
+        **getattr(sample, "counts", {}),
         "num_spheres": int(sc.num_bodies),
         "preparation_wall_time_s": t_prepared - t_start,
         "stage_wall_time_s": [s.get("wall_time_s") for s in stages],
