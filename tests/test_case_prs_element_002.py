@@ -419,3 +419,47 @@ def test_continuing_each_element_adds_under_5_percent_of_its_loading_strain(smok
                 label, k, line["added_strain"], e["loading_strain"])
         assert line["inertial_number"] <= s["params"]["rest_inertial"], label
     assert {f: f.stat().st_mtime_ns for f in out.rglob("*") if f.is_file()} == before
+
+
+def test_ctrl_c_with_workers_stops_the_pool_at_once(tmp_path):
+    """A stop with --workers ends the packings' processes at once (the pool, left to shut
+    down by itself, ran every queued packing first): exit 130, an interrupted run, no process
+    left behind."""
+    import signal
+    import subprocess
+    import sys
+    import time
+
+    from conftest import ROOT
+
+    out = tmp_path / "w"
+    args = [sys.executable, str(ROOT / "cases" / "prs_element_002.py"), "--smoke", "--out",
+            str(out), "--stresses", "20000,20000,40000", "--n", "250", "--grids", "standard",
+            "--seeds", "1-4", "--workers", "2"]
+    proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    t0 = time.time()
+    while time.time() - t0 < 120 and proc.poll() is None:
+        if list(out.glob("standard_s*_growth.csv")) or time.time() - t0 > 40:
+            break
+        time.sleep(0.2)
+    time.sleep(3)  # (the workers well into their packings)
+    children = subprocess.run(["pgrep", "-P", str(proc.pid)], capture_output=True,
+                              text=True).stdout.split()
+    assert children, "the pool's processes should be running"
+    t_stop = time.time()
+    proc.send_signal(signal.SIGINT)  # to the main process alone
+    _o, err = proc.communicate(timeout=60)
+    assert proc.returncode == 130, err[-2000:]
+    assert time.time() - t_stop < 30
+    from geogrid_dem.rundir import run_status
+
+    assert run_status(out)["status"] == "interrupted"
+    def alive():
+        return [c for c in children if subprocess.run(["kill", "-0", c],
+                                                      capture_output=True).returncode == 0]
+
+    t_gone = time.time()
+    while alive() and time.time() - t_gone < 10:  # (multiprocessing's tracker exits last)
+        time.sleep(0.2)
+    assert not alive(), [subprocess.run(["ps", "-o", "args=", "-p", c], capture_output=True,
+                                        text=True).stdout for c in alive()]

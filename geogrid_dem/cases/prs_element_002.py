@@ -489,8 +489,7 @@ def run(p: Params, out: Path) -> dict:
             n_proc = min(p.workers, len(todo))
             log(f"--workers {p.workers}: {len(todo)} packings (RE and PRS on each), {n_proc} "
                 "at a time")
-            ex = stack.enter_context(concurrent.futures.ProcessPoolExecutor(
-                max_workers=n_proc, mp_context=multiprocessing.get_context("spawn")))
+            ex = stack.enter_context(_pool(n_proc))
             results = ex.map(_pair_job, *zip(*args))
         else:
             results = (_pair_job(*a) for a in args)
@@ -515,6 +514,26 @@ def run(p: Params, out: Path) -> dict:
             f"{_fmt(f['diff_se'])} (n = {f['n']}): {f['verdict']}")
     log(f"done in {summary['wall_time_total_s']:.1f} s; report in {out / 'report.md'}")
     return summary
+
+
+@contextlib.contextmanager
+def _pool(n_proc: int):
+    """The packings' process pool. A stop (Ctrl-C, SIGTERM, an error) ends it at once: its
+    processes are terminated and the packings not yet started cancelled (a pool left to shut
+    down by itself would run every queued packing first); the finished ones are kept."""
+    ex = concurrent.futures.ProcessPoolExecutor(
+        max_workers=n_proc, mp_context=multiprocessing.get_context("spawn"))
+    try:
+        yield ex
+    except BaseException:
+        procs = list((getattr(ex, "_processes", None) or {}).values())
+        ex.shutdown(wait=False, cancel_futures=True)
+        for proc in procs:
+            proc.terminate()
+        for proc in procs:
+            proc.join(timeout=10)
+        raise
+    ex.shutdown(wait=True)
 
 
 def _draw_pairs(p: Params, out: Path) -> None:
