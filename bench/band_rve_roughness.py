@@ -22,9 +22,14 @@ from __future__ import annotations
 
 import argparse
 import json
+import math
 import time
 
 import numpy as np
+import sys
+from pathlib import Path
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 
 def roughness(*, grains: int, seed: int, pressure_pa: float, tension_n_per_m: float,
@@ -72,7 +77,7 @@ def roughness(*, grains: int, seed: int, pressure_pa: float, tension_n_per_m: fl
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = _cli.BenchParser(zero_ok=("probe",), description=__doc__.split("\n\n")[0])
     ap.add_argument("--smoke", action="store_true", help="the first relaxation level only")
     ap.add_argument("--grains", type=int, default=80)
     ap.add_argument("--seed", type=int, default=1501, help="packing seed (the footing's "
@@ -92,8 +97,8 @@ def main(argv=None) -> dict:
         levels = [float(x) for x in a.unbalanced.split(",")]
     except ValueError:
         ap.error(f"--unbalanced={a.unbalanced!r}: comma-separated numbers")
-    if not levels or any(not (x > 0) for x in levels):
-        ap.error(f"--unbalanced={a.unbalanced!r}: numbers > 0")
+    if not levels or any(not (x > 0 and math.isfinite(x)) for x in levels):
+        ap.error(f"--unbalanced={a.unbalanced!r}: numbers > 0, finite")
     if a.grains < 80:
         ap.error(f"--grains={a.grains}: at least 80 (fewer of the footing's 3 mm grains do "
                  "not fit beside the sheet)")
@@ -114,4 +119,4 @@ def main(argv=None) -> dict:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(_cli.run(main))

@@ -25,6 +25,10 @@ import time
 import numpy as np
 
 import cpp_dem as dem
+import sys
+from pathlib import Path
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 try:  # the package layout of the revision under test (bench/ab_build.py runs older ones too)
     from cpp_dem.build.clumps import ClumpTemplate, clump_cloud
 except ImportError:
@@ -123,7 +127,7 @@ def clone(src, free: bool, hi, hold: bool = False):
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--clumps", type=int, default=2000)
     ap.add_argument("--mode", choices=("settled", "same-state"), default="settled",
                     help="settled: each pile settled on its own, timed at rest; same-state: "
@@ -191,4 +195,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(_cli.run(main))

@@ -37,6 +37,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 from _report import markdown_table  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 
 def _log(msg: str) -> None:
@@ -92,13 +94,15 @@ def _resolutions(text: str) -> list[int]:
                                          "6,12,24") from None
     if not out:
         raise argparse.ArgumentTypeError(f"{text!r}: no resolution given, e.g. 6,12,24")
+    if any(x < 1 for x in out):
+        raise argparse.ArgumentTypeError(f"{text!r}: each resolution must be >= 1")
     return out
 
 
 def main(argv=None) -> int:
     from geogrid_dem.cases import prs_element_002 as c
 
-    ap = argparse.ArgumentParser(
+    ap = _cli.BenchParser(out="folder",
         prog="bench/clump_resolution.py",
         description="The 002 element (DEM only, smoke settings, 1 thread) with the gravel grains "
                     "filled with N spheres each (clumps:gravel@N): wall time, grains, spheres, "
@@ -167,4 +171,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(_cli.run(main))

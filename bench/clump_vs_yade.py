@@ -37,6 +37,8 @@ import numpy as np
 
 import cpp_dem as dem
 from cpp_dem.build.clumps import ClumpTemplate, clump_cloud, random_orientations
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 HERE = Path(__file__).resolve().parent
 
@@ -136,7 +138,7 @@ def run_ours(sc, walls, stages):
 
 
 def main() -> int:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(out="file", description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--layout", choices=("cloud", "lattice", "settled", "dense"), default="cloud",
                     help="dense: a dense pack (cpp_dem compacts the cloud by servo walls to "
                          "--pressure, frictionless and without gravity, so no contact carries "
@@ -272,4 +274,4 @@ def main() -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

@@ -49,6 +49,8 @@ sys.path.insert(0, str(ROOT / "bench"))
 import prs_element as case  # noqa: E402
 from femcoupling.drivers import prs_element as drv  # noqa: E402
 from _report import emit, markdown_table, pct  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 
 def smoke_params(**kw) -> case.Params:
@@ -294,7 +296,7 @@ def presets_study(out, log) -> list:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = _cli.BenchParser(out="append", description=__doc__.split("\n\n")[0])
     ap.add_argument("--study", nargs="+", choices=("mesh", "tol", "fem-time", "presets"),
                     default=["mesh", "tol", "fem-time"])
     ap.add_argument("--sizes", type=float, nargs="+", default=[0.2, 0.1, 0.05, 0.025, 0.0125],
@@ -335,4 +337,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

@@ -45,6 +45,8 @@ sys.path.insert(0, str(HERE.parent / "cpp_dem"))
 sys.path.insert(0, str(HERE.parent))
 
 from _report import write_json  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 COLUMNS = ("step", "axial_strain", "q_pa", "radial_pa", "volumetric_strain", "status",
            "iterations", "wall_s")
@@ -103,8 +105,8 @@ def main(argv=None) -> int:
     from cpp_dem.progress import Progress
     from femcoupling.hierarchical3d import HierarchicalCylinder, cylinder_cells
 
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(signed=("alone",), description=__doc__,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--radius", type=float, default=0.025, help="specimen radius, m")
     ap.add_argument("--height", type=float, default=0.1, help="specimen height, m")
     ap.add_argument("--size", type=float, default=0.05, help="tetrahedra size, m")
@@ -223,4 +225,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

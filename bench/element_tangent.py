@@ -36,6 +36,8 @@ import cpp_dem as dem  # noqa: E402
 from cpp_dem.protocols import periodic  # noqa: E402
 from cpp_dem.protocols import prep
 from cpp_dem.elements.periodic import DemElement  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 
 def log(msg: str) -> None:
@@ -57,8 +59,8 @@ def elastic_element(base: DemElement, friction_deg: float) -> DemElement:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(out="file", description=__doc__,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, default=400)
     ap.add_argument("--stress", type=float, default=100e3, help="isotropic stress, Pa")
     ap.add_argument("--seed", type=int, default=1)
@@ -134,4 +136,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(_cli.run(main))

@@ -26,6 +26,8 @@ from cpp_dem import measure
 from cpp_dem.protocols import prep
 from cpp_dem.build.packing import loose_cloud
 from cpp_dem.protocols.triaxial import build_box_sample, deviatoric_stage, isotropic_stage
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -177,7 +179,7 @@ SCENARIOS = {"dt": dt_factors, "confinement": confinement, "friction": friction,
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = _cli.BenchParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--only", nargs="*", choices=sorted(SCENARIOS), default=None)
     ap.add_argument("--threads", type=int, default=0)
     a = ap.parse_args(argv)
@@ -189,4 +191,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

@@ -30,6 +30,8 @@ from pathlib import Path
 import numpy as np
 
 from _report import write_json  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "cpp_dem"))
@@ -42,8 +44,8 @@ def main(argv=None) -> int:
     from cpp_dem.elements.pool import ElementPool, PeriodicFactory
     from femcoupling import biaxial
 
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(out="file", description=__doc__,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--nx", type=int, default=2)
     ap.add_argument("--ny", type=int, default=2)
     ap.add_argument("--grains", type=int, default=150, help="grains per element")
@@ -207,4 +209,4 @@ def compare(runs: list, big: list, porosity_tol: float = 0.005) -> dict:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(_cli.run(main))

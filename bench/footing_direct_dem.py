@@ -58,6 +58,8 @@ sys.path.insert(0, str(HERE.parent / "cpp_dem"))
 sys.path.insert(0, str(HERE.parent))
 
 from _report import write_json  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 #: The direct DEM's boxes of each --out-of-plane choice: (its key in the runs, periodic_y).
 BOXES = {"walls": (("dem", False),), "periodic": (("dem_periodic", True),),
@@ -70,7 +72,7 @@ SMOKE = dict(length=0.06, depth=0.04, thickness=0.03, b=0.03, nx=2, ny=2, cell_g
 
 
 def parse(argv=None) -> argparse.Namespace:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = _cli.BenchParser(description=__doc__.splitlines()[0])
     ap.add_argument("--smoke", action="store_true",
                     help="test size: a box of about 390 grains, 24 elements of 50, 1 seed")
     ap.add_argument("--out", type=Path, default=Path("results/bench/footing_direct_dem"))
@@ -105,8 +107,12 @@ def parse(argv=None) -> argparse.Namespace:
     for k in ("length", "depth", "thickness", "b", "nx", "ny", "cell_grains"):
         if getattr(a, k) is None:
             setattr(a, k, base[k])
-    a.settlements = (tuple(float(v) * 1e-3 for v in a.settlements_mm.split(","))
-                     if a.settlements_mm else base["settlements"])
+    try:
+        a.settlements = (tuple(v * 1e-3 for v in _cli.numbers(a.settlements_mm,
+                                                               "--settlements-mm"))
+                         if a.settlements_mm else base["settlements"])
+    except _cli.BenchInputError as e:
+        ap.error(str(e))
     if a.seeds is None:
         a.seeds = 1 if a.smoke else 3
     if a.seeds < 1:
@@ -360,4 +366,4 @@ def main(argv=None) -> dict:
 
 
 if __name__ == "__main__":  # (Dask spawns its workers: the guard is needed)
-    main()
+    sys.exit(_cli.run(main))

@@ -19,6 +19,10 @@ import numpy as np
 
 import cpp_dem as dem
 from cpp_dem.build import geogrid
+import sys
+from pathlib import Path
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 
 def build(n_grains: int, nodes: int, with_grid: bool, seed: int = 1):
@@ -61,7 +65,7 @@ def build(n_grains: int, nodes: int, with_grid: bool, seed: int = 1):
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--grains", type=int, default=10000)
     ap.add_argument("--nodes", type=int, default=71, help="grid nodes per side (71: 9940 members)")
     ap.add_argument("--steps", type=int, default=2000)
@@ -89,4 +93,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(_cli.run(main))

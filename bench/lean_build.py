@@ -71,6 +71,8 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 from _machine import busy_cpu_seconds, own_cpu_seconds  # noqa: E402  (bench/ is on sys.path)
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 ROOT = Path(__file__).resolve().parents[1]
 PKG_SRC = ROOT / "cpp_dem" / "cpp_dem"
@@ -490,7 +492,7 @@ def print_tables(ratios: list[dict], counted: list[dict], imports: list[dict],
 # ---- main ---------------------------------------------------------------------------------------
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(
+    ap = _cli.BenchParser(out="append",
         description="Full vs lean (-DCPP_DEM_GEOGRID=OFF) build on the same sphere-only scene, "
                     "and a check that DEM-only runs never import dolfinx. One JSON line per "
                     "measurement on stdout, Markdown tables on stderr.",
@@ -596,4 +598,4 @@ def main(argv: list[str] | None = None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

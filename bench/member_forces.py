@@ -30,6 +30,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "cpp_dem"))
 
 import cpp_dem as dem  # noqa: E402
 from cpp_dem.build import geogrid  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 
 def loop_forces(grid, scene) -> np.ndarray:
@@ -63,7 +65,7 @@ def loaded_grid(nodes: int, seed: int = 1):
 
 
 def main(argv=None) -> dict:
-    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap = _cli.BenchParser(description=__doc__.splitlines()[0])
     ap.add_argument("--nodes", type=int, default=10, help="grid nodes per side (default 10)")
     ap.add_argument("--calls", type=int, default=200, help="calls per timed block")
     ap.add_argument("--blocks", type=int, default=5, help="timed blocks of each")
@@ -98,4 +100,4 @@ def main(argv=None) -> dict:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(_cli.run(main))

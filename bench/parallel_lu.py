@@ -38,6 +38,8 @@ sys.path.insert(0, str(HERE.parent / "cpp_dem"))
 sys.path.insert(0, str(HERE.parent))
 
 from _report import markdown_table, write_json  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 PACKAGES = ("superlu_dist", "mumps")
 
@@ -83,7 +85,7 @@ def worker(lu: str, fine_size: float, out: Path) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = _cli.BenchParser(out="folder", description=__doc__.split("\n\n")[0])
     ap.add_argument("--smoke", action="store_true", help="fine size 0.1 m, 2 runs each")
     ap.add_argument("--runs", type=int, default=None, help="runs per package (default 6)")
     ap.add_argument("--fine-size", type=float, default=None,
@@ -161,4 +163,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

@@ -18,6 +18,8 @@ import argparse
 import json
 import sys
 from pathlib import Path
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 #: case -> (error key, or {knob: key}, label of the error axis)
 ERRORS = {
@@ -112,7 +114,7 @@ def plot(case: str, rows: list, png: Path) -> None:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = _cli.BenchParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("jsonl", nargs="+", type=Path, help="JSONL files of the benches")
     ap.add_argument("--out", type=Path, default=Path("results/speed_accuracy"),
                     help="directory for pareto_<case>.png")
@@ -132,4 +134,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

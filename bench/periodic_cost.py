@@ -38,11 +38,13 @@ sys.path.insert(0, str(HERE.parent / "cpp_dem"))
 import cpp_dem as dem  # noqa: E402
 from cpp_dem import measure  # noqa: E402
 from cpp_dem.elements.periodic import DemElement  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(out="file", description=__doc__,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, default=2000)
     ap.add_argument("--steps", type=int, default=500)
     ap.add_argument("--rounds", type=int, default=5)
@@ -104,4 +106,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(_cli.run(main))

@@ -39,6 +39,8 @@ import cpp_dem as dem  # noqa: E402
 from cpp_dem.protocols import periodic  # noqa: E402
 from cpp_dem.protocols import prep
 from cpp_dem.build.packing import loose_cloud  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 
 def log(msg: str) -> None:
@@ -165,8 +167,8 @@ def summary(rows) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(out="file", description=__doc__,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--layer", type=float, nargs=2, default=(10, 30),
                     help="layer width and height in mean diameters")
     ap.add_argument("--slab", type=float, default=1.5,
@@ -223,4 +225,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(_cli.run(main))

@@ -45,6 +45,8 @@ sys.path.insert(0, str(HERE.parent / "cpp_dem"))
 
 import cpp_dem as dem  # noqa: E402
 from cpp_dem.protocols import periodic  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 
 def log(msg: str) -> None:
@@ -60,8 +62,8 @@ def invariants(s: np.ndarray) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(out="file", description=__doc__,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, default=500)
     ap.add_argument("--seed", type=int, default=1)
     ap.add_argument("--stress", type=float, default=100e3, help="preparation stress, Pa")
@@ -191,4 +193,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(_cli.run(main))

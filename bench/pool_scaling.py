@@ -49,6 +49,8 @@ sys.path.insert(0, str(HERE.parent / "cpp_dem"))
 from _report import emit, write_json  # noqa: E402
 
 from cpp_dem.elements.pool import ElementPool, PeriodicFactory  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 DASK = str(Path(sys.executable).with_name("dask"))
 PROJECTED = 1000  # elements
@@ -198,8 +200,8 @@ def client_scan(client, args) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(out="file", description=__doc__,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--elements", type=int, default=8)
     ap.add_argument("--grains", type=int, default=400)
     ap.add_argument("--workers", type=int, default=2)
@@ -272,4 +274,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(_cli.run(main))

@@ -95,6 +95,8 @@ from cpp_dem import apply_threads  # noqa: E402
 from cpp_dem._core import ServoWall  # noqa: E402
 from cpp_dem.build import geogrid  # noqa: E402
 from cpp_dem.protocols import pullout  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 MEMBERS = ("A1", "C1", "A2", "C2")
 DEFINITIONS = ("section_sum", "section_abs_sum", "section_edge_abs", "along_mean_abs",
@@ -714,8 +716,8 @@ def agreement(ours: dict, yade: dict, so: dict, sy: dict) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(out="file", description=__doc__,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--spheres", type=int, default=3000,
                     help="grains (the paper's smallest sample: 3000)")
     ap.add_argument("--steps", type=int, default=0,
@@ -878,4 +880,4 @@ def summary_line(res: dict) -> dict:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

@@ -39,6 +39,8 @@ from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -257,8 +259,9 @@ def summarise(rows: list, args, seeds: list, sweep: list) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(prog="bench/quasi_static.py", description=__doc__.split("\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(out="folder", prog="bench/quasi_static.py",
+                          description=__doc__.split("\n")[0],
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, default=150, help="clumps before the grid's layer is "
                     "cleared (the 002 smoke size)")
     ap.add_argument("--grid", choices=("detailed", "standard"), default="detailed")
@@ -285,10 +288,13 @@ def main(argv=None) -> int:
         sweep = sorted({r["speedup_setting"] for r in rows if r["speedup_setting"] > 0})
         print(json.dumps(summarise(rows, args, seeds, sweep)))
         return 0
-    sweep = sorted({float(x) for x in args.sweep.split(",")} | {args.main})
-    if any(s < 1 for s in sweep):
-        ap.error(f"--sweep={args.sweep}: every setting must be >= 1")
-    seeds = [int(x) for x in args.seeds.split(",")]
+    try:
+        sweep = sorted(set(_cli.numbers(args.sweep, "--sweep", minimum=1)) | {args.main})
+        seeds = _cli.numbers(args.seeds, "--seeds", kind=int, lo="nonneg")
+    except _cli.BenchInputError as e:
+        ap.error(str(e))
+    if args.main < 1:
+        ap.error(f"--main={args.main}: must be >= 1 (a setting of the sweep)")
     if args.out:
         args.out.mkdir(parents=True, exist_ok=True)
     rows = []
@@ -330,4 +336,4 @@ def main(argv=None) -> int:
 
 if __name__ == "__main__":
     sys.path.insert(0, str(ROOT))
-    sys.exit(main())
+    sys.exit(_cli.run(main))

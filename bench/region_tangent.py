@@ -27,6 +27,8 @@ import tempfile
 import time
 import warnings
 from pathlib import Path
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
@@ -74,8 +76,8 @@ def run(mode: str, seed: int, args, cache: str) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(out="append", description=__doc__,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--grains", type=int, default=200, help="grains of the element")
     ap.add_argument("--seeds", type=int, nargs="+", default=[1],
                     help="packing seeds of the element (one pair of runs each)")
@@ -135,4 +137,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(_cli.run(main))

@@ -39,6 +39,8 @@ from cpp_dem import DemElement, _core  # noqa: E402
 from cpp_dem.build import woven  # noqa: E402
 from cpp_dem.elements import reinforced  # noqa: E402
 from cpp_dem.elements.periodic import default_material  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 
 def log(msg: str) -> None:
@@ -81,8 +83,8 @@ def stiffness_xx(el: DemElement, h: float) -> tuple[float, float]:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(description=__doc__,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--n", type=int, default=150, help="grains (default 150)")
     ap.add_argument("--stress", type=float, default=50e3, help="Pa (default 50e3)")
     ap.add_argument("--prestress", type=float, default=2000.0, help="N/m (default 2000)")
@@ -139,4 +141,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

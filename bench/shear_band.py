@@ -46,6 +46,8 @@ sys.path.insert(0, str(HERE.parent / "cpp_dem"))
 sys.path.insert(0, str(HERE.parent))
 
 from _report import write_json  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 
 def equivalent_shear_strain(grad: np.ndarray) -> np.ndarray:
@@ -142,8 +144,8 @@ def main(argv=None) -> int:
     from femcoupling import biaxial
     from femcoupling.hierarchical import quadrature_points
 
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(out="folder", zero_ok=("weak_radius",), description=__doc__,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--nx", type=int, default=4, help="cells across (x2 triangles)")
     ap.add_argument("--ny", type=int, default=9, help="cells up")
     ap.add_argument("--degree", type=int, default=2, choices=(1, 2),
@@ -173,9 +175,11 @@ def main(argv=None) -> int:
     if not (0 <= args.weak_radius < 1):
         ap.error(f"--weak-radius={args.weak_radius}: must be in [0, 1) (a fraction of lx)")
     try:
-        wx, wy = (float(v) for v in args.weak_at.split(","))
-    except ValueError:
-        ap.error(f"--weak-at={args.weak_at!r}: two fractions, x,y")
+        wx, wy = _cli.numbers(args.weak_at, "--weak-at", lo="nonneg")
+    except (ValueError, _cli.BenchInputError):
+        ap.error(f"--weak-at={args.weak_at!r}: two fractions in [0, 1], x,y")
+    if not (wx <= 1 and wy <= 1):
+        ap.error(f"--weak-at={args.weak_at!r}: two fractions in [0, 1], x,y")
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
     t0 = time.perf_counter()
@@ -259,4 +263,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    raise SystemExit(main())
+    sys.exit(_cli.run(main))

@@ -35,6 +35,8 @@ import cpp_dem as dem  # noqa: E402
 from _report import emit, markdown_table, pct  # noqa: E402
 import pullout_000 as case  # noqa: E402
 from cpp_dem.protocols import pullout  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 #: knob -> (values, index of the reference value, Params field or None)
 KNOBS = {
@@ -155,7 +157,7 @@ def presets_run(base, distance: float, out: Path | None = None) -> list:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = _cli.BenchParser(out="append", description=__doc__.split("\n\n")[0])
     ap.add_argument("--knobs", nargs="*", choices=sorted(KNOBS), default=list(KNOBS))
     ap.add_argument("--distance", type=float, default=0.02, help="pull distance, m")
     ap.add_argument("--threads", type=int, default=1)
@@ -209,4 +211,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

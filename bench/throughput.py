@@ -69,6 +69,8 @@ from _machine import busy_cpu_seconds, own_cpu_seconds  # noqa: E402  (bench/ is
 import numpy as np  # noqa: E402
 
 import cpp_dem as dem  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 ROOT = Path(__file__).resolve().parents[1]
 YADE_SCRIPT = Path(__file__).resolve().parent / "yade_throughput.py"
@@ -477,8 +479,8 @@ def agree(a: float, b: float, tol: float) -> bool:
 
 
 def main(argv: list[str] | None = None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(out="append", description=__doc__.split("\n\n")[0],
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", type=int, nargs="+", help="packing sizes N (default 1000 10000; "
                     "--quick: 1000)")
     ap.add_argument("--threads", type=int, nargs="+", default=[1, 2], help="thread counts")
@@ -696,4 +698,4 @@ def summarize(path: Path) -> None:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

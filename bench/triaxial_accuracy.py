@@ -39,6 +39,8 @@ from _report import emit, markdown_table, pct  # noqa: E402
 import triaxial as case  # noqa: E402
 from cpp_dem import _core  # noqa: E402
 from cpp_dem.protocols.triaxial import apply_preset, build_box_sample, deviatoric_stage  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 #: knob -> (values, index of the reference value)
 KNOBS = {
@@ -162,7 +164,7 @@ def presets_runs(iso: Isotropic, log) -> list:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = _cli.BenchParser(out="append", description=__doc__.split("\n\n")[0])
     ap.add_argument("--knobs", nargs="*", choices=sorted(KNOBS), default=list(KNOBS))
     ap.add_argument("--presets", action="store_true",
                     help="also measure the presets fast/balanced/accurate against the most "
@@ -206,4 +208,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

@@ -33,6 +33,8 @@ import cpp_dem as dem  # noqa: E402
 from cpp_dem import measure  # noqa: E402
 from cpp_dem.protocols import prep
 from cpp_dem.protocols.triaxial import build_box_sample, isotropic_stage  # noqa: E402
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 YOUNG, POISSON, PHI, RHO, DAMPING = 4.5e6, 0.33, 32.0, 2650.0, 0.2
 
@@ -92,8 +94,8 @@ def run_yade(csv: Path, lo, hi, args, threads: int, yade: str) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__,
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(description=__doc__,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--packing", type=Path, help="CSV x,y,z,r (m) of an isotropic sample")
     ap.add_argument("--n", type=int, default=3000, help="grains, when no --packing is given")
     ap.add_argument("--pressure", type=float, default=75e3, help="cell pressure, Pa")
@@ -124,4 +126,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(_cli.run(main))

@@ -23,6 +23,8 @@ import sys
 import time
 import warnings
 from pathlib import Path
+sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 
@@ -50,7 +52,7 @@ def run(workers: int, args) -> dict:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = _cli.BenchParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--grains", type=int, default=100, help="grains per element (default 100)")
     ap.add_argument("--iterations", type=int, default=3,
                     help="FEM solves of the loop, >= 2 (default 3)")
@@ -71,4 +73,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(_cli.run(main))

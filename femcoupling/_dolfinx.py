@@ -40,6 +40,33 @@ class FemModules(typing.NamedTuple):
     """``mpi4py.MPI`` as loaded first by ``dolfinx_solver``."""
 
 
+#: PETSc's options at its initialisation, when :func:`load` is the first to import it: no
+#: signal handlers of PETSc's own (see :func:`load`).
+PETSC_INIT_ARGS = ["-no_signal_handler"]
+
+
+def restore_python_signal_handlers(names=("SIGTERM", "SIGINT")) -> None:
+    """Puts the dispositions Python has of the signals ``names`` back at the C level, where
+    a library below replaced them (on the main thread only: Python runs handlers there
+    alone, and only there may set them). Two did: a PETSc initialised before :func:`load`
+    (by an ``import petsc4py.PETSc`` of a script's own) installs its own handler of SIGTERM,
+    which aborts the process (status 241) instead of letting the run close its files and
+    workers; and every ``gmsh.initialize()`` sets SIGTERM, SIGQUIT, SIGPIPE (and SIGHUP)
+    back to their defaults, so that a SIGTERM killed the process at once (status -15, the
+    manifest left ``running``, the Dask workers orphaned) and a broken pipe killed it
+    instead of raising ``BrokenPipeError`` (``femcoupling.elastic``)."""
+    import signal
+    import threading
+
+    if threading.current_thread() is not threading.main_thread():
+        return
+    for name in names:
+        sig = getattr(signal, name)
+        handler = signal.getsignal(sig)
+        if handler is not None:  # (None: installed outside Python; left as it is)
+            signal.signal(sig, handler)
+
+
 @functools.cache
 def load() -> FemModules:
     """Import the FEM stack in the required order and return its modules.
@@ -49,8 +76,19 @@ def load() -> FemModules:
     Returns:
         A :class:`FemModules` holding dolfinx and its companions.
     """
+    import sys
+
     import dolfinx_solver  # noqa: F401 - must precede dolfinx: orders MPI, guards petsc4py
 
+    if "petsc4py.PETSc" not in sys.modules:
+        # PETSc's initialisation installs its own handler of SIGTERM, SIGHUP, SIGSEGV,
+        # SIGFPE ... (PetscPushSignalHandler) over Python's: a SIGTERM then printed PETSc's
+        # "Caught signal number 15" and aborted the process (exit 241), so a case's SIGTERM
+        # handler (geogrid_dem.rundir.run_main: exit 143, manifest "interrupted", Dask
+        # workers closed) never ran. -no_signal_handler leaves the signals to Python.
+        import petsc4py
+
+        petsc4py.init(PETSC_INIT_ARGS)
     import dolfinx
     import dolfinx.fem
     import dolfinx.fem.petsc
@@ -60,6 +98,7 @@ def load() -> FemModules:
     from mpi4py import MPI
     from petsc4py import PETSc
 
+    restore_python_signal_handlers()
     return FemModules(
         dolfinx=dolfinx,
         fem=dolfinx.fem,

@@ -124,6 +124,12 @@ def _gmsh_model(name: str) -> Iterator[Any]:
         # the rest of the process. No config files: the mesh must not depend on
         # the user's gmshrc.
         gmsh.initialize(readConfigFiles=False, interruptible=False)
+        # (gmsh sets SIGTERM, SIGHUP, SIGQUIT and SIGPIPE back to their defaults: a
+        # SIGTERM then killed a run at once, its manifest left "running"; SIGHUP is left
+        # at its default, as gmsh leaves it)
+        from femcoupling._dolfinx import restore_python_signal_handlers
+
+        restore_python_signal_handlers(("SIGTERM", "SIGINT", "SIGQUIT", "SIGPIPE"))
     touched_options = ("General.Terminal", "Mesh.MeshSizeMin", "Mesh.MeshSizeMax")
     saved_options = {key: gmsh.option.getNumber(key) for key in touched_options}
     previous_model = None if owns_session else gmsh.model.getCurrent()

@@ -362,7 +362,8 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         self._step_end = {"converged_on": out.converged_on,
                           "noise_residual": out.noise_residual, "status": out.status,
                           "residual": rel, "tol": self.newton_rtol * out.scale / on,
-                          "residual_pa": rel * self._largest_stress(pts)}
+                          "residual_pa": rel * self._largest_stress(pts),
+                          "redraws": out.redraws}
 
     def _newton(self) -> int:
         """Newton iterations of the current step (``femcoupling.quadrature.newton_solve``,
@@ -461,9 +462,11 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
                f"Pa), above the tolerance newton_rtol={self.newton_rtol:g} ({r.tol:.3g} of "
                f"the regions' force), within {self.noise_factor:g} x the elements' noise "
                f"({r.noise_residual:.3g} of the body's force scale) and within "
-               f"noise_ceiling={self.noise_ceiling:g}: the DEM region elements do not "
-               "resolve the tolerance asked; the step stopped at their scatter "
-               "(stopped_at_scatter, not converged)")
+               f"noise_ceiling={self.noise_ceiling:g}"
+               + (f" (after {r.redraws} more iterates: the first stall was above the "
+                  "ceiling, within the noise)" if r.redraws else "")
+               + ": the DEM region elements do not resolve the tolerance asked; the step "
+               "stopped at their scatter (stopped_at_scatter, not converged)")
         self.warnings.append(msg)
         warnings.warn(msg, NoiseWarning, stacklevel=3)
 

@@ -38,6 +38,9 @@ class StepResult:
         residual_pa: the accepted residual in stress units, Pa: ``residual`` times the
             largest stress magnitude of the points of that scale (the regions' with region
             elements, else the body's).
+        redraws: the iterates Newton took after it had stalled within the elements' noise
+            but above ``SoilModel.noise_ceiling``, before one was within both
+            (``femcoupling.quadrature.REDRAWS``); 0 where none was needed.
     """
 
     stage: str
@@ -52,3 +55,4 @@ class StepResult:
     residual: float = float("nan")
     tol: float = float("nan")
     residual_pa: float = float("nan")
+    redraws: int = 0

@@ -493,3 +493,40 @@ def test_a_square_footing_in_3d_runs_with_an_element_in_every_tetrahedron_of_its
         from geogrid_dem.cases.footing_multiscale import parse_args
 
         parse_args(["--smoke", "--dim", "3", "--band-grains", "80"])
+
+
+#: The rounding-only variants of a machine of this kind: the pair pass's narrow SIMD form
+#: (the CPU's other path, CPP_DEM_NARROW=1) and another BLAS kernel (OPENBLAS_CORETYPE).
+ROUNDING_VARIANTS = ({"CPP_DEM_NARROW": "1"}, {"OPENBLAS_CORETYPE": "Haswell"})
+
+
+@pytest.mark.parametrize("env", ROUNDING_VARIANTS, ids=lambda e: ",".join(f"{k}={v}"
+                                                                        for k, v in e.items()))
+def test_the_smoke_s_verdicts_do_not_depend_on_the_rounding_path(case_smoke, tmp_path, env):
+    """Issue 60 item 1: the smoke ended with RE seed 1 ``failed`` on a fresh machine and
+    passed here; a rounding-only change flipped it. RE seed 1 is its rounding-sensitive run:
+    its steps stall at 0.86-0.93 % of the zone's own force against the 1 % noise ceiling,
+    the noise band (twice the measured noise) at 1.3-1.6 %, and the calibration moves with
+    the BLAS kernel (E 10.3-12.1 MPa over five kernels here, 11.3-14.5 on the fresh
+    machine). That run alone (``--variants RE --seeds 1``, about 20 s; its calibration and
+    elements are those of the whole smoke) under each rounding variant ends with the
+    verdicts of the whole smoke's run: the same status and exit status, every level
+    reached."""
+    import os
+
+    out_ref, ref = case_smoke("footing_multiscale")
+    s_ref = json.loads((out_ref / "summary.json").read_text())
+    want = s_ref["variants"]["RE"]["multiscale"]["runs"]["1"]
+    assert ref.returncode in (0, 3) and want["status"] in ("converged", "stopped_at_scatter")
+    out = tmp_path / "rve"
+    r = subprocess.run([sys.executable, "-m", "geogrid_dem.cases.footing_multiscale",
+                        "--smoke", "--variants", "RE", "--seeds", "1", "--out", str(out)],
+                       capture_output=True, text=True, cwd=ROOT, timeout=900,
+                       env={**os.environ, "OMP_NUM_THREADS": "1", **env})
+    s = json.loads((out / "summary.json").read_text())
+    got = s["variants"]["RE"]["multiscale"]["runs"]["1"]
+    assert got["status"] == want["status"], (got["status"], got["reason"])
+    assert r.returncode == (0 if want["status"] == "converged" else 3), r.stderr[-2000:]
+    assert got["pressure_pa"] == pytest.approx(s["pressures_pa"], rel=0.011)
+    assert set(got["level_statuses"][0]) <= {"converged", "stopped_at_scatter"}
+    assert len(got["step_redraws"]) == len(got["step_statuses"])

@@ -44,7 +44,8 @@ from cpp_dem._core import RadiusGrowth, ServoWall, TriaxialController  # noqa: F
 from cpp_dem.checkpoint import load_checkpoint, save_checkpoint  # noqa: F401
 from cpp_dem.scene import (BOX_WALLS, ControllerLimitWarning, Scene, apply_threads,
                            hertz_mindlin_material,  # noqa: F401
-                    TargetNotMetWarning, linear_material)
+                    PhysicalRangeWarning, TargetNotMetWarning, TimeStepWarning,
+                    linear_material)
 from cpp_dem.measure.inertial import InertialNumberWarning  # noqa: F401,E402
 
 from cpp_dem.build import geogrid  # noqa: F401,E402
@@ -52,6 +53,7 @@ from cpp_dem.build import packing
 from cpp_dem.protocols import periodic
 from cpp_dem._core import CellController  # noqa: F401,E402  (periodic cells)
 from cpp_dem.elements.periodic import DemElement  # noqa: F401,E402
+from cpp_dem.elements.increments import ContactLossWarning  # noqa: F401,E402
 
 __all__ = [
     "BeamParams",
@@ -71,7 +73,10 @@ __all__ = [
     "write_packing_csv",
     "BlowUpError",
     "ContactModel",
+    "ContactLossWarning",
     "ControllerLimitWarning",
+    "PhysicalRangeWarning",
+    "TimeStepWarning",
     "InertialNumberWarning",
     "TargetNotMetWarning",
     "ContactPhys",

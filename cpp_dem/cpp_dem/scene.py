@@ -153,6 +153,37 @@ class TargetNotMetWarning(UserWarning):
     error with ``warnings.simplefilter("error", cpp_dem.TargetNotMetWarning)``."""
 
 
+class PhysicalRangeWarning(UserWarning):
+    """A material or a grain with values no grain has (``Scene.add_material``,
+    ``Scene.add_clumps``; bounds in :data:`GRAIN_BOUNDS`): the run goes on, but says so. A
+    value given on purpose (a contact that never slides, at 89 deg) is one to filter:
+    ``warnings.simplefilter("ignore", cpp_dem.PhysicalRangeWarning)``."""
+
+
+#: What no grain has, and why (docs/reliability.md):
+#: - ``young``: no solid is stiffer than diamond, 1.05-1.2e12 Pa;
+#: - ``density``: none is denser than osmium, 22 590 kg/m^3;
+#: - ``friction_angle_deg``: friction measured between grains of sand, gravel and rock, and
+#:   against steel or a geogrid, is mu 0.1-1.0 (6-45 deg); above 60 deg (mu 1.73) a contact is
+#:   one that does not slide, not a material's;
+#: - ``clump_members``: a grain's shape as a clump takes 2-100 spheres (the studies here
+#:   6-24: docs/clumps.md); each member is a sphere to every contact search, so a clump of
+#:   more than 1000 costs as much as 1000 grains.
+GRAIN_BOUNDS = {"young": 1.2e12, "density": 2.3e4, "friction_angle_deg": 60.0,
+                "clump_members": 1000}
+
+
+def _warn_range(msg: str) -> None:
+    import warnings
+
+    warnings.warn(msg, PhysicalRangeWarning, stacklevel=3)
+
+
+class TimeStepWarning(UserWarning):
+    """A hand-set time step above ``critical_dt()`` at a moment the dt check does not stop
+    (:meth:`Scene.run`; docs/reliability.md)."""
+
+
 class Scene(_core.Scene):
     """A DEM scene: spheres, walls, materials, contacts and the step loop (in C++).
 
@@ -172,6 +203,28 @@ class Scene(_core.Scene):
         self.local_damping = local_damping
 
     # ---- building ------------------------------------------------------------------------
+    def add_material(self, material) -> int:
+        """Adds ``material`` (a ``cpp_dem.Material``); returns its index. A modulus, a
+        density or a friction angle that no grain has (:data:`GRAIN_BOUNDS`: E 5e16 Pa,
+        mu 20, phi 89.9 deg) gives a :class:`PhysicalRangeWarning` naming the value and the
+        bound."""
+        idx = _core.Scene.add_material(self, material)
+        b = GRAIN_BOUNDS
+        for field, value, bound, unit, why in (
+                ("young", material.young, b["young"], "Pa", "no solid is stiffer than diamond"),
+                ("density", material.density, b["density"], "kg/m^3",
+                 "no solid is denser than osmium"),
+                ("friction_angle_deg", material.friction_angle_deg, b["friction_angle_deg"],
+                 "deg", "grains of sand, gravel and rock, steel and geogrids have mu 0.1-1.0, "
+                        "6-45 deg; such a contact does not slide")):
+            if value > bound:
+                extra = (f" (mu = tan phi = {math.tan(math.radians(value)):.3g})"
+                         if field == "friction_angle_deg" else "")
+                _warn_range(f"material {idx}: {field}={value:g}{extra} is above {bound:g} "
+                            f"{unit}, which no grain has ({why}); the run goes on with it "
+                            "(filter cpp_dem.PhysicalRangeWarning if it is meant)")
+        return idx
+
     def add_spheres(self, centers, radii, *, material: int) -> np.ndarray:
         """Adds spheres with centres (n, 3) in m and radii (n,) in m; returns their ids.
 
@@ -283,6 +336,13 @@ class Scene(_core.Scene):
         if stiffness not in ("member", "grain"):
             raise ParameterError(f"stiffness={stiffness!r}: must be 'member' or 'grain'")
         material = _index(material, "material")
+        if template.num_members > GRAIN_BOUNDS["clump_members"]:
+            _warn_range(f"template {template.name!r}: {template.num_members} members, more than "
+                        f"{GRAIN_BOUNDS['clump_members']}: a grain's shape as a clump takes "
+                        "2-100 spheres (the studies here 6-24), and each member is a sphere to "
+                        f"every contact search, so each of these {n} clumps costs as much as "
+                        f"{template.num_members} grains (filter cpp_dem.PhysicalRangeWarning "
+                        "if it is meant)")
         rho = self.material(material).density
         props = template.props
         local = template.local_centres
@@ -374,6 +434,55 @@ class Scene(_core.Scene):
                 "inside, or build the walls around it")
 
     # ---- running ---------------------------------------------------------------------------
+    @property
+    def dt(self) -> float:
+        """Time step, s. Set by hand, it is checked at the next ``run`` against
+        ``critical_dt()`` (:meth:`_check_time_step`) besides the core's dt check."""
+        return _core.Scene.dt.fget(self)
+
+    @dt.setter
+    def dt(self, value: float) -> None:
+        _core.Scene.dt.fset(self, value)
+        self._dt_by_hand = True
+
+    def set_auto_timestep(self, safety: float = 0.8, period: int = 100) -> None:
+        """Every ``period`` steps set dt = safety x critical_dt() (period 0: once, now)."""
+        _core.Scene.set_auto_timestep(self, safety, period)
+        self._dt_by_hand = period == 0
+
+    def _check_time_step(self) -> None:
+        """Says (TimeStepWarning, once per scene) that ``dt`` is above ``critical_dt()`` where
+        the dt check cannot: when no contact is active, ``critical_dt()`` is the p-wave
+        estimate R sqrt(rho / E), while the check holds dt to the estimate of the contacts
+        that form, sqrt(2 m / k_n) with k_n >= E R for a grain: 2.9 times larger for spheres.
+        A step between the two runs on without an error, and grains dropped on each other
+        at 1.5 x the p-wave estimate (0.52 x the contacts') had their energy balance off by
+        2-48 % (docs/reliability.md)."""
+        dt = self.dt
+        # (only a step set by hand, checked once per value: counting the contacts is a pass
+        # over them, which a loop of short runs should not pay every call)
+        if (not getattr(self, "_dt_by_hand", False) or getattr(self, "_dt_said", False)
+                or getattr(self, "_dt_checked", None) == dt or self.dt_check_period <= 0
+                or self.density_scaling or not self.num_bodies):
+            return
+        self._dt_checked = dt
+        if self.num_active_contacts:
+            return
+        est = float(self.critical_dt())
+        if not (math.isfinite(est) and est > 0 and dt > est * (1 + 1e-9)):
+            return
+        import warnings
+
+        self._dt_said = True
+        warnings.warn(TimeStepWarning(
+            f"dt={dt:.4g} s is {dt / est:.3g} x critical_dt()={est:.4g} s, the "
+            "p-wave estimate R sqrt(rho / E) of a scene in which no contact is active: once "
+            "grains touch, the dt check holds dt only to their contacts' estimate, sqrt(2 m / "
+            "k_n) (about 2.9 x the p-wave one for spheres), so the run goes on, but grains "
+            "that strike each other then take only a few steps per impact (grains dropped on "
+            "each other at 1.5 x the p-wave estimate: the energy balance 2-48 % off); lower "
+            "dt, or use set_auto_timestep(safety <= 1)"), stacklevel=3)
+
     #: Raise ControllerLimitWarning as an error (see :meth:`_check_controller_limits`).
     strict_controllers: bool = False
 
@@ -442,6 +551,7 @@ class Scene(_core.Scene):
                                  "call")
         self._check_geometry()
         self._check_controllers()
+        self._check_time_step()
         if every <= 0:
             self._run(steps)
             self._check_controller_limits()

@@ -141,11 +141,13 @@ def periodic_runner(p: ElementParams, out: Path, variant: str):
 def step_statuses(steps) -> dict:
     """Per load step of the FEM's Newton (``StepResult``): its status, its accepted residual
     (relative to the DEM region's own internal force), the tolerance on that scale and the
-    residual in Pa: the summary's record."""
+    residual in Pa, and the iterates it took after a stall above the noise ceiling
+    (``StepResult.redraws``): the summary's record."""
     return {"step_statuses": [r.status for r in steps],
             "step_residuals": [float(r.residual) for r in steps],
             "step_tols": [float(r.tol) for r in steps],
-            "step_residuals_pa": [float(r.residual_pa) for r in steps]}
+            "step_residuals_pa": [float(r.residual_pa) for r in steps],
+            "step_redraws": [int(getattr(r, "redraws", 0)) for r in steps]}
 
 
 def hierarchical_status(hier: dict, fem_strain_increment, rotation_deg: float):

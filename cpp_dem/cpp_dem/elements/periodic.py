@@ -26,7 +26,6 @@ move to another process.
 from __future__ import annotations
 
 import math
-import pickle
 import time
 from dataclasses import dataclass
 
@@ -38,11 +37,13 @@ from cpp_dem import measure
 from cpp_dem.protocols import periodic
 from cpp_dem.protocols import prep
 from cpp_dem._core import CellController, ParameterError
+from cpp_dem.elements import increments, state_format
 from cpp_dem.scene import Scene
 
 #: Voigt order of the tangents: (row, column) of each of the 6 components.
 VOIGT = ((0, 0), (1, 1), (2, 2), (1, 2), (0, 2), (0, 1))
-_FORMAT = "cpp_dem.DemElement/1"
+#: The kind of a DemElement's bytes (cpp_dem.elements.state_format).
+_KIND = "cpp_dem.DemElement"
 
 
 def voigt_strain(k: int, h: float) -> np.ndarray:
@@ -83,6 +84,9 @@ class DemElement:
     the homogenised (Love–Weber) stress and a tangent, and keeps its contacts and their
     history between calls. Build it with :meth:`periodic`, :meth:`box`, or from a prepared
     scene."""
+
+    #: what its bytes hold, for cpp_dem.elements.state_format
+    STATE_KIND = _KIND
 
     def __init__(self, scene: Scene, *, walls=(), gain: float = 0.3,
                  max_rate: float | None = None, dt_safety: float = 0.5,
@@ -297,15 +301,22 @@ class DemElement:
         return run, u, bool(u < unbalanced)
 
     def apply_strain(self, de, *, steps: int | None = None, max_strain_per_step: float = 2e-6,
-                     unbalanced: float = 1e-3, max_relax_steps: int = 20_000) -> np.ndarray:
+                     unbalanced: float = 1e-3, max_relax_steps: int = 20_000,
+                     max_increment: float = increments.MAX_STRAIN_INCREMENT) -> np.ndarray:
         """Deforms the element by the displacement-gradient increment ``de`` (3 x 3, -,
         tension positive; shear and rotation included for a periodic element) over ``steps``
         steps (default: at most ``max_strain_per_step`` per step), then relaxes with the
         boundary held until the unbalanced force is below ``unbalanced`` (at most
         ``max_relax_steps``). Returns the stress (Pa, tension positive); ``last_report`` says
-        what ran."""
+        what ran. Bad arguments, and a principal stretch change above ``max_increment`` in
+        one call, are refused by name; an increment that opens every contact warns
+        (``cpp_dem.elements.increments``)."""
         t0 = time.perf_counter()
         e = _as_tensor(de, "de")
+        increments.check_strain_call(e, steps=steps, max_strain_per_step=max_strain_per_step,
+                                     unbalanced=unbalanced, max_relax_steps=max_relax_steps,
+                                     max_increment=max_increment)
+        before = self.contact_count()
         n = self._steps_for(e, steps, max_strain_per_step)
         self._set_dt()
         dt = float(self.scene.dt)
@@ -333,6 +344,7 @@ class DemElement:
             self.scene.run(n)
         relax, u, ok = self._relax(unbalanced, max_relax_steps)
         self.last_report = IncrementReport(n, relax, u, ok, time.perf_counter() - t0)
+        increments.report_contact_loss(self, e, before)
         return self.stress()
 
     def _check_rate(self, rate: float) -> None:
@@ -513,56 +525,71 @@ class DemElement:
     # ---- save / restore ----------------------------------------------------------------
     def to_bytes(self) -> bytes:
         """The whole state (scene, contacts with history, controller, element settings) as
-        bytes; ``from_bytes`` restores it bitwise."""
+        bytes of cpp_dem's element format (``cpp_dem.elements.state_format``: the settings as
+        JSON, the scene's checkpoint blob, a SHA-256 checksum; nothing pickled);
+        ``from_bytes`` restores it bitwise."""
         ctl = self.controller
         if self.kind == "periodic":
-            cfg = {"gain": ctl.gain, "max_rate": ctl.max_rate,
-                   "allow_tension": ctl.allow_tension,
-                   "modes": [[ctl.mode(r, c) for c in range(3)] for r in range(3)],
-                   "goals": [[ctl.goal(r, c) for c in range(3)] for r in range(3)]}
+            cfg = {"gain": float(ctl.gain), "max_rate": float(ctl.max_rate),
+                   "allow_tension": bool(ctl.allow_tension),
+                   "modes": [[str(ctl.mode(r, c)) for c in range(3)] for r in range(3)],
+                   "goals": [[float(ctl.goal(r, c)) for c in range(3)] for r in range(3)]}
         else:
-            cfg = {"gain": ctl.gain, "max_speed": ctl.max_speed}
-        d = {"format": _FORMAT, "kind": self.kind, "walls": self.walls,
-             "gain": self.gain, "dt_safety": self.dt_safety,
-             "dt_max": self.dt_max, "controller": cfg,
-             "blob": bytes(_core._checkpoint_save(self.scene))}
-        if self.band_thickness is not None:  # (absent otherwise: older bytes unchanged)
-            d["band_thickness"] = self.band_thickness
-        return pickle.dumps(d, protocol=pickle.HIGHEST_PROTOCOL)
+            cfg = {"gain": float(ctl.gain), "max_speed": float(ctl.max_speed)}
+        fields = {"kind": self.kind, "walls": [int(w) for w in self.walls],
+                  "gain": float(self.gain), "dt_safety": float(self.dt_safety),
+                  "dt_max": None if self.dt_max is None else float(self.dt_max),
+                  "controller": cfg}
+        if self.band_thickness is not None:  # (absent otherwise)
+            fields["band_thickness"] = float(self.band_thickness)
+        return state_format.pack(_KIND, fields,
+                                 {"scene": bytes(_core._checkpoint_save(self.scene))})
 
     @classmethod
     def from_bytes(cls, data: bytes) -> "DemElement":
         """An element restored from ``to_bytes``: running it on gives bitwise what the saved
-        element would have given."""
+        element would have given. Bytes of another format (a pickle of an older version
+        included), changed after they were written, or holding values the element's setters
+        refuse raise a ParameterError naming ``data``; nothing in them is executed."""
+        d, parts = state_format.unpack(data, _KIND)
         try:
-            d = pickle.loads(data)
-        except Exception as e:  # noqa: BLE001 - any unpickling failure is bad input
-            raise ParameterError(f"data: not a saved DemElement ({e})") from None
-        if not isinstance(d, dict) or d.get("format") != _FORMAT:
-            raise ParameterError(f"data: not a saved DemElement (format "
-                                 f"{d.get('format') if isinstance(d, dict) else None!r}, "
-                                 f"expected {_FORMAT!r})")
-        scene = Scene()
-        cfg = d["controller"]
-        if d["kind"] == "periodic":
-            ctl = CellController(gain=cfg["gain"], max_rate=cfg["max_rate"])
-            ctl.allow_tension = bool(cfg.get("allow_tension", False))  # (older bytes: off)
-            for r in range(3):
-                for c in range(3):
-                    if cfg["modes"][r][c] == "stress":
-                        ctl.set_stress(r, c, cfg["goals"][r][c])
-                    else:
-                        ctl.set_rate(r, c, cfg["goals"][r][c])
-        else:
-            ctl = _core.TriaxialController(walls=list(d["walls"]), gain=cfg["gain"],
-                                           max_speed=cfg["max_speed"])
+            kind, cfg = d["kind"], d["controller"]
+            if kind not in ("periodic", "walls"):
+                raise ValueError(f"kind={kind!r}, allowed 'periodic' or 'walls'")
+            walls = tuple(int(w) for w in d["walls"])
+            gain, dt_safety = float(d["gain"]), float(d["dt_safety"])
+            dt_max = None if d.get("dt_max") is None else float(d["dt_max"])
+            band = None if d.get("band_thickness") is None else float(d["band_thickness"])
+            blob = parts["scene"]
+            scene = Scene()
+            if kind == "periodic":
+                ctl = CellController(gain=float(cfg["gain"]), max_rate=float(cfg["max_rate"]))
+                ctl.allow_tension = bool(cfg["allow_tension"])
+                for r in range(3):
+                    for c in range(3):
+                        mode, goal = cfg["modes"][r][c], float(cfg["goals"][r][c])
+                        if mode == "stress":
+                            ctl.set_stress(r, c, goal)
+                        elif mode == "rate":
+                            ctl.set_rate(r, c, goal)
+                        else:
+                            raise ValueError(f"controller mode {mode!r}, allowed 'stress' or "
+                                             "'rate'")
+            else:
+                ctl = _core.TriaxialController(walls=list(walls), gain=float(cfg["gain"]),
+                                               max_speed=float(cfg["max_speed"]))
+        except KeyError as e:
+            raise ParameterError(f"data: a saved DemElement without its field {e}") from None
+        except (TypeError, ValueError, IndexError) as e:
+            raise ParameterError(f"data: a saved DemElement with a malformed field: {e}") \
+                from None
         scene.add_controller(ctl)
-        _core._checkpoint_load(scene, d["blob"])
+        _core._checkpoint_load(scene, blob)
         el = cls.__new__(cls)
-        el.scene, el.walls, el.kind = scene, tuple(d["walls"]), d["kind"]
-        el.gain, el.dt_safety, el.controller = d["gain"], d["dt_safety"], ctl
-        el.dt_max = d.get("dt_max")  # (None in bytes saved before it: set by the next stage)
-        el.band_thickness = d.get("band_thickness")
+        el.scene, el.walls, el.kind = scene, walls, kind
+        el.gain, el.dt_safety, el.controller = gain, dt_safety, ctl
+        el.dt_max = dt_max
+        el.band_thickness = band
         return el
 
     def clone(self) -> "DemElement":
