@@ -18,8 +18,9 @@ Kinds (options are ``key=value`` words after the kind; a value lists items with 
   (those grid forms' rows only), ``from=KEY`` (the data's list of rows, default ``findings``).
 - ``measures``: the same without 002 and verdict (t crit only when a row has
   ``t_critical``). Options as ``findings`` (``from`` defaults to ``measures``).
-- ``elements``: one row per element: grains, porosity at the end, rest status, inertial number
-  max and at the end, loading strain z, strain ratio to the FEM (x, y, z). Options:
+- ``elements``: one row per element: grains, porosity and coordination number at the end,
+  rest status, the loading's largest inertial number over a record and the last hold's,
+  loading strain z, strain ratio to the FEM (x, y, z). Options:
   ``grid=G,...``, ``labels=L,...`` (those elements, in that order).
 - ``provenance``: one line, "Command: `...` at commit abc1234 on DATE (machine)."
 
@@ -168,14 +169,15 @@ def elements_table(data: dict, opts: dict) -> list[str]:
     if "grid" in opts:
         grids = opts["grid"].split(",")
         labels = [x for x in labels if any(x.startswith(g + "_") for g in grids)]
-    head = ["element", "grains", "porosity", "rest", "I max", "I end", "loading strain z",
-            "strain / FEM (x, y, z)"]
+    head = ["element", "grains", "porosity", "coordination", "rest", "I loading (max)",
+            "I hold (end)", "loading strain z", "strain / FEM (x, y, z)"]
     rows = []
     for x in labels:
         e = el[x]
         rest = e.get("rest") if isinstance(e.get("rest"), dict) else {}
         rows.append([cell(x), fmt(e.get("num_grains")), fmt(e.get("porosity_final")),
-                     fmt(rest.get("status")), fmt(rest.get("inertial_number_max")),
+                     fmt(e.get("coordination_final")), fmt(rest.get("status")),
+                     fmt(rest.get("loading_inertial_number_max")),
                      fmt(rest.get("inertial_number_end")), _vec(e.get("loading_strain"), 2),
                      _vec(e.get("strain_ratio_to_fem"))])
     return _table(head, rows)

@@ -49,7 +49,9 @@ def _data() -> dict:
                                    "pairs_left_out")}],
         "elements": {
             "detailed_RE_s1": {"num_grains": 1612, "porosity_final": 0.41234,
-                               "rest": {"status": "at_rest", "inertial_number_max": 9.2e-4,
+                               "coordination_final": 4.6512,
+                               "rest": {"status": "at_rest", "inertial_number_max": 9.2e-5,
+                                        "loading_inertial_number_max": 9.2e-4,
                                         "inertial_number_end": 4.1e-5, "hold_steps": 20000},
                                "loading_strain": [0.001, 0.0, 0.0031415926],
                                "strain_ratio_to_fem": [0.91, 1.0, 1.234567]},
@@ -130,11 +132,11 @@ def test_render_writes_the_tables_and_is_idempotent(docs):
     assert any(x.startswith("| detailed | porosity | 1.892e-08 ± ") and x.endswith(" | 6 |")
                for x in lines)
     # elements, the detailed grid's only; missing keys are '-'
-    assert ("| element | grains | porosity | rest | I max | I end | loading strain z | "
-            "strain / FEM (x, y, z) |") in lines
-    assert ("| detailed_RE_s1 | 1612 | 0.4123 | at_rest | 0.00092 | 4.1e-05 | 0.003142 | "
-            "0.91, 1, 1.235 |") in lines
-    assert "| detailed_PRS_s1 | 1612 | 0.4119 | at_strength | - | - | - | - |" in lines
+    assert ("| element | grains | porosity | coordination | rest | I loading (max) | "
+            "I hold (end) | loading strain z | strain / FEM (x, y, z) |") in lines
+    assert ("| detailed_RE_s1 | 1612 | 0.4123 | 4.651 | at_rest | 0.00092 | 4.1e-05 | "
+            "0.003142 | 0.91, 1, 1.235 |") in lines
+    assert "| detailed_PRS_s1 | 1612 | 0.4119 | - | at_strength | - | - | - | - |" in lines
     assert not any("standard_RE_s1" in x for x in lines)
     assert ("Command: `.venv/bin/python cases/prs_element_002.py --smoke --seeds 1-2` at "
             "commit 0123456 on 2026-01-02 (box: Linux x86_64, 2 cores).") in lines
@@ -154,7 +156,7 @@ def test_check_fails_on_an_edited_number(docs):
     page = docs / "study.md"
     assert dt.process(page, write=True) == []
     good = page.read_text()
-    page.write_text(good.replace("| 0.4123 | at_rest |", "| 0.4124 | at_rest |"))
+    page.write_text(good.replace("| 0.4123 | 4.651 | at_rest |", "| 0.4124 | 4.651 | at_rest |"))
     problems = dt.process(page, write=False)
     assert len(problems) == 1
     assert "table 3" in problems[0] and "elements" in problems[0] and "0.4124" in problems[0]
