@@ -309,6 +309,7 @@ def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any 
     nscale = float("nan")
     omega, d_prev, omegas = 1.0, None, []
     hist: list[float] = []
+    drawn: list[float] = []  # the residuals since the first stall: draws of the noise
     above: str | None = None  # the ceiling failure that the redraws try to get under
     redraws = 0
     for it in range(rules.max_newton + 1):
@@ -317,6 +318,8 @@ def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any 
         scale = problem.force_scale()
         rel = rnorm / scale
         hist.append(rel)
+        if not math.isnan(noise_rel):
+            drawn.append(rel)
         if log is not None:
             log(f"iteration {it}: residual {rel:.3e}")
         if not math.isfinite(rel):
@@ -358,7 +361,13 @@ def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any 
             v = problem.stress_change_residual(before) / scale
             noisiest = getattr(problem, "noisiest", None)
             where = noisiest(before) if noisiest is not None else ""
-            noise_rel = v if math.isnan(noise_rel) else max(noise_rel, v)
+            # After a first stall every iterate is a draw of the elements' noise, and their
+            # spread measures it too: at a second stall the noise is at least that spread (one
+            # probe can miss most of it: 8.6e-6 against iterates spread over 5.7e-6-3.5e-5, so
+            # whether a draw fell within 2 x the probe's noise was luck, and the rounding path
+            # decided the iteration count).
+            spread = (max(drawn) - min(drawn)) if len(drawn) >= 3 else 0.0
+            noise_rel = v if math.isnan(noise_rel) else max(noise_rel, v, spread)
             if rules.probe_size == "correction":
                 # back on the iterate: the state a step accepts is the iterate's (a 1e-9 probe
                 # is within the noise of it, and is kept)

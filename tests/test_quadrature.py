@@ -200,6 +200,39 @@ def test_a_stall_above_the_ceiling_within_the_noise_draws_again_before_the_cut()
         NewtonRules(rtol=1e-3, max_newton=5, redraws=-1)
 
 
+class _UnderProbed(_Spring):
+    """A spring whose noise probe sees a tenth of the noise the iterates draw (one probe is
+    one sample of a DEM element's roughness, and can miss most of it)."""
+
+    def stress_change_residual(self, before):
+        return 0.1 * super().stress_change_residual(before)
+
+
+def test_at_a_second_stall_the_noise_is_at_least_the_spread_of_the_iterates_drawn():
+    """After a first stall every iterate is a draw of the elements' noise. When the probe
+    misses most of it, a step waited for a lucky draw within 2 x the probe's noise, so the
+    rounding path decided the iteration count (the region element of
+    test_fem_region_element: 17 iterations on one CPU, 7-11 on others). At a second stall the
+    noise is at least the iterates' spread: the step is taken there, within 2 x that noise."""
+    rules = NewtonRules(rtol=1e-12, max_newton=60, probe=True, ceiling=1e-2)
+    its = []
+    for seed in range(40):
+        p = _UnderProbed(noise=1e-4)
+        p.rng = np.random.default_rng(seed)
+        out = newton_solve(p, rules)
+        assert out.status == "stopped_at_scatter"
+        assert out.residual <= 2 * out.noise_residual
+        its.append(out.iterations)
+    # Taken at the first stall within the probe's noise, or at a later one with the noise at
+    # least the draws' spread: measured 7-18 iterations, median 11 (waiting for a lucky draw
+    # within 2 x the probe's noise: 7-44, median 16).
+    assert max(its) <= 20 and np.median(its) <= 12, sorted(its)
+    # and a problem whose probe sees its noise is taken at its first stall, as before
+    p = _Spring(noise=1e-4)
+    out = newton_solve(p, rules)
+    assert out.status == "stopped_at_scatter" and out.iterations <= 8
+
+
 def test_the_soil_body_and_the_hierarchical_mode_share_one_newton(monkeypatch):
     from femcoupling import hierarchical, quadrature
     from test_fem_handover import two_region_model
