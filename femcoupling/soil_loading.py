@@ -133,6 +133,15 @@ class LoadingStages:
                                 "positive)")
         if not isinstance(steps, int) or steps < 1:
             raise FemInputError(f"steps={steps!r}: must be an integer >= 1")
+        tol = geo._real("tol", tol)
+        if not 0 < tol < 1:
+            # (a tolerance of 0 or below can never be met: the step would be taken again for
+            # ever)
+            raise FemInputError(f"tol={tol!r}: must be in (0, 1) (the pressure's relative "
+                                "tolerance, -)")
+        if not isinstance(max_steps_factor, int) or max_steps_factor < 1:
+            raise FemInputError(f"max_steps_factor={max_steps_factor!r}: must be an integer "
+                                ">= 1")
         # (from the footing's current mean settlement, as ``load_footing(settlement_m=)``:
         # after a prestress stage the surface has moved, and the footing starts there)
         u_start = -self.footing_settlement_m()

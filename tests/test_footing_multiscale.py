@@ -245,6 +245,12 @@ def test_a_given_first_slope_reaches_the_pressure_as_the_small_first_step_does(d
     assert len(rb) < len(ra)  # the probe step is not taken
     with pytest.raises(FemInputError, match="slope_pa_per_m=-1.0: must be > 0"):
         b.load_footing_to_pressure(1e3, slope_pa_per_m=-1.0)
+    # a tolerance that can never be met was taken again for ever (a hang)
+    for bad in (-0.01, 0.0, float("nan")):
+        with pytest.raises(FemInputError, match="tol=.*must be (in \\(0, 1\\)|finite)"):
+            b.load_footing_to_pressure(1e3, tol=bad)
+    with pytest.raises(FemInputError, match="max_steps_factor=0: must be an integer >= 1"):
+        b.load_footing_to_pressure(1e3, max_steps_factor=0)
 
 
 def test_the_prestress_is_in_the_prs_layer_only(dp_model):
