@@ -323,6 +323,8 @@ def _read_json(path: Path) -> dict | None:
 
 
 def _pid_alive(pid: int) -> bool:
+    """Whether process ``pid`` runs: a zombie (killed, not yet reaped: a sweep row's case
+    after its Dask worker was killed) writes nothing and holds no folder."""
     try:
         os.kill(pid, 0)
     except ProcessLookupError:
@@ -331,7 +333,11 @@ def _pid_alive(pid: int) -> bool:
         return True
     except OSError:
         return False
-    return True
+    try:
+        stat = Path(f"/proc/{pid}/stat").read_text()
+        return stat[stat.rindex(")") + 2:].split()[0] != "Z"
+    except (OSError, ValueError, IndexError):
+        return True
 
 
 def _files(out: Path) -> list[Path]:

@@ -525,6 +525,14 @@ def _run_row(command: list[str], argv: list[str], env: dict[str, str]) -> dict[s
             and "--overwrite" not in argv and "--resume" not in argv
             and any(dest.rglob(rundir.MANIFEST))):
         argv = [*argv, "--overwrite"]
+    if dest is not None:
+        # An earlier attempt's case dies with its killed worker (SIGKILL by the parent-death
+        # signal) a moment after Dask has given the row to another worker: wait for it (at
+        # most 30 s) rather than take its lock for another run's.
+        lock, t_wait = rundir._read_json(dest / rundir.LOCK), time.perf_counter()
+        while (lock and isinstance(lock.get("pid"), int) and rundir._pid_alive(lock["pid"])
+               and time.perf_counter() - t_wait < 30):
+            time.sleep(0.1)
     t0 = time.perf_counter()
     wrap = [sys.executable, "-c", _DIE_WITH_PARENT] if sys.platform.startswith("linux") else []
     proc = subprocess.run([*wrap, *command, *argv], capture_output=True, text=True,

@@ -133,3 +133,27 @@ def test_a_row_run_again_replaces_only_its_recorded_files(tmp_path):
     r = _run_row(echo, ["--resume", "--out", str(row)], {})
     assert "--overwrite" not in r["stderr_tail"]  # (a resume keeps its files itself)
     assert (row / "keep.txt").read_text() == "mine\n"
+
+
+def test_a_zombie_holds_no_folder():
+    """A sweep row's case killed with its Dask worker is a zombie until reaped: it writes
+    nothing, so its lock does not stop the row's rerun (it did: 'another run is writing into
+    it: pid N')."""
+    import os
+    import subprocess
+    import sys
+    import time
+
+    from geogrid_dem import rundir
+
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    t0 = time.time()
+    while time.time() - t0 < 10:  # exited, not reaped: a zombie
+        state = open(f"/proc/{child.pid}/stat").read().rsplit(")", 1)[1].split()[0]
+        if state == "Z":
+            break
+        time.sleep(0.05)
+    assert state == "Z"
+    assert not rundir._pid_alive(child.pid)
+    assert rundir._pid_alive(os.getpid())
+    child.wait()
