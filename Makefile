@@ -7,9 +7,10 @@ setup:
 
 # The main demo: the headline, 002's prestressed reinforced-soil element driven by the FEM
 # (a footing on a geogrid-reinforced fill): RE against PRS on two seeds at smoke size, loaded
-# slowly and measured at rest (about 100 s after set-up), ending in its findings table (results/demo_002/report.md) and its
-# figures (results/demo_002/detailed_s1_views.png, _grid, _rose). A second `make demo`
-# replaces the demo's own earlier run there (--overwrite: only the files that run recorded).
+# slowly and measured at rest (about 2 min after set-up), ending in its findings table
+# (results/demo_002/report.md) and its figures (results/demo_002/detailed_s1_views.png, _grid,
+# _rose). A second `make demo` replaces the demo's own earlier run there (--overwrite: only
+# the files that run recorded).
 demo: setup
 	$(PY) cases/prs_element_002.py --smoke --workers 2 --out results/demo_002 --overwrite
 	@echo "findings: results/demo_002/report.md; figures: results/demo_002/detailed_s1_views.png"
