@@ -440,12 +440,8 @@ def prepare_woven_element(p: ElementParams, mean_stress: float,
         # The slow growth's controller as prep.grow_to_stress adds it (same kind, walls,
         # bodies and settings), disabled as it leaves it; the loading's damping and friction.
         fast.enabled = False
-        slow = RadiusGrowth(walls=list(sample.walls), bodies=[int(b) for b in grain_bodies],
-                            target_stress=mean_stress, gain=0.5,
-                            max_strain=p.growth_max_strain * rate)
-        slow.period = 1
-        sc.add_controller(slow)
-        slow.enabled = False
+        prep.add_growth(sc, sample.walls, mean_stress, max_strain=p.growth_max_strain * rate,
+                        bodies=grain_bodies).enabled = False
         _grain_damping(sc, sample, p, p.friction_deg, 0.0)
         sc.local_damping = p.damping
         sc.block_dofs(grid.spheres, "")
@@ -889,7 +885,7 @@ def loading_stage(sample, grid, targets, stage: int, p: ElementParams, rec, *,
         for a in strain_axes:
             ctl.set_strain_rate(a, float(np.clip((lam * path[a] - eps[a]) / dt_rec,
                                                  -0.5 * cap, 0.5 * cap)))
-        if ends is not None:
+        if ends is not None and tension is not None:
             ends.set(t_from + lam * (t_to - t_from))
         rate.mark()
         with warnings.catch_warnings(record=True) as caught:
@@ -1026,13 +1022,12 @@ def save_final_state(path: Path, sample, p: ElementParams, targets, *, prestress
     parameters, its label and variant, the targets (Pa), the controller's set points and axis
     modes, and the grid's end conditions (the end tension, N/m; the prestress grips locked or
     not)."""
+    import json
     from dataclasses import asdict
 
     from cpp_dem.checkpoint import save_checkpoint
 
     ctl = sample.controller
-    import json
-
     params = json.loads(json.dumps(asdict(p), default=lambda o: np.asarray(o).tolist()))
     save_checkpoint(path, sample.scene, extra={
         "kind": "prs_element_002 element", "label": label, "prestressed": bool(prestressed),

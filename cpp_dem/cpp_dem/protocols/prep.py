@@ -152,6 +152,19 @@ def solve_to_equilibrium(scene, *, unbalanced: float = 0.01, check_every: int = 
     return False, scene.step_count - start, u
 
 
+def add_growth(scene, walls, stress: float, *, gain: float = 0.5, max_strain: float = 1e-3,
+               period: int = 1, bodies=(), grown_only: bool = False):
+    """The RadiusGrowth controller that :func:`grow_to_stress` runs, added to ``scene`` and
+    returned (a checkpoint's skeleton adds the same one: cpp_dem.elements.box
+    ``prepare_woven_element(build_only=True)``)."""
+    g = _core.RadiusGrowth(walls=list(walls), bodies=[int(b) for b in bodies],
+                           target_stress=stress, gain=gain, max_strain=max_strain,
+                           grown_only=grown_only)
+    g.period = period
+    scene.add_controller(g)
+    return g
+
+
 def grow_to_stress(scene, walls, stress: float, *, tol: float = 0.01, unbalanced: float = 0.01,
                    gain: float = 0.5, max_strain: float = 1e-3, period: int = 1,
                    check_every: int = 200, max_steps: int = 200_000, bodies=(),
@@ -174,11 +187,8 @@ def grow_to_stress(scene, walls, stress: float, *, tol: float = 0.01, unbalanced
     _check_target(stress)
     for w in walls:
         scene.set_wall_velocity(int(w), (0.0, 0.0, 0.0))
-    g = _core.RadiusGrowth(walls=list(walls), bodies=[int(b) for b in bodies],
-                           target_stress=stress, gain=gain, max_strain=max_strain,
-                           grown_only=grown_only)
-    g.period = period
-    scene.add_controller(g)
+    g = add_growth(scene, walls, stress, gain=gain, max_strain=max_strain, period=period,
+                   bodies=bodies, grown_only=grown_only)
     start = scene.step_count
     ok, u, mean, passed = False, float("nan"), float("nan"), 0
     while scene.step_count - start < max_steps:
