@@ -1,6 +1,7 @@
-"""The footing_multiscale case (its code: geogrid_dem/cases/footing_multiscale.py; also
-``geogrid-dem run footing-multiscale`` and ``python -m geogrid_dem.cases.footing_multiscale``).
-Run it with --smoke or --help; imported, this module offers everything the case module has."""
+"""The footing_multiscale case, from the prestressed-element paper (its code:
+geogrid_dem/cases/footing_multiscale.py; also ``geogrid-dem run footing-multiscale`` and
+``python -m geogrid_dem.cases.footing_multiscale``). Run it with --smoke or --help; imported,
+this module offers everything the case module has."""
 
 import sys
 

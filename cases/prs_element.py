@@ -1,6 +1,7 @@
-"""The prs_element case (its code: geogrid_dem/cases/prs_element.py; also
-``geogrid-dem run prs-element`` and ``python -m geogrid_dem.cases.prs_element``). Run it with
---smoke or --help; imported, this module offers everything the case module has."""
+"""The prs_element case, from the prestressed-element paper (its code:
+geogrid_dem/cases/prs_element.py; also ``geogrid-dem run prs-element`` and ``python -m
+geogrid_dem.cases.prs_element``). Run it with --smoke or --help; imported, this module offers
+everything the case module has."""
 
 import sys
 

@@ -1,6 +1,7 @@
-"""The prs_element_002 case (its code: geogrid_dem/cases/prs_element_002.py; also
-``geogrid-dem run prs-element-002`` and ``python -m geogrid_dem.cases.prs_element_002``). Run it
-with --smoke or --help; imported, this module offers everything the case module has."""
+"""The prs_element_002 case, from the prestressed-element paper (its code:
+geogrid_dem/cases/prs_element_002.py; also ``geogrid-dem run prs-element-002`` and ``python -m
+geogrid_dem.cases.prs_element_002``). Run it with --smoke or --help; imported, this module
+offers everything the case module has."""
 
 import sys
 

@@ -1,4 +1,4 @@
-"""The pullout_000 case (its code: geogrid_dem/cases/pullout_000.py; also
+"""The pullout_000 case, from the pull-out paper (its code: geogrid_dem/cases/pullout_000.py; also
 ``geogrid-dem run pullout-000`` and ``python -m geogrid_dem.cases.pullout_000``). Run it with
 --smoke or --help; imported, this module offers everything the case module has."""
 

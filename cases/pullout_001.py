@@ -1,4 +1,4 @@
-"""The pullout_001 case (its code: geogrid_dem/cases/pullout_001.py; also
+"""The pullout_001 case, from the thesis (its code: geogrid_dem/cases/pullout_001.py; also
 ``geogrid-dem run pullout-001`` and ``python -m geogrid_dem.cases.pullout_001``). Run it with
 --smoke or --help; imported, this module offers everything the case module has."""
 

@@ -1,6 +1,6 @@
-"""The triaxial case (its code: geogrid_dem/cases/triaxial.py; also
-``geogrid-dem run triaxial`` and ``python -m geogrid_dem.cases.triaxial``). Run it with
---smoke or --help; imported, this module offers everything the case module has."""
+"""The triaxial case, from the thesis (its code: geogrid_dem/cases/triaxial.py; also
+``geogrid-dem run triaxial`` and ``python -m geogrid_dem.cases.triaxial``). Run it with --smoke
+or --help; imported, this module offers everything the case module has."""
 
 import sys
 

@@ -1,4 +1,5 @@
-"""Calibration of the triaxial case's E, nu and phi to a reference curve (001 §6.1, Table 6.1).
+"""Calibration of the triaxial case's E, nu and phi to a reference curve (the thesis §6.1,
+Table 6.1).
 
 001 §6.1 picks Young's modulus E, Poisson's ratio nu (here k_s / k_n of the linear law) and the
 contact friction angle phi by running the grid of Table 6.1 and comparing the q-eps_a and

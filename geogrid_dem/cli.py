@@ -84,12 +84,31 @@ def _echo(msg: str) -> None:
     print(msg, flush=True)
 
 
+def columns(rows: list[tuple[str, ...]], gap: int = 2) -> list[str]:
+    """The rows as lines of aligned columns: each column but the last padded to its widest
+    cell plus ``gap`` spaces, so that every cell of a column starts in one place."""
+    widths = [max(len(r[k]) for r in rows) + gap for k in range(len(rows[0]) - 1)]
+    return ["".join(c.ljust(w) for c, w in zip(r, widths)) + r[-1] for r in rows]
+
+
+def cases_table() -> list[str]:
+    """The lines of `geogrid-dem cases`: a table of the cases (name, the study it rebuilds by
+    its short name, what it runs), then the studies' short names with their codes (the
+    aliases in case names and equation citations) and titles."""
+    from geogrid_dem.cases import SOURCE_STUDIES
+
+    lines = columns([("case", "study", "what it runs"),
+                     *((name, case.study_name or "-", case.summary)
+                       for name, case in CASES.items())])
+    lines += ["", "The studies (docs/studies.md; the code is their alias in case names and "
+              "equation citations):"]
+    lines += columns([(f"  {s.name} ({s.code})", f'"{s.title}"') for s in SOURCE_STUDIES])
+    return lines
+
+
 def list_cases() -> None:
-    """Lists the cases, each with the study it comes from."""
-    width = max(map(len, CASES)) + 2  # every summary starts in one column
-    for name, case in CASES.items():
-        src = f'  ("{case.study}")' if case.study else ""
-        print(f"{name:{width}s}{case.summary}{src}")
+    """Lists the cases, each with the study it comes from, then the studies."""
+    print("\n".join(cases_table()))
 
 
 def run_cmd(target: str, extra: list[str]) -> None:

@@ -259,22 +259,6 @@ def test_a_case_started_as_several_mpi_ranks_is_refused(tmp_path, monkeypatch, c
     assert mpi_ranks() == 1
 
 
-def test_the_cases_table_starts_every_summary_in_one_column(capsys):
-    """`geogrid-dem cases`: whatever the length of a case's name, its summary starts in the
-    same column as every other's."""
-    from geogrid_dem import cli as cli_mod
-    from geogrid_dem.cases import CASES
-
-    cli_mod.list_cases()
-    rows = capsys.readouterr().out.splitlines()
-    assert len(rows) == len(CASES)
-    columns = set()
-    for row, (name, case) in zip(rows, CASES.items()):
-        assert row.startswith(name + " "), row
-        columns.add(row.index(case.summary))
-    assert len(columns) == 1, rows
-
-
 def test_a_run_file_keeps_out_as_given_or_leaves_the_numbered_folder_out(tmp_path, monkeypatch):
     """run.toml keeps a relative --out relative (as given), and leaves out the default
     numbered folder: copied elsewhere, the run file reruns into a new folder of its own."""

@@ -153,8 +153,8 @@ def test_study_cells_mean_sd_and_within():
     # CoV trend over the grain size: r = 1.5 mm with a CoV well below r = 2.5 mm's.
     small = [_row(s, 15.0, 0.2 + 0.01 * s, 250.0, 0.3, r=1.5e-3) for s in (1, 2, 3)]
     lines = case.cov_trend(case.study_cells(rows + small))
-    assert len(lines) == 1 and "001's measure" in lines[0]
-    assert lines[0].split("001's measure")[1].split(";")[0].endswith("falls")
+    assert len(lines) == 1 and "the thesis's measure" in lines[0]
+    assert lines[0].split("the thesis's measure")[1].split(";")[0].endswith("falls")
 
 
 @pytest.mark.parametrize("argv,match", [

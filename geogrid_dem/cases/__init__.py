@@ -2,14 +2,16 @@
 ``python -m geogrid_dem.cases.MODULE``, or ``python cases/MODULE.py`` in the source tree).
 Each takes ``--smoke`` (test-sized) and ``--out DIR`` and prints progress with an ETA.
 
-The source studies (docs/references.md):
+The source studies (docs/studies.md maps each to its cases; docs/references.md), by the short
+names the docs use, with the code that cites them in equation references ("000 eq (8)"):
 
-- "Geogrid pull-out modelling using DEM" (a conference paper, run in Yade): ``pullout-000``;
-- "Discrete Element Modeling of Soil-Geogrid Interactions" (a thesis, Yade): ``pullout-001``
-  and ``triaxial``;
-- "Microscopic interaction effects of prestressed geogrids in a reinforced soil element" (a
-  journal paper, PFC3D): ``prs-element`` and ``prs-element-002``, and its question at the
-  scale of a structure, ``footing-multiscale``.
+- the pull-out paper (000), "Geogrid pull-out modelling using DEM" (a conference paper, run
+  in Yade): ``pullout-000``;
+- the thesis (001), "Discrete Element Modeling of Soil-Geogrid Interactions" (Yade):
+  ``pullout-001`` and ``triaxial``;
+- the prestressed-element paper (002), "Microscopic interaction effects of prestressed
+  geogrids in a reinforced soil element" (a journal paper, PFC3D): ``prs-element`` and
+  ``prs-element-002``, and its question at the scale of a structure, ``footing-multiscale``.
 """
 
 from __future__ import annotations
@@ -21,7 +23,35 @@ PULLOUT_PAPER = "Geogrid pull-out modelling using DEM"
 THESIS = "Discrete Element Modeling of Soil-Geogrid Interactions"
 PRESTRESS_PAPER = ("Microscopic interaction effects of prestressed geogrids in a reinforced "
                    "soil element")
-STUDIES = {"000": PULLOUT_PAPER, "001": THESIS, "002": PRESTRESS_PAPER}
+
+
+@dataclass(frozen=True)
+class Study:
+    """A source study: its code (the alias of equation citations, "000 eq (8)", and of case
+    names such as ``pullout-000``), its title, and the short readable name the docs, reports
+    and case listings use (docs/studies.md)."""
+
+    code: str
+    title: str
+    name: str
+
+
+#: The source studies, in the order of their codes.
+SOURCE_STUDIES = (Study("000", PULLOUT_PAPER, "the pull-out paper"),
+                  Study("001", THESIS, "the thesis"),
+                  Study("002", PRESTRESS_PAPER, "the prestressed-element paper"))
+#: code -> title.
+STUDIES = {s.code: s.title for s in SOURCE_STUDIES}
+
+
+def study_named(title: str) -> Study | None:
+    """The source study of this title (a Case's ``study``), or None for '' (no study)."""
+    if not title:
+        return None
+    for s in SOURCE_STUDIES:
+        if s.title == title:
+            return s
+    raise KeyError(f"no source study titled {title!r}")
 
 
 @dataclass(frozen=True)
@@ -37,6 +67,12 @@ class Case:
     @property
     def folder(self) -> str:
         return self.module
+
+    @property
+    def study_name(self) -> str:
+        """The study's short readable name ("the thesis"), or '' for none."""
+        s = study_named(self.study)
+        return s.name if s else ""
 
 
 #: command name -> Case. The one place a case is registered.
@@ -61,7 +97,9 @@ CASES: dict[str, Case] = {
 
 
 def describe(name: str, what: str) -> str:
-    """A case's --help description: what it runs, then the study it reproduces by title."""
+    """A case's --help description: what it runs, then the study it reproduces by its short
+    name and title."""
     case = CASES[name]
-    src = f'\n\nSource: "{case.study}".' if case.study else ""
+    src = (f'\n\nSource: {case.study_name}, "{case.study}" (docs/studies.md).' if case.study
+           else "")
     return what + src

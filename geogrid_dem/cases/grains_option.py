@@ -1,6 +1,6 @@
-"""The cases' --grains option (triaxial, pull-out 000 and 001): 'spheres', or 'clumps:NAME'
-with NAME a shipped grain (gravel_a .. gravel_d), 'gravel' for the four mixed, or a clump
-template CSV (x, y, z, r in m). The case's radii or PSD are then the clumps'
+"""The cases' --grains option (triaxial, pullout-000 and pullout-001): 'spheres', or
+'clumps:NAME' with NAME a shipped grain (gravel_a .. gravel_d), 'gravel' for the four mixed,
+or a clump template CSV (x, y, z, r in m). The case's radii or PSD are then the clumps'
 equivalent-volume radii (docs/clumps.md). Also the grains' CSV output the cases share."""
 
 from __future__ import annotations

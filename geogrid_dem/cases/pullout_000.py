@@ -1,15 +1,16 @@
 #!/usr/bin/env python3
-"""Geogrid pull-out of 000 (§2.3, §3, Table 1): a 1.0 x 0.5 x 0.5 m box, a flat-ribbed
-biaxial geogrid (80 mm apertures, 10 mm ribs, 2 mm thick, E = 4 GPa) at mid-height, 3000 /
-6000 / 9000 spheres (E = 1 MPa, nu = 0.5, unit weight 25.5 kN/m^3, phi = 30 deg, initial
-radius 12 +- 6 mm) grown by REFD around the held geogrid to the confining stress.
+"""Geogrid pull-out of the pull-out paper (000 §2.3, §3, Table 1): a 1.0 x 0.5 x 0.5 m box, a
+flat-ribbed biaxial geogrid (80 mm apertures, 10 mm ribs, 2 mm thick, E = 4 GPa) at
+mid-height, 3000 / 6000 / 9000 spheres (E = 1 MPa, nu = 0.5, unit weight 25.5 kN/m^3,
+phi = 30 deg, initial radius 12 +- 6 mm) grown by REFD around the held geogrid to the
+confining stress.
 
 Stages: grains in two loose layers, geogrid held; REFD with frictionless walls (expansion at
 phi = 30 deg, friction lowered until the target porosity, friction restored); geogrid freed,
 gravity on, top wall servo-controlled to the confining stress, stabilised; the clamp (the
 front transverse rib) pulled towards -x at constant velocity while the top wall holds the
-stress. 000 states neither the confining stress nor the pull rate nor the porosity: the
-defaults here (25 kPa, 0.01 m/s, 0.35) are ours, see docs/pullout.md.
+stress. The paper states neither the confining stress nor the pull rate nor the porosity:
+the defaults here (25 kPa, 0.01 m/s, 0.35) are ours, see docs/pullout.md.
 
 The geogrid is 4000 times stiffer than the grains: with true masses its critical time step
 is about 1e-7 s. Its node masses are scaled (--node-density-scale, default auto: the grid's
@@ -58,7 +59,7 @@ from geogrid_dem.cases.pullout_common import (clump_layers, grain_label, make_lo
 
 @dataclass
 class Params:
-    """Parameters of the 000 pull-out (SI)."""
+    """Parameters of the pull-out paper's pull-out (SI)."""
 
     spheres: int = 3000                 #: number of grains (spheres, or clumps), -
     box: tuple = (1.0, 0.5, 0.5)        #: box x (pull), y, z, m (Table 1)

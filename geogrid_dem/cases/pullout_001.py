@@ -1,9 +1,9 @@
 #!/usr/bin/env python3
-"""Geogrid pull-out of 001 (chapter 5, Tables 5.1-5.4, App. A): a 10 cm cube, a square grid
-(10 x 10 nodes, 1 cm openings, cylinders of radius 1 mm) or a triangular grid (equilateral,
-1.43 cm sides, radius 0.5 mm) at mid-height, equal grains (r = 1, 1.5 or 2.5 mm; Table 5.1:
-E = 5 MPa, nu = 0.3, rho = 2650 kg/m^3, phi = 20 deg), confinement 75 / 150 / 300 kPa on the
-top wall, pulled at 0.06 m/s.
+"""Geogrid pull-out of the thesis (001 chapter 5, Tables 5.1-5.4, App. A): a 10 cm cube, a
+square grid (10 x 10 nodes, 1 cm openings, cylinders of radius 1 mm) or a triangular grid
+(equilateral, 1.43 cm sides, radius 0.5 mm) at mid-height, equal grains (r = 1, 1.5 or
+2.5 mm; Table 5.1: E = 5 MPa, nu = 0.3, rho = 2650 kg/m^3, phi = 20 deg), confinement 75 / 150
+/ 300 kPa on the top wall, pulled at 0.06 m/s.
 
 Stages (App. A): grains on a regular hexagonal lattice (gap r/2) outside the geogrid's
 layer; grid held; radius growth to 10 kPa; top wall servo-controlled to the confining
@@ -24,10 +24,10 @@ layer; the radius growth then packs them.
 
 With --study the parameter table of 001 (Table 5.2) is run, each cell for every seed of
 --seeds, and summarised like Tables 5.3 (mean pull-out force) and 5.4 (coefficient of
-variation), beside 001's values: per cell the mean and standard deviation over the seeds of
-001's measure and of the whole resistance (study.csv, study.md, study.png; one row per run in
-rows/). The App. A lattice is deterministic: with sphere grains the seed acts only through
---jitter (each lattice site moved at random within the lattice gap).
+variation), beside the thesis's values: per cell the mean and standard deviation over the
+seeds of the thesis's measure and of the whole resistance (study.csv, study.md, study.png; one
+row per run in rows/). The App. A lattice is deterministic: with sphere grains the seed acts
+only through --jitter (each lattice site moved at random within the lattice gap).
 """
 
 from __future__ import annotations
@@ -78,7 +78,7 @@ T54 = {("square", 2.5e-3, 75e3): 0.543, ("square", 1.5e-3, 75e3): 0.445,
 
 @dataclass
 class Params:
-    """Parameters of the 001 pull-out (SI)."""
+    """Parameters of the thesis's pull-out (SI)."""
 
     grid: str = "square"            #: square or triangular (001 §5.1)
     radius: float = 1.5e-3          #: grain radius, m (Table 5.2)
@@ -291,9 +291,9 @@ def stats_001(rec: dict) -> dict:
 
 
 def window_stats(rec: dict, d_max: float) -> dict:
-    """Mean (N) and CoV (-) of the whole resistance (``pull_force``) and of 001's measure
-    (``force_001``) over the records with a displacement in (0, d_max] m: the statistics of a
-    pull window that runs of different lengths share."""
+    """Mean (N) and CoV (-) of the whole resistance (``pull_force``) and of the thesis's
+    measure (``force_001``) over the records with a displacement in (0, d_max] m: the
+    statistics of a pull window that runs of different lengths share."""
     d = np.asarray(rec["displacement"], float)
     sel = (d > 0) & (d <= d_max * (1 + 1e-12))
     out = {"records": int(np.count_nonzero(sel))}
@@ -355,7 +355,7 @@ def run(p: Params, out: Path) -> dict:
     log = make_logger(tag)
     sample = build(p)
     sel = force_bodies_001(p.grid, sample.grid.nodes, sample.grid.reference_positions)
-    log(f"001's pull-out force (force_001): sum of |x force| on {sel.rule}"
+    log(f"the thesis's pull-out force (force_001): sum of |x force| on {sel.rule}"
         + (f"; App. A's ids {', '.join(map(str, sel.yade_ids))}" if sel.yade_ids else ""))
     snaps = np.linspace(0, p.distance, p.snapshots + 1)[1:] if p.snapshots else []
     slot_half_m = p.front_slot * (grid_spec(p)[0] + p.radius)
@@ -379,13 +379,13 @@ def run(p: Params, out: Path) -> dict:
         title=f"{THESIS}: pull-out, {p.grid} grid, {grain_label(sample)}, "
               f"r = {p.radius * 1e3:g} mm, {p.pressure / 1e3:g} kPa", log=log,
         extra_series={"force_001": (lambda s: force_001(s.scene, sel.nodes), "N",
-                                    "001's measure: back-row nodes, sum |x force|"),
+                                    "the thesis's measure: back-row nodes, sum |x force|"),
                       **({"grains_out": (grains_out, "-", "grains out through the slot")}
                          if slot_half_m > 0 else {})},
         extra_summary=lambda rec: {**stats_001(rec), **(
             {"grains_out_end": float(rec["grains_out"][-1])} if "grains_out" in rec else {})},
         before_pull=before_pull)
-    log(f"001's measure (force_001): mean {summary['mean_force_001_N']:.3f} N, CoV "
+    log(f"the thesis's measure (force_001): mean {summary['mean_force_001_N']:.3f} N, CoV "
         f"{summary['cov_001']:.3f}; whole resistance (pull_force): mean "
         f"{summary['mean_force_N']:.2f} N, CoV {summary['cov_force']:.3f}")
     return summary
@@ -441,8 +441,9 @@ def run_name(q: Params) -> str:
 
 def run_row(q: Params, sub: Path, status: str, wall_time: float) -> dict:
     """One run of the study as a row (SI): its cell, seed, how far it pulled, our mean force
-    and CoV (the whole resistance, pullout.summarize), 001's measure's (stats_001), the front
-    row's mean, the wall time (s) and the status ("ok" or why it stopped)."""
+    and CoV (the whole resistance, pullout.summarize), those of the thesis's measure
+    (stats_001), the front row's mean, the wall time (s) and the status ("ok" or why it
+    stopped)."""
     rec = pullout.read_record(sub / "pullout.csv")
     if not rec or len(rec.get("pull_force", ())) < 3:
         rec = None  # stopped before the pull
@@ -557,8 +558,8 @@ def _within(ref, mean: float, sd: float):
 
 def study_cells(rows: list[dict]) -> list[dict]:
     """One row per cell (CELL_KEY): the thesis's values (T5.3, T5.4) and, over the seeds whose
-    run completed the pull ("ok"), the mean and standard deviation of 001's measure (mean
-    force and CoV), of the whole resistance and of the front row's mean; whether the thesis's
+    run completed the pull ("ok"), the mean and standard deviation of the thesis's measure
+    (mean force and CoV), of the whole resistance and of the front row's mean; whether the thesis's
     values lie within mean +- WITHIN_SD sd; the mean wall time per run (s); and the runs that
     stopped, with how far they pulled. A cell none of whose runs completed gives the same
     statistics over its stopped runs, each over what it pulled (basis "partial"; no
@@ -669,7 +670,7 @@ def window_lines(wt: list[dict]) -> list[str]:
         if len(cs) < 2:
             continue
         parts = []
-        for name, k in (("001's measure", "cov_001"), ("whole resistance", "cov_force")):
+        for name, k in (("the thesis's measure", "cov_001"), ("whole resistance", "cov_force")):
             vals = ", ".join(f"{c[k]:.3f} ± {c['sd_' + k]:.3f} (r = {c['radius_m'] * 1e3:g} mm, "
                              f"{c['runs']} runs)" for c in cs)
             parts.append(f"{name} {vals}: {', then '.join(c[k + '_step'] for c in cs[1:])}")
@@ -685,8 +686,8 @@ def window_lines(wt: list[dict]) -> list[str]:
 def cov_trend(cells: list[dict]) -> list[str]:
     """Lines on the CoV against the grain size (001, Table 5.4: it falls with smaller grains):
     for every grid, pressure and material with completed cells at two or more radii, the CoV
-    of 001's measure and of the whole resistance from the largest to the smallest grains, and
-    whether each step falls or rises by more than WITHIN_SD combined standard deviations
+    of the thesis's measure and of the whole resistance from the largest to the smallest
+    grains, and whether each step falls or rises by more than WITHIN_SD combined standard deviations
     (sqrt(sd1^2 + sd2^2)) or stays within the scatter."""
     out = []
     groups: dict = {}
@@ -698,7 +699,7 @@ def cov_trend(cells: list[dict]) -> list[str]:
             continue
         cs = sorted(cs, key=lambda c: -c["radius_m"])
         parts = []
-        for name, k, sdk in (("001's measure", "cov_001", "sd_cov_001"),
+        for name, k, sdk in (("the thesis's measure", "cov_001", "sd_cov_001"),
                              ("whole resistance", "cov_force", "sd_cov_force")):
             vals = ", ".join(f"{c[k]:.3f} ± {c[sdk]:.3f} (r = {c['radius_m'] * 1e3:g} mm)"
                              for c in cs)
@@ -746,12 +747,14 @@ def write_study(rows: list, out: Path, window_m: float | None = None) -> None:
             out.append(f"{'' if head.startswith('seed') else 'seed '}{head}: {what}")
         return "; ".join(out)
 
-    lines = [f"Per cell: mean ± standard deviation over the seeds whose run completed the "
+    lines = ["# The thesis's pull-out study (001, Tables 5.2-5.4): report", "",
+             f'Source: the thesis, "{THESIS}" (docs/studies.md).', "",
+             f"Per cell: mean ± standard deviation over the seeds whose run completed the "
              f"pull; \"within\": the thesis's value lies within our mean ± {WITHIN_SD:g} sd.",
              "",
              "| grid | r (mm) | P (kPa) | grid E (Pa) | seeds (completed) | thesis T5.3 (N) | "
-             "001's measure (N) | whole grid (N) | T5.3 within | thesis T5.4 | "
-             "CoV, 001's measure | CoV, whole grid | T5.4 within | front row (N) | "
+             "thesis's measure (N) | whole grid (N) | T5.3 within | thesis T5.4 | "
+             "CoV, thesis's measure | CoV, whole grid | T5.4 within | front row (N) | "
              "wall time per run (s) | status |",
              "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for c in cells:
@@ -792,9 +795,9 @@ def write_study(rows: list, out: Path, window_m: float | None = None) -> None:
 def plot_study(cells: list[dict], png: Path) -> None:
     """Tables 5.3 and 5.4 against ours: the mean force (log scale) and the CoV against the
     confining stress, one row of panels per grid material (and grains, jitter), one colour per
-    grid and radius: 001's measure and the whole resistance (mean ± sd over the seeds) and the
-    thesis's values. A cell none of whose runs completed is drawn faded (statistics over what
-    its runs pulled)."""
+    grid and radius: the thesis's measure and the whole resistance (mean ± sd over the seeds)
+    and the thesis's values. A cell none of whose runs completed is drawn faded (statistics
+    over what its runs pulled)."""
     import matplotlib
 
     matplotlib.use("Agg")
@@ -821,7 +824,8 @@ def plot_study(cells: list[dict], png: Path) -> None:
                     (row[1], ("cov_force", "sd_cov_force"), ("cov_001", "sd_cov_001"),
                      "thesis_cov")):
                 for key, sdkey, fmt, mfc, what in ((k, sdk, "o", None, "whole grid"),
-                                                   (k1, sdk1, "s", "none", "001's measure")):
+                                                   (k1, sdk1, "s", "none",
+                                                    "the thesis's measure")):
                     done = [c for c in sel if c["basis"] == "completed"]
                     part = [c for c in sel if c["basis"] == "partial"]
                     for group, alpha, ls, tag in ((done, 1.0, "-" if fmt == "o" else "--", ""),

@@ -1,7 +1,8 @@
 """What the two pull-out cases (pullout_000.py, pullout_001.py) share: running the stages
 with progress lines, the recorders (HDF5 + CSV, appended and flushed as the run goes), the VTK
-snapshots at chosen displacements, the plots (000 Figs 5, 7, 8), the summary, and the
-initial cloud of clump grains (--grains clumps:NAME; the option itself: grains_option.py)."""
+snapshots at chosen displacements, the plots (the pull-out paper's Figs 5, 7, 8), the
+summary, and the initial cloud of clump grains (--grains clumps:NAME; the option itself:
+grains_option.py)."""
 
 from __future__ import annotations
 

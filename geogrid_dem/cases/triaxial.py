@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Drained triaxial test of a granular sample in a box (001 chapter 6 and Appendix B).
+"""Drained triaxial test of a granular sample in a box (the thesis, 001 chapter 6 and App. B).
 
 Axis z is the axial axis (the 0.6 m side of the default 0.3 x 0.3 x 0.6 m box); x and y are
 the lateral axes held at the cell pressure. Six frictionless, servo-controlled walls.
