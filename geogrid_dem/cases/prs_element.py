@@ -1,5 +1,6 @@
 #!/usr/bin/env python3
-"""Prestressed reinforced-soil (PRS) element of 002, with its boundary stresses from a FEM model.
+"""The prestressed reinforced-soil (PRS) element of the prestressed-element paper (002), with
+its boundary stresses from a FEM model.
 
 002 §3: a 0.1 m cube of grains with a geogrid at mid-height, six servo-controlled walls
 driven to the stresses "calculated by a multiscale FEM analysis"; reinforced (RE) versus
@@ -68,7 +69,7 @@ from pathlib import Path
 
 import numpy as np
 
-from geogrid_dem.cases import describe
+from geogrid_dem.cases import PRESTRESS_PAPER, describe
 from geogrid_dem.options import (case_parser, check_cap, check_common_args, given_options,
                                  refuse_unused)
 from geogrid_dem.rundir import begin_run, end_run, run_main
@@ -185,7 +186,8 @@ def coupling_summary(summary: dict) -> dict | None:
 
 
 def write_report(out: Path, summary: dict) -> None:
-    lines = ["# PRS element: report", ""]
+    lines = ["# The PRS element, driven by FEM stresses: report", "",
+             f'Source: the prestressed-element paper, "{PRESTRESS_PAPER}" (docs/studies.md).', ""]
     mode = summary["mode"]
     lines.append(f"Mode: {mode}. Stresses in kPa, DEM compression positive.")
     lines.append("")
@@ -282,14 +284,12 @@ def run_variants(p: Params, out: Path, fems: dict | None = None) -> list:
     fems = fems or {}
     if p.workers < 2 or p.cell_elements:  # (cell elements: the workers are Dask's)
         return [run_variant(p, out, v, fem=fems.get(v)) for v in VARIANTS]
-    import concurrent.futures
-    import multiprocessing
+    from geogrid_dem.processes import process_pool, results_in_order
 
     log(f"--workers {p.workers}: RE and PRS run in two processes")
-    ctx = multiprocessing.get_context("spawn")
-    with concurrent.futures.ProcessPoolExecutor(max_workers=2, mp_context=ctx) as ex:
-        return list(ex.map(run_variant, [p] * len(VARIANTS), [out] * len(VARIANTS),
-                           VARIANTS))
+    with process_pool(2) as ex:
+        return list(results_in_order(ex, run_variant, [p] * len(VARIANTS),
+                                     [out] * len(VARIANTS), VARIANTS))
 
 
 def run(p: Params, out: Path) -> dict:

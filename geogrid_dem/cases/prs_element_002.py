@@ -28,9 +28,7 @@ SI units. DEM stresses compression positive.
 
 from __future__ import annotations
 
-import concurrent.futures
 import contextlib
-import multiprocessing
 import json
 import math
 import sys
@@ -43,6 +41,7 @@ import numpy as np
 from geogrid_dem.cases import prs_element as _fem_case
 from cpp_dem.elements.box import GRID_ENDS, KINEMATICS, run_element
 from geogrid_dem.cases import PRESTRESS_PAPER
+from geogrid_dem.processes import process_pool, results_in_order
 from geogrid_dem.rundir import begin_run, end_run, run_main
 
 GRIDS = ("detailed", "standard")
@@ -489,8 +488,8 @@ def run(p: Params, out: Path) -> dict:
             n_proc = min(p.workers, len(todo))
             log(f"--workers {p.workers}: {len(todo)} packings (RE and PRS on each), {n_proc} "
                 "at a time")
-            ex = stack.enter_context(_pool(n_proc))
-            results = ex.map(_pair_job, *zip(*args))
+            ex = stack.enter_context(process_pool(n_proc))
+            results = results_in_order(ex, _pair_job, *zip(*args))
         else:
             results = (_pair_job(*a) for a in args)
         for k, ((g, s), res) in enumerate(zip(todo, results)):
@@ -514,26 +513,6 @@ def run(p: Params, out: Path) -> dict:
             f"{_fmt(f['diff_se'])} (n = {f['n']}): {f['verdict']}")
     log(f"done in {summary['wall_time_total_s']:.1f} s; report in {out / 'report.md'}")
     return summary
-
-
-@contextlib.contextmanager
-def _pool(n_proc: int):
-    """The packings' process pool. A stop (Ctrl-C, SIGTERM, an error) ends it at once: its
-    processes are terminated and the packings not yet started cancelled (a pool left to shut
-    down by itself would run every queued packing first); the finished ones are kept."""
-    ex = concurrent.futures.ProcessPoolExecutor(
-        max_workers=n_proc, mp_context=multiprocessing.get_context("spawn"))
-    try:
-        yield ex
-    except BaseException:
-        procs = list((getattr(ex, "_processes", None) or {}).values())
-        ex.shutdown(wait=False, cancel_futures=True)
-        for proc in procs:
-            proc.terminate()
-        for proc in procs:
-            proc.join(timeout=10)
-        raise
-    ex.shutdown(wait=True)
 
 
 def _draw_pairs(p: Params, out: Path) -> None:
