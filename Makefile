@@ -31,11 +31,12 @@ test: setup
 bench: setup
 	$(PY) bench/throughput.py
 
-# The API reference of cpp_dem (with cpp_dem._core), femcoupling and geogrid_dem from their
-# docstrings (MkDocs + mkdocstrings, docs/api.md); a warning or a module that fails to import fails it.
+# One site: the guide (docs/*.md, in the order of docs/start_here.md) and the API reference of
+# cpp_dem (with cpp_dem._core), femcoupling and geogrid_dem from their docstrings (MkDocs +
+# mkdocstrings, docs/api.md); a warning or a module that fails to import fails it.
 docs: setup
 	$(PY) -m mkdocs build --strict --clean
-	@echo "API reference: open build/docs/html/index.html"
+	@echo "The site (guide and API reference): open build/docs/html/index.html"
 
 # Every marked results table of the docs rewritten from its data file (docs/developing.md,
 # "Adding a results table"); the suite checks them (tests/test_docs_tables.py).

@@ -1,16 +1,19 @@
-"""The API reference (``make docs``, docs/api.md) builds with no warning and holds the objects.
+"""The site (``make docs``, docs/api.md): the guide and the API reference, built with no warning.
 
-The real reference is built once (MkDocs, ``--strict``: a warning fails the build) into a
-temporary folder. A synthetic package, built with the same configuration, shows that the checks
-bite: a docstring naming a parameter the function does not have, a cross-reference to nothing,
-and a module that fails to import each make the build fail, while the same package without the
-fault builds.
+The real site is built once (MkDocs, ``--strict``: a warning fails the build) into a temporary
+folder: its navigation holds the guide pages (docs/*.md) grouped as docs/start_here.md leads
+through them, then the API reference, whose pages hold the objects; a class bound from C++
+(``cpp_dem.Scene``, a subclass of ``cpp_dem._core.Scene``) lists its inherited members. A
+synthetic package, built with the same configuration, shows that the checks bite: a docstring
+naming a parameter the function does not have, a cross-reference to nothing, and a module that
+fails to import each make the build fail, while the same package without the fault builds.
 """
 
 from __future__ import annotations
 
 import importlib.util
 import os
+import re
 import subprocess
 import sys
 import textwrap
@@ -21,6 +24,7 @@ import yaml
 
 ROOT = Path(__file__).resolve().parents[1]
 CONFIG = ROOT / "mkdocs.yml"
+DOCS = ROOT / "docs"
 HOOK = ROOT / "docs" / "api" / "reference_pages.py"
 EXTENSION = ROOT / "docs" / "api" / "docstring_style.py"
 
@@ -37,7 +41,7 @@ def build(config: Path, site: Path, pythonpath: Path | None = None) -> subproces
 
 @pytest.fixture(scope="module")
 def site(tmp_path_factory) -> tuple[Path, str]:
-    out = tmp_path_factory.mktemp("api_docs") / "html"
+    out = tmp_path_factory.mktemp("site") / "html"
     run = build(CONFIG, out)
     assert run.returncode == 0, f"mkdocs build --strict failed:\n{run.stderr[-6000:]}"
     return out, run.stderr
@@ -55,12 +59,12 @@ def test_reference_builds_without_a_warning(site):
 
 
 @pytest.mark.parametrize("page, objects", [
-    ("cpp_dem/index.html", ["cpp_dem.Scene", "cpp_dem.Scene.run", "cpp_dem.Material"]),
-    ("cpp_dem/scene.html", ["cpp_dem.scene.Scene.run", "cpp_dem.scene.linear_material"]),
-    ("cpp_dem/_core.html", ["cpp_dem._core.Scene", "cpp_dem._core.Material"]),
-    ("cpp_dem/elements/pool.html", ["cpp_dem.elements.pool.ElementPool"]),
-    ("femcoupling/hierarchical.html", ["femcoupling.hierarchical"]),
-    ("geogrid_dem/cli.html", ["geogrid_dem.cli", "geogrid_dem.cli.main"]),
+    ("api/cpp_dem/index.html", ["cpp_dem.Scene", "cpp_dem.Scene.run", "cpp_dem.Material"]),
+    ("api/cpp_dem/scene.html", ["cpp_dem.scene.Scene.run", "cpp_dem.scene.linear_material"]),
+    ("api/cpp_dem/_core.html", ["cpp_dem._core.Scene", "cpp_dem._core.Material"]),
+    ("api/cpp_dem/elements/pool.html", ["cpp_dem.elements.pool.ElementPool"]),
+    ("api/femcoupling/hierarchical.html", ["femcoupling.hierarchical"]),
+    ("api/geogrid_dem/cli.html", ["geogrid_dem.cli", "geogrid_dem.cli.main"]),
 ])
 def test_pages_hold_the_objects(site, page, objects):
     html = _ids(site[0] / page)
@@ -80,7 +84,7 @@ def test_every_public_module_has_a_page(site):
         for module, is_package in modules:
             if any(p.startswith("_") for p in module.split(".")) and module != "cpp_dem._core":
                 continue
-            page = site[0] / hook.page_path(module, is_package).replace(".md", ".html")
+            page = site[0] / "api" / hook.page_path(module, is_package).replace(".md", ".html")
             if not page.is_file() or f'id="{module}"' not in page.read_text(encoding="utf-8"):
                 missing.append(module)
     assert not missing, f"modules without a page: {missing}"
@@ -88,14 +92,142 @@ def test_every_public_module_has_a_page(site):
 
 def test_docstrings_read_as_written(site):
     """``name : description`` stays a description (type from the signature); ``::`` is code."""
-    core = _ids(site[0] / "cpp_dem/_core.html")
+    core = _ids(site[0] / "api/cpp_dem/_core.html")
     start = core.index('id="cpp_dem._core.Material"')
     material = core[start:core.index('id="cpp_dem._core.Material.density"', start)]
     assert "mass density, kg/m^3 (&gt; 0)." in material
     assert "1–6) or" in material and "Cundall–Strack, 000 eqs" in material  # one sentence
-    package = _ids(site[0] / "cpp_dem/index.html")
-    assert "Quick start:</p>" in package and "<pre><code" in package
-    assert ":func:" not in _ids(site[0] / "cpp_dem/io/vtk.html")
+    package = _ids(site[0] / "api/cpp_dem/index.html")
+    assert "Quick start:</p>" in package and re.search(r"<pre[^>]*><code", package)
+    assert ":func:" not in _ids(site[0] / "api/cpp_dem/io/vtk.html")
+
+
+# --- the guide in the same site, its navigation following docs/start_here.md ----------------
+
+CAPTION = re.compile(r'<p class="caption"><span class="caption-text">([^<]*)</span></p>')
+HREF = re.compile(r'href="([^"]*)"')
+
+
+def navigation(site: Path, page: str = "index.html") -> tuple[list[str], list[tuple[str, list]]]:
+    """The navigation of ``page`` (at the top of the site): the pages before the first
+    section, then (section title, its pages in order); a page is its path in the site
+    (``pullout.html``), the page itself included (its link is ``#``)."""
+    html = _ids(site / page)
+    start = html.index('class="wy-menu wy-menu-vertical"')
+    menu = html[start:html.index("</nav>", start)]
+
+    def pages(part: str) -> list[str]:
+        hrefs = [page if h == "#" else h.split("#")[0] for h in HREF.findall(part)]
+        return [h for h in hrefs if h]  # not the headings of the page itself (#id)
+
+    parts = CAPTION.split(menu)
+    return pages(parts[0]), [(unescape(parts[i]), pages(parts[i + 1]))
+                             for i in range(1, len(parts), 2)]
+
+
+def unescape(text: str) -> str:
+    return text.replace("&amp;", "&").replace("&gt;", ">").replace("&lt;", "<")
+
+
+def start_here_sections() -> tuple[set[str], list[tuple[str, set[str]]]]:
+    """docs/start_here.md: the pages its introduction links, and its numbered sections (title
+    up to its first colon, the pages it links)."""
+    text = (DOCS / "start_here.md").read_text(encoding="utf-8")
+    chunks = re.split(r"^## (\d+\. .*)$", text, flags=re.MULTILINE)
+
+    def pages(chunk: str) -> set[str]:
+        return set(re.findall(r"\]\(([\w.-]+)\.md(?:#[^)]*)?\)", chunk))
+
+    intro = pages(re.split(r"^## ", chunks[0], flags=re.MULTILINE)[0])
+    return intro, [(chunks[i].split(":")[0].strip(), pages(chunks[i + 1]))
+                   for i in range(1, len(chunks), 2)]
+
+
+def test_navigation_holds_the_guide_as_start_here_orders_it(site):
+    root = site[0]
+    top, sections = navigation(root)
+    assert top[:1] == ["index.html"], top  # the home page
+    assert 'id="start-here"' in _ids(root / "index.html")  # is docs/start_here.md
+    linked = set(top) | {page for _, pages in sections for page in pages}
+    guide = {"index.html" if p.stem == "start_here" else f"{p.stem}.html"
+             for p in DOCS.glob("*.md")}
+    assert {"pullout.html", "triaxial.html", "prs_element_002.html", "multiscale.html"} <= guide
+    missing = sorted(g for g in guide if g not in linked or not (root / g).is_file())
+    assert not missing, f"guide pages not built or not in the navigation: {missing}"
+    # The pages the introduction of start_here.md names come right after it; the numbered
+    # sections, in order, are those of start_here.md, each holding pages that section names;
+    # every page a numbered section names is under one.
+    intro, expected = start_here_sections()
+    named = set().union(*(n for _, n in expected)) - {"start_here"}
+    assert {f"{p}.html" for p in intro - named} <= set(top), (intro, top)
+    numbered = [(t, pages) for t, pages in sections if re.match(r"\d+\. ", t)]
+    assert [t for t, _ in numbered] == [t for t, _ in expected]
+    placed = {page for _, pages in numbered for page in pages}
+    for (title, pages), (_, names) in zip(numbered, expected):
+        assert pages and all(p.removesuffix(".html") in names for p in pages), (title, pages)
+    assert not sorted(p for p in named if f"{p}.html" not in placed), placed
+    # The API reference is its own section, last.
+    assert sections[-1][0] == "API reference"
+    api = set(sections[-1][1])
+    assert {"api/index.html", "api/cpp_dem/scene.html", "api/cpp_dem/_core.html"} <= api
+    # Links to repository files the site does not hold became text (no link out of the site).
+    leaving = {g: re.findall(r'href="\.\./[^"]*"', _ids(root / g)) for g in guide}
+    assert not any(leaving.values()), {g: h for g, h in leaving.items() if h}
+
+
+def test_guide_headings_have_githubs_ids(site):
+    """A heading's id in the site is GitHub's (as tests/test_docs_text.py computes it), so an
+    anchor works in both; a repeated heading (GitHub ``-1``, the site ``_1``) aside."""
+    checker = ROOT / "tests" / "test_docs_text.py"
+    spec = importlib.util.spec_from_file_location("_docs_text", checker)
+    docs_text = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(docs_text)
+    differing = {}
+    for page in sorted(DOCS.glob("*.md")):
+        html = _ids(site[0] / ("index.html" if page.stem == "start_here" else f"{page.stem}.html"))
+        main = html[html.index('role="main"'):]
+        made = set(re.findall(r'<h[1-6] id="([^"]+)"', main))
+        ids = docs_text.heading_ids(page)
+        repeated = {i for i in ids if re.sub(r"-\d+$", "", i) in ids - {i}}
+        github = ids - repeated
+        if github - made:
+            differing[page.name] = sorted(github - made)
+    assert not differing, differing
+
+
+def _members(html: str, cls: str) -> set[str]:
+    return set(re.findall(rf'id="{re.escape(cls)}\.(\w+)"', html))
+
+
+def test_scene_page_lists_the_members_of_the_compiled_scene(site):
+    core = _ids(site[0] / "api/cpp_dem/_core.html")
+    compiled = _members(core, "cpp_dem._core.Scene")
+    assert {"positions", "velocities", "gravity"} <= compiled
+    for page, cls in [("api/cpp_dem/scene.html", "cpp_dem.scene.Scene"),
+                      ("api/cpp_dem/index.html", "cpp_dem.Scene")]:
+        html = _ids(site[0] / page)
+        members = _members(html, cls)
+        assert {"run", "add_box", "add_spheres", "positions"} <= members, page
+        assert not compiled - members, f"{page} lacks {sorted(compiled - members)}"
+        # An inherited member with its docstring: gravity, set in Scene.__init__, is _core's.
+        start = html.index(f'id="{cls}.gravity"')
+        assert "Gravitational acceleration, m/s^2" in html[start:start + 3000], page
+
+
+def test_every_bound_class_lists_its_inherited_members(site):
+    """A class of cpp_dem._core re-exported by cpp_dem has the members its page there has;
+    a subclass within the core (ServoWall of Controller) those of its base too."""
+    core = _ids(site[0] / "api/cpp_dem/_core.html")
+    package = _ids(site[0] / "api/cpp_dem/index.html")
+    classes = sorted(set(re.findall(r'id="cpp_dem\._core\.([A-Z]\w*)"', core)))
+    assert {"Scene", "Material", "Controller", "ServoWall", "CellController"} <= set(classes)
+    base = _members(core, "cpp_dem._core.Controller")
+    assert base and base <= _members(core, "cpp_dem._core.ServoWall")
+    exported = [c for c in classes if f'id="cpp_dem.{c}"' in package]
+    assert {"Scene", "Material", "ServoWall", "CellController"} <= set(exported)
+    for c in exported:
+        lacking = _members(core, f"cpp_dem._core.{c}") - _members(package, f"cpp_dem.{c}")
+        assert not lacking, f"cpp_dem.{c} lacks {sorted(lacking)}"
 
 
 # --- the checks bite: a synthetic package built with the same configuration --------------------
@@ -145,6 +277,7 @@ def _synthetic(tmp_path: Path, extra: str = "", note: str = "", bad: str | None 
     (docs / "index.md").write_text("# Synthetic\n")
     config = yaml.safe_load(CONFIG.read_text(encoding="utf-8"))
     config.update(docs_dir=str(docs), site_dir=str(tmp_path / "site"), hooks=[str(HOOK)])
+    config.pop("nav", None)  # the reference alone, without the guide
     config["extra"]["api_reference"] = {"packages": {"synth": str(src)}, "private_pages": []}
     for plugin in config["plugins"]:
         if isinstance(plugin, dict) and "mkdocstrings" in plugin:

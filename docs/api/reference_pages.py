@@ -6,16 +6,26 @@ The packages to document are listed in mkdocs.yml under ``extra: api_reference: 
 - the module is imported first; a module that fails to import stops the build with an error
   naming the module and the exception (the reference itself is read from the source by griffe,
   which would otherwise describe a module that cannot be used);
-- a page ``<package>/<sub>/<module>.md`` holding ``::: <module>`` is generated (a package gets
-  ``.../index.md``), and the navigation lists the pages package by package.
+- a page ``<folder>/<package>/<sub>/<module>.md`` holding ``::: <module>`` is generated (a
+  package gets ``.../index.md``; ``<folder>`` is ``api_reference: folder`` under the docs, where
+  the landing page ``index.md`` of the reference is), and the navigation gets a section "API
+  reference": the landing page, then the pages package by package, after the pages of the
+  ``nav`` of mkdocs.yml (the guide).
 
 Private modules (a name part starting with ``_``) are imported but get no page, except those
 listed under ``api_reference: private_pages`` (the compiled core, read from its ``.pyi`` stub).
+
+A class bound from C++ has its members on the compiled class, which the Python package
+re-exports or subclasses (``cpp_dem.Scene`` derives from ``cpp_dem._core.Scene``). The modules
+listed under ``api_reference: bound_modules`` are those compiled ones: a page holding a class
+of theirs, or a subclass of one, lists the inherited members as well (mkdocstrings'
+``inherited_members``), each with its docstring.
 """
 
 from __future__ import annotations
 
 import importlib
+import inspect
 import logging
 import traceback
 from pathlib import Path
@@ -27,6 +37,7 @@ from mkdocs.structure.files import File, Files
 log = logging.getLogger("mkdocs.hooks.api_reference")
 
 _PAGES: dict[str, str] = {}  # module name -> page path (src_uri) of the current build
+_INHERITED: set[str] = set()  # modules whose page lists inherited members
 
 
 def find_modules(name: str, folder: Path) -> list[tuple[str, bool]]:
@@ -74,49 +85,80 @@ def page_path(module: str, is_package: bool) -> str:
     return "/".join(parts) + ("/index.md" if is_package else ".md")
 
 
-def _settings(config: MkDocsConfig) -> tuple[dict[str, Path], set[str]]:
+def bound_classes(module: str, bound_modules: set[str]) -> list[str]:
+    """The public classes of (imported) ``module`` that are, or derive from, a class of one of
+    ``bound_modules``: its ``__all__`` if it has one, otherwise the names it defines."""
+    mod = importlib.import_module(module)
+    names = getattr(mod, "__all__", None)
+    if names is None:
+        names = [n for n, obj in vars(mod).items()
+                 if not n.startswith("_") and getattr(obj, "__module__", None) == module]
+    found = []
+    for name in names:
+        obj = getattr(mod, name, None)
+        if inspect.isclass(obj) and any(c.__module__ in bound_modules for c in obj.__mro__):
+            found.append(name)
+    return found
+
+
+def _settings(config: MkDocsConfig) -> tuple[dict[str, Path], set[str], str, set[str]]:
     ref = (config.extra or {}).get("api_reference")
     if not isinstance(ref, dict) or not isinstance(ref.get("packages"), dict) or not ref["packages"]:
         raise PluginError("mkdocs.yml: extra: api_reference: packages must map each package name "
                           "to its folder (relative to mkdocs.yml)")
     base = Path(config.config_file_path).parent
     packages = {str(k): (base / str(v)).resolve() for k, v in ref["packages"].items()}
-    private = ref.get("private_pages") or []
-    if not isinstance(private, list):
-        raise PluginError(f"mkdocs.yml: extra: api_reference: private_pages={private!r}: must be a "
-                          "list of module names")
-    return packages, set(map(str, private))
+    lists = {}
+    for key in ("private_pages", "bound_modules"):
+        value = ref.get(key) or []
+        if not isinstance(value, list):
+            raise PluginError(f"mkdocs.yml: extra: api_reference: {key}={value!r}: must be a "
+                              "list of module names")
+        lists[key] = set(map(str, value))
+    folder = str(ref.get("folder") or "").strip("/")
+    return packages, lists["private_pages"], folder, lists["bound_modules"]
 
 
 def on_config(config: MkDocsConfig) -> MkDocsConfig:
-    packages, private_pages = _settings(config)
+    packages, private_pages, folder, bound_modules = _settings(config)
+    prefix = f"{folder}/" if folder else ""
     _PAGES.clear()
-    nav: list = [{"Overview": "index.md"}]
+    _INHERITED.clear()
+    nav: list = [{"Overview": f"{prefix}index.md"}]
     all_modules: list[str] = []
-    for name, folder in packages.items():
+    for name, folder_path in packages.items():
         section = []
-        for module, is_package in find_modules(name, folder):
+        for module, is_package in find_modules(name, folder_path):
             all_modules.append(module)
             private = any(part.startswith("_") for part in module.split("."))
             if private and module not in private_pages:
                 continue
-            _PAGES[module] = page_path(module, is_package)
+            _PAGES[module] = prefix + page_path(module, is_package)
             section.append({module: _PAGES[module]})
         nav.append({name: section})
-    missing = sorted(private_pages - set(_PAGES))
-    if missing:
-        raise PluginError(f"mkdocs.yml: extra: api_reference: private_pages: {missing} not found "
-                          "in the packages listed")
+    for key, names, known in (("private_pages", private_pages, _PAGES),
+                              ("bound_modules", bound_modules, all_modules)):
+        missing = sorted(set(names) - set(known))
+        if missing:
+            raise PluginError(f"mkdocs.yml: extra: api_reference: {key}: {missing} not found "
+                              "in the packages listed")
     failed = import_failures(all_modules)
     if failed:
         raise PluginError(f"API reference: {len(failed)} of {len(all_modules)} modules fail to "
                           "import:\n  " + "\n  ".join(failed))
-    log.info("API reference: %d modules import, %d pages", len(all_modules), len(_PAGES))
-    config.nav = nav
+    if bound_modules:
+        _INHERITED.update(m for m in _PAGES if bound_classes(m, bound_modules))
+    log.info("API reference: %d modules import, %d pages (%d with inherited members: %s)",
+             len(all_modules), len(_PAGES), len(_INHERITED), ", ".join(sorted(_INHERITED)))
+    guide = list(config.nav or [])
+    config.nav = [*guide, {"API reference": nav}] if guide else nav
     return config
 
 
 def on_files(files: Files, config: MkDocsConfig) -> Files:
     for module, src_uri in _PAGES.items():
-        files.append(File.generated(config, src_uri, content=f"::: {module}\n"))
+        content = f"::: {module}\n"
+        if module in _INHERITED:
+            content += "    options:\n      inherited_members: true\n"
+        files.append(File.generated(config, src_uri, content=content))
     return files
