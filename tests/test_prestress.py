@@ -163,3 +163,27 @@ def test_end_tension_bad_input_names_the_field():
         e.set(float("nan"))
     with pytest.raises(cd.ParameterError, match="direction='diagonal'"):
         EndTension(s, g, direction="diagonal")
+
+
+def test_uniform_tension_gives_every_member_the_target():
+    """tension_uniform stretches the whole (free) grid at once: every member carries the
+    target (not only the lines' mean), the grid is held while locked and all of it is free
+    after unlock."""
+    s, g = _woven()
+    p = Prestress(s, g, tension_per_m=1000.0)
+    row = p.tension_uniform(100000)
+    assert p.locked
+    assert abs(np.mean(row["line_forces_n"]) / p.target_n - 1) <= 0.01
+    np.testing.assert_allclose(p.member_forces(), p.target_n, rtol=0.03)
+    s.run(200)  # held: nothing moves, the force stays
+    np.testing.assert_allclose(p.line_forces(), row["line_forces_n"], rtol=1e-4)  # (the last step)
+    assert all(np.asarray(s._blocked)[g.spheres])
+    p.unlock()
+    assert not any(np.asarray(s._blocked)[g.spheres])
+
+
+def test_uniform_tension_unreachable_says_so():
+    s, g = _woven()
+    p = Prestress(s, g, tension_per_m=1000.0)
+    with pytest.raises(PrestressError, match="uniform stretch"):
+        p.tension_uniform(100)

@@ -191,3 +191,55 @@ def test_clump_rests_on_a_woven_grid():
     weight = s.clump_masses[0] * 9.81
     assert abs(fz / weight - 1) < 0.01
     assert np.linalg.norm(s.clump_velocities[0]) < 1e-4
+
+
+def test_tails_continue_every_string_past_its_end_junctions():
+    """tails=(2, 1): each longitudinal string goes on by 2 touching spheres past both end
+    junctions, each transverse one by 1; the tail bonds belong to no member and touch."""
+    s0, g0, _ = _grid("standard", ax=3, ay=1)
+    s, g, _ = _grid("standard", ax=3, ay=1, tails=(2, 1))
+    r = woven.PRESETS["standard"]["sphere_radius"]
+    n_long, n_trans = 2, 4  # strings (one strand per member)
+    assert len(g.spheres) == len(g0.spheres) + 2 * (2 * n_long + 1 * n_trans)
+    assert len(g.bonds) == len(g0.bonds) + 2 * (2 * n_long + 1 * n_trans)
+    assert g.tails == (2, 1) and g0.tails == (0, 0)
+    # The members are the same; the tails' bonds are in none of them.
+    assert g.n_members == g0.n_members
+    assert [len(b) for b in g.member_bonds] == [len(b) for b in g0.member_bonds]
+    assert np.sum(g.bond_member < 0) == np.sum(g0.bond_member < 0) + 2 * (2 * 2 + 1 * 4)
+    pos = np.asarray(s.positions)[g.spheres]
+    x0 = np.asarray(s0.positions)[g0.spheres]
+    assert pos[:, 0].min() == pytest.approx(x0[:, 0].min() - 2 * 2 * r, abs=1e-15)
+    assert pos[:, 0].max() == pytest.approx(x0[:, 0].max() + 2 * 2 * r, abs=1e-15)
+    assert pos[:, 1].min() == pytest.approx(x0[:, 1].min() - 2 * r, abs=1e-15)
+    st = s.bond_state()
+    np.testing.assert_allclose(st["reference_gap"][g.bond_member < 0], 0, atol=1e-15)
+    # Tail spheres are of their string's kind.
+    assert set(g.sphere_kind) == set(g0.sphere_kind)
+
+
+@pytest.mark.parametrize("kw, field", [(dict(tails=-1), "tails"), (dict(tails=1.5), "tails"),
+                                       (dict(tails=(1, 2, 3)), "tails")])
+def test_bad_tails_name_the_field(kw, field):
+    with pytest.raises((cd.ParameterError, ValueError), match=field):
+        _grid("standard", **kw)
+
+
+def test_a_grid_with_tails_is_pulled_at_their_tips():
+    """EndTension on a grid with tails grips the tips (one sphere per string end), and the
+    lines carry T x pitch through the tails to the members."""
+    from cpp_dem.protocols.prestress import EndTension, GridEnds
+
+    s = cd.Scene(local_damping=0.7)
+    m = s.add_material(woven.woven_material("standard"))
+    g = woven.woven_geogrid(s, origin=(0, 0, 0), apertures_x=3, apertures_y=2, material=m,
+                            preset="standard", tails=3)
+    s.dt = 0.5 * s.critical_dt()
+    ends = GridEnds(s, g)
+    x = np.asarray(s.positions)[:, 0]
+    assert len(ends.low) == len(ends.high) == 3  # one tip per longitudinal string
+    assert x[ends.low].max() == pytest.approx(x[g.spheres].min())
+    e = EndTension(s, g)
+    e.set(1000.0)
+    s.run(40000)
+    assert e.line_forces().mean() == pytest.approx(1000.0 * g.pitch[1], rel=1e-3)

@@ -18,6 +18,11 @@ between junctions, so a grain can enter between them (002's "single string inter
   column i.
 - **Member force.** A member's tensile force is the sum, over its strings, of the force of the
   bond that the member's mid-section cuts.
+- **Tails** (``tails``): each string may go on past its end junctions by a number of touching
+  spheres, bonded like the strings, so that a grid cut from a larger sheet reaches towards the
+  faces of its box (the element's grid is pulled at its tails' tips: the layer's tension
+  enters at the faces, not at an end rib inside the soil). Tail spheres are of their string's
+  kind; tail bonds belong to no member (``bond_member`` -1, as inside a junction).
 
 **Presets** (:data:`PRESETS`):
 - 002 Table 2 gives the "detailed" and "standard" sets, with their densities: contact bonds,
@@ -26,8 +31,9 @@ between junctions, so a grain can enter between them (002's "single string inter
   - detailed: spheres of radius 1 mm, three strings per member, 4.5 mm apart centre to
     centre (a 2.5 mm clear gap between adjacent strings), 16 mm clear apertures;
   - standard: one string of 1.5 mm spheres per member, 20 mm clear apertures.
-  Both keep a 27 mm pitch (aperture + (strands - 1) x strand_spacing + 2 x sphere_radius),
-  so the element's 3 x 3 apertures fit its 0.1 m box (cpp_dem.elements.box).
+  The pitch (aperture + (strands - 1) x strand_spacing + 2 x sphere_radius) is 27 mm
+  (detailed) and 23 mm (standard), so the element's 3 x 3 apertures fit its 0.1 m box
+  (cpp_dem.elements.box), which gives the standard grid tails to reach towards its faces.
 
 **Why 4.5 mm between the detailed strings.** 002 sees grains enter between the single
 strings of the detailed grid (its Fig. 4b). With 1 mm spheres 2.5 mm apart (the earlier
@@ -171,13 +177,14 @@ class WovenGeogrid:
     sphere_strand : per sphere, its string (index into strand_direction); -1 at junctions.
     strand_direction : per string, 'longitudinal' or 'transverse'.
     strand_member_line : per string, its junction row (longitudinal) or column (transverse).
-    bond_member : per bond, the member it belongs to (-1 inside a junction).
+    bond_member : per bond, the member it belongs to (-1 inside a junction or in a tail).
     member_direction, member_cell, member_side, member_axis : as cpp_dem.build.geogrid.Geogrid.
     member_section_bonds : per member, the bonds its mid-section cuts (one per string).
     member_bonds : per member, all its bonds.
     member_width : width of a member, m (from the outer strings' edges).
     pitch : centre distance of the members, m (x, y).
     reference_positions : (n, 3) sphere positions when built, m.
+    tails : spheres per string past each end junction (x strings, y strings).
     """
 
     spheres: np.ndarray
@@ -197,6 +204,7 @@ class WovenGeogrid:
     pitch: tuple
     n_cells: tuple
     reference_positions: np.ndarray
+    tails: tuple = (0, 0)
 
     @property
     def n_members(self) -> int:
@@ -234,7 +242,7 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
                   strand_spacing: float | None = None,
                   aperture: float | Sequence[float] | None = None,
                   max_spheres: int | None = None, convention: str = "series",
-                  periodic: bool = False) -> WovenGeogrid:
+                  periodic: bool = False, tails: int | Sequence[int] = 0) -> WovenGeogrid:
     """Builds a woven biaxial geogrid of bonded spheres (module docstring) in ``scene``.
 
     origin : centre of the first junction (m; the grid spans apertures_x x apertures_y cells
@@ -252,6 +260,9 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
         apertures_y x pitch_y along the axes): the last junction column and row are the
         first ones' images, and the strings close through the cell's faces (bonds in a
         periodic cell: docs/bonds.md). A reinforced-soil RVE's sheet.
+    tails : touching spheres that each string goes on by past its end junctions (module
+        docstring), one count or (longitudinal strings, transverse strings); 0 (the default)
+        ends the strings at the end junctions. Not with ``periodic``.
     """
     p = _preset(preset)
     r = float(p["sphere_radius"] if sphere_radius is None else sphere_radius)
@@ -273,6 +284,14 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
     width = (ns - 1) * sp + 2 * r
     if not np.all(ap >= 2 * r):
         raise ParameterError(f"aperture={tuple(ap)}: must be >= 2 x sphere_radius (m)")
+    tl = (tails, tails) if np.ndim(tails) == 0 else tuple(tails)
+    if len(tl) != 2 or not all(isinstance(t, (int, np.integer)) and not isinstance(t, bool)
+                               and t >= 0 for t in tl):
+        raise ParameterError(f"tails={tails!r}: must be a whole number >= 0 of spheres, or two "
+                             "(longitudinal strings, transverse strings)")
+    tl = (int(tl[0]), int(tl[1]))
+    if periodic and any(tl):
+        raise ParameterError(f"tails={tails!r}: a periodic sheet has no ends; use 0")
     o = np.asarray(origin, dtype=float).reshape(3)
     pitch = ap + width
     if periodic:
@@ -286,7 +305,8 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
                 + n_ap * (max(1, round((p - (ns - 1) * sp) / (2 * r))) - 1))
 
     spheres = (n_lines[0] * n_lines[1] + n_lines[1] * fill(apertures_x, pitch[0])
-               + n_lines[0] * fill(apertures_y, pitch[1]))
+               + n_lines[0] * fill(apertures_y, pitch[1])
+               + 2 * (n_lines[1] * tl[0] + n_lines[0] * tl[1]))
     cap = MAX_WOVEN_SPHERES if max_spheres is None else max_spheres
     if isinstance(cap, bool) or not isinstance(cap, (int, np.integer)) or cap < 1:
         raise ParameterError(f"max_spheres={max_spheres!r}: must be a whole number >= 1, or "
@@ -362,12 +382,29 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
                 pair_along.append((t_last, along[k]))
             prev = cur
 
+    def tail(sid, end_sphere, start, step, fixed, direction, count):
+        """``count`` touching spheres from ``end_sphere`` (at ``start`` along the string)
+        outwards by ``step`` (+-2r), bonded in a chain, in no member."""
+        last, t_last = end_sphere, start
+        for q in range(1, count + 1):
+            t = start + q * step
+            xyz = (t, fixed, o[2]) if direction == LONGITUDINAL else (fixed, t, o[2])
+            nxt = sphere(("T", sid, step > 0, q), xyz, direction, sid)
+            pairs.append((last, nxt))
+            pair_member.append(None)
+            pair_along.append((t_last, t))
+            last, t_last = nxt, t
+
     for b, y in enumerate(ys):
         if not (periodic and b >= n_y):  # (periodic: the last row is the first's image)
             string(b, xs, x_line, y_line[b], y, LONGITUDINAL)
+            tail(b, index[jkey(0, b)], xs[0], -2 * r, y, LONGITUDINAL, tl[0])
+            tail(b, index[jkey(len(xs) - 1, b)], xs[-1], 2 * r, y, LONGITUDINAL, tl[0])
     for a, x in enumerate(xs):
         if not (periodic and a >= n_x):
             string(n_long + a, ys, y_line, x_line[a], x, TRANSVERSE)
+            tail(n_long + a, index[jkey(a, 0)], ys[0], -2 * r, x, TRANSVERSE, tl[1])
+            tail(n_long + a, index[jkey(a, len(ys) - 1)], ys[-1], 2 * r, x, TRANSVERSE, tl[1])
 
     # Members: cell (i, j) has longitudinal member A on row j between columns i and i + 1,
     # and transverse member C on column i between rows j and j + 1.
@@ -405,7 +442,7 @@ def woven_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures
         bond_member=bond_member, member_direction=direction, member_cell=cell,
         member_side=side, member_axis=axis, member_section_bonds=section,
         member_bonds=member_bonds, member_width=width, pitch=(float(pitch[0]), float(pitch[1])),
-        n_cells=(apertures_x, apertures_y), reference_positions=pts.copy())
+        n_cells=(apertures_x, apertures_y), reference_positions=pts.copy(), tails=tl)
 
 
 def preset_pitch(preset: str = "detailed", **geometry) -> tuple[float, float]:

@@ -386,9 +386,16 @@ def prepare_woven_element(p: ElementParams, mean_stress: float,
         raise ParameterError(f"apertures={p.apertures}: the {preset} grid ({p.apertures} x "
                              f"{pitch * 1e3:.1f} mm) does not fit in the {p.edge:g} m element "
                              "with 3 % of its edge to spare on each side")
+    # The grid reaches towards the faces: where its end ribs leave room (beyond the walls'
+    # 3 %) for whole spheres, its strings go on past them as tails (cpp_dem.build.woven), so
+    # that the ends pulled (the layer's tension, the prestress's grips) are near the faces and
+    # not at a rib inside the soil. (The standard grid's 23 mm pitch leaves its end ribs
+    # 14 mm inside the walls: pulled there, they pressed the soil outside them into the
+    # walls, and the element never came to rest. The detailed grid's leave 4 mm: no tail.)
+    tails = int(math.floor((o - 0.5 * width - 0.03 * p.edge) / (2 * r_grid) + 1e-9))
     grid = woven.woven_geogrid(sc, origin=(o, o, z_grid), apertures_x=p.apertures,
                                apertures_y=p.apertures, material=gmat, preset=preset,
-                               convention=p.grid_convention)
+                               convention=p.grid_convention, tails=tails)
     # 002's laws: grid-grain and grid-grid linear (Table 1, Table 2; p.grid_convention); walls
     # frictionless, and for Hertz–Mindlin grains linear with 002's grain k_n, k_s as the
     # contact's (002 gives no wall stiffness).
@@ -582,9 +589,18 @@ def load_variant(sample, grid, p: ElementParams, prestressed: bool,
     if prestressed and p.prestress > 0:
         ps = Prestress(sc, grid, tension_per_m=p.prestress)
         t0 = time.perf_counter()
-        row = ps.tension(p.max_steps)
+        # 'lock' (002's concept: the grid tensioned, the fill over it, its ends released):
+        # the whole grid stretched at once in the fill, so that every member carries T_p
+        # (grips pulling the ends of a grid already interlocked with the grains tensioned the
+        # end members above T_p and the inner ones below; released, the difference pushed
+        # the soil outside the end ribs into the walls, and the standard grid's element never
+        # came to rest). 'grips': the ends pulled by the grips and held.
+        row = ps.tension_uniform(p.max_steps) if p.grid_ends == "lock" else \
+            ps.tension(p.max_steps)
         log(f"PRS: longitudinal members tensioned to {ps.target_n:.1f} N each (T_p = "
-            f"{p.prestress / 1e3:g} kN/m) and locked at step {row['step']}: line forces "
+            f"{p.prestress / 1e3:g} kN/m"
+            + ("; the whole grid stretched uniformly" if p.grid_ends == "lock" else "")
+            + f") and locked at step {row['step']}: line forces "
             f"{np.round(row['line_forces_n'], 2).tolist()} N ({time.perf_counter() - t0:.1f} s)")
         if p.grid_ends == "lock":
             # 002's concept: the grid tensioned in the fill, then its ends released; the

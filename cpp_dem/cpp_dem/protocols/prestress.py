@@ -20,6 +20,10 @@ Then it locks the grips (ends held) and reports the locked-in force as the run g
   - Every ``period`` steps each line's grip moves at v = gain (T_p - T) / (k period dt).
   - k is the line's measured secant stiffness.
   - v is capped at ``max_speed``. The default is 1e-4 of the smallest radius per step.
+- **Uniform.** :meth:`Prestress.tension_uniform` holds and stretches the whole grid at once
+  instead (one strain along the members, servoed on the lines' mean force): a sheet
+  tensioned before the fill, whose members all carry the target, where grips pulling the
+  ends of a grid already in a fill tension the end members more than the inner ones.
 - **Lock.** The grips lock when every line has been within ``tolerance`` of the target for
   ``settle_checks`` checks in a row. A target not reached within the steps allowed raises
   :class:`PrestressError`, naming the lines and their forces. :meth:`Prestress.unlock` lets
@@ -90,8 +94,11 @@ class GridEnds:
         lo, hi = x.min(), x.max()
         if grip_width is None:
             # The end junctions: a woven grid's patch of crossings (its member width less a
-            # sphere diameter), a node grid's end nodes.
-            if hasattr(grid, "member_width"):
+            # sphere diameter), a node grid's end nodes; a woven grid with tails along this
+            # axis is held at their tips.
+            if getattr(grid, "tails", (0, 0))[self.axis] > 0:
+                grip_width = 1e-6 * (hi - lo)
+            elif hasattr(grid, "member_width"):
                 r_grid = float(np.asarray(scene.radii)[bodies[0]])
                 grip_width = grid.member_width - 2 * r_grid + 1e-9 * (hi - lo)
             else:
@@ -227,6 +234,69 @@ class Prestress:
             f"member, tolerance {self.tolerance:g}): {', '.join(bad) or 'not settled'}; "
             f"the grips stop where they are (max_speed={self.max_speed:.3g} m/s)")
 
+    def tension_uniform(self, max_steps: int) -> dict:
+        """Tensions the whole grid at once, as a sheet tensioned before the fill: every grid
+        body is held (all DOFs) and moved with one uniform stretch along the members'
+        direction about the grid's centre, v = rate x (x - centre), the rate servoed on the
+        lines' mean force as :meth:`tension` servoes the grips, until the lines are within
+        the tolerance in their mean for ``settle_checks`` checks (one strain sets the mean;
+        each line's force is in the record); then the grid is locked where it is, all
+        of it held (:meth:`unlock` lets all of it go). Returns the record at locking; raises
+        PrestressError after ``max_steps``.
+
+        Against :meth:`tension` (the ends pulled in an existing fill): grains interlocked in
+        the apertures anchor the members next to the grips, so the grips' pull reaches the
+        inner members only in part (the lines' mean is on target, the end members above it,
+        the inner ones below); released, the difference loads the soil between the end
+        ribs and the walls. A uniform stretch gives every member the same strain, T_p / J:
+        the fill is around a grid that is tensioned all along (002's concept), and each
+        grid body moves by at most that strain times half the grid's length."""
+        if self.locked:
+            raise PrestressError("the prestress is locked already")
+        sc, ax = self.scene, self.axis
+        bodies = _grid_bodies(self.grid)
+        sc.block_dofs(bodies, "all")
+        self._all = bodies
+        x0 = np.asarray(sc.positions)[bodies, ax].copy()
+        centre = 0.5 * (x0.min() + x0.max())
+        half = 0.5 * (x0.max() - x0.min())
+        max_rate = self.max_speed / half  # 1/s: the ends at the grips' max_speed
+        stiffness = math.nan  # N per unit strain (secant), the lines' mean
+
+        def set_rate(rate: float) -> None:
+            v = np.asarray(sc.velocities).copy()
+            v[bodies] = 0.0
+            v[bodies, ax] = rate * (np.asarray(sc.positions)[bodies, ax] - centre)
+            sc.velocities = v
+
+        good, done = 0, 0
+        while done < max_steps:
+            f = self.line_forces()
+            # (one strain for all lines: their mean is what it sets; their spread is the
+            # lines' own, recorded in the row)
+            ok = abs(float(np.mean(f)) - self.target_n) <= self.tolerance * self.target_n
+            good = good + 1 if ok else 0
+            if good >= self.settle_checks:
+                set_rate(0.0)
+                self.locked = True
+                return self.record()
+            strain = float(np.mean((np.asarray(sc.positions)[bodies, ax] - centre)
+                                   * (x0 - centre)) / np.mean((x0 - centre) ** 2)) - 1.0
+            fm = float(np.mean(f))
+            if strain > 0 and fm > 0.05 * self.target_n:
+                stiffness = fm / strain
+            rate = (self.gain * (self.target_n - fm) / (stiffness * self.period * sc.dt)
+                    if math.isfinite(stiffness) else max_rate)
+            set_rate(float(np.clip(rate, -max_rate, max_rate)))
+            sc.run(self.period)
+            done += self.period
+        set_rate(0.0)
+        f = self.line_forces()
+        raise PrestressError(
+            f"prestress not reached by a uniform stretch in {max_steps} steps (target "
+            f"{self.target_n:.4g} N per member, tolerance {self.tolerance:g}): line forces "
+            f"{np.round(f, 4).tolist()} N; the grid stops where it is")
+
     def check_locked(self, tolerance: float | None = None) -> dict:
         """Records the locked-in force now; raises PrestressError if a line has left the
         target by more than ``tolerance`` (default: the tensioning tolerance)."""
@@ -242,7 +312,9 @@ class Prestress:
     def unlock(self) -> None:
         """The grips let go: their bodies move freely again. The locked-in force then rests on
         whatever else holds the ends (an :class:`EndTension`, or nothing)."""
-        self.scene.block_dofs(np.concatenate([self.held, self.pulled]), "")
+        held = getattr(self, "_all", None)
+        self.scene.block_dofs(np.concatenate([self.held, self.pulled]) if held is None
+                              else held, "")
         self.locked = False
 
 
@@ -296,7 +368,12 @@ class EndTension:
         """Tensile force of the members that hold an end body, N: where the pull enters the
         grid (the applied line force, less what grains take up within half a member)."""
         e = self.ends
-        end = np.concatenate([e.low, e.high])
-        m = [k for k in e.members
-             if np.isin(_member_bodies(self.scene, self.grid, k), end).any()]
+        if getattr(self.grid, "tails", (0, 0))[e.axis] > 0:
+            # (pulled at the tails' tips, in no member: the members of the end cells)
+            along = np.asarray(self.grid.member_cell)[e.members, e.axis]
+            m = e.members[(along == along.min()) | (along == along.max())]
+        else:
+            end = np.concatenate([e.low, e.high])
+            m = [k for k in e.members
+                 if np.isin(_member_bodies(self.scene, self.grid, k), end).any()]
         return self.grid.member_axial_forces(self.scene)[m]
