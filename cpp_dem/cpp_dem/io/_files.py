@@ -85,7 +85,13 @@ def _quiet_unraisable():
     import io
 
     old = sys.unraisablehook
-    sys.unraisablehook = lambda _u: None
+    interrupted: list[BaseException] = []
+
+    def hook(u):  # (a Ctrl-C that lands in a destructor is reported here: kept, not dropped)
+        if u.exc_type is not None and issubclass(u.exc_type, KeyboardInterrupt):
+            interrupted.append(u.exc_value or KeyboardInterrupt())
+
+    sys.unraisablehook = hook
     try:
         with contextlib.redirect_stderr(io.StringIO()):
             try:
@@ -94,6 +100,8 @@ def _quiet_unraisable():
                 gc.collect()
     finally:
         sys.unraisablehook = old
+    if interrupted:
+        raise KeyboardInterrupt from interrupted[0]
 
 
 class _DeallocErrors:
@@ -107,16 +115,27 @@ class _DeallocErrors:
         self._old_hook, self._old_err = sys.unraisablehook, sys.stderr
         self._buf = io.StringIO()
         self._hooked: list[str] = []
-        sys.unraisablehook = lambda u: self._hooked.append(f"{u.exc_type.__name__}: "
-                                                          f"{u.exc_value}")
+        self._interrupt: BaseException | None = None
+
+        def hook(u):
+            if u.exc_type is not None and issubclass(u.exc_type, KeyboardInterrupt):
+                # (a Ctrl-C or SIGTERM that lands in a destructor is reported here, not
+                # raised: it is raised again on the way out, or the run went on, unstopped)
+                self._interrupt = u.exc_value or KeyboardInterrupt()
+                return
+            self._hooked.append(f"{u.exc_type.__name__}: {u.exc_value}")
+
+        sys.unraisablehook = hook
         sys.stderr = self._buf
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, exc_type, *exc) -> None:
         sys.unraisablehook, sys.stderr = self._old_hook, self._old_err
         self.text = "\n".join(self._hooked) + self._buf.getvalue()
         if self.text and not self.failure():  # not ours: pass it on as it came
             self._old_err.write(self._buf.getvalue())
+        if self._interrupt is not None and exc_type is None:
+            raise KeyboardInterrupt from self._interrupt
 
     def failure(self) -> RuntimeError | None:
         """The write failure reported, as a RuntimeError carrying HDF5's message, or None."""
