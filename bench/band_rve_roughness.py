@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """How rough a band RVE's answer is (docs/multiscale.md, "The layer's cells as reinforced
-RVEs"): the reinforced-soil RVE of a footing's band cell (``femcoupling.region.
+RVEs"): the reinforced-soil RVE of a footing's band cell (``femcoupling.materials.dem_elements.
 ReinforcedBandElement`` with the footing's grains, ``footing_multiscale.band_options``)
 takes one strain increment, and again with a probe of ``--probe`` more in zz, each relaxed
 to each unbalanced force of ``--unbalanced``. The difference of the two stresses, over the
@@ -38,8 +38,8 @@ def roughness(*, grains: int, seed: int, pressure_pa: float, tension_n_per_m: fl
     at each relaxation level: relative differences (total, grains', bonds')."""
     from cpp_dem import DemElement
     from cpp_dem.protocols import periodic
-    from femcoupling.drivers import footing_multiscale as fm
-    from femcoupling.region import ReinforcedBandElement
+    from femcoupling.materials.dem_elements import ReinforcedBandElement
+    from geogrid_dem.studies import footing_multiscale as fm
 
     t0 = time.perf_counter()
     options = fm.band_options(fm.FootingParams())

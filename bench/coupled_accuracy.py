@@ -12,7 +12,7 @@ handed-over wall targets of the element region after the footing load (x, y, z, 
 compression positive), and their PRS - RE difference (what the case compares). Errors: max
 over x, y, z of |value - ref| / max |ref|, for the targets and for the difference.
 
-tol: ONE two-way run (femcoupling.twoway.two_way) of the RE variant with the DEM element at
+tol: ONE two-way run (femcoupling.coupling.twoway.two_way) of the RE variant with the DEM element at
 the case's smoke size and a tight tolerance; the loop is deterministic, so a looser tolerance
 stops earlier on the same sequence of iterations: for each tolerance, the iteration it stops
 at, the cumulative CPU time, and the error of its handed-over targets against the last
@@ -47,7 +47,7 @@ sys.path.insert(0, str(ROOT / "cases"))
 sys.path.insert(0, str(ROOT / "bench"))
 
 import prs_element as case  # noqa: E402
-from femcoupling.drivers import prs_element as drv  # noqa: E402
+from geogrid_dem.studies import prs_element as drv  # noqa: E402
 from _report import emit, markdown_table, pct  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
 import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
@@ -78,7 +78,7 @@ def footing_load(p: case.Params):
 
 def fem_handover(p: case.Params, variant: str) -> dict:
     """The FEM of one variant at p's mesh sizes: handed-over targets and cost."""
-    from femcoupling.twoway import one_way
+    from femcoupling.coupling.twoway import one_way
 
     c0 = time.process_time()
     m = drv.fem_model(p, variant == "PRS")
@@ -137,7 +137,7 @@ def mesh_study(sizes: list, out, log) -> list:
 
 def two_way_run(p: case.Params, tol: float, max_iterations: int, workdir: Path, log) -> dict:
     """The RE two-way loop: convergence, changes, final targets, CPU of FEM and DEM."""
-    from femcoupling.twoway import two_way
+    from femcoupling.coupling.twoway import two_way
 
     c0 = time.process_time()
     m = drv.fem_model(p, False)
@@ -157,7 +157,7 @@ def two_way_run(p: case.Params, tol: float, max_iterations: int, workdir: Path, 
 def tol_study(tight: float, max_iterations: int, tols: list, check: float | None, out,
               log) -> list:
     """One tight two-way run; what each looser tolerance would have given (module doc)."""
-    from femcoupling import twoway
+    from femcoupling.coupling import twoway
 
     p = smoke_params()
     history: list = []  # (targets after FEM solve k, cumulative CPU at that point)
@@ -221,7 +221,7 @@ def tol_study(tight: float, max_iterations: int, tols: list, check: float | None
 
 def fem_time_study(holds: list, out, log) -> list:
     """One-way case with the DEM element held for each of ``holds`` steps (module doc)."""
-    from femcoupling.twoway import one_way
+    from femcoupling.coupling.twoway import one_way
 
     rows = []
     fem_handover(smoke_params(), "RE")  # warm-up: the form compilation is not per solve

@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """A 3D hierarchical triaxial test of a cylindrical specimen (issue 38, "3D beyond a box"):
 FEM x DEM with a periodic DEM element at the quadrature point of every tetrahedron of the
-specimen (``femcoupling.hierarchical3d.HierarchicalCylinder``), held on Dask workers.
+specimen (``femcoupling.coupling.hierarchical3d.HierarchicalCylinder``), held on Dask workers.
 
 The specimen is the quarter x, y >= 0 of a cylinder ``--radius`` by ``--height`` (m)
 (``--section full``: the whole cylinder, no symmetry planes), with smooth platens
@@ -64,7 +64,7 @@ def run_alone(factory, n: int, path: list, strain_kw: dict, workers: int) -> np.
     ``path`` (3 x 3 each), in parallel on a pool of ``workers``; returns (n, len(path), 6)
     Voigt stresses, Pa."""
     from cpp_dem.elements.pool import ElementPool
-    from femcoupling.hierarchical import voigt_stress
+    from femcoupling.coupling.hierarchical import voigt_stress
 
     out = np.zeros((n, len(path), 6))
     with ElementPool.build(n, factory, workers=workers) as pool:
@@ -103,7 +103,7 @@ def plot(rows, q_alone, n_alone: int, path: Path, title: str) -> None:
 def main(argv=None) -> int:
     from cpp_dem.elements.pool import ElementPool, PeriodicFactory
     from cpp_dem.progress import Progress
-    from femcoupling.hierarchical3d import HierarchicalCylinder, cylinder_cells
+    from femcoupling.coupling.hierarchical3d import HierarchicalCylinder, cylinder_cells
 
     ap = _cli.BenchParser(signed=("alone",), description=__doc__,
                           formatter_class=argparse.RawDescriptionHelpFormatter)

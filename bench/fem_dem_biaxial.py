@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""A plane-strain biaxial test by hierarchical FEM x DEM (femcoupling.hierarchical, issue 18):
-a rectangle of P1 triangles, a periodic DEM element at each quadrature point (one per cell)
+"""A plane-strain biaxial test by hierarchical FEM x DEM (femcoupling.coupling.hierarchical, issue
+18): a rectangle of P1 triangles, a periodic DEM element at each quadrature point (one per cell)
 held on Dask workers, confining pressure on the right, the top pushed down in steps.
 
 Prints per load step the Newton iterations and residual, the mean element stresses (tension
@@ -29,7 +29,7 @@ sys.path.insert(0, str(HERE.parent))
 def main(argv=None) -> int:
     from cpp_dem.elements.pool import ElementPool, PeriodicFactory
     from cpp_dem.elements.cluster import dask_client
-    from femcoupling import biaxial
+    from geogrid_dem.studies import biaxial
 
     ap = _cli.BenchParser(out="file", description=__doc__,
                           formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -48,7 +48,7 @@ def main(argv=None) -> int:
                     help="the elements relax to this unbalanced force after each increment")
     ap.add_argument("--tangent", default="network",
                     choices=("network", "network-elastic", "secant"),
-                    help="the elements' tangent in the Jacobian (femcoupling.hierarchical."
+                    help="the elements' tangent in the Jacobian (femcoupling.coupling.hierarchical."
                          "TANGENTS)")
     ap.add_argument("--prep-friction", type=float, default=0.0,
                     help="friction angle (deg) the elements' grains grow at (0: dense; "

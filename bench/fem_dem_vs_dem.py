@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
-"""FEM x DEM against direct DEM in a plane-strain biaxial test (issue 18; femcoupling.biaxial;
-docs/multiscale.md).
+"""FEM x DEM against direct DEM in a plane-strain biaxial test (issue 18;
+geogrid_dem.studies.biaxial; docs/multiscale.md).
 
 Three runs from the same grains and path (x at the confining pressure, y held, z shortened):
 
@@ -42,7 +42,7 @@ def main(argv=None) -> int:
     from cpp_dem import measure
     from cpp_dem.elements.periodic import DemElement
     from cpp_dem.elements.pool import ElementPool, PeriodicFactory
-    from femcoupling import biaxial
+    from geogrid_dem.studies import biaxial
 
     ap = _cli.BenchParser(out="file", description=__doc__,
                           formatter_class=argparse.RawDescriptionHelpFormatter)

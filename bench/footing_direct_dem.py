@@ -14,7 +14,7 @@ gravity. For each seed s:
    ``--periodic-prep-friction`` degrees: 1 puts it at the elements' porosity); the top
    wall is split into the footing and the surcharge, and the footing is pushed to each
    settlement and held until the grains are at rest.
-2. **FEM x DEM** (``femcoupling.footing_dem``): the same rectangle in ``--nx`` by ``--ny``
+2. **FEM x DEM** (``geogrid_dem.studies.footing_dem``): the same rectangle in ``--nx`` by ``--ny``
    cells of triangles (``--degree 2``: P2, three quadrature points each, which do not lock
    under dilatant flow; ``--degree 1``: P1, one), a periodic element of ``--cell-grains``
    of the same grains (material, radii, preparation) at each point, prepared at q (element
@@ -22,7 +22,7 @@ gravity. For each seed s:
    the same settlements.
 
 The footing pressures are paired over the seeds at each settlement both reached: FEM x DEM
-minus direct DEM, the mean and its standard error (``femcoupling.footing_dem.
+minus direct DEM, the mean and its standard error (``geogrid_dem.studies.footing_dem.
 paired_pressures``); with ``both``, FEM x DEM minus each box, and the periodic box minus the
 walled one. With ``--oedometer`` the walled box (prepared again: the same) and the first 8
 elements of each seed also go through the same oedometric path from q, which compares the
@@ -264,8 +264,8 @@ def main(argv=None) -> dict:
     from cpp_dem.elements.pool import ElementPool
     from cpp_dem.protocols.footing import (load_strip_footing,
                                            prepare_footing_box)
-    from femcoupling.footing_dem import element_factory, fem_dem_footing, paired_pressures
-    from femcoupling.hierarchical import quadrature_points
+    from femcoupling.coupling.hierarchical import quadrature_points
+    from geogrid_dem.studies.footing_dem import element_factory, fem_dem_footing, paired_pressures
 
     out = Path(a.out)
     out.mkdir(parents=True, exist_ok=True)

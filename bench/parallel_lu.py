@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """The FEM's LU package on 2 MPI ranks: is the same input the same output, and what does it
-cost? (``femcoupling.quadrature.PARALLEL_LU``; docs/fem.md, "Under MPI".)
+cost? (``femcoupling.fem.quadrature.PARALLEL_LU``; docs/fem.md, "Under MPI".)
 
 Each run is the Drucker–Prager soil body of tests/mpi_soil_body.py (self-weight, a
 prestressed geogrid layer, a footing pressed to 100 kPa in 4 steps and then pushed 10 mm
@@ -47,11 +47,11 @@ PACKAGES = ("superlu_dist", "mumps")
 def worker(lu: str, fine_size: float, out: Path) -> None:
     """One run under mpiexec: the body with ``lu`` as the parallel LU; rank 0 writes
     ``out`` (JSON: a hash of the results, the steps, the FEM's wall time, the dofs)."""
-    import femcoupling.quadrature as quadrature
-    from femcoupling.elastoplastic import SoilModel
-    from femcoupling.geometry import GeogridLayer, ReinforcedSoilBody
-    from femcoupling.materials import DruckerPrager, GeogridLayerMaterial
-    from femcoupling.mpi_points import world
+    import femcoupling.fem.quadrature as quadrature
+    from femcoupling.fem.geometry import GeogridLayer, ReinforcedSoilBody
+    from femcoupling.fem.mpi_points import world
+    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.materials.continuum import DruckerPrager, GeogridLayerMaterial
 
     quadrature.PARALLEL_LU = lu
     comm = world()

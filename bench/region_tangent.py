@@ -2,8 +2,8 @@
 
 One FEM body (the two-region test body of tests/test_fem_handover.py: 4 x 3 m, elastic soil
 50 MPa / 0.3, 18 kN/m^3, a 1 m footing), one region coupled two ways to a dense periodic DEM
-element (femcoupling.region.PeriodicRegionElement) under a footing pressure. For each
-``--modes`` value the same loop runs with ``two_way(stiffness=mode)`` from the same prepared
+element (femcoupling.materials.dem_elements.PeriodicRegionElement) under a footing pressure. For
+each ``--modes`` value the same loop runs with ``two_way(stiffness=mode)`` from the same prepared
 element (its bytes are kept in a shared folder), and the bench prints per mode: FEM solves,
 whether and on what it converged, the last change, the region's stiffness (isotropic part),
 the DEM/FEM normal strain ratio (largest components, as ``check_region``), and how far the
@@ -36,8 +36,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 def run(mode: str, seed: int, args, cache: str) -> dict:
     import numpy as np
 
-    from femcoupling.region import PeriodicRegionElement
-    from femcoupling.twoway import RegionWarning, two_way
+    from femcoupling.coupling.twoway import RegionWarning, two_way
+    from femcoupling.materials.dem_elements import PeriodicRegionElement
 
     from test_fem_handover import two_region_model  # (the FEM body of the tests)
 

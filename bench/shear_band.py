@@ -18,7 +18,7 @@ mean). The band: the points above the 85th percentile of eps_q, their principal 
 principal stress's direction). Beside it, the band angles the RVEs predict: Mohr-Coulomb
 45 + phi/2, Roscoe 45 + psi/2 and Arthur 45 + (phi + psi)/4, with phi the peak friction angle
 and psi the dilatancy angle at the peak of two RVEs run alone in the same plane-strain path
-(``femcoupling.biaxial.direct_biaxial``).
+(``geogrid_dem.studies.biaxial.direct_biaxial``).
 
 Writes in --out: ``strain.xdmf`` (eps_q per cell, the cell's mean, and the displacement; open
 in ParaView), ``shear_band.png`` (eps_q at the points, the band's line, the load curve),
@@ -141,8 +141,8 @@ def plot(points, eq, band, fd, lx, ly, png: Path, title: str) -> None:
 def main(argv=None) -> int:
 
     from cpp_dem.elements.pool import ElementPool, PeriodicFactory
-    from femcoupling import biaxial
-    from femcoupling.hierarchical import quadrature_points
+    from femcoupling.coupling.hierarchical import quadrature_points
+    from geogrid_dem.studies import biaxial
 
     ap = _cli.BenchParser(out="folder", zero_ok=("weak_radius",), description=__doc__,
                           formatter_class=argparse.RawDescriptionHelpFormatter)

@@ -3,8 +3,8 @@ answers are bitwise the same. Not a test.
 
 The two-region test body of tests/test_fem_handover.py (4 x 3 m, elastic soil 50 MPa / 0.3,
 a 1 m footing), both regions coupled to a dense periodic DEM element
-(femcoupling.region.PeriodicRegionElement, ``--grains`` grains) for ``--iterations`` FEM
-solves. With ``--workers 1`` the regions run in this process; with more, each region is an
+(femcoupling.materials.dem_elements.PeriodicRegionElement, ``--grains`` grains) for ``--iterations``
+FEM solves. With ``--workers 1`` the regions run in this process; with more, each region is an
 element of ``cpp_dem.elements.pool.ElementPool.runners`` on a LocalCluster (its start
 included in the time); each worker, and this process (``--threads``, default 1), runs one
 thread. Prints one JSON line per worker count (wall seconds, FEM solves, the
@@ -32,8 +32,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 def run(workers: int, args) -> dict:
     import numpy as np
 
-    from femcoupling.region import PeriodicRegionElement
-    from femcoupling.twoway import RegionWarning, two_way
+    from femcoupling.coupling.twoway import RegionWarning, two_way
+    from femcoupling.materials.dem_elements import PeriodicRegionElement
 
     from test_fem_handover import _footing, two_region_model  # (the FEM body of the tests)
 

@@ -30,10 +30,10 @@ out.mkdir(parents=True, exist_ok=True)
 # --- the FEM body, its handover, the DEM element (docs/fem.md shows this part) ---
 import numpy as np
 
-from femcoupling.elastoplastic import SoilModel
-from femcoupling.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
-from femcoupling.materials import DruckerPrager, GeogridLayerMaterial
-from femcoupling.twoway import one_way
+from femcoupling.coupling.twoway import one_way
+from femcoupling.fem.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
+from femcoupling.fem.soil_model import SoilModel
+from femcoupling.materials.continuum import DruckerPrager, GeogridLayerMaterial
 from cpp_dem.elements.box import ElementParams, grid_axial_stiffness, run_element
 
 p = ElementParams(n=300 if smoke else 2000, hold_steps=600, unbalanced=0.05)  # DEM element

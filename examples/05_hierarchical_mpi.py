@@ -5,7 +5,7 @@ A plane-strain biaxial test of a 0.04 m x 0.08 m sample (P1 triangles, smooth pl
 right side at a 100 kPa confining pressure, the top pushed down) with a periodic DEM element
 at every triangle's quadrature point, each its own packing (seed 1 + k). The same script runs
 on one rank or on several: each rank assembles and solves its part of the mesh, and rank 0
-holds the Dask client of the element pool (femcoupling.mpi_points). Element k is the same
+holds the Dask client of the element pool (femcoupling.fem.mpi_points). Element k is the same
 place, and the same packing, on any number of ranks.
 
 Run:   .venv/bin/python examples/05_hierarchical_mpi.py [--smoke] [--out DIR]
@@ -32,8 +32,8 @@ ap.add_argument("--out", type=Path, default=Path("results/examples/05_hierarchic
 args = ap.parse_args()
 
 from cpp_dem.elements.pool import ElementPool, PeriodicFactory  # noqa: E402
-from femcoupling.biaxial import fem_dem_biaxial  # noqa: E402
-from femcoupling.mpi_points import on_root, world  # noqa: E402
+from femcoupling.fem.mpi_points import on_root, world  # noqa: E402
+from geogrid_dem.studies.biaxial import fem_dem_biaxial  # noqa: E402
 
 
 def main(out: Path, smoke: bool) -> None:

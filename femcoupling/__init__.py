@@ -1,25 +1,30 @@
-"""femcoupling: the continuum (FEM) side of the coupled DEM-FEM framework.
+"""femcoupling: the continuum (FEM) side of the coupled DEM-FEM framework and its coupling
+with DEM elements, in three subpackages:
 
-The package will hold:
+- :mod:`femcoupling.materials`: what the FEM's points are made of. Continuum laws (elastic,
+  anisotropic elastic, Drucker-Prager with its return mapping, the geogrid layer's band) and
+  DEM elements as materials (one for a region, one per cell on the one Dask pool, the
+  reinforced band); all behind one interface at quadrature points.
+- :mod:`femcoupling.fem`: the FEM models in dolfinx. The reinforced soil body in gmsh with
+  tagged layers and element regions (``geometry``, ``gmsh_mesh``), ``SoilModel``
+  (``soil_model`` and its parts ``soil_loading``, ``soil_regions``, ``soil_measures``,
+  ``soil_steps``), the quadrature spaces and the one Newton (``quadrature``), points under
+  MPI (``mpi_points``), and the toolchain check (``elastic_block``).
+- :mod:`femcoupling.coupling`: the coupling's named parts. The transfer (``handover``: FEM
+  stress -> wall targets, stiffness back), the loops (``twoway``: one-way and two-way over
+  element regions; ``hierarchical``, ``hierarchical3d``: a DEM element at every quadrature
+  point), ``relaxation``, ``status`` (how a loop ended), ``records``, the continuum fitted
+  to the grains (``continuum_fit``) and ``runner_pool``.
 
-- **geometry**: gmsh builds the outer domain, with physical groups tagging the
-  regions and boundaries the coupling needs;
-- **outer domain**: :func:`dolfinx.io.gmsh.model_to_mesh` turns the gmsh model
-  into a dolfinx mesh, and dolfinx solves the continuum (elastic, later
-  elastoplastic);
-- **stress extraction**: the stress tensor averaged over the cells tagged as a
-  DEM element's region;
-- **FEM -> DEM handover**: those averages become the targets of the element's
-  servo walls (and, in two-way mode, the element's secant stiffness goes back
-  to the region's material until the handed-over stresses stop changing).
+Below them, :mod:`femcoupling._checks` (:class:`FemInputError`, the one error type, and the
+input checks) and :mod:`femcoupling._dolfinx` (the one place that imports the FEM stack).
 
-Modules: :mod:`femcoupling.geometry` (gmsh reinforced-soil body with tagged geogrid
-layers and element regions), :mod:`femcoupling.materials` (elastic, Drucker-Prager and
-its return mapping), :mod:`femcoupling.elastoplastic` (:class:`SoilModel`: K0 state,
-prestress, footing load steps, Newton, extraction, XDMF), :mod:`femcoupling.handover`
-(FEM -> DEM servo targets, NumPy only), :mod:`femcoupling.twoway` (one-way, two-way,
-HDF5 history), and the first toolchain check :func:`solve_elastic_block`. Import the
-submodules directly; this package namespace stays small and cheap. See docs/fem.md.
+The package imports ``cpp_dem`` (its DEM elements, their pool, its measures) and never
+``geogrid_dem``: the cases, and the studies and drivers that compose the two libraries, each
+with its own ``Params``, are the application's (``geogrid_dem.studies``). Its modules import
+one another at the top of the file and form no cycle (tests/test_layout.py). Import the
+modules directly; this namespace holds only :class:`FemInputError`. See docs/fem.md and
+docs/multiscale.md.
 
 Units are SI (m, Pa); stresses are tension-positive.
 
@@ -29,6 +34,6 @@ petsc4py/mpi4py). They are loaded on first use, through
 ``dolfinx`` as the wheel requires.
 """
 
-from femcoupling.elastic import ElasticBlockResult, solve_elastic_block
+from femcoupling._checks import FemInputError
 
-__all__ = ["ElasticBlockResult", "solve_elastic_block"]
+__all__ = ["FemInputError"]

@@ -54,7 +54,7 @@ def restore_python_signal_handlers(names=("SIGTERM", "SIGINT")) -> None:
     workers; and every ``gmsh.initialize()`` sets SIGTERM, SIGQUIT, SIGPIPE (and SIGHUP)
     back to their defaults, so that a SIGTERM killed the process at once (status -15, the
     manifest left ``running``, the Dask workers orphaned) and a broken pipe killed it
-    instead of raising ``BrokenPipeError`` (``femcoupling.elastic``)."""
+    instead of raising ``BrokenPipeError`` (``femcoupling.fem.elastic_block``)."""
     import signal
     import threading
 

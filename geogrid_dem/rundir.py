@@ -21,8 +21,11 @@
   complete", exit status 0).
 
 :func:`run_main` runs a case's work inside this: an interrupted run closes its files, marks
-the folder ``interrupted``, prints one line saying where the results are and returns 130; a
-full disk or a file-size limit gives one error line naming the file and marks it ``failed``.
+the folder ``interrupted``, writes its ``summary.json`` marked ``interrupted`` with what it
+finished and draws the figures of the finished parts (what the case gave
+:func:`on_interrupt`), prints one line saying where the results are and returns 130; a full
+disk or a file-size limit gives one error line naming the file and marks it ``failed``. A
+run that completes has ``"status": "finished"`` in its ``summary.json`` (:func:`end_run`).
 """
 
 from __future__ import annotations
@@ -54,6 +57,15 @@ EXIT_INTERRUPTED = 130
 
 #: Folders this process began (begin_run) and has not ended: marked on an interrupt.
 _ACTIVE: list[Path] = []
+#: The summary of a case's results folder (the case's numbers; on an interrupt, what it
+#: finished).
+SUMMARY = "summary.json"
+#: The files an interrupted run's summary lists as its ``figures`` (of those its figures()
+#: wrote: a table it writes beside them is among its ``files``).
+FIGURE_SUFFIXES = (".png", ".pdf", ".svg", ".jpg", ".jpeg", ".eps")
+#: What the case in a folder says when it is interrupted: folder -> (summary, figures), the
+#: callables given to on_interrupt.
+_ON_INTERRUPT: dict[Path, tuple] = {}
 #: --overwrite of this process's command line (run_main sets it for the nested runs too).
 _OVERWRITE = False
 
@@ -579,9 +591,14 @@ def begin_run(out, case: str, log=print, *, overwrite: bool | None = None,
 
 def end_run(out, status: str = "complete", reason: str | None = None) -> None:
     """Records the files in ``out`` and the run's ``status`` (``complete``, ``interrupted`` or
-    ``failed``, with the ``reason``) in the manifest begin_run reads; releases the lock."""
+    ``failed``, with the ``reason``) in the manifest begin_run reads; releases the lock. A
+    completed run's ``summary.json`` gets ``"status": "finished"`` (one written as the run went
+    may say ``running``); the folder's on_interrupt callables are forgotten."""
     out = Path(out)
     manifest_path = out / MANIFEST
+    _ON_INTERRUPT.pop(out.absolute(), None)
+    if status == "complete":
+        _mark_summary_finished(out)
     with _MANIFEST_LOCK:
         old = _read_json(manifest_path) or {}
         files = [str(p.relative_to(out)) for p in _files(out)] if out.is_dir() else []
@@ -609,6 +626,100 @@ def end_run(out, status: str = "complete", reason: str | None = None) -> None:
         lock_path.unlink(missing_ok=True)
     if out in _ACTIVE:
         _ACTIVE.remove(out)
+
+
+def _mark_summary_finished(out: Path) -> None:
+    """``"status": "finished"`` first in ``out/summary.json``, if the case wrote one (a JSON
+    object) without a status, or with ``running`` (written as the run went)."""
+    path = out / SUMMARY
+    if not path.is_file():
+        return
+    d = _read_json(path)
+    if d is None or d.get("status", "running") != "running":
+        return
+    d.pop("status", None)
+    _write_atomic(path, json.dumps({"status": "finished", **d}, indent=2) + "\n")
+
+
+def on_interrupt(out, *, summary=None, figures=None) -> None:
+    """What the case running in the results folder ``out`` reports if it is interrupted
+    (Ctrl-C, SIGINT, SIGTERM; :func:`run_main`): ``summary()`` returns a dict of what it
+    finished (its ``finished`` entry, by convention, names the finished parts: stages, rows,
+    packings; the other entries are their numbers), written into ``out/summary.json``
+    beside the ``status`` ``interrupted``, the ``reason``, the ``case``, the ``figures``
+    drawn and the ``files`` written so far; ``figures()`` draws the figures of the finished
+    parts into ``out``. Both are called once, on an interrupt only, after the recorders are
+    closed (their files hold every row written), and are best effort: an error in either is
+    said in one line and recorded under ``report_errors``, and the run still stops with
+    130 / 143. A summary.json the case wrote as it went is kept and updated. A later call for
+    the same folder replaces the callables; :func:`end_run` forgets them. A case that gives
+    none still leaves ``{status, reason, case, files}``."""
+    _ON_INTERRUPT[Path(out).absolute()] = (summary, figures)
+
+
+def _one_line(e: BaseException) -> str:
+    text = str(e).strip().split("\n")[0]
+    return f"{type(e).__name__}: {text[:300]}" if text else type(e).__name__
+
+
+def _stamps(out: Path) -> dict:
+    """relative name -> (size, mtime_ns) of the files of ``out``."""
+    found = {}
+    for p in _files(out) if out.is_dir() else []:
+        try:
+            st = p.stat()
+        except OSError:
+            continue
+        found[p.relative_to(out).as_posix()] = (st.st_size, st.st_mtime_ns)
+    return found
+
+
+def write_interrupted_summary(out, case: str, reason: str, *, err=None) -> Path:
+    """Writes ``out/summary.json`` of a run that was interrupted (run_main does, for every
+    folder of the run, before it marks them): ``status`` ``interrupted``, the ``reason``,
+    the ``case`` (its manifest's), the time (``interrupted_at``, UTC), what the case's
+    on_interrupt ``summary()`` returns (over a summary.json the case wrote as it went),
+    then the ``figures`` its ``figures()`` drew and the ``files`` of the folder. Each part
+    that fails is said in one line on ``err`` (default stderr) and skipped; returns the
+    path."""
+    out = Path(out)
+    if err is None:
+        def err(msg: str) -> None:
+            print(msg, file=sys.stderr, flush=True)
+    summary_fn, figures_fn = _ON_INTERRUPT.pop(out.absolute(), (None, None))
+    path = out / SUMMARY
+    case = (_read_json(out / MANIFEST) or {}).get("case") or case
+    head = {"status": "interrupted", "reason": reason, "case": case, "interrupted_at": _now()}
+    body = {k: v for k, v in (_read_json(path) or {}).items() if k != "status"}
+    errors: list[str] = []
+
+    def write(extra: dict) -> None:
+        rec = {**head, **{k: v for k, v in body.items() if k not in head}, **extra}
+        files = sorted(set(_stamps(out)) | {SUMMARY})
+        _write_atomic(path, json.dumps(plain({**rec, "files": files}), indent=2) + "\n")
+
+    if summary_fn is not None:
+        try:
+            body.update(summary_fn() or {})
+        except BaseException as e:  # noqa: BLE001  (best effort: the interrupt goes on)
+            errors.append(f"the summary of the finished parts: {_one_line(e)}")
+            err(f"[{case}] interrupted: could not say what finished ({_one_line(e)}); "
+                f"{SUMMARY} holds the status and the files")
+    write({"report_errors": errors} if errors else {})
+    if figures_fn is None:
+        return path
+    before = _stamps(out)
+    try:
+        figures_fn()
+    except BaseException as e:  # noqa: BLE001
+        errors.append(f"the figures of the finished parts: {_one_line(e)}")
+        err(f"[{case}] interrupted: could not draw the figures of the finished parts "
+            f"({_one_line(e)}); the summary and the files written are kept")
+    after = _stamps(out)
+    drawn = sorted(k for k, v in after.items() if before.get(k) != v
+                   and Path(k).suffix.lower() in FIGURE_SUFFIXES)
+    write({"figures": drawn, **({"report_errors": errors} if errors else {})})
+    return path
 
 
 def run_status(out) -> dict | None:
@@ -650,7 +761,12 @@ def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
     completed run returns 0 without running ``work``). ``params``, ``checkpoints``: the run's
     parameters and the patterns of its checkpoints (begin_run), whose SHA-256 is recorded
     about once a second while ``work`` runs and once more at its end. Warnings are shown one
-    line each, a repeated one once and then counted (geogrid_dem.warnings_display)."""
+    line each, a repeated one once and then counted (geogrid_dem.warnings_display).
+
+    On an interrupt each folder of the run also gets its ``summary.json`` marked
+    ``interrupted`` (write_interrupted_summary): what the case finished and the figures of
+    the finished parts, where ``work`` said how with :func:`on_interrupt`, else the status,
+    the reason, the case and the files."""
     from geogrid_dem.warnings_display import shown_once
 
     with shown_once():
@@ -694,7 +810,13 @@ def _run_main(case, out, work, *, overwrite, log, own_folder, keep, params, chec
     def _mark(status: str, reason: str) -> list[Path]:
         close_all_writers()
         folders = list(_ACTIVE) or ([out] if own_folder else [])
-        for d in reversed(folders):
+        for d in reversed(folders):  # (a run inside another first: the outer lists its files)
+            if status == "interrupted":
+                try:
+                    write_interrupted_summary(d, case, reason)
+                except Exception as e:  # noqa: BLE001  (e.g. a full disk: the mark goes on)
+                    print(f"[{case}] interrupted: {d / SUMMARY} could not be written "
+                          f"({_one_line(e)})", file=sys.stderr, flush=True)
             end_run(d, status, reason)
         return folders
 
@@ -712,14 +834,16 @@ def _run_main(case, out, work, *, overwrite, log, own_folder, keep, params, chec
             if recorder is not None:
                 recorder.stop()
     except KeyboardInterrupt:
-        if main_thread:  # a second Ctrl-C does not cut the closing short
+        if main_thread:  # a second Ctrl-C (or SIGTERM) does not cut the closing short
             signal.signal(signal.SIGINT, signal.SIG_IGN)
+            if old_term == signal.SIG_DFL:
+                signal.signal(signal.SIGTERM, signal.SIG_IGN)
         sig = "SIGTERM" if got else "SIGINT / Ctrl-C"
         folders = _mark("interrupted", f"interrupted ({sig}) before the end")
         where = ", ".join(str(d) for d in folders) or str(out)
         print(f"[{case}] interrupted ({sig}): the run is incomplete (marked 'interrupted' in "
-              f"{MANIFEST}); the files written so far are in {where}", file=sys.stderr,
-              flush=True)
+              f"{MANIFEST} and {SUMMARY}, with what finished); the files written so far are "
+              f"in {where}", file=sys.stderr, flush=True)
         return 128 + signal.SIGTERM if got else EXIT_INTERRUPTED
     except OSError as e:
         if not _full_disk(e):

@@ -663,7 +663,7 @@ def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) 
                 r = {"returncode": -1, "wall_s": 0.0,
                      "stderr_tail": f"{type(e).__name__}: {e}"}
             # A row that completed but exits non-zero (a coupled run that did not converge:
-            # femcoupling.status.EXIT_CODES) keeps its results: 'completed', with its code.
+            # femcoupling.coupling.status.EXIT_CODES) keeps its results: 'completed', with its code.
             from geogrid_dem import rundir
 
             done = ((rundir.run_status(row_dir) or {}).get("status") == "complete"

@@ -13,8 +13,8 @@ import sys
 def main(out: str, section: str = "quarter", size: str = "0.025") -> None:
     from cpp_dem.elements.linear import LinearElement, LinearFactory
     from cpp_dem.elements.pool import ElementPool
-    from femcoupling.hierarchical3d import HierarchicalCylinder, cylinder_cells
-    from femcoupling.mpi_points import on_root, world
+    from femcoupling.coupling.hierarchical3d import HierarchicalCylinder, cylinder_cells
+    from femcoupling.fem.mpi_points import on_root, world
 
     comm = world()
     n = cylinder_cells(0.025, 0.1, float(size), section)

@@ -11,8 +11,8 @@ import numpy as np
 
 def main(out: str) -> None:
     from cpp_dem.elements.pool import ElementPool, PeriodicFactory
-    from femcoupling.hierarchical3d import Hierarchical3D
-    from femcoupling.mpi_points import on_root, world
+    from femcoupling.coupling.hierarchical3d import Hierarchical3D
+    from femcoupling.fem.mpi_points import on_root, world
 
     comm = world()
     pool = on_root(comm, lambda: ElementPool.build(6, PeriodicFactory(n=40, seed=3),

@@ -1,6 +1,6 @@
 """Run by tests/test_hierarchical_mpi.py as ``mpiexec -n 2 python tests/mpi_idle_wait.py OUT``:
 the CPU time rank 1 spends waiting while rank 0 works for WORK_S seconds, once at a plain
-``comm.bcast`` and once through ``femcoupling.mpi_points`` (``on_root`` and
+``comm.bcast`` and once through ``femcoupling.fem.mpi_points`` (``on_root`` and
 ``bcast_from_root``). Rank 0 writes OUT/result.json."""
 
 import json
@@ -11,7 +11,7 @@ WORK_S = 1.0
 
 
 def main(out: str) -> None:
-    from femcoupling.mpi_points import bcast_from_root, on_root, world
+    from femcoupling.fem.mpi_points import bcast_from_root, on_root, world
 
     comm = world()
 

@@ -1,4 +1,4 @@
-"""The reinforced soil body (``femcoupling.elastoplastic.SoilModel``) under MPI, run by
+"""The reinforced soil body (``femcoupling.fem.soil_model.SoilModel``) under MPI, run by
 tests/test_soil_body_mpi.py as ``mpiexec -n N python tests/mpi_soil_body.py OUT``.
 
 A Drucker-Prager soil (max_newton=60: no step is cut, so every rank count takes the same
@@ -17,10 +17,10 @@ import sys
 
 
 def main(out: str) -> None:
-    from femcoupling.elastoplastic import SoilModel
-    from femcoupling.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
-    from femcoupling.materials import DruckerPrager, GeogridLayerMaterial
-    from femcoupling.mpi_points import world
+    from femcoupling.fem.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
+    from femcoupling.fem.mpi_points import world
+    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.materials.continuum import DruckerPrager, GeogridLayerMaterial
 
     comm = world()
     body = ReinforcedSoilBody(

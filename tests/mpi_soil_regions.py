@@ -5,8 +5,8 @@ A 4 x 3 m elastic body (P1) with two element regions: region a has an element pe
 (``set_cell_elements``), region b one element (``set_region_element``). The elements are
 linear stand-ins whose stiffness depends on the key they are given (the serial cell number),
 held on rank 0 as a group that answers all its members at once (``trial_many``, as
-``femcoupling.region.PoolRegionMaterials``). A footing pressure of 100 kPa in 2 steps.
-With ``dem``: region a's cells take periodic DEM elements of 40 grains on a 1-worker Dask
+``femcoupling.materials.dem_elements.PoolRegionMaterials``). A footing pressure of 100 kPa in 2
+steps. With ``dem``: region a's cells take periodic DEM elements of 40 grains on a 1-worker Dask
 pool instead, under 20 kPa in one step. Rank 0 writes OUT/result.json."""
 
 import json
@@ -17,7 +17,7 @@ import numpy as np
 
 def _stiffness(key: str) -> np.ndarray:
     """A transversely isotropic stiffness (Mandel 6 x 6, Pa), scaled by the key's cell."""
-    from femcoupling.materials import mandel_identity
+    from femcoupling.materials.continuum import mandel_identity
 
     cell = int(key.rsplit("/", 1)[1]) if "/" in key else 0
     k, g = 30e6 * (1.0 + 0.05 * (cell % 7)), 12e6
@@ -52,7 +52,7 @@ class StandInGroup:
         self.calls = self.commits = 0
 
     def trial_many(self, increments):
-        from femcoupling.materials import mandel_to_tensor, tensor_to_mandel
+        from femcoupling.materials.continuum import mandel_to_tensor, tensor_to_mandel
 
         self.calls += 1
         out = {}
@@ -72,7 +72,7 @@ class StandInGroup:
 
 
 class StandIn(StandInGroup):
-    """One linear element (``femcoupling.region.DemRegionMaterial``'s interface: no
+    """One linear element (``femcoupling.materials.dem_elements.DemRegionMaterial``'s interface: no
     ``group``, evaluated alone)."""
 
     def __init__(self, key):
@@ -84,10 +84,10 @@ class StandIn(StandInGroup):
 
 
 def main(out: str, dem: bool) -> None:
-    from femcoupling.elastoplastic import SoilModel
-    from femcoupling.geometry import ElementRegion, ReinforcedSoilBody
-    from femcoupling.materials import LinearElastic
-    from femcoupling.mpi_points import on_root, world
+    from femcoupling.fem.geometry import ElementRegion, ReinforcedSoilBody
+    from femcoupling.fem.mpi_points import on_root, world
+    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.materials.continuum import LinearElastic
 
     comm = world()
     body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5,
@@ -103,7 +103,7 @@ def main(out: str, dem: bool) -> None:
            "cell_stresses_pa": [v.tolist() for v in stresses.values()]}
     pool = None
     if dem:
-        from femcoupling.region import PeriodicRegionElement, PoolRegionMaterials
+        from femcoupling.materials.dem_elements import PeriodicRegionElement, PoolRegionMaterials
 
         group = on_root(comm, lambda: PoolRegionMaterials.build(
             stresses, PeriodicRegionElement(n=40, seed=3, tol=0.02, unbalanced=1e-2),

@@ -219,7 +219,7 @@ def test_a_pickle_payload_is_refused_and_runs_nothing(tmp_path):
     from cpp_dem.elements.linear import LinearElement
     from cpp_dem.elements.periodic import DemElement
     from cpp_dem.elements.pool import ElementPool
-    from femcoupling.region import PeriodicRegionElement
+    from femcoupling.materials.dem_elements import PeriodicRegionElement
 
     planted = tmp_path / "planted"
     evil = _payloads(planted)

@@ -373,7 +373,7 @@ def test_packing_options_that_a_packing_replaces_are_refused(tmp_path, capsys):
 def test_options_at_their_default_value_given_explicitly_count_as_given(capsys):
     """(given, not different from the default: a run file that writes the default out is
     refused the same way)"""
-    from femcoupling.drivers.footing_multiscale import FootingParams
+    from geogrid_dem.studies.footing_multiscale import FootingParams
 
     line = _refused("footing_multiscale", ["--smoke", "--variants", "RE", "--prestress",
                                            str(FootingParams().prestress)], capsys)

@@ -9,7 +9,8 @@ never ran and the manifest was left ``running``, the Dask workers orphaned:
   ``femcoupling._dolfinx.load`` now initialises PETSc with ``-no_signal_handler`` (and puts
   Python's handlers back if a script initialised PETSc before it);
 - every ``gmsh.initialize()`` set SIGTERM (SIGQUIT, SIGPIPE, SIGHUP) back to its default: the
-  process died at once (status -15). ``femcoupling.elastic`` puts Python's back after it."""
+  process died at once (status -15). ``femcoupling.fem.gmsh_mesh`` puts Python's back after
+  it."""
 
 from __future__ import annotations
 
@@ -79,8 +80,8 @@ _FEM_CHILD = textwrap.dedent("""
         if len(sys.argv) > 2:  # (PETSc initialised by a script's own import, before load)
             import dolfinx_solver
             from petsc4py import PETSc
-        from femcoupling.drivers.footing_multiscale import FootingParams, model
-        from femcoupling.materials import DruckerPrager
+        from geogrid_dem.studies.footing_multiscale import FootingParams, model
+        from femcoupling.materials.continuum import DruckerPrager
         from geogrid_dem.cases.footing_multiscale import SMOKE
 
         # (gmsh meshes the body, dolfinx and PETSc solve it: the footing seated)
@@ -128,3 +129,9 @@ def test_sigterm_while_footing_multiscale_prepares_on_dask_stops_it_and_its_work
     assert m["status"] == "interrupted" and "SIGTERM" in m["reason"], m
     assert not (out / ".geogrid-dem.lock").exists()
     assert _left(children) == []
+    # summary.json says what finished (issue 64): the calibration and the Drucker-Prager
+    # body's level the log showed, drawn in load_settlement.png
+    s = json.loads((out / "summary.json").read_text())
+    assert s["status"] == "interrupted" and "SIGTERM" in s["reason"], s
+    assert s["finished"][:2] == ["calibration", "unreinforced drucker_prager: 1 of 1 levels"], s
+    assert "load_settlement.png" in s["figures"] and (out / "load_settlement.png").is_file()

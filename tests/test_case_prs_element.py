@@ -128,10 +128,10 @@ def test_homogeneous_field_handed_over_reproduces_the_standalone_element(tmp_pat
     sys.path.insert(0, str(ROOT / "cases"))
     import prs_element as pe
 
-    from femcoupling.elastoplastic import SoilModel
-    from femcoupling.geometry import ElementRegion, ReinforcedSoilBody
-    from femcoupling.handover import fem_to_dem
-    from femcoupling.materials import LinearElastic
+    from femcoupling.coupling.handover import fem_to_dem
+    from femcoupling.fem.geometry import ElementRegion, ReinforcedSoilBody
+    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.materials.continuum import LinearElastic
 
     p_pa, nu = 60e3, 0.3
     body = ReinforcedSoilBody(width_m=1.0, height_m=1.0, footing_half_width_m=1.0,
@@ -249,8 +249,8 @@ def test_two_way_keeps_the_prepared_element_between_iterations(tmp_path, capsys)
     as a fresh element would."""
     from dataclasses import asdict
 
-    from femcoupling.drivers.prs_element import element_runner
-    from femcoupling.handover import fem_to_dem
+    from femcoupling.coupling.handover import fem_to_dem
+    from geogrid_dem.studies.prs_element import element_runner
     from geogrid_dem.cases import prs_element as pe
 
     p = pe.Params(**pe.SMOKE)

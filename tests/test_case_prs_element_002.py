@@ -459,6 +459,11 @@ def test_sigterm_with_workers_stops_the_pool_at_once(tmp_path):
     from geogrid_dem.rundir import run_status
 
     assert run_status(out)["status"] == "interrupted"
+    # the summary it wrote as it went, marked; the FEM runs it finished named (issue 64)
+    s = json.loads((out / "summary.json").read_text())
+    assert s["status"] == "interrupted" and "SIGTERM" in s["reason"], s.get("reason")
+    assert s["finished"][:2] == ["FEM standard_RE", "FEM standard_PRS"], s["finished"]
+    assert s["mode"] == "FEM -> DEM (one-way)" and "findings" in s
     def alive():
         return [c for c in children if subprocess.run(["kill", "-0", c],
                                                       capture_output=True).returncode == 0]

@@ -17,7 +17,7 @@ def _coupling_status_said(out, proc, key: str) -> dict:
     checks (converged only when every check held), the worst of them in ``coupling``, in the
     report and the log, and the exit status that says it (non-zero with one line on stderr
     when not converged; the results written all the same). Returns the summary."""
-    from femcoupling.status import STATUSES, exit_code, worst
+    from femcoupling.coupling.status import STATUSES, exit_code, worst
 
     s = json.loads((out / "summary.json").read_text())
     report = (out / "report.md").read_text()

@@ -17,8 +17,8 @@ def test_the_glob_finds_the_known_cases():
 
 
 #: Cases whose smoke is a coupled run: a completed run exits with its coupling's status
-#: (femcoupling.status.EXIT_CODES: 0 converged, 3 stopped within the elements' scatter), the
-#: one summary.json gives.
+#: (femcoupling.coupling.status.EXIT_CODES: 0 converged, 3 stopped within the elements' scatter),
+#: the one summary.json gives.
 COUPLED = {"footing_multiscale"}
 
 
@@ -33,4 +33,5 @@ def test_case_smoke_runs_and_writes_results(case_smoke, name):
     files = [p for p in out.rglob("*") if p.is_file()]
     assert len(files) >= 2, f"{name}: only {files} in --out"
     assert summary, f"{name}: empty summary.json"
+    assert summary["status"] == "finished", summary.get("status")  # (rundir.end_run)
     assert (proc.stdout + proc.stderr).strip(), f"{name}: printed no progress"

@@ -213,7 +213,7 @@ def test_ctrl_c_in_each_command_exits_130_with_one_line(tmp_path, monkeypatch, c
 def test_a_completed_run_that_exits_with_a_coupling_status_keeps_its_run_file(tmp_path,
                                                                                monkeypatch):
     """A coupled case that completes but did not converge exits 3, 4 or 5
-    (femcoupling.status.EXIT_CODES): its folder still gets run.toml, as a converged run's;
+    (femcoupling.coupling.status.EXIT_CODES): its folder still gets run.toml, as a converged run's;
     a run that failed gets none."""
     from geogrid_dem import cli as gcli
     from geogrid_dem import rundir

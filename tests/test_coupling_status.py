@@ -1,7 +1,7 @@
 """Statuses that tell the truth (issue 37): every coupled loop ends in one of converged,
 stopped_at_scatter, stalled or failed, and converged only when every check held.
 
-Mostly the status logic on synthetic inputs (femcoupling.status); a few cheap loops on the
+Mostly the status logic on synthetic inputs (femcoupling.coupling.status); a few cheap loops on the
 FEM test body with stand-in elements (a few seconds each): the two-way loop's axes check for
 a walled element, and the region mode's stall judged against the region's own forces."""
 
@@ -12,9 +12,9 @@ import math
 import numpy as np
 import pytest
 
-from femcoupling.geometry import FemInputError
-from femcoupling.status import (EXIT_CODES, STATUSES, exit_code, judge_region, judge_steps,
-                                newton_acceptance, worst)
+from femcoupling import FemInputError
+from femcoupling.coupling.status import (EXIT_CODES, STATUSES, exit_code, judge_region, judge_steps,
+                                         newton_acceptance, worst)
 
 # a region that passes every check: a change within tol, axes near the walls, strains met
 GOOD = dict(settled=True, final_change=0.005, tol=0.02, walled=True, axes_rotation_deg=3.0,
@@ -159,7 +159,7 @@ class _Elastic:
         self.full = full_tensor
 
     def __call__(self, name, initial, final):
-        from femcoupling.twoway import ElementResponse
+        from femcoupling.coupling.twoway import ElementResponse
 
         ds = final.normal_pa - initial.normal_pa
         return ElementResponse(stress_initial_pa=initial.normal_pa,
@@ -175,7 +175,7 @@ def test_two_way_a_walled_element_past_the_axes_limit_is_not_converged():
     warning), with one that takes the full tensor it converges."""
     from test_fem_handover import _footing, two_region_model
 
-    from femcoupling.twoway import two_way
+    from femcoupling.coupling.twoway import two_way
 
     runs = {full: two_way(two_region_model(("b",)), regions=["b"], load=_footing,
                           element_runner=_Elastic(full), tol=1e-3, max_iterations=6)
@@ -227,7 +227,7 @@ def test_a_step_cut_at_the_ceiling_names_the_element_that_moved_most():
     names the rough one first, with how far its points moved at the probe (Pa)."""
     import re
 
-    from femcoupling.elastoplastic import NewtonDivergence
+    from femcoupling.fem.soil_model import NewtonDivergence
     from test_fem_handover import two_region_model
 
     m = two_region_model(("a", "b"))
@@ -251,7 +251,7 @@ def test_region_mode_stall_is_judged_against_the_regions_own_forces():
     above the ceiling (noise_ceiling, 1e-2): the step is not taken. 30 Pa stalls at 4.1e-4 of
     the region's force: taken, as stopped_at_scatter (not converged), its residual in Pa
     too."""
-    from femcoupling.elastoplastic import NewtonDivergence
+    from femcoupling.fem.soil_model import NewtonDivergence
 
     m = _rough_model(2000.0)
     assert m.noise_ceiling == 1e-2

@@ -78,7 +78,7 @@ def test_two_way_runs_its_regions_on_a_started_cluster(cluster):
     from test_fem_handover import _footing, two_region_model
     from test_fem_runner_pool import CountingElement, _same
 
-    from femcoupling.twoway import two_way
+    from femcoupling.coupling.twoway import two_way
 
     client, _, _ = cluster
     kw = dict(regions=["a", "b"], load=_footing, tol=1e-6, max_iterations=4,

@@ -65,8 +65,8 @@ class Echo:
 
 def test_both_families_satisfy_the_interface():
     from cpp_dem.elements.periodic import DemElement
-    from femcoupling.drivers.prs_element import _Runner
-    from femcoupling.region import PeriodicRegionElement
+    from femcoupling.materials.dem_elements import PeriodicRegionElement
+    from geogrid_dem.studies.prs_element import _Runner
 
     assert check_element(DemElement, StrainElement, "element_type") is DemElement
     for runner in (PeriodicRegionElement(n=50), _Runner.__new__(_Runner), Echo()):

@@ -1,5 +1,5 @@
-"""Scales that agree (femcoupling.calibration; issue 18): the FEM soil (Drucker–Prager matched
-to Mohr–Coulomb) fitted to a periodic DEM element along its region's stress path."""
+"""Scales that agree (femcoupling.coupling.continuum_fit; issue 18): the FEM soil (Drucker–Prager
+matched to Mohr–Coulomb) fitted to a periodic DEM element along its region's stress path."""
 
 from __future__ import annotations
 
@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from femcoupling.calibration import fit_along_path, friction_angle_deg
-from femcoupling.geometry import FemInputError
+from femcoupling import FemInputError
+from femcoupling.coupling.continuum_fit import fit_along_path, friction_angle_deg
 
 INITIAL = np.diag([-25e3, -25e3, -50e3])  # FEM tensors, tension positive, Pa
 FINAL = np.diag([-25e3, -25e3, -80e3])
@@ -50,7 +50,7 @@ def test_the_fit_carries_what_the_element_carries(fit):
 
 
 def test_the_fitted_elasticity_is_the_elements_secant(fit):
-    from femcoupling.handover import secant_stiffness
+    from femcoupling.coupling.handover import secant_stiffness
 
     j = int(np.searchsorted(fit.t, 1.0 + 1e-12)) - 1
     ds = -np.diag(fit.stresses_pa[j] - fit.stresses_pa[0])

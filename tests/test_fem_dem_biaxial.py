@@ -1,4 +1,5 @@
-"""FEM x DEM against direct DEM in a plane-strain biaxial test (femcoupling.biaxial; issue 18).
+"""FEM x DEM against direct DEM in a plane-strain biaxial test (geogrid_dem.studies.biaxial; issue
+18).
 
 Small size: a 2 x 2 mesh of 8 periodic elements of 100 dense grains, to 3 % axial strain at
 100 kPa, against the same 8 elements alone under the homogeneous path (the direct DEM of the
@@ -20,7 +21,7 @@ import pytest
 pytest.importorskip("dolfinx_solver")
 
 from cpp_dem.elements.pool import ElementPool, PeriodicFactory  # noqa: E402
-from femcoupling import biaxial  # noqa: E402
+from geogrid_dem.studies import biaxial  # noqa: E402
 
 P, STRAIN = 100e3, 0.03
 FAC = PeriodicFactory(n=100, stress=P, isotropic=True, options={"prep_friction_deg": 0.0})

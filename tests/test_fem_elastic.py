@@ -1,4 +1,5 @@
-"""Verification of femcoupling.solve_elastic_block against the analytic uniaxial-stress solution.
+"""Verification of femcoupling.fem.elastic_block.solve_elastic_block (the toolchain check)
+against the analytic uniaxial-stress solution.
 
 A box on three roller planes (z=0, x=0, y=0) under a uniform compressive top
 traction t is in homogeneous uniaxial stress:
@@ -21,7 +22,7 @@ import numpy as np
 import pytest
 
 import femcoupling
-from femcoupling import ElasticBlockResult, solve_elastic_block
+from femcoupling.fem.elastic_block import ElasticBlockResult, solve_elastic_block
 
 REPO_ROOT = pathlib.Path(__file__).resolve().parents[1]
 
@@ -174,7 +175,9 @@ def test_arguments_are_keyword_only() -> None:
 
 
 def test_public_api() -> None:
-    assert set(femcoupling.__all__) == {"ElasticBlockResult", "solve_elastic_block"}
+    """The package namespace holds only its one error type; the rest is in the subpackages."""
+    assert set(femcoupling.__all__) == {"FemInputError"}
+    assert issubclass(femcoupling.FemInputError, ValueError)
 
 
 def test_import_femcoupling_does_not_import_the_fem_stack() -> None:

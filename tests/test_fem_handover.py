@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from femcoupling.handover import HandoverError, fem_to_dem, secant_stiffness
+from femcoupling.coupling.handover import HandoverError, fem_to_dem, secant_stiffness
 
 
 def test_sign_convention_tension_positive_to_compression_positive():
@@ -61,7 +61,7 @@ class ElasticElement:
         self.E, self.nu = young_pa, poisson
 
     def __call__(self, name, initial, final):
-        from femcoupling.twoway import ElementResponse
+        from femcoupling.coupling.twoway import ElementResponse
 
         ds = final.normal_pa - initial.normal_pa
         de = (ds - self.nu * (ds.sum() - ds)) / self.E
@@ -73,9 +73,9 @@ def two_region_model(regions=("a", "b")):
     """The test body (also bench/region_tangent.py's): 4 x 3 m of elastic soil (50 MPa,
     0.3, 18 kN/m^3) under a 1 m footing, element regions a (under the footing) and b (off
     its edge, turned principal axes), in its geostatic state."""
-    from femcoupling.elastoplastic import SoilModel
-    from femcoupling.geometry import ElementRegion, ReinforcedSoilBody
-    from femcoupling.materials import LinearElastic
+    from femcoupling.fem.geometry import ElementRegion, ReinforcedSoilBody
+    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.materials.continuum import LinearElastic
 
     where = {"a": (0.25, 2.7), "b": (0.75, 2.4)}
     body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5,
@@ -94,7 +94,7 @@ def test_two_way_converges_and_puts_the_element_stiffness_into_the_region(tmp_pa
     and the loop with it."""
     import h5py
 
-    from femcoupling.twoway import HandoverHistory, two_way
+    from femcoupling.coupling.twoway import HandoverHistory, two_way
 
     m = two_region_model()
     load = lambda model: model.load_footing(pressure_pa=100e3, steps=1)  # noqa: E731
@@ -138,7 +138,7 @@ class SofteningElement:
         self.ref = ref
 
     def __call__(self, name, initial, final):
-        from femcoupling.twoway import ElementResponse
+        from femcoupling.coupling.twoway import ElementResponse
 
         ds = final.normal_pa - initial.normal_pa
         E = 10e6 * (final.fem_stress_pa[2, 2] / self.ref) ** -3
@@ -155,7 +155,7 @@ class NoisyElement:
         self.rng = np.random.default_rng(7)
 
     def __call__(self, name, initial, final):
-        from femcoupling.twoway import ElementResponse
+        from femcoupling.coupling.twoway import ElementResponse
 
         ds = final.normal_pa - initial.normal_pa
         E = 10e6 * (1 + 0.03 * self.rng.standard_normal())
@@ -166,8 +166,8 @@ class NoisyElement:
 
 
 def test_aitken_relaxation_ends_the_two_cycle():
-    from femcoupling.materials import LinearElastic
-    from femcoupling.twoway import two_way
+    from femcoupling.coupling.twoway import two_way
+    from femcoupling.materials.continuum import LinearElastic
 
     m = _one_region_model()
     m.set_region_material("a", LinearElastic(10e6, 0.25))
@@ -191,7 +191,7 @@ def test_aitken_relaxation_ends_the_two_cycle():
 def test_two_way_stops_at_the_elements_scatter_and_says_so(tmp_path):
     import h5py
 
-    from femcoupling.twoway import HandoverHistory, RegionWarning, two_way
+    from femcoupling.coupling.twoway import HandoverHistory, RegionWarning, two_way
 
     m = _one_region_model()
     with HandoverHistory(tmp_path / "h.h5", regions=["x", "a"]) as hist:
@@ -212,7 +212,7 @@ def test_two_way_stops_at_the_elements_scatter_and_says_so(tmp_path):
 
 
 def test_check_region_flags_turned_axes_and_strain_far_from_the_region():
-    from femcoupling.twoway import check_region
+    from femcoupling.coupling.twoway import check_region
 
     t = fem_to_dem(np.array([[-100e3, 0, -40e3], [0, -80e3, 0], [-40e3, 0, -150e3]]))
     msgs, ratio = check_region("r", t, fem_strain_increment=[1e-4, 0, 2e-4],
@@ -226,7 +226,7 @@ def test_check_region_flags_turned_axes_and_strain_far_from_the_region():
 
 
 def test_region_layers_are_the_layers_that_cross_a_region():
-    from femcoupling.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
+    from femcoupling.fem.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
 
     lay = (GeogridLayer(z_m=2.7, x_min_m=0.0, x_max_m=2.0),   # through a
            GeogridLayer(z_m=2.45, x_min_m=1.0, x_max_m=3.0),  # b's height, not its x
@@ -243,10 +243,10 @@ def test_region_targets_carry_the_tension_of_the_layer_across_the_region():
     layer's mean tension over the region's width (issue 18: for the element's grid ends);
     region b, which no layer crosses, carries none. Measured 1.95 kN/m (the band loses a
     little of T_p to the soil it compresses)."""
-    from femcoupling.elastoplastic import SoilModel
-    from femcoupling.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
-    from femcoupling.materials import GeogridLayerMaterial, LinearElastic
-    from femcoupling.twoway import region_targets
+    from femcoupling.coupling.twoway import region_targets
+    from femcoupling.fem.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
+    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.materials.continuum import GeogridLayerMaterial, LinearElastic
 
     body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5,
                               layers=(GeogridLayer(z_m=2.7, x_min_m=0.0, x_max_m=2.0,
@@ -274,7 +274,7 @@ class FlowingElement:
     (the loop settles with the element straining 3.5 times its region)."""
 
     def __call__(self, name, initial, final):
-        from femcoupling.twoway import ElementResponse
+        from femcoupling.coupling.twoway import ElementResponse
 
         ds = final.normal_pa - initial.normal_pa
         de = (ds - 0.25 * (ds.sum() - ds)) / 10e6
@@ -288,7 +288,7 @@ def test_settled_stresses_with_strains_apart_are_not_convergence():
     region has stalled (as a DEM element at its strength does), not converged: it stops,
     says so and reports status "stalled". With the limit raised above the mismatch the
     same loop converges, after the same FEM solves."""
-    from femcoupling.twoway import RegionWarning, two_way
+    from femcoupling.coupling.twoway import RegionWarning, two_way
 
     def run(limit):
         return two_way(_one_region_model(), regions=["a"], load=_footing,
@@ -310,8 +310,8 @@ def test_settled_stresses_with_strains_apart_are_not_convergence():
 def test_history_append_file_keeps_rows_and_refuses_other_regions(tmp_path):
     import h5py
 
-    from femcoupling.geometry import FemInputError
-    from femcoupling.twoway import HandoverHistory
+    from femcoupling import FemInputError
+    from femcoupling.coupling.twoway import HandoverHistory
 
     with HandoverHistory(tmp_path / "part.h5", regions=["x", "y"]) as part:
         part.append(iteration=1, region=1, change=0.5)

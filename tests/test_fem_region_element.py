@@ -1,13 +1,13 @@
 """The hierarchical mode on the reinforced-soil body (issue 18): a DEM element as the
 material of a SoilModel element region, called at every Newton iterate
-(SoilModel.set_region_element, femcoupling.region.DemRegionMaterial)."""
+(SoilModel.set_region_element, femcoupling.materials.dem_elements.DemRegionMaterial)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from femcoupling.materials import mandel_to_tensor, tensor_to_mandel
+from femcoupling.materials.continuum import mandel_to_tensor, tensor_to_mandel
 from test_fem_handover import _footing, two_region_model
 from test_fem_region_tangent import C_TRUE
 
@@ -36,7 +36,7 @@ def test_a_linear_region_element_is_the_same_as_its_material():
     tangent times their deviation from it: for a linear element that is exactly the material
     with its stiffness (the displacements agree to Newton's tolerance), and Newton converges
     as it does with the material (the formulation's Jacobian is consistent)."""
-    from femcoupling.materials import AnisotropicElastic
+    from femcoupling.materials.continuum import AnisotropicElastic
 
     a = two_region_model(("a",))
     a.set_region_material("a", AnisotropicElastic(C_TRUE))
@@ -54,7 +54,7 @@ def test_a_linear_region_element_is_the_same_as_its_material():
 
 
 def test_region_element_needs_the_interface():
-    from femcoupling.geometry import FemInputError
+    from femcoupling import FemInputError
 
     m = two_region_model(("a",))
     with pytest.raises(FemInputError, match="needs a trial"):
@@ -72,7 +72,7 @@ def test_a_dem_region_element_strains_as_its_region_and_carries_its_stress(tmp_p
     the noise measured at the scale of Newton's corrections), and the step is taken there,
     stopped_at_scatter, and said; the same run again is bitwise the same (a rejected
     iterate leaves no trace)."""
-    from femcoupling.region import DemRegionMaterial, PeriodicRegionElement
+    from femcoupling.materials.dem_elements import DemRegionMaterial, PeriodicRegionElement
 
     def run(records=None):
         m = two_region_model(("a",))
@@ -117,7 +117,8 @@ def test_region_elements_on_dask_workers_give_the_same_run_bitwise():
     (PoolRegionMaterials, evaluated at once at every iterate) give bitwise the run that the
     same elements in this process give, one after the other; save_state/restore_state carry
     the workers' elements (the restored run repeats bitwise)."""
-    from femcoupling.region import DemRegionMaterial, PeriodicRegionElement, PoolRegionMaterials
+    from femcoupling.materials.dem_elements import (DemRegionMaterial, PeriodicRegionElement,
+                                                    PoolRegionMaterials)
 
     runner = PeriodicRegionElement(n=100, seed=5, tol=0.02, unbalanced=1e-2)
 
@@ -152,9 +153,9 @@ def test_region_elements_on_dask_workers_give_the_same_run_bitwise():
 def _cells_model(fine_m: float):
     """The test body's region a alone, meshed at ``fine_m`` there (P1: one quadrature point
     per cell)."""
-    from femcoupling.elastoplastic import SoilModel
-    from femcoupling.geometry import ElementRegion, ReinforcedSoilBody
-    from femcoupling.materials import LinearElastic
+    from femcoupling.fem.geometry import ElementRegion, ReinforcedSoilBody
+    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.materials.continuum import LinearElastic
 
     body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5,
                               regions=(ElementRegion("a", (0.25, 2.7), 0.2),),
@@ -169,8 +170,8 @@ def test_an_element_per_cell_of_a_linear_stand_in_is_the_material():
     cell): exactly the material with that stiffness, Newton converging as with it."""
     from types import SimpleNamespace
 
-    from femcoupling.geometry import FemInputError
-    from femcoupling.materials import AnisotropicElastic
+    from femcoupling import FemInputError
+    from femcoupling.materials.continuum import AnisotropicElastic
 
     a = _cells_model(0.1)
     a.set_region_material("a", AnisotropicElastic(C_TRUE))
@@ -197,7 +198,7 @@ def test_an_element_per_cell_on_dask_workers(tmp_path):
     mean, the step converges (at a stall, said), and the records hold a row per element."""
     import h5py
 
-    from femcoupling.region import PeriodicRegionElement, PoolRegionMaterials
+    from femcoupling.materials.dem_elements import PeriodicRegionElement, PoolRegionMaterials
 
     m = _cells_model(0.15)
     stresses = m.cell_stresses("a")
@@ -237,8 +238,8 @@ def test_a_band_member_on_the_pool_answers_as_its_element_alone():
     ``band_tangent="fd-forward"`` the forward differences of the components asked (the others
     filled by symmetry). The soil element's tangent is its network's."""
     from cpp_dem.elements.periodic import DemElement
-    from femcoupling.region import (PeriodicRegionElement, PoolRegionMaterials,
-                                    ReinforcedBandElement, network_stiffness)
+    from femcoupling.materials.dem_elements import (PeriodicRegionElement, PoolRegionMaterials,
+                                                    ReinforcedBandElement, network_stiffness)
 
     runner = PeriodicRegionElement(n=40, seed=3, tol=0.02, unbalanced=1e-2)
     band = ReinforcedBandElement(n=50, seed=11, band_thickness_m=0.02)
@@ -282,7 +283,7 @@ def test_a_band_member_on_the_pool_answers_as_its_element_alone():
         soil.apply_strain(de)
         assert np.array_equal(got["zone/0"][1], network_stiffness(soil, 1e-3))
         # the footing's record of the band's sheets: the band members' committed states
-        from femcoupling.drivers.footing_multiscale import band_sheet_tensions
+        from geogrid_dem.studies.footing_multiscale import band_sheet_tensions
 
         assert band_sheet_tensions(group, 1) == [sheet]
     finally:

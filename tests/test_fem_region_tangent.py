@@ -1,6 +1,6 @@
 """Region mode with the element's tangent (issue 18): the region takes a full stiffness made
 from the DEM element's tangent, corrected to reproduce the element's increment exactly
-(femcoupling.handover.secant_tangent, a BFGS update), instead of an isotropic secant.
+(femcoupling.coupling.handover.secant_tangent, a BFGS update), instead of an isotropic secant.
 
 The stand-in element is linear and transversely isotropic (stiffer vertically): its exact
 stiffness is known, so the loop must put exactly that stiffness into the region, and the
@@ -14,11 +14,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from femcoupling.geometry import FemInputError
-from femcoupling.handover import HandoverError, secant_tangent
-from femcoupling.materials import (AnisotropicElastic, LinearElastic, elastic_tangent,
-                                   mandel_to_tensor, tensor_to_mandel,
-                                   voigt_to_mandel_stiffness)
+from femcoupling import FemInputError
+from femcoupling.coupling.handover import HandoverError, secant_tangent
+from femcoupling.materials.continuum import (AnisotropicElastic, LinearElastic, elastic_tangent,
+                                             mandel_to_tensor, tensor_to_mandel,
+                                             voigt_to_mandel_stiffness)
 from test_fem_handover import _footing, _one_region_model
 
 
@@ -102,7 +102,7 @@ class AnisotropicElement:
     returns its exact tangent (picklable)."""
 
     def __call__(self, name, initial, final):
-        from femcoupling.twoway import ElementResponse
+        from femcoupling.coupling.twoway import ElementResponse
 
         ds = np.asarray(final.fem_stress_pa) - np.asarray(initial.fem_stress_pa)  # tension +
         de = mandel_to_tensor(np.linalg.solve(C_TRUE, tensor_to_mandel(ds, 6)))
@@ -124,7 +124,7 @@ def test_voigt_and_mandel_stiffness_forms_agree():
 def _coupled(stiffness, tmp_path):
     import h5py
 
-    from femcoupling.twoway import HandoverHistory, two_way
+    from femcoupling.coupling.twoway import HandoverHistory, two_way
 
     m = _one_region_model()
     e0 = m.region_strain("a")
@@ -159,7 +159,7 @@ def test_two_way_gives_the_region_the_elements_own_stiffness(tmp_path):
 
 
 def test_two_way_refuses_an_unknown_stiffness_mode():
-    from femcoupling.twoway import two_way
+    from femcoupling.coupling.twoway import two_way
 
     with pytest.raises(FemInputError, match="stiffness='secant'"):
         two_way(_one_region_model(), regions=["a"], load=_footing,
@@ -190,7 +190,7 @@ class NanTangentElement(AnisotropicElement):
 
 
 def test_a_tangent_that_gives_no_stiffness_is_said_and_the_secant_taken():
-    from femcoupling.twoway import RegionWarning, two_way
+    from femcoupling.coupling.twoway import RegionWarning, two_way
 
     with pytest.warns(RegionWarning, match="the element's tangent gives no stiffness"):
         res = two_way(_one_region_model(), regions=["a"], load=_footing,

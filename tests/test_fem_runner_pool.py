@@ -27,7 +27,7 @@ class CountingElement:
         self.kill_flag = kill_flag
 
     def __call__(self, name, initial, final):
-        from femcoupling.twoway import ElementResponse
+        from femcoupling.coupling.twoway import ElementResponse
 
         self.calls[name] = self.calls.get(name, 0) + 1
         if (self.kill_flag and name == "b" and self.calls[name] == 2
@@ -58,7 +58,7 @@ class StatefulCounting(CountingElement):
 
 
 def _loop(runner, workers, log=None, client=None, load=_footing):
-    from femcoupling.twoway import two_way
+    from femcoupling.coupling.twoway import two_way
 
     return two_way(two_region_model(), regions=["a", "b"], load=load,
                    element_runner=runner, tol=1e-6, max_iterations=4, workers=workers,
@@ -189,7 +189,7 @@ def test_a_worker_that_joins_mid_loop_receives_a_region(serial):
 
 def test_a_failing_element_names_its_region():
     from cpp_dem import ParameterError
-    from femcoupling.runner_pool import RunnerPool
+    from femcoupling.coupling.runner_pool import RunnerPool
 
     def bad(name, initial, final):
         raise ValueError("no packing")
@@ -208,8 +208,8 @@ def test_periodic_elements_are_prepared_once_on_their_workers():
     """Real periodic elements (100 grains), no cache_dir: the last iteration starts from the
     element its worker kept in memory, and its answer is bitwise that of the same runner run
     here from the same targets."""
-    from femcoupling.region import PeriodicRegionElement
-    from femcoupling.twoway import two_way
+    from femcoupling.coupling.twoway import two_way
+    from femcoupling.materials.dem_elements import PeriodicRegionElement
 
     runner = PeriodicRegionElement(n=100, tol=0.01)
     res = two_way(two_region_model(), regions=["a", "b"], load=_footing,
@@ -228,7 +228,7 @@ def test_a_runner_dask_cannot_send_is_refused_before_a_cluster_starts():
     import threading
 
     from cpp_dem import ParameterError
-    from femcoupling.runner_pool import RunnerPool
+    from femcoupling.coupling.runner_pool import RunnerPool
 
     class Holds:  # a runner with a lock in it
         def __init__(self):

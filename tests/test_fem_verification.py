@@ -20,10 +20,11 @@ import pathlib
 import numpy as np
 import pytest
 
-from femcoupling.elastoplastic import SoilModel
-from femcoupling.geometry import ElementRegion, FemInputError, ReinforcedSoilBody
-from femcoupling.materials import (DruckerPrager, LinearElastic, drucker_prager_return,
-                                   mandel_identity)
+from femcoupling import FemInputError
+from femcoupling.fem.geometry import ElementRegion, ReinforcedSoilBody
+from femcoupling.fem.soil_model import SoilModel
+from femcoupling.materials.continuum import (DruckerPrager, LinearElastic, drucker_prager_return,
+                                             mandel_identity)
 
 ROOT = pathlib.Path(__file__).resolve().parents[1]
 B_M = 1.0
@@ -100,7 +101,7 @@ def test_return_mapping_lands_on_the_yield_surface_and_tangent_is_consistent():
         assert np.all(np.abs(f[dl > 0]) <= 1e-6 * k)
         assert np.count_nonzero(dl > 0) > 10
         # finite-difference check of the consistent tangent at cone points
-        from femcoupling.materials import elastic_tangent
+        from femcoupling.materials.continuum import elastic_tangent
         C = elastic_tangent(K, G, ncomp)[0]
         for i in np.flatnonzero(dl > 0)[:5]:
             num = np.zeros((ncomp, ncomp))
@@ -156,7 +157,7 @@ def test_point_stress_on_p1_is_the_cells_stress():
     tree = dg.bb_tree(m.mesh, 2)
     coll = dg.compute_colliding_cells(m.mesh, dg.compute_collisions_points(tree, p3), p3)
     cms = m.cell_mean_stress()
-    from femcoupling.materials import mandel_to_tensor
+    from femcoupling.materials.continuum import mandel_to_tensor
 
     for i in range(2):
         want = mandel_to_tensor(cms[coll.links(i)[0]])

@@ -1,4 +1,4 @@
-"""A strip footing by hierarchical FEM x DEM (femcoupling.footing_dem; the model's
+"""A strip footing by hierarchical FEM x DEM (geogrid_dem.studies.footing_dem; the model's
 platens="footing"): it starts at the surcharge, its pressure is its reaction (the body is in
 equilibrium with it: footing plus surcharge equal the bottom's reaction), it stiffens as it
 settles, and bad input is refused by name."""
@@ -12,9 +12,9 @@ pytest.importorskip("dolfinx_solver")
 
 from cpp_dem.elements.pool import ElementPool  # noqa: E402
 from cpp_dem.protocols.footing import StripFootingBox  # noqa: E402
-from femcoupling.footing_dem import (element_factory, fem_dem_footing,  # noqa: E402
-                                     paired_pressures)
-from femcoupling.geometry import FemInputError  # noqa: E402
+from femcoupling import FemInputError  # noqa: E402
+from geogrid_dem.studies.footing_dem import (element_factory, fem_dem_footing,  # noqa: E402
+                                             paired_pressures)
 
 Q = 20e3
 BOX = StripFootingBox(footing_b=0.02, length=0.08, depth=0.04, thickness=0.03,
@@ -99,7 +99,7 @@ def test_paired_pressures_pairs_by_seed_and_refuses_mismatches():
 
 
 def test_bad_footing_input_is_refused_by_name():
-    from femcoupling.hierarchical import HierarchicalPlaneStrain
+    from femcoupling.coupling.hierarchical import HierarchicalPlaneStrain
 
     kw = dict(lx=0.08, ly=0.04, nx=4, ny=2, confining_pa=Q, platens="footing")
     with pytest.raises(FemInputError, match="footing_b=0.03: must end on a mesh line"):
@@ -182,7 +182,7 @@ def test_the_bench_takes_a_periodic_box_and_refuses_the_oedometer_on_it_alone(ca
 def test_the_bench_runs_at_smoke_size(tmp_path, capsys, monkeypatch):
     import json
 
-    import femcoupling.footing_dem as fdm
+    import geogrid_dem.studies.footing_dem as fdm
 
     bench = _bench()
     given = []  # the boxes the elements are made from

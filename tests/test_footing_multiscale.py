@@ -18,7 +18,7 @@ ROOT = Path(__file__).resolve().parents[1]
 
 
 def test_paired_differences_over_seeds():
-    from femcoupling.drivers.footing_multiscale import paired
+    from geogrid_dem.studies.footing_multiscale import paired
 
     a = np.array([[1.0, 2.0], [1.2, 2.6], [0.8, 2.3]])
     b = np.array([[0.5, 1.0], [0.5, 1.0], [0.5, 1.0]])
@@ -34,7 +34,7 @@ def test_a_continuum_that_does_not_converge_stops_the_run_saying_which(tmp_path)
     """A Drucker–Prager FEM that does not converge (here the calibration's first, with a
     starting soil of 5 degrees that cannot carry the seating pressure) stops the run with a
     message naming that FEM, its soil and Newton's failure, not with a traceback."""
-    from femcoupling.drivers.footing_multiscale import FootingParams, run
+    from geogrid_dem.studies.footing_multiscale import FootingParams, run
     from geogrid_dem.cases.footing_multiscale import SMOKE
 
     p = FootingParams(**{**SMOKE, "soil_friction": 5.0})
@@ -53,9 +53,9 @@ def test_a_footing_that_stops_short_says_where_and_is_left_at_its_last_step():
     (25 degrees, 40 kPa more than the seating's 20): the failure says how far the pressure
     rose and at what settlement, and the model is back at its last accepted step (its
     reaction is that step's, not the failed iterate's)."""
-    from femcoupling.drivers.footing_multiscale import FootingParams, model
-    from femcoupling.materials import DruckerPrager
-    from femcoupling.soil_steps import NewtonDivergence
+    from femcoupling.fem.soil_steps import NewtonDivergence
+    from femcoupling.materials.continuum import DruckerPrager
+    from geogrid_dem.studies.footing_multiscale import FootingParams, model
     from geogrid_dem.cases.footing_multiscale import SMOKE
 
     p = FootingParams(**SMOKE)
@@ -77,8 +77,8 @@ def test_a_drucker_prager_body_that_stops_after_its_first_level_is_recorded_so()
     """The continuum body of a variant whose soil (25 degrees) carries the first level
     (40 kPa) but not the second (60 kPa): its record keeps the level it reached and says why;
     the run goes on (the multiscale runs need only its first level)."""
-    from femcoupling.drivers.footing_multiscale import FootingParams, run_continuum
-    from femcoupling.materials import DruckerPrager
+    from femcoupling.materials.continuum import DruckerPrager
+    from geogrid_dem.studies.footing_multiscale import FootingParams, run_continuum
     from geogrid_dem.cases.footing_multiscale import SMOKE
 
     p = FootingParams(**{**SMOKE, "pressure_pa": 60e3, "levels": 2})
@@ -96,7 +96,7 @@ def test_the_calibration_takes_the_path_as_far_as_the_starting_soil_carried():
     """The calibration's first FEM whose starting soil (25 degrees) stops between half and
     all of the rise asked (to 60 kPa): the zone's path to there, the record and the log
     saying so; below half the rise, the run stops (the test above)."""
-    from femcoupling.drivers.footing_multiscale import PATH_SHORT_MIN, FootingParams, calibrate
+    from geogrid_dem.studies.footing_multiscale import PATH_SHORT_MIN, FootingParams, calibrate
     from geogrid_dem.cases.footing_multiscale import SMOKE
 
     said = []
@@ -132,8 +132,8 @@ def test_the_calibration_takes_the_path_as_far_as_the_starting_soil_carried():
 def test_bad_parameters_are_named(field, value, words):
     from dataclasses import replace
 
-    from femcoupling.drivers.footing_multiscale import FootingParams
-    from femcoupling.geometry import FemInputError
+    from femcoupling import FemInputError
+    from geogrid_dem.studies.footing_multiscale import FootingParams
 
     change = field if isinstance(field, dict) else {field: value}
     with pytest.raises(FemInputError, match=words.replace("(", r"\(").replace(")", r"\)")):
@@ -170,8 +170,8 @@ def test_the_layer_thickness_flag_sets_the_band_thickness():
 def test_an_element_without_stiffness_fails_the_newton_iterate_by_name():
     """A trial that opens every contact of an element (no stiffness left) is a failed
     Newton iterate (the model cuts the step), not an error that ends the run."""
-    from femcoupling.quadrature import NewtonFailure
-    from femcoupling.region import trial_stiffness
+    from femcoupling.fem.quadrature import NewtonFailure
+    from femcoupling.materials.dem_elements import trial_stiffness
 
     ok = trial_stiffness("element zone/7", np.eye(6) * 1e6, 1e-3, np.zeros((3, 3)), 40)
     assert np.linalg.eigvalsh(ok).min() > 0
@@ -187,8 +187,8 @@ def test_a_band_cells_rve_starts_at_its_state_and_relaxed():
     beside the sheet and D_zz 11.5 MPa (network, the cell's scale); grown at their
     friction they were at 0.47 and 5.1 MPa."""
     from cpp_dem.elements.reinforced import cell_height, sheet_tension_per_metre
-    from femcoupling.drivers.footing_multiscale import FootingParams, band_options
-    from femcoupling.region import ReinforcedBandElement, _Concat
+    from femcoupling.materials.dem_elements import ReinforcedBandElement, _Concat
+    from geogrid_dem.studies.footing_multiscale import FootingParams, band_options
 
     p = FootingParams()
     r = ReinforcedBandElement(n=60, seed=7, band_thickness_m=0.02, options=band_options(p))
@@ -219,8 +219,8 @@ def test_a_band_cells_rve_starts_at_its_state_and_relaxed():
 @pytest.fixture(scope="module")
 def dp_model():
     pytest.importorskip("dolfinx_solver")
-    from femcoupling.drivers.footing_multiscale import FootingParams, model
-    from femcoupling.materials import DruckerPrager
+    from femcoupling.materials.continuum import DruckerPrager
+    from geogrid_dem.studies.footing_multiscale import FootingParams, model
 
     p = FootingParams(width=2.0, height=1.5, mesh_size=0.5, fine_size=0.25)
     soil = DruckerPrager(young_pa=10e6, poisson=0.3, cohesion_pa=0.0, friction_deg=37.0)
@@ -231,7 +231,7 @@ def test_a_given_first_slope_reaches_the_pressure_as_the_small_first_step_does(d
     """``load_footing_to_pressure(slope_pa_per_m=)`` starts from the given slope instead of a
     first settlement of 1e-6 of the height: both reach the pressure within its 1 %, at
     settlements within 1 % of each other (the same elastoplastic soil, other steps)."""
-    from femcoupling.geometry import FemInputError
+    from femcoupling import FemInputError
 
     a, b = dp_model(), dp_model()
     p0 = a.footing_pressure_pa()
@@ -256,7 +256,7 @@ def test_a_given_first_slope_reaches_the_pressure_as_the_small_first_step_does(d
 def test_the_prestress_is_in_the_prs_layer_only(dp_model):
     """The variants' models: RE's layer is unstressed before the footing, PRS's carries T_p
     (within the FEM's equilibrium: the band's mean force), the unreinforced body has none."""
-    from femcoupling.drivers.footing_multiscale import FootingParams
+    from geogrid_dem.studies.footing_multiscale import FootingParams
 
     T = FootingParams().prestress
     assert len(dp_model("unreinforced").layers) == 0
@@ -269,8 +269,8 @@ def test_the_layer_cells_in_the_zone_and_where_their_rves_start(dp_model):
     """``band_cells``: exactly the layer's cells whose centres are in the zone;
     ``band_cell_states``: the band's tension (its thickness times sigma_xx) and the grains'
     pressure around it (the zone's soil cells within the reach)."""
-    from femcoupling import geometry as geo
-    from femcoupling.geometry import FemInputError
+    from femcoupling import FemInputError
+    from femcoupling.fem import geometry as geo
 
     m = dp_model("PRS")
     cells = m.band_cells("zone")
@@ -353,7 +353,7 @@ def test_a_failed_run_is_kept_and_left_out_of_the_levels_it_did_not_reach(tmp_pa
     """A run that fails is kept in its record with its status; each level's means and paired
     differences are over the seeds whose runs reached it in every variant, and the
     coupling's status (and exit status) is 'failed'."""
-    from femcoupling.drivers import footing_multiscale as fm
+    from geogrid_dem.studies import footing_multiscale as fm
 
     p = fm.FootingParams(seeds=(1, 2, 3), levels=2)
     monkeypatch.setattr(fm, "calibrate", lambda p, log: (None, {"young_pa": 1.0}))
@@ -397,7 +397,7 @@ def test_levels_are_compared_at_their_own_pressure_not_where_the_footing_stopped
     one, though the footing stops up to 1 % of the rise away from it (a stand-in that
     overshoots by 0.8 %); the settlement where it stopped differs by 0.8 % of the rise over
     the slope."""
-    from femcoupling.drivers.footing_multiscale import FootingParams, at_level, load_levels
+    from geogrid_dem.studies.footing_multiscale import FootingParams, at_level, load_levels
 
     class Linear:  # (pressure = 20 kPa + k s; each rise stops 0.8 % past its target)
         k, s = 4e6, 0.0
@@ -429,8 +429,8 @@ def test_a_zone_that_cannot_be_prepared_fails_its_run_and_says_why(tmp_path, mon
     on 0.35 m cells with 80 grains) is a failed run before its first level, recorded with
     the attempts' failures, so the run's other variants and seeds go on (before, it stopped
     the whole run)."""
-    from femcoupling.drivers import footing_multiscale as fm
-    from femcoupling.region import PoolRegionMaterials
+    from femcoupling.materials.dem_elements import PoolRegionMaterials
+    from geogrid_dem.studies import footing_multiscale as fm
 
     class Body:
         warnings = []

@@ -1,5 +1,5 @@
-"""Hierarchical FEM x DEM in plane strain (femcoupling.hierarchical): a DEM element at every
-quadrature point, on Dask workers. In a homogeneous field Newton converges in one iteration
+"""Hierarchical FEM x DEM in plane strain (femcoupling.coupling.hierarchical): a DEM element at
+every quadrature point, on Dask workers. In a homogeneous field Newton converges in one iteration
 and every element answers as the stand-alone element given the same increment (bitwise);
 1 and 2 workers give bitwise the same run."""
 
@@ -11,8 +11,8 @@ import pytest
 pytest.importorskip("dolfinx_solver")
 
 from cpp_dem.elements.pool import ElementPool, PeriodicFactory  # noqa: E402
-from femcoupling.hierarchical import (HierarchicalPlaneStrain, dem_increment,  # noqa: E402
-                                      fem_stress)
+from femcoupling.coupling.hierarchical import (HierarchicalPlaneStrain,  # noqa: E402
+                                               dem_increment, fem_stress)
 
 FACTORY = PeriodicFactory(n=100, same=True)
 
@@ -113,7 +113,7 @@ def test_a_broken_element_tangent_keeps_the_last_good_one():
 
 
 def test_aitken_factor():
-    from femcoupling.hierarchical import aitken_factor
+    from femcoupling.coupling.hierarchical import aitken_factor
 
     d = np.array([1.0, -2.0, 0.5])
     assert aitken_factor(1.0, d, -d) == pytest.approx(0.5)  # a 2-cycle halves it
@@ -124,7 +124,7 @@ def test_aitken_factor():
 
 
 def test_bad_convergence_options_are_refused():
-    from femcoupling.geometry import FemInputError
+    from femcoupling import FemInputError
 
     with ElementPool.build(2, PeriodicFactory(n=60, same=True), workers=1) as pool:
         for kw, field in (({"convergence": "loose"}, "convergence"),
@@ -148,7 +148,8 @@ def test_a_tolerance_below_the_noise_is_cut_above_the_ceiling_and_said_below_it(
       converged), and said (NoiseWarning, ``warnings``, report.md), its residual in Pa too.
     - With convergence='tolerance' the same step fails and its error names the residual.
     """
-    from femcoupling.hierarchical import NewtonFailure, NoiseWarning
+    from femcoupling.coupling.hierarchical import NewtonFailure
+    from femcoupling.coupling.status import NoiseWarning
 
     fac = PeriodicFactory(n=80, isotropic=True, options={"prep_friction_deg": 0.0})
     kw = dict(lx=0.01, ly=0.01, nx=1, ny=1, confining_pa=100e3, newton_rtol=1e-9,
@@ -196,7 +197,7 @@ def test_a_tolerance_below_the_noise_is_cut_above_the_ceiling_and_said_below_it(
 def test_records_of_an_earlier_run_are_not_mixed_in(runs, records):
     """A second run into the same folder would append to the first's rows: refused, unless
     asked to replace them."""
-    from femcoupling.geometry import FemInputError
+    from femcoupling import FemInputError
 
     with ElementPool.build(2, PeriodicFactory(n=60, same=True), workers=1) as pool:
         with pytest.raises(FemInputError, match="records of an earlier run"):
@@ -204,7 +205,7 @@ def test_records_of_an_earlier_run_are_not_mixed_in(runs, records):
 
 
 def test_secant_update_maps_the_increment_and_stays_positive():
-    from femcoupling.hierarchical import secant_update
+    from femcoupling.coupling.hierarchical import secant_update
 
     rng = np.random.default_rng(4)
     for _ in range(20):
@@ -227,7 +228,7 @@ def test_the_secant_tangent_reaches_the_network_tangents_solution():
     """A confined element pair sheared in two load steps: Newton with the secant tangent
     converges to the state the network tangent's Newton reaches (within the tolerance), and
     the secant was used; an unknown tangent is refused with the list."""
-    from femcoupling.geometry import FemInputError
+    from femcoupling import FemInputError
 
     res = {}
     for tangent in ("network", "secant"):
@@ -255,7 +256,7 @@ def test_quadratic_triangles_three_elements_each_give_the_homogeneous_response()
             m = HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, homogeneous=True,
                                         degree=2)
             assert (m.n_cells, m.nq, m.n_points) == (2, 3, 6)
-            from femcoupling.hierarchical import quadrature_points
+            from femcoupling.coupling.hierarchical import quadrature_points
 
             assert np.allclose(m.point_coordinates, quadrature_points(0.01, 0.01, 1, 1, 2),
                                rtol=0, atol=1e-15)
@@ -277,7 +278,7 @@ def test_quadratic_triangles_three_elements_each_give_the_homogeneous_response()
         for r in s2:
             s = el.apply_strain(r.increments[k])
         assert np.array_equal(fem_stress(s), s2[-1].element_stresses[k])
-    from femcoupling.geometry import FemInputError
+    from femcoupling import FemInputError
 
     with ElementPool.build(2, FACTORY, workers=1) as pool:
         with pytest.raises(FemInputError, match="pool: has 2 elements for 6 quadrature"):
@@ -292,8 +293,8 @@ def test_rough_platens_grip_the_ends_and_quadrature_points_are_in_element_order(
     the bottom), the sides carry the confining pressure on both sides and bulge outwards at
     mid-height. ``quadrature_points`` gives the model's points in its elements' order before
     the model is built."""
-    from femcoupling.geometry import FemInputError
-    from femcoupling.hierarchical import quadrature_points
+    from femcoupling import FemInputError
+    from femcoupling.coupling.hierarchical import quadrature_points
 
     fac = PeriodicFactory(n=80, stress=100e3, isotropic=True, same=True,
                           options={"prep_friction_deg": 0.0})

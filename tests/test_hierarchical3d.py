@@ -1,5 +1,5 @@
-"""Hierarchical FEM x DEM in 3D (femcoupling.hierarchical3d, issue 38 item 4), at small size:
-one hexahedron of six P1 tetrahedra, a periodic element of 80 grains at each quadrature point.
+"""Hierarchical FEM x DEM in 3D (femcoupling.coupling.hierarchical3d, issue 38 item 4), at small
+size: one hexahedron of six P1 tetrahedra, a periodic element of 80 grains at each quadrature point.
 
 - a homogeneous field (every node on u = G x) converges in one Newton iteration, every element
   sees G's increment, and each element is the stand-alone element given the same increments;
@@ -16,8 +16,8 @@ import pytest
 pytest.importorskip("dolfinx_solver")
 
 from cpp_dem.elements.pool import ElementPool, PeriodicFactory  # noqa: E402
-from femcoupling.hierarchical import voigt_stress  # noqa: E402
-from femcoupling.hierarchical3d import Hierarchical3D  # noqa: E402
+from femcoupling.coupling.hierarchical import voigt_stress  # noqa: E402
+from femcoupling.coupling.hierarchical3d import Hierarchical3D  # noqa: E402
 
 FACTORY = PeriodicFactory(n=80, same=True, isotropic=True)
 G1 = np.array([[1e-4, 0.0, 2e-5], [0.0, -0.5e-4, 0.0], [0.0, 1e-5, -2e-4]])
@@ -71,7 +71,7 @@ def test_a_triaxial_step(tmp_path):
 
 
 def test_bad_input_is_refused():
-    from femcoupling.geometry import FemInputError
+    from femcoupling import FemInputError
 
     with ElementPool.build(6, FACTORY, workers=1) as pool:
         with pytest.raises(FemInputError, match="confining_pa=None"):

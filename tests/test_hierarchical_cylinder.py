@@ -1,4 +1,4 @@
-"""A 3D hierarchical triaxial specimen beyond a box (femcoupling.hierarchical3d.
+"""A 3D hierarchical triaxial specimen beyond a box (femcoupling.coupling.hierarchical3d.
 HierarchicalCylinder; docs/multiscale.md, "A cylindrical triaxial specimen"): a quarter
 cylinder of P1 tetrahedra (gmsh), or the whole cylinder, an element at each quadrature
 point.
@@ -34,7 +34,7 @@ pytest.importorskip("dolfinx_solver")
 
 from cpp_dem.elements.linear import LinearElement, LinearFactory  # noqa: E402
 from cpp_dem.elements.pool import ElementPool, PeriodicFactory  # noqa: E402
-from femcoupling.hierarchical3d import HierarchicalCylinder, cylinder_cells  # noqa: E402
+from femcoupling.coupling.hierarchical3d import HierarchicalCylinder, cylinder_cells  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 MPIEXEC = Path(sys.executable).parent / "mpiexec"
@@ -139,7 +139,7 @@ def test_periodic_dem_elements_carry_the_confining_pressure(tmp_path):
 
 
 def test_bad_input_is_refused():
-    from femcoupling.geometry import FemInputError
+    from femcoupling import FemInputError
 
     with pytest.raises(FemInputError, match=r"radius_m=-0.1: must be > 0 \(m\)"):
         cylinder_cells(-0.1, H, SIZE)

@@ -1,4 +1,4 @@
-"""The hierarchical FEM under MPI (femcoupling.mpi_points; docs/multiscale.md, "Under MPI").
+"""The hierarchical FEM under MPI (femcoupling.fem.mpi_points; docs/multiscale.md, "Under MPI").
 
 examples/05_hierarchical_mpi.py runs on 2 ranks (MPICH's mpiexec of the venv) and on 1: every
 element is at the serial model's place, and the two runs agree within the Newton tolerance
@@ -49,7 +49,7 @@ def runs(tmp_path_factory):
 
 
 def test_every_element_is_at_the_serial_models_place(runs):
-    from femcoupling.hierarchical import quadrature_points
+    from femcoupling.coupling.hierarchical import quadrature_points
 
     serial = quadrature_points(0.04, 0.08, 2, 2)
     for ranks, d in runs.items():
@@ -88,7 +88,7 @@ def test_the_records_are_written_once_by_rank_0(runs):
 
 
 def _partition(local, serial, size=1.0):
-    from femcoupling.mpi_points import PointPartition, world
+    from femcoupling.fem.mpi_points import PointPartition, world
 
     return PointPartition(world().Split(world().rank), local, serial, size)
 
@@ -113,8 +113,8 @@ def test_a_point_off_the_serial_mesh_or_matched_twice_is_refused():
 
 
 def test_the_pool_must_be_on_rank_0_only():
-    from femcoupling.geometry import FemInputError
-    from femcoupling.mpi_points import RootMaterial, world
+    from femcoupling import FemInputError
+    from femcoupling.fem.mpi_points import RootMaterial, world
 
     with pytest.raises(FemInputError, match="rank 0 only"):
         RootMaterial(world().Split(world().rank), None)
@@ -125,7 +125,7 @@ def test_a_3d_box_on_two_ranks_is_the_serial_box(tmp_path):
     the faces' confining pressure carried (the elements' mean lateral stress within 5 %), a
     records row per element and step."""
     from femcoupling import _dolfinx
-    from femcoupling.hierarchical import _coordinates
+    from femcoupling.coupling.hierarchical import _coordinates
 
     if not MPIEXEC.exists():
         pytest.skip(f"no mpiexec beside {sys.executable}")
@@ -159,7 +159,7 @@ def test_a_3d_box_on_two_ranks_is_the_serial_box(tmp_path):
 def test_ranks_waiting_for_the_elements_idle_instead_of_spinning(tmp_path):
     """While rank 0 runs the elements, the other ranks wait. At a plain MPI broadcast MPICH
     spins: rank 1 spends the whole wait (1 s) on the CPU, a core the Dask workers need on one
-    machine. Through ``on_root`` and ``bcast_from_root`` (femcoupling.mpi_points, the waits of
+    machine. Through ``on_root`` and ``bcast_from_root`` (femcoupling.fem.mpi_points, the waits of
     the hierarchical models, the soil body's regions and the two-way loop) it sleeps between
     polls: measured 0.02 s of CPU a 1 s wait, 3 ms later than the plain broadcast."""
     if not MPIEXEC.exists():

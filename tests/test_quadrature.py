@@ -1,9 +1,9 @@
-"""One material interface and one Newton (femcoupling.quadrature, issue 37 item 3).
+"""One material interface and one Newton (femcoupling.fem.quadrature, issue 37 item 3).
 
 - Every material implements ``QuadratureMaterial``: the continuum ones at points
   (``at_points``), the DEM region elements, their Dask group, and the hierarchical mode's pool.
 - Point materials: a rejected trial leaves no trace, state/set_state restore bitwise, and
-  Drucker–Prager points are the return mapping of ``femcoupling.materials``.
+  Drucker–Prager points are the return mapping of ``femcoupling.materials.continuum``.
 - ``newton_solve``'s rules on a synthetic one-unknown problem with a seeded noise: converged,
   stopped_at_scatter within the noise and the ceiling, cut above the ceiling, cut at
   ``max_newton``, and a correction that is not finite.
@@ -17,10 +17,11 @@ import math
 import numpy as np
 import pytest
 
-from femcoupling.materials import (AnisotropicElastic, DruckerPrager, LinearElastic,
-                                   drucker_prager_return)
-from femcoupling.quadrature import (DruckerPragerPoints, ElasticPoints, NewtonFailure,
-                                    NewtonRules, QuadratureMaterial, newton_solve)
+from femcoupling.fem.quadrature import (NewtonFailure, NewtonRules, QuadratureMaterial,
+                                        newton_solve)
+from femcoupling.materials.continuum import (AnisotropicElastic, DruckerPrager,
+                                             DruckerPragerPoints, ElasticPoints, LinearElastic,
+                                             drucker_prager_return)
 
 
 def _stress(n: int, ncomp: int = 4) -> np.ndarray:
@@ -30,9 +31,9 @@ def _stress(n: int, ncomp: int = 4) -> np.ndarray:
 
 
 def test_every_material_implements_the_interface():
-    from femcoupling.hierarchical import ElementPoolMaterial
-    from femcoupling.region import DemRegionMaterial, PoolRegionMaterials
-    from femcoupling.soil_regions import RegionPoints
+    from femcoupling.coupling.hierarchical import ElementPoolMaterial
+    from femcoupling.fem.soil_regions import RegionPoints
+    from femcoupling.materials.dem_elements import DemRegionMaterial, PoolRegionMaterials
 
     s = _stress(3)
     c = np.diag([3e6, 3e6, 3e6, 2e6, 2e6, 2e6])
@@ -160,7 +161,7 @@ def test_newton_rules_on_a_synthetic_problem():
     with pytest.raises(NewtonFailure, match="reason -11"):
         newton_solve(_Spring(bad_correction=True), NewtonRules(rtol=1e-9, max_newton=5))
     # the rules check what they are given
-    from femcoupling.geometry import FemInputError
+    from femcoupling import FemInputError
 
     with pytest.raises(FemInputError, match="probe_size"):
         NewtonRules(rtol=1e-3, max_newton=5, probe_size=2.0)
@@ -175,7 +176,7 @@ def test_a_stall_above_the_ceiling_within_the_noise_draws_again_before_the_cut()
     noise): without redraws the step is cut; with them a later iterate of the same step,
     within the same bounds (the noise and the ceiling), is accepted, and says so. Far below
     the noise the ceiling still cuts, naming the redraws."""
-    from femcoupling.quadrature import REDRAWS
+    from femcoupling.fem.quadrature import REDRAWS
 
     kw = dict(rtol=1e-9, max_newton=12, probe=True, ceiling=3e-5)
     with pytest.raises(NewtonFailure, match="within the elements' noise .* above the ceiling"):
@@ -194,7 +195,7 @@ def test_a_stall_above_the_ceiling_within_the_noise_draws_again_before_the_cut()
                                                          redraws=0))
     assert out.redraws == 0 and (out.iterations, out.residual) == (ref.iterations,
                                                                    ref.residual)
-    from femcoupling.geometry import FemInputError
+    from femcoupling import FemInputError
 
     with pytest.raises(FemInputError, match="redraws=-1: must be a whole number >= 0"):
         NewtonRules(rtol=1e-3, max_newton=5, redraws=-1)
@@ -234,10 +235,12 @@ def test_at_a_second_stall_the_noise_is_at_least_the_spread_of_the_iterates_draw
 
 
 def test_the_soil_body_and_the_hierarchical_mode_share_one_newton(monkeypatch):
-    from femcoupling import hierarchical, quadrature
+    from femcoupling.coupling import hierarchical
+    from femcoupling.fem import quadrature, soil_model
     from test_fem_handover import two_region_model
 
     assert hierarchical.newton_solve is quadrature.newton_solve
+    assert soil_model.newton_solve is quadrature.newton_solve
     calls = []
     orig = quadrature.newton_solve
 
@@ -245,7 +248,7 @@ def test_the_soil_body_and_the_hierarchical_mode_share_one_newton(monkeypatch):
         calls.append(type(problem).__name__)
         return orig(problem, rules, **kw)
 
-    monkeypatch.setattr(quadrature, "newton_solve", counting)
+    monkeypatch.setattr(soil_model, "newton_solve", counting)  # (the name SoilModel calls)
     m = two_region_model(("a",))
     calls.clear()  # (the model's K0 stage)
     (r,) = m.load_footing(pressure_pa=10e3, steps=1)

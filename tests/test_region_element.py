@@ -1,6 +1,6 @@
-"""The periodic region element (femcoupling.region.PeriodicRegionElement; issue 18): it takes
-the FEM region's full stress tensor, shear included; it is prepared once and kept (as bytes)
-for the next two-way iterations; a stress beyond its strength is said, not silently missed.
+"""The periodic region element (femcoupling.materials.dem_elements.PeriodicRegionElement; issue 18):
+it takes the FEM region's full stress tensor, shear included; it is prepared once and kept (as
+bytes) for the next two-way iterations; a stress beyond its strength is said, not silently missed.
 And two_way does not warn about turned principal axes for an element that takes them."""
 
 from __future__ import annotations
@@ -8,8 +8,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from femcoupling.handover import fem_to_dem
-from femcoupling.region import PeriodicRegionElement
+from femcoupling.coupling.handover import fem_to_dem
+from femcoupling.materials.dem_elements import PeriodicRegionElement
 
 # FEM tensors (tension positive, Pa): an initial K0-like state and a loaded one with shear
 INITIAL = np.diag([-25e3, -25e3, -50e3])
@@ -77,7 +77,7 @@ def test_a_stress_beyond_its_strength_is_said(tmp_path):
 
 
 def test_two_way_takes_a_full_tensor_element_at_its_word():
-    from femcoupling.twoway import check_region
+    from femcoupling.coupling.twoway import check_region
 
     t = fem_to_dem(np.array([[-100e3, 0, -40e3], [0, -80e3, 0], [-40e3, 0, -150e3]]))
     assert t.rotation_deg > 15
@@ -90,8 +90,8 @@ def test_two_way_takes_a_full_tensor_element_at_its_word():
 def test_the_element_returns_its_tangent_and_the_region_gets_a_full_stiffness(runs):
     """The network tangent at the final state, made to reproduce the increment exactly, is
     the region's stiffness (two_way's default), shear included."""
-    from femcoupling.materials import tensor_to_mandel
-    from femcoupling.twoway import element_stiffness
+    from femcoupling.coupling.twoway import element_stiffness
+    from femcoupling.materials.continuum import tensor_to_mandel
 
     a, _, _ = runs
     t = a.info["tangent_voigt_pa"]

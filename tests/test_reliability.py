@@ -71,7 +71,7 @@ def _binary_csv(tmp):
 
 
 def _fem_sizes():
-    from femcoupling.geometry import ReinforcedSoilBody
+    from femcoupling.fem.geometry import ReinforcedSoilBody
 
     return ReinforcedSoilBody(width_m=4, height_m=3, footing_half_width_m=0.5, fine_size_m=2,
                               mesh_size_m=0.5)

@@ -140,15 +140,15 @@ def test_elements_without_copies_give_their_accepted_states_and_recover_before_a
 # ---- the FEM side ----------------------------------------------------------------------------
 
 def _body(**kw):
-    from femcoupling.geometry import ReinforcedSoilBody
+    from femcoupling.fem.geometry import ReinforcedSoilBody
 
     return ReinforcedSoilBody(**{"width_m": 4.0, "height_m": 3.0, "footing_half_width_m": 0.5,
                                  **kw})
 
 
 def test_a_0_1_mm_fem_mesh_is_refused_with_its_estimate_before_gmsh():
-    from femcoupling import solve_elastic_block
-    from femcoupling.geometry import FemInputError
+    from femcoupling import FemInputError
+    from femcoupling.fem.elastic_block import solve_elastic_block
 
     with pytest.raises(FemInputError, match=r"mesh_size_m=0.0001, fine_size_m=0.0001: about "
                        r"2.8e\+09 cells .* GiB .* above max_cells=900000 \(the default"):
@@ -166,8 +166,8 @@ def test_a_0_1_mm_fem_mesh_is_refused_with_its_estimate_before_gmsh():
 
 def test_the_cell_estimate_is_within_a_factor_of_two_of_gmsh():
     pytest.importorskip("gmsh")
-    from femcoupling.elastic import _gmsh_model
-    from femcoupling.geometry import ElementRegion, GeogridLayer, _build
+    from femcoupling.fem.geometry import ElementRegion, GeogridLayer, _build
+    from femcoupling.fem.gmsh_mesh import _gmsh_model
 
     bodies = [
         _body(layers=(GeogridLayer(z_m=2.7, x_min_m=0.0, x_max_m=2.0, thickness_m=0.02),),
@@ -189,7 +189,8 @@ def test_the_cell_estimate_is_within_a_factor_of_two_of_gmsh():
 
 
 def test_fem_layers_that_overlap_or_coincide_are_refused_naming_both():
-    from femcoupling.geometry import ElementRegion, FemInputError, GeogridLayer
+    from femcoupling import FemInputError
+    from femcoupling.fem.geometry import ElementRegion, GeogridLayer
 
     with pytest.raises(FemInputError, match=r"layers\[1\] \(z 0.995..1.005 m, x 0..2 m\) overlaps "
                        r"layers\[0\] \(z 0.995..1.005 m, x 0..2 m\)"):
@@ -211,9 +212,9 @@ def test_fem_layers_that_overlap_or_coincide_are_refused_naming_both():
 
 def test_a_tensile_footing_load_on_a_cohesionless_soil_says_why():
     pytest.importorskip("dolfinx_solver")  # the FEM stack, as tests/test_fem_dem_biaxial.py
-    from femcoupling.elastoplastic import SoilModel
-    from femcoupling.geometry import FemInputError
-    from femcoupling.materials import DruckerPrager
+    from femcoupling import FemInputError
+    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.materials.continuum import DruckerPrager
 
     body = _body(mesh_size_m=1.0, fine_size_m=0.1)
     m = SoilModel(body, soil=DruckerPrager(young_pa=1e8, poisson=0.3, cohesion_pa=0.0,
@@ -239,7 +240,7 @@ class _CreepingStage:
     towards 0.6 on ever shorter steps and never reach 1 (a load it cannot carry)."""
 
     def __init__(self):
-        from femcoupling.soil_steps import StepResult
+        from femcoupling.fem.soil_steps import StepResult
 
         self._step = StepResult
         self.max_newton, self.max_cuts, self.last_failure = 25, 6, ""
@@ -274,7 +275,7 @@ class _CreepingStage:
 
 def test_a_stage_never_cuts_its_step_below_the_nominal_over_2_to_the_max_cuts():
     pytest.importorskip("dolfinx_solver")
-    from femcoupling.elastoplastic import NewtonDivergence, SoilModel
+    from femcoupling.fem.soil_model import NewtonDivergence, SoilModel
 
     fake = _CreepingStage()
     with pytest.raises(NewtonDivergence, match=r"Newton failed at load factor 0.5\d+ with the "
@@ -292,8 +293,8 @@ def test_a_flexible_load_the_soil_cannot_carry_stops_and_says_so():
     stopped after 60 s); now it stops at the step floor, says how far it got, and leaves the
     model at its last converged state, from which a settlement can push further."""
     pytest.importorskip("dolfinx_solver")
-    from femcoupling.elastoplastic import NewtonDivergence, SoilModel
-    from femcoupling.materials import DruckerPrager
+    from femcoupling.fem.soil_model import NewtonDivergence, SoilModel
+    from femcoupling.materials.continuum import DruckerPrager
 
     body = _body(width_m=3.0, height_m=2.0, mesh_size_m=0.5, fine_size_m=0.1,
                  fine_radius_m=0.3)

@@ -184,7 +184,11 @@ def test_sigint_in_the_middle_of_a_case_closes_its_files_and_marks_it_interrupte
     h5 = read_h5_series(out / "deposition.h5")
     csv = read_csv_series(out / "deposition.csv")
     assert len(h5["time"]) >= 1 and len(csv["time"]) >= 1
-    assert not (out / "summary.json").exists()
+    # the summary says so (deposition gives rundir.on_interrupt nothing: the minimal one)
+    s = json.loads((out / "summary.json").read_text())
+    assert s["status"] == "interrupted" and "SIGINT" in s["reason"] and s["case"] == "deposition"
+    assert {"deposition.h5", "deposition.csv", "summary.json"} <= set(s["files"])
+    assert "summary.json" in m["files"]  # the run's file: an --overwrite removes it
     # an interrupted run is not replaced silently either
     p = run([*DEPOSITION, *TINY, "--out", str(out)])
     assert p.returncode != 0 and "holds an interrupted run of deposition" in p.stderr

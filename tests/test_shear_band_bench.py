@@ -51,7 +51,7 @@ def test_band_direction_finds_a_synthetic_band_and_not_a_round_spot(angle):
 
 
 def test_rve_angles_of_a_synthetic_curve():
-    from femcoupling import biaxial
+    from geogrid_dem.studies import biaxial
 
     e1 = np.linspace(0, 0.05, 101)
     s3 = np.full_like(e1, 100e3)

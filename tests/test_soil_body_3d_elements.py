@@ -20,9 +20,9 @@ pytest.importorskip("dolfinx_solver")
 
 
 def _body_3d(fine_m: float):
-    from femcoupling.elastoplastic import SoilModel
-    from femcoupling.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
-    from femcoupling.materials import DruckerPrager, GeogridLayerMaterial
+    from femcoupling.fem.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
+    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.materials.continuum import DruckerPrager, GeogridLayerMaterial
 
     body = ReinforcedSoilBody(
         width_m=1.5, height_m=1.0, footing_half_width_m=0.25, dim=3, length_m=0.3,
@@ -44,7 +44,7 @@ def test_3d_cell_elements_of_a_linear_stand_in_are_the_material():
     transversely isotropic): the body is the one whose zone has that material, to Newton's
     tolerance, in the same Newton iterations. A wrong component order, weight or sign of
     the 3D strains (yy, yz, xy included) would break it."""
-    from femcoupling.materials import AnisotropicElastic
+    from femcoupling.materials.continuum import AnisotropicElastic
 
     a = _body_3d(0.1)
     a.set_region_material("zone", AnisotropicElastic(C_TRUE))
@@ -73,8 +73,8 @@ def test_3d_cell_elements_on_dask_workers(tmp_path):
     the elements' volume mean; the records hold a row per element."""
     import h5py
 
-    from femcoupling.drivers.footing_multiscale import FootingParams, grain_options
-    from femcoupling.region import PeriodicRegionElement, PoolRegionMaterials
+    from femcoupling.materials.dem_elements import PeriodicRegionElement, PoolRegionMaterials
+    from geogrid_dem.studies.footing_multiscale import FootingParams, grain_options
 
     m = _body_3d(0.2)
     stresses = m.cell_stresses("zone")

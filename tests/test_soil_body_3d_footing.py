@@ -6,7 +6,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from femcoupling.geometry import FemInputError, ReinforcedSoilBody
+from femcoupling import FemInputError
+from femcoupling.fem.geometry import ReinforcedSoilBody
 
 KW = dict(width_m=1.0, height_m=0.6, footing_half_width_m=0.25, dim=3, length_m=1.0,
           mesh_size_m=0.25, fine_size_m=0.1)
@@ -26,8 +27,8 @@ def test_a_footing_length_is_checked_by_name():
 
 def _model(**kw):
     pytest.importorskip("dolfinx_solver")
-    from femcoupling.elastoplastic import SoilModel
-    from femcoupling.materials import LinearElastic
+    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.materials.continuum import LinearElastic
 
     return SoilModel(ReinforcedSoilBody(**KW, **kw),
                      soil=LinearElastic(young_pa=20e6, poisson=0.3))

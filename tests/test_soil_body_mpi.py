@@ -1,4 +1,4 @@
-"""The reinforced soil body (femcoupling.elastoplastic.SoilModel) on 2 MPI ranks is the serial
+"""The reinforced soil body (femcoupling.fem.soil_model.SoilModel) on 2 MPI ranks is the serial
 body (docs/fem.md, "Verification"; docs/multiscale.md, "Under MPI").
 
 - tests/mpi_soil_body.py: a Drucker-Prager soil with its self-weight, a prestressed geogrid
@@ -72,7 +72,7 @@ def test_two_ranks_give_the_serial_body_within_the_newton_tolerance(runs):
 def test_two_ranks_give_the_same_output_every_time(runs, tmp_path):
     """Same input, same output on 2 ranks, also when the cores are busy: two more runs at
     once (four ranks on this machine's two cores) give the fixture's 2-rank results bitwise. The
-    parallel LU is SuperLU_DIST (femcoupling.quadrature.PARALLEL_LU); with MUMPS's parallel
+    parallel LU is SuperLU_DIST (femcoupling.fem.quadrature.PARALLEL_LU); with MUMPS's parallel
     LU, 5 runs of 15 beside two busy processes ended in other last bits, one in 11 steps
     (bench/parallel_lu.py measures both)."""
     procs = []

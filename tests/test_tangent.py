@@ -185,8 +185,8 @@ def test_the_tangent_does_not_depend_on_the_blas_threads():
     # client. network_tangent runs BLAS on one thread, and gives the threads back.
     from threadpoolctl import threadpool_info, threadpool_limits
 
-    from femcoupling.handover import fem_to_dem
-    from femcoupling.region import PeriodicRegionElement
+    from femcoupling.coupling.handover import fem_to_dem
+    from femcoupling.materials.dem_elements import PeriodicRegionElement
 
     k0 = fem_to_dem(np.diag([-2314.285714285711, -2314.285714285711, -5399.999999999994]))
     el, _ = PeriodicRegionElement(n=100, seed=5, tol=0.02, unbalanced=1e-2).prepare("a", k0)

@@ -13,7 +13,7 @@ RVE (the woven sheet and grains, the sheet at the band's tension; --band-grains)
 --levels equal pressure rises up to --pressure. The same body with the fitted
 Drucker–Prager everywhere is run for each variant too. This is the prestressed-element
 study's question at the scale of the structure: does prestress improve the
-load–settlement behaviour? (femcoupling.drivers.footing_multiscale; docs/multiscale.md.)
+load–settlement behaviour? (geogrid_dem.studies.footing_multiscale; docs/multiscale.md.)
 
 Outputs in --out: load_settlement.csv (a row per level of every run, appended as it
 runs), summary.json (settlement per variant and level: seed mean, sd, each seed, the
@@ -21,10 +21,12 @@ Drucker–Prager body; paired differences between variants over the seeds with t
 standard errors; the coupling statuses; the cost), calibration.json,
 load_settlement.png, fem_<variant>_seed<s>.xdmf (the FEM state at the takeover and at
 each level: ParaView), zone_elements_<variant>_seed<s>.h5 (each element per load step).
-SI units; pressures and settlements compression / downward positive.
+SI units; pressures and settlements compression / downward positive. Interrupted (Ctrl-C,
+SIGTERM), a run leaves summary.json marked "interrupted" with the levels each run reached
+and load_settlement.png of them.
 
 The exit status is 0 when every load step of every run converged, else the coupling's
-(3: stopped within the elements' scatter; femcoupling.status).
+(3: stopped within the elements' scatter; femcoupling.coupling.status).
 """
 
 from __future__ import annotations
@@ -35,7 +37,7 @@ from dataclasses import replace
 from geogrid_dem.cases import describe
 from geogrid_dem.options import (case_parser, check_cap, distinct, given_options,
                                  parse_checked, refuse_unused)
-from geogrid_dem.rundir import run_main
+from geogrid_dem.rundir import on_interrupt, run_main
 
 #: The test-sized run: a coarse mesh (14-20 zone cells), 80 grains an element, one load
 #: level, two seeds.
@@ -50,9 +52,69 @@ def log(msg: str) -> None:
     print(f"[footing_multiscale] {msg}", flush=True)
 
 
+def levels_so_far(out) -> dict:
+    """The levels every run reached, from load_settlement.csv (a row per level, flushed as it
+    is reached): "<variant> <model>[ seed <s>]" -> {"pressure_pa": [...], "settlement_m":
+    [...]} in the order reached."""
+    import csv
+
+    runs: dict = {}
+    try:
+        with open(out / "load_settlement.csv", newline="") as fh:
+            for r in csv.DictReader(fh):
+                name = f"{r['variant']} {r['model']}" + (f" seed {r['seed']}" if r["seed"] else "")
+                run = runs.setdefault(name, {"pressure_pa": [], "settlement_m": []})
+                run["pressure_pa"].append(float(r["pressure_pa"]))
+                run["settlement_m"].append(float(r["settlement_m"]))
+    except (OSError, KeyError, ValueError):
+        pass
+    return runs
+
+
+def interrupted_report(p, out) -> None:
+    """What an interrupted run reports (rundir.on_interrupt): summary.json with what finished
+    (the calibration; per run, the levels it reached, from load_settlement.csv) and
+    load_settlement.png of those levels, one curve a run (the seed means need every run)."""
+    def summary() -> dict:
+        runs = levels_so_far(out)
+        return {"finished": (["calibration"] if (out / "calibration.json").is_file() else [])
+                + [f"{k}: {len(r['pressure_pa'])} of {p.levels} levels" for k, r in runs.items()],
+                "pressures_pa": p.pressures_pa, "levels_reached": runs}
+
+    def figures() -> None:
+        runs = levels_so_far(out)
+        if not runs:
+            return
+        import matplotlib
+        import numpy as np
+
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+
+        from cpp_dem.io.figures import save_figure
+
+        colours = dict(zip(("unreinforced", "RE", "PRS"), ("k", "tab:blue", "tab:red")))
+        fig, ax = plt.subplots(figsize=(6.5, 4.5))
+        for name, r in runs.items():
+            dp = "drucker_prager" in name
+            ax.plot(1e3 * np.array(r["settlement_m"]), np.array(r["pressure_pa"]) / 1e3,
+                    color=colours.get(name.split()[0], "C0"), ls="--" if dp else "-",
+                    marker=None if dp else "o", label=name)
+        ax.set_xlabel("footing settlement (mm)")
+        ax.set_ylabel("footing pressure (kPa)")
+        ax.invert_yaxis()
+        ax.legend(fontsize=7)
+        ax.set_title("Strip footing: load-settlement (interrupted: the levels reached)")
+        fig.tight_layout()
+        save_figure(fig, out / "load_settlement.png")
+        plt.close(fig)
+
+    on_interrupt(out, summary=summary, figures=figures)
+
+
 def build_parser():
     """The case's parser: the shared options (geogrid_dem.options) and its own."""
-    from femcoupling.drivers.footing_multiscale import BAND_TANGENTS, VARIANTS, FootingParams
+    from geogrid_dem.studies.footing_multiscale import BAND_TANGENTS, VARIANTS, FootingParams
 
     d = FootingParams()
     ap = case_parser("footing-multiscale", describe("footing-multiscale",
@@ -123,7 +185,7 @@ FLAGS = {"--pressure": "pressure_pa", "--seat": "seat_pa", "--levels": "levels",
 
 
 def parse_args(argv=None):
-    from femcoupling.drivers.footing_multiscale import VARIANTS, FootingParams
+    from geogrid_dem.studies.footing_multiscale import VARIANTS, FootingParams
 
     ap = build_parser()
     a = parse_checked(ap, argv)
@@ -163,7 +225,7 @@ def parse_args(argv=None):
         v = getattr(a, flag[2:].replace("-", "_"))
         if v is not None:
             p = replace(p, **{field: v})
-    from femcoupling.geometry import FemInputError
+    from femcoupling import FemInputError
 
     try:
         p.check()
@@ -177,13 +239,14 @@ def parse_args(argv=None):
 def main(argv=None) -> int:
     from cpp_dem import apply_threads
     from cpp_dem.progress import Progress
-    from femcoupling.drivers.footing_multiscale import run
+    from geogrid_dem.studies.footing_multiscale import run
 
     p, out = parse_args(argv)
     done: dict = {}
 
     def work(o):
         apply_threads(p.threads)
+        interrupted_report(p, o)
         bar = Progress("footing_multiscale")
         done["summary"] = run(p, o, log, lambda f, detail: bar.update(f, detail))
         s = done["summary"]

@@ -12,8 +12,8 @@ prestressed reinforced (PRS) soil. Here:
    and PRS (prestress T_p in the layers, equilibrated with the soil before the footing
    load). The stress averaged over the soil cells of the element region (a 0.1 m square on
    the upper layer under the footing) before and after the footing load is handed over
-   (``femcoupling.handover.fem_to_dem``: tension positive -> compression positive; the shear
-   components and the principal-axis rotation are reported, not imposed).
+   (``femcoupling.coupling.handover.fem_to_dem``: tension positive -> compression positive; the
+   shear components and the principal-axis rotation are reported, not imposed).
 2. **DEM** (``cpp_dem``): a 0.1 m cube of spheres (the grains of 002 are clumps; spheres for
    now) with a square geogrid at mid-height (001 §5.1 layout; PET-like stiffness), prepared by
    radius growth, then servo walls to the initial (pre-load) stresses, then to the final ones.
@@ -31,7 +31,7 @@ prestressed reinforced (PRS) soil. Here:
 The FEM soil (``--soil``): by default calibrated on the case's own element, by passes (the
 element driven along its region's path; the soil its secant E and nu, until the element
 strains within 2 x its FEM region; no cohesion, the footing then a rigid smooth one pushed to
-its pressure; ``femcoupling.drivers.prs_element.calibrate_soil``). ``--soil given`` keeps the
+its pressure; ``geogrid_dem.studies.prs_element.calibrate_soil``). ``--soil given`` keeps the
 fill of the paper's set-up (``soil_*``); ``--soil E,NU,PHI,C`` gives one.
 
 DEM-only mode: ``--stresses sx,sy,sz`` (Pa, compression positive) or ``--stresses FILE.csv``
@@ -45,10 +45,12 @@ cell tags: element region and layers marked; a time series: the state before the
 load and after each load step, the coupled ones in two-way and hierarchical runs),
 ``fem_<RE|PRS>.png``, ``handover.h5`` (the handover history), ``report.md`` and
 ``summary.json``. SI units. DEM stresses and strains are
-compression positive; FEM stresses tension positive.
+compression positive; FEM stresses tension positive. Interrupted (Ctrl-C, SIGTERM), a run
+leaves ``summary.json`` marked ``interrupted`` with the soil calibration and the variants
+that finished (``finished``).
 
 A coupled run (``--two-way``, ``--hierarchical``) ends each variant in a status
-(``femcoupling.status``): ``converged``, ``stopped_at_scatter``, ``stalled`` or ``failed``,
+(``femcoupling.coupling.status``): ``converged``, ``stopped_at_scatter``, ``stalled`` or ``failed``,
 with its checks (summary ``two_way.<RE|PRS>`` or ``hierarchical.<RE|PRS>``: ``status``,
 ``reason``, ``final_change``, ``tol``, ``axes_rotation_deg``, ``dem_fem_strain_ratio``;
 ``coupling`` the worst of them). Exit status: 0 when the run completed and the coupling asked
@@ -64,7 +66,7 @@ import json
 import math
 import sys
 import time
-from dataclasses import asdict, dataclass, field, replace
+from dataclasses import asdict, replace
 from pathlib import Path
 
 import numpy as np
@@ -72,64 +74,9 @@ import numpy as np
 from geogrid_dem.cases import PRESTRESS_PAPER, describe
 from geogrid_dem.options import (case_parser, check_cap, check_common_args, given_options,
                                  refuse_unused)
-from geogrid_dem.rundir import begin_run, end_run, run_main
-from cpp_dem.elements.box import ElementParams
-from femcoupling.drivers.prs_element import (HISTORY_REGIONS, VARIANTS, calibrate_soil, log,
-                                              run_element, run_variant)
-
-
-
-@dataclass
-class Params(ElementParams):
-    """Parameters of the PRS element case (SI): the DEM element's (cpp_dem.elements.box.
-    ElementParams: grains, geogrid, servo) and the FEM structure's and coupling's below."""
-
-    # --- FEM structure (plane strain) ---
-    fem_width: float = 4.0           #: half width of the modelled fill, m
-    fem_height: float = 3.0          #: height of the fill, m
-    footing_b: float = 0.5           #: footing half width, m
-    footing_pressure: float = 100e3  #: footing pressure, Pa
-    fem_steps: int = 6               #: load steps
-    soil_young: float = 50e6         #: Pa
-    soil_poisson: float = 0.3        #: -
-    soil_cohesion: float = 10e3      #: Pa (apparent cohesion of a compacted gravelly fill)
-    soil_friction: float = 35.0      #: deg
-    unit_weight: float = 18e3        #: N/m^3
-    layer_depths: tuple = (0.3, 0.6)  #: depths of the geogrid layers below the top, m
-    layer_length: float = 2.0        #: layer extent from the symmetry plane, m
-    layer_thickness: float = 0.01    #: band thickness, m
-    region_x: float = 0.25           #: element region centre x (on the upper layer), m
-    mesh_size: float = 0.5           #: coarse FEM mesh size, m
-    fine_size: float = 0.025         #: fine FEM mesh size (footing edge, region, layers), m
-    # --- coupling ---
-    two_way: bool = False
-    two_way_tol: float = 0.02
-    max_iterations: int = 8
-    workers: int = 1
-    #: the FEM soil: "calibrated" (the default: set to the case's own element along the
-    #: region's path, cohesion 0; drivers.calibrate_soil) or "given" (the soil_* fields)
-    soil: str = "calibrated"
-    #: the two-way loop's element: "walls" (the case's element, geogrid included, three
-    #: normal stresses, its probed tangent back) or "periodic" (soil only, the full tensor, its
-    #: network tangent back; the case's element is then driven to the converged targets)
-    two_way_element: str = "walls"
-    #: the walls element's tangent in the two-way loop: three stress probes of this size,
-    #: relative to the mean stress (cpp_dem.elements.box.probe_tangent); 0: the isotropic secant
-    tangent_probe: float = 0.05
-    #: hand the FEM layer's tension across the element region to the element's grid ends
-    #: (force-controlled; a PRS grid's grips let go), so the walls carry the soil's stress
-    #: alone and the grid is counted once; False: free ends (RE), locked grips (PRS)
-    grid_handover: bool = True
-    #: hierarchical: the region's material is a dense periodic DEM element of the case's grains
-    #: inside the FEM's Newton (its stress and tangent at every iterate), no two-way loop
-    hierarchical: bool = False
-    #: hierarchical: an element per cell of the element region instead of one for the region
-    #: (each prepared at its cell's stress, seed + its index), on ``workers`` Dask workers
-    cell_elements: bool = False
-    #: grains of each cell's element (0: ``n``)
-    cell_grains: int = 0
-    stresses: list = field(default_factory=list)  #: DEM-only targets (rows of 3), Pa
-    prs: bool = False                #: DEM-only: prestress the grid (else RE)
+from geogrid_dem.rundir import begin_run, end_run, on_interrupt, run_main
+from geogrid_dem.studies.prs_element import (HISTORY_REGIONS, VARIANTS, Params, calibrate_soil, log,
+                                             run_element, run_variant)
 
 
 SMOKE = dict(n=300, hold_steps=600, fem_steps=3, mesh_size=1.0, fine_size=0.05,
@@ -172,9 +119,9 @@ def status_checks(t: dict) -> str:
 
 def coupling_summary(summary: dict) -> dict | None:
     """The summary's ``coupling`` record of a coupled run (two-way or hierarchical): the mode,
-    each variant's status, the worst of them and its exit status (femcoupling.status); None
+    each variant's status, the worst of them and its exit status (femcoupling.coupling.status); None
     for a run without coupling."""
-    from femcoupling.status import exit_code, worst
+    from femcoupling.coupling.status import exit_code, worst
 
     for mode, key in (("two-way", "two_way"), ("hierarchical", "hierarchical")):
         if key in summary:
@@ -276,33 +223,61 @@ def write_report(out: Path, summary: dict) -> None:
     (out / "report.md").write_text("\n".join(lines) + "\n")
 
 
-def run_variants(p: Params, out: Path, fems: dict | None = None) -> list:
+def run_variants(p: Params, out: Path, fems: dict | None = None,
+                 done: dict | None = None) -> list:
     """RE and PRS (``run_variant``), in two processes with ``p.workers`` >= 2 (spawned: no fork
     of an MPI/PETSc process; each is the serial run's, so the results are the same). ``fems``:
     a variant's FEM already solved with ``p``'s soil (the calibration's last pass), taken by
-    the serial path; the processes solve their own."""
+    the serial path; the processes solve their own. ``done``: variant -> its parts, filled as
+    each finishes (an interrupted run reports them)."""
     fems = fems or {}
+    done = {} if done is None else done
     if p.workers < 2 or p.cell_elements:  # (cell elements: the workers are Dask's)
-        return [run_variant(p, out, v, fem=fems.get(v)) for v in VARIANTS]
+        for v in VARIANTS:
+            done[v] = run_variant(p, out, v, fem=fems.get(v))
+        return [done[v] for v in VARIANTS]
     from geogrid_dem.processes import process_pool, results_in_order
 
     log(f"--workers {p.workers}: RE and PRS run in two processes")
     with process_pool(2) as ex:
-        return list(results_in_order(ex, run_variant, [p] * len(VARIANTS),
-                                     [out] * len(VARIANTS), VARIANTS))
+        for v, r in zip(VARIANTS, results_in_order(ex, run_variant, [p] * len(VARIANTS),
+                                                   [out] * len(VARIANTS), VARIANTS)):
+            done[v] = r
+    return [done[v] for v in VARIANTS]
+
+
+def interrupted_report(out: Path, summary: dict, done: dict) -> None:
+    """What an interrupted run reports (rundir.on_interrupt): its summary so far, the soil
+    calibration if it finished and the variants (FEM, coupling, element) that finished, named
+    in ``finished``. Their figures (fem_<variant>.png, the elements') are drawn as each part
+    finishes: none is left to draw."""
+    def partial() -> dict:
+        s = {**summary, "finished": ["soil calibration"] if "calibration" in summary else []}
+        if done:
+            s["fem"] = {v: r["fem"] for v, r in done.items()}
+            s["elements"] = {v: r["element"] for v, r in done.items()}
+            for key in ("two_way", "hierarchical"):
+                if any(r.get(key) is not None for r in done.values()):
+                    s[key] = {v: r[key] for v, r in done.items()}
+            s["finished"] += [f"variant {v}" for v in done]
+        return s
+
+    on_interrupt(out, summary=partial)
 
 
 def run(p: Params, out: Path) -> dict:
     t_start = time.perf_counter()
     begin_run(out, "prs_element", log=log)
     summary: dict = {"params": {k: v for k, v in asdict(p).items()}, "elements": {}}
+    done: dict = {}  # variant -> its parts, as each finishes
+    interrupted_report(out, summary, done)
     if p.stresses:
         summary["mode"] = "DEM-only (stresses given)"
         log(f"DEM-only: {len(p.stresses)} target row(s), no FEM")
         summary["elements"]["PRS" if p.prs else "RE"] = run_element(
             p, p.stresses, prestressed=p.prs, label="element", out=out)
     else:
-        from femcoupling.twoway import HandoverHistory
+        from femcoupling.coupling.twoway import HandoverHistory
 
         summary["mode"] = "FEM -> DEM" + (" (two-way)" if p.two_way else " (hierarchical)"
                                           if p.hierarchical else " (one-way)")
@@ -321,7 +296,7 @@ def run(p: Params, out: Path) -> dict:
                                        "soil)" if p.soil_cohesion == 0 else "a pressure")}
         log(f"FEM soil ({p.soil}): E {p.soil_young / 1e6:.4g} MPa, nu {p.soil_poisson:.3f}, "
             f"c {p.soil_cohesion / 1e3:g} kPa, phi {p.soil_friction:g} deg")
-        parts = run_variants(p, out, fems)
+        parts = run_variants(p, out, fems, done)
         fems.clear()
         summary["fem"] = {v: r["fem"] for v, r in zip(VARIANTS, parts)}
         summary["elements"] = {v: r["element"] for v, r in zip(VARIANTS, parts)}
@@ -608,7 +583,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
 
 def coupling_exit(summary: dict | None, status: int, out) -> int:
     """The exit status of a completed run (``status`` 0 from run_main) whose coupling did not
-    converge: its code (femcoupling.status.EXIT_CODES), said in one line on stderr; any
+    converge: its code (femcoupling.coupling.status.EXIT_CODES), said in one line on stderr; any
     other status unchanged."""
     c = None if summary is None else summary.get("coupling")
     if status != 0 or c is None or c["status"] == "converged":

@@ -22,6 +22,9 @@ Outputs in --out, per element `<grid>_<RE|PRS>_s<seed>`: `.h5`/`.csv` series, `_
 `<grid>_s<seed>_views/_grid/_rose` (.png, .pdf; RE and PRS on shared scales) and the growth
 history; for the run `summary.json` ("findings": paired differences PRS - RE with verdicts)
 and `report.md`. `jobs/` holds each finished packing's summary (--resume keeps them).
+`summary.json` is written after each finished packing (`"status": "running"`); a stopped run
+(Ctrl-C, SIGTERM) marks it `"interrupted"`, with the finished packings (`finished`), the
+findings over them and their figures.
 
 SI units. DEM stresses compression positive.
 """
@@ -42,7 +45,7 @@ from geogrid_dem.cases import prs_element as _fem_case
 from cpp_dem.elements.box import GRID_ENDS, KINEMATICS, run_element
 from geogrid_dem.cases import PRESTRESS_PAPER
 from geogrid_dem.processes import process_pool, results_in_order
-from geogrid_dem.rundir import begin_run, end_run, run_main
+from geogrid_dem.rundir import begin_run, end_run, on_interrupt, run_main
 
 GRIDS = ("detailed", "standard")
 VARIANTS = ("RE", "PRS")
@@ -423,6 +426,27 @@ def resume_keep(out: Path) -> list[str]:
     return keep
 
 
+def interrupted_report(p: Params, out: Path, summary: dict) -> None:
+    """What an interrupted run reports (rundir.on_interrupt): its summary so far (the FEM
+    variants solved, the elements of every finished packing, also those a worker finished
+    out of order: their job files) with ``finished`` naming them, the findings and measures
+    over the finished packings; the figures of each finished (grid, seed) pair."""
+    def partial() -> dict:
+        s = {**summary, "elements": dict(summary["elements"])}
+        done = []
+        for g, sd in ((g, sd) for g in p.grids for sd in p.seeds):
+            f = out / _job_file(g, sd)
+            if f.is_file():
+                s["elements"].update(json.loads(f.read_text())["elements"])
+                done.append(f"packing {g} seed {sd} (RE and PRS)")
+        s["finished"] = [f"FEM {k}" for k in summary.get("fem", {})] + done
+        s["findings"] = findings(s["elements"], p.seeds, p.grids)
+        s["measures"] = measures_table(s["elements"], p.seeds, p.grids)
+        return s
+
+    on_interrupt(out, summary=partial, figures=lambda: _draw_pairs(p, out))
+
+
 def run(p: Params, out: Path) -> dict:
     """The case in ``out`` (begun by run_main: with --resume the finished packings' files
     are kept there, and only the others run)."""
@@ -432,6 +456,7 @@ def run(p: Params, out: Path) -> dict:
     summary: dict = {"params": {k: (list(v) if isinstance(v, tuple) else v)
                                 for k, v in asdict(p).items()},
                      "seeds": list(p.seeds), "smoke": bool(p.smoke), "elements": {}}
+    interrupted_report(p, out, summary)
     targets: dict = {}
     with contextlib.ExitStack() as stack:
         hist = None
@@ -442,8 +467,8 @@ def run(p: Params, out: Path) -> dict:
                     targets[(g, v)] = {"rows": [np.asarray(r, float) for r in p.stresses],
                                        "tension": None, "strain": None}
         else:
-            from femcoupling.drivers.prs_element import run_fem
-            from femcoupling.twoway import HandoverHistory
+            from femcoupling.coupling.twoway import HandoverHistory
+            from geogrid_dem.studies.prs_element import run_fem
 
             summary["mode"] = "FEM -> DEM (one-way)"
             summary["fem"] = {}
@@ -497,10 +522,10 @@ def run(p: Params, out: Path) -> dict:
             log(f"packing {k + 1}/{len(todo)} ({g}, seed {s}) done"
                 + (f"; about {left:.0f} s left" if k + 1 < len(todo) else ""))
             summary["elements"].update(res["elements"])
-            # Written as the run goes: a stopped run keeps (and --resume reuses) the pairs
-            # it finished.
-            (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float)
-                                              + "\n")
+            # Written as the run goes ("running"; a stop marks it "interrupted"): a stopped
+            # run keeps (and --resume reuses) the pairs it finished.
+            (out / "summary.json").write_text(json.dumps({"status": "running", **summary},
+                                                         indent=2, default=float) + "\n")
     _draw_pairs(p, out)
     summary["findings"] = findings(summary["elements"], p.seeds, p.grids)
     summary["measures"] = measures_table(summary["elements"], p.seeds, p.grids)

@@ -26,7 +26,9 @@ pullout_force.png (000 Fig. 5), pullout_members.png (Figs 7-8), vtk/ (spheres, c
 geogrid with member forces, box; PVD series over the snapshots), packing_prepared.csv (the
 grains' spheres after the preparation; with clumps also clumps_prepared.csv), summary.json.
 With several --spheres values: one sub-directory per count and comparison.png +
-comparison.csv.
+comparison.csv. Interrupted (Ctrl-C, SIGTERM), a run leaves summary.json marked
+"interrupted" with the stages it finished and the pull so far, and the figures of that pull;
+with several counts, the counts that finished and their comparison (docs/output.md).
 """
 
 from __future__ import annotations
@@ -45,7 +47,7 @@ from geogrid_dem.cases import PULLOUT_PAPER, describe
 from cpp_dem import apply_threads
 from geogrid_dem.options import (case_parser, check_cap, distinct, given_options,
                                  parse_checked, refuse_unused)
-from geogrid_dem.rundir import run_main
+from geogrid_dem.rundir import on_interrupt, run_main
 import cpp_dem as dem  # noqa: E402
 from cpp_dem import presets  # noqa: E402
 from cpp_dem.build import geogrid
@@ -304,6 +306,10 @@ def main(argv=None) -> int:
             run(replace(p, spheres=counts[0]), out)
             return
         runs = {}
+        # interrupted: the counts that finished, and their comparison
+        on_interrupt(out, summary=lambda: {"finished": [f"n{n}" for n in runs],
+                                           "spheres": counts},
+                     figures=lambda: compare(runs, out) if runs else None)
         for n in counts:
             sub = out / f"n{n}"
             runs[n] = (sub, run(replace(p, spheres=n), sub))

@@ -18,7 +18,7 @@ from cpp_dem.build import geogrid
 from cpp_dem import measure
 from cpp_dem.protocols import pullout
 from geogrid_dem.cases.grains_option import grain_templates, write_grains_csv
-from geogrid_dem.rundir import begin_run, end_run
+from geogrid_dem.rundir import begin_run, end_run, on_interrupt
 from cpp_dem.io import (CsvRecorder, H5Recorder, PvdWriter, write_vtk_box,
                             write_vtk_contacts, write_vtk_spheres)
 
@@ -162,6 +162,40 @@ def plot_pull(rec: dict, png_force: Path, png_members: Path, title: str,
     plt.close(fig)
 
 
+def _record_so_far(out: Path) -> dict | None:
+    """The pull recorded so far in out/pullout.csv (flushed row by row); None before 3
+    rows."""
+    rec = pullout.read_record(out / "pullout.csv")
+    return rec if rec and len(rec.get("pull_force", ())) >= 3 else None
+
+
+def interrupted_report(out: Path, *, meta: dict, finished: list, distance: float, title: str,
+                       more_forces: dict | None) -> None:
+    """What an interrupted pull-out reports (rundir.on_interrupt): summary.json with the
+    stages it finished (``finished``: the preparation, the pull to how far) and the
+    statistics of the pull so far (pullout.summarize of the rows recorded); the figures
+    pullout_force.png and pullout_members.png of it."""
+    def summary() -> dict:
+        s = {**meta, "finished": list(finished)}
+        rec = _record_so_far(out)
+        if rec is not None:
+            d = float(rec["displacement"][-1])
+            s["finished"].append(f"pull to {1e3 * d:.3g} mm of {1e3 * distance:g} mm")
+            s.update(pullout.summarize(rec))
+        return s
+
+    def figures() -> None:
+        rec = _record_so_far(out)
+        if rec is not None:
+            d = float(rec["displacement"][-1])
+            nan = np.full(len(rec["pull_force"]), np.nan)  # (members the grid has not)
+            plot_pull({**{k: nan for k in SERIES}, **rec}, out / "pullout_force.png",
+                      out / "pullout_members.png", f"{title} (interrupted at {1e3 * d:.3g} mm)",
+                      pullout.summarize(rec), more_forces)
+
+    on_interrupt(out, summary=summary, figures=figures)
+
+
 def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
              prep_kwargs: dict, velocity: float, distance: float, record_every: int,
              snapshot_displacements, grain_density: float, stress: float, title: str,
@@ -176,9 +210,15 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
     record, each evaluated at every record (after pullout.pull_record, on the same state) and
     written to pullout.h5/.csv beside the standard ones; the returned record holds them too,
     and pullout_force.png draws them on a right-hand axis.
-    ``extra_summary(rec) -> dict``: more entries of summary.json, from the whole record."""
+    ``extra_summary(rec) -> dict``: more entries of summary.json, from the whole record.
+    Interrupted, it leaves summary.json and the figures of the pull so far
+    (interrupted_report)."""
     t_start = time.perf_counter()
     begin_run(out, tag)
+    finished: list[str] = []  # the stages done, for the summary of an interrupted run
+    interrupted_report(out, meta=meta, finished=finished, distance=distance,
+                       title=title, more_forces={k: e[2] for k, e in
+                                                 (extra_series or {}).items()} or None)
     vtk = out / "vtk"
     vtk.mkdir(exist_ok=True)
     sc = sample.scene
@@ -205,6 +245,7 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
             for k in ("spheres", "contacts", "geogrid", "box")}
     write_vtk_state(sample, vtk, "prepared", pvds)
     write_grains_csv(sc, out, "prepared")
+    finished.append("preparation" + ("" if res.converged else " (not converged)"))
     ov_prep = largest_overlaps(sc)
     if before_pull is not None:
         before_pull(sample)

@@ -18,7 +18,9 @@ member_axial_force, (n_records, n_members) N), triaxial.csv (columns axial_strai
 volumetric_strain, deviatoric_stress, ...), triaxial.png and .pdf (eps_v-eps_a, q-eps_a,
 eps_v-time), isotropic.h5 (checkpoint after stage 1), packing_isotropic.csv (grains only),
 vtk/ (spheres and box at the end of each stage), summary.json. SI units; stresses and
-strains compression positive; q = sigma_z - (sigma_x + sigma_y) / 2.
+strains compression positive; q = sigma_z - (sigma_x + sigma_y) / 2. Interrupted (Ctrl-C,
+SIGTERM), a run leaves summary.json marked "interrupted" with the stages it finished (the
+axial loading to the strain reached) and triaxial.png of the loading so far.
 
 --resume continues an interrupted (or failed) run in --out from its checkpoint isotropic.h5:
 the sample is rebuilt from the same parameters, the state after stage 1 loaded (bitwise), and
@@ -41,7 +43,7 @@ from geogrid_dem.cases import describe
 from cpp_dem import apply_threads
 from geogrid_dem.options import (case_parser, check_cap, given_options, parse_checked,
                                  refuse_unused)
-from geogrid_dem.rundir import begin_run, end_run, run_main
+from geogrid_dem.rundir import begin_run, end_run, on_interrupt, run_main
 import cpp_dem as dem
 from cpp_dem.build import geogrid
 from cpp_dem import measure
@@ -223,7 +225,7 @@ def grid_layer(p: Params, lo, hi) -> GridLayer | None:
     return GridLayer(z=0.5 * (lo[2] + hi[2]), centre=0.5 * (lo[:2] + hi[:2]), width=width)
 
 
-def plot(rows: dict, png: Path, p: Params) -> None:
+def plot(rows: dict, png: Path, p: Params, note: str = "") -> None:
     import matplotlib
 
     matplotlib.use("Agg")
@@ -243,7 +245,7 @@ def plot(rows: dict, png: Path, p: Params) -> None:
     for a in ax:
         a.grid(alpha=0.3)
     fig.suptitle(f"Triaxial test, cell pressure {p.cell_pressure / 1e3:g} kPa, "
-                 f"E = {p.young / 1e6:g} MPa, phi = {p.phi:g} deg")
+                 f"E = {p.young / 1e6:g} MPa, phi = {p.phi:g} deg{note}")
     fig.tight_layout()
     save_figure(fig, png)
     plt.close(fig)
@@ -417,12 +419,51 @@ def inertial_number(sc, p: Params) -> float:
     return p.strain_rate * d_mean * math.sqrt(p.density / p.cell_pressure)
 
 
+def interrupted_report(p: Params, out: Path, finished: list, numbers: dict) -> None:
+    """What an interrupted run reports (rundir.on_interrupt): summary.json with the stages
+    it finished (``finished``; the axial loading to the strain reached) and their numbers
+    (``numbers``: the isotropic state; the peak q so far, read from triaxial.csv), and
+    triaxial.png of the loading so far."""
+    def loading():
+        from cpp_dem.io import read_csv_series
+
+        try:
+            rows = read_csv_series(out / "triaxial.csv")
+        except (FileNotFoundError, ValueError):
+            return None
+        return rows if len(rows.get("axial_strain", ())) >= 2 else None
+
+    def summary() -> dict:
+        s = {"finished": list(finished), **numbers}
+        rows = loading()
+        if rows is not None:
+            ea, q = rows["axial_strain"], rows["deviatoric_stress"]
+            k = int(np.argmax(q))
+            s["finished"].append(f"axial loading to {100 * ea[-1]:.3g} % of "
+                                 f"{100 * p.stop_strain:g} %")
+            s.update(axial_strain_reached=float(ea[-1]), q_peak_so_far_Pa=float(q[k]),
+                     axial_strain_at_peak_so_far=float(ea[k]),
+                     volumetric_strain_last=float(rows["volumetric_strain"][-1]))
+        return s
+
+    def figures() -> None:
+        rows = loading()
+        if rows is not None:
+            plot(rows, out / "triaxial.png", p, f" (interrupted at axial strain "
+                                                f"{100 * rows['axial_strain'][-1]:.3g} %)")
+
+    on_interrupt(out, summary=summary, figures=figures)
+
+
 def run(p: Params, out: Path, *, resume: bool = False) -> dict:
     """Runs the case into ``out``; ``resume``: from the checkpoint of stage 1 there."""
     t_start = time.perf_counter()
     apply_threads(p.threads)
     begin_run(out, "triaxial", keep=RESUME_KEEP if resume else None)
     (out / "vtk").mkdir(exist_ok=True)
+    finished: list[str] = []  # for the summary of an interrupted run
+    numbers: dict = {}
+    interrupted_report(p, out, finished, numbers)
 
     def log(msg: str) -> None:
         print(f"[triaxial] {msg}", flush=True)
@@ -431,6 +472,13 @@ def run(p: Params, out: Path, *, resume: bool = False) -> dict:
     sample, grid, n_grains, iso, t_iso = (prepared.sample, prepared.grid, prepared.n_grains,
                                           prepared.iso, prepared.t_iso)
     sc, walls, grow, psd_info = sample.scene, sample.walls, prepared.grow, prepared.psd_info
+    finished += (["expansion"] if grow is not None and not resume else []) + [
+        "isotropic stage" + (" (skipped: --skip-isotropic)" if p.skip_isotropic else
+                             " (loaded from isotropic.h5: --resume)" if resume else "")]
+    numbers.update(num_grains=n_grains, porosity_isotropic=iso.porosity,
+                   isotropic_axis_stresses_Pa=np.asarray(iso.axis_stresses).tolist(),
+                   isotropic_unbalanced=iso.unbalanced_force,
+                   expansion_growth_factor=grow.extra["growth_factor"] if grow else None)
     if p.preset:
         p.strain_rate = apply_preset(sample, p.preset, pressure=p.cell_pressure,
                                      density=p.density)

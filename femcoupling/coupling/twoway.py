@@ -2,7 +2,7 @@
 
 One way: :func:`one_way` solves the structure once and returns, per element region, the
 FEM stress of the initial state (before the load stage) and after it, as
-:class:`~femcoupling.handover.WallTargets` (compression positive).
+:class:`~femcoupling.coupling.handover.WallTargets` (compression positive).
 
 Two way (:func:`two_way`): iterate
 
@@ -19,10 +19,10 @@ Two way (:func:`two_way`): iterate
    (``info["tangent_voigt_pa"]`` with the full strain and stress increment tensors: a
    periodic element's network tangent, the case's wall-bounded element's tangent by stress
    probes), the tangent made to reproduce the increment exactly
-   (:func:`femcoupling.handover.secant_tangent`, a BFGS update) as an
-   :class:`~femcoupling.materials.AnisotropicElastic`; otherwise (an element that returns
+   (:func:`femcoupling.coupling.handover.secant_tangent`, a BFGS update) as an
+   :class:`~femcoupling.materials.continuum.AnisotropicElastic`; otherwise (an element that returns
    none, or ``stiffness="isotropic"``) the isotropic secant (E, nu)
-   (:func:`femcoupling.handover.secant_stiffness`), a least-squares fit of the three normal
+   (:func:`femcoupling.coupling.handover.secant_stiffness`), a least-squares fit of the three normal
    increments;
 
 until the handed-over stresses change by less than ``tol`` (relative, max norm over the
@@ -34,7 +34,7 @@ relaxed between iterations (Aitken's factor by default, on (log E, nu) or on the
 matrix), which damps the 2-cycles a noisy element drives.
 
 The loop ends in one status per region and the worst of them for the loop
-(:mod:`femcoupling.status`; ``TwoWayResult.status``, ``.regions``):
+(:mod:`femcoupling.coupling.status`; ``TwoWayResult.status``, ``.regions``):
 ``converged`` (the change within ``tol``, the principal axes within ``max_rotation_deg`` of
 a walled element's walls, the element straining within [1 / ``max_strain_ratio``,
 ``max_strain_ratio``] times its region), ``stopped_at_scatter`` (every check held but the
@@ -64,14 +64,15 @@ from typing import Any
 
 import numpy as np
 
-from femcoupling.geometry import FemInputError
-from femcoupling.handover import (HandoverError, WallTargets, fem_to_dem, secant_stiffness,
-                                 secant_tangent)
-from femcoupling.materials import (AnisotropicElastic, LinearElastic, tensor_to_mandel,
-                                   voigt_to_mandel_stiffness)
-from femcoupling.relaxation import check_relaxation, next_factor
-from femcoupling.status import (CouplingStatus, check_limits, judge_region, strain_ratio_held,
-                                worst)
+from femcoupling._checks import FemInputError
+from femcoupling.coupling.handover import (HandoverError, WallTargets, fem_to_dem, secant_stiffness,
+                                           secant_tangent)
+from femcoupling.coupling.relaxation import check_relaxation, next_factor
+from femcoupling.coupling.status import (CouplingStatus, check_limits, judge_region,
+                                         strain_ratio_held, worst)
+from femcoupling.fem.mpi_points import bcast_from_root
+from femcoupling.materials.continuum import (AnisotropicElastic, LinearElastic, tensor_to_mandel,
+                                             voigt_to_mandel_stiffness)
 
 __all__ = ["ElementResponse", "HandoverHistory", "RegionWarning", "STIFFNESS_MODES",
            "TwoWayResult", "check_region", "element_stiffness", "one_way", "region_targets",
@@ -195,12 +196,12 @@ class TwoWayResult:
     """Outcome of :func:`two_way`.
 
     Attributes:
-        status: how the loop ended, the worst of its regions' (:mod:`femcoupling.status`):
+        status: how the loop ended, the worst of its regions' (:mod:`femcoupling.coupling.status`):
             "converged", "stopped_at_scatter", "stalled" or "failed".
         reason: one line per region that is not converged ("region: reason"), or that every
             check held.
-        regions: per region its :class:`~femcoupling.status.CouplingStatus` (status, reason,
-            final_change, tol, axes_rotation_deg, dem_fem_strain_ratio, checks).
+        regions: per region its :class:`~femcoupling.coupling.status.CouplingStatus` (status,
+            reason, final_change, tol, axes_rotation_deg, dem_fem_strain_ratio, checks).
         iterations: number of FEM solves of the load stage.
         changes: relative change after each iteration (the first is inf; max over regions).
         targets: final WallTargets per region.
@@ -350,7 +351,7 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
     """The two-way loop (module doc). ``model`` is a SoilModel in its initial state.
 
     Args:
-        model: :class:`femcoupling.elastoplastic.SoilModel` after its initial stages.
+        model: :class:`femcoupling.fem.soil_model.SoilModel` after its initial stages.
         regions: element region names coupled.
         load: ``load(model)`` applies the load stage from the initial state.
         element_runner: runs one DEM element (see module doc).
@@ -369,7 +370,7 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
         scatter_factor: the loop also ends when the change is within this many times the
             elements' relative stress scatter (when they report it), > 0.
         max_rotation_deg, max_strain_ratio: the limits of :func:`check_region` (and of the
-            status: :func:`femcoupling.status.judge_region`), deg and -, > 0 and > 1.
+            status: :func:`femcoupling.coupling.status.judge_region`), deg and -, > 0 and > 1.
         history_names: the names the regions have in ``history`` (default: ``regions``).
         stiffness: "tangent" (the element's tangent, made to reproduce its increment, where
             the element returns one; else the isotropic secant) or "isotropic" (always the
@@ -393,8 +394,6 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
         raise FemInputError(f"history_names={names!r}: one per region {regions!r}")
     hrow = {r: (history.regions.index(n) if history is not None and n in history.regions
                 else j) for j, (r, n) in enumerate(zip(regions, names))}
-    from femcoupling.mpi_points import bcast_from_root
-
     comm = model.comm
     rank0 = comm.rank == 0
     say = (log if (log is not None and rank0) else (lambda msg: None))
@@ -433,7 +432,7 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
                             max_strain_ratio=max_strain_ratio, full_tensor=_full(resp))
 
     def judge(r: str, settled: bool, ratio: float) -> CouplingStatus:
-        """Region r's status (femcoupling.status.judge_region) at the loop's end."""
+        """Region r's status (femcoupling.coupling.status.judge_region) at the loop's end."""
         return judge_region(settled=settled, final_change=rchange[r], tol=tol,
                             walled=not _full(responses.get(r)),
                             axes_rotation_deg=final[r].rotation_deg,

@@ -1,8 +1,8 @@
 """A plane-strain biaxial test by hierarchical FEM x DEM and by direct DEM of the same grains
 (issue 18, "against direct DEM"; docs/multiscale.md).
 
-- :func:`fem_dem_biaxial`: the rectangle of ``femcoupling.hierarchical`` with a periodic DEM
-  element per cell, the right side at the confining pressure, the top pushed down in equal
+- :func:`fem_dem_biaxial`: the rectangle of ``femcoupling.coupling.hierarchical`` with a periodic
+  DEM element per cell, the right side at the confining pressure, the top pushed down in equal
   load steps.
 - :func:`direct_biaxial`: a periodic DEM cell under the same path (x at the pressure, y held,
   z shortened: ``cpp_dem.protocols.periodic.plane_strain_biaxial``). Give it the element factory to run
@@ -51,8 +51,8 @@ class WeakZoneFactory:
 
 def weak_zone(points: np.ndarray, centre, radius: float) -> tuple:
     """The elements whose quadrature point (``points``, m, shape (n, 2): from
-    ``femcoupling.hierarchical.quadrature_points``) lies within ``radius`` (m) of ``centre``
-    (m): the weaker zone of a ``WeakZoneFactory``. Raises ValueError when none does."""
+    ``femcoupling.coupling.hierarchical.quadrature_points``) lies within ``radius`` (m) of
+    ``centre`` (m): the weaker zone of a ``WeakZoneFactory``. Raises ValueError when none does."""
     d = np.linalg.norm(np.asarray(points, float) - np.asarray(centre, float)[None, :], axis=1)
     k = tuple(int(i) for i in np.flatnonzero(d <= radius))
     if not k:
@@ -81,7 +81,7 @@ def fem_dem_biaxial(pool, *, lx: float, ly: float, nx: int, ny: int, pressure: f
     through ``log``. A load step that fails (``NewtonFailure``) raises, or with
     ``stop_on_failure`` ends the run there: ``failed`` then gives its axial strain and the
     reason (None for a run that reached ``strain``), and the curve is the steps before."""
-    from femcoupling.hierarchical import HierarchicalPlaneStrain, NewtonFailure
+    from femcoupling.coupling.hierarchical import HierarchicalPlaneStrain, NewtonFailure
 
     t0 = time.perf_counter()
     m = HierarchicalPlaneStrain(pool, lx=lx, ly=ly, nx=nx, ny=ny, confining_pa=pressure,

@@ -1,4 +1,4 @@
-"""The regions of :class:`femcoupling.elastoplastic.SoilModel` with a material of their own: an
+"""The regions of :class:`femcoupling.fem.soil_model.SoilModel` with a material of their own: an
 elastic or anisotropic material, one DEM element for a region (its mean strain in, its
 stress and tangent out), or an element per cell. A mixin of ``SoilModel``: the methods use its
 mesh, spaces and state."""
@@ -9,22 +9,23 @@ from typing import Any
 
 import numpy as np
 
-from femcoupling import geometry as geo
-from femcoupling.geometry import FemInputError
-from femcoupling.materials import (LinearElastic, mandel_to_tensor, stiffness_block,
-                                   tensor_to_mandel)
-from femcoupling.quadrature import check_material
+from femcoupling._checks import FemInputError
+from femcoupling.fem import geometry as geo
+from femcoupling.fem.mpi_points import PointPartition, bcast_from_root, check_on_root
+from femcoupling.fem.quadrature import NewtonFailure, check_material
+from femcoupling.materials.continuum import (LinearElastic, mandel_to_tensor, stiffness_block,
+                                             tensor_to_mandel)
 
 
 class RegionPoints:
     """The quadrature points of one element region (or cell) whose stress a DEM element gives
-    (a ``femcoupling.quadrature.QuadratureMaterial`` on those points): ``element`` (a
-    ``femcoupling.region.DemRegionMaterial``, or a member of a ``PoolRegionMaterials``, whose
-    ``group`` evaluates, commits and saves its members at once) gets the points' volume-mean
-    strain increment (``weights``, summing to 1); each point takes its committed stress
-    (``stress_pa``) plus the element's stress increment, plus the element's tangent times the
-    point's deviation from that mean (so the region's mean stress is the element's, and the
-    pointwise tangent is the consistent Jacobian: with the mean alone every point would depend
+    (a ``femcoupling.fem.quadrature.QuadratureMaterial`` on those points): ``element`` (a
+    ``femcoupling.materials.dem_elements.DemRegionMaterial``, or a member of a
+    ``PoolRegionMaterials``, whose ``group`` evaluates, commits and saves its members at once) gets
+    the points' volume-mean strain increment (``weights``, summing to 1); each point takes its
+    committed stress (``stress_pa``) plus the element's stress increment, plus the element's tangent
+    times the point's deviation from that mean (so the region's mean stress is the element's, and
+    the pointwise tangent is the consistent Jacobian: with the mean alone every point would depend
     on every other one, and Newton converged linearly, 15 % per iteration); ``key``: the
     model's name of the element (a group's member key). The points never
     yield (``plastic`` is 0). ``commit``, ``state`` and ``set_state`` are those of the points'
@@ -86,9 +87,6 @@ class RegionPoints:
         if comm is None or comm.size == 1:
             answers = RegionPoints._evaluate(sets, means)
         else:
-            from femcoupling.mpi_points import bcast_from_root
-            from femcoupling.quadrature import NewtonFailure
-
             total = comm.allreduce(np.array(means).reshape(len(sets), -1))
             means = list(total)
             answers, err = None, None
@@ -128,13 +126,13 @@ class RegionMaterials:
     def set_region_element(self, name: str, element: Any) -> None:
         """The element region ``name`` takes its stress and tangent from a DEM element at
         every Newton iterate (the hierarchical mode on this body, one element for the
-        region's cells): ``element`` (``femcoupling.region.DemRegionMaterial``) gets the
-        region's volume-mean strain increment since the start of the load step (3 x 3) and
+        region's cells): ``element`` (``femcoupling.materials.dem_elements.DemRegionMaterial``) gets
+        the region's volume-mean strain increment since the start of the load step (3 x 3) and
         returns its stress increment (3 x 3, Pa) and tangent (6 x 6 Mandel, Pa), which every
         point of the region takes; a converged step commits it. The members of one
-        ``femcoupling.region.PoolRegionMaterials`` (several regions' elements on Dask
-        workers) are evaluated at once, in parallel. Under MPI the element lives on rank 0
-        (``element=None`` on the others: ``femcoupling.mpi_points.on_root``); the region's
+        ``femcoupling.materials.dem_elements.PoolRegionMaterials`` (several regions' elements on
+        Dask workers) are evaluated at once, in parallel. Under MPI the element lives on rank 0
+        (``element=None`` on the others: ``femcoupling.fem.mpi_points.on_root``); the region's
         mean is taken over all ranks. Collective."""
         tag = self.body.region_tag(name)
         self._add_element(name, element, np.repeat(self.cell_tag_of == tag, self.nq))
@@ -152,8 +150,6 @@ class RegionMaterials:
             self._serial_cell_ids = np.arange(self.n_cells)
             return self._serial_cell_ids
         from scipy.spatial import cKDTree
-
-        from femcoupling.mpi_points import PointPartition
 
         serial = None
         if self.comm.rank == 0:
@@ -211,9 +207,9 @@ class RegionMaterials:
 
     def band_cell_states(self, name: str, reach_m: float) -> dict:
         """Where a reinforced RVE of each cell of :meth:`band_cells` (``name``) starts
-        (``femcoupling.region.ReinforcedBandElement``): key -> (the grains' pressure, Pa,
-        compression positive: the volume mean of -tr(sigma)/3 over the region's soil cells
-        whose centres are within ``reach_m`` (m) of the band cell's; the band's tension
+        (``femcoupling.materials.dem_elements.ReinforcedBandElement``): key -> (the grains'
+        pressure, Pa, compression positive: the volume mean of -tr(sigma)/3 over the region's soil
+        cells whose centres are within ``reach_m`` (m) of the band cell's; the band's tension
         along x, N/m: the layer's thickness times the cell's sigma_xx)."""
         if not (isinstance(reach_m, (int, float)) and np.isfinite(reach_m) and reach_m > 0):
             raise FemInputError(f"reach_m={reach_m!r}: must be > 0 (m)")
@@ -238,7 +234,7 @@ class RegionMaterials:
         """Every cell of element region ``name`` takes its stress and tangent from its own
         DEM element (the hierarchical mode at the cells' scale; with P1 cells, one
         quadrature point each, an element per quadrature point). ``group`` holds one element
-        per cell under the keys of :meth:`cell_stresses` (``femcoupling.region.
+        per cell under the keys of :meth:`cell_stresses` (``femcoupling.materials.dem_elements.
         PoolRegionMaterials.build(m.cell_stresses(name), runner, workers=)``: all of them
         evaluated at once on Dask workers at every Newton iterate); each cell is then what
         :meth:`set_region_element` makes of a region: its element gets the cell's mean strain
@@ -252,8 +248,6 @@ class RegionMaterials:
         keys = list(self.cell_stresses(name)) + (list(self.band_cells(name)) if band else [])
         on_root = self.comm.size == 1 or self.comm.rank == 0
         if self.comm.size > 1:
-            from femcoupling.mpi_points import check_on_root
-
             check_on_root(self.comm, group)
         members = getattr(group, "materials", None)
         missing = [k for k in keys if members is None or k not in members] if on_root else []
@@ -280,8 +274,6 @@ class RegionMaterials:
         answer with a weight of 0). ``_checked``: the caller checked the element's rank and
         sets the points' materials once for all its elements."""
         if self.comm.size > 1 and not _checked:
-            from femcoupling.mpi_points import check_on_root
-
             check_on_root(self.comm, element)
         if element is not None or self.comm.size == 1:
             check_material(element, "element")
@@ -302,8 +294,8 @@ class RegionMaterials:
 
     def _element_units(self) -> list:
         """(unit, region names): each region element once, except the members of one group
-        (``femcoupling.region.PoolRegionMaterials``: an element's ``group``), which the group
-        evaluates, commits and saves at once. Under MPI, the elements on rank 0 (none on
+        (``femcoupling.materials.dem_elements.PoolRegionMaterials``: an element's ``group``), which
+        the group evaluates, commits and saves at once. Under MPI, the elements on rank 0 (none on
         the others)."""
         if self.comm.size > 1 and self.comm.rank != 0:
             return []

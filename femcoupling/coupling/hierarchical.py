@@ -16,7 +16,7 @@ cell k // nq, point k % nq; with P1, cell k). In a load step Newton iterates:
    shear), and the displacements are corrected.
 
 An accepted step is saved (``pool.accept``: every element's state saved as bytes). Each
-step ends in a status (:mod:`femcoupling.status`): ``converged`` (the residual within
+step ends in a status (:mod:`femcoupling.coupling.status`): ``converged`` (the residual within
 ``newton_rtol``) or ``stopped_at_scatter`` (``convergence="noise"``: Newton stalled above
 ``newton_rtol`` with the residual within ``noise_factor`` times the elements' measured noise
 and within the ``noise_ceiling``, 10 x ``newton_rtol`` by default). A step whose residual is
@@ -26,9 +26,9 @@ within the noise but above the ceiling is not accepted: it is cut, as a step New
 stress times the square root of the domain's area) and also given in stress units
 (``HierStep.residual_pa``, Pa: that relative residual times the largest element stress).
 The
-elements are the points' material (``ElementPoolMaterial``, a ``femcoupling.quadrature.
-QuadratureMaterial``), and Newton and its rules are ``femcoupling.quadrature.newton_solve``,
-the same as the Drucker–Prager soil body's of ``femcoupling.elastoplastic``.
+elements are the points' material (``ElementPoolMaterial``, a ``femcoupling.fem.quadrature.
+QuadratureMaterial``), and Newton and its rules are ``femcoupling.fem.quadrature.newton_solve``,
+the same as the Drucker–Prager soil body's of ``femcoupling.fem.soil_model``.
 
 Boundary conditions (``platens="smooth"``, the default): left u_x = 0, bottom u_y = 0; the
 top is moved by ``top_displacement`` (u_y, m); the right is either loaded by a confining
@@ -47,7 +47,7 @@ is moved with the homogeneous field, so every element sees the same strain.
 
 Stresses are tension positive here (FEM), Pa. The FEM is serial, or, with ``comm`` (an
 mpi4py communicator, ``mpiexec -n N``), split over its ranks with the elements' pool on rank 0
-(``pool=None`` on the others; :mod:`femcoupling.mpi_points`): element k is the same place on
+(``pool=None`` on the others; :mod:`femcoupling.fem.mpi_points`): element k is the same place on
 any number of ranks.
 
 Records (``out=DIR``), appended and flushed at every accepted step:
@@ -69,11 +69,14 @@ from pathlib import Path
 import numpy as np
 
 from femcoupling import _dolfinx
-from femcoupling.geometry import FemInputError
-from femcoupling.quadrature import (NewtonFailure, NewtonRules, QuadratureSystem, lu_package,
-                                    newton_solve)
-from femcoupling.relaxation import aitken_factor, check_relaxation
-from femcoupling.status import worst
+from femcoupling._checks import FemInputError
+from femcoupling.coupling.handover import HandoverError, spd_floor
+from femcoupling.coupling.records import append_rows
+from femcoupling.coupling.relaxation import aitken_factor, check_relaxation
+from femcoupling.coupling.status import NoiseWarning, worst
+from femcoupling.fem.mpi_points import PointPartition, RootMaterial, bcast_from_root, check_on_root
+from femcoupling.fem.quadrature import (NewtonFailure, NewtonRules, QuadratureSystem, lu_package,
+                                        newton_solve)
 
 __all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning", "TANGENTS",
            "aitken_factor", "quadrature_points", "secant_update"]
@@ -123,7 +126,8 @@ def quadrature_points(lx: float, ly: float, nx: int, ny: int, degree: int = 1) -
     """The coordinates (m, shape (n, 2)) of the quadrature points of a
     ``HierarchicalPlaneStrain(lx=, ly=, nx=, ny=, degree=)``, in its elements' order (element
     k at cell k // nq, point k % nq), without building the model: to choose elements by
-    place before the pool is built (a weaker zone: ``femcoupling.biaxial.WeakZoneFactory``)."""
+    place before the pool is built (a weaker zone:
+    ``geogrid_dem.studies.biaxial.WeakZoneFactory``)."""
     import basix
 
     fx = _dolfinx.load()
@@ -179,8 +183,6 @@ def secant_update(tangent: np.ndarray, strain: np.ndarray, stress: np.ndarray,
     symmetric, positive part of ``tangent`` (eigenvalues raised to ``min_eig_fraction`` of the
     largest). None where no positive secant exists (ds . de <= 0: the element gave back
     energy) or the increment is zero."""
-    from femcoupling.handover import HandoverError, spd_floor
-
     try:
         t = spd_floor(tangent, min_eig_fraction, name="secant_update")
     except HandoverError:  # (no positive stiffness at all)
@@ -190,12 +192,6 @@ def secant_update(tangent: np.ndarray, strain: np.ndarray, stress: np.ndarray,
     if not (curv_t > 0 and curv > 1e-12 * curv_t):
         return None
     return t - np.outer(td, td) / curv_t + np.outer(stress, stress) / curv
-
-
-class NoiseWarning(UserWarning):
-    """The tolerance asked for is below what the DEM elements can resolve: re-running them
-    on (to 1e-9) the same increment moves the residual by more, so a load step is accepted at
-    that noise instead (below the ceiling: stopped_at_scatter, not converged)."""
 
 
 @dataclasses.dataclass
@@ -223,7 +219,7 @@ class HierStep:
     #: what ended Newton: "tolerance" (``newton_rtol``) or "noise" (the residual is within
     #: the elements' noise and the ceiling: ``NoiseWarning``)
     converged_on: str = "tolerance"
-    #: the step's status (femcoupling.status): "converged" (``newton_rtol`` met) or
+    #: the step's status (femcoupling.coupling.status): "converged" (``newton_rtol`` met) or
     #: "stopped_at_scatter" (accepted within the elements' noise, above ``newton_rtol``)
     status: str = "converged"
     #: the accepted residual in stress units, Pa: ``residual`` times the largest element
@@ -323,7 +319,7 @@ class HierarchicalPlaneStrain:
             loads = lambda v: (-self._pressure * ufl.dot(n_out, v) * ds(1),)  # noqa: E731
         else:
             loads = lambda v: (ufl.dot(self.traction, v) * ds(1),)  # noqa: E731
-        # spaces, forms and solver: the same as the FEM soil's (femcoupling.quadrature)
+        # spaces, forms and solver: the same as the FEM soil's (femcoupling.fem.quadrature)
         sysq = self.system = QuadratureSystem(
             msh, degree=degree, qdeg=_qdeg(degree), ncomp=3, strain=eps,
             loads=loads, lu=lu_package(self.comm, None))
@@ -380,7 +376,7 @@ class HierarchicalPlaneStrain:
                 self.traction.value[:] = [-float(confining_pa), 0.0]
             self.bcs = [b for b in self.bcs if b is not None]
         self.history: list[HierStep] = []
-        #: the elements as the quadrature points' material (femcoupling.quadrature)
+        #: the elements as the quadrature points' material (femcoupling.fem.quadrature)
         self._material(pool, tangent=tangent, strain_kw=self.strain_kw)
 
     @property
@@ -396,8 +392,6 @@ class HierarchicalPlaneStrain:
     def _check_pool(self, pool, n: int, what: str) -> None:
         """The pool (rank 0's under MPI) holds one element per quadrature point."""
         if self._parallel:
-            from femcoupling.mpi_points import bcast_from_root, check_on_root
-
             check_on_root(self.comm, pool)
             have = bcast_from_root(self.comm, pool.n if self._root else None)
         else:
@@ -411,13 +405,11 @@ class HierarchicalPlaneStrain:
 
     def _material(self, pool, **kw) -> None:
         """The elements as the points' material: ``ElementPoolMaterial`` (under MPI on rank 0,
-        seen by every rank: ``femcoupling.mpi_points.RootMaterial``)."""
+        seen by every rank: ``femcoupling.fem.mpi_points.RootMaterial``)."""
         mat = ElementPoolMaterial(pool, **kw) if pool is not None else None
         if self._parallel:
-            from femcoupling.mpi_points import RootMaterial
-
             mat = RootMaterial(self.comm, mat)
-        #: the elements as the quadrature points' material (femcoupling.quadrature)
+        #: the elements as the quadrature points' material (femcoupling.fem.quadrature)
         self.material = mat
         self._set_q(mat.stress, mat.tangent)
 
@@ -493,7 +485,7 @@ class HierarchicalPlaneStrain:
     def _points(self, nq: int) -> None:
         """The quadrature points: ``nq`` per cell, element k at cell k // nq, point k % nq (the
         quadrature spaces' own order, checked). Under MPI a rank's points are the elements
-        at their places in the serial mesh (``femcoupling.mpi_points.PointPartition``)."""
+        at their places in the serial mesh (``femcoupling.fem.mpi_points.PointPartition``)."""
         if len(self.system.qweights) != nq:
             raise RuntimeError(f"{nq} quadrature point(s) per cell expected")
         self.nq, self.n_local_points = nq, self.n_cells * nq
@@ -503,8 +495,6 @@ class HierarchicalPlaneStrain:
         self.partition = None
         self.n_points = self.n_local_points
         if self._parallel:
-            from femcoupling.mpi_points import PointPartition
-
             size = max(self.lx, self.ly, getattr(self, "lz", 0.0))
             serial = _coordinates(self._fx, self._serial_mesh(), self.system.qpoints)
             self.partition = PointPartition(self.comm, self._local_coordinates(), serial, size)
@@ -690,8 +680,6 @@ class HierarchicalPlaneStrain:
         DEM seconds and steps),
         flushed; the FEM state in ``fem.xdmf`` (displacement m, the elements' stress Pa per
         cell, at the load as time); and a line of ``steps.csv`` with the FEM/DEM time split."""
-        from femcoupling.records import append_rows
-
         k = len(self.history) - 1
         if self._root:
             self.out.mkdir(parents=True, exist_ok=True)
@@ -799,7 +787,7 @@ class HierarchicalPlaneStrain:
             xf.write_function(sig, r.load)
 
 class _HierNewton:
-    """``HierarchicalPlaneStrain`` as ``femcoupling.quadrature.newton_solve``'s problem."""
+    """``HierarchicalPlaneStrain`` as ``femcoupling.fem.quadrature.newton_solve``'s problem."""
 
     def __init__(self, m: "HierarchicalPlaneStrain") -> None:
         self.m = m
@@ -835,7 +823,7 @@ class _HierNewton:
 
 class ElementPoolMaterial:
     """The DEM elements of an ``ElementPool`` as the material of the hierarchical mode's
-    quadrature points (a ``femcoupling.quadrature.QuadratureMaterial``; element k is point k).
+    quadrature points (a ``femcoupling.fem.quadrature.QuadratureMaterial``; element k is point k).
 
     ``trial(g)``: ``g`` (n, 2, 2) the displacement-gradient increments since the last commit
     (shear and rotation included; FEM (x, y) is the element's (x, z), its y held: plane

@@ -1,4 +1,4 @@
-"""What a load step of :class:`femcoupling.elastoplastic.SoilModel` ends in: its record
+"""What a load step of :class:`femcoupling.fem.soil_model.SoilModel` ends in: its record
 (:class:`StepResult`) or :class:`NewtonDivergence`."""
 
 from __future__ import annotations
@@ -24,12 +24,13 @@ class StepResult:
         plastic_points: number of plastic quadrature points (global).
         converged_on: "tolerance" (``newton_rtol``), or "noise": with DEM region elements,
             Newton stalled above the tolerance within the elements' measured noise
-            (``femcoupling.quadrature.newton_solve``; said in ``SoilModel.warnings``).
+            (``femcoupling.fem.quadrature.newton_solve``; said in ``SoilModel.warnings``).
         noise_residual: that noise, relative to the whole body's force scale (NaN where it
             was not measured).
         status: "converged" (``newton_rtol`` met) or "stopped_at_scatter" (within
             ``SoilModel.noise_factor`` times the noise and ``SoilModel.noise_ceiling`` of the
-            DEM regions' own internal force, above the tolerance) (:mod:`femcoupling.status`).
+            DEM regions' own internal force, above the tolerance)
+            (:mod:`femcoupling.coupling.status`).
         residual: the accepted residual relative to the force scale it is judged against:
             the DEM regions' own internal force where the model has region elements, else
             the body's, -.
@@ -40,7 +41,7 @@ class StepResult:
             elements, else the body's).
         redraws: the iterates Newton took after it had stalled within the elements' noise
             but above ``SoilModel.noise_ceiling``, before one was within both
-            (``femcoupling.quadrature.REDRAWS``); 0 where none was needed.
+            (``femcoupling.fem.quadrature.REDRAWS``); 0 where none was needed.
     """
 
     stage: str

@@ -1,11 +1,11 @@
 """The continuum outer domain: a reinforced soil body solved in dolfinx (plane strain or 3D).
 
-:class:`SoilModel` holds the mesh of a :class:`~femcoupling.geometry.ReinforcedSoilBody`,
+:class:`SoilModel` holds the mesh of a :class:`~femcoupling.fem.geometry.ReinforcedSoilBody`,
 P2 (default) displacements, and a stress history at the quadrature points (a quadrature
 space; the return mapping is the NumPy kernel
-:func:`femcoupling.materials.drucker_prager_return`). Loading is incremental with a full
+:func:`femcoupling.materials.continuum.drucker_prager_return`). Loading is incremental with a full
 Newton iteration on the consistent tangent at each step (LU: MUMPS on one rank,
-``femcoupling.quadrature.PARALLEL_LU`` on more).
+``femcoupling.fem.quadrature.PARALLEL_LU`` on more).
 
 Stages (each one a sequence of equilibrium steps):
 
@@ -27,10 +27,10 @@ tensors ordered (x, y, z), **tension positive** (in 2D y is the out-of-plane dir
 Every method is collective under MPI and returns the same values on every rank.
 
 The class is split by role: this module holds the mesh, the spaces, the material arrays,
-Newton and the state; :mod:`femcoupling.soil_loading` the load stages,
-:mod:`femcoupling.soil_regions` the regions with a material or DEM element of their own,
-:mod:`femcoupling.soil_measures` what the model gives out (settlement, stresses, forces,
-XDMF), and :mod:`femcoupling.soil_steps` a step's record.
+Newton and the state; :mod:`femcoupling.fem.soil_loading` the load stages,
+:mod:`femcoupling.fem.soil_regions` the regions with a material or DEM element of their own,
+:mod:`femcoupling.fem.soil_measures` what the model gives out (settlement, stresses, forces,
+XDMF), and :mod:`femcoupling.fem.soil_steps` a step's record.
 """
 
 from __future__ import annotations
@@ -41,13 +41,17 @@ from typing import Any
 
 import numpy as np
 
-from femcoupling import geometry as geo
-from femcoupling.geometry import FemInputError
-from femcoupling.materials import GeogridLayerMaterial, LinearElastic, mandel_to_tensor
-from femcoupling.soil_loading import LoadingStages
-from femcoupling.soil_measures import SoilMeasures
-from femcoupling.soil_regions import RegionMaterials
-from femcoupling.soil_steps import NewtonDivergence, StepResult
+from femcoupling import _dolfinx
+from femcoupling._checks import FemInputError
+from femcoupling.coupling.status import NoiseWarning
+from femcoupling.fem import geometry as geo
+from femcoupling.fem.quadrature import (NewtonFailure, NewtonRules, QuadratureSystem, lu_package,
+                                        newton_solve)
+from femcoupling.fem.soil_loading import LoadingStages
+from femcoupling.fem.soil_measures import SoilMeasures
+from femcoupling.fem.soil_regions import RegionMaterials, RegionPoints
+from femcoupling.fem.soil_steps import NewtonDivergence, StepResult
+from femcoupling.materials.continuum import GeogridLayerMaterial, LinearElastic, mandel_to_tensor
 
 __all__ = ["SoilModel", "StepResult", "NewtonDivergence"]
 
@@ -58,7 +62,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
     """A reinforced soil body in dolfinx; see the module doc. Collective on ``comm``.
 
     Args:
-        body: the geometry (tags documented in :mod:`femcoupling.geometry`).
+        body: the geometry (tags documented in :mod:`femcoupling.fem.geometry`).
         soil: the soil's material (:class:`LinearElastic` or :class:`DruckerPrager`).
         layers: one :class:`GeogridLayerMaterial` per geogrid layer of ``body``.
         region_materials: optional material per element-region name (default: ``soil``).
@@ -96,8 +100,6 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
             raise FemInputError(f"degree={degree!r}: must be 1 or 2")
         geo._pos("newton_rtol", newton_rtol)
 
-        from femcoupling import _dolfinx
-
         fx = self._fx = _dolfinx.load()
         fem, ufl = fx.fem, fx.ufl
         self.body, self.soil, self.layers = body, soil, layers
@@ -106,7 +108,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         #: (``set_cell_elements``: "<region>/<cell>")
         self.region_elements: dict = {}
         self._element_points: dict = {}
-        #: with region elements, where Newton stalls (femcoupling.quadrature.newton_solve): a
+        #: with region elements, where Newton stalls (femcoupling.fem.quadrature.newton_solve): a
         #: step within ``noise_factor`` times the elements' measured noise and within
         #: ``noise_ceiling`` of the DEM regions' own internal force (not the body's: a 0.1 m
         #: region in a 4 x 3 m body carries a small share of it) is stopped_at_scatter. 1e-2:
@@ -135,9 +137,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         self.n_owned = cmap.size_local
         self.n_cells = cmap.size_local + cmap.num_ghosts
 
-        # --- spaces, forms and solver (femcoupling.quadrature.QuadratureSystem) ---
-        from femcoupling.quadrature import QuadratureSystem, lu_package
-
+        # --- spaces, forms and solver (femcoupling.fem.quadrature.QuadratureSystem) ---
         qdeg = max(1, 2 * (degree - 1))
         self.qdeg = qdeg
         st = fx.PETSc.ScalarType
@@ -165,7 +165,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         self.sig_cur = np.zeros((n_qp, self.ncomp))  # the last trial's stress, (cell, q)
         self.dlam = np.zeros(n_qp)
 
-        # --- the materials at the quadrature points (femcoupling.quadrature) ---
+        # --- the materials at the quadrature points (femcoupling.fem.quadrature) ---
         self.cell_tag_of = np.full(self.n_cells, geo.SOIL_TAG, dtype=np.int32)
         self.cell_tag_of[self.cell_tags.indices] = self.cell_tags.values
         self._point_sets: list = []
@@ -230,13 +230,11 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         return self.region_materials.get(name, self.soil)
 
     def _set_point_materials(self, stress_pa: np.ndarray | None = None) -> None:
-        """The quadrature points' materials (``femcoupling.quadrature.QuadratureMaterial``):
+        """The quadrature points' materials (``femcoupling.fem.quadrature.QuadratureMaterial``):
         the points of each cell tag without a region element take their tag's material
         (``material_of_tag(tag).at_points``); the points of a region element, its
-        :class:`~femcoupling.soil_regions.RegionPoints`. The committed stress carries over
+        :class:`~femcoupling.fem.soil_regions.RegionPoints`. The committed stress carries over
         (``stress_pa`` where given)."""
-        from femcoupling.soil_regions import RegionPoints
-
         sig = self.sig_n if stress_pa is None else stress_pa
         taken = self._region_points()
         sets = []
@@ -273,8 +271,6 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
     def _update_tangent_and_stress(self, deps: np.ndarray) -> None:
         """Every point set's trial for the strain increments ``deps`` (n_qp, ncomp); the
         members of one DEM pool (``trial_many``) at once."""
-        from femcoupling.soil_regions import RegionPoints
-
         n = len(deps)
         sig = np.empty((n, self.ncomp))
         tan = np.empty((n, self.ncomp, self.ncomp))
@@ -352,7 +348,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
 
     def _end_step(self, out: Any) -> None:
         """The step's end (``StepResult``'s converged_on, noise_residual, status, residual,
-        tol, residual_pa) from its ``femcoupling.quadrature.NewtonOutcome``: the residual is
+        tol, residual_pa) from its ``femcoupling.fem.quadrature.NewtonOutcome``: the residual is
         judged on the DEM regions' own force scale where the model has region elements, else
         on the body's."""
         rscale = self._region_scale() if self.region_elements else None
@@ -366,7 +362,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
                           "redraws": out.redraws}
 
     def _newton(self) -> int:
-        """Newton iterations of the current step (``femcoupling.quadrature.newton_solve``,
+        """Newton iterations of the current step (``femcoupling.fem.quadrature.newton_solve``,
         the hierarchical mode's Newton and its rules); returns their number, or -1 on
         failure (the reason in ``last_failure``).
 
@@ -377,8 +373,6 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         ``noise_ceiling`` of the DEM regions' own internal force (``_region_scale``) is
         stopped_at_scatter (said in ``warnings``); above the ceiling, or never within the
         noise, the step is cut."""
-        from femcoupling.quadrature import NewtonFailure, NewtonRules, newton_solve
-
         rules = NewtonRules(rtol=self.newton_rtol, max_newton=self.max_newton,
                             noise_factor=self.noise_factor, ceiling=self.noise_ceiling,
                             probe=bool(self.region_elements), probe_size="correction")
@@ -455,8 +449,6 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
     def _noise_warning(self, r: StepResult) -> None:
         import warnings
 
-        from femcoupling.hierarchical import NoiseWarning
-
         msg = (f"{r.stage} step at load factor {r.load_factor:.4g}: Newton stalled at "
                f"{r.residual:.3g} of the DEM regions' own internal force ({r.residual_pa:.3g} "
                f"Pa), above the tolerance newton_rtol={self.newton_rtol:g} ({r.tol:.3g} of "
@@ -500,7 +492,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
 
 
 class _SoilNewton:
-    """``SoilModel`` as ``femcoupling.quadrature.newton_solve``'s problem."""
+    """``SoilModel`` as ``femcoupling.fem.quadrature.newton_solve``'s problem."""
 
     def __init__(self, m: SoilModel) -> None:
         self.m, self.bcs = m, m._active_bcs()

@@ -1,8 +1,8 @@
 """How a coupled loop ended: one status from a fixed set, and what it rests on (issue 37).
 
-Every coupled loop of this package (the two-way region loop, :mod:`femcoupling.twoway`; the
-hierarchical Newton of :mod:`femcoupling.hierarchical`; the region mode's Newton in
-:class:`femcoupling.elastoplastic.SoilModel`) ends in exactly one of :data:`STATUSES`:
+Every coupled loop of this package (the two-way region loop, :mod:`femcoupling.coupling.twoway`; the
+hierarchical Newton of :mod:`femcoupling.coupling.hierarchical`; the region mode's Newton in
+:class:`femcoupling.fem.soil_model.SoilModel`) ends in exactly one of :data:`STATUSES`:
 
 ``converged``
     every check held: the tolerance was met, the principal axes of the FEM stress are within
@@ -33,10 +33,10 @@ import dataclasses
 import math
 from collections.abc import Iterable
 
-from femcoupling.geometry import FemInputError
+from femcoupling._checks import FemInputError
 
-__all__ = ["EXIT_CODES", "STATUSES", "CouplingStatus", "check_limits", "exit_code", "judge_region",
-           "judge_steps", "newton_acceptance", "worst"]
+__all__ = ["EXIT_CODES", "STATUSES", "CouplingStatus", "NoiseWarning", "check_limits", "exit_code",
+           "judge_region", "judge_steps", "newton_acceptance", "worst"]
 
 #: the statuses, best first
 STATUSES = ("converged", "stopped_at_scatter", "stalled", "failed")
@@ -44,6 +44,13 @@ STATUSES = ("converged", "stopped_at_scatter", "stalled", "failed")
 #: the exit status of a case whose requested coupling ended so (0: converged, or no coupling
 #: asked; 1, 2, 130 and 143 are taken by errors, bad arguments and interrupts)
 EXIT_CODES = {"converged": 0, "stopped_at_scatter": 3, "stalled": 4, "failed": 5}
+
+
+class NoiseWarning(UserWarning):
+    """The tolerance asked for is below what the DEM elements can resolve: re-running them
+    on (to 1e-9) the same increment moves the residual by more, so a load step is accepted at
+    that noise instead (below the ceiling: stopped_at_scatter, not converged). Warned by the
+    Newton of the hierarchical models and of the soil body with DEM element regions."""
 
 
 def _check_status(status: str) -> str:
@@ -239,7 +246,7 @@ def judge_steps(steps, *, dem_fem_strain_ratio: float = math.nan, walled: bool =
                 max_strain_ratio: float = 2.0) -> CouplingStatus:
     """The status of a region coupled inside the FEM's Newton (the region mode's hierarchical
     load stage) over its accepted load ``steps`` (each with ``status``, ``residual`` and
-    ``tol``, as ``femcoupling.elastoplastic.StepResult``): "stalled" where a check of the
+    ``tol``, as ``femcoupling.fem.soil_model.StepResult``): "stalled" where a check of the
     coupled state fails (the element's strain not within [1 / ``max_strain_ratio``,
     ``max_strain_ratio``] of its region's or, for a ``walled`` element, the axes past
     ``max_rotation_deg``; or a step taken at a stall); else "stopped_at_scatter" where a step

@@ -1,10 +1,10 @@
 """The hierarchical FEM under MPI: the mesh split over the ranks, the DEM elements on Dask
 through rank 0 (issue 38, item 5; docs/multiscale.md, "Under MPI").
 
-A hierarchical model (:class:`femcoupling.hierarchical.HierarchicalPlaneStrain`,
-:class:`femcoupling.hierarchical3d.Hierarchical3D`) given ``comm=MPI.COMM_WORLD`` builds its
-mesh on that communicator: each rank assembles and solves its part (PETSc, SuperLU_DIST's
-parallel LU: ``femcoupling.quadrature.PARALLEL_LU``). The elements stay where they are
+A hierarchical model (:class:`femcoupling.coupling.hierarchical.HierarchicalPlaneStrain`,
+:class:`femcoupling.coupling.hierarchical3d.Hierarchical3D`) given ``comm=MPI.COMM_WORLD`` builds
+its mesh on that communicator: each rank assembles and solves its part (PETSc, SuperLU_DIST's
+parallel LU: ``femcoupling.fem.quadrature.PARALLEL_LU``). The elements stay where they are
 without MPI: in one ``ElementPool`` whose Dask client lives on rank 0 (the other ranks pass
 ``pool=None``). Two pieces join the two:
 
@@ -28,8 +28,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from femcoupling.geometry import FemInputError
-from femcoupling.quadrature import NewtonFailure
+from femcoupling import _dolfinx
+from femcoupling._checks import FemInputError
+from femcoupling.fem.quadrature import NewtonFailure
 
 __all__ = ["PointPartition", "RootMaterial", "bcast_from_root", "check_on_root", "on_root",
            "wait_for_root", "world"]
@@ -41,8 +42,6 @@ IDLE_POLL_MAX_S = 2e-3
 def world():
     """``MPI.COMM_WORLD``, imported in the order the FEM stack needs (``femcoupling._dolfinx``):
     one rank under plain ``python``, N under ``mpiexec -n N``."""
-    from femcoupling import _dolfinx
-
     return _dolfinx.load().MPI.COMM_WORLD
 
 
@@ -88,7 +87,7 @@ def check_on_root(comm, pool) -> None:
     if (pool is None) != (comm.rank != 0):
         raise FemInputError(f"pool: {'None' if pool is None else 'given'} on rank "
                             f"{comm.rank}; under MPI the element pool lives on rank 0 only "
-                            "(pool=None on the others: femcoupling.mpi_points.on_root)")
+                            "(pool=None on the others: femcoupling.fem.mpi_points.on_root)")
 
 
 class PointPartition:

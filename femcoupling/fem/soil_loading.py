@@ -1,4 +1,4 @@
-"""The load stages of :class:`femcoupling.elastoplastic.SoilModel`: the K0 initial state, the
+"""The load stages of :class:`femcoupling.fem.soil_model.SoilModel`: the K0 initial state, the
 prestress of the geogrid layers, and the footing (a pressure, a settlement, or a rigid
 footing pushed to a pressure). A mixin of ``SoilModel``: each stage runs its equilibrium
 steps through ``SoilModel._run_stage``."""
@@ -10,10 +10,10 @@ from typing import Any
 
 import numpy as np
 
-from femcoupling import geometry as geo
-from femcoupling.geometry import FemInputError
-from femcoupling.materials import DruckerPrager
-from femcoupling.soil_steps import NewtonDivergence, StepResult
+from femcoupling._checks import FemInputError
+from femcoupling.fem import geometry as geo
+from femcoupling.fem.soil_steps import NewtonDivergence, StepResult
+from femcoupling.materials.continuum import DruckerPrager
 
 
 class LoadingStages:

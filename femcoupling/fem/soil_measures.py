@@ -1,4 +1,4 @@
-"""What :class:`femcoupling.elastoplastic.SoilModel` gives out: the footing's settlement and
+"""What :class:`femcoupling.fem.soil_model.SoilModel` gives out: the footing's settlement and
 pressure, region and point stresses (NumPy 3 x 3, tension positive, the same on every MPI
 rank), layer forces, and the XDMF output. A mixin of ``SoilModel``."""
 
@@ -12,9 +12,10 @@ from typing import Any
 import numpy as np
 import numpy.typing as npt
 
-from femcoupling import geometry as geo
-from femcoupling.geometry import FemInputError
-from femcoupling.materials import mandel_to_tensor
+from femcoupling._checks import FemInputError
+from femcoupling.fem import geometry as geo
+from femcoupling.fem.quadrature import lu_package
+from femcoupling.materials.continuum import mandel_to_tensor
 
 _counter = itertools.count()
 
@@ -129,8 +130,6 @@ class SoilMeasures:
         fx = self._fx
         fem, ufl = fx.fem, fx.ufl
         import dolfinx.geometry as dg
-
-        from femcoupling.quadrature import lu_package
 
         pts = np.atleast_2d(np.asarray(points_m, float))
         if pts.shape[1] != self.tdim:

@@ -4,6 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from femcoupling._checks import FemInputError
+
 __all__ = ["aitken_factor", "check_relaxation", "next_factor"]
 
 
@@ -24,8 +26,6 @@ def aitken_factor(omega: float, d_prev: np.ndarray, d: np.ndarray, lo: float = 0
 def check_relaxation(relaxation) -> str | float:
     """``relaxation`` if it is "aitken", "none" or a fixed factor in (0, 1]; else a
     FemInputError naming the value and what is allowed."""
-    from femcoupling.geometry import FemInputError
-
     if relaxation in ("aitken", "none") or (
             isinstance(relaxation, (int, float)) and 0 < float(relaxation) <= 1):
         return relaxation

@@ -47,7 +47,7 @@ class WallTargets:
         fem_stress_pa: the FEM tensor handed over (tension positive), for the record.
         grid_tension_n_per_m: the tension of the geogrid layer crossing the region, N/m of
             width, tension positive, for the element's grid ends; None where no layer
-            crosses it (``femcoupling.twoway.region_targets``).
+            crosses it (``femcoupling.coupling.twoway.region_targets``).
     """
 
     normal_pa: np.ndarray

@@ -1,13 +1,14 @@
-"""The FEM side of the reinforced-soil element case (``geogrid-dem run prs-element``, and
-``prs-element-002`` which builds on it): the FEM model of the structure, one-way and two-way
-runs of its element region, the region's material as a DEM element inside the FEM's Newton
-(hierarchical, one element or one per cell), and the calibration of the FEM soil to the
-element's grains.
+"""The reinforced-soil element study (``geogrid-dem run prs-element``, and
+``prs-element-002`` which builds on it): its parameters (:class:`Params`), the FEM model of
+the structure, one-way and two-way runs of its element region, the region's material as a DEM
+element inside the FEM's Newton (hierarchical, one element or one per cell), and the
+calibration of the FEM soil to the element's grains.
 
-``p`` is the case's parameter object: a ``cpp_dem.elements.box.ElementParams`` with the FEM
-fields of ``geogrid_dem.cases.prs_element.Params`` (structure, soil, layers, coupling). The
-element itself is ``cpp_dem.elements.box``'s; this module only drives it. SI units; FEM
-stresses tension positive, DEM stresses compression positive.
+``p`` is a :class:`Params`: a ``cpp_dem.elements.box.ElementParams`` with the FEM fields
+(structure, soil, layers, coupling). The element itself is ``cpp_dem.elements.box``'s and the
+FEM ``femcoupling``'s; this module composes them, and the case
+(``geogrid_dem.cases.prs_element``) parses options, calls it and writes the report. SI units;
+FEM stresses tension positive, DEM stresses compression positive.
 """
 
 from __future__ import annotations
@@ -16,7 +17,7 @@ import functools
 import json
 import math
 import time
-from dataclasses import asdict, replace
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -25,6 +26,60 @@ from cpp_dem import apply_threads
 from cpp_dem.elements import box as _element
 from cpp_dem.elements.box import ElementParams, grid_stiffness_per_metre
 from cpp_dem.io.figures import save_figure
+
+
+@dataclass
+class Params(ElementParams):
+    """Parameters of the PRS element study (SI): the DEM element's (cpp_dem.elements.box.
+    ElementParams: grains, geogrid, servo) and the FEM structure's and coupling's below (the
+    case ``geogrid-dem run prs-element`` and ``prs-element-002`` set them)."""
+
+    # --- FEM structure (plane strain) ---
+    fem_width: float = 4.0           #: half width of the modelled fill, m
+    fem_height: float = 3.0          #: height of the fill, m
+    footing_b: float = 0.5           #: footing half width, m
+    footing_pressure: float = 100e3  #: footing pressure, Pa
+    fem_steps: int = 6               #: load steps
+    soil_young: float = 50e6         #: Pa
+    soil_poisson: float = 0.3        #: -
+    soil_cohesion: float = 10e3      #: Pa (apparent cohesion of a compacted gravelly fill)
+    soil_friction: float = 35.0      #: deg
+    unit_weight: float = 18e3        #: N/m^3
+    layer_depths: tuple = (0.3, 0.6)  #: depths of the geogrid layers below the top, m
+    layer_length: float = 2.0        #: layer extent from the symmetry plane, m
+    layer_thickness: float = 0.01    #: band thickness, m
+    region_x: float = 0.25           #: element region centre x (on the upper layer), m
+    mesh_size: float = 0.5           #: coarse FEM mesh size, m
+    fine_size: float = 0.025         #: fine FEM mesh size (footing edge, region, layers), m
+    # --- coupling ---
+    two_way: bool = False
+    two_way_tol: float = 0.02
+    max_iterations: int = 8
+    workers: int = 1
+    #: the FEM soil: "calibrated" (the default: set to the case's own element along the
+    #: region's path, cohesion 0; calibrate_soil) or "given" (the soil_* fields)
+    soil: str = "calibrated"
+    #: the two-way loop's element: "walls" (the case's element, geogrid included, three
+    #: normal stresses, its probed tangent back) or "periodic" (soil only, the full tensor, its
+    #: network tangent back; the case's element is then driven to the converged targets)
+    two_way_element: str = "walls"
+    #: the walls element's tangent in the two-way loop: three stress probes of this size,
+    #: relative to the mean stress (cpp_dem.elements.box.probe_tangent); 0: the isotropic secant
+    tangent_probe: float = 0.05
+    #: hand the FEM layer's tension across the element region to the element's grid ends
+    #: (force-controlled; a PRS grid's grips let go), so the walls carry the soil's stress
+    #: alone and the grid is counted once; False: free ends (RE), locked grips (PRS)
+    grid_handover: bool = True
+    #: hierarchical: the region's material is a dense periodic DEM element of the case's grains
+    #: inside the FEM's Newton (its stress and tangent at every iterate), no two-way loop
+    hierarchical: bool = False
+    #: hierarchical: an element per cell of the element region instead of one for the region
+    #: (each prepared at its cell's stress, seed + its index), on ``workers`` Dask workers
+    cell_elements: bool = False
+    #: grains of each cell's element (0: ``n``)
+    cell_grains: int = 0
+    stresses: list = field(default_factory=list)  #: DEM-only targets (rows of 3), Pa
+    prs: bool = False                #: DEM-only: prestress the grid (else RE)
 
 
 def log(msg: str) -> None:
@@ -39,7 +94,7 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
                                 log=log, cache=cache, grid_tension=grid_tension, probe=probe)
 
 
-def handed_tension(p: ElementParams, targets: list, label: str) -> list | None:
+def handed_tension(p: Params, targets: list, label: str) -> list | None:
     """The geogrid tensions (N/m) handed to the element's grid ends for these WallTargets
     (``grid_tension_n_per_m``, the FEM layer across the region): None when
     ``p.grid_handover`` is off or the FEM has no layer there. A layer in compression is handed
@@ -65,7 +120,7 @@ def element_runner(cls, p_dict: dict, out: str, name: str, initial, final):
     case's parameter class) from the initial to the final WallTargets. In
     one process the element at the initial targets is prepared once and restored for the
     next iterations (``_ELEMENTS``)."""
-    from femcoupling.twoway import ElementResponse
+    from femcoupling.coupling.twoway import ElementResponse
 
     p = cls(**p_dict)
     prestressed = name.endswith("PRS")
@@ -92,7 +147,7 @@ def element_runner(cls, p_dict: dict, out: str, name: str, initial, final):
 class _Runner:
     """Binds the case parameters to :func:`element_runner` (picklable)."""
 
-    def __init__(self, p: ElementParams, out: Path, variant: str):
+    def __init__(self, p: Params, out: Path, variant: str):
         self.cls, self.p, self.out, self.variant = type(p), asdict(p), str(out), variant
 
     def __call__(self, name, initial, final):
@@ -103,8 +158,8 @@ class _Runner:
 # ---- FEM structure ---------------------------------------------------------------------------
 
 
-def fem_body(p: ElementParams):
-    from femcoupling.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
+def fem_body(p: Params):
+    from femcoupling.fem.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
 
     h = p.fem_height
     layers = tuple(GeogridLayer(z_m=h - d, x_min_m=0.0, x_max_m=p.layer_length,
@@ -116,7 +171,7 @@ def fem_body(p: ElementParams):
                               fine_size_m=p.fine_size, fine_radius_m=2 * p.footing_b)
 
 
-def periodic_options(p: ElementParams) -> dict:
+def periodic_options(p: Params) -> dict:
     """``DemElement.periodic`` keywords for a periodic element of this case's grains: their
     material and radii (the mean radius of ``p.n`` grains filling the element's cube at a
     solid fraction of 0.6)."""
@@ -128,10 +183,11 @@ def periodic_options(p: ElementParams) -> dict:
     return {"material": mat, "radius_mean": r_mean, "radius_spread": p.radius_spread}
 
 
-def periodic_runner(p: ElementParams, out: Path, variant: str):
+def periodic_runner(p: Params, out: Path, variant: str):
     """A dense periodic element of this case's grains for the region
-    (``femcoupling.region.PeriodicRegionElement``, kept in ``out/region_elements/<variant>``)."""
-    from femcoupling.region import PeriodicRegionElement
+    (``femcoupling.materials.dem_elements.PeriodicRegionElement``, kept in
+    ``out/region_elements/<variant>``)."""
+    from femcoupling.materials.dem_elements import PeriodicRegionElement
 
     return PeriodicRegionElement(n=p.n, seed=p.seed, prep_friction_deg=0.0, tol=0.02,
                                  unbalanced=1e-2, options=periodic_options(p),
@@ -151,14 +207,14 @@ def step_statuses(steps) -> dict:
 
 
 def hierarchical_status(hier: dict, fem_strain_increment, rotation_deg: float):
-    """The status of a hierarchical load stage (``femcoupling.status.judge_steps``) from its
-    record (``run_hierarchical``): its steps' statuses and residuals, and the element's (or
+    """The status of a hierarchical load stage (``femcoupling.coupling.status.judge_steps``) from
+    its record (``run_hierarchical``): its steps' statuses and residuals, and the element's (or
     the cells' volume mean) strain increment against its FEM region's (compression
     positive). The periodic elements take the full tensor: the axes are reported, not
     checked."""
     from types import SimpleNamespace
 
-    from femcoupling.status import judge_steps
+    from femcoupling.coupling.status import judge_steps
 
     steps = [SimpleNamespace(status=st, residual=r, tol=t) for st, r, t in
              zip(hier["step_statuses"], hier["step_residuals"], hier["step_tols"])]
@@ -169,12 +225,13 @@ def hierarchical_status(hier: dict, fem_strain_increment, rotation_deg: float):
                        axes_rotation_deg=rotation_deg)
 
 
-def run_hierarchical(p: ElementParams, out: Path, variant: str, m, load) -> dict:
+def run_hierarchical(p: Params, out: Path, variant: str, m, load) -> dict:
     """The load stage with the region's material a periodic DEM element inside the FEM's
-    Newton (``SoilModel.set_region_element``, ``femcoupling.region.DemRegionMaterial``),
-    from the model's current (initial) state; with ``p.cell_elements`` an element per cell
-    (``run_cell_elements``). Returns the record of the summary."""
-    from femcoupling.region import DemRegionMaterial
+    Newton (``SoilModel.set_region_element``,
+    ``femcoupling.materials.dem_elements.DemRegionMaterial``), from the model's current (initial)
+    state; with ``p.cell_elements`` an element per cell (``run_cell_elements``). Returns the record
+    of the summary."""
+    from femcoupling.materials.dem_elements import DemRegionMaterial
 
     if p.cell_elements:
         return run_cell_elements(p, out, variant, m, load)
@@ -207,15 +264,15 @@ def run_hierarchical(p: ElementParams, out: Path, variant: str, m, load) -> dict
             "wall_time_s": time.perf_counter() - t0}
 
 
-def run_cell_elements(p: ElementParams, out: Path, variant: str, m, load) -> dict:
+def run_cell_elements(p: Params, out: Path, variant: str, m, load) -> dict:
     """The load stage with every cell of the element region its own dense periodic element
-    (``SoilModel.set_cell_elements``; ``femcoupling.region.PoolRegionMaterials`` on
+    (``SoilModel.set_cell_elements``; ``femcoupling.materials.dem_elements.PoolRegionMaterials`` on
     ``p.workers`` Dask workers, element k packed with seed ``p.seed + k`` at its cell's
     stress, ``p.cell_grains`` grains each), from the model's current (initial) state.
     Returns the record of the summary."""
     from dataclasses import replace
 
-    from femcoupling.region import PoolRegionMaterials
+    from femcoupling.materials.dem_elements import PoolRegionMaterials
 
     t0 = time.perf_counter()
     cells = m.cell_stresses("element")
@@ -258,10 +315,11 @@ def run_cell_elements(p: ElementParams, out: Path, variant: str, m, load) -> dic
             "wall_time_s": time.perf_counter() - t0}
 
 
-def loop_runner(p: ElementParams, out: Path, variant: str):
+def loop_runner(p: Params, out: Path, variant: str):
     """The two-way loop's element runner (``p.two_way_element``): the case's element, or a
-    dense periodic element of its grains (``femcoupling.region.PeriodicRegionElement``, kept
-    between iterations in ``out/region_elements/<variant>``)."""
+    dense periodic element of its grains
+    (``femcoupling.materials.dem_elements.PeriodicRegionElement``, kept between iterations in
+    ``out/region_elements/<variant>``)."""
     if p.two_way_element == "walls":
         return _Runner(p, out, variant)
     return periodic_runner(p, out, variant)
@@ -275,7 +333,7 @@ POISSON_MAX = 0.45
 def _element_secant(e: dict) -> tuple[float, float, float]:
     """(E Pa, nu fitted, nu) of an element summary's secant over its last stage (nu at most
     POISSON_MAX, E refitted then)."""
-    from femcoupling.handover import secant_stiffness
+    from femcoupling.coupling.handover import secant_stiffness
 
     ds = np.subtract(e["stress_final_pa"], e["stress_initial_pa"])  # compression positive
     de = np.asarray(e["strain_increment"], float)
@@ -288,8 +346,8 @@ def _element_secant(e: dict) -> tuple[float, float, float]:
     return E, nu_raw, nu
 
 
-def calibrate_soil(p: ElementParams, out: Path, *, max_passes: int = 4,
-                   keep: dict | None = None) -> tuple[ElementParams, dict]:
+def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
+                   keep: dict | None = None) -> tuple[Params, dict]:
     """One soil on both scales (the default of the FEM modes): the FEM soil set to the case's
     own element, by passes. Each pass solves the RE FEM with the current soil, drives the
     case's element (the same grains, preparation and seed as the run's, so the same
@@ -312,9 +370,9 @@ def calibrate_soil(p: ElementParams, out: Path, *, max_passes: int = 4,
     ``calibration.json``). With ``keep`` (a dict) and a converged calibration, keep["RE"] is
     the last pass's ``run_fem`` result: the RE FEM with the returned soil, already solved
     (``run_variant(fem=)`` takes it instead of solving it again)."""
-    from femcoupling.calibration import friction_angle_deg
-    from femcoupling.status import strain_ratio_held
-    from femcoupling.twoway import check_region
+    from femcoupling.coupling.continuum_fit import friction_angle_deg
+    from femcoupling.coupling.status import strain_ratio_held
+    from femcoupling.coupling.twoway import check_region
 
     t0 = time.perf_counter()
     q = p
@@ -384,10 +442,10 @@ def calibrate_soil(p: ElementParams, out: Path, *, max_passes: int = 4,
     return replace(q, soil_friction=p.soil_friction, soil_cohesion=0.0), rec
 
 
-def fem_model(p: ElementParams, prestressed: bool):
+def fem_model(p: Params, prestressed: bool):
     """The FEM model of the structure in its initial state (geostatic, then the prestress)."""
-    from femcoupling.elastoplastic import SoilModel
-    from femcoupling.materials import DruckerPrager, GeogridLayerMaterial
+    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.materials.continuum import DruckerPrager, GeogridLayerMaterial
 
     J = grid_stiffness_per_metre(p)
     layer = GeogridLayerMaterial(axial_stiffness_n_per_m=J,
@@ -409,7 +467,7 @@ def plot_fem(m, png: Path, title: str) -> None:
     import matplotlib.pyplot as plt
     from matplotlib.collections import PolyCollection
 
-    from femcoupling.materials import mandel_to_tensor
+    from femcoupling.materials.continuum import mandel_to_tensor
 
     g = m.mesh.geometry
     cells = g.dofmaps[0][: m.n_owned]
@@ -446,10 +504,10 @@ def plot_fem(m, png: Path, title: str) -> None:
     plt.close(fig)
 
 
-def run_fem(p: ElementParams, out: Path, variant: str) -> tuple:
+def run_fem(p: Params, out: Path, variant: str) -> tuple:
     """FEM of the structure for RE or PRS; returns (initial, final) WallTargets, the model,
     and numbers for the report."""
-    from femcoupling.twoway import one_way
+    from femcoupling.coupling.twoway import one_way
 
     t0 = time.perf_counter()
     prestressed = variant == "PRS"
@@ -519,14 +577,14 @@ VARIANTS = ("RE", "PRS")
 HISTORY_REGIONS = [f"element_{v}" for v in VARIANTS]
 
 
-def run_variant(p: ElementParams, out: Path, variant: str, fem: tuple | None = None) -> dict:
+def run_variant(p: Params, out: Path, variant: str, fem: tuple | None = None) -> dict:
     """One variant (RE or PRS) of the FEM mode: its FEM (``fem``: a ``run_fem`` result of this
     variant with ``p``'s soil, already solved: the calibration's last pass), the two-way loop
     if asked, then the case's element driven to the (coupled) targets. Its handover rows go to
     ``out/handover_<variant>.h5`` (``run`` merges them into handover.h5). Returns the
     summary parts: {"fem": ..., "element": ..., "two_way": ... or None, "hierarchical": ...
     or None}."""
-    from femcoupling.twoway import HandoverHistory, check_region, region_targets, two_way
+    from femcoupling.coupling.twoway import HandoverHistory, check_region, region_targets, two_way
 
     # One thread unless asked (as run_element): the periodic elements prepared here before it
     # ran with OpenMP's default, and two variants side by side then took 23 x longer.
@@ -562,7 +620,7 @@ def run_variant(p: ElementParams, out: Path, variant: str, fem: tuple | None = N
             stiff = tw.stiffnesses.get("element")
             st = tw.regions["element"]
             # status, reason, final_change, tol, axes_rotation_deg, dem_fem_strain_ratio,
-            # checks: the loop's element against its region (femcoupling.status)
+            # checks: the loop's element against its region (femcoupling.coupling.status)
             resp = tw.responses.get("element")
             tws = {"element": p.two_way_element, **st.as_dict(),
                    # the loop element's porosity (periodic: dense; the case's element's is

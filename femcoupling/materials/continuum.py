@@ -28,7 +28,7 @@ import math
 import numpy as np
 import numpy.typing as npt
 
-from femcoupling.geometry import FemInputError, _pos, _real
+from femcoupling._checks import FemInputError, _pos, _real
 
 __all__ = ["LinearElastic", "AnisotropicElastic", "DruckerPrager", "GeogridLayerMaterial",
            "elastic_tangent", "isotropic_projection", "stiffness_block",
@@ -72,10 +72,8 @@ class LinearElastic:
 
     def at_points(self, stress_pa: npt.ArrayLike):
         """This material at quadrature points whose committed stress is ``stress_pa``
-        ((n, ncomp) Mandel, Pa): a ``femcoupling.quadrature.QuadratureMaterial``
+        ((n, ncomp) Mandel, Pa): a ``femcoupling.fem.quadrature.QuadratureMaterial``
         (``DruckerPragerPoints`` on this material's cone; an elastic one never yields)."""
-        from femcoupling.quadrature import DruckerPragerPoints
-
         a, b, k = self.dp_parameters()
         return DruckerPragerPoints(bulk_pa=self.bulk_pa, shear_pa=self.shear_pa, alpha=a,
                                    beta=b, k_pa=k, stress_pa=stress_pa)
@@ -119,7 +117,7 @@ class AnisotropicElastic(LinearElastic):
     takes its (xx, zz, yy, xz) rows and columns (``PLANE_STRAIN_OF_3D``). ``young_pa`` and
     ``poisson`` are those of its isotropic projection (:func:`isotropic_projection`), for what
     needs an isotropic value (the at-rest coefficient). It never yields. The two-way loop
-    gives it to a region from the DEM element's tangent (:mod:`femcoupling.twoway`)."""
+    gives it to a region from the DEM element's tangent (:mod:`femcoupling.coupling.twoway`)."""
 
     c_mandel_pa: tuple = ()
 
@@ -144,10 +142,8 @@ class AnisotropicElastic(LinearElastic):
 
     def at_points(self, stress_pa: npt.ArrayLike):
         """This material at quadrature points whose committed stress is ``stress_pa``
-        ((n, ncomp) Mandel, Pa): ``femcoupling.quadrature.ElasticPoints`` with the full
+        ((n, ncomp) Mandel, Pa): :class:`ElasticPoints` with the full
         stiffness (never yields)."""
-        from femcoupling.quadrature import ElasticPoints
-
         stress = np.asarray(stress_pa, float)
         c = self.matrix(stress.shape[1])
         return ElasticPoints(np.repeat(c[None], len(stress), axis=0), stress)
@@ -207,7 +203,7 @@ class GeogridLayerMaterial:
         axial_stiffness_n_per_m: geogrid tensile stiffness J, N/m (the band gets E = J / t).
         prestress_n_per_m: prestress force per metre width T_p, N/m, >= 0 (PRS, 002): an
             initial tensile stress T_p / t along x in the band, equilibrated with the soil
-            by :meth:`femcoupling.elastoplastic.SoilModel.apply_prestress`.
+            by :meth:`femcoupling.fem.soil_model.SoilModel.apply_prestress`.
         poisson: Poisson's ratio of the band, -.
     """
 
@@ -350,3 +346,75 @@ def drucker_prager_return(sig_trial: npt.NDArray[np.float64], *, bulk_pa, shear_
             tangent[a_idx] = APEX_TANGENT_FRACTION * C[a_idx]
             dlam[a_idx] = -1.0
     return sig, tangent, dlam
+
+
+# ---- the laws at quadrature points (femcoupling.fem.quadrature.QuadratureMaterial) ----------
+
+class _StressPoints:
+    """The committed and trial stress of ``n`` continuum points (Mandel, Pa)."""
+
+    plastic: np.ndarray
+
+    def __init__(self, stress_pa: np.ndarray) -> None:
+        self.stress_n = np.array(stress_pa, float)
+        if self.stress_n.ndim != 2:
+            raise ValueError(f"stress_pa: shape {self.stress_n.shape}; (n, ncomp) expected")
+        self.stress = self.stress_n.copy()  #: the last trial's stress
+        self.plastic = np.zeros(len(self.stress_n))
+
+    @property
+    def n(self) -> int:
+        return len(self.stress_n)
+
+    def commit(self) -> None:
+        """The last trial's stress becomes the committed one."""
+        self.stress_n = self.stress.copy()
+
+    def state(self) -> np.ndarray:
+        """The committed stress, (n, ncomp), Pa."""
+        return self.stress_n.copy()
+
+    def set_state(self, data: np.ndarray) -> None:
+        """Return to a committed stress ``data`` ((n, ncomp), Pa)."""
+        data = np.array(data, float)
+        if data.shape != self.stress_n.shape:
+            raise ValueError(f"set_state: shape {data.shape}; {self.stress_n.shape} expected")
+        self.stress_n, self.stress = data, data.copy()
+
+
+class ElasticPoints(_StressPoints):
+    """Linear elastic points: ``stiffness_pa`` (n, ncomp, ncomp) Mandel (isotropic or full
+    anisotropic), committed stress ``stress_pa`` (n, ncomp). ``trial(strain increment
+    (n, ncomp))`` gives sigma_n + C d_eps and C."""
+
+    def __init__(self, stiffness_pa: np.ndarray, stress_pa: np.ndarray) -> None:
+        super().__init__(stress_pa)
+        self.C = np.ascontiguousarray(stiffness_pa, dtype=float)
+        if self.C.shape != (self.n,) + (self.stress_n.shape[1],) * 2:
+            raise ValueError(f"stiffness_pa: shape {self.C.shape}; (n, ncomp, ncomp) expected")
+
+    def trial(self, increment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        self.stress = self.stress_n + np.einsum("nij,nj->ni", self.C, increment)
+        return self.stress, self.C.copy()
+
+
+class DruckerPragerPoints(_StressPoints):
+    """Drucker–Prager points (:func:`drucker_prager_return`): moduli
+    ``bulk_pa``, ``shear_pa`` and cone ``alpha``, ``beta``, ``k_pa`` ((n,) or scalars; k = inf
+    never yields), committed stress ``stress_pa`` (n, ncomp). ``trial`` gives the returned
+    stress and the consistent tangent; ``plastic`` is the last trial's plastic multiplier per
+    point (0 elastic, -1 apex)."""
+
+    def __init__(self, *, bulk_pa, shear_pa, alpha, beta, k_pa, stress_pa) -> None:
+        super().__init__(stress_pa)
+        full = lambda a: np.array(np.broadcast_to(np.asarray(a, float), (self.n,)))  # noqa: E731
+        self.K, self.G = full(bulk_pa), full(shear_pa)
+        self.alpha, self.beta, self.k = full(alpha), full(beta), full(k_pa)
+        self.C = elastic_tangent(self.K, self.G, self.stress_n.shape[1])
+
+    def trial(self, increment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        sig_tr = self.stress_n + np.einsum("nij,nj->ni", self.C, increment)
+        sig, tan, dl = drucker_prager_return(sig_tr, bulk_pa=self.K, shear_pa=self.G,
+                                             alpha=self.alpha, beta=self.beta, k_pa=self.k)
+        self.stress, self.plastic = sig, dl
+        return sig, tan

@@ -1,7 +1,7 @@
 """A periodic DEM element for the region mode (issue 18): it takes the FEM region's full
 stress tensor, shear included, where the wall-bounded element takes three normal stresses.
 
-``PeriodicRegionElement`` is an ``element_runner`` for :func:`femcoupling.twoway.two_way`
+``PeriodicRegionElement`` is an ``element_runner`` for :func:`femcoupling.coupling.twoway.two_way`
 (picklable, so it runs in the loop's worker processes). For a region it
 
 1. prepares a periodic ``DemElement`` (``n`` grains, dense: grown frictionless, then at the
@@ -41,6 +41,12 @@ import time
 from pathlib import Path
 
 import numpy as np
+
+from femcoupling.coupling.handover import HandoverError, fem_to_dem, spd_floor
+from femcoupling.coupling.records import append_rows
+from femcoupling.coupling.twoway import ElementResponse
+from femcoupling.fem.quadrature import NewtonFailure
+from femcoupling.materials.continuum import voigt_to_mandel_stiffness
 
 __all__ = ["BAND_TANGENTS", "DemRegionMaterial", "PeriodicRegionElement",
            "PoolRegionMaterials", "servo", "trial_stiffness"]
@@ -188,8 +194,6 @@ class PeriodicRegionElement:
                 if f.name not in skip}
 
     def __call__(self, name: str, initial, final):
-        from femcoupling.twoway import ElementResponse
-
         t0 = time.perf_counter()
         el, cached = self.prepare(name, initial)
         e0, s_ini = el.strain(), el.stress()
@@ -231,9 +235,6 @@ def network_stiffness(element, min_eig_fraction: float = 1e-3, *,
     """A periodic element's tangent from its contact network (or the given 6 x 6 Voigt one),
     as a 6 x 6 Mandel stiffness made symmetric and positive definite (eigenvalues floored at
     ``min_eig_fraction`` of the largest), Pa."""
-    from femcoupling.handover import spd_floor
-    from femcoupling.materials import voigt_to_mandel_stiffness
-
     t = element.network_tangent()[0] if voigt is None else voigt
     return spd_floor(voigt_to_mandel_stiffness(t), min_eig_fraction)
 
@@ -245,9 +246,6 @@ def trial_stiffness(label: str, voigt, min_eig_fraction: float, increment,
     contacts opened: a cohesionless element stretched past its confinement) fails the Newton
     iterate (``NewtonFailure``: the model cuts the step and tries a shorter one), naming it
     by ``label``, its ``contacts`` and its strain ``increment``."""
-    from femcoupling.handover import HandoverError
-    from femcoupling.quadrature import NewtonFailure
-
     try:
         return network_stiffness(None, min_eig_fraction, voigt=voigt)
     except HandoverError as exc:
@@ -308,8 +306,6 @@ class DemRegionMaterial:
         """The material of region ``name``: ``runner``'s element (its grains, seed, cache)
         servo-controlled to ``stress_fem_pa`` (3 x 3, Pa, tension positive: the region's
         stress where the element takes over)."""
-        from femcoupling.handover import fem_to_dem
-
         el, _ = runner.prepare(name, fem_to_dem(stress_fem_pa))
         return cls(el, **kw)
 
@@ -339,8 +335,6 @@ class DemRegionMaterial:
         self._set(self.element, self._trial_tangent)
         self.steps += 1
         if self.records is not None:
-            from femcoupling.records import append_rows
-
             el = self.element
             append_rows(self.records, {
                 "step": [self.steps], "strain": [el.strain() - self._origin],
@@ -499,7 +493,7 @@ class PoolRegionMaterials:
                 for k, n in enumerate(self.names)}
 
     def trial(self, increments: dict) -> dict:
-        """``trial_many``: the group as one ``femcoupling.quadrature.QuadratureMaterial``
+        """``trial_many``: the group as one ``femcoupling.fem.quadrature.QuadratureMaterial``
         whose increment is the regions' (name -> 3 x 3)."""
         return self.trial_many(increments)
 
@@ -514,8 +508,6 @@ class PoolRegionMaterials:
         self.steps += 1
         if self.records is not None:
             import h5py
-
-            from femcoupling.records import append_rows
 
             n = len(self.names)
             append_rows(self.records, {
@@ -562,8 +554,6 @@ class _Prepare:
     distinct_seeds: bool = False
 
     def __call__(self, k: int):
-        from femcoupling.handover import fem_to_dem
-
         runner = (dataclasses.replace(self.runner, seed=self.runner.seed + k)
                   if self.distinct_seeds else self.runner)
         return runner.prepare(self.names[k], fem_to_dem(self.stresses[k]))[0]

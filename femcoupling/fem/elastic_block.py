@@ -1,9 +1,11 @@
-"""Linear-elastic rectangular block: gmsh geometry -> dolfinx mesh -> solve -> stresses.
+"""The toolchain check: a linear-elastic rectangular block, gmsh geometry -> dolfinx mesh ->
+solve -> stresses, against its closed-form answer.
 
 The first, smallest piece of the continuum side. It proves the toolchain
 (gmsh, :func:`dolfinx.io.gmsh.model_to_mesh`, :class:`dolfinx.fem.petsc.LinearProblem`)
 and the shape of the FEM -> DEM boundary: plain NumPy values in a dataclass,
-no dolfinx type crosses it.
+no dolfinx type crosses it. (The meshing step it shares with the other models is
+:mod:`femcoupling.fem.gmsh_mesh`.)
 
 Problem (SI units throughout)::
 
@@ -26,17 +28,18 @@ positive along +z.
 
 from __future__ import annotations
 
-import contextlib
 import dataclasses
 import itertools
 import math
-from collections.abc import Iterator
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
+from femcoupling import _dolfinx
 from femcoupling._checks import _CELLS_PER_SIZE, _check_cells, _pos, _real
+from femcoupling.fem.gmsh_mesh import GMSH_RANK, gmsh_mesh_on_root
+from femcoupling.fem.quadrature import lu_package
 
 __all__ = ["ElasticBlockResult", "solve_elastic_block"]
 
@@ -53,7 +56,6 @@ X_MIN_TAG = 3
 Y_MIN_TAG = 4
 """Facet tag of the face y = 0 (symmetry plane, u_y = 0)."""
 
-_GMSH_RANK = 0  # rank that builds the gmsh model; model_to_mesh distributes from it
 _problem_counter = itertools.count()  # unique PETSc options prefix per solve
 
 
@@ -106,76 +108,6 @@ def _validate(
         raise ValueError(f"degree={degree!r}: must be 1 or 2")
     _check_cells(f"mesh_size_m={h!r}", _CELLS_PER_SIZE[3] * lx * ly * lz / h**3, max_cells, 3)
     return lx, ly, lz, young, nu, traction, h, int(degree)
-
-
-@contextlib.contextmanager
-def _gmsh_model(name: str) -> Iterator[Any]:
-    """Yield the ``gmsh`` module with a fresh current model called ``name``, quiet.
-
-    Initialises gmsh if needed (and finalises it afterwards); if the caller
-    already has a gmsh session, it is reused: the new model is removed and the
-    caller's current model and the options touched here are restored on exit.
-    """
-    import gmsh
-
-    owns_session = not gmsh.isInitialized()
-    if owns_session:
-        # interruptible=False: the default replaces Python's SIGINT handler for
-        # the rest of the process. No config files: the mesh must not depend on
-        # the user's gmshrc.
-        gmsh.initialize(readConfigFiles=False, interruptible=False)
-        # (gmsh sets SIGTERM, SIGHUP, SIGQUIT and SIGPIPE back to their defaults: a
-        # SIGTERM then killed a run at once, its manifest left "running"; SIGHUP is left
-        # at its default, as gmsh leaves it)
-        from femcoupling._dolfinx import restore_python_signal_handlers
-
-        restore_python_signal_handlers(("SIGTERM", "SIGINT", "SIGQUIT", "SIGPIPE"))
-    touched_options = ("General.Terminal", "Mesh.MeshSizeMin", "Mesh.MeshSizeMax")
-    saved_options = {key: gmsh.option.getNumber(key) for key in touched_options}
-    previous_model = None if owns_session else gmsh.model.getCurrent()
-    try:
-        gmsh.option.setNumber("General.Terminal", 0)
-        gmsh.model.add(name)
-        try:
-            yield gmsh
-        finally:
-            gmsh.model.setCurrent(name)
-            gmsh.model.remove()
-    finally:
-        if owns_session:
-            gmsh.finalize()
-        else:
-            for key, value in saved_options.items():
-                gmsh.option.setNumber(key, value)
-            if previous_model is not None:
-                with contextlib.suppress(Exception):
-                    gmsh.model.setCurrent(previous_model)
-
-
-def gmsh_mesh_on_root(comm: Any, name: str, build: Any, *, gdim: int, what: str) -> Any:
-    """A dolfinx mesh built by gmsh on one rank and distributed: ``build(gmsh)`` makes the
-    geometry, physical groups and mesh in a fresh gmsh model ``name`` (rank 0's name is used
-    by every rank) on rank 0 of ``comm``; ``model_to_mesh`` distributes it. Returns its
-    ``MeshData`` (mesh, cell_tags, facet_tags). An exception in ``build`` raises
-    ``RuntimeError("gmsh failed to <what>: ...")`` on every rank, so that none hangs.
-    Collective."""
-    from femcoupling import _dolfinx
-
-    fx = _dolfinx.load()
-    name = comm.bcast(name, root=_GMSH_RANK)
-    with contextlib.ExitStack() as stack:
-        model, err = None, ""
-        if comm.rank == _GMSH_RANK:
-            try:
-                gmsh = stack.enter_context(_gmsh_model(name))
-                build(gmsh)
-                model = gmsh.model
-            except Exception as exc:  # reported on every rank so that none hangs
-                err = f"{type(exc).__name__}: {exc}"
-        err = comm.bcast(err, root=_GMSH_RANK)
-        if err:
-            raise RuntimeError(f"gmsh failed to {what}: {err}")
-        return fx.io_gmsh.model_to_mesh(model, comm, _GMSH_RANK, gdim=gdim)
 
 
 def _build_box(gmsh: Any, lx_m: float, ly_m: float, lz_m: float, mesh_size_m: float) -> None:
@@ -235,7 +167,7 @@ def solve_elastic_block(
     (physical groups: volume ``block``; faces ``bottom``, ``top``, ``x_min``,
     ``y_min``), converted by :func:`dolfinx.io.gmsh.model_to_mesh`, and solved
     with vector Lagrange elements and a direct LU solver (MUMPS; on more than one
-    rank ``femcoupling.quadrature.PARALLEL_LU``). The bottom
+    rank ``femcoupling.fem.quadrature.PARALLEL_LU``). The bottom
     face and the planes x = 0, y = 0 are rollers (zero normal displacement);
     the top face carries the traction ``-top_traction_pa * n``.
 
@@ -257,7 +189,7 @@ def solve_elastic_block(
             rank of ``comm`` must call this; gmsh runs on rank 0 only.
         max_cells: the most tetrahedra the mesh may have, estimated before meshing
             (4.63 per mesh_size_m^3 of volume); None is the default cap, 150 000
-            (femcoupling.geometry.ReinforcedSoilBody.max_cells).
+            (femcoupling.fem.geometry.ReinforcedSoilBody.max_cells).
 
     Returns:
         An :class:`ElasticBlockResult` (stresses tension-positive), the same on
@@ -271,9 +203,6 @@ def solve_elastic_block(
         lx_m, ly_m, lz_m, young_pa, poisson, top_traction_pa, mesh_size_m, degree, max_cells
     )
 
-    from femcoupling import _dolfinx
-    from femcoupling.quadrature import lu_package
-
     fx = _dolfinx.load()
     fem, ufl, PETSc, MPI = fx.fem, fx.ufl, fx.PETSc, fx.MPI
     if comm is None:
@@ -281,7 +210,7 @@ def solve_elastic_block(
 
     # --- geometry and mesh: gmsh on one rank, distributed by model_to_mesh ---
     # Rank 0's name for everyone: the PETSc options prefix must agree across ranks.
-    model_name = comm.bcast(f"femcoupling_elastic_block_{next(_problem_counter)}", root=_GMSH_RANK)
+    model_name = comm.bcast(f"femcoupling_elastic_block_{next(_problem_counter)}", root=GMSH_RANK)
     petsc_prefix = f"{model_name}_"
     mesh_data = gmsh_mesh_on_root(comm, model_name, lambda gmsh: _build_box(gmsh, lx, ly, lz, h),
                                   gdim=3, what="build the block")

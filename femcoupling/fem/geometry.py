@@ -38,8 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from femcoupling._checks import _CELLS_PER_SIZE, FemInputError, _check_cells, _pos, _real  # noqa: F401
-from femcoupling.elastic import gmsh_mesh_on_root
+from femcoupling import _dolfinx
+from femcoupling._checks import _CELLS_PER_SIZE, FemInputError, _check_cells, _pos, _real
+from femcoupling.fem.gmsh_mesh import gmsh_mesh_on_root
 
 __all__ = [
     "SOIL_TAG", "LAYER_TAG0", "REGION_TAG0", "BOTTOM", "TOP", "X_MIN", "X_MAX", "FOOTING",
@@ -67,7 +68,7 @@ class GeogridLayer:
         z_m: elevation of the layer's mid-plane, m (0 < z_m < height).
         x_min_m, x_max_m: horizontal extent, m.
         thickness_m: band thickness t, m; the layer's cells get Young's modulus J / t
-            (J the geogrid's axial stiffness, N/m) in :mod:`femcoupling.elastoplastic`.
+            (J the geogrid's axial stiffness, N/m) in :mod:`femcoupling.fem.soil_model`.
         name: label used in reports and outputs.
     """
 
@@ -133,7 +134,7 @@ class ReinforcedSoilBody:
         max_cells: the most cells the mesh may have (estimated before gmsh meshes:
             :meth:`estimated_cells`); a body above it is refused. None (the default) is
             900 000 in 2D and 150 000 in 3D: about 12 GiB each for a Drucker-Prager
-            :class:`~femcoupling.elastoplastic.SoilModel` with P2 elements (13 KiB per
+            :class:`~femcoupling.fem.soil_model.SoilModel` with P2 elements (13 KiB per
             triangle, 79 KiB per tetrahedron measured, docs/fem.md), half of a 24 GiB
             machine; raise it to mesh more on a bigger one.
 
@@ -469,8 +470,6 @@ def _build(gmsh: Any, body: ReinforcedSoilBody) -> None:
 
 def build_mesh(body: ReinforcedSoilBody, *, comm: Any = None) -> MeshBundle:
     """Build the body in gmsh (rank 0) and distribute it with ``model_to_mesh``. Collective."""
-    from femcoupling import _dolfinx
-
     fx = _dolfinx.load()
     if comm is None:
         comm = fx.MPI.COMM_WORLD

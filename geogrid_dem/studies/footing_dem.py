@@ -8,7 +8,7 @@ surcharge ``surcharge_pa`` on the rest of the top, smooth sides and bottom, no g
 models start from the isotropic stress q = ``surcharge_pa`` everywhere, and the footing is
 pushed down to the same settlements; both relax to equilibrium at each (quasi-static).
 
-- :func:`fem_dem_footing`: ``femcoupling.hierarchical.HierarchicalPlaneStrain`` with
+- :func:`fem_dem_footing`: ``femcoupling.coupling.hierarchical.HierarchicalPlaneStrain`` with
   ``platens="footing"`` (nx by ny cells of triangles, a periodic element at each quadrature
   point: one per P1 triangle, three per P2), the footing's pressure from its reaction.
 - The direct DEM is ``cpp_dem.protocols.footing`` (a box of the grains between smooth walls,
@@ -69,7 +69,7 @@ def fem_dem_footing(pool, *, length: float, depth: float, nx: int, ny: int, foot
     ``wall_s``. With ``out``: ``footing_fem_dem.csv`` (a row per settlement, appended and
     flushed as each is reached) and the model's records in ``out/records``."""
     from cpp_dem.protocols.footing import check_settlements
-    from femcoupling.hierarchical import HierarchicalPlaneStrain, NewtonFailure
+    from femcoupling.coupling.hierarchical import HierarchicalPlaneStrain, NewtonFailure
 
     s_targets = check_settlements(settlements_m, depth)
     t0 = time.perf_counter()

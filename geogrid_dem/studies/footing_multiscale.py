@@ -2,7 +2,7 @@
 soil in plane strain, with a DEM element at every cell of the zone under the footing; or, with
 ``dim = 3``, a square footing in 3D.
 
-The body (``femcoupling.geometry``: the half next to the symmetry plane x = 0, z up) has
+The body (``femcoupling.fem.geometry``: the half next to the symmetry plane x = 0, z up) has
 a square zone of edge b (the footing's half width) right under the footing. In 3D the body is
 the quarter next to the planes x = 0 and y = 0 under a square footing 2b x 2b, ``width`` in x
 and in y, and the zone a cube of edge b under it; the layer covers the body across y. The
@@ -11,21 +11,21 @@ run:
 1. **Calibration.** The Drucker–Prager soil outside the zone is fitted on an element of the
    zone's own grains: E and nu its secant along the zone's mean stress path in a first FEM
    of the unreinforced body (from the seating pressure to the largest,
-   ``femcoupling.calibration.fit_along_path``), phi the peak of its plane-strain biaxial
+   ``femcoupling.coupling.continuum_fit.fit_along_path``), phi the peak of its plane-strain biaxial
    test at the path's final mean pressure; no cohesion (:func:`calibrate`).
 2. **Variants** ``unreinforced``, ``RE`` (one geogrid layer: an elastic band of axial
    stiffness J, N/m) and ``PRS`` (the same layer with its prestress T_p locked in,
    ``SoilModel.apply_prestress``). Each starts geostatic (K0), the footing is seated to
    ``seat_pa`` as a rigid smooth footing with the fitted soil everywhere, and then every
    soil cell of the zone takes its own dense periodic DEM element, prepared at that cell's
-   stress (``SoilModel.set_cell_elements``, ``femcoupling.region.PoolRegionMaterials`` on
-   Dask workers: element k of seed s packed with seed ``1000 s + k``). The layer's cells
-   inside the zone stay the FEM band, or, with ``band_grains`` > 0, each gets a reinforced
-   RVE (``femcoupling.region.ReinforcedBandElement``: the woven sheet and grains, the sheet
-   at the band cell's tension, the grains at the pressure of the zone's soil cells around
-   it; band element j packed with seed ``1000 s + 500 + j``, 100 further at each new
-   preparation attempt) in the same pool. The footing
-   is then pushed to each load level in turn
+   stress (``SoilModel.set_cell_elements``,
+   ``femcoupling.materials.dem_elements.PoolRegionMaterials`` on Dask workers: element k of seed s
+   packed with seed ``1000 s + k``). The layer's cells inside the zone stay the FEM band, or, with
+   ``band_grains`` > 0, each gets a reinforced RVE
+   (``femcoupling.materials.dem_elements.ReinforcedBandElement``: the woven sheet and grains, the
+   sheet at the band cell's tension, the grains at the pressure of the zone's soil cells around it;
+   band element j packed with seed ``1000 s + 500 + j``, 100 further at each new preparation
+   attempt) in the same pool. The footing is then pushed to each load level in turn
    (``load_footing_to_pressure``); the settlement at each level is recorded where the
    footing stopped and at the level's own pressure (``at_level``).
 3. **The same body with the fitted Drucker–Prager everywhere** (the zone too), for each
@@ -46,8 +46,10 @@ from pathlib import Path
 
 import numpy as np
 
-from femcoupling.region import BAND_TANGENTS
-from femcoupling.soil_steps import NewtonDivergence
+from femcoupling.fem.soil_steps import NewtonDivergence
+from femcoupling.materials.dem_elements import BAND_TANGENTS
+from geogrid_dem.studies import biaxial
+from geogrid_dem.studies.prs_element import hierarchical_status, step_statuses
 
 VARIANTS = ("unreinforced", "RE", "PRS")
 #: The Voigt components of the elements' finite-difference tangents: the x-z plane's in plane
@@ -83,7 +85,7 @@ class FootingParams:
     band_grains: int = 0            #: grains of the reinforced RVE of each of the layer's
                                     #: cells in the zone (0: they stay the FEM's band)
     band_tangent: str = "network"   #: their tangent: "network" (with the sheet's bonds),
-                                    #: "network-elastic" or "fd-forward" (region.py)
+                                    #: "network-elastic" or "fd-forward" (dem_elements)
     radius_mean: float = 0.003      #: the grains' mean radius, m
     radius_spread: float = 0.2      #: radii uniform in r_mean (1 +- spread), -
     young: float = 50e6             #: grain Young's modulus (linear law), Pa
@@ -103,7 +105,7 @@ class FootingParams:
 
     def check(self) -> None:
         """Refuses a bad value, naming the field, the value and what is allowed."""
-        from femcoupling.geometry import FemInputError
+        from femcoupling import FemInputError
 
         def bad(name, allowed):
             raise FemInputError(f"{name}={getattr(self, name)!r}: must be {allowed}")
@@ -171,7 +173,7 @@ def body(p: FootingParams, reinforced: bool):
     """The body: the zone ``"zone"`` (edge b, under the footing, from the surface down) and,
     ``reinforced``, one geogrid layer ``layer_depth`` below the surface; plane strain, or
     (``p.dim`` 3) the quarter of a square footing, the body ``width`` in x and in y."""
-    from femcoupling.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
+    from femcoupling.fem.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
 
     b, h = p.footing_b, p.height
     layers = (GeogridLayer(z_m=h - p.layer_depth, x_min_m=0.0, x_max_m=p.layer_length,
@@ -188,8 +190,8 @@ def body(p: FootingParams, reinforced: bool):
 def model(p: FootingParams, variant: str, soil):
     """The FEM model of ``variant`` with ``soil`` (a DruckerPrager) everywhere: geostatic,
     then (PRS) the prestress locked in, then the footing seated to ``seat_pa``."""
-    from femcoupling.elastoplastic import SoilModel
-    from femcoupling.materials import GeogridLayerMaterial
+    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.materials.continuum import GeogridLayerMaterial
 
     reinforced = variant != "unreinforced"
     layers = [GeogridLayerMaterial(axial_stiffness_n_per_m=p.grid_stiffness,
@@ -239,12 +241,11 @@ def calibrate(p: FootingParams, log) -> tuple:
     """Step 1 of the module doc: (the fitted DruckerPrager, its record). E and nu: the
     secant of an element of the zone's grains (seed ``seeds[0]``) along the zone's mean stress
     path (``fit_along_path``); phi: the peak of a plane-strain biaxial test of that element
-    at the path's final mean pressure (``femcoupling.biaxial.direct_biaxial``, to 6 %
+    at the path's final mean pressure (``geogrid_dem.studies.biaxial.direct_biaxial``, to 6 %
     axial strain; sin phi = (s1 - s3) / (s1 + s3)); no cohesion."""
     from cpp_dem.elements.periodic import DemElement
-    from femcoupling import biaxial
-    from femcoupling.calibration import fit_along_path
-    from femcoupling.materials import DruckerPrager
+    from femcoupling.coupling.continuum_fit import fit_along_path
+    from femcoupling.materials.continuum import DruckerPrager
 
     t0 = time.perf_counter()
     soil0 = DruckerPrager(young_pa=p.soil_young, poisson=p.soil_poisson, cohesion_pa=0.0,
@@ -334,9 +335,8 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
     """Step 2 of the module doc for one variant and seed: the record of the summary.
     ``first_slope``: the continuum's pressure–settlement slope over the first level (Pa/m),
     where the footing's first step is sized from."""
-    from femcoupling.drivers.prs_element import hierarchical_status, step_statuses
-    from femcoupling.region import (PeriodicRegionElement, PoolRegionMaterials,
-                                    ReinforcedBandElement)
+    from femcoupling.materials.dem_elements import (PeriodicRegionElement, PoolRegionMaterials,
+                                                    ReinforcedBandElement)
 
     t0 = time.perf_counter()
     m = continuum(f"{variant} seed {seed}: the seating before the DEM zone takes over",
@@ -567,7 +567,7 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
     is reached, flushed), ``calibration.json``, ``summary.json`` and
     ``load_settlement.png``. Returns the summary."""
     from cpp_dem.elements.cluster import local_client
-    from femcoupling.status import exit_code, worst
+    from femcoupling.coupling.status import exit_code, worst
 
     p.check()
     t0 = time.perf_counter()

@@ -1,8 +1,8 @@
 """Scales that agree (issue 18): fit the FEM soil (Drucker–Prager matched to Mohr–Coulomb) to
 a DEM element along the stress path of its FEM region.
 
-:func:`fit_along_path` drives a dense periodic element (``femcoupling.region``) from the
-region's initial stress tensor along the straight path to its loaded one, and on beyond it,
+:func:`fit_along_path` drives a dense periodic element (``femcoupling.materials.dem_elements``) from
+the region's initial stress tensor along the straight path to its loaded one, and on beyond it,
 sigma(t) = sigma_0 + t (sigma_1 - sigma_0), t = beyond / points, 2 beyond / points, ...,
 until a point cannot be reached (the element strains more than ``max_strain`` on the way: it
 is at its strength) or t = ``beyond``. Then
@@ -27,9 +27,10 @@ import math
 
 import numpy as np
 
-from femcoupling.geometry import FemInputError
-from femcoupling.handover import fem_to_dem, secant_stiffness
-from femcoupling.materials import DruckerPrager
+from femcoupling._checks import FemInputError
+from femcoupling.coupling.handover import fem_to_dem, secant_stiffness
+from femcoupling.materials.continuum import DruckerPrager
+from femcoupling.materials.dem_elements import PeriodicRegionElement, servo
 
 __all__ = ["PathFit", "fit_along_path", "friction_angle_deg"]
 
@@ -90,8 +91,6 @@ def fit_along_path(initial_pa, final_pa, *, n: int = 200, seed: int = 1,
     (3 x 3, Pa, tension positive) before and after the load; ``n``, ``seed``,
     ``prep_friction_deg``, ``options`` (more ``DemElement.periodic`` keywords: material,
     radius_mean, ...): the element (``PeriodicRegionElement``)."""
-    from femcoupling.region import PeriodicRegionElement, servo
-
     s0, s1 = np.asarray(initial_pa, float), np.asarray(final_pa, float)
     for name, v in (("initial_pa", s0), ("final_pa", s1)):
         if v.shape != (3, 3) or not np.all(np.isfinite(v)):

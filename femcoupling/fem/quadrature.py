@@ -1,21 +1,22 @@
 """One material interface and one Newton for every quadrature-point model of this package.
 
 Two models solve equilibrium with a stress and a tangent at quadrature points: the FEM soil
-(:class:`femcoupling.elastoplastic.SoilModel`: elastic, anisotropic elastic and
+(:class:`femcoupling.fem.soil_model.SoilModel`: elastic, anisotropic elastic and
 Drucker–Prager points, and DEM elements for element regions or cells) and the hierarchical
-FEM x DEM (:class:`femcoupling.hierarchical.HierarchicalPlaneStrain`: a DEM element at every
-quadrature point). Both use what this module gives:
+FEM x DEM (:class:`femcoupling.coupling.hierarchical.HierarchicalPlaneStrain`: a DEM element at
+every quadrature point). Both use what this module gives:
 
 :class:`QuadratureMaterial`
     the protocol of a material at a set of quadrature points: ``trial(increment)`` returns
     the stress and tangent of the points after ``increment`` (since the last commit),
     ``commit()`` keeps the last trial, ``state()``/``set_state(data)`` save and restore the
     committed state (bitwise), and optionally ``trial_many`` evaluates several members at once
-    (a Dask pool of DEM elements). :class:`ElasticPoints` (isotropic or anisotropic),
-    :class:`DruckerPragerPoints` (``LinearElastic.at_points``, ``AnisotropicElastic.
-    at_points``, ``DruckerPrager.at_points``), ``femcoupling.region.DemRegionMaterial``,
-    ``femcoupling.region.PoolRegionMaterials`` and ``femcoupling.hierarchical.
-    ElementPoolMaterial`` implement it.
+    (a Dask pool of DEM elements). ``femcoupling.materials.continuum.ElasticPoints``
+    (isotropic or anisotropic), ``femcoupling.materials.continuum.DruckerPragerPoints``
+    (``LinearElastic.at_points``, ``AnisotropicElastic.at_points``,
+    ``DruckerPrager.at_points``), ``femcoupling.materials.dem_elements.DemRegionMaterial``,
+    ``femcoupling.materials.dem_elements.PoolRegionMaterials`` and
+    ``femcoupling.coupling.hierarchical.ElementPoolMaterial`` implement it.
 :class:`QuadratureSystem`
     the dolfinx side: displacement and quadrature spaces, the internal force and Jacobian
     forms of a stress and a tangent at the points, the residual with lifted Dirichlet values,
@@ -52,9 +53,14 @@ from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
 
-__all__ = ["QuadratureMaterial", "ElasticPoints", "DruckerPragerPoints", "NewtonRules",
-           "NewtonOutcome", "NewtonFailure", "QuadratureSystem", "check_material",
-           "newton_solve", "lu_package", "NOISE_PROBE", "PARALLEL_LU"]
+from femcoupling import _dolfinx
+from femcoupling._checks import FemInputError
+from femcoupling.coupling.relaxation import next_factor
+from femcoupling.coupling.status import newton_acceptance
+
+__all__ = ["QuadratureMaterial", "NewtonRules", "NewtonOutcome", "NewtonFailure",
+           "QuadratureSystem", "check_material", "newton_solve", "lu_package", "NOISE_PROBE",
+           "PARALLEL_LU"]
 
 #: the relative change of every increment that measures the elements' noise
 NOISE_PROBE = 1e-9
@@ -111,87 +117,11 @@ def check_material(material: Any, name: str) -> Any:
     missing = [k for k in ("trial", "commit", "state", "set_state")
                if not callable(getattr(material, k, None))]
     if missing:
-        from femcoupling.geometry import FemInputError
-
         raise FemInputError(f"{name}={material!r}: needs a "
                             f"{', '.join(k + '()' for k in missing)} method (a femcoupling."
-                            "quadrature.QuadratureMaterial, as femcoupling.region."
-                            "DemRegionMaterial)")
+                            "fem.quadrature.QuadratureMaterial, as femcoupling.materials."
+                            "dem_elements.DemRegionMaterial)")
     return material
-
-
-class _StressPoints:
-    """The committed and trial stress of ``n`` continuum points (Mandel, Pa)."""
-
-    plastic: np.ndarray
-
-    def __init__(self, stress_pa: np.ndarray) -> None:
-        self.stress_n = np.array(stress_pa, float)
-        if self.stress_n.ndim != 2:
-            raise ValueError(f"stress_pa: shape {self.stress_n.shape}; (n, ncomp) expected")
-        self.stress = self.stress_n.copy()  #: the last trial's stress
-        self.plastic = np.zeros(len(self.stress_n))
-
-    @property
-    def n(self) -> int:
-        return len(self.stress_n)
-
-    def commit(self) -> None:
-        """The last trial's stress becomes the committed one."""
-        self.stress_n = self.stress.copy()
-
-    def state(self) -> np.ndarray:
-        """The committed stress, (n, ncomp), Pa."""
-        return self.stress_n.copy()
-
-    def set_state(self, data: np.ndarray) -> None:
-        """Return to a committed stress ``data`` ((n, ncomp), Pa)."""
-        data = np.array(data, float)
-        if data.shape != self.stress_n.shape:
-            raise ValueError(f"set_state: shape {data.shape}; {self.stress_n.shape} expected")
-        self.stress_n, self.stress = data, data.copy()
-
-
-class ElasticPoints(_StressPoints):
-    """Linear elastic points: ``stiffness_pa`` (n, ncomp, ncomp) Mandel (isotropic or full
-    anisotropic), committed stress ``stress_pa`` (n, ncomp). ``trial(strain increment
-    (n, ncomp))`` gives sigma_n + C d_eps and C."""
-
-    def __init__(self, stiffness_pa: np.ndarray, stress_pa: np.ndarray) -> None:
-        super().__init__(stress_pa)
-        self.C = np.ascontiguousarray(stiffness_pa, dtype=float)
-        if self.C.shape != (self.n,) + (self.stress_n.shape[1],) * 2:
-            raise ValueError(f"stiffness_pa: shape {self.C.shape}; (n, ncomp, ncomp) expected")
-
-    def trial(self, increment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        self.stress = self.stress_n + np.einsum("nij,nj->ni", self.C, increment)
-        return self.stress, self.C.copy()
-
-
-class DruckerPragerPoints(_StressPoints):
-    """Drucker–Prager points (``femcoupling.materials.drucker_prager_return``): moduli
-    ``bulk_pa``, ``shear_pa`` and cone ``alpha``, ``beta``, ``k_pa`` ((n,) or scalars; k = inf
-    never yields), committed stress ``stress_pa`` (n, ncomp). ``trial`` gives the returned
-    stress and the consistent tangent; ``plastic`` is the last trial's plastic multiplier per
-    point (0 elastic, -1 apex)."""
-
-    def __init__(self, *, bulk_pa, shear_pa, alpha, beta, k_pa, stress_pa) -> None:
-        from femcoupling.materials import elastic_tangent
-
-        super().__init__(stress_pa)
-        full = lambda a: np.array(np.broadcast_to(np.asarray(a, float), (self.n,)))  # noqa: E731
-        self.K, self.G = full(bulk_pa), full(shear_pa)
-        self.alpha, self.beta, self.k = full(alpha), full(beta), full(k_pa)
-        self.C = elastic_tangent(self.K, self.G, self.stress_n.shape[1])
-
-    def trial(self, increment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        from femcoupling.materials import drucker_prager_return
-
-        sig_tr = self.stress_n + np.einsum("nij,nj->ni", self.C, increment)
-        sig, tan, dl = drucker_prager_return(sig_tr, bulk_pa=self.K, shear_pa=self.G,
-                                             alpha=self.alpha, beta=self.beta, k_pa=self.k)
-        self.stress, self.plastic = sig, dl
-        return sig, tan
 
 
 # ---- Newton ----------------------------------------------------------------------------------
@@ -220,8 +150,6 @@ class NewtonRules:
     redraws: int = REDRAWS
 
     def __post_init__(self) -> None:
-        from femcoupling.geometry import FemInputError
-
         if not (self.probe_size == "correction" or (isinstance(self.probe_size, float)
                                                     and 0 < self.probe_size < 1)):
             raise FemInputError(f"probe_size={self.probe_size!r}: a relative change in (0, "
@@ -299,12 +227,9 @@ def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any 
                  log: Any = None) -> NewtonOutcome:
     """The Newton iteration of a load step on ``problem`` under ``rules`` (module doc);
     ``relaxation`` of the corrections ("none", "aitken" or a factor: ``femcoupling.
-    relaxation``; the first correction of a step is always a full one, as it also puts the
+    coupling.relaxation``; the first correction of a step is always a full one, as it also puts the
     displacement on its new boundary values); ``log(msg)`` gets a line per iteration. Returns
     the accepted step's :class:`NewtonOutcome`, or raises :class:`NewtonFailure`."""
-    from femcoupling.relaxation import next_factor
-    from femcoupling.status import newton_acceptance
-
     rel = noise_rel = float("nan")
     nscale = float("nan")
     omega, d_prev, omegas = 1.0, None, []
@@ -426,8 +351,6 @@ class QuadratureSystem:
 
     def __init__(self, mesh, *, degree: int, qdeg: int, ncomp: int, strain, loads=None,
                  lu: str | None = None) -> None:
-        from femcoupling import _dolfinx
-
         fx = self._fx = _dolfinx.load()
         fem, ufl = fx.fem, fx.ufl
         import basix

@@ -6,11 +6,11 @@ meshed by gmsh; the box's geometry is a set of hooks the cylinder replaces).
 The FEM is a box ``lx`` x ``ly`` x ``lz`` (m) of P1 tetrahedra (dolfinx's ``create_box``: six
 per hexahedron of an ``nx`` x ``ny`` x ``nz`` grid), one quadrature point each; the pool's
 element k is cell k. Everything else is the plane-strain mode's
-(:class:`femcoupling.hierarchical.HierarchicalPlaneStrain`): the elements as the points'
+(:class:`femcoupling.coupling.hierarchical.HierarchicalPlaneStrain`): the elements as the points'
 material (``ElementPoolMaterial(dim=3)``: each element takes the full displacement-gradient
 increment of its point, rotation included, and returns its stress and tangent in its own
 Voigt order xx, yy, zz, yz, xz, xy with engineering shear), Newton and its acceptance
-(``femcoupling.quadrature.newton_solve``), step cuts, records (``out=``) and statuses.
+(``femcoupling.fem.quadrature.newton_solve``), step cuts, records (``out=``) and statuses.
 
 Loading (``step``):
 
@@ -24,7 +24,7 @@ Loading (``step``):
 The force scale of the tolerance is the largest element stress times the box's volume to the
 power 2/3. Stresses are tension positive, Pa. The FEM is serial, or split over the ranks of
 ``comm`` with the elements' pool on rank 0 (as the plane-strain mode's;
-:mod:`femcoupling.mpi_points`). The secant tangent is plane strain only.
+:mod:`femcoupling.fem.mpi_points`). The secant tangent is plane strain only.
 """
 
 from __future__ import annotations
@@ -35,9 +35,10 @@ import math
 import numpy as np
 
 from femcoupling import _dolfinx
-from femcoupling.geometry import FemInputError
-from femcoupling.hierarchical import HierarchicalPlaneStrain
-from femcoupling.quadrature import QuadratureSystem, lu_package
+from femcoupling._checks import FemInputError
+from femcoupling.coupling.hierarchical import HierarchicalPlaneStrain
+from femcoupling.fem.gmsh_mesh import gmsh_mesh_on_root
+from femcoupling.fem.quadrature import NewtonFailure, QuadratureSystem, lu_package
 
 __all__ = ["Hierarchical3D", "HierarchicalCylinder", "cylinder_cells", "SECTIONS"]
 
@@ -210,8 +211,6 @@ class Hierarchical3D(HierarchicalPlaneStrain):
         return self._cut_steps(target, max_cuts)
 
     def _cut_steps(self, target, max_cuts: int):
-        from femcoupling.quadrature import NewtonFailure
-
         try:
             return self._step_to(target)
         except NewtonFailure:
@@ -255,8 +254,6 @@ def _cylinder_mesh(fx, radius: float, height: float, size: float, comm,
     quarter x, y >= 0 or the full cylinder (a node embedded at the bottom's centre, for its
     rigid-body constraints), of P1 tetrahedra about ``size`` (m) across, meshed by gmsh on
     rank 0 of ``comm`` (None: serial) and distributed: (mesh, facet tags ``CYL_*``)."""
-    from femcoupling.elastic import gmsh_mesh_on_root
-
     comm = fx.MPI.COMM_SELF if comm is None else comm
     kinds = ([CYL_BOTTOM, CYL_TOP, CYL_X0, CYL_Y0, CYL_SIDE] if section == "quarter"
              else [CYL_BOTTOM, CYL_TOP, CYL_SIDE])

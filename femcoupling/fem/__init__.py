@@ -1,0 +1,20 @@
+"""The FEM side: geometry, meshes and the models solved in dolfinx.
+
+- :mod:`femcoupling.fem.geometry`: the reinforced soil body (2D or 3D) in gmsh, its tagged
+  layers and element regions; :mod:`femcoupling.fem.gmsh_mesh`: gmsh on one rank, the mesh
+  distributed by dolfinx;
+- :mod:`femcoupling.fem.soil_model`: ``SoilModel``, the soil body's model (spaces, material
+  state, one load-step loop), with its parts :mod:`~femcoupling.fem.soil_loading` (the load
+  stages), :mod:`~femcoupling.fem.soil_regions` (regions with a material of their own),
+  :mod:`~femcoupling.fem.soil_measures` (what it gives out) and
+  :mod:`~femcoupling.fem.soil_steps` (a step's record, its failure);
+- :mod:`femcoupling.fem.quadrature`: the material interface at quadrature points, the spaces
+  and forms, and the one Newton with its acceptance rules;
+- :mod:`femcoupling.fem.mpi_points`: quadrature points split over MPI ranks, their materials
+  on rank 0;
+- :mod:`femcoupling.fem.elastic_block`: the toolchain check (a linear-elastic block against
+  its closed form).
+
+dolfinx, PETSc and MPI come from :mod:`femcoupling._dolfinx` on first use. Import the
+modules directly; this namespace imports nothing.
+"""
