@@ -76,6 +76,16 @@ def write_error(path: PathLike, exc: BaseException, kept: str = "") -> ResultWri
     return ResultWriteError(path, code, why, kept)
 
 
+def _interrupt_of(u) -> BaseException | None:
+    """The KeyboardInterrupt (a Ctrl-C, or a SIGTERM the cases turn into one) that an
+    unraisable report ``u`` carries, or None. One that lands in an h5py destructor reaches
+    ``sys.unraisablehook``, not the caller: the guards below raise it again on the way out,
+    or the run would go on, unstopped."""
+    if u.exc_type is not None and issubclass(u.exc_type, KeyboardInterrupt):
+        return u.exc_value or KeyboardInterrupt()
+    return None
+
+
 @contextlib.contextmanager
 def _quiet_unraisable():
     """Silences the reports that h5py's object destructors print (to ``sys.stderr``, or
@@ -87,9 +97,10 @@ def _quiet_unraisable():
     old = sys.unraisablehook
     interrupted: list[BaseException] = []
 
-    def hook(u):  # (a Ctrl-C that lands in a destructor is reported here: kept, not dropped)
-        if u.exc_type is not None and issubclass(u.exc_type, KeyboardInterrupt):
-            interrupted.append(u.exc_value or KeyboardInterrupt())
+    def hook(u):  # (the rest is silenced)
+        got = _interrupt_of(u)
+        if got is not None:
+            interrupted.append(got)
 
     sys.unraisablehook = hook
     try:
@@ -118,12 +129,11 @@ class _DeallocErrors:
         self._interrupt: BaseException | None = None
 
         def hook(u):
-            if u.exc_type is not None and issubclass(u.exc_type, KeyboardInterrupt):
-                # (a Ctrl-C or SIGTERM that lands in a destructor is reported here, not
-                # raised: it is raised again on the way out, or the run went on, unstopped)
-                self._interrupt = u.exc_value or KeyboardInterrupt()
-                return
-            self._hooked.append(f"{u.exc_type.__name__}: {u.exc_value}")
+            got = _interrupt_of(u)
+            if got is None:
+                self._hooked.append(f"{u.exc_type.__name__}: {u.exc_value}")
+            elif self._interrupt is None:
+                self._interrupt = got
 
         sys.unraisablehook = hook
         sys.stderr = self._buf
