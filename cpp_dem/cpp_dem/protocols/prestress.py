@@ -159,6 +159,7 @@ class Prestress:
         self.start = pos[self.pulled, self.axis].copy()
         self.stiffness = np.full(len(self.lines), np.nan)  # N/m per line (secant)
         self.locked = False
+        self._all = None  # every grid body, once tension_uniform holds them all
         self.history: list[dict] = []
 
     # ---- measuring ------------------------------------------------------------------------
@@ -271,10 +272,10 @@ class Prestress:
 
         good, done = 0, 0
         while done < max_steps:
-            f = self.line_forces()
             # (one strain for all lines: their mean is what it sets; their spread is the
             # lines' own, recorded in the row)
-            ok = abs(float(np.mean(f)) - self.target_n) <= self.tolerance * self.target_n
+            fm = float(np.mean(self.line_forces()))
+            ok = abs(fm - self.target_n) <= self.tolerance * self.target_n
             good = good + 1 if ok else 0
             if good >= self.settle_checks:
                 set_rate(0.0)
@@ -282,7 +283,6 @@ class Prestress:
                 return self.record()
             strain = float(np.mean((np.asarray(sc.positions)[bodies, ax] - centre)
                                    * (x0 - centre)) / np.mean((x0 - centre) ** 2)) - 1.0
-            fm = float(np.mean(f))
             if strain > 0 and fm > 0.05 * self.target_n:
                 stiffness = fm / strain
             rate = (self.gain * (self.target_n - fm) / (stiffness * self.period * sc.dt)
@@ -312,9 +312,8 @@ class Prestress:
     def unlock(self) -> None:
         """The grips let go: their bodies move freely again. The locked-in force then rests on
         whatever else holds the ends (an :class:`EndTension`, or nothing)."""
-        held = getattr(self, "_all", None)
-        self.scene.block_dofs(np.concatenate([self.held, self.pulled]) if held is None
-                              else held, "")
+        self.scene.block_dofs(np.concatenate([self.held, self.pulled]) if self._all is None
+                              else self._all, "")
         self.locked = False
 
 
@@ -365,15 +364,12 @@ class EndTension:
         return np.array([f[ms].mean() for ms in self.ends.line_members])
 
     def end_member_forces(self) -> np.ndarray:
-        """Tensile force of the members that hold an end body, N: where the pull enters the
-        grid (the applied line force, less what grains take up within half a member)."""
+        """Tensile force of the members of the grid's first and last cells along the pull, N:
+        where the pull enters the grid (the applied line force, less what grains take up
+        within half a member)."""
         e = self.ends
-        if getattr(self.grid, "tails", (0, 0))[e.axis] > 0:
-            # (pulled at the tails' tips, in no member: the members of the end cells)
-            along = np.asarray(self.grid.member_cell)[e.members, e.axis]
-            m = e.members[(along == along.min()) | (along == along.max())]
-        else:
-            end = np.concatenate([e.low, e.high])
-            m = [k for k in e.members
-                 if np.isin(_member_bodies(self.scene, self.grid, k), end).any()]
+        # The members of the first and last cells along the pull (the end bodies may be in no
+        # member: a woven grid's tails, a PFacet grid's end nodes).
+        along = np.asarray(self.grid.member_cell)[e.members, e.axis]
+        m = e.members[(along == along.min()) | (along == along.max())]
         return self.grid.member_axial_forces(self.scene)[m]
