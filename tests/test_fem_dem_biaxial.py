@@ -25,6 +25,16 @@ from geogrid_dem.studies import biaxial  # noqa: E402
 
 P, STRAIN = 100e3, 0.03
 FAC = PeriodicFactory(n=100, stress=P, isotropic=True, options={"prep_friction_deg": 0.0})
+#: Newton to 1e-3 of the internal force scale (the largest stress, 2-4 x P here, times the
+#: domain's size); past the peak the elements' noise (a 1e-9 change of their increments)
+#: moves the residual by 1e-3 to 4e-3, so a step is accepted within the noise
+#: (stopped_at_scatter), and only up to this ceiling. With the default ceiling (10 x
+#: newton_rtol) step 9 was accepted at 8.3e-3 (its lateral stress 6.2e-3 off) on two CPUs
+#: and passed on the one the test was written on: the noise's draw, so the rounding path,
+#: decided. With this ceiling that step is cut and taken at 3.3e-3. (Measured: the lateral
+#: stress's error in Pa is 0.2-1.1 x the residual in Pa; the largest error 2.8e-3 of P on
+#: this CPU's and OpenBLAS-Haswell's paths, 4.3e-3 on CPP_DEM_NARROW=1's.)
+CEILING = 4e-3
 
 
 @pytest.fixture(scope="module")
@@ -32,7 +42,7 @@ def fem_dem():
     with ElementPool.build(8, FAC, workers=2) as pool:
         return biaxial.fem_dem_biaxial(pool, lx=0.02, ly=0.04, nx=2, ny=2, pressure=P,
                                        strain=STRAIN, steps=10, newton_rtol=1e-3,
-                                       max_newton=25,
+                                       max_newton=25, noise_ceiling=CEILING,
                                        tangent="network-elastic", log=None,
                                        strain_kw={"unbalanced": 1e-5,
                                                   "max_relax_steps": 100_000})
@@ -45,7 +55,9 @@ def alone():
 
 
 def test_the_lateral_stress_is_the_confining_pressure(fem_dem, alone):
-    # the elements' mean lateral stress is the boundary's in equilibrium: Newton to 1e-3
+    # the elements' mean lateral stress is the boundary's in equilibrium: Newton to 1e-3, or
+    # within the elements' noise up to the ceiling
+    assert max(fem_dem["residual"]) <= CEILING
     assert np.abs(fem_dem["sigma_lateral"] / P - 1).max() < 5e-3
     for r in alone:
         assert np.abs(r["sigma_lateral"] / P - 1).max() < 0.02  # the cell's servo
