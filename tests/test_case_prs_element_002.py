@@ -242,30 +242,23 @@ def test_figures_on_shared_scales_measures_and_paraview_files(smoke):
         assert {int(r["stage"]) for r in rows} == {0, 1}
 
 
-def test_elements_side_by_side_give_the_serial_results(smoke, tmp_path):
-    """The smoke run puts its two packings on two processes (--workers 2, conftest); seed 2
-    run alone, serially, gives the same numbers, bitwise."""
-    import subprocess
-    import sys
-
-    from conftest import ROOT, SMOKE_ARGS
+def test_elements_side_by_side_give_the_serial_results(smoke, standard_runs):
+    """The smoke run puts its two packings on two processes (--workers 2, conftest); the
+    standard grid's two seeds run 2 at a time give the same numbers, bitwise, as the same
+    run made serially (and stopped by Ctrl-C after seed 1, then resumed: standard_runs)."""
+    from conftest import SMOKE_ARGS
 
     out, proc = smoke
     assert "--workers" in SMOKE_ARGS["prs_element_002"] and "2 at a time" in proc.stdout
-    alone = tmp_path / "alone"
-    r = subprocess.run([sys.executable, str(ROOT / "cases" / "prs_element_002.py"), "--smoke",
-                        "--out", str(alone), "--seeds", "2-2"],
-                       capture_output=True, text=True, timeout=900)
-    assert r.returncode == 0, r.stdout[-2000:] + r.stderr[-2000:]
-    a = json.loads((alone / "summary.json").read_text())["elements"]
-    b = json.loads((out / "summary.json").read_text())["elements"]
-    for label in ("detailed_RE_s2", "detailed_PRS_s2"):
+    serial, side, stdout = standard_runs["serial"], standard_runs["side"], standard_runs["stdout"]
+    assert "2 at a time" in stdout
+    a = json.loads((serial / "summary.json").read_text())["elements"]
+    b = json.loads((side / "summary.json").read_text())["elements"]
+    assert sorted(a) == sorted(b) and len(a) == 4
+    for label in a:
         for key in ("stress_final_pa", "stress_initial_pa", "strain_increment", "num_grains",
                     "prepared_sha256"):
             assert a[label][key] == b[label][key], (label, key)
-    # One seed: no verdict is possible.
-    f = json.loads((alone / "summary.json").read_text())["findings"]
-    assert f and all(x["verdict"] == "not resolved" and x["n"] == 1 for x in f)
 
 
 @pytest.mark.parametrize("args, msg", [
@@ -318,9 +311,16 @@ def test_the_preparation_grows_in_contact_and_does_not_start_over(smoke):
         assert np.all(np.diff(por) < 0.02), (seed, por)
 
 
-def test_ctrl_c_then_resume_keeps_the_finished_packing(tmp_path):
-    """Ctrl-C after seed 1's packing, then --resume: seed 1 is kept (its job file unchanged),
-    seed 2 runs, and the findings are over both."""
+#: the standard grid, its stresses given (no FEM run), 250 clumps: a small run of two seeds
+STANDARD_ARGS = ["--smoke", "--stresses", "20000,20000,40000", "--n", "250", "--grids",
+                 "standard", "--seeds", "1-2"]
+
+
+@pytest.fixture(scope="module")
+def standard_runs(tmp_path_factory):
+    """STANDARD_ARGS run serially, stopped by Ctrl-C once seed 1's packing is saved and then
+    resumed ("serial"; the first run's seed-1 job file's bytes and exit status and the
+    resumed run's process are kept), and run with --workers 2 ("side", its stdout)."""
     import signal
     import subprocess
     import sys
@@ -328,10 +328,10 @@ def test_ctrl_c_then_resume_keeps_the_finished_packing(tmp_path):
 
     from conftest import ROOT
 
-    out = tmp_path / "r"
-    args = [sys.executable, str(ROOT / "cases" / "prs_element_002.py"), "--smoke", "--out",
-            str(out), "--stresses", "20000,20000,40000", "--n", "250", "--grids", "standard",
-            "--seeds", "1-2"]
+    base = tmp_path_factory.mktemp("standard")
+    out = base / "r"
+    args = [sys.executable, str(ROOT / "cases" / "prs_element_002.py"), "--out", str(out),
+            *STANDARD_ARGS]
     proc = subprocess.Popen(args, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     job = out / "jobs" / "standard_s1.json"
     t0 = time.time()
@@ -341,13 +341,29 @@ def test_ctrl_c_then_resume_keeps_the_finished_packing(tmp_path):
     before = job.read_bytes()
     proc.send_signal(signal.SIGINT)
     _o, err = proc.communicate(timeout=300)
-    assert proc.returncode == 130, err[-2000:]
-    assert not (out / "jobs" / "standard_s2.json").exists()
-    p = subprocess.run([*args, "--resume"], capture_output=True, text=True, timeout=900)
+    second_started = (out / "jobs" / "standard_s2.json").exists()
+    resumed = subprocess.run([*args, "--resume"], capture_output=True, text=True, timeout=900)
+    side = base / "side"
+    p = subprocess.run([sys.executable, str(ROOT / "cases" / "prs_element_002.py"), "--out",
+                        str(side), *STANDARD_ARGS, "--workers", "2"],
+                       capture_output=True, text=True, timeout=900)
+    assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
+    return {"serial": out, "job": job, "job_before": before, "interrupted_rc": proc.returncode,
+            "interrupted_err": err, "second_started": second_started, "resumed": resumed,
+            "side": side, "stdout": p.stdout}
+
+
+def test_ctrl_c_then_resume_keeps_the_finished_packing(standard_runs):
+    """Ctrl-C after seed 1's packing, then --resume: seed 1 is kept (its job file unchanged),
+    seed 2 runs, and the findings are over both."""
+    r = standard_runs
+    assert r["interrupted_rc"] == 130, r["interrupted_err"][-2000:]
+    assert not r["second_started"]
+    p = r["resumed"]
     assert p.returncode == 0, p.stderr[-2000:]
     assert "--resume: standard seed 1 kept from the earlier run" in p.stdout
-    assert job.read_bytes() == before
-    s = json.loads((out / "summary.json").read_text())
+    assert r["job"].read_bytes() == r["job_before"]
+    s = json.loads((r["serial"] / "summary.json").read_text())
     assert sorted(s["elements"]) == [lb.replace("detailed", "standard") for lb in LABELS]
     assert all(f["n"] == 2 for f in s["findings"])
 
