@@ -12,7 +12,7 @@ lost every contact on the way (docs/periodic.md, docs/reliability.md).
   enough for a dense 60-grain element at 10 kPa) carries no stress and no stiffness; its
   stress, zero, is not a material's answer. :class:`ContactLossWarning` names the increment,
   the contacts before and the unbalanced force. (The FEM's Newton also fails such a trial, by
-  name: ``femcoupling.region.trial_stiffness``.)
+  name: ``femcoupling.materials.dem_elements.trial_stiffness``.)
 """
 
 from __future__ import annotations

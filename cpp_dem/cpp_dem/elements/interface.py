@@ -16,15 +16,16 @@ It is driven in one of two ways (one family, two ways in):
   ``contact_count()``, ``stress_scatter()``, ``network_tangent()`` and ``fd_tangent()`` give
   what a Newton iteration needs. ``cpp_dem.DemElement`` in both its kinds: a periodic cell
   (``DemElement.periodic``) or a box of six servo walls (``DemElement.box``). The
-  hierarchical mode and ``femcoupling.region.PoolRegionMaterials`` drive these
+  hierarchical mode and ``femcoupling.materials.dem_elements.PoolRegionMaterials`` drive these
   (``ElementPool.build`` / ``apply_strain``).
 - **target-driven** (``TargetElement``): ``run(initial, final)`` takes the FEM region's
-  state before and after the load (``femcoupling.twoway.WallTargets``) and returns the
-  element's answer (``femcoupling.twoway.ElementResponse``). ``RunnerElement`` makes one of a
-  two-way ``element_runner`` (a picklable callable ``runner(name, initial, final)``) and a
+  state before and after the load (``femcoupling.coupling.handover.WallTargets``) and
+  returns the element's answer (``femcoupling.coupling.twoway.ElementResponse``).
+  ``RunnerElement`` makes one of a two-way ``element_runner`` (a picklable callable ``runner(name, initial, final)``) and a
   region name: the case's walled box element with its geogrid
-  (``femcoupling.drivers.prs_element``) or a periodic element servo-controlled to the full
-  tensor (``femcoupling.region.PeriodicRegionElement``). The two-way loop drives these
+  (``geogrid_dem.studies.prs_element``) or a periodic element servo-controlled to the full
+  tensor (``femcoupling.materials.dem_elements.PeriodicRegionElement``). The two-way loop
+  drives these
   (``ElementPool.runners`` / ``run``).
 
 **A RunnerElement's bytes hold code** (its runner, pickled as Dask sends it), so they are

@@ -1,8 +1,8 @@
 """The byte format of saved element states: parsed, never executed.
 
 ``DemElement.to_bytes``, ``LinearElement.to_bytes``, ``RunnerElement.to_bytes`` and a region
-runner's ``state()`` (``femcoupling.region.PeriodicRegionElement``) write this format, and
-their ``from_bytes`` / ``set_state`` read it back. Nothing in it is unpickled: its plain
+runner's ``state()`` (``femcoupling.materials.dem_elements.PeriodicRegionElement``) write this
+format, and their ``from_bytes`` / ``set_state`` read it back. Nothing in it is unpickled: its plain
 values are JSON, its binary parts (a scene's checkpoint blob) raw bytes.
 
     offset      size  what

@@ -264,11 +264,11 @@ def plane_strain_biaxial(scene, *, pressure: float, strain: float,
                          strain_per_step: float = 5e-7, points: int = 100,
                          progress=None) -> dict:
     """A drained plane-strain biaxial test of a periodic cell, the direct-DEM reference of
-    ``femcoupling.hierarchical``'s biaxial: the cell's z is shortened at a constant rate
+    ``femcoupling.coupling.hierarchical``'s biaxial: the cell's z is shortened at a constant rate
     (``strain_per_step`` per step, -) to the axial ``strain`` (-, compression positive); x is
     servo-controlled to ``pressure`` (Pa, compression positive) with the x–z shear stress at
     zero; y (out of plane) and the other shears are held. The FEM's (x, y) is the cell's
-    (x, z), as in ``femcoupling.hierarchical.dem_increment``.
+    (x, z), as in ``femcoupling.coupling.hierarchical.dem_increment``.
 
     Returns arrays sampled ``points`` times (compression positive): ``axial_strain``,
     ``volumetric_strain`` (-tr of the small strain since the start), ``sigma_x``,
