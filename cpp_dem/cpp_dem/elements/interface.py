@@ -21,12 +21,11 @@ It is driven in one of two ways (one family, two ways in):
 - **target-driven** (``TargetElement``): ``run(initial, final)`` takes the FEM region's
   state before and after the load (``femcoupling.coupling.handover.WallTargets``) and
   returns the element's answer (``femcoupling.coupling.twoway.ElementResponse``).
-  ``RunnerElement`` makes one of a two-way ``element_runner`` (a picklable callable ``runner(name, initial, final)``) and a
-  region name: the case's walled box element with its geogrid
-  (``geogrid_dem.studies.prs_element``) or a periodic element servo-controlled to the full
-  tensor (``femcoupling.materials.dem_elements.PeriodicRegionElement``). The two-way loop
-  drives these
-  (``ElementPool.runners`` / ``run``).
+  ``RunnerElement`` makes one of a two-way ``element_runner`` (a picklable callable
+  ``runner(name, initial, final)``) and a region name: the case's walled box element with
+  its geogrid (``geogrid_dem.studies.prs_element``) or a periodic element servo-controlled to
+  the full tensor (``femcoupling.materials.dem_elements.PeriodicRegionElement``). The
+  two-way loop drives these (``ElementPool.runners`` / ``run``).
 
 **A RunnerElement's bytes hold code** (its runner, pickled as Dask sends it), so they are
 restored only in the session that made them: ``to_bytes`` signs them (HMAC-SHA-256) with the

@@ -1,9 +1,10 @@
 """The byte format of saved element states: parsed, never executed.
 
 ``DemElement.to_bytes``, ``LinearElement.to_bytes``, ``RunnerElement.to_bytes`` and a region
-runner's ``state()`` (``femcoupling.materials.dem_elements.PeriodicRegionElement``) write this
-format, and their ``from_bytes`` / ``set_state`` read it back. Nothing in it is unpickled: its plain
-values are JSON, its binary parts (a scene's checkpoint blob) raw bytes.
+runner's ``state()`` (``femcoupling.materials.dem_elements.PeriodicRegionElement``) write
+this format, and their ``from_bytes`` / ``set_state`` read it back. Nothing in it is
+unpickled: its plain values are JSON, its binary parts (a scene's checkpoint blob) raw
+bytes.
 
     offset      size  what
     0           8     magic ``b"CPDEMREC"``
