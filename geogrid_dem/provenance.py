@@ -1,6 +1,8 @@
 """Where a result came from: the package version and, when the code runs from a git checkout,
-its commit (with ``+dirty`` when tracked files differ). Nothing here assumes a source tree:
-git is asked about the folder of this file, and an installed copy reports ``unknown``."""
+its commit (with ``+dirty`` when tracked files differ), and the CPU dispatch the run's
+arithmetic took (``cpp_dem.dispatch.cpu_dispatch``: the DEM core's SIMD path, the BLAS
+kernels). Nothing here assumes a source tree: git is asked about the folder of this file, and
+an installed copy reports ``unknown``."""
 
 from __future__ import annotations
 
@@ -44,3 +46,11 @@ def git_revision() -> str:
     ``unknown``."""
     out = _git("describe", "--always", "--dirty")
     return (out.stdout.strip() if out is not None and out.returncode == 0 else "") or "unknown"
+
+
+def code_record() -> dict:
+    """What a run records of its code (the manifest's ``code``, a summary's ``provenance``):
+    ``version``, ``commit`` and ``cpu_dispatch``."""
+    from cpp_dem.dispatch import cpu_dispatch
+
+    return {"version": version(), "commit": git_commit(), "cpu_dispatch": cpu_dispatch()}

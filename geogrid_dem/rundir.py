@@ -395,9 +395,9 @@ def _unrecorded(out, files, manifest, status):
 
 
 def _code() -> dict:
-    from geogrid_dem.provenance import git_commit, version
+    from geogrid_dem.provenance import code_record
 
-    return {"version": version(), "commit": git_commit()}
+    return code_record()
 
 
 def _check_resume(out: Path, case: str, manifest: dict | None, status: str | None,

@@ -347,6 +347,11 @@ def test_the_smoke_gives_load_settlement_for_each_variant(case_smoke):
         assert (out / f"zone_elements_{v}_seed{seeds[0]}.h5").exists()
     assert (out / "load_settlement.png").stat().st_size > 1000
     assert "ETA" in proc.stdout
+    # the rounding path the run took (issue 62 item 3): the core's SIMD path and every BLAS
+    # loaded by then (numpy's and the FEM's)
+    d = s["provenance"]["cpu_dispatch"]
+    assert d["dem_simd"]["ops"] in ("wide", "narrow") and len(d["blas"]) >= 2
+    assert s["provenance"]["commit"]
 
 
 def test_a_failed_run_is_kept_and_left_out_of_the_levels_it_did_not_reach(tmp_path, monkeypatch):
@@ -536,3 +541,9 @@ def test_the_smoke_s_verdicts_do_not_depend_on_the_rounding_path(case_smoke, tmp
     assert got["pressure_pa"] == pytest.approx(s["pressures_pa"], rel=0.011)
     assert set(got["level_statuses"][0]) <= {"converged", "stopped_at_scatter"}
     assert len(got["step_redraws"]) == len(got["step_statuses"])
+    # ... and its summary says which path it took
+    d = s["provenance"]["cpu_dispatch"]
+    if env.get("CPP_DEM_NARROW") == "1":
+        assert d["dem_simd"]["ops"] == "narrow" and d["cpp_dem_narrow"] == "1"
+    if "OPENBLAS_CORETYPE" in env:
+        assert {b["architecture"] for b in d["blas"]} == {env["OPENBLAS_CORETYPE"]}

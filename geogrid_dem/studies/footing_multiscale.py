@@ -48,6 +48,7 @@ import numpy as np
 
 from femcoupling.fem.soil_steps import NewtonDivergence
 from femcoupling.materials.dem_elements import BAND_TANGENTS
+from geogrid_dem.provenance import code_record
 from geogrid_dem.studies import biaxial
 from geogrid_dem.studies.prs_element import hierarchical_status, step_statuses
 
@@ -640,7 +641,8 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
                  "dem_s": sum(r["dem_s"] for v in variants.values()
                               for r in v["multiscale"]["runs"].values())},
         "params": {k: (list(v) if isinstance(v, tuple) else v)
-                   for k, v in dataclasses.asdict(p).items()}}
+                   for k, v in dataclasses.asdict(p).items()},
+        "provenance": code_record()}
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     figure(summary, out / "load_settlement.png")
     return summary
