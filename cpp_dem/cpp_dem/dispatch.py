@@ -5,7 +5,7 @@ another BLAS kernel, they may not: the step's hot loops are compiled for several
 sets and picked at load time, ``CPP_DEM_NARROW=1`` selects the narrow (scalar) form of the
 pair pass, and OpenBLAS picks its kernels by CPU (``OPENBLAS_CORETYPE`` overrides it). A run
 records what it took (``cpu_dispatch()``), so that two results can be told apart by their
-rounding path (docs/reliability.md)."""
+rounding path (docs/cli.md, "Results folders")."""
 
 from __future__ import annotations
 
