@@ -321,6 +321,16 @@ def test_the_smoke_gives_load_settlement_for_each_variant(case_smoke):
             rise = np.diff([dp["seated_settlement_m"], *run["settlement_m"]])
             moved = np.abs(np.subtract(run["settlement_at_level_m"], run["settlement_m"]))
             assert np.all(moved <= 0.011 * rise)
+            # per step, the residual accepted, the noise measured at its stall and the
+            # ceiling, on one scale (issue 62 item 4): a step taken within the noise is
+            # within twice it (SoilModel.noise_factor) and the ceiling
+            n = len(run["step_statuses"])
+            assert len(run["step_noise"]) == len(run["step_ceilings"]) == n
+            for st, r, noise, ceil in zip(run["step_statuses"], run["step_residuals"],
+                                          run["step_noise"], run["step_ceilings"]):
+                assert ceil == 1e-2
+                if st == "stopped_at_scatter":
+                    assert noise is not None and r <= 2.0 * noise and r <= ceil
         assert ms["settlement_mean_m"] == pytest.approx(np.mean(
             [ms["runs"][str(x)]["settlement_at_level_m"] for x in seeds], axis=0), rel=1e-12)
         # the zone's elements and the Drucker-Prager fitted on the same grains: within 30 %

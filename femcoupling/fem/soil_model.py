@@ -348,7 +348,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
 
     def _end_step(self, out: Any) -> None:
         """The step's end (``StepResult``'s converged_on, noise_residual, status, residual,
-        tol, residual_pa) from its ``femcoupling.fem.quadrature.NewtonOutcome``: the residual is
+        tol, residual_pa, redraws, noise, ceiling) from its ``femcoupling.fem.quadrature.NewtonOutcome``: the residual is
         judged on the DEM regions' own force scale where the model has region elements, else
         on the body's."""
         rscale = self._region_scale() if self.region_elements else None
@@ -359,7 +359,9 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
                           "noise_residual": out.noise_residual, "status": out.status,
                           "residual": rel, "tol": self.newton_rtol * out.scale / on,
                           "residual_pa": rel * self._largest_stress(pts),
-                          "redraws": out.redraws}
+                          "redraws": out.redraws,
+                          "noise": out.noise_residual * out.scale / on,
+                          "ceiling": self.noise_ceiling if rscale is not None else math.inf}
 
     def _newton(self) -> int:
         """Newton iterations of the current step (``femcoupling.fem.quadrature.newton_solve``,

@@ -42,6 +42,12 @@ class StepResult:
         redraws: the iterates Newton took after it had stalled within the elements' noise
             but above ``SoilModel.noise_ceiling``, before one was within both
             (``femcoupling.fem.quadrature.REDRAWS``); 0 where none was needed.
+        noise: the elements' noise measured at the step's stall, on the scale of
+            ``residual`` (NaN where Newton did not stall); a step above ``tol`` is accepted
+            within ``SoilModel.noise_factor`` times it.
+        ceiling: the largest residual a step may be accepted at within the noise, on the
+            scale of ``residual`` (``SoilModel.noise_ceiling``; inf without DEM region
+            elements).
     """
 
     stage: str
@@ -57,3 +63,5 @@ class StepResult:
     tol: float = float("nan")
     residual_pa: float = float("nan")
     redraws: int = 0
+    noise: float = float("nan")
+    ceiling: float = float("nan")

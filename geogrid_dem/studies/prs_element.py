@@ -194,16 +194,25 @@ def periodic_runner(p: Params, out: Path, variant: str):
                                  cache_dir=str(out / "region_elements" / variant))
 
 
+def _finite_or_none(x) -> float | None:
+    x = float(x)
+    return x if math.isfinite(x) else None
+
+
 def step_statuses(steps) -> dict:
     """Per load step of the FEM's Newton (``StepResult``): its status, its accepted residual
     (relative to the DEM region's own internal force), the tolerance on that scale and the
-    residual in Pa, and the iterates it took after a stall above the noise ceiling
-    (``StepResult.redraws``): the summary's record."""
+    residual in Pa, the iterates it took after a stall above the noise ceiling
+    (``StepResult.redraws``), and on the residual's scale the elements' noise measured at its
+    stall and the ceiling (None: not measured, no ceiling): the summary's record."""
     return {"step_statuses": [r.status for r in steps],
             "step_residuals": [float(r.residual) for r in steps],
             "step_tols": [float(r.tol) for r in steps],
             "step_residuals_pa": [float(r.residual_pa) for r in steps],
-            "step_redraws": [int(getattr(r, "redraws", 0)) for r in steps]}
+            "step_redraws": [int(getattr(r, "redraws", 0)) for r in steps],
+            "step_noise": [_finite_or_none(getattr(r, "noise", math.nan)) for r in steps],
+            "step_ceilings": [_finite_or_none(getattr(r, "ceiling", math.nan))
+                              for r in steps]}
 
 
 def hierarchical_status(hier: dict, fem_strain_increment, rotation_deg: float):
