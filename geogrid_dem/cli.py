@@ -402,6 +402,25 @@ def _parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
                          "continued in turn) and LABEL_continue.json; default: write nothing")
     co.add_argument("--overwrite", action="store_true",
                     help="replace an earlier continuation of LABEL in --out")
+    wa = sub.add_parser("watch", help="a running case's main curve, redrawn as it grows",
+                        formatter_class=HelpFormatter,
+                        description="Redraws the main curve of a case run (the series it "
+                                    "wrote last: pull-out force, triaxial deviator, footing "
+                                    "pressure, an element's vertical stress, ...) every "
+                                    "--every seconds into RUN_DIR_watch.png beside the folder "
+                                    "and prints its last point, until the run ends "
+                                    "(docs/output.md, \"Watching a run\"). Writes nothing "
+                                    "into RUN_DIR.")
+    wa.add_argument("run_dir", metavar="RUN_DIR", type=Path, help="the --out of a case run")
+    wa.add_argument("--every", type=float, default=2.0, metavar="S",
+                    help="seconds between drawings (default 2)")
+    wa.add_argument("--once", action="store_true", help="draw once and stop")
+    wa.add_argument("--csv", default=None, metavar="GLOB",
+                    help="the series file(s) to watch, e.g. 'detailed_PRS_s1.csv'")
+    wa.add_argument("--x", default=None, help="the column along x (with --y)")
+    wa.add_argument("--y", default=None, help="the column along y")
+    wa.add_argument("--png", type=Path, default=None,
+                    help="where to draw (default RUN_DIR_watch.png beside RUN_DIR)")
     return ap, run
 
 
@@ -437,6 +456,14 @@ def _main(argv: list[str] | None) -> None:
             from geogrid_dem.continue_run import main_continue
 
             main_continue(a.run_dir, a.label, a.steps, a.out, a.overwrite)
+        elif a.command == "watch":
+            from geogrid_dem.watch import WatchError, main_watch
+
+            try:
+                main_watch(a.run_dir, csv_glob=a.csv, x=a.x, y=a.y, every_s=a.every,
+                           once=a.once, png=a.png)
+            except WatchError as e:
+                raise UsageError(str(e)) from None
     except UsageError as e:
         print(f"Error: {e}", file=sys.stderr)
         sys.exit(2)
