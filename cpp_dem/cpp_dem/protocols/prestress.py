@@ -364,12 +364,15 @@ class EndTension:
         return np.array([f[ms].mean() for ms in self.ends.line_members])
 
     def end_member_forces(self) -> np.ndarray:
-        """Tensile force of the members of the grid's first and last cells along the pull, N:
-        where the pull enters the grid (the applied line force, less what grains take up
-        within half a member)."""
+        """Tensile force of the members that hold an end body, N: where the pull enters the
+        grid (the applied line force, less what grains take up within half a member). Where
+        no member holds an end body (a woven grid pulled at its tails' tips, a grid whose end
+        nodes are in no member), the members of its first and last cells along the pull."""
         e = self.ends
-        # The members of the first and last cells along the pull (the end bodies may be in no
-        # member: a woven grid's tails, a PFacet grid's end nodes).
-        along = np.asarray(self.grid.member_cell)[e.members, e.axis]
-        m = e.members[(along == along.min()) | (along == along.max())]
+        end = np.concatenate([e.low, e.high])
+        m = [k for k in e.members
+             if np.isin(_member_bodies(self.scene, self.grid, k), end).any()]
+        if not m:
+            along = np.asarray(self.grid.member_cell)[e.members, e.axis]
+            m = e.members[(along == along.min()) | (along == along.max())]
         return self.grid.member_axial_forces(self.scene)[m]
