@@ -1,5 +1,5 @@
 # Two entry points (see README): `make demo` and `make test`. Both set everything up first.
-.PHONY: setup demo demo-pullout test bench docs clean
+.PHONY: setup demo demo-pullout test bench docs wheel clean
 PY := .venv/bin/python
 
 setup:
@@ -27,6 +27,16 @@ demo-pullout: setup
 TEST_JOBS ?= 2
 test: setup
 	OMP_NUM_THREADS=1 OMP_WAIT_POLICY=passive $(PY) -m pytest -q -n $(TEST_JOBS) --dist loadfile --durations=25 tests
+
+# A wheel of the project (cpp_dem built, femcoupling and geogrid_dem) in $(DIST), for machines
+# of this kind (Linux x86-64, Python 3.12): `pip install dist/geogrid_dem-*.whl` into any venv,
+# no compiler needed there (docs/start_here.md, "Install"). The build reuses the editable
+# install's build folder.
+DIST ?= dist
+wheel: setup
+	$(PY) -m pip wheel -q --no-build-isolation --no-deps -w $(DIST) . \
+	  -Ccmake.define.CPP_DEM_GEOGRID=ON
+	@ls $(DIST)/geogrid_dem-*.whl
 
 bench: setup
 	$(PY) bench/throughput.py
