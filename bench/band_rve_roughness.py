@@ -1,7 +1,8 @@
 #!/usr/bin/env python3
-"""How rough a band RVE's answer is (docs/multiscale.md, "The layer's cells as reinforced
-RVEs"): the reinforced-soil RVE of a footing's band cell (``femcoupling.materials.dem_elements.
-ReinforcedBandElement`` with the footing's grains, ``footing_multiscale.band_options``)
+"""How rough a band RVE's answer is (docs/studies/footing_multiscale.md, "How rough a band
+RVE's answer is"): the reinforced-soil RVE of a footing's band cell
+(``femcoupling.materials.dem_elements.ReinforcedBandElement`` with the footing's grains,
+``footing_multiscale.band_options``)
 takes one strain increment, and again with a probe of ``--probe`` more in zz, each relaxed
 to each unbalanced force of ``--unbalanced``. The difference of the two stresses, over the
 stress, is split into the grains' part and the sheet's bonds' part

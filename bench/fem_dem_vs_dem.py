@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """FEM x DEM against direct DEM in a plane-strain biaxial test (issue 18;
-geogrid_dem.studies.biaxial; docs/multiscale.md).
+geogrid_dem.studies.biaxial; docs/studies/biaxial.md).
 
 Three runs from the same grains and path (x at the confining pressure, y held, z shortened):
 

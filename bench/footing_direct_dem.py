@@ -1,6 +1,6 @@
 #!/usr/bin/env python3
 """A small strip footing by hierarchical FEM x DEM against a direct DEM of the same grains
-(issue 38, item 2; docs/multiscale.md, "A small footing against direct DEM").
+(issue 38, item 2; docs/studies/footing_direct_dem.md).
 
 The body is plane strain, the half beside the footing's symmetry plane, small enough for a
 direct DEM on this machine: ``--length`` by ``--depth`` (m), the footing's half width ``--b``

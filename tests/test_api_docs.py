@@ -1,7 +1,8 @@
 """The site (``make docs``, docs/api.md): the guide and the API reference, built with no warning.
 
 The real site is built once (MkDocs, ``--strict``: a warning fails the build) into a temporary
-folder: its navigation holds the guide pages (docs/*.md) grouped as docs/start_here.md leads
+folder: its navigation holds the guide pages (docs/*.md, and the measured studies of
+docs/studies/*.md) grouped as docs/start_here.md leads
 through them, then the API reference, whose pages hold the objects; a class bound from C++
 (``cpp_dem.Scene``, a subclass of ``cpp_dem._core.Scene``) lists its inherited members. A
 synthetic package, built with the same configuration, shows that the checks bite: a docstring
@@ -151,7 +152,9 @@ def test_navigation_holds_the_guide_as_start_here_orders_it(site):
     linked = set(top) | {page for _, pages in sections for page in pages}
     guide = {"index.html" if p.stem == "start_here" else f"{p.stem}.html"
              for p in DOCS.glob("*.md")}
+    guide |= {f"studies/{p.stem}.html" for p in (DOCS / "studies").glob("*.md")}
     assert {"pullout.html", "triaxial.html", "prs_element_002.html", "multiscale.html"} <= guide
+    assert {"coupling_newton.html", "studies/footing_multiscale.html"} <= guide
     missing = sorted(g for g in guide if g not in linked or not (root / g).is_file())
     assert not missing, f"guide pages not built or not in the navigation: {missing}"
     # The pages the introduction of start_here.md names come right after it; the numbered
@@ -171,7 +174,9 @@ def test_navigation_holds_the_guide_as_start_here_orders_it(site):
     api = set(sections[-1][1])
     assert {"api/index.html", "api/cpp_dem/scene.html", "api/cpp_dem/_core.html"} <= api
     # Links to repository files the site does not hold became text (no link out of the site).
-    leaving = {g: re.findall(r'href="\.\./[^"]*"', _ids(root / g)) for g in guide}
+    # (A page one folder down, docs/studies/, leaves the site with ../../.)
+    leaving = {g: re.findall(r'href="(?:\.\./){%d}[^"]*"' % (g.count("/") + 1), _ids(root / g))
+               for g in guide}
     assert not any(leaving.values()), {g: h for g, h in leaving.items() if h}
 
 
@@ -183,8 +188,9 @@ def test_guide_headings_have_githubs_ids(site):
     docs_text = importlib.util.module_from_spec(spec)
     spec.loader.exec_module(docs_text)
     differing = {}
-    for page in sorted(DOCS.glob("*.md")):
-        html = _ids(site[0] / ("index.html" if page.stem == "start_here" else f"{page.stem}.html"))
+    for page in [*sorted(DOCS.glob("*.md")), *sorted((DOCS / "studies").glob("*.md"))]:
+        built = page.relative_to(DOCS).with_suffix(".html").as_posix()
+        html = _ids(site[0] / ("index.html" if page.stem == "start_here" else built))
         main = html[html.index('role="main"'):]
         made = set(re.findall(r'<h[1-6] id="([^"]+)"', main))
         ids = docs_text.heading_ids(page)

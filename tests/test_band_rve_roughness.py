@@ -1,6 +1,6 @@
 """bench/band_rve_roughness.py at smoke size: the band RVE's answer to an increment is
 repeatable bitwise, and a probe of 1e-9 moves it (the roughness the footing's Newton meets,
-docs/multiscale.md); bad input is refused by name."""
+docs/studies/footing_multiscale.md); bad input is refused by name."""
 
 import json
 import subprocess

@@ -172,9 +172,9 @@ def test_dense_preparation_holds_an_isochoric_shear():
     """Grown at zero friction (prep_friction_deg=0) the packing is dense and dilatant: under
     an isochoric shear its mean stress rises. Grown at its own friction (30 deg) the same
     grains make a loose packing whose mean stress falls (seed 2: it loses every contact by
-    2e-3; docs/multiscale.md). How far is chaotic: over seeds 1-12 after the two increments,
-    dense 100.8 to 104.9 kPa, loose 18 to 98 kPa (below 50 kPa at seeds 2 and 4 only; the
-    earlier bound p_loose < 50 kPa held at seed 2 by chance). Asserted: the signs."""
+    2e-3; docs/coupling_hierarchical.md). How far is chaotic: over seeds 1-12 after the two
+    increments, dense 100.8 to 104.9 kPa, loose 18 to 98 kPa (below 50 kPa at seeds 2 and 4
+    only; the earlier bound p_loose < 50 kPa held at seed 2 by chance). Asserted: the signs."""
     de = np.diag([1e-3, 0.0, -1e-3])
     p = {}
     for pf in (0.0, None):

@@ -10,7 +10,8 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+# The guide and its measured studies (docs/studies/): every page under docs/.
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("**/*.md"))]
 
 _COMMAND = re.compile(r"^(?:\.venv/bin/)?(?:geogrid-dem run (?P<name>[a-z0-9-]+)"
                       r"|(?:\.venv/bin/)?python3? (?:cases/(?P<script>[a-z0-9_]+)\.py"

@@ -8,7 +8,7 @@ from pathlib import Path
 import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
-PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md"))]
+PAGES = [ROOT / "README.md", *sorted((ROOT / "docs").glob("**/*.md"))]  # docs/studies/ too
 _FROM = re.compile(r"from ((?:cpp_dem|femcoupling|geogrid_dem)(?:\.\w+)*) import ([\w, ]+)")
 _IMPORT = re.compile(r"(?<![\w.])import ((?:cpp_dem|femcoupling|geogrid_dem)(?:\.\w+)*)")
 

@@ -1,9 +1,15 @@
 """The user docs read as reference pages, not as a work log.
 
-Checked for README.md and docs/*.md:
+Checked for README.md, docs/*.md and the measured studies of docs/studies/*.md:
 
 - no work-log words: "session", "issue N", "#N", "last time";
-- no commit hashes (runs of 7-40 hex digits with both a digit and a letter);
+- no commit hashes (runs of 7-40 hex digits with both a digit and a letter), except on the
+  study pages, where each table names the commit that landed it;
+- no history in the reference pages (docs/*.md): what was tried, not kept, or predates, and
+  what was so "at the time", goes to the CHANGELOG or to a study page;
+- docs/multiscale.md is an index of at most 400 lines (its parts have their own pages);
+- each coupling part's page (docs/coupling_*.md) has the sections of the template, in order;
+- each table of a study page is followed by its command, its commit and its data file;
 - every markdown link to a local file resolves (relative to the page), and an anchor in it,
   or one on the same page, names a heading of that page (GitHub's heading ids);
 - bench/README.md's index names every benchmark script of bench/;
@@ -21,6 +27,8 @@ import pytest
 
 ROOT = Path(__file__).resolve().parents[1]
 DOCS = ROOT / "docs"
+# The measured studies: each table with its command, the commit that landed it and its data.
+STUDIES = DOCS / "studies"
 
 # Pages rewritten elsewhere; skipped by the text checks until the lead empties this list.
 PENDING = ["docs/output.md"]
@@ -39,8 +47,12 @@ BIB_KEY = re.compile(r"@\w+\s*\{\s*([^,\s]+)\s*,")
 
 
 def _pages() -> list[Path]:
-    pages = [ROOT / "README.md", *sorted(DOCS.glob("*.md"))]
+    pages = [ROOT / "README.md", *sorted(DOCS.glob("*.md")), *sorted(STUDIES.glob("*.md"))]
     return [p for p in pages if p.exists() and p.relative_to(ROOT).as_posix() not in PENDING]
+
+
+def _is_study(p: Path) -> bool:
+    return p.parent.resolve() == STUDIES.resolve()
 
 
 def _page_id(p: Path) -> str:
@@ -63,10 +75,12 @@ def heading_ids(page: Path) -> set[str]:
     return ids
 
 
-def work_log_hits(text: str) -> list[str]:
-    """Work-log phrases and commit ids found in ``text`` (empty when clean)."""
+def work_log_hits(text: str, commits: bool = True) -> list[str]:
+    """Work-log phrases and (unless ``commits`` is False) commit ids found in ``text`` (empty
+    when clean)."""
     hits = [m.group(0) for pat in WORK_LOG for m in pat.finditer(text)]
-    hits += [m.group(0) for m in COMMIT_HASH.finditer(text)]
+    if commits:
+        hits += [m.group(0) for m in COMMIT_HASH.finditer(text)]
     return hits
 
 
@@ -98,8 +112,108 @@ def test_page_has_no_work_log_words_or_commit_ids(page: Path):
     for n, line in enumerate(text.splitlines(), 1):
         if n in skip:
             continue
-        bad += [f"line {n}: {h!r}" for h in work_log_hits(line)]
+        bad += [f"line {n}: {h!r}" for h in work_log_hits(line, commits=not _is_study(page))]
     assert not bad, f"{_page_id(page)} reads like a work log: " + "; ".join(bad[:20])
+
+
+# History words: a reference page gives the current behaviour and figures; what was tried and
+# not kept, what predates a change, what was so at the time, goes to the CHANGELOG (or, with
+# its command and commit, to a study page of docs/studies/).
+HISTORY = re.compile(r"\bpredat\w*|\btried, not kept\b|\bnot kept\b|\bat the time\b",
+                     re.IGNORECASE)
+MULTISCALE_MAX_LINES = 400
+
+
+def history_hits(text: str) -> list[str]:
+    """``line N: 'words'`` for each history phrase in ``text`` (empty when clean)."""
+    return [f"line {n}: {m.group(0)!r}" for n, line in enumerate(text.splitlines(), 1)
+            for m in HISTORY.finditer(line)]
+
+
+def test_the_history_check_finds_the_words():
+    assert history_hits("These figures predate `at_level`.\nok\n") == ["line 1: 'predate'"]
+    assert history_hits("a patch (tried, not kept)") == ["line 1: 'tried, not kept'"]
+    assert history_hits("a variant measured and not kept") == ["line 1: 'not kept'"]
+    assert history_hits("measured at the time: 3 s; Predates it") == [
+        "line 1: 'at the time'", "line 1: 'Predates'"]
+    assert history_hits("the state is kept; a time step; tried cases") == []
+
+
+@pytest.mark.parametrize("page", [p for p in _pages() if not _is_study(p)], ids=_page_id)
+def test_reference_pages_hold_no_history(page: Path):
+    bad = history_hits(page.read_text(encoding="utf-8"))
+    assert not bad, (f"{_page_id(page)} speaks of history (move it to CHANGELOG.md or to a page "
+                     f"of docs/studies/): " + "; ".join(bad[:20]))
+
+
+# A coupling part's reference page (docs/coupling_*.md) has these sections, in this order.
+TEMPLATE = ["What it is", "API", "Options", "Statuses", "Limits"]
+# The line under each table of a study page: the command, the commit that landed the table,
+# and its committed data file (or "not committed").
+PROVENANCE = re.compile(r"^\s*Command: .+ · commit `[0-9a-f]{7,40}` .* · data: .+\.$")
+
+
+def h2_sections(text: str) -> list[str]:
+    """The page's level-2 headings, in order (not those in code blocks)."""
+    out, in_code = [], False
+    for line in text.splitlines():
+        if line.startswith("```"):
+            in_code = not in_code
+        elif not in_code and line.startswith("## "):
+            out.append(line[3:].strip())
+    return out
+
+
+@pytest.mark.parametrize("page", sorted(DOCS.glob("coupling_*.md")), ids=_page_id)
+def test_coupling_pages_follow_the_template(page: Path):
+    assert h2_sections(page.read_text(encoding="utf-8")) == TEMPLATE, _page_id(page)
+
+
+def tables_without_provenance(text: str) -> list[int]:
+    """The first line of each table not followed (after blank lines) by a provenance line."""
+    lines, bad, k = text.splitlines(), [], 0
+    while k < len(lines):
+        if lines[k].lstrip().startswith("|"):
+            start = k
+            while k < len(lines) and lines[k].lstrip().startswith("|"):
+                k += 1
+            while k < len(lines) and not lines[k].strip():
+                k += 1
+            if k >= len(lines) or not PROVENANCE.match(lines[k]):
+                bad.append(start + 1)
+        else:
+            k += 1
+    return bad
+
+
+def test_the_provenance_check_finds_a_bare_table():
+    table = "| a | b |\n|---|---|\n| 1 | 2 |\n"
+    good = "Command: `x --y` · commit `abc1234` (2026-01-02) · data: not committed."
+    assert tables_without_provenance(table + "\n" + good + "\n") == []
+    assert tables_without_provenance("text\n" + table + "\nmore text\n") == [2]
+
+
+@pytest.mark.parametrize("page", sorted(STUDIES.glob("*.md")), ids=_page_id)
+def test_study_tables_carry_command_commit_and_data(page: Path):
+    bad = tables_without_provenance(page.read_text(encoding="utf-8"))
+    assert not bad, (f"{_page_id(page)}: the tables at lines {bad} lack their provenance line "
+                     "(Command: ... · commit `...` (date) · data: FILE or not committed.)")
+
+
+def multiscale_too_long(text: str) -> int | None:
+    """The line count of docs/multiscale.md's ``text`` when it is over the index's limit."""
+    n = len(text.splitlines())
+    return n if n > MULTISCALE_MAX_LINES else None
+
+
+def test_multiscale_is_an_index():
+    text = (DOCS / "multiscale.md").read_text(encoding="utf-8")
+    n = multiscale_too_long(text)
+    assert n is None, (f"docs/multiscale.md has {n} lines (at most {MULTISCALE_MAX_LINES}): it "
+                       "is the index; a part's reference goes to docs/coupling_*.md, a measured "
+                       "table to docs/studies/")
+    # The measure can fail: 401 lines are too many.
+    assert multiscale_too_long("x\n" * (MULTISCALE_MAX_LINES + 1)) == MULTISCALE_MAX_LINES + 1
 
 
 def broken_links(page: Path) -> list[str]:

@@ -8,8 +8,8 @@ elements, so it must follow their mean curve within 2 standard errors (the eleme
 standard deviation / sqrt(8)) at every step.
 
 Against cells of all the grains at the same porosity and loading rate (bench/fem_dem_vs_dem.py
---porosity --rate, five seeds each) the peak agrees within the seed scatter (docs/multiscale.md);
-that run is too long for the suite and is not asserted here."""
+--porosity --rate, five seeds each) the peak agrees within the seed scatter
+(docs/studies/biaxial.md); that run is too long for the suite and is not asserted here."""
 
 from __future__ import annotations
 

@@ -1,5 +1,5 @@
 """A 3D hierarchical triaxial specimen beyond a box (femcoupling.coupling.hierarchical3d.
-HierarchicalCylinder; docs/multiscale.md, "A cylindrical triaxial specimen"): a quarter
+HierarchicalCylinder; docs/coupling_hierarchical.md, "A cylindrical triaxial specimen"): a quarter
 cylinder of P1 tetrahedra (gmsh), or the whole cylinder, an element at each quadrature
 point.
 

@@ -1,4 +1,4 @@
-"""The hierarchical FEM under MPI (femcoupling.fem.mpi_points; docs/multiscale.md, "Under MPI").
+"""The hierarchical FEM under MPI (femcoupling.fem.mpi_points; docs/coupling_mpi.md).
 
 examples/05_hierarchical_mpi.py runs on 2 ranks (MPICH's mpiexec of the venv) and on 1: every
 element is at the serial model's place, and the two runs agree within the Newton tolerance

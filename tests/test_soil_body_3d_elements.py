@@ -1,6 +1,7 @@
-"""The reinforced-soil body in 3D with DEM elements (issue 38; docs/multiscale.md, "The
-reinforced-soil body in 3D"): a footing on a body of tetrahedra with a prestressed geogrid
-layer, and a DEM element at every cell of a cube under the footing, across the layer.
+"""The reinforced-soil body in 3D with DEM elements (issue 38; docs/coupling_dem_elements.md,
+"The reinforced-soil body in 3D with elements"): a footing on a body of tetrahedra with a
+prestressed geogrid layer, and a DEM element at every cell of a cube under the footing, across
+the layer.
 
 The same code path as in plane strain (SoilModel.set_cell_elements), with every strain
 component: verified first with linear stand-ins, which must be exactly the material of their

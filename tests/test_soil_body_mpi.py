@@ -1,5 +1,5 @@
 """The reinforced soil body (femcoupling.fem.soil_model.SoilModel) on 2 MPI ranks is the serial
-body (docs/fem.md, "Verification"; docs/multiscale.md, "Under MPI").
+body (docs/fem.md, "Verification"; docs/coupling_mpi.md, "Region elements under MPI").
 
 - tests/mpi_soil_body.py: a Drucker-Prager soil with its self-weight, a prestressed geogrid
   layer, a footing loaded by pressure and then by settlement, run under MPICH's mpiexec of

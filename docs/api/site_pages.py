@@ -1,7 +1,8 @@
 """MkDocs hook of the guide pages (named in mkdocs.yml): the site reads them as GitHub does.
 
-The guide pages (``docs/*.md``) are written to be read in the repository as well as in the
-built site. This hook makes the site read them the same way:
+The guide pages (``docs/*.md``, and the measured studies of ``docs/studies/*.md``) are written
+to be read in the repository as well as in the built site. This hook makes the site read them
+the same way:
 
 - heading ids are GitHub's (lower case, punctuation dropped, each space a ``-``), so an anchor
   such as ``speed_accuracy.md#coupled-fem--dem-prs-element`` works in both, and

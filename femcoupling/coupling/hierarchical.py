@@ -1,5 +1,5 @@
 """Hierarchical FEM x DEM in plane strain: a DEM element at every quadrature point (issue 18,
-second part; docs/multiscale.md).
+second part; docs/coupling_hierarchical.md).
 
 The FEM is a rectangle ``lx`` x ``ly`` (m) of P1 triangles with one quadrature point each
 (``degree=2``: P2 triangles with three points each, which do not lock under isochoric or

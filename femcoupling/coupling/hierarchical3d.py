@@ -1,5 +1,5 @@
 """Hierarchical FEM x DEM in 3D: a periodic DEM element at the quadrature point of every
-tetrahedron (docs/multiscale.md, "Hierarchical mode in 3D"), in a box
+tetrahedron (docs/coupling_hierarchical.md, "In 3D: a box"), in a box
 (:class:`Hierarchical3D`) or a cylindrical triaxial specimen (:class:`HierarchicalCylinder`,
 meshed by gmsh; the box's geometry is a set of hooks the cylinder replaces).
 

@@ -1,5 +1,5 @@
 """The hierarchical FEM under MPI: the mesh split over the ranks, the DEM elements on Dask
-through rank 0 (issue 38, item 5; docs/multiscale.md, "Under MPI").
+through rank 0 (issue 38, item 5; docs/coupling_mpi.md).
 
 A hierarchical model (:class:`femcoupling.coupling.hierarchical.HierarchicalPlaneStrain`,
 :class:`femcoupling.coupling.hierarchical3d.Hierarchical3D`) given ``comm=MPI.COMM_WORLD`` builds

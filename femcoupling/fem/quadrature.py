@@ -71,7 +71,7 @@ NOISE_PROBE = 1e-9
 #: the 1 % ceiling, its noise measured at 1.3-1.6 % (twice: the acceptance band): whether a
 #: step was taken or cut (and the run's path after it) was the rounding's choice, and a fresh
 #: machine's failed the run. A later iterate of the same step is another draw; one within the
-#: same bounds is as good an answer (docs/multiscale.md).
+#: same bounds is as good an answer (docs/coupling_newton.md).
 REDRAWS = 4
 
 #: The LU package of the FEM's solves on more than one MPI rank (PETSc's name). SuperLU_DIST

@@ -13,7 +13,8 @@ RVE (the woven sheet and grains, the sheet at the band's tension; --band-grains)
 --levels equal pressure rises up to --pressure. The same body with the fitted
 Drucker–Prager everywhere is run for each variant too. This is the prestressed-element
 study's question at the scale of the structure: does prestress improve the
-load–settlement behaviour? (geogrid_dem.studies.footing_multiscale; docs/multiscale.md.)
+load–settlement behaviour? (geogrid_dem.studies.footing_multiscale;
+docs/studies/footing_multiscale.md.)
 
 Outputs in --out: load_settlement.csv (a row per level of every run, appended as it
 runs), summary.json (settlement per variant and level: seed mean, sd, each seed, the

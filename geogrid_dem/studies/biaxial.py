@@ -1,5 +1,5 @@
 """A plane-strain biaxial test by hierarchical FEM x DEM and by direct DEM of the same grains
-(issue 18, "against direct DEM"; docs/multiscale.md).
+(issue 18, "against direct DEM"; docs/studies/biaxial.md).
 
 - :func:`fem_dem_biaxial`: the rectangle of ``femcoupling.coupling.hierarchical`` with a periodic
   DEM element per cell, the right side at the confining pressure, the top pushed down in equal

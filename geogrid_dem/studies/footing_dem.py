@@ -1,6 +1,6 @@
 """A small strip footing by hierarchical FEM x DEM and by direct DEM of the same grains
 (issue 38, item 2: "compare a small footing with a direct DEM of the same grains, where that
-fits on this machine"; docs/multiscale.md, "A small footing against direct DEM").
+fits on this machine"; docs/studies/footing_direct_dem.md).
 
 The body is plane strain, the half beside the footing's symmetry plane: ``length`` (x) by
 ``depth`` (z), a rigid smooth footing of half width ``footing_b`` on the top at x <= b, the

@@ -59,7 +59,7 @@ FD_COMPONENTS = {2: (0, 2, 4), 3: (0, 1, 2, 3, 4, 5)}
 #: The calibration's first FEM (the starting soil) that stops short of the largest pressure
 #: gives the zone's path as far as it went if the footing's pressure rose by at least this
 #: fraction of what was asked (in 3D with 0.35 and 0.25 m zone cells, the 35-degree starting
-#: soil carried 87 kPa of 100: docs/multiscale.md); else the run stops.
+#: soil carried 87 kPa of 100: docs/studies/footing_multiscale.md); else the run stops.
 PATH_SHORT_MIN = 0.5
 
 

@@ -161,7 +161,8 @@ class DemElement:
         RadiusGrowth's (gain, max_strain per call). ``prep_friction_deg``: grow the grains
         at this friction angle first (0: a dense packing, as Yade's and PFC's users do), then
         at the material's; without it the packing grows at the material's friction and is
-        loose (it can lose all its contacts under a small isochoric shear: docs/multiscale.md).
+        loose (it can lose all its contacts under a small isochoric shear:
+        docs/coupling_hierarchical.md).
         ``material``: a Material (default: a linear law, E = 100 MPa, k_s/k_n 0.3, 30 deg,
         2650 kg/m^3)."""
         if material is None:
@@ -274,7 +275,7 @@ class DemElement:
         """The element's own scatter of its homogenised stress, Pa (3 x 3, symmetric):
         ``measure.stress_scatter``, the bootstrap of its contacts' Love–Weber terms. How far
         the stress of a sample of this size is from the mean of samples like it; the noise
-        floor of a coupled loop (docs/multiscale.md)."""
+        floor of a coupled loop (docs/coupling_newton.md)."""
         return measure.stress_scatter(self.scene, self.volume(), n_boot=n_boot, seed=seed)
 
     # ---- driving ---------------------------------------------------------------------------

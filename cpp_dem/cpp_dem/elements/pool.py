@@ -35,7 +35,7 @@ same for any number of workers, with late or lost workers.
 
 The default cluster is a ``LocalCluster`` of single-threaded worker processes on this
 machine; pass ``client=`` to use any Dask cluster (``dask-jobqueue``'s SLURMCluster or
-PBSCluster, ``SSHCluster``, ``dask-mpi``: docs/multiscale.md). SI units.
+PBSCluster, ``SSHCluster``, ``dask-mpi``: docs/coupling_element_pool.md). SI units.
 """
 
 from __future__ import annotations

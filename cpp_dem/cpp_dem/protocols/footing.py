@@ -390,7 +390,7 @@ def _grow_periodic_y(scene, walls, q: float, p: StripFootingBox, max_steps: int,
     (the walls' contacts add 4-6 % at these sizes), so that it aims at the box's stress.
     Aiming at its own reading instead, the growth held the box 3.5 % above q (and at the
     bench's size took 199 400 steps against 128 000; both end denser inside than the walled
-    box, docs/multiscale.md)."""
+    box, docs/studies/footing_direct_dem.md)."""
     g = _core.RadiusGrowth(walls=[], target_stress=q, gain=0.5, max_strain=1e-3)
     scene.add_controller(g)
     start = scene.step_count
