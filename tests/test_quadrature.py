@@ -167,6 +167,28 @@ def test_newton_rules_on_a_synthetic_problem():
         NewtonRules(rtol=1e-3, max_newton=5, probe_size=2.0)
 
 
+class _ShrinkingSpring(_Spring):
+    """A _Spring whose noisy points carry a tenth of their force after the noise probe's
+    iterate (a zone's elements unloading between two iterates of a step)."""
+
+    calls = 0
+
+    def noise_scale(self):
+        self.calls += 1
+        return self.f if self.calls == 1 else 0.1 * self.f
+
+
+def test_a_redraw_is_judged_against_the_ceiling_of_its_own_iterate():
+    """The ceiling is a fraction of the noisy points' own force at the iterate accepted: a
+    redraw judged on the force they had at the probe's iterate took a footing smoke step at
+    4.2 % of its zone's own force against the 1 % ceiling. Here the first stall is above the
+    ceiling (3e-5 of the force) and the points then carry a tenth of it: no later draw is
+    within the ceiling, and the step is cut (with the probe's force, one was accepted)."""
+    kw = dict(rtol=1e-9, max_newton=12, probe=True, ceiling=3e-5)
+    with pytest.raises(NewtonFailure, match="4 more iterates, each a new draw"):
+        newton_solve(_ShrinkingSpring(noise=1e-4), NewtonRules(**kw))
+
+
 def test_a_stall_above_the_ceiling_within_the_noise_draws_again_before_the_cut():
     """Issue 60 item 1: a residual that stalls within the elements' noise is a draw of that
     noise; where the noise straddles the ceiling, the first draw decided the step by the

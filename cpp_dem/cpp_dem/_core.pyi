@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BeamParams', 'BlowUpError', 'BondParams', 'CellController', 'ContactModel', 'ContactPhys', 'Controller', 'GEOGRID', 'Material', 'ParameterError', 'RadiusGrowth', 'Scene', 'ServoWall', 'TriaxialController', 'contact_laws', 'get_num_threads', 'mix_materials', 'servo_speed', 'set_num_threads']
+__all__: list[str] = ['BeamParams', 'BlowUpError', 'BondParams', 'CellController', 'ContactModel', 'ContactPhys', 'Controller', 'GEOGRID', 'Material', 'ParameterError', 'RadiusGrowth', 'Scene', 'ServoWall', 'TriaxialController', 'contact_laws', 'get_num_threads', 'mix_materials', 'servo_speed', 'set_num_threads', 'simd_dispatch']
 class ParameterError(ValueError):
     pass
 class BlowUpError(RuntimeError):
@@ -219,7 +219,11 @@ class Scene:
         pb_shear_force (n, 3), N; pb_twisting_moment (about the normal), N m; pb_bending_moment (n, 3),
         N m, all on b; pb_sigma, pb_tau: the parallel bond's rim stresses, Pa (0 once broken);
         pb_radius: R_bar, m; reference_gap, m; force (n, 3): the bond's total force on b, N (a gets
-        the opposite); normal (n, 3): unit a -> b.
+        the opposite); normal (n, 3): unit a -> b; normal_stiffness, shear_stiffness: the springs
+        acting now along and across the normal at the contact point, N/m (the linear contact's, when
+        bonded or pressed, plus the intact parallel bond's k_bar A); bending_stiffness,
+        twisting_stiffness: the intact parallel bond's k_bar_n I and k_bar_s J, N m/rad (0 once
+        broken); friction: the linear contact's Coulomb mu, -.
         """
     def cell_stress(self) -> numpy.typing.NDArray[numpy.float64]:
         """
@@ -1144,5 +1148,9 @@ def servo_speed(sigma_target: float, sigma: float, area: float, stiffness: float
 def set_num_threads(threads: int) -> None:
     """
     Sets the number of OpenMP threads used by every scene.
+    """
+def simd_dispatch() -> dict:
+    """
+    The step's SIMD path in this process: ops 'wide' (4-lane vector ops) or 'narrow' (CPP_DEM_NARROW=1, or a CPU without AVX2 + FMA); with clones (the hot loops compiled for x86-64-v4, -v3 and baseline), the level the loader picks on this CPU.
     """
 GEOGRID: bool = True

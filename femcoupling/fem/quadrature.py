@@ -255,7 +255,10 @@ def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any 
             return NewtonOutcome(it, rel, scale, noise_rel, nscale, "tolerance", "converged",
                                  tuple(omegas))
         if above is not None:
-            # a redraw (REDRAWS): accepted within the noise already measured and the ceiling
+            # a redraw (REDRAWS): accepted within the noise already measured and the ceiling,
+            # the ceiling on this iterate's noisy points (their force at the probe's iterate
+            # was up to 4 x it: a footing step was taken at 4.2 % of its zone's own force)
+            nscale = problem.noise_scale()
             accept = newton_acceptance(rel, rtol=rules.rtol, noise_residual=noise_rel,
                                        noise_factor=rules.noise_factor,
                                        ceiling=rules.ceiling * nscale / scale)
