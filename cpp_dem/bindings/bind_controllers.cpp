@@ -135,6 +135,14 @@ compression positive, from the box size when the controller first ran (or reset_
       .def_property("max_speed", &TriaxialController::max_speed,
                     &TriaxialController::set_max_speed, "Velocity cap of the servo, m/s.")
       .def_property("gain", &TriaxialController::gain, &TriaxialController::set_gain)
+      .def_property("symmetric", &TriaxialController::symmetric,
+                    &TriaxialController::set_symmetric,
+                    "Axis-mean servo (default False: each wall on its own stress): both walls "
+                    "of a stress-controlled axis move inwards at one speed, from the axis's "
+                    "mean stress and their mean contact stiffness, so the box cannot "
+                    "translate. Use it under gravity: on their own stresses the bottom wall "
+                    "(carrying the weight too) backs off while the top one pushes, and at "
+                    "the speed cap the box only translates.")
       .def_property_readonly("effective_max_speed", &TriaxialController::effective_max_speed,
                              "Cap of the stress-controlled walls now, m/s: max_speed, raised "
                              "while an axis is strain-rate controlled to |rate| x the longest "

@@ -959,6 +959,14 @@ class TriaxialController(Controller):
         Box size at zero strain, m.
         """
     @property
+    def symmetric(self) -> bool:
+        """
+        Axis-mean servo (default False: each wall on its own stress): both walls of a stress-controlled axis move inwards at one speed, from the axis's mean stress and their mean contact stiffness, so the box cannot translate. Use it under gravity: on their own stresses the bottom wall (carrying the weight too) backs off while the top one pushes, and at the speed cap the box only translates.
+        """
+    @symmetric.setter
+    def symmetric(self, arg1: bool) -> None:
+        ...
+    @property
     def walls(self) -> list[int]:
         ...
 class RadiusGrowth(Controller):

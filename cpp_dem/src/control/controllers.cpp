@@ -204,21 +204,36 @@ void TriaxialController::apply(Scene& scene) {
   // strain-rate control); a stress-only stage (a preparation) settles as it may.
   const bool loading = mode_[0] == Mode::StrainRate || mode_[1] == Mode::StrainRate ||
                        mode_[2] == Mode::StrainRate;
+  std::array<Real, 6> v{};  // along each wall's inward normal, m/s
+  std::array<Real, 6> sigma{};
   for (int k = 0; k < 6; ++k) {
     const int a = k / 2;
-    Wall& w = scene.wall(walls_[k]);
-    Real v;  // along the inward normal, m/s
     if (mode_[a] == Mode::StrainRate) {
-      v = 0.5 * goal_[a] * l0_[a];
-    } else {
+      v[k] = 0.5 * goal_[a] * l0_[a];
+    } else if (!symmetric_) {
       const Real area = box_wall_area(size, k);
-      const Real sigma = wall_normal_stress(w, area);
-      v = servo_speed(goal_[a], sigma, area, wall_contact_stiffness(scene, walls_[k]),
-                      scene.dt(), period, gain_, cap);
-      if (loading) limit_[k].observe(v, cap, sigma, goal_[a]);
+      sigma[k] = wall_normal_stress(scene.wall(walls_[k]), area);
+      v[k] = servo_speed(goal_[a], sigma[k], area, wall_contact_stiffness(scene, walls_[k]),
+                         scene.dt(), period, gain_, cap);
+    } else if (k % 2 == 1) {
+      // both walls of the axis at one speed, from the axis's mean stress and their mean
+      // contact stiffness (the mean stress changes by k_mean v / area)
+      const Real area = box_wall_area(size, k);
+      const Real s0 = wall_normal_stress(scene.wall(walls_[k - 1]), area);
+      const Real s1 = wall_normal_stress(scene.wall(walls_[k]), area);
+      const Real kmean = 0.5 * (wall_contact_stiffness(scene, walls_[k - 1]) +
+                                wall_contact_stiffness(scene, walls_[k]));
+      sigma[k - 1] = sigma[k] = 0.5 * (s0 + s1);
+      v[k - 1] = v[k] = servo_speed(goal_[a], sigma[k], area, kmean, scene.dt(), period,
+                                    gain_, cap);
     }
+  }
+  for (int k = 0; k < 6; ++k) {
+    const int a = k / 2;
+    if (mode_[a] == Mode::Stress && loading) limit_[k].observe(v[k], cap, sigma[k], goal_[a]);
+    Wall& w = scene.wall(walls_[k]);
     w.velocity.setZero();
-    w.velocity[w.axis] = w.sense * v;
+    w.velocity[w.axis] = w.sense * v[k];
   }
 }
 
@@ -239,12 +254,14 @@ std::vector<Real> TriaxialController::save_state() const {
   s.push_back(l0_set_ ? 1.0 : 0.0);
   s.push_back(gain_);
   s.push_back(max_speed_);
+  s.push_back(symmetric_ ? 1.0 : 0.0);
   return s;
 }
 
 void TriaxialController::load_state(const std::vector<Real>& s) {
-  if (s.size() != 12)
-    throw ParameterError("TriaxialController state: expected 12 values, got " +
+  // (12 values: a checkpoint written before the axis-mean servo, which is then off)
+  if (s.size() != 12 && s.size() != 13)
+    throw ParameterError("TriaxialController state: expected 12 or 13 values, got " +
                          std::to_string(s.size()));
   for (int a = 0; a < 3; ++a) {
     mode_[a] = static_cast<Mode>(static_cast<int>(s[3 * a]));
@@ -254,6 +271,7 @@ void TriaxialController::load_state(const std::vector<Real>& s) {
   l0_set_ = s[9] != 0;
   gain_ = s[10];
   max_speed_ = s[11];
+  symmetric_ = s.size() == 13 && s[12] != 0;
 }
 
 // ---- which controller moves which wall -------------------------------------------------------

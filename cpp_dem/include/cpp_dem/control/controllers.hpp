@@ -165,6 +165,14 @@ class TriaxialController : public Controller, public StatefulController {
   Real max_speed() const { return max_speed_; }
   void set_gain(Real g);
   Real gain() const { return gain_; }
+  /// Axis-mean servo (default false: each wall on its own stress). With it both walls of a
+  /// stress-controlled axis move inwards at one speed, from the axis's stress (the mean of
+  /// its two walls) and their mean contact stiffness: the box cannot translate. Under gravity
+  /// the bottom wall carries the grains' weight as well, so on their own stresses the bottom
+  /// wall backs off while the top one pushes: once both are at the cap the box only
+  /// translates and the axis's stress stays off its target for good.
+  void set_symmetric(bool on) { symmetric_ = on; }
+  bool symmetric() const { return symmetric_; }
   const std::vector<int>& walls() const { return walls_; }
 
   /// Current box dimensions, m (from the wall positions; needs a scene).
@@ -201,6 +209,7 @@ class TriaxialController : public Controller, public StatefulController {
   Vec3 goal_ = Vec3::Zero();
   Vec3 l0_ = Vec3::Zero();
   bool l0_set_ = false;
+  bool symmetric_ = false;
   std::array<LimitWatch, 6> limit_{};
 };
 
