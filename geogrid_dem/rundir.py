@@ -352,6 +352,30 @@ def _pid_alive(pid: int) -> bool:
         return True
 
 
+def lock_holder_gone(lock: dict | None) -> bool:
+    """Whether the run that wrote ``lock`` (a lock file's content) is gone: its process, on
+    this host, no longer runs. A lock of another host cannot be judged here: it counts as
+    live, as does an unreadable one (None)."""
+    return bool(lock) and lock.get("host") == socket.gethostname() and \
+        isinstance(lock.get("pid"), int) and not _pid_alive(lock["pid"])
+
+
+def live_status(out) -> str:
+    """The status of the run in the results folder ``out``, from its manifest: "running",
+    "complete", "interrupted", "failed", or "killed" (the manifest says running but no lock
+    is left, or its process on this host is gone); "unknown" without a manifest."""
+    m = run_status(out)
+    if m is None:
+        return "unknown"
+    status = str(m.get("status", "unknown"))
+    if status == "running":
+        lock_path = Path(out) / LOCK
+        lock = _read_json(lock_path) if lock_path.exists() else None
+        if lock is None or lock_holder_gone(lock):
+            return "killed"
+    return status
+
+
 def _files(out: Path) -> list[Path]:
     """The files of ``out`` but its own run file, manifest and lock (those of sub-folders, a
     run of several, count as files of the run)."""
@@ -497,8 +521,7 @@ def begin_run(out, case: str, log=print, *, overwrite: bool | None = None,
         return out
     stale = None
     if lock_path.exists():
-        if lock and lock.get("host") == socket.gethostname() and \
-                isinstance(lock.get("pid"), int) and not _pid_alive(lock["pid"]):
+        if lock_holder_gone(lock):
             stale = lock
         else:
             raise RunFolderError(

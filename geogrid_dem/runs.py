@@ -485,10 +485,7 @@ def check_row_folder(row_dir: Path, case: str, params: dict[str, Any], *, source
                            "replaces only its own rows: nothing was removed; name another "
                            "'out', or move that folder")
     lock = rundir._read_json(row_dir / rundir.LOCK) if (row_dir / rundir.LOCK).exists() else None
-    import socket
-
-    if lock and isinstance(lock.get("pid"), int) and (
-            lock.get("host") != socket.gethostname() or rundir._pid_alive(lock["pid"])):
+    if lock and isinstance(lock.get("pid"), int) and not rundir.lock_holder_gone(lock):
         raise RunFileError(f"{source}: {row_dir}: another run is writing into it (pid "
                            f"{lock.get('pid')} on {lock.get('host')}); wait for it to end, or "
                            "name another 'out'")

@@ -19,7 +19,6 @@ from __future__ import annotations
 import csv
 import math
 import os
-import socket
 import time
 from dataclasses import dataclass
 from pathlib import Path
@@ -69,22 +68,11 @@ def _header(path: Path) -> list[str]:
 
 
 def run_state(run_dir: Path) -> str:
-    """The run's status from its manifest: "running", "complete", "interrupted", "failed",
-    or "killed" (the manifest says running but the lock's process on this host is gone);
-    "unknown" without a manifest."""
+    """The run's status (``geogrid_dem.rundir.live_status``): "running", "complete",
+    "interrupted", "failed", "killed", or "unknown" without a manifest."""
     from geogrid_dem import rundir
 
-    m = rundir.run_status(run_dir)
-    if m is None:
-        return "unknown"
-    status = str(m.get("status", "unknown"))
-    if status == "running":
-        lock = rundir._read_json(run_dir / rundir.LOCK)
-        if lock is None or (lock.get("host") == socket.gethostname()
-                            and isinstance(lock.get("pid"), int)
-                            and not rundir._pid_alive(lock["pid"])):
-            return "killed"
-    return status
+    return rundir.live_status(run_dir)
 
 
 def pick_series(run_dir: Path, csv_glob: str | None = None, x: str | None = None,
