@@ -215,8 +215,11 @@ def t_critical(n: int, level: float = 0.95) -> float:
 def verdict(diff_mean: float, diff_se: float, n: int, expected_sign: int) -> str:
     """At 95 % by Student's t over the n paired seeds: 'agrees' when the paired difference has
     002's sign and |d| > t(0.975, n - 1) x se, 'opposes' when it has the other sign beyond
-    that, else 'not resolved' (also with fewer than 2 seeds: no standard error)."""
-    if n < 2 or not (math.isfinite(diff_mean) and math.isfinite(diff_se)):
+    that, else 'not resolved' (also with fewer than 2 seeds: no standard error; and with a
+    standard error of 0 (up to rounding, 1e-9 of the mean), the pairs' differences all equal: a counted measure whose pairs moved
+    by the same count gives no estimate of its scatter, and t would be infinite)."""
+    if n < 2 or not (math.isfinite(diff_mean) and math.isfinite(diff_se)) or \
+            diff_se <= 1e-9 * abs(diff_mean):
         return "not resolved"
     if abs(diff_mean) <= t_critical(n) * diff_se or diff_mean == 0:
         return "not resolved"
