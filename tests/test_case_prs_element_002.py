@@ -60,6 +60,7 @@ def test_every_element_is_loaded_slowly_and_measured_at_rest_on_its_fem_path(smo
         assert e["loading_strain"][1] == 0.0 and ratio[1] == 1.0, name  # y held
         assert ratio[0] == pytest.approx(1.0, abs=0.05), name  # x on the FEM's path
         assert 0.5 <= ratio[2] <= 2.0, name
+        assert e["off_fem_path"] == [], name  # (and the summary says so)
         # A dense fill: 002's compacted soil, not a loose one.
         assert e["porosity_final"] < 0.42, name
         # The walls cannot shear the element: the omission is measured, stated in degrees.
@@ -180,6 +181,42 @@ def test_paired_statistics_on_synthetic_elements():
         el[f"detailed_PRS_s{k}"] = {"x": b + (0.3 if k % 2 else -0.3)}
     st = case.paired(el, "detailed", range(4), lambda e: e["x"])
     assert case.verdict(st["diff_mean"], st["diff_se"], st["n"], -1) == "not resolved"
+
+
+def test_an_element_off_its_fem_path_is_named_in_the_summary_and_the_report(tmp_path):
+    """Issue 59: the element's strain is within 0.5-2 x its FEM region's on every axis by
+    default; one outside it is named, per axis (an axis without a ratio is not judged)."""
+    assert case.off_fem_path({"strain_ratio_to_fem": [1.0, 1.0, 1.3]}) == []
+    assert case.off_fem_path({"strain_ratio_to_fem": [1.0, None, 0.41]}) == ["z"]
+    assert case.off_fem_path({"strain_ratio_to_fem": [2.5, 1.0, 0.5]}) == ["x"]
+    assert case.off_fem_path({}) == []
+    said = []
+    els = {"standard_RE_s1": {"strain_ratio_to_fem": [1.0, 1.0, 0.409]},
+           "standard_PRS_s1": {"strain_ratio_to_fem": [1.0, 1.0, 0.9]}, "no_fem": {}}
+    assert list(case.mark_off_fem_path(els, said.append)) == ["standard_RE_s1"]
+    assert els["standard_PRS_s1"]["off_fem_path"] == [] and "off_fem_path" not in els["no_fem"]
+    assert said == ["WARNING: 1 of 3 elements strained off their FEM region's path (their "
+                    "strain over the region's outside 0.5-2 x): standard_RE_s1 (z 0.409); the "
+                    "element is stiffer or softer there than the FEM's soil (summary.json: "
+                    "each element's off_fem_path)"]
+    row = {"grid": "standard", "name": "n", "re_mean": 1.0, "re_sd": 0.1, "prs_mean": 1.0,
+           "prs_sd": 0.1, "diff_mean": 0.0, "diff_se": 0.1, "n": 6, "t_critical": 2.571,
+           "expected_sign": -1, "verdict": "not resolved"}
+    el = {"num_grains": 500, "stress_final_pa": [1e3, 1e3, 2e3], "converged": [True, True],
+          "loading_strain": [0.0, 0.0, 1e-3], "hold_max_rel_error": 0.001,
+          "grid_force_longitudinal_mean_n": 1.0, "porosity_final": 0.4,
+          "density_scaling": {"dt_s": 1e-6}, "preparation_wall_time_s": 1.0,
+          "stage_wall_time_s": [1.0], "wall_time_s": 2.0}
+    summary = {"mode": "FEM -> DEM (one-way)", "seeds": [1], "findings": [row],
+               "measures": [], "elements": {
+                   "standard_RE_s1": {**el, "strain_ratio_to_fem": [1.0, 1.0, 0.41],
+                                      "off_fem_path": ["z"]},
+                   "standard_PRS_s1": {**el, "strain_ratio_to_fem": [1.0, 1.0, 0.9],
+                                       "off_fem_path": []}}}
+    case.write_report(tmp_path, summary)
+    report = (tmp_path / "report.md").read_text()
+    assert "**Off the FEM path:** standard_RE_s1 (z) strained outside 0.5–2" in report
+    assert "standard_PRS_s1 (" not in report
 
 
 def test_a_verdict_needs_every_element_at_rest():

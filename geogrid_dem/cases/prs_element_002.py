@@ -226,6 +226,45 @@ def verdict(diff_mean: float, diff_se: float, n: int, expected_sign: int) -> str
     return "agrees" if np.sign(diff_mean) == expected_sign else "opposes"
 
 
+#: The element's strain over its FEM region's, per axis, that counts as on the region's path
+#: (issue 59: within 0.5-2 by default); an element outside it is named (``off_fem_path``).
+STRAIN_RATIO_RANGE = (0.5, 2.0)
+
+
+def off_fem_path(e: dict) -> list[str]:
+    """The axes ("x", "y", "z") on which an element's loading strain is outside
+    STRAIN_RATIO_RANGE times its FEM region's (``strain_ratio_to_fem``; an axis without a
+    ratio, the region's strain zero there, is not judged). Empty: on the region's path."""
+    lo, hi = STRAIN_RATIO_RANGE
+    return [ax for ax, r in zip("xyz", e.get("strain_ratio_to_fem") or [])
+            if r is not None and not lo <= r <= hi]
+
+
+def mark_off_fem_path(elements: dict, log) -> dict:
+    """Sets each element's ``off_fem_path`` (:func:`off_fem_path`; elements with a strain
+    ratio to the FEM only) and logs a WARNING naming those off it, with their ratios. Returns
+    {label: element} of those off it."""
+    off = {}
+    for label, e in elements.items():
+        if e.get("strain_ratio_to_fem") is not None:
+            e["off_fem_path"] = off_fem_path(e)
+            if e["off_fem_path"]:
+                off[label] = e
+    if off:
+        lo, hi = STRAIN_RATIO_RANGE
+
+        def ratios(e):
+            r = e["strain_ratio_to_fem"]
+            return ", ".join(f"{ax} {r['xyz'.index(ax)]:.3g}" for ax in e["off_fem_path"])
+
+        log(f"WARNING: {len(off)} of {len(elements)} elements strained off their FEM region's "
+            f"path (their strain over the region's outside {lo:g}-{hi:g} x): "
+            + ", ".join(f"{k} ({ratios(e)})" for k, e in off.items())
+            + "; the element is stiffer or softer there than the FEM's soil (summary.json: "
+              "each element's off_fem_path)")
+    return off
+
+
 def _stats(x: list) -> tuple[float, float]:
     a = np.asarray(x, float)
     return float(a.mean()), (float(a.std(ddof=1)) if len(a) > 1 else float("nan"))
@@ -359,6 +398,14 @@ def write_report(out: Path, summary: dict) -> None:
     if stalled:
         lines += ["", f"**Not at rest:** {', '.join(stalled)} ended a stage NOT converged "
                   "(the elements' `stall`): the findings that rest on them are `not resolved`."]
+    off = {k: e["off_fem_path"] for k, e in summary["elements"].items()
+           if e.get("off_fem_path")}
+    if off:
+        lo, hi = STRAIN_RATIO_RANGE
+        named = ", ".join(f"{k} ({'/'.join(v)})" for k, v in off.items())
+        lines += ["", f"**Off the FEM path:** {named} strained outside {lo:g}–{hi:g} × their "
+                  "FEM region on those axes: the element is stiffer or softer there than the "
+                  "FEM's soil."]
     lines += ["", "## Other measures (no direction from 002)", ""]
     lines += findings_table(summary["measures"], with_verdict=False)
     rows = [("grains", lambda e: f"{e['num_grains']}"),
@@ -530,6 +577,7 @@ def run(p: Params, out: Path) -> dict:
             (out / "summary.json").write_text(json.dumps({"status": "running", **summary},
                                                          indent=2, default=float) + "\n")
     _draw_pairs(p, out)
+    mark_off_fem_path(summary["elements"], log)
     summary["findings"] = findings(summary["elements"], p.seeds, p.grids)
     summary["measures"] = measures_table(summary["elements"], p.seeds, p.grids)
     summary["wall_time_total_s"] = time.perf_counter() - t_start
