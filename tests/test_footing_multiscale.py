@@ -338,6 +338,20 @@ def test_the_smoke_gives_load_settlement_for_each_variant(case_smoke):
         assert np.asarray(ms["settlement_mean_m"]) == pytest.approx(dp["settlement_m"],
                                                                       rel=0.3)
         assert s["settlement_m"][v] == ms["settlement_mean_m"]
+        # the one-soil check on volume change too (issue 62 item 7): the zone's volumetric
+        # strain per level, in each multiscale run and in the Drucker-Prager body
+        assert len(dp["zone_volumetric_strain"]) == levels
+        for seed in seeds:
+            vol = ms["runs"][str(seed)]["zone_volumetric_strain"]
+            assert len(vol) == levels and all(math.isfinite(x) and x != 0 for x in vol)
+        o = s["one_soil"][v]
+        assert o["volumetric_strain_multiscale"] == pytest.approx(np.mean(
+            [ms["runs"][str(x)]["zone_volumetric_strain"] for x in seeds], axis=0), rel=1e-12)
+        assert o["volumetric_strain_drucker_prager"] == dp["zone_volumetric_strain"]
+        assert o["volumetric_strain_difference"] == pytest.approx(np.subtract(
+            o["volumetric_strain_multiscale"], o["volumetric_strain_drucker_prager"]))
+        assert o["settlement_difference_m"] == pytest.approx(np.subtract(
+            ms["settlement_mean_m"], dp["settlement_at_level_m"]))
     for k in ("RE-unreinforced", "PRS-RE", "PRS-unreinforced"):
         d = s["paired_settlement_differences"][k]
         assert d["seeds"] == [2] * levels and len(d["mean_m"]) == levels

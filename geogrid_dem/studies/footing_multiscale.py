@@ -353,7 +353,7 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
                          "so no cell gets a reinforced RVE; a layer higher in the zone, a "
                          "finer --fine-size, or --band-grains 0")
     tag = f"{variant}_seed{seed}"
-    group, failures = None, []
+    group, failures, vols = None, [], []
     for attempt in range(PREPARATION_ATTEMPTS):
         base = 1000 * seed + 100 * attempt
         runner = PeriodicRegionElement(n=p.cell_grains, seed=base, prep_friction_deg=0.0,
@@ -384,6 +384,7 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
         statuses, settlement at the level's pressure) and how it ended."""
         return {"pressure_pa": [r[0] for r in rows], "settlement_m": [r[1] for r in rows],
                 "settlement_at_level_m": [r[4] for r in rows],
+                "zone_volumetric_strain": list(vols),
                 "newton_iterations": [r[2] for r in rows],
                 "level_statuses": [r[3] for r in rows], "status": status, "reason": reason,
                 "cells": len(cells), "band_cells": len(bands),
@@ -418,6 +419,7 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
             rows.append((m.footing_pressure_pa(), m.footing_settlement_m(),
                          sum(r.newton_iterations for r in got),
                          [r.status for r in got], at))
+            vols.append(zone_volumetric_strain(m, e0))
             if bands:
                 sheets.append(band_sheet_tensions(group, len(cells)))
             on_level(variant, "multiscale", seed, k, rows[-1])
@@ -466,11 +468,13 @@ def run_continuum(p: FootingParams, variant: str, soil, on_level) -> dict:
     t0 = time.perf_counter()
     m = model(p, variant, soil)
     seated = m.footing_settlement_m()
-    rows = []
+    e0 = m.region_strain("zone")
+    rows, vols = [], []
 
     def level(k, got, at):
         rows.append((m.footing_pressure_pa(), m.footing_settlement_m(),
                      sum(r.newton_iterations for r in got), [r.status for r in got], at))
+        vols.append(zone_volumetric_strain(m, e0))
         on_level(variant, "drucker_prager", None, k, rows[-1])
 
     failure = None
@@ -482,8 +486,54 @@ def run_continuum(p: FootingParams, variant: str, soil, on_level) -> dict:
         failure = str(exc)
     return {"pressure_pa": [r[0] for r in rows], "settlement_m": [r[1] for r in rows],
             "settlement_at_level_m": [r[4] for r in rows], "seated_settlement_m": seated,
+            "zone_volumetric_strain": vols,
             "levels_reached": len(rows), "failure": failure,
             "wall_time_s": time.perf_counter() - t0}
+
+
+def zone_volumetric_strain(m, e0: np.ndarray) -> float:
+    """The DEM zone's volumetric strain since ``e0`` (its mean strain at the seating), -,
+    dilation positive: the trace of the zone's volume-averaged strain change."""
+    return float(np.trace(m.region_strain("zone") - e0))
+
+
+def one_soil(variants: dict) -> dict:
+    """Per variant, the DEM zone against the Drucker–Prager body fitted on its grains, level by
+    level (issue 62: not only the settlement, the zone's volume change too: a continuum that
+    dilates more or less than its grains shows it here): the multiscale runs' seed mean of
+    the settlement at the level's pressure and of the zone's volumetric strain (dilation +;
+    over the seeds that reached the level, ``seeds_used``), the body's, and their
+    differences (multiscale − Drucker–Prager; None where either stopped before the level)."""
+    out = {}
+    for v, r in variants.items():
+        ms, dp = r["multiscale"], r["drucker_prager"]
+        n = len(ms["seeds_used"])
+
+        def mean_of(key, k):
+            xs = [ms["runs"][str(s)][key][k] for s in ms["seeds_used"][k]
+                  if len(ms["runs"][str(s)][key]) > k]
+            return float(np.mean(xs)) if xs else None
+
+        def dp_at(key, k):
+            return dp[key][k] if k < len(dp[key]) else None
+
+        def diff(a, b):
+            return None if a is None or b is None else a - b
+
+        rows = {"settlement_multiscale_m": [mean_of("settlement_at_level_m", k)
+                                            for k in range(n)],
+                "settlement_drucker_prager_m": [dp_at("settlement_at_level_m", k)
+                                                for k in range(n)],
+                "volumetric_strain_multiscale": [mean_of("zone_volumetric_strain", k)
+                                                 for k in range(n)],
+                "volumetric_strain_drucker_prager": [dp_at("zone_volumetric_strain", k)
+                                                     for k in range(n)]}
+        rows["settlement_difference_m"] = [diff(a, b) for a, b in zip(
+            rows["settlement_multiscale_m"], rows["settlement_drucker_prager_m"])]
+        rows["volumetric_strain_difference"] = [diff(a, b) for a, b in zip(
+            rows["volumetric_strain_multiscale"], rows["volumetric_strain_drucker_prager"])]
+        out[v] = rows
+    return out
 
 
 def paired(a: np.ndarray, b: np.ndarray) -> dict:
@@ -628,6 +678,7 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
         "case": "footing_multiscale", "pressures_pa": p.pressures_pa, "seat_pa": p.seat_pa,
         "settlement_m": {v: r["multiscale"]["settlement_mean_m"] for v, r in variants.items()},
         "variants": variants, "paired_settlement_differences": diffs,
+        "one_soil": one_soil(variants),
         "calibration": cal,
         "coupling": {"mode": "hierarchical (an element per zone cell)", "status": status,
                      "exit_code": exit_code(status),
