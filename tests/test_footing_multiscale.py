@@ -418,6 +418,10 @@ def test_a_failed_run_is_kept_and_left_out_of_the_levels_it_did_not_reach(tmp_pa
     assert s["settlement_m"]["RE"] == pytest.approx([0.009 + 2e-4, 0.019 + 4e-4])
     assert s["variants"]["RE"]["multiscale"]["settlement_sd_m"][0] == pytest.approx(1e-4)
     assert json.loads((tmp_path / "summary.json").read_text())["coupling"]["status"] == "failed"
+    # (runs without a zone volumetric strain record: the one-soil rows say None, not 0)
+    o = s["one_soil"]["RE"]
+    assert o["volumetric_strain_multiscale"] == [None, None]
+    assert o["settlement_multiscale_m"] == pytest.approx([0.009 + 2e-4, 0.019 + 4e-4])
 
 
 def test_levels_are_compared_at_their_own_pressure_not_where_the_footing_stopped():

@@ -509,13 +509,12 @@ def one_soil(variants: dict) -> dict:
         ms, dp = r["multiscale"], r["drucker_prager"]
         n = len(ms["seeds_used"])
 
-        def mean_of(key, k):
-            xs = [ms["runs"][str(s)][key][k] for s in ms["seeds_used"][k]
-                  if len(ms["runs"][str(s)][key]) > k]
-            return float(np.mean(xs)) if xs else None
+        def mean_of(key, k):  # (None where a run has no such record)
+            xs = [ms["runs"][str(s)].get(key, [])[k:k + 1] for s in ms["seeds_used"][k]]
+            return float(np.mean(xs)) if xs and all(xs) else None
 
         def dp_at(key, k):
-            return dp[key][k] if k < len(dp[key]) else None
+            return (dp.get(key) or [])[k] if k < len(dp.get(key) or []) else None
 
         def diff(a, b):
             return None if a is None or b is None else a - b
