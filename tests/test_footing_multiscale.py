@@ -5,6 +5,7 @@ tests/test_cases_smoke.py)."""
 from __future__ import annotations
 
 import csv
+import dataclasses
 import json
 import math
 import subprocess
@@ -352,6 +353,14 @@ def test_the_smoke_gives_load_settlement_for_each_variant(case_smoke):
             o["volumetric_strain_multiscale"], o["volumetric_strain_drucker_prager"]))
         assert o["settlement_difference_m"] == pytest.approx(np.subtract(
             ms["settlement_mean_m"], dp["settlement_at_level_m"]))
+    # every difference with its budget (issue 62 item 1): the smoke measures the seeds' part
+    # alone, so none is resolved and the unmeasured parts are named
+    assert len(s["differences"]) == 6
+    for d in s["differences"]:
+        assert d["n"] == 2 and d["budget"]["seeds"] > 0 and d["total"] is None
+        assert d["unmeasured"] == ["ceiling", "calibration", "rve", "mesh"]
+        assert d["resolved"] is False
+    assert "its budget not measured (ceiling, calibration, rve, mesh; --budget)" in proc.stdout
     for k in ("RE-unreinforced", "PRS-RE", "PRS-unreinforced"):
         d = s["paired_settlement_differences"][k]
         assert d["seeds"] == [2] * levels and len(d["mean_m"]) == levels
@@ -418,10 +427,84 @@ def test_a_failed_run_is_kept_and_left_out_of_the_levels_it_did_not_reach(tmp_pa
     assert s["settlement_m"]["RE"] == pytest.approx([0.009 + 2e-4, 0.019 + 4e-4])
     assert s["variants"]["RE"]["multiscale"]["settlement_sd_m"][0] == pytest.approx(1e-4)
     assert json.loads((tmp_path / "summary.json").read_text())["coupling"]["status"] == "failed"
+    # the budgeted differences at the last level: over the seeds that reached it (1 and 3)
+    d = {r["name"]: r for r in s["differences"]}["PRS - RE"]
+    assert d["n"] == 2 and d["mean"] == pytest.approx(-0.001) and not d["resolved"]
     # (runs without a zone volumetric strain record: the one-soil rows say None, not 0)
     o = s["one_soil"]["RE"]
     assert o["volumetric_strain_multiscale"] == [None, None]
     assert o["settlement_multiscale_m"] == pytest.approx([0.009 + 2e-4, 0.019 + 4e-4])
+
+
+def test_each_difference_carries_its_measured_budget_and_is_resolved_only_above_it(
+        tmp_path, monkeypatch):
+    """Issue 62 item 1: every paired difference (PRS - RE, RE - unreinforced, PRS -
+    unreinforced, and each variant's DEM zone - Drucker-Prager) carries its error budget:
+    each --budget part is a rerun with one thing changed (the ceiling halved, the continuum
+    refitted on another seed, twice the grains, a finer zone), the part how far the
+    difference moved; the seeds' part t x se. Resolved only above the whole budget; with a
+    part unmeasured, not resolved and the part named."""
+    from geogrid_dem.studies import footing_multiscale as fm
+
+    fitted = []
+
+    def calibrate(p, log):
+        fitted.append(p.calibration_seed)
+        return ("refit" if p.calibration_seed is not None else "soil"), {"young_pa": 1.0}
+
+    monkeypatch.setattr(fm, "calibrate", calibrate)
+    monkeypatch.setattr("cpp_dem.elements.cluster.local_client", lambda n: (_Closable(), None))
+    monkeypatch.setattr(fm, "run_continuum", lambda p, v, soil, on_level: {
+        "pressure_pa": p.pressures_pa, "settlement_m": [0.010],
+        "settlement_at_level_m": [0.010], "seated_settlement_m": 0.005, "levels_reached": 1,
+        "failure": None})
+    monkeypatch.setattr(fm, "figure", lambda s, png: None)
+    # PRS - RE is -1 mm, moved by 0.1 mm by a halved ceiling, 0.05 mm by the refit, 0.2 mm
+    # by twice the grains and 0.3 mm by the finer mesh; seeds scatter it by +-0.01 mm
+    effect = {"unreinforced": 0.0, "RE": -1e-3, "PRS": -2e-3}
+
+    def fake(p, v, seed, soil, client, out, log, on_level, first_slope):
+        shift = {"RE": 0.0, "PRS": 1.0, "unreinforced": 0.0}[v] * (
+            1e-4 * (p.noise_ceiling < 1e-2) + 5e-5 * (soil == "refit")
+            + 2e-4 * (p.cell_grains > 150) + 3e-4 * (p.fine_size < 0.125))
+        at = [0.012 + effect[v] + shift + 1e-5 * seed * (v == "PRS")]
+        on_level(v, "multiscale", seed, 0, (p.pressures_pa[0], at[0], 1, ["converged"], at[0]))
+        return {"status": "converged", "settlement_at_level_m": at, "settlement_m": at,
+                "cells": 4, "element_evaluations": 1, "dem_s": 1.0}
+
+    monkeypatch.setattr(fm, "run_multiscale", fake)
+    p = fm.FootingParams(seeds=(1, 2, 3), levels=1, budget=("ceiling", "calibration", "rve",
+                                                             "mesh"))
+    s = fm.run(p, tmp_path, lambda m: None)
+    assert fitted == [None, 4]  # (the refit on the largest seed + 1)
+    d = {x["name"]: x for x in s["differences"]}
+    assert set(d) == {"RE - unreinforced", "PRS - RE", "PRS - unreinforced",
+                      "unreinforced: DEM zone - Drucker-Prager", "RE: DEM zone - Drucker-Prager",
+                      "PRS: DEM zone - Drucker-Prager"}
+    x = d["PRS - RE"]
+    assert x["mean"] == pytest.approx(-1e-3 + 2e-5) and x["n"] == 3
+    assert x["budget"]["ceiling"] == pytest.approx(1e-4)
+    assert x["budget"]["calibration"] == pytest.approx(5e-5)
+    assert x["budget"]["rve"] == pytest.approx(2e-4)
+    assert x["budget"]["mesh"] == pytest.approx(3e-4)
+    se = 1e-5 / math.sqrt(3)  # (the seeds' differences 1e-5, 2e-5, 3e-5 m)
+    assert x["se"] == pytest.approx(se)
+    assert x["budget"]["seeds"] == pytest.approx(4.303 * se, rel=1e-3)  # t(0.975, 2) x se
+    assert x["total"] == pytest.approx(6.5e-4 + 4.303 * se, rel=1e-3) and x["resolved"]
+    # RE - unreinforced: -1 mm, nothing moves it, no scatter: resolved above a zero budget
+    assert d["RE - unreinforced"]["resolved"] and d["RE - unreinforced"]["total"] == 0.0
+    # PRS's zone against its body: +0.02 mm, moved 0.65 mm by the parts: not resolved
+    z = d["PRS: DEM zone - Drucker-Prager"]
+    assert z["mean"] == pytest.approx(2e-5) and z["total"] > 6.5e-4 and not z["resolved"]
+    for part in p.budget:
+        assert (tmp_path / f"budget_{part}" / "load_settlement.csv").is_file()
+    assert (tmp_path / "budget_calibration" / "calibration.json").is_file()
+    # without reruns: the parts unmeasured, named, and nothing resolved
+    (tmp_path / "b").mkdir()
+    s = fm.run(dataclasses.replace(p, budget=("ceiling",)), tmp_path / "b", lambda m: None)
+    x = {r["name"]: r for r in s["differences"]}["PRS - RE"]
+    assert x["unmeasured"] == ["calibration", "rve", "mesh"] and x["total"] is None
+    assert not x["resolved"] and x["budget"]["ceiling"] == pytest.approx(1e-4)
 
 
 def test_levels_are_compared_at_their_own_pressure_not_where_the_footing_stopped():

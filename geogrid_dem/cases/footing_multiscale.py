@@ -115,7 +115,8 @@ def interrupted_report(p, out) -> None:
 
 def build_parser():
     """The case's parser: the shared options (geogrid_dem.options) and its own."""
-    from geogrid_dem.studies.footing_multiscale import BAND_TANGENTS, VARIANTS, FootingParams
+    from geogrid_dem.studies.footing_multiscale import (BAND_TANGENTS, BUDGET_PARTS, VARIANTS,
+                                                        FootingParams)
 
     d = FootingParams()
     ap = case_parser("footing-multiscale", describe("footing-multiscale",
@@ -165,6 +166,15 @@ def build_parser():
                          "bonds (network), the same with sliding contacts taken as stuck "
                          "(network-elastic), or forward differences of the plane's "
                          "components, three more runs of each RVE a trial (fd-forward)")
+    ap.add_argument("--noise-ceiling", type=float, default=d.noise_ceiling,
+                    help="Newton: a DEM zone step is accepted within the elements' noise only "
+                         "up to this fraction of the zone's own internal force")
+    ap.add_argument("--budget", default="",
+                    help="the error budget's parts to measure, each by a rerun of every "
+                         "variant with one thing changed: a comma-separated selection of "
+                         + "; ".join(f"{k} ({v})" for k, v in BUDGET_PARTS.items())
+                         + "; or all. Each difference is resolved only above its whole "
+                           "budget (the seeds' part is always measured)")
     ap.add_argument("--workers", type=int, default=d.workers,
                     help="Dask workers of the zone's elements (a LocalCluster)")
     ap.add_argument("--dim", type=int, choices=(2, 3), default=d.dim,
@@ -182,11 +192,11 @@ FLAGS = {"--pressure": "pressure_pa", "--seat": "seat_pa", "--levels": "levels",
          "--grid-stiffness": "grid_stiffness", "--prestress": "prestress",
          "--fine-size": "fine_size", "--cell-grains": "cell_grains",
          "--band-grains": "band_grains", "--band-tangent": "band_tangent",
-         "--workers": "workers", "--dim": "dim"}
+         "--workers": "workers", "--dim": "dim", "--noise-ceiling": "noise_ceiling"}
 
 
 def parse_args(argv=None):
-    from geogrid_dem.studies.footing_multiscale import VARIANTS, FootingParams
+    from geogrid_dem.studies.footing_multiscale import BUDGET_PARTS, VARIANTS, FootingParams
 
     ap = build_parser()
     a = parse_checked(ap, argv)
@@ -221,7 +231,13 @@ def parse_args(argv=None):
     if not (a.band_grains if a.band_grains is not None else p.band_grains):
         refuse_unused(ap, a, given, "band_tangent", "without band RVEs (--band-grains 0: the "
                       "layer's cells stay the FEM's elastic band)", "give --band-grains N")
-    p = replace(p, seeds=tuple(range(a.seed, a.seed + seeds)), variants=variants)
+    budget = tuple(BUDGET_PARTS) if a.budget.strip() == "all" else tuple(
+        b.strip() for b in a.budget.split(",") if b.strip())
+    if any(b not in BUDGET_PARTS for b in budget):
+        ap.error(f"--budget={a.budget!r}: a comma-separated selection of "
+                 f"{', '.join(BUDGET_PARTS)}, or all")
+    distinct(ap, "--budget", repr(a.budget), budget)
+    p = replace(p, seeds=tuple(range(a.seed, a.seed + seeds)), variants=variants, budget=budget)
     for flag, field in FLAGS.items():  # (None: the smoke's or the full run's default)
         v = getattr(a, flag[2:].replace("-", "_"))
         if v is not None:

@@ -53,6 +53,14 @@ from geogrid_dem.studies import biaxial
 from geogrid_dem.studies.prs_element import hierarchical_status, step_statuses
 
 VARIANTS = ("unreinforced", "RE", "PRS")
+#: The numerical error budget of a paired difference (issue 62): each part is measured by
+#: rerunning the variants with one thing changed, the part being how far the difference moves.
+#: The seeds' part (t(0.975, n - 1) x its standard error) is always measured.
+BUDGET_PARTS = {
+    "ceiling": "Newton's noise ceiling halved",
+    "calibration": "the continuum refitted on another element seed (the largest seed + 1)",
+    "rve": "twice the grains in every element",
+    "mesh": "the zone's cells fine_size / sqrt(2) (about twice as many)"}
 #: The Voigt components of the elements' finite-difference tangents: the x-z plane's in plane
 #: strain (xx, zz, xz), all six in 3D.
 FD_COMPONENTS = {2: (0, 2, 4), 3: (0, 1, 2, 3, 4, 5)}
@@ -103,6 +111,13 @@ class FootingParams:
     threads: int = 1                #: OpenMP threads of this process (the FEM; the elements
                                     #: run one thread each on their workers)
     dim: int = 2                    #: 2: a strip footing in plane strain; 3: a square one
+    noise_ceiling: float = 1e-2     #: Newton: a DEM zone step is accepted within the
+                                    #: elements' noise only up to this fraction of the
+                                    #: zone's own internal force, -
+    calibration_seed: int | None = None  #: the element seed the continuum is fitted on
+                                    #: (None: ``seeds[0]``)
+    budget: tuple = ()              #: the error budget's parts measured by reruns
+                                    #: (BUDGET_PARTS; the seeds' part is always measured)
 
     def check(self) -> None:
         """Refuses a bad value, naming the field, the value and what is allowed."""
@@ -156,6 +171,14 @@ class FootingParams:
         if self.band_grains and set(self.variants) == {"unreinforced"}:
             bad("band_grains", "0 with variants ('unreinforced',) alone: the RVEs are the "
                                "layer's, and RE and PRS have the layer")
+        if not (isinstance(self.noise_ceiling, (int, float)) and 0 < self.noise_ceiling < 1):
+            bad("noise_ceiling", "a fraction in (0, 1)")
+        if self.calibration_seed is not None and not (
+                isinstance(self.calibration_seed, int) and self.calibration_seed >= 0):
+            bad("calibration_seed", "None (the first seed) or a whole number >= 0")
+        if len(set(self.budget)) != len(self.budget) or \
+                any(b not in BUDGET_PARTS for b in self.budget):
+            bad("budget", "distinct parts of " + ", ".join(BUDGET_PARTS))
         if self.dim == 3 and self.band_grains:
             bad("band_grains", "0 in 3D (the layer's cells stay the FEM's band: the reinforced "
                                "RVEs are verified in plane strain only)")
@@ -267,14 +290,15 @@ def calibrate(p: FootingParams, log) -> tuple:
                  f"{m.footing_pressure_pa() / 1e3:.1f} kPa of {p.pressure_pa / 1e3:g} ({exc})")
         log(f"calibration: WARNING: {short}; the zone's path is taken to there")
     s1 = m.region_stress("zone")
-    fit = fit_along_path(s0, s1, n=p.cell_grains, seed=p.seeds[0], prep_friction_deg=0.0,
+    seed = p.seeds[0] if p.calibration_seed is None else p.calibration_seed
+    fit = fit_along_path(s0, s1, n=p.cell_grains, seed=seed, prep_friction_deg=0.0,
                          points=p.fit_points, options=grain_options(p), unbalanced=1e-2,
                          tol=0.02)
     pressure = float(-np.trace(s1) / 3)
     run = biaxial.direct_biaxial(
         lambda k: DemElement.periodic(p.cell_grains, stress=pressure, seed=k,
                                       prep_friction_deg=0.0, **grain_options(p)),
-        [p.seeds[0]], pressure=pressure, strain=0.06, strain_per_step=1e-6, log=None)[0]
+        [seed], pressure=pressure, strain=0.06, strain_per_step=1e-6, log=None)[0]
     angles = biaxial.rve_angles(run)
     peak_reached = angles["peak_axial_strain"] < 0.06 - 1e-9
     mat = DruckerPrager(young_pa=fit.material.young_pa, poisson=fit.material.poisson,
@@ -290,7 +314,7 @@ def calibrate(p: FootingParams, log) -> tuple:
            "path_footing_pressure_pa": m.footing_pressure_pa(), "path_stopped": short,
            "biaxial_pressure_pa": pressure, "biaxial_peak_axial_strain":
                angles["peak_axial_strain"], "biaxial_peak_reached": bool(peak_reached),
-           "dilatancy_deg": angles["psi_deg"], "element_seed": p.seeds[0],
+           "dilatancy_deg": angles["psi_deg"], "element_seed": seed,
            "element_grains": p.cell_grains,
            "start": {"young_pa": p.soil_young, "poisson": p.soil_poisson,
                      "friction_deg": p.soil_friction},
@@ -342,6 +366,7 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
     t0 = time.perf_counter()
     m = continuum(f"{variant} seed {seed}: the seating before the DEM zone takes over",
                   model, p, variant, soil)
+    m.noise_ceiling = p.noise_ceiling
     e0 = m.region_strain("zone")
     cells = m.cell_stresses("zone")
     # (the grains around a band cell: the zone's soil cells within 1.5 fine cells of it)
@@ -535,6 +560,71 @@ def one_soil(variants: dict) -> dict:
     return out
 
 
+def _t_critical(n: int) -> float:
+    """Student's t(0.975, n - 1), -; NaN below 2 seeds."""
+    if n < 2:
+        return float("nan")
+    from scipy.stats import t as student_t
+
+    return float(student_t.ppf(0.975, n - 1))
+
+
+def _last_differences(variants: dict, levels: int) -> dict:
+    """The run's differences at its last level, {name: (mean, se, n)} (m): the paired
+    settlement differences between variants over the seeds that reached the level in every
+    variant, and per variant the DEM zone against the Drucker–Prager body fitted on its
+    grains (se: the zone's seed scatter; the body is one run). (None, None, n) where no seed
+    reached it."""
+    k = levels - 1
+    out = {}
+
+    def at(v):
+        ms = variants[v]["multiscale"]
+        used = ms["seeds_used"][k]
+        return np.array([ms["runs"][str(s)]["settlement_at_level_m"][k] for s in used])
+
+    for a, b in (("RE", "unreinforced"), ("PRS", "RE"), ("PRS", "unreinforced")):
+        if a in variants and b in variants:
+            d = at(a) - at(b)
+            n = len(d)
+            out[f"{a} - {b}"] = (float(d.mean()) if n else None,
+                                 float(d.std(ddof=1) / math.sqrt(n)) if n > 1 else None, n)
+    for v, r in variants.items():
+        z, dp = at(v), r["drucker_prager"].get("settlement_at_level_m") or []
+        n = len(z)
+        mean = float(z.mean() - dp[k]) if n and len(dp) > k else None
+        out[f"{v}: DEM zone - Drucker-Prager"] = (
+            mean, float(z.std(ddof=1) / math.sqrt(n)) if n > 1 and mean is not None else None,
+            n)
+    return out
+
+
+def differences(variants: dict, reruns: dict, levels: int) -> list:
+    """The error budget of every difference the run reports (issue 62), at the last level:
+    ``{"name", "mean", "se", "n", "budget": {"ceiling", "calibration", "rve", "mesh",
+    "seeds"}, "total", "resolved", "unmeasured"}`` (m). Each part of ``reruns`` (BUDGET_PARTS:
+    the variants rerun with one thing changed) is how far the difference moved, |rerun -
+    run|; "seeds" is t(0.975, n - 1) x se. ``total`` is their sum (no independence assumed),
+    None while a part is unmeasured (``unmeasured`` names them); ``resolved`` only when
+    every part is measured and |mean| exceeds the total."""
+    base = _last_differences(variants, levels)
+    moved = {part: _last_differences(v, levels) for part, v in reruns.items()}
+    rows = []
+    for name, (mean, se, n) in base.items():
+        budget = {part: None for part in BUDGET_PARTS}
+        for part, d in moved.items():
+            other = d.get(name, (None,))[0]
+            if mean is not None and other is not None:
+                budget[part] = abs(other - mean)
+        budget["seeds"] = _t_critical(n) * se if se is not None else None
+        unmeasured = [k for k, x in budget.items() if x is None or not math.isfinite(x)]
+        total = None if unmeasured else float(sum(budget.values()))
+        rows.append({"name": name, "mean": mean, "se": se, "n": n, "budget": budget,
+                     "total": total, "unmeasured": unmeasured,
+                     "resolved": bool(total is not None and abs(mean) > total)})
+    return rows
+
+
 def paired(a: np.ndarray, b: np.ndarray) -> dict:
     """The paired difference a - b over seeds (rows) at each level (columns): mean and
     standard error (None with one seed), m."""
@@ -612,55 +702,98 @@ def figure(summary: dict, png: Path) -> None:
     plt.close(fig)
 
 
+def budget_params(p: FootingParams, part: str) -> FootingParams:
+    """The parameters of the rerun that measures the budget's ``part`` (BUDGET_PARTS)."""
+    change = {"ceiling": dict(noise_ceiling=0.5 * p.noise_ceiling),
+              "calibration": dict(calibration_seed=max(p.seeds) + 1),
+              "rve": dict(cell_grains=2 * p.cell_grains, band_grains=2 * p.band_grains),
+              "mesh": dict(fine_size=p.fine_size / math.sqrt(2.0))}[part]
+    return dataclasses.replace(p, budget=(), **change)
+
+
+def _csv_rows(path: Path):
+    """A load-settlement CSV (its header written now) and the function that appends a row."""
+    path.write_text("variant,model,seed,level,pressure_pa,settlement_m,"
+                    "settlement_at_level_m,newton_iterations,statuses\n")
+
+    def add(variant, kind, seed, k, row):
+        pres, settle, its, statuses, at = row
+        with path.open("a") as f:
+            f.write(f"{variant},{kind},{'' if seed is None else seed},{k + 1},{pres:.6g},"
+                    f"{settle:.6g},{at:.6g},{its},{' '.join(statuses)}\n")
+            f.flush()
+    return add
+
+
+def run_variants(p: FootingParams, soil, client, out: Path, log, on_level) -> dict:
+    """Steps 2 and 3 of the module doc for every variant: {variant: {"multiscale": {"status",
+    "runs"}, "drucker_prager": ...}}."""
+    from femcoupling.coupling.status import worst
+
+    variants: dict = {}
+    for v in p.variants:
+        dp = continuum(f"{v}: the Drucker–Prager body", run_continuum, p, v, soil, on_level)
+        if dp["failure"] is not None:
+            log(f"WARNING: {v}: the Drucker–Prager body stopped after level "
+                f"{dp['levels_reached']} of {p.levels} (near its bearing capacity?): "
+                f"{dp['failure']}")
+        slope = (dp["pressure_pa"][0] - p.seat_pa) / (dp["settlement_m"][0]
+                                                       - dp["seated_settlement_m"])
+        runs = {s: run_multiscale(p, v, s, soil, client, out, log, on_level, slope)
+                for s in p.seeds}
+        variants[v] = {"multiscale": {"status": worst(r["status"] for r in runs.values()),
+                                      "runs": {str(s): r for s, r in runs.items()}},
+                       "drucker_prager": dp}
+    return variants
+
+
 def run(p: FootingParams, out: Path, log, progress=None) -> dict:
     """The whole case (module doc); writes ``load_settlement.csv`` (a row per level as it
     is reached, flushed), ``calibration.json``, ``summary.json`` and
-    ``load_settlement.png``. Returns the summary."""
+    ``load_settlement.png``; with ``p.budget``, each part's rerun in ``budget_<part>/``
+    (its own ``load_settlement.csv``, and ``calibration.json`` when refitted). Returns the
+    summary."""
     from cpp_dem.elements.cluster import local_client
     from femcoupling.coupling.status import exit_code, worst
 
     p.check()
     t0 = time.perf_counter()
-    csv = out / "load_settlement.csv"
-    csv.write_text("variant,model,seed,level,pressure_pa,settlement_m,"
-                   "settlement_at_level_m,newton_iterations,statuses\n")
+    add_row = _csv_rows(out / "load_settlement.csv")
     # (the progress counts the DEM zone's levels: the continuum's take seconds)
-    n_units = len(p.variants) * len(p.seeds) * p.levels
+    n_units = (1 + len(p.budget)) * len(p.variants) * len(p.seeds) * p.levels
     done = [0]
 
-    def on_level(variant, kind, seed, k, row):
-        pres, settle, its, statuses, at = row
-        with csv.open("a") as f:
-            f.write(f"{variant},{kind},{'' if seed is None else seed},{k + 1},{pres:.6g},"
-                    f"{settle:.6g},{at:.6g},{its},{' '.join(statuses)}\n")
-            f.flush()
-        done[0] += kind == "multiscale"
-        log(f"{variant} {kind}{'' if seed is None else f' seed {seed}'}: level {k + 1}/"
-            f"{p.levels}: {pres / 1e3:.1f} kPa, settlement {1e3 * settle:.3f} mm")
-        if progress is not None:
-            progress(done[0] / n_units, f"{variant} {kind} level {k + 1}")
+    def level_rows(add, what=""):
+        def on_level(variant, kind, seed, k, row):
+            add(variant, kind, seed, k, row)
+            done[0] += kind == "multiscale"
+            log(f"{what}{variant} {kind}{'' if seed is None else f' seed {seed}'}: level "
+                f"{k + 1}/{p.levels}: {row[0] / 1e3:.1f} kPa, settlement {1e3 * row[1]:.3f} mm")
+            if progress is not None:
+                progress(done[0] / n_units, f"{what}{variant} {kind} level {k + 1}")
+        return on_level
 
     soil, cal = continuum("the calibration's first FEM (the unreinforced body with the "
                           f"starting soil: E {p.soil_young / 1e6:g} MPa, nu {p.soil_poisson:g}, "
                           f"phi {p.soil_friction:g} deg, no cohesion)", calibrate, p, log)
     (out / "calibration.json").write_text(json.dumps(cal, indent=2) + "\n")
-    variants: dict = {}
+    reruns: dict = {}
     client, cluster = local_client(p.workers)
     try:
-        for v in p.variants:
-            dp = continuum(f"{v}: the Drucker–Prager body", run_continuum, p, v, soil,
-                           on_level)
-            if dp["failure"] is not None:
-                log(f"WARNING: {v}: the Drucker–Prager body stopped after level "
-                    f"{dp['levels_reached']} of {p.levels} (near its bearing capacity?): "
-                    f"{dp['failure']}")
-            slope = (dp["pressure_pa"][0] - p.seat_pa) / (dp["settlement_m"][0]
-                                                           - dp["seated_settlement_m"])
-            runs = {s: run_multiscale(p, v, s, soil, client, out, log, on_level, slope)
-                    for s in p.seeds}
-            variants[v] = {"multiscale": {"status": worst(r["status"] for r in runs.values()),
-                                          "runs": {str(s): r for s, r in runs.items()}},
-                           "drucker_prager": dp}
+        variants = run_variants(p, soil, client, out, log, level_rows(add_row))
+        for part in p.budget:
+            q, sub = budget_params(p, part), out / f"budget_{part}"
+            sub.mkdir(exist_ok=True)
+            log(f"budget: {part}: {BUDGET_PARTS[part]}")
+            soil_q = soil
+            if part == "calibration":
+                soil_q, cal_q = continuum("the budget's refitted calibration", calibrate, q,
+                                          log)
+                (sub / "calibration.json").write_text(json.dumps(cal_q, indent=2) + "\n")
+            reruns[part] = run_variants(q, soil_q, client, sub, log,
+                                        level_rows(_csv_rows(sub / "load_settlement.csv"),
+                                                   f"budget {part}: "))
+            statistics(reruns[part], q.seeds, q.levels)
     finally:
         client.close()
         if cluster is not None:
@@ -678,6 +811,7 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
         "settlement_m": {v: r["multiscale"]["settlement_mean_m"] for v, r in variants.items()},
         "variants": variants, "paired_settlement_differences": diffs,
         "one_soil": one_soil(variants),
+        "differences": differences(variants, reruns, p.levels),
         "calibration": cal,
         "coupling": {"mode": "hierarchical (an element per zone cell)", "status": status,
                      "exit_code": exit_code(status),
@@ -695,4 +829,13 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
         "provenance": code_record()}
     (out / "summary.json").write_text(json.dumps(summary, indent=2) + "\n")
     figure(summary, out / "load_settlement.png")
+    for d in summary["differences"]:
+        if d["mean"] is None:
+            continue
+        log(f"{d['name']} at {p.pressures_pa[-1] / 1e3:g} kPa: {1e3 * d['mean']:+.4f} mm "
+            + ("(one seed)" if d["se"] is None else f"± {1e3 * d['se']:.4f} (se, n = {d['n']})")
+            + (f": resolved above its budget {1e3 * d['total']:.4f} mm" if d["resolved"] else
+               f": not resolved (budget {1e3 * d['total']:.4f} mm)" if d["total"] is not None
+               else f": not resolved, its budget not measured ({', '.join(d['unmeasured'])};"
+                    " --budget)"))
     return summary
