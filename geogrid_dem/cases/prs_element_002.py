@@ -46,6 +46,7 @@ from cpp_dem.elements.box import GRID_ENDS, KINEMATICS, run_element
 from geogrid_dem.cases import PRESTRESS_PAPER
 from geogrid_dem.processes import process_pool, results_in_order
 from geogrid_dem.rundir import begin_run, end_run, on_interrupt, run_main
+from geogrid_dem.stats import t_critical
 
 GRIDS = ("detailed", "standard")
 VARIANTS = ("RE", "PRS")
@@ -200,16 +201,6 @@ MEASURES = (
 
 #: Below this many seeds a report's verdicts check the machinery; they are not findings.
 SEEDS_FOR_FINDINGS = 6
-
-
-def t_critical(n: int, level: float = 0.95) -> float:
-    """Student's t at (1 + level) / 2 with n - 1 degrees of freedom (two-sided ``level``), -;
-    NaN below 2 seeds."""
-    if n < 2:
-        return float("nan")
-    from scipy.stats import t as student_t
-
-    return float(student_t.ppf(0.5 * (1.0 + level), n - 1))
 
 
 def verdict(diff_mean: float, diff_se: float, n: int, expected_sign: int) -> str:

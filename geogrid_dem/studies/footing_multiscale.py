@@ -49,6 +49,7 @@ import numpy as np
 from femcoupling.fem.soil_steps import NewtonDivergence
 from femcoupling.materials.dem_elements import BAND_TANGENTS
 from geogrid_dem.provenance import code_record
+from geogrid_dem.stats import t_critical
 from geogrid_dem.studies import biaxial
 from geogrid_dem.studies.prs_element import hierarchical_status, step_statuses
 
@@ -544,8 +545,7 @@ def one_soil(variants: dict) -> dict:
         def diff(a, b):
             return None if a is None or b is None else a - b
 
-        rows = {"settlement_multiscale_m": [mean_of("settlement_at_level_m", k)
-                                            for k in range(n)],
+        rows = {"settlement_multiscale_m": list(ms["settlement_mean_m"]),
                 "settlement_drucker_prager_m": [dp_at("settlement_at_level_m", k)
                                                 for k in range(n)],
                 "volumetric_strain_multiscale": [mean_of("zone_volumetric_strain", k)
@@ -560,35 +560,21 @@ def one_soil(variants: dict) -> dict:
     return out
 
 
-def _t_critical(n: int) -> float:
-    """Student's t(0.975, n - 1), -; NaN below 2 seeds."""
-    if n < 2:
-        return float("nan")
-    from scipy.stats import t as student_t
-
-    return float(student_t.ppf(0.975, n - 1))
-
-
-def _last_differences(variants: dict, levels: int) -> dict:
+def _last_differences(variants: dict, diffs: dict, levels: int) -> dict:
     """The run's differences at its last level, {name: (mean, se, n)} (m): the paired
-    settlement differences between variants over the seeds that reached the level in every
-    variant, and per variant the DEM zone against the Drucker–Prager body fitted on its
-    grains (se: the zone's seed scatter; the body is one run). (None, None, n) where no seed
-    reached it."""
+    settlement differences between variants (``diffs``, :func:`statistics`'s, over the seeds
+    that reached the level in every variant), and per variant the DEM zone against the
+    Drucker–Prager body fitted on its grains (se: the zone's seed scatter; the body is one
+    run). (None, None, n) where no seed reached it."""
     k = levels - 1
-    out = {}
+    out = {f"{a} - {b}": (d["mean_m"][k], d["se_m"][k], d["seeds"][k])
+           for (a, b), d in ((key.split("-"), d) for key, d in diffs.items())}
 
     def at(v):
         ms = variants[v]["multiscale"]
         used = ms["seeds_used"][k]
         return np.array([ms["runs"][str(s)]["settlement_at_level_m"][k] for s in used])
 
-    for a, b in (("RE", "unreinforced"), ("PRS", "RE"), ("PRS", "unreinforced")):
-        if a in variants and b in variants:
-            d = at(a) - at(b)
-            n = len(d)
-            out[f"{a} - {b}"] = (float(d.mean()) if n else None,
-                                 float(d.std(ddof=1) / math.sqrt(n)) if n > 1 else None, n)
     for v, r in variants.items():
         z, dp = at(v), r["drucker_prager"].get("settlement_at_level_m") or []
         n = len(z)
@@ -599,16 +585,17 @@ def _last_differences(variants: dict, levels: int) -> dict:
     return out
 
 
-def differences(variants: dict, reruns: dict, levels: int) -> list:
+def differences(variants: dict, diffs: dict, reruns: dict, levels: int) -> list:
     """The error budget of every difference the run reports (issue 62), at the last level:
     ``{"name", "mean", "se", "n", "budget": {"ceiling", "calibration", "rve", "mesh",
-    "seeds"}, "total", "resolved", "unmeasured"}`` (m). Each part of ``reruns`` (BUDGET_PARTS:
-    the variants rerun with one thing changed) is how far the difference moved, |rerun -
+    "seeds"}, "total", "resolved", "unmeasured"}`` (m). ``diffs``: :func:`statistics`'s
+    paired differences of ``variants``. Each part of ``reruns`` (BUDGET_PARTS: (variants,
+    diffs) rerun with one thing changed) is how far the difference moved, |rerun -
     run|; "seeds" is t(0.975, n - 1) x se. ``total`` is their sum (no independence assumed),
     None while a part is unmeasured (``unmeasured`` names them); ``resolved`` only when
     every part is measured and |mean| exceeds the total."""
-    base = _last_differences(variants, levels)
-    moved = {part: _last_differences(v, levels) for part, v in reruns.items()}
+    base = _last_differences(variants, diffs, levels)
+    moved = {part: _last_differences(v, d, levels) for part, (v, d) in reruns.items()}
     rows = []
     for name, (mean, se, n) in base.items():
         budget = {part: None for part in BUDGET_PARTS}
@@ -616,7 +603,7 @@ def differences(variants: dict, reruns: dict, levels: int) -> list:
             other = d.get(name, (None,))[0]
             if mean is not None and other is not None:
                 budget[part] = abs(other - mean)
-        budget["seeds"] = _t_critical(n) * se if se is not None else None
+        budget["seeds"] = t_critical(n) * se if se is not None else None
         unmeasured = [k for k, x in budget.items() if x is None or not math.isfinite(x)]
         total = None if unmeasured else float(sum(budget.values()))
         rows.append({"name": name, "mean": mean, "se": se, "n": n, "budget": budget,
@@ -790,10 +777,10 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
                 soil_q, cal_q = continuum("the budget's refitted calibration", calibrate, q,
                                           log)
                 (sub / "calibration.json").write_text(json.dumps(cal_q, indent=2) + "\n")
-            reruns[part] = run_variants(q, soil_q, client, sub, log,
-                                        level_rows(_csv_rows(sub / "load_settlement.csv"),
-                                                   f"budget {part}: "))
-            statistics(reruns[part], q.seeds, q.levels)
+            vq = run_variants(q, soil_q, client, sub, log,
+                              level_rows(_csv_rows(sub / "load_settlement.csv"),
+                                         f"budget {part}: "))
+            reruns[part] = (vq, statistics(vq, q.seeds, q.levels))
     finally:
         client.close()
         if cluster is not None:
@@ -811,7 +798,7 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
         "settlement_m": {v: r["multiscale"]["settlement_mean_m"] for v, r in variants.items()},
         "variants": variants, "paired_settlement_differences": diffs,
         "one_soil": one_soil(variants),
-        "differences": differences(variants, reruns, p.levels),
+        "differences": differences(variants, diffs, reruns, p.levels),
         "calibration": cal,
         "coupling": {"mode": "hierarchical (an element per zone cell)", "status": status,
                      "exit_code": exit_code(status),
