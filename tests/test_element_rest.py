@@ -62,6 +62,31 @@ def test_a_jump_of_the_targets_is_not_rest_and_the_same_element_after_its_hold_i
     assert later["failed"] == []
 
 
+def test_the_quasi_static_check_is_made_where_the_element_is_measured(prepared, monkeypatch):
+    """A servo stage that a rest hold follows is not checked where the servo converged (the
+    element still moves there, and is not measured); the rest hold's end is, with the grains'
+    own inertial number reported."""
+    from cpp_dem.protocols import quasi_static
+
+    checked = []
+    real = quasi_static.check
+    monkeypatch.setattr(quasi_static, "check", lambda sc, stage, **kw: (
+        checked.append((stage, float(sc.density_scaling_stats()["inertial_number"]))),
+        real(sc, stage, **kw))[1])
+    sample, grid = _restore(prepared)
+    targets = [5e3, 5e3, 10e3]
+    st = box.servo_stage(sample, grid, targets, 0, P, lambda **r: None, log=lambda m: None,
+                         check_end=False)
+    assert checked == [] and "sample_inertial_number_max" in st
+    rest = _hold(sample, grid, targets, P)
+    assert [c[0] for c in checked] == ["element stage 0 at the end of its rest hold"]
+    assert rest["sample_inertial_number_end"] == checked[0][1]
+    assert rest["status"] == "at_rest"
+    assert rest["sample_inertial_number_end"] <= quasi_static.QUASI_STATIC_LIMIT
+    box.servo_stage(sample, grid, targets, 0, P, lambda **r: None, log=lambda m: None)
+    assert checked[-1][0] == "element servo stage 0"  # (checked by default)
+
+
 def test_the_loading_ramp_keeps_the_inertial_number_bounded_and_ends_at_rest(prepared):
     sample, grid = _restore(prepared)
     rows = []
