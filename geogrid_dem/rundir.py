@@ -797,6 +797,26 @@ def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
                          keep=keep, params=params, checkpoints=checkpoints)
 
 
+def write_views(out: Path) -> list[Path]:
+    """ParaView state files beside every folder of VTK files under ``out``
+    (cpp_dem.io.paraview_state.write_states: ``<run>_view.py`` per run of series); a folder
+    that cannot take one is said on stderr, and the run goes on. Returns the paths."""
+    from cpp_dem.io.paraview_state import write_states
+
+    out = Path(out)
+    if not out.is_dir():
+        return []
+    written = []
+    for folder in sorted({f.parent for f in out.rglob("*.pvd")}
+                         | {f.parent for f in out.rglob("*.vtp")}):
+        try:
+            written += write_states(folder)
+        except OSError as e:
+            print(f"[views] {folder}: no ParaView state written ({_one_line(e)})",
+                  file=sys.stderr, flush=True)
+    return written
+
+
 def _run_main(case, out, work, *, overwrite, log, own_folder, keep, params, checkpoints) -> int:
     global _OVERWRITE
     from cpp_dem.io import close_all_writers
@@ -834,6 +854,7 @@ def _run_main(case, out, work, *, overwrite, log, own_folder, keep, params, chec
         close_all_writers()
         folders = list(_ACTIVE) or ([out] if own_folder else [])
         for d in reversed(folders):  # (a run inside another first: the outer lists its files)
+            write_views(d)
             if status == "interrupted":
                 try:
                     write_interrupted_summary(d, case, reason)
@@ -895,7 +916,9 @@ def _run_main(case, out, work, *, overwrite, log, own_folder, keep, params, chec
             # starts do not inherit the ignore.)
             signal.signal(signal.SIGINT, old_int)
     for d in list(_ACTIVE):
+        write_views(d)
         end_run(d)
     if own_folder:
+        write_views(out)
         end_run(out)  # files written after the case's own end_run are listed too
     return 0

@@ -24,6 +24,9 @@ def test_the_documented_smoke_runs_the_fem_path_on_two_seeds(smoke):
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
     # (make demo's run: the states measured are quasi-static, issue 59)
     assert "InertialNumberWarning" not in proc.stdout + proc.stderr
+    # (a ParaView state beside each element's series: docs/output.md)
+    for label in LABELS:
+        assert f"{label}_spheres.pvd" in (out / "vtk" / f"{label}_view.py").read_text()
     s = json.loads((out / "summary.json").read_text())
     assert s["mode"] == "FEM -> DEM (one-way)" and s["seeds"] == [1, 2]
     assert sorted(s["elements"]) == LABELS
