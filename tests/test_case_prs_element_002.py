@@ -29,6 +29,11 @@ def test_the_documented_smoke_runs_the_fem_path_on_two_seeds(smoke):
         assert f"{label}_spheres.pvd" in (out / "vtk" / f"{label}_view.py").read_text()
     s = json.loads((out / "summary.json").read_text())
     assert s["mode"] == "FEM -> DEM (one-way)" and s["seeds"] == [1, 2]
+    soil = s["soil"]["detailed"]
+    cal = s["calibration"]["detailed"]
+    assert soil["source"] == "calibrated" and cal["converged"]
+    assert soil["young_pa"] == cal["young_pa"] and soil["cohesion_pa"] == 0.0
+    assert "FEM soil of the detailed grid (calibrated)" in (out / "report.md").read_text()
     assert sorted(s["elements"]) == LABELS
     for name, e in s["elements"].items():
         assert e["grains"] == "clumps:gravel@6" and e["grain_law"] == "hertz", name
@@ -39,6 +44,8 @@ def test_the_documented_smoke_runs_the_fem_path_on_two_seeds(smoke):
         assert e["targets_pa"] == [fem["targets_initial_pa"], fem["targets_final_pa"]]
         assert len(e["converged"]) == 2
         assert e["rest"]["sample_inertial_number_end"] <= 1e-2, name
+        # On its FEM region's path with the soil calibrated on the grains (issue 59 item 3)
+        assert e["off_fem_path"] == [], (name, e["strain_ratio_to_fem"])
         # 002's gravity and damping stages, as run (docs/prs_element_002.md)
         c = e["conditions"]
         assert c["gravity_m_per_s2"] == pytest.approx(9.81)
@@ -535,3 +542,18 @@ def test_sigterm_with_workers_stops_the_pool_at_once(tmp_path):
         time.sleep(0.2)
     assert not alive(), [subprocess.run(["ps", "-o", "args=", "-p", c], capture_output=True,
                                         text=True).stdout for c in alive()]
+
+
+def test_the_fem_soil_option_is_parsed_and_refused_by_name():
+    from geogrid_dem.cases.prs_element_002 import parse_args
+
+    assert parse_args(["--smoke"])[0].soil == "calibrated"
+    assert parse_args(["--smoke", "--soil", "given"])[0].soil == "given"
+    p, _ = parse_args(["--smoke", "--soil", "2e7,0.3,33,0"])
+    assert (p.soil, p.soil_young, p.soil_friction) == ("given", 2e7, 33.0)
+    for argv, msg in ((["--soil", "2e7,0.6,33,0"], "NU=0.6 must be in [0, 0.5)"),
+                      (["--soil", "soft"], "'calibrated', 'given' or four numbers"),
+                      (["--soil", "given", "--stresses", "2e4,2e4,4e4"],
+                       "not with --stresses")):
+        with pytest.raises(SystemExit):
+            parse_args(["--smoke", *argv])

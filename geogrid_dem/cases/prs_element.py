@@ -438,6 +438,41 @@ def apply_element_args(ap, a, p, given=frozenset()):
     return p
 
 
+def add_soil_arg(ap, d: Params) -> None:
+    """``--soil``: the FEM soil, calibrated on the case's element, given, or four numbers."""
+    ap.add_argument("--soil", type=str, default=None,
+                    help="the FEM soil (Drucker-Prager matched to Mohr-Coulomb): 'calibrated' "
+                         "(the default: E and nu the case's own element's secant along the "
+                         "element region's stress path, no cohesion, phi as given), 'given' "
+                         f"(E {d.soil_young:g} Pa, nu {d.soil_poisson:g}, phi "
+                         f"{d.soil_friction:g} deg, c {d.soil_cohesion:g} Pa), or "
+                         "E,NU,PHI,C (Pa, -, deg, Pa)")
+
+
+def apply_soil_arg(ap, a, p: Params) -> None:
+    """Sets ``p.soil`` (and with four numbers the soil's E, nu, phi, c) from ``--soil``;
+    refused with --stresses (no FEM) and with bad numbers, naming the field."""
+    if a.soil is not None and a.stresses:
+        ap.error(f"--soil={a.soil}: the FEM soil; not with --stresses (no FEM)")
+    soil = a.soil or "calibrated"
+    if soil in ("calibrated", "given"):
+        p.soil = soil
+        return
+    try:
+        E, nu, phi, c = (float(x) for x in soil.split(","))
+    except ValueError:
+        ap.error(f"--soil={soil!r}: 'calibrated', 'given' or four numbers E,NU,PHI,C "
+                 "(Pa, -, deg, Pa)")
+    for name, v, ok, allowed in (("E", E, E > 0, "> 0 Pa"),
+                                 ("NU", nu, 0 <= nu < 0.5, "in [0, 0.5)"),
+                                 ("PHI", phi, 0 < phi < 90, "in (0, 90) deg"),
+                                 ("C", c, c >= 0, ">= 0 Pa")):
+        if not (math.isfinite(v) and ok):
+            ap.error(f"--soil={soil!r}: {name}={v:g} must be {allowed}")
+    p.soil = "given"
+    p.soil_young, p.soil_poisson, p.soil_friction, p.soil_cohesion = E, nu, phi, c
+
+
 def build_parser():
     """The case's parser: the shared options (geogrid_dem.options) and its own."""
     d = Params()
@@ -482,13 +517,7 @@ def build_parser():
                     help="leave the element's grid ends free (RE) or in the locked grips "
                          "(PRS) instead of pulling them by the FEM layer's tension across the "
                          "region (then the grid also counts in the walls' stress: twice)")
-    ap.add_argument("--soil", type=str, default=None,
-                    help="the FEM soil (Drucker-Prager matched to Mohr-Coulomb): 'calibrated' "
-                         "(the default: E and nu the case's own element's secant along the "
-                         "element region's stress path, no cohesion, phi as given), 'given' "
-                         f"(E {d.soil_young:g} Pa, nu {d.soil_poisson:g}, phi "
-                         f"{d.soil_friction:g} deg, c {d.soil_cohesion:g} Pa), or "
-                         "E,NU,PHI,C (Pa, -, deg, Pa)")
+    add_soil_arg(ap, d)
     ap.add_argument("--calibrate", action="store_true", help=argparse.SUPPRESS)
     return ap
 
@@ -507,28 +536,10 @@ def parse_args(argv=None) -> tuple[Params, Path]:
         ap.error(f"--workers={a.workers}: must be >= 1")
     p.two_way, p.two_way_tol, p.max_iterations, p.workers = (a.two_way, a.tol, a.max_iterations,
                                                              a.workers)
-    if a.soil is not None and a.stresses:
-        ap.error(f"--soil={a.soil}: the FEM soil; not with --stresses (no FEM)")
-    soil = a.soil or "calibrated"
-    if a.calibrate and soil != "calibrated":
+    if a.calibrate and (a.soil or "calibrated") != "calibrated" and not a.stresses:
         ap.error(f"--calibrate (kept for older run files: it means --soil calibrated) with "
-                 f"--soil={soil!r}: give one of them")
-    if soil in ("calibrated", "given"):
-        p.soil = soil
-    else:
-        try:
-            E, nu, phi, c = (float(x) for x in soil.split(","))
-        except ValueError:
-            ap.error(f"--soil={soil!r}: 'calibrated', 'given' or four numbers E,NU,PHI,C "
-                     "(Pa, -, deg, Pa)")
-        for name, v, ok, allowed in (("E", E, E > 0, "> 0 Pa"),
-                                     ("NU", nu, 0 <= nu < 0.5, "in [0, 0.5)"),
-                                     ("PHI", phi, 0 < phi < 90, "in (0, 90) deg"),
-                                     ("C", c, c >= 0, ">= 0 Pa")):
-            if not (math.isfinite(v) and ok):
-                ap.error(f"--soil={soil!r}: {name}={v:g} must be {allowed}")
-        p.soil = "given"
-        p.soil_young, p.soil_poisson, p.soil_friction, p.soil_cohesion = E, nu, phi, c
+                 f"--soil={a.soil!r}: give one of them")
+    apply_soil_arg(ap, a, p)
     p.grid_handover = not a.no_grid_handover
     if a.hierarchical and a.two_way:
         ap.error("--hierarchical: the element is inside the FEM's Newton; not with --two-way")

@@ -370,8 +370,15 @@ def write_report(out: Path, summary: dict) -> None:
     lines = ["# The prestressed reinforced-soil element (clumps, woven grid): report", "",
              f'Source: "{PRESTRESS_PAPER}".', "",
              f"Mode: {summary['mode']}. Seeds: {summary['seeds']} (RE and PRS on each seed's "
-             "grown packing). Stresses in kPa, compression positive.", "",
-             "## 002's findings, paired over the seeds", ""]
+             "grown packing). Stresses in kPa, compression positive.", ""]
+    for g, soil in summary.get("soil", {}).items():
+        cal = summary.get("calibration", {}).get(g)
+        lines += [f"FEM soil of the {g} grid ({soil['source']}): E "
+                  f"{soil['young_pa'] / 1e6:.4g} MPa, nu {soil['poisson']:.3f}, phi "
+                  f"{soil['friction_deg']:g} deg, c {soil['cohesion_pa']:g} Pa"
+                  + (f"; calibrated on RE seed {summary['seeds'][0]}'s element, "
+                     f"{cal['message']}" if cal else "") + ".", ""]
+    lines += ["## 002's findings, paired over the seeds", ""]
     n_seeds = len(summary["seeds"])
     if n_seeds < SEEDS_FOR_FINDINGS:
         lines += [f"**{n_seeds} seed(s), fewer than {SEEDS_FOR_FINDINGS}: these verdicts check "
@@ -509,10 +516,29 @@ def run(p: Params, out: Path) -> dict:
                                        "tension": None, "strain": None}
         else:
             from femcoupling.coupling.twoway import HandoverHistory
-            from geogrid_dem.studies.prs_element import run_fem
+            from geogrid_dem.studies.prs_element import calibrate_soil, run_fem
 
             summary["mode"] = "FEM -> DEM (one-way)"
             summary["fem"] = {}
+            soils, fems = {}, {}
+            for g in p.grids:
+                # One soil on both scales: the FEM soil calibrated on this grid's RE element
+                # of the first seed (the same grains, packing and path), or the given one.
+                fem_out = out / f"fem_{g}"
+                fem_out.mkdir(parents=True, exist_ok=True)
+                q = replace(p, geogrid=f"woven-{g}", seed=p.seeds[0])
+                if p.soil == "calibrated":
+                    fems[g] = {}
+                    q, summary.setdefault("calibration", {})[g] = calibrate_soil(
+                        q, fem_out, keep=fems[g])
+                soils[g] = {k: getattr(q, k) for k in ("soil_young", "soil_poisson",
+                                                       "soil_friction", "soil_cohesion")}
+                summary.setdefault("soil", {})[g] = {
+                    "source": p.soil, "young_pa": q.soil_young, "poisson": q.soil_poisson,
+                    "friction_deg": q.soil_friction, "cohesion_pa": q.soil_cohesion}
+                log(f"FEM soil of the {g} grid ({p.soil}): E {q.soil_young / 1e6:.4g} MPa, nu "
+                    f"{q.soil_poisson:.3f}, phi {q.soil_friction:g} deg, c "
+                    f"{q.soil_cohesion:g} Pa")
             hist = stack.enter_context(HandoverHistory(
                 out / "handover.h5", regions=[f"{g}_{v}" for g in p.grids for v in p.variants],
                 metadata={"case": "prs_element_002"}))
@@ -521,8 +547,8 @@ def run(p: Params, out: Path) -> dict:
                 # same for every seed.
                 fem_out = out / f"fem_{g}"
                 fem_out.mkdir(parents=True, exist_ok=True)
-                ini, fin, _m, _s0, _load, info = run_fem(
-                    replace(p, geogrid=f"woven-{g}"), fem_out, v)
+                ini, fin, _m, _s0, _load, info = (fems.get(g, {}).get(v) or run_fem(
+                    replace(p, geogrid=f"woven-{g}", **soils[g]), fem_out, v))
                 info.update(targets_initial_pa=ini.normal_pa.tolist(),
                             targets_final_pa=fin.normal_pa.tolist(),
                             shear_pa=fin.shear_pa.tolist(), rotation_deg=fin.rotation_deg,
@@ -621,6 +647,12 @@ def handover(p: Params, ini, fin, info: dict) -> dict:
     t0, t1 = ini.grid_tension_n_per_m, fin.grid_tension_n_per_m
     if p.grid_ends == "lock" and t0 is not None and t1 is not None:
         tension = [float(t0), float(t1)]
+        if min(tension) < 0:
+            # (a geogrid carries no compression: pushed, its ends would buckle it)
+            log(f"the {p.geogrid} FEM layer is in compression across the region "
+                f"({np.round(np.array(tension) / 1e3, 4).tolist()} kN/m): a geogrid carries "
+                "none, so its ends take 0 there")
+            tension = [max(t, 0.0) for t in tension]
     return {"rows": [ini.normal_pa, fin.normal_pa], "tension": tension,
             "strain": [float(x) for x in info["strain_increment"]]}
 
@@ -693,6 +725,7 @@ def build_parser():
         smoke=f"{SMOKE['n']} clumps, coarse FEM mesh",
         preset="of the element: density scaling of its growth and servo stages "
                "(--density-scaling overrides it)")
+    _fem_case.add_soil_arg(ap, d)
     ap.add_argument("--grids", default=None,
                     help=f"woven forms to run (default {','.join(GRIDS)}; --smoke: detailed)")
     ap.add_argument("--variants", default=",".join(VARIANTS), help="RE and/or PRS")
@@ -828,6 +861,7 @@ def parse_args(argv=None) -> tuple[Params, Path]:
                      f"{min_grains(p, g)}")
     if a.stresses:
         p.stresses = _fem_case.parse_stresses(a.stresses, ap)
+    _fem_case.apply_soil_arg(ap, a, p)
     if a.resume and a.out is None:
         ap.error("--resume: give --out, the folder of the run to continue")
     if a.resume and a.overwrite:
