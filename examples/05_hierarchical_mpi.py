@@ -84,4 +84,7 @@ def main(out: Path, smoke: bool) -> None:
 
 
 if __name__ == "__main__":  # (Dask spawns its workers: the guard is needed)
-    main(args.out, args.smoke)
+    from geogrid_dem.warnings_display import shown_once
+
+    with shown_once():  # (one line per kind of warning, then how many more: as the cases)
+        main(args.out, args.smoke)

@@ -44,8 +44,26 @@ def runs(tmp_path_factory):
         assert f"{ranks} rank(s): status" in p.stdout
         for name in declared(EXAMPLE, "OUTPUTS"):  # (the example's RUN_BY names this test)
             assert (d / name).stat().st_size > 0, name
+        (d / "output.txt").write_text(p.stdout + p.stderr)
         out[ranks] = d
     return out
+
+
+def test_each_kind_of_warning_is_one_line(runs):
+    """The elements' warnings (raised on the Dask workers) reach rank 0's display: one line
+    per kind, then how many more; none in Python's format with its echoed source line."""
+    import re
+
+    from geogrid_dem.warnings_display import key
+
+    for ranks, d in runs.items():
+        text = (d / "output.txt").read_text()
+        assert not re.search(r"\.py:\d+: \w+Warning", text), (ranks, text[-3000:])
+        shown = [m.groups() for m in re.finditer(r"^\[warning\] (\w+): (.*)$", text, re.M)
+                 if " more like it (" not in m.group(2)]
+        keys = [key(type(c, (Warning,), {}), msg) for c, msg in shown]
+        assert len(keys) == len(set(keys)), (ranks, shown)
+        assert shown, ranks  # (the smoke's elements do warn: the test can fail)
 
 
 def test_every_element_is_at_the_serial_models_place(runs):

@@ -47,6 +47,7 @@ import shutil
 import tempfile
 import time
 import uuid
+import warnings
 import weakref
 from dataclasses import dataclass
 from pathlib import Path
@@ -88,6 +89,26 @@ def _comm_error(e: BaseException) -> bool:
     except ImportError:  # pragma: no cover
         CommClosedError = OSError
     return isinstance(e, (CommClosedError, OSError))
+
+
+def _recording(call: Callable):
+    """``call()`` with the warnings it raises recorded: (its result, [(category, message,
+    filename, lineno)]). An element's warnings on a Dask worker would print there, in
+    Python's format, once per element; the pool says them again on the client instead
+    (:func:`_say_again`), where the run's display shows each kind once."""
+    with warnings.catch_warnings(record=True) as caught:
+        warnings.simplefilter("always")
+        result = call()
+    return result, [(w.category, str(w.message), w.filename, w.lineno) for w in caught]
+
+
+def _say_again(records: list) -> None:
+    """Raises on the client, element by element in index order, the warnings the hosts
+    recorded (``record["warnings"]``), each message prefixed with its element."""
+    for r in sorted(records, key=lambda r: r["index"]):
+        for category, message, filename, lineno in r.get("warnings", ()):
+            warnings.warn_explicit(f"element {r['index']}: {message}", category, filename,
+                                   lineno)
 
 
 def state_digest(data: bytes) -> str:
@@ -250,12 +271,13 @@ class ElementHost:
         bytes; returns its record (and the bytes if ``send``)."""
         from cpp_dem.elements.interface import check_element
 
-        el = check_element(factory(index), self.kind, f"factory({index})")
+        el, said = _recording(lambda: check_element(factory(index), self.kind,
+                                                    f"factory({index})"))
         data = el.to_bytes()
         self.elements[index] = el
         self.accepted[index] = data
-        return {"record": self._spill(index, data, generation),
-                "bytes": data if send else None}
+        return {"index": index, "record": self._spill(index, data, generation),
+                "bytes": data if send else None, "warnings": said}
 
     def add(self, index: int, data: bytes, generation: int, digest: str | None = None) -> tuple:
         """Element ``index`` from bytes the client sent; returns its record."""
@@ -313,11 +335,12 @@ class ElementHost:
             t0 = time.perf_counter()
             el = self.elements[k]
             try:  # (the pool's ElementError then names the element that failed)
-                s = el.apply_strain(np.asarray(de), **strain_kw)
-                d = element_tangent(el, tangent, strain_kw, fd_components)
+                (s, d), said = _recording(lambda: (
+                    el.apply_strain(np.asarray(de), **strain_kw),
+                    element_tangent(el, tangent, strain_kw, fd_components)))
             except Exception as e:  # noqa: BLE001
                 raise RuntimeError(f"element {k}: {type(e).__name__}: {e}") from e
-            out.append({"index": k, "stress": s, "tangent": d,
+            out.append({"index": k, "stress": s, "tangent": d, "warnings": said,
                         "contacts": el.contact_count(), "cpu_s": time.perf_counter() - t0,
                         "steps": el.last_report.steps + el.last_report.relax_steps,
                         "scatter": el.stress_scatter() if scatter else None})
@@ -329,11 +352,12 @@ class ElementHost:
         out = []
         for k, args in zip(indices, calls):
             t0 = time.perf_counter()
+            said = []
             try:
-                answer, error = self.elements[k].run(*args), None
+                (answer, said), error = _recording(lambda: self.elements[k].run(*args)), None
             except Exception as e:  # noqa: BLE001 - reported by the pool, naming the element
                 answer, error = None, f"{type(e).__name__}: {e}"
-            out.append({"index": k, "answer": answer, "error": error,
+            out.append({"index": k, "answer": answer, "error": error, "warnings": said,
                         "cpu_s": time.perf_counter() - t0})
         return out
 
@@ -590,10 +614,13 @@ class ElementPool:
             for k in range(n):
                 a = pool._where[k] = addrs[k % len(addrs)]
                 futures.append((k, pool._hosts[a].build(k, factory, 0, keep_copies)))
+            built = []
             for k, f in futures:
                 got = f.result()
                 pool._count("build", got)
                 pool._record(k, 0, got["record"], got["bytes"])
+                built.append(got)
+            _say_again(built)
         return pool
 
     @classmethod
@@ -940,6 +967,7 @@ class ElementPool:
         if todo:
             raise RuntimeError(f"elements {todo}: lost three times; giving up")
         self._log.append((method, payload, extra))
+        _say_again(list(results.values()))
         return results, recovered
 
     def _require(self, kind_name: str, call: str) -> None:
