@@ -116,7 +116,7 @@ class LoadingStages:
         at the target over the steps left by the last step's secant slope (from half to four
         times the last step), until the pressure reaches the target. A step that passes it
         beyond ``tol`` is taken again, shortened by linear interpolation. The results' ``load_factor`` is the pressure's fraction of the
-        target; ``callback(r)`` is called for each accepted step. Raises NewtonDivergence if
+        target; ``callback(r)`` is called for each step as it is accepted. Raises NewtonDivergence if
         the pressure has not reached the target after ``max_steps_factor`` x ``steps``
         steps (the soil's bearing capacity is below it), or if a step fails after its cuts
         (its message then says how far the pressure rose, and at what settlement; the model
@@ -164,9 +164,15 @@ class LoadingStages:
         def rise() -> float:
             return self.footing_pressure_pa() - p0
 
+        def accepted(since: int) -> None:  # (as each step is taken: a run's progress)
+            if callback is not None:
+                for r in done[since:]:
+                    callback(r)
+
         d1 = 1e-6 * self.body.height_m
         if slope_pa_per_m is None:
             go(d1)
+            accepted(0)
             d = d1
             slope = rise() / d1
             if not slope > 0:
@@ -203,15 +209,13 @@ class LoadingStages:
                 continue
             d += dd
             taken += 1
+            accepted(n_done)
             # the next step from the last one's secant slope, aiming at the target over the
             # steps left (at most 4 x longer, at least half as long as this one)
             slope = (p_new - p_now) / dd
             want = ((target - p_new) / slope / max(1, steps - taken) if slope > 0
                     else 4.0 * dd)
             dd = min(max(want, 0.5 * dd), 4.0 * dd)
-        for r in done:
-            if callback is not None:
-                callback(r)
         return done
 
     def _cohesionless_under_footing(self) -> bool:
