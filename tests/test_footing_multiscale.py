@@ -228,6 +228,22 @@ def dp_model():
     return lambda variant="unreinforced": model(p, variant, soil)
 
 
+def test_the_callback_sees_each_step_as_it_is_taken(dp_model):
+    """``load_footing_to_pressure``'s callback runs as each step is accepted, with the model
+    in that step's state (a record or an xdmf frame written there is that step's), not at
+    the end for all of them."""
+    m = dp_model()
+    seen = []
+    got = m.load_footing_to_pressure(
+        20e3, steps=3, callback=lambda r: seen.append((r.footing_settlement_m,
+                                                       m.footing_settlement_m())))
+    assert len(seen) == len(got) >= 3
+    assert [a for a, _ in seen] == [r.footing_settlement_m for r in got]
+    for at_step, model_now in seen:
+        assert model_now == pytest.approx(at_step, rel=1e-12)
+    assert len({round(b, 12) for _, b in seen}) == len(seen)  # (a new state each time)
+
+
 def test_a_given_first_slope_reaches_the_pressure_as_the_small_first_step_does(dp_model):
     """``load_footing_to_pressure(slope_pa_per_m=)`` starts from the given slope instead of a
     first settlement of 1e-6 of the height: both reach the pressure within its 1 %, at
