@@ -557,3 +557,38 @@ def test_the_fem_soil_option_is_parsed_and_refused_by_name():
                        "not with --stresses")):
         with pytest.raises(SystemExit):
             parse_args(["--smoke", *argv])
+
+
+def test_the_fem_soil_is_calibrated_once_and_kept_on_resume(tmp_path, monkeypatch):
+    """fem_soil: 'calibrated' runs the calibration (here a stand-in that writes its record),
+    --resume keeps a finished one instead of running it again, 'given' runs none."""
+    from dataclasses import replace
+
+    from geogrid_dem.cases import prs_element_002 as case
+    from geogrid_dem.studies import prs_element as study
+
+    calls = []
+
+    def fake(q, out, keep=None):
+        calls.append(q.seed)
+        rec = {"young_pa": 42e6, "poisson": 0.31, "converged": True}
+        (out / "calibration.json").write_text(json.dumps(rec))
+        keep["RE"] = "the RE FEM"
+        return replace(q, soil_young=42e6, soil_poisson=0.31, soil_cohesion=0.0), rec
+
+    monkeypatch.setattr(study, "calibrate_soil", fake)
+    p = case.Params(**case.SMOKE)
+    p.seeds = (3, 4)
+    s1: dict = {}
+    soil, kept = case.fem_soil(p, "detailed", tmp_path / "fem_detailed", s1)
+    assert calls == [3] and kept == {"RE": "the RE FEM"}
+    assert soil["soil_young"] == 42e6 and soil["soil_cohesion"] == 0.0
+    assert s1["soil"]["detailed"]["source"] == "calibrated"
+    p.resume = True
+    s2: dict = {}
+    soil2, kept2 = case.fem_soil(p, "detailed", tmp_path / "fem_detailed", s2)
+    assert calls == [3] and kept2 == {} and soil2 == soil
+    assert s2["calibration"]["detailed"]["young_pa"] == 42e6
+    p.resume, p.soil = False, "given"
+    soil3, _ = case.fem_soil(p, "detailed", tmp_path / "fem_detailed", {})
+    assert calls == [3] and soil3["soil_young"] == p.soil_young

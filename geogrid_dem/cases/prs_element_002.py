@@ -516,29 +516,13 @@ def run(p: Params, out: Path) -> dict:
                                        "tension": None, "strain": None}
         else:
             from femcoupling.coupling.twoway import HandoverHistory
-            from geogrid_dem.studies.prs_element import calibrate_soil, run_fem
+            from geogrid_dem.studies.prs_element import run_fem
 
             summary["mode"] = "FEM -> DEM (one-way)"
             summary["fem"] = {}
             soils, fems = {}, {}
             for g in p.grids:
-                # One soil on both scales: the FEM soil calibrated on this grid's RE element
-                # of the first seed (the same grains, packing and path), or the given one.
-                fem_out = out / f"fem_{g}"
-                fem_out.mkdir(parents=True, exist_ok=True)
-                q = replace(p, geogrid=f"woven-{g}", seed=p.seeds[0])
-                if p.soil == "calibrated":
-                    fems[g] = {}
-                    q, summary.setdefault("calibration", {})[g] = calibrate_soil(
-                        q, fem_out, keep=fems[g])
-                soils[g] = {k: getattr(q, k) for k in ("soil_young", "soil_poisson",
-                                                       "soil_friction", "soil_cohesion")}
-                summary.setdefault("soil", {})[g] = {
-                    "source": p.soil, "young_pa": q.soil_young, "poisson": q.soil_poisson,
-                    "friction_deg": q.soil_friction, "cohesion_pa": q.soil_cohesion}
-                log(f"FEM soil of the {g} grid ({p.soil}): E {q.soil_young / 1e6:.4g} MPa, nu "
-                    f"{q.soil_poisson:.3f}, phi {q.soil_friction:g} deg, c "
-                    f"{q.soil_cohesion:g} Pa")
+                soils[g], fems[g] = fem_soil(p, g, out / f"fem_{g}", summary)
             hist = stack.enter_context(HandoverHistory(
                 out / "handover.h5", regions=[f"{g}_{v}" for g in p.grids for v in p.variants],
                 metadata={"case": "prs_element_002"}))
@@ -633,6 +617,40 @@ def shear_omitted(fin) -> dict:
             "principal_pa": [float(x) for x in fin.principal_pa],
             "friction_principal_deg": full, "friction_diagonal_deg": diag,
             "friction_omitted_deg": full - diag}
+
+
+def fem_soil(p: Params, grid: str, fem_out: Path, summary: dict) -> tuple[dict, dict]:
+    """The FEM soil of ``grid``'s runs, one soil on both scales: with ``p.soil`` 'calibrated'
+    calibrated on this grid's RE element of the first seed (the same grains and preparation;
+    ``geogrid_dem.studies.prs_element.calibrate_soil``, its record in ``fem_out``), else as
+    given. With ``p.resume`` a calibration the interrupted run finished (its
+    ``calibration.json``) is kept, not run again. Returns the soil's Params fields and the
+    FEM runs the calibration solved with it (variant -> ``run_fem``'s result, to be reused);
+    fills ``summary["soil"][grid]`` (and ``["calibration"][grid]``)."""
+    from geogrid_dem.studies.prs_element import calibrate_soil
+
+    fem_out.mkdir(parents=True, exist_ok=True)
+    q = replace(p, geogrid=f"woven-{grid}", seed=p.seeds[0])
+    kept: dict = {}
+    if p.soil == "calibrated":
+        path = fem_out / "calibration.json"
+        if getattr(p, "resume", False) and path.is_file():
+            rec = json.loads(path.read_text())
+            q = replace(q, soil_young=float(rec["young_pa"]), soil_poisson=float(rec["poisson"]),
+                        soil_cohesion=0.0)
+            log(f"--resume: the {grid} grid's soil calibration kept from the earlier run "
+                f"({path})")
+        else:
+            q, rec = calibrate_soil(q, fem_out, keep=kept)
+        summary.setdefault("calibration", {})[grid] = rec
+    soil = {k: getattr(q, k) for k in ("soil_young", "soil_poisson", "soil_friction",
+                                       "soil_cohesion")}
+    summary.setdefault("soil", {})[grid] = {
+        "source": p.soil, "young_pa": q.soil_young, "poisson": q.soil_poisson,
+        "friction_deg": q.soil_friction, "cohesion_pa": q.soil_cohesion}
+    log(f"FEM soil of the {grid} grid ({p.soil}): E {q.soil_young / 1e6:.4g} MPa, nu "
+        f"{q.soil_poisson:.3f}, phi {q.soil_friction:g} deg, c {q.soil_cohesion:g} Pa")
+    return soil, kept
 
 
 def handover(p: Params, ini, fin, info: dict) -> dict:
