@@ -5,6 +5,7 @@ of conftest: the detailed grid, seeds 1 and 2)."""
 import csv
 import json
 import math
+import re
 
 import numpy as np
 import pytest
@@ -464,6 +465,13 @@ def test_make_demo_is_the_tested_smoke_and_names_its_outputs(smoke):
         (row,) = [ln for ln in report.splitlines()
                   if ln.replace("\\|u\\|", "|u|").startswith(f"| {f['grid']} | {f['name']} | ")]
         assert f"| {f['verdict']} |" in row, row
+    # The README's time for it, within a factor of 3 of this run's (the suite runs it beside
+    # other tests, so it is slower here than alone)
+    readme = Path(__file__).resolve().parents[1].joinpath("README.md").read_text()
+    said = re.search(r"about (\d+) min on\s+two cores", readme)
+    assert said, "README.md gives make demo's time as 'about N min on two cores'"
+    took = json.loads((out / "summary.json").read_text())["wall_time_total_s"]
+    assert 1 / 3 <= took / (60 * int(said.group(1))) <= 3, (took, said.group(0))
 
 
 def test_continuing_each_element_adds_under_5_percent_of_its_loading_strain(smoke):
