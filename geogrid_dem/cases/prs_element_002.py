@@ -543,7 +543,7 @@ def run(p: Params, out: Path) -> dict:
                     f"handed over {so['friction_diagonal_deg']:.1f} deg (the omission: "
                     f"{so['friction_omitted_deg']:.1f} deg)")
                 summary["fem"][f"{g}_{v}"] = info
-                targets[(g, v)] = handover(p, ini, fin, info)
+                targets[(g, v)] = handover(p, ini, fin, info, label=f"{g}_{v}")
                 hist.append(iteration=0, region=k, fem_stress_pa=fin.fem_stress_pa,
                             targets_pa=fin.normal_pa, shear_pa=fin.shear_pa,
                             rotation_deg=fin.rotation_deg, change=0.0,
@@ -653,23 +653,23 @@ def fem_soil(p: Params, grid: str, fem_out: Path, summary: dict) -> tuple[dict, 
     return soil, kept
 
 
-def handover(p: Params, ini, fin, info: dict) -> dict:
+def handover(p: Params, ini, fin, info: dict, label: str = "") -> dict:
     """What the FEM hands to a variant's element: the wall targets before and after the
     footing (``rows``, Pa); with the prestress locked in (grid_ends 'lock') the FEM layer's
     tension across the region before and after the footing (``tension``, N/m), which the
     grid's ends carry: the structure's fill holds the layer's prestress (the FEM tensions its
     layer and lets the soil take it up), and the element is a piece of it; and the FEM
     region's strain over the loading (``strain``, 3, compression positive), which the
-    element's strain-controlled axes follow."""
+    element's strain-controlled axes follow. ``label`` names the region in the log."""
     tension = None
     t0, t1 = ini.grid_tension_n_per_m, fin.grid_tension_n_per_m
     if p.grid_ends == "lock" and t0 is not None and t1 is not None:
         tension = [float(t0), float(t1)]
         if min(tension) < 0:
             # (a geogrid carries no compression: pushed, its ends would buckle it)
-            log(f"the {p.geogrid} FEM layer is in compression across the region "
-                f"({np.round(np.array(tension) / 1e3, 4).tolist()} kN/m): a geogrid carries "
-                "none, so its ends take 0 there")
+            log(f"{label + ': ' if label else ''}the FEM layer is in compression across the "
+                f"region ({np.round(np.array(tension) / 1e3, 4).tolist()} kN/m): a geogrid "
+                "carries none, so its ends take 0 there")
             tension = [max(t, 0.0) for t in tension]
     return {"rows": [ini.normal_pa, fin.normal_pa], "tension": tension,
             "strain": [float(x) for x in info["strain_increment"]]}
