@@ -3,6 +3,8 @@ one per run, each file's role read from its arrays, and every file, filter array
 array the state names present in the files. ParaView is not installed here: the state runs
 against a stand-in ``paraview.simple`` that records the pipeline."""
 
+import os
+import shutil
 import sys
 import types
 from pathlib import Path
@@ -67,6 +69,7 @@ def _fake_paraview(calls: list):
     simple.Threshold = lambda Input: _Proxy("threshold", Input=Input)
     simple.Glyph = lambda Input, GlyphType: _Proxy("glyph", Input=Input)
     simple.GetActiveViewOrCreate = lambda name: _Proxy("view")
+    simple.GetActiveCamera = lambda: _Proxy("camera")
     simple.Show = lambda src, view=None: _Proxy("display", source=src)
     simple.Hide = lambda src, view=None: calls.append(("hide", src))
     simple.ColorBy = lambda d, spec: calls.append(("color", d.source, spec))
@@ -160,3 +163,28 @@ def test_a_folder_without_vtk_gets_no_state(tmp_path):
     assert pvs.write_states(tmp_path) == []
     with pytest.raises(KeyError):
         pvs._ROLE_CODE["nothing"]
+
+
+@pytest.mark.skipif(shutil.which("pvbatch") is None or shutil.which("xvfb-run") is None,
+                    reason="ParaView's pvbatch (and xvfb-run) not installed")
+def test_paraview_itself_opens_the_state_and_draws_it(tmp_path):
+    """With ParaView installed (``apt-get install paraview xvfb``; not part of the set-up),
+    pvbatch runs the state and saves a picture of it."""
+    import subprocess
+
+    s, g = _scene()
+    _write_run(tmp_path, "a_", s, g)
+    (state,) = [p for p in pvs.write_states(tmp_path) if p.name == "a_view.py"]
+    shot = tmp_path / "shot.py"
+    shot.write_text("import runpy, sys\nrunpy.run_path(sys.argv[1], run_name='__state__')\n"
+                    "from paraview.simple import GetActiveView, SaveScreenshot\n"
+                    "SaveScreenshot(sys.argv[2], GetActiveView(), ImageResolution=[320, 240])\n")
+    png = tmp_path / "a.png"
+    # (ParaView's own Python: none of this venv's paths)
+    env = {k: v for k, v in os.environ.items()
+           if k not in ("PYTHONPATH", "PYTHONHOME", "VIRTUAL_ENV")}
+    p = subprocess.run(["xvfb-run", "-a", "pvbatch", str(shot), str(state), str(png)],
+                       capture_output=True, text=True, timeout=300, env=env, cwd=tmp_path)
+    (tmp_path / "pv.log").write_text(p.stdout + p.stderr)
+    assert p.returncode == 0, p.stdout[-2000:] + p.stderr[-2000:]
+    assert png.stat().st_size > 1000

@@ -148,7 +148,7 @@ def _spheres(source, scale_array="radius"):
 
 def _colour(display, where, array, solid=None):
     if solid is not None:
-        ColorBy(display, None)
+        display.ColorArrayName = ["POINTS", ""]  # (no array: one colour)
         display.AmbientColor = display.DiffuseColor = solid
         return
     ColorBy(display, (where, array))
@@ -199,6 +199,10 @@ Show(src, view)
 }
 
 _TAIL = '''
+view.ResetCamera()
+camera = GetActiveCamera()  # (from above and aside: the grid shows between the grains)
+camera.Elevation(30)
+camera.Azimuth(30)
 view.ResetCamera()
 Render()
 '''
