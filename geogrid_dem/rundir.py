@@ -915,10 +915,12 @@ def _run_main(case, out, work, *, overwrite, log, own_folder, keep, params, chec
             # session that called run_main gets its own handler back, and the processes it
             # starts do not inherit the ignore.)
             signal.signal(signal.SIGINT, old_int)
-    for d in list(_ACTIVE):
+    active = list(_ACTIVE)
+    for d in active:
         write_views(d)
         end_run(d)
     if own_folder:
-        write_views(out)
+        if out not in active:  # (its views written once)
+            write_views(out)
         end_run(out)  # files written after the case's own end_run are listed too
     return 0
