@@ -51,9 +51,13 @@ def results_in_order(ex: concurrent.futures.Executor, fn: Callable, *iterables: 
     docstring). A job's error is raised when its turn comes."""
     futures = [ex.submit(fn, *args) for args in zip(*iterables)]
     for f in futures:
-        while True:
-            try:
-                yield f.result(timeout=poll_s)
-                break
-            except concurrent.futures.TimeoutError:
-                continue
+        yield wait_result(f, poll_s)
+
+
+def wait_result(f: concurrent.futures.Future, poll_s: float = POLL_S):
+    """``f.result()``, waited for in timed waits of ``poll_s`` (s) (module docstring)."""
+    while True:
+        try:
+            return f.result(timeout=poll_s)
+        except concurrent.futures.TimeoutError:
+            continue

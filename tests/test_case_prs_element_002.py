@@ -580,8 +580,8 @@ def test_the_fem_soil_is_calibrated_once_and_kept_on_resume(tmp_path, monkeypatc
 
     calls = []
 
-    def fake(q, out, keep=None):
-        calls.append(q.seed)
+    def fake(q, out, keep=None, seeds=None, workers=1):
+        calls.append((q.seed, tuple(seeds), workers))
         rec = {"young_pa": 42e6, "poisson": 0.31, "converged": True}
         (out / "calibration.json").write_text(json.dumps(rec))
         keep["RE"] = "the RE FEM"
@@ -590,16 +590,65 @@ def test_the_fem_soil_is_calibrated_once_and_kept_on_resume(tmp_path, monkeypatc
     monkeypatch.setattr(study, "calibrate_soil", fake)
     p = case.Params(**case.SMOKE)
     p.seeds = (3, 4)
+    p.workers = 2
     s1: dict = {}
     soil, kept = case.fem_soil(p, "detailed", tmp_path / "fem_detailed", s1)
-    assert calls == [3] and kept == {"RE": "the RE FEM"}
+    # (on the mean of every seed's element, on the run's workers)
+    assert calls == [(3, (3, 4), 2)] and kept == {"RE": "the RE FEM"}
     assert soil["soil_young"] == 42e6 and soil["soil_cohesion"] == 0.0
     assert s1["soil"]["detailed"]["source"] == "calibrated"
     p.resume = True
     s2: dict = {}
     soil2, kept2 = case.fem_soil(p, "detailed", tmp_path / "fem_detailed", s2)
-    assert calls == [3] and kept2 == {} and soil2 == soil
+    assert len(calls) == 1 and kept2 == {} and soil2 == soil
     assert s2["calibration"]["detailed"]["young_pa"] == 42e6
     p.resume, p.soil = False, "given"
     soil3, _ = case.fem_soil(p, "detailed", tmp_path / "fem_detailed", {})
-    assert calls == [3] and soil3["soil_young"] == p.soil_young
+    assert len(calls) == 1 and soil3["soil_young"] == p.soil_young
+
+
+def test_the_soil_is_fitted_to_the_mean_of_the_seeds_elements(tmp_path, monkeypatch):
+    """calibrate_soil with several seeds: each pass drives every seed's element along the
+    region's path and fits the soil to their mean (stand-ins: the FEM strains as its soil, the
+    seeds' elements as E 40 and 60 MPa, nu 0: the mean strains as 1/mean(1/E) = 48 MPa), and
+    the record keeps each seed's own secant; one seed is the mean's special case (60 MPa)."""
+    from dataclasses import replace
+    from types import SimpleNamespace
+
+    from geogrid_dem.studies import prs_element as study
+
+    ini_pa, fin_pa = np.array([2e3, 2e3, 5e3]), np.array([20e3, 30e3, 90e3])
+
+    def targets(rows):
+        return SimpleNamespace(normal_pa=rows, rotation_deg=0.0, grid_tension_n_per_m=None,
+                               shear_pa=np.zeros(3))
+
+    def fake_fem(q, out, variant):
+        return (targets(ini_pa), targets(fin_pa), None, None, None,
+                {"strain_increment": ((fin_pa - ini_pa) / q.soil_young).tolist()})
+
+    seen = []
+
+    def fake_element(q, rows, *, prestressed, label, out, grid_tension=None, cache=None):
+        seen.append((q.seed, label))
+        E = {1: 40e6, 2: 60e6}[q.seed]
+        return {"stress_initial_pa": rows[0].tolist(), "stress_final_pa": rows[1].tolist(),
+                "strain_increment": ((rows[1] - rows[0]) / E).tolist(), "porosity_final": 0.4}
+
+    monkeypatch.setattr(study, "run_fem", fake_fem)
+    monkeypatch.setattr(study, "run_element", fake_element)
+    p = study.Params(seed=1)
+    q, rec = study.calibrate_soil(p, tmp_path, seeds=[1, 2])
+    assert rec["converged"] and rec["seeds"] == [1, 2]
+    assert q.soil_young == pytest.approx(48e6, rel=1e-9) and q.soil_poisson == pytest.approx(0)
+    first = rec["passes"][0]
+    assert [r["seed"] for r in first["seeds"]] == [1, 2]
+    assert [r["secant_young_pa"] for r in first["seeds"]] == pytest.approx([40e6, 60e6])
+    assert first["dem_fem_strain_ratio"] == pytest.approx(50 / 48)
+    assert [s for s, _ in seen[:2]] == [1, 2] and seen[0][1] == "calibration_RE_s1_1"
+    seen.clear()
+    q1, rec1 = study.calibrate_soil(replace(p, seed=2), tmp_path)
+    assert q1.soil_young == pytest.approx(60e6) and "seeds" not in rec1["passes"][0]
+    assert seen[0] == (2, "calibration_RE_1") and rec1["seeds"] == [2]
+    with pytest.raises(ValueError, match="seeds"):
+        study.calibrate_soil(p, tmp_path, seeds=[])

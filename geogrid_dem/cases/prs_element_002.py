@@ -621,8 +621,9 @@ def shear_omitted(fin) -> dict:
 
 def fem_soil(p: Params, grid: str, fem_out: Path, summary: dict) -> tuple[dict, dict]:
     """The FEM soil of ``grid``'s runs, one soil on both scales: with ``p.soil`` 'calibrated'
-    calibrated on this grid's RE element of the first seed (the same grains and preparation;
-    ``geogrid_dem.studies.prs_element.calibrate_soil``, its record in ``fem_out``), else as
+    calibrated on the mean of this grid's RE elements of the run's seeds (the same grains and
+    preparation; ``geogrid_dem.studies.prs_element.calibrate_soil``, on ``p.workers``
+    processes; its record in ``fem_out``), else as
     given. With ``p.resume`` a calibration the interrupted run finished (its
     ``calibration.json``) is kept, not run again. Returns the soil's Params fields and the
     FEM runs the calibration solved with it (variant -> ``run_fem``'s result, to be reused);
@@ -641,7 +642,8 @@ def fem_soil(p: Params, grid: str, fem_out: Path, summary: dict) -> tuple[dict, 
             log(f"--resume: the {grid} grid's soil calibration kept from the earlier run "
                 f"({path})")
         else:
-            q, rec = calibrate_soil(q, fem_out, keep=kept)
+            q, rec = calibrate_soil(q, fem_out, keep=kept, seeds=list(p.seeds),
+                                    workers=p.workers)
         summary.setdefault("calibration", {})[grid] = rec
     soil = {k: getattr(q, k) for k in ("soil_young", "soil_poisson", "soil_friction",
                                        "soil_cohesion")}

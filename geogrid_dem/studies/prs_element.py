@@ -13,6 +13,7 @@ FEM stresses tension positive, DEM stresses compression positive.
 
 from __future__ import annotations
 
+import contextlib
 import functools
 import json
 import math
@@ -26,6 +27,7 @@ from cpp_dem import apply_threads
 from cpp_dem.elements import box as _element
 from cpp_dem.elements.box import ElementParams, grid_stiffness_per_metre
 from cpp_dem.io.figures import save_figure
+from geogrid_dem.processes import process_pool, wait_result
 
 
 @dataclass
@@ -355,8 +357,38 @@ def _element_secant(e: dict) -> tuple[float, float, float]:
     return E, nu_raw, nu
 
 
+#: The calibration's elements in a worker process, kept between its passes: per (run key,
+#: seed) the element prepared and servoed to the initial targets (``run_element``'s cache).
+_CALIBRATION_ELEMENTS: dict = {}
+
+
+def _calibration_elements(q: Params, seeds: list, rows: list, tension: list | None, k: int,
+                          out: Path, key: str) -> list[dict]:
+    """Pass ``k``'s RE elements of ``seeds`` (in turn, in this process) along ``rows``
+    (picklable: a calibration on several seeds runs groups of them side by side; each seed's
+    element keeps its preparation between passes in the process that runs it)."""
+    res = []
+    for s in seeds:
+        cache = _CALIBRATION_ELEMENTS.setdefault((key, int(s)), {})
+        res.append(run_element(replace(q, seed=int(s)), rows, prestressed=False,
+                               label=f"calibration_RE_s{s}_{k}", out=out, grid_tension=tension,
+                               cache=cache))
+    return res
+
+
+def _mean_element(es: list[dict]) -> dict:
+    """The seeds' mean element: the mean of their initial and final stresses and of their
+    strain increments (one element when there is one)."""
+    if len(es) == 1:
+        return es[0]
+    return {key: np.mean([np.asarray(e[key], float) for e in es], axis=0).tolist()
+            for key in ("stress_initial_pa", "stress_final_pa", "strain_increment",
+                        "porosity_final")}
+
+
 def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
-                   keep: dict | None = None) -> tuple[Params, dict]:
+                   keep: dict | None = None, seeds: list | None = None,
+                   workers: int = 1) -> tuple[Params, dict]:
     """One soil on both scales (the default of the FEM modes): the FEM soil set to the case's
     own element, by passes. Each pass solves the RE FEM with the current soil, drives the
     case's element (the same grains, preparation and seed as the run's, so the same
@@ -378,7 +410,16 @@ def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
     ``converged`` False. Returns the parameters with that soil and the record (also
     ``calibration.json``). With ``keep`` (a dict) and a converged calibration, keep["RE"] is
     the last pass's ``run_fem`` result: the RE FEM with the returned soil, already solved
-    (``run_variant(fem=)`` takes it instead of solving it again)."""
+    (``run_variant(fem=)`` takes it instead of solving it again).
+
+    ``seeds`` (default ``[p.seed]``): with several, each pass drives every seed's element
+    (same grains and preparation, its own packing) along the path, and the soil is fitted to
+    their mean (mean stresses, mean strain increment; the strain ratio is the mean's): one
+    element is one sample of a chaotic packing, whose secant moves with the seed and with the
+    CPU's rounding path; the mean moves about 1/sqrt(seeds) as much. ``workers`` (> 1): the
+    seeds' elements in that many spawned processes (one thread each; each seed always in the
+    same process, which keeps its preparation between passes), the same numbers as in one.
+    Each pass's row lists the seeds' own ratios and secants (``seeds``)."""
     from femcoupling.coupling.continuum_fit import friction_angle_deg
     from femcoupling.coupling.status import strain_ratio_held
     from femcoupling.coupling.twoway import check_region
@@ -387,43 +428,82 @@ def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
     q = p
     passes, warnings = [], []
     converged = False
+    seeds = [int(p.seed)] if seeds is None else [int(s) for s in seeds]
+    if not seeds:
+        raise ValueError("calibrate_soil: seeds=[]: give at least one element seed")
     cache: dict = {}  # the element at the initial targets, prepared once for every pass
-    for k in range(1, max_passes + 1):
-        fem = run_fem(q, out, "RE")
-        ini, fin, _m, _s0, _load, info = fem
-        label = f"calibration_RE_{k}"
-        e = run_element(q, [ini.normal_pa, fin.normal_pa], prestressed=False, label=label,
-                        out=out, grid_tension=handed_tension(q, [ini, fin], label),
-                        cache=cache)
-        _msgs, ratio = check_region(label, fin, fem_strain_increment=info["strain_increment"],
-                                    dem_strain_increment=e["strain_increment"])
-        E, nu_raw, nu = _element_secant(e)
-        row = {"pass": k, "soil_young_pa": q.soil_young, "soil_poisson": q.soil_poisson,
-               "soil_cohesion_pa": q.soil_cohesion, "dem_fem_strain_ratio": ratio,
-               "secant_young_pa": E, "secant_poisson_fitted": nu_raw, "secant_poisson": nu,
-               "rotation_deg": fin.rotation_deg,
-               "path_initial_pa": ini.normal_pa.tolist(), "path_final_pa": fin.normal_pa.tolist(),
-               "element_strain_increment": e["strain_increment"],
-               "fem_strain_increment": info["strain_increment"],
-               "porosity_element": e["porosity_final"],
-               "friction_mobilised_deg": friction_angle_deg(-np.diag(e["stress_final_pa"]))}
-        passes.append(row)
-        log(f"calibration pass {k}: soil E {q.soil_young / 1e6:.4g} MPa, nu "
-            f"{q.soil_poisson:.3f}: the element strains {ratio:.3g} x its FEM region; its "
-            f"secant along that path: E {E / 1e6:.4g} MPa, nu {nu_raw:.3f}")
-        if k > 1 and strain_ratio_held(ratio):
-            converged = True
-            if keep is not None:  # (this pass's soil is the one returned)
-                keep["RE"] = fem
-            break
-        if nu < nu_raw:
-            warnings.append(f"calibration pass {k}: the element's secant Poisson's ratio "
-                            f"{nu_raw:.3f} is above the FEM soil's limit {POISSON_MAX}: nu = "
-                            f"{POISSON_MAX} (E refitted: {E / 1e6:.4g} MPa)")
-            log("WARNING: " + warnings[-1])
-        q = replace(q, soil_young=E, soil_poisson=nu, soil_cohesion=0.0)
+    groups = [seeds[j::max(1, min(int(workers), len(seeds)))]
+              for j in range(max(1, min(int(workers), len(seeds))))]
+    key = json.dumps([str(out), time.time_ns()])  # (this calibration's, in its workers)
+    with contextlib.ExitStack() as stack:
+        pools = ([stack.enter_context(process_pool(1)) for _ in groups] if len(groups) > 1
+                 else [])
+        for k in range(1, max_passes + 1):
+            fem = run_fem(q, out, "RE")
+            ini, fin, _m, _s0, _load, info = fem
+            label = f"calibration_RE_{k}"
+            tension = handed_tension(q, [ini, fin], label)
+            rows = [ini.normal_pa, fin.normal_pa]
+            if len(seeds) == 1:
+                es = [run_element(q, rows, prestressed=False, label=label, out=out,
+                                  grid_tension=tension, cache=cache)]
+            elif pools:
+                futs = [ex.submit(_calibration_elements, q, g, rows, tension, k, out, key)
+                        for ex, g in zip(pools, groups)]
+                by_seed = {}
+                for g, f in zip(groups, futs):
+                    by_seed.update(zip(g, wait_result(f)))
+                es = [by_seed[s] for s in seeds]
+            else:
+                es = _calibration_elements(q, seeds, rows, tension, k, out, key)
+            e = _mean_element(es)
+            _msgs, ratio = check_region(label, fin,
+                                        fem_strain_increment=info["strain_increment"],
+                                        dem_strain_increment=e["strain_increment"])
+            E, nu_raw, nu = _element_secant(e)
+            row = {"pass": k, "soil_young_pa": q.soil_young, "soil_poisson": q.soil_poisson,
+                   "soil_cohesion_pa": q.soil_cohesion, "dem_fem_strain_ratio": ratio,
+                   "secant_young_pa": E, "secant_poisson_fitted": nu_raw, "secant_poisson": nu,
+                   "rotation_deg": fin.rotation_deg,
+                   "path_initial_pa": ini.normal_pa.tolist(), "path_final_pa": fin.normal_pa.tolist(),
+                   "element_strain_increment": e["strain_increment"],
+                   "fem_strain_increment": info["strain_increment"],
+                   "porosity_element": e["porosity_final"],
+                   "friction_mobilised_deg": friction_angle_deg(-np.diag(e["stress_final_pa"]))}
+            if len(seeds) > 1:
+                row["seeds"] = []
+                for s, es_k in zip(seeds, es):
+                    E_k, nu_k, _ = _element_secant(es_k)
+                    row["seeds"].append({
+                        "seed": s, "dem_fem_strain_ratio": check_region(
+                            f"{label}_s{s}", fin, fem_strain_increment=info["strain_increment"],
+                            dem_strain_increment=es_k["strain_increment"])[1],
+                        "secant_young_pa": E_k, "secant_poisson_fitted": nu_k,
+                        "element_strain_increment": es_k["strain_increment"],
+                        "porosity_element": es_k["porosity_final"]})
+                log(f"calibration pass {k}, the seeds' own: strain ratio "
+                    + ", ".join(f"{r['dem_fem_strain_ratio']:.3g}" for r in row["seeds"])
+                    + "; secant E " + ", ".join(f"{r['secant_young_pa'] / 1e6:.4g}"
+                                                for r in row["seeds"]) + " MPa")
+            passes.append(row)
+            log(f"calibration pass {k}: soil E {q.soil_young / 1e6:.4g} MPa, nu "
+                f"{q.soil_poisson:.3f}: the element strains {ratio:.3g} x its FEM region; its "
+                f"secant along that path: E {E / 1e6:.4g} MPa, nu {nu_raw:.3f}")
+            if k > 1 and strain_ratio_held(ratio):
+                converged = True
+                if keep is not None:  # (this pass's soil is the one returned)
+                    keep["RE"] = fem
+                break
+            if nu < nu_raw:
+                warnings.append(f"calibration pass {k}: the element's secant Poisson's ratio "
+                                f"{nu_raw:.3f} is above the FEM soil's limit {POISSON_MAX}: nu = "
+                                f"{POISSON_MAX} (E refitted: {E / 1e6:.4g} MPa)")
+                log("WARNING: " + warnings[-1])
+            q = replace(q, soil_young=E, soil_poisson=nu, soil_cohesion=0.0)
     last = passes[-1]
-    rec = {"method": "the case's element along the RE region's path, by passes",
+    rec = {"method": ("the case's element along the RE region's path, by passes" if len(seeds)
+                      == 1 else f"the mean of the case's elements of seeds {seeds} along the RE "
+                      "region's path, by passes"), "seeds": seeds,
            "converged": converged, "passes": passes,
            "young_pa": q.soil_young, "poisson": q.soil_poisson, "cohesion_pa": 0.0,
            "friction_deg": p.soil_friction, "friction_source": "given",
