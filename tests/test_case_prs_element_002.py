@@ -277,6 +277,11 @@ def test_a_pair_with_an_element_at_strength_is_left_out_and_counted():
              f["name"])
     assert f["n"] == 3 and f["pairs_left_out"] == ["detailed_s3"]
     assert f["t_critical"] == pytest.approx(4.303, abs=1e-3)
+    # ... and one still but not at rest (its walls off their targets) too
+    el["detailed_PRS_s0"]["rest"]["status"] = "not_at_rest"
+    f = next(f for f in case.findings(el, range(4), ("detailed",)) if "vertical strain" in
+             f["name"])
+    assert f["n"] == 2 and f["pairs_left_out"] == ["detailed_s0", "detailed_s3"]
 
 
 def test_figures_on_shared_scales_measures_and_paraview_files(smoke):

@@ -115,6 +115,22 @@ def test_a_held_axis_does_not_move_and_the_strain_path_is_followed(prepared):
     assert st["rest"]["status"] in ("at_rest", "at_strength")
 
 
+def test_a_still_element_whose_walls_miss_their_targets_is_not_at_rest_nor_at_strength(
+        prepared):
+    """An element at rest by motion whose servo cannot hold its targets within tol (here a
+    tol of 1e-6: a record's wall stress scatters by about 1 %) is 'not_at_rest', the failed
+    check named, not 'at_strength': that word says the element still moves."""
+    sample, grid = _restore(prepared)
+    targets = [5e3, 5e3, 10e3]
+    assert _hold(sample, grid, targets, P)["status"] == "at_rest"
+    p = P.__class__(**{**P.__dict__, "rest_max_holds": 2, "tol": 1e-6})
+    r = _hold(sample, grid, targets, p)
+    assert r["status"] == "not_at_rest", r
+    assert r["inertial_number_end"] <= p.rest_inertial
+    assert [f for f in r["failed"] if "walls" in f] and not [
+        f for f in r["failed"] if "inertial number" in f]
+
+
 def test_an_element_pushed_past_its_strength_is_at_strength(prepared):
     sample, grid = _restore(prepared)
     p = P.__class__(**{**P.__dict__, "rest_max_holds": 3})

@@ -265,23 +265,25 @@ def _stats(x: list) -> tuple[float, float]:
 STAT_KEYS = ("re_mean", "re_sd", "prs_mean", "prs_sd", "diff_mean", "diff_se", "n")
 
 
-def at_strength(e: dict) -> bool:
+def not_at_rest(e: dict) -> bool:
     """Whether an element did not come to rest at its targets (its ``rest`` status is
-    'at_strength'): it is never measured mid-flow."""
-    return (e.get("rest") or {}).get("status") == "at_strength"
+    'at_strength', still moving, or 'not_at_rest', still but a force or servo check failed;
+    ``cpp_dem.elements.box.rest_hold``): it is never measured unless at rest."""
+    return (e.get("rest") or {}).get("status") in ("at_strength", "not_at_rest")
 
 
 def paired(elements: dict, grid: str, seeds, value) -> dict | None:
     """RE and PRS values of ``value`` over the seeds with both, and their paired difference
     (PRS - RE): means, sds, the difference's mean and standard error, n; 'unconverged': the
     labels of those elements with a stage that did not converge; 'pairs_left_out': the
-    labels of the pairs left out because an element of theirs is at_strength."""
+    labels of the pairs left out because an element of theirs is not at rest
+    (:func:`not_at_rest`)."""
     re_v, prs_v, unconverged, left_out = [], [], [], []
     for s in seeds:
         re_, prs = elements.get(f"{grid}_RE_s{s}"), elements.get(f"{grid}_PRS_s{s}")
         if re_ is None or prs is None:
             continue
-        if at_strength(re_) or at_strength(prs):
+        if not_at_rest(re_) or not_at_rest(prs):
             left_out.append(f"{grid}_s{s}")
             continue
         a, b = value(re_), value(prs)
@@ -390,7 +392,9 @@ def write_report(out: Path, summary: dict) -> None:
               "value). At 95 % by Student's t over the n pairs: `agrees`: 002's sign with "
               "|d| > t crit × se; `opposes`: the other sign beyond it; else `not resolved` "
               "(also when an element behind it did not converge). A pair with an element "
-              "`at_strength` (not at rest at its targets) is left out and named.", ""]
+              "not at rest at its targets (`at_strength`: still moving; `not_at_rest`: still, "
+              "but its unbalanced force or its walls' error failed) is left out and named.",
+              ""]
     lines += findings_table(summary["findings"])
     stalled = sorted({k for f in summary["findings"] for k in f.get("unconverged", [])})
     if stalled:

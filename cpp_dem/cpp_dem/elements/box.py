@@ -109,7 +109,8 @@ class ElementParams:
                                      #: number, -
     rest_unbalanced: float = 0.01    #: at rest: the unbalanced-force ratio at most this, -
     rest_max_holds: int = 12         #: holds of hold_steps before an element that does not come
-                                     #: to rest is reported at_strength, -
+                                     #: to rest is reported at_strength (still moving) or
+                                     #: not_at_rest (still, a force or servo check failed), -
     kinematics: str = "stress"       #: the loading's walls: 'stress' (every axis servoed to its
                                      #: target), 'plane-strain' (y held, x and z servoed), or
                                      #: 'fem-strain' (y held, x following the FEM region's
@@ -998,8 +999,11 @@ def rest_hold(sample, targets, p: ElementParams, record, stress_axes, bias, rate
     strain rate gives an inertial number at most p.rest_inertial, the unbalanced-force ratio
     at its end is at most p.rest_unbalanced, and the stress axes held their targets within
     p.tol in the mean over the hold (one record's wall stress scatters by about 1 % at a few
-    kPa; ``hold_max_rel_error`` reports the largest). After p.rest_max_holds holds without that the element is ``at_strength``: it
-    flows (or creeps) under its targets; the friction angle its walls mobilise is given.
+    kPa; ``hold_max_rel_error`` reports the largest). After p.rest_max_holds holds without that
+    the element is ``at_strength`` when it still moves (its last hold's inertial number above
+    p.rest_inertial: it flows or creeps under its targets), else ``not_at_rest`` (still, but
+    its unbalanced force or its walls' error failed: ``failed`` says which); the friction angle
+    its walls mobilise is given either way.
     Returns {"status", "inertial_number_max" (over the holds), "inertial_number_end" (the
     last hold's), "unbalanced_end", "hold_steps" (all holds), "holds", "hold_max_rel_error",
     "mobilised_friction_deg", "failed" (the checks the last hold failed)}."""
@@ -1041,6 +1045,9 @@ def rest_hold(sample, targets, p: ElementParams, record, stress_axes, bias, rate
         if not failed:
             status = "at_rest"
             break
+    if status != "at_rest" and inertials[-1] <= p.rest_inertial:
+        # (still: not flowing, so not at its strength; what failed is a force or the servo)
+        status = "not_at_rest"
     ax = held_stresses(sample)
     out = {"status": status, "inertial_number_max": float(max(inertials)),
            "inertial_number_end": float(inertials[-1]), "unbalanced_end": unb,
@@ -1266,7 +1273,8 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
     (3,, compression positive): the FEM region's strain over the last row's loading; the
     strain-controlled axes of p.kinematics follow it, and the summary gives
     ``strain_ratio_to_fem`` (the element's ``loading_strain`` over it, per axis; 1 where
-    both are 0). The summary's ``rest`` is the last stage's (status at_rest or at_strength,
+    both are 0). The summary's ``rest`` is the last stage's (status at_rest, at_strength or
+    not_at_rest: rest_hold,
     with ``rest_initial`` the first's), and ``interaction_start`` the measures at the start
     of the loading (woven grids).
 
