@@ -1,12 +1,11 @@
 """The CPU dispatch of this process: which code paths its arithmetic takes.
 
-Two runs of the same input on the same build give the same bits. The DEM core's hot loops
-are compiled for several instruction sets and picked at load time, and ``CPP_DEM_NARROW=1``
-selects the narrow (scalar) form of the pair pass: these give the same bits (no fused
-multiply-adds; docs/core.md, "Determinism and threads"). What may still differ on another CPU
-is OpenBLAS's kernels, picked by CPU (``OPENBLAS_CORETYPE`` overrides it), and glibc's
-CPU-specific ``libm`` code. A run records its path (``cpu_dispatch()``), so that two results
-can be told apart by it (docs/cli.md, "Results folders")."""
+Two runs of the same input on the same build give the same bits; on another CPU, or with
+another BLAS kernel, they may not: the step's hot loops are compiled for several instruction
+sets and picked at load time, ``CPP_DEM_NARROW=1`` selects the narrow (scalar) form of the
+pair pass, and OpenBLAS picks its kernels by CPU (``OPENBLAS_CORETYPE`` overrides it). A run
+records what it took (``cpu_dispatch()``), so that two results can be told apart by their
+rounding path (docs/cli.md, "Results folders")."""
 
 from __future__ import annotations
 

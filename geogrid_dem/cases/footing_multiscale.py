@@ -43,7 +43,7 @@ from geogrid_dem.rundir import on_interrupt, run_main
 #: The test-sized run: a coarse mesh (14-20 zone cells), 80 grains an element, one load
 #: level, two seeds.
 SMOKE = dict(width=2.0, height=1.5, mesh_size=0.5, fine_size=0.35, cell_grains=80, levels=1,
-             fit_points=4, pressure_pa=40e3, calibration_seeds=4)
+             fit_points=4, pressure_pa=40e3)
 #: The smoke in 3D (--dim 3), over SMOKE: coarser zone cells and smaller elements (a zone
 #: of 0.35 m cells has 93 tetrahedra unreinforced, 140 with the layer).
 SMOKE_3D = dict(fine_size=0.5, cell_grains=50)
@@ -169,10 +169,6 @@ def build_parser():
     ap.add_argument("--noise-ceiling", type=float, default=d.noise_ceiling,
                     help="Newton: a DEM zone step is accepted within the elements' noise only "
                          "up to this fraction of the zone's own internal force")
-    ap.add_argument("--calibration-seeds", type=int, default=None,
-                    help=f"how many element seeds the continuum is fitted to the mean of "
-                         f"(their E, nu along the zone's path, their biaxial phi; 1 to 64; "
-                         f"default {d.calibration_seeds}, smoke {SMOKE['calibration_seeds']})")
     ap.add_argument("--budget", default="",
                     help="the error budget's parts to measure, each by a rerun of every "
                          "variant with one thing changed: a comma-separated selection of "
@@ -196,8 +192,7 @@ FLAGS = {"--pressure": "pressure_pa", "--seat": "seat_pa", "--levels": "levels",
          "--grid-stiffness": "grid_stiffness", "--prestress": "prestress",
          "--fine-size": "fine_size", "--cell-grains": "cell_grains",
          "--band-grains": "band_grains", "--band-tangent": "band_tangent",
-         "--workers": "workers", "--dim": "dim", "--noise-ceiling": "noise_ceiling",
-         "--calibration-seeds": "calibration_seeds"}
+         "--workers": "workers", "--dim": "dim", "--noise-ceiling": "noise_ceiling"}
 
 
 def parse_args(argv=None):

@@ -115,10 +115,8 @@ class FootingParams:
     noise_ceiling: float = 1e-2     #: Newton: a DEM zone step is accepted within the
                                     #: elements' noise only up to this fraction of the
                                     #: zone's own internal force, -
-    calibration_seed: int | None = None  #: the first element seed the continuum is fitted on
+    calibration_seed: int | None = None  #: the element seed the continuum is fitted on
                                     #: (None: ``seeds[0]``)
-    calibration_seeds: int = 8      #: how many element seeds (from ``calibration_seed`` on)
-                                    #: the continuum is fitted to the mean of
     budget: tuple = ()              #: the error budget's parts measured by reruns
                                     #: (BUDGET_PARTS; the seeds' part is always measured)
 
@@ -179,8 +177,6 @@ class FootingParams:
         if self.calibration_seed is not None and not (
                 isinstance(self.calibration_seed, int) and self.calibration_seed >= 0):
             bad("calibration_seed", "None (the first seed) or a whole number >= 0")
-        if not (isinstance(self.calibration_seeds, int) and 1 <= self.calibration_seeds <= 64):
-            bad("calibration_seeds", "a whole number of element seeds from 1 to 64")
         if len(set(self.budget)) != len(self.budget) or \
                 any(b not in BUDGET_PARTS for b in self.budget):
             bad("budget", "distinct parts of " + ", ".join(BUDGET_PARTS))
@@ -268,14 +264,10 @@ def band_sheet_tensions(group, first: int) -> list:
 
 def calibrate(p: FootingParams, log) -> tuple:
     """Step 1 of the module doc: (the fitted DruckerPrager, its record). E and nu: the
-    secant of the mean of ``calibration_seeds`` elements of the zone's grains (seeds from
-    ``calibration_seed``, default ``seeds[0]``, on) along the zone's mean stress path
-    (``fit_along_path`` each, ``mean_path_secant``); phi: the mean of their peaks in a
-    plane-strain biaxial test at the path's final mean pressure
-    (``geogrid_dem.studies.biaxial.direct_biaxial``, to 6 % axial strain; sin phi = (s1 - s3)
-    / (s1 + s3)); no cohesion. One element is one sample of a chaotic packing: its E moves
-    with the seed and with the CPU's rounding path (the FEM's path handed to it moves in the
-    last bits); the mean of n moves about 1/sqrt(n) as much."""
+    secant of an element of the zone's grains (seed ``seeds[0]``) along the zone's mean stress
+    path (``fit_along_path``); phi: the peak of a plane-strain biaxial test of that element
+    at the path's final mean pressure (``geogrid_dem.studies.biaxial.direct_biaxial``, to 6 %
+    axial strain; sin phi = (s1 - s3) / (s1 + s3)); no cohesion."""
     from cpp_dem.elements.periodic import DemElement
     from femcoupling.coupling.continuum_fit import fit_along_path
     from femcoupling.materials.continuum import DruckerPrager
@@ -299,78 +291,36 @@ def calibrate(p: FootingParams, log) -> tuple:
                  f"{m.footing_pressure_pa() / 1e3:.1f} kPa of {p.pressure_pa / 1e3:g} ({exc})")
         log(f"calibration: WARNING: {short}; the zone's path is taken to there")
     s1 = m.region_stress("zone")
-    first = p.seeds[0] if p.calibration_seed is None else p.calibration_seed
-    seeds = list(range(first, first + p.calibration_seeds))
-    fits = [fit_along_path(s0, s1, n=p.cell_grains, seed=k, prep_friction_deg=0.0,
-                           points=p.fit_points, options=grain_options(p), unbalanced=1e-2,
-                           tol=0.02) for k in seeds]
+    seed = p.seeds[0] if p.calibration_seed is None else p.calibration_seed
+    fit = fit_along_path(s0, s1, n=p.cell_grains, seed=seed, prep_friction_deg=0.0,
+                         points=p.fit_points, options=grain_options(p), unbalanced=1e-2,
+                         tol=0.02)
     pressure = float(-np.trace(s1) / 3)
-    runs = biaxial.direct_biaxial(
+    run = biaxial.direct_biaxial(
         lambda k: DemElement.periodic(p.cell_grains, stress=pressure, seed=k,
                                       prep_friction_deg=0.0, **grain_options(p)),
-        seeds, pressure=pressure, strain=0.06, strain_per_step=1e-6, log=None)
-    angles = [biaxial.rve_angles(r) for r in runs]
-    young, poisson = mean_path_secant(fits)
-    phi = float(np.mean([a["phi_peak_deg"] for a in angles]))
-    peak_strain = [a["peak_axial_strain"] for a in angles]
-    peak_reached = all(e < 0.06 - 1e-9 for e in peak_strain)
-    mat = DruckerPrager(young_pa=young, poisson=poisson, cohesion_pa=0.0, friction_deg=phi)
+        [seed], pressure=pressure, strain=0.06, strain_per_step=1e-6, log=None)[0]
+    angles = biaxial.rve_angles(run)
+    peak_reached = angles["peak_axial_strain"] < 0.06 - 1e-9
+    mat = DruckerPrager(young_pa=fit.material.young_pa, poisson=fit.material.poisson,
+                        cohesion_pa=0.0, friction_deg=angles["phi_peak_deg"])
     log(f"calibration: E {mat.young_pa / 1e6:.4g} MPa, nu {mat.poisson:.3f} along the zone's "
         f"path; phi {mat.friction_deg:.1f} deg, the biaxial peak at {pressure / 1e3:.1f} kPa "
-        f"(axial strain {max(peak_strain):.4f}"
-        + ("" if peak_reached else ": no peak within 6 %, a lower bound") + f"), c = 0; "
-        + (f"the mean of element seeds {seeds[0]}-{seeds[-1]} (E "
-           + ", ".join(f"{f.material.young_pa / 1e6:.3g}" for f in fits) + " MPa, phi "
-           + ", ".join(f"{a['phi_peak_deg']:.1f}" for a in angles) + " deg; the seeds' "
-           f"standard error: E {_se([f.material.young_pa for f in fits]) / 1e6:.2g} MPa, phi "
-           f"{_se([a['phi_peak_deg'] for a in angles]):.2g} deg); "
-           if len(seeds) > 1 else f"element seed {first} (one seed: no standard error); ")
-        + f"({time.perf_counter() - t0:.1f} s)")
+        f"(axial strain {angles['peak_axial_strain']:.4f}"
+        + ("" if peak_reached else ": no peak within 6 %, a lower bound") + f"), c = 0 "
+        f"({time.perf_counter() - t0:.1f} s)")
     rec = {"young_pa": mat.young_pa, "poisson": mat.poisson, "friction_deg": mat.friction_deg,
-           "cohesion_pa": 0.0, "path_fit": fits[0].message,
+           "cohesion_pa": 0.0, "path_fit": fit.message,
            "path_initial_pa": (-np.diag(s0)).tolist(), "path_final_pa": (-np.diag(s1)).tolist(),
            "path_footing_pressure_pa": m.footing_pressure_pa(), "path_stopped": short,
-           "biaxial_pressure_pa": pressure, "biaxial_peak_axial_strain": max(peak_strain),
-           "biaxial_peak_reached": bool(peak_reached),
-           "dilatancy_deg": float(np.mean([a["psi_deg"] for a in angles])),
-           "element_seed": first, "element_seeds": seeds,
-           "per_seed": [{"seed": k, "young_pa": f.material.young_pa,
-                         "poisson": f.material.poisson, "friction_deg": a["phi_peak_deg"],
-                         "dilatancy_deg": a["psi_deg"],
-                         "biaxial_peak_axial_strain": a["peak_axial_strain"],
-                         "path_fit": f.message} for k, f, a in zip(seeds, fits, angles)],
-           # the seeds' scatter: the sampling error of the mean's E (from the seeds' own
-           # secants) and phi, one standard error (None with one seed)
-           "young_pa_se": _se([f.material.young_pa for f in fits]),
-           "friction_deg_se": _se([a["phi_peak_deg"] for a in angles]),
+           "biaxial_pressure_pa": pressure, "biaxial_peak_axial_strain":
+               angles["peak_axial_strain"], "biaxial_peak_reached": bool(peak_reached),
+           "dilatancy_deg": angles["psi_deg"], "element_seed": seed,
            "element_grains": p.cell_grains,
            "start": {"young_pa": p.soil_young, "poisson": p.soil_poisson,
                      "friction_deg": p.soil_friction},
            "wall_time_s": time.perf_counter() - t0}
     return mat, rec
-
-
-def _se(xs: list) -> float | None:
-    """The standard error of the mean of ``xs`` (None for fewer than two)."""
-    return float(np.std(xs, ddof=1) / math.sqrt(len(xs))) if len(xs) > 1 else None
-
-
-def mean_path_secant(fits: list) -> tuple[float, float]:
-    """(E Pa, nu) of the seeds' mean element along the zone's path: the secant
-    (``handover.secant_stiffness``) of the mean of their stress and strain increments to the
-    last point each reached on the path's own part (t <= 1; ``fit_along_path``'s fit). One
-    fit: its own E, nu."""
-    from femcoupling.coupling.handover import secant_stiffness
-
-    if len(fits) == 1:
-        return fits[0].material.young_pa, fits[0].material.poisson
-    ds, de = [], []
-    for f in fits:
-        j = int(np.searchsorted(f.t, 1.0 + 1e-12)) - 1
-        ds.append(-np.diag(f.stresses_pa[j] - f.stresses_pa[0]))
-        de.append(-np.diag(f.strains[j]))
-    return secant_stiffness(stress_increment_pa=np.mean(ds, axis=0),
-                            strain_increment=np.mean(de, axis=0))
 
 
 def at_level(target: float, p0: float, s0: float, p1: float, s1: float) -> float:
@@ -742,9 +692,7 @@ def figure(summary: dict, png: Path) -> None:
 def budget_params(p: FootingParams, part: str) -> FootingParams:
     """The parameters of the rerun that measures the budget's ``part`` (BUDGET_PARTS)."""
     change = {"ceiling": dict(noise_ceiling=0.5 * p.noise_ceiling),
-              "calibration": dict(calibration_seed=max(
-                  max(p.seeds), (p.seeds[0] if p.calibration_seed is None
-                                 else p.calibration_seed) + p.calibration_seeds - 1) + 1),
+              "calibration": dict(calibration_seed=max(p.seeds) + 1),
               "rve": dict(cell_grains=2 * p.cell_grains, band_grains=2 * p.band_grains),
               "mesh": dict(fine_size=p.fine_size / math.sqrt(2.0))}[part]
     return dataclasses.replace(p, budget=(), **change)
