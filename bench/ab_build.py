@@ -306,7 +306,8 @@ def count_instructions(scene: str, n: int, args, overlays: dict, tmp: Path) -> d
 def compare(scene: str, n: int, threads: int, args, overlays: dict, tmp: Path) -> dict:
     import numpy as np
 
-    steps = args.steps or max(100, math.ceil(args.particle_steps / n))
+    # (the pull-out ignores N: its smoke's 375 grains set its share of --particle-steps)
+    steps = args.steps or max(100, math.ceil(args.particle_steps / (n or 375)))
     cpu: dict[str, list[float]] = {"old": [], "new": []}
     hashes: dict[str, set] = {"old": set(), "new": set()}
     dumps = {}
