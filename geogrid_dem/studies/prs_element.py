@@ -432,8 +432,8 @@ def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
     if not seeds:
         raise ValueError("calibrate_soil: seeds=[]: give at least one element seed")
     cache: dict = {}  # the element at the initial targets, prepared once for every pass
-    groups = [seeds[j::max(1, min(int(workers), len(seeds)))]
-              for j in range(max(1, min(int(workers), len(seeds))))]
+    n_groups = max(1, min(int(workers), len(seeds)))
+    groups = [seeds[j::n_groups] for j in range(n_groups)]
     key = json.dumps([str(out), time.time_ns()])  # (this calibration's, in its workers)
     with contextlib.ExitStack() as stack:
         pools = ([stack.enter_context(process_pool(1)) for _ in groups] if len(groups) > 1
