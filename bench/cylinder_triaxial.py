@@ -186,7 +186,7 @@ def main(argv=None) -> int:
             q, radial = _invariants(m.volume_mean_stress())
             row = {"step": k, "axial_strain": ea, "q_pa": q, "radial_pa": radial,
                    "volumetric_strain": ev, "status": r.status,
-                   "iterations": int(sum(h.iterations for h in new)),
+                   "iterations": int(sum(h.newton_iterations for h in new)),
                    "wall_s": time.perf_counter() - t0}
             rows.append(row)
             writer.writerow(row)
@@ -211,7 +211,7 @@ def main(argv=None) -> int:
                "radial_pa": last.get("radial_pa"),
                "volumetric_strain": last.get("volumetric_strain"),
                "q_alone_mean_pa": q_alone, "alone": int(len(alone)),
-               "newton_iterations": int(sum(h.iterations for h in m.history)),
+               "newton_iterations": int(sum(h.newton_iterations for h in m.history)),
                "build_s": t_build, "wall_s": time.perf_counter() - t0}
     if rows:
         plot(rows, q_alone_path, len(alone), out / "cylinder_triaxial.png",

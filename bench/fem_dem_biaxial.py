@@ -81,14 +81,14 @@ def main(argv=None) -> int:
     rows = []
     for eps, r in zip(fd["axial_strain"], fd["steps"]):
         s = r.mean_stress
-        rows.append({"eps_y": float(eps), "iterations": r.iterations, "residual": r.residual,
+        rows.append({"eps_y": float(eps), "iterations": r.newton_iterations, "residual": r.residual,
                      "noise_residual": r.noise_residual, "converged_on": r.converged_on,
                      "status": r.status,
                      "sigma_xx": float(s[0]), "sigma_yy": float(s[1]),
                      "q": float(-(s[1] - s[0])), "dem_s": r.dem_s, "fem_s": r.fem_s,
                      "wall_s": r.wall_s})
     m = fd["model"]
-    totals = {"newton_iterations": int(sum(h.iterations for h in m.history)),
+    totals = {"newton_iterations": int(sum(h.newton_iterations for h in m.history)),
               "accepted_steps": len(m.history), "load_steps": len(rows),
               "stopped_at_scatter": sum(h.status != "converged" for h in m.history),
               "secants_used": m.secants_used, "bad_tangents": m.bad_tangents,

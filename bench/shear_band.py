@@ -210,7 +210,7 @@ def main(argv=None) -> int:
         write_strain_xdmf(m, eq, out / "strain.xdmf")
         statuses = {s: sum(h.status == s for h in m.history)
                     for s in sorted({h.status for h in m.history})}
-        iterations = int(sum(h.iterations for h in m.history))
+        iterations = int(sum(h.newton_iterations for h in m.history))
         # the scale (issue 38 item 5): worker memory, what the client received per
         # accepted step, the time per Newton iteration
         mem = pool.memory()

@@ -59,7 +59,7 @@ def main(out: Path, smoke: bool) -> None:
         fh.write("axial_strain,sigma_axial_pa,sigma_lateral_pa,iterations,status\n")
         for k, r in enumerate(res["steps"]):
             row = [float(res[c][k]) for c in ("axial_strain", "sigma_axial", "sigma_lateral")]
-            fh.write(",".join(map(repr, row)) + f",{r.iterations},{r.status}\n")
+            fh.write(",".join(map(repr, row)) + f",{r.newton_iterations},{r.status}\n")
     sig = m.history[-1].element_stresses
     with open(out / "elements.csv", "w") as fh:
         fh.write("element,x_m,y_m,sigma_xx_pa,sigma_yy_pa,sigma_xy_pa\n")

@@ -7,8 +7,9 @@ with DEM elements, in three subpackages:
   reinforced band); all behind one interface at quadrature points.
 - :mod:`femcoupling.fem`: the FEM models in dolfinx. The reinforced soil body in gmsh with
   tagged layers and element regions (``geometry``, ``gmsh_mesh``), ``SoilModel``
-  (``soil_model`` and its parts ``soil_loading``, ``soil_regions``, ``soil_measures``,
-  ``soil_steps``), the quadrature spaces and the one Newton (``quadrature``), points under
+  (``soil_model`` and its parts ``soil_loading``, ``soil_regions``, ``soil_measures``), a
+  load step's record and the one failure type of every model (``steps``), the quadrature
+  spaces and the one Newton (``quadrature``), points under
   MPI (``mpi_points``), and the toolchain check (``elastic_block``).
 - :mod:`femcoupling.coupling`: the coupling's named parts. The transfer (``handover``: FEM
   stress -> wall targets, stiffness back), the loops (``twoway``: one-way and two-way over

@@ -61,7 +61,7 @@ def test_records_one_row_per_element_per_step(runs, records):
 def test_homogeneous_field_converges_in_one_iteration(runs):
     steps, _ = runs[2]
     for r in steps:
-        assert r.iterations == 1
+        assert r.newton_iterations == 1
         assert r.residual < 1e-3
         # every element sees the homogeneous increment: to rounding in the first step
         # (4e-19 of 1e-4); in the second to 3e-4 of it, as the first step's element stresses
@@ -268,7 +268,7 @@ def test_quadratic_triangles_three_elements_each_give_the_homogeneous_response()
     for a, b in zip(s1, s2):
         assert np.array_equal(a.element_stresses, b.element_stresses)
     for r in s2:
-        assert r.iterations == 1
+        assert r.newton_iterations == 1
         assert np.allclose(r.increments, r.increments[0], rtol=0, atol=1e-3 * 1e-4)
         # (to 4e-4: the diagonal's mid-node is free, and the elements' relaxation to a
         # tolerance moves it, as the interior node of the P1 test above)

@@ -39,7 +39,7 @@ def runs():
 def test_a_homogeneous_field_gives_the_elements_response(runs):
     steps, _ = runs[2]
     for r in steps:
-        assert r.iterations == 1 and r.status == "converged"
+        assert r.newton_iterations == 1 and r.status == "converged"
         # every element sees the gradient's increment (to rounding: every node is on the
         # boundary), rotation included
         np.testing.assert_allclose(r.increments, np.broadcast_to(G1, (6, 3, 3)), rtol=0,

@@ -186,3 +186,30 @@ def test_femcoupling_holds_no_drivers():
     (geogrid_dem/studies/), each with its own Params."""
     assert not (FEM_PKG / "drivers").exists()
     assert (ROOT / "geogrid_dem" / "studies" / "__init__.py").is_file()
+
+
+_FAILURES_AND_STEPS = """
+import dataclasses, importlib, inspect, pkgutil, femcoupling
+from femcoupling.fem.steps import LoadStep
+failures, steps = set(), set()
+for info in pkgutil.walk_packages(femcoupling.__path__, "femcoupling."):
+    mod = importlib.import_module(info.name)
+    for name, obj in vars(mod).items():
+        if not inspect.isclass(obj) or obj.__module__ != info.name:
+            continue
+        if issubclass(obj, Exception) and not issubclass(obj, (Warning, ValueError)):
+            failures.add(name)
+        if dataclasses.is_dataclass(obj) and "Step" in name and not issubclass(obj, LoadStep):
+            steps.add(name)
+print(sorted(failures), sorted(steps))
+"""
+
+
+def test_femcoupling_has_one_failure_type_and_one_step_record():
+    """Every FEM model of femcoupling fails with one type (NewtonFailure: input errors are
+    ValueErrors, and warnings are not failures), and every load step's record is a LoadStep
+    (femcoupling.fem.steps): the two models had NewtonDivergence beside NewtonFailure, and
+    StepResult and HierStep with the same Newton fields under other names."""
+    out = subprocess.run([sys.executable, "-c", _FAILURES_AND_STEPS], capture_output=True,
+                         text=True, check=True, cwd=ROOT).stdout.strip()
+    assert out == "['NewtonFailure'] []", out

@@ -221,7 +221,7 @@ def test_a_tensile_footing_load_on_a_cohesionless_soil_says_why():
                                            friction_deg=30.0),
                   unit_weight_n_m3=18e3, degree=1)
     m.set_geostatic()
-    # was: NewtonDivergence "Newton failed at load factor 0.0322 after 6 step cuts"
+    # was: NewtonFailure "Newton failed at load factor 0.0322 after 6 step cuts"
     with pytest.raises(FemInputError, match=r"pressure_pa=-20000.0: a tensile footing load .* "
                        r"from 0 to -20000 Pa.*cohesionless Drucker-Prager \(cohesion_pa=0.0\), "
                        r"which carries no tension"):
@@ -240,7 +240,7 @@ class _CreepingStage:
     towards 0.6 on ever shorter steps and never reach 1 (a load it cannot carry)."""
 
     def __init__(self):
-        from femcoupling.fem.soil_steps import StepResult
+        from femcoupling.fem.steps import StepResult
 
         self._step = StepResult
         self.max_newton, self.max_cuts, self.last_failure = 25, 6, ""
@@ -275,10 +275,10 @@ class _CreepingStage:
 
 def test_a_stage_never_cuts_its_step_below_the_nominal_over_2_to_the_max_cuts():
     pytest.importorskip("dolfinx_solver")
-    from femcoupling.fem.soil_model import NewtonDivergence, SoilModel
+    from femcoupling.fem.soil_model import NewtonFailure, SoilModel
 
     fake = _CreepingStage()
-    with pytest.raises(NewtonDivergence, match=r"Newton failed at load factor 0.5\d+ with the "
+    with pytest.raises(NewtonFailure, match=r"Newton failed at load factor 0.5\d+ with the "
                        r"step cut 6 times \(to 1/64 of its nominal size\); the stage stopped "
                        r"at load factor 0.5\d+"):
         SoilModel._run_stage(fake, "footing", fake.apply, 4)
@@ -293,7 +293,7 @@ def test_a_flexible_load_the_soil_cannot_carry_stops_and_says_so():
     stopped after 60 s); now it stops at the step floor, says how far it got, and leaves the
     model at its last converged state, from which a settlement can push further."""
     pytest.importorskip("dolfinx_solver")
-    from femcoupling.fem.soil_model import NewtonDivergence, SoilModel
+    from femcoupling.fem.soil_model import NewtonFailure, SoilModel
     from femcoupling.materials.continuum import DruckerPrager
 
     body = _body(width_m=3.0, height_m=2.0, mesh_size_m=0.5, fine_size_m=0.1,
@@ -301,7 +301,7 @@ def test_a_flexible_load_the_soil_cannot_carry_stops_and_says_so():
     m = SoilModel(body, soil=DruckerPrager(young_pa=30e6, poisson=0.3, cohesion_pa=2e3,
                                            friction_deg=35.0), unit_weight_n_m3=18e3)
     m.set_geostatic()
-    with pytest.raises(NewtonDivergence, match=r"step cut 6 times .* the footing carries "
+    with pytest.raises(NewtonFailure, match=r"step cut 6 times .* the footing carries "
                        r"1\d{5}(\.\d+)? Pa of pressure_pa=300000\. A uniform \(flexible\) "
                        r"pressure .* push the footing by settlement_m"):
         m.load_footing(pressure_pa=300e3, steps=3)

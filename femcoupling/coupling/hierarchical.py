@@ -77,6 +77,7 @@ from femcoupling.coupling.status import NoiseWarning, worst
 from femcoupling.fem.mpi_points import PointPartition, RootMaterial, bcast_from_root, check_on_root
 from femcoupling.fem.quadrature import (NewtonFailure, NewtonRules, QuadratureSystem, lu_package,
                                         newton_solve)
+from femcoupling.fem.steps import LoadStep
 
 __all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning", "TANGENTS",
            "aitken_factor", "quadrature_points", "secant_update"]
@@ -194,45 +195,30 @@ def secant_update(tangent: np.ndarray, strain: np.ndarray, stress: np.ndarray,
     return t - np.outer(td, td) / curv_t + np.outer(stress, stress) / curv
 
 
-@dataclasses.dataclass
-class HierStep:
-    """One accepted load step: the top displacement (m), Newton iterations, the residual at
-    the end (relative to the internal force scale; in Pa: ``residual_pa``), the elements'
-    mean Voigt stress (xx, yy, xy), tension positive, Pa, the element
-    stresses (n_cells, 3), the DEM seconds (sum over the elements' work), the FEM seconds
-    (the step's wall time outside the pool's calls), the wall seconds, and the elements
-    rebuilt after a lost worker."""
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class HierStep(LoadStep):
+    """One accepted load step of the hierarchical models (the Newton fields:
+    ``femcoupling.fem.steps.LoadStep``; ``residual`` is relative to the internal force scale,
+    ``residual_pa`` is it times the largest element stress: the residual force over the
+    square root of the domain's area): the top displacement, the elements' stresses and the
+    step's timings."""
 
-    load: float
-    iterations: int
-    residual: float
+    load: float  #: the top's displacement (total since the start), m
+    #: the elements' mean Voigt stress (xx, yy, xy; 3D: xx, yy, zz, yz, xz, xy), tension
+    #: positive, Pa
     mean_stress: np.ndarray
-    element_stresses: np.ndarray
-    dem_s: float
-    fem_s: float
-    wall_s: float
-    recovered: list
-    increments: np.ndarray  # (n_cells, 3, 3): each element's increment of the step, -
-    #: the residual the elements' own noise makes (relative to the same scale as
-    #: ``residual``): measured when Newton stalled; NaN if it was not needed
-    noise_residual: float = float("nan")
-    #: what ended Newton: "tolerance" (``newton_rtol``) or "noise" (the residual is within
-    #: the elements' noise and the ceiling: ``NoiseWarning``)
-    converged_on: str = "tolerance"
-    #: the step's status (femcoupling.coupling.status): "converged" (``newton_rtol`` met) or
-    #: "stopped_at_scatter" (accepted within the elements' noise, above ``newton_rtol``)
-    status: str = "converged"
-    #: the accepted residual in stress units, Pa: ``residual`` times the largest element
-    #: stress (the residual force over the square root of the domain's area)
-    residual_pa: float = float("nan")
-    #: the noise's residual in the same units, Pa (NaN if it was not measured)
+    element_stresses: np.ndarray  #: (n_cells, ncomp) the element stresses, Pa
+    dem_s: float  #: the DEM seconds (sum over the elements' work), s
+    fem_s: float  #: the FEM seconds (the step's wall time outside the pool's calls), s
+    wall_s: float  #: the step's wall time, s
+    recovered: list  #: the elements rebuilt after a lost worker
+    increments: np.ndarray  #: (n_cells, 3, 3): each element's increment of the step, -
+    #: the noise's residual in Pa (NaN if it was not measured)
     noise_residual_pa: float = float("nan")
     #: (n_cells, 3) each element's stress scatter (xx, yy, xy), Pa: the bootstrap of its
     #: contact network (``DemElement.stress_scatter``), how far a sample of its size is from
     #: the material's mean
     element_scatter: np.ndarray | None = None
-    #: the relaxation factor of each Newton correction (1: plain Newton)
-    relaxation: tuple = ()
 
 
 def _relative_scatter(r: HierStep) -> float:
@@ -658,12 +644,13 @@ class HierarchicalPlaneStrain:
         self._bc_now = (top_displacement, right_displacement)
         self.u_n.x.array[:] = self.u.x.array
         wall = time.perf_counter() - t0
-        r = HierStep(load=top_displacement, iterations=its, residual=rel,
+        r = HierStep(load=top_displacement, newton_iterations=its, residual=rel,
                      mean_stress=self._sig.mean(axis=0), element_stresses=self._sig.copy(),
                      dem_s=mat.step_dem_s, fem_s=wall - mat.step_pool_s, wall_s=wall,
                      recovered=mat.step_recovered, increments=mat.increments.copy(),
                      noise_residual=noise_rel, converged_on=out.converged_on,
-                     relaxation=out.relaxation, element_scatter=mat.scatter.copy(),
+                     relaxation=out.relaxation, redraws=out.redraws,
+                     element_scatter=mat.scatter.copy(),
                      status=out.status, residual_pa=rel * stress_of_scale,
                      noise_residual_pa=noise_rel * stress_of_scale)
         self.history.append(r)
@@ -714,7 +701,7 @@ class HierarchicalPlaneStrain:
                 fh.write("step,load_m,iterations,residual,noise_residual,converged_on,"
                          "relaxation_min,fem_s,dem_s,wall_s,recovered,bad_tangents,status,"
                          "residual_pa,noise_residual_pa\n")
-            fh.write(f"{k},{r.load!r},{r.iterations},{r.residual!r},{r.noise_residual!r},"
+            fh.write(f"{k},{r.load!r},{r.newton_iterations},{r.residual!r},{r.noise_residual!r},"
                      f"{r.converged_on},{min(r.relaxation, default=1.0)!r},{r.fem_s!r},"
                      f"{r.dem_s!r},{r.wall_s!r},{len(r.recovered)},{self.bad_tangents},"
                      f"{r.status},{r.residual_pa!r},{r.noise_residual_pa!r}\n")
@@ -749,7 +736,7 @@ class HierarchicalPlaneStrain:
                  "sigma_yy, kPa | element scatter |",
                  "|---|---|---|---|---|---|---|---|---|---|---|---|"]
         for k, r in enumerate(h):
-            lines.append(f"| {k} | {r.load:.6g} | {r.iterations} | {r.residual:.3g} | "
+            lines.append(f"| {k} | {r.load:.6g} | {r.newton_iterations} | {r.residual:.3g} | "
                          f"{r.residual_pa:.3g} | {r.noise_residual:.3g} | {r.status} | "
                          f"{r.converged_on} | "
                          f"{min(r.relaxation, default=1.0):.3g} | "

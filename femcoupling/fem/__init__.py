@@ -6,8 +6,10 @@
 - :mod:`femcoupling.fem.soil_model`: ``SoilModel``, the soil body's model (spaces, material
   state, one load-step loop), with its parts :mod:`~femcoupling.fem.soil_loading` (the load
   stages), :mod:`~femcoupling.fem.soil_regions` (regions with a material of their own),
-  :mod:`~femcoupling.fem.soil_measures` (what it gives out) and
-  :mod:`~femcoupling.fem.soil_steps` (a step's record, its failure);
+  :mod:`~femcoupling.fem.soil_measures` (what it gives out);
+- :mod:`femcoupling.fem.steps`: what a load step of every model ends in: its record
+  (``LoadStep``, the same Newton fields in every model) or ``NewtonFailure`` (the one failure
+  type);
 - :mod:`femcoupling.fem.quadrature`: the material interface at quadrature points, the spaces
   and forms, and the one Newton with its acceptance rules;
 - :mod:`femcoupling.fem.mpi_points`: quadrature points split over MPI ranks, their materials

@@ -57,6 +57,7 @@ from femcoupling import _dolfinx
 from femcoupling._checks import FemInputError
 from femcoupling.coupling.relaxation import next_factor
 from femcoupling.coupling.status import newton_acceptance
+from femcoupling.fem.steps import NewtonFailure  # (the one failure type; re-exported)
 
 __all__ = ["QuadratureMaterial", "NewtonRules", "NewtonOutcome", "NewtonFailure",
            "QuadratureSystem", "check_material", "newton_solve", "lu_package", "NOISE_PROBE",
@@ -87,10 +88,6 @@ def lu_package(comm: Any, serial: str | None) -> str | None:
     rank): ``serial`` on one rank ("mumps", or None for PETSc's own LU), else
     :data:`PARALLEL_LU`."""
     return serial if comm is None or comm.size == 1 else PARALLEL_LU
-
-
-class NewtonFailure(RuntimeError):
-    """Newton did not converge in a load step (the caller cuts the step)."""
 
 
 @runtime_checkable

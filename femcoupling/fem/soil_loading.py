@@ -12,7 +12,7 @@ import numpy as np
 
 from femcoupling._checks import FemInputError
 from femcoupling.fem import geometry as geo
-from femcoupling.fem.soil_steps import NewtonDivergence, StepResult
+from femcoupling.fem.steps import NewtonFailure, StepResult
 from femcoupling.materials.continuum import DruckerPrager
 
 
@@ -88,14 +88,14 @@ class LoadingStages:
                 self.footing_u.value = u0 - lf * d
         try:
             return self._run_stage("footing", apply, steps, callback)
-        except NewtonDivergence as e:
+        except NewtonFailure as e:
             if settlement_m is not None and d < 0 and self._cohesionless_under_footing():
-                raise NewtonDivergence(
+                raise NewtonFailure(
                     f"{e}; settlement_m={d!r} lifts the footing, and the soil is a "
                     f"cohesionless Drucker-Prager (cohesion_pa={self.soil.cohesion_pa!r}), "
                     "which carries no tension") from e
             if pressure_pa is not None:
-                raise NewtonDivergence(
+                raise NewtonFailure(
                     f"{e}; the footing carries {self.footing_pressure_pa():.6g} Pa of "
                     f"pressure_pa={p:g}. A uniform (flexible) pressure is limited by the "
                     "soil yielding at its edge, often far below what a rigid footing carries: "
@@ -116,7 +116,7 @@ class LoadingStages:
         at the target over the steps left by the last step's secant slope (from half to four
         times the last step), until the pressure reaches the target. A step that passes it
         beyond ``tol`` is taken again, shortened by linear interpolation. The results' ``load_factor`` is the pressure's fraction of the
-        target; ``callback(r)`` is called for each step as it is accepted. Raises NewtonDivergence if
+        target; ``callback(r)`` is called for each step as it is accepted. Raises NewtonFailure if
         the pressure has not reached the target after ``max_steps_factor`` x ``steps``
         steps (the soil's bearing capacity is below it), or if a step fails after its cuts
         (its message then says how far the pressure rose, and at what settlement; the model
@@ -176,7 +176,7 @@ class LoadingStages:
             d = d1
             slope = rise() / d1
             if not slope > 0:
-                raise NewtonDivergence(f"footing: a settlement of {d1:.3g} m gave no pressure "
+                raise NewtonFailure(f"footing: a settlement of {d1:.3g} m gave no pressure "
                                        f"({rise():.3g} Pa)")
         else:
             slope = geo._real("slope_pa_per_m", slope_pa_per_m)
@@ -186,18 +186,18 @@ class LoadingStages:
         taken = 0
         while rise() < target * (1.0 - tol):
             if taken >= max_steps_factor * steps:
-                raise NewtonDivergence(
+                raise NewtonFailure(
                     f"footing: the pressure rose by {rise():.4g} Pa after a settlement of "
                     f"{d:.4g} m in {taken} steps, short of pressure_pa={target:g}: the soil's "
                     "bearing capacity is below it")
             state, n_done, p_now = self.save_state(), len(done), rise()
             try:
                 go(d + dd)
-            except NewtonDivergence as exc:
+            except NewtonFailure as exc:
                 # (back to the last accepted step: its stresses, not the failed iterate's)
                 self.restore_state(state)
                 del done[n_done:]
-                raise NewtonDivergence(
+                raise NewtonFailure(
                     f"{exc}; the footing stopped where its pressure had risen by "
                     f"{p_now:.4g} Pa of pressure_pa={target:g}, at a settlement of "
                     f"{self.footing_settlement_m():.4g} m (the model is left there)") from exc

@@ -30,7 +30,8 @@ The class is split by role: this module holds the mesh, the spaces, the material
 Newton and the state; :mod:`femcoupling.fem.soil_loading` the load stages,
 :mod:`femcoupling.fem.soil_regions` the regions with a material or DEM element of their own,
 :mod:`femcoupling.fem.soil_measures` what the model gives out (settlement, stresses, forces,
-XDMF), and :mod:`femcoupling.fem.soil_steps` a step's record.
+XDMF). A step's record is :class:`femcoupling.fem.steps.StepResult` (a
+:class:`~femcoupling.fem.steps.LoadStep`), its failure :class:`~femcoupling.fem.steps.NewtonFailure`.
 """
 
 from __future__ import annotations
@@ -45,15 +46,14 @@ from femcoupling import _dolfinx
 from femcoupling._checks import FemInputError
 from femcoupling.coupling.status import NoiseWarning
 from femcoupling.fem import geometry as geo
-from femcoupling.fem.quadrature import (NewtonFailure, NewtonRules, QuadratureSystem, lu_package,
-                                        newton_solve)
+from femcoupling.fem.quadrature import NewtonRules, QuadratureSystem, lu_package, newton_solve
 from femcoupling.fem.soil_loading import LoadingStages
 from femcoupling.fem.soil_measures import SoilMeasures
 from femcoupling.fem.soil_regions import RegionMaterials, RegionPoints
-from femcoupling.fem.soil_steps import NewtonDivergence, StepResult
+from femcoupling.fem.steps import NewtonFailure, StepResult
 from femcoupling.materials.continuum import GeogridLayerMaterial, LinearElastic, mandel_to_tensor
 
-__all__ = ["SoilModel", "StepResult", "NewtonDivergence"]
+__all__ = ["SoilModel", "StepResult", "NewtonFailure"]
 
 SQRT2 = math.sqrt(2.0)
 
@@ -70,7 +70,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         degree: displacement degree (1 or 2).
         newton_rtol: Newton stops when |R| <= newton_rtol * |F_int| (free dofs), -.
         max_newton: iterations before a step is cut in half.
-        max_cuts: step halvings before :class:`NewtonDivergence`.
+        max_cuts: step halvings before :class:`NewtonFailure`.
         comm: mpi4py communicator (default COMM_WORLD).
     """
 
@@ -407,7 +407,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         A step Newton fails is rolled back and halved; an easy step (at most half of
         ``max_newton`` iterations) doubles the next one back towards the nominal size. The
         step is never smaller than the nominal one over ``2**max_cuts``: a step that fails at
-        that size raises :class:`NewtonDivergence`, and so does a step that would need to be
+        that size raises :class:`NewtonFailure`, and so does a step that would need to be
         cut below it (near a limit load a stage would otherwise creep on, ever shorter)."""
         if not isinstance(steps, int) or steps < 1:
             raise FemInputError(f"steps={steps!r}: must be an integer >= 1")
@@ -423,7 +423,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
                 depth += 1
                 if depth > self.max_cuts:
                     apply(lf_done)
-                    raise NewtonDivergence(
+                    raise NewtonFailure(
                         f"stage {stage!r}: Newton failed at load factor {lf:.6g} with the "
                         f"step cut {self.max_cuts} times (to 1/{2 ** self.max_cuts} of its "
                         f"nominal size); the stage stopped at load factor {lf_done:.6g}"
@@ -436,8 +436,11 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
             if its <= self.max_newton // 2 and depth > 0:  # easy: grow back towards nominal
                 dlf *= 2.0
                 depth -= 1
-            r = StepResult(stage, lf, self.footing_settlement_m(), self.footing_pressure_pa(),
-                           its, self.plastic_points(), **self._step_end)
+            r = StepResult(stage=stage, load_factor=lf,
+                           footing_settlement_m=self.footing_settlement_m(),
+                           footing_pressure_pa=self.footing_pressure_pa(),
+                           newton_iterations=its, plastic_points=self.plastic_points(),
+                           **self._step_end)
             if r.converged_on == "noise":
                 self._noise_warning(r)
             self.history.append(r)

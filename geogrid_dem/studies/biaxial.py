@@ -107,12 +107,12 @@ def fem_dem_biaxial(pool, *, lx: float, ly: float, nx: int, ny: int, pressure: f
         for h in m.history[before:]:  # (a cut step adds its halves)
             ev -= float(np.mean(h.increments[:, 0, 0] + h.increments[:, 2, 2]))
         s = r.mean_stress
-        rows.append((eps, -s[1], -s[0], ev, r.iterations, r.residual, r.converged_on))
+        rows.append((eps, -s[1], -s[0], ev, r.newton_iterations, r.residual, r.converged_on))
         if log is not None:
             done = time.perf_counter() - t1
             log(f"[fem x dem] step {k}/{steps}: axial strain {eps:.4f}, sigma_axial "
                 f"{-s[1] / 1e3:.1f} kPa, sigma_lateral {-s[0] / 1e3:.1f} kPa, Newton "
-                f"{r.iterations} (residual {r.residual:.1e}, noise {r.noise_residual:.1e}, "
+                f"{r.newton_iterations} (residual {r.residual:.1e}, noise {r.noise_residual:.1e}, "
                 f"on {r.converged_on}), DEM {r.dem_s:.1f} s, FEM {r.fem_s:.2f} s, wall "
                 f"{r.wall_s:.1f} s, ETA {done / k * (steps - k):.0f} s")
     out = {"axial_strain": np.array([r[0] for r in rows]),

@@ -106,11 +106,11 @@ def fem_dem_footing(pool, *, length: float, depth: float, nx: int, ny: int, foot
                 log(f"[fem x dem footing] settlement {s * 1e3:.3f} mm: FAILED ({e}); the run "
                     "ends here")
             break
-        keep((float(s), m.footing_pressure(), r.status, r.iterations, r.wall_s))
+        keep((float(s), m.footing_pressure(), r.status, r.newton_iterations, r.wall_s))
         if log is not None:
             done = time.perf_counter() - t1
             log(f"[fem x dem footing] {k}/{len(s_targets)}: settlement {s * 1e3:.3f} mm, "
-                f"footing {rows[-1][1] / 1e3:.1f} kPa, Newton {r.iterations} ({r.status}), "
+                f"footing {rows[-1][1] / 1e3:.1f} kPa, Newton {r.newton_iterations} ({r.status}), "
                 f"wall {r.wall_s:.1f} s, ETA {done / k * (len(s_targets) - k):.0f} s")
     return {"settlement_m": np.array([r[0] for r in rows]),
             "footing_pressure_pa": np.array([r[1] for r in rows]),

@@ -46,7 +46,7 @@ from pathlib import Path
 
 import numpy as np
 
-from femcoupling.fem.soil_steps import NewtonDivergence
+from femcoupling.fem.steps import NewtonFailure
 from femcoupling.materials.dem_elements import BAND_TANGENTS
 from geogrid_dem.provenance import code_record
 from geogrid_dem.stats import t_critical
@@ -281,7 +281,7 @@ def calibrate(p: FootingParams, log) -> tuple:
     asked = p.pressure_pa - p_start
     try:
         m.load_footing_to_pressure(asked, steps=p.levels)
-    except NewtonDivergence as exc:
+    except NewtonFailure as exc:
         # (the starting soil's body can be weaker than the fitted soil's: its bearing
         # capacity below the pressure; the zone's path is then taken as far as it went,
         # when that is at least PATH_SHORT_MIN of the rise, and the record says so)
@@ -453,7 +453,7 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
         n0, failed = len(m.history), None
         try:
             load_levels(p, m, level, first_slope)
-        except NewtonDivergence as exc:  # (the run stops; the others go on: see run)
+        except NewtonFailure as exc:  # (the run stops; the others go on: see run)
             failed = f"level {len(rows) + 1}: {exc}"
             log(f"{tag}: FAILED at {failed}")
         steps = [r for r in m.history[n0:] if r.stage == "footing"]
@@ -479,7 +479,7 @@ def continuum(what: str, fn, *args):
     traceback."""
     try:
         return fn(*args)
-    except NewtonDivergence as exc:
+    except NewtonFailure as exc:
         raise SystemExit(
             f"[footing_multiscale] {what}: the Drucker–Prager FEM did not converge: {exc}. A "
             "body whose settlement grows fast before it stops is near its bearing capacity: a "
@@ -490,7 +490,7 @@ def run_continuum(p: FootingParams, variant: str, soil, on_level) -> dict:
     """Step 3 of the module doc for one variant. A body that stops after its first level
     (near its bearing capacity) is recorded with the levels it reached (``levels_reached``)
     and why (``failure``; None when it reached every level); one that stops before raises
-    its NewtonDivergence (the multiscale runs start from its first level's slope)."""
+    its NewtonFailure (the multiscale runs start from its first level's slope)."""
     t0 = time.perf_counter()
     m = model(p, variant, soil)
     seated = m.footing_settlement_m()
@@ -506,7 +506,7 @@ def run_continuum(p: FootingParams, variant: str, soil, on_level) -> dict:
     failure = None
     try:
         load_levels(p, m, level)
-    except NewtonDivergence as exc:
+    except NewtonFailure as exc:
         if not rows:
             raise
         failure = str(exc)
