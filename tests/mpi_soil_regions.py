@@ -32,8 +32,15 @@ class StandInGroup:
     ``group`` answers every member at once; counts its calls and commits."""
 
     class Member:
+        strain_measure = "tensor"
+        plastic = np.zeros(1)
+
         def __init__(self, group, key):
             self.group, self.key = group, key
+
+        @property
+        def stress_n(self):
+            return self.group.committed[self.key]
 
         def trial(self, de):
             return self.group.trial_many({self.key: de})[self.key]
@@ -50,6 +57,8 @@ class StandInGroup:
     def __init__(self, keys):
         self.materials = {k: StandInGroup.Member(self, k) for k in keys}
         self.calls = self.commits = 0
+        self.committed = {k: np.zeros((3, 3)) for k in keys}  # Pa
+        self._trial = dict(self.committed)
 
     def trial_many(self, increments):
         from femcoupling.materials.continuum import mandel_to_tensor, tensor_to_mandel
@@ -58,26 +67,35 @@ class StandInGroup:
         out = {}
         for k, de in increments.items():
             c = _stiffness(k)
-            out[k] = (mandel_to_tensor(c @ tensor_to_mandel(de, 6)), c)
+            self._trial[k] = self.committed[k] + mandel_to_tensor(c @ tensor_to_mandel(de, 6))
+            out[k] = (self._trial[k], c)
         return out
 
     def commit(self):
         self.commits += 1
+        self.committed = dict(self._trial)
 
     def state(self):
-        return b""
+        return dict(self.committed)
 
     def set_state(self, data):
-        pass
+        self.committed, self._trial = dict(data), dict(data)
 
 
 class StandIn(StandInGroup):
     """One linear element (``femcoupling.materials.dem_elements.DemRegionMaterial``'s interface: no
     ``group``, evaluated alone)."""
 
+    strain_measure = "tensor"
+    plastic = np.zeros(1)
+
     def __init__(self, key):
         super().__init__([key])
         self.key = key
+
+    @property
+    def stress_n(self):
+        return self.committed[self.key]
 
     def trial(self, de):
         return self.trial_many({self.key: de})[self.key]

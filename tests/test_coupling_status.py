@@ -206,8 +206,8 @@ def _rough_stand_in(amp_pa: float):
             self.amp, self.rng = amp_pa, np.random.default_rng(7)
 
         def trial(self, de):
-            ds, c = super().trial(de)
-            return ds + self.amp * self.rng.standard_normal() * np.diag([1.0, 0.0, 1.0]), c
+            s, c = super().trial(de)
+            return s + self.amp * self.rng.standard_normal() * np.diag([1.0, 0.0, 1.0]), c
 
     return RoughStandIn()
 

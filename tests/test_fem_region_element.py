@@ -13,22 +13,31 @@ from test_fem_region_tangent import C_TRUE
 
 
 class LinearStandIn:
-    """A linear element with stiffness C_TRUE behind the region-element interface."""
+    """A linear element with stiffness C_TRUE behind the region-element interface
+    (``femcoupling.fem.quadrature.QuadratureMaterial`` of strain measure "tensor"): its
+    stress is the committed one plus C_TRUE times the increment."""
+
+    strain_measure = "tensor"
+    plastic = np.zeros(1)
 
     def __init__(self):
         self.commits = 0
+        self.stress_n = np.zeros((3, 3))
+        self._trial = self.stress_n
 
     def trial(self, de):
-        return mandel_to_tensor(C_TRUE @ tensor_to_mandel(de, 6)), C_TRUE
+        self._trial = self.stress_n + mandel_to_tensor(C_TRUE @ tensor_to_mandel(de, 6))
+        return self._trial, C_TRUE
 
     def commit(self):
         self.commits += 1
+        self.stress_n = self._trial
 
     def state(self):
-        return b""
+        return self.stress_n.copy()
 
     def set_state(self, data):
-        pass
+        self.stress_n = self._trial = np.array(data, float)
 
 
 def test_a_linear_region_element_is_the_same_as_its_material():
@@ -259,8 +268,10 @@ def test_a_band_member_on_the_pool_answers_as_its_element_alone():
 
         sheet = sheet_tension_per_metre(alone.scene)[0]  # (N/m, as prepared)
         after = alone.apply_strain(de)
-        ds, tangent = got["zone-geogrid/1"]
-        assert np.array_equal(ds, after - before)
+        total, tangent = got["zone-geogrid/1"]
+        assert np.array_equal(total, after)
+        member = group.materials["zone-geogrid/1"]
+        assert np.array_equal(member.stress_n, before)  # (its increment: total - stress_n)
         net = alone.network_tangent()[0]
         assert np.array_equal(group._filled(net), net)  # (a whole tangent stays)
         assert np.array_equal(tangent, network_stiffness(None, 1e-3, voigt=net))
@@ -274,7 +285,7 @@ def test_a_band_member_on_the_pool_answers_as_its_element_alone():
         both = group.trial_many({"zone/0": de, "zone-geogrid/1": de})
         again = both["zone-geogrid/1"]
         assert np.array_equal(both["zone/0"][1], got["zone/0"][1])  # (the soil's: network)
-        assert np.array_equal(again[0], ds)
+        assert np.array_equal(again[0], total)
         assert np.array_equal(again[1], network_stiffness(None, 1e-3, voigt=whole))
         group.band_tangent = "network"
         with pytest.raises(ValueError, match="band_tangent='fd': 'network', "):

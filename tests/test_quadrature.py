@@ -43,10 +43,15 @@ def test_every_material_implements_the_interface():
     assert [type(p) for p in pts] == [DruckerPragerPoints, DruckerPragerPoints, ElasticPoints]
     for p in pts:
         assert isinstance(p, QuadratureMaterial)
-    for cls in (DemRegionMaterial, PoolRegionMaterials, ElementPoolMaterial, RegionPoints):
+    from femcoupling.materials.dem_elements import _PoolMember
+
+    for cls in (DemRegionMaterial, _PoolMember, ElementPoolMaterial, RegionPoints):
         for k in ("trial", "commit", "state", "set_state"):
             assert callable(getattr(cls, k, None)), (cls, k)
+        assert cls.strain_measure in ("tensor", "gradient", "mandel"), cls
+    # the group answers its members at once; it is not itself a material (no dict dialect)
     assert callable(PoolRegionMaterials.trial_many)
+    assert not hasattr(PoolRegionMaterials, "trial")
     assert not isinstance(object(), QuadratureMaterial)
 
 
@@ -275,3 +280,150 @@ def test_the_soil_body_and_the_hierarchical_mode_share_one_newton(monkeypatch):
     calls.clear()  # (the model's K0 stage)
     (r,) = m.load_footing(pressure_pa=10e3, steps=1)
     assert r.status == "converged" and calls == ["_SoilNewton"]
+
+
+# ---- one exchange for every material (issue 61 item 2) ---------------------------------------
+
+class _ElasticPool:
+    """A linear-elastic stand-in for ``cpp_dem.elements.pool.ElementPool`` (what
+    ``ElementPoolMaterial`` calls): each element's strain, its stress s0 I + lambda tr(e) I +
+    2 mu e (Pa), its Voigt tangent; trials pending until accepted or rejected."""
+
+    def __init__(self, n: int, lam: float = 20e6, mu: float = 10e6, s0: float = -50e3):
+        self.n, self.lam, self.mu, self.s0 = n, lam, mu, s0
+        self._strain, self._trial = np.zeros((n, 3, 3)), None
+
+    def _stress(self, e):
+        return (self.s0 + self.lam * np.trace(e)) * np.eye(3) + 2 * self.mu * e
+
+    def apply_strain(self, increments, *, tangent=None, scatter=False, **kw):
+        from cpp_dem.elements.pool import PoolStep
+
+        inc = np.asarray(increments, float)
+        self._trial = self._strain + 0.5 * (inc + np.swapaxes(inc, 1, 2))
+        c = np.zeros((6, 6))
+        c[:3, :3] = self.lam
+        c[:3, :3] += 2 * self.mu * np.eye(3)
+        c[3:, 3:] = self.mu * np.eye(3)
+        n = self.n
+        return PoolStep(stresses=[self._stress(e) for e in self._trial], tangents=[c] * n,
+                        contacts=[10] * n, cpu_s=[0.0] * n, steps=[1] * n, wall_s=0.0,
+                        recovered=[], scatters=[np.zeros((3, 3))] * n if scatter else None)
+
+    def reject(self):
+        self._trial = None
+
+    def accept(self):
+        if self._trial is not None:
+            self._strain, self._trial = self._trial, None
+
+    def states(self):
+        return [e.tobytes() for e in self._strain]
+
+    def load_states(self, data):
+        self._strain = np.array([np.frombuffer(b).reshape(3, 3) for b in data])
+        self._trial = None
+
+
+def _materials():
+    """One material of every kind, each with an increment in the measure it declares."""
+    from femcoupling.coupling.hierarchical import ElementPoolMaterial
+    from femcoupling.fem.soil_regions import RegionPoints
+    from test_fem_region_element import LinearStandIn
+
+    rng = np.random.default_rng(4)
+    s = _stress(3)
+    c = np.diag([3e6, 4e6, 5e6, 2e6, 2e6, 2e6])
+    mandel = 1e-3 * rng.standard_normal((3, 4))
+    out = [(LinearElastic(10e6, 0.3).at_points(s), mandel),
+           (DruckerPrager(10e6, 0.3, cohesion_pa=1e3, friction_deg=30).at_points(s), mandel),
+           (AnisotropicElastic(c).at_points(s), mandel),
+           (RegionPoints(LinearStandIn(), np.full(3, 1 / 3), s, 4, "a"), mandel),
+           (LinearStandIn(), 1e-3 * np.diag([1.0, 0.5, -2.0])),
+           (ElementPoolMaterial(_ElasticPool(3)), 1e-3 * rng.standard_normal((3, 2, 2)))]
+    return out
+
+
+def test_every_material_goes_through_the_same_exchange():
+    """Every material (continuum points, a region element's points, a region element, the
+    hierarchical pool) declares its strain measure and holds its committed stress and plastic
+    multipliers; ``trial(increment)`` returns its total stress and tangent: a zero increment
+    gives the committed stress, a rejected trial leaves no trace, a commit keeps the last
+    trial's stress, and ``state``/``set_state`` restore bitwise."""
+    from femcoupling.fem.quadrature import STRAIN_MEASURES
+
+    kinds = set()
+    for m, inc in _materials():
+        name = type(m).__name__
+        assert isinstance(m, QuadratureMaterial), name
+        assert m.strain_measure in STRAIN_MEASURES, name
+        kinds.add(m.strain_measure)
+        s0 = np.array(m.stress_n, copy=True)
+        points = 1 if m.strain_measure == "tensor" else len(s0)
+        assert np.shape(m.plastic) == (points,), name
+        z, _ = m.trial(np.zeros_like(inc))
+        assert np.array_equal(z, s0), name
+        saved = m.state()
+        s1, t1 = (np.array(a, copy=True) for a in m.trial(inc))
+        assert not np.array_equal(s1, s0), name
+        m.trial(7 * inc)  # rejected
+        s2, t2 = m.trial(inc)
+        assert np.array_equal(s1, s2) and np.array_equal(t1, t2), name
+        m.commit()
+        assert np.array_equal(m.stress_n, s1), name
+        m.set_state(saved)
+        assert np.array_equal(m.stress_n, s0), name
+        assert np.array_equal(m.trial(inc)[0], s1), name
+    assert kinds == set(STRAIN_MEASURES)
+
+
+def test_a_model_refuses_a_material_of_another_strain_measure():
+    """A region element must take the region's mean strain tensor ("tensor"); one that
+    declares another measure, or none, is refused with the field and what is allowed."""
+    from femcoupling import FemInputError
+    from femcoupling.fem.quadrature import check_material
+    from test_fem_region_element import LinearStandIn
+
+    el = LinearStandIn()
+    assert check_material(el, "element", "tensor") is el
+    el.strain_measure = "gradient"
+    with pytest.raises(FemInputError, match=r"element.strain_measure='gradient': this model "
+                                             r"hands it 'tensor'"):
+        check_material(el, "element", "tensor")
+    el.strain_measure = "voigt"
+    with pytest.raises(FemInputError, match=r"strain_measure='voigt': one of"):
+        check_material(el, "element")
+
+    class Old:  # (a region element of the former dialect: a stress increment, no stress_n)
+        def trial(self, de):
+            return np.zeros((3, 3)), np.eye(6)
+
+        commit = state = set_state = trial
+
+    with pytest.raises(FemInputError, match="needs a strain_measure, stress_n, plastic"):
+        check_material(Old(), "element", "tensor")
+
+
+def test_a_dem_region_element_goes_through_the_same_exchange():
+    """The real region element (a periodic DEM element of 40 grains,
+    ``DemRegionMaterial``) through the exchange of
+    ``test_every_material_goes_through_the_same_exchange``: its total stress, its committed
+    stress, a rejected trial without trace, its state restored bitwise."""
+    from femcoupling.materials.dem_elements import DemRegionMaterial, PeriodicRegionElement
+
+    m = DemRegionMaterial.prepared("a", np.diag([-50e3, -50e3, -80e3]), PeriodicRegionElement(
+        n=40, seed=3, tol=0.02, unbalanced=1e-2))
+    assert isinstance(m, QuadratureMaterial) and m.strain_measure == "tensor"
+    inc = np.diag([2e-4, 0.0, -5e-4])
+    s0 = m.stress_n.copy()
+    assert np.array_equal(m.trial(np.zeros((3, 3)))[0], s0)
+    saved = m.state()
+    s1, t1 = (np.array(a, copy=True) for a in m.trial(inc))
+    assert not np.array_equal(s1, s0)
+    m.trial(3 * inc)  # rejected
+    s2, t2 = m.trial(inc)
+    assert np.array_equal(s1, s2) and np.array_equal(t1, t2)
+    m.commit()
+    assert np.array_equal(m.stress_n, s1)
+    m.set_state(saved)
+    assert np.array_equal(m.stress_n, s0) and np.array_equal(m.trial(inc)[0], s1)

@@ -75,8 +75,8 @@ from femcoupling.coupling.records import append_rows
 from femcoupling.coupling.relaxation import aitken_factor, check_relaxation
 from femcoupling.coupling.status import NoiseWarning, worst
 from femcoupling.fem.mpi_points import PointPartition, RootMaterial, bcast_from_root, check_on_root
-from femcoupling.fem.quadrature import (NewtonFailure, NewtonRules, QuadratureSystem, lu_package,
-                                        newton_solve)
+from femcoupling.fem.quadrature import (NewtonFailure, NewtonRules, QuadratureSystem,
+                                        check_material, lu_package, newton_solve)
 from femcoupling.fem.steps import LoadStep
 
 __all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning", "TANGENTS",
@@ -395,6 +395,7 @@ class HierarchicalPlaneStrain:
         mat = ElementPoolMaterial(pool, **kw) if pool is not None else None
         if self._parallel:
             mat = RootMaterial(self.comm, mat)
+        check_material(mat, "material", "gradient")
         #: the elements as the quadrature points' material (femcoupling.fem.quadrature)
         self.material = mat
         self._set_q(mat.stress, mat.tangent)
@@ -824,7 +825,11 @@ class ElementPoolMaterial:
     (``bad_tangents`` counts them). With tangent="secant" the network tangent is changed to
     map the increment onto the stress increment (``secant_update``; ``secants_used``).
     ``commit`` accepts (``pool.accept``: the states saved on the workers); ``state`` and
-    ``set_state`` are the pool's accepted states (bytes per element)."""
+    ``set_state`` are the pool's accepted states (bytes per element) with the committed
+    stresses and tangents. Its ``strain_measure`` is "gradient"; ``stress_n`` the committed
+    stresses; ``plastic`` 0 (an element's plasticity is in its contacts)."""
+
+    strain_measure = "gradient"
 
     def __init__(self, pool, *, tangent: str = "network", strain_kw: dict | None = None,
                  dim: int = 2) -> None:
@@ -910,14 +915,29 @@ class ElementPoolMaterial:
         self.pool.reject()
         self._pending = False
 
+    @property
+    def stress_n(self) -> np.ndarray:
+        """The committed stresses, (n, 3) (3D: (n, 6)), Voigt, Pa."""
+        return self.stress_start
+
+    @property
+    def plastic(self) -> np.ndarray:
+        return np.zeros(len(self.stress_start))
+
     def commit(self) -> None:
         self.pool.accept()
         self._pending = False
         self.stress_start = self.stress.copy()
 
-    def state(self) -> list:
-        return self.pool.states()
+    def state(self) -> tuple:
+        """The pool's accepted states (bytes per element), the committed stresses and
+        tangents."""
+        return self.pool.states(), self.stress_start.copy(), self.tangent.copy()
 
     def set_state(self, data) -> None:
-        self.pool.load_states(data)
+        """Back to a ``state()``: the elements, their stresses and tangents."""
+        states, stress, tangent = data
+        self.pool.load_states(states)
         self._pending = False
+        self.stress_start = np.array(stress, float)
+        self.stress, self.tangent = self.stress_start.copy(), np.array(tangent, float)

@@ -134,8 +134,9 @@ class RootMaterial:
     """A quadrature-point material (``ElementPoolMaterial``) held on rank 0, seen by every rank
     (module doc). ``material``: the material on rank 0, None elsewhere."""
 
+    strain_measure = "gradient"
     #: what the hierarchical model reads of its material, copied to every rank after a call
-    SHARED = ("stress", "tangent", "last_step", "bad_tangents", "secants_used",
+    SHARED = ("stress", "stress_start", "tangent", "last_step", "bad_tangents", "secants_used",
               "increments", "scatter", "step_dem_s", "step_pool_s", "step_recovered")
 
     def __init__(self, comm, material) -> None:
@@ -162,6 +163,15 @@ class RootMaterial:
         if err is not None:
             raise NewtonFailure(err)
         return out
+
+    @property
+    def stress_n(self) -> np.ndarray:
+        """The committed stresses (every rank's copy), Pa."""
+        return self.stress_start
+
+    @property
+    def plastic(self) -> np.ndarray:
+        return np.zeros(len(self.stress_start))
 
     def trial(self, g: np.ndarray):
         self._call("trial", g)

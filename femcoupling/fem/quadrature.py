@@ -7,11 +7,12 @@ FEM x DEM (:class:`femcoupling.coupling.hierarchical.HierarchicalPlaneStrain`: a
 every quadrature point). Both use what this module gives:
 
 :class:`QuadratureMaterial`
-    the protocol of a material at a set of quadrature points: ``trial(increment)`` returns
-    the stress and tangent of the points after ``increment`` (since the last commit),
-    ``commit()`` keeps the last trial, ``state()``/``set_state(data)`` save and restore the
-    committed state (bitwise), and optionally ``trial_many`` evaluates several members at once
-    (a Dask pool of DEM elements). ``femcoupling.materials.continuum.ElasticPoints``
+    the one exchange of every material: it declares its ``strain_measure`` (the increment
+    ``trial`` takes: :data:`STRAIN_MEASURES`); ``trial(increment)`` returns its total stress
+    and tangent after ``increment`` (since the last commit); ``stress_n`` and ``plastic`` are
+    its committed stress and last plastic multipliers; ``commit()`` keeps the last trial,
+    ``state()``/``set_state(data)`` save and restore the committed state (bitwise); a Dask
+    group of DEM elements answers its members at once (``trial_many``). ``femcoupling.materials.continuum.ElasticPoints``
     (isotropic or anisotropic), ``femcoupling.materials.continuum.DruckerPragerPoints``
     (``LinearElastic.at_points``, ``AnisotropicElastic.at_points``,
     ``DruckerPrager.at_points``), ``femcoupling.materials.dem_elements.DemRegionMaterial``,
@@ -59,8 +60,8 @@ from femcoupling.coupling.relaxation import next_factor
 from femcoupling.coupling.status import newton_acceptance
 from femcoupling.fem.steps import NewtonFailure  # (the one failure type; re-exported)
 
-__all__ = ["QuadratureMaterial", "NewtonRules", "NewtonOutcome", "NewtonFailure",
-           "QuadratureSystem", "check_material", "newton_solve", "lu_package", "NOISE_PROBE",
+__all__ = ["QuadratureMaterial", "STRAIN_MEASURES", "NewtonRules", "NewtonOutcome",
+           "NewtonFailure", "QuadratureSystem", "check_material", "newton_solve", "lu_package", "NOISE_PROBE",
            "PARALLEL_LU"]
 
 #: the relative change of every increment that measures the elements' noise
@@ -90,14 +91,42 @@ def lu_package(comm: Any, serial: str | None) -> str | None:
     return serial if comm is None or comm.size == 1 else PARALLEL_LU
 
 
+#: The strain measures a material may declare (``QuadratureMaterial.strain_measure``): the
+#: increment its ``trial`` takes, and the form of the stress and tangent it returns. A model
+#: hands each material the measure it declares and refuses one it cannot give.
+STRAIN_MEASURES = {
+    "mandel": "the small-strain increment since the last commit at each point, Mandel form, "
+              "(n, ncomp): 2D (xx, yy, zz, sqrt2 xy), 3D (xx, yy, zz, sqrt2 yz, sqrt2 xz, "
+              "sqrt2 xy); the stress (n, ncomp) and tangent (n, ncomp, ncomp) in the same "
+              "form (the soil body's points: SoilModel)",
+    "gradient": "the displacement-gradient increment since the last commit at each point, "
+                "(n, gdim, gdim) (a DEM element needs its rotation too); the stress in Voigt "
+                "form, 2D (xx, yy, xy), 3D (xx, yy, zz, yz, xz, xy), and the tangent with "
+                "engineering shear (the hierarchical models' points)",
+    "tensor": "one strain increment tensor since the last commit, 3 x 3 (a region's or a "
+              "cell's volume mean: the region elements of SoilModel.set_region_element and "
+              "set_cell_elements); the stress 3 x 3 and the tangent 6 x 6 Mandel",
+}
+
+
 @runtime_checkable
 class QuadratureMaterial(Protocol):
-    """A material at a set of quadrature points (see the module doc). ``trial`` takes the
-    increment since the last commit (the model's kinematic increment at its points: a Mandel
-    strain increment for the FEM soil, a displacement-gradient increment for the hierarchical
-    mode, a 3 x 3 mean strain increment for a region element) and returns the points' stress
-    (or stress increment, for a region element) and tangent; a rejected trial leaves no trace:
-    the next ``trial`` starts again from the committed state."""
+    """A material at a set of quadrature points, or of a region (see the module doc): one
+    exchange for every material, as a constitutive law's in Kratos.
+
+    - ``strain_measure``: the increment ``trial`` takes (a key of :data:`STRAIN_MEASURES`);
+    - ``trial(increment)``: the **total** stress and the tangent after ``increment`` (since
+      the last commit); a rejected trial leaves no trace: the next ``trial`` starts again
+      from the committed state;
+    - ``stress_n``: the committed stress, Pa, tension positive (in the measure's form);
+    - ``plastic``: the last trial's plastic multiplier per point, (n,) (0: elastic; a DEM
+      element's is 0: its plasticity is in its contacts, not a multiplier);
+    - ``commit()`` keeps the last trial; ``state()``/``set_state(data)`` save and restore the
+      committed state, bitwise."""
+
+    strain_measure: str
+    stress_n: Any
+    plastic: Any
 
     def trial(self, increment: Any) -> tuple[Any, Any]: ...
 
@@ -108,16 +137,25 @@ class QuadratureMaterial(Protocol):
     def set_state(self, data: Any) -> None: ...
 
 
-def check_material(material: Any, name: str) -> Any:
-    """``material`` if it implements :class:`QuadratureMaterial`; else a FemInputError (a
-    ValueError) naming ``name`` and the missing methods."""
-    missing = [k for k in ("trial", "commit", "state", "set_state")
+def check_material(material: Any, name: str, measure: str | None = None) -> Any:
+    """``material`` if it implements :class:`QuadratureMaterial` (and declares ``measure``,
+    where given: the one the model hands it); else a FemInputError (a ValueError) naming
+    ``name``, the missing members or the measure declared and the one allowed."""
+    missing = [k + "()" for k in ("trial", "commit", "state", "set_state")
                if not callable(getattr(material, k, None))]
+    missing += [k for k in ("strain_measure", "stress_n", "plastic")
+                if not hasattr(material, k)]
     if missing:
-        raise FemInputError(f"{name}={material!r}: needs a "
-                            f"{', '.join(k + '()' for k in missing)} method (a femcoupling."
-                            "fem.quadrature.QuadratureMaterial, as femcoupling.materials."
-                            "dem_elements.DemRegionMaterial)")
+        raise FemInputError(f"{name}={material!r}: needs a {', '.join(missing)} (a "
+                            "femcoupling.fem.quadrature.QuadratureMaterial, as femcoupling."
+                            "materials.dem_elements.DemRegionMaterial)")
+    got = material.strain_measure
+    if measure is not None and got != measure:
+        raise FemInputError(f"{name}.strain_measure={got!r}: this model hands it "
+                            f"{measure!r} ({STRAIN_MEASURES[measure]})")
+    if got not in STRAIN_MEASURES:
+        raise FemInputError(f"{name}.strain_measure={got!r}: one of "
+                            f"{sorted(STRAIN_MEASURES)}")
     return material
 
 

@@ -46,7 +46,8 @@ from femcoupling import _dolfinx
 from femcoupling._checks import FemInputError
 from femcoupling.coupling.status import NoiseWarning
 from femcoupling.fem import geometry as geo
-from femcoupling.fem.quadrature import NewtonRules, QuadratureSystem, lu_package, newton_solve
+from femcoupling.fem.quadrature import (NewtonRules, QuadratureSystem, check_material, lu_package,
+                                        newton_solve)
 from femcoupling.fem.soil_loading import LoadingStages
 from femcoupling.fem.soil_measures import SoilMeasures
 from femcoupling.fem.soil_regions import RegionMaterials, RegionPoints
@@ -242,7 +243,9 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
             sel = np.repeat(self.cell_tag_of == tag, self.nq) & ~taken
             idx = np.flatnonzero(sel)
             if idx.size:
-                sets.append((idx, self.material_of_tag(int(tag)).at_points(sig[idx])))
+                sets.append((idx, check_material(
+                    self.material_of_tag(int(tag)).at_points(sig[idx]),
+                    f"the material of cell tag {int(tag)}", "mandel")))
         for key, (sel, w) in self._element_points.items():
             idx = np.flatnonzero(sel)
             sets.append((idx, RegionPoints(self.region_elements[key], w, sig[idx],

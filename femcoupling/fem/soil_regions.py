@@ -29,7 +29,12 @@ class RegionPoints:
     on every other one, and Newton converged linearly, 15 % per iteration); ``key``: the
     model's name of the element (a group's member key). The points never
     yield (``plastic`` is 0). ``commit``, ``state`` and ``set_state`` are those of the points'
-    stress; the model commits and saves the element (or its group) once."""
+    stress; the model commits and saves the element (or its group) once. The points take
+    Mandel strain increments (``strain_measure``); the element, the region's mean as a
+    tensor (its ``strain_measure`` is "tensor"), and it answers with its total stress: its
+    increment is that less its committed stress (``stress_n``)."""
+
+    strain_measure = "mandel"
 
     def __init__(self, element: Any, weights: np.ndarray, stress_pa: np.ndarray,
                  ncomp: int, key: str = "") -> None:
@@ -49,10 +54,19 @@ class RegionPoints:
                        + (increment - mean) @ c.T)
         return self.stress, np.broadcast_to(c, (len(self.stress),) + c.shape)
 
+    @staticmethod
+    def _increment(element: Any, answer: tuple) -> tuple:
+        """The element's (stress increment, tangent) from its answer (total stress,
+        tangent): the total less its committed stress."""
+        total, c = answer
+        return np.asarray(total, float) - element.stress_n, c
+
     def trial(self, increment: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The points' stress and tangent for their strain increments ((n, ncomp))."""
         mean = self.mean(increment)
-        return self._answer(increment, mean, self.element.trial(mandel_to_tensor(mean)))
+        el = self.element
+        return self._answer(increment, mean,
+                            self._increment(el, el.trial(mandel_to_tensor(mean))))
 
     @staticmethod
     def _evaluate(sets: list, means: list) -> dict:
@@ -64,12 +78,14 @@ class RegionPoints:
         for k, (_, m) in enumerate(sets):
             unit = getattr(m.element, "group", None)
             if unit is None:
-                answers[k] = m.element.trial(mandel_to_tensor(means[k]))
+                answers[k] = RegionPoints._increment(
+                    m.element, m.element.trial(mandel_to_tensor(means[k])))
             else:
                 units.setdefault(id(unit), (unit, []))[1].append(k)
         for unit, ks in units.values():
             got = unit.trial_many({sets[k][1].key: mandel_to_tensor(means[k]) for k in ks})
-            answers.update({k: got[sets[k][1].key] for k in ks})
+            answers.update({k: RegionPoints._increment(sets[k][1].element,
+                                                       got[sets[k][1].key]) for k in ks})
         return answers
 
     @staticmethod
@@ -276,7 +292,7 @@ class RegionMaterials:
         if self.comm.size > 1 and not _checked:
             check_on_root(self.comm, element)
         if element is not None or self.comm.size == 1:
-            check_material(element, "element")
+            check_material(element, "element", "tensor")
         self.region_elements[key] = element
         self._region_form = None  # (the regions' cells changed)
         w = (self.cell_volume[:, None] * self.qweights[None, :]).reshape(-1)[sel]

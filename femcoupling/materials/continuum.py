@@ -351,8 +351,10 @@ def drucker_prager_return(sig_trial: npt.NDArray[np.float64], *, bulk_pa, shear_
 # ---- the laws at quadrature points (femcoupling.fem.quadrature.QuadratureMaterial) ----------
 
 class _StressPoints:
-    """The committed and trial stress of ``n`` continuum points (Mandel, Pa)."""
+    """The committed and trial stress of ``n`` continuum points (Mandel, Pa): they take
+    Mandel strain increments (``strain_measure``, femcoupling.fem.quadrature.STRAIN_MEASURES)."""
 
+    strain_measure = "mandel"
     plastic: np.ndarray
 
     def __init__(self, stress_pa: np.ndarray) -> None:

@@ -260,9 +260,10 @@ class DemRegionMaterial:
     of cells (``SoilModel.set_region_element``). At every Newton iterate the model hands it
     the region's mean strain increment since the start of the load step (the full tensor,
     shear included; plane strain holds the out-of-plane strain at zero); the element, restored
-    to the start of the step, takes it and returns its stress increment and its tangent from
-    its contact network. The model adds the increment to every region point's stress of the
-    start of the step and assembles Newton's Jacobian with the tangent. A converged step is
+    to the start of the step, takes it and returns its stress and its tangent from its contact
+    network. The model adds its stress increment (that stress less ``stress_n``, the stress at
+    the start of the step) to every region point's stress of the start of the step and
+    assembles Newton's Jacobian with the tangent. A converged step is
     committed (``commit``: the element's state kept as bytes); a rejected iterate leaves no
     trace. So the element strains exactly as its region does: the two scales agree by
     construction. SI units; tension positive.
@@ -274,7 +275,14 @@ class DemRegionMaterial:
     directions); ``records``: an HDF5 file that gets a row at every committed step (appended
     and flushed): step, strain since the element took over (3 x 3), stress (3 x 3, Pa),
     tangent (6 x 6 Mandel, Pa), contact count, element runs and DEM seconds so far.
+
+    A ``femcoupling.fem.quadrature.QuadratureMaterial`` of ``strain_measure`` "tensor":
+    ``trial`` returns the element's total stress; ``stress_n`` is its stress at the start of
+    the step (the committed one); ``plastic`` is 0 (its plasticity is in its contacts).
     """
+
+    strain_measure = "tensor"
+    plastic = np.zeros(1)
 
     def __init__(self, element, *, strain_kw: dict | None = None,
                  min_eig_fraction: float = 1e-3, records=None) -> None:
@@ -309,26 +317,31 @@ class DemRegionMaterial:
         el, _ = runner.prepare(name, fem_to_dem(stress_fem_pa))
         return cls(el, **kw)
 
+    @property
+    def stress_n(self) -> np.ndarray:
+        """The element's committed stress (at the start of the step), 3 x 3, Pa."""
+        return self._stress0
+
     def trial(self, strain_increment) -> tuple[np.ndarray, np.ndarray]:
         """The element, from the start of the step, through ``strain_increment`` (3 x 3, -):
-        returns its stress increment (3 x 3, Pa) and its tangent (6 x 6 Mandel, Pa)."""
+        returns its stress (3 x 3, Pa) and its tangent (6 x 6 Mandel, Pa)."""
         from cpp_dem.elements.periodic import DemElement
 
         de = np.asarray(strain_increment, float)
         if not np.any(de):
             self.element = DemElement.from_bytes(self._committed)
             self._trial_tangent = self._tangent0
-            return np.zeros((3, 3)), self._tangent0
+            return self._stress0.copy(), self._tangent0
         t0 = time.perf_counter()
         el = self.element = DemElement.from_bytes(self._committed)
-        ds = el.apply_strain(de, **self.strain_kw) - self._stress0
+        s = el.apply_strain(de, **self.strain_kw)
         c = self._trial_tangent = trial_stiffness("the region's element",
                                                   el.network_tangent()[0],
                                                   self.min_eig_fraction, de,
                                                   el.contact_count())
         self.calls += 1
         self.dem_s += time.perf_counter() - t0
-        return ds, c
+        return s, c
 
     def commit(self) -> None:
         """The last trial becomes the start of the next step (and a row of ``records``)."""
@@ -472,12 +485,13 @@ class PoolRegionMaterials:
 
     def trial_many(self, increments: dict) -> dict:
         """Every region's element, from the start of the step, through its increment (name ->
-        3 x 3, -): name -> (stress increment 3 x 3 Pa, tangent 6 x 6 Mandel Pa)."""
+        3 x 3, -): name -> (stress 3 x 3 Pa, tangent 6 x 6 Mandel Pa)."""
         des = [np.asarray(increments.get(n, np.zeros((3, 3))), float) for n in self.names]
         self.pool.reject()
         if not any(np.any(d) for d in des):
             self._last = None
-            return {n: (np.zeros((3, 3)), self._tangent0[k]) for k, n in enumerate(self.names)}
+            return {n: (self._stress0[k].copy(), self._tangent0[k])
+                    for k, n in enumerate(self.names)}
         step = self.pool.apply_strain(des, tangent=("network", self.band_tangent),
                                       fd_components=self.fd_components,
                                       **self.strain_kw)
@@ -489,13 +503,7 @@ class PoolRegionMaterials:
                                        self.min_eig_fraction, des[k], c)
                        for k, (t, c) in enumerate(zip(step.tangents, step.contacts))],
                       des, list(step.contacts), list(step.cpu_s))
-        return {n: (self._last[0][k] - self._stress0[k], self._last[1][k])
-                for k, n in enumerate(self.names)}
-
-    def trial(self, increments: dict) -> dict:
-        """``trial_many``: the group as one ``femcoupling.fem.quadrature.QuadratureMaterial``
-        whose increment is the regions' (name -> 3 x 3)."""
-        return self.trial_many(increments)
+        return {n: (self._last[0][k], self._last[1][k]) for k, n in enumerate(self.names)}
 
     def commit(self) -> None:
         """The last trial becomes the start of the next step on every worker (and rows of
@@ -633,10 +641,20 @@ class _Concat:
 
 class _PoolMember:
     """One region of a ``PoolRegionMaterials``: what ``SoilModel.set_region_element`` takes
-    (the model finds the ``group`` and evaluates, commits and saves the group once)."""
+    (the model finds the ``group`` and evaluates, commits and saves the group once); a
+    ``QuadratureMaterial`` as ``DemRegionMaterial`` is."""
+
+    strain_measure = "tensor"
+    plastic = np.zeros(1)
 
     def __init__(self, group: PoolRegionMaterials, name: str) -> None:
         self.group, self.name = group, name
+        self._k = group.names.index(name)
+
+    @property
+    def stress_n(self) -> np.ndarray:
+        """The element's committed stress, 3 x 3, Pa."""
+        return self.group._stress0[self._k]
 
     def trial(self, strain_increment):
         return self.group.trial_many({n: (strain_increment if n == self.name else
