@@ -9,8 +9,8 @@
 
 Every case parses its flags with one parser (geogrid_dem.options): the shared ones have the
 same names, units and meaning everywhere (``--smoke``, ``--out DIR``, ``--overwrite``,
-``--seed N``, ``--threads N`` with 0 = OpenMP's default of every core, and ``--preset
-fast|balanced|accurate`` where the case has presets). Everything after the case name goes to
+``--seed N``, ``--threads N`` with 0 = automatic threads (``cpp_dem.apply_threads``), and
+``--preset fast|balanced|accurate`` where the case has presets). Everything after the case name goes to
 that parser (``geogrid-dem run triaxial --help`` lists the case's flags).
 
 A **run file** names the case and its parameters; the keys are the case's flags without the
@@ -176,7 +176,7 @@ def sweep_cmd(file: Path, workers: int, scheduler: str | None, threads: int,
     if workers < 1:
         raise UsageError(f"--workers={workers}: must be >= 1")
     if threads < 0:
-        raise UsageError(f"--threads={threads}: must be >= 0 (0 = all cores)")
+        raise UsageError(f"--threads={threads}: must be >= 0 (0 = automatic)")
     if max_rows < 1:
         raise UsageError(f"--max-rows={max_rows}: must be >= 1")
     if not isinstance(data["out"], str) or not data["out"]:
@@ -364,7 +364,7 @@ def _parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
                                     "case's flags before Dask starts.")
     sw.add_argument("file", type=Path, help="the sweep file (TOML)")
     _dask_options(sw, workers="processes of the local Dask cluster",
-                  threads="OpenMP threads per row; 0: OpenMP's default (every core)")
+                  threads="OpenMP threads per row; 0: automatic (cpp_dem.apply_threads)")
     sw.add_argument("--max-rows", type=int, default=MAX_ROWS,
                     help="the largest table run; a larger one is refused with its size")
     cal = sub.add_parser("calibrate", help="fit the triaxial case's E, nu, phi to a curve",

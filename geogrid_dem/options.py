@@ -6,8 +6,10 @@ A case declares its own options once, in its ``parse_args``, on the parser that
 ``--overwrite``, ``--seed``, ``--threads`` and, where the case has presets, ``--preset``) are
 declared here, once, with one meaning each:
 
-- ``--threads N``: the OpenMP threads of this run; ``0`` is OpenMP's default (every core of the
-  machine, or ``OMP_NUM_THREADS`` when set). Results do not depend on it.
+- ``--threads N``: the OpenMP threads of this run; ``0`` is automatic
+  (``cpp_dem.apply_threads``: ``OMP_NUM_THREADS`` when set; else one thread for a scene below
+  ``cpp_dem.scene.AUTO_SERIAL_BODIES`` bodies and the cores free of other work for a larger
+  one, said on stderr when it leaves a core). Results do not depend on it.
 - ``--out DIR``: the results folder (a new ``results/<case>/run_NNN`` when omitted); a folder
   that holds an earlier run needs ``--overwrite``.
 - ``--allow-large``: lifts the caps (:data:`CAPS`) on the work one run may start: the count
@@ -71,7 +73,7 @@ def case_parser(name: str, description: str, *, smoke: str, seed: int, threads: 
     """The parser of case ``name`` (its command name, e.g. ``pullout-000``) with the shared
     options: ``--smoke`` (``smoke`` says what the test-sized run is), ``--out`` and
     ``--overwrite`` (``out_help`` adds to the help of ``--out``), ``--seed`` (default
-    ``seed``), ``--threads`` (default ``threads``; 0 = OpenMP's default) and, when ``preset``
+    ``seed``), ``--threads`` (default ``threads``; 0 = automatic) and, when ``preset``
     is given (its help text), ``--preset``. The case adds its own options to it."""
     ap = argparse.ArgumentParser(prog=f"geogrid-dem run {name}", description=description,
                                  formatter_class=HelpFormatter)
@@ -79,8 +81,9 @@ def case_parser(name: str, description: str, *, smoke: str, seed: int, threads: 
     add_out_args(ap, CASES[name].folder, help_extra=out_help)
     ap.add_argument("--seed", type=int, default=seed, help="random seed of the packing")
     ap.add_argument("--threads", type=int, default=threads,
-                    help="OpenMP threads of this run; 0: OpenMP's default (every core, or "
-                         "OMP_NUM_THREADS); results do not depend on it")
+                    help="OpenMP threads of this run; 0: automatic (OMP_NUM_THREADS when set; "
+                         "else one thread for a small scene, the cores free of other work for "
+                         "a large one); results do not depend on it")
     if preset is not None:
         ap.add_argument("--preset", choices=PRESETS, default="",
                         help=f"speed-accuracy preset {preset} (docs/speed_accuracy.md)")

@@ -37,13 +37,13 @@ from cpp_dem._core import (  # noqa: F401,E402  (re-exported)
     ParameterError,
     get_num_threads,
     mix_materials,
-    set_num_threads,
 )
 from cpp_dem.build.packing import read_packing_csv, write_packing_csv  # noqa: F401
 from cpp_dem._core import RadiusGrowth, ServoWall, TriaxialController  # noqa: F401  (samples)
 from cpp_dem.checkpoint import load_checkpoint, save_checkpoint  # noqa: F401
 from cpp_dem.scene import (BOX_WALLS, ControllerLimitWarning, Scene, apply_threads,
-                           hertz_mindlin_material,  # noqa: F401
+                           free_cores, hertz_mindlin_material,  # noqa: F401
+                           set_num_threads, threads_for,
                     PhysicalRangeWarning, TargetNotMetWarning, TimeStepWarning,
                     linear_material)
 from cpp_dem.measure.inertial import InertialNumberWarning  # noqa: F401,E402
@@ -64,6 +64,8 @@ __all__ = [
     "geogrid",
     "BOX_WALLS",
     "apply_threads",
+    "free_cores",
+    "threads_for",
     "RadiusGrowth",
     "ServoWall",
     "TriaxialController",

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import math
+import os
 import sys
 import time as _time
 from typing import Callable, Iterable, Sequence
@@ -12,12 +13,126 @@ import numpy as np
 from cpp_dem import _core
 from cpp_dem._core import Material, ParameterError
 
-def apply_threads(threads: int) -> None:
-    """Sets this process's OpenMP threads the way every ``--threads`` option means it: n > 0
-    threads, 0 leaves OpenMP's default (every core, or ``OMP_NUM_THREADS``). Results do not
-    depend on it."""
+#: Under automatic threads (``apply_threads(0)``), a scene with fewer bodies than this runs
+#: on one thread: below it a step's parallel regions cost more than they save (measured with
+#: ``bench/threads_auto.py``; docs/benchmarks.md).
+AUTO_SERIAL_BODIES = 1000
+
+#: What ``apply_threads(0)`` decided: whether the threads are automatic, the threads for a
+#: scene of AUTO_SERIAL_BODIES bodies or more, and why (the line it printed).
+_AUTO = {"on": False, "threads": 1, "note": ""}
+
+
+def _cpu_ticks(cpus) -> dict:
+    """{cpu: (busy ticks, all ticks)} of ``cpus`` from /proc/stat (busy: all but idle and
+    iowait); {} where it cannot be read."""
+    out = {}
+    try:
+        with open("/proc/stat") as fh:
+            for line in fh:
+                name, *vals = line.split()
+                if not name.startswith("cpu") or name == "cpu":
+                    continue
+                k = int(name[3:])
+                if k in cpus:
+                    t = [int(v) for v in vals[:8]]
+                    out[k] = (sum(t) - t[3] - t[4], sum(t))
+    except (OSError, ValueError):
+        return {}
+    return out
+
+
+def busy_cores(before: dict, after: dict, threshold: float = 0.5) -> int:
+    """How many CPUs were busy between two ``_cpu_ticks`` samples: those whose busy share of
+    the interval is above ``threshold`` (a CPU without ticks in it counts as free)."""
+    busy = 0
+    for k, (b1, t1) in after.items():
+        b0, t0 = before.get(k, (b1, t1))
+        if t1 > t0 and (b1 - b0) / (t1 - t0) > threshold:
+            busy += 1
+    return busy
+
+
+def _quota_cores(path: str = "/sys/fs/cgroup/cpu.max") -> float | None:
+    """The cgroup's CPU quota in cores ("200000 100000" -> 2.0), None without one."""
+    try:
+        quota, period = open(path).read().split()[:2]
+    except (OSError, ValueError):
+        return None
+    return None if quota == "max" else int(quota) / int(period)
+
+
+def free_cores(sample_s: float = 0.1) -> tuple[int, int]:
+    """(the cores this process may use, how many of them other work keeps busy): the CPUs of
+    its affinity (capped by a cgroup quota), and those whose busy share over ``sample_s``
+    seconds of /proc/stat was above one half while this process slept."""
+    cpus = set(os.sched_getaffinity(0)) if hasattr(os, "sched_getaffinity") else set(
+        range(os.cpu_count() or 1))
+    usable = len(cpus)
+    quota = _quota_cores()
+    if quota is not None:
+        usable = max(1, min(usable, int(quota)))
+    before = _cpu_ticks(cpus)
+    _time.sleep(sample_s)
+    busy = busy_cores(before, _cpu_ticks(cpus)) if before else 0
+    return usable, min(busy, usable - 1)
+
+
+def apply_threads(threads: int) -> str:
+    """Sets this process's OpenMP threads the way every ``--threads`` option means it, and
+    returns what it chose (one line). n > 0: n threads. 0: automatic: ``OMP_NUM_THREADS``
+    where it is set; else a scene below :data:`AUTO_SERIAL_BODIES` bodies runs on one thread,
+    and a larger one on the cores free of other work (:func:`free_cores`, sampled when the
+    first such scene runs: an OpenMP thread on a core that another process keeps busy makes
+    every parallel region wait for it; ``pullout-000 --smoke`` took 3.4 x as long on both
+    cores of a 2-core machine with one busy as on one thread). Automatic threads that leave
+    cores to other work say so on stderr. Results do not depend on the threads."""
     if threads > 0:
-        _core.set_num_threads(int(threads))
+        set_num_threads(int(threads))
+        _AUTO["note"] = f"{int(threads)} thread(s) (--threads {int(threads)})"
+        return _AUTO["note"]
+    if os.environ.get("OMP_NUM_THREADS"):
+        _AUTO.update(on=False, note=f"{_core.get_num_threads()} thread(s) (OMP_NUM_THREADS)")
+        return _AUTO["note"]
+    _AUTO.update(on=True, threads=None,
+                 note=f"automatic threads: one for a scene below {AUTO_SERIAL_BODIES} bodies, "
+                      "else the cores free of other work (--threads N to choose)")
+    _core.set_num_threads(1)  # (until a large scene runs: the work outside Scene.run too)
+    return _AUTO["note"]
+
+
+def _auto_threads(bodies: int) -> None:
+    """Under automatic threads, the threads for a scene of ``bodies`` bodies (one below
+    AUTO_SERIAL_BODIES; else the free cores, sampled once), set only when they change."""
+    if not _AUTO["on"]:
+        return
+    if bodies < AUTO_SERIAL_BODIES:
+        want = 1
+    else:
+        if _AUTO["threads"] is None:
+            usable, busy = free_cores()
+            _AUTO["threads"] = usable - busy
+            _AUTO["note"] = (f"{usable - busy} thread(s) (automatic: {usable} core(s), {busy} "
+                             "busy with other work; --threads N to choose)")
+            if busy:
+                print(f"[threads] {_AUTO['note']}", file=sys.stderr, flush=True)
+        want = _AUTO["threads"]
+    if want != _core.get_num_threads():
+        _core.set_num_threads(want)
+
+
+def set_num_threads(threads: int) -> None:
+    """Sets the OpenMP threads of every scene to ``threads`` (>= 1): a choice, so automatic
+    threads (``apply_threads(0)``) end."""
+    _core.set_num_threads(int(threads))
+    _AUTO["on"] = False
+
+
+def threads_for(scene) -> int:
+    """The OpenMP threads ``scene`` runs on (automatic threads: set for its size now, as
+    ``Scene.run`` does), for a run's log."""
+    _auto_threads(scene.num_bodies)
+    return _core.get_num_threads()
 
 
 _DOF_BITS = {"x": 1, "y": 2, "z": 4, "rx": 8, "ry": 16, "rz": 32}
@@ -552,6 +667,7 @@ class Scene(_core.Scene):
         self._check_geometry()
         self._check_controllers()
         self._check_time_step()
+        _auto_threads(self.num_bodies)
         if every <= 0:
             self._run(steps)
             self._check_controller_limits()

@@ -77,7 +77,7 @@ class Params:
     settled_speed: float = 0.005     #: stop once max |v| is below this, m/s ...
     settled_unbalanced: float = 0.01  #: ... and the unbalanced force below this, -
     settled_hold: float = 0.05       #: ... over this long (consecutive records), s
-    threads: int = 0                 #: OpenMP threads (0: OpenMP's default, every core), -
+    threads: int = 0                 #: OpenMP threads (0: automatic, cpp_dem.apply_threads), -
 
 
 SMOKE = dict(n=400, box=(0.06, 0.06, 0.12), duration=1.0, snapshot_interval=0.05)
@@ -240,7 +240,7 @@ def run(p: Params, out: Path) -> dict:
     scene, walls = build_scene(p)
     n = scene.num_bodies
     print(f"[deposition] {n} spheres, radii {p.r_min * 1e3:.1f}-{p.r_max * 1e3:.1f} mm, box "
-          f"{p.box[0]} x {p.box[1]} x {p.box[2]} m, {dem.get_num_threads()} threads; "
+          f"{p.box[0]} x {p.box[1]} x {p.box[2]} m, {dem.threads_for(scene)} threads; "
           f"dt = {scene.dt:.3g} s (auto, safety {p.dt_safety}, p-wave {scene.pwave_dt():.3g} s)",
           flush=True)
 

@@ -234,7 +234,7 @@ def run_case(sample: pullout.PulloutSample, out: Path, *, tag: str, meta: dict,
         f"{len(sample.grid.links)} links / {len(sample.grid.pfacets)} PFacets / "
         f"{sample.grid.n_members} members; clamp holds {len(sample.clamp_nodes)} nodes "
         f"({sample.info['clamp']}); apertures 1, 2 = cells {sample.apertures.tolist()}; "
-        f"{dem.get_num_threads()} threads")
+        f"{dem.threads_for(sc)} threads")
     t0 = time.perf_counter()
     res = pullout.prepare(sample, stress=stress, log=log, **prep_kwargs)
     t_prep = time.perf_counter() - t0

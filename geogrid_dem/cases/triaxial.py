@@ -309,7 +309,7 @@ def build(p: Params, log) -> tuple:
     what = (f"{n_grains} grains (clumps of {sc.num_bodies} spheres in all)" if sc.num_clumps
             else f"{n_grains} grains")
     log(f"{what}, box {np.round(measure.box_size(sc, walls), 4)} m, "
-        f"{dem.get_num_threads()} threads, dt {sc.dt:.3g} s")
+        f"{dem.threads_for(sc)} threads, dt {sc.dt:.3g} s")
     return sample, grid, layer, n_grains, psd_info
 
 
