@@ -74,7 +74,8 @@ from femcoupling.coupling.handover import HandoverError, spd_floor
 from femcoupling.coupling.records import append_rows
 from femcoupling.coupling.relaxation import aitken_factor, check_relaxation
 from femcoupling.coupling.status import NoiseWarning, worst
-from femcoupling.fem.mpi_points import PointPartition, RootMaterial, bcast_from_root, check_on_root
+from femcoupling.fem.mpi_points import (PointPartition, RootMaterial, StartStress, bcast_from_root,
+                                        check_on_root)
 from femcoupling.fem.quadrature import (NewtonFailure, NewtonRules, QuadratureSystem,
                                         check_material, lu_package, newton_solve)
 from femcoupling.fem.steps import LoadStep
@@ -809,7 +810,7 @@ class _HierNewton:
         self.m.system.move(correction, factor)
 
 
-class ElementPoolMaterial:
+class ElementPoolMaterial(StartStress):
     """The DEM elements of an ``ElementPool`` as the material of the hierarchical mode's
     quadrature points (a ``femcoupling.fem.quadrature.QuadratureMaterial``; element k is point k).
 
@@ -914,15 +915,6 @@ class ElementPoolMaterial:
         """Back to the committed state (the last trial leaves no trace)."""
         self.pool.reject()
         self._pending = False
-
-    @property
-    def stress_n(self) -> np.ndarray:
-        """The committed stresses, (n, 3) (3D: (n, 6)), Voigt, Pa."""
-        return self.stress_start
-
-    @property
-    def plastic(self) -> np.ndarray:
-        return np.zeros(len(self.stress_start))
 
     def commit(self) -> None:
         self.pool.accept()

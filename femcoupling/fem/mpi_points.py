@@ -130,7 +130,24 @@ class PointPartition:
         return np.asarray(values)[self.ids]
 
 
-class RootMaterial:
+class StartStress:
+    """``stress_n`` and ``plastic`` of a material of DEM elements at points that keeps its
+    committed stresses as ``stress_start`` (``ElementPoolMaterial``, ``RootMaterial``)."""
+
+    stress_start: np.ndarray
+
+    @property
+    def stress_n(self) -> np.ndarray:
+        """The committed stresses, (n, ncomp), Voigt, Pa."""
+        return self.stress_start
+
+    @property
+    def plastic(self) -> np.ndarray:
+        """0 at every point: an element's plasticity is in its contacts."""
+        return np.zeros(len(self.stress_start))
+
+
+class RootMaterial(StartStress):
     """A quadrature-point material (``ElementPoolMaterial``) held on rank 0, seen by every rank
     (module doc). ``material``: the material on rank 0, None elsewhere."""
 
@@ -163,15 +180,6 @@ class RootMaterial:
         if err is not None:
             raise NewtonFailure(err)
         return out
-
-    @property
-    def stress_n(self) -> np.ndarray:
-        """The committed stresses (every rank's copy), Pa."""
-        return self.stress_start
-
-    @property
-    def plastic(self) -> np.ndarray:
-        return np.zeros(len(self.stress_start))
 
     def trial(self, g: np.ndarray):
         self._call("trial", g)
