@@ -378,6 +378,12 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
       .def("reset_energy", &Scene::reset_energy)
       .def("unbalanced_force", &Scene::unbalanced_force,
            "Mean resultant force on free bodies / mean contact force, - (NaN without contacts).")
+      .def("memory_by_field", [](const Scene& s) {
+        py::dict d;
+        for (const auto& [name, bytes] : s.memory_by_field()) d[py::str(name)] = bytes;
+        return d;
+      }, "Bytes allocated by each of the core's arrays (capacity x element size), by field "
+         "name: the scene's own memory, not the allocator's or Python's.")
       .def("collider_stats", [](const Scene& s) {
         const ColliderStats c = s.collider_stats();
         py::dict d;

@@ -277,6 +277,10 @@ class Scene:
         """
     def material(self, index: int) -> Material:
         ...
+    def memory_by_field(self) -> dict:
+        """
+        Bytes allocated by each of the core's arrays (capacity x element size), by field name: the scene's own memory, not the allocator's or Python's.
+        """
     def num_controllers(self) -> int:
         """
         Number of controllers.

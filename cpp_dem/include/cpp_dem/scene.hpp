@@ -399,6 +399,10 @@ class Scene {
   void reset_energy();
   /// Mean |resultant force| on free bodies / mean |contact force|, - (Yade's unbalancedForce).
   Real unbalanced_force() const;
+  /// Bytes allocated by each of the scene's arrays (capacity x element size), by field name
+  /// ("bodies.pos", "contacts.pairs", ...): the core's own memory, not the allocator's or
+  /// Python's. A vector of vectors counts its buffers too.
+  std::vector<std::pair<std::string, std::size_t>> memory_by_field() const;
   ColliderStats collider_stats() const;
 
   /// Sphere–sphere contacts, hot part (ids, activity, spring state); see pair_phys and

@@ -118,4 +118,14 @@ void CellGrid::query_box(const Vec3& lo, const Vec3& hi, const std::vector<Vec3>
   std::sort(out.begin() + first, out.end());
 }
 
+void CellGrid::add_memory(std::vector<std::pair<std::string, std::size_t>>& out) const {
+  const auto bytes = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
+  out.emplace_back("broadphase.cell_start", bytes(cell_start_));
+  out.emplace_back("broadphase.cell_bodies", bytes(cell_bodies_));
+  out.emplace_back("broadphase.body_cell", bytes(body_cell_));
+  std::size_t per = per_body_.capacity() * sizeof(std::vector<int>);
+  for (const auto& v : per_body_) per += v.capacity() * sizeof(int);
+  out.emplace_back("broadphase.per_body_buffers", per);
+}
+
 }  // namespace cpp_dem

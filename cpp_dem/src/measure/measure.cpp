@@ -376,4 +376,75 @@ Real Scene::unbalanced_force() const {
   return (sum_f / nfree) / (sum_c / nc);
 }
 
+std::vector<std::pair<std::string, std::size_t>> Scene::memory_by_field() const {
+  std::vector<std::pair<std::string, std::size_t>> out;
+  const auto add = [&](const char* name, const auto& v) {
+    out.emplace_back(name, v.capacity() * sizeof(v[0]));
+  };
+#define CPP_DEM_MEM(prefix, store, field) add(prefix #field, store.field)
+#define CPP_DEM_BODY(field) CPP_DEM_MEM("bodies.", bodies_, field)
+  CPP_DEM_BODY(pos); CPP_DEM_BODY(vel); CPP_DEM_BODY(angvel); CPP_DEM_BODY(force);
+  CPP_DEM_BODY(torque); CPP_DEM_BODY(ext_force); CPP_DEM_BODY(ext_torque); CPP_DEM_BODY(ori);
+  CPP_DEM_BODY(radius); CPP_DEM_BODY(mass); CPP_DEM_BODY(inertia); CPP_DEM_BODY(material);
+  CPP_DEM_BODY(blocked); CPP_DEM_BODY(kind); CPP_DEM_BODY(clump); CPP_DEM_BODY(image);
+  CPP_DEM_BODY(ke); CPP_DEM_BODY(damp_dissip); CPP_DEM_BODY(ext_work);
+  CPP_DEM_BODY(pos_at_energy_reset); CPP_DEM_BODY(inertia_scale);
+#undef CPP_DEM_BODY
+#define CPP_DEM_CLUMP(field) CPP_DEM_MEM("clumps.", clumps_, field)
+  CPP_DEM_CLUMP(pos); CPP_DEM_CLUMP(vel); CPP_DEM_CLUMP(angvel); CPP_DEM_CLUMP(angmom);
+  CPP_DEM_CLUMP(ori); CPP_DEM_CLUMP(rot); CPP_DEM_CLUMP(force); CPP_DEM_CLUMP(torque);
+  CPP_DEM_CLUMP(ext_force); CPP_DEM_CLUMP(ext_torque); CPP_DEM_CLUMP(mass);
+  CPP_DEM_CLUMP(inertia); CPP_DEM_CLUMP(stiffness_radius); CPP_DEM_CLUMP(blocked);
+  CPP_DEM_CLUMP(member_off); CPP_DEM_CLUMP(ke); CPP_DEM_CLUMP(damp_dissip);
+  CPP_DEM_CLUMP(ext_work); CPP_DEM_CLUMP(pos_at_energy_reset); CPP_DEM_CLUMP(inertia_scale);
+  CPP_DEM_CLUMP(member); CPP_DEM_CLUMP(member_local);
+#undef CPP_DEM_CLUMP
+#undef CPP_DEM_MEM
+  add("order.id_of_slot", id_of_slot_);
+  add("order.slot_of_id", slot_of_id_);
+  add("broadphase.pos_at_build", pos_at_build_);
+  add("broadphase.radius_at_build", radius_at_build_);
+  add("broadphase.candidates", candidates_);
+  add("broadphase.candidate_images", candidate_images_);
+  grid_.add_memory(out);
+  add("contacts.pairs", pairs_);
+  add("contacts.pair_cold", pair_cold_);
+  add("contacts.pair_out", pair_out_);
+  add("contacts.pair_jadj_off", pair_jadj_off_);
+  add("contacts.pair_jslot", pair_jslot_);
+  add("contacts.pair_ioff", pair_ioff_);
+  add("contacts.walls", wall_contacts_);
+  add("contacts.wall_adj_off", wall_adj_off_);
+  add("contacts.wall_adj", wall_adj_);
+  add("scratch.pair_fi", pair_fi_);
+  add("scratch.pair_ti", pair_ti_);
+  add("scratch.acc_lin", acc_lin_);
+  add("scratch.acc_ang", acc_ang_);
+  add("scratch.wall_order", wall_order_);
+  add("scratch.wall_block_off", wall_block_off_);
+  add("scratch.density_scaling_kt", ds_kt_);
+  add("scratch.density_scaling_kr", ds_kr_);
+  add("walls.walls", walls_);
+  add("walls.openings", wall_openings_);
+  add("geogrid.links", links_);
+  add("geogrid.pfacets", facets_);
+  add("geogrid.contacts", grid_contacts_);
+  add("geogrid.breaks", breaks_);
+  add("geogrid.node_link_off", node_link_off_);
+  add("geogrid.node_link", node_link_);
+  add("geogrid.link_facet", link_facet_);
+  add("geogrid.sphere_gc_off", sphere_gc_off_);
+  add("geogrid.sphere_gc", sphere_gc_);
+  add("geogrid.node_gc_off", node_gc_off_);
+  add("geogrid.node_gc", node_gc_);
+  add("bonds.bonds", bonds_);
+  add("bonds.breaks", bond_breaks_);
+  add("bonds.body_bond_off", body_bond_off_);
+  add("bonds.body_bond", body_bond_);
+  add("bonds.pairs", bond_pairs_);
+  add("materials.materials", materials_);
+  add("materials.pair_laws", pair_laws_);
+  return out;
+}
+
 }  // namespace cpp_dem

@@ -1,6 +1,8 @@
 // Broad phase: a uniform cell grid with a Verlet margin.
 #pragma once
 
+#include <string>
+
 #include <cstdint>
 #include <utility>
 #include <vector>
@@ -24,6 +26,8 @@ class CellGrid {
   /// in increasing id order.
   void query_box(const Vec3& lo, const Vec3& hi, const std::vector<Vec3>& pos,
                  const std::vector<Real>& radius, Real margin, std::vector<int>& out) const;
+  /// Appends (field, bytes allocated) of the grid's arrays to `out` (Scene::memory_by_field).
+  void add_memory(std::vector<std::pair<std::string, std::size_t>>& out) const;
 
  private:
   long cell_of(const Vec3& x, int axis) const;
