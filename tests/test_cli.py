@@ -158,8 +158,9 @@ def test_every_case_has_one_help_style(case):
     assert not _doubled(helps), _doubled(helps)
     for flag in ("--smoke", "--out", "--overwrite", "--seed", "--threads"):
         assert helps.get(flag), f"{case}: {flag} has no help line"
-    # --threads means the same everywhere: 0 is OpenMP's default (every core)
-    assert "0: OpenMP's default (every core" in helps["--threads"]
+    # --threads means the same everywhere: 0 is automatic (cpp_dem.apply_threads)
+    assert "0: automatic (OMP_NUM_THREADS when set; else one thread for a small scene" \
+        in helps["--threads"]
     from geogrid_dem.cases import CASES
 
     if CASES[case].study:  # the study is named by its title, not a number
