@@ -585,8 +585,9 @@ def test_the_fem_soil_is_calibrated_once_and_kept_on_resume(tmp_path, monkeypatc
 
     calls = []
 
-    def fake(q, out, keep=None, seeds=None, workers=1):
+    def fake(q, out, keep=None, seeds=None, workers=1, resume=False):
         calls.append((q.seed, tuple(seeds), workers))
+        assert resume is bool(getattr(p, "resume", False))
         rec = {"young_pa": 42e6, "poisson": 0.31, "converged": True}
         (out / "calibration.json").write_text(json.dumps(rec))
         keep["RE"] = "the RE FEM"
@@ -657,3 +658,57 @@ def test_the_soil_is_fitted_to_the_mean_of_the_seeds_elements(tmp_path, monkeypa
     assert seen[0] == (2, "calibration_RE_1") and rec1["seeds"] == [2]
     with pytest.raises(ValueError, match="seeds"):
         study.calibrate_soil(p, tmp_path, seeds=[])
+
+
+def test_an_interrupted_calibration_goes_on_at_its_next_pass(tmp_path, monkeypatch):
+    """calibrate_soil(resume=True) after a break in pass 2 (the FEM stand-in interrupted)
+    takes pass 1 and its soil from calibration_passes.json and gives the record of a run
+    without the break; a passes file of another calibration is refused by name."""
+    from types import SimpleNamespace
+
+    from geogrid_dem.studies import prs_element as study
+
+    ini_pa, fin_pa = np.array([2e3, 2e3, 5e3]), np.array([20e3, 30e3, 90e3])
+    fem_calls = []
+
+    def targets(rows):
+        return SimpleNamespace(normal_pa=rows, rotation_deg=0.0, grid_tension_n_per_m=None,
+                               shear_pa=np.zeros(3))
+
+    def fake_fem(q, out, variant):
+        fem_calls.append(q.soil_young)
+        if len(fem_calls) == stop_at:
+            raise KeyboardInterrupt("the run was stopped")
+        return (targets(ini_pa), targets(fin_pa), None, None, None,
+                {"strain_increment": ((fin_pa - ini_pa) / q.soil_young).tolist()})
+
+    def fake_element(q, rows, *, prestressed, label, out, grid_tension=None, cache=None):
+        E = 9e6  # (far from the given soil: pass 1 is off the band, pass 2 converges)
+        return {"stress_initial_pa": rows[0].tolist(), "stress_final_pa": rows[1].tolist(),
+                "strain_increment": ((rows[1] - rows[0]) / E).tolist(), "porosity_final": 0.4}
+
+    monkeypatch.setattr(study, "run_fem", fake_fem)
+    monkeypatch.setattr(study, "run_element", fake_element)
+    p = study.Params(seed=1)
+    stop_at = 0
+    whole = tmp_path / "whole"
+    whole.mkdir()
+    _, ref = study.calibrate_soil(p, whole)
+    assert ref["converged"] and len(ref["passes"]) == 2
+    broken = tmp_path / "broken"
+    broken.mkdir()
+    fem_calls.clear()
+    stop_at = 2
+    with pytest.raises(KeyboardInterrupt):
+        study.calibrate_soil(p, broken)
+    saved = json.loads((broken / "calibration_passes.json").read_text())
+    assert len(saved["passes"]) == 1 and not (broken / "calibration.json").exists()
+    fem_calls.clear()
+    stop_at = 0
+    q, rec = study.calibrate_soil(p, broken, resume=True)
+    assert fem_calls == [ref["passes"][1]["soil_young_pa"]]  # (pass 2 alone, on its soil)
+    drop = ("wall_time_s", "message")
+    assert {k: v for k, v in rec.items() if k not in drop} == \
+        {k: v for k, v in json.loads(json.dumps(ref, default=float)).items() if k not in drop}
+    with pytest.raises(ValueError, match=r"seeds=\[1\], but this calibration has seeds=\[1, 2\]"):
+        study.calibrate_soil(p, broken, seeds=[1, 2], resume=True)

@@ -629,7 +629,8 @@ def fem_soil(p: Params, grid: str, fem_out: Path, summary: dict) -> tuple[dict, 
     preparation; ``geogrid_dem.studies.prs_element.calibrate_soil``, on ``p.workers``
     processes; its record in ``fem_out``), else as
     given. With ``p.resume`` a calibration the interrupted run finished (its
-    ``calibration.json``) is kept, not run again. Returns the soil's Params fields and the
+    ``calibration.json``) is kept, not run again, and one it left unfinished goes on at its
+    next pass (``calibration_passes.json``). Returns the soil's Params fields and the
     FEM runs the calibration solved with it (variant -> ``run_fem``'s result, to be reused);
     fills ``summary["soil"][grid]`` (and ``["calibration"][grid]``)."""
     from geogrid_dem.studies.prs_element import calibrate_soil
@@ -647,7 +648,7 @@ def fem_soil(p: Params, grid: str, fem_out: Path, summary: dict) -> tuple[dict, 
                 f"({path})")
         else:
             q, rec = calibrate_soil(q, fem_out, keep=kept, seeds=list(p.seeds),
-                                    workers=p.workers)
+                                    workers=p.workers, resume=getattr(p, "resume", False))
         summary.setdefault("calibration", {})[grid] = rec
     soil = {k: getattr(q, k) for k in ("soil_young", "soil_poisson", "soil_friction",
                                        "soil_cohesion")}

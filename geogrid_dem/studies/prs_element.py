@@ -17,6 +17,7 @@ import contextlib
 import functools
 import json
 import math
+import os
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -388,7 +389,7 @@ def _mean_element(es: list[dict]) -> dict:
 
 def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
                    keep: dict | None = None, seeds: list | None = None,
-                   workers: int = 1) -> tuple[Params, dict]:
+                   workers: int = 1, resume: bool = False) -> tuple[Params, dict]:
     """One soil on both scales (the default of the FEM modes): the FEM soil set to the case's
     own element, by passes. Each pass solves the RE FEM with the current soil, drives the
     case's element (the same grains, preparation and seed as the run's, so the same
@@ -419,7 +420,14 @@ def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
     CPU's rounding path; the mean moves about 1/sqrt(seeds) as much. ``workers`` (> 1): the
     seeds' elements in that many spawned processes (one thread each; each seed always in the
     same process, which keeps its preparation between passes), the same numbers as in one.
-    Each pass's row lists the seeds' own ratios and secants (``seeds``)."""
+    Each pass's row lists the seeds' own ratios and secants (``seeds``).
+
+    Each finished pass is written to ``calibration_passes.json`` (its row, the warnings and the
+    soil of the next pass) before the next starts. With ``resume``, an interrupted calibration
+    goes on from that file at the next pass, with the same numbers as one run without a
+    break (every pass drives elements prepared afresh from the same seeds and preparation);
+    a file of another calibration (other seeds, passes or starting soil) is refused, naming
+    what differs."""
     from femcoupling.coupling.continuum_fit import friction_angle_deg
     from femcoupling.coupling.status import strain_ratio_held
     from femcoupling.coupling.twoway import check_region
@@ -431,6 +439,14 @@ def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
     seeds = [int(p.seed)] if seeds is None else [int(s) for s in seeds]
     if not seeds:
         raise ValueError("calibrate_soil: seeds=[]: give at least one element seed")
+    before = {"young_pa": p.soil_young, "poisson": p.soil_poisson,
+              "cohesion_pa": p.soil_cohesion, "friction_deg": p.soil_friction}
+    progress = out / "calibration_passes.json"
+    first, earlier_s = 1, 0.0
+    if resume and progress.is_file():
+        q, passes, warnings, earlier_s = _resumed_passes(progress, p, seeds, max_passes, before)
+        first = len(passes) + 1
+        log(f"--resume: the calibration goes on at pass {first} ({progress})")
     cache: dict = {}  # the element at the initial targets, prepared once for every pass
     n_groups = max(1, min(int(workers), len(seeds)))
     groups = [seeds[j::n_groups] for j in range(n_groups)]
@@ -438,7 +454,7 @@ def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
     with contextlib.ExitStack() as stack:
         pools = ([stack.enter_context(process_pool(1)) for _ in groups] if len(groups) > 1
                  else [])
-        for k in range(1, max_passes + 1):
+        for k in range(first, max_passes + 1):
             fem = run_fem(q, out, "RE")
             ini, fin, _m, _s0, _load, info = fem
             label = f"calibration_RE_{k}"
@@ -500,6 +516,10 @@ def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
                                 f"{POISSON_MAX} (E refitted: {E / 1e6:.4g} MPa)")
                 log("WARNING: " + warnings[-1])
             q = replace(q, soil_young=E, soil_poisson=nu, soil_cohesion=0.0)
+            _write_json_atomic(progress, {
+                "seeds": seeds, "max_passes": max_passes, "before": before, "passes": passes,
+                "warnings": warnings, "wall_time_s": earlier_s + time.perf_counter() - t0,
+                "next_soil": {"young_pa": E, "poisson": nu, "cohesion_pa": 0.0}})
     last = passes[-1]
     rec = {"method": ("the case's element along the RE region's path, by passes" if len(seeds)
                       == 1 else f"the mean of the case's elements of seeds {seeds} along the RE "
@@ -510,9 +530,8 @@ def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
            "friction_mobilised_deg": last["friction_mobilised_deg"],
            "dem_fem_strain_ratio": last["dem_fem_strain_ratio"] if converged else None,
            "porosity_element": last["porosity_element"],
-           "before": {"young_pa": p.soil_young, "poisson": p.soil_poisson,
-                      "cohesion_pa": p.soil_cohesion, "friction_deg": p.soil_friction},
-           "warnings": warnings, "wall_time_s": time.perf_counter() - t0}
+           "before": before,
+           "warnings": warnings, "wall_time_s": earlier_s + time.perf_counter() - t0}
     if not converged:
         warnings.append(f"calibration: no soil within {max_passes} passes made the element "
                         f"strain within [1/2, 2] x its FEM region (last "
@@ -529,6 +548,34 @@ def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
     log("calibration: " + rec["message"])
     (out / "calibration.json").write_text(json.dumps(rec, indent=2, default=float) + "\n")
     return replace(q, soil_friction=p.soil_friction, soil_cohesion=0.0), rec
+
+
+def _write_json_atomic(path: Path, data: dict) -> None:
+    """``data`` as JSON at ``path``, written whole or not at all (a temporary file renamed)."""
+    tmp = path.with_suffix(".json.tmp")
+    tmp.write_text(json.dumps(data, indent=2, default=float) + "\n")
+    os.replace(tmp, path)
+
+
+def _resumed_passes(path: Path, p: Params, seeds: list, max_passes: int, before: dict):
+    """(the soil of the next pass, the passes, the warnings, the seconds they took) of an
+    interrupted calibration (``calibration_passes.json``); a ValueError naming the field when
+    the file is of another calibration."""
+    try:
+        got = json.loads(path.read_text())
+        mine = {"seeds": seeds, "max_passes": max_passes, "before": before}
+        for key, want in mine.items():
+            if got[key] != want:
+                raise ValueError(f"{path}: {key}={got[key]!r}, but this calibration has "
+                                 f"{key}={want!r}: the file is another calibration's; remove "
+                                 "it (or the run folder) to calibrate afresh")
+        soil = got["next_soil"]
+        q = replace(p, soil_young=float(soil["young_pa"]), soil_poisson=float(soil["poisson"]),
+                    soil_cohesion=float(soil["cohesion_pa"]))
+        return q, list(got["passes"]), list(got["warnings"]), float(got["wall_time_s"])
+    except (KeyError, TypeError, json.JSONDecodeError) as e:
+        raise ValueError(f"{path}: not a calibration's passes ({type(e).__name__}: {e}); "
+                         "remove it to calibrate afresh") from e
 
 
 def fem_model(p: Params, prestressed: bool):
