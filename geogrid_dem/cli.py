@@ -10,8 +10,8 @@
 Every case parses its flags with one parser (geogrid_dem.options): the shared ones have the
 same names, units and meaning everywhere (``--smoke``, ``--out DIR``, ``--overwrite``,
 ``--seed N``, ``--threads N`` with 0 = automatic threads (``cpp_dem.apply_threads``), and
-``--preset fast|balanced|accurate`` where the case has presets). Everything after the case name goes to
-that parser (``geogrid-dem run triaxial --help`` lists the case's flags).
+``--preset fast|balanced|accurate`` where the case has presets). Everything after the case
+name goes to that parser (``geogrid-dem run triaxial --help`` lists the case's flags).
 
 A **run file** names the case and its parameters; the keys are the case's flags without the
 leading dashes (``cell-pressure`` or ``cell_pressure``), ``true`` switches a flag on, a list

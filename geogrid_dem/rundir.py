@@ -189,7 +189,7 @@ def record_checkpoints(out) -> None:
         if manifest is None or not manifest.get("checkpoint_patterns"):
             return
         if _scan_checkpoints(out, manifest):
-            _write_atomic(out / MANIFEST, json.dumps(manifest, indent=1) + "\n")
+            write_atomic(out / MANIFEST, json.dumps(manifest, indent=1) + "\n")
 
 
 class _CheckpointRecorder(threading.Thread):
@@ -383,7 +383,9 @@ def _files(out: Path) -> list[Path]:
                   if p.is_file() and not (p.parent == out and p.name in _FREE))
 
 
-def _write_atomic(path: Path, text: str) -> None:
+def write_atomic(path: Path, text: str) -> None:
+    """``text`` at ``path``, written whole or not at all (a temporary file renamed; one writer
+    at a time in this process)."""
     with _MANIFEST_LOCK:
         tmp = path.with_name(path.name + ".tmp")
         tmp.write_text(text, encoding="utf-8")
@@ -606,7 +608,7 @@ def begin_run(out, case: str, log=print, *, overwrite: bool | None = None,
     if checkpoints:
         rec["checkpoint_patterns"] = list(checkpoints)
         rec["checkpoints"] = carried
-    _write_atomic(manifest_path, json.dumps(rec, indent=1) + "\n")
+    write_atomic(manifest_path, json.dumps(rec, indent=1) + "\n")
     if out not in _ACTIVE:
         _ACTIVE.append(out)
     return out
@@ -640,7 +642,7 @@ def end_run(out, status: str = "complete", reason: str | None = None) -> None:
             except OSError:
                 pass
         try:
-            _write_atomic(manifest_path, json.dumps(rec, indent=1) + "\n")
+            write_atomic(manifest_path, json.dumps(rec, indent=1) + "\n")
         except OSError:
             if status == "complete":
                 raise
@@ -661,7 +663,7 @@ def _mark_summary_finished(out: Path) -> None:
     if d is None or d.get("status", "running") != "running":
         return
     d.pop("status", None)
-    _write_atomic(path, json.dumps({"status": "finished", **d}, indent=2) + "\n")
+    write_atomic(path, json.dumps({"status": "finished", **d}, indent=2) + "\n")
 
 
 def on_interrupt(out, *, summary=None, figures=None) -> None:
@@ -719,7 +721,7 @@ def write_interrupted_summary(out, case: str, reason: str, *, err=None) -> Path:
     def write(extra: dict) -> None:
         rec = {**head, **{k: v for k, v in body.items() if k not in head}, **extra}
         files = sorted(set(_stamps(out)) | {SUMMARY})
-        _write_atomic(path, json.dumps(plain({**rec, "files": files}), indent=2) + "\n")
+        write_atomic(path, json.dumps(plain({**rec, "files": files}), indent=2) + "\n")
 
     if summary_fn is not None:
         try:

@@ -12,10 +12,12 @@ every quadrature point). Both use what this module gives:
     and tangent after ``increment`` (since the last commit); ``stress_n`` and ``plastic`` are
     its committed stress and last plastic multipliers; ``commit()`` keeps the last trial,
     ``state()``/``set_state(data)`` save and restore the committed state (bitwise); a Dask
-    group of DEM elements answers its members at once (``trial_many``). ``femcoupling.materials.continuum.ElasticPoints``
-    (isotropic or anisotropic), ``femcoupling.materials.continuum.DruckerPragerPoints``
-    (``LinearElastic.at_points``, ``AnisotropicElastic.at_points``,
-    ``DruckerPrager.at_points``), ``femcoupling.materials.dem_elements.DemRegionMaterial``,
+    group of DEM elements answers its members at once (``trial_many``).
+    ``femcoupling.materials.continuum.ElasticPoints`` (isotropic or anisotropic),
+    ``femcoupling.materials.continuum.DruckerPragerPoints`` (``LinearElastic.at_points``,
+    ``AnisotropicElastic.at_points``, ``DruckerPrager.at_points``),
+    ``femcoupling.fem.soil_regions.RegionPoints``,
+    ``femcoupling.materials.dem_elements.DemRegionMaterial``, the members of a
     ``femcoupling.materials.dem_elements.PoolRegionMaterials`` and
     ``femcoupling.coupling.hierarchical.ElementPoolMaterial`` implement it.
 :class:`QuadratureSystem`
@@ -61,8 +63,8 @@ from femcoupling.coupling.status import newton_acceptance
 from femcoupling.fem.steps import NewtonFailure  # (the one failure type; re-exported)
 
 __all__ = ["QuadratureMaterial", "STRAIN_MEASURES", "NewtonRules", "NewtonOutcome",
-           "NewtonFailure", "QuadratureSystem", "check_material", "newton_solve", "lu_package", "NOISE_PROBE",
-           "PARALLEL_LU"]
+           "NewtonFailure", "QuadratureSystem", "check_material", "newton_solve", "lu_package",
+           "NOISE_PROBE", "PARALLEL_LU"]
 
 #: the relative change of every increment that measures the elements' noise
 NOISE_PROBE = 1e-9

@@ -177,7 +177,7 @@ class LoadingStages:
             slope = rise() / d1
             if not slope > 0:
                 raise NewtonFailure(f"footing: a settlement of {d1:.3g} m gave no pressure "
-                                       f"({rise():.3g} Pa)")
+                                    f"({rise():.3g} Pa)")
         else:
             slope = geo._real("slope_pa_per_m", slope_pa_per_m)
             if not slope > 0:

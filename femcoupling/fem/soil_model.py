@@ -31,7 +31,8 @@ Newton and the state; :mod:`femcoupling.fem.soil_loading` the load stages,
 :mod:`femcoupling.fem.soil_regions` the regions with a material or DEM element of their own,
 :mod:`femcoupling.fem.soil_measures` what the model gives out (settlement, stresses, forces,
 XDMF). A step's record is :class:`femcoupling.fem.steps.StepResult` (a
-:class:`~femcoupling.fem.steps.LoadStep`), its failure :class:`~femcoupling.fem.steps.NewtonFailure`.
+:class:`~femcoupling.fem.steps.LoadStep`), its failure
+:class:`~femcoupling.fem.steps.NewtonFailure`.
 """
 
 from __future__ import annotations

@@ -17,7 +17,6 @@ import contextlib
 import functools
 import json
 import math
-import os
 import time
 from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
@@ -29,6 +28,7 @@ from cpp_dem.elements import box as _element
 from cpp_dem.elements.box import ElementParams, grid_stiffness_per_metre
 from cpp_dem.io.figures import save_figure
 from geogrid_dem.processes import process_pool, wait_result
+from geogrid_dem.rundir import write_atomic
 
 
 @dataclass
@@ -516,10 +516,11 @@ def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
                                 f"{POISSON_MAX} (E refitted: {E / 1e6:.4g} MPa)")
                 log("WARNING: " + warnings[-1])
             q = replace(q, soil_young=E, soil_poisson=nu, soil_cohesion=0.0)
-            _write_json_atomic(progress, {
+            write_atomic(progress, json.dumps({
                 "seeds": seeds, "max_passes": max_passes, "before": before, "passes": passes,
                 "warnings": warnings, "wall_time_s": earlier_s + time.perf_counter() - t0,
-                "next_soil": {"young_pa": E, "poisson": nu, "cohesion_pa": 0.0}})
+                "next_soil": {"young_pa": E, "poisson": nu, "cohesion_pa": 0.0}},
+                indent=2, default=float) + "\n")
     last = passes[-1]
     rec = {"method": ("the case's element along the RE region's path, by passes" if len(seeds)
                       == 1 else f"the mean of the case's elements of seeds {seeds} along the RE "
@@ -548,13 +549,6 @@ def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
     log("calibration: " + rec["message"])
     (out / "calibration.json").write_text(json.dumps(rec, indent=2, default=float) + "\n")
     return replace(q, soil_friction=p.soil_friction, soil_cohesion=0.0), rec
-
-
-def _write_json_atomic(path: Path, data: dict) -> None:
-    """``data`` as JSON at ``path``, written whole or not at all (a temporary file renamed)."""
-    tmp = path.with_suffix(".json.tmp")
-    tmp.write_text(json.dumps(data, indent=2, default=float) + "\n")
-    os.replace(tmp, path)
 
 
 def _resumed_passes(path: Path, p: Params, seeds: list, max_passes: int, before: dict):
