@@ -210,13 +210,51 @@ def test_both_vector_forms_agree():
     assert lines[0][0] != lines[0][1]
 
 
-def _format_10(blob: bytes) -> bytes:
-    """A blob of format 12 rewritten as format 10: no wall openings (their vector, after the
-    walls', and their size, the layout's last entry, gone). No clumps, no controller (whose
-    kinds format 12 added)."""
+def _format_12(blob: bytes) -> bytes:
+    """A blob of format 13 rewritten as format 12: its materials as records of the 8 shared
+    parameters (the law's id, 7 bytes of padding, 8 doubles) instead of names and values, and
+    the record's size in the layout."""
     import struct
 
     b = bytearray(blob)
+    assert int.from_bytes(b[8:12], "little") == 13
+    b[8:12] = (12).to_bytes(4, "little")
+    n_layout = struct.unpack_from("<Q", b, 12)[0]
+    assert struct.unpack_from("<Q", b, 20 + 4 * 8)[0] == 0  # (materials by name: no size)
+    b[20 + 4 * 8:20 + 5 * 8] = struct.pack("<Q", 8 + 8 * 8)
+    at = start = 20 + 8 * n_layout
+    laws = [law["name"] for law in cd.contact_laws()]
+    order = ("density", "young", "poisson", "friction_angle_deg", "damping_normal",
+             "damping_shear", "rolling_stiffness", "rolling_friction")
+
+    def text(at):
+        n = struct.unpack_from("<Q", b, at)[0]
+        return bytes(b[at + 8:at + 8 + n]).decode(), at + 8 + n
+
+    records = []
+    count = struct.unpack_from("<Q", b, at)[0]
+    at += 8
+    for _ in range(count):
+        law, at = text(at)
+        values = {}
+        n_fields = struct.unpack_from("<Q", b, at)[0]
+        at += 8
+        for _ in range(n_fields):
+            name, at = text(at)
+            values[name] = struct.unpack_from("<d", b, at)[0]
+            at += 8
+        records.append(struct.pack("<B7x8d", laws.index(law), *(values[k] for k in order)))
+    b[start:at] = struct.pack("<Q", count) + b"".join(records)
+    return bytes(b)
+
+
+def _format_10(blob: bytes) -> bytes:
+    """A blob of format 13 rewritten as format 12 (_format_12), then as format 10: no wall
+    openings (their vector, after the walls', and their size, the layout's last entry, gone).
+    No clumps, no controller (whose kinds format 12 added)."""
+    import struct
+
+    b = bytearray(_format_12(blob))
     assert int.from_bytes(b[8:12], "little") == 12
     b[8:12] = (10).to_bytes(4, "little")
     n_layout = struct.unpack_from("<Q", b, 12)[0]
@@ -313,8 +351,8 @@ def _older_format(blob: bytes, nbodies: int, kinematics_at: int, version: int) -
 
 def test_checkpoints_of_the_formats_before_still_load():
     """Format 8 had no shear kinematics and 9 no density scaling: such blobs load, with the
-    default kinematics (8) and scaling off (8 and 9). (The blobs are written as format 12 and
-    rewritten as 10, then as 9 and 8.)"""
+    default kinematics (8) and scaling off (8 and 9). (The blobs are written as format 13 and
+    rewritten as 12 and 10, then as 9 and 8.)"""
     from cpp_dem import _core
 
     blobs = {}
@@ -327,7 +365,7 @@ def test_checkpoints_of_the_formats_before_still_load():
         s.dt = DT
         s.run(2)
         blobs[kin] = bytes(_core._checkpoint_save(s))
-    assert int.from_bytes(blobs["yade"][8:12], "little") == 12
+    assert int.from_bytes(blobs["yade"][8:12], "little") == 13
     a, b = _format_10(blobs["contact_point"]), _format_10(blobs["yade"])
     assert len(a) == len(b)
     diff = [k for k in range(len(a)) if a[k] != b[k]]

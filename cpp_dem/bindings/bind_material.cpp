@@ -1,9 +1,130 @@
+#include <algorithm>
 #include <cmath>
+#include <string>
+#include <vector>
 
 #include "convert.hpp"
 #include "cpp_dem/laws/registry.hpp"
 
 namespace cpp_dem::bind {
+
+namespace {
+
+/// Material's docstring: every law's parameters from the field list.
+std::string material_docstring() {
+  std::string doc =
+      "Elastic-frictional material (immutable; SI units).\n\n"
+      "Parameters (keywords only; cpp_dem.material_fields(model) lists them)\n"
+      "----------\n"
+      "model : a law of the registry (cpp_dem.contact_laws()), default 'linear'.\n";
+  const auto line = [&](const FieldInfo& f, const std::string& law) {
+    doc += std::string(f.name) + " : " + f.doc + "; " + f.unit + "; " + f.range() +
+           (f.required() ? "; required" : "; default " + fmt_real(f.fallback)) + law + ".\n";
+  };
+  for (const FieldInfo& f : kMaterialFields) line(f, "");
+  for (const LawInfo& law : kLaws)
+    for (int k = 0; k < law.n_fields; ++k)
+      line(law.fields[k], std::string(" (the '") + law.name + "' law only)");
+  return doc;
+}
+
+/// Edit distance of two names (the suggestion for a misspelt keyword).
+size_t edit_distance(const std::string& a, const std::string& b) {
+  std::vector<size_t> row(b.size() + 1);
+  for (size_t j = 0; j <= b.size(); ++j) row[j] = j;
+  for (size_t i = 1; i <= a.size(); ++i) {
+    size_t diag = row[0];
+    row[0] = i;
+    for (size_t j = 1; j <= b.size(); ++j) {
+      const size_t up = row[j];
+      row[j] = std::min({row[j] + 1, row[j - 1] + 1, diag + (a[i - 1] == b[j - 1] ? 0 : 1)});
+      diag = up;
+    }
+  }
+  return row[b.size()];
+}
+
+/// A material from keywords: model (a law's name), then the parameters of its field list.
+Material make_material(const py::dict& kw) {
+  py::object model = kw.contains("model") ? py::object(kw["model"]) : py::object(py::str("linear"));
+  if (!py::isinstance<py::str>(model))
+    throw ParameterError("model=" + py::repr(model).cast<std::string>() +
+                         ": must be the name of a law (cpp_dem.contact_laws())");
+  Material mat = Material::of_law(law_by_name(model.cast<std::string>()));
+  const auto fields = material_fields(mat.model);
+  std::vector<bool> given(fields.size(), false);
+  for (auto item : kw) {
+    const std::string key = py::str(item.first);
+    if (key == "model") continue;
+    const size_t i = field_index(fields, key);
+    if (i == fields.size()) {
+      std::string allowed, other;
+      size_t best = key.size() / 3 + 2;  // (a suggestion within a third of the name's letters)
+      for (const FieldInfo* f : fields) {
+        allowed += std::string(allowed.empty() ? "" : ", ") + f->name;
+        const size_t d = edit_distance(key, f->name);
+        if (d < best) {
+          best = d;
+          other = std::string(" (did you mean ") + f->name + "?)";
+        }
+      }
+      for (const LawInfo& law : kLaws)
+        for (int k = 0; k < law.n_fields; ++k)
+          if (key == law.fields[k].name)
+            other = std::string(" (a parameter of the '") + law.name + "' law)";
+      throw ParameterError(key + "=" + py::repr(item.second).cast<std::string>() +
+                           ": not a parameter of a '" + law_info(mat.model).name +
+                           "' material; allowed: " + allowed + other);
+    }
+    const double v = number_arg(item.second, fields[i]->name, fields[i]->unit);
+    field_value(mat, *fields[i]) = fields[i]->to_stored(v);
+    given[i] = true;
+  }
+  for (size_t i = 0; i < fields.size(); ++i)
+    if (!given[i] && fields[i]->required())
+      throw ParameterError(std::string("Material: ") + fields[i]->name + " is required (" +
+                           fields[i]->unit + ")");
+  mat.validate();
+  return mat;
+}
+
+py::dict as_dict(const Material& s) {
+  py::dict out;
+  out["model"] = law_info(s.model).name;
+  for (const FieldInfo* f : material_fields(s.model))
+    out[f->name] = f->to_python(field_value(s, *f));
+  return out;
+}
+
+/// A pickled material: (2, law name, {parameter: stored value}); also the 9-tuple of the builds
+/// before the field list (law name and the 8 shared parameters, stored values).
+Material unpickle_material(const py::tuple& t) {
+  if (t.size() == 9) {
+    Material mat = Material::of_law(law_by_name(t[0].cast<std::string>()));
+    Real* legacy[] = {&mat.density, &mat.young, &mat.poisson, &mat.friction_angle,
+                      &mat.damping_normal, &mat.damping_shear, &mat.rolling_stiffness,
+                      &mat.rolling_friction};
+    for (int k = 0; k < 8; ++k) *legacy[k] = t[k + 1].cast<double>();
+    mat.validate();
+    return mat;
+  }
+  if (t.size() != 3 || t[0].cast<int>() != 2)
+    throw std::runtime_error("Material: bad pickled state");
+  Material mat = Material::of_law(law_by_name(t[1].cast<std::string>()));
+  const py::dict stored = t[2].cast<py::dict>();
+  const auto fields = material_fields(mat.model);
+  for (auto item : stored) {
+    const std::string key = py::str(item.first);
+    const size_t i = field_index(fields, key);
+    if (i == fields.size())
+      throw std::runtime_error("Material: pickled parameter '" + key + "' unknown");
+    field_value(mat, *fields[i]) = item.second.cast<double>();
+  }
+  mat.validate();
+  return mat;
+}
+
+}  // namespace
 
 void bind_material(py::module_& m) {
   // The laws of the registry (laws/law_list.hpp): their ids and names.
@@ -21,94 +142,94 @@ void bind_material(py::module_& m) {
     return out;
   }, "The contact laws of the registry: name, summary, whether the hot loops have a short kernel.");
 
-  py::class_<Material>(m, "Material", R"doc(
-Elastic-frictional material (immutable; SI units).
-
-Parameters
-----------
-model : a law of the registry (cpp_dem.contact_laws()): "linear" (Cundall–Strack, 000 eqs
-    1–6) or "hertz_mindlin".
-density : mass density, kg/m^3 (> 0).
-young : Young's modulus E, Pa (> 0).
-poisson : Poisson's ratio nu, -. For the linear law this is k_s/k_n (000 eq 5), in (0, 0.5];
-    for Hertz–Mindlin, in (-1, 0.5].
-friction_angle_deg : contact friction angle, degrees, in [0, 90).
-damping_normal, damping_shear : viscous contact damping, ratio of critical, in [0, 1].
-rolling_stiffness : beta_r, -; k_r = beta_r k_s R*^2 (0: no rolling resistance).
-rolling_friction : eta_r, -; |M_r| <= eta_r R* |F_n|.
-)doc")
-      // The arguments as Python objects, so that a string or a bool is refused naming the
-      // parameter (not with pybind11's list of signatures).
-      .def(py::init([](const py::object& model, const py::object& density,
-                       const py::object& young, const py::object& poisson,
-                       const py::object& friction_angle_deg, const py::object& damping_normal,
-                       const py::object& damping_shear, const py::object& rolling_stiffness,
-                       const py::object& rolling_friction) {
-             if (!py::isinstance<py::str>(model))
-               throw ParameterError("model=" + py::repr(model).cast<std::string>() +
-                                    ": must be the name of a law (cpp_dem.contact_laws())");
-             Material mat;
-             mat.model = law_by_name(model.cast<std::string>());
-             mat.density = number_arg(density, "density", "kg/m^3");
-             mat.young = number_arg(young, "young", "Pa");
-             mat.poisson = number_arg(poisson, "poisson", "-");
-             mat.friction_angle =
-                 number_arg(friction_angle_deg, "friction_angle_deg", "degrees") * M_PI / 180.0;
-             mat.damping_normal = number_arg(damping_normal, "damping_normal", "ratio of critical");
-             mat.damping_shear = number_arg(damping_shear, "damping_shear", "ratio of critical");
-             mat.rolling_stiffness = number_arg(rolling_stiffness, "rolling_stiffness", "-");
-             mat.rolling_friction = number_arg(rolling_friction, "rolling_friction", "-");
-             mat.validate();
-             return mat;
-           }),
-           py::kw_only(), py::arg("model") = py::str("linear"), py::arg("density"),
-           py::arg("young"), py::arg("poisson"), py::arg("friction_angle_deg"),
-           py::arg("damping_normal") = py::float_(0.0), py::arg("damping_shear") = py::float_(0.0),
-           py::arg("rolling_stiffness") = py::float_(0.0),
-           py::arg("rolling_friction") = py::float_(0.0))
-      .def_property_readonly("model", [](const Material& s) {
-        return law_info(s.model).name;
-      })
-      .def_readonly("density", &Material::density, "kg/m^3")
-      .def_readonly("young", &Material::young, "Pa")
-      .def_readonly("poisson", &Material::poisson, "-")
-      .def_property_readonly("friction_angle_deg",
-                             [](const Material& s) { return s.friction_angle * 180.0 / M_PI; })
-      .def_readonly("damping_normal", &Material::damping_normal)
-      .def_readonly("damping_shear", &Material::damping_shear)
-      .def_readonly("rolling_stiffness", &Material::rolling_stiffness)
-      .def_readonly("rolling_friction", &Material::rolling_friction)
+  // Material: its keywords, attributes, repr, pickle and replace all come from the field list
+  // (material_fields: the shared parameters, then the law's own; laws/fields.hpp).
+  static const std::string material_doc = material_docstring();
+  py::class_<Material> cls(m, "Material", material_doc.c_str());
+  cls.def(py::init([](const py::kwargs& kw) { return make_material(kw); }),
+          "Material(*, model='linear', density, young, poisson, friction_angle_deg, ...): "
+          "the parameters of cpp_dem.material_fields(model), by keyword.")
+      .def_property_readonly("model", [](const Material& s) { return law_info(s.model).name; })
       .def_property_readonly("shear_modulus", &Material::shear_modulus, "Pa")
-      // Pickled exactly (the friction angle in radians, as stored), so that a material
+      .def("as_dict", &as_dict,
+           "{'model': name, parameter: value, ...}: every parameter of this material, in the "
+           "units of its keyword (material_fields).")
+      .def("replace", [](const Material& s, const py::kwargs& changes) {
+             py::dict kw;
+             const py::object name = py::str(law_info(s.model).name);
+             const bool same_law =
+                 !changes.contains("model") || py::object(changes["model"]).equal(name);
+             for (const FieldInfo* f : material_fields(s.model))
+               if (same_law || f->member) kw[f->name] = f->to_python(field_value(s, *f));
+             kw["model"] = law_info(s.model).name;
+             for (auto item : changes) kw[item.first] = item.second;
+             return make_material(kw);
+           },
+           "A copy with the given parameters changed (checked as Material(...) checks them); "
+           "a new model keeps the shared parameters and takes that law's own defaults.")
+      // Pickled exactly (stored values: the friction angle in radians), so that a material
       // reaches Dask workers and process pools bitwise.
       .def(py::pickle(
           [](const Material& s) {
-            return py::make_tuple(std::string(law_info(s.model).name), s.density, s.young,
-                                  s.poisson, s.friction_angle, s.damping_normal,
-                                  s.damping_shear, s.rolling_stiffness, s.rolling_friction);
+            py::dict stored;
+            for (const FieldInfo* f : material_fields(s.model))
+              stored[f->name] = field_value(s, *f);
+            return py::make_tuple(2, std::string(law_info(s.model).name), stored);
           },
-          [](const py::tuple& t) {
-            if (t.size() != 9) throw std::runtime_error("Material: bad pickled state");
-            Material mat;
-            mat.model = law_by_name(t[0].cast<std::string>());
-            mat.density = t[1].cast<double>();
-            mat.young = t[2].cast<double>();
-            mat.poisson = t[3].cast<double>();
-            mat.friction_angle = t[4].cast<double>();
-            mat.damping_normal = t[5].cast<double>();
-            mat.damping_shear = t[6].cast<double>();
-            mat.rolling_stiffness = t[7].cast<double>();
-            mat.rolling_friction = t[8].cast<double>();
-            mat.validate();
-            return mat;
-          }))
+          [](const py::tuple& t) { return unpickle_material(t); }))
       .def("__repr__", [](const Material& s) {
-        return std::string("Material(model='") +
-               law_info(s.model).name +
-               "', density=" + fmt_real(s.density) + ", young=" + fmt_real(s.young) +
-               ", poisson=" + fmt_real(s.poisson) +
-               ", friction_angle_deg=" + fmt_real(s.friction_angle * 180.0 / M_PI) + ")";
+        std::string out = std::string("Material(model='") + law_info(s.model).name + "'";
+        for (const FieldInfo* f : material_fields(s.model)) {
+          const Real v = f->to_python(field_value(s, *f));
+          if (f->required() || !(v == f->fallback))
+            out += std::string(", ") + f->name + "=" + fmt_real(v);
+        }
+        return out + ")";
       });
+  // One read-only attribute per parameter of any law.
+  std::vector<std::string> names;
+  const auto add_attribute = [&](const FieldInfo& f) {
+    if (std::find(names.begin(), names.end(), f.name) != names.end()) return;
+    names.push_back(f.name);
+    const std::string key = f.name;
+    cls.def_property_readonly(
+        f.name,
+        [key](const Material& s) -> double {
+          for (const FieldInfo* g : material_fields(s.model))
+            if (key == g->name) return g->to_python(field_value(s, *g));
+          throw py::attribute_error("Material: a '" + std::string(law_info(s.model).name) +
+                                    "' material has no parameter '" + key + "'");
+        },
+        (std::string(f.unit) + "; " + f.doc).c_str());
+  };
+  for (const FieldInfo& f : kMaterialFields) add_attribute(f);
+  for (const LawInfo& law : kLaws)
+    for (int k = 0; k < law.n_fields; ++k) add_attribute(law.fields[k]);
+
+  m.def("material_fields", [](const py::object& model) {
+          if (!py::isinstance<py::str>(model))
+            throw ParameterError("model=" + py::repr(model).cast<std::string>() +
+                                 ": must be the name of a law (cpp_dem.contact_laws())");
+          py::list out;
+          for (const FieldInfo* f : material_fields(law_by_name(model.cast<std::string>()))) {
+            py::dict row;
+            row["name"] = f->name;
+            row["unit"] = f->unit;
+            row["doc"] = f->doc;
+            row["default"] = f->required() ? py::object(py::none()) : py::float_(f->fallback);
+            row["allowed"] = f->range();
+            row["lo"] = f->lo;
+            row["lo_closed"] = f->lo_closed;
+            row["hi"] = f->hi;
+            row["hi_closed"] = f->hi_closed;
+            row["law_owned"] = f->member == nullptr;
+            out.append(row);
+          }
+          return out;
+        }, py::arg("model") = py::str("linear"),
+        "The parameters of a material of law `model`: name, unit, doc, default (None: "
+        "required), allowed (the range as text) and its bounds lo, hi (-inf, inf: none) with "
+        "lo_closed, hi_closed, law_owned (the law's own, or shared by every law).");
 
   py::class_<ContactPhys>(m, "ContactPhys", "Mixed parameters of one contact (read-only).")
       .def_property_readonly("model", [](const ContactPhys& p) {

@@ -35,7 +35,9 @@ from cpp_dem._core import (  # noqa: F401,E402  (re-exported)
     ContactPhys,
     Material,
     ParameterError,
+    contact_laws,
     get_num_threads,
+    material_fields,
     mix_materials,
 )
 from cpp_dem.build.packing import read_packing_csv, write_packing_csv  # noqa: F401
@@ -89,5 +91,7 @@ __all__ = [
     "hertz_mindlin_material",
     "linear_material",
     "mix_materials",
+    "contact_laws",
+    "material_fields",
     "set_num_threads",
 ]

@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BeamParams', 'BlowUpError', 'BondParams', 'CellController', 'ContactModel', 'ContactPhys', 'Controller', 'GEOGRID', 'Material', 'ParameterError', 'RadiusGrowth', 'Scene', 'ServoWall', 'TriaxialController', 'contact_laws', 'get_num_threads', 'mix_materials', 'servo_speed', 'set_num_threads', 'simd_dispatch']
+__all__: list[str] = ['BeamParams', 'BlowUpError', 'BondParams', 'CellController', 'ContactModel', 'ContactPhys', 'Controller', 'GEOGRID', 'Material', 'ParameterError', 'RadiusGrowth', 'Scene', 'ServoWall', 'TriaxialController', 'contact_laws', 'get_num_threads', 'material_fields', 'mix_materials', 'servo_speed', 'set_num_threads', 'simd_dispatch']
 class ParameterError(ValueError):
     pass
 class BlowUpError(RuntimeError):
@@ -62,55 +62,74 @@ class Material:
     """
     Elastic-frictional material (immutable; SI units).
     
-    Parameters
+    Parameters (keywords only; cpp_dem.material_fields(model) lists them)
     ----------
-    model : a law of the registry (cpp_dem.contact_laws()): "linear" (Cundall–Strack, 000 eqs
-        1–6) or "hertz_mindlin".
-    density : mass density, kg/m^3 (> 0).
-    young : Young's modulus E, Pa (> 0).
-    poisson : Poisson's ratio nu, -. For the linear law this is k_s/k_n (000 eq 5), in (0, 0.5];
-        for Hertz–Mindlin, in (-1, 0.5].
-    friction_angle_deg : contact friction angle, degrees, in [0, 90).
-    damping_normal, damping_shear : viscous contact damping, ratio of critical, in [0, 1].
-    rolling_stiffness : beta_r, -; k_r = beta_r k_s R*^2 (0: no rolling resistance).
-    rolling_friction : eta_r, -; |M_r| <= eta_r R* |F_n|.
+    model : a law of the registry (cpp_dem.contact_laws()), default 'linear'.
+    density : mass density; kg/m^3; > 0; required.
+    young : Young's modulus E; Pa; > 0; required.
+    poisson : Poisson's ratio nu (the linear law: the ratio k_s/k_n of 000 eq 5, in (0, 0.5]); -; in (-1, 0.5]; required.
+    friction_angle_deg : contact friction angle (stored in radians); deg; in [0, 90); required.
+    damping_normal : viscous damping of the normal spring; ratio of critical; in [0, 1]; default 0.
+    damping_shear : viscous damping of the shear spring; ratio of critical; in [0, 1]; default 0.
+    rolling_stiffness : beta_r: k_r = beta_r k_s R*^2 (0: no rolling resistance); -; >= 0; default 0.
+    rolling_friction : eta_r: |M_r| <= eta_r R* |F_n|; -; >= 0; default 0.
     """
-    def __getstate__(self) -> tuple[str, float, float, float, float, float, float, float, float]:
+    def __getstate__(self) -> tuple[int, str, dict]:
         ...
-    def __init__(self, *, model: typing.Any = 'linear', density: typing.Any, young: typing.Any, poisson: typing.Any, friction_angle_deg: typing.Any, damping_normal: typing.Any = 0.0, damping_shear: typing.Any = 0.0, rolling_stiffness: typing.Any = 0.0, rolling_friction: typing.Any = 0.0) -> None:
-        ...
+    def __init__(self, **kwargs) -> None:
+        """
+        Material(*, model='linear', density, young, poisson, friction_angle_deg, ...): the parameters of cpp_dem.material_fields(model), by keyword.
+        """
     def __repr__(self) -> str:
         ...
     def __setstate__(self, arg0: tuple) -> None:
         ...
+    def as_dict(self) -> dict:
+        """
+        {'model': name, parameter: value, ...}: every parameter of this material, in the units of its keyword (material_fields).
+        """
+    def replace(self, **kwargs) -> Material:
+        """
+        A copy with the given parameters changed (checked as Material(...) checks them); a new model keeps the shared parameters and takes that law's own defaults.
+        """
     @property
     def damping_normal(self) -> float:
-        ...
+        """
+        ratio of critical; viscous damping of the normal spring
+        """
     @property
     def damping_shear(self) -> float:
-        ...
+        """
+        ratio of critical; viscous damping of the shear spring
+        """
     @property
     def density(self) -> float:
         """
-        kg/m^3
+        kg/m^3; mass density
         """
     @property
     def friction_angle_deg(self) -> float:
-        ...
+        """
+        deg; contact friction angle (stored in radians)
+        """
     @property
     def model(self) -> str:
         ...
     @property
     def poisson(self) -> float:
         """
-        -
+        -; Poisson's ratio nu (the linear law: the ratio k_s/k_n of 000 eq 5, in (0, 0.5])
         """
     @property
     def rolling_friction(self) -> float:
-        ...
+        """
+        -; eta_r: |M_r| <= eta_r R* |F_n|
+        """
     @property
     def rolling_stiffness(self) -> float:
-        ...
+        """
+        -; beta_r: k_r = beta_r k_s R*^2 (0: no rolling resistance)
+        """
     @property
     def shear_modulus(self) -> float:
         """
@@ -119,7 +138,7 @@ class Material:
     @property
     def young(self) -> float:
         """
-        Pa
+        Pa; Young's modulus E
         """
 class ContactPhys:
     """
@@ -1148,6 +1167,10 @@ def contact_laws() -> list:
 def get_num_threads() -> int:
     """
     Number of OpenMP threads used by the next parallel region.
+    """
+def material_fields(model: typing.Any = 'linear') -> list:
+    """
+    The parameters of a material of law `model`: name, unit, doc, default (None: required), allowed (the range as text) and its bounds lo, hi (-inf, inf: none) with lo_closed, hi_closed, law_owned (the law's own, or shared by every law).
     """
 def mix_materials(a: Material, b: Material, r1: float, r2: float, m1: float, m2: float) -> ContactPhys:
     """

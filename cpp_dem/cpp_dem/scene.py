@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import difflib
 import math
 import os
 import sys
@@ -143,16 +144,15 @@ _MAX_STEPS = 2**63 - 1
 BOX_WALLS = ("x-", "x+", "y-", "y+", "z-", "z+")
 
 
-#: The optional law parts a material helper takes (ratios of critical, -).
-LAW_PARTS = ("damping_normal", "damping_shear", "rolling_stiffness", "rolling_friction")
-
-
-def _check_parts(parts: dict) -> None:
+def _check_parts(parts: dict, model: str) -> None:
+    """The optional parameters a material helper passes on: the parameters of the law's field
+    list that have a default (``cpp_dem.material_fields(model)``)."""
+    optional = [f["name"] for f in _core.material_fields(model) if f["default"] is not None]
     for key, value in parts.items():
-        if key not in LAW_PARTS:
-            close = [p for p in LAW_PARTS if p[:4] == key[:4]]
-            raise ParameterError(f"{key}={value!r}: not a parameter of the material; allowed: "
-                                 f"{', '.join(LAW_PARTS)}"
+        if key not in optional:
+            close = difflib.get_close_matches(key, optional, n=1)
+            raise ParameterError(f"{key}={value!r}: not an optional parameter of a '{model}' "
+                                 f"material; allowed: {', '.join(optional)}"
                                  + (f" (did you mean {close[0]}?)" if close else ""))
         if not isinstance(value, (int, float)) or isinstance(value, bool):
             raise ParameterError(f"{key}={value!r}: must be a number")
@@ -162,10 +162,11 @@ def linear_material(*, density: float, young: float, poisson: float,
                     friction_angle_deg: float, **parts: float) -> Material:
     """Material for the linear Cundall–Strack law (000 eqs 1–6). SI units (kg/m^3, Pa, deg).
 
-    ``parts`` are the optional law parts: damping_normal, damping_shear (ratios of critical),
-    rolling_stiffness, rolling_friction.
+    ``parts`` are the optional parameters (``cpp_dem.material_fields("linear")`` with a
+    default): damping_normal, damping_shear (ratios of critical), rolling_stiffness,
+    rolling_friction.
     """
-    _check_parts(parts)
+    _check_parts(parts, "linear")
     return Material(model="linear", density=density, young=young, poisson=poisson,
                     friction_angle_deg=friction_angle_deg, **parts)
 
@@ -177,7 +178,7 @@ def hertz_mindlin_material(*, density: float, shear_modulus: float, poisson: flo
     shear_modulus: G, Pa; poisson: nu, -; friction_coefficient: mu = tan(phi), -;
     density: kg/m^3. Young's modulus is E = 2 G (1 + nu).
     """
-    _check_parts(parts)
+    _check_parts(parts, "hertz_mindlin")
     for key, value, unit in (("density", density, "kg/m^3"), ("shear_modulus", shear_modulus, "Pa"),
                              ("poisson", poisson, "-"),
                              ("friction_coefficient", friction_coefficient, "-")):

@@ -10,6 +10,7 @@
 #include <typeinfo>
 
 #include "cpp_dem/control/controllers.hpp"
+#include "cpp_dem/laws/registry.hpp"
 
 namespace cpp_dem {
 
@@ -74,11 +75,81 @@ class Reader {
   }
 };
 
+/// A material as versions 8 to 12 stored it (a record of the 8 shared parameters).
+struct MaterialV12 {
+  ContactModel model;
+  std::uint8_t pad_[7];
+  Real density, young, poisson, friction_angle, damping_normal, damping_shear,
+      rolling_stiffness, rolling_friction;
+};
+static_assert(sizeof(MaterialV12) == 8 + 8 * sizeof(Real));
+
+std::vector<char> chars(const char* s) { return std::vector<char>(s, s + std::strlen(s)); }
+
+/// The materials by their field list (version 13 on): per material, the law's name, then
+/// each parameter's name and stored value.
+void put_materials(Writer& w, const std::vector<Material>& materials) {
+  w.put(static_cast<std::uint64_t>(materials.size()));
+  for (const Material& m : materials) {
+    w.vec(chars(law_info(m.model).name));
+    const auto fields = material_fields(m.model);
+    w.put(static_cast<std::uint64_t>(fields.size()));
+    for (const FieldInfo* f : fields) {
+      w.vec(chars(f->name));
+      w.put(field_value(m, *f));
+    }
+  }
+}
+
+/// Reads what put_materials wrote: a parameter the blob lacks takes its default, a parameter
+/// or law this build does not know is refused by name.
+std::vector<Material> get_materials(Reader& r) {
+  const auto n = r.get<std::uint64_t>();
+  if (n > r.buf.size()) throw ParameterError("checkpoint: corrupt material count");
+  std::vector<Material> out;
+  for (std::uint64_t k = 0; k < n; ++k) {
+    const std::string what = "checkpoint: material " + std::to_string(k);
+    std::vector<char> name;
+    r.vec(name);
+    Material m;
+    try {
+      m.model = law_by_name(std::string(name.begin(), name.end()));
+    } catch (const ParameterError& e) {
+      throw ParameterError(what + ": " + e.what() + " (a law of another build)");
+    }
+    const auto fields = material_fields(m.model);
+    std::vector<bool> seen(fields.size(), false);
+    const auto count = r.get<std::uint64_t>();
+    if (count > r.buf.size()) throw ParameterError(what + ": corrupt parameter count");
+    for (std::uint64_t j = 0; j < count; ++j) {
+      r.vec(name);
+      const std::string field(name.begin(), name.end());
+      const Real v = r.get<Real>();
+      const size_t i = field_index(fields, field);
+      if (i == fields.size())
+        throw ParameterError(what + " (" + law_info(m.model).name + "): parameter '" + field +
+                             "' is not one of this build's (a checkpoint of another build)");
+      field_value(m, *fields[i]) = v;
+      seen[i] = true;
+    }
+    for (size_t i = 0; i < fields.size(); ++i) {
+      if (seen[i]) continue;
+      if (fields[i]->required())
+        throw ParameterError(what + ": parameter '" + fields[i]->name + "' is missing");
+      field_value(m, *fields[i]) = fields[i]->to_stored(fields[i]->fallback);
+    }
+    out.push_back(m);
+  }
+  return out;
+}
+
 /// Sizes of every record type, in a fixed order: the layout fingerprint.
 /// (Before version 10 the body store had one array fewer, inertia_scale.)
 std::vector<std::uint64_t> layout(std::uint32_t version = Checkpoint::kVersion) {
   const std::uint64_t body_store = sizeof(BodyStore) - (version < 10 ? sizeof(std::vector<Real>) : 0);
-  std::vector<std::uint64_t> l = {sizeof(Real),        body_store,        sizeof(Vec3),        sizeof(Quat),       sizeof(Material),
+  // (From version 13 on the materials go by name: no record size.)
+  const std::uint64_t material = version < 13 ? sizeof(MaterialV12) : 0;
+  std::vector<std::uint64_t> l = {sizeof(Real),        body_store,        sizeof(Vec3),        sizeof(Quat),       material,
           sizeof(Wall),        sizeof(PairContact), sizeof(PairOutput), sizeof(WallContact), sizeof(GridLink),
           sizeof(PFacet),      sizeof(GridContact), sizeof(BreakEvent), sizeof(ContactPhys),
           sizeof(ContactState), sizeof(PairContactCold), sizeof(PeriodicCell), sizeof(Bond),
@@ -259,7 +330,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.raw(kMagic, sizeof(kMagic));
   w.put(kVersion);
   w.vec(layout());
-  w.vec(s.materials_);
+  put_materials(w, s.materials_);
   w.vec(s.pair_laws_);
   // Bodies.
   s.bodies_.for_each_array([&](const auto& v) { w.vec(v); });
@@ -361,7 +432,24 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
                          "sizes differ); restart with the build that wrote it");
   // Read everything into a copy first, so a bad blob leaves the scene untouched.
   Scene t;
-  r.vec(t.materials_);
+  if (version >= 13) {
+    t.materials_ = get_materials(r);
+  } else {
+    std::vector<MaterialV12> old;
+    r.vec(old);
+    for (const MaterialV12& o : old) {
+      Material m = Material::of_law(o.model);  // (a law's own parameters: their defaults)
+      m.density = o.density;
+      m.young = o.young;
+      m.poisson = o.poisson;
+      m.friction_angle = o.friction_angle;
+      m.damping_normal = o.damping_normal;
+      m.damping_shear = o.damping_shear;
+      m.rolling_stiffness = o.rolling_stiffness;
+      m.rolling_friction = o.rolling_friction;
+      t.materials_.push_back(m);
+    }
+  }
   r.vec(t.pair_laws_);
   // (The inertia factors, the last arrays of both stores, from version 10 on; before, 1.)
   t.bodies_.for_each_array([&](auto& v) {

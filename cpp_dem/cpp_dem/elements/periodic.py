@@ -192,9 +192,9 @@ class DemElement:
         centers, radii, edge = periodic.cube_cloud(n, radius_mean, radius_spread, seed, 0.25)
         scene = Scene(local_damping=damping)
         m = scene.add_material(material)
-        wm = scene.add_material(_core.Material(
-            model=material.model, density=material.density, young=material.young,
-            poisson=material.poisson, friction_angle_deg=0.0))
+        wm = scene.add_material(material.replace(  # (the grains' elastic law, frictionless)
+            friction_angle_deg=0.0, damping_normal=0.0, damping_shear=0.0,
+            rolling_stiffness=0.0, rolling_friction=0.0))
         walls = scene.add_box((0, 0, 0), (edge, edge, edge), material=wm)
         scene.add_spheres(centers, radii, material=m)
         scene.set_auto_timestep(0.5, 500)

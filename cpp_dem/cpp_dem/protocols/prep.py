@@ -64,11 +64,7 @@ def set_friction(scene, bodies, material: Material, friction_angle_deg: float) -
     """Gives ``bodies`` a copy of ``material`` with another friction angle (deg); returns the
     new material index. Contacts remix their parameters at the next step (the stored shear
     forces are capped by the new Coulomb limit)."""
-    m = Material(model=material.model, density=material.density, young=material.young,
-                 poisson=material.poisson, friction_angle_deg=friction_angle_deg,
-                 damping_normal=material.damping_normal, damping_shear=material.damping_shear,
-                 rolling_stiffness=material.rolling_stiffness,
-                 rolling_friction=material.rolling_friction)
+    m = material.replace(friction_angle_deg=friction_angle_deg)
     idx = scene.add_material(m)
     for b in np.asarray(bodies, dtype=int):
         scene.set_body_material(int(b), idx)

@@ -190,9 +190,9 @@ def build_sample(centers, radii, lo, hi, *, grain: Material, grid_builder: Calla
         raise ParameterError(f"clamp_depth={clamp_depth}: must be >= 0 (m)")
     sc = Scene(local_damping=local_damping)
     gmat = sc.add_material(grain)
-    wall_mat = sc.add_material(Material(model=grain.model, density=grain.density,
-                                        young=grain.young, poisson=grain.poisson,
-                                        friction_angle_deg=0.0))
+    wall_mat = sc.add_material(grain.replace(  # (the grains' elastic law, frictionless)
+        friction_angle_deg=0.0, damping_normal=0.0, damping_shear=0.0, rolling_stiffness=0.0,
+        rolling_friction=0.0))
     walls = sc.add_box(lo, hi, material=wall_mat)
     if clumps is not None:
         cloud, templates = clumps

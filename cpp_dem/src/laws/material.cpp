@@ -17,23 +17,62 @@ std::string fmt_real(Real v) {
   return buf;
 }
 
+std::string FieldInfo::range() const {
+  std::string range;
+  const bool has_lo = std::isfinite(lo), has_hi = std::isfinite(hi);
+  if (has_lo && has_hi)
+    range = std::string("in ") + (lo_closed ? "[" : "(") + fmt_real(lo) + ", " + fmt_real(hi) +
+            (hi_closed ? "]" : ")");
+  else if (has_lo)
+    range = std::string(lo_closed ? ">= " : "> ") + fmt_real(lo);
+  else if (has_hi)
+    range = std::string(hi_closed ? "<= " : "< ") + fmt_real(hi);
+  else
+    range = "finite";
+  return range;
+}
+
+std::string FieldInfo::allowed() const {
+  const std::string u = unit;
+  return "must be " + range() + (u == "-" ? "" : " (" + u + ")");
+}
+
+void FieldInfo::check(Real v) const {
+  const bool ok = std::isfinite(v) && (!std::isfinite(lo) || (lo_closed ? v >= lo : v > lo)) &&
+                  (!std::isfinite(hi) || (hi_closed ? v <= hi : v < hi));
+  if (!ok) throw ParameterError(std::string(name) + "=" + fmt_real(v) + ": " + allowed());
+}
+
+std::vector<const FieldInfo*> material_fields(ContactModel m) {
+  std::vector<const FieldInfo*> out;
+  for (const FieldInfo& f : kMaterialFields) out.push_back(&f);
+  const LawInfo& law = law_info(m);
+  for (int k = 0; k < law.n_fields; ++k) out.push_back(&law.fields[k]);
+  return out;
+}
+
 void Material::validate() const {
-  require(std::isfinite(density) && density > 0, "density", density,
-          "must be > 0 (kg/m^3)");
-  require(std::isfinite(young) && young > 0, "young", young, "must be > 0 (Pa)");
-  // The law's own rule for nu (and any other field it reads differently).
+  // Every field's range (the list's order), then the law's own rules (e.g. the linear law's
+  // nu > 0, where nu is the ratio k_s/k_n).
+  for (const FieldInfo* f : material_fields(model)) f->check(f->to_python(field_value(*this, *f)));
   with_elastic_part(model, [&](auto part) { decltype(part)::validate(*this); });
-  require(std::isfinite(friction_angle) && friction_angle >= 0 &&
-              friction_angle < M_PI / 2,
-          "friction_angle_deg", friction_angle * 180.0 / M_PI, "must be in [0, 90) degrees");
-  require(std::isfinite(damping_normal) && damping_normal >= 0 && damping_normal <= 1,
-          "damping_normal", damping_normal, "must be in [0, 1] (ratio of critical)");
-  require(std::isfinite(damping_shear) && damping_shear >= 0 && damping_shear <= 1,
-          "damping_shear", damping_shear, "must be in [0, 1] (ratio of critical)");
-  require(std::isfinite(rolling_stiffness) && rolling_stiffness >= 0, "rolling_stiffness",
-          rolling_stiffness, "must be >= 0");
-  require(std::isfinite(rolling_friction) && rolling_friction >= 0, "rolling_friction",
-          rolling_friction, "must be >= 0");
+}
+
+Material Material::of_law(ContactModel m) {
+  Material out;
+  out.model = m;
+  for (const FieldInfo* f : material_fields(m))
+    if (!f->required()) field_value(out, *f) = f->to_stored(f->fallback);
+  return out;
+}
+
+Material Material::as_law(ContactModel m) const {
+  if (m == model) return *this;
+  Material out = *this;
+  out.model = m;
+  const Material fresh = of_law(m);
+  for (int k = 0; k < kLawParamSlots; ++k) out.law_params[k] = fresh.law_params[k];
+  return out;
 }
 
 ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2, Real m1,
@@ -47,7 +86,9 @@ ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2
   // Two materials of different laws meet with the linear law (e.g. Hertz–Mindlin grains
   // against a linear geogrid, as 002 §2.3).
   p.model = a.model == b.model ? a.model : ContactModel::Linear;
-  with_elastic_part(p.model, [&](auto part) { decltype(part)::mix(a, b, r1, r2, r_eff, p); });
+  // (a material of another law brings the shared parameters; the law's own are its defaults)
+  const Material a2 = a.as_law(p.model), b2 = b.as_law(p.model);
+  with_elastic_part(p.model, [&](auto part) { decltype(part)::mix(a2, b2, r1, r2, r_eff, p); });
   p.tan_phi = std::tan(std::min(a.friction_angle, b.friction_angle));
   p.beta_n = 0.5 * (a.damping_normal + b.damping_normal);
   p.beta_s = 0.5 * (a.damping_shear + b.damping_shear);
@@ -59,7 +100,7 @@ ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2
   if (beta_r > 0 && eta_r > 0) {
     // The rolling stiffness scales with the law's reference shear stiffness.
     const Real ks_lin = with_elastic_part(
-        p.model, [&](auto part) { return decltype(part)::rolling_reference(a, b, r_eff, p); });
+        p.model, [&](auto part) { return decltype(part)::rolling_reference(a2, b2, r_eff, p); });
     p.kr = beta_r * ks_lin * r_eff * r_eff;
     p.rolling_cap = eta_r * r_eff;
   }
@@ -83,9 +124,7 @@ ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2
   if (!law) return mix_materials(a, b, r1, r2, m1, m2);
   ContactPhys p;
   if (law->model_set) {
-    Material a2 = a, b2 = b;
-    a2.model = b2.model = law->model;
-    p = mix_materials(a2, b2, r1, r2, m1, m2);
+    p = mix_materials(a.as_law(law->model), b.as_law(law->model), r1, r2, m1, m2);
   } else {
     p = mix_materials(a, b, r1, r2, m1, m2);
   }

@@ -2,6 +2,7 @@
 // stiffness, Coulomb cap. Its elastic part for the registry.
 #pragma once
 
+#include <array>
 #include <cmath>
 
 #include "cpp_dem/laws/material.hpp"
@@ -28,6 +29,8 @@ struct HertzMindlinElastic {
   static constexpr bool kShortKernel = false;
   static constexpr const char* kSummary =
       "Hertz normal force, no-slip Mindlin tangential stiffness, Coulomb cap";
+  /// Its own parameters beyond the shared ones (material.hpp): none.
+  static constexpr std::array<FieldInfo, 0> kFields{};
   static void validate(const Material& m) {
     require(std::isfinite(m.poisson) && m.poisson > -1 && m.poisson <= 0.5, "poisson",
             m.poisson, "must be in (-1, 0.5]");

@@ -3,6 +3,7 @@
 // resistance.
 #pragma once
 
+#include <array>
 #include <cmath>
 
 #include "cpp_dem/laws/material.hpp"
@@ -19,6 +20,8 @@ struct LinearElastic {
   static constexpr bool kShortKernel = true;
   static constexpr const char* kSummary =
       "linear Cundall–Strack: F_n = k_n u_n, dF_s = -k_s v_s dt, Coulomb cap (000 eqs 1-5)";
+  /// Its own parameters beyond the shared ones (material.hpp): none.
+  static constexpr std::array<FieldInfo, 0> kFields{};
   /// nu is the ratio k_s/k_n of 000 eq (5) here.
   static void validate(const Material& m) {
     require(std::isfinite(m.poisson) && m.poisson > 0 && m.poisson <= 0.5, "poisson", m.poisson,

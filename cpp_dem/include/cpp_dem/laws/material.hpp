@@ -1,7 +1,11 @@
 // Materials and the per-contact parameters mixed from two materials.
 #pragma once
 
+#include <string>
+#include <vector>
+
 #include "cpp_dem/core/types.hpp"
+#include "cpp_dem/laws/fields.hpp"
 #include "cpp_dem/laws/law_list.hpp"
 
 namespace cpp_dem {
@@ -17,6 +21,9 @@ namespace cpp_dem {
 ///  - damping ratios and rolling parameters: arithmetic means,
 ///  - two materials with different models meet with the linear model (e.g. Hertz–Mindlin
 ///    grains against a linear geogrid, as 002 §2.3).
+///
+/// Every parameter is a field of the one list (material_fields(model)): the shared ones below
+/// (kMaterialFields), and the law's own in law_params (its kFields, laws/<law>.hpp).
 struct Material {
   ContactModel model = ContactModel::Linear;  ///< the law's elastic part (laws/law_list.hpp)
   std::uint8_t pad_[7] = {};      ///< zero (explicit padding: checkpoints are byte-identical)
@@ -32,13 +39,63 @@ struct Material {
   Real rolling_stiffness = 0.0;
   /// Rolling friction coefficient eta_r, -: |M_r| <= eta_r R* |F_n|. 0 = off.
   Real rolling_friction = 0.0;
+  /// The law's own parameters, in the order of its kFields (laws/<law>.hpp); a law reads them
+  /// as law_params[k]. Slots a law does not declare are zero.
+  Real law_params[kLawParamSlots] = {};
 
   /// Shear modulus G = E / (2 (1 + nu)), Pa.
   Real shear_modulus() const { return young / (2.0 * (1.0 + poisson)); }
 
   /// Throws ParameterError naming the first bad field, its value and the allowed range.
   void validate() const;
+
+  /// This material under law m: the same shared parameters; the law's own at m's defaults
+  /// when m is not this material's law (so that a law never reads another law's slots).
+  Material as_law(ContactModel m) const;
+  /// A material of law m with every optional parameter at its default (the required ones at
+  /// the member initialisers above).
+  static Material of_law(ContactModel m);
 };
+
+/// The parameters every law shares, in their Python order. Defaults are the Python keywords'
+/// (NaN: required); bounds are checked by Material::validate before the law's own rules.
+inline const FieldInfo kMaterialFields[] = {
+    {"density", "kg/m^3", "mass density", kRequired, 0.0, false, kNoBound, false,
+     FieldScale::Plain, &Material::density},
+    {"young", "Pa", "Young's modulus E", kRequired, 0.0, false, kNoBound, false, FieldScale::Plain,
+     &Material::young},
+    {"poisson", "-",
+     "Poisson's ratio nu (the linear law: the ratio k_s/k_n of 000 eq 5, in (0, 0.5])",
+     kRequired, -1.0, false, 0.5, true, FieldScale::Plain, &Material::poisson},
+    {"friction_angle_deg", "deg", "contact friction angle (stored in radians)", kRequired, 0.0,
+     true, 90.0, false, FieldScale::Degrees, &Material::friction_angle},
+    {"damping_normal", "ratio of critical", "viscous damping of the normal spring", 0.0, 0.0,
+     true, 1.0, true, FieldScale::Plain, &Material::damping_normal},
+    {"damping_shear", "ratio of critical", "viscous damping of the shear spring", 0.0, 0.0,
+     true, 1.0, true, FieldScale::Plain, &Material::damping_shear},
+    {"rolling_stiffness", "-", "beta_r: k_r = beta_r k_s R*^2 (0: no rolling resistance)", 0.0,
+     0.0, true, kNoBound, false, FieldScale::Plain, &Material::rolling_stiffness},
+    {"rolling_friction", "-", "eta_r: |M_r| <= eta_r R* |F_n|", 0.0, 0.0, true, kNoBound, false,
+     FieldScale::Plain, &Material::rolling_friction},
+};
+
+/// Every parameter of a material of law m: kMaterialFields, then the law's own kFields.
+std::vector<const FieldInfo*> material_fields(ContactModel m);
+
+/// The place of the field called `name` in `fields` (fields.size(): none).
+inline size_t field_index(const std::vector<const FieldInfo*>& fields, const std::string& name) {
+  size_t i = 0;
+  while (i < fields.size() && name != fields[i]->name) ++i;
+  return i;
+}
+
+/// The stored value of field f in material s (a named member, or a law_params slot).
+inline Real& field_value(Material& s, const FieldInfo& f) {
+  return f.member ? s.*(f.member) : s.law_params[f.slot];
+}
+inline Real field_value(const Material& s, const FieldInfo& f) {
+  return f.member ? s.*(f.member) : s.law_params[f.slot];
+}
 
 /// Per-contact parameters, computed once when the contact becomes active
 /// (and again when radii change). Plain values; the law kernels read only these.

@@ -20,7 +20,21 @@ struct LawInfo {
   const char* name;      ///< name in the Python API and run files
   const char* summary;   ///< one line for docs and reprs
   bool short_kernel;     ///< the hot loops have a short kernel for it (no dashpot, no rolling)
+  const FieldInfo* fields;  ///< its own parameters (part::kFields; Material::law_params)
+  int n_fields;
 };
+
+/// A law's own fields: at most kLawParamSlots, each in the slot of its place in the list, each
+/// with a default (a material of another law meets this law with it).
+template <class Part>
+constexpr bool law_fields_fit() {
+  if (Part::kFields.size() > static_cast<std::size_t>(kLawParamSlots)) return false;
+  for (std::size_t k = 0; k < Part::kFields.size(); ++k)
+    if (Part::kFields[k].slot != static_cast<int>(k) || Part::kFields[k].member ||
+        !(Part::kFields[k].fallback == Part::kFields[k].fallback))  // (a default: not NaN)
+      return false;
+  return true;
+}
 
 /// Calls f(Part{}) with the elastic part of law m (the one dispatch on a law id).
 template <class F>
@@ -37,10 +51,19 @@ inline decltype(auto) with_elastic_part(ContactModel m, F&& f) {
 
 /// Every law, in the order of laws/law_list.hpp.
 inline constexpr LawInfo kLaws[] = {
-#define CPP_DEM_LAW_ROW(id, name, part) {ContactModel::id, name, part::kSummary, part::kShortKernel},
+#define CPP_DEM_LAW_ROW(id, name, part)                                              \
+  {ContactModel::id, name, part::kSummary, part::kShortKernel, part::kFields.data(), \
+   static_cast<int>(part::kFields.size())},
     CPP_DEM_CONTACT_LAWS(CPP_DEM_LAW_ROW)
 #undef CPP_DEM_LAW_ROW
 };
+
+#define CPP_DEM_LAW_FIT(id, name, part)                                                 \
+  static_assert(law_fields_fit<part>(), name ": its kFields must fill Material::law_params " \
+                "slots 0, 1, ... in order, each with a default (raise kLawParamSlots in "  \
+                "laws/fields.hpp for more)");
+CPP_DEM_CONTACT_LAWS(CPP_DEM_LAW_FIT)
+#undef CPP_DEM_LAW_FIT
 
 /// The row of law m.
 inline const LawInfo& law_info(ContactModel m) {
