@@ -120,6 +120,14 @@ void Scene::sort_bodies_spatially() {
 }
 
 void Scene::rebuild() {
+  // Bodies added since the last build grew the per-body arrays one body at a time (up to
+  // twice their size): give the slack back (a no-op where an array is already tight).
+  if (dirty_) {
+    bodies_.for_each_array([](auto& v) { v.shrink_to_fit(); });
+    clumps_.for_each_array([](auto& v) { v.shrink_to_fit(); });
+    id_of_slot_.shrink_to_fit();
+    slot_of_id_.shrink_to_fit();
+  }
   // Spatial order while no contact (and so no contact history) exists yet.
   if (spatial_sort_ && pairs_.empty() && wall_contacts_.empty() && grid_contacts_.empty())
     sort_bodies_spatially();
