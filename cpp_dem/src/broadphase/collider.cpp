@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 
+#include "cpp_dem/core/parallel.hpp"
+
 namespace cpp_dem {
 
 long CellGrid::cell_of(const Vec3& x, int a) const {
@@ -61,12 +63,10 @@ void CellGrid::find_pairs(const std::vector<Vec3>& pos, const std::vector<Real>&
   out.clear();
   const int n = static_cast<int>(pos.size());
   if (nspheres_ < 2) return;
-  if (static_cast<int>(per_body_.size()) < n) per_body_.resize(n);
-#pragma omp parallel for schedule(dynamic, 256) if (n > 2000)
-  for (int i = 0; i < n; ++i) {
-    std::vector<int>& mine = per_body_[i];
-    mine.clear();
-    if (body_cell_[i] < 0) continue;
+  // The pairs of body i (j > i, sorted) are appended to `to`.
+  const auto pairs_of = [&](int i, std::vector<std::pair<int, int>>& to) {
+    if (body_cell_[i] < 0) return;
+    const size_t first = to.size();
     const long cz = body_cell_[i] % ncell_[2];
     const long cy = (body_cell_[i] / ncell_[2]) % ncell_[1];
     const long cx = body_cell_[i] / (ncell_[2] * ncell_[1]);
@@ -78,16 +78,39 @@ void CellGrid::find_pairs(const std::vector<Vec3>& pos, const std::vector<Real>&
             const int j = cell_bodies_[k];
             if (j <= i) continue;
             const Real reach = radius[i] + radius[j] + margin;
-            if ((pos[j] - pos[i]).squaredNorm() < reach * reach) mine.push_back(j);
+            if ((pos[j] - pos[i]).squaredNorm() < reach * reach) to.emplace_back(i, j);
           }
         }
-    std::sort(mine.begin(), mine.end());
+    std::sort(to.begin() + first, to.end());
+  };
+  if (n <= 2000 || omp_get_max_threads() == 1) {  // (one thread: straight into out)
+    for (int i = 0; i < n; ++i) pairs_of(i, out);
+    if (out.capacity() > out.size() + out.size() / 2) {
+      // (grown by doubling: kept with an eighth to spare, so the next builds reuse it)
+      std::vector<std::pair<int, int>> tight;
+      tight.reserve(out.size() + out.size() / 8);
+      tight.assign(out.begin(), out.end());
+      out.swap(tight);
+    }
+    return;
+  }
+  // On threads: the bodies in blocks of kBlock, each block's pairs in a buffer of its own
+  // (kept: their capacity serves the next build), joined in block order: the same list as on
+  // one thread.
+  constexpr int kBlock = 256;
+  const int nblocks = (n + kBlock - 1) / kBlock;
+  if (static_cast<int>(blocks_.size()) < nblocks) blocks_.resize(nblocks);
+#pragma omp parallel for schedule(dynamic, 1)
+  for (int blk = 0; blk < nblocks; ++blk) {
+    blocks_[blk].clear();
+    const int end = std::min(n, (blk + 1) * kBlock);
+    for (int i = blk * kBlock; i < end; ++i) pairs_of(i, blocks_[blk]);
   }
   size_t total = 0;
-  for (int i = 0; i < n; ++i) total += per_body_[i].size();
+  for (int blk = 0; blk < nblocks; ++blk) total += blocks_[blk].size();
   out.reserve(total);
-  for (int i = 0; i < n; ++i)
-    for (int j : per_body_[i]) out.emplace_back(i, j);
+  for (int blk = 0; blk < nblocks; ++blk)
+    out.insert(out.end(), blocks_[blk].begin(), blocks_[blk].end());
 }
 
 void CellGrid::query_box(const Vec3& lo, const Vec3& hi, const std::vector<Vec3>& pos,
@@ -123,9 +146,9 @@ void CellGrid::add_memory(std::vector<std::pair<std::string, std::size_t>>& out)
   out.emplace_back("broadphase.cell_start", bytes(cell_start_));
   out.emplace_back("broadphase.cell_bodies", bytes(cell_bodies_));
   out.emplace_back("broadphase.body_cell", bytes(body_cell_));
-  std::size_t per = per_body_.capacity() * sizeof(std::vector<int>);
-  for (const auto& v : per_body_) per += v.capacity() * sizeof(int);
-  out.emplace_back("broadphase.per_body_buffers", per);
+  std::size_t blocks = blocks_.capacity() * sizeof(blocks_[0]);
+  for (const auto& b : blocks_) blocks += b.capacity() * sizeof(b[0]);
+  out.emplace_back("broadphase.thread_blocks", blocks);
 }
 
 }  // namespace cpp_dem

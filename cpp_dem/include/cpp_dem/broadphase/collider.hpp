@@ -36,7 +36,8 @@ class CellGrid {
   long ncell_[3] = {1, 1, 1};
   int nspheres_ = 0;
   std::vector<int> cell_start_, cell_bodies_, body_cell_;
-  std::vector<std::vector<int>> per_body_;  // reused buffers, one per body
+  /// find_pairs on threads: each block of bodies' pairs (kept for their capacity)
+  std::vector<std::vector<std::pair<int, int>>> blocks_;
 };
 
 /// The broad phase of a periodic cell (broadphase/periodic.cpp): every pair (i < j) of spheres
