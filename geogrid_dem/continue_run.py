@@ -41,6 +41,7 @@ from typing import Callable
 
 import numpy as np
 
+from geogrid_dem.rundir import write_atomic
 from geogrid_dem.runs import RunFileError, UsageError
 
 #: The most steps one call runs (continue again from its --out to go farther).
@@ -316,9 +317,7 @@ def continue_element(run_dir, label: str, steps, *, out=None, overwrite: bool = 
                    "state": f"{label}{FINAL_SUFFIX}",
                    "wall_time_s": time.perf_counter() - t_wall,
                    "units": "SI; stresses compression positive; strains compression positive"}
-        tmp = o / f"{label}_continue.json.tmp"
-        tmp.write_text(json.dumps(summary, indent=2) + "\n")
-        tmp.replace(o / f"{label}_continue.json")
+        write_atomic(o / f"{label}_continue.json", json.dumps(summary, indent=2) + "\n")
         log(f"{label}: the continued state in {o / (label + FINAL_SUFFIX)}")
     if not math.isfinite(res["inertial_number"]):
         log(f"WARNING: {label}: the inertial number is not finite")

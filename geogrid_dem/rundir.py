@@ -51,7 +51,7 @@ MANIFEST = ".geogrid-dem-run.json"
 LOCK = ".geogrid-dem.lock"
 #: Files a results folder may hold without being an earlier run's: the command's run file,
 #: the manifest (and its temporary) and the lock.
-_FREE = {"run.toml", MANIFEST, LOCK, MANIFEST + ".tmp"}
+_FREE = {"run.toml", MANIFEST, LOCK}
 #: Exit status of a run stopped by SIGINT (128 + 2, as a shell reports it).
 EXIT_INTERRUPTED = 130
 
@@ -380,16 +380,26 @@ def _files(out: Path) -> list[Path]:
     """The files of ``out`` but its own run file, manifest and lock (those of sub-folders, a
     run of several, count as files of the run)."""
     return sorted(p for p in out.rglob("*")
-                  if p.is_file() and not (p.parent == out and p.name in _FREE))
+                  if p.is_file() and not (p.parent == out and p.name in _FREE)
+                  and not is_temporary(p))
+
+
+def is_temporary(path: Path) -> bool:
+    """Whether ``path`` is a temporary file of :func:`write_atomic` (left only by a writer
+    killed between its write and its rename): not a result."""
+    return path.name.startswith(".") and path.name.endswith(".tmp")
 
 
 def write_atomic(path: Path, text: str) -> None:
-    """``text`` at ``path``, written whole or not at all (a temporary file renamed; one writer
-    at a time in this process)."""
-    with _MANIFEST_LOCK:
-        tmp = path.with_name(path.name + ".tmp")
+    """``text`` at ``path``, written whole or not at all: a temporary file of this process and
+    thread, renamed (so processes and threads may write the same path at once; the last
+    rename wins)."""
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.{threading.get_ident()}.tmp")
+    try:
         tmp.write_text(text, encoding="utf-8")
         tmp.replace(path)
+    finally:
+        tmp.unlink(missing_ok=True)
 
 
 def _lock_text(case: str) -> str:

@@ -29,6 +29,7 @@ import tomllib
 from pathlib import Path
 from typing import Any
 
+from geogrid_dem import rundir
 from geogrid_dem.cases import CASES
 from geogrid_dem.provenance import git_commit, version
 
@@ -176,9 +177,7 @@ def write_run_file(out: Path, case: str, params: dict[str, Any]) -> None:
         raise RunFileError(f"{out / 'run.toml'}: would not be valid TOML ({e}); not "
                            "written") from None
     out.mkdir(parents=True, exist_ok=True)
-    tmp = out / ".run.toml.tmp"
-    tmp.write_text(text, encoding="utf-8")
-    tmp.replace(out / "run.toml")
+    rundir.write_atomic(out / "run.toml", text)
 
 
 #: TOML's escapes of a basic string; other control characters are written \uXXXX.
@@ -381,7 +380,6 @@ def _row_params(fixed: dict[str, Any], row: dict[str, Any], row_dir: Path,
 def _row_finished(row_dir: Path, case: str, params: dict[str, Any]) -> bool:
     """The row's folder holds its finished run: a summary.json, a run.toml of the same case
     and parameters, and no manifest saying the run did not complete."""
-    from geogrid_dem import rundir
 
     run_file = row_dir / "run.toml"
     if not (row_dir / "summary.json").exists() or not run_file.exists():
@@ -415,7 +413,6 @@ def _row_unrecorded(row_dir: Path) -> list[Path]:
     row's own, or the sub-runs of a study) lists what it wrote in its manifest (a killed run:
     what it wrote since it started, geogrid_dem.rundir); run.toml, manifests and locks are
     the sweep's and the runs' own."""
-    from geogrid_dem import rundir
 
     recorded: set[Path] = set()
     for m in row_dir.rglob(rundir.MANIFEST):
@@ -427,9 +424,9 @@ def _row_unrecorded(row_dir: Path) -> list[Path]:
         files = rundir._files(d)
         bad = set(rundir._unrecorded(d, files, manifest, status))
         recorded |= {p for p in files if p not in bad}
-    free = set(rundir._FREE) | {".run.toml.tmp"}
     return sorted(p for p in row_dir.rglob("*")
-                  if p.is_file() and p.name not in free and p not in recorded)
+                  if p.is_file() and p.name not in rundir._FREE and not rundir.is_temporary(p)
+                  and p not in recorded)
 
 
 def check_row_folder(row_dir: Path, case: str, params: dict[str, Any], *, source: str) -> None:
@@ -440,7 +437,6 @@ def check_row_folder(row_dir: Path, case: str, params: dict[str, Any], *, source
     process is writing into; files that its earlier run did not record (yours?). A row of this
     sweep that did not finish passes: the case replaces only the files its earlier run
     recorded (``--overwrite``, added by the row). Nothing is removed here."""
-    from geogrid_dem import rundir
 
     if row_dir.is_symlink():
         raise RunFileError(f"{source}: {row_dir} is a symbolic link (to {os.readlink(row_dir)}); "
@@ -515,7 +511,6 @@ def _run_row(command: list[str], argv: list[str], env: dict[str, str]) -> dict[s
     earlier attempt (a row that did not finish, or one run again after a killed worker) is
     given ``--overwrite``: the case removes the files that attempt recorded, and only those
     (geogrid_dem.rundir); nothing else in the folder is removed."""
-    from geogrid_dem import rundir
 
     dest = out_of(argv)
     if (dest is not None and dest.is_dir() and not dest.is_symlink()
@@ -661,8 +656,6 @@ def _run_on_dask(todo, results, script, case, scheduler, workers, threads, out) 
                      "stderr_tail": f"{type(e).__name__}: {e}"}
             # A row that completed but exits non-zero (a coupled run that did not converge:
             # femcoupling.coupling.status.EXIT_CODES) keeps its results: 'completed', with its code.
-            from geogrid_dem import rundir
-
             done = ((rundir.run_status(row_dir) or {}).get("status") == "complete"
                     if row_dir.is_dir() else False)
             ok = r["returncode"] == 0 or done

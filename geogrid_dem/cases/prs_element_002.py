@@ -45,7 +45,7 @@ from geogrid_dem.cases import prs_element as _fem_case
 from cpp_dem.elements.box import GRID_ENDS, KINEMATICS, run_element
 from geogrid_dem.cases import PRESTRESS_PAPER
 from geogrid_dem.processes import process_pool, results_in_order
-from geogrid_dem.rundir import begin_run, end_run, on_interrupt, run_main
+from geogrid_dem.rundir import begin_run, end_run, on_interrupt, run_main, write_atomic
 from geogrid_dem.stats import t_critical
 
 GRIDS = ("detailed", "standard")
@@ -699,9 +699,7 @@ def _pair_job(p: Params, grid: str, seed: int, targets: dict, out: Path) -> dict
         res["elements"][label]["seed"] = seed
         res["labels"].append(label)
     res["preparation_wall_time_s"] = prepared.get("wall_time_s")
-    tmp = out / (_job_file(grid, seed) + ".tmp")
-    tmp.write_text(json.dumps(res, indent=2, default=float) + "\n")
-    tmp.replace(out / _job_file(grid, seed))
+    write_atomic(out / _job_file(grid, seed), json.dumps(res, indent=2, default=float) + "\n")
     return res
 
 

@@ -50,7 +50,7 @@ from geogrid_dem.cases import THESIS, describe
 from cpp_dem import apply_threads
 from geogrid_dem.options import (case_parser, check_cap, distinct, given_options,
                                  parse_checked, refuse_unused)
-from geogrid_dem.rundir import end_run, run_main, run_status
+from geogrid_dem.rundir import end_run, run_main, run_status, write_atomic
 import cpp_dem as dem  # noqa: E402
 from cpp_dem.build import geogrid  # noqa: E402
 from cpp_dem.protocols import prep
@@ -477,12 +477,6 @@ def row_run_dir(out: Path, row: dict) -> Path:
     return out / run_name(q)
 
 
-def _write_atomic(path: Path, text: str) -> None:
-    tmp = path.with_name(f".{path.name}.{os.getpid()}.tmp")  # one per process: runs in parallel
-    tmp.write_text(text)
-    tmp.replace(path)
-
-
 def study(p: Params, out: Path, grids, radii, pressures, radii_given: bool,
           seeds=(1,), overwrite: bool = False, window_m: float | None = None) -> None:
     """Runs the cells grid x radius x pressure, each once per seed, into sub-folders of
@@ -510,7 +504,7 @@ def study(p: Params, out: Path, grids, radii, pressures, radii_given: bool,
                         # run before, its row lost (e.g. a stop between the two): no new run
                         wall = json.loads((sub / "summary.json").read_text())[
                             "wall_time_total_s"]
-                        _write_atomic(row_file, json.dumps(run_row(q, sub, "ok", wall),
+                        write_atomic(row_file, json.dumps(run_row(q, sub, "ok", wall),
                                                            indent=1) + "\n")
                         continue
                     t0 = time.perf_counter()
@@ -524,11 +518,11 @@ def study(p: Params, out: Path, grids, radii, pressures, radii_given: bool,
                     except KeyboardInterrupt:
                         # what it pulled stays in the study, marked; a new study runs it again
                         row = run_row(q, sub, "interrupted (Ctrl-C)", time.perf_counter() - t0)
-                        _write_atomic(row_file, json.dumps(row, indent=1) + "\n")
+                        write_atomic(row_file, json.dumps(row, indent=1) + "\n")
                         write_study(read_rows(out), out, window_m)
                         raise
                     row = run_row(q, sub, status, time.perf_counter() - t0)
-                    _write_atomic(row_file, json.dumps(row, indent=1) + "\n")
+                    write_atomic(row_file, json.dumps(row, indent=1) + "\n")
                     write_study(read_rows(out), out, window_m)
     rows = read_rows(out)
     if rows:
@@ -725,7 +719,7 @@ def write_study(rows: list, out: Path, window_m: float | None = None) -> None:
     w = csv.DictWriter(buf, fieldnames=list(cells[0]))
     w.writeheader()
     w.writerows(cells)
-    _write_atomic(out / "study.csv", buf.getvalue())
+    write_atomic(out / "study.csv", buf.getvalue())
 
     def f(v, fmt):
         return "—" if v is None or (isinstance(v, float) and not math.isfinite(v)) \
@@ -782,13 +776,13 @@ def write_study(rows: list, out: Path, window_m: float | None = None) -> None:
         w = csv.DictWriter(buf, fieldnames=list(wt[0]))
         w.writeheader()
         w.writerows(wt)
-        _write_atomic(out / "study_window.csv", buf.getvalue())
+        write_atomic(out / "study_window.csv", buf.getvalue())
         wl = window_lines(wt)
         if wl:
             lines += ["", "CoV against the grain size over the pull every run of the "
                       "compared radii reached, stopped runs included (study_window.csv; the "
                       "same steps rule):", "", *wl]
-    _write_atomic(out / "study.md", "\n".join(lines) + "\n")
+    write_atomic(out / "study.md", "\n".join(lines) + "\n")
     plot_study(cells, out / "study.png")
 
 
