@@ -1,0 +1,30 @@
+"""bench/step_budget.py: a step's bytes from the core's arrays and their traffic counts, over
+its time and the measured bandwidth (the bench itself is not run by CI at full size)."""
+
+import json
+import subprocess
+import sys
+
+from conftest import ROOT
+
+
+def test_the_budget_is_the_fields_times_their_traffic_over_the_time(tmp_path):
+    proc = subprocess.run([sys.executable, str(ROOT / "bench" / "step_budget.py"), "--sizes",
+                           "300", "--steps", "20", "--warmup", "5", "--bandwidth-mib", "8"],
+                          capture_output=True, text=True, timeout=600, cwd=ROOT,
+                          env={"OMP_NUM_THREADS": "1", "PATH": "/usr/bin:/bin"})
+    assert proc.returncode == 0, proc.stderr[-2000:]
+    bw, row = [json.loads(line) for line in proc.stdout.splitlines()]
+    assert bw["copy_bytes_per_s"] > 1e8 and bw["read_bytes_per_s"] > 1e8
+    sys.path.insert(0, str(ROOT / "bench"))
+    from step_budget import TRAFFIC
+
+    assert set(row["moved_by_field"]) <= set(TRAFFIC)
+    assert row["bytes_per_step"] == sum(row["moved_by_field"].values())
+    # every contact crosses the pair pass and the reduction: at least 2 x 104 + 2 x 64 B each
+    assert row["moved_by_field"]["contacts.pairs"] >= 2 * 104 * row["contacts"]
+    assert row["moved_by_field"]["contacts.pair_out"] >= 2 * 64 * row["contacts"]
+    assert row["needed_bytes_per_s"] == row["bytes_per_step"] / row["s_per_step"]
+    assert abs(row["share_of_copy_bandwidth"]
+               - row["needed_bytes_per_s"] / bw["copy_bytes_per_s"]) < 1e-12
+    assert "ms/step" in proc.stderr and "of the copy bandwidth" in proc.stderr
