@@ -96,8 +96,9 @@ def test_docstrings_read_as_written(site):
     core = _ids(site[0] / "api/cpp_dem/_core.html")
     start = core.index('id="cpp_dem._core.Material"')
     material = core[start:core.index('id="cpp_dem._core.Material.density"', start)]
-    assert "mass density, kg/m^3 (&gt; 0)." in material
-    assert "1–6) or" in material and "Cundall–Strack, 000 eqs" in material  # one sentence
+    # (the parameters' lines, generated from the field list: cpp_dem.material_fields)
+    assert "mass density; kg/m^3; &gt; 0; required." in material
+    assert "contact friction angle (stored in radians); deg; in [0, 90); required." in material
     package = _ids(site[0] / "api/cpp_dem/index.html")
     assert "Quick start:</p>" in package and re.search(r"<pre[^>]*><code", package)
     assert ":func:" not in _ids(site[0] / "api/cpp_dem/io/vtk.html")

@@ -129,10 +129,10 @@ def test_the_material_helpers_pass_on_the_optional_parameters_only():
     m = dem.linear_material(density=2650, young=1e7, poisson=0.3, friction_angle_deg=30,
                             rolling_stiffness=0.5, rolling_friction=0.1)
     assert (m.rolling_stiffness, m.rolling_friction) == (0.5, 0.1)
-    with pytest.raises(dem.ParameterError, match=r"damp_shear=0.1: not an optional parameter "
-                       r"of a 'linear' material; .*did you mean damping_shear"):
+    with pytest.raises(dem.ParameterError, match=r"damp_shear=0.1: not a parameter this helper "
+                       r"passes on to a 'linear' material; .*did you mean damping_shear"):
         dem.linear_material(density=2650, young=1e7, poisson=0.3, friction_angle_deg=30,
                             damp_shear=0.1)
-    with pytest.raises(dem.ParameterError, match=r"friction_angle_deg=30: not an optional"):
+    with pytest.raises(dem.ParameterError, match=r"friction_angle_deg=30: not a parameter this"):
         dem.hertz_mindlin_material(density=2650, shear_modulus=1e7, poisson=0.3,
                                    friction_coefficient=0.5, friction_angle_deg=30)

@@ -151,8 +151,8 @@ def _check_parts(parts: dict, model: str) -> None:
     for key, value in parts.items():
         if key not in optional:
             close = difflib.get_close_matches(key, optional, n=1)
-            raise ParameterError(f"{key}={value!r}: not an optional parameter of a '{model}' "
-                                 f"material; allowed: {', '.join(optional)}"
+            raise ParameterError(f"{key}={value!r}: not a parameter this helper passes on to a "
+                                 f"'{model}' material; allowed: {', '.join(optional)}"
                                  + (f" (did you mean {close[0]}?)" if close else ""))
         if not isinstance(value, (int, float)) or isinstance(value, bool):
             raise ParameterError(f"{key}={value!r}: must be a number")
