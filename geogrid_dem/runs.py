@@ -497,13 +497,17 @@ def check_row_folder(row_dir: Path, case: str, params: dict[str, Any], *, source
 #: process when the worker thread that started it dies (PR_SET_PDEATHSIG, kept across exec),
 #: then becomes the case. A killed Dask worker so leaves no orphan writing into the row's
 #: folder while Dask runs the row again elsewhere. (A preexec_fn would run in the forked
-#: child of a threaded worker, which is not safe.)
+#: child of a threaded worker, which is not safe.) A worker killed before the signal was
+#: armed has already made this process an orphan (its parent pid is no longer the worker's,
+#: given as the first argument): it exits at once rather than run the row beside the retry.
 _DIE_WITH_PARENT = ("import ctypes, os, signal, sys\n"
                     "try:\n"
                     "    ctypes.CDLL(None, use_errno=True).prctl(1, int(signal.SIGKILL))\n"
                     "except Exception:\n"
                     "    pass\n"
-                    "os.execv(sys.argv[1], sys.argv[1:])\n")
+                    "if os.getppid() != int(sys.argv[1]):\n"
+                    "    os._exit(137)\n"
+                    "os.execv(sys.argv[2], sys.argv[2:])\n")
 
 
 def _run_row(command: list[str], argv: list[str], env: dict[str, str]) -> dict[str, Any]:
@@ -526,7 +530,8 @@ def _run_row(command: list[str], argv: list[str], env: dict[str, str]) -> dict[s
                and time.perf_counter() - t_wait < 30):
             time.sleep(0.1)
     t0 = time.perf_counter()
-    wrap = [sys.executable, "-c", _DIE_WITH_PARENT] if sys.platform.startswith("linux") else []
+    wrap = ([sys.executable, "-c", _DIE_WITH_PARENT, str(os.getpid())]
+            if sys.platform.startswith("linux") else [])
     proc = subprocess.run([*wrap, *command, *argv], capture_output=True, text=True,
                           env={**os.environ, **env})
     return {"returncode": proc.returncode, "wall_s": time.perf_counter() - t0,

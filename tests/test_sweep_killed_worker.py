@@ -74,3 +74,18 @@ def test_sweep_survives_a_killed_worker(tmp_path):
     assert not orphan.is_running() or orphan.status() == psutil.STATUS_ZOMBIE
     assert "4 rows, 0 finished before, 4 to run" in stdout
     assert _numbers(out1) == calm
+
+
+def test_an_orphan_row_never_starts(tmp_path):
+    """The race the parent-death signal leaves open: a worker killed before its row's case
+    armed the signal has already orphaned it. The wrapper sees a parent pid that is not the
+    worker's and exits before the case starts (nothing written); with the right parent pid it
+    runs the command."""
+    from geogrid_dem.runs import _DIE_WITH_PARENT
+    marker = tmp_path / "ran"
+    cmd = [sys.executable, "-c", f"open({str(marker)!r}, 'w').write('x')"]
+    wrong = subprocess.run([sys.executable, "-c", _DIE_WITH_PARENT, str(os.getpid() + 10**6),
+                            *cmd])
+    assert wrong.returncode == 137 and not marker.exists()
+    right = subprocess.run([sys.executable, "-c", _DIE_WITH_PARENT, str(os.getpid()), *cmd])
+    assert right.returncode == 0 and marker.read_text() == "x"
