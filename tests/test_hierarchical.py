@@ -165,6 +165,7 @@ def test_a_tolerance_below_the_noise_is_cut_above_the_ceiling_and_said_below_it(
             m.step(top_displacement=-2e-5, max_cuts=1)
         assert tried == [-2e-5, -1e-5]  # cut once, then failed
         assert m.history == [] and m.status == "converged"  # (nothing accepted)
+        assert float(m.top_u.value) == 0.0  # the boundary back at the last accepted step
         pool.reject()
 
         m = HierarchicalPlaneStrain(pool, max_newton=12, noise_ceiling=1e-4, out=tmp_path, **kw)

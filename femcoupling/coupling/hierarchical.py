@@ -78,7 +78,7 @@ from femcoupling.fem.mpi_points import (PointPartition, RootMaterial, StartStres
                                         check_on_root)
 from femcoupling.fem.quadrature import (NewtonFailure, NewtonRules, QuadratureSystem,
                                         check_material, lu_package, newton_solve)
-from femcoupling.fem.steps import LoadStep
+from femcoupling.fem.steps import LoadStep, load_path
 
 __all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning", "TANGENTS",
            "aitken_factor", "quadrature_points", "secant_update"]
@@ -569,20 +569,32 @@ class HierarchicalPlaneStrain:
              max_cuts: int = 4) -> HierStep:
         """One load step to the given boundary displacements (m, total since the start). If
         Newton fails, the step is rolled back (the elements to their accepted state, u to
-        u_n) and taken in two halves, at most ``max_cuts`` times deep; the last half-step's
-        record is returned (all of them are in ``history``)."""
-        try:
-            return self._step(top_displacement, right_displacement)
-        except NewtonFailure:
-            if max_cuts <= 0:
-                raise
-            self._rollback()
-            t0, r0 = self._bc_now
-            self.step(top_displacement=0.5 * (t0 + top_displacement),
-                      right_displacement=0.5 * (r0 + right_displacement),
-                      max_cuts=max_cuts - 1)
-            return self.step(top_displacement=top_displacement,
-                             right_displacement=right_displacement, max_cuts=max_cuts - 1)
+        u_n) and halved, at most ``max_cuts`` times below the whole step
+        (``femcoupling.fem.steps.load_path``, the loop of every model: an easy half-step
+        grows the next back); the last accepted step's record is returned (all of them are
+        in ``history``). Past ``max_cuts``, the model is left at its last accepted step and
+        :class:`NewtonFailure` says where the load stopped."""
+        return self._cut_steps(self._bc_now, (top_displacement, right_displacement), max_cuts,
+                               lambda p: self._step(float(p[0]), float(p[1])))
+
+    def _cut_steps(self, now, target, max_cuts: int, go) -> HierStep:
+        """The load from the accepted ``now`` to ``target`` (the boundary values: a tuple or
+        an array) by ``go(point)`` (solves and commits a step to ``point``, or raises
+        NewtonFailure), through ``load_path``: ``point`` is ``target`` itself at the end, else
+        ``now + lf (target - now)``."""
+        a, b = np.asarray(now, float), np.asarray(target, float)
+
+        def at(lf: float):
+            return target if lf == 1.0 else a + lf * (b - a)
+
+        return load_path(lambda lf: go(at(lf)), self._rollback,
+                         lambda lf: self._restore(at(lf)), steps=1, max_cuts=max_cuts,
+                         max_newton=self.max_newton,
+                         where=f"load step {len(self.history)}")[-1]
+
+    def _restore(self, point) -> None:
+        """The boundary back at ``point`` (the last accepted step's) after a failed load."""
+        self._set_boundary(float(point[0]), float(point[1]))
 
     _bc_now = (0.0, 0.0)  # the boundary displacements of the last accepted step, m
 

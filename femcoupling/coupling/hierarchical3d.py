@@ -38,7 +38,7 @@ from femcoupling import _dolfinx
 from femcoupling._checks import FemInputError
 from femcoupling.coupling.hierarchical import HierarchicalPlaneStrain
 from femcoupling.fem.gmsh_mesh import gmsh_mesh_on_root
-from femcoupling.fem.quadrature import NewtonFailure, QuadratureSystem, lu_package
+from femcoupling.fem.quadrature import QuadratureSystem, lu_package
 
 __all__ = ["Hierarchical3D", "HierarchicalCylinder", "cylinder_cells", "SECTIONS"]
 
@@ -193,9 +193,9 @@ class Hierarchical3D(HierarchicalPlaneStrain):
              max_cuts: int = 4):
         """One load step: ``gradient`` (3 x 3, -, total since the start: the homogeneous
         mode's u = G x) or ``top_displacement`` (m, total: the triaxial test's top u_z). A
-        step Newton fails is rolled back and taken in two halves, at most ``max_cuts`` times
-        deep; returns the last half-step's ``HierStep`` (all are in ``history``; its ``load``
-        is G_zz, or the top displacement)."""
+        step Newton fails is rolled back and halved, at most ``max_cuts`` times
+        (``HierarchicalPlaneStrain.step``); returns the last accepted step's ``HierStep``
+        (all are in ``history``; its ``load`` is G_zz, or the top displacement)."""
         if self.homogeneous:
             if gradient is None or top_displacement is not None:
                 raise FemInputError("step: the homogeneous mode takes gradient= (3 x 3) only")
@@ -208,18 +208,15 @@ class Hierarchical3D(HierarchicalPlaneStrain):
             if top_displacement is None or gradient is not None:
                 raise FemInputError("step: the triaxial test takes top_displacement= only")
             target = float(top_displacement)
-        return self._cut_steps(target, max_cuts)
+        now = self._gradient if self.homogeneous else self._bc_now[0]
+        return self._cut_steps(now, target, max_cuts, self._step_to)
 
-    def _cut_steps(self, target, max_cuts: int):
-        try:
-            return self._step_to(target)
-        except NewtonFailure:
-            if max_cuts <= 0:
-                raise
-            self._rollback()
-            now = self._gradient if self.homogeneous else self._bc_now[0]
-            self._cut_steps(0.5 * (now + target), max_cuts - 1)
-            return self._cut_steps(target, max_cuts - 1)
+    def _restore(self, point) -> None:
+        if self.homogeneous:
+            self._pending_gradient = np.array(point, float)
+            self._set_boundary(float(point[2, 2]), 0.0)
+        else:
+            self._set_boundary(float(point), 0.0)
 
     def _step_to(self, target):
         if self.homogeneous:

@@ -52,7 +52,7 @@ from femcoupling.fem.quadrature import (NewtonRules, QuadratureSystem, check_mat
 from femcoupling.fem.soil_loading import LoadingStages
 from femcoupling.fem.soil_measures import SoilMeasures
 from femcoupling.fem.soil_regions import RegionMaterials, RegionPoints
-from femcoupling.fem.steps import NewtonFailure, StepResult
+from femcoupling.fem.steps import NewtonFailure, StepResult, load_path
 from femcoupling.materials.continuum import GeogridLayerMaterial, LinearElastic, mandel_to_tensor
 
 __all__ = ["SoilModel", "StepResult", "NewtonFailure"]
@@ -406,52 +406,35 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
     # ---- stages --------------------------------------------------------------------------
 
     def _run_stage(self, stage: str, apply: Any, steps: int, callback: Any = None) -> list:
-        """Apply ``apply(load_factor)`` in ``steps`` equal increments, Newton at each.
-
-        A step Newton fails is rolled back and halved; an easy step (at most half of
-        ``max_newton`` iterations) doubles the next one back towards the nominal size. The
-        step is never smaller than the nominal one over ``2**max_cuts``: a step that fails at
-        that size raises :class:`NewtonFailure`, and so does a step that would need to be
-        cut below it (near a limit load a stage would otherwise creep on, ever shorter)."""
+        """Apply ``apply(load_factor)`` in ``steps`` equal increments, Newton at each, through
+        the one load-step loop (``femcoupling.fem.steps.load_path``: a failed step rolled back
+        and halved, an easy one doubling the next back towards the nominal size, at most
+        ``max_cuts`` halvings below it, then :class:`NewtonFailure`)."""
         if not isinstance(steps, int) or steps < 1:
             raise FemInputError(f"steps={steps!r}: must be an integer >= 1")
-        out = []
-        lf_done, dlf = 0.0, 1.0 / steps
-        depth = 0  # halvings of the step below its nominal size
-        while lf_done < 1.0 - 1e-12:
-            lf = min(1.0, lf_done + dlf)
+
+        def take(lf: float) -> StepResult:
             apply(lf)
             its = self._newton()
             if its < 0:
-                self._rollback()
-                depth += 1
-                if depth > self.max_cuts:
-                    apply(lf_done)
-                    raise NewtonFailure(
-                        f"stage {stage!r}: Newton failed at load factor {lf:.6g} with the "
-                        f"step cut {self.max_cuts} times (to 1/{2 ** self.max_cuts} of its "
-                        f"nominal size); the stage stopped at load factor {lf_done:.6g}"
-                        + (f" (the last failure: {self.last_failure})"
-                           if self.last_failure else ""))
-                dlf /= 2.0
-                continue
+                raise NewtonFailure(self.last_failure or "")
             self._commit()
-            lf_done = lf
-            if its <= self.max_newton // 2 and depth > 0:  # easy: grow back towards nominal
-                dlf *= 2.0
-                depth -= 1
-            r = StepResult(stage=stage, load_factor=lf,
-                           footing_settlement_m=self.footing_settlement_m(),
-                           footing_pressure_pa=self.footing_pressure_pa(),
-                           newton_iterations=its, plastic_points=self.plastic_points(),
-                           **self._step_end)
+            return StepResult(stage=stage, load_factor=lf,
+                              footing_settlement_m=self.footing_settlement_m(),
+                              footing_pressure_pa=self.footing_pressure_pa(),
+                              newton_iterations=its, plastic_points=self.plastic_points(),
+                              **self._step_end)
+
+        def accepted(r: StepResult) -> None:
             if r.converged_on == "noise":
                 self._noise_warning(r)
             self.history.append(r)
-            out.append(r)
             if callback is not None:
                 callback(r)
-        return out
+
+        return load_path(take, self._rollback, apply, steps=steps, max_cuts=self.max_cuts,
+                         max_newton=self.max_newton, where=f"stage {stage!r}",
+                         accepted=accepted)
 
     _ext_scale = 0.0
 
@@ -469,7 +452,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
                + ": the DEM region elements do not resolve the tolerance asked; the step "
                "stopped at their scatter (stopped_at_scatter, not converged)")
         self.warnings.append(msg)
-        warnings.warn(msg, NoiseWarning, stacklevel=3)
+        warnings.warn(msg, NoiseWarning, stacklevel=5)  # the stage's caller
 
     # ---- state ---------------------------------------------------------------------------
 

@@ -6,6 +6,9 @@ failure type).
   (halved) and taken again; raised out of a model's stage (``SoilModel``'s loading) or step
   (the hierarchical models' ``step``), it means the step failed even cut ``max_cuts`` times,
   and its message says where the load stopped and why the last Newton failed.
+- :func:`load_path`: the one load-step loop of every model: a load (a stage of
+  ``SoilModel``, a step of the hierarchical models) in equal increments, each Newton failure
+  rolled back and the step halved, an easy step growing it back.
 - :class:`LoadStep`: one accepted load step: what Newton did (``newton_iterations``,
   ``residual``, ``status``, ...). Each model's record adds what it loads and measures:
   :class:`StepResult` (``femcoupling.fem.soil_model.SoilModel``: the stage, its load factor,
@@ -18,12 +21,60 @@ SI units; a field's unit is in its name or its doc.
 from __future__ import annotations
 
 import dataclasses
+from typing import Any, Callable
 
 
 class NewtonFailure(RuntimeError):
     """A load step could not be accepted: Newton did not converge (a model then cuts the
     step), or, raised out of a model's stage or step, it did not converge even with the step
     cut ``max_cuts`` times (the message says the load reached and the last failure)."""
+
+
+def load_path(take: Callable[[float], "LoadStep"], rollback: Callable[[], None],
+              restore: Callable[[float], None], *, steps: int, max_cuts: int,
+              max_newton: int, where: str,
+              accepted: Callable[[Any], None] | None = None) -> list:
+    """The one load-step loop of every FEM model: a load from load factor 0 to 1 (-) in
+    ``steps`` equal increments; returns the records of the accepted steps, in order.
+
+    ``take(lf)`` sets the load at load factor ``lf``, solves, commits and returns the step's
+    record (a :class:`LoadStep`), or raises :class:`NewtonFailure`. A failed step is rolled
+    back (``rollback()``) and halved; an easy step (at most half of ``max_newton``
+    iterations) doubles the next one back towards the nominal size. The step is never smaller
+    than the nominal one over ``2**max_cuts``: a step that fails at that size, or would need
+    to be cut below it, leaves the load where it was accepted last (``restore(lf)``) and
+    raises :class:`NewtonFailure` naming ``where``, the load factors and the last failure.
+    ``accepted(record)``, if given, is called on each accepted step after it is counted (what
+    it raises, NewtonFailure included, ends the load as it is). Load factors are dyadic sums
+    (exact in binary); the last is 1.0 exactly."""
+    out: list = []
+    lf_done, dlf = 0.0, 1.0 / steps
+    depth = 0  # halvings of the step below its nominal size
+    while lf_done < 1.0 - 1e-12:
+        lf = min(1.0, lf_done + dlf)
+        try:
+            r = take(lf)
+        except NewtonFailure as e:
+            rollback()
+            depth += 1
+            if depth > max_cuts:
+                restore(lf_done)
+                last = str(e)
+                raise NewtonFailure(
+                    f"{where}: Newton failed at load factor {lf:.6g} with the step cut "
+                    f"{max_cuts} times (to 1/{2 ** max_cuts} of its nominal size); the stage "
+                    f"stopped at load factor {lf_done:.6g}"
+                    + (f" (the last failure: {last})" if last else "")) from None
+            dlf /= 2.0
+            continue
+        lf_done = lf
+        if r.newton_iterations <= max_newton // 2 and depth > 0:  # easy: grow back
+            dlf *= 2.0
+            depth -= 1
+        out.append(r)
+        if accepted is not None:
+            accepted(r)
+    return out
 
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
