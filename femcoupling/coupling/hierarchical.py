@@ -607,20 +607,13 @@ class HierarchicalPlaneStrain:
     def footing_pressure(self) -> float:
         """The footing's mean pressure, Pa, compression positive (``platens="footing"``): the
         reaction at its vertical displacement dofs (the internal force of the points' current
-        stresses less the surcharge's share of the edge node) over its half width; summed in
-        dof order on each rank, then over the ranks."""
+        stresses less the surcharge's share of the edge node) over its half width
+        (``QuadratureSystem.reaction``, the soil body's footing reaction too)."""
         if self.platens != "footing":
             raise FemInputError(f"footing_pressure(): only with platens='footing' (this "
                                 f"model's platens={self.platens!r})")
-        fx = self._fx
-        vec = fx.fem.assemble_vector(self._form_reaction)
-        vec.scatter_reverse(fx.dolfinx.la.InsertMode.add)
-        imap = self.V.dofmap.index_map
-        n_owned = imap.size_local * self.V.dofmap.index_map_bs
-        owned = self._footing_dofs[self._footing_dofs < n_owned]
-        total = float(np.sum(vec.array[np.sort(owned)]))
-        if self._parallel:
-            total = self.comm.allreduce(total)
+        total = self.system.reaction(self._form_reaction, self._footing_dofs,
+                                     self.comm if self._parallel else None)
         return -total / self.footing_b
 
     def _set_boundary(self, top_displacement: float, right_displacement: float) -> None:

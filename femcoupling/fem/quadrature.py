@@ -434,6 +434,19 @@ class QuadratureSystem:
         if lu is not None:
             pc.setFactorSolverType(lu)
 
+    def reaction(self, form, dofs: np.ndarray, comm=None) -> float:
+        """The sum of the assembled vector of ``form`` (a residual: the reaction where ``dofs``
+        are constrained), N (per m in 2D), over ``dofs`` (this rank's owned ones, summed in
+        dof order, then over the ranks of ``comm``): the footing's reaction in every model."""
+        fx = self._fx
+        vec = fx.fem.assemble_vector(form)
+        vec.scatter_reverse(fx.dolfinx.la.InsertMode.add)
+        n_own = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
+        total = float(np.sum(vec.array[np.sort(dofs[dofs < n_own])]))
+        if comm is not None and comm.size > 1:
+            total = comm.allreduce(total)
+        return total
+
     def residual(self, bcs: list) -> float:
         """b = R(u) lifted by J (g - u) at the constrained dofs (the predictor of the
         prescribed increment), b = u - g there; returns |b| (dolfinx's Newton convention:

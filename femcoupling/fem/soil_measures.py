@@ -31,14 +31,9 @@ class SoilMeasures:
     def footing_pressure_pa(self) -> float:
         """Mean footing pressure, Pa, compression positive: from the reaction at the footing's
         constrained dofs in displacement control, the applied traction otherwise."""
-        fx = self._fx
         if not self._displacement_control:
             return float(-self.traction.value[self.zc])
-        vec = fx.fem.assemble_vector(self.form_react)
-        vec.scatter_reverse(fx.dolfinx.la.InsertMode.add)
-        n_own = self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs
-        d = self.footing_dofs[self.footing_dofs < n_own]
-        f = self.comm.allreduce(float(vec.array[d].sum()), op=fx.MPI.SUM)
+        f = self.system.reaction(self.form_react, self.footing_dofs, self.comm)
         return float(-f / self.footing_area)
 
     def plastic_points(self) -> int:
