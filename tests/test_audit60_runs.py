@@ -503,3 +503,45 @@ def test_a_run_into_a_folder_named_with_an_emoji_writes_a_readable_run_toml(tmp_
     assert p.returncode == 0, p.stderr
     data = tomllib.loads((out / "run.toml").read_text(encoding="utf-8"))
     assert data["case"] == "deposition" and data["params"]["out"] == str(out)
+
+
+def test_a_002_run_stopped_in_its_calibration_resumes_at_the_next_pass(tmp_path, capsys):
+    """prs-element-002 interrupted during its soil calibration (no packing finished yet):
+    --resume keeps the calibration's record of its finished passes (a checkpoint, by its
+    SHA-256) and the files of those passes, and removes the unfinished pass's files; before,
+    it refused ("jobs/detailed_s1.json is not there") and a full-size run lost hours."""
+    from geogrid_dem.cases import prs_element_002 as case
+
+    out = tmp_path / "r"
+
+    def work(o):
+        fem = o / "fem_detailed"
+        fem.mkdir()
+        (fem / "calibration_passes.json").write_text(json.dumps({"passes": [{"k": 1}]}))
+        for name in ("calibration_RE_s1_1.csv", "calibration_RE_s2_1_final.h5",
+                     "calibration_RE_s1_2_growth.csv", "fem_RE.h5"):
+            (fem / name).write_text(name)
+        raise KeyboardInterrupt
+
+    assert rundir.run_main("prs_element_002", out, work, params=P(),
+                           checkpoints=case.CHECKPOINTS) == 130
+    assert "fem_detailed/calibration_passes.json" in rundir.run_status(out)["checkpoints"]
+    keep = case.resume_keep(out)
+    assert keep == ["fem_detailed/calibration_passes.json",
+                    "fem_detailed/calibration_RE_s1_1.csv",
+                    "fem_detailed/calibration_RE_s2_1_final.h5"], keep
+    ran: list = []
+    assert rundir.run_main("prs_element_002", out, lambda o: ran.append(o), params=P(),
+                           checkpoints=case.CHECKPOINTS, keep=keep) == 0
+    assert ran == [out]
+    left = sorted(str(f.relative_to(out)) for f in (out / "fem_detailed").iterdir())
+    assert left == sorted(keep)  # the unfinished pass 2 and its FEM run are gone
+    # a passes record changed since it was written is refused by its SHA-256
+    out2 = tmp_path / "r2"
+    assert rundir.run_main("prs_element_002", out2, work, params=P(),
+                           checkpoints=case.CHECKPOINTS) == 130
+    (out2 / "fem_detailed" / "calibration_passes.json").write_text('{"passes": [1, 2]}')
+    with pytest.raises(rundir.RunFolderError, match="calibration_passes.json is not the file "
+                                                     "this run wrote"):
+        rundir.run_main("prs_element_002", out2, lambda o: None, params=P(),
+                        checkpoints=case.CHECKPOINTS, keep=case.resume_keep(out2))

@@ -349,12 +349,15 @@ def test_bad_inputs_name_the_option(tmp_path, args, msg):
 
 def test_resume_keeps_the_finished_packings(smoke, tmp_path):
     # The files --resume keeps: each finished (grid, seed) pair's summary first, then its
-    # elements' and its packing's files.
+    # elements' and its packing's files, then the soil calibration's record and its passes'
+    # files (not the FEM runs: they are solved again on the kept soil).
     out, _ = smoke
     keep = case.resume_keep(out)
     assert keep[0] == "jobs/detailed_s1.json" and "jobs/detailed_s2.json" in keep
     assert "detailed_RE_s1_figure.npz" in keep and "detailed_s1_growth.csv" in keep
-    assert not any(k.startswith("fem_") or k == "summary.json" for k in keep)
+    fem = [k for k in keep if k.startswith("fem_")]
+    assert "fem_detailed/calibration.json" in fem and "summary.json" not in keep
+    assert all(k.startswith("fem_detailed/calibration") for k in fem), fem
     assert case.resume_keep(tmp_path) == []
 
 

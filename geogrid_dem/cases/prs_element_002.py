@@ -34,6 +34,7 @@ from __future__ import annotations
 import contextlib
 import json
 import math
+import re
 import sys
 import time
 from dataclasses import asdict, dataclass, replace
@@ -456,10 +457,51 @@ def _job_file(grid: str, seed: int) -> str:
     return f"{JOBS}/{grid}_s{seed}.json"
 
 
+#: The calibration's records in each grid's FEM folder (``fem_<grid>/``) that --resume keeps
+#: (checkpoints: their SHA-256 is recorded as they are written): a finished calibration, and
+#: the passes an unfinished one finished (``geogrid_dem.studies.prs_element.calibrate_soil``).
+CALIBRATION_RECORDS = ("calibration.json", "calibration_passes.json")
+CHECKPOINTS = (f"{JOBS}/*.json", *(f"fem_*/{name}" for name in CALIBRATION_RECORDS))
+
+
 def resume_keep(out: Path) -> list[str]:
-    """The files of the finished (grid, seed) pairs in ``out`` (their summaries first), which
-    --resume keeps; an empty list when none finished."""
+    """The files --resume keeps in ``out``: those of the finished (grid, seed) pairs (their
+    summaries first), then each grid's calibration records (CALIBRATION_RECORDS) with the
+    files of its passes (``fem_<grid>/calibration_*``), so a run stopped during the
+    calibration goes on at its next pass; an empty list when nothing finished."""
     out = Path(out)
+    keep = _finished_pairs(out)
+    seen = set(keep)
+    for fem_dir in sorted(out.glob("fem_*")):
+        records = [fem_dir / n for n in CALIBRATION_RECORDS if (fem_dir / n).is_file()]
+        if not records:
+            continue
+        done = _calibration_passes_done(records[0])
+        for g in [*records, *sorted(fem_dir.glob("calibration_*"))]:
+            rel = str(g.relative_to(out))
+            m = _PASS_FILE.match(g.name)
+            if g in records or (m and int(m.group(1)) <= done):  # (an unfinished pass: not)
+                if g.is_file() and rel not in seen:
+                    keep.append(rel)
+                    seen.add(rel)
+    return keep
+
+
+#: A calibration pass's element files: calibration_<variant>[_s<seed>]_<pass>...
+_PASS_FILE = re.compile(r"calibration_[A-Za-z]+(?:_s\d+)?_(\d+)(?![0-9])")
+
+
+def _calibration_passes_done(record: Path) -> int:
+    """The passes a calibration record holds (0 if it cannot be read: begin_run then refuses
+    a file that is not the run's by its SHA-256)."""
+    try:
+        return len(json.loads(record.read_text())["passes"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return 0
+
+
+def _finished_pairs(out: Path) -> list[str]:
+    """The files of the finished (grid, seed) pairs in ``out``, their summaries first."""
     done = sorted((out / JOBS).glob("*.json")) if (out / JOBS).is_dir() else []
     keep = [str(f.relative_to(out)) for f in done]
     seen = set(keep)
@@ -899,10 +941,10 @@ def main(argv=None) -> int:
     keep = None
     if p.resume:
         keep = resume_keep(out) or [_job_file(p.grids[0], p.seeds[0])]  # (named as missing)
-    # (the parameters and each job file's SHA-256 go into the manifest: --resume continues
+    # (the parameters and each checkpoint's SHA-256 go into the manifest: --resume continues
     # the same run or refuses, rundir.begin_run)
     return run_main("prs_element_002", out, lambda o: run(p, o), keep=keep, params=p,
-                    checkpoints=(f"{JOBS}/*.json",))
+                    checkpoints=CHECKPOINTS)
 
 
 if __name__ == "__main__":
