@@ -44,13 +44,18 @@ size_t edit_distance(const std::string& a, const std::string& b) {
   return row[b.size()];
 }
 
-/// A material from keywords: model (a law's name), then the parameters of its field list.
-Material make_material(const py::dict& kw) {
-  py::object model = kw.contains("model") ? py::object(kw["model"]) : py::object(py::str("linear"));
+/// The law named by a Python value given as model= (a str naming a law), or ParameterError.
+ContactModel law_of(const py::object& model) {
   if (!py::isinstance<py::str>(model))
     throw ParameterError("model=" + py::repr(model).cast<std::string>() +
                          ": must be the name of a law (cpp_dem.contact_laws())");
-  Material mat = Material::of_law(law_by_name(model.cast<std::string>()));
+  return law_by_name(model.cast<std::string>());
+}
+
+/// A material from keywords: model (a law's name), then the parameters of its field list.
+Material make_material(const py::dict& kw) {
+  py::object model = kw.contains("model") ? py::object(kw["model"]) : py::object(py::str("linear"));
+  Material mat = Material::of_law(law_of(model));
   const auto fields = material_fields(mat.model);
   std::vector<bool> given(fields.size(), false);
   for (auto item : kw) {
@@ -207,11 +212,8 @@ void bind_material(py::module_& m) {
     for (int k = 0; k < law.n_fields; ++k) add_attribute(law.fields[k]);
 
   m.def("material_fields", [](const py::object& model) {
-          if (!py::isinstance<py::str>(model))
-            throw ParameterError("model=" + py::repr(model).cast<std::string>() +
-                                 ": must be the name of a law (cpp_dem.contact_laws())");
           py::list out;
-          for (const FieldInfo* f : material_fields(law_by_name(model.cast<std::string>()))) {
+          for (const FieldInfo* f : material_fields(law_of(model))) {
             py::dict row;
             row["name"] = f->name;
             row["unit"] = f->unit;
