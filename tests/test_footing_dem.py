@@ -58,6 +58,8 @@ def test_the_footing_starts_at_the_surcharge_and_stiffens(run):
     # reaction of a uniform -q I is q b exactly (measured: 20000.001 Pa)
     assert p[0] == pytest.approx(Q, rel=5e-3)
     assert np.all(np.diff(p) > 0) and p[-1] > 2 * Q
+    m = res["model"]
+    assert m.footing_settlement_m() == SETTLEMENTS[-1] and m.footing_pressure_pa() == p[-1]
     assert set(res["status"][1:]) <= {"converged", "stopped_at_scatter"}
 
 

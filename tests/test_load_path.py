@@ -105,3 +105,15 @@ def test_every_fem_model_steps_through_the_one_loop():
     assert calls == {"femcoupling/fem/soil_model.py", "femcoupling/coupling/hierarchical.py"
                      }, calls
     assert own == [], own
+
+
+def test_every_footing_model_measures_its_footing_by_the_same_names():
+    """The soil body and the hierarchical model's footing give the footing's pressure and
+    settlement under one name each (SI units in the names)."""
+    from femcoupling.coupling.hierarchical import HierarchicalPlaneStrain
+    from femcoupling.fem.soil_model import SoilModel
+
+    for cls in (SoilModel, HierarchicalPlaneStrain):
+        assert callable(getattr(cls, "footing_pressure_pa", None)), cls
+        assert callable(getattr(cls, "footing_settlement_m", None)), cls
+        assert not hasattr(cls, "footing_pressure"), cls

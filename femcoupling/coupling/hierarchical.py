@@ -40,7 +40,7 @@ confining pressure; no symmetry plane forces the band's shape. ``platens="footin
 rigid smooth strip footing of half width ``footing_b``, m, beside its symmetry plane): the
 left and right on rollers (u_x = 0), the bottom u_y = 0, the top moved by
 ``top_displacement`` over 0 <= x <= ``footing_b`` (u_y; u_x free: smooth) and loaded by the
-surcharge ``confining_pa`` beyond it; ``footing_pressure()`` is the footing's mean pressure
+surcharge ``confining_pa`` beyond it; ``footing_pressure_pa()`` is the footing's mean pressure
 from its reaction. With both
 ``right_displacement`` and ``top_displacement`` and ``homogeneous=True`` every boundary node
 is moved with the homogeneous field, so every element sees the same strain.
@@ -604,17 +604,27 @@ class HierarchicalPlaneStrain:
         self.u.x.array[:] = self.u_n.x.array
         self.u.x.scatter_forward()
 
-    def footing_pressure(self) -> float:
+    def footing_pressure_pa(self) -> float:
         """The footing's mean pressure, Pa, compression positive (``platens="footing"``): the
         reaction at its vertical displacement dofs (the internal force of the points' current
         stresses less the surcharge's share of the edge node) over its half width
-        (``QuadratureSystem.reaction``, the soil body's footing reaction too)."""
-        if self.platens != "footing":
-            raise FemInputError(f"footing_pressure(): only with platens='footing' (this "
-                                f"model's platens={self.platens!r})")
+        (``QuadratureSystem.reaction``: ``SoilModel.footing_pressure_pa`` sums the same way)."""
+        self._check_footing_platens("footing_pressure_pa")
         total = self.system.reaction(self._form_reaction, self._footing_dofs,
                                      self.comm if self._parallel else None)
         return -total / self.footing_b
+
+    def footing_settlement_m(self) -> float:
+        """The footing's settlement, m, positive down (``platens="footing"``): its imposed
+        vertical displacement (every footing node moves with it), as
+        ``SoilModel.footing_settlement_m``."""
+        self._check_footing_platens("footing_settlement_m")
+        return -float(self.top_u.value)
+
+    def _check_footing_platens(self, what: str) -> None:
+        if self.platens != "footing":
+            raise FemInputError(f"{what}(): only with platens='footing' (this model's "
+                                f"platens={self.platens!r})")
 
     def _set_boundary(self, top_displacement: float, right_displacement: float) -> None:
         if self.platens == "footing" and right_displacement != 0.0:

@@ -94,7 +94,7 @@ def fem_dem_footing(pool, *, length: float, depth: float, nx: int, ny: int, foot
                 fh.write(",".join(repr(v) if isinstance(v, float) else str(v) for v in row)
                          + "\n")
 
-    keep((0.0, m.footing_pressure(), "start", 0, 0.0))
+    keep((0.0, m.footing_pressure_pa(), "start", 0, 0.0))
     failed = None
     t1 = time.perf_counter()
     for k, s in enumerate(s_targets, start=1):
@@ -106,7 +106,7 @@ def fem_dem_footing(pool, *, length: float, depth: float, nx: int, ny: int, foot
                 log(f"[fem x dem footing] settlement {s * 1e3:.3f} mm: FAILED ({e}); the run "
                     "ends here")
             break
-        keep((float(s), m.footing_pressure(), r.status, r.newton_iterations, r.wall_s))
+        keep((float(s), m.footing_pressure_pa(), r.status, r.newton_iterations, r.wall_s))
         if log is not None:
             done = time.perf_counter() - t1
             log(f"[fem x dem footing] {k}/{len(s_targets)}: settlement {s * 1e3:.3f} mm, "
