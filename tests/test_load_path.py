@@ -87,8 +87,9 @@ def test_no_cut_at_all_fails_at_once():
 
 
 def test_every_fem_model_steps_through_the_one_loop():
-    """No model of femcoupling halves its steps by a loop of its own: the stage loop of
-    SoilModel and the step of the hierarchical models (2D, 3D, cylinder) call load_path."""
+    """No model of femcoupling halves its steps by a loop of its own: every model is a
+    FemModel, whose _load (the stage loop of SoilModel, the step of the hierarchical models:
+    2D, 3D, cylinder) is the one call of load_path."""
     calls, own = set(), []
     for path in sorted((ROOT / "femcoupling").rglob("*.py")):
         tree = ast.parse(path.read_text())
@@ -102,9 +103,16 @@ def test_every_fem_model_steps_through_the_one_loop():
             if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Sub) \
                     and isinstance(node.left, ast.Name) and node.left.id == "max_cuts":
                 own.append(f"{path.name}:{node.lineno}")
-    assert calls == {"femcoupling/fem/soil_model.py", "femcoupling/coupling/hierarchical.py"
-                     }, calls
+    assert calls == {"femcoupling/fem/model.py"}, calls  # (FemModel._load)
     assert own == [], own
+    from femcoupling.coupling.hierarchical import HierarchicalPlaneStrain
+    from femcoupling.coupling.hierarchical3d import Hierarchical3D, HierarchicalCylinder
+    from femcoupling.fem.model import FemModel
+    from femcoupling.fem.soil_model import SoilModel
+
+    for cls in (SoilModel, HierarchicalPlaneStrain, Hierarchical3D, HierarchicalCylinder):
+        assert issubclass(cls, FemModel), cls
+        assert cls._load is FemModel._load and cls.status is FemModel.status, cls
 
 
 def test_every_footing_model_measures_its_footing_by_the_same_names():

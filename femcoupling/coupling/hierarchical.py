@@ -73,12 +73,13 @@ from femcoupling._checks import FemInputError
 from femcoupling.coupling.handover import HandoverError, spd_floor
 from femcoupling.coupling.records import append_rows
 from femcoupling.coupling.relaxation import aitken_factor, check_relaxation
-from femcoupling.coupling.status import NoiseWarning, worst
+from femcoupling.coupling.status import NoiseWarning
 from femcoupling.fem.mpi_points import (PointPartition, RootMaterial, StartStress, bcast_from_root,
                                         check_on_root)
 from femcoupling.fem.quadrature import (NewtonFailure, NewtonRules, QuadratureSystem,
                                         check_material, lu_package, newton_solve)
-from femcoupling.fem.steps import LoadStep, load_path
+from femcoupling.fem.model import FemModel
+from femcoupling.fem.steps import LoadStep
 
 __all__ = ["HierarchicalPlaneStrain", "HierStep", "NewtonFailure", "NoiseWarning", "TANGENTS",
            "aitken_factor", "quadrature_points", "secant_update"]
@@ -230,7 +231,7 @@ def _relative_scatter(r: HierStep) -> float:
     return float(np.mean(r.element_scatter.max(axis=1) / np.maximum(big, 1e-300)))
 
 
-class HierarchicalPlaneStrain:
+class HierarchicalPlaneStrain(FemModel):
     """See the module doc. ``pool``: an ElementPool with one element per cell (cell k ->
     element k). ``newton_rtol``: the residual's tolerance relative to the internal force
     scale, -; ``noise_factor``: with ``convergence="noise"``, a stalled step is accepted
@@ -273,10 +274,9 @@ class HierarchicalPlaneStrain:
         self._options(out=out, overwrite=overwrite, verbose=verbose, tangent=tangent,
                       tangents=tuple(TANGENTS), convergence=convergence, relaxation=relaxation,
                       noise_factor=noise_factor, noise_ceiling=noise_ceiling,
-                      newton_rtol=newton_rtol)
+                      newton_rtol=newton_rtol, max_newton=max_newton)
         self.homogeneous = homogeneous
         self.confining_pa = confining_pa
-        self.newton_rtol, self.max_newton = newton_rtol, max_newton
         self.strain_kw = dict(strain_kw or {})
         msh = self.mesh = _rectangle(fx, lx, ly, nx, ny, comm)
         self.n_cells = msh.topology.index_map(2).size_local  # (this rank's)
@@ -362,7 +362,6 @@ class HierarchicalPlaneStrain:
             else:
                 self.traction.value[:] = [-float(confining_pa), 0.0]
             self.bcs = [b for b in self.bcs if b is not None]
-        self.history: list[HierStep] = []
         #: the elements as the quadrature points' material (femcoupling.fem.quadrature)
         self._material(pool, tangent=tangent, strain_kw=self.strain_kw)
 
@@ -403,7 +402,7 @@ class HierarchicalPlaneStrain:
 
     def _options(self, *, out, overwrite: bool, verbose: bool, tangent: str, tangents: tuple,
                  convergence: str, relaxation, noise_factor: float,
-                 noise_ceiling: float | None, newton_rtol: float) -> None:
+                 noise_ceiling: float | None, newton_rtol: float, max_newton: int) -> None:
         """Checks and keeps the options both dimensions share (``out`` cleared of an
         earlier run's records only with ``overwrite``)."""
         self.out = None if out is None else Path(out)
@@ -433,7 +432,6 @@ class HierarchicalPlaneStrain:
         if not (noise_factor > 0 and math.isfinite(noise_factor)):
             raise FemInputError(f"noise_factor={noise_factor}: must be > 0 (a stalled step is "
                                 "accepted within this many times the noise's residual)")
-        self.noise_factor = float(noise_factor)
         if not (newton_rtol > 0 and math.isfinite(newton_rtol)):
             raise FemInputError(f"newton_rtol={newton_rtol!r}: must be > 0 (relative to the "
                                 "internal force scale)")
@@ -443,9 +441,8 @@ class HierarchicalPlaneStrain:
                                 f"{newton_rtol!r} and finite (the largest residual, relative "
                                 "to the internal force scale, a step may be accepted at "
                                 "within the elements' noise; default 10 x newton_rtol)")
-        self.noise_ceiling = float(ceiling)
-        #: every warning of the run (also given as ``NoiseWarning``), in order
-        self.warnings: list[str] = []
+        self._solver_options(newton_rtol=newton_rtol, max_newton=max_newton,
+                             noise_factor=noise_factor, noise_ceiling=ceiling)
 
     # ---- the elements' material ---------------------------------------------------------
     @property
@@ -542,12 +539,9 @@ class HierarchicalPlaneStrain:
                          f"{contacts[k]} contacts, mean stress {self._sig[k][:2].mean():.4g} Pa"
                          for k in np.argsort(ev)[:n])
 
-    def _warn(self, msg: str) -> None:
-        import warnings
-
-        self.warnings.append(msg)
-        if self._root:
-            warnings.warn(msg, NoiseWarning, stacklevel=3)
+    @property
+    def _warns_here(self) -> bool:
+        return self._root
 
     def _scale_length(self) -> float:
         """The force scale over the largest stress: the square root of the domain's area, m
@@ -557,12 +551,6 @@ class HierarchicalPlaneStrain:
     def _scale(self) -> float:
         """|F_int| of the current stresses (the tolerance's scale)."""
         return float(np.abs(self._sig).max()) * self._scale_length() + 1e-300
-
-    @property
-    def status(self) -> str:
-        """The run's status so far: the worst of its accepted steps' ("converged" before
-        any). A step that could not be accepted raised ``NewtonFailure``: the run failed."""
-        return worst(r.status for r in self.history)
 
     # ---- a load step -----------------------------------------------------------------------
     def step(self, *, top_displacement: float, right_displacement: float = 0.0,
@@ -587,10 +575,8 @@ class HierarchicalPlaneStrain:
         def at(lf: float):
             return target if lf == 1.0 else a + lf * (b - a)
 
-        return load_path(lambda lf: go(at(lf)), self._rollback,
-                         lambda lf: self._restore(at(lf)), steps=1, max_cuts=max_cuts,
-                         max_newton=self.max_newton,
-                         where=f"load step {len(self.history)}")[-1]
+        return self._load(lambda lf: go(at(lf)), lambda lf: self._restore(at(lf)), steps=1,
+                          max_cuts=max_cuts, where=f"load step {len(self.history)}")[-1]
 
     def _restore(self, point) -> None:
         """The boundary back at ``point`` (the last accepted step's) after a failed load."""
@@ -598,11 +584,9 @@ class HierarchicalPlaneStrain:
 
     _bc_now = (0.0, 0.0)  # the boundary displacements of the last accepted step, m
 
-    def _rollback(self) -> None:
-        """Back to the last accepted step: the elements to their accepted state, u to u_n."""
+    def _reject_points(self) -> None:
+        """The elements back at their accepted state (``FemModel._rollback``)."""
         self.material.reject()
-        self.u.x.array[:] = self.u_n.x.array
-        self.u.x.scatter_forward()
 
     def footing_pressure_pa(self) -> float:
         """The footing's mean pressure, Pa, compression positive (``platens="footing"``): the

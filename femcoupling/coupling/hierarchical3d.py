@@ -89,9 +89,9 @@ class Hierarchical3D(HierarchicalPlaneStrain):
         self._options(out=out, overwrite=overwrite, verbose=verbose, tangent=tangent,
                       tangents=("network", "network-elastic"), convergence=convergence,
                       relaxation=relaxation, noise_factor=noise_factor,
-                      noise_ceiling=noise_ceiling, newton_rtol=newton_rtol)
+                      noise_ceiling=noise_ceiling, newton_rtol=newton_rtol,
+                      max_newton=max_newton)
         self.homogeneous, self.confining_pa = homogeneous, confining_pa
-        self.newton_rtol, self.max_newton = newton_rtol, max_newton
         self.strain_kw = dict(strain_kw or {})
         msh = self.mesh = self._mesh(comm)
         self.n_cells = msh.topology.index_map(3).size_local  # (this rank's)
@@ -124,7 +124,6 @@ class Hierarchical3D(HierarchicalPlaneStrain):
         else:
             self.bcs = self._triaxial_bcs(msh)
             self._confine(float(confining_pa))
-        self.history = []
         self._material(pool, tangent=tangent, strain_kw=self.strain_kw, dim=3)
         self._gradient = np.zeros((3, 3))
 

@@ -7,9 +7,12 @@
   state, one load-step loop), with its parts :mod:`~femcoupling.fem.soil_loading` (the load
   stages), :mod:`~femcoupling.fem.soil_regions` (regions with a material of their own),
   :mod:`~femcoupling.fem.soil_measures` (what it gives out);
+- :mod:`femcoupling.fem.model`: ``FemModel``, what every model (``SoilModel``, the
+  hierarchical models) is on its solver side: the Newton options, the load-step loop, the
+  rollback of a failed step, the run's history, warnings and status;
 - :mod:`femcoupling.fem.steps`: what a load step of every model ends in: its record
   (``LoadStep``, the same Newton fields in every model) or ``NewtonFailure`` (the one failure
-  type);
+  type), and the one load-step loop (``load_path``);
 - :mod:`femcoupling.fem.quadrature`: the material interface at quadrature points, the spaces
   and forms, and the one Newton with its acceptance rules;
 - :mod:`femcoupling.fem.mpi_points`: quadrature points split over MPI ranks, their materials

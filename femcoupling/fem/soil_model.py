@@ -45,14 +45,14 @@ import numpy as np
 
 from femcoupling import _dolfinx
 from femcoupling._checks import FemInputError
-from femcoupling.coupling.status import NoiseWarning
 from femcoupling.fem import geometry as geo
 from femcoupling.fem.quadrature import (NewtonRules, QuadratureSystem, check_material, lu_package,
                                         newton_solve)
 from femcoupling.fem.soil_loading import LoadingStages
 from femcoupling.fem.soil_measures import SoilMeasures
 from femcoupling.fem.soil_regions import RegionMaterials, RegionPoints
-from femcoupling.fem.steps import NewtonFailure, StepResult, load_path
+from femcoupling.fem.model import FemModel
+from femcoupling.fem.steps import NewtonFailure, StepResult
 from femcoupling.materials.continuum import GeogridLayerMaterial, LinearElastic, mandel_to_tensor
 
 __all__ = ["SoilModel", "StepResult", "NewtonFailure"]
@@ -60,7 +60,7 @@ __all__ = ["SoilModel", "StepResult", "NewtonFailure"]
 SQRT2 = math.sqrt(2.0)
 
 
-class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
+class SoilModel(RegionMaterials, LoadingStages, SoilMeasures, FemModel):
     """A reinforced soil body in dolfinx; see the module doc. Collective on ``comm``.
 
     Args:
@@ -116,17 +116,14 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         #: region in a 4 x 3 m body carries a small share of it) is stopped_at_scatter. 1e-2:
         #: the equilibrium the region elements are relaxed to (their unbalanced-force ratio,
         #: 1e-2 in the region elements of this package)
-        self.noise_factor = 2.0
-        self.noise_ceiling = 1e-2
+        self._solver_options(newton_rtol=newton_rtol, max_newton=max_newton,
+                             noise_factor=2.0, noise_ceiling=1e-2)
         self.last_failure = ""  #: why the last failed Newton failed
-        #: every warning of the run (steps stopped within the elements' noise), in order
-        self.warnings: list[str] = []
         self._step_end: dict = {}
         self._region_form = None  # the DEM regions' internal force (built on demand)
         self.unit_weight_n_m3, self.degree = gamma, degree
-        self.newton_rtol, self.max_newton, self.max_cuts = newton_rtol, max_newton, max_cuts
+        self.max_cuts = max_cuts
         self.comm = comm if comm is not None else fx.MPI.COMM_WORLD
-        self.history: list[StepResult] = []
 
         mb = geo.build_mesh(body, comm=self.comm)
         self.mesh, self.cell_tags, self.facet_tags = mb.mesh, mb.cell_tags, mb.facet_tags
@@ -399,10 +396,6 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
         self.u_n.x.array[:] = self.u.x.array
         self.u_n.x.scatter_forward()
 
-    def _rollback(self) -> None:
-        self.u.x.array[:] = self.u_n.x.array
-        self.u.x.scatter_forward()
-
     # ---- stages --------------------------------------------------------------------------
 
     def _run_stage(self, stage: str, apply: Any, steps: int, callback: Any = None) -> list:
@@ -432,15 +425,12 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
             if callback is not None:
                 callback(r)
 
-        return load_path(take, self._rollback, apply, steps=steps, max_cuts=self.max_cuts,
-                         max_newton=self.max_newton, where=f"stage {stage!r}",
-                         accepted=accepted)
+        return self._load(take, apply, steps=steps, max_cuts=self.max_cuts,
+                          where=f"stage {stage!r}", accepted=accepted)
 
     _ext_scale = 0.0
 
     def _noise_warning(self, r: StepResult) -> None:
-        import warnings
-
         msg = (f"{r.stage} step at load factor {r.load_factor:.4g}: Newton stalled at "
                f"{r.residual:.3g} of the DEM regions' own internal force ({r.residual_pa:.3g} "
                f"Pa), above the tolerance newton_rtol={self.newton_rtol:g} ({r.tol:.3g} of "
@@ -451,8 +441,7 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures):
                   "ceiling, within the noise)" if r.redraws else "")
                + ": the DEM region elements do not resolve the tolerance asked; the step "
                "stopped at their scatter (stopped_at_scatter, not converged)")
-        self.warnings.append(msg)
-        warnings.warn(msg, NoiseWarning, stacklevel=5)  # the stage's caller
+        self._warn(msg, stacklevel=6)  # (the stage's caller: _run_stage's)
 
     # ---- state ---------------------------------------------------------------------------
 
