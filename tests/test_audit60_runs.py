@@ -507,8 +507,9 @@ def test_a_run_into_a_folder_named_with_an_emoji_writes_a_readable_run_toml(tmp_
 
 def test_a_002_run_stopped_in_its_calibration_resumes_at_the_next_pass(tmp_path, capsys):
     """prs-element-002 interrupted during its soil calibration (no packing finished yet):
-    --resume keeps the calibration's record of its finished passes (a checkpoint, by its
-    SHA-256) and the files of those passes, and removes the unfinished pass's files; before,
+    --resume keeps the calibration's record of its finished passes and the grown packings
+    (checkpoints, by their SHA-256) and the files of those passes, and removes the unfinished
+    pass's files; before,
     it refused ("jobs/detailed_s1.json is not there") and a full-size run lost hours."""
     from geogrid_dem.cases import prs_element_002 as case
 
@@ -519,7 +520,7 @@ def test_a_002_run_stopped_in_its_calibration_resumes_at_the_next_pass(tmp_path,
         fem.mkdir()
         (fem / "calibration_passes.json").write_text(json.dumps({"passes": [{"k": 1}]}))
         for name in ("calibration_RE_s1_1.csv", "calibration_RE_s2_1_final.h5",
-                     "calibration_RE_s1_2_growth.csv", "fem_RE.h5"):
+                     "calibration_RE_s1_2_growth.csv", "fem_RE.h5", "packing_s1.h5"):
             (fem / name).write_text(name)
         raise KeyboardInterrupt
 
@@ -527,7 +528,7 @@ def test_a_002_run_stopped_in_its_calibration_resumes_at_the_next_pass(tmp_path,
                            checkpoints=case.CHECKPOINTS) == 130
     assert "fem_detailed/calibration_passes.json" in rundir.run_status(out)["checkpoints"]
     keep = case.resume_keep(out)
-    assert keep == ["fem_detailed/calibration_passes.json",
+    assert keep == ["fem_detailed/packing_s1.h5", "fem_detailed/calibration_passes.json",
                     "fem_detailed/calibration_RE_s1_1.csv",
                     "fem_detailed/calibration_RE_s2_1_final.h5"], keep
     ran: list = []

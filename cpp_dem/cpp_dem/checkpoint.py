@@ -130,6 +130,58 @@ def _checked(path: str, f, name: str, *, required: bool) -> np.ndarray | None:
     return None
 
 
+def _header(path, f) -> dict:
+    """The checked header of the open checkpoint ``f``: its format, and its extra JSON
+    against the header's checksum (ParameterError naming ``path`` otherwise)."""
+    fmt = f.attrs.get("format")
+    if fmt not in (FORMAT, _FORMAT_UNCHECKED):
+        raise _core.ParameterError(f"{path}: format {fmt!r}, expected {FORMAT!r} (a file "
+                                   "written by save_checkpoint)")
+    if fmt == _FORMAT_UNCHECKED:
+        warnings.warn(f"{path}: a checkpoint of format {fmt!r}, written before checkpoints "
+                      "carried checksums: it is loaded unverified", UserWarning, stacklevel=3)
+    missing = [k for k in ("step", "time", "extra_json") if k not in f.attrs]
+    if missing:
+        raise _core.ParameterError(f"{path}: attribute {missing[0]} missing; the file is not "
+                                   "a complete checkpoint written by save_checkpoint")
+    extra_json = f.attrs["extra_json"]
+    if fmt == FORMAT:
+        want = f.attrs.get("header_sha256")
+        try:
+            got = _header_sha256(fmt, f.attrs["step"], f.attrs["time"], extra_json)
+        except (TypeError, ValueError):
+            got = None
+        if want is None or got != want:
+            raise _core.ParameterError(
+                f"{path}: the header (attributes step, time, extra_json) "
+                + ("carries no checksum (attribute header_sha256)" if want is None else
+                   "does not match its checksum (attribute header_sha256)")
+                + "; the file changed after it was written; restart from another checkpoint")
+    try:
+        extra = json.loads(extra_json)
+    except (TypeError, ValueError) as e:
+        raise _core.ParameterError(f"{path}: attribute extra_json is not readable JSON "
+                                   f"({e}): {str(extra_json)[:80]!r}") from None
+    if not isinstance(extra, dict):
+        raise _core.ParameterError(f"{path}: attribute extra_json holds a "
+                                   f"{type(extra).__name__}, expected a JSON object (dict)")
+    return extra
+
+
+def checkpoint_extra(path: str | os.PathLike) -> dict:
+    """The ``extra`` dict of the checkpoint ``path`` (its header checked against its
+    checksum, as ``load_checkpoint`` checks it), without loading its state."""
+    import h5py
+
+    try:
+        f = h5py.File(path, "r")
+    except OSError as e:
+        raise _core.ParameterError(f"{path}: not a readable checkpoint (an HDF5 file "
+                                   f"written by save_checkpoint): {e}") from None
+    with f:
+        return _header(path, f)
+
+
 def load_checkpoint(path: str | os.PathLike, scene, *, replace: bool = False) -> dict:
     """Restores the state saved in ``path`` into ``scene``; returns the ``extra`` dict.
 
@@ -152,38 +204,7 @@ def load_checkpoint(path: str | os.PathLike, scene, *, replace: bool = False) ->
         raise _core.ParameterError(f"{path}: not a readable checkpoint (an HDF5 file "
                                    f"written by save_checkpoint): {e}") from None
     with f:
-        fmt = f.attrs.get("format")
-        if fmt not in (FORMAT, _FORMAT_UNCHECKED):
-            raise _core.ParameterError(f"{path}: format {fmt!r}, expected {FORMAT!r} (a file "
-                                       "written by save_checkpoint)")
-        if fmt == _FORMAT_UNCHECKED:
-            warnings.warn(f"{path}: a checkpoint of format {fmt!r}, written before checkpoints "
-                          "carried checksums: it is loaded unverified", UserWarning, stacklevel=2)
-        missing = [k for k in ("step", "time", "extra_json") if k not in f.attrs]
-        if missing:
-            raise _core.ParameterError(f"{path}: attribute {missing[0]} missing; the file is not "
-                                       "a complete checkpoint written by save_checkpoint")
-        extra_json = f.attrs["extra_json"]
-        if fmt == FORMAT:
-            want = f.attrs.get("header_sha256")
-            try:
-                got = _header_sha256(fmt, f.attrs["step"], f.attrs["time"], extra_json)
-            except (TypeError, ValueError):
-                got = None
-            if want is None or got != want:
-                raise _core.ParameterError(
-                    f"{path}: the header (attributes step, time, extra_json) "
-                    + ("carries no checksum (attribute header_sha256)" if want is None else
-                       "does not match its checksum (attribute header_sha256)")
-                    + "; the file changed after it was written; restart from another checkpoint")
-        try:
-            extra = json.loads(extra_json)
-        except (TypeError, ValueError) as e:
-            raise _core.ParameterError(f"{path}: attribute extra_json is not readable JSON "
-                                       f"({e}): {str(extra_json)[:80]!r}") from None
-        if not isinstance(extra, dict):
-            raise _core.ParameterError(f"{path}: attribute extra_json holds a "
-                                       f"{type(extra).__name__}, expected a JSON object (dict)")
+        extra = _header(path, f)
         a = _checked(path, f, _BLOB, required=True)
         if a.dtype != np.uint8 or a.ndim != 1:
             raise _core.ParameterError(f"{path}: dataset {_BLOB} holds {a.dtype} of shape "

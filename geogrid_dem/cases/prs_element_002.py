@@ -457,20 +457,35 @@ def _job_file(grid: str, seed: int) -> str:
     return f"{JOBS}/{grid}_s{seed}.json"
 
 
+PACKINGS = "packings"  #: the folder of the unfinished pairs' grown packings (--resume keeps)
+
+
+def _packing_file(grid: str, seed: int) -> str:
+    return f"{PACKINGS}/{grid}_s{seed}.h5"
+
+
 #: The calibration's records in each grid's FEM folder (``fem_<grid>/``) that --resume keeps
 #: (checkpoints: their SHA-256 is recorded as they are written): a finished calibration, and
 #: the passes an unfinished one finished (``geogrid_dem.studies.prs_element.calibrate_soil``).
 CALIBRATION_RECORDS = ("calibration.json", "calibration_passes.json")
-CHECKPOINTS = (f"{JOBS}/*.json", *(f"fem_*/{name}" for name in CALIBRATION_RECORDS))
+#: What --resume keeps only when its bytes are the run's (SHA-256 recorded as written): the
+#: pairs' job files, the calibrations' records, and the grown packings of the unfinished pairs
+#: and calibrations (``cpp_dem.elements.box.save_prepared``).
+CHECKPOINTS = (f"{JOBS}/*.json", *(f"fem_*/{name}" for name in CALIBRATION_RECORDS),
+               f"{PACKINGS}/*.h5", "fem_*/packing_s*.h5")
 
 
 def resume_keep(out: Path) -> list[str]:
     """The files --resume keeps in ``out``: those of the finished (grid, seed) pairs (their
-    summaries first), then each grid's calibration records (CALIBRATION_RECORDS) with the
-    files of its passes (``fem_<grid>/calibration_*``), so a run stopped during the
-    calibration goes on at its next pass; an empty list when nothing finished."""
+    summaries first), the grown packings of the unfinished ones and of an unfinished
+    calibration (restored, not grown again), then each grid's calibration records
+    (CALIBRATION_RECORDS) with the files of its passes (``fem_<grid>/calibration_*``), so a
+    run stopped during the calibration goes on at its next pass; an empty list when nothing
+    finished."""
     out = Path(out)
     keep = _finished_pairs(out)
+    keep += [str(f.relative_to(out)) for f in [*sorted(out.glob(f"{PACKINGS}/*.h5")),
+                                               *sorted(out.glob("fem_*/packing_s*.h5"))]]
     seen = set(keep)
     for fem_dir in sorted(out.glob("fem_*")):
         records = [fem_dir / n for n in CALIBRATION_RECORDS if (fem_dir / n).is_file()]
@@ -728,7 +743,9 @@ def _pair_job(p: Params, grid: str, seed: int, targets: dict, out: Path) -> dict
     """RE and PRS on one grown packing (picklable: ``--workers`` runs them in other
     processes); ``targets``: per variant, :func:`handover`'s dict. Writes
     jobs/<grid>_s<seed>.json when both are done."""
-    prepared: dict = {}
+    # (the grown packing on disk while the pair runs: a resumed run restores it instead of
+    # growing it again; removed with the pair's job file written)
+    prepared: dict = {"file": out / _packing_file(grid, seed)}
     grow = float(np.mean([np.mean(t["rows"][0]) for t in targets.values()]))
     res = {"grid": grid, "seed": seed, "elements": {}, "labels": []}
     for v, t in targets.items():
@@ -742,6 +759,7 @@ def _pair_job(p: Params, grid: str, seed: int, targets: dict, out: Path) -> dict
         res["labels"].append(label)
     res["preparation_wall_time_s"] = prepared.get("wall_time_s")
     write_atomic(out / _job_file(grid, seed), json.dumps(res, indent=2, default=float) + "\n")
+    prepared["file"].unlink(missing_ok=True)
     return res
 
 

@@ -91,10 +91,19 @@ def log(msg: str) -> None:
 
 def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: str, out: Path,
                 cache: dict | None = None, grid_tension: list | None = None,
-                probe: float = 0.0) -> dict:
+                probe: float = 0.0, prepared: dict | None = None) -> dict:
     """:func:`cpp_dem.elements.box.run_element` with this case's log."""
     return _element.run_element(p, targets, prestressed=prestressed, label=label, out=out,
-                                log=log, cache=cache, grid_tension=grid_tension, probe=probe)
+                                log=log, cache=cache, grid_tension=grid_tension, probe=probe,
+                                prepared=prepared)
+
+
+def packing_file(out: Path, seed: int) -> Path:
+    """The grown packing of the calibration's element of ``seed`` in its folder ``out``
+    (``cpp_dem.elements.box.save_prepared``): an interrupted calibration resumed in a new
+    process restores it instead of growing it again (bitwise the same element); removed once
+    the calibration is done."""
+    return Path(out) / f"packing_s{int(seed)}.h5"
 
 
 def handed_tension(p: Params, targets: list, label: str) -> list | None:
@@ -373,7 +382,7 @@ def _calibration_elements(q: Params, seeds: list, rows: list, tension: list | No
         cache = _CALIBRATION_ELEMENTS.setdefault((key, int(s)), {})
         res.append(run_element(replace(q, seed=int(s)), rows, prestressed=False,
                                label=f"calibration_RE_s{s}_{k}", out=out, grid_tension=tension,
-                               cache=cache))
+                               cache=cache, prepared={"file": packing_file(out, s)}))
     return res
 
 
@@ -462,7 +471,8 @@ def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
             rows = [ini.normal_pa, fin.normal_pa]
             if len(seeds) == 1:
                 es = [run_element(q, rows, prestressed=False, label=label, out=out,
-                                  grid_tension=tension, cache=cache)]
+                                  grid_tension=tension, cache=cache,
+                                  prepared={"file": packing_file(out, q.seed)})]
             elif pools:
                 futs = [ex.submit(_calibration_elements, q, g, rows, tension, k, out, key)
                         for ex, g in zip(pools, groups)]
@@ -548,6 +558,8 @@ def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
                       f"{rec['wall_time_s']:.1f} s")
     log("calibration: " + rec["message"])
     (out / "calibration.json").write_text(json.dumps(rec, indent=2, default=float) + "\n")
+    for s in seeds:  # (the grown packings: a finished calibration is not resumed)
+        packing_file(out, s).unlink(missing_ok=True)
     return replace(q, soil_friction=p.soil_friction, soil_cohesion=0.0), rec
 
 

@@ -1089,6 +1089,79 @@ def save_final_state(path: Path, sample, p: ElementParams, targets, *, prestress
         "prestress_locked": bool(prestress is not None and prestress.locked)})
 
 
+#: The ``kind`` of a prepared packing's file (:func:`save_prepared`).
+PREPARED_KIND = "woven element, prepared"
+
+
+def _params_json(p: ElementParams) -> dict:
+    import json
+    from dataclasses import asdict
+
+    return json.loads(json.dumps(asdict(p), default=lambda o: np.asarray(o).tolist()))
+
+
+def save_prepared(path: Path, sample, p: ElementParams, grow_stress: float,
+                  label: str) -> None:
+    """The grown packing of :func:`prepare_woven_element` (before its variant is loaded) to
+    ``path``, to be restored by :func:`restore_prepared` instead of grown again (a resumed
+    run's packings): the scene's checkpoint with, as its extra JSON, the element's
+    parameters, the grow stress (Pa), the label and the growth's history."""
+    from cpp_dem.checkpoint import save_checkpoint
+
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    save_checkpoint(path, sample.scene, extra={
+        "kind": PREPARED_KIND, "label": label, "params": _params_json(p),
+        "grow_stress_pa": float(grow_stress),
+        "growth_history": [{k: _plain(v) for k, v in r.items()} for r in sample.growth_history]})
+
+
+def _plain(v):
+    """A growth-history value as JSON keeps it: a str, an int, or a float."""
+    if isinstance(v, str):
+        return v
+    if isinstance(v, (int, np.integer)) and not isinstance(v, bool):
+        return int(v)
+    return float(v)
+
+
+def restore_prepared(prepared: dict, p: ElementParams, grow_stress: float,
+                     log: Callable[[str], None] = _log) -> bool:
+    """Fills ``prepared`` (run_element's) from its ``file`` when that holds the packing these
+    parameters and this grow stress (Pa) grow: the element's skeleton
+    (``prepare_woven_element(build_only=True)``) with the file's state, bitwise the grown one;
+    True then. False, and ``prepared`` unchanged, when there is no file; a file of other
+    parameters or grow stress is set aside (renamed ``*.stale``, said in the log) and the
+    packing is grown again."""
+    from cpp_dem.checkpoint import checkpoint_extra, load_checkpoint
+
+    path = Path(prepared["file"])
+    if not path.is_file():
+        return False
+    extra = checkpoint_extra(path)
+    why = ("not a prepared packing" if extra.get("kind") != PREPARED_KIND else
+           "other element parameters" if extra.get("params") != _params_json(p) else
+           f"grown to {extra.get('grow_stress_pa')!r} Pa, not {float(grow_stress)!r}"
+           if extra.get("grow_stress_pa") != float(grow_stress) else None)
+    if why is not None:
+        stale = path.with_name(path.name + ".stale")
+        path.replace(stale)
+        log(f"{path}: {why}: set aside as {stale.name}; the packing is grown again")
+        return False
+    sample, grid = prepare_woven_element(p, float(grow_stress), log=lambda _m: None,
+                                         build_only=True)
+    load_checkpoint(path, sample.scene)
+    sample.growth_history[:] = [dict(r) for r in extra["growth_history"]]
+    blob = bytes(_core._checkpoint_save(sample.scene))
+    prepared["state"] = (sample, grid, blob)
+    prepared["sha256"] = hashlib.sha256(blob).hexdigest()
+    prepared["label"] = extra["label"]
+    prepared["wall_time_s"] = 0.0
+    log(f"{extra['label']}: the grown packing restored from {path} (step "
+        f"{sample.scene.step_count}): no growth")
+    return True
+
+
 GROWTH_COLUMNS = ("phase", "step", "time_s", "coordination", "porosity", "wall_stress_pa",
                   "unbalanced_force", "dt_s")
 
@@ -1305,20 +1378,23 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
         log(f"{label}: the element at the first targets restored from the cache "
             f"(step {sample.scene.step_count}): no preparation")
     elif woven_grid and prepared is not None:
+        grow_pa = float(targets[0].mean()) if grow_stress is None else float(grow_stress)
+        if "state" not in prepared and prepared.get("file") is not None:
+            restore_prepared(prepared, p, grow_pa, log=log)
         if "state" in prepared:
             sample, grid, blob = prepared["state"]
             _core._checkpoint_load(sample.scene, blob)
             log(f"{label}: the prepared packing of {prepared['label']} restored (step "
                 f"{sample.scene.step_count})")
         else:
-            sample, grid = prepare_woven_element(
-                p, float(targets[0].mean()) if grow_stress is None else float(grow_stress),
-                log=log)
+            sample, grid = prepare_woven_element(p, grow_pa, log=log)
             blob = bytes(_core._checkpoint_save(sample.scene))
             prepared["state"] = (sample, grid, blob)
             prepared["sha256"] = hashlib.sha256(blob).hexdigest()
             prepared["label"] = prep_label or label
             prepared["wall_time_s"] = time.perf_counter() - t_start
+            if prepared.get("file") is not None:
+                save_prepared(prepared["file"], sample, p, grow_pa, prepared["label"])
         ps = load_variant(sample, grid, p, prestressed, log=log)
     elif woven_grid:
         sample, grid, ps = make_woven_element(
