@@ -638,7 +638,8 @@ def test_the_soil_is_fitted_to_the_mean_of_the_seeds_elements(tmp_path, monkeypa
 
     seen = []
 
-    def fake_element(q, rows, *, prestressed, label, out, grid_tension=None, cache=None):
+    def fake_element(q, rows, *, prestressed, label, out, grid_tension=None, cache=None,
+                     prepared=None):
         seen.append((q.seed, label))
         E = {1: 40e6, 2: 60e6}[q.seed]
         return {"stress_initial_pa": rows[0].tolist(), "stress_final_pa": rows[1].tolist(),
@@ -685,7 +686,8 @@ def test_an_interrupted_calibration_goes_on_at_its_next_pass(tmp_path, monkeypat
         return (targets(ini_pa), targets(fin_pa), None, None, None,
                 {"strain_increment": ((fin_pa - ini_pa) / q.soil_young).tolist()})
 
-    def fake_element(q, rows, *, prestressed, label, out, grid_tension=None, cache=None):
+    def fake_element(q, rows, *, prestressed, label, out, grid_tension=None, cache=None,
+                     prepared=None):
         E = 9e6  # (far from the given soil: pass 1 is off the band, pass 2 converges)
         return {"stress_initial_pa": rows[0].tolist(), "stress_final_pa": rows[1].tolist(),
                 "strain_increment": ((rows[1] - rows[0]) / E).tolist(), "porosity_final": 0.4}
