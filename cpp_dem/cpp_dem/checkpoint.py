@@ -168,17 +168,22 @@ def _header(path, f) -> dict:
     return extra
 
 
-def checkpoint_extra(path: str | os.PathLike) -> dict:
-    """The ``extra`` dict of the checkpoint ``path`` (its header checked against its
-    checksum, as ``load_checkpoint`` checks it), without loading its state."""
+def _open(path: str):
+    """The checkpoint ``path`` open for reading (h5py), or a ParameterError naming it."""
     import h5py
 
     try:
-        f = h5py.File(path, "r")
+        return h5py.File(path, "r")
     except OSError as e:
         raise _core.ParameterError(f"{path}: not a readable checkpoint (an HDF5 file "
                                    f"written by save_checkpoint): {e}") from None
-    with f:
+
+
+def checkpoint_extra(path: str | os.PathLike) -> dict:
+    """The ``extra`` dict of the checkpoint ``path`` (its header checked against its
+    checksum, as ``load_checkpoint`` checks it), without loading its state."""
+    path = os.fspath(path)
+    with _open(path) as f:
         return _header(path, f)
 
 
@@ -195,15 +200,8 @@ def load_checkpoint(path: str | os.PathLike, scene, *, replace: bool = False) ->
     the file and leaves ``scene`` as it was."""
     if not isinstance(replace, bool):
         raise _core.ParameterError(f"replace={replace!r}: must be True or False")
-    import h5py
-
     path = os.fspath(path)
-    try:
-        f = h5py.File(path, "r")
-    except OSError as e:
-        raise _core.ParameterError(f"{path}: not a readable checkpoint (an HDF5 file "
-                                   f"written by save_checkpoint): {e}") from None
-    with f:
+    with _open(path) as f:
         extra = _header(path, f)
         a = _checked(path, f, _BLOB, required=True)
         if a.dtype != np.uint8 or a.ndim != 1:
