@@ -471,8 +471,9 @@ CALIBRATION_RECORDS = ("calibration.json", "calibration_passes.json")
 #: What --resume keeps only when its bytes are the run's (SHA-256 recorded as written): the
 #: pairs' job files, the calibrations' records, and the grown packings of the unfinished pairs
 #: and calibrations (``cpp_dem.elements.box.save_prepared``).
+PACKING_FILES = (f"{PACKINGS}/*.h5", "fem_*/packing_s*.h5")
 CHECKPOINTS = (f"{JOBS}/*.json", *(f"fem_*/{name}" for name in CALIBRATION_RECORDS),
-               f"{PACKINGS}/*.h5", "fem_*/packing_s*.h5")
+               *PACKING_FILES)
 
 
 def resume_keep(out: Path) -> list[str]:
@@ -484,8 +485,7 @@ def resume_keep(out: Path) -> list[str]:
     finished."""
     out = Path(out)
     keep = _finished_pairs(out)
-    keep += [str(f.relative_to(out)) for f in [*sorted(out.glob(f"{PACKINGS}/*.h5")),
-                                               *sorted(out.glob("fem_*/packing_s*.h5"))]]
+    keep += [str(f.relative_to(out)) for pat in PACKING_FILES for f in sorted(out.glob(pat))]
     seen = set(keep)
     for fem_dir in sorted(out.glob("fem_*")):
         records = [fem_dir / n for n in CALIBRATION_RECORDS if (fem_dir / n).is_file()]

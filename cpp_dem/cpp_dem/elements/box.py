@@ -1073,16 +1073,12 @@ def save_final_state(path: Path, sample, p: ElementParams, targets, *, prestress
     parameters, its label and variant, the targets (Pa), the controller's set points and axis
     modes, and the grid's end conditions (the end tension, N/m; the prestress grips locked or
     not)."""
-    import json
-    from dataclasses import asdict
-
     from cpp_dem.checkpoint import save_checkpoint
 
     ctl = sample.controller
-    params = json.loads(json.dumps(asdict(p), default=lambda o: np.asarray(o).tolist()))
     save_checkpoint(path, sample.scene, extra={
         "kind": "prs_element_002 element", "label": label, "prestressed": bool(prestressed),
-        "params": params, "targets_pa": [float(x) for x in targets],
+        "params": _params_json(p), "targets_pa": [float(x) for x in targets],
         "set_points": [float(ctl.goal(a)) for a in range(3)],
         "modes": [ctl.mode(a) for a in range(3)],
         "grid_end_tension_n_per_m": None if ends is None else float(ends.tension_per_m),
@@ -1094,6 +1090,7 @@ PREPARED_KIND = "woven element, prepared"
 
 
 def _params_json(p: ElementParams) -> dict:
+    """The element's parameters as JSON keeps them (a state file's ``params``)."""
     import json
     from dataclasses import asdict
 
