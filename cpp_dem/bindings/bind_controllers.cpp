@@ -23,6 +23,48 @@ py::dict limit_dict(const LimitWatch& l, int wall, const std::string& axis) {
   d["cap_m_per_s"] = l.cap;
   return d;
 }
+
+/// The watch of a StressServo (ServoWall, CylinderServo) on its Python class: limit_report,
+/// clear_limit_report, target_report, clear_target_report. Its reports name its wall by `key`
+/// ("wall"; a cylinder's also by "cylinder", with "wall" its index too).
+template <class S, class Cls>
+void def_servo_watch(Cls& cls, const char* key, int (S::*id)() const, Real (S::*target)() const) {
+  const std::string k = key;
+  cls.def("limit_report", [k, id](const S& c) {
+        py::list out;
+        if (c.limit().count > 0) {
+          py::dict d = limit_dict(c.limit(), (c.*id)(), "");
+          d[k.c_str()] = (c.*id)();
+          out.append(d);
+        }
+        return out;
+      }, ("Calls since the last clear at the speed cap while drifting from the target stress "
+          "(off by more than 5 % and growing): a list with one dict (" + k + ", calls, "
+          "target_pa, reached_pa, cap_m_per_s), or empty.").c_str())
+      .def("clear_limit_report", &S::clear_limit)
+      .def("target_report", [k, id, target](const S& c) {
+        py::list out;
+        const LimitWatch& l = c.limit();
+        if (l.unmet()) {
+          py::dict d;
+          d["wall"] = (c.*id)();
+          d[k.c_str()] = (c.*id)();
+          d["target_pa"] = (c.*target)();
+          d["reached_pa"] = l.last_sigma;
+          d["calls"] = l.run_calls;
+          d["calls_at_cap"] = l.run_cap_calls;
+          d["cap_m_per_s"] = l.last_cap;
+          out.append(d);
+        }
+        return out;
+      }, ("The target not reached: when the stress has not been within 5 % of the current "
+          "target at any call since it was set, and the target was not reported yet, a list "
+          "with one dict (" + k + ", target_pa, reached_pa: the stress at the last call, calls "
+          "and calls_at_cap since the last clear_target_report, cap_m_per_s); else empty.").c_str())
+      .def("clear_target_report", &S::clear_target_watch, py::arg("reported") = false,
+           "Starts the count of calls over; reported=True: the unmet target was reported "
+           "(it is not reported again until a new target is set).");
+}
 }  // namespace
 
 void bind_controllers(py::module_& m) {
@@ -62,15 +104,15 @@ void bind_controllers(py::module_& m) {
         "Servo wall speed along the inward normal, m/s: gain (sigma_target - sigma) area / "
         "(stiffness dt period), capped to +-max_speed (stresses Pa, area m^2, stiffness N/m).");
 
-  py::class_<ServoWall, Controller, std::shared_ptr<ServoWall>>(m, "ServoWall", R"doc(
+  py::class_<ServoWall, Controller, std::shared_ptr<ServoWall>> servo_wall(m, "ServoWall", R"doc(
 One wall driven to a target normal stress (Pa, compressive positive) by its velocity.
 
 Each call sets the wall velocity along its inward normal to
 gain (sigma_target - sigma) A / (k dt period), k the summed normal stiffness of the wall's
 contacts (N/m), capped to +-max_speed (m/s). A is `area` (m^2), or the current box face area
 when `box_walls` (the six walls of Scene.add_box) are given.
-)doc")
-      .def(py::init<int, Real, Real, Real, Real, std::vector<int>>(), py::kw_only(),
+)doc");
+  servo_wall.def(py::init<int, Real, Real, Real, Real, std::vector<int>>(), py::kw_only(),
            py::arg("wall"), py::arg("target_stress"), py::arg("area") = 0.0,
            py::arg("gain") = 0.5, py::arg("max_speed"), py::arg("box_walls") = std::vector<int>{})
       .def_property("target_stress", &ServoWall::target_stress, &ServoWall::set_target_stress,
@@ -78,41 +120,38 @@ when `box_walls` (the six walls of Scene.add_box) are given.
       .def_property("max_speed", &ServoWall::max_speed, &ServoWall::set_max_speed,
                     "Velocity cap, m/s.")
       .def_property("gain", &ServoWall::gain, &ServoWall::set_gain, "Gain alpha in (0, 1].")
-      .def("limit_report", [](const ServoWall& c) {
-        py::list out;
-        if (c.limit().count > 0) out.append(limit_dict(c.limit(), c.wall(), ""));
-        return out;
-      }, "Calls since the last clear at the speed cap while drifting from the target stress "
-         "(off by more than 5 % and growing): a list with one dict (wall, calls, target_pa, "
-         "reached_pa, cap_m_per_s), or empty.")
-      .def("clear_limit_report", &ServoWall::clear_limit)
-      .def("target_report", [](const ServoWall& c) {
-        py::list out;
-        const LimitWatch& l = c.limit();
-        if (l.unmet()) {
-          py::dict d;
-          d["wall"] = c.wall();
-          d["target_pa"] = c.target_stress();
-          d["reached_pa"] = l.last_sigma;
-          d["calls"] = l.run_calls;
-          d["calls_at_cap"] = l.run_cap_calls;
-          d["cap_m_per_s"] = l.last_cap;
-          out.append(d);
-        }
-        return out;
-      }, "The target not reached: when the stress has not been within 5 % of the current "
-         "target at any call since it was set, and the target was not reported yet, a list "
-         "with one dict (wall, target_pa, reached_pa: the stress at the last call, calls and "
-         "calls_at_cap since the last clear_target_report, cap_m_per_s); else empty.")
-      .def("clear_target_report", &ServoWall::clear_target_watch, py::arg("reported") = false,
-           "Starts the count of calls over; reported=True: the unmet target was reported "
-           "(it is not reported again until a new target is set).")
       .def_property_readonly("wall", &ServoWall::wall)
       .def_property_readonly("area", &ServoWall::area, "Area at the last call, m^2.")
       .def_property_readonly("measured_stress", &ServoWall::measured_stress,
                              "Stress at the last call, Pa.")
       .def_property_readonly("stiffness", &ServoWall::stiffness,
                              "Summed contact normal stiffness at the last call, N/m.");
+  def_servo_watch<ServoWall>(servo_wall, "wall", &ServoWall::wall, &ServoWall::target_stress);
+
+  py::class_<CylinderServo, Controller, std::shared_ptr<CylinderServo>> cylinder_servo(
+      m, "CylinderServo", R"doc(
+A cylindrical wall (Scene.add_cylinder_wall, finite) driven to a target mean normal pressure on
+its lateral surface (Pa, compressive positive) by the rate of its radius.
+
+Each call sets the wall's radial velocity to gain (p_target - p) A / (k dt period) in the
+direction that presses the grains harder when p is below the target (inside: narrowing;
+outside: widening), capped to +-max_speed (m/s). p is the wall's normal force over its lateral
+area A = 2 pi R (hi - lo), k the summed normal stiffness of its contacts (N/m).
+)doc");
+  cylinder_servo.def(py::init<int, Real, Real, Real>(), py::kw_only(), py::arg("cylinder"),
+           py::arg("target_pressure"), py::arg("gain") = 0.5, py::arg("max_speed"))
+      .def_property("target_pressure", &CylinderServo::target_pressure,
+                    &CylinderServo::set_target_pressure, "Target pressure, Pa (compressive positive).")
+      .def_property("max_speed", &CylinderServo::max_speed, &CylinderServo::set_max_speed,
+                    "Cap of the radial speed, m/s.")
+      .def_property("gain", &CylinderServo::gain, &CylinderServo::set_gain, "Gain alpha in (0, 1].")
+      .def_property_readonly("cylinder", &CylinderServo::cylinder)
+      .def_property_readonly("measured_pressure", &CylinderServo::measured_pressure,
+                             "Pressure at the last call, Pa.")
+      .def_property_readonly("stiffness", &CylinderServo::stiffness,
+                             "Summed contact normal stiffness at the last call, N/m.");
+  def_servo_watch<CylinderServo>(cylinder_servo, "cylinder", &CylinderServo::cylinder,
+                                 &CylinderServo::target_pressure);
 
   py::class_<TriaxialController, Controller, std::shared_ptr<TriaxialController>> tc(
       m, "TriaxialController", R"doc(

@@ -1,5 +1,8 @@
 #include <pybind11/stl.h>
 
+#include <cmath>
+#include <limits>
+
 #include "convert.hpp"
 #include "cpp_dem/scene.hpp"
 
@@ -162,6 +165,68 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
            "Adds an axis-aligned one-sided wall: axis 0/1/2 (x/y/z), position along the axis (m), "
            "sense +1 if spheres are on its +axis side, -1 otherwise. Returns its index.")
       .def_property_readonly("num_walls", &Scene::num_walls)
+      .def("add_cylinder_wall",
+           [](Scene& s, const Array& centre, const Array& axis, double radius, bool inside,
+              int material, double lo, double hi) {
+             return s.add_cylinder_wall(to_vec3(centre, "centre"), to_vec3(axis, "axis"), radius,
+                                        inside, material, lo, hi);
+           },
+           py::kw_only(), py::arg("centre"), py::arg("axis"), py::arg("radius"),
+           py::arg("inside"), py::arg("material"),
+           py::arg("lo") = -std::numeric_limits<double>::infinity(),
+           py::arg("hi") = std::numeric_limits<double>::infinity(),
+           "Adds a cylindrical wall: its axis through centre (m) along axis (any non-zero "
+           "vector), radius (m), spheres inside it (inside=True: a triaxial cell's rigid side) "
+           "or outside it (a pile), its lateral surface from lo to hi (m along the axis from "
+           "centre; the default: infinite). The ends are open: a sphere beyond an end meets its "
+           "rim circle. Not in a periodic cell. Returns its index.")
+      .def_property_readonly("num_cylinder_walls", &Scene::num_cylinder_walls)
+      .def("cylinder_wall",
+           [](const Scene& s, int id) {
+             const CylinderWall& w = s.cylinder_wall(id);
+             py::dict d;
+             d["centre"] = real_array({w.centre[0], w.centre[1], w.centre[2]});
+             d["axis"] = real_array({w.axis[0], w.axis[1], w.axis[2]});
+             d["radius"] = w.radius;
+             d["inside"] = w.inside != 0;
+             d["lo"] = w.lo;
+             d["hi"] = w.hi;
+             d["material"] = w.material;
+             d["velocity"] = real_array({w.velocity[0], w.velocity[1], w.velocity[2]});
+             d["radial_velocity"] = w.radial_velocity;
+             d["force"] = real_array({w.force[0], w.force[1], w.force[2]});
+             d["normal_force"] = w.normal_force;
+             d["pressure_pa"] = w.finite() ? w.normal_force / w.lateral_area()
+                                           : std::numeric_limits<double>::quiet_NaN();
+             d["work"] = w.work;
+             return d;
+           },
+           py::arg("cylinder"),
+           "A cylindrical wall as a dict: centre (m), axis (unit), radius (m), inside, lo, hi "
+           "(m), material, velocity (m/s), radial_velocity (m/s), force (N, the spheres' on "
+           "it, last step), normal_force (N, the sum of its contacts' normal forces, "
+           "compressive positive), pressure_pa (normal_force over the lateral area 2 pi R "
+           "(hi - lo); NaN when infinite) and work (J, done by it on the spheres).")
+      .def("set_cylinder_velocity",
+           [](Scene& s, int id, const Array& v) {
+             const Vec3 vel = to_vec3(v, "velocity");
+             if (!vel.allFinite())
+               throw ParameterError("velocity=(" + fmt_real(vel[0]) + ", " + fmt_real(vel[1]) +
+                                    ", " + fmt_real(vel[2]) + ") of cylindrical wall " +
+                                    std::to_string(id) + ": must be finite (m/s)");
+             s.cylinder_wall(id).velocity = vel;
+           },
+           py::arg("cylinder"), py::arg("velocity"),
+           "Imposed velocity of the whole cylindrical wall (3 values), m/s.")
+      .def("set_cylinder_radial_velocity",
+           [](Scene& s, int id, double v) {
+             require(std::isfinite(v), "radial_velocity", v, "must be finite (m/s)");
+             s.cylinder_wall(id).radial_velocity = v;
+           },
+           py::arg("cylinder"), py::arg("radial_velocity"),
+           "Imposed rate of the cylinder's radius, m/s (> 0 widens it).")
+      .def("set_cylinder_radius", &Scene::set_cylinder_radius, py::arg("cylinder"),
+           py::arg("radius"), "Sets the cylinder's radius, m.")
       .def("set_wall_opening", &Scene::set_wall_opening, py::arg("wall"), py::kw_only(),
            py::arg("axis"), py::arg("lo") = 0.0, py::arg("hi") = 0.0,
            "Opens the wall for bodies whose centre lies in (lo, hi) (m) along axis 0/1/2 (not "

@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BeamParams', 'BlowUpError', 'BondParams', 'CellController', 'ContactModel', 'ContactPhys', 'Controller', 'GEOGRID', 'Material', 'ParameterError', 'RadiusGrowth', 'Scene', 'ServoWall', 'TriaxialController', 'contact_laws', 'get_num_threads', 'material_fields', 'mix_materials', 'servo_speed', 'set_num_threads', 'simd_dispatch']
+__all__: list[str] = ['BeamParams', 'BlowUpError', 'BondParams', 'CellController', 'ContactModel', 'ContactPhys', 'Controller', 'CylinderServo', 'GEOGRID', 'Material', 'ParameterError', 'RadiusGrowth', 'Scene', 'ServoWall', 'TriaxialController', 'contact_laws', 'get_num_threads', 'material_fields', 'mix_materials', 'servo_speed', 'set_num_threads', 'simd_dispatch']
 class ParameterError(ValueError):
     pass
 class BlowUpError(RuntimeError):
@@ -213,6 +213,10 @@ class Scene:
         """
         Adds a controller (run every controller.period steps, before the forces, in the order added); returns its index. The scene keeps it alive. Refused (ParameterError) when it is in the scene already, or when it and another enabled controller move one wall.
         """
+    def add_cylinder_wall(self, *, centre: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], axis: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], radius: float, inside: bool, material: int, lo: float = ..., hi: float = ...) -> int:
+        """
+        Adds a cylindrical wall: its axis through centre (m) along axis (any non-zero vector), radius (m), spheres inside it (inside=True: a triaxial cell's rigid side) or outside it (a pile), its lateral surface from lo to hi (m along the axis from centre; the default: infinite). The ends are open: a sphere beyond an end meets its rim circle. Not in a periodic cell. Returns its index.
+        """
     def add_grid_link(self, a: int, b: int, params: BeamParams, material: int) -> int:
         """
         Cohesive link + connection cylinder between nodes a and b.
@@ -278,6 +282,10 @@ class Scene:
         """
         (critical_dt(), the id of the body that sets it, -1 when no contact or link exists): which body limits the time step. With contact_seen, the estimate of a packing in contact even when nothing touches yet (every grain's stiffness floor; not with density scaling on).
         """
+    def cylinder_wall(self, cylinder: int) -> dict:
+        """
+        A cylindrical wall as a dict: centre (m), axis (unit), radius (m), inside, lo, hi (m), material, velocity (m/s), radial_velocity (m/s), force (N, the spheres' on it, last step), normal_force (N, the sum of its contacts' normal forces, compressive positive), pressure_pa (normal_force over the lateral area 2 pi R (hi - lo); NaN when infinite) and work (J, done by it on the spheres).
+        """
     def density_scaling_stats(self) -> dict:
         """
         What density scaling does now: max_factor and mean_factor (mass-weighted) of the inertia factors, -; scaled_share, the share of free bodies and clumps with a factor above 1 (scaled of movable); inertial_number, the sample's with the scaled inertia, sqrt(sum rho_c |dv_c|^2 / sum |f_c| / d_c^2) over the active pair contacts (dv_c the centres' relative velocity, f_c the force, d_c the sum of the radii, rho_c the bodies' density times their factor), -.
@@ -322,6 +330,18 @@ class Scene:
         """
     def set_clump_state(self, clump: int, position: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], orientation: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], velocity: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], angular_velocity: typing.Annotated[numpy.typing.ArrayLike, numpy.float64]) -> None:
         ...
+    def set_cylinder_radial_velocity(self, cylinder: int, radial_velocity: float) -> None:
+        """
+        Imposed rate of the cylinder's radius, m/s (> 0 widens it).
+        """
+    def set_cylinder_radius(self, cylinder: int, radius: float) -> None:
+        """
+        Sets the cylinder's radius, m.
+        """
+    def set_cylinder_velocity(self, cylinder: int, velocity: typing.Annotated[numpy.typing.ArrayLike, numpy.float64]) -> None:
+        """
+        Imposed velocity of the whole cylindrical wall (3 values), m/s.
+        """
     def set_density_scaling(self, target_dt: float, safety: float = 0.5, period: int = 1) -> None:
         """
         Density scaling for quasi-static stages: dt = target_dt (s), and every `period` steps each free body and clump takes the inertia factor s = max(1, (target_dt / (safety x its own critical step))^2), its critical step from its active contacts, bonds and links (updated just before the bodies move; a factor falls at most by half per update; a body that never touched keeps 1). Weight and gravity stay the true ones; velocities are kept when a factor changes. While on, the automatic time step is not applied and critical_dt() takes the scaled inertia. Kept in checkpoints. See cpp_dem.protocols.quasi_static and docs/quasi_static.md.
@@ -672,6 +692,9 @@ class Scene:
     def num_clumps(self) -> int:
         ...
     @property
+    def num_cylinder_walls(self) -> int:
+        ...
+    @property
     def num_grid_links(self) -> int:
         ...
     @property
@@ -909,6 +932,69 @@ class ServoWall(Controller):
         ...
     @property
     def wall(self) -> int:
+        ...
+class CylinderServo(Controller):
+    """
+    A cylindrical wall (Scene.add_cylinder_wall, finite) driven to a target mean normal pressure on
+    its lateral surface (Pa, compressive positive) by the rate of its radius.
+    
+    Each call sets the wall's radial velocity to gain (p_target - p) A / (k dt period) in the
+    direction that presses the grains harder when p is below the target (inside: narrowing;
+    outside: widening), capped to +-max_speed (m/s). p is the wall's normal force over its lateral
+    area A = 2 pi R (hi - lo), k the summed normal stiffness of its contacts (N/m).
+    """
+    def __init__(self, *, cylinder: int, target_pressure: float, gain: float = 0.5, max_speed: float) -> None:
+        ...
+    def clear_limit_report(self) -> None:
+        ...
+    def clear_target_report(self, reported: bool = False) -> None:
+        """
+        Starts the count of calls over; reported=True: the unmet target was reported (it is not reported again until a new target is set).
+        """
+    def limit_report(self) -> list:
+        """
+        Calls since the last clear at the speed cap while drifting from the target stress (off by more than 5 % and growing): a list with one dict (cylinder, calls, target_pa, reached_pa, cap_m_per_s), or empty.
+        """
+    def target_report(self) -> list:
+        """
+        The target not reached: when the stress has not been within 5 % of the current target at any call since it was set, and the target was not reported yet, a list with one dict (cylinder, target_pa, reached_pa: the stress at the last call, calls and calls_at_cap since the last clear_target_report, cap_m_per_s); else empty.
+        """
+    @property
+    def cylinder(self) -> int:
+        ...
+    @property
+    def gain(self) -> float:
+        """
+        Gain alpha in (0, 1].
+        """
+    @gain.setter
+    def gain(self, arg1: float) -> None:
+        ...
+    @property
+    def max_speed(self) -> float:
+        """
+        Cap of the radial speed, m/s.
+        """
+    @max_speed.setter
+    def max_speed(self, arg1: float) -> None:
+        ...
+    @property
+    def measured_pressure(self) -> float:
+        """
+        Pressure at the last call, Pa.
+        """
+    @property
+    def stiffness(self) -> float:
+        """
+        Summed contact normal stiffness at the last call, N/m.
+        """
+    @property
+    def target_pressure(self) -> float:
+        """
+        Target pressure, Pa (compressive positive).
+        """
+    @target_pressure.setter
+    def target_pressure(self, arg1: float) -> None:
         ...
 class TriaxialController(Controller):
     """

@@ -619,7 +619,9 @@ class Scene(_core.Scene):
                            else f"at its speed cap for {r['calls_at_cap']} of {r['calls']} "
                            "calls: run longer, raise its gain or max_speed, or check that "
                            "grains are in front of the wall")
-                    msg = (f"controller {i} ({type(c).__name__}, wall {r['wall']}): has not "
+                    wall = (f"cylindrical wall {r['cylinder']}" if "cylinder" in r
+                            else f"wall {r['wall']}")
+                    msg = (f"controller {i} ({type(c).__name__}, {wall}): has not "
                            f"reached its target {r['target_pa']:.6g} Pa (within 5 %) in this "
                            f"run; the stress is {r['reached_pa']:.6g} Pa; {why}")
                     c.clear_target_report(True)
@@ -639,6 +641,7 @@ class Scene(_core.Scene):
                     cap = f"rate cap {r['cap_per_s']:.4g} 1/s"
                 else:
                     where = (f"axis {r['axis']}, wall {r['wall']}" if "axis" in r
+                             else f"cylindrical wall {r['cylinder']}" if "cylinder" in r
                              else f"wall {r['wall']}")
                     knob, cap = "max_speed", f"speed cap {r['cap_m_per_s']:.4g} m/s"
                 msg = (f"controller {i} ({type(c).__name__}, {where}): at its {cap} for "

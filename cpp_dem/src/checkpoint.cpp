@@ -156,6 +156,8 @@ std::vector<std::uint64_t> layout(std::uint32_t version = Checkpoint::kVersion) 
           sizeof(BondBreak), sizeof(PairLaw)};
   // (Version 11 added the wall openings.)
   if (version >= 11) l.push_back(sizeof(WallOpening));
+  // (Version 14 added the cylindrical walls.)
+  if (version >= 14) l.push_back(sizeof(CylinderWall));
   return l;
 }
 
@@ -279,7 +281,8 @@ void Checkpoint::check_values(const Scene& t) {
 }
 
 void Checkpoint::check_same_scene(const Scene& s, const Scene& t) {
-  if (s.num_bodies() == 0 && s.walls_.empty() && !s.cell_.on) return;  // blank: nothing to replace
+  if (s.num_bodies() == 0 && s.walls_.empty() && s.cylinder_walls_.empty() && !s.cell_.on)
+    return;  // blank: nothing to replace
   const auto axes = [](const PeriodicCell& c) {
     std::string a;
     for (int k = 0; k < 3; ++k)
@@ -323,6 +326,19 @@ void Checkpoint::check_same_scene(const Scene& s, const Scene& t) {
                            " in the saved scene, " + side(b) + " in this one" + kSameScene);
     }
   }
+  if (t.cylinder_walls_.size() != s.cylinder_walls_.size())
+    throw ParameterError("checkpoint: the saved scene has " +
+                         std::to_string(t.cylinder_walls_.size()) + " cylindrical walls, this "
+                         "scene has " + std::to_string(s.cylinder_walls_.size()) + kSameScene);
+  for (size_t k = 0; k < s.cylinder_walls_.size(); ++k)
+    if (t.cylinder_walls_[k].inside != s.cylinder_walls_[k].inside) {
+      const auto side = [](const CylinderWall& w) {
+        return std::string(w.inside ? "inside" : "outside");
+      };
+      throw ParameterError("checkpoint: cylindrical wall " + std::to_string(k) + " holds its "
+                           "spheres " + side(t.cylinder_walls_[k]) + " in the saved scene, " +
+                           side(s.cylinder_walls_[k]) + " in this one" + kSameScene);
+    }
 }
 
 std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
@@ -401,6 +417,10 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.put(s.phys_version_);
   w.put(s.dirty_);
   w.put(s.builds_);
+  w.vec(s.cylinder_walls_);
+  w.vec(s.cylinder_contacts_);
+  w.vec(s.cyl_adj_off_);
+  w.vec(s.cyl_adj_);
   // Controllers.
   const std::uint64_t nc = s.controllers_.size();
   w.put(nc);
@@ -566,6 +586,25 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
   r.get(t.dirty_);
   t.disp_valid_ = false;  // need_rebuild measures the displacements itself
   r.get(t.builds_);
+  if (version >= 14) {
+    r.vec(t.cylinder_walls_);
+    r.vec(t.cylinder_contacts_);
+    r.vec(t.cyl_adj_off_);
+    r.vec(t.cyl_adj_);
+    for (const CylinderWall& c : t.cylinder_walls_)
+      if (!(c.radius > 0 && std::abs(c.axis.norm() - 1) < 1e-9 && c.hi > c.lo &&
+            c.material >= 0 && c.material < static_cast<int>(t.materials_.size())))
+        throw ParameterError("checkpoint: corrupt cylindrical walls");
+    for (const WallContact& c : t.cylinder_contacts_)
+      if (c.body < 0 || static_cast<size_t>(c.body) >= nb || c.wall < 0 ||
+          static_cast<size_t>(c.wall) >= t.cylinder_walls_.size())
+        throw ParameterError("checkpoint: corrupt cylinder contacts");
+    const size_t nadj = t.cyl_adj_.size();
+    bool adj_ok = t.cyl_adj_off_.empty() || t.cyl_adj_off_.size() == nb + 1;
+    for (int e : t.cyl_adj_off_) adj_ok = adj_ok && e >= 0 && static_cast<size_t>(e) <= nadj;
+    for (int e : t.cyl_adj_) adj_ok = adj_ok && e >= 0 && static_cast<size_t>(e) < t.cylinder_contacts_.size();
+    if (!adj_ok) throw ParameterError("checkpoint: corrupt cylinder contacts");
+  }
   const auto nc = r.get<std::uint64_t>();
   if (nc != s.controllers_.size())
     throw ParameterError("checkpoint: the saved scene had " + std::to_string(nc) +

@@ -278,6 +278,11 @@ void Scene::step() {
   if (err_pair != std::numeric_limits<long>::max()) raise_overlap(err_pair, false);
   compute_wall_forces(err_wall);
   if (err_wall != std::numeric_limits<long>::max()) raise_overlap(err_wall, true);
+  if (!cylinder_walls_.empty()) {
+    long err_cyl;
+    compute_cylinder_forces(err_cyl);
+    if (err_cyl != std::numeric_limits<long>::max()) raise_cylinder_overlap(err_cyl);
+  }
   if constexpr (kGeogridBuilt) {
     if (has_grid()) {
       long err_grid;
@@ -348,6 +353,7 @@ void Scene::step() {
     w.position += dx;
     w.moved_since_build += std::abs(dx);
   }
+  if (!cylinder_walls_.empty()) move_cylinder_walls();
   ++step_;
   time_ += dt_;
 }

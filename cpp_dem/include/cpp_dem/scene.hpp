@@ -16,6 +16,7 @@
 #include "cpp_dem/bodies/cell.hpp"
 #include "cpp_dem/bodies/clump.hpp"
 #include "cpp_dem/bodies/geogrid.hpp"
+#include "cpp_dem/bodies/cylinder_wall.hpp"
 #include "cpp_dem/bodies/wall.hpp"
 #include "cpp_dem/broadphase/collider.hpp"
 #include "cpp_dem/contacts/contact_record.hpp"
@@ -233,6 +234,18 @@ class Scene {
   int num_walls() const { return static_cast<int>(walls_.size()); }
   Wall& wall(int id);
   const Wall& wall(int id) const;
+  /// Adds a cylindrical wall (CylinderWall; passes/cylinder_wall.cpp): axis through `centre`
+  /// along `axis` (normalised here), radius (m), spheres inside (inside = true) or outside
+  /// it, its lateral surface between lo and hi (m along the axis from centre; +-inf: an
+  /// infinite cylinder). Not in a periodic cell. Returns its index.
+  int add_cylinder_wall(const Vec3& centre, const Vec3& axis, Real radius, bool inside,
+                        int material, Real lo, Real hi);
+  int num_cylinder_walls() const { return static_cast<int>(cylinder_walls_.size()); }
+  CylinderWall& cylinder_wall(int id);
+  const CylinderWall& cylinder_wall(int id) const;
+  /// Sets cylinder `id`'s radius (m): the move counts towards the next broad-phase build.
+  void set_cylinder_radius(int id, Real radius);
+  const std::vector<WallContact>& cylinder_contacts() const { return cylinder_contacts_; }
 
   // ---- storage order ------------------------------------------------------------------
   // At its first broad-phase build (while no contact exists yet) the scene stores its
@@ -427,11 +440,11 @@ class Scene {
   const std::vector<WallContact>& wall_contacts() const { return wall_contacts_; }
   int num_active_contacts() const;
   /// Calls f(const ContactRecord&) for every contact of every container, active or not, in a
-  /// fixed order (pair, wall, then grain–geogrid contacts, each in container order): the one
+  /// fixed order (pair, wall, grain–geogrid, then cylinder contacts, each in container order): the one
   /// walk of the contact containers for measurements, stiffness and output.
   template <class F>
   void for_each_contact(F&& f) const;
-  /// for_each_contact over one container only (ContactKind::Pair, Wall or Grid).
+  /// for_each_contact over one container only (ContactKind::Pair, Wall, Grid or Cylinder).
   template <class F>
   void for_each_contact_of(ContactKind kind, F&& f) const;
 
@@ -508,6 +521,13 @@ class Scene {
                                      const Vec3& rel_angvel);
   void compute_wall_forces(long& err_contact);
   CPP_DEM_HOT void compute_wall_forces_hot(long& err_contact);
+  // Cylindrical walls (passes/cylinder_wall.cpp): the contact pass, its candidates at a
+  // build, the walls' motion and work after the integration.
+  void compute_cylinder_forces(long& err_contact);
+  void rebuild_cylinder_contacts(Real margin);
+  void move_cylinder_walls();
+  void update_phys(WallContact& c, const CylinderWall& w) const;
+  [[noreturn]] void raise_cylinder_overlap(long k) const;
   void reduce_and_integrate(long& err_body);
   CPP_DEM_HOT void reduce_and_integrate_hot(long& err_body);
   /// The clump pass (after reduce_and_integrate, only with clumps): member forces into the
@@ -594,6 +614,11 @@ class Scene {
   // contact index within a group; contact k writes to slot pair_jslot_[k]). The reduction
   // into bodies reads both in a fixed order, contiguously, without a branch per entry.
   std::vector<int> pair_jadj_off_, pair_jslot_, pair_ioff_, wall_adj_off_, wall_adj_;
+  // Cylindrical walls and their contacts (WallContact::wall: the cylinder's index), sorted by
+  // (body, cylinder); cyl_adj_off_/cyl_adj_: each body's contacts (CSR, contact order).
+  std::vector<CylinderWall> cylinder_walls_;
+  std::vector<WallContact> cylinder_contacts_;
+  std::vector<int> cyl_adj_off_, cyl_adj_;
   // Geogrid.
   int num_nodes_ = 0;
   std::vector<GridLink> links_;
@@ -703,6 +728,7 @@ void Scene::for_each_contact(F&& f) const {
   for_each_contact_of(ContactKind::Pair, f);
   for_each_contact_of(ContactKind::Wall, f);
   for_each_contact_of(ContactKind::Grid, f);
+  if (!cylinder_contacts_.empty()) for_each_contact_of(ContactKind::Cylinder, f);
 }
 
 template <class F>
@@ -726,9 +752,10 @@ void Scene::for_each_contact_of(ContactKind kind, F&& f) const {
       r.arm2 = bodies_.radius[c.j] - 0.5 * c.overlap;
       f(static_cast<const ContactRecord&>(r));
     }
-  } else if (kind == ContactKind::Wall) {
-    for (size_t k = 0; k < wall_contacts_.size(); ++k) {
-      const WallContact& c = wall_contacts_[k];
+  } else if (kind == ContactKind::Wall || kind == ContactKind::Cylinder) {
+    const auto& contacts = kind == ContactKind::Wall ? wall_contacts_ : cylinder_contacts_;
+    for (size_t k = 0; k < contacts.size(); ++k) {
+      const WallContact& c = contacts[k];
       r.index = static_cast<long>(k);
       r.active = c.active;
       r.body2 = c.body;

@@ -28,6 +28,8 @@ bool Scene::need_rebuild() const {
   const Real half = 0.5 * (margin_ > 0 ? margin_ : default_margin());
   for (const Wall& w : walls_)
     if (w.moved_since_build > half) return true;
+  for (const CylinderWall& w : cylinder_walls_)
+    if (w.moved_since_build > half) return true;
   // A deforming periodic cell changes every branch vector l by (F_b - I) l, F_b = H H_build^-1:
   // at most |F_b - I| (2 r_max + margin) for a pair that was out of reach at the build.
   Real cell_part = 0;
@@ -129,7 +131,8 @@ void Scene::rebuild() {
     slot_of_id_.shrink_to_fit();
   }
   // Spatial order while no contact (and so no contact history) exists yet.
-  if (spatial_sort_ && pairs_.empty() && wall_contacts_.empty() && grid_contacts_.empty())
+  if (spatial_sort_ && pairs_.empty() && wall_contacts_.empty() && grid_contacts_.empty() &&
+      cylinder_contacts_.empty())
     sort_bodies_spatially();
   const Real margin = margin_ > 0 ? margin_ : default_margin();
   const int n = num_bodies();
@@ -186,32 +189,16 @@ void Scene::rebuild() {
   pair_out_.assign(pairs_.size(), PairOutput());
   // Sphere–wall candidates: signed distance to the plane below r + margin, and the centre
   // not beyond the plane by more than r (one-sided walls ignore what is behind them).
-  std::vector<WallContact> wnext;
-  size_t kw = 0;
+  WallContactMerge merge(wall_contacts_, [this](const ContactState& st) { drop_dissipation(st); });
   for (int b = 0; b < n; ++b) {
     if (bodies_.kind[b] != BODY_SPHERE && !grid_wall_contacts_) continue;  // grid nodes: only if asked for
     for (int w = 0; w < num_walls(); ++w) {
       const Wall& wl = walls_[w];
       const Real s = wl.sense * (bodies_.pos[b][wl.axis] - wl.position);
-      if (!(s < bodies_.radius[b] + margin && s > -bodies_.radius[b])) continue;
-      while (kw < wall_contacts_.size() &&
-             std::make_pair(wall_contacts_[kw].body, wall_contacts_[kw].wall) < std::make_pair(b, w)) {
-        drop_dissipation(wall_contacts_[kw].state);
-        ++kw;
-      }
-      if (kw < wall_contacts_.size() && wall_contacts_[kw].body == b && wall_contacts_[kw].wall == w) {
-        wnext.push_back(wall_contacts_[kw++]);
-      } else {
-        WallContact c;
-        c.body = b;
-        c.wall = w;
-        wnext.push_back(c);
-      }
+      if (s < bodies_.radius[b] + margin && s > -bodies_.radius[b]) merge.add(b, w);
     }
   }
-  for (; kw < wall_contacts_.size(); ++kw) {
-    drop_dissipation(wall_contacts_[kw].state);
-  }
+  std::vector<WallContact> wnext = merge.finish();
   wall_contacts_.swap(wnext);
   // Adjacency (CSR) in contact order, so reductions into bodies have a fixed order.
   pair_jadj_off_.assign(n + 1, 0);
@@ -230,18 +217,11 @@ void Scene::rebuild() {
     for (int c = 0; c < static_cast<int>(pairs_.size()); ++c)
       pair_jslot_[c] = fill[pairs_[c].j]++;
   }
-  wall_adj_off_.assign(n + 1, 0);
-  for (const auto& c : wall_contacts_) wall_adj_off_[c.body + 1]++;
-  for (int b = 0; b < n; ++b) wall_adj_off_[b + 1] += wall_adj_off_[b];
-  wall_adj_.resize(wall_adj_off_[n]);
-  {
-    std::vector<int> fill(wall_adj_off_.begin(), wall_adj_off_.end() - 1);
-    for (int c = 0; c < static_cast<int>(wall_contacts_.size()); ++c)
-      wall_adj_[fill[wall_contacts_[c].body]++] = c;
-  }
+  contacts_by_body(wall_contacts_, n, wall_adj_off_, wall_adj_);
   if constexpr (kGeogridBuilt) {
     if (has_grid()) rebuild_grid_contacts(margin);
   }
+  if (!cylinder_walls_.empty()) rebuild_cylinder_contacts(margin);
   pos_at_build_ = bodies_.pos;
   radius_at_build_ = bodies_.radius;
   cell_.h_at_build = cell_.h;

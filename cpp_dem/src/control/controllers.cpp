@@ -45,9 +45,9 @@ Real wall_normal_stress(const Wall& w, Real area) {
   return -w.sense * w.force[w.axis] / area;
 }
 
-Real wall_contact_stiffness(const Scene& s, int wall) {
+Real wall_contact_stiffness(const Scene& s, int wall, ContactKind kind) {
   Real k = 0;
-  s.for_each_contact_of(ContactKind::Wall, [&](const ContactRecord& c) {
+  s.for_each_contact_of(kind, [&](const ContactRecord& c) {
     if (!c.active || c.other != wall) return;
     Real kn, ks;
     c.stiffness(kn, ks);
@@ -69,34 +69,45 @@ Real servo_speed(Real sigma_target, Real sigma, Real area, Real stiffness, Real 
   return std::clamp(v, -max_speed, max_speed);
 }
 
-// ---- ServoWall ------------------------------------------------------------------------------
+// ---- StressServo, ServoWall ----------------------------------------------------------------
+
+StressServo::StressServo(Real target, const char* field, Real gain, Real max_speed)
+    : target_(target), gain_(gain), max_speed_(max_speed) {
+  check_stress(target, field);
+  check_gain(gain);
+  check_speed(max_speed);
+}
+
+void StressServo::set_target(Real target, const char* field) {
+  check_stress(target, field);
+  target_ = target;
+}
+void StressServo::set_max_speed(Real v) {
+  check_speed(v);
+  max_speed_ = v;
+}
+void StressServo::set_gain(Real g) {
+  check_gain(g);
+  gain_ = g;
+}
+
+Real StressServo::speed(const Scene& scene, Real measured, Real area, Real k) {
+  stiffness_ = k;
+  const Real v = servo_speed(target_, measured, area, k, scene.dt(), period, gain_, max_speed_);
+  limit_.observe(v, max_speed_, measured, target_);
+  return v;
+}
 
 ServoWall::ServoWall(int wall, Real target_stress, Real area, Real gain, Real max_speed,
                      std::vector<int> box_walls)
-    : wall_(wall), target_(target_stress), area0_(area), gain_(gain), max_speed_(max_speed),
+    : StressServo(target_stress, "target_stress", gain, max_speed), wall_(wall), area0_(area),
       box_(std::move(box_walls)) {
-  check_stress(target_stress, "target_stress");
-  check_gain(gain);
-  check_speed(max_speed);
   if (box_.empty())
     require(std::isfinite(area) && area > 0, "area", area,
             "must be > 0 (m^2), or give box_walls to compute it from the box");
   else if (box_.size() != 6)
     throw ParameterError("box_walls: expected 6 walls (x-, x+, y-, y+, z-, z+), got " +
                          std::to_string(box_.size()));
-}
-
-void ServoWall::set_target_stress(Real sigma) {
-  check_stress(sigma, "target_stress");
-  target_ = sigma;
-}
-void ServoWall::set_max_speed(Real v) {
-  check_speed(v);
-  max_speed_ = v;
-}
-void ServoWall::set_gain(Real g) {
-  check_gain(g);
-  gain_ = g;
 }
 
 void ServoWall::apply(Scene& scene) {
@@ -112,12 +123,28 @@ void ServoWall::apply(Scene& scene) {
     area_ = box_wall_area(size, k);
   }
   sigma_ = wall_normal_stress(w, area_);
-  stiffness_ = wall_contact_stiffness(scene, wall_);
-  const Real v = servo_speed(target_, sigma_, area_, stiffness_, scene.dt(), period, gain_,
-                             max_speed_);
-  limit_.observe(v, max_speed_, sigma_, target_);
+  const Real v = speed(scene, sigma_, area_, wall_contact_stiffness(scene, wall_));
   w.velocity.setZero();
   w.velocity[w.axis] = w.sense * v;
+}
+
+// ---- CylinderServo ---------------------------------------------------------------------------
+
+CylinderServo::CylinderServo(int cylinder, Real target_pressure, Real gain, Real max_speed)
+    : StressServo(target_pressure, "target_pressure", gain, max_speed), cylinder_(cylinder) {}
+
+void CylinderServo::apply(Scene& scene) {
+  CylinderWall& w = scene.cylinder_wall(cylinder_);
+  if (!w.finite())
+    throw ParameterError("CylinderServo: cylindrical wall " + std::to_string(cylinder_) +
+                         " is infinite (lo=" + fmt_real(w.lo) + ", hi=" + fmt_real(w.hi) +
+                         "): a pressure needs a finite lateral area; give it lo and hi");
+  const Real area = w.lateral_area();
+  p_ = w.normal_force / area;
+  // The speed into the grains (inside: a smaller radius).
+  const Real v = speed(scene, p_, area,
+                       wall_contact_stiffness(scene, cylinder_, ContactKind::Cylinder));
+  w.radial_velocity = w.inside ? -v : v;
 }
 
 // ---- TriaxialController ---------------------------------------------------------------------
@@ -278,6 +305,7 @@ void TriaxialController::load_state(const std::vector<Real>& s) {
 
 std::vector<int> controlled_walls(const Controller& c) {
   if (const auto* s = dynamic_cast<const ServoWall*>(&c)) return {s->wall()};
+  if (const auto* s = dynamic_cast<const CylinderServo*>(&c)) return {-1 - s->cylinder()};
   if (const auto* t = dynamic_cast<const TriaxialController*>(&c)) return t->walls();
   return {};
 }
@@ -285,6 +313,7 @@ std::vector<int> controlled_walls(const Controller& c) {
 namespace {
 std::string controller_name(const Controller& c) {
   if (dynamic_cast<const ServoWall*>(&c)) return "ServoWall";
+  if (dynamic_cast<const CylinderServo*>(&c)) return "CylinderServo";
   if (dynamic_cast<const TriaxialController*>(&c)) return "TriaxialController";
   if (dynamic_cast<const RadiusGrowth*>(&c)) return "RadiusGrowth";
   if (dynamic_cast<const CellController*>(&c)) return "CellController";
@@ -293,12 +322,16 @@ std::string controller_name(const Controller& c) {
 }  // namespace
 
 namespace {
-/// The first wall both controllers move, or -1.
-int shared_wall(const Controller& a, const Controller& b) {
+/// Whether both controllers move a wall; the first such wall's name ("wall 3", "cylindrical
+/// wall 0": controlled_walls gives a cylinder k as -1 - k) in `name`.
+bool shared_wall(const Controller& a, const Controller& b, std::string& name) {
   const std::vector<int> wa = controlled_walls(a);
   for (int w : controlled_walls(b))
-    if (std::find(wa.begin(), wa.end(), w) != wa.end()) return w;
-  return -1;
+    if (std::find(wa.begin(), wa.end(), w) != wa.end()) {
+      name = w >= 0 ? "wall " + std::to_string(w) : "cylindrical wall " + std::to_string(-1 - w);
+      return true;
+    }
+  return false;
 }
 }  // namespace
 
@@ -310,10 +343,10 @@ void check_new_controller(const Scene& s, const Controller& c) {
                            " is controller " + std::to_string(i) +
                            " of the scene already (it would run twice per step)");
     if (!c.enabled || !other->enabled) continue;
-    const int w = shared_wall(c, *other);
-    if (w >= 0)
+    std::string w;
+    if (shared_wall(c, *other, w))
       throw ParameterError(
-          "controller (" + controller_name(c) + "): wall " + std::to_string(w) +
+          "controller (" + controller_name(c) + "): " + w +
           " is moved by controller " + std::to_string(i) + " (" + controller_name(*other) +
           ") already; two controllers would set its velocity in turn. Disable one "
           "(controller.enabled = False) or remove them (scene.clear_controllers())");
@@ -327,12 +360,12 @@ void check_enabled_controllers(const Scene& s) {
     for (int j = i + 1; j < s.num_controllers(); ++j) {
       const auto b = s.controller(j);
       if (!b->enabled) continue;
-      const int w = shared_wall(*a, *b);
-      if (w >= 0)
+      std::string w;
+      if (shared_wall(*a, *b, w))
         throw ParameterError(
             "controllers " + std::to_string(i) + " (" + controller_name(*a) + ") and " +
             std::to_string(j) + " (" + controller_name(*b) + ") are both enabled and both "
-            "move wall " + std::to_string(w) + "; they would set its velocity in turn. "
+            "move " + w + "; they would set its velocity in turn. "
             "Disable one (controller.enabled = False) before running");
     }
   }

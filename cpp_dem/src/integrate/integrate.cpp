@@ -53,6 +53,7 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
   const bool energy = track_energy_;
   const bool grid = has_grid();  // constant false without the geogrid: the branch vanishes
   const bool bonded = has_bonds();
+  const bool cylinders = !cylinder_walls_.empty();
   const bool renormalize = step_ % kRenormalizePeriod == 0;
   long err = std::numeric_limits<long>::max();
   Real worst = 0;
@@ -102,6 +103,14 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
       if (!c.active) continue;
       f += ops.load(c.force);
       t += ops.load(c.torque);
+    }
+    if (cylinders) {
+      for (int e = cyl_adj_off_[b]; e < cyl_adj_off_[b + 1]; ++e) {
+        const WallContact& c = cylinder_contacts_[cyl_adj_[e]];
+        if (!c.active) continue;
+        f += ops.load(c.force);
+        t += ops.load(c.torque);
+      }
     }
     if (grid) {
       // Grain side of grain–geogrid contacts.

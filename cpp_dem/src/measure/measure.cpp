@@ -284,6 +284,7 @@ Energies Scene::energies() const {
   for (const Bond& l : bonds_) e.friction += l.dissip_friction;
   e.elastic = stored_elastic_energy();
   for (const Wall& w : walls_) e.wall_work += w.work;
+  for (const CylinderWall& w : cylinder_walls_) e.wall_work += w.work;
   e.cell_work = cell_.work;
   if (!track_energy_ || !energy_reference_set_) return e;
   // The potential of gravity is taken at the positions where the kinetic energy was sampled
@@ -317,11 +318,13 @@ void Scene::reset_energy() {
   dropped_friction_ = dropped_viscous_ = 0;
   for (PairContactCold& c : pair_cold_) c.dissip_friction = c.dissip_viscous = 0;
   for (WallContact& c : wall_contacts_) c.state.dissip_friction = c.state.dissip_viscous = 0;
+  for (WallContact& c : cylinder_contacts_) c.state.dissip_friction = c.state.dissip_viscous = 0;
   for (GridContact& c : grid_contacts_) c.state.dissip_friction = c.state.dissip_viscous = 0;
   for (GridLink& l : links_) l.dissip_plastic = 0;
   for (Bond& l : bonds_) l.dissip_friction = 0;
   dropped_plastic_ = 0;
   for (Wall& w : walls_) w.work = 0;
+  for (CylinderWall& w : cylinder_walls_) w.work = 0;
   cell_.work = 0;
   // The reference (kinetic + elastic) is taken in the next step, once the contacts of the
   // current positions have been evaluated, so energy stored in initial overlaps counts.
@@ -426,6 +429,10 @@ std::vector<std::pair<std::string, std::size_t>> Scene::memory_by_field() const 
   add("scratch.density_scaling_kr", ds_kr_);
   add("walls.walls", walls_);
   add("walls.openings", wall_openings_);
+  add("walls.cylinders", cylinder_walls_);
+  add("contacts.cylinders", cylinder_contacts_);
+  add("contacts.cyl_adj_off", cyl_adj_off_);
+  add("contacts.cyl_adj", cyl_adj_);
   add("geogrid.links", links_);
   add("geogrid.pfacets", facets_);
   add("geogrid.contacts", grid_contacts_);

@@ -10,7 +10,8 @@
 namespace cpp_dem {
 
 /// The container a contact lives in.
-enum class ContactKind : std::uint8_t { Pair = 0, Wall = 1, Grid = 2 };
+/// Cylinder: a sphere against a cylindrical wall (CylinderWall), sides as a wall contact's.
+enum class ContactKind : std::uint8_t { Pair = 0, Wall = 1, Grid = 2, Cylinder = 3 };
 
 /// A contact seen through Scene::for_each_contact. Sides: a pair contact is (i, j); a wall
 /// contact (the wall, the sphere); a grain–geogrid contact (the virtual sphere of the
@@ -21,7 +22,7 @@ struct ContactRecord {
   bool active = false;   ///< touching in the last step
   int body1 = -1;        ///< storage slot of side 1 (-1: a wall or a geogrid primitive)
   int body2 = -1;        ///< storage slot of side 2
-  int other = -1;        ///< the wall's index, or the grid contact's primitive (-1 for a pair)
+  int other = -1;        ///< the wall's (or cylinder's) index, or the grid contact's primitive (-1 for a pair)
   const ContactPhys* phys = nullptr;  ///< its law's parameters
   /// Its history (springs, normal, overlap, f_n, dissipation): the container's record, or for
   /// a pair contact (stored in a hot and a cold part) a copy valid during the visit.

@@ -27,8 +27,9 @@ class StatefulController {
 /// Normal stress on a wall, Pa, compressive positive: -sense * F_axis / area.
 Real wall_normal_stress(const Wall& w, Real area);
 
-/// Sum of the tangent normal stiffnesses of the active sphere contacts of a wall, N/m.
-Real wall_contact_stiffness(const Scene& s, int wall);
+/// Sum of the tangent normal stiffnesses of the active sphere contacts of a wall (kind
+/// ContactKind::Cylinder: of cylindrical wall `wall`), N/m.
+Real wall_contact_stiffness(const Scene& s, int wall, ContactKind kind = ContactKind::Wall);
 
 /// Servo law of one wall (Yade's TriaxialStressController / PFC servo, with the gain from the
 /// measured stiffness): the wall displacement towards the spheres over the next `period`
@@ -103,29 +104,15 @@ struct LimitWatch {
   }
 };
 
-/// One wall driven to a target normal stress by its velocity (the other walls are not
-/// touched). The area is fixed (m^2) or, when `box_walls` holds the six walls of a box (order
-/// x-, x+, y-, y+, z-, z+), recomputed every call from the current box dimensions.
-class ServoWall : public Controller {
+/// What a servo of one wall shares (ServoWall, CylinderServo): its target stress (Pa,
+/// compressive positive), gain, speed cap, the contact stiffness at its last call and its
+/// LimitWatch; its speed is servo_speed's.
+class StressServo : public Controller {
  public:
-  /// wall: wall id; target_stress: Pa, >= 0 (compressive); area: m^2 (> 0) or 0 when
-  /// box_walls are given; gain: alpha in (0, 1] (fraction of the stiffness-predicted
-  /// correction applied per period); max_speed: the velocity cap, m/s (> 0).
-  ServoWall(int wall, Real target_stress, Real area, Real gain, Real max_speed,
-            std::vector<int> box_walls = {});
-  void apply(Scene& scene) override;
-
-  void set_target_stress(Real sigma);
-  Real target_stress() const { return target_; }
   void set_max_speed(Real v);
   Real max_speed() const { return max_speed_; }
   void set_gain(Real g);
   Real gain() const { return gain_; }
-  int wall() const { return wall_; }
-  /// Wall area used at the last call, m^2.
-  Real area() const { return area_; }
-  /// Stress measured at the last call, Pa (compressive positive).
-  Real measured_stress() const { return sigma_; }
   /// Contact stiffness measured at the last call, N/m.
   Real stiffness() const { return stiffness_; }
   /// Calls at the speed cap while off the target (see LimitWatch).
@@ -134,12 +121,65 @@ class ServoWall : public Controller {
   /// Starts the count of calls towards a target not yet reached over (LimitWatch::clear_run).
   void clear_target_watch(bool told) { limit_.clear_run(told); }
 
- private:
+ protected:
+  /// target: Pa, >= 0 (its name in messages: field); gain: alpha in (0, 1] (fraction of the
+  /// stiffness-predicted correction applied per period); max_speed: the cap, m/s (> 0).
+  StressServo(Real target, const char* field, Real gain, Real max_speed);
+  void set_target(Real target, const char* field);
+  /// The speed into the grains (servo_speed, m/s) for the stress `measured` (Pa) on `area`
+  /// (m^2) with contact stiffness `k` (N/m, kept), watched by the LimitWatch.
+  Real speed(const Scene& scene, Real measured, Real area, Real k);
   LimitWatch limit_;
+  Real target_, gain_, max_speed_;
+  Real stiffness_ = 0;
+};
+
+/// One wall driven to a target normal stress by its velocity (the other walls are not
+/// touched). The area is fixed (m^2) or, when `box_walls` holds the six walls of a box (order
+/// x-, x+, y-, y+, z-, z+), recomputed every call from the current box dimensions.
+class ServoWall : public StressServo {
+ public:
+  /// wall: wall id; target_stress: Pa, >= 0 (compressive); area: m^2 (> 0) or 0 when
+  /// box_walls are given; gain, max_speed: StressServo's.
+  ServoWall(int wall, Real target_stress, Real area, Real gain, Real max_speed,
+            std::vector<int> box_walls = {});
+  void apply(Scene& scene) override;
+
+  void set_target_stress(Real sigma) { set_target(sigma, "target_stress"); }
+  Real target_stress() const { return target_; }
+  int wall() const { return wall_; }
+  /// Wall area used at the last call, m^2.
+  Real area() const { return area_; }
+  /// Stress measured at the last call, Pa (compressive positive).
+  Real measured_stress() const { return sigma_; }
+
+ private:
   int wall_;
-  Real target_, area0_, gain_, max_speed_;
+  Real area0_;
   std::vector<int> box_;
-  Real area_ = 0, sigma_ = 0, stiffness_ = 0;
+  Real area_ = 0, sigma_ = 0;
+};
+
+/// A cylindrical wall (Scene::add_cylinder_wall) driven to a target mean normal pressure on
+/// its lateral surface (Pa, compressive positive) by the rate of its radius: each call sets
+/// radial_velocity to -/+ gain (p_target - p) A / (k dt period) (inside: a pressure below the
+/// target narrows the cylinder; outside: it widens it), capped to +-max_speed (m/s); p is the
+/// wall's normal_force over its lateral area A = 2 pi R (hi - lo), k the summed normal
+/// stiffness of its contacts (N/m). The cylinder must be finite.
+class CylinderServo : public StressServo {
+ public:
+  CylinderServo(int cylinder, Real target_pressure, Real gain, Real max_speed);
+  void apply(Scene& scene) override;
+
+  void set_target_pressure(Real p) { set_target(p, "target_pressure"); }
+  Real target_pressure() const { return target_; }
+  int cylinder() const { return cylinder_; }
+  /// Pressure measured at the last call, Pa (compressive positive).
+  Real measured_pressure() const { return p_; }
+
+ private:
+  int cylinder_;
+  Real p_ = 0;
 };
 
 /// Per-axis control of a box of six walls (order x-, x+, y-, y+, z-, z+): each axis is either
@@ -213,8 +253,9 @@ class TriaxialController : public Controller, public StatefulController {
   std::array<LimitWatch, 6> limit_{};
 };
 
-/// The walls a controller moves: a ServoWall's wall, a TriaxialController's six; none for
-/// the others (RadiusGrowth reads the walls but does not move them).
+/// The walls a controller moves: a ServoWall's wall, a TriaxialController's six, a
+/// CylinderServo's cylinder k as -1 - k; none for the others (RadiusGrowth reads the walls but
+/// does not move them).
 std::vector<int> controlled_walls(const Controller& c);
 
 /// Refuses (ParameterError) a controller `c` about to be added to `s` that is in `s` already,
