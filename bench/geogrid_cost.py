@@ -34,6 +34,10 @@ def build(n_grains: int, nodes: int, with_grid: bool, seed: int = 1):
     n_xy = int(side / spacing)
     layers = max(2, int(math.ceil(n_grains / n_xy**2)))
     below = layers // 2
+    if n_grains <= below * n_xy**2:
+        raise ValueError(f"n_grains={n_grains}: the scene puts the first {below * n_xy**2} "
+                         f"grains ({below} layer(s) of {n_xy} x {n_xy}) below the grid; give "
+                         "more, so that grains lie above it too (the box's top follows them)")
     rng = np.random.default_rng(seed)
     s = dem.Scene(gravity=(0, 0, -9.81), local_damping=0.3)
     sand = s.add_material(dem.linear_material(density=2650, young=1e7, poisson=0.3,
