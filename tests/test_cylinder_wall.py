@@ -268,3 +268,22 @@ def test_the_documented_example_runs_and_holds_its_pressure():
     p, radius = (float(v) for v in out.getvalue().split())
     assert p == pytest.approx(20e3, rel=0.05)
     assert radius < 0.017  # m: closed on the grains
+
+
+def test_a_sphere_behind_a_cylinder_is_refused_and_the_series_record_it(tmp_path):
+    from cpp_dem.io.series import standard_series
+
+    sc = dem.Scene()
+    m = _material(sc)
+    sc.add_cylinder_wall(centre=[0, 0, 0], axis=[0, 0, 1], radius=R0, inside=True, material=m,
+                         lo=0.0, hi=0.1)
+    with pytest.raises(dem.ParameterError, match="outside cylindrical wall 0, behind it"):
+        sc.add_spheres([[0, 0, 0.05], [2 * R0, 0, 0.05]], [R, R], material=m)
+    sc.add_spheres([[0, 0, 0.05], [2 * R0, 0, 0.2]], [R, R], material=m)  # beyond its end: kept
+    sc.positions = [[0, 0, 0.05], [2 * R0, 0, 0.05]]  # moved behind it
+    sc.dt = 0.1 * sc.critical_dt()
+    with pytest.raises(dem.ParameterError, match="body 1 .* outside cylindrical wall 0"):
+        sc.run(1)
+    series = standard_series(sc)
+    assert series["cylinder_radius_0"][0](sc) == R0
+    assert series["cylinder_normal_force_0"][1] == "N"

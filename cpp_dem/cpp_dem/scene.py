@@ -211,6 +211,21 @@ def _index(value, field: str) -> int:
     return int(value)
 
 
+def _behind_cylinder(cyl: dict, x: np.ndarray) -> np.ndarray:
+    """(n,) whether each centre x (n, 3), m, lies behind the cylindrical wall ``cyl``
+    (``Scene.cylinder_wall``): within its ends and beyond its lateral surface, on the side its
+    spheres are not (outside an ``inside`` one, inside an outer one). Such a centre is never
+    touched by it."""
+    d = x - np.asarray(cyl["centre"])
+    a = np.asarray(cyl["axis"])
+    t = d @ a
+    rho = np.linalg.norm(d - np.outer(t, a), axis=1)
+    tol = 1e-9 * cyl["radius"]
+    within = (t >= cyl["lo"]) & (t <= cyl["hi"])
+    beyond = rho > cyl["radius"] + tol if cyl["inside"] else rho < cyl["radius"] - tol
+    return within & beyond
+
+
 def _dof_mask(dofs: str) -> int:
     mask = 0
     for w in dofs.replace(",", " ").split():
@@ -362,6 +377,15 @@ class Scene(_core.Scene):
                         f"centers[{k}]={c[k].tolist()}: behind wall {w} ({'xyz'[axis]} "
                         f"{'>=' if sense > 0 else '<='} {pos[w]:g} m is inside), outside the "
                         "walls; move it inside or add the walls after the spheres")
+        if self.num_cylinder_walls and len(c) and c.shape[-1] == 3:
+            for w in range(self.num_cylinder_walls):
+                behind = _behind_cylinder(self.cylinder_wall(w), c)
+                if np.any(behind):
+                    k = int(np.flatnonzero(behind)[0])
+                    side = "outside" if self.cylinder_wall(w)["inside"] else "inside"
+                    raise ParameterError(
+                        f"centers[{k}]={c[k].tolist()}: {side} cylindrical wall {w}, behind "
+                        "it; move it to the wall's side or add the wall after the spheres")
         first = self._add_spheres(c, r, material)
         return np.arange(first, first + len(r))
 
@@ -515,11 +539,12 @@ class Scene(_core.Scene):
         (one pass over the bodies; what is beyond an opened wall left through it). A body
         behind a wall is never touched by it (the walls are one-sided): ParameterError
         naming the body, its position and the wall."""
-        key = (self.num_bodies, self.num_walls, self.__dict__.get("_geometry_version", 0))
+        key = (self.num_bodies, self.num_walls, self.num_cylinder_walls,
+               self.__dict__.get("_geometry_version", 0))
         if self.__dict__.get("_geometry_checked") == key and self.step_count > 0:
             return
         self.__dict__["_geometry_checked"] = key
-        if not (self.num_walls and self.num_bodies):
+        if not ((self.num_walls or self.num_cylinder_walls) and self.num_bodies):
             return
         x = np.asarray(self.positions)
         pos = np.asarray(self.wall_positions)
@@ -548,6 +573,18 @@ class Scene(_core.Scene):
                 f"{'>=' if sense > 0 else '<='} {pos[w]:g} m is inside), outside the walls "
                 f"({int(behind.sum())} of the bodies); the wall would never touch it: move it "
                 "inside, or build the walls around it")
+        for w in range(self.num_cylinder_walls):
+            cyl = self.cylinder_wall(w)
+            behind = check & _behind_cylinder(cyl, x)
+            if not behind.any():
+                continue
+            k = int(np.flatnonzero(behind)[0])
+            self.__dict__["_geometry_checked"] = None  # refused: check again next time
+            raise ParameterError(
+                f"body {k} at [{', '.join(f'{v:.6g}' for v in x[k])}] m: "
+                f"{'outside' if cyl['inside'] else 'inside'} cylindrical wall {w} (radius "
+                f"{cyl['radius']:g} m; {int(behind.sum())} of the bodies), behind it: the wall "
+                "would never touch it; move it to the wall's side")
 
     # ---- running ---------------------------------------------------------------------------
     @property

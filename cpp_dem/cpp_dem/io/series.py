@@ -56,7 +56,9 @@ def standard_series(scene=None, *, energies: bool = True, walls: bool = True
       (force the spheres exert on it, (3,) vector, N) and ``wall_position_<k>`` (m), with
       k = ``xmin, xmax, ymin, ymax, zmin, zmax`` for the first six walls (the order of
       ``cpp_dem.BOX_WALLS``: x-, x+, y-, y+, z-, z+; the floor of a box is ``zmin``) and the
-      wall index for further walls.
+      wall index for further walls; for every cylindrical wall k, ``cylinder_radius_<k>`` (m)
+      and ``cylinder_normal_force_<k>`` (N, compressive positive: its pressure times its
+      lateral area).
     """
     s: dict[str, tuple[Callable | None, str]] = {
         "time": (lambda sc: float(sc.time), "s"),
@@ -79,6 +81,12 @@ def standard_series(scene=None, *, energies: bool = True, walls: bool = True
             s[f"wall_force_{tag}"] = (lambda sc, w=w: np.asarray(sc.wall_forces)[w].copy(), "N")
             s[f"wall_position_{tag}"] = (lambda sc, w=w: float(np.asarray(sc.wall_positions)[w]),
                                          "m")
+    if walls and scene is not None and getattr(scene, "num_cylinder_walls", 0):
+        for w in range(int(scene.num_cylinder_walls)):
+            s[f"cylinder_radius_{w}"] = (lambda sc, w=w: float(sc.cylinder_wall(w)["radius"]),
+                                         "m")
+            s[f"cylinder_normal_force_{w}"] = (
+                lambda sc, w=w: float(sc.cylinder_wall(w)["normal_force"]), "N")
     return s
 
 
