@@ -182,13 +182,14 @@ void Scene::raise_cylinder_overlap(long k) const {
 }
 
 void Scene::move_cylinder_walls() {
-  for (CylinderWall& w : cylinder_walls_) {
+  for (size_t k = 0; k < cylinder_walls_.size(); ++k) {
+    CylinderWall& w = cylinder_walls_[k];
     const Real dx = w.velocity.norm() * dt_, dr = w.radial_velocity * dt_;
     w.centre += w.velocity * dt_;
     w.radius += dr;
     if (!(w.radius > 0)) {
       std::ostringstream os;
-      os << "cylindrical wall at step " << step_ << ": its radius fell to " << w.radius
+      os << "cylindrical wall " << k << " at step " << step_ << ": its radius fell to " << w.radius
          << " m (radial_velocity " << w.radial_velocity << " m/s): it must stay > 0";
       throw BlowUpError(os.str());
     }
