@@ -287,3 +287,33 @@ def test_a_sphere_behind_a_cylinder_is_refused_and_the_series_record_it(tmp_path
     series = standard_series(sc)
     assert series["cylinder_radius_0"][0](sc) == R0
     assert series["cylinder_normal_force_0"][1] == "N"
+
+
+def test_a_loose_cloud_fills_a_cylinder_without_overlaps():
+    from cpp_dem.build.packing import loose_cylinder
+
+    rng = np.random.default_rng(3)
+    radii = rng.uniform(0.8, 1.2, 300) * 0.002
+    c, r = loose_cylinder(radii, 0.02, 0.06, centre=(0.1, -0.2, 0.5), seed=4)
+    c2, r2 = loose_cylinder(radii, 0.02, 0.06, centre=(0.1, -0.2, 0.5), seed=4)
+    assert np.array_equal(c, c2) and np.array_equal(r, r2)  # seeded
+    assert sorted(r) == sorted(radii)
+    rho = np.hypot(c[:, 0] - 0.1, c[:, 1] + 0.2)
+    assert np.all(rho + r <= 0.02 + 1e-15)
+    assert np.all(c[:, 2] - r >= 0.5 - 1e-15) and np.all(c[:, 2] + r <= 0.56 + 1e-15)
+    d = np.linalg.norm(c[:, None] - c[None], axis=2) - (r[:, None] + r[None])
+    np.fill_diagonal(d, 1.0)
+    assert d.min() >= 0
+    # The spheres fit the scene's cylinder: none is behind it.
+    sc = dem.Scene()
+    m = _material(sc)
+    sc.add_cylinder_wall(centre=[0.1, -0.2, 0.5], axis=[0, 0, 1], radius=0.02, inside=True,
+                         material=m, lo=0.0, hi=0.06)
+    sc.add_spheres(c, r, material=m)
+    with pytest.raises(dem.ParameterError, match="radius=0.001: must be > the largest grain"):
+        loose_cylinder(radii, 0.001, 0.06)
+    with pytest.raises(dem.ParameterError, match=r"height=0.0: must be > 0 \(m\)"):
+        loose_cylinder(radii, 0.02, 0.0)
+    with pytest.raises(dem.ParameterError, match="loose_cylinder: could not place .* of the "
+                                                 "cylinder"):
+        loose_cylinder(radii, 0.01, 0.02, max_tries=50)

@@ -89,6 +89,14 @@ def loose_cloud(radii, lo, hi, *, seed: int = 0, max_tries: int = 2000
     placed in ``max_tries`` attempts (the cloud is too dense for sequential addition: solid
     fractions above about 0.3 need a bigger box and then compaction).
     """
+    return _sequential_addition(radii, lo, hi, seed=seed, max_tries=max_tries)
+
+
+def _sequential_addition(radii, lo, hi, *, seed: int, max_tries: int,
+                         inside: Callable[[np.ndarray, float], bool] | None = None,
+                         region: str = "box") -> tuple[np.ndarray, np.ndarray]:
+    """loose_cloud's placement in the box [lo, hi], keeping only centres x of radius r where
+    ``inside(x, r)`` (the box's own bounds always hold); ``region`` names it in the error."""
     r = np.sort(np.asarray(radii, dtype=float).reshape(-1))[::-1]
     if len(r) == 0:
         raise ParameterError("radii: no spheres")
@@ -105,6 +113,8 @@ def loose_cloud(radii, lo, hi, *, seed: int = 0, max_tries: int = 2000
         placed = False
         for _ in range(max_tries):
             x = lo_a + rk + rng.random(3) * (hi_a - lo_a - 2 * rk)
+            if inside is not None and not inside(x, rk):
+                continue
             c = np.minimum((x - lo_a) // h3, ncell - 1).astype(int)
             ok = True
             for i in range(max(c[0] - 1, 0), min(c[0] + 2, ncell[0])):
@@ -128,14 +138,50 @@ def loose_cloud(radii, lo, hi, *, seed: int = 0, max_tries: int = 2000
                 placed = True
                 break
         if not placed:
-            solid = float(np.sum(4.0 / 3.0 * np.pi * r**3) / np.prod(hi_a - lo_a))
-            raise ParameterError(f"loose_cloud: could not place sphere {k} (r={rk}) in "
-                                 f"{max_tries} tries; the spheres fill {solid:.3f} of the box "
+            volume = (np.prod(hi_a - lo_a) if inside is None
+                      else np.pi / 4 * (hi_a[0] - lo_a[0]) ** 2 * (hi_a[2] - lo_a[2]))
+            solid = float(np.sum(4.0 / 3.0 * np.pi * r**3) / volume)
+            name = "loose_cloud" if region == "box" else f"loose_{region}"
+            raise ParameterError(f"{name}: could not place sphere {k} (r={rk}) in "
+                                 f"{max_tries} tries; the spheres fill {solid:.3f} of the "
+                                 f"{region} "
                                  "(random sequential addition jams above about 0.3); use a "
-                                 "bigger box or smaller radii, then compact")
+                                 f"bigger {region} or smaller radii, then compact")
     # Number the spheres in space order (the placement order is random): faster scenes.
     order = spatial_order(pos, r)
     return pos[order], r[order]
+
+
+def loose_cylinder(radii, radius: float, height: float, *, centre=(0.0, 0.0, 0.0),
+                   seed: int = 0, max_tries: int = 2000) -> tuple[np.ndarray, np.ndarray]:
+    """A random loose cloud (as :func:`loose_cloud`) inside the upright cylinder of ``radius``
+    and ``height`` (m) whose base is centred at ``centre`` (m; its axis along z): every sphere
+    lies wholly inside it, none overlaps another. For a cylindrical specimen between two
+    plane walls (z = centre z and z = centre z + height) and a cylindrical wall
+    (``Scene.add_cylinder_wall(centre=centre, axis=(0, 0, 1), radius=radius, inside=True,
+    lo=0, hi=height)``), then compacted (``cpp_dem.CylinderServo``, ``ServoWall``).
+
+    Returns (centres (n, 3), radii (n,)) in space order. Raises ParameterError naming the
+    value when the cylinder is narrower or lower than the largest grain, or, as
+    ``loose_cloud``, when a sphere cannot be placed (solid fractions above about 0.3)."""
+    r_max = float(np.max(np.asarray(radii, dtype=float))) if np.size(radii) else 0.0
+    for name, v in (("radius", radius), ("height", height)):
+        if not (np.isfinite(v) and v > 0):
+            raise ParameterError(f"{name}={v}: must be > 0 (m)")
+    if not radius > r_max:
+        raise ParameterError(f"radius={radius}: must be > the largest grain radius {r_max} (m)")
+    c = np.asarray(centre, dtype=float).reshape(-1)
+    if c.shape != (3,) or not np.all(np.isfinite(c)):
+        raise ParameterError(f"centre={list(np.asarray(centre).reshape(-1))}: expected 3 finite "
+                             "values (m)")
+    lo = c + [-radius, -radius, 0.0]
+    hi = c + [radius, radius, height]
+
+    def inside(x: np.ndarray, rk: float) -> bool:
+        return (x[0] - c[0]) ** 2 + (x[1] - c[1]) ** 2 <= (radius - rk) ** 2
+
+    return _sequential_addition(radii, lo, hi, seed=seed, max_tries=max_tries, inside=inside,
+                                region="cylinder")
 
 
 def placed_count(asked: int, placed: int, why: str, *, log: Callable[[str], None] = print,
