@@ -52,12 +52,22 @@ void run_interruptible(Scene& s, long steps) {
   if (raised) throw py::error_already_set();
 }
 
+/// A velocity argument (3 values, m/s) that must be finite, `of` naming what it moves.
+Vec3 finite_velocity(const Array& v, const std::string& of) {
+  const Vec3 vel = to_vec3(v, "velocity");
+  if (!vel.allFinite())
+    throw ParameterError("velocity=(" + fmt_real(vel[0]) + ", " + fmt_real(vel[1]) + ", " +
+                         fmt_real(vel[2]) + ") of " + of + ": must be finite (m/s)");
+  return vel;
+}
+
 py::dict contacts_dict(const Scene& s) {
   std::vector<int> ids;
   std::vector<Vec3> force, normal, branch, fs;
   std::vector<Real> overlap, fn, kn, ks, tan_phi;
   s.for_each_contact([&](const ContactRecord& c) {
-    if (!c.active || c.kind == ContactKind::Grid) return;  // grid: Scene.grid_contacts()
+    // grid: Scene.grid_contacts(); cylinders and meshes: their walls' records
+    if (!c.active || (c.kind != ContactKind::Pair && c.kind != ContactKind::Wall)) return;
     ids.push_back(s.id_of(c.kind == ContactKind::Pair ? c.body1 : c.body2));
     ids.push_back(c.kind == ContactKind::Pair ? s.id_of(c.body2) : -1 - c.other);
     force.push_back(c.force2);
@@ -209,12 +219,8 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
            "(hi - lo); NaN when infinite) and work (J, done by it on the spheres).")
       .def("set_cylinder_velocity",
            [](Scene& s, int id, const Array& v) {
-             const Vec3 vel = to_vec3(v, "velocity");
-             if (!vel.allFinite())
-               throw ParameterError("velocity=(" + fmt_real(vel[0]) + ", " + fmt_real(vel[1]) +
-                                    ", " + fmt_real(vel[2]) + ") of cylindrical wall " +
-                                    std::to_string(id) + ": must be finite (m/s)");
-             s.cylinder_wall(id).velocity = vel;
+             s.cylinder_wall(id).velocity =
+                 finite_velocity(v, "cylindrical wall " + std::to_string(id));
            },
            py::arg("cylinder"), py::arg("velocity"),
            "Imposed velocity of the whole cylindrical wall (3 values), m/s.")
@@ -225,6 +231,47 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
            },
            py::arg("cylinder"), py::arg("radial_velocity"),
            "Imposed rate of the cylinder's radius, m/s (> 0 widens it).")
+      .def("_add_mesh_wall",
+           [](Scene& s, const Array& vertices, const py::array_t<int, py::array::c_style |
+                                                                       py::array::forcecast>& tris,
+              int material) {
+             if (tris.ndim() != 2 || tris.shape(1) != 3)
+               throw ParameterError("triangles: expected an (n, 3) array of vertex indices");
+             std::vector<std::array<int, 3>> t(static_cast<size_t>(tris.shape(0)));
+             for (py::ssize_t k = 0; k < tris.shape(0); ++k)
+               t[k] = {tris.at(k, 0), tris.at(k, 1), tris.at(k, 2)};
+             return s.add_mesh_wall(to_vec3_list(vertices, "vertices"), t, material);
+           },
+           py::arg("vertices"), py::arg("triangles"), py::arg("material"))
+      .def_property_readonly("num_mesh_walls", &Scene::num_mesh_walls)
+      .def_property_readonly("mesh_dropped_contacts", &Scene::mesh_dropped_contacts,
+                             "Sphere–mesh contacts beyond three at one sphere and mesh in one "
+                             "step, left out (the deepest kept), since the scene was made.")
+      .def("mesh_wall",
+           [](const Scene& s, int id) {
+             const MeshWall& w = s.mesh_wall(id);
+             py::dict d;
+             d["vertices"] = vec3_array(s.mesh_vertices(id));
+             d["num_triangles"] = w.ntri;
+             d["material"] = w.material;
+             d["velocity"] = real_array({w.velocity[0], w.velocity[1], w.velocity[2]});
+             d["ref"] = real_array({w.ref[0], w.ref[1], w.ref[2]});
+             d["force"] = real_array({w.force[0], w.force[1], w.force[2]});
+             d["moment"] = real_array({w.moment[0], w.moment[1], w.moment[2]});
+             d["work"] = w.work;
+             return d;
+           },
+           py::arg("mesh"),
+           "A mesh wall as a dict: vertices (current, m), num_triangles, material, velocity "
+           "(m/s), ref (m, the point its moment is about: its vertices' mean, moving with it), "
+           "force (N) and moment (N m, about ref) of the spheres on it at the last step, work "
+           "(J, done by it on the spheres).")
+      .def("set_mesh_velocity",
+           [](Scene& s, int id, const Array& v) {
+             s.mesh_wall(id).velocity = finite_velocity(v, "mesh wall " + std::to_string(id));
+           },
+           py::arg("mesh"), py::arg("velocity"),
+           "Imposed velocity of the whole mesh wall (3 values), m/s.")
       .def("set_cylinder_radius", &Scene::set_cylinder_radius, py::arg("cylinder"),
            py::arg("radius"), "Sets the cylinder's radius, m.")
       .def("set_wall_opening", &Scene::set_wall_opening, py::arg("wall"), py::kw_only(),
@@ -240,12 +287,7 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
            py::arg("wall"), "(axis, lo, hi) of the wall's opening, m; axis -1: closed.")
       .def("set_wall_velocity",
            [](Scene& s, int id, const Array& v) {
-             const Vec3 vel = to_vec3(v, "velocity");
-             if (!vel.allFinite())
-               throw ParameterError("velocity=(" + fmt_real(vel[0]) + ", " + fmt_real(vel[1]) +
-                                    ", " + fmt_real(vel[2]) + ") of wall " + std::to_string(id) +
-                                    ": must be finite (m/s)");
-             s.wall(id).velocity = vel;
+             s.wall(id).velocity = finite_velocity(v, "wall " + std::to_string(id));
            },
            py::arg("wall"), py::arg("velocity"), "Imposed wall velocity (3 values), m/s.")
       .def("set_wall_position",

@@ -191,6 +191,8 @@ class Scene:
         ...
     def _add_grid_nodes(self, positions: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], radius: float, mass: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], inertia: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], material: int) -> int:
         ...
+    def _add_mesh_wall(self, vertices: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], triangles: typing.Annotated[numpy.typing.ArrayLike, numpy.int32], material: int) -> int:
+        ...
     def _add_spheres(self, centers: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], radii: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], material: int) -> int:
         ...
     def _check_controllers(self) -> None:
@@ -308,6 +310,10 @@ class Scene:
         """
         Bytes allocated by each of the core's arrays (capacity x element size), by field name: the scene's own memory, not the allocator's or Python's.
         """
+    def mesh_wall(self, mesh: int) -> dict:
+        """
+        A mesh wall as a dict: vertices (current, m), num_triangles, material, velocity (m/s), ref (m, the point its moment is about: its vertices' mean, moving with it), force (N) and moment (N m, about ref) of the spheres on it at the last step, work (J, done by it on the spheres).
+        """
     def num_controllers(self) -> int:
         """
         Number of controllers.
@@ -349,6 +355,10 @@ class Scene:
     def set_mass_inertia(self, body: int, mass: float, inertia: float) -> None:
         """
         Sets a body's mass (kg) and inertia (kg m^2).
+        """
+    def set_mesh_velocity(self, mesh: int, velocity: typing.Annotated[numpy.typing.ArrayLike, numpy.float64]) -> None:
+        """
+        Imposed velocity of the whole mesh wall (3 values), m/s.
         """
     def set_pair_law(self, a: int, b: int, *, model: str | None = None, kn: float | None = None, ks: float | None = None, friction: float | None = None, damping_normal: float | None = None, damping_shear: float | None = None) -> None:
         """
@@ -680,6 +690,11 @@ class Scene:
     def mean_spin(self, arg1: bool) -> None:
         ...
     @property
+    def mesh_dropped_contacts(self) -> int:
+        """
+        Sphere–mesh contacts beyond three at one sphere and mesh in one step, left out (the deepest kept), since the scene was made.
+        """
+    @property
     def num_active_contacts(self) -> int:
         ...
     @property
@@ -699,6 +714,9 @@ class Scene:
         ...
     @property
     def num_materials(self) -> int:
+        ...
+    @property
+    def num_mesh_walls(self) -> int:
         ...
     @property
     def num_pfacets(self) -> int:

@@ -390,6 +390,34 @@ class Scene(_core.Scene):
         return np.arange(first, first + len(r))
 
 
+    def add_mesh_wall(self, vertices=None, triangles=None, *, material: int, path=None,
+                      scale: float = 1.0) -> int:
+        """Adds a rigid triangle-mesh wall; returns its index.
+
+        Give ``vertices`` (n, 3), m, and ``triangles`` (m, 3) vertex indices, or ``path``: an
+        STL, OBJ or PLY file (``scale`` turns its unit into m, 1e-3 for mm; read by
+        :func:`cpp_dem.build.clump_mesh.read_triangle_mesh`, duplicate vertices merged so that
+        neighbouring triangles share edges). The mesh may be open or closed and is two-sided.
+        A sphere meets it at faces, edges and vertices, each once (docs/core.md, "Mesh
+        walls"). ``set_mesh_velocity`` moves it; ``mesh_wall(k)`` gives its force and moment.
+        """
+        if path is not None:
+            if vertices is not None or triangles is not None:
+                raise ParameterError("add_mesh_wall: give vertices and triangles, or path, not "
+                                     "both")
+            from cpp_dem.build.clump_mesh import read_triangle_mesh
+
+            vertices, triangles = read_triangle_mesh(path, scale)
+        elif vertices is None or triangles is None:
+            raise ParameterError("add_mesh_wall: give vertices (n, 3, m) and triangles (m, 3), "
+                                 "or path (an STL, OBJ or PLY file)")
+        v = np.atleast_2d(_numbers(vertices, "vertices", "m"))
+        t = np.asarray(triangles)
+        if t.ndim != 2 or t.shape[1] != 3 or not (np.issubdtype(t.dtype, np.integer)
+                                                   or np.all(np.mod(t, 1) == 0)):
+            raise ParameterError(f"triangles: shape {t.shape}; must be (m, 3) vertex indices")
+        return self._add_mesh_wall(v, t.astype(np.int64), _index(material, "material"))
+
     def add_box(self, lo: Sequence[float], hi: Sequence[float], *, material: int) -> list[int]:
         """Adds the six walls of the box [lo, hi] (m), facing inwards.
 

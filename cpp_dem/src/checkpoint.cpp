@@ -157,7 +157,11 @@ std::vector<std::uint64_t> layout(std::uint32_t version = Checkpoint::kVersion) 
   // (Version 11 added the wall openings.)
   if (version >= 11) l.push_back(sizeof(WallOpening));
   // (Version 14 added the cylindrical walls.)
-  if (version >= 14) l.push_back(sizeof(CylinderWall));
+  if (version >= 14) {
+    l.push_back(sizeof(CylinderWall));
+    l.push_back(sizeof(MeshWall));
+    l.push_back(sizeof(MeshContact));
+  }
   return l;
 }
 
@@ -281,7 +285,8 @@ void Checkpoint::check_values(const Scene& t) {
 }
 
 void Checkpoint::check_same_scene(const Scene& s, const Scene& t) {
-  if (s.num_bodies() == 0 && s.walls_.empty() && s.cylinder_walls_.empty() && !s.cell_.on)
+  if (s.num_bodies() == 0 && s.walls_.empty() && s.cylinder_walls_.empty() &&
+      s.mesh_walls_.empty() && !s.cell_.on)
     return;  // blank: nothing to replace
   const auto axes = [](const PeriodicCell& c) {
     std::string a;
@@ -338,7 +343,16 @@ void Checkpoint::check_same_scene(const Scene& s, const Scene& t) {
       throw ParameterError("checkpoint: cylindrical wall " + std::to_string(k) + " holds its "
                            "spheres " + side(t.cylinder_walls_[k]) + " in the saved scene, " +
                            side(s.cylinder_walls_[k]) + " in this one" + kSameScene);
-    }
+    }  if (t.mesh_walls_.size() != s.mesh_walls_.size())
+    throw ParameterError("checkpoint: the saved scene has " + std::to_string(t.mesh_walls_.size()) +
+                         " mesh walls, this scene has " + std::to_string(s.mesh_walls_.size()) +
+                         kSameScene);
+  for (size_t k = 0; k < s.mesh_walls_.size(); ++k)
+    if (t.mesh_walls_[k].ntri != s.mesh_walls_[k].ntri)
+      throw ParameterError("checkpoint: mesh wall " + std::to_string(k) + " has " +
+                           std::to_string(t.mesh_walls_[k].ntri) + " triangles in the saved "
+                           "scene, " + std::to_string(s.mesh_walls_[k].ntri) + " in this one" +
+                           kSameScene);
 }
 
 std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
@@ -421,6 +435,15 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.vec(s.cylinder_contacts_);
   w.vec(s.cyl_adj_off_);
   w.vec(s.cyl_adj_);
+  w.vec(s.mesh_walls_);
+  w.vec(s.mesh_vertices_);
+  w.vec(s.mesh_tris_);
+  w.vec(s.mesh_contacts_);
+  w.vec(s.mesh_cand_off_);
+  w.vec(s.mesh_cand_tri_);
+  w.vec(s.mesh_adj_off_);
+  w.vec(s.mesh_adj_);
+  w.put(s.mesh_dropped_);
   // Controllers.
   const std::uint64_t nc = s.controllers_.size();
   w.put(nc);
@@ -604,6 +627,34 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
     for (int e : t.cyl_adj_off_) adj_ok = adj_ok && e >= 0 && static_cast<size_t>(e) <= nadj;
     for (int e : t.cyl_adj_) adj_ok = adj_ok && e >= 0 && static_cast<size_t>(e) < t.cylinder_contacts_.size();
     if (!adj_ok) throw ParameterError("checkpoint: corrupt cylinder contacts");
+    r.vec(t.mesh_walls_);
+    r.vec(t.mesh_vertices_);
+    r.vec(t.mesh_tris_);
+    r.vec(t.mesh_contacts_);
+    r.vec(t.mesh_cand_off_);
+    r.vec(t.mesh_cand_tri_);
+    r.vec(t.mesh_adj_off_);
+    r.vec(t.mesh_adj_);
+    r.get(t.mesh_dropped_);
+    bool mesh_ok = t.mesh_cand_off_.empty() ||
+                   (t.mesh_cand_off_.size() == t.mesh_contacts_.size() + 1 &&
+                    static_cast<size_t>(t.mesh_cand_off_.back()) == t.mesh_cand_tri_.size());
+    for (const MeshWall& m : t.mesh_walls_)
+      mesh_ok = mesh_ok && m.vert_off >= 0 && m.nvert >= 3 && m.tri_off >= 0 && m.ntri >= 1 &&
+                static_cast<size_t>(m.vert_off + m.nvert) <= t.mesh_vertices_.size() &&
+                static_cast<size_t>(m.tri_off + m.ntri) <= t.mesh_tris_.size() &&
+                m.material >= 0 && m.material < static_cast<int>(t.materials_.size());
+    for (const MeshContact& c : t.mesh_contacts_)
+      mesh_ok = mesh_ok && c.body >= 0 && static_cast<size_t>(c.body) < nb && c.wall >= 0 &&
+                static_cast<size_t>(c.wall) < t.mesh_walls_.size();
+    for (int e : t.mesh_cand_tri_)
+      mesh_ok = mesh_ok && e >= 0 && static_cast<size_t>(e) < t.mesh_tris_.size();
+    for (const auto& tri : t.mesh_tris_)
+      for (int i : tri) mesh_ok = mesh_ok && i >= 0;
+    for (int e : t.mesh_adj_)
+      mesh_ok = mesh_ok && e >= 0 && static_cast<size_t>(e) < t.mesh_contacts_.size();
+    if (!(t.mesh_adj_off_.empty() || t.mesh_adj_off_.size() == nb + 1)) mesh_ok = false;
+    if (!mesh_ok) throw ParameterError("checkpoint: corrupt mesh walls");
   }
   const auto nc = r.get<std::uint64_t>();
   if (nc != s.controllers_.size())

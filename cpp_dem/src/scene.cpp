@@ -283,6 +283,11 @@ void Scene::step() {
     compute_cylinder_forces(err_cyl);
     if (err_cyl != std::numeric_limits<long>::max()) raise_cylinder_overlap(err_cyl);
   }
+  if (!mesh_walls_.empty()) {
+    long err_mesh;
+    compute_mesh_forces(err_mesh);
+    if (err_mesh != std::numeric_limits<long>::max()) raise_mesh_overlap(err_mesh);
+  }
   if constexpr (kGeogridBuilt) {
     if (has_grid()) {
       long err_grid;
@@ -354,6 +359,7 @@ void Scene::step() {
     w.moved_since_build += std::abs(dx);
   }
   if (!cylinder_walls_.empty()) move_cylinder_walls();
+  if (!mesh_walls_.empty()) move_mesh_walls();
   ++step_;
   time_ += dt_;
 }

@@ -95,6 +95,7 @@ from cpp_dem.build.clumps import ClumpTemplate, MassProperties, _principal
 __all__ = [
     "templates_from_spec",
     "read_surface_mesh",
+    "read_triangle_mesh",
     "check_closed_mesh",
     "mesh_mass_properties",
     "fill_mesh",
@@ -127,20 +128,31 @@ def read_surface_mesh(path, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]
     """Reads a closed triangle surface from an STL (ascii or binary), OBJ or PLY file.
 
     scale: multiplies the file's coordinates to give m (1e-3 for a file in mm).
-    Returns (vertices (n, 3) float, m; triangles (m, 3) int), duplicate vertices merged (exact
-    coordinate matches), unused vertices dropped, quads split into two triangles,
+    Returns (vertices (n, 3) float, m; triangles (m, 3) int) as :func:`read_triangle_mesh`,
     checked by :func:`check_closed_mesh` (closed, consistently oriented, outward normals: a
     globally inverted mesh is flipped). Needs ``meshio`` (>= 5.3).
+    """
+    return check_closed_mesh(*read_triangle_mesh(path, scale))
+
+
+def read_triangle_mesh(path, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]:
+    """Reads a triangle surface, closed or open, from an STL (ascii or binary), OBJ or PLY file
+    (a wall: ``Scene.add_mesh_wall``).
+
+    scale: multiplies the file's coordinates to give m (1e-3 for a file in mm).
+    Returns (vertices (n, 3) float, m; triangles (m, 3) int), duplicate vertices merged (exact
+    coordinate matches: neighbouring triangles share their edges), unused vertices dropped,
+    quads split into two triangles. Needs ``meshio`` (>= 5.3).
     """
     try:
         import meshio  # lazy: only needed to read files
     except ImportError as e:  # pragma: no cover - depends on the environment
-        raise ImportError("read_surface_mesh needs meshio (pip install 'meshio>=5.3')") from e
+        raise ImportError("reading a mesh file needs meshio (pip install 'meshio>=5.3')") from e
     path = os.fspath(path)
     if not (isinstance(scale, (int, float)) and math.isfinite(scale) and scale > 0):
         raise ParameterError(f"scale={scale!r}: must be > 0 (file unit in m, e.g. 1e-3 for mm)")
     if not os.path.isfile(path):
-        raise ParameterError(f"path={path!r}: no such file (a closed STL, OBJ or PLY surface)")
+        raise ParameterError(f"path={path!r}: no such file (an STL, OBJ or PLY surface)")
     try:
         with warnings.catch_warnings():  # meshio's binary-STL size probe can overflow (harmless)
             warnings.simplefilter("ignore", RuntimeWarning)
@@ -173,7 +185,7 @@ def read_surface_mesh(path, scale: float = 1.0) -> tuple[np.ndarray, np.ndarray]
     uniq, inv = np.unique(pts, axis=0, return_inverse=True)
     tri = inv.ravel()[tri]
     used, tri_new = np.unique(tri, return_inverse=True)
-    return check_closed_mesh(uniq[used] * float(scale), tri_new.reshape(-1, 3))
+    return uniq[used] * float(scale), tri_new.reshape(-1, 3)
 
 
 def _as_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:

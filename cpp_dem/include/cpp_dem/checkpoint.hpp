@@ -23,7 +23,7 @@ class Checkpoint {
   /// clumps' inertia factors); 11: the walls' openings (WallOpening); 12: each controller's
   /// kind (its C++ type); 13: materials by their field list (the law's name, then each
   /// parameter's name and stored value: a parameter added later takes its default); 14: the
-  /// cylindrical walls and their contacts. load also reads versions 8 (with the default
+  /// cylindrical and triangle-mesh walls and their contacts. load also reads versions 8 (with the default
   /// kinematics), 9 (scaling off), 10 (walls closed), 11 (controllers' kinds unchecked), 12
   /// (materials as records of the 8 parameters then) and 13 (no cylindrical walls).
   static constexpr std::uint32_t kVersion = 14;

@@ -17,6 +17,7 @@
 #include "cpp_dem/bodies/clump.hpp"
 #include "cpp_dem/bodies/geogrid.hpp"
 #include "cpp_dem/bodies/cylinder_wall.hpp"
+#include "cpp_dem/bodies/mesh_wall.hpp"
 #include "cpp_dem/bodies/wall.hpp"
 #include "cpp_dem/broadphase/collider.hpp"
 #include "cpp_dem/contacts/contact_record.hpp"
@@ -246,6 +247,19 @@ class Scene {
   /// Sets cylinder `id`'s radius (m): the move counts towards the next broad-phase build.
   void set_cylinder_radius(int id, Real radius);
   const std::vector<WallContact>& cylinder_contacts() const { return cylinder_contacts_; }
+  /// Adds a rigid triangle-mesh wall (MeshWall; passes/mesh_wall.cpp): vertices (m) and
+  /// triangles (indices into them). Its moment is taken about the vertices' mean. Not in a
+  /// periodic cell. Returns its index.
+  int add_mesh_wall(const std::vector<Vec3>& vertices,
+                    const std::vector<std::array<int, 3>>& triangles, int material);
+  int num_mesh_walls() const { return static_cast<int>(mesh_walls_.size()); }
+  MeshWall& mesh_wall(int id);
+  const MeshWall& mesh_wall(int id) const;
+  /// The current vertices of mesh `id`, m.
+  std::vector<Vec3> mesh_vertices(int id) const;
+  /// Sphere–mesh contacts beyond MeshContact::kMaxSubs at one step, left out (the deepest
+  /// kept), since the scene was made.
+  long mesh_dropped_contacts() const { return mesh_dropped_; }
 
   // ---- storage order ------------------------------------------------------------------
   // At its first broad-phase build (while no contact exists yet) the scene stores its
@@ -440,11 +454,12 @@ class Scene {
   const std::vector<WallContact>& wall_contacts() const { return wall_contacts_; }
   int num_active_contacts() const;
   /// Calls f(const ContactRecord&) for every contact of every container, active or not, in a
-  /// fixed order (pair, wall, grain–geogrid, then cylinder contacts, each in container order): the one
+  /// fixed order (pair, wall, grain–geogrid, cylinder, then mesh contacts, each in container
+  /// order): the one
   /// walk of the contact containers for measurements, stiffness and output.
   template <class F>
   void for_each_contact(F&& f) const;
-  /// for_each_contact over one container only (ContactKind::Pair, Wall, Grid or Cylinder).
+  /// for_each_contact over one container only (ContactKind::Pair, Wall, Grid, Cylinder, Mesh).
   template <class F>
   void for_each_contact_of(ContactKind kind, F&& f) const;
 
@@ -527,6 +542,11 @@ class Scene {
   void rebuild_cylinder_contacts(Real margin);
   void move_cylinder_walls();
   void update_phys(WallContact& c, const CylinderWall& w) const;
+  // Triangle-mesh walls (passes/mesh_wall.cpp).
+  void compute_mesh_forces(long& err_contact);
+  void rebuild_mesh_contacts(Real margin);
+  void move_mesh_walls();
+  [[noreturn]] void raise_mesh_overlap(long k) const;
   [[noreturn]] void raise_cylinder_overlap(long k) const;
   void reduce_and_integrate(long& err_body);
   CPP_DEM_HOT void reduce_and_integrate_hot(long& err_body);
@@ -619,6 +639,15 @@ class Scene {
   std::vector<CylinderWall> cylinder_walls_;
   std::vector<WallContact> cylinder_contacts_;
   std::vector<int> cyl_adj_off_, cyl_adj_;
+  // Triangle-mesh walls: their vertices and triangles (MeshWall's ranges), their contacts
+  // (sorted by (body, mesh)), each contact's candidate triangles (CSR: mesh_cand_tri_
+  // [mesh_cand_off_[k] ..], indices into mesh_tris_) and each body's contacts (CSR).
+  std::vector<MeshWall> mesh_walls_;
+  std::vector<Vec3> mesh_vertices_;
+  std::vector<std::array<int, 3>> mesh_tris_;
+  std::vector<MeshContact> mesh_contacts_;
+  std::vector<int> mesh_cand_off_, mesh_cand_tri_, mesh_adj_off_, mesh_adj_;
+  long mesh_dropped_ = 0;
   // Geogrid.
   int num_nodes_ = 0;
   std::vector<GridLink> links_;
@@ -729,6 +758,7 @@ void Scene::for_each_contact(F&& f) const {
   for_each_contact_of(ContactKind::Wall, f);
   for_each_contact_of(ContactKind::Grid, f);
   if (!cylinder_contacts_.empty()) for_each_contact_of(ContactKind::Cylinder, f);
+  if (!mesh_contacts_.empty()) for_each_contact_of(ContactKind::Mesh, f);
 }
 
 template <class F>
@@ -765,6 +795,23 @@ void Scene::for_each_contact_of(ContactKind kind, F&& f) const {
       r.force2 = c.force;
       r.arm2 = bodies_.radius[c.body] - 0.5 * c.state.overlap;
       f(static_cast<const ContactRecord&>(r));
+    }
+  } else if (kind == ContactKind::Mesh) {
+    // Each of a sphere–mesh pair's contacts (faces, edges, vertices) is one record.
+    for (size_t k = 0; k < mesh_contacts_.size(); ++k) {
+      const MeshContact& c = mesh_contacts_[k];
+      for (int s = 0; s < MeshContact::kMaxSubs; ++s) {
+        const MeshSub& sub = c.subs[s];
+        r.index = static_cast<long>(k) * MeshContact::kMaxSubs + s;
+        r.active = c.active && sub.kind >= 0;
+        r.body2 = c.body;
+        r.other = c.wall;
+        r.phys = &c.phys;
+        r.state = &sub.state;
+        r.force2 = sub.force;
+        r.arm2 = bodies_.radius[c.body] - 0.5 * sub.state.overlap;
+        f(static_cast<const ContactRecord&>(r));
+      }
     }
   } else {
     for (size_t k = 0; k < grid_contacts_.size(); ++k) {

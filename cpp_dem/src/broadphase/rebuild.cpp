@@ -30,6 +30,8 @@ bool Scene::need_rebuild() const {
     if (w.moved_since_build > half) return true;
   for (const CylinderWall& w : cylinder_walls_)
     if (w.moved_since_build > half) return true;
+  for (const MeshWall& w : mesh_walls_)
+    if (w.moved_since_build > half) return true;
   // A deforming periodic cell changes every branch vector l by (F_b - I) l, F_b = H H_build^-1:
   // at most |F_b - I| (2 r_max + margin) for a pair that was out of reach at the build.
   Real cell_part = 0;
@@ -132,7 +134,7 @@ void Scene::rebuild() {
   }
   // Spatial order while no contact (and so no contact history) exists yet.
   if (spatial_sort_ && pairs_.empty() && wall_contacts_.empty() && grid_contacts_.empty() &&
-      cylinder_contacts_.empty())
+      cylinder_contacts_.empty() && mesh_contacts_.empty())
     sort_bodies_spatially();
   const Real margin = margin_ > 0 ? margin_ : default_margin();
   const int n = num_bodies();
@@ -189,7 +191,8 @@ void Scene::rebuild() {
   pair_out_.assign(pairs_.size(), PairOutput());
   // Sphere–wall candidates: signed distance to the plane below r + margin, and the centre
   // not beyond the plane by more than r (one-sided walls ignore what is behind them).
-  WallContactMerge merge(wall_contacts_, [this](const ContactState& st) { drop_dissipation(st); });
+  WallContactMerge merge(wall_contacts_,
+                         [this](const WallContact& c) { drop_dissipation(c.state); });
   for (int b = 0; b < n; ++b) {
     if (bodies_.kind[b] != BODY_SPHERE && !grid_wall_contacts_) continue;  // grid nodes: only if asked for
     for (int w = 0; w < num_walls(); ++w) {
@@ -222,6 +225,7 @@ void Scene::rebuild() {
     if (has_grid()) rebuild_grid_contacts(margin);
   }
   if (!cylinder_walls_.empty()) rebuild_cylinder_contacts(margin);
+  if (!mesh_walls_.empty()) rebuild_mesh_contacts(margin);
   pos_at_build_ = bodies_.pos;
   radius_at_build_ = bodies_.radius;
   cell_.h_at_build = cell_.h;

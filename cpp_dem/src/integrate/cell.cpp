@@ -39,9 +39,10 @@ void Scene::set_periodic_cell(const Mat3& h, const std::array<bool, 3>& periodic
   if (has_grid())
     throw ParameterError("periodic cell: the scene has a geogrid; a geogrid in a periodic cell "
                          "is not supported yet");
-  if (!cylinder_walls_.empty())
-    throw ParameterError("periodic cell: the scene has cylindrical walls; they are not "
-                         "supported in a periodic cell");
+  if (!cylinder_walls_.empty() || !mesh_walls_.empty())
+    throw ParameterError(std::string("periodic cell: the scene has ") +
+                         (mesh_walls_.empty() ? "cylindrical" : "mesh") +
+                         " walls; they are not supported in a periodic cell");
   for (int a = 0; a < 3; ++a) {
     if (!periodic[a]) continue;
     for (const Wall& w : walls_)

@@ -54,6 +54,7 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
   const bool grid = has_grid();  // constant false without the geogrid: the branch vanishes
   const bool bonded = has_bonds();
   const bool cylinders = !cylinder_walls_.empty();
+  const bool meshes = !mesh_walls_.empty();
   const bool renormalize = step_ % kRenormalizePeriod == 0;
   long err = std::numeric_limits<long>::max();
   Real worst = 0;
@@ -110,6 +111,17 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
         if (!c.active) continue;
         f += ops.load(c.force);
         t += ops.load(c.torque);
+      }
+    }
+    if (meshes) {
+      for (int e = mesh_adj_off_[b]; e < mesh_adj_off_[b + 1]; ++e) {
+        const MeshContact& c = mesh_contacts_[mesh_adj_[e]];
+        if (!c.active) continue;
+        for (const MeshSub& s : c.subs) {
+          if (s.kind < 0) continue;
+          f += ops.load(s.force);
+          t += ops.load(s.torque);
+        }
       }
     }
     if (grid) {

@@ -285,6 +285,7 @@ Energies Scene::energies() const {
   e.elastic = stored_elastic_energy();
   for (const Wall& w : walls_) e.wall_work += w.work;
   for (const CylinderWall& w : cylinder_walls_) e.wall_work += w.work;
+  for (const MeshWall& w : mesh_walls_) e.wall_work += w.work;
   e.cell_work = cell_.work;
   if (!track_energy_ || !energy_reference_set_) return e;
   // The potential of gravity is taken at the positions where the kinetic energy was sampled
@@ -319,12 +320,15 @@ void Scene::reset_energy() {
   for (PairContactCold& c : pair_cold_) c.dissip_friction = c.dissip_viscous = 0;
   for (WallContact& c : wall_contacts_) c.state.dissip_friction = c.state.dissip_viscous = 0;
   for (WallContact& c : cylinder_contacts_) c.state.dissip_friction = c.state.dissip_viscous = 0;
+  for (MeshContact& c : mesh_contacts_)
+    for (MeshSub& s : c.subs) s.state.dissip_friction = s.state.dissip_viscous = 0;
   for (GridContact& c : grid_contacts_) c.state.dissip_friction = c.state.dissip_viscous = 0;
   for (GridLink& l : links_) l.dissip_plastic = 0;
   for (Bond& l : bonds_) l.dissip_friction = 0;
   dropped_plastic_ = 0;
   for (Wall& w : walls_) w.work = 0;
   for (CylinderWall& w : cylinder_walls_) w.work = 0;
+  for (MeshWall& w : mesh_walls_) w.work = 0;
   cell_.work = 0;
   // The reference (kinetic + elastic) is taken in the next step, once the contacts of the
   // current positions have been evaluated, so energy stored in initial overlaps counts.
@@ -433,6 +437,14 @@ std::vector<std::pair<std::string, std::size_t>> Scene::memory_by_field() const 
   add("contacts.cylinders", cylinder_contacts_);
   add("contacts.cyl_adj_off", cyl_adj_off_);
   add("contacts.cyl_adj", cyl_adj_);
+  add("walls.meshes", mesh_walls_);
+  add("walls.mesh_vertices", mesh_vertices_);
+  add("walls.mesh_triangles", mesh_tris_);
+  add("contacts.meshes", mesh_contacts_);
+  add("contacts.mesh_cand_off", mesh_cand_off_);
+  add("contacts.mesh_cand_tri", mesh_cand_tri_);
+  add("contacts.mesh_adj_off", mesh_adj_off_);
+  add("contacts.mesh_adj", mesh_adj_);
   add("geogrid.links", links_);
   add("geogrid.pfacets", facets_);
   add("geogrid.contacts", grid_contacts_);

@@ -81,7 +81,7 @@ void Scene::rebuild_cylinder_contacts(Real margin) {
   // beyond an end: within r + margin of it), not beyond the surface by r or more. Merged with
   // the old list (both sorted by body, then cylinder) so that kept contacts keep history.
   WallContactMerge merge(cylinder_contacts_,
-                         [this](const ContactState& st) { drop_dissipation(st); });
+                         [this](const WallContact& c) { drop_dissipation(c.state); });
   const int n = num_bodies();
   for (int b = 0; b < n; ++b) {
     if (bodies_.kind[b] != BODY_SPHERE && !grid_wall_contacts_) continue;

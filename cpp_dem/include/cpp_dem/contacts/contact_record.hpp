@@ -10,8 +10,9 @@
 namespace cpp_dem {
 
 /// The container a contact lives in.
-/// Cylinder: a sphere against a cylindrical wall (CylinderWall), sides as a wall contact's.
-enum class ContactKind : std::uint8_t { Pair = 0, Wall = 1, Grid = 2, Cylinder = 3 };
+/// Cylinder: a sphere against a cylindrical wall (CylinderWall); Mesh: against a face, edge or
+/// vertex of a triangle-mesh wall (MeshSub); sides as a wall contact's.
+enum class ContactKind : std::uint8_t { Pair = 0, Wall = 1, Grid = 2, Cylinder = 3, Mesh = 4 };
 
 /// A contact seen through Scene::for_each_contact. Sides: a pair contact is (i, j); a wall
 /// contact (the wall, the sphere); a grain–geogrid contact (the virtual sphere of the

@@ -22,42 +22,44 @@ struct WallContact {
   Vec3 torque = Vec3::Zero();   ///< torque on the sphere, N m
 };
 
-/// A build's sphere–wall candidates merged with the last build's contacts: add(b, w) for each
-/// candidate in ascending (body, wall) order; a pair the old list (sorted the same way) holds
-/// keeps its contact and history, a new one starts fresh, and `drop(state)` is called for each
-/// old contact not kept. finish() gives the new list.
-template <class Drop>
+/// A build's sphere–wall candidates merged with the last build's contacts (WallContact, or any
+/// contact record with `body` and `wall`, as MeshContact): add(b, w) for each candidate in
+/// ascending (body, wall) order; a pair the old list (sorted the same way) holds keeps its
+/// contact and history, a new one starts fresh, and `drop(contact)` is called for each old
+/// contact not kept. finish() gives the new list.
+template <class C, class Drop>
 class WallContactMerge {
  public:
-  WallContactMerge(const std::vector<WallContact>& old, Drop drop) : old_(old), drop_(drop) {}
+  WallContactMerge(const std::vector<C>& old, Drop drop) : old_(old), drop_(drop) {}
   void add(int b, int w) {
     while (k_ < old_.size() && (old_[k_].body < b || (old_[k_].body == b && old_[k_].wall < w)))
-      drop_(old_[k_++].state);
+      drop_(old_[k_++]);
     if (k_ < old_.size() && old_[k_].body == b && old_[k_].wall == w) {
       next_.push_back(old_[k_++]);
     } else {
-      WallContact c;
+      C c;
       c.body = b;
       c.wall = w;
       next_.push_back(c);
     }
   }
-  std::vector<WallContact> finish() {
-    for (; k_ < old_.size(); ++k_) drop_(old_[k_].state);
+  std::vector<C> finish() {
+    for (; k_ < old_.size(); ++k_) drop_(old_[k_]);
     return std::move(next_);
   }
 
  private:
-  const std::vector<WallContact>& old_;
+  const std::vector<C>& old_;
   Drop drop_;
   size_t k_ = 0;
-  std::vector<WallContact> next_;
+  std::vector<C> next_;
 };
 
 /// The contacts of each of n bodies (CSR, in contact order, so reductions into bodies have a
 /// fixed order): body b's are adj[off[b]] .. adj[off[b + 1] - 1].
-inline void contacts_by_body(const std::vector<WallContact>& contacts, int n,
-                             std::vector<int>& off, std::vector<int>& adj) {
+template <class C>
+void contacts_by_body(const std::vector<C>& contacts, int n, std::vector<int>& off,
+                      std::vector<int>& adj) {
   off.assign(n + 1, 0);
   for (const auto& c : contacts) off[c.body + 1]++;
   for (int b = 0; b < n; ++b) off[b + 1] += off[b];

@@ -1,0 +1,382 @@
+// Triangle-mesh walls (bodies/mesh_wall.hpp): adding them, their candidates at a build (the
+// triangles binned in a grid), the contact pass (faces, edges and vertices without double
+// counting, history carried across the mesh's edges), and their motion after the integration.
+#include <algorithm>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <tuple>
+#include <unordered_map>
+#include <vector>
+
+#include "cpp_dem/core/parallel.hpp"
+#include "cpp_dem/laws/registry.hpp"
+#include "cpp_dem/scene.hpp"
+
+namespace cpp_dem {
+
+namespace {
+constexpr Real kInf = std::numeric_limits<Real>::infinity();
+
+/// A touching feature of a mesh found for one sphere: its key, closest point, unit normal
+/// (from the mesh to the centre) and distance.
+struct Touch {
+  std::int32_t kind, a, b;
+  Vec3 p, n;
+  Real dist;
+};
+
+/// The distance from x to triangle t of the scene's arrays (its closest point in p).
+Real triangle_distance(const Vec3& x, const Vec3& a, const Vec3& b, const Vec3& c, Vec3& p) {
+  int e0, e1;
+  closest_on_triangle(x, a, b, c, p, e0, e1);
+  return (x - p).norm();
+}
+}  // namespace
+
+int Scene::add_mesh_wall(const std::vector<Vec3>& vertices,
+                         const std::vector<std::array<int, 3>>& triangles, int material) {
+  if (vertices.size() < 3)
+    throw ParameterError("vertices: " + std::to_string(vertices.size()) +
+                         " given; a mesh needs at least 3 (m)");
+  if (triangles.empty()) throw ParameterError("triangles: none given");
+  for (size_t k = 0; k < vertices.size(); ++k)
+    if (!vertices[k].allFinite())
+      throw ParameterError("vertices[" + std::to_string(k) + "]: must be finite (m)");
+  const int nv = static_cast<int>(vertices.size());
+  for (size_t t = 0; t < triangles.size(); ++t) {
+    const auto& tri = triangles[t];
+    for (int i : tri)
+      if (i < 0 || i >= nv)
+        throw ParameterError("triangles[" + std::to_string(t) + "]: vertex " + std::to_string(i) +
+                             " is not one of the " + std::to_string(nv) + " vertices");
+    const Vec3 ab = vertices[tri[1]] - vertices[tri[0]], ac = vertices[tri[2]] - vertices[tri[0]];
+    const Real scale = std::max(ab.squaredNorm(), ac.squaredNorm());
+    if (!(ab.cross(ac).norm() > 1e-12 * scale))
+      throw ParameterError("triangles[" + std::to_string(t) + "]: degenerate (its vertices " +
+                           std::to_string(tri[0]) + ", " + std::to_string(tri[1]) + ", " +
+                           std::to_string(tri[2]) + " are collinear or repeated)");
+  }
+  this->material(material);
+  if (cell_.on)
+    throw ParameterError("add_mesh_wall: the scene is a periodic cell; mesh walls are not "
+                         "supported in one");
+  MeshWall w;
+  w.vert_off = static_cast<int>(mesh_vertices_.size());
+  w.nvert = nv;
+  w.tri_off = static_cast<int>(mesh_tris_.size());
+  w.ntri = static_cast<int>(triangles.size());
+  w.material = material;
+  Vec3 mean = Vec3::Zero();
+  for (const Vec3& v : vertices) mean += v;
+  w.ref = mean / nv;
+  mesh_vertices_.insert(mesh_vertices_.end(), vertices.begin(), vertices.end());
+  mesh_tris_.insert(mesh_tris_.end(), triangles.begin(), triangles.end());
+  mesh_walls_.push_back(w);
+  dirty_ = true;
+  return num_mesh_walls() - 1;
+}
+
+MeshWall& Scene::mesh_wall(int id) {
+  if (id < 0 || id >= num_mesh_walls())
+    throw ParameterError("mesh=" + std::to_string(id) + ": no such mesh wall (the scene has " +
+                         std::to_string(num_mesh_walls()) + ")");
+  return mesh_walls_[id];
+}
+const MeshWall& Scene::mesh_wall(int id) const { return const_cast<Scene*>(this)->mesh_wall(id); }
+
+std::vector<Vec3> Scene::mesh_vertices(int id) const {
+  const MeshWall& w = mesh_wall(id);
+  return std::vector<Vec3>(mesh_vertices_.begin() + w.vert_off,
+                           mesh_vertices_.begin() + w.vert_off + w.nvert);
+}
+
+void Scene::rebuild_mesh_contacts(Real margin) {
+  // Each mesh's triangles binned in a grid of cells 2 (r_max + margin) wide (by their
+  // bounding boxes); a sphere looks in the cells its box of reach r + margin overlaps, and
+  // keeps the triangles within that reach. A sphere with at least one is a candidate of the
+  // mesh, with that list.
+  const int n = num_bodies();
+  Real rmax = 0;
+  for (int b = 0; b < n; ++b) rmax = std::max(rmax, bodies_.radius[b]);
+  const Real h = 2 * (rmax + margin);
+  struct Bins {
+    Vec3 lo, hi;
+    std::array<long, 3> dims;
+    std::unordered_map<long, std::vector<int>> cells;
+  };
+  std::vector<Bins> bins(mesh_walls_.size());
+  for (size_t m = 0; m < mesh_walls_.size(); ++m) {
+    const MeshWall& w = mesh_walls_[m];
+    Bins& B = bins[m];
+    B.lo = Vec3::Constant(kInf);
+    B.hi = Vec3::Constant(-kInf);
+    for (int v = 0; v < w.nvert; ++v) {
+      B.lo = B.lo.cwiseMin(mesh_vertices_[w.vert_off + v]);
+      B.hi = B.hi.cwiseMax(mesh_vertices_[w.vert_off + v]);
+    }
+    for (int a = 0; a < 3; ++a) B.dims[a] = static_cast<long>((B.hi[a] - B.lo[a]) / h) + 1;
+    for (int t = 0; t < w.ntri; ++t) {
+      const auto& tri = mesh_tris_[w.tri_off + t];
+      Vec3 tlo = Vec3::Constant(kInf), thi = Vec3::Constant(-kInf);
+      for (int i : tri) {
+        tlo = tlo.cwiseMin(mesh_vertices_[w.vert_off + i]);
+        thi = thi.cwiseMax(mesh_vertices_[w.vert_off + i]);
+      }
+      std::array<long, 3> c0, c1;
+      for (int a = 0; a < 3; ++a) {
+        c0[a] = std::min(B.dims[a] - 1, static_cast<long>((tlo[a] - B.lo[a]) / h));
+        c1[a] = std::min(B.dims[a] - 1, static_cast<long>((thi[a] - B.lo[a]) / h));
+      }
+      for (long i = c0[0]; i <= c1[0]; ++i)
+        for (long j = c0[1]; j <= c1[1]; ++j)
+          for (long k = c0[2]; k <= c1[2]; ++k)
+            B.cells[(i * B.dims[1] + j) * B.dims[2] + k].push_back(w.tri_off + t);
+    }
+  }
+  WallContactMerge merge(mesh_contacts_, [this](const MeshContact& c) {
+    for (const MeshSub& s : c.subs) drop_dissipation(s.state);
+  });
+  std::vector<int> off{0}, tris, found;
+  for (int b = 0; b < n; ++b) {
+    if (bodies_.kind[b] != BODY_SPHERE && !grid_wall_contacts_) continue;
+    const Vec3& x = bodies_.pos[b];
+    const Real reach = bodies_.radius[b] + margin;
+    for (int m = 0; m < num_mesh_walls(); ++m) {
+      const MeshWall& w = mesh_walls_[m];
+      const Bins& B = bins[m];
+      if (((x.array() + reach) < B.lo.array()).any() || ((x.array() - reach) > B.hi.array()).any())
+        continue;
+      std::array<long, 3> c0, c1;
+      for (int a = 0; a < 3; ++a) {
+        c0[a] = std::max(0L, static_cast<long>(std::floor((x[a] - reach - B.lo[a]) / h)));
+        c1[a] = std::min(B.dims[a] - 1, static_cast<long>(std::floor((x[a] + reach - B.lo[a]) / h)));
+      }
+      found.clear();
+      for (long i = c0[0]; i <= c1[0]; ++i)
+        for (long j = c0[1]; j <= c1[1]; ++j)
+          for (long k = c0[2]; k <= c1[2]; ++k) {
+            const auto it = B.cells.find((i * B.dims[1] + j) * B.dims[2] + k);
+            if (it != B.cells.end()) found.insert(found.end(), it->second.begin(), it->second.end());
+          }
+      std::sort(found.begin(), found.end());
+      found.erase(std::unique(found.begin(), found.end()), found.end());
+      const size_t before = tris.size();
+      for (int t : found) {
+        const auto& tri = mesh_tris_[t];
+        Vec3 p;
+        if (triangle_distance(x, mesh_vertices_[w.vert_off + tri[0]],
+                              mesh_vertices_[w.vert_off + tri[1]],
+                              mesh_vertices_[w.vert_off + tri[2]], p) < reach)
+          tris.push_back(t);
+      }
+      if (tris.size() == before) continue;
+      merge.add(b, m);
+      off.push_back(static_cast<int>(tris.size()));
+    }
+  }
+  mesh_contacts_ = merge.finish();
+  mesh_cand_off_.swap(off);
+  mesh_cand_tri_.swap(tris);
+  contacts_by_body(mesh_contacts_, n, mesh_adj_off_, mesh_adj_);
+  for (MeshWall& w : mesh_walls_) w.moved_since_build = 0;
+}
+
+void Scene::compute_mesh_forces(long& err_contact) {
+  const long nc = static_cast<long>(mesh_contacts_.size());
+  long err = std::numeric_limits<long>::max();
+  long dropped = 0;
+  const Real dt = dt_;
+#pragma omp parallel for reduction(min : err) reduction(+ : dropped) schedule(static) \
+    if (nc > kParallelMin)
+  for (long k = 0; k < nc; ++k) {
+    MeshContact& c = mesh_contacts_[k];
+    const MeshWall& w = mesh_walls_[c.wall];
+    const int b = c.body;
+    const Vec3& x = bodies_.pos[b];
+    const Real r = bodies_.radius[b];
+    // 1. The touching features: each candidate triangle's closest point within r, keyed by
+    // its face, edge (the mesh's vertex numbers, sorted) or vertex.
+    // (One list per thread, kept between contacts and steps: no allocation in the step.)
+    static thread_local std::vector<Touch> found;
+    found.clear();
+    for (int e = mesh_cand_off_[k]; e < mesh_cand_off_[k + 1]; ++e) {
+      const int t = mesh_cand_tri_[e];
+      const auto& tri = mesh_tris_[t];
+      Vec3 p;
+      int e0, e1;
+      const MeshFeature f = closest_on_triangle(x, mesh_vertices_[w.vert_off + tri[0]],
+                                                mesh_vertices_[w.vert_off + tri[1]],
+                                                mesh_vertices_[w.vert_off + tri[2]], p, e0, e1);
+      const Vec3 d = x - p;
+      const Real dist = d.norm();
+      if (!(dist < r) || !(dist > 0)) continue;
+      Touch h{f, -1, -1, p, d / dist, dist};
+      if (f == kFace) {
+        h.a = t - w.tri_off;
+      } else if (f == kEdge) {
+        h.a = std::min(tri[e0], tri[e1]);
+        h.b = std::max(tri[e0], tri[e1]);
+      } else {
+        h.a = tri[e0];
+      }
+      found.push_back(h);
+    }
+    const int nf = static_cast<int>(found.size());
+    // 2. Without double counting: faces first, then edges and vertices, deepest first; a point that coincides with one kept (an
+    // edge or vertex that several triangles share) is the same contact; an edge or vertex
+    // point on or behind the plane of a kept face contact is part of that surface (a flat or
+    // convex neighbour of the face): only a face's own contact counts there.
+    std::sort(found.begin(), found.end(), [](const Touch& p, const Touch& q) {
+      return std::make_tuple(p.kind != kFace, p.dist, p.kind, p.a, p.b) <
+             std::make_tuple(q.kind != kFace, q.dist, q.kind, q.a, q.b);
+    });
+    Touch keep[MeshContact::kMaxSubs];
+    int nk = 0;
+    const Real tol = 1e-9 * r;
+    for (int i = 0; i < nf; ++i) {
+      const Touch& h = found[i];
+      bool same = false;
+      for (int j = 0; j < nk && !same; ++j) {
+        same = (h.p - keep[j].p).norm() <= tol;
+        if (!same && h.kind != kFace && keep[j].kind == kFace)
+          same = (h.p - keep[j].p).dot(keep[j].n) <= tol;
+      }
+      if (same) continue;
+      if (nk < MeshContact::kMaxSubs) keep[nk++] = h;
+      else ++dropped;
+    }
+    // 3. Each kept contact takes its own history from the last step, or, new, that of a
+    // contact of this pair which ended now with a normal within 25 degrees (the sphere went
+    // from one face to its neighbour across an edge); else it starts fresh.
+    std::array<MeshSub, MeshContact::kMaxSubs> old = c.subs;
+    bool used[MeshContact::kMaxSubs] = {false, false, false};
+    int from[MeshContact::kMaxSubs];
+    for (int j = 0; j < nk; ++j) {
+      from[j] = -1;
+      for (int s = 0; s < MeshContact::kMaxSubs; ++s)
+        if (!used[s] && old[s].kind == keep[j].kind && old[s].a == keep[j].a &&
+            old[s].b == keep[j].b) {
+          from[j] = s;
+          used[s] = true;
+          break;
+        }
+    }
+    for (int j = 0; j < nk; ++j) {
+      if (from[j] >= 0) continue;
+      Real best = std::cos(25.0 * 3.14159265358979323846 / 180);
+      for (int s = 0; s < MeshContact::kMaxSubs; ++s) {
+        if (used[s] || old[s].kind < 0) continue;
+        const Real cosang = old[s].state.normal.dot(keep[j].n);
+        if (cosang > best) {
+          best = cosang;
+          from[j] = s;
+        }
+      }
+      if (from[j] >= 0) used[from[j]] = true;
+    }
+    // What the slots not carried on dissipated stays in the totals: slot 0 keeps it.
+    Real lost_f = 0, lost_v = 0;
+    for (int s = 0; s < MeshContact::kMaxSubs; ++s)
+      if (!used[s]) {
+        lost_f += old[s].state.dissip_friction;
+        lost_v += old[s].state.dissip_viscous;
+      }
+    if (nk == 0) {
+      if (c.active) {
+        c.active = false;
+        for (MeshSub& s : c.subs) s = MeshSub{};
+        c.subs[0].state.dissip_friction = lost_f;
+        c.subs[0].state.dissip_viscous = lost_v;
+      }
+      continue;
+    }
+    Real worst = 0;
+    for (int j = 0; j < nk; ++j) worst = std::max(worst, r - keep[j].dist);
+    if (!(worst <= max_overlap_ratio_ * r)) {
+      err = std::min(err, k);
+      continue;
+    }
+    if (!c.active || c.phys_version != phys_version_) {
+      c.phys = mix_materials(materials_[w.material], materials_[bodies_.material[b]], kInf,
+                             stiffness_radius(b), kInf, bodies_.mass[b],
+                             pair_law(w.material, bodies_.material[b]));
+      c.phys_version = phys_version_;
+      note_formed_contact(c.phys, b, -1);
+    }
+    c.active = true;
+    for (int j = 0; j < MeshContact::kMaxSubs; ++j) {
+      MeshSub& s = c.subs[j];
+      if (j >= nk) {
+        s = MeshSub{};
+        continue;
+      }
+      const Touch& h = keep[j];
+      s = MeshSub{};
+      if (from[j] >= 0) s.state = old[from[j]].state;
+      s.kind = h.kind;
+      s.a = h.a;
+      s.b = h.b;
+      ContactGeometry g;
+      g.overlap = r - h.dist;
+      g.normal = h.n;
+      g.branch2 = -(r - 0.5 * g.overlap) * h.n;
+      g.branch1 = x + g.branch2;
+      g.rel_vel = (bodies_.vel[b] + bodies_.angvel[b].cross(g.branch2)) - w.velocity;
+      g.angvel_sum = bodies_.angvel[b];
+      g.rel_angvel = bodies_.angvel[b];
+      const LawOutput out = apply_law(c.phys, g, dt, s.state);
+      s.force = out.force2;
+      s.torque = g.branch2.cross(out.force2) + out.moment2;
+      s.point = x + g.branch2;
+    }
+    c.subs[0].state.dissip_friction += lost_f;
+    c.subs[0].state.dissip_viscous += lost_v;
+  }
+  err_contact = err;
+  mesh_dropped_ += dropped;
+  if (err != std::numeric_limits<long>::max()) return;
+  // The meshes' force, moment (about ref) and work, summed in contact order.
+  for (MeshWall& w : mesh_walls_) {
+    w.force.setZero();
+    w.moment.setZero();
+  }
+  for (const MeshContact& c : mesh_contacts_) {
+    if (!c.active) continue;
+    MeshWall& w = mesh_walls_[c.wall];
+    const Vec3& x = bodies_.pos[c.body];
+    for (const MeshSub& s : c.subs) {
+      if (s.kind < 0) continue;
+      w.force -= s.force;
+      // The sphere's extra moment (rolling) is the torque beyond its branch's.
+      const Vec3 extra = s.torque - (s.point - x).cross(s.force);
+      w.moment -= (s.point - w.ref).cross(s.force) + extra;
+      w.work += s.force.dot(w.velocity) * dt;
+    }
+  }
+}
+
+void Scene::raise_mesh_overlap(long k) const {
+  const MeshContact& c = mesh_contacts_[k];
+  std::ostringstream os;
+  os.precision(4);
+  os << "blow-up at step " << step_ << ": body " << id_of(c.body) << " overlaps mesh wall "
+     << c.wall << " by more than max_overlap_ratio=" << max_overlap_ratio_ << " of its radius"
+     << (step_ == 0 ? " (the initial configuration overlaps this much: move the bodies apart)"
+                    : " (the time step may be too large, the contact too soft or the mesh too "
+                      "fast)")
+     << blow_up_hint(c.body);
+  throw BlowUpError(os.str());
+}
+
+void Scene::move_mesh_walls() {
+  for (MeshWall& w : mesh_walls_) {
+    if (w.velocity.isZero(0)) continue;
+    const Vec3 dx = w.velocity * dt_;
+    for (int v = 0; v < w.nvert; ++v) mesh_vertices_[w.vert_off + v] += dx;
+    w.ref += dx;
+    w.moved_since_build += dx.norm();
+  }
+}
+
+}  // namespace cpp_dem

@@ -1,0 +1,260 @@
+"""Triangle-mesh walls (Scene.add_mesh_wall, cpp_dem/src/passes/mesh_wall.cpp): a sphere
+sliding on an inclined mesh moves as on the analytic plane (trajectory and force to rounding)
+and crosses the shared edge of two triangles without a jump; a sphere on a vertex where eight
+triangles meet is pushed once, not eight times; one in a concave corner feels both faces, as
+two plane walls; the force and the moment on the mesh; a moving mesh; a file read by the
+project's mesh reader; a checkpoint; bad input refused by name."""
+
+import numpy as np
+import pytest
+
+import cpp_dem as dem
+from cpp_dem.build.clump_mesh import write_stl
+from cpp_dem.checkpoint import load_checkpoint, save_checkpoint
+
+R = 0.005  # m
+L = 0.2  # m, half the side of the square meshes
+SHIFT = np.array([0.01, -0.02, 0.03])  # m
+
+
+def _material(sc, friction_deg=20.0):
+    # Viscous normal damping (rotation invariant, unlike local damping) keeps the sphere on
+    # the surface instead of bouncing.
+    return sc.add_material(dem.linear_material(density=2000, young=1e7, poisson=0.3,
+                                               friction_angle_deg=friction_deg,
+                                               damping_normal=0.7))
+
+
+def _tilt(a_deg: float, b_deg: float) -> np.ndarray:
+    a, b = np.radians([a_deg, b_deg])
+    rx = np.array([[1, 0, 0], [0, np.cos(a), -np.sin(a)], [0, np.sin(a), np.cos(a)]])
+    rz = np.array([[np.cos(b), -np.sin(b), 0], [np.sin(b), np.cos(b), 0], [0, 0, 1]])
+    return rz @ rx
+
+
+SQUARE = np.array([[-L, -L, 0], [L, -L, 0], [L, L, 0], [-L, L, 0]], float)
+SQUARE_TRIS = [[0, 1, 2], [0, 2, 3]]  # the diagonal x = y is their shared edge
+
+
+def test_a_sphere_slides_on_an_inclined_mesh_as_on_the_plane_and_across_its_edge():
+    # The plane z = 0 with gravity tilted 35 degrees from its normal; the mesh is the same
+    # square turned anyhow, gravity turned with it. The sphere slides from x > y to x < y,
+    # across the triangles' shared edge: its contact keeps its history (the shear spring at
+    # the Coulomb limit), so the path stays the plane's to rounding.
+    q = _tilt(20, 35)
+    th = np.radians(35)
+    g = 9.81 * np.array([0.6 * np.sin(th), 0.8 * np.sin(th), -np.cos(th)])
+    x0 = np.array([-0.05, -0.06, R - 1e-5])
+    plane = dem.Scene(gravity=tuple(g))
+    m = _material(plane)
+    plane.add_wall(axis=2, position=0.0, sense=1, material=m)
+    plane.add_spheres([x0], [R], material=m)
+    mesh = dem.Scene(gravity=tuple(q @ g))
+    m = _material(mesh)
+    k = mesh.add_mesh_wall((q @ SQUARE.T).T + SHIFT, SQUARE_TRIS, material=m)
+    mesh.add_spheres([q @ x0 + SHIFT], [R], material=m)
+    plane.dt = mesh.dt = 0.2 * plane.critical_dt()
+    crossed, f_err, f_max = False, 0.0, 0.0
+    for _ in range(50):
+        plane.run(500)
+        mesh.run(500)
+        xp = np.asarray(plane.positions)[0]
+        xm = q.T @ (np.asarray(mesh.positions)[0] - SHIFT)
+        assert np.abs(xp - xm).max() <= 1e-9 * R
+        fp = np.asarray(plane.wall_forces)[0]
+        fm = q.T @ np.asarray(mesh.mesh_wall(k)["force"])
+        f_err, f_max = max(f_err, np.abs(fp - fm).max()), max(f_max, np.abs(fp).max())
+        crossed = crossed or xp[0] < xp[1]
+    assert crossed and f_max > 0
+    assert f_err <= 1e-6 * f_max
+    assert mesh.mesh_dropped_contacts == 0
+
+
+def _fan(n: int = 8):
+    """n triangles around the vertex at the origin, in the plane z = 0."""
+    a = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    v = np.vstack([[0, 0, 0], np.column_stack([L * np.cos(a), L * np.sin(a), np.zeros(n)])])
+    t = [[0, 1 + i, 1 + (i + 1) % n] for i in range(n)]
+    return v, t
+
+
+def test_a_sphere_on_a_vertex_of_eight_triangles_is_pushed_once():
+    # At rest on the vertex (and then just off it, on an edge, and inside a face) the mesh
+    # holds the sphere's weight at the plane's overlap: the triangles that share the vertex
+    # or the edge give one contact, not one each.
+    v, t = _fan()
+    for x in ([0, 0, R], [0.3 * R, 0, R], [0.2 * R, 0.1 * R, R]):
+        z = {}
+        for kind in ("mesh", "plane"):
+            sc = dem.Scene(gravity=(0, 0, -9.81))
+            m = _material(sc)
+            if kind == "mesh":
+                k = sc.add_mesh_wall(v, t, material=m)
+            else:
+                sc.add_wall(axis=2, position=0.0, sense=1, material=m)
+            sc.add_spheres([x], [R], material=m)
+            sc.dt = 0.2 * sc.critical_dt()
+            sc.run(20000)
+            z[kind] = np.asarray(sc.positions)[0, 2]
+            if kind == "mesh":
+                weight = float(np.asarray(sc.masses)[0]) * 9.81
+                assert sc.mesh_wall(k)["force"][2] == pytest.approx(-weight, rel=1e-6), x
+        assert z["mesh"] == pytest.approx(z["plane"], abs=1e-12 * R), x
+        assert R - z["plane"] > 1e-5 * R  # (a real overlap: eight contacts would shrink it)
+
+
+def test_a_sphere_in_a_concave_corner_feels_both_faces_as_two_plane_walls():
+    # An L-shaped mesh: the floor z = 0 (x >= 0) and the wall x = 0 (z >= 0); gravity presses
+    # the sphere into the corner. Two plane walls give the reference.
+    v = np.array([[0, -L, 0], [L, -L, 0], [L, L, 0], [0, L, 0], [0, -L, L], [0, L, L]], float)
+    t = [[0, 1, 2], [0, 2, 3], [0, 3, 5], [0, 5, 4]]
+    g = (-6.0, 0.0, -7.0)
+    x0 = [R, 0.01, R]
+    walls = dem.Scene(gravity=g)
+    m = _material(walls)
+    walls.add_wall(axis=0, position=0.0, sense=1, material=m)
+    walls.add_wall(axis=2, position=0.0, sense=1, material=m)
+    walls.add_spheres([x0], [R], material=m)
+    mesh = dem.Scene(gravity=g)
+    m = _material(mesh)
+    k = mesh.add_mesh_wall(v, t, material=m)
+    mesh.add_spheres([x0], [R], material=m)
+    walls.dt = mesh.dt = 0.2 * walls.critical_dt()
+    walls.run(20000)
+    mesh.run(20000)
+    assert np.abs(np.asarray(walls.positions) - np.asarray(mesh.positions)).max() <= 1e-9 * R
+    fw = np.asarray(walls.wall_forces).sum(axis=0)
+    assert np.abs(fw - np.asarray(mesh.mesh_wall(k)["force"])).max() <= 1e-9 * np.abs(fw).max()
+    weight = float(np.asarray(mesh.masses)[0]) * np.asarray(g)
+    assert np.asarray(mesh.mesh_wall(k)["force"])[[0, 2]] == pytest.approx(weight[[0, 2]],
+                                                                           rel=1e-6)
+
+
+def test_the_force_and_moment_on_a_mesh_and_a_moving_mesh(tmp_path):
+    # A sphere at rest off the mesh's centre: the moment about it is the lever times the
+    # weight. A mesh moving sideways under the sphere rolls it along.
+    sc = dem.Scene(gravity=(0, 0, -9.81))
+    m = _material(sc)
+    k = sc.add_mesh_wall(SQUARE, SQUARE_TRIS, material=m)
+    assert np.allclose(sc.mesh_wall(k)["ref"], 0)
+    sc.add_spheres([[0.05, -0.03, R]], [R], material=m)
+    sc.dt = 0.2 * sc.critical_dt()
+    sc.run(20000)
+    w = sc.mesh_wall(k)
+    weight = float(np.asarray(sc.masses)[0]) * 9.81
+    f = np.array([0, 0, -weight])
+    x = np.asarray(sc.positions)[0]
+    lever = np.array([x[0], x[1], 0.0])  # the contact point, from ref
+    assert np.asarray(w["moment"]) == pytest.approx(np.cross(lever, f), rel=1e-6, abs=1e-12)
+    sc.set_mesh_velocity(k, [0.05, 0, 0])
+    sc.run(20000)
+    w = sc.mesh_wall(k)
+    moved = 0.05 * 20000 * sc.dt
+    assert np.asarray(w["vertices"])[0, 0] == pytest.approx(-L + moved, rel=1e-9)
+    assert np.asarray(w["ref"])[0] == pytest.approx(moved, rel=1e-9)
+    # Rolling without slipping on the moving plate, the sphere's centre takes 2/7 of its
+    # speed (friction's impulse J: v = J / m, w = J R / I, v + w R = V, I = 2/5 m R^2).
+    assert (np.asarray(sc.positions)[0, 0] - x[0]) / moved == pytest.approx(2 / 7, rel=0.01)
+    assert w["work"] > 0  # the mesh did work on the sphere
+
+
+def test_a_mesh_file_and_a_checkpoint(tmp_path):
+    path = tmp_path / "fan.stl"
+    v, t = _fan()
+    write_stl(path, np.asarray(v, float) * 1e3, np.asarray(t))  # in mm
+    sc = dem.Scene(gravity=(0, 0, -9.81))
+    m = _material(sc)
+    k = sc.add_mesh_wall(path=path, scale=1e-3, material=m)
+    assert sc.mesh_wall(k)["num_triangles"] == 8
+    assert len(sc.mesh_wall(k)["vertices"]) == 9  # the STL's repeated corners merged
+    sc.add_spheres([[0.2 * R, 0.1 * R, R]], [R], material=m)
+    sc.dt = 0.2 * sc.critical_dt()
+    sc.set_mesh_velocity(k, [0.01, 0, 0])
+    sc.run(3000)
+    save_checkpoint(tmp_path / "c.h5", sc)
+    sc.run(500)
+    ref = np.asarray(sc.positions).copy(), sc.mesh_wall(k)
+    other = dem.Scene(gravity=(0, 0, -9.81))
+    m = _material(other)
+    other.add_mesh_wall(path=path, scale=1e-3, material=m)
+    other.add_spheres([[0.2 * R, 0.1 * R, R]], [R], material=m)
+    load_checkpoint(tmp_path / "c.h5", other)
+    other.run(500)
+    assert np.array_equal(np.asarray(other.positions), ref[0])
+    for key in ("vertices", "force", "moment", "ref"):
+        assert np.array_equal(other.mesh_wall(k)[key], ref[1][key]), key
+    assert other.mesh_wall(k)["work"] == ref[1]["work"]
+    bare = dem.Scene(gravity=(0, 0, -9.81))
+    m = _material(bare)
+    bare.add_spheres([[0.2 * R, 0.1 * R, R]], [R], material=m)
+    with pytest.raises(dem.ParameterError, match="1 mesh walls, this scene has 0"):
+        load_checkpoint(tmp_path / "c.h5", bare)
+
+
+def test_energy_is_balanced_with_a_moving_mesh():
+    sc = dem.Scene(gravity=(0, 0, -9.81))
+    m = _material(sc)
+    k = sc.add_mesh_wall(*_fan(), material=m)
+    sc.add_spheres([[0.02, 0.01, R], [-0.03, 0.02, R]], [R, R], material=m)
+    sc.dt = 0.2 * sc.critical_dt()
+    sc.track_energy = True
+    sc.set_mesh_velocity(k, [0.02, 0.01, 0.0])
+    sc.run(20000)
+    e = sc.energies()
+    assert abs(e["wall_work"]) > 100 * abs(e["balance_error"])
+    assert e["balance_error_relative"] < 1e-3
+
+
+@pytest.mark.parametrize("kw, msg", [
+    ({"vertices": [[0, 0, 0], [1, 0, 0]], "triangles": [[0, 1, 1]]}, "vertices: 2 given"),
+    ({"vertices": SQUARE, "triangles": [[0, 1, 7]]},
+     r"triangles\[0\]: vertex 7 is not one of the 4 vertices"),
+    ({"vertices": SQUARE, "triangles": [[0, 1, 1]]}, r"triangles\[0\]: degenerate"),
+    ({"vertices": [[0, 0, 0], [1, 0, 0], [0, np.nan, 0]], "triangles": [[0, 1, 2]]},
+     "vertices"),
+    ({"vertices": SQUARE, "triangles": [[0, 1]]}, r"triangles: shape \(1, 2\)"),
+    ({"path": "/nonexistent.stl"}, "no such file"),
+    ({}, "give vertices"),
+])
+def test_bad_meshes_are_refused_by_name(kw, msg):
+    sc = dem.Scene()
+    m = _material(sc)
+    with pytest.raises(dem.ParameterError, match=msg):
+        sc.add_mesh_wall(material=m, **kw)
+    with pytest.raises(dem.ParameterError, match="mesh=2: no such mesh wall"):
+        sc.mesh_wall(2)
+
+
+def _fine_square(n: int, half: float):
+    """The square [-half, half]^2 at z = 0 cut into n x n cells of two triangles each."""
+    s = np.linspace(-half, half, n + 1)
+    v = np.array([[x, y, 0.0] for y in s for x in s])
+    t = []
+    for j in range(n):
+        for i in range(n):
+            a = j * (n + 1) + i
+            t += [[a, a + 1, a + n + 2], [a, a + n + 2, a + n + 1]]
+    return v, t
+
+
+def test_a_sphere_rolls_over_a_fine_mesh_as_over_the_plane():
+    # Triangles a fifth of the sphere's radius: dozens within its reach at every step, many
+    # edges crossed. The path stays the plane's (one contact at a time, its history carried).
+    v, t = _fine_square(60, 6 * R)
+    g = (2.0, 1.5, -9.81)
+    out = {}
+    for kind in ("mesh", "plane"):
+        sc = dem.Scene(gravity=g)
+        m = _material(sc)
+        if kind == "mesh":
+            k = sc.add_mesh_wall(v, t, material=m)
+        else:
+            sc.add_wall(axis=2, position=0.0, sense=1, material=m)
+        sc.add_spheres([[-4 * R, -4 * R, R - 1e-6]], [R], material=m)
+        sc.dt = 0.2 * sc.critical_dt()
+        sc.run(12000)
+        out[kind] = np.asarray(sc.positions)[0]
+        if kind == "mesh":
+            assert sc.mesh_dropped_contacts == 0
+    assert np.linalg.norm(out["plane"][:2] - [-4 * R, -4 * R]) > 3 * R  # it travelled
+    assert np.abs(out["mesh"] - out["plane"]).max() <= 1e-9 * R
