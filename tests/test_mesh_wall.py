@@ -258,3 +258,46 @@ def test_a_sphere_rolls_over_a_fine_mesh_as_over_the_plane():
             assert sc.mesh_dropped_contacts == 0
     assert np.linalg.norm(out["plane"][:2] - [-4 * R, -4 * R]) > 3 * R  # it travelled
     assert np.abs(out["mesh"] - out["plane"]).max() <= 1e-9 * R
+
+
+def test_a_mesh_plate_servoed_to_a_stress_holds_it():
+    # A two-triangle plate above grains in a box, servoed down to 10 kPa (MeshServo), as a
+    # loading plate: it holds the stress within 2 %, and the box carries its push.
+    from cpp_dem.build.packing import loose_cloud
+
+    c, r = loose_cloud(np.full(120, 0.002), (0, 0, 0), (0.03, 0.03, 0.02), seed=2)
+    sc = dem.Scene(local_damping=0.3)
+    # (No viscous damping here: a force that follows the plate's speed makes a servo at its
+    # cap chatter.)
+    m = sc.add_material(dem.linear_material(density=2000, young=1e7, poisson=0.3,
+                                            friction_angle_deg=20))
+    walls = sc.add_box((0, 0, 0), (0.03, 0.03, 0.03), material=m)
+    sc.add_spheres(c, r, material=m)
+    lid = np.array([[0, 0, 0.022], [0.03, 0, 0.022], [0.03, 0.03, 0.022], [0, 0.03, 0.022]])
+    k = sc.add_mesh_wall(lid, [[0, 1, 2], [0, 2, 3]], material=m)
+    sc.dt = 0.3 * sc.critical_dt()
+    servo = dem.MeshServo(mesh=k, direction=(0, 0, -1), target_stress=10e3, area=0.03**2,
+                          max_speed=0.2)
+    sc.add_controller(servo)
+    with pytest.raises(dem.ParameterError, match="mesh wall 0 is moved by controller 0"):
+        sc.add_controller(dem.MeshServo(mesh=k, direction=(0, 0, -1), target_stress=1.0,
+                                        area=1.0, max_speed=0.1))
+    import warnings
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", dem.ControllerLimitWarning)  # (closing in at the cap)
+        held = 0
+        for _ in range(60):
+            sc.run(1000)
+            ok = abs(servo.measured_stress / 10e3 - 1) < 0.02
+            held = held + 1 if ok else 0
+            if held == 3:
+                break
+    assert held == 3, servo.measured_stress
+    f = np.asarray(sc.mesh_wall(k)["force"])
+    assert f[2] / 0.03**2 == pytest.approx(servo.measured_stress, rel=0.05)  # (pushed up)
+    # At rest (no gravity) the box's walls (the floor, and the sides by friction) carry the
+    # plate's push.
+    box_z = np.asarray(sc.wall_forces)[walls][:, 2].sum()
+    assert -box_z == pytest.approx(f[2], rel=0.02)
+    with pytest.raises(dem.ParameterError, match="direction=.*non-zero"):
+        dem.MeshServo(mesh=k, direction=(0, 0, 0), target_stress=1.0, area=1.0, max_speed=0.1)

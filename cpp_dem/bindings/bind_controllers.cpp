@@ -153,6 +153,34 @@ area A = 2 pi R (hi - lo), k the summed normal stiffness of its contacts (N/m).
   def_servo_watch<CylinderServo>(cylinder_servo, "cylinder", &CylinderServo::cylinder,
                                  &CylinderServo::target_pressure);
 
+  py::class_<MeshServo, Controller, std::shared_ptr<MeshServo>> mesh_servo(m, "MeshServo", R"doc(
+A mesh wall (Scene.add_mesh_wall) driven as a whole along `direction` (into the grains) to a
+target normal stress (Pa, compressive positive) on `area` (m^2): a loading plate, a footing.
+
+Each call sets the mesh's velocity to v direction, v = gain (sigma_target - sigma) A /
+(k dt period) capped to +-max_speed (m/s); sigma is the spheres' push on the mesh against
+`direction` over A, k the summed normal stiffness of its contacts (N/m).
+)doc");
+  mesh_servo.def(py::init([](int mesh, const Array& direction, Real target, Real area, Real gain,
+                             Real max_speed) {
+                   return std::make_shared<MeshServo>(mesh, to_vec3(direction, "direction"),
+                                                      target, area, gain, max_speed);
+                 }),
+                 py::kw_only(), py::arg("mesh"), py::arg("direction"), py::arg("target_stress"),
+                 py::arg("area"), py::arg("gain") = 0.5, py::arg("max_speed"))
+      .def_property("target_stress", &MeshServo::target_stress, &MeshServo::set_target_stress,
+                    "Target normal stress, Pa (compressive positive).")
+      .def_property("max_speed", &MeshServo::max_speed, &MeshServo::set_max_speed,
+                    "Velocity cap, m/s.")
+      .def_property("gain", &MeshServo::gain, &MeshServo::set_gain, "Gain alpha in (0, 1].")
+      .def_property_readonly("mesh", &MeshServo::mesh)
+      .def_property_readonly("area", &MeshServo::area, "The area, m^2.")
+      .def_property_readonly("measured_stress", &MeshServo::measured_stress,
+                             "Stress at the last call, Pa.")
+      .def_property_readonly("stiffness", &MeshServo::stiffness,
+                             "Summed contact normal stiffness at the last call, N/m.");
+  def_servo_watch<MeshServo>(mesh_servo, "mesh", &MeshServo::mesh, &MeshServo::target_stress);
+
   py::class_<TriaxialController, Controller, std::shared_ptr<TriaxialController>> tc(
       m, "TriaxialController", R"doc(
 Per-axis control of a box of six walls (order x-, x+, y-, y+, z-, z+): stress control (both

@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BeamParams', 'BlowUpError', 'BondParams', 'CellController', 'ContactModel', 'ContactPhys', 'Controller', 'CylinderServo', 'GEOGRID', 'Material', 'ParameterError', 'RadiusGrowth', 'Scene', 'ServoWall', 'TriaxialController', 'contact_laws', 'get_num_threads', 'material_fields', 'mix_materials', 'servo_speed', 'set_num_threads', 'simd_dispatch']
+__all__: list[str] = ['BeamParams', 'BlowUpError', 'BondParams', 'CellController', 'ContactModel', 'ContactPhys', 'Controller', 'CylinderServo', 'GEOGRID', 'Material', 'MeshServo', 'ParameterError', 'RadiusGrowth', 'Scene', 'ServoWall', 'TriaxialController', 'contact_laws', 'get_num_threads', 'material_fields', 'mix_materials', 'servo_speed', 'set_num_threads', 'simd_dispatch']
 class ParameterError(ValueError):
     pass
 class BlowUpError(RuntimeError):
@@ -1013,6 +1013,73 @@ class CylinderServo(Controller):
         """
     @target_pressure.setter
     def target_pressure(self, arg1: float) -> None:
+        ...
+class MeshServo(Controller):
+    """
+    A mesh wall (Scene.add_mesh_wall) driven as a whole along `direction` (into the grains) to a
+    target normal stress (Pa, compressive positive) on `area` (m^2): a loading plate, a footing.
+    
+    Each call sets the mesh's velocity to v direction, v = gain (sigma_target - sigma) A /
+    (k dt period) capped to +-max_speed (m/s); sigma is the spheres' push on the mesh against
+    `direction` over A, k the summed normal stiffness of its contacts (N/m).
+    """
+    def __init__(self, *, mesh: int, direction: typing.Annotated[numpy.typing.ArrayLike, numpy.float64], target_stress: float, area: float, gain: float = 0.5, max_speed: float) -> None:
+        ...
+    def clear_limit_report(self) -> None:
+        ...
+    def clear_target_report(self, reported: bool = False) -> None:
+        """
+        Starts the count of calls over; reported=True: the unmet target was reported (it is not reported again until a new target is set).
+        """
+    def limit_report(self) -> list:
+        """
+        Calls since the last clear at the speed cap while drifting from the target stress (off by more than 5 % and growing): a list with one dict (mesh, calls, target_pa, reached_pa, cap_m_per_s), or empty.
+        """
+    def target_report(self) -> list:
+        """
+        The target not reached: when the stress has not been within 5 % of the current target at any call since it was set, and the target was not reported yet, a list with one dict (mesh, target_pa, reached_pa: the stress at the last call, calls and calls_at_cap since the last clear_target_report, cap_m_per_s); else empty.
+        """
+    @property
+    def area(self) -> float:
+        """
+        The area, m^2.
+        """
+    @property
+    def gain(self) -> float:
+        """
+        Gain alpha in (0, 1].
+        """
+    @gain.setter
+    def gain(self, arg1: float) -> None:
+        ...
+    @property
+    def max_speed(self) -> float:
+        """
+        Velocity cap, m/s.
+        """
+    @max_speed.setter
+    def max_speed(self, arg1: float) -> None:
+        ...
+    @property
+    def measured_stress(self) -> float:
+        """
+        Stress at the last call, Pa.
+        """
+    @property
+    def mesh(self) -> int:
+        ...
+    @property
+    def stiffness(self) -> float:
+        """
+        Summed contact normal stiffness at the last call, N/m.
+        """
+    @property
+    def target_stress(self) -> float:
+        """
+        Target normal stress, Pa (compressive positive).
+        """
+    @target_stress.setter
+    def target_stress(self, arg1: float) -> None:
         ...
 class TriaxialController(Controller):
     """

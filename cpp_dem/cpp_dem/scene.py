@@ -685,6 +685,7 @@ class Scene(_core.Scene):
                            "calls: run longer, raise its gain or max_speed, or check that "
                            "grains are in front of the wall")
                     wall = (f"cylindrical wall {r['cylinder']}" if "cylinder" in r
+                            else f"mesh wall {r['mesh']}" if "mesh" in r
                             else f"wall {r['wall']}")
                     msg = (f"controller {i} ({type(c).__name__}, {wall}): has not "
                            f"reached its target {r['target_pa']:.6g} Pa (within 5 %) in this "
@@ -707,6 +708,7 @@ class Scene(_core.Scene):
                 else:
                     where = (f"axis {r['axis']}, wall {r['wall']}" if "axis" in r
                              else f"cylindrical wall {r['cylinder']}" if "cylinder" in r
+                             else f"mesh wall {r['mesh']}" if "mesh" in r
                              else f"wall {r['wall']}")
                     knob, cap = "max_speed", f"speed cap {r['cap_m_per_s']:.4g} m/s"
                 msg = (f"controller {i} ({type(c).__name__}, {where}): at its {cap} for "

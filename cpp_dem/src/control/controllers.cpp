@@ -147,6 +147,29 @@ void CylinderServo::apply(Scene& scene) {
   w.radial_velocity = w.inside ? -v : v;
 }
 
+// ---- MeshServo -------------------------------------------------------------------------------
+
+MeshServo::MeshServo(int mesh, Vec3 direction, Real target_stress, Real area, Real gain,
+                     Real max_speed)
+    : StressServo(target_stress, "target_stress", gain, max_speed), mesh_(mesh), area_(area) {
+  const Real len = direction.norm();
+  if (!(std::isfinite(len) && len > 0))
+    throw ParameterError("direction=(" + fmt_real(direction[0]) + ", " + fmt_real(direction[1]) +
+                         ", " + fmt_real(direction[2]) + "): must be a finite non-zero vector "
+                         "(into the grains)");
+  direction_ = direction / len;
+  require(std::isfinite(area) && area > 0, "area", area, "must be > 0 (m^2)");
+}
+
+void MeshServo::apply(Scene& scene) {
+  MeshWall& w = scene.mesh_wall(mesh_);
+  // The spheres push the mesh back against the direction it goes into them.
+  sigma_ = -w.force.dot(direction_) / area_;
+  const Real v = speed(scene, sigma_, area_,
+                       wall_contact_stiffness(scene, mesh_, ContactKind::Mesh));
+  w.velocity = v * direction_;
+}
+
 // ---- TriaxialController ---------------------------------------------------------------------
 
 TriaxialController::TriaxialController(std::vector<int> walls, Real gain, Real max_speed)
@@ -306,6 +329,7 @@ void TriaxialController::load_state(const std::vector<Real>& s) {
 std::vector<int> controlled_walls(const Controller& c) {
   if (const auto* s = dynamic_cast<const ServoWall*>(&c)) return {s->wall()};
   if (const auto* s = dynamic_cast<const CylinderServo*>(&c)) return {-1 - s->cylinder()};
+  if (const auto* s = dynamic_cast<const MeshServo*>(&c)) return {kMeshWallCode - s->mesh()};
   if (const auto* t = dynamic_cast<const TriaxialController*>(&c)) return t->walls();
   return {};
 }
@@ -314,6 +338,7 @@ namespace {
 std::string controller_name(const Controller& c) {
   if (dynamic_cast<const ServoWall*>(&c)) return "ServoWall";
   if (dynamic_cast<const CylinderServo*>(&c)) return "CylinderServo";
+  if (dynamic_cast<const MeshServo*>(&c)) return "MeshServo";
   if (dynamic_cast<const TriaxialController*>(&c)) return "TriaxialController";
   if (dynamic_cast<const RadiusGrowth*>(&c)) return "RadiusGrowth";
   if (dynamic_cast<const CellController*>(&c)) return "CellController";
@@ -328,7 +353,9 @@ bool shared_wall(const Controller& a, const Controller& b, std::string& name) {
   const std::vector<int> wa = controlled_walls(a);
   for (int w : controlled_walls(b))
     if (std::find(wa.begin(), wa.end(), w) != wa.end()) {
-      name = w >= 0 ? "wall " + std::to_string(w) : "cylindrical wall " + std::to_string(-1 - w);
+      name = w >= 0                ? "wall " + std::to_string(w)
+             : w > kMeshWallCode ? "cylindrical wall " + std::to_string(-1 - w)
+                                 : "mesh wall " + std::to_string(kMeshWallCode - w);
       return true;
     }
   return false;

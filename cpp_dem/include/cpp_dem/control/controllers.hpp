@@ -182,6 +182,30 @@ class CylinderServo : public StressServo {
   Real p_ = 0;
 };
 
+/// A mesh wall (Scene::add_mesh_wall) driven as a whole along the unit `direction` (into the
+/// grains) to a target normal stress (Pa, compressive positive) on `area` (m^2): each call
+/// sets its velocity to v direction, v = gain (sigma_target - sigma) A / (k dt period) capped
+/// to +-max_speed (m/s), sigma the spheres' push on it against `direction` over the area, k
+/// the summed normal stiffness of its contacts (N/m). A loading plate or a footing.
+class MeshServo : public StressServo {
+ public:
+  MeshServo(int mesh, Vec3 direction, Real target_stress, Real area, Real gain, Real max_speed);
+  void apply(Scene& scene) override;
+
+  void set_target_stress(Real sigma) { set_target(sigma, "target_stress"); }
+  Real target_stress() const { return target_; }
+  int mesh() const { return mesh_; }
+  const Vec3& direction() const { return direction_; }
+  Real area() const { return area_; }
+  /// Stress measured at the last call, Pa (compressive positive).
+  Real measured_stress() const { return sigma_; }
+
+ private:
+  int mesh_;
+  Vec3 direction_;
+  Real area_, sigma_ = 0;
+};
+
 /// Per-axis control of a box of six walls (order x-, x+, y-, y+, z-, z+): each axis is either
 /// stress-controlled (both walls servo to the target normal stress, with the wall area
 /// recomputed from the current box dimensions) or strain-rate-controlled (both walls move
@@ -254,9 +278,12 @@ class TriaxialController : public Controller, public StatefulController {
 };
 
 /// The walls a controller moves: a ServoWall's wall, a TriaxialController's six, a
-/// CylinderServo's cylinder k as -1 - k; none for the others (RadiusGrowth reads the walls but
+/// CylinderServo's cylinder k as -1 - k, a MeshServo's mesh k as kMeshWallCode - k; none for
+/// the others (RadiusGrowth reads the walls but
 /// does not move them).
 std::vector<int> controlled_walls(const Controller& c);
+/// controlled_walls' code of mesh wall 0 (mesh k: kMeshWallCode - k).
+constexpr int kMeshWallCode = -(1 << 24);
 
 /// Refuses (ParameterError) a controller `c` about to be added to `s` that is in `s` already,
 /// or that is enabled and moves a wall that an enabled controller of `s` moves already (the
