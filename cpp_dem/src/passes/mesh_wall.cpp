@@ -187,8 +187,10 @@ void Scene::compute_mesh_forces(long& err_contact) {
   long err = std::numeric_limits<long>::max();
   long dropped = 0;
   const Real dt = dt_;
-#pragma omp parallel for reduction(min : err) reduction(+ : dropped) schedule(static) \
-    if (nc > kParallelMin)
+#pragma omp parallel reduction(min : err) reduction(+ : dropped) if (nc > kParallelMin)
+  {
+  std::vector<Touch> found;  // (one list per thread, kept between contacts)
+#pragma omp for schedule(static)
   for (long k = 0; k < nc; ++k) {
     MeshContact& c = mesh_contacts_[k];
     const MeshWall& w = mesh_walls_[c.wall];
@@ -197,8 +199,6 @@ void Scene::compute_mesh_forces(long& err_contact) {
     const Real r = bodies_.radius[b];
     // 1. The touching features: each candidate triangle's closest point within r, keyed by
     // its face, edge (the mesh's vertex numbers, sorted) or vertex.
-    // (One list per thread, kept between contacts and steps: no allocation in the step.)
-    static thread_local std::vector<Touch> found;
     found.clear();
     for (int e = mesh_cand_off_[k]; e < mesh_cand_off_[k + 1]; ++e) {
       const int t = mesh_cand_tri_[e];
@@ -227,10 +227,11 @@ void Scene::compute_mesh_forces(long& err_contact) {
     // edge or vertex that several triangles share) is the same contact; an edge or vertex
     // point on or behind the plane of a kept face contact is part of that surface (a flat or
     // convex neighbour of the face): only a face's own contact counts there.
-    std::sort(found.begin(), found.end(), [](const Touch& p, const Touch& q) {
-      return std::make_tuple(p.kind != kFace, p.dist, p.kind, p.a, p.b) <
-             std::make_tuple(q.kind != kFace, q.dist, q.kind, q.a, q.b);
-    });
+    if (nf > 1)
+      std::sort(found.begin(), found.end(), [](const Touch& p, const Touch& q) {
+        return std::make_tuple(p.kind != kFace, p.dist, p.kind, p.a, p.b) <
+               std::make_tuple(q.kind != kFace, q.dist, q.kind, q.a, q.b);
+      });
     Touch keep[MeshContact::kMaxSubs];
     int nk = 0;
     const Real tol = 1e-9 * r;
@@ -332,6 +333,7 @@ void Scene::compute_mesh_forces(long& err_contact) {
     }
     c.subs[0].state.dissip_friction += lost_f;
     c.subs[0].state.dissip_viscous += lost_v;
+  }
   }
   err_contact = err;
   mesh_dropped_ += dropped;
