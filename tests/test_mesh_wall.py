@@ -301,3 +301,26 @@ def test_a_mesh_plate_servoed_to_a_stress_holds_it():
     assert -box_z == pytest.approx(f[2], rel=0.02)
     with pytest.raises(dem.ParameterError, match="direction=.*non-zero"):
         dem.MeshServo(mesh=k, direction=(0, 0, 0), target_stress=1.0, area=1.0, max_speed=0.1)
+
+
+def test_the_mesh_pass_is_the_same_on_one_and_two_threads():
+    # 400 grains on a fine mesh floor (its contacts are split between the threads above 128).
+    v, t = _fine_square(40, 0.05)
+    g = np.arange(20) * 2.05 * R - 0.039
+    x = np.array([[a, b, R - 1e-6] for a in g for b in g])
+    states = []
+    threads = dem.get_num_threads()
+    try:
+        for n in (1, 2):
+            dem.set_num_threads(n)
+            sc = dem.Scene(gravity=(1.0, 0.5, -9.81))
+            m = _material(sc)
+            sc.add_mesh_wall(v, t, material=m)
+            sc.add_spheres(x, np.full(len(x), R), material=m)
+            sc.dt = 0.2 * sc.critical_dt()
+            sc.run(500)
+            states.append((np.asarray(sc.positions).copy(), np.asarray(sc.mesh_wall(0)["force"])))
+    finally:
+        dem.set_num_threads(threads)
+    assert np.array_equal(states[0][0], states[1][0])
+    assert np.array_equal(states[0][1], states[1][1]) and states[0][1][2] < 0  # (pushed down)
