@@ -256,3 +256,24 @@ def test_deposition_smoke_run_reads_back(tmp_path):
                                rtol=1e-12)
     b = read(box[0][1])
     np.testing.assert_array_equal(b["points"].max(axis=0), deposition.SMOKE["box"])
+
+
+def test_cylinder_and_mesh_walls_read_back(tmp_path):
+    from cpp_dem.io import write_vtk_walls
+
+    sc = dem.Scene()
+    m = sc.add_material(dem.linear_material(density=2000, young=1e7, poisson=0.3,
+                                            friction_angle_deg=30))
+    sc.add_cylinder_wall(centre=[0, 0, 0], axis=[0, 0, 1], radius=0.05, inside=True,
+                         material=m, lo=0.0, hi=0.1)
+    sc.add_cylinder_wall(centre=[1, 0, 0], axis=[1, 1, 0], radius=0.01, inside=False,
+                         material=m)  # infinite: drawn 1 m long
+    v = np.array([[0, 0, -0.1], [0.2, 0, -0.1], [0.2, 0.2, -0.1], [0, 0.2, -0.1]])
+    sc.add_mesh_wall(v, [[0, 1, 2], [0, 2, 3]], material=m)
+    d = read(write_vtk_walls(tmp_path / "walls.vtp", sc, segments=12))
+    assert d["n_polys"] == 2 * 12 * 2 + 2
+    assert list(d["cell"]["kind"]) == [0] * 48 + [1, 1]
+    assert list(d["cell"]["wall"]) == [0] * 24 + [1] * 24 + [0, 0]
+    rho = np.hypot(d["points"][:24, 0], d["points"][:24, 1])
+    assert np.allclose(rho, 0.05) and set(np.round(d["points"][:24, 2], 12)) == {0.0, 0.1}
+    assert np.allclose(d["points"][-4:], v)

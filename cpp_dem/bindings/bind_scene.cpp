@@ -253,6 +253,10 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
              py::dict d;
              d["vertices"] = vec3_array(s.mesh_vertices(id));
              d["num_triangles"] = w.ntri;
+             py::array_t<int> tris({static_cast<py::ssize_t>(w.ntri), py::ssize_t(3)});
+             for (int t = 0; t < w.ntri; ++t)
+               for (int i = 0; i < 3; ++i) tris.mutable_at(t, i) = s.mesh_triangles()[w.tri_off + t][i];
+             d["triangles"] = tris;
              d["material"] = w.material;
              d["velocity"] = real_array({w.velocity[0], w.velocity[1], w.velocity[2]});
              d["ref"] = real_array({w.ref[0], w.ref[1], w.ref[2]});
@@ -262,7 +266,8 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
              return d;
            },
            py::arg("mesh"),
-           "A mesh wall as a dict: vertices (current, m), num_triangles, material, velocity "
+           "A mesh wall as a dict: vertices (current, m), triangles ((m, 3) indices into "
+           "them), num_triangles, material, velocity "
            "(m/s), ref (m, the point its moment is about: its vertices' mean, moving with it), "
            "force (N) and moment (N m, about ref) of the spheres on it at the last step, work "
            "(J, done by it on the spheres).")

@@ -312,7 +312,7 @@ class Scene:
         """
     def mesh_wall(self, mesh: int) -> dict:
         """
-        A mesh wall as a dict: vertices (current, m), num_triangles, material, velocity (m/s), ref (m, the point its moment is about: its vertices' mean, moving with it), force (N) and moment (N m, about ref) of the spheres on it at the last step, work (J, done by it on the spheres).
+        A mesh wall as a dict: vertices (current, m), triangles ((m, 3) indices into them), num_triangles, material, velocity (m/s), ref (m, the point its moment is about: its vertices' mean, moving with it), force (N) and moment (N m, about ref) of the spheres on it at the last step, work (J, done by it on the spheres).
         """
     def num_controllers(self) -> int:
         """

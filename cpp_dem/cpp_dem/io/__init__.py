@@ -15,6 +15,7 @@ VTK (XML PolyData, ``.vtp``; open in ParaView, see ``docs/output.md``):
   second sphere), ``normal``, ``overlap`` (m).
 - :func:`write_vtk_box` — the six faces of an axis-aligned box (walls), optionally with the
   wall forces (N) as cell data; a ``.pvd`` of them over time is the box as it moves.
+- :func:`write_vtk_walls` — the cylindrical and triangle-mesh walls where they are now.
 - :class:`PvdWriter` — a ``.pvd`` collection (time → file) rewritten atomically after every
   entry, so a crashed run leaves a valid index of the files written so far.
 
@@ -42,7 +43,7 @@ from .figures import save_figure
 from .foreign import (read_liggghts_box, read_liggghts_data, read_pfc_balls, read_yade_text,
                       write_liggghts_data, write_pfc_balls, write_yade_text)
 from .vtk import (SPHERE_KINDS, PvdWriter, sphere_kinds, write_vtk_box, write_vtk_contacts,
-                  write_vtk_spheres, write_vtp)
+                  write_vtk_spheres, write_vtk_walls, write_vtp)
 
 __all__ = [
     "SNAPSHOT_FIELDS",
@@ -69,5 +70,6 @@ __all__ = [
     "write_vtk_box",
     "write_vtk_contacts",
     "write_vtk_spheres",
+    "write_vtk_walls",
     "write_vtp",
 ]

@@ -303,6 +303,54 @@ def write_vtk_box(path: PathLike, lo: Sequence[float], hi: Sequence[float], *,
                      encoding=encoding)
 
 
+def write_vtk_walls(path: PathLike, scene, *, segments: int = 48, infinite_length: float = 1.0,
+                    encoding: str = "binary") -> Path:
+    """Writes the scene's cylindrical and mesh walls (``Scene.add_cylinder_wall``,
+    ``add_mesh_wall``) at their current places as one ``.vtp`` of polygons: each cylinder's
+    lateral surface as ``segments`` quads of two triangles (an infinite one drawn ``infinite_length`` m long
+    about its centre), each mesh's triangles. Cell data: ``kind`` (0 cylinder, 1 mesh) and
+    ``wall`` (its index among its kind). Field data ``TimeValue``. Show it with Opacity < 1.
+    """
+    if not (isinstance(segments, int) and segments >= 3):
+        raise ValueError(f"segments={segments!r}: must be an integer >= 3")
+    if not (np.isfinite(infinite_length) and infinite_length > 0):
+        raise ValueError(f"infinite_length={infinite_length!r}: must be > 0 (m)")
+    points, polys, kind, index = [], [], [], []
+    for k in range(int(getattr(scene, "num_cylinder_walls", 0))):
+        w = scene.cylinder_wall(k)
+        a = np.asarray(w["axis"], float)
+        ref = np.array([1.0, 0, 0]) if abs(a[0]) < 0.9 else np.array([0, 1.0, 0])
+        e1 = ref - ref.dot(a) * a
+        e1 /= np.linalg.norm(e1)
+        e2 = np.cross(a, e1)
+        lo = w["lo"] if np.isfinite(w["lo"]) else -0.5 * infinite_length
+        hi = w["hi"] if np.isfinite(w["hi"]) else 0.5 * infinite_length
+        base = sum(len(p) for p in points)
+        phi = np.linspace(0, 2 * np.pi, segments, endpoint=False)
+        ring = w["radius"] * (np.outer(np.cos(phi), e1) + np.outer(np.sin(phi), e2))
+        c = np.asarray(w["centre"], float)
+        points.append(np.vstack([c + lo * a + ring, c + hi * a + ring]))
+        for i in range(segments):
+            j = (i + 1) % segments
+            polys += [[base + i, base + j, base + segments + j],
+                      [base + i, base + segments + j, base + segments + i]]
+            kind += [0, 0]
+            index += [k, k]
+    tri_points = []
+    for k in range(int(getattr(scene, "num_mesh_walls", 0))):
+        w = scene.mesh_wall(k)
+        v = np.asarray(w["vertices"], float)
+        base = sum(len(p) for p in points) + sum(len(p) for p in tri_points)
+        tri_points.append(v)
+        for t in np.asarray(w["triangles"]):
+            polys.append([base + int(t[0]), base + int(t[1]), base + int(t[2])])
+            kind.append(1)
+            index.append(k)
+    pts = np.vstack(points + tri_points) if points or tri_points else np.zeros((0, 3))
+    cd = {"kind": np.asarray(kind, np.int64), "wall": np.asarray(index, np.int64)}
+    return write_vtp(path, pts, polys=polys, cell_data=cd, field_data=_time_field(scene),
+                     encoding=encoding)
+
 
 class PvdWriter(_ClosesOnExit):
     """A ParaView ``.pvd`` collection: a list of (time, file) entries for a time series.

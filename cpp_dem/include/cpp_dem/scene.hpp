@@ -255,6 +255,8 @@ class Scene {
   int num_mesh_walls() const { return static_cast<int>(mesh_walls_.size()); }
   MeshWall& mesh_wall(int id);
   const MeshWall& mesh_wall(int id) const;
+  /// Every mesh's triangles (MeshWall::tri_off, ntri), indices into its own vertices.
+  const std::vector<std::array<int, 3>>& mesh_triangles() const { return mesh_tris_; }
   /// The current vertices of mesh `id`, m.
   std::vector<Vec3> mesh_vertices(int id) const;
   /// Sphere–mesh contacts beyond MeshContact::kMaxSubs at one step, left out (the deepest
