@@ -210,13 +210,33 @@ def test_both_vector_forms_agree():
     assert lines[0][0] != lines[0][1]
 
 
-def _format_12(blob: bytes) -> bytes:
-    """A blob of format 13 rewritten as format 12: its materials as records of the 8 shared
-    parameters (the law's id, 7 bytes of padding, 8 doubles) instead of names and values, and
-    the record's size in the layout."""
+def _format_13(blob: bytes) -> bytes:
+    """A blob of format 14 of a scene without cylindrical or mesh walls and without
+    controllers rewritten as format 13: their 12 empty vectors and the dropped-contact count
+    (just before the controllers' count, at the end) gone, and their three record sizes, the
+    layout's last entries."""
     import struct
 
     b = bytearray(blob)
+    assert int.from_bytes(b[8:12], "little") == 14
+    b[8:12] = (13).to_bytes(4, "little")
+    assert struct.unpack_from("<Q", b, len(b) - 8)[0] == 0  # no controller
+    section = b[len(b) - 8 - 13 * 8:len(b) - 8]
+    assert bytes(section) == bytes(13 * 8)  # 12 empty vectors and a count of 0
+    del b[len(b) - 8 - 13 * 8:len(b) - 8]
+    n_layout = struct.unpack_from("<Q", b, 12)[0]
+    del b[20 + 8 * (n_layout - 3):20 + 8 * n_layout]
+    b[12:20] = struct.pack("<Q", n_layout - 3)
+    return bytes(b)
+
+
+def _format_12(blob: bytes) -> bytes:
+    """A blob of format 14 rewritten as format 13 (_format_13), then as format 12: its
+    materials as records of the 8 shared parameters (the law's id, 7 bytes of padding, 8
+    doubles) instead of names and values, and the record's size in the layout."""
+    import struct
+
+    b = bytearray(_format_13(blob))
     assert int.from_bytes(b[8:12], "little") == 13
     b[8:12] = (12).to_bytes(4, "little")
     n_layout = struct.unpack_from("<Q", b, 12)[0]
@@ -249,7 +269,7 @@ def _format_12(blob: bytes) -> bytes:
 
 
 def _format_10(blob: bytes) -> bytes:
-    """A blob of format 13 rewritten as format 12 (_format_12), then as format 10: no wall
+    """A blob of format 14 rewritten as format 12 (_format_12), then as format 10: no wall
     openings (their vector, after the walls', and their size, the layout's last entry, gone).
     No clumps, no controller (whose kinds format 12 added)."""
     import struct
@@ -310,6 +330,10 @@ def test_a_checkpoint_of_format_10_loads_with_its_walls_closed():
     u = cd.Scene()
     _core._checkpoint_load(u, opened)
     assert u.wall_opening(0) == (0, 2 * R1, 4 * R1)
+    v = cd.Scene()  # format 13 (before the cylindrical and mesh walls) loads as it was
+    _core._checkpoint_load(v, _format_13(opened))
+    assert v.wall_opening(0) == (0, 2 * R1, 4 * R1) and v.num_cylinder_walls == 0
+    v.run(3)
 
 
 def _older_format(blob: bytes, nbodies: int, kinematics_at: int, version: int) -> bytes:
@@ -351,8 +375,8 @@ def _older_format(blob: bytes, nbodies: int, kinematics_at: int, version: int) -
 
 def test_checkpoints_of_the_formats_before_still_load():
     """Format 8 had no shear kinematics and 9 no density scaling: such blobs load, with the
-    default kinematics (8) and scaling off (8 and 9). (The blobs are written as format 13 and
-    rewritten as 12 and 10, then as 9 and 8.)"""
+    default kinematics (8) and scaling off (8 and 9). (The blobs are written as format 14 and
+    rewritten as 13, 12 and 10, then as 9 and 8.)"""
     from cpp_dem import _core
 
     blobs = {}
@@ -365,7 +389,7 @@ def test_checkpoints_of_the_formats_before_still_load():
         s.dt = DT
         s.run(2)
         blobs[kin] = bytes(_core._checkpoint_save(s))
-    assert int.from_bytes(blobs["yade"][8:12], "little") == 13
+    assert int.from_bytes(blobs["yade"][8:12], "little") == 14
     a, b = _format_10(blobs["contact_point"]), _format_10(blobs["yade"])
     assert len(a) == len(b)
     diff = [k for k in range(len(a)) if a[k] != b[k]]
