@@ -379,10 +379,11 @@ class Scene(_core.Scene):
                         "walls; move it inside or add the walls after the spheres")
         if self.num_cylinder_walls and len(c) and c.shape[-1] == 3:
             for w in range(self.num_cylinder_walls):
-                behind = _behind_cylinder(self.cylinder_wall(w), c)
+                cyl = self.cylinder_wall(w)
+                behind = _behind_cylinder(cyl, c)
                 if np.any(behind):
                     k = int(np.flatnonzero(behind)[0])
-                    side = "outside" if self.cylinder_wall(w)["inside"] else "inside"
+                    side = "outside" if cyl["inside"] else "inside"
                     raise ParameterError(
                         f"centers[{k}]={c[k].tolist()}: {side} cylindrical wall {w}, behind "
                         "it; move it to the wall's side or add the wall after the spheres")
