@@ -71,6 +71,26 @@ SMOKE_ARGS: dict[str, tuple[str, ...]] = {
 }
 
 
+def run_list_item_example(page: str, marker: str) -> str:
+    """Runs the first ```python block after ``marker`` in ``docs/<page>`` (a list item's
+    example: its two-space indent removed) as shown, the ControllerLimitWarning of a
+    compaction at the cap silenced; returns what it printed."""
+    import contextlib
+    import io
+    import re
+    import warnings
+
+    import cpp_dem as dem
+
+    text = (ROOT / "docs" / page).read_text()
+    code = re.search(r"```python\n(.*?)```", text[text.index(marker):], re.S)[1]
+    code = "\n".join(line[2:] for line in code.splitlines())
+    with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()) as out:
+        warnings.simplefilter("ignore", dem.ControllerLimitWarning)
+        exec(compile(code, f"docs/{page}", "exec"), {})
+    return out.getvalue()
+
+
 def case_names() -> list[str]:
     """The runnable cases: cases/*.py that run as a script (the thin wrappers of
     geogrid_dem.cases; helpers such as pullout_common.py do not)."""

@@ -251,21 +251,10 @@ def test_what_a_cylinder_cannot_do_is_said():
 
 def test_the_documented_example_runs_and_holds_its_pressure():
     # docs/core.md's example under "Cylindrical walls", run as shown.
-    import contextlib
-    import io
-    import re
-    import warnings
-    from pathlib import Path
+    from conftest import run_list_item_example
 
-    text = (Path(__file__).resolve().parents[1] / "docs" / "core.md").read_text()
-    k = text.index("**Cylindrical walls**")
-    code = re.search(r"```python\n(.*?)```", text[k:], re.S)[1]
-    code = "\n".join(line[2:] for line in code.splitlines())  # (the list item's indent)
-    ns: dict = {}
-    with warnings.catch_warnings(), contextlib.redirect_stdout(io.StringIO()) as out:
-        warnings.simplefilter("ignore", dem.ControllerLimitWarning)  # (compacting at the cap)
-        exec(compile(code, "docs/core.md", "exec"), ns)
-    p, radius = (float(v) for v in out.getvalue().split())
+    out = run_list_item_example("core.md", "**Cylindrical walls**")
+    p, radius = (float(v) for v in out.split())
     assert p == pytest.approx(20e3, rel=0.05)
     assert radius < 0.017  # m: closed on the grains
 

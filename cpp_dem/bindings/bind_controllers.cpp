@@ -1,6 +1,8 @@
 // Bindings of the sample controllers (controllers.hpp). Type conversion only.
 #include <pybind11/stl.h>
 
+#include <array>
+
 #include "convert.hpp"
 #include "cpp_dem/control/controllers.hpp"
 
@@ -243,6 +245,51 @@ compression positive, from the box size when the controller first ran (or reset_
       .def_static("axis_stresses", [](const Scene& s, const std::vector<int>& w) {
         return vec3_np(TriaxialController::axis_stresses(s, w));
       }, py::arg("scene"), py::arg("walls"), "Per-axis mean wall stress, Pa.");
+
+  py::class_<MembranePressure, Controller, std::shared_ptr<MembranePressure>>(
+      m, "MembranePressure", R"doc(
+A confining pressure on a surface of triangles between bodies: a flexible membrane of PFacets
+(cpp_dem.build.membrane.cylindrical_membrane makes one and this controller with it).
+
+Every call (period 1: every step, before the contact forces) sets the external force of each
+node to the sum of a third of -p A_f over its triangles, A_f = (x1 - x0) x (x2 - x0) / 2 the
+triangle's area vector from the nodes' current positions (outward for nodes listed
+anticlockwise seen from outside) and p = `pressure_pa` (Pa, compressive positive: it pushes the
+surface inwards). The load follows each triangle's area and normal as the surface deforms. It
+owns its nodes' external forces: a force set on them otherwise is replaced at the next call.
+)doc")
+      .def(py::init([](const std::vector<std::array<int, 3>>& triangles, Real pressure_pa) {
+             return std::make_shared<MembranePressure>(triangles, pressure_pa);
+           }),
+           py::kw_only(), py::arg("triangles"), py::arg("pressure_pa"))
+      .def_property("pressure_pa", &MembranePressure::pressure, &MembranePressure::set_pressure,
+                    "The pressure, Pa (compressive positive).")
+      .def_property_readonly("triangles", &MembranePressure::triangles,
+                             "Node body ids, three per triangle.")
+      .def_property_readonly("nodes", &MembranePressure::nodes, "The nodes it loads (ids).")
+      .def_property_readonly("area", &MembranePressure::area,
+                             "Sum of the triangles' areas at the last call, m^2.")
+      .def_property_readonly("area_vector", [](const MembranePressure& c) {
+             const Vec3& a = c.area_vector();
+             return std::vector<Real>{a[0], a[1], a[2]};
+           },
+                             "Sum of the triangles' area vectors at the last call, m^2.");
+
+  py::class_<PlatenClamp, Controller, std::shared_ptr<PlatenClamp>>(m, "PlatenClamp", R"doc(
+Bodies held to a planar wall, as a membrane's end ring is sealed to its platen.
+
+Every call gives each body the wall's velocity along the wall's axis, corrected by its offset
+from where the wall has carried it since the first call over one step, and holds it still
+across the axis; the bodies' translations are blocked at the first call. Add it after the
+wall's servo, so that it follows the velocity the servo sets in the same step (added before,
+it follows one step late and the correction takes up the difference).
+)doc")
+      .def(py::init<int, std::vector<int>>(), py::kw_only(), py::arg("wall"), py::arg("bodies"))
+      .def_property_readonly("wall", &PlatenClamp::wall)
+      .def_property_readonly("bodies", &PlatenClamp::bodies)
+      .def_property_readonly("max_offset", &PlatenClamp::max_offset,
+                             "Largest offset along the axis from where the wall carried a body, "
+                             "at the last call, m.");
 
   py::class_<RadiusGrowth, Controller, std::shared_ptr<RadiusGrowth>>(m, "RadiusGrowth", R"doc(
 Radius growth under stress control (001 §4.3.1; the expansion of REFD, 000 §2.3): each call

@@ -41,8 +41,8 @@ from cpp_dem._core import (  # noqa: F401,E402  (re-exported)
     mix_materials,
 )
 from cpp_dem.build.packing import read_packing_csv, write_packing_csv  # noqa: F401
-from cpp_dem._core import (CylinderServo, MeshServo, RadiusGrowth,  # noqa: F401  (samples)
-                           ServoWall, TriaxialController)
+from cpp_dem._core import (CylinderServo, MembranePressure, MeshServo,  # noqa: F401
+                           PlatenClamp, RadiusGrowth, ServoWall, TriaxialController)
 from cpp_dem.checkpoint import load_checkpoint, save_checkpoint  # noqa: F401
 from cpp_dem.scene import (BOX_WALLS, ControllerLimitWarning, Scene, apply_threads,
                            free_cores, hertz_mindlin_material,  # noqa: F401
@@ -70,7 +70,9 @@ __all__ = [
     "free_cores",
     "threads_for",
     "CylinderServo",
+    "MembranePressure",
     "MeshServo",
+    "PlatenClamp",
     "RadiusGrowth",
     "ServoWall",
     "TriaxialController",

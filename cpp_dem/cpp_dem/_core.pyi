@@ -8,7 +8,7 @@ import collections.abc
 import numpy
 import numpy.typing
 import typing
-__all__: list[str] = ['BeamParams', 'BlowUpError', 'BondParams', 'CellController', 'ContactModel', 'ContactPhys', 'Controller', 'CylinderServo', 'GEOGRID', 'Material', 'MeshServo', 'ParameterError', 'RadiusGrowth', 'Scene', 'ServoWall', 'TriaxialController', 'contact_laws', 'get_num_threads', 'material_fields', 'mix_materials', 'servo_speed', 'set_num_threads', 'simd_dispatch']
+__all__: list[str] = ['BeamParams', 'BlowUpError', 'BondParams', 'CellController', 'ContactModel', 'ContactPhys', 'Controller', 'CylinderServo', 'GEOGRID', 'Material', 'MembranePressure', 'MeshServo', 'ParameterError', 'PlatenClamp', 'RadiusGrowth', 'Scene', 'ServoWall', 'TriaxialController', 'contact_laws', 'get_num_threads', 'material_fields', 'mix_materials', 'servo_speed', 'set_num_threads', 'simd_dispatch']
 class ParameterError(ValueError):
     pass
 class BlowUpError(RuntimeError):
@@ -1162,6 +1162,71 @@ class TriaxialController(Controller):
         ...
     @property
     def walls(self) -> list[int]:
+        ...
+class MembranePressure(Controller):
+    """
+    A confining pressure on a surface of triangles between bodies: a flexible membrane of PFacets
+    (cpp_dem.build.membrane.cylindrical_membrane makes one and this controller with it).
+    
+    Every call (period 1: every step, before the contact forces) sets the external force of each
+    node to the sum of a third of -p A_f over its triangles, A_f = (x1 - x0) x (x2 - x0) / 2 the
+    triangle's area vector from the nodes' current positions (outward for nodes listed
+    anticlockwise seen from outside) and p = `pressure_pa` (Pa, compressive positive: it pushes the
+    surface inwards). The load follows each triangle's area and normal as the surface deforms. It
+    owns its nodes' external forces: a force set on them otherwise is replaced at the next call.
+    """
+    def __init__(self, *, triangles: collections.abc.Sequence[typing.Annotated[collections.abc.Sequence[int], "FixedSize(3)"]], pressure_pa: float) -> None:
+        ...
+    @property
+    def area(self) -> float:
+        """
+        Sum of the triangles' areas at the last call, m^2.
+        """
+    @property
+    def area_vector(self) -> list[float]:
+        """
+        Sum of the triangles' area vectors at the last call, m^2.
+        """
+    @property
+    def nodes(self) -> list[int]:
+        """
+        The nodes it loads (ids).
+        """
+    @property
+    def pressure_pa(self) -> float:
+        """
+        The pressure, Pa (compressive positive).
+        """
+    @pressure_pa.setter
+    def pressure_pa(self, arg1: float) -> None:
+        ...
+    @property
+    def triangles(self) -> list[typing.Annotated[list[int], "FixedSize(3)"]]:
+        """
+        Node body ids, three per triangle.
+        """
+class PlatenClamp(Controller):
+    """
+    Bodies held to a planar wall, as a membrane's end ring is sealed to its platen.
+    
+    Every call gives each body the wall's velocity along the wall's axis, corrected by its offset
+    from where the wall has carried it since the first call over one step, and holds it still
+    across the axis; the bodies' translations are blocked at the first call. Add it after the
+    wall's servo, so that it follows the velocity the servo sets in the same step (added before,
+    it follows one step late and the correction takes up the difference).
+    """
+    def __init__(self, *, wall: int, bodies: collections.abc.Sequence[int]) -> None:
+        ...
+    @property
+    def bodies(self) -> list[int]:
+        ...
+    @property
+    def max_offset(self) -> float:
+        """
+        Largest offset along the axis from where the wall carried a body, at the last call, m.
+        """
+    @property
+    def wall(self) -> int:
         ...
 class RadiusGrowth(Controller):
     """

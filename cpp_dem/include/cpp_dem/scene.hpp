@@ -324,6 +324,10 @@ class Scene {
   void set_external_forces(const std::vector<Vec3>& f);
   void set_external_torques(const std::vector<Vec3>& t);
   void set_body_material(int body, int material);
+  /// One body's velocity (m/s) and external force (N), by id: what a controller that owns
+  /// bodies (MembranePressure, PlatenClamp) sets every step. The id is checked.
+  void set_body_velocity(int body, const Vec3& v);
+  void set_body_external_force(int body, const Vec3& f);
 
   // ---- parameters ----------------------------------------------------------------------
   Real dt() const { return dt_; }

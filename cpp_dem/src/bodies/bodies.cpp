@@ -251,6 +251,14 @@ void Scene::set_external_forces(const std::vector<Vec3>& f) {
   require_size(f, bodies_.pos.size(), "external_forces");
   bodies_.ext_force = f;
 }
+void Scene::set_body_velocity(int body, const Vec3& v) {
+  check_body(body);
+  bodies_.vel[slot_of(body)] = v;
+}
+void Scene::set_body_external_force(int body, const Vec3& f) {
+  check_body(body);
+  bodies_.ext_force[slot_of(body)] = f;
+}
 void Scene::set_external_torques(const std::vector<Vec3>& t) {
   require_size(t, bodies_.pos.size(), "external_torques");
   bodies_.ext_torque = t;

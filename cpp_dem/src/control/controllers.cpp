@@ -170,6 +170,120 @@ void MeshServo::apply(Scene& scene) {
   w.velocity = v * direction_;
 }
 
+// ---- MembranePressure, PlatenClamp -------------------------------------------------------------
+
+MembranePressure::MembranePressure(std::vector<std::array<int, 3>> triangles, Real pressure_pa)
+    : tris_(std::move(triangles)) {
+  if (tris_.empty()) throw ParameterError("triangles: empty (a membrane needs at least one)");
+  for (size_t t = 0; t < tris_.size(); ++t) {
+    const auto& n = tris_[t];
+    for (int a = 0; a < 3; ++a) {
+      if (n[a] < 0)
+        throw ParameterError("triangles[" + std::to_string(t) + "]=(" + std::to_string(n[0]) +
+                             ", " + std::to_string(n[1]) + ", " + std::to_string(n[2]) +
+                             "): body ids must be >= 0");
+      nodes_.push_back(n[a]);
+    }
+    if (n[0] == n[1] || n[1] == n[2] || n[0] == n[2])
+      throw ParameterError("triangles[" + std::to_string(t) + "]=(" + std::to_string(n[0]) +
+                           ", " + std::to_string(n[1]) + ", " + std::to_string(n[2]) +
+                           "): three different bodies");
+  }
+  std::sort(nodes_.begin(), nodes_.end());
+  nodes_.erase(std::unique(nodes_.begin(), nodes_.end()), nodes_.end());
+  set_pressure(pressure_pa);
+}
+
+void MembranePressure::set_pressure(Real p) {
+  require(std::isfinite(p), "pressure_pa", p, "must be finite (Pa, compressive positive)");
+  pressure_ = p;
+}
+
+void MembranePressure::apply(Scene& scene) {
+  const auto& pos = scene.positions();
+  force_.assign(nodes_.size(), Vec3::Zero());
+  area_ = 0;
+  area_vec_.setZero();
+  const auto index = [&](int id) {
+    return static_cast<size_t>(std::lower_bound(nodes_.begin(), nodes_.end(), id) -
+                               nodes_.begin());
+  };
+  // In triangle order: the same sums on any thread count.
+  for (const auto& n : tris_) {
+    if (n[0] >= scene.num_bodies() || n[1] >= scene.num_bodies() || n[2] >= scene.num_bodies())
+      throw ParameterError("MembranePressure: triangle (" + std::to_string(n[0]) + ", " +
+                           std::to_string(n[1]) + ", " + std::to_string(n[2]) +
+                           ") names a body the scene does not have (" +
+                           std::to_string(scene.num_bodies()) + " bodies)");
+    const Vec3& x0 = pos[scene.slot_of(n[0])];
+    const Vec3 a = 0.5 * (pos[scene.slot_of(n[1])] - x0).cross(pos[scene.slot_of(n[2])] - x0);
+    area_ += a.norm();
+    area_vec_ += a;
+    const Vec3 share = (-pressure_ / 3.0) * a;
+    for (int k = 0; k < 3; ++k) force_[index(n[k])] += share;
+  }
+  for (size_t k = 0; k < nodes_.size(); ++k) scene.set_body_external_force(nodes_[k], force_[k]);
+}
+
+std::vector<Real> PlatenClamp::save_state() const {
+  std::vector<Real> st{started_ ? 1.0 : 0.0, wall_start_};
+  for (const Vec3& x : start_) st.insert(st.end(), {x[0], x[1], x[2]});
+  return st;
+}
+
+void PlatenClamp::load_state(const std::vector<Real>& st) {
+  const bool on = !st.empty() && st[0] != 0;
+  const size_t want = on ? 2 + 3 * bodies_.size() : 2;
+  if (st.size() != want)
+    throw ParameterError("PlatenClamp: a state of " + std::to_string(st.size()) +
+                         " values, this clamp of " + std::to_string(bodies_.size()) +
+                         " bodies takes " + std::to_string(want));
+  started_ = on;
+  wall_start_ = st[1];
+  start_.clear();
+  if (on)
+    for (size_t k = 0; k < bodies_.size(); ++k)
+      start_.emplace_back(st[2 + 3 * k], st[3 + 3 * k], st[4 + 3 * k]);
+}
+
+PlatenClamp::PlatenClamp(int wall, std::vector<int> bodies) : wall_(wall), bodies_(std::move(bodies)) {
+  require(wall >= 0, "wall", wall, "must be a wall id (>= 0)");
+  if (bodies_.empty()) throw ParameterError("bodies: empty (the bodies to hold to the wall)");
+  for (int b : bodies_) require(b >= 0, "bodies", b, "body ids must be >= 0");
+}
+
+void PlatenClamp::apply(Scene& scene) {
+  const Wall& w = scene.wall(wall_);
+  if (!started_) {
+    for (int b : bodies_) {
+      if (b >= scene.num_bodies())
+        throw ParameterError("PlatenClamp: body " + std::to_string(b) +
+                             " does not exist (the scene has " +
+                             std::to_string(scene.num_bodies()) + " bodies)");
+      const int s = scene.slot_of(b);
+      if (scene.clumps_of_bodies()[s] >= 0)
+        throw ParameterError("PlatenClamp: body " + std::to_string(b) +
+                             " is a member of a clump; hold free bodies (grid nodes)");
+      scene.set_blocked(b, static_cast<std::uint8_t>(scene.blocked()[s] | (DOF_X << w.axis)));
+      start_.push_back(scene.positions()[s]);
+    }
+    wall_start_ = w.position;
+    started_ = true;
+  }
+  const int ax = w.axis;
+  const Real moved = w.position - wall_start_;
+  const Real dt = scene.dt();
+  max_offset_ = 0;
+  for (size_t k = 0; k < bodies_.size(); ++k) {
+    const Real now = scene.positions()[scene.slot_of(bodies_[k])][ax];
+    const Real off = start_[k][ax] + moved - now;
+    max_offset_ = std::max(max_offset_, std::abs(off));
+    Vec3 v = scene.velocities()[scene.slot_of(bodies_[k])];
+    v[ax] = w.velocity[ax] + (dt > 0 ? off / dt : 0.0);
+    scene.set_body_velocity(bodies_[k], v);
+  }
+}
+
 // ---- TriaxialController ---------------------------------------------------------------------
 
 TriaxialController::TriaxialController(std::vector<int> walls, Real gain, Real max_speed)
@@ -342,6 +456,8 @@ std::string controller_name(const Controller& c) {
   if (dynamic_cast<const TriaxialController*>(&c)) return "TriaxialController";
   if (dynamic_cast<const RadiusGrowth*>(&c)) return "RadiusGrowth";
   if (dynamic_cast<const CellController*>(&c)) return "CellController";
+  if (dynamic_cast<const MembranePressure*>(&c)) return "MembranePressure";
+  if (dynamic_cast<const PlatenClamp*>(&c)) return "PlatenClamp";
   return "Controller";
 }
 }  // namespace

@@ -206,6 +206,67 @@ class MeshServo : public StressServo {
   Real area_, sigma_ = 0;
 };
 
+/// A confining pressure on a surface of triangles between bodies (a flexible membrane of
+/// PFacets: cpp_dem.build.membrane): every call sets the external force of each of its
+/// nodes to the sum of a third of -p A_f over its triangles, A_f = (x1 - x0) x (x2 - x0) / 2
+/// the triangle's area vector from the nodes' current positions (outward for nodes listed
+/// anticlockwise seen from outside), p the pressure (Pa, compressive positive: it pushes the
+/// surface inwards). So the load follows the area and the normal of each triangle as the
+/// surface deforms. It owns its nodes' external forces: a force set on them otherwise is
+/// replaced at the next call. The pressure's work is the external work of the energy balance.
+class MembranePressure : public Controller {
+ public:
+  /// triangles: node body ids, three per triangle (outward order); pressure_pa: finite.
+  MembranePressure(std::vector<std::array<int, 3>> triangles, Real pressure_pa);
+  void apply(Scene& scene) override;
+  void set_pressure(Real p);
+  Real pressure() const { return pressure_; }
+  const std::vector<std::array<int, 3>>& triangles() const { return tris_; }
+  /// The nodes it loads (body ids, ascending).
+  const std::vector<int>& nodes() const { return nodes_; }
+  /// Sum of the triangles' areas at the last call, m^2.
+  Real area() const { return area_; }
+  /// Sum of the triangles' area vectors at the last call, m^2 (zero for a closed surface).
+  const Vec3& area_vector() const { return area_vec_; }
+
+ private:
+  std::vector<std::array<int, 3>> tris_;
+  std::vector<int> nodes_;
+  std::vector<Vec3> force_;  // scratch, per node
+  Real pressure_;
+  Real area_ = 0;
+  Vec3 area_vec_ = Vec3::Zero();
+};
+
+/// Bodies held to a planar wall, as a membrane's end ring is sealed to its platen: every call
+/// gives each body the wall's velocity along the wall's axis, corrected by its offset from
+/// where the wall has carried it since the first call over one step ((target - x) / dt), and
+/// holds it still across the axis. The bodies' translations are blocked at the first call
+/// (a blocked degree of freedom keeps its imposed velocity).
+class PlatenClamp : public Controller, public StatefulController {
+ public:
+  /// wall: the planar wall's id; bodies: body ids (not clump members).
+  PlatenClamp(int wall, std::vector<int> bodies);
+  void apply(Scene& scene) override;
+  int wall() const { return wall_; }
+  const std::vector<int>& bodies() const { return bodies_; }
+  /// Largest distance along the axis between a body and where the wall has carried it, at
+  /// the last call, m.
+  Real max_offset() const { return max_offset_; }
+  /// Whether it has started, the wall's position then and the bodies' positions then: a
+  /// restart goes on holding them where they were.
+  std::vector<Real> save_state() const override;
+  void load_state(const std::vector<Real>& st) override;
+
+ private:
+  int wall_;
+  std::vector<int> bodies_;
+  std::vector<Vec3> start_;  // the bodies' positions at the first call
+  Real wall_start_ = 0;
+  bool started_ = false;
+  Real max_offset_ = 0;
+};
+
 /// Per-axis control of a box of six walls (order x-, x+, y-, y+, z-, z+): each axis is either
 /// stress-controlled (both walls servo to the target normal stress, with the wall area
 /// recomputed from the current box dimensions) or strain-rate-controlled (both walls move
