@@ -1,0 +1,201 @@
+"""The drained triaxial test of a cylindrical specimen in a flexible membrane, as in the
+laboratory (issue 65; the cubical one is :mod:`cpp_dem.protocols.triaxial`).
+
+:func:`prepare` makes the specimen in a rigid mould: a loose cloud inside a cylindrical wall
+between a still base and a lid, compacted by servos on the mould's radius and the lid to the
+cell pressure; then the mould is opened and a membrane
+(:func:`cpp_dem.build.membrane.cylindrical_membrane`) holds the specimen under the cell
+pressure alone, its end rings sealed to the platens, the lid servoed to the cell pressure on
+the specimen's cross-section until the specimen is at rest. :func:`shear` then moves the lid
+down at a constant axial strain rate, the cell pressure held on the membrane.
+
+Recorded per row (compression positive): the axial strain eps_a = (H0 - H) / H0, the
+volumetric strain eps_v = (V0 - V) / V0 from the volume inside the membrane (its triangles'
+volume less their area times R_c: ``Membrane.inner_volume_m3``), the axial stress on the
+current cross-section A = V / H (the laboratory's area correction), the deviator
+q = sigma_a - sigma_r with sigma_r the cell pressure, and the membrane's correction: the
+grains' measured radial stress in the middle third less the cell pressure, what the
+membrane's own tension adds to the confinement (the laboratory subtracts an estimate of it
+from q; here it is measured).
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from cpp_dem import _core
+from cpp_dem.build.membrane import Membrane, cylindrical_membrane
+from cpp_dem.build.packing import loose_cylinder
+import warnings
+
+from cpp_dem.scene import ControllerLimitWarning, Scene
+
+
+@dataclass
+class CylinderSpecimen:
+    """A specimen made by :func:`prepare`."""
+
+    scene: Scene
+    membrane: Membrane
+    base: int  #: the base's wall id (still)
+    lid: int  #: the lid's wall id
+    material: int
+    pressure_pa: float  #: the cell pressure, Pa
+    height0_m: float  #: the height between the platens at the end of the preparation, m
+    volume0_m3: float  #: the specimen's volume then, m^3
+    lid_servo: object = None
+    #: what the preparation reached: steps, the mould's and the lid's stresses, the radial
+    #: stress the grains put on the membrane (Pa), whether the targets were reached
+    prepared: dict = field(default_factory=dict)
+
+
+def _auto_segments(radius_m: float, r_min: float) -> int:
+    """The fewest segments whose triangles (side about the chord) are at most the smallest
+    grain's radius: finer than the grains, as a rubber membrane is."""
+    return max(12, int(math.ceil(2.0 * math.pi * radius_m / r_min)))
+
+
+def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
+            material: _core.Material, seed: int = 1, membrane_young_pa: float = 1e6,
+            membrane_thickness_m: float = 3e-4, mass_scale: float = 20.0,
+            damping: float = 0.3, tol: float = 0.01, max_steps: int = 200_000,
+            check_every: int = 1000, log=None) -> CylinderSpecimen:
+    """The specimen of ``radii`` (m) in a mould of ``radius_m`` and ``height_m`` (m),
+    compacted to ``pressure_pa`` (Pa) and then held by a membrane of
+    ``membrane_young_pa`` (Pa) and ``membrane_thickness_m`` (m) (R_c a quarter of the smallest
+    grain radius, triangles no larger than it). Each stage runs until its stresses are within
+    ``tol`` of the cell pressure at two checks in a row (``check_every`` steps apart), at most
+    ``max_steps``; a stage that does not get there is said in ``prepared["reached"]`` (False)
+    and by ``log``, not hidden."""
+    say = log or (lambda msg: None)
+    p = float(pressure_pa)
+    if not (math.isfinite(p) and p > 0):
+        raise _core.ParameterError(f"pressure_pa={pressure_pa!r}: must be > 0 (Pa)")
+    radii = np.asarray(radii, dtype=float)
+    pts, radii = loose_cylinder(radii, radius_m, height_m, seed=seed)
+    sc = Scene(local_damping=damping)
+    m = sc.add_material(material)
+    mould = sc.add_cylinder_wall(centre=[0, 0, 0], axis=[0, 0, 1], radius=radius_m,
+                                 inside=True, material=m, lo=0.0, hi=height_m)
+    base = sc.add_wall(axis=2, position=0.0, sense=1, material=m)
+    lid = sc.add_wall(axis=2, position=height_m, sense=-1, material=m)
+    sc.add_spheres(pts, radii, material=m)
+    sc.dt = 0.3 * sc.critical_dt()
+    speed = 0.1 * height_m / (1e4 * sc.dt)  # m/s: the servos' cap, a tenth of the height in 1e4 steps
+    cs = _core.CylinderServo(cylinder=mould, target_pressure=p, max_speed=speed)
+    mould_servo = _core.ServoWall(wall=lid, target_stress=p, area=math.pi * radius_m**2,
+                                  max_speed=speed)
+    sc.add_controller(cs)
+    sc.add_controller(mould_servo)
+
+    def settle(ok, what: str) -> tuple[int, bool]:
+        steps, held = 0, 0
+        while steps < max_steps:
+            sc.run(check_every)
+            steps += check_every
+            held = held + 1 if ok() else 0
+            if held == 2:
+                return steps, True
+        say(f"{what}: not within {tol:.0%} of {p:g} Pa after {steps} steps")
+        return steps, False
+
+    def mould_radius_now() -> float:
+        return sc.cylinder_wall(mould)["radius"]
+
+    def mould_ok() -> bool:
+        # (the lid's stress on the mould's area as made: the membrane's stage below puts it
+        # on the specimen's own cross-section)
+        return (abs(sc.cylinder_wall(mould)["pressure_pa"] / p - 1) < tol
+                and abs(mould_servo.measured_stress / p - 1) < tol)
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", ControllerLimitWarning)  # (compacting at the cap)
+        n1, ok1 = settle(mould_ok, "compaction in the mould")
+    rs = mould_radius_now()
+    say(f"compacted in the mould: radius {rs:.5g} m after {n1} steps")
+    cs.enabled = mould_servo.enabled = False
+    sc.set_cylinder_radius(mould, 3.0 * radius_m)  # (opened wide: the membrane holds alone)
+    z0, z1 = sc.wall_positions
+    rc = 0.25 * float(radii.min())
+    mb = cylindrical_membrane(sc, centre=[0, 0, z0], radius_m=rs + rc, height_m=z1 - z0,
+                              young_pa=membrane_young_pa, thickness_m=membrane_thickness_m,
+                              node_radius_m=rc, material=m,
+                              segments=_auto_segments(rs + rc, float(radii.min())),
+                              mass_scale=mass_scale)
+    area = math.pi * rs**2
+    lid_servo = _core.ServoWall(wall=lid, target_stress=p, area=area, max_speed=speed)
+    sc.add_controller(lid_servo)
+    sc.add_controller(mb.pressure(p))
+    for c in mb.clamps(base, lid):
+        sc.add_controller(c)
+    sc.dt = min(sc.dt, 0.3 * sc.critical_dt())
+
+    def held_ok() -> bool:
+        a = math.pi * mb.specimen_radius_m(sc) ** 2
+        return (abs(sc.wall_forces[lid][2] / a / p - 1) < tol
+                and abs(mb.radial_stress_pa(sc) / p - 1) < 2 * tol)
+
+    with warnings.catch_warnings():
+        # (the swap from the mould to the membrane unloads the specimen for a moment)
+        warnings.simplefilter("ignore", ControllerLimitWarning)
+        n2, _ = settle(lambda: True, "the membrane's first hold")
+    # The lid's servo on the specimen's own cross-section, now that the membrane lies on it.
+    lid_servo.enabled = False
+    lid_servo = _core.ServoWall(wall=lid, target_stress=p,
+                                area=math.pi * mb.specimen_radius_m(sc) ** 2, max_speed=speed)
+    sc.add_controller(lid_servo)
+    n3, ok3 = settle(held_ok, "the hold in the membrane")
+    z0, z1 = sc.wall_positions
+    prepared = {"steps": n1 + n2 + n3, "mould_radius_m": rs,
+                "radial_stress_pa": mb.radial_stress_pa(sc),
+                "axial_stress_pa": sc.wall_forces[lid][2] / (math.pi *
+                                                             mb.specimen_radius_m(sc) ** 2),
+                "grains_outside": int(len(mb.grains_outside(sc))), "reached": ok1 and ok3}
+    return CylinderSpecimen(scene=sc, membrane=mb, base=base, lid=lid, material=m,
+                            pressure_pa=p, height0_m=z1 - z0,
+                            volume0_m3=mb.inner_volume_m3(sc), lid_servo=lid_servo,
+                            prepared=prepared)
+
+
+def row(spec: CylinderSpecimen) -> dict:
+    """The specimen's state now (module doc): axial and volumetric strain (-), the axial
+    stress on the current cross-section, the deviator and the membrane's correction (Pa),
+    the cross-section (m^2), the grains outside the membrane (count)."""
+    sc, mb = spec.scene, spec.membrane
+    z0, z1 = sc.wall_positions
+    h = z1 - z0
+    v = mb.inner_volume_m3(sc)
+    a = v / h
+    sigma_a = float(sc.wall_forces[spec.lid][2]) / a
+    radial = mb.radial_stress_pa(sc)
+    return {"step": int(sc.step_count), "axial_strain": (spec.height0_m - h) / spec.height0_m,
+            "volumetric_strain": (spec.volume0_m3 - v) / spec.volume0_m3,
+            "axial_stress_pa": sigma_a, "deviatoric_stress_pa": sigma_a - spec.pressure_pa,
+            "radial_stress_pa": radial,
+            "membrane_correction_pa": radial - spec.pressure_pa, "area_m2": a,
+            "grains_outside": int(len(mb.grains_outside(sc)))}
+
+
+def shear(spec: CylinderSpecimen, *, strain_rate: float, stop_strain: float,
+          record_every: int = 500, on_row=None) -> list[dict]:
+    """Moves the lid down at ``strain_rate`` (1/s, of the height at the start) to
+    ``stop_strain`` (-), the cell pressure held on the membrane; returns a :func:`row` every
+    ``record_every`` steps (``on_row`` is called with each)."""
+    for name, v in (("strain_rate", strain_rate), ("stop_strain", stop_strain)):
+        if not (math.isfinite(v) and v > 0):
+            raise _core.ParameterError(f"{name}={v!r}: must be > 0")
+    sc = spec.scene
+    if spec.lid_servo is not None:
+        spec.lid_servo.enabled = False
+    sc.set_wall_velocity(spec.lid, [0.0, 0.0, -strain_rate * spec.height0_m])
+    rows = [row(spec)]
+    while rows[-1]["axial_strain"] < stop_strain:
+        sc.run(record_every)
+        rows.append(row(spec))
+        if on_row is not None:
+            on_row(rows[-1])
+    sc.set_wall_velocity(spec.lid, [0.0, 0.0, 0.0])
+    return rows
