@@ -598,7 +598,11 @@ class Scene {
   void step();
   void set_energy_reference();
   void raise_overlap(long contact, bool wall) const;
+  /// 0.2 times the mean radius, m (the broad phase's margin when none is set). Kept from its
+  /// last sum until the radii change (set_radii) or the bodies are built again (rebuild):
+  /// need_rebuild asks for it every step.
   Real default_margin() const;
+  mutable Real default_margin_ = -1;  ///< the kept sum's margin, m (-1: to be summed)
 
   std::vector<Material> materials_;
   std::vector<PairLaw> pair_laws_;

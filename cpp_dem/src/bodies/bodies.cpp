@@ -235,6 +235,7 @@ void Scene::set_radii(const std::vector<Real>& r) {
   }
   disp_valid_ = false;  // grown radii count in the broad phase's check
   min_radius_ = -1;
+  default_margin_ = -1;
   ++phys_version_;
 }
 void Scene::set_blocked(int body, std::uint8_t mask) {

@@ -15,10 +15,12 @@ constexpr Real kInf = std::numeric_limits<Real>::infinity();
 }  // namespace
 
 Real Scene::default_margin() const {
+  if (default_margin_ >= 0) return default_margin_;
   if (bodies_.radius.empty()) return 0;
   Real s = 0;
   for (Real r : bodies_.radius) s += r;
-  return 0.2 * s / bodies_.radius.size();
+  default_margin_ = 0.2 * s / bodies_.radius.size();
+  return default_margin_;
 }
 
 // ---- broad phase ----------------------------------------------------------------------------
@@ -124,6 +126,7 @@ void Scene::sort_bodies_spatially() {
 }
 
 void Scene::rebuild() {
+  default_margin_ = -1;  // (bodies added, or put in space order: summed again)
   // Bodies added since the last build grew the per-body arrays one body at a time (up to
   // twice their size): give the slack back (a no-op where an array is already tight).
   if (dirty_) {
