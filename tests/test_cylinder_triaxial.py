@@ -29,7 +29,11 @@ def test_the_membrane_holds_the_specimen_at_the_cell_pressure(sheared):
     assert prepared["reached"]
     assert prepared["grains_outside"] == 0
     assert prepared["axial_stress_pa"] == pytest.approx(P, rel=0.01)
-    assert prepared["radial_stress_pa"] == pytest.approx(P, rel=0.02)
+    # The grains' radial stress is the cell pressure plus the membrane's correction (what
+    # its tension adds), measured: 2.5 kPa here.
+    assert prepared["radial_stress_pa"] == pytest.approx(P + prepared["membrane_correction_pa"],
+                                                         rel=1e-12)
+    assert abs(prepared["membrane_correction_pa"]) < 0.05 * P
     assert rows[0]["axial_strain"] == 0 and rows[0]["volumetric_strain"] == 0
 
 
@@ -39,8 +43,8 @@ def test_shearing_gives_the_deviator_and_the_volume_change_from_the_membrane(she
     q = np.array([r["deviatoric_stress_pa"] for r in rows])
     eps_v = np.array([r["volumetric_strain"] for r in rows])
     assert eps_a[-1] >= 0.02 and np.all(np.diff(eps_a) > 0)
-    # The loose specimen (friction 30 deg) stiffens and contracts from the start.
-    assert q[-1] > 0.4 * P
+    # The specimen (friction 30 deg, made in a frictionless mould) stiffens and contracts.
+    assert q[-1] > 0.8 * P
     assert np.all(eps_v[1:] > 0)
     # The deviator is the axial stress on the current cross-section less the cell pressure,
     # and the cross-section is the volume inside the membrane over the height.
