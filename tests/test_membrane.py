@@ -220,6 +220,31 @@ def test_bad_membranes_are_refused_by_name():
         dem.MembranePressure(triangles=[(0, 1, 1)], pressure_pa=1.0)
     with pytest.raises(dem.ParameterError, match="bodies: empty"):
         dem.PlatenClamp(wall=0, bodies=[])
+    # Two controllers setting the same thing of one body would replace each other's every
+    # step: refused, naming the body (a pressure and a clamp on one ring are not: a force
+    # and an axial velocity).
+    sc2, m2 = _scene()
+    lo = sc2.add_wall(axis=2, position=0.0, sense=1, material=m2)
+    hi = sc2.add_wall(axis=2, position=0.02, sense=-1, material=m2)
+    mb = cylindrical_membrane(sc2, centre=[0, 0, 0], radius_m=0.02, height_m=0.02,
+                              young_pa=1e6, thickness_m=3e-4, node_radius_m=2e-4, material=m2,
+                              segments=40)
+    sc2.add_controller(mb.pressure(1e3))
+    for c in mb.clamps(lo, hi):
+        sc2.add_controller(c)
+    with pytest.raises(dem.ParameterError, match=r"the external force of body \d+ is set by "
+                                                 r"controller 0 \(MembranePressure\)"):
+        sc2.add_controller(mb.pressure(2e3))
+    with pytest.raises(dem.ParameterError, match=r"the velocity of body \d+ is set by "
+                                                 r"controller 1 \(PlatenClamp\)"):
+        sc2.add_controller(mb.clamps(lo, hi)[0])
+    late = mb.pressure(2e3)
+    late.enabled = False
+    sc2.add_controller(late)  # (disabled: allowed, and checked again before a run)
+    late.enabled = True
+    sc2.dt = 1e-6
+    with pytest.raises(dem.ParameterError, match="both enabled and both set the external force"):
+        sc2.run(1)
     ctl = dem.MembranePressure(triangles=[(0, 7, 8)], pressure_pa=1.0)
     sc.add_controller(ctl)
     sc.dt = 1e-6

@@ -1,6 +1,7 @@
 #include "cpp_dem/control/controllers.hpp"
 
 #include <algorithm>
+#include <iterator>
 #include <cmath>
 #include <string>
 
@@ -478,6 +479,38 @@ bool shared_wall(const Controller& a, const Controller& b, std::string& name) {
 }
 }  // namespace
 
+namespace {
+/// The bodies a controller sets a force or a velocity of (a membrane's nodes, a clamp's
+/// bodies), ascending, and what it sets.
+std::vector<int> controlled_bodies(const Controller& c, const char*& what) {
+  if (const auto* m = dynamic_cast<const MembranePressure*>(&c)) {
+    what = "external force";
+    return m->nodes();
+  }
+  if (const auto* k = dynamic_cast<const PlatenClamp*>(&c)) {
+    what = "velocity";
+    std::vector<int> b = k->bodies();
+    std::sort(b.begin(), b.end());
+    return b;
+  }
+  return {};
+}
+
+/// Whether both controllers set the same thing of one body (two membranes' forces, two
+/// clamps' velocities); the first such body's description in `name`.
+bool shared_body(const Controller& a, const Controller& b, std::string& name) {
+  const char* wa = "";
+  const char* wb = "";
+  const std::vector<int> ba = controlled_bodies(a, wa), bb = controlled_bodies(b, wb);
+  if (ba.empty() || bb.empty() || std::string(wa) != wb) return false;
+  std::vector<int> both;
+  std::set_intersection(ba.begin(), ba.end(), bb.begin(), bb.end(), std::back_inserter(both));
+  if (both.empty()) return false;
+  name = "the " + std::string(wa) + " of body " + std::to_string(both.front());
+  return true;
+}
+}  // namespace
+
 void check_new_controller(const Scene& s, const Controller& c) {
   for (int i = 0; i < s.num_controllers(); ++i) {
     const auto other = s.controller(i);
@@ -492,6 +525,12 @@ void check_new_controller(const Scene& s, const Controller& c) {
           "controller (" + controller_name(c) + "): " + w +
           " is moved by controller " + std::to_string(i) + " (" + controller_name(*other) +
           ") already; two controllers would set its velocity in turn. Disable one "
+          "(controller.enabled = False) or remove them (scene.clear_controllers())");
+    if (shared_body(c, *other, w))
+      throw ParameterError(
+          "controller (" + controller_name(c) + "): " + w + " is set by controller " +
+          std::to_string(i) + " (" + controller_name(*other) + ") already; the later would "
+          "replace the earlier's every step. Give each body to one controller, disable one "
           "(controller.enabled = False) or remove them (scene.clear_controllers())");
   }
 }
@@ -509,6 +548,12 @@ void check_enabled_controllers(const Scene& s) {
             "controllers " + std::to_string(i) + " (" + controller_name(*a) + ") and " +
             std::to_string(j) + " (" + controller_name(*b) + ") are both enabled and both "
             "move " + w + "; they would set its velocity in turn. "
+            "Disable one (controller.enabled = False) before running");
+      if (shared_body(*a, *b, w))
+        throw ParameterError(
+            "controllers " + std::to_string(i) + " (" + controller_name(*a) + ") and " +
+            std::to_string(j) + " (" + controller_name(*b) + ") are both enabled and both "
+            "set " + w + "; the later would replace the earlier's every step. "
             "Disable one (controller.enabled = False) before running");
     }
   }
