@@ -101,6 +101,15 @@ class Membrane:
         the mid-surface, so that the grains' side takes the cell pressure, -."""
         return (self.radius_m - self.node_radius_m) / self.radius_m
 
+    def _ring_heights(self, x: np.ndarray) -> np.ndarray:
+        """Each ring's mean height, m, bottom to top, from the positions ``x`` (m)."""
+        return np.array([float(np.mean(x[r, 2])) for r in self.rings])
+
+    @staticmethod
+    def _area_vectors(p: np.ndarray) -> np.ndarray:
+        """The area vectors (m^2, (m, 3)) of the triangles whose corners are ``p`` (m, 3, 3)."""
+        return 0.5 * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+
     def _contacts_in_band(self, scene, z0: float, z1: float) -> tuple[np.ndarray, np.ndarray]:
         """The grains' contacts with the membrane whose contact point lies in [z0, z1): the
         radial unit vectors there and the forces on the grains (N). The point is on the
@@ -132,12 +141,12 @@ class Membrane:
         its load to the grains. ``pressure_pa``: the pressure on the mid-surface (a
         :meth:`pressure` controller's ``pressure_pa``)."""
         x = np.asarray(scene.positions)
-        zr = [float(np.mean(x[r, 2])) for r in self.rings]
+        zr = self._ring_heights(x)
         z0, z1 = (zr[0] + f * (zr[-1] - zr[0]) for f in band)
         e, f = self._contacts_in_band(scene, z0, z1)
         push = float(-np.einsum("ki,ki->k", f[:, :2], e).sum())
         p = x[self.triangles]
-        area = 0.5 * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        area = self._area_vectors(p)
         cen = p.mean(axis=1)
         keep = (cen[:, 2] >= z0) & (cen[:, 2] < z1)
         e = cen[keep, :2] - self.centre[:2]
@@ -152,12 +161,6 @@ class Membrane:
         return (_core.PlatenClamp(wall=int(bottom_wall), bodies=[int(i) for i in self.rings[0]]),
                 _core.PlatenClamp(wall=int(top_wall), bodies=[int(i) for i in self.rings[-1]]))
 
-    def _axial(self, scene) -> tuple[np.ndarray, np.ndarray]:
-        """The nodes' positions relative to the bottom ring's centre, split into the axial
-        coordinate (m) and the radial vector (m)."""
-        x = np.asarray(scene.positions)[self.nodes] - self.centre
-        return x[:, 2], x[:, :2]
-
     def volume_m3(self, scene) -> float:
         """The volume the membrane's mid-surface encloses between its end rings' planes, m^3:
         by the divergence theorem with the field (x, y, 0) / 2 (div 1), which the end caps
@@ -166,7 +169,7 @@ class Membrane:
         inside it is this less about the lateral area times R_c."""
         x = np.asarray(scene.positions)
         p = x[self.triangles] - self.centre  # (m, 3 nodes, 3)
-        area = 0.5 * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0])
+        area = self._area_vectors(p)
         c = p.mean(axis=1)
         return float(0.5 * np.sum(c[:, 0] * area[:, 0] + c[:, 1] * area[:, 1]))
 
@@ -182,7 +185,7 @@ class Membrane:
         none, for a membrane that holds its specimen."""
         x = np.asarray(scene.positions)
         grains = np.flatnonzero(np.asarray(scene.body_kinds) == 0)
-        zr = np.array([float(np.mean(x[r, 2])) for r in self.rings])
+        zr = self._ring_heights(x)
         rr = self.ring_radii_m(scene)
         g = x[grains]
         r = np.linalg.norm(g[:, :2] - self.centre[:2], axis=1)
@@ -193,15 +196,14 @@ class Membrane:
     def inner_volume_m3(self, scene) -> float:
         """The specimen's volume, m^3: :meth:`volume_m3` less the triangles' area times R_c
         (the surface the grains touch lies R_c inside the nodes')."""
-        x = np.asarray(scene.positions)
-        p = x[self.triangles]
-        area = np.linalg.norm(0.5 * np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+        area = np.linalg.norm(self._area_vectors(np.asarray(scene.positions)[self.triangles]),
+                              axis=1)
         return self.volume_m3(scene) - float(area.sum()) * self.node_radius_m
 
     def specimen_radius_m(self, scene) -> float:
         """The radius of the cylinder of the specimen's volume and height (between the end
         rings), m: its cross-section for stresses, as a laboratory's corrected area."""
-        zr = [float(np.mean(np.asarray(scene.positions)[r, 2])) for r in self.rings]
+        zr = self._ring_heights(np.asarray(scene.positions))
         return math.sqrt(self.inner_volume_m3(scene) / (math.pi * (zr[-1] - zr[0])))
 
     def radial_stress_pa(self, scene, band: tuple[float, float] = (1 / 3, 2 / 3)) -> float:
@@ -210,8 +212,7 @@ class Membrane:
         contact point lies in ``band`` (fractions of the height between the end rings; the
         middle third by default, away from the platens) over the band's lateral area at
         :meth:`specimen_radius_m`."""
-        x_all = np.asarray(scene.positions)
-        zr = [float(np.mean(x_all[r, 2])) for r in self.rings]
+        zr = self._ring_heights(np.asarray(scene.positions))
         z0, z1 = (zr[0] + f * (zr[-1] - zr[0]) for f in band)
         e, f = self._contacts_in_band(scene, z0, z1)
         push = -np.einsum("ki,ki->k", f[:, :2], e)

@@ -162,9 +162,9 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     sc.add_controller(lid_servo)
     n3, ok3 = settle(held_ok, "the hold in the membrane")
     z0, z1 = sc.wall_positions
+    radial = mb.radial_stress_pa(sc)
     prepared = {"steps": n1 + n2 + n3, "mould_radius_m": rs,
-                "radial_stress_pa": mb.radial_stress_pa(sc),
-                "membrane_correction_pa": mb.radial_stress_pa(sc) - p,
+                "radial_stress_pa": radial, "membrane_correction_pa": radial - p,
                 "axial_stress_pa": sc.wall_forces[lid][2] / (math.pi *
                                                              mb.specimen_radius_m(sc) ** 2),
                 "grains_outside": int(len(mb.grains_outside(sc))), "reached": ok1 and ok3}

@@ -192,6 +192,15 @@ MembranePressure::MembranePressure(std::vector<std::array<int, 3>> triangles, Re
   }
   std::sort(nodes_.begin(), nodes_.end());
   nodes_.erase(std::unique(nodes_.begin(), nodes_.end()), nodes_.end());
+  // Each corner's place in nodes_, once (apply sums into force_ by it every step).
+  at_.reserve(tris_.size());
+  for (const auto& n : tris_) {
+    std::array<int, 3> k;
+    for (int c = 0; c < 3; ++c)
+      k[c] = static_cast<int>(std::lower_bound(nodes_.begin(), nodes_.end(), n[c]) -
+                              nodes_.begin());
+    at_.push_back(k);
+  }
   set_pressure(pressure_pa);
 }
 
@@ -205,23 +214,22 @@ void MembranePressure::apply(Scene& scene) {
   force_.assign(nodes_.size(), Vec3::Zero());
   area_ = 0;
   area_vec_.setZero();
-  const auto index = [&](int id) {
-    return static_cast<size_t>(std::lower_bound(nodes_.begin(), nodes_.end(), id) -
-                               nodes_.begin());
-  };
+  if (nodes_.back() >= scene.num_bodies())  // (nodes_ ascending: its last is the largest id)
+    for (const auto& n : tris_)
+      if (n[0] >= scene.num_bodies() || n[1] >= scene.num_bodies() || n[2] >= scene.num_bodies())
+        throw ParameterError("MembranePressure: triangle (" + std::to_string(n[0]) + ", " +
+                             std::to_string(n[1]) + ", " + std::to_string(n[2]) +
+                             ") names a body the scene does not have (" +
+                             std::to_string(scene.num_bodies()) + " bodies)");
   // In triangle order: the same sums on any thread count.
-  for (const auto& n : tris_) {
-    if (n[0] >= scene.num_bodies() || n[1] >= scene.num_bodies() || n[2] >= scene.num_bodies())
-      throw ParameterError("MembranePressure: triangle (" + std::to_string(n[0]) + ", " +
-                           std::to_string(n[1]) + ", " + std::to_string(n[2]) +
-                           ") names a body the scene does not have (" +
-                           std::to_string(scene.num_bodies()) + " bodies)");
+  for (size_t t = 0; t < tris_.size(); ++t) {
+    const auto& n = tris_[t];
     const Vec3& x0 = pos[scene.slot_of(n[0])];
     const Vec3 a = 0.5 * (pos[scene.slot_of(n[1])] - x0).cross(pos[scene.slot_of(n[2])] - x0);
     area_ += a.norm();
     area_vec_ += a;
     const Vec3 share = (-pressure_ / 3.0) * a;
-    for (int k = 0; k < 3; ++k) force_[index(n[k])] += share;
+    for (int k = 0; k < 3; ++k) force_[at_[t][k]] += share;
   }
   for (size_t k = 0; k < nodes_.size(); ++k) scene.set_body_external_force(nodes_[k], force_[k]);
 }

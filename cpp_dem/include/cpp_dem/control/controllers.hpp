@@ -232,6 +232,7 @@ class MembranePressure : public Controller {
  private:
   std::vector<std::array<int, 3>> tris_;
   std::vector<int> nodes_;
+  std::vector<std::array<int, 3>> at_;  // each triangle's corners' places in nodes_
   std::vector<Vec3> force_;  // scratch, per node
   Real pressure_;
   Real area_ = 0;
