@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """A 3D hierarchical triaxial test of a cylindrical specimen (issue 38, "3D beyond a box"):
 FEM x DEM with a periodic DEM element at the quadrature point of every tetrahedron of the
-specimen (``femcoupling.coupling.hierarchical3d.HierarchicalCylinder``), held on Dask workers.
+specimen (``femcoupling.fem.model.FemModel`` on a ``femcoupling.fem.bodies.Cylinder``), held on Dask workers.
 
 The specimen is the quarter x, y >= 0 of a cylinder ``--radius`` by ``--height`` (m)
 (``--section full``: the whole cylinder, no symmetry planes), with smooth platens
@@ -64,7 +64,7 @@ def run_alone(factory, n: int, path: list, strain_kw: dict, workers: int) -> np.
     ``path`` (3 x 3 each), in parallel on a pool of ``workers``; returns (n, len(path), 6)
     Voigt stresses, Pa."""
     from cpp_dem.elements.pool import ElementPool
-    from femcoupling.coupling.hierarchical import voigt_stress
+    from femcoupling.materials.element_pool import voigt_stress
 
     out = np.zeros((n, len(path), 6))
     with ElementPool.build(n, factory, workers=workers) as pool:
@@ -103,7 +103,8 @@ def plot(rows, q_alone, n_alone: int, path: Path, title: str) -> None:
 def main(argv=None) -> int:
     from cpp_dem.elements.pool import ElementPool, PeriodicFactory
     from cpp_dem.progress import Progress
-    from femcoupling.coupling.hierarchical3d import HierarchicalCylinder, cylinder_cells
+    from femcoupling.fem.bodies import Cylinder, cylinder_cells
+    from femcoupling.fem.model import FemModel
 
     ap = _cli.BenchParser(signed=("alone",), description=__doc__,
                           formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -162,12 +163,10 @@ def main(argv=None) -> int:
         writer = csv.DictWriter(fh, fieldnames=COLUMNS)
         writer.writeheader()
         fh.flush()
-        m = HierarchicalCylinder(pool, radius_m=args.radius, height_m=args.height,
-                                 size_m=args.size, platens=args.platens,
-                                 section=args.section,
-                                 confining_pa=args.pressure,
-                                 newton_rtol=args.rtol, max_newton=args.max_newton,
-                                 strain_kw=strain_kw, out=out / "records", overwrite=True)
+        body = Cylinder(radius_m=args.radius, height_m=args.height, size_m=args.size,
+                        platens=args.platens, section=args.section, confining_pa=args.pressure)
+        m = FemModel(body, elements=pool, newton_rtol=args.rtol, max_newton=args.max_newton,
+                     strain_kw=strain_kw, out=out / "records", overwrite=True)
         w = m.element_volumes
         failed = None
         for k in range(1, args.steps + 1):

@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""A plane-strain biaxial test by hierarchical FEM x DEM (femcoupling.coupling.hierarchical, issue
+"""A plane-strain biaxial test by hierarchical FEM x DEM (femcoupling.fem.model.FemModel, issue
 18): a rectangle of P1 triangles, a periodic DEM element at each quadrature point (one per cell)
 held on Dask workers, confining pressure on the right, the top pushed down in steps.
 
@@ -48,7 +48,8 @@ def main(argv=None) -> int:
                     help="the elements relax to this unbalanced force after each increment")
     ap.add_argument("--tangent", default="network",
                     choices=("network", "network-elastic", "secant"),
-                    help="the elements' tangent in the Jacobian (femcoupling.coupling.hierarchical."
+                    help="the elements' tangent in the Jacobian ("
+                         "femcoupling.materials.element_pool."
                          "TANGENTS)")
     ap.add_argument("--prep-friction", type=float, default=0.0,
                     help="friction angle (deg) the elements' grains grow at (0: dense; "

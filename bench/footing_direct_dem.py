@@ -264,7 +264,7 @@ def main(argv=None) -> dict:
     from cpp_dem.elements.pool import ElementPool
     from cpp_dem.protocols.footing import (load_strip_footing,
                                            prepare_footing_box)
-    from femcoupling.coupling.hierarchical import quadrature_points
+    from femcoupling.fem.bodies import quadrature_points
     from geogrid_dem.studies.footing_dem import element_factory, fem_dem_footing, paired_pressures
 
     out = Path(a.out)

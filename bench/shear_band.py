@@ -7,7 +7,7 @@ DEM element (RVE) at every quadrature point, held on Dask workers.
   RVEs per cell). Constant-strain P1 triangles lock under the isochoric or dilatant flow of a
   band; P2's strain varies linearly in a cell, so a band can cross it.
 - Rough platens: the bottom is held, the top moves down without sliding, both sides carry the
-  confining pressure (``HierarchicalPlaneStrain(platens="rough")``).
+  confining pressure (``Rectangle(platens="rough")`` of ``femcoupling.fem.bodies``).
 - An imperfection: the RVEs within ``--weak-radius`` of ``--weak-at`` are grown loose (at the
   material's friction, ``WeakZoneFactory``), the others dense; every RVE has its own seed.
 
@@ -141,7 +141,7 @@ def plot(points, eq, band, fd, lx, ly, png: Path, title: str) -> None:
 def main(argv=None) -> int:
 
     from cpp_dem.elements.pool import ElementPool, PeriodicFactory
-    from femcoupling.coupling.hierarchical import quadrature_points
+    from femcoupling.fem.bodies import quadrature_points
     from geogrid_dem.studies import biaxial
 
     ap = _cli.BenchParser(out="folder", zero_ok=("weak_radius",), description=__doc__,

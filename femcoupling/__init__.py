@@ -5,7 +5,9 @@ with DEM elements, in three subpackages:
   anisotropic elastic, Drucker-Prager with its return mapping, the geogrid layer's band) and
   DEM elements as materials (one for a region, one per cell on the one Dask pool, the
   reinforced band); all behind one interface at quadrature points.
-- :mod:`femcoupling.fem`: the FEM models in dolfinx. The reinforced soil body in gmsh with
+- :mod:`femcoupling.fem`: the FEM models in dolfinx. ``FemModel`` (``model``) on the bodies
+  of ``bodies`` (rectangle, box, cylinder) with a DEM element at every quadrature point (the
+  hierarchical mode); the reinforced soil body in gmsh with
   tagged layers and element regions (``geometry``, ``gmsh_mesh``), ``SoilModel``
   (``soil_model`` and its parts ``soil_loading``, ``soil_regions``, ``soil_measures``), a
   load step's record and the one failure type of every model (``steps``), the quadrature
@@ -13,8 +15,7 @@ with DEM elements, in three subpackages:
   MPI (``mpi_points``), and the toolchain check (``elastic_block``).
 - :mod:`femcoupling.coupling`: the coupling's named parts. The transfer (``handover``: FEM
   stress -> wall targets, stiffness back), the loops (``twoway``: one-way and two-way over
-  element regions; ``hierarchical``, ``hierarchical3d``: a DEM element at every quadrature
-  point), ``relaxation``, ``status`` (how a loop ended), ``records``, the continuum fitted
+  element regions), ``relaxation``, ``status`` (how a loop ended), ``records``, the continuum fitted
   to the grains (``continuum_fit``) and ``runner_pool``.
 
 Below them, :mod:`femcoupling._checks` (:class:`FemInputError`, the one error type, and the

@@ -13,7 +13,8 @@ import sys
 def main(out: str, section: str = "quarter", size: str = "0.025") -> None:
     from cpp_dem.elements.linear import LinearElement, LinearFactory
     from cpp_dem.elements.pool import ElementPool
-    from femcoupling.coupling.hierarchical3d import HierarchicalCylinder, cylinder_cells
+    from femcoupling.fem.bodies import Cylinder, cylinder_cells
+    from femcoupling.fem.model import FemModel
     from femcoupling.fem.mpi_points import on_root, world
 
     comm = world()
@@ -21,9 +22,9 @@ def main(out: str, section: str = "quarter", size: str = "0.025") -> None:
     pool = on_root(comm, lambda: ElementPool.build(n, LinearFactory(), workers=1,
                                                    element_type=LinearElement))
     try:
-        m = HierarchicalCylinder(pool, radius_m=0.025, height_m=0.1, size_m=float(size),
-                                 confining_pa=100e3, newton_rtol=1e-10, comm=comm,
-                                 section=section)
+        body = Cylinder(radius_m=0.025, height_m=0.1, size_m=float(size), confining_pa=100e3,
+                        section=section)
+        m = FemModel(body, elements=pool, newton_rtol=1e-10, comm=comm)
         r = m.step(top_displacement=-1e-4)
         xyz, mean = m.point_coordinates, m.volume_mean_stress()  # (collective)
     finally:

@@ -11,15 +11,16 @@ import numpy as np
 
 def main(out: str) -> None:
     from cpp_dem.elements.pool import ElementPool, PeriodicFactory
-    from femcoupling.coupling.hierarchical3d import Hierarchical3D
+    from femcoupling.fem.bodies import Box
+    from femcoupling.fem.model import FemModel
     from femcoupling.fem.mpi_points import on_root, world
 
     comm = world()
     pool = on_root(comm, lambda: ElementPool.build(6, PeriodicFactory(n=40, seed=3),
                                                    workers=1))
     try:
-        m = Hierarchical3D(pool, lx=0.02, ly=0.02, lz=0.02, nx=1, ny=1, nz=1,
-                           confining_pa=100e3, comm=comm, out=out, overwrite=True)
+        body = Box(lx=0.02, ly=0.02, lz=0.02, nx=1, ny=1, nz=1, confining_pa=100e3)
+        m = FemModel(body, elements=pool, comm=comm, out=out, overwrite=True)
         m.step(top_displacement=-1e-5)  # (two steps: the records appended under MPI)
         r = m.step(top_displacement=-2e-5)
         xyz = m.point_coordinates  # (collective)

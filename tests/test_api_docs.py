@@ -64,7 +64,8 @@ def test_reference_builds_without_a_warning(site):
     ("api/cpp_dem/scene.html", ["cpp_dem.scene.Scene.run", "cpp_dem.scene.linear_material"]),
     ("api/cpp_dem/_core.html", ["cpp_dem._core.Scene", "cpp_dem._core.Material"]),
     ("api/cpp_dem/elements/pool.html", ["cpp_dem.elements.pool.ElementPool"]),
-    ("api/femcoupling/coupling/hierarchical.html", ["femcoupling.coupling.hierarchical"]),
+    ("api/femcoupling/fem/model.html", ["femcoupling.fem.model.FemModel",
+                                       "femcoupling.fem.model.FemModel.step"]),
     ("api/geogrid_dem/cli.html", ["geogrid_dem.cli", "geogrid_dem.cli.main"]),
 ])
 def test_pages_hold_the_objects(site, page, objects):

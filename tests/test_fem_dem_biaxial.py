@@ -61,7 +61,7 @@ def test_the_lateral_stress_is_the_confining_pressure(fem_dem, alone):
     7.9e-3 with a residual of 3.5e-3 accepted within the noise: within this bound.)"""
     m = fem_dem["model"]
     x = m.u.function_space.tabulate_dof_coordinates()[:, 0]
-    kappa = float(np.linalg.norm(x)) / math.sqrt(m.lx * m.ly)
+    kappa = float(np.linalg.norm(x)) / math.sqrt(m.body.lx * m.body.ly)
     assert 1 < kappa < 3  # (|x| / sqrt(A) of the 2 x 2 mesh's nodes)
     assert max(fem_dem["residual"]) <= CEILING
     for k, (st, lateral) in enumerate(zip(fem_dem["steps"], fem_dem["sigma_lateral"])):

@@ -46,7 +46,7 @@ def _bottom_and_top_reactions(m):
         return fx.fem.locate_dofs_topological(m.V.sub(1), 1, facets)
 
     bottom = float(np.sum(vec.array[dofs(lambda x: np.isclose(x[1], 0.0))]))
-    top = float(np.sum(f_int.array[dofs(lambda x: np.isclose(x[1], m.ly))]))
+    top = float(np.sum(f_int.array[dofs(lambda x: np.isclose(x[1], m.body.ly))]))
     return bottom, top
 
 
@@ -101,17 +101,17 @@ def test_paired_pressures_pairs_by_seed_and_refuses_mismatches():
 
 
 def test_bad_footing_input_is_refused_by_name():
-    from femcoupling.coupling.hierarchical import HierarchicalPlaneStrain
+    from femcoupling.fem.bodies import Rectangle
 
     kw = dict(lx=0.08, ly=0.04, nx=4, ny=2, confining_pa=Q, platens="footing")
     with pytest.raises(FemInputError, match="footing_b=0.03: must end on a mesh line"):
-        HierarchicalPlaneStrain(None, footing_b=0.03, **kw)
+        Rectangle(footing_b=0.03, **kw)
     with pytest.raises(FemInputError, match="footing_b=0.08: the footing's half width"):
-        HierarchicalPlaneStrain(None, footing_b=0.08, **kw)
+        Rectangle(footing_b=0.08, **kw)
     with pytest.raises(FemInputError, match="footing_b=0.02: only with platens='footing'"):
-        HierarchicalPlaneStrain(None, **{**kw, "platens": "smooth"}, footing_b=0.02)
+        Rectangle(**{**kw, "platens": "smooth"}, footing_b=0.02)
     with pytest.raises(FemInputError, match="needs confining_pa"):
-        HierarchicalPlaneStrain(None, **{**kw, "confining_pa": None}, footing_b=0.02)
+        Rectangle(**{**kw, "confining_pa": None}, footing_b=0.02)
     with pytest.raises(ValueError, match="settlements_m=.*increasing"):
         fem_dem_footing(None, length=0.08, depth=0.04, nx=4, ny=2, footing_b=0.02,
                         surcharge_pa=Q, settlements_m=(2e-5, 1e-5))
@@ -120,7 +120,7 @@ def test_bad_footing_input_is_refused_by_name():
 def test_a_footing_model_refuses_a_side_displacement(run):
     res, _ = run
     with pytest.raises(FemInputError, match="right_displacement=1e-06"):
-        res["model"]._set_boundary(-1e-4, 1e-6)
+        res["model"].step(top_displacement=-1e-4, right_displacement=1e-6)
 
 
 def _bench():

@@ -1,6 +1,6 @@
-"""Hierarchical FEM x DEM in plane strain (femcoupling.coupling.hierarchical): a DEM element at
-every quadrature point, on Dask workers. In a homogeneous field Newton converges in one iteration
-and every element answers as the stand-alone element given the same increment (bitwise);
+"""Hierarchical FEM x DEM in plane strain (femcoupling.fem.model.FemModel on a Rectangle): a DEM
+element at every quadrature point, on Dask workers. In a homogeneous field Newton converges in
+one iteration and every element answers as the stand-alone element given the same increment (bitwise);
 1 and 2 workers give bitwise the same run."""
 
 from __future__ import annotations
@@ -11,15 +11,22 @@ import pytest
 pytest.importorskip("dolfinx_solver")
 
 from cpp_dem.elements.pool import ElementPool, PeriodicFactory  # noqa: E402
-from femcoupling.coupling.hierarchical import (HierarchicalPlaneStrain,  # noqa: E402
-                                               dem_increment, fem_stress)
+from femcoupling.fem.bodies import Rectangle  # noqa: E402
+from femcoupling.fem.model import FemModel, split_options  # noqa: E402
+from femcoupling.materials.element_pool import dem_increment, fem_stress  # noqa: E402
 
 FACTORY = PeriodicFactory(n=100, same=True)
 
 
+def _rect(pool, **kw):
+    """A FemModel on a Rectangle of ``kw``'s body arguments, the rest the model's."""
+    body, options = split_options(Rectangle, kw)
+    return FemModel(Rectangle(**body), elements=pool, **options)
+
+
 def _run(workers, out=None):
     with ElementPool.build(8, FACTORY, workers=workers) as pool:
-        m = HierarchicalPlaneStrain(pool, lx=0.02, ly=0.02, nx=2, ny=2, homogeneous=True,
+        m = _rect(pool, lx=0.02, ly=0.02, nx=2, ny=2, homogeneous=True,
                                     out=out)
         steps = [m.step(top_displacement=-2e-6 * k, right_displacement=1e-6 * k)
                  for k in (1, 2)]
@@ -101,7 +108,7 @@ def test_dem_increment_maps_the_plane_to_x_z():
 
 def test_a_broken_element_tangent_keeps_the_last_good_one():
     with ElementPool.build(2, PeriodicFactory(n=80, same=True), workers=1) as pool:
-        m = HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1)
+        m = _rect(pool, lx=0.01, ly=0.01, nx=1, ny=1)
         good = m._tan.copy()
         stresses = [np.diag([-1e5, -1e5, -1e5])] * 2
         bad = np.zeros((6, 6))
@@ -113,7 +120,7 @@ def test_a_broken_element_tangent_keeps_the_last_good_one():
 
 
 def test_aitken_factor():
-    from femcoupling.coupling.hierarchical import aitken_factor
+    from femcoupling.coupling.relaxation import aitken_factor
 
     d = np.array([1.0, -2.0, 0.5])
     assert aitken_factor(1.0, d, -d) == pytest.approx(0.5)  # a 2-cycle halves it
@@ -134,7 +141,7 @@ def test_bad_convergence_options_are_refused():
                           ({"noise_ceiling": 1e-4, "newton_rtol": 1e-3}, "noise_ceiling"),
                           ({"newton_rtol": 0.0}, "newton_rtol")):
             with pytest.raises(FemInputError, match=field):
-                HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, **kw)
+                _rect(pool, lx=0.01, ly=0.01, nx=1, ny=1, **kw)
 
 
 def test_a_tolerance_below_the_noise_is_cut_above_the_ceiling_and_said_below_it(tmp_path):
@@ -148,18 +155,18 @@ def test_a_tolerance_below_the_noise_is_cut_above_the_ceiling_and_said_below_it(
       converged), and said (NoiseWarning, ``warnings``, report.md), its residual in Pa too.
     - With convergence='tolerance' the same step fails and its error names the residual.
     """
-    from femcoupling.coupling.hierarchical import NewtonFailure
+    from femcoupling.fem.steps import NewtonFailure
     from femcoupling.coupling.status import NoiseWarning
 
     fac = PeriodicFactory(n=80, isotropic=True, options={"prep_friction_deg": 0.0})
     kw = dict(lx=0.01, ly=0.01, nx=1, ny=1, confining_pa=100e3, newton_rtol=1e-9,
               tangent="network-elastic")
     with ElementPool.build(2, fac, workers=1) as pool:
-        m = HierarchicalPlaneStrain(pool, max_newton=12, **kw)
+        m = _rect(pool, max_newton=12, **kw)
         assert m.noise_ceiling == pytest.approx(1e-8)
         tried = []
         step = m._step
-        m._step = lambda top, right: (tried.append(top), step(top, right))[1]
+        m._step = lambda point: (tried.append(float(point[0])), step(point))[1]
         with pytest.raises(NewtonFailure, match=r"within the elements' noise .* above the "
                                                 r"ceiling noise_ceiling=1e-08.*the step is cut"):
             m.step(top_displacement=-2e-5, max_cuts=1)
@@ -168,7 +175,7 @@ def test_a_tolerance_below_the_noise_is_cut_above_the_ceiling_and_said_below_it(
         assert float(m.top_u.value) == 0.0  # the boundary back at the last accepted step
         pool.reject()
 
-        m = HierarchicalPlaneStrain(pool, max_newton=12, noise_ceiling=1e-4, out=tmp_path, **kw)
+        m = _rect(pool, max_newton=12, noise_ceiling=1e-4, out=tmp_path, **kw)
         with pytest.warns(NoiseWarning, match="below the elements' noise"):
             r = m.step(top_displacement=-2e-5)
         assert r.converged_on == "noise" and r.status == "stopped_at_scatter"
@@ -190,7 +197,7 @@ def test_a_tolerance_below_the_noise_is_cut_above_the_ceiling_and_said_below_it(
         # equilibrium to the noise: the mean lateral stress is the confining pressure
         assert r.mean_stress[0] == pytest.approx(-100e3, rel=2e-3)
 
-        m = HierarchicalPlaneStrain(pool, max_newton=6, convergence="tolerance", **kw)
+        m = _rect(pool, max_newton=6, convergence="tolerance", **kw)
         with pytest.raises(NewtonFailure, match="no convergence in 6 iterations"):
             m.step(top_displacement=-4e-5, max_cuts=0)
 
@@ -202,11 +209,11 @@ def test_records_of_an_earlier_run_are_not_mixed_in(runs, records):
 
     with ElementPool.build(2, PeriodicFactory(n=60, same=True), workers=1) as pool:
         with pytest.raises(FemInputError, match="records of an earlier run"):
-            HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, out=records)
+            _rect(pool, lx=0.01, ly=0.01, nx=1, ny=1, out=records)
 
 
 def test_secant_update_maps_the_increment_and_stays_positive():
-    from femcoupling.coupling.hierarchical import secant_update
+    from femcoupling.materials.element_pool import secant_update
 
     rng = np.random.default_rng(4)
     for _ in range(20):
@@ -236,13 +243,13 @@ def test_the_secant_tangent_reaches_the_network_tangents_solution():
         with ElementPool.build(2, PeriodicFactory(n=100, stress=100e3, isotropic=True,
                                                   options={"prep_friction_deg": 0.0}),
                                workers=1) as pool:
-            m = HierarchicalPlaneStrain(pool, lx=0.02, ly=0.02, nx=1, ny=1,
+            m = _rect(pool, lx=0.02, ly=0.02, nx=1, ny=1,
                                         confining_pa=100e3, newton_rtol=1e-3,
                                         tangent=tangent, convergence="tolerance")
             steps = [m.step(top_displacement=-2e-5 * k) for k in (1, 2)]
             res[tangent] = (steps[-1].mean_stress, m.secants_used)
             with pytest.raises(FemInputError, match="'secant'"):
-                HierarchicalPlaneStrain(pool, lx=0.02, ly=0.02, nx=1, ny=1, tangent="x")
+                _rect(pool, lx=0.02, ly=0.02, nx=1, ny=1, tangent="x")
     (s_net, used_net), (s_sec, used_sec) = res["network"], res["secant"]
     assert used_net == 0 and used_sec > 0
     assert np.abs(s_sec - s_net).max() < 5e-3 * np.abs(s_net).max()
@@ -254,10 +261,10 @@ def test_quadratic_triangles_three_elements_each_give_the_homogeneous_response()
     increment and answers as the stand-alone element; 1 and 2 workers give the same run."""
     def run(workers):
         with ElementPool.build(6, FACTORY, workers=workers) as pool:
-            m = HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, homogeneous=True,
+            m = _rect(pool, lx=0.01, ly=0.01, nx=1, ny=1, homogeneous=True,
                                         degree=2)
             assert (m.n_cells, m.nq, m.n_points) == (2, 3, 6)
-            from femcoupling.coupling.hierarchical import quadrature_points
+            from femcoupling.fem.bodies import quadrature_points
 
             assert np.allclose(m.point_coordinates, quadrature_points(0.01, 0.01, 1, 1, 2),
                                rtol=0, atol=1e-15)
@@ -283,10 +290,10 @@ def test_quadratic_triangles_three_elements_each_give_the_homogeneous_response()
 
     with ElementPool.build(2, FACTORY, workers=1) as pool:
         with pytest.raises(FemInputError, match="pool: has 2 elements for 6 quadrature"):
-            HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, homogeneous=True,
+            _rect(pool, lx=0.01, ly=0.01, nx=1, ny=1, homogeneous=True,
                                     degree=2)
         with pytest.raises(FemInputError, match="degree=3"):
-            HierarchicalPlaneStrain(pool, lx=0.01, ly=0.01, nx=1, ny=1, degree=3)
+            _rect(pool, lx=0.01, ly=0.01, nx=1, ny=1, degree=3)
 
 
 def test_rough_platens_grip_the_ends_and_quadrature_points_are_in_element_order():
@@ -295,12 +302,12 @@ def test_rough_platens_grip_the_ends_and_quadrature_points_are_in_element_order(
     mid-height. ``quadrature_points`` gives the model's points in its elements' order before
     the model is built."""
     from femcoupling import FemInputError
-    from femcoupling.coupling.hierarchical import quadrature_points
+    from femcoupling.fem.bodies import quadrature_points
 
     fac = PeriodicFactory(n=80, stress=100e3, isotropic=True, same=True,
                           options={"prep_friction_deg": 0.0})
     with ElementPool.build(4, fac, workers=1) as pool:
-        m = HierarchicalPlaneStrain(pool, lx=0.01, ly=0.02, nx=1, ny=2, confining_pa=100e3,
+        m = _rect(pool, lx=0.01, ly=0.02, nx=1, ny=2, confining_pa=100e3,
                                     platens="rough", newton_rtol=5e-3)
         assert np.allclose(m.point_coordinates, quadrature_points(0.01, 0.02, 1, 2, degree=1),
                            rtol=0, atol=1e-15)
@@ -314,10 +321,38 @@ def test_rough_platens_grip_the_ends_and_quadrature_points_are_in_element_order(
         left, right = mid & np.isclose(x[:, 0], 0.0), mid & np.isclose(x[:, 0], 0.01)
         assert ux[left].item() < 0 < ux[right].item()  # both sides bulge out
         with pytest.raises(FemInputError, match="platens='sticky'"):
-            HierarchicalPlaneStrain(pool, lx=0.01, ly=0.02, nx=1, ny=2, confining_pa=1e5,
+            _rect(pool, lx=0.01, ly=0.02, nx=1, ny=2, confining_pa=1e5,
                                     platens="sticky")
         with pytest.raises(FemInputError, match="platens='rough': needs confining_pa"):
-            HierarchicalPlaneStrain(pool, lx=0.01, ly=0.02, nx=1, ny=2, platens="rough")
+            _rect(pool, lx=0.01, ly=0.02, nx=1, ny=2, platens="rough")
     p2 = quadrature_points(0.02, 0.04, 2, 3, degree=2)
     assert p2.shape == (2 * 2 * 3 * 3, 2)
     assert np.all((p2 > 0) & (p2 < [0.02, 0.04]))
+
+
+def test_one_model_on_every_body_refuses_what_is_not_one():
+    """FemModel takes a body of femcoupling.fem.bodies and a pool; anything else is refused by
+    name, and the bodies' own arguments split from the model's."""
+    from femcoupling import FemInputError
+    from femcoupling.fem.bodies import Box, Cylinder
+    from femcoupling.fem.geometry import ReinforcedSoilBody
+
+    with pytest.raises(FemInputError, match="not a body of femcoupling.fem.bodies .* no mesh"):
+        FemModel(object(), elements=None)
+    soil = ReinforcedSoilBody(width_m=2.0, height_m=1.0, footing_half_width_m=0.5)
+    with pytest.raises(FemInputError, match="the reinforced soil body is SoilModel's"):
+        FemModel(soil, elements=None)
+    with pytest.raises(FemInputError, match=r"elements=None: an ElementPool with one element "
+                                            r"per quadrature point \(8 quadrature points"):
+        FemModel(Rectangle(lx=0.02, ly=0.02, nx=2, ny=2, homogeneous=True), elements=None)
+    body, model = split_options(Rectangle, dict(lx=1.0, degree=2, platens="rough",
+                                                newton_rtol=1e-4, out="x"))
+    assert body == dict(lx=1.0, degree=2, platens="rough")
+    assert model == dict(newton_rtol=1e-4, out="x")
+    assert split_options(Cylinder, dict(section="full", tangent="network"))[0] == \
+        dict(section="full")
+    with pytest.raises(FemInputError, match="footing_pressure_pa\\(\\): only on a Rectangle"):
+        Box(lx=1.0, ly=1.0, lz=1.0, nx=1, ny=1, nz=1, homogeneous=True).footing_pressure_pa(None)
+    with pytest.raises(FemInputError, match="tangent='secant': one of 'network'"):
+        FemModel(Box(lx=1.0, ly=1.0, lz=1.0, nx=1, ny=1, nz=1, homogeneous=True),
+                 elements=None, tangent="secant")

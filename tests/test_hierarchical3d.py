@@ -1,4 +1,4 @@
-"""Hierarchical FEM x DEM in 3D (femcoupling.coupling.hierarchical3d, issue 38 item 4), at small
+"""Hierarchical FEM x DEM in 3D (femcoupling.fem.model.FemModel on femcoupling.fem.bodies.Box, issue 38 item 4), at small
 size: one hexahedron of six P1 tetrahedra, a periodic element of 80 grains at each quadrature point.
 
 - a homogeneous field (every node on u = G x) converges in one Newton iteration, every element
@@ -16,16 +16,23 @@ import pytest
 pytest.importorskip("dolfinx_solver")
 
 from cpp_dem.elements.pool import ElementPool, PeriodicFactory  # noqa: E402
-from femcoupling.coupling.hierarchical import voigt_stress  # noqa: E402
-from femcoupling.coupling.hierarchical3d import Hierarchical3D  # noqa: E402
+from femcoupling.fem.bodies import Box  # noqa: E402
+from femcoupling.fem.model import FemModel, split_options  # noqa: E402
+from femcoupling.materials.element_pool import voigt_stress  # noqa: E402
 
 FACTORY = PeriodicFactory(n=80, same=True, isotropic=True)
+def _box(pool, **kw):
+    """A FemModel on a Box of ``kw``'s body arguments, the rest the model's."""
+    body, options = split_options(Box, kw)
+    return FemModel(Box(**body), elements=pool, **options)
+
+
 G1 = np.array([[1e-4, 0.0, 2e-5], [0.0, -0.5e-4, 0.0], [0.0, 1e-5, -2e-4]])
 
 
 def _run(workers):
     with ElementPool.build(6, FACTORY, workers=workers) as pool:
-        m = Hierarchical3D(pool, lx=0.01, ly=0.01, lz=0.01, nx=1, ny=1, nz=1,
+        m = _box(pool, lx=0.01, ly=0.01, lz=0.01, nx=1, ny=1, nz=1,
                            homogeneous=True)
         steps = [m.step(gradient=k * G1) for k in (1, 2)]
         return steps, m.u.x.array.copy()
@@ -60,7 +67,7 @@ def test_one_and_two_workers_give_the_same_run(runs):
 
 def test_a_triaxial_step(tmp_path):
     with ElementPool.build(6, FACTORY, workers=1) as pool:
-        m = Hierarchical3D(pool, lx=0.01, ly=0.01, lz=0.01, nx=1, ny=1, nz=1,
+        m = _box(pool, lx=0.01, ly=0.01, lz=0.01, nx=1, ny=1, nz=1,
                            confining_pa=100e3, out=tmp_path)
         r = m.step(top_displacement=-2e-6)
     assert r.status in ("converged", "stopped_at_scatter")
@@ -75,14 +82,14 @@ def test_bad_input_is_refused():
 
     with ElementPool.build(6, FACTORY, workers=1) as pool:
         with pytest.raises(FemInputError, match="confining_pa=None"):
-            Hierarchical3D(pool, lx=0.01, ly=0.01, lz=0.01, nx=1, ny=1, nz=1)
+            _box(pool, lx=0.01, ly=0.01, lz=0.01, nx=1, ny=1, nz=1)
         with pytest.raises(FemInputError, match="pool: has 6 elements for 12 cells"):
-            Hierarchical3D(pool, lx=0.01, ly=0.01, lz=0.01, nx=2, ny=1, nz=1,
+            _box(pool, lx=0.01, ly=0.01, lz=0.01, nx=2, ny=1, nz=1,
                            homogeneous=True)
         with pytest.raises(FemInputError, match="tangent='secant'"):
-            Hierarchical3D(pool, lx=0.01, ly=0.01, lz=0.01, nx=1, ny=1, nz=1,
+            _box(pool, lx=0.01, ly=0.01, lz=0.01, nx=1, ny=1, nz=1,
                            homogeneous=True, tangent="secant")
-        m = Hierarchical3D(pool, lx=0.01, ly=0.01, lz=0.01, nx=1, ny=1, nz=1,
+        m = _box(pool, lx=0.01, ly=0.01, lz=0.01, nx=1, ny=1, nz=1,
                            homogeneous=True)
         with pytest.raises(FemInputError, match="gradient: shape"):
             m.step(gradient=np.zeros((2, 2)))

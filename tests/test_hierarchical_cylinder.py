@@ -1,5 +1,5 @@
-"""A 3D hierarchical triaxial specimen beyond a box (femcoupling.coupling.hierarchical3d.
-HierarchicalCylinder; docs/coupling_hierarchical.md, "A cylindrical triaxial specimen"): a quarter
+"""A 3D hierarchical triaxial specimen beyond a box (femcoupling.fem.model.FemModel
+on femcoupling.fem.bodies.Cylinder; docs/coupling_hierarchical.md, "A cylindrical triaxial specimen"): a quarter
 cylinder of P1 tetrahedra (gmsh), or the whole cylinder, an element at each quadrature
 point.
 
@@ -34,7 +34,15 @@ pytest.importorskip("dolfinx_solver")
 
 from cpp_dem.elements.linear import LinearElement, LinearFactory  # noqa: E402
 from cpp_dem.elements.pool import ElementPool, PeriodicFactory  # noqa: E402
-from femcoupling.coupling.hierarchical3d import HierarchicalCylinder, cylinder_cells  # noqa: E402
+from femcoupling.fem.bodies import Cylinder, cylinder_cells  # noqa: E402
+from femcoupling.fem.model import FemModel, split_options  # noqa: E402
+
+
+def _cyl(pool, **kw):
+    """A FemModel on a Cylinder of ``kw``'s body arguments, the rest the model's."""
+    body, options = split_options(Cylinder, kw)
+    return FemModel(Cylinder(**body), elements=pool, **options)
+
 
 ROOT = Path(__file__).resolve().parents[1]
 MPIEXEC = Path(sys.executable).parent / "mpiexec"
@@ -46,7 +54,7 @@ K = E / (3 * (1 - 2 * NU))
 def _linear(section="quarter", **kw):
     n = cylinder_cells(R, H, SIZE, section)
     pool = ElementPool.build(n, LinearFactory(E, NU, P0), workers=1, element_type=LinearElement)
-    return pool, HierarchicalCylinder(pool, radius_m=R, height_m=H, size_m=SIZE,
+    return pool, _cyl(pool, radius_m=R, height_m=H, size_m=SIZE,
                                       newton_rtol=1e-10, section=section, **kw)
 
 
@@ -128,7 +136,7 @@ def test_rough_platens_restrain_the_ends():
 def test_periodic_dem_elements_carry_the_confining_pressure(tmp_path):
     n = cylinder_cells(R, H, 0.05)
     with ElementPool.build(n, PeriodicFactory(n=40, seed=3, isotropic=True), workers=2) as pool:
-        m = HierarchicalCylinder(pool, radius_m=R, height_m=H, size_m=0.05,
+        m = _cyl(pool, radius_m=R, height_m=H, size_m=0.05,
                                  confining_pa=100e3, out=tmp_path)
         r = m.step(top_displacement=-1e-5)
         s = m.volume_mean_stress()
@@ -151,11 +159,11 @@ def test_bad_input_is_refused():
         with pytest.raises(FemInputError, match=r"pool: has 3 elements for 205 tetrahedra "
                                                 r"\(cylinder_cells\(0.025, 0.1, 0.025, "
                                                 r"'quarter'\)\)"):
-            HierarchicalCylinder(pool, radius_m=R, height_m=H, size_m=SIZE, confining_pa=1e5)
+            _cyl(pool, radius_m=R, height_m=H, size_m=SIZE, confining_pa=1e5)
         with pytest.raises(FemInputError, match="confining_pa=None"):
-            HierarchicalCylinder(pool, radius_m=R, height_m=H, size_m=SIZE)
+            _cyl(pool, radius_m=R, height_m=H, size_m=SIZE)
         with pytest.raises(FemInputError, match=r"platens='glued': 'smooth' or 'rough'"):
-            HierarchicalCylinder(pool, radius_m=R, height_m=H, size_m=SIZE, platens="glued",
+            _cyl(pool, radius_m=R, height_m=H, size_m=SIZE, platens="glued",
                                  confining_pa=1e5)
 
 

@@ -67,7 +67,7 @@ def test_each_kind_of_warning_is_one_line(runs):
 
 
 def test_every_element_is_at_the_serial_models_place(runs):
-    from femcoupling.coupling.hierarchical import quadrature_points
+    from femcoupling.fem.bodies import quadrature_points
 
     serial = quadrature_points(0.04, 0.08, 2, 2)
     for ranks, d in runs.items():
@@ -143,7 +143,7 @@ def test_a_3d_box_on_two_ranks_is_the_serial_box(tmp_path):
     the faces' confining pressure carried (the elements' mean lateral stress within 5 %), a
     records row per element and step."""
     from femcoupling import _dolfinx
-    from femcoupling.coupling.hierarchical import _coordinates
+    from femcoupling.fem.bodies import point_coordinates as _coordinates
 
     if not MPIEXEC.exists():
         pytest.skip(f"no mpiexec beside {sys.executable}")

@@ -88,8 +88,8 @@ def test_no_cut_at_all_fails_at_once():
 
 def test_every_fem_model_steps_through_the_one_loop():
     """No model of femcoupling halves its steps by a loop of its own: every model is a
-    FemModel, whose _load (the stage loop of SoilModel, the step of the hierarchical models:
-    2D, 3D, cylinder) is the one call of load_path."""
+    FemSolver, whose _load (the stage loop of SoilModel, the step of FemModel on every body:
+    rectangle, box, cylinder) is the one call of load_path."""
     calls, own = set(), []
     for path in sorted((ROOT / "femcoupling").rglob("*.py")):
         tree = ast.parse(path.read_text())
@@ -103,25 +103,23 @@ def test_every_fem_model_steps_through_the_one_loop():
             if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Sub) \
                     and isinstance(node.left, ast.Name) and node.left.id == "max_cuts":
                 own.append(f"{path.name}:{node.lineno}")
-    assert calls == {"femcoupling/fem/model.py"}, calls  # (FemModel._load)
+    assert calls == {"femcoupling/fem/model.py"}, calls  # (FemSolver._load)
     assert own == [], own
-    from femcoupling.coupling.hierarchical import HierarchicalPlaneStrain
-    from femcoupling.coupling.hierarchical3d import Hierarchical3D, HierarchicalCylinder
-    from femcoupling.fem.model import FemModel
+    from femcoupling.fem.model import FemModel, FemSolver
     from femcoupling.fem.soil_model import SoilModel
 
-    for cls in (SoilModel, HierarchicalPlaneStrain, Hierarchical3D, HierarchicalCylinder):
-        assert issubclass(cls, FemModel), cls
-        assert cls._load is FemModel._load and cls.status is FemModel.status, cls
+    for cls in (SoilModel, FemModel):
+        assert issubclass(cls, FemSolver), cls
+        assert cls._load is FemSolver._load and cls.status is FemSolver.status, cls
 
 
 def test_every_footing_model_measures_its_footing_by_the_same_names():
     """The soil body and the hierarchical model's footing give the footing's pressure and
     settlement under one name each (SI units in the names)."""
-    from femcoupling.coupling.hierarchical import HierarchicalPlaneStrain
+    from femcoupling.fem.model import FemModel
     from femcoupling.fem.soil_model import SoilModel
 
-    for cls in (SoilModel, HierarchicalPlaneStrain):
+    for cls in (SoilModel, FemModel):
         assert callable(getattr(cls, "footing_pressure_pa", None)), cls
         assert callable(getattr(cls, "footing_settlement_m", None)), cls
         assert not hasattr(cls, "footing_pressure"), cls

@@ -31,7 +31,7 @@ def _stress(n: int, ncomp: int = 4) -> np.ndarray:
 
 
 def test_every_material_implements_the_interface():
-    from femcoupling.coupling.hierarchical import ElementPoolMaterial
+    from femcoupling.materials.element_pool import ElementPoolMaterial
     from femcoupling.fem.soil_regions import RegionPoints
     from femcoupling.materials.dem_elements import DemRegionMaterial, PoolRegionMaterials
 
@@ -262,11 +262,10 @@ def test_at_a_second_stall_the_noise_is_at_least_the_spread_of_the_iterates_draw
 
 
 def test_the_soil_body_and_the_hierarchical_mode_share_one_newton(monkeypatch):
-    from femcoupling.coupling import hierarchical
-    from femcoupling.fem import quadrature, soil_model
+    from femcoupling.fem import model, quadrature, soil_model
     from test_fem_handover import two_region_model
 
-    assert hierarchical.newton_solve is quadrature.newton_solve
+    assert model.newton_solve is quadrature.newton_solve
     assert soil_model.newton_solve is quadrature.newton_solve
     calls = []
     orig = quadrature.newton_solve
@@ -327,7 +326,7 @@ class _ElasticPool:
 
 def _materials():
     """One material of every kind, each with an increment in the measure it declares."""
-    from femcoupling.coupling.hierarchical import ElementPoolMaterial
+    from femcoupling.materials.element_pool import ElementPoolMaterial
     from femcoupling.fem.soil_regions import RegionPoints
     from test_fem_region_element import LinearStandIn
 

@@ -15,7 +15,7 @@ import pytest
 import cpp_dem as dem
 from cpp_dem.build import clumps
 from cpp_dem.build.clumps import ClumpTemplate
-from femcoupling.fem.model import FemModel
+from femcoupling.fem.model import FemSolver
 
 
 # ---- clumps ----------------------------------------------------------------------------------
@@ -235,8 +235,8 @@ def test_a_tensile_footing_load_on_a_cohesionless_soil_says_why():
         m.load_footing(pressure_pa=-20e3, steps=1)
 
 
-class _CreepingStage(FemModel):
-    """A stand-in for SoilModel's stage loop (a FemModel: the load-step loop): Newton converges (slowly: no step growth) only
+class _CreepingStage(FemSolver):
+    """A stand-in for SoilModel's stage loop (a FemSolver: the load-step loop): Newton converges (slowly: no step growth) only
     on steps that end at most halfway to the load factor 0.6, so the stage can creep
     towards 0.6 on ever shorter steps and never reach 1 (a load it cannot carry)."""
 

@@ -4,9 +4,6 @@
   targets and back (secant stiffness and tangent); plain NumPy;
 - :mod:`femcoupling.coupling.twoway`: the coupled loops over element regions: one-way, and
   two-way with the element's stiffness back to its region; the HDF5 handover history;
-- :mod:`femcoupling.coupling.hierarchical`, :mod:`femcoupling.coupling.hierarchical3d`: the
-  hierarchical mode, a DEM element at every quadrature point (plane strain; 3D box and
-  cylinder);
 - :mod:`femcoupling.coupling.relaxation`: the relaxation of coupled iterations (Aitken);
 - :mod:`femcoupling.coupling.status`: how a coupled loop ended (one status from a fixed set,
   with its checks), the exit codes, ``NoiseWarning``;

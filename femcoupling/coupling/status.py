@@ -1,7 +1,7 @@
 """How a coupled loop ended: one status from a fixed set, and what it rests on (issue 37).
 
 Every coupled loop of this package (the two-way region loop, :mod:`femcoupling.coupling.twoway`; the
-hierarchical Newton of :mod:`femcoupling.coupling.hierarchical`; the region mode's Newton in
+hierarchical Newton of :class:`femcoupling.fem.model.FemModel`; the region mode's Newton in
 :class:`femcoupling.fem.soil_model.SoilModel`) ends in exactly one of :data:`STATUSES`:
 
 ``converged``

@@ -7,9 +7,11 @@
   state, one load-step loop), with its parts :mod:`~femcoupling.fem.soil_loading` (the load
   stages), :mod:`~femcoupling.fem.soil_regions` (regions with a material of their own),
   :mod:`~femcoupling.fem.soil_measures` (what it gives out);
-- :mod:`femcoupling.fem.model`: ``FemModel``, what every model (``SoilModel``, the
-  hierarchical models) is on its solver side: the Newton options, the load-step loop, the
-  rollback of a failed step, the run's history, warnings and status;
+- :mod:`femcoupling.fem.model`: ``FemModel``, a body of :mod:`~femcoupling.fem.bodies`
+  (``Rectangle``, ``Box``, ``Cylinder``) with a DEM element at every quadrature point (the
+  hierarchical mode); ``FemSolver``, what every model (``SoilModel``, ``FemModel``) is on
+  its solver side: the Newton options, the load-step loop, the rollback of a failed step,
+  the run's history, warnings and status;
 - :mod:`femcoupling.fem.steps`: what a load step of every model ends in: its record
   (``LoadStep``, the same Newton fields in every model) or ``NewtonFailure`` (the one failure
   type), and the one load-step loop (``load_path``);

@@ -1,6 +1,6 @@
 """gmsh on one MPI rank, its mesh distributed by dolfinx: the meshing step every model of
 the package shares (the reinforced soil body, :mod:`femcoupling.fem.geometry`; the cylinder of
-:mod:`femcoupling.coupling.hierarchical3d`; the toolchain check,
+:mod:`femcoupling.fem.bodies`; the toolchain check,
 :mod:`femcoupling.fem.elastic_block`).
 
 gmsh is imported on first use, in the function that needs it; dolfinx through

@@ -1,12 +1,11 @@
 """The hierarchical FEM under MPI: the mesh split over the ranks, the DEM elements on Dask
 through rank 0 (issue 38, item 5; docs/coupling_mpi.md).
 
-A hierarchical model (:class:`femcoupling.coupling.hierarchical.HierarchicalPlaneStrain`,
-:class:`femcoupling.coupling.hierarchical3d.Hierarchical3D`) given ``comm=MPI.COMM_WORLD`` builds
-its mesh on that communicator: each rank assembles and solves its part (PETSc, SuperLU_DIST's
+A :class:`femcoupling.fem.model.FemModel` (DEM elements at its points, on any body of
+:mod:`femcoupling.fem.bodies`) given ``comm=MPI.COMM_WORLD`` builds its mesh on that communicator: each rank assembles and solves its part (PETSc, SuperLU_DIST's
 parallel LU: ``femcoupling.fem.quadrature.PARALLEL_LU``). The elements stay where they are
 without MPI: in one ``ElementPool`` whose Dask client lives on rank 0 (the other ranks pass
-``pool=None``). Two pieces join the two:
+``elements=None``). Two pieces join the two:
 
 - :class:`PointPartition`: which element each of a rank's quadrature points is. The serial
   model numbers its points (cell, point) in the serial mesh's order; a rank's point is given

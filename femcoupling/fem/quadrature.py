@@ -3,8 +3,8 @@
 Two models solve equilibrium with a stress and a tangent at quadrature points: the FEM soil
 (:class:`femcoupling.fem.soil_model.SoilModel`: elastic, anisotropic elastic and
 Drucker–Prager points, and DEM elements for element regions or cells) and the hierarchical
-FEM x DEM (:class:`femcoupling.coupling.hierarchical.HierarchicalPlaneStrain`: a DEM element at
-every quadrature point). Both use what this module gives:
+FEM x DEM (:class:`femcoupling.fem.model.FemModel`: a DEM element at every quadrature
+point). Both use what this module gives:
 
 :class:`QuadratureMaterial`
     the one exchange of every material: it declares its ``strain_measure`` (the increment
@@ -19,7 +19,7 @@ every quadrature point). Both use what this module gives:
     ``femcoupling.fem.soil_regions.RegionPoints``,
     ``femcoupling.materials.dem_elements.DemRegionMaterial``, the members of a
     ``femcoupling.materials.dem_elements.PoolRegionMaterials`` and
-    ``femcoupling.coupling.hierarchical.ElementPoolMaterial`` implement it.
+    ``femcoupling.materials.element_pool.ElementPoolMaterial`` implement it.
 :class:`QuadratureSystem`
     the dolfinx side: displacement and quadrature spaces, the internal force and Jacobian
     forms of a stress and a tangent at the points, the residual with lifted Dirichlet values,

@@ -51,7 +51,7 @@ from femcoupling.fem.quadrature import (NewtonRules, QuadratureSystem, check_mat
 from femcoupling.fem.soil_loading import LoadingStages
 from femcoupling.fem.soil_measures import SoilMeasures
 from femcoupling.fem.soil_regions import RegionMaterials, RegionPoints
-from femcoupling.fem.model import FemModel
+from femcoupling.fem.model import FemSolver
 from femcoupling.fem.steps import NewtonFailure, StepResult
 from femcoupling.materials.continuum import GeogridLayerMaterial, LinearElastic, mandel_to_tensor
 
@@ -60,7 +60,7 @@ __all__ = ["SoilModel", "StepResult", "NewtonFailure"]
 SQRT2 = math.sqrt(2.0)
 
 
-class SoilModel(RegionMaterials, LoadingStages, SoilMeasures, FemModel):
+class SoilModel(RegionMaterials, LoadingStages, SoilMeasures, FemSolver):
     """A reinforced soil body in dolfinx; see the module doc. Collective on ``comm``.
 
     Args:

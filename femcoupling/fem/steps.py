@@ -4,16 +4,17 @@ failure type).
 
 - :class:`NewtonFailure`: Newton did not converge. Inside a model a failed step is cut
   (halved) and taken again; raised out of a model's stage (``SoilModel``'s loading) or step
-  (the hierarchical models' ``step``), it means the step failed even cut ``max_cuts`` times,
+  (``FemModel.step``), it means the step failed even cut ``max_cuts`` times,
   and its message says where the load stopped and why the last Newton failed.
 - :func:`load_path`: the one load-step loop of every model: a load (a stage of
-  ``SoilModel``, a step of the hierarchical models) in equal increments, each Newton failure
+  ``SoilModel``, a step of ``FemModel``) in equal increments, each Newton failure
   rolled back and the step halved, an easy step growing it back.
 - :class:`LoadStep`: one accepted load step: what Newton did (``newton_iterations``,
   ``residual``, ``status``, ...). Each model's record adds what it loads and measures:
   :class:`StepResult` (``femcoupling.fem.soil_model.SoilModel``: the stage, its load factor,
-  the footing's settlement and pressure) and ``femcoupling.coupling.hierarchical.HierStep``
-  (the hierarchical models: the top displacement, the elements' stresses and timings).
+  the footing's settlement and pressure) and :class:`HierStep`
+  (``femcoupling.fem.model.FemModel``, DEM elements at its points: the load, the elements'
+  stresses and timings).
 
 SI units; a field's unit is in its name or its doc.
 """
@@ -22,6 +23,8 @@ from __future__ import annotations
 
 import dataclasses
 from typing import Any, Callable
+
+import numpy as np
 
 
 class NewtonFailure(RuntimeError):
@@ -143,3 +146,30 @@ class StepResult(LoadStep):
     tol: float = float("nan")
     noise: float = float("nan")
     ceiling: float = float("nan")
+
+
+@dataclasses.dataclass(frozen=True, kw_only=True)
+class HierStep(LoadStep):
+    """One accepted load step of a :class:`femcoupling.fem.model.FemModel` (DEM elements at its
+    points: the hierarchical mode) (the Newton fields:
+    ``femcoupling.fem.steps.LoadStep``; ``residual`` is relative to the internal force scale,
+    ``residual_pa`` is it times the largest element stress: the residual force over the
+    square root of the domain's area): the top displacement, the elements' stresses and the
+    step's timings."""
+
+    load: float  #: the top's displacement (total since the start), m
+    #: the elements' mean Voigt stress (xx, yy, xy; 3D: xx, yy, zz, yz, xz, xy), tension
+    #: positive, Pa
+    mean_stress: np.ndarray
+    element_stresses: np.ndarray  #: (n_cells, ncomp) the element stresses, Pa
+    dem_s: float  #: the DEM seconds (sum over the elements' work), s
+    fem_s: float  #: the FEM seconds (the step's wall time outside the pool's calls), s
+    wall_s: float  #: the step's wall time, s
+    recovered: list  #: the elements rebuilt after a lost worker
+    increments: np.ndarray  #: (n_cells, 3, 3): each element's increment of the step, -
+    #: the noise's residual in Pa (NaN if it was not measured)
+    noise_residual_pa: float = float("nan")
+    #: (n_cells, 3) each element's stress scatter (xx, yy, xy), Pa: the bootstrap of its
+    #: contact network (``DemElement.stress_scatter``), how far a sample of its size is from
+    #: the material's mean
+    element_scatter: np.ndarray | None = None

@@ -1,7 +1,7 @@
 """A plane-strain biaxial test by hierarchical FEM x DEM and by direct DEM of the same grains
 (issue 18, "against direct DEM"; docs/studies/biaxial.md).
 
-- :func:`fem_dem_biaxial`: the rectangle of ``femcoupling.coupling.hierarchical`` with a periodic
+- :func:`fem_dem_biaxial`: a ``femcoupling.fem.model.FemModel`` on a ``Rectangle`` with a periodic
   DEM element per cell, the right side at the confining pressure, the top pushed down in equal
   load steps.
 - :func:`direct_biaxial`: a periodic DEM cell under the same path (x at the pressure, y held,
@@ -51,7 +51,7 @@ class WeakZoneFactory:
 
 def weak_zone(points: np.ndarray, centre, radius: float) -> tuple:
     """The elements whose quadrature point (``points``, m, shape (n, 2): from
-    ``femcoupling.coupling.hierarchical.quadrature_points``) lies within ``radius`` (m) of
+    ``femcoupling.fem.bodies.quadrature_points``) lies within ``radius`` (m) of
     ``centre`` (m): the weaker zone of a ``WeakZoneFactory``. Raises ValueError when none does."""
     d = np.linalg.norm(np.asarray(points, float) - np.asarray(centre, float)[None, :], axis=1)
     k = tuple(int(i) for i in np.flatnonzero(d <= radius))
@@ -73,19 +73,22 @@ def fem_dem_biaxial(pool, *, lx: float, ly: float, nx: int, ny: int, pressure: f
                     strain: float, steps: int, log: Callable | None = print,
                     stop_on_failure: bool = False, **model_kw) -> dict:
     """Runs the hierarchical biaxial (``pool``: one element per cell, 2 nx ny) to the axial
-    ``strain`` (-) in ``steps`` equal load steps; ``model_kw`` go to
-    ``HierarchicalPlaneStrain``. Besides the curve (see the module doc; the stresses are the
+    ``strain`` (-) in ``steps`` equal load steps; ``model_kw`` go to the
+    ``Rectangle`` (its own arguments: ``degree``, ``platens``) or the ``FemModel``. Besides the curve (see the module doc; the stresses are the
     elements' means, which in equilibrium are the boundary tractions), ``iterations``,
     ``residual``, ``converged_on`` per step, ``steps`` (the HierStep of each load step),
-    ``model`` (the HierarchicalPlaneStrain) and ``wall_s``. Prints progress with an ETA
+    ``model`` (the FemModel) and ``wall_s``. Prints progress with an ETA
     through ``log``. A load step that fails (``NewtonFailure``) raises, or with
     ``stop_on_failure`` ends the run there: ``failed`` then gives its axial strain and the
     reason (None for a run that reached ``strain``), and the curve is the steps before."""
-    from femcoupling.coupling.hierarchical import HierarchicalPlaneStrain, NewtonFailure
+    from femcoupling.fem.bodies import Rectangle
+    from femcoupling.fem.model import FemModel, split_options
+    from femcoupling.fem.steps import NewtonFailure
 
     t0 = time.perf_counter()
-    m = HierarchicalPlaneStrain(pool, lx=lx, ly=ly, nx=nx, ny=ny, confining_pa=pressure,
-                                **model_kw)
+    body_kw, model_kw = split_options(Rectangle, model_kw)
+    m = FemModel(Rectangle(lx=lx, ly=ly, nx=nx, ny=ny, confining_pa=pressure, **body_kw),
+                 elements=pool, **model_kw)
     rows, steps_done = [], []
     ev = 0.0
     t1 = time.perf_counter()

@@ -8,7 +8,7 @@ surcharge ``surcharge_pa`` on the rest of the top, smooth sides and bottom, no g
 models start from the isotropic stress q = ``surcharge_pa`` everywhere, and the footing is
 pushed down to the same settlements; both relax to equilibrium at each (quasi-static).
 
-- :func:`fem_dem_footing`: ``femcoupling.coupling.hierarchical.HierarchicalPlaneStrain`` with
+- :func:`fem_dem_footing`: a ``femcoupling.fem.model.FemModel`` on a ``Rectangle`` with
   ``platens="footing"`` (nx by ny cells of triangles, a periodic element at each quadrature
   point: one per P1 triangle, three per P2), the footing's pressure from its reaction.
 - The direct DEM is ``cpp_dem.protocols.footing`` (a box of the grains between smooth walls,
@@ -62,14 +62,17 @@ def fem_dem_footing(pool, *, length: float, depth: float, nx: int, ny: int, foot
     point (2 nx ny, times 3 with ``degree=2`` in ``model_kw``; ``element_factory``),
     ``footing_b`` a multiple of ``length / nx``. The footing is
     pushed to each of ``settlements_m`` (m, increasing) in a load step (cut in halves where
-    Newton fails: ``HierarchicalPlaneStrain.step``). Returns ``settlement_m`` and
+    Newton fails: ``FemModel.step``; ``model_kw``: the ``Rectangle``'s ``degree``, the
+    rest the ``FemModel``'s). Returns ``settlement_m`` and
     ``footing_pressure_pa`` (row 0: zero settlement, the start), ``status`` and
     ``iterations`` per settlement, ``failed`` (None, or the settlement and the reason of a
     step that failed after its cuts: the run ends there, its rows kept), ``model`` and
     ``wall_s``. With ``out``: ``footing_fem_dem.csv`` (a row per settlement, appended and
     flushed as each is reached) and the model's records in ``out/records``."""
     from cpp_dem.protocols.footing import check_settlements
-    from femcoupling.coupling.hierarchical import HierarchicalPlaneStrain, NewtonFailure
+    from femcoupling.fem.bodies import Rectangle
+    from femcoupling.fem.model import FemModel, split_options
+    from femcoupling.fem.steps import NewtonFailure
 
     s_targets = check_settlements(settlements_m, depth)
     t0 = time.perf_counter()
@@ -78,10 +81,10 @@ def fem_dem_footing(pool, *, length: float, depth: float, nx: int, ny: int, foot
     if csv is not None and csv.exists() and not overwrite:
         raise FileExistsError(f"{csv}: holds an earlier run; give a new folder, or "
                               "overwrite=True")
-    m = HierarchicalPlaneStrain(pool, lx=length, ly=depth, nx=nx, ny=ny,
-                                confining_pa=surcharge_pa, platens="footing",
-                                footing_b=footing_b, out=records, overwrite=overwrite,
-                                **model_kw)
+    body_kw, model_kw = split_options(Rectangle, model_kw)
+    m = FemModel(Rectangle(lx=length, ly=depth, nx=nx, ny=ny, confining_pa=surcharge_pa,
+                           platens="footing", footing_b=footing_b, **body_kw),
+                 elements=pool, out=records, overwrite=overwrite, **model_kw)
     rows: list[tuple] = []
     if csv is not None:
         csv.parent.mkdir(parents=True, exist_ok=True)

@@ -4,7 +4,7 @@
 A hierarchical FEM model with :class:`LinearElement` at its quadrature points is an
 isotropic elastic continuum, whose boundary-value problems have closed-form answers: it
 checks the model's mesh, boundary conditions and loads apart from the grains' scatter
-(``femcoupling.hierarchical3d.HierarchicalCylinder``'s triaxial specimen, in its tests). It
+(``femcoupling.fem.model.FemModel`` on a ``Cylinder``: the triaxial specimen, in its tests). It
 runs on an ``ElementPool`` as a ``DemElement`` does (``LinearFactory``).
 
 Stresses are 3 x 3, Pa, tension positive; tangents 6 x 6 in the elements' Voigt order xx, yy,
