@@ -50,7 +50,7 @@ def worker(lu: str, fine_size: float, out: Path) -> None:
     import femcoupling.fem.quadrature as quadrature
     from femcoupling.fem.geometry import GeogridLayer, ReinforcedSoilBody
     from femcoupling.fem.mpi_points import world
-    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.fem.model import FemModel
     from femcoupling.materials.continuum import DruckerPrager, GeogridLayerMaterial
 
     quadrature.PARALLEL_LU = lu
@@ -61,7 +61,7 @@ def worker(lu: str, fine_size: float, out: Path) -> None:
         mesh_size_m=0.4, fine_size_m=fine_size, fine_radius_m=0.3)
     comm.barrier()
     t0 = time.perf_counter()
-    m = SoilModel(body, soil=DruckerPrager(young_pa=30e6, poisson=0.3, cohesion_pa=2e3,
+    m = FemModel(body, soil=DruckerPrager(young_pa=30e6, poisson=0.3, cohesion_pa=2e3,
                                            friction_deg=35.0),
                   layers=[GeogridLayerMaterial(500e3, prestress_n_per_m=10e3)],
                   unit_weight_n_m3=18e3, max_newton=60, comm=comm)

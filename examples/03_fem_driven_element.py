@@ -32,7 +32,7 @@ import numpy as np
 
 from femcoupling.coupling.twoway import one_way
 from femcoupling.fem.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
-from femcoupling.fem.soil_model import SoilModel
+from femcoupling.fem.model import FemModel
 from femcoupling.materials.continuum import DruckerPrager, GeogridLayerMaterial
 from cpp_dem.elements.box import ElementParams, grid_axial_stiffness, run_element
 
@@ -44,7 +44,7 @@ body = ReinforcedSoilBody(
     mesh_size_m=1.0, fine_size_m=0.05 if smoke else 0.025, fine_radius_m=1.0)  # m
 soil = DruckerPrager(young_pa=50e6, poisson=0.3, cohesion_pa=10e3, friction_deg=35.0)
 layer = GeogridLayerMaterial(axial_stiffness_n_per_m=grid_axial_stiffness(p))
-m = SoilModel(body, soil=soil, layers=[layer], unit_weight_n_m3=18e3, newton_rtol=1e-6)
+m = FemModel(body, soil=soil, layers=[layer], unit_weight_n_m3=18e3, newton_rtol=1e-6)
 m.set_geostatic()                                   # K0 state under self-weight
 
 

@@ -5,11 +5,12 @@ with DEM elements, in three subpackages:
   anisotropic elastic, Drucker-Prager with its return mapping, the geogrid layer's band) and
   DEM elements as materials (one for a region, one per cell on the one Dask pool, the
   reinforced band); all behind one interface at quadrature points.
-- :mod:`femcoupling.fem`: the FEM models in dolfinx. ``FemModel`` (``model``) on the bodies
-  of ``bodies`` (rectangle, box, cylinder) with a DEM element at every quadrature point (the
-  hierarchical mode); the reinforced soil body in gmsh with
-  tagged layers and element regions (``geometry``, ``gmsh_mesh``), ``SoilModel``
-  (``soil_model`` and its parts ``soil_loading``, ``soil_regions``, ``soil_measures``), a
+- :mod:`femcoupling.fem`: the FEM model in dolfinx, ``FemModel`` (``model``), one class for
+  every body: the reinforced soil body in gmsh with tagged layers and element regions
+  (``geometry``, ``gmsh_mesh``; the model's part ``soil_body`` and its roles
+  ``soil_loading``, ``soil_regions``, ``soil_measures``), and the rectangle, box and cylinder
+  of ``bodies`` with a DEM element at every quadrature point (``element_body``: the
+  hierarchical mode); the solver side every model shares (``solver``), a
   load step's record and the one failure type of every model (``steps``), the quadrature
   spaces and the one Newton (``quadrature``), points under
   MPI (``mpi_points``), and the toolchain check (``elastic_block``).

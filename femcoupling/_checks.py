@@ -34,7 +34,7 @@ def _pos(name: str, value: Any) -> float:
 #: Cells per h^dim of volume in a uniform mesh of size h (gmsh, algorithm 6 in 2D, Delaunay in
 #: 3D; measured: 11 626 triangles on 2 m x 1 m at 0.02 m, 37 053 tetrahedra on 1 m^3 at 0.05 m).
 _CELLS_PER_SIZE = {2: 2.33, 3: 4.63}
-#: Peak memory per cell of a Drucker-Prager SoilModel with P2 elements (mesh, function
+#: Peak memory per cell of a Drucker-Prager soil body's FemModel with P2 elements (mesh, function
 #: spaces, the quadrature state and the Newton system), bytes, by dim: measured as the growth
 #: of the peak RSS from 11 280 to 44 584 triangles (270 to 703 MiB) and from 4 050 to 17 643
 #: tetrahedra (353 to 1 408 MiB), set_geostatic and two load steps (docs/fem.md).

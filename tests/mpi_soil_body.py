@@ -1,4 +1,4 @@
-"""The reinforced soil body (``femcoupling.fem.soil_model.SoilModel``) under MPI, run by
+"""The reinforced soil body (``femcoupling.fem.model.FemModel`` (the soil body)) under MPI, run by
 tests/test_soil_body_mpi.py as ``mpiexec -n N python tests/mpi_soil_body.py OUT``.
 
 A Drucker-Prager soil (max_newton=60: no step is cut, so every rank count takes the same
@@ -19,7 +19,7 @@ import sys
 def main(out: str) -> None:
     from femcoupling.fem.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
     from femcoupling.fem.mpi_points import world
-    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.fem.model import FemModel
     from femcoupling.materials.continuum import DruckerPrager, GeogridLayerMaterial
 
     comm = world()
@@ -28,7 +28,7 @@ def main(out: str) -> None:
         layers=(GeogridLayer(z_m=1.7, x_min_m=0.0, x_max_m=2.0, thickness_m=0.02),),
         regions=(ElementRegion("el", (0.3, 1.5), 0.2), ElementRegion("b", (0.3, 1.7), 0.2)),
         mesh_size_m=0.4, fine_size_m=0.05, fine_radius_m=0.3)
-    m = SoilModel(body, soil=DruckerPrager(young_pa=30e6, poisson=0.3, cohesion_pa=2e3,
+    m = FemModel(body, soil=DruckerPrager(young_pa=30e6, poisson=0.3, cohesion_pa=2e3,
                                            friction_deg=35.0),
                   layers=[GeogridLayerMaterial(500e3, prestress_n_per_m=10e3)],
                   unit_weight_n_m3=18e3, max_newton=60, comm=comm)

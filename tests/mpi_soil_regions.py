@@ -104,7 +104,7 @@ class StandIn(StandInGroup):
 def main(out: str, dem: bool) -> None:
     from femcoupling.fem.geometry import ElementRegion, ReinforcedSoilBody
     from femcoupling.fem.mpi_points import on_root, world
-    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.fem.model import FemModel
     from femcoupling.materials.continuum import LinearElastic
 
     comm = world()
@@ -112,7 +112,7 @@ def main(out: str, dem: bool) -> None:
                               regions=(ElementRegion("a", (0.25, 2.7), 0.2),
                                        ElementRegion("b", (0.75, 2.4), 0.2)),
                               mesh_size_m=0.6, fine_size_m=0.1)
-    m = SoilModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1,
+    m = FemModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1,
                   comm=comm)
     m.set_geostatic()
     stresses = m.cell_stresses("a")

@@ -130,14 +130,14 @@ def test_homogeneous_field_handed_over_reproduces_the_standalone_element(tmp_pat
 
     from femcoupling.coupling.handover import fem_to_dem
     from femcoupling.fem.geometry import ElementRegion, ReinforcedSoilBody
-    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.fem.model import FemModel
     from femcoupling.materials.continuum import LinearElastic
 
     p_pa, nu = 60e3, 0.3
     body = ReinforcedSoilBody(width_m=1.0, height_m=1.0, footing_half_width_m=1.0,
                               regions=(ElementRegion("e", (0.5, 0.5), 0.1),),
                               mesh_size_m=0.25, fine_size_m=0.05)
-    m = SoilModel(body, soil=LinearElastic(30e6, nu), degree=1)
+    m = FemModel(body, soil=LinearElastic(30e6, nu), degree=1)
     m.set_geostatic()
     m.load_footing(pressure_pa=p_pa, steps=1)
     t = fem_to_dem(m.region_stress("e"))

@@ -227,7 +227,7 @@ def test_a_step_cut_at_the_ceiling_names_the_element_that_moved_most():
     names the rough one first, with how far its points moved at the probe (Pa)."""
     import re
 
-    from femcoupling.fem.soil_model import NewtonFailure
+    from femcoupling.fem.steps import NewtonFailure
     from test_fem_handover import two_region_model
 
     m = two_region_model(("a", "b"))
@@ -251,7 +251,7 @@ def test_region_mode_stall_is_judged_against_the_regions_own_forces():
     above the ceiling (noise_ceiling, 1e-2): the step is not taken. 30 Pa stalls at 4.1e-4 of
     the region's force: taken, as stopped_at_scatter (not converged), its residual in Pa
     too."""
-    from femcoupling.fem.soil_model import NewtonFailure
+    from femcoupling.fem.steps import NewtonFailure
 
     m = _rough_model(2000.0)
     assert m.noise_ceiling == 1e-2

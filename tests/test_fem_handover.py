@@ -74,14 +74,14 @@ def two_region_model(regions=("a", "b")):
     0.3, 18 kN/m^3) under a 1 m footing, element regions a (under the footing) and b (off
     its edge, turned principal axes), in its geostatic state."""
     from femcoupling.fem.geometry import ElementRegion, ReinforcedSoilBody
-    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.fem.model import FemModel
     from femcoupling.materials.continuum import LinearElastic
 
     where = {"a": (0.25, 2.7), "b": (0.75, 2.4)}
     body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5,
                               regions=tuple(ElementRegion(r, where[r], 0.2) for r in regions),
                               mesh_size_m=0.6, fine_size_m=0.06)
-    m = SoilModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1)
+    m = FemModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1)
     m.set_geostatic()
     return m
 
@@ -245,7 +245,7 @@ def test_region_targets_carry_the_tension_of_the_layer_across_the_region():
     little of T_p to the soil it compresses)."""
     from femcoupling.coupling.twoway import region_targets
     from femcoupling.fem.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
-    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.fem.model import FemModel
     from femcoupling.materials.continuum import GeogridLayerMaterial, LinearElastic
 
     body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5,
@@ -254,7 +254,7 @@ def test_region_targets_carry_the_tension_of_the_layer_across_the_region():
                               regions=(ElementRegion("a", (0.25, 2.7), 0.2),
                                        ElementRegion("b", (0.75, 2.4), 0.2)),
                               mesh_size_m=0.6, fine_size_m=0.06)
-    m = SoilModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1,
+    m = FemModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1,
                   layers=[GeogridLayerMaterial(axial_stiffness_n_per_m=3e5,
                                                prestress_n_per_m=2000.0)])
     m.set_geostatic()

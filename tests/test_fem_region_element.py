@@ -1,6 +1,6 @@
 """The hierarchical mode on the reinforced-soil body (issue 18): a DEM element as the
-material of a SoilModel element region, called at every Newton iterate
-(SoilModel.set_region_element, femcoupling.materials.dem_elements.DemRegionMaterial)."""
+material of a FemModel element region (the soil body), called at every Newton iterate
+(FemModel.set_region_element, femcoupling.materials.dem_elements.DemRegionMaterial)."""
 
 from __future__ import annotations
 
@@ -163,13 +163,13 @@ def _cells_model(fine_m: float):
     """The test body's region a alone, meshed at ``fine_m`` there (P1: one quadrature point
     per cell)."""
     from femcoupling.fem.geometry import ElementRegion, ReinforcedSoilBody
-    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.fem.model import FemModel
     from femcoupling.materials.continuum import LinearElastic
 
     body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5,
                               regions=(ElementRegion("a", (0.25, 2.7), 0.2),),
                               mesh_size_m=0.6, fine_size_m=fine_m)
-    m = SoilModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1)
+    m = FemModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1)
     m.set_geostatic()
     return m
 

@@ -1,4 +1,4 @@
-"""Verification of the continuum side (femcoupling.SoilModel) against analytic solutions.
+"""Verification of the continuum side (femcoupling.fem.model.FemModel on the soil body) against analytic solutions.
 
 - Flamant/Boussinesq strip load on an elastic half-space (plane strain): on the centreline
   sigma_z(z) = -(p / pi) (alpha + sin alpha), alpha = 2 atan(b / z). Tolerance 2 % at
@@ -22,7 +22,7 @@ import pytest
 
 from femcoupling import FemInputError
 from femcoupling.fem.geometry import ElementRegion, ReinforcedSoilBody
-from femcoupling.fem.soil_model import SoilModel
+from femcoupling.fem.model import FemModel
 from femcoupling.materials.continuum import (DruckerPrager, LinearElastic, drucker_prager_return,
                                              mandel_identity)
 
@@ -36,11 +36,11 @@ def flamant_sigma_z(z_m: float) -> float:
     return -(P_PA / math.pi) * (a + math.sin(a))
 
 
-def strip_model(fine: float = 0.1, coarse: float = 3.0, size: float = 20.0) -> SoilModel:
+def strip_model(fine: float = 0.1, coarse: float = 3.0, size: float = 20.0) -> FemModel:
     body = ReinforcedSoilBody(width_m=size * B_M, height_m=size * B_M, footing_half_width_m=B_M,
                               regions=(ElementRegion("under", (0.5, size * B_M - 1.0), 0.5),),
                               mesh_size_m=coarse, fine_size_m=fine, fine_radius_m=3 * B_M)
-    m = SoilModel(body, soil=LinearElastic(10e6, 0.3))
+    m = FemModel(body, soil=LinearElastic(10e6, 0.3))
     m.set_geostatic()
     m.load_footing(pressure_pa=P_PA, steps=1)
     return m
@@ -73,7 +73,7 @@ def test_prandtl_limit_load_within_5_percent():
     assert nc == pytest.approx(30.14, abs=0.01)
     body = ReinforcedSoilBody(width_m=12.0, height_m=6.0, footing_half_width_m=1.0,
                               mesh_size_m=1.0, fine_size_m=0.05, fine_radius_m=0.5)
-    m = SoilModel(body, soil=DruckerPrager(young_pa=1e8, poisson=0.3, cohesion_pa=c,
+    m = FemModel(body, soil=DruckerPrager(young_pa=1e8, poisson=0.3, cohesion_pa=c,
                                            friction_deg=30.0))
     m.set_geostatic()
     steps = m.load_footing(settlement_m=0.025, steps=15)
@@ -145,7 +145,7 @@ def test_point_stress_on_p1_is_the_cells_stress():
     returned NaN and inf)."""
     body = ReinforcedSoilBody(width_m=4.0, height_m=3.0, footing_half_width_m=0.5,
                               mesh_size_m=0.6, fine_size_m=0.1)
-    m = SoilModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1)
+    m = FemModel(body, soil=LinearElastic(50e6, 0.3), unit_weight_n_m3=18e3, degree=1)
     m.set_geostatic()
     m.load_footing(pressure_pa=100e3, steps=1)
     import dolfinx.geometry as dg

@@ -340,7 +340,7 @@ def test_the_smoke_gives_load_settlement_for_each_variant(case_smoke):
             assert np.all(moved <= 0.011 * rise)
             # per step, the residual accepted, the noise measured at its stall and the
             # ceiling, on one scale (issue 62 item 4): a step taken within the noise is
-            # within twice it (SoilModel.noise_factor) and the ceiling
+            # within twice it (FemModel.noise_factor) and the ceiling
             n = len(run["step_statuses"])
             assert len(run["step_noise"]) == len(run["step_ceilings"]) == n
             for st, r, noise, ceil in zip(run["step_statuses"], run["step_residuals"],

@@ -337,11 +337,17 @@ def test_one_model_on_every_body_refuses_what_is_not_one():
     from femcoupling.fem.bodies import Box, Cylinder
     from femcoupling.fem.geometry import ReinforcedSoilBody
 
-    with pytest.raises(FemInputError, match="not a body of femcoupling.fem.bodies .* no mesh"):
+    with pytest.raises(FemInputError, match="body=<object .*: a femcoupling.fem.geometry.Reinf"):
         FemModel(object(), elements=None)
     soil = ReinforcedSoilBody(width_m=2.0, height_m=1.0, footing_half_width_m=0.5)
-    with pytest.raises(FemInputError, match="the reinforced soil body is SoilModel's"):
+    with pytest.raises(FemInputError, match="elements: not an argument of FemModel on the "
+                                            "reinforced soil body .it is a body of femcoupling"):
         FemModel(soil, elements=None)
+    with pytest.raises(FemInputError, match="soil: not an argument of FemModel on a Rectangle "
+                                            ".it is the reinforced soil body's.; its own: "):
+        FemModel(Rectangle(lx=1.0, ly=1.0, nx=1, ny=1), elements=None, soil=None)
+    with pytest.raises(FemInputError, match="elements: missing"):
+        FemModel(Rectangle(lx=1.0, ly=1.0, nx=1, ny=1))
     with pytest.raises(FemInputError, match=r"elements=None: an ElementPool with one element "
                                             r"per quadrature point \(8 quadrature points"):
         FemModel(Rectangle(lx=0.02, ly=0.02, nx=2, ny=2, homogeneous=True), elements=None)

@@ -87,9 +87,9 @@ def test_no_cut_at_all_fails_at_once():
 
 
 def test_every_fem_model_steps_through_the_one_loop():
-    """No model of femcoupling halves its steps by a loop of its own: every model is a
-    FemSolver, whose _load (the stage loop of SoilModel, the step of FemModel on every body:
-    rectangle, box, cylinder) is the one call of load_path."""
+    """No model of femcoupling halves its steps by a loop of its own: the one model is a
+    FemSolver, whose _load (the soil body's stages, the step of every body of
+    femcoupling.fem.bodies: rectangle, box, cylinder) is the one call of load_path."""
     calls, own = set(), []
     for path in sorted((ROOT / "femcoupling").rglob("*.py")):
         tree = ast.parse(path.read_text())
@@ -103,23 +103,44 @@ def test_every_fem_model_steps_through_the_one_loop():
             if isinstance(node, ast.BinOp) and isinstance(node.op, ast.Sub) \
                     and isinstance(node.left, ast.Name) and node.left.id == "max_cuts":
                 own.append(f"{path.name}:{node.lineno}")
-    assert calls == {"femcoupling/fem/model.py"}, calls  # (FemSolver._load)
+    assert calls == {"femcoupling/fem/solver.py"}, calls  # (FemSolver._load)
     assert own == [], own
     from femcoupling.fem.model import FemModel, FemSolver
-    from femcoupling.fem.soil_model import SoilModel
 
-    for cls in (SoilModel, FemModel):
-        assert issubclass(cls, FemSolver), cls
-        assert cls._load is FemSolver._load and cls.status is FemSolver.status, cls
+    assert FemModel._load is FemSolver._load and FemModel.status is FemSolver.status
+
+
+def test_one_model_class_solves_every_body():
+    """Issue 61: one class solves the continuum. FemModel is the only FemSolver of the
+    package, and every class that builds a QuadratureSystem (the spaces, forms and solver)
+    is one of its parts."""
+    import importlib
+    import inspect
+    import pkgutil
+
+    import femcoupling
+    from femcoupling.fem.model import FemModel, FemSolver
+
+    solvers, builders = set(), set()
+    for info in pkgutil.walk_packages(femcoupling.__path__, "femcoupling."):
+        mod = importlib.import_module(info.name)
+        for _, cls in inspect.getmembers(mod, inspect.isclass):
+            if cls.__module__ != mod.__name__:
+                continue
+            if issubclass(cls, FemSolver) and cls is not FemSolver:
+                solvers.add(cls)
+            if "QuadratureSystem(" in inspect.getsource(cls):
+                builders.add(cls)
+    assert solvers == {FemModel}, solvers
+    assert builders and all(c in FemModel.__mro__ for c in builders), builders
 
 
 def test_every_footing_model_measures_its_footing_by_the_same_names():
-    """The soil body and the hierarchical model's footing give the footing's pressure and
-    settlement under one name each (SI units in the names)."""
+    """The soil body and a Rectangle with a footing give the footing's pressure and
+    settlement under one name each (SI units in the names), the same methods of the one
+    model."""
     from femcoupling.fem.model import FemModel
-    from femcoupling.fem.soil_model import SoilModel
 
-    for cls in (SoilModel, FemModel):
-        assert callable(getattr(cls, "footing_pressure_pa", None)), cls
-        assert callable(getattr(cls, "footing_settlement_m", None)), cls
-        assert not hasattr(cls, "footing_pressure"), cls
+    assert callable(getattr(FemModel, "footing_pressure_pa", None))
+    assert callable(getattr(FemModel, "footing_settlement_m", None))
+    assert not hasattr(FemModel, "footing_pressure")

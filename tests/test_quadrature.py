@@ -262,11 +262,11 @@ def test_at_a_second_stall_the_noise_is_at_least_the_spread_of_the_iterates_draw
 
 
 def test_the_soil_body_and_the_hierarchical_mode_share_one_newton(monkeypatch):
-    from femcoupling.fem import model, quadrature, soil_model
+    from femcoupling.fem import element_body, quadrature, soil_body
     from test_fem_handover import two_region_model
 
-    assert model.newton_solve is quadrature.newton_solve
-    assert soil_model.newton_solve is quadrature.newton_solve
+    assert element_body.newton_solve is quadrature.newton_solve
+    assert soil_body.newton_solve is quadrature.newton_solve
     calls = []
     orig = quadrature.newton_solve
 
@@ -274,7 +274,7 @@ def test_the_soil_body_and_the_hierarchical_mode_share_one_newton(monkeypatch):
         calls.append(type(problem).__name__)
         return orig(problem, rules, **kw)
 
-    monkeypatch.setattr(soil_model, "newton_solve", counting)  # (the name SoilModel calls)
+    monkeypatch.setattr(soil_body, "newton_solve", counting)  # (the name the soil body calls)
     m = two_region_model(("a",))
     calls.clear()  # (the model's K0 stage)
     (r,) = m.load_footing(pressure_pa=10e3, steps=1)

@@ -214,11 +214,11 @@ def test_fem_layers_that_overlap_or_coincide_are_refused_naming_both():
 def test_a_tensile_footing_load_on_a_cohesionless_soil_says_why():
     pytest.importorskip("dolfinx_solver")  # the FEM stack, as tests/test_fem_dem_biaxial.py
     from femcoupling import FemInputError
-    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.fem.model import FemModel
     from femcoupling.materials.continuum import DruckerPrager
 
     body = _body(mesh_size_m=1.0, fine_size_m=0.1)
-    m = SoilModel(body, soil=DruckerPrager(young_pa=1e8, poisson=0.3, cohesion_pa=0.0,
+    m = FemModel(body, soil=DruckerPrager(young_pa=1e8, poisson=0.3, cohesion_pa=0.0,
                                            friction_deg=30.0),
                   unit_weight_n_m3=18e3, degree=1)
     m.set_geostatic()
@@ -236,7 +236,7 @@ def test_a_tensile_footing_load_on_a_cohesionless_soil_says_why():
 
 
 class _CreepingStage(FemSolver):
-    """A stand-in for SoilModel's stage loop (a FemSolver: the load-step loop): Newton converges (slowly: no step growth) only
+    """A stand-in for the soil body's stage loop (a FemSolver: the load-step loop): Newton converges (slowly: no step growth) only
     on steps that end at most halfway to the load factor 0.6, so the stage can creep
     towards 0.6 on ever shorter steps and never reach 1 (a load it cannot carry)."""
 
@@ -276,13 +276,14 @@ class _CreepingStage(FemSolver):
 
 def test_a_stage_never_cuts_its_step_below_the_nominal_over_2_to_the_max_cuts():
     pytest.importorskip("dolfinx_solver")
-    from femcoupling.fem.soil_model import NewtonFailure, SoilModel
+    from femcoupling.fem.model import FemModel
+    from femcoupling.fem.steps import NewtonFailure
 
     fake = _CreepingStage()
     with pytest.raises(NewtonFailure, match=r"Newton failed at load factor 0.5\d+ with the "
                        r"step cut 6 times \(to 1/64 of its nominal size\); the stage stopped "
                        r"at load factor 0.5\d+"):
-        SoilModel._run_stage(fake, "footing", fake.apply, 4)
+        FemModel._run_stage(fake, "footing", fake.apply, 4)
     assert 0.5 < fake.lf_done < 0.6
     assert fake.lf == fake.lf_done  # the load is put back where the stage stopped
     assert fake.trials < 100
@@ -294,12 +295,13 @@ def test_a_flexible_load_the_soil_cannot_carry_stops_and_says_so():
     stopped after 60 s); now it stops at the step floor, says how far it got, and leaves the
     model at its last converged state, from which a settlement can push further."""
     pytest.importorskip("dolfinx_solver")
-    from femcoupling.fem.soil_model import NewtonFailure, SoilModel
+    from femcoupling.fem.model import FemModel
+    from femcoupling.fem.steps import NewtonFailure
     from femcoupling.materials.continuum import DruckerPrager
 
     body = _body(width_m=3.0, height_m=2.0, mesh_size_m=0.5, fine_size_m=0.1,
                  fine_radius_m=0.3)
-    m = SoilModel(body, soil=DruckerPrager(young_pa=30e6, poisson=0.3, cohesion_pa=2e3,
+    m = FemModel(body, soil=DruckerPrager(young_pa=30e6, poisson=0.3, cohesion_pa=2e3,
                                            friction_deg=35.0), unit_weight_n_m3=18e3)
     m.set_geostatic()
     with pytest.raises(NewtonFailure, match=r"step cut 6 times .* the footing carries "

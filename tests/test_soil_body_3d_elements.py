@@ -3,7 +3,7 @@
 prestressed geogrid layer, and a DEM element at every cell of a cube under the footing, across
 the layer.
 
-The same code path as in plane strain (SoilModel.set_cell_elements), with every strain
+The same code path as in plane strain (FemModel.set_cell_elements), with every strain
 component: verified first with linear stand-ins, which must be exactly the material of their
 stiffness, then run with dense periodic elements on Dask."""
 
@@ -22,7 +22,7 @@ pytest.importorskip("dolfinx_solver")
 
 def _body_3d(fine_m: float):
     from femcoupling.fem.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
-    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.fem.model import FemModel
     from femcoupling.materials.continuum import DruckerPrager, GeogridLayerMaterial
 
     body = ReinforcedSoilBody(
@@ -30,7 +30,7 @@ def _body_3d(fine_m: float):
         layers=(GeogridLayer(z_m=0.9, x_min_m=0.0, x_max_m=1.0, thickness_m=0.02),),
         regions=(ElementRegion("zone", (0.1, 0.15, 0.85), 0.2),),
         mesh_size_m=0.3, fine_size_m=fine_m)
-    m = SoilModel(body, soil=DruckerPrager(young_pa=20e6, poisson=0.3, cohesion_pa=2e3,
+    m = FemModel(body, soil=DruckerPrager(young_pa=20e6, poisson=0.3, cohesion_pa=2e3,
                                            friction_deg=35.0),
                   layers=[GeogridLayerMaterial(500e3, prestress_n_per_m=2e3)],
                   unit_weight_n_m3=18e3, degree=1)

@@ -27,10 +27,10 @@ def test_a_footing_length_is_checked_by_name():
 
 def _model(**kw):
     pytest.importorskip("dolfinx_solver")
-    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.fem.model import FemModel
     from femcoupling.materials.continuum import LinearElastic
 
-    return SoilModel(ReinforcedSoilBody(**KW, **kw),
+    return FemModel(ReinforcedSoilBody(**KW, **kw),
                      soil=LinearElastic(young_pa=20e6, poisson=0.3))
 
 

@@ -1,4 +1,4 @@
-"""The reinforced soil body (femcoupling.fem.soil_model.SoilModel) on 2 MPI ranks is the serial
+"""The reinforced soil body (femcoupling.fem.model.FemModel) on 2 MPI ranks is the serial
 body (docs/fem.md, "Verification"; docs/coupling_mpi.md, "Region elements under MPI").
 
 - tests/mpi_soil_body.py: a Drucker-Prager soil with its self-weight, a prestressed geogrid

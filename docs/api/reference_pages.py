@@ -19,7 +19,9 @@ A class bound from C++ has its members on the compiled class, which the Python p
 re-exports or subclasses (``cpp_dem.Scene`` derives from ``cpp_dem._core.Scene``). The modules
 listed under ``api_reference: bound_modules`` are those compiled ones: a page holding a class
 of theirs, or a subclass of one, lists the inherited members as well (mkdocstrings'
-``inherited_members``), each with its docstring.
+``inherited_members``), each with its docstring. So does a page holding a class composed of
+parts, the modules listed under ``api_reference: part_modules`` (``femcoupling.fem.model.
+FemModel`` and the modules of its parts).
 """
 
 from __future__ import annotations
@@ -109,14 +111,15 @@ def _settings(config: MkDocsConfig) -> tuple[dict[str, Path], set[str], str, set
     base = Path(config.config_file_path).parent
     packages = {str(k): (base / str(v)).resolve() for k, v in ref["packages"].items()}
     lists = {}
-    for key in ("private_pages", "bound_modules"):
+    for key in ("private_pages", "bound_modules", "part_modules"):
         value = ref.get(key) or []
         if not isinstance(value, list):
             raise PluginError(f"mkdocs.yml: extra: api_reference: {key}={value!r}: must be a "
                               "list of module names")
         lists[key] = set(map(str, value))
     folder = str(ref.get("folder") or "").strip("/")
-    return packages, lists["private_pages"], folder, lists["bound_modules"]
+    return (packages, lists["private_pages"], folder,
+            lists["bound_modules"] | lists["part_modules"])
 
 
 def on_config(config: MkDocsConfig) -> MkDocsConfig:

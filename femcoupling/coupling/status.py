@@ -2,7 +2,7 @@
 
 Every coupled loop of this package (the two-way region loop, :mod:`femcoupling.coupling.twoway`; the
 hierarchical Newton of :class:`femcoupling.fem.model.FemModel`; the region mode's Newton in
-:class:`femcoupling.fem.soil_model.SoilModel`) ends in exactly one of :data:`STATUSES`:
+:class:`femcoupling.fem.model.FemModel`) ends in exactly one of :data:`STATUSES`:
 
 ``converged``
     every check held: the tolerance was met, the principal axes of the FEM stress are within
@@ -246,7 +246,7 @@ def judge_steps(steps, *, dem_fem_strain_ratio: float = math.nan, walled: bool =
                 max_strain_ratio: float = 2.0) -> CouplingStatus:
     """The status of a region coupled inside the FEM's Newton (the region mode's hierarchical
     load stage) over its accepted load ``steps`` (each with ``status``, ``residual`` and
-    ``tol``, as ``femcoupling.fem.soil_model.StepResult``): "stalled" where a check of the
+    ``tol``, as ``femcoupling.fem.steps.StepResult``): "stalled" where a check of the
     coupled state fails (the element's strain not within [1 / ``max_strain_ratio``,
     ``max_strain_ratio``] of its region's or, for a ``walled`` element, the axes past
     ``max_rotation_deg``; or a step taken at a stall); else "stopped_at_scatter" where a step

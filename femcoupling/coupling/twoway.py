@@ -348,10 +348,10 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
             max_strain_ratio: float = 2.0,
             history_names: Sequence[str] | None = None,
             stiffness: str = "tangent", client: Any = None) -> TwoWayResult:
-    """The two-way loop (module doc). ``model`` is a SoilModel in its initial state.
+    """The two-way loop (module doc). ``model`` is a FemModel of the soil body in its initial state.
 
     Args:
-        model: :class:`femcoupling.fem.soil_model.SoilModel` after its initial stages.
+        model: :class:`femcoupling.fem.model.FemModel` after its initial stages.
         regions: element region names coupled.
         load: ``load(model)`` applies the load stage from the initial state.
         element_runner: runs one DEM element (see module doc).

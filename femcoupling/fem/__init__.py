@@ -3,13 +3,14 @@
 - :mod:`femcoupling.fem.geometry`: the reinforced soil body (2D or 3D) in gmsh, its tagged
   layers and element regions; :mod:`femcoupling.fem.gmsh_mesh`: gmsh on one rank, the mesh
   distributed by dolfinx;
-- :mod:`femcoupling.fem.soil_model`: ``SoilModel``, the soil body's model (spaces, material
-  state, one load-step loop), with its parts :mod:`~femcoupling.fem.soil_loading` (the load
-  stages), :mod:`~femcoupling.fem.soil_regions` (regions with a material of their own),
-  :mod:`~femcoupling.fem.soil_measures` (what it gives out);
-- :mod:`femcoupling.fem.model`: ``FemModel``, a body of :mod:`~femcoupling.fem.bodies`
+- :mod:`femcoupling.fem.model`: ``FemModel``, the one model: a body with materials at its
+  quadrature points. Its parts: :mod:`~femcoupling.fem.soil_body` for the reinforced soil
+  body (spaces, material state, Newton), with its roles :mod:`~femcoupling.fem.soil_loading`
+  (the load stages), :mod:`~femcoupling.fem.soil_regions` (regions with a material of their
+  own) and :mod:`~femcoupling.fem.soil_measures` (what it gives out);
+  :mod:`~femcoupling.fem.element_body` for a body of :mod:`~femcoupling.fem.bodies`
   (``Rectangle``, ``Box``, ``Cylinder``) with a DEM element at every quadrature point (the
-  hierarchical mode); ``FemSolver``, what every model (``SoilModel``, ``FemModel``) is on
+  hierarchical mode); :mod:`~femcoupling.fem.solver` (``FemSolver``), what every model is on
   its solver side: the Newton options, the load-step loop, the rollback of a failed step,
   the run's history, warnings and status;
 - :mod:`femcoupling.fem.steps`: what a load step of every model ends in: its record

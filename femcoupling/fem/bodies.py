@@ -43,6 +43,7 @@ lengths m.
 
 from __future__ import annotations
 
+import inspect
 import itertools
 import math
 
@@ -109,7 +110,17 @@ def _cells_count(**values) -> None:
             raise FemInputError(f"{name}={v!r}: must be an integer >= 1")
 
 
-class Rectangle:
+class _Body:
+    """What every body shares: its repr from its constructor's arguments (each kept under
+    its own name)."""
+
+    def __repr__(self) -> str:
+        names = inspect.signature(type(self)).parameters
+        return f"{type(self).__name__}(" + ", ".join(
+            f"{k}={getattr(self, k)!r}" for k in names) + ")"
+
+
+class Rectangle(_Body):
     """A plane-strain rectangle (module doc). ``confining_pa``: Pa, compression positive
     (None with smooth platens: the right is moved instead); ``footing_b``: the footing's half
     width, m (``platens="footing"`` only, on a mesh line)."""
@@ -159,12 +170,6 @@ class Rectangle:
         if abs(cells - round(cells)) > 1e-9 * nx:
             raise FemInputError(f"footing_b={footing_b!r}: must end on a mesh line, a multiple "
                                 f"of lx / nx = {lx / nx:g} m (the footing's edge is a node)")
-
-    def __repr__(self) -> str:
-        return (f"Rectangle(lx={self.lx!r}, ly={self.ly!r}, nx={self.nx}, ny={self.ny}, "
-                f"degree={self.degree}, platens={self.platens!r}, "
-                f"confining_pa={self.confining_pa!r}, homogeneous={self.homogeneous}, "
-                f"footing_b={self.footing_b!r})")
 
     # ---- the model's hooks ---------------------------------------------------------------
     def mesh(self, fx, comm):
@@ -297,7 +302,7 @@ class Rectangle:
                                 f"platens={self.platens!r})")
 
 
-class Box:
+class Box(_Body):
     """A box of tetrahedra (module doc). ``confining_pa``: Pa, compression positive (the
     triaxial test's; None only with ``homogeneous=True``)."""
 
@@ -320,11 +325,6 @@ class Box:
             raise FemInputError("confining_pa=None: a triaxial test needs the confining "
                                 "pressure (Pa, compression positive), or homogeneous=True")
         self.homogeneous, self.confining_pa = homogeneous, confining_pa
-
-    def __repr__(self) -> str:
-        return (f"Box(lx={self.lx!r}, ly={self.ly!r}, lz={self.lz!r}, nx={self.nx}, "
-                f"ny={self.ny}, nz={self.nz}, homogeneous={self.homogeneous}, "
-                f"confining_pa={self.confining_pa!r})")
 
     # ---- the geometry (the hooks a body of another shape replaces) -------------------------
     def mesh(self, fx, comm):
@@ -529,12 +529,6 @@ class Cylinder(Box):
         self.lx = self.ly = self.radius_m
         self.lz = self.height_m
         self._options(homogeneous, confining_pa)
-
-    def __repr__(self) -> str:
-        return (f"Cylinder(radius_m={self.radius_m!r}, height_m={self.height_m!r}, "
-                f"size_m={self.size_m!r}, platens={self.platens!r}, "
-                f"section={self.section!r}, homogeneous={self.homogeneous}, "
-                f"confining_pa={self.confining_pa!r})")
 
     def mesh(self, fx, comm):
         mesh, self._facets = _cylinder_mesh(fx, self.radius_m, self.height_m, self.size_m,

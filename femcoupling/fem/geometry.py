@@ -68,7 +68,7 @@ class GeogridLayer:
         z_m: elevation of the layer's mid-plane, m (0 < z_m < height).
         x_min_m, x_max_m: horizontal extent, m.
         thickness_m: band thickness t, m; the layer's cells get Young's modulus J / t
-            (J the geogrid's axial stiffness, N/m) in :mod:`femcoupling.fem.soil_model`.
+            (J the geogrid's axial stiffness, N/m) in :mod:`femcoupling.fem.soil_body`.
         name: label used in reports and outputs.
     """
 
@@ -134,7 +134,7 @@ class ReinforcedSoilBody:
         max_cells: the most cells the mesh may have (estimated before gmsh meshes:
             :meth:`estimated_cells`); a body above it is refused. None (the default) is
             900 000 in 2D and 150 000 in 3D: about 12 GiB each for a Drucker-Prager
-            :class:`~femcoupling.fem.soil_model.SoilModel` with P2 elements (13 KiB per
+            :class:`~femcoupling.fem.model.FemModel` with P2 elements (13 KiB per
             triangle, 79 KiB per tetrahedron measured, docs/fem.md), half of a 24 GiB
             machine; raise it to mesh more on a bigger one.
 

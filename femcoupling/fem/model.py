@@ -1,10 +1,28 @@
-"""The FEM model: :class:`FemModel`, a body with materials at its quadrature points, and
-:class:`FemSolver`, the solver side every model shares.
+"""The FEM model of the package: :class:`FemModel`, one class for every body, with materials
+at its quadrature points (docs/fem.md, docs/coupling_hierarchical.md).
 
-**FemModel** (docs/coupling_hierarchical.md) solves a body of
-:mod:`femcoupling.fem.bodies` (``Rectangle``: plane strain with smooth, rough or footing
-platens; ``Box``; ``Cylinder``), which chooses the mesh, the boundary conditions and what a
-step moves, with a DEM element at every quadrature point (``elements``: an ``ElementPool``
+The body chooses the mesh, the boundary conditions and how the model is loaded:
+
+- the reinforced soil body (:class:`femcoupling.fem.geometry.ReinforcedSoilBody`, plane
+  strain or 3D, with geogrid layers and element regions): continuum materials at its points
+  (``soil=``, ``layers=``, ``region_materials=``; DEM elements for a region or each of its
+  cells), loaded by its stages (``set_geostatic``, ``apply_prestress``, ``load_footing``,
+  ``load_footing_to_pressure``); the part :class:`femcoupling.fem.soil_body.SoilPart` and its
+  roles (:mod:`~femcoupling.fem.soil_loading`, :mod:`~femcoupling.fem.soil_regions`,
+  :mod:`~femcoupling.fem.soil_measures`);
+- a body of :mod:`femcoupling.fem.bodies` (``Rectangle``: plane strain with smooth, rough or
+  footing platens; ``Box``; ``Cylinder``) with a DEM element at every quadrature point
+  (``elements=``), loaded by :meth:`FemModel.step`: the hierarchical mode, below; the part
+  :class:`femcoupling.fem.element_body.ElementPart`.
+
+A method of one kind of body called on a model of the other is refused by name
+(``FemInputError``). Every model shares the solver side
+(:class:`femcoupling.fem.solver.FemSolver`): the Newton options, the one load-step loop, the
+rollback, ``history``, ``warnings`` and ``status``; and the one Newton
+(:func:`femcoupling.fem.quadrature.newton_solve`).
+
+**The hierarchical mode.** A body of :mod:`femcoupling.fem.bodies` with a DEM element at every
+quadrature point (``elements``: an ``ElementPool``
 with one element per point; point k is cell k // nq, point k % nq): the hierarchical mode. The
 elements are the points' material
 (:class:`femcoupling.materials.element_pool.ElementPoolMaterial`, whose strain measure is the
@@ -29,49 +47,35 @@ the internal force scale (the largest element stress times the body's ``scale_le
 square root of the area in 2D, the volume to the power 2/3 in 3D) and also given in stress
 units (``HierStep.residual_pa``, Pa). Newton and its rules are
 :func:`femcoupling.fem.quadrature.newton_solve`, the soil body's
-(:class:`femcoupling.fem.soil_model.SoilModel`) too.
+(:class:`femcoupling.fem.model.FemModel`) too.
 
 Stresses are tension positive, Pa. The FEM is serial, or, with ``comm`` (an mpi4py
 communicator, ``mpiexec -n N``), split over its ranks with the elements' pool on rank 0
 (``elements=None`` on the others; :mod:`femcoupling.fem.mpi_points`): element k is the same
 place on any number of ranks. Records (``out=DIR``):
 :class:`femcoupling.coupling.records.ElementRecords`.
-
-**FemSolver** holds what every model (``FemModel``; the reinforced soil body's
-``SoilModel``) shares:
-
-- the Newton options (``newton_rtol``, ``max_newton``, ``noise_factor``, ``noise_ceiling``)
-  that :func:`femcoupling.fem.quadrature.newton_solve` applies;
-- the load-step loop (:meth:`FemSolver._load`: :func:`femcoupling.fem.steps.load_path`) and
-  the rollback of a failed step (:meth:`FemSolver._rollback`);
-- the record of the run: ``history`` (one :class:`~femcoupling.fem.steps.LoadStep` per
-  accepted step), ``warnings`` (each also given as a
-  :class:`~femcoupling.coupling.status.NoiseWarning`) and :attr:`FemSolver.status`.
 """
 
 from __future__ import annotations
 
 import inspect
-import math
-import time
-import warnings as _warnings
-from typing import Any, Callable
 
-import numpy as np
-
-from femcoupling import _dolfinx
 from femcoupling._checks import FemInputError
-from femcoupling.coupling.records import ElementRecords
-from femcoupling.coupling.relaxation import check_relaxation
-from femcoupling.coupling.status import NoiseWarning, worst
-from femcoupling.fem.bodies import point_coordinates
-from femcoupling.fem.mpi_points import PointPartition, RootMaterial, bcast_from_root, check_on_root
-from femcoupling.fem.quadrature import (NewtonRules, QuadratureSystem, check_material, lu_package,
-                                        newton_solve)
-from femcoupling.fem.steps import HierStep, LoadStep, load_path
-from femcoupling.materials.element_pool import TANGENTS, ElementPoolMaterial
+from femcoupling.fem import geometry as geo
+from femcoupling.fem.element_body import ElementPart
+from femcoupling.fem.soil_body import SoilPart
+from femcoupling.fem.soil_loading import LoadingStages
+from femcoupling.fem.soil_measures import SoilMeasures
+from femcoupling.fem.soil_regions import RegionMaterials
+from femcoupling.fem.solver import FemSolver
 
 __all__ = ["FemModel", "FemSolver", "split_options"]
+
+#: the keyword arguments of each kind of body (``FemModel``'s others are refused with it)
+_SOIL_ARGS = ("soil", "layers", "region_materials", "unit_weight_n_m3", "degree", "max_cuts")
+_ELEMENT_ARGS = ("elements", "tangent", "strain_kw", "convergence", "relaxation",
+                 "noise_factor", "noise_ceiling", "verbose", "out", "overwrite")
+_BODY_HOOKS = ("mesh", "bcs", "loads", "target", "apply", "scale_length")
 
 
 def split_options(body_type, options: dict) -> tuple[dict, dict]:
@@ -83,425 +87,109 @@ def split_options(body_type, options: dict) -> tuple[dict, dict]:
             {k: v for k, v in options.items() if k not in names})
 
 
-class FemSolver:
-    """The solver side of every model; see the module doc."""
-
-    #: whether this process gives the run's warnings as NoiseWarning (a FemModel under MPI:
-    #: rank 0 only; every warning is in ``warnings`` on every rank)
-    _warns_here = True
-
-    def _solver_options(self, *, newton_rtol: float, max_newton: int, noise_factor: float,
-                        noise_ceiling: float) -> None:
-        """The Newton options (checked by the subclass) and an empty record of the run."""
-        self.newton_rtol, self.max_newton = newton_rtol, max_newton
-        self.noise_factor, self.noise_ceiling = float(noise_factor), float(noise_ceiling)
-        #: one record per accepted load step, in order
-        self.history: list = []
-        #: every warning of the run (also given as ``NoiseWarning``), in order
-        self.warnings: list[str] = []
-
-    @property
-    def status(self) -> str:
-        """The run's status so far: the worst of its accepted steps' ("converged" before
-        any; :func:`femcoupling.coupling.status.worst`). A step that could not be accepted
-        raised ``NewtonFailure``: the run failed."""
-        return worst(r.status for r in self.history)
-
-    def _reject_points(self) -> None:
-        """The quadrature points' materials back at their accepted state (the soil body's
-        materials hold nothing beyond their next trial: nothing to do)."""
-
-    def _rollback(self) -> None:
-        """Back to the last accepted step: the points' materials, and u to u_n."""
-        self._reject_points()
-        self.u.x.array[:] = self.u_n.x.array
-        self.u.x.scatter_forward()
-
-    def _load(self, take: Callable[[float], LoadStep], restore: Callable[[float], None], *,
-              steps: int, max_cuts: int, where: str,
-              accepted: Callable[[Any], None] | None = None) -> list:
-        """A load from load factor 0 to 1 in ``steps`` increments by the one load-step loop
-        (:func:`femcoupling.fem.steps.load_path`, with this model's rollback and
-        ``max_newton``)."""
-        return load_path(take, self._rollback, restore, steps=steps, max_cuts=max_cuts,
-                         max_newton=self.max_newton, where=where, accepted=accepted)
-
-    def _warn(self, msg: str, stacklevel: int = 2) -> None:
-        """Keeps ``msg`` in ``warnings`` and gives it as a NoiseWarning (``stacklevel`` as
-        for ``warnings.warn`` called where this is)."""
-        self.warnings.append(msg)
-        if self._warns_here:
-            _warnings.warn(msg, NoiseWarning, stacklevel=stacklevel + 1)
-
-
-class FemModel(FemSolver):
-    """A body with a DEM element at every quadrature point; see the module doc.
+class FemModel(SoilPart, RegionMaterials, LoadingStages, SoilMeasures, ElementPart, FemSolver):
+    """A body with materials at its quadrature points, solved in dolfinx; see the module doc.
+    Collective on ``comm``.
 
     Args:
-        body: a :mod:`femcoupling.fem.bodies` body (``Rectangle``, ``Box``, ``Cylinder``).
+        body: a ``femcoupling.fem.geometry.ReinforcedSoilBody``, or a body of
+            :mod:`femcoupling.fem.bodies` (``Rectangle``, ``Box``, ``Cylinder``).
+        newton_rtol: Newton's tolerance (the soil body: |R| <= newton_rtol |F_int| over the
+            free dofs, default 1e-8; the bodies with elements: relative to the internal force
+            scale, default 1e-3), -.
+        max_newton: iterations before a step is cut (default 25; with elements 10).
+        comm: mpi4py communicator (the soil body: default COMM_WORLD; with elements: None,
+            serial).
+
+    The reinforced soil body's:
+        soil: the soil's material (``LinearElastic``, ``AnisotropicElastic``,
+            ``DruckerPrager``).
+        layers: one ``GeogridLayerMaterial`` per geogrid layer of ``body``.
+        region_materials: optional material per element-region name (default: ``soil``).
+        unit_weight_n_m3: soil unit weight gamma, N/m^3, >= 0 (0: weightless).
+        degree: displacement degree (1 or 2; default 2).
+        max_cuts: step halvings before ``NewtonFailure`` (default 6).
+
+    A body of :mod:`femcoupling.fem.bodies`'s:
         elements: an ``ElementPool`` with one element per quadrature point (under MPI on
             rank 0, None on the others).
-        newton_rtol: the residual's tolerance relative to the internal force scale, -.
-        max_newton: Newton iterations before a step is cut.
-        tangent: the elements' tangent in the Jacobian (:data:`femcoupling.materials.
-            element_pool.TANGENTS`; "secant" in plane strain only).
+        tangent: the elements' tangent in the Jacobian
+            (:data:`femcoupling.materials.element_pool.TANGENTS`; "secant" in plane strain
+            only; default "network").
         strain_kw: keyword arguments of every element's ``apply_strain``.
-        convergence: "noise" (``newton_rtol``, or, when Newton stalls above it, within the
-            elements' measured noise) or "tolerance" (``newton_rtol`` only).
-        relaxation: of Newton's corrections: "aitken", "none" or a factor in (0, 1].
+        convergence: "noise" (default: ``newton_rtol``, or, when Newton stalls above it,
+            within the elements' measured noise) or "tolerance" (``newton_rtol`` only).
+        relaxation: of Newton's corrections: "aitken" (default), "none" or a factor in (0, 1].
         noise_factor: a stalled step is accepted within this many times the elements'
-            measured noise ...
+            measured noise (default 2) ...
         noise_ceiling: ... and only up to this residual (relative, like ``newton_rtol``;
             default 10 x ``newton_rtol``), above which the step is cut.
-        comm: mpi4py communicator (None: serial).
         verbose: a line per Newton iteration (rank 0).
         out: the records' folder (None: none); ``overwrite``: replace an earlier run's.
     """
 
-    def __init__(self, body, *, elements, newton_rtol: float = 1e-3, max_newton: int = 10,
-                 tangent: str = "network", strain_kw: dict | None = None,
-                 convergence: str = "noise", relaxation: str | float = "aitken",
-                 noise_factor: float = 2.0, noise_ceiling: float | None = None, comm=None,
-                 verbose: bool = False, out=None, overwrite: bool = False) -> None:
-        for hook in ("mesh", "bcs", "loads", "target", "apply", "scale_length"):
-            if not callable(getattr(body, hook, None)):
-                raise FemInputError(f"body={body!r}: not a body of femcoupling.fem.bodies "
-                                    "(Rectangle, Box or Cylinder): it has no "
-                                    f"{hook}(); the reinforced soil body is SoilModel's")
-        fx = self._fx = _dolfinx.load()
-        fem, ufl = fx.fem, fx.ufl
-        self.body, self.pool, self.comm = body, elements, comm
-        self.gdim, self.degree = body.gdim, body.degree
-        self.records = None
-        if out is not None:
-            self.records = ElementRecords(out, overwrite=overwrite, root=self._root,
-                                          comm=comm)
-        self.out = None if self.records is None else self.records.out
-        self._options(verbose=verbose, tangent=tangent, convergence=convergence,
-                      relaxation=relaxation, noise_factor=noise_factor,
-                      noise_ceiling=noise_ceiling, newton_rtol=newton_rtol,
-                      max_newton=max_newton)
-        self.strain_kw = dict(strain_kw or {})
-        msh = self.mesh = body.mesh(fx, comm)
-        self.n_cells = msh.topology.index_map(msh.topology.dim).size_local  # (this rank's)
-        self._check_pool(elements, *body.expected_points(self))
-        loads = body.loads(self, msh)
-        # spaces, forms and solver: the same as the FEM soil's (femcoupling.fem.quadrature)
-        sysq = self.system = QuadratureSystem(
-            msh, degree=body.degree, qdeg=body.qdeg, ncomp=body.ncomp,
-            strain=lambda w: body.strain(ufl, w), loads=loads,
-            lu=lu_package(self.comm, None))
-        self.V, self.Wv, self.Wt = sysq.V, sysq.Wv, sysq.Wt
-        self._points(body.nq)
-        self.u, self.u_n, self.du = sysq.u, sysq.u_n, sysq.du
-        self.sig_q, self.tan_q = sysq.sig_q, sysq.tan_q
-        self.expr_grad = fem.Expression(ufl.grad(self.u), sysq.qpoints)
-        self.expr_grad_n = fem.Expression(ufl.grad(self.u_n), sysq.qpoints)
-        self.bcs = body.bcs(self)
-        self._bc_now = body.start()  # the boundary of the last accepted step
-        #: the elements as the quadrature points' material (femcoupling.fem.quadrature)
-        self._material(elements, tangent=tangent, strain_kw=self.strain_kw, dim=body.dim)
+    def __init__(self, body, *, newton_rtol: float | None = None,
+                 max_newton: int | None = None, comm=None, **options) -> None:
+        given = {k: v for k, v in (("newton_rtol", newton_rtol), ("max_newton", max_newton))
+                 if v is not None}
+        if isinstance(body, geo.ReinforcedSoilBody):
+            self._kind = "soil"
+            self.body = body
+            self._refuse(options, _SOIL_ARGS, "the reinforced soil body")
+            self._build_soil(body, comm=comm, **given, **options)
+        elif all(callable(getattr(body, h, None)) for h in _BODY_HOOKS):
+            self._kind = "elements"
+            self.body = body
+            self._refuse(options, _ELEMENT_ARGS, f"a {type(body).__name__}")
+            if "elements" not in options:
+                raise FemInputError(f"elements: missing; a {type(body).__name__}'s points are "
+                                    "DEM elements: an ElementPool with one per point")
+            self._build_elements(body, comm=comm, **given, **options)
+        else:
+            raise FemInputError(f"body={body!r}: a femcoupling.fem.geometry.ReinforcedSoilBody "
+                                "or a body of femcoupling.fem.bodies (Rectangle, Box, "
+                                "Cylinder)")
 
-    partition = None  #: each rank's points as elements under MPI (mpi_points.PointPartition)
+    @staticmethod
+    def _refuse(options: dict, allowed: tuple, body: str) -> None:
+        """A keyword argument of the other kind of body, or none at all, is refused by name."""
+        for k in options:
+            if k not in allowed:
+                other = ("a body of femcoupling.fem.bodies'" if k in _ELEMENT_ARGS else
+                         "the reinforced soil body's" if k in _SOIL_ARGS else None)
+                raise FemInputError(
+                    f"{k}: not an argument of FemModel on {body}"
+                    + (f" (it is {other})" if other else "")
+                    + f"; its own: newton_rtol, max_newton, comm, {', '.join(allowed)}")
 
     def __repr__(self) -> str:
-        return f"FemModel({self.body!r}, {self.n_points} elements)"
-
-    @property
-    def _parallel(self) -> bool:
-        """Whether the FEM is split over more than one MPI rank."""
-        return self.comm is not None and self.comm.size > 1
-
-    @property
-    def _root(self) -> bool:
-        """Whether this is the rank that writes the records (rank 0; serial: True)."""
-        return self.comm is None or self.comm.rank == 0
+        if self._kind == "elements":
+            return f"FemModel({self.body!r}, {self.n_points} elements)"
+        return f"FemModel({self.body!r})"
 
     @property
     def _warns_here(self) -> bool:
-        return self._root
-
-    def _check_pool(self, pool, n: int, what: str) -> None:
-        """The pool (rank 0's under MPI) holds one element per quadrature point."""
-        if self._parallel:
-            check_on_root(self.comm, pool)
-            have = bcast_from_root(self.comm, pool.n if self._root else None)
-        elif pool is None or not hasattr(pool, "n"):
-            raise FemInputError(f"elements={pool!r}: an ElementPool with one element per "
-                                f"quadrature point ({n} {what}); None only on the MPI ranks "
-                                "other than 0")
-        else:
-            have = pool.n
-        if have != n:
-            raise FemInputError(f"pool: has {have} elements for {n} {what}")
-
-    def _material(self, pool, **kw) -> None:
-        """The elements as the points' material: ``ElementPoolMaterial`` (under MPI on rank 0,
-        seen by every rank: ``femcoupling.fem.mpi_points.RootMaterial``)."""
-        mat = ElementPoolMaterial(pool, **kw) if pool is not None else None
-        if self._parallel:
-            mat = RootMaterial(self.comm, mat)
-        check_material(mat, "material", "gradient")
-        #: the elements as the quadrature points' material (femcoupling.fem.quadrature)
-        self.material = mat
-        self._set_q(mat.stress, mat.tangent)
-
-    def _options(self, *, verbose: bool, tangent: str, convergence: str, relaxation,
-                 noise_factor: float, noise_ceiling: float | None, newton_rtol: float,
-                 max_newton: int) -> None:
-        """Checks and keeps the solver's options."""
-        self.verbose = verbose
-        tangents = self.body.tangents
-        if tangent not in tangents:
-            raise FemInputError(f"tangent={tangent!r}: one of " + "; ".join(
-                f"'{k}' ({TANGENTS[k]})" for k in tangents))
-        self.tangent = tangent
-        if convergence not in ("noise", "tolerance"):
-            raise FemInputError(f"convergence={convergence!r}: 'noise' (newton_rtol, or, "
-                                "when Newton stalls above it, within the elements' measured "
-                                "noise) or 'tolerance' (newton_rtol only)")
-        self.convergence = convergence
-        self.relaxation = check_relaxation(relaxation)
-        if not (noise_factor > 0 and math.isfinite(noise_factor)):
-            raise FemInputError(f"noise_factor={noise_factor}: must be > 0 (a stalled step is "
-                                "accepted within this many times the noise's residual)")
-        if not (newton_rtol > 0 and math.isfinite(newton_rtol)):
-            raise FemInputError(f"newton_rtol={newton_rtol!r}: must be > 0 (relative to the "
-                                "internal force scale)")
-        ceiling = 10.0 * newton_rtol if noise_ceiling is None else noise_ceiling
-        if not (math.isfinite(ceiling) and ceiling >= newton_rtol):
-            raise FemInputError(f"noise_ceiling={noise_ceiling!r}: must be >= newton_rtol="
-                                f"{newton_rtol!r} and finite (the largest residual, relative "
-                                "to the internal force scale, a step may be accepted at "
-                                "within the elements' noise; default 10 x newton_rtol)")
-        self._solver_options(newton_rtol=newton_rtol, max_newton=max_newton,
-                             noise_factor=noise_factor, noise_ceiling=ceiling)
-
-    # ---- the elements' material ---------------------------------------------------------
-    @property
-    def bad_tangents(self) -> int:
-        """Element tangents replaced by their last good one (``ElementPoolMaterial``)."""
-        return self.material.bad_tangents
-
-    @property
-    def secants_used(self) -> int:
-        """Element tangents replaced by their secant (tangent="secant")."""
-        return self.material.secants_used
-
-    @property
-    def _sig(self) -> np.ndarray:
-        return self.material.stress
-
-    @property
-    def _tan(self) -> np.ndarray:
-        return self.material.tangent
-
-    @property
-    def _last_pool_step(self):
-        return self.material.last_step
-
-    def _points(self, nq: int) -> None:
-        """The quadrature points: ``nq`` per cell, element k at cell k // nq, point k % nq (the
-        quadrature spaces' own order, checked). Under MPI a rank's points are the elements
-        at their places in the serial mesh (``femcoupling.fem.mpi_points.PointPartition``)."""
-        if len(self.system.qweights) != nq:
-            raise RuntimeError(f"{nq} quadrature point(s) per cell expected")
-        self.nq, self.n_local_points = nq, self.n_cells * nq
-        if not np.array_equal(self.Wv.dofmap.list[: self.n_cells].reshape(-1),
-                              np.arange(self.n_local_points)):
-            raise RuntimeError("the quadrature space's points are not in (cell, point) order")
-        self.partition = None
-        self.n_points = self.n_local_points
-        if self._parallel:
-            serial = point_coordinates(self._fx, self.body.serial_mesh(self._fx),
-                                       self.system.qpoints)
-            self.partition = PointPartition(self.comm, self._local_coordinates(), serial,
-                                            self.body.size())
-            self.n_points = self.partition.n
-
-    def _local(self, values: np.ndarray) -> np.ndarray:
-        """This rank's rows of a per-element array (serial: all of it)."""
-        return values if self.partition is None else self.partition.local(values)
-
-    def _put(self, f, values: np.ndarray) -> None:
-        """A quadrature function ``f`` at this rank's points from a per-element array (its
-        ghost points, under MPI, from their owners)."""
-        v = np.asarray(self._local(values), float).reshape(-1)
-        f.x.array[: v.size] = v
-        f.x.scatter_forward()
-
-    def _set_q(self, sig: np.ndarray, tan: np.ndarray) -> None:
-        self._put(self.sig_q, sig)
-        self._put(self.tan_q, tan)
-
-    def _local_coordinates(self) -> np.ndarray:
-        return point_coordinates(self._fx, self.mesh, self.system.qpoints)
-
-    @property
-    def point_coordinates(self) -> np.ndarray:
-        """The quadrature points' coordinates, m, shape (n_points, gdim), in element order (on
-        every rank)."""
-        x = self._local_coordinates()
-        return x if self.partition is None else self.partition.gather(x)
-
-    def _grad_increment(self) -> np.ndarray:
-        """Every element's displacement-gradient increment since the step's start (under MPI
-        gathered from the ranks, on every rank), (n_points, gdim, gdim), -."""
-        cells = np.arange(self.n_cells, dtype=np.int32)
-        d = self.gdim
-        g = self.expr_grad.eval(self.mesh, cells).reshape(-1, d, d)
-        gn = self.expr_grad_n.eval(self.mesh, cells).reshape(-1, d, d)
-        return g - gn if self.partition is None else self.partition.gather(g - gn)
-
-    def _evaluate(self, first: bool, perturb: float = 0.0) -> None:
-        """Stress and tangent of every element for the current iterate (its increments
-        scaled by 1 + ``perturb``: the noise probe)."""
-        g = self._grad_increment()
-        self._set_q(*self.material.trial(g * (1.0 + perturb) if perturb else g))
-
-    def _softest(self, n: int = 3) -> str:
-        """The ``n`` elements of the current iterate with the smallest tangent eigenvalue:
-        index, that eigenvalue (Pa), contacts and mean stress (Pa)."""
-        ev = np.array([np.linalg.eigvalsh(0.5 * (c + c.T))[0] for c in self._tan])
-        contacts = self._last_pool_step.contacts
-        return "; ".join(f"element {k}: smallest tangent eigenvalue {ev[k]:.3g} Pa, "
-                         f"{contacts[k]} contacts, mean stress {self._sig[k][:2].mean():.4g} Pa"
-                         for k in np.argsort(ev)[:n])
-
-    def _scale(self) -> float:
-        """|F_int| of the current stresses (the tolerance's scale)."""
-        return float(np.abs(self._sig).max()) * self.body.scale_length() + 1e-300
-
-    # ---- a load step -----------------------------------------------------------------------
-    def step(self, *, max_cuts: int = 4, **boundary) -> HierStep:
-        """One load step to the boundary values ``boundary`` (total since the start; what a
-        body takes: ``Rectangle``: ``top_displacement=`` and ``right_displacement=``, m;
-        ``Box``, ``Cylinder``: ``top_displacement=``, m, or, homogeneous, ``gradient=``, a
-        3 x 3 displacement gradient). If Newton fails, the step is rolled back (the elements
-        to their accepted state, u to u_n) and halved, at most ``max_cuts`` times below the
-        whole step (``femcoupling.fem.steps.load_path``, the loop of every model: an easy
-        half-step grows the next back); the last accepted step's record is returned (all of
-        them are in ``history``). Past ``max_cuts``, the model is left at its last accepted
-        step and :class:`~femcoupling.fem.steps.NewtonFailure` says where the load stopped."""
-        target = self.body.target(**boundary)
-        a, b = np.asarray(self._bc_now, float), np.asarray(target, float)
-
-        def at(lf: float):
-            """The boundary at load factor ``lf`` from the accepted one to ``target``."""
-            return target if lf == 1.0 else a + lf * (b - a)
-
-        return self._load(lambda lf: self._step(at(lf)),
-                          lambda lf: self.body.apply(self, at(lf)), steps=1,
-                          max_cuts=max_cuts, where=f"load step {len(self.history)}")[-1]
+        """With elements under MPI, rank 0 gives the warnings (every rank keeps them)."""
+        return self._root if self._kind == "elements" else True
 
     def _reject_points(self) -> None:
-        """The elements back at their accepted state (``FemSolver._rollback``)."""
-        self.material.reject()
+        """The points' materials back at their accepted state (``FemSolver._rollback``): the
+        elements (the soil body's materials hold nothing beyond their next trial)."""
+        if self._kind == "elements":
+            self.material.reject()
 
     def footing_pressure_pa(self) -> float:
-        """The footing's mean pressure, Pa, compression positive (a ``Rectangle`` with
-        ``platens="footing"``): the reaction at its vertical displacement dofs (the internal
-        force of the points' current stresses less the surcharge's share of the edge node)
-        over its half width (``QuadratureSystem.reaction``: ``SoilModel.footing_pressure_pa``
-        sums the same way)."""
-        return self.body.footing_pressure_pa(self)
+        """The footing's mean pressure, Pa, compression positive: the soil body's (the reaction
+        in displacement control, the applied pressure in load control) or a ``Rectangle``'s
+        with ``platens="footing"`` (the reaction at its vertical displacement dofs over its
+        half width); both sum the reaction by ``QuadratureSystem.reaction``."""
+        if self._kind == "elements":
+            return self.body.footing_pressure_pa(self)
+        return SoilMeasures.footing_pressure_pa(self)
 
     def footing_settlement_m(self) -> float:
-        """The footing's settlement, m, positive down (a ``Rectangle`` with
-        ``platens="footing"``): its imposed vertical displacement (every footing node moves
-        with it), as ``SoilModel.footing_settlement_m``."""
-        return self.body.footing_settlement_m(self)
-
-    def _step(self, point) -> HierStep:
-        t0 = time.perf_counter()
-        load = self.body.apply(self, point)
-        mat = self.material
-        mat.new_step_counters()
-        rules = NewtonRules(rtol=self.newton_rtol, max_newton=self.max_newton,
-                            noise_factor=self.noise_factor, ceiling=self.noise_ceiling,
-                            probe=self.convergence == "noise")
-        log = ((lambda msg: print(f"[hier] {msg}", flush=True))
-               if self.verbose and self._root else None)
-        out = newton_solve(_ElementNewton(self), rules, relaxation=self.relaxation, log=log)
-        rel, noise_rel, its = out.residual, out.noise_residual, out.iterations
-        stress_of_scale = out.scale / self.body.scale_length()  # Pa: the largest stress
-        if out.converged_on == "noise":
-            self._warn(f"load step {len(self.history)} (top {load:.6g} m): the "
-                       f"tolerance asked (newton_rtol={self.newton_rtol:g}) is below the "
-                       f"elements' noise (a 1e-9 change of their increments moves the "
-                       f"residual by {noise_rel:.3g} of the internal force scale); stopped "
-                       f"at the noise at {rel:.3g} ({rel * stress_of_scale:.3g} Pa; ceiling "
-                       f"{self.noise_ceiling:g}): stopped_at_scatter, not converged")
-        mat.commit()
-        self._bc_now = point
-        self.u_n.x.array[:] = self.u.x.array
-        wall = time.perf_counter() - t0
-        r = HierStep(load=load, newton_iterations=its, residual=rel,
-                     mean_stress=self._sig.mean(axis=0), element_stresses=self._sig.copy(),
-                     dem_s=mat.step_dem_s, fem_s=wall - mat.step_pool_s, wall_s=wall,
-                     recovered=mat.step_recovered, increments=mat.increments.copy(),
-                     noise_residual=noise_rel, converged_on=out.converged_on,
-                     relaxation=out.relaxation, redraws=out.redraws,
-                     element_scatter=mat.scatter.copy(),
-                     status=out.status, residual_pa=rel * stress_of_scale,
-                     noise_residual_pa=noise_rel * stress_of_scale)
-        self.history.append(r)
-        if self.records is not None:
-            self.records.write(self, r)
-        return r
-
-    # ---- what the body's elements give ----------------------------------------------------
-    @property
-    def element_volumes(self) -> np.ndarray:
-        """(n,) each element's cell's volume (m^3; in 2D its area, m^2, per metre out of
-        plane), in element order (collective under MPI): the weights of the body's mean
-        stress. (A cell's points share its volume equally.)"""
-        fx = self._fx
-        fem, ufl = fx.fem, fx.ufl
-        dg0 = fem.functionspace(self.mesh, ("DG", 0))
-        vol = fem.assemble_vector(fem.form(ufl.TestFunction(dg0) * ufl.dx)).array
-        own = np.repeat(np.asarray(vol[: self.n_cells], float) / self.nq, self.nq)
-        return own if self.partition is None else self.partition.gather(own)
-
-    def volume_mean_stress(self, step=None) -> np.ndarray:
-        """The body's volume-mean stress of a step (the last if None), in the elements'
-        Voigt order, tension positive, Pa. (``HierStep.mean_stress`` is the elements'
-        unweighted mean.)"""
-        r = self.history[-1] if step is None else step
-        w = self.element_volumes
-        return w @ np.asarray(r.element_stresses) / w.sum()
-
-
-class _ElementNewton:
-    """A ``FemModel`` as ``femcoupling.fem.quadrature.newton_solve``'s problem."""
-
-    def __init__(self, m: FemModel) -> None:
-        self.m = m
-
-    def evaluate(self, first: bool, perturb: float = 0.0) -> None:
-        self.m._evaluate(first, perturb)
-
-    def residual(self) -> float:
-        return self.m.system.residual(self.m.bcs)
-
-    def force_scale(self) -> float:
-        return self.m._scale()
-
-    def at_boundary_values(self) -> bool:
-        return self.m.system.at_boundary_values(self.m.bcs)
-
-    noise_scale = force_scale  # (every point is a DEM element)
-
-    def stresses(self) -> np.ndarray:
-        return self.m._sig.copy()
-
-    def stress_change_residual(self, before: np.ndarray) -> float:
-        return self.m.system.change_residual(self.m._sig - before, self.m.bcs, self.m._put)
-
-    def correction(self) -> np.ndarray:
-        return self.m.system.correction(self.m.bcs, describe=lambda: (
-            f"softening elements whose tangents lost stiffness; the softest elements: "
-            f"{self.m._softest()}"))
-
-    def move(self, correction: np.ndarray, factor: float) -> None:
-        self.m.system.move(correction, factor)
+        """The footing's settlement, m, positive down: the soil body's mean footing
+        displacement, or a ``Rectangle``'s (``platens="footing"``) imposed one."""
+        if self._kind == "elements":
+            return self.body.footing_settlement_m(self)
+        return SoilMeasures.footing_settlement_m(self)

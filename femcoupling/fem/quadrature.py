@@ -1,7 +1,7 @@
 """One material interface and one Newton for every quadrature-point model of this package.
 
 Two models solve equilibrium with a stress and a tangent at quadrature points: the FEM soil
-(:class:`femcoupling.fem.soil_model.SoilModel`: elastic, anisotropic elastic and
+(:class:`femcoupling.fem.model.FemModel`: elastic, anisotropic elastic and
 Drucker–Prager points, and DEM elements for element regions or cells) and the hierarchical
 FEM x DEM (:class:`femcoupling.fem.model.FemModel`: a DEM element at every quadrature
 point). Both use what this module gives:
@@ -100,13 +100,13 @@ STRAIN_MEASURES = {
     "mandel": "the small-strain increment since the last commit at each point, Mandel form, "
               "(n, ncomp): 2D (xx, yy, zz, sqrt2 xy), 3D (xx, yy, zz, sqrt2 yz, sqrt2 xz, "
               "sqrt2 xy); the stress (n, ncomp) and tangent (n, ncomp, ncomp) in the same "
-              "form (the soil body's points: SoilModel)",
+              "form (the soil body's points: FemModel)",
     "gradient": "the displacement-gradient increment since the last commit at each point, "
                 "(n, gdim, gdim) (a DEM element needs its rotation too); the stress in Voigt "
                 "form, 2D (xx, yy, xy), 3D (xx, yy, zz, yz, xz, xy), and the tangent with "
                 "engineering shear (the hierarchical models' points)",
     "tensor": "one strain increment tensor since the last commit, 3 x 3 (a region's or a "
-              "cell's volume mean: the region elements of SoilModel.set_region_element and "
+              "cell's volume mean: the region elements of FemModel.set_region_element and "
               "set_cell_elements); the stress 3 x 3 and the tangent 6 x 6 Mandel",
 }
 
@@ -220,7 +220,7 @@ class NewtonOutcome:
 class NewtonProblem(Protocol):
     """What :func:`newton_solve` asks of a model. It may also have
     ``noisiest(before) -> str``: which elements moved most at a noise probe, named in the
-    message of a step cut above the ceiling (``SoilModel``'s region elements)."""
+    message of a step cut above the ceiling (``FemModel``'s region elements)."""
 
     def evaluate(self, first: bool, perturb: float = 0.0) -> None:
         """Every material's trial at the current iterate (increments x (1 + perturb))."""

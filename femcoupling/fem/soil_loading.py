@@ -1,7 +1,7 @@
-"""The load stages of :class:`femcoupling.fem.soil_model.SoilModel`: the K0 initial state, the
+"""The load stages of :class:`femcoupling.fem.model.FemModel`: the K0 initial state, the
 prestress of the geogrid layers, and the footing (a pressure, a settlement, or a rigid
-footing pushed to a pressure). A mixin of ``SoilModel``: each stage runs its equilibrium
-steps through ``SoilModel._run_stage``."""
+footing pushed to a pressure). A part of ``FemModel`` for the soil body: each stage runs its equilibrium
+steps through ``FemModel._run_stage``."""
 
 from __future__ import annotations
 
@@ -12,10 +12,12 @@ import numpy as np
 
 from femcoupling._checks import FemInputError
 from femcoupling.fem import geometry as geo
+from femcoupling.fem.solver import SOIL_ONLY, body_kind
 from femcoupling.fem.steps import NewtonFailure, StepResult
 from femcoupling.materials.continuum import DruckerPrager
 
 
+@body_kind("soil", SOIL_ONLY)
 class LoadingStages:
     """See the module doc."""
 

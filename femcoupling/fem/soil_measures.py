@@ -1,6 +1,6 @@
-"""What :class:`femcoupling.fem.soil_model.SoilModel` gives out: the footing's settlement and
+"""What :class:`femcoupling.fem.model.FemModel` gives out: the footing's settlement and
 pressure, region and point stresses (NumPy 3 x 3, tension positive, the same on every MPI
-rank), layer forces, and the XDMF output. A mixin of ``SoilModel``."""
+rank), layer forces, and the XDMF output. A part of ``FemModel`` for the soil body."""
 
 from __future__ import annotations
 
@@ -15,11 +15,13 @@ import numpy.typing as npt
 from femcoupling._checks import FemInputError
 from femcoupling.fem import geometry as geo
 from femcoupling.fem.quadrature import lu_package
+from femcoupling.fem.solver import SOIL_ONLY, body_kind
 from femcoupling.materials.continuum import mandel_to_tensor
 
 _counter = itertools.count()
 
 
+@body_kind("soil", SOIL_ONLY)
 class SoilMeasures:
     """See the module doc."""
 

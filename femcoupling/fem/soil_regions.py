@@ -1,6 +1,6 @@
-"""The regions of :class:`femcoupling.fem.soil_model.SoilModel` with a material of their own: an
+"""The regions of :class:`femcoupling.fem.model.FemModel` with a material of their own: an
 elastic or anisotropic material, one DEM element for a region (its mean strain in, its
-stress and tangent out), or an element per cell. A mixin of ``SoilModel``: the methods use its
+stress and tangent out), or an element per cell. A part of ``FemModel`` for the soil body: the methods use its
 mesh, spaces and state."""
 
 from __future__ import annotations
@@ -13,6 +13,7 @@ from femcoupling._checks import FemInputError
 from femcoupling.fem import geometry as geo
 from femcoupling.fem.mpi_points import PointPartition, bcast_from_root, check_on_root
 from femcoupling.fem.quadrature import NewtonFailure, check_material
+from femcoupling.fem.solver import SOIL_ONLY, body_kind
 from femcoupling.materials.continuum import (LinearElastic, mandel_to_tensor, stiffness_block,
                                              tensor_to_mandel)
 
@@ -128,6 +129,7 @@ class RegionPoints:
         self.stress = self.stress_n.copy()
 
 
+@body_kind("soil", SOIL_ONLY)
 class RegionMaterials:
     """See the module doc."""
 

@@ -3,15 +3,15 @@
 failure type).
 
 - :class:`NewtonFailure`: Newton did not converge. Inside a model a failed step is cut
-  (halved) and taken again; raised out of a model's stage (``SoilModel``'s loading) or step
+  (halved) and taken again; raised out of a model's stage (``FemModel``'s loading) or step
   (``FemModel.step``), it means the step failed even cut ``max_cuts`` times,
   and its message says where the load stopped and why the last Newton failed.
 - :func:`load_path`: the one load-step loop of every model: a load (a stage of
-  ``SoilModel``, a step of ``FemModel``) in equal increments, each Newton failure
+  ``FemModel``, a step of ``FemModel``) in equal increments, each Newton failure
   rolled back and the step halved, an easy step growing it back.
 - :class:`LoadStep`: one accepted load step: what Newton did (``newton_iterations``,
   ``residual``, ``status``, ...). Each model's record adds what it loads and measures:
-  :class:`StepResult` (``femcoupling.fem.soil_model.SoilModel``: the stage, its load factor,
+  :class:`StepResult` (``femcoupling.fem.model.FemModel`` (the soil body): the stage, its load factor,
   the footing's settlement and pressure) and :class:`HierStep`
   (``femcoupling.fem.model.FemModel``, DEM elements at its points: the load, the elements'
   stresses and timings).
@@ -116,7 +116,7 @@ class LoadStep:
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class StepResult(LoadStep):
-    """One accepted load step of ``femcoupling.fem.soil_model.SoilModel`` (the Newton fields:
+    """One accepted load step of ``femcoupling.fem.model.FemModel`` (the soil body) (the Newton fields:
     :class:`LoadStep`; ``residual`` is relative to the DEM regions' own internal force where
     the model has region elements, else to the body's).
 
@@ -131,10 +131,10 @@ class StepResult(LoadStep):
             ``residual <= tol``.
         noise: the elements' noise measured at the step's stall, on the scale of
             ``residual`` (NaN where Newton did not stall); a step above ``tol`` is accepted
-            within ``SoilModel.noise_factor`` times it. (``noise_residual`` is the same
+            within ``FemModel.noise_factor`` times it. (``noise_residual`` is the same
             noise relative to the whole body's force scale.)
         ceiling: the largest residual a step may be accepted at within the noise, on the
-            scale of ``residual`` (``SoilModel.noise_ceiling``; inf without DEM region
+            scale of ``residual`` (``FemModel.noise_ceiling``; inf without DEM region
             elements).
     """
 

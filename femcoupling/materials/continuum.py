@@ -203,7 +203,7 @@ class GeogridLayerMaterial:
         axial_stiffness_n_per_m: geogrid tensile stiffness J, N/m (the band gets E = J / t).
         prestress_n_per_m: prestress force per metre width T_p, N/m, >= 0 (PRS, 002): an
             initial tensile stress T_p / t along x in the band, equilibrated with the soil
-            by :meth:`femcoupling.fem.soil_model.SoilModel.apply_prestress`.
+            by :meth:`femcoupling.fem.model.FemModel.apply_prestress`.
         poisson: Poisson's ratio of the band, -.
     """
 

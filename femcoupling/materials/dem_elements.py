@@ -255,9 +255,9 @@ def trial_stiffness(label: str, voigt, min_eig_fraction: float, increment,
 
 
 class DemRegionMaterial:
-    """A periodic DEM element as the material of a ``SoilModel`` element region: the
+    """A periodic DEM element as the material of a ``FemModel`` element region (the soil body): the
     hierarchical mode on the reinforced-soil body, one element for the region's tagged group
-    of cells (``SoilModel.set_region_element``). At every Newton iterate the model hands it
+    of cells (``FemModel.set_region_element``). At every Newton iterate the model hands it
     the region's mean strain increment since the start of the load step (the full tensor,
     shear included; plane strain holds the out-of-plane strain at zero); the element, restored
     to the start of the step, takes it and returns its stress and its tangent from its contact
@@ -377,14 +377,14 @@ BAND_TANGENTS = ("network", "network-elastic", "fd-forward")
 class PoolRegionMaterials:
     """The DEM elements of several element regions on Dask workers
     (``cpp_dem.elements.pool.ElementPool``, one element per region), for
-    ``SoilModel.set_region_element``: the model evaluates them all at once at every Newton
+    ``FemModel.set_region_element``: the model evaluates them all at once at every Newton
     iterate (``trial_many``), so the regions' DEM runs in parallel. Each region's element
     behaves as a ``DemRegionMaterial`` (the same answers, bitwise: every worker runs one
     element at a time on one thread). ``materials[name]`` is what to give the model.
 
     Build with ``PoolRegionMaterials.build(stresses, runner, workers=)``: each element
     prepared on the workers by ``runner`` (``PeriodicRegionElement``) at its stress, all at
-    once. The same group serves ``SoilModel.set_cell_elements`` (one element per cell of a
+    once. The same group serves ``FemModel.set_cell_elements`` (one element per cell of a
     region: ``stresses = model.cell_stresses(name)``), and can also hold reinforced RVEs for
     the cells of a geogrid band (``build(band=)``, ``ReinforcedBandElement``). The elements'
     tangents (Newton's Jacobian) are from their contact networks at every trial, the
@@ -468,7 +468,7 @@ class PoolRegionMaterials:
         positive); ``distinct_seeds``: element k packed with seed ``runner.seed + k`` (else
         every element from ``runner.seed``). ``band``: (a ``ReinforcedBandElement``, name ->
         (the grains' pressure, Pa, compression positive; the sheet's tension, N/m)): more
-        members, reinforced cells of a geogrid band (``SoilModel.band_cell_states``),
+        members, reinforced cells of a geogrid band (``FemModel.band_cell_states``),
         after the soil's; band element j packed with seed ``band[0].seed + j``."""
         from cpp_dem.elements.pool import ElementPool
 
@@ -640,7 +640,7 @@ class _Concat:
 
 
 class _PoolMember:
-    """One region of a ``PoolRegionMaterials``: what ``SoilModel.set_region_element`` takes
+    """One region of a ``PoolRegionMaterials``: what ``FemModel.set_region_element`` takes
     (the model finds the ``group`` and evaluates, commits and saves the group once); a
     ``QuadratureMaterial`` as ``DemRegionMaterial`` is."""
 

@@ -15,10 +15,10 @@ run:
    test at the path's final mean pressure; no cohesion (:func:`calibrate`).
 2. **Variants** ``unreinforced``, ``RE`` (one geogrid layer: an elastic band of axial
    stiffness J, N/m) and ``PRS`` (the same layer with its prestress T_p locked in,
-   ``SoilModel.apply_prestress``). Each starts geostatic (K0), the footing is seated to
+   ``FemModel.apply_prestress``). Each starts geostatic (K0), the footing is seated to
    ``seat_pa`` as a rigid smooth footing with the fitted soil everywhere, and then every
    soil cell of the zone takes its own dense periodic DEM element, prepared at that cell's
-   stress (``SoilModel.set_cell_elements``,
+   stress (``FemModel.set_cell_elements``,
    ``femcoupling.materials.dem_elements.PoolRegionMaterials`` on Dask workers: element k of seed s
    packed with seed ``1000 s + k``). The layer's cells inside the zone stay the FEM band, or, with
    ``band_grains`` > 0, each gets a reinforced RVE
@@ -215,14 +215,14 @@ def body(p: FootingParams, reinforced: bool):
 def model(p: FootingParams, variant: str, soil):
     """The FEM model of ``variant`` with ``soil`` (a DruckerPrager) everywhere: geostatic,
     then (PRS) the prestress locked in, then the footing seated to ``seat_pa``."""
-    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.fem.model import FemModel
     from femcoupling.materials.continuum import GeogridLayerMaterial
 
     reinforced = variant != "unreinforced"
     layers = [GeogridLayerMaterial(axial_stiffness_n_per_m=p.grid_stiffness,
                                    prestress_n_per_m=p.prestress if variant == "PRS" else 0.0)
               ] if reinforced else []
-    m = SoilModel(body(p, reinforced), soil=soil, layers=layers,
+    m = FemModel(body(p, reinforced), soil=soil, layers=layers,
                   unit_weight_n_m3=p.unit_weight, newton_rtol=1e-6)
     m.set_geostatic()
     if variant == "PRS" and p.prestress > 0:

@@ -248,7 +248,7 @@ def hierarchical_status(hier: dict, fem_strain_increment, rotation_deg: float):
 
 def run_hierarchical(p: Params, out: Path, variant: str, m, load) -> dict:
     """The load stage with the region's material a periodic DEM element inside the FEM's
-    Newton (``SoilModel.set_region_element``,
+    Newton (``FemModel.set_region_element``,
     ``femcoupling.materials.dem_elements.DemRegionMaterial``), from the model's current (initial)
     state; with ``p.cell_elements`` an element per cell (``run_cell_elements``). Returns the record
     of the summary."""
@@ -287,7 +287,7 @@ def run_hierarchical(p: Params, out: Path, variant: str, m, load) -> dict:
 
 def run_cell_elements(p: Params, out: Path, variant: str, m, load) -> dict:
     """The load stage with every cell of the element region its own dense periodic element
-    (``SoilModel.set_cell_elements``; ``femcoupling.materials.dem_elements.PoolRegionMaterials`` on
+    (``FemModel.set_cell_elements``; ``femcoupling.materials.dem_elements.PoolRegionMaterials`` on
     ``p.workers`` Dask workers, element k packed with seed ``p.seed + k`` at its cell's
     stress, ``p.cell_grains`` grains each), from the model's current (initial) state.
     Returns the record of the summary."""
@@ -414,7 +414,7 @@ def calibrate_soil(p: Params, out: Path, *, max_passes: int = 4,
 
     The first pass starts from the given soil. The calibrated soil has no cohesion (the grains
     have none; the FEM then loads the footing as a rigid smooth footing to its pressure,
-    ``SoilModel.load_footing_to_pressure``) and the given phi (the element is not taken to
+    ``FemModel.load_footing_to_pressure``) and the given phi (the element is not taken to
     its strength here; the record gives the friction it mobilised at the path's end).
     After ``max_passes`` without convergence the last secant is kept and the record says
     ``converged`` False. Returns the parameters with that soil and the record (also
@@ -586,7 +586,7 @@ def _resumed_passes(path: Path, p: Params, seeds: list, max_passes: int, before:
 
 def fem_model(p: Params, prestressed: bool):
     """The FEM model of the structure in its initial state (geostatic, then the prestress)."""
-    from femcoupling.fem.soil_model import SoilModel
+    from femcoupling.fem.model import FemModel
     from femcoupling.materials.continuum import DruckerPrager, GeogridLayerMaterial
 
     J = grid_stiffness_per_metre(p)
@@ -594,7 +594,7 @@ def fem_model(p: Params, prestressed: bool):
                                  prestress_n_per_m=p.prestress if prestressed else 0.0)
     soil = DruckerPrager(young_pa=p.soil_young, poisson=p.soil_poisson,
                          cohesion_pa=p.soil_cohesion, friction_deg=p.soil_friction)
-    m = SoilModel(fem_body(p), soil=soil, layers=[layer] * len(p.layer_depths),
+    m = FemModel(fem_body(p), soil=soil, layers=[layer] * len(p.layer_depths),
                   unit_weight_n_m3=p.unit_weight, newton_rtol=1e-6)
     m.set_geostatic()
     if prestressed:

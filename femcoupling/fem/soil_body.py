@@ -1,6 +1,7 @@
-"""The continuum outer domain: a reinforced soil body solved in dolfinx (plane strain or 3D).
+"""The part of :class:`femcoupling.fem.model.FemModel` for the reinforced soil body: the
+continuum outer domain solved in dolfinx (plane strain or 3D).
 
-:class:`SoilModel` holds the mesh of a :class:`~femcoupling.fem.geometry.ReinforcedSoilBody`,
+``FemModel(ReinforcedSoilBody(...), soil=...)`` holds the mesh of a :class:`~femcoupling.fem.geometry.ReinforcedSoilBody`,
 P2 (default) displacements, and a stress history at the quadrature points (a quadrature
 space; the return mapping is the NumPy kernel
 :func:`femcoupling.materials.continuum.drucker_prager_return`). Loading is incremental with a full
@@ -9,25 +10,25 @@ Newton iteration on the consistent tangent at each step (LU: MUMPS on one rank,
 
 Stages (each one a sequence of equilibrium steps):
 
-1. :meth:`SoilModel.set_geostatic` -- a K0 initial state from the self-weight:
+1. :meth:`femcoupling.fem.model.FemModel.set_geostatic` -- a K0 initial state from the self-weight:
    sigma_zz = -gamma (H - z), sigma_xx = sigma_yy = K0 sigma_zz (tension positive), in
    equilibrium with the body force (no displacement results).
-2. :meth:`SoilModel.apply_prestress` -- prestressed geogrid layers (PRS, 002): the initial
+2. :meth:`femcoupling.fem.model.FemModel.apply_prestress` -- prestressed geogrid layers (PRS, 002): the initial
    tensile stress T_p / t along x is added in the layers' bands, and the body is brought to
    equilibrium (the band shortens and compresses the soil around it).
-3. :meth:`SoilModel.load_footing` -- a footing pressure (load control) or a footing
+3. :meth:`femcoupling.fem.model.FemModel.load_footing` -- a footing pressure (load control) or a footing
    settlement (displacement control, smooth footing) in steps.
 
 Boundary conditions: bottom fixed; x = 0 (symmetry) and x = width rollers (u_x = 0);
 3D: y = 0 and y = length rollers (u_y = 0); the top is free apart from the footing.
 
-Extraction: :meth:`SoilModel.region_stress` (volume average over a tagged region) and
-:meth:`SoilModel.point_stress` (from a local L2 projection onto DG1) return NumPy 3x3
+Extraction: :meth:`femcoupling.fem.model.FemModel.region_stress` (volume average over a tagged region) and
+:meth:`femcoupling.fem.model.FemModel.point_stress` (from a local L2 projection onto DG1) return NumPy 3x3
 tensors ordered (x, y, z), **tension positive** (in 2D y is the out-of-plane direction).
 Every method is collective under MPI and returns the same values on every rank.
 
-The class is split by role: this module holds the mesh, the spaces, the material arrays,
-Newton and the state; :mod:`femcoupling.fem.soil_loading` the load stages,
+The class is split by role: this module (:class:`SoilPart`) holds the mesh, the spaces, the
+material arrays, Newton and the state; :mod:`femcoupling.fem.soil_loading` the load stages,
 :mod:`femcoupling.fem.soil_regions` the regions with a material or DEM element of their own,
 :mod:`femcoupling.fem.soil_measures` what the model gives out (settlement, stresses, forces,
 XDMF). A step's record is :class:`femcoupling.fem.steps.StepResult` (a
@@ -48,39 +49,30 @@ from femcoupling._checks import FemInputError
 from femcoupling.fem import geometry as geo
 from femcoupling.fem.quadrature import (NewtonRules, QuadratureSystem, check_material, lu_package,
                                         newton_solve)
-from femcoupling.fem.soil_loading import LoadingStages
-from femcoupling.fem.soil_measures import SoilMeasures
-from femcoupling.fem.soil_regions import RegionMaterials, RegionPoints
-from femcoupling.fem.model import FemSolver
+from femcoupling.fem.soil_regions import RegionPoints
+from femcoupling.fem.solver import SOIL_ONLY, body_kind
 from femcoupling.fem.steps import NewtonFailure, StepResult
 from femcoupling.materials.continuum import GeogridLayerMaterial, LinearElastic, mandel_to_tensor
 
-__all__ = ["SoilModel", "StepResult", "NewtonFailure"]
+__all__ = ["SoilPart"]
 
 SQRT2 = math.sqrt(2.0)
 
 
-class SoilModel(RegionMaterials, LoadingStages, SoilMeasures, FemSolver):
-    """A reinforced soil body in dolfinx; see the module doc. Collective on ``comm``.
+@body_kind("soil", SOIL_ONLY)
+class SoilPart:
+    """The part of ``FemModel`` for a reinforced soil body in dolfinx; see the module doc
+    (its arguments: ``FemModel``'s). Collective on ``comm``."""
 
-    Args:
-        body: the geometry (tags documented in :mod:`femcoupling.fem.geometry`).
-        soil: the soil's material (:class:`LinearElastic` or :class:`DruckerPrager`).
-        layers: one :class:`GeogridLayerMaterial` per geogrid layer of ``body``.
-        region_materials: optional material per element-region name (default: ``soil``).
-        unit_weight_n_m3: soil unit weight gamma, N/m^3, >= 0 (0: weightless).
-        degree: displacement degree (1 or 2).
-        newton_rtol: Newton stops when |R| <= newton_rtol * |F_int| (free dofs), -.
-        max_newton: iterations before a step is cut in half.
-        max_cuts: step halvings before :class:`NewtonFailure`.
-        comm: mpi4py communicator (default COMM_WORLD).
-    """
-
-    def __init__(self, body: geo.ReinforcedSoilBody, *, soil: LinearElastic,
-                 layers: Sequence[GeogridLayerMaterial] = (),
-                 region_materials: Mapping[str, LinearElastic] | None = None,
-                 unit_weight_n_m3: float = 0.0, degree: int = 2, newton_rtol: float = 1e-8,
-                 max_newton: int = 25, max_cuts: int = 6, comm: Any = None) -> None:
+    def _build_soil(self, body: geo.ReinforcedSoilBody, *, soil: LinearElastic,
+                    layers: Sequence[GeogridLayerMaterial] = (),
+                    region_materials: Mapping[str, LinearElastic] | None = None,
+                    unit_weight_n_m3: float = 0.0, degree: int = 2, newton_rtol: float = 1e-8,
+                    max_newton: int = 25, max_cuts: int = 6, comm: Any = None) -> None:
+        """The model of the reinforced soil ``body`` (``FemModel``'s arguments: the body
+        (tags in :mod:`femcoupling.fem.geometry`), ``soil``, ``layers``, ``region_materials``,
+        ``unit_weight_n_m3``, ``degree``, ``newton_rtol`` (|R| <= newton_rtol |F_int| over
+        the free dofs), ``max_newton``, ``max_cuts``, ``comm`` (default COMM_WORLD))."""
         if not isinstance(soil, LinearElastic):
             raise FemInputError(f"soil={soil!r}: must be a LinearElastic or DruckerPrager")
         layers = tuple(layers)
@@ -473,9 +465,9 @@ class SoilModel(RegionMaterials, LoadingStages, SoilMeasures, FemSolver):
 
 
 class _SoilNewton:
-    """``SoilModel`` as ``femcoupling.fem.quadrature.newton_solve``'s problem."""
+    """A ``FemModel`` of the soil body as ``femcoupling.fem.quadrature.newton_solve``'s problem."""
 
-    def __init__(self, m: SoilModel) -> None:
+    def __init__(self, m) -> None:
         self.m, self.bcs = m, m._active_bcs()
 
     def evaluate(self, first: bool, perturb: float = 0.0) -> None:
