@@ -362,3 +362,27 @@ def test_one_model_on_every_body_refuses_what_is_not_one():
     with pytest.raises(FemInputError, match="tangent='secant': one of 'network'"):
         FemModel(Box(lx=1.0, ly=1.0, lz=1.0, nx=1, ny=1, nz=1, homogeneous=True),
                  elements=None, tangent="secant")
+
+
+def test_a_method_of_one_kind_of_body_is_refused_on_the_other():
+    """The one model's parts keep to their bodies: a soil-body stage or measure on a model of
+    a Rectangle, or step() on the soil body's model, is refused by name, not run on the
+    wrong state."""
+    from femcoupling import FemInputError
+    from femcoupling.fem.geometry import ReinforcedSoilBody
+
+    m = FemModel.__new__(FemModel)  # (the guard reads only the kind and the body)
+    m._kind, m.body = "elements", Rectangle(lx=1.0, ly=1.0, nx=1, ny=1)
+    for call in (lambda: m.set_geostatic(), lambda: m.load_footing(pressure_pa=1e3),
+                 lambda: m.region_stress("a"), lambda: m.set_cell_elements("a", None),
+                 lambda: m.sig_n, lambda: m.save_state()):
+        with pytest.raises(FemInputError, match=r"a model of the reinforced soil body .* "
+                                                r"\(this model's body: Rectangle\(lx=1.0"):
+            call()
+    m._kind, m.body = "soil", ReinforcedSoilBody(width_m=2.0, height_m=1.0,
+                                                 footing_half_width_m=0.5)
+    for call in (lambda: m.step(top_displacement=-1e-3), lambda: m.volume_mean_stress(),
+                 lambda: m.point_coordinates):
+        with pytest.raises(FemInputError, match=r"a model of a body of femcoupling.fem.bodies "
+                                                r".* \(this model's body: ReinforcedSoilBody"):
+            call()
