@@ -56,7 +56,7 @@ def test_the_lateral_stress_is_the_confining_pressure(fem_dem, alone):
     by no more than the accepted residual allows. The virtual work of the residual R on the
     field v = x (exact in the mesh's space; zero on the symmetry plane x = 0, and the top's
     and bottom's y rows do not see it) is A (mean sigma_xx - P) = R . x, so
-    |mean sigma_xx - P| <= |R| |x| / A = residual_pa |x| / sqrt(A) (HierStep.residual_pa
+    |mean sigma_xx - P| <= |R| |x| / A = residual_pa |x| / sqrt(A) (LoadStep.residual_pa
     is |R| / sqrt(A)). (An empirical 5e-3 of P held on two CPUs and failed on a third, at
     7.9e-3 with a residual of 3.5e-3 accepted within the noise: within this bound.)"""
     m = fem_dem["model"]

@@ -60,6 +60,10 @@ def test_the_footing_starts_at_the_surcharge_and_stiffens(run):
     assert np.all(np.diff(p) > 0) and p[-1] > 2 * Q
     m = res["model"]
     assert m.footing_settlement_m() == SETTLEMENTS[-1] and m.footing_pressure_pa() == p[-1]
+    # the one step record carries the footing's measures (the soil body's names), step by step
+    accepted = [r for r in m.history if r.load_factor == 1.0]
+    assert [r.footing_pressure_pa for r in accepted][-len(SETTLEMENTS):] == list(p[1:])
+    assert [r.footing_settlement_m for r in accepted][-len(SETTLEMENTS):] == list(SETTLEMENTS)
     assert set(res["status"][1:]) <= {"converged", "stopped_at_scatter"}
 
 

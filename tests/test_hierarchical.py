@@ -166,7 +166,7 @@ def test_a_tolerance_below_the_noise_is_cut_above_the_ceiling_and_said_below_it(
         assert m.noise_ceiling == pytest.approx(1e-8)
         tried = []
         step = m._step
-        m._step = lambda point: (tried.append(float(point[0])), step(point))[1]
+        m._step = lambda point, lf: (tried.append(float(point[0])), step(point, lf))[1]
         with pytest.raises(NewtonFailure, match=r"within the elements' noise .* above the "
                                                 r"ceiling noise_ceiling=1e-08.*the step is cut"):
             m.step(top_displacement=-2e-5, max_cuts=1)

@@ -241,9 +241,9 @@ class _CreepingStage(FemSolver):
     towards 0.6 on ever shorter steps and never reach 1 (a load it cannot carry)."""
 
     def __init__(self):
-        from femcoupling.fem.steps import StepResult
+        from femcoupling.fem.steps import LoadStep
 
-        self._step = StepResult
+        self._step = LoadStep
         self.max_newton, self.max_cuts, self.last_failure = 25, 6, ""
         self.history, self.lf_done, self.lf, self.trials = [], 0.0, 0.0, 0
         self._step_end = {}

@@ -19,7 +19,7 @@ from pathlib import Path
 import numpy as np
 
 from femcoupling._checks import FemInputError
-from femcoupling.fem.steps import HierStep
+from femcoupling.fem.steps import LoadStep
 
 __all__ = ["ElementRecords", "RECORD_FILES", "append_rows"]
 
@@ -47,7 +47,7 @@ def append_rows(path: Path, rows: dict, *, units: str) -> None:
         f.flush()
 
 
-def _relative_scatter(r: HierStep) -> float:
+def _relative_scatter(r: LoadStep) -> float:
     """The elements' mean bootstrap scatter relative to their largest stress component."""
     if r.element_scatter is None:
         return float("nan")

@@ -246,7 +246,7 @@ def judge_steps(steps, *, dem_fem_strain_ratio: float = math.nan, walled: bool =
                 max_strain_ratio: float = 2.0) -> CouplingStatus:
     """The status of a region coupled inside the FEM's Newton (the region mode's hierarchical
     load stage) over its accepted load ``steps`` (each with ``status``, ``residual`` and
-    ``tol``, as ``femcoupling.fem.steps.StepResult``): "stalled" where a check of the
+    ``tol``, as ``femcoupling.fem.steps.LoadStep``): "stalled" where a check of the
     coupled state fails (the element's strain not within [1 / ``max_strain_ratio``,
     ``max_strain_ratio``] of its region's or, for a ``walled`` element, the axes past
     ``max_rotation_deg``; or a step taken at a stall); else "stopped_at_scatter" where a step

@@ -18,7 +18,7 @@ from femcoupling.fem.mpi_points import PointPartition, RootMaterial, bcast_from_
 from femcoupling.fem.quadrature import (NewtonRules, QuadratureSystem, check_material, lu_package,
                                         newton_solve)
 from femcoupling.fem.solver import body_kind
-from femcoupling.fem.steps import HierStep
+from femcoupling.fem.steps import LoadStep
 from femcoupling.materials.element_pool import TANGENTS, ElementPoolMaterial
 
 __all__ = ["ElementPart"]
@@ -238,7 +238,7 @@ class ElementPart:
         return float(np.abs(self._sig).max()) * self.body.scale_length() + 1e-300
 
     # ---- a load step -----------------------------------------------------------------------
-    def step(self, *, max_cuts: int = 4, **boundary) -> HierStep:
+    def step(self, *, max_cuts: int = 4, **boundary) -> LoadStep:
         """One load step to the boundary values ``boundary`` (total since the start; what a
         body takes: ``Rectangle``: ``top_displacement=`` and ``right_displacement=``, m;
         ``Box``, ``Cylinder``: ``top_displacement=``, m, or, homogeneous, ``gradient=``, a
@@ -255,11 +255,11 @@ class ElementPart:
             """The boundary at load factor ``lf`` from the accepted one to ``target``."""
             return target if lf == 1.0 else a + lf * (b - a)
 
-        return self._load(lambda lf: self._step(at(lf)),
+        return self._load(lambda lf: self._step(at(lf), lf),
                           lambda lf: self.body.apply(self, at(lf)), steps=1,
                           max_cuts=max_cuts, where=f"load step {len(self.history)}")[-1]
 
-    def _step(self, point) -> HierStep:
+    def _step(self, point, load_factor: float = 1.0) -> LoadStep:
         t0 = time.perf_counter()
         load = self.body.apply(self, point)
         mat = self.material
@@ -283,7 +283,8 @@ class ElementPart:
         self._bc_now = point
         self.u_n.x.array[:] = self.u.x.array
         wall = time.perf_counter() - t0
-        r = HierStep(load=load, newton_iterations=its, residual=rel,
+        footing = getattr(self.body, "platens", None) == "footing"
+        r = LoadStep(load=load, load_factor=load_factor, newton_iterations=its, residual=rel,
                      mean_stress=self._sig.mean(axis=0), element_stresses=self._sig.copy(),
                      dem_s=mat.step_dem_s, fem_s=wall - mat.step_pool_s, wall_s=wall,
                      recovered=mat.step_recovered, increments=mat.increments.copy(),
@@ -291,7 +292,11 @@ class ElementPart:
                      relaxation=out.relaxation, redraws=out.redraws,
                      element_scatter=mat.scatter.copy(),
                      status=out.status, residual_pa=rel * stress_of_scale,
-                     noise_residual_pa=noise_rel * stress_of_scale)
+                     noise_residual_pa=noise_rel * stress_of_scale,
+                     footing_settlement_m=(self.footing_settlement_m() if footing
+                                           else float("nan")),
+                     footing_pressure_pa=(self.footing_pressure_pa() if footing
+                                          else float("nan")))
         self.history.append(r)
         if self.records is not None:
             self.records.write(self, r)
@@ -312,7 +317,7 @@ class ElementPart:
 
     def volume_mean_stress(self, step=None) -> np.ndarray:
         """The body's volume-mean stress of a step (the last if None), in the elements'
-        Voigt order, tension positive, Pa. (``HierStep.mean_stress`` is the elements'
+        Voigt order, tension positive, Pa. (``LoadStep.mean_stress`` is the elements'
         unweighted mean.)"""
         r = self.history[-1] if step is None else step
         w = self.element_volumes

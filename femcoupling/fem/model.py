@@ -45,7 +45,7 @@ noise but above the ceiling is cut, as a step Newton fails (``NewtonFailure``; a
 still fails after its cuts raises it: the run has ``failed``). The residual is relative to
 the internal force scale (the largest element stress times the body's ``scale_length``: the
 square root of the area in 2D, the volume to the power 2/3 in 3D) and also given in stress
-units (``HierStep.residual_pa``, Pa). Newton and its rules are
+units (``LoadStep.residual_pa``, Pa). Newton and its rules are
 :func:`femcoupling.fem.quadrature.newton_solve`, the soil body's
 (:class:`femcoupling.fem.model.FemModel`) too.
 

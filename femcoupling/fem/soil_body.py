@@ -31,8 +31,7 @@ The class is split by role: this module (:class:`SoilPart`) holds the mesh, the 
 material arrays, Newton and the state; :mod:`femcoupling.fem.soil_loading` the load stages,
 :mod:`femcoupling.fem.soil_regions` the regions with a material or DEM element of their own,
 :mod:`femcoupling.fem.soil_measures` what the model gives out (settlement, stresses, forces,
-XDMF). A step's record is :class:`femcoupling.fem.steps.StepResult` (a
-:class:`~femcoupling.fem.steps.LoadStep`), its failure
+XDMF). A step's record is :class:`femcoupling.fem.steps.LoadStep`, its failure
 :class:`~femcoupling.fem.steps.NewtonFailure`.
 """
 
@@ -51,7 +50,7 @@ from femcoupling.fem.quadrature import (NewtonRules, QuadratureSystem, check_mat
                                         newton_solve)
 from femcoupling.fem.soil_regions import RegionPoints
 from femcoupling.fem.solver import SOIL_ONLY, body_kind
-from femcoupling.fem.steps import NewtonFailure, StepResult
+from femcoupling.fem.steps import LoadStep, NewtonFailure
 from femcoupling.materials.continuum import GeogridLayerMaterial, LinearElastic, mandel_to_tensor
 
 __all__ = ["SoilPart"]
@@ -340,7 +339,7 @@ class SoilPart:
         return self.comm.allreduce(own, op=self._fx.MPI.MAX) if self.comm.size > 1 else own
 
     def _end_step(self, out: Any) -> None:
-        """The step's end (``StepResult``'s converged_on, noise_residual, status, residual,
+        """The step's end (``LoadStep``'s converged_on, noise_residual, status, residual,
         tol, residual_pa, redraws, noise, ceiling) from its ``femcoupling.fem.quadrature.NewtonOutcome``: the residual is
         judged on the DEM regions' own force scale where the model has region elements, else
         on the body's."""
@@ -398,19 +397,19 @@ class SoilPart:
         if not isinstance(steps, int) or steps < 1:
             raise FemInputError(f"steps={steps!r}: must be an integer >= 1")
 
-        def take(lf: float) -> StepResult:
+        def take(lf: float) -> LoadStep:
             apply(lf)
             its = self._newton()
             if its < 0:
                 raise NewtonFailure(self.last_failure or "")
             self._commit()
-            return StepResult(stage=stage, load_factor=lf,
+            return LoadStep(stage=stage, load_factor=lf,
                               footing_settlement_m=self.footing_settlement_m(),
                               footing_pressure_pa=self.footing_pressure_pa(),
                               newton_iterations=its, plastic_points=self.plastic_points(),
                               **self._step_end)
 
-        def accepted(r: StepResult) -> None:
+        def accepted(r: LoadStep) -> None:
             if r.converged_on == "noise":
                 self._noise_warning(r)
             self.history.append(r)
@@ -422,7 +421,7 @@ class SoilPart:
 
     _ext_scale = 0.0
 
-    def _noise_warning(self, r: StepResult) -> None:
+    def _noise_warning(self, r: LoadStep) -> None:
         msg = (f"{r.stage} step at load factor {r.load_factor:.4g}: Newton stalled at "
                f"{r.residual:.3g} of the DEM regions' own internal force ({r.residual_pa:.3g} "
                f"Pa), above the tolerance newton_rtol={self.newton_rtol:g} ({r.tol:.3g} of "

@@ -13,7 +13,7 @@ import numpy as np
 from femcoupling._checks import FemInputError
 from femcoupling.fem import geometry as geo
 from femcoupling.fem.solver import SOIL_ONLY, body_kind
-from femcoupling.fem.steps import NewtonFailure, StepResult
+from femcoupling.fem.steps import LoadStep, NewtonFailure
 from femcoupling.materials.continuum import DruckerPrager
 
 
@@ -40,7 +40,7 @@ class LoadingStages:
         self._ext_scale = self.unit_weight_n_m3 * self.body.height_m * self.footing_area
         self._run_stage("geostatic", lambda lf: None, 1)
 
-    def apply_prestress(self, *, steps: int = 1) -> list[StepResult]:
+    def apply_prestress(self, *, steps: int = 1) -> list[LoadStep]:
         """Add each layer's prestress T_p / t (tension along x) and equilibrate (PRS, 002)."""
         add = np.zeros_like(self.sig_n)
         for i, lm in enumerate(self.layers):
@@ -58,7 +58,7 @@ class LoadingStages:
 
     def load_footing(self, *, pressure_pa: float | None = None,
                      settlement_m: float | None = None, steps: int = 10,
-                     callback: Any = None) -> list[StepResult]:
+                     callback: Any = None) -> list[LoadStep]:
         """Load the footing by a pressure (Pa, compression positive; load control) or a
         settlement (m, downward positive; displacement control of a smooth footing), from the
         current state, in ``steps`` equal increments. Returns the converged steps."""
@@ -107,7 +107,7 @@ class LoadingStages:
     def load_footing_to_pressure(self, pressure_pa: float, *, steps: int = 10,
                                  callback: Any = None, tol: float = 0.01,
                                  max_steps_factor: int = 4,
-                                 slope_pa_per_m: float | None = None) -> list[StepResult]:
+                                 slope_pa_per_m: float | None = None) -> list[LoadStep]:
         """Push the footing down as a rigid smooth footing (displacement control) until its
         mean pressure (the reaction, Pa, compression positive) has risen by ``pressure_pa``
         from the current state, within ``tol`` (relative). For a cohesionless soil, whose
@@ -149,7 +149,7 @@ class LoadingStages:
         u_start = -self.footing_settlement_m()
         self._displacement_control = True
         p0 = self.footing_pressure_pa()
-        done: list[StepResult] = []
+        done: list[LoadStep] = []
         d = 0.0
 
         def go(d_to: float) -> None:

@@ -1,20 +1,17 @@
 """What a load step of every FEM model of this package ends in: its record
-(:class:`LoadStep`, the same Newton fields in every model) or :class:`NewtonFailure` (the one
-failure type).
+(:class:`LoadStep`, one for every body) or :class:`NewtonFailure` (the one failure type).
 
 - :class:`NewtonFailure`: Newton did not converge. Inside a model a failed step is cut
-  (halved) and taken again; raised out of a model's stage (``FemModel``'s loading) or step
-  (``FemModel.step``), it means the step failed even cut ``max_cuts`` times,
+  (halved) and taken again; raised out of a model's stage (the soil body's loading) or
+  step (``FemModel.step``), it means the step failed even cut ``max_cuts`` times,
   and its message says where the load stopped and why the last Newton failed.
 - :func:`load_path`: the one load-step loop of every model: a load (a stage of
-  ``FemModel``, a step of ``FemModel``) in equal increments, each Newton failure
+  the soil body, a ``FemModel.step``) in equal increments, each Newton failure
   rolled back and the step halved, an easy step growing it back.
-- :class:`LoadStep`: one accepted load step: what Newton did (``newton_iterations``,
-  ``residual``, ``status``, ...). Each model's record adds what it loads and measures:
-  :class:`StepResult` (``femcoupling.fem.model.FemModel`` (the soil body): the stage, its load factor,
-  the footing's settlement and pressure) and :class:`HierStep`
-  (``femcoupling.fem.model.FemModel``, DEM elements at its points: the load, the elements'
-  stresses and timings).
+- :class:`LoadStep`: one accepted load step, the one record of every body: what Newton did
+  (``newton_iterations``, ``residual``, ``status``, ...), what was loaded (the soil body's
+  stage and load factor; a body's load) and what the body measures (the footing's
+  settlement and pressure, the plastic points; the elements' stresses and timings).
 
 SI units; a field's unit is in its name or its doc.
 """
@@ -82,12 +79,17 @@ def load_path(take: Callable[[float], "LoadStep"], rollback: Callable[[], None],
 
 @dataclasses.dataclass(frozen=True, kw_only=True)
 class LoadStep:
-    """One accepted load step: what Newton did, named the same in every model.
+    """One accepted load step of :class:`femcoupling.fem.model.FemModel`, on every body: what
+    Newton did, named the same on every body, what was loaded, and what the body measures.
+    A field a body does not measure keeps its default (NaN, None, empty).
 
-    Attributes:
+    What Newton did:
         newton_iterations: iterations this step took.
-        residual: the accepted residual relative to the force scale it is judged against
-            (the model's doc says which), -.
+        residual: the accepted residual relative to the force scale it is judged against,
+            -: on the soil body, the DEM regions' own internal force where the model has
+            region elements, else the body's; on a body with elements at every point, the
+            internal force scale (the largest element stress times the body's
+            ``scale_length``).
         converged_on: "tolerance" (``newton_rtol``), or "noise": Newton stalled above the
             tolerance within the DEM elements' measured noise
             (``femcoupling.fem.quadrature.newton_solve``; said in the model's ``warnings``).
@@ -97,11 +99,47 @@ class LoadStep:
         noise_residual: the elements' noise measured at the step's stall, relative to the
             model's force scale (NaN where it was not measured).
         residual_pa: the accepted residual in stress units, Pa.
+        noise_residual_pa: the noise's residual in Pa (bodies with elements; NaN if it was
+            not measured).
         redraws: the iterates Newton took after it had stalled within the elements' noise
             but above the ceiling, before one was within both
             (``femcoupling.fem.quadrature.REDRAWS``); 0 where none was needed.
         relaxation: the relaxation factor of each Newton correction (1: plain Newton; empty
             where the model does not relax).
+        tol: ``newton_rtol`` on the scale of ``residual``, - (the soil body; ``status`` is
+            "converged" when ``residual <= tol``).
+        noise: the elements' noise measured at the step's stall, on the scale of
+            ``residual`` (the soil body; NaN where Newton did not stall); a step above
+            ``tol`` is accepted within ``noise_factor`` times it.
+        ceiling: the largest residual a step may be accepted at within the noise, on the
+            scale of ``residual`` (the soil body: ``noise_ceiling``; inf without DEM region
+            elements).
+
+    What was loaded:
+        stage: the soil body's 'geostatic', 'prestress' or 'footing'; 'step' for a
+            ``FemModel.step``.
+        load_factor: fraction of the stage's load (or of the step, when it was cut)
+            applied, -.
+        load: a body of ``femcoupling.fem.bodies``: its load, total since the start (the top
+            displacement, m; a homogeneous box's G_zz, -).
+
+    What the body measures:
+        footing_settlement_m: the footing's mean downward displacement, m (positive down).
+        footing_pressure_pa: the footing's mean pressure, Pa, **compression positive** (the
+            reaction in displacement control; the soil body's applied pressure in load
+            control).
+        plastic_points: the soil body's plastic quadrature points (global).
+        mean_stress: the elements' mean Voigt stress (xx, yy, xy; 3D: xx, yy, zz, yz, xz,
+            xy), tension positive, Pa.
+        element_stresses: (n_points, ncomp) the element stresses, Pa.
+        element_scatter: (n_points, ncomp) each element's stress scatter, Pa: the bootstrap
+            of its contact network (``DemElement.stress_scatter``), how far a sample of its
+            size is from the material's mean.
+        increments: (n_points, 3, 3) each element's increment of the step, -.
+        dem_s: the DEM seconds (sum over the elements' work), s.
+        fem_s: the FEM seconds (the step's wall time outside the pool's calls), s.
+        wall_s: the step's wall time, s.
+        recovered: the elements rebuilt after a lost worker.
     """
 
     newton_iterations: int
@@ -110,66 +148,23 @@ class LoadStep:
     status: str = "converged"
     noise_residual: float = float("nan")
     residual_pa: float = float("nan")
+    noise_residual_pa: float = float("nan")
     redraws: int = 0
     relaxation: tuple = ()
-
-
-@dataclasses.dataclass(frozen=True, kw_only=True)
-class StepResult(LoadStep):
-    """One accepted load step of ``femcoupling.fem.model.FemModel`` (the soil body) (the Newton fields:
-    :class:`LoadStep`; ``residual`` is relative to the DEM regions' own internal force where
-    the model has region elements, else to the body's).
-
-    Attributes:
-        stage: 'geostatic', 'prestress' or 'footing'.
-        load_factor: fraction of the stage's load applied, -.
-        footing_settlement_m: mean downward displacement of the footing, m (positive down).
-        footing_pressure_pa: mean footing pressure, Pa, **compression positive** (the reaction
-            in displacement control; the applied pressure in load control).
-        plastic_points: number of plastic quadrature points (global).
-        tol: ``newton_rtol`` on the scale of ``residual``, -; ``status`` is "converged" when
-            ``residual <= tol``.
-        noise: the elements' noise measured at the step's stall, on the scale of
-            ``residual`` (NaN where Newton did not stall); a step above ``tol`` is accepted
-            within ``FemModel.noise_factor`` times it. (``noise_residual`` is the same
-            noise relative to the whole body's force scale.)
-        ceiling: the largest residual a step may be accepted at within the noise, on the
-            scale of ``residual`` (``FemModel.noise_ceiling``; inf without DEM region
-            elements).
-    """
-
-    stage: str
-    load_factor: float
-    footing_settlement_m: float
-    footing_pressure_pa: float
-    plastic_points: int
     tol: float = float("nan")
     noise: float = float("nan")
     ceiling: float = float("nan")
-
-
-@dataclasses.dataclass(frozen=True, kw_only=True)
-class HierStep(LoadStep):
-    """One accepted load step of a :class:`femcoupling.fem.model.FemModel` (DEM elements at its
-    points: the hierarchical mode) (the Newton fields:
-    ``femcoupling.fem.steps.LoadStep``; ``residual`` is relative to the internal force scale,
-    ``residual_pa`` is it times the largest element stress: the residual force over the
-    square root of the domain's area): the top displacement, the elements' stresses and the
-    step's timings."""
-
-    load: float  #: the top's displacement (total since the start), m
-    #: the elements' mean Voigt stress (xx, yy, xy; 3D: xx, yy, zz, yz, xz, xy), tension
-    #: positive, Pa
-    mean_stress: np.ndarray
-    element_stresses: np.ndarray  #: (n_cells, ncomp) the element stresses, Pa
-    dem_s: float  #: the DEM seconds (sum over the elements' work), s
-    fem_s: float  #: the FEM seconds (the step's wall time outside the pool's calls), s
-    wall_s: float  #: the step's wall time, s
-    recovered: list  #: the elements rebuilt after a lost worker
-    increments: np.ndarray  #: (n_cells, 3, 3): each element's increment of the step, -
-    #: the noise's residual in Pa (NaN if it was not measured)
-    noise_residual_pa: float = float("nan")
-    #: (n_cells, 3) each element's stress scatter (xx, yy, xy), Pa: the bootstrap of its
-    #: contact network (``DemElement.stress_scatter``), how far a sample of its size is from
-    #: the material's mean
+    stage: str = "step"
+    load_factor: float = 1.0
+    load: float = float("nan")
+    footing_settlement_m: float = float("nan")
+    footing_pressure_pa: float = float("nan")
+    plastic_points: int = 0
+    mean_stress: np.ndarray | None = None
+    element_stresses: np.ndarray | None = None
     element_scatter: np.ndarray | None = None
+    increments: np.ndarray | None = None
+    dem_s: float = float("nan")
+    fem_s: float = float("nan")
+    wall_s: float = float("nan")
+    recovered: list = dataclasses.field(default_factory=list)

@@ -76,7 +76,7 @@ def fem_dem_biaxial(pool, *, lx: float, ly: float, nx: int, ny: int, pressure: f
     ``strain`` (-) in ``steps`` equal load steps; ``model_kw`` go to the
     ``Rectangle`` (its own arguments: ``degree``, ``platens``) or the ``FemModel``. Besides the curve (see the module doc; the stresses are the
     elements' means, which in equilibrium are the boundary tractions), ``iterations``,
-    ``residual``, ``converged_on`` per step, ``steps`` (the HierStep of each load step),
+    ``residual``, ``converged_on`` per step, ``steps`` (the LoadStep of each load step),
     ``model`` (the FemModel) and ``wall_s``. Prints progress with an ETA
     through ``log``. A load step that fails (``NewtonFailure``) raises, or with
     ``stop_on_failure`` ends the run there: ``failed`` then gives its axial strain and the

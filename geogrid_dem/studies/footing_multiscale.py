@@ -334,7 +334,7 @@ def at_level(target: float, p0: float, s0: float, p1: float, s1: float) -> float
 
 def load_levels(p: FootingParams, m, on_level, first_slope: float | None = None) -> None:
     """Pushes the footing to each of ``p.pressures_pa`` in turn; ``on_level(k, steps, at)``
-    after each (its accepted StepResults, every step also in ``m.history``; ``at``: the
+    after each (its accepted LoadSteps, every step also in ``m.history``; ``at``: the
     settlement at the level's pressure, ``at_level``). Each level after the first starts
     from the last level's secant slope, the first from ``first_slope`` (Pa/m; None: the
     model's small first settlement, ``load_footing_to_pressure``)."""

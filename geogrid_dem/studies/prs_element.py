@@ -212,10 +212,10 @@ def _finite_or_none(x) -> float | None:
 
 
 def step_statuses(steps) -> dict:
-    """Per load step of the FEM's Newton (``StepResult``): its status, its accepted residual
+    """Per load step of the FEM's Newton (``LoadStep``): its status, its accepted residual
     (relative to the DEM region's own internal force), the tolerance on that scale and the
     residual in Pa, the iterates it took after a stall above the noise ceiling
-    (``StepResult.redraws``), and on the residual's scale the elements' noise measured at its
+    (``LoadStep.redraws``), and on the residual's scale the elements' noise measured at its
     stall and the ceiling (None: not measured, no ceiling): the summary's record."""
     return {"step_statuses": [r.status for r in steps],
             "step_residuals": [float(r.residual) for r in steps],
