@@ -31,6 +31,7 @@ from typing import Sequence
 
 import numpy as np
 
+from cpp_dem._checks import positive
 from cpp_dem._core import BeamParams, ParameterError
 
 G_STANDARD = 9.81  # m/s^2, to turn unit weights into densities
@@ -156,11 +157,6 @@ def section_sums(terms: np.ndarray, starts: np.ndarray, n: int) -> np.ndarray:
     return out
 
 
-def _check_positive(name: str, value: float) -> None:
-    if not (isinstance(value, (int, float)) and math.isfinite(value) and value > 0):
-        raise ParameterError(f"{name}={value}: must be > 0")
-
-
 def _check_count(name: str, value, least: int) -> int:
     """A whole number >= least, or ParameterError naming the field."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
@@ -276,9 +272,9 @@ def _density(unit_weight: float | None, density: float | None) -> float:
     if (unit_weight is None) == (density is None):
         raise ParameterError("unit_weight, density: give exactly one (N/m^3 or kg/m^3)")
     if unit_weight is not None:
-        _check_positive("unit_weight", unit_weight)
+        positive("unit_weight", unit_weight)
         return unit_weight / G_STANDARD
-    _check_positive("density", density)
+    positive("density", density)
     return float(density)
 
 
@@ -310,9 +306,9 @@ def square_grid(scene, *, origin: Sequence[float], length: float, width: float, 
     ``max_nodes``; None: MAX_GRID_NODES, refused before anything is built); cylinder radius
     from ``params.radius``; mass from unit_weight (N/m^3) or density (kg/m^3).
     """
-    _check_positive("length", length)
-    _check_positive("width", width)
-    _check_positive("node_density_scale", node_density_scale)
+    positive("length", length)
+    positive("width", width)
+    positive("node_density_scale", node_density_scale)
     nodes_x = _check_count("nodes_x", nodes_x, 2)
     nodes_y = _check_count("nodes_y", nodes_y, 2)
     _check_grid_size(f"nodes_x={nodes_x}, nodes_y={nodes_y}", nodes_x * nodes_y, max_nodes)
@@ -351,9 +347,9 @@ def triangular_grid(scene, *, origin: Sequence[float], length: float, width: flo
     (001 §5.2: 1.43 cm). Rows along x (longitudinal members), diagonals at +-60 degrees.
     Fills [0, length] x [0, width] with whole triangles. A grid of more than ``max_nodes``
     nodes (None: MAX_GRID_NODES) is refused before it is built; so are biaxial grids."""
-    _check_positive("length", length)
-    _check_positive("width", width)
-    _check_positive("side", side)
+    positive("length", length)
+    positive("width", width)
+    positive("side", side)
     h = side * math.sqrt(3) / 2
     _check_grid_size(f"side={side} on {length} x {width} m",
                      (length / side + 1) * (width / h + 1), max_nodes)
@@ -405,8 +401,8 @@ def biaxial_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertur
     x = origin + i * pitch, pitch = sqrt(aperture_area) + rib_width; the grid spans
     apertures_x x apertures_y cells.
     """
-    _check_positive("aperture_area", aperture_area)
-    _check_positive("rib_width", rib_width)
+    positive("aperture_area", aperture_area)
+    positive("rib_width", rib_width)
     apertures_x = _check_count("apertures_x", apertures_x, 1)
     apertures_y = _check_count("apertures_y", apertures_y, 1)
     segments_per_rib = _check_count("segments_per_rib", segments_per_rib, 1)
@@ -514,7 +510,7 @@ def polyline(scene, points, *, params: BeamParams, material: int,
     if bad.any():
         k = int(np.argmax(bad))
         raise ParameterError(f"points[{k}]={pts[k].tolist()}: must be 3 finite numbers (m)")
-    _check_positive("node_density_scale", node_density_scale)
+    positive("node_density_scale", node_density_scale)
     b = _Builder(params, _density(unit_weight, density))
     ids = [b.node(k, p) for k, p in enumerate(pts)]
     order = [b.link(ids[k], ids[k + 1]) for k in range(len(ids) - 1)]

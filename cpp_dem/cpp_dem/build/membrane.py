@@ -35,16 +35,10 @@ from collections.abc import Sequence
 import numpy as np
 
 from cpp_dem import _core
+from cpp_dem._checks import positive
 from cpp_dem.build.geogrid import _Builder
 
 __all__ = ["Membrane", "cylindrical_membrane", "lattice_link_young"]
-
-
-def _positive(name: str, value) -> float:
-    v = float(value)
-    if not (math.isfinite(v) and v > 0):
-        raise _core.ParameterError(f"{name}={value!r}: must be > 0 and finite")
-    return v
 
 
 def lattice_link_young(young_pa: float, thickness_m: float, link_length_m: float,
@@ -240,13 +234,13 @@ def cylindrical_membrane(scene, *, centre: Sequence[float], radius_m: float, hei
     c0 = np.asarray(centre, dtype=float).reshape(-1)
     if c0.shape != (3,) or not np.all(np.isfinite(c0)):
         raise _core.ParameterError(f"centre={centre!r}: three finite coordinates, m")
-    radius_m = _positive("radius_m", radius_m)
-    height_m = _positive("height_m", height_m)
-    young_pa = _positive("young_pa", young_pa)
-    thickness_m = _positive("thickness_m", thickness_m)
-    node_radius_m = _positive("node_radius_m", node_radius_m)
-    density_kg_m3 = _positive("density_kg_m3", density_kg_m3)
-    mass_scale = _positive("mass_scale", mass_scale)
+    radius_m = positive("radius_m", radius_m)
+    height_m = positive("height_m", height_m)
+    young_pa = positive("young_pa", young_pa)
+    thickness_m = positive("thickness_m", thickness_m)
+    node_radius_m = positive("node_radius_m", node_radius_m)
+    density_kg_m3 = positive("density_kg_m3", density_kg_m3)
+    mass_scale = positive("mass_scale", mass_scale)
     if int(segments) != segments or segments < 6:
         raise _core.ParameterError(f"segments={segments!r}: an integer >= 6 (nodes around a "
                                    "ring)")

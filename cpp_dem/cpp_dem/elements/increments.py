@@ -23,6 +23,7 @@ import warnings
 
 import numpy as np
 
+from cpp_dem._checks import positive
 from cpp_dem._core import ParameterError
 
 __all__ = ["ContactLossWarning", "MAX_STRAIN_INCREMENT", "check_strain_call",
@@ -46,13 +47,6 @@ def _whole(name: str, v, lo: int, allowed: str) -> int:
     return int(v)
 
 
-def _positive(name: str, v, allowed: str) -> float:
-    if isinstance(v, bool) or not isinstance(v, numbers.Real) or not (
-            math.isfinite(float(v)) and float(v) > 0):
-        raise ParameterError(f"{name}={v!r}: must be a finite number > 0 ({allowed})")
-    return float(v)
-
-
 def principal_stretch(de: np.ndarray) -> float:
     """The largest |lambda - 1| of the principal stretches lambda of F = I + ``de`` (the
     square roots of the eigenvalues of F^T F): 0 for a rigid rotation."""
@@ -69,11 +63,11 @@ def check_strain_call(de: np.ndarray, *, steps, max_strain_per_step, unbalanced,
     increment ``de`` that stretches more than ``max_increment`` in one call."""
     if steps is not None:
         _whole("steps", steps, 1, "DEM steps of the loading; None: from max_strain_per_step")
-    _positive("max_strain_per_step", max_strain_per_step,
+    positive("max_strain_per_step", max_strain_per_step,
               "the largest strain of one DEM step, -")
-    _positive("unbalanced", unbalanced, "the unbalanced-force ratio the relaxation ends at, -")
+    positive("unbalanced", unbalanced, "the unbalanced-force ratio the relaxation ends at, -")
     _whole("max_relax_steps", max_relax_steps, 0, "DEM steps of the relaxation at most")
-    bound = _positive("max_increment", max_increment,
+    bound = positive("max_increment", max_increment,
                       "the largest principal stretch change of one call, -")
     got = principal_stretch(de)
     if got > bound:
