@@ -156,6 +156,34 @@ def _check_fill(v, t, vol, inertia, stated):
     return tmpl
 
 
+def test_a_surface_that_crosses_itself_is_refused():
+    """Two cubes that interpenetrate make a closed, consistently oriented surface (every edge
+    in two triangles, opposite ways) whose divergence-theorem volume counts their overlap
+    twice: refused, naming two crossing triangles. Apart, the same two cubes are a closed
+    surface of twice a cube's volume; a fine convex surface (13 920 triangles) has no
+    crossing pair."""
+    a_v, a_t = cm.box_mesh(1.0)
+    b_v, b_t = cm.box_mesh(1.0, centre=(0.5, 0.3, 0.2))
+    v, t = np.vstack([a_v, b_v]), np.vstack([a_t, b_t + len(a_v)])
+    crossing = cm.self_intersections(v, t)
+    assert len(crossing) == 12 and all(i < j for i, j in crossing)
+    assert all(not set(t[i]) & set(t[j]) for i, j in crossing)  # (no shared vertex)
+    with pytest.raises(dem.ParameterError, match=r"triangles: triangles \d+ .* and \d+ .* cross "
+                                                 r"\(they share no vertex; 12 crossing"):
+        cm.mesh_mass_properties(v, t)
+    c_v, c_t = cm.box_mesh(1.0, centre=(3.0, 0.0, 0.0))
+    apart = cm.mesh_mass_properties(np.vstack([a_v, c_v]), np.vstack([a_t, c_t + len(a_v)]))
+    assert apart.volume == pytest.approx(2.0, rel=1e-12)
+    from scipy.spatial import ConvexHull
+
+    th, ph = np.linspace(0, math.pi, 60)[1:-1], np.linspace(0, 2 * math.pi, 120, endpoint=False)
+    pts = np.array([[0, 0, 1.0], [0, 0, -1.0]] + [
+        [math.sin(x) * math.cos(y), math.sin(x) * math.sin(y), math.cos(x)]
+        for x in th for y in ph])
+    hull = ConvexHull(pts).simplices
+    assert len(hull) == 13920 and len(cm.self_intersections(pts, hull)) == 0
+
+
 def test_cube_fill_matches_analytic_within_stated_error():
     v, t = cm.box_mesh(1.0)
     vol, inertia = _box(1.0, 1.0, 1.0)

@@ -213,8 +213,10 @@ def check_closed_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
     triangles) with outward normals (flipped if the signed volume is negative).
 
     Closed: every edge is shared by exactly two triangles. Consistently oriented: the two
-    triangles traverse their shared edge in opposite directions. Triangles with a repeated
-    vertex index are dropped first. Raises :class:`ParameterError` naming the first bad edge.
+    triangles traverse their shared edge in opposite directions. Not crossing itself: no two
+    triangles that share no vertex meet (:func:`self_intersections`). Triangles with a
+    repeated vertex index are dropped first. Raises :class:`ParameterError` naming the first
+    bad edge or crossing pair.
     """
     v, t = _as_mesh(vertices, triangles)
     deg = (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 0] == t[:, 2])
@@ -240,6 +242,13 @@ def check_closed_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
             f"triangles: edge ({a}, {b}) is traversed in the same direction by both of its "
             "triangles; the surface is not consistently oriented (fix the winding of the "
             "triangles so that all normals point outward)")
+    crossing = self_intersections(v, t)
+    if len(crossing):
+        i, j = crossing[0]
+        raise ParameterError(
+            f"triangles: triangles {i} {t[i].tolist()} and {j} {t[j].tolist()} cross (they "
+            f"share no vertex; {len(crossing)} crossing pair(s)); a closed surface must not "
+            "cross itself: the volume and inertia it encloses would be wrong")
     vol = _signed_volume(v, t)
     scale = float(np.ptp(v, axis=0).max()) ** 3
     if not abs(vol) > 1e-12 * scale:
@@ -247,6 +256,64 @@ def check_closed_mesh(vertices, triangles) -> tuple[np.ndarray, np.ndarray]:
     if vol < 0:
         t = t[:, ::-1].copy()
     return v, t
+
+
+def self_intersections(vertices, triangles, *, block: int = 512) -> np.ndarray:
+    """The pairs (i, j), i < j, of triangles that share no vertex and cross or touch: an
+    edge of one meets the other (Moller-Trumbore, touching included to 1e-12 of the mesh's
+    size), shape (k, 2), in order. Candidates are the pairs whose bounding boxes overlap,
+    ``block`` triangles at a time. Coplanar overlaps of triangles that share no vertex are not
+    found (no edge crosses the other's plane)."""
+    v = np.asarray(vertices, float)
+    t = np.asarray(triangles, np.int64)
+    eps = 1e-12 * float(np.ptp(v, axis=0).max() or 1.0)
+    order = np.argsort(v[t][:, :, 0].min(axis=1), kind="stable")  # (swept along x)
+    t = t[order]
+    p = v[t]  # (n, 3, 3)
+    lo, hi = p.min(axis=1), p.max(axis=1)
+    pairs = []
+    for s0 in range(0, len(t), block):
+        rows = np.arange(s0, min(s0 + block, len(t)))
+        # (the columns whose x-range can reach the block's: sorted by their lower x)
+        end = int(np.searchsorted(lo[:, 0], hi[rows, 0].max() + eps, side="right"))
+        cols = np.arange(s0, max(end, s0))
+        over = np.all((lo[rows, None, :] <= hi[None, cols, :] + eps)
+                      & (lo[None, cols, :] <= hi[rows, None, :] + eps), axis=2)
+        i, j = np.nonzero(over)
+        a_, b_ = rows[i], cols[j]
+        keep = a_ < b_
+        a_, b_ = a_[keep], b_[keep]
+        shared = (t[a_][:, :, None] == t[b_][:, None, :]).any(axis=(1, 2))
+        pairs.append(np.stack([a_[~shared], b_[~shared]], axis=1))
+    cand = np.concatenate(pairs) if pairs else np.zeros((0, 2), np.int64)
+    if not len(cand):
+        return cand
+    hit = np.zeros(len(cand), bool)
+    for a, b in ((0, 1), (1, 0)):
+        tri = p[cand[:, b]]
+        for e in range(3):
+            q0, q1 = p[cand[:, a], e], p[cand[:, a], (e + 1) % 3]
+            hit |= _segment_meets_triangle(q0, q1, tri, eps)
+    found = np.sort(order[cand[hit]], axis=1)  # (the given triangles' indices)
+    return found[np.lexsort((found[:, 1], found[:, 0]))]
+
+
+def _segment_meets_triangle(q0, q1, tri, eps: float) -> np.ndarray:
+    """Whether each segment q0-q1 meets its triangle (rows), touching included."""
+    d = q1 - q0
+    e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
+    h = np.cross(d, e2)
+    det = np.einsum("ij,ij->i", e1, h)
+    ok = np.abs(det) > 1e-300
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+    s = q0 - tri[:, 0]
+    u = inv * np.einsum("ij,ij->i", s, h)
+    qv = np.cross(s, e1)
+    w = inv * np.einsum("ij,ij->i", d, qv)
+    tt = inv * np.einsum("ij,ij->i", e2, qv)
+    size = np.linalg.norm(d, axis=1) + 1e-300
+    tol = eps / size
+    return ok & (u >= -tol) & (w >= -tol) & (u + w <= 1 + tol) & (tt >= -tol) & (tt <= 1 + tol)
 
 
 def _signed_volume(v, t) -> float:
