@@ -425,10 +425,14 @@ class Box(_Body):
         return float(point)
 
     def footing_pressure_pa(self, m) -> float:
-        raise FemInputError("footing_pressure_pa(): only on a Rectangle with "
-                            f"platens='footing' (this body: {type(self).__name__})")
+        self._no_footing("footing_pressure_pa")
 
-    footing_settlement_m = footing_pressure_pa
+    def footing_settlement_m(self, m) -> float:
+        self._no_footing("footing_settlement_m")
+
+    def _no_footing(self, what: str):
+        raise FemInputError(f"{what}(): only on a Rectangle with platens='footing' (this "
+                            f"body: {type(self).__name__})")
 
 
 def _fixed(m, c: int, facets, value):

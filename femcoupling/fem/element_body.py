@@ -42,13 +42,12 @@ class ElementPart:
         its points (``FemModel``'s arguments)."""
         fx = self._fx = _dolfinx.load()
         fem, ufl = fx.fem, fx.ufl
-        self.body, self.pool, self.comm = body, elements, comm
+        self.pool, self.comm = elements, comm  # (self.body: FemModel's)
         self.gdim, self.degree = body.gdim, body.degree
         self.records = None
         if out is not None:
             self.records = ElementRecords(out, overwrite=overwrite, root=self._root,
                                           comm=comm)
-        self.out = None if self.records is None else self.records.out
         self._options(verbose=verbose, tangent=tangent, convergence=convergence,
                       relaxation=relaxation, noise_factor=noise_factor,
                       noise_ceiling=noise_ceiling, newton_rtol=newton_rtol,
