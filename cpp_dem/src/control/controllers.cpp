@@ -550,19 +550,19 @@ void check_enabled_controllers(const Scene& s) {
     for (int j = i + 1; j < s.num_controllers(); ++j) {
       const auto b = s.controller(j);
       if (!b->enabled) continue;
+      // two enabled controllers on one wall, or on one body's force or velocity
+      const auto refuse = [&](const std::string& verb, const std::string& what,
+                              const std::string& why) {
+        throw ParameterError(
+            "controllers " + std::to_string(i) + " (" + controller_name(*a) + ") and " +
+            std::to_string(j) + " (" + controller_name(*b) + ") are both enabled and both " +
+            verb + " " + what + "; " + why + ". "
+            "Disable one (controller.enabled = False) before running");
+      };
       std::string w;
-      if (shared_wall(*a, *b, w))
-        throw ParameterError(
-            "controllers " + std::to_string(i) + " (" + controller_name(*a) + ") and " +
-            std::to_string(j) + " (" + controller_name(*b) + ") are both enabled and both "
-            "move " + w + "; they would set its velocity in turn. "
-            "Disable one (controller.enabled = False) before running");
+      if (shared_wall(*a, *b, w)) refuse("move", w, "they would set its velocity in turn");
       if (shared_body(*a, *b, w))
-        throw ParameterError(
-            "controllers " + std::to_string(i) + " (" + controller_name(*a) + ") and " +
-            std::to_string(j) + " (" + controller_name(*b) + ") are both enabled and both "
-            "set " + w + "; the later would replace the earlier's every step. "
-            "Disable one (controller.enabled = False) before running");
+        refuse("set", w, "the later would replace the earlier's every step");
     }
   }
 }
