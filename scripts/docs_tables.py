@@ -23,6 +23,12 @@ Kinds (options are ``key=value`` words after the kind; a value lists items with 
   loading strain z, strain ratio to the FEM (x, y, z). Options:
   ``grid=G,...``, ``labels=L,...`` (those elements, in that order).
 - ``provenance``: one line, "Command: `...` at commit abc1234 on DATE (machine)."
+- ``rve_size``: ``bench/rve_size.py``'s statistics, a row per element size: grains, seeds,
+  E, ν, φ and ψ mean ± sd with E's, ν's and φ's coefficients of variation, the wall time
+  of one fit, one element's state (kB), and whether its means lie within the next size's
+  budget.
+- ``differences``: ``footing-multiscale``'s ``differences``, a row per difference: mean,
+  se and n, each part of its error budget, the total and whether it is resolved (mm).
 
 Numbers have 4 significant digits; a missing key, None or NaN is ``-`` (older data files).
 
@@ -60,7 +66,8 @@ FENCE = re.compile(r"^\s*(```|~~~)")
 
 #: the options each kind accepts
 OPTIONS = {"findings": {"grid", "from"}, "measures": {"grid", "from"},
-           "elements": {"grid", "labels"}, "provenance": set()}
+           "elements": {"grid", "labels"}, "provenance": set(), "rve_size": set(),
+           "differences": set()}
 
 #: lists longer than this are dropped by capture (histories, not scalars)
 MAX_LIST = 12
@@ -199,9 +206,65 @@ def provenance_line(data: dict, opts: dict) -> list[str]:
             f"{machine}."]
 
 
+def _stat(st: dict, key: str, scale: float = 1.0) -> str:
+    x = st.get(key) if isinstance(st.get(key), dict) else {}
+    mean, sd = x.get("mean"), x.get("sd")
+    f = (lambda v: None if not isinstance(v, (int, float)) else v * scale)  # noqa: E731
+    return f"{fmt(f(mean))} ± {fmt(f(sd))}"
+
+
+def _cv(st: dict, key: str) -> str:
+    x = st.get(key) if isinstance(st.get(key), dict) else {}
+    cv = x.get("cv")
+    return f"{100 * cv:.1f} %" if isinstance(cv, (int, float)) and math.isfinite(cv) else "-"
+
+
+def rve_size_table(data: dict, opts: dict) -> list[str]:
+    """bench/rve_size.py's rve_size.json: a row per element size."""
+    sizes = data.get("sizes")
+    if not isinstance(sizes, dict) or not sizes:
+        raise TableError("the data file has no 'sizes' (bench/rve_size.py's rve_size.json)")
+    within = {str(c.get("grains")): c.get("within") for c in data.get("comparisons") or []}
+    head = ["grains", "seeds", "E (MPa) mean ± sd", "E cv", "ν mean ± sd", "ν cv",
+            "φ (°) mean ± sd", "φ cv", "ψ (°) mean ± sd", "fit (s)", "state (kB)",
+            "within the next size's budget"]
+    rows = []
+    for n in sorted(sizes, key=int):
+        st = sizes[n].get("params") or {}
+        seeds = (st.get("young_pa") or {}).get("n")
+        kb = sizes[n].get("state_bytes")
+        rows.append([n, fmt(seeds), _stat(st, "young_pa", 1e-6), _cv(st, "young_pa"),
+                     _stat(st, "poisson"), _cv(st, "poisson"), _stat(st, "friction_deg"),
+                     _cv(st, "friction_deg"), _stat(st, "dilatancy_deg"),
+                     fmt(sizes[n].get("fit_wall_s")),
+                     fmt(kb / 1e3 if isinstance(kb, (int, float)) else None),
+                     "-" if n not in within else ("yes" if within[n] else "no")])
+    return _table(head, rows)
+
+
+def differences_table(data: dict, opts: dict) -> list[str]:
+    """footing-multiscale's summary.json ``differences``: each difference with its budget,
+    in mm."""
+    rows = data.get("differences")
+    if not isinstance(rows, list):
+        raise TableError("the data file has no 'differences' (footing-multiscale's summary)")
+    parts = ("ceiling", "calibration", "rve", "mesh", "seeds")
+    mm = (lambda v: None if not isinstance(v, (int, float)) else 1e3 * v)  # noqa: E731
+    head = ["difference", "mean (mm)", "se (mm)", "n"] + [f"{p} (mm)" for p in parts] + [
+        "total (mm)", "resolved"]
+    out = []
+    for r in rows:
+        b = r.get("budget") if isinstance(r.get("budget"), dict) else {}
+        out.append([fmt(r.get("name")), fmt(mm(r.get("mean"))), fmt(mm(r.get("se"))),
+                    fmt(r.get("n"))] + [fmt(mm(b.get(p))) for p in parts]
+                   + [fmt(mm(r.get("total"))), "yes" if r.get("resolved") else "no"])
+    return _table(head, out)
+
+
 KINDS = {"findings": findings_table,
          "measures": lambda d, o: findings_table(d, o, verdict=False),
-         "elements": elements_table, "provenance": provenance_line}
+         "elements": elements_table, "provenance": provenance_line,
+         "rve_size": rve_size_table, "differences": differences_table}
 
 
 # ---- pages -------------------------------------------------------------------------------------

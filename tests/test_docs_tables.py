@@ -269,3 +269,39 @@ def test_generated_lines_are_those_between_markers(docs):
     assert all(not lines[k - 1].startswith("<!--") for k in gen)
     assert not any(lines[k - 1] in ("Some text.", "The others:") for k in gen)
     assert dt.generated_lines("<!-- table: data/x.json findings -->\n") == set()
+
+
+def test_the_rve_size_and_differences_kinds_render_their_rows():
+    """bench/rve_size.py's statistics and footing-multiscale's differences with their budget
+    (issue 62): a row per size and per difference, in the units of their heads."""
+    def st(mean, sd, cv, n=4):
+        return {"mean": mean, "sd": sd, "se": sd / 2, "cv": cv, "n": n}
+
+    data = {"sizes": {
+        "200": {"params": {"young_pa": st(12.5e6, 1.25e6, 0.1), "poisson": st(0.25, 0.02, 0.08),
+                           "friction_deg": st(40.0, 2.0, 0.05),
+                           "dilatancy_deg": st(20.0, 3.0, 0.15)},
+                "fit_wall_s": 4.2, "state_bytes": 310000},
+        "100": {"params": {"young_pa": st(11e6, 2e6, 0.18), "poisson": st(0.26, 0.03, 0.115),
+                           "friction_deg": st(41.0, 3.0, 0.073),
+                           "dilatancy_deg": st(22.0, 4.0, 0.18)},
+                "fit_wall_s": 1.9, "state_bytes": 160000}},
+        "comparisons": [{"grains": 100, "next": 200, "within": False}]}
+    lines = dt.rve_size_table(data, {})
+    assert lines[0].startswith("| grains | seeds | E (MPa) mean ± sd | E cv |")
+    assert lines[2] == ("| 100 | 4 | 11 ± 2 | 18.0 % | 0.26 ± 0.03 | 11.5 % | 41 ± 3 | 7.3 % "
+                        "| 22 ± 4 | 1.9 | 160 | no |")
+    assert lines[3].startswith("| 200 | 4 | 12.5 ± 1.25 | 10.0 % |") and lines[3].endswith(
+        "| 4.2 | 310 | - |")
+    diffs = {"differences": [{"name": "PRS - RE", "mean": -1e-3, "se": 1e-5, "n": 3,
+                              "budget": {"ceiling": 1e-4, "calibration": None, "rve": 2e-4,
+                                         "mesh": 3e-4, "seeds": 4.3e-5},
+                              "total": None, "resolved": False}]}
+    lines = dt.differences_table(diffs, {})
+    assert lines[0] == ("| difference | mean (mm) | se (mm) | n | ceiling (mm) | calibration (mm)"
+                        " | rve (mm) | mesh (mm) | seeds (mm) | total (mm) | resolved |")
+    assert lines[2] == "| PRS - RE | -1 | 0.01 | 3 | 0.1 | - | 0.2 | 0.3 | 0.043 | - | no |"
+    with pytest.raises(dt.TableError, match="no 'sizes'"):
+        dt.rve_size_table({}, {})
+    with pytest.raises(dt.TableError, match="no 'differences'"):
+        dt.differences_table({}, {})

@@ -43,7 +43,7 @@ from geogrid_dem.rundir import on_interrupt, run_main
 #: The test-sized run: a coarse mesh (14-20 zone cells), 80 grains an element, one load
 #: level, two seeds.
 SMOKE = dict(width=2.0, height=1.5, mesh_size=0.5, fine_size=0.35, cell_grains=80, levels=1,
-             fit_points=4, pressure_pa=40e3)
+             fit_points=4, pressure_pa=40e3, calibration_elements=8)
 #: The smoke in 3D (--dim 3), over SMOKE: coarser zone cells and smaller elements (a zone
 #: of 0.35 m cells has 93 tetrahedra unreinforced, 140 with the layer).
 SMOKE_3D = dict(fine_size=0.5, cell_grains=50)
@@ -169,6 +169,10 @@ def build_parser():
     ap.add_argument("--noise-ceiling", type=float, default=d.noise_ceiling,
                     help="Newton: a DEM zone step is accepted within the elements' noise only "
                          "up to this fraction of the zone's own internal force")
+    ap.add_argument("--calibration-elements", type=int, default=None,
+                    help="elements of the zone's grains the Drucker-Prager is fitted on, their "
+                         f"mean (default {d.calibration_elements}, smoke "
+                         f"{SMOKE['calibration_elements']}; seeds from --seed on)")
     ap.add_argument("--budget", default="",
                     help="the error budget's parts to measure, each by a rerun of every "
                          "variant with one thing changed: a comma-separated selection of "
@@ -192,7 +196,8 @@ FLAGS = {"--pressure": "pressure_pa", "--seat": "seat_pa", "--levels": "levels",
          "--grid-stiffness": "grid_stiffness", "--prestress": "prestress",
          "--fine-size": "fine_size", "--cell-grains": "cell_grains",
          "--band-grains": "band_grains", "--band-tangent": "band_tangent",
-         "--workers": "workers", "--dim": "dim", "--noise-ceiling": "noise_ceiling"}
+         "--workers": "workers", "--dim": "dim", "--noise-ceiling": "noise_ceiling",
+         "--calibration-elements": "calibration_elements"}
 
 
 def parse_args(argv=None):
@@ -216,6 +221,9 @@ def parse_args(argv=None):
         ap.error(f"--variants={a.variants!r}: a comma-separated selection of "
                  f"{', '.join(VARIANTS)}")
     distinct(ap, "--variants", repr(a.variants), variants)
+    if a.calibration_elements is not None:
+        check_cap(ap, a, "--calibration-elements", a.calibration_elements,
+                  a.calibration_elements, "seeds", "element seeds of the calibration")
     for flag in ("--cell-grains", "--band-grains"):
         v = getattr(a, flag[2:].replace("-", "_"))
         if v is not None:

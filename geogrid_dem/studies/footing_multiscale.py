@@ -8,11 +8,12 @@ the quarter next to the planes x = 0 and y = 0 under a square footing 2b x 2b, `
 and in y, and the zone a cube of edge b under it; the layer covers the body across y. The
 run:
 
-1. **Calibration.** The Drucker–Prager soil outside the zone is fitted on an element of the
-   zone's own grains: E and nu its secant along the zone's mean stress path in a first FEM
-   of the unreinforced body (from the seating pressure to the largest,
-   ``femcoupling.coupling.continuum_fit.fit_along_path``), phi the peak of its plane-strain biaxial
-   test at the path's final mean pressure; no cohesion (:func:`calibrate`).
+1. **Calibration.** The Drucker–Prager soil outside the zone is fitted on
+   ``calibration_elements`` elements of the zone's own grains (their mean): E and nu each
+   one's secant along the zone's mean stress path in a first FEM of the unreinforced body
+   (from the seating pressure to the largest,
+   ``femcoupling.coupling.continuum_fit.fit_along_path``), phi the peak of its plane-strain
+   biaxial test at the path's final mean pressure; no cohesion (:func:`calibrate`).
 2. **Variants** ``unreinforced``, ``RE`` (one geogrid layer: an elastic band of axial
    stiffness J, N/m) and ``PRS`` (the same layer with its prestress T_p locked in,
    ``FemModel.apply_prestress``). Each starts geostatic (K0), the footing is seated to
@@ -59,7 +60,7 @@ VARIANTS = ("unreinforced", "RE", "PRS")
 #: The seeds' part (t(0.975, n - 1) x its standard error) is always measured.
 BUDGET_PARTS = {
     "ceiling": "Newton's noise ceiling halved",
-    "calibration": "the continuum refitted on another element seed (the largest seed + 1)",
+    "calibration": "the continuum refitted on the next calibration_elements element seeds",
     "rve": "twice the grains in every element",
     "mesh": "the zone's cells fine_size / sqrt(2) (about twice as many)"}
 #: The Voigt components of the elements' finite-difference tangents: the x-z plane's in plane
@@ -115,8 +116,10 @@ class FootingParams:
     noise_ceiling: float = 1e-2     #: Newton: a DEM zone step is accepted within the
                                     #: elements' noise only up to this fraction of the
                                     #: zone's own internal force, -
-    calibration_seed: int | None = None  #: the element seed the continuum is fitted on
-                                    #: (None: ``seeds[0]``)
+    calibration_seed: int | None = None  #: the first element seed the continuum is fitted
+                                    #: on (None: ``seeds[0]``)
+    calibration_elements: int = 16  #: elements the continuum is fitted on (seeds from
+                                    #: ``calibration_seed`` on; their mean: calibrate)
     budget: tuple = ()              #: the error budget's parts measured by reruns
                                     #: (BUDGET_PARTS; the seeds' part is always measured)
 
@@ -143,7 +146,7 @@ class FootingParams:
         if not (self.prestress >= 0 and math.isfinite(self.prestress)):
             bad("prestress", ">= 0 N/m")
         for name, lo in (("levels", 1), ("steps_per_level", 1), ("cell_grains", 50),
-                         ("workers", 1), ("fit_points", 2)):
+                         ("workers", 1), ("fit_points", 2), ("calibration_elements", 1)):
             v = getattr(self, name)
             if not (isinstance(v, int) and v >= lo):
                 bad(name, f"an integer >= {lo}")
@@ -262,17 +265,15 @@ def band_sheet_tensions(group, first: int) -> list:
             for b in pool.states(range(first, pool.n))]
 
 
-def calibrate(p: FootingParams, log) -> tuple:
-    """Step 1 of the module doc: (the fitted DruckerPrager, its record). E and nu: the
-    secant of an element of the zone's grains (seed ``seeds[0]``) along the zone's mean stress
-    path (``fit_along_path``); phi: the peak of a plane-strain biaxial test of that element
-    at the path's final mean pressure (``geogrid_dem.studies.biaxial.direct_biaxial``, to 6 %
-    axial strain; sin phi = (s1 - s3) / (s1 + s3)); no cohesion."""
-    from cpp_dem.elements.periodic import DemElement
-    from femcoupling.coupling.continuum_fit import fit_along_path
+def zone_path(p: FootingParams, log) -> tuple:
+    """The zone's mean stress path the continuum is fitted along: (s0, s1, record), the zone's
+    stress tensors (3 x 3, Pa, tension positive) at the seating and at the largest pressure
+    of a first FEM of the unreinforced body with the starting soil (``soil_young``, ...), and
+    the record's path keys. A body that stops short is taken as far as it went when that is
+    at least PATH_SHORT_MIN of the rise (the record's ``path_stopped`` says so; else its
+    NewtonFailure is raised)."""
     from femcoupling.materials.continuum import DruckerPrager
 
-    t0 = time.perf_counter()
     soil0 = DruckerPrager(young_pa=p.soil_young, poisson=p.soil_poisson, cohesion_pa=0.0,
                           friction_deg=p.soil_friction)
     m = model(p, "unreinforced", soil0)
@@ -291,7 +292,53 @@ def calibrate(p: FootingParams, log) -> tuple:
                  f"{m.footing_pressure_pa() / 1e3:.1f} kPa of {p.pressure_pa / 1e3:g} ({exc})")
         log(f"calibration: WARNING: {short}; the zone's path is taken to there")
     s1 = m.region_stress("zone")
-    seed = p.seeds[0] if p.calibration_seed is None else p.calibration_seed
+    # (both ends on one grid, the larger end's: what the FEM's rounding cannot move)
+    scale = s0 if np.abs(s0).max() > np.abs(s1).max() else s1
+    s0, s1 = target_grid(s0, scale), target_grid(s1, scale)
+    return s0, s1, {"path_initial_pa": (-np.diag(s0)).tolist(),
+                    "path_final_pa": (-np.diag(s1)).tolist(),
+                    "path_footing_pressure_pa": m.footing_pressure_pa(),
+                    "path_stopped": short}
+
+
+#: Significant digits (of the largest component) an element's stress target from the FEM
+#: keeps: the zone's path the calibration drives its elements along, and each zone cell's
+#: stress its element is prepared at. The FEM's last digits are its solver's (newton_rtol
+#: 1e-6) and its BLAS kernel's rounding, and an element servoed to a target is chaotic: the
+#: smoke's path changed by 1e-7 moved one element's fit from E 13.2 to 10.8 and 11.4 MPa and
+#: phi from 44.4 to 38.1 and 38.2 deg, and the calibration moved with the BLAS kernel (E
+#: 10.3-12.1 MPa over five kernels on one machine, 11.3-14.5 on another). On a grid of 3
+#: digits (100 Pa at 100 kPa; the elements hold their targets within 2 %) a 1e-7 change moves
+#: a component to the next grid value with a chance of about 2e-4.
+TARGET_DIGITS = 3
+
+
+def target_grid(stress_pa, scale_of=None) -> np.ndarray:
+    """``stress_pa`` (3 x 3, Pa) rounded to the grid of TARGET_DIGITS significant digits of the
+    largest component of ``scale_of`` (default itself), symmetric."""
+    s = np.asarray(stress_pa, float)
+    big = float(np.abs(np.asarray(s if scale_of is None else scale_of, float)).max())
+    if not big > 0:
+        return s.copy()
+    step = 10.0 ** (math.floor(math.log10(big)) - TARGET_DIGITS + 1)
+    g = np.round(s / step) * step
+    return 0.5 * (g + g.T)
+
+
+def fit_element(p: FootingParams, s0, s1, seed: int) -> dict:
+    """One element of the zone's grains (``p.cell_grains``, packing seed ``seed``) fitted as
+    step 1 of the module doc: E and nu its secant along the path s0 -> s1
+    (``fit_along_path``), phi and psi the peak of its plane-strain biaxial test at the path's
+    final mean pressure (``biaxial.direct_biaxial`` to 6 % axial strain, ``rve_angles``).
+    Returns a plain dict (it runs on a Dask worker too): ``seed``, ``grains``, ``young_pa``,
+    ``poisson``, ``friction_deg``, ``dilatancy_deg``, ``peak_axial_strain``,
+    ``peak_reached`` (False: no peak within 6 %, phi a lower bound), ``path_fit`` (the fit's
+    sentence), ``wall_s``."""
+    from cpp_dem.elements.periodic import DemElement
+    from femcoupling.coupling.continuum_fit import fit_along_path
+
+    t0 = time.perf_counter()
+    s0, s1 = np.asarray(s0, float), np.asarray(s1, float)
     fit = fit_along_path(s0, s1, n=p.cell_grains, seed=seed, prep_friction_deg=0.0,
                          points=p.fit_points, options=grain_options(p), unbalanced=1e-2,
                          tol=0.02)
@@ -301,22 +348,94 @@ def calibrate(p: FootingParams, log) -> tuple:
                                       prep_friction_deg=0.0, **grain_options(p)),
         [seed], pressure=pressure, strain=0.06, strain_per_step=1e-6, log=None)[0]
     angles = biaxial.rve_angles(run)
-    peak_reached = angles["peak_axial_strain"] < 0.06 - 1e-9
-    mat = DruckerPrager(young_pa=fit.material.young_pa, poisson=fit.material.poisson,
-                        cohesion_pa=0.0, friction_deg=angles["phi_peak_deg"])
-    log(f"calibration: E {mat.young_pa / 1e6:.4g} MPa, nu {mat.poisson:.3f} along the zone's "
-        f"path; phi {mat.friction_deg:.1f} deg, the biaxial peak at {pressure / 1e3:.1f} kPa "
-        f"(axial strain {angles['peak_axial_strain']:.4f}"
-        + ("" if peak_reached else ": no peak within 6 %, a lower bound") + f"), c = 0 "
-        f"({time.perf_counter() - t0:.1f} s)")
+    return {"seed": int(seed), "grains": int(p.cell_grains),
+            "young_pa": float(fit.material.young_pa), "poisson": float(fit.material.poisson),
+            "friction_deg": float(angles["phi_peak_deg"]),
+            "dilatancy_deg": float(angles["psi_deg"]),
+            "peak_axial_strain": float(angles["peak_axial_strain"]),
+            "peak_reached": bool(angles["peak_axial_strain"] < 0.06 - 1e-9),
+            "path_fit": fit.message, "wall_s": time.perf_counter() - t0}
+
+
+#: The fitted parameters a calibration averages over its element seeds (fit_element's keys).
+FIT_KEYS = ("young_pa", "poisson", "friction_deg", "dilatancy_deg")
+
+
+def seed_scatter(fits: list, keys=FIT_KEYS) -> dict:
+    """Per key, the mean over ``fits`` (fit_element's dicts), their sd (ddof 1), the mean's
+    standard error and the coefficient of variation sd / |mean| (None for one fit), and n."""
+    out = {}
+    for key in keys:
+        v = np.array([f[key] for f in fits], float)
+        n = len(v)
+        sd = float(v.std(ddof=1)) if n > 1 else None
+        out[key] = {"mean": float(v.mean()), "sd": sd,
+                    "se": sd / math.sqrt(n) if sd is not None else None,
+                    "cv": sd / abs(float(v.mean())) if sd is not None and v.mean() else None,
+                    "n": n}
+    return out
+
+
+def fit_elements(p: FootingParams, s0, s1, seeds, client=None) -> list:
+    """``fit_element`` of each seed, in the order of ``seeds`` (on ``client``'s Dask workers
+    when given, one element a task; else here, one after the other): the same dicts either
+    way, each element's fit depending on its seed alone."""
+    seeds = [int(s) for s in seeds]
+    if client is None:
+        return [fit_element(p, s0, s1, s) for s in seeds]
+    futures = client.map(fit_element, [p] * len(seeds), [s0] * len(seeds),
+                         [s1] * len(seeds), seeds, pure=False)
+    return client.gather(futures)
+
+
+def calibration_seeds(p: FootingParams) -> list:
+    """The element seeds the continuum is fitted on: ``calibration_elements`` seeds from
+    ``calibration_seed`` (None: from ``seeds[0]``)."""
+    first = p.seeds[0] if p.calibration_seed is None else p.calibration_seed
+    return list(range(first, first + p.calibration_elements))
+
+
+def calibrate(p: FootingParams, log, client=None) -> tuple:
+    """Step 1 of the module doc: (the fitted DruckerPrager, its record). E, nu, phi: the mean
+    over ``calibration_elements`` elements of the zone's grains (``calibration_seeds``), each
+    fitted by :func:`fit_element` along the zone's path (:func:`zone_path`; on ``client``'s
+    workers when given); no cohesion. One element's fit scatters over its packing seed (at
+    80 grains E by 14 %, nu 11 %, phi 8 %: docs/studies/footing_multiscale.md) as it does
+    over the CPU's rounding path, which decorrelates a chaotic element like another seed
+    would: the mean over several is what rounding cannot move beyond its standard error. The
+    record has each element's fit (``elements``) and the scatter (``seed_scatter``: mean,
+    sd, se, cv per parameter)."""
+    from femcoupling.materials.continuum import DruckerPrager
+
+    t0 = time.perf_counter()
+    s0, s1, path = zone_path(p, log)
+    seeds = calibration_seeds(p)
+    fits = fit_elements(p, s0, s1, seeds, client)
+    spread = seed_scatter(fits)
+    mat = DruckerPrager(young_pa=spread["young_pa"]["mean"],
+                        poisson=spread["poisson"]["mean"], cohesion_pa=0.0,
+                        friction_deg=spread["friction_deg"]["mean"])
+    pressure = float(-np.trace(s1) / 3)
+    short_of_peak = [f["seed"] for f in fits if not f["peak_reached"]]
+
+    def pm(key, scale=1.0, unit=""):
+        s = spread[key]
+        return (f"{s['mean'] / scale:.4g}{unit}" if s["se"] is None else
+                f"{s['mean'] / scale:.4g} ± {s['se'] / scale:.2g}{unit}")
+
+    log(f"calibration on {len(seeds)} element{'s' * (len(seeds) > 1)} of {p.cell_grains} "
+        f"grains (seeds {seeds[0]}-{seeds[-1]}; mean ± se): E {pm('young_pa', 1e6, ' MPa')}, "
+        f"nu {pm('poisson')} along the zone's path; phi {pm('friction_deg', 1, ' deg')}, the "
+        f"biaxial peak at {pressure / 1e3:.1f} kPa"
+        + (f" (no peak within 6 % for seeds {short_of_peak}: a lower bound there)"
+           if short_of_peak else "") + f", c = 0 ({time.perf_counter() - t0:.1f} s)")
     rec = {"young_pa": mat.young_pa, "poisson": mat.poisson, "friction_deg": mat.friction_deg,
-           "cohesion_pa": 0.0, "path_fit": fit.message,
-           "path_initial_pa": (-np.diag(s0)).tolist(), "path_final_pa": (-np.diag(s1)).tolist(),
-           "path_footing_pressure_pa": m.footing_pressure_pa(), "path_stopped": short,
-           "biaxial_pressure_pa": pressure, "biaxial_peak_axial_strain":
-               angles["peak_axial_strain"], "biaxial_peak_reached": bool(peak_reached),
-           "dilatancy_deg": angles["psi_deg"], "element_seed": seed,
-           "element_grains": p.cell_grains,
+           "cohesion_pa": 0.0, **path,
+           "biaxial_pressure_pa": pressure,
+           "biaxial_peak_axial_strain": float(np.mean([f["peak_axial_strain"] for f in fits])),
+           "biaxial_peak_reached": not short_of_peak,
+           "dilatancy_deg": spread["dilatancy_deg"]["mean"], "element_seeds": seeds,
+           "element_grains": p.cell_grains, "seed_scatter": spread, "elements": fits,
            "start": {"young_pa": p.soil_young, "poisson": p.soil_poisson,
                      "friction_deg": p.soil_friction},
            "wall_time_s": time.perf_counter() - t0}
@@ -369,7 +488,8 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
                   model, p, variant, soil)
     m.noise_ceiling = p.noise_ceiling
     e0 = m.region_strain("zone")
-    cells = m.cell_stresses("zone")
+    # (each cell's element prepared at its stress on the grid of TARGET_DIGITS)
+    cells = {k: target_grid(v) for k, v in m.cell_stresses("zone").items()}
     # (the grains around a band cell: the zone's soil cells within 1.5 fine cells of it)
     bands = (m.band_cell_states("zone", 1.5 * p.fine_size)
              if p.band_grains and variant != "unreinforced" else {})
@@ -692,7 +812,7 @@ def figure(summary: dict, png: Path) -> None:
 def budget_params(p: FootingParams, part: str) -> FootingParams:
     """The parameters of the rerun that measures the budget's ``part`` (BUDGET_PARTS)."""
     change = {"ceiling": dict(noise_ceiling=0.5 * p.noise_ceiling),
-              "calibration": dict(calibration_seed=max(p.seeds) + 1),
+              "calibration": dict(calibration_seed=calibration_seeds(p)[-1] + 1),
               "rve": dict(cell_grains=2 * p.cell_grains, band_grains=2 * p.band_grains),
               "mesh": dict(fine_size=p.fine_size / math.sqrt(2.0))}[part]
     return dataclasses.replace(p, budget=(), **change)
@@ -760,13 +880,14 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
                 progress(done[0] / n_units, f"{what}{variant} {kind} level {k + 1}")
         return on_level
 
-    soil, cal = continuum("the calibration's first FEM (the unreinforced body with the "
-                          f"starting soil: E {p.soil_young / 1e6:g} MPa, nu {p.soil_poisson:g}, "
-                          f"phi {p.soil_friction:g} deg, no cohesion)", calibrate, p, log)
-    (out / "calibration.json").write_text(json.dumps(cal, indent=2) + "\n")
     reruns: dict = {}
     client, cluster = local_client(p.workers)
     try:
+        soil, cal = continuum("the calibration's first FEM (the unreinforced body with the "
+                              f"starting soil: E {p.soil_young / 1e6:g} MPa, nu "
+                              f"{p.soil_poisson:g}, phi {p.soil_friction:g} deg, no cohesion)",
+                              calibrate, p, log, client)
+        (out / "calibration.json").write_text(json.dumps(cal, indent=2) + "\n")
         variants = run_variants(p, soil, client, out, log, level_rows(add_row))
         for part in p.budget:
             q, sub = budget_params(p, part), out / f"budget_{part}"
@@ -775,7 +896,7 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
             soil_q = soil
             if part == "calibration":
                 soil_q, cal_q = continuum("the budget's refitted calibration", calibrate, q,
-                                          log)
+                                          log, client)
                 (sub / "calibration.json").write_text(json.dumps(cal_q, indent=2) + "\n")
             vq = run_variants(q, soil_q, client, sub, log,
                               level_rows(_csv_rows(sub / "load_settlement.csv"),
