@@ -30,6 +30,9 @@ Kinds (options are ``key=value`` words after the kind; a value lists items with 
 - ``differences``: ``footing-multiscale``'s ``differences``, a row per difference: mean,
   se and n, each part of its error budget, the total and whether it is resolved (mm).
 
+  These two are followed by their source line, as a study page's table is
+  (docs/studies/): "Command: `...` · commit `abc1234` (DATE) · data: FILE."
+
 Numbers have 4 significant digits; a missing key, None or NaN is ``-`` (older data files).
 
 Commands::
@@ -261,10 +264,26 @@ def differences_table(data: dict, opts: dict) -> list[str]:
     return _table(head, out)
 
 
+def source_line(data: dict, path: str) -> str:
+    """The line under a study page's table: "Command: `...` · commit `abc1234` (DATE) ·
+    data: PATH." (docs/studies/: tests/test_docs_text.py)."""
+    p = data["provenance"]
+    cmd = str(p["command"])
+    tick = "``" if "`" in cmd else "`"
+    pad = " " if tick == "``" else ""
+    commit = str(p.get("commit"))
+    commit = commit[:7] if re.fullmatch(r"[0-9a-f]{40}", commit) else commit
+    dirty = " with uncommitted changes" if p.get("dirty") else ""
+    return (f"Command: {tick}{pad}{cmd}{pad}{tick} · commit `{commit}`{dirty} "
+            f"({str(p.get('date') or '-')[:10]}) · data: {path}.")
+
+
 KINDS = {"findings": findings_table,
          "measures": lambda d, o: findings_table(d, o, verdict=False),
          "elements": elements_table, "provenance": provenance_line,
          "rve_size": rve_size_table, "differences": differences_table}
+#: the kinds whose table is followed by its source line (:func:`source_line`)
+SOURCED = {"rve_size", "differences"}
 
 
 # ---- pages -------------------------------------------------------------------------------------
@@ -347,7 +366,10 @@ def body(page: Path, block: dict, cache: dict | None = None) -> list[str]:
     if not isinstance(prov, dict) or not prov.get("command") or not prov.get("commit"):
         raise TableError(f"data file {block['data']} has no provenance with its command and "
                          "commit (make it with `capture`)")
-    return [""] + KINDS[kind](data, opts) + [""]
+    lines = KINDS[kind](data, opts)
+    if kind in SOURCED:  # (a study page's table carries its source line: docs/studies/)
+        lines += ["", source_line(data, block["data"])]
+    return [""] + lines + [""]
 
 
 def process(page: Path, *, write: bool) -> list[str]:

@@ -301,6 +301,11 @@ def test_the_rve_size_and_differences_kinds_render_their_rows():
     assert lines[0] == ("| difference | mean (mm) | se (mm) | n | ceiling (mm) | calibration (mm)"
                         " | rve (mm) | mesh (mm) | seeds (mm) | total (mm) | resolved |")
     assert lines[2] == "| PRS - RE | -1 | 0.01 | 3 | 0.1 | - | 0.2 | 0.3 | 0.043 | - | no |"
+    # on a page, each is followed by its source line, as a study page's table is
+    line = dt.source_line({"provenance": dict(PROVENANCE)}, "../data/run.json")
+    assert line == ("Command: `.venv/bin/python cases/prs_element_002.py --smoke --seeds 1-2` "
+                    "· commit `0123456` (2026-01-02) · data: ../data/run.json.")
+    assert dt.SOURCED == {"rve_size", "differences"}
     with pytest.raises(dt.TableError, match="no 'sizes'"):
         dt.rve_size_table({}, {})
     with pytest.raises(dt.TableError, match="no 'differences'"):
