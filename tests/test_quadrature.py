@@ -12,13 +12,14 @@
 
 from __future__ import annotations
 
+import dataclasses
 import math
 
 import numpy as np
 import pytest
 
-from femcoupling.fem.quadrature import (NewtonFailure, NewtonRules, QuadratureMaterial,
-                                        newton_solve)
+from femcoupling.fem.quadrature import (NOISE_PROBE, NewtonFailure, NewtonRules,
+                                        QuadratureMaterial, newton_solve)
 from femcoupling.materials.continuum import (AnisotropicElastic, DruckerPrager,
                                              DruckerPragerPoints, ElasticPoints, LinearElastic,
                                              drucker_prager_return)
@@ -426,3 +427,46 @@ def test_a_dem_region_element_goes_through_the_same_exchange():
     assert np.array_equal(m.stress_n, s1)
     m.set_state(saved)
     assert np.array_equal(m.stress_n, s0) and np.array_equal(m.trial(inc)[0], s1)
+
+
+class _StiffTangent(_Spring):
+    """A spring whose Newton corrections use a tangent 5 x too stiff: Newton converges, but
+    slowly (by 0.8 an iteration), and stalls by the rule of two iterations. It has the
+    soil body's ``increment_norm`` (u since the step's start, 0)."""
+
+    def correction(self):
+        return np.array([-(self.sig - self.f) / (5.0 * (self.k + 3 * self.a * self.u**2))])
+
+    def increment_norm(self):
+        return abs(self.u)
+
+
+def test_the_correction_probe_measures_roughness_not_the_tangent_s_error():
+    """Issue 62 item 4: the soil body's probe at the size of Newton's last correction took
+    the tangents' prediction off a one-sided change, so a wrong tangent read as noise: a
+    smooth spring with a 5 x stiff tangent was 'stopped_at_scatter' with no noise at all.
+    Both ways, the second difference keeps the roughness and the curvature at the probe's
+    size; the latest probe counts (an early one at a large correction kept the curvature as
+    noise to the end), and the iterates' spread counts only where a draw rose above an
+    earlier one (a slow descent is progress). The smooth spring now converges; a rough one
+    (noise 1e-4) still stops at its scatter within 2 x the noise measured; and the noise
+    measured is the roughness's size (within a factor 3 of the 1e-9 probe's on a rough
+    spring with the right tangent)."""
+    rules = NewtonRules(rtol=1e-8, max_newton=200, probe=True, ceiling=1e-2,
+                        probe_size="correction")
+    p = _StiffTangent()
+    out = newton_solve(p, rules)
+    assert out.status == "converged" and out.residual <= 1e-8
+    assert p.k * p.u + p.a * p.u**3 == pytest.approx(2.0, rel=1e-7)
+    rough = _StiffTangent(noise=1e-4)
+    out = newton_solve(rough, rules)
+    assert out.status == "stopped_at_scatter" and out.residual <= 2 * out.noise_residual
+    assert 1e-5 < out.noise_residual * 2.0 < 1e-3  # (noise 1e-4 over the force 2)
+    # on a rough spring with the right tangent the two probes see the same roughness
+    both = []
+    for size in ("correction", NOISE_PROBE):
+        q = _Spring(noise=1e-4)
+        q.increment_norm = lambda q=q: abs(q.u)
+        both.append(newton_solve(q, dataclasses.replace(rules, probe_size=size))
+                    .noise_residual)
+    assert both[1] / 3 < both[0] < 3 * both[1], both

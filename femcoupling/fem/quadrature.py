@@ -31,10 +31,11 @@ point). Both use what this module gives:
     - when Newton stalls (the residual has not halved in two iterations, or the last
       iteration is reached) and the model's materials are noisy (DEM elements), the noise is
       measured: every point is evaluated again on its increment scaled by 1 + 1e-9 (the
-      elements' chaos), or by 1 + the size of Newton's last correction with the change the
-      tangents predict taken off (``probe_size="correction"``: the elements' roughness at
-      the scale Newton works at), and the residual of that change of the stresses is what
-      no iterate can get below. The step is
+      elements' chaos), or by 1 + and 1 - the size of Newton's last correction, the second
+      difference of the stresses over sqrt 3 (``probe_size="correction"``: the elements'
+      roughness at the scale Newton works at; the smooth part of their answer, and so the
+      tangents' error, drops out to first order), and the residual of that change of the
+      stresses is what no iterate can get below. The step is
       then ``stopped_at_scatter`` if its residual is within ``noise_factor`` times that noise
       and within ``ceiling`` of the noisy points' own force scale; within the noise but above
       the ceiling Newton takes up to ``redraws`` (:data:`REDRAWS`) more iterates, each a
@@ -178,8 +179,9 @@ class NewtonRules:
     probe: bool = False
     #: the noise probe's relative change of the increments: a number (``NOISE_PROBE``, 1e-9:
     #: the elements' chaos), or "correction": the size of Newton's last correction relative
-    #: to the step's displacement increment (at least 1e-9), with the change the points'
-    #: tangents predict taken off (the elements' roughness at the scale Newton works at)
+    #: to the step's displacement increment (at least 1e-9), both ways, the second
+    #: difference of the stresses (the elements' roughness at the scale Newton works at,
+    #: which the tangents' error does not enter)
     probe_size: float | str = NOISE_PROBE
     #: a step stalled within the noise but above the ceiling: Newton takes up to this many
     #: more iterates (each a new draw of the elements' noise) and accepts the first within
@@ -240,10 +242,6 @@ class NewtonProblem(Protocol):
     def stress_change_residual(self, before: np.ndarray) -> float:
         """|internal force| (N) of the stress change since ``before``, Dirichlet rows
         zeroed."""
-
-    def predicted_change(self, perturb: float) -> np.ndarray:
-        """The stress change the points' current tangents predict for their increments
-        scaled by 1 + ``perturb`` (only with ``probe_size="correction"``)."""
 
     def increment_norm(self) -> float:
         """|u - u_n|: the step's displacement increment so far (only with
@@ -317,22 +315,42 @@ def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any 
             # counts; after a probe, two more iterations before the next)
             before = problem.stresses()
             if rules.probe_size == "correction":
+                # the increments changed both ways by Newton's last correction: the second
+                # difference s(+) + s(-) - 2 s(0) keeps the answer's roughness at that scale
+                # and drops its smooth part, to first order in the change, whatever the
+                # tangent (a one-sided change less the tangents' prediction measured the
+                # tangents' error as noise); divided by sqrt 3, its size for a noise of the
+                # one-sided probe's size (sd sqrt 6 against sqrt 2 of one evaluation's)
                 last = 0.0 if d_prev is None else omegas[-1] * float(np.linalg.norm(d_prev))
                 size = max(NOISE_PROBE, last / max(problem.increment_norm(), 1e-300))
-                before = before + problem.predicted_change(size)
+                problem.evaluate(first=False, perturb=size)
+                before = 2.0 * before - problem.stresses()
+                problem.evaluate(first=False, perturb=-size)
+                v = problem.stress_change_residual(before) / scale / math.sqrt(3.0)
             else:
                 size = rules.probe_size
-            problem.evaluate(first=False, perturb=size)
-            v = problem.stress_change_residual(before) / scale
+                problem.evaluate(first=False, perturb=size)
+                v = problem.stress_change_residual(before) / scale
             noisiest = getattr(problem, "noisiest", None)
             where = noisiest(before) if noisiest is not None else ""
             # After a first stall every iterate is a draw of the elements' noise, and their
             # spread measures it too: at a second stall the noise is at least that spread (one
             # probe can miss most of it: 8.6e-6 against iterates spread over 5.7e-6-3.5e-5, so
             # whether a draw fell within 2 x the probe's noise was luck, and the rounding path
-            # decided the iteration count).
-            spread = (max(drawn) - min(drawn)) if len(drawn) >= 3 else 0.0
-            noise_rel = v if math.isnan(noise_rel) else max(noise_rel, v, spread)
+            # decided the iteration count). The spread counted is the largest rise of a draw
+            # above an earlier one: a Newton that still converges, slowly, lowers its
+            # residual from draw to draw, and that fall is its progress, not noise (a smooth
+            # problem with a tangent 5 x too stiff was taken within the "noise" of its own
+            # descent).
+            spread = max((drawn[k] - min(drawn[:k]) for k in range(1, len(drawn))),
+                         default=0.0) if len(drawn) >= 3 else 0.0
+            if rules.probe_size == "correction":
+                # (the latest probe's: its second difference keeps the answer's curvature at
+                # the probe's size too, and an earlier probe at a larger correction would
+                # keep a smooth problem's curvature as its noise to the end of the step)
+                noise_rel = max(v, spread)
+            else:
+                noise_rel = v if math.isnan(noise_rel) else max(noise_rel, v, spread)
             if rules.probe_size == "correction":
                 # back on the iterate: the state a step accepts is the iterate's (a 1e-9 probe
                 # is within the noise of it, and is kept)

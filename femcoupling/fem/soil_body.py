@@ -470,7 +470,7 @@ class _SoilNewton:
         self.m, self.bcs = m, m._active_bcs()
 
     def evaluate(self, first: bool, perturb: float = 0.0) -> None:
-        deps = self._deps = self.m._strain_increment()  # (the iterate's; kept for the probe)
+        deps = self.m._strain_increment()
         self.m._update_tangent_and_stress(deps * (1.0 + perturb) if perturb else deps)
 
     def residual(self) -> float:
@@ -503,11 +503,6 @@ class _SoilNewton:
                for k, (sel, w) in m._element_points.items()}
         top = sorted(rms, key=lambda k: (-rms[k], k))[:count]
         return ", ".join(f"{k} {rms[k]:.3g} Pa" for k in top)
-
-    def predicted_change(self, perturb: float) -> np.ndarray:
-        m = self.m
-        tan = m.tan_q.x.array.reshape(-1, m.ncomp, m.ncomp)[m._qdofs_t]
-        return perturb * np.einsum("nij,nj->ni", tan, self._deps)
 
     def at_boundary_values(self) -> bool:
         return self.m.system.at_boundary_values(self.bcs)
