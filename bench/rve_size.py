@@ -165,8 +165,18 @@ def main(argv=None) -> int:
     bar = Progress("rve_size")
     work = sum(a.sizes) * len(seeds)
     done = 0
-    fits: dict = {n: [] for n in a.sizes}
+    fits: dict = {}
     states: dict = {}
+
+    def written(f):  # (each fit appended and flushed as it ends, and the progress)
+        nonlocal done
+        with lines.open("a") as fh:
+            fh.write(json.dumps(f) + "\n")
+            fh.flush()
+        done += f["grains"]
+        bar.update(done / work, f"{f['grains']} grains seed {f['seed']}: E "
+                                f"{f['young_pa'] / 1e6:.3g} MPa, phi {f['friction_deg']:.1f} deg")
+
     client, cluster = local_client(a.workers)
     try:
         for n in a.sizes:
@@ -174,22 +184,10 @@ def main(argv=None) -> int:
             el = DemElement.periodic(n, stress=pressure, seed=seeds[0], prep_friction_deg=0.0,
                                      **fm.grain_options(p))
             states[n] = len(el.to_bytes())
-            futures = client.map(fm.fit_element, [p] * len(seeds), [s0] * len(seeds),
-                                 [s1] * len(seeds), seeds, pure=False) if client else None
-            for k, s in enumerate(seeds):
-                f = futures[k].result() if futures else fm.fit_element(p, s0, s1, s)
-                fits[n].append(f)
-                with lines.open("a") as fh:
-                    fh.write(json.dumps(f) + "\n")
-                    fh.flush()
-                done += n
-                bar.update(done / work, f"{n} grains seed {s}: E {f['young_pa'] / 1e6:.3g} "
-                                        f"MPa, phi {f['friction_deg']:.1f} deg")
+            fits[n] = fm.fit_elements(p, s0, s1, seeds, client, on_fit=written)
     finally:
-        if client is not None:
-            client.close()
-        if cluster is not None:
-            cluster.close()
+        client.close()
+        cluster.close()
     stats = {n: {**size_statistics(fits[n]), "state_bytes": states[n]} for n in a.sizes}
     rows, answer = representative(a.sizes, stats)
     summary = {"bench": "rve_size", "sizes": {str(n): stats[n] for n in a.sizes},

@@ -193,20 +193,24 @@ def elements_table(data: dict, opts: dict) -> list[str]:
     return _table(head, rows)
 
 
+def _command_and_commit(p: dict) -> tuple[str, str]:
+    """A provenance's command as inline code (double backticks around one that has a
+    backtick) and its commit, a full hash shortened to 7 characters."""
+    cmd = str(p["command"])
+    cmd = f"`` {cmd} ``" if "`" in cmd else f"`{cmd}`"
+    commit = str(p.get("commit") or "unknown")
+    return cmd, commit[:7] if re.fullmatch(r"[0-9a-f]{40}", commit) else commit
+
+
 def provenance_line(data: dict, opts: dict) -> list[str]:
     p = data.get("provenance")
     if not isinstance(p, dict) or not p.get("command"):
         raise TableError("the data file has no provenance (make it with `capture`)")
-    cmd = str(p["command"])
-    tick = "``" if "`" in cmd else "`"
-    pad = " " if tick == "``" else ""
-    commit = str(p.get("commit") or "unknown")
-    commit = commit[:7] if re.fullmatch(r"[0-9a-f]{40}", commit) else commit
+    cmd, commit = _command_and_commit(p)
     dirty = " (with uncommitted changes)" if p.get("dirty") else ""
     date = str(p.get("date") or "-")[:10]
     machine = f" ({p['machine']})" if p.get("machine") else ""
-    return [f"Command: {tick}{pad}{cmd}{pad}{tick} at commit {commit}{dirty} on {date}"
-            f"{machine}."]
+    return [f"Command: {cmd} at commit {commit}{dirty} on {date}{machine}."]
 
 
 def _stat(st: dict, key: str, scale: float = 1.0) -> str:
@@ -268,13 +272,9 @@ def source_line(data: dict, path: str) -> str:
     """The line under a study page's table: "Command: `...` · commit `abc1234` (DATE) ·
     data: PATH." (docs/studies/: tests/test_docs_text.py)."""
     p = data["provenance"]
-    cmd = str(p["command"])
-    tick = "``" if "`" in cmd else "`"
-    pad = " " if tick == "``" else ""
-    commit = str(p.get("commit"))
-    commit = commit[:7] if re.fullmatch(r"[0-9a-f]{40}", commit) else commit
+    cmd, commit = _command_and_commit(p)
     dirty = " with uncommitted changes" if p.get("dirty") else ""
-    return (f"Command: {tick}{pad}{cmd}{pad}{tick} · commit `{commit}`{dirty} "
+    return (f"Command: {cmd} · commit `{commit}`{dirty} "
             f"({str(p.get('date') or '-')[:10]}) · data: {path}.")
 
 

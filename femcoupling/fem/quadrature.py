@@ -349,12 +349,11 @@ def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any 
                 # the probe's size too, and an earlier probe at a larger correction would
                 # keep a smooth problem's curvature as its noise to the end of the step)
                 noise_rel = max(v, spread)
-            else:
-                noise_rel = v if math.isnan(noise_rel) else max(noise_rel, v, spread)
-            if rules.probe_size == "correction":
                 # back on the iterate: the state a step accepts is the iterate's (a 1e-9 probe
                 # is within the noise of it, and is kept)
                 problem.evaluate(first=False)
+            else:
+                noise_rel = v if math.isnan(noise_rel) else max(noise_rel, v, spread)
             rnorm = problem.residual()
             rel = rnorm / scale
             hist = [rel]

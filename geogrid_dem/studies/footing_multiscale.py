@@ -293,8 +293,7 @@ def zone_path(p: FootingParams, log) -> tuple:
         log(f"calibration: WARNING: {short}; the zone's path is taken to there")
     s1 = m.region_stress("zone")
     # (both ends on one grid, the larger end's: what the FEM's rounding cannot move)
-    scale = s0 if np.abs(s0).max() > np.abs(s1).max() else s1
-    s0, s1 = target_grid(s0, scale), target_grid(s1, scale)
+    s0, s1 = target_grid(s0, (s0, s1)), target_grid(s1, (s0, s1))
     return s0, s1, {"path_initial_pa": (-np.diag(s0)).tolist(),
                     "path_final_pa": (-np.diag(s1)).tolist(),
                     "path_footing_pressure_pa": m.footing_pressure_pa(),
@@ -315,7 +314,7 @@ TARGET_DIGITS = 3
 
 def target_grid(stress_pa, scale_of=None) -> np.ndarray:
     """``stress_pa`` (3 x 3, Pa) rounded to the grid of TARGET_DIGITS significant digits of the
-    largest component of ``scale_of`` (default itself), symmetric."""
+    largest component of ``scale_of`` (a tensor or several; default itself), symmetric."""
     s = np.asarray(stress_pa, float)
     big = float(np.abs(np.asarray(s if scale_of is None else scale_of, float)).max())
     if not big > 0:
@@ -376,16 +375,21 @@ def seed_scatter(fits: list, keys=FIT_KEYS) -> dict:
     return out
 
 
-def fit_elements(p: FootingParams, s0, s1, seeds, client=None) -> list:
+def fit_elements(p: FootingParams, s0, s1, seeds, client=None, on_fit=None) -> list:
     """``fit_element`` of each seed, in the order of ``seeds`` (on ``client``'s Dask workers
     when given, one element a task; else here, one after the other): the same dicts either
-    way, each element's fit depending on its seed alone."""
+    way, each element's fit depending on its seed alone. ``on_fit(fit)`` is called with each
+    in that order as soon as it and those before it are done."""
     seeds = [int(s) for s in seeds]
-    if client is None:
-        return [fit_element(p, s0, s1, s) for s in seeds]
-    futures = client.map(fit_element, [p] * len(seeds), [s0] * len(seeds),
-                         [s1] * len(seeds), seeds, pure=False)
-    return client.gather(futures)
+    futures = None if client is None else client.map(
+        fit_element, [p] * len(seeds), [s0] * len(seeds), [s1] * len(seeds), seeds,
+        pure=False)
+    fits = []
+    for k, s in enumerate(seeds):
+        fits.append(fit_element(p, s0, s1, s) if futures is None else futures[k].result())
+        if on_fit is not None:
+            on_fit(fits[-1])
+    return fits
 
 
 def calibration_seeds(p: FootingParams) -> list:
