@@ -83,6 +83,88 @@ def band_direction(points: np.ndarray, eq: np.ndarray, percentile: float = 85.0)
             "leans": "right" if d[0] * d[1] > 0 else "left"}
 
 
+def band_profile(points: np.ndarray, eq: np.ndarray, first: dict) -> dict:
+    """The band fitted to every point: eps_q = b + A exp(-s^2 / (2 w^2)), s the distance from
+    the band's line across it, by least squares from ``first`` (``band_direction``'s). Its
+    angle from the horizontal (deg, in [0, 90], and which way it leans), its width (the full
+    width at half the rise above the background, m) and their standard errors (from the
+    fit's Jacobian and residual; the residual's spatial correlation makes them a lower
+    bound: ``band_error`` adds the estimators' spread). NaN where no band fits."""
+    from scipy.optimize import least_squares
+
+    nan = {"angle_deg": float("nan"), "angle_se_deg": float("nan"), "width_m": float("nan"),
+           "width_se_m": float("nan"), "leans": None}
+    if not math.isfinite(first.get("angle_deg", float("nan"))):
+        return nan
+    x = np.asarray(points, float)
+    y = np.asarray(eq, float)
+    c = np.asarray(first["centre_m"], float)
+    t0 = math.radians(first["angle_deg"]) * (1 if first["leans"] == "right" else -1)
+    span = float(np.ptp(x, axis=0).max())
+    lo = float(np.percentile(y, 25))
+
+    def model(q):
+        b, a, t, off, lw = q
+        s = (x - c) @ np.array([-math.sin(t), math.cos(t)]) - off
+        return b + a * np.exp(-0.5 * s * s / math.exp(2 * lw))
+
+    q0 = [lo, float(y.max() - lo), t0, 0.0, math.log(max(span / 20, 1e-12))]
+    try:
+        fit = least_squares(lambda q: model(q) - y, q0, method="lm", x_scale="jac")
+    except (ValueError, np.linalg.LinAlgError):
+        return nan
+    b, a, t, off, lw = fit.x
+    w = math.exp(lw)
+    dof = max(len(y) - 5, 1)
+    try:
+        cov = np.linalg.inv(fit.jac.T @ fit.jac) * float(fit.fun @ fit.fun) / dof
+    except np.linalg.LinAlgError:
+        return nan
+    if not (fit.success and a > 0 and w < span and np.all(np.diag(cov) >= 0)):
+        return nan
+    d = np.array([math.cos(t), math.sin(t)])
+    fwhm = 2 * math.sqrt(2 * math.log(2))
+    return {"angle_deg": math.degrees(math.atan2(abs(d[1]), abs(d[0]))),
+            "angle_se_deg": math.degrees(math.sqrt(cov[2, 2])),
+            "width_m": fwhm * w, "width_se_m": fwhm * w * math.sqrt(cov[4, 4]),
+            "leans": "right" if d[0] * d[1] > 0 else "left",
+            "background": float(b), "rise": float(a),
+            "rise_se": float(math.sqrt(cov[1, 1]))}
+
+
+def band_error(points: np.ndarray, eq: np.ndarray, fit: dict) -> float:
+    """The band angle's error, deg: the larger of the fit's 95 % interval (1.96 standard
+    errors) and half the range of its estimators (the fit; the principal direction above
+    the 80th, 85th and 90th percentiles of eps_q)."""
+    est = [fit["angle_deg"]] + [band_direction(points, eq, q)["angle_deg"]
+                                for q in (80.0, 85.0, 90.0)]
+    if not all(math.isfinite(a) for a in est):
+        return float("nan")
+    return max(1.96 * fit["angle_se_deg"], 0.5 * (max(est) - min(est)))
+
+
+def mesh_study(rows: list[dict]) -> dict:
+    """The band on successive meshes (each a row of ``shear_band.json``): its angle and width
+    per mesh, and for each pair of successive meshes whether the angle moves more than its
+    error (the two errors added in quadrature) and the width's ratio."""
+    meshes = [{"mesh": r["mesh"], "elements": r["elements"], "cell_m": r["cell_m"],
+               "nonlocal_length_m": r.get("nonlocal_length_m"),
+               "angle_deg": r["band_fit"]["angle_deg"], "angle_error_deg": r["angle_error_deg"],
+               "width_m": r["band_fit"]["width_m"], "width_se_m": r["band_fit"]["width_se_m"],
+               "localization_index": r["localization_index"],
+               "axial_strain": r["axial_strain_reached"]} for r in rows]
+    pairs = []
+    for a, b in zip(meshes, meshes[1:]):
+        err = math.hypot(a["angle_error_deg"], b["angle_error_deg"])
+        move = b["angle_deg"] - a["angle_deg"]
+        pairs.append({"from": a["mesh"], "to": b["mesh"], "angle_move_deg": move,
+                      "angle_error_deg": err,
+                      "angle_moves": bool(abs(move) > err) if math.isfinite(err) else None,
+                      "width_ratio": b["width_m"] / a["width_m"],
+                      "cell_ratio": b["cell_m"] / a["cell_m"]})
+    return {"meshes": meshes, "pairs": pairs}
+
+
 def write_strain_xdmf(model, eq: np.ndarray, path: Path) -> None:
     """eps_q per cell (the mean of its points) and the displacement, in one XDMF file."""
     fx = model._fx
@@ -167,8 +249,23 @@ def main(argv=None) -> int:
                     help="the RVEs relax to this unbalanced force after each increment")
     ap.add_argument("--rve-seeds", type=int, default=2,
                     help="RVEs run alone for phi and psi (0: skip)")
+    ap.add_argument("--nonlocal-length", type=float, default=0.0,
+                    help="the elements strained by a mean over this length, m "
+                         "(femcoupling.fem.nonlocal_strain); 0: local")
+    ap.add_argument("--nonlocal-weight", type=float, default=1.0,
+                    help="the averaged strain's share, in (0, 1]")
+    ap.add_argument("--compare", nargs="+", metavar="JSON",
+                    help="no run: the band on the meshes of these shear_band.json files, "
+                         "coarse to fine (angle, width, whether the angle moves more than "
+                         "its error), printed and written to --out/mesh_study.json")
     ap.add_argument("--out", default="results/bench_runs/shear_band")
     args = ap.parse_args(argv)
+    if args.compare:
+        return _compare(args.compare, Path(args.out))
+    if not (args.nonlocal_length >= 0 and math.isfinite(args.nonlocal_length)):
+        ap.error(f"--nonlocal-length={args.nonlocal_length}: a length >= 0, m (0: local)")
+    if not (0 < args.nonlocal_weight <= 1):
+        ap.error(f"--nonlocal-weight={args.nonlocal_weight}: must be in (0, 1]")
     for name in ("nx", "ny", "grains", "steps", "workers"):
         if getattr(args, name) < 1:
             ap.error(f"--{name}={getattr(args, name)}: must be >= 1")
@@ -202,6 +299,8 @@ def main(argv=None) -> int:
             strain=args.strain, steps=args.steps, newton_rtol=args.rtol,
             max_newton=args.max_newton, degree=args.degree, platens="rough",
             out=out / "records", overwrite=True, stop_on_failure=True,
+            nonlocal_length=args.nonlocal_length or None,
+            **({"nonlocal_weight": args.nonlocal_weight} if args.nonlocal_length else {}),
             strain_kw={"unbalanced": args.unbalanced, "max_relax_steps": 100_000})
         m = fd["model"]
         cells = np.arange(m.n_cells, dtype=np.int32)
@@ -227,6 +326,8 @@ def main(argv=None) -> int:
             "dem_s_per_element_evaluation": float(
                 sum(h.dem_s for h in m.history) / max(iterations, 1) / n)}
     band = band_direction(pts, eq)
+    fit = band_profile(pts, eq, band)
+    angle_error = band_error(pts, eq, fit)
     li = float(eq.max() / eq.mean()) if eq.mean() > 0 else float("nan")
     rves = []
     if args.rve_seeds:
@@ -237,13 +338,15 @@ def main(argv=None) -> int:
     phi = float(np.mean([r["phi_peak_deg"] for r in rves])) if rves else float("nan")
     psi = float(np.mean([r["psi_deg"] for r in rves])) if rves else float("nan")
     row = {"elements": n, "mesh": f"{args.nx}x{args.ny}", "degree": args.degree,
+           "cell_m": args.lx / args.nx,
+           "nonlocal_length_m": args.nonlocal_length, "nonlocal_weight": args.nonlocal_weight,
            "grains_per_element": args.grains, "weak_elements": len(weak),
            "axial_strain_reached": float(fd["axial_strain"][-1]) if len(fd["axial_strain"])
            else 0.0, "failed": fd["failed"], "statuses": statuses,
            "newton_iterations": iterations,
            "localization_index": li, "eps_q_mean": float(eq.mean()), "eps_q_max": float(eq.max()),
            "band_angle_deg": band["angle_deg"], "band_elongation": band["elongation"],
-           "band_leans": band.get("leans"),
+           "band_leans": band.get("leans"), "band_fit": fit, "angle_error_deg": angle_error,
            "phi_peak_deg": phi, "psi_deg": psi,
            "mohr_coulomb_deg": 45 + phi / 2, "roscoe_deg": 45 + psi / 2,
            "arthur_deg": 45 + (phi + psi) / 4, "rves": rves,
@@ -259,6 +362,37 @@ def main(argv=None) -> int:
                                          "sigma_axial": np.asarray(fd["sigma_axial"]).tolist(),
                                          "eps_q": eq.tolist(), "points": pts.tolist()})
     print(json.dumps(row, default=float), flush=True)
+    return 0
+
+
+def _compare(files: list[str], out: Path) -> int:
+    rows = []
+    for f in files:
+        try:
+            rows.append(json.loads(Path(f).read_text()))
+        except (OSError, ValueError) as e:
+            raise _cli.BenchInputError(f"--compare {f}: not a readable shear_band.json ({e})")
+        r = rows[-1]
+        if not all(k in r for k in ("points", "eps_q", "args", "elements", "mesh")):
+            raise _cli.BenchInputError(f"--compare {f}: not a shear_band.json (needs points, "
+                                       "eps_q, args, elements, mesh)")
+        # (measured again from the field: files of an older bench compare too)
+        pts, eq = np.asarray(r["points"], float), np.asarray(r["eps_q"], float)
+        band = band_direction(pts, eq)
+        r["band_fit"] = band_profile(pts, eq, band)
+        r["angle_error_deg"] = band_error(pts, eq, r["band_fit"])
+        r["cell_m"] = r["args"]["lx"] / r["args"]["nx"]
+        r.setdefault("nonlocal_length_m", r["args"].get("nonlocal_length", 0.0))
+    study = mesh_study(rows)
+    out.mkdir(parents=True, exist_ok=True)
+    write_json(out / "mesh_study.json", study)
+    for m in study["meshes"]:
+        print(f"[mesh] {m['mesh']} ({m['elements']} elements, cells {m['cell_m'] * 1e3:.1f} mm)"
+              f": band {m['angle_deg']:.1f} +- {m['angle_error_deg']:.1f} deg, width "
+              f"{m['width_m'] * 1e3:.1f} +- {m['width_se_m'] * 1e3:.1f} mm, localization "
+              f"index {m['localization_index']:.2f} at {100 * m['axial_strain']:.2f} %",
+              flush=True)
+    print(json.dumps(study, default=float), flush=True)
     return 0
 
 

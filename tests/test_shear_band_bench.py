@@ -50,6 +50,47 @@ def test_band_direction_finds_a_synthetic_band_and_not_a_round_spot(angle):
     assert sb.band_direction(pts, spot)["elongation"] < 1.5  # round: no band
 
 
+@pytest.mark.parametrize("angle, width", [(30.0, 8e-3), (55.0, 5e-3), (120.0, 12e-3)])
+def test_band_profile_fits_a_noisy_band_s_angle_and_width(angle, width):
+    sb = _bench()
+    rng = np.random.default_rng(5)
+    pts = rng.uniform(0, 1, (300, 2)) * [0.05, 0.10]
+    t = math.radians(angle)
+    s = -(pts[:, 0] - 0.02) * math.sin(t) + (pts[:, 1] - 0.05) * math.cos(t)
+    sigma = width / (2 * math.sqrt(2 * math.log(2)))
+    eq = 0.01 + 0.05 * np.exp(-0.5 * (s / sigma) ** 2) + rng.normal(0, 0.003, len(s))
+    f = sb.band_profile(pts, eq, sb.band_direction(pts, eq))
+    expect = angle if angle <= 90 else 180 - angle
+    assert abs(f["angle_deg"] - expect) < 3 * f["angle_se_deg"] + 0.2
+    assert f["angle_se_deg"] < 1.0
+    assert f["width_m"] == pytest.approx(width, rel=0.1)
+    assert abs(f["width_m"] - width) < 4 * f["width_se_m"] + 2e-4
+    assert f["leans"] == ("right" if angle <= 90 else "left")
+    err = sb.band_error(pts, eq, f)
+    assert err >= 1.96 * f["angle_se_deg"] and err < 3.0
+    # a wider band is measured wider (the measure can fail)
+    wide = 0.01 + 0.05 * np.exp(-0.5 * (s / (2 * sigma)) ** 2)
+    assert sb.band_profile(pts, wide, sb.band_direction(pts, wide))["width_m"] == \
+        pytest.approx(2 * width, rel=0.1)
+
+
+def test_the_mesh_study_says_whether_the_angle_moves_beyond_its_error():
+    sb = _bench()
+
+    def row(mesh, angle, err, width, cell):
+        return {"mesh": mesh, "elements": 1, "cell_m": cell, "band_fit": {
+            "angle_deg": angle, "width_m": width, "width_se_m": 1e-4},
+            "angle_error_deg": err, "localization_index": 5.0, "axial_strain_reached": 0.03}
+
+    st = sb.mesh_study([row("a", 54.0, 1.0, 10e-3, 12.5e-3), row("b", 50.0, 1.0, 8e-3, 10e-3),
+                        row("c", 49.0, 1.0, 8e-3, 8e-3)])
+    assert [p["angle_moves"] for p in st["pairs"]] == [True, False]
+    assert st["pairs"][0]["angle_move_deg"] == pytest.approx(-4.0)
+    assert st["pairs"][0]["angle_error_deg"] == pytest.approx(math.sqrt(2))
+    assert st["pairs"][0]["width_ratio"] == pytest.approx(0.8)
+    assert st["pairs"][1]["cell_ratio"] == pytest.approx(0.8)
+
+
 def test_rve_angles_of_a_synthetic_curve():
     from geogrid_dem.studies import biaxial
 
@@ -81,5 +122,36 @@ def test_the_bench_runs_at_a_tiny_size(tmp_path, capsys):
     assert 0 < sc["client_bytes_per_accepted_step"] < sc["accepted_state_bytes"]
     for f in ("strain.xdmf", "shear_band.png", "shear_band.json", "records/fem.xdmf"):
         assert (tmp_path / f).is_file(), f
+    assert row["cell_m"] == pytest.approx(0.05) and row["nonlocal_length_m"] == 0.0
+    assert "angle_deg" in row["band_fit"] and "angle_error_deg" in row
     with pytest.raises(SystemExit):
         sb.main(["--weak-radius", "1.5", "--out", str(tmp_path / "x")])
+    for bad in (["--nonlocal-length", "-1"], ["--nonlocal-weight", "0"]):
+        with pytest.raises(SystemExit):
+            sb.main(bad + ["--out", str(tmp_path / "x")])
+
+
+def test_the_bench_runs_nonlocal_and_compares_its_meshes(tmp_path, capsys):
+    """The documented nonlocal run and mesh comparison, at a tiny size: the model averages
+    the strain (its records say so), and --compare reads the runs' files."""
+    pytest.importorskip("dolfinx_solver")
+    sb = _bench()
+    runs = []
+    for nx, ny in ((1, 2), (2, 3)):
+        out = tmp_path / f"m{nx}x{ny}"
+        assert sb.main(["--nx", str(nx), "--ny", str(ny), "--grains", "40", "--strain",
+                        "0.002", "--steps", "1", "--workers", "1", "--rve-seeds", "0",
+                        "--weak-radius", "0.3", "--nonlocal-length", "0.02",
+                        "--nonlocal-weight", "0.8",
+                        "--out", str(out)]) == 0
+        row = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+        assert row["nonlocal_length_m"] == 0.02 and row["nonlocal_weight"] == 0.8
+        assert "nonlocal (NonlocalStrain(length_m=0.02, weight=0.8" in (
+            out / "records" / "report.md").read_text()
+        runs.append(str(out / "shear_band.json"))
+    assert sb.main(["--compare", *runs, "--out", str(tmp_path / "study")]) == 0
+    study = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert [m["mesh"] for m in study["meshes"]] == ["1x2", "2x3"]
+    assert len(study["pairs"]) == 1 and (tmp_path / "study" / "mesh_study.json").is_file()
+    with pytest.raises(ValueError, match="none.json: not a readable shear_band.json"):
+        sb.main(["--compare", str(tmp_path / "none.json"), "--out", str(tmp_path / "s2")])

@@ -137,6 +137,9 @@ class ElementRecords:
                  f"`{m.tangent}`, convergence `{m.convergence}` (newton_rtol "
                  f"{m.newton_rtol:g}, noise factor {m.noise_factor:g}, noise ceiling "
                  f"{m.noise_ceiling:g}), relaxation `{m.relaxation}`",
+                 "- strain: " + (
+                     "each element its own point's" if m.nonlocal_strain is None else
+                     f"nonlocal ({m.nonlocal_strain!r}; femcoupling.fem.nonlocal_strain)"),
                  f"- CPU: FEM {fem_s:.2f} s (the wall time outside the element calls), DEM "
                  f"{dem_s:.2f} s (the elements' work summed over workers), wall {wall_s:.2f} s"
                  f"; DEM share of the work {dem_s / max(fem_s + dem_s, 1e-300):.1%}",

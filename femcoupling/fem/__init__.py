@@ -18,6 +18,8 @@
   type), and the one load-step loop (``load_path``);
 - :mod:`femcoupling.fem.quadrature`: the material interface at quadrature points, the spaces
   and forms, and the one Newton with its acceptance rules;
+- :mod:`femcoupling.fem.nonlocal_strain`: the elements strained by a mean of the strain
+  around them (a length for a softening body of DEM elements);
 - :mod:`femcoupling.fem.mpi_points`: quadrature points split over MPI ranks, their materials
   on rank 0;
 - :mod:`femcoupling.fem.elastic_block`: the toolchain check (a linear-elastic block against

@@ -15,6 +15,7 @@ from femcoupling.coupling.records import ElementRecords
 from femcoupling.coupling.relaxation import check_relaxation
 from femcoupling.fem.bodies import point_coordinates
 from femcoupling.fem.mpi_points import PointPartition, RootMaterial, bcast_from_root, check_on_root
+from femcoupling.fem.nonlocal_strain import NonlocalStrain
 from femcoupling.fem.quadrature import (NewtonRules, QuadratureSystem, check_material, lu_package,
                                         newton_solve)
 from femcoupling.fem.solver import body_kind
@@ -36,7 +37,8 @@ class ElementPart:
                         max_newton: int = 10, tangent: str = "network",
                         strain_kw: dict | None = None, convergence: str = "noise",
                         relaxation: str | float = "aitken", noise_factor: float = 2.0,
-                        noise_ceiling: float | None = None, comm=None, verbose: bool = False,
+                        noise_ceiling: float | None = None, nonlocal_length: float | None = None,
+                        nonlocal_weight: float = 1.0, comm=None, verbose: bool = False,
                         out=None, overwrite: bool = False) -> None:
         """The model of a body of :mod:`femcoupling.fem.bodies` with the pool's elements at
         its points (``FemModel``'s arguments)."""
@@ -72,8 +74,15 @@ class ElementPart:
         self._bc_now = body.start()  # the boundary of the last accepted step
         #: the elements as the quadrature points' material (femcoupling.fem.quadrature)
         self._material(elements, tangent=tangent, strain_kw=self.strain_kw, dim=body.dim)
+        if nonlocal_length is None and nonlocal_weight != 1.0:
+            raise FemInputError(f"nonlocal_weight={nonlocal_weight!r}: given without "
+                                "nonlocal_length (the averaging's length, m)")
+        if nonlocal_length is not None:
+            self.nonlocal_strain = NonlocalStrain(
+                self.point_coordinates, self.element_volumes, nonlocal_length, nonlocal_weight)
 
     partition = None  #: each rank's points as elements under MPI (mpi_points.PointPartition)
+    nonlocal_strain = None  #: the averaging (femcoupling.fem.nonlocal_strain); None: local
 
     @property
     def _parallel(self) -> bool:
@@ -221,6 +230,8 @@ class ElementPart:
         """Stress and tangent of every element for the current iterate (its increments
         scaled by 1 + ``perturb``: the noise probe)."""
         g = self._grad_increment()
+        if self.nonlocal_strain is not None:
+            g = self.nonlocal_strain.apply(g)
         self._set_q(*self.material.trial(g * (1.0 + perturb) if perturb else g))
 
     def _softest(self, n: int = 3) -> str:

@@ -74,7 +74,8 @@ __all__ = ["FemModel", "FemSolver", "split_options"]
 #: the keyword arguments of each kind of body (``FemModel``'s others are refused with it)
 _SOIL_ARGS = ("soil", "layers", "region_materials", "unit_weight_n_m3", "degree", "max_cuts")
 _ELEMENT_ARGS = ("elements", "tangent", "strain_kw", "convergence", "relaxation",
-                 "noise_factor", "noise_ceiling", "verbose", "out", "overwrite")
+                 "noise_factor", "noise_ceiling", "nonlocal_length", "nonlocal_weight",
+                 "verbose", "out", "overwrite")
 _BODY_HOOKS = ("mesh", "bcs", "loads", "target", "apply", "scale_length")
 
 
@@ -124,6 +125,10 @@ class FemModel(SoilPart, RegionMaterials, LoadingStages, SoilMeasures, ElementPa
             measured noise (default 2) ...
         noise_ceiling: ... and only up to this residual (relative, like ``newton_rtol``;
             default 10 x ``newton_rtol``), above which the step is cut.
+        nonlocal_length: the elements strained by a mean of the strain around them over this
+            length, m (:mod:`femcoupling.fem.nonlocal_strain`: a shear band's width set by
+            it, not by the mesh); None (default): each by its own point's.
+        nonlocal_weight: the averaged strain's share, in (0, 1] (default 1).
         verbose: a line per Newton iteration (rank 0).
         out: the records' folder (None: none); ``overwrite``: replace an earlier run's.
     """

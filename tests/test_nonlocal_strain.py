@@ -1,0 +1,81 @@
+"""femcoupling.fem.nonlocal_strain: the averaging leaves a homogeneous strain alone, spreads
+a concentrated one over its length, and refuses what it cannot be."""
+
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from femcoupling._checks import FemInputError
+from femcoupling.fem.nonlocal_strain import NonlocalStrain
+
+
+def _grid(n=41, h=1e-3):
+    x, y = np.meshgrid(np.arange(n) * h, np.arange(n) * h)
+    return np.column_stack([x.ravel(), y.ravel()]), np.full(n * n, h * h)
+
+
+def test_a_homogeneous_strain_reaches_every_point_unchanged_also_by_the_boundary():
+    pts, vol = _grid()
+    vol = vol * np.random.default_rng(1).uniform(0.5, 2.0, len(vol))  # uneven cells
+    nl = NonlocalStrain(pts, vol, 3e-3, 0.7)
+    g = np.tile(np.array([[1e-3, 2e-4], [-5e-4, -2e-3]]), (len(pts), 1, 1))
+    out = nl.apply(g)
+    assert out.shape == g.shape
+    np.testing.assert_allclose(out, g, rtol=1e-12, atol=0)
+    np.testing.assert_allclose(np.asarray(nl.matrix.sum(axis=1)).ravel(), 1.0, rtol=1e-12)
+
+
+def test_a_spike_spreads_over_the_length_and_keeps_its_integral_in_the_interior():
+    pts, vol = _grid()
+    k = len(pts) // 2  # the centre
+    g = np.zeros((len(pts), 1))
+    g[k] = 1.0
+    for length in (2e-3, 4e-3):
+        out = NonlocalStrain(pts, vol, length).apply(g)[:, 0]
+        # a Gaussian of variance length^2 / 2 per axis around the spike
+        r2 = np.sum((pts - pts[k]) ** 2, axis=1)
+        var = (out * r2).sum() / out.sum() / 2
+        assert var == pytest.approx(length ** 2 / 2, rel=0.02)
+        assert out.sum() == pytest.approx(1.0, rel=1e-3)  # (far from the edges)
+        assert out[k] < 0.1
+    mixed = NonlocalStrain(pts, vol, 2e-3, weight=0.25).apply(g)[:, 0]
+    assert mixed[k] > 0.75  # its own share kept
+    assert NonlocalStrain(pts, vol, 2e-3, 0.25).own_share[k] == pytest.approx(mixed[k])
+
+
+def test_the_averaging_has_no_zero_energy_pattern_on_its_points():
+    """The smallest eigenvalue of the (volume-symmetrised) averaging is positive: no strain
+    pattern on the points averages to nothing (a Gaussian's transform is positive)."""
+    pts, vol = _grid(15)
+    a = NonlocalStrain(pts, vol, 1.5e-3).matrix.toarray()
+    ev = np.linalg.eigvals(a)
+    assert np.all(np.isfinite(ev)) and ev.real.min() > 1e-6
+    # (the check can fail: a box kernel over a point's 8 neighbours has a zero pattern)
+    box = (np.abs(pts[:, None, :] - pts[None, :, :]).max(axis=2) < 1.5e-3).astype(float)
+    box /= box.sum(axis=1, keepdims=True)
+    assert np.linalg.eigvals(box).real.min() < 1e-6
+
+
+@pytest.mark.parametrize("kw, field", [
+    ({"length_m": 0.0}, "nonlocal_length"), ({"length_m": -1e-3}, "nonlocal_length"),
+    ({"length_m": math.nan}, "nonlocal_length"), ({"length_m": 1e-3, "weight": 0.0},
+                                                  "nonlocal_weight"),
+    ({"length_m": 1e-3, "weight": 1.5}, "nonlocal_weight"),
+    ({"length_m": 1e-3, "cutoff": 1.0}, "cutoff")])
+def test_bad_settings_are_refused_by_name(kw, field):
+    pts, vol = _grid(5)
+    with pytest.raises(FemInputError, match=field):
+        NonlocalStrain(pts, vol, **kw)
+
+
+def test_points_without_a_volume_each_or_a_wrong_field_are_refused():
+    pts, vol = _grid(5)
+    with pytest.raises(FemInputError, match="one positive volume"):
+        NonlocalStrain(pts, vol[:-1], 1e-3)
+    with pytest.raises(FemInputError, match="one positive volume"):
+        NonlocalStrain(pts, np.zeros_like(vol), 1e-3)
+    with pytest.raises(FemInputError, match="increments: 3 points"):
+        NonlocalStrain(pts, vol, 1e-3).apply(np.zeros((3, 2, 2)))
