@@ -151,10 +151,40 @@ def test_the_command_refuses_bad_flags_by_name():
                         (["--seeds", "0"], "--seeds=0: must be >= 1"),
                         (["--band-grains", "10"], "--band-grains: band_grains=10: must be 0"),
                         (["--layer-thickness", "-1"],
-                         "--layer-thickness: layer_thickness=-1.0: must be a finite number")):
+                         "--layer-thickness: layer_thickness=-1.0: must be a finite number"),
+                        (["--resolve-mm", "0"], "--resolve-mm=0.0: a settlement difference")):
         r = subprocess.run([sys.executable, "-m", "geogrid_dem.cases.footing_multiscale",
                             "--smoke", *argv], capture_output=True, text=True, cwd=ROOT)
         assert r.returncode == 2 and words in r.stderr, r.stderr
+
+
+def test_the_zone_s_ceiling_is_tied_to_the_difference_to_resolve():
+    """``resolve_m`` sets Newton's ceiling for the DEM zone: resolve / (4 x the largest
+    continuum settlement), never above noise_ceiling; the budget's ceiling rerun halves it;
+    the flag is in mm."""
+    from dataclasses import replace
+
+    from femcoupling import FemInputError
+    from geogrid_dem.cases.footing_multiscale import parse_args
+    from geogrid_dem.studies import footing_multiscale as fm
+    from geogrid_dem.studies.footing_multiscale import FootingParams
+
+    p = FootingParams()
+    fixed = fm.zone_ceiling(p, [3e-3, 3.2e-3])
+    assert fixed["ceiling"] == p.noise_ceiling and fixed["reference_settlement_m"] == 3.2e-3
+    assert fixed["resolvable_m"] == pytest.approx(4 * 1e-2 * 3.2e-3)
+    tied = fm.zone_ceiling(replace(p, resolve_m=3.2e-5), [3e-3, 3.2e-3])
+    assert tied["ceiling"] == pytest.approx(2.5e-3)
+    assert tied["resolvable_m"] == pytest.approx(3.2e-5)  # (the rule, inverted)
+    assert fm.zone_ceiling(replace(p, resolve_m=1.0), [3e-3])["ceiling"] == p.noise_ceiling
+    q = fm.budget_params(replace(p, resolve_m=3.2e-5), "ceiling")
+    assert fm.zone_ceiling(q, [3.2e-3])["ceiling"] == pytest.approx(1.25e-3)
+    assert fm.budget_params(p, "ceiling").noise_ceiling == 0.5 * p.noise_ceiling
+    for bad in (0.0, -1e-3, math.inf, "1"):
+        with pytest.raises(FemInputError, match="resolve_m="):
+            replace(p, resolve_m=bad).check()
+    assert parse_args(["--smoke", "--resolve-mm", "0.05"])[0].resolve_m == pytest.approx(5e-5)
+    assert parse_args(["--smoke"])[0].resolve_m is None
 
 
 def test_the_layer_thickness_flag_sets_the_band_thickness():
@@ -378,6 +408,17 @@ def test_the_smoke_gives_load_settlement_for_each_variant(case_smoke):
         assert d["unmeasured"] == ["ceiling", "calibration", "rve", "mesh"]
         assert d["resolved"] is False
     assert "its budget not measured (ceiling, calibration, rve, mesh; --budget)" in proc.stdout
+    # the ceiling and what it resolves (issue 62 item 4): the fixed ceiling, by the rule
+    acc = s["acceptance"]
+    assert acc["ceiling"] == s["params"]["noise_ceiling"] and acc["resolve_m"] is None
+    assert acc["reference_settlement_m"] == max(
+        r["drucker_prager"]["settlement_m"][-1] for r in s["variants"].values())
+    assert acc["resolvable_m"] == pytest.approx(4 * acc["ceiling"]
+                                                * acc["reference_settlement_m"])
+    assert "the DEM zone's Newton ceiling: 0.01 of its force" in proc.stdout
+    for r in s["variants"].values():
+        for run in r["multiscale"]["runs"].values():
+            assert all(c is None or c == acc["ceiling"] for c in run["step_ceilings"])
     for k in ("RE-unreinforced", "PRS-RE", "PRS-unreinforced"):
         d = s["paired_settlement_differences"][k]
         assert d["seeds"] == [2] * levels and len(d["mean_m"]) == levels

@@ -32,6 +32,8 @@ The exit status is 0 when every load step of every run converged, else the coupl
 
 from __future__ import annotations
 
+import math
+
 import sys
 from dataclasses import replace
 
@@ -169,6 +171,11 @@ def build_parser():
     ap.add_argument("--noise-ceiling", type=float, default=d.noise_ceiling,
                     help="Newton: a DEM zone step is accepted within the elements' noise only "
                          "up to this fraction of the zone's own internal force")
+    ap.add_argument("--resolve-mm", type=float, default=None,
+                    help="the smallest settlement difference the run is to resolve, mm: the "
+                         "zone's ceiling becomes resolve / (4 x the continuum's settlement), "
+                         "at most --noise-ceiling (default: the ceiling is --noise-ceiling, "
+                         "and summary.json's acceptance says what it resolves)")
     ap.add_argument("--calibration-elements", type=int, default=None,
                     help="elements of the zone's grains the Drucker-Prager is fitted on, their "
                          f"mean (default {d.calibration_elements}, smoke "
@@ -250,6 +257,10 @@ def parse_args(argv=None):
         v = getattr(a, flag[2:].replace("-", "_"))
         if v is not None:
             p = replace(p, **{field: v})
+    if a.resolve_mm is not None:
+        if not (math.isfinite(a.resolve_mm) and a.resolve_mm > 0):
+            ap.error(f"--resolve-mm={a.resolve_mm}: a settlement difference > 0, mm")
+        p = replace(p, resolve_m=a.resolve_mm / 1e3)
     from femcoupling import FemInputError
 
     try:

@@ -30,7 +30,9 @@ run:
    (``load_footing_to_pressure``); the settlement at each level is recorded where the
    footing stopped and at the level's own pressure (``at_level``).
 3. **The same body with the fitted Drucker–Prager everywhere** (the zone too), for each
-   variant: the continuum answer the DEM zone is compared with.
+   variant: the continuum answer the DEM zone is compared with. These bodies run before the
+   DEM zones: Newton's ceiling for the zone's steps is set from their settlements and the
+   difference the run is to resolve (``zone_ceiling``, ``resolve_m``).
 
 Every variant runs the same seeds, so the differences between variants are paired over
 seeds (mean and standard error), at each level's pressure. SI units; FEM stresses tension
@@ -120,6 +122,9 @@ class FootingParams:
                                     #: on (None: ``seeds[0]``)
     calibration_elements: int = 16  #: elements the continuum is fitted on (seeds from
                                     #: ``calibration_seed`` on; their mean: calibrate)
+    resolve_m: float | None = None  #: the smallest settlement difference the run is to
+                                    #: resolve, m: the zone's ceiling is then set from it
+                                    #: (zone_ceiling); None: noise_ceiling
     budget: tuple = ()              #: the error budget's parts measured by reruns
                                     #: (BUDGET_PARTS; the seeds' part is always measured)
 
@@ -177,6 +182,11 @@ class FootingParams:
                                "layer's, and RE and PRS have the layer")
         if not (isinstance(self.noise_ceiling, (int, float)) and 0 < self.noise_ceiling < 1):
             bad("noise_ceiling", "a fraction in (0, 1)")
+        if self.resolve_m is not None and not (
+                isinstance(self.resolve_m, (int, float)) and math.isfinite(self.resolve_m)
+                and self.resolve_m > 0):
+            bad("resolve_m", "None (the ceiling is noise_ceiling) or a settlement difference "
+                             "> 0, m")
         if self.calibration_seed is not None and not (
                 isinstance(self.calibration_seed, int) and self.calibration_seed >= 0):
             bad("calibration_seed", "None (the first seed) or a whole number >= 0")
@@ -479,18 +489,36 @@ def load_levels(p: FootingParams, m, on_level, first_slope: float | None = None)
 PREPARATION_ATTEMPTS = 3
 
 
+def zone_ceiling(p: FootingParams, settlements_m) -> dict:
+    """Newton's ceiling for the DEM zone's steps, tied to the effect under study: a step
+    accepted at a residual r of the zone's force leaves the settlement s off by about r s
+    (the run's next step equilibrates the whole state again, so the errors do not add up),
+    so for a difference ``p.resolve_m`` to stand above it 4 times over the ceiling is
+    resolve_m / (4 s), s the largest of the continuum bodies' ``settlements_m`` at the last
+    level, and never above ``p.noise_ceiling``. Without ``resolve_m``: ``noise_ceiling``,
+    and what it resolves by the same rule. The summary's ``acceptance`` record."""
+    s = max(float(x) for x in settlements_m)
+    c = p.noise_ceiling if p.resolve_m is None else min(p.noise_ceiling,
+                                                        p.resolve_m / (4.0 * s))
+    return {"ceiling": c, "resolve_m": p.resolve_m, "reference_settlement_m": s,
+            "settlement_error_bound_m": c * s, "resolvable_m": 4.0 * c * s,
+            "rule": ("noise_ceiling (no resolve_m)" if p.resolve_m is None else
+                     "min(noise_ceiling, resolve_m / (4 x the continuum's settlement))")}
+
+
 def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out: Path, log,
-                   on_level, first_slope: float) -> dict:
+                   on_level, first_slope: float, ceiling: float | None = None) -> dict:
     """Step 2 of the module doc for one variant and seed: the record of the summary.
     ``first_slope``: the continuum's pressure–settlement slope over the first level (Pa/m),
-    where the footing's first step is sized from."""
+    where the footing's first step is sized from; ``ceiling``: Newton's for the zone
+    (``zone_ceiling``; None: ``p.noise_ceiling``)."""
     from femcoupling.materials.dem_elements import (PeriodicRegionElement, PoolRegionMaterials,
                                                     ReinforcedBandElement)
 
     t0 = time.perf_counter()
     m = continuum(f"{variant} seed {seed}: the seating before the DEM zone takes over",
                   model, p, variant, soil)
-    m.noise_ceiling = p.noise_ceiling
+    m.noise_ceiling = p.noise_ceiling if ceiling is None else ceiling
     e0 = m.region_strain("zone")
     # (each cell's element prepared at its stress on the grid of TARGET_DIGITS)
     cells = {k: target_grid(v) for k, v in m.cell_stresses("zone").items()}
@@ -815,7 +843,9 @@ def figure(summary: dict, png: Path) -> None:
 
 def budget_params(p: FootingParams, part: str) -> FootingParams:
     """The parameters of the rerun that measures the budget's ``part`` (BUDGET_PARTS)."""
-    change = {"ceiling": dict(noise_ceiling=0.5 * p.noise_ceiling),
+    change = {"ceiling": (dict(noise_ceiling=0.5 * p.noise_ceiling) if p.resolve_m is None
+                          else dict(noise_ceiling=0.5 * p.noise_ceiling,
+                                    resolve_m=0.5 * p.resolve_m)),
               "calibration": dict(calibration_seed=calibration_seeds(p)[-1] + 1),
               "rve": dict(cell_grains=2 * p.cell_grains, band_grains=2 * p.band_grains),
               "mesh": dict(fine_size=p.fine_size / math.sqrt(2.0))}[part]
@@ -836,26 +866,36 @@ def _csv_rows(path: Path):
     return add
 
 
-def run_variants(p: FootingParams, soil, client, out: Path, log, on_level) -> dict:
-    """Steps 2 and 3 of the module doc for every variant: {variant: {"multiscale": {"status",
-    "runs"}, "drucker_prager": ...}}."""
+def run_variants(p: FootingParams, soil, client, out: Path, log, on_level) -> tuple:
+    """Steps 3 and 2 of the module doc for every variant: the continuum bodies first (the
+    zone's ceiling is set from their settlements: ``zone_ceiling``), then the DEM zones.
+    Returns ({variant: {"multiscale": {"status", "runs"}, "drucker_prager": ...}}, the
+    ``zone_ceiling`` record)."""
     from femcoupling.coupling.status import worst
 
     variants: dict = {}
+    bodies = {}
     for v in p.variants:
-        dp = continuum(f"{v}: the Drucker–Prager body", run_continuum, p, v, soil, on_level)
+        dp = bodies[v] = continuum(f"{v}: the Drucker–Prager body", run_continuum, p, v, soil,
+                                   on_level)
         if dp["failure"] is not None:
             log(f"WARNING: {v}: the Drucker–Prager body stopped after level "
                 f"{dp['levels_reached']} of {p.levels} (near its bearing capacity?): "
                 f"{dp['failure']}")
+    acc = zone_ceiling(p, [dp["settlement_m"][-1] for dp in bodies.values()])
+    log(f"the DEM zone's Newton ceiling: {acc['ceiling']:.3g} of its force ({acc['rule']}): "
+        f"a settlement off by up to {1e3 * acc['settlement_error_bound_m']:.4f} mm, "
+        f"differences from {1e3 * acc['resolvable_m']:.4f} mm resolvable by it")
+    for v, dp in bodies.items():
         slope = (dp["pressure_pa"][0] - p.seat_pa) / (dp["settlement_m"][0]
                                                        - dp["seated_settlement_m"])
-        runs = {s: run_multiscale(p, v, s, soil, client, out, log, on_level, slope)
+        runs = {s: run_multiscale(p, v, s, soil, client, out, log, on_level, slope,
+                                  acc["ceiling"])
                 for s in p.seeds}
         variants[v] = {"multiscale": {"status": worst(r["status"] for r in runs.values()),
                                       "runs": {str(s): r for s, r in runs.items()}},
                        "drucker_prager": dp}
-    return variants
+    return variants, acc
 
 
 def run(p: FootingParams, out: Path, log, progress=None) -> dict:
@@ -892,7 +932,7 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
                               f"{p.soil_poisson:g}, phi {p.soil_friction:g} deg, no cohesion)",
                               calibrate, p, log, client)
         (out / "calibration.json").write_text(json.dumps(cal, indent=2) + "\n")
-        variants = run_variants(p, soil, client, out, log, level_rows(add_row))
+        variants, acceptance = run_variants(p, soil, client, out, log, level_rows(add_row))
         for part in p.budget:
             q, sub = budget_params(p, part), out / f"budget_{part}"
             sub.mkdir(exist_ok=True)
@@ -902,9 +942,9 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
                 soil_q, cal_q = continuum("the budget's refitted calibration", calibrate, q,
                                           log, client)
                 (sub / "calibration.json").write_text(json.dumps(cal_q, indent=2) + "\n")
-            vq = run_variants(q, soil_q, client, sub, log,
-                              level_rows(_csv_rows(sub / "load_settlement.csv"),
-                                         f"budget {part}: "))
+            vq, _ = run_variants(q, soil_q, client, sub, log,
+                                 level_rows(_csv_rows(sub / "load_settlement.csv"),
+                                            f"budget {part}: "))
             reruns[part] = (vq, statistics(vq, q.seeds, q.levels))
     finally:
         client.close()
@@ -922,7 +962,7 @@ def run(p: FootingParams, out: Path, log, progress=None) -> dict:
         "case": "footing_multiscale", "pressures_pa": p.pressures_pa, "seat_pa": p.seat_pa,
         "settlement_m": {v: r["multiscale"]["settlement_mean_m"] for v, r in variants.items()},
         "variants": variants, "paired_settlement_differences": diffs,
-        "one_soil": one_soil(variants),
+        "one_soil": one_soil(variants), "acceptance": acceptance,
         "differences": differences(variants, diffs, reruns, p.levels),
         "calibration": cal,
         "coupling": {"mode": "hierarchical (an element per zone cell)", "status": status,
