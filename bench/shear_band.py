@@ -354,9 +354,10 @@ def main(argv=None) -> int:
            else float("nan"),
            "scale": scale, "build_s": t_build, "wall_s": time.perf_counter() - t0}
     plot(pts, eq, band, fd, args.lx, args.ly, out / "shear_band.png",
-         f"{n} RVEs, {args.nx} x {args.ny} P{args.degree}; localization index {li:.2f}; band "
-         f"{band['angle_deg']:.0f} deg (Mohr-Coulomb {45 + phi / 2:.0f}, Roscoe "
-         f"{45 + psi / 2:.0f})")
+         f"{n} RVEs, {args.nx} x {args.ny} P{args.degree}"
+         + (f", nonlocal length {1e3 * args.nonlocal_length:g} mm" if args.nonlocal_length
+            else "") + f"; localization index {li:.2f}; band {band['angle_deg']:.0f} deg"
+         + (f" (Mohr-Coulomb {45 + phi / 2:.0f}, Roscoe {45 + psi / 2:.0f})" if rves else ""))
     write_json(out / "shear_band.json", {"args": vars(args), **row,
                                          "axial_strain": fd["axial_strain"].tolist(),
                                          "sigma_axial": np.asarray(fd["sigma_axial"]).tolist(),

@@ -29,8 +29,12 @@ Kinds (options are ``key=value`` words after the kind; a value lists items with 
   budget.
 - ``differences``: ``footing-multiscale``'s ``differences``, a row per difference: mean,
   se and n, each part of its error budget, the total and whether it is resolved (mm).
+- ``band_meshes``: ``bench/shear_band.py --compare``'s ``mesh_study.json``, a row per mesh:
+  elements, cell size, nonlocal length, axial strain, localization index, the band's angle
+  ± its error and width ± se, the width over the cell, and the angle's move from the
+  coarser mesh ± its error and whether it exceeds it.
 
-  These two are followed by their source line, as a study page's table is
+  These three are followed by their source line, as a study page's table is
   (docs/studies/): "Command: `...` · commit `abc1234` (DATE) · data: FILE."
 
 Numbers have 4 significant digits; a missing key, None or NaN is ``-`` (older data files).
@@ -70,7 +74,7 @@ FENCE = re.compile(r"^\s*(```|~~~)")
 #: the options each kind accepts
 OPTIONS = {"findings": {"grid", "from"}, "measures": {"grid", "from"},
            "elements": {"grid", "labels"}, "provenance": set(), "rve_size": set(),
-           "differences": set()}
+           "differences": set(), "band_meshes": set()}
 
 #: lists longer than this are dropped by capture (histories, not scalars)
 MAX_LIST = 12
@@ -268,6 +272,44 @@ def differences_table(data: dict, opts: dict) -> list[str]:
     return _table(head, out)
 
 
+def _signed(x) -> str:
+    """A difference with its sign (4 significant digits), ``-`` when missing."""
+    return f"{x:+.4g}" if isinstance(x, (int, float)) and math.isfinite(x) else "-"
+
+
+def band_meshes_table(data: dict, opts: dict) -> list[str]:
+    """bench/shear_band.py --compare's mesh_study.json: a row per mesh, coarse to fine."""
+    meshes = data.get("meshes")
+    if not isinstance(meshes, list) or not meshes:
+        raise TableError("the data file has no 'meshes' (bench/shear_band.py --compare's "
+                         "mesh_study.json)")
+    pairs = {p.get("to"): p for p in data.get("pairs") or []}
+    mm = (lambda v: None if not isinstance(v, (int, float)) else 1e3 * v)  # noqa: E731
+    head = ["mesh", "elements", "cell (mm)", "nonlocal length (mm)", "axial strain (%)",
+            "localization index", "band angle (°) ± error", "width (mm) ± se", "width / cell",
+            "angle's move from the coarser mesh (°) ± error", "moves"]
+    rows = []
+    for m in meshes:
+        p = pairs.get(m.get("mesh"))
+        length = m.get("nonlocal_length_m")
+        w, c = m.get("width_m"), m.get("cell_m")
+        rows.append([
+            fmt(m.get("mesh")), fmt(m.get("elements")), fmt(mm(c)),
+            "local" if not length else fmt(mm(length)),
+            fmt(100 * m["axial_strain"] if isinstance(m.get("axial_strain"), (int, float))
+                else None),
+            fmt(m.get("localization_index")),
+            f"{fmt(m.get('angle_deg'))} ± {fmt(m.get('angle_error_deg'))}",
+            f"{fmt(mm(w))} ± {fmt(mm(m.get('width_se_m')))}",
+            fmt(w / c if isinstance(w, (int, float)) and isinstance(c, (int, float)) and c
+                else None),
+            "-" if p is None else
+            f"{_signed(p.get('angle_move_deg'))} ± {fmt(p.get('angle_error_deg'))}",
+            "-" if p is None or p.get("angle_moves") is None else
+            ("yes" if p["angle_moves"] else "no")])
+    return _table(head, rows)
+
+
 def source_line(data: dict, path: str) -> str:
     """The line under a study page's table: "Command: `...` · commit `abc1234` (DATE) ·
     data: PATH." (docs/studies/: tests/test_docs_text.py)."""
@@ -281,9 +323,10 @@ def source_line(data: dict, path: str) -> str:
 KINDS = {"findings": findings_table,
          "measures": lambda d, o: findings_table(d, o, verdict=False),
          "elements": elements_table, "provenance": provenance_line,
-         "rve_size": rve_size_table, "differences": differences_table}
+         "rve_size": rve_size_table, "differences": differences_table,
+         "band_meshes": band_meshes_table}
 #: the kinds whose table is followed by its source line (:func:`source_line`)
-SOURCED = {"rve_size", "differences"}
+SOURCED = {"rve_size", "differences", "band_meshes"}
 
 
 # ---- pages -------------------------------------------------------------------------------------

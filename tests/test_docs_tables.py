@@ -305,8 +305,30 @@ def test_the_rve_size_and_differences_kinds_render_their_rows():
     line = dt.source_line({"provenance": dict(PROVENANCE)}, "../data/run.json")
     assert line == ("Command: `.venv/bin/python cases/prs_element_002.py --smoke --seeds 1-2` "
                     "· commit `0123456` (2026-01-02) · data: ../data/run.json.")
-    assert dt.SOURCED == {"rve_size", "differences"}
+    assert dt.SOURCED == {"rve_size", "differences", "band_meshes"}
     with pytest.raises(dt.TableError, match="no 'sizes'"):
         dt.rve_size_table({}, {})
     with pytest.raises(dt.TableError, match="no 'differences'"):
         dt.differences_table({}, {})
+
+
+def test_the_band_meshes_kind_renders_a_row_per_mesh():
+    """bench/shear_band.py --compare's mesh study (issue 62 item 6): a row per mesh, the
+    angle's move from the coarser mesh with its error and whether it exceeds it."""
+    def mesh(name, cell, angle, width, length=0.0):
+        return {"mesh": name, "elements": 216, "cell_m": cell, "nonlocal_length_m": length,
+                "angle_deg": angle, "angle_error_deg": 1.5, "width_m": width,
+                "width_se_m": 4e-4, "localization_index": 4.6, "axial_strain": 0.03}
+
+    data = {"meshes": [mesh("4x9", 0.0125, 54.5, 0.0082), mesh("5x11", 0.01, 50.25, 0.006,
+                                                                0.006)],
+            "pairs": [{"from": "4x9", "to": "5x11", "angle_move_deg": -4.25,
+                       "angle_error_deg": 2.121, "angle_moves": True}]}
+    lines = dt.band_meshes_table(data, {})
+    assert lines[0].startswith("| mesh | elements | cell (mm) | nonlocal length (mm) |")
+    assert lines[2] == ("| 4x9 | 216 | 12.5 | local | 3 | 4.6 | 54.5 ± 1.5 | 8.2 ± 0.4 | 0.656 "
+                        "| - | - |")
+    assert lines[3] == ("| 5x11 | 216 | 10 | 6 | 3 | 4.6 | 50.25 ± 1.5 | 6 ± 0.4 | 0.6 "
+                        "| -4.25 ± 2.121 | yes |")
+    with pytest.raises(dt.TableError, match="no 'meshes'"):
+        dt.band_meshes_table({}, {})

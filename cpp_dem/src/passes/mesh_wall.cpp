@@ -200,14 +200,22 @@ void Scene::compute_mesh_forces(long& err_contact) {
     // 1. The touching features: each candidate triangle's closest point within r, keyed by
     // its face, edge (the mesh's vertex numbers, sorted) or vertex.
     found.clear();
+    const Real reach2 = r * r * (1 + 1e-9);
     for (int e = mesh_cand_off_[k]; e < mesh_cand_off_[k + 1]; ++e) {
       const int t = mesh_cand_tri_[e];
       const auto& tri = mesh_tris_[t];
+      const Vec3& v0 = mesh_vertices_[w.vert_off + tri[0]];
+      const Vec3& v1 = mesh_vertices_[w.vert_off + tri[1]];
+      const Vec3& v2 = mesh_vertices_[w.vert_off + tri[2]];
+      // A triangle whose bounding box is farther than r cannot touch: skipped before its
+      // closest point (a sphere resting on a face is about r above its neighbours' boxes;
+      // the 1e-9 slack leaves every borderline case to the exact test below).
+      const Vec3 gap = ((v0.cwiseMin(v1).cwiseMin(v2) - x).cwiseMax(x - v0.cwiseMax(v1)
+                        .cwiseMax(v2))).cwiseMax(Real(0));
+      if (gap.squaredNorm() > reach2) continue;
       Vec3 p;
       int e0, e1;
-      const MeshFeature f = closest_on_triangle(x, mesh_vertices_[w.vert_off + tri[0]],
-                                                mesh_vertices_[w.vert_off + tri[1]],
-                                                mesh_vertices_[w.vert_off + tri[2]], p, e0, e1);
+      const MeshFeature f = closest_on_triangle(x, v0, v1, v2, p, e0, e1);
       const Vec3 d = x - p;
       const Real dist = d.norm();
       if (!(dist < r) || !(dist > 0)) continue;
@@ -223,6 +231,7 @@ void Scene::compute_mesh_forces(long& err_contact) {
       found.push_back(h);
     }
     const int nf = static_cast<int>(found.size());
+    if (nf == 0 && !c.active) continue;  // (nothing touches, nothing did: nothing to do)
     // 2. Without double counting: faces first, then edges and vertices, deepest first; a point that coincides with one kept (an
     // edge or vertex that several triangles share) is the same contact; an edge or vertex
     // point on or behind the plane of a kept face contact is part of that surface (a flat or
