@@ -26,8 +26,21 @@ in ParaView), ``shear_band.png`` (eps_q at the points, the band's line, the load
 Prints progress with an ETA, and a final JSON line with "elements", "localization_index" and
 the angles. SI units; compression positive in the printed stresses.
 
+The band is also fitted to every point (``band_profile``): eps_q = b + A exp(-s^2 / 2 w^2), s
+the distance across the band, gives its angle and width (the full width at half its rise)
+with their standard errors; the angle's error (``band_error``) is the larger of the fit's 95 %
+interval and half the range of its estimators (the fit, the principal direction above the
+80th, 85th and 90th percentiles). ``--nonlocal-length L`` strains each element by a mean of
+the strain increments within about L (m; ``femcoupling.fem.nonlocal_strain``): the band's
+regularisation. ``--compare A.json B.json ...`` runs nothing: it measures the band of each
+run's ``shear_band.json`` (coarse to fine) and says, for successive meshes, whether the angle
+moves more than its error (``mesh_study.json``).
+
     .venv/bin/python bench/shear_band.py --nx 4 --ny 9 --grains 80 --out DIR   # 216 RVEs
     .venv/bin/python bench/shear_band.py --nx 3 --ny 6 --grains 80 --out DIR2  # the coarser mesh
+    .venv/bin/python bench/shear_band.py --nx 5 --ny 11 --nonlocal-length 0.006 --out DIR3
+    .venv/bin/python bench/shear_band.py --compare DIR/shear_band.json DIR3/shear_band.json \
+        --out DIR4
 """
 
 from __future__ import annotations

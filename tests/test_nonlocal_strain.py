@@ -79,3 +79,37 @@ def test_points_without_a_volume_each_or_a_wrong_field_are_refused():
         NonlocalStrain(pts, np.zeros_like(vol), 1e-3)
     with pytest.raises(FemInputError, match="increments: 3 points"):
         NonlocalStrain(pts, vol, 1e-3).apply(np.zeros((3, 2, 2)))
+
+
+def test_a_model_s_elements_take_the_averaged_increments(tmp_path):
+    """FemModel(nonlocal_length=...) hands its elements the averaged displacement-gradient
+    increments (the same as NonlocalStrain.apply of the local ones), and without it the
+    local ones: the averaging is applied where the elements are strained."""
+    pytest.importorskip("dolfinx_solver")
+    from cpp_dem.elements.pool import ElementPool, PeriodicFactory
+    from femcoupling.fem.bodies import Rectangle
+    from femcoupling.fem.model import FemModel
+
+    fac = PeriodicFactory(n=40, stress=100e3, isotropic=True,
+                          options={"prep_friction_deg": 0.0})
+    rng = np.random.default_rng(2)
+    with ElementPool.build(4, fac, workers=1) as pool:
+        got = {}
+        for length in (None, 0.03):
+            m = FemModel(Rectangle(lx=0.05, ly=0.10, nx=1, ny=2, degree=1,
+                                   confining_pa=100e3), elements=pool, nonlocal_length=length)
+            m.u.x.array[:] = 1e-5 * rng.standard_normal(m.u.x.array.size)
+            m.u.x.scatter_forward()
+            m._evaluate(True)
+            g = m._grad_increment()
+            sent = np.asarray(m.material.increments)[:, [0, 2]][:, :, [0, 2]]
+            want = g if length is None else m.nonlocal_strain.apply(g)
+            np.testing.assert_allclose(sent, want, rtol=0, atol=1e-18)
+            got[length] = (g, sent)
+            m.material.reject()
+        g, sent = got[0.03]
+        assert np.abs(sent - g).max() > 1e-3 * np.abs(g).max()  # (averaged: not the local)
+    with pytest.raises(FemInputError, match="nonlocal_weight=0.5: given without"):
+        with ElementPool.build(4, fac, workers=1) as pool:
+            FemModel(Rectangle(lx=0.05, ly=0.10, nx=1, ny=2, degree=1, confining_pa=100e3),
+                     elements=pool, nonlocal_weight=0.5)
