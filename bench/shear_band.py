@@ -255,6 +255,9 @@ def main(argv=None) -> int:
                     help="the weak zone's centre as fractions of (lx, ly)")
     ap.add_argument("--weak-radius", type=float, default=0.12,
                     help="its radius as a fraction of lx; 0: no weak zone")
+    ap.add_argument("--seed", type=int, default=1,
+                    help="element k's packing seed is seed + k (another seed: another random "
+                         "field of packings on the same mesh)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--rtol", type=float, default=5e-3)
     ap.add_argument("--max-newton", type=int, default=12)
@@ -295,8 +298,10 @@ def main(argv=None) -> int:
     t0 = time.perf_counter()
     nq = 3 if args.degree == 2 else 1
     n = 2 * args.nx * args.ny * nq
+    if args.seed < 0:
+        ap.error(f"--seed={args.seed}: must be >= 0")
     base = PeriodicFactory(n=args.grains, stress=args.pressure, isotropic=True,
-                           options={"prep_friction_deg": 0.0})
+                           seed=args.seed, options={"prep_friction_deg": 0.0})
     pts = quadrature_points(args.lx, args.ly, args.nx, args.ny, args.degree)
     weak = () if args.weak_radius == 0 else biaxial.weak_zone(
         pts, (wx * args.lx, wy * args.ly), args.weak_radius * args.lx)
@@ -351,7 +356,7 @@ def main(argv=None) -> int:
     phi = float(np.mean([r["phi_peak_deg"] for r in rves])) if rves else float("nan")
     psi = float(np.mean([r["psi_deg"] for r in rves])) if rves else float("nan")
     row = {"elements": n, "mesh": f"{args.nx}x{args.ny}", "degree": args.degree,
-           "cell_m": args.lx / args.nx,
+           "cell_m": args.lx / args.nx, "seed": args.seed,
            "nonlocal_length_m": args.nonlocal_length, "nonlocal_weight": args.nonlocal_weight,
            "grains_per_element": args.grains, "weak_elements": len(weak),
            "axial_strain_reached": float(fd["axial_strain"][-1]) if len(fd["axial_strain"])

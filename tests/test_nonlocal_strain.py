@@ -113,3 +113,43 @@ def test_a_model_s_elements_take_the_averaged_increments(tmp_path):
         with ElementPool.build(4, fac, workers=1) as pool:
             FemModel(Rectangle(lx=0.05, ly=0.10, nx=1, ny=2, degree=1, confining_pa=100e3),
                      elements=pool, nonlocal_weight=0.5)
+
+
+def test_the_nonlocal_jacobian_solves_a_linear_body_in_one_correction():
+    """With fixed element tangents (a linear body), Newton's correction with the nonlocal
+    strain's consistent Jacobian (G^T D A W^-1 G) ends at equilibrium in one step; the
+    local Jacobian's (what the elements' tangents alone give) does not: the check can fail."""
+    pytest.importorskip("dolfinx_solver")
+    from cpp_dem.elements.pool import ElementPool, PeriodicFactory
+    from femcoupling.fem.bodies import Rectangle
+    from femcoupling.fem.model import FemModel
+
+    fac = PeriodicFactory(n=40, stress=100e3, isotropic=True,
+                          options={"prep_friction_deg": 0.0})
+    with ElementPool.build(12, fac, workers=1) as pool:
+        m = FemModel(Rectangle(lx=0.05, ly=0.10, nx=1, ny=2, degree=2, platens="rough",
+                               confining_pa=100e3), elements=pool, nonlocal_length=0.02,
+                     nonlocal_weight=0.9)
+        m._evaluate(True)
+        tan, sig0 = np.asarray(m._tan).copy(), np.asarray(m._sig).copy()
+        m.material.reject()
+
+        def linear():  # the averaged strain through fixed tangents
+            g = m.nonlocal_strain.apply(m._grad_increment())
+            eps = np.stack([g[:, 0, 0], g[:, 1, 1], g[:, 0, 1] + g[:, 1, 0]], axis=1)
+            m._set_q(sig0 + np.einsum("nij,nj->ni", tan, eps), tan)
+
+        after = {}
+        for how in ("nonlocal", "local"):
+            m.u.x.array[:] = 0.0
+            m.u.x.scatter_forward()
+            m.body.apply(m, m.body.target(top_displacement=-1e-4))
+            linear()
+            r0 = m.system.residual(m.bcs)
+            du = (m._nonlocal_correction(lambda: "") if how == "nonlocal"
+                  else m.system.correction(m.bcs))
+            m.system.move(du, 1.0)
+            linear()
+            after[how] = m.system.residual(m.bcs) / r0
+        assert after["nonlocal"] < 1e-10
+        assert after["local"] > 1e-4

@@ -80,6 +80,8 @@ class ElementPart:
         if nonlocal_length is not None:
             self.nonlocal_strain = NonlocalStrain(
                 self.point_coordinates, self.element_volumes, nonlocal_length, nonlocal_weight)
+            if not self._parallel:
+                self._nonlocal_operators(body)
 
     partition = None  #: each rank's points as elements under MPI (mpi_points.PointPartition)
     nonlocal_strain = None  #: the averaging (femcoupling.fem.nonlocal_strain); None: local
@@ -234,6 +236,97 @@ class ElementPart:
             g = self.nonlocal_strain.apply(g)
         self._set_q(*self.material.trial(g * (1.0 + perturb) if perturb else g))
 
+    # ---- the nonlocal strain's Jacobian (serial) -------------------------------------------
+    def _nonlocal_operators(self, body) -> None:
+        """What the consistent Jacobian of the nonlocal strain needs: G, the strain at the
+        points weighted by their quadrature weights (row (point, component), column a dof),
+        the weights, and the constrained dofs' mask of the current boundary conditions is
+        made at each correction."""
+        fx = self._fx
+        fem, ufl = fx.fem, fx.ufl
+        q, dv = ufl.TestFunction(self.Wv), ufl.TrialFunction(self.V)
+        dxq = self.system.dxq
+        import scipy.sparse as sp
+
+        mat = fx.fem_petsc.assemble_matrix(fem.form(ufl.dot(body.strain(ufl, dv), q) * dxq))
+        mat.assemble()
+        indptr, indices, values = mat.getValuesCSR()
+        self._nl_G = sp.csr_matrix((values, indices, indptr), shape=mat.getSize())
+        mat.destroy()
+        w = fem.assemble_vector(fem.form(q[0] * dxq)).array
+        self._nl_w = np.asarray(w[: self.n_local_points * body.ncomp:body.ncomp], float)
+        if self._nl_G.shape[0] != self.n_local_points * body.ncomp or np.any(self._nl_w <= 0):
+            raise RuntimeError("the nonlocal Jacobian's operators do not match the points")
+
+    def _constrained(self) -> np.ndarray:
+        """A mask of the dofs the current boundary conditions constrain (serial)."""
+        fx = self._fx
+        marks = []
+        for x0 in (0.0, 1.0):
+            v = fx.fem_petsc.create_vector(self.V)
+            with v.localForm() as loc:
+                loc.set(0.0)
+            x = v.copy()
+            x.set(x0)
+            fx.fem_petsc.set_bc(v, self.bcs, x0=x, alpha=-1.0)
+            marks.append(v.getArray().copy())
+            v.destroy()
+            x.destroy()
+        return marks[0] != marks[1]
+
+    def _unlifted_residual(self) -> np.ndarray:
+        """R(u) at the free dofs and u - g at the constrained ones (serial), as an array."""
+        fx = self._fx
+        v = fx.fem_petsc.create_vector(self.V)
+        with v.localForm() as loc:
+            loc.set(0.0)
+        fx.fem_petsc.assemble_vector(v, self.system.form_res)
+        v.ghostUpdate(addv=fx.PETSc.InsertMode.ADD, mode=fx.PETSc.ScatterMode.REVERSE)
+        fx.fem_petsc.set_bc(v, self.bcs, x0=self.u.x.petsc_vec, alpha=-1.0)
+        b = v.getArray().copy()
+        v.destroy()
+        return b
+
+    def _nonlocal_correction(self, describe) -> np.ndarray:
+        """Newton's correction with the nonlocal strain's consistent Jacobian (serial):
+        K = G^T D (A x I) W^-1 G, D the elements' tangents, A the averaging (a point's force
+        answers to the strains around it), W the points' weights; the constrained dofs'
+        rows the identity. Solves K du = b, b the residual with u - g at the constrained
+        dofs, and returns -du, as ``QuadratureSystem.correction``."""
+        import scipy.sparse as sp
+        from scipy.sparse.linalg import splu
+
+        from femcoupling.fem.steps import NewtonFailure
+
+        nc = self.body.ncomp
+        n = self.n_local_points
+        G = self._nl_G
+        mix = self.nonlocal_strain.weight * self.nonlocal_strain.matrix
+        mix = mix + (1.0 - self.nonlocal_strain.weight) * sp.identity(n, format="csr")
+        avg = sp.kron(mix, sp.identity(nc), format="csr")
+        tan = sp.block_diag(list(np.asarray(self._tan, float)), format="csr")
+        winv = sp.diags(np.repeat(1.0 / self._nl_w, nc))
+        K = (G.T @ (tan @ (avg @ (winv @ G)))).tocsr()
+        # the free rows whole (their columns at the constrained dofs carry the prescribed
+        # increment: the lifting, consistent), the constrained rows the identity; the
+        # residual unlifted, u - g at the constrained dofs (dolfinx's Newton convention)
+        fixed = self._constrained()
+        K = (sp.diags((~fixed).astype(float)) @ K + sp.diags(fixed.astype(float))).tocsc()
+        b = self._unlifted_residual()
+        try:
+            du = splu(K).solve(b)
+        except RuntimeError as exc:  # (a singular factor)
+            du = np.full_like(b, np.nan)
+            why = f" ({exc})"
+        else:
+            why = ""
+        if not np.all(np.isfinite(du)):
+            raise NewtonFailure(f"the Newton correction failed (the nonlocal Jacobian is "
+                                f"singular{why}; {describe()})")
+        self.system.du.x.array[: du.size] = du
+        self.system.du.x.scatter_forward()
+        return -self.system.du.x.array.copy()
+
     def _softest(self, n: int = 3) -> str:
         """The ``n`` elements of the current iterate with the smallest tangent eigenvalue:
         index, that eigenvalue (Pa), contacts and mean stress (Pa)."""
@@ -361,9 +454,13 @@ class _ElementNewton:
         return self.m.system.change_residual(self.m._sig - before, self.m.bcs, self.m._put)
 
     def correction(self) -> np.ndarray:
-        return self.m.system.correction(self.m.bcs, describe=lambda: (
-            f"softening elements whose tangents lost stiffness; the softest elements: "
-            f"{self.m._softest()}"))
+        def describe():
+            return (f"softening elements whose tangents lost stiffness; the softest elements: "
+                    f"{self.m._softest()}")
+
+        if self.m.nonlocal_strain is not None and not self.m._parallel:
+            return self.m._nonlocal_correction(describe)
+        return self.m.system.correction(self.m.bcs, describe=describe)
 
     def move(self, correction: np.ndarray, factor: float) -> None:
         self.m.system.move(correction, factor)

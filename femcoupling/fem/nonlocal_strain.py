@@ -17,9 +17,11 @@ mode), and with ``weight`` < 1 the element's own strain keeps a share of it (Baz
 "imbricate" mix; Jirasek 1998). The band's width then scales with ``length_m`` once the cells
 are smaller than it.
 
-Newton keeps the elements' local tangents in its matrix (the averaging's coupling between
-points is left out: a modified Newton; the residual is exact), so it converges in more
-iterations the larger ``length_m`` is against the cells.
+Newton's matrix is the consistent one (``ElementPart._nonlocal_correction``): a point's force
+answers to the strains around it, K = G^T D (A x I) W^-1 G (G the points' strain weighted by
+their quadrature weights W, D the elements' tangents); it is not symmetric. A linear body is
+solved in one correction (``tests/test_nonlocal_strain.py``). Under MPI the matrix keeps the
+elements' local tangents (the coupling left out: a modified Newton, more iterations).
 """
 
 from __future__ import annotations
