@@ -45,6 +45,12 @@ class ElementPart:
         fx = self._fx = _dolfinx.load()
         fem, ufl = fx.fem, fx.ufl
         self.pool, self.comm = elements, comm  # (self.body: FemModel's)
+        if nonlocal_length is None and nonlocal_weight != 1.0:
+            raise FemInputError(f"nonlocal_weight={nonlocal_weight!r}: given without "
+                                "nonlocal_length (the averaging's length, m)")
+        if nonlocal_length is not None and self._parallel:
+            raise FemInputError(f"nonlocal_length={nonlocal_length!r}: serial only (its "
+                                "Jacobian is built on one rank); run without comm")
         self.gdim, self.degree = body.gdim, body.degree
         self.records = None
         if out is not None:
@@ -74,14 +80,10 @@ class ElementPart:
         self._bc_now = body.start()  # the boundary of the last accepted step
         #: the elements as the quadrature points' material (femcoupling.fem.quadrature)
         self._material(elements, tangent=tangent, strain_kw=self.strain_kw, dim=body.dim)
-        if nonlocal_length is None and nonlocal_weight != 1.0:
-            raise FemInputError(f"nonlocal_weight={nonlocal_weight!r}: given without "
-                                "nonlocal_length (the averaging's length, m)")
         if nonlocal_length is not None:
             self.nonlocal_strain = NonlocalStrain(
                 self.point_coordinates, self.element_volumes, nonlocal_length, nonlocal_weight)
-            if not self._parallel:
-                self._nonlocal_operators(body)
+            self._nonlocal_operators(body)
 
     partition = None  #: each rank's points as elements under MPI (mpi_points.PointPartition)
     nonlocal_strain = None  #: the averaging (femcoupling.fem.nonlocal_strain); None: local
@@ -458,7 +460,7 @@ class _ElementNewton:
             return (f"softening elements whose tangents lost stiffness; the softest elements: "
                     f"{self.m._softest()}")
 
-        if self.m.nonlocal_strain is not None and not self.m._parallel:
+        if self.m.nonlocal_strain is not None:
             return self.m._nonlocal_correction(describe)
         return self.m.system.correction(self.m.bcs, describe=describe)
 

@@ -20,8 +20,8 @@ are smaller than it.
 Newton's matrix is the consistent one (``ElementPart._nonlocal_correction``): a point's force
 answers to the strains around it, K = G^T D (A x I) W^-1 G (G the points' strain weighted by
 their quadrature weights W, D the elements' tangents); it is not symmetric. A linear body is
-solved in one correction (``tests/test_nonlocal_strain.py``). Under MPI the matrix keeps the
-elements' local tangents (the coupling left out: a modified Newton, more iterations).
+solved in one correction (``tests/test_nonlocal_strain.py``). Serial only: a model split over
+MPI ranks refuses it.
 """
 
 from __future__ import annotations
