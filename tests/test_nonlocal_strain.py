@@ -153,3 +153,15 @@ def test_the_nonlocal_jacobian_solves_a_linear_body_in_one_correction():
             after[how] = m.system.residual(m.bcs) / r0
         assert after["nonlocal"] < 1e-10
         assert after["local"] > 1e-4
+
+
+def test_a_model_split_over_mpi_ranks_refuses_the_nonlocal_strain():
+    pytest.importorskip("dolfinx_solver")
+    from types import SimpleNamespace
+
+    from femcoupling.fem.bodies import Rectangle
+    from femcoupling.fem.model import FemModel
+
+    with pytest.raises(FemInputError, match="nonlocal_length=0.01: serial only"):
+        FemModel(Rectangle(lx=0.05, ly=0.10, nx=1, ny=2, degree=1, confining_pa=1e5),
+                 elements=None, nonlocal_length=0.01, comm=SimpleNamespace(size=2, rank=0))
