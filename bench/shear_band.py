@@ -157,15 +157,41 @@ def band_error(points: np.ndarray, eq: np.ndarray, fit: dict) -> float:
 
 
 def mesh_study(rows: list[dict]) -> dict:
-    """The band on successive meshes (each a row of ``shear_band.json``): its angle and width
-    per mesh, and for each pair of successive meshes whether the angle moves more than its
-    error (the two errors added in quadrature) and the width's ratio."""
-    meshes = [{"mesh": r["mesh"], "elements": r["elements"], "cell_m": r["cell_m"],
-               "nonlocal_length_m": r.get("nonlocal_length_m"),
-               "angle_deg": r["band_fit"]["angle_deg"], "angle_error_deg": r["angle_error_deg"],
-               "width_m": r["band_fit"]["width_m"], "width_se_m": r["band_fit"]["width_se_m"],
-               "localization_index": r["localization_index"],
-               "axial_strain": r["axial_strain_reached"]} for r in rows]
+    """The band on successive meshes (rows of ``shear_band.json``, coarse to fine; a mesh
+    may have several runs, each another ``seed``): per mesh the mean angle and width over
+    its runs, and for each pair of successive meshes whether the angle moves more than its
+    error and the width's ratio. A run's angle error is its fit's (``band_error``, a 95 %
+    half-width) and, where some mesh has two runs or more, the seeds' scatter: 1.96 x their
+    pooled standard deviation (``seed_sd_deg``, with ``seed_dof`` degrees of freedom), added
+    in quadrature; a mesh's error is its runs' over the square root of their number, and a
+    move's the two meshes' in quadrature. Without a second seed the seeds' part is not
+    measured (``seed_sd_deg`` None) and the errors are the fits' alone."""
+    groups: dict = {}
+    for r in rows:
+        groups.setdefault(r["mesh"], []).append(r)
+    dev, dof = 0.0, 0
+    for runs in groups.values():
+        a = np.array([r["band_fit"]["angle_deg"] for r in runs], float)
+        if len(a) > 1:
+            dev += float(((a - a.mean()) ** 2).sum())
+            dof += len(a) - 1
+    seed_sd = math.sqrt(dev / dof) if dof else None
+    meshes = []
+    for name, runs in groups.items():
+        r0, n = runs[0], len(runs)
+        fit_err = math.sqrt(np.mean([r["angle_error_deg"] ** 2 for r in runs]))
+        per_run = math.hypot(fit_err, 1.96 * seed_sd) if seed_sd is not None else fit_err
+        meshes.append({
+            "mesh": name, "elements": r0["elements"], "cell_m": r0["cell_m"], "runs": n,
+            "seeds": [r.get("seed", 1) for r in runs],
+            "nonlocal_length_m": r0.get("nonlocal_length_m"),
+            "angle_deg": float(np.mean([r["band_fit"]["angle_deg"] for r in runs])),
+            "angle_error_deg": per_run / math.sqrt(n),
+            "width_m": float(np.mean([r["band_fit"]["width_m"] for r in runs])),
+            "width_se_m": math.sqrt(np.mean([r["band_fit"]["width_se_m"] ** 2
+                                             for r in runs]) / n),
+            "localization_index": float(np.mean([r["localization_index"] for r in runs])),
+            "axial_strain": float(min(r["axial_strain_reached"] for r in runs))})
     pairs = []
     for a, b in zip(meshes, meshes[1:]):
         err = math.hypot(a["angle_error_deg"], b["angle_error_deg"])
@@ -175,7 +201,7 @@ def mesh_study(rows: list[dict]) -> dict:
                       "angle_moves": bool(abs(move) > err) if math.isfinite(err) else None,
                       "width_ratio": b["width_m"] / a["width_m"],
                       "cell_ratio": b["cell_m"] / a["cell_m"]})
-    return {"meshes": meshes, "pairs": pairs}
+    return {"meshes": meshes, "pairs": pairs, "seed_sd_deg": seed_sd, "seed_dof": dof}
 
 
 def write_strain_xdmf(model, eq: np.ndarray, path: Path) -> None:
@@ -406,11 +432,16 @@ def _compare(files: list[str], out: Path) -> int:
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "mesh_study.json", study)
     for m in study["meshes"]:
-        print(f"[mesh] {m['mesh']} ({m['elements']} elements, cells {m['cell_m'] * 1e3:.1f} mm)"
-              f": band {m['angle_deg']:.1f} +- {m['angle_error_deg']:.1f} deg, width "
-              f"{m['width_m'] * 1e3:.1f} +- {m['width_se_m'] * 1e3:.1f} mm, localization "
-              f"index {m['localization_index']:.2f} at {100 * m['axial_strain']:.2f} %",
-              flush=True)
+        print(f"[mesh] {m['mesh']} ({m['elements']} elements, cells "
+              f"{m['cell_m'] * 1e3:.1f} mm, {m['runs']} run(s)): band {m['angle_deg']:.1f} +- "
+              f"{m['angle_error_deg']:.1f} deg, width {m['width_m'] * 1e3:.1f} +- "
+              f"{m['width_se_m'] * 1e3:.1f} mm, localization index "
+              f"{m['localization_index']:.2f} at {100 * m['axial_strain']:.2f} %", flush=True)
+    sd = study["seed_sd_deg"]
+    print("[mesh] the seeds' scatter of the angle: " + (
+        "not measured (one run a mesh; --seed gives another)" if sd is None else
+        f"sd {sd:.2f} deg ({study['seed_dof']} degrees of freedom), in every error"),
+        flush=True)
     print(json.dumps(study, default=float), flush=True)
     return 0
 

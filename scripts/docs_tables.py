@@ -30,9 +30,9 @@ Kinds (options are ``key=value`` words after the kind; a value lists items with 
 - ``differences``: ``footing-multiscale``'s ``differences``, a row per difference: mean,
   se and n, each part of its error budget, the total and whether it is resolved (mm).
 - ``band_meshes``: ``bench/shear_band.py --compare``'s ``mesh_study.json``, a row per mesh:
-  elements, cell size, nonlocal length, axial strain, localization index, the band's angle
-  ± its error and width ± se, the width over the cell, and the angle's move from the
-  coarser mesh ± its error and whether it exceeds it.
+  elements, runs (seeds), cell size, nonlocal length, axial strain, localization index, the
+  band's angle ± its error and width ± se, the width over the cell, and the angle's move
+  from the coarser mesh ± its error and whether it exceeds it.
 
   These three are followed by their source line, as a study page's table is
   (docs/studies/): "Command: `...` · commit `abc1234` (DATE) · data: FILE."
@@ -285,7 +285,7 @@ def band_meshes_table(data: dict, opts: dict) -> list[str]:
                          "mesh_study.json)")
     pairs = {p.get("to"): p for p in data.get("pairs") or []}
     mm = (lambda v: None if not isinstance(v, (int, float)) else 1e3 * v)  # noqa: E731
-    head = ["mesh", "elements", "cell (mm)", "nonlocal length (mm)", "axial strain (%)",
+    head = ["mesh", "elements", "runs", "cell (mm)", "nonlocal length (mm)", "axial strain (%)",
             "localization index", "band angle (°) ± error", "width (mm) ± se", "width / cell",
             "angle's move from the coarser mesh (°) ± error", "moves"]
     rows = []
@@ -294,7 +294,7 @@ def band_meshes_table(data: dict, opts: dict) -> list[str]:
         length = m.get("nonlocal_length_m")
         w, c = m.get("width_m"), m.get("cell_m")
         rows.append([
-            fmt(m.get("mesh")), fmt(m.get("elements")), fmt(mm(c)),
+            fmt(m.get("mesh")), fmt(m.get("elements")), fmt(m.get("runs", 1)), fmt(mm(c)),
             "local" if not length else fmt(mm(length)),
             fmt(100 * m["axial_strain"] if isinstance(m.get("axial_strain"), (int, float))
                 else None),

@@ -325,10 +325,10 @@ def test_the_band_meshes_kind_renders_a_row_per_mesh():
             "pairs": [{"from": "4x9", "to": "5x11", "angle_move_deg": -4.25,
                        "angle_error_deg": 2.121, "angle_moves": True}]}
     lines = dt.band_meshes_table(data, {})
-    assert lines[0].startswith("| mesh | elements | cell (mm) | nonlocal length (mm) |")
-    assert lines[2] == ("| 4x9 | 216 | 12.5 | local | 3 | 4.6 | 54.5 ± 1.5 | 8.2 ± 0.4 | 0.656 "
-                        "| - | - |")
-    assert lines[3] == ("| 5x11 | 216 | 10 | 6 | 3 | 4.6 | 50.25 ± 1.5 | 6 ± 0.4 | 0.6 "
+    assert lines[0].startswith("| mesh | elements | runs | cell (mm) | nonlocal length (mm) |")
+    assert lines[2] == ("| 4x9 | 216 | 1 | 12.5 | local | 3 | 4.6 | 54.5 ± 1.5 | 8.2 ± 0.4 "
+                        "| 0.656 | - | - |")
+    assert lines[3] == ("| 5x11 | 216 | 1 | 10 | 6 | 3 | 4.6 | 50.25 ± 1.5 | 6 ± 0.4 | 0.6 "
                         "| -4.25 ± 2.121 | yes |")
     with pytest.raises(dt.TableError, match="no 'meshes'"):
         dt.band_meshes_table({}, {})

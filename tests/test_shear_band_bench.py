@@ -77,18 +77,32 @@ def test_band_profile_fits_a_noisy_band_s_angle_and_width(angle, width):
 def test_the_mesh_study_says_whether_the_angle_moves_beyond_its_error():
     sb = _bench()
 
-    def row(mesh, angle, err, width, cell):
-        return {"mesh": mesh, "elements": 1, "cell_m": cell, "band_fit": {
+    def row(mesh, angle, err, width, cell, seed=1):
+        return {"mesh": mesh, "elements": 1, "cell_m": cell, "seed": seed, "band_fit": {
             "angle_deg": angle, "width_m": width, "width_se_m": 1e-4},
             "angle_error_deg": err, "localization_index": 5.0, "axial_strain_reached": 0.03}
 
-    st = sb.mesh_study([row("a", 54.0, 1.0, 10e-3, 12.5e-3), row("b", 50.0, 1.0, 8e-3, 10e-3),
-                        row("c", 49.0, 1.0, 8e-3, 8e-3)])
+    rows = [row("a", 54.0, 1.0, 10e-3, 12.5e-3), row("b", 50.0, 1.0, 8e-3, 10e-3),
+            row("c", 49.0, 1.0, 8e-3, 8e-3)]
+    st = sb.mesh_study(rows)
     assert [p["angle_moves"] for p in st["pairs"]] == [True, False]
     assert st["pairs"][0]["angle_move_deg"] == pytest.approx(-4.0)
     assert st["pairs"][0]["angle_error_deg"] == pytest.approx(math.sqrt(2))
     assert st["pairs"][0]["width_ratio"] == pytest.approx(0.8)
     assert st["pairs"][1]["cell_ratio"] == pytest.approx(0.8)
+    assert st["seed_sd_deg"] is None and st["seed_dof"] == 0
+    # a second seed of mesh b 2 deg off: the seeds' scatter enters every error, and the
+    # 4 deg move is no longer beyond it
+    st = sb.mesh_study(rows[:2] + [row("b", 52.0, 1.0, 8e-3, 10e-3, seed=1001)] + rows[2:])
+    sd = math.sqrt(2.0)  # (50 and 52 about 51: sd sqrt(2), one degree of freedom)
+    assert st["seed_sd_deg"] == pytest.approx(sd) and st["seed_dof"] == 1
+    b = st["meshes"][1]
+    assert (b["runs"], b["seeds"], b["angle_deg"]) == (2, [1, 1001], pytest.approx(51.0))
+    assert b["angle_error_deg"] == pytest.approx(math.hypot(1.0, 1.96 * sd) / math.sqrt(2))
+    a = st["meshes"][0]
+    assert a["angle_error_deg"] == pytest.approx(math.hypot(1.0, 1.96 * sd))
+    assert st["pairs"][0]["angle_move_deg"] == pytest.approx(-3.0)
+    assert st["pairs"][0]["angle_moves"] is False
 
 
 def test_rve_angles_of_a_synthetic_curve():
