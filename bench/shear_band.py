@@ -204,6 +204,27 @@ def mesh_study(rows: list[dict]) -> dict:
     return {"meshes": meshes, "pairs": pairs, "seed_sd_deg": seed_sd, "seed_dof": dof}
 
 
+def elements_strain(json_path: Path, r: dict) -> np.ndarray:
+    """eps_q of the strain the elements took (the sum of their accepted increments, the
+    run's ``records/elements.h5``), (n,): with a nonlocal strain the averaged field, which
+    the displacement's may not be; without one the same as ``eps_q``."""
+    if not r.get("nonlocal_length_m") and not r["args"].get("nonlocal_length"):
+        return np.asarray(r["eps_q"], float)
+    if "eps_q_elements" in r:
+        return np.asarray(r["eps_q_elements"], float)
+    h5 = Path(json_path).parent / "records" / "elements.h5"
+    if not h5.is_file():
+        raise _cli.BenchInputError(f"--field elements: {json_path} has no eps_q_elements and "
+                                   f"{h5} is missing")
+    import h5py
+
+    with h5py.File(h5, "r") as f:
+        el, inc = f["element"][:], f["increment"][:]
+    g = np.zeros((len(r["points"]), 3, 3))
+    np.add.at(g, el, inc)  # (plane strain: the FEM's x, y are the element's x, z)
+    return equivalent_shear_strain(g[:, [0, 2]][:, :, [0, 2]])
+
+
 def write_strain_xdmf(model, eq: np.ndarray, path: Path) -> None:
     """eps_q per cell (the mean of its points) and the displacement, in one XDMF file."""
     fx = model._fx
@@ -300,10 +321,13 @@ def main(argv=None) -> int:
                     help="no run: the band on the meshes of these shear_band.json files, "
                          "coarse to fine (angle, width, whether the angle moves more than "
                          "its error), printed and written to --out/mesh_study.json")
+    ap.add_argument("--field", choices=("displacement", "elements"), default="displacement",
+                    help="with --compare: the band of the displacement's strain, or of the "
+                         "strain the elements took (with a nonlocal strain, the averaged one)")
     ap.add_argument("--out", default="results/bench_runs/shear_band")
     args = ap.parse_args(argv)
     if args.compare:
-        return _compare(args.compare, Path(args.out))
+        return _compare(args.compare, Path(args.out), args.field)
     if not (args.nonlocal_length >= 0 and math.isfinite(args.nonlocal_length)):
         ap.error(f"--nonlocal-length={args.nonlocal_length}: a length >= 0, m (0: local)")
     if not (0 < args.nonlocal_weight <= 1):
@@ -350,6 +374,9 @@ def main(argv=None) -> int:
         cells = np.arange(m.n_cells, dtype=np.int32)
         grad = m.expr_grad.eval(m.mesh, cells).reshape(-1, 2, 2)
         eq = equivalent_shear_strain(grad)
+        # (the elements' own strain: with a nonlocal strain, the averaged field)
+        eq_el = (eq if m.nonlocal_strain is None else
+                 equivalent_shear_strain(m.nonlocal_strain.apply(grad)))
         write_strain_xdmf(m, eq, out / "strain.xdmf")
         statuses = {s: sum(h.status == s for h in m.history)
                     for s in sorted({h.status for h in m.history})}
@@ -373,6 +400,10 @@ def main(argv=None) -> int:
     fit = band_profile(pts, eq, band)
     angle_error = band_error(pts, eq, fit)
     li = float(eq.max() / eq.mean()) if eq.mean() > 0 else float("nan")
+    fit_el = band_profile(pts, eq_el, band_direction(pts, eq_el))
+    elements_field = {"localization_index": float(eq_el.max() / eq_el.mean()),
+                      "eps_q_max": float(eq_el.max()), "band_fit": fit_el,
+                      "angle_error_deg": band_error(pts, eq_el, fit_el)}
     rves = []
     if args.rve_seeds:
         runs = biaxial.direct_biaxial(base, list(range(args.rve_seeds)),
@@ -391,6 +422,7 @@ def main(argv=None) -> int:
            "localization_index": li, "eps_q_mean": float(eq.mean()), "eps_q_max": float(eq.max()),
            "band_angle_deg": band["angle_deg"], "band_elongation": band["elongation"],
            "band_leans": band.get("leans"), "band_fit": fit, "angle_error_deg": angle_error,
+           "elements_field": elements_field,
            "phi_peak_deg": phi, "psi_deg": psi,
            "mohr_coulomb_deg": 45 + phi / 2, "roscoe_deg": 45 + psi / 2,
            "arthur_deg": 45 + (phi + psi) / 4, "rves": rves,
@@ -405,12 +437,14 @@ def main(argv=None) -> int:
     write_json(out / "shear_band.json", {"args": vars(args), **row,
                                          "axial_strain": fd["axial_strain"].tolist(),
                                          "sigma_axial": np.asarray(fd["sigma_axial"]).tolist(),
-                                         "eps_q": eq.tolist(), "points": pts.tolist()})
+                                         "eps_q": eq.tolist(),
+                                         "eps_q_elements": eq_el.tolist(),
+                                         "points": pts.tolist()})
     print(json.dumps(row, default=float), flush=True)
     return 0
 
 
-def _compare(files: list[str], out: Path) -> int:
+def _compare(files: list[str], out: Path, field: str = "displacement") -> int:
     rows = []
     for f in files:
         try:
@@ -422,13 +456,17 @@ def _compare(files: list[str], out: Path) -> int:
             raise _cli.BenchInputError(f"--compare {f}: not a shear_band.json (needs points, "
                                        "eps_q, args, elements, mesh)")
         # (measured again from the field: files of an older bench compare too)
-        pts, eq = np.asarray(r["points"], float), np.asarray(r["eps_q"], float)
+        r.setdefault("nonlocal_length_m", r["args"].get("nonlocal_length", 0.0))
+        pts = np.asarray(r["points"], float)
+        eq = (np.asarray(r["eps_q"], float) if field == "displacement"
+              else elements_strain(Path(f), r))
+        r["localization_index"] = float(eq.max() / eq.mean())
         band = band_direction(pts, eq)
         r["band_fit"] = band_profile(pts, eq, band)
         r["angle_error_deg"] = band_error(pts, eq, r["band_fit"])
         r["cell_m"] = r["args"]["lx"] / r["args"]["nx"]
-        r.setdefault("nonlocal_length_m", r["args"].get("nonlocal_length", 0.0))
     study = mesh_study(rows)
+    study["field"] = field
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "mesh_study.json", study)
     for m in study["meshes"]:
@@ -438,6 +476,9 @@ def _compare(files: list[str], out: Path) -> int:
               f"{m['width_se_m'] * 1e3:.1f} mm, localization index "
               f"{m['localization_index']:.2f} at {100 * m['axial_strain']:.2f} %", flush=True)
     sd = study["seed_sd_deg"]
+    print("[mesh] the band of " + {"displacement": "the displacement's strain",
+                                   "elements": "the strain the elements took"}[field],
+          flush=True)
     print("[mesh] the seeds' scatter of the angle: " + (
         "not measured (one run a mesh; --seed gives another)" if sd is None else
         f"sd {sd:.2f} deg ({study['seed_dof']} degrees of freedom), in every error"),

@@ -167,5 +167,18 @@ def test_the_bench_runs_nonlocal_and_compares_its_meshes(tmp_path, capsys):
     study = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
     assert [m["mesh"] for m in study["meshes"]] == ["1x2", "2x3"]
     assert len(study["pairs"]) == 1 and (tmp_path / "study" / "mesh_study.json").is_file()
+    assert study["field"] == "displacement"
+    # the band of the strain the elements took: the averaged field, saved with the run and
+    # the same as the sum of the increments in its records
+    r = json.loads(Path(runs[1]).read_text())
+    el = np.asarray(r["eps_q_elements"])
+    assert not np.allclose(el, r["eps_q"])
+    del r["eps_q_elements"]
+    np.testing.assert_allclose(sb.elements_strain(Path(runs[1]), r), el, rtol=1e-9, atol=1e-15)
+    assert sb.main(["--compare", *runs, "--field", "elements", "--out",
+                    str(tmp_path / "study_el")]) == 0
+    study = json.loads(capsys.readouterr().out.strip().splitlines()[-1])
+    assert study["field"] == "elements"
+    assert study["meshes"][1]["localization_index"] == pytest.approx(el.max() / el.mean())
     with pytest.raises(ValueError, match="none.json: not a readable shear_band.json"):
         sb.main(["--compare", str(tmp_path / "none.json"), "--out", str(tmp_path / "s2")])
