@@ -19,7 +19,7 @@ from femcoupling.fem.nonlocal_strain import NonlocalStrain
 from femcoupling.fem.quadrature import (NewtonRules, QuadratureSystem, check_material, lu_package,
                                         newton_solve)
 from femcoupling.fem.solver import body_kind
-from femcoupling.fem.steps import LoadStep
+from femcoupling.fem.steps import LoadStep, NewtonFailure
 from femcoupling.materials.element_pool import TANGENTS, ElementPoolMaterial
 
 __all__ = ["ElementPart"]
@@ -297,8 +297,6 @@ class ElementPart:
         dofs, and returns -du, as ``QuadratureSystem.correction``."""
         import scipy.sparse as sp
         from scipy.sparse.linalg import splu
-
-        from femcoupling.fem.steps import NewtonFailure
 
         nc = self.body.ncomp
         n = self.n_local_points
