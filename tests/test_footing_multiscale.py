@@ -460,7 +460,7 @@ def test_a_failed_run_is_kept_and_left_out_of_the_levels_it_did_not_reach(tmp_pa
     monkeypatch.setattr(fm, "figure", lambda s, png: None)
     offset = {"unreinforced": 0.0, "RE": -0.001, "PRS": -0.002}
 
-    def fake(p, v, seed, soil, client, out, log, on_level, first_slope):
+    def fake(p, v, seed, soil, client, out, log, on_level, first_slope, ceiling):
         if v == "RE" and seed == 2:
             return {"status": "failed", "reason": "level 2: ...", "settlement_m": [0.0093],
                     "settlement_at_level_m": [0.0092], "cells": 4, "element_evaluations": 1,
@@ -521,9 +521,10 @@ def test_each_difference_carries_its_measured_budget_and_is_resolved_only_above_
     # by twice the grains and 0.3 mm by the finer mesh; seeds scatter it by +-0.01 mm
     effect = {"unreinforced": 0.0, "RE": -1e-3, "PRS": -2e-3}
 
-    def fake(p, v, seed, soil, client, out, log, on_level, first_slope):
+    def fake(p, v, seed, soil, client, out, log, on_level, first_slope, ceiling):
+        # (the ceiling the run hands each DEM zone: zone_ceiling's, halved in its rerun)
         shift = {"RE": 0.0, "PRS": 1.0, "unreinforced": 0.0}[v] * (
-            1e-4 * (p.noise_ceiling < 1e-2) + 5e-5 * (soil == "refit")
+            1e-4 * (ceiling < 1e-2) + 5e-5 * (soil == "refit")
             + 2e-4 * (p.cell_grains > 150) + 3e-4 * (p.fine_size < 0.125))
         at = [0.012 + effect[v] + shift + 1e-5 * seed * (v == "PRS")]
         on_level(v, "multiscale", seed, 0, (p.pressures_pa[0], at[0], 1, ["converged"], at[0]))
@@ -626,7 +627,7 @@ def test_a_zone_that_cannot_be_prepared_fails_its_run_and_says_why(tmp_path, mon
     monkeypatch.setattr(PoolRegionMaterials, "build", staticmethod(refuse))
     lines = []
     r = fm.run_multiscale(fm.FootingParams(), "RE", 2, None, None, tmp_path, lines.append,
-                          lambda *a: None, 1e6)
+                          lambda *a: None, 1e6, 1e-2)
     assert seeds == [2000, 2100, 2200]
     assert r["status"] == "failed" and r["pressure_pa"] == [] and r["cells"] == 1
     assert r["reason"].startswith("preparation: the zone's elements could not be prepared "

@@ -33,7 +33,6 @@ The exit status is 0 when every load step of every run converged, else the coupl
 from __future__ import annotations
 
 import math
-
 import sys
 from dataclasses import replace
 

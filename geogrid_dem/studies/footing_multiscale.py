@@ -507,18 +507,18 @@ def zone_ceiling(p: FootingParams, settlements_m) -> dict:
 
 
 def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out: Path, log,
-                   on_level, first_slope: float, ceiling: float | None = None) -> dict:
+                   on_level, first_slope: float, ceiling: float) -> dict:
     """Step 2 of the module doc for one variant and seed: the record of the summary.
     ``first_slope``: the continuum's pressure–settlement slope over the first level (Pa/m),
     where the footing's first step is sized from; ``ceiling``: Newton's for the zone
-    (``zone_ceiling``; None: ``p.noise_ceiling``)."""
+    (``zone_ceiling``)."""
     from femcoupling.materials.dem_elements import (PeriodicRegionElement, PoolRegionMaterials,
                                                     ReinforcedBandElement)
 
     t0 = time.perf_counter()
     m = continuum(f"{variant} seed {seed}: the seating before the DEM zone takes over",
                   model, p, variant, soil)
-    m.noise_ceiling = p.noise_ceiling if ceiling is None else ceiling
+    m.noise_ceiling = ceiling
     e0 = m.region_strain("zone")
     # (each cell's element prepared at its stress on the grid of TARGET_DIGITS)
     cells = {k: target_grid(v) for k, v in m.cell_stresses("zone").items()}
@@ -843,9 +843,8 @@ def figure(summary: dict, png: Path) -> None:
 
 def budget_params(p: FootingParams, part: str) -> FootingParams:
     """The parameters of the rerun that measures the budget's ``part`` (BUDGET_PARTS)."""
-    change = {"ceiling": (dict(noise_ceiling=0.5 * p.noise_ceiling) if p.resolve_m is None
-                          else dict(noise_ceiling=0.5 * p.noise_ceiling,
-                                    resolve_m=0.5 * p.resolve_m)),
+    change = {"ceiling": dict(noise_ceiling=0.5 * p.noise_ceiling,
+                              resolve_m=None if p.resolve_m is None else 0.5 * p.resolve_m),
               "calibration": dict(calibration_seed=calibration_seeds(p)[-1] + 1),
               "rve": dict(cell_grains=2 * p.cell_grains, band_grains=2 * p.band_grains),
               "mesh": dict(fine_size=p.fine_size / math.sqrt(2.0))}[part]
