@@ -156,6 +156,14 @@ def band_error(points: np.ndarray, eq: np.ndarray, fit: dict) -> float:
     return max(1.96 * fit["angle_se_deg"], 0.5 * (max(est) - min(est)))
 
 
+def band_measures(points: np.ndarray, eq: np.ndarray) -> tuple[dict, dict, float]:
+    """The band of a field eps_q at the points: its principal direction
+    (``band_direction``), its fit (``band_profile``) and the angle's error (``band_error``)."""
+    band = band_direction(points, eq)
+    fit = band_profile(points, eq, band)
+    return band, fit, band_error(points, eq, fit)
+
+
 def mesh_study(rows: list[dict]) -> dict:
     """The band on successive meshes (rows of ``shear_band.json``, coarse to fine; a mesh
     may have several runs, each another ``seed``): per mesh the mean angle and width over
@@ -396,14 +404,12 @@ def main(argv=None) -> int:
             "newton_iteration_s": float(sum(h.wall_s for h in m.history) / max(iterations, 1)),
             "dem_s_per_element_evaluation": float(
                 sum(h.dem_s for h in m.history) / max(iterations, 1) / n)}
-    band = band_direction(pts, eq)
-    fit = band_profile(pts, eq, band)
-    angle_error = band_error(pts, eq, fit)
+    band, fit, angle_error = band_measures(pts, eq)
     li = float(eq.max() / eq.mean()) if eq.mean() > 0 else float("nan")
-    fit_el = band_profile(pts, eq_el, band_direction(pts, eq_el))
+    _, fit_el, error_el = band_measures(pts, eq_el)
     elements_field = {"localization_index": float(eq_el.max() / eq_el.mean()),
                       "eps_q_max": float(eq_el.max()), "band_fit": fit_el,
-                      "angle_error_deg": band_error(pts, eq_el, fit_el)}
+                      "angle_error_deg": error_el}
     rves = []
     if args.rve_seeds:
         runs = biaxial.direct_biaxial(base, list(range(args.rve_seeds)),
@@ -461,9 +467,7 @@ def _compare(files: list[str], out: Path, field: str = "displacement") -> int:
         eq = (np.asarray(r["eps_q"], float) if field == "displacement"
               else elements_strain(Path(f), r))
         r["localization_index"] = float(eq.max() / eq.mean())
-        band = band_direction(pts, eq)
-        r["band_fit"] = band_profile(pts, eq, band)
-        r["angle_error_deg"] = band_error(pts, eq, r["band_fit"])
+        _, r["band_fit"], r["angle_error_deg"] = band_measures(pts, eq)
         r["cell_m"] = r["args"]["lx"] / r["args"]["nx"]
     study = mesh_study(rows)
     study["field"] = field

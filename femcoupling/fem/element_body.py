@@ -240,28 +240,34 @@ class ElementPart:
 
     # ---- the nonlocal strain's Jacobian (serial) -------------------------------------------
     def _nonlocal_operators(self, body) -> None:
-        """What the consistent Jacobian of the nonlocal strain needs: G, the strain at the
-        points weighted by their quadrature weights (row (point, component), column a dof),
-        the weights, and the constrained dofs' mask of the current boundary conditions is
-        made at each correction."""
+        """What the consistent Jacobian of the nonlocal strain needs, made once: G, the strain
+        at the points weighted by their quadrature weights W (row (point, component), column
+        a dof); the averaged strain of the dofs, (A x I) W^-1 G; and the mask of the dofs the
+        boundary conditions constrain (their values change from step to step, not the
+        dofs)."""
+        import scipy.sparse as sp
+
         fx = self._fx
         fem, ufl = fx.fem, fx.ufl
         q, dv = ufl.TestFunction(self.Wv), ufl.TrialFunction(self.V)
         dxq = self.system.dxq
-        import scipy.sparse as sp
-
+        nc = body.ncomp
         mat = fx.fem_petsc.assemble_matrix(fem.form(ufl.dot(body.strain(ufl, dv), q) * dxq))
         mat.assemble()
         indptr, indices, values = mat.getValuesCSR()
-        self._nl_G = sp.csr_matrix((values, indices, indptr), shape=mat.getSize())
+        G = sp.csr_matrix((values, indices, indptr), shape=mat.getSize())
         mat.destroy()
         w = fem.assemble_vector(fem.form(q[0] * dxq)).array
-        self._nl_w = np.asarray(w[: self.n_local_points * body.ncomp:body.ncomp], float)
-        if self._nl_G.shape[0] != self.n_local_points * body.ncomp or np.any(self._nl_w <= 0):
+        w = np.asarray(w[: self.n_local_points * nc:nc], float)
+        if G.shape[0] != self.n_local_points * nc or np.any(w <= 0):
             raise RuntimeError("the nonlocal Jacobian's operators do not match the points")
+        avg = sp.kron(self.nonlocal_strain.operator(), sp.identity(nc), format="csr")
+        winv = sp.diags(np.repeat(1.0 / w, nc))
+        self._nl_G, self._nl_AG = G, avg @ (winv @ G)
+        self._nl_fixed = self._constrained()
 
     def _constrained(self) -> np.ndarray:
-        """A mask of the dofs the current boundary conditions constrain (serial)."""
+        """A mask of the dofs the boundary conditions constrain (serial)."""
         fx = self._fx
         marks = []
         for x0 in (0.0, 1.0):
@@ -298,19 +304,12 @@ class ElementPart:
         import scipy.sparse as sp
         from scipy.sparse.linalg import splu
 
-        nc = self.body.ncomp
-        n = self.n_local_points
-        G = self._nl_G
-        mix = self.nonlocal_strain.weight * self.nonlocal_strain.matrix
-        mix = mix + (1.0 - self.nonlocal_strain.weight) * sp.identity(n, format="csr")
-        avg = sp.kron(mix, sp.identity(nc), format="csr")
         tan = sp.block_diag(list(np.asarray(self._tan, float)), format="csr")
-        winv = sp.diags(np.repeat(1.0 / self._nl_w, nc))
-        K = (G.T @ (tan @ (avg @ (winv @ G)))).tocsr()
+        K = (self._nl_G.T @ (tan @ self._nl_AG)).tocsr()
         # the free rows whole (their columns at the constrained dofs carry the prescribed
         # increment: the lifting, consistent), the constrained rows the identity; the
         # residual unlifted, u - g at the constrained dofs (dolfinx's Newton convention)
-        fixed = self._constrained()
+        fixed = self._nl_fixed
         K = (sp.diags((~fixed).astype(float)) @ K + sp.diags(fixed.astype(float))).tocsc()
         b = self._unlifted_residual()
         try:

@@ -88,8 +88,9 @@ class NonlocalStrain:
         out = (1.0 - self.weight) * flat + self.weight * (self.matrix @ flat)
         return out.reshape(g.shape)
 
-    def describe(self) -> dict:
-        """The averaging's settings and size, for a run's records."""
-        return {"length_m": self.length_m, "weight": self.weight, "points": self.n,
-                "neighbours_mean": float(self.matrix.nnz / self.n),
-                "own_share_min": float(self.own_share.min())}
+    def operator(self):
+        """The mix as one sparse matrix, (1 - weight) I + weight A (n x n): what the
+        consistent Jacobian multiplies by (``apply`` gives its product with the increments)."""
+        from scipy.sparse import identity
+
+        return self.weight * self.matrix + (1.0 - self.weight) * identity(self.n, format="csr")
