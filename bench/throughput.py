@@ -56,6 +56,7 @@ import dataclasses  # noqa: E402
 import hashlib  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
+import resource  # noqa: E402
 import shutil  # noqa: E402
 import statistics  # noqa: E402
 import subprocess  # noqa: E402
@@ -71,6 +72,7 @@ import numpy as np  # noqa: E402
 import cpp_dem as dem  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
 import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
+import liggghts_throughput  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 YADE_SCRIPT = Path(__file__).resolve().parent / "yade_throughput.py"
@@ -378,9 +380,11 @@ def pick_blocks(pss: list[float], other: list[float], threshold: float) -> int:
 
 
 def run_ours(p: Packing, cfg: BenchScene, threads: int, steps: int, warmup: int,
-             repeats: int, extra: int, busy_threshold: float) -> dict:
+             repeats: int, extra: int, busy_threshold: float, after_block=None) -> dict:
     """Warm-up, then `repeats` timed blocks of `steps` steps (the physics is read after them),
-    then up to `extra` more blocks while fewer than `repeats` blocks were undisturbed."""
+    then up to `extra` more blocks while fewer than `repeats` blocks were undisturbed.
+    ``after_block()``, when given, runs after each timed block (another code's block: the two
+    codes alternate)."""
     dem.set_num_threads(threads)
     scene, _walls = make_scene(p, cfg)
     t0 = time.perf_counter()
@@ -396,6 +400,8 @@ def run_ours(p: Packing, cfg: BenchScene, threads: int, steps: int, warmup: int,
     while True:
         with LoadMeter() as m:
             scene.run(steps)
+        if after_block is not None:
+            after_block()
         walls.append(m.wall)
         cpu_util.append(m.own / (m.wall * threads))
         other.append(m.other / m.wall)
@@ -421,6 +427,7 @@ def run_ours(p: Packing, cfg: BenchScene, threads: int, steps: int, warmup: int,
         "particle_steps_per_s_median": statistics.median(pss),
         "wall_s": sum(walls[:repeats]),
         "wall_s_per_repeat": [round(w, 4) for w in walls],
+        "particle_steps_per_s_per_repeat": [round(v) for v in pss],
         "warmup_wall_s": round(warmup_wall, 3),
         "cpu_utilisation": round(cpu_util[best], 3),
         "other_load_cores": round(other[best], 2),
@@ -467,6 +474,57 @@ def run_yade(p: Packing, cfg: BenchScene, threads: int, steps: int, warmup: int,
     return res
 
 
+# ---- LIGGGHTS run ------------------------------------------------------------------------------
+
+class LiggghtsBlocks:
+    """LIGGGHTS blocks of the same scene (bench/liggghts_throughput.py), one process each, run
+    between cpp_dem's timed blocks; each block's other load is the machine's busy CPU less
+    this process's and LIGGGHTS's own."""
+
+    def __init__(self, exe: str, p: Packing, cfg: BenchScene, steps: int, warmup: int,
+                 workdir: Path):
+        self.exe, self.p, self.cfg, self.steps, self.warmup = exe, p, cfg, steps, warmup
+        self.workdir = workdir / f"liggghts_n{p.n}"
+        self.blocks: list[dict] = []
+
+    def __call__(self) -> None:
+        c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        with LoadMeter() as m:
+            r = liggghts_throughput.run_block(
+                self.exe, self.workdir, self.p.centers, self.p.radii, self.p.lo, self.p.hi,
+                young=self.cfg.young, poisson=self.cfg.poisson,
+                friction_angle_deg=self.cfg.friction_angle_deg, density=self.cfg.density,
+                dt=bench_dt(self.p, self.cfg), skin=self.cfg.margin_factor * float(
+                    self.p.radii.mean()), warmup=self.warmup, steps=self.steps)
+        c1 = resource.getrusage(resource.RUSAGE_CHILDREN)
+        child = (c1.ru_utime - c0.ru_utime) + (c1.ru_stime - c0.ru_stime)
+        r["other_load_cores"] = max(0.0, m.other - child) / m.wall
+        if r["atoms"] != self.p.n:
+            raise liggghts_throughput.LiggghtsError(
+                f"liggghts lost atoms: {r['atoms']} of {self.p.n} at the end")
+        self.blocks.append(r)
+
+    def summary(self, ours_per_block: list[float], busy_threshold: float) -> dict:
+        """LIGGGHTS's best undisturbed block and the paired ratios (cpp_dem's block k over
+        LIGGGHTS's block k, the two run one after the other)."""
+        pss = [b["particle_steps_per_s"] for b in self.blocks]
+        other = [b["other_load_cores"] for b in self.blocks]
+        best = pick_blocks(pss, other, busy_threshold)
+        paired = [o / g for o, g in zip(ours_per_block, pss)]
+        return {
+            "liggghts_particle_steps_per_s": pss[best],
+            "liggghts_particle_steps_per_s_median": statistics.median(pss),
+            "liggghts_particle_steps_per_s_per_block": [round(v) for v in pss],
+            "liggghts_other_load_cores_per_block": [round(v, 2) for v in other],
+            "liggghts_steps": self.steps,
+            "liggghts_warmup_steps": self.warmup,
+            "liggghts_pair_contacts": self.blocks[best]["pair_contacts"],
+            "liggghts_ratio_per_block": [round(v, 3) for v in paired],
+            "liggghts_ratio_median": statistics.median(paired),
+            "liggghts_command": self.blocks[best]["command"],
+        }
+
+
 # ---- driver -----------------------------------------------------------------------------------
 
 def default_steps(n: int, target: float) -> int:
@@ -498,6 +556,13 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--quick", action="store_true", help="short run (< 1 min)")
     ap.add_argument("--no-yade", action="store_true", help="skip Yade even if on the PATH")
     ap.add_argument("--yade", default="yade", help="Yade executable (default: yade on PATH)")
+    ap.add_argument("--no-liggghts", action="store_true",
+                    help="skip LIGGGHTS even if on the PATH")
+    ap.add_argument("--liggghts", default="liggghts",
+                    help="LIGGGHTS executable (default: liggghts on PATH); run on one thread "
+                         "only, its blocks alternating with cpp_dem's")
+    ap.add_argument("--liggghts-steps", type=int,
+                    help="timed steps of a LIGGGHTS block (default: cpp_dem's block's)")
     ap.add_argument("--yade-timing", action="store_true",
                     help="also run Yade with O.timingEnabled and report time per engine")
     ap.add_argument("--yade-target-interv", type=int, default=None,
@@ -532,6 +597,9 @@ def main(argv: list[str] | None = None) -> int:
     yade = None if args.no_yade else shutil.which(args.yade)
     if not args.no_yade and yade is None:
         log(f"'{args.yade}' not on the PATH: running cpp_dem only")
+    liggghts = None if args.no_liggghts else shutil.which(args.liggghts)
+    if not args.no_liggghts and liggghts is None:
+        log(f"'{args.liggghts}' not on the PATH: no LIGGGHTS column")
     workdir = Path(tempfile.mkdtemp(prefix="bench_yade_"))
 
     if args.packing is not None:
@@ -558,13 +626,23 @@ def main(argv: list[str] | None = None) -> int:
             if args.wait_idle > 0:
                 wait_idle(args.wait_idle)
             log(f"n={p.n} threads={threads}: cpp_dem {warmup} + {repeats} x {steps} steps")
+            lig = None
+            if liggghts is not None and threads == 1:
+                lig = LiggghtsBlocks(liggghts, p, cfg, args.liggghts_steps or steps, warmup,
+                                     workdir)
+                log(f"  LIGGGHTS {lig.warmup} + {lig.steps} steps after each cpp_dem block")
             ours = run_ours(p, cfg, threads, steps, warmup, repeats, args.extra_repeats,
-                            BUSY_THRESHOLD)
+                            BUSY_THRESHOLD, after_block=lig)
             line = {"bench": "throughput", "n_particles": p.n, "threads": threads,
                     "steps": steps, "repeats": repeats, "warmup_steps": warmup,
                     "local_damping": cfg.local_damping, "gravity": list(cfg.gravity),
                     "packing": str(p.csv), "spatial_order": bool(args.spatial_order), **prov}
             line.update(ours)
+            if lig is not None:
+                line.update(lig.summary(ours["particle_steps_per_s_per_repeat"],
+                                        BUSY_THRESHOLD))
+                line["liggghts_ratio"] = (ours["particle_steps_per_s"]
+                                          / line["liggghts_particle_steps_per_s"])
             if yade is not None:
                 if args.wait_idle > 0:
                     wait_idle(args.wait_idle)
@@ -640,9 +718,10 @@ def _fmt(v, spec: str) -> str:
 def print_table(rows: list[dict]) -> None:
     """Markdown summary on stderr."""
     out = ["", "| N | threads | steps | cpp_dem p-steps/s | Yade p-steps/s | ratio | "
+           "LIGGGHTS p-steps/s | ratio (best / best; paired median) | "
            "par. eff. (ours / Yade) | contacts/particle | contacts ours / Yade | "
            "wall force ours / Yade | builds (timed) ours / Yade |",
-           "|---|---|---|---|---|---|---|---|---|---|---|"]
+           "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         pe = r.get("parallel_efficiency")
         ype = r.get("yade_parallel_efficiency")
@@ -651,7 +730,11 @@ def print_table(rows: list[dict]) -> None:
             f"| {r['n_particles']} | {r['threads']} | {r['steps']} | "
             f"{r['particle_steps_per_s']:.3g} | "
             f"{_fmt(r.get('yade_particle_steps_per_s'), '.3g')} | "
-            f"{_fmt(r.get('ratio'), '.2f')} | {eff} | {r['coordination']:.2f} | "
+            f"{_fmt(r.get('ratio'), '.2f')} | "
+            f"{_fmt(r.get('liggghts_particle_steps_per_s'), '.3g')} | "
+            f"{_fmt(r.get('liggghts_ratio'), '.2f')}; "
+            f"{_fmt(r.get('liggghts_ratio_median'), '.2f')} | "
+            f"{eff} | {r['coordination']:.2f} | "
             f"{_fmt(r.get('contacts_ratio'), '.3f')} | {_fmt(r.get('wall_force_ratio'), '.3f')} | "
             f"{r['collider_builds_timed']} / {r.get('yade_collider_runs_timed', '–')} |")
     print("\n".join(out), file=sys.stderr, flush=True)
@@ -668,9 +751,9 @@ def summarize(path: Path) -> None:
             groups.setdefault(key, []).append(r)
     best: dict[tuple, dict] = {}
     out = ["| N | threads | runs | cpp_dem p-steps/s best (range) | Yade p-steps/s best (range) | "
-           "ratio | par. eff. ours / Yade | contacts ours / Yade | wall force ours / Yade | "
-           "core (git, C++ hash) |",
-           "|---|---|---|---|---|---|---|---|---|---|"]
+           "ratio | vs LIGGGHTS per run (paired median) | par. eff. ours / Yade | "
+           "contacts ours / Yade | wall force ours / Yade | core (git, C++ hash) |",
+           "|---|---|---|---|---|---|---|---|---|---|---|"]
     for key in sorted(groups):
         rs = groups[key]
         ours = [r["particle_steps_per_s"] for r in rs]
@@ -692,6 +775,8 @@ def summarize(path: Path) -> None:
             f"{b['ours']:.3g} ({min(ours):.3g}–{max(ours):.3g}) | "
             + (f"{b['yade']:.3g} ({min(yade):.3g}–{max(yade):.3g}) | "
                f"{b['ours'] / b['yade']:.2f} | " if yade else "– | – | ")
+            + (", ".join(f"{r['liggghts_ratio_median']:.2f}" for r in rs
+                         if "liggghts_ratio_median" in r) or "–") + " | "
             + f"{eff} | {_fmt(last.get('contacts_ratio'), '.4f')} | "
             f"{_fmt(last.get('wall_force_ratio'), '.4f')} | {cores} |")
     print("\n".join(out))
