@@ -186,9 +186,16 @@ def provenance() -> dict:
     files = [ROOT / "CMakeLists.txt", ROOT / "pyproject.toml"]
     for sub in ("cpp_dem/include", "cpp_dem/src", "cpp_dem/bindings"):
         files += [f for f in (ROOT / sub).rglob("*") if f.is_file()]
-    # Same order as `find ... | sort` in scripts/setup.sh (byte order of the relative paths).
-    head, rest = files[:2], sorted(files[2:], key=lambda f: str(f.relative_to(ROOT)).encode())
-    h = hashlib.sha256(b"".join(f.read_bytes() for f in head + rest)).hexdigest()
+    # Same order as `find ... | LC_ALL=C sort` in scripts/setup.sh (byte order of the relative
+    # paths), then, as there, the list of the Python modules (a moved module re-installs).
+    def byte_order(paths):
+        return sorted(paths, key=lambda f: str(f.relative_to(ROOT)).encode())
+
+    head, rest = files[:2], byte_order(files[2:])
+    modules = byte_order([f for d in ("cpp_dem/cpp_dem", "femcoupling", "geogrid_dem")
+                          for f in (ROOT / d).rglob("*.py")])
+    listing = "".join(f"{f.relative_to(ROOT)}\n" for f in modules).encode()
+    h = hashlib.sha256(b"".join(f.read_bytes() for f in head + rest) + listing).hexdigest()
     stamp = ROOT / ".venv" / ".build-stamp"
     info["cpp_source_hash"] = h[:12]
     if stamp.exists():
@@ -643,6 +650,9 @@ def main(argv: list[str] | None = None) -> int:
                                         BUSY_THRESHOLD))
                 line["liggghts_ratio"] = (ours["particle_steps_per_s"]
                                           / line["liggghts_particle_steps_per_s"])
+                # (the same packing: the sphere-sphere contacts of both, ours at the start)
+                line["liggghts_pair_contacts_ratio"] = (ours["sphere_contacts_start"]
+                                                        / line["liggghts_pair_contacts"])
             if yade is not None:
                 if args.wait_idle > 0:
                     wait_idle(args.wait_idle)

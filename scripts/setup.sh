@@ -47,8 +47,8 @@ fi
 # 4. Editable build of the C++ core (re-run only when C++/build files change).
 # The editable install maps each Python module to its file: the list of modules is part of the
 # hash, so a moved or added module re-installs.
-SRC_HASH=$( (cat CMakeLists.txt pyproject.toml $(find cpp_dem/include cpp_dem/src cpp_dem/bindings -type f | sort);
-             find cpp_dem/cpp_dem femcoupling geogrid_dem -name '*.py' | sort) | sha256sum | cut -d' ' -f1)
+SRC_HASH=$( (cat CMakeLists.txt pyproject.toml $(find cpp_dem/include cpp_dem/src cpp_dem/bindings -type f | LC_ALL=C sort);
+             find cpp_dem/cpp_dem femcoupling geogrid_dem -name '*.py' | LC_ALL=C sort) | sha256sum | cut -d' ' -f1)
 BUILD_STAMP="$VENV/.build-stamp"
 if [ ! -f "$BUILD_STAMP" ] || [ "$(cat "$BUILD_STAMP")" != "$SRC_HASH" ] || \
    ! "$PY" -c "import cpp_dem._core as c, geogrid_dem; assert c.GEOGRID" >/dev/null 2>&1; then
