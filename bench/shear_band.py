@@ -53,6 +53,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from scipy.stats import t as student_t
 
 HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parent / "cpp_dem"))
@@ -169,9 +170,9 @@ def mesh_study(rows: list[dict]) -> dict:
     may have several runs, each another ``seed``): per mesh the mean angle and width over
     its runs, and for each pair of successive meshes whether the angle moves more than its
     error and the width's ratio. A run's angle error is its fit's (``band_error``, a 95 %
-    half-width) and, where some mesh has two runs or more, the seeds' scatter: 1.96 x their
-    pooled standard deviation (``seed_sd_deg``, with ``seed_dof`` degrees of freedom), added
-    in quadrature; a mesh's error is its runs' over the square root of their number, and a
+    half-width) and, where some mesh has two runs or more, the seeds' scatter: Student's
+    t (0.975, ``seed_dof``; ``seed_t975``) x their pooled standard deviation
+    (``seed_sd_deg``, with ``seed_dof`` degrees of freedom), added in quadrature; a mesh's error is its runs' over the square root of their number, and a
     move's the two meshes' in quadrature. Without a second seed the seeds' part is not
     measured (``seed_sd_deg`` None) and the errors are the fits' alone."""
     groups: dict = {}
@@ -184,14 +185,20 @@ def mesh_study(rows: list[dict]) -> dict:
             dev += float(((a - a.mean()) ** 2).sum())
             dof += len(a) - 1
     seed_sd = math.sqrt(dev / dof) if dof else None
+    seed_t975 = float(student_t.ppf(0.975, dof)) if dof else None
     meshes = []
     for name, runs in groups.items():
         r0, n = runs[0], len(runs)
         fit_err = math.sqrt(np.mean([r["angle_error_deg"] ** 2 for r in runs]))
-        per_run = math.hypot(fit_err, 1.96 * seed_sd) if seed_sd is not None else fit_err
+        per_run = (math.hypot(fit_err, seed_t975 * seed_sd) if seed_sd is not None
+                   else fit_err)
         meshes.append({
             "mesh": name, "elements": r0["elements"], "cell_m": r0["cell_m"], "runs": n,
             "seeds": [r.get("seed", 1) for r in runs],
+            # (each run's own: another study can pool them without the runs' files)
+            "angles_deg": [float(r["band_fit"]["angle_deg"]) for r in runs],
+            "angle_fit_errors_deg": [float(r["angle_error_deg"]) for r in runs],
+            "widths_m": [float(r["band_fit"]["width_m"]) for r in runs],
             "nonlocal_length_m": r0.get("nonlocal_length_m"),
             "angle_deg": float(np.mean([r["band_fit"]["angle_deg"] for r in runs])),
             "angle_error_deg": per_run / math.sqrt(n),
@@ -209,7 +216,8 @@ def mesh_study(rows: list[dict]) -> dict:
                       "angle_moves": bool(abs(move) > err) if math.isfinite(err) else None,
                       "width_ratio": b["width_m"] / a["width_m"],
                       "cell_ratio": b["cell_m"] / a["cell_m"]})
-    return {"meshes": meshes, "pairs": pairs, "seed_sd_deg": seed_sd, "seed_dof": dof}
+    return {"meshes": meshes, "pairs": pairs, "seed_sd_deg": seed_sd, "seed_dof": dof,
+            "seed_t975": seed_t975}
 
 
 def elements_strain(json_path: Path, r: dict) -> np.ndarray:
@@ -485,7 +493,8 @@ def _compare(files: list[str], out: Path, field: str = "displacement") -> int:
           flush=True)
     print("[mesh] the seeds' scatter of the angle: " + (
         "not measured (one run a mesh; --seed gives another)" if sd is None else
-        f"sd {sd:.2f} deg ({study['seed_dof']} degrees of freedom), in every error"),
+        f"sd {sd:.2f} deg ({study['seed_dof']} degrees of freedom; Student's t "
+        f"{study['seed_t975']:.2f} x sd in every error)"),
         flush=True)
     print(json.dumps(study, default=float), flush=True)
     return 0

@@ -95,12 +95,17 @@ def test_the_mesh_study_says_whether_the_angle_moves_beyond_its_error():
     # 4 deg move is no longer beyond it
     st = sb.mesh_study(rows[:2] + [row("b", 52.0, 1.0, 8e-3, 10e-3, seed=1001)] + rows[2:])
     sd = math.sqrt(2.0)  # (50 and 52 about 51: sd sqrt(2), one degree of freedom)
+    t1 = 12.7062  # Student's t, 0.975, one degree of freedom
     assert st["seed_sd_deg"] == pytest.approx(sd) and st["seed_dof"] == 1
+    assert st["seed_t975"] == pytest.approx(t1, rel=1e-5)
     b = st["meshes"][1]
     assert (b["runs"], b["seeds"], b["angle_deg"]) == (2, [1, 1001], pytest.approx(51.0))
-    assert b["angle_error_deg"] == pytest.approx(math.hypot(1.0, 1.96 * sd) / math.sqrt(2))
+    assert b["angles_deg"] == [50.0, 52.0] and b["widths_m"] == [8e-3, 8e-3]
+    assert b["angle_fit_errors_deg"] == [1.0, 1.0]
+    assert b["angle_error_deg"] == pytest.approx(math.hypot(1.0, t1 * sd) / math.sqrt(2),
+                                                 rel=1e-5)
     a = st["meshes"][0]
-    assert a["angle_error_deg"] == pytest.approx(math.hypot(1.0, 1.96 * sd))
+    assert a["angle_error_deg"] == pytest.approx(math.hypot(1.0, t1 * sd), rel=1e-5)
     assert st["pairs"][0]["angle_move_deg"] == pytest.approx(-3.0)
     assert st["pairs"][0]["angle_moves"] is False
 
