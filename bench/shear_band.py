@@ -172,15 +172,17 @@ def mesh_study(rows: list[dict]) -> dict:
     error and the width's ratio. A run's angle error is its fit's (``band_error``, a 95 %
     half-width) and, where some mesh has two runs or more, the seeds' scatter: Student's
     t (0.975, ``seed_dof``; ``seed_t975``) x their pooled standard deviation
-    (``seed_sd_deg``, with ``seed_dof`` degrees of freedom), added in quadrature; a mesh's error is its runs' over the square root of their number, and a
-    move's the two meshes' in quadrature. Without a second seed the seeds' part is not
+    (``seed_sd_deg``, with ``seed_dof`` degrees of freedom), added in quadrature; a mesh's
+    error is its runs' over the square root of their number, and a move's the two meshes'
+    in quadrature. Without a second seed the seeds' part is not
     measured (``seed_sd_deg`` None) and the errors are the fits' alone."""
     groups: dict = {}
     for r in rows:
         groups.setdefault(r["mesh"], []).append(r)
+    # each run's angle, its fit's error and width, by mesh
+    angles = {k: [float(r["band_fit"]["angle_deg"]) for r in v] for k, v in groups.items()}
     dev, dof = 0.0, 0
-    for runs in groups.values():
-        a = np.array([r["band_fit"]["angle_deg"] for r in runs], float)
+    for a in map(np.asarray, angles.values()):
         if len(a) > 1:
             dev += float(((a - a.mean()) ** 2).sum())
             dof += len(a) - 1
@@ -189,20 +191,20 @@ def mesh_study(rows: list[dict]) -> dict:
     meshes = []
     for name, runs in groups.items():
         r0, n = runs[0], len(runs)
-        fit_err = math.sqrt(np.mean([r["angle_error_deg"] ** 2 for r in runs]))
+        errors = [float(r["angle_error_deg"]) for r in runs]
+        widths = [float(r["band_fit"]["width_m"]) for r in runs]
+        fit_err = math.sqrt(np.mean([e ** 2 for e in errors]))
         per_run = (math.hypot(fit_err, seed_t975 * seed_sd) if seed_sd is not None
                    else fit_err)
         meshes.append({
             "mesh": name, "elements": r0["elements"], "cell_m": r0["cell_m"], "runs": n,
             "seeds": [r.get("seed", 1) for r in runs],
             # (each run's own: another study can pool them without the runs' files)
-            "angles_deg": [float(r["band_fit"]["angle_deg"]) for r in runs],
-            "angle_fit_errors_deg": [float(r["angle_error_deg"]) for r in runs],
-            "widths_m": [float(r["band_fit"]["width_m"]) for r in runs],
+            "angles_deg": angles[name], "angle_fit_errors_deg": errors, "widths_m": widths,
             "nonlocal_length_m": r0.get("nonlocal_length_m"),
-            "angle_deg": float(np.mean([r["band_fit"]["angle_deg"] for r in runs])),
+            "angle_deg": float(np.mean(angles[name])),
             "angle_error_deg": per_run / math.sqrt(n),
-            "width_m": float(np.mean([r["band_fit"]["width_m"] for r in runs])),
+            "width_m": float(np.mean(widths)),
             "width_se_m": math.sqrt(np.mean([r["band_fit"]["width_se_m"] ** 2
                                              for r in runs]) / n),
             "localization_index": float(np.mean([r["localization_index"] for r in runs])),
