@@ -18,3 +18,13 @@ def own_cpu_seconds() -> float:
     """CPU seconds (user + system) of this process."""
     t = os.times()
     return t.user + t.system
+
+
+def resident_bytes() -> int:
+    """This process's resident memory now (VmRSS of /proc/self/status), bytes; 0 where the
+    file has none."""
+    with open("/proc/self/status", encoding="ascii") as fh:
+        for line in fh:
+            if line.startswith("VmRSS:"):
+                return int(line.split()[1]) * 1024
+    return 0

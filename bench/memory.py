@@ -44,19 +44,14 @@ import json, sys
 from pathlib import Path
 sys.path.insert(0, sys.argv[1])
 import throughput as T
-
-def rss():
-    for line in open("/proc/self/status"):
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) * 1024
-    return 0
+from _machine import resident_bytes
 
 p = T.load_packing(Path(sys.argv[2]))
 cfg = T.BenchScene()
-before = rss()
+before = resident_bytes()
 scene, _ = T.make_scene(p, cfg)
 scene.run(int(sys.argv[3]))
-after = rss()
+after = resident_bytes()
 print(json.dumps({"grains": p.n, "contacts": int(scene.num_active_contacts),
                   "rss_bytes": after - before, "fields": scene.memory_by_field()}))
 """

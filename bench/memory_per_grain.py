@@ -26,20 +26,19 @@ import argparse
 import json
 import subprocess
 import sys
+from pathlib import Path
+
+HERE = Path(__file__).resolve().parent
 
 _ONE = r"""
 import json, sys
 import numpy as np
 import cpp_dem as dem
-
-def rss():
-    for line in open("/proc/self/status"):
-        if line.startswith("VmRSS:"):
-            return int(line.split()[1]) * 1024
-    return 0
+sys.path.insert(0, sys.argv[2])
+from _machine import resident_bytes
 
 k = int(sys.argv[1])
-before = rss()
+before = resident_bytes()
 s = dem.Scene()
 m = s.add_material(dem.linear_material(density=2650, young=1e7, poisson=0.3,
                                        friction_angle_deg=30))
@@ -49,7 +48,7 @@ pos = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
 s.add_spheres(pos, np.full(len(pos), 0.51 * h), material=m)
 s.dt = 1e-7
 s.run(5)
-after = rss()
+after = resident_bytes()
 fields = s.memory_by_field()
 print(json.dumps({"grains": len(pos), "contacts": int(s.num_active_contacts),
                   "rss_bytes": after - before, "fields": fields}))
@@ -57,8 +56,8 @@ print(json.dumps({"grains": len(pos), "contacts": int(s.num_active_contacts),
 
 
 def one(k: int) -> dict:
-    out = subprocess.run([sys.executable, "-c", _ONE, str(k)], capture_output=True, text=True,
-                         check=True, env={"OMP_NUM_THREADS": "1", "PATH": ""})
+    out = subprocess.run([sys.executable, "-c", _ONE, str(k), str(HERE)], capture_output=True,
+                         text=True, check=True, env={"OMP_NUM_THREADS": "1", "PATH": ""})
     return json.loads(out.stdout.strip().splitlines()[-1])
 
 
