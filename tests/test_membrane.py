@@ -300,3 +300,42 @@ def test_a_checkpoint_continues_a_membrane_bitwise(tmp_path):
     other.run(500)
     assert np.array_equal(np.asarray(other.positions), ref)
     assert len(mb.grains_outside(sc)) == 0
+
+
+def test_a_grain_is_outside_only_beyond_the_surface_where_its_ray_crosses_it():
+    # The membrane wraps coarse grains: their centres can lie beyond its rings' mean radius
+    # while inside it. grains_outside follows the surface along the horizontal ray from the
+    # axis through each centre (the triangle it crosses), so a grain in a bulge is inside
+    # and one just beyond the surface is outside.
+    r, n = 0.05, 40
+    sc, m = _scene()
+    mb = cylindrical_membrane(sc, centre=[0, 0, 0], radius_m=r, height_m=0.1, young_pa=1e6,
+                              thickness_m=3e-4, node_radius_m=0.001, material=m, segments=n)
+    x = np.asarray(sc.positions)
+    k = len(mb.rings) // 2
+    ring = np.asarray(mb.rings[k])
+    z = float(x[ring[0], 2])
+    a0 = math.atan2(x[ring[0], 1], x[ring[0], 0])
+    e0 = np.array([math.cos(a0), math.sin(a0), 0.0])
+    # Along a node's ray the surface is at the node; half-way between two nodes of the ring,
+    # at the chord's middle.
+    mid = a0 + math.pi / n
+    emid = np.array([math.cos(mid), math.sin(mid), 0.0])
+    s = mb.surface_radius_m(sc, [0.5 * r * e0 + [0, 0, z], 0.5 * r * emid + [0, 0, z]])
+    assert s[0] == pytest.approx(r, rel=1e-12)
+    assert s[1] == pytest.approx(r * math.cos(math.pi / n), rel=1e-12)
+    assert math.isnan(mb.surface_radius_m(sc, [[0.0, 0.01, 0.2]])[0])  # above the top ring
+    a5 = math.atan2(x[ring[5], 1], x[ring[5], 0])
+    e5 = np.array([math.cos(a5), math.sin(a5), 0.0])
+    inside, beyond = 0.99 * r * e0 + [0, 0, z], 1.01 * r * e0 + [0, 0, z]
+    sc.add_spheres([inside, beyond, 1.06 * r * e5 + [0, 0, z]], [0.004] * 3, material=m)
+    g = np.flatnonzero(np.asarray(sc.body_kinds) == 0)
+    assert mb.grains_outside(sc).tolist() == [g[1], g[2]]
+    # A bulge of the membrane (node 5 of the ring pushed out by 8 mm) takes in the grain at
+    # 1.06 r on its ray; the rings' mean radius moves by 0.2 mm, and would still call it
+    # outside.
+    x = np.asarray(sc.positions).copy()
+    x[ring[5]] += 0.008 * e5
+    sc.positions = x
+    assert mb.grains_outside(sc).tolist() == [g[1]]
+    assert mb.ring_radii_m(sc)[k] < 1.06 * r < mb.surface_radius_m(sc, [x[g[2]]])[0]

@@ -174,18 +174,73 @@ class Membrane:
                          for r in self.rings])
 
     def grains_outside(self, scene) -> np.ndarray:
-        """Ids of the spheres whose centre lies outside the membrane's mid-surface (the
-        radius of the rings at its height, interpolated), or above or below its end rings:
-        none, for a membrane that holds its specimen."""
+        """Ids of the spheres whose centre lies outside the membrane, or above or below its
+        end rings: none, for a membrane that holds its specimen. Outside is beyond the
+        membrane's mid-surface where the horizontal ray from the axis through the centre
+        crosses it (:meth:`surface_radius_m`): the membrane wraps coarse grains, and the
+        centres of those it wraps lie beyond its rings' mean radius."""
         x = np.asarray(scene.positions)
         grains = np.flatnonzero(np.asarray(scene.body_kinds) == 0)
         zr = self._ring_heights(x)
-        rr = self.ring_radii_m(scene)
         g = x[grains]
+        ends = (g[:, 2] < zr[0]) | (g[:, 2] > zr[-1])
         r = np.linalg.norm(g[:, :2] - self.centre[:2], axis=1)
-        bound = np.interp(g[:, 2], zr, rr)
-        out = (r > bound) | (g[:, 2] < zr[0]) | (g[:, 2] > zr[-1])
+        # (only a centre beyond the innermost node can be outside: the surface is there or
+        # farther out)
+        near = ~ends & (r > float(np.min(np.linalg.norm(x[self.nodes, :2] - self.centre[:2],
+                                                         axis=1))))
+        out = ends.copy()
+        bound = self.surface_radius_m(scene, g[near])
+        miss = np.isnan(bound)  # (no crossing found: the rings' radius there)
+        bound[miss] = np.interp(g[near][miss, 2], zr, self.ring_radii_m(scene))
+        out[near] = r[near] > bound
         return grains[out]
+
+    def surface_radius_m(self, scene, points) -> np.ndarray:
+        """The membrane's mid-surface radius, m, along the horizontal ray from the axis
+        through each of ``points`` ((k, 3), m): the farthest crossing of that ray with its
+        triangles (Moller-Trumbore; a ray on a shared edge or vertex crosses both
+        triangles alike). NaN where the ray crosses none (a point above or below the
+        end rings)."""
+        pts = np.asarray(points, dtype=float).reshape(-1, 3) - self.centre
+        out = np.full(len(pts), np.nan)
+        if not len(pts):
+            return out
+        tri = np.asarray(scene.positions)[self.triangles] - self.centre  # (m, 3, 3)
+        zlo, zhi = tri[:, :, 2].min(axis=1), tri[:, :, 2].max(axis=1)
+        order = np.argsort(zlo, kind="stable")
+        zlo_s = zlo[order]
+        reach = float(np.max(zhi - zlo))
+        # each point against the triangles whose height range holds it: those with
+        # zlo in [z - reach, z], then zhi >= z
+        lo = np.searchsorted(zlo_s, pts[:, 2] - reach, side="left")
+        hi = np.searchsorted(zlo_s, pts[:, 2], side="right")
+        counts = hi - lo
+        pi = np.repeat(np.arange(len(pts)), counts)
+        ti = order[np.repeat(lo, counts) + (np.arange(counts.sum())
+                                            - np.repeat(np.cumsum(counts) - counts, counts))]
+        keep = zhi[ti] >= pts[pi, 2]
+        pi, ti = pi[keep], ti[keep]
+        d = pts[pi].copy()
+        d[:, 2] = 0.0
+        d /= np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
+        o = np.zeros_like(d)
+        o[:, 2] = pts[pi, 2]
+        a, b, c = tri[ti, 0], tri[ti, 1], tri[ti, 2]
+        e1, e2 = b - a, c - a
+        h = np.cross(d, e2)
+        det = np.einsum("ki,ki->k", e1, h)
+        ok = np.abs(det) > 1e-300
+        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
+        s = o - a
+        u = inv * np.einsum("ki,ki->k", s, h)
+        q = np.cross(s, e1)
+        v = inv * np.einsum("ki,ki->k", d, q)
+        t = inv * np.einsum("ki,ki->k", e2, q)
+        eps = 1e-9
+        hit = ok & (u >= -eps) & (v >= -eps) & (u + v <= 1 + eps) & (t > 0)
+        np.fmax.at(out, pi[hit], t[hit])
+        return out
 
     def inner_volume_m3(self, scene) -> float:
         """The specimen's volume, m^3: :meth:`volume_m3` less the triangles' area times R_c
