@@ -27,6 +27,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from cpp_dem import _core
+from cpp_dem.measure import inertial
+from cpp_dem.protocols.quasi_static import effective_density
 from cpp_dem.build.membrane import Membrane, cylindrical_membrane
 from cpp_dem.build.packing import loose_cylinder
 import warnings
@@ -63,7 +65,7 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
             membrane_young_pa: float = 1e6,
             membrane_thickness_m: float = 3e-4, mass_scale: float = 20.0,
             damping: float = 0.3, tol: float = 0.01, max_steps: int = 200_000,
-            check_every: int = 1000, log=None) -> CylinderSpecimen:
+            check_every: int = 1000, inclusion=None, log=None) -> CylinderSpecimen:
     """The specimen of ``radii`` (m) in a mould of ``radius_m`` and ``height_m`` (m),
     compacted to ``pressure_pa`` (Pa) and then held by a membrane of
     ``membrane_young_pa`` (Pa) and ``membrane_thickness_m`` (m) (R_c a quarter of the smallest
@@ -74,7 +76,13 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     frictionless by default, as the cubical test's walls: lubricated ends). Each stage runs until its stresses are within
     ``tol`` of the cell pressure at two checks in a row (``check_every`` steps apart), at most
     ``max_steps``; a stage that does not get there is said in ``prepared["reached"]`` (False)
-    and by ``log``, not hidden."""
+    and by ``log``, not hidden.
+
+    ``inclusion(scene, centres, radii)``, if given, is called once the mould and the platens
+    are in the scene and before the grains: it adds what the specimen holds besides its
+    grains (a geogrid disc: :func:`cpp_dem.build.geogrid.disc_grid`) and returns a mask of the
+    grains (of the loose cloud's ``centres`` and ``radii``, m) to keep, False for those it
+    displaces. The time step is set after it, so it counts the inclusion's members."""
     say = log or (lambda msg: None)
     p = float(pressure_pa)
     if not (math.isfinite(p) and p > 0):
@@ -88,6 +96,14 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
                                  inside=True, material=smooth, lo=0.0, hi=height_m)
     base = sc.add_wall(axis=2, position=0.0, sense=1, material=smooth)
     lid = sc.add_wall(axis=2, position=height_m, sense=-1, material=smooth)
+    if inclusion is not None:
+        keep = np.asarray(inclusion(sc, pts, radii), dtype=bool)
+        if keep.shape != radii.shape:
+            raise _core.ParameterError(f"inclusion: returned a mask of shape {keep.shape}; "
+                                       f"it must be one bool per grain, {radii.shape}")
+        if not keep.any():
+            raise _core.ParameterError("inclusion: displaced every grain")
+        pts, radii = pts[keep], radii[keep]
     sc.add_spheres(pts, radii, material=m)
     sc.dt = 0.3 * sc.critical_dt()
     speed = 0.1 * height_m / (1e4 * sc.dt)  # m/s: the servos' cap, a tenth of the height in 1e4 steps
@@ -97,11 +113,13 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     sc.add_controller(cs)
     sc.add_controller(mould_servo)
 
-    def settle(ok, what: str) -> tuple[int, bool]:
+    def settle(ok, what: str, between=None) -> tuple[int, bool]:
         steps, held = 0, 0
         while steps < max_steps:
             sc.run(check_every)
             steps += check_every
+            if between is not None:
+                between()
             held = held + 1 if ok() else 0
             if held == 2:
                 return steps, True
@@ -157,10 +175,21 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
         n2, _ = settle(lambda: True, "the membrane's first hold")
     # The lid's servo on the specimen's own cross-section, now that the membrane lies on it.
     lid_servo.enabled = False
-    lid_servo = _core.ServoWall(wall=lid, target_stress=p,
-                                area=math.pi * mb.specimen_radius_m(sc) ** 2, max_speed=speed)
+    r_lid = mb.specimen_radius_m(sc)
+    lid_servo = _core.ServoWall(wall=lid, target_stress=p, area=math.pi * r_lid ** 2,
+                                max_speed=speed)
     sc.add_controller(lid_servo)
-    n3, ok3 = settle(held_ok, "the hold in the membrane")
+
+    def on_section() -> None:
+        # The servo's force target follows the specimen's cross-section as the membrane
+        # moves (its area is fixed when it is made): p on the current section.
+        lid_servo.target_stress = p * (mb.specimen_radius_m(sc) / r_lid) ** 2
+
+    with warnings.catch_warnings():
+        # (the new servo starts from the first hold's stress, at its cap for a while; the
+        # hold's own check says whether it got there)
+        warnings.simplefilter("ignore", ControllerLimitWarning)
+        n3, ok3 = settle(held_ok, "the hold in the membrane", between=on_section)
     z0, z1 = sc.wall_positions
     radial = mb.radial_stress_pa(sc)
     prepared = {"steps": n1 + n2 + n3, "mould_radius_m": rs,
@@ -176,21 +205,43 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
 
 def row(spec: CylinderSpecimen) -> dict:
     """The specimen's state now (module doc): axial and volumetric strain (-), the axial
-    stress on the current cross-section, the deviator and the membrane's correction (Pa),
-    the cross-section (m^2), the grains outside the membrane (count)."""
+    stress on the current cross-section at the lid (the load cell) and at the base (in a
+    quasi-static test they agree: a lid ahead of its base is a test loaded too fast), the
+    deviator and the membrane's correction (Pa),
+    the cross-section (m^2), the grains outside the membrane (count), the grains' unbalanced
+    force (their mean over their mean contact force, -)."""
     sc, mb = spec.scene, spec.membrane
     z0, z1 = sc.wall_positions
     h = z1 - z0
     v = mb.inner_volume_m3(sc)
     a = v / h
     sigma_a = float(sc.wall_forces[spec.lid][2]) / a
+    sigma_base = -float(sc.wall_forces[spec.base][2]) / a
     radial = mb.radial_stress_pa(sc)
     return {"step": int(sc.step_count), "axial_strain": (spec.height0_m - h) / spec.height0_m,
             "volumetric_strain": (spec.volume0_m3 - v) / spec.volume0_m3,
-            "axial_stress_pa": sigma_a, "deviatoric_stress_pa": sigma_a - spec.pressure_pa,
+            "axial_stress_pa": sigma_a, "base_stress_pa": sigma_base,
+            "deviatoric_stress_pa": sigma_a - spec.pressure_pa,
             "radial_stress_pa": radial,
             "membrane_correction_pa": radial - spec.pressure_pa, "area_m2": a,
-            "grains_outside": int(len(mb.grains_outside(sc)))}
+            "grains_outside": int(len(mb.grains_outside(sc))),
+            "unbalanced_force": float(sc.unbalanced_force())}
+
+
+def inertial_number(spec: CylinderSpecimen, strain_rate: float) -> float:
+    """The loading's inertial number I = rate x d_mean / sqrt(p / rho), - (the grains' mean
+    diameter, the cell pressure, the grains' density): quasi-static below about 1e-3, as
+    the cubical test's (:func:`cpp_dem.measure.inertial.check_quasi_static`)."""
+    d_mean, rho = _grains(spec)
+    return inertial.inertial_number(strain_rate, d_mean, spec.pressure_pa, rho)
+
+
+def _grains(spec: CylinderSpecimen) -> tuple[float, float]:
+    """The grains' mean diameter (m) and density (kg/m^3, with density scaling's factor)."""
+    sc = spec.scene
+    grains = np.asarray(sc.body_kinds) == 0
+    return (2.0 * float(np.mean(np.asarray(sc.radii)[grains])),
+            effective_density(sc, float(sc.material(spec.material).density)))
 
 
 def shear(spec: CylinderSpecimen, *, strain_rate: float, stop_strain: float,
@@ -202,6 +253,11 @@ def shear(spec: CylinderSpecimen, *, strain_rate: float, stop_strain: float,
         if not (math.isfinite(v) and v > 0):
             raise _core.ParameterError(f"{name}={v!r}: must be > 0")
     sc = spec.scene
+    d_mean, rho = _grains(spec)
+    inertial.check_quasi_static(inertial_number(spec, strain_rate),
+                                "cylindrical triaxial shearing", rate=strain_rate,
+                                diameter=d_mean, pressure=spec.pressure_pa, density=rho,
+                                stacklevel=2)
     if spec.lid_servo is not None:
         spec.lid_servo.enabled = False
     sc.set_wall_velocity(spec.lid, [0.0, 0.0, -strain_rate * spec.height0_m])
