@@ -371,6 +371,42 @@ def test_generators_label_members():
     assert (tri.member_direction == "diagonal").sum() > 0
 
 
+@pytest.mark.parametrize("pattern, spacing", [("square", 0.01), ("triangular", 0.0143)])
+def test_a_disc_grid_is_the_lattice_cut_round(pattern, spacing):
+    # The nodes of the lattice (a node at the centre) within the radius, the members between
+    # two kept nodes, every member one spacing long, no node without a member, cells >= 0.
+    s, m = grid_scene()
+    p = dem.BeamParams(young=5e6, poisson=0.3, radius=1e-3)
+    c, radius = np.array([0.02, -0.01, 0.05]), 0.0475
+    g = geogrid.disc_grid(s, centre=c, radius=radius, spacing=spacing, pattern=pattern,
+                          params=p, material=m, density=2650.0)
+    x = np.asarray(s.positions)[g.nodes]
+    r = np.linalg.norm(x[:, :2] - c[:2], axis=1)
+    assert np.all(r <= radius * (1 + 1e-12)) and np.all(x[:, 2] == c[2])
+    assert np.min(r) == pytest.approx(0.0, abs=1e-15)  # a node at the centre
+    np.testing.assert_allclose(s.grid_link_rest_lengths, spacing, rtol=1e-12)
+    ends = np.asarray(s.grid_link_nodes)[g.links]
+    assert set(ends.ravel().tolist()) == set(g.nodes.tolist())
+    assert g.member_cell.min() == 0 and g.n_members == len(g.links)
+    # Every lattice node within the radius is there: count them directly.
+    h = spacing if pattern == "square" else spacing * math.sqrt(3) / 2
+    k = int(radius / spacing) + 2
+    count = 0
+    for j in range(-k, k + 1):
+        for i in range(-k, k + 1):
+            xx = i * spacing + (0.5 * spacing if pattern == "triangular" and j % 2 else 0.0)
+            count += (xx ** 2 + (j * h) ** 2) <= radius ** 2
+    assert len(g.nodes) == count
+    # The disc is symmetric about its centre: the nodes' mean is the centre.
+    np.testing.assert_allclose(x[:, :2].mean(axis=0), c[:2], atol=1e-12)
+    with pytest.raises(dem.ParameterError, match="pattern='hex'"):
+        geogrid.disc_grid(s, centre=c, radius=radius, spacing=spacing, pattern="hex",
+                          params=p, material=m, density=2650.0)
+    with pytest.raises(dem.ParameterError, match="the disc holds no member"):
+        geogrid.disc_grid(s, centre=c, radius=0.5 * spacing, spacing=spacing, pattern=pattern,
+                          params=p, material=m, density=2650.0)
+
+
 def test_node_density_scaling_raises_the_critical_step_by_its_square_root():
     dts = []
     for scale in (1.0, 100.0):

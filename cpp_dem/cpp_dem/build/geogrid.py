@@ -387,6 +387,77 @@ def triangular_grid(scene, *, origin: Sequence[float], length: float, width: flo
                              sides, axis, params.radius, (nx - 1, ny - 1))
 
 
+def disc_grid(scene, *, centre: Sequence[float], radius: float, spacing: float,
+              pattern: str = "square", params: BeamParams, material: int,
+              unit_weight: float | None = None, density: float | None = None,
+              node_density_scale: float = 1.0, max_nodes: int | None = None) -> Geogrid:
+    """A round geogrid of cylinders in the plane z = centre[2]: the square grid of node
+    spacing ``spacing`` (m), or the grid of equilateral triangles of edge ``spacing``
+    (``pattern="triangular"``), centred on ``centre`` (a node there), cut to the disc of
+    ``radius`` (m): the nodes within it, and the members whose two ends are both kept (a node
+    left with no member is dropped). For a cylindrical specimen; ``member_cell`` counts the
+    lattice's cells from the disc's lowest row and column, so it is >= 0. The rest as
+    :func:`square_grid` (mass from unit_weight or density, ``max_nodes`` counted first)."""
+    positive("radius", radius)
+    positive("spacing", spacing)
+    positive("node_density_scale", node_density_scale)
+    if pattern not in ("square", "triangular"):
+        raise ParameterError(f"pattern={pattern!r}: must be 'square' or 'triangular'")
+    c = _check_origin(centre)
+    row = spacing if pattern == "square" else spacing * math.sqrt(3) / 2
+    _check_grid_size(f"radius={radius}, spacing={spacing}", math.pi * radius**2
+                     / (spacing * row), max_nodes)
+    _check_members_apart(spacing, params.radius, "node spacing")
+    nj = int(math.floor(radius / row + 1e-9))
+    ni = int(math.floor(radius / spacing + 1e-9)) + 1
+
+    def at(i: int, j: int) -> tuple[float, float]:
+        shift = 0.5 * spacing if (pattern == "triangular" and j % 2) else 0.0
+        return i * spacing + shift, j * row
+
+    kept = {}
+    for j in range(-nj, nj + 1):
+        for i in range(-ni, ni + 1):
+            x, y = at(i, j)
+            if x * x + y * y <= radius * radius * (1 + 1e-12):
+                kept[i, j] = (x, y)
+    if pattern == "square":
+        def neighbours(i, j):
+            return [((i + 1, j), LONGITUDINAL, "A", (1.0, 0, 0)),
+                    ((i, j + 1), TRANSVERSE, "C", (0, 1.0, 0))]
+    else:
+        def neighbours(i, j):
+            up = [(i - 1, j + 1), (i, j + 1)] if j % 2 == 0 else [(i, j + 1), (i + 1, j + 1)]
+            return [((i + 1, j), LONGITUDINAL, "A", None)] + [(u, DIAGONAL, "", None)
+                                                                for u in up]
+    pairs = [((i, j), nb, kind, sd, ax) for (i, j) in sorted(kept, key=lambda k: (k[1], k[0]))
+             for nb, kind, sd, ax in neighbours(i, j) if nb in kept]
+    if not pairs:
+        raise ParameterError(f"radius={radius}, spacing={spacing}: the disc holds no member "
+                             "(the radius must be at least one spacing)")
+    used = {k for a, b, *_ in pairs for k in (a, b)}
+    i0 = min(k[0] for k in used)
+    j0 = min(k[1] for k in used)
+    b = _Builder(params, _density(unit_weight, density))
+    ids = {}
+    for k in sorted(used, key=lambda k: (k[1], k[0])):
+        x, y = kept[k]
+        ids[k] = b.node(k, c + [x, y, 0.0])
+    direction, cell, sides, axis, links_of = [], [], [], [], []
+    for a, nb, kind, sd, ax in pairs:
+        links_of.append(b.link(ids[a], ids[nb]))
+        direction.append(kind)
+        cell.append((a[0] - i0, a[1] - j0))
+        sides.append(sd)
+        if ax is None:
+            p, q = b.points[ids[a]], b.points[ids[nb]]
+            ax = (q - p) / np.linalg.norm(q - p)
+        axis.append(ax)
+    span = (max(k[0] for k in used) - i0, max(k[1] for k in used) - j0)
+    return _one_link_members(b, scene, material, node_density_scale, links_of, direction, cell,
+                             sides, axis, params.radius, span)
+
+
 def biaxial_geogrid(scene, *, origin: Sequence[float], apertures_x: int, apertures_y: int,
                     aperture_area: float = 6.4e-3, rib_width: float = 0.01,
                     params: BeamParams, material: int, unit_weight: float | None = None,
