@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from cpp_dem.io.figures import save_figure
-from geogrid_dem.cases import describe
+from geogrid_dem.cases import describe, triaxial_cylinder
 from cpp_dem import apply_threads
 from geogrid_dem.options import (case_parser, check_cap, given_options, parse_checked,
                                  refuse_unused)
@@ -95,6 +95,8 @@ class Params:
     grains: str = "spheres"          #: spheres, or clumps:NAME (a shipped grain gravel_a ..
                                      #: gravel_d, 'gravel' for the four mixed, or a template
                                      #: CSV x,y,z,r); sizes are equivalent-volume diameters
+    specimen: str = "box"            #: box (six servo walls), or cylinder: the box's
+                                     #: inscribed cylinder in a flexible membrane
 
 
 #: The fewest grains a sample may have, from a packing or a PSD, -.
@@ -468,6 +470,11 @@ def run(p: Params, out: Path, *, resume: bool = False) -> dict:
     def log(msg: str) -> None:
         print(f"[triaxial] {msg}", flush=True)
 
+    if p.specimen == "cylinder":
+        summary = triaxial_cylinder.run(p, out, log, plot)
+        end_run(out)
+        return summary
+
     prepared = restore(p, out, log) if resume else prepare(p, log)
     sample, grid, n_grains, iso, t_iso = (prepared.sample, prepared.grid, prepared.n_grains,
                                           prepared.iso, prepared.t_iso)
@@ -648,7 +655,8 @@ def build_parser():
     ap.add_argument("--density", type=_positive("--density", ap), default=d.density,
                     help="grain density, kg/m^3")
     ap.add_argument("--geogrid", choices=("none", "square", "triangular"), default="none",
-                    help="geogrid layer at mid-height (the thesis's §6.3, its grids of §5.1)")
+                    help="geogrid layer at mid-height (the thesis's §6.3, its grids of §5.1); "
+                         "with --specimen cylinder a disc of the same grid")
     ap.add_argument("--clear-layer", action="store_true",
                     help="remove the grains of the geogrid layer even without a geogrid, so "
                     "that runs with and without one start from the same packing")
@@ -659,6 +667,11 @@ def build_parser():
                     help=GRAINS_HELP + "; the PSD gives equivalent-volume diameters")
     ap.add_argument("--dt-safety", type=float, default=d.dt_safety,
                     help="time step = safety x critical estimate, (0, 1]")
+    ap.add_argument("--specimen", choices=("box", "cylinder"), default=d.specimen,
+                    help="box: six servo-controlled walls (the thesis); cylinder: the box's "
+                         "inscribed cylinder (diameter its x side, height its z side) in a "
+                         "flexible membrane under the cell pressure, as in the laboratory "
+                         "(docs/triaxial.md)")
     return ap
 
 
@@ -744,6 +757,19 @@ def parse_args(argv=None) -> tuple[Params, Path]:
         if a.overwrite:
             ap.error("--resume and --overwrite: choose one (--resume keeps stage 1's files)")
     p.resume = a.resume
+    p.specimen = a.specimen
+    if a.specimen == "cylinder":
+        why = "with --specimen cylinder"
+        for dest, what in (("packing", "(the cylinder's grains are generated)"),
+                           ("skip_isotropic", "(the membrane holds the specimen first)"),
+                           ("prep_friction", "(the mould compacts at --phi)"),
+                           ("dt_safety", "(its time step is 0.3 of the critical one: the "
+                                         "membrane's links)"),
+                           ("preset", "(its loading runs at --strain-rate)"),
+                           ("resume", "(it keeps no checkpoint)")):
+            refuse_unused(ap, a, given, dest, f"{why} {what}")
+        if a.grains != "spheres":
+            ap.error(f"--grains={a.grains}: {why}: spheres only (the box takes clumps)")
     return p, a.out
 
 
