@@ -486,15 +486,27 @@ def run_yade(p: Packing, cfg: BenchScene, threads: int, steps: int, warmup: int,
 class LiggghtsBlocks:
     """LIGGGHTS blocks of the same scene (bench/liggghts_throughput.py), one process each, run
     between cpp_dem's timed blocks; each block's other load is the machine's busy CPU less
-    this process's and LIGGGHTS's own."""
+    this process's and LIGGGHTS's own. A block that fails (LIGGGHTS's error, a lost atom, a
+    missing executable) is said in ``error`` (its first line) and no further block runs:
+    cpp_dem's blocks go on, and the bench's line says ``liggghts_error`` (as Yade's)."""
 
     def __init__(self, exe: str, p: Packing, cfg: BenchScene, steps: int, warmup: int,
                  workdir: Path):
         self.exe, self.p, self.cfg, self.steps, self.warmup = exe, p, cfg, steps, warmup
         self.workdir = workdir / f"liggghts_n{p.n}"
         self.blocks: list[dict] = []
+        self.error: str | None = None
 
     def __call__(self) -> None:
+        if self.error is not None:
+            return
+        try:
+            self._block()
+        except (liggghts_throughput.LiggghtsError, OSError) as exc:
+            self.error = str(exc).splitlines()[0]
+            log(f"  LIGGGHTS: {exc}")
+
+    def _block(self) -> None:
         c0 = resource.getrusage(resource.RUSAGE_CHILDREN)
         with LoadMeter() as m:
             r = liggghts_throughput.run_block(
@@ -645,7 +657,9 @@ def main(argv: list[str] | None = None) -> int:
                     "local_damping": cfg.local_damping, "gravity": list(cfg.gravity),
                     "packing": str(p.csv), "spatial_order": bool(args.spatial_order), **prov}
             line.update(ours)
-            if lig is not None:
+            if lig is not None and lig.error is not None:
+                line["liggghts_error"] = lig.error
+            elif lig is not None:
                 line.update(lig.summary(ours["particle_steps_per_s_per_repeat"],
                                         BUSY_THRESHOLD))
                 line["liggghts_ratio"] = (ours["particle_steps_per_s"]

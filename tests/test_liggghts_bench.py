@@ -85,3 +85,19 @@ def test_a_failed_block_says_so(tmp_path, body, words):
         lt.run_block(exe, tmp_path / "w", CENTERS, RADII, LO, HI, young=1e7, poisson=0.3,
                      friction_angle_deg=30, density=2600, dt=1e-5, skin=4e-4, warmup=10,
                      steps=100)
+
+
+def test_a_failed_block_in_the_throughput_bench_is_said_and_not_run_again(tmp_path):
+    # As Yade's: the bench's line says liggghts_error (the first line) and cpp_dem's blocks
+    # go on; no later LIGGGHTS block runs.
+    import throughput
+
+    calls = tmp_path / "calls"
+    exe = _fake(tmp_path, f"echo x >> {calls}\necho 'ERROR: Unknown command'\nexit 1\n")
+    p = throughput.Packing(centers=CENTERS, radii=RADII, lo=LO, hi=HI, csv=tmp_path / "p.csv",
+                           meta={})
+    blocks = throughput.LiggghtsBlocks(exe, p, throughput.BenchScene(), 100, 10, tmp_path)
+    blocks()
+    blocks()
+    assert blocks.error == "liggghts failed (exit 1):" and blocks.blocks == []
+    assert calls.read_text() == "x\n"
