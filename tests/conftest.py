@@ -57,6 +57,18 @@ def rng():
 #: The flags each case's --smoke run is made with, shared by tests/test_cases_smoke.py (which
 #: finds every case by glob) and the case's own physics tests, so each smoke runs once per
 #: session. A new case needs no entry: it runs with --smoke and --out alone.
+def load_bench(name: str):
+    """The module of ``bench/<name>.py`` (bench/ put on the path first, for its own imports)."""
+    import importlib.util
+
+    path = ROOT / "bench" / f"{name}.py"
+    sys.path.insert(0, str(path.parent))
+    spec = importlib.util.spec_from_file_location(name, path)
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
 SMOKE_ARGS: dict[str, tuple[str, ...]] = {
     "deposition": ("--threads", "2"),
     "triaxial": ("--threads", "2"),

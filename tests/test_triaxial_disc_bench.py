@@ -5,7 +5,6 @@ the bench's paired differences; the table in docs/studies/triaxial_disc.md is th
 rendering of the committed data file. Bad options are refused by name."""
 
 import csv
-import importlib.util
 import json
 import os
 import subprocess
@@ -14,17 +13,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from conftest import load_bench
 
 ROOT = Path(__file__).resolve().parents[1]
 BENCH = ROOT / "bench" / "triaxial_disc.py"
 
 
 def _bench_module():
-    sys.path.insert(0, str(BENCH.parent))
-    spec = importlib.util.spec_from_file_location("triaxial_disc", BENCH)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_bench("triaxial_disc")
 
 
 @pytest.fixture(scope="module")

@@ -2,23 +2,20 @@
 its smoke runs both shapes on one seed and writes the paired differences; the table in
 docs/studies/triaxial_membrane.md is the bench's rendering of the committed data file."""
 
-import importlib.util
 import json
 import os
 import subprocess
 import sys
 from pathlib import Path
 
+from conftest import load_bench
+
 ROOT = Path(__file__).resolve().parents[1]
 BENCH = ROOT / "bench" / "triaxial_membrane.py"
 
 
 def _bench_module():
-    sys.path.insert(0, str(BENCH.parent))
-    spec = importlib.util.spec_from_file_location("triaxial_membrane", BENCH)
-    mod = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(mod)
-    return mod
+    return load_bench("triaxial_membrane")
 
 
 def test_the_smoke_runs_both_shapes_and_pairs_them(tmp_path):
