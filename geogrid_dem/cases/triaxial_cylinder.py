@@ -44,6 +44,7 @@ import numpy as np
 import cpp_dem as dem
 from cpp_dem.build import geogrid, psd
 from cpp_dem.io import CsvRecorder, PvdWriter, write_vtk_spheres
+from cpp_dem.measure import inertial
 from cpp_dem.protocols import cylinder_triaxial as cyl
 
 #: triaxial.csv's columns: (None, unit), as the box's SERIES
@@ -206,8 +207,10 @@ def run(p, out: Path, log, plot) -> dict:
                 f" kPa  ({100 * done:.0f} %, ETA {el / max(done, 1e-9) * (1 - done):.0f} s)")
 
     spec_inertial = cyl.inertial_number(spec, p.strain_rate)
-    log(f"shearing at {p.strain_rate:g} /s: inertial number {spec_inertial:.2g} "
-        "(quasi-static below about 1e-3)")
+    log(f"shearing at {p.strain_rate:g} /s: inertial number {spec_inertial:.2g}"
+        + (f", above the strict quasi-static {inertial.QUASI_STATIC_STRICT:g}: the rate shows "
+           "in q (docs/triaxial.md)" if spec_inertial > inertial.QUASI_STATIC_STRICT else
+           f" (quasi-static below {inertial.QUASI_STATIC_STRICT:g})"))
     t1 = time.perf_counter()
     steps0 = sc.step_count
     try:
