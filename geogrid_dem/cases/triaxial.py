@@ -39,7 +39,7 @@ from pathlib import Path
 import numpy as np
 
 from cpp_dem.io.figures import save_figure
-from geogrid_dem.cases import describe, triaxial_cylinder
+from geogrid_dem.cases import describe, thesis_grids, triaxial_cylinder
 from cpp_dem import apply_threads
 from geogrid_dem.options import (case_parser, check_cap, given_options, parse_checked,
                                  refuse_unused)
@@ -192,21 +192,18 @@ class GridLayer:
 
     def radius(self, p: Params) -> float:
         """Cylinder radius, m: 1 mm for the square grid, 0.5 mm for the triangular (001 §5.1)."""
-        return 1e-3 if p.geogrid == "square" else 0.5e-3
+        return thesis_grids.GRIDS[p.geogrid][0]
 
     def overlaps(self, c: np.ndarray, r: np.ndarray) -> np.ndarray:
         """Grains (at the cloud's radii) that cut the layer slab over the grid's footprint."""
         half = 0.5 * self.width
         inside = np.all(np.abs(c[:, :2] - self.centre) < half + r[:, None], axis=1)
-        return inside & (np.abs(c[:, 2] - self.z) < r + 1e-3)
+        return inside & (np.abs(c[:, 2] - self.z) < r + thesis_grids.SLAB_M)
 
     def build(self, sc, p: Params):
-        """Adds the geogrid: 001 Table 5.1 material (E = 5 MPa, nu = 0.3, rho = 2650 kg/m^3,
-        phi = 20 deg) with cohesive links of normal and shear cohesion 1e7 Pa (App. A)."""
-        mat = sc.add_material(dem.linear_material(density=2650.0, young=5e6, poisson=0.3,
-                                                  friction_angle_deg=20.0))
-        beam = dem.BeamParams(young=5e6, poisson=0.3, radius=self.radius(p),
-                              normal_cohesion=1e7, shear_cohesion=1e7)
+        """Adds the geogrid: 001 Table 5.1 material with cohesive links (App. A;
+        :func:`geogrid_dem.cases.thesis_grids.add_grid_material`)."""
+        mat, beam = thesis_grids.add_grid_material(sc, p.geogrid)
         o = np.array([self.centre[0] - 0.5 * self.width, self.centre[1] - 0.5 * self.width,
                       self.z])
         if p.geogrid == "square":
@@ -215,7 +212,8 @@ class GridLayer:
                                        nodes_x=n, nodes_y=n, params=beam, material=mat,
                                        density=2650.0)
         return geogrid.triangular_grid(sc, origin=o, length=self.width, width=self.width,
-                                       side=0.0143, params=beam, material=mat, density=2650.0)
+                                       side=thesis_grids.GRIDS["triangular"][1], params=beam,
+                                       material=mat, density=2650.0)
 
 
 def grid_layer(p: Params, lo, hi) -> GridLayer | None:

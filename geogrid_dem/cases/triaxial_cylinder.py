@@ -7,9 +7,10 @@ side (0.3 x 0.6 m by default, H / D = 2 as in the laboratory; the smoke scales i
 grain count as it scales the box). The mould starts that cylinder scaled by (solid fraction /
 cloud fraction)^(1/3), to hold the loose cloud, and its servos compact it to the cell
 pressure: the specimen's size is what the compaction leaves (summary.json). The grains are
-the App. B sieve curve fitted to ``--n`` in the cylinder's volume. :func:`cpp_dem.protocols.cylinder_triaxial.prepare` compacts them in a
-rigid mould to the cell pressure and then holds them in a membrane (modulus 1 MPa, 0.3 mm
-thick: a latex membrane) under the cell pressure alone, the platens frictionless;
+the App. B sieve curve fitted to ``--n`` in the cylinder's volume.
+:func:`cpp_dem.protocols.cylinder_triaxial.prepare` compacts them in a rigid mould to the cell
+pressure and then holds them in a membrane (modulus 1 MPa, 0.3 mm thick: a latex membrane)
+under the cell pressure alone, the platens frictionless;
 :func:`cpp_dem.protocols.cylinder_triaxial.shear` moves the lid down at the strain rate with
 the cell pressure held on the membrane.
 
@@ -23,11 +24,10 @@ Outputs in --out: triaxial.csv (axial_strain, volumetric_strain from the volume 
 membrane, deviatoric_stress on the current cross-section, axial_stress at the lid and
 base_stress at the base (less by what the membrane carries through its friction with the
 grains, and by the loading's dynamics: summary.json's platen_difference_max),
-unbalanced_force (as the box's), radial_stress: the
-grains' radial stress on the membrane's middle third, membrane_correction: it less the cell
-pressure, area, grains_outside), triaxial.png and .pdf, vtk/ (the spheres, membrane nodes
-included, at the end of the hold and at the end; geogrid_final.vtp with a disc),
-summary.json. SI units; stresses and strains
+unbalanced_force (as the box's), radial_stress: the grains' radial stress on the membrane's
+middle third, membrane_correction: it less the cell pressure, area, grains_outside),
+triaxial.png and .pdf, vtk/ (the spheres, membrane nodes included, at the end of the hold and
+at the end; geogrid_final.vtp with a disc), summary.json. SI units; stresses and strains
 compression positive.
 """
 
@@ -46,6 +46,7 @@ from cpp_dem.build import geogrid, psd
 from cpp_dem.io import CsvRecorder, PvdWriter, write_vtk_spheres
 from cpp_dem.measure import inertial
 from cpp_dem.protocols import cylinder_triaxial as cyl
+from geogrid_dem.cases import thesis_grids
 
 #: triaxial.csv's columns: (None, unit), as the box's SERIES
 SERIES = {"time": (None, "s"), "step": (None, "-"), "axial_strain": (None, "-"),
@@ -80,11 +81,6 @@ def radii(p, log) -> tuple[np.ndarray, dict]:
                  "passing_mass": pc.tolist(), "grains": "spheres"}
 
 
-#: the members' radius, m, and spacing, m, of the thesis's two grids (001 §5.1, as the box's
-#: layer: square 1 mm with 10 nodes over 9.5 cm; triangular 0.5 mm, edge 1.43 cm)
-DISC_GRIDS = {"square": (1e-3, 0.095 / 9), "triangular": (0.5e-3, 0.0143)}
-
-
 @dataclass
 class Disc:
     """A geogrid disc at mid-height of the mould (``--geogrid`` with ``--specimen cylinder``):
@@ -99,29 +95,23 @@ class Disc:
 
     def __call__(self, sc, centres, radii):
         """The cylinder protocol's ``inclusion``: adds the disc at mid-height of the grains'
-        cloud and returns the grains to keep (those that do not cut its slab, SLAB_M either
-        side of its plane over its footprint, whatever the grid: the box's rule)."""
+        cloud and returns the grains to keep (those that do not cut its slab,
+        :data:`geogrid_dem.cases.thesis_grids.SLAB_M` either side of its plane over its
+        footprint, whatever the grid: the box's rule)."""
         z = 0.5 * (float(np.min(centres[:, 2] - radii)) + float(np.max(centres[:, 2] + radii)))
         if self.pattern != "none":
-            rc, spacing = DISC_GRIDS[self.pattern]
-            mat = sc.add_material(dem.linear_material(density=2650.0, young=5e6, poisson=0.3,
-                                                      friction_angle_deg=20.0))
-            beam = dem.BeamParams(young=5e6, poisson=0.3, radius=rc, normal_cohesion=1e7,
-                                  shear_cohesion=1e7)
+            mat, beam = thesis_grids.add_grid_material(sc, self.pattern)
             self.grid = geogrid.disc_grid(sc, centre=[0.0, 0.0, z], radius=self.radius_m,
-                                          spacing=spacing, pattern=self.pattern, params=beam,
-                                          material=mat, density=2650.0)
+                                          spacing=thesis_grids.GRIDS[self.pattern][1],
+                                          pattern=self.pattern, params=beam, material=mat,
+                                          density=2650.0)
             # soft grain-grid contacts (R_c in the mixing rule), as in the box: overlaps to
             # 0.95 R
             sc.max_overlap_ratio = 0.95
-        cuts = ((np.linalg.norm(centres[:, :2], axis=1) < self.radius_m + radii + SLAB_M)
-                & (np.abs(centres[:, 2] - z) < radii + SLAB_M))
+        slab = thesis_grids.SLAB_M
+        cuts = ((np.linalg.norm(centres[:, :2], axis=1) < self.radius_m + radii + slab)
+                & (np.abs(centres[:, 2] - z) < radii + slab))
         return ~cuts
-
-
-#: the disc's slab: grains within this of its plane (and of its rim) are removed, m (the
-#: box's layer: 1 mm, the square grid's R_c)
-SLAB_M = 1e-3
 
 
 def disc(p, r_m: float):
@@ -225,8 +215,10 @@ def run(p, out: Path, log, plot) -> dict:
     if grid is not None:
         geogrid.write_vtk_geogrid(out / "vtk" / "geogrid_final.vtp", sc, grid)
     n_grains = int(np.count_nonzero(np.asarray(sc.body_kinds) == 0))
-    series = {k: np.array([_rows_to_series(sc, r, t_shear0)[k] for r in rows], float)
-              for k in ("axial_strain", "volumetric_strain", "deviatoric_stress")}
+    series = {k: np.array([r[key] for r in rows], float)
+              for k, key in (("axial_strain", "axial_strain"),
+                             ("volumetric_strain", "volumetric_strain"),
+                             ("deviatoric_stress", "deviatoric_stress_pa"))}
     series["time"] = np.arange(len(rows)) * p.record_every * sc.dt
     plot(series, out / "triaxial.png", p, " (cylindrical specimen in a membrane)")
     q = series["deviatoric_stress"]

@@ -254,7 +254,8 @@ def shear(spec: CylinderSpecimen, *, strain_rate: float, stop_strain: float,
             raise _core.ParameterError(f"{name}={v!r}: must be > 0")
     sc = spec.scene
     d_mean, rho = _grains(spec)
-    inertial.check_quasi_static(inertial_number(spec, strain_rate),
+    inertial.check_quasi_static(inertial.inertial_number(strain_rate, d_mean, spec.pressure_pa,
+                                                         rho),
                                 "cylindrical triaxial shearing", rate=strain_rate,
                                 diameter=d_mean, pressure=spec.pressure_pa, density=rho,
                                 stacklevel=2)
