@@ -298,19 +298,28 @@ def self_intersections(vertices, triangles, *, block: int = 512) -> np.ndarray:
     return found[np.lexsort((found[:, 1], found[:, 0]))]
 
 
-def _segment_meets_triangle(q0, q1, tri, eps: float) -> np.ndarray:
-    """Whether each segment q0-q1 meets its triangle (rows), touching included."""
-    d = q1 - q0
+def _ray_triangle(o, d, tri):
+    """Moller-Trumbore for each row: the ray o + t d (o, d: (k, 3)) against its triangle
+    (tri: (k, 3 corners, 3)). Returns (ok, u, v, t): ok False where the ray is parallel to the
+    triangle's plane; u, v the crossing's barycentric coordinates on the edges from corner 0
+    to corners 1 and 2; t its parameter along d (0 where not ok)."""
     e1, e2 = tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]
     h = np.cross(d, e2)
     det = np.einsum("ij,ij->i", e1, h)
     ok = np.abs(det) > 1e-300
     inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-    s = q0 - tri[:, 0]
+    s = o - tri[:, 0]
     u = inv * np.einsum("ij,ij->i", s, h)
     qv = np.cross(s, e1)
-    w = inv * np.einsum("ij,ij->i", d, qv)
-    tt = inv * np.einsum("ij,ij->i", e2, qv)
+    v = inv * np.einsum("ij,ij->i", d, qv)
+    t = inv * np.einsum("ij,ij->i", e2, qv)
+    return ok, u, v, t
+
+
+def _segment_meets_triangle(q0, q1, tri, eps: float) -> np.ndarray:
+    """Whether each segment q0-q1 meets its triangle (rows), touching included."""
+    d = q1 - q0
+    ok, u, w, tt = _ray_triangle(q0, d, tri)
     size = np.linalg.norm(d, axis=1) + 1e-300
     tol = eps / size
     return ok & (u >= -tol) & (w >= -tol) & (u + w <= 1 + tol) & (tt >= -tol) & (tt <= 1 + tol)

@@ -36,6 +36,7 @@ import numpy as np
 
 from cpp_dem import _core
 from cpp_dem._checks import positive
+from cpp_dem.build.clump_mesh import _ray_triangle
 from cpp_dem.build.geogrid import _Builder
 
 __all__ = ["Membrane", "cylindrical_membrane", "lattice_link_young"]
@@ -226,17 +227,7 @@ class Membrane:
         d /= np.maximum(np.linalg.norm(d, axis=1), 1e-300)[:, None]
         o = np.zeros_like(d)
         o[:, 2] = pts[pi, 2]
-        a, b, c = tri[ti, 0], tri[ti, 1], tri[ti, 2]
-        e1, e2 = b - a, c - a
-        h = np.cross(d, e2)
-        det = np.einsum("ki,ki->k", e1, h)
-        ok = np.abs(det) > 1e-300
-        inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)
-        s = o - a
-        u = inv * np.einsum("ki,ki->k", s, h)
-        q = np.cross(s, e1)
-        v = inv * np.einsum("ki,ki->k", d, q)
-        t = inv * np.einsum("ki,ki->k", e2, q)
+        ok, u, v, t = _ray_triangle(o, d, tri[ti])
         eps = 1e-9
         hit = ok & (u >= -eps) & (v >= -eps) & (u + v <= 1 + eps) & (t > 0)
         np.fmax.at(out, pi[hit], t[hit])
