@@ -36,7 +36,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
 import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
-from triaxial_membrane import T975  # noqa: E402  (Student's t at 0.975)
+from geogrid_dem.stats import paired_difference, resolved  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -98,14 +98,9 @@ def paired(runs: list[dict], at: list[float], grid: str) -> list[dict]:
                      if (shape, grid, k) in by and (shape, "cleared", k) in by
                      and by[shape, grid, k][key][i] is not None
                      and by[shape, "cleared", k][key][i] is not None]
-                n = len(d)
-                mean = float(np.mean(d)) if n else math.nan
-                se = float(np.std(d, ddof=1) / math.sqrt(n)) if n > 1 else math.nan
-                t = mean / se if n > 1 and se > 0 else math.nan
-                crit = T975.get(n - 1, math.nan)
-                out.append({"shape": shape, "measure": key, "axial_strain": s, "n": n,
-                            "mean": mean, "se": se, "t": t,
-                            "resolved": bool(math.isfinite(t) and abs(t) > crit)})
+                p = paired_difference(d)
+                out.append({"shape": shape, "measure": key, "axial_strain": s, **p,
+                            "resolved": resolved(p["t"], p["n"])})
     return out
 
 

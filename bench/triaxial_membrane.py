@@ -39,6 +39,7 @@ from cpp_dem.protocols import triaxial as tx
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
 import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
+from geogrid_dem.stats import paired_difference, resolved  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 YOUNG, POISSON, DENSITY = 5e7, 0.3, 2650.0
@@ -96,17 +97,8 @@ def paired(runs: list[dict], strains: list[float]) -> list[dict]:
         for i, s in enumerate(strains):
             d = [by["cylinder", k][key][i] - by["box", k][key][i] for k in seeds
                  if by["cylinder", k][key][i] is not None and by["box", k][key][i] is not None]
-            n = len(d)
-            mean = float(np.mean(d)) if n else math.nan
-            se = float(np.std(d, ddof=1) / math.sqrt(n)) if n > 1 else math.nan
-            out.append({"measure": key, "axial_strain": s, "n": n, "mean": mean, "se": se,
-                        "t": mean / se if se and se > 0 else math.nan})
+            out.append({"measure": key, "axial_strain": s, **paired_difference(d)})
     return out
-
-
-#: Student's t at 0.975 for n - 1 degrees of freedom (n = 2 .. 10)
-T975 = {1: 12.706, 2: 4.303, 3: 3.182, 4: 2.776, 5: 2.571, 6: 2.447, 7: 2.365, 8: 2.306,
-        9: 2.262}
 
 
 def _fmt(x, scale: float, digits: int) -> str:
@@ -132,13 +124,11 @@ def table(data: dict) -> list[str]:
                 v = [r[key][i] for r in runs if r["shape"] == shape and r[key][i] is not None]
                 mean[shape] = float(np.mean(v)) if v else None
             d = pairs[key, e]
-            t_crit = T975.get(d["n"] - 1, math.nan)
-            resolved = ("yes" if math.isfinite(d["t"]) and abs(d["t"]) > t_crit else
-                        "no" if d["n"] > 1 else "-")
+            res = "yes" if resolved(d["t"], d["n"]) else "no" if d["n"] > 1 else "-"
             out.append(f"| {100 * e:g} | {name} | {_fmt(mean['cylinder'], scale, digits)} | "
                        f"{_fmt(mean['box'], scale, digits)} | "
                        f"{_fmt(d['mean'], scale, digits)} +- {_fmt(d['se'], scale, digits)} | "
-                       f"{_fmt(d['t'], 1, 1)} | {resolved} |")
+                       f"{_fmt(d['t'], 1, 1)} | {res} |")
         if i == 0:
             por = {shape: float(np.mean([r["porosity"] for r in runs if r["shape"] == shape]))
                    for shape in ("cylinder", "box")}
