@@ -63,16 +63,15 @@ def run_one(a, shape: str, grid: str, seed: int) -> dict:
                                        f"{(p.stderr or p.stdout).strip()[-600:]}")
     rows = list(csv.DictReader(open(d / "triaxial.csv")))
     e = np.array([float(r["axial_strain"]) for r in rows])
+    cols = {key: np.array([float(r[key]) for r in rows])
+            for key in ("deviatoric_stress", "volumetric_strain")}
     out = {"shape": shape, "grid": grid, "seed": seed}
-    for key in ("deviatoric_stress", "volumetric_strain"):
-        v = np.array([float(r[key]) for r in rows])
+    for key, v in cols.items():
         out[key] = [float(np.interp(s, e, v)) if s <= e[-1] else None for s in a.at]
     # the curves on a common grid of axial strain (every 0.1 %), for the figure
     grid_e = np.round(np.arange(0.0, e[-1] + 1e-12, 0.001), 6)
-    out["curve"] = {"axial_strain": grid_e.tolist()}
-    for key in ("deviatoric_stress", "volumetric_strain"):
-        v = np.array([float(r[key]) for r in rows])
-        out["curve"][key] = np.interp(grid_e, e, v).tolist()
+    out["curve"] = {"axial_strain": grid_e.tolist(),
+                    **{key: np.interp(grid_e, e, v).tolist() for key, v in cols.items()}}
     s = json.loads((d / "summary.json").read_text())
     out["num_grains"] = s["num_grains"]
     # the cylinder's base against its lid (less by what the membrane carries through its
