@@ -23,7 +23,11 @@ Scenes (SI units; the same input for both builds):
   bonded (contact and parallel bonds, unbreakable; dt at most 0.5 x the critical step);
 - ``pullout``: the geogrid pull-out of ``cases/pullout_000.py --smoke`` (N is ignored: 375
   grains and a flat-ribbed biaxial grid of PFacets), prepared untimed (REFD, gravity, top servo)
-  and timed while the clamp pulls the grid.
+  and timed while the clamp pulls the grid;
+- ``membrane``: the cylindrical triaxial specimen of ``triaxial --specimen cylinder`` (N
+  grains of its sieve curve, the seed 1, a membrane of PFacets under the cell pressure),
+  prepared untimed (``cylinder_triaxial.prepare``, the hold's steps capped at 20 000) and
+  timed while the lid moves down at 0.1 /s.
 
 Each *block* is a fresh subprocess that builds the scene, runs ``--warmup`` untimed steps and
 times ``--steps`` steps (CPU time of that process). Blocks alternate old | new, new | old, ...
@@ -227,6 +231,31 @@ def pullout_scene(root: Path = ROOT):
     return sample.scene, pull
 
 
+def membrane_scene(n: int):
+    """The cylindrical specimen of the triaxial case (the overlay's revision, or the working
+    tree's), ``n`` grains, held in its membrane; returns (scene, advance) with the lid moving
+    down at 0.1 /s."""
+    from cpp_dem.protocols import cylinder_triaxial as cyl
+    from geogrid_dem.cases import triaxial as case
+    from geogrid_dem.cases import triaxial_cylinder as tc
+
+    import cpp_dem as dem
+
+    p = case.Params(n=n, seed=1)
+    p.box = case.smoke_box(p)
+    r_m, h_m = tc.geometry(p.box)
+    rad, _ = tc.radii(p, lambda msg: None)
+    mat = dem.linear_material(density=p.density, young=p.young, poisson=p.poisson,
+                              friction_angle_deg=p.phi)
+    grow = (p.solid_fraction / p.cloud_fraction) ** (1.0 / 3.0)
+    spec = cyl.prepare(rad, radius_m=grow * r_m, height_m=grow * h_m,
+                       pressure_pa=p.cell_pressure, material=mat, seed=1, damping=p.damping,
+                       max_steps=20_000)
+    spec.lid_servo.enabled = False
+    spec.scene.set_wall_velocity(spec.lid, [0.0, 0.0, -0.1 * spec.height0_m])
+    return spec.scene, spec.scene.run
+
+
 def worker(cfg: dict) -> dict:
     if cfg["overlay"]:
         use_overlay(Path(cfg["overlay"]))
@@ -235,9 +264,11 @@ def worker(cfg: dict) -> dict:
     import cpp_dem as dem
 
     dem.set_num_threads(cfg["threads"])
+    root = Path(cfg["overlay"]).parent / "src" if cfg["overlay"] else ROOT
     if cfg["scene"] == "pullout":
-        root = Path(cfg["overlay"]).parent / "src" if cfg["overlay"] else ROOT
         scene, advance = pullout_scene(root)
+    elif cfg["scene"] == "membrane":
+        scene, advance = membrane_scene(cfg["n"])
     else:
         scene = make_scene(cfg["scene"], cfg["n"])
         advance = scene.run
@@ -347,7 +378,8 @@ def main(argv: list[str] | None = None) -> int:
                          "installed build of the working tree); for an A/B of one commit "
                          "while the working tree holds other, unfinished changes")
     ap.add_argument("--scenes", nargs="+", default=list(DEFAULT_SCENES),
-                    help="KIND:N, KIND one of spheres, general, hertz, geogrid")
+                    help="KIND:N, KIND one of spheres, general, hertz, geogrid, pullout, "
+                         "clumps, bonds, membrane")
     ap.add_argument("--threads", nargs="+", type=int, default=[1, 2])
     ap.add_argument("--rounds", type=int, default=4)
     ap.add_argument("--steps", type=int, default=0, help="timed steps (0: from --particle-steps)")
@@ -364,9 +396,10 @@ def main(argv: list[str] | None = None) -> int:
     for spec in args.scenes:
         kind, _, n = spec.partition(":")
         if kind not in ("spheres", "general", "hertz", "geogrid", "pullout",
-                        "clumps", "bonds") or not n.isdigit():
+                        "clumps", "bonds", "membrane") or not n.isdigit():
             raise SystemExit(f"--scenes {spec}: must be KIND:N with KIND spheres, general, "
-                             "hertz, geogrid, pullout, clumps or bonds and N a whole number")
+                             "hertz, geogrid, pullout, clumps, bonds or membrane and N a "
+                             "whole number")
     overlays = {"old": build_ref(args.ref, args.jobs),
                 "new": build_ref(args.new_ref, args.jobs) if args.new_ref else ""}
     rows = []

@@ -300,6 +300,12 @@ def test_a_checkpoint_continues_a_membrane_bitwise(tmp_path):
     other.run(500)
     assert np.array_equal(np.asarray(other.positions), ref)
     assert len(mb.grains_outside(sc)) == 0
+    # Loaded back into the scene that ran on: the step's packed copy of the grid contacts'
+    # fields and status bits (which primitive owns, which contact is active) is made again
+    # from the loaded contacts, not kept from the later state.
+    load_checkpoint(path, sc)
+    sc.run(500)
+    assert np.array_equal(np.asarray(sc.positions), ref)
 
 
 def test_a_grain_is_outside_only_beyond_the_surface_where_its_ray_crosses_it():

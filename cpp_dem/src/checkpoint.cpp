@@ -554,6 +554,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
   r.vec(t.links_);
   r.vec(t.facets_);
   r.vec(t.grid_contacts_);
+  if constexpr (kGeogridBuilt) t.index_grid_contacts();  // (the step's packed copy follows)
   r.vec(t.breaks_);
   r.vec(t.bonds_);
   r.vec(t.bond_breaks_);

@@ -585,6 +585,8 @@ class Scene {
   Real skeleton_distance(const int* nodes, int nn, const Vec3& x) const;
   void rebuild_grid_adjacency();
   void compute_grid_contacts(long& err_contact);
+  /// grid_hot_ and grid_live_ from grid_contacts_ (after a rebuild or a checkpoint load).
+  void index_grid_contacts();
   void compute_links();
   // Bonds (passes/bonds.cpp).
   void compute_bonds(long& err);
@@ -669,6 +671,19 @@ class Scene {
   std::vector<int> link_facet_;                     // 2 per link: incident facets (-1: none)
   std::vector<int> sphere_gc_off_, sphere_gc_;      // sphere -> grid contacts
   std::vector<int> node_gc_off_, node_gc_;          // node -> grid contact * 3 + slot
+  // The grid contacts' fields the step reads for every candidate, packed (a GridContact is
+  // 472 bytes; most candidates are out of reach), and their status bits: kGridOwner,
+  // kGridActive, mirrors of GridContact::owner and ::active, written with them.
+  struct GridHot {
+    int sphere = 0, prim = 0;
+    int node[3] = {0, 0, 0};
+    GridPrimitive kind = GridPrimitive::Node;
+    std::uint8_t nnodes = 0;
+    Real rc = 0;
+  };
+  static constexpr std::uint8_t kGridOwner = 1, kGridActive = 2;
+  std::vector<GridHot> grid_hot_;
+  std::vector<std::uint8_t> grid_live_;
   bool grid_topology_dirty_ = true;
   // Bonds.
   std::vector<Bond> bonds_;

@@ -234,6 +234,7 @@ void Scene::rebuild_grid_contacts(Real margin) {
     sphere_gc_[fs[gc.sphere]++] = c;
     for (int i = 0; i < gc.nnodes; ++i) node_gc_[fn[gc.node[i]]++] = 3 * c + i;
   }
+  index_grid_contacts();
 }
 
 }  // namespace cpp_dem

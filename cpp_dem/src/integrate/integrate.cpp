@@ -126,16 +126,17 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
     }
     if (grid) {
       // Grain side of grain–geogrid contacts.
+      // (grid_live_: the contacts' active bits, packed, read before the contact itself)
       for (int e = sphere_gc_off_[b]; e < sphere_gc_off_[b + 1]; ++e) {
+        if (!(grid_live_[sphere_gc_[e]] & kGridActive)) continue;
         const GridContact& c = grid_contacts_[sphere_gc_[e]];
-        if (!c.active) continue;
         f += ops.load(c.force);
         t += ops.load(c.torque_sphere);
       }
       // Node side: the virtual sphere's force and torque split by the weights (000 eq 19).
       for (int e = node_gc_off_[b]; e < node_gc_off_[b + 1]; ++e) {
+        if (!(grid_live_[node_gc_[e] / 3] & kGridActive)) continue;
         const GridContact& c = grid_contacts_[node_gc_[e] / 3];
-        if (!c.active) continue;
         const Real w = c.w[node_gc_[e] % 3];
         f -= w * ops.load(c.force);
         t += w * ops.load(c.torque_virtual);
