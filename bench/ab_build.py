@@ -231,10 +231,10 @@ def pullout_scene(root: Path = ROOT):
     return sample.scene, pull
 
 
-def membrane_scene(n: int):
+def membrane_scene(n: int, max_steps: int = 20_000):
     """The cylindrical specimen of the triaxial case (the overlay's revision, or the working
-    tree's), ``n`` grains, held in its membrane; returns (scene, advance) with the lid moving
-    down at 0.1 /s."""
+    tree's), ``n`` grains, held in its membrane (at most ``max_steps`` steps a stage of the
+    preparation); returns (scene, advance) with the lid moving down at 0.1 /s."""
     from cpp_dem.protocols import cylinder_triaxial as cyl
     from geogrid_dem.cases import triaxial as case
     from geogrid_dem.cases import triaxial_cylinder as tc
@@ -250,7 +250,7 @@ def membrane_scene(n: int):
     grow = (p.solid_fraction / p.cloud_fraction) ** (1.0 / 3.0)
     spec = cyl.prepare(rad, radius_m=grow * r_m, height_m=grow * h_m,
                        pressure_pa=p.cell_pressure, material=mat, seed=1, damping=p.damping,
-                       max_steps=20_000)
+                       max_steps=max_steps)
     spec.lid_servo.enabled = False
     spec.scene.set_wall_velocity(spec.lid, [0.0, 0.0, -0.1 * spec.height0_m])
     return spec.scene, spec.scene.run
@@ -315,7 +315,7 @@ def count_instructions(scene: str, n: int, args, overlays: dict, tmp: Path) -> d
         raise SystemExit("--instructions needs valgrind (apt-get install valgrind)")
     prefix = [valgrind, "--tool=callgrind", "--callgrind-out-file=/dev/null"]
     lo = 20
-    hi = lo + (args.steps or max(20, math.ceil(4e5 / n)))
+    hi = lo + (args.steps or max(20, math.ceil(4e5 / (n or 500))))  # (pullout: N is 0, 501 bodies)
     per_step = {}
     for variant in ("old", "new"):
         counts, done = {}, {}
