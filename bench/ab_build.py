@@ -264,8 +264,8 @@ def worker(cfg: dict) -> dict:
     import cpp_dem as dem
 
     dem.set_num_threads(cfg["threads"])
-    root = Path(cfg["overlay"]).parent / "src" if cfg["overlay"] else ROOT
     if cfg["scene"] == "pullout":
+        root = Path(cfg["overlay"]).parent / "src" if cfg["overlay"] else ROOT
         scene, advance = pullout_scene(root)
     elif cfg["scene"] == "membrane":
         scene, advance = membrane_scene(cfg["n"])

@@ -1,4 +1,4 @@
-"""bench/ab_build.py's scenes are built and stepped by the worker each block runs (the
+"""bench/ab_build.py's membrane scene is built and stepped, and an unknown scene refused (the
 builds themselves are not made here: CI does not run the A/B)."""
 
 import importlib.util

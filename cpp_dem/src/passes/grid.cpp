@@ -124,8 +124,8 @@ void Scene::compute_grid_contacts(long& err_contact) {
     // Virtual-sphere velocities interpolated from the nodes, 000 eqs (17), (18).
     Vec3 vq = Vec3::Zero(), wq = Vec3::Zero();
     for (int i = 0; i < h.nnodes; ++i) {
-      vq += c.w[i] * bodies_.vel[h.node[i]];
-      wq += c.w[i] * bodies_.angvel[h.node[i]];
+      vq += w[i] * bodies_.vel[h.node[i]];
+      wq += w[i] * bodies_.angvel[h.node[i]];
     }
     const int s = h.sphere;
     c.geom = virtual_sphere_geometry(x, bodies_.radius[s], bodies_.vel[s], bodies_.angvel[s], q, h.rc, vq, wq);
