@@ -27,12 +27,16 @@ Scenes (SI units; the same input for both builds):
 - ``membrane``: the cylindrical triaxial specimen of ``triaxial --specimen cylinder`` (N
   grains of its sieve curve, the seed 1, a membrane of PFacets under the cell pressure),
   prepared untimed (``cylinder_triaxial.prepare``, the hold's steps capped at 20 000) and
-  timed while the lid moves down at 0.1 /s.
+  timed while the lid moves down at 0.1 /s;
+- ``meshbox``: ``bench/mesh_wall_cost.py``'s scene, N grains at rest under gravity in a box
+  whose six faces are one mesh wall of 10 092 triangles (settled once, by the first block's
+  build, and kept in results/bench_cache: both builds start from that state).
 
 Each *block* is a fresh subprocess that builds the scene, runs ``--warmup`` untimed steps and
 times ``--steps`` steps (CPU time of that process). Blocks alternate old | new, new | old, ...
 round by round, so a drift of the machine's load cancels in the ratios. Every block hashes
-the final state (positions, velocities, spins, orientations, wall forces): the closing table
+the final state (positions, velocities, spins, orientations, wall forces, a mesh wall's force
+and moment): the closing table
 says whether the two builds gave bitwise equal results, and if not the largest position
 difference relative to the mean radius.
 
@@ -256,6 +260,29 @@ def membrane_scene(n: int, max_steps: int = 20_000):
     return spec.scene, spec.scene.run
 
 
+def meshbox_scene(n: int, cells: int = 29, cache_dir: Path | None = None):
+    """bench/mesh_wall_cost.py's scene B: ``n`` grains at rest under gravity in a box whose six
+    faces are one mesh wall of 12 cells^2 triangles (10 092). The settled state is computed
+    once (by the first block's build) and kept in ``cache_dir`` (default results/bench_cache),
+    so both builds start from the same grains, velocities and dt."""
+    import numpy as np
+
+    sys.path.insert(0, str(BENCH))
+    import mesh_wall_cost as mwc
+    from throughput import DEFAULT_CACHE
+
+    cache = Path(cache_dir or DEFAULT_CACHE) / f"meshbox_{n}.npz"
+    if not cache.is_file():
+        cache.parent.mkdir(parents=True, exist_ok=True)
+        lo, hi, x, r, v, dt = mwc.settled(n, 1)
+        tmp = cache.with_suffix(".tmp.npz")
+        np.savez(tmp, lo=lo, hi=hi, x=x, r=r, v=v, dt=dt)
+        tmp.replace(cache)
+    z = np.load(cache)
+    state = (z["lo"], z["hi"], z["x"], z["r"], z["v"], float(z["dt"]))
+    return mwc.scene("mesh", state, cells)
+
+
 def worker(cfg: dict) -> dict:
     if cfg["overlay"]:
         use_overlay(Path(cfg["overlay"]))
@@ -269,6 +296,9 @@ def worker(cfg: dict) -> dict:
         scene, advance = pullout_scene(root)
     elif cfg["scene"] == "membrane":
         scene, advance = membrane_scene(cfg["n"])
+    elif cfg["scene"] == "meshbox":
+        scene = meshbox_scene(cfg["n"])
+        advance = scene.run
     else:
         scene = make_scene(cfg["scene"], cfg["n"])
         advance = scene.run
@@ -281,6 +311,9 @@ def worker(cfg: dict) -> dict:
     arrays = [np.ascontiguousarray(a, dtype=np.float64) for a in
               (scene.positions, scene.velocities, scene.angular_velocities, scene.orientations,
                scene.wall_forces)]
+    for m in range(getattr(scene, "num_mesh_walls", 0)):  # (a mesh wall's force and moment)
+        w = scene.mesh_wall(m)
+        arrays.append(np.concatenate([w["force"], w["moment"]]).astype(np.float64))
     state = hashlib.sha256()
     for a in arrays:
         state.update(a.tobytes())
@@ -379,7 +412,7 @@ def main(argv: list[str] | None = None) -> int:
                          "while the working tree holds other, unfinished changes")
     ap.add_argument("--scenes", nargs="+", default=list(DEFAULT_SCENES),
                     help="KIND:N, KIND one of spheres, general, hertz, geogrid, pullout, "
-                         "clumps, bonds, membrane")
+                         "clumps, bonds, membrane, meshbox")
     ap.add_argument("--threads", nargs="+", type=int, default=[1, 2])
     ap.add_argument("--rounds", type=int, default=4)
     ap.add_argument("--steps", type=int, default=0, help="timed steps (0: from --particle-steps)")
@@ -396,10 +429,10 @@ def main(argv: list[str] | None = None) -> int:
     for spec in args.scenes:
         kind, _, n = spec.partition(":")
         if kind not in ("spheres", "general", "hertz", "geogrid", "pullout",
-                        "clumps", "bonds", "membrane") or not n.isdigit():
+                        "clumps", "bonds", "membrane", "meshbox") or not n.isdigit():
             raise SystemExit(f"--scenes {spec}: must be KIND:N with KIND spheres, general, "
-                             "hertz, geogrid, pullout, clumps, bonds or membrane and N a "
-                             "whole number")
+                             "hertz, geogrid, pullout, clumps, bonds, membrane or meshbox and "
+                             "N a whole number")
     overlays = {"old": build_ref(args.ref, args.jobs),
                 "new": build_ref(args.new_ref, args.jobs) if args.new_ref else ""}
     rows = []

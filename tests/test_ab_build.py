@@ -1,5 +1,5 @@
-"""bench/ab_build.py's membrane scene is built and stepped, and an unknown scene refused (the
-builds themselves are not made here: CI does not run the A/B)."""
+"""bench/ab_build.py's membrane and mesh-box scenes are built and stepped, and an unknown scene
+refused (the builds themselves are not made here: CI does not run the A/B)."""
 
 import importlib.util
 import sys
@@ -27,6 +27,24 @@ def test_the_membrane_scene_is_the_cylindrical_specimen_in_its_membrane():
     assert scene.num_bodies > 100  # the grains and the membrane's nodes
     assert len(scene.grid_contacts()["sphere"]) > 0  # the membrane holds the grains
     assert scene.wall_velocities[1][2] < 0  # the lid moves down
+
+
+def test_the_meshbox_scene_starts_both_builds_from_one_settled_state(tmp_path):
+    """The grains settle once; a second block (the other build) reads that state: the same
+    scene, stepped the same, to the bit. The grains rest on the mesh's floor."""
+    import numpy as np
+
+    ab = _ab()
+    a = ab.meshbox_scene(150, cache_dir=tmp_path)
+    assert (tmp_path / "meshbox_150.npz").is_file()
+    b = ab.meshbox_scene(150, cache_dir=tmp_path)
+    for s in (a, b):
+        assert (s.num_mesh_walls, s.num_walls, s.num_bodies) == (1, 0, 150)
+        assert s.mesh_wall(0)["num_triangles"] == 10092
+        s.run(50)
+    assert np.array_equal(np.asarray(a.positions), np.asarray(b.positions))
+    w = a.mesh_wall(0)
+    assert w["force"][2] < 0 and np.array_equal(w["force"], b.mesh_wall(0)["force"])
 
 
 def test_an_unknown_scene_is_refused_by_name():

@@ -190,6 +190,7 @@ void Scene::compute_mesh_forces(long& err_contact) {
 #pragma omp parallel reduction(min : err) reduction(+ : dropped) if (nc > kParallelMin)
   {
   std::vector<Touch> found;  // (one list per thread, kept between contacts)
+  std::array<MeshSub, MeshContact::kMaxSubs> old;  // (a pair's records of the last step)
 #pragma omp for schedule(static)
   for (long k = 0; k < nc; ++k) {
     MeshContact& c = mesh_contacts_[k];
@@ -259,20 +260,28 @@ void Scene::compute_mesh_forces(long& err_contact) {
     // 3. Each kept contact takes its own history from the last step, or, new, that of a
     // contact of this pair which ended now with a normal within 25 degrees (the sphere went
     // from one face to its neighbour across an edge); else it starts fresh.
-    std::array<MeshSub, MeshContact::kMaxSubs> old = c.subs;
+    // The common case, a pair touching the features it touched at the last step in the same
+    // order (a feature's key is unique among the kept ones), keeps every contact in its slot:
+    // the records are updated in place, as the matching below would leave them.
+    bool in_place = c.active;
+    for (int j = 0; j < MeshContact::kMaxSubs && in_place; ++j) {
+      const MeshSub& s = c.subs[j];
+      in_place = j < nk ? s.kind == keep[j].kind && s.a == keep[j].a && s.b == keep[j].b
+                        : s.kind < 0;
+    }
+    if (!in_place) old = c.subs;
+    const std::array<MeshSub, MeshContact::kMaxSubs>& last = in_place ? c.subs : old;
     bool used[MeshContact::kMaxSubs] = {false, false, false};
     int from[MeshContact::kMaxSubs];
     for (int j = 0; j < nk; ++j) {
-      from[j] = -1;
-      for (int s = 0; s < MeshContact::kMaxSubs; ++s)
+      from[j] = in_place ? j : -1;
+      for (int s = 0; s < MeshContact::kMaxSubs && from[j] < 0; ++s)
         if (!used[s] && old[s].kind == keep[j].kind && old[s].a == keep[j].a &&
-            old[s].b == keep[j].b) {
+            old[s].b == keep[j].b)
           from[j] = s;
-          used[s] = true;
-          break;
-        }
+      if (from[j] >= 0) used[from[j]] = true;
     }
-    for (int j = 0; j < nk; ++j) {
+    for (int j = 0; j < nk && !in_place; ++j) {
       if (from[j] >= 0) continue;
       Real best = std::cos(25.0 * 3.14159265358979323846 / 180);
       for (int s = 0; s < MeshContact::kMaxSubs; ++s) {
@@ -289,8 +298,8 @@ void Scene::compute_mesh_forces(long& err_contact) {
     Real lost_f = 0, lost_v = 0;
     for (int s = 0; s < MeshContact::kMaxSubs; ++s)
       if (!used[s]) {
-        lost_f += old[s].state.dissip_friction;
-        lost_v += old[s].state.dissip_viscous;
+        lost_f += last[s].state.dissip_friction;
+        lost_v += last[s].state.dissip_viscous;
       }
     if (nk == 0) {
       if (c.active) {
@@ -322,11 +331,13 @@ void Scene::compute_mesh_forces(long& err_contact) {
         continue;
       }
       const Touch& h = keep[j];
-      s = MeshSub{};
-      if (from[j] >= 0) s.state = old[from[j]].state;
-      s.kind = h.kind;
-      s.a = h.a;
-      s.b = h.b;
+      if (!in_place) {
+        s = MeshSub{};
+        if (from[j] >= 0) s.state = old[from[j]].state;
+        s.kind = h.kind;
+        s.a = h.a;
+        s.b = h.b;
+      }
       ContactGeometry g;
       g.overlap = r - h.dist;
       g.normal = h.n;
