@@ -225,6 +225,43 @@ def test_bad_meshes_are_refused_by_name(kw, msg):
         sc.mesh_wall(2)
 
 
+def test_a_mesh_that_must_be_closed_is_refused_open_or_crossing_and_holds_grains_closed():
+    """add_mesh_wall(closed=True): a container or a solid must bound a volume. A box with one
+    triangle missing (a hole), the box given as six sheets that do not share their edges,
+    and two boxes crossing each other in one mesh are refused by name; the closed box is
+    taken and holds the grains dropped in it; closed=False (the default) takes the open
+    mesh as before."""
+    from cpp_dem.build.clump_mesh import box_mesh
+
+    v, t = box_mesh(0.04)
+    sc = dem.Scene(gravity=(0, 0, -9.81))
+    m = _material(sc)
+    with pytest.raises(dem.ParameterError, match=r"add_mesh_wall\(closed=True\): triangles: "
+                       r"edge \(\d+, \d+\) belongs to 1 triangle\(s\), an open boundary"):
+        sc.add_mesh_wall(v, t[1:], material=m, closed=True)
+    sheets = np.concatenate([v[tri] for tri in np.asarray(t)])  # (each corner its own vertex)
+    with pytest.raises(dem.ParameterError, match="open boundary"):
+        sc.add_mesh_wall(sheets, np.arange(3 * len(t)).reshape(-1, 3), material=m, closed=True)
+    v2, t2 = box_mesh(0.04, centre=(0.02, 0.01, 0.005))
+    with pytest.raises(dem.ParameterError, match=r"triangles \d+ .* and \d+ .* cross"):
+        sc.add_mesh_wall(np.vstack([v, v2]), np.vstack([t, np.asarray(t2) + len(v)]),
+                         material=m, closed=True)
+    with pytest.raises(dem.ParameterError, match="closed=1: must be True or False"):
+        sc.add_mesh_wall(v, t, material=m, closed=1)
+    assert sc.num_mesh_walls == 0  # (nothing refused was added)
+    sc.add_mesh_wall(v, t, material=m, closed=True)
+    g = (np.arange(3) - 1) * 2.2 * R
+    sc.add_spheres([[a, b, 0.0] for a in g for b in g], np.full(9, R), material=m)
+    sc.dt = 0.2 * sc.critical_dt()
+    sc.run(4000)
+    x = np.asarray(sc.positions)
+    assert np.all(np.abs(x) < 0.02 - 0.9 * R)  # inside the box,
+    assert x[:, 2].max() < -0.02 + 1.2 * R  # on its floor
+    other = dem.Scene()
+    other.add_mesh_wall(v, t[1:], material=_material(other))  # open: taken as it is
+    assert other.num_mesh_walls == 1
+
+
 def _fine_square(n: int, half: float):
     """The square [-half, half]^2 at z = 0 cut into n x n cells of two triangles each."""
     s = np.linspace(-half, half, n + 1)

@@ -392,7 +392,7 @@ class Scene(_core.Scene):
 
 
     def add_mesh_wall(self, vertices=None, triangles=None, *, material: int, path=None,
-                      scale: float = 1.0) -> int:
+                      scale: float = 1.0, closed: bool = False) -> int:
         """Adds a rigid triangle-mesh wall; returns its index.
 
         Give ``vertices`` (n, 3), m, and ``triangles`` (m, 3) vertex indices, or ``path``: an
@@ -401,6 +401,13 @@ class Scene(_core.Scene):
         neighbouring triangles share edges). The mesh may be open or closed and is two-sided.
         A sphere meets it at faces, edges and vertices, each once (docs/core.md, "Mesh
         walls"). ``set_mesh_velocity`` moves it; ``mesh_wall(k)`` gives its force and moment.
+
+        ``closed=True`` where the mesh must bound a volume (a container the grains fill, a
+        solid footing or clamp): it is refused, naming the first bad edge or pair of
+        triangles, if it is open (an edge of one triangle: a hole), has an edge of three
+        triangles or more, is not consistently oriented, or crosses itself
+        (:func:`cpp_dem.build.clump_mesh.check_closed_mesh`). Vertices given twice at one place
+        are two vertices there (a file's are merged when it is read).
         """
         if path is not None:
             if vertices is not None or triangles is not None:
@@ -417,7 +424,19 @@ class Scene(_core.Scene):
         if t.ndim != 2 or t.shape[1] != 3 or not (np.issubdtype(t.dtype, np.integer)
                                                    or np.all(np.mod(t, 1) == 0)):
             raise ParameterError(f"triangles: shape {t.shape}; must be (m, 3) vertex indices")
-        return self._add_mesh_wall(v, t.astype(np.int64), _index(material, "material"))
+        t = t.astype(np.int64)
+        if not isinstance(closed, (bool, np.bool_)):
+            raise ParameterError(f"closed={closed!r}: must be True or False")
+        # (bad indices and degenerate triangles are refused below, by the core, by name)
+        if closed and t.size and 0 <= t.min() and t.max() < len(v) and not (
+                (t[:, 0] == t[:, 1]) | (t[:, 1] == t[:, 2]) | (t[:, 0] == t[:, 2])).any():
+            from cpp_dem.build.clump_mesh import check_closed_mesh
+
+            try:
+                check_closed_mesh(v, t)
+            except ParameterError as e:
+                raise ParameterError(f"add_mesh_wall(closed=True): {e}") from None
+        return self._add_mesh_wall(v, t, _index(material, "material"))
 
     def add_box(self, lo: Sequence[float], hi: Sequence[float], *, material: int) -> list[int]:
         """Adds the six walls of the box [lo, hi] (m), facing inwards.
