@@ -34,13 +34,17 @@ interval and half the range of its estimators (the fit, the principal direction 
 the strain increments within about L (m; ``femcoupling.fem.nonlocal_strain``): the band's
 regularisation. ``--compare A.json B.json ...`` runs nothing: it measures the band of each
 run's ``shear_band.json`` (coarse to fine) and says, for successive meshes, whether the angle
-moves more than its error (``mesh_study.json``).
+moves more than its error (``mesh_study.json``). ``--pool STUDY.json`` adds the runs of an
+earlier study (its ``mesh_study.json``, or the copy in docs/data) to those files: new seeds
+pool with runs whose files are gone.
 
     .venv/bin/python bench/shear_band.py --nx 4 --ny 9 --grains 80 --out DIR   # 216 RVEs
     .venv/bin/python bench/shear_band.py --nx 3 --ny 6 --grains 80 --out DIR2  # the coarser mesh
     .venv/bin/python bench/shear_band.py --nx 5 --ny 11 --nonlocal-length 0.006 --out DIR3
     .venv/bin/python bench/shear_band.py --compare DIR/shear_band.json DIR3/shear_band.json \
         --out DIR4
+    .venv/bin/python bench/shear_band.py --compare DIR5/shear_band.json --pool \
+        DIR4/mesh_study.json --out DIR6   # DIR5: another --seed
 """
 
 from __future__ import annotations
@@ -339,13 +343,18 @@ def main(argv=None) -> int:
                     help="no run: the band on the meshes of these shear_band.json files, "
                          "coarse to fine (angle, width, whether the angle moves more than "
                          "its error), printed and written to --out/mesh_study.json")
+    ap.add_argument("--pool", type=Path, metavar="STUDY_JSON",
+                    help="with --compare: also the runs of this earlier mesh_study.json (each "
+                         "mesh's runs with their own angle, fit error and width)")
     ap.add_argument("--field", choices=("displacement", "elements"), default="displacement",
                     help="with --compare: the band of the displacement's strain, or of the "
                          "strain the elements took (with a nonlocal strain, the averaged one)")
     ap.add_argument("--out", default="results/bench_runs/shear_band")
     args = ap.parse_args(argv)
+    if args.pool and not args.compare:
+        ap.error("--pool: only with --compare (the new runs' shear_band.json files)")
     if args.compare:
-        return _compare(args.compare, Path(args.out), args.field)
+        return _compare(args.compare, Path(args.out), args.field, args.pool)
     if not (args.nonlocal_length >= 0 and math.isfinite(args.nonlocal_length)):
         ap.error(f"--nonlocal-length={args.nonlocal_length}: a length >= 0, m (0: local)")
     if not (0 < args.nonlocal_weight <= 1):
@@ -460,7 +469,75 @@ def main(argv=None) -> int:
     return 0
 
 
-def _compare(files: list[str], out: Path, field: str = "displacement") -> int:
+def pooled_runs(path: Path, field: str = "displacement") -> list[dict]:
+    """The runs of an earlier mesh study (``mesh_study.json``, or its copy in docs/data) as
+    rows of :func:`mesh_study`: each mesh's runs with their own angle, fit error and width
+    (``angles_deg``, ``angle_fit_errors_deg``, ``widths_m``); a mesh of one run in a study
+    without a seeds' scatter is that run. Each run takes its mesh's localization index, axial
+    strain and width error (the mesh's width error times the square root of its runs), so
+    the study made again from these rows gives that mesh's numbers. Refused, by name: a
+    file that is not a mesh study, a study of the other ``field``, and a mesh whose runs'
+    own angles were not kept (a study of an older bench with several runs, or one whose
+    errors hold a seeds' scatter)."""
+    try:
+        st = json.loads(Path(path).read_text())
+    except (OSError, ValueError) as e:
+        raise _cli.BenchInputError(f"--pool {path}: not a readable mesh_study.json ({e})")
+    if not isinstance(st, dict) or not isinstance(st.get("meshes"), list):
+        raise _cli.BenchInputError(f"--pool {path}: not a mesh_study.json (needs meshes)")
+    if st.get("field", "displacement") != field:
+        raise _cli.BenchInputError(f"--pool {path}: its band is of the field "
+                                   f"{st.get('field')!r}; --field {field} asked")
+    rows = []
+    for m in st["meshes"]:
+        n = int(m["runs"])
+        if "angles_deg" in m:
+            angles, errors = m["angles_deg"], m["angle_fit_errors_deg"]
+            widths, seeds = m["widths_m"], m["seeds"]
+        elif n == 1 and st.get("seed_sd_deg") is None:
+            angles, errors = [m["angle_deg"]], [m["angle_error_deg"]]
+            widths, seeds = [m["width_m"]], m.get("seeds", [1])
+        else:
+            raise _cli.BenchInputError(
+                f"--pool {path}: mesh {m['mesh']} keeps no run's own angle ({n} runs; a study "
+                "of an older bench): compare its runs' shear_band.json files instead")
+        if not len(angles) == len(errors) == len(widths) == len(seeds) == n:
+            raise _cli.BenchInputError(f"--pool {path}: mesh {m['mesh']}: {n} runs, but "
+                                       f"{len(angles)} angles, {len(errors)} errors, "
+                                       f"{len(widths)} widths and {len(seeds)} seeds")
+        for a, e, w, seed in zip(angles, errors, widths, seeds):
+            rows.append({"mesh": m["mesh"], "elements": m["elements"], "cell_m": m["cell_m"],
+                         "seed": int(seed), "nonlocal_length_m": m.get("nonlocal_length_m"),
+                         "band_fit": {"angle_deg": float(a), "width_m": float(w),
+                                      "width_se_m": float(m["width_se_m"]) * math.sqrt(n)},
+                         "angle_error_deg": float(e),
+                         "localization_index": float(m["localization_index"]),
+                         "axial_strain_reached": float(m["axial_strain"]),
+                         "pooled_from": str(path)})
+    return rows
+
+
+def check_poolable(rows: list[dict]) -> list[dict]:
+    """``rows`` (runs of one study) sorted coarse to fine (by cell), a mesh's by seed;
+    refused, by name: two runs of one mesh and seed (a run counted twice), and runs of
+    different nonlocal lengths (a local and a nonlocal band are not one study)."""
+    seen: dict = {}
+    for r in rows:
+        key = (r["mesh"], int(r.get("seed", 1)))
+        where = r.get("pooled_from") or r.get("file", "?")
+        if key in seen:
+            raise _cli.BenchInputError(f"mesh {key[0]} seed {key[1]}: twice ({seen[key]} and "
+                                       f"{where}); a run counts once")
+        seen[key] = where
+    lengths = {float(r.get("nonlocal_length_m") or 0.0) for r in rows}
+    if len(lengths) > 1:
+        raise _cli.BenchInputError(f"nonlocal lengths {sorted(lengths)} m among the runs: one "
+                                   "study compares runs of one regularisation (0: local)")
+    return sorted(rows, key=lambda r: (-float(r["cell_m"]), int(r.get("seed", 1))))
+
+
+def _compare(files: list[str], out: Path, field: str = "displacement",
+             pool: Path | None = None) -> int:
     rows = []
     for f in files:
         try:
@@ -479,8 +556,13 @@ def _compare(files: list[str], out: Path, field: str = "displacement") -> int:
         r["localization_index"] = float(eq.max() / eq.mean())
         _, r["band_fit"], r["angle_error_deg"] = band_measures(pts, eq)
         r["cell_m"] = r["args"]["lx"] / r["args"]["nx"]
-    study = mesh_study(rows)
+        r["file"] = str(f)
+    if pool is not None:
+        rows = pooled_runs(pool, field) + rows
+    study = mesh_study(check_poolable(rows))
     study["field"] = field
+    if pool is not None:
+        study["pooled"] = str(pool)
     out.mkdir(parents=True, exist_ok=True)
     write_json(out / "mesh_study.json", study)
     for m in study["meshes"]:

@@ -110,6 +110,57 @@ def test_the_mesh_study_says_whether_the_angle_moves_beyond_its_error():
     assert st["pairs"][0]["angle_moves"] is False
 
 
+def test_a_pooled_study_gives_its_own_numbers_and_takes_new_seeds(tmp_path):
+    """--pool: the runs of an earlier study (their files gone) as rows again. The study made
+    from them is the earlier one; a new seed joins its mesh and the seeds' scatter; a run
+    counted twice, a local run among nonlocal ones, a study of the other field or one that
+    kept no run's own angle are refused by name."""
+    sb = _bench()
+
+    def row(mesh, angle, err, width, cell, seed=1, length=0.006):
+        return {"mesh": mesh, "elements": 1, "cell_m": cell, "seed": seed,
+                "nonlocal_length_m": length, "band_fit": {
+                    "angle_deg": angle, "width_m": width, "width_se_m": 2e-4},
+                "angle_error_deg": err, "localization_index": 5.0,
+                "axial_strain_reached": 0.03}
+
+    rows = [row("a", 54.0, 1.0, 10e-3, 12.5e-3), row("a", 51.0, 1.5, 9e-3, 12.5e-3, 1001),
+            row("b", 50.0, 1.0, 8e-3, 10e-3)]
+    st = sb.mesh_study(rows)
+    st["field"] = "displacement"
+    f = tmp_path / "mesh_study.json"
+    f.write_text(json.dumps(st))
+    again = sb.mesh_study(sb.check_poolable(sb.pooled_runs(f)))
+    for m, n in zip(st["meshes"], again["meshes"]):
+        for k in ("angle_deg", "angle_error_deg", "width_m", "width_se_m", "runs", "seeds"):
+            assert n[k] == pytest.approx(m[k], rel=1e-12), k
+    assert again["seed_sd_deg"] == pytest.approx(st["seed_sd_deg"])
+    # a new seed on mesh b (given first: the study sorts coarse to fine)
+    new = sb.mesh_study(sb.check_poolable([row("b", 46.0, 1.0, 8e-3, 10e-3, 2001)]
+                                          + sb.pooled_runs(f)))
+    assert [m["mesh"] for m in new["meshes"]] == ["a", "b"]
+    assert new["meshes"][1]["seeds"] == [1, 2001] and new["seed_dof"] == 2
+    assert new["meshes"][1]["angle_deg"] == pytest.approx(48.0)
+    with pytest.raises(ValueError, match="mesh b seed 1: twice"):
+        sb.check_poolable(sb.pooled_runs(f) + [row("b", 49.0, 1.0, 8e-3, 10e-3)])
+    with pytest.raises(ValueError, match="nonlocal lengths"):
+        sb.check_poolable(sb.pooled_runs(f) + [row("b", 49.0, 1.0, 8e-3, 10e-3, 7, 0.0)])
+    with pytest.raises(ValueError, match="its band is of the field 'displacement'"):
+        sb.pooled_runs(f, "elements")
+    old = dict(st, meshes=[{k: v for k, v in m.items() if k != "angles_deg"}
+                           for m in st["meshes"]])
+    f.write_text(json.dumps(old))
+    with pytest.raises(ValueError, match="mesh a keeps no run's own angle"):
+        sb.pooled_runs(f)
+    # the committed nonlocal study (one run a mesh, no seeds' scatter) pools as its runs
+    data = json.loads((ROOT / "docs/data/shear_band_meshes_nonlocal.json").read_text())
+    runs = sb.pooled_runs(ROOT / "docs/data/shear_band_meshes_nonlocal.json")
+    assert [r["band_fit"]["angle_deg"] for r in runs] == \
+        [m["angle_deg"] for m in data["meshes"] if m["runs"] == 1]
+    with pytest.raises(SystemExit):
+        sb.main(["--pool", str(f), "--out", str(tmp_path / "x")])
+
+
 def test_rve_angles_of_a_synthetic_curve():
     from geogrid_dem.studies import biaxial
 
