@@ -656,6 +656,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
       mesh_ok = mesh_ok && e >= 0 && static_cast<size_t>(e) < t.mesh_contacts_.size();
     if (!(t.mesh_adj_off_.empty() || t.mesh_adj_off_.size() == nb + 1)) mesh_ok = false;
     if (!mesh_ok) throw ParameterError("checkpoint: corrupt mesh walls");
+    t.index_mesh_contacts();
   }
   const auto nc = r.get<std::uint64_t>();
   if (nc != s.controllers_.size())

@@ -587,6 +587,8 @@ class Scene {
   void compute_grid_contacts(long& err_contact);
   /// grid_hot_ and grid_live_ from grid_contacts_ (after a rebuild or a checkpoint load).
   void index_grid_contacts();
+  /// mesh_flat_ from the mesh contacts' candidates (after a build or a checkpoint load).
+  void index_mesh_contacts();
   void compute_links();
   // Bonds (passes/bonds.cpp).
   void compute_bonds(long& err);
@@ -659,6 +661,9 @@ class Scene {
   std::vector<std::array<int, 3>> mesh_tris_;
   std::vector<MeshContact> mesh_contacts_;
   std::vector<int> mesh_cand_off_, mesh_cand_tri_, mesh_adj_off_, mesh_adj_;
+  // Per mesh contact: 1 where its candidate triangles all lie in one plane (a flat patch;
+  // index_mesh_contacts, after a build or a checkpoint load; not saved).
+  std::vector<std::uint8_t> mesh_flat_;
   long mesh_dropped_ = 0;
   // Geogrid.
   int num_nodes_ = 0;

@@ -443,6 +443,7 @@ std::vector<std::pair<std::string, std::size_t>> Scene::memory_by_field() const 
   add("contacts.meshes", mesh_contacts_);
   add("contacts.mesh_cand_off", mesh_cand_off_);
   add("contacts.mesh_cand_tri", mesh_cand_tri_);
+  add("contacts.mesh_flat", mesh_flat_);
   add("contacts.mesh_adj_off", mesh_adj_off_);
   add("contacts.mesh_adj", mesh_adj_);
   add("geogrid.links", links_);

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <limits>
 #include <sstream>
+#include <stdexcept>
 #include <tuple>
 #include <unordered_map>
 #include <vector>
@@ -180,10 +181,58 @@ void Scene::rebuild_mesh_contacts(Real margin) {
   mesh_cand_tri_.swap(tris);
   contacts_by_body(mesh_contacts_, n, mesh_adj_off_, mesh_adj_);
   for (MeshWall& w : mesh_walls_) w.moved_since_build = 0;
+  index_mesh_contacts();
 }
+
+void Scene::index_mesh_contacts() {
+  // A contact's candidates are a flat patch when every vertex of them lies within 1e-10 of
+  // the sphere's radius of its first triangle's plane: a point of them is then on the plane
+  // of any face contact among them far inside the tolerance (1e-9 r) with which step 2 of
+  // the pass takes it as part of that face's surface. A mesh moves by translation only, so
+  // this holds until the next build.
+  const size_t nc = mesh_contacts_.size();
+  mesh_flat_.assign(nc, 0);
+  if (mesh_cand_off_.size() != nc + 1) return;
+  for (size_t k = 0; k < nc; ++k) {
+    const int e0 = mesh_cand_off_[k], e1 = mesh_cand_off_[k + 1];
+    if (e0 == e1) continue;
+    const MeshContact& c = mesh_contacts_[k];
+    const MeshWall& w = mesh_walls_[c.wall];
+    const auto vert = [&](int t, int i) -> const Vec3& {
+      return mesh_vertices_[w.vert_off + mesh_tris_[t][i]];
+    };
+    const int t0 = mesh_cand_tri_[e0];
+    const Vec3 a = vert(t0, 0);
+    const Vec3 nrm = (vert(t0, 1) - a).cross(vert(t0, 2) - a);
+    const Real len = nrm.norm();
+    if (!(len > 0)) continue;
+    const Real tol = 1e-10 * bodies_.radius[c.body] * len;  // (on the unnormalised normal)
+    bool flat = true;
+    for (int e = e0; e < e1 && flat; ++e)
+      for (int i = 0; i < 3 && flat; ++i)
+        flat = std::abs(nrm.dot(vert(mesh_cand_tri_[e], i) - a)) <= tol;
+    mesh_flat_[k] = flat;
+  }
+}
+
+namespace {
+/// Whether p (in the plane of triangle v0 v1 v2) is farther than m from each of its edges'
+/// lines, m (compared squared).
+bool inside_by(const Vec3& p, const Vec3& v0, const Vec3& v1, const Vec3& v2, Real m) {
+  const Vec3* v[3] = {&v0, &v1, &v2};
+  for (int i = 0; i < 3; ++i) {
+    const Vec3 e = *v[(i + 1) % 3] - *v[i];
+    if (!(e.cross(p - *v[i]).squaredNorm() > m * m * e.squaredNorm())) return false;
+  }
+  return true;
+}
+}  // namespace
 
 void Scene::compute_mesh_forces(long& err_contact) {
   const long nc = static_cast<long>(mesh_contacts_.size());
+  if (mesh_flat_.size() != mesh_contacts_.size())
+    throw std::logic_error("mesh contacts not indexed: " + std::to_string(nc) + " contacts, " +
+                           std::to_string(mesh_flat_.size()) + " indexed");
   long err = std::numeric_limits<long>::max();
   long dropped = 0;
   const Real dt = dt_;
@@ -201,8 +250,37 @@ void Scene::compute_mesh_forces(long& err_contact) {
     // 1. The touching features: each candidate triangle's closest point within r, keyed by
     // its face, edge (the mesh's vertex numbers, sorted) or vertex.
     found.clear();
+    // A flat patch whose sphere touched one face alone at the last step, and whose closest
+    // point is still inside that face, farther than 1e-9 r from its edges: that face is the
+    // pair's one contact. The patch's other triangles' points lie on its plane (step 2 would
+    // take them as part of its surface), and none of them has that point inside it (the
+    // same contact as the full walk finds, to the bit).
+    bool one_face = false;
+    if (mesh_flat_[k] && c.active && c.subs[0].kind == kFace && c.subs[1].kind < 0) {
+      const int t = w.tri_off + c.subs[0].a;
+      bool candidate = false;
+      for (int e = mesh_cand_off_[k]; e < mesh_cand_off_[k + 1] && !candidate; ++e)
+        candidate = mesh_cand_tri_[e] == t;
+      if (candidate) {
+        const auto& tri = mesh_tris_[t];
+        const Vec3& v0 = mesh_vertices_[w.vert_off + tri[0]];
+        const Vec3& v1 = mesh_vertices_[w.vert_off + tri[1]];
+        const Vec3& v2 = mesh_vertices_[w.vert_off + tri[2]];
+        Vec3 p;
+        int e0, e1;
+        if (closest_on_triangle(x, v0, v1, v2, p, e0, e1) == kFace &&
+            inside_by(p, v0, v1, v2, 1e-9 * r)) {
+          const Vec3 d = x - p;
+          const Real dist = d.norm();
+          if (dist < r && dist > 0) {
+            found.push_back(Touch{kFace, t - w.tri_off, -1, p, d / dist, dist});
+            one_face = true;
+          }
+        }
+      }
+    }
     const Real reach2 = r * r * (1 + 1e-9);
-    for (int e = mesh_cand_off_[k]; e < mesh_cand_off_[k + 1]; ++e) {
+    for (int e = mesh_cand_off_[k]; e < mesh_cand_off_[k + 1] && !one_face; ++e) {
       const int t = mesh_cand_tri_[e];
       const auto& tri = mesh_tris_[t];
       const Vec3& v0 = mesh_vertices_[w.vert_off + tri[0]];
