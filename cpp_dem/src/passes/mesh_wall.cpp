@@ -253,8 +253,9 @@ void Scene::compute_mesh_forces(long& err_contact) {
     // A flat patch whose sphere touched one face alone at the last step, and whose closest
     // point is still inside that face, farther than 1e-9 r from its edges: that face is the
     // pair's one contact. The patch's other triangles' points lie on its plane (step 2 would
-    // take them as part of its surface), and none of them has that point inside it (the
-    // same contact as the full walk finds, to the bit).
+    // take them as part of its surface), and none of them has that point inside it where
+    // no two of them overlap (the same contact as the full walk finds, to the bit; where two
+    // overlap, as a triangle given twice, the walk may key the contact to the other one).
     bool one_face = false;
     if (mesh_flat_[k] && c.active && c.subs[0].kind == kFace && c.subs[1].kind < 0) {
       const int t = w.tri_off + c.subs[0].a;
