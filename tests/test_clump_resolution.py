@@ -60,6 +60,26 @@ def test_each_resolution_has_exactly_n_spheres_of_the_same_four_shapes(n):
         assert np.array_equal(t.radii, shipped[g].radii[:n])
 
 
+def test_below_24_the_csv_s_first_spheres_are_the_fill_itself():
+    """Below the shipped 24 spheres, shipped_fill takes the CSV's first n spheres instead of
+    filling again: the fill of n spheres itself (fill_mesh with the shipped settings), to the
+    bit, mass properties included."""
+    for g in GRAINS:
+        v, t = cm.shipped_mesh(g)
+        for n in (1, 6, 23):
+            fill = cm.fill_mesh(v, t, max_spheres=n, name=f"{g}_{n}", **cm.SHIPPED_FILL)
+            got = cm.shipped_fill(g, n)
+            assert got.name == fill.name and got.cells == fill.cells, (g, n)
+            assert np.array_equal(got.centres, fill.centres), (g, n)
+            assert np.array_equal(got.radii, fill.radii), (g, n)
+            assert got.volume == fill.volume and got.equivalent_diameter == \
+                fill.equivalent_diameter, (g, n)
+            assert np.array_equal(got.props.centroid, fill.props.centroid), (g, n)
+            assert np.array_equal(got.props.inertia, fill.props.inertia), (g, n)
+            assert np.array_equal(got.local_centres, fill.local_centres), (g, n)
+            assert got.bounding_radius == fill.bounding_radius, (g, n)
+
+
 def test_fills_are_cached_in_the_process():
     a = cm.templates_from_spec("clumps:gravel@12")
     b = cm.templates_from_spec("clumps:gravel@12")

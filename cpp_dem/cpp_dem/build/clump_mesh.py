@@ -889,7 +889,9 @@ def shipped_fill(name: str, spheres: int) -> ClumpTemplate:
     ``spheres = SHIPPED_SPHERES`` (24) returns the shipped CSV itself (:func:`shipped_template`,
     named ``<name>``), which that fill reproduces bit for bit. The greedy fill is sequential,
     so the template of n spheres is the first n spheres of any larger one: the resolutions
-    nest. Fills are cached in the process (about a second per grain).
+    nest, and below 24 the fill is the shipped CSV's first n spheres, which are taken
+    without filling again (the same template to the bit). Larger fills are cached in the
+    process (about a second per grain).
 
     name: a shipped grain. spheres: an integer in [1, MAX_SPHERES]."""
     if not (isinstance(spheres, (int, np.integer)) and not isinstance(spheres, bool)
@@ -902,6 +904,11 @@ def shipped_fill(name: str, spheres: int) -> ClumpTemplate:
 
 @functools.lru_cache(maxsize=None)
 def _shipped_fill(name: str, spheres: int) -> ClumpTemplate:
+    if spheres < SHIPPED_SPHERES:
+        # (the greedy fill's first spheres: its template with the fill's cells, 160)
+        first = shipped_template(name)
+        return ClumpTemplate.from_spheres(first.centres[:spheres], first.radii[:spheres],
+                                          f"{name}_{spheres}")
     v, t = shipped_mesh(name)
     return fill_mesh(v, t, max_spheres=spheres, name=f"{name}_{spheres}", **SHIPPED_FILL)
 
