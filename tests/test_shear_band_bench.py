@@ -152,11 +152,14 @@ def test_a_pooled_study_gives_its_own_numbers_and_takes_new_seeds(tmp_path):
     f.write_text(json.dumps(old))
     with pytest.raises(ValueError, match="mesh a keeps no run's own angle"):
         sb.pooled_runs(f)
-    # the committed nonlocal study (one run a mesh, no seeds' scatter) pools as its runs
-    data = json.loads((ROOT / "docs/data/shear_band_meshes_nonlocal.json").read_text())
-    runs = sb.pooled_runs(ROOT / "docs/data/shear_band_meshes_nonlocal.json")
-    assert [r["band_fit"]["angle_deg"] for r in runs] == \
-        [m["angle_deg"] for m in data["meshes"] if m["runs"] == 1]
+    # the committed nonlocal study of seed 1 (one run a mesh, no seeds' scatter, an older
+    # bench's file without the runs' lists) pools as its runs
+    seed1 = ROOT / "docs/data/shear_band_nonlocal_seed1.json"
+    data = json.loads(seed1.read_text())
+    assert all(m["runs"] == 1 and "angles_deg" not in m for m in data["meshes"])
+    runs = sb.pooled_runs(seed1)
+    assert [r["band_fit"]["angle_deg"] for r in runs] == [m["angle_deg"] for m in data["meshes"]]
+    assert [r["seed"] for r in runs] == [1, 1, 1]
     with pytest.raises(SystemExit):
         sb.main(["--pool", str(f), "--out", str(tmp_path / "x")])
 
