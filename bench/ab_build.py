@@ -323,8 +323,11 @@ def worker(cfg: dict) -> dict:
             "bodies": int(scene.num_bodies), "state_sha256": state.hexdigest()[:16]}
 
 
-def run_block(cfg: dict, prefix: list[str] | None = None) -> dict:
-    env = dict(os.environ, OMP_NUM_THREADS=str(cfg["threads"]), OPENBLAS_NUM_THREADS="1")
+def run_block(cfg: dict, prefix: list[str] | None = None, env_add: dict | None = None) -> dict:
+    """One block in a fresh process (``env_add``: more environment variables, such as
+    ``CPP_DEM_NARROW``)."""
+    env = dict(os.environ, OMP_NUM_THREADS=str(cfg["threads"]), OPENBLAS_NUM_THREADS="1",
+               **(env_add or {}))
     if prefix:
         env["PYTHONHASHSEED"] = "0"  # the interpreter's own work repeats exactly
     proc = subprocess.run([*(prefix or []), sys.executable, str(Path(__file__).resolve()),
