@@ -13,6 +13,7 @@ import numpy as np
 
 from cpp_dem import _core
 from cpp_dem._core import Material, ParameterError
+from cpp_dem.fixedorder import unit
 
 #: Under automatic threads (``apply_threads(0)``), a scene with fewer bodies than this runs
 #: on one thread: below it a step's parallel regions cost more than they save (measured with
@@ -267,8 +268,7 @@ def _quat_from_matrix(m) -> np.ndarray:
         q[1 + i] = 0.25 * s
         q[1 + j] = (m[j, i] + m[i, j]) / s
         q[1 + k] = (m[k, i] + m[i, k]) / s
-    q = np.asarray(q)
-    return q / np.linalg.norm(q)
+    return unit(q)
 
 
 class ControllerLimitWarning(UserWarning):
@@ -538,7 +538,7 @@ class Scene(_core.Scene):
         out = np.empty(n, dtype=int)
         for k in range(n):
             fk = float(f[k])
-            qc = _quat_mul(q[k] / np.linalg.norm(q[k]), q_axes)
+            qc = _quat_mul(unit(q[k]), q_axes)  # (fixedorder: not BLAS)
             if template.num_members == 1:
                 # Exact, with the same arithmetic as a sphere of the scaled radius.
                 r = float(template.radii[0]) * fk

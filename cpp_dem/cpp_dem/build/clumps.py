@@ -70,9 +70,80 @@ def _as_spheres(centres, radii):
     return c, r
 
 
+def _rotate(m: list, s: float, tau: float, i: int, j: int, k: int, l: int) -> None:
+    g, h = m[i][j], m[k][l]
+    m[i][j] = g - s * (h + g * tau)
+    m[k][l] = h + s * (g - h * tau)
+
+
+def _jacobi_eigh3(a) -> tuple[np.ndarray, np.ndarray]:
+    """Eigenvalues (ascending) and unit eigenvectors (columns) of the symmetric 3 x 3 ``a``, by
+    cyclic Jacobi rotations in plain floating point (+, -, *, / and sqrt, in a fixed order):
+    the same bits on every CPU and BLAS. (LAPACK's eigh rounds as its BLAS kernel does, and a
+    clump's principal frame decides every member's place: another kernel grew into another
+    sample of a chaotic packing.)"""
+    n = 3
+    m = [[float(a[i][j]) for j in range(n)] for i in range(n)]
+    v = [[1.0 if i == j else 0.0 for j in range(n)] for i in range(n)]
+    d = [m[i][i] for i in range(n)]
+    b = list(d)
+    z = [0.0] * n
+    for sweep in range(1, 51):
+        off = abs(m[0][1]) + abs(m[0][2]) + abs(m[1][2])
+        if off == 0.0:
+            break
+        tresh = 0.2 * off / (n * n) if sweep < 4 else 0.0
+        for p in range(n - 1):
+            for q in range(p + 1, n):
+                g = 100.0 * abs(m[p][q])
+                if sweep > 4 and abs(d[p]) + g == abs(d[p]) and abs(d[q]) + g == abs(d[q]):
+                    m[p][q] = 0.0
+                elif abs(m[p][q]) > tresh:
+                    h = d[q] - d[p]
+                    if abs(h) + g == abs(h):
+                        t = m[p][q] / h
+                    else:
+                        theta = 0.5 * h / m[p][q]
+                        t = 1.0 / (abs(theta) + math.sqrt(1.0 + theta * theta))
+                        if theta < 0.0:
+                            t = -t
+                    c = 1.0 / math.sqrt(1.0 + t * t)
+                    s = t * c
+                    tau = s / (1.0 + c)
+                    h = t * m[p][q]
+                    z[p] -= h
+                    z[q] += h
+                    d[p] -= h
+                    d[q] += h
+                    m[p][q] = 0.0
+                    for j in range(p):
+                        _rotate(m, s, tau, j, p, j, q)
+                    for j in range(p + 1, q):
+                        _rotate(m, s, tau, p, j, j, q)
+                    for j in range(q + 1, n):
+                        _rotate(m, s, tau, p, j, q, j)
+                    for j in range(n):
+                        _rotate(v, s, tau, j, p, j, q)
+        for p in range(n):
+            b[p] += z[p]
+            d[p] = b[p]
+            z[p] = 0.0
+    else:
+        raise ArithmeticError(f"inertia={np.asarray(a).tolist()}: Jacobi rotations did not "
+                              "converge in 50 sweeps (not a finite symmetric tensor?)")
+    order = sorted(range(n), key=lambda i: (d[i], i))
+    return (np.array([d[i] for i in order]),
+            np.array([[v[r][i] for i in order] for r in range(n)]))
+
+
 def _principal(inertia: np.ndarray):
-    w, v = np.linalg.eigh(0.5 * (inertia + inertia.T))
-    if np.linalg.det(v) < 0:
+    """Principal moments (ascending) and axes (columns, a right-handed frame) of ``inertia``,
+    the same bits on every CPU and BLAS (:func:`_jacobi_eigh3`)."""
+    w, v = _jacobi_eigh3(0.5 * (inertia + inertia.T))
+    det = (v[0, 0] * (v[1, 1] * v[2, 2] - v[1, 2] * v[2, 1])
+           - v[0, 1] * (v[1, 0] * v[2, 2] - v[1, 2] * v[2, 0])
+           + v[0, 2] * (v[1, 0] * v[2, 1] - v[1, 1] * v[2, 0]))
+    if det < 0:
         v[:, 2] = -v[:, 2]
     return w, v
 
@@ -184,7 +255,8 @@ def _union_mass_properties(c: np.ndarray, r: np.ndarray, cells: int) -> MassProp
         x = c - cen
         inertia = np.zeros((3, 3))
         for k in range(len(r)):
-            inertia += np.eye(3) * (0.4 * v[k] * r[k] ** 2 + v[k] * x[k] @ x[k]) - v[k] * np.outer(x[k], x[k])
+            xx = x[k, 0] * x[k, 0] + x[k, 1] * x[k, 1] + x[k, 2] * x[k, 2]  # (not BLAS's dot)
+            inertia += np.eye(3) * (0.4 * v[k] * r[k] ** 2 + v[k] * xx) - v[k] * np.outer(x[k], x[k])
         pm, axes = _principal(inertia)
         return MassProperties(vol, cen, inertia, pm, axes)
     lo = (c - r[:, None]).min(axis=0)
@@ -270,7 +342,9 @@ class ClumpTemplate:
     @property
     def local_centres(self) -> np.ndarray:
         """Member centres in the principal frame about the centroid, m (k, 3)."""
-        return (self.centres - self.props.centroid) @ self.props.axes
+        # (summed in a fixed order, not by BLAS: the same bits on every CPU and BLAS kernel)
+        x, a = self.centres - self.props.centroid, self.props.axes
+        return x[:, 0:1] * a[0] + x[:, 1:2] * a[1] + x[:, 2:3] * a[2]
 
     @property
     def bounding_radius(self) -> float:

@@ -33,6 +33,7 @@ import numpy as np
 
 from cpp_dem._checks import positive
 from cpp_dem._core import BeamParams, ParameterError
+from cpp_dem.fixedorder import norm, unit
 
 G_STANDARD = 9.81  # m/s^2, to turn unit weights into densities
 
@@ -241,7 +242,7 @@ class _Builder:
         mass = np.zeros(len(pts))
         in_facet = set()
         for a, b, c in self.facets:
-            area = 0.5 * np.linalg.norm(np.cross(pts[b] - pts[a], pts[c] - pts[a]))
+            area = 0.5 * norm(np.cross(pts[b] - pts[a], pts[c] - pts[a]))
             for n in (a, b, c):
                 mass[n] += self.density * area * 2 * rc / 3
             in_facet.update({(min(a, b), max(a, b)), (min(b, c), max(b, c)),
@@ -249,7 +250,7 @@ class _Builder:
         for a, b in self.link_list:
             if (min(a, b), max(a, b)) in in_facet:
                 continue
-            m = self.density * math.pi * rc**2 * np.linalg.norm(pts[b] - pts[a])
+            m = self.density * math.pi * rc**2 * norm(pts[b] - pts[a])
             mass[a] += m / 2
             mass[b] += m / 2
         mass = np.maximum(mass, 1e-12) * node_density_scale
@@ -372,7 +373,7 @@ def triangular_grid(scene, *, origin: Sequence[float], length: float, width: flo
         cell.append(cij)
         sides.append(sd)
         p, q = b.points[ids[a]], b.points[ids[c]]
-        axis.append((q - p) / np.linalg.norm(q - p))
+        axis.append(unit(q - p))
 
     for (i, j) in list(ids):
         if (i + 1, j) in ids:
@@ -451,7 +452,7 @@ def disc_grid(scene, *, centre: Sequence[float], radius: float, spacing: float,
         sides.append(sd)
         if ax is None:
             p, q = b.points[ids[a]], b.points[ids[nb]]
-            ax = (q - p) / np.linalg.norm(q - p)
+            ax = unit(q - p)
         axis.append(ax)
     span = (max(k[0] for k in used) - i0, max(k[1] for k in used) - j0)
     return _one_link_members(b, scene, material, node_density_scale, links_of, direction, cell,
