@@ -43,6 +43,10 @@ def test_the_documented_smoke_runs_the_fem_path_on_two_seeds(smoke):
         v = "PRS" if "PRS" in name else "RE"
         fem = s["fem"][f"detailed_{v}"]
         assert e["targets_pa"] == [fem["targets_initial_pa"], fem["targets_final_pa"]]
+        # ... on the grid of TARGET_DIGITS: the FEM's rounding (its BLAS kernel) cannot move
+        # them, nor the strain the element follows
+        for x in (*e["targets_pa"], e["fem_strain_increment"]):
+            assert on_target_grid(x), (name, x)
         assert len(e["converged"]) == 2
         assert e["rest"]["sample_inertial_number_end"] <= 1e-2, name
         # On its FEM region's path with the soil calibrated on the grains (issue 59 item 3)
@@ -53,6 +57,17 @@ def test_the_documented_smoke_runs_the_fem_path_on_two_seeds(smoke):
         assert c["fill_viscous"] == 0.97 and c["fill_local_damping"] == 0.0
         assert c["local_damping_loading"] == pytest.approx(0.9)
         assert c["grid_ends"] == "lock" and c["grid_convention"] == "series"
+
+
+def on_target_grid(x) -> bool:
+    """Whether ``x`` has at most TARGET_DIGITS + 1 significant digits of its largest
+    component (+ 1: the grid's step is the FEM tensor's, whose largest component can round
+    up to the next decade); a FEM value off the grid has 16."""
+    from femcoupling.coupling.handover import TARGET_DIGITS
+
+    x = np.asarray(x, float)
+    step = 10.0 ** (math.floor(math.log10(np.abs(x).max())) - TARGET_DIGITS)
+    return bool(np.all(np.abs(x / step - np.round(x / step)) < 1e-6))
 
 
 def test_every_element_is_loaded_slowly_and_measured_at_rest_on_its_fem_path(smoke):

@@ -327,3 +327,48 @@ def test_history_append_file_keeps_rows_and_refuses_other_regions(tmp_path):
     with HandoverHistory(tmp_path / "other.h5", regions=["y", "x"]) as h:
         with pytest.raises(FemInputError, match="regions"):
             h.append_file(tmp_path / "part.h5")
+
+
+def test_targets_on_the_grid_do_not_move_with_the_fems_last_digits():
+    """What the FEM hands a DEM element is put on a grid of TARGET_DIGITS significant digits
+    (femcoupling.coupling.handover.targets_on_grid): a rounding-level change of the FEM (its
+    BLAS kernel, a Newton iterate within tolerance) leaves stress, strain and geogrid tension
+    as they were, and the grid is fine enough for an element that holds its targets within
+    2 %."""
+    from femcoupling.coupling.handover import (TARGET_DIGITS, WallTargets, on_grid,
+                                               target_grid, targets_on_grid)
+
+    assert TARGET_DIGITS == 3
+    rng = np.random.default_rng(4)
+    moved = 0
+    for _ in range(200):
+        a = -np.diag(rng.uniform(2e3, 9e4, 3))
+        a[0, 2] = a[2, 0] = rng.uniform(-5e3, 5e3)
+        t = dataclasses_replace(fem_to_dem(a), grid_tension_n_per_m=rng.uniform(1e3, 9e3))
+        u = dataclasses_replace(fem_to_dem(a * (1 + 1e-9)),
+                                grid_tension_n_per_m=t.grid_tension_n_per_m * (1 + 1e-9))
+        g, h = targets_on_grid(t), targets_on_grid(u)
+        assert isinstance(g, WallTargets)
+        # within half a grid step of the FEM's (0.05-0.5 % of the largest component)
+        step = 10.0 ** (np.floor(np.log10(np.abs(a).max())) - TARGET_DIGITS + 1)
+        assert np.abs(g.fem_stress_pa - a).max() <= 0.5 * step * 1.0001
+        assert step <= 1e-2 * np.abs(a).max()
+        tt = t.grid_tension_n_per_m
+        assert abs(g.grid_tension_n_per_m - tt) <= 0.5 * 10.0 ** (np.floor(np.log10(tt)) - 2)
+        moved += not (np.array_equal(g.normal_pa, h.normal_pa)
+                      and g.grid_tension_n_per_m == h.grid_tension_n_per_m)
+    assert moved <= 1  # (a component on a grid boundary moves: about 1e-5 of them here)
+    # The grid's step is 3 digits of the largest component, the same on every component.
+    s = on_grid([0.0021347, -0.00051234, 0.0])
+    np.testing.assert_allclose(s, [0.00213, -0.00051, 0.0], rtol=0, atol=1e-15)
+    assert np.array_equal(on_grid([0.0, 0.0]), [0.0, 0.0])
+    # (without the grid the same change moves every target)
+    a = -np.diag([2.5e3, 3.3e3, 4.1e3])
+    assert not np.array_equal(fem_to_dem(a).normal_pa, fem_to_dem(a * (1 + 1e-9)).normal_pa)
+    assert np.array_equal(target_grid(a), target_grid(a * (1 + 1e-9)))
+
+
+def dataclasses_replace(t, **kw):
+    import dataclasses
+
+    return dataclasses.replace(t, **kw)

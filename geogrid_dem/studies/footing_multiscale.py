@@ -49,6 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
+from femcoupling.coupling.handover import TARGET_DIGITS, target_grid  # noqa: F401 (re-exported)
 from femcoupling.fem.steps import NewtonFailure
 from femcoupling.materials.dem_elements import BAND_TANGENTS
 from geogrid_dem.provenance import code_record
@@ -308,30 +309,6 @@ def zone_path(p: FootingParams, log) -> tuple:
                     "path_final_pa": (-np.diag(s1)).tolist(),
                     "path_footing_pressure_pa": m.footing_pressure_pa(),
                     "path_stopped": short}
-
-
-#: Significant digits (of the largest component) an element's stress target from the FEM
-#: keeps: the zone's path the calibration drives its elements along, and each zone cell's
-#: stress its element is prepared at. The FEM's last digits are its solver's (newton_rtol
-#: 1e-6) and its BLAS kernel's rounding, and an element servoed to a target is chaotic: the
-#: smoke's path changed by 1e-7 moved one element's fit from E 13.2 to 10.8 and 11.4 MPa and
-#: phi from 44.4 to 38.1 and 38.2 deg, and the calibration moved with the BLAS kernel (E
-#: 10.3-12.1 MPa over five kernels on one machine, 11.3-14.5 on another). On a grid of 3
-#: digits (100 Pa at 100 kPa; the elements hold their targets within 2 %) a 1e-7 change moves
-#: a component to the next grid value with a chance of about 2e-4.
-TARGET_DIGITS = 3
-
-
-def target_grid(stress_pa, scale_of=None) -> np.ndarray:
-    """``stress_pa`` (3 x 3, Pa) rounded to the grid of TARGET_DIGITS significant digits of the
-    largest component of ``scale_of`` (a tensor or several; default itself), symmetric."""
-    s = np.asarray(stress_pa, float)
-    big = float(np.abs(np.asarray(s if scale_of is None else scale_of, float)).max())
-    if not big > 0:
-        return s.copy()
-    step = 10.0 ** (math.floor(math.log10(big)) - TARGET_DIGITS + 1)
-    g = np.round(s / step) * step
-    return 0.5 * (g + g.T)
 
 
 def fit_element(p: FootingParams, s0, s1, seed: int) -> dict:
