@@ -80,9 +80,10 @@ def test_probed_tangent_of_the_walls_element(loaded_element):
     """probe_tangent (issue 18: the wall-bounded element's tangent in place of the isotropic
     secant): three stress probes, the element's creep at the held state subtracted. Its
     normal block is symmetric positive definite, each probe shortens its own axis, the shear
-    moduli are the planes' isotropic ones, the tangent is a property of the state (5 % and
-    10 % probes agree within 20 %: measured 13 % on the largest term), and the element is
-    left bitwise where it was."""
+    moduli are the planes' isotropic ones, and the element is left bitwise where it was. (The
+    5 % and 10 % probes' normal blocks differ by 9-59 % of the 5 % one's norm over seeds 1-6
+    of this 300-grain element: its tangent depends on the probe's size as much as on the
+    state, so no agreement between them is asserted; docs/coupling_handover.md.)"""
     from cpp_dem.elements.box import probe_tangent
 
     p, sample, grid, t0, t1 = loaded_element
@@ -101,7 +102,7 @@ def test_probed_tangent_of_the_walls_element(loaded_element):
         for k, (i, j) in zip((3, 4, 5), ((1, 2), (0, 2), (0, 1))):
             assert v[k, k] == pytest.approx((n[i, i] + n[j, j] - 2 * n[i, j]) / 4, rel=1e-12)
         c[rel] = n
-    assert np.linalg.norm(c[0.1] - c[0.05]) < 0.2 * np.linalg.norm(c[0.05])
+    assert not np.array_equal(c[0.1], c[0.05])  # (two probes, two answers)
 
 
 def test_a_probe_size_outside_its_range_is_refused(loaded_element):

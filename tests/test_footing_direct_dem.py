@@ -107,11 +107,12 @@ def test_the_prepared_box_is_at_q_on_every_wall_in_equilibrium(loaded):
 def test_the_footing_starts_at_q_and_the_surcharge_holds_q_at_every_level(loaded):
     p, rows = loaded["p"], loaded["rows"]
     assert rows["settlement_m"] == [0.0] + SETTLEMENTS
-    # Measured 19.41 kPa (-3 %) at zero settlement: the ~20 grains under the footing carry
-    # q within their scatter (seeds 1, 2, 3 of this box: 19.5, 20.8, 19.4 kPa; periodic
-    # along y, seeds 1-5: 21.7, 17.2, 18.5, 19.4, 19.5 kPa, so 14 % off at worst).
-    assert rows["footing_pressure_pa"][0] == pytest.approx(Q, rel=0.15 if p.periodic_y
-                                                          else 0.05)
+    # The ~20 grains under the footing carry q at zero settlement within their scatter, a
+    # chaotic sample's: between y walls, seeds 1-8 read 20.6, 18.6, 18.5, 20.7, 20.1, 21.5,
+    # 18.1 and 21.2 kPa (sd 1.35 kPa, 7 %; seed 3 read 19.4 kPa before the core's rounding
+    # changed, and 18.5 after); periodic along y, seeds 1-8 scatter as much (PERIODIC_Y_SEEDS).
+    # The bound is 3.5 of those sd: a footing that starts unloaded or twice loaded fails it.
+    assert rows["footing_pressure_pa"][0] == pytest.approx(Q, rel=0.25)
     # The surcharge within its relaxation tolerance (2 tol) at every level, all relaxed.
     assert all(rows["relaxed"])
     assert np.all(np.abs(np.array(rows["surcharge_pa"]) - Q) <= 2 * p.tol * Q)
