@@ -109,11 +109,10 @@ def fem_to_dem(stress_fem_pa: npt.ArrayLike, *, min_stress_pa: float = 0.0) -> W
 #: Significant digits (of the largest component) a DEM element's target from the FEM keeps:
 #: its stress, its strain and its geogrid tension. The FEM's last digits are its solver's
 #: (Newton tolerance 1e-6) and its BLAS kernel's rounding, and an element servoed to a target
-#: is chaotic: a path changed by 1e-7 grew into another sample of the element (the footing's
-#: calibration moved from E 13.2 to 10.8 MPa; 002's smoke soil from 43.9 to 27.7 MPa with
-#: another BLAS kernel). On a grid of 3 digits (100 Pa at 100 kPa; an element holds its
-#: targets within 2 %) a 1e-7 change moves a component to the next grid value with a chance
-#: of about 2e-4.
+#: is chaotic: a path changed by 1e-7 grew into another sample of the element (one of the
+#: footing's calibration elements moved from E 13.2 to 10.8 MPa). On a grid of 3 digits
+#: (100 Pa at 100 kPa; an element holds its targets within 2 %) a 1e-7 change moves a
+#: component to the next grid value with a chance of about 2e-4.
 TARGET_DIGITS = 3
 
 

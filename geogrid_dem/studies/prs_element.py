@@ -685,8 +685,8 @@ def run_fem(p: Params, out: Path, variant: str) -> tuple:
 
     xdmf = out / f"fem_{variant}.xdmf"
     initial, final = one_way(m, regions=["element"], load=functools.partial(load, xdmf=xdmf))
-    # (what the element takes, on the grid of TARGET_DIGITS: the FEM's rounding, its BLAS
-    # kernel's included, cannot move it)
+    # (what the element takes, on the grid of TARGET_DIGITS: a last-bit change of the FEM, its
+    # BLAS kernel's, cannot move it; other load steps of the FEM can: docs/prs_element_002.md)
     ini, fin = targets_on_grid(initial["element"]), targets_on_grid(final["element"])
     log(f"FEM {variant} handover, initial: {ini.report()}")
     log(f"FEM {variant} handover, loaded:  {fin.report()}")
