@@ -559,7 +559,7 @@ s = dem.Scene()
 m = s.add_material(dem.linear_material(density=2600, young=1e7, poisson=0.3,
                                        friction_angle_deg=30))
 h = hashlib.sha256()
-for k, tpl in enumerate(t.values() if isinstance(t, dict) else t):
+for k, tpl in enumerate(t):
     h.update(np.ascontiguousarray(tpl.local_centres).tobytes())
     h.update(np.ascontiguousarray(tpl.props.axes).tobytes())
     s.add_clumps(tpl, np.random.default_rng(k).uniform(0, 1, (20, 3)) + 2.0 * k,

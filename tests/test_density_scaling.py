@@ -264,9 +264,9 @@ def test_a_scaled_triaxial_path_follows_the_unscaled_one_from_the_same_state():
     # A compacted sample, saved; from it the same deviatoric loading (physical strain
     # rate) unscaled and at 4 x the step, on four seeds. The wall-stress paths, averaged in
     # 5 strain bins, agree within 2 % rms on the seeds' mean, and the scaled one takes about
-    # 4 x fewer steps. (Without its
-    # inertia factors the scaled run blows up at once; with the weight scaled as well it
-    # would be no different here: no gravity. The column test above covers the weight.)
+    # 4 x fewer steps. (Without its inertia factors the scaled run blows up at once; with the
+    # weight scaled as well it would be no different here: no gravity. The column test above
+    # covers the weight.)
     from cpp_dem.protocols.triaxial import deviatoric_stage
 
     rms = []

@@ -49,7 +49,7 @@ from pathlib import Path
 
 import numpy as np
 
-from femcoupling.coupling.handover import TARGET_DIGITS, target_grid  # noqa: F401 (re-exported)
+from femcoupling.coupling.handover import target_grid
 from femcoupling.fem.steps import NewtonFailure
 from femcoupling.materials.dem_elements import BAND_TANGENTS
 from geogrid_dem.provenance import code_record
