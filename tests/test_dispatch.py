@@ -10,6 +10,7 @@ import subprocess
 import sys
 from pathlib import Path
 
+import pytest
 from cpp_dem.dispatch import cpu_dispatch
 
 
@@ -32,7 +33,8 @@ def _flags() -> set[str]:
 
 def test_the_simd_path_follows_the_cpu_and_the_narrow_switch():
     d = cpu_dispatch()
-    assert set(d) == {"dem_simd", "cpp_dem_narrow", "cpu", "openblas_coretype", "blas"}
+    assert set(d) == {"dem_simd", "numpy_simd", "cpp_dem_narrow", "cpu", "openblas_coretype",
+                      "blas"}
     simd = d["dem_simd"]
     flags = _flags()
     if simd["clones"]:
@@ -44,6 +46,18 @@ def test_the_simd_path_follows_the_cpu_and_the_narrow_switch():
     n = _dispatch_in({"CPP_DEM_NARROW": "1"})
     assert n["dem_simd"]["ops"] == "narrow" and n["cpp_dem_narrow"] == "1"
     assert n["dem_simd"]["level"] == simd["level"]  # (the loader's pick is the CPU's)
+
+
+def test_numpys_own_dispatch_is_recorded_as_npy_disable_cpu_features_sets_it():
+    """NumPy's array exp, log, power, tan and arccos take another form on a CPU without
+    AVX-512 and round otherwise: its targets are recorded, and a disabled one drops out."""
+    d = _dispatch_in({})["numpy_simd"]
+    assert d["version"] and d["disabled"] is None
+    if not d["targets"]:
+        pytest.skip("this CPU runs none of NumPy's dispatch targets")
+    top = d["targets"][-1]
+    less = _dispatch_in({"NPY_DISABLE_CPU_FEATURES": top})["numpy_simd"]
+    assert less["disabled"] == top and top not in less["targets"]
 
 
 def test_the_blas_kernel_is_recorded_as_openblas_coretype_sets_it():

@@ -27,10 +27,26 @@ def _cpu_model() -> str:
     return platform.processor() or "unknown"
 
 
+def _numpy_simd() -> dict:
+    """NumPy's own dispatch: its version, the instruction-set targets its loops run at here
+    (an array's exp, log, power, tan, arccos round otherwise on a CPU without AVX-512), and
+    ``NPY_DISABLE_CPU_FEATURES``."""
+    import numpy as np
+
+    try:
+        from numpy._core._multiarray_umath import __cpu_dispatch__, __cpu_features__
+        targets = [t for t in __cpu_dispatch__ if __cpu_features__.get(t)]
+    except ImportError:  # (another NumPy layout)
+        targets = None
+    return {"version": np.__version__, "targets": targets,
+            "disabled": os.environ.get("NPY_DISABLE_CPU_FEATURES")}
+
+
 def cpu_dispatch() -> dict:
     """The rounding path of this process: ``dem_simd`` (the DEM core's: ``ops`` "wide" or
     "narrow", ``clones`` and the instruction-set ``level`` its hot loops run at),
-    ``cpp_dem_narrow`` (the variable's value or None), ``cpu`` (the CPU's model name),
+    ``numpy_simd`` (NumPy's version, the targets its loops run at, and
+    ``NPY_DISABLE_CPU_FEATURES``), ``cpp_dem_narrow`` (the variable's value or None), ``cpu`` (the CPU's model name),
     ``openblas_coretype`` (the variable's value or None) and ``blas``: one entry per BLAS
     library loaded in the process at the call ({"library": file name, "api", "version",
     "architecture": the kernel set it runs}; a library loaded later, such as dolfinx's on its
@@ -49,6 +65,7 @@ def cpu_dispatch() -> dict:
     except Exception as e:  # noqa: BLE001  (threadpoolctl missing or a library it cannot read)
         blas.append({"error": f"{type(e).__name__}: {e}"})
     return {"dem_simd": dict(_core.simd_dispatch()),
+            "numpy_simd": _numpy_simd(),
             "cpp_dem_narrow": os.environ.get("CPP_DEM_NARROW"),
             "cpu": _cpu_model(),
             "openblas_coretype": os.environ.get("OPENBLAS_CORETYPE"),

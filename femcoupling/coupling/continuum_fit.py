@@ -26,6 +26,7 @@ import dataclasses
 import math
 
 import numpy as np
+from cpp_dem import fixedorder
 
 from femcoupling._checks import FemInputError
 from femcoupling.coupling.handover import fem_to_dem, secant_stiffness
@@ -66,7 +67,7 @@ def friction_angle_deg(stress_pa, cohesion_pa: float = 0.0) -> float:
     FEM's plane the x–z one) is at failure with cohesion ``cohesion_pa``."""
     s = -np.asarray(stress_pa, float)  # compression positive
     m = np.array([[s[0, 0], s[0, 2]], [s[2, 0], s[2, 2]]])
-    lo, hi = np.linalg.eigvalsh(0.5 * (m + m.T))
+    lo, hi = fixedorder.eigvalsh(0.5 * (m + m.T))
     if not hi > 0:
         raise FemInputError(f"stress_pa={np.round(-s, 1).tolist()}: no compression in the plane")
     if cohesion_pa == 0.0:

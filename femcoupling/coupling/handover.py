@@ -22,6 +22,7 @@ import math
 
 import numpy as np
 import numpy.typing as npt
+from cpp_dem import fixedorder
 
 __all__ = ["HandoverError", "TARGET_DIGITS", "WallTargets", "fem_to_dem", "on_grid",
            "secant_stiffness", "secant_tangent", "spd_floor", "target_grid", "targets_on_grid"]
@@ -72,7 +73,9 @@ class WallTargets:
 def _rotation_deg(axes: np.ndarray) -> float:
     """Largest angle between a column of ``axes`` and its nearest coordinate axis, deg."""
     cos = np.max(np.abs(axes), axis=0).clip(-1.0, 1.0)
-    return float(np.degrees(np.arccos(cos)).max())
+    # (math's acos, not NumPy's: NumPy's arccos of an array takes its AVX-512 form on a CPU
+    # that has it, and rounds otherwise there)
+    return max(math.degrees(math.acos(float(c))) for c in cos)
 
 
 def fem_to_dem(stress_fem_pa: npt.ArrayLike, *, min_stress_pa: float = 0.0) -> WallTargets:
@@ -97,8 +100,8 @@ def fem_to_dem(stress_fem_pa: npt.ArrayLike, *, min_stress_pa: float = 0.0) -> W
                                 f"the {name} walls would need {float(normal[a])!r} Pa compression; "
                                 f"must be > {min_stress_pa!r} Pa (servo walls only push)")
     shear = np.array([dem[1, 2], dem[0, 2], dem[0, 1]])
-    w, v = np.linalg.eigh(dem)
-    order = np.argsort(w)[::-1]
+    w, v = fixedorder.eigh(dem)
+    order = np.argsort(w, kind="stable")[::-1]
     w, v = w[order], v[:, order]
     return WallTargets(normal_pa=normal, shear_pa=shear, principal_pa=w, principal_axes=v,
                        rotation_deg=_rotation_deg(v) if np.ptp(w) > 1e-9 * scale else 0.0,
@@ -143,6 +146,24 @@ def targets_on_grid(t: WallTargets) -> WallTargets:
     return dataclasses.replace(g, grid_tension_n_per_m=float(on_grid(t.grid_tension_n_per_m)))
 
 
+def _lstsq_2(x: np.ndarray, y: np.ndarray, rhs: np.ndarray) -> tuple[float, float]:
+    """The least-squares (a, b) of a x + b y = rhs (three equations), the minimum-norm one
+    where x and y are parallel (as NumPy's lstsq, whose LAPACK calls BLAS: another CPU
+    would give another last bit of a calibrated modulus): the normal equations' 2 x 2
+    eigenproblem (:func:`cpp_dem.fixedorder.eigh`) with singular values below 3 eps of the
+    largest dropped."""
+    d = fixedorder.dot
+    g = np.array([[d(x, x), d(x, y)], [d(x, y), d(y, y)]])
+    r = np.array([d(x, rhs), d(y, rhs)])
+    lam, v = fixedorder.eigh(g)
+    keep = lam > (3.0 * np.finfo(float).eps) ** 2 * lam[-1]
+    sol = np.zeros(2)
+    for k in range(2):
+        if keep[k]:
+            sol = sol + v[:, k] * (d(v[:, k], r) / lam[k])
+    return float(sol[0]), float(sol[1])
+
+
 def secant_stiffness(*, stress_increment_pa: npt.ArrayLike, strain_increment: npt.ArrayLike,
                      poisson_bounds: tuple[float, float] = (0.0, 0.45)) -> tuple[float, float]:
     """Isotropic secant (E, nu) of an element from its normal stress and strain increments.
@@ -159,14 +180,14 @@ def secant_stiffness(*, stress_increment_pa: npt.ArrayLike, strain_increment: np
         raise HandoverError(f"stress_increment_pa={ds.tolist()}, strain_increment="
                             f"{de.tolist()}: must be finite (3,) vectors")
     others = ds.sum() - ds
-    A = np.column_stack([ds, -others])  # unknowns (1/E, nu/E)
-    (a, b), *_ = np.linalg.lstsq(A, de, rcond=None)
+    a, b = _lstsq_2(ds, -others, de)  # unknowns (1/E, nu/E)
     nu = b / a if a > 0 else math.nan
     lo, hi = poisson_bounds
     if not (math.isfinite(nu) and lo <= nu <= hi):
         nu = min(max(nu, lo), hi) if math.isfinite(nu) else lo
         x = ds - nu * others
-        a = float(x @ de) / float(x @ x) if float(x @ x) > 0 else math.nan
+        xx = fixedorder.dot(x, x)
+        a = fixedorder.dot(x, de) / xx if xx > 0 else math.nan
     if not (math.isfinite(a) and a > 0):
         raise HandoverError(f"secant stiffness: stress increment {ds.tolist()} Pa and strain "
                             f"increment {de.tolist()} give no positive modulus")
@@ -181,11 +202,11 @@ def spd_floor(t: npt.ArrayLike, min_eig_fraction: float = 1e-3, *,
     directions (sliding contacts near the strength). Raises HandoverError if ``t`` has no
     positive stiffness at all."""
     t = np.asarray(t, float)
-    lam, vec = np.linalg.eigh(0.5 * (t + t.T))
+    lam, vec = fixedorder.eigh(0.5 * (t + t.T))
     if not lam[-1] > 0:
         raise HandoverError(f"{name}: the tangent has no positive stiffness "
                             f"(largest eigenvalue {lam[-1]:.3g} Pa)")
-    return (vec * np.maximum(lam, min_eig_fraction * lam[-1])) @ vec.T
+    return fixedorder.matmul(vec * np.maximum(lam, min_eig_fraction * lam[-1]), vec.T)
 
 
 def secant_tangent(tangent_mandel_pa: npt.ArrayLike, *, strain_increment: npt.ArrayLike,
@@ -215,8 +236,8 @@ def secant_tangent(tangent_mandel_pa: npt.ArrayLike, *, strain_increment: npt.Ar
         raise HandoverError(f"secant_tangent: tangent {t.shape}, strain increment {de.shape}, "
                             f"stress increment {ds.shape}: must be finite 6 x 6, (6,), (6,)")
     t = spd_floor(t, min_eig_fraction, name="secant_tangent")
-    td = t @ de
-    curv_t, curv = float(de @ td), float(ds @ de)
+    td = fixedorder.matmul(t, de)
+    curv_t, curv = fixedorder.dot(de, td), fixedorder.dot(ds, de)
     if not curv_t > 0:  # (only for de = 0)
         raise HandoverError(f"secant_tangent: no strain increment (de . T de = {curv_t:.3g} "
                             "Pa)")

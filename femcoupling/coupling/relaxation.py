@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
+from cpp_dem import fixedorder
 
 from femcoupling._checks import FemInputError
 
@@ -17,10 +18,10 @@ def aitken_factor(omega: float, d_prev: np.ndarray, d: np.ndarray, lo: float = 0
     1 / (1 - a); a 2-cycle (d = -d_prev) halves it. Unchanged if the corrections are equal to
     the last bit."""
     diff = np.asarray(d, float) - np.asarray(d_prev, float)
-    den = float(diff @ diff)
+    den = fixedorder.dot(diff, diff)
     if den == 0.0:
         return float(omega)
-    return float(np.clip(-omega * float(np.asarray(d_prev, float) @ diff) / den, lo, hi))
+    return float(np.clip(-omega * fixedorder.dot(d_prev, diff) / den, lo, hi))
 
 
 def check_relaxation(relaxation) -> str | float:

@@ -39,7 +39,7 @@ import numpy.typing as npt
 from femcoupling import _dolfinx
 from femcoupling._checks import _CELLS_PER_SIZE, _check_cells, _pos, _real
 from femcoupling.fem.gmsh_mesh import GMSH_RANK, gmsh_mesh_on_root
-from femcoupling.fem.quadrature import lu_package
+from femcoupling.fem.quadrature import lu_options
 
 __all__ = ["ElasticBlockResult", "solve_elastic_block"]
 
@@ -247,12 +247,7 @@ def solve_elastic_block(
         L,
         bcs=bcs,
         petsc_options_prefix=petsc_prefix,
-        petsc_options={
-            "ksp_type": "preonly",
-            "pc_type": "lu",
-            "pc_factor_mat_solver_type": lu_package(comm, "mumps"),
-            "ksp_error_if_not_converged": True,
-        },
+        petsc_options={**lu_options(comm), "ksp_error_if_not_converged": True},
     )
     uh = problem.solve()
     assert isinstance(uh, fem.Function)

@@ -8,6 +8,7 @@ import math
 import time
 
 import numpy as np
+from cpp_dem import fixedorder
 
 from femcoupling import _dolfinx
 from femcoupling._checks import FemInputError
@@ -69,7 +70,7 @@ class ElementPart:
         sysq = self.system = QuadratureSystem(
             msh, degree=body.degree, qdeg=body.qdeg, ncomp=body.ncomp,
             strain=lambda w: body.strain(ufl, w), loads=loads,
-            lu=lu_package(self.comm, None))
+            lu=lu_package(self.comm))
         self.V, self.Wv, self.Wt = sysq.V, sysq.Wv, sysq.Wt
         self._points(body.nq)
         self.u, self.u_n, self.du = sysq.u, sysq.u_n, sysq.du
@@ -329,11 +330,11 @@ class ElementPart:
     def _softest(self, n: int = 3) -> str:
         """The ``n`` elements of the current iterate with the smallest tangent eigenvalue:
         index, that eigenvalue (Pa), contacts and mean stress (Pa)."""
-        ev = np.array([np.linalg.eigvalsh(0.5 * (c + c.T))[0] for c in self._tan])
+        ev = np.array([fixedorder.eigvalsh(0.5 * (c + c.T))[0] for c in self._tan])
         contacts = self._last_pool_step.contacts
         return "; ".join(f"element {k}: smallest tangent eigenvalue {ev[k]:.3g} Pa, "
                          f"{contacts[k]} contacts, mean stress {self._sig[k][:2].mean():.4g} Pa"
-                         for k in np.argsort(ev)[:n])
+                         for k in np.argsort(ev, kind="stable")[:n])
 
     def _scale(self) -> float:
         """|F_int| of the current stresses (the tolerance's scale)."""
@@ -423,7 +424,7 @@ class ElementPart:
         unweighted mean.)"""
         r = self.history[-1] if step is None else step
         w = self.element_volumes
-        return w @ np.asarray(r.element_stresses) / w.sum()
+        return fixedorder.weighted_rows(w, r.element_stresses) / math.fsum(w)
 
 
 class _ElementNewton:

@@ -65,7 +65,9 @@ class NonlocalStrain:
         i = np.concatenate([np.arange(self.n), pairs[:, 0], pairs[:, 1]])
         j = np.concatenate([np.arange(self.n), pairs[:, 1], pairs[:, 0]])
         r2 = np.sum((x[i] - x[j]) ** 2, axis=1)
-        w = v[j] * np.exp(-r2 / length_m ** 2)
+        # (math's exp, not NumPy's: NumPy's exp of an array takes its AVX-512 form on a CPU
+        # that has it, and rounds otherwise there)
+        w = v[j] * np.array([math.exp(e) for e in (-r2 / length_m ** 2).tolist()])
         a = csr_matrix((w, (i, j)), shape=(self.n, self.n))
         a.sum_duplicates()
         rows = np.asarray(a.sum(axis=1)).reshape(-1)

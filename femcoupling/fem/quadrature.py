@@ -56,6 +56,7 @@ import math
 from typing import Any, Protocol, runtime_checkable
 
 import numpy as np
+from cpp_dem.fixedorder import sum_squares
 
 from femcoupling import _dolfinx
 from femcoupling._checks import FemInputError
@@ -64,8 +65,9 @@ from femcoupling.coupling.status import newton_acceptance
 from femcoupling.fem.steps import NewtonFailure  # (the one failure type; re-exported)
 
 __all__ = ["QuadratureMaterial", "STRAIN_MEASURES", "NewtonRules", "NewtonOutcome",
-           "NewtonFailure", "QuadratureSystem", "check_material", "newton_solve", "lu_package",
-           "NOISE_PROBE", "PARALLEL_LU"]
+           "NewtonFailure", "QuadratureSystem", "check_material", "newton_solve", "lu_options",
+           "lu_package",
+           "NOISE_PROBE", "PARALLEL_LU", "SERIAL_LU"]
 
 #: the relative change of every increment that measures the elements' noise
 NOISE_PROBE = 1e-9
@@ -87,11 +89,27 @@ REDRAWS = 4
 PARALLEL_LU = "superlu_dist"
 
 
-def lu_package(comm: Any, serial: str | None) -> str | None:
+#: The LU package of the FEM's solves on one rank: None, PETSc's own LU. Its factorization
+#: and solve are plain loops, so a Newton correction has the same bits on every CPU. MUMPS's
+#: dense fronts call BLAS, whose kernel (picked by the CPU, or by ``OPENBLAS_CORETYPE``)
+#: rounds in its own order: 002's soil took 16 load steps under one kernel and 8 under
+#: another (docs/fem.md, "The same bits on every CPU"). "mumps" may be set here, to trade
+#: that for speed; bench/serial_lu.py measures both.
+SERIAL_LU: str | None = None
+
+
+def lu_package(comm: Any) -> str | None:
     """The LU package of a linear solve on ``comm`` (an mpi4py communicator, or None: one
-    rank): ``serial`` on one rank ("mumps", or None for PETSc's own LU), else
-    :data:`PARALLEL_LU`."""
-    return serial if comm is None or comm.size == 1 else PARALLEL_LU
+    rank): :data:`SERIAL_LU` on one rank, :data:`PARALLEL_LU` on more."""
+    return SERIAL_LU if comm is None or comm.size == 1 else PARALLEL_LU
+
+
+def lu_options(comm: Any) -> dict:
+    """PETSc options of a direct solve (``dolfinx.fem.petsc.LinearProblem``) on ``comm``:
+    LU by :func:`lu_package`."""
+    pkg = lu_package(comm)
+    return {"ksp_type": "preonly", "pc_type": "lu",
+            **({"pc_factor_mat_solver_type": pkg} if pkg is not None else {})}
 
 
 #: The strain measures a material may declare (``QuadratureMaterial.strain_measure``): the
@@ -321,7 +339,7 @@ def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any 
                 # tangent (a one-sided change less the tangents' prediction measured the
                 # tangents' error as noise); divided by sqrt 3, its size for a noise of the
                 # one-sided probe's size (sd sqrt 6 against sqrt 2 of one evaluation's)
-                last = 0.0 if d_prev is None else omegas[-1] * float(np.linalg.norm(d_prev))
+                last = 0.0 if d_prev is None else omegas[-1] * math.sqrt(sum_squares(d_prev))
                 size = max(NOISE_PROBE, last / max(problem.increment_norm(), 1e-300))
                 problem.evaluate(first=False, perturb=size)
                 before = 2.0 * before - problem.stresses()
@@ -477,7 +495,16 @@ class QuadratureSystem:
                                    alpha=-1.0)
         self.b.ghostUpdate(addv=PETSc.InsertMode.ADD, mode=PETSc.ScatterMode.REVERSE)
         fx.fem_petsc.set_bc(self.b, bcs, x0=self.u.x.petsc_vec, alpha=-1.0)
-        return self.b.norm()
+        return self.norm(self.b.array)
+
+    def norm(self, owned: np.ndarray) -> float:
+        """The Euclidean norm of a vector whose ``owned`` entries (this rank's) are given,
+        over the ranks: exactly rounded on each rank (``cpp_dem.fixedorder.sum_squares``;
+        PETSc's norm is BLAS's, whose kernel, picked by the CPU, rounds in its own order, and
+        a residual at its tolerance then decides another step on another machine)."""
+        ss = sum_squares(owned)
+        comm = self.mesh.comm
+        return math.sqrt(comm.allreduce(ss) if comm.size > 1 else ss)
 
     def at_boundary_values(self, bcs: list) -> bool:
         """Whether u equals its Dirichlet values ``bcs`` at every constrained dof."""
@@ -500,7 +527,7 @@ class QuadratureSystem:
         self.b_change.ghostUpdate(addv=fx.PETSc.InsertMode.ADD,
                                   mode=fx.PETSc.ScatterMode.REVERSE)
         fx.fem_petsc.set_bc(self.b_change, bcs, alpha=0.0)
-        return float(self.b_change.norm())
+        return self.norm(self.b_change.array)
 
     def correction(self, bcs: list, describe=None) -> np.ndarray:
         """The full Newton correction -du of J du = b (``residual`` first), as an array;

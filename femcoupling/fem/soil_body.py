@@ -42,6 +42,7 @@ from collections.abc import Mapping, Sequence
 from typing import Any
 
 import numpy as np
+from cpp_dem.fixedorder import dot, eigvalsh3_batch, sum_squares
 
 from femcoupling import _dolfinx
 from femcoupling._checks import FemInputError
@@ -140,7 +141,7 @@ class SoilPart:
         self._eps = self._mandel_strain
         sysq = self.system = QuadratureSystem(
             msh, degree=degree, qdeg=qdeg, ncomp=self.ncomp, strain=self._eps,
-            lu=lu_package(self.comm, "mumps"),
+            lu=lu_package(self.comm),
             loads=lambda v: (ufl.dot(self.body_force, v) * dx,
                              ufl.dot(self.traction, v) * ds(geo.FOOTING)))
         self.V, self.Wv, self.Wt, self.dxq = sysq.V, sysq.Wv, sysq.Wt, sysq.dxq
@@ -304,7 +305,7 @@ class SoilPart:
         vec = fx.fem.assemble_vector(self.form_react)
         vec.scatter_reverse(fx.dolfinx.la.InsertMode.add)
         own = vec.array[: self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs]
-        return math.sqrt(self.comm.allreduce(float(own @ own), op=fx.MPI.SUM)) + 1e-300
+        return self.system.norm(own) + 1e-300
 
     def _region_points(self) -> np.ndarray:
         """(n_qp,) the quadrature points that take their stress from a region element."""
@@ -327,14 +328,14 @@ class SoilPart:
         vec = fem.assemble_vector(self._region_form)
         vec.scatter_reverse(fx.dolfinx.la.InsertMode.add)
         own = vec.array[: self.V.dofmap.index_map.size_local * self.V.dofmap.index_map_bs]
-        return math.sqrt(self.comm.allreduce(float(own @ own), op=fx.MPI.SUM)) + 1e-300
+        return self.system.norm(own) + 1e-300
 
     def _largest_stress(self, points: np.ndarray | None) -> float:
         """The largest stress magnitude (the largest absolute eigenvalue of the tensor) of
         the current stress at ``points`` (all points if None), Pa; the largest over the MPI
         ranks."""
         sig = self.sig_cur if points is None else self.sig_cur[points]
-        own = (float(np.abs(np.linalg.eigvalsh(mandel_to_tensor(sig))).max()) if len(sig)
+        own = (float(np.abs(eigvalsh3_batch(mandel_to_tensor(sig))).max()) if len(sig)
                else 0.0)
         return self.comm.allreduce(own, op=self._fx.MPI.MAX) if self.comm.size > 1 else own
 
@@ -499,7 +500,7 @@ class _SoilNewton:
         if m.comm.size > 1 or not m._element_points:
             return ""
         change = np.linalg.norm(np.asarray(m.sig_cur) - before, axis=1)
-        rms = {k: float(np.sqrt(w @ change[sel] ** 2))
+        rms = {k: math.sqrt(dot(w, change[sel] ** 2))
                for k, (sel, w) in m._element_points.items()}
         top = sorted(rms, key=lambda k: (-rms[k], k))[:count]
         return ", ".join(f"{k} {rms[k]:.3g} Pa" for k in top)
@@ -509,7 +510,7 @@ class _SoilNewton:
 
     def increment_norm(self) -> float:
         m = self.m
-        return float(np.linalg.norm(m.u.x.array - m.u_n.x.array))
+        return math.sqrt(sum_squares(m.u.x.array - m.u_n.x.array))
 
     def correction(self) -> np.ndarray:
         return self.m.system.correction(self.bcs)

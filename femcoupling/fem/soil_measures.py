@@ -14,7 +14,7 @@ import numpy.typing as npt
 
 from femcoupling._checks import FemInputError
 from femcoupling.fem import geometry as geo
-from femcoupling.fem.quadrature import lu_package
+from femcoupling.fem.quadrature import lu_options
 from femcoupling.fem.solver import SOIL_ONLY, body_kind
 from femcoupling.materials.continuum import mandel_to_tensor
 
@@ -141,8 +141,7 @@ class SoilMeasures:
         prob = fx.fem_petsc.LinearProblem(
             ufl.inner(t, s) * self.dxq, ufl.inner(self.sig_q, s) * self.dxq,
             petsc_options_prefix=f"femcoupling_proj_{next(_counter)}_",
-            petsc_options={"ksp_type": "preonly", "pc_type": "lu",
-                           "pc_factor_mat_solver_type": lu_package(self.comm, "mumps")})
+            petsc_options=lu_options(self.comm))
         sh = prob.solve()
         tree = dg.bb_tree(self.mesh, self.tdim)
         cand = dg.compute_collisions_points(tree, p3)
@@ -172,7 +171,13 @@ class SoilMeasures:
 
         P1 = fem.functionspace(self.mesh, ("Lagrange", 1, (self.tdim,)))
         u1 = fem.Function(P1, name="displacement_m")
-        u1.interpolate(self.u)
+        # (the vertices' values copied: the first dofs of a Lagrange cell are its vertices'
+        # in every degree. dolfinx's interpolate between the spaces goes through basix's
+        # matrices, which BLAS rounds as its kernel does: another CPU, other last bits)
+        nv = P1.dofmap.list.shape[1]
+        bs = self.tdim
+        u1.x.array.reshape(-1, bs)[P1.dofmap.list.reshape(-1)] = self.u.x.array.reshape(
+            -1, bs)[self.V.dofmap.list[:, :nv].reshape(-1)]
         T = fem.functionspace(self.mesh, ("DG", 0, (3, 3)))
         sig = fem.Function(T, name="stress_pa")
         sig.x.array[:] = mandel_to_tensor(self.cell_mean_stress()).reshape(-1)[

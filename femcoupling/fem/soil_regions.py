@@ -5,9 +5,11 @@ mesh, spaces and state."""
 
 from __future__ import annotations
 
+import math
 from typing import Any
 
 import numpy as np
+from cpp_dem import fixedorder
 
 from femcoupling._checks import FemInputError
 from femcoupling.fem import geometry as geo
@@ -46,13 +48,13 @@ class RegionPoints:
 
     def mean(self, increment: np.ndarray) -> np.ndarray:
         """The points' volume-mean strain increment (ncomp,)."""
-        return self.weights @ increment
+        return fixedorder.weighted_rows(self.weights, increment)
 
     def _answer(self, increment: np.ndarray, mean: np.ndarray, answer: tuple):
         ds, c = answer
         c = stiffness_block(c, self.ncomp)
         self.stress = (self.stress_n + tensor_to_mandel(ds, self.ncomp)
-                       + (increment - mean) @ c.T)
+                       + fixedorder.rows_matmul(increment - mean, c.T))
         return self.stress, np.broadcast_to(c, (len(self.stress),) + c.shape)
 
     @staticmethod
@@ -244,7 +246,7 @@ class RegionMaterials:
                 raise FemInputError(f"reach_m={reach_m!r}: no soil cell of region {name!r} "
                                     f"within it of band cell {c}; give a larger reach")
             w = volume[near]
-            out[key] = (float(w @ pressure[near] / w.sum()),
+            out[key] = (fixedorder.dot(w, pressure[near]) / math.fsum(w),
                         float(self.body.layers[i].thickness_m * cms[c, 0]))
         return out
 

@@ -27,6 +27,7 @@ import math
 
 import numpy as np
 import numpy.typing as npt
+from cpp_dem import fixedorder
 
 from femcoupling._checks import FemInputError, _pos, _real
 
@@ -89,7 +90,7 @@ def isotropic_projection(c_mandel_pa: npt.ArrayLike) -> tuple[float, float]:
     G = (tr C - 3K) / 10 (the projection on 3K P_vol + 2G P_dev)."""
     c = np.asarray(c_mandel_pa, float)
     one = mandel_identity(6)
-    k = float(one @ c @ one) / 9.0
+    k = fixedorder.dot(one, fixedorder.matmul(c, one)) / 9.0
     return k, (float(np.trace(c)) - 3.0 * k) / 10.0
 
 
@@ -131,7 +132,7 @@ class AnisotropicElastic(LinearElastic):
             raise FemInputError(f"c_mandel_pa: not symmetric (largest |C - C^T| "
                                 f"{float(np.abs(c - c.T).max()):.3g} Pa of {scale:.3g} Pa)")
         c = 0.5 * (c + c.T)
-        low = float(np.linalg.eigvalsh(c).min())
+        low = float(fixedorder.eigvalsh(c).min())
         if not low > 0:
             raise FemInputError(f"c_mandel_pa: not positive definite (smallest eigenvalue "
                                 f"{low:.3g} Pa); a stiffness must store energy")

@@ -17,6 +17,7 @@ Stresses tension positive, Pa.
 from __future__ import annotations
 
 import numpy as np
+from cpp_dem import fixedorder
 
 from femcoupling._checks import FemInputError
 from femcoupling.coupling.handover import HandoverError, spd_floor
@@ -81,8 +82,8 @@ def secant_update(tangent: np.ndarray, strain: np.ndarray, stress: np.ndarray,
         t = spd_floor(tangent, min_eig_fraction, name="secant_update")
     except HandoverError:  # (no positive stiffness at all)
         return None
-    td = t @ strain
-    curv_t, curv = float(strain @ td), float(stress @ strain)
+    td = fixedorder.matmul(t, strain)
+    curv_t, curv = fixedorder.dot(strain, td), fixedorder.dot(stress, strain)
     if not (curv_t > 0 and curv > 1e-12 * curv_t):
         return None
     return t - np.outer(td, td) / curv_t + np.outer(stress, stress) / curv
@@ -162,7 +163,7 @@ class ElementPoolMaterial(StartStress):
         for k, c in enumerate(tan):
             ok = bool(np.all(np.isfinite(c)))
             if ok:
-                ev = np.linalg.eigvalsh(0.5 * (c + c.T))
+                ev = fixedorder.eigvalsh(0.5 * (c + c.T))
                 ok = ev[0] >= -0.1 * ev[-1]
             if not ok and last is not None:
                 tan[k] = last[k]

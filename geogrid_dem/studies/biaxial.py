@@ -24,6 +24,7 @@ import time
 from collections.abc import Callable, Sequence
 
 import numpy as np
+from cpp_dem import fixedorder
 
 __all__ = ["fem_dem_biaxial", "direct_biaxial", "summarise", "at_strain", "rve_angles",
            "WeakZoneFactory", "weak_zone"]
@@ -182,7 +183,7 @@ def rve_angles(res: dict) -> dict:
     phi = math.degrees(math.asin((s1[k] - s3[k]) / (s1[k] + s3[k])))
     near = np.abs(e1 - e1[k]) <= 0.005
     gam = 2 * e1 - ev
-    slope = np.polyfit(gam[near], ev[near], 1)[0] if near.sum() >= 3 else float("nan")
+    slope = fixedorder.line_slope(gam[near], ev[near]) if near.sum() >= 3 else float("nan")
     psi = math.degrees(math.asin(float(np.clip(-slope, -1, 1))))
     return {"phi_peak_deg": phi, "psi_deg": psi, "peak_axial_strain": float(e1[k])}
 

@@ -48,6 +48,7 @@ import time
 from pathlib import Path
 
 import numpy as np
+from cpp_dem import fixedorder
 
 from femcoupling.coupling.handover import target_grid
 from femcoupling.fem.steps import NewtonFailure
@@ -593,7 +594,8 @@ def run_multiscale(p: FootingParams, variant: str, seed: int, soil, client, out:
         group.close()
     if failed is None:
         hier = {**step_statuses(steps),
-                "element_strain_increment": (vol @ strains / vol.sum()).tolist()}
+                "element_strain_increment": (fixedorder.weighted_rows(vol, strains)
+                                             / math.fsum(vol)).tolist()}
         st = hierarchical_status(hier, -np.diag(m.region_strain("zone") - e0), math.nan)
         status, reason = st.status, st.reason
     else:

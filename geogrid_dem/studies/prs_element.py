@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from cpp_dem import apply_threads
+from cpp_dem import apply_threads, fixedorder
 from cpp_dem.elements import box as _element
 from cpp_dem.elements.box import ElementParams, grid_stiffness_per_metre
 from cpp_dem.io.figures import save_figure
@@ -329,7 +329,8 @@ def run_cell_elements(p: Params, out: Path, variant: str, m, load) -> dict:
             **step_statuses(steps),
             "element_runs": group.calls, "dem_s": group.dem_s, "cells": len(cells),
             # their volume mean: the region's (each cell's element strains as its cell)
-            "element_strain_increment": (vol @ strains / vol.sum()).tolist(),
+            "element_strain_increment": (fixedorder.weighted_rows(vol, strains)
+                                         / math.fsum(vol)).tolist(),
             "cell_grains": runner.n, "preparation_s": t_prep,
             "cell_strain_increments": strains.tolist(),
             "cell_stresses_final_pa": stresses.tolist(),

@@ -29,6 +29,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from cpp_dem import fixedorder
 from cpp_dem._core import ParameterError
 from cpp_dem.build.packing import loose_cloud
 
@@ -70,76 +71,10 @@ def _as_spheres(centres, radii):
     return c, r
 
 
-def _rotate(m: list, s: float, tau: float, i: int, j: int, k: int, l: int) -> None:
-    g, h = m[i][j], m[k][l]
-    m[i][j] = g - s * (h + g * tau)
-    m[k][l] = h + s * (g - h * tau)
-
-
-def _jacobi_eigh3(a) -> tuple[np.ndarray, np.ndarray]:
-    """Eigenvalues (ascending) and unit eigenvectors (columns) of the symmetric 3 x 3 ``a``, by
-    cyclic Jacobi rotations in plain floating point (+, -, *, / and sqrt, in a fixed order):
-    the same bits on every CPU and BLAS. (LAPACK's eigh rounds as its BLAS kernel does, and a
-    clump's principal frame decides every member's place: another kernel grew into another
-    sample of a chaotic packing.)"""
-    n = 3
-    m = [[float(a[i][j]) for j in range(n)] for i in range(n)]
-    v = [[1.0 if i == j else 0.0 for j in range(n)] for i in range(n)]
-    d = [m[i][i] for i in range(n)]
-    b = list(d)
-    z = [0.0] * n
-    for sweep in range(1, 51):
-        off = abs(m[0][1]) + abs(m[0][2]) + abs(m[1][2])
-        if off == 0.0:
-            break
-        tresh = 0.2 * off / (n * n) if sweep < 4 else 0.0
-        for p in range(n - 1):
-            for q in range(p + 1, n):
-                g = 100.0 * abs(m[p][q])
-                if sweep > 4 and abs(d[p]) + g == abs(d[p]) and abs(d[q]) + g == abs(d[q]):
-                    m[p][q] = 0.0
-                elif abs(m[p][q]) > tresh:
-                    h = d[q] - d[p]
-                    if abs(h) + g == abs(h):
-                        t = m[p][q] / h
-                    else:
-                        theta = 0.5 * h / m[p][q]
-                        t = 1.0 / (abs(theta) + math.sqrt(1.0 + theta * theta))
-                        if theta < 0.0:
-                            t = -t
-                    c = 1.0 / math.sqrt(1.0 + t * t)
-                    s = t * c
-                    tau = s / (1.0 + c)
-                    h = t * m[p][q]
-                    z[p] -= h
-                    z[q] += h
-                    d[p] -= h
-                    d[q] += h
-                    m[p][q] = 0.0
-                    for j in range(p):
-                        _rotate(m, s, tau, j, p, j, q)
-                    for j in range(p + 1, q):
-                        _rotate(m, s, tau, p, j, j, q)
-                    for j in range(q + 1, n):
-                        _rotate(m, s, tau, p, j, q, j)
-                    for j in range(n):
-                        _rotate(v, s, tau, j, p, j, q)
-        for p in range(n):
-            b[p] += z[p]
-            d[p] = b[p]
-            z[p] = 0.0
-    else:
-        raise ArithmeticError(f"inertia={np.asarray(a).tolist()}: Jacobi rotations did not "
-                              "converge in 50 sweeps (not a finite symmetric tensor?)")
-    order = sorted(range(n), key=lambda i: (d[i], i))
-    return (np.array([d[i] for i in order]),
-            np.array([[v[r][i] for i in order] for r in range(n)]))
-
-
 def _principal(inertia: np.ndarray):
     """Principal moments (ascending) and axes (columns, a right-handed frame) of ``inertia``,
-    the same bits on every CPU and BLAS (:func:`_jacobi_eigh3`)."""
-    w, v = _jacobi_eigh3(0.5 * (inertia + inertia.T))
+    the same bits on every CPU and BLAS (:func:`cpp_dem.fixedorder.eigh`)."""
+    w, v = fixedorder.eigh(0.5 * (inertia + inertia.T))
     det = (v[0, 0] * (v[1, 1] * v[2, 2] - v[1, 2] * v[2, 1])
            - v[0, 1] * (v[1, 0] * v[2, 2] - v[1, 2] * v[2, 0])
            + v[0, 2] * (v[1, 0] * v[2, 1] - v[1, 1] * v[2, 0]))
@@ -191,7 +126,7 @@ def _chord_moments(Y: np.ndarray, Z: np.ndarray, c: np.ndarray, r: np.ndarray):
     s = np.sqrt(np.where(hit, s2, 0.0))
     a = np.where(hit, c[None, :, 0] - s, np.inf)
     b = np.where(hit, c[None, :, 0] + s, -np.inf)
-    order = np.argsort(a, axis=1)
+    order = np.argsort(a, axis=1, kind="stable")
     a = np.take_along_axis(a, order, axis=1)
     b = np.take_along_axis(b, order, axis=1)
     # Merge the sorted intervals line by line (vectorised across lines). The chords a line
@@ -206,7 +141,7 @@ def _chord_moments(Y: np.ndarray, Z: np.ndarray, c: np.ndarray, r: np.ndarray):
         hi_ = np.where(ok, hi_, 0.0)
         m0[mask] += hi_ - lo_
         m1[mask] += 0.5 * (hi_ ** 2 - lo_ ** 2)
-        m2[mask] += (hi_ ** 3 - lo_ ** 3) / 3.0
+        m2[mask] += (hi_ * hi_ * hi_ - lo_ * lo_ * lo_) / 3.0
 
     for k in range(1, int(hit.sum(axis=1).max())):
         ak, bk = a[:, k], b[:, k]
@@ -249,7 +184,7 @@ def _union_mass_properties(c: np.ndarray, r: np.ndarray, cells: int) -> MassProp
         return MassProperties(vol, c[0].copy(), np.eye(3) * i, np.full(3, i), np.eye(3))
     if _disjoint(c, r):
         # No two members overlap: the sum of the spheres is exact (parallel axes).
-        v = 4.0 / 3.0 * math.pi * r ** 3
+        v = 4.0 / 3.0 * math.pi * (r * r * r)
         vol = float(v.sum())
         cen = (v[:, None] * c).sum(axis=0) / vol
         x = c - cen
@@ -446,7 +381,7 @@ def clump_cloud(templates, diameters, lo, hi, *, seed: int = 0, max_tries: int =
     # to its clump (loose_cloud returns the spheres in space order).
     rb_key = rb * (1 + 1e-12 * np.arange(len(rb)))
     pos, rr = loose_cloud(rb_key, lo, hi, seed=seed, max_tries=max_tries)
-    order = np.argsort(rb_key)
+    order = np.argsort(rb_key, kind="stable")
     idx = order[np.searchsorted(rb_key[order], rr)]
     return ClumpCloud(which[idx], pos, random_orientations(len(d), seed + 1), scale[idx])
 

@@ -140,7 +140,7 @@ def _sequential_addition(radii, lo, hi, *, seed: int, max_tries: int,
         if not placed:
             volume = (np.prod(hi_a - lo_a) if inside is None
                       else np.pi / 4 * (hi_a[0] - lo_a[0]) ** 2 * (hi_a[2] - lo_a[2]))
-            solid = float(np.sum(4.0 / 3.0 * np.pi * r**3) / volume)
+            solid = float(np.sum(4.0 / 3.0 * np.pi * (r * r * r)) / volume)
             name = "loose_cloud" if region == "box" else f"loose_{region}"
             raise ParameterError(f"{name}: could not place sphere {k} (r={rk}) in "
                                  f"{max_tries} tries; the spheres fill {solid:.3f} of the "

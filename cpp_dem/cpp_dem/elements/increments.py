@@ -24,6 +24,7 @@ import warnings
 import numpy as np
 
 from cpp_dem._checks import positive
+from cpp_dem import fixedorder
 from cpp_dem._core import ParameterError
 
 __all__ = ["ContactLossWarning", "MAX_STRAIN_INCREMENT", "check_strain_call",
@@ -51,7 +52,7 @@ def principal_stretch(de: np.ndarray) -> float:
     """The largest |lambda - 1| of the principal stretches lambda of F = I + ``de`` (the
     square roots of the eigenvalues of F^T F): 0 for a rigid rotation."""
     f = np.eye(3) + np.asarray(de, float)
-    lam = np.sqrt(np.clip(np.linalg.eigvalsh(f.T @ f), 0.0, None))
+    lam = np.sqrt(np.clip(fixedorder.eigvalsh(fixedorder.matmul3(f.T, f)), 0.0, None))
     return float(np.abs(lam - 1.0).max())
 
 

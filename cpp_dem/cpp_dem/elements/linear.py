@@ -17,6 +17,7 @@ from types import SimpleNamespace
 
 import numpy as np
 
+from cpp_dem import fixedorder
 from cpp_dem._core import ParameterError
 from cpp_dem.elements import state_format
 
@@ -67,8 +68,8 @@ class LinearElement:
         if d.shape != (3, 3):
             raise ParameterError(f"de: shape {d.shape}; a 3 x 3 displacement gradient")
         e = 0.5 * (d + d.T)
-        ds = self.tangent @ np.array([e[0, 0], e[1, 1], e[2, 2], 2 * e[1, 2], 2 * e[0, 2],
-                                      2 * e[0, 1]])
+        ds = fixedorder.matmul(self.tangent, [e[0, 0], e[1, 1], e[2, 2], 2 * e[1, 2],
+                                              2 * e[0, 2], 2 * e[0, 1]])
         self._stress = self._stress + np.array([[ds[0], ds[5], ds[4]], [ds[5], ds[1], ds[3]],
                                                 [ds[4], ds[3], ds[2]]])
         return self.stress()

@@ -33,7 +33,7 @@ import numpy as np
 
 from cpp_dem import _core
 from cpp_dem.measure import inertial
-from cpp_dem import measure
+from cpp_dem import fixedorder, measure
 from cpp_dem.protocols import periodic
 from cpp_dem.protocols import prep
 from cpp_dem._core import CellController, ParameterError
@@ -77,6 +77,16 @@ class IncrementReport:
     unbalanced_force: float    #: at the end, -
     relaxed: bool              #: the unbalanced force went below the asked tolerance
     cpu_s: float               #: wall-clock seconds of the call
+
+
+#: Significant digits (of the largest entry) of a periodic element's network tangent
+#: (``DemElement.network_tangent``). Its sparse LU's dense supernodes call BLAS, whose kernel
+#: (picked by the CPU, or ``OPENBLAS_CORETYPE``) rounds in its own order: two kernels gave
+#: tangents 2e-16 apart (relative), and a Newton on those Jacobians took other iterates, so
+#: the footing's elements followed another path. On a grid of 6 digits an entry moves with
+#: a chance of about 1e-10 an evaluation; a Jacobian 1e-6 off its own value costs Newton
+#: nothing (docs/fem.md, "The same bits on every CPU").
+TANGENT_DIGITS = 6
 
 
 class DemElement:
@@ -256,8 +266,8 @@ class DemElement:
         not hidden, since ``stress`` symmetrises."""
         s = self._raw_stress()
         k = 0.5 * (s - s.T)
-        n = float(np.linalg.norm(s))
-        return float(np.linalg.norm(k)) / n if n > 0 else 0.0
+        n = math.sqrt(fixedorder.sum_squares(s))
+        return math.sqrt(fixedorder.sum_squares(k)) / n if n > 0 else 0.0
 
     def strain(self) -> np.ndarray:
         """Small strain since the element was set up (-, tension positive): for a periodic
@@ -366,7 +376,7 @@ class DemElement:
         p = abs(float(np.trace(raw))) / 3.0
         if not (rate > 0 and p > 0 and len(r)):
             return
-        rho = float(np.asarray(sc.masses)[grains].sum() / (4.0 / 3.0 * math.pi * np.sum(r**3)))
+        rho = float(np.asarray(sc.masses)[grains].sum() / (4.0 / 3.0 * math.pi * np.sum(r * r * r)))
         if not (math.isfinite(rho) and rho > 0):
             return  # (members of clumps carry no mass of their own)
         d = float(2.0 * r.mean())
@@ -430,7 +440,8 @@ class DemElement:
                         rotations: bool = True) -> tuple[np.ndarray, dict]:
         """The tangent from the contact network (Kruyt–Rothenburg type stiffness assembly,
         ``cpp_dem.measure.network_tangent.network_tangent``): 6 x 6 Voigt, Pa, tension
-        positive, and its info dict. Periodic elements only.
+        positive, on the grid of :data:`TANGENT_DIGITS` significant digits of its largest
+        entry (the same bits on every CPU), and its info dict. Periodic elements only.
 
         A reinforced cell's bonds (its sheet) are in the network: each bond a spring pair
         along and across its normal, in tension too, that does not slide, with its parallel
@@ -449,11 +460,14 @@ class DemElement:
         if self.band_thickness is not None:
             h = np.asarray(self.scene.cell_matrix)
             normal = np.cross(h[:, 0], h[:, 1])
-            normal /= np.linalg.norm(normal)
+            normal /= fixedorder.norm(normal)
             ratio = periodic.cell_height(self.scene) / self.band_thickness
             d = d + np.einsum("ij,k,m->ijkm", -ratio * periodic.bond_stress(self.scene),
                               normal, normal)
-        return tangent.to_voigt(d), info
+        # (on a grid: the sparse LU's supernodes go through BLAS, whose kernel, picked by the
+        # CPU, rounds in its own order, and a last bit of a Newton's Jacobian changes its
+        # iterates, and so the elements' path)
+        return fixedorder.on_grid(tangent.to_voigt(d), TANGENT_DIGITS), info
 
     def network_data(self) -> dict:
         """The active pair contacts, and a reinforced cell's bonds after them, as the arrays
@@ -613,15 +627,13 @@ def _voigt(s: np.ndarray) -> np.ndarray:
 def _rate_for(de: np.ndarray, n: int, dt: float) -> np.ndarray:
     """The constant velocity gradient L (1/s) whose n steps of the cell's map (Cayley's form,
     ``PeriodicCell::step_map``) give exactly F = I + de: A = (I + de)^(1/n) and
-    L dt = 2 (A - I)(A + I)^-1."""
-    from scipy.linalg import fractional_matrix_power
-
+    L dt = 2 (A - I)(A + I)^-1 (``cpp_dem.fixedorder.cayley_rate``: in a fixed order, so
+    the same bits on every CPU and BLAS kernel)."""
     f = np.eye(3) + de
-    if not np.linalg.det(f) > 0:
+    if not fixedorder.det3(f) > 0:
         raise ParameterError("de: I + de must have a positive determinant (the increment "
                              "would turn the cell inside out)")
-    a = np.real(fractional_matrix_power(f, 1.0 / n))
-    return 2.0 / dt * (a - np.eye(3)) @ np.linalg.inv(a + np.eye(3))
+    return fixedorder.cayley_rate(f, n) / dt
 
 
 __all__ = ["DemElement", "IncrementReport", "VOIGT", "voigt_strain"]

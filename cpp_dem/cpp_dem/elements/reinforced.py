@@ -248,7 +248,7 @@ def _grains_beside_sheet(scene, n: int, sheet_radius: float, radius_mean, spread
     radii = 1.0 + spread * (2.0 * rng.random(n) - 1.0)
     room = lx * ly * (lz - 2 * sheet_radius)
     if radius_mean is None:
-        radii *= (0.25 * room / np.sum(4.0 / 3.0 * np.pi * radii**3)) ** (1.0 / 3.0)
+        radii *= math.cbrt(0.25 * room / float(np.sum(4.0 / 3.0 * np.pi * (radii * radii * radii))))
     else:
         radii *= radius_mean
     seeds = rng.integers(0, 2**31, size=2)

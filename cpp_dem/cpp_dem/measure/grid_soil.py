@@ -113,7 +113,7 @@ def _strings_of_member(grid, scene, m: int) -> list[np.ndarray]:
     out = []
     for s in sorted(strings):
         ids = np.array(sorted(strings[s]))
-        out.append(ids[np.argsort(pos[ids - first, ax])])
+        out.append(ids[np.argsort(pos[ids - first, ax], kind="stable")])
     cross = 1 - ax
     out.sort(key=lambda ids: float(np.mean(pos[ids - first, cross])))
     return out
@@ -425,7 +425,7 @@ def single_string_entries(scene, grid, *, margin: float = ENTRY_MARGIN) -> dict:
         lines = []
         for s in strings:
             p = pos[s]
-            o = np.argsort(p[:, ax])
+            o = np.argsort(p[:, ax], kind="stable")
             lines.append((np.interp(x, p[o, ax], p[o, cross]), np.interp(x, p[o, ax], p[o, 2])))
         for i in range(len(strings) - 1):
             (c0, z0), (c1, z1) = lines[i], lines[i + 1]

@@ -45,10 +45,12 @@ and the residual of the solved system is reported.
 from __future__ import annotations
 
 import functools
+import math
 import time
 
 import numpy as np
 
+from cpp_dem import fixedorder
 from cpp_dem._core import ParameterError
 
 #: Voigt order of the 6 x 6 tangents.
@@ -273,7 +275,8 @@ def network_tangent(*, i, j, branch, normal, li, lj, kn, ks, fn, fs, tan_phi, vo
         q += lu.solve(rhs_rel - kg @ q)
     q += q_spin
     res = kg @ q - rhs
-    residual = float(np.linalg.norm(res) / max(np.linalg.norm(rhs), 1e-300))
+    residual = math.sqrt(fixedorder.sum_squares(res)) / max(
+        math.sqrt(fixedorder.sum_squares(rhs)), 1e-300)
     sigma = -np.einsum("ci,cj->ij", wt[:, None] * f, l) / volume
     D = np.zeros((3, 3, 3, 3))
     A = np.zeros((3, 3, 3, 3))

@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from cpp_dem import measure
+from cpp_dem import fixedorder, measure
 from cpp_dem.protocols import prep
 from cpp_dem._core import CellController, ParameterError
 from cpp_dem.build.packing import loose_cloud
@@ -52,7 +52,9 @@ def cube_cloud(n: int, radius_mean: float, radius_spread: float, seed: int,
                              "sequential addition jams above it)")
     rng = np.random.default_rng(seed)
     radii = radius_mean * (1.0 + radius_spread * (2.0 * rng.random(n) - 1.0))
-    edge = float((np.sum(4.0 / 3.0 * np.pi * radii**3) / solid_fraction) ** (1.0 / 3.0))
+    # (r * r * r, not r**3: NumPy's power of an array rounds otherwise on a CPU without
+    # AVX-512, and the cell's edge decides where every sphere goes)
+    edge = math.cbrt(float(np.sum(4.0 / 3.0 * np.pi * (radii * radii * radii))) / solid_fraction)
     centers, radii = periodic_cloud(radii, edge, seed=seed)
     return centers, radii, edge
 
@@ -97,7 +99,9 @@ def default_max_rate(scene, fraction: float = 1e-4) -> float:
 
 def deformation_gradient(scene) -> np.ndarray:
     """F = H H_ref^-1 (-): the cell's deformation since it was set."""
-    return np.asarray(scene.cell_matrix) @ np.linalg.inv(np.asarray(scene.cell_reference))
+    # (in a fixed order: NumPy's 3 x 3 product and inverse are BLAS's and LAPACK's, which
+    # round as the CPU's kernel does; an element's strain is read from this)
+    return fixedorder.matmul3(scene.cell_matrix, fixedorder.inv3(scene.cell_reference))
 
 
 def small_strain(scene) -> np.ndarray:
@@ -315,7 +319,8 @@ def bond_branches(scene) -> np.ndarray:
     x = np.asarray(scene.positions)
     h = np.asarray(scene.cell_matrix)
     d = x[ab[:, 1]] - x[ab[:, 0]]
-    return d - np.round(np.linalg.solve(h, d.T).T) @ h.T
+    return d - fixedorder.rows_matmul(np.round(fixedorder.rows_matmul(d, fixedorder.inv3(h).T)),
+                                      h.T)
 
 
 def bond_stress(scene) -> np.ndarray:
