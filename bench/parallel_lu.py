@@ -84,21 +84,76 @@ def worker(lu: str, fine_size: float, out: Path) -> None:
                                    "settlement_m": results["settlement_m"][-1]}))
 
 
+def add_body_args(ap, out_file: str) -> None:
+    """The options of a bench on this body: ``--fine-size``, ``--out`` (for ``out_file``)
+    and the hidden ``--worker LU FILE`` (one run)."""
+    ap.add_argument("--fine-size", type=float, default=None,
+                    help="FEM cell size under the footing, m (default 0.025)")
+    ap.add_argument("--out", type=Path, default=None, help=f"folder for {out_file}")
+    ap.add_argument("--worker", nargs=2, metavar=("LU", "FILE"), help=argparse.SUPPRESS)
+
+
+def fine_size(ap, a) -> float:
+    """The body's fine size (m): ``--fine-size``, else 0.1 with --smoke and 0.025 without;
+    refused unless > 0."""
+    fine = a.fine_size if a.fine_size is not None else (0.1 if a.smoke else 0.025)
+    if not fine > 0:
+        ap.error(f"--fine-size={fine}: must be > 0 (m)")
+    return fine
+
+
+def package_rows(got: dict) -> list:
+    """One row per package of ``got`` (package -> its runs' worker JSON): runs, distinct
+    results, load steps, the FEM's mean wall time and its time per Newton iteration."""
+    rows = []
+    for lu, r in got.items():
+        rows.append({"package": lu, "runs": len(r), "distinct_results": len({x["hash"] for x in r}),
+                     "steps": sorted({x["steps"] for x in r}),
+                     "wall_s_mean": sum(x["wall_s"] for x in r) / len(r),
+                     "s_per_newton_iteration": sum(x["wall_s"] for x in r)
+                     / sum(x["newton_iterations"] for x in r),
+                     "settlements_m": sorted({x["settlement_m"] for x in r})})
+    return rows
+
+
+def package_table(rows: list) -> None:
+    """:func:`package_rows`' rows as a table on stderr."""
+    markdown_table(rows, [("package", lambda r: r["package"]),
+                          ("runs", lambda r: str(r["runs"])),
+                          ("distinct results", lambda r: str(r["distinct_results"])),
+                          ("steps", lambda r: ",".join(map(str, r["steps"]))),
+                          ("FEM wall s", lambda r: f"{r['wall_s_mean']:.2f}"),
+                          ("s per Newton iteration",
+                           lambda r: f"{r['s_per_newton_iteration']:.3f}")])
+
+
+def report(a, bench: str, rows: list, fields: dict) -> int:
+    """The bench's summary: ``fields``, the rows and the first package's time over the
+    second's (whole run and per Newton iteration); as a table on stderr, in
+    ``<--out>/<bench>.json`` and as the last line on stdout."""
+    first, second = rows[0]["package"], rows[1]["package"]
+    summary = {"bench": bench, **fields, "packages": rows,
+               f"time_ratio_{first}_over_{second}": rows[0]["wall_s_mean"]
+               / rows[1]["wall_s_mean"],
+               f"iteration_time_ratio_{first}_over_{second}":
+                   rows[0]["s_per_newton_iteration"] / rows[1]["s_per_newton_iteration"]}
+    package_table(rows)
+    if a.out is not None:
+        write_json(a.out / f"{bench}.json", summary)
+    print(json.dumps(summary), flush=True)
+    return 0
+
+
 def main(argv=None) -> int:
     ap = _cli.BenchParser(out="folder", description=__doc__.split("\n\n")[0])
     ap.add_argument("--smoke", action="store_true", help="fine size 0.1 m, 2 runs each")
     ap.add_argument("--runs", type=int, default=None, help="runs per package (default 6)")
-    ap.add_argument("--fine-size", type=float, default=None,
-                    help="FEM cell size under the footing, m (default 0.025)")
     ap.add_argument("--ranks", type=int, default=2, help="MPI ranks (at least 2)")
     ap.add_argument("--load", choices=("on", "off"), default="on",
                     help="two busy processes beside the runs (default on)")
-    ap.add_argument("--out", type=Path, default=None, help="folder for parallel_lu.json")
-    ap.add_argument("--worker", nargs=2, metavar=("LU", "FILE"), help=argparse.SUPPRESS)
+    add_body_args(ap, "parallel_lu.json")
     a = ap.parse_args(argv)
-    fine = a.fine_size if a.fine_size is not None else (0.1 if a.smoke else 0.025)
-    if not fine > 0:
-        ap.error(f"--fine-size={fine}: must be > 0 (m)")
+    fine = fine_size(ap, a)
     if a.worker:
         worker(a.worker[0], fine, Path(a.worker[1]))
         return 0
@@ -134,32 +189,10 @@ def main(argv=None) -> int:
     finally:
         for b in busy:
             b.kill()
-    rows = []
-    for lu in PACKAGES:
-        r = got[lu]
-        rows.append({"package": lu, "runs": len(r), "distinct_results": len({x["hash"] for x in r}),
-                     "steps": sorted({x["steps"] for x in r}),
-                     "wall_s_mean": sum(x["wall_s"] for x in r) / len(r),
-                     "s_per_newton_iteration": sum(x["wall_s"] for x in r)
-                     / sum(x["newton_iterations"] for x in r),
-                     "settlements_m": sorted({x["settlement_m"] for x in r})})
-    summary = {"bench": "parallel_lu", "ranks": a.ranks, "fine_size_m": fine,
-               "dofs": got[PACKAGES[0]][0]["dofs"], "load": a.load, "packages": rows,
-               "time_ratio_superlu_dist_over_mumps": rows[0]["wall_s_mean"]
-               / rows[1]["wall_s_mean"],
-               "iteration_time_ratio_superlu_dist_over_mumps":
-                   rows[0]["s_per_newton_iteration"] / rows[1]["s_per_newton_iteration"]}
-    markdown_table(rows, [("package", lambda r: r["package"]),
-                          ("runs", lambda r: str(r["runs"])),
-                          ("distinct results", lambda r: str(r["distinct_results"])),
-                          ("steps", lambda r: ",".join(map(str, r["steps"]))),
-                          ("FEM wall s", lambda r: f"{r['wall_s_mean']:.2f}"),
-                          ("s per Newton iteration",
-                           lambda r: f"{r['s_per_newton_iteration']:.3f}")])
-    if a.out is not None:
-        write_json(a.out / "parallel_lu.json", summary)
-    print(json.dumps(summary), flush=True)
-    return 0
+    rows = package_rows(got)
+    return report(a, "parallel_lu", rows, {"ranks": a.ranks, "fine_size_m": fine,
+                                           "dofs": got[PACKAGES[0]][0]["dofs"],
+                                           "load": a.load})
 
 
 if __name__ == "__main__":
