@@ -1,5 +1,6 @@
 """The reinforced soil body (``femcoupling.fem.model.FemModel`` (the soil body)) under MPI, run by
-tests/test_soil_body_mpi.py as ``mpiexec -n N python tests/mpi_soil_body.py OUT``.
+tests/test_soil_body_mpi.py as ``mpiexec -n N python tests/mpi_soil_body.py OUT [LU]`` (LU: the
+package on one rank, femcoupling.fem.quadrature.SERIAL_LU; PETSc's own by default).
 
 A Drucker-Prager soil (max_newton=60: no step is cut, so every rank count takes the same
 steps) with its self-weight, a prestressed geogrid layer and two element
@@ -16,12 +17,16 @@ import json
 import sys
 
 
-def main(out: str) -> None:
+def main(out: str, lu: str | None = None) -> None:
     from femcoupling.fem.geometry import ElementRegion, GeogridLayer, ReinforcedSoilBody
     from femcoupling.fem.mpi_points import world
     from femcoupling.fem.model import FemModel
     from femcoupling.materials.continuum import DruckerPrager, GeogridLayerMaterial
 
+    if lu is not None:  # (the LU on one rank: SERIAL_LU, PETSc's own by default)
+        import femcoupling.fem.quadrature as quadrature
+
+        quadrature.SERIAL_LU = lu
     comm = world()
     body = ReinforcedSoilBody(
         width_m=3.0, height_m=2.0, footing_half_width_m=0.5,
@@ -59,4 +64,4 @@ def main(out: str) -> None:
 
 
 if __name__ == "__main__":
-    main(sys.argv[1])
+    main(sys.argv[1], sys.argv[2] if len(sys.argv) > 2 else None)

@@ -1,8 +1,9 @@
-"""002's element, DEM only, gives the same bits on the DEM core's two forms and under another
-BLAS kernel (docs/core.md, "The same bits on every x86-64 CPU"): its clumps of gravel built
-(principal frames, members, quaternions), its woven grid, the growth, the servo stages, the
-rest hold and the measures. Before, each was another chaotic sample: 002's smoke read another
-soil and another verdict on each path (docs/prs_element_002.md, "Smoke size")."""
+"""002's element, DEM only, gives the same bits on the DEM core's two forms, with NumPy's
+baseline loops and under another BLAS kernel (docs/core.md, "The same bits on every x86-64
+CPU"): its clumps of gravel built (principal frames, members, quaternions), its woven grid,
+the growth, the servo stages, the rest hold and the measures. Before, each was another
+chaotic sample: 002's smoke read another soil and another verdict on each path
+(docs/prs_element_002.md, "Smoke size")."""
 
 from __future__ import annotations
 
@@ -40,7 +41,9 @@ def _run(out: Path, env: dict) -> tuple[dict, dict]:
 def test_the_element_is_the_same_bits_on_the_narrow_form_and_another_blas_kernel(tmp_path):
     # (the narrow form with this CPU's BLAS kernel, against the wide form with Haswell's: a
     # run equal to both paths' changes at once)
-    a = _run(tmp_path / "narrow", {"CPP_DEM_NARROW": "1"})
+    # (the narrow side also with NumPy's baseline loops: a CPU without AVX2 has neither)
+    a = _run(tmp_path / "narrow", {"CPP_DEM_NARROW": "1",
+                                   "NPY_DISABLE_CPU_FEATURES": "X86_V3 X86_V4 AVX512_ICL AVX512_SPR"})
     b = _run(tmp_path / "haswell", {"OPENBLAS_CORETYPE": "Haswell", "CPP_DEM_NARROW": "0"})
     assert len(a[1]) >= 4 and a[1].keys() == b[1].keys()
     for name in a[1]:

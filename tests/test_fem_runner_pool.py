@@ -212,9 +212,13 @@ def test_periodic_elements_are_prepared_once_on_their_workers():
     from femcoupling.materials.dem_elements import PeriodicRegionElement
 
     runner = PeriodicRegionElement(n=100, tol=0.01)
+    # (two iterations: the second starts from the kept elements. A third took targets from
+    # the second's 100-grain secants, which a chaotic element can make anything: one sample
+    # gave E = 113 MPa with nu = -0.09, and the next targets a tension the walls cannot
+    # impose, HandoverError, a test of the coupling's physics, not of the cache)
     res = two_way(two_region_model(), regions=["a", "b"], load=_footing,
-                  element_runner=runner, tol=1e-3, max_iterations=3, workers=2)
-    assert res.iterations == 3
+                  element_runner=runner, tol=1e-3, max_iterations=2, workers=2)
+    assert res.iterations == 2
     for r in ("a", "b"):
         got = res.responses[r]
         assert got.info["prepared_from_cache"]  # kept on its worker, not prepared again

@@ -158,14 +158,10 @@ for k in range(20):
                             stress_increment_pa=1e7 * e6 + rng.normal(size=6) * 1e2).tobytes())
     m = rng.normal(size=(200, 3, 3))
     h.update(fo.eigvalsh3_batch(m + np.swapaxes(m, 1, 2)).tobytes())
-# what a packing is built from: a periodic cloud's cell, sieve-curve radii, volumes
+# what a periodic element is built from: its cloud's cell
 from cpp_dem.protocols.periodic import cube_cloud
-from cpp_dem.build.psd import radii_from_psd, expected_count
 c, r, edge = cube_cloud(80, 1e-3, 0.2, 104, 0.25)  # (a seed whose r**3 rounded otherwise)
 h.update(c.tobytes()); h.update(r.tobytes()); h.update(np.float64(edge).tobytes())
-sizes, passing = [1e-3, 2e-3, 4e-3, 8e-3], [0.0, 0.2, 0.7, 1.0]
-h.update(radii_from_psd(sizes, passing, 500, seed=2).tobytes())
-h.update(np.float64(expected_count(sizes, passing, 1e-3, by="count")).tobytes())
 # a periodic element's network tangent (a sparse LU whose supernodes call BLAS), strained
 from cpp_dem.elements.periodic import DemElement
 el = DemElement.periodic(60, stress=40e3, seed=3, prep_friction_deg=0.0)
@@ -177,7 +173,7 @@ print(h.hexdigest())
 
 def test_the_small_arithmetic_does_not_depend_on_the_blas_kernel():
     """A periodic cell's rate, the handover's principal frame, secant modulus and secant
-    tangent, batched eigenvalues, a periodic cloud and sieve-curve radii, and a strained
+    tangent, batched eigenvalues, a periodic cloud, and a strained
     periodic element's network tangent and strain: the same bits under three BLAS kernels
     and NumPy's baseline loops (LAPACK's eigh and lstsq, SciPy's fractional power, BLAS's
     matmul, the sparse LU's supernodes and NumPy's array power gave others)."""

@@ -173,6 +173,48 @@ def test_newton_rules_on_a_synthetic_problem():
         NewtonRules(rtol=1e-3, max_newton=5, probe_size=2.0)
 
 
+class _Atan:
+    """One unknown whose internal force is atan(u), unloaded, from u = 1.45: full Newton
+    corrections overshoot further each time (|u| 1.45, 1.55, 1.85, 2.9, ...), as a
+    Drucker–Prager body's points flipping between the cone and its apex made them cycle."""
+
+    def __init__(self) -> None:
+        self.u, self.sig = 1.45, 0.0
+
+    def evaluate(self, first, perturb=0.0):
+        self.sig = math.atan(self.u)
+
+    def residual(self):
+        return abs(self.sig)
+
+    def force_scale(self):
+        return 1.0
+
+    def at_boundary_values(self):
+        return True
+
+    def correction(self):
+        return np.array([-self.sig * (1.0 + self.u * self.u)])
+
+    def move(self, d, w):
+        self.u += w * float(d[0])
+
+
+def test_a_smooth_models_newton_backtracks_where_the_residual_rises():
+    with pytest.raises(NewtonFailure, match="no convergence in 7 iterations"):
+        newton_solve(_Atan(), NewtonRules(rtol=1e-12, max_newton=7))
+    p = _Atan()
+    out = newton_solve(p, NewtonRules(rtol=1e-12, max_newton=7, line_search=2))
+    assert out.status == "converged" and abs(p.u) < 1e-12
+    # a model with DEM points (a noisy residual) does not take it
+    from femcoupling import FemInputError
+
+    with pytest.raises(FemInputError, match="line_search"):
+        NewtonRules(rtol=1e-3, max_newton=5, probe=True, line_search=2)
+    with pytest.raises(FemInputError, match="line_search"):
+        NewtonRules(rtol=1e-3, max_newton=5, line_search=-1)
+
+
 class _ShrinkingSpring(_Spring):
     """A _Spring whose noisy points carry a tenth of their force after the noise probe's
     iterate (a zone's elements unloading between two iterates of a step)."""

@@ -43,7 +43,11 @@ def _run(script: str, ranks: int, d: Path, *extra: str) -> dict:
 def runs(tmp_path_factory):
     if not MPIEXEC.exists():
         pytest.skip(f"no mpiexec beside {sys.executable}")
-    return {ranks: _run("mpi_soil_body.py", ranks, tmp_path_factory.mktemp(f"soil{ranks}"))
+    # (one LU package on both rank counts: the serial run with 2 ranks' SuperLU_DIST. PETSc's
+    # own LU, the serial default, rounds otherwise, and this body's Newton at the cone's apex
+    # turns a last bit into another step: with it one step stalls at 3.5e-2 and is cut)
+    return {ranks: _run("mpi_soil_body.py", ranks, tmp_path_factory.mktemp(f"soil{ranks}"),
+                        *(["superlu_dist"] if ranks == 1 else []))
             for ranks in (1, 2)}
 
 

@@ -148,20 +148,27 @@ def targets_on_grid(t: WallTargets) -> WallTargets:
 
 def _lstsq_2(x: np.ndarray, y: np.ndarray, rhs: np.ndarray) -> tuple[float, float]:
     """The least-squares (a, b) of a x + b y = rhs (three equations), the minimum-norm one
-    where x and y are parallel (as NumPy's lstsq, whose LAPACK calls BLAS: another CPU
-    would give another last bit of a calibrated modulus): the normal equations' 2 x 2
-    eigenproblem (:func:`cpp_dem.fixedorder.eigh`) with singular values below 3 eps of the
-    largest dropped."""
+    where x and y are parallel to within 3 eps (as NumPy's lstsq, whose LAPACK calls BLAS:
+    another CPU would give another last bit of a calibrated modulus): Gram–Schmidt on the
+    two columns, every sum exactly rounded (``cpp_dem.fixedorder.dot``)."""
     d = fixedorder.dot
-    g = np.array([[d(x, x), d(x, y)], [d(x, y), d(y, y)]])
-    r = np.array([d(x, rhs), d(y, rhs)])
-    lam, v = fixedorder.eigh(g)
-    keep = lam > (3.0 * np.finfo(float).eps) ** 2 * lam[-1]
-    sol = np.zeros(2)
-    for k in range(2):
-        if keep[k]:
-            sol = sol + v[:, k] * (d(v[:, k], r) / lam[k])
-    return float(sol[0]), float(sol[1])
+    nx, ny = math.sqrt(d(x, x)), math.sqrt(d(y, y))
+    if nx == 0.0 and ny == 0.0:
+        return 0.0, 0.0
+    if nx == 0.0:  # (only y: its own fit)
+        return 0.0, d(y, rhs) / (ny * ny)
+    q1 = x / nx
+    r12 = d(q1, y)
+    w = y - r12 * q1
+    r22 = math.sqrt(d(w, w))
+    if r22 <= 3.0 * np.finfo(float).eps * max(nx, ny):
+        # parallel: A = x [1, c]; the minimum-norm solution t / (1 + c^2) (1, c)
+        c = r12 / nx
+        t = d(x, rhs) / (nx * nx)
+        return t / (1.0 + c * c), c * t / (1.0 + c * c)
+    q2 = w / r22
+    b = d(q2, rhs) / r22
+    return (d(q1, rhs) - r12 * b) / nx, b
 
 
 def secant_stiffness(*, stress_increment_pa: npt.ArrayLike, strain_increment: npt.ArrayLike,

@@ -67,7 +67,7 @@ from femcoupling.fem.steps import NewtonFailure  # (the one failure type; re-exp
 __all__ = ["QuadratureMaterial", "STRAIN_MEASURES", "NewtonRules", "NewtonOutcome",
            "NewtonFailure", "QuadratureSystem", "check_material", "newton_solve", "lu_options",
            "lu_package",
-           "NOISE_PROBE", "PARALLEL_LU", "SERIAL_LU"]
+           "LINE_SEARCH_RISE", "NOISE_PROBE", "PARALLEL_LU", "SERIAL_LU"]
 
 #: the relative change of every increment that measures the elements' noise
 NOISE_PROBE = 1e-9
@@ -80,6 +80,10 @@ NOISE_PROBE = 1e-9
 #: machine's failed the run. A later iterate of the same step is another draw; one within the
 #: same bounds is as good an answer (docs/coupling_newton.md).
 REDRAWS = 4
+
+#: A smooth model's backtracking (``NewtonRules.line_search``) goes back where the residual
+#: rose above this many times the residual before the correction (1.0: any rise).
+LINE_SEARCH_RISE = 1.0
 
 #: The LU package of the FEM's solves on more than one MPI rank (PETSc's name). SuperLU_DIST
 #: gives the same output for the same input: tests/mpi_soil_body.py on 2 ranks, with two
@@ -205,6 +209,12 @@ class NewtonRules:
     #: more iterates (each a new draw of the elements' noise) and accepts the first within
     #: the same bounds (the noise and the ceiling), before the step is cut (module doc)
     redraws: int = REDRAWS
+    #: a smooth model's (no DEM points) backtracking: where the residual rose over Newton's
+    #: last correction (not a step's first, which puts the displacement on its boundary
+    #: values) above :data:`LINE_SEARCH_RISE` times its value before, the iterate goes back by
+    #: half that correction, up to this many times in a row (0: none). A Drucker–Prager soil's points that flip between the cone and its apex made
+    #: full corrections cycle: a step stuck at 3.5e-2 of the force scale for 100 iterations.
+    line_search: int = 0
 
     def __post_init__(self) -> None:
         if not (self.probe_size == "correction" or (isinstance(self.probe_size, float)
@@ -213,6 +223,12 @@ class NewtonRules:
                                 "1), or 'correction'")
         if not (isinstance(self.redraws, int) and self.redraws >= 0):
             raise FemInputError(f"redraws={self.redraws!r}: must be a whole number >= 0")
+        if not (isinstance(self.line_search, int) and self.line_search >= 0):
+            raise FemInputError(f"line_search={self.line_search!r}: must be a whole number "
+                                ">= 0")
+        if self.line_search and self.probe:
+            raise FemInputError("line_search: only for a model without DEM points (probe="
+                                "False): a noisy residual's rise is a draw, not an overshoot")
 
 
 @dataclasses.dataclass
@@ -290,6 +306,8 @@ def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any 
     drawn: list[float] = []  # the residuals since the first stall: draws of the noise
     above: str | None = None  # the ceiling failure that the redraws try to get under
     redraws = 0
+    back_from = None  # (the residual before the last correction, it, its factor)
+    backtracks = 0
     for it in range(rules.max_newton + 1):
         problem.evaluate(first=(it == 0))
         rnorm = problem.residual()
@@ -300,6 +318,19 @@ def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any 
             drawn.append(rel)
         if log is not None:
             log(f"iteration {it}: residual {rel:.3e}")
+        if not math.isfinite(rel) and not back_from:
+            raise NewtonFailure(f"Newton: the residual is not finite at iteration {it}")
+        rose = back_from and (not math.isfinite(rel) or rel > LINE_SEARCH_RISE * back_from[0])
+        if rose and backtracks < rules.line_search and it < rules.max_newton:
+            # the residual rose over the last correction: back by half of it
+            backtracks += 1
+            half = 0.5 * back_from[2]
+            back_from = (back_from[0], back_from[1], half)
+            problem.move(back_from[1], -half)
+            omegas[-1] -= half
+            if log is not None:
+                log(f"line search: back by half the correction ({backtracks})")
+            continue
         if not math.isfinite(rel):
             raise NewtonFailure(f"Newton: the residual is not finite at iteration {it}")
         # (before any correction the displacement may be off its new Dirichlet values: their
@@ -409,6 +440,9 @@ def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any 
         omegas.append(w_k)
         d_prev = dk
         problem.move(dk, w_k)
+        backtracks = 0
+        # (a step's first correction is never backtracked: it sets the boundary values)
+        back_from = (rel, dk, w_k) if rules.line_search and it > 0 else None
     raise AssertionError("unreachable")
 
 

@@ -141,7 +141,7 @@ def _chord_moments(Y: np.ndarray, Z: np.ndarray, c: np.ndarray, r: np.ndarray):
         hi_ = np.where(ok, hi_, 0.0)
         m0[mask] += hi_ - lo_
         m1[mask] += 0.5 * (hi_ ** 2 - lo_ ** 2)
-        m2[mask] += (hi_ * hi_ * hi_ - lo_ * lo_ * lo_) / 3.0
+        m2[mask] += (fixedorder.powers(hi_, 3) - fixedorder.powers(lo_, 3)) / 3.0
 
     for k in range(1, int(hit.sum(axis=1).max())):
         ak, bk = a[:, k], b[:, k]
@@ -184,7 +184,7 @@ def _union_mass_properties(c: np.ndarray, r: np.ndarray, cells: int) -> MassProp
         return MassProperties(vol, c[0].copy(), np.eye(3) * i, np.full(3, i), np.eye(3))
     if _disjoint(c, r):
         # No two members overlap: the sum of the spheres is exact (parallel axes).
-        v = 4.0 / 3.0 * math.pi * (r * r * r)
+        v = 4.0 / 3.0 * math.pi * fixedorder.powers(r, 3)
         vol = float(v.sum())
         cen = (v[:, None] * c).sum(axis=0) / vol
         x = c - cen

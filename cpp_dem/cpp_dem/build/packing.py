@@ -8,6 +8,7 @@ from typing import Callable
 
 import numpy as np
 
+from cpp_dem import fixedorder
 from cpp_dem._core import ParameterError
 
 CSV_HEADER = "x,y,z,r"
@@ -140,7 +141,7 @@ def _sequential_addition(radii, lo, hi, *, seed: int, max_tries: int,
         if not placed:
             volume = (np.prod(hi_a - lo_a) if inside is None
                       else np.pi / 4 * (hi_a[0] - lo_a[0]) ** 2 * (hi_a[2] - lo_a[2]))
-            solid = float(np.sum(4.0 / 3.0 * np.pi * (r * r * r)) / volume)
+            solid = float(np.sum(4.0 / 3.0 * np.pi * fixedorder.powers(r, 3)) / volume)
             name = "loose_cloud" if region == "box" else f"loose_{region}"
             raise ParameterError(f"{name}: could not place sphere {k} (r={rk}) in "
                                  f"{max_tries} tries; the spheres fill {solid:.3f} of the "

@@ -80,7 +80,7 @@ def _count_weights(d: np.ndarray, p: np.ndarray, by: str) -> np.ndarray:
     else:
         # Mass uniform in d within the class: number ~ int dP/dd / d^3 dd.
         da, db = d[:-1], d[1:]
-        w = dp / (db - da) * 0.5 * (1.0 / (da * da) - 1.0 / (db * db))
+        w = dp / (db - da) * 0.5 * (da**-2 - db**-2)
     return w / w.sum()
 
 
@@ -93,11 +93,10 @@ def expected_count(sizes, passing, solid_volume: float, by: str = "mass") -> flo
     da, db = d[:-1], d[1:]
     if by == "mass":
         # N = V_s int dP / v(d), v = pi d^3 / 6.
-        inv_v = np.sum(dp / (db - da) * 6.0 / math.pi * 0.5 * (1.0 / (da * da) - 1.0 / (db * db)))
+        inv_v = np.sum(dp / (db - da) * 6.0 / math.pi * 0.5 * (da**-2 - db**-2))
         return float(solid_volume * inv_v)
     # by count: mean volume = sum dP_k mean_{uniform d in class} pi d^3 / 6.
-    mean_v = np.sum(dp * math.pi / 6.0 * ((db * db) * (db * db) - (da * da) * (da * da))
-                    / (4.0 * (db - da)))
+    mean_v = np.sum(dp * math.pi / 6.0 * (db**4 - da**4) / (4.0 * (db - da)))
     return float(solid_volume / mean_v)
 
 
@@ -178,8 +177,7 @@ def radii_from_psd(sizes, passing, n: int, *, by: str = "mass", seed: int = 0) -
         diam = da + t * (db - da)
     else:
         # Inverse of F(x) = (da^-2 - x^-2) / (da^-2 - db^-2).
-        ia, ib = 1.0 / (da * da), 1.0 / (db * db)
-        diam = 1.0 / np.sqrt(ia - t * (ia - ib))
+        diam = (da**-2 - t * (da**-2 - db**-2)) ** -0.5
     return rng.permutation(0.5 * diam)
 
 
@@ -202,5 +200,5 @@ def radii_uniform(mean: float, dispersion: float, n: int, *, seed: int = 0) -> n
 def passing_of(radii, sizes, *, by: str = "mass") -> np.ndarray:
     """Cumulative fraction (by mass or count) of the grains with diameter < each size."""
     d = 2 * np.asarray(radii, float)
-    w = d * d * d if by == "mass" else np.ones_like(d)
+    w = d**3 if by == "mass" else np.ones_like(d)
     return np.array([w[d < s].sum() for s in np.asarray(sizes, float)]) / w.sum()

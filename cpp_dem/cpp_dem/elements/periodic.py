@@ -376,7 +376,8 @@ class DemElement:
         p = abs(float(np.trace(raw))) / 3.0
         if not (rate > 0 and p > 0 and len(r)):
             return
-        rho = float(np.asarray(sc.masses)[grains].sum() / (4.0 / 3.0 * math.pi * np.sum(r * r * r)))
+        rho = float(np.asarray(sc.masses)[grains].sum()
+                    / (4.0 / 3.0 * math.pi * np.sum(fixedorder.powers(r, 3))))
         if not (math.isfinite(rho) and rho > 0):
             return  # (members of clumps carry no mass of their own)
         d = float(2.0 * r.mean())

@@ -25,6 +25,7 @@ import math
 
 import numpy as np
 
+from cpp_dem import fixedorder
 from cpp_dem._core import ParameterError
 from cpp_dem.build import woven
 from cpp_dem.build.packing import loose_cloud
@@ -248,7 +249,8 @@ def _grains_beside_sheet(scene, n: int, sheet_radius: float, radius_mean, spread
     radii = 1.0 + spread * (2.0 * rng.random(n) - 1.0)
     room = lx * ly * (lz - 2 * sheet_radius)
     if radius_mean is None:
-        radii *= math.cbrt(0.25 * room / float(np.sum(4.0 / 3.0 * np.pi * (radii * radii * radii))))
+        radii *= math.pow(0.25 * room / float(np.sum(4.0 / 3.0 * np.pi
+                                                     * fixedorder.powers(radii, 3))), 1.0 / 3.0)
     else:
         radii *= radius_mean
     seeds = rng.integers(0, 2**31, size=2)

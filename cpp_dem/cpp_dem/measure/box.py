@@ -16,7 +16,7 @@ import math
 
 import numpy as np
 
-from cpp_dem import _core
+from cpp_dem import _core, fixedorder
 
 
 def _cell(scene, walls) -> bool:
@@ -117,7 +117,7 @@ def grain_diameters(scene) -> np.ndarray:
     """Equivalent-volume diameters of the grains, m: free spheres 2 r, clumps (6 V / pi)^(1/3)
     with V the union's volume (order: the free spheres by id, then the clumps)."""
     r, v = _free_radii_and_clump_volumes(scene)
-    return np.concatenate([2.0 * r, np.array([math.cbrt(6.0 * x / math.pi) for x in v.tolist()])])
+    return np.concatenate([2.0 * r, fixedorder.powers(6.0 * v / np.pi, 1.0 / 3.0)])
 
 
 def solid_volume(scene) -> float:
@@ -125,7 +125,7 @@ def solid_volume(scene) -> float:
     twice; see porosity), clumps the volume of the union of their members (mass / density:
     overlaps inside a clump count once). Geogrid nodes are not grains and are left out."""
     r, v = _free_radii_and_clump_volumes(scene)
-    return float(np.sum(4.0 / 3.0 * np.pi * (r * r * r))) + float(np.sum(v))
+    return float(np.sum(4.0 / 3.0 * np.pi * fixedorder.powers(r, 3))) + float(np.sum(v))
 
 
 def porosity(scene, walls) -> float:
@@ -278,7 +278,8 @@ def slab_solid_volume(z: np.ndarray, r: np.ndarray, z0: float, z1: float) -> flo
     a = np.clip(z0 - z, -r, r)
     b = np.clip(z1 - z, -r, r)
     # integral of pi (r^2 - u^2) du from a to b
-    return float(np.sum(np.pi * (r * r * (b - a) - (b * b * b - a * a * a) / 3.0)))
+    return float(np.sum(np.pi * (r**2 * (b - a)
+                                 - (fixedorder.powers(b, 3) - fixedorder.powers(a, 3)) / 3.0)))
 
 
 def interior_porosity(pos: np.ndarray, radii: np.ndarray, box, inset: float,
@@ -291,8 +292,7 @@ def interior_porosity(pos: np.ndarray, radii: np.ndarray, box, inset: float,
     if np.any(hi - lo < 2 * inset):  # too thin for a meaningful count
         return float("nan")
     inside = np.all((pos >= lo) & (pos < hi), axis=1)
-    ri = radii[inside]
-    solid = float(np.sum(4.0 / 3.0 * np.pi * (ri * ri * ri)))
+    solid = float(np.sum(4.0 / 3.0 * np.pi * fixedorder.powers(radii[inside], 3)))
     return 1.0 - solid / float(np.prod(hi - lo))
 
 

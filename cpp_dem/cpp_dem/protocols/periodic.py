@@ -52,9 +52,10 @@ def cube_cloud(n: int, radius_mean: float, radius_spread: float, seed: int,
                              "sequential addition jams above it)")
     rng = np.random.default_rng(seed)
     radii = radius_mean * (1.0 + radius_spread * (2.0 * rng.random(n) - 1.0))
-    # (r * r * r, not r**3: NumPy's power of an array rounds otherwise on a CPU without
+    # (libm's pow, not NumPy's r**3: an array's power rounds otherwise on a CPU without
     # AVX-512, and the cell's edge decides where every sphere goes)
-    edge = math.cbrt(float(np.sum(4.0 / 3.0 * np.pi * (radii * radii * radii))) / solid_fraction)
+    edge = math.pow(float(np.sum(4.0 / 3.0 * np.pi * fixedorder.powers(radii, 3)))
+                    / solid_fraction, 1.0 / 3.0)
     centers, radii = periodic_cloud(radii, edge, seed=seed)
     return centers, radii, edge
 
