@@ -102,6 +102,14 @@ def fine_size(ap, a) -> float:
     return fine
 
 
+def run_count(ap, a, *, smoke: int, full: int) -> int:
+    """``--runs``, else ``smoke`` with --smoke and ``full`` without; refused unless >= 1."""
+    runs = a.runs if a.runs is not None else (smoke if a.smoke else full)
+    if runs < 1:
+        ap.error(f"--runs={runs}: must be >= 1")
+    return runs
+
+
 def package_rows(got: dict) -> list:
     """One row per package of ``got`` (package -> its runs' worker JSON): runs, distinct
     results, load steps, the FEM's mean wall time and its time per Newton iteration."""
@@ -157,9 +165,7 @@ def main(argv=None) -> int:
     if a.worker:
         worker(a.worker[0], fine, Path(a.worker[1]))
         return 0
-    runs = a.runs if a.runs is not None else (2 if a.smoke else 6)
-    if runs < 1:
-        ap.error(f"--runs={runs}: must be >= 1")
+    runs = run_count(ap, a, smoke=2, full=6)
     if a.ranks < 2:
         ap.error(f"--ranks={a.ranks}: must be >= 2 (on one rank no parallel LU is used)")
     mpiexec = Path(sys.executable).parent / "mpiexec"

@@ -34,7 +34,7 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE))
 
 import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
-from parallel_lu import add_body_args, fine_size, package_rows, report  # noqa: E402
+from parallel_lu import add_body_args, fine_size, package_rows, report, run_count  # noqa: E402
 
 PACKAGES = ("petsc", "mumps")
 KERNELS = ("default", "Haswell", "Sandybridge")
@@ -59,9 +59,7 @@ def main(argv=None) -> int:
     if a.worker:
         worker(a.worker[0], fine, Path(a.worker[1]))
         return 0
-    runs = a.runs if a.runs is not None else (1 if a.smoke else 3)
-    if runs < 1:
-        ap.error(f"--runs={runs}: must be >= 1")
+    runs = run_count(ap, a, smoke=1, full=3)
     got: dict = {lu: [] for lu in PACKAGES}
     t_start = time.perf_counter()
     total = runs * len(PACKAGES) * len(KERNELS)
