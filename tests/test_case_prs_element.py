@@ -81,7 +81,7 @@ def test_fem_to_dem_smoke_outputs_and_servo_hold(smoke):
     assert "## Warnings" in report
     assert all(w in report for v in ("RE", "PRS") for w in s["elements"][v]["warnings"])
     # the FEM layer's tension across the region, handed to the grid ends (issue 18): PRS
-    # near T_p; a layer in compression (RE's initial state, measured -46 N/m) is handed as 0
+    # below T_p (it gave some to the soil); a layer in compression (RE's initial state, measured -46 N/m) is handed as 0
     import h5py
 
     for v in ("RE", "PRS"):
@@ -89,7 +89,11 @@ def test_fem_to_dem_smoke_outputs_and_servo_hold(smoke):
         e = s["elements"][v]
         assert e["grid_tension_n_per_m"] == [max(t, 0.0) for t in fem_t]
         assert e["grid_end_force_n"] == pytest.approx(0.095 / 9 * max(fem_t[1], 0), rel=1e-2)
-    assert 0.8 * 2000 < s["fem"]["PRS"]["grid_tension_n_per_m"][0] < 1.2 * 2000
+    # the prestressed layer keeps part of T_p across the region once equilibrated with the
+    # soil (it shortens as the soil gives: the softer the soil, the more it loses; measured
+    # 1530 N/m of 2000 on the calibrated soil of 1.23 MPa, 1950 on the given 50 MPa, checked
+    # in test_one_soil_on_both_scales_by_default)
+    assert 0.5 * 2000 < s["fem"]["PRS"]["grid_tension_n_per_m"][0] < 2000
     with h5py.File(out / "handover.h5") as f:
         np.testing.assert_allclose(f["grid_tension_n_per_m"][:],
                                    [s["fem"][v]["grid_tension_n_per_m"][1] for v in ("RE", "PRS")])
@@ -205,9 +209,11 @@ def test_preset_sets_the_fem_mesh_and_the_two_way_tolerance(name, h, tol):
 def test_one_soil_on_both_scales_by_default(smoke, given_smoke):
     """The default FEM soil is calibrated on the case's own element (issue 37): by passes,
     the element driven along its region's path until it strains within [1/2, 2] times its
-    FEM region (smoke, measured: 112 x with the given soil, then 0.20 x, then 0.98 x: three
-    passes); no cohesion, nu set to its limit where the secant's is above it, said. The run
-    then holds: RE and PRS elements within 2 x their regions (measured 0.98 and 1.58). The
+    FEM region (smoke, measured: 87 x with the given soil, then 0.29 x with its secant, then
+    0.91 x with E interpolated between the two: three passes; the secants alone swung 2.3 x,
+    0.41 x and never held); no cohesion, nu set to its limit where the secant's is above it,
+    said. The run then holds: RE and PRS elements within 2 x their regions (measured 0.91 and
+    0.88). The
     given soil (--soil given, 50 MPa) leaves the element straining over 50 x its region."""
     out, proc = smoke
     assert proc.returncode == 0, proc.stdout[-3000:] + proc.stderr[-3000:]
@@ -240,6 +246,11 @@ def test_one_soil_on_both_scales_by_default(smoke, given_smoke):
     for v in ("RE", "PRS"):
         assert g["elements"][v]["dem_fem_strain_ratio"] > 10
         assert any("strains" in w for w in g["elements"][v]["warnings"])
+    # the prestress lost to the soil's give falls with its stiffness: the layer on the given
+    # 50 MPa soil keeps more of T_p than on the calibrated (softer) one, both less than T_p
+    t_cal = s["fem"]["PRS"]["grid_tension_n_per_m"][0]
+    t_given = g["fem"]["PRS"]["grid_tension_n_per_m"][0]
+    assert c["young_pa"] < 50e6 and t_cal < t_given < 2000.0
 
 
 def test_two_way_keeps_the_prepared_element_between_iterations(tmp_path, capsys):

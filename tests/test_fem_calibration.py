@@ -69,3 +69,61 @@ def test_bad_input_is_refused():
         fit_along_path(np.eye(2), FINAL)
     with pytest.raises(FemInputError, match="beyond"):
         fit_along_path(INITIAL, FINAL, beyond=0.5)
+
+
+def _calibrate_synthetic(update, steep: float, young0_pa: float, passes: int = 4,
+                         root_pa: float = 1.2e6):
+    """The calibration's loop on a synthetic element whose secant falls with the FEM soil's
+    modulus E (ln secant = -steep ln(E/root) + 0.5 sin(ln(E/root)), relative to the root);
+    the element's strain ratio is E / secant. Returns the rows and whether a pass after the
+    first held the ratio within [1/2, 2]."""
+    rows, E = [], young0_pa
+    for k in range(1, passes + 1):
+        x = math.log(E / root_pa)
+        sec = root_pa * math.exp(-steep * x + 0.5 * math.sin(x))
+        rows.append({"pass": k, "soil_young_pa": E, "dem_fem_strain_ratio": E / sec,
+                     "secant_young_pa": sec})
+        if k > 1 and 0.5 <= E / sec <= 2.0:
+            return rows, True
+        E = update(rows)
+    return rows, False
+
+
+def test_calibration_update_brackets_a_steep_element():
+    """The calibration's next E (``next_soil_young``): the plain secant update (the pass's
+    element secant) swings about the root when the element answers the FEM soil's modulus
+    more steeply than 1 : 1 in log-log, and never lands inside [1/2, 2] in four passes (the
+    smoke element did this: ratios 87, 0.29, 2.3, 0.41); once two passes bracket ratio 1 the
+    update interpolates inside the bracket and lands within four passes, from either side,
+    at every steepness tried. Before a bracket it is the element's secant."""
+    from geogrid_dem.studies.prs_element import next_soil_young
+
+    def plain(rows):
+        return rows[-1]["secant_young_pa"]
+
+    def bracketed(rows):
+        E, rule = next_soil_young(rows)
+        r = [row["dem_fem_strain_ratio"] for row in rows]
+        if min(r) < 1 < max(r):  # inside the closest bracket
+            lo = max((row for row in rows if row["dem_fem_strain_ratio"] < 1),
+                     key=lambda row: row["dem_fem_strain_ratio"])["soil_young_pa"]
+            hi = min((row for row in rows if row["dem_fem_strain_ratio"] > 1),
+                     key=lambda row: row["dem_fem_strain_ratio"])["soil_young_pa"]
+            assert min(lo, hi) < E < max(lo, hi) and rule.startswith("interpolated")
+        else:
+            assert E == rows[-1]["secant_young_pa"] and "secant" in rule
+        return E
+
+    for steep in (0.5, 1.0, 1.3, 2.0, 3.0):
+        for E0 in (50e6, 0.05e6):
+            rows, held = _calibrate_synthetic(bracketed, steep, E0)
+            assert held, (steep, E0, [r["dem_fem_strain_ratio"] for r in rows])
+            if steep >= 1.0:
+                rows, held = _calibrate_synthetic(plain, steep, E0)
+                assert not held, (steep, E0)
+    # a ratio that is not finite (strains not both measured) is not a bracket's end
+    rows = [{"pass": 1, "soil_young_pa": 5e6, "dem_fem_strain_ratio": float("nan"),
+             "secant_young_pa": 2e6},
+            {"pass": 2, "soil_young_pa": 2e6, "dem_fem_strain_ratio": 0.3,
+             "secant_young_pa": 3e6}]
+    assert next_soil_young(rows)[0] == 3e6
