@@ -158,6 +158,15 @@ for k in range(20):
                             stress_increment_pa=1e7 * e6 + rng.normal(size=6) * 1e2).tobytes())
     m = rng.normal(size=(200, 3, 3))
     h.update(fo.eigvalsh3_batch(m + np.swapaxes(m, 1, 2)).tobytes())
+# a sieve curve's samples (by mass and by count; NumPy's array power gave other radii for
+# 200 seeds of 200 on NumPy's baseline loops) and the count it expects
+from cpp_dem.build import psd
+sizes, passing = np.array([0.005, 0.01, 0.02, 0.03]), np.array([0.0, 0.3, 0.7, 1.0])
+for s in range(20):
+    for by in ("mass", "count"):
+        h.update(psd.radii_from_psd(sizes, passing, 300, seed=s, by=by).tobytes())
+        h.update(np.float64(psd.expected_count(sizes, passing, 1e-3, by=by)).tobytes())
+h.update(psd.passing_of(psd.radii_from_psd(sizes, passing, 300, seed=1), sizes).tobytes())
 # what a periodic element is built from: its cloud's cell
 from cpp_dem.protocols.periodic import cube_cloud
 c, r, edge = cube_cloud(80, 1e-3, 0.2, 104, 0.25)  # (a seed whose r**3 rounded otherwise)
@@ -173,7 +182,7 @@ print(h.hexdigest())
 
 def test_the_small_arithmetic_does_not_depend_on_the_blas_kernel():
     """A periodic cell's rate, the handover's principal frame, secant modulus and secant
-    tangent, batched eigenvalues, a periodic cloud, and a strained
+    tangent, batched eigenvalues, a sieve curve's samples, a periodic cloud, and a strained
     periodic element's network tangent and strain: the same bits under three BLAS kernels
     and NumPy's baseline loops (LAPACK's eigh and lstsq, SciPy's fractional power, BLAS's
     matmul, the sparse LU's supernodes and NumPy's array power gave others)."""
