@@ -5,14 +5,14 @@ cost? (``femcoupling.fem.quadrature.PARALLEL_LU``; docs/fem.md, "Under MPI".)
 Each run is the Drucker–Prager soil body of tests/mpi_soil_body.py (self-weight, a
 prestressed geogrid layer, a footing pressed to 100 kPa in 4 steps and then pushed 10 mm
 in 4), meshed at ``--fine-size`` (m) under the footing, on ``--ranks`` ranks under the venv's
-mpiexec. The two packages, SuperLU_DIST and MUMPS, run in alternating blocks, ``--runs``
-each. With ``--load`` (the default) two busy processes run beside them, as the other tests
+mpiexec. The three packages, PETSc's own LU on every rank (the default: each rank factors
+the gathered matrix), SuperLU_DIST and MUMPS, run in alternating blocks, ``--runs`` each. With ``--load`` (the default) two busy processes run beside them, as the other tests
 do in the test suite: that is when MUMPS's results changed.
 
 For each package: how many distinct results the runs gave (the settlements, stresses and
 layer force compared bitwise; 1 is repeatable), the load steps taken, the wall time of
-the FEM's stages (mean, s) and that time per Newton iteration. The ratios are SuperLU_DIST's
-over MUMPS's, in the same script (the whole run's, and per iteration: the runs' paths
+the FEM's stages (mean, s) and that time per Newton iteration. The ratios are PETSc's
+over SuperLU_DIST's, in the same script (the whole run's, and per iteration: the runs' paths
 differ, so the iterations differ too). The body's size is printed (degrees of freedom).
 
 Prints a table on stderr and a final JSON line; with --out also writes
@@ -41,11 +41,12 @@ from _report import markdown_table, write_json  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
 import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
-PACKAGES = ("superlu_dist", "mumps")
+PACKAGES = ("petsc", "superlu_dist", "mumps")
 
 
 def worker(lu: str, fine_size: float, out: Path) -> None:
-    """One run under mpiexec: the body with ``lu`` as the parallel LU; rank 0 writes
+    """One run under mpiexec: the body with ``lu`` as the parallel LU ("petsc": PETSc's
+    own on every rank, PARALLEL_LU None); rank 0 writes
     ``out`` (JSON: a hash of the results, the steps, the FEM's wall time, the dofs)."""
     import femcoupling.fem.quadrature as quadrature
     from femcoupling.fem.geometry import GeogridLayer, ReinforcedSoilBody
@@ -53,7 +54,7 @@ def worker(lu: str, fine_size: float, out: Path) -> None:
     from femcoupling.fem.model import FemModel
     from femcoupling.materials.continuum import DruckerPrager, GeogridLayerMaterial
 
-    quadrature.PARALLEL_LU = lu
+    quadrature.PARALLEL_LU = None if lu in (None, "petsc") else lu
     comm = world()
     body = ReinforcedSoilBody(
         width_m=3.0, height_m=2.0, footing_half_width_m=0.5,

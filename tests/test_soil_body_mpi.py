@@ -39,13 +39,31 @@ def _run(script: str, ranks: int, d: Path, *extra: str) -> dict:
     return json.loads((d / "result.json").read_text())
 
 
+def test_two_ranks_give_the_same_bits_under_every_blas_kernel(runs, tmp_path):
+    """The 2-rank body under two other BLAS kernels and NumPy's baseline loops gives the
+    fixture's 2-rank results bitwise: its LU is PETSc's own on the gathered matrix, plain
+    loops. With SuperLU_DIST (whose fronts call BLAS) the three kernels gave three results:
+    10, 10 and 11 load steps, other Newton iterations under each."""
+    from test_fixedorder import KERNELS, NUMPY_BASELINE
+
+    for k, env in enumerate((*KERNELS[1:], NUMPY_BASELINE)):
+        d = tmp_path / f"k{k}"
+        d.mkdir()
+        p = subprocess.run([str(MPIEXEC), "-n", "2",
+                            *[a for key, v in env.items() for a in ("-genv", key, v)],
+                            sys.executable, str(ROOT / "tests" / "mpi_soil_body.py"), str(d)],
+                           capture_output=True, text=True, timeout=600, cwd=ROOT)
+        assert p.returncode == 0, f"{env}: {p.stdout[-2000:]}\n{p.stderr[-4000:]}"
+        assert json.loads((d / "result.json").read_text()) == runs[2], env
+
+
 @pytest.fixture(scope="module")
 def runs(tmp_path_factory):
     if not MPIEXEC.exists():
         pytest.skip(f"no mpiexec beside {sys.executable}")
-    # (one LU package on both rank counts: the serial run with 2 ranks' SuperLU_DIST. PETSc's
-    # own LU, the serial default, rounds otherwise, and this body's Newton at the cone's apex
-    # turns a last bit into another step: with it one step stalls at 3.5e-2 and is cut)
+    # (the serial run with SuperLU_DIST: PETSc's own LU on one rank, the serial default,
+    # takes 11 load steps on this body where the 2 ranks' (PETSc's LU on the gathered matrix,
+    # in another order of the dofs) take 10: its Newton turns a last bit into another step)
     return {ranks: _run("mpi_soil_body.py", ranks, tmp_path_factory.mktemp(f"soil{ranks}"),
                         *(["superlu_dist"] if ranks == 1 else []))
             for ranks in (1, 2)}
@@ -76,9 +94,9 @@ def test_two_ranks_give_the_serial_body_within_the_newton_tolerance(runs):
 def test_two_ranks_give_the_same_output_every_time(runs, tmp_path):
     """Same input, same output on 2 ranks, also when the cores are busy: two more runs at
     once (four ranks on this machine's two cores) give the fixture's 2-rank results bitwise. The
-    parallel LU is SuperLU_DIST (femcoupling.fem.quadrature.PARALLEL_LU); with MUMPS's parallel
-    LU, 5 runs of 15 beside two busy processes ended in other last bits, one in 11 steps
-    (bench/parallel_lu.py measures both)."""
+    parallel LU is PETSc's own on every rank (femcoupling.fem.quadrature.PARALLEL_LU); with
+    MUMPS's parallel LU, 5 runs of 15 beside two busy processes ended in other last bits, one
+    in 11 steps (bench/parallel_lu.py measures the three)."""
     procs = []
     for k in range(2):
         d = tmp_path / f"again{k}"
@@ -167,10 +185,10 @@ def test_dem_cell_elements_on_two_ranks_agree_within_their_noise(regions):
     assert _rel(one["settlement_m"], two["settlement_m"]) < 1e-3
 
 
-def test_the_parallel_lu_bench_runs_both_packages(tmp_path):
+def test_the_parallel_lu_bench_runs_its_packages(tmp_path):
     """bench/parallel_lu.py --smoke, without its two busy processes (they would slow the
-    suite's other tests): both LU packages on 2 ranks, two runs each; SuperLU_DIST's runs
-    give one result (MUMPS's may give one or more: not asserted)."""
+    suite's other tests): the three LU packages on 2 ranks, two runs each; PETSc's and
+    SuperLU_DIST's runs give one result each (MUMPS's may give one or more: not asserted)."""
     if not MPIEXEC.exists():
         pytest.skip(f"no mpiexec beside {sys.executable}")
     p = subprocess.run([sys.executable, str(ROOT / "bench" / "parallel_lu.py"), "--smoke",
@@ -180,8 +198,10 @@ def test_the_parallel_lu_bench_runs_both_packages(tmp_path):
     last = json.loads(p.stdout.strip().splitlines()[-1])
     assert last == json.loads((tmp_path / "parallel_lu.json").read_text())
     rows = {r["package"]: r for r in last["packages"]}
-    assert set(rows) == {"superlu_dist", "mumps"} and last["dofs"] > 1000
+    assert set(rows) == {"petsc", "superlu_dist", "mumps"} and last["dofs"] > 1000
     assert last["load"] == "off"
-    assert rows["superlu_dist"]["runs"] == 2 and rows["superlu_dist"]["distinct_results"] == 1
+    for lu in ("petsc", "superlu_dist"):
+        assert rows[lu]["runs"] == 2 and rows[lu]["distinct_results"] == 1, lu
+    assert "time_ratio_petsc_over_superlu_dist" in last
     assert all(r["s_per_newton_iteration"] > 0 for r in rows.values())
     assert "ETA" in p.stderr

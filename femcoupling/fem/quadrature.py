@@ -66,7 +66,7 @@ from femcoupling.fem.steps import NewtonFailure  # (the one failure type; re-exp
 
 __all__ = ["QuadratureMaterial", "STRAIN_MEASURES", "NewtonRules", "NewtonOutcome",
            "NewtonFailure", "QuadratureSystem", "check_material", "newton_solve", "lu_options",
-           "lu_package",
+           "lu_package", "lu_pc_type",
            "LINE_SEARCH_RISE", "NOISE_PROBE", "PARALLEL_LU", "SERIAL_LU"]
 
 #: the relative change of every increment that measures the elements' noise
@@ -85,12 +85,16 @@ REDRAWS = 4
 #: rose above this many times the residual before the correction (1.0: any rise).
 LINE_SEARCH_RISE = 1.0
 
-#: The LU package of the FEM's solves on more than one MPI rank (PETSc's name). SuperLU_DIST
-#: gives the same output for the same input: tests/mpi_soil_body.py on 2 ranks, with two
-#: busy processes beside it, was bitwise the same in 12 runs of 12. With MUMPS's parallel LU
-#: 5 runs of 15 ended in other last bits, and one took 11 load steps where the others took 10
-#: (docs/fem.md, "Under MPI"). "mumps" may be set here; bench/parallel_lu.py measures both.
-PARALLEL_LU = "superlu_dist"
+#: The LU package of the FEM's solves on more than one MPI rank: None, PETSc's own LU on
+#: every rank at once (``PCREDUNDANT``: each rank gathers the whole matrix and factors it
+#: with plain loops), so a correction has the same bits on every CPU. SuperLU_DIST's and
+#: MUMPS's fronts call BLAS: tests/mpi_soil_body.py on 2 ranks with SuperLU_DIST took 10
+#: load steps under two BLAS kernels and 11 under a third, its Newton iterations and last
+#: bits others under each; MUMPS's parallel LU also ended 5 runs of 15 beside busy
+#: processes in other last bits (docs/fem.md, "Under MPI"). "superlu_dist" or "mumps" may be
+#: set here, to trade that for a parallel factorization; bench/parallel_lu.py measures all
+#: three.
+PARALLEL_LU: str | None = None
 
 
 #: The LU package of the FEM's solves on one rank: None, PETSc's own LU. Its factorization
@@ -108,11 +112,17 @@ def lu_package(comm: Any) -> str | None:
     return SERIAL_LU if comm is None or comm.size == 1 else PARALLEL_LU
 
 
+def lu_pc_type(comm: Any, package: str | None) -> str:
+    """The PETSc preconditioner of a direct solve on ``comm`` with LU ``package``: "lu", or
+    "redundant" (PETSc's own LU on every rank) for None on more than one rank."""
+    return "redundant" if package is None and comm is not None and comm.size > 1 else "lu"
+
+
 def lu_options(comm: Any) -> dict:
     """PETSc options of a direct solve (``dolfinx.fem.petsc.LinearProblem``) on ``comm``:
     LU by :func:`lu_package`."""
     pkg = lu_package(comm)
-    return {"ksp_type": "preonly", "pc_type": "lu",
+    return {"ksp_type": "preonly", "pc_type": lu_pc_type(comm, pkg),
             **({"pc_factor_mat_solver_type": pkg} if pkg is not None else {})}
 
 
@@ -456,7 +466,8 @@ class QuadratureSystem:
     displacement ``w`` that pairs with the stress (Mandel for the soil; Voigt with engineering
     shear for the hierarchical mode); ``loads(v)``: the external virtual work terms (UFL
     forms), each subtracted in turn from the internal one; ``lu``: the LU package ("mumps",
-    or None for PETSc's own)."""
+    "superlu_dist", or None for PETSc's own: on more than one rank, on every rank at once,
+    :func:`lu_pc_type`)."""
 
     def __init__(self, mesh, *, degree: int, qdeg: int, ncomp: int, strain, loads=None,
                  lu: str | None = None) -> None:
@@ -499,7 +510,7 @@ class QuadratureSystem:
         self.ksp.setOperators(self.A)
         self.ksp.setType("preonly")
         pc = self.ksp.getPC()
-        pc.setType("lu")
+        pc.setType(lu_pc_type(mesh.comm, lu))
         if lu is not None:
             pc.setFactorSolverType(lu)
 

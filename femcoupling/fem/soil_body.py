@@ -5,8 +5,8 @@ continuum outer domain solved in dolfinx (plane strain or 3D).
 P2 (default) displacements, and a stress history at the quadrature points (a quadrature
 space; the return mapping is the NumPy kernel
 :func:`femcoupling.materials.continuum.drucker_prager_return`). Loading is incremental with a full
-Newton iteration on the consistent tangent at each step (LU: MUMPS on one rank,
-``femcoupling.fem.quadrature.PARALLEL_LU`` on more).
+Newton iteration on the consistent tangent at each step (LU: PETSc's own,
+``femcoupling.fem.quadrature.SERIAL_LU`` on one rank and ``PARALLEL_LU`` on more).
 
 Stages (each one a sequence of equilibrium steps):
 
