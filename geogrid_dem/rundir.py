@@ -54,6 +54,9 @@ LOCK = ".geogrid-dem.lock"
 _FREE = {"run.toml", MANIFEST, LOCK}
 #: Exit status of a run stopped by SIGINT (128 + 2, as a shell reports it).
 EXIT_INTERRUPTED = 130
+#: the exit status of a case the core stopped (a BlowUpError: an overlap beyond
+#: max_overlap_ratio, a body tunnelling, a value not finite)
+EXIT_STOPPED = 6
 
 #: Folders this process began (begin_run) and has not ended: marked on an interrupt.
 _ACTIVE: list[Path] = []
@@ -787,7 +790,8 @@ def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
     None makes a numbered one; ``overwrite`` None: the ``--overwrite`` that
     check_common_args recorded) and returns the exit status: 0 when it completed, 130 when it
     was interrupted (Ctrl-C, SIGINT, SIGTERM), 1 when a file could not be written (a full
-    disk, a file-size limit). On an interrupt or a failure every recorder still open is closed
+    disk, a file-size limit), 6 (EXIT_STOPPED) when the core stopped the simulation (a
+    BlowUpError: one line on stderr gives its message). On an interrupt or a failure every recorder still open is closed
     (what was written stays readable), every folder of the run is marked ``interrupted`` or
     ``failed`` in its manifest, and one line says so and where the results are; any other
     error is re-raised after that. SIGTERM stops the run as SIGINT does (status 143).
@@ -914,6 +918,18 @@ def _run_main(case, out, work, *, overwrite, log, own_folder, keep, params, chec
         print(f"error: {msg}; the run is incomplete (marked 'failed' in {MANIFEST}), the files "
               f"written before are in {out}", file=sys.stderr, flush=True)
         return 1
+    except Exception as e:
+        if type(e).__name__ != "BlowUpError":  # (cpp_dem's: not imported for this check)
+            _mark("failed", f"{type(e).__name__}: {e}".split("\n")[0][:500])
+            raise
+        # The core stopped the run (an overlap, a body tunnelling, a value not finite): what
+        # it says names the step, the bodies and the cause; a traceback adds nothing.
+        msg = str(e).split("\n")[0]
+        _mark("failed", f"BlowUpError: {msg}"[:500])
+        print(f"error: [{case}] the simulation stopped: {msg}. The run is incomplete (marked "
+              f"'failed' in {MANIFEST}); the files written before are in {out}",
+              file=sys.stderr, flush=True)
+        return EXIT_STOPPED
     except BaseException as e:
         if isinstance(e, SystemExit) and e.code in (0, None):
             raise

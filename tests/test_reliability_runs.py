@@ -498,3 +498,21 @@ def test_a_ctrl_c_inside_an_import_is_an_interrupt(tmp_path):
 
     with pytest.raises(ImportError, match="no such module"):
         run_main("deposition", tmp_path / "s", broken)
+
+
+def test_a_run_the_core_stops_says_so_in_one_line(tmp_path):
+    """A case whose simulation the core stops (here grains of E = 20 kPa under 75 kPa: an
+    overlap beyond the blow-up limit in the preparation) exits 6 through ``geogrid-dem run``
+    with one line on stderr giving the core's message (the step, the bodies, the cause) and
+    the folder, no traceback, and its folder marked failed."""
+    out = tmp_path / "stopped"
+    p = subprocess.run([str(Path(PY).parent / "geogrid-dem"), "run", "triaxial", "--smoke",
+                        "--young", "2e4", "--out", str(out)], capture_output=True, text=True,
+                       timeout=300, cwd=tmp_path, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert p.returncode == 6, p.stderr[-3000:]
+    assert "Traceback" not in p.stderr
+    line = [x for x in p.stderr.splitlines() if x.startswith("error: [triaxial] the simulation "
+                                                              "stopped: blow-up at step")]
+    assert len(line) == 1 and "max_overlap_ratio" in line[0] and str(out) in line[0]
+    manifest = json.loads((out / ".geogrid-dem-run.json").read_text())
+    assert manifest["status"] == "failed" and "BlowUpError" in manifest["reason"]
