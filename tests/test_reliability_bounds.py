@@ -315,6 +315,38 @@ def test_a_flexible_load_the_soil_cannot_carry_stops_and_says_so():
     assert r[-1].footing_pressure_pa > reached
 
 
+
+def test_a_flexible_loads_stop_falls_with_the_mesh_toward_the_edge_wedges_bound():
+    """Where a uniform pressure stops is the soil failing at the load's edge, not Newton at the
+    cone's apex: a wedge of any size can fail there, its self-weight term vanishing with its
+    size, so the stop falls from above as the mesh resolves smaller wedges, toward Prandtl's
+    weightless bound c Nc (c = 500 Pa, phi = 30 deg: Nc = 30.14, 15.1 kPa). Measured on this
+    body: 39.8 and 32.6 kPa at fine sizes 0.1 and 0.05 m (26.7 and 22.3 kPa at 0.025 and
+    0.0125 m); a rigid footing pushed by settlement reaches a plateau of 129 kPa on it.
+    (A smoothed apex, a hyperbolic cone, moved the stop by under 2 %.)"""
+    pytest.importorskip("dolfinx_solver")
+    from femcoupling.fem.model import FemModel
+    from femcoupling.fem.steps import NewtonFailure
+    from femcoupling.materials.continuum import DruckerPrager
+
+    c, phi = 500.0, 30.0
+    t = math.tan(math.radians(phi))
+    nq = math.exp(math.pi * t) * math.tan(math.radians(45 + phi / 2)) ** 2
+    bound = c * (nq - 1) / t  # Prandtl: c Nc, Pa
+    stops = []
+    for fine in (0.1, 0.05):
+        body = _body(width_m=3.0, height_m=2.0, mesh_size_m=0.4, fine_size_m=fine,
+                     fine_radius_m=0.3)
+        m = FemModel(body, soil=DruckerPrager(young_pa=30e6, poisson=0.3, cohesion_pa=c,
+                                               friction_deg=phi), unit_weight_n_m3=18e3,
+                     max_newton=60)
+        m.set_geostatic()
+        with pytest.raises(NewtonFailure, match="A uniform \\(flexible\\) pressure"):
+            m.load_footing(pressure_pa=300e3, steps=20)
+        stops.append(m.history[-1].footing_pressure_pa)
+    assert bound == pytest.approx(15.07e3, rel=1e-3)
+    assert bound < stops[1] < 0.9 * stops[0] < 300e3, (bound, stops)
+
 # ---- grids -----------------------------------------------------------------------------------
 
 def _grid_scene():
