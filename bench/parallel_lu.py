@@ -6,8 +6,9 @@ Each run is the Drucker–Prager soil body of tests/mpi_soil_body.py (self-weigh
 prestressed geogrid layer, a footing pressed to 100 kPa in 4 steps and then pushed 10 mm
 in 4), meshed at ``--fine-size`` (m) under the footing, on ``--ranks`` ranks under the venv's
 mpiexec. The three packages, PETSc's own LU on every rank (the default: each rank factors
-the gathered matrix), SuperLU_DIST and MUMPS, run in alternating blocks, ``--runs`` each. With ``--load`` (the default) two busy processes run beside them, as the other tests
-do in the test suite: that is when MUMPS's results changed.
+the gathered matrix), SuperLU_DIST and MUMPS, run in alternating blocks, ``--runs`` each.
+With ``--load`` (the default) two busy processes run beside them, as the other tests do in
+the test suite: that is when MUMPS's results changed.
 
 For each package: how many distinct results the runs gave (the settlements, stresses and
 layer force compared bitwise; 1 is repeatable), the load steps taken, the wall time of

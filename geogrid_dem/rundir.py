@@ -791,8 +791,8 @@ def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
     check_common_args recorded) and returns the exit status: 0 when it completed, 130 when it
     was interrupted (Ctrl-C, SIGINT, SIGTERM), 1 when a file could not be written (a full
     disk, a file-size limit), 6 (EXIT_STOPPED) when the core stopped the simulation (a
-    BlowUpError: one line on stderr gives its message). On an interrupt or a failure every recorder still open is closed
-    (what was written stays readable), every folder of the run is marked ``interrupted`` or
+    BlowUpError: one line on stderr gives its message). On an interrupt or a failure every
+    recorder still open is closed (what was written stays readable), every folder of the run is marked ``interrupted`` or
     ``failed`` in its manifest, and one line says so and where the results are; any other
     error is re-raised after that. SIGTERM stops the run as SIGINT does (status 143).
     ``own_folder`` False: ``out`` is a folder of several runs (each begins its own
@@ -918,23 +918,20 @@ def _run_main(case, out, work, *, overwrite, log, own_folder, keep, params, chec
         print(f"error: {msg}; the run is incomplete (marked 'failed' in {MANIFEST}), the files "
               f"written before are in {out}", file=sys.stderr, flush=True)
         return 1
-    except Exception as e:
-        if type(e).__name__ != "BlowUpError":  # (cpp_dem's: not imported for this check)
-            _mark("failed", f"{type(e).__name__}: {e}".split("\n")[0][:500])
-            raise
-        # The core stopped the run (an overlap, a body tunnelling, a value not finite): what
-        # it says names the step, the bodies and the cause; a traceback adds nothing.
-        msg = str(e).split("\n")[0]
-        _mark("failed", f"BlowUpError: {msg}"[:500])
-        print(f"error: [{case}] the simulation stopped: {msg}. The run is incomplete (marked "
-              f"'failed' in {MANIFEST}); the files written before are in {out}",
-              file=sys.stderr, flush=True)
-        return EXIT_STOPPED
     except BaseException as e:
         if isinstance(e, SystemExit) and e.code in (0, None):
             raise
+        from cpp_dem import BlowUpError
+
         _mark("failed", f"{type(e).__name__}: {e}".split("\n")[0][:500])
-        raise
+        if not isinstance(e, BlowUpError):
+            raise
+        # The core stopped the run (an overlap, a body tunnelling, a value not finite): what
+        # it says names the step, the bodies and the cause; a traceback adds nothing.
+        print(f"error: [{case}] the simulation stopped: {str(e).splitlines()[0]}. The run is "
+              f"incomplete (marked 'failed' in {MANIFEST}); the files written before are in "
+              f"{out}", file=sys.stderr, flush=True)
+        return EXIT_STOPPED
     finally:
         if main_thread and old_term == signal.SIG_DFL:
             signal.signal(signal.SIGTERM, signal.SIG_DFL)

@@ -81,7 +81,8 @@ def test_fem_to_dem_smoke_outputs_and_servo_hold(smoke):
     assert "## Warnings" in report
     assert all(w in report for v in ("RE", "PRS") for w in s["elements"][v]["warnings"])
     # the FEM layer's tension across the region, handed to the grid ends (issue 18): PRS
-    # below T_p (it gave some to the soil); a layer in compression (RE's initial state, measured -46 N/m) is handed as 0
+    # below T_p (it gave some to the soil); a layer in compression (RE's initial state,
+    # measured -46 N/m) is handed as 0
     import h5py
 
     for v in ("RE", "PRS"):

@@ -2,8 +2,9 @@
 through rank 0 (issue 38, item 5; docs/coupling_mpi.md).
 
 A :class:`femcoupling.fem.model.FemModel` (DEM elements at its points, on any body of
-:mod:`femcoupling.fem.bodies`) given ``comm=MPI.COMM_WORLD`` builds its mesh on that communicator: each rank assembles its part (PETSc; the LU is PETSc's own on the gathered matrix,
-on every rank: ``femcoupling.fem.quadrature.PARALLEL_LU``). The elements stay where they are
+:mod:`femcoupling.fem.bodies`) given ``comm=MPI.COMM_WORLD`` builds its mesh on that
+communicator: each rank assembles its part (PETSc; the LU is PETSc's own on the gathered
+matrix, on every rank: ``femcoupling.fem.quadrature.PARALLEL_LU``). The elements stay where they are
 without MPI: in one ``ElementPool`` whose Dask client lives on rank 0 (the other ranks pass
 ``elements=None``). Two pieces join the two:
 

@@ -222,8 +222,9 @@ class NewtonRules:
     #: a smooth model's (no DEM points) backtracking: where the residual rose over Newton's
     #: last correction (not a step's first, which puts the displacement on its boundary
     #: values) above :data:`LINE_SEARCH_RISE` times its value before, the iterate goes back by
-    #: half that correction, up to this many times in a row (0: none). A Drucker–Prager soil's points that flip between the cone and its apex made
-    #: full corrections cycle: a step stuck at 3.5e-2 of the force scale for 100 iterations.
+    #: half that correction, up to this many times in a row (0: none). A Drucker–Prager
+    #: soil's points that flip between the cone and its apex made full corrections cycle: a
+    #: step stuck at 3.5e-2 of the force scale for 100 iterations.
     line_search: int = 0
 
     def __post_init__(self) -> None:

@@ -402,7 +402,8 @@ def next_soil_young(passes: list[dict]) -> tuple[float, str]:
         e = ea + (0.0 - ra) * (eb - ea) / (rb - ra)
         return math.exp(e), (f"interpolated to ratio 1 between passes {lo['pass']} and "
                              f"{hi['pass']} (ratios {math.exp(ra):.3g}, {math.exp(rb):.3g})")
-    return float(passes[-1]["secant_young_pa"]), f"the element's secant of pass {passes[-1]['pass']}"
+    last = passes[-1]
+    return float(last["secant_young_pa"]), f"the element's secant of pass {last['pass']}"
 
 
 def _calibration_elements(q: Params, seeds: list, rows: list, tension: list | None, k: int,
