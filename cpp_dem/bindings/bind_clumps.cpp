@@ -62,7 +62,11 @@ void bind_clumps(py::module_& m) {
                              "Clump masses, kg, shape (c,).")
       .def_property_readonly("clump_inertias", [](const Scene& s) { return vec3_array(s.clumps().inertia); },
                              "Principal moments of inertia, kg m^2, shape (c, 3).")
-      .def_property_readonly("clump_kinetic_energies", [](const Scene& s) { return real_array(s.clumps().ke); },
+      .def_property_readonly("clump_kinetic_energies", [](const Scene& s) {
+        // (zero until the scene tracks energy: the accumulators are allocated then)
+        const auto& ke = s.clumps().ke;
+        return real_array(ke.empty() ? std::vector<Real>(s.clumps().size(), 0.0) : ke);
+      },
                              "Kinetic energy of each clump at the last step (with track_energy), J.")
       .def("set_clump_state",
            [](Scene& s, int c, const Array& pos, const Array& ori, const Array& vel, const Array& w) {

@@ -500,8 +500,17 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
   });
   const size_t nb = t.bodies_.pos.size();
   if (version < 10) t.bodies_.inertia_scale.assign(nb, 1.0);
+  // (the energy accumulators: one entry per body, or none where the scene never tracked energy;
+  // BodyStore::size_energy)
+  const auto energy_array = [](const BodyStore& b, const void* v) {
+    return v == &b.ke || v == &b.damp_dissip || v == &b.ext_work || v == &b.pos_at_energy_reset;
+  };
+  const bool energy_sized = t.bodies_.ke.size() == nb;
   t.bodies_.for_each_array([&](const auto& v) {
-    if (v.size() != nb) throw ParameterError("checkpoint: corrupt body arrays");
+    const bool energy = energy_array(t.bodies_, &v);
+    if (v.size() != nb && !(energy && v.empty() && !energy_sized))
+      throw ParameterError("checkpoint: corrupt body arrays");
+    if (energy && v.size() != t.bodies_.ke.size()) throw ParameterError("checkpoint: corrupt body arrays");
   });
   t.clumps_.for_each_array([&](auto& v) {
     if (version >= 10 || static_cast<const void*>(&v) != &t.clumps_.inertia_scale) r.vec(v);
@@ -513,6 +522,10 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
     const size_t ncl = t.clumps_.pos.size(), nm = t.clumps_.member.size();
     bool ok = t.clumps_.member_off.size() == (ncl ? ncl + 1 : 0) && t.clumps_.member_local.size() == nm;
     for (int m : t.clumps_.member) ok = ok && m >= 0 && static_cast<size_t>(m) < nb;
+    // (the energy accumulators: one entry per clump, or none; ClumpStore::size_energy)
+    const size_t ne = t.clumps_.ke.size();
+    ok = ok && (ne == ncl || ne == 0) && t.clumps_.damp_dissip.size() == ne &&
+         t.clumps_.ext_work.size() == ne && t.clumps_.pos_at_energy_reset.size() == ne;
     if (!ok) throw ParameterError("checkpoint: corrupt clump arrays");
   }
   r.vec(t.id_of_slot_);
@@ -586,6 +599,9 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
   r.get(t.max_step_ratio_);
   r.get(t.dt_check_period_);
   r.get(t.track_energy_);
+  if (t.track_energy_ && (t.bodies_.ke.size() != t.bodies_.pos.size() ||
+                          t.clumps_.ke.size() != t.clumps_.pos.size()))
+    throw ParameterError("checkpoint: corrupt energy accumulators (energy tracked, not kept)");
   r.get(t.clump_rotation_);
   // Version 8 had no shear kinematics: its scenes ran the default (t's own).
   if (version >= 9) {

@@ -45,6 +45,8 @@ void Scene::set_max_step_ratio(Real r) {
 void Scene::set_track_energy(bool on) {
   if (on && !track_energy_) {
     track_energy_ = true;
+    bodies_.size_energy();  // (allocated when first tracked: BodyStore's energy accumulators)
+    clumps_.size_energy();
     reset_energy();
   }
   track_energy_ = on;

@@ -106,6 +106,8 @@ void Scene::push_body(const Vec3& x, Real radius, Real mass, Real inertia, int m
     slot_of_id_.push_back(num_bodies());
   }
   bodies_.push(x, radius, mass, inertia, material, kind);
+  // (the energy accumulators, once allocated, keep one entry per body)
+  if (track_energy_ || !bodies_.ke.empty()) bodies_.size_energy();
   bond_topology_dirty_ = true;  // the bonds' adjacency is per body
 }
 

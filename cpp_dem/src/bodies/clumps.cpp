@@ -54,11 +54,8 @@ int Scene::add_clump(const std::vector<Vec3>& local, const std::vector<Real>& ra
   clumps_.inertia.push_back(inertia);
   clumps_.stiffness_radius.push_back(stiffness_radius);
   clumps_.blocked.push_back(DOF_NONE);
-  clumps_.ke.push_back(0);
-  clumps_.damp_dissip.push_back(0);
-  clumps_.ext_work.push_back(0);
-  clumps_.pos_at_energy_reset.push_back(com);
   clumps_.inertia_scale.push_back(1.0);
+  if (track_energy_ || !clumps_.ke.empty()) clumps_.size_energy();
   // Members: spheres whose masses share the clump's by volume (they carry its weight in the
   // integration pass; the clump pass applies it at the centre of mass).
   Real vsum = 0;

@@ -259,8 +259,10 @@ Real Scene::inertia_scale(int id) const {
 
 Energies Scene::energies() const {
   Energies e;
-  const int n = num_bodies();
-  for (int c = 0; c < clumps_.size(); ++c) {
+  // (bodies and clumps carry their terms once the scene has tracked energy)
+  const int n = bodies_.ke.empty() ? 0 : num_bodies();
+  const int nc = clumps_.ke.empty() ? 0 : clumps_.size();
+  for (int c = 0; c < nc; ++c) {
     e.kinetic += clumps_.ke[c];
     e.gravity_potential += -clumps_.mass[c] * gravity_.dot(clumps_.pos[c] - clumps_.pos_at_energy_reset[c]);
     e.local_damping += clumps_.damp_dissip[c];
@@ -305,14 +307,15 @@ Energies Scene::energies() const {
 }
 
 void Scene::reset_energy() {
-  const int n = num_bodies();
+  // (the accumulators exist once the scene has tracked energy: BodyStore::size_energy)
+  const int n = static_cast<int>(bodies_.ke.size());
   for (int b = 0; b < n; ++b) {
     bodies_.damp_dissip[b] = 0;
     bodies_.ext_work[b] = 0;
     bodies_.ke[b] = 0;
     bodies_.pos_at_energy_reset[b] = bodies_.pos[b];
   }
-  for (int c = 0; c < clumps_.size(); ++c) {
+  for (int c = 0; c < static_cast<int>(clumps_.ke.size()); ++c) {
     clumps_.damp_dissip[c] = clumps_.ext_work[c] = clumps_.ke[c] = 0;
     clumps_.pos_at_energy_reset[c] = clumps_.pos[c];
   }

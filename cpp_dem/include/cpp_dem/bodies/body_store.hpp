@@ -37,7 +37,9 @@ struct BodyStore {
   /// Periodic cell: how many cell vectors the body was shifted by when wrapped into the cell
   /// (its unwrapped position is pos + H image); zero without a cell.
   std::vector<std::array<int, 3>> image;
-  // Energy accumulators per body (written only when the scene tracks energy).
+  // Energy accumulators per body: allocated when the scene first tracks energy (empty
+  // before: a scene that never does carries none of their 48 bytes a body), then one entry
+  // per body (Scene::push_body, Scene::size_energy).
   std::vector<Real> ke;                    ///< kinetic energy at the last step, J
   std::vector<Real> damp_dissip;           ///< dissipated by local damping, J
   std::vector<Real> ext_work;              ///< work of external forces and imposed DOFs, J
@@ -67,11 +69,17 @@ struct BodyStore {
     kind.push_back(k);
     clump.push_back(-1);
     image.push_back({0, 0, 0});
-    ke.push_back(0);
-    damp_dissip.push_back(0);
-    ext_work.push_back(0);
-    pos_at_energy_reset.push_back(x);
     inertia_scale.push_back(1.0);
+  }
+
+  /// Gives the energy accumulators one entry per body: zero, each position its reference.
+  void size_energy() {
+    const size_t n = pos.size(), old = ke.size();
+    ke.resize(n, 0);
+    damp_dissip.resize(n, 0);
+    ext_work.resize(n, 0);
+    pos_at_energy_reset.resize(n);
+    for (size_t b = old; b < n; ++b) pos_at_energy_reset[b] = pos[b];
   }
 
   /// Calls f(array) for every per-body array, in a fixed order (the checkpoint's).

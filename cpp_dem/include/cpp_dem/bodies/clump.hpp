@@ -34,7 +34,8 @@ struct ClumpStore {
   std::vector<Real> stiffness_radius;
   std::vector<std::uint8_t> blocked;  ///< Dof mask; a blocked DOF keeps its velocity
   std::vector<int> member_off;        ///< members of c: member_off[c] .. member_off[c + 1]
-  // Energy accumulators (written when the scene tracks energy).
+  // Energy accumulators: empty until the scene first tracks energy, then one entry per clump
+  // (as BodyStore's).
   std::vector<Real> ke, damp_dissip, ext_work;
   std::vector<Vec3> pos_at_energy_reset;
   /// Density scaling: the factor s >= 1 of the clump's mass and principal moments (see
@@ -54,6 +55,16 @@ struct ClumpStore {
   template <class F>
   void for_each_array(F&& f) const {
     visit(*this, f);
+  }
+
+  /// Gives the energy accumulators one entry per clump: zero, each centre its reference.
+  void size_energy() {
+    const size_t n = pos.size(), old = ke.size();
+    ke.resize(n, 0);
+    damp_dissip.resize(n, 0);
+    ext_work.resize(n, 0);
+    pos_at_energy_reset.resize(n);
+    for (size_t c = old; c < n; ++c) pos_at_energy_reset[c] = pos[c];
   }
 
   /// The member slots after the body store's permutation (perm[new slot] = old slot).
