@@ -42,7 +42,7 @@ def test_every_field_is_counted_by_its_capacity():
 
 def test_the_fields_add_up_to_what_a_grain_costs_the_process():
     """bench/memory_per_grain.py on two lattices: the marginal resident memory per grain is
-    the fields' sum to within 10 % (measured: 1 328 against 1 298 B/grain between 2.7e4 and
+    the fields' sum to within 10 % (measured: 1 283 against 1 250 B/grain between 2.7e4 and
     2.16e5 grains); a field left uncounted, or counted twice, would show here."""
     import json
 

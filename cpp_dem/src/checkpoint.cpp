@@ -500,18 +500,21 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
   });
   const size_t nb = t.bodies_.pos.size();
   if (version < 10) t.bodies_.inertia_scale.assign(nb, 1.0);
-  // (the energy accumulators: one entry per body, or none where the scene never tracked energy;
-  // BodyStore::size_energy)
-  const auto energy_array = [](const BodyStore& b, const void* v) {
-    return v == &b.ke || v == &b.damp_dissip || v == &b.ext_work || v == &b.pos_at_energy_reset;
+  // (Arrays allocated on first use hold one entry per body, or none: the energy accumulators,
+  // where the scene never tracked energy, BodyStore::size_energy, all four together; the
+  // external force and the external torque, each where none was set.)
+  const BodyStore& bs = t.bodies_;
+  const auto lazy = [&bs](const void* v) {
+    return v == &bs.ke || v == &bs.damp_dissip || v == &bs.ext_work ||
+           v == &bs.pos_at_energy_reset || v == &bs.ext_force || v == &bs.ext_torque;
   };
-  const bool energy_sized = t.bodies_.ke.size() == nb;
+  const size_t ne = bs.ke.size();
   t.bodies_.for_each_array([&](const auto& v) {
-    const bool energy = energy_array(t.bodies_, &v);
-    if (v.size() != nb && !(energy && v.empty() && !energy_sized))
+    if (v.size() != nb && !(lazy(&v) && v.empty()))
       throw ParameterError("checkpoint: corrupt body arrays");
-    if (energy && v.size() != t.bodies_.ke.size()) throw ParameterError("checkpoint: corrupt body arrays");
   });
+  if (bs.damp_dissip.size() != ne || bs.ext_work.size() != ne || bs.pos_at_energy_reset.size() != ne)
+    throw ParameterError("checkpoint: corrupt body arrays");
   t.clumps_.for_each_array([&](auto& v) {
     if (version >= 10 || static_cast<const void*>(&v) != &t.clumps_.inertia_scale) r.vec(v);
   });
@@ -523,9 +526,11 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
     bool ok = t.clumps_.member_off.size() == (ncl ? ncl + 1 : 0) && t.clumps_.member_local.size() == nm;
     for (int m : t.clumps_.member) ok = ok && m >= 0 && static_cast<size_t>(m) < nb;
     // (the energy accumulators: one entry per clump, or none; ClumpStore::size_energy)
-    const size_t ne = t.clumps_.ke.size();
-    ok = ok && (ne == ncl || ne == 0) && t.clumps_.damp_dissip.size() == ne &&
-         t.clumps_.ext_work.size() == ne && t.clumps_.pos_at_energy_reset.size() == ne;
+    const size_t nce = t.clumps_.ke.size(), ncx = t.clumps_.ext_force.size();
+    ok = ok && (nce == ncl || nce == 0) && t.clumps_.damp_dissip.size() == nce &&
+         t.clumps_.ext_work.size() == nce && t.clumps_.pos_at_energy_reset.size() == nce;
+    // (the external force and torque, allocated together when one is first set)
+    ok = ok && (ncx == ncl || ncx == 0) && t.clumps_.ext_torque.size() == ncx;
     if (!ok) throw ParameterError("checkpoint: corrupt clump arrays");
   }
   r.vec(t.id_of_slot_);

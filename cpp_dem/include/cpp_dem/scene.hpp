@@ -310,8 +310,13 @@ class Scene {
   const std::vector<Quat>& orientations() const { return bodies_.ori; }
   const std::vector<int>& body_materials() const { return bodies_.material; }
   const std::vector<std::uint8_t>& blocked() const { return bodies_.blocked; }
-  const std::vector<Vec3>& external_forces() const { return bodies_.ext_force; }
-  const std::vector<Vec3>& external_torques() const { return bodies_.ext_torque; }
+  /// By slot, N and N m (zeros where none was ever set: the arrays are allocated then).
+  std::vector<Vec3> external_forces() const {
+    return bodies_.ext_force.empty() ? std::vector<Vec3>(bodies_.pos.size(), Vec3::Zero()) : bodies_.ext_force;
+  }
+  std::vector<Vec3> external_torques() const {
+    return bodies_.ext_torque.empty() ? std::vector<Vec3>(bodies_.pos.size(), Vec3::Zero()) : bodies_.ext_torque;
+  }
 
   // Setters of whole arrays take storage order (the bindings translate from id order).
   void set_positions(const std::vector<Vec3>& v);

@@ -260,6 +260,7 @@ void Scene::set_body_velocity(int body, const Vec3& v) {
 }
 void Scene::set_body_external_force(int body, const Vec3& f) {
   check_body(body);
+  if (bodies_.ext_force.empty()) bodies_.ext_force.assign(bodies_.pos.size(), Vec3::Zero());
   bodies_.ext_force[slot_of(body)] = f;
 }
 void Scene::set_external_torques(const std::vector<Vec3>& t) {

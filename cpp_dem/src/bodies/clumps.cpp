@@ -48,8 +48,10 @@ int Scene::add_clump(const std::vector<Vec3>& local, const std::vector<Real>& ra
   clumps_.rot.push_back(clumps_.ori.back().toRotationMatrix());
   clumps_.force.push_back(Vec3::Zero());
   clumps_.torque.push_back(Vec3::Zero());
-  clumps_.ext_force.push_back(Vec3::Zero());
-  clumps_.ext_torque.push_back(Vec3::Zero());
+  if (!clumps_.ext_force.empty()) {  // (allocated when one is first set)
+    clumps_.ext_force.push_back(Vec3::Zero());
+    clumps_.ext_torque.push_back(Vec3::Zero());
+  }
   clumps_.mass.push_back(mass);
   clumps_.inertia.push_back(inertia);
   clumps_.stiffness_radius.push_back(stiffness_radius);
@@ -124,6 +126,10 @@ void Scene::set_clump_external(int c, const Vec3& force, const Vec3& torque) {
   check_clump(c);
   if (!force.allFinite()) throw ParameterError("force: must be finite (N)");
   if (!torque.allFinite()) throw ParameterError("torque: must be finite (N m)");
+  if (clumps_.ext_force.empty()) {
+    clumps_.ext_force.assign(clumps_.pos.size(), Vec3::Zero());
+    clumps_.ext_torque.assign(clumps_.pos.size(), Vec3::Zero());
+  }
   clumps_.ext_force[c] = force;
   clumps_.ext_torque[c] = torque;
 }

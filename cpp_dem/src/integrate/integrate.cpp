@@ -90,8 +90,8 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
     }
   };
   const auto sum_forces = [&](int b, auto& f, auto& t, auto ops) __attribute__((always_inline)) {
-    f = ops.load(bodies_.ext_force[b]) + bodies_.mass[b] * ops.load(gravity_);
-    t = ops.load(bodies_.ext_torque[b]);
+    f = ops.load(bodies_.ext_force_of(b)) + bodies_.mass[b] * ops.load(gravity_);
+    t = ops.load(bodies_.ext_torque_of(b));
     for (int e = pair_jadj_off_[b]; e < pair_jadj_off_[b + 1]; ++e) {
       const PairOutput& o = pair_out_[e];  // zero when inactive
       f += ops.load_padded(o.force.data());
@@ -313,9 +313,9 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
       const Real inv_m = 1.0 / m, inv_i = 1.0 / inertia;
       Real dissip = 0, work = 0;
       // (Imposed velocity: the constraint supplies -f[a]; its work is -f[a] v dt.)
-      const Vec3 v = leapfrog_velocity<true>(f, bodies_.ext_force[b], m, inv_m, dofs, DOF_X, v_old,
+      const Vec3 v = leapfrog_velocity<true>(f, bodies_.ext_force_of(b), m, inv_m, dofs, DOF_X, v_old,
                                              dt, lambda, dissip, work);
-      const Vec3 w = leapfrog_velocity<true>(t, bodies_.ext_torque[b], inertia, inv_i, dofs, DOF_RX,
+      const Vec3 w = leapfrog_velocity<true>(t, bodies_.ext_torque_of(b), inertia, inv_i, dofs, DOF_RX,
                                              w_old, dt, lambda, dissip, work);
       const Vec3 vm = 0.5 * (v_old + v);
       const Vec3 wm = 0.5 * (w_old + w);

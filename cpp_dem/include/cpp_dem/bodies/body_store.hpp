@@ -24,8 +24,10 @@ struct BodyStore {
   std::vector<Vec3> angvel;      ///< spins, rad/s
   std::vector<Vec3> force;       ///< resultant force of the last step, N
   std::vector<Vec3> torque;      ///< resultant torque of the last step, N m
-  std::vector<Vec3> ext_force;   ///< imposed external force, N
-  std::vector<Vec3> ext_torque;  ///< imposed external torque, N m
+  /// Imposed external force, N; empty until one is set (then one entry per body): a scene
+  /// without imposed loads carries none of its 24 bytes a body. Read through ext_force_of.
+  std::vector<Vec3> ext_force;
+  std::vector<Vec3> ext_torque;  ///< imposed external torque, N m (empty as ext_force)
   std::vector<Quat> ori;         ///< orientations
   std::vector<Real> radius;      ///< m (a grid node's: the geogrid's R_c)
   std::vector<Real> mass;        ///< kg
@@ -53,13 +55,13 @@ struct BodyStore {
 
   /// Appends one body at rest.
   void push(const Vec3& x, Real r, Real m, Real i, int mat, std::uint8_t k) {
+    if (!ext_force.empty()) ext_force.push_back(Vec3::Zero());  // (once set, one per body)
+    if (!ext_torque.empty()) ext_torque.push_back(Vec3::Zero());
     pos.push_back(x);
     vel.push_back(Vec3::Zero());
     angvel.push_back(Vec3::Zero());
     force.push_back(Vec3::Zero());
     torque.push_back(Vec3::Zero());
-    ext_force.push_back(Vec3::Zero());
-    ext_torque.push_back(Vec3::Zero());
     ori.push_back(Quat::Identity());
     radius.push_back(r);
     mass.push_back(m);
@@ -71,6 +73,10 @@ struct BodyStore {
     image.push_back({0, 0, 0});
     inertia_scale.push_back(1.0);
   }
+
+  /// Body b's imposed force and torque (zero where none was ever set).
+  const Vec3& ext_force_of(int b) const { return ext_force.empty() ? kZeroVec3 : ext_force[b]; }
+  const Vec3& ext_torque_of(int b) const { return ext_torque.empty() ? kZeroVec3 : ext_torque[b]; }
 
   /// Gives the energy accumulators one entry per body: zero, each position its reference.
   void size_energy() {

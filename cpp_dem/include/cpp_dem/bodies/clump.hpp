@@ -24,8 +24,8 @@ struct ClumpStore {
   std::vector<Mat3> rot;        ///< rotation matrix of ori (kept with it; the pass reads it)
   std::vector<Vec3> force;      ///< resultant force of the last step (members + gravity), N
   std::vector<Vec3> torque;     ///< resultant torque about the centre of mass, N m
-  std::vector<Vec3> ext_force;  ///< imposed force on the clump, N
-  std::vector<Vec3> ext_torque; ///< imposed torque on the clump, N m
+  std::vector<Vec3> ext_force;  ///< imposed force on the clump, N (empty until one is set)
+  std::vector<Vec3> ext_torque; ///< imposed torque on the clump, N m (empty until one is set)
   std::vector<Real> mass;       ///< kg
   std::vector<Vec3> inertia;    ///< principal moments, kg m^2
   /// Radius the members' contacts take for their stiffness (and the mixing rules), m; 0: each

@@ -73,4 +73,8 @@ inline void require(bool ok, const char* field, Real value, const char* allowed)
   if (!ok) throw ParameterError(std::string(field) + "=" + fmt_real(value) + ": " + allowed);
 }
 
+/// A zero vector to read where a lazily allocated per-body array is empty (the external
+/// forces and torques: BodyStore).
+inline const Vec3 kZeroVec3 = Vec3::Zero();
+
 }  // namespace cpp_dem

@@ -1,7 +1,8 @@
-"""The per-body energy accumulators (issue 63 item 3): a scene that never tracks energy carries
-none of their 48 bytes a body or clump; one that does has them for every body and clump,
-those added while it tracks and before it started alike, and its balance is the one the full
-arrays gave."""
+"""Per-body arrays allocated on first use (issue 63 item 3). The energy accumulators: a scene
+that never tracks energy carries none of their 48 bytes a body or clump; one that does has
+them for every body and clump, those added while it tracks and before it started alike. The
+external forces and torques: none of their 48 bytes until one is set; then every body has
+its entry and the loads act as before."""
 
 from __future__ import annotations
 
@@ -105,3 +106,63 @@ def test_clump_kinetic_energies_are_zero_until_tracked():
     s.track_energy = True
     s.run(2)
     assert s.clump_kinetic_energies[0] > 0
+
+
+def test_external_loads_are_allocated_when_first_set_and_act_as_before():
+    s, m = _pile()
+    s.run(10)
+    f = s.memory_by_field()
+    assert f["bodies.ext_force"] == 0 and f["bodies.ext_torque"] == 0
+    n = s.num_bodies
+    assert np.array_equal(s.external_forces, np.zeros((n, 3)))
+    # a load on every body as one array: the same motion as gravity raised by its weight
+    a, _ = _pile()
+    loads = np.zeros((n, 3))
+    loads[:, 2] = -a.masses * 9.81
+    a.external_forces = loads
+    assert a.memory_by_field()["bodies.ext_force"] >= 24 * n
+    assert a.memory_by_field()["bodies.ext_torque"] == 0  # (the torques stay unallocated)
+    b, _ = _pile()
+    b.gravity = (0, 0, -2 * 9.81)
+    a.run(2000)
+    b.run(2000)
+    assert np.allclose(a.positions, b.positions, rtol=0, atol=1e-12)
+    assert np.array_equal(a.external_forces, loads)
+    # a body added afterwards gets its (zero) entry
+    a.add_spheres(np.array([[0.05, 0.05, 0.38]]), np.array([0.005]), material=m)
+    assert a.external_forces.shape == (n + 1, 3) and not a.external_forces[-1].any()
+    a.run(10)
+
+
+def test_checkpoints_with_and_without_external_loads_go_on_bitwise(tmp_path):
+    for loaded in (False, True):
+        s, _ = _pile()
+        if loaded:
+            f = np.zeros((s.num_bodies, 3))
+            f[:, 0] = 1e-4
+            s.external_forces = f
+        s.run(1000)
+        path = tmp_path / f"loads{int(loaded)}.h5"
+        save_checkpoint(path, s)
+        s.run(1000)
+        t, _ = _pile()
+        if loaded:
+            t.external_forces = f
+        load_checkpoint(path, t)
+        t.run(1000)
+        assert np.array_equal(s.positions, t.positions)
+        assert np.array_equal(s.external_forces, t.external_forces)
+
+
+def test_a_clump_s_external_load_is_allocated_when_set():
+    s = dem.Scene()
+    m = s.add_material(dem.linear_material(density=2650, young=1e7, poisson=0.3,
+                                           friction_angle_deg=30))
+    t = ClumpTemplate.from_spheres([[0.0, 0, 0], [0.006, 0, 0]], [0.005, 0.005])
+    s.add_clumps(t, np.array([[0.0, 0, 0], [0.1, 0, 0]]), material=m)
+    s.dt = 1e-6
+    assert s.memory_by_field()["clumps.ext_force"] == 0
+    s.set_clump_external(1, np.array([0.0, 0, 1e-3]), np.zeros(3))
+    s.run(100)
+    v = s.clump_velocities
+    assert v[0, 2] == 0 and v[1, 2] > 0  # (the load moves its clump alone)
