@@ -73,18 +73,25 @@ def test_the_balance_and_the_motion_do_not_depend_on_when_they_were_allocated():
         assert s.energies()["balance_error_relative"] < 1e-2
 
 
+def _restarted(path, setup, steps: int = 1500):
+    """A pile set up by ``setup(scene)``, run, saved to ``path`` and run on; and the same pile
+    set up again, loaded from ``path`` and run on as far: (the first, the second)."""
+    s, _ = _pile()
+    setup(s)
+    s.run(steps)
+    save_checkpoint(path, s)
+    s.run(steps)
+    t, _ = _pile()
+    setup(t)
+    load_checkpoint(path, t)
+    t.run(steps)
+    return s, t
+
+
 def test_checkpoints_with_and_without_them_load_and_go_on_bitwise(tmp_path):
     for track in (False, True):
-        s, _ = _pile()
-        s.track_energy = track
-        s.run(1500)
-        path = tmp_path / f"track{int(track)}.h5"
-        save_checkpoint(path, s)
-        s.run(1500)
-        t, _ = _pile()
-        t.track_energy = track
-        load_checkpoint(path, t)
-        t.run(1500)
+        s, t = _restarted(tmp_path / f"track{int(track)}.h5",
+                          lambda sc: setattr(sc, "track_energy", track))
         assert np.array_equal(s.positions, t.positions)
         if track:
             assert t.energies() == s.energies()
@@ -135,23 +142,17 @@ def test_external_loads_are_allocated_when_first_set_and_act_as_before():
 
 
 def test_checkpoints_with_and_without_external_loads_go_on_bitwise(tmp_path):
+    def load(sc):
+        f = np.zeros((sc.num_bodies, 3))
+        f[:, 0] = 1e-4
+        sc.external_forces = f
+
     for loaded in (False, True):
-        s, _ = _pile()
-        if loaded:
-            f = np.zeros((s.num_bodies, 3))
-            f[:, 0] = 1e-4
-            s.external_forces = f
-        s.run(1000)
-        path = tmp_path / f"loads{int(loaded)}.h5"
-        save_checkpoint(path, s)
-        s.run(1000)
-        t, _ = _pile()
-        if loaded:
-            t.external_forces = f
-        load_checkpoint(path, t)
-        t.run(1000)
+        s, t = _restarted(tmp_path / f"loads{int(loaded)}.h5",
+                          load if loaded else (lambda sc: None), steps=1000)
         assert np.array_equal(s.positions, t.positions)
         assert np.array_equal(s.external_forces, t.external_forces)
+        assert (t.memory_by_field()["bodies.ext_force"] > 0) == loaded
 
 
 def test_a_clump_s_external_load_is_allocated_when_set():

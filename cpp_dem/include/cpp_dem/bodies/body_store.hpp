@@ -18,6 +18,19 @@ enum BodyKind : std::uint8_t {
 };
 // (A clump member is a BODY_SPHERE with clump >= 0; the clump itself is in ClumpStore.)
 
+/// Gives a store's energy accumulators (ke, damp_dissip, ext_work, pos_at_energy_reset) one
+/// entry per item of its pos: the new ones zero, each position its reference (BodyStore's,
+/// ClumpStore's size_energy).
+template <class Store>
+void size_energy_arrays(Store& s) {
+  const size_t n = s.pos.size(), old = s.ke.size();
+  s.ke.resize(n, 0);
+  s.damp_dissip.resize(n, 0);
+  s.ext_work.resize(n, 0);
+  s.pos_at_energy_reset.resize(n);
+  for (size_t k = old; k < n; ++k) s.pos_at_energy_reset[k] = s.pos[k];
+}
+
 struct BodyStore {
   std::vector<Vec3> pos;         ///< centres, m
   std::vector<Vec3> vel;         ///< velocities, m/s
@@ -79,14 +92,7 @@ struct BodyStore {
   const Vec3& ext_torque_of(int b) const { return ext_torque.empty() ? kZeroVec3 : ext_torque[b]; }
 
   /// Gives the energy accumulators one entry per body: zero, each position its reference.
-  void size_energy() {
-    const size_t n = pos.size(), old = ke.size();
-    ke.resize(n, 0);
-    damp_dissip.resize(n, 0);
-    ext_work.resize(n, 0);
-    pos_at_energy_reset.resize(n);
-    for (size_t b = old; b < n; ++b) pos_at_energy_reset[b] = pos[b];
-  }
+  void size_energy() { size_energy_arrays(*this); }
 
   /// Calls f(array) for every per-body array, in a fixed order (the checkpoint's).
   template <class F>

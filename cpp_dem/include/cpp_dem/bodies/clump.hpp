@@ -58,14 +58,7 @@ struct ClumpStore {
   }
 
   /// Gives the energy accumulators one entry per clump: zero, each centre its reference.
-  void size_energy() {
-    const size_t n = pos.size(), old = ke.size();
-    ke.resize(n, 0);
-    damp_dissip.resize(n, 0);
-    ext_work.resize(n, 0);
-    pos_at_energy_reset.resize(n);
-    for (size_t c = old; c < n; ++c) pos_at_energy_reset[c] = pos[c];
-  }
+  void size_energy() { size_energy_arrays(*this); }
 
   /// The member slots after the body store's permutation (perm[new slot] = old slot).
   void remap_members(const std::vector<int>& perm) {
