@@ -315,7 +315,6 @@ def test_a_flexible_load_the_soil_cannot_carry_stops_and_says_so():
     assert r[-1].footing_pressure_pa > reached
 
 
-
 def test_a_flexible_loads_stop_falls_with_the_mesh_toward_the_edge_wedges_bound():
     """Where a uniform pressure stops is the soil failing at the load's edge, not Newton at the
     cone's apex: a wedge of any size can fail there, its self-weight term vanishing with its

@@ -259,9 +259,9 @@ Real Scene::inertia_scale(int id) const {
 
 Energies Scene::energies() const {
   Energies e;
-  // (bodies and clumps carry their terms once the scene has tracked energy)
-  const int n = bodies_.ke.empty() ? 0 : num_bodies();
-  const int nc = clumps_.ke.empty() ? 0 : clumps_.size();
+  // (the accumulators exist once the scene has tracked energy: BodyStore::size_energy)
+  const int n = static_cast<int>(bodies_.ke.size());
+  const int nc = static_cast<int>(clumps_.ke.size());
   for (int c = 0; c < nc; ++c) {
     e.kinetic += clumps_.ke[c];
     e.gravity_potential += -clumps_.mass[c] * gravity_.dot(clumps_.pos[c] - clumps_.pos_at_energy_reset[c]);
