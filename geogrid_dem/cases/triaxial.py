@@ -97,6 +97,8 @@ class Params:
                                      #: CSV x,y,z,r); sizes are equivalent-volume diameters
     specimen: str = "box"            #: box (six servo walls), or cylinder: the box's
                                      #: inscribed cylinder in a flexible membrane
+    membrane_side: float = 1.0       #: the cylinder's membrane: its triangles' side in
+                                     #: smallest grain radii, 0.75 to 2, -
 
 
 #: The fewest grains a sample may have, from a packing or a PSD, -.
@@ -670,6 +672,11 @@ def build_parser():
                          "inscribed cylinder (diameter its x side, height its z side) in a "
                          "flexible membrane under the cell pressure, as in the laboratory "
                          "(docs/triaxial.md)")
+    ap.add_argument("--membrane-side", type=float, default=d.membrane_side,
+                    help="with --specimen cylinder: the membrane's triangles' side in "
+                         "smallest grain radii, 0.75 to 2 (1: finer than the grains, as "
+                         "rubber; 2: as wide as the smallest grain, about 4 x fewer nodes "
+                         "and faster: docs/studies/membrane_resolution.md)")
     return ap
 
 
@@ -756,6 +763,14 @@ def parse_args(argv=None) -> tuple[Params, Path]:
             ap.error("--resume and --overwrite: choose one (--resume keeps stage 1's files)")
     p.resume = a.resume
     p.specimen = a.specimen
+    if not (math.isfinite(a.membrane_side) and 0.75 <= a.membrane_side <= 2.0):
+        ap.error(f"--membrane-side={a.membrane_side}: must be in [0.75, 2] (smallest grain "
+                 "radii: below 0.75 the membrane's links would overlap, above 2 its "
+                 "triangles are wider than the grain)")
+    p.membrane_side = a.membrane_side
+    if a.specimen != "cylinder":
+        refuse_unused(ap, a, given, "membrane_side",
+                      f"with --specimen {a.specimen} (there is no membrane)")
     if a.specimen == "cylinder":
         why = "with --specimen cylinder"
         for dest, what in (("packing", "(the cylinder's grains are generated)"),

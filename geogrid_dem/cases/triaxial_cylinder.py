@@ -159,7 +159,11 @@ def run(p, out: Path, log, plot) -> dict:
     layer = disc(p, r_m)
     spec = cyl.prepare(rad, radius_m=grow * r_m, height_m=grow * h_m,
                        pressure_pa=p.cell_pressure, material=mat, seed=p.seed,
-                       damping=p.damping, inclusion=layer, log=log)
+                       damping=p.damping, membrane_side=p.membrane_side,
+                       inclusion=layer, log=log)
+    mb = spec.membrane
+    log(f"membrane: {len(mb.nodes)} nodes, links {1e3 * mb.link_length_m:.2f} mm long "
+        f"(--membrane-side {p.membrane_side:g}: its triangles' side in smallest grain radii)")
     grid = layer.grid if layer is not None else None
     if layer is not None and grid is None:
         log(f"the disc's slab cleared ({2 * layer.radius_m * 1e3:.0f} mm across, at "
@@ -238,7 +242,9 @@ def run(p, out: Path, log, plot) -> dict:
         "clear_layer": bool(p.clear_layer),
         "geogrid_nodes_outside": nodes_outside(spec, grid) if grid else 0,
         "psd": psd_info, "membrane": {"young_pa": 1e6, "thickness_m": 3e-4,
-                                      "nodes": int(len(spec.membrane.nodes))},
+                                      "nodes": int(len(spec.membrane.nodes)),
+                                      "side": p.membrane_side,
+                                      "link_length_m": spec.membrane.link_length_m},
         "held": {k2: held[k2] for k2 in ("radial_stress_pa", "axial_stress_pa",
                                          "membrane_correction_pa", "grains_outside")},
         "preparation": json.loads(json.dumps(prepared, default=str)),

@@ -39,7 +39,7 @@ from cpp_dem._checks import positive
 from cpp_dem.build.clump_mesh import _ray_triangle
 from cpp_dem.build.geogrid import _Builder
 
-__all__ = ["Membrane", "cylindrical_membrane", "lattice_link_young"]
+__all__ = ["Membrane", "cylindrical_membrane", "lattice_link_young", "lattice_sides"]
 
 
 def lattice_link_young(young_pa: float, thickness_m: float, link_length_m: float,
@@ -50,6 +50,17 @@ def lattice_link_young(young_pa: float, thickness_m: float, link_length_m: float
     beta = 3.0 * (node_radius_m / link_length_m) ** 2
     kn = young_pa * thickness_m * (3.0 + beta) / (2.0 * math.sqrt(3.0) * (1.0 + beta))
     return kn * link_length_m / (math.pi * node_radius_m**2)
+
+
+def lattice_sides(radius_m: float, height_m: float, segments: int) -> tuple[float, float, int]:
+    """The triangles of :func:`cylindrical_membrane` with ``segments`` nodes around rings of
+    radius ``radius_m`` over ``height_m`` (m): their side around the ring (the chord, m),
+    their side between rings (m) and the number of rings."""
+    n = int(segments)
+    chord = 2.0 * radius_m * math.sin(math.pi / n)
+    n_rings = max(2, int(round(height_m / (chord * math.sqrt(3.0) / 2.0))) + 1)
+    spacing = height_m / (n_rings - 1)
+    return chord, math.hypot(spacing, 2.0 * radius_m * math.sin(math.pi / (2 * n))), n_rings
 
 
 @dataclasses.dataclass
@@ -291,10 +302,8 @@ def cylindrical_membrane(scene, *, centre: Sequence[float], radius_m: float, hei
         raise _core.ParameterError(f"segments={segments!r}: an integer >= 6 (nodes around a "
                                    "ring)")
     n = int(segments)
-    chord = 2.0 * radius_m * math.sin(math.pi / n)
-    n_rings = max(2, int(round(height_m / (chord * math.sqrt(3.0) / 2.0))) + 1)
+    chord, diagonal, n_rings = lattice_sides(radius_m, height_m, n)
     spacing = height_m / (n_rings - 1)
-    diagonal = math.hypot(spacing, 2.0 * radius_m * math.sin(math.pi / (2 * n)))
     longest = max(chord, diagonal)
     if node_radius_m >= 0.5 * min(chord, diagonal):
         raise _core.ParameterError(

@@ -30,7 +30,7 @@ from cpp_dem import _core
 from cpp_dem.measure import inertial
 from cpp_dem.protocols.quasi_static import effective_density
 from cpp_dem.protocols.prep import overlap_limit
-from cpp_dem.build.membrane import Membrane, cylindrical_membrane
+from cpp_dem.build.membrane import Membrane, cylindrical_membrane, lattice_sides
 from cpp_dem.build.packing import loose_cylinder
 import warnings
 
@@ -55,22 +55,34 @@ class CylinderSpecimen:
     prepared: dict = field(default_factory=dict)
 
 
-def _auto_segments(radius_m: float, r_min: float) -> int:
-    """The fewest segments whose triangles (side about the chord) are at most the smallest
-    grain's radius: finer than the grains, as a rubber membrane is."""
-    return max(12, int(math.ceil(2.0 * math.pi * radius_m / r_min)))
+#: the largest ``membrane_side`` of :func:`prepare`: a triangle as wide as the smallest grain,
+#: the membrane's limit (:func:`cpp_dem.build.membrane.cylindrical_membrane`)
+MEMBRANE_SIDE_MAX = 2.0
+
+
+def _auto_segments(radius_m: float, height_m: float, side_m: float, r_min: float) -> int:
+    """The fewest segments whose chord is at most ``side_m`` (m), and whose triangles are no
+    wider than the smallest grain (``2 r_min``, m: the membrane's limit) on any side."""
+    n = max(12, int(math.ceil(2.0 * math.pi * radius_m / side_m)))
+    while max(lattice_sides(radius_m, height_m, n)[:2]) > 2.0 * r_min:
+        n += 1
+    return n
 
 
 def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
             material: _core.Material, seed: int = 1, platen_friction_deg: float = 0.0,
             membrane_young_pa: float = 1e6,
             membrane_thickness_m: float = 3e-4, mass_scale: float = 20.0,
-            damping: float = 0.3, tol: float = 0.01, max_steps: int = 200_000,
+            membrane_side: float = 1.0, damping: float = 0.3, tol: float = 0.01,
+            max_steps: int = 200_000,
             check_every: int = 1000, inclusion=None, log=None) -> CylinderSpecimen:
     """The specimen of ``radii`` (m) in a mould of ``radius_m`` and ``height_m`` (m),
     compacted to ``pressure_pa`` (Pa) and then held by a membrane of
     ``membrane_young_pa`` (Pa) and ``membrane_thickness_m`` (m) (R_c a quarter of the smallest
-    grain radius, triangles no larger than it). The hold ends with the lid within ``tol`` and
+    grain radius; its triangles' side around a ring ``membrane_side`` times that radius, -:
+    1, the default, is finer than the grains, as a rubber membrane is; up to
+    :data:`MEMBRANE_SIDE_MAX`, as wide as the smallest grain, the membrane's limit; a coarser
+    membrane is cheaper, docs/studies/membrane_resolution.md measures what it changes). The hold ends with the lid within ``tol`` and
     the grains' radial stress steady; it differs from the cell pressure by the membrane's
     correction (``prepared["membrane_correction_pa"]``). The grains and the membrane take
     ``material``; the mould and the platens the same with ``platen_friction_deg`` (deg;
@@ -90,6 +102,12 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     p = float(pressure_pa)
     if not (math.isfinite(p) and p > 0):
         raise _core.ParameterError(f"pressure_pa={pressure_pa!r}: must be > 0 (Pa)")
+    side = float(membrane_side)
+    if not (math.isfinite(side) and 0.75 <= side <= MEMBRANE_SIDE_MAX):
+        raise _core.ParameterError(
+            f"membrane_side={membrane_side!r}: must be in [0.75, {MEMBRANE_SIDE_MAX:g}] (the "
+            "membrane's triangles in smallest grain radii: below 0.75 its links would overlap, above "
+            f"{MEMBRANE_SIDE_MAX:g} they are wider than the grain)")
     radii = np.asarray(radii, dtype=float)
     pts, radii = loose_cylinder(radii, radius_m, height_m, seed=seed)
     sc = Scene(local_damping=damping)
@@ -156,7 +174,9 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     mb = cylindrical_membrane(sc, centre=[0, 0, z0], radius_m=rs + rc, height_m=z1 - z0,
                               young_pa=membrane_young_pa, thickness_m=membrane_thickness_m,
                               node_radius_m=rc, material=m,
-                              segments=_auto_segments(rs + rc, float(radii.min())),
+                              segments=_auto_segments(rs + rc, z1 - z0,
+                                                      side * float(radii.min()),
+                                                      float(radii.min())),
                               mass_scale=mass_scale)
     area = math.pi * rs**2
     lid_servo = _core.ServoWall(wall=lid, target_stress=p, area=area, max_speed=speed)
