@@ -129,7 +129,7 @@ def table(data: dict) -> list[str]:
     head = ["measure", "axial strain, %", f"side {fine:g}", f"side {coarse:g}",
             f"{coarse:g} - {fine:g} (+- SE)", "t", "resolved (95 %)"]
     out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
-    pairs = {(d["measure"], d["axial_strain"]): d for d in data["paired"]}
+    pairs = {(d["measure"], d.get("axial_strain")): d for d in data["paired"]}
 
     def line(name, strain, key, scale, digits, i=None):
         d = pairs[key, strain]
