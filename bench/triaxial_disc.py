@@ -248,4 +248,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    _cli.run(main)
+    sys.exit(_cli.run(main))

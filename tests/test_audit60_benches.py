@@ -115,3 +115,24 @@ def test_a_folder_bench_refuses_a_folder_of_an_earlier_run(tmp_path):
     assert _cli.numbers("2, 4,8", "--sweep", minimum=1) == [2.0, 4.0, 8.0]
     with pytest.raises(_cli.BenchInputError, match="--sweep='0.5': 0.5 is not allowed"):
         _cli.numbers("0.5", "--sweep", minimum=1)
+
+
+def benches_that_drop_the_exit_status(bench: Path = BENCH) -> list[str]:
+    """The bench scripts whose ``_cli.run(main)`` is not passed to ``sys.exit``: their
+    refusals printed an error and exited 0 (a sweep script would read them as done)."""
+    import re
+
+    return sorted(p.name for p in bench.glob("*.py")
+                  if re.search(r"^\s*_cli\.run\(main\)\s*$", p.read_text(), re.MULTILINE))
+
+
+def test_every_bench_exits_with_its_status(tmp_path):
+    assert benches_that_drop_the_exit_status() == []
+    # the check can fail: a bench that drops it is named
+    (tmp_path / "b.py").write_text("if __name__ == '__main__':\n    _cli.run(main)\n")
+    (tmp_path / "ok.py").write_text("if __name__ == '__main__':\n    sys.exit(_cli.run(main))\n")
+    assert benches_that_drop_the_exit_status(tmp_path) == ["b.py"]
+    # and triaxial_disc.py, which dropped it, refuses with exit 2 now
+    p = _bench(["triaxial_disc.py", "--shapes", "sphere", "--out", str(tmp_path / "x.json")],
+               tmp_path)
+    assert p.returncode == 2 and "--shapes='sphere'" in p.stderr, (p.returncode, p.stderr)
