@@ -63,6 +63,9 @@ def test_thread_count_independence(tmp_path):
     (["--packing", "/nonexistent.csv"], "--packing=/nonexistent.csv: no such file"),
     (["--grain-scale", "0"], "--grain-scale=0.0: must be > 0"),
     (["--dt-safety", "1.2"], "--dt-safety=1.2: must be in (0, 1]"),
+    (["--membrane-side", "2"], "--membrane-side=2.0: has no effect with --specimen box"),
+    (["--specimen", "cylinder", "--membrane-side", "2.5"],
+     "--membrane-side=2.5: must be in [0.75, 2]"),
 ])
 def test_bad_inputs(tmp_path, args, msg):
     p = run_case(tmp_path, "--smoke", *args)
