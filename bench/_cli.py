@@ -233,3 +233,51 @@ def run(main, argv=None) -> int:
         print(f"{prog}: error: {name}{text}", file=sys.stderr, flush=True)
         return 2
     return status if isinstance(status, int) and not isinstance(status, bool) else 0
+
+
+def study_parser(name: str, doc: str, *, runs: bool = False) -> BenchParser:
+    """The parser of a study over seeds whose docs table is rendered from its data file:
+    ``--out`` (the data file, default ``results/bench_runs/<name>.json``), ``--table FILE``
+    (print the docs' table of a data file and run nothing) and, with ``runs``, ``--runs``
+    (the folder of the case's runs, default beside ``--out``). ``doc`` is the bench's
+    module doc."""
+    import argparse
+
+    ap = BenchParser(out="file", description=doc,
+                     formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap.add_argument("--out", default=f"results/bench_runs/{name}.json",
+                    help="the JSON file of the runs and the paired differences")
+    ap.add_argument("--table", default="", help="print the docs' table of this data file, "
+                    "and run nothing")
+    if runs:
+        ap.add_argument("--runs", default="", help="the folder of the case's runs (default: "
+                        "beside --out, <out stem>_runs/)")
+    return ap
+
+
+def parse_study(ap: argparse.ArgumentParser, table) -> argparse.Namespace | None:
+    """A study's arguments (:func:`study_parser`), its ``--seeds`` and ``--at`` lists parsed;
+    None after printing ``table(data)`` of ``--table``'s data file (nothing to run)."""
+    import json
+
+    a = ap.parse_args()
+    if a.table:
+        print("\n".join(table(json.loads(Path(a.table).read_text()))))
+        return None
+    a.seeds = numbers(a.seeds, "--seeds", kind=int, lo="nonneg")
+    a.at = numbers(a.at, "--at")
+    return a
+
+
+def run_triaxial_case(args: list, what: str) -> None:
+    """``cases/triaxial.py`` with ``args`` in a process of one OpenMP thread;
+    :class:`BenchInputError` naming ``what`` (the run) and the case's last words if it
+    fails."""
+    import subprocess
+
+    root = Path(__file__).resolve().parents[1]
+    p = subprocess.run([sys.executable, str(root / "cases" / "triaxial.py"), *args],
+                       capture_output=True, text=True, env={**os.environ, "OMP_NUM_THREADS": "1"})
+    if p.returncode != 0:
+        raise BenchInputError(f"{what}: the case failed (exit {p.returncode}): "
+                              f"{(p.stderr or p.stdout).strip()[-600:]}")

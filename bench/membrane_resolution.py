@@ -23,24 +23,19 @@ finer over the seeds, with its standard error and Student's t (resolved at 95 % 
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
 import math
-import os
-import platform
-import subprocess
 import sys
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
 import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
+import _report  # noqa: E402
 from geogrid_dem.stats import paired_difference, resolved  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
 
 #: the measures read at each axial strain: (the CSV's column, the table's name, its scale
 #: from SI, its digits)
@@ -53,16 +48,11 @@ def run_one(a, side: float, seed: int) -> dict:
     """The case's run for (side, seed), or its earlier run's files; its readings."""
     d = Path(a.runs) / f"side{side:g}_s{seed}"
     if not (d / "summary.json").exists():
-        cmd = [sys.executable, str(ROOT / "cases" / "triaxial.py"), "--smoke", "--n", str(a.n),
-               "--seed", str(seed), "--specimen", "cylinder", "--membrane-side", repr(side),
-               "--stop-strain", repr(a.stop_strain), "--strain-rate", repr(a.strain_rate),
-               "--threads", "1", "--out", str(d), "--overwrite"]
-        p = subprocess.run(cmd, capture_output=True, text=True,
-                           env={**os.environ, "OMP_NUM_THREADS": "1"})
-        if p.returncode != 0:
-            raise _cli.BenchInputError(f"--membrane-side {side:g}, seed {seed}: the case failed "
-                                       f"(exit {p.returncode}): "
-                                       f"{(p.stderr or p.stdout).strip()[-600:]}")
+        _cli.run_triaxial_case(["--smoke", "--n", str(a.n), "--seed", str(seed), "--specimen",
+                                "cylinder", "--membrane-side", repr(side), "--stop-strain",
+                                repr(a.stop_strain), "--strain-rate", repr(a.strain_rate),
+                                "--threads", "1", "--out", str(d), "--overwrite"],
+                               f"--membrane-side {side:g}, seed {seed}")
     rows = list(csv.DictReader(open(d / "triaxial.csv")))
     e = np.array([float(r["axial_strain"]) for r in rows])
     out: dict = {"side": side, "seed": seed}
@@ -109,10 +99,6 @@ def paired(runs: list[dict], at: list[float], fine: float, coarse: float) -> lis
     return out
 
 
-def _fmt(x, scale: float, digits: int) -> str:
-    return "-" if x is None or not math.isfinite(x) else f"{x * scale:.{digits}f}"
-
-
 def _mean(runs: list[dict], side: float, key: str, i: int | None = None):
     v = [r[key] if i is None else r[key][i] for r in runs if r["side"] == side]
     v = [x for x in v if x is not None]
@@ -135,10 +121,10 @@ def table(data: dict) -> list[str]:
         d = pairs[key, strain]
         res = "yes" if d["resolved"] else ("no" if d["n"] > 1 else "-")
         out.append(f"| {name} | {strain_txt(strain)} | "
-                   f"{_fmt(_mean(runs, fine, key, i), scale, digits)} | "
-                   f"{_fmt(_mean(runs, coarse, key, i), scale, digits)} | "
-                   f"{_fmt(d['mean'], scale, digits)} +- {_fmt(d['se'], scale, digits)} | "
-                   f"{_fmt(d['t'], 1, 1)} | {res} |")
+                   f"{_report.fmt(_mean(runs, fine, key, i), scale, digits)} | "
+                   f"{_report.fmt(_mean(runs, coarse, key, i), scale, digits)} | "
+                   f"{_report.fmt(d['mean'], scale, digits)} +- {_report.fmt(d['se'], scale, digits)} | "
+                   f"{_report.fmt(d['t'], 1, 1)} | {res} |")
 
     def strain_txt(s):
         return "-" if s is None else f"{100 * s:g}"
@@ -152,8 +138,8 @@ def table(data: dict) -> list[str]:
                               ("deviatoric_steps", "loading steps", 0),
                               ("wall_time_preparation_s", "wall time, preparation, s", 1),
                               ("wall_time_deviatoric_s", "wall time, loading, s", 1)):
-        out.append(f"| {name} | - | {_fmt(_mean(runs, fine, key), 1, digits)} | "
-                   f"{_fmt(_mean(runs, coarse, key), 1, digits)} | | | |")
+        out.append(f"| {name} | - | {_report.fmt(_mean(runs, fine, key), 1, digits)} | "
+                   f"{_report.fmt(_mean(runs, coarse, key), 1, digits)} | | | |")
     for d in data["paired"]:
         if d["measure"].startswith("speedup_"):
             what = "loading" if "deviatoric" in d["measure"] else "whole run"
@@ -163,12 +149,7 @@ def table(data: dict) -> list[str]:
 
 
 def main() -> None:
-    ap = _cli.BenchParser(out="file", description=__doc__,
-                          formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--out", default="results/bench_runs/membrane_resolution.json",
-                    help="the JSON file of the runs and the paired differences")
-    ap.add_argument("--runs", default="", help="the folder of the case's runs (default: "
-                    "beside --out, <out stem>_runs/)")
+    ap = _cli.study_parser("membrane_resolution", __doc__, runs=True)
     ap.add_argument("--n", type=int, default=1500, help="grains per specimen (--n of the case)")
     ap.add_argument("--seeds", default="1,2,3,4,5", help="comma-separated packing seeds")
     ap.add_argument("--sides", default="1,2", help="the two membrane sides compared (the "
@@ -180,14 +161,9 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2, help="runs at a time (one thread each)")
     ap.add_argument("--smoke", action="store_true",
                     help="300 grains, two seeds, to 1 %% at 0.5 /s")
-    ap.add_argument("--table", default="", help="print the docs' table of this data file, "
-                    "and run nothing")
-    a = ap.parse_args()
-    if a.table:
-        print("\n".join(table(json.loads(Path(a.table).read_text()))))
+    a = _cli.parse_study(ap, table)
+    if a is None:
         return
-    a.seeds = _cli.numbers(a.seeds, "--seeds", kind=int, lo="nonneg")
-    a.at = _cli.numbers(a.at, "--at")
     a.sides = _cli.numbers(a.sides, "--sides")
     if len(a.sides) != 2 or not a.sides[0] < a.sides[1] \
             or not all(0.75 <= s <= 2.0 for s in a.sides):
@@ -198,22 +174,9 @@ def main() -> None:
             [0.005, 0.01], 0.5
     a.runs = a.runs or str(Path(a.out).with_suffix("")) + "_runs"
     jobs = [(side, seed) for seed in a.seeds for side in a.sides]
-    with ThreadPoolExecutor(max_workers=a.jobs) as pool:
-        runs = []
-        for r in pool.map(lambda j: run_one(a, *j), jobs):
-            print(json.dumps(r), flush=True)
-            runs.append(r)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
-                            capture_output=True, text=True).stdout.strip()
-    data = {"command": "bench/membrane_resolution.py " + " ".join(sys.argv[1:]),
-            "machine": platform.processor() or platform.machine(), "commit": commit,
-            "params": {k: v for k, v in vars(a).items() if k not in ("out", "table")},
-            "runs": runs, "paired": paired(runs, a.at, *a.sides)}
-    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.out).write_text(json.dumps(data, indent=1, default=float) + "\n")
-    for d in data["paired"]:
-        print(json.dumps(d))
-
+    runs = _report.run_jobs(lambda side, seed: run_one(a, side, seed), jobs, a.jobs)
+    _report.write_study("membrane_resolution.py", a, runs, paired(runs, a.at, *a.sides),
+                        a.out)
 
 if __name__ == "__main__":
     sys.exit(_cli.run(main))

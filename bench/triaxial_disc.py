@@ -21,24 +21,18 @@ Student's t (resolved at 95 % when |t| > t(0.975, n - 1)).
 
 from __future__ import annotations
 
-import argparse
 import csv
 import json
-import math
-import os
-import platform
-import subprocess
 import sys
-from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared _cli)
 import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
+import _report  # noqa: E402
 from geogrid_dem.stats import paired_difference, resolved  # noqa: E402
 
-ROOT = Path(__file__).resolve().parents[1]
 
 
 def _run_dir(runs: Path, shape: str, grid: str, seed: int) -> Path:
@@ -50,17 +44,11 @@ def run_one(a, shape: str, grid: str, seed: int) -> dict:
     d = _run_dir(Path(a.runs), shape, grid, seed)
     if not (d / "summary.json").exists():
         which = ["--clear-layer"] if grid == "cleared" else ["--geogrid", grid]
-        cmd = [sys.executable, str(ROOT / "cases" / "triaxial.py"), "--smoke", "--n", str(a.n),
-               "--seed", str(seed), "--specimen", shape, *which,
-               "--stop-strain", repr(a.stop_strain), "--strain-rate", repr(a.strain_rate),
-               "--threads", "1", "--out", str(d),
-               "--overwrite"]
-        p = subprocess.run(cmd, capture_output=True, text=True,
-                           env={**os.environ, "OMP_NUM_THREADS": "1"})
-        if p.returncode != 0:
-            raise _cli.BenchInputError(f"{shape}, {' '.join(which)}, seed {seed}: the case "
-                                       f"failed (exit {p.returncode}): "
-                                       f"{(p.stderr or p.stdout).strip()[-600:]}")
+        _cli.run_triaxial_case(["--smoke", "--n", str(a.n), "--seed", str(seed), "--specimen",
+                                shape, *which, "--stop-strain", repr(a.stop_strain),
+                                "--strain-rate", repr(a.strain_rate), "--threads", "1",
+                                "--out", str(d), "--overwrite"],
+                               f"{shape}, {' '.join(which)}, seed {seed}")
     rows = list(csv.DictReader(open(d / "triaxial.csv")))
     e = np.array([float(r["axial_strain"]) for r in rows])
     cols = {key: np.array([float(r[key]) for r in rows])
@@ -103,10 +91,6 @@ def paired(runs: list[dict], at: list[float], grid: str) -> list[dict]:
     return out
 
 
-def _fmt(x, scale: float, digits: int) -> str:
-    return "-" if x is None or not math.isfinite(x) else f"{x * scale:.{digits}f}"
-
-
 def table(data: dict) -> list[str]:
     """The docs' table (docs/studies/triaxial_disc.md): per shape, axial strain and measure,
     the means without and with the grid over the seeds, and the paired difference with its
@@ -129,10 +113,10 @@ def table(data: dict) -> list[str]:
                 d = pairs[shape, key, e]
                 res = "yes" if d["resolved"] else ("no" if d["n"] > 1 else "-")
                 out.append(f"| {shape} | {100 * e:g} | {name} | "
-                           f"{_fmt(mean['cleared'], scale, digits)}"
-                           f" | {_fmt(mean[grid], scale, digits)} | "
-                           f"{_fmt(d['mean'], scale, digits)} +- {_fmt(d['se'], scale, digits)}"
-                           f" | {_fmt(d['t'], 1, 1)} | {res} |")
+                           f"{_report.fmt(mean['cleared'], scale, digits)}"
+                           f" | {_report.fmt(mean[grid], scale, digits)} | "
+                           f"{_report.fmt(d['mean'], scale, digits)} +- {_report.fmt(d['se'], scale, digits)}"
+                           f" | {_report.fmt(d['t'], 1, 1)} | {res} |")
     return out
 
 
@@ -182,12 +166,7 @@ def figure(data: dict, png: Path) -> None:
 
 
 def main() -> None:
-    ap = _cli.BenchParser(out="file", description=__doc__,
-                          formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--out", default="results/bench_runs/triaxial_disc.json",
-                    help="the JSON file of the runs and the paired differences")
-    ap.add_argument("--runs", default="", help="the folder of the case's runs (default: "
-                    "beside --out, <out stem>_runs/)")
+    ap = _cli.study_parser("triaxial_disc", __doc__, runs=True)
     ap.add_argument("--n", type=int, default=1500, help="grains per specimen (--n of the case)")
     ap.add_argument("--seeds", default="1,2,3,4", help="comma-separated packing seeds")
     ap.add_argument("--shapes", default="cylinder,box", help="cylinder, box or both")
@@ -202,8 +181,6 @@ def main() -> None:
     ap.add_argument("--jobs", type=int, default=2, help="runs at a time (one thread each)")
     ap.add_argument("--smoke", action="store_true",
                     help="300 grains, one seed, the cylinder only, to 1 %%")
-    ap.add_argument("--table", default="", help="print the docs' table of this data file, "
-                    "and run nothing")
     ap.add_argument("--figure", default="", help="with --table: also draw the mean curves "
                     "of that data file into this PNG")
     a = ap.parse_args()
@@ -230,22 +207,8 @@ def main() -> None:
     a.runs = a.runs or str(Path(a.out).with_suffix("")) + "_runs"
     jobs = [(shape, g, seed) for seed in a.seeds for shape in a.shapes
             for g in ("cleared", a.geogrid)]
-    with ThreadPoolExecutor(max_workers=a.jobs) as pool:
-        runs = []
-        for r in pool.map(lambda j: run_one(a, *j), jobs):
-            print(json.dumps({k: v for k, v in r.items() if k != "curve"}), flush=True)
-            runs.append(r)
-    commit = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT,
-                            capture_output=True, text=True).stdout.strip()
-    data = {"command": "bench/triaxial_disc.py " + " ".join(sys.argv[1:]),
-            "machine": platform.processor() or platform.machine(), "commit": commit,
-            "params": {k: v for k, v in vars(a).items() if k not in ("out", "table")},
-            "runs": runs, "paired": paired(runs, a.at, a.geogrid)}
-    Path(a.out).parent.mkdir(parents=True, exist_ok=True)
-    Path(a.out).write_text(json.dumps(data, indent=1, default=float) + "\n")
-    for d in data["paired"]:
-        print(json.dumps(d))
-
+    runs = _report.run_jobs(lambda *j: run_one(a, *j), jobs, a.jobs, hide=("curve",))
+    _report.write_study("triaxial_disc.py", a, runs, paired(runs, a.at, a.geogrid), a.out)
 
 if __name__ == "__main__":
     sys.exit(_cli.run(main))

@@ -22,7 +22,6 @@ with its standard error and Student's t.
 
 from __future__ import annotations
 
-import argparse
 import json
 import math
 import platform
@@ -142,10 +141,7 @@ def table(data: dict) -> list[str]:
 
 
 def main() -> None:
-    ap = _cli.BenchParser(out="file", description=__doc__,
-                          formatter_class=argparse.RawDescriptionHelpFormatter)
-    ap.add_argument("--out", default="results/bench_runs/triaxial_membrane.json",
-                    help="the JSON file of the runs and the paired differences")
+    ap = _cli.study_parser("triaxial_membrane", __doc__)
     ap.add_argument("--grains", type=int, default=600, help="grains per specimen")
     ap.add_argument("--seeds", default="1,2,3", help="comma-separated seeds (one pair each)")
     ap.add_argument("--pressure", type=float, default=100e3, help="cell pressure, Pa")
@@ -158,14 +154,9 @@ def main() -> None:
                     help="axial strains to read q and the volumetric strain at")
     ap.add_argument("--record-every", type=int, default=500, help="steps between rows")
     ap.add_argument("--smoke", action="store_true", help="150 grains, one seed, to 1 %%")
-    ap.add_argument("--table", default="", help="print the docs' table of this data file, "
-                    "and run nothing")
-    a = ap.parse_args()
-    if a.table:
-        print("\n".join(table(json.loads(Path(a.table).read_text()))))
+    a = _cli.parse_study(ap, table)
+    if a is None:
         return
-    a.seeds = _cli.numbers(a.seeds, "--seeds", kind=int, lo="nonneg")
-    a.at = _cli.numbers(a.at, "--at")
     if a.smoke:
         a.grains, a.seeds, a.stop_strain, a.at = 150, a.seeds[:1], 0.01, [0.005, 0.01]
         a.radius_m, a.height_m = 0.014, 0.04
