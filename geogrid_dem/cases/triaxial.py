@@ -776,8 +776,8 @@ def parse_args(argv=None) -> tuple[Params, Path]:
         for dest, what in (("packing", "(the cylinder's grains are generated)"),
                            ("skip_isotropic", "(the membrane holds the specimen first)"),
                            ("prep_friction", "(the mould compacts at --phi)"),
-                           ("dt_safety", "(its time step is 0.3 of the critical one: the "
-                                         "membrane's links)"),
+                           ("dt_safety", "(its time step is the protocol's: 0.3 of the "
+                                         "grains' p-wave estimate in the mould)"),
                            ("preset", "(its loading runs at --strain-rate)"),
                            ("resume", "(it keeps no checkpoint)")):
             refuse_unused(ap, a, given, dest, f"{why} {what}")
