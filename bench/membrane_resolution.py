@@ -123,7 +123,8 @@ def table(data: dict) -> list[str]:
         out.append(f"| {name} | {strain_txt(strain)} | "
                    f"{_report.fmt(_mean(runs, fine, key, i), scale, digits)} | "
                    f"{_report.fmt(_mean(runs, coarse, key, i), scale, digits)} | "
-                   f"{_report.fmt(d['mean'], scale, digits)} +- {_report.fmt(d['se'], scale, digits)} | "
+                   f"{_report.fmt(d['mean'], scale, digits)} +- "
+                   f"{_report.fmt(d['se'], scale, digits)} | "
                    f"{_report.fmt(d['t'], 1, 1)} | {res} |")
 
     def strain_txt(s):

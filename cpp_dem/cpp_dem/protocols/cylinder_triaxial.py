@@ -82,8 +82,8 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     grain radius; its triangles' side around a ring ``membrane_side`` times that radius, -:
     1, the default, is finer than the grains, as a rubber membrane is; up to
     :data:`MEMBRANE_SIDE_MAX`, as wide as the smallest grain, the membrane's limit; a coarser
-    membrane is cheaper, docs/studies/membrane_resolution.md measures what it changes). The hold ends with the lid within ``tol`` and
-    the grains' radial stress steady; it differs from the cell pressure by the membrane's
+    membrane is cheaper, docs/studies/membrane_resolution.md measures what it changes). The
+    hold ends with the lid within ``tol`` and the grains' radial stress steady; it differs from the cell pressure by the membrane's
     correction (``prepared["membrane_correction_pa"]``). The grains and the membrane take
     ``material``; the mould and the platens the same with ``platen_friction_deg`` (deg;
     frictionless by default, as the cubical test's walls: lubricated ends). Each stage runs until its stresses are within
@@ -106,8 +106,8 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     if not (math.isfinite(side) and 0.75 <= side <= MEMBRANE_SIDE_MAX):
         raise _core.ParameterError(
             f"membrane_side={membrane_side!r}: must be in [0.75, {MEMBRANE_SIDE_MAX:g}] (the "
-            "membrane's triangles in smallest grain radii: below 0.75 its links would overlap, above "
-            f"{MEMBRANE_SIDE_MAX:g} they are wider than the grain)")
+            "membrane's triangles in smallest grain radii: below 0.75 its links would "
+            f"overlap, above {MEMBRANE_SIDE_MAX:g} they are wider than the grain)")
     radii = np.asarray(radii, dtype=float)
     pts, radii = loose_cylinder(radii, radius_m, height_m, seed=seed)
     sc = Scene(local_damping=damping)
