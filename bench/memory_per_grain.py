@@ -29,6 +29,8 @@ import sys
 from pathlib import Path
 
 HERE = Path(__file__).resolve().parent
+sys.path.insert(0, str(HERE))  # (bench/: the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 _ONE = r"""
 import json, sys
@@ -62,7 +64,7 @@ def one(k: int) -> dict:
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = _cli.BenchParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--k", type=int, nargs="+", default=[30, 60],
                     help="lattice edges, k^3 grains each (default: 30 60)")
     ap.add_argument("--top", type=int, default=12, help="fields in the stderr table")
@@ -99,4 +101,4 @@ def main(argv=None) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(_cli.run(main))

@@ -101,7 +101,8 @@ def timed(kind: str, state, cells: int, warmup: int, steps: int) -> float:
 
 
 def main() -> None:
-    ap = _cli.BenchParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(description=__doc__,
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--grains", type=int, default=2000, help="spheres in the box")
     ap.add_argument("--cells", type=int, default=29, help="squares along each face's side")
     ap.add_argument("--steps", type=int, default=2000, help="timed steps per block")
@@ -131,4 +132,4 @@ def main() -> None:
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(_cli.run(main))

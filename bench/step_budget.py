@@ -37,6 +37,7 @@ import numpy as np
 
 sys.path.insert(0, str(Path(__file__).resolve().parent))
 import throughput  # noqa: E402  (its packings and scene)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 #: How many times a step reads and writes each of the core's arrays (the fields of
 #: Scene.memory_by_field): (reads, writes). Arrays a step of the throughput scene does not
@@ -106,8 +107,8 @@ def budget(n: int, steps: int, warmup: int, bw: dict) -> dict:
 
 
 def main(argv=None) -> int:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    ap = _cli.BenchParser(description=__doc__.split("\n\n")[0],
+                          formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--sizes", type=int, nargs="+", default=[1000, 10000, 100000],
                     help="packing sizes N (bench/throughput.py's packings; default 1e3 1e4 1e5)")
     ap.add_argument("--steps", type=int, default=0,
@@ -139,4 +140,4 @@ def main(argv=None) -> int:
 
 
 if __name__ == "__main__":
-    sys.exit(main())
+    sys.exit(_cli.run(main))

@@ -26,6 +26,8 @@ import time
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "bench"))  # (the shared _cli)
+import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 
 def _spin() -> None:  # (other work on a core)
@@ -69,7 +71,7 @@ def measure(case: str, busy: int, blocks: int, cores: int) -> dict:
 
 
 def main(argv=None) -> None:
-    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap = _cli.BenchParser(description=__doc__.split("\n\n")[0], zero_ok={"busy"})
     ap.add_argument("--cases", nargs="+", default=["pullout-000"],
                     help="cases whose --smoke is timed (default: pullout-000)")
     ap.add_argument("--busy", type=int, nargs="+", default=[0, 1],
@@ -79,10 +81,17 @@ def main(argv=None) -> None:
     cores = len(os.sched_getaffinity(0))
     if a.blocks < 1 or any(b < 0 or b >= cores for b in a.busy):
         ap.error(f"--blocks must be >= 1 and --busy in [0, {cores - 1}] ({cores} cores)")
+    from geogrid_dem.cases import CASES
+
+    scripts = sorted(CASES)
+    for case in a.cases:
+        if case not in scripts:
+            raise _cli.BenchInputError(f"--cases={case}: no such case; one of "
+                                       f"{', '.join(scripts)}")
     for case in a.cases:
         for busy in a.busy:
             print(json.dumps(measure(case, busy, a.blocks, cores)), flush=True)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(_cli.run(main))

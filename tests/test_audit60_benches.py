@@ -117,22 +117,45 @@ def test_a_folder_bench_refuses_a_folder_of_an_earlier_run(tmp_path):
         _cli.numbers("0.5", "--sweep", minimum=1)
 
 
-def benches_that_drop_the_exit_status(bench: Path = BENCH) -> list[str]:
-    """The bench scripts whose ``_cli.run(main)`` is not passed to ``sys.exit``: their
-    refusals printed an error and exited 0 (a sweep script would read them as done)."""
+def benches_outside_the_cli(bench: Path = BENCH) -> list[str]:
+    """The bench scripts run as programs (a ``__main__`` guard) that do not go through
+    bench/_cli.py: a plain ``argparse.ArgumentParser`` (no number checks), or a main not
+    run as ``sys.exit(_cli.run(main))`` (a refusal printed its error and exited 0, or a
+    library's refusal ended in a traceback)."""
     import re
 
-    return sorted(p.name for p in bench.glob("*.py")
-                  if re.search(r"^\s*_cli\.run\(main\)\s*$", p.read_text(), re.MULTILINE))
+    out = []
+    for p in sorted(bench.glob("*.py")):
+        text = p.read_text()
+        if "__main__" not in text:
+            continue  # (a module the benches share, or a script Yade runs)
+        if ("argparse.ArgumentParser(" in text
+                or not re.search(r"^\s*sys\.exit\(_cli\.run\(main\)\)\s*$", text, re.MULTILINE)):
+            out.append(p.name)
+    return out
 
 
-def test_every_bench_exits_with_its_status(tmp_path):
-    assert benches_that_drop_the_exit_status() == []
-    # the check can fail: a bench that drops it is named
-    (tmp_path / "b.py").write_text("if __name__ == '__main__':\n    _cli.run(main)\n")
-    (tmp_path / "ok.py").write_text("if __name__ == '__main__':\n    sys.exit(_cli.run(main))\n")
-    assert benches_that_drop_the_exit_status(tmp_path) == ["b.py"]
-    # and triaxial_disc.py, which dropped it, refuses with exit 2 now
-    p = _bench(["triaxial_disc.py", "--shapes", "sphere", "--out", str(tmp_path / "x.json")],
-               tmp_path)
-    assert p.returncode == 2 and "--shapes='sphere'" in p.stderr, (p.returncode, p.stderr)
+def test_every_bench_goes_through_the_cli_and_exits_with_its_status(tmp_path):
+    assert benches_outside_the_cli() == []
+    # the check can fail: a bench that drops the status, or parses on its own, is named
+    main = "if __name__ == '__main__':\n"
+    (tmp_path / "a.py").write_text(main + "    _cli.run(main)\n")
+    (tmp_path / "b.py").write_text("ap = argparse.ArgumentParser()\n" + main
+                                   + "    sys.exit(_cli.run(main))\n")
+    (tmp_path / "c.py").write_text(main + "    main()\n")
+    (tmp_path / "ok.py").write_text(main + "    sys.exit(_cli.run(main))\n")
+    (tmp_path / "module.py").write_text("def f():\n    pass\n")
+    assert benches_outside_the_cli(tmp_path) == ["a.py", "b.py", "c.py"]
+
+
+@pytest.mark.parametrize("args, words", [
+    # triaxial_disc.py exited 0 after this refusal
+    (["triaxial_disc.py", "--shapes", "sphere"], "--shapes='sphere'"),
+    (["threads_auto.py", "--cases", "nosuch"], "--cases=nosuch: no such case; one of"),
+    (["step_budget.py", "--warmup", "-1"], "--warmup=-1: must be >= 0"),
+    (["memory_per_grain.py", "--k", "2"], "--k [2]: one or more edges of at least 3"),
+])
+def test_the_benches_brought_in_refuse_with_exit_2(tmp_path, args, words):
+    p = _bench([*args, *(["--out", str(tmp_path / "x.json")] if args[0] == "triaxial_disc.py"
+                         else [])], tmp_path)
+    assert p.returncode == 2 and words in p.stderr, (p.returncode, p.stderr[-2000:])
