@@ -15,8 +15,15 @@ nodes. Then, per measure and strain, the paired difference of the coarser side l
 finer over the seeds, with its standard error and Student's t (resolved at 95 % when
 |t| > t(0.975, n - 1)), and the finer run's wall time over the coarser's per seed.
 
+With ``--dt-safety S`` the pair is the time step at one side (``--sides``, one value): the
+protocol's step (0.3 of the grains' p-wave estimate in the mould, kept) against S of the
+critical step, renewed every 100 steps (the case's ``--dt-safety``), the second into
+``side<SIDE>_dt<S>_s<seed>/``; the difference is the renewed step's less the kept one's.
+
     .venv/bin/python bench/membrane_resolution.py --seeds 1,2,3,4,5 \
         --out docs/data/membrane_resolution.json
+    .venv/bin/python bench/membrane_resolution.py --seeds 1,2,3,4,5 --sides 2 --dt-safety 0.5 \
+        --out docs/data/membrane_time_step.json
     .venv/bin/python bench/membrane_resolution.py --smoke --out /tmp/mr.json
     .venv/bin/python bench/membrane_resolution.py --table docs/data/membrane_resolution.json
 """
@@ -44,18 +51,42 @@ MEASURES = (("deviatoric_stress", "q, kPa", 1e-3, 2),
             ("membrane_correction", "membrane correction, kPa", 1e-3, 2))
 
 
-def run_one(a, side: float, seed: int) -> dict:
-    """The case's run for (side, seed), or its earlier run's files; its readings."""
-    d = Path(a.runs) / f"side{side:g}_s{seed}"
+def variant(side: float, dt_safety: float | None) -> str:
+    """A run's variant as the tables name it: its side, and its time step where it is not
+    the protocol's."""
+    return f"side {side:g}" + ("" if dt_safety is None else f", step {dt_safety:g} renewed")
+
+
+def _variant_of(r: dict) -> str:
+    return variant(r["side"], r.get("dt_safety"))
+
+
+def _short(label: str) -> str:
+    """The variant in a difference's header: the renewed step's fraction, or the side."""
+    if "step" in label:
+        return label.split("step ")[1].split(" ")[0]
+    return label.removeprefix("side ")
+
+
+def run_one(a, side: float, seed: int, dt_safety: float | None = None) -> dict:
+    """The case's run for (side, seed, time step), or its earlier run's files; its
+    readings."""
+    dt_tag = "" if dt_safety is None else f"_dt{dt_safety:g}"
+    d = Path(a.runs) / f"side{side:g}{dt_tag}_s{seed}"
     if not (d / "summary.json").exists():
+        dt_args = [] if dt_safety is None else ["--dt-safety", repr(dt_safety)]
         _cli.run_triaxial_case(["--smoke", "--n", str(a.n), "--seed", str(seed), "--specimen",
-                                "cylinder", "--membrane-side", repr(side), "--stop-strain",
-                                repr(a.stop_strain), "--strain-rate", repr(a.strain_rate),
-                                "--threads", "1", "--out", str(d), "--overwrite"],
-                               f"--membrane-side {side:g}, seed {seed}")
+                                "cylinder", "--membrane-side", repr(side), *dt_args,
+                                "--stop-strain", repr(a.stop_strain), "--strain-rate",
+                                repr(a.strain_rate), "--threads", "1", "--out", str(d),
+                                "--overwrite"],
+                               f"--membrane-side {side:g}{' ' + ' '.join(dt_args)}, "
+                               f"seed {seed}")
     rows = list(csv.DictReader(open(d / "triaxial.csv")))
     e = np.array([float(r["axial_strain"]) for r in rows])
     out: dict = {"side": side, "seed": seed}
+    if dt_safety is not None:
+        out["dt_safety"] = dt_safety
     for key, *_ in MEASURES:
         v = np.array([float(r[key]) for r in rows])
         out[key] = [float(np.interp(s, e, v)) if s <= e[-1] else None for s in a.at]
@@ -72,10 +103,11 @@ def run_one(a, side: float, seed: int) -> dict:
     return out
 
 
-def paired(runs: list[dict], at: list[float], fine: float, coarse: float) -> list[dict]:
-    """coarse - fine per seed, per measure and strain, and the fine run's wall time over the
-    coarse one's (the loading's, and the whole run's): n, mean, se, t, resolved."""
-    by = {(r["side"], r["seed"]): r for r in runs}
+def paired(runs: list[dict], at: list[float], fine: str, coarse: str) -> list[dict]:
+    """coarse - fine (variants, :func:`variant`) per seed, per measure and strain, and the fine
+    run's wall time over the coarse one's (the loading's, and the whole run's): n, mean, se,
+    t, resolved."""
+    by = {(_variant_of(r), r["seed"]): r for r in runs}
     seeds = sorted({r["seed"] for r in runs if (fine, r["seed"]) in by
                     and (coarse, r["seed"]) in by})
     out = []
@@ -99,8 +131,8 @@ def paired(runs: list[dict], at: list[float], fine: float, coarse: float) -> lis
     return out
 
 
-def _mean(runs: list[dict], side: float, key: str, i: int | None = None):
-    v = [r[key] if i is None else r[key][i] for r in runs if r["side"] == side]
+def _mean(runs: list[dict], which: str, key: str, i: int | None = None):
+    v = [r[key] if i is None else r[key][i] for r in runs if _variant_of(r) == which]
     v = [x for x in v if x is not None]
     return float(np.mean(v)) if v else None
 
@@ -111,9 +143,10 @@ def table(data: dict) -> list[str]:
     with its standard error, t and whether it is resolved at 95 %; then the peak, the hold's
     correction, the nodes and the wall times."""
     runs, at = data["runs"], data["params"]["at"]
-    fine, coarse = data["params"]["sides"]
-    head = ["measure", "axial strain, %", f"side {fine:g}", f"side {coarse:g}",
-            f"{coarse:g} - {fine:g} (+- SE)", "t", "resolved (95 %)"]
+    fine, coarse = variants(data["params"])
+    short = ("kept", _short(coarse)) if "step" in coarse else (_short(fine), _short(coarse))
+    head = ["measure", "axial strain, %", fine, coarse,
+            f"{short[1]} - {short[0]} (+- SE)", "t", "resolved (95 %)"]
     out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
     pairs = {(d["measure"], d.get("axial_strain")): d for d in data["paired"]}
 
@@ -144,9 +177,18 @@ def table(data: dict) -> list[str]:
     for d in data["paired"]:
         if d["measure"].startswith("speedup_"):
             what = "loading" if "deviatoric" in d["measure"] else "whole run"
-            out.append(f"| side {fine:g} over side {coarse:g}, wall time of the {what} | - | "
+            out.append(f"| {fine} over {coarse}, wall time of the {what} | - | "
                        f"| | {d['mean']:.2f} ({d['min']:.2f}-{d['max']:.2f}) | | |")
     return out
+
+
+def variants(params: dict) -> tuple[str, str]:
+    """The two variants a data file compares (:func:`variant`), the finer (or the kept
+    step) first."""
+    side, dt = params["sides"], params.get("dt_safety")
+    if dt is None:
+        return variant(side[0], None), variant(side[1], None)
+    return variant(side[0], None), variant(side[0], dt)
 
 
 def main() -> None:
@@ -154,7 +196,10 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=1500, help="grains per specimen (--n of the case)")
     ap.add_argument("--seeds", default="1,2,3,4,5", help="comma-separated packing seeds")
     ap.add_argument("--sides", default="1,2", help="the two membrane sides compared (the "
-                    "case's --membrane-side), finer first")
+                    "case's --membrane-side), finer first; with --dt-safety, the one side")
+    ap.add_argument("--dt-safety", type=float, default=None,
+                    help="compare the protocol's time step with this fraction of the critical "
+                         "step, renewed (the case's --dt-safety), at the one side of --sides")
     ap.add_argument("--stop-strain", type=float, default=0.04, help="axial strain to reach, -")
     ap.add_argument("--strain-rate", type=float, default=0.1, help="axial strain rate, 1/s")
     ap.add_argument("--at", default="0.01,0.02,0.03,0.04",
@@ -166,18 +211,29 @@ def main() -> None:
     if a is None:
         return
     a.sides = _cli.numbers(a.sides, "--sides")
-    if len(a.sides) != 2 or not a.sides[0] < a.sides[1] \
+    given = ','.join(f'{s:g}' for s in a.sides)
+    if a.dt_safety is not None:
+        if len(a.sides) != 1 or not 0.75 <= a.sides[0] <= 2.0:
+            raise _cli.BenchInputError(f"--sides={given}: with --dt-safety, one side in "
+                                       "[0.75, 2]")
+        if not a.dt_safety <= 1:
+            raise _cli.BenchInputError(f"--dt-safety={a.dt_safety:g}: must be in (0, 1]")
+    elif len(a.sides) != 2 or not a.sides[0] < a.sides[1] \
             or not all(0.75 <= s <= 2.0 for s in a.sides):
-        raise _cli.BenchInputError(f"--sides={','.join(f'{s:g}' for s in a.sides)}: must be "
-                                   "two sides in [0.75, 2], the finer first")
+        raise _cli.BenchInputError(f"--sides={given}: must be two sides in [0.75, 2], the "
+                                   "finer first")
     if a.smoke:
         a.n, a.seeds, a.stop_strain, a.at, a.strain_rate = 300, a.seeds[:2], 0.01, \
             [0.005, 0.01], 0.5
     a.runs = a.runs or str(Path(a.out).with_suffix("")) + "_runs"
-    jobs = [(side, seed) for seed in a.seeds for side in a.sides]
-    runs = _report.run_jobs(lambda side, seed: run_one(a, side, seed), jobs, a.jobs)
-    _report.write_study("membrane_resolution.py", a, runs, paired(runs, a.at, *a.sides),
-                        a.out)
+    if a.dt_safety is None:
+        jobs = [(side, seed, None) for seed in a.seeds for side in a.sides]
+    else:
+        jobs = [(a.sides[0], seed, dt) for seed in a.seeds for dt in (None, a.dt_safety)]
+    runs = _report.run_jobs(lambda side, seed, dt: run_one(a, side, seed, dt), jobs, a.jobs)
+    params = {"sides": a.sides, "dt_safety": a.dt_safety}
+    _report.write_study("membrane_resolution.py", a, runs,
+                        paired(runs, a.at, *variants(params)), a.out)
 
 if __name__ == "__main__":
     sys.exit(_cli.run(main))

@@ -666,7 +666,9 @@ def build_parser():
     ap.add_argument("--grains", type=str, default=d.grains,
                     help=GRAINS_HELP + "; the PSD gives equivalent-volume diameters")
     ap.add_argument("--dt-safety", type=float, default=d.dt_safety,
-                    help="time step = safety x critical estimate, (0, 1]")
+                    help="time step = safety x critical estimate, (0, 1], renewed every 100 "
+                         "steps (with --specimen cylinder, without it: the protocol's, 0.3 of "
+                         "the grains' p-wave estimate in the mould, kept)")
     ap.add_argument("--specimen", choices=("box", "cylinder"), default=d.specimen,
                     help="box: six servo-controlled walls (the thesis); cylinder: the box's "
                          "inscribed cylinder (diameter its x side, height its z side) in a "
@@ -776,13 +778,13 @@ def parse_args(argv=None) -> tuple[Params, Path]:
         for dest, what in (("packing", "(the cylinder's grains are generated)"),
                            ("skip_isotropic", "(the membrane holds the specimen first)"),
                            ("prep_friction", "(the mould compacts at --phi)"),
-                           ("dt_safety", "(its time step is the protocol's: 0.3 of the "
-                                         "grains' p-wave estimate in the mould)"),
                            ("preset", "(its loading runs at --strain-rate)"),
                            ("resume", "(it keeps no checkpoint)")):
             refuse_unused(ap, a, given, dest, f"{why} {what}")
         if a.grains != "spheres":
             ap.error(f"--grains={a.grains}: {why}: spheres only (the box takes clumps)")
+        # (given: that fraction of the critical step, renewed; else the protocol's step)
+        p.dt_safety = a.dt_safety if "dt_safety" in given else None
     return p, a.out
 
 

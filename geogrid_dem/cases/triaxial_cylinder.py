@@ -160,10 +160,14 @@ def run(p, out: Path, log, plot) -> dict:
     spec = cyl.prepare(rad, radius_m=grow * r_m, height_m=grow * h_m,
                        pressure_pa=p.cell_pressure, material=mat, seed=p.seed,
                        damping=p.damping, membrane_side=p.membrane_side,
-                       inclusion=layer, log=log)
+                       dt_safety=p.dt_safety, inclusion=layer, log=log)
     mb = spec.membrane
     log(f"membrane: {len(mb.nodes)} nodes, links {1e3 * mb.link_length_m:.2f} mm long "
-        f"(--membrane-side {p.membrane_side:g}: its triangles' side in smallest grain radii)")
+        f"(--membrane-side {p.membrane_side:g}: its triangles' side in smallest grain radii); "
+        + ("time step 0.3 of the grains' p-wave estimate in the mould, kept: "
+           f"{spec.scene.dt:.3g} s" if p.dt_safety is None else
+           f"time step {p.dt_safety:g} of the critical one, renewed every 100 steps: "
+           f"{spec.scene.dt:.3g} s at the hold"))
     grid = layer.grid if layer is not None else None
     if layer is not None and grid is None:
         log(f"the disc's slab cleared ({2 * layer.radius_m * 1e3:.0f} mm across, at "
@@ -244,6 +248,7 @@ def run(p, out: Path, log, plot) -> dict:
         "psd": psd_info, "membrane": {"young_pa": 1e6, "thickness_m": 3e-4,
                                       "nodes": int(len(spec.membrane.nodes)),
                                       "side": p.membrane_side,
+                                      "dt_safety": p.dt_safety,
                                       "link_length_m": spec.membrane.link_length_m},
         "held": {k2: held[k2] for k2 in ("radial_stress_pa", "axial_stress_pa",
                                          "membrane_correction_pa", "grains_outside")},

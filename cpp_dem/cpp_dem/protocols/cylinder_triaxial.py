@@ -73,7 +73,8 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
             material: _core.Material, seed: int = 1, platen_friction_deg: float = 0.0,
             membrane_young_pa: float = 1e6,
             membrane_thickness_m: float = 3e-4, mass_scale: float = 20.0,
-            membrane_side: float = 1.0, damping: float = 0.3, tol: float = 0.01,
+            membrane_side: float = 1.0, dt_safety: float | None = None,
+            damping: float = 0.3, tol: float = 0.01,
             max_steps: int = 200_000,
             check_every: int = 1000, inclusion=None, log=None) -> CylinderSpecimen:
     """The specimen of ``radii`` (m) in a mould of ``radius_m`` and ``height_m`` (m),
@@ -83,6 +84,11 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     1, the default, is finer than the grains, as a rubber membrane is; up to
     :data:`MEMBRANE_SIDE_MAX`, as wide as the smallest grain, the membrane's limit; a coarser
     membrane is cheaper, docs/studies/membrane_resolution.md measures what it changes). The
+    time step: without ``dt_safety``, 0.3 of the grains' p-wave estimate, set in the mould
+    before they touch and kept (at most 0.3 of the critical step once the membrane is on);
+    with ``dt_safety`` in (0, 1], that fraction of the critical step of the grains and the
+    membrane as they touch, renewed every 100 steps (as the cubical test's), which lets the
+    step grow as the contacts form (docs/studies/membrane_resolution.md measures it). The
     hold ends with the lid within ``tol`` and the grains' radial stress steady; it differs from the cell pressure by the membrane's
     correction (``prepared["membrane_correction_pa"]``). The grains and the membrane take
     ``material``; the mould and the platens the same with ``platen_friction_deg`` (deg;
@@ -102,6 +108,10 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     p = float(pressure_pa)
     if not (math.isfinite(p) and p > 0):
         raise _core.ParameterError(f"pressure_pa={pressure_pa!r}: must be > 0 (Pa)")
+    if dt_safety is not None and not (math.isfinite(float(dt_safety))
+                                      and 0 < float(dt_safety) <= 1):
+        raise _core.ParameterError(f"dt_safety={dt_safety!r}: must be in (0, 1] (a fraction "
+                                   "of the critical time step), or None (the protocol's)")
     side = float(membrane_side)
     if not (math.isfinite(side) and 0.75 <= side <= MEMBRANE_SIDE_MAX):
         raise _core.ParameterError(
@@ -134,6 +144,8 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     sc.add_spheres(pts, radii, material=m)
     sc.dt = 0.3 * sc.critical_dt()
     speed = 0.1 * height_m / (1e4 * sc.dt)  # m/s: the servos' cap, a tenth of the height in 1e4 steps
+    if dt_safety is not None:  # (the servos' caps in m/s stay those of the protocol's step)
+        sc.set_auto_timestep(safety=float(dt_safety), period=100)
     cs = _core.CylinderServo(cylinder=mould, target_pressure=p, max_speed=speed)
     mould_servo = _core.ServoWall(wall=lid, target_stress=p, area=math.pi * radius_m**2,
                                   max_speed=speed)
@@ -184,7 +196,8 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     sc.add_controller(mb.pressure(p))
     for c in mb.clamps(base, lid):
         sc.add_controller(c)
-    sc.dt = min(sc.dt, 0.3 * sc.critical_dt())
+    sc.dt = (min(sc.dt, 0.3 * sc.critical_dt()) if dt_safety is None
+             else float(dt_safety) * sc.critical_dt())
 
     last = [math.nan]
 
