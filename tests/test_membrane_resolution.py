@@ -68,6 +68,38 @@ def test_a_membrane_side_out_of_range_is_refused_by_name(side):
                    material=_material(), membrane_side=side)
 
 
+def test_a_renewed_time_step_holds_the_specimen_at_its_fraction_of_the_critical_one():
+    radii = 0.002 * np.random.default_rng(1).uniform(0.8, 1.0, 300)
+    spec = ct.prepare(radii, radius_m=0.017, height_m=0.05, pressure_pa=P,
+                      material=_material(), membrane_side=ct.MEMBRANE_SIDE_MAX, dt_safety=0.5)
+    s, sc = spec.prepared, spec.scene
+    assert s["reached"] and s["grains_outside"] == 0
+    # renewed every 100 steps: within a few per cent of half the critical step at the hold
+    # (the grains and the membrane), and longer than the protocol's kept step
+    assert sc.dt == pytest.approx(0.5 * sc.critical_dt(), rel=0.05)
+    kept = ct.prepare(radii, radius_m=0.017, height_m=0.05, pressure_pa=P,
+                      material=_material(), membrane_side=ct.MEMBRANE_SIDE_MAX).scene.dt
+    assert sc.dt > 1.5 * kept
+    rows = ct.shear(spec, strain_rate=0.5, stop_strain=0.01, record_every=1000)
+    assert all(r["grains_outside"] == 0 for r in rows)
+
+
+@pytest.mark.parametrize("dt", [0.0, 1.5, math.nan])
+def test_a_time_step_fraction_out_of_range_is_refused_by_name(dt):
+    with pytest.raises(dem.ParameterError, match=r"dt_safety=.*must be in \(0, 1\]"):
+        ct.prepare([0.002] * 10, radius_m=0.017, height_m=0.05, pressure_pa=P,
+                   material=_material(), dt_safety=dt)
+
+
+def test_the_case_passes_dt_safety_to_the_cylinder_only_when_given(tmp_path):
+    from geogrid_dem.cases import triaxial
+
+    base = ["--smoke", "--specimen", "cylinder", "--out", str(tmp_path)]
+    assert triaxial.parse_args(base)[0].dt_safety is None  # (the protocol's step)
+    assert triaxial.parse_args([*base, "--dt-safety", "0.5"])[0].dt_safety == 0.5
+    assert triaxial.parse_args(["--smoke", "--out", str(tmp_path)])[0].dt_safety == 0.5  # box
+
+
 @pytest.fixture(scope="module")
 def smoke(tmp_path_factory):
     base = tmp_path_factory.mktemp("mres")
@@ -77,11 +109,18 @@ def smoke(tmp_path_factory):
                        capture_output=True, text=True, timeout=600, cwd=base,
                        env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert p.returncode == 0, p.stderr[-2000:]
-    return base / "mr_runs", json.loads(out.read_text())
+    # the time step at side 1: the kept run of seed 1 read again, the renewed one run
+    dt = subprocess.run([sys.executable, str(ROOT / "bench" / "membrane_resolution.py"),
+                         "--smoke", "--seeds", "1", "--sides", "1", "--dt-safety", "0.5",
+                         "--runs", str(base / "mr_runs"), "--out", str(base / "dt.json")],
+                        capture_output=True, text=True, timeout=600, cwd=base,
+                        env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert dt.returncode == 0, dt.stderr[-2000:]
+    return base / "mr_runs", json.loads(out.read_text()), json.loads((base / "dt.json").read_text())
 
 
 def test_the_bench_runs_the_case_at_both_sides_and_pairs_them(smoke):
-    runs, data = smoke
+    runs, data, _ = smoke
     by = {r["side"]: r for r in data["runs"]}
     assert set(by) == {1.0, 2.0} and by[1.0]["num_grains"] == by[2.0]["num_grains"]
     for side in (1, 2):
@@ -101,9 +140,27 @@ def test_the_bench_runs_the_case_at_both_sides_and_pairs_them(smoke):
     assert len(lines) == 2 + 3 * len(data["params"]["at"]) + 2 + 4 + 2
 
 
-def test_the_docs_table_is_the_committed_data_s():
+def test_the_bench_pairs_the_kept_time_step_with_the_renewed_one(smoke):
+    runs, _, data = smoke
+    by = {r.get("dt_safety"): r for r in data["runs"]}
+    assert set(by) == {None, 0.5} and {r["side"] for r in data["runs"]} == {1.0}
+    s = json.loads((runs / "side1_dt0.5_s1" / "summary.json").read_text())
+    assert s["membrane"]["dt_safety"] == 0.5 and s["grains_outside_max"] == 0
+    # the renewed step is longer here: fewer steps to the same strain
+    assert by[0.5]["deviatoric_steps"] < by[None]["deviatoric_steps"]
+    d = next(x for x in data["paired"] if x["measure"] == "volumetric_strain"
+             and x["axial_strain"] == 0.01)
+    assert d["mean"] == by[0.5]["volumetric_strain"][1] - by[None]["volumetric_strain"][1]
+    lines = load_bench("membrane_resolution").table(data)
+    assert lines[0].startswith("| measure | axial strain, % | side 1 | side 1, step 0.5 renewed "
+                               "| 0.5 - kept (+- SE) |")
+
+
+@pytest.mark.parametrize("name", ["membrane_resolution", "membrane_resolution_fine",
+                                  "membrane_time_step", "membrane_time_step_side1"])
+def test_the_docs_table_is_the_committed_data_s(name):
     mod = load_bench("membrane_resolution")
-    data = json.loads((ROOT / "docs" / "data" / "membrane_resolution.json").read_text())
+    data = json.loads((ROOT / "docs" / "data" / f"{name}.json").read_text())
     text = (ROOT / "docs" / "studies" / "membrane_resolution.md").read_text()
     for line in mod.table(data):
         assert line in text, line
@@ -112,6 +169,8 @@ def test_the_docs_table_is_the_committed_data_s():
 @pytest.mark.parametrize("args, msg", [
     (["--sides", "2,1"], "--sides=2,1: must be two sides in [0.75, 2], the finer first"),
     (["--sides", "1,3"], "--sides=1,3: must be two sides in [0.75, 2]"),
+    (["--sides", "1,2", "--dt-safety", "0.5"], "--sides=1,2: with --dt-safety, one side"),
+    (["--sides", "1", "--dt-safety", "1.5"], "--dt-safety=1.5: must be in (0, 1]"),
 ])
 def test_the_bench_refuses_bad_sides_by_name(tmp_path, args, msg):
     p = subprocess.run([sys.executable, str(ROOT / "bench" / "membrane_resolution.py"), *args,
