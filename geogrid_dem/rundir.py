@@ -794,7 +794,8 @@ def run_main(case: str, out, work, *, overwrite: bool | None = None, log=None,
     BlowUpError: one line on stderr gives its message). On an interrupt or a failure every
     recorder still open is closed (what was written stays readable), every folder of the run
     is marked ``interrupted`` or ``failed`` in its manifest, and one line says so and where
-    the results are; any other error is re-raised after that. SIGTERM stops the run as SIGINT does (status 143).
+    the results are; any other error is re-raised after that. SIGTERM stops the run as
+    SIGINT does (status 143).
     ``own_folder`` False: ``out`` is a folder of several runs (each begins its own
     sub-folder), not locked or recorded itself. ``keep``: a --resume (see begin_run; one of a
     completed run returns 0 without running ``work``). ``params``, ``checkpoints``: the run's

@@ -765,10 +765,11 @@ def parse_args(argv=None) -> tuple[Params, Path]:
             ap.error("--resume and --overwrite: choose one (--resume keeps stage 1's files)")
     p.resume = a.resume
     p.specimen = a.specimen
-    if not (math.isfinite(a.membrane_side) and 0.75 <= a.membrane_side <= 2.0):
-        ap.error(f"--membrane-side={a.membrane_side}: must be in [0.75, 2] (smallest grain "
-                 "radii: below 0.75 the membrane's links would overlap, above 2 its "
-                 "triangles are wider than the grain)")
+    from cpp_dem.protocols.cylinder_triaxial import membrane_side_problem
+
+    problem = membrane_side_problem(a.membrane_side)
+    if problem:
+        ap.error(f"--membrane-side={a.membrane_side}: {problem}")
     p.membrane_side = a.membrane_side
     if a.specimen != "cylinder":
         refuse_unused(ap, a, given, "membrane_side",

@@ -58,6 +58,18 @@ class CylinderSpecimen:
 #: the largest ``membrane_side`` of :func:`prepare`: a triangle as wide as the smallest grain,
 #: the membrane's limit (:func:`cpp_dem.build.membrane.cylindrical_membrane`)
 MEMBRANE_SIDE_MAX = 2.0
+#: the smallest: below it the links (R_c a quarter of the smallest radius) would overlap
+MEMBRANE_SIDE_MIN = 0.75
+
+
+def membrane_side_problem(side: float) -> str | None:
+    """What is wrong with a ``membrane_side`` (-), after its name in a refusal; None when it
+    is allowed (the protocol's and the triaxial case's check)."""
+    if math.isfinite(side) and MEMBRANE_SIDE_MIN <= side <= MEMBRANE_SIDE_MAX:
+        return None
+    return (f"must be in [{MEMBRANE_SIDE_MIN:g}, {MEMBRANE_SIDE_MAX:g}] (the membrane's "
+            f"triangles in smallest grain radii: below {MEMBRANE_SIDE_MIN:g} its links would "
+            f"overlap, above {MEMBRANE_SIDE_MAX:g} they are wider than the grain)")
 
 
 def _auto_segments(radius_m: float, height_m: float, side_m: float, r_min: float) -> int:
@@ -89,8 +101,8 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     with ``dt_safety`` in (0, 1], that fraction of the critical step of the grains and the
     membrane as they touch, renewed every 100 steps (as the cubical test's), which lets the
     step grow as the contacts form (docs/studies/membrane_resolution.md measures it). The
-    hold ends with the lid within ``tol`` and the grains' radial stress steady; it differs from the cell pressure by the membrane's
-    correction (``prepared["membrane_correction_pa"]``). The grains and the membrane take
+    hold ends with the lid within ``tol`` and the grains' radial stress steady; it differs
+    from the cell pressure by the membrane's correction (``prepared["membrane_correction_pa"]``). The grains and the membrane take
     ``material``; the mould and the platens the same with ``platen_friction_deg`` (deg;
     frictionless by default, as the cubical test's walls: lubricated ends). Each stage runs until its stresses are within
     ``tol`` of the cell pressure at two checks in a row (``check_every`` steps apart), at most
@@ -108,16 +120,14 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     p = float(pressure_pa)
     if not (math.isfinite(p) and p > 0):
         raise _core.ParameterError(f"pressure_pa={pressure_pa!r}: must be > 0 (Pa)")
-    if dt_safety is not None and not (math.isfinite(float(dt_safety))
-                                      and 0 < float(dt_safety) <= 1):
+    safety = None if dt_safety is None else float(dt_safety)
+    if safety is not None and not (math.isfinite(safety) and 0 < safety <= 1):
         raise _core.ParameterError(f"dt_safety={dt_safety!r}: must be in (0, 1] (a fraction "
                                    "of the critical time step), or None (the protocol's)")
     side = float(membrane_side)
-    if not (math.isfinite(side) and 0.75 <= side <= MEMBRANE_SIDE_MAX):
-        raise _core.ParameterError(
-            f"membrane_side={membrane_side!r}: must be in [0.75, {MEMBRANE_SIDE_MAX:g}] (the "
-            "membrane's triangles in smallest grain radii: below 0.75 its links would "
-            f"overlap, above {MEMBRANE_SIDE_MAX:g} they are wider than the grain)")
+    problem = membrane_side_problem(side)
+    if problem:
+        raise _core.ParameterError(f"membrane_side={membrane_side!r}: {problem}")
     radii = np.asarray(radii, dtype=float)
     pts, radii = loose_cylinder(radii, radius_m, height_m, seed=seed)
     sc = Scene(local_damping=damping)
@@ -144,8 +154,8 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     sc.add_spheres(pts, radii, material=m)
     sc.dt = 0.3 * sc.critical_dt()
     speed = 0.1 * height_m / (1e4 * sc.dt)  # m/s: the servos' cap, a tenth of the height in 1e4 steps
-    if dt_safety is not None:  # (the servos' caps in m/s stay those of the protocol's step)
-        sc.set_auto_timestep(safety=float(dt_safety), period=100)
+    if safety is not None:  # (the servos' caps in m/s stay those of the protocol's step)
+        sc.set_auto_timestep(safety=safety, period=100)
     cs = _core.CylinderServo(cylinder=mould, target_pressure=p, max_speed=speed)
     mould_servo = _core.ServoWall(wall=lid, target_stress=p, area=math.pi * radius_m**2,
                                   max_speed=speed)
@@ -196,8 +206,8 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     sc.add_controller(mb.pressure(p))
     for c in mb.clamps(base, lid):
         sc.add_controller(c)
-    sc.dt = (min(sc.dt, 0.3 * sc.critical_dt()) if dt_safety is None
-             else float(dt_safety) * sc.critical_dt())
+    sc.dt = (min(sc.dt, 0.3 * sc.critical_dt()) if safety is None
+             else safety * sc.critical_dt())
 
     last = [math.nan]
 
