@@ -989,7 +989,20 @@ def loading_stage(sample, grid, targets, stage: int, p: ElementParams, rec, *,
             "wall_time_s": time.perf_counter() - wall0, "wall_stresses_pa": ax,
             "box_size_m": size_held, "box_size_start_m": size0,
             "inertial_number_max": i_max, "ramp_records": windows,
-            "records_at_speed_cap": at_cap, "rest": rest}
+            "records_at_speed_cap": at_cap, "rest": rest,
+            "strain_axes": list(strain_axes) if strain_path is not None else []}
+
+
+def _strain_path_note(st: dict) -> str:
+    """The stage log's note on the axes that followed the FEM region's strain path (their
+    stresses are the element's answer, not servoed to the targets); empty without one."""
+    axes = st.get("strain_axes") or []
+    if not axes:
+        return ""
+    names = ", ".join("xyz"[a] for a in axes)
+    strain = ", ".join(f"{100 * st['strain_stage'][a]:.3g}" for a in axes)
+    return (f" ({names} on the FEM region's strain path, strain {strain} % (extension +): "
+            "the element's own stresses there, not servoed to the targets)")
 
 
 def rest_hold(sample, targets, p: ElementParams, record, stress_axes, bias, rate: "_Rate", *,
@@ -1524,7 +1537,8 @@ def run_element(p: ElementParams, targets: list, *, prestressed: bool, label: st
             if k == 0 and cache is not None and len(targets) > 1:
                 cache[key] = (sample, grid, ps, ends, bytes(_core._checkpoint_save(sc)), st)
             log(f"{label} stage {k}: walls {np.round(st['wall_stresses_pa'] / 1e3, 3).tolist()} "
-                f"kPa for targets {np.round(t / 1e3, 3).tolist()} kPa in {st['steps']} steps "
+                f"kPa for targets {np.round(t / 1e3, 3).tolist()} kPa"
+                + _strain_path_note(st) + f" in {st['steps']} steps "
                 f"({'converged' if st['converged'] else 'NOT converged'}); held within "
                 f"{100 * st['hold_max_rel_error']:.2f} % over {p.hold_steps} steps")
         h5.snapshot(sc)
