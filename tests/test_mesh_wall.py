@@ -17,12 +17,17 @@ L = 0.2  # m, half the side of the square meshes
 SHIFT = np.array([0.01, -0.02, 0.03])  # m
 
 
-def _material(sc, friction_deg=20.0):
+def _material(sc, friction_deg=20.0, damping_normal=0.7):
     # Viscous normal damping (rotation invariant, unlike local damping) keeps the sphere on
-    # the surface instead of bouncing.
+    # the surface instead of bouncing. Without it (0) a mesh contact takes the linear law's
+    # short kernel, with it the general law.
     return sc.add_material(dem.linear_material(density=2000, young=1e7, poisson=0.3,
                                                friction_angle_deg=friction_deg,
-                                               damping_normal=0.7))
+                                               damping_normal=damping_normal))
+
+
+#: The mesh pass's two forms of the linear law: the general one (a dashpot) and the short kernel.
+LAWS = pytest.mark.parametrize("damping_normal", [0.7, 0.0], ids=["general_law", "short_kernel"])
 
 
 def _tilt(a_deg: float, b_deg: float) -> np.ndarray:
@@ -274,7 +279,8 @@ def _fine_square(n: int, half: float):
     return v, t
 
 
-def test_a_sphere_rolls_over_a_fine_mesh_as_over_the_plane():
+@LAWS
+def test_a_sphere_rolls_over_a_fine_mesh_as_over_the_plane(damping_normal):
     # Triangles a fifth of the sphere's radius: dozens within its reach at every step, many
     # edges crossed. The path stays the plane's (one contact at a time, its history carried).
     v, t = _fine_square(60, 6 * R)
@@ -282,7 +288,7 @@ def test_a_sphere_rolls_over_a_fine_mesh_as_over_the_plane():
     out = {}
     for kind in ("mesh", "plane"):
         sc = dem.Scene(gravity=g)
-        m = _material(sc)
+        m = _material(sc, damping_normal=damping_normal)
         if kind == "mesh":
             k = sc.add_mesh_wall(v, t, material=m)
         else:

@@ -11,6 +11,7 @@
 #include <vector>
 
 #include "cpp_dem/core/parallel.hpp"
+#include "cpp_dem/laws/linear.hpp"
 #include "cpp_dem/laws/registry.hpp"
 #include "cpp_dem/scene.hpp"
 
@@ -236,6 +237,9 @@ void Scene::compute_mesh_forces(long& err_contact) {
   long err = std::numeric_limits<long>::max();
   long dropped = 0;
   const Real dt = dt_;
+  mesh_sum_code_.resize(nc);
+  mesh_sum_f_.resize(MeshContact::kMaxSubs * nc);
+  mesh_sum_m_.resize(MeshContact::kMaxSubs * nc);
 #pragma omp parallel reduction(min : err) reduction(+ : dropped) if (nc > kParallelMin)
   {
   std::vector<Touch> found;  // (one list per thread, kept between contacts)
@@ -247,6 +251,7 @@ void Scene::compute_mesh_forces(long& err_contact) {
     const int b = c.body;
     const Vec3& x = bodies_.pos[b];
     const Real r = bodies_.radius[b];
+    mesh_sum_code_[k] = 0;  // (none, until its contacts are computed below)
     // 1. The touching features: each candidate triangle's closest point within r, keyed by
     // its face, edge (the mesh's vertex numbers, sorted) or vertex.
     found.clear();
@@ -316,70 +321,80 @@ void Scene::compute_mesh_forces(long& err_contact) {
     // edge or vertex that several triangles share) is the same contact; an edge or vertex
     // point on or behind the plane of a kept face contact is part of that surface (a flat or
     // convex neighbour of the face): only a face's own contact counts there.
-    if (nf > 1)
-      std::sort(found.begin(), found.end(), [](const Touch& p, const Touch& q) {
-        return std::make_tuple(p.kind != kFace, p.dist, p.kind, p.a, p.b) <
-               std::make_tuple(q.kind != kFace, q.dist, q.kind, q.a, q.b);
-      });
     Touch keep[MeshContact::kMaxSubs];
     int nk = 0;
-    const Real tol = 1e-9 * r;
-    for (int i = 0; i < nf; ++i) {
-      const Touch& h = found[i];
-      bool same = false;
-      for (int j = 0; j < nk && !same; ++j) {
-        same = (h.p - keep[j].p).norm() <= tol;
-        if (!same && h.kind != kFace && keep[j].kind == kFace)
-          same = (h.p - keep[j].p).dot(keep[j].n) <= tol;
-      }
-      if (same) continue;
-      if (nk < MeshContact::kMaxSubs) keep[nk++] = h;
-      else ++dropped;
-    }
-    // 3. Each kept contact takes its own history from the last step, or, new, that of a
-    // contact of this pair which ended now with a normal within 25 degrees (the sphere went
-    // from one face to its neighbour across an edge); else it starts fresh.
-    // The common case, a pair touching the features it touched at the last step in the same
-    // order (a feature's key is unique among the kept ones), keeps every contact in its slot:
-    // the records are updated in place, as the matching below would leave them.
-    bool in_place = c.active;
-    for (int j = 0; j < MeshContact::kMaxSubs && in_place; ++j) {
-      const MeshSub& s = c.subs[j];
-      in_place = j < nk ? s.kind == keep[j].kind && s.a == keep[j].a && s.b == keep[j].b
-                        : s.kind < 0;
-    }
-    if (!in_place) old = c.subs;
-    const std::array<MeshSub, MeshContact::kMaxSubs>& last = in_place ? c.subs : old;
+    bool in_place;
     bool used[MeshContact::kMaxSubs] = {false, false, false};
     int from[MeshContact::kMaxSubs];
-    for (int j = 0; j < nk; ++j) {
-      from[j] = in_place ? j : -1;
-      for (int s = 0; s < MeshContact::kMaxSubs && from[j] < 0; ++s)
-        if (!used[s] && old[s].kind == keep[j].kind && old[s].a == keep[j].a &&
-            old[s].b == keep[j].b)
-          from[j] = s;
-      if (from[j] >= 0) used[from[j]] = true;
-    }
-    for (int j = 0; j < nk && !in_place; ++j) {
-      if (from[j] >= 0) continue;
-      Real best = std::cos(25.0 * 3.14159265358979323846 / 180);
-      for (int s = 0; s < MeshContact::kMaxSubs; ++s) {
-        if (used[s] || old[s].kind < 0) continue;
-        const Real cosang = old[s].state.normal.dot(keep[j].n);
-        if (cosang > best) {
-          best = cosang;
-          from[j] = s;
-        }
-      }
-      if (from[j] >= 0) used[from[j]] = true;
-    }
-    // What the slots not carried on dissipated stays in the totals: slot 0 keeps it.
     Real lost_f = 0, lost_v = 0;
-    for (int s = 0; s < MeshContact::kMaxSubs; ++s)
-      if (!used[s]) {
-        lost_f += last[s].state.dissip_friction;
-        lost_v += last[s].state.dissip_viscous;
+    if (one_face) {
+      // Steps 2 and 3's result for the one face (above), without their work: the pair's one
+      // contact, in place in slot 0; the empty slots carry no dissipation.
+      keep[nk++] = found[0];
+      in_place = true;
+      from[0] = 0;
+      used[0] = true;
+    } else {
+      if (nf > 1)
+        std::sort(found.begin(), found.end(), [](const Touch& p, const Touch& q) {
+          return std::make_tuple(p.kind != kFace, p.dist, p.kind, p.a, p.b) <
+                 std::make_tuple(q.kind != kFace, q.dist, q.kind, q.a, q.b);
+        });
+      const Real tol = 1e-9 * r;
+      for (int i = 0; i < nf; ++i) {
+        const Touch& h = found[i];
+        bool same = false;
+        for (int j = 0; j < nk && !same; ++j) {
+          same = (h.p - keep[j].p).norm() <= tol;
+          if (!same && h.kind != kFace && keep[j].kind == kFace)
+            same = (h.p - keep[j].p).dot(keep[j].n) <= tol;
+        }
+        if (same) continue;
+        if (nk < MeshContact::kMaxSubs) keep[nk++] = h;
+        else ++dropped;
       }
+      // 3. Each kept contact takes its own history from the last step, or, new, that of a
+      // contact of this pair which ended now with a normal within 25 degrees (the sphere went
+      // from one face to its neighbour across an edge); else it starts fresh.
+      // The common case, a pair touching the features it touched at the last step in the same
+      // order (a feature's key is unique among the kept ones), keeps every contact in its slot:
+      // the records are updated in place, as the matching below would leave them.
+      in_place = c.active;
+      for (int j = 0; j < MeshContact::kMaxSubs && in_place; ++j) {
+        const MeshSub& s = c.subs[j];
+        in_place = j < nk ? s.kind == keep[j].kind && s.a == keep[j].a && s.b == keep[j].b
+                          : s.kind < 0;
+      }
+      if (!in_place) old = c.subs;
+      const std::array<MeshSub, MeshContact::kMaxSubs>& last = in_place ? c.subs : old;
+      for (int j = 0; j < nk; ++j) {
+        from[j] = in_place ? j : -1;
+        for (int s = 0; s < MeshContact::kMaxSubs && from[j] < 0; ++s)
+          if (!used[s] && old[s].kind == keep[j].kind && old[s].a == keep[j].a &&
+              old[s].b == keep[j].b)
+            from[j] = s;
+        if (from[j] >= 0) used[from[j]] = true;
+      }
+      for (int j = 0; j < nk && !in_place; ++j) {
+        if (from[j] >= 0) continue;
+        Real best = std::cos(25.0 * 3.14159265358979323846 / 180);
+        for (int s = 0; s < MeshContact::kMaxSubs; ++s) {
+          if (used[s] || old[s].kind < 0) continue;
+          const Real cosang = old[s].state.normal.dot(keep[j].n);
+          if (cosang > best) {
+            best = cosang;
+            from[j] = s;
+          }
+        }
+        if (from[j] >= 0) used[from[j]] = true;
+      }
+      // What the slots not carried on dissipated stays in the totals: slot 0 keeps it.
+      for (int s = 0; s < MeshContact::kMaxSubs; ++s)
+        if (!used[s]) {
+          lost_f += last[s].state.dissip_friction;
+          lost_v += last[s].state.dissip_viscous;
+        }
+    }
     if (nk == 0) {
       if (c.active) {
         c.active = false;
@@ -403,10 +418,12 @@ void Scene::compute_mesh_forces(long& err_contact) {
       note_formed_contact(c.phys, b, -1);
     }
     c.active = true;
+    const bool simple = short_kernel_applies(c.phys);
     for (int j = 0; j < MeshContact::kMaxSubs; ++j) {
       MeshSub& s = c.subs[j];
       if (j >= nk) {
-        s = MeshSub{};
+        // (in place, the slots beyond nk are empty already: reset at the last step)
+        if (!in_place) s = MeshSub{};
         continue;
       }
       const Touch& h = keep[j];
@@ -417,6 +434,25 @@ void Scene::compute_mesh_forces(long& err_contact) {
         s.a = h.a;
         s.b = h.b;
       }
+      if (simple) {
+        // The short kernel (laws/linear.hpp): apply_law's lines for a linear law without
+        // dashpots or rolling resistance, without its geometry record or its dispatch. The
+        // zero terms it adds (the shear dashpot's force, the rolling moment) are added here
+        // too, so a -0 component comes out as apply_law's +0: the same bits.
+        const Real overlap = r - h.dist;
+        const Vec3 branch2 = -(r - 0.5 * overlap) * h.n;
+        const Vec3 rel_vel = (bodies_.vel[b] + bodies_.angvel[b].cross(branch2)) - w.velocity;
+        ContactState& st = s.state;
+        const Real fn = linear_frictional<NarrowOps>(st.fs, st.normal, h.n, overlap, rel_vel,
+                                                     bodies_.angvel[b], c.phys.kn, c.phys.ks,
+                                                     c.phys.tan_phi, dt, st.dissip_friction);
+        st.normal = h.n;
+        st.overlap = overlap;
+        st.fn = fn;
+        s.force = fn * h.n + st.fs + Vec3::Zero();
+        s.torque = branch2.cross(s.force) + Vec3::Zero();
+        s.point = x + branch2;
+      } else {
       ContactGeometry g;
       g.overlap = r - h.dist;
       g.normal = h.n;
@@ -429,7 +465,15 @@ void Scene::compute_mesh_forces(long& err_contact) {
       s.force = out.force2;
       s.torque = g.branch2.cross(out.force2) + out.moment2;
       s.point = x + g.branch2;
+      }
+      // The mesh's share (the totals below): the force on the sphere, and the moment about
+      // the mesh's ref, the sphere's extra moment (rolling: the torque beyond its branch's)
+      // included.
+      const Vec3 extra = s.torque - (s.point - x).cross(s.force);
+      mesh_sum_f_[MeshContact::kMaxSubs * k + j] = s.force;
+      mesh_sum_m_[MeshContact::kMaxSubs * k + j] = (s.point - w.ref).cross(s.force) + extra;
     }
+    mesh_sum_code_[k] = 4 * c.wall + nk;
     c.subs[0].state.dissip_friction += lost_f;
     c.subs[0].state.dissip_viscous += lost_v;
   }
@@ -437,22 +481,21 @@ void Scene::compute_mesh_forces(long& err_contact) {
   err_contact = err;
   mesh_dropped_ += dropped;
   if (err != std::numeric_limits<long>::max()) return;
-  // The meshes' force, moment (about ref) and work, summed in contact order.
+  // The meshes' force, moment (about ref) and work, summed in contact order (from the pass's
+  // shares: a touching pair's contacts are its first nk slots, in slot order).
   for (MeshWall& w : mesh_walls_) {
     w.force.setZero();
     w.moment.setZero();
   }
-  for (const MeshContact& c : mesh_contacts_) {
-    if (!c.active) continue;
-    MeshWall& w = mesh_walls_[c.wall];
-    const Vec3& x = bodies_.pos[c.body];
-    for (const MeshSub& s : c.subs) {
-      if (s.kind < 0) continue;
-      w.force -= s.force;
-      // The sphere's extra moment (rolling) is the torque beyond its branch's.
-      const Vec3 extra = s.torque - (s.point - x).cross(s.force);
-      w.moment -= (s.point - w.ref).cross(s.force) + extra;
-      w.work += s.force.dot(w.velocity) * dt;
+  for (long k = 0; k < nc; ++k) {
+    const int code = mesh_sum_code_[k];
+    if (code == 0) continue;
+    MeshWall& w = mesh_walls_[code / 4];
+    for (long q = MeshContact::kMaxSubs * k, e = q + code % 4; q < e; ++q) {
+      const Vec3& f = mesh_sum_f_[q];
+      w.force -= f;
+      w.moment -= mesh_sum_m_[q];
+      w.work += f.dot(w.velocity) * dt;
     }
   }
 }
