@@ -19,11 +19,16 @@ With ``--dt-safety S`` the pair is the time step at one side (``--sides``, one v
 protocol's step (0.3 of the grains' p-wave estimate in the mould, kept) against S of the
 critical step, renewed every 100 steps (the case's ``--dt-safety``), the second into
 ``side<SIDE>_dt<S>_s<seed>/``; the difference is the renewed step's less the kept one's.
+With two sides and ``--dt-safety S`` the pair is both options together: the finer side at
+the protocol's step against the coarser at S (the runs of the two studies above, read
+again where they are in ``--runs``).
 
     .venv/bin/python bench/membrane_resolution.py --seeds 1,2,3,4,5 \
         --out docs/data/membrane_resolution.json
     .venv/bin/python bench/membrane_resolution.py --seeds 1,2,3,4,5 --sides 2 --dt-safety 0.5 \
         --out docs/data/membrane_time_step.json
+    .venv/bin/python bench/membrane_resolution.py --seeds 1,2,3,4,5 --sides 1,2 --dt-safety 0.5 \
+        --out docs/data/membrane_options_together.json
     .venv/bin/python bench/membrane_resolution.py --smoke --out /tmp/mr.json
     .venv/bin/python bench/membrane_resolution.py --table docs/data/membrane_resolution.json
 """
@@ -67,6 +72,16 @@ def _short(label: str) -> str:
     if "step" in label:
         return label.split("step ")[1].split(" ")[0]
     return label.removeprefix("side ")
+
+
+def _shorts(fine: str, coarse: str) -> tuple[str, str]:
+    """The two variants in a difference's header: the kept step and the renewed one's
+    fraction at one side, the two sides at one step, or both options together."""
+    if "step" not in coarse:
+        return _short(fine), _short(coarse)
+    if coarse.startswith(fine + ","):
+        return "kept", _short(coarse)
+    return fine, coarse.removesuffix(" renewed")
 
 
 def run_one(a, side: float, seed: int, dt_safety: float | None = None) -> dict:
@@ -145,7 +160,7 @@ def table(data: dict) -> list[str]:
     correction, the nodes and the wall times."""
     runs, at = data["runs"], data["params"]["at"]
     fine, coarse = variants(data["params"])
-    short = ("kept", _short(coarse)) if "step" in coarse else (_short(fine), _short(coarse))
+    short = _shorts(fine, coarse)
     head = ["measure", "axial strain, %", fine, coarse,
             f"{short[1]} - {short[0]} (+- SE)", "t", "resolved (95 %)"]
     out = ["| " + " | ".join(head) + " |", "|" + "---|" * len(head)]
@@ -189,7 +204,7 @@ def variants(params: dict) -> tuple[str, str]:
     side, dt = params["sides"], params.get("dt_safety")
     if dt is None:
         return variant(side[0], None), variant(side[1], None)
-    return variant(side[0], None), variant(side[0], dt)
+    return variant(side[0], None), variant(side[-1], dt)
 
 
 def main() -> None:
@@ -197,7 +212,8 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=1500, help="grains per specimen (--n of the case)")
     ap.add_argument("--seeds", default="1,2,3,4,5", help="comma-separated packing seeds")
     ap.add_argument("--sides", default="1,2", help="the two membrane sides compared (the "
-                    "case's --membrane-side), finer first; with --dt-safety, the one side")
+                    "case's --membrane-side), finer first; with --dt-safety, the one side, "
+                    "or two: the finer at the protocol's step, the coarser at --dt-safety")
     ap.add_argument("--dt-safety", type=float, default=None,
                     help="compare the protocol's time step with this fraction of the critical "
                          "step, renewed (the case's --dt-safety), at the one side of --sides")
@@ -215,9 +231,11 @@ def main() -> None:
     given = ','.join(f'{s:g}' for s in a.sides)
     allowed = [membrane_side_problem(s) is None for s in a.sides]
     if a.dt_safety is not None:
-        if len(a.sides) != 1 or not allowed[0]:
+        if (len(a.sides) not in (1, 2) or not all(allowed)
+                or (len(a.sides) == 2 and not a.sides[0] < a.sides[1])):
             raise _cli.BenchInputError(f"--sides={given}: with --dt-safety, one side in "
-                                       "[0.75, 2]")
+                                       "[0.75, 2], or two, the finer first (the finer at the "
+                                       "protocol's step against the coarser at --dt-safety)")
         if not a.dt_safety <= 1:
             raise _cli.BenchInputError(f"--dt-safety={a.dt_safety:g}: must be in (0, 1]")
     elif len(a.sides) != 2 or not a.sides[0] < a.sides[1] or not all(allowed):
@@ -230,7 +248,8 @@ def main() -> None:
     if a.dt_safety is None:
         jobs = [(side, seed, None) for seed in a.seeds for side in a.sides]
     else:
-        jobs = [(a.sides[0], seed, dt) for seed in a.seeds for dt in (None, a.dt_safety)]
+        jobs = [(side, seed, dt) for seed in a.seeds
+                for side, dt in ((a.sides[0], None), (a.sides[-1], a.dt_safety))]
     runs = _report.run_jobs(lambda side, seed, dt: run_one(a, side, seed, dt), jobs, a.jobs)
     params = {"sides": a.sides, "dt_safety": a.dt_safety}
     _report.write_study("membrane_resolution.py", a, runs,

@@ -116,11 +116,20 @@ def smoke(tmp_path_factory):
                         capture_output=True, text=True, timeout=600, cwd=base,
                         env={**os.environ, "OMP_NUM_THREADS": "1"})
     assert dt.returncode == 0, dt.stderr[-2000:]
-    return base / "mr_runs", json.loads(out.read_text()), json.loads((base / "dt.json").read_text())
+    # both options together: the kept runs of side 1 read again, side 2's renewed one run
+    both = subprocess.run([sys.executable, str(ROOT / "bench" / "membrane_resolution.py"),
+                           "--smoke", "--seeds", "1", "--sides", "1,2", "--dt-safety", "0.5",
+                           "--runs", str(base / "mr_runs"), "--out", str(base / "both.json")],
+                          capture_output=True, text=True, timeout=600, cwd=base,
+                          env={**os.environ, "OMP_NUM_THREADS": "1"})
+    assert both.returncode == 0, both.stderr[-2000:]
+    return (base / "mr_runs", json.loads(out.read_text()),
+            json.loads((base / "dt.json").read_text()),
+            json.loads((base / "both.json").read_text()))
 
 
 def test_the_bench_runs_the_case_at_both_sides_and_pairs_them(smoke):
-    runs, data, _ = smoke
+    runs, data, *_ = smoke
     by = {r["side"]: r for r in data["runs"]}
     assert set(by) == {1.0, 2.0} and by[1.0]["num_grains"] == by[2.0]["num_grains"]
     for side in (1, 2):
@@ -141,7 +150,7 @@ def test_the_bench_runs_the_case_at_both_sides_and_pairs_them(smoke):
 
 
 def test_the_bench_pairs_the_kept_time_step_with_the_renewed_one(smoke):
-    runs, _, data = smoke
+    runs, _, data, _ = smoke
     by = {r.get("dt_safety"): r for r in data["runs"]}
     assert set(by) == {None, 0.5} and {r["side"] for r in data["runs"]} == {1.0}
     s = json.loads((runs / "side1_dt0.5_s1" / "summary.json").read_text())
@@ -156,8 +165,26 @@ def test_the_bench_pairs_the_kept_time_step_with_the_renewed_one(smoke):
                                "| 0.5 - kept (+- SE) |")
 
 
+def test_the_bench_pairs_the_default_with_both_options_together(smoke):
+    runs, plain, _, data = smoke
+    by = {(r["side"], r.get("dt_safety")): r for r in data["runs"]}
+    assert set(by) == {(1.0, None), (2.0, 0.5)}
+    # the default's run is the first study's, read again
+    assert by[1.0, None] == next(r for r in plain["runs"] if r["side"] == 1.0)
+    s = json.loads((runs / "side2_dt0.5_s1" / "summary.json").read_text())
+    assert s["membrane"]["dt_safety"] == 0.5 and s["membrane"]["side"] == 2
+    d = next(x for x in data["paired"] if x["measure"] == "deviatoric_stress"
+             and x["axial_strain"] == 0.01)
+    both, default = by[2.0, 0.5], by[1.0, None]
+    assert d["mean"] == both["deviatoric_stress"][1] - default["deviatoric_stress"][1]
+    lines = load_bench("membrane_resolution").table(data)
+    assert lines[0].startswith("| measure | axial strain, % | side 1 | side 2, step 0.5 renewed "
+                               "| side 2, step 0.5 - side 1 (+- SE) |")
+
+
 @pytest.mark.parametrize("name", ["membrane_resolution", "membrane_resolution_fine",
-                                  "membrane_time_step", "membrane_time_step_side1"])
+                                  "membrane_time_step", "membrane_time_step_side1",
+                                  "membrane_options_together"])
 def test_the_docs_table_is_the_committed_data_s(name):
     mod = load_bench("membrane_resolution")
     data = json.loads((ROOT / "docs" / "data" / f"{name}.json").read_text())
@@ -169,7 +196,9 @@ def test_the_docs_table_is_the_committed_data_s(name):
 @pytest.mark.parametrize("args, msg", [
     (["--sides", "2,1"], "--sides=2,1: must be two sides in [0.75, 2], the finer first"),
     (["--sides", "1,3"], "--sides=1,3: must be two sides in [0.75, 2]"),
-    (["--sides", "1,2", "--dt-safety", "0.5"], "--sides=1,2: with --dt-safety, one side"),
+    (["--sides", "2,1", "--dt-safety", "0.5"],
+     "--sides=2,1: with --dt-safety, one side in [0.75, 2], or two, the finer first"),
+    (["--sides", "1,1.5,2", "--dt-safety", "0.5"], "--sides=1,1.5,2: with --dt-safety"),
     (["--sides", "1", "--dt-safety", "1.5"], "--dt-safety=1.5: must be in (0, 1]"),
 ])
 def test_the_bench_refuses_bad_sides_by_name(tmp_path, args, msg):
