@@ -148,9 +148,8 @@ void Scene::integrate_clumps_hot(long& err_clump) {
         t += ts;
       }
     }
-    const bool ext = !clumps_.ext_force.empty();  // (none imposed yet: not allocated)
-    const Vec3& fe = ext ? clumps_.ext_force[c] : kZeroVec3;
-    const Vec3& te = ext ? clumps_.ext_torque[c] : kZeroVec3;
+    const Vec3& fe = clumps_.ext_force_of(c);
+    const Vec3& te = clumps_.ext_torque_of(c);
     if (fe.squaredNorm() > 0) f += fe;
     if (te.squaredNorm() > 0) t += te;
     clumps_.force[c] = f;

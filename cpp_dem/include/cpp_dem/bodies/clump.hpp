@@ -47,6 +47,11 @@ struct ClumpStore {
 
   int size() const { return static_cast<int>(pos.size()); }
 
+  /// The imposed force and torque on clump c: zero where none has been set (the arrays are
+  /// allocated when one first is), as BodyStore's.
+  const Vec3& ext_force_of(int c) const { return ext_force.empty() ? kZeroVec3 : ext_force[c]; }
+  const Vec3& ext_torque_of(int c) const { return ext_torque.empty() ? kZeroVec3 : ext_torque[c]; }
+
   /// Calls f(array) for every array in a fixed order (the checkpoint's).
   template <class F>
   void for_each_array(F&& f) {
