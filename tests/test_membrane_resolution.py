@@ -103,29 +103,25 @@ def test_the_case_passes_dt_safety_to_the_cylinder_only_when_given(tmp_path):
 @pytest.fixture(scope="module")
 def smoke(tmp_path_factory):
     base = tmp_path_factory.mktemp("mres")
-    out = base / "mr.json"
-    p = subprocess.run([sys.executable, str(ROOT / "bench" / "membrane_resolution.py"),
-                        "--smoke", "--seeds", "1", "--out", str(out)],
-                       capture_output=True, text=True, timeout=600, cwd=base,
-                       env={**os.environ, "OMP_NUM_THREADS": "1"})
-    assert p.returncode == 0, p.stderr[-2000:]
+
+    def bench(name: str, *args: str) -> dict:
+        """The bench's smoke of seed 1 with ``args``, its runs in mr_runs/ (a run already
+        there is read again), its data file ``name``.json."""
+        out = base / f"{name}.json"
+        p = subprocess.run([sys.executable, str(ROOT / "bench" / "membrane_resolution.py"),
+                            "--smoke", "--seeds", "1", *args, "--runs", str(base / "mr_runs"),
+                            "--out", str(out)],
+                           capture_output=True, text=True, timeout=600, cwd=base,
+                           env={**os.environ, "OMP_NUM_THREADS": "1"})
+        assert p.returncode == 0, p.stderr[-2000:]
+        return json.loads(out.read_text())
+
+    sides = bench("mr")
     # the time step at side 1: the kept run of seed 1 read again, the renewed one run
-    dt = subprocess.run([sys.executable, str(ROOT / "bench" / "membrane_resolution.py"),
-                         "--smoke", "--seeds", "1", "--sides", "1", "--dt-safety", "0.5",
-                         "--runs", str(base / "mr_runs"), "--out", str(base / "dt.json")],
-                        capture_output=True, text=True, timeout=600, cwd=base,
-                        env={**os.environ, "OMP_NUM_THREADS": "1"})
-    assert dt.returncode == 0, dt.stderr[-2000:]
-    # both options together: the kept runs of side 1 read again, side 2's renewed one run
-    both = subprocess.run([sys.executable, str(ROOT / "bench" / "membrane_resolution.py"),
-                           "--smoke", "--seeds", "1", "--sides", "1,2", "--dt-safety", "0.5",
-                           "--runs", str(base / "mr_runs"), "--out", str(base / "both.json")],
-                          capture_output=True, text=True, timeout=600, cwd=base,
-                          env={**os.environ, "OMP_NUM_THREADS": "1"})
-    assert both.returncode == 0, both.stderr[-2000:]
-    return (base / "mr_runs", json.loads(out.read_text()),
-            json.loads((base / "dt.json").read_text()),
-            json.loads((base / "both.json").read_text()))
+    step = bench("dt", "--sides", "1", "--dt-safety", "0.5")
+    # both options together: the kept run of side 1 read again, side 2's renewed one run
+    both = bench("both", "--sides", "1,2", "--dt-safety", "0.5")
+    return base / "mr_runs", sides, step, both
 
 
 def test_the_bench_runs_the_case_at_both_sides_and_pairs_them(smoke):
