@@ -990,19 +990,21 @@ def loading_stage(sample, grid, targets, stage: int, p: ElementParams, rec, *,
             "box_size_m": size_held, "box_size_start_m": size0,
             "inertial_number_max": i_max, "ramp_records": windows,
             "records_at_speed_cap": at_cap, "rest": rest,
-            "strain_axes": list(strain_axes) if strain_path is not None else []}
+            "strain_axes": list(strain_axes), "strain_path_given": strain_path is not None}
 
 
 def _strain_path_note(st: dict) -> str:
-    """The stage log's note on the axes that followed the FEM region's strain path (their
-    stresses are the element's answer, not servoed to the targets); empty without one."""
+    """The stage log's note on its strain-controlled axes (their stresses are the element's
+    answer, not servoed to the targets): on the FEM region's strain path, or held where the
+    stage has none; empty without such axes."""
     axes = st.get("strain_axes") or []
     if not axes:
         return ""
     names = ", ".join("xyz"[a] for a in axes)
+    how = "on the FEM region's strain path" if st.get("strain_path_given") else "held"
     strain = ", ".join(f"{100 * st['strain_stage'][a]:.3g}" for a in axes)
-    return (f" ({names} on the FEM region's strain path, strain {strain} % (extension +): "
-            "the element's own stresses there, not servoed to the targets)")
+    return (f" ({names} strain-controlled, {how}: strain {strain} % (extension +); their "
+            "stresses are the element's own, not servoed to the targets)")
 
 
 def rest_hold(sample, targets, p: ElementParams, record, stress_axes, bias, rate: "_Rate", *,
