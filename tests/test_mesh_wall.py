@@ -26,9 +26,6 @@ def _material(sc, friction_deg=20.0, damping_normal=0.7):
                                                damping_normal=damping_normal))
 
 
-#: The mesh pass's two forms of the linear law: the general one (a dashpot) and the short kernel.
-LAWS = pytest.mark.parametrize("damping_normal", [0.7, 0.0], ids=["general_law", "short_kernel"])
-
 
 def _tilt(a_deg: float, b_deg: float) -> np.ndarray:
     a, b = np.radians([a_deg, b_deg])
@@ -279,7 +276,8 @@ def _fine_square(n: int, half: float):
     return v, t
 
 
-@LAWS
+# The mesh pass's two forms of the linear law: the general one (a dashpot), the short kernel.
+@pytest.mark.parametrize("damping_normal", [0.7, 0.0], ids=["general_law", "short_kernel"])
 def test_a_sphere_rolls_over_a_fine_mesh_as_over_the_plane(damping_normal):
     # Triangles a fifth of the sphere's radius: dozens within its reach at every step, many
     # edges crossed. The path stays the plane's (one contact at a time, its history carried).

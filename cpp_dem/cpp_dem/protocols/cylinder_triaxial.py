@@ -102,14 +102,16 @@ def prepare(radii, *, radius_m: float, height_m: float, pressure_pa: float,
     membrane as they touch, renewed every 100 steps (as the cubical test's), which lets the
     step grow as the contacts form (docs/studies/membrane_resolution.md measures it). The
     hold ends with the lid within ``tol`` and the grains' radial stress steady; it differs
-    from the cell pressure by the membrane's correction (``prepared["membrane_correction_pa"]``). The grains and the membrane take
-    ``material``; the mould and the platens the same with ``platen_friction_deg`` (deg;
-    frictionless by default, as the cubical test's walls: lubricated ends). Each stage runs until its stresses are within
-    ``tol`` of the cell pressure at two checks in a row (``check_every`` steps apart), at most
-    ``max_steps``; a stage that does not get there is said in ``prepared["reached"]`` (False)
-    and by ``log``, not hidden. The scene's blow-up limit on overlaps is the cubical test's
-    for soft grains under confinement (:func:`cpp_dem.protocols.prep.overlap_limit` of the
-    cell pressure and the material's Young's modulus, 0.5 to 0.95 of the radius).
+    from the cell pressure by the membrane's correction
+    (``prepared["membrane_correction_pa"]``). The grains and the membrane take ``material``;
+    the mould and the platens the same with ``platen_friction_deg`` (deg; frictionless by
+    default, as the cubical test's walls: lubricated ends). Each stage runs until its
+    stresses are within ``tol`` of the cell pressure at two checks in a row (``check_every``
+    steps apart), at most ``max_steps``; a stage that does not get there is said in
+    ``prepared["reached"]`` (False) and by ``log``, not hidden. The scene's blow-up limit on
+    overlaps is the cubical test's for soft grains under confinement
+    (:func:`cpp_dem.protocols.prep.overlap_limit` of the cell pressure and the material's
+    Young's modulus, 0.5 to 0.95 of the radius).
 
     ``inclusion(scene, centres, radii)``, if given, is called once the mould and the platens
     are in the scene and before the grains: it adds what the specimen holds besides its
