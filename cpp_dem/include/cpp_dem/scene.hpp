@@ -669,11 +669,12 @@ class Scene {
   // Per mesh contact: 1 where its candidate triangles all lie in one plane (a flat patch;
   // index_mesh_contacts, after a build or a checkpoint load; not saved).
   std::vector<std::uint8_t> mesh_flat_;
-  // Per mesh contact, written by its pass for the meshes' totals (scratch, not saved): its
-  // mesh and count of touching contacts, 4 wall + n (0: none), and each contact's force on
-  // the sphere (N) and moment term about the mesh's ref (N m), [3 k + j].
+  // Per mesh contact, written by its pass for the meshes' totals and the reduction into
+  // bodies (scratch, not saved): its mesh and count of touching contacts, 4 wall + n (0:
+  // none), and each contact's force on the sphere (N), torque on the sphere (N m) and moment
+  // term about the mesh's ref (N m), [3 k + j].
   std::vector<int> mesh_sum_code_;
-  std::vector<Vec3> mesh_sum_f_, mesh_sum_m_;
+  std::vector<Vec3> mesh_sum_f_, mesh_sum_t_, mesh_sum_m_;
   long mesh_dropped_ = 0;
   // Geogrid.
   int num_nodes_ = 0;

@@ -114,13 +114,13 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
       }
     }
     if (meshes) {
+      // (from the mesh pass's shares: a touching pair's contacts are its first n slots, the
+      // same forces and torques as its records', read without the 664-B records)
       for (int e = mesh_adj_off_[b]; e < mesh_adj_off_[b + 1]; ++e) {
-        const MeshContact& c = mesh_contacts_[mesh_adj_[e]];
-        if (!c.active) continue;
-        for (const MeshSub& s : c.subs) {
-          if (s.kind < 0) continue;
-          f += ops.load(s.force);
-          t += ops.load(s.torque);
+        const long k = mesh_adj_[e];
+        for (long q = MeshContact::kMaxSubs * k, end = q + mesh_sum_code_[k] % 4; q < end; ++q) {
+          f += ops.load(mesh_sum_f_[q]);
+          t += ops.load(mesh_sum_t_[q]);
         }
       }
     }

@@ -449,6 +449,7 @@ std::vector<std::pair<std::string, std::size_t>> Scene::memory_by_field() const 
   add("contacts.mesh_flat", mesh_flat_);
   add("contacts.mesh_sum_code", mesh_sum_code_);
   add("contacts.mesh_sum_f", mesh_sum_f_);
+  add("contacts.mesh_sum_t", mesh_sum_t_);
   add("contacts.mesh_sum_m", mesh_sum_m_);
   add("contacts.mesh_adj_off", mesh_adj_off_);
   add("contacts.mesh_adj", mesh_adj_);

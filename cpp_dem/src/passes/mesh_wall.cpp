@@ -239,6 +239,7 @@ void Scene::compute_mesh_forces(long& err_contact) {
   const Real dt = dt_;
   mesh_sum_code_.resize(nc);
   mesh_sum_f_.resize(MeshContact::kMaxSubs * nc);
+  mesh_sum_t_.resize(MeshContact::kMaxSubs * nc);
   mesh_sum_m_.resize(MeshContact::kMaxSubs * nc);
 #pragma omp parallel reduction(min : err) reduction(+ : dropped) if (nc > kParallelMin)
   {
@@ -471,6 +472,7 @@ void Scene::compute_mesh_forces(long& err_contact) {
       // included.
       const Vec3 extra = s.torque - (s.point - x).cross(s.force);
       mesh_sum_f_[MeshContact::kMaxSubs * k + j] = s.force;
+      mesh_sum_t_[MeshContact::kMaxSubs * k + j] = s.torque;
       mesh_sum_m_[MeshContact::kMaxSubs * k + j] = (s.point - w.ref).cross(s.force) + extra;
     }
     mesh_sum_code_[k] = 4 * c.wall + nk;
