@@ -38,7 +38,10 @@ round by round, so a drift of the machine's load cancels in the ratios. Every bl
 the final state (positions, velocities, spins, orientations, wall forces, a mesh wall's force
 and moment): the closing table
 says whether the two builds gave bitwise equal results, and if not the largest position
-difference relative to the mean radius.
+difference (m) beside the chaos floor: the same largest difference between the old build's
+run and that run again with its first body moved by one ulp in x (one more block, not
+timed; ``floor_max_position_diff_m`` in the JSON line). A change of the arithmetic made on
+purpose is within the floor when the two are of one size.
 
 The ratio reported is new/old in particle-steps per second (> 1: the new build is faster),
 median over the rounds, with its spread.
@@ -302,6 +305,12 @@ def worker(cfg: dict) -> dict:
     else:
         scene = make_scene(cfg["scene"], cfg["n"])
         advance = scene.run
+    if cfg.get("perturb"):
+        # (the chaos floor's run: the first body moved by one ulp in x, through
+        # Scene.positions, before the warm-up)
+        x = np.array(scene.positions, dtype=np.float64)
+        x[0, 0] = np.nextafter(x[0, 0], np.inf)
+        scene.positions = x
     advance(cfg["warmup"])
     c0, w0 = time.process_time(), time.perf_counter()
     step0 = scene.step_count
@@ -392,14 +401,25 @@ def compare(scene: str, n: int, threads: int, args, overlays: dict, tmp: Path) -
                 f"{1e6 * r['cpu_s'] / steps:9.1f} us/step CPU, state {r['state_sha256']}")
     ratios = [o / nw for o, nw in zip(cpu["old"], cpu["new"])]
     a, b = np.load(dumps["old"]), np.load(dumps["new"])
+    bitwise = hashes["old"] == hashes["new"] and len(hashes["old"]) == 1
+    floor = None
+    if not bitwise and a.shape == b.shape:
+        # Not the same bits: the chaos floor beside it, the old build's run again with one
+        # body moved by one ulp (how far a rounding-level change alone takes this run).
+        dump = tmp / f"{scene}_{n}_{threads}_floor.npy"
+        run_block({"variant": "old", "scene": scene, "n": n, "threads": threads,
+                   "steps": steps, "warmup": args.warmup, "dump": str(dump),
+                   "overlay": str(overlays["old"]), "perturb": True})
+        floor = float(np.max(np.abs(a - np.load(dump))))
     rec = {"scene": scene, "n": n, "bodies": int(len(a)), "threads": threads, "steps": steps,
            "rounds": args.rounds,
            "old_us_per_step": 1e6 * statistics.median(cpu["old"]),
            "new_us_per_step": 1e6 * statistics.median(cpu["new"]),
            "ratio_new_over_old": statistics.median(ratios),
            "ratio_min": min(ratios), "ratio_max": max(ratios),
-           "bitwise_equal": hashes["old"] == hashes["new"] and len(hashes["old"]) == 1,
-           "max_position_diff_m": float(np.max(np.abs(a - b))) if a.shape == b.shape else None}
+           "bitwise_equal": bitwise,
+           "max_position_diff_m": float(np.max(np.abs(a - b))) if a.shape == b.shape else None,
+           "floor_max_position_diff_m": floor}
     print(json.dumps(rec), flush=True)
     return rec
 
@@ -460,7 +480,10 @@ def main(argv: list[str] | None = None) -> int:
           " | bitwise |", file=sys.stderr)
     print("|---|---|---|---|---|---|---|", file=sys.stderr)
     for r in rows:
-        bit = "yes" if r["bitwise_equal"] else f"no (max dx {r['max_position_diff_m']:.1e} m)"
+        bit = "yes" if r["bitwise_equal"] else (
+            f"no (max dx {r['max_position_diff_m']:.1e} m; one ulp moved: "
+            f"{r['floor_max_position_diff_m']:.1e} m)" if r["floor_max_position_diff_m"] is not None
+            else "no (the body counts differ)")
         print(f"| {r['scene']} | {r['bodies']} | {r['threads']} | {r['old_us_per_step']:.1f} | "
               f"{r['new_us_per_step']:.1f} | {r['ratio_new_over_old']:.3f} "
               f"({r['ratio_min']:.3f}-{r['ratio_max']:.3f}) | {bit} |", file=sys.stderr)

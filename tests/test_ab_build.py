@@ -51,3 +51,26 @@ def test_an_unknown_scene_is_refused_by_name():
     ab = _ab()
     with pytest.raises(SystemExit, match="membrane"):
         ab.main(["--scenes", "cylinder:100"])
+
+
+def test_the_floor_block_moves_one_body_by_one_ulp(tmp_path):
+    """The chaos floor's block (an A/B whose builds differ in their bits): the same scene with
+    the first body moved by one ulp; before any step the positions differ by that ulp alone,
+    and after steps the two runs differ, the unperturbed one repeating itself to the bit."""
+    import json
+
+    import numpy as np
+
+    ab = _ab()
+    out = {}
+    for name, perturb, steps in (("a", False, 0), ("b", True, 0), ("c", False, 300),
+                                 ("d", False, 300), ("e", True, 300)):
+        cfg = {"variant": "new", "scene": "spheres", "n": 300, "threads": 1, "steps": steps,
+               "warmup": 0, "dump": str(tmp_path / f"{name}.npy"), "overlay": "",
+               "perturb": perturb}
+        r = ab.worker(json.loads(json.dumps(cfg)))
+        out[name] = (np.load(tmp_path / f"{name}.npy"), r["state_sha256"])
+    d = out["b"][0] - out["a"][0]
+    assert np.count_nonzero(d) == 1 and d[0, 0] == np.spacing(out["a"][0][0, 0])
+    assert out["c"][1] == out["d"][1]
+    assert out["c"][1] != out["e"][1] and np.abs(out["c"][0] - out["e"][0]).max() > 0
