@@ -365,3 +365,35 @@ def test_the_mesh_pass_is_the_same_on_one_and_two_threads():
         dem.set_num_threads(threads)
     assert np.array_equal(states[0][0], states[1][0])
     assert np.array_equal(states[0][1], states[1][1]) and states[0][1][2] < 0  # (pushed down)
+
+
+def test_a_checkpoint_loaded_over_another_mesh_takes_the_loaded_faces(tmp_path):
+    """A face's contact comes from its triangle's normal (computed when the mesh is added, not
+    saved): loaded into a scene whose mesh has the same triangles elsewhere (tilted 30
+    degrees), a checkpoint's mesh pushes along its own faces' normals, the run going on as the
+    saved one to the bit; loaded over the same mesh, the same too (its normals kept)."""
+    tilted = SQUARE @ _tilt(30, 0).T
+
+    def scene(vertices):
+        sc = dem.Scene(gravity=(0.5, 0.2, -9.81))
+        m = _material(sc)
+        sc.add_mesh_wall(vertices, SQUARE_TRIS, material=m)
+        sc.add_spheres([[0.3 * R, 0.1 * R, 0.99 * R]], [R], material=m)
+        sc.dt = 0.2 * sc.critical_dt()
+        return sc
+
+    sc = scene(SQUARE)
+    sc.set_mesh_velocity(0, [0.003, 0.001, 0.0])
+    sc.run(2000)
+    path = tmp_path / "c.h5"
+    save_checkpoint(path, sc)
+    sc.run(1000)
+    want = np.asarray(sc.positions).copy(), np.asarray(sc.mesh_wall(0)["force"])
+    assert want[1][2] < 0  # (the sphere rests on the face: it pushes the mesh down)
+    for vertices in (SQUARE, tilted):
+        other = scene(vertices)
+        other.set_mesh_velocity(0, [0.003, 0.001, 0.0])
+        load_checkpoint(path, other)
+        other.run(1000)
+        assert np.array_equal(np.asarray(other.positions), want[0])
+        assert np.array_equal(np.asarray(other.mesh_wall(0)["force"]), want[1])

@@ -677,6 +677,20 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
       mesh_ok = mesh_ok && e >= 0 && static_cast<size_t>(e) < t.mesh_contacts_.size();
     if (!(t.mesh_adj_off_.empty() || t.mesh_adj_off_.size() == nb + 1)) mesh_ok = false;
     if (!mesh_ok) throw ParameterError("checkpoint: corrupt mesh walls");
+    // The triangles' normals (not saved): this scene's, computed when its meshes were added,
+    // where they are the loaded mesh's (a mesh moves by translation: the saved run computed
+    // the same from the same file, to the bit); else computed from the loaded vertices.
+    t.frame_mesh_triangles(0);
+    bool same_frames = s.mesh_tri_n_.size() == t.mesh_tri_n_.size();
+    for (size_t k = 0; k < t.mesh_tri_n_.size() && same_frames; ++k) {
+      same_frames = (s.mesh_tri_n_[k] - t.mesh_tri_n_[k]).norm() <= 1e-9;
+      for (int i = 0; i < 3 && same_frames; ++i)
+        same_frames = (s.mesh_tri_e_[k][i] - t.mesh_tri_e_[k][i]).norm() <= 1e-9;
+    }
+    if (same_frames) {
+      t.mesh_tri_n_ = s.mesh_tri_n_;
+      t.mesh_tri_e_ = s.mesh_tri_e_;
+    }
     t.index_mesh_contacts();
   }
   const auto nc = r.get<std::uint64_t>();

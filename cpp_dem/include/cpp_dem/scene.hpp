@@ -594,6 +594,9 @@ class Scene {
   void index_grid_contacts();
   /// mesh_flat_ from the mesh contacts' candidates (after a build or a checkpoint load).
   void index_mesh_contacts();
+  /// Appends the normals of triangles [t0, mesh_tris_.size()) to mesh_tri_n_ / mesh_tri_e_
+  /// (from the vertices now), after truncating them to t0 entries.
+  void frame_mesh_triangles(size_t t0);
   void compute_links();
   // Bonds (passes/bonds.cpp).
   void compute_bonds(long& err);
@@ -664,6 +667,12 @@ class Scene {
   std::vector<MeshWall> mesh_walls_;
   std::vector<Vec3> mesh_vertices_;
   std::vector<std::array<int, 3>> mesh_tris_;
+  // Per triangle (as mesh_tris_): its unit normal, (b - a) x (c - a) normalised, and the unit
+  // normals of its edges a->b, b->c, c->a in its plane, pointing inwards. A mesh moves by
+  // translation only, so they are fixed: computed when the mesh is added (a checkpoint load
+  // keeps this scene's where they are the loaded mesh's, else computes them from it).
+  std::vector<Vec3> mesh_tri_n_;
+  std::vector<std::array<Vec3, 3>> mesh_tri_e_;
   std::vector<MeshContact> mesh_contacts_;
   std::vector<int> mesh_cand_off_, mesh_cand_tri_, mesh_adj_off_, mesh_adj_;
   // Per mesh contact: 1 where its candidate triangles all lie in one plane (a flat patch;

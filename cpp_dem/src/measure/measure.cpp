@@ -443,6 +443,8 @@ std::vector<std::pair<std::string, std::size_t>> Scene::memory_by_field() const 
   add("walls.meshes", mesh_walls_);
   add("walls.mesh_vertices", mesh_vertices_);
   add("walls.mesh_triangles", mesh_tris_);
+  add("walls.mesh_triangle_normals", mesh_tri_n_);
+  add("walls.mesh_edge_normals", mesh_tri_e_);
   add("contacts.meshes", mesh_contacts_);
   add("contacts.mesh_cand_off", mesh_cand_off_);
   add("contacts.mesh_cand_tri", mesh_cand_tri_);

@@ -28,6 +28,14 @@ struct Touch {
   Real dist;
 };
 
+/// A sphere at x over the face of a triangle of unit normal n through v0: its contact with
+/// the face's plane (the closest point x - s n, s = n . (x - v0); the normal +-n towards x;
+/// the distance |s|), keyed by the triangle tri (its number in its mesh).
+Touch face_touch(const Vec3& x, const Vec3& n, const Vec3& v0, std::int32_t tri) {
+  const Real s = n.dot(x - v0);
+  return Touch{kFace, tri, -1, x - s * n, s < 0 ? Vec3(-n) : n, std::abs(s)};
+}
+
 /// The distance from x to triangle t of the scene's arrays (its closest point in p).
 Real triangle_distance(const Vec3& x, const Vec3& a, const Vec3& b, const Vec3& c, Vec3& p) {
   int e0, e1;
@@ -75,8 +83,27 @@ int Scene::add_mesh_wall(const std::vector<Vec3>& vertices,
   mesh_vertices_.insert(mesh_vertices_.end(), vertices.begin(), vertices.end());
   mesh_tris_.insert(mesh_tris_.end(), triangles.begin(), triangles.end());
   mesh_walls_.push_back(w);
+  frame_mesh_triangles(w.tri_off);
   dirty_ = true;
   return num_mesh_walls() - 1;
+}
+
+void Scene::frame_mesh_triangles(size_t t0) {
+  mesh_tri_n_.resize(t0);
+  mesh_tri_e_.resize(t0);
+  for (const MeshWall& w : mesh_walls_)
+    for (int t = 0; t < w.ntri; ++t) {
+      if (static_cast<size_t>(w.tri_off + t) < t0) continue;
+      const auto& tri = mesh_tris_[w.tri_off + t];
+      const Vec3* v[3] = {&mesh_vertices_[w.vert_off + tri[0]],
+                          &mesh_vertices_[w.vert_off + tri[1]],
+                          &mesh_vertices_[w.vert_off + tri[2]]};
+      const Vec3 n = (*v[1] - *v[0]).cross(*v[2] - *v[0]).normalized();
+      std::array<Vec3, 3> e;
+      for (int i = 0; i < 3; ++i) e[i] = n.cross(*v[(i + 1) % 3] - *v[i]).normalized();
+      mesh_tri_n_.push_back(n);
+      mesh_tri_e_.push_back(e);
+    }
 }
 
 MeshWall& Scene::mesh_wall(int id) {
@@ -216,19 +243,6 @@ void Scene::index_mesh_contacts() {
   }
 }
 
-namespace {
-/// Whether p (in the plane of triangle v0 v1 v2) is farther than m from each of its edges'
-/// lines, m (compared squared).
-bool inside_by(const Vec3& p, const Vec3& v0, const Vec3& v1, const Vec3& v2, Real m) {
-  const Vec3* v[3] = {&v0, &v1, &v2};
-  for (int i = 0; i < 3; ++i) {
-    const Vec3 e = *v[(i + 1) % 3] - *v[i];
-    if (!(e.cross(p - *v[i]).squaredNorm() > m * m * e.squaredNorm())) return false;
-  }
-  return true;
-}
-}  // namespace
-
 void Scene::compute_mesh_forces(long& err_contact) {
   const long nc = static_cast<long>(mesh_contacts_.size());
   if (mesh_flat_.size() != mesh_contacts_.size())
@@ -254,15 +268,22 @@ void Scene::compute_mesh_forces(long& err_contact) {
     const Real r = bodies_.radius[b];
     mesh_sum_code_[k] = 0;  // (none, until its contacts are computed below)
     // 1. The touching features: each candidate triangle's closest point within r, keyed by
-    // its face, edge (the mesh's vertex numbers, sorted) or vertex.
+    // its face, edge (the mesh's vertex numbers, sorted) or vertex. Where it is the face's,
+    // the contact is the plane's: the centre projected along the face's unit normal (its
+    // distance and normal as an analytic plane's, not through the closest point's
+    // barycentric coordinates).
     found.clear();
-    // A flat patch whose sphere touched one face alone at the last step, and whose closest
-    // point is still inside that face, farther than 1e-9 r from its edges: that face is the
-    // pair's one contact. The patch's other triangles' points lie on its plane (step 2 would
-    // take them as part of its surface), and none of them has that point inside it where
-    // no two of them overlap (the same contact as the full walk finds, to the bit; where two
-    // overlap, as a triangle given twice, the walk may key the contact to the other one).
+    // A flat patch whose sphere touched one face alone at the last step, and whose centre is
+    // still over that face, farther than 1e-9 r inside each of its edges (measured along
+    // their normals in its plane): that face is the pair's one contact. The patch's other
+    // triangles' points lie on its plane (step 2 would take them as part of its surface), and
+    // none of them has the centre over it where no two of them overlap (the same contact as
+    // the full walk finds, to the bit: a face's contact is computed from its plane on both
+    // paths; where two overlap, as a triangle given twice, the walk may key the contact to
+    // the other one).
     bool one_face = false;
+    Touch keep[MeshContact::kMaxSubs];  // (the contacts kept, step 2; the fast path's in 0)
+    int nk = 0;
     if (mesh_flat_[k] && c.active && c.subs[0].kind == kFace && c.subs[1].kind < 0) {
       const int t = w.tri_off + c.subs[0].a;
       bool candidate = false;
@@ -273,14 +294,12 @@ void Scene::compute_mesh_forces(long& err_contact) {
         const Vec3& v0 = mesh_vertices_[w.vert_off + tri[0]];
         const Vec3& v1 = mesh_vertices_[w.vert_off + tri[1]];
         const Vec3& v2 = mesh_vertices_[w.vert_off + tri[2]];
-        Vec3 p;
-        int e0, e1;
-        if (closest_on_triangle(x, v0, v1, v2, p, e0, e1) == kFace &&
-            inside_by(p, v0, v1, v2, 1e-9 * r)) {
-          const Vec3 d = x - p;
-          const Real dist = d.norm();
-          if (dist < r && dist > 0) {
-            found.push_back(Touch{kFace, t - w.tri_off, -1, p, d / dist, dist});
+        const std::array<Vec3, 3>& e = mesh_tri_e_[t];
+        const Real m = 1e-9 * r;
+        if (e[0].dot(x - v0) > m && e[1].dot(x - v1) > m && e[2].dot(x - v2) > m) {
+          const Touch h = face_touch(x, mesh_tri_n_[t], v0, t - w.tri_off);
+          if (h.dist < r && h.dist > 0) {
+            keep[nk++] = h;
             one_face = true;
           }
         }
@@ -302,13 +321,17 @@ void Scene::compute_mesh_forces(long& err_contact) {
       Vec3 p;
       int e0, e1;
       const MeshFeature f = closest_on_triangle(x, v0, v1, v2, p, e0, e1);
+      if (f == kFace) {
+        // (a face's contact from its plane: the fast path above computes it the same way)
+        const Touch h = face_touch(x, mesh_tri_n_[t], v0, t - w.tri_off);
+        if (h.dist < r && h.dist > 0) found.push_back(h);
+        continue;
+      }
       const Vec3 d = x - p;
       const Real dist = d.norm();
       if (!(dist < r) || !(dist > 0)) continue;
       Touch h{f, -1, -1, p, d / dist, dist};
-      if (f == kFace) {
-        h.a = t - w.tri_off;
-      } else if (f == kEdge) {
+      if (f == kEdge) {
         h.a = std::min(tri[e0], tri[e1]);
         h.b = std::max(tri[e0], tri[e1]);
       } else {
@@ -316,22 +339,19 @@ void Scene::compute_mesh_forces(long& err_contact) {
       }
       found.push_back(h);
     }
-    const int nf = static_cast<int>(found.size());
-    if (nf == 0 && !c.active) continue;  // (nothing touches, nothing did: nothing to do)
+    const int nf = static_cast<int>(found.size());  // (0 on the fast path: its one in keep)
+    if (nf == 0 && !one_face && !c.active) continue;  // (nothing touches, nothing did)
     // 2. Without double counting: faces first, then edges and vertices, deepest first; a point that coincides with one kept (an
     // edge or vertex that several triangles share) is the same contact; an edge or vertex
     // point on or behind the plane of a kept face contact is part of that surface (a flat or
     // convex neighbour of the face): only a face's own contact counts there.
-    Touch keep[MeshContact::kMaxSubs];
-    int nk = 0;
     bool in_place;
     bool used[MeshContact::kMaxSubs] = {false, false, false};
     int from[MeshContact::kMaxSubs];
     Real lost_f = 0, lost_v = 0;
     if (one_face) {
-      // Steps 2 and 3's result for the one face (above), without their work: the pair's one
-      // contact, in place in slot 0; the empty slots carry no dissipation.
-      keep[nk++] = found[0];
+      // Steps 2 and 3's result for the one face (above, kept), without their work: the
+      // pair's one contact, in place in slot 0; the empty slots carry no dissipation.
       in_place = true;
       from[0] = 0;
       used[0] = true;
@@ -435,6 +455,7 @@ void Scene::compute_mesh_forces(long& err_contact) {
         s.a = h.a;
         s.b = h.b;
       }
+      Vec3 rolling = Vec3::Zero();  // (the law's moment on the sphere beyond its branch's)
       if (simple) {
         // The short kernel (laws/linear.hpp): apply_law's lines for a linear law without
         // dashpots or rolling resistance, without its geometry record or its dispatch. The
@@ -466,14 +487,14 @@ void Scene::compute_mesh_forces(long& err_contact) {
       s.force = out.force2;
       s.torque = g.branch2.cross(out.force2) + out.moment2;
       s.point = x + g.branch2;
+      rolling = out.moment2;
       }
-      // The mesh's share (the totals below): the force on the sphere, and the moment about
-      // the mesh's ref, the sphere's extra moment (rolling: the torque beyond its branch's)
+      // The mesh's share (the totals below and the reduction into bodies): the force and the
+      // torque on the sphere, and their moment about the mesh's ref, the law's rolling moment
       // included.
-      const Vec3 extra = s.torque - (s.point - x).cross(s.force);
       mesh_sum_f_[MeshContact::kMaxSubs * k + j] = s.force;
       mesh_sum_t_[MeshContact::kMaxSubs * k + j] = s.torque;
-      mesh_sum_m_[MeshContact::kMaxSubs * k + j] = (s.point - w.ref).cross(s.force) + extra;
+      mesh_sum_m_[MeshContact::kMaxSubs * k + j] = (s.point - w.ref).cross(s.force) + rolling;
     }
     mesh_sum_code_[k] = 4 * c.wall + nk;
     c.subs[0].state.dissip_friction += lost_f;
