@@ -339,8 +339,9 @@ void Scene::compute_mesh_forces(long& err_contact) {
       }
       found.push_back(h);
     }
-    const int nf = static_cast<int>(found.size());  // (0 on the fast path: its one in keep)
-    if (nf == 0 && !one_face && !c.active) continue;  // (nothing touches, nothing did)
+    // (0 on the fast path, whose one contact is in keep: a pair that touched at the last step)
+    const int nf = static_cast<int>(found.size());
+    if (nf == 0 && !c.active) continue;  // (nothing touches, nothing did: nothing to do)
     // 2. Without double counting: faces first, then edges and vertices, deepest first; a point that coincides with one kept (an
     // edge or vertex that several triangles share) is the same contact; an edge or vertex
     // point on or behind the plane of a kept face contact is part of that surface (a flat or
