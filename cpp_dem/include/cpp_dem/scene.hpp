@@ -598,8 +598,12 @@ class Scene {
   /// (from the vertices now), after truncating them to t0 entries.
   void frame_mesh_triangles(size_t t0);
   void compute_links();
+  // Its multiversioned body (CPP_DEM_HOT, as the hot passes above): every intact link's step.
+  CPP_DEM_HOT void compute_links_hot();
   // Bonds (passes/bonds.cpp).
   void compute_bonds(long& err);
+  // Its multiversioned body (CPP_DEM_HOT, as the hot passes above): every bond's step.
+  CPP_DEM_HOT void compute_bonds_hot(long& err);
   void rebuild_bond_adjacency();
   /// The spatial sort moved bodies: bonds follow (perm[new slot] = old slot).
   void remap_bonds(const std::vector<int>& perm);

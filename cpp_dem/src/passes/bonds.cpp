@@ -158,6 +158,30 @@ void Scene::drop_bonded_candidates() {
 
 void Scene::compute_bonds(long& err) {
   if (bond_topology_dirty_) rebuild_bond_adjacency();
+  compute_bonds_hot(err);
+  // Breakage, in bond order: the part is removed, its energy counted, the event recorded.
+  const long nb = static_cast<long>(bonds_.size());
+  for (long k = 0; k < nb; ++k) {
+    Bond& l = bonds_[k];
+    if (l.pending_break < 0) continue;
+    BondBreak ev;
+    ev.step = step_;
+    ev.time = time_;
+    ev.bond = static_cast<int>(k);
+    ev.mode = l.pending_break;
+    ev.value = l.pending_value;
+    bond_breaks_.push_back(ev);
+    dropped_plastic_ += bond_release(l, l.pending_break, bodies_.radius[l.a],
+                                     bodies_.radius[l.b], bodies_.pos[l.a],
+                                     Vec3(bodies_.pos[l.b] + bond_shift(l)));
+    l.pending_break = -1;
+  }
+}
+
+void Scene::compute_bonds_hot(long& err) {
+  // (Multiversioned as the other hot passes, core/types.hpp: bond_step is inlined into each
+  // clone, whose VEX forms take fewer instructions than the baseline's SSE2 for the same
+  // operations, the same bits: contraction is off.)
   const long nb = static_cast<long>(bonds_.size());
   const Real dt = dt_;
   const Real max_ratio = max_overlap_ratio_;
@@ -185,22 +209,6 @@ void Scene::compute_bonds(long& err) {
     if (!(overlap <= max_ratio * std::min(ra, rb))) first_bad = std::min(first_bad, k);
   }
   err = first_bad;
-  // Breakage, in bond order: the part is removed, its energy counted, the event recorded.
-  for (long k = 0; k < nb; ++k) {
-    Bond& l = bonds_[k];
-    if (l.pending_break < 0) continue;
-    BondBreak ev;
-    ev.step = step_;
-    ev.time = time_;
-    ev.bond = static_cast<int>(k);
-    ev.mode = l.pending_break;
-    ev.value = l.pending_value;
-    bond_breaks_.push_back(ev);
-    dropped_plastic_ += bond_release(l, l.pending_break, bodies_.radius[l.a],
-                                     bodies_.radius[l.b], bodies_.pos[l.a],
-                                     Vec3(bodies_.pos[l.b] + bond_shift(l)));
-    l.pending_break = -1;
-  }
 }
 
 void Scene::raise_bond_overlap(long k) const {

@@ -76,8 +76,8 @@ inline void beam_stiffness(const BeamParams& p, Real length, GridLink& l) {
 /// incremented, the moments capped at their elastic limits (perfectly plastic beyond, eqs 11,
 /// 12), a break at the tensile or shear strength is flagged (pending_break), and the forces
 /// and torques on the nodes are set.
-inline void beam_link_step(GridLink& l, const Vec3& xa, const Vec3& xb, const Vec3& va,
-                           const Vec3& vb, const Vec3& wa, const Vec3& wb, Real dt) {
+ALWAYS_INLINE void beam_link_step(GridLink& l, const Vec3& xa, const Vec3& xb, const Vec3& va,
+                                  const Vec3& vb, const Vec3& wa, const Vec3& wb, Real dt) {
   const Vec3 d = xb - xa;
   const Real len = d.norm();
   const Vec3 n = d / len;

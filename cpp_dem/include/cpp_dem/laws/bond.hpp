@@ -201,8 +201,9 @@ inline Real bond_release(Bond& l, int mode, Real ra, Real rb, const Vec3& xa, co
 /// A part that reaches its strength is flagged in pending_break (the scene removes it after
 /// the pass, in bond order). Sets the forces and torques on the two spheres; returns the
 /// linear contact's overlap beyond the reference gap, gap0 - g (m).
-inline Real bond_step(Bond& l, Real ra, Real rb, const Vec3& xa, const Vec3& xb, const Vec3& va,
-                      const Vec3& vb, const Vec3& wa, const Vec3& wb, Real dt) {
+ALWAYS_INLINE Real bond_step(Bond& l, Real ra, Real rb, const Vec3& xa, const Vec3& xb,
+                             const Vec3& va, const Vec3& vb, const Vec3& wa, const Vec3& wb,
+                             Real dt) {
   const Vec3 d = xb - xa;
   const Real dist = d.norm();
   const Vec3 n = d / dist;
