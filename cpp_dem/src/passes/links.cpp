@@ -32,7 +32,7 @@ void Scene::compute_links() {
 }
 
 // (Multiversioned as the other hot passes, core/types.hpp: beam_link_step is inlined into
-// each clone; the same bits, fewer instructions where the CPU has AVX2 or AVX-512.)
+// each clone, whose IEEE operations are the baseline's, in its order: the same bits.)
 void Scene::compute_links_hot() {
   const long nl = static_cast<long>(links_.size());
   const Real dt = dt_;
