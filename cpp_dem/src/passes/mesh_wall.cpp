@@ -92,8 +92,7 @@ void Scene::frame_mesh_triangles(size_t t0) {
   mesh_tri_n_.resize(t0);
   mesh_tri_e_.resize(t0);
   for (const MeshWall& w : mesh_walls_)
-    for (int t = 0; t < w.ntri; ++t) {
-      if (static_cast<size_t>(w.tri_off + t) < t0) continue;
+    for (long t = std::max(0L, static_cast<long>(t0) - w.tri_off); t < w.ntri; ++t) {
       const auto& tri = mesh_tris_[w.tri_off + t];
       const Vec3* v[3] = {&mesh_vertices_[w.vert_off + tri[0]],
                           &mesh_vertices_[w.vert_off + tri[1]],
