@@ -100,6 +100,60 @@ int main() {
     p.kr = 1.0;
     check(!short_kernel_applies(p), "registry: rolling resistance takes the composed law");
   }
+  // ---- the Hertz–Mindlin short kernel equals the composed law, in both vector forms -------
+  {
+    // 200 steps of one contact whose normal turns, whose overlap grows and shrinks and whose
+    // tangential velocity makes it stick and slip in turn: fs, fn and the slip energy of
+    // hertz_frictional, in Eigen's 3-vectors and in 4-lane registers, against apply_law's.
+    ContactPhys p;
+    p.model = ContactModel::HertzMindlin;
+    p.kn = 2.9e9;  // K, N/m^1.5 (002's grains, R* = 2.5 mm)
+    p.ks = 3.4e9;  // C, N/m^1.5
+    p.tan_phi = 0.8;
+    ContactState s_law;
+    Vec3 fs_n = Vec3::Zero(), n_old = Vec3::Zero();
+    V4 fs_w = V4{}, n_old_w = V4{};
+    Real d_n = 0, d_w = 0;
+    bool same = true, slipped = false, stuck = false;
+    for (int k = 0; k < 200; ++k) {
+      const Real a = 0.002 * k;
+      ContactGeometry g;
+      g.normal = Vec3(std::cos(a), std::sin(a), 0.1 * std::sin(3 * a)).normalized();
+      g.overlap = 1e-5 * (1.5 + std::sin(0.05 * k));
+      g.rel_vel = Vec3(-0.01, 0.02 * std::sin(0.1 * k), 0.3 * std::cos(0.07 * k));
+      g.angvel_sum = Vec3(3.0, -1.0, 2.0 * std::cos(0.02 * k));
+      g.rel_angvel = Vec3::Zero();
+      const Real before = s_law.dissip_friction;
+      const LawOutput out = apply_law(p, g, 1e-6, s_law);
+      (s_law.dissip_friction > before ? slipped : stuck) = true;
+      const Real fn_n = hertz_frictional<NarrowOps>(fs_n, n_old, g.normal, g.overlap,
+                                                    g.rel_vel, g.angvel_sum, p.kn, p.ks,
+                                                    p.tan_phi, 1e-6, d_n);
+      n_old = g.normal;
+      const V4 n_w = v4(g.normal);
+      const Real fn_w = hertz_frictional<WideOps>(fs_w, n_old_w, n_w, g.overlap,
+                                                  v4(g.rel_vel), v4(g.angvel_sum), p.kn, p.ks,
+                                                  p.tan_phi, 1e-6, d_w);
+      n_old_w = n_w;
+      const Vec3 f_n = fn_n * g.normal + fs_n + Vec3::Zero();
+      same = same && fn_n == s_law.fn && fn_w == s_law.fn && fs_n == s_law.fs &&
+             vec3(fs_w) == s_law.fs && d_n == s_law.dissip_friction &&
+             d_w == s_law.dissip_friction && f_n == out.force2 && out.moment2 == Vec3::Zero();
+    }
+    check(same && slipped && stuck,
+          "Hertz short kernel == composed law over 200 steps (stick and slip, both forms), "
+          "bitwise");
+    check(pair_kernel(p) == kHertzKernel && !short_kernel_applies(p),
+          "registry: a plain Hertz–Mindlin pair takes the Hertz kernel, walls the composed law");
+    p.beta_n = 0.1;
+    check(pair_kernel(p) == kComposedKernel, "registry: a Hertz dashpot takes the composed law");
+    p.beta_n = 0;
+    p.kr = 1.0;
+    check(pair_kernel(p) == kComposedKernel, "registry: Hertz rolling takes the composed law");
+    p.model = ContactModel::Linear;
+    p.kr = 0;
+    check(pair_kernel(p) == kLinearKernel, "registry: a plain linear pair takes its kernel");
+  }
   // ---- Hertz–Mindlin: stiffness and energy are consistent with the force ----------------
   {
     ContactPhys p;

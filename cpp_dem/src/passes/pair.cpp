@@ -8,11 +8,41 @@
 #include "cpp_dem/core/parallel.hpp"
 #include "cpp_dem/core/simd.hpp"
 #include "cpp_dem/geometry/sphere_sphere.hpp"
+#include "cpp_dem/laws/hertz_mindlin.hpp"
 #include "cpp_dem/laws/linear.hpp"
 #include "cpp_dem/laws/registry.hpp"
 #include "cpp_dem/scene.hpp"
 
 namespace cpp_dem {
+
+namespace {
+
+/// Pair contact c (k) with the Hertz–Mindlin short kernel (hertz_frictional) on its hot
+/// record: j's force and torque into force_j and torque_j (PairOutput's padded vectors), i's
+/// added to fi and ti; slip energy into dissip_friction (the cold record's). The force and
+/// the moments are general_pair's expressions, to the bit: the composed law's force
+/// fn n + fs plus its zero shear dashpot, the branches li n and -lj n, and its zero rolling
+/// moment added on j and subtracted on i (a -0 component comes out as general_pair's).
+template <class Ops, class V>
+ALWAYS_INLINE void hertz_pair(PairContact& c, Real* force_j, Real* torque_j, const V& n,
+                              Real overlap, Real li, Real lj, const V& rel_vel,
+                              const V& angvel_sum, Real dt, Real& dissip_friction, V& fi, V& ti,
+                              Ops ops) {
+  V fs = ops.load_head(c.fs.data());
+  const Real fn = hertz_frictional<Ops>(fs, ops.load_head(c.normal.data()), n, overlap,
+                                        rel_vel, angvel_sum, c.kn, c.ks, c.tan_phi, dt,
+                                        dissip_friction);
+  ops.store_with(c.fs.data(), fs, overlap);  // fs, overlap
+  ops.store_with(c.normal.data(), n, fn);    // normal, fn
+  const V f = fn * n + fs + ops.zero();
+  ops.store_padded(force_j, f);
+  ops.store_padded(torque_j, V(ops.cross(V(-lj * n), f) + ops.zero()));
+  const V f_i = -f;
+  fi += f_i;
+  ti += V(ops.cross(V(li * n), f_i) - ops.zero());
+}
+
+}  // namespace
 
 void Scene::update_phys(PairContact& c, PairContactCold& cold) const {
   const ContactPhys& p = cold.phys =
@@ -22,7 +52,7 @@ void Scene::update_phys(PairContact& c, PairContactCold& cold) const {
   c.kn = p.kn;
   c.ks = p.ks;
   c.tan_phi = p.tan_phi;
-  c.simple = short_kernel_applies(p);
+  c.kernel = pair_kernel(p);
   c.phys_version = phys_version_;
   note_formed_contact(p, c.i, c.j);
 }
@@ -154,7 +184,12 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
         Real li, lj;
         sphere_sphere_frame<Ops, kYadeShear>(d, dist, overlap, ri, rj, vi, vj, wi, wj, n, li, lj,
                                              rel_vel);
-        if (!c.simple) {
+        if (c.kernel == kHertzKernel) {
+          hertz_pair<Ops>(c, o.force.data(), o.torque_j.data(), n, overlap, li, lj, rel_vel,
+                          V(wi + wj), dt, pair_cold_[k].dissip_friction, fi, ti, ops);
+          continue;
+        }
+        if (c.kernel != kLinearKernel) {
           const auto on_i = general_pair(k, o, ops.vec(n), overlap, li, lj, ops.vec(rel_vel),
                                          ops.vec(wi + wj), ops.vec(wj - wi));
           fi += ops.load(on_i.first);
@@ -274,7 +309,13 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           Real li, lj;
           sphere_sphere_frame<WideOps, kYadeShear>(d, dist, overlap, ri, rj, vi, vj, wi, wj, n,
                                                    li, lj, rel_vel);
-          if (!c.simple) {
+          if (c.kernel == kHertzKernel) {
+            hertz_pair<WideOps>(c, o.force.data(), o.torque_j.data(), n, overlap, li, lj,
+                                rel_vel, V4(wi + wj), dt, pair_cold_[k].dissip_friction, fi,
+                                ti, WideOps());
+            continue;
+          }
+          if (c.kernel != kLinearKernel) {
             const auto on_i = general_pair(k, o, vec3(n), overlap, li, lj, vec3(rel_vel),
                                            vec3(wi + wj), vec3(wj - wi));
             fi += v4(on_i.first);

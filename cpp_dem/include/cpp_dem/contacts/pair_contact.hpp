@@ -15,9 +15,10 @@ namespace cpp_dem {
 struct PairContact {
   int i = 0, j = 0;             ///< body ids, i < j; side 1 = i, side 2 = j
   bool active = false;
-  /// The law is linear without viscous damping and without rolling resistance: the pair
-  /// pass runs the short kernel, which reads only this record.
-  bool simple = false;
+  /// The pair pass's kernel (laws/registry.hpp's PairKernel): a linear or Hertz–Mindlin law
+  /// without viscous damping and without rolling resistance takes its short kernel, which
+  /// reads only this record (and adds slip energy to the cold part); 0: the composed law.
+  std::uint8_t kernel = 0;
   /// The periodic image of j the contact sees (bodies/cell.hpp's image code; kNoShift: j).
   std::uint8_t image = kNoShift;
   std::uint8_t pad_ = 0;        ///< zero (explicit padding: checkpoints are byte-identical)

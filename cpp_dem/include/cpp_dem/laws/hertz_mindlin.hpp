@@ -6,6 +6,7 @@
 #include <cmath>
 
 #include "cpp_dem/laws/material.hpp"
+#include "cpp_dem/laws/tangential.hpp"
 
 namespace cpp_dem {
 
@@ -67,5 +68,22 @@ struct HertzMindlinElastic {
     return 0.4 * p.kn * overlap * overlap * std::sqrt(overlap);
   }
 };
+
+/// The pair pass's short kernel of the Hertz–Mindlin law without dashpots or rolling
+/// resistance (frictional_spring's arguments; overlap in m; k_hertz = K and c_mindlin = C,
+/// N/m^1.5, as ContactPhys::kn and ::ks): the composed law's lines for it, in its order
+/// (the same bits as apply_law), without its geometry record, its state's copy or its
+/// dispatch. Returns the normal force F_n (N).
+template <class Ops, class V>
+ALWAYS_INLINE Real hertz_frictional(V& fs, const V& n_old, const V& n, Real overlap,
+                                    const V& rel_vel, const V& angvel_sum, Real k_hertz,
+                                    Real c_mindlin, Real tan_phi, Real dt,
+                                    Real& dissip_friction) {
+  const Real ks = mindlin_shear_stiffness(c_mindlin, overlap);
+  const Real fn = hertz_normal_force(k_hertz, overlap);
+  frictional_spring<Ops>(fs, n_old, n, fn, rel_vel, angvel_sum, ks, tan_phi, dt,
+                         dissip_friction);
+  return fn;
+}
 
 }  // namespace cpp_dem

@@ -55,26 +55,16 @@ struct LinearElastic {
   }
 };
 
-/// The short kernel: the linear law with Coulomb friction and no dashpot or rolling part, on
-/// plain values, for the hot loops (either vector form). fs: the stored shear force on side 2
-/// (N), updated; n_old: the previous normal (zero for a new contact); n: the unit normal from
-/// side 1 to side 2; overlap (m); rel_vel: velocity of side 2 minus side 1 at the contact
-/// point (m/s); angvel_sum: the sum of the two spins (rad/s); kn, ks (N/m); tan_phi (-);
-/// dt (s). Slip energy (J) is added to dissip_friction. Returns the normal force F_n (N).
+/// The short kernel: the linear law with Coulomb friction and no dashpot or rolling part
+/// (frictional_spring's arguments; overlap in m, kn and ks in N/m). Returns the normal force
+/// F_n (N).
 template <class Ops, class V>
 ALWAYS_INLINE Real linear_frictional(V& fs, const V& n_old, const V& n, Real overlap,
                                      const V& rel_vel, const V& angvel_sum, Real kn, Real ks,
                                      Real tan_phi, Real dt, Real& dissip_friction) {
   const Real fn = kn * overlap;  // 000 eq (1)
-  const Real vn = Ops::dot(rel_vel, n);
-  const V vt = rel_vel - vn * n;
-  if (Ops::dot(n_old, n_old) > 0) {
-    V axis, twist;
-    frame_turn<Ops>(n_old, n, angvel_sum, dt, axis, twist);
-    turn_into_frame<Ops>(fs, axis, twist, n);
-  }
-  fs -= (ks * dt) * vt;  // 000 eq (2)
-  cap_magnitude<Ops>(fs, tan_phi * (fn > 0 ? fn : 0.0), ks, dissip_friction);  // 000 eq (3)
+  frictional_spring<Ops>(fs, n_old, n, fn, rel_vel, angvel_sum, ks, tan_phi, dt,
+                         dissip_friction);
   return fn;
 }
 

@@ -52,4 +52,27 @@ ALWAYS_INLINE bool cap_magnitude(V& spring, Real cap, Real k, Real& dissipated) 
   return cap_spring<Ops>(spring, spring, cap, k, dissipated);
 }
 
+/// The short kernels' common part: the tangential spring of a contact without dashpots or
+/// rolling resistance, given its normal force fn (N) and its tangent shear stiffness ks
+/// (N/m), on plain values, for the hot loops (either vector form). fs: the stored shear force
+/// on side 2 (N), updated; n_old: the previous normal (zero for a new contact); n: the unit
+/// normal from side 1 to side 2; rel_vel: velocity of side 2 minus side 1 at the contact point
+/// (m/s); angvel_sum: the sum of the two spins (rad/s); tan_phi (-); dt (s). Slip energy (J)
+/// is added to dissip_friction. The composed law's lines (apply_composed_law) with those
+/// parts off, in its order: the same bits.
+template <class Ops, class V>
+ALWAYS_INLINE void frictional_spring(V& fs, const V& n_old, const V& n, Real fn,
+                                     const V& rel_vel, const V& angvel_sum, Real ks,
+                                     Real tan_phi, Real dt, Real& dissip_friction) {
+  const Real vn = Ops::dot(rel_vel, n);
+  const V vt = rel_vel - vn * n;
+  if (Ops::dot(n_old, n_old) > 0) {
+    V axis, twist;
+    frame_turn<Ops>(n_old, n, angvel_sum, dt, axis, twist);
+    turn_into_frame<Ops>(fs, axis, twist, n);
+  }
+  fs -= (ks * dt) * vt;  // 000 eq (2)
+  cap_magnitude<Ops>(fs, tan_phi * (fn > 0 ? fn : 0.0), ks, dissip_friction);  // 000 eq (3)
+}
+
 }  // namespace cpp_dem
