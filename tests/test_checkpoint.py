@@ -71,3 +71,45 @@ def test_checkpoint_keeps_the_blow_up_settings(tmp_path):
     load_checkpoint(tmp_path / "ck.h5", b.scene)
     assert b.scene.max_step_ratio == 0.5
     assert b.scene.dt_check_period == 7
+
+
+def make_hertz():
+    """Hertz–Mindlin spheres falling into a box, half of them with contact dashpots (the
+    pair pass's two Hertz kernels), and a linear wall law."""
+    s = dem.Scene(gravity=(0, 0, -9.81))
+    plain = s.add_material(dem.hertz_mindlin_material(density=2650, shear_modulus=2.9e7,
+                                                      poisson=0.25, friction_coefficient=0.8))
+    damped = s.add_material(dem.hertz_mindlin_material(density=2650, shear_modulus=2.9e7,
+                                                       poisson=0.25, friction_coefficient=0.8))
+    s.set_pair_law(damped, damped, damping_normal=0.97, damping_shear=0.97)
+    s.set_pair_law(plain, damped, damping_normal=0.5, damping_shear=0.5)
+    s.add_box((0, 0, 0), (0.03, 0.03, 0.06), material=plain)
+    c, r = loose_cloud(np.full(120, 0.003), (0, 0, 0), (0.03, 0.03, 0.06), seed=5)
+    s.add_spheres(c, r, material=plain)
+    s.velocities = np.random.default_rng(5).normal(0, 0.5, (120, 3))
+    for b in range(0, 120, 2):
+        s.set_body_material(b, damped)
+    s.dt = 0.2 * s.critical_dt()
+    return s
+
+
+def test_a_hertz_restart_is_bitwise_and_its_checkpoint_the_same_bytes_again(tmp_path):
+    """The Hertz kernels (with and without dashpots) are found again from each contact's law
+    when a checkpoint loads: the restart is bitwise, and the loaded scene saves the same
+    bytes (a contact's bytes do not depend on its kernel)."""
+    n = 1500
+    a = make_hertz()
+    a.run(n)
+    assert a.num_active_contacts > 10
+    blob = bytes(_core._checkpoint_save(a))
+    save_checkpoint(tmp_path / "ck.h5", a)
+    a.run(n)
+    b = make_hertz()
+    load_checkpoint(tmp_path / "ck.h5", b)
+    assert bytes(_core._checkpoint_save(b)) == blob
+    b.run(n)
+    for x, y in zip((a.positions, a.velocities, a.angular_velocities, a.forces,
+                     a.contacts()["force"]),
+                    (b.positions, b.velocities, b.angular_velocities, b.forces,
+                     b.contacts()["force"])):
+        assert np.array_equal(x, y)

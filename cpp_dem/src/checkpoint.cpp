@@ -374,7 +374,14 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.put(s.cell_);
   w.put(s.max_radius_at_build_);
   // Contacts and adjacency.
-  w.vec(s.pairs_);
+  {
+    // (A contact's kernel is saved as the format's flag "linear short kernel", 0 or 1: the
+    // Hertz kernels, derived from the phys, are 0 here and found again at the load, so a
+    // contact's bytes do not depend on which kernels a build has.)
+    std::vector<PairContact> pairs = s.pairs_;
+    for (PairContact& c : pairs) c.kernel = c.kernel == kLinearKernel ? kLinearKernel : 0;
+    w.vec(pairs);
+  }
   w.vec(s.pair_cold_);
   w.vec(s.pair_out_);
   w.vec(s.wall_contacts_);
@@ -561,6 +568,17 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
   r.get(t.max_radius_at_build_);
   r.vec(t.pairs_);
   r.vec(t.pair_cold_);
+  if (t.pair_cold_.size() != t.pairs_.size())
+    throw ParameterError("checkpoint: corrupt pair contacts");
+  for (size_t k = 0; k < t.pairs_.size(); ++k) {
+    // (the Hertz kernels of the contacts saved as the composed law's: see the save)
+    PairContact& c = t.pairs_[k];
+    if (c.kernel != 0 && c.kernel != kLinearKernel)
+      throw ParameterError("checkpoint: corrupt pair contacts");
+    const std::uint8_t kernel = pair_kernel(t.pair_cold_[k].phys);
+    if (c.kernel == 0 && (kernel == kHertzKernel || kernel == kHertzDampedKernel))
+      c.kernel = kernel;
+  }
   r.vec(t.pair_out_);
   r.vec(t.wall_contacts_);
   r.vec(t.pair_jadj_off_);

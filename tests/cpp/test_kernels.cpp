@@ -1,6 +1,7 @@
 // Kernel tests of the contact-law parts and shape-pair units, on plain values (no scene).
 // Built and run by tests/test_cpp_kernels.py; prints one line per check and "N passed, M
 // failed" at the end, exits 1 on a failure.
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <string>
@@ -110,19 +111,24 @@ int main() {
     p.kn = 2.9e9;  // K, N/m^1.5 (002's grains, R* = 2.5 mm)
     p.ks = 3.4e9;  // C, N/m^1.5
     p.tan_phi = 0.8;
+    // Step k's geometry; vt: the amplitude of the tangential velocity (m/s).
+    const auto step_geometry = [](int k, Real vt) {
+      const Real a = 0.002 * k;
+      ContactGeometry g;
+      g.normal = Vec3(std::cos(a), std::sin(a), 0.1 * std::sin(3 * a)).normalized();
+      g.overlap = 1e-5 * (1.5 + std::sin(0.05 * k));
+      g.rel_vel = Vec3(-0.01, 0.02 * std::sin(0.1 * k), vt * std::cos(0.07 * k));
+      g.angvel_sum = Vec3(3.0, -1.0, 2.0 * std::cos(0.02 * k));
+      g.rel_angvel = Vec3::Zero();
+      return g;
+    };
     ContactState s_law;
     Vec3 fs_n = Vec3::Zero(), n_old = Vec3::Zero();
     V4 fs_w = V4{}, n_old_w = V4{};
     Real d_n = 0, d_w = 0;
     bool same = true, slipped = false, stuck = false;
     for (int k = 0; k < 200; ++k) {
-      const Real a = 0.002 * k;
-      ContactGeometry g;
-      g.normal = Vec3(std::cos(a), std::sin(a), 0.1 * std::sin(3 * a)).normalized();
-      g.overlap = 1e-5 * (1.5 + std::sin(0.05 * k));
-      g.rel_vel = Vec3(-0.01, 0.02 * std::sin(0.1 * k), 0.3 * std::cos(0.07 * k));
-      g.angvel_sum = Vec3(3.0, -1.0, 2.0 * std::cos(0.02 * k));
-      g.rel_angvel = Vec3::Zero();
+      const ContactGeometry g = step_geometry(k, 0.3);
       const Real before = s_law.dissip_friction;
       const LawOutput out = apply_law(p, g, 1e-6, s_law);
       (s_law.dissip_friction > before ? slipped : stuck) = true;
@@ -143,15 +149,53 @@ int main() {
     check(same && slipped && stuck,
           "Hertz short kernel == composed law over 200 steps (stick and slip, both forms), "
           "bitwise");
+    // With dashpots (002's filling: 0.97 of critical, normal and shear; then normal only).
+    for (const auto& [bn, bs] : {std::pair<Real, Real>{0.97, 0.97}, {0.3, 0.0}}) {
+      ContactPhys q = p;
+      q.beta_n = bn;
+      q.beta_s = bs;
+      q.mass_eff = 2.1e-4;  // kg
+      ContactState st;
+      Vec3 gs_n = Vec3::Zero(), m_old = Vec3::Zero();
+      V4 gs_w = V4{}, m_old_w = V4{};
+      Real df_n = 0, dv_n = 0, df_w = 0, dv_w = 0;
+      bool eq = true, slip = false, stick = false;
+      for (int k = 0; k < 200; ++k) {
+        const ContactGeometry g = step_geometry(k, 3.0);
+        const Real before = st.dissip_friction;
+        const LawOutput out = apply_law(q, g, 1e-6, st);
+        Vec3 fvs_n;
+        const Real fn_n = hertz_damped<NarrowOps>(gs_n, m_old, g.normal, g.overlap, g.rel_vel,
+                                                  g.angvel_sum, q, 1e-6, df_n, dv_n, fvs_n);
+        m_old = g.normal;
+        const V4 n_w = v4(g.normal);
+        V4 fvs_w;
+        const Real fn_w = hertz_damped<WideOps>(gs_w, m_old_w, n_w, g.overlap, v4(g.rel_vel),
+                                                v4(g.angvel_sum), q, 1e-6, df_w, dv_w, fvs_w);
+        m_old_w = n_w;
+        // (slipping: with a shear dashpot its force is dropped, else slip energy is added)
+        ((bs > 0 ? fvs_n == Vec3::Zero() : st.dissip_friction > before) ? slip : stick) = true;
+        eq = eq && fn_n == st.fn && fn_w == st.fn && gs_n == st.fs && vec3(gs_w) == st.fs &&
+             df_n == st.dissip_friction && df_w == st.dissip_friction &&
+             dv_n == st.dissip_viscous && dv_w == st.dissip_viscous &&
+             Vec3(fn_n * g.normal + gs_n + fvs_n) == out.force2 &&
+             vec3(fn_w * n_w + gs_w + fvs_w) == out.force2;
+      }
+      check(eq && slip && stick && dv_n > 0,
+            "Hertz damped kernel == composed law over 200 steps (beta_n " + std::to_string(bn) +
+                ", beta_s " + std::to_string(bs) + "; stick and slip, both forms), bitwise");
+    }
     check(pair_kernel(p) == kHertzKernel && !short_kernel_applies(p),
           "registry: a plain Hertz–Mindlin pair takes the Hertz kernel, walls the composed law");
     p.beta_n = 0.1;
-    check(pair_kernel(p) == kComposedKernel, "registry: a Hertz dashpot takes the composed law");
-    p.beta_n = 0;
+    check(pair_kernel(p) == kHertzDampedKernel,
+          "registry: a Hertz pair with a dashpot takes the damped Hertz kernel");
     p.kr = 1.0;
     check(pair_kernel(p) == kComposedKernel, "registry: Hertz rolling takes the composed law");
     p.model = ContactModel::Linear;
     p.kr = 0;
+    check(pair_kernel(p) == kComposedKernel, "registry: a linear dashpot takes the composed law");
+    p.beta_n = 0;
     check(pair_kernel(p) == kLinearKernel, "registry: a plain linear pair takes its kernel");
   }
   // ---- Hertz–Mindlin: stiffness and energy are consistent with the force ----------------

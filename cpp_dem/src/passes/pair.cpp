@@ -17,24 +17,30 @@ namespace cpp_dem {
 
 namespace {
 
-/// Pair contact c (k) with the Hertz–Mindlin short kernel (hertz_frictional) on its hot
-/// record: j's force and torque into force_j and torque_j (PairOutput's padded vectors), i's
-/// added to fi and ti; slip energy into dissip_friction (the cold record's). The force and
-/// the moments are general_pair's expressions, to the bit: the composed law's force
-/// fn n + fs plus its zero shear dashpot, the branches li n and -lj n, and its zero rolling
-/// moment added on j and subtracted on i (a -0 component comes out as general_pair's).
-template <class Ops, class V>
-ALWAYS_INLINE void hertz_pair(PairContact& c, Real* force_j, Real* torque_j, const V& n,
-                              Real overlap, Real li, Real lj, const V& rel_vel,
-                              const V& angvel_sum, Real dt, Real& dissip_friction, V& fi, V& ti,
+/// Pair contact c with the Hertz–Mindlin short kernel (hertz_frictional; kDamped:
+/// hertz_damped, with the dashpots of its cold record's phys) on its hot record: j's force
+/// and torque into force_j and torque_j (PairOutput's padded vectors), i's added to fi and
+/// ti; slip and viscous energy into the cold record. The force and the moments are
+/// general_pair's expressions, to the bit: the composed law's force fn n + fs plus its shear
+/// dashpot's (zero without one), the branches li n and -lj n, and its zero rolling moment
+/// added on j and subtracted on i (a -0 component comes out as general_pair's).
+template <bool kDamped, class Ops, class V>
+ALWAYS_INLINE void hertz_pair(PairContact& c, PairContactCold& cold, Real* force_j,
+                              Real* torque_j, const V& n, Real overlap, Real li, Real lj,
+                              const V& rel_vel, const V& angvel_sum, Real dt, V& fi, V& ti,
                               Ops ops) {
   V fs = ops.load_head(c.fs.data());
-  const Real fn = hertz_frictional<Ops>(fs, ops.load_head(c.normal.data()), n, overlap,
-                                        rel_vel, angvel_sum, c.kn, c.ks, c.tan_phi, dt,
-                                        dissip_friction);
+  V fvs = ops.zero();
+  const Real fn =
+      kDamped ? hertz_damped<Ops>(fs, ops.load_head(c.normal.data()), n, overlap, rel_vel,
+                                  angvel_sum, cold.phys, dt, cold.dissip_friction,
+                                  cold.dissip_viscous, fvs)
+              : hertz_frictional<Ops>(fs, ops.load_head(c.normal.data()), n, overlap, rel_vel,
+                                      angvel_sum, c.kn, c.ks, c.tan_phi, dt,
+                                      cold.dissip_friction);
   ops.store_with(c.fs.data(), fs, overlap);  // fs, overlap
   ops.store_with(c.normal.data(), n, fn);    // normal, fn
-  const V f = fn * n + fs + ops.zero();
+  const V f = fn * n + fs + fvs;
   ops.store_padded(force_j, f);
   ops.store_padded(torque_j, V(ops.cross(V(-lj * n), f) + ops.zero()));
   const V f_i = -f;
@@ -184,9 +190,13 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
         Real li, lj;
         sphere_sphere_frame<Ops, kYadeShear>(d, dist, overlap, ri, rj, vi, vj, wi, wj, n, li, lj,
                                              rel_vel);
-        if (c.kernel == kHertzKernel) {
-          hertz_pair<Ops>(c, o.force.data(), o.torque_j.data(), n, overlap, li, lj, rel_vel,
-                          V(wi + wj), dt, pair_cold_[k].dissip_friction, fi, ti, ops);
+        if (c.kernel == kHertzKernel || c.kernel == kHertzDampedKernel) {
+          if (c.kernel == kHertzKernel)
+            hertz_pair<false>(c, pair_cold_[k], o.force.data(), o.torque_j.data(), n, overlap,
+                              li, lj, rel_vel, V(wi + wj), dt, fi, ti, ops);
+          else
+            hertz_pair<true>(c, pair_cold_[k], o.force.data(), o.torque_j.data(), n, overlap,
+                             li, lj, rel_vel, V(wi + wj), dt, fi, ti, ops);
           continue;
         }
         if (c.kernel != kLinearKernel) {
@@ -309,10 +319,13 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           Real li, lj;
           sphere_sphere_frame<WideOps, kYadeShear>(d, dist, overlap, ri, rj, vi, vj, wi, wj, n,
                                                    li, lj, rel_vel);
-          if (c.kernel == kHertzKernel) {
-            hertz_pair<WideOps>(c, o.force.data(), o.torque_j.data(), n, overlap, li, lj,
-                                rel_vel, V4(wi + wj), dt, pair_cold_[k].dissip_friction, fi,
-                                ti, WideOps());
+          if (c.kernel == kHertzKernel || c.kernel == kHertzDampedKernel) {
+            if (c.kernel == kHertzKernel)
+              hertz_pair<false>(c, pair_cold_[k], o.force.data(), o.torque_j.data(), n, overlap,
+                                li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
+            else
+              hertz_pair<true>(c, pair_cold_[k], o.force.data(), o.torque_j.data(), n, overlap,
+                               li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
             continue;
           }
           if (c.kernel != kLinearKernel) {

@@ -5,6 +5,7 @@
 #include <array>
 #include <cmath>
 
+#include "cpp_dem/laws/damping.hpp"
 #include "cpp_dem/laws/material.hpp"
 #include "cpp_dem/laws/tangential.hpp"
 
@@ -83,6 +84,43 @@ ALWAYS_INLINE Real hertz_frictional(V& fs, const V& n_old, const V& n, Real over
   const Real fn = hertz_normal_force(k_hertz, overlap);
   frictional_spring<Ops>(fs, n_old, n, fn, rel_vel, angvel_sum, ks, tan_phi, dt,
                          dissip_friction);
+  return fn;
+}
+
+/// hertz_frictional with the dashpots (002's filling: viscous damping normal and shear):
+/// the composed law's lines for the Hertz–Mindlin law without rolling resistance, in its
+/// order (the same bits as apply_law), the parameters from p (kn = K, ks = C, tan_phi,
+/// beta_n, beta_s, mass_eff). fvs: the shear dashpot's force (N; zero where the contact
+/// slips or beta_s = 0), which the contact's force adds: fn n + fs + fvs. Viscous energy (J)
+/// is added to dissip_viscous. Returns the total normal force (N).
+template <class Ops, class V>
+ALWAYS_INLINE Real hertz_damped(V& fs, const V& n_old, const V& n, Real overlap,
+                                const V& rel_vel, const V& angvel_sum, const ContactPhys& p,
+                                Real dt, Real& dissip_friction, Real& dissip_viscous, V& fvs) {
+  const Real kn = hertz_normal_stiffness(p.kn, overlap);
+  const Real ks = mindlin_shear_stiffness(p.ks, overlap);
+  Real fn = hertz_normal_force(p.kn, overlap);
+  const Real vn = Ops::dot(rel_vel, n);
+  const V vt = rel_vel - vn * n;
+  if (p.beta_n > 0) {
+    const Real fv = -viscous_coefficient(p.beta_n, p.mass_eff, kn) * vn;
+    fn += fv;
+    dissip_viscous += -fv * vn * dt;
+  }
+  if (Ops::dot(n_old, n_old) > 0) {
+    V axis, twist;
+    frame_turn<Ops>(n_old, n, angvel_sum, dt, axis, twist);
+    turn_into_frame<Ops>(fs, axis, twist, n);
+  }
+  fs -= (ks * dt) * vt;
+  fvs = Ops::zero();
+  if (p.beta_s > 0) fvs = -viscous_coefficient(p.beta_s, p.mass_eff, ks) * vt;
+  const Real cap = p.tan_phi * (fn > 0 ? fn : 0.0);
+  if (cap_spring<Ops>(fs, p.beta_s > 0 ? V(fs + fvs) : fs, cap, ks, dissip_friction)) {
+    fvs = Ops::zero();  // slip: the capped total is all in the spring
+  } else if (p.beta_s > 0) {
+    dissip_viscous += -Ops::dot(fvs, vt) * dt;
+  }
   return fn;
 }
 

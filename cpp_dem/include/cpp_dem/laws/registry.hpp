@@ -93,13 +93,18 @@ inline bool short_kernel_applies(const ContactPhys& p) {
 /// linear short kernel (short_kernel_applies), the Hertz–Mindlin one (hertz_frictional: the
 /// law without dashpots or rolling resistance), or the composed law (apply_law). The short
 /// kernels do the composed law's operations in its order: the same bits.
-enum PairKernel : std::uint8_t { kComposedKernel = 0, kLinearKernel = 1, kHertzKernel = 2 };
+/// kHertzDampedKernel: the Hertz–Mindlin law with dashpots (hertz_damped), no rolling.
+enum PairKernel : std::uint8_t {
+  kComposedKernel = 0,
+  kLinearKernel = 1,
+  kHertzKernel = 2,
+  kHertzDampedKernel = 3
+};
 
 inline std::uint8_t pair_kernel(const ContactPhys& p) {
   if (short_kernel_applies(p)) return kLinearKernel;
-  if (p.model == ContactModel::HertzMindlin && !(p.beta_n > 0) && !(p.beta_s > 0) &&
-      !(p.kr > 0))
-    return kHertzKernel;
+  if (p.model == ContactModel::HertzMindlin && !(p.kr > 0))
+    return !(p.beta_n > 0) && !(p.beta_s > 0) ? kHertzKernel : kHertzDampedKernel;
   return kComposedKernel;
 }
 
