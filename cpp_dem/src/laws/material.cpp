@@ -3,8 +3,11 @@
 #include "cpp_dem/laws/material.hpp"
 
 #include <cmath>
+#include <cstdint>
 #include <cstdio>
+#include <cstring>
 #include <limits>
+#include <optional>
 
 #include "cpp_dem/laws/beam.hpp"  // BeamParams
 #include "cpp_dem/laws/registry.hpp"
@@ -75,6 +78,27 @@ Material Material::as_law(ContactModel m) const {
   return out;
 }
 
+namespace {
+
+/// tan(angle) (angle in rad), remembered for the last angle this thread asked for, to the
+/// bit: the contacts of a packing whose radii grow are mixed again at every step, all with
+/// the same friction angle.
+Real friction_tan(Real angle) {
+  thread_local bool known = false;
+  thread_local std::uint64_t last_bits = 0;
+  thread_local Real last_tan = 0;
+  std::uint64_t bits;
+  std::memcpy(&bits, &angle, sizeof bits);
+  if (!known || bits != last_bits) {
+    last_tan = std::tan(angle);
+    last_bits = bits;
+    known = true;
+  }
+  return last_tan;
+}
+
+}  // namespace
+
 ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2, Real m1,
                           Real m2) {
   ContactPhys p;
@@ -86,10 +110,15 @@ ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2
   // Two materials of different laws meet with the linear law (e.g. Hertz–Mindlin grains
   // against a linear geogrid, as 002 §2.3).
   p.model = a.model == b.model ? a.model : ContactModel::Linear;
-  // (a material of another law brings the shared parameters; the law's own are its defaults)
-  const Material a2 = a.as_law(p.model), b2 = b.as_law(p.model);
+  // (a material of another law brings the shared parameters; the law's own are its defaults;
+  // a material of the contact's law is read in place, not copied)
+  std::optional<Material> a_other, b_other;
+  if (a.model != p.model) a_other = a.as_law(p.model);
+  if (b.model != p.model) b_other = b.as_law(p.model);
+  const Material& a2 = a_other ? *a_other : a;
+  const Material& b2 = b_other ? *b_other : b;
   with_elastic_part(p.model, [&](auto part) { decltype(part)::mix(a2, b2, r1, r2, r_eff, p); });
-  p.tan_phi = std::tan(std::min(a.friction_angle, b.friction_angle));
+  p.tan_phi = friction_tan(std::min(a.friction_angle, b.friction_angle));
   p.beta_n = 0.5 * (a.damping_normal + b.damping_normal);
   p.beta_s = 0.5 * (a.damping_shear + b.damping_shear);
   if (std::isinf(m1)) p.mass_eff = m2;
