@@ -92,8 +92,9 @@ void Scene::open_pair(long k, PairOutput& o) {
   o = PairOutput();
 }
 
-/// Pair contact k with a law other than the short kernel's: normal n, overlap (m), branch
-/// lengths li, lj (m), relative velocity (m/s), sum and difference of the spins (rad/s).
+/// Pair contact k with the composed law (no short kernel for its law and parts): normal n,
+/// overlap (m), branch lengths li, lj (m), relative velocity (m/s), sum and difference of the
+/// spins (rad/s).
 /// Writes j's force and torque into o; returns i's force (N) and torque (N m).
 std::pair<Vec3, Vec3> Scene::general_pair(long k, PairOutput& o, const Vec3& n, Real overlap,
                                           Real li, Real lj, const Vec3& rel_vel,
@@ -190,20 +191,19 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
         Real li, lj;
         sphere_sphere_frame<Ops, kYadeShear>(d, dist, overlap, ri, rj, vi, vj, wi, wj, n, li, lj,
                                              rel_vel);
-        if (c.kernel == kHertzKernel || c.kernel == kHertzDampedKernel) {
-          if (c.kernel == kHertzKernel)
+        if (c.kernel != kLinearKernel) {
+          if (c.kernel == kHertzKernel) {
             hertz_pair<false>(c, pair_cold_[k], o.force.data(), o.torque_j.data(), n, overlap,
                               li, lj, rel_vel, V(wi + wj), dt, fi, ti, ops);
-          else
+          } else if (c.kernel == kHertzDampedKernel) {
             hertz_pair<true>(c, pair_cold_[k], o.force.data(), o.torque_j.data(), n, overlap,
                              li, lj, rel_vel, V(wi + wj), dt, fi, ti, ops);
-          continue;
-        }
-        if (c.kernel != kLinearKernel) {
-          const auto on_i = general_pair(k, o, ops.vec(n), overlap, li, lj, ops.vec(rel_vel),
-                                         ops.vec(wi + wj), ops.vec(wj - wi));
-          fi += ops.load(on_i.first);
-          ti += ops.load(on_i.second);
+          } else {
+            const auto on_i = general_pair(k, o, ops.vec(n), overlap, li, lj, ops.vec(rel_vel),
+                                           ops.vec(wi + wj), ops.vec(wj - wi));
+            fi += ops.load(on_i.first);
+            ti += ops.load(on_i.second);
+          }
           continue;
         }
         // The short kernel on the hot record: (fs, overlap) and (normal, fn) in the record.
@@ -319,20 +319,19 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           Real li, lj;
           sphere_sphere_frame<WideOps, kYadeShear>(d, dist, overlap, ri, rj, vi, vj, wi, wj, n,
                                                    li, lj, rel_vel);
-          if (c.kernel == kHertzKernel || c.kernel == kHertzDampedKernel) {
-            if (c.kernel == kHertzKernel)
+          if (c.kernel != kLinearKernel) {
+            if (c.kernel == kHertzKernel) {
               hertz_pair<false>(c, pair_cold_[k], o.force.data(), o.torque_j.data(), n, overlap,
                                 li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
-            else
+            } else if (c.kernel == kHertzDampedKernel) {
               hertz_pair<true>(c, pair_cold_[k], o.force.data(), o.torque_j.data(), n, overlap,
                                li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
-            continue;
-          }
-          if (c.kernel != kLinearKernel) {
-            const auto on_i = general_pair(k, o, vec3(n), overlap, li, lj, vec3(rel_vel),
-                                           vec3(wi + wj), vec3(wj - wi));
-            fi += v4(on_i.first);
-            ti += v4(on_i.second);
+            } else {
+              const auto on_i = general_pair(k, o, vec3(n), overlap, li, lj, vec3(rel_vel),
+                                             vec3(wi + wj), vec3(wj - wi));
+              fi += v4(on_i.first);
+              ti += v4(on_i.second);
+            }
             continue;
           }
           // The short kernel on the hot record, with 3-vectors in 4-lane registers:

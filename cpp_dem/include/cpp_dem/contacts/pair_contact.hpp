@@ -17,7 +17,10 @@ struct PairContact {
   bool active = false;
   /// The pair pass's kernel (laws/registry.hpp's PairKernel): a linear or Hertz–Mindlin law
   /// without viscous damping and without rolling resistance takes its short kernel, which
-  /// reads only this record (and adds slip energy to the cold part); 0: the composed law.
+  /// reads only this record (and adds slip energy to the cold part); a Hertz–Mindlin law
+  /// with dashpots its damped kernel, which reads the cold part's phys too; 0: the composed
+  /// law. (Checkpoints hold 0 or 1, the linear kernel's flag; the Hertz kernels are found
+  /// again at the load.)
   std::uint8_t kernel = 0;
   /// The periodic image of j the contact sees (bodies/cell.hpp's image code; kNoShift: j).
   std::uint8_t image = kNoShift;
