@@ -124,6 +124,44 @@ def test_one_sphere_clump_moves_bitwise_as_the_sphere(energy):
         assert np.abs(a.orientations - b.orientations).max() < 1e-13
 
 
+@pytest.mark.parametrize("grow", [False, True])
+def test_a_clump_member_calls_for_the_broad_phase_as_the_sphere(grow):
+    """The Verlet margin's measure of a clump's members (the largest displacement since the
+    last build, plus any growth of the radius since) is the sphere pass's: one-sphere clumps
+    moving apart rebuild at the same steps as the spheres. With growth: the radii grow once
+    by 7 % after the first build, short of half the margin, and the slow motion after it
+    completes the half margin long before it would alone."""
+    runs = []
+    for clump in (False, True):
+        s = dem.Scene()
+        mat = material(s)
+        x = np.array([[0.0, 0.0, 0.0], [0.03, 0.0, 0.0], [0.0, 0.03, 0.0]])
+        v = np.array([[-0.3, 0.1, 0.0], [0.5, 0.0, 0.2], [0.0, 0.7, -0.1]])  # m/s
+        if grow:
+            v *= 0.05
+        r = np.array([0.005, 0.004, 0.006])
+        if clump:
+            for k in range(3):
+                s.add_clumps(ClumpTemplate.from_spheres([[0, 0, 0]], [r[k]]), x[k:k + 1],
+                             material=mat)
+                s.set_clump_state(k, x[k], [1, 0, 0, 0], v[k], [0, 0, 0])
+        else:
+            s.add_spheres(x, r, material=mat)
+            s.velocities = v
+        s.dt = 1e-5
+        builds = []
+        for block in range(400):
+            if grow and block == 1:
+                s.radii = s.radii * 1.07
+            s.run(5)
+            builds.append(s.collider_stats()["builds"])
+        runs.append((builds, s.positions.copy()))
+    (b_sphere, x_sphere), (b_clump, x_clump) = runs
+    assert b_sphere[-1] >= 3, b_sphere[-1]  # (so the rebuilds are tested)
+    assert b_clump == b_sphere
+    assert np.array_equal(x_clump, x_sphere)
+
+
 # ---- free rotation -----------------------------------------------------------------------
 
 def _asymmetric():

@@ -513,15 +513,17 @@ class Scene {
   /// The same for body `slot` at `pos` (m), its position in registers (the clump pass).
   __attribute__((always_inline)) inline Real displacement_since_build(int slot,
                                                                        const Vec3& pos) const {
-    return (pos - pos_at_build_[slot]).norm() +
-           std::max(0.0, bodies_.radius[slot] - radius_at_build_[slot]);
+    return (pos - pos_at_build_[slot]).norm() + radius_growth_since_build(slot);
+  }
+  /// How much body `slot`'s radius has grown since the last build, m (+0 where it has not).
+  __attribute__((always_inline)) inline Real radius_growth_since_build(int slot) const {
+    return std::max(0.0, bodies_.radius[slot] - radius_at_build_[slot]);
   }
   /// The same in a deforming periodic cell: beyond the cell's own deformation since the build
   /// fb (= H H_build^-1), |x - fb x_build| plus any growth.
   __attribute__((always_inline)) inline Real displacement_since_build(int slot,
                                                                        const Mat3& fb) const {
-    return (bodies_.pos[slot] - fb * pos_at_build_[slot]).norm() +
-           std::max(0.0, bodies_.radius[slot] - radius_at_build_[slot]);
+    return (bodies_.pos[slot] - fb * pos_at_build_[slot]).norm() + radius_growth_since_build(slot);
   }
   void rebuild();
   /// Stores the spheres in spatial order (see "storage order"); only while no contact exists.

@@ -122,9 +122,13 @@ void Scene::integrate_clumps_hot(long& err_clump) {
   const bool renormalize = step_ % kRenormalizePeriod == 0;
   const bool yade_rotation = clump_rotation_ == ClumpRotation::Yade;
   long err = std::numeric_limits<long>::max();
-  Real worst = 0;
+  // The members' largest displacement since the build (displacement_since_build): of those
+  // whose radius has not grown, the largest squared distance, rooted once at the end (the
+  // square root is monotonic and correctly rounded, so this is the largest of their roots,
+  // to the bit); of the others, the distance plus the growth, as it was.
+  Real worst = 0, worst_sq = 0;
 #pragma omp parallel for schedule(static) reduction(min : err) reduction(max : worst) \
-    if (nc > kParallelMin)
+    reduction(max : worst_sq) if (nc > kParallelMin)
   for (int c = 0; c < nc; ++c) {
     const int e0 = clumps_.member_off[c], e1 = clumps_.member_off[c + 1];
     const Mat3& rot_old = clumps_.rot[c];  // of ori[c]; place_members (last) renews it
@@ -266,9 +270,12 @@ void Scene::integrate_clumps_hot(long& err_clump) {
     // (Each member's displacement since the neighbour lists were built is taken as it is
     // placed, from the position in registers rather than read back from the store.)
     cpp_dem::place_members(clumps_, bodies_, c, [&](int s, const Vec3& x) {
-      worst = std::max(worst, displacement_since_build(s, x));
+      const Real grown = radius_growth_since_build(s);
+      if (grown == 0) worst_sq = std::max(worst_sq, (x - pos_at_build_[s]).squaredNorm());
+      else worst = std::max(worst, displacement_since_build(s, x));
     });
   }
+  worst = std::max(worst, std::sqrt(worst_sq));
   err_clump = err;
   if (err == std::numeric_limits<long>::max() && disp_valid_) max_disp_ = std::max(max_disp_, worst);
 }
