@@ -4,6 +4,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <string>
 
 #include "cpp_dem/geometry/sphere_grid.hpp"
@@ -215,6 +216,48 @@ int main() {
                        HertzMindlinElastic::normal_energy(p, d - h)) / (2 * h);
     check(close(f, dedd, 1e-6), "Hertz: F = dE/d delta", f, dedd);
     check(close(ks, 5e8 * std::sqrt(d), 1e-15), "Mindlin: k_t = C sqrt(delta)", ks, 5e8 * std::sqrt(d));
+  }
+  // ---- mixing two materials: written in place, every field; the moduli remembered ----------
+  {
+    Material h1 = Material::of_law(ContactModel::HertzMindlin), h2 = h1, h3 = h1;
+    h1.young = 70e9, h1.poisson = 0.25, h1.friction_angle = 0.61, h1.density = 2650;
+    h1.rolling_stiffness = 0.3, h1.rolling_friction = 0.1;  // (kr and rolling_cap set)
+    h2.young = 20e9, h2.poisson = 0.3, h2.friction_angle = 0.5, h2.density = 2000;
+    h3.young = 5e9, h3.poisson = 0.45, h3.friction_angle = 0.4, h3.density = 1200;
+    h3.damping_normal = 0.97, h3.damping_shear = 0.5;
+    PairLaw linear_over;
+    linear_over.model_set = true, linear_over.model = ContactModel::Linear;
+    linear_over.kn = 1e6, linear_over.friction = 0.5;
+    const auto same = [](const ContactPhys& x, const ContactPhys& y) {
+      return std::memcmp(&x, &y, sizeof x) == 0;
+    };
+    ContactPhys out;
+    std::memset(static_cast<void*>(&out), 0x7f, sizeof out);  // (a stale record: every field must be written)
+    bool in_place = true, moduli = true;
+    const Material* mats[] = {&h1, &h2, &h3};
+    // The pairs in turn, so that the remembered moduli change at every call.
+    for (int k = 0; k < 12; ++k) {
+      const Material& a = *mats[k % 3];
+      const Material& b = *mats[(k / 3) % 3];
+      const Real r1 = 0.002 + 1e-4 * k, r2 = 0.003, m1 = 1e-4, m2 = 2e-4;
+      const PairLaw* const laws[] = {nullptr, &linear_over};
+      for (const PairLaw* law : laws) {
+        mix_materials(a, b, r1, r2, m1, m2, law, out);
+        in_place = in_place && same(out, mix_materials(a, b, r1, r2, m1, m2, law));
+      }
+      // Hertz's K = 4/3 E* sqrt(R*), E* from this pair's moduli (not the last pair's).
+      const ContactPhys p = mix_materials(a, b, r1, r2, m1, m2);
+      const Real e_star =
+          1.0 / ((1 - a.poisson * a.poisson) / a.young + (1 - b.poisson * b.poisson) / b.young);
+      moduli = moduli && p.kn == 4.0 / 3.0 * e_star * std::sqrt(r1 * r2 / (r1 + r2));
+    }
+    check(in_place, "mix: written in place over a stale record, the result returned, bitwise");
+    check(moduli, "mix: the remembered moduli are the pair's, as the pairs change");
+    const ContactPhys rolling = mix_materials(h1, h1, 0.002, 0.003, 1e-4, 2e-4);
+    out = rolling;
+    mix_materials(h2, h2, 0.002, 0.003, 1e-4, 2e-4, nullptr, out);
+    check(rolling.kr > 0 && out.kr == 0 && out.rolling_cap == 0,
+          "mix: a contact without rolling resistance over one with it has none");
   }
   // ---- registry -----------------------------------------------------------------------
   {

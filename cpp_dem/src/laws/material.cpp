@@ -97,11 +97,10 @@ Real friction_tan(Real angle) {
   return last_tan;
 }
 
-}  // namespace
-
-ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2, Real m1,
-                          Real m2) {
-  ContactPhys p;
+/// mix_materials into p (every field set).
+void mix_into(const Material& a, const Material& b, Real r1, Real r2, Real m1, Real m2,
+              ContactPhys& p) {
+  p = ContactPhys{};
   // A wall passes an infinite radius: R* is then the sphere's radius, and the linear rule
   // (000 eq 4) takes the sphere's radius for both sides, as Yade does.
   const Real r_eff = std::isinf(r2) ? r1 : (std::isinf(r1) ? r2 : r1 * r2 / (r1 + r2));
@@ -133,6 +132,14 @@ ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2
     p.kr = beta_r * ks_lin * r_eff * r_eff;
     p.rolling_cap = eta_r * r_eff;
   }
+}
+
+}  // namespace
+
+ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2, Real m1,
+                          Real m2) {
+  ContactPhys p;
+  mix_into(a, b, r1, r2, m1, m2, p);
   return p;
 }
 
@@ -148,20 +155,26 @@ void PairLaw::validate() const {
           "must be in [0, 1] (ratio of critical), or unset");
 }
 
-ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2, Real m1,
-                          Real m2, const PairLaw* law) {
-  if (!law) return mix_materials(a, b, r1, r2, m1, m2);
-  ContactPhys p;
-  if (law->model_set) {
-    p = mix_materials(a.as_law(law->model), b.as_law(law->model), r1, r2, m1, m2);
-  } else {
-    p = mix_materials(a, b, r1, r2, m1, m2);
-  }
+void mix_materials(const Material& a, const Material& b, Real r1, Real r2, Real m1, Real m2,
+                   const PairLaw* law, ContactPhys& p) {
+  // (Written in place: a result returned and then copied was read back, as 16-byte loads,
+  // from the 8-byte stores that had just written it, a stall at each of its fields.)
+  if (law && law->model_set)
+    mix_into(a.as_law(law->model), b.as_law(law->model), r1, r2, m1, m2, p);
+  else
+    mix_into(a, b, r1, r2, m1, m2, p);
+  if (!law) return;
   if (law->kn >= 0) p.kn = law->kn;
   if (law->ks >= 0) p.ks = law->ks;
   if (law->friction >= 0) p.tan_phi = law->friction;
   if (law->damping_normal >= 0) p.beta_n = law->damping_normal;
   if (law->damping_shear >= 0) p.beta_s = law->damping_shear;
+}
+
+ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2, Real m1,
+                          Real m2, const PairLaw* law) {
+  ContactPhys p;
+  mix_materials(a, b, r1, r2, m1, m2, law, p);
   return p;
 }
 

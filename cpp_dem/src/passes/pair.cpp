@@ -51,10 +51,10 @@ ALWAYS_INLINE void hertz_pair(PairContact& c, PairContactCold& cold, Real* force
 }  // namespace
 
 void Scene::update_phys(PairContact& c, PairContactCold& cold) const {
-  const ContactPhys& p = cold.phys =
-      mix_materials(materials_[bodies_.material[c.i]], materials_[bodies_.material[c.j]], stiffness_radius(c.i),
-                    stiffness_radius(c.j), bodies_.mass[c.i], bodies_.mass[c.j],
-                    pair_law(bodies_.material[c.i], bodies_.material[c.j]));
+  ContactPhys& p = cold.phys;
+  mix_materials(materials_[bodies_.material[c.i]], materials_[bodies_.material[c.j]],
+                stiffness_radius(c.i), stiffness_radius(c.j), bodies_.mass[c.i], bodies_.mass[c.j],
+                pair_law(bodies_.material[c.i], bodies_.material[c.j]), p);
   c.kn = p.kn;
   c.ks = p.ks;
   c.tan_phi = p.tan_phi;

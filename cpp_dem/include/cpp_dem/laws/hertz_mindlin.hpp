@@ -4,6 +4,7 @@
 
 #include <array>
 #include <cmath>
+#include <cstring>
 
 #include "cpp_dem/laws/damping.hpp"
 #include "cpp_dem/laws/material.hpp"
@@ -41,20 +42,39 @@ struct HertzMindlinElastic {
   static Real inverse_e_star(const Material& a, const Material& b) {
     return (1 - a.poisson * a.poisson) / a.young + (1 - b.poisson * b.poisson) / b.young;
   }
-  /// p.kn = K = 4/3 E* sqrt(R*) (N/m^1.5) and p.ks = C = 8 G* sqrt(R*) (N/m^1.5), with the
-  /// effective moduli E*, G* of two elastic spheres (reciprocal sums).
+  /// The effective moduli of two elastic spheres (reciprocal sums): 1/E* (1/Pa), E* and G*
+  /// (Pa).
+  struct Moduli {
+    Real inverse_e_star, e_star, g_star;
+  };
+  /// The moduli of materials a and b, remembered per thread for the last (E, nu) of both
+  /// asked for, to the bit: the contacts of a packing whose radii grow are mixed again at
+  /// every step, nearly all of one pair of materials.
+  static Moduli moduli(const Material& a, const Material& b) {
+    thread_local bool known = false;
+    thread_local Real last_key[4] = {0, 0, 0, 0};
+    thread_local Moduli last{0, 0, 0};
+    const Real key[4] = {a.young, a.poisson, b.young, b.poisson};
+    if (!known || std::memcmp(key, last_key, sizeof key) != 0) {
+      const Real inv = inverse_e_star(a, b);
+      const Real g_a = a.shear_modulus(), g_b = b.shear_modulus();
+      last = {inv, 1.0 / inv, 1.0 / ((2 - a.poisson) / g_a + (2 - b.poisson) / g_b)};
+      std::memcpy(last_key, key, sizeof key);
+      known = true;
+    }
+    return last;
+  }
+  /// p.kn = K = 4/3 E* sqrt(R*) (N/m^1.5) and p.ks = C = 8 G* sqrt(R*) (N/m^1.5).
   static void mix(const Material& a, const Material& b, Real, Real, Real r_eff, ContactPhys& p) {
-    const Real e_star = 1.0 / inverse_e_star(a, b);
-    const Real g_a = a.shear_modulus(), g_b = b.shear_modulus();
-    const Real g_star = 1.0 / ((2 - a.poisson) / g_a + (2 - b.poisson) / g_b);
-    p.kn = 4.0 / 3.0 * e_star * std::sqrt(r_eff);
-    p.ks = 8.0 * g_star * std::sqrt(r_eff);
+    const Moduli m = moduli(a, b);
+    p.kn = 4.0 / 3.0 * m.e_star * std::sqrt(r_eff);
+    p.ks = 8.0 * m.g_star * std::sqrt(r_eff);
   }
   /// k_s depends on the overlap, so the rolling stiffness takes the reference stiffness
   /// E* R* (N/m) and stays a constant of the contact.
   static Real rolling_reference(const Material& a, const Material& b, Real r_eff,
                                 const ContactPhys&) {
-    return r_eff / inverse_e_star(a, b);
+    return r_eff / moduli(a, b).inverse_e_star;
   }
   static Real normal_force(const ContactPhys& p, Real overlap) {
     return hertz_normal_force(p.kn, overlap);

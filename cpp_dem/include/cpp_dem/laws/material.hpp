@@ -139,5 +139,9 @@ ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2
 /// mix_materials with the pair law `law` over it (nullptr: none).
 ContactPhys mix_materials(const Material& a, const Material& b, Real r1, Real r2, Real m1,
                           Real m2, const PairLaw* law);
+/// The same, written into `out` (whose every field it sets): the pair pass's contacts, mixed
+/// again at every step while radii grow, are written in place, not copied.
+void mix_materials(const Material& a, const Material& b, Real r1, Real r2, Real m1, Real m2,
+                   const PairLaw* law, ContactPhys& out);
 
 }  // namespace cpp_dem
