@@ -1,7 +1,10 @@
 """bench/ab_build.py's membrane and mesh-box scenes are built and stepped, and an unknown scene
-refused (the builds themselves are not made here: CI does not run the A/B)."""
+refused; bench/ab_case.py's comparison of two runs' summaries and its refusals (the builds
+themselves are not made here: CI does not run the A/B)."""
 
 import importlib.util
+import json
+import math
 import sys
 from pathlib import Path
 
@@ -74,3 +77,47 @@ def test_the_floor_block_moves_one_body_by_one_ulp(tmp_path):
     assert np.count_nonzero(d) == 1 and d[0, 0] == np.spacing(out["a"][0][0, 0])
     assert out["c"][1] == out["d"][1]
     assert out["c"][1] != out["e"][1] and np.abs(out["c"][0] - out["e"][0]).max() > 0
+
+
+def _ab_case():
+    _ab()  # (ab_case imports ab_build's builder)
+    spec = importlib.util.spec_from_file_location("ab_case", ROOT / "bench" / "ab_case.py")
+    mod = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(mod)
+    return mod
+
+
+def test_the_case_ab_compares_every_result_but_the_wall_times():
+    """bench/ab_case.py: two summaries that differ only in their wall times (and a NaN on
+    both sides) are identical; one number changed in the last bit, a missing field or a
+    changed type is named by its path."""
+    ab = _ab_case()
+    old = {"elements": {"RE_s1": {"wall_time_s": 35.9, "stage_wall_time_s": [2.8, 5.8],
+                                  "porosity_final": 0.4105, "rest": {"dt": float("nan")},
+                                  "converged": [True, True]}},
+           "findings": [{"verdict": "not resolved", "diff_mean": 4.024e-10}],
+           "wall_time_total_s": 168.2}
+    new = json.loads(json.dumps(old, allow_nan=True))
+    new["elements"]["RE_s1"]["wall_time_s"] = 30.1
+    new["elements"]["RE_s1"]["stage_wall_time_s"] = [2.1, 5.0]
+    new["wall_time_total_s"] = 150.0
+    assert ab.differences(old, new) == []
+    new["findings"][0]["diff_mean"] = math.nextafter(4.024e-10, 1.0)
+    new["elements"]["RE_s1"]["converged"] = [True, 1]
+    del new["elements"]["RE_s1"]["porosity_final"]
+    d = ab.differences(old, new)
+    assert len(d) == 3, d
+    assert any(x.startswith(".findings[0].diff_mean: 4.024e-10 -> ") for x in d), d
+    assert ".elements.RE_s1.converged[1]: True -> 1" in d, d
+    assert ".elements.RE_s1.porosity_final: present -> missing" in d, d
+
+
+def test_the_case_ab_refuses_an_unknown_case_and_an_out_among_its_arguments(capsys):
+    ab = _ab_case()
+    assert ab.case_module("prs-element-002") == "geogrid_dem.cases.prs_element_002"
+    assert ab.case_module("prs_element_002") == "geogrid_dem.cases.prs_element_002"
+    with pytest.raises(ab._cli.BenchInputError, match="'nosuch': not a case; one of "
+                                                      "pullout-000, "):
+        ab.case_module("nosuch")
+    with pytest.raises(ab._cli.BenchInputError, match="--out among the case's arguments"):
+        ab.main(["--ref", "HEAD", "--", "deposition", "--smoke", "--out", "x"])
