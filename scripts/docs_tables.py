@@ -162,7 +162,11 @@ def findings_table(data: dict, opts: dict, *, verdict: bool = True) -> list[str]
     out = []
     for r in rows:
         line = [fmt(r.get("grid")), fmt(r.get("name")), pm(r, "re_mean", "re_sd"),
-                pm(r, "prs_mean", "prs_sd"), pm(r, "diff_mean", "diff_se"), fmt(r.get("n"))]
+                pm(r, "prs_mean", "prs_sd"),
+                # (a finding about PRS alone holds PRS's own mean and se there)
+                ("PRS alone: " if r.get("compare") == "PRS" else "")
+                + pm(r, "diff_mean", "diff_se"),
+                fmt(r.get("n"))]
         line += [fmt(r.get("t_critical"))] if with_t else []
         line += [sign(r.get("expected_sign")), fmt(r.get("verdict"))] if verdict else []
         line += [_left_out(r)] if with_left else []

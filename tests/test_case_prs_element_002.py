@@ -222,6 +222,34 @@ def test_paired_statistics_on_synthetic_elements():
     assert case.verdict(st["diff_mean"], st["diff_se"], st["n"], -1) == "not resolved"
 
 
+def test_a_finding_about_prs_alone_is_labelled_so_and_an_unresolved_one_says_why(smoke):
+    """The finding about PRS alone holds PRS's own mean and se in the difference's column: the
+    log and report.md label it "PRS", not "PRS - RE". A 'not resolved' verdict whose numbers
+    do not say why (one seed, no scatter, an unconverged element) gives its reason."""
+    out, proc = smoke
+    s = json.loads((out / "summary.json").read_text())
+    logged = [ln for ln in proc.stdout.splitlines()
+              if ln.startswith("[prs_element_002] detailed: ")]
+    assert len(logged) == len(s["findings"])
+    for f, ln in zip(s["findings"], logged):
+        assert re.search(re.escape(f"{f['name']}: {f['compare']} ") + r"-?[0-9]", ln), ln
+        why = case.unresolved_reason(f)
+        assert ln.endswith(f"): {f['verdict']}" + (f" ({why})" if why else "")), ln
+    alone = [f for f in s["findings"] if f["compare"] == "PRS"]
+    assert alone and all(case.findings_table([f])[2].count("| PRS alone: ") == 1 for f in alone)
+    assert all("PRS alone" not in case.findings_table([f])[2]
+               for f in s["findings"] if f["compare"] == "PRS - RE")
+    base = {"verdict": "not resolved", "n": 2, "diff_mean": 1.0, "diff_se": 0.5,
+            "unconverged": []}
+    assert case.unresolved_reason(base) == ""  # (within t crit: its numbers say it)
+    assert case.unresolved_reason({**base, "verdict": "agrees"}) == ""
+    assert "no scatter" in case.unresolved_reason({**base, "diff_se": 1e-14})
+    assert "fewer than 2 seeds" in case.unresolved_reason({**base, "n": 1,
+                                                            "diff_se": float("nan")})
+    assert "not finite" in case.unresolved_reason({**base, "diff_se": float("nan")})
+    assert "detailed_RE_s1" in case.unresolved_reason({**base, "unconverged": ["detailed_RE_s1"]})
+
+
 def test_an_element_off_its_fem_path_is_named_in_the_summary_and_the_report(tmp_path):
     """Issue 59: the element's strain is within 0.5-2 x its FEM region's on every axis by
     default; one outside it is named, per axis (an axis without a ratio is not judged)."""

@@ -352,6 +352,30 @@ def _fmt(x) -> str:
     return "-" if x is None or not math.isfinite(x) else f"{x:.4g}"
 
 
+def _alone(f: dict) -> str:
+    """The label of a finding about PRS alone, whose difference column holds PRS's own mean
+    and standard error (not PRS - RE)."""
+    return "PRS alone: " if f.get("compare") == "PRS" else ""
+
+
+def unresolved_reason(f: dict) -> str:
+    """Why a finding is 'not resolved' where its numbers alone do not say it (an element
+    behind it unconverged, fewer than 2 seeds, a mean or standard error not finite, no
+    scatter of the pairs' differences); empty otherwise (within t crit x se)."""
+    if f.get("verdict") != "not resolved":
+        return ""
+    if f.get("unconverged"):
+        return "an element behind it did not converge: " + ", ".join(f["unconverged"])
+    if f.get("n", 0) < 2:
+        return "fewer than 2 seeds: no standard error"
+    d, se = f.get("diff_mean"), f.get("diff_se")
+    if d is None or se is None or not (math.isfinite(d) and math.isfinite(se)):
+        return "its mean or standard error is not finite"
+    if se <= 1e-9 * abs(d):
+        return "every pair's difference is the same: no scatter to judge it by"
+    return ""
+
+
 def findings_table(rows: list[dict], *, with_verdict: bool = True) -> list[str]:
     """The markdown table of findings (or measures) rows."""
     head = "| grid | finding | RE mean ± sd | PRS mean ± sd | PRS − RE ± se | n |"
@@ -359,8 +383,8 @@ def findings_table(rows: list[dict], *, with_verdict: bool = True) -> list[str]:
              "|---|---|---|---|---|---|" + ("---|---|---|---|" if with_verdict else "")]
     for f in rows:
         line = (f"| {f['grid']} | {f['name']} | {_fmt(f['re_mean'])} ± {_fmt(f['re_sd'])} | "
-                f"{_fmt(f['prs_mean'])} ± {_fmt(f['prs_sd'])} | {_fmt(f['diff_mean'])} ± "
-                f"{_fmt(f['diff_se'])} | {f['n']} |")
+                f"{_fmt(f['prs_mean'])} ± {_fmt(f['prs_sd'])} | "
+                f"{_alone(f)}{_fmt(f['diff_mean'])} ± {_fmt(f['diff_se'])} | {f['n']} |")
         if with_verdict:
             line += (f" {_fmt(f.get('t_critical'))} | {'+' if f['expected_sign'] > 0 else '−'}"
                      f" | {f['verdict']} | {', '.join(f.get('pairs_left_out') or []) or '-'} |")
@@ -647,8 +671,9 @@ def run(p: Params, out: Path) -> dict:
     write_report(out, summary)
     end_run(out)
     for f in summary["findings"]:
-        log(f"{f['grid']}: {f['name']}: PRS - RE {_fmt(f['diff_mean'])} ± "
-            f"{_fmt(f['diff_se'])} (n = {f['n']}): {f['verdict']}")
+        why = unresolved_reason(f)
+        log(f"{f['grid']}: {f['name']}: {f['compare']} {_fmt(f['diff_mean'])} ± "
+            f"{_fmt(f['diff_se'])} (n = {f['n']}): {f['verdict']}" + (f" ({why})" if why else ""))
     log(f"done in {summary['wall_time_total_s']:.1f} s; report in {out / 'report.md'}")
     return summary
 
