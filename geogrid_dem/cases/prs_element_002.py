@@ -204,14 +204,26 @@ MEASURES = (
 SEEDS_FOR_FINDINGS = 6
 
 
+def unjudgeable(diff_mean: float, diff_se: float, n: int) -> str:
+    """Why a paired difference cannot be judged by Student's t, '' when it can: fewer than 2
+    seeds (no standard error), a mean or standard error not finite, or a standard error of 0
+    (up to rounding, 1e-9 of the mean): the pairs' differences all equal, as a counted
+    measure whose pairs moved by the same count, give no estimate of its scatter, and t
+    would be infinite."""
+    if n < 2:
+        return "fewer than 2 seeds: no standard error"
+    if not (math.isfinite(diff_mean) and math.isfinite(diff_se)):
+        return "its mean or standard error is not finite"
+    if diff_se <= 1e-9 * abs(diff_mean):
+        return "every pair's difference is the same: no scatter to judge it by"
+    return ""
+
+
 def verdict(diff_mean: float, diff_se: float, n: int, expected_sign: int) -> str:
     """At 95 % by Student's t over the n paired seeds: 'agrees' when the paired difference has
     002's sign and |d| > t(0.975, n - 1) x se, 'opposes' when it has the other sign beyond
-    that, else 'not resolved' (also with fewer than 2 seeds: no standard error; and with a
-    standard error of 0 (up to rounding, 1e-9 of the mean), the pairs' differences all equal: a counted measure whose pairs moved
-    by the same count gives no estimate of its scatter, and t would be infinite)."""
-    if n < 2 or not (math.isfinite(diff_mean) and math.isfinite(diff_se)) or \
-            diff_se <= 1e-9 * abs(diff_mean):
+    that, else 'not resolved' (also where :func:`unjudgeable` gives a reason)."""
+    if unjudgeable(diff_mean, diff_se, n):
         return "not resolved"
     if abs(diff_mean) <= t_critical(n) * diff_se or diff_mean == 0:
         return "not resolved"
@@ -366,14 +378,9 @@ def unresolved_reason(f: dict) -> str:
         return ""
     if f.get("unconverged"):
         return "an element behind it did not converge: " + ", ".join(f["unconverged"])
-    if f.get("n", 0) < 2:
-        return "fewer than 2 seeds: no standard error"
+    nan = float("nan")
     d, se = f.get("diff_mean"), f.get("diff_se")
-    if d is None or se is None or not (math.isfinite(d) and math.isfinite(se)):
-        return "its mean or standard error is not finite"
-    if se <= 1e-9 * abs(d):
-        return "every pair's difference is the same: no scatter to judge it by"
-    return ""
+    return unjudgeable(nan if d is None else d, nan if se is None else se, f.get("n", 0))
 
 
 def findings_table(rows: list[dict], *, with_verdict: bool = True) -> list[str]:
