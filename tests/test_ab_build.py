@@ -121,3 +121,24 @@ def test_the_case_ab_refuses_an_unknown_case_and_an_out_among_its_arguments(caps
         ab.case_module("nosuch")
     with pytest.raises(ab._cli.BenchInputError, match="--out among the case's arguments"):
         ab.main(["--ref", "HEAD", "--", "deposition", "--smoke", "--out", "x"])
+
+
+def test_the_placement_ab_finds_the_same_cloud_and_refuses_bad_sizes(tmp_path):
+    """bench/ab_placement.py against this very revision: the same clouds, to the bit, one
+    JSON line per size appended to --out; a size out of range is refused by name."""
+    import json
+    import subprocess
+    import sys
+
+    bench = ROOT / "bench" / "ab_placement.py"
+    out = tmp_path / "ab.jsonl"
+    p = subprocess.run([sys.executable, str(bench), "--ref", "HEAD", "--sizes", "30:0.1,80:0.3",
+                        "--rounds", "2", "--out", str(out)], capture_output=True, text=True,
+                       cwd=ROOT)
+    assert p.returncode == 0, p.stderr[-2000:]
+    rows = [json.loads(x) for x in out.read_text().splitlines()]
+    assert [(r["n"], r["solid_fraction"]) for r in rows] == [(30, 0.1), (80, 0.3)]
+    assert all(r["identical"] and r["old_s"] > 0 and r["new_s"] > 0 for r in rows)
+    bad = subprocess.run([sys.executable, str(bench), "--ref", "HEAD", "--sizes", "30:0.6"],
+                         capture_output=True, text=True, cwd=ROOT)
+    assert bad.returncode != 0 and "--sizes='30:0.6'" in bad.stderr

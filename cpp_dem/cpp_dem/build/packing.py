@@ -97,7 +97,13 @@ def _sequential_addition(radii, lo, hi, *, seed: int, max_tries: int,
                          inside: Callable[[np.ndarray, float], bool] | None = None,
                          region: str = "box") -> tuple[np.ndarray, np.ndarray]:
     """loose_cloud's placement in the box [lo, hi], keeping only centres x of radius r where
-    ``inside(x, r)`` (the box's own bounds always hold); ``region`` names it in the error."""
+    ``inside(x, r)`` (the box's own bounds always hold); ``region`` names it in the error.
+
+    Each sphere takes the first of its tries (three uniform draws each, in turn from one
+    seeded generator) that lies inside and overlaps no sphere placed before it. The tries are
+    drawn and checked in batches (numpy, not a loop per try); the generator is then set to
+    where the try taken left it, so the cloud is the one that trying one at a time gives, to
+    the bit (tests/test_packing_placement.py)."""
     r = np.sort(np.asarray(radii, dtype=float).reshape(-1))[::-1]
     if len(r) == 0:
         raise ParameterError("radii: no spheres")
@@ -105,39 +111,55 @@ def _sequential_addition(radii, lo, hi, *, seed: int, max_tries: int,
         raise ParameterError(f"radii: must be > 0 (m); smallest is {r[-1]}")
     lo_a, hi_a = _check_box(lo, hi, r[0])
     rng = np.random.default_rng(seed)
-    h = 2 * r[0]  # cell size: a sphere overlaps only spheres in its own or adjacent cells
-    ncell = np.maximum(1, np.floor((hi_a - lo_a) / h).astype(int))
-    h3 = (hi_a - lo_a) / ncell
-    cells: dict[tuple, list[int]] = {}
-    pos = np.empty((len(r), 3))
+    bits = rng.bit_generator
+    n = len(r)
+    # Cells of at least 2 r_max: a sphere can overlap only spheres in its own or the 26
+    # adjacent cells. Larger where the box is sparse, so that there are at most about 4 cells
+    # a sphere (the table is dense), and a border of empty cells around them.
+    size = hi_a - lo_a
+    h = max(2 * r[0], float(np.prod(size) / (4.0 * n + 64)) ** (1.0 / 3.0))
+    ncell = np.maximum(1, np.floor(size / h).astype(int))
+    h3 = size / ncell
+    dims = ncell + 2
+    stride = np.array([dims[1] * dims[2], dims[2], 1])
+    around = np.array([i * stride[0] + j * stride[1] + m
+                       for i in (-1, 0, 1) for j in (-1, 0, 1) for m in (-1, 0, 1)])
+    # the sphere ids of each cell, -1 where none: row -1 of pos and r is a sphere at infinity
+    table = np.full((int(np.prod(dims)), 4), -1, dtype=np.int64)
+    count = np.zeros(len(table), dtype=np.int64)
+    pos = np.full((n + 1, 3), np.inf)
+    r_at = np.append(r, 0.0)
+    last = 1  # (the tries the sphere before took: the first batch's size)
     for k, rk in enumerate(r):
         placed = False
-        for _ in range(max_tries):
-            x = lo_a + rk + rng.random(3) * (hi_a - lo_a - 2 * rk)
-            if inside is not None and not inside(x, rk):
-                continue
-            c = np.minimum((x - lo_a) // h3, ncell - 1).astype(int)
-            ok = True
-            for i in range(max(c[0] - 1, 0), min(c[0] + 2, ncell[0])):
-                for j in range(max(c[1] - 1, 0), min(c[1] + 2, ncell[1])):
-                    for m in range(max(c[2] - 1, 0), min(c[2] + 2, ncell[2])):
-                        lst = cells.get((i, j, m))
-                        if not lst:
-                            continue
-                        idx = np.asarray(lst)
-                        d2 = ((pos[idx] - x) ** 2).sum(1)
-                        if np.any(d2 < (r[idx] + rk) ** 2):
-                            ok = False
-                            break
-                    if not ok:
-                        break
-                if not ok:
-                    break
-            if ok:
-                pos[k] = x
-                cells.setdefault(tuple(c), []).append(k)
+        tries, batch = 0, min(last, 256)
+        base = lo_a + rk
+        span = hi_a - lo_a - 2 * rk
+        while tries < max_tries and not placed:
+            b = min(batch, max_tries - tries)
+            state = bits.state
+            xs = base + rng.random((b, 3)) * span
+            cell = (np.minimum((xs - lo_a) // h3, ncell - 1).astype(np.int64) + 1) @ stride
+            ids = table[cell[:, None] + around]  # (b, 27, cells' room)
+            d2 = ((pos[ids] - xs[:, None, None, :]) ** 2).sum(-1)
+            ok = ~(d2 < (r_at[ids] + rk) ** 2).reshape(b, -1).any(axis=1)
+            if inside is not None:
+                ok &= np.array([inside(x, rk) for x in xs], dtype=bool)
+            if ok.any():
+                t = int(np.argmax(ok))
+                if t < b - 1:  # (the generator as after try t alone: 3 draws a try)
+                    bits.state = state
+                    bits.advance(3 * (t + 1))
+                pos[k] = xs[t]
+                c = cell[t]
+                if count[c] == table.shape[1]:
+                    table = np.concatenate([table, np.full_like(table, -1)], axis=1)
+                table[c, count[c]] = k
+                count[c] += 1
                 placed = True
-                break
+                last = tries + t + 1
+            tries += b
+            batch = min(2 * batch, 256)
         if not placed:
             volume = (np.prod(hi_a - lo_a) if inside is None
                       else np.pi / 4 * (hi_a[0] - lo_a[0]) ** 2 * (hi_a[2] - lo_a[2]))
@@ -149,6 +171,7 @@ def _sequential_addition(radii, lo, hi, *, seed: int, max_tries: int,
                                  "(random sequential addition jams above about 0.3); use a "
                                  f"bigger {region} or smaller radii, then compact")
     # Number the spheres in space order (the placement order is random): faster scenes.
+    pos = pos[:n]
     order = spatial_order(pos, r)
     return pos[order], r[order]
 
