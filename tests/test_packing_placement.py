@@ -79,3 +79,15 @@ def test_the_tries_run_out_at_the_same_sphere_and_are_named():
         with pytest.raises(ParameterError, match=rf"could not place sphere {stuck} \(r=1.0\) "
                                                  rf"in {tries} tries"):
             loose_cloud(radii, (0, 0, 0), (edge,) * 3, seed=7, max_tries=tries)
+
+
+@pytest.mark.parametrize("radii, hi", [
+    (np.r_[20.0, np.full(300, 1.0)], (90.0, 90.0, 90.0)),  # one large sphere among small ones
+    (np.full(200, 1.0), (60.0, 60.0, 2.5)),  # a flat box: one cell across its height
+    (np.array([1.0]), (2.5, 2.5, 2.5)),  # one sphere, little room
+    (np.geomspace(0.1, 2.0, 400), (40.0, 25.0, 30.0)),  # a wide spread of sizes
+])
+def test_uneven_clouds_are_the_one_of_one_try_at_a_time(radii, hi):
+    c, r = loose_cloud(radii, (0, 0, 0), hi, seed=11)
+    c0, r0 = _one_at_a_time(radii, (0, 0, 0), hi, 11, 2000)
+    assert np.array_equal(c, c0) and np.array_equal(r, r0)

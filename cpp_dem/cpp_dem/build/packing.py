@@ -114,10 +114,11 @@ def _sequential_addition(radii, lo, hi, *, seed: int, max_tries: int,
     bits = rng.bit_generator
     n = len(r)
     # Cells of at least 2 r_max: a sphere can overlap only spheres in its own or the 26
-    # adjacent cells. Larger where the box is sparse, so that there are at most about 4 cells
-    # a sphere (the table is dense), and a border of empty cells around them.
+    # adjacent cells. Larger where the box is sparse, so that there are at most about twice as
+    # many cells as spheres (the table is dense: cells x the most spheres in one; a uniform
+    # cloud fills its cells evenly), and a border of empty cells around them.
     size = hi_a - lo_a
-    h = max(2 * r[0], float(np.prod(size) / (4.0 * n + 64)) ** (1.0 / 3.0))
+    h = max(2 * r[0], float(np.prod(size) / (2.0 * n + 64)) ** (1.0 / 3.0))
     ncell = np.maximum(1, np.floor(size / h).astype(int))
     h3 = size / ncell
     dims = ncell + 2
@@ -125,7 +126,7 @@ def _sequential_addition(radii, lo, hi, *, seed: int, max_tries: int,
     around = np.array([i * stride[0] + j * stride[1] + m
                        for i in (-1, 0, 1) for j in (-1, 0, 1) for m in (-1, 0, 1)])
     # the sphere ids of each cell, -1 where none: row -1 of pos and r is a sphere at infinity
-    table = np.full((int(np.prod(dims)), 4), -1, dtype=np.int64)
+    table = np.full((int(np.prod(dims)), 4), -1, dtype=np.int32)
     count = np.zeros(len(table), dtype=np.int64)
     pos = np.full((n + 1, 3), np.inf)
     r_at = np.append(r, 0.0)
