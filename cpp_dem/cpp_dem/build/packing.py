@@ -137,7 +137,9 @@ def _sequential_addition(radii, lo, hi, *, seed: int, max_tries: int,
         base = lo_a + rk
         span = hi_a - lo_a - 2 * rk
         while tries < max_tries and not placed:
-            b = min(batch, max_tries - tries)
+            # (at most about 2 million neighbour slots a batch: 50 MB of distances where the
+            # cells hold many small spheres)
+            b = min(batch, max_tries - tries, max(1, (1 << 21) // (27 * table.shape[1])))
             state = bits.state
             xs = base + rng.random((b, 3)) * span
             cell = (np.minimum((xs - lo_a) // h3, ncell - 1).astype(np.int64) + 1) @ stride
