@@ -66,4 +66,5 @@ fi
 # compiled them again: about 0.3 s a process, 100 s of CPU over `make test`.
 "$PY" -m compileall -q -j 0 "$ROOT/cpp_dem/cpp_dem" "$ROOT/femcoupling" "$ROOT/geogrid_dem" \
   >/dev/null
+touch "$VENV/.bytecode-stamp"  # (when: tests/test_setup_bytecode.py checks what was there then)
 say "ready: $($PY -c 'import cpp_dem, sys; print("cpp_dem", "python", sys.version.split()[0], "threads", cpp_dem.get_num_threads())')"
