@@ -5,7 +5,7 @@
 of the main arrays (positions, velocities, radii, walls) and ``extra`` metadata.
 ``load_checkpoint(path, scene)`` restores it into the scene it came from — the same kind
 (periodic or not), bodies (count, each one's kind and clump), clumps and walls (count, axis and
-side) — or into a new, empty ``Scene()``; ``replace=True`` lets it replace another scene. The
+side), materials and pair laws (every value) — or into a new, empty ``Scene()``; ``replace=True`` lets it replace another scene. The
 scene must hold the same controllers (same number and kinds, added in the same order — they are
 code, the checkpoint restores their state), and the stored values must pass the checks of the
 API's setters. Running n steps after loading gives bitwise the same state as running on.

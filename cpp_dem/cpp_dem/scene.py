@@ -212,6 +212,28 @@ def _index(value, field: str) -> int:
     return int(value)
 
 
+def _ids(values, field: str, count: int, what: str) -> np.ndarray:
+    """values (one id or several) as int ids in [0, count), or ParameterError naming the field:
+    a float, a bool or an id out of range is refused (not truncated or wrapped)."""
+    a = np.atleast_1d(np.asarray(values, dtype=object if np.ndim(values) == 0 else None))
+    if a.size == 0 and a.ndim == 1:
+        return np.zeros(0, np.int64)
+    if a.dtype == object:
+        ok = all(isinstance(v, (int, np.integer)) and not isinstance(v, (bool, np.bool_))
+                 for v in a.ravel())
+    else:
+        ok = np.issubdtype(a.dtype, np.integer)
+    if not ok or a.ndim != 1:
+        raise ParameterError(f"{field}={values!r}: must be {what} ids, whole numbers (not "
+                             "floats or booleans), one or a 1-D list")
+    a = a.astype(np.int64)
+    bad = (a < 0) | (a >= count)
+    if bad.any():
+        raise ParameterError(f"{field}: {what} {int(a[np.argmax(bad)])} does not exist (the "
+                             f"scene has {count}: 0 to {count - 1})")
+    return a
+
+
 def _behind_cylinder(cyl: dict, x: np.ndarray) -> np.ndarray:
     """(n,) whether each centre x (n, 3), m, lies behind the cylindrical wall ``cyl``
     (``Scene.cylinder_wall``): within its ends and beyond its lateral surface, on the side its
@@ -356,6 +378,21 @@ class Scene(_core.Scene):
                             "(filter cpp_dem.PhysicalRangeWarning if it is meant)")
         return idx
 
+    def set_pair_law(self, a: int, b: int, **law) -> None:
+        """Gives materials a and b their own law over the mixing rules (``_core.Scene.
+        set_pair_law``: model, kn, ks, friction, damping_normal, damping_shear; None keeps the
+        mixed value). A friction coefficient above tan 60 deg (:data:`GRAIN_BOUNDS`) gives a
+        :class:`PhysicalRangeWarning`, as a material's friction angle does."""
+        _core.Scene.set_pair_law(self, a, b, **law)
+        mu = law.get("friction")
+        bound = math.tan(math.radians(GRAIN_BOUNDS["friction_angle_deg"]))
+        if mu is not None and mu > bound:
+            _warn_range(f"set_pair_law({a}, {b}): friction={mu:g} is above {bound:.3g} (tan "
+                        f"{GRAIN_BOUNDS['friction_angle_deg']:g} deg), which no grain has "
+                        "(grains of sand, gravel and rock, steel and geogrids have mu 0.1-1.0); "
+                        "such a contact does not slide; the run goes on with it (filter "
+                        "cpp_dem.PhysicalRangeWarning if it is meant)")
+
     def add_spheres(self, centers, radii, *, material: int) -> np.ndarray:
         """Adds spheres with centres (n, 3) in m and radii (n,) in m; returns their ids.
 
@@ -425,6 +462,12 @@ class Scene(_core.Scene):
                                                    or np.all(np.mod(t, 1) == 0)):
             raise ParameterError(f"triangles: shape {t.shape}; must be (m, 3) vertex indices")
         t = t.astype(np.int64)
+        out = (t < 0) | (t >= len(v))
+        if out.any():
+            k = int(np.argmax(out.any(axis=1)))
+            i = int(t[k][out[k]][0])
+            raise ParameterError(f"triangles[{k}]: vertex {i} is not one of the {len(v)} "
+                                 "vertices")
         if not isinstance(closed, (bool, np.bool_)):
             raise ParameterError(f"closed={closed!r}: must be True or False")
         # (bad indices and degenerate triangles are refused below, by the core, by name)
@@ -471,7 +514,7 @@ class Scene(_core.Scene):
         (or 'xyz', 'all', '' to free). A blocked DOF keeps its (possibly imposed) velocity.
         A clump's members cannot be blocked one by one: see :meth:`block_clump_dofs`."""
         mask = _dof_mask(dofs)
-        for b in np.atleast_1d(np.asarray(bodies, dtype=int)):
+        for b in _ids(bodies, "bodies", self.num_bodies, "body"):
             self._set_blocked(int(b), mask)
 
     # ---- clumps ----------------------------------------------------------------------------
@@ -555,17 +598,17 @@ class Scene(_core.Scene):
     def block_clump_dofs(self, clumps: Iterable[int] | int, dofs: str) -> None:
         """Blocks DOFs of clumps (as :meth:`block_dofs`; rotations about the global axes)."""
         mask = _dof_mask(dofs)
-        for c in np.atleast_1d(np.asarray(clumps, dtype=int)):
+        for c in _ids(clumps, "clumps", self.num_clumps, "clump"):
             self._set_clump_blocked(int(c), mask)
 
     def clump_blocked_dofs(self, clump: int) -> str:
         """The blocked DOFs of a clump as a string like 'x y rz'."""
-        mask = self._clump_blocked[clump]
+        mask = self._clump_blocked[int(_ids(clump, "clump", self.num_clumps, "clump")[0])]
         return " ".join(k for k, bit in _DOF_BITS.items() if mask & bit)
 
     def blocked_dofs(self, body: int) -> str:
         """The blocked DOFs of a body as a string like 'x y rz'."""
-        mask = self._blocked[body]
+        mask = self._blocked[int(_ids(body, "body", self.num_bodies, "body")[0])]
         return " ".join(k for k, bit in _DOF_BITS.items() if mask & bit)
 
     # ---- geometry against the walls ---------------------------------------------------------
@@ -579,6 +622,21 @@ class Scene(_core.Scene):
     def positions(self, value) -> None:
         _core.Scene.positions.fset(self, value)
         self.__dict__["_geometry_version"] = self.__dict__.get("_geometry_version", 0) + 1
+
+    def _geometry_changed(self) -> None:
+        self.__dict__["_geometry_version"] = self.__dict__.get("_geometry_version", 0) + 1
+
+    def set_wall_position(self, wall: int, position: float) -> None:
+        """Moves the plane wall ``wall`` to ``position`` (m) at once; checked against the
+        bodies at the next run (a body left behind the wall is refused by name)."""
+        _core.Scene.set_wall_position(self, wall, position)
+        self._geometry_changed()
+
+    def set_cylinder_radius(self, cylinder: int, radius: float) -> None:
+        """Sets the cylindrical wall's radius (m) at once; checked against the bodies at the
+        next run (a body left behind it is refused by name)."""
+        _core.Scene.set_cylinder_radius(self, cylinder, radius)
+        self._geometry_changed()
 
     def _check_geometry(self) -> None:
         """Before the first step, and at the first run after bodies or walls were added or

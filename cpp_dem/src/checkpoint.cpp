@@ -5,6 +5,7 @@
 #include <cstdlib>
 #include <cstring>
 #include <memory>
+#include <sstream>
 #include <string>
 #include <type_traits>
 #include <typeinfo>
@@ -346,6 +347,54 @@ void Checkpoint::check_same_scene(const Scene& s, const Scene& t) {
     }  if (t.mesh_walls_.size() != s.mesh_walls_.size())
     throw ParameterError("checkpoint: the saved scene has " + std::to_string(t.mesh_walls_.size()) +
                          " mesh walls, this scene has " + std::to_string(s.mesh_walls_.size()) +
+                         kSameScene);
+  // The materials and pair laws: a scene of other grains or laws is another scene (a run
+  // that changes them, as a frictionless growth, saves and restores them with its state: the
+  // scene rebuilt for its resume is brought to the same ones before the load).
+  if (t.materials_.size() != s.materials_.size())
+    throw ParameterError("checkpoint: the saved scene has " + std::to_string(t.materials_.size()) +
+                         " materials, this scene has " + std::to_string(s.materials_.size()) +
+                         kSameScene);
+  for (size_t k = 0; k < s.materials_.size(); ++k) {
+    const Material &a = t.materials_[k], &b = s.materials_[k];
+    if (a.model != b.model)
+      throw ParameterError("checkpoint: material " + std::to_string(k) + " follows the " +
+                           law_info(a.model).name + " law in the saved scene, the " +
+                           law_info(b.model).name + " law in this one" + kSameScene);
+    for (const FieldInfo* f : material_fields(a.model)) {
+      const Real va = field_value(a, *f), vb = field_value(b, *f);
+      if (std::memcmp(&va, &vb, sizeof(Real)) == 0) continue;
+      std::ostringstream os;
+      os.precision(17);
+      os << "checkpoint: material " << k << "'s " << f->name << " is " << va
+         << " (stored value) in the saved scene, " << vb << " in this one" << kSameScene;
+      throw ParameterError(os.str());
+    }
+  }
+  const auto law_text = [](const std::vector<PairLaw>& laws) {
+    std::ostringstream os;
+    os.precision(17);
+    if (laws.empty()) return std::string("none");
+    for (const PairLaw& l : laws) {
+      os << "(" << l.a << ", " << l.b << ":";
+      if (l.model_set) os << " model " << law_info(l.model).name;
+      const std::pair<const char*, Real> v[] = {{"kn", l.kn}, {"ks", l.ks},
+                                                {"friction", l.friction},
+                                                {"damping_normal", l.damping_normal},
+                                                {"damping_shear", l.damping_shear}};
+      for (const auto& [name, x] : v)
+        if (x >= 0) os << " " << name << " " << x;
+      os << ")";
+    }
+    return os.str();
+  };
+  const bool same_laws =
+      t.pair_laws_.size() == s.pair_laws_.size() &&
+      (t.pair_laws_.empty() || std::memcmp(t.pair_laws_.data(), s.pair_laws_.data(),
+                                           t.pair_laws_.size() * sizeof(PairLaw)) == 0);
+  if (!same_laws)
+    throw ParameterError("checkpoint: the pair laws are " + law_text(t.pair_laws_) +
+                         " in the saved scene, " + law_text(s.pair_laws_) + " in this one" +
                          kSameScene);
   for (size_t k = 0; k < s.mesh_walls_.size(); ++k)
     if (t.mesh_walls_[k].ntri != s.mesh_walls_[k].ntri)

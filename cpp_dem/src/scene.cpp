@@ -272,6 +272,7 @@ void Scene::step() {
     check_dt();
   for (const auto& c : controllers_)
     if (c->enabled && step_ % c->period == 0) c->apply(*this);
+  check_boundary_steps();
   if (need_rebuild()) rebuild();
   disp_valid_ = false;  // until this step's integration measures them again
   if (cell_.on) refresh_image_offsets();
@@ -366,19 +367,98 @@ void Scene::step() {
   time_ += dt_;
 }
 
+Real Scene::grain_min_radius() {
+  if (min_radius_ < 0) {
+    Real grains = std::numeric_limits<Real>::infinity(), all = grains;
+    max_radius_ = 0;
+    for (int b = 0; b < num_bodies(); ++b) {
+      all = std::min(all, bodies_.radius[b]);
+      max_radius_ = std::max(max_radius_, bodies_.radius[b]);
+      if (bodies_.kind[b] == BODY_SPHERE) grains = std::min(grains, bodies_.radius[b]);
+    }
+    min_radius_ = std::isfinite(grains) ? grains : all;
+  }
+  return min_radius_;
+}
+
+void Scene::check_boundary_steps() {
+  // What a boundary moves towards the bodies in one step, against what a grain may move
+  // (check_tunnelling): a plane wall along its inward normal, a cylinder by its translation
+  // across its axis and its radius's change towards the bodies, a mesh by its translation, a
+  // periodic cell by the mean field's change of a contact's branch (2 r_max |L| dt, |L| the
+  // Frobenius norm of the velocity gradient; the step map is singular at |L| dt = 2).
+  if (num_bodies() == 0) return;
+  const bool moving_cell = cell_.on && !cell_.vel_grad.isZero(0);
+  bool any = moving_cell;
+  for (const Wall& w : walls_) any = any || w.velocity[w.axis] != 0;
+  for (const CylinderWall& w : cylinder_walls_)
+    any = any || !w.velocity.isZero(0) || w.radial_velocity != 0;
+  for (const MeshWall& w : mesh_walls_) any = any || !w.velocity.isZero(0);
+  if (!any) return;
+  const Real limit = max_step_ratio_ * grain_min_radius();
+  const auto g = [](Real x) {
+    std::ostringstream os;
+    os.precision(4);
+    os << x;
+    return os.str();
+  };
+  const auto fail = [&](const std::string& what, Real moved, const std::string& how) {
+    std::ostringstream os;
+    os.precision(4);
+    os << "blow-up at step " << step_ << ": " << what << " would move " << moved
+       << " m towards the bodies in one step (" << how << ", dt " << dt_
+       << " s), more than max_step_ratio=" << max_step_ratio_ << " of the smallest grain's "
+       << "radius " << grain_min_radius() << " m: it can pass through a grain without touching "
+       << "it (tunnelling); lower its speed (a servo's max_speed, a strain rate) or the time step";
+    throw BlowUpError(os.str());
+  };
+  for (size_t k = 0; k < walls_.size(); ++k) {
+    const Wall& w = walls_[k];
+    const Real in = w.sense * w.velocity[w.axis] * dt_;  // (> 0: towards its inner side)
+    if (in > limit)
+      fail("wall " + std::to_string(k) + " (" + (w.sense > 0 ? "+" : "-") + "xyz"[w.axis] +
+               ")", in, "velocity " + g(w.velocity[w.axis]) + " m/s along its axis");
+  }
+  for (size_t k = 0; k < cylinder_walls_.size(); ++k) {
+    const CylinderWall& w = cylinder_walls_[k];
+    const Vec3 across = w.velocity - w.velocity.dot(w.axis) * w.axis;
+    const Real in = across.norm() * dt_ +
+                    std::max(Real(0), (w.inside ? -1 : 1) * w.radial_velocity * dt_);
+    if (in > limit)
+      fail("cylindrical wall " + std::to_string(k), in,
+           "speed across its axis " + g(across.norm()) + " m/s, radial velocity " +
+               g(w.radial_velocity) + " m/s");
+  }
+  for (size_t k = 0; k < mesh_walls_.size(); ++k) {
+    const Real in = mesh_walls_[k].velocity.norm() * dt_;
+    if (in > limit)
+      fail("mesh wall " + std::to_string(k), in,
+           "speed " + g(mesh_walls_[k].velocity.norm()) + " m/s");
+  }
+  if (moving_cell) {
+    const Real rmax = max_radius_;  // (with grain_min_radius above)
+    const Real strain = cell_.vel_grad.norm() * dt_;
+    if (strain > 1 || 2 * rmax * strain > limit) {
+      std::ostringstream os;
+      os.precision(4);
+      os << "blow-up at step " << step_ << ": the periodic cell's velocity_gradient strains it "
+         << "by |L| dt = " << strain << " in one step (|L| = " << cell_.vel_grad.norm()
+         << " 1/s, the Frobenius norm; dt " << dt_ << " s): a contact's branch of 2 r_max = "
+         << 2 * rmax << " m would change by " << 2 * rmax * strain << " m, more than "
+         << "max_step_ratio=" << max_step_ratio_ << " of the smallest grain's radius "
+         << grain_min_radius() << " m (tunnelling), or |L| dt above 1 (the step map is "
+         << "singular at 2); lower the strain rate (a cell servo's max_rate) or the time step";
+      throw BlowUpError(os.str());
+    }
+  }
+}
+
 void Scene::check_tunnelling() {
   // A grain may move its radius times max_step_ratio per step. A geogrid node is a member of
   // radius R_c, and what it must not cross is a grain: the band of deep overlaps along its
   // path through a grain of radius r is r + 2 R_c long, so it may move (R_c + r_min) times
   // max_step_ratio, r_min the smallest grain radius.
-  if (min_radius_ < 0) {
-    Real grains = std::numeric_limits<Real>::infinity(), all = grains;
-    for (int b = 0; b < num_bodies(); ++b) {
-      all = std::min(all, bodies_.radius[b]);
-      if (bodies_.kind[b] == BODY_SPHERE) grains = std::min(grains, bodies_.radius[b]);
-    }
-    min_radius_ = std::isfinite(grains) ? grains : all;
-  }
+  grain_min_radius();
   // Leapfrog moved each body by v dt, and no body moved farther in this step than since the
   // last build (max_disp_): below max_step_ratio x the smallest grain radius nothing tunnels.
   if (disp_valid_ && max_disp_ <= max_step_ratio_ * min_radius_) return;

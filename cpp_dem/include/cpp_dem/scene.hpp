@@ -738,10 +738,18 @@ class Scene {
   Real max_step_ratio_ = 1.0;
   // Smallest radius of a body, m (-1: not known yet; set by rebuild and set_radii, not saved).
   Real min_radius_ = -1;
+  Real max_radius_ = 0;  ///< the largest body radius, with min_radius_ (grain_min_radius)
   /// Throws BlowUpError if a body moved more than max_step_ratio of its radius in the step
   /// just integrated (it scans the bodies only when the largest displacement since the last
   /// broad-phase build says one may have).
   void check_tunnelling();
+  /// The smallest grain radius (geogrid nodes' where there is no grain), cached until radii
+  /// change (min_radius_).
+  Real grain_min_radius();
+  /// Before a step's passes: no wall, cylinder, mesh or periodic cell moves the bodies' side
+  /// of it by more than max_step_ratio x the smallest grain radius in the step (it could pass
+  /// a grain without touching it); BlowUpError naming the boundary and its move.
+  void check_boundary_steps();
   bool track_energy_ = false;
   ShearKinematics shear_kinematics_ = ShearKinematics::ContactPoint;
   ClumpRotation clump_rotation_ = ClumpRotation::Fincham;

@@ -175,13 +175,29 @@ void Scene::set_positions(const std::vector<Vec3>& v) {
   bodies_.pos = v;
   dirty_ = true;
 }
+namespace {
+/// ParameterError naming the field and the first body (by slot order of v: its id) whose
+/// vector is not finite.
+void require_finite(const Scene& s, const std::vector<Vec3>& v, const char* field,
+                    const char* unit) {
+  for (size_t k = 0; k < v.size(); ++k)
+    if (!v[k].allFinite())
+      throw ParameterError(std::string(field) + ": body " +
+                           std::to_string(s.id_of(static_cast<int>(k))) + " has (" +
+                           std::to_string(v[k][0]) + ", " + std::to_string(v[k][1]) + ", " +
+                           std::to_string(v[k][2]) + "); must be finite (" + unit + ")");
+}
+}  // namespace
+
 void Scene::set_velocities(const std::vector<Vec3>& v) {
   require_size(v, bodies_.pos.size(), "velocities");
+  require_finite(*this, v, "velocities", "m/s");
   check_members_unchanged(*this, bodies_.vel, v, "velocities");
   bodies_.vel = v;
 }
 void Scene::set_angular_velocities(const std::vector<Vec3>& v) {
   require_size(v, bodies_.pos.size(), "angular_velocities");
+  require_finite(*this, v, "angular_velocities", "rad/s");
   check_members_unchanged(*this, bodies_.angvel, v, "angular_velocities");
   bodies_.angvel = v;
 }
@@ -252,19 +268,25 @@ void Scene::set_blocked(int body, std::uint8_t mask) {
 }
 void Scene::set_external_forces(const std::vector<Vec3>& f) {
   require_size(f, bodies_.pos.size(), "external_forces");
+  require_finite(*this, f, "external_forces", "N");
   bodies_.ext_force = f;
 }
 void Scene::set_body_velocity(int body, const Vec3& v) {
   check_body(body);
+  if (!v.allFinite()) throw ParameterError("velocity of body " + std::to_string(body) +
+                                           ": must be finite (m/s)");
   bodies_.vel[slot_of(body)] = v;
 }
 void Scene::set_body_external_force(int body, const Vec3& f) {
   check_body(body);
+  if (!f.allFinite()) throw ParameterError("external force of body " + std::to_string(body) +
+                                           ": must be finite (N)");
   if (bodies_.ext_force.empty()) bodies_.ext_force.assign(bodies_.pos.size(), Vec3::Zero());
   bodies_.ext_force[slot_of(body)] = f;
 }
 void Scene::set_external_torques(const std::vector<Vec3>& t) {
   require_size(t, bodies_.pos.size(), "external_torques");
+  require_finite(*this, t, "external_torques", "N m");
   bodies_.ext_torque = t;
 }
 void Scene::set_body_material(int body, int material) {

@@ -128,12 +128,77 @@ void Scene::rebuild_mesh_contacts(Real margin) {
   Real rmax = 0;
   for (int b = 0; b < n; ++b) rmax = std::max(rmax, bodies_.radius[b]);
   const Real h = 2 * (rmax + margin);
+  // A triangle whose box spans more than kMaxCells cells (a mesh of large triangles among
+  // small grains) is binned instead in a coarse grid whose cells are a quarter of the largest
+  // such box (at most 5 x 5 x 5 cells a triangle): the memory stays bounded by 125 entries a
+  // triangle, whatever the mesh's size. Either way a sphere's candidates are exactly the
+  // triangles within its reach (sorted), so where they are binned changes only the cost.
+  // (Cell keys wrap in 64 bits: two cells that share a key only add triangles that the exact
+  // test below drops.)
+  constexpr double kMaxCells = 64;
+  struct Grid {
+    Vec3 lo = Vec3::Zero();
+    Real h = 0;
+    std::array<long, 3> dims{1, 1, 1};
+    std::unordered_map<std::uint64_t, std::vector<int>> cells;
+    void size(const Vec3& lo_, const Vec3& hi, Real h_) {
+      lo = lo_;
+      h = h_;
+      for (int d = 0; d < 3; ++d)
+        dims[d] = static_cast<long>(std::min((hi[d] - lo[d]) / h, 1e15)) + 1;
+    }
+    std::uint64_t key(long i, long j, long k) const {
+      return (static_cast<std::uint64_t>(i) * static_cast<std::uint64_t>(dims[1]) +
+              static_cast<std::uint64_t>(j)) * static_cast<std::uint64_t>(dims[2]) +
+             static_cast<std::uint64_t>(k);
+    }
+    /// The cells that the box [a, b] overlaps (clamped to the grid), as index ranges; the
+    /// number of cells.
+    double range(const Vec3& a, const Vec3& b, std::array<long, 3>& c0,
+                 std::array<long, 3>& c1) const {
+      double count = 1;
+      for (int d = 0; d < 3; ++d) {
+        const auto at = [&](Real v) {
+          return static_cast<long>(std::clamp(std::floor((v - lo[d]) / h), 0.0,
+                                              static_cast<double>(dims[d] - 1)));
+        };
+        c0[d] = at(a[d]);
+        c1[d] = at(b[d]);
+        count *= double(c1[d] - c0[d] + 1);
+      }
+      return count;
+    }
+    void add(const std::array<long, 3>& c0, const std::array<long, 3>& c1, int t) {
+      for (long i = c0[0]; i <= c1[0]; ++i)
+        for (long j = c0[1]; j <= c1[1]; ++j)
+          for (long k = c0[2]; k <= c1[2]; ++k) cells[key(i, j, k)].push_back(t);
+    }
+    void gather(const Vec3& a, const Vec3& b, std::vector<int>& out) const {
+      if (cells.empty()) return;
+      std::array<long, 3> c0, c1;
+      range(a, b, c0, c1);
+      for (long i = c0[0]; i <= c1[0]; ++i)
+        for (long j = c0[1]; j <= c1[1]; ++j)
+          for (long k = c0[2]; k <= c1[2]; ++k) {
+            const auto it = cells.find(key(i, j, k));
+            if (it != cells.end()) out.insert(out.end(), it->second.begin(), it->second.end());
+          }
+    }
+  };
   struct Bins {
     Vec3 lo, hi;
-    std::array<long, 3> dims;
-    std::unordered_map<long, std::vector<int>> cells;
+    Grid fine, coarse;
+  };
+  const auto box_of = [this](const MeshWall& w, int t, Vec3& tlo, Vec3& thi) {
+    tlo = Vec3::Constant(kInf);
+    thi = Vec3::Constant(-kInf);
+    for (int i : mesh_tris_[t]) {
+      tlo = tlo.cwiseMin(mesh_vertices_[w.vert_off + i]);
+      thi = thi.cwiseMax(mesh_vertices_[w.vert_off + i]);
+    }
   };
   std::vector<Bins> bins(mesh_walls_.size());
+  std::vector<int> large;
   for (size_t m = 0; m < mesh_walls_.size(); ++m) {
     const MeshWall& w = mesh_walls_[m];
     Bins& B = bins[m];
@@ -143,23 +208,28 @@ void Scene::rebuild_mesh_contacts(Real margin) {
       B.lo = B.lo.cwiseMin(mesh_vertices_[w.vert_off + v]);
       B.hi = B.hi.cwiseMax(mesh_vertices_[w.vert_off + v]);
     }
-    for (int a = 0; a < 3; ++a) B.dims[a] = static_cast<long>((B.hi[a] - B.lo[a]) / h) + 1;
-    for (int t = 0; t < w.ntri; ++t) {
-      const auto& tri = mesh_tris_[w.tri_off + t];
-      Vec3 tlo = Vec3::Constant(kInf), thi = Vec3::Constant(-kInf);
-      for (int i : tri) {
-        tlo = tlo.cwiseMin(mesh_vertices_[w.vert_off + i]);
-        thi = thi.cwiseMax(mesh_vertices_[w.vert_off + i]);
-      }
+    B.fine.size(B.lo, B.hi, h);
+    large.clear();
+    Real coarse_h = h;
+    for (int t = w.tri_off; t < w.tri_off + w.ntri; ++t) {
+      Vec3 tlo, thi;
+      box_of(w, t, tlo, thi);
       std::array<long, 3> c0, c1;
-      for (int a = 0; a < 3; ++a) {
-        c0[a] = std::min(B.dims[a] - 1, static_cast<long>((tlo[a] - B.lo[a]) / h));
-        c1[a] = std::min(B.dims[a] - 1, static_cast<long>((thi[a] - B.lo[a]) / h));
+      if (B.fine.range(tlo, thi, c0, c1) > kMaxCells) {
+        large.push_back(t);
+        coarse_h = std::max(coarse_h, 0.25 * (thi - tlo).maxCoeff());
+        continue;
       }
-      for (long i = c0[0]; i <= c1[0]; ++i)
-        for (long j = c0[1]; j <= c1[1]; ++j)
-          for (long k = c0[2]; k <= c1[2]; ++k)
-            B.cells[(i * B.dims[1] + j) * B.dims[2] + k].push_back(w.tri_off + t);
+      B.fine.add(c0, c1, t);
+    }
+    if (large.empty()) continue;
+    B.coarse.size(B.lo, B.hi, coarse_h);
+    for (int t : large) {
+      Vec3 tlo, thi;
+      box_of(w, t, tlo, thi);
+      std::array<long, 3> c0, c1;
+      B.coarse.range(tlo, thi, c0, c1);
+      B.coarse.add(c0, c1, t);
     }
   }
   WallContactMerge merge(mesh_contacts_, [this](const MeshContact& c) {
@@ -175,18 +245,10 @@ void Scene::rebuild_mesh_contacts(Real margin) {
       const Bins& B = bins[m];
       if (((x.array() + reach) < B.lo.array()).any() || ((x.array() - reach) > B.hi.array()).any())
         continue;
-      std::array<long, 3> c0, c1;
-      for (int a = 0; a < 3; ++a) {
-        c0[a] = std::max(0L, static_cast<long>(std::floor((x[a] - reach - B.lo[a]) / h)));
-        c1[a] = std::min(B.dims[a] - 1, static_cast<long>(std::floor((x[a] + reach - B.lo[a]) / h)));
-      }
       found.clear();
-      for (long i = c0[0]; i <= c1[0]; ++i)
-        for (long j = c0[1]; j <= c1[1]; ++j)
-          for (long k = c0[2]; k <= c1[2]; ++k) {
-            const auto it = B.cells.find((i * B.dims[1] + j) * B.dims[2] + k);
-            if (it != B.cells.end()) found.insert(found.end(), it->second.begin(), it->second.end());
-          }
+      const Vec3 a = x.array() - reach, bb = x.array() + reach;
+      B.fine.gather(a, bb, found);
+      B.coarse.gather(a, bb, found);
       std::sort(found.begin(), found.end());
       found.erase(std::unique(found.begin(), found.end()), found.end());
       const size_t before = tris.size();
