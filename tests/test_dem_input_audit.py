@@ -228,3 +228,39 @@ def test_a_pair_law_friction_no_grain_has_warns():
     with warnings.catch_warnings():
         warnings.simplefilter("error")
         sc.set_pair_law(0, 0, friction=0.5)
+
+
+def test_grains_kilometres_apart_run():
+    # (the broad phase's cell count overflowed 64 bits: "cannot create std::vector larger
+    # than max_size()")
+    sc = dem.Scene()
+    m = sc.add_material(dem.linear_material(density=2650, young=5e7, poisson=0.3,
+                                            friction_angle_deg=20))
+    sc.add_spheres([[0, 0, 0], [3e4, 3e4, 3e4]], [R, R], material=m)
+    sc.dt = 0.3 * sc.critical_dt()
+    sc.run(3)
+    assert sc.step_count == 3
+
+
+def test_shapes_and_types_are_refused_by_name():
+    sc = scene()
+    cases = [
+        (lambda: sc.add_spheres(np.zeros((1, 1, 3)), [R], material=0),
+         r"centers: shape \(1, 1, 3\); must be \(n, 3\)"),
+        (lambda: sc.add_spheres([[0.05, 0.05, 0.05]], [R], material=2**31),
+         r"material=2147483648: no such material"),
+        (lambda: sc.run(10, every=0.5), r"every=0.5: must be a whole number of steps"),
+        (lambda: sc.run(10, every="3"), r"every='3': must be a whole number of steps"),
+        (lambda: sc.add_cylinder_wall(centre=[0, 0, 0], axis=[0, 0, 1], radius=1.0, inside=2,
+                                      material=0), r"inside=2: must be True"),
+    ]
+    for call, msg in cases:
+        with pytest.raises(ParameterError, match=msg):
+            call()
+    from cpp_dem.build.clumps import ClumpTemplate
+
+    t = ClumpTemplate.from_spheres([[0, 0, 0], [0.004, 0, 0]], [0.003, 0.003], name="pair")
+    with pytest.raises(ParameterError, match=r"scale: 2 factors for 1 clumps"):
+        sc.add_clumps(t, [[0.05, 0.05, 0.08]], material=0, scale=[1, 2])
+    sc.run(4, every=2.0)  # a whole float is a whole number
+    assert sc.step_count == 4

@@ -295,6 +295,10 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
              s.wall(id).velocity = finite_velocity(v, "wall " + std::to_string(id));
            },
            py::arg("wall"), py::arg("velocity"), "Imposed wall velocity (3 values), m/s.")
+      .def("_inject_unchecked", &Scene::inject_unchecked, py::arg("field"), py::arg("body"),
+           py::arg("axis"), py::arg("value"),
+           "Writes one component of a body's velocity, spin, external force or torque without "
+           "the setters' checks (tests of the blow-up detector).")
       .def("set_wall_position",
            [](Scene& s, int id, double x) {
              require(std::isfinite(x), "position", x, "must be finite (m)");

@@ -209,6 +209,9 @@ def _index(value, field: str) -> int:
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise ParameterError(f"{field}={value!r}: must be a whole number (an index returned by "
                              "add_material)")
+    if not 0 <= int(value) < 2**31:
+        raise ParameterError(f"{field}={value}: no such material (an index returned by "
+                             "add_material: 0, 1, ...)")
     return int(value)
 
 
@@ -401,6 +404,11 @@ class Scene(_core.Scene):
         c = _numbers(centers, "centers", "m")
         r = np.atleast_1d(_numbers(radii, "radii", "m"))
         c = np.atleast_2d(c)
+        if c.ndim != 2 or c.shape[1] != 3:
+            raise ParameterError(f"centers: shape {np.shape(centers)}; must be (n, 3) centres, m "
+                                 "(or 3 numbers for one sphere)")
+        if r.ndim != 1:
+            raise ParameterError(f"radii: shape {np.shape(radii)}; must be (n,) radii, m")
         material = _index(material, "material")
         if self.num_walls and len(c) and c.shape[-1] == 3:
             pos = np.asarray(self.wall_positions)
@@ -427,6 +435,21 @@ class Scene(_core.Scene):
         first = self._add_spheres(c, r, material)
         return np.arange(first, first + len(r))
 
+
+    def add_cylinder_wall(self, *, centre, axis, radius: float, inside: bool, material: int,
+                          lo: float = -math.inf, hi: float = math.inf) -> int:
+        """Adds a cylindrical wall (``_core.Scene.add_cylinder_wall``): its axis through
+        ``centre`` (m) along ``axis``, ``radius`` (m), the spheres ``inside`` it (True: a
+        triaxial cell's rigid side) or outside it (False: a pile), its lateral surface from
+        ``lo`` to ``hi`` (m along the axis from the centre; default infinite). Returns its
+        index."""
+        if not isinstance(inside, (bool, np.bool_)):
+            raise ParameterError(f"inside={inside!r}: must be True (the spheres inside the "
+                                 "cylinder) or False (outside it)")
+        return _core.Scene.add_cylinder_wall(self, centre=centre, axis=axis, radius=radius,
+                                             inside=bool(inside),
+                                             material=_index(material, "material"), lo=lo,
+                                             hi=hi)
 
     def add_mesh_wall(self, vertices=None, triangles=None, *, material: int, path=None,
                       scale: float = 1.0, closed: bool = False) -> int:
@@ -561,7 +584,11 @@ class Scene(_core.Scene):
             if bad.any():
                 k = int(np.argmax(bad))
                 raise ParameterError(f"orientations[{k}]: norm {norm[k]!r}; must be a unit quaternion")
-        f = np.broadcast_to(np.asarray(scale, dtype=float), (n,))
+        f = _numbers(scale, "scale", "-")
+        if f.shape not in ((), (1,), (n,)):
+            raise ParameterError(f"scale: {f.size} factors for {n} clumps; give one factor or "
+                                 f"one per clump ({n})")
+        f = np.broadcast_to(f, (n,))
         if not np.all(np.isfinite(f) & (f > 0)):
             raise ParameterError(f"scale={scale!r}: must be > 0 (one factor or one per clump)")
         if stiffness not in ("member", "grain"):
@@ -808,6 +835,12 @@ class Scene(_core.Scene):
                 or not float(steps).is_integer()):
             raise ParameterError(f"steps={steps!r}: must be a whole number of steps")
         steps = int(steps)
+        if (isinstance(every, (bool, str, bytes))
+                or not isinstance(every, (int, float, np.integer, np.floating))
+                or not float(every).is_integer() or every < 0):
+            raise ParameterError(f"every={every!r}: must be a whole number of steps >= 0 (0: "
+                                 "no callback)")
+        every = int(every)
         if steps < 0:
             raise ParameterError(f"steps={steps}: must be >= 0")
         if steps > _MAX_STEPS:

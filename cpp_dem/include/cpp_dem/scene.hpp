@@ -333,6 +333,11 @@ class Scene {
   /// bodies (MembranePressure, PlatenClamp) sets every step. The id is checked.
   void set_body_velocity(int body, const Vec3& v);
   void set_body_external_force(int body, const Vec3& f);
+  /// Writes one component of a body's velocity, spin, external force or torque without the
+  /// setters' checks (a non-finite value, as a law or controller could produce one): the
+  /// blow-up detector's tests. field: "velocities", "angular_velocities", "external_forces"
+  /// or "external_torques".
+  void inject_unchecked(const std::string& field, int body, int axis, Real value);
 
   // ---- parameters ----------------------------------------------------------------------
   Real dt() const { return dt_; }

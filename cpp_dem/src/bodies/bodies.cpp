@@ -284,6 +284,25 @@ void Scene::set_body_external_force(int body, const Vec3& f) {
   if (bodies_.ext_force.empty()) bodies_.ext_force.assign(bodies_.pos.size(), Vec3::Zero());
   bodies_.ext_force[slot_of(body)] = f;
 }
+void Scene::inject_unchecked(const std::string& field, int body, int axis, Real value) {
+  check_body(body);
+  if (axis < 0 || axis > 2) throw ParameterError("axis=" + std::to_string(axis) + ": 0, 1 or 2");
+  const int b = slot_of(body);
+  if (field == "velocities") {
+    bodies_.vel[b][axis] = value;
+  } else if (field == "angular_velocities") {
+    bodies_.angvel[b][axis] = value;
+  } else if (field == "external_forces") {
+    if (bodies_.ext_force.empty()) bodies_.ext_force.assign(bodies_.pos.size(), Vec3::Zero());
+    bodies_.ext_force[b][axis] = value;
+  } else if (field == "external_torques") {
+    if (bodies_.ext_torque.empty()) bodies_.ext_torque.assign(bodies_.pos.size(), Vec3::Zero());
+    bodies_.ext_torque[b][axis] = value;
+  } else {
+    throw ParameterError("field='" + field + "': velocities, angular_velocities, "
+                         "external_forces or external_torques");
+  }
+}
 void Scene::set_external_torques(const std::vector<Vec3>& t) {
   require_size(t, bodies_.pos.size(), "external_torques");
   require_finite(*this, t, "external_torques", "N m");

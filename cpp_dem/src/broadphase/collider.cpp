@@ -30,13 +30,14 @@ void CellGrid::build(const std::vector<Vec3>& pos, const std::vector<Real>& radi
   // Cell edge: the largest interaction range, grown if the grid would have too many cells.
   Real h = std::max(2 * rmax + margin, 1e-300);
   const Vec3 ext = (hi - lo).cwiseMax(Vec3::Constant(1e-300));
+  // (The count in floating point: grains kilometres apart would overflow a 64-bit product.)
   for (;;) {
-    long total = 1;
+    double total = 1;
     for (int a = 0; a < 3; ++a) {
-      ncell_[a] = std::max(1L, static_cast<long>(std::floor(ext[a] / h)) + 1);
-      total *= ncell_[a];
+      ncell_[a] = std::max(1L, static_cast<long>(std::min(std::floor(ext[a] / h), 1e15)) + 1);
+      total *= static_cast<double>(ncell_[a]);
     }
-    if (total <= 4L * nspheres_ + 64) break;
+    if (total <= 4.0 * nspheres_ + 64) break;
     h *= 1.25;
   }
   lo_ = lo;
