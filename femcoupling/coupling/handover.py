@@ -24,6 +24,9 @@ import numpy as np
 import numpy.typing as npt
 from cpp_dem import fixedorder
 
+from femcoupling._checks import FemInputError, _real
+from femcoupling.coupling._inputs import check_fraction
+
 __all__ = ["HandoverError", "TARGET_DIGITS", "WallTargets", "fem_to_dem", "on_grid",
            "secant_stiffness", "secant_tangent", "spd_floor", "target_grid", "targets_on_grid"]
 
@@ -83,8 +86,12 @@ def fem_to_dem(stress_fem_pa: npt.ArrayLike, *, min_stress_pa: float = 0.0) -> W
 
     The normal targets are ``-sigma_ii`` (compression positive). Raises
     :class:`HandoverError` if the tensor is not a finite symmetric 3x3 or a normal target is
-    not above ``min_stress_pa`` (walls can push, not pull).
+    not above ``min_stress_pa`` (walls can push, not pull); FemInputError if
+    ``min_stress_pa`` is not a finite number >= 0 Pa.
     """
+    if _real("min_stress_pa", min_stress_pa) < 0.0:
+        raise FemInputError(f"min_stress_pa={min_stress_pa!r}: must be >= 0 Pa (the least "
+                            "compression a wall target may have: servo walls only push)")
     s = np.asarray(stress_fem_pa, dtype=float)
     if s.shape != (3, 3) or not np.all(np.isfinite(s)):
         raise HandoverError(f"stress_fem_pa={s.tolist()!r}: must be a finite 3x3 tensor")
@@ -178,8 +185,11 @@ def secant_stiffness(*, stress_increment_pa: npt.ArrayLike, strain_increment: np
     Both increments are (3,) along x, y, z in the same sign convention (the DEM's
     compression positive, or both tension positive). Least squares on
     ``d_eps_i = (d_sig_i - nu (d_sig_j + d_sig_k)) / E``; nu is clipped to
-    ``poisson_bounds`` (then E is refitted). Returns (E / Pa, nu / -).
+    ``poisson_bounds`` (then E is refitted): a pair (lo, hi) of finite numbers with
+    -1 <= lo <= hi < 0.5 (an isotropic solid's range; lo = hi fixes nu), FemInputError
+    otherwise. Returns (E / Pa, nu / -).
     """
+    _check_poisson_bounds(poisson_bounds)
     ds = np.asarray(stress_increment_pa, float)
     de = np.asarray(strain_increment, float)
     if ds.shape != (3,) or de.shape != (3,) or not (np.all(np.isfinite(ds))
@@ -201,13 +211,30 @@ def secant_stiffness(*, stress_increment_pa: npt.ArrayLike, strain_increment: np
     return float(1.0 / a), float(nu)
 
 
+def _check_poisson_bounds(bounds) -> None:
+    """``bounds`` is (lo, hi), finite, -1 <= lo <= hi < 0.5; else FemInputError."""
+    if isinstance(bounds, (str, bytes)):
+        raise FemInputError(f"poisson_bounds={bounds!r}: must be a pair (lo, hi)")
+    try:
+        lo, hi = bounds
+    except (TypeError, ValueError):
+        raise FemInputError(f"poisson_bounds={bounds!r}: must be a pair (lo, hi)") from None
+    _real("poisson_bounds[0]", lo)
+    _real("poisson_bounds[1]", hi)
+    if not -1.0 <= lo <= hi < 0.5:
+        raise FemInputError(f"poisson_bounds={bounds!r}: must be (lo, hi) with "
+                            "-1 <= lo <= hi < 0.5 (Poisson's ratio of an isotropic solid; "
+                            "lo = hi fixes it)")
+
+
 def spd_floor(t: npt.ArrayLike, min_eig_fraction: float = 1e-3, *,
               name: str = "spd_floor") -> np.ndarray:
     """The symmetric part of ``t`` with its eigenvalues raised to at least
     ``min_eig_fraction`` times the largest: a positive definite stiffness from a network
     tangent that is not quite symmetric (geometric terms) and soft or negative in some
     directions (sliding contacts near the strength). Raises HandoverError if ``t`` has no
-    positive stiffness at all."""
+    positive stiffness at all, FemInputError if ``min_eig_fraction`` is not in (0, 1)."""
+    check_fraction(min_eig_fraction)
     t = np.asarray(t, float)
     lam, vec = fixedorder.eigh(0.5 * (t + t.T))
     if not lam[-1] > 0:
@@ -230,10 +257,10 @@ def secant_tangent(tangent_mandel_pa: npt.ArrayLike, *, strain_increment: npt.Ar
     so that C de = ds exactly, C is symmetric, and it keeps T's response to every strain that
     does no work with T de nor with ds (four of the six directions). T is made symmetric first
     (a network tangent with geometric terms is not quite symmetric) and positive definite:
-    eigenvalues below ``min_eig_fraction`` times the largest are raised to it (an element near
-    its strength has sliding contacts and a tangent soft, or negative, in some directions). C
-    is then positive definite whenever ds . de > 0 (the element stored energy over the
-    increment); otherwise a HandoverError names the reason. Returns C (Pa).
+    eigenvalues below ``min_eig_fraction`` (in (0, 1)) times the largest are raised to it
+    (an element near its strength has sliding contacts and a tangent soft, or negative, in
+    some directions). C is then positive definite whenever ds . de > 0 (the element stored
+    energy over the increment); otherwise a HandoverError names the reason. Returns C (Pa).
     """
     t = np.asarray(tangent_mandel_pa, float)
     de = np.asarray(strain_increment, float)

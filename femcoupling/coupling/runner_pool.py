@@ -17,15 +17,21 @@ from typing import Any
 from cpp_dem._core import ParameterError
 from cpp_dem.elements.pool import ElementPool
 
+from femcoupling.coupling._inputs import check_client
+
 __all__ = ["RunnerPool"]
 
 
 class RunnerPool:
     """``ElementPool.runners(runner, names, workers=, client=, log=, **options)`` (``.pool``,
     whose other attributes it passes on) with ``run(jobs)`` taking (name, initial, final)
-    per region (any subset, any order) and accepting after it; ``names``: the regions."""
+    per region (any subset, any order) and accepting after it; ``names``: the regions.
+    ``client``: None (a LocalCluster of ``workers`` processes) or a
+    ``dask.distributed.Client``; anything else (an address: its client is
+    ``cpp_dem.elements.cluster.dask_client(address, 0)[0]``) is refused (FemInputError)."""
 
     def __init__(self, runner: Callable, names: Sequence[str], **options: Any) -> None:
+        check_client(options.get("client"))
         self.pool = ElementPool.runners(runner, names, **options)
         self.names = list(names)
 

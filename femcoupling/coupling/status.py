@@ -33,7 +33,7 @@ import dataclasses
 import math
 from collections.abc import Iterable
 
-from femcoupling._checks import FemInputError
+from femcoupling._checks import FemInputError, _real
 
 __all__ = ["EXIT_CODES", "STATUSES", "CouplingStatus", "NoiseWarning", "check_limits", "exit_code",
            "judge_region", "judge_steps", "newton_acceptance", "worst"]
@@ -144,9 +144,9 @@ def strain_ratio_held(ratio: float, max_strain_ratio: float = 2.0) -> bool:
 def check_limits(max_rotation_deg: float, max_strain_ratio: float) -> None:
     """The checks' limits: ``max_rotation_deg`` > 0 (deg), ``max_strain_ratio`` > 1 (-);
     raises FemInputError naming the field and the value."""
-    if not (max_rotation_deg > 0 and math.isfinite(max_rotation_deg)):
+    if not (_real("max_rotation_deg", max_rotation_deg) > 0):
         raise FemInputError(f"max_rotation_deg={max_rotation_deg!r}: must be > 0 (deg)")
-    if not (max_strain_ratio > 1 and math.isfinite(max_strain_ratio)):
+    if not (_real("max_strain_ratio", max_strain_ratio) > 1):
         raise FemInputError(f"max_strain_ratio={max_strain_ratio!r}: must be > 1 (the element "
                             "and its region strain within that factor of each other)")
 

@@ -65,6 +65,7 @@ from typing import Any
 import numpy as np
 
 from femcoupling._checks import FemInputError
+from femcoupling.coupling._inputs import check_client, check_names, check_positive
 from femcoupling.coupling.handover import (HandoverError, WallTargets, fem_to_dem, secant_stiffness,
                                            secant_tangent)
 from femcoupling.coupling.relaxation import check_relaxation, next_factor
@@ -162,7 +163,8 @@ class HandoverHistory:
     def append_file(self, path: Any) -> None:
         """Append every row of another history file (same fields; its region indices are
         kept, so it must list the same ``regions``) and flush: the record of a part of a run
-        made in another process."""
+        made in another process. A file of other attributes (``regions``, ``metadata``,
+        units) is refused, naming them: it is the record of another run."""
         if self._f is None:
             return
         import h5py
@@ -171,6 +173,15 @@ class HandoverHistory:
             if list(src.attrs["regions"]) != self.regions:
                 raise FemInputError(f"path={str(path)!r}: its regions "
                                     f"{list(src.attrs['regions'])} are not {self.regions}")
+            differ = [k for k in sorted(set(src.attrs) | set(self._f.attrs))
+                      if not _same_attr(src.attrs.get(k), self._f.attrs.get(k))]
+            if differ:
+                raise FemInputError(
+                    f"path={str(path)!r}: the record of a run with other metadata ("
+                    + "; ".join(f"{k}: {_attr_text(src.attrs.get(k))} there, "
+                                f"{_attr_text(self._f.attrs.get(k))} here" for k in differ)
+                    + f"); only the parts of one run, written with the same metadata, are "
+                    f"merged into {str(self.path)!r}")
             n = src["iteration"].shape[0]
             for name in self.FIELDS:
                 d = self._f[name]
@@ -189,6 +200,25 @@ class HandoverHistory:
 
     def __exit__(self, *exc: Any) -> None:
         self.close()
+
+
+def _same_attr(a: Any, b: Any) -> bool:
+    """Two HDF5 attribute values (None: absent) are equal: the same shape and every element
+    equal (NaN equal to NaN)."""
+    if a is None or b is None:
+        return a is b
+    try:
+        return bool(np.array_equal(a, b, equal_nan=True))
+    except TypeError:  # (not numbers: strings)
+        return bool(np.array_equal(a, b))
+
+
+def _attr_text(v: Any) -> str:
+    """An HDF5 attribute value for a message (absent: "none")."""
+    if v is None:
+        return "none"
+    v = np.asarray(v)
+    return repr(v.item() if v.ndim == 0 else v.tolist())
 
 
 @dataclasses.dataclass
@@ -352,10 +382,11 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
 
     Args:
         model: :class:`femcoupling.fem.model.FemModel` after its initial stages.
-        regions: element region names coupled.
+        regions: element region names coupled: a non-empty list of distinct strings.
         load: ``load(model)`` applies the load stage from the initial state.
         element_runner: runs one DEM element (see module doc).
-        tol: relative change of the handed-over stresses that ends the loop, -, > 0.
+        tol: relative change of the handed-over stresses that ends the loop, -, finite
+            and > 0.
         max_iterations: FEM solves at most, >= 2.
         workers: Dask worker processes for the DEM elements (1: in this process; > 1 with
             several regions: a LocalCluster, each region's runner an element of
@@ -371,29 +402,53 @@ def two_way(model: Any, *, regions: Sequence[str], load: Callable[[Any], Any],
             elements' relative stress scatter (when they report it), > 0.
         max_rotation_deg, max_strain_ratio: the limits of :func:`check_region` (and of the
             status: :func:`femcoupling.coupling.status.judge_region`), deg and -, > 0 and > 1.
-        history_names: the names the regions have in ``history`` (default: ``regions``).
+        history_names: the names the regions have in ``history`` (default: ``regions``),
+            one per region, each listed in ``history.regions``.
+
+    Every argument is checked before the first FEM solve (FemInputError naming the field).
         stiffness: "tangent" (the element's tangent, made to reproduce its increment, where
             the element returns one; else the isotropic secant) or "isotropic" (always the
             isotropic secant of the normal increments).
     """
-    if not tol > 0:
-        raise FemInputError(f"tol={tol!r}: must be > 0")
-    if not (isinstance(max_iterations, int) and max_iterations >= 2):
+    # Every argument is checked here, before the first FEM solve.
+    regions = check_names("regions", regions, what="element regions")
+    check_positive("tol", tol, " (the relative change of the handed-over stresses that ends "
+                   "the loop)")
+    if isinstance(max_iterations, bool) or not (isinstance(max_iterations, int)
+                                                and max_iterations >= 2):
         raise FemInputError(f"max_iterations={max_iterations!r}: must be an integer >= 2")
-    if not (isinstance(workers, int) and workers >= 1):
+    if isinstance(workers, bool) or not (isinstance(workers, int) and workers >= 1):
         raise FemInputError(f"workers={workers!r}: must be an integer >= 1")
+    check_client(client)
+    if isinstance(relaxation, bool):
+        raise FemInputError(f"relaxation={relaxation!r}: 'aitken' (Aitken's dynamic factor "
+                            "on the corrections), 'none', or a fixed factor in (0, 1]")
     check_relaxation(relaxation)
     if stiffness not in STIFFNESS_MODES:
         raise FemInputError(f"stiffness={stiffness!r}: must be one of {STIFFNESS_MODES}")
-    if not (scatter_factor > 0 and math.isfinite(scatter_factor)):
-        raise FemInputError(f"scatter_factor={scatter_factor!r}: must be > 0")
+    check_positive("scatter_factor", scatter_factor, " (a change within this many times the "
+                   "elements' relative scatter ends the loop)")
     check_limits(max_rotation_deg, max_strain_ratio)
-    regions = list(regions)
-    names = list(history_names) if history_names is not None else regions
+    for name, f in (("load", load), ("element_runner", element_runner)):
+        if not callable(f):
+            raise FemInputError(f"{name}={f!r:.120}: must be callable")
+    if log is not None and not callable(log):
+        raise FemInputError(f"log={log!r:.120}: must be callable (a progress line sink), "
+                            "or None")
+    names = (check_names("history_names", history_names, what="regions' history names")
+             if history_names is not None else regions)
     if len(names) != len(regions):
         raise FemInputError(f"history_names={names!r}: one per region {regions!r}")
-    hrow = {r: (history.regions.index(n) if history is not None and n in history.regions
-                else j) for j, (r, n) in enumerate(zip(regions, names))}
+    if history is not None:
+        missing = [n for n in names if n not in history.regions]
+        if missing:
+            field = "history_names" if history_names is not None else "regions"
+            raise FemInputError(
+                f"{field}={names!r}: {missing} not among the history's regions "
+                f"{list(history.regions)} (HandoverHistory(regions=)); name each region as "
+                "the history lists it (history_names=), or list it there")
+    hrow = {r: (history.regions.index(n) if history is not None else j)
+            for j, (r, n) in enumerate(zip(regions, names))}
     comm = model.comm
     rank0 = comm.rank == 0
     say = (log if (log is not None and rank0) else (lambda msg: None))

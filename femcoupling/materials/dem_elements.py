@@ -37,11 +37,14 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import os
 import time
 from pathlib import Path
 
 import numpy as np
 
+from femcoupling._checks import FemInputError, _real
+from femcoupling.coupling._inputs import check_client, check_fraction, check_int, check_open
 from femcoupling.coupling.handover import HandoverError, fem_to_dem, spd_floor
 from femcoupling.coupling.records import append_rows
 from femcoupling.coupling.twoway import ElementResponse
@@ -75,7 +78,11 @@ def servo(el, target, *, tol: float, unbalanced: float, chunk_steps: int,
     (3 x 3, Pa, tension positive) in chunks of ``chunk_steps``, giving up once it has strained
     more than ``max_strain`` (largest component) on the way: the target is beyond its
     strength. Returns the stress reached (tension positive), whether the target was reached,
-    and the strain used."""
+    and the strain used. ``chunk_steps`` >= 1, ``max_strain`` in (0, 1), ``tol`` and
+    ``unbalanced`` in (0, 1) (FemInputError otherwise: a chunk of no steps, or a limit never
+    reached, would run forever)."""
+    _check_servo(tol=tol, unbalanced=unbalanced, chunk_steps=chunk_steps,
+                 max_strain=max_strain)
     e0 = el.strain()
     while True:
         try:
@@ -85,6 +92,17 @@ def servo(el, target, *, tol: float, unbalanced: float, chunk_steps: int,
             got = float(np.abs(el.strain() - e0).max())
             if got > max_strain:
                 return el.stress(), False, got
+
+
+def _check_servo(*, tol, unbalanced, chunk_steps, max_strain) -> None:
+    """The servo's settings (``servo``, ``PeriodicRegionElement``); FemInputError naming the
+    first one out of its range."""
+    check_open("tol", tol, 0.0, 1.0, " (the servo's relative tolerance on the stress)")
+    check_open("unbalanced", unbalanced, 0.0, 1.0, " (the unbalanced force ratio of the "
+               "servo's equilibrium)")
+    check_int("chunk_steps", chunk_steps, 1, " (DEM steps per servo chunk)")
+    check_open("max_strain", max_strain, 0.0, 1.0, " (the strain, largest component, past "
+               "which a target beyond the element's strength is given up)")
 
 
 #: The kind of PeriodicRegionElement.state() bytes (cpp_dem.elements.state_format).
@@ -99,7 +117,10 @@ class PeriodicRegionElement:
     elements are also kept on disk (None: in the runner's memory only); ``tangent``: return
     the element's tangent at the final state (``DemElement.network_tangent``, from its
     contact network), so that ``two_way`` gives the region a full stiffness instead of an
-    isotropic secant."""
+    isotropic secant. Refused (FemInputError naming the field): ``n`` not a whole number
+    >= 2, ``seed`` not one >= 0, ``prep_friction_deg`` outside [0, 90), ``tol``,
+    ``unbalanced`` or ``max_strain`` outside (0, 1), ``chunk_steps`` not a whole number
+    >= 1."""
 
     n: int = 400
     seed: int = 1
@@ -114,6 +135,38 @@ class PeriodicRegionElement:
     #: the prepared elements' bytes by (region, initial tensor): this runner's memory
     _kept: dict = dataclasses.field(default_factory=dict, init=False, repr=False,
                                     compare=False)
+    #: the settings (``_settings()`` as JSON text) the elements in ``_kept`` were prepared with
+    _kept_for: str | None = dataclasses.field(default=None, init=False, repr=False,
+                                              compare=False)
+
+    def __post_init__(self) -> None:
+        self._check()
+
+    def _check(self) -> None:
+        """FemInputError naming the first field out of its range (the class doc)."""
+        check_int("n", self.n, 2, " (grains; a periodic cell needs at least 2)")
+        check_int("seed", self.seed, 0, " (the packing's seed)")
+        if self.prep_friction_deg is not None:
+            f = _real("prep_friction_deg", self.prep_friction_deg)
+            if not 0.0 <= f < 90.0:
+                raise FemInputError(f"prep_friction_deg={f!r}: must be in [0, 90) deg (the "
+                                    "friction the grains grow at; 0: dense), or None")
+        _check_servo(tol=self.tol, unbalanced=self.unbalanced, chunk_steps=self.chunk_steps,
+                     max_strain=self.max_strain)
+        if self.cache_dir is not None and not isinstance(self.cache_dir, (str, os.PathLike)):
+            raise FemInputError(f"cache_dir={self.cache_dir!r}: must be a folder's path, or "
+                                "None (the runner's memory only)")
+        if self.options is not None and not isinstance(self.options, dict):
+            raise FemInputError(f"options={self.options!r:.120}: must be a dict of "
+                                "DemElement.periodic keywords, or None")
+
+    def _kept_now(self, settings: str) -> dict:
+        """``_kept``, emptied if its elements were prepared with settings other than
+        ``settings`` (fields changed since)."""
+        if self._kept and self._kept_for != settings:
+            self._kept = {}
+        self._kept_for = settings
+        return self._kept
 
     def prepare(self, name: str, initial) -> tuple:
         """The element of region ``name`` at the ``initial`` WallTargets' full tensor: kept in
@@ -122,6 +175,8 @@ class PeriodicRegionElement:
         initial tensor is not taken. Returns (element, whether it was kept)."""
         from cpp_dem.elements.periodic import DemElement
 
+        self._check()  # (fields may have been set since the runner was made)
+        self._kept_now(_settings_text(self._settings()))
         s0 = np.asarray(initial.fem_stress_pa, float)
         key = (name, s0.tobytes())
         if key in self._kept:
@@ -162,15 +217,20 @@ class PeriodicRegionElement:
     def state(self) -> bytes:
         """The elements this runner prepared (its memory: bytes by region and initial
         tensor), as bytes (``cpp_dem.elements.interface``: a runner's byte state) of
-        cpp_dem's element format (``cpp_dem.elements.state_format``: nothing pickled)."""
+        cpp_dem's element format (``cpp_dem.elements.state_format``: nothing pickled), with
+        the settings they were prepared with."""
         from cpp_dem.elements import state_format
 
-        keys = [[name, s0.hex()] for name, s0 in self._kept]
-        return state_format.pack(_KEPT_KIND, {"keys": keys},
-                                 {str(k): v for k, v in enumerate(self._kept.values())})
+        settings = self._settings()
+        kept = self._kept_now(_settings_text(settings))
+        keys = [[name, s0.hex()] for name, s0 in kept]
+        return state_format.pack(_KEPT_KIND, {"keys": keys, "settings": settings},
+                                 {str(k): v for k, v in enumerate(kept.values())})
 
     def set_state(self, data: bytes) -> None:
-        """The prepared elements of ``state()`` back in this runner's memory."""
+        """The prepared elements of ``state()`` back in this runner's memory. The state of a
+        runner of other settings (grains, seed, preparation, servo, options: its elements
+        are not this runner's) is refused (FemInputError naming what differs)."""
         from cpp_dem.elements import state_format
 
         if not isinstance(data, (bytes, bytearray)):
@@ -184,12 +244,29 @@ class PeriodicRegionElement:
         except (TypeError, ValueError, KeyError):
             raise ValueError("data: not a PeriodicRegionElement.state() (its keys and "
                              "parts do not match)") from None
+        mine = self._settings()
+        theirs = fields.get("settings")
+        if not isinstance(theirs, dict):
+            raise FemInputError("data: a PeriodicRegionElement.state() without the settings "
+                                "its elements were prepared with (written by an older "
+                                "version); leave it out: the runner prepares its elements "
+                                "again")
+        if _settings_text(theirs) != _settings_text(mine):
+            differ = sorted(k for k in set(theirs) | set(mine)
+                            if _settings_text(theirs.get(k)) != _settings_text(mine.get(k)))
+            raise FemInputError(
+                "data: the state of a PeriodicRegionElement of other settings ("
+                + "; ".join(f"{k}: {theirs.get(k)!r:.80} there, {mine.get(k)!r:.80} here"
+                            for k in differ)
+                + "): its elements are not this runner's; give it to a runner of the same "
+                "settings, or leave it out: the runner prepares its elements again")
         self._kept = kept
+        self._kept_for = _settings_text(mine)
 
     def _settings(self) -> dict:
         """What makes the prepared element (grains, seed, preparation, servo, options), as
         plain JSON values: a kept element prepared otherwise is not taken."""
-        skip = {"cache_dir", "tangent", "_kept"}
+        skip = {"cache_dir", "tangent", "_kept", "_kept_for"}
         return {f.name: _plain(getattr(self, f.name)) for f in dataclasses.fields(self)
                 if f.name not in skip}
 
@@ -223,6 +300,12 @@ class PeriodicRegionElement:
                   "reached": message is None, **({"message": message} if message else {})})
 
 
+def _settings_text(settings) -> str:
+    """``PeriodicRegionElement._settings()`` (or one of its values) as canonical JSON text:
+    equal text, equal settings."""
+    return json.dumps(settings, sort_keys=True)
+
+
 def _porosity(el) -> float:
     """The porosity of a periodic element's cell, -."""
     from cpp_dem import measure
@@ -254,6 +337,25 @@ def trial_stiffness(label: str, voigt, min_eig_fraction: float, increment,
             f"increment {np.round(np.asarray(increment), 7).tolist()}): {exc}") from exc
 
 
+def _new_records(records, overwrite: bool, remove: bool = True) -> Path | None:
+    """``records`` as a Path (None: no records), refused (FemInputError) if the file exists
+    (an earlier run's rows) unless ``overwrite``, then removed (if ``remove``)."""
+    if not isinstance(overwrite, bool):
+        raise FemInputError(f"overwrite={overwrite!r}: must be True or False")
+    if records is None:
+        return None
+    if not isinstance(records, (str, os.PathLike)):
+        raise FemInputError(f"records={records!r:.120}: must be an HDF5 file's path, or None")
+    path = Path(records)
+    if path.exists():
+        if not overwrite:
+            raise FemInputError(f"records={str(path)!r}: holds the records of an earlier run; "
+                                "give a new file, or overwrite=True to replace them")
+        if remove:
+            path.unlink()
+    return path
+
+
 class DemRegionMaterial:
     """A periodic DEM element as the material of a ``FemModel`` element region (the soil body): the
     hierarchical mode on the reinforced-soil body, one element for the region's tagged group
@@ -271,10 +373,12 @@ class DemRegionMaterial:
     ``element``: a periodic ``cpp_dem.elements.periodic.DemElement`` in the region's initial state
     (``prepared`` makes one); ``strain_kw``: keywords for ``DemElement.apply_strain``;
     ``min_eig_fraction``: the tangent is made symmetric and positive definite, eigenvalues
-    floored at this fraction of the largest (a network near its strength has soft or negative
-    directions); ``records``: an HDF5 file that gets a row at every committed step (appended
-    and flushed): step, strain since the element took over (3 x 3), stress (3 x 3, Pa),
-    tangent (6 x 6 Mandel, Pa), contact count, element runs and DEM seconds so far.
+    floored at this fraction of the largest, in (0, 1) (a network near its strength has soft
+    or negative directions); ``records``: an HDF5 file that gets a row at every committed
+    step (appended and flushed): step, strain since the element took over (3 x 3), stress
+    (3 x 3, Pa), tangent (6 x 6 Mandel, Pa), contact count, element runs and DEM seconds so
+    far. A ``records`` file that exists (an earlier run's rows) is refused unless
+    ``overwrite`` (then it is removed): appending would mix two runs' rows.
 
     A ``femcoupling.fem.quadrature.QuadratureMaterial`` of ``strain_measure`` "tensor":
     ``trial`` returns the element's total stress; ``stress_n`` is its stress at the start of
@@ -285,13 +389,14 @@ class DemRegionMaterial:
     plastic = np.zeros(1)
 
     def __init__(self, element, *, strain_kw: dict | None = None,
-                 min_eig_fraction: float = 1e-3, records=None) -> None:
+                 min_eig_fraction: float = 1e-3, records=None,
+                 overwrite: bool = False) -> None:
         if getattr(element, "kind", None) != "periodic":
             raise ValueError(f"element={element!r}: must be a periodic DemElement (it takes "
                              "the full strain tensor)")
         self.strain_kw = dict(strain_kw or {})
-        self.min_eig_fraction = float(min_eig_fraction)
-        self.records = None if records is None else Path(records)
+        self.min_eig_fraction = float(check_fraction(min_eig_fraction))
+        self.records = _new_records(records, overwrite)
         self.steps = 0            #: committed steps
         self.calls = 0            #: element evaluations (DEM runs)
         self.dem_s = 0.0          #: wall seconds in them
@@ -398,20 +503,23 @@ class PoolRegionMaterials:
     ``records``: an HDF5 file that gets a row per element at every committed step (appended
     and flushed): step, element (its index in ``names``, which the file's ``names``
     attribute lists), strain since the element took over (3 x 3, -), stress (3 x 3, Pa),
-    tangent (6 x 6 Mandel, Pa), contact count, and the DEM seconds of its last run.
+    tangent (6 x 6 Mandel, Pa), contact count, and the DEM seconds of its last run; a file
+    that exists is refused unless ``overwrite`` (as ``DemRegionMaterial``'s).
+    ``min_eig_fraction``: in (0, 1), as ``DemRegionMaterial``'s.
     """
 
     def __init__(self, pool, names, *, min_eig_fraction: float = 1e-3,
                  strain_kw: dict | None = None, records=None,
-                 fd_components=tuple(range(6)), band_tangent: str = "network") -> None:
+                 fd_components=tuple(range(6)), band_tangent: str = "network",
+                 overwrite: bool = False) -> None:
         from cpp_dem.elements.periodic import DemElement
 
         self.pool, self.names = pool, list(names)
         if pool.n != len(self.names):
             raise ValueError(f"names={self.names!r}: one per pool element ({pool.n})")
-        self.min_eig_fraction = float(min_eig_fraction)
+        self.min_eig_fraction = float(check_fraction(min_eig_fraction))
         self.strain_kw = dict(strain_kw or {})
-        self.records = None if records is None else Path(records)
+        self.records = _new_records(records, overwrite)
         self.calls, self.dem_s, self.steps = 0, 0.0, 0
         if band_tangent not in BAND_TANGENTS:
             raise ValueError(f"band_tangent={band_tangent!r}: "
@@ -472,6 +580,10 @@ class PoolRegionMaterials:
         after the soil's; band element j packed with seed ``band[0].seed + j``."""
         from cpp_dem.elements.pool import ElementPool
 
+        check_client(client)
+        # (the pool's own checks, before a cluster starts and the elements are prepared)
+        check_fraction(kw.get("min_eig_fraction", 1e-3))
+        _new_records(kw.get("records"), kw.get("overwrite", False), remove=False)
         names = list(stresses)
         make = _Prepare(runner, names, [np.asarray(stresses[n], float) for n in names],
                         distinct_seeds)
