@@ -4,7 +4,10 @@
 from __future__ import annotations
 
 import math
+import numbers
 from typing import Any
+
+import numpy as np
 
 
 class FemInputError(ValueError, TypeError):
@@ -60,3 +63,76 @@ def _check_cells(what: str, n: float, max_cells: Any, dim: int) -> None:
             f"cell for a P2 Drucker-Prager model), above max_cells={cap}"
             f"{' (the default for dim=%d)' % dim if max_cells is None else ''}; coarsen the "
             "mesh, or raise max_cells if the machine has the memory")
+
+
+def _whole(name: str, value: Any, lo: int, hi: int | None = None, what: str = "") -> Any:
+    """``value`` unchanged if it is a whole number (an int or a NumPy integer; not a bool) in
+    [``lo``, ``hi``] (``hi`` None: no upper bound), or FemInputError naming the field, its
+    value and the range (``what``, if given, says what the field counts)."""
+    ok = isinstance(value, numbers.Integral) and not isinstance(value, (bool, np.bool_))
+    if not ok or value < lo or (hi is not None and value > hi):
+        allowed = f">= {lo}" if hi is None else f"in [{lo}, {hi}]"
+        raise FemInputError(f"{name}={value!r}: must be a whole number {allowed}"
+                            + (f" ({what})" if what else ""))
+    return value
+
+
+def _choice(name: str, value: Any, choices: tuple, text: str) -> Any:
+    """``value`` unchanged if it is a whole number (not a bool, nor a float of whole value)
+    among ``choices``, or FemInputError "<name>=<value>: must be <text>"."""
+    if isinstance(value, (bool, np.bool_)) or not isinstance(value, numbers.Integral):
+        raise FemInputError(f"{name}={value!r}: must be {text} (a whole number, not a "
+                            f"{type(value).__name__})")
+    if value not in choices:
+        raise FemInputError(f"{name}={value!r}: must be {text}")
+    return value
+
+
+def _flag(name: str, value: Any) -> Any:
+    """``value`` unchanged if it is a bool (or a NumPy bool), or FemInputError naming the
+    field."""
+    if not isinstance(value, (bool, np.bool_)):
+        raise FemInputError(f"{name}={value!r}: must be True or False")
+    return value
+
+
+#: The largest ``newton_rtol`` of a ``FemModel``: a relative residual of 1 % of the force scale
+#: (the loosest tolerance the package uses is 5e-3; at 0.5 a step was accepted unsolved, after
+#: 0 iterations).
+NEWTON_RTOL_MAX = 1e-2
+#: The most step halvings of a load step (``max_cuts``): 2**20 cuts a step to about 1e-6 of its
+#: nominal size, and a load Newton carries only in steps that small takes up to a million of
+#: them (a Drucker-Prager footing pushed past its capacity crept on at 2**-21 of its step,
+#: thousands of steps a minute, with max_cuts=30); at about 52 cuts a step no longer moves the
+#: load factor (a double) at all. The package's own defaults are 4 and 6.
+MAX_CUTS_MAX = 20
+
+
+def _newton_rtol(value: Any) -> float:
+    """``newton_rtol`` as a float in (0, NEWTON_RTOL_MAX], or FemInputError."""
+    v = _real("newton_rtol", value)
+    if not 0.0 < v <= NEWTON_RTOL_MAX:
+        raise FemInputError(f"newton_rtol={value!r}: must be in (0, {NEWTON_RTOL_MAX:g}] "
+                            "(Newton's tolerance, relative to the force scale)")
+    return v
+
+
+def _max_cuts(value: Any) -> int:
+    """``max_cuts`` unchanged if a whole number in [0, MAX_CUTS_MAX], or FemInputError."""
+    return _whole("max_cuts", value, 0, MAX_CUTS_MAX,
+                  f"halvings of a load step before NewtonFailure; {MAX_CUTS_MAX} cuts a step "
+                  f"to 1/2**{MAX_CUTS_MAX} of its size")
+
+
+def _max_newton(value: Any) -> int:
+    """``max_newton`` unchanged if a whole number >= 1, or FemInputError."""
+    return _whole("max_newton", value, 1, None, "Newton iterations before a step is cut")
+
+
+def _confining(name: str, value: Any) -> Any:
+    """A confining pressure (Pa, compression positive) unchanged if None or a finite real
+    >= 0, or FemInputError."""
+    if value is not None and _real(name, value) < 0.0:
+        raise FemInputError(f"{name}={value!r}: must be >= 0 (Pa, compression positive), or "
+                            "None")
+    return value

@@ -50,7 +50,8 @@ import math
 import numpy as np
 
 from femcoupling import _dolfinx
-from femcoupling._checks import FemInputError
+from femcoupling._checks import (FemInputError, _choice, _confining, _flag, _pos, _real,
+                                 _whole)
 from femcoupling.fem.gmsh_mesh import gmsh_mesh_on_root
 
 __all__ = ["Box", "Cylinder", "Rectangle", "SECTIONS", "cylinder_cells", "quadrature_points"]
@@ -106,8 +107,7 @@ def _finite_positive(**values) -> None:
 
 def _cells_count(**values) -> None:
     for name, v in values.items():
-        if not (isinstance(v, int) and v >= 1):
-            raise FemInputError(f"{name}={v!r}: must be an integer >= 1")
+        _whole(name, v, 1, None, "cells along the side")
 
 
 class _Body:
@@ -137,18 +137,23 @@ class Rectangle(_Body):
                                 "'rough' (bottom held, top without sliding, confining "
                                 "pressure on both sides) or 'footing' (a smooth strip footing "
                                 "of half width footing_b, the surcharge confining_pa beside it)")
+        _flag("homogeneous", homogeneous)
+        _confining("confining_pa", confining_pa)
         if platens in ("rough", "footing") and (homogeneous or confining_pa is None):
             raise FemInputError(f"platens={platens!r}: needs confining_pa (Pa; 'rough': on "
                                 "both sides, 'footing': the surcharge), and not "
                                 "homogeneous=True")
+        if homogeneous and confining_pa is not None:
+            raise FemInputError(f"confining_pa={confining_pa!r}: not with homogeneous=True "
+                                "(every boundary node follows the homogeneous field of "
+                                "top_displacement and right_displacement: no side is loaded); "
+                                "give one or the other")
+        _choice("degree", degree, (1, 2), "1 (P1 triangles, one point each) or 2 (P2 "
+                "triangles, three points each: no volumetric locking)")
+        _pos("lx", lx)
+        _pos("ly", ly)
+        _cells_count(nx=nx, ny=ny)
         self._check_footing(platens, footing_b, lx, nx)
-        if degree not in (1, 2):
-            raise FemInputError(f"degree={degree!r}: 1 (P1 triangles, one point each) or 2 (P2 "
-                                "triangles, three points each: no volumetric locking)")
-        if not (lx > 0 and ly > 0 and math.isfinite(lx) and math.isfinite(ly)):
-            raise FemInputError(f"lx={lx}, ly={ly}: must be > 0 (m)")
-        if nx < 1 or ny < 1:
-            raise FemInputError(f"nx={nx}, ny={ny}: must be >= 1")
         self.lx, self.ly, self.nx, self.ny = float(lx), float(ly), nx, ny
         self.degree, self.platens, self.footing_b = degree, platens, footing_b
         self.confining_pa, self.homogeneous = confining_pa, homogeneous
@@ -264,10 +269,23 @@ class Rectangle(_Body):
         return (0.0, 0.0)
 
     def target(self, *, top_displacement: float, right_displacement: float = 0.0):
-        """A step's boundary displacements (m, total since the start): (top, right)."""
+        """A step's boundary displacements (m, total since the start, finite): (top, right).
+        ``right_displacement`` moves the right side only with smooth platens and
+        ``confining_pa=None`` (or ``homogeneous=True``); elsewhere it is 0 only."""
+        _real("top_displacement", top_displacement)
+        _real("right_displacement", right_displacement)
         if self.platens == "footing" and right_displacement != 0.0:
             raise FemInputError(f"right_displacement={right_displacement!r}: the footing's "
                                 "right side is on rollers (0 only)")
+        if right_displacement != 0.0 and self.platens == "rough":
+            raise FemInputError(f"right_displacement={right_displacement!r}: with "
+                                "platens='rough' both sides carry confining_pa="
+                                f"{self.confining_pa!r} Pa (0 only)")
+        if (right_displacement != 0.0 and self.platens == "smooth" and not self.homogeneous
+                and self.confining_pa is not None):
+            raise FemInputError(f"right_displacement={right_displacement!r}: the right side "
+                                f"carries confining_pa={self.confining_pa!r} Pa (0 only; "
+                                "confining_pa=None moves it instead)")
         return (top_displacement, right_displacement)
 
     def apply(self, m, point) -> float:
@@ -321,9 +339,15 @@ class Box(_Body):
         self._options(homogeneous, confining_pa)
 
     def _options(self, homogeneous: bool, confining_pa) -> None:
+        _flag("homogeneous", homogeneous)
+        _confining("confining_pa", confining_pa)
         if not homogeneous and confining_pa is None:
             raise FemInputError("confining_pa=None: a triaxial test needs the confining "
                                 "pressure (Pa, compression positive), or homogeneous=True")
+        if homogeneous and confining_pa is not None:
+            raise FemInputError(f"confining_pa={confining_pa!r}: not with homogeneous=True "
+                                "(every boundary node follows u = G x: no face is loaded); "
+                                "give one or the other")
         self.homogeneous, self.confining_pa = homogeneous, confining_pa
 
     # ---- the geometry (the hooks a body of another shape replaces) -------------------------
@@ -412,7 +436,7 @@ class Box(_Body):
             return g
         if top_displacement is None or gradient is not None:
             raise FemInputError("step: the triaxial test takes top_displacement= only")
-        return float(top_displacement)
+        return _real("top_displacement", top_displacement)
 
     def apply(self, m, point) -> float:
         """The boundary at ``point`` (G, or the top's displacement); returns the step's load:

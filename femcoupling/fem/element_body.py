@@ -11,7 +11,7 @@ import numpy as np
 from cpp_dem import fixedorder
 
 from femcoupling import _dolfinx
-from femcoupling._checks import FemInputError
+from femcoupling._checks import FemInputError, _max_newton, _newton_rtol
 from femcoupling.coupling.records import ElementRecords
 from femcoupling.coupling.relaxation import check_relaxation
 from femcoupling.fem.bodies import point_coordinates
@@ -143,9 +143,8 @@ class ElementPart:
         if not (noise_factor > 0 and math.isfinite(noise_factor)):
             raise FemInputError(f"noise_factor={noise_factor}: must be > 0 (a stalled step is "
                                 "accepted within this many times the noise's residual)")
-        if not (newton_rtol > 0 and math.isfinite(newton_rtol)):
-            raise FemInputError(f"newton_rtol={newton_rtol!r}: must be > 0 (relative to the "
-                                "internal force scale)")
+        _newton_rtol(newton_rtol)
+        _max_newton(max_newton)
         ceiling = 10.0 * newton_rtol if noise_ceiling is None else noise_ceiling
         if not (math.isfinite(ceiling) and ceiling >= newton_rtol):
             raise FemInputError(f"noise_ceiling={noise_ceiling!r}: must be >= newton_rtol="
@@ -346,11 +345,12 @@ class ElementPart:
         body takes: ``Rectangle``: ``top_displacement=`` and ``right_displacement=``, m;
         ``Box``, ``Cylinder``: ``top_displacement=``, m, or, homogeneous, ``gradient=``, a
         3 x 3 displacement gradient). If Newton fails, the step is rolled back (the elements
-        to their accepted state, u to u_n) and halved, at most ``max_cuts`` times below the
-        whole step (``femcoupling.fem.steps.load_path``, the loop of every model: an easy
-        half-step grows the next back); the last accepted step's record is returned (all of
-        them are in ``history``). Past ``max_cuts``, the model is left at its last accepted
-        step and :class:`~femcoupling.fem.steps.NewtonFailure` says where the load stopped."""
+        to their accepted state, u to u_n) and halved, at most ``max_cuts`` (a whole number
+        in [0, 20]) times below the whole step (``femcoupling.fem.steps.load_path``, the loop
+        of every model: an easy half-step grows the next back); the last accepted step's
+        record is returned (all of them are in ``history``). Past ``max_cuts``, the model is
+        left at its last accepted step and :class:`~femcoupling.fem.steps.NewtonFailure` says
+        where the load stopped."""
         target = self.body.target(**boundary)
         a, b = np.asarray(self._bc_now, float), np.asarray(target, float)
 

@@ -39,7 +39,8 @@ from typing import Any
 import numpy as np
 
 from femcoupling import _dolfinx
-from femcoupling._checks import _CELLS_PER_SIZE, FemInputError, _check_cells, _pos, _real
+from femcoupling._checks import (_CELLS_PER_SIZE, FemInputError, _check_cells, _choice, _pos,
+                                 _real)
 from femcoupling.fem.gmsh_mesh import gmsh_mesh_on_root
 
 __all__ = [
@@ -162,8 +163,7 @@ class ReinforcedSoilBody:
         if b > w:
             raise FemInputError(f"footing_half_width_m={b!r}: must be <= width_m={w!r} "
                                 "(= width_m: a uniform surcharge on the whole top)")
-        if self.dim not in (2, 3):
-            raise FemInputError(f"dim={self.dim!r}: must be 2 or 3")
+        _choice("dim", self.dim, (2, 3), "2 or 3")
         _pos("length_m", self.length_m)
         if self.footing_length_m is not None:
             if self.dim != 3:

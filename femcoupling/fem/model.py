@@ -60,7 +60,7 @@ from __future__ import annotations
 
 import inspect
 
-from femcoupling._checks import FemInputError
+from femcoupling._checks import FemInputError, _max_newton, _newton_rtol
 from femcoupling.fem import geometry as geo
 from femcoupling.fem.element_body import ElementPart
 from femcoupling.fem.soil_body import SoilPart
@@ -88,6 +88,14 @@ def split_options(body_type, options: dict) -> tuple[dict, dict]:
             {k: v for k, v in options.items() if k not in names})
 
 
+def _check_comm(comm) -> None:
+    """``comm``: None or an mpi4py communicator (anything with its ``rank`` and ``size``),
+    else FemInputError."""
+    if comm is not None and not all(hasattr(comm, a) for a in ("rank", "size")):
+        raise FemInputError(f"comm={comm!r}: an mpi4py communicator (e.g. MPI.COMM_WORLD), "
+                            "or None")
+
+
 class FemModel(SoilPart, RegionMaterials, LoadingStages, SoilMeasures, ElementPart, FemSolver):
     """A body with materials at its quadrature points, solved in dolfinx; see the module doc.
     Collective on ``comm``.
@@ -97,8 +105,9 @@ class FemModel(SoilPart, RegionMaterials, LoadingStages, SoilMeasures, ElementPa
             :mod:`femcoupling.fem.bodies` (``Rectangle``, ``Box``, ``Cylinder``).
         newton_rtol: Newton's tolerance (the soil body: |R| <= newton_rtol |F_int| over the
             free dofs, default 1e-8; the bodies with elements: relative to the internal force
-            scale, default 1e-3), -.
-        max_newton: iterations before a step is cut (default 25; with elements 10).
+            scale, default 1e-3), -, in (0, 1e-2].
+        max_newton: iterations before a step is cut, a whole number >= 1 (default 25; with
+            elements 10).
         comm: mpi4py communicator (the soil body: default COMM_WORLD; with elements: None,
             serial).
 
@@ -109,7 +118,8 @@ class FemModel(SoilPart, RegionMaterials, LoadingStages, SoilMeasures, ElementPa
         region_materials: optional material per element-region name (default: ``soil``).
         unit_weight_n_m3: soil unit weight gamma, N/m^3, >= 0 (0: weightless).
         degree: displacement degree (1 or 2; default 2).
-        max_cuts: step halvings before ``NewtonFailure`` (default 6).
+        max_cuts: step halvings before ``NewtonFailure``, a whole number in [0, 20]
+            (default 6).
 
     A body of :mod:`femcoupling.fem.bodies`'s:
         elements: an ``ElementPool`` with one element per quadrature point (under MPI on
@@ -137,6 +147,11 @@ class FemModel(SoilPart, RegionMaterials, LoadingStages, SoilMeasures, ElementPa
                  max_newton: int | None = None, comm=None, **options) -> None:
         given = {k: v for k, v in (("newton_rtol", newton_rtol), ("max_newton", max_newton))
                  if v is not None}
+        if newton_rtol is not None:
+            _newton_rtol(newton_rtol)
+        if max_newton is not None:
+            _max_newton(max_newton)
+        _check_comm(comm)
         if isinstance(body, geo.ReinforcedSoilBody):
             self._kind = "soil"
             self.body = body

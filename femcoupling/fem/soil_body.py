@@ -45,7 +45,8 @@ import numpy as np
 from cpp_dem.fixedorder import dot, eigvalsh3_batch, sum_squares
 
 from femcoupling import _dolfinx
-from femcoupling._checks import FemInputError
+from femcoupling._checks import (FemInputError, _choice, _max_cuts, _max_newton,
+                                 _newton_rtol)
 from femcoupling.fem import geometry as geo
 from femcoupling.fem.quadrature import (NewtonRules, QuadratureSystem, check_material, lu_package,
                                         newton_solve)
@@ -90,9 +91,10 @@ class SoilPart:
         gamma = geo._real("unit_weight_n_m3", unit_weight_n_m3)
         if gamma < 0:
             raise FemInputError(f"unit_weight_n_m3={gamma!r}: must be >= 0")
-        if degree not in (1, 2):
-            raise FemInputError(f"degree={degree!r}: must be 1 or 2")
-        geo._pos("newton_rtol", newton_rtol)
+        _choice("degree", degree, (1, 2), "1 or 2")
+        _newton_rtol(newton_rtol)
+        _max_newton(max_newton)
+        _max_cuts(max_cuts)
 
         fx = self._fx = _dolfinx.load()
         fem, ufl = fx.fem, fx.ufl
@@ -397,6 +399,9 @@ class SoilPart:
         ``max_cuts`` halvings below it, then :class:`NewtonFailure`)."""
         if not isinstance(steps, int) or steps < 1:
             raise FemInputError(f"steps={steps!r}: must be an integer >= 1")
+        if callback is not None and not callable(callback):
+            raise FemInputError(f"callback={callback!r}: must be callable (called with each "
+                                "accepted step's LoadStep), or None")
 
         def take(lf: float) -> LoadStep:
             apply(lf)

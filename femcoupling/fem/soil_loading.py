@@ -6,6 +6,7 @@ steps through ``FemModel._run_stage``."""
 from __future__ import annotations
 
 import dataclasses
+import math
 from typing import Any
 
 import numpy as np
@@ -14,7 +15,9 @@ from femcoupling._checks import FemInputError
 from femcoupling.fem import geometry as geo
 from femcoupling.fem.solver import SOIL_ONLY, body_kind
 from femcoupling.fem.steps import LoadStep, NewtonFailure
-from femcoupling.materials.continuum import DruckerPrager
+from femcoupling.materials.continuum import DruckerPrager, mandel_identity
+
+SQRT2 = math.sqrt(2.0)
 
 
 @body_kind("soil", SOIL_ONLY)
@@ -26,8 +29,15 @@ class LoadingStages:
 
         ``k0`` (-, > 0) defaults to the soil's: 1 - sin(phi) for Drucker–Prager, nu / (1 - nu)
         for an elastic soil. The state is in equilibrium with the body force; a check solve is
-        run (it must converge in 0 or 1 iterations).
+        run (it converges in 0 or 1 iterations where the state lies inside every point's
+        yield surface). A ``k0`` given is refused (FemInputError, before any state is set)
+        where the K0 state lies outside the yield surface of a point's Drucker–Prager
+        material: the message gives the points and the range of k0 the soil holds at the
+        body's base. (The default of a cohesionless Drucker–Prager soil with phi above about
+        36 deg, Jaky's 1 - sin(phi), lies outside the plane-strain cone near the base: the
+        check solve returns those points onto it, ``LoadStep.plastic_points``.)
         """
+        given = k0 is not None
         k0 = self.soil.k0() if k0 is None else geo._pos("k0", k0)
         fx = self._fx
         x = fx.fem.Expression(fx.ufl.SpatialCoordinate(self.mesh), self.qpoints)
@@ -36,9 +46,48 @@ class LoadingStages:
         sig = np.zeros((len(sv), self.ncomp))
         sig[:, :3] = k0 * sv[:, None]
         sig[:, self.zc] = sv
+        if given:
+            self._check_k0(k0, sig)
         self.sig_n = sig
         self._ext_scale = self.unit_weight_n_m3 * self.body.height_m * self.footing_area
         self._run_stage("geostatic", lambda lf: None, 1)
+
+    def _check_k0(self, k0: float, sig: np.ndarray) -> None:
+        """Refuses a given ``k0`` whose K0 state ``sig`` ((cell, q), Mandel, Pa) lies outside
+        the Drucker–Prager yield surface (f = 3 alpha p + sqrt(J2) - k > 0, as
+        ``drucker_prager_return`` judges it) at any point of a continuum material (the
+        points of DEM region elements are not judged). Collective."""
+        own = self.n_owned * self.nq
+        al, kk = np.zeros(own), np.full(own, np.inf)
+        tags = np.repeat(self.cell_tag_of, self.nq)[:own]
+        for tag in np.unique(tags):
+            a, _, k = self.material_of_tag(int(tag)).dp_parameters()
+            al[tags == tag], kk[tags == tag] = a, k
+        s = sig[:own]
+        p = s[:, :3].sum(1) / 3.0
+        sqrt_j2 = np.linalg.norm(s - p[:, None] * mandel_identity(self.ncomp), axis=1) / SQRT2
+        with np.errstate(invalid="ignore"):
+            f = 3.0 * al * p + sqrt_j2 - kk
+        out = np.isfinite(kk) & (f > 0.0) & ~self._region_points()[:own]
+        MPI = self._fx.MPI
+        n_out, n_all = (int(self.comm.allreduce(int(v), op=MPI.SUM))
+                        for v in (np.count_nonzero(out), own))
+        if n_out == 0:
+            return
+        held = ""
+        depth_pa = self.unit_weight_n_m3 * self.body.height_m
+        if isinstance(self.soil, DruckerPrager) and depth_pa > 0:
+            a, _, k = self.soil.dp_parameters()
+            r3, c = 1.0 / math.sqrt(3.0), k / depth_pa
+            lo, hi = max(0.0, (r3 - a - c) / (r3 + 2.0 * a)), (r3 + a + c) / (r3 - 2.0 * a)
+            held = (f"; the soil (friction_deg={self.soil.friction_deg!r}, cohesion_pa="
+                    f"{self.soil.cohesion_pa!r}) holds k0 in [{lo:.4g}, {hi:.4g}] at the "
+                    f"body's base (vertical stress {depth_pa:.4g} Pa; the active and passive "
+                    "limits of its plane-strain Drucker–Prager cone)")
+        raise FemInputError(
+            f"k0={k0!r}: the K0 state lies outside the yield surface at {n_out} of {n_all} "
+            "quadrature points: it is not a state the material can hold (the check solve "
+            "would yield them away from it)" + held)
 
     def apply_prestress(self, *, steps: int = 1) -> list[LoadStep]:
         """Add each layer's prestress T_p / t (tension along x) and equilibrate (PRS, 002)."""
@@ -129,6 +178,9 @@ class LoadingStages:
         elements that first settlement raises the pressure by less than the elements' own
         scatter, so its slope can be anything, and the step it sizes can tear the elements
         apart; give the slope of a previous stage or of the continuum model then."""
+        if callback is not None and not callable(callback):
+            raise FemInputError(f"callback={callback!r}: must be callable (called with each "
+                                "accepted step's LoadStep), or None")
         target = geo._real("pressure_pa", pressure_pa)
         if not target > 0:
             raise FemInputError(f"pressure_pa={pressure_pa!r}: must be > 0 (Pa, compression "

@@ -5,14 +5,13 @@ rank), layer forces, and the XDMF output. A part of ``FemModel`` for the soil bo
 from __future__ import annotations
 
 import itertools
-import math
 from collections.abc import Sequence
 from typing import Any
 
 import numpy as np
 import numpy.typing as npt
 
-from femcoupling._checks import FemInputError
+from femcoupling._checks import FemInputError, _real, _whole
 from femcoupling.fem import geometry as geo
 from femcoupling.fem.quadrature import lu_options
 from femcoupling.fem.solver import SOIL_ONLY, body_kind
@@ -87,7 +86,24 @@ class SoilMeasures:
     def layer_force_n_per_m(self, i: int, *, x_range_m: tuple[float, float] | None = None
                             ) -> float:
         """Mean axial force per metre width in geogrid layer ``i`` (sigma_xx t), N/m, tension
-        positive; over the cells whose centre lies in ``x_range_m`` if given."""
+        positive; over the cells whose centre lies in ``x_range_m`` (m, (low, high), low <
+        high) if given. A layer the body does not have, or a range with none of the layer's
+        cells, raises FemInputError."""
+        n = len(self.body.layers)
+        if n == 0:
+            raise FemInputError(f"i={i!r}: the body has no geogrid layers")
+        _whole("i", i, 0, n - 1, f"the index of one of the body's {n} geogrid layers")
+        if x_range_m is not None:
+            try:
+                lo_hi = () if isinstance(x_range_m, str) else tuple(x_range_m)
+            except TypeError:
+                lo_hi = ()
+            if len(lo_hi) != 2:
+                raise FemInputError(f"x_range_m={x_range_m!r}: must be (low, high), m")
+            lo, hi = _real("x_range_m[0]", lo_hi[0]), _real("x_range_m[1]", lo_hi[1])
+            if not lo < hi:
+                raise FemInputError(f"x_range_m={x_range_m!r}: must be (low, high) with "
+                                    "low < high, m")
         tag = geo.LAYER_TAG0 + i
         sel = self.cell_tag_of[: self.n_owned] == tag
         if x_range_m is not None:
@@ -97,7 +113,13 @@ class SoilMeasures:
         vol = self.cell_volume[: self.n_owned][sel]
         MPI = self._fx.MPI
         s = self.comm.allreduce(np.array([(cm * vol).sum(), vol.sum()]), op=MPI.SUM)
-        return float(s[0] / s[1] * self.body.layers[i].thickness_m) if s[1] > 0 else math.nan
+        if not s[1] > 0:
+            lay = self.body.layers[i]
+            raise FemInputError(f"x_range_m={x_range_m!r}: no cell of geogrid layer {i} (x "
+                                f"from {lay.x_min_m:g} to {lay.x_max_m:g} m) has its centre "
+                                "in it" if x_range_m is not None else
+                                f"i={i!r}: geogrid layer {i} has no cells")
+        return float(s[0] / s[1] * self.body.layers[i].thickness_m)
 
     def region_layer_force(self, name: str) -> float | None:
         """The geogrid tension across the element region ``name``, N/m, tension positive: the

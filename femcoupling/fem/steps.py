@@ -23,6 +23,8 @@ from typing import Any, Callable
 
 import numpy as np
 
+from femcoupling._checks import _max_cuts, _max_newton, _whole
+
 
 class NewtonFailure(RuntimeError):
     """A load step could not be accepted: Newton did not converge (a model then cuts the
@@ -46,20 +48,35 @@ def load_path(take: Callable[[float], "LoadStep"], rollback: Callable[[], None],
     raises :class:`NewtonFailure` naming ``where``, the load factors and the last failure.
     ``accepted(record)``, if given, is called on each accepted step after it is counted (what
     it raises, NewtonFailure included, ends the load as it is). Load factors are dyadic sums
-    (exact in binary); the last is 1.0 exactly."""
+    (exact in binary); the last is 1.0 exactly.
+
+    ``steps`` and ``max_newton`` are whole numbers >= 1, ``max_cuts`` one in [0, 20]
+    (``femcoupling._checks.MAX_CUTS_MAX``; else FemInputError). A cut step too small to move
+    the load factor (below its floating-point resolution) is never taken: the load stops
+    there with NewtonFailure, as past ``max_cuts``."""
+    _whole("steps", steps, 1, None, "equal increments of the load")
+    _max_cuts(max_cuts)
+    _max_newton(max_newton)
     out: list = []
     lf_done, dlf = 0.0, 1.0 / steps
     depth = 0  # halvings of the step below its nominal size
+    last = ""  # the last Newton failure
     while lf_done < 1.0 - 1e-12:
         lf = min(1.0, lf_done + dlf)
+        if not lf > lf_done:  # (the cut step no longer moves the load: it would loop)
+            restore(lf_done)
+            raise NewtonFailure(
+                f"{where}: the step cut to {dlf:.3g} of the load no longer moves the load "
+                f"factor (below its floating-point resolution); the stage stopped at load "
+                f"factor {lf_done!r}" + (f" (the last failure: {last})" if last else ""))
         try:
             r = take(lf)
         except NewtonFailure as e:
             rollback()
             depth += 1
+            last = str(e)
             if depth > max_cuts:
                 restore(lf_done)
-                last = str(e)
                 raise NewtonFailure(
                     f"{where}: Newton failed at load factor {lf:.6g} with the step cut "
                     f"{max_cuts} times (to 1/{2 ** max_cuts} of its nominal size); the stage "
