@@ -355,3 +355,29 @@ def test_runner_pool_refuses_a_client_that_is_not_one(client):
         RunnerPool(PeriodicRegionElement(n=30), ["A", "B"], client=client)
     assert "dask_client" in str(e.value)
 
+
+
+def test_an_element_that_hovers_near_its_target_is_stopped():
+    # Neither settled nor strained past max_strain: the servo used to loop for ever.
+    from femcoupling.materials import dem_elements as de
+
+    class Hover:
+        calls = 0
+
+        def strain(self):
+            return np.full((3, 3), 1e-6 * (self.calls % 2))
+
+        def stress(self):
+            return np.zeros((3, 3))
+
+        def apply_stress(self, target, *, tol, unbalanced, max_steps):
+            self.calls += 1
+            raise RuntimeError("not settled")
+
+    el = Hover()
+    with pytest.raises(de.ElementHoverError, match=r"neither reached its target stress .* nor "
+                                                   r"strained past max_strain=0.05 in 2000000 "
+                                                   r"steps"):
+        de.servo(el, np.zeros((3, 3)), tol=0.01, unbalanced=0.01, chunk_steps=1000,
+                 max_strain=0.05)
+    assert el.calls == 2000

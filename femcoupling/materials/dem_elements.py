@@ -84,6 +84,7 @@ def servo(el, target, *, tol: float, unbalanced: float, chunk_steps: int,
     _check_servo(tol=tol, unbalanced=unbalanced, chunk_steps=chunk_steps,
                  max_strain=max_strain)
     e0 = el.strain()
+    done = 0
     while True:
         try:
             s = el.apply_stress(target, tol=tol, unbalanced=unbalanced, max_steps=chunk_steps)
@@ -92,6 +93,24 @@ def servo(el, target, *, tol: float, unbalanced: float, chunk_steps: int,
             got = float(np.abs(el.strain() - e0).max())
             if got > max_strain:
                 return el.stress(), False, got
+            done += chunk_steps
+            if done >= SERVO_MAX_STEPS:
+                raise ElementHoverError(
+                    f"the periodic element neither reached its target stress (tol={tol:g}, "
+                    f"unbalanced={unbalanced:g}) nor strained past max_strain={max_strain:g} "
+                    f"in {done} steps (it strained {got:.3g}): it hovers near the target "
+                    "without settling; loosen tol or unbalanced, or lower max_strain") from None
+
+
+#: The most DEM steps ``servo`` takes before it stops an element that hovers near its target
+#: without meeting tol and unbalanced and without straining past max_strain (ten times
+#: ``DemElement.apply_stress``'s own default budget).
+SERVO_MAX_STEPS = 2_000_000
+
+
+class ElementHoverError(RuntimeError):
+    """A periodic element that ``servo`` stopped after SERVO_MAX_STEPS steps near its target,
+    neither settled nor strained past its limit."""
 
 
 def _check_servo(*, tol, unbalanced, chunk_steps, max_strain) -> None:
