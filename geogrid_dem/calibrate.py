@@ -388,9 +388,21 @@ class Config:
                     raise ValueError(f"{src}: field 'reference.{k}'={ref[k]!r}: must be "
                                      f"{_ONE[k]}")
         fixed = dict(d.get("params", {}))
-        for k in ("out", *KEYS):
-            if k in fixed:
-                raise ValueError(f"{src}: field 'params.{k}': set by the calibration")
+        from geogrid_dem.runs import param_action
+
+        for k in fixed:
+            act = param_action("triaxial", k)
+            dest = act.dest if act is not None else k
+            if dest in ("out", *KEYS):
+                alias = f" (the triaxial's {'/'.join(act.option_strings)})" \
+                    if act is not None and k != dest else ""
+                raise ValueError(f"{src}: field 'params.{k}'{alias}: set by the calibration")
+        for k in ref:
+            act = param_action("triaxial", k)
+            if act is not None and k not in KEYS and act.dest in KEYS:
+                raise ValueError(f"{src}: field 'reference.{k}' (the triaxial's "
+                                 f"{'/'.join(act.option_strings)}): give the truth's "
+                                 f"{act.dest} as 'reference.{act.dest}'")
         mis = _section(d, "misfit", src, {"points": (int, 2, 100_000, "a whole number in "
                                                             "[2, 100000]"),
                                           "w_q": (float, 0.0, 1.0, "in [0, 1] (the weight of q; "

@@ -75,7 +75,7 @@ from geogrid_dem.provenance import version
 from geogrid_dem.runs import (MAX_ROWS, RunFileError, UsageError, _close_client, _row_finished,
                               _row_params, _run_on_dask, _started_client, _summary_of,
                               argv_to_params, case_command, check_argv, check_params,
-                              check_row_folder,
+                              check_row_folder, check_same_parameter, param_action,
                               load_toml, out_of, params_to_argv, run_case, sweep_rows,
                               write_results, write_run_file)
 
@@ -119,8 +119,17 @@ def run_cmd(target: str, extra: list[str]) -> None:
         source = str(path)
         data = load_toml(path, "run")
         case = data["case"]
+        if "sweep" in data:
+            raise RunFileError(f"{source}: field 'sweep': a run file runs the case once; a "
+                               f"[sweep] table is run by `geogrid-dem sweep {source}` (remove "
+                               "the table to run the [params] once)")
         params = dict(data.get("params", {}))
-        if "out" in data and "out" not in params:
+        if "out" in data:
+            clash = next((k for k in params if param_action(case, k) is not None
+                          and param_action(case, k).dest == "out"), None)
+            if clash is not None:
+                raise RunFileError(f"{source}: fields 'out' and 'params.{clash}' both name the "
+                                   "results folder; give it once")
             params["out"] = data["out"]
         check_params(case, params, source=source)
         argv = params_to_argv(params, source=source)
@@ -149,7 +158,7 @@ def run_cmd(target: str, extra: list[str]) -> None:
         # run file are kept as a converged run's)
         if (status == 0 or state == "complete"
                 or (status == rundir.EXIT_INTERRUPTED and state == "interrupted")):
-            params = argv_to_params(argv)
+            params = argv_to_params(argv, case)
             params.pop("overwrite", None)  # a run file never replaces a run by itself
             if numbered:  # (its copy reruns into a new numbered folder of its own)
                 params.pop("out", None)
@@ -177,19 +186,24 @@ def sweep_cmd(file: Path, workers: int, scheduler: str | None, threads: int,
         raise UsageError(f"--workers={workers}: must be >= 1")
     if threads < 0:
         raise UsageError(f"--threads={threads}: must be >= 0 (0 = automatic)")
+    _check_local_bounds(scheduler, workers, threads, low_workers=1)
     if max_rows < 1:
         raise UsageError(f"--max-rows={max_rows}: must be >= 1")
     if not isinstance(data["out"], str) or not data["out"]:
         raise RunFileError(f"{file}: field 'out'={data['out']!r}: must be a folder's path")
     out = Path(data["out"])
-    why = rundir._writable_or_error(out)
+    why = rundir._writable_or_error(out) or _holds_a_run(out)
     if why:
         raise RunFileError(f"{file}: field 'out'={data['out']!r}: {why}")
     fixed = dict(data.get("params", {}))
-    for k in ("out",):
-        if k in fixed:
+    for k in fixed:
+        if param_action(case, k) is not None and param_action(case, k).dest == "out":
             raise RunFileError(f"{file}: field 'params.{k}': set the sweep's folder with the "
                                "top-level field 'out' (each row writes in OUT/row_NNN)")
+    if isinstance(data.get("sweep"), dict):
+        check_same_parameter(case, [("params", fixed),
+                                    ("sweep", {k: v for k, v in data["sweep"].items()
+                                               if k != "mode"})], source=str(file))
     rows = sweep_rows(data, str(file), max_rows)
     script = case_command(case)
     # every row is parsed by the case's parser (about 5 ms a row); above MAX_ROWS (a lifted
@@ -212,7 +226,10 @@ def sweep_cmd(file: Path, workers: int, scheduler: str | None, threads: int,
         argv = params_to_argv(params, source=src)
         if i in parse:
             check_params(case, params, source=src)
-            check_argv(case, argv, source=src)
+            # (on a scheduler's workers a row's threads are bounded by the cores of the
+            # machine that runs it, which its case checks there, not by this one's)
+            check_argv(case, argv if not scheduler else params_to_argv(
+                _threads_unbounded(case, params), source=src), source=src)
         checked.append((i, row_dir, params, argv))
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -287,6 +304,7 @@ def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | N
         cfg.out = out
     if workers < 0 or threads < 0:
         raise UsageError("--workers and --threads must be >= 0")
+    _check_local_bounds(scheduler, workers, threads, low_workers=0)
     # every triaxial run's flags checked before any work: the fixed ones, the reference's
     # and the grid's corners
     src = f"calibration file {file}"
@@ -328,6 +346,47 @@ def calibrate_cmd(file: Path, out: Path | None, workers: int, scheduler: str | N
             _close_client(*box)
 
 
+def _check_local_bounds(scheduler: str | None, workers: int, threads: int, *,
+                        low_workers: int) -> None:
+    """Refuses (UsageError) ``--threads`` and, for a local cluster, ``--workers`` above
+    ``rundir.local_bound()`` (4 x the cores of this machine; docs/cli.md). Rows run on a
+    ``--scheduler``'s machines are checked there."""
+    if scheduler:
+        return
+    why = (rundir.local_bound_error("--workers", workers, low_workers,
+                                    "the local cluster's worker processes")
+           or rundir.local_bound_error("--threads", threads, 0, "the threads of each run"))
+    if why:
+        raise UsageError(why)
+
+
+def _holds_a_run(out: Path) -> str | None:
+    """Why a sweep may not write into ``out``: it holds a case's run (its manifest, lock or
+    run file: a sweep's results.csv and row folders would go in among that run's files)."""
+    if not out.is_dir():
+        return None
+    manifest = rundir.run_status(out)
+    if manifest is not None or (out / rundir.LOCK).exists() or (out / "run.toml").is_file():
+        what = ""
+        if isinstance(manifest, dict):
+            what = (f" of {manifest.get('case', 'a case')!s} ({manifest.get('status', '?')}, "
+                    f"started {manifest.get('started', '?')})")
+        return (f"holds a run{what} (its {rundir.MANIFEST if manifest is not None else 'run.toml'}"
+                "); a sweep writes results.csv and row_NNN/ into a folder of its own: name "
+                "another 'out'")
+    return None
+
+
+def _threads_unbounded(case: str, params: dict) -> dict:
+    """``params`` with a ``threads`` above this machine's bound set to 0 (for the check of a
+    row that runs on another machine)."""
+    key = next((k for k in params if param_action(case, k) is not None
+                and param_action(case, k).dest == "threads"), None)
+    if key is not None and isinstance(params[key], int) and params[key] > rundir.local_bound():
+        return {**params, key: 0}
+    return params
+
+
 def _dask_options(p: argparse.ArgumentParser, *, workers: str, threads: str) -> None:
     """--workers, --scheduler and --threads of a command that runs cases on Dask."""
     p.add_argument("--workers", type=int, default=2, help=workers)
@@ -340,7 +399,7 @@ def _parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     """The command's parser and its ``run`` subparser (whose help ``geogrid-dem run --help``
     prints: everything after ``run`` goes to the case's own parser)."""
     ap = argparse.ArgumentParser(
-        prog="geogrid-dem", formatter_class=HelpFormatter,
+        prog="geogrid-dem", formatter_class=HelpFormatter, allow_abbrev=False,
         description="Coupled DEM-FEM for geogrid-reinforced soil: run the cases of the source "
                     "studies, run files and sweeps, calibrate a case's parameters, and "
                     "continue a finished element.",
@@ -349,16 +408,16 @@ def _parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     ap.add_argument("--version", action="version", version=f"geogrid-dem, version {version()}")
     sub = ap.add_subparsers(dest="command", metavar="COMMAND", required=True)
     sub.add_parser("cases", help="list the cases and the studies they come from",
-                   formatter_class=HelpFormatter)
+                   formatter_class=HelpFormatter, allow_abbrev=False)
     run = sub.add_parser("run", help="run a case (NAME, then its flags) or a run file (FILE.toml)",
-                         formatter_class=HelpFormatter, add_help=False,
+                         formatter_class=HelpFormatter, allow_abbrev=False, add_help=False,
                          description="Runs a case, with its own flags after its name, or a run "
                                      "file (TOML) whose flags can be overridden after it "
                                      "(the last --out wins). Cases: " + ", ".join(CASES) + ".")
     run.add_argument("target", metavar="NAME|FILE.toml", nargs="?")
     run.add_argument("case_args", nargs=argparse.REMAINDER, help="the case's flags")
     sw = sub.add_parser("sweep", help="run a sweep file's rows on Dask; gather results.csv",
-                        formatter_class=HelpFormatter,
+                        formatter_class=HelpFormatter, allow_abbrev=False,
                         description="Runs a sweep file's rows on Dask, skipping finished rows; "
                                     "gathers OUT/results.csv. Every row is checked against the "
                                     "case's flags before Dask starts.")
@@ -368,7 +427,7 @@ def _parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     sw.add_argument("--max-rows", type=int, default=MAX_ROWS,
                     help="the largest table run; a larger one is refused with its size")
     cal = sub.add_parser("calibrate", help="fit the triaxial case's E, nu, phi to a curve",
-                         formatter_class=HelpFormatter,
+                         formatter_class=HelpFormatter, allow_abbrev=False,
                          description="Fits E, nu and phi of the triaxial case to a reference "
                                      "curve: a grid on Dask, then a local optimiser; writes "
                                      "OUT/grid.csv, best.json, misfit.png/.pdf.")
@@ -383,7 +442,7 @@ def _parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
 
     co = sub.add_parser("continue", help="cycle a finished prs-element-002 element on: N steps "
                                          "at its final targets, one JSON line",
-                        formatter_class=HelpFormatter,
+                        formatter_class=HelpFormatter, allow_abbrev=False,
                         description="Restores an element of a prs-element-002 run from its "
                                     "final state (RUN_DIR/LABEL_final.h5) with its walls "
                                     "servoing at their final set points and its grid's end "
@@ -403,7 +462,7 @@ def _parser() -> tuple[argparse.ArgumentParser, argparse.ArgumentParser]:
     co.add_argument("--overwrite", action="store_true",
                     help="replace an earlier continuation of LABEL in --out")
     wa = sub.add_parser("watch", help="a running case's main curve, redrawn as it grows",
-                        formatter_class=HelpFormatter,
+                        formatter_class=HelpFormatter, allow_abbrev=False,
                         description="Redraws the main curve of a case run (the series it "
                                     "wrote last: pull-out force, triaxial deviator, footing "
                                     "pressure, an element's vertical stress, ...) every "

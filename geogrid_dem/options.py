@@ -31,17 +31,19 @@ import argparse
 import re
 
 from geogrid_dem.cases import CASES
-from geogrid_dem.rundir import add_out_args, check_common_args
+from geogrid_dem.rundir import MAX_SEED, add_out_args, check_common_args, seed_error
 
-__all__ = ["CAPS", "HelpFormatter", "add_allow_large", "case_parser", "check_cap",
-           "check_common_args", "distinct", "given_options", "parse_checked", "refuse_unused"]
+__all__ = ["CAPS", "MAX_SEED", "HelpFormatter", "add_allow_large", "case_parser", "check_cap",
+           "check_common_args", "check_seeds", "distinct", "given_options", "parse_checked",
+           "refuse_unused", "warn_below"]
 
 PRESETS = ("fast", "balanced", "accurate")
 
 #: The most work one run starts without ``--allow-large`` (docs/cli.md, "Caps"): seeds
 #: (packings of a study), grains of one sample or element (a clump counts as one), DEM
 #: elements or runs of one command, points of a calibration grid.
-CAPS = {"seeds": 100, "grains": 200_000, "elements or runs": 10_000, "grid points": 1_000}
+CAPS = {"seeds": 100, "grains": 200_000, "elements or runs": 10_000, "grid points": 1_000,
+        "snapshots": 100, "load levels": 100}
 ALLOW_LARGE = "--allow-large"
 
 
@@ -75,8 +77,10 @@ def case_parser(name: str, description: str, *, smoke: str, seed: int, threads: 
     ``--overwrite`` (``out_help`` adds to the help of ``--out``), ``--seed`` (default
     ``seed``), ``--threads`` (default ``threads``; 0 = automatic) and, when ``preset``
     is given (its help text), ``--preset``. The case adds its own options to it."""
+    # (allow_abbrev=False: an abbreviated flag, --ou for --out, is refused rather than taken
+    # for the flag it starts, which run.toml and the results folder would then miss)
     ap = argparse.ArgumentParser(prog=f"geogrid-dem run {name}", description=description,
-                                 formatter_class=HelpFormatter)
+                                 formatter_class=HelpFormatter, allow_abbrev=False)
     ap.add_argument("--smoke", action="store_true", help=f"test-sized run: {smoke}")
     add_out_args(ap, CASES[name].folder, help_extra=out_help)
     ap.add_argument("--seed", type=int, default=seed, help="random seed of the packing")
@@ -167,6 +171,33 @@ def distinct(ap: argparse.ArgumentParser, flag: str, text, items) -> None:
         if x in seen:
             ap.error(f"{flag}={text}: {x} is listed twice; list each once")
         seen.add(x)
+
+
+def check_seeds(ap: argparse.ArgumentParser, flag: str, text, seeds) -> None:
+    """``ap.error`` when a seed of ``seeds`` (the parsed values of ``flag``, given as ``text``)
+    lies outside [0, :data:`MAX_SEED`]."""
+    for s in seeds:
+        if seed_error(flag, s):
+            ap.error(f"{flag}={text}: the seed {s} is outside [0, {MAX_SEED}] (0 to 2**63 - "
+                     "1: a run records its seed as a 64-bit integer)")
+
+
+def warn_below(flag: str, value: float, low: float, unit: str, slip: str) -> None:
+    """A ``cpp_dem.PhysicalRangeWarning`` (one line, ``[warning] ...``) when ``value`` of
+    ``flag`` is below ``low`` (in ``unit``): a value that small is most likely a unit slip
+    (``slip`` says which, e.g. "kPa given as Pa"). The run goes on: a tiny value may be
+    meant."""
+    if not value < low:
+        return
+    import warnings
+
+    from cpp_dem.scene import PhysicalRangeWarning
+    from geogrid_dem.warnings_display import shown_once
+
+    with shown_once():
+        warnings.warn(f"{flag}={value:g}: below {low:g} {unit}, likely a unit slip ({slip}); "
+                      "the run goes on with it (filter cpp_dem.PhysicalRangeWarning if it is "
+                      "meant)", PhysicalRangeWarning, stacklevel=2)
 
 
 def parse_checked(ap: argparse.ArgumentParser, argv) -> argparse.Namespace:

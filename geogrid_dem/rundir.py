@@ -264,11 +264,54 @@ def mpi_ranks() -> int:
     return 1
 
 
+#: The largest seed a case takes: its runs record it as a 64-bit signed integer (HDF5
+#: attributes, the manifest), so a larger one would fail only when the first record is written.
+MAX_SEED = 2**63 - 1
+
+#: The bound on ``--threads`` and on a local ``--workers``: this many times the machine's
+#: cores (``os.cpu_count()``). The threads of a run, and the worker processes of a local
+#: cluster, share the machine's cores: beyond a few per core they only slow a run down (256
+#: threads take 20 x as long as 1 on 2 cores), and tens of thousands crash it.
+PER_CORE = 4
+
+
+def cores() -> int:
+    """The machine's cores (``os.cpu_count()``; 1 when it cannot say)."""
+    return os.cpu_count() or 1
+
+
+def local_bound() -> int:
+    """The most ``--threads`` of a run and ``--workers`` of a local cluster: :data:`PER_CORE`
+    x :func:`cores`."""
+    return PER_CORE * cores()
+
+
+def local_bound_error(flag: str, value: int, low: int, what: str) -> str | None:
+    """The refusal of ``flag=value`` above :func:`local_bound` (``what`` says what the count
+    is), or None within it."""
+    bound = local_bound()
+    if value <= bound:
+        return None
+    return (f"{flag}={value}: more than {bound} ({PER_CORE} x the {cores()} cores of this "
+            f"machine); {what} share its cores, and more than {PER_CORE} a core only slow the "
+            f"run down (or exhaust the machine); allowed: {low} to {bound}")
+
+
+def seed_error(flag: str, value) -> str | None:
+    """The refusal of a seed outside [0, :data:`MAX_SEED`], or None."""
+    if isinstance(value, int) and 0 <= value <= MAX_SEED:
+        return None
+    return (f"{flag}={value}: must be a whole number in [0, {MAX_SEED}] (0 to 2**63 - 1: a "
+            "run records its seed as a 64-bit integer)")
+
+
 def check_common_args(ap: argparse.ArgumentParser, a: argparse.Namespace) -> None:
-    """Refuses (through ``ap.error``, naming the flag and the value) a ``--threads`` below 0 and
-    an ``--out`` that is a file or cannot be written into, and a start as more than one MPI
-    rank (:func:`mpi_ranks`); records ``--overwrite`` (where the parser has it) for
-    :func:`run_main` and the runs of this process."""
+    """Refuses (through ``ap.error``, naming the flag and the value) a ``--threads`` below 0 or
+    above :func:`local_bound`, a ``--workers`` (a local cluster's processes) above it, a
+    ``--seed`` outside [0, :data:`MAX_SEED`], an ``--out`` that is a file or cannot be
+    written into, and a start as more than one MPI rank (:func:`mpi_ranks`); records
+    ``--overwrite`` (where the parser has it) for :func:`run_main` and the runs of this
+    process."""
     global _OVERWRITE
     ranks = mpi_ranks()
     if ranks > 1:
@@ -281,6 +324,19 @@ def check_common_args(ap: argparse.ArgumentParser, a: argparse.Namespace) -> Non
     threads = getattr(a, "threads", None)
     if threads is not None and threads < 0:
         ap.error(f"--threads={threads}: must be >= 0 (0 = the default)")
+    if threads is not None:
+        why = local_bound_error("--threads", threads, 0, "the threads of a run")
+        if why:
+            ap.error(why.replace("allowed: 0 to", "allowed: 0 (automatic) to"))
+    workers = getattr(a, "workers", None)
+    if isinstance(workers, int):
+        why = local_bound_error("--workers", workers, 1, "the worker processes")
+        if why:
+            ap.error(why)
+    if hasattr(a, "seed"):
+        why = seed_error("--seed", a.seed)
+        if why:
+            ap.error(why)
     for dest, v in vars(a).items():
         # (a name that is not UTF-8 text, from a file system's bytes, cannot be written into
         # the run file or the manifest)

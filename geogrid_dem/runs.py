@@ -48,6 +48,9 @@ class UsageError(RunFileError):
 
 def case_command(name: str, *, field: str = "case") -> list[str]:
     """The interpreter command that runs case `name` (its module in geogrid_dem.cases)."""
+    if not isinstance(name, str):
+        raise RunFileError(f"{field}={name!r}: must be a string, the name of one case; "
+                           f"allowed: {', '.join(CASES)}")
     if name not in CASES:
         raise RunFileError(f"{field}={name!r}: no such case; allowed: {', '.join(CASES)}")
     return [sys.executable, "-m", f"geogrid_dem.cases.{CASES[name].module}"]
@@ -66,15 +69,51 @@ def _flags(case: str) -> dict[str, argparse.Action]:
             if o.startswith("--")}
 
 
+def param_action(case: str, key: str) -> argparse.Action | None:
+    """The case's option that the run-file key ``key`` (a flag without its dashes, ``-`` or
+    ``_``) names, or None."""
+    return _flags(case).get("--" + key.replace("_", "-")) if isinstance(key, str) else None
+
+
+def _spelling(key: str, where: str = "") -> str:
+    return f"'{where}.{key}'" if where else repr(key)
+
+
+def check_same_parameter(case: str, tables: list[tuple[str, dict[str, Any]]], *,
+                         source: str) -> None:
+    """Refuses two keys that set one parameter of the case, in one table or across
+    ``tables`` (``(where, table)`` pairs, ``where`` e.g. "params" or "sweep"): two spellings
+    (``cell-pressure`` and ``cell_pressure``) or a flag and its alias (``young`` and ``E``),
+    which the last would settle without a word. Names both."""
+    seen: dict[str, tuple[str, str]] = {}
+    for where, table in tables:
+        for key in table:
+            act = param_action(case, key)
+            if act is None:
+                continue
+            if act.dest in seen:
+                k0, w0 = seen[act.dest]
+                flag = next((o for o in act.option_strings if o.startswith("--")),
+                            "--" + act.dest)
+                raise RunFileError(
+                    f"{source}: fields {_spelling(k0, w0)} and {_spelling(key, where)} set the "
+                    f"same parameter ({' / '.join(act.option_strings)}): give {flag} once")
+            seen[act.dest] = (key, where)
+
+
 def check_params(case: str, params: dict[str, Any], *, source: str) -> None:
-    """Refuses a parameter that is not a flag of the case (with a did-you-mean), a switch
-    given a value other than true/false, and a flag that takes a value given true/false."""
+    """Refuses a parameter that is not a flag of the case (with a did-you-mean), ``help``,
+    two keys that set one parameter (:func:`check_same_parameter`), a switch given a value
+    other than true/false, and a flag that takes a value given true/false."""
     flags = _flags(case)
     for key, value in params.items():
         if not isinstance(key, str) or not key or key.startswith("-"):
             raise RunFileError(f"{source}: field {key!r}: write the flag's name without dashes")
         flag = "--" + key.replace("_", "-")
         act = flags.get(flag)
+        if act is not None and act.dest == "help":
+            raise RunFileError(f"{source}: field {key!r}: not a parameter (a run file runs the "
+                               f"case); `geogrid-dem run {case} --help` lists its parameters")
         if act is None:
             names = sorted({f[2:] for f in flags if f not in ("--help",)})
             near = difflib.get_close_matches(key.replace("_", "-"), names, n=1)
@@ -93,6 +132,7 @@ def check_params(case: str, params: dict[str, Any], *, source: str) -> None:
         if not switch and isinstance(value, bool):
             raise RunFileError(f"{source}: field {key}={str(value).lower()}: takes a value "
                                f"({act.help or 'see the case --help'}), not true/false")
+    check_same_parameter(case, [("", params)], source=source)
 
 
 def check_argv(case: str, argv: list[str], *, source: str) -> None:
@@ -223,9 +263,30 @@ def _toml_value(v: Any, key: str = "") -> str:
     return _toml_str(str(v), key)  # (an integer beyond TOML's 64 bits as its digits)
 
 
-def argv_to_params(argv: list[str]) -> dict[str, Any]:
-    """The flags given on the command line as run-file parameters (for OUT/run.toml)."""
+def _takes_text(act: argparse.Action | None) -> bool:
+    """Whether the option ``act`` takes text (a folder, a name, a comma list), whose value a
+    run file keeps as it was written, rather than a number."""
+    if act is None:
+        return False
+    t = act.type
+    return t is None or t is str or (isinstance(t, type) and issubclass(t, os.PathLike))
+
+
+def argv_to_params(argv: list[str], case: str | None = None) -> dict[str, Any]:
+    """The flags given on the command line as run-file parameters (for OUT/run.toml). A
+    value is written as a number where the case's option (``case``'s parser) takes one; an
+    option that takes text (``--out``, a comma list, a name) keeps its text unless the
+    number reads back as the very same text (``--out 007`` stays "007", ``--out 1e3`` stays
+    "1e3": as numbers they would name the folders 7 and 1000.0)."""
     params: dict[str, Any] = {}
+
+    def value(key: str, text: str) -> Any:
+        v = _number_or_string(text)
+        if case is not None and not isinstance(v, str) and _takes_text(
+                param_action(case, key)) and str(v) != text:
+            return text
+        return v
+
     k = 0
     while k < len(argv):
         a = argv[k]
@@ -234,9 +295,9 @@ def argv_to_params(argv: list[str]) -> dict[str, Any]:
             continue
         key, _, inline = a[2:].partition("=")
         if inline:
-            params[key] = _number_or_string(inline)
+            params[key] = value(key, inline)
         elif k + 1 < len(argv) and not argv[k + 1].startswith("--"):
-            params[key] = _number_or_string(argv[k + 1])
+            params[key] = value(key, argv[k + 1])
             k += 1
         else:
             params[key] = True
@@ -329,6 +390,18 @@ def run_case(case: str, argv: list[str], *, source: str | None = None) -> int:
     return status
 
 
+def _value_key(x: Any) -> tuple:
+    """What makes two values of a sweep list give the same run: equal numbers (1 and 1.0),
+    equal text, the same switch."""
+    if isinstance(x, bool):
+        return ("switch", x)
+    if isinstance(x, int):
+        return ("number", x)
+    if isinstance(x, float):
+        return ("number", int(x)) if x.is_integer() else ("number", x)
+    return (type(x).__name__, json.dumps(x, sort_keys=True, default=str))
+
+
 #: The largest sweep run without --max-rows.
 MAX_ROWS = 10_000
 
@@ -348,6 +421,18 @@ def sweep_rows(data: dict[str, Any], source: str,
     for key, v in values.items():
         if not isinstance(v, list) or not v:
             raise RunFileError(f"{source}: field 'sweep.{key}'={v!r}: must be a non-empty list")
+        if key == "out":
+            raise RunFileError(f"{source}: field 'sweep.out': not a parameter to sweep (each "
+                               "row writes into OUT/row_NNN of the top-level 'out')")
+        if mode == "product":
+            # (a value listed twice would run the same rows twice)
+            seen: set = set()
+            for x in v:
+                if _value_key(x) in seen:
+                    raise RunFileError(f"{source}: field 'sweep.{key}'={v!r}: {x!r} is listed "
+                                       "twice (it would run the same rows twice); list each "
+                                       "value once")
+                seen.add(_value_key(x))
     if not values:
         raise RunFileError(f"{source}: [sweep] has no parameter lists")
     keys = list(values)
@@ -367,7 +452,16 @@ def sweep_rows(data: dict[str, Any], source: str,
         raise RunFileError(f"{source}: field 'sweep' (mode 'list'): the lists must have equal "
                            f"lengths, got {lengths}")
     n = next(iter(lengths.values()))
-    return [{k: values[k][i] for k in keys} for i in range(n)]
+    rows = [{k: values[k][i] for k in keys} for i in range(n)]
+    first: dict[tuple, int] = {}
+    for i, row in enumerate(rows):
+        text = tuple(sorted((k, _value_key(v)) for k, v in row.items()))
+        if text in first:
+            raise RunFileError(f"{source}: field 'sweep' (mode 'list'): rows {first[text]} and "
+                               f"{i} are the same ({', '.join(f'{k}={v!r}' for k, v in row.items())}"
+                               "): each would run the same case twice; list each row once")
+        first[text] = i
+    return rows
 
 
 def _row_params(fixed: dict[str, Any], row: dict[str, Any], row_dir: Path,
@@ -379,7 +473,8 @@ def _row_params(fixed: dict[str, Any], row: dict[str, Any], row_dir: Path,
 
 def _row_finished(row_dir: Path, case: str, params: dict[str, Any]) -> bool:
     """The row's folder holds its finished run: a summary.json, a run.toml of the same case
-    and parameters, and no manifest saying the run did not complete."""
+    and parameters (``threads`` and ``workers`` aside: they do not change what a row
+    computes, :data:`_RESULT_FREE`), and no manifest saying the run did not complete."""
 
     run_file = row_dir / "run.toml"
     if not (row_dir / "summary.json").exists() or not run_file.exists():
@@ -392,12 +487,22 @@ def _row_finished(row_dir: Path, case: str, params: dict[str, Any]) -> bool:
     manifest = rundir.run_status(row_dir)
     if manifest is not None and manifest.get("status", "complete") != "complete":
         return False
-    return old.get("case") == case and old.get("params") == json.loads(json.dumps(params))
+    theirs = old.get("params") if isinstance(old.get("params"), dict) else {}
 
+    def computed(d: dict) -> dict:
+        return {k: v for k, v in d.items() if k not in _RESULT_FREE}
+
+    return (old.get("case") == case
+            and computed(theirs) == computed(json.loads(json.dumps(params))))
+
+
+#: Row parameters that do not change what a row computes (docs/cli.md: the results do not
+#: depend on the threads, nor on the workers of a case that runs its parts side by side).
+_RESULT_FREE = ("threads", "workers")
 
 #: Row parameters that do not make a row another sweep's: its folder (a sweep folder that was
-#: moved) and its threads (they do not change what it computes).
-_ROW_FREE = ("out", "threads")
+#: moved) and those of :data:`_RESULT_FREE`.
+_ROW_FREE = ("out", *_RESULT_FREE)
 
 
 def _links_in(folder: Path) -> list[Path]:

@@ -37,8 +37,8 @@ import sys
 from dataclasses import replace
 
 from geogrid_dem.cases import describe
-from geogrid_dem.options import (case_parser, check_cap, distinct, given_options,
-                                 parse_checked, refuse_unused)
+from geogrid_dem.options import (MAX_SEED, case_parser, check_cap, distinct, given_options,
+                                 parse_checked, refuse_unused, warn_below)
 from geogrid_dem.rundir import on_interrupt, run_main
 
 #: The test-sized run: a coarse mesh (14-20 zone cells), 80 grains an element, one load
@@ -221,6 +221,14 @@ def parse_args(argv=None):
     check_cap(ap, a, "--seeds", seeds, seeds, "seeds", "seeds (runs per variant)")
     if a.seed < 0:
         ap.error(f"--seed={a.seed}: must be >= 0")
+    if a.seed + seeds - 1 > MAX_SEED:
+        ap.error(f"--seed={a.seed} with --seeds={seeds}: the seeds {a.seed} to "
+                 f"{a.seed + seeds - 1} pass {MAX_SEED} (2**63 - 1: a run records its seed as "
+                 "a 64-bit integer)")
+    if a.levels is not None:
+        # (each level is a Newton solve of the FEM with the DEM zone; the levels' pressures
+        # are made before the cluster starts)
+        check_cap(ap, a, "--levels", a.levels, a.levels, "load levels")
     variants = tuple(v.strip() for v in a.variants.split(",") if v.strip())
     bad = [v for v in variants if v not in VARIANTS]
     if bad or not variants:
@@ -268,6 +276,8 @@ def parse_args(argv=None):
         field = str(e).split("=", 1)[0]
         flag = next((f for f, name in FLAGS.items() if name == field), field)
         ap.error(f"{flag}: {e}")
+    warn_below("--pressure", p.pressure_pa, 1e3, "Pa",
+               f"kPa given as Pa? {p.pressure_pa:g} kPa is --pressure {p.pressure_pa * 1e3:g}")
     return replace(p, threads=a.threads), a.out
 
 

@@ -73,7 +73,7 @@ import numpy as np
 
 from geogrid_dem.cases import PRESTRESS_PAPER, describe
 from geogrid_dem.options import (case_parser, check_cap, check_common_args, given_options,
-                                 refuse_unused)
+                                 refuse_unused, warn_below)
 from geogrid_dem.rundir import begin_run, end_run, on_interrupt, run_main
 from geogrid_dem.studies.prs_element import (HISTORY_REGIONS, VARIANTS, Params, calibrate_soil, log,
                                              run_element, run_variant)
@@ -427,6 +427,10 @@ def apply_element_args(ap, a, p, given=frozenset()):
         ap.error(f"--prestress={a.prestress}: must be >= 0 (N/m)")
     if not (math.isfinite(a.footing_pressure) and a.footing_pressure > 0):
         ap.error(f"--footing-pressure={a.footing_pressure}: must be > 0 (Pa)")
+    if not a.stresses:
+        warn_below("--footing-pressure", a.footing_pressure, 1e3, "Pa",
+                   f"kPa given as Pa? {a.footing_pressure:g} kPa is --footing-pressure "
+                   f"{a.footing_pressure * 1e3:g}")
     if a.density_scaling is not None and not (
             math.isfinite(a.density_scaling) and (a.density_scaling == 0 or a.density_scaling >= 1)):
         ap.error(f"--density-scaling={a.density_scaling}: must be 0 (off) or >= 1 (the target "

@@ -890,7 +890,7 @@ def parse_seeds(text: str, ap, args=None) -> tuple[int, ...]:
     """'1-3' -> (1, 2, 3); '1,4' -> (1, 4). An empty text, a seed listed twice and more seeds
     than the cap (without --allow-large in ``args``, the parsed namespace; checked before
     the list is made) are refused, naming --seeds."""
-    from geogrid_dem.options import check_cap, distinct
+    from geogrid_dem.options import check_cap, check_seeds, distinct
 
     try:
         if "-" in text.strip().lstrip("-"):
@@ -906,11 +906,12 @@ def parse_seeds(text: str, ap, args=None) -> tuple[int, ...]:
                  "distinct integers >= 0")
     distinct(ap, "--seeds", repr(text), seeds)
     check_cap(ap, args, "--seeds", repr(text), len(seeds), "seeds")
+    check_seeds(ap, "--seeds", repr(text), seeds)
     return seeds
 
 
 def parse_args(argv=None) -> tuple[Params, Path]:
-    from geogrid_dem.options import check_cap, given_options, refuse_unused
+    from geogrid_dem.options import check_cap, check_seeds, given_options, refuse_unused
 
     ap = build_parser()
     a = ap.parse_args(argv)
@@ -922,6 +923,9 @@ def parse_args(argv=None) -> tuple[Params, Path]:
     p.grains = a.grains or p.grains
     # (an empty --seeds is refused by parse_seeds, not replaced by the default)
     p.seeds = parse_seeds(a.seeds, ap, a) if a.seeds is not None else (p.seed, p.seed + 1)
+    if a.seeds is None:
+        check_seeds(ap, "--seed", f"{p.seed} (the packings' seeds --seed and the next one)",
+                    p.seeds)
     n_elements = len(p.grids) * len(p.variants) * len(p.seeds)
     check_cap(ap, a, "--grids/--variants/--seeds",
               f"{','.join(p.grids)}/{','.join(p.variants)}/{a.seeds}", n_elements,

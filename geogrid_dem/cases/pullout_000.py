@@ -46,7 +46,7 @@ from cpp_dem.io.figures import save_figure
 from geogrid_dem.cases import PULLOUT_PAPER, describe
 from cpp_dem import apply_threads
 from geogrid_dem.options import (case_parser, check_cap, distinct, given_options,
-                                 parse_checked, refuse_unused)
+                                 parse_checked, refuse_unused, warn_below)
 from geogrid_dem.rundir import on_interrupt, run_main
 import cpp_dem as dem  # noqa: E402
 from cpp_dem import presets  # noqa: E402
@@ -294,7 +294,13 @@ def parse_args(argv=None) -> tuple[Params, list[int], Path]:
     if a.snapshots is not None:
         if a.snapshots < 0:
             ap.error(f"--snapshots={a.snapshots}: must be >= 0")
+        # (each snapshot writes the grains and the grid, HDF5 and VTK: 3000 of a smoke run
+        # are 4000 files and 420 MB)
+        check_cap(ap, a, "--snapshots", a.snapshots, a.snapshots, "snapshots",
+                  "snapshots over the pull")
         p = replace(p, snapshots=a.snapshots)
+    warn_below("--pressure", a.pressure, 1e3, "Pa",
+               f"kPa given as Pa? {a.pressure:g} kPa is --pressure {a.pressure * 1e3:g}")
     return p, counts, a.out
 
 

@@ -48,8 +48,8 @@ import numpy as np
 from cpp_dem.io.figures import save_figure
 from geogrid_dem.cases import THESIS, describe
 from cpp_dem import apply_threads
-from geogrid_dem.options import (case_parser, check_cap, distinct, given_options,
-                                 parse_checked, refuse_unused)
+from geogrid_dem.options import (case_parser, check_cap, check_seeds, distinct,
+                                 given_options, parse_checked, refuse_unused, warn_below)
 from geogrid_dem.rundir import end_run, run_main, run_status, write_atomic
 import cpp_dem as dem  # noqa: E402
 from cpp_dem.build import geogrid  # noqa: E402
@@ -878,6 +878,7 @@ def _seeds(text: str, ap, a=None) -> list[int]:
     check_cap(ap, a, "--seeds", repr(text), len(seeds), "seeds")
     if not seeds:
         ap.error(f"--seeds={text!r}: A-B needs A <= B")
+    check_seeds(ap, "--seeds", repr(text), seeds)
     if len(set(seeds)) != len(seeds):
         ap.error(f"--seeds={text!r}: a seed is given twice")
     return seeds
@@ -1009,6 +1010,13 @@ def parse_args(argv=None):
     if len(seeds) > 1 and a.grains == "spheres" and a.jitter == 0:
         ap.error(f"--seeds={a.seeds}: with sphere grains and --jitter 0 (App. A's exact "
                  "lattice) every seed gives the same run; give --jitter > 0 (e.g. 0.1)")
+    if a.seeds is None and a.grains == "spheres" and a.jitter == 0 \
+            and a.seed != ap.get_default("seed"):
+        ap.error(f"--seed={a.seed}: has no effect with sphere grains and --jitter 0 (App. A's "
+                 "exact lattice: no draw takes the seed; every seed gives the same run); give "
+                 "--jitter > 0 (e.g. 0.1) or clump grains, or leave --seed out")
+    for P in pressures:
+        warn_below("--pressure", P, 1e3, "Pa", f"kPa given as Pa? {P:g} kPa is {P * 1e3:g}")
     p = replace(p, grid=a.grid, radius=radii[0], pressure=pressures[0], velocity=a.velocity,
                 grid_young=a.grid_young,
                 pull=a.pull, damping=a.damping, seed=seeds[0], threads=a.threads,

@@ -42,7 +42,7 @@ from cpp_dem.io.figures import save_figure
 from geogrid_dem.cases import describe, thesis_grids, triaxial_cylinder
 from cpp_dem import apply_threads
 from geogrid_dem.options import (case_parser, check_cap, given_options, parse_checked,
-                                 refuse_unused)
+                                 refuse_unused, warn_below)
 from geogrid_dem.rundir import begin_run, end_run, on_interrupt, run_main
 import cpp_dem as dem
 from cpp_dem.build import geogrid
@@ -786,6 +786,12 @@ def parse_args(argv=None) -> tuple[Params, Path]:
             ap.error(f"--grains={a.grains}: {why}: spheres only (the box takes clumps)")
         # (given: that fraction of the critical step, renewed; else the protocol's step)
         p.dt_safety = a.dt_safety if "dt_safety" in given else None
+    warn_below("--cell-pressure", a.cell_pressure, 1e3, "Pa",
+               f"kPa given as Pa? {a.cell_pressure:g} kPa is --cell-pressure "
+               f"{a.cell_pressure * 1e3:g}")
+    warn_below("--density", a.density, 500.0, "kg/m^3",
+               f"g/cm^3 or t/m^3 given as kg/m^3? {a.density:g} g/cm^3 is --density "
+               f"{a.density * 1e3:g}")
     return p, a.out
 
 
