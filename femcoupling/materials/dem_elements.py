@@ -95,7 +95,7 @@ def servo(el, target, *, tol: float, unbalanced: float, chunk_steps: int,
                 return el.stress(), False, got
             done += chunk_steps
             if done >= SERVO_MAX_STEPS:
-                raise ElementHoverError(
+                raise HandoverError(
                     f"the periodic element neither reached its target stress (tol={tol:g}, "
                     f"unbalanced={unbalanced:g}) nor strained past max_strain={max_strain:g} "
                     f"in {done} steps (it strained {got:.3g}): it hovers near the target "
@@ -106,11 +106,6 @@ def servo(el, target, *, tol: float, unbalanced: float, chunk_steps: int,
 #: without meeting tol and unbalanced and without straining past max_strain (ten times
 #: ``DemElement.apply_stress``'s own default budget).
 SERVO_MAX_STEPS = 2_000_000
-
-
-class ElementHoverError(RuntimeError):
-    """A periodic element that ``servo`` stopped after SERVO_MAX_STEPS steps near its target,
-    neither settled nor strained past its limit."""
 
 
 def _check_servo(*, tol, unbalanced, chunk_steps, max_strain) -> None:
