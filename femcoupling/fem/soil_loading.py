@@ -33,9 +33,9 @@ class LoadingStages:
         yield surface). A ``k0`` given is refused (FemInputError, before any state is set)
         where the K0 state lies outside the yield surface of a point's Drucker–Prager
         material: the message gives the points and the range of k0 the soil holds at the
-        body's base. (The default of a cohesionless Drucker–Prager soil with phi above about
-        36 deg, Jaky's 1 - sin(phi), lies outside the plane-strain cone near the base: the
-        check solve returns those points onto it, ``LoadStep.plastic_points``.)
+        body's base. (The default of a cohesionless Drucker–Prager soil with phi above 35.9
+        deg, Jaky's 1 - sin(phi), lies outside the plane-strain cone at every point: the check
+        solve returns every point onto it, ``LoadStep.plastic_points``.)
         """
         given = k0 is not None
         k0 = self.soil.k0() if k0 is None else geo._pos("k0", k0)

@@ -16,7 +16,8 @@ run:
    biaxial test at the path's final mean pressure; no cohesion (:func:`calibrate`).
 2. **Variants** ``unreinforced``, ``RE`` (one geogrid layer: an elastic band of axial
    stiffness J, N/m) and ``PRS`` (the same layer with its prestress T_p locked in,
-   ``FemModel.apply_prestress``). Each starts geostatic (K0), the footing is seated to
+   ``FemModel.apply_prestress``). Each starts geostatic (K0 by Jaky; a fitted soil above
+   35.9 deg starts on its yield cone instead: docs/fem.md), the footing is seated to
    ``seat_pa`` as a rigid smooth footing with the fitted soil everywhere, and then every
    soil cell of the zone takes its own dense periodic DEM element, prepared at that cell's
    stress (``FemModel.set_cell_elements``,
