@@ -648,7 +648,7 @@ class Scene(_core.Scene):
     @positions.setter
     def positions(self, value) -> None:
         _core.Scene.positions.fset(self, value)
-        self.__dict__["_geometry_version"] = self.__dict__.get("_geometry_version", 0) + 1
+        self._geometry_changed()
 
     def _geometry_changed(self) -> None:
         self.__dict__["_geometry_version"] = self.__dict__.get("_geometry_version", 0) + 1

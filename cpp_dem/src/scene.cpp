@@ -389,12 +389,6 @@ void Scene::check_boundary_steps() {
   // Frobenius norm of the velocity gradient; the step map is singular at |L| dt = 2).
   if (num_bodies() == 0) return;
   const bool moving_cell = cell_.on && !cell_.vel_grad.isZero(0);
-  bool any = moving_cell;
-  for (const Wall& w : walls_) any = any || w.velocity[w.axis] != 0;
-  for (const CylinderWall& w : cylinder_walls_)
-    any = any || !w.velocity.isZero(0) || w.radial_velocity != 0;
-  for (const MeshWall& w : mesh_walls_) any = any || !w.velocity.isZero(0);
-  if (!any) return;
   const Real limit = max_step_ratio_ * grain_min_radius();
   const auto g = [](Real x) {
     std::ostringstream os;
