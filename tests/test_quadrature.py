@@ -202,9 +202,10 @@ class _Atan:
 
 def test_a_smooth_models_newton_backtracks_where_the_residual_rises():
     with pytest.raises(NewtonFailure, match="no convergence in 7 iterations"):
-        newton_solve(_Atan(), NewtonRules(rtol=1e-12, max_newton=7))
+        newton_solve(_Atan(), NewtonRules(rtol=1e-12, max_newton=7, break_cycles=False))
     p = _Atan()
-    out = newton_solve(p, NewtonRules(rtol=1e-12, max_newton=7, line_search=2))
+    out = newton_solve(p, NewtonRules(rtol=1e-12, max_newton=7, line_search=2,
+                                      break_cycles=False))
     assert out.status == "converged" and abs(p.u) < 1e-12
     # a model with DEM points (a noisy residual) does not take it
     from femcoupling import FemInputError
@@ -512,3 +513,51 @@ def test_the_correction_probe_measures_roughness_not_the_tangent_s_error():
         both.append(newton_solve(q, dataclasses.replace(rules, probe_size=size))
                     .noise_residual)
     assert both[1] / 3 < both[0] < 3 * both[1], both
+
+
+class _SqrtCycle:
+    """One unknown whose internal force is sign(u) sqrt|u|: a full Newton correction is -2 u,
+    so Newton goes u, -u, u, ... for ever, an exact two-iterate cycle (as a Drucker–Prager
+    soil's points flipping between the cone and its apex made tests/mpi_soil_body.py's
+    prestress step cycle until max_newton)."""
+
+    def __init__(self) -> None:
+        self.u, self.sig = 0.3, 0.0
+
+    def evaluate(self, first, perturb=0.0):
+        self.sig = math.copysign(math.sqrt(abs(self.u)), self.u)
+
+    def residual(self):
+        return abs(self.sig)
+
+    def force_scale(self):
+        return 1.0
+
+    def at_boundary_values(self):
+        return True
+
+    def correction(self):
+        return np.array([-2.0 * self.u])
+
+    def move(self, d, w):
+        self.u += w * float(d[0])
+
+
+def test_a_smooth_models_newton_halves_a_correction_that_makes_no_progress():
+    """A cycle is left by half a correction (NewtonRules.break_cycles, on by default for a
+    model without DEM points): plain Newton cycles to max_newton; with it, the third
+    iterate is the root. The atan problem's growing overshoot is caught the same way."""
+    from femcoupling.fem.quadrature import CYCLE_RATIO
+
+    assert 0.5 < CYCLE_RATIO < 1.0
+    with pytest.raises(NewtonFailure, match="no convergence in 20 iterations"):
+        newton_solve(_SqrtCycle(), NewtonRules(rtol=1e-12, max_newton=20, break_cycles=False))
+    lines = []
+    p = _SqrtCycle()
+    out = newton_solve(p, NewtonRules(rtol=1e-12, max_newton=20), log=lines.append)
+    assert out.status == "converged" and out.iterations == 3 and p.u == 0.0
+    assert out.relaxation == (1.0, 1.0, 0.5)
+    assert sum("half the correction" in m for m in lines) == 1
+    p = _Atan()
+    out = newton_solve(p, NewtonRules(rtol=1e-12, max_newton=7))
+    assert out.status == "converged" and abs(p.u) < 1e-12 and 0.5 in out.relaxation
