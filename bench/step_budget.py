@@ -42,7 +42,8 @@ import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 #: How many times a step reads and writes each of the core's arrays (the fields of
 #: Scene.memory_by_field): (reads, writes). Arrays a step of the throughput scene does not
 #: touch (energy tracking, external loads, clumps, the broad phase between its builds, the
-#: cold contact record of the short kernel) are left out.
+#: friction dissipation, written only where a contact slips) are left out; a scene of the
+#: short kernels has no cold contact record.
 TRAFFIC = {
     "contacts.pairs": (1, 1),          # pair pass: geometry in, shear force and normal out
     "contacts.pair_out": (1, 1),       # pair pass writes, reduction reads

@@ -144,6 +144,16 @@ std::vector<Material> get_materials(Reader& r) {
   return out;
 }
 
+/// A pair contact's cold part as versions 8 to 14 stored it: with its friction dissipation
+/// (now Scene::pair_dissip_) between the rolling moment and the viscous dissipation, and kept
+/// by every scene.
+struct PairContactColdV14 {
+  ContactPhys phys;
+  Vec3 mr = Vec3::Zero();
+  Real dissip_friction = 0;
+  Real dissip_viscous = 0;
+};
+
 /// Sizes of every record type, in a fixed order: the layout fingerprint.
 /// (Before version 10 the body store had one array fewer, inertia_scale.)
 std::vector<std::uint64_t> layout(std::uint32_t version = Checkpoint::kVersion) {
@@ -153,7 +163,7 @@ std::vector<std::uint64_t> layout(std::uint32_t version = Checkpoint::kVersion) 
   std::vector<std::uint64_t> l = {sizeof(Real),        body_store,        sizeof(Vec3),        sizeof(Quat),       material,
           sizeof(Wall),        sizeof(PairContact), sizeof(PairOutput), sizeof(WallContact), sizeof(GridLink),
           sizeof(PFacet),      sizeof(GridContact), sizeof(BreakEvent), sizeof(ContactPhys),
-          sizeof(ContactState), sizeof(PairContactCold), sizeof(PeriodicCell), sizeof(Bond),
+          sizeof(ContactState), version < 15 ? sizeof(PairContactColdV14) : sizeof(PairContactCold), sizeof(PeriodicCell), sizeof(Bond),
           sizeof(BondBreak), sizeof(PairLaw)};
   // (Version 11 added the wall openings.)
   if (version >= 11) l.push_back(sizeof(WallOpening));
@@ -431,7 +441,11 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
     for (PairContact& c : pairs) c.kernel = c.kernel == kLinearKernel ? kLinearKernel : 0;
     w.vec(pairs);
   }
+  // (Version 15: whether the scene keeps the cold part, the cold part (empty if not) and the
+  // friction dissipation.)
+  w.put(static_cast<std::uint8_t>(s.pair_cold_on_));
   w.vec(s.pair_cold_);
+  w.vec(s.pair_dissip_);
   w.vec(s.pair_out_);
   w.vec(s.wall_contacts_);
   w.vec(s.pair_jadj_off_);
@@ -616,15 +630,44 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
   r.get(t.cell_);
   r.get(t.max_radius_at_build_);
   r.vec(t.pairs_);
-  r.vec(t.pair_cold_);
-  if (t.pair_cold_.size() != t.pairs_.size())
+  if (version >= 15) {
+    const auto on = r.get<std::uint8_t>();
+    if (on > 1) throw ParameterError("checkpoint: corrupt pair contacts");
+    t.pair_cold_on_ = on == 1;
+    r.vec(t.pair_cold_);
+    r.vec(t.pair_dissip_);
+  } else {
+    // (every scene kept the cold part, the friction dissipation in it)
+    std::vector<PairContactColdV14> old;
+    r.vec(old);
+    t.pair_cold_on_ = true;
+    t.pair_cold_.resize(old.size());
+    t.pair_dissip_.resize(old.size());
+    for (size_t k = 0; k < old.size(); ++k) {
+      t.pair_cold_[k].phys = old[k].phys;
+      t.pair_cold_[k].mr = old[k].mr;
+      t.pair_cold_[k].dissip_viscous = old[k].dissip_viscous;
+      t.pair_dissip_[k] = old[k].dissip_friction;
+      // (the hot record's model byte was padding, zero: the law's model, from the phys)
+      t.pairs_[k].model = static_cast<std::uint8_t>(old[k].phys.model);
+    }
+  }
+  if (t.pair_cold_.size() != (t.pair_cold_on_ ? t.pairs_.size() : 0) ||
+      t.pair_dissip_.size() != t.pairs_.size())
     throw ParameterError("checkpoint: corrupt pair contacts");
+  t.pair_cold_version_ = -1;
+  t.pair_cold_missing_ = 0;
   for (size_t k = 0; k < t.pairs_.size(); ++k) {
     // (the Hertz kernels of the contacts saved as the composed law's: see the save)
     PairContact& c = t.pairs_[k];
     if (c.kernel != 0 && c.kernel != kLinearKernel)
       throw ParameterError("checkpoint: corrupt pair contacts");
-    const std::uint8_t kernel = pair_kernel(t.pair_cold_[k].phys);
+    std::uint8_t kernel = kComposedKernel;
+    if (t.pair_cold_on_) {
+      kernel = pair_kernel(t.pair_cold_[k].phys);
+    } else if (c.model == static_cast<std::uint8_t>(ContactModel::HertzMindlin)) {
+      kernel = kHertzKernel;  // (without the cold part only the short kernels run)
+    }
     if (c.kernel == 0 && (kernel == kHertzKernel || kernel == kHertzDampedKernel))
       c.kernel = kernel;
   }

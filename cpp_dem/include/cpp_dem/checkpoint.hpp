@@ -26,7 +26,7 @@ class Checkpoint {
   /// cylindrical and triangle-mesh walls and their contacts. load also reads versions 8 (with the default
   /// kinematics), 9 (scaling off), 10 (walls closed), 11 (controllers' kinds unchecked), 12
   /// (materials as records of the 8 parameters then) and 13 (no cylindrical walls).
-  static constexpr std::uint32_t kVersion = 14;
+  static constexpr std::uint32_t kVersion = 15;
   /// The whole state of `scene` as bytes. Controllers are code, not data: the blob holds
   /// their count, kinds, `period`, `enabled` and, for StatefulController ones, their state.
   static std::vector<std::uint8_t> save(const Scene& scene);

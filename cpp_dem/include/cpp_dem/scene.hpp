@@ -451,20 +451,36 @@ class Scene {
   /// Sphere–sphere contacts, hot part (ids, activity, spring state); see pair_phys and
   /// pair_state for the full records.
   const std::vector<PairContact>& pair_contacts() const { return pairs_; }
-  /// Parameters of pair contact k.
-  const ContactPhys& pair_phys(size_t k) const { return pair_cold_[k].phys; }
-  /// History of pair contact k, assembled from its hot and cold parts.
+  /// Parameters of pair contact k (as of its last activation or change of materials): its
+  /// cold part's, or, in a scene without one (only short kernels: ensure_pair_cold), the
+  /// hot record's model, kn, ks and tan_phi, with no dashpots and no rolling resistance
+  /// (mass_eff and rolling_cap, which such a contact does not read, are zero).
+  ContactPhys pair_phys(size_t k) const {
+    if (pair_cold_on_) return pair_cold_[k].phys;
+    const PairContact& c = pairs_[k];
+    ContactPhys p;
+    p.model = static_cast<ContactModel>(c.model);
+    p.kn = c.kn;
+    p.ks = c.ks;
+    p.tan_phi = c.tan_phi;
+    return p;
+  }
+  /// History of pair contact k, assembled from its hot record, its friction dissipation and
+  /// its cold part (zero rolling moment and viscous dissipation without one).
   ContactState pair_state(size_t k) const {
     ContactState s;
     s.fs = pairs_[k].fs;
-    s.mr = pair_cold_[k].mr;
+    if (pair_cold_on_) s.mr = pair_cold_[k].mr;
     s.normal = pairs_[k].normal;
     s.overlap = pairs_[k].overlap;
     s.fn = pairs_[k].fn;
-    s.dissip_friction = pair_cold_[k].dissip_friction;
-    s.dissip_viscous = pair_cold_[k].dissip_viscous;
+    s.dissip_friction = pair_dissip_[k];
+    if (pair_cold_on_) s.dissip_viscous = pair_cold_[k].dissip_viscous;
     return s;
   }
+  /// Whether the scene keeps the pair contacts' cold part (PairContactCold): from the first
+  /// time one of its material pairs takes a kernel that reads it (ensure_pair_cold) on.
+  bool pair_cold_on() const { return pair_cold_on_; }
   /// Force on body j of pair contact k, N (zero when inactive).
   const Vec3& pair_force(size_t k) const { return pair_out_[pair_jslot_[k]].force; }
   const std::vector<WallContact>& wall_contacts() const { return wall_contacts_; }
@@ -487,10 +503,16 @@ class Scene {
     dropped_friction_ += s.dissip_friction;
     dropped_viscous_ += s.dissip_viscous;
   }
-  void drop_dissipation(const PairContactCold& c) {
-    dropped_friction_ += c.dissip_friction;
-    dropped_viscous_ += c.dissip_viscous;
+  /// Pair contact k leaves the lists (its dissipation to the scene's totals).
+  void drop_pair_dissipation(size_t k) {
+    dropped_friction_ += pair_dissip_[k];
+    dropped_viscous_ += pair_cold_on_ ? pair_cold_[k].dissip_viscous : 0.0;
   }
+  /// Makes the pair contacts' cold part where a material pair of the scene takes a kernel
+  /// that reads it (the Hertz–Mindlin law with dashpots, the composed law: pair_kernel of
+  /// each pair of materials, or rolling resistance asked by both factors), checked again
+  /// when the materials change (phys_version_). Once made it stays.
+  void ensure_pair_cold();
   /// Energy stored in active contacts and unbroken geogrid links, J.
   Real stored_elastic_energy() const;
   /// Appends one body (kind 0 sphere, 1 grid node) at rest to every per-body array.
@@ -575,7 +597,9 @@ class Scene {
   /// Members of clump c at their clump's pose: positions, velocities, spins, orientations.
   void place_members(int c);
   void check_clump(int c) const;
-  void update_phys(PairContact& c, PairContactCold& cold) const;
+  /// Pair contact c's parameters for the current materials (into its cold part k where
+  /// the scene has one), copied into its hot record.
+  void update_phys(PairContact& c, size_t k);
   /// The radius body `slot` takes in the mixing rules: its own, or its clump's stiffness radius.
   Real stiffness_radius(int slot) const {
     if (!has_clumps()) return bodies_.radius[slot];
@@ -647,7 +671,12 @@ class Scene {
   std::vector<std::shared_ptr<Controller>> controllers_;
   // Contacts and their adjacency (CSR: for body b, entries adj_off[b]..adj_off[b+1]).
   std::vector<PairContact> pairs_;
-  std::vector<PairContactCold> pair_cold_;
+  std::vector<PairContactCold> pair_cold_;  // empty unless pair_cold_on_ (ensure_pair_cold)
+  bool pair_cold_on_ = false;
+  int pair_cold_version_ = -1;  // phys_version_ at the last ensure_pair_cold
+  int pair_cold_missing_ = 0;   // set by update_phys if a kernel needs the cold part (a bug)
+  // Friction dissipated by each pair contact, J (ContactState::dissip_friction).
+  std::vector<Real> pair_dissip_;
   std::vector<PairOutput> pair_out_;
   // Per body: the sum over its contacts as i of -force and torque_i, written by the pair
   // pass every step (scratch, not state).
@@ -836,14 +865,16 @@ void Scene::for_each_contact_of(ContactKind kind, F&& f) const {
   r.kind = kind;
   if (kind == ContactKind::Pair) {
     ContactState scratch;
+    ContactPhys phys;
     r.state = &scratch;
+    r.phys = &phys;
     for (size_t k = 0; k < pairs_.size(); ++k) {
       const PairContact& c = pairs_[k];
       r.index = static_cast<long>(k);
       r.active = c.active;
       r.body1 = c.i;
       r.body2 = c.j;
-      r.phys = &pair_cold_[k].phys;
+      phys = pair_phys(k);
       scratch = pair_state(k);
       r.force2 = pair_out_[pair_jslot_[k]].force;
       r.shift2 = pair_shift(k);

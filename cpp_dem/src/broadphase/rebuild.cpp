@@ -163,34 +163,40 @@ void Scene::rebuild() {
   drop_bonded_candidates();  // a bonded pair is its bond's contact
   // Merge the new candidate list with the old contacts, keeping history (both sorted).
   std::vector<PairContact> next;
-  std::vector<PairContactCold> next_cold;
+  std::vector<PairContactCold> next_cold;  // (only where the scene has the cold part)
+  std::vector<Real> next_dissip;
   next.reserve(candidates_.size());
-  next_cold.reserve(candidates_.size());
+  if (pair_cold_on_) next_cold.reserve(candidates_.size());
+  next_dissip.reserve(candidates_.size());
   size_t k = 0;
   for (size_t q = 0; q < candidates_.size(); ++q) {
     const auto& ij = candidates_[q];
     while (k < pairs_.size() && std::make_pair(pairs_[k].i, pairs_[k].j) < ij) {
-      drop_dissipation(pair_cold_[k]);
+      drop_pair_dissipation(k);
       ++k;
     }
     if (k < pairs_.size() && pairs_[k].i == ij.first && pairs_[k].j == ij.second) {
       next.push_back(pairs_[k]);
-      next_cold.push_back(pair_cold_[k++]);
+      next_dissip.push_back(pair_dissip_[k]);
+      if (pair_cold_on_) next_cold.push_back(pair_cold_[k]);
+      ++k;
     } else {
       PairContact c;
       c.i = ij.first;
       c.j = ij.second;
       next.push_back(c);
-      next_cold.emplace_back();
+      next_dissip.push_back(0.0);
+      if (pair_cold_on_) next_cold.emplace_back();
     }
     // (The image may change for a kept contact: a body was wrapped into the cell.)
     next.back().image = candidate_images_[q];
   }
   for (; k < pairs_.size(); ++k) {
-    drop_dissipation(pair_cold_[k]);
+    drop_pair_dissipation(k);
   }
   pairs_.swap(next);
   pair_cold_.swap(next_cold);
+  pair_dissip_.swap(next_dissip);
   pair_out_.assign(pairs_.size(), PairOutput());
   // Sphere–wall candidates: signed distance to the plane below r + margin, and the centre
   // not beyond the plane by more than r (one-sided walls ignore what is behind them).

@@ -320,7 +320,8 @@ void Scene::reset_energy() {
     clumps_.pos_at_energy_reset[c] = clumps_.pos[c];
   }
   dropped_friction_ = dropped_viscous_ = 0;
-  for (PairContactCold& c : pair_cold_) c.dissip_friction = c.dissip_viscous = 0;
+  std::fill(pair_dissip_.begin(), pair_dissip_.end(), 0.0);
+  for (PairContactCold& c : pair_cold_) c.dissip_viscous = 0;
   for (WallContact& c : wall_contacts_) c.state.dissip_friction = c.state.dissip_viscous = 0;
   for (WallContact& c : cylinder_contacts_) c.state.dissip_friction = c.state.dissip_viscous = 0;
   for (MeshContact& c : mesh_contacts_)
@@ -419,6 +420,7 @@ std::vector<std::pair<std::string, std::size_t>> Scene::memory_by_field() const 
   grid_.add_memory(out);
   add("contacts.pairs", pairs_);
   add("contacts.pair_cold", pair_cold_);
+  add("contacts.pair_dissip", pair_dissip_);
   add("contacts.pair_out", pair_out_);
   add("contacts.pair_jadj_off", pair_jadj_off_);
   add("contacts.pair_jslot", pair_jslot_);

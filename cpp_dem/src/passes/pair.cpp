@@ -20,24 +20,23 @@ namespace {
 /// Pair contact c with the Hertz–Mindlin short kernel (hertz_frictional; kDamped:
 /// hertz_damped, with the dashpots of its cold record's phys) on its hot record: j's force
 /// and torque into force_j and torque_j (PairOutput's padded vectors), i's added to fi and
-/// ti; slip and viscous energy into the cold record. The force and the moments are
+/// ti; slip energy into dissip_friction, viscous energy into the cold record. The force and the moments are
 /// general_pair's expressions, to the bit: the composed law's force fn n + fs plus its shear
 /// dashpot's (zero without one), the branches li n and -lj n, and its zero rolling moment
 /// added on j and subtracted on i (a -0 component comes out as general_pair's).
 template <bool kDamped, class Ops, class V>
-ALWAYS_INLINE void hertz_pair(PairContact& c, PairContactCold& cold, Real* force_j,
-                              Real* torque_j, const V& n, Real overlap, Real li, Real lj,
+ALWAYS_INLINE void hertz_pair(PairContact& c, PairContactCold* cold, Real& dissip_friction,
+                              Real* force_j, Real* torque_j, const V& n, Real overlap, Real li, Real lj,
                               const V& rel_vel, const V& angvel_sum, Real dt, V& fi, V& ti,
                               Ops ops) {
   V fs = ops.load_head(c.fs.data());
   V fvs = ops.zero();
   const Real fn =
       kDamped ? hertz_damped<Ops>(fs, ops.load_head(c.normal.data()), n, overlap, rel_vel,
-                                  angvel_sum, cold.phys, dt, cold.dissip_friction,
-                                  cold.dissip_viscous, fvs)
+                                  angvel_sum, cold->phys, dt, dissip_friction,
+                                  cold->dissip_viscous, fvs)
               : hertz_frictional<Ops>(fs, ops.load_head(c.normal.data()), n, overlap, rel_vel,
-                                      angvel_sum, c.kn, c.ks, c.tan_phi, dt,
-                                      cold.dissip_friction);
+                                      angvel_sum, c.kn, c.ks, c.tan_phi, dt, dissip_friction);
   ops.store_with(c.fs.data(), fs, overlap);  // fs, overlap
   ops.store_with(c.normal.data(), n, fn);    // normal, fn
   const V f = fn * n + fs + fvs;
@@ -50,8 +49,9 @@ ALWAYS_INLINE void hertz_pair(PairContact& c, PairContactCold& cold, Real* force
 
 }  // namespace
 
-void Scene::update_phys(PairContact& c, PairContactCold& cold) const {
-  ContactPhys& p = cold.phys;
+void Scene::update_phys(PairContact& c, size_t k) {
+  ContactPhys local;
+  ContactPhys& p = pair_cold_on_ ? pair_cold_[k].phys : local;
   mix_materials(materials_[bodies_.material[c.i]], materials_[bodies_.material[c.j]],
                 stiffness_radius(c.i), stiffness_radius(c.j), bodies_.mass[c.i], bodies_.mass[c.j],
                 pair_law(bodies_.material[c.i], bodies_.material[c.j]), p);
@@ -59,14 +59,21 @@ void Scene::update_phys(PairContact& c, PairContactCold& cold) const {
   c.ks = p.ks;
   c.tan_phi = p.tan_phi;
   c.kernel = pair_kernel(p);
+  c.model = static_cast<std::uint8_t>(p.model);
   c.phys_version = phys_version_;
+  if (!pair_cold_on_ && c.kernel != kLinearKernel && c.kernel != kHertzKernel) {
+    // (ensure_pair_cold made no cold part for materials that need one: the pass skips the
+    // contact and the step stops with a logic_error)
+#pragma omp atomic write
+    pair_cold_missing_ = 1;
+  }
   note_formed_contact(p, c.i, c.j);
 }
 
 
 LawOutput Scene::apply_pair_law(size_t k, const ContactGeometry& g, Real dt) {
   PairContact& c = pairs_[k];
-  PairContactCold& cold = pair_cold_[k];
+  PairContactCold& cold = pair_cold_[k];  // (the composed law: the scene has the cold part)
   ContactState s = pair_state(k);
   const LawOutput out = apply_law(cold.phys, g, dt, s);
   c.fs = s.fs;
@@ -74,7 +81,7 @@ LawOutput Scene::apply_pair_law(size_t k, const ContactGeometry& g, Real dt) {
   c.overlap = s.overlap;
   c.fn = s.fn;
   cold.mr = s.mr;
-  cold.dissip_friction = s.dissip_friction;
+  pair_dissip_[k] = s.dissip_friction;
   cold.dissip_viscous = s.dissip_viscous;
   return out;
 }
@@ -88,7 +95,7 @@ void Scene::open_pair(long k, PairOutput& o) {
   c.normal.setZero();
   c.overlap = 0;
   c.fn = 0;
-  pair_cold_[k].mr.setZero();
+  if (pair_cold_on_) pair_cold_[k].mr.setZero();
   o = PairOutput();
 }
 
@@ -145,6 +152,7 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
   const int* const ioff = pair_ioff_.data();
   const int* const jslot = pair_jslot_.data();
   PairContact* const pairs = pairs_.data();
+  Real* const dissip = pair_dissip_.data();
   PairOutput* const out_j = pair_out_.data();
   Real* const out_fi = pair_fi_.data()->data();
   Real* const out_ti = pair_ti_.data()->data();
@@ -180,7 +188,7 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
           err = std::min(err, static_cast<long>(k));
           continue;
         }
-        if (!c.active || c.phys_version != version) update_phys(c, pair_cold_[k]);
+        if (!c.active || c.phys_version != version) update_phys(c, k);
         c.active = true;
         V wj = ops.load(angvel[j]), vj = ops.load(vel[j]);
         if (periodic) {
@@ -193,11 +201,13 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
                                              rel_vel);
         if (c.kernel != kLinearKernel) {
           if (c.kernel == kHertzKernel) {
-            hertz_pair<false>(c, pair_cold_[k], o.force.data(), o.torque_j.data(), n, overlap,
-                              li, lj, rel_vel, V(wi + wj), dt, fi, ti, ops);
+            hertz_pair<false>(c, nullptr, dissip[k], o.force.data(), o.torque_j.data(), n,
+                              overlap, li, lj, rel_vel, V(wi + wj), dt, fi, ti, ops);
+          } else if (!pair_cold_on_) {
+            continue;  // (a bug: pair_cold_missing_ stops the step)
           } else if (c.kernel == kHertzDampedKernel) {
-            hertz_pair<true>(c, pair_cold_[k], o.force.data(), o.torque_j.data(), n, overlap,
-                             li, lj, rel_vel, V(wi + wj), dt, fi, ti, ops);
+            hertz_pair<true>(c, &pair_cold_[k], dissip[k], o.force.data(), o.torque_j.data(),
+                             n, overlap, li, lj, rel_vel, V(wi + wj), dt, fi, ti, ops);
           } else {
             const auto on_i = general_pair(k, o, ops.vec(n), overlap, li, lj, ops.vec(rel_vel),
                                            ops.vec(wi + wj), ops.vec(wj - wi));
@@ -210,7 +220,7 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
         V fs = ops.load_head(c.fs.data());
         const Real fn = linear_frictional<Ops>(fs, ops.load_head(c.normal.data()), n, overlap,
                                                rel_vel, V(wi + wj), c.kn, c.ks, c.tan_phi, dt,
-                                               pair_cold_[k].dissip_friction);
+                                               dissip[k]);
         ops.store_with(c.fs.data(), fs, overlap);  // fs, overlap
         ops.store_with(c.normal.data(), n, fn);    // normal, fn
         const V f = fn * n + fs;
@@ -229,8 +239,37 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
 }
 
 void Scene::compute_pair_forces(long& err_contact) {
+  ensure_pair_cold();
   if (shear_kinematics_ == ShearKinematics::Yade) compute_pair_forces_hot<true>(err_contact);
   else compute_pair_forces_hot<false>(err_contact);
+  if (pair_cold_missing_)
+    throw std::logic_error("cpp_dem: a pair contact's law needs the contacts' cold part, "
+                           "which ensure_pair_cold did not make (a bug: please report it)");
+}
+
+void Scene::ensure_pair_cold() {
+  if (pair_cold_on_ || pair_cold_version_ == phys_version_) return;
+  pair_cold_version_ = phys_version_;
+  const int nm = static_cast<int>(materials_.size());
+  bool need = false;
+  for (int a = 0; a < nm && !need; ++a) {
+    for (int b = a; b < nm && !need; ++b) {
+      const Material& ma = materials_[a];
+      const Material& mb = materials_[b];
+      // (the kernel does not depend on the radii and masses, but for rolling resistance,
+      // whose stiffness is > 0 where both its factors are and the shear stiffness is)
+      const std::uint8_t kernel = pair_kernel(mix_materials(ma, mb, 1.0, 1.0, 1.0, 1.0,
+                                                            pair_law(a, b)));
+      const bool rolling = ma.rolling_stiffness + mb.rolling_stiffness > 0 &&
+                           ma.rolling_friction + mb.rolling_friction > 0;
+      need = rolling || (kernel != kLinearKernel && kernel != kHertzKernel);
+    }
+  }
+  if (!need) return;
+  pair_cold_on_ = true;
+  // (every active contact's phys is made again, into its cold part, at its next step:
+  // phys_version_ has changed since the last check, or no step has run)
+  pair_cold_.assign(pairs_.size(), PairContactCold());
 }
 
 template <bool kYadeShear>
@@ -263,6 +302,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   const int* const ioff = pair_ioff_.data();
   const int* const jslot = pair_jslot_.data();
   PairContact* const pairs = pairs_.data();
+  Real* const dissip = pair_dissip_.data();
   PairOutput* const out_j = pair_out_.data();
   Real* const out_fi = pair_fi_.data()->data();
   Real* const out_ti = pair_ti_.data()->data();
@@ -308,7 +348,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
             err = std::min(err, static_cast<long>(k));
             continue;
           }
-          if (!c.active || c.phys_version != version) update_phys(c, pair_cold_[k]);
+          if (!c.active || c.phys_version != version) update_phys(c, k);
           c.active = true;
           V4 wj = v4(angvel[j]), vj = v4(vel[j]);
           if constexpr (kPeriodic) {
@@ -321,11 +361,13 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
                                                    li, lj, rel_vel);
           if (c.kernel != kLinearKernel) {
             if (c.kernel == kHertzKernel) {
-              hertz_pair<false>(c, pair_cold_[k], o.force.data(), o.torque_j.data(), n, overlap,
-                                li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
+              hertz_pair<false>(c, nullptr, dissip[k], o.force.data(), o.torque_j.data(), n,
+                                overlap, li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
+            } else if (!pair_cold_on_) {
+              continue;  // (a bug: pair_cold_missing_ stops the step)
             } else if (c.kernel == kHertzDampedKernel) {
-              hertz_pair<true>(c, pair_cold_[k], o.force.data(), o.torque_j.data(), n, overlap,
-                               li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
+              hertz_pair<true>(c, &pair_cold_[k], dissip[k], o.force.data(), o.torque_j.data(),
+                               n, overlap, li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
             } else {
               const auto on_i = general_pair(k, o, vec3(n), overlap, li, lj, vec3(rel_vel),
                                              vec3(wi + wj), vec3(wj - wi));
@@ -339,7 +381,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           V4 fs = zero_lane3(load4(c.fs.data()));
           const Real fn = linear_frictional<WideOps>(fs, zero_lane3(load4(c.normal.data())), n,
                                                      overlap, rel_vel, wi + wj, c.kn, c.ks,
-                                                     c.tan_phi, dt, pair_cold_[k].dissip_friction);
+                                                     c.tan_phi, dt, dissip[k]);
           store4(c.fs.data(), with_lane3(fs, overlap));  // fs, overlap
           store4(c.normal.data(), with_lane3(n, fn));    // normal, fn
           const V4 f = fn * n + fs;

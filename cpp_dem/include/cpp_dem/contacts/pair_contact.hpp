@@ -8,9 +8,12 @@
 namespace cpp_dem {
 
 /// A sphere–sphere contact (candidate pair from the broad phase; active while overlapping):
-/// the hot part, what the pair pass reads and writes every step (104 bytes). The rest of the
-/// contact's parameters and history (PairContactCold) is in a parallel array, touched when
-/// the contact is (re)activated, when it slips, and by laws with damping or rolling.
+/// the hot part, what the pair pass reads and writes every step (104 bytes). The friction
+/// it dissipates is in a parallel array of doubles (Scene::pair_dissip_, written when it
+/// slips). The rest of its parameters and history (PairContactCold) is in another parallel
+/// array, which a scene has only once one of its material pairs takes a kernel that reads it
+/// (dashpots, rolling resistance, the composed law): with the short kernels alone the hot
+/// record holds all the law's parameters (Scene::ensure_pair_cold).
 /// The full records: Scene::pair_phys(k), Scene::pair_state(k).
 struct PairContact {
   int i = 0, j = 0;             ///< body ids, i < j; side 1 = i, side 2 = j
@@ -24,7 +27,9 @@ struct PairContact {
   std::uint8_t kernel = 0;
   /// The periodic image of j the contact sees (bodies/cell.hpp's image code; kNoShift: j).
   std::uint8_t image = kNoShift;
-  std::uint8_t pad_ = 0;        ///< zero (explicit padding: checkpoints are byte-identical)
+  /// The law's ContactModel (as its number; set with kn, ks, tan_phi): with them the whole
+  /// phys of a short kernel's contact where the scene has no cold part (Scene::pair_phys).
+  std::uint8_t model = 0;
   int phys_version = -1;        ///< scene phys version the phys was computed at
   Real kn = 0;                  ///< copy of ContactPhys::kn
   Real ks = 0;                  ///< copy of ContactPhys::ks
@@ -37,11 +42,11 @@ struct PairContact {
   Real fn = 0;                  ///< ContactState::fn, N
 };
 
-/// The cold part of a sphere–sphere contact (same index as its PairContact).
+/// The cold part of a sphere–sphere contact (same index as its PairContact), in a scene
+/// whose materials need it (PairContact).
 struct PairContactCold {
   ContactPhys phys;
   Vec3 mr = Vec3::Zero();       ///< ContactState::mr, rolling moment on j, N m
-  Real dissip_friction = 0;     ///< ContactState::dissip_friction, J
   Real dissip_viscous = 0;      ///< ContactState::dissip_viscous, J
 };
 

@@ -1,0 +1,90 @@
+"""The pair contacts' cold part (PairContactCold: the law's full parameters, the rolling moment,
+the viscous dissipation) is kept only by a scene one of whose material pairs takes a kernel
+that reads it (dashpots, rolling resistance, the composed law); with the short kernels alone
+the hot record holds all the law's parameters (docs/core.md, "Contact storage"). Nothing but
+the memory changes: the same bits with the cold part or without it, and a checkpoint of the
+format before (14, the cold part in every scene, the friction dissipation in it) continues as
+the build that wrote it did."""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+import cpp_dem as dem
+from cpp_dem import _core
+
+REG = Path(__file__).resolve().parent / "regression"
+
+
+def _scene(kind: str, extra_damped_material: bool = False) -> dem.Scene:
+    """tests/regression/make_checkpoints_v14.py's scene: 80 spheres dropped into a box."""
+    sys.path.insert(0, str(REG))
+    from make_checkpoints_v14 import scene
+
+    return scene(kind, extra_damped_material)
+
+
+@pytest.mark.parametrize("kind", ["linear", "hertz_short"])
+def test_the_short_kernels_give_the_same_bits_with_or_without_the_cold_part(kind):
+    a, b = _scene(kind), _scene(kind, extra_damped_material=True)
+    a.run(6000)
+    b.run(6000)
+    fa, fb = a.memory_by_field(), b.memory_by_field()
+    assert fa["contacts.pair_cold"] == 0  # (short kernels only)
+    assert fb["contacts.pair_cold"] >= 104 * a.num_active_contacts > 0
+    assert a.num_active_contacts == b.num_active_contacts > 20
+    for name in ("positions", "velocities", "angular_velocities"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    ea, eb = a.energies(), b.energies()
+    assert ea["friction"] == eb["friction"] > 0  # (slip happened: its dissipation is kept)
+    ca, cb = a.contacts(), b.contacts()
+    for key in ("kn", "ks", "tan_phi", "force"):
+        assert np.array_equal(ca[key], cb[key]), key
+    # a checkpoint without the cold part restores it as it was
+    c = dem.Scene()
+    _core._checkpoint_load(c, _core._checkpoint_save(a), replace=True)
+    assert c.memory_by_field()["contacts.pair_cold"] == 0
+    a.run(200)
+    c.run(200)
+    assert np.array_equal(a.positions, c.positions)
+
+
+def test_a_damped_material_given_during_a_run_brings_the_cold_part():
+    """A scene that starts with the short kernel and is given dashpots later keeps the cold
+    part from then on, and runs as a scene that had it from the start."""
+    a, b = _scene("linear"), _scene("linear", extra_damped_material=True)
+    a.run(1000)
+    b.run(1000)
+    damped = dem.linear_material(density=2650, young=5e6, poisson=0.3, friction_angle_deg=25,
+                                 damping_normal=0.3)
+    for s in (a, b):
+        m = s.add_material(damped)
+        for body in range(s.num_bodies):
+            s.set_body_material(body, m)
+    assert a.memory_by_field()["contacts.pair_cold"] == 0  # (not until the next step)
+    a.run(500)
+    b.run(500)
+    assert a.memory_by_field()["contacts.pair_cold"] > 0
+    assert np.array_equal(a.positions, b.positions)
+    assert a.energies()["viscous"] == b.energies()["viscous"]
+
+
+@pytest.mark.parametrize("kind", ["linear", "hertz"])
+def test_a_format_14_checkpoint_continues_as_the_build_that_wrote_it(kind):
+    """tests/regression/make_checkpoints_v14.py, run by the build before this format: its
+    checkpoint after 3000 steps and its state 300 steps later (the hertz scene has dashpots
+    and rolling resistance: the composed law, with the cold part)."""
+    ref = np.load(REG / f"pair_cold_{kind}_v14.npz")
+    s = dem.Scene()
+    _core._checkpoint_load(s, ref["blob"].tobytes(), replace=True)
+    s.run(300)
+    assert s.num_active_contacts == int(ref["active"])
+    for name, key in (("positions", "positions"), ("velocities", "velocities"),
+                      ("angular_velocities", "angvel")):
+        assert np.array_equal(getattr(s, name), ref[key]), name
+    e = s.energies()
+    assert e["friction"] == float(ref["friction"]) and e["viscous"] == float(ref["viscous"])
