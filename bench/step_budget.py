@@ -46,13 +46,13 @@ import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 #: short kernels has no cold contact record.
 TRAFFIC = {
     "contacts.pairs": (1, 1),          # pair pass: geometry in, shear force and normal out
-    "contacts.pair_out": (1, 1),       # pair pass writes, reduction reads
-    "contacts.pair_jslot": (1, 0),     # reduction: each body's contacts as side j
-    "contacts.pair_jadj_off": (1, 0),
+    # (one thread: the pair pass adds each contact's share to its bodies' sums at once and
+    # keeps no pair_out; on more threads it writes pair_out, 64 B a contact, which the
+    # reduction reads back through pair_jslot and pair_jadj_off)
     "contacts.pair_ioff": (1, 0),
     "contacts.wall_adj_off": (1, 0),
-    "scratch.pair_fi": (1, 1),         # pair pass sums side i's force, reduction reads it
-    "scratch.pair_ti": (1, 1),
+    "scratch.pair_fi": (2, 2),         # started, summed into by the pair pass, reduction reads
+    "scratch.pair_ti": (2, 2),
     "scratch.acc_lin": (1, 1),         # reduction writes, integration reads
     "scratch.acc_ang": (1, 1),
     "bodies.pos": (2, 1),              # pair pass and integration read, integration writes

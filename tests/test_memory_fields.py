@@ -35,7 +35,9 @@ def test_every_field_is_counted_by_its_capacity():
     for name, size in (("bodies.pos", 24), ("bodies.ori", 32), ("bodies.radius", 8),
                        ("scratch.pair_fi", 32)):
         assert f[name] >= n * size, name
-    assert f["contacts.pairs"] >= c * 8 and f["contacts.pair_out"] >= c * 8
+    assert f["contacts.pairs"] >= c * 8
+    # (one thread, the short kernel: the pass sums into the bodies and keeps no outputs)
+    assert f["contacts.pair_out"] == 0 and f["contacts.pair_cold"] == 0
     assert f["bonds.bonds"] == 0 and f["geogrid.links"] == 0  # (none in this scene)
     assert len({k.split(".")[0] for k in f}) >= 8
 

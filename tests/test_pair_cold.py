@@ -88,3 +88,43 @@ def test_a_format_14_checkpoint_continues_as_the_build_that_wrote_it(kind):
         assert np.array_equal(getattr(s, name), ref[key]), name
     e = s.energies()
     assert e["friction"] == float(ref["friction"]) and e["viscous"] == float(ref["viscous"])
+
+
+def _pile(kind: str) -> dem.Scene:
+    """384 spheres dropped into a box (about 1 000 candidate pairs: the pass runs threaded
+    on two threads), two of them pushed by an external force."""
+    sys.path.insert(0, str(REG))
+    from make_checkpoints_v14 import scene
+
+    s = scene(kind, nx=8, nz=6)
+    f = np.zeros((s.num_bodies, 3))
+    f[[5, 200]] = [[1e-3, 0, 0], [0, -2e-3, 1e-3]]
+    s.external_forces = f
+    return s
+
+
+@pytest.mark.parametrize("kind", ["linear", "hertz_short"])
+def test_one_thread_sums_into_the_bodies_and_two_keep_outputs_the_same_bits(kind):
+    """On one thread, with the short kernels alone, the pair pass adds each contact's share
+    to its bodies' sums (starting from the external force and the weight) and keeps no
+    outputs; on two it writes them and the reduction sums them: the same bits, the same
+    contact forces, the same checkpoint bytes."""
+    before = dem.get_num_threads()
+    runs = []
+    try:
+        for t in (1, 2):
+            dem.set_num_threads(t)
+            s = _pile(kind)
+            s.run(3000)
+            runs.append((s, s.memory_by_field()["contacts.pair_out"],
+                         _core._checkpoint_save(s)))
+    finally:
+        dem.set_num_threads(before)
+    (a, out_a, blob_a), (b, out_b, blob_b) = runs
+    assert out_a == 0 and out_b > 0  # (one thread keeps none)
+    assert len(a.contacts()["force"]) > 200
+    for name in ("positions", "velocities", "angular_velocities", "forces", "torques"):
+        assert np.array_equal(getattr(a, name), getattr(b, name)), name
+    ca, cb = a.contacts(), b.contacts()
+    assert np.array_equal(ca["force"], cb["force"]) and np.array_equal(ca["ids"], cb["ids"])
+    assert blob_a == blob_b

@@ -446,7 +446,13 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.put(static_cast<std::uint8_t>(s.pair_cold_on_));
   w.vec(s.pair_cold_);
   w.vec(s.pair_dissip_);
-  w.vec(s.pair_out_);
+  // (The pair pass's outputs only where the scene has the cold part: without it every
+  // contact's force is its hot record's, f_n n + f_s (Scene::pair_force), and a pass on one
+  // thread keeps no outputs (pair_direct_), so the bytes do not depend on the threads.)
+  if (s.pair_cold_on_)
+    w.vec(s.pair_out_);
+  else
+    w.vec(std::vector<PairOutput>());
   w.vec(s.wall_contacts_);
   w.vec(s.pair_jadj_off_);
   w.vec(s.pair_jslot_);
@@ -672,6 +678,10 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
       c.kernel = kernel;
   }
   r.vec(t.pair_out_);
+  // (format 15: none after a direct pair pass, whose forces are the hot records')
+  if (t.pair_out_.size() != t.pairs_.size() && !(version >= 15 && t.pair_out_.empty()))
+    throw ParameterError("checkpoint: corrupt pair contacts");
+  t.pair_direct_ = t.pair_out_.size() != t.pairs_.size();
   r.vec(t.wall_contacts_);
   r.vec(t.pair_jadj_off_);
   r.vec(t.pair_jslot_);

@@ -9,11 +9,11 @@ import numpy as np
 import cpp_dem as dem
 
 
-def scene(kind: str, extra_damped_material: bool = False) -> dem.Scene:
-    """80 spheres dropped into a box: ``kind`` "linear" (friction), "hertz" (Hertz–Mindlin
-    with dashpots and rolling resistance: the composed law) or "hertz_short" (without them:
-    the Hertz short kernel); ``extra_damped_material`` adds a damped material no body has (it
-    only makes the scene keep the contacts' cold part)."""
+def scene(kind: str, extra_damped_material: bool = False, nx: int = 4, nz: int = 5) -> dem.Scene:
+    """nx x nx x nz (80) spheres dropped into a box: ``kind`` "linear" (friction), "hertz"
+    (Hertz–Mindlin with dashpots and rolling resistance: the composed law) or "hertz_short"
+    (without them: the Hertz short kernel); ``extra_damped_material`` adds a damped material
+    no body has (it only makes the scene keep the contacts' cold part)."""
     s = dem.Scene(gravity=(0, 0, -9.81))
     if kind == "linear":
         m = s.add_material(dem.linear_material(density=2650, young=5e6, poisson=0.3,
@@ -29,11 +29,12 @@ def scene(kind: str, extra_damped_material: bool = False) -> dem.Scene:
         s.add_material(dem.linear_material(density=2650, young=5e6, poisson=0.3,
                                            friction_angle_deg=25, damping_normal=0.3))
     rng = np.random.default_rng(7)
-    g = np.arange(4) * 0.0105
-    pos = np.stack(np.meshgrid(g, g, np.arange(5) * 0.0105, indexing="ij"), -1).reshape(-1, 3)
+    g = np.arange(nx) * 0.0105
+    pos = np.stack(np.meshgrid(g, g, np.arange(nz) * 0.0105, indexing="ij"), -1).reshape(-1, 3)
     pos = pos + 0.006 + rng.uniform(-5e-4, 5e-4, pos.shape)
     s.add_spheres(pos, np.full(len(pos), 0.005), material=m)
-    s.add_box((0, 0, 0), (0.05, 0.05, 0.08), material=m)
+    side = 0.0105 * nx + 0.008  # (0.05 m for 4)
+    s.add_box((0, 0, 0), (side, side, 0.0105 * nz + 0.0275), material=m)
     s.dt = 0.5 * s.critical_dt()
     return s
 

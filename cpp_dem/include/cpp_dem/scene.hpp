@@ -481,8 +481,14 @@ class Scene {
   /// Whether the scene keeps the pair contacts' cold part (PairContactCold): from the first
   /// time one of its material pairs takes a kernel that reads it (ensure_pair_cold) on.
   bool pair_cold_on() const { return pair_cold_on_; }
-  /// Force on body j of pair contact k, N (zero when inactive).
-  const Vec3& pair_force(size_t k) const { return pair_out_[pair_jslot_[k]].force; }
+  /// Force on body j of pair contact k, N (zero when inactive): the pair pass's output, or,
+  /// after a pass that summed the forces into the bodies directly (pair_direct_: only
+  /// short kernels, whose force is f_n n + f_s), that sum from the hot record, the same bits.
+  Vec3 pair_force(size_t k) const {
+    if (pair_out_.size() == pairs_.size()) return pair_out_[pair_jslot_[k]].force;
+    const PairContact& c = pairs_[k];
+    return Vec3(c.fn * c.normal + c.fs);
+  }
   const std::vector<WallContact>& wall_contacts() const { return wall_contacts_; }
   int num_active_contacts() const;
   /// Calls f(const ContactRecord&) for every contact of every container, active or not, in a
@@ -570,7 +576,7 @@ class Scene {
   void pair_bodies_narrow(int b0, int b1, long& err);
   std::pair<int, int> pair_bodies_of_thread(long t, long nt) const;
   // The pair pass's cold paths (both forms): a contact opened; a law without short kernel.
-  void open_pair(long k, PairOutput& o);
+  void open_pair(long k, PairOutput* o);
   std::pair<Vec3, Vec3> general_pair(long k, PairOutput& o, const Vec3& n, Real overlap, Real li,
                                      Real lj, const Vec3& rel_vel, const Vec3& angvel_sum,
                                      const Vec3& rel_angvel);
@@ -677,7 +683,12 @@ class Scene {
   int pair_cold_missing_ = 0;   // set by update_phys if a kernel needs the cold part (a bug)
   // Friction dissipated by each pair contact, J (ContactState::dissip_friction).
   std::vector<Real> pair_dissip_;
-  std::vector<PairOutput> pair_out_;
+  std::vector<PairOutput> pair_out_;  // empty after a direct pass (pair_direct_)
+  // The last pair pass ran on one thread with short kernels only and summed each contact's
+  // force and torque on j into j's pair_fi_ / pair_ti_ at once (which it started from the
+  // body's external force and weight), in the order the reduction sums pair_out_: the
+  // reduction then reads those sums, and pair_out_ is not kept.
+  bool pair_direct_ = false;
   // Per body: the sum over its contacts as i of -force and torque_i, written by the pair
   // pass every step (scratch, not state).
   // i's share of its pair contacts' forces (N) and torques (N m), 4 doubles per body (the
@@ -876,7 +887,7 @@ void Scene::for_each_contact_of(ContactKind kind, F&& f) const {
       r.body2 = c.j;
       phys = pair_phys(k);
       scratch = pair_state(k);
-      r.force2 = pair_out_[pair_jslot_[k]].force;
+      r.force2 = pair_force(k);
       r.shift2 = pair_shift(k);
       r.arm1 = bodies_.radius[c.i] - 0.5 * c.overlap;
       r.arm2 = bodies_.radius[c.j] - 0.5 * c.overlap;

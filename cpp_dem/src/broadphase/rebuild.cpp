@@ -197,7 +197,10 @@ void Scene::rebuild() {
   pairs_.swap(next);
   pair_cold_.swap(next_cold);
   pair_dissip_.swap(next_dissip);
-  pair_out_.assign(pairs_.size(), PairOutput());
+  if (pair_direct_)
+    std::vector<PairOutput>().swap(pair_out_);  // (a direct pass keeps none)
+  else
+    pair_out_.assign(pairs_.size(), PairOutput());
   // Sphere–wall candidates: signed distance to the plane below r + margin, and the centre
   // not beyond the plane by more than r (one-sided walls ignore what is behind them).
   WallContactMerge merge(wall_contacts_,

@@ -109,7 +109,7 @@ Mat3 Scene::pair_stress_sum() const {
     const PairContact& c = pairs_[k];
     if (!c.active) continue;
     const Vec3 l = bodies_.pos[c.j] + pair_shift(k) - bodies_.pos[c.i];
-    s += pair_out_[pair_jslot_[k]].force * l.transpose();
+    s += pair_force(k) * l.transpose();
   }
   // Bonds (contact and parallel bonds: a geogrid of bonded spheres in the cell), b at the
   // image the bond sees.

@@ -89,16 +89,24 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
       t += ops.load(l.torque_a);
     }
   };
+  // (After a direct pair pass, pair_direct_, pair_fi_ and pair_ti_ hold these first three
+  // terms summed in this order: the external force and the weight, j's shares, i's.)
+  const bool direct = pair_direct_;
   const auto sum_forces = [&](int b, auto& f, auto& t, auto ops) __attribute__((always_inline)) {
-    f = ops.load(bodies_.ext_force_of(b)) + bodies_.mass[b] * ops.load(gravity_);
-    t = ops.load(bodies_.ext_torque_of(b));
-    for (int e = pair_jadj_off_[b]; e < pair_jadj_off_[b + 1]; ++e) {
-      const PairOutput& o = pair_out_[e];  // zero when inactive
-      f += ops.load_padded(o.force.data());
-      t += ops.load_padded(o.torque_j.data());
+    if (direct) {
+      f = ops.load_padded(fi + 4L * b);
+      t = ops.load_padded(ti + 4L * b);
+    } else {
+      f = ops.load(bodies_.ext_force_of(b)) + bodies_.mass[b] * ops.load(gravity_);
+      t = ops.load(bodies_.ext_torque_of(b));
+      for (int e = pair_jadj_off_[b]; e < pair_jadj_off_[b + 1]; ++e) {
+        const PairOutput& o = pair_out_[e];  // zero when inactive
+        f += ops.load_padded(o.force.data());
+        t += ops.load_padded(o.torque_j.data());
+      }
+      f += ops.load_padded(fi + 4L * b);
+      t += ops.load_padded(ti + 4L * b);
     }
-    f += ops.load_padded(fi + 4L * b);
-    t += ops.load_padded(ti + 4L * b);
     for (int e = wall_adj_off_[b]; e < wall_adj_off_[b + 1]; ++e) {
       const WallContact& c = wall_contacts_[wall_adj_[e]];
       if (!c.active) continue;

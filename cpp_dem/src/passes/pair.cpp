@@ -88,7 +88,7 @@ LawOutput Scene::apply_pair_law(size_t k, const ContactGeometry& g, Real dt) {
 
 /// Pair contact k has opened: forget its springs' history (ContactState::clear_history) and
 /// its output o.
-void Scene::open_pair(long k, PairOutput& o) {
+void Scene::open_pair(long k, PairOutput* o) {
   PairContact& c = pairs_[k];
   c.active = false;
   c.fs.setZero();
@@ -96,7 +96,7 @@ void Scene::open_pair(long k, PairOutput& o) {
   c.overlap = 0;
   c.fn = 0;
   if (pair_cold_on_) pair_cold_[k].mr.setZero();
-  o = PairOutput();
+  if (o) *o = PairOutput();
 }
 
 /// Pair contact k with the composed law (no short kernel for its law and parts): normal n,
@@ -156,6 +156,9 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
   PairOutput* const out_j = pair_out_.data();
   Real* const out_fi = pair_fi_.data()->data();
   Real* const out_ti = pair_ti_.data()->data();
+  // (pair_direct_: j's force and torque added to its sums at once, i's at the end of its
+  // contacts, in the order the reduction adds pair_out_'s; compute_pair_forces_hot)
+  const bool direct = pair_direct_;
   // Periodic cell: j is seen at its image, and the mean field's velocity L d and spin are
   // added to the stored fluctuations (bodies/cell.hpp).
   const bool periodic = cell_.on;
@@ -171,7 +174,7 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
       const Real ri = radius[i];
       for (int k = k0; k < k1; ++k) {
         PairContact& c = pairs[k];
-        PairOutput& o = out_j[jslot[k]];
+        PairOutput* const o = direct ? nullptr : &out_j[jslot[k]];
         const int j = c.j;
         V d = ops.load(pos[j]) - xi;
         if (periodic) d += ops.load_padded(image_offset_[c.image].data());
@@ -201,15 +204,23 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
                                              rel_vel);
         if (c.kernel != kLinearKernel) {
           if (c.kernel == kHertzKernel) {
-            hertz_pair<false>(c, nullptr, dissip[k], o.force.data(), o.torque_j.data(), n,
-                              overlap, li, lj, rel_vel, V(wi + wj), dt, fi, ti, ops);
-          } else if (!pair_cold_on_) {
+            alignas(32) Real hf[4], ht[4];  // (direct: j's share, added below)
+            hertz_pair<false>(c, nullptr, dissip[k], o ? o->force.data() : hf,
+                              o ? o->torque_j.data() : ht, n, overlap, li, lj, rel_vel,
+                              V(wi + wj), dt, fi, ti, ops);
+            if (!o) {
+              ops.store_padded(out_fi + 4L * j, V(ops.load_padded(out_fi + 4L * j) +
+                                                  ops.load_padded(hf)));
+              ops.store_padded(out_ti + 4L * j, V(ops.load_padded(out_ti + 4L * j) +
+                                                  ops.load_padded(ht)));
+            }
+          } else if (!pair_cold_on_ || !o) {
             continue;  // (a bug: pair_cold_missing_ stops the step)
           } else if (c.kernel == kHertzDampedKernel) {
-            hertz_pair<true>(c, &pair_cold_[k], dissip[k], o.force.data(), o.torque_j.data(),
+            hertz_pair<true>(c, &pair_cold_[k], dissip[k], o->force.data(), o->torque_j.data(),
                              n, overlap, li, lj, rel_vel, V(wi + wj), dt, fi, ti, ops);
           } else {
-            const auto on_i = general_pair(k, o, ops.vec(n), overlap, li, lj, ops.vec(rel_vel),
+            const auto on_i = general_pair(k, *o, ops.vec(n), overlap, li, lj, ops.vec(rel_vel),
                                            ops.vec(wi + wj), ops.vec(wj - wi));
             fi += ops.load(on_i.first);
             ti += ops.load(on_i.second);
@@ -224,16 +235,26 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
         ops.store_with(c.fs.data(), fs, overlap);  // fs, overlap
         ops.store_with(c.normal.data(), n, fn);    // normal, fn
         const V f = fn * n + fs;
-        ops.store_padded(o.force.data(), f);
         // Moments (000 eq 6): -l_j n x F on j, l_i n x (-F) on i; n x F = n x fs.
         const V nxf = ops.cross(n, fs);
-        ops.store_padded(o.torque_j.data(), V(-lj * nxf));
+        if (o) {
+          ops.store_padded(o->force.data(), f);
+          ops.store_padded(o->torque_j.data(), V(-lj * nxf));
+        } else {
+          ops.store_padded(out_fi + 4L * j, V(ops.load_padded(out_fi + 4L * j) + f));
+          ops.store_padded(out_ti + 4L * j, V(ops.load_padded(out_ti + 4L * j) + V(-lj * nxf)));
+        }
         fi -= f;
         ti -= li * nxf;
       }
     }
-    ops.store_padded(out_fi + 4L * i, fi);
-    ops.store_padded(out_ti + 4L * i, ti);
+    if (direct) {
+      ops.store_padded(out_fi + 4L * i, V(ops.load_padded(out_fi + 4L * i) + fi));
+      ops.store_padded(out_ti + 4L * i, V(ops.load_padded(out_ti + 4L * i) + ti));
+    } else {
+      ops.store_padded(out_fi + 4L * i, fi);
+      ops.store_padded(out_ti + 4L * i, ti);
+    }
   }
   err_out = err;
 }
@@ -284,11 +305,36 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   const int n = num_bodies();
   pair_fi_.resize(n);
   pair_ti_.resize(n);
+  // On one thread with the short kernels alone (no cold part: every contact's force is
+  // f_n n + f_s, kept in its hot record) the pass adds j's share to j's sums at once
+  // (pair_direct_), and pair_out_ is not kept: 64 B a contact less to write and read back.
+  const long ncontacts = static_cast<long>(pairs_.size());
+  pair_direct_ = !pair_cold_on_ && (ncontacts <= kParallelMin || max_threads() == 1);
+  if (pair_direct_) {
+    if (pair_out_.capacity() > 0) std::vector<PairOutput>().swap(pair_out_);
+    // The sums start where the reduction starts: the external force and the weight.
+    Real* const fsum = pair_fi_.data()->data();
+    Real* const tsum = pair_ti_.data()->data();
+    const Vec3 g = gravity_;
+    for (int b = 0; b < n; ++b) {
+      const Vec3& fe = bodies_.ext_force_of(b);
+      const Vec3& te = bodies_.ext_torque_of(b);
+      const Real m = bodies_.mass[b];
+      for (int a = 0; a < 3; ++a) {
+        fsum[4L * b + a] = fe[a] + m * g[a];
+        tsum[4L * b + a] = te[a];
+      }
+      fsum[4L * b + 3] = 0.0;
+      tsum[4L * b + 3] = 0.0;
+    }
+  } else if (pair_out_.size() != pairs_.size()) {
+    pair_out_.assign(pairs_.size(), PairOutput());  // (after direct passes)
+  }
   if (!use_wide_ops()) {
     compute_pair_forces_narrow(err_contact);
     return;
   }
-  const long nc = static_cast<long>(pairs_.size());
+  const long nc = ncontacts;
   const Real dt = dt_;
   const Real max_ratio = max_overlap_ratio_;
   const int version = phys_version_;
@@ -312,14 +358,16 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   const V4 l0 = v4(cell_.vel_grad.col(0)), l1 = v4(cell_.vel_grad.col(1)),
            l2 = v4(cell_.vel_grad.col(2)), spin = v4(cell_.spin());
   const Real* const offsets = image_offset_.data()->data();
-#pragma omp parallel reduction(min : err) if (nc > kParallelMin)
+#pragma omp parallel reduction(min : err) if (nc > kParallelMin && !pair_direct_)
   {
     const auto [t, nt] = thread_and_team();
     const auto [b0, b1] = pair_bodies_of_thread(t, nt);
     // (Captured by value: the pointers stay in registers; by reference they were taken as
     // addresses the loop's stores might alias, and reloaded, 14 % more instructions.)
-    const auto loop = [=, &err](auto periodic_tag) __attribute__((always_inline)) {
+    const auto loop = [=, &err](auto periodic_tag, auto direct_tag) __attribute__((always_inline)) {
     constexpr bool kPeriodic = decltype(periodic_tag)::value;
+    // (kDirect: pair_direct_, j's share into its sums at once, i's at the end of its contacts)
+    constexpr bool kDirect = decltype(direct_tag)::value;
     for (int i = b0; i < b1; ++i) {
       const int k0 = ioff[i], k1 = ioff[i + 1];
       // i's share: -force and torque_i summed over its contacts.
@@ -331,7 +379,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
         const Real ri = radius[i];
         for (int k = k0; k < k1; ++k) {
           PairContact& c = pairs[k];
-          PairOutput& o = out_j[jslot[k]];
+          PairOutput* const o = kDirect ? nullptr : &out_j[jslot[k]];
           const int j = c.j;
           V4 d = v4(pos[j]) - xi;
           if constexpr (kPeriodic) d += load4(offsets + 4 * c.image);
@@ -361,15 +409,23 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
                                                    li, lj, rel_vel);
           if (c.kernel != kLinearKernel) {
             if (c.kernel == kHertzKernel) {
-              hertz_pair<false>(c, nullptr, dissip[k], o.force.data(), o.torque_j.data(), n,
-                                overlap, li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
-            } else if (!pair_cold_on_) {
+              if constexpr (kDirect) {
+                alignas(32) Real hf[4], ht[4];
+                hertz_pair<false>(c, nullptr, dissip[k], hf, ht, n, overlap, li, lj, rel_vel,
+                                  V4(wi + wj), dt, fi, ti, WideOps());
+                store4(out_fi + 4L * j, load4(out_fi + 4L * j) + load4(hf));
+                store4(out_ti + 4L * j, load4(out_ti + 4L * j) + load4(ht));
+              } else {
+                hertz_pair<false>(c, nullptr, dissip[k], o->force.data(), o->torque_j.data(), n,
+                                  overlap, li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
+              }
+            } else if (kDirect || !pair_cold_on_) {
               continue;  // (a bug: pair_cold_missing_ stops the step)
             } else if (c.kernel == kHertzDampedKernel) {
-              hertz_pair<true>(c, &pair_cold_[k], dissip[k], o.force.data(), o.torque_j.data(),
+              hertz_pair<true>(c, &pair_cold_[k], dissip[k], o->force.data(), o->torque_j.data(),
                                n, overlap, li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
             } else {
-              const auto on_i = general_pair(k, o, vec3(n), overlap, li, lj, vec3(rel_vel),
+              const auto on_i = general_pair(k, *o, vec3(n), overlap, li, lj, vec3(rel_vel),
                                              vec3(wi + wj), vec3(wj - wi));
               fi += v4(on_i.first);
               ti += v4(on_i.second);
@@ -385,20 +441,36 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           store4(c.fs.data(), with_lane3(fs, overlap));  // fs, overlap
           store4(c.normal.data(), with_lane3(n, fn));    // normal, fn
           const V4 f = fn * n + fs;
-          store4(o.force.data(), f);  // with its padding (lane 3, zero)
           // Moments (000 eq 6): -l_j n x F on j, l_i n x (-F) on i; n x F = n x fs.
           const V4 nxf = cross3(n, fs);
-          store4(o.torque_j.data(), -lj * nxf);
+          if constexpr (kDirect) {
+            store4(out_fi + 4L * j, load4(out_fi + 4L * j) + f);
+            store4(out_ti + 4L * j, load4(out_ti + 4L * j) + (-lj * nxf));
+          } else {
+            store4(o->force.data(), f);  // with its padding (lane 3, zero)
+            store4(o->torque_j.data(), -lj * nxf);
+          }
           fi -= f;
           ti -= li * nxf;
         }
       }
-      store4(out_fi + 4L * i, fi);  // lane 3 is zero: every term had a zero lane 3
-      store4(out_ti + 4L * i, ti);
+      // (lane 3 is zero: every term had a zero lane 3)
+      if constexpr (kDirect) {
+        store4(out_fi + 4L * i, load4(out_fi + 4L * i) + fi);
+        store4(out_ti + 4L * i, load4(out_ti + 4L * i) + ti);
+      } else {
+        store4(out_fi + 4L * i, fi);
+        store4(out_ti + 4L * i, ti);
+      }
     }
     };
-    if (cell_.on) loop(std::true_type{});
-    else loop(std::false_type{});
+    if (pair_direct_) {
+      if (cell_.on) loop(std::true_type{}, std::true_type{});
+      else loop(std::false_type{}, std::true_type{});
+    } else {
+      if (cell_.on) loop(std::true_type{}, std::false_type{});
+      else loop(std::false_type{}, std::false_type{});
+    }
   }
   err_contact = err;
 }
@@ -406,7 +478,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
 void Scene::compute_pair_forces_narrow(long& err_contact) {
   // (compute_pair_forces has sized pair_fi_ and pair_ti_.)
   long err = std::numeric_limits<long>::max();
-#pragma omp parallel reduction(min : err) if (static_cast<long>(pairs_.size()) > kParallelMin)
+#pragma omp parallel reduction(min : err) \
+    if (static_cast<long>(pairs_.size()) > kParallelMin && !pair_direct_)
   {
     const auto [t, nt] = thread_and_team();
     const auto bodies = pair_bodies_of_thread(t, nt);

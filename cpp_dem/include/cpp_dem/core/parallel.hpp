@@ -23,6 +23,15 @@ inline std::pair<long, long> thread_share(long total, long t, long nt) {
   return {t * total / nt, (t + 1) * total / nt};
 }
 /// This thread's number and the number of threads in the team.
+/// The threads a parallel region would start with (1 without OpenMP).
+inline int max_threads() {
+#ifdef _OPENMP
+  return omp_get_max_threads();
+#else
+  return 1;
+#endif
+}
+
 inline std::pair<long, long> thread_and_team() {
 #ifdef _OPENMP
   return {omp_get_thread_num(), omp_get_num_threads()};
