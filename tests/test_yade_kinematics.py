@@ -210,14 +210,88 @@ def test_both_vector_forms_agree():
     assert lines[0][0] != lines[0][1]
 
 
-def _format_13(blob: bytes) -> bytes:
-    """A blob of format 14 of a scene without cylindrical or mesh walls and without
-    controllers rewritten as format 13: their 12 empty vectors and the dropped-contact count
-    (just before the controllers' count, at the end) gone, and their three record sizes, the
-    layout's last entries."""
+def _format_14(blob: bytes) -> bytes:
+    """A blob of format 15 of a scene without clumps rewritten as format 14: the pair contacts'
+    cold part for every contact, with its friction dissipation between the rolling moment and
+    the viscous dissipation (112 B a record, the layout's size too), where format 15 has a
+    flag, the cold part only if the scene keeps one (104 B a record) and the dissipation
+    apart; and the pair pass's outputs for every contact (zero where format 15 kept none: a
+    loaded scene's next step writes them). Without the cold part, the phys is the hot
+    record's model, kn, ks and tan phi."""
     import struct
 
     b = bytearray(blob)
+    assert int.from_bytes(b[8:12], "little") == 15
+    b[8:12] = (14).to_bytes(4, "little")
+    n_layout = struct.unpack_from("<Q", b, 12)[0]
+    lay = list(struct.unpack_from(f"<{n_layout}Q", b, 20))
+    real, v3, q, wall, opening = lay[0], lay[2], lay[3], lay[5], lay[20]
+    pair, out, cold, cell = lay[6], lay[7], lay[15], lay[16]
+    b[20 + 15 * 8:20 + 16 * 8] = struct.pack("<Q", cold + 8)
+    at = 20 + 8 * n_layout
+
+    def skip_vec(at, elem):
+        n = struct.unpack_from("<Q", b, at)[0]
+        return at + 8 + n * elem
+
+    def skip_text(at):
+        return at + 8 + struct.unpack_from("<Q", b, at)[0]
+
+    count = struct.unpack_from("<Q", b, at)[0]  # the materials, by name
+    at += 8
+    for _ in range(count):
+        at = skip_text(at)
+        n_fields = struct.unpack_from("<Q", b, at)[0]
+        at += 8
+        for _ in range(n_fields):
+            at = skip_text(at) + 8
+    at = skip_vec(at, lay[19])  # pair laws
+    for elem in (v3,) * 7 + (q, real, real, real, 4, 1, 1, 4, 12, real, real, real, v3, real):
+        at = skip_vec(at, elem)  # the body store
+    for _ in range(22):
+        assert struct.unpack_from("<Q", b, at)[0] == 0
+        at = skip_vec(at, 0)  # the clump store, empty
+    at = skip_vec(at, 4)  # id_of_slot
+    at += 1  # spatial_sort
+    at = skip_vec(at, v3)  # pos_at_build
+    at = skip_vec(at, real)  # radius_at_build
+    at = skip_vec(at, wall)
+    at = skip_vec(at, opening)
+    at += cell + real  # the cell, max_radius_at_build
+    npairs = struct.unpack_from("<Q", b, at)[0]
+    hot = [bytes(b[at + 8 + k * pair:at + 8 + (k + 1) * pair]) for k in range(npairs)]
+    at = skip_vec(at, pair)
+    start, on = at, b[at]
+    at += 1
+    ncold = struct.unpack_from("<Q", b, at)[0]
+    colds = [bytes(b[at + 8 + k * cold:at + 8 + (k + 1) * cold]) for k in range(ncold)]
+    at = skip_vec(at, cold)
+    dissip = [bytes(b[at + 8 + 8 * k:at + 16 + 8 * k]) for k in range(npairs)]
+    at = skip_vec(at, real)
+    nout = struct.unpack_from("<Q", b, at)[0]
+    outs = bytes(b[at + 8:at + 8 + nout * out]) if nout == npairs else bytes(npairs * out)
+    end = skip_vec(at, out)
+    old = []
+    for k in range(npairs):
+        if on:
+            phys, mr, viscous = colds[k][:72], colds[k][72:96], colds[k][96:104]
+        else:  # (model byte at 11; kn, ks, tan phi at 16)
+            phys = (hot[k][11:12] + bytes(7) + hot[k][16:40] + bytes(5 * 8))
+            mr, viscous = bytes(24), bytes(8)
+        old.append(phys + mr + dissip[k] + viscous)
+    b[start:end] = (struct.pack("<Q", npairs) + b"".join(old) + struct.pack("<Q", npairs)
+                    + outs)
+    return bytes(b)
+
+
+def _format_13(blob: bytes) -> bytes:
+    """A blob of format 15 rewritten as format 14 (_format_14), then, of a scene without
+    cylindrical or mesh walls and without controllers, as format 13: their 12 empty vectors
+    and the dropped-contact count (just before the controllers' count, at the end) gone, and
+    their three record sizes, the layout's last entries."""
+    import struct
+
+    b = bytearray(_format_14(blob))
     assert int.from_bytes(b[8:12], "little") == 14
     b[8:12] = (13).to_bytes(4, "little")
     assert struct.unpack_from("<Q", b, len(b) - 8)[0] == 0  # no controller
@@ -231,7 +305,7 @@ def _format_13(blob: bytes) -> bytes:
 
 
 def _format_12(blob: bytes) -> bytes:
-    """A blob of format 14 rewritten as format 13 (_format_13), then as format 12: its
+    """A blob of format 15 rewritten as format 13 (_format_13), then as format 12: its
     materials as records of the 8 shared parameters (the law's id, 7 bytes of padding, 8
     doubles) instead of names and values, and the record's size in the layout."""
     import struct
@@ -269,7 +343,7 @@ def _format_12(blob: bytes) -> bytes:
 
 
 def _format_10(blob: bytes) -> bytes:
-    """A blob of format 14 rewritten as format 12 (_format_12), then as format 10: no wall
+    """A blob of format 15 rewritten as format 12 (_format_12), then as format 10: no wall
     openings (their vector, after the walls', and their size, the layout's last entry, gone).
     No clumps, no controller (whose kinds format 12 added)."""
     import struct
@@ -375,8 +449,8 @@ def _older_format(blob: bytes, nbodies: int, kinematics_at: int, version: int) -
 
 def test_checkpoints_of_the_formats_before_still_load():
     """Format 8 had no shear kinematics and 9 no density scaling: such blobs load, with the
-    default kinematics (8) and scaling off (8 and 9). (The blobs are written as format 14 and
-    rewritten as 13, 12 and 10, then as 9 and 8.)"""
+    default kinematics (8) and scaling off (8 and 9). (The blobs are written as format 15 and
+    rewritten as 14, 13, 12 and 10, then as 9 and 8.)"""
     from cpp_dem import _core
 
     blobs = {}
@@ -389,7 +463,7 @@ def test_checkpoints_of_the_formats_before_still_load():
         s.dt = DT
         s.run(2)
         blobs[kin] = bytes(_core._checkpoint_save(s))
-    assert int.from_bytes(blobs["yade"][8:12], "little") == 14
+    assert int.from_bytes(blobs["yade"][8:12], "little") == 15
     a, b = _format_10(blobs["contact_point"]), _format_10(blobs["yade"])
     assert len(a) == len(b)
     diff = [k for k in range(len(a)) if a[k] != b[k]]
