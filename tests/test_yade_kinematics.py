@@ -210,6 +210,32 @@ def test_both_vector_forms_agree():
     assert lines[0][0] != lines[0][1]
 
 
+def _skip_vec(b, at: int, elem: int) -> int:
+    """The offset after the vector at ``at`` of a checkpoint blob (a count, then its records
+    of ``elem`` bytes)."""
+    import struct
+
+    return at + 8 + struct.unpack_from("<Q", b, at)[0] * elem
+
+
+def _skip_to_walls(b, at: int, lay: list) -> int:
+    """From the pair laws (at ``at``) of a blob of layout ``lay`` without clumps to its walls:
+    the body store, the (empty) clump store, the storage order and the broad phase's build."""
+    import struct
+
+    real, v3, q = lay[0], lay[2], lay[3]
+    at = _skip_vec(b, at, lay[19])  # pair laws
+    for elem in (v3,) * 7 + (q, real, real, real, 4, 1, 1, 4, 12, real, real, real, v3, real):
+        at = _skip_vec(b, at, elem)  # the body store
+    for _ in range(22):
+        assert struct.unpack_from("<Q", b, at)[0] == 0
+        at = _skip_vec(b, at, 0)  # the clump store, empty
+    at = _skip_vec(b, at, 4)  # id_of_slot
+    at += 1  # spatial_sort
+    at = _skip_vec(b, at, v3)  # pos_at_build
+    return _skip_vec(b, at, real)  # radius_at_build
+
+
 def _format_14(blob: bytes) -> bytes:
     """A blob of format 15 of a scene without clumps rewritten as format 14: the pair contacts'
     cold part for every contact, with its friction dissipation between the rolling moment and
@@ -225,36 +251,23 @@ def _format_14(blob: bytes) -> bytes:
     b[8:12] = (14).to_bytes(4, "little")
     n_layout = struct.unpack_from("<Q", b, 12)[0]
     lay = list(struct.unpack_from(f"<{n_layout}Q", b, 20))
-    real, v3, q, wall, opening = lay[0], lay[2], lay[3], lay[5], lay[20]
+    real, wall, opening = lay[0], lay[5], lay[20]
     pair, out, cold, cell = lay[6], lay[7], lay[15], lay[16]
     b[20 + 15 * 8:20 + 16 * 8] = struct.pack("<Q", cold + 8)
     at = 20 + 8 * n_layout
 
     def skip_vec(at, elem):
-        n = struct.unpack_from("<Q", b, at)[0]
-        return at + 8 + n * elem
-
-    def skip_text(at):
-        return at + 8 + struct.unpack_from("<Q", b, at)[0]
+        return _skip_vec(b, at, elem)
 
     count = struct.unpack_from("<Q", b, at)[0]  # the materials, by name
     at += 8
     for _ in range(count):
-        at = skip_text(at)
+        at = _skip_vec(b, at, 1)  # the law's name
         n_fields = struct.unpack_from("<Q", b, at)[0]
         at += 8
         for _ in range(n_fields):
-            at = skip_text(at) + 8
-    at = skip_vec(at, lay[19])  # pair laws
-    for elem in (v3,) * 7 + (q, real, real, real, 4, 1, 1, 4, 12, real, real, real, v3, real):
-        at = skip_vec(at, elem)  # the body store
-    for _ in range(22):
-        assert struct.unpack_from("<Q", b, at)[0] == 0
-        at = skip_vec(at, 0)  # the clump store, empty
-    at = skip_vec(at, 4)  # id_of_slot
-    at += 1  # spatial_sort
-    at = skip_vec(at, v3)  # pos_at_build
-    at = skip_vec(at, real)  # radius_at_build
+            at = _skip_vec(b, at, 1) + 8  # a field's name and value
+    at = _skip_to_walls(b, at, lay)
     at = skip_vec(at, wall)
     at = skip_vec(at, opening)
     at += cell + real  # the cell, max_radius_at_build
@@ -353,25 +366,11 @@ def _format_10(blob: bytes) -> bytes:
     b[8:12] = (10).to_bytes(4, "little")
     n_layout = struct.unpack_from("<Q", b, 12)[0]
     lay = list(struct.unpack_from(f"<{n_layout}Q", b, 20))
-    real, v3, q, wall, opening = lay[0], lay[2], lay[3], lay[5], lay[20]
-    at = 20 + 8 * n_layout
-
-    def skip_vec(at, elem):
-        n = struct.unpack_from("<Q", b, at)[0]
-        return at + 8 + n * elem
-
-    at = skip_vec(at, lay[4])  # materials
-    at = skip_vec(at, lay[19])  # pair laws
-    for elem in (v3,) * 7 + (q, real, real, real, 4, 1, 1, 4, 12, real, real, real, v3, real):
-        at = skip_vec(at, elem)  # the body store
-    for _ in range(22):
-        at = skip_vec(at, 0)  # the clump store, empty
-    at = skip_vec(at, 4)  # id_of_slot
-    at += 1  # spatial_sort
-    at = skip_vec(at, v3)  # pos_at_build
-    at = skip_vec(at, real)  # radius_at_build
-    at = skip_vec(at, wall)
-    end = skip_vec(at, opening)  # the openings: cut
+    wall, opening = lay[5], lay[20]
+    at = _skip_vec(b, 20 + 8 * n_layout, lay[4])  # materials
+    at = _skip_to_walls(b, at, lay)
+    at = _skip_vec(b, at, wall)
+    end = _skip_vec(b, at, opening)  # the openings: cut
     del b[at:end]
     del b[20 + 8 * (n_layout - 1):20 + 8 * n_layout]  # the layout's last size
     b[12:20] = struct.pack("<Q", n_layout - 1)
