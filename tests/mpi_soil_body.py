@@ -2,8 +2,8 @@
 tests/test_soil_body_mpi.py as ``mpiexec -n N python tests/mpi_soil_body.py OUT [LU]`` (LU: the
 package on one rank, femcoupling.fem.quadrature.SERIAL_LU; PETSc's own by default).
 
-A Drucker-Prager soil (max_newton=60; a Newton that makes no progress over two corrections
-halves the next, femcoupling.fem.quadrature.CYCLE_RATIO, so no step is cut and every rank
+A Drucker-Prager soil (max_newton=60; a Newton that makes no progress over four iterations
+halves its next correction, femcoupling.fem.quadrature.CYCLE_WINDOW, so no step is cut and every rank
 count and LU takes the same steps) with its self-weight, a prestressed geogrid layer and two element
 regions (b across the layer):
 geostatic stress, prestress (2 steps), a footing pressure of 100 kPa (4 steps), then a

@@ -62,7 +62,8 @@ def runs(tmp_path_factory):
     if not MPIEXEC.exists():
         pytest.skip(f"no mpiexec beside {sys.executable}")
     # (both on the package's default LU, PETSc's own. Before a Newton that makes no progress
-    # over two corrections halved the next (femcoupling.fem.quadrature.CYCLE_RATIO), the
+    # over four iterations halved its next correction (femcoupling.fem.quadrature.
+    # CYCLE_RATIO, CYCLE_WINDOW), the
     # serial run cycled at the cone's apex in the prestress until max_newton cut the step: 11
     # load steps against the 2 ranks' 10, on one machine with this LU and on another with
     # SuperLU_DIST, 0.3 % apart in the cells' stresses)

@@ -678,7 +678,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
       c.kernel = kernel;
   }
   r.vec(t.pair_out_);
-  // (format 15: none after a direct pair pass, whose forces are the hot records')
+  // (format 15: none where the scene has no cold part, whose forces are the hot records')
   if (t.pair_out_.size() != t.pairs_.size() && !(version >= 15 && t.pair_out_.empty()))
     throw ParameterError("checkpoint: corrupt pair contacts");
   t.pair_direct_ = t.pair_out_.size() != t.pairs_.size();

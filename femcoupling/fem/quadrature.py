@@ -41,8 +41,9 @@ point). Both use what this module gives:
       the ceiling Newton takes up to ``redraws`` (:data:`REDRAWS`) more iterates, each a
       new draw of that noise, and accepts the first within the noise and the ceiling; if
       none is, the step is cut (:class:`NewtonFailure`);
-    - otherwise Newton goes on (a model without DEM points halves a correction after two that
-      made no progress, :data:`CYCLE_RATIO`: a cycle), and a step that reaches
+    - otherwise Newton goes on (a model without DEM points halves a correction where its
+      residual made no progress over :data:`CYCLE_WINDOW` iterations: a cycle), and a step
+      that reaches
       ``max_newton``, or whose residual or correction is not finite, or whose linear solve
       fails, is cut (:class:`NewtonFailure`).
 
@@ -69,7 +70,7 @@ from femcoupling.fem.steps import NewtonFailure  # (the one failure type; re-exp
 __all__ = ["QuadratureMaterial", "STRAIN_MEASURES", "NewtonRules", "NewtonOutcome",
            "NewtonFailure", "QuadratureSystem", "check_material", "newton_solve", "lu_options",
            "lu_package", "lu_pc_type",
-           "CYCLE_RATIO", "LINE_SEARCH_RISE", "NOISE_PROBE", "PARALLEL_LU", "SERIAL_LU"]
+           "CYCLE_RATIO", "CYCLE_WINDOW", "LINE_SEARCH_RISE", "NOISE_PROBE", "PARALLEL_LU", "SERIAL_LU"]
 
 #: the relative change of every increment that measures the elements' noise
 NOISE_PROBE = 1e-9
@@ -83,8 +84,9 @@ NOISE_PROBE = 1e-9
 #: same bounds is as good an answer (docs/coupling_newton.md).
 REDRAWS = 4
 
-#: A smooth model's correction is halved where its residual has not fallen below this
-#: fraction of its value two iterations before (``NewtonRules.break_cycles``). A
+#: A smooth model's correction is halved where the least of its last CYCLE_WINDOW residuals is
+#: not below this fraction of the least of the CYCLE_WINDOW before (``NewtonRules.
+#: break_cycles``). A
 #: Drucker–Prager soil whose points flip between the cone and its apex makes full Newton
 #: corrections cycle between two iterates (tests/mpi_soil_body.py's prestress: 4.93e-2 and
 #: 6.23e-2 of the force scale in turn for 50 iterations, until max_newton cut the step),
@@ -93,6 +95,9 @@ REDRAWS = 4
 #: the correction leaves the cycle; the three LUs then take the same 10 steps, within
 #: 5e-11 of each other (docs/coupling_newton.md).
 CYCLE_RATIO = 0.9
+#: The iterations of each of the two windows CYCLE_RATIO compares (a cycle of up to this
+#: period: tests/mpi_soil_body.py's serial body cycled with periods 2 and 4).
+CYCLE_WINDOW = 4
 
 #: A smooth model's backtracking (``NewtonRules.line_search``) goes back where the residual
 #: rose above this many times the residual before the correction (1.0: any rise).
@@ -239,10 +244,10 @@ class NewtonRules:
     #: soil's points that flip between the cone and its apex made full corrections cycle: a
     #: step stuck at 3.5e-2 of the force scale for 100 iterations.
     line_search: int = 0
-    #: a smooth model's (no DEM points) correction is halved where the residual has not
-    #: fallen below :data:`CYCLE_RATIO` times its value two iterations before (a Newton
-    #: cycling between two iterates); with ``probe`` it does nothing (a noisy residual that
-    #: does not fall is a stall, which the noise probe judges)
+    #: a smooth model's (no DEM points) correction is halved where the least of its last
+    #: :data:`CYCLE_WINDOW` residuals is not below :data:`CYCLE_RATIO` times the least of the
+    #: window before (a Newton cycling); with ``probe`` it does nothing (a noisy residual
+    #: that does not fall is a stall, which the noise probe judges)
     break_cycles: bool = True
 
     def __post_init__(self) -> None:
@@ -466,13 +471,15 @@ def newton_solve(problem: NewtonProblem, rules: NewtonRules, *, relaxation: Any 
         dk = problem.correction()
         omega = next_factor(relaxation, omega, d_prev, dk)
         w_k = 1.0 if it == 0 else omega
-        if (rules.break_cycles and not rules.probe and it >= 2 and len(hist) >= 3
-                and rel >= CYCLE_RATIO * hist[-3]):
-            # no progress over two corrections: a cycle (or its start); half a correction
-            # leaves it, whatever the rounding put the iterates on
+        if (rules.break_cycles and not rules.probe and len(hist) >= 2 * CYCLE_WINDOW
+                and min(hist[-CYCLE_WINDOW:])
+                >= CYCLE_RATIO * min(hist[-2 * CYCLE_WINDOW:-CYCLE_WINDOW])):
+            # the last CYCLE_WINDOW residuals got no lower than the ones before: a cycle (of
+            # any period up to the window); half a correction leaves it, whatever the
+            # rounding put the iterates on
             w_k *= 0.5
             if log is not None:
-                log("no progress over two iterations: half the correction")
+                log("no progress over the last iterations: half the correction")
         omegas.append(w_k)
         d_prev = dk
         problem.move(dk, w_k)
