@@ -515,11 +515,11 @@ def test_the_correction_probe_measures_roughness_not_the_tangent_s_error():
     assert both[1] / 3 < both[0] < 3 * both[1], both
 
 
-class _SqrtCycle:
-    """One unknown whose internal force is sign(u) sqrt|u|: a full Newton correction is -2 u,
-    so Newton goes u, -u, u, ... for ever, an exact two-iterate cycle (as a Drucker–Prager
-    soil's points flipping between the cone and its apex made tests/mpi_soil_body.py's
-    prestress step cycle until max_newton)."""
+class _SqrtCycle(_Atan):
+    """One unknown whose internal force is sign(u) sqrt|u| (the rest as _Atan's): a full
+    Newton correction is -2 u, so Newton goes u, -u, u, ... for ever, an exact two-iterate
+    cycle (as a Drucker–Prager soil's points flipping between the cone and its apex made
+    tests/mpi_soil_body.py's prestress step cycle until max_newton)."""
 
     def __init__(self) -> None:
         self.u, self.sig = 0.3, 0.0
@@ -527,20 +527,8 @@ class _SqrtCycle:
     def evaluate(self, first, perturb=0.0):
         self.sig = math.copysign(math.sqrt(abs(self.u)), self.u)
 
-    def residual(self):
-        return abs(self.sig)
-
-    def force_scale(self):
-        return 1.0
-
-    def at_boundary_values(self):
-        return True
-
     def correction(self):
         return np.array([-2.0 * self.u])
-
-    def move(self, d, w):
-        self.u += w * float(d[0])
 
 
 def test_a_smooth_models_newton_halves_a_correction_that_makes_no_progress():
