@@ -46,15 +46,14 @@ import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 #: short kernels has no cold contact record.
 TRAFFIC = {
     "contacts.pairs": (1, 1),          # pair pass: geometry in, shear force and normal out
-    # (one thread: the pair pass adds each contact's share to its bodies' sums at once and
-    # keeps no pair_out; on more threads it writes pair_out, 64 B a contact, which the
-    # reduction reads back through pair_jslot and pair_jadj_off)
+    # (one thread: the pair pass adds each contact's share to its bodies' force and torque
+    # at once and keeps no pair_out; on more threads it writes pair_out, 64 B a contact, and
+    # pair_fi and pair_ti, which the reduction reads back through pair_jslot and
+    # pair_jadj_off: none of them is in the fields here)
     "contacts.pair_ioff": (1, 0),
     "contacts.wall_adj_off": (1, 0),
-    "scratch.pair_fi": (2, 2),         # started, summed into by the pair pass, reduction reads
-    "scratch.pair_ti": (2, 2),
-    "scratch.acc_lin": (1, 1),         # reduction writes, integration reads
-    "scratch.acc_ang": (1, 1),
+    "bodies.force": (2, 3),            # started, summed into by the pair pass, completed by
+    "bodies.torque": (2, 3),           # the reduction (the accelerations: a block's, in cache)
     "bodies.pos": (2, 1),              # pair pass and integration read, integration writes
     "bodies.vel": (2, 1),
     "bodies.angvel": (2, 1),

@@ -33,11 +33,16 @@ def test_every_field_is_counted_by_its_capacity():
     assert c == 3 * 8 * 8 * 7  # (every sphere touches its six neighbours)
     assert all(isinstance(v, int) and v >= 0 for v in f.values())
     for name, size in (("bodies.pos", 24), ("bodies.ori", 32), ("bodies.radius", 8),
-                       ("scratch.pair_fi", 32)):
+                       ("bodies.force", 24)):
         assert f[name] >= n * size, name
     assert f["contacts.pairs"] >= c * 8
-    # (one thread, the short kernel: the pass sums into the bodies and keeps no outputs)
-    assert f["contacts.pair_out"] == 0 and f["contacts.pair_cold"] == 0
+    # (one thread, the short kernel: the pass sums into the bodies' forces and keeps no
+    # outputs, no slots for them and no scratch sums; the integration's accelerations are a
+    # block's, on the stack)
+    for name in ("contacts.pair_out", "contacts.pair_cold", "contacts.pair_jslot",
+                 "contacts.pair_jadj_off", "scratch.pair_fi", "scratch.pair_ti"):
+        assert f[name] == 0, name
+    assert not any(k.startswith("scratch.acc") for k in f)
     assert f["bonds.bonds"] == 0 and f["geogrid.links"] == 0  # (none in this scene)
     assert len({k.split(".")[0] for k in f}) >= 8
 

@@ -103,6 +103,16 @@ def _pile(kind: str) -> dem.Scene:
     return s
 
 
+_KEPT = ("contacts.pair_out", "contacts.pair_jslot", "contacts.pair_jadj_off",
+         "scratch.pair_fi", "scratch.pair_ti")
+
+
+def _kept(s) -> dict:
+    """Bytes of the arrays that only a pass keeping its outputs (more than one thread) has."""
+    f = s.memory_by_field()
+    return {k: f[k] for k in _KEPT}
+
+
 @pytest.mark.parametrize("kind", ["linear", "hertz_short"])
 def test_one_thread_sums_into_the_bodies_and_two_keep_outputs_the_same_bits(kind):
     """On one thread, with the short kernels alone, the pair pass adds each contact's share
@@ -116,12 +126,13 @@ def test_one_thread_sums_into_the_bodies_and_two_keep_outputs_the_same_bits(kind
             dem.set_num_threads(t)
             s = _pile(kind)
             s.run(3000)
-            runs.append((s, s.memory_by_field()["contacts.pair_out"],
-                         _core._checkpoint_save(s)))
+            runs.append((s, _kept(s), _core._checkpoint_save(s)))
     finally:
         dem.set_num_threads(before)
-    (a, out_a, blob_a), (b, out_b, blob_b) = runs
-    assert out_a == 0 and out_b > 0  # (one thread keeps none)
+    (a, kept_a, blob_a), (b, kept_b, blob_b) = runs
+    # (one thread keeps neither the outputs nor their slots nor the bodies' scratch sums)
+    assert kept_a == dict.fromkeys(_KEPT, 0), kept_a
+    assert all(v > 0 for v in kept_b.values()), kept_b
     assert len(a.contacts()["force"]) > 200
     for name in ("positions", "velocities", "angular_velocities", "forces", "torques"):
         assert np.array_equal(getattr(a, name), getattr(b, name)), name
@@ -149,3 +160,27 @@ def test_a_blob_rewritten_as_format_14_runs_on_to_the_same_bits(kind):
     b.run(300)
     assert np.array_equal(a.positions, b.positions)
     assert a.energies()["friction"] == b.energies()["friction"]
+
+
+def test_threads_changed_between_steps_give_the_one_thread_bits():
+    """A run that goes from one thread to two and back (the pass switching between summing
+    into the bodies and keeping its outputs, whose slots it then makes again, with a
+    rebuild of the contacts in each part) ends on the bits of a run on one thread."""
+    before = dem.get_num_threads()
+    try:
+        dem.set_num_threads(1)
+        ref = _pile("linear")
+        ref.run(3000)
+        s = _pile("linear")
+        builds = []
+        for t, n in ((1, 800), (2, 1200), (1, 1000)):
+            dem.set_num_threads(t)
+            b0 = s.collider_stats()["builds"]
+            s.run(n)
+            builds.append(s.collider_stats()["builds"] - b0)
+            assert (_kept(s)["contacts.pair_jslot"] > 0) == (t == 2)
+    finally:
+        dem.set_num_threads(before)
+    assert all(b > 0 for b in builds), builds
+    for name in ("positions", "velocities", "angular_velocities", "forces", "torques"):
+        assert np.array_equal(getattr(ref, name), getattr(s, name)), name

@@ -454,8 +454,16 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   else
     w.vec(std::vector<PairOutput>());
   w.vec(s.wall_contacts_);
-  w.vec(s.pair_jadj_off_);
-  w.vec(s.pair_jslot_);
+  if (s.pair_jslot_.size() == s.pairs_.size() && s.pair_jadj_off_.size() == s.pair_ioff_.size()) {
+    w.vec(s.pair_jadj_off_);
+    w.vec(s.pair_jslot_);
+  } else {
+    // (after a direct pass the scene keeps no slots of outputs: the ones it would have)
+    std::vector<int> jadj_off, jslot;
+    s.index_pair_outputs(jadj_off, jslot);
+    w.vec(jadj_off);
+    w.vec(jslot);
+  }
   w.vec(s.pair_ioff_);
   w.vec(s.wall_adj_off_);
   w.vec(s.wall_adj_);

@@ -519,6 +519,12 @@ class Scene {
   /// each pair of materials, or rolling resistance asked by both factors), checked again
   /// when the materials change (phys_version_). Once made it stays.
   void ensure_pair_cold();
+  /// The slots of the pair pass's outputs, grouped by j (pair_jadj_off_, pair_jslot_ of the
+  /// comment below), from pairs_ and the body count of the last build (pair_ioff_).
+  void index_pair_outputs(std::vector<int>& jadj_off, std::vector<int>& jslot) const;
+  /// Whether the pair pass sums into the bodies directly (pair_direct_): without the cold
+  /// part, on one thread or with too few contacts to share.
+  bool pair_pass_direct() const;
   /// Energy stored in active contacts and unbroken geogrid links, J.
   Real stored_elastic_energy() const;
   /// Appends one body (kind 0 sphere, 1 grid node) at rest to every per-body array.
@@ -694,8 +700,6 @@ class Scene {
   // i's share of its pair contacts' forces (N) and torques (N m), 4 doubles per body (the
   // fourth zero), so they are stored and loaded as one register.
   std::vector<std::array<Real, 4>> pair_fi_, pair_ti_;
-  // Scratch of reduce_and_integrate: accelerations of the step (zero for blocked DOFs).
-  std::vector<Vec3> acc_lin_, acc_ang_;
   // Scratch of compute_wall_forces, made again after each build: wall contacts by block of
   // bodies and wall axis, and where each block's contacts start in that order.
   std::vector<int> wall_order_, wall_block_off_;
@@ -706,6 +710,8 @@ class Scene {
   // outputs in pair_out_[pair_jadj_off_[b] .. pair_jadj_off_[b + 1]) (grouped by j, ascending
   // contact index within a group; contact k writes to slot pair_jslot_[k]). The reduction
   // into bodies reads both in a fixed order, contiguously, without a branch per entry.
+  // pair_jadj_off_ and pair_jslot_ exist only while the pass keeps its outputs (not after a
+  // direct pass, pair_direct_: 16 B a grain less); index_pair_outputs makes them.
   std::vector<int> pair_jadj_off_, pair_jslot_, pair_ioff_, wall_adj_off_, wall_adj_;
   // Cylindrical walls and their contacts (WallContact::wall: the cylinder's index), sorted by
   // (body, cylinder); cyl_adj_off_/cyl_adj_: each body's contacts (CSR, contact order).

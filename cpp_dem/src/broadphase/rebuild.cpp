@@ -197,7 +197,10 @@ void Scene::rebuild() {
   pairs_.swap(next);
   pair_cold_.swap(next_cold);
   pair_dissip_.swap(next_dissip);
-  if (pair_direct_)
+  // (The next pass's kind, as it will choose it unless a material change gives the scene
+  // the cold part first: then the pass makes the outputs and their slots itself.)
+  const bool direct = pair_pass_direct();
+  if (direct)
     std::vector<PairOutput>().swap(pair_out_);  // (a direct pass keeps none)
   else
     pair_out_.assign(pairs_.size(), PairOutput());
@@ -216,21 +219,14 @@ void Scene::rebuild() {
   std::vector<WallContact> wnext = merge.finish();
   wall_contacts_.swap(wnext);
   // Adjacency (CSR) in contact order, so reductions into bodies have a fixed order.
-  pair_jadj_off_.assign(n + 1, 0);
   pair_ioff_.assign(n + 1, 0);
-  for (const auto& c : pairs_) {
-    pair_ioff_[c.i + 1]++;
-    pair_jadj_off_[c.j + 1]++;
-  }
-  for (int b = 0; b < n; ++b) {
-    pair_ioff_[b + 1] += pair_ioff_[b];
-    pair_jadj_off_[b + 1] += pair_jadj_off_[b];
-  }
-  pair_jslot_.resize(pairs_.size());
-  {
-    std::vector<int> fill(pair_jadj_off_.begin(), pair_jadj_off_.end() - 1);
-    for (int c = 0; c < static_cast<int>(pairs_.size()); ++c)
-      pair_jslot_[c] = fill[pairs_[c].j]++;
+  for (const auto& c : pairs_) pair_ioff_[c.i + 1]++;
+  for (int b = 0; b < n; ++b) pair_ioff_[b + 1] += pair_ioff_[b];
+  if (direct) {
+    std::vector<int>().swap(pair_jadj_off_);
+    std::vector<int>().swap(pair_jslot_);
+  } else {
+    index_pair_outputs(pair_jadj_off_, pair_jslot_);
   }
   contacts_by_body(wall_contacts_, n, wall_adj_off_, wall_adj_);
   if constexpr (kGeogridBuilt) {

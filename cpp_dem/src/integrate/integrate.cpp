@@ -14,7 +14,7 @@ namespace cpp_dem {
 namespace {
 using namespace integrate_terms;
 
-/// One leapfrog half of the update for a run of degrees of freedom [k0, k1) of flat arrays:
+/// One leapfrog half of the update for a run of `count` degrees of freedom of flat arrays:
 /// the accelerations acc (m/s^2 or rad/s^2, zero for a blocked DOF) are damped (Cundall local
 /// damping, lambda) and give the new velocities vel; with pos (not null) the positions follow,
 /// pos += vel dt. Returns the sum of the new positions and velocities, which is finite unless
@@ -22,11 +22,11 @@ using namespace integrate_terms;
 /// elementwise, so the compiler vectorises it across bodies.
 template <bool kDamp>
 inline Real leapfrog_dofs(Real* __restrict vel, const Real* __restrict acc, Real* __restrict pos,
-                          long k0, long k1, Real dt, Real lambda) {
+                          long count, Real dt, Real lambda) {
   Real check = 0;
   if (pos) {
 #pragma omp simd reduction(+ : check)
-    for (long k = k0; k < k1; ++k) {
+    for (long k = 0; k < count; ++k) {
       const Real v = vel[k] + (kDamp ? damp_component(acc[k], vel[k], dt, lambda) : acc[k]) * dt;
       vel[k] = v;
       pos[k] += v * dt;
@@ -34,7 +34,7 @@ inline Real leapfrog_dofs(Real* __restrict vel, const Real* __restrict acc, Real
     }
   } else {
 #pragma omp simd reduction(+ : check)
-    for (long k = k0; k < k1; ++k) {
+    for (long k = 0; k < count; ++k) {
       const Real v = vel[k] + (kDamp ? damp_component(acc[k], vel[k], dt, lambda) : acc[k]) * dt;
       vel[k] = v;
       check += v;
@@ -89,13 +89,13 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
       t += ops.load(l.torque_a);
     }
   };
-  // (After a direct pair pass, pair_direct_, pair_fi_ and pair_ti_ hold these first three
-  // terms summed in this order: the external force and the weight, j's shares, i's.)
+  // (After a direct pair pass, pair_direct_, the bodies' force and torque hold these first
+  // three terms summed in this order: the external force and the weight, j's shares, i's.)
   const bool direct = pair_direct_;
   const auto sum_forces = [&](int b, auto& f, auto& t, auto ops) __attribute__((always_inline)) {
     if (direct) {
-      f = ops.load_padded(fi + 4L * b);
-      t = ops.load_padded(ti + 4L * b);
+      f = ops.load(bodies_.force[b]);
+      t = ops.load(bodies_.torque[b]);
     } else {
       f = ops.load(bodies_.ext_force_of(b)) + bodies_.mass[b] * ops.load(gravity_);
       t = ops.load(bodies_.ext_torque_of(b));
@@ -167,7 +167,7 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
   // Forces and accelerations of bodies [b0, b1) (inverse masses and inertias from b0 on);
   // false if a force or torque may be non-finite.
   const auto block_forces = [&](int b0, int b1, const Real* inv_m, const Real* inv_i,
-                                auto ops) __attribute__((always_inline)) {
+                                Vec3* acc_l, Vec3* acc_a, auto ops) __attribute__((always_inline)) {
     using V = typename decltype(ops)::V;
     V fcheck = ops.zero();  // sum of every force and torque: finite unless one of them is not
     for (int b = b0; b < b1; ++b) {
@@ -182,8 +182,8 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
           if (dofs & (DOF_RX << a)) aa[a] = 0;
         }
       }
-      ops.store(acc_lin_[b], al);
-      ops.store(acc_ang_[b], aa);
+      ops.store(acc_l[b - b0], al);
+      ops.store(acc_a[b - b0], aa);
     }
     return std::isfinite(fcheck[0] + fcheck[1] + fcheck[2]);
   };
@@ -205,13 +205,11 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
     // accelerations per body, then the velocities and positions as flat arrays of degrees of
     // freedom (vectorised across bodies), then orientations and checks. Every body's
     // update is the same arithmetic whatever the blocks or threads.
-    acc_lin_.resize(n);
-    acc_ang_.resize(n);
+    // (The accelerations live in a block's buffers, acc_l and acc_a: 48 B a body less than
+    // arrays of every body's, and they stay in the L1 cache.)
     Real* const vel = bodies_.vel.data()->data();
     Real* const angvel = bodies_.angvel.data()->data();
     Real* const pos = bodies_.pos.data()->data();
-    const Real* const acc_lin = acc_lin_.data()->data();
-    const Real* const acc_ang = acc_ang_.data()->data();
     const Real* const mass = bodies_.mass.data();
     const Real* const inertia = bodies_.inertia.data();
     const Real* const scale = ds_on_ ? bodies_.inertia_scale.data() : nullptr;
@@ -257,27 +255,30 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
             inv_i[q] = 1.0 / inertia[b0 + q];
           }
         }
+        Vec3 acc_l[kBlock], acc_a[kBlock];
         const bool forces_ok =
-            wide ? block_forces(b0, b1, inv_m, inv_i, WideOps())
-                 : block_forces(b0, b1, inv_m, inv_i, NarrowOps());
+            wide ? block_forces(b0, b1, inv_m, inv_i, acc_l, acc_a, WideOps())
+                 : block_forces(b0, b1, inv_m, inv_i, acc_l, acc_a, NarrowOps());
         if (!forces_ok) {
           // Only now the exact test; a body with a non-finite force or torque does not move.
           for (int b = b0; b < b1; ++b) {
             if (!forces_finite(b)) {
               err = std::min(err, static_cast<long>(b));
-              acc_lin_[b].setZero();
-              acc_ang_[b].setZero();
+              acc_l[b - b0].setZero();
+              acc_a[b - b0].setZero();
             }
           }
         }
         const long k0 = 3L * b0, k1 = 3L * b1;
+        const Real* const acc_lin = acc_l[0].data();
+        const Real* const acc_ang = acc_a[0].data();
         Real check;
         if (lambda > 0) {
-          check = leapfrog_dofs<true>(vel, acc_lin, pos, k0, k1, dt, lambda) +
-                  leapfrog_dofs<true>(angvel, acc_ang, nullptr, k0, k1, dt, lambda);
+          check = leapfrog_dofs<true>(vel + k0, acc_lin, pos + k0, 3L * count, dt, lambda) +
+                  leapfrog_dofs<true>(angvel + k0, acc_ang, nullptr, 3L * count, dt, lambda);
         } else {
-          check = leapfrog_dofs<false>(vel, acc_lin, pos, k0, k1, dt, lambda) +
-                  leapfrog_dofs<false>(angvel, acc_ang, nullptr, k0, k1, dt, lambda);
+          check = leapfrog_dofs<false>(vel + k0, acc_lin, pos + k0, 3L * count, dt, lambda) +
+                  leapfrog_dofs<false>(angvel + k0, acc_ang, nullptr, 3L * count, dt, lambda);
         }
         // Orientations: vectorised across the block when every spin is in the series range.
         Real w2max = 0;

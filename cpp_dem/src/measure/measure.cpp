@@ -430,8 +430,6 @@ std::vector<std::pair<std::string, std::size_t>> Scene::memory_by_field() const 
   add("contacts.wall_adj", wall_adj_);
   add("scratch.pair_fi", pair_fi_);
   add("scratch.pair_ti", pair_ti_);
-  add("scratch.acc_lin", acc_lin_);
-  add("scratch.acc_ang", acc_ang_);
   add("scratch.wall_order", wall_order_);
   add("scratch.wall_block_off", wall_block_off_);
   add("scratch.density_scaling_kt", ds_kt_);

@@ -156,8 +156,10 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
   PairOutput* const out_j = pair_out_.data();
   Real* const out_fi = pair_fi_.data()->data();
   Real* const out_ti = pair_ti_.data()->data();
-  // (pair_direct_: j's force and torque added to its sums at once, i's at the end of its
-  // contacts, in the order the reduction adds pair_out_'s; compute_pair_forces_hot)
+  Vec3* const fsum = bodies_.force.data();
+  Vec3* const tsum = bodies_.torque.data();
+  // (pair_direct_: j's force and torque added to its sums (fsum, tsum) at once, i's at the
+  // end of its contacts, in the order the reduction adds pair_out_'s; compute_pair_forces_hot)
   const bool direct = pair_direct_;
   // Periodic cell: j is seen at its image, and the mean field's velocity L d and spin are
   // added to the stored fluctuations (bodies/cell.hpp).
@@ -209,10 +211,8 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
                               o ? o->torque_j.data() : ht, n, overlap, li, lj, rel_vel,
                               V(wi + wj), dt, fi, ti, ops);
             if (!o) {
-              ops.store_padded(out_fi + 4L * j, V(ops.load_padded(out_fi + 4L * j) +
-                                                  ops.load_padded(hf)));
-              ops.store_padded(out_ti + 4L * j, V(ops.load_padded(out_ti + 4L * j) +
-                                                  ops.load_padded(ht)));
+              ops.store(fsum[j], V(ops.load(fsum[j]) + ops.load_padded(hf)));
+              ops.store(tsum[j], V(ops.load(tsum[j]) + ops.load_padded(ht)));
             }
           } else if (!pair_cold_on_ || !o) {
             continue;  // (a bug: pair_cold_missing_ stops the step)
@@ -241,16 +241,16 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
           ops.store_padded(o->force.data(), f);
           ops.store_padded(o->torque_j.data(), V(-lj * nxf));
         } else {
-          ops.store_padded(out_fi + 4L * j, V(ops.load_padded(out_fi + 4L * j) + f));
-          ops.store_padded(out_ti + 4L * j, V(ops.load_padded(out_ti + 4L * j) + V(-lj * nxf)));
+          ops.store(fsum[j], V(ops.load(fsum[j]) + f));
+          ops.store(tsum[j], V(ops.load(tsum[j]) + V(-lj * nxf)));
         }
         fi -= f;
         ti -= li * nxf;
       }
     }
     if (direct) {
-      ops.store_padded(out_fi + 4L * i, V(ops.load_padded(out_fi + 4L * i) + fi));
-      ops.store_padded(out_ti + 4L * i, V(ops.load_padded(out_ti + 4L * i) + ti));
+      ops.store(fsum[i], V(ops.load(fsum[i]) + fi));
+      ops.store(tsum[i], V(ops.load(tsum[i]) + ti));
     } else {
       ops.store_padded(out_fi + 4L * i, fi);
       ops.store_padded(out_ti + 4L * i, ti);
@@ -266,6 +266,23 @@ void Scene::compute_pair_forces(long& err_contact) {
   if (pair_cold_missing_)
     throw std::logic_error("cpp_dem: a pair contact's law needs the contacts' cold part, "
                            "which ensure_pair_cold did not make (a bug: please report it)");
+}
+
+bool Scene::pair_pass_direct() const {
+  return !pair_cold_on_ && (static_cast<long>(pairs_.size()) <= kParallelMin || max_threads() == 1);
+}
+
+void Scene::index_pair_outputs(std::vector<int>& jadj_off, std::vector<int>& jslot) const {
+  jadj_off.clear();
+  jslot.clear();
+  if (pair_ioff_.empty()) return;  // (no build yet)
+  const int n = static_cast<int>(pair_ioff_.size()) - 1;  // (the last build's bodies)
+  jadj_off.assign(n + 1, 0);
+  for (const auto& c : pairs_) jadj_off[c.j + 1]++;
+  for (int b = 0; b < n; ++b) jadj_off[b + 1] += jadj_off[b];
+  jslot.resize(pairs_.size());
+  std::vector<int> fill(jadj_off.begin(), jadj_off.end() - 1);
+  for (int c = 0; c < static_cast<int>(pairs_.size()); ++c) jslot[c] = fill[pairs_[c].j]++;
 }
 
 void Scene::ensure_pair_cold() {
@@ -303,32 +320,41 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   // so the sums do not depend on the number of threads. 3-vectors in 4-lane registers
   // (WideOps) where the CPU has AVX2; otherwise the same loop with Eigen's Vector3d.
   const int n = num_bodies();
-  pair_fi_.resize(n);
-  pair_ti_.resize(n);
   // On one thread with the short kernels alone (no cold part: every contact's force is
-  // f_n n + f_s, kept in its hot record) the pass adds j's share to j's sums at once
-  // (pair_direct_), and pair_out_ is not kept: 64 B a contact less to write and read back.
+  // f_n n + f_s, kept in its hot record) the pass adds each contact's force and torque to
+  // its bodies' sums in the bodies' own force and torque (pair_direct_), which the reduction
+  // then completes: pair_out_, pair_fi_ and pair_ti_ are not kept (64 B a contact and 64 B
+  // a body less to write and read back).
   const long ncontacts = static_cast<long>(pairs_.size());
-  pair_direct_ = !pair_cold_on_ && (ncontacts <= kParallelMin || max_threads() == 1);
+  pair_direct_ = pair_pass_direct();
   if (pair_direct_) {
     if (pair_out_.capacity() > 0) std::vector<PairOutput>().swap(pair_out_);
+    if (pair_jslot_.capacity() > 0 || pair_jadj_off_.capacity() > 0) {
+      std::vector<int>().swap(pair_jadj_off_);
+      std::vector<int>().swap(pair_jslot_);
+    }
+    if (pair_fi_.capacity() > 0 || pair_ti_.capacity() > 0) {
+      std::vector<std::array<Real, 4>>().swap(pair_fi_);
+      std::vector<std::array<Real, 4>>().swap(pair_ti_);
+    }
     // The sums start where the reduction starts: the external force and the weight.
-    Real* const fsum = pair_fi_.data()->data();
-    Real* const tsum = pair_ti_.data()->data();
     const Vec3 g = gravity_;
     for (int b = 0; b < n; ++b) {
       const Vec3& fe = bodies_.ext_force_of(b);
       const Vec3& te = bodies_.ext_torque_of(b);
       const Real m = bodies_.mass[b];
       for (int a = 0; a < 3; ++a) {
-        fsum[4L * b + a] = fe[a] + m * g[a];
-        tsum[4L * b + a] = te[a];
+        bodies_.force[b][a] = fe[a] + m * g[a];
+        bodies_.torque[b][a] = te[a];
       }
-      fsum[4L * b + 3] = 0.0;
-      tsum[4L * b + 3] = 0.0;
     }
-  } else if (pair_out_.size() != pairs_.size()) {
-    pair_out_.assign(pairs_.size(), PairOutput());  // (after direct passes)
+  } else {
+    pair_fi_.resize(n);
+    pair_ti_.resize(n);
+    // (after direct passes)
+    if (pair_out_.size() != pairs_.size()) pair_out_.assign(pairs_.size(), PairOutput());
+    if (pair_jslot_.size() != pairs_.size() || pair_jadj_off_.size() != pair_ioff_.size())
+      index_pair_outputs(pair_jadj_off_, pair_jslot_);
   }
   if (!use_wide_ops()) {
     compute_pair_forces_narrow(err_contact);
@@ -352,6 +378,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   PairOutput* const out_j = pair_out_.data();
   Real* const out_fi = pair_fi_.data()->data();
   Real* const out_ti = pair_ti_.data()->data();
+  Vec3* const fsum = bodies_.force.data();  // (direct)
+  Vec3* const tsum = bodies_.torque.data();
   // Periodic cell: j is seen at its image, and the mean field's velocity L d and spin are
   // added to the stored fluctuations (bodies/cell.hpp). The loop is instantiated twice, so
   // the cell costs the wall-bounded scene nothing.
@@ -413,8 +441,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
                 alignas(32) Real hf[4], ht[4];
                 hertz_pair<false>(c, nullptr, dissip[k], hf, ht, n, overlap, li, lj, rel_vel,
                                   V4(wi + wj), dt, fi, ti, WideOps());
-                store4(out_fi + 4L * j, load4(out_fi + 4L * j) + load4(hf));
-                store4(out_ti + 4L * j, load4(out_ti + 4L * j) + load4(ht));
+                store3(fsum[j], v4(fsum[j]) + load4(hf));
+                store3(tsum[j], v4(tsum[j]) + load4(ht));
               } else {
                 hertz_pair<false>(c, nullptr, dissip[k], o->force.data(), o->torque_j.data(), n,
                                   overlap, li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
@@ -444,8 +472,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           // Moments (000 eq 6): -l_j n x F on j, l_i n x (-F) on i; n x F = n x fs.
           const V4 nxf = cross3(n, fs);
           if constexpr (kDirect) {
-            store4(out_fi + 4L * j, load4(out_fi + 4L * j) + f);
-            store4(out_ti + 4L * j, load4(out_ti + 4L * j) + (-lj * nxf));
+            store3(fsum[j], v4(fsum[j]) + f);
+            store3(tsum[j], v4(tsum[j]) + (-lj * nxf));
           } else {
             store4(o->force.data(), f);  // with its padding (lane 3, zero)
             store4(o->torque_j.data(), -lj * nxf);
@@ -456,8 +484,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
       }
       // (lane 3 is zero: every term had a zero lane 3)
       if constexpr (kDirect) {
-        store4(out_fi + 4L * i, load4(out_fi + 4L * i) + fi);
-        store4(out_ti + 4L * i, load4(out_ti + 4L * i) + ti);
+        store3(fsum[i], v4(fsum[i]) + fi);
+        store3(tsum[i], v4(tsum[i]) + ti);
       } else {
         store4(out_fi + 4L * i, fi);
         store4(out_ti + 4L * i, ti);
