@@ -10,6 +10,7 @@ from pathlib import Path
 import numpy as np
 
 import cpp_dem as dem
+from cpp_dem import _core
 
 ROOT = Path(__file__).resolve().parents[1]
 
@@ -59,3 +60,78 @@ def test_the_fields_add_up_to_what_a_grain_costs_the_process():
     assert slope["between"] == [16**3, 32**3]
     rss, core = slope["marginal_rss_bytes_per_grain"], slope["marginal_core_bytes_per_grain"]
     assert abs(rss - core) < 0.1 * core, slope
+
+
+def _pair(gap_over_r: float) -> dem.Scene:
+    """Two resting spheres of radius 1 mm, gap_over_r radii apart, in zero gravity."""
+    s = dem.Scene()
+    m = s.add_material(dem.linear_material(density=2650, young=1e7, poisson=0.3,
+                                           friction_angle_deg=30))
+    r = 1e-3
+    s.add_spheres(np.array([[0.0, 0, 0], [2 * r + gap_over_r * r, 0, 0]]), np.full(2, r),
+                  material=m)
+    s.gravity = (0.0, 0.0, 0.0)
+    s.dt = 1e-7
+    return s
+
+
+def _field(s: dem.Scene, name: str) -> int:
+    return s.memory_by_field()[name]
+
+
+def test_radii_at_the_build_are_kept_from_the_first_change_and_growth_is_seen():
+    """The radii at the last build exist only once one changes (set through radii): two
+    spheres a skin's worth apart (0.1 radius, the margin 0.2 radius covers it) that grow by
+    a tenth of a radius each touch, and repel, without moving first: the broad phase saw the
+    growth. A checkpoint taken after the growth continues to the same bits."""
+    s = _pair(0.3)  # (0.3 r apart: beyond the margin, no candidate pair at the build)
+    s.run(5)
+    assert _field(s, "broadphase.radius_at_build") == 0
+    assert s.collider_stats()["pair_candidates"] == 0
+    s.radii = s.radii * 1.2  # (now 0.1 r overlapping)
+    assert _field(s, "broadphase.radius_at_build") == 2 * 8
+    blob = bytes(_core._checkpoint_save(s))
+    s.run(5)
+    assert s.num_active_contacts == 1
+    assert s.velocities[0, 0] < 0 < s.velocities[1, 0]
+    assert _field(s, "broadphase.radius_at_build") == 0  # (the rebuild the growth called)
+    c = dem.Scene()
+    _core._checkpoint_load(c, blob, replace=True)
+    assert _field(c, "broadphase.radius_at_build") == 2 * 8
+    c.run(5)
+    assert np.array_equal(c.positions, s.positions) and np.array_equal(c.velocities, s.velocities)
+
+
+def test_wrap_counts_and_inertia_factors_exist_from_their_first_use():
+    """A scene without a periodic cell has no wrap counts and one without density scaling
+    no inertia factors (their absence reads as zeros and ones); a wrapped body makes the
+    counts, density scaling the factors, and a checkpoint keeps them or their absence."""
+    from cpp_dem import periodic
+
+    s = _pair(-0.01)  # (pressed together: a contact for the scaling to see)
+    s.run(2)
+    assert _field(s, "bodies.image") == 0 and _field(s, "bodies.inertia_scale") == 0
+    assert np.array_equal(s.images, np.zeros((2, 3)))
+    s.set_density_scaling(target_dt=1e-3, safety=0.5, period=1)  # (beyond their own step)
+    s.run(2)
+    assert _field(s, "bodies.inertia_scale") >= 2 * 8
+    assert max(s.inertia_scale(b) for b in range(2)) > 1
+    s.clear_density_scaling()
+    assert _field(s, "bodies.inertia_scale") == 0 and s.inertia_scale(0) == 1.0
+
+    p = _pair(0.0)
+    p.set_periodic_cell(periodic.cube_cell(10e-3))
+    p.velocities = np.array([[-5.0, 0, 0], [5.0, 0, 0]])  # (the first leaves by x = 0)
+    assert _field(p, "bodies.image") == 0
+    p.run(3000)
+    assert _field(p, "bodies.image") == 2 * 12
+    im = p.images
+    assert im[0].tolist() == [-1, 0, 0] and not im[1].any()
+    q = dem.Scene()
+    _core._checkpoint_load(q, bytes(_core._checkpoint_save(p)), replace=True)
+    assert np.array_equal(q.images, im)
+    # (a scene without the arrays writes the zeros and ones they stand for)
+    blank = dem.Scene()
+    _core._checkpoint_load(blank, bytes(_core._checkpoint_save(s)), replace=True)
+    assert _field(blank, "bodies.image") == 0 and _field(blank, "bodies.inertia_scale") == 0
+    assert bytes(_core._checkpoint_save(blank)) == bytes(_core._checkpoint_save(s))

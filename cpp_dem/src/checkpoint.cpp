@@ -421,13 +421,29 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.vec(layout());
   put_materials(w, s.materials_);
   w.vec(s.pair_laws_);
-  // Bodies.
-  s.bodies_.for_each_array([&](const auto& v) { w.vec(v); });
+  // Bodies. (The wrap counts and the inertia factors exist from their first use on:
+  // without them the arrays they stand for, zeros and ones, so the bytes are the same.)
+  const size_t nbodies = s.bodies_.pos.size();
+  s.bodies_.for_each_array([&](const auto& v) {
+    using T = typename std::decay_t<decltype(v)>::value_type;
+    const void* const p = &v;
+    if (v.empty() && p == &s.bodies_.image) {
+      w.vec(std::vector<T>(nbodies, T{}));
+    } else if (v.empty() && p == &s.bodies_.inertia_scale) {
+      if constexpr (std::is_same_v<T, Real>) w.vec(std::vector<Real>(nbodies, 1.0));
+    } else {
+      w.vec(v);
+    }
+  });
   s.clumps_.for_each_array([&](const auto& v) { w.vec(v); });
   w.vec(s.id_of_slot_);
   w.put(s.spatial_sort_);
   w.vec(s.pos_at_build_);
-  w.vec(s.radius_at_build_);
+  if (s.radius_at_build_.empty())  // (no radius changed since the build: they are today's)
+    w.vec(std::vector<Real>(s.bodies_.radius.begin(),
+                            s.bodies_.radius.begin() + s.pos_at_build_.size()));
+  else
+    w.vec(s.radius_at_build_);
   w.vec(s.walls_);
   w.vec(s.wall_openings_);
   w.put(s.cell_);
@@ -893,6 +909,17 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
     s.controllers_[j]->enabled = ctl[j].enabled;
   }
   t.controllers_ = std::move(s.controllers_);
+  // Arrays made at their first use are dropped where they hold what their absence stands
+  // for: no body wrapped, every inertia factor 1, no radius changed since the build.
+  BodyStore& tb = t.bodies_;
+  if (std::all_of(tb.image.begin(), tb.image.end(),
+                  [](const std::array<int, 3>& a) { return a[0] == 0 && a[1] == 0 && a[2] == 0; }))
+    std::vector<std::array<int, 3>>().swap(tb.image);
+  if (std::all_of(tb.inertia_scale.begin(), tb.inertia_scale.end(), [](Real f) { return f == 1.0; }))
+    std::vector<Real>().swap(tb.inertia_scale);
+  if (t.radius_at_build_.size() <= tb.radius.size() &&
+      std::equal(t.radius_at_build_.begin(), t.radius_at_build_.end(), tb.radius.begin()))
+    std::vector<Real>().swap(t.radius_at_build_);
   // The cell grid is scratch of the broad phase (rebuilt from scratch at every build).
   s = std::move(t);
 }

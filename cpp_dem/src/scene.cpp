@@ -85,7 +85,7 @@ void Scene::clear_density_scaling() {
   ds_on_ = false;
   ds_stale_ = false;
   for (int c = 0; c < clumps_.size(); ++c) set_clump_scale(c, 1.0);
-  std::fill(bodies_.inertia_scale.begin(), bodies_.inertia_scale.end(), 1.0);
+  std::vector<Real>().swap(bodies_.inertia_scale);  // (every factor 1: none kept)
 }
 
 void Scene::set_clump_scale(int c, Real s) {

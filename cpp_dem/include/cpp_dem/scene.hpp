@@ -189,8 +189,8 @@ class Scene {
   Vec3 bond_shift(const Bond& l) const {
     if (!cell_.on) return Vec3::Zero();
     Vec3 s;
-    for (int a = 0; a < 3; ++a)
-      s[a] = l.cell_shift[a] + bodies_.image[l.b][a] - bodies_.image[l.a][a];
+    const std::array<int, 3> ia = bodies_.image_of(l.a), ib = bodies_.image_of(l.b);
+    for (int a = 0; a < 3; ++a) s[a] = l.cell_shift[a] + ib[a] - ia[a];
     return cell_.h * s;
   }
   /// Every break of a bond part so far, in the order they happened.
@@ -225,7 +225,10 @@ class Scene {
   }
   /// Per body (storage order): the cell vectors it was shifted by when wrapped (its
   /// unwrapped position is pos + H image).
-  const std::vector<std::array<int, 3>>& body_images() const { return bodies_.image; }
+  std::vector<std::array<int, 3>> body_images() const {
+    return bodies_.image.empty() ? std::vector<std::array<int, 3>>(bodies_.size(), {0, 0, 0})
+                                 : bodies_.image;
+  }
 
   int add_wall(int axis, Real position, int sense, int material);
   /// Opens wall `id` for bodies whose centre lies in (lo, hi) along `axis` (WallOpening);
@@ -555,7 +558,9 @@ class Scene {
     return (pos - pos_at_build_[slot]).norm() + radius_growth_since_build(slot);
   }
   /// How much body `slot`'s radius has grown since the last build, m (+0 where it has not).
+  /// (radius_at_build_ is empty while no radius has changed since the build: +0.)
   __attribute__((always_inline)) inline Real radius_growth_since_build(int slot) const {
+    if (radius_at_build_.empty()) return 0.0;
     return std::max(0.0, bodies_.radius[slot] - radius_at_build_[slot]);
   }
   /// The same in a deforming periodic cell: beyond the cell's own deformation since the build
@@ -672,6 +677,8 @@ class Scene {
   std::vector<int> id_of_slot_, slot_of_id_;
   bool spatial_sort_ = true;
   std::vector<Vec3> pos_at_build_;
+  // The radii at the last build, kept only once one has changed since it (set_radii);
+  // empty otherwise (radius_growth_since_build: +0).
   std::vector<Real> radius_at_build_;
   Real max_radius_at_build_ = 0;  // largest radius at the last build, m (need_rebuild)
   std::vector<Wall> walls_;

@@ -220,6 +220,10 @@ void Scene::set_radii(const std::vector<Real>& r) {
     }
     clump_factor[c] = f;
   }
+  // (The radii at the last build, kept from the first change on: the broad phase's
+  // measure of growth, Scene::radius_growth_since_build.)
+  if (radius_at_build_.empty())
+    radius_at_build_.assign(bodies_.radius.begin(), bodies_.radius.begin() + pos_at_build_.size());
   for (size_t b = 0; b < r.size(); ++b) {
     if (bodies_.clump[b] >= 0) {
       const Real f = clump_factor[bodies_.clump[b]];

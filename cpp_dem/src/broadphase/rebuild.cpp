@@ -235,7 +235,8 @@ void Scene::rebuild() {
   if (!cylinder_walls_.empty()) rebuild_cylinder_contacts(margin);
   if (!mesh_walls_.empty()) rebuild_mesh_contacts(margin);
   pos_at_build_ = bodies_.pos;
-  radius_at_build_ = bodies_.radius;
+  // (the radii at the build are kept only once one changes: set_radii)
+  if (!radius_at_build_.empty()) std::vector<Real>().swap(radius_at_build_);
   cell_.h_at_build = cell_.h;
   max_radius_at_build_ = 0;
   for (Real r : bodies_.radius) max_radius_at_build_ = std::max(max_radius_at_build_, r);

@@ -99,6 +99,7 @@ void Scene::wrap_into_cell() {
     }
     if (!any) continue;
     bodies_.pos[b] -= cell_.h * w;
+    if (bodies_.image.empty()) bodies_.image.assign(n, {0, 0, 0});  // (the first wrap)
     for (int a = 0; a < 3; ++a) bodies_.image[b][a] += static_cast<int>(w[a]);
   }
 }

@@ -212,7 +212,8 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
     Real* const pos = bodies_.pos.data()->data();
     const Real* const mass = bodies_.mass.data();
     const Real* const inertia = bodies_.inertia.data();
-    const Real* const scale = ds_on_ ? bodies_.inertia_scale.data() : nullptr;
+    const Real* const scale =
+        ds_on_ && !bodies_.inertia_scale.empty() ? bodies_.inertia_scale.data() : nullptr;
     const bool has_clumps = clumps_.size() > 0;
     const int* const clump_of = bodies_.clump.data();
     constexpr int kBlock = kBodyBlock;
@@ -317,7 +318,7 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
       }
       const std::uint8_t dofs = bodies_.blocked[b];
       const Vec3 v_old = bodies_.vel[b], w_old = bodies_.angvel[b];
-      const Real ds = ds_on_ ? bodies_.inertia_scale[b] : 1.0;  // density scaling
+      const Real ds = ds_on_ ? bodies_.inertia_scale_of(b) : 1.0;  // density scaling
       const Real m = bodies_.mass[b] * ds, inertia = bodies_.inertia[b] * ds;
       const Real inv_m = 1.0 / m, inv_i = 1.0 / inertia;
       Real dissip = 0, work = 0;

@@ -109,7 +109,7 @@ Real Scene::clump_critical_dt(int c, const std::vector<Vec3>& kt, const std::vec
 
 Real Scene::body_critical_dt(int b, const std::vector<Vec3>& kt, const std::vector<Vec3>& kr,
                              bool scaled) const {
-  const Real f = scaled ? bodies_.inertia_scale[b] : 1.0;
+  const Real f = scaled ? bodies_.inertia_scale_of(b) : 1.0;
   const Real m = bodies_.mass[b] * f, inertia = bodies_.inertia[b] * f;
   Real d = std::numeric_limits<Real>::infinity();
   for (int a = 0; a < 3; ++a) {
@@ -199,6 +199,7 @@ void Scene::update_density_scaling() {
   for (int c = 0; c < clumps_.size(); ++c)
     set_clump_scale(c, factor(clump_critical_dt(c, ds_kt_, ds_kr_, false), clumps_.inertia_scale[c]));
   const int n = num_bodies();
+  if (bodies_.inertia_scale.empty()) bodies_.inertia_scale.assign(n, 1.0);  // (the first factors)
   for (int b = 0; b < n; ++b) {
     const Real s = bodies_.clump[b] >= 0
                        ? 1.0
@@ -224,7 +225,7 @@ Scene::DensityScalingStats Scene::density_scaling_stats() const {
   for (int c = 0; c < clumps_.size(); ++c)
     count(clumps_.mass[c], clumps_.inertia_scale[c], clumps_.blocked[c]);
   for (int b = 0; b < num_bodies(); ++b)
-    if (bodies_.clump[b] < 0) count(bodies_.mass[b], bodies_.inertia_scale[b], bodies_.blocked[b]);
+    if (bodies_.clump[b] < 0) count(bodies_.mass[b], bodies_.inertia_scale_of(b), bodies_.blocked[b]);
   st.mean_factor = mass > 0 ? scaled_mass / mass : 1.0;
   st.scaled_share = st.movable > 0 ? static_cast<Real>(st.scaled) / st.movable : 0.0;
   // The inertial number over the active pair contacts, in contact order.
@@ -249,7 +250,7 @@ Scene::DensityScalingStats Scene::density_scaling_stats() const {
 
 Real Scene::slot_inertia_scale(int b) const {
   const int c = bodies_.clump[b];
-  return c >= 0 ? clumps_.inertia_scale[c] : bodies_.inertia_scale[b];
+  return c >= 0 ? clumps_.inertia_scale[c] : bodies_.inertia_scale_of(b);
 }
 
 Real Scene::inertia_scale(int id) const {

@@ -66,7 +66,7 @@ int Scene::add_bond(int a, int b, const BondParams& p) {
     for (int ax = 0; ax < 3; ++ax) {
       if (!cell_.periodic[ax]) continue;
       const long rel = -std::lround(f[ax]) -
-                       (bodies_.image[sb][ax] - bodies_.image[sa][ax]);
+                       (bodies_.image_of(sb)[ax] - bodies_.image_of(sa)[ax]);
       if (rel < std::numeric_limits<std::int16_t>::min() ||
           rel > std::numeric_limits<std::int16_t>::max())
         throw ParameterError("bond " + std::to_string(a) + "-" + std::to_string(b) +

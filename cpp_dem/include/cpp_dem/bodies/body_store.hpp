@@ -50,7 +50,9 @@ struct BodyStore {
   std::vector<std::uint8_t> kind;     ///< BodyKind
   std::vector<int> clump;             ///< index of the clump a member belongs to, -1: free
   /// Periodic cell: how many cell vectors the body was shifted by when wrapped into the cell
-  /// (its unwrapped position is pos + H image); zero without a cell.
+  /// (its unwrapped position is pos + H image); zero without a cell. Empty until a body is
+  /// first wrapped (Scene::wrap_into_cell), then one entry per body: a scene without a cell
+  /// carries none of its 12 bytes a body. Read through image_of.
   std::vector<std::array<int, 3>> image;
   // Energy accumulators per body: allocated when the scene first tracks energy (empty
   // before: a scene that never does carries none of their 48 bytes a body), then one entry
@@ -62,6 +64,8 @@ struct BodyStore {
   /// Density scaling (Scene::set_density_scaling): the factor s >= 1 of the body's inertia;
   /// it moves as a body of mass s x mass and moment s x inertia, while its weight stays
   /// mass x g. 1 when scaling is off, and for a clump member (its clump carries the factor).
+  /// Empty until density scaling first sets a factor (Scene::update_density_scaling), then
+  /// one entry per body; read through inertia_scale_of.
   std::vector<Real> inertia_scale;
 
   int size() const { return static_cast<int>(pos.size()); }
@@ -83,13 +87,19 @@ struct BodyStore {
     blocked.push_back(DOF_NONE);
     kind.push_back(k);
     clump.push_back(-1);
-    image.push_back({0, 0, 0});
-    inertia_scale.push_back(1.0);
+    if (!image.empty()) image.push_back({0, 0, 0});  // (once made, one per body)
+    if (!inertia_scale.empty()) inertia_scale.push_back(1.0);
   }
 
   /// Body b's imposed force and torque (zero where none was ever set).
   const Vec3& ext_force_of(int b) const { return ext_force.empty() ? kZeroVec3 : ext_force[b]; }
   const Vec3& ext_torque_of(int b) const { return ext_torque.empty() ? kZeroVec3 : ext_torque[b]; }
+  /// Body b's wrap count in the periodic cell (zero where no body was ever wrapped).
+  std::array<int, 3> image_of(int b) const {
+    return image.empty() ? std::array<int, 3>{0, 0, 0} : image[b];
+  }
+  /// Body b's inertia factor of density scaling (1 where none was ever set).
+  Real inertia_scale_of(int b) const { return inertia_scale.empty() ? 1.0 : inertia_scale[b]; }
 
   /// Gives the energy accumulators one entry per body: zero, each position its reference.
   void size_energy() { size_energy_arrays(*this); }
