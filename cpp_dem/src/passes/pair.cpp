@@ -310,6 +310,9 @@ void Scene::ensure_pair_cold() {
   pair_cold_.assign(pairs_.size(), PairContactCold());
 }
 
+/// How many contacts ahead the pair pass prefetches the second body's state.
+constexpr int kPrefetchAhead = 4;
+
 template <bool kYadeShear>
 void Scene::compute_pair_forces_hot(long& err_contact) {
   // Body-major: body i and its contacts (i, j), j > i, which are contiguous in pairs_ (sorted
@@ -392,6 +395,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
     const auto [b0, b1] = pair_bodies_of_thread(t, nt);
     // (Captured by value: the pointers stay in registers; by reference they were taken as
     // addresses the loop's stores might alias, and reloaded, 14 % more instructions.)
+    const int kend = ioff[b1];  // (the thread's last contact + 1)
     const auto loop = [=, &err](auto periodic_tag, auto direct_tag) __attribute__((always_inline)) {
     constexpr bool kPeriodic = decltype(periodic_tag)::value;
     // (kDirect: pair_direct_, j's share into its sums at once, i's at the end of its contacts)
@@ -409,6 +413,18 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           PairContact& c = pairs[k];
           PairOutput* const o = kDirect ? nullptr : &out_j[jslot[k]];
           const int j = c.j;
+          if (k + kPrefetchAhead < kend) {
+            // (the state of a contact's second body some contacts ahead, toward the cache:
+            // its reads are the scattered ones of the pass)
+            const int jn = pairs[k + kPrefetchAhead].j;
+            __builtin_prefetch(&pos[jn]);
+            __builtin_prefetch(&vel[jn]);
+            __builtin_prefetch(&angvel[jn]);
+            if constexpr (kDirect) {
+              __builtin_prefetch(&fsum[jn], 1);
+              __builtin_prefetch(&tsum[jn], 1);
+            }
+          }
           V4 d = v4(pos[j]) - xi;
           if constexpr (kPeriodic) d += load4(offsets + 4 * c.image);
           const Real dist2 = dot3(d, d);
