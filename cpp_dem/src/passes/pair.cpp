@@ -310,8 +310,11 @@ void Scene::ensure_pair_cold() {
   pair_cold_.assign(pairs_.size(), PairContactCold());
 }
 
-/// How many contacts ahead the pair pass prefetches the second body's state.
+/// How many contacts ahead the one-thread pair pass prefetches the second body's state, in
+/// a scene of at least kPrefetchMinBodies bodies (bench/ab_build.py, spheres at one thread:
+/// 0.98 x at 1e4, 1.02 x at 3e4, 1.15 x at 1e5; 8 ahead: 1.05 x more at 1e5, 0.97 x at 1e4).
 constexpr int kPrefetchAhead = 4;
+constexpr int kPrefetchMinBodies = 20000;
 
 template <bool kYadeShear>
 void Scene::compute_pair_forces_hot(long& err_contact) {
@@ -396,6 +399,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
     // (Captured by value: the pointers stay in registers; by reference they were taken as
     // addresses the loop's stores might alias, and reloaded, 14 % more instructions.)
     const int kend = ioff[b1];  // (the thread's last contact + 1)
+    const bool prefetch = n >= kPrefetchMinBodies;
     const auto loop = [=, &err](auto periodic_tag, auto direct_tag) __attribute__((always_inline)) {
     constexpr bool kPeriodic = decltype(periodic_tag)::value;
     // (kDirect: pair_direct_, j's share into its sums at once, i's at the end of its contacts)
@@ -413,17 +417,17 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           PairContact& c = pairs[k];
           PairOutput* const o = kDirect ? nullptr : &out_j[jslot[k]];
           const int j = c.j;
-          if (k + kPrefetchAhead < kend) {
-            // (the state of a contact's second body some contacts ahead, toward the cache:
-            // its reads are the scattered ones of the pass)
+          if (kDirect && prefetch && k + kPrefetchAhead < kend) {
+            // (one thread, a scene larger than the caches: the state of a contact's second
+            // body some contacts ahead, toward the cache, its reads being the scattered ones
+            // of the pass; at 1e4 bodies, and on two threads sharing the caches, it slowed
+            // the pass: 0.98 x and 0.94 x)
             const int jn = pairs[k + kPrefetchAhead].j;
             __builtin_prefetch(&pos[jn]);
             __builtin_prefetch(&vel[jn]);
             __builtin_prefetch(&angvel[jn]);
-            if constexpr (kDirect) {
-              __builtin_prefetch(&fsum[jn], 1);
-              __builtin_prefetch(&tsum[jn], 1);
-            }
+            __builtin_prefetch(&fsum[jn], 1);
+            __builtin_prefetch(&tsum[jn], 1);
           }
           V4 d = v4(pos[j]) - xi;
           if constexpr (kPeriodic) d += load4(offsets + 4 * c.image);
