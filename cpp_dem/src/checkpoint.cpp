@@ -501,8 +501,12 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   w.vec(s.node_gc_);
   w.put(s.grid_topology_dirty_);
   w.put(s.grid_wall_contacts_);
-  w.vec(s.candidates_);
-  w.vec(s.candidate_images_);
+  // (the candidates as the list of pairs and an image code for each, kNoShift without a cell)
+  w.vec(s.candidate_pairs());
+  if (s.candidate_images_.empty())
+    w.vec(std::vector<std::uint8_t>(s.cand_j_.size(), kNoShift));
+  else
+    w.vec(s.candidate_images_);
   // Energy bookkeeping.
   w.put(s.dropped_friction_);
   w.put(s.dropped_viscous_);
@@ -734,8 +738,27 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
   r.vec(t.node_gc_);
   r.get(t.grid_topology_dirty_);
   r.get(t.grid_wall_contacts_);
-  r.vec(t.candidates_);
-  r.vec(t.candidate_images_);
+  {
+    std::vector<std::pair<int, int>> cand;
+    r.vec(cand);
+    r.vec(t.candidate_images_);
+    bool ok = t.candidate_images_.size() == cand.size();
+    for (size_t q = 0; q < cand.size() && ok; ++q)
+      ok = cand[q].first >= 0 && cand[q].first < cand[q].second &&
+           static_cast<size_t>(cand[q].second) < nb &&
+           (q == 0 || cand[q - 1] < cand[q]);
+    if (!ok) throw ParameterError("checkpoint: corrupt broad-phase candidates");
+    t.cand_off_.assign(cand.empty() ? 0 : nb + 1, 0);
+    t.cand_j_.resize(cand.size());
+    for (size_t q = 0; q < cand.size(); ++q) {
+      t.cand_off_[cand[q].first + 1]++;
+      t.cand_j_[q] = cand[q].second;
+    }
+    for (size_t b = 0; b + 1 < t.cand_off_.size(); ++b) t.cand_off_[b + 1] += t.cand_off_[b];
+    if (std::all_of(t.candidate_images_.begin(), t.candidate_images_.end(),
+                    [](std::uint8_t c) { return c == kNoShift; }))
+      std::vector<std::uint8_t>().swap(t.candidate_images_);
+  }
   r.get(t.dropped_friction_);
   r.get(t.dropped_viscous_);
   r.get(t.energy_reference_);

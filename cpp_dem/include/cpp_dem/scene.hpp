@@ -657,6 +657,31 @@ class Scene {
   void remap_bonds(const std::vector<int>& perm);
   /// Removes bonded pairs from the broad phase's candidates.
   void drop_bonded_candidates();
+  /// Removes the candidate pairs (i, j) for which drop(i, j) is true (called in (i, j)
+  /// order), with their images.
+  template <class Drop>
+  void drop_candidates(Drop&& drop) {
+    const int n = static_cast<int>(cand_off_.size()) - 1;
+    if (n < 0) return;
+    const bool images = !candidate_images_.empty();
+    int out = 0, q0 = cand_off_[0];
+    for (int i = 0; i < n; ++i) {
+      const int q1 = cand_off_[i + 1];
+      cand_off_[i] = out;
+      for (int q = q0; q < q1; ++q) {
+        if (drop(i, cand_j_[q])) continue;
+        cand_j_[out] = cand_j_[q];
+        if (images) candidate_images_[out] = candidate_images_[q];
+        ++out;
+      }
+      q0 = q1;
+    }
+    cand_off_[n] = out;
+    cand_j_.resize(out);
+    if (images) candidate_images_.resize(out);
+  }
+  /// The candidate pairs as a list of (i, j) (a checkpoint's form).
+  std::vector<std::pair<int, int>> candidate_pairs() const;
   [[noreturn]] void raise_bond_overlap(long k) const;
   bool has_bonds() const { return !bonds_.empty(); }
   void step();
@@ -686,7 +711,9 @@ class Scene {
   PeriodicCell cell_;
   // Scratch of the periodic pair pass: H s for each image code, 4 doubles each (lane 3 zero).
   std::array<std::array<Real, 4>, 27> image_offset_{};
-  std::vector<std::uint8_t> candidate_images_;  // image code of each candidates_ pair
+  // Image code of each candidate pair (cand_j_) in a periodic cell; empty without one (every
+  // pair sees j itself, kNoShift).
+  std::vector<std::uint8_t> candidate_images_;
   std::vector<std::shared_ptr<Controller>> controllers_;
   // Contacts and their adjacency (CSR: for body b, entries adj_off[b]..adj_off[b+1]).
   std::vector<PairContact> pairs_;
@@ -782,7 +809,10 @@ class Scene {
   bool bond_topology_dirty_ = true;
   bool grid_wall_contacts_ = false;
   CellGrid grid_;
-  std::vector<std::pair<int, int>> candidates_;
+  // The broad phase's candidate pairs of the last build, rows by i (i < j, sorted by (i, j)):
+  // i's partners are cand_j_[cand_off_[i]] .. cand_j_[cand_off_[i + 1]) (after each build
+  // the pairs_ are these pairs, in this order).
+  std::vector<int> cand_off_, cand_j_;
   // Dissipation of contacts already dropped from the lists, J.
   Real dropped_friction_ = 0, dropped_viscous_ = 0;
   Real energy_reference_ = 0;  // kinetic + elastic when tracking (re)started, J

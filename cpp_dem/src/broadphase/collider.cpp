@@ -60,13 +60,14 @@ void CellGrid::build(const std::vector<Vec3>& pos, const std::vector<Real>& radi
 }
 
 void CellGrid::find_pairs(const std::vector<Vec3>& pos, const std::vector<Real>& radius,
-                          Real margin, std::vector<std::pair<int, int>>& out) {
-  out.clear();
+                          Real margin, std::vector<int>& off, std::vector<int>& js) {
   const int n = static_cast<int>(pos.size());
+  off.assign(n + 1, 0);
+  js.clear();
   if (nspheres_ < 2) return;
-  // The pairs of body i (j > i, sorted) are appended to `to`.
-  const auto pairs_of = [&](int i, std::vector<std::pair<int, int>>& to) {
-    if (body_cell_[i] < 0) return;
+  // The partners of body i (j > i, sorted) are appended to `to`; returns how many.
+  const auto pairs_of = [&](int i, std::vector<int>& to) {
+    if (body_cell_[i] < 0) return 0;
     const size_t first = to.size();
     const long cz = body_cell_[i] % ncell_[2];
     const long cy = (body_cell_[i] / ncell_[2]) % ncell_[1];
@@ -79,25 +80,26 @@ void CellGrid::find_pairs(const std::vector<Vec3>& pos, const std::vector<Real>&
             const int j = cell_bodies_[k];
             if (j <= i) continue;
             const Real reach = radius[i] + radius[j] + margin;
-            if ((pos[j] - pos[i]).squaredNorm() < reach * reach) to.emplace_back(i, j);
+            if ((pos[j] - pos[i]).squaredNorm() < reach * reach) to.push_back(j);
           }
         }
     std::sort(to.begin() + first, to.end());
+    return static_cast<int>(to.size() - first);
   };
-  if (n <= 2000 || omp_get_max_threads() == 1) {  // (one thread: straight into out)
-    for (int i = 0; i < n; ++i) pairs_of(i, out);
-    if (out.capacity() > out.size() + out.size() / 2) {
+  if (n <= 2000 || omp_get_max_threads() == 1) {  // (one thread: straight into js)
+    for (int i = 0; i < n; ++i) off[i + 1] = off[i] + pairs_of(i, js);
+    if (js.capacity() > js.size() + js.size() / 2) {
       // (grown by doubling: kept with an eighth to spare, so the next builds reuse it)
-      std::vector<std::pair<int, int>> tight;
-      tight.reserve(out.size() + out.size() / 8);
-      tight.assign(out.begin(), out.end());
-      out.swap(tight);
+      std::vector<int> tight;
+      tight.reserve(js.size() + js.size() / 8);
+      tight.assign(js.begin(), js.end());
+      js.swap(tight);
     }
     return;
   }
-  // On threads: the bodies in blocks of kBlock, each block's pairs in a buffer of its own
-  // (kept: their capacity serves the next build), joined in block order: the same list as on
-  // one thread.
+  // On threads: the bodies in blocks of kBlock, each block's partners in a buffer of its own
+  // (kept: their capacity serves the next build) and each body's count in off[i + 1], joined
+  // in block order: the same rows as on one thread.
   constexpr int kBlock = 256;
   const int nblocks = (n + kBlock - 1) / kBlock;
   if (static_cast<int>(blocks_.size()) < nblocks) blocks_.resize(nblocks);
@@ -105,13 +107,12 @@ void CellGrid::find_pairs(const std::vector<Vec3>& pos, const std::vector<Real>&
   for (int blk = 0; blk < nblocks; ++blk) {
     blocks_[blk].clear();
     const int end = std::min(n, (blk + 1) * kBlock);
-    for (int i = blk * kBlock; i < end; ++i) pairs_of(i, blocks_[blk]);
+    for (int i = blk * kBlock; i < end; ++i) off[i + 1] = pairs_of(i, blocks_[blk]);
   }
-  size_t total = 0;
-  for (int blk = 0; blk < nblocks; ++blk) total += blocks_[blk].size();
-  out.reserve(total);
+  for (int i = 0; i < n; ++i) off[i + 1] += off[i];
+  js.reserve(off[n]);
   for (int blk = 0; blk < nblocks; ++blk)
-    out.insert(out.end(), blocks_[blk].begin(), blocks_[blk].end());
+    js.insert(js.end(), blocks_[blk].begin(), blocks_[blk].end());
 }
 
 void CellGrid::query_box(const Vec3& lo, const Vec3& hi, const std::vector<Vec3>& pos,

@@ -25,6 +25,14 @@ Real Scene::default_margin() const {
 
 // ---- broad phase ----------------------------------------------------------------------------
 
+std::vector<std::pair<int, int>> Scene::candidate_pairs() const {
+  std::vector<std::pair<int, int>> out;
+  out.reserve(cand_j_.size());
+  for (int i = 0; i + 1 < static_cast<int>(cand_off_.size()); ++i)
+    for (int q = cand_off_[i]; q < cand_off_[i + 1]; ++q) out.emplace_back(i, cand_j_[q]);
+  return out;
+}
+
 bool Scene::need_rebuild() const {
   if (dirty_) return true;
   const Real half = 0.5 * (margin_ > 0 ? margin_ : default_margin());
@@ -143,53 +151,60 @@ void Scene::rebuild() {
   const int n = num_bodies();
   if (cell_.on) {
     wrap_into_cell();
-    find_periodic_pairs(bodies_.pos, bodies_.radius, bodies_.kind, margin, cell_, candidates_,
+    std::vector<std::pair<int, int>> found;
+    find_periodic_pairs(bodies_.pos, bodies_.radius, bodies_.kind, margin, cell_, found,
                         candidate_images_);
+    cand_off_.assign(n + 1, 0);
+    cand_j_.resize(found.size());
+    for (size_t q = 0; q < found.size(); ++q) {
+      cand_off_[found[q].first + 1]++;
+      cand_j_[q] = found[q].second;  // (sorted by (i, j): rows in order)
+    }
+    for (int b = 0; b < n; ++b) cand_off_[b + 1] += cand_off_[b];
   } else {
     grid_.build(bodies_.pos, bodies_.radius, bodies_.kind, margin);
-    grid_.find_pairs(bodies_.pos, bodies_.radius, margin, candidates_);
-    candidate_images_.assign(candidates_.size(), kNoShift);
+    grid_.find_pairs(bodies_.pos, bodies_.radius, margin, cand_off_, cand_j_);
+    if (candidate_images_.capacity() > 0) std::vector<std::uint8_t>().swap(candidate_images_);
   }
   if (has_clumps()) {
     // Two members of one clump never touch.
     const auto& cl = bodies_.clump;
-    candidates_.erase(std::remove_if(candidates_.begin(), candidates_.end(),
-                                     [&cl](const std::pair<int, int>& p) {
-                                       return cl[p.first] >= 0 && cl[p.first] == cl[p.second];
-                                     }),
-                      candidates_.end());
-    candidate_images_.assign(candidates_.size(), kNoShift);  // (clumps: never periodic)
+    drop_candidates([&cl](int i, int j) { return cl[i] >= 0 && cl[i] == cl[j]; });
+    std::vector<std::uint8_t>().swap(candidate_images_);  // (clumps: never periodic)
   }
   drop_bonded_candidates();  // a bonded pair is its bond's contact
   // Merge the new candidate list with the old contacts, keeping history (both sorted).
+  const size_t ncand = cand_j_.size();
   std::vector<PairContact> next;
   std::vector<PairContactCold> next_cold;  // (only where the scene has the cold part)
   std::vector<Real> next_dissip;
-  next.reserve(candidates_.size());
-  if (pair_cold_on_) next_cold.reserve(candidates_.size());
-  next_dissip.reserve(candidates_.size());
+  next.reserve(ncand);
+  if (pair_cold_on_) next_cold.reserve(ncand);
+  next_dissip.reserve(ncand);
   size_t k = 0;
-  for (size_t q = 0; q < candidates_.size(); ++q) {
-    const auto& ij = candidates_[q];
-    while (k < pairs_.size() && std::make_pair(pairs_[k].i, pairs_[k].j) < ij) {
-      drop_pair_dissipation(k);
-      ++k;
+  for (int i = 0; i < n; ++i) {
+    for (int q = cand_off_[i]; q < cand_off_[i + 1]; ++q) {
+      const std::pair<int, int> ij(i, cand_j_[q]);
+      while (k < pairs_.size() && std::make_pair(pairs_[k].i, pairs_[k].j) < ij) {
+        drop_pair_dissipation(k);
+        ++k;
+      }
+      if (k < pairs_.size() && pairs_[k].i == ij.first && pairs_[k].j == ij.second) {
+        next.push_back(pairs_[k]);
+        next_dissip.push_back(pair_dissip_[k]);
+        if (pair_cold_on_) next_cold.push_back(pair_cold_[k]);
+        ++k;
+      } else {
+        PairContact c;
+        c.i = ij.first;
+        c.j = ij.second;
+        next.push_back(c);
+        next_dissip.push_back(0.0);
+        if (pair_cold_on_) next_cold.emplace_back();
+      }
+      // (The image may change for a kept contact: a body was wrapped into the cell.)
+      next.back().image = candidate_images_.empty() ? kNoShift : candidate_images_[q];
     }
-    if (k < pairs_.size() && pairs_[k].i == ij.first && pairs_[k].j == ij.second) {
-      next.push_back(pairs_[k]);
-      next_dissip.push_back(pair_dissip_[k]);
-      if (pair_cold_on_) next_cold.push_back(pair_cold_[k]);
-      ++k;
-    } else {
-      PairContact c;
-      c.i = ij.first;
-      c.j = ij.second;
-      next.push_back(c);
-      next_dissip.push_back(0.0);
-      if (pair_cold_on_) next_cold.emplace_back();
-    }
-    // (The image may change for a kept contact: a body was wrapped into the cell.)
-    next.back().image = candidate_images_[q];
   }
   for (; k < pairs_.size(); ++k) {
     drop_pair_dissipation(k);

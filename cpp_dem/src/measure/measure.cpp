@@ -416,7 +416,8 @@ std::vector<std::pair<std::string, std::size_t>> Scene::memory_by_field() const 
   add("order.slot_of_id", slot_of_id_);
   add("broadphase.pos_at_build", pos_at_build_);
   add("broadphase.radius_at_build", radius_at_build_);
-  add("broadphase.candidates", candidates_);
+  add("broadphase.candidates", cand_j_);
+  add("broadphase.candidate_off", cand_off_);
   add("broadphase.candidate_images", candidate_images_);
   grid_.add_memory(out);
   add("contacts.pairs", pairs_);

@@ -141,19 +141,11 @@ void Scene::drop_bonded_candidates() {
   if (bond_topology_dirty_) rebuild_bond_adjacency();
   // Both lists are sorted by (i, j): one merge.
   size_t q = 0;
-  const auto bonded = [&](const std::pair<int, int>& p) {
+  drop_candidates([&](int i, int j) {
+    const std::pair<int, int> p(i, j);
     while (q < bond_pairs_.size() && bond_pairs_[q] < p) ++q;
     return q < bond_pairs_.size() && bond_pairs_[q] == p;
-  };
-  size_t out = 0;
-  for (size_t k = 0; k < candidates_.size(); ++k) {
-    if (bonded(candidates_[k])) continue;
-    candidates_[out] = candidates_[k];
-    candidate_images_[out] = candidate_images_[k];
-    ++out;
-  }
-  candidates_.resize(out);
-  candidate_images_.resize(out);
+  });
 }
 
 void Scene::compute_bonds(long& err) {

@@ -18,10 +18,11 @@ class CellGrid {
   /// Bins the spheres; cells are at least 2 r_max + margin wide.
   void build(const std::vector<Vec3>& pos, const std::vector<Real>& radius,
              const std::vector<std::uint8_t>& skip, Real margin);
-  /// All sphere pairs (i < j) with |x_i - x_j| < r_i + r_j + margin, sorted by (i, j);
-  /// the result does not depend on the number of threads.
+  /// All sphere pairs (i < j) with |x_i - x_j| < r_i + r_j + margin, sorted by (i, j), as
+  /// rows by i: i's partners j are js[off[i]] .. js[off[i + 1]) (off: one entry per body
+  /// and one more). The result does not depend on the number of threads.
   void find_pairs(const std::vector<Vec3>& pos, const std::vector<Real>& radius, Real margin,
-                  std::vector<std::pair<int, int>>& out);
+                  std::vector<int>& off, std::vector<int>& js);
   /// Appends to `out` the spheres whose box (centre +- r + margin) overlaps [lo, hi],
   /// in increasing id order.
   void query_box(const Vec3& lo, const Vec3& hi, const std::vector<Vec3>& pos,
@@ -36,8 +37,8 @@ class CellGrid {
   long ncell_[3] = {1, 1, 1};
   int nspheres_ = 0;
   std::vector<int> cell_start_, cell_bodies_, body_cell_;
-  /// find_pairs on threads: each block of bodies' pairs (kept for their capacity)
-  std::vector<std::vector<std::pair<int, int>>> blocks_;
+  /// find_pairs on threads: each block of bodies' partners j (kept for their capacity)
+  std::vector<std::vector<int>> blocks_;
 };
 
 /// The broad phase of a periodic cell (broadphase/periodic.cpp): every pair (i < j) of spheres
