@@ -22,10 +22,13 @@ def test_the_budget_is_the_fields_times_their_traffic_over_the_time(tmp_path):
     assert set(row["moved_by_field"]) <= set(TRAFFIC)
     assert row["bytes_per_step"] == sum(row["moved_by_field"].values())
     # every contact crosses the pair pass: at least 2 x 104 B each; on one thread its shares
-    # go into the bodies' sums (2 x 2 x 32 B a body, each of two sums), not into pair_out
+    # go into the bodies' force and torque (2 reads and 3 writes of 24 B a body, each), not
+    # into pair_out, pair_fi or pair_ti
     assert row["moved_by_field"]["contacts.pairs"] >= 2 * 104 * row["contacts"]
-    assert "contacts.pair_out" not in row["moved_by_field"]
-    assert row["moved_by_field"]["scratch.pair_fi"] >= 4 * 32 * row["n"]
+    for name in ("contacts.pair_out", "scratch.pair_fi", "scratch.pair_ti"):
+        assert name not in row["moved_by_field"], name
+    assert row["moved_by_field"]["bodies.force"] == 5 * 24 * row["n"]
+    assert row["moved_by_field"]["bodies.torque"] == 5 * 24 * row["n"]
     assert row["needed_bytes_per_s"] == row["bytes_per_step"] / row["s_per_step"]
     assert abs(row["share_of_copy_bandwidth"]
                - row["needed_bytes_per_s"] / bw["copy_bytes_per_s"]) < 1e-12
