@@ -310,9 +310,10 @@ void Scene::ensure_pair_cold() {
   pair_cold_.assign(pairs_.size(), PairContactCold());
 }
 
-/// How many contacts ahead the one-thread pair pass prefetches the second body's state, in
-/// a scene of at least kPrefetchMinBodies bodies (bench/ab_build.py, spheres at one thread:
-/// 0.98 x at 1e4, 1.02 x at 3e4, 1.15 x at 1e5; 8 ahead: 1.05 x more at 1e5, 0.97 x at 1e4).
+/// How many contacts ahead the pair pass prefetches the second body's state, in a scene of
+/// at least kPrefetchMinBodies bodies (bench/ab_build.py, spheres, one thread: 0.98 x at
+/// 1e4, 1.02 x at 3e4, 1.15 x at 1e5; two threads: 0.94 x at 1e4, 1.09 x at 3e4, 1.10 x at
+/// 5e4, 1.12 x at 1e5; 8 ahead on one thread: 1.05 x more at 1e5, 0.97 x at 1e4).
 constexpr int kPrefetchAhead = 4;
 constexpr int kPrefetchMinBodies = 20000;
 
@@ -417,17 +418,18 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           PairContact& c = pairs[k];
           PairOutput* const o = kDirect ? nullptr : &out_j[jslot[k]];
           const int j = c.j;
-          if (kDirect && prefetch && k + kPrefetchAhead < kend) {
-            // (one thread, a scene larger than the caches: the state of a contact's second
-            // body some contacts ahead, toward the cache, its reads being the scattered ones
-            // of the pass; at 1e4 bodies, and on two threads sharing the caches, it slowed
-            // the pass: 0.98 x and 0.94 x)
+          if (prefetch && k + kPrefetchAhead < kend) {
+            // (a scene larger than the caches: the state of a contact's second body some
+            // contacts ahead, toward the cache, its reads being the scattered ones of the
+            // pass; at 1e4 bodies it slowed the pass, 0.98 x on one thread, 0.94 x on two)
             const int jn = pairs[k + kPrefetchAhead].j;
             __builtin_prefetch(&pos[jn]);
             __builtin_prefetch(&vel[jn]);
             __builtin_prefetch(&angvel[jn]);
-            __builtin_prefetch(&fsum[jn], 1);
-            __builtin_prefetch(&tsum[jn], 1);
+            if constexpr (kDirect) {
+              __builtin_prefetch(&fsum[jn], 1);
+              __builtin_prefetch(&tsum[jn], 1);
+            }
           }
           V4 d = v4(pos[j]) - xi;
           if constexpr (kPeriodic) d += load4(offsets + 4 * c.image);
