@@ -15,10 +15,15 @@ from cpp_dem import _core
 ROOT = Path(__file__).resolve().parents[1]
 
 
-def _lattice(k: int) -> dem.Scene:
+def _scene() -> tuple[dem.Scene, int]:
+    """A scene with the tests' one material (linear, sand-like): the scene and the material."""
     s = dem.Scene()
-    m = s.add_material(dem.linear_material(density=2650, young=1e7, poisson=0.3,
-                                           friction_angle_deg=30))
+    return s, s.add_material(dem.linear_material(density=2650, young=1e7, poisson=0.3,
+                                                 friction_angle_deg=30))
+
+
+def _lattice(k: int) -> dem.Scene:
+    s, m = _scene()
     g = np.arange(k) * 0.01
     pos = np.stack(np.meshgrid(g, g, g, indexing="ij"), -1).reshape(-1, 3)
     s.add_spheres(pos, np.full(len(pos), 0.0051), material=m)
@@ -64,9 +69,7 @@ def test_the_fields_add_up_to_what_a_grain_costs_the_process():
 
 def _pair(gap_over_r: float) -> dem.Scene:
     """Two resting spheres of radius 1 mm, gap_over_r radii apart, in zero gravity."""
-    s = dem.Scene()
-    m = s.add_material(dem.linear_material(density=2650, young=1e7, poisson=0.3,
-                                           friction_angle_deg=30))
+    s, m = _scene()
     r = 1e-3
     s.add_spheres(np.array([[0.0, 0, 0], [2 * r + gap_over_r * r, 0, 0]]), np.full(2, r),
                   material=m)
@@ -148,9 +151,7 @@ def test_the_candidate_rows_are_the_same_on_one_thread_and_two():
     try:
         for t in (1, 2):
             dem.set_num_threads(t)
-            s = dem.Scene()
-            m = s.add_material(dem.linear_material(density=2650, young=1e7, poisson=0.3,
-                                                   friction_angle_deg=30))
+            s, m = _scene()
             rng = np.random.default_rng(7)
             g = np.arange(15) * 0.0085  # (spheres of 4 mm, 0.5 mm apart, jittered)
             pos = np.stack(np.meshgrid(g, g, g[:14], indexing="ij"), -1).reshape(-1, 3)

@@ -470,11 +470,9 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
   else
     w.vec(std::vector<PairOutput>());
   w.vec(s.wall_contacts_);
-  if (s.pair_jslot_.size() == s.pairs_.size() && s.pair_jadj_off_.size() == s.pair_ioff_.size()) {
-    w.vec(s.pair_jadj_off_);
-    w.vec(s.pair_jslot_);
-  } else {
-    // (after a direct pass the scene keeps no slots of outputs: the ones it would have)
+  {
+    // (the slots of the pass's outputs, derived from the pairs: a scene after a direct pass
+    // keeps none, and where it keeps them they are these)
     std::vector<int> jadj_off, jslot;
     s.index_pair_outputs(jadj_off, jslot);
     w.vec(jadj_off);
@@ -748,13 +746,12 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
            static_cast<size_t>(cand[q].second) < nb &&
            (q == 0 || cand[q - 1] < cand[q]);
     if (!ok) throw ParameterError("checkpoint: corrupt broad-phase candidates");
-    t.cand_off_.assign(cand.empty() ? 0 : nb + 1, 0);
-    t.cand_j_.resize(cand.size());
-    for (size_t q = 0; q < cand.size(); ++q) {
-      t.cand_off_[cand[q].first + 1]++;
-      t.cand_j_[q] = cand[q].second;
+    if (cand.empty()) {  // (no build yet, or none found: no rows)
+      t.cand_off_.clear();
+      t.cand_j_.clear();
+    } else {
+      t.set_candidate_rows(cand, static_cast<int>(nb));
     }
-    for (size_t b = 0; b + 1 < t.cand_off_.size(); ++b) t.cand_off_[b + 1] += t.cand_off_[b];
     if (std::all_of(t.candidate_images_.begin(), t.candidate_images_.end(),
                     [](std::uint8_t c) { return c == kNoShift; }))
       std::vector<std::uint8_t>().swap(t.candidate_images_);

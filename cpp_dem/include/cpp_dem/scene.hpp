@@ -528,6 +528,12 @@ class Scene {
   /// Whether the pair pass sums into the bodies directly (pair_direct_): without the cold
   /// part, on one thread or with too few contacts to share.
   bool pair_pass_direct() const;
+  /// Frees what only a pass that keeps its outputs uses: pair_out_, its slots
+  /// (pair_jadj_off_, pair_jslot_) and the first bodies' sums (pair_fi_, pair_ti_).
+  void release_pair_outputs();
+  /// Sets the candidate rows (cand_off_, cand_j_, for n bodies) from a list of pairs sorted
+  /// by (i, j): candidate_pairs()'s inverse.
+  void set_candidate_rows(const std::vector<std::pair<int, int>>& pairs, int n);
   /// Energy stored in active contacts and unbroken geogrid links, J.
   Real stored_elastic_energy() const;
   /// Appends one body (kind 0 sphere, 1 grid node) at rest to every per-body array.

@@ -33,6 +33,16 @@ std::vector<std::pair<int, int>> Scene::candidate_pairs() const {
   return out;
 }
 
+void Scene::set_candidate_rows(const std::vector<std::pair<int, int>>& pairs, int n) {
+  cand_off_.assign(n + 1, 0);
+  cand_j_.resize(pairs.size());
+  for (size_t q = 0; q < pairs.size(); ++q) {
+    cand_off_[pairs[q].first + 1]++;
+    cand_j_[q] = pairs[q].second;  // (sorted by (i, j): rows in order)
+  }
+  for (int b = 0; b < n; ++b) cand_off_[b + 1] += cand_off_[b];
+}
+
 bool Scene::need_rebuild() const {
   if (dirty_) return true;
   const Real half = 0.5 * (margin_ > 0 ? margin_ : default_margin());
@@ -154,13 +164,7 @@ void Scene::rebuild() {
     std::vector<std::pair<int, int>> found;
     find_periodic_pairs(bodies_.pos, bodies_.radius, bodies_.kind, margin, cell_, found,
                         candidate_images_);
-    cand_off_.assign(n + 1, 0);
-    cand_j_.resize(found.size());
-    for (size_t q = 0; q < found.size(); ++q) {
-      cand_off_[found[q].first + 1]++;
-      cand_j_[q] = found[q].second;  // (sorted by (i, j): rows in order)
-    }
-    for (int b = 0; b < n; ++b) cand_off_[b + 1] += cand_off_[b];
+    set_candidate_rows(found, n);
   } else {
     grid_.build(bodies_.pos, bodies_.radius, bodies_.kind, margin);
     grid_.find_pairs(bodies_.pos, bodies_.radius, margin, cand_off_, cand_j_);
@@ -212,13 +216,6 @@ void Scene::rebuild() {
   pairs_.swap(next);
   pair_cold_.swap(next_cold);
   pair_dissip_.swap(next_dissip);
-  // (The next pass's kind, as it will choose it unless a material change gives the scene
-  // the cold part first: then the pass makes the outputs and their slots itself.)
-  const bool direct = pair_pass_direct();
-  if (direct)
-    std::vector<PairOutput>().swap(pair_out_);  // (a direct pass keeps none)
-  else
-    pair_out_.assign(pairs_.size(), PairOutput());
   // Sphere–wall candidates: signed distance to the plane below r + margin, and the centre
   // not beyond the plane by more than r (one-sided walls ignore what is behind them).
   WallContactMerge merge(wall_contacts_,
@@ -237,10 +234,12 @@ void Scene::rebuild() {
   pair_ioff_.assign(n + 1, 0);
   for (const auto& c : pairs_) pair_ioff_[c.i + 1]++;
   for (int b = 0; b < n; ++b) pair_ioff_[b + 1] += pair_ioff_[b];
-  if (direct) {
-    std::vector<int>().swap(pair_jadj_off_);
-    std::vector<int>().swap(pair_jslot_);
+  // The pass's outputs and their slots, for the next pass's kind as it will choose it (unless
+  // a material change gives the scene the cold part first: the pass then makes them itself).
+  if (pair_pass_direct()) {
+    release_pair_outputs();
   } else {
+    pair_out_.assign(pairs_.size(), PairOutput());
     index_pair_outputs(pair_jadj_off_, pair_jslot_);
   }
   contacts_by_body(wall_contacts_, n, wall_adj_off_, wall_adj_);

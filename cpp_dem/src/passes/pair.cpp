@@ -268,6 +268,15 @@ void Scene::compute_pair_forces(long& err_contact) {
                            "which ensure_pair_cold did not make (a bug: please report it)");
 }
 
+void Scene::release_pair_outputs() {
+  // (swapped with empty vectors: clear() would keep their memory)
+  if (pair_out_.capacity() > 0) std::vector<PairOutput>().swap(pair_out_);
+  if (pair_jadj_off_.capacity() > 0) std::vector<int>().swap(pair_jadj_off_);
+  if (pair_jslot_.capacity() > 0) std::vector<int>().swap(pair_jslot_);
+  if (pair_fi_.capacity() > 0) std::vector<std::array<Real, 4>>().swap(pair_fi_);
+  if (pair_ti_.capacity() > 0) std::vector<std::array<Real, 4>>().swap(pair_ti_);
+}
+
 bool Scene::pair_pass_direct() const {
   return !pair_cold_on_ && (static_cast<long>(pairs_.size()) <= kParallelMin || max_threads() == 1);
 }
@@ -335,15 +344,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   const long ncontacts = static_cast<long>(pairs_.size());
   pair_direct_ = pair_pass_direct();
   if (pair_direct_) {
-    if (pair_out_.capacity() > 0) std::vector<PairOutput>().swap(pair_out_);
-    if (pair_jslot_.capacity() > 0 || pair_jadj_off_.capacity() > 0) {
-      std::vector<int>().swap(pair_jadj_off_);
-      std::vector<int>().swap(pair_jslot_);
-    }
-    if (pair_fi_.capacity() > 0 || pair_ti_.capacity() > 0) {
-      std::vector<std::array<Real, 4>>().swap(pair_fi_);
-      std::vector<std::array<Real, 4>>().swap(pair_ti_);
-    }
+    release_pair_outputs();
     // The sums start where the reduction starts: the external force and the weight.
     const Vec3 g = gravity_;
     for (int b = 0; b < n; ++b) {
