@@ -105,40 +105,79 @@ def _pile(kind: str) -> dem.Scene:
 
 _KEPT = ("contacts.pair_out", "contacts.pair_jslot", "contacts.pair_jadj_off",
          "scratch.pair_fi", "scratch.pair_ti")
+_CROSS = ("scratch.pair_cross", "scratch.pair_cross_k", "scratch.pair_cross_j")
 
 
 def _kept(s) -> dict:
-    """Bytes of the arrays that only a pass keeping its outputs (more than one thread) has."""
+    """Bytes of the arrays that only a pass keeping its outputs (the cold part) has, and of
+    a threaded direct pass's cross pairs."""
     f = s.memory_by_field()
-    return {k: f[k] for k in _KEPT}
+    return {k: f[k] for k in _KEPT + _CROSS}
 
 
-@pytest.mark.parametrize("kind", ["linear", "hertz_short"])
-def test_one_thread_sums_into_the_bodies_and_two_keep_outputs_the_same_bits(kind):
-    """On one thread, with the short kernels alone, the pair pass adds each contact's share
-    to its bodies' sums (starting from the external force and the weight) and keeps no
-    outputs; on two it writes them and the reduction sums them: the same bits, the same
-    contact forces, the same checkpoint bytes."""
+@pytest.mark.parametrize("kind", ["linear", "hertz_short", "hertz"])
+def test_one_two_and_three_threads_give_the_same_bits(kind):
+    """With the short kernels alone the pair pass adds each contact's share to its bodies'
+    sums (starting from the external force and the weight) and keeps no outputs, on one
+    thread and on more: there each thread sums its own bodies, and the contacts whose second
+    body another thread sums (cross pairs) have their shares computed first and added in
+    their place. With the composed law ("hertz": dashpots, rolling) the pass keeps its
+    outputs and the reduction sums them. The same bits either way, the same contact forces,
+    the same checkpoint bytes."""
     before = dem.get_num_threads()
     runs = []
     try:
-        for t in (1, 2):
+        for t in (1, 2, 3):
             dem.set_num_threads(t)
             s = _pile(kind)
             s.run(3000)
             runs.append((s, _kept(s), _core._checkpoint_save(s)))
     finally:
         dem.set_num_threads(before)
-    (a, kept_a, blob_a), (b, kept_b, blob_b) = runs
-    # (one thread keeps neither the outputs nor their slots nor the bodies' scratch sums)
-    assert kept_a == dict.fromkeys(_KEPT, 0), kept_a
-    assert all(v > 0 for v in kept_b.values()), kept_b
+    (a, kept_a, blob_a) = runs[0]
+    # (one thread keeps neither the outputs nor their slots nor the bodies' scratch sums,
+    # without the cold part)
+    if kind != "hertz":
+        assert kept_a == dict.fromkeys(_KEPT + _CROSS, 0), kept_a
     assert len(a.contacts()["force"]) > 200
-    for name in ("positions", "velocities", "angular_velocities", "forces", "torques"):
-        assert np.array_equal(getattr(a, name), getattr(b, name)), name
-    ca, cb = a.contacts(), b.contacts()
-    assert np.array_equal(ca["force"], cb["force"]) and np.array_equal(ca["ids"], cb["ids"])
-    assert blob_a == blob_b
+    for b, kept_b, blob_b in runs[1:]:
+        if kind == "hertz":
+            assert all(kept_b[k] > 0 for k in _KEPT) and not any(kept_b[k] for k in _CROSS)
+        else:
+            assert not any(kept_b[k] for k in _KEPT), kept_b
+            assert all(kept_b[k] > 0 for k in _CROSS), kept_b  # (cross pairs exist)
+        for name in ("positions", "velocities", "angular_velocities", "forces", "torques"):
+            assert np.array_equal(getattr(a, name), getattr(b, name)), name
+        ca, cb = a.contacts(), b.contacts()
+        assert np.array_equal(ca["force"], cb["force"]) and np.array_equal(ca["ids"], cb["ids"])
+        assert blob_a == blob_b
+
+
+def test_the_cross_pairs_shares_in_another_order_would_change_the_bits():
+    """The threaded direct pass is bitwise the one-thread pass because each cross pair's
+    share enters its bodies' sums where the one-thread pass adds it. The measure can fail:
+    the same forces summed with the cross shares last, not first, differ in the last bits
+    (numpy, on the run's own contact forces)."""
+    dem.set_num_threads(1)
+    s = _pile("linear")
+    s.run(3000)
+    c = s.contacts()
+    ids, f = np.asarray(c["ids"]), np.asarray(c["force"])
+    pairs = [(k, int(a), int(b)) for k, (a, b) in enumerate(ids) if b >= 0]
+    # body j's sum of its shares in contact order, and with a "cross" half (even k) moved last
+    differs = 0
+    for j in range(s.num_bodies):
+        mine = [k for k, a, b in pairs if b == j]
+        if len(mine) < 3:
+            continue
+        x = 0.0
+        for k in mine:
+            x = x + f[k]
+        y = 0.0
+        for k in [k for k in mine if k % 2] + [k for k in mine if not k % 2]:
+            y = y + f[k]
+        differs += int(not np.array_equal(x, y))
+    assert differs > 0
 
 
 @pytest.mark.parametrize("kind", ["linear", "hertz"])
@@ -163,9 +202,9 @@ def test_a_blob_rewritten_as_format_14_runs_on_to_the_same_bits(kind):
 
 
 def test_threads_changed_between_steps_give_the_one_thread_bits():
-    """A run that goes from one thread to two and back (the pass switching between summing
-    into the bodies and keeping its outputs, whose slots it then makes again, with a
-    rebuild of the contacts in each part) ends on the bits of a run on one thread."""
+    """A run that goes from one thread to two and back (the pass making the cross pairs'
+    index for two threads, with a rebuild of the contacts in each part) ends on the bits of
+    a run on one thread."""
     before = dem.get_num_threads()
     try:
         dem.set_num_threads(1)
@@ -178,7 +217,9 @@ def test_threads_changed_between_steps_give_the_one_thread_bits():
             b0 = s.collider_stats()["builds"]
             s.run(n)
             builds.append(s.collider_stats()["builds"] - b0)
-            assert (_kept(s)["contacts.pair_jslot"] > 0) == (t == 2)
+            # (two threads: the cross pairs' index, made again after each build)
+            assert (_kept(s)["scratch.pair_cross"] > 0) == (t == 2)
+            assert _kept(s)["contacts.pair_jslot"] == 0
     finally:
         dem.set_num_threads(before)
     assert all(b > 0 for b in builds), builds

@@ -26,13 +26,14 @@ SCRIPT = textwrap.dedent("""
     import sys
     import numpy as np
     import cpp_dem as dem
-    out, threads = sys.argv[1], int(sys.argv[2])
+    out, threads, viscous = sys.argv[1], int(sys.argv[2]), sys.argv[3] == "1"
     dem.set_num_threads(threads)
     rng = np.random.default_rng(11)
     s = dem.Scene(gravity=(0, 0, -9.81), local_damping=0.1)
     lin = s.add_material(dem.linear_material(density=2600, young=1e7, poisson=0.3,
                                              friction_angle_deg=30))
-    # A second material with viscous damping: its contacts take the general law.
+    # A second material with viscous damping: its contacts take the general law, and the
+    # pass keeps its outputs (without it each thread sums its own bodies, pair_cross_).
     vis = s.add_material(dem.linear_material(density=2600, young=1e7, poisson=0.3,
                                              friction_angle_deg=30, damping_normal=0.2))
     # A compressed simple cubic lattice in a box (overlaps 0.5 % of R with every neighbour
@@ -41,7 +42,7 @@ SCRIPT = textwrap.dedent("""
     s.add_box((0, 0, 0), (n * h,) * 3, material=lin)
     g = np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), -1).reshape(-1, 3)
     s.add_spheres(0.5 * h + h * g, np.full(len(g), r), material=lin)
-    for b in range(0, len(g), 5):
+    for b in range(0, len(g), 5 if viscous else len(g) + 1):
         s.set_body_material(b, vis)
     s.velocities = rng.normal(0, 0.01, (len(g), 3))
     s.angular_velocities = rng.normal(0, 1.0, (len(g), 3))
@@ -52,17 +53,18 @@ SCRIPT = textwrap.dedent("""
 """)
 
 
-def run(tmp_path, narrow: bool, threads: int) -> dict:
-    out = tmp_path / f"n{int(narrow)}_t{threads}.npz"
+def run(tmp_path, narrow: bool, threads: int, viscous: bool) -> dict:
+    out = tmp_path / f"n{int(narrow)}_t{threads}_v{int(viscous)}.npz"
     env = dict(os.environ, CPP_DEM_NARROW="1" if narrow else "0")
-    subprocess.run([sys.executable, "-c", SCRIPT, str(out), str(threads)], env=env,
-                   check=True, timeout=300)
+    subprocess.run([sys.executable, "-c", SCRIPT, str(out), str(threads), str(int(viscous))],
+                   env=env, check=True, timeout=300)
     return dict(np.load(out))
 
 
-def test_narrow_and_wide_forms_agree_and_are_thread_independent(tmp_path):
-    wide1, wide2 = run(tmp_path, False, 1), run(tmp_path, False, 2)
-    narrow1, narrow2 = run(tmp_path, True, 1), run(tmp_path, True, 2)
+@pytest.mark.parametrize("viscous", [True, False], ids=["outputs", "direct"])
+def test_narrow_and_wide_forms_agree_and_are_thread_independent(tmp_path, viscous):
+    wide1, wide2 = run(tmp_path, False, 1, viscous), run(tmp_path, False, 2, viscous)
+    narrow1, narrow2 = run(tmp_path, True, 1, viscous), run(tmp_path, True, 2, viscous)
     for a, b in ((wide1, wide2), (narrow1, narrow2)):
         for key in a:
             assert np.array_equal(a[key], b[key]), key

@@ -708,6 +708,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
   if (t.pair_out_.size() != t.pairs_.size() && !(version >= 15 && t.pair_out_.empty()))
     throw ParameterError("checkpoint: corrupt pair contacts");
   t.pair_direct_ = t.pair_out_.size() != t.pairs_.size();
+  t.release_pair_cross();  // (made again by a threaded direct pass)
   r.vec(t.wall_contacts_);
   r.vec(t.pair_jadj_off_);
   r.vec(t.pair_jslot_);

@@ -526,8 +526,15 @@ class Scene {
   /// comment below), from pairs_ and the body count of the last build (pair_ioff_).
   void index_pair_outputs(std::vector<int>& jadj_off, std::vector<int>& jslot) const;
   /// Whether the pair pass sums into the bodies directly (pair_direct_): without the cold
-  /// part, on one thread or with too few contacts to share.
+  /// part (on any number of threads: pair_cross_).
   bool pair_pass_direct() const;
+  /// The cross pairs of a direct pass on nt threads (pair_cross_k_ and the rest, below).
+  void index_pair_cross(int nt);
+  /// Frees the cross pairs' index (after each build: it is made again for the next pass).
+  void release_pair_cross();
+  /// The bodies [b0, b1)'s force and torque set to where the direct pass's sums start: the
+  /// external force and the weight, the external torque.
+  void start_pair_sums(int b0, int b1);
   /// Frees what only a pass that keeps its outputs uses: pair_out_, its slots
   /// (pair_jadj_off_, pair_jslot_) and the first bodies' sums (pair_fi_, pair_ti_).
   void release_pair_outputs();
@@ -589,8 +596,10 @@ class Scene {
   // The pair pass without AVX2 (scene.cpp, pair_bodies_narrow) and its threads' bodies.
   void compute_pair_forces_narrow(long& err_contact);
   // kYadeShear: ShearKinematics::Yade (chosen once per pass, not per contact).
+  // mode: kPassOutputs, kPassDirect (pair_cross_ shares for j >= jlimit, from slot cursor
+  // on) or kPassCross (r0, r1: cross slots, their shares into pair_cross_).
   template <bool kYadeShear>
-  void pair_bodies_narrow(int b0, int b1, long& err);
+  void pair_bodies_narrow(int r0, int r1, long& err, int mode, int jlimit, long cursor);
   std::pair<int, int> pair_bodies_of_thread(long t, long nt) const;
   // The pair pass's cold paths (both forms): a contact opened; a law without short kernel.
   void open_pair(long k, PairOutput* o);
@@ -740,6 +749,18 @@ class Scene {
   // i's share of its pair contacts' forces (N) and torques (N m), 4 doubles per body (the
   // fourth zero), so they are stored and loaded as one register.
   std::vector<std::array<Real, 4>> pair_fi_, pair_ti_;
+  // A direct pass on nt > 1 threads (index_pair_cross, made for pair_cross_nt_ threads at the
+  // first pass after a build): thread t sums bodies [b0, b1) (pair_bodies_of_thread), and the
+  // contacts of its rows whose j is >= b1 (cross pairs: the tails of the rows, whose j
+  // another thread sums) are pair_cross_k_[pair_cross_t_[t] .. pair_cross_t_[t + 1]), in
+  // contact order. Their shares (pair_cross_) are computed first, the threads taking equal
+  // parts of them; then each thread starts its bodies' sums, adds the cross shares whose j
+  // it sums (pair_cross_j_: slots by (j, slot), thread t's from pair_cross_jt_[t]), and runs
+  // its rows, adding each cross pair's share of i in its place: every sum in the one-thread
+  // pass's order, so the bits do not depend on the threads.
+  std::vector<int> pair_cross_k_, pair_cross_t_, pair_cross_j_, pair_cross_jt_;
+  std::vector<PairCross> pair_cross_;
+  int pair_cross_nt_ = 0;  // 0: to make at the next threaded direct pass
   // Scratch of compute_wall_forces, made again after each build: wall contacts by block of
   // bodies and wall axis, and where each block's contacts start in that order.
   std::vector<int> wall_order_, wall_block_off_;

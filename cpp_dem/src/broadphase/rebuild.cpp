@@ -236,6 +236,7 @@ void Scene::rebuild() {
   for (int b = 0; b < n; ++b) pair_ioff_[b + 1] += pair_ioff_[b];
   // The pass's outputs and their slots, for the next pass's kind as it will choose it (unless
   // a material change gives the scene the cold part first: the pass then makes them itself).
+  release_pair_cross();  // (made again by a threaded direct pass)
   if (pair_pass_direct()) {
     release_pair_outputs();
   } else {

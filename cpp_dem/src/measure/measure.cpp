@@ -432,6 +432,11 @@ std::vector<std::pair<std::string, std::size_t>> Scene::memory_by_field() const 
   add("contacts.wall_adj", wall_adj_);
   add("scratch.pair_fi", pair_fi_);
   add("scratch.pair_ti", pair_ti_);
+  add("scratch.pair_cross", pair_cross_);
+  add("scratch.pair_cross_k", pair_cross_k_);
+  add("scratch.pair_cross_t", pair_cross_t_);
+  add("scratch.pair_cross_j", pair_cross_j_);
+  add("scratch.pair_cross_jt", pair_cross_jt_);
   add("scratch.wall_order", wall_order_);
   add("scratch.wall_block_off", wall_block_off_);
   add("scratch.density_scaling_kt", ds_kt_);

@@ -17,6 +17,11 @@ namespace cpp_dem {
 
 namespace {
 
+// The pair pass's modes (compute_pair_forces_hot, pair_bodies_narrow): j's shares into the
+// outputs, summed by the reduction; j's and i's into the bodies' sums at once; a threaded
+// direct pass's cross pairs' shares into their PairCross.
+constexpr int kPassOutputs = 0, kPassDirect = 1, kPassCross = 2;
+
 /// Pair contact c with the Hertz–Mindlin short kernel (hertz_frictional; kDamped:
 /// hertz_damped, with the dashpots of its cold record's phys) on its hot record: j's force
 /// and torque into force_j and torque_j (PairOutput's padded vectors), i's added to fi and
@@ -135,7 +140,8 @@ std::pair<int, int> Scene::pair_bodies_of_thread(long t, long nt) const {
 /// instructions, measured 0.070 against 0.063 ms per step, not understood), so the loop is
 /// written twice. kYadeShear: ShearKinematics::Yade (sphere_sphere_frame).
 template <bool kYadeShear>
-void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
+void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlimit,
+                               long cursor) {
   using Ops = NarrowOps;
   using V = Ops::V;
   const Ops ops;
@@ -158,26 +164,42 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
   Real* const out_ti = pair_ti_.data()->data();
   Vec3* const fsum = bodies_.force.data();
   Vec3* const tsum = bodies_.torque.data();
-  // (pair_direct_: j's force and torque added to its sums (fsum, tsum) at once, i's at the
-  // end of its contacts, in the order the reduction adds pair_out_'s; compute_pair_forces_hot)
-  const bool direct = pair_direct_;
+  const int* const cross_k = pair_cross_k_.data();
+  PairCross* const cross = pair_cross_.data();
+  // (kPassDirect: j's force and torque added to its sums (fsum, tsum) at once, i's at the
+  // end of its contacts, in the order the reduction adds pair_out_'s; kPassCross: the
+  // cross pairs' shares; compute_pair_forces_hot)
+  const bool direct = mode == kPassDirect;
+  const bool shares = mode == kPassCross;
   // Periodic cell: j is seen at its image, and the mean field's velocity L d and spin are
   // added to the stored fluctuations (bodies/cell.hpp).
   const bool periodic = cell_.on;
   const Mat3 lgrad = cell_.vel_grad;
   const Vec3 spin = cell_.spin();
-  for (int i = b0; i < b1; ++i) {
-    const int k0 = ioff[i], k1 = ioff[i + 1];
+  for (int r = r0; r < r1; ++r) {
+    // (rows: bodies, or in kPassCross single cross pairs)
+    const int k0 = shares ? cross_k[r] : ioff[r], k1 = shares ? k0 + 1 : ioff[r + 1];
+    const int i = shares ? pairs[k0].i : r;
     // i's share: -force and torque_i summed over its contacts.
     V fi = ops.zero(), ti = ops.zero();
+    bool gave = false;  // (kPassCross)
     if (k0 < k1) {
       const V xi = ops.load(pos[i]), vi = ops.load(vel[i]);
       const V wi = periodic ? V(ops.load(angvel[i]) + spin) : ops.load(angvel[i]);
       const Real ri = radius[i];
       for (int k = k0; k < k1; ++k) {
         PairContact& c = pairs[k];
-        PairOutput* const o = direct ? nullptr : &out_j[jslot[k]];
+        PairOutput* const o = direct ? nullptr : shares ? &cross[r].out : &out_j[jslot[k]];
         const int j = c.j;
+        if (direct && j >= jlimit) {
+          // a cross pair: its shares were computed first; i's is added in its place
+          const PairCross& x = cross[cursor++];
+          if (x.on) {
+            fi += ops.load_head(x.fi.data());
+            ti += ops.load_head(x.ti.data());
+          }
+          continue;
+        }
         V d = ops.load(pos[j]) - xi;
         if (periodic) d += ops.load_padded(image_offset_[c.image].data());
         const Real dist2 = ops.dot(d, d);
@@ -195,6 +217,7 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
         }
         if (!c.active || c.phys_version != version) update_phys(c, k);
         c.active = true;
+        gave = true;
         V wj = ops.load(angvel[j]), vj = ops.load(vel[j]);
         if (periodic) {
           wj += spin;
@@ -248,7 +271,11 @@ void Scene::pair_bodies_narrow(int b0, int b1, long& err_out) {
         ti -= li * nxf;
       }
     }
-    if (direct) {
+    if (shares) {
+      ops.store_padded(cross[r].fi.data(), fi);
+      ops.store_padded(cross[r].ti.data(), ti);
+      cross[r].on = gave;
+    } else if (direct) {
       ops.store(fsum[i], V(ops.load(fsum[i]) + fi));
       ops.store(tsum[i], V(ops.load(tsum[i]) + ti));
     } else {
@@ -277,9 +304,7 @@ void Scene::release_pair_outputs() {
   if (pair_ti_.capacity() > 0) std::vector<std::array<Real, 4>>().swap(pair_ti_);
 }
 
-bool Scene::pair_pass_direct() const {
-  return !pair_cold_on_ && (static_cast<long>(pairs_.size()) <= kParallelMin || max_threads() == 1);
-}
+bool Scene::pair_pass_direct() const { return !pair_cold_on_; }
 
 void Scene::index_pair_outputs(std::vector<int>& jadj_off, std::vector<int>& jslot) const {
   jadj_off.clear();
@@ -336,26 +361,17 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   // so the sums do not depend on the number of threads. 3-vectors in 4-lane registers
   // (WideOps) where the CPU has AVX2; otherwise the same loop with Eigen's Vector3d.
   const int n = num_bodies();
-  // On one thread with the short kernels alone (no cold part: every contact's force is
-  // f_n n + f_s, kept in its hot record) the pass adds each contact's force and torque to
-  // its bodies' sums in the bodies' own force and torque (pair_direct_), which the reduction
-  // then completes: pair_out_, pair_fi_ and pair_ti_ are not kept (64 B a contact and 64 B
-  // a body less to write and read back).
+  // With the short kernels alone (no cold part: every contact's force is f_n n + f_s, kept
+  // in its hot record) the pass adds each contact's force and torque to its bodies' sums in
+  // the bodies' own force and torque (pair_direct_), which the reduction then completes:
+  // pair_out_, pair_fi_ and pair_ti_ are not kept (64 B a contact and 64 B a body less to
+  // write and read back). On more threads each sums its own bodies, and the contacts whose
+  // second body another thread sums (cross pairs) have their shares computed first
+  // (pair_cross_): the same sums in the same order.
   const long ncontacts = static_cast<long>(pairs_.size());
   pair_direct_ = pair_pass_direct();
   if (pair_direct_) {
     release_pair_outputs();
-    // The sums start where the reduction starts: the external force and the weight.
-    const Vec3 g = gravity_;
-    for (int b = 0; b < n; ++b) {
-      const Vec3& fe = bodies_.ext_force_of(b);
-      const Vec3& te = bodies_.ext_torque_of(b);
-      const Real m = bodies_.mass[b];
-      for (int a = 0; a < 3; ++a) {
-        bodies_.force[b][a] = fe[a] + m * g[a];
-        bodies_.torque[b][a] = te[a];
-      }
-    }
   } else {
     pair_fi_.resize(n);
     pair_ti_.resize(n);
@@ -364,6 +380,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
     if (pair_jslot_.size() != pairs_.size() || pair_jadj_off_.size() != pair_ioff_.size())
       index_pair_outputs(pair_jadj_off_, pair_jslot_);
   }
+  if (pair_cold_on_ || ncontacts <= kParallelMin) release_pair_cross();
   if (!use_wide_ops()) {
     compute_pair_forces_narrow(err_contact);
     return;
@@ -394,22 +411,38 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   const V4 l0 = v4(cell_.vel_grad.col(0)), l1 = v4(cell_.vel_grad.col(1)),
            l2 = v4(cell_.vel_grad.col(2)), spin = v4(cell_.spin());
   const Real* const offsets = image_offset_.data()->data();
-#pragma omp parallel reduction(min : err) if (nc > kParallelMin && !pair_direct_)
+#pragma omp parallel reduction(min : err) if (nc > kParallelMin)
   {
     const auto [t, nt] = thread_and_team();
     const auto [b0, b1] = pair_bodies_of_thread(t, nt);
+    const bool crossing = pair_direct_ && nt > 1;
+    if (crossing) {
+#pragma omp single
+      {
+        if (pair_cross_nt_ != nt) index_pair_cross(static_cast<int>(nt));
+      }
+    }
+    const int* const cross_k = pair_cross_k_.data();
+    PairCross* const cross = pair_cross_.data();
     // (Captured by value: the pointers stay in registers; by reference they were taken as
     // addresses the loop's stores might alias, and reloaded, 14 % more instructions.)
     const int kend = ioff[b1];  // (the thread's last contact + 1)
     const bool prefetch = n >= kPrefetchMinBodies;
-    const auto loop = [=, &err](auto periodic_tag, auto direct_tag) __attribute__((always_inline)) {
+    // Rows r0 .. r1: bodies, or in kPassCross cross slots (one contact each). kPassDirect:
+    // the contacts with j >= jlimit are cross pairs, whose shares are pair_cross_[cursor..].
+    const auto loop = [=, &err](auto periodic_tag, auto mode_tag, int r0, int r1, int jlimit,
+                                long cursor) __attribute__((always_inline)) {
     constexpr bool kPeriodic = decltype(periodic_tag)::value;
-    // (kDirect: pair_direct_, j's share into its sums at once, i's at the end of its contacts)
-    constexpr bool kDirect = decltype(direct_tag)::value;
-    for (int i = b0; i < b1; ++i) {
-      const int k0 = ioff[i], k1 = ioff[i + 1];
+    // (kDirect: j's share into its sums at once, i's at the end of its contacts; kShares:
+    // a cross pair's shares into its PairCross)
+    constexpr bool kDirect = decltype(mode_tag)::value == kPassDirect;
+    constexpr bool kShares = decltype(mode_tag)::value == kPassCross;
+    for (int r = r0; r < r1; ++r) {
+      const int k0 = kShares ? cross_k[r] : ioff[r], k1 = kShares ? k0 + 1 : ioff[r + 1];
+      const int i = kShares ? pairs[k0].i : r;
       // i's share: -force and torque_i summed over its contacts.
       V4 fi = V4{}, ti = V4{};
+      [[maybe_unused]] bool gave = false;  // (kShares)
       if (k0 < k1) {
         const V4 xi = v4(pos[i]), vi = v4(vel[i]);
         V4 wi = v4(angvel[i]);
@@ -417,9 +450,20 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
         const Real ri = radius[i];
         for (int k = k0; k < k1; ++k) {
           PairContact& c = pairs[k];
-          PairOutput* const o = kDirect ? nullptr : &out_j[jslot[k]];
+          PairOutput* const o = kDirect ? nullptr : kShares ? &cross[r].out : &out_j[jslot[k]];
           const int j = c.j;
-          if (prefetch && k + kPrefetchAhead < kend) {
+          if constexpr (kDirect) {
+            if (j >= jlimit) {
+              // a cross pair: its shares were computed first; i's is added in its place
+              const PairCross& x = cross[cursor++];
+              if (x.on) {
+                fi += load4(x.fi.data());
+                ti += load4(x.ti.data());
+              }
+              continue;
+            }
+          }
+          if (!kShares && prefetch && k + kPrefetchAhead < kend) {
             // (a scene larger than the caches: the state of a contact's second body some
             // contacts ahead, toward the cache, its reads being the scattered ones of the
             // pass; at 1e4 bodies it slowed the pass, 0.98 x on one thread, 0.94 x on two)
@@ -449,6 +493,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           }
           if (!c.active || c.phys_version != version) update_phys(c, k);
           c.active = true;
+          if constexpr (kShares) gave = true;
           V4 wj = v4(angvel[j]), vj = v4(vel[j]);
           if constexpr (kPeriodic) {
             wj += spin;
@@ -506,7 +551,11 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
         }
       }
       // (lane 3 is zero: every term had a zero lane 3)
-      if constexpr (kDirect) {
+      if constexpr (kShares) {
+        store4(cross[r].fi.data(), fi);
+        store4(cross[r].ti.data(), ti);
+        cross[r].on = gave;
+      } else if constexpr (kDirect) {
         store3(fsum[i], v4(fsum[i]) + fi);
         store3(tsum[i], v4(tsum[i]) + ti);
       } else {
@@ -515,31 +564,131 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
       }
     }
     };
-    if (pair_direct_) {
-      if (cell_.on) loop(std::true_type{}, std::true_type{});
-      else loop(std::false_type{}, std::true_type{});
+    // (inlined: a lambda called apart from the pass would be compiled for the baseline CPU,
+    // outside the pass's multiversioned clones)
+    const auto run = [&](auto mode_tag, int r0, int r1, int jlimit, long cursor)
+        __attribute__((always_inline)) {
+      if (cell_.on) loop(std::true_type{}, mode_tag, r0, r1, jlimit, cursor);
+      else loop(std::false_type{}, mode_tag, r0, r1, jlimit, cursor);
+    };
+    if (!pair_direct_) {
+      run(std::integral_constant<int, kPassOutputs>{}, b0, b1, 0, 0);
+    } else if (!crossing) {
+      start_pair_sums(b0, b1);
+      run(std::integral_constant<int, kPassDirect>{}, b0, b1, std::numeric_limits<int>::max(), 0);
     } else {
-      if (cell_.on) loop(std::true_type{}, std::false_type{});
-      else loop(std::false_type{}, std::false_type{});
+      // The cross pairs' shares, each thread an equal part of them; then this thread's
+      // bodies' sums, started, given their cross shares (in contact order), and its rows.
+      const auto [s0, s1] = thread_share(static_cast<long>(pair_cross_k_.size()), t, nt);
+      run(std::integral_constant<int, kPassCross>{}, static_cast<int>(s0), static_cast<int>(s1),
+          0, 0);
+#pragma omp barrier
+      start_pair_sums(b0, b1);
+      for (int e = pair_cross_jt_[t]; e < pair_cross_jt_[t + 1]; ++e) {
+        const PairCross& x = cross[pair_cross_j_[e]];
+        if (!x.on) continue;
+        store3(fsum[x.j], v4(fsum[x.j]) + load4(x.out.force.data()));
+        store3(tsum[x.j], v4(tsum[x.j]) + load4(x.out.torque_j.data()));
+      }
+      run(std::integral_constant<int, kPassDirect>{}, b0, b1, b1, pair_cross_t_[t]);
     }
   }
   err_contact = err;
 }
 
 void Scene::compute_pair_forces_narrow(long& err_contact) {
-  // (compute_pair_forces has sized pair_fi_ and pair_ti_.)
+  // (compute_pair_forces has sized pair_fi_ and pair_ti_; the same steps as the wide form's)
   long err = std::numeric_limits<long>::max();
-#pragma omp parallel reduction(min : err) \
-    if (static_cast<long>(pairs_.size()) > kParallelMin && !pair_direct_)
+#pragma omp parallel reduction(min : err) if (static_cast<long>(pairs_.size()) > kParallelMin)
   {
     const auto [t, nt] = thread_and_team();
-    const auto bodies = pair_bodies_of_thread(t, nt);
-    if (shear_kinematics_ == ShearKinematics::Yade)
-      pair_bodies_narrow<true>(bodies.first, bodies.second, err);
-    else
-      pair_bodies_narrow<false>(bodies.first, bodies.second, err);
+    const auto [b0, b1] = pair_bodies_of_thread(t, nt);
+    const auto run = [&](int r0, int r1, int mode, int jlimit, long cursor) {
+      if (shear_kinematics_ == ShearKinematics::Yade)
+        pair_bodies_narrow<true>(r0, r1, err, mode, jlimit, cursor);
+      else
+        pair_bodies_narrow<false>(r0, r1, err, mode, jlimit, cursor);
+    };
+    if (!pair_direct_) {
+      run(b0, b1, kPassOutputs, 0, 0);
+    } else if (nt == 1) {
+      start_pair_sums(b0, b1);
+      run(b0, b1, kPassDirect, std::numeric_limits<int>::max(), 0);
+    } else {
+#pragma omp single
+      {
+        if (pair_cross_nt_ != nt) index_pair_cross(static_cast<int>(nt));
+      }
+      const auto [s0, s1] = thread_share(static_cast<long>(pair_cross_k_.size()), t, nt);
+      run(static_cast<int>(s0), static_cast<int>(s1), kPassCross, 0, 0);
+#pragma omp barrier
+      start_pair_sums(b0, b1);
+      for (int e = pair_cross_jt_[t]; e < pair_cross_jt_[t + 1]; ++e) {
+        const PairCross& x = pair_cross_[pair_cross_j_[e]];
+        if (!x.on) continue;
+        bodies_.force[x.j] += x.out.force;
+        bodies_.torque[x.j] += x.out.torque_j;
+      }
+      run(b0, b1, kPassDirect, b1, pair_cross_t_[t]);
+    }
   }
   err_contact = err;
+}
+
+void Scene::start_pair_sums(int b0, int b1) {
+  // The sums start where the reduction starts: the external force and the weight.
+  const Vec3 g = gravity_;
+  for (int b = b0; b < b1; ++b) {
+    const Vec3& fe = bodies_.ext_force_of(b);
+    const Vec3& te = bodies_.ext_torque_of(b);
+    const Real m = bodies_.mass[b];
+    for (int a = 0; a < 3; ++a) {
+      bodies_.force[b][a] = fe[a] + m * g[a];
+      bodies_.torque[b][a] = te[a];
+    }
+  }
+}
+
+void Scene::index_pair_cross(int nt) {
+  pair_cross_k_.clear();
+  pair_cross_t_.assign(nt + 1, 0);
+  std::vector<std::pair<int, int>> bodies(nt);
+  for (int t = 0; t < nt; ++t) {
+    const auto [b0, b1] = pair_bodies_of_thread(t, nt);
+    bodies[t] = {b0, b1};
+    for (int i = b0; i < b1; ++i) {
+      // (a row is sorted by j: its cross pairs are its tail)
+      int k = pair_ioff_[i + 1];
+      while (k > pair_ioff_[i] && pairs_[k - 1].j >= b1) --k;
+      for (; k < pair_ioff_[i + 1]; ++k) pair_cross_k_.push_back(k);
+    }
+    pair_cross_t_[t + 1] = static_cast<int>(pair_cross_k_.size());
+  }
+  const int ns = static_cast<int>(pair_cross_k_.size());
+  pair_cross_.assign(ns, PairCross());
+  pair_cross_j_.resize(ns);
+  for (int s = 0; s < ns; ++s) {
+    pair_cross_[s].j = pairs_[pair_cross_k_[s]].j;
+    pair_cross_j_[s] = s;
+  }
+  // (stable: within a body j its slots stay in contact order)
+  std::stable_sort(pair_cross_j_.begin(), pair_cross_j_.end(),
+                   [&](int a, int b) { return pair_cross_[a].j < pair_cross_[b].j; });
+  pair_cross_jt_.assign(nt + 1, ns);
+  for (int t = 0; t < nt; ++t) {
+    pair_cross_jt_[t] = static_cast<int>(
+        std::lower_bound(pair_cross_j_.begin(), pair_cross_j_.end(), bodies[t].first,
+                         [&](int s, int b) { return pair_cross_[s].j < b; }) -
+        pair_cross_j_.begin());
+  }
+  pair_cross_nt_ = nt;
+}
+
+void Scene::release_pair_cross() {
+  pair_cross_nt_ = 0;
+  if (pair_cross_.capacity() > 0) std::vector<PairCross>().swap(pair_cross_);
+  for (auto* v : {&pair_cross_k_, &pair_cross_t_, &pair_cross_j_, &pair_cross_jt_})
+    if (v->capacity() > 0) std::vector<int>().swap(*v);
 }
 
 }  // namespace cpp_dem

@@ -2,6 +2,8 @@
 // part, and the per-step output grouped by the second body.
 #pragma once
 
+#include <array>
+
 #include "cpp_dem/bodies/cell.hpp"
 #include "cpp_dem/laws/contact_law.hpp"
 
@@ -61,6 +63,17 @@ struct PairOutput {
   Real pad_force = 0;            ///< zero (padding)
   Vec3 torque_j = Vec3::Zero();  ///< torque on j, N m
   Real pad_torque = 0;           ///< zero (padding)
+};
+
+/// A cross pair's shares in a threaded direct pass (Scene::pair_cross_): a contact whose
+/// second body j another thread sums. Its shares are computed before the threads sum their
+/// bodies, then added where the one-thread pass adds them: j's among j's first terms, i's in
+/// its place in i's running sum, so the sums have the one-thread pass's bits.
+struct PairCross {
+  PairOutput out;                 ///< j's force and torque (PairOutput), N, N m
+  std::array<Real, 4> fi{}, ti{};  ///< i's shares as the pass adds them (fourth zero), N, N m
+  int j = 0;                      ///< the second body (set with the index)
+  int on = 0;                     ///< whether the contact gave shares in the last pass
 };
 
 }  // namespace cpp_dem
