@@ -750,7 +750,7 @@ class Scene {
   // fourth zero), so they are stored and loaded as one register.
   std::vector<std::array<Real, 4>> pair_fi_, pair_ti_;
   // A direct pass on nt > 1 threads (index_pair_cross, made for pair_cross_nt_ threads at the
-  // first pass after a build): thread t sums bodies [b0, b1) (pair_bodies_of_thread), and the
+  // first pass after a build): thread t sums bodies [b0, b1) (pair_cross_b_, below), and the
   // contacts of its rows whose j is >= b1 (cross pairs: the tails of the rows, whose j
   // another thread sums) are pair_cross_k_[pair_cross_t_[t] .. pair_cross_t_[t + 1]), in
   // contact order. Their shares (pair_cross_) are computed first, the threads taking equal
@@ -758,7 +758,9 @@ class Scene {
   // it sums (pair_cross_j_: slots by (j, slot), thread t's from pair_cross_jt_[t]), and runs
   // its rows, adding each cross pair's share of i in its place: every sum in the one-thread
   // pass's order, so the bits do not depend on the threads.
-  std::vector<int> pair_cross_k_, pair_cross_t_, pair_cross_j_, pair_cross_jt_;
+  // The threads' bodies are pair_cross_b_[t] .. pair_cross_b_[t + 1], split so that the
+  // contacts each computes in its rows, besides its part of the cross pairs, are equal.
+  std::vector<int> pair_cross_k_, pair_cross_t_, pair_cross_j_, pair_cross_jt_, pair_cross_b_;
   std::vector<PairCross> pair_cross_;
   int pair_cross_nt_ = 0;  // 0: to make at the next threaded direct pass
   // Scratch of compute_wall_forces, made again after each build: wall contacts by block of

@@ -437,6 +437,7 @@ std::vector<std::pair<std::string, std::size_t>> Scene::memory_by_field() const 
   add("scratch.pair_cross_t", pair_cross_t_);
   add("scratch.pair_cross_j", pair_cross_j_);
   add("scratch.pair_cross_jt", pair_cross_jt_);
+  add("scratch.pair_cross_b", pair_cross_b_);
   add("scratch.wall_order", wall_order_);
   add("scratch.wall_block_off", wall_block_off_);
   add("scratch.density_scaling_kt", ds_kt_);

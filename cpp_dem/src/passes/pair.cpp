@@ -414,7 +414,6 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
 #pragma omp parallel reduction(min : err) if (nc > kParallelMin)
   {
     const auto [t, nt] = thread_and_team();
-    const auto [b0, b1] = pair_bodies_of_thread(t, nt);
     const bool crossing = pair_direct_ && nt > 1;
     if (crossing) {
 #pragma omp single
@@ -422,6 +421,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
         if (pair_cross_nt_ != nt) index_pair_cross(static_cast<int>(nt));
       }
     }
+    const auto [b0, b1] = crossing ? std::pair<int, int>(pair_cross_b_[t], pair_cross_b_[t + 1])
+                                   : pair_bodies_of_thread(t, nt);
     const int* const cross_k = pair_cross_k_.data();
     PairCross* const cross = pair_cross_.data();
     // (Captured by value: the pointers stay in registers; by reference they were taken as
@@ -602,23 +603,22 @@ void Scene::compute_pair_forces_narrow(long& err_contact) {
 #pragma omp parallel reduction(min : err) if (static_cast<long>(pairs_.size()) > kParallelMin)
   {
     const auto [t, nt] = thread_and_team();
-    const auto [b0, b1] = pair_bodies_of_thread(t, nt);
     const auto run = [&](int r0, int r1, int mode, int jlimit, long cursor) {
       if (shear_kinematics_ == ShearKinematics::Yade)
         pair_bodies_narrow<true>(r0, r1, err, mode, jlimit, cursor);
       else
         pair_bodies_narrow<false>(r0, r1, err, mode, jlimit, cursor);
     };
-    if (!pair_direct_) {
-      run(b0, b1, kPassOutputs, 0, 0);
-    } else if (nt == 1) {
-      start_pair_sums(b0, b1);
-      run(b0, b1, kPassDirect, std::numeric_limits<int>::max(), 0);
+    if (!pair_direct_ || nt == 1) {
+      const auto [b0, b1] = pair_bodies_of_thread(t, nt);
+      if (pair_direct_) start_pair_sums(b0, b1);
+      run(b0, b1, pair_direct_ ? kPassDirect : kPassOutputs, std::numeric_limits<int>::max(), 0);
     } else {
 #pragma omp single
       {
         if (pair_cross_nt_ != nt) index_pair_cross(static_cast<int>(nt));
       }
+      const int b0 = pair_cross_b_[t], b1 = pair_cross_b_[t + 1];
       const auto [s0, s1] = thread_share(static_cast<long>(pair_cross_k_.size()), t, nt);
       run(static_cast<int>(s0), static_cast<int>(s1), kPassCross, 0, 0);
 #pragma omp barrier
@@ -650,17 +650,34 @@ void Scene::start_pair_sums(int b0, int b1) {
 }
 
 void Scene::index_pair_cross(int nt) {
+  // The threads' bodies: each thread computes an equal part of the cross pairs apart, so the
+  // rows are split by their other contacts, those the thread computes in its rows (counted
+  // at the split by equal contacts, pair_bodies_of_thread: the cross pairs change little
+  // when the borders move).
+  const int n = static_cast<int>(pair_ioff_.size()) - 1;
+  const auto tail = [&](int i, int jlimit) {  // (a row is sorted by j: its cross pairs are its tail)
+    int k = pair_ioff_[i + 1];
+    while (k > pair_ioff_[i] && pairs_[k - 1].j >= jlimit) --k;
+    return k;
+  };
+  std::vector<long> own(n + 1, 0);  // (cumulative: the rows' contacts that are not cross)
+  for (int t = 0; t < nt; ++t) {
+    const auto [b0, b1] = pair_bodies_of_thread(t, nt);
+    for (int i = b0; i < b1; ++i) own[i + 1] = tail(i, b1) - pair_ioff_[i];
+  }
+  for (int i = 0; i < n; ++i) own[i + 1] += own[i];
+  pair_cross_b_.assign(nt + 1, n);
+  for (int t = 0; t < nt; ++t)
+    pair_cross_b_[t] = static_cast<int>(
+        std::lower_bound(own.begin(), own.end(), t * own[n] / nt) - own.begin());
   pair_cross_k_.clear();
   pair_cross_t_.assign(nt + 1, 0);
   std::vector<std::pair<int, int>> bodies(nt);
   for (int t = 0; t < nt; ++t) {
-    const auto [b0, b1] = pair_bodies_of_thread(t, nt);
+    const int b0 = pair_cross_b_[t], b1 = pair_cross_b_[t + 1];
     bodies[t] = {b0, b1};
     for (int i = b0; i < b1; ++i) {
-      // (a row is sorted by j: its cross pairs are its tail)
-      int k = pair_ioff_[i + 1];
-      while (k > pair_ioff_[i] && pairs_[k - 1].j >= b1) --k;
-      for (; k < pair_ioff_[i + 1]; ++k) pair_cross_k_.push_back(k);
+      for (int k = tail(i, b1); k < pair_ioff_[i + 1]; ++k) pair_cross_k_.push_back(k);
     }
     pair_cross_t_[t + 1] = static_cast<int>(pair_cross_k_.size());
   }
@@ -687,7 +704,7 @@ void Scene::index_pair_cross(int nt) {
 void Scene::release_pair_cross() {
   pair_cross_nt_ = 0;
   if (pair_cross_.capacity() > 0) std::vector<PairCross>().swap(pair_cross_);
-  for (auto* v : {&pair_cross_k_, &pair_cross_t_, &pair_cross_j_, &pair_cross_jt_})
+  for (auto* v : {&pair_cross_k_, &pair_cross_t_, &pair_cross_j_, &pair_cross_jt_, &pair_cross_b_})
     if (v->capacity() > 0) std::vector<int>().swap(*v);
 }
 
