@@ -739,10 +739,11 @@ class Scene {
   // Friction dissipated by each pair contact, J (ContactState::dissip_friction).
   std::vector<Real> pair_dissip_;
   std::vector<PairOutput> pair_out_;  // empty after a direct pass (pair_direct_)
-  // The last pair pass ran on one thread with short kernels only and summed each contact's
-  // force and torque on j into j's pair_fi_ / pair_ti_ at once (which it started from the
-  // body's external force and weight), in the order the reduction sums pair_out_: the
-  // reduction then reads those sums, and pair_out_ is not kept.
+  // The last pair pass ran with short kernels only (no cold part) and summed each
+  // contact's force and torque into its bodies' force and torque at once (which it started
+  // from the body's external force and weight), in the order the reduction sums pair_out_:
+  // the reduction then reads those sums, and pair_out_ is not kept (on more threads as on
+  // one: pair_cross_, below).
   bool pair_direct_ = false;
   // Per body: the sum over its contacts as i of -force and torque_i, written by the pair
   // pass every step (scratch, not state).
