@@ -532,6 +532,9 @@ class Scene {
   void index_pair_cross(int nt);
   /// Frees the cross pairs' index (after each build: it is made again for the next pass).
   void release_pair_cross();
+  /// Adds to thread t's bodies' sums (pair_cross_b_) their shares of the cross pairs, in
+  /// contact order (between start_pair_sums and the thread's rows).
+  void add_cross_shares(long t);
   /// The bodies [b0, b1)'s force and torque set to where the direct pass's sums start: the
   /// external force and the weight, the external torque.
   void start_pair_sums(int b0, int b1);

@@ -339,6 +339,7 @@ void Scene::ensure_pair_cold() {
   }
   if (!need) return;
   pair_cold_on_ = true;
+  release_pair_cross();  // (a pass with the cold part keeps its outputs instead)
   // (every active contact's phys is made again, into its cold part, at its next step:
   // phys_version_ has changed since the last check, or no step has run)
   pair_cold_.assign(pairs_.size(), PairContactCold());
@@ -380,7 +381,6 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
     if (pair_jslot_.size() != pairs_.size() || pair_jadj_off_.size() != pair_ioff_.size())
       index_pair_outputs(pair_jadj_off_, pair_jslot_);
   }
-  if (pair_cold_on_ || ncontacts <= kParallelMin) release_pair_cross();
   if (!use_wide_ops()) {
     compute_pair_forces_narrow(err_contact);
     return;
@@ -585,12 +585,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           0, 0);
 #pragma omp barrier
       start_pair_sums(b0, b1);
-      for (int e = pair_cross_jt_[t]; e < pair_cross_jt_[t + 1]; ++e) {
-        const PairCross& x = cross[pair_cross_j_[e]];
-        if (!x.on) continue;
-        store3(fsum[x.j], v4(fsum[x.j]) + load4(x.out.force.data()));
-        store3(tsum[x.j], v4(tsum[x.j]) + load4(x.out.torque_j.data()));
-      }
+      add_cross_shares(t);
       run(std::integral_constant<int, kPassDirect>{}, b0, b1, b1, pair_cross_t_[t]);
     }
   }
@@ -623,12 +618,7 @@ void Scene::compute_pair_forces_narrow(long& err_contact) {
       run(static_cast<int>(s0), static_cast<int>(s1), kPassCross, 0, 0);
 #pragma omp barrier
       start_pair_sums(b0, b1);
-      for (int e = pair_cross_jt_[t]; e < pair_cross_jt_[t + 1]; ++e) {
-        const PairCross& x = pair_cross_[pair_cross_j_[e]];
-        if (!x.on) continue;
-        bodies_.force[x.j] += x.out.force;
-        bodies_.torque[x.j] += x.out.torque_j;
-      }
+      add_cross_shares(t);
       run(b0, b1, kPassDirect, b1, pair_cross_t_[t]);
     }
   }
@@ -646,6 +636,17 @@ void Scene::start_pair_sums(int b0, int b1) {
       bodies_.force[b][a] = fe[a] + m * g[a];
       bodies_.torque[b][a] = te[a];
     }
+  }
+}
+
+void Scene::add_cross_shares(long t) {
+  // (in contact order: the slots of a body, pair_cross_j_, are; few, so not in the pass's
+  // vector forms, whose sums these are to the bit)
+  for (int e = pair_cross_jt_[t]; e < pair_cross_jt_[t + 1]; ++e) {
+    const PairCross& x = pair_cross_[pair_cross_j_[e]];
+    if (!x.on) continue;
+    bodies_.force[x.j] += x.out.force;
+    bodies_.torque[x.j] += x.out.torque_j;
   }
 }
 
@@ -672,10 +673,8 @@ void Scene::index_pair_cross(int nt) {
         std::lower_bound(own.begin(), own.end(), t * own[n] / nt) - own.begin());
   pair_cross_k_.clear();
   pair_cross_t_.assign(nt + 1, 0);
-  std::vector<std::pair<int, int>> bodies(nt);
   for (int t = 0; t < nt; ++t) {
     const int b0 = pair_cross_b_[t], b1 = pair_cross_b_[t + 1];
-    bodies[t] = {b0, b1};
     for (int i = b0; i < b1; ++i) {
       for (int k = tail(i, b1); k < pair_ioff_[i + 1]; ++k) pair_cross_k_.push_back(k);
     }
@@ -694,7 +693,7 @@ void Scene::index_pair_cross(int nt) {
   pair_cross_jt_.assign(nt + 1, ns);
   for (int t = 0; t < nt; ++t) {
     pair_cross_jt_[t] = static_cast<int>(
-        std::lower_bound(pair_cross_j_.begin(), pair_cross_j_.end(), bodies[t].first,
+        std::lower_bound(pair_cross_j_.begin(), pair_cross_j_.end(), pair_cross_b_[t],
                          [&](int s, int b) { return pair_cross_[s].j < b; }) -
         pair_cross_j_.begin());
   }
