@@ -120,7 +120,7 @@ int main(int argc, char** argv) {
       "pair_candidates=%zu wall_candidates=%zu checksum=%016llx\n",
       s.num_bodies(), omp_get_max_threads(), steps, 1e3 * (t1 - t0) / steps,
       s.num_bodies() * steps / (t1 - t0), s.num_active_contacts(),
-      s.collider_stats().builds - builds0, s.pair_contacts().size(), s.wall_contacts().size(),
+      s.collider_stats().builds - builds0, s.collider_stats().pair_candidates, s.wall_contacts().size(),
       static_cast<unsigned long long>(h));
   return 0;
 }

@@ -505,6 +505,7 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
         py::dict d;
         d["builds"] = c.builds;
         d["pair_candidates"] = c.pair_candidates;
+        d["pair_records"] = c.pair_records;
         d["wall_candidates"] = c.wall_candidates;
         d["grid_candidates"] = c.grid_candidates;
         return d;

@@ -453,15 +453,19 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
     // (A contact's kernel is saved as the format's flag "linear short kernel", 0 or 1: the
     // Hertz kernels, derived from the phys, are 0 here and found again at the load, so a
     // contact's bytes do not depend on which kernels a build has.)
-    std::vector<PairContact> pairs = s.pairs_;
+    // (A record for every candidate pair, in candidate order, with its friction dissipation:
+    // the scene keeps them only for the candidates that carry history, Scene::pair_slot_.)
+    std::vector<PairContact> pairs;
+    std::vector<Real> dissip;
+    s.expanded_pairs(pairs, dissip);
     for (PairContact& c : pairs) c.kernel = c.kernel == kLinearKernel ? kLinearKernel : 0;
     w.vec(pairs);
+    // (Version 15: whether the scene keeps the cold part, the cold part (empty if not) and
+    // the friction dissipation.)
+    w.put(static_cast<std::uint8_t>(s.pair_cold_on_));
+    w.vec(s.pair_cold_);
+    w.vec(dissip);
   }
-  // (Version 15: whether the scene keeps the cold part, the cold part (empty if not) and the
-  // friction dissipation.)
-  w.put(static_cast<std::uint8_t>(s.pair_cold_on_));
-  w.vec(s.pair_cold_);
-  w.vec(s.pair_dissip_);
   // (The pair pass's outputs only where the scene has the cold part: without it every
   // contact's force is its hot record's, f_n n + f_s (Scene::pair_force), and a pass on one
   // thread keeps no outputs (pair_direct_), so the bytes do not depend on the threads.)
@@ -756,6 +760,16 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
     if (std::all_of(t.candidate_images_.begin(), t.candidate_images_.end(),
                     [](std::uint8_t c) { return c == kNoShift; }))
       std::vector<std::uint8_t>().swap(t.candidate_images_);
+    // The pair records are the candidates', one each in their order, in rows pair_ioff_.
+    bool pairs_ok = t.pairs_.size() == cand.size() && t.pair_ioff_.size() <= nb + 1 &&
+                    (!cand.empty() || t.pair_ioff_.empty() || t.pair_ioff_.back() == 0);
+    for (size_t q = 0; q < cand.size() && pairs_ok; ++q)
+      pairs_ok = t.pairs_[q].i == cand[q].first && t.pairs_[q].j == cand[q].second &&
+                 static_cast<size_t>(cand[q].first) + 1 < t.pair_ioff_.size() &&
+                 t.pair_ioff_[cand[q].first] <= static_cast<int>(q) &&
+                 static_cast<int>(q) < t.pair_ioff_[cand[q].first + 1];
+    if (!pairs_ok) throw ParameterError("checkpoint: corrupt pair contacts");
+    t.compact_pairs();
   }
   r.get(t.dropped_friction_);
   r.get(t.dropped_viscous_);

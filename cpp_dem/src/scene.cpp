@@ -126,14 +126,15 @@ void Scene::raise_overlap(long k, bool wall) const {
        << " of its radius (max_overlap_ratio=" << max_overlap_ratio_ << why;
     body = c.body;
   } else {
-    const PairContact& c = pairs_[k];
-    const Real ov = bodies_.radius[c.i] + bodies_.radius[c.j] -
-                    (bodies_.pos[c.j] + pair_shift(k) - bodies_.pos[c.i]).norm();
-    os << "blow-up at step " << step_ << ": bodies " << id_of(c.i) << " and " << id_of(c.j)
-       << " overlap by " << ov / std::min(bodies_.radius[c.i], bodies_.radius[c.j])
+    // (k: the candidate pair)
+    const int ci = pair_first_body(k), cj = cand_j_[k];
+    const Real ov = bodies_.radius[ci] + bodies_.radius[cj] -
+                    (bodies_.pos[cj] + pair_shift(k) - bodies_.pos[ci]).norm();
+    os << "blow-up at step " << step_ << ": bodies " << id_of(ci) << " and " << id_of(cj)
+       << " overlap by " << ov / std::min(bodies_.radius[ci], bodies_.radius[cj])
        << " of the smaller radius (max_overlap_ratio=" << max_overlap_ratio_ << why;
     if (!std::isfinite(ov)) os << " (non-finite position)";
-    body = bodies_.radius[c.j] < bodies_.radius[c.i] ? c.j : c.i;
+    body = bodies_.radius[cj] < bodies_.radius[ci] ? cj : ci;
   }
   if (step_ > 0) os << blow_up_hint(body);
   throw BlowUpError(os.str());
@@ -467,11 +468,14 @@ void Scene::check_tunnelling() {
     // next step's overlap check would give it).
     const auto& x = bodies_.pos;
     const auto& r = bodies_.radius;
-    for (size_t k = 0; k < pairs_.size(); ++k) {
-      const PairContact& c = pairs_[k];
-      if (c.i != b && c.j != b) continue;
-      const Real ov = r[c.i] + r[c.j] - (x[c.j] + pair_shift(k) - x[c.i]).norm();
-      if (!(ov <= max_overlap_ratio_ * std::min(r[c.i], r[c.j]))) raise_overlap(k, false);
+    const int nrows = static_cast<int>(pair_ioff_.size()) - 1;
+    for (int i = 0; i < nrows; ++i) {
+      for (int k = pair_ioff_[i]; k < pair_ioff_[i + 1]; ++k) {
+        const int j = cand_j_[k];
+        if (i != b && j != b) continue;
+        const Real ov = r[i] + r[j] - (x[j] + pair_shift(k) - x[i]).norm();
+        if (!(ov <= max_overlap_ratio_ * std::min(r[i], r[j]))) raise_overlap(k, false);
+      }
     }
     for (size_t k = 0; k < wall_contacts_.size(); ++k) {
       const WallContact& c = wall_contacts_[k];

@@ -50,6 +50,9 @@ struct Energies {
 struct ColliderStats {
   long builds = 0;          ///< number of broad-phase builds so far
   long pair_candidates = 0; ///< sphere–sphere candidate pairs in the current list
+  /// sphere–sphere contact records: the candidates that carry history (touching, or having
+  /// slipped), or every candidate where the scene has the cold part (Scene::pair_slot_)
+  long pair_records = 0;
   long wall_candidates = 0; ///< sphere–wall candidates in the current list
   long grid_candidates = 0; ///< grain–geogrid primitive candidates in the current list
 };
@@ -218,9 +221,10 @@ class Scene {
   /// The shift of pair contact k's second body (its image is x_j + shift), m; zero without
   /// a cell.
   Vec3 pair_shift(size_t k) const {
-    if (pairs_[k].image == kNoShift) return Vec3::Zero();
+    const std::uint8_t image = candidate_images_.empty() ? kNoShift : candidate_images_[k];
+    if (image == kNoShift) return Vec3::Zero();
     Vec3 s;
-    for (int a = 0; a < 3; ++a) s[a] = image_shift(pairs_[k].image, a);
+    for (int a = 0; a < 3; ++a) s[a] = image_shift(image, a);
     return cell_.h * s;
   }
   /// Per body (storage order): the cell vectors it was shifted by when wrapped (its
@@ -451,16 +455,21 @@ class Scene {
   std::vector<std::pair<std::string, std::size_t>> memory_by_field() const;
   ColliderStats collider_stats() const;
 
-  /// Sphere–sphere contacts, hot part (ids, activity, spring state); see pair_phys and
-  /// pair_state for the full records.
-  const std::vector<PairContact>& pair_contacts() const { return pairs_; }
+  /// Pair contact k (the k-th candidate pair of the last build, in (i, j) order): its hot
+  /// record, or, for a candidate that carries no history (no record, pair_slot_), a fresh
+  /// one, inactive with zero springs.
+  const PairContact& pair_record(size_t k) const {
+    static const PairContact kFresh{};
+    const int s = pair_slot_[k];
+    return s >= 0 ? pairs_[s] : kFresh;
+  }
   /// Parameters of pair contact k (as of its last activation or change of materials): its
   /// cold part's, or, in a scene without one (only short kernels: ensure_pair_cold), the
   /// hot record's model, kn, ks and tan_phi, with no dashpots and no rolling resistance
   /// (mass_eff and rolling_cap, which such a contact does not read, are zero).
   ContactPhys pair_phys(size_t k) const {
-    if (pair_cold_on_) return pair_cold_[k].phys;
-    const PairContact& c = pairs_[k];
+    if (pair_cold_on_) return pair_cold_[k].phys;  // (with the cold part: a record each)
+    const PairContact& c = pair_record(k);
     ContactPhys p;
     p.model = static_cast<ContactModel>(c.model);
     p.kn = c.kn;
@@ -472,12 +481,13 @@ class Scene {
   /// its cold part (zero rolling moment and viscous dissipation without one).
   ContactState pair_state(size_t k) const {
     ContactState s;
-    s.fs = pairs_[k].fs;
+    const PairContact& c = pair_record(k);
+    s.fs = c.fs;
     if (pair_cold_on_) s.mr = pair_cold_[k].mr;
-    s.normal = pairs_[k].normal;
-    s.overlap = pairs_[k].overlap;
-    s.fn = pairs_[k].fn;
-    s.dissip_friction = pair_dissip_[k];
+    s.normal = c.normal;
+    s.overlap = c.overlap;
+    s.fn = c.fn;
+    s.dissip_friction = pair_slot_[k] >= 0 ? pair_dissip_[pair_slot_[k]] : 0.0;
     if (pair_cold_on_) s.dissip_viscous = pair_cold_[k].dissip_viscous;
     return s;
   }
@@ -488,8 +498,9 @@ class Scene {
   /// after a pass that summed the forces into the bodies directly (pair_direct_: only
   /// short kernels, whose force is f_n n + f_s), that sum from the hot record, the same bits.
   Vec3 pair_force(size_t k) const {
-    if (pair_out_.size() == pairs_.size()) return pair_out_[pair_jslot_[k]].force;
-    const PairContact& c = pairs_[k];
+    if (!pair_out_.empty() && pair_out_.size() == cand_j_.size())
+      return pair_out_[pair_jslot_[k]].force;
+    const PairContact& c = pair_record(k);
     return Vec3(c.fn * c.normal + c.fs);
   }
   const std::vector<WallContact>& wall_contacts() const { return wall_contacts_; }
@@ -512,7 +523,7 @@ class Scene {
     dropped_friction_ += s.dissip_friction;
     dropped_viscous_ += s.dissip_viscous;
   }
-  /// Pair contact k leaves the lists (its dissipation to the scene's totals).
+  /// Pair contact record k (pairs_) leaves the lists (its dissipation to the scene's totals).
   void drop_pair_dissipation(size_t k) {
     dropped_friction_ += pair_dissip_[k];
     dropped_viscous_ += pair_cold_on_ ? pair_cold_[k].dissip_viscous : 0.0;
@@ -523,7 +534,8 @@ class Scene {
   /// when the materials change (phys_version_). Once made it stays.
   void ensure_pair_cold();
   /// The slots of the pair pass's outputs, grouped by j (pair_jadj_off_, pair_jslot_ of the
-  /// comment below), from pairs_ and the body count of the last build (pair_ioff_).
+  /// comment below), from the candidate pairs and the body count of the last build
+  /// (pair_ioff_).
   void index_pair_outputs(std::vector<int>& jadj_off, std::vector<int>& jslot) const;
   /// Whether the pair pass sums into the bodies directly (pair_direct_): without the cold
   /// part (on any number of threads: pair_cross_).
@@ -635,6 +647,28 @@ class Scene {
   /// Pair contact c's parameters for the current materials (into its cold part k where
   /// the scene has one), copied into its hot record.
   void update_phys(PairContact& c, size_t k);
+  /// The first body of candidate pair k (its row in pair_ioff_).
+  int pair_first_body(long k) const {
+    return static_cast<int>(std::upper_bound(pair_ioff_.begin(), pair_ioff_.end(), k) -
+                            pair_ioff_.begin()) - 1;
+  }
+  /// A new record (c, its friction dissipation) for candidate k, found touching on thread t
+  /// (pair_new_; apart from the pass's loop: rare).
+  void keep_new_pair(long t, int k, const PairContact& c, Real dissip);
+  /// Joins the pass's new records into pairs_, in candidate order (pair_slot_).
+  void adopt_new_pairs();
+  /// A record for every candidate, at its candidate's index (the scene takes the cold part).
+  void materialize_pairs();
+  /// Keeps only the records that carry history (a loaded checkpoint's full list): active,
+  /// some friction dissipated, or the scene has the cold part. Sets pair_slot_.
+  void compact_pairs();
+  /// Whether record c (with friction dissipation d) carries history to keep at a build.
+  bool pair_keeps_record(const PairContact& c, Real d) const {
+    return pair_cold_on_ || c.active || d != 0;
+  }
+  /// Every candidate's record in candidate order (a fresh one where it has none, or where
+  /// its record carries no history) and its friction dissipation: a checkpoint's form.
+  void expanded_pairs(std::vector<PairContact>& out, std::vector<Real>& dissip) const;
   /// The radius body `slot` takes in the mixing rules: its own, or its clump's stiffness radius.
   Real stiffness_radius(int slot) const {
     if (!has_clumps()) return bodies_.radius[slot];
@@ -734,7 +768,28 @@ class Scene {
   std::vector<std::uint8_t> candidate_images_;
   std::vector<std::shared_ptr<Controller>> controllers_;
   // Contacts and their adjacency (CSR: for body b, entries adj_off[b]..adj_off[b+1]).
+  // Pair contacts: a record (PairContact) only for the candidate pairs that carry history.
+  // Candidate k (cand_j_[k], in row i: pair_ioff_[i] <= k < pair_ioff_[i + 1]) has record
+  // pair_slot_[k] in pairs_, or -1: a candidate that has not touched since the last build
+  // (or touched and opened without slipping) is nothing but its candidate entry, and takes
+  // a record the step it touches (pair_new_, adopt_new_pairs). At a build the records that
+  // carry history (active, or some friction dissipated) are kept, in candidate order;
+  // pairs_[0, pair_sorted_end_) are in candidate order, those made since after them.
+  // A scene with the cold part (pair_cold_on_) keeps a record for every candidate, each at
+  // its candidate's index (pair_slot_[k] == k), as pair_out_ and pair_jslot_ assume.
+  // pair_dissip_ and pair_cold_ go with the records.
   std::vector<PairContact> pairs_;
+  std::vector<int> pair_slot_;
+  std::size_t pair_sorted_end_ = 0;
+  // A candidate the pair pass found touching without a record: its new record, made on
+  // the thread that computed it (pair_new_[t]), joined into pairs_ after the pass in
+  // candidate order (adopt_new_pairs).
+  struct NewPair {
+    int k;
+    Real dissip;
+    PairContact c;
+  };
+  std::vector<std::vector<NewPair>> pair_new_;
   std::vector<PairContactCold> pair_cold_;  // empty unless pair_cold_on_ (ensure_pair_cold)
   bool pair_cold_on_ = false;
   int pair_cold_version_ = -1;  // phys_version_ at the last ensure_pair_cold
@@ -772,8 +827,8 @@ class Scene {
   std::vector<int> wall_order_, wall_block_off_;
   long wall_order_builds_ = -1;
   std::vector<WallContact> wall_contacts_;
-  // Pair contacts of body b: those where b is i are the contacts pair_ioff_[b] ..
-  // pair_ioff_[b + 1] (contiguous: pairs_ is sorted by (i, j)); those where b is j have their
+  // Pair contacts of body b: those where b is i are the candidates pair_ioff_[b] ..
+  // pair_ioff_[b + 1] (contiguous: sorted by (i, j)); those where b is j have their
   // outputs in pair_out_[pair_jadj_off_[b] .. pair_jadj_off_[b + 1]) (grouped by j, ascending
   // contact index within a group; contact k writes to slot pair_jslot_[k]). The reduction
   // into bodies reads both in a fixed order, contiguously, without a branch per entry.
@@ -955,19 +1010,23 @@ void Scene::for_each_contact_of(ContactKind kind, F&& f) const {
     ContactPhys phys;
     r.state = &scratch;
     r.phys = &phys;
-    for (size_t k = 0; k < pairs_.size(); ++k) {
-      const PairContact& c = pairs_[k];
-      r.index = static_cast<long>(k);
-      r.active = c.active;
-      r.body1 = c.i;
-      r.body2 = c.j;
-      phys = pair_phys(k);
-      scratch = pair_state(k);
-      r.force2 = pair_force(k);
-      r.shift2 = pair_shift(k);
-      r.arm1 = bodies_.radius[c.i] - 0.5 * c.overlap;
-      r.arm2 = bodies_.radius[c.j] - 0.5 * c.overlap;
-      f(static_cast<const ContactRecord&>(r));
+    // (every candidate pair, in (i, j) order; one without a record as a fresh one)
+    const int nrows = static_cast<int>(pair_ioff_.size()) - 1;
+    for (int i = 0; i < nrows; ++i) {
+      for (int k = pair_ioff_[i]; k < pair_ioff_[i + 1]; ++k) {
+        const PairContact& c = pair_record(k);
+        r.index = static_cast<long>(k);
+        r.active = c.active;
+        r.body1 = i;
+        r.body2 = cand_j_[k];
+        phys = pair_phys(k);
+        scratch = pair_state(k);
+        r.force2 = pair_force(k);
+        r.shift2 = pair_shift(k);
+        r.arm1 = bodies_.radius[i] - 0.5 * c.overlap;
+        r.arm2 = bodies_.radius[r.body2] - 0.5 * c.overlap;
+        f(static_cast<const ContactRecord&>(r));
+      }
     }
   } else if (kind == ContactKind::Wall || kind == ContactKind::Cylinder) {
     const auto& contacts = kind == ContactKind::Wall ? wall_contacts_ : cylinder_contacts_;

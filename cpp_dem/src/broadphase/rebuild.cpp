@@ -154,7 +154,7 @@ void Scene::rebuild() {
     slot_of_id_.shrink_to_fit();
   }
   // Spatial order while no contact (and so no contact history) exists yet.
-  if (spatial_sort_ && pairs_.empty() && wall_contacts_.empty() && grid_contacts_.empty() &&
+  if (spatial_sort_ && cand_j_.empty() && wall_contacts_.empty() && grid_contacts_.empty() &&
       cylinder_contacts_.empty() && mesh_contacts_.empty())
     sort_bodies_spatially();
   const Real margin = margin_ > 0 ? margin_ : default_margin();
@@ -177,45 +177,90 @@ void Scene::rebuild() {
     std::vector<std::uint8_t>().swap(candidate_images_);  // (clumps: never periodic)
   }
   drop_bonded_candidates();  // a bonded pair is its bond's contact
-  // Merge the new candidate list with the old contacts, keeping history (both sorted).
+  // Merge the new candidate list with the old contacts' records, keeping those that carry
+  // history (both in (i, j) order: the old records up to pair_sorted_end_ are, and those made
+  // since are sorted here). A candidate without history has no record (pair_slot_ -1)
+  // unless the scene has the cold part, which keeps one for every candidate.
   const size_t ncand = cand_j_.size();
-  std::vector<PairContact> next;
-  std::vector<PairContactCold> next_cold;  // (only where the scene has the cold part)
-  std::vector<Real> next_dissip;
-  next.reserve(ncand);
-  if (pair_cold_on_) next_cold.reserve(ncand);
-  next_dissip.reserve(ncand);
-  size_t k = 0;
+  const size_t nold = pairs_.size();
+  std::vector<int> late(nold - std::min(nold, pair_sorted_end_));
+  for (size_t e = 0; e < late.size(); ++e) late[e] = static_cast<int>(pair_sorted_end_ + e);
+  const auto key = [this](size_t k) { return std::make_pair(pairs_[k].i, pairs_[k].j); };
+  std::sort(late.begin(), late.end(), [&](int a, int b) { return key(a) < key(b); });
+  size_t ka = 0, kb = 0;  // (the next old record of each run)
+  const size_t na = nold - late.size();
+  // The next old record in (i, j) order, or -1.
+  const auto next_old = [&]() -> long {
+    const bool a = ka < na, b = kb < late.size();
+    if (!a && !b) return -1;
+    if (!b || (a && key(ka) < key(late[kb]))) return static_cast<long>(ka);
+    return late[kb];
+  };
+  const auto pop_old = [&](long k) {
+    if (static_cast<size_t>(k) < na) ++ka;
+    else ++kb;
+  };
+  // (first the old record of each candidate, -1 for none; then the records, sized once)
+  pair_slot_.assign(ncand, -1);
+  size_t kept = 0;
   for (int i = 0; i < n; ++i) {
     for (int q = cand_off_[i]; q < cand_off_[i + 1]; ++q) {
       const std::pair<int, int> ij(i, cand_j_[q]);
-      while (k < pairs_.size() && std::make_pair(pairs_[k].i, pairs_[k].j) < ij) {
+      long k = next_old();
+      while (k >= 0 && key(k) < ij) {
         drop_pair_dissipation(k);
-        ++k;
+        pop_old(k);
+        k = next_old();
       }
-      if (k < pairs_.size() && pairs_[k].i == ij.first && pairs_[k].j == ij.second) {
+      if (k >= 0 && key(k) == ij) {
+        pop_old(k);
+        if (pair_keeps_record(pairs_[k], pair_dissip_[k])) {
+          pair_slot_[q] = static_cast<int>(k);
+          ++kept;
+        }
+        // (else a record without history: its dissipation, zero, needs no drop)
+      }
+      if (pair_cold_on_ && pair_slot_[q] < 0) ++kept;  // (a fresh record)
+    }
+  }
+  for (long k = next_old(); k >= 0; k = next_old()) {
+    drop_pair_dissipation(k);
+    pop_old(k);
+  }
+  std::vector<PairContact> next;
+  std::vector<PairContactCold> next_cold;  // (only where the scene has the cold part)
+  std::vector<Real> next_dissip;
+  // (room for a sixteenth more without the cold part: contacts form between builds)
+  const size_t cap = pair_cold_on_ ? kept : kept + kept / 16 + 16;
+  next.reserve(cap);
+  if (pair_cold_on_) next_cold.reserve(kept);
+  next_dissip.reserve(cap);
+  for (int i = 0; i < n; ++i) {
+    for (int q = cand_off_[i]; q < cand_off_[i + 1]; ++q) {
+      const int k = pair_slot_[q];
+      if (k >= 0) {
         next.push_back(pairs_[k]);
         next_dissip.push_back(pair_dissip_[k]);
         if (pair_cold_on_) next_cold.push_back(pair_cold_[k]);
-        ++k;
-      } else {
+      } else if (pair_cold_on_) {
         PairContact c;
-        c.i = ij.first;
-        c.j = ij.second;
+        c.i = i;
+        c.j = cand_j_[q];
         next.push_back(c);
         next_dissip.push_back(0.0);
-        if (pair_cold_on_) next_cold.emplace_back();
+        next_cold.emplace_back();
+      } else {
+        continue;
       }
       // (The image may change for a kept contact: a body was wrapped into the cell.)
       next.back().image = candidate_images_.empty() ? kNoShift : candidate_images_[q];
+      pair_slot_[q] = static_cast<int>(next.size()) - 1;
     }
-  }
-  for (; k < pairs_.size(); ++k) {
-    drop_pair_dissipation(k);
   }
   pairs_.swap(next);
   pair_cold_.swap(next_cold);
   pair_dissip_.swap(next_dissip);
+  pair_sorted_end_ = pairs_.size();
   // Sphere–wall candidates: signed distance to the plane below r + margin, and the centre
   // not beyond the plane by more than r (one-sided walls ignore what is behind them).
   WallContactMerge merge(wall_contacts_,
@@ -231,16 +276,19 @@ void Scene::rebuild() {
   std::vector<WallContact> wnext = merge.finish();
   wall_contacts_.swap(wnext);
   // Adjacency (CSR) in contact order, so reductions into bodies have a fixed order.
-  pair_ioff_.assign(n + 1, 0);
-  for (const auto& c : pairs_) pair_ioff_[c.i + 1]++;
-  for (int b = 0; b < n; ++b) pair_ioff_[b + 1] += pair_ioff_[b];
+  // (the candidates' rows)
+  if (cand_off_.size() == static_cast<size_t>(n) + 1) {
+    pair_ioff_ = cand_off_;
+  } else {
+    pair_ioff_.assign(n + 1, 0);
+  }
   // The pass's outputs and their slots, for the next pass's kind as it will choose it (unless
   // a material change gives the scene the cold part first: the pass then makes them itself).
   release_pair_cross();  // (made again by a threaded direct pass)
   if (pair_pass_direct()) {
     release_pair_outputs();
   } else {
-    pair_out_.assign(pairs_.size(), PairOutput());
+    pair_out_.assign(cand_j_.size(), PairOutput());
     index_pair_outputs(pair_jadj_off_, pair_jslot_);
   }
   contacts_by_body(wall_contacts_, n, wall_adj_off_, wall_adj_);
@@ -264,7 +312,8 @@ void Scene::rebuild() {
 ColliderStats Scene::collider_stats() const {
   ColliderStats s;
   s.builds = builds_;
-  s.pair_candidates = static_cast<long>(pairs_.size());
+  s.pair_candidates = static_cast<long>(cand_j_.size());
+  s.pair_records = static_cast<long>(pairs_.size());
   s.wall_candidates = static_cast<long>(wall_contacts_.size());
   s.grid_candidates = static_cast<long>(grid_contacts_.size());
   return s;

@@ -106,11 +106,13 @@ void Scene::wrap_into_cell() {
 
 Mat3 Scene::pair_stress_sum() const {
   Mat3 s = Mat3::Zero();
-  for (size_t k = 0; k < pairs_.size(); ++k) {
-    const PairContact& c = pairs_[k];
-    if (!c.active) continue;
-    const Vec3 l = bodies_.pos[c.j] + pair_shift(k) - bodies_.pos[c.i];
-    s += pair_force(k) * l.transpose();
+  const int nrows = static_cast<int>(pair_ioff_.size()) - 1;
+  for (int i = 0; i < nrows; ++i) {
+    for (int k = pair_ioff_[i]; k < pair_ioff_[i + 1]; ++k) {
+      if (pair_slot_[k] < 0 || !pairs_[pair_slot_[k]].active) continue;
+      const Vec3 l = bodies_.pos[cand_j_[k]] + pair_shift(k) - bodies_.pos[i];
+      s += pair_force(k) * l.transpose();
+    }
   }
   // Bonds (contact and parallel bonds: a geogrid of bonded spheres in the cell), b at the
   // image the bond sees.

@@ -421,6 +421,7 @@ std::vector<std::pair<std::string, std::size_t>> Scene::memory_by_field() const 
   add("broadphase.candidate_images", candidate_images_);
   grid_.add_memory(out);
   add("contacts.pairs", pairs_);
+  add("contacts.pair_slot", pair_slot_);
   add("contacts.pair_cold", pair_cold_);
   add("contacts.pair_dissip", pair_dissip_);
   add("contacts.pair_out", pair_out_);
@@ -438,6 +439,12 @@ std::vector<std::pair<std::string, std::size_t>> Scene::memory_by_field() const 
   add("scratch.pair_cross_j", pair_cross_j_);
   add("scratch.pair_cross_jt", pair_cross_jt_);
   add("scratch.pair_cross_b", pair_cross_b_);
+  {
+    // (each thread's new records of the last pass, and the list of them)
+    std::size_t bytes = pair_new_.capacity() * sizeof(pair_new_[0]);
+    for (const auto& v : pair_new_) bytes += v.capacity() * sizeof(NewPair);
+    out.emplace_back("scratch.pair_new", bytes);
+  }
   add("scratch.wall_order", wall_order_);
   add("scratch.wall_block_off", wall_block_off_);
   add("scratch.density_scaling_kt", ds_kt_);

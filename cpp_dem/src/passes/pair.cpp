@@ -55,6 +55,7 @@ ALWAYS_INLINE void hertz_pair(PairContact& c, PairContactCold* cold, Real& dissi
 }  // namespace
 
 void Scene::update_phys(PairContact& c, size_t k) {
+  // (k: the record's slot; a new record, pair_new_, has none and the scene no cold part)
   ContactPhys local;
   ContactPhys& p = pair_cold_on_ ? pair_cold_[k].phys : local;
   mix_materials(materials_[bodies_.material[c.i]], materials_[bodies_.material[c.j]],
@@ -91,8 +92,8 @@ LawOutput Scene::apply_pair_law(size_t k, const ContactGeometry& g, Real dt) {
   return out;
 }
 
-/// Pair contact k has opened: forget its springs' history (ContactState::clear_history) and
-/// its output o.
+/// Pair contact record k has opened: forget its springs' history
+/// (ContactState::clear_history) and its output o.
 void Scene::open_pair(long k, PairOutput* o) {
   PairContact& c = pairs_[k];
   c.active = false;
@@ -125,7 +126,7 @@ std::pair<Vec3, Vec3> Scene::general_pair(long k, PairOutput& o, const Vec3& n, 
 /// would give some threads much more work than others.
 std::pair<int, int> Scene::pair_bodies_of_thread(long t, long nt) const {
   const int n = num_bodies();
-  const long nc = static_cast<long>(pairs_.size());
+  const long nc = pair_ioff_.empty() ? 0 : static_cast<long>(pair_ioff_.back());
   const auto first_body_at = [&](long k) {
     return static_cast<int>(std::lower_bound(pair_ioff_.begin(), pair_ioff_.begin() + n, k) -
                             pair_ioff_.begin());
@@ -156,6 +157,9 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
   const Vec3* const angvel = bodies_.angvel.data();
   const Real* const radius = bodies_.radius.data();
   const int* const ioff = pair_ioff_.data();
+  const int* const cand_j = cand_j_.data();
+  const int* const slot = pair_slot_.data();
+  const std::uint8_t* const images = candidate_images_.empty() ? nullptr : candidate_images_.data();
   const int* const jslot = pair_jslot_.data();
   PairContact* const pairs = pairs_.data();
   Real* const dissip = pair_dissip_.data();
@@ -166,6 +170,9 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
   Vec3* const tsum = bodies_.torque.data();
   const int* const cross_k = pair_cross_k_.data();
   PairCross* const cross = pair_cross_.data();
+  const long thread = thread_and_team().first;
+  PairContact fresh;  // (a candidate touching without a record: its new record)
+  Real fresh_dissip = 0;
   // (kPassDirect: j's force and torque added to its sums (fsum, tsum) at once, i's at the
   // end of its contacts, in the order the reduction adds pair_out_'s; kPassCross: the
   // cross pairs' shares; compute_pair_forces_hot)
@@ -179,7 +186,7 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
   for (int r = r0; r < r1; ++r) {
     // (rows: bodies, or in kPassCross single cross pairs)
     const int k0 = shares ? cross_k[r] : ioff[r], k1 = shares ? k0 + 1 : ioff[r + 1];
-    const int i = shares ? pairs[k0].i : r;
+    const int i = shares ? cross[r].i : r;
     // i's share: -force and torque_i summed over its contacts.
     V fi = ops.zero(), ti = ops.zero();
     bool gave = false;  // (kPassCross)
@@ -188,9 +195,9 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
       const V wi = periodic ? V(ops.load(angvel[i]) + spin) : ops.load(angvel[i]);
       const Real ri = radius[i];
       for (int k = k0; k < k1; ++k) {
-        PairContact& c = pairs[k];
+        // (k: the candidate; s: its record, or -1)
         PairOutput* const o = direct ? nullptr : shares ? &cross[r].out : &out_j[jslot[k]];
-        const int j = c.j;
+        const int j = cand_j[k];
         if (direct && j >= jlimit) {
           // a cross pair: its shares were computed first; i's is added in its place
           const PairCross& x = cross[cursor++];
@@ -200,13 +207,15 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
           }
           continue;
         }
+        const std::uint8_t image = images ? images[k] : kNoShift;
         V d = ops.load(pos[j]) - xi;
-        if (periodic) d += ops.load_padded(image_offset_[c.image].data());
+        if (periodic) d += ops.load_padded(image_offset_[image].data());
         const Real dist2 = ops.dot(d, d);
         const Real rj = radius[j];
         const Real rsum = ri + rj;
+        const int s = slot[k];
         if (dist2 >= rsum * rsum) {
-          if (c.active) open_pair(k, o);  // the contact opened
+          if (s >= 0 && pairs[s].active) open_pair(s, o);  // the contact opened
           continue;
         }
         const Real dist = std::sqrt(dist2);
@@ -215,7 +224,16 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
           err = std::min(err, static_cast<long>(k));
           continue;
         }
-        if (!c.active || c.phys_version != version) update_phys(c, k);
+        if (s < 0) {
+          fresh = PairContact();
+          fresh.i = i;
+          fresh.j = j;
+          fresh.image = image;
+          fresh_dissip = 0;
+        }
+        PairContact& c = s >= 0 ? pairs[s] : fresh;
+        Real& dis = s >= 0 ? dissip[s] : fresh_dissip;
+        if (!c.active || c.phys_version != version) update_phys(c, s);
         c.active = true;
         gave = true;
         V wj = ops.load(angvel[j]), vj = ops.load(vel[j]);
@@ -230,20 +248,22 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
         if (c.kernel != kLinearKernel) {
           if (c.kernel == kHertzKernel) {
             alignas(32) Real hf[4], ht[4];  // (direct: j's share, added below)
-            hertz_pair<false>(c, nullptr, dissip[k], o ? o->force.data() : hf,
+            hertz_pair<false>(c, nullptr, dis, o ? o->force.data() : hf,
                               o ? o->torque_j.data() : ht, n, overlap, li, lj, rel_vel,
                               V(wi + wj), dt, fi, ti, ops);
             if (!o) {
               ops.store(fsum[j], V(ops.load(fsum[j]) + ops.load_padded(hf)));
               ops.store(tsum[j], V(ops.load(tsum[j]) + ops.load_padded(ht)));
             }
+            if (s < 0) keep_new_pair(thread, k, c, dis);
           } else if (!pair_cold_on_ || !o) {
             continue;  // (a bug: pair_cold_missing_ stops the step)
           } else if (c.kernel == kHertzDampedKernel) {
-            hertz_pair<true>(c, &pair_cold_[k], dissip[k], o->force.data(), o->torque_j.data(),
+            // (with the cold part every candidate has its record, at its index: s == k)
+            hertz_pair<true>(c, &pair_cold_[s], dis, o->force.data(), o->torque_j.data(),
                              n, overlap, li, lj, rel_vel, V(wi + wj), dt, fi, ti, ops);
           } else {
-            const auto on_i = general_pair(k, *o, ops.vec(n), overlap, li, lj, ops.vec(rel_vel),
+            const auto on_i = general_pair(s, *o, ops.vec(n), overlap, li, lj, ops.vec(rel_vel),
                                            ops.vec(wi + wj), ops.vec(wj - wi));
             fi += ops.load(on_i.first);
             ti += ops.load(on_i.second);
@@ -254,7 +274,7 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
         V fs = ops.load_head(c.fs.data());
         const Real fn = linear_frictional<Ops>(fs, ops.load_head(c.normal.data()), n, overlap,
                                                rel_vel, V(wi + wj), c.kn, c.ks, c.tan_phi, dt,
-                                               dissip[k]);
+                                               dis);
         ops.store_with(c.fs.data(), fs, overlap);  // fs, overlap
         ops.store_with(c.normal.data(), n, fn);    // normal, fn
         const V f = fn * n + fs;
@@ -269,6 +289,7 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
         }
         fi -= f;
         ti -= li * nxf;
+        if (s < 0) keep_new_pair(thread, k, c, dis);
       }
     }
     if (shares) {
@@ -288,8 +309,10 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
 
 void Scene::compute_pair_forces(long& err_contact) {
   ensure_pair_cold();
+  if (pair_new_.size() < static_cast<size_t>(max_threads())) pair_new_.resize(max_threads());
   if (shear_kinematics_ == ShearKinematics::Yade) compute_pair_forces_hot<true>(err_contact);
   else compute_pair_forces_hot<false>(err_contact);
+  adopt_new_pairs();
   if (pair_cold_missing_)
     throw std::logic_error("cpp_dem: a pair contact's law needs the contacts' cold part, "
                            "which ensure_pair_cold did not make (a bug: please report it)");
@@ -312,11 +335,123 @@ void Scene::index_pair_outputs(std::vector<int>& jadj_off, std::vector<int>& jsl
   if (pair_ioff_.empty()) return;  // (no build yet)
   const int n = static_cast<int>(pair_ioff_.size()) - 1;  // (the last build's bodies)
   jadj_off.assign(n + 1, 0);
-  for (const auto& c : pairs_) jadj_off[c.j + 1]++;
+  for (const int j : cand_j_) jadj_off[j + 1]++;
   for (int b = 0; b < n; ++b) jadj_off[b + 1] += jadj_off[b];
-  jslot.resize(pairs_.size());
+  const int nc = static_cast<int>(cand_j_.size());
+  jslot.resize(nc);
   std::vector<int> fill(jadj_off.begin(), jadj_off.end() - 1);
-  for (int c = 0; c < static_cast<int>(pairs_.size()); ++c) jslot[c] = fill[pairs_[c].j]++;
+  for (int k = 0; k < nc; ++k) jslot[k] = fill[cand_j_[k]]++;
+}
+
+namespace {
+constexpr std::size_t kNewPairsKept = 256;  // (a thread's list of new records kept between passes)
+}  // namespace
+
+void Scene::keep_new_pair(long t, int k, const PairContact& c, Real dissip) {
+  pair_new_[t].push_back(NewPair{k, dissip, c});
+}
+
+void Scene::adopt_new_pairs() {
+  size_t m = 0;
+  for (const auto& v : pair_new_) m += v.size();
+  if (m == 0) return;
+  std::vector<NewPair> all;
+  all.reserve(m);
+  for (auto& v : pair_new_) {
+    all.insert(all.end(), v.begin(), v.end());
+    // (a few a step are kept for the next; the many of a first touch, as a packing's first
+    // step, are given back)
+    if (v.capacity() > kNewPairsKept) std::vector<NewPair>().swap(v);
+    else v.clear();
+  }
+  // (each thread's in its own order: the records go in candidate order, whatever the threads)
+  std::sort(all.begin(), all.end(), [](const NewPair& a, const NewPair& b) { return a.k < b.k; });
+  const size_t need = pairs_.size() + m;
+  if (need > pairs_.capacity()) {
+    // (room for a sixteenth more: contacts form a few at a time between builds)
+    const size_t cap = need + need / 16 + 16;
+    pairs_.reserve(cap);
+    pair_dissip_.reserve(cap);
+  }
+  for (const NewPair& e : all) {
+    pair_slot_[e.k] = static_cast<int>(pairs_.size());
+    pairs_.push_back(e.c);
+    pair_dissip_.push_back(e.dissip);
+  }
+}
+
+void Scene::materialize_pairs() {
+  const size_t nc = cand_j_.size();
+  bool identity = pairs_.size() == nc;
+  for (size_t k = 0; k < nc && identity; ++k) identity = pair_slot_[k] == static_cast<int>(k);
+  if (identity) return;
+  std::vector<PairContact> next(nc);
+  std::vector<Real> next_dissip(nc, 0.0);
+  const int nrows = static_cast<int>(pair_ioff_.size()) - 1;
+  for (int i = 0; i < nrows; ++i) {
+    for (int k = pair_ioff_[i]; k < pair_ioff_[i + 1]; ++k) {
+      const int s = pair_slot_[k];
+      if (s >= 0) {
+        next[k] = pairs_[s];
+        next_dissip[k] = pair_dissip_[s];
+      } else {
+        next[k].i = i;
+        next[k].j = cand_j_[k];
+        next[k].image = candidate_images_.empty() ? kNoShift : candidate_images_[k];
+      }
+      pair_slot_[k] = static_cast<int>(k);
+    }
+  }
+  pairs_.swap(next);
+  pair_dissip_.swap(next_dissip);
+  pair_sorted_end_ = pairs_.size();
+}
+
+void Scene::compact_pairs() {
+  // (pairs_ and pair_dissip_ hold one record for each candidate, in candidate order)
+  const size_t nc = pairs_.size();
+  pair_slot_.assign(nc, -1);
+  size_t kept = 0;
+  for (size_t k = 0; k < nc; ++k) kept += pair_keeps_record(pairs_[k], pair_dissip_[k]);
+  if (kept == nc) {
+    for (size_t k = 0; k < nc; ++k) pair_slot_[k] = static_cast<int>(k);
+  } else {
+    std::vector<PairContact> next;
+    std::vector<Real> next_dissip;
+    next.reserve(kept + kept / 16 + 16);
+    next_dissip.reserve(next.capacity());
+    for (size_t k = 0; k < nc; ++k) {
+      if (!pair_keeps_record(pairs_[k], pair_dissip_[k])) continue;
+      pair_slot_[k] = static_cast<int>(next.size());
+      next.push_back(pairs_[k]);
+      next_dissip.push_back(pair_dissip_[k]);
+    }
+    pairs_.swap(next);
+    pair_dissip_.swap(next_dissip);
+  }
+  pair_sorted_end_ = pairs_.size();
+}
+
+void Scene::expanded_pairs(std::vector<PairContact>& out, std::vector<Real>& dissip) const {
+  const size_t nc = cand_j_.size();
+  out.assign(nc, PairContact());
+  dissip.assign(nc, 0.0);
+  const int nrows = static_cast<int>(pair_ioff_.size()) - 1;
+  for (int i = 0; i < nrows; ++i) {
+    for (int k = pair_ioff_[i]; k < pair_ioff_[i + 1]; ++k) {
+      const int s = pair_slot_[k];
+      if (s >= 0 && pair_keeps_record(pairs_[s], pair_dissip_[s])) {
+        out[k] = pairs_[s];
+        dissip[k] = pair_dissip_[s];
+      } else {
+        // (a record that carries no history is saved as the fresh one it is equal to in
+        // all but the parameters of its last touch, which its next touch makes again)
+        out[k].i = i;
+        out[k].j = cand_j_[k];
+        out[k].image = candidate_images_.empty() ? kNoShift : candidate_images_[k];
+      }
+    }
+  }
 }
 
 void Scene::ensure_pair_cold() {
@@ -339,6 +474,7 @@ void Scene::ensure_pair_cold() {
   }
   if (!need) return;
   pair_cold_on_ = true;
+  materialize_pairs();   // (a record for every candidate, at its index)
   release_pair_cross();  // (a pass with the cold part keeps its outputs instead)
   // (every active contact's phys is made again, into its cold part, at its next step:
   // phys_version_ has changed since the last check, or no step has run)
@@ -369,7 +505,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   // write and read back). On more threads each sums its own bodies, and the contacts whose
   // second body another thread sums (cross pairs) have their shares computed first
   // (pair_cross_): the same sums in the same order.
-  const long ncontacts = static_cast<long>(pairs_.size());
+  const long ncontacts = static_cast<long>(cand_j_.size());  // (the candidates)
   pair_direct_ = pair_pass_direct();
   if (pair_direct_) {
     release_pair_outputs();
@@ -377,8 +513,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
     pair_fi_.resize(n);
     pair_ti_.resize(n);
     // (after direct passes)
-    if (pair_out_.size() != pairs_.size()) pair_out_.assign(pairs_.size(), PairOutput());
-    if (pair_jslot_.size() != pairs_.size() || pair_jadj_off_.size() != pair_ioff_.size())
+    if (pair_out_.size() != cand_j_.size()) pair_out_.assign(cand_j_.size(), PairOutput());
+    if (pair_jslot_.size() != cand_j_.size() || pair_jadj_off_.size() != pair_ioff_.size())
       index_pair_outputs(pair_jadj_off_, pair_jslot_);
   }
   if (!use_wide_ops()) {
@@ -397,6 +533,10 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   const Vec3* const angvel = bodies_.angvel.data();
   const Real* const radius = bodies_.radius.data();
   const int* const ioff = pair_ioff_.data();
+  const int* const cand_j = cand_j_.data();
+  const int* const slot = pair_slot_.data();
+  const std::uint8_t* const images =
+      candidate_images_.empty() ? nullptr : candidate_images_.data();
   const int* const jslot = pair_jslot_.data();
   PairContact* const pairs = pairs_.data();
   Real* const dissip = pair_dissip_.data();
@@ -428,10 +568,13 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
     // (Captured by value: the pointers stay in registers; by reference they were taken as
     // addresses the loop's stores might alias, and reloaded, 14 % more instructions.)
     const int kend = ioff[b1];  // (the thread's last contact + 1)
+    PairContact fresh;  // (a candidate touching without a record: its new record)
+    Real fresh_dissip = 0;
+    const long thread = t;
     const bool prefetch = n >= kPrefetchMinBodies;
     // Rows r0 .. r1: bodies, or in kPassCross cross slots (one contact each). kPassDirect:
     // the contacts with j >= jlimit are cross pairs, whose shares are pair_cross_[cursor..].
-    const auto loop = [=, &err](auto periodic_tag, auto mode_tag, int r0, int r1, int jlimit,
+    const auto loop = [=, &err, &fresh, &fresh_dissip](auto periodic_tag, auto mode_tag, int r0, int r1, int jlimit,
                                 long cursor) __attribute__((always_inline)) {
     constexpr bool kPeriodic = decltype(periodic_tag)::value;
     // (kDirect: j's share into its sums at once, i's at the end of its contacts; kShares:
@@ -440,7 +583,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
     constexpr bool kShares = decltype(mode_tag)::value == kPassCross;
     for (int r = r0; r < r1; ++r) {
       const int k0 = kShares ? cross_k[r] : ioff[r], k1 = kShares ? k0 + 1 : ioff[r + 1];
-      const int i = kShares ? pairs[k0].i : r;
+      const int i = kShares ? cross[r].i : r;
       // i's share: -force and torque_i summed over its contacts.
       V4 fi = V4{}, ti = V4{};
       [[maybe_unused]] bool gave = false;  // (kShares)
@@ -450,9 +593,9 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
         if constexpr (kPeriodic) wi += spin;
         const Real ri = radius[i];
         for (int k = k0; k < k1; ++k) {
-          PairContact& c = pairs[k];
+          // (k: the candidate; s: its record, or -1)
           PairOutput* const o = kDirect ? nullptr : kShares ? &cross[r].out : &out_j[jslot[k]];
-          const int j = c.j;
+          const int j = cand_j[k];
           if constexpr (kDirect) {
             if (j >= jlimit) {
               // a cross pair: its shares were computed first; i's is added in its place
@@ -468,7 +611,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
             // (a scene larger than the caches: the state of a contact's second body some
             // contacts ahead, toward the cache, its reads being the scattered ones of the
             // pass; at 1e4 bodies it slowed the pass, 0.98 x on one thread, 0.94 x on two)
-            const int jn = pairs[k + kPrefetchAhead].j;
+            const int jn = cand_j[k + kPrefetchAhead];
             __builtin_prefetch(&pos[jn]);
             __builtin_prefetch(&vel[jn]);
             __builtin_prefetch(&angvel[jn]);
@@ -477,13 +620,18 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
               __builtin_prefetch(&tsum[jn], 1);
             }
           }
+          [[maybe_unused]] std::uint8_t image = kNoShift;
           V4 d = v4(pos[j]) - xi;
-          if constexpr (kPeriodic) d += load4(offsets + 4 * c.image);
+          if constexpr (kPeriodic) {
+            if (images) image = images[k];
+            d += load4(offsets + 4 * image);
+          }
           const Real dist2 = dot3(d, d);
           const Real rj = radius[j];
           const Real rsum = ri + rj;
+          const int s = slot[k];
           if (dist2 >= rsum * rsum) {
-            if (c.active) open_pair(k, o);  // the contact opened
+            if (s >= 0 && pairs[s].active) open_pair(s, o);  // the contact opened
             continue;
           }
           const Real dist = std::sqrt(dist2);
@@ -492,7 +640,16 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
             err = std::min(err, static_cast<long>(k));
             continue;
           }
-          if (!c.active || c.phys_version != version) update_phys(c, k);
+          if (__builtin_expect(s < 0, 0)) {
+            fresh = PairContact();
+            fresh.i = i;
+            fresh.j = j;
+            fresh.image = image;
+            fresh_dissip = 0;
+          }
+          PairContact& c = s >= 0 ? pairs[s] : fresh;
+          Real& dis = s >= 0 ? dissip[s] : fresh_dissip;
+          if (!c.active || c.phys_version != version) update_phys(c, s);
           c.active = true;
           if constexpr (kShares) gave = true;
           V4 wj = v4(angvel[j]), vj = v4(vel[j]);
@@ -508,21 +665,23 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
             if (c.kernel == kHertzKernel) {
               if constexpr (kDirect) {
                 alignas(32) Real hf[4], ht[4];
-                hertz_pair<false>(c, nullptr, dissip[k], hf, ht, n, overlap, li, lj, rel_vel,
+                hertz_pair<false>(c, nullptr, dis, hf, ht, n, overlap, li, lj, rel_vel,
                                   V4(wi + wj), dt, fi, ti, WideOps());
                 store3(fsum[j], v4(fsum[j]) + load4(hf));
                 store3(tsum[j], v4(tsum[j]) + load4(ht));
               } else {
-                hertz_pair<false>(c, nullptr, dissip[k], o->force.data(), o->torque_j.data(), n,
+                hertz_pair<false>(c, nullptr, dis, o->force.data(), o->torque_j.data(), n,
                                   overlap, li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
               }
+              if (__builtin_expect(s < 0, 0)) keep_new_pair(thread, k, c, dis);
             } else if (kDirect || !pair_cold_on_) {
               continue;  // (a bug: pair_cold_missing_ stops the step)
             } else if (c.kernel == kHertzDampedKernel) {
-              hertz_pair<true>(c, &pair_cold_[k], dissip[k], o->force.data(), o->torque_j.data(),
+              // (with the cold part every candidate has its record, at its index: s == k)
+              hertz_pair<true>(c, &pair_cold_[s], dis, o->force.data(), o->torque_j.data(),
                                n, overlap, li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
             } else {
-              const auto on_i = general_pair(k, *o, vec3(n), overlap, li, lj, vec3(rel_vel),
+              const auto on_i = general_pair(s, *o, vec3(n), overlap, li, lj, vec3(rel_vel),
                                              vec3(wi + wj), vec3(wj - wi));
               fi += v4(on_i.first);
               ti += v4(on_i.second);
@@ -534,7 +693,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           V4 fs = zero_lane3(load4(c.fs.data()));
           const Real fn = linear_frictional<WideOps>(fs, zero_lane3(load4(c.normal.data())), n,
                                                      overlap, rel_vel, wi + wj, c.kn, c.ks,
-                                                     c.tan_phi, dt, dissip[k]);
+                                                     c.tan_phi, dt, dis);
           store4(c.fs.data(), with_lane3(fs, overlap));  // fs, overlap
           store4(c.normal.data(), with_lane3(n, fn));    // normal, fn
           const V4 f = fn * n + fs;
@@ -549,6 +708,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           }
           fi -= f;
           ti -= li * nxf;
+          if (__builtin_expect(s < 0, 0)) keep_new_pair(thread, k, c, dis);
         }
       }
       // (lane 3 is zero: every term had a zero lane 3)
@@ -595,7 +755,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
 void Scene::compute_pair_forces_narrow(long& err_contact) {
   // (compute_pair_forces has sized pair_fi_ and pair_ti_; the same steps as the wide form's)
   long err = std::numeric_limits<long>::max();
-#pragma omp parallel reduction(min : err) if (static_cast<long>(pairs_.size()) > kParallelMin)
+#pragma omp parallel reduction(min : err) if (static_cast<long>(cand_j_.size()) > kParallelMin)
   {
     const auto [t, nt] = thread_and_team();
     const auto run = [&](int r0, int r1, int mode, int jlimit, long cursor) {
@@ -658,7 +818,7 @@ void Scene::index_pair_cross(int nt) {
   const int n = static_cast<int>(pair_ioff_.size()) - 1;
   const auto tail = [&](int i, int jlimit) {  // (a row is sorted by j: its cross pairs are its tail)
     int k = pair_ioff_[i + 1];
-    while (k > pair_ioff_[i] && pairs_[k - 1].j >= jlimit) --k;
+    while (k > pair_ioff_[i] && cand_j_[k - 1] >= jlimit) --k;
     return k;
   };
   std::vector<long> own(n + 1, 0);  // (cumulative: the rows' contacts that are not cross)
@@ -684,7 +844,8 @@ void Scene::index_pair_cross(int nt) {
   pair_cross_.assign(ns, PairCross());
   pair_cross_j_.resize(ns);
   for (int s = 0; s < ns; ++s) {
-    pair_cross_[s].j = pairs_[pair_cross_k_[s]].j;
+    pair_cross_[s].i = pair_first_body(pair_cross_k_[s]);
+    pair_cross_[s].j = cand_j_[pair_cross_k_[s]];
     pair_cross_j_[s] = s;
   }
   // (stable: within a body j its slots stay in contact order)

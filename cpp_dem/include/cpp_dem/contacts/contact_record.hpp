@@ -19,7 +19,7 @@ enum class ContactKind : std::uint8_t { Pair = 0, Wall = 1, Grid = 2, Cylinder =
 /// primitive, the grain).
 struct ContactRecord {
   ContactKind kind = ContactKind::Pair;
-  long index = 0;        ///< index in its container (pair_contacts, wall_contacts, grid_contacts)
+  long index = 0;        ///< index in its container (a pair: its candidate pair; wall_contacts, grid_contacts)
   bool active = false;   ///< touching in the last step
   int body1 = -1;        ///< storage slot of side 1 (-1: a wall or a geogrid primitive)
   int body2 = -1;        ///< storage slot of side 2

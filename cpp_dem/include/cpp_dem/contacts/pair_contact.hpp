@@ -72,7 +72,7 @@ struct PairOutput {
 struct PairCross {
   PairOutput out;                 ///< j's force and torque (PairOutput), N, N m
   std::array<Real, 4> fi{}, ti{};  ///< i's shares as the pass adds them (fourth zero), N, N m
-  int j = 0;                      ///< the second body (set with the index)
+  int i = 0, j = 0;               ///< the bodies (set with the index)
   int on = 0;                     ///< whether the contact gave shares in the last pass
 };
 
