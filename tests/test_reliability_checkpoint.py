@@ -271,7 +271,7 @@ def test_the_saved_records_have_no_implicit_padding():
     src = ROOT / "cpp_dem" / "src" / "checkpoint.cpp"
     body = src.read_text().split("std::vector<std::uint64_t> layout(")[1].split("\n}\n")[0]
     records = set(re.findall(r"sizeof\((\w+)\)", body)) - {"Real", "Vec3", "Quat"}
-    assert {"Wall", "WallOpening", "PairContact", "WallContact", "GridContact",
+    assert {"Wall", "WallOpening", "PairContactDisk", "WallContact", "GridContact",
             "Bond"} <= records
     r = subprocess.run([gxx, "-std=c++17", "-fsyntax-only", "-fopenmp", "-Wpadded",
                         f"-I{ROOT / 'cpp_dem' / 'include'}", f"-I{eigen}",

@@ -161,7 +161,7 @@ std::vector<std::uint64_t> layout(std::uint32_t version = Checkpoint::kVersion) 
   // (From version 13 on the materials go by name: no record size.)
   const std::uint64_t material = version < 13 ? sizeof(MaterialV12) : 0;
   std::vector<std::uint64_t> l = {sizeof(Real),        body_store,        sizeof(Vec3),        sizeof(Quat),       material,
-          sizeof(Wall),        sizeof(PairContact), sizeof(PairOutput), sizeof(WallContact), sizeof(GridLink),
+          sizeof(Wall),        sizeof(PairContactDisk), sizeof(PairOutput), sizeof(WallContact), sizeof(GridLink),
           sizeof(PFacet),      sizeof(GridContact), sizeof(BreakEvent), sizeof(ContactPhys),
           sizeof(ContactState), version < 15 ? sizeof(PairContactColdV14) : sizeof(PairContactCold), sizeof(PeriodicCell), sizeof(Bond),
           sizeof(BondBreak), sizeof(PairLaw)};
@@ -455,10 +455,10 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
     // contact's bytes do not depend on which kernels a build has.)
     // (A record for every candidate pair, in candidate order, with its friction dissipation:
     // the scene keeps them only for the candidates that carry history, Scene::pair_slot_.)
-    std::vector<PairContact> pairs;
+    std::vector<PairContactDisk> pairs;
     std::vector<Real> dissip;
     s.expanded_pairs(pairs, dissip);
-    for (PairContact& c : pairs) c.kernel = c.kernel == kLinearKernel ? kLinearKernel : 0;
+    for (PairContactDisk& c : pairs) c.kernel = c.kernel == kLinearKernel ? kLinearKernel : 0;
     w.vec(pairs);
     // (Version 15: whether the scene keeps the cold part, the cold part (empty if not) and
     // the friction dissipation.)
@@ -665,7 +665,10 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
     if (o.axis < -1 || o.axis > 2) throw ParameterError("checkpoint: corrupt wall openings");
   r.get(t.cell_);
   r.get(t.max_radius_at_build_);
-  r.vec(t.pairs_);
+  // (one record for every candidate, with its first body and phys version: compact_pairs,
+  // below, keeps those that carry history)
+  std::vector<PairContactDisk> disk;
+  r.vec(disk);
   if (version >= 15) {
     const auto on = r.get<std::uint8_t>();
     if (on > 1) throw ParameterError("checkpoint: corrupt pair contacts");
@@ -685,17 +688,17 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
       t.pair_cold_[k].dissip_viscous = old[k].dissip_viscous;
       t.pair_dissip_[k] = old[k].dissip_friction;
       // (the hot record's model byte was padding, zero: the law's model, from the phys)
-      t.pairs_[k].model = static_cast<std::uint8_t>(old[k].phys.model);
+      disk[k].model = static_cast<std::uint8_t>(old[k].phys.model);
     }
   }
-  if (t.pair_cold_.size() != (t.pair_cold_on_ ? t.pairs_.size() : 0) ||
-      t.pair_dissip_.size() != t.pairs_.size())
+  if (t.pair_cold_.size() != (t.pair_cold_on_ ? disk.size() : 0) ||
+      t.pair_dissip_.size() != disk.size())
     throw ParameterError("checkpoint: corrupt pair contacts");
   t.pair_cold_version_ = -1;
   t.pair_cold_missing_ = 0;
-  for (size_t k = 0; k < t.pairs_.size(); ++k) {
+  for (size_t k = 0; k < disk.size(); ++k) {
     // (the Hertz kernels of the contacts saved as the composed law's: see the save)
-    PairContact& c = t.pairs_[k];
+    PairContactDisk& c = disk[k];
     if (c.kernel != 0 && c.kernel != kLinearKernel)
       throw ParameterError("checkpoint: corrupt pair contacts");
     std::uint8_t kernel = kComposedKernel;
@@ -709,9 +712,9 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
   }
   r.vec(t.pair_out_);
   // (format 15: none where the scene has no cold part, whose forces are the hot records')
-  if (t.pair_out_.size() != t.pairs_.size() && !(version >= 15 && t.pair_out_.empty()))
+  if (t.pair_out_.size() != disk.size() && !(version >= 15 && t.pair_out_.empty()))
     throw ParameterError("checkpoint: corrupt pair contacts");
-  t.pair_direct_ = t.pair_out_.size() != t.pairs_.size();
+  t.pair_direct_ = t.pair_out_.size() != disk.size();
   t.release_pair_cross();  // (made again by a threaded direct pass)
   r.vec(t.wall_contacts_);
   r.vec(t.pair_jadj_off_);
@@ -761,15 +764,15 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
                     [](std::uint8_t c) { return c == kNoShift; }))
       std::vector<std::uint8_t>().swap(t.candidate_images_);
     // The pair records are the candidates', one each in their order, in rows pair_ioff_.
-    bool pairs_ok = t.pairs_.size() == cand.size() && t.pair_ioff_.size() <= nb + 1 &&
+    bool pairs_ok = disk.size() == cand.size() && t.pair_ioff_.size() <= nb + 1 &&
                     (!cand.empty() || t.pair_ioff_.empty() || t.pair_ioff_.back() == 0);
     for (size_t q = 0; q < cand.size() && pairs_ok; ++q)
-      pairs_ok = t.pairs_[q].i == cand[q].first && t.pairs_[q].j == cand[q].second &&
+      pairs_ok = disk[q].i == cand[q].first && disk[q].j == cand[q].second &&
                  static_cast<size_t>(cand[q].first) + 1 < t.pair_ioff_.size() &&
                  t.pair_ioff_[cand[q].first] <= static_cast<int>(q) &&
                  static_cast<int>(q) < t.pair_ioff_[cand[q].first + 1];
     if (!pairs_ok) throw ParameterError("checkpoint: corrupt pair contacts");
-    t.compact_pairs();
+    t.compact_pairs(disk);
   }
   r.get(t.dropped_friction_);
   r.get(t.dropped_viscous_);

@@ -644,9 +644,9 @@ class Scene {
   /// Members of clump c at their clump's pose: positions, velocities, spins, orientations.
   void place_members(int c);
   void check_clump(int c) const;
-  /// Pair contact c's parameters for the current materials (into its cold part k where
-  /// the scene has one), copied into its hot record.
-  void update_phys(PairContact& c, size_t k);
+  /// Pair contact c's (first body i) parameters for the current materials (into its cold
+  /// part k where the scene has one), copied into its hot record.
+  void update_phys(PairContact& c, size_t k, int i);
   /// The first body of candidate pair k (its row in pair_ioff_).
   int pair_first_body(long k) const {
     return static_cast<int>(std::upper_bound(pair_ioff_.begin(), pair_ioff_.end(), k) -
@@ -659,16 +659,17 @@ class Scene {
   void adopt_new_pairs();
   /// A record for every candidate, at its candidate's index (the scene takes the cold part).
   void materialize_pairs();
-  /// Keeps only the records that carry history (a loaded checkpoint's full list): active,
-  /// some friction dissipated, or the scene has the cold part. Sets pair_slot_.
-  void compact_pairs();
+  /// The records from a checkpoint's (one for every candidate, in candidate order, with
+  /// pair_dissip_ the same), keeping only those that carry history: active, some friction
+  /// dissipated, or the scene has the cold part. Sets pair_slot_ and pair_phys_version_.
+  void compact_pairs(const std::vector<PairContactDisk>& disk);
   /// Whether record c (with friction dissipation d) carries history to keep at a build.
   bool pair_keeps_record(const PairContact& c, Real d) const {
     return pair_cold_on_ || c.active || d != 0;
   }
   /// Every candidate's record in candidate order (a fresh one where it has none, or where
   /// its record carries no history) and its friction dissipation: a checkpoint's form.
-  void expanded_pairs(std::vector<PairContact>& out, std::vector<Real>& dissip) const;
+  void expanded_pairs(std::vector<PairContactDisk>& out, std::vector<Real>& dissip) const;
   /// The radius body `slot` takes in the mixing rules: its own, or its clump's stiffness radius.
   Real stiffness_radius(int slot) const {
     if (!has_clumps()) return bodies_.radius[slot];
@@ -772,15 +773,18 @@ class Scene {
   // Candidate k (cand_j_[k], in row i: pair_ioff_[i] <= k < pair_ioff_[i + 1]) has record
   // pair_slot_[k] in pairs_, or -1: a candidate that has not touched since the last build
   // (or touched and opened without slipping) is nothing but its candidate entry, and takes
-  // a record the step it touches (pair_new_, adopt_new_pairs). At a build the records that
-  // carry history (active, or some friction dissipated) are kept, in candidate order;
-  // pairs_[0, pair_sorted_end_) are in candidate order, those made since after them.
+  // a record the step it touches (pair_new_, adopt_new_pairs: after those of the build). At a
+  // build the records that carry history (active, or some friction dissipated) are kept, in
+  // candidate order.
   // A scene with the cold part (pair_cold_on_) keeps a record for every candidate, each at
   // its candidate's index (pair_slot_[k] == k), as pair_out_ and pair_jslot_ assume.
   // pair_dissip_ and pair_cold_ go with the records.
   std::vector<PairContact> pairs_;
   std::vector<int> pair_slot_;
-  std::size_t pair_sorted_end_ = 0;
+  // The scene phys version (phys_version_) of the last pair pass: every active record's
+  // parameters are those of its materials then; the next pass makes them again where the
+  // materials have changed since.
+  int pair_phys_version_ = -1;
   // A candidate the pair pass found touching without a record: its new record, made on
   // the thread that computed it (pair_new_[t]), joined into pairs_ after the pass in
   // candidate order (adopt_new_pairs).

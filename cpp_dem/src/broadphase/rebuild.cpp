@@ -12,6 +12,7 @@ namespace cpp_dem {
 
 namespace {
 constexpr Real kInf = std::numeric_limits<Real>::infinity();
+constexpr int kFreshRecord = -2;  // (rebuild: a candidate that takes a fresh record)
 }  // namespace
 
 Real Scene::default_margin() const {
@@ -159,6 +160,16 @@ void Scene::rebuild() {
     sort_bodies_spatially();
   const Real margin = margin_ > 0 ? margin_ : default_margin();
   const int n = num_bodies();
+  // The old records in candidate order, (i, j) order, with their first bodies (a record's
+  // is its candidate's row, which the new build's candidates replace).
+  struct OldRecord {
+    int i, j, k;
+  };
+  std::vector<OldRecord> old;
+  old.reserve(pairs_.size());
+  for (int i = 0; i + 1 < static_cast<int>(pair_ioff_.size()); ++i)
+    for (int q = pair_ioff_[i]; q < pair_ioff_[i + 1]; ++q)
+      if (pair_slot_[q] >= 0) old.push_back({i, cand_j_[q], pair_slot_[q]});
   if (cell_.on) {
     wrap_into_cell();
     std::vector<std::pair<int, int>> found;
@@ -178,55 +189,45 @@ void Scene::rebuild() {
   }
   drop_bonded_candidates();  // a bonded pair is its bond's contact
   // Merge the new candidate list with the old contacts' records, keeping those that carry
-  // history (both in (i, j) order: the old records up to pair_sorted_end_ are, and those made
-  // since are sorted here). A candidate without history has no record (pair_slot_ -1)
-  // unless the scene has the cold part, which keeps one for every candidate.
+  // history (both in (i, j) order). A candidate without history has no record (pair_slot_
+  // -1) unless the scene has the cold part, which keeps one for every candidate, or it
+  // touches now: it takes its fresh record here, in candidate order, and not at the next
+  // pass (a packing's first build: every contact), the same record either way.
+  const auto touching = [this](int i, int j, int q) {
+    Vec3 d = bodies_.pos[j] - bodies_.pos[i];
+    if (!candidate_images_.empty() && candidate_images_[q] != kNoShift) {
+      Vec3 sh;
+      for (int a = 0; a < 3; ++a) sh[a] = image_shift(candidate_images_[q], a);
+      d += cell_.h * sh;
+    }
+    const Real rsum = bodies_.radius[i] + bodies_.radius[j];
+    return d.squaredNorm() < rsum * rsum;
+  };
   const size_t ncand = cand_j_.size();
-  const size_t nold = pairs_.size();
-  std::vector<int> late(nold - std::min(nold, pair_sorted_end_));
-  for (size_t e = 0; e < late.size(); ++e) late[e] = static_cast<int>(pair_sorted_end_ + e);
-  const auto key = [this](size_t k) { return std::make_pair(pairs_[k].i, pairs_[k].j); };
-  std::sort(late.begin(), late.end(), [&](int a, int b) { return key(a) < key(b); });
-  size_t ka = 0, kb = 0;  // (the next old record of each run)
-  const size_t na = nold - late.size();
-  // The next old record in (i, j) order, or -1.
-  const auto next_old = [&]() -> long {
-    const bool a = ka < na, b = kb < late.size();
-    if (!a && !b) return -1;
-    if (!b || (a && key(ka) < key(late[kb]))) return static_cast<long>(ka);
-    return late[kb];
-  };
-  const auto pop_old = [&](long k) {
-    if (static_cast<size_t>(k) < na) ++ka;
-    else ++kb;
-  };
+  size_t e = 0;  // (the next old record)
   // (first the old record of each candidate, -1 for none; then the records, sized once)
   pair_slot_.assign(ncand, -1);
   size_t kept = 0;
   for (int i = 0; i < n; ++i) {
     for (int q = cand_off_[i]; q < cand_off_[i + 1]; ++q) {
       const std::pair<int, int> ij(i, cand_j_[q]);
-      long k = next_old();
-      while (k >= 0 && key(k) < ij) {
-        drop_pair_dissipation(k);
-        pop_old(k);
-        k = next_old();
-      }
-      if (k >= 0 && key(k) == ij) {
-        pop_old(k);
+      for (; e < old.size() && std::make_pair(old[e].i, old[e].j) < ij; ++e)
+        drop_pair_dissipation(old[e].k);
+      if (e < old.size() && old[e].i == i && old[e].j == ij.second) {
+        const int k = old[e++].k;
         if (pair_keeps_record(pairs_[k], pair_dissip_[k])) {
-          pair_slot_[q] = static_cast<int>(k);
+          pair_slot_[q] = k;
           ++kept;
         }
         // (else a record without history: its dissipation, zero, needs no drop)
       }
-      if (pair_cold_on_ && pair_slot_[q] < 0) ++kept;  // (a fresh record)
+      if (pair_slot_[q] < 0 && (pair_cold_on_ || touching(i, ij.second, q))) {
+        pair_slot_[q] = kFreshRecord;
+        ++kept;
+      }
     }
   }
-  for (long k = next_old(); k >= 0; k = next_old()) {
-    drop_pair_dissipation(k);
-    pop_old(k);
-  }
+  for (; e < old.size(); ++e) drop_pair_dissipation(old[e].k);
   std::vector<PairContact> next;
   std::vector<PairContactCold> next_cold;  // (only where the scene has the cold part)
   std::vector<Real> next_dissip;
@@ -242,13 +243,12 @@ void Scene::rebuild() {
         next.push_back(pairs_[k]);
         next_dissip.push_back(pair_dissip_[k]);
         if (pair_cold_on_) next_cold.push_back(pair_cold_[k]);
-      } else if (pair_cold_on_) {
+      } else if (k == kFreshRecord) {
         PairContact c;
-        c.i = i;
         c.j = cand_j_[q];
         next.push_back(c);
         next_dissip.push_back(0.0);
-        next_cold.emplace_back();
+        if (pair_cold_on_) next_cold.emplace_back();
       } else {
         continue;
       }
@@ -260,7 +260,6 @@ void Scene::rebuild() {
   pairs_.swap(next);
   pair_cold_.swap(next_cold);
   pair_dissip_.swap(next_dissip);
-  pair_sorted_end_ = pairs_.size();
   // Sphere–wall candidates: signed distance to the plane below r + margin, and the centre
   // not beyond the plane by more than r (one-sided walls ignore what is behind them).
   WallContactMerge merge(wall_contacts_,

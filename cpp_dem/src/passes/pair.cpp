@@ -54,26 +54,26 @@ ALWAYS_INLINE void hertz_pair(PairContact& c, PairContactCold* cold, Real& dissi
 
 }  // namespace
 
-void Scene::update_phys(PairContact& c, size_t k) {
+void Scene::update_phys(PairContact& c, size_t k, int i) {
   // (k: the record's slot; a new record, pair_new_, has none and the scene no cold part)
   ContactPhys local;
   ContactPhys& p = pair_cold_on_ ? pair_cold_[k].phys : local;
-  mix_materials(materials_[bodies_.material[c.i]], materials_[bodies_.material[c.j]],
-                stiffness_radius(c.i), stiffness_radius(c.j), bodies_.mass[c.i], bodies_.mass[c.j],
-                pair_law(bodies_.material[c.i], bodies_.material[c.j]), p);
+  const int j = c.j;
+  mix_materials(materials_[bodies_.material[i]], materials_[bodies_.material[j]],
+                stiffness_radius(i), stiffness_radius(j), bodies_.mass[i], bodies_.mass[j],
+                pair_law(bodies_.material[i], bodies_.material[j]), p);
   c.kn = p.kn;
   c.ks = p.ks;
   c.tan_phi = p.tan_phi;
   c.kernel = pair_kernel(p);
   c.model = static_cast<std::uint8_t>(p.model);
-  c.phys_version = phys_version_;
   if (!pair_cold_on_ && c.kernel != kLinearKernel && c.kernel != kHertzKernel) {
     // (ensure_pair_cold made no cold part for materials that need one: the pass skips the
     // contact and the step stops with a logic_error)
 #pragma omp atomic write
     pair_cold_missing_ = 1;
   }
-  note_formed_contact(p, c.i, c.j);
+  note_formed_contact(p, i, j);
 }
 
 
@@ -149,7 +149,8 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
   long err = err_out;
   const Real dt = dt_;
   const Real max_ratio = max_overlap_ratio_;
-  const int version = phys_version_;
+  // (the materials changed since the last pass: every active contact's parameters anew)
+  const bool stale = pair_phys_version_ != phys_version_;
   // Local pointers: the loop's stores of bools could alias the vectors' own pointers, so
   // through the members the compiler reloaded them for every access.
   const Vec3* const pos = bodies_.pos.data();
@@ -226,14 +227,13 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
         }
         if (s < 0) {
           fresh = PairContact();
-          fresh.i = i;
           fresh.j = j;
           fresh.image = image;
           fresh_dissip = 0;
         }
         PairContact& c = s >= 0 ? pairs[s] : fresh;
         Real& dis = s >= 0 ? dissip[s] : fresh_dissip;
-        if (!c.active || c.phys_version != version) update_phys(c, s);
+        if (!c.active || stale) update_phys(c, s, i);
         c.active = true;
         gave = true;
         V wj = ops.load(angvel[j]), vj = ops.load(vel[j]);
@@ -312,6 +312,7 @@ void Scene::compute_pair_forces(long& err_contact) {
   if (pair_new_.size() < static_cast<size_t>(max_threads())) pair_new_.resize(max_threads());
   if (shear_kinematics_ == ShearKinematics::Yade) compute_pair_forces_hot<true>(err_contact);
   else compute_pair_forces_hot<false>(err_contact);
+  pair_phys_version_ = phys_version_;  // (every active contact's parameters are now of it)
   adopt_new_pairs();
   if (pair_cold_missing_)
     throw std::logic_error("cpp_dem: a pair contact's law needs the contacts' cold part, "
@@ -395,7 +396,6 @@ void Scene::materialize_pairs() {
         next[k] = pairs_[s];
         next_dissip[k] = pair_dissip_[s];
       } else {
-        next[k].i = i;
         next[k].j = cand_j_[k];
         next[k].image = candidate_images_.empty() ? kNoShift : candidate_images_[k];
       }
@@ -404,52 +404,82 @@ void Scene::materialize_pairs() {
   }
   pairs_.swap(next);
   pair_dissip_.swap(next_dissip);
-  pair_sorted_end_ = pairs_.size();
 }
 
-void Scene::compact_pairs() {
-  // (pairs_ and pair_dissip_ hold one record for each candidate, in candidate order)
-  const size_t nc = pairs_.size();
+void Scene::compact_pairs(const std::vector<PairContactDisk>& disk) {
+  // (disk and pair_dissip_ hold one record for each candidate, in candidate order)
+  const size_t nc = disk.size();
+  const auto hot = [](const PairContactDisk& d) {
+    PairContact c;
+    c.j = d.j;
+    c.active = d.active;
+    c.kernel = d.kernel;
+    c.image = d.image;
+    c.model = d.model;
+    c.kn = d.kn;
+    c.ks = d.ks;
+    c.tan_phi = d.tan_phi;
+    c.fs = d.fs;
+    c.overlap = d.overlap;
+    c.normal = d.normal;
+    c.fn = d.fn;
+    return c;
+  };
   pair_slot_.assign(nc, -1);
   size_t kept = 0;
-  for (size_t k = 0; k < nc; ++k) kept += pair_keeps_record(pairs_[k], pair_dissip_[k]);
-  if (kept == nc) {
-    for (size_t k = 0; k < nc; ++k) pair_slot_[k] = static_cast<int>(k);
-  } else {
-    std::vector<PairContact> next;
-    std::vector<Real> next_dissip;
-    next.reserve(kept + kept / 16 + 16);
-    next_dissip.reserve(next.capacity());
-    for (size_t k = 0; k < nc; ++k) {
-      if (!pair_keeps_record(pairs_[k], pair_dissip_[k])) continue;
-      pair_slot_[k] = static_cast<int>(next.size());
-      next.push_back(pairs_[k]);
-      next_dissip.push_back(pair_dissip_[k]);
-    }
-    pairs_.swap(next);
-    pair_dissip_.swap(next_dissip);
+  for (size_t k = 0; k < nc; ++k) kept += pair_keeps_record(hot(disk[k]), pair_dissip_[k]);
+  std::vector<PairContact> next;
+  std::vector<Real> next_dissip;
+  const size_t cap = pair_cold_on_ ? kept : kept + kept / 16 + 16;
+  next.reserve(cap);
+  next_dissip.reserve(cap);
+  // The active records' phys were made at one version, the last pass's (the scene's own
+  // unless the materials changed after that pass).
+  pair_phys_version_ = phys_version_;
+  for (size_t k = 0; k < nc; ++k) {
+    const PairContact c = hot(disk[k]);
+    if (c.active && disk[k].phys_version != phys_version_)
+      pair_phys_version_ = disk[k].phys_version;
+    if (!pair_keeps_record(c, pair_dissip_[k])) continue;
+    pair_slot_[k] = static_cast<int>(next.size());
+    next.push_back(c);
+    next_dissip.push_back(pair_dissip_[k]);
   }
-  pair_sorted_end_ = pairs_.size();
+  pairs_.swap(next);
+  pair_dissip_.swap(next_dissip);
 }
 
-void Scene::expanded_pairs(std::vector<PairContact>& out, std::vector<Real>& dissip) const {
+void Scene::expanded_pairs(std::vector<PairContactDisk>& out, std::vector<Real>& dissip) const {
   const size_t nc = cand_j_.size();
-  out.assign(nc, PairContact());
+  out.assign(nc, PairContactDisk());
   dissip.assign(nc, 0.0);
   const int nrows = static_cast<int>(pair_ioff_.size()) - 1;
   for (int i = 0; i < nrows; ++i) {
     for (int k = pair_ioff_[i]; k < pair_ioff_[i + 1]; ++k) {
+      PairContactDisk& d = out[k];
+      d.i = i;
+      d.j = cand_j_[k];
+      d.image = candidate_images_.empty() ? kNoShift : candidate_images_[k];
       const int s = pair_slot_[k];
-      if (s >= 0 && pair_keeps_record(pairs_[s], pair_dissip_[s])) {
-        out[k] = pairs_[s];
-        dissip[k] = pair_dissip_[s];
-      } else {
-        // (a record that carries no history is saved as the fresh one it is equal to in
-        // all but the parameters of its last touch, which its next touch makes again)
-        out[k].i = i;
-        out[k].j = cand_j_[k];
-        out[k].image = candidate_images_.empty() ? kNoShift : candidate_images_[k];
-      }
+      // (a record that carries no history is saved as the fresh one it is equal to in all
+      // but the parameters of its last touch, which its next touch makes again)
+      if (s < 0 || !pair_keeps_record(pairs_[s], pair_dissip_[s])) continue;
+      const PairContact& c = pairs_[s];
+      d.active = c.active;
+      d.kernel = c.kernel;
+      d.image = c.image;
+      d.model = c.model;
+      // (an active contact's phys are of the last pass's version; an inactive one's are
+      // made again at its next touch)
+      d.phys_version = c.active ? pair_phys_version_ : -1;
+      d.kn = c.kn;
+      d.ks = c.ks;
+      d.tan_phi = c.tan_phi;
+      d.fs = c.fs;
+      d.overlap = c.overlap;
+      d.normal = c.normal;
+      d.fn = c.fn;
+      dissip[k] = pair_dissip_[s];
     }
   }
 }
@@ -524,7 +554,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   const long nc = ncontacts;
   const Real dt = dt_;
   const Real max_ratio = max_overlap_ratio_;
-  const int version = phys_version_;
+  const bool stale = pair_phys_version_ != phys_version_;  // (as in pair_bodies_narrow)
   long err = std::numeric_limits<long>::max();
   // The loop works through local pointers: its stores of bools could alias the vectors'
   // own pointers, so through the members the compiler reloads them for every access.
@@ -642,14 +672,13 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           }
           if (__builtin_expect(s < 0, 0)) {
             fresh = PairContact();
-            fresh.i = i;
             fresh.j = j;
             fresh.image = image;
             fresh_dissip = 0;
           }
           PairContact& c = s >= 0 ? pairs[s] : fresh;
           Real& dis = s >= 0 ? dissip[s] : fresh_dissip;
-          if (!c.active || c.phys_version != version) update_phys(c, s);
+          if (!c.active || stale) update_phys(c, s, i);
           c.active = true;
           if constexpr (kShares) gave = true;
           V4 wj = v4(angvel[j]), vj = v4(vel[j]);

@@ -10,7 +10,9 @@
 namespace cpp_dem {
 
 /// A sphere–sphere contact (candidate pair from the broad phase; active while overlapping):
-/// the hot part, what the pair pass reads and writes every step (104 bytes). The friction
+/// the hot part, what the pair pass reads and writes every step (96 bytes). Its first body
+/// is its candidate's row (Scene::pair_ioff_), and its parameters are those of the scene's
+/// materials as of the last pair pass (Scene::pair_phys_version_). The friction
 /// it dissipates is in a parallel array of doubles (Scene::pair_dissip_, written when it
 /// slips). The rest of its parameters and history (PairContactCold) is in another parallel
 /// array, which a scene has only once one of its material pairs takes a kernel that reads it
@@ -18,7 +20,7 @@ namespace cpp_dem {
 /// record holds all the law's parameters (Scene::ensure_pair_cold).
 /// The full records: Scene::pair_phys(k), Scene::pair_state(k).
 struct PairContact {
-  int i = 0, j = 0;             ///< body ids, i < j; side 1 = i, side 2 = j
+  int j = 0;                    ///< second body's slot (side 2; side 1, i < j, is its row)
   bool active = false;
   /// The pair pass's kernel (laws/registry.hpp's PairKernel): a linear or Hertz–Mindlin law
   /// without viscous damping and without rolling resistance takes its short kernel, which
@@ -32,7 +34,6 @@ struct PairContact {
   /// The law's ContactModel (as its number; set with kn, ks, tan_phi): with them the whole
   /// phys of a short kernel's contact where the scene has no cold part (Scene::pair_phys).
   std::uint8_t model = 0;
-  int phys_version = -1;        ///< scene phys version the phys was computed at
   Real kn = 0;                  ///< copy of ContactPhys::kn
   Real ks = 0;                  ///< copy of ContactPhys::ks
   Real tan_phi = 0;             ///< copy of ContactPhys::tan_phi
@@ -42,6 +43,24 @@ struct PairContact {
   Real overlap = 0;             ///< ContactState::overlap, m
   Vec3 normal = Vec3::Zero();   ///< ContactState::normal (zero: new contact)
   Real fn = 0;                  ///< ContactState::fn, N
+};
+
+/// A sphere–sphere contact as a checkpoint holds it (formats up to this one): the hot record
+/// with its first body and the scene phys version its phys was computed at (104 bytes).
+struct PairContactDisk {
+  int i = 0, j = 0;
+  bool active = false;
+  std::uint8_t kernel = 0;
+  std::uint8_t image = kNoShift;
+  std::uint8_t model = 0;
+  int phys_version = -1;
+  Real kn = 0;
+  Real ks = 0;
+  Real tan_phi = 0;
+  Vec3 fs = Vec3::Zero();
+  Real overlap = 0;
+  Vec3 normal = Vec3::Zero();
+  Real fn = 0;
 };
 
 /// The cold part of a sphere–sphere contact (same index as its PairContact), in a scene
