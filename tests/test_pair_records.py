@@ -150,3 +150,33 @@ def test_a_checkpoint_round_trip_keeps_its_bytes_and_the_run():
         b.run(300)
         assert np.array_equal(a.positions, b.positions)
         assert a.energies()["friction"] == b.energies()["friction"]
+
+
+def test_a_change_of_materials_reaches_every_active_contact_at_the_next_step():
+    """The parameters of every active contact are made again at the first step after the
+    materials change (one phys version for the scene, not one per record), and a checkpoint
+    saved between the change and that step continues as the run that was not saved."""
+    a = scene("drop_linear")
+    a.run(STEPS["drop_linear"])
+    stiff = dem.linear_material(density=2650, young=2e7, poisson=0.3, friction_angle_deg=25)
+    m = a.add_material(stiff)
+    for body in range(a.num_bodies):
+        a.set_body_material(body, m)
+    before = a.contacts()
+    blob = _core._checkpoint_save(a)
+    b = dem.Scene()
+    _core._checkpoint_load(b, blob, replace=True)
+    a.run(1)
+    b.run(1)
+    after = a.contacts()
+    # sphere-sphere contacts (the second id a body's, not a wall's): kn = 2 E r1 r2 / (r1 + r2)
+    # = E r, four times the old at the first step with the new modulus
+    pairs_before = before["ids"][:, 1] >= 0
+    pairs_after = after["ids"][:, 1] >= 0
+    assert pairs_before.sum() > 10 and pairs_after.sum() > 10
+    assert np.allclose(before["kn"][pairs_before], 5e6 * 0.005, rtol=1e-12)
+    assert np.allclose(after["kn"][pairs_after], 2e7 * 0.005, rtol=1e-12)
+    assert np.array_equal(b.contacts()["kn"], after["kn"])
+    a.run(300)
+    b.run(300)
+    assert np.array_equal(a.positions, b.positions)
