@@ -47,7 +47,7 @@ def test_a_candidate_that_does_not_touch_has_no_record():
     assert st["pair_records"] == 48
     f = s.memory_by_field()
     assert f["contacts.pairs"] < 104 * st["pair_candidates"]
-    assert f["contacts.pair_slot"] == 4 * st["pair_candidates"]
+    assert "contacts.pair_slot" not in f  # (a candidate: 4 B, its record slot or its j)
     # (the active contacts' arrays: the 48 along x)
     c = s.contacts()
     assert len(c["force"]) == 48

@@ -454,7 +454,7 @@ std::vector<std::uint8_t> Checkpoint::save(const Scene& s) {
     // Hertz kernels, derived from the phys, are 0 here and found again at the load, so a
     // contact's bytes do not depend on which kernels a build has.)
     // (A record for every candidate pair, in candidate order, with its friction dissipation:
-    // the scene keeps them only for the candidates that carry history, Scene::pair_slot_.)
+    // the scene keeps them only for the candidates that carry history, Scene::cand_j_.)
     std::vector<PairContactDisk> pairs;
     std::vector<Real> dissip;
     s.expanded_pairs(pairs, dissip);
@@ -773,6 +773,7 @@ void Checkpoint::load(Scene& s, const std::vector<std::uint8_t>& blob, bool repl
                  static_cast<int>(q) < t.pair_ioff_[cand[q].first + 1];
     if (!pairs_ok) throw ParameterError("checkpoint: corrupt pair contacts");
     t.compact_pairs(disk);
+    std::vector<int>().swap(t.cand_off_);  // (the rows are pair_ioff_: Scene::rebuild)
   }
   r.get(t.dropped_friction_);
   r.get(t.dropped_viscous_);

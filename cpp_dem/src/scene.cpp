@@ -127,7 +127,7 @@ void Scene::raise_overlap(long k, bool wall) const {
     body = c.body;
   } else {
     // (k: the candidate pair)
-    const int ci = pair_first_body(k), cj = cand_j_[k];
+    const int ci = pair_first_body(k), cj = cand_second(k);
     const Real ov = bodies_.radius[ci] + bodies_.radius[cj] -
                     (bodies_.pos[cj] + pair_shift(k) - bodies_.pos[ci]).norm();
     os << "blow-up at step " << step_ << ": bodies " << id_of(ci) << " and " << id_of(cj)
@@ -471,7 +471,7 @@ void Scene::check_tunnelling() {
     const int nrows = static_cast<int>(pair_ioff_.size()) - 1;
     for (int i = 0; i < nrows; ++i) {
       for (int k = pair_ioff_[i]; k < pair_ioff_[i + 1]; ++k) {
-        const int j = cand_j_[k];
+        const int j = cand_second(k);
         if (i != b && j != b) continue;
         const Real ov = r[i] + r[j] - (x[j] + pair_shift(k) - x[i]).norm();
         if (!(ov <= max_overlap_ratio_ * std::min(r[i], r[j]))) raise_overlap(k, false);

@@ -51,7 +51,7 @@ struct ColliderStats {
   long builds = 0;          ///< number of broad-phase builds so far
   long pair_candidates = 0; ///< sphere–sphere candidate pairs in the current list
   /// sphere–sphere contact records: the candidates that carry history (touching, or having
-  /// slipped), or every candidate where the scene has the cold part (Scene::pair_slot_)
+  /// slipped), or every candidate where the scene has the cold part (Scene::cand_j_)
   long pair_records = 0;
   long wall_candidates = 0; ///< sphere–wall candidates in the current list
   long grid_candidates = 0; ///< grain–geogrid primitive candidates in the current list
@@ -456,13 +456,20 @@ class Scene {
   ColliderStats collider_stats() const;
 
   /// Pair contact k (the k-th candidate pair of the last build, in (i, j) order): its hot
-  /// record, or, for a candidate that carries no history (no record, pair_slot_), a fresh
-  /// one, inactive with zero springs.
+  /// record, or, for a candidate that carries no history (no record, cand_j_), a fresh one,
+  /// inactive with zero springs (its second body: cand_second).
   const PairContact& pair_record(size_t k) const {
     static const PairContact kFresh{};
-    const int s = pair_slot_[k];
+    const int s = cand_slot(k);
     return s >= 0 ? pairs_[s] : kFresh;
   }
+  /// Candidate pair k's second body.
+  int cand_second(size_t k) const {
+    const int v = cand_j_[k];
+    return v >= 0 ? pairs_[v].j : ~v;
+  }
+  /// Candidate pair k's record in pairs_, or -1.
+  int cand_slot(size_t k) const { return cand_j_[k] >= 0 ? cand_j_[k] : -1; }
   /// Parameters of pair contact k (as of its last activation or change of materials): its
   /// cold part's, or, in a scene without one (only short kernels: ensure_pair_cold), the
   /// hot record's model, kn, ks and tan_phi, with no dashpots and no rolling resistance
@@ -487,7 +494,7 @@ class Scene {
     s.normal = c.normal;
     s.overlap = c.overlap;
     s.fn = c.fn;
-    s.dissip_friction = pair_slot_[k] >= 0 ? pair_dissip_[pair_slot_[k]] : 0.0;
+    s.dissip_friction = cand_slot(k) >= 0 ? pair_dissip_[cand_slot(k)] : 0.0;
     if (pair_cold_on_) s.dissip_viscous = pair_cold_[k].dissip_viscous;
     return s;
   }
@@ -600,6 +607,8 @@ class Scene {
   void rebuild();
   /// Stores the spheres in spatial order (see "storage order"); only while no contact exists.
   void sort_bodies_spatially();
+  /// Room in the per-body arrays for count more bodies (add_spheres).
+  void reserve_bodies(std::size_t count);
   // The three hot passes. Each is a plain entry point (called by step(), in scene.cpp) and
   // its multiversioned body (CPP_DEM_HOT), which only its own unit calls: GCC emits the
   // clones of a target_clones function as local symbols of the unit that defines it.
@@ -655,13 +664,14 @@ class Scene {
   /// A new record (c, its friction dissipation) for candidate k, found touching on thread t
   /// (pair_new_; apart from the pass's loop: rare).
   void keep_new_pair(long t, int k, const PairContact& c, Real dissip);
-  /// Joins the pass's new records into pairs_, in candidate order (pair_slot_).
+  /// Joins the pass's new records into pairs_, in candidate order (cand_j_).
   void adopt_new_pairs();
   /// A record for every candidate, at its candidate's index (the scene takes the cold part).
   void materialize_pairs();
   /// The records from a checkpoint's (one for every candidate, in candidate order, with
   /// pair_dissip_ the same), keeping only those that carry history: active, some friction
-  /// dissipated, or the scene has the cold part. Sets pair_slot_ and pair_phys_version_.
+  /// dissipated, or the scene has the cold part. Sets cand_j_'s slots and
+  /// pair_phys_version_.
   void compact_pairs(const std::vector<PairContactDisk>& disk);
   /// Whether record c (with friction dissipation d) carries history to keep at a build.
   bool pair_keeps_record(const PairContact& c, Real d) const {
@@ -770,17 +780,17 @@ class Scene {
   std::vector<std::shared_ptr<Controller>> controllers_;
   // Contacts and their adjacency (CSR: for body b, entries adj_off[b]..adj_off[b+1]).
   // Pair contacts: a record (PairContact) only for the candidate pairs that carry history.
-  // Candidate k (cand_j_[k], in row i: pair_ioff_[i] <= k < pair_ioff_[i + 1]) has record
-  // pair_slot_[k] in pairs_, or -1: a candidate that has not touched since the last build
+  // Candidate k (in row i: pair_ioff_[i] <= k < pair_ioff_[i + 1]) has record cand_j_[k] in
+  // pairs_ (which holds its second body), or, where cand_j_[k] < 0, none (its second body is
+  // ~cand_j_[k]; cand_second, cand_slot): a candidate that has not touched since the last build
   // (or touched and opened without slipping) is nothing but its candidate entry, and takes
   // a record the step it touches (pair_new_, adopt_new_pairs: after those of the build). At a
   // build the records that carry history (active, or some friction dissipated) are kept, in
   // candidate order.
   // A scene with the cold part (pair_cold_on_) keeps a record for every candidate, each at
-  // its candidate's index (pair_slot_[k] == k), as pair_out_ and pair_jslot_ assume.
+  // its candidate's index (cand_j_[k] == k), as pair_out_ and pair_jslot_ assume.
   // pair_dissip_ and pair_cold_ go with the records.
   std::vector<PairContact> pairs_;
-  std::vector<int> pair_slot_;
   // The scene phys version (phys_version_) of the last pair pass: every active record's
   // parameters are those of its materials then; the next pass makes them again where the
   // materials have changed since.
@@ -902,8 +912,9 @@ class Scene {
   bool grid_wall_contacts_ = false;
   CellGrid grid_;
   // The broad phase's candidate pairs of the last build, rows by i (i < j, sorted by (i, j)):
-  // i's partners are cand_j_[cand_off_[i]] .. cand_j_[cand_off_[i + 1]) (after each build
-  // the pairs_ are these pairs, in this order).
+  // i's partners are entries cand_off_[i] .. cand_off_[i + 1] of cand_j_. During a build (and
+  // a checkpoint's load) cand_j_ holds the second bodies; once the records are made, each
+  // entry is its record's slot in pairs_ or, without one, ~j (pairs_ above: 4 B a candidate).
   std::vector<int> cand_off_, cand_j_;
   // Dissipation of contacts already dropped from the lists, J.
   Real dropped_friction_ = 0, dropped_viscous_ = 0;
@@ -1022,7 +1033,7 @@ void Scene::for_each_contact_of(ContactKind kind, F&& f) const {
         r.index = static_cast<long>(k);
         r.active = c.active;
         r.body1 = i;
-        r.body2 = cand_j_[k];
+        r.body2 = cand_second(k);
         phys = pair_phys(k);
         scratch = pair_state(k);
         r.force2 = pair_force(k);

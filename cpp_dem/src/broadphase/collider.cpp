@@ -143,6 +143,10 @@ void CellGrid::query_box(const Vec3& lo, const Vec3& hi, const std::vector<Vec3>
   std::sort(out.begin() + first, out.end());
 }
 
+void CellGrid::release() {
+  for (auto* v : {&cell_start_, &cell_bodies_, &body_cell_}) std::vector<int>().swap(*v);
+}
+
 void CellGrid::add_memory(std::vector<std::pair<std::string, std::size_t>>& out) const {
   const auto bytes = [](const auto& v) { return v.capacity() * sizeof(v[0]); };
   out.emplace_back("broadphase.cell_start", bytes(cell_start_));

@@ -29,8 +29,8 @@ Real Scene::default_margin() const {
 std::vector<std::pair<int, int>> Scene::candidate_pairs() const {
   std::vector<std::pair<int, int>> out;
   out.reserve(cand_j_.size());
-  for (int i = 0; i + 1 < static_cast<int>(cand_off_.size()); ++i)
-    for (int q = cand_off_[i]; q < cand_off_[i + 1]; ++q) out.emplace_back(i, cand_j_[q]);
+  for (int i = 0; i + 1 < static_cast<int>(pair_ioff_.size()); ++i)
+    for (int q = pair_ioff_[i]; q < pair_ioff_[i + 1]; ++q) out.emplace_back(i, cand_second(q));
   return out;
 }
 
@@ -169,7 +169,7 @@ void Scene::rebuild() {
   old.reserve(pairs_.size());
   for (int i = 0; i + 1 < static_cast<int>(pair_ioff_.size()); ++i)
     for (int q = pair_ioff_[i]; q < pair_ioff_[i + 1]; ++q)
-      if (pair_slot_[q] >= 0) old.push_back({i, cand_j_[q], pair_slot_[q]});
+      if (cand_slot(q) >= 0) old.push_back({i, pairs_[cand_slot(q)].j, cand_slot(q)});
   if (cell_.on) {
     wrap_into_cell();
     std::vector<std::pair<int, int>> found;
@@ -189,8 +189,8 @@ void Scene::rebuild() {
   }
   drop_bonded_candidates();  // a bonded pair is its bond's contact
   // Merge the new candidate list with the old contacts' records, keeping those that carry
-  // history (both in (i, j) order). A candidate without history has no record (pair_slot_
-  // -1) unless the scene has the cold part, which keeps one for every candidate, or it
+  // history (both in (i, j) order). A candidate without history has no record (cand_j_ < 0)
+  // unless the scene has the cold part, which keeps one for every candidate, or it
   // touches now: it takes its fresh record here, in candidate order, and not at the next
   // pass (a packing's first build: every contact), the same record either way.
   const auto touching = [this](int i, int j, int q) {
@@ -206,7 +206,7 @@ void Scene::rebuild() {
   const size_t ncand = cand_j_.size();
   size_t e = 0;  // (the next old record)
   // (first the old record of each candidate, -1 for none; then the records, sized once)
-  pair_slot_.assign(ncand, -1);
+  std::vector<int> slot(ncand, -1);
   size_t kept = 0;
   for (int i = 0; i < n; ++i) {
     for (int q = cand_off_[i]; q < cand_off_[i + 1]; ++q) {
@@ -216,13 +216,13 @@ void Scene::rebuild() {
       if (e < old.size() && old[e].i == i && old[e].j == ij.second) {
         const int k = old[e++].k;
         if (pair_keeps_record(pairs_[k], pair_dissip_[k])) {
-          pair_slot_[q] = k;
+          slot[q] = k;
           ++kept;
         }
         // (else a record without history: its dissipation, zero, needs no drop)
       }
-      if (pair_slot_[q] < 0 && (pair_cold_on_ || touching(i, ij.second, q))) {
-        pair_slot_[q] = kFreshRecord;
+      if (slot[q] < 0 && (pair_cold_on_ || touching(i, ij.second, q))) {
+        slot[q] = kFreshRecord;
         ++kept;
       }
     }
@@ -238,7 +238,7 @@ void Scene::rebuild() {
   next_dissip.reserve(cap);
   for (int i = 0; i < n; ++i) {
     for (int q = cand_off_[i]; q < cand_off_[i + 1]; ++q) {
-      const int k = pair_slot_[q];
+      const int k = slot[q];
       if (k >= 0) {
         next.push_back(pairs_[k]);
         next_dissip.push_back(pair_dissip_[k]);
@@ -250,11 +250,12 @@ void Scene::rebuild() {
         next_dissip.push_back(0.0);
         if (pair_cold_on_) next_cold.emplace_back();
       } else {
+        cand_j_[q] = ~cand_j_[q];  // (no record: its second body's complement)
         continue;
       }
       // (The image may change for a kept contact: a body was wrapped into the cell.)
       next.back().image = candidate_images_.empty() ? kNoShift : candidate_images_[q];
-      pair_slot_[q] = static_cast<int>(next.size()) - 1;
+      cand_j_[q] = static_cast<int>(next.size()) - 1;
     }
   }
   pairs_.swap(next);
@@ -262,25 +263,34 @@ void Scene::rebuild() {
   pair_dissip_.swap(next_dissip);
   // Sphere–wall candidates: signed distance to the plane below r + margin, and the centre
   // not beyond the plane by more than r (one-sided walls ignore what is behind them).
+  const auto wall_candidate = [&](int b, int w) {
+    if (bodies_.kind[b] != BODY_SPHERE && !grid_wall_contacts_) return false;  // grid nodes: only if asked for
+    const Wall& wl = walls_[w];
+    const Real s = wl.sense * (bodies_.pos[b][wl.axis] - wl.position);
+    return s < bodies_.radius[b] + margin && s > -bodies_.radius[b];
+  };
   WallContactMerge merge(wall_contacts_,
                          [this](const WallContact& c) { drop_dissipation(c.state); });
-  for (int b = 0; b < n; ++b) {
-    if (bodies_.kind[b] != BODY_SPHERE && !grid_wall_contacts_) continue;  // grid nodes: only if asked for
-    for (int w = 0; w < num_walls(); ++w) {
-      const Wall& wl = walls_[w];
-      const Real s = wl.sense * (bodies_.pos[b][wl.axis] - wl.position);
-      if (s < bodies_.radius[b] + margin && s > -bodies_.radius[b]) merge.add(b, w);
-    }
+  {
+    // (counted first: the list is made at its size, 240 B a contact, not grown by doubling)
+    std::size_t count = 0;
+    for (int b = 0; b < n; ++b)
+      for (int w = 0; w < num_walls(); ++w) count += wall_candidate(b, w);
+    merge.reserve(count);
   }
+  for (int b = 0; b < n; ++b)
+    for (int w = 0; w < num_walls(); ++w)
+      if (wall_candidate(b, w)) merge.add(b, w);
   std::vector<WallContact> wnext = merge.finish();
   wall_contacts_.swap(wnext);
   // Adjacency (CSR) in contact order, so reductions into bodies have a fixed order.
   // (the candidates' rows)
   if (cand_off_.size() == static_cast<size_t>(n) + 1) {
-    pair_ioff_ = cand_off_;
+    pair_ioff_.swap(cand_off_);
   } else {
     pair_ioff_.assign(n + 1, 0);
   }
+  std::vector<int>().swap(cand_off_);  // (the build's scratch: pair_ioff_ holds the rows)
   // The pass's outputs and their slots, for the next pass's kind as it will choose it (unless
   // a material change gives the scene the cold part first: the pass then makes them itself).
   release_pair_cross();  // (made again by a threaded direct pass)
@@ -296,6 +306,7 @@ void Scene::rebuild() {
   }
   if (!cylinder_walls_.empty()) rebuild_cylinder_contacts(margin);
   if (!mesh_walls_.empty()) rebuild_mesh_contacts(margin);
+  grid_.release();  // (the cell grid is the build's scratch)
   pos_at_build_ = bodies_.pos;
   // (the radii at the build are kept only once one changes: set_radii)
   if (!radius_at_build_.empty()) std::vector<Real>().swap(radius_at_build_);

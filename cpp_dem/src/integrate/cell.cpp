@@ -109,8 +109,8 @@ Mat3 Scene::pair_stress_sum() const {
   const int nrows = static_cast<int>(pair_ioff_.size()) - 1;
   for (int i = 0; i < nrows; ++i) {
     for (int k = pair_ioff_[i]; k < pair_ioff_[i + 1]; ++k) {
-      if (pair_slot_[k] < 0 || !pairs_[pair_slot_[k]].active) continue;
-      const Vec3 l = bodies_.pos[cand_j_[k]] + pair_shift(k) - bodies_.pos[i];
+      if (cand_slot(k) < 0 || !pairs_[cand_slot(k)].active) continue;
+      const Vec3 l = bodies_.pos[cand_second(k)] + pair_shift(k) - bodies_.pos[i];
       s += pair_force(k) * l.transpose();
     }
   }

@@ -421,7 +421,6 @@ std::vector<std::pair<std::string, std::size_t>> Scene::memory_by_field() const 
   add("broadphase.candidate_images", candidate_images_);
   grid_.add_memory(out);
   add("contacts.pairs", pairs_);
-  add("contacts.pair_slot", pair_slot_);
   add("contacts.pair_cold", pair_cold_);
   add("contacts.pair_dissip", pair_dissip_);
   add("contacts.pair_out", pair_out_);

@@ -158,8 +158,8 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
   const Vec3* const angvel = bodies_.angvel.data();
   const Real* const radius = bodies_.radius.data();
   const int* const ioff = pair_ioff_.data();
-  const int* const cand_j = cand_j_.data();
-  const int* const slot = pair_slot_.data();
+  // (a candidate's record slot, or ~j: cand_j_)
+  const int* const cand = cand_j_.data();
   const std::uint8_t* const images = candidate_images_.empty() ? nullptr : candidate_images_.data();
   const int* const jslot = pair_jslot_.data();
   PairContact* const pairs = pairs_.data();
@@ -198,7 +198,8 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
       for (int k = k0; k < k1; ++k) {
         // (k: the candidate; s: its record, or -1)
         PairOutput* const o = direct ? nullptr : shares ? &cross[r].out : &out_j[jslot[k]];
-        const int j = cand_j[k];
+        const int s = cand[k];  // (its record, or < 0)
+        const int j = s >= 0 ? pairs[s].j : ~s;
         if (direct && j >= jlimit) {
           // a cross pair: its shares were computed first; i's is added in its place
           const PairCross& x = cross[cursor++];
@@ -214,7 +215,6 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
         const Real dist2 = ops.dot(d, d);
         const Real rj = radius[j];
         const Real rsum = ri + rj;
-        const int s = slot[k];
         if (dist2 >= rsum * rsum) {
           if (s >= 0 && pairs[s].active) open_pair(s, o);  // the contact opened
           continue;
@@ -336,12 +336,12 @@ void Scene::index_pair_outputs(std::vector<int>& jadj_off, std::vector<int>& jsl
   if (pair_ioff_.empty()) return;  // (no build yet)
   const int n = static_cast<int>(pair_ioff_.size()) - 1;  // (the last build's bodies)
   jadj_off.assign(n + 1, 0);
-  for (const int j : cand_j_) jadj_off[j + 1]++;
-  for (int b = 0; b < n; ++b) jadj_off[b + 1] += jadj_off[b];
   const int nc = static_cast<int>(cand_j_.size());
+  for (int k = 0; k < nc; ++k) jadj_off[cand_second(k) + 1]++;
+  for (int b = 0; b < n; ++b) jadj_off[b + 1] += jadj_off[b];
   jslot.resize(nc);
   std::vector<int> fill(jadj_off.begin(), jadj_off.end() - 1);
-  for (int k = 0; k < nc; ++k) jslot[k] = fill[cand_j_[k]]++;
+  for (int k = 0; k < nc; ++k) jslot[k] = fill[cand_second(k)]++;
 }
 
 namespace {
@@ -375,7 +375,7 @@ void Scene::adopt_new_pairs() {
     pair_dissip_.reserve(cap);
   }
   for (const NewPair& e : all) {
-    pair_slot_[e.k] = static_cast<int>(pairs_.size());
+    cand_j_[e.k] = static_cast<int>(pairs_.size());
     pairs_.push_back(e.c);
     pair_dissip_.push_back(e.dissip);
   }
@@ -384,22 +384,22 @@ void Scene::adopt_new_pairs() {
 void Scene::materialize_pairs() {
   const size_t nc = cand_j_.size();
   bool identity = pairs_.size() == nc;
-  for (size_t k = 0; k < nc && identity; ++k) identity = pair_slot_[k] == static_cast<int>(k);
+  for (size_t k = 0; k < nc && identity; ++k) identity = cand_j_[k] == static_cast<int>(k);
   if (identity) return;
   std::vector<PairContact> next(nc);
   std::vector<Real> next_dissip(nc, 0.0);
   const int nrows = static_cast<int>(pair_ioff_.size()) - 1;
   for (int i = 0; i < nrows; ++i) {
     for (int k = pair_ioff_[i]; k < pair_ioff_[i + 1]; ++k) {
-      const int s = pair_slot_[k];
+      const int s = cand_slot(k);
       if (s >= 0) {
         next[k] = pairs_[s];
         next_dissip[k] = pair_dissip_[s];
       } else {
-        next[k].j = cand_j_[k];
+        next[k].j = cand_second(k);
         next[k].image = candidate_images_.empty() ? kNoShift : candidate_images_[k];
       }
-      pair_slot_[k] = static_cast<int>(k);
+      cand_j_[k] = static_cast<int>(k);
     }
   }
   pairs_.swap(next);
@@ -425,7 +425,6 @@ void Scene::compact_pairs(const std::vector<PairContactDisk>& disk) {
     c.fn = d.fn;
     return c;
   };
-  pair_slot_.assign(nc, -1);
   size_t kept = 0;
   for (size_t k = 0; k < nc; ++k) kept += pair_keeps_record(hot(disk[k]), pair_dissip_[k]);
   std::vector<PairContact> next;
@@ -440,8 +439,11 @@ void Scene::compact_pairs(const std::vector<PairContactDisk>& disk) {
     const PairContact c = hot(disk[k]);
     if (c.active && disk[k].phys_version != phys_version_)
       pair_phys_version_ = disk[k].phys_version;
-    if (!pair_keeps_record(c, pair_dissip_[k])) continue;
-    pair_slot_[k] = static_cast<int>(next.size());
+    if (!pair_keeps_record(c, pair_dissip_[k])) {
+      cand_j_[k] = ~cand_j_[k];  // (no record: its second body's complement)
+      continue;
+    }
+    cand_j_[k] = static_cast<int>(next.size());
     next.push_back(c);
     next_dissip.push_back(pair_dissip_[k]);
   }
@@ -458,9 +460,9 @@ void Scene::expanded_pairs(std::vector<PairContactDisk>& out, std::vector<Real>&
     for (int k = pair_ioff_[i]; k < pair_ioff_[i + 1]; ++k) {
       PairContactDisk& d = out[k];
       d.i = i;
-      d.j = cand_j_[k];
+      d.j = cand_second(k);
       d.image = candidate_images_.empty() ? kNoShift : candidate_images_[k];
-      const int s = pair_slot_[k];
+      const int s = cand_slot(k);
       // (a record that carries no history is saved as the fresh one it is equal to in all
       // but the parameters of its last touch, which its next touch makes again)
       if (s < 0 || !pair_keeps_record(pairs_[s], pair_dissip_[s])) continue;
@@ -563,8 +565,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   const Vec3* const angvel = bodies_.angvel.data();
   const Real* const radius = bodies_.radius.data();
   const int* const ioff = pair_ioff_.data();
-  const int* const cand_j = cand_j_.data();
-  const int* const slot = pair_slot_.data();
+  // (a candidate's record slot, or ~j: cand_j_)
+  const int* const cand = cand_j_.data();
   const std::uint8_t* const images =
       candidate_images_.empty() ? nullptr : candidate_images_.data();
   const int* const jslot = pair_jslot_.data();
@@ -625,7 +627,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
         for (int k = k0; k < k1; ++k) {
           // (k: the candidate; s: its record, or -1)
           PairOutput* const o = kDirect ? nullptr : kShares ? &cross[r].out : &out_j[jslot[k]];
-          const int j = cand_j[k];
+          const int s = cand[k];  // (its record, or < 0)
+          const int j = s >= 0 ? pairs[s].j : ~s;
           if constexpr (kDirect) {
             if (j >= jlimit) {
               // a cross pair: its shares were computed first; i's is added in its place
@@ -641,7 +644,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
             // (a scene larger than the caches: the state of a contact's second body some
             // contacts ahead, toward the cache, its reads being the scattered ones of the
             // pass; at 1e4 bodies it slowed the pass, 0.98 x on one thread, 0.94 x on two)
-            const int jn = cand_j[k + kPrefetchAhead];
+            const int sn = cand[k + kPrefetchAhead];
+            const int jn = sn >= 0 ? pairs[sn].j : ~sn;
             __builtin_prefetch(&pos[jn]);
             __builtin_prefetch(&vel[jn]);
             __builtin_prefetch(&angvel[jn]);
@@ -659,7 +663,6 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           const Real dist2 = dot3(d, d);
           const Real rj = radius[j];
           const Real rsum = ri + rj;
-          const int s = slot[k];
           if (dist2 >= rsum * rsum) {
             if (s >= 0 && pairs[s].active) open_pair(s, o);  // the contact opened
             continue;
@@ -847,7 +850,7 @@ void Scene::index_pair_cross(int nt) {
   const int n = static_cast<int>(pair_ioff_.size()) - 1;
   const auto tail = [&](int i, int jlimit) {  // (a row is sorted by j: its cross pairs are its tail)
     int k = pair_ioff_[i + 1];
-    while (k > pair_ioff_[i] && cand_j_[k - 1] >= jlimit) --k;
+    while (k > pair_ioff_[i] && cand_second(k - 1) >= jlimit) --k;
     return k;
   };
   std::vector<long> own(n + 1, 0);  // (cumulative: the rows' contacts that are not cross)
@@ -874,7 +877,7 @@ void Scene::index_pair_cross(int nt) {
   pair_cross_j_.resize(ns);
   for (int s = 0; s < ns; ++s) {
     pair_cross_[s].i = pair_first_body(pair_cross_k_[s]);
-    pair_cross_[s].j = cand_j_[pair_cross_k_[s]];
+    pair_cross_[s].j = cand_second(pair_cross_k_[s]);
     pair_cross_j_[s] = s;
   }
   // (stable: within a body j its slots stay in contact order)

@@ -91,6 +91,15 @@ struct BodyStore {
     if (!inertia_scale.empty()) inertia_scale.push_back(1.0);
   }
 
+  /// Whether v is one of the arrays every body has from its push (not made on first use).
+  template <class V>
+  bool always_kept(const V& v) const {
+    const void* p = &v;
+    return p == &pos || p == &vel || p == &angvel || p == &force || p == &torque || p == &ori ||
+           p == &radius || p == &mass || p == &inertia || p == &material || p == &blocked ||
+           p == &kind || p == &clump;
+  }
+
   /// Body b's imposed force and torque (zero where none was ever set).
   const Vec3& ext_force_of(int b) const { return ext_force.empty() ? kZeroVec3 : ext_force[b]; }
   const Vec3& ext_torque_of(int b) const { return ext_torque.empty() ? kZeroVec3 : ext_torque[b]; }

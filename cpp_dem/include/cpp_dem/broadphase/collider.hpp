@@ -28,6 +28,8 @@ class CellGrid {
   void query_box(const Vec3& lo, const Vec3& hi, const std::vector<Vec3>& pos,
                  const std::vector<Real>& radius, Real margin, std::vector<int>& out) const;
   /// Appends (field, bytes allocated) of the grid's arrays to `out` (Scene::memory_by_field).
+  /// Frees the grid's cells (made again by the next build; the threads' blocks are kept).
+  void release();
   void add_memory(std::vector<std::pair<std::string, std::size_t>>& out) const;
 
  private:

@@ -31,6 +31,8 @@ template <class C, class Drop>
 class WallContactMerge {
  public:
   WallContactMerge(const std::vector<C>& old, Drop drop) : old_(old), drop_(drop) {}
+  /// Room for n contacts (the build's count of candidates).
+  void reserve(std::size_t n) { next_.reserve(n); }
   void add(int b, int w) {
     while (k_ < old_.size() && (old_[k_].body < b || (old_[k_].body == b && old_[k_].wall < w)))
       drop_(old_[k_++]);
