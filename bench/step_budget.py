@@ -46,6 +46,7 @@ import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 #: short kernels has no cold contact record.
 TRAFFIC = {
     "contacts.pairs": (1, 1),          # pair pass: geometry in, shear force and normal out
+    "broadphase.candidates": (1, 0),   # pair pass: each candidate's record slot (or its j)
     # (one thread: the pair pass adds each contact's share to its bodies' force and torque
     # at once and keeps no pair_out; on more threads it writes pair_out, 64 B a contact, and
     # pair_fi and pair_ti, which the reduction reads back through pair_jslot and
@@ -96,8 +97,11 @@ def budget(n: int, steps: int, warmup: int, bw: dict) -> dict:
     fields = scene.memory_by_field()
     moved = {k: fields.get(k, 0) * sum(rw) for k, rw in TRAFFIC.items()}
     total = sum(moved.values())
-    contacts = len(scene.contacts()["normal_force"])
-    return {"n": p.n, "contacts": contacts, "s_per_step": s_per_step,
+    c = scene.contacts()
+    contacts = len(c["normal_force"])
+    pair_contacts = int((np.asarray(c["ids"])[:, 1] >= 0).sum()) if contacts else 0
+    return {"n": p.n, "contacts": contacts, "pair_contacts": pair_contacts,
+            "s_per_step": s_per_step,
             "bytes_per_step": total, "bytes_per_grain_step": total / p.n,
             "needed_bytes_per_s": total / s_per_step,
             "share_of_copy_bandwidth": total / s_per_step / bw["copy_bytes_per_s"],

@@ -21,10 +21,12 @@ def test_the_budget_is_the_fields_times_their_traffic_over_the_time(tmp_path):
 
     assert set(row["moved_by_field"]) <= set(TRAFFIC)
     assert row["bytes_per_step"] == sum(row["moved_by_field"].values())
-    # every contact crosses the pair pass: at least 2 x 104 B each; on one thread its shares
-    # go into the bodies' force and torque (2 reads and 3 writes of 24 B a body, each), not
-    # into pair_out, pair_fi or pair_ti
-    assert row["moved_by_field"]["contacts.pairs"] >= 2 * 104 * row["contacts"]
+    # every sphere-sphere contact's record crosses the pair pass: at least 2 x 96 B each, and
+    # every candidate's 4 B are read; on one thread the shares go into the bodies' force and
+    # torque (2 reads and 3 writes of 24 B a body, each), not into pair_out, pair_fi or pair_ti
+    assert 0 < row["pair_contacts"] <= row["contacts"]
+    assert row["moved_by_field"]["contacts.pairs"] >= 2 * 96 * row["pair_contacts"]
+    assert row["moved_by_field"]["broadphase.candidates"] >= 4 * row["pair_contacts"]
     for name in ("contacts.pair_out", "scratch.pair_fi", "scratch.pair_ti"):
         assert name not in row["moved_by_field"], name
     assert row["moved_by_field"]["bodies.force"] == 5 * 24 * row["n"]
