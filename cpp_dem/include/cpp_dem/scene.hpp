@@ -455,14 +455,9 @@ class Scene {
   std::vector<std::pair<std::string, std::size_t>> memory_by_field() const;
   ColliderStats collider_stats() const;
 
-  /// Pair contact k (the k-th candidate pair of the last build, in (i, j) order): its hot
-  /// record, or, for a candidate that carries no history (no record, cand_j_), a fresh one,
-  /// inactive with zero springs (its second body: cand_second).
-  const PairContact& pair_record(size_t k) const {
-    static const PairContact kFresh{};
-    const int s = cand_slot(k);
-    return s >= 0 ? pairs_[s] : kFresh;
-  }
+  /// Pair contact k is the k-th candidate pair of the last build, in (i, j) order; one that
+  /// carries no history has no record (cand_j_) and is an inactive contact with zero
+  /// springs (a fresh record's values).
   /// Candidate pair k's second body.
   int cand_second(size_t k) const {
     const int v = cand_j_[k];
@@ -476,8 +471,11 @@ class Scene {
   /// (mass_eff and rolling_cap, which such a contact does not read, are zero).
   ContactPhys pair_phys(size_t k) const {
     if (pair_cold_on_) return pair_cold_[k].phys;  // (with the cold part: a record each)
-    const PairContact& c = pair_record(k);
     ContactPhys p;
+    p.model = static_cast<ContactModel>(0);  // (a fresh record's)
+    const int s = cand_slot(k);
+    if (s < 0) return p;
+    const PairContact& c = pairs_[s];
     p.model = static_cast<ContactModel>(c.model);
     p.kn = c.kn;
     p.ks = c.ks;
@@ -487,16 +485,8 @@ class Scene {
   /// History of pair contact k, assembled from its hot record, its friction dissipation and
   /// its cold part (zero rolling moment and viscous dissipation without one).
   ContactState pair_state(size_t k) const {
-    ContactState s;
-    const PairContact& c = pair_record(k);
-    s.fs = c.fs;
-    if (pair_cold_on_) s.mr = pair_cold_[k].mr;
-    s.normal = c.normal;
-    s.overlap = c.overlap;
-    s.fn = c.fn;
-    s.dissip_friction = cand_slot(k) >= 0 ? pair_dissip_[cand_slot(k)] : 0.0;
-    if (pair_cold_on_) s.dissip_viscous = pair_cold_[k].dissip_viscous;
-    return s;
+    const int s = cand_slot(k);
+    return s >= 0 ? record_state(s) : ContactState();
   }
   /// Whether the scene keeps the pair contacts' cold part (PairContactCold): from the first
   /// time one of its material pairs takes a kernel that reads it (ensure_pair_cold) on.
@@ -507,7 +497,9 @@ class Scene {
   Vec3 pair_force(size_t k) const {
     if (!pair_out_.empty() && pair_out_.size() == cand_j_.size())
       return pair_out_[pair_jslot_[k]].force;
-    const PairContact& c = pair_record(k);
+    const int s = cand_slot(k);
+    if (s < 0) return Vec3::Zero();
+    const PairContact& c = pairs_[s];
     return Vec3(c.fn * c.normal + c.fs);
   }
   const std::vector<WallContact>& wall_contacts() const { return wall_contacts_; }
@@ -529,6 +521,19 @@ class Scene {
   void drop_dissipation(const ContactState& s) {
     dropped_friction_ += s.dissip_friction;
     dropped_viscous_ += s.dissip_viscous;
+  }
+  /// History of pair record s (pairs_, its friction dissipation and cold part).
+  ContactState record_state(size_t s) const {
+    ContactState st;
+    const PairContact& c = pairs_[s];
+    st.fs = c.fs;
+    if (pair_cold_on_) st.mr = pair_cold_[s].mr;
+    st.normal = c.normal;
+    st.overlap = c.overlap;
+    st.fn = c.fn;
+    st.dissip_friction = pair_dissip_[s];
+    if (pair_cold_on_) st.dissip_viscous = pair_cold_[s].dissip_viscous;
+    return st;
   }
   /// Pair contact record k (pairs_) leaves the lists (its dissipation to the scene's totals).
   void drop_pair_dissipation(size_t k) {
@@ -1029,17 +1034,17 @@ void Scene::for_each_contact_of(ContactKind kind, F&& f) const {
     const int nrows = static_cast<int>(pair_ioff_.size()) - 1;
     for (int i = 0; i < nrows; ++i) {
       for (int k = pair_ioff_[i]; k < pair_ioff_[i + 1]; ++k) {
-        const PairContact& c = pair_record(k);
+        const int s = cand_slot(k);
         r.index = static_cast<long>(k);
-        r.active = c.active;
+        r.active = s >= 0 && pairs_[s].active;
         r.body1 = i;
         r.body2 = cand_second(k);
         phys = pair_phys(k);
         scratch = pair_state(k);
         r.force2 = pair_force(k);
         r.shift2 = pair_shift(k);
-        r.arm1 = bodies_.radius[i] - 0.5 * c.overlap;
-        r.arm2 = bodies_.radius[r.body2] - 0.5 * c.overlap;
+        r.arm1 = bodies_.radius[i] - 0.5 * scratch.overlap;
+        r.arm2 = bodies_.radius[r.body2] - 0.5 * scratch.overlap;
         f(static_cast<const ContactRecord&>(r));
       }
     }

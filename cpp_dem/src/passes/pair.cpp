@@ -80,7 +80,7 @@ void Scene::update_phys(PairContact& c, size_t k, int i) {
 LawOutput Scene::apply_pair_law(size_t k, const ContactGeometry& g, Real dt) {
   PairContact& c = pairs_[k];
   PairContactCold& cold = pair_cold_[k];  // (the composed law: the scene has the cold part)
-  ContactState s = pair_state(k);
+  ContactState s = record_state(k);  // (k: the record's slot)
   const LawOutput out = apply_law(cold.phys, g, dt, s);
   c.fs = s.fs;
   c.normal = s.normal;
@@ -198,7 +198,9 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
       for (int k = k0; k < k1; ++k) {
         // (k: the candidate; s: its record, or -1)
         PairOutput* const o = direct ? nullptr : shares ? &cross[r].out : &out_j[jslot[k]];
-        const int s = cand[k];  // (its record, or < 0)
+        // (its record, or < 0; with the cold part, kPassOutputs, every candidate's record is at
+        // its index)
+        const int s = direct || shares ? cand[k] : k;
         const int j = s >= 0 ? pairs[s].j : ~s;
         if (direct && j >= jlimit) {
           // a cross pair: its shares were computed first; i's is added in its place
@@ -627,7 +629,9 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
         for (int k = k0; k < k1; ++k) {
           // (k: the candidate; s: its record, or -1)
           PairOutput* const o = kDirect ? nullptr : kShares ? &cross[r].out : &out_j[jslot[k]];
-          const int s = cand[k];  // (its record, or < 0)
+          // (its record, or < 0; with the cold part, kPassOutputs, every candidate's record is
+          // at its index)
+          const int s = kDirect || kShares ? cand[k] : k;
           const int j = s >= 0 ? pairs[s].j : ~s;
           if constexpr (kDirect) {
             if (j >= jlimit) {
@@ -644,7 +648,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
             // (a scene larger than the caches: the state of a contact's second body some
             // contacts ahead, toward the cache, its reads being the scattered ones of the
             // pass; at 1e4 bodies it slowed the pass, 0.98 x on one thread, 0.94 x on two)
-            const int sn = cand[k + kPrefetchAhead];
+            const int sn = kDirect ? cand[k + kPrefetchAhead] : k + kPrefetchAhead;
             const int jn = sn >= 0 ? pairs[sn].j : ~sn;
             __builtin_prefetch(&pos[jn]);
             __builtin_prefetch(&vel[jn]);
