@@ -524,8 +524,8 @@ constexpr int kPrefetchMinBodies = 20000;
 
 template <bool kYadeShear>
 void Scene::compute_pair_forces_hot(long& err_contact) {
-  // Body-major: body i and its contacts (i, j), j > i, which are contiguous in pairs_ (sorted
-  // by (i, j)). i's position, velocities and radius are loaded once; i's share of the forces
+  // Body-major: body i and its candidate pairs (i, j), j > i, its row of cand_j_ (sorted by
+  // (i, j); each candidate's record in pairs_, or none: Scene::cand_j_). i's position, velocities and radius are loaded once; i's share of the forces
   // and torques is summed in registers, in contact order, into pair_fi_/pair_ti_; j's share
   // goes to its slot in pair_out_, which holds the contacts grouped by j (in contact order
   // within a body), so reduce_and_integrate reads them contiguously. Both orders are fixed,
