@@ -221,7 +221,7 @@ class Scene {
   /// The shift of pair contact k's second body (its image is x_j + shift), m; zero without
   /// a cell.
   Vec3 pair_shift(size_t k) const {
-    const std::uint8_t image = candidate_images_.empty() ? kNoShift : candidate_images_[k];
+    const std::uint8_t image = candidate_image(k);
     if (image == kNoShift) return Vec3::Zero();
     Vec3 s;
     for (int a = 0; a < 3; ++a) s[a] = image_shift(image, a);
@@ -678,9 +678,12 @@ class Scene {
   /// dissipated, or the scene has the cold part. Sets cand_j_'s slots and
   /// pair_phys_version_.
   void compact_pairs(const std::vector<PairContactDisk>& disk);
-  /// Whether record c (with friction dissipation d) carries history to keep at a build.
-  bool pair_keeps_record(const PairContact& c, Real d) const {
-    return pair_cold_on_ || c.active || d != 0;
+  /// Whether a record (active or not, with friction dissipation d) carries history to keep
+  /// at a build.
+  bool pair_keeps_record(bool active, Real d) const { return pair_cold_on_ || active || d != 0; }
+  /// The image code of candidate pair k (kNoShift without a cell).
+  std::uint8_t candidate_image(size_t k) const {
+    return candidate_images_.empty() ? kNoShift : candidate_images_[k];
   }
   /// Every candidate's record in candidate order (a fresh one where it has none, or where
   /// its record carries no history) and its friction dissipation: a checkpoint's form.

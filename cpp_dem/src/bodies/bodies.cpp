@@ -89,31 +89,22 @@ int Scene::add_spheres(const std::vector<Vec3>& pos, const std::vector<Real>& ra
       throw ParameterError("position of sphere " + std::to_string(k) + ": must be finite");
   }
   const int first = num_bodies();
-  reserve_bodies(pos.size());
   for (size_t k = 0; k < pos.size(); ++k) {
     const Real r = radius[k];
     const Real m = sphere_mass(mat.density, r);
     push_body(pos[k], r, m, 0.4 * m * r * r, material, BODY_SPHERE);
+    // (after the first, whose push tells the per-body arrays: room for the rest at once)
+    if (k == 0) reserve_bodies(pos.size() - 1);
   }
   dirty_ = true;
   return first;
 }
 
 void Scene::reserve_bodies(std::size_t count) {
-  // (a batch of bodies is stored at its size, not grown by doubling one body at a time; many
-  // small batches grow by half at least, so that adding them costs linear time)
+  bodies_.reserve_more(count);
   const std::size_t n = static_cast<std::size_t>(num_bodies());
-  const auto grow = [&](auto& v) {
-    // (an array made on its first use, still empty, stays so: BodyStore::push)
-    if ((n == 0 || v.size() != n) && !bodies_.always_kept(v)) return;
-    if (v.size() != n || v.capacity() >= n + count) return;
-    v.reserve(std::max(n + count, v.capacity() + v.capacity() / 2));
-  };
-  bodies_.for_each_array(grow);
-  if (!id_of_slot_.empty()) {
-    grow(id_of_slot_);
-    grow(slot_of_id_);
-  }
+  for (auto* v : {&id_of_slot_, &slot_of_id_})  // (kept once the storage order is not the ids')
+    reserve_per_body(*v, n, count);
 }
 
 void Scene::push_body(const Vec3& x, Real radius, Real mass, Real inertia, int material,

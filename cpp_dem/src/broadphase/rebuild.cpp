@@ -194,14 +194,8 @@ void Scene::rebuild() {
   // touches now: it takes its fresh record here, in candidate order, and not at the next
   // pass (a packing's first build: every contact), the same record either way.
   const auto touching = [this](int i, int j, int q) {
-    Vec3 d = bodies_.pos[j] - bodies_.pos[i];
-    if (!candidate_images_.empty() && candidate_images_[q] != kNoShift) {
-      Vec3 sh;
-      for (int a = 0; a < 3; ++a) sh[a] = image_shift(candidate_images_[q], a);
-      d += cell_.h * sh;
-    }
     const Real rsum = bodies_.radius[i] + bodies_.radius[j];
-    return d.squaredNorm() < rsum * rsum;
+    return (bodies_.pos[j] + pair_shift(q) - bodies_.pos[i]).squaredNorm() < rsum * rsum;
   };
   const size_t ncand = cand_j_.size();
   size_t e = 0;  // (the next old record)
@@ -215,7 +209,7 @@ void Scene::rebuild() {
         drop_pair_dissipation(old[e].k);
       if (e < old.size() && old[e].i == i && old[e].j == ij.second) {
         const int k = old[e++].k;
-        if (pair_keeps_record(pairs_[k], pair_dissip_[k])) {
+        if (pair_keeps_record(pairs_[k].active, pair_dissip_[k])) {
           slot[q] = k;
           ++kept;
         }
@@ -244,9 +238,7 @@ void Scene::rebuild() {
         next_dissip.push_back(pair_dissip_[k]);
         if (pair_cold_on_) next_cold.push_back(pair_cold_[k]);
       } else if (k == kFreshRecord) {
-        PairContact c;
-        c.j = cand_j_[q];
-        next.push_back(c);
+        next.push_back(fresh_pair(cand_j_[q], kNoShift));
         next_dissip.push_back(0.0);
         if (pair_cold_on_) next_cold.emplace_back();
       } else {
@@ -254,7 +246,7 @@ void Scene::rebuild() {
         continue;
       }
       // (The image may change for a kept contact: a body was wrapped into the cell.)
-      next.back().image = candidate_images_.empty() ? kNoShift : candidate_images_[q];
+      next.back().image = candidate_image(q);
       cand_j_[q] = static_cast<int>(next.size()) - 1;
     }
   }

@@ -228,9 +228,7 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
           continue;
         }
         if (s < 0) {
-          fresh = PairContact();
-          fresh.j = j;
-          fresh.image = image;
+          fresh = fresh_pair(j, image);
           fresh_dissip = 0;
         }
         PairContact& c = s >= 0 ? pairs[s] : fresh;
@@ -398,8 +396,7 @@ void Scene::materialize_pairs() {
         next[k] = pairs_[s];
         next_dissip[k] = pair_dissip_[s];
       } else {
-        next[k].j = cand_second(k);
-        next[k].image = candidate_images_.empty() ? kNoShift : candidate_images_[k];
+        next[k] = fresh_pair(cand_second(k), candidate_image(k));
       }
       cand_j_[k] = static_cast<int>(k);
     }
@@ -411,24 +408,8 @@ void Scene::materialize_pairs() {
 void Scene::compact_pairs(const std::vector<PairContactDisk>& disk) {
   // (disk and pair_dissip_ hold one record for each candidate, in candidate order)
   const size_t nc = disk.size();
-  const auto hot = [](const PairContactDisk& d) {
-    PairContact c;
-    c.j = d.j;
-    c.active = d.active;
-    c.kernel = d.kernel;
-    c.image = d.image;
-    c.model = d.model;
-    c.kn = d.kn;
-    c.ks = d.ks;
-    c.tan_phi = d.tan_phi;
-    c.fs = d.fs;
-    c.overlap = d.overlap;
-    c.normal = d.normal;
-    c.fn = d.fn;
-    return c;
-  };
   size_t kept = 0;
-  for (size_t k = 0; k < nc; ++k) kept += pair_keeps_record(hot(disk[k]), pair_dissip_[k]);
+  for (size_t k = 0; k < nc; ++k) kept += pair_keeps_record(disk[k].active, pair_dissip_[k]);
   std::vector<PairContact> next;
   std::vector<Real> next_dissip;
   const size_t cap = pair_cold_on_ ? kept : kept + kept / 16 + 16;
@@ -438,15 +419,14 @@ void Scene::compact_pairs(const std::vector<PairContactDisk>& disk) {
   // unless the materials changed after that pass).
   pair_phys_version_ = phys_version_;
   for (size_t k = 0; k < nc; ++k) {
-    const PairContact c = hot(disk[k]);
-    if (c.active && disk[k].phys_version != phys_version_)
-      pair_phys_version_ = disk[k].phys_version;
-    if (!pair_keeps_record(c, pair_dissip_[k])) {
+    const PairContactDisk& d = disk[k];
+    if (d.active && d.phys_version != phys_version_) pair_phys_version_ = d.phys_version;
+    if (!pair_keeps_record(d.active, pair_dissip_[k])) {
       cand_j_[k] = ~cand_j_[k];  // (no record: its second body's complement)
       continue;
     }
     cand_j_[k] = static_cast<int>(next.size());
-    next.push_back(c);
+    next.push_back(hot_pair(d));
     next_dissip.push_back(pair_dissip_[k]);
   }
   pairs_.swap(next);
@@ -460,30 +440,17 @@ void Scene::expanded_pairs(std::vector<PairContactDisk>& out, std::vector<Real>&
   const int nrows = static_cast<int>(pair_ioff_.size()) - 1;
   for (int i = 0; i < nrows; ++i) {
     for (int k = pair_ioff_[i]; k < pair_ioff_[i + 1]; ++k) {
-      PairContactDisk& d = out[k];
-      d.i = i;
-      d.j = cand_second(k);
-      d.image = candidate_images_.empty() ? kNoShift : candidate_images_[k];
       const int s = cand_slot(k);
-      // (a record that carries no history is saved as the fresh one it is equal to in all
-      // but the parameters of its last touch, which its next touch makes again)
-      if (s < 0 || !pair_keeps_record(pairs_[s], pair_dissip_[s])) continue;
-      const PairContact& c = pairs_[s];
-      d.active = c.active;
-      d.kernel = c.kernel;
-      d.image = c.image;
-      d.model = c.model;
-      // (an active contact's phys are of the last pass's version; an inactive one's are
-      // made again at its next touch)
-      d.phys_version = c.active ? pair_phys_version_ : -1;
-      d.kn = c.kn;
-      d.ks = c.ks;
-      d.tan_phi = c.tan_phi;
-      d.fs = c.fs;
-      d.overlap = c.overlap;
-      d.normal = c.normal;
-      d.fn = c.fn;
-      dissip[k] = pair_dissip_[s];
+      if (s >= 0 && pair_keeps_record(pairs_[s].active, pair_dissip_[s])) {
+        // (an active contact's phys are of the last pass's version; an inactive one's are
+        // made again at its next touch)
+        out[k] = disk_pair(pairs_[s], i, pairs_[s].active ? pair_phys_version_ : -1);
+        dissip[k] = pair_dissip_[s];
+      } else {
+        // (a record that carries no history is saved as the fresh one it is equal to in all
+        // but the parameters of its last touch, which its next touch makes again)
+        out[k] = disk_pair(fresh_pair(cand_second(k), candidate_image(k)), i, -1);
+      }
     }
   }
 }
@@ -678,9 +645,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
             continue;
           }
           if (__builtin_expect(s < 0, 0)) {
-            fresh = PairContact();
-            fresh.j = j;
-            fresh.image = image;
+            fresh = fresh_pair(j, image);
             fresh_dissip = 0;
           }
           PairContact& c = s >= 0 ? pairs[s] : fresh;

@@ -3,6 +3,7 @@
 // here, to push() and to for_each_array(); the passes read the arrays directly.
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cstdint>
 #include <vector>
@@ -29,6 +30,14 @@ void size_energy_arrays(Store& s) {
   s.ext_work.resize(n, 0);
   s.pos_at_energy_reset.resize(n);
   for (size_t k = old; k < n; ++k) s.pos_at_energy_reset[k] = s.pos[k];
+}
+
+/// Room in v, an array of one entry per body of n (none where v has not, or n is 0), for
+/// count more: at least half its capacity more, so that many small batches cost linear time.
+template <class V>
+void reserve_per_body(V& v, std::size_t n, std::size_t count) {
+  if (n > 0 && v.size() == n && v.capacity() < n + count)
+    v.reserve(std::max(n + count, v.capacity() + v.capacity() / 2));
 }
 
 struct BodyStore {
@@ -91,13 +100,13 @@ struct BodyStore {
     if (!inertia_scale.empty()) inertia_scale.push_back(1.0);
   }
 
-  /// Whether v is one of the arrays every body has from its push (not made on first use).
-  template <class V>
-  bool always_kept(const V& v) const {
-    const void* p = &v;
-    return p == &pos || p == &vel || p == &angvel || p == &force || p == &torque || p == &ori ||
-           p == &radius || p == &mass || p == &inertia || p == &material || p == &blocked ||
-           p == &kind || p == &clump;
+  /// Room for count more bodies in every array that holds one entry per body (so not in one
+  /// made on its first use and still empty; with no body yet, none is told apart: nothing).
+  /// A batch is stored at its size, not grown by doubling one body at a time; small batches
+  /// grow by half at least (linear time).
+  void reserve_more(std::size_t count) {
+    const std::size_t n = pos.size();
+    for_each_array([&](auto& v) { reserve_per_body(v, n, count); });
   }
 
   /// Body b's imposed force and torque (zero where none was ever set).

@@ -63,6 +63,52 @@ struct PairContactDisk {
   Real fn = 0;
 };
 
+/// The record of a candidate that has not touched (or touched and opened without slipping):
+/// second body j, seen at its image, inactive, with zero springs and no parameters yet.
+inline PairContact fresh_pair(int j, std::uint8_t image) {
+  PairContact c;
+  c.j = j;
+  c.image = image;
+  return c;
+}
+
+/// A checkpoint's record as the hot record (its first body and phys version aside).
+inline PairContact hot_pair(const PairContactDisk& d) {
+  PairContact c = fresh_pair(d.j, d.image);
+  c.active = d.active;
+  c.kernel = d.kernel;
+  c.model = d.model;
+  c.kn = d.kn;
+  c.ks = d.ks;
+  c.tan_phi = d.tan_phi;
+  c.fs = d.fs;
+  c.overlap = d.overlap;
+  c.normal = d.normal;
+  c.fn = d.fn;
+  return c;
+}
+
+/// The hot record c of first body i, its phys made at version phys_version, as a checkpoint
+/// holds it.
+inline PairContactDisk disk_pair(const PairContact& c, int i, int phys_version) {
+  PairContactDisk d;
+  d.i = i;
+  d.j = c.j;
+  d.active = c.active;
+  d.kernel = c.kernel;
+  d.image = c.image;
+  d.model = c.model;
+  d.phys_version = phys_version;
+  d.kn = c.kn;
+  d.ks = c.ks;
+  d.tan_phi = c.tan_phi;
+  d.fs = c.fs;
+  d.overlap = c.overlap;
+  d.normal = c.normal;
+  d.fn = c.fn;
+  return d;
+}
+
 /// The cold part of a sphere–sphere contact (same index as its PairContact), in a scene
 /// whose materials need it (PairContact).
 struct PairContactCold {
