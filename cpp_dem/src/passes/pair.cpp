@@ -593,12 +593,13 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
         V4 wi = v4(angvel[i]);
         if constexpr (kPeriodic) wi += spin;
         const Real ri = radius[i];
+        // Candidate k's record, or < 0 (cand_j_); with the cold part, kPassOutputs, every
+        // candidate's record is at its index.
+        const auto record_of = [cand](int k) { return kDirect || kShares ? cand[k] : k; };
         for (int k = k0; k < k1; ++k) {
           // (k: the candidate; s: its record, or -1)
           PairOutput* const o = kDirect ? nullptr : kShares ? &cross[r].out : &out_j[jslot[k]];
-          // (its record, or < 0; with the cold part, kPassOutputs, every candidate's record is
-          // at its index)
-          const int s = kDirect || kShares ? cand[k] : k;
+          const int s = record_of(k);
           const int j = s >= 0 ? pairs[s].j : ~s;
           if constexpr (kDirect) {
             if (j >= jlimit) {
@@ -615,7 +616,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
             // (a scene larger than the caches: the state of a contact's second body some
             // contacts ahead, toward the cache, its reads being the scattered ones of the
             // pass; at 1e4 bodies it slowed the pass, 0.98 x on one thread, 0.94 x on two)
-            const int sn = kDirect ? cand[k + kPrefetchAhead] : k + kPrefetchAhead;
+            const int sn = record_of(k + kPrefetchAhead);
             const int jn = sn >= 0 ? pairs[sn].j : ~sn;
             __builtin_prefetch(&pos[jn]);
             __builtin_prefetch(&vel[jn]);

@@ -72,19 +72,26 @@ inline PairContact fresh_pair(int j, std::uint8_t image) {
   return c;
 }
 
+/// The fields the hot record and the checkpoint's share, from one to the other (all but
+/// the bodies, the image and the phys version).
+template <class From, class To>
+void copy_pair_fields(const From& a, To& b) {
+  b.active = a.active;
+  b.kernel = a.kernel;
+  b.model = a.model;
+  b.kn = a.kn;
+  b.ks = a.ks;
+  b.tan_phi = a.tan_phi;
+  b.fs = a.fs;
+  b.overlap = a.overlap;
+  b.normal = a.normal;
+  b.fn = a.fn;
+}
+
 /// A checkpoint's record as the hot record (its first body and phys version aside).
 inline PairContact hot_pair(const PairContactDisk& d) {
   PairContact c = fresh_pair(d.j, d.image);
-  c.active = d.active;
-  c.kernel = d.kernel;
-  c.model = d.model;
-  c.kn = d.kn;
-  c.ks = d.ks;
-  c.tan_phi = d.tan_phi;
-  c.fs = d.fs;
-  c.overlap = d.overlap;
-  c.normal = d.normal;
-  c.fn = d.fn;
+  copy_pair_fields(d, c);
   return c;
 }
 
@@ -94,18 +101,9 @@ inline PairContactDisk disk_pair(const PairContact& c, int i, int phys_version) 
   PairContactDisk d;
   d.i = i;
   d.j = c.j;
-  d.active = c.active;
-  d.kernel = c.kernel;
   d.image = c.image;
-  d.model = c.model;
   d.phys_version = phys_version;
-  d.kn = c.kn;
-  d.ks = c.ks;
-  d.tan_phi = c.tan_phi;
-  d.fs = c.fs;
-  d.overlap = c.overlap;
-  d.normal = c.normal;
-  d.fn = c.fn;
+  copy_pair_fields(c, d);
   return d;
 }
 
