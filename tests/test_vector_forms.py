@@ -95,3 +95,94 @@ def test_the_wide_and_the_narrow_form_step_to_the_same_bits(scene, n, steps, tmp
     ab = load_bench("ab_build")
     assert _hash(ab, scene, n, steps, False, tmp_path) == _hash(ab, scene, n, steps, True,
                                                                 tmp_path)
+
+
+# The direct pass below the prefetch's size runs its active linear contacts eight at a time
+# (cpp_dem/src/passes/pair_batch.hpp, a second writing of the linear short kernel) and adds
+# every share afterwards in the loop's order. These scenes take it through each of its
+# branches: contacts forming and opening as a loose cloud falls (they leave the batch for a
+# step), Hertz-Mindlin contacts between them in the same rows (their shares kept apart, in
+# order), slip (friction 0.2), both shear kinematics, one sphere whose row holds more
+# candidates than a block (kBatchRow: it runs alone), two threads (cross pairs), and a
+# periodic cell under a velocity gradient (images, the mean field's velocity and spin).
+BATCH_SCRIPT = textwrap.dedent("""
+    import sys
+    import numpy as np
+    import cpp_dem as dem
+    out, threads, kinematics, cell = sys.argv[1], int(sys.argv[2]), sys.argv[3], sys.argv[4]
+    dem.set_num_threads(threads)
+    rng = np.random.default_rng(5)
+    periodic = cell == "periodic"
+    s = dem.Scene(gravity=(0, 0, 0 if periodic else -9.81),
+                  local_damping=0.05 if periodic else 0.4)
+    s.shear_kinematics = kinematics
+    lin = s.add_material(dem.linear_material(density=2600, young=5e6, poisson=0.3,
+                                             friction_angle_deg=11.3))
+    hm = s.add_material(dem.hertz_mindlin_material(density=2600, shear_modulus=2e6,
+                                                   poisson=0.25, friction_coefficient=0.2))
+    def lattice(n, h, z0=0.0, jitter=2e-4):
+        g = np.stack(np.meshgrid(*[np.arange(k) for k in n], indexing="ij"), -1).reshape(-1, 3)
+        return h * (g + 0.5) + [0, 0, z0] + rng.uniform(-jitter, jitter, (len(g), 3))
+    if periodic:
+        # a loose lattice that the cell compresses and shears into a packing
+        x = lattice((10, 10, 10), 0.0036)
+        s.set_periodic_cell(np.diag([0.036, 0.036, 0.036]))
+        s.add_spheres(x, rng.uniform(0.0012, 0.0017, len(x)), material=lin)
+        s.velocity_gradient = [[-4.0, 2.0, 0], [0, -4.0, 0], [0, 0, -4.0]]
+    else:
+        side = 0.08
+        s.add_box((0, 0, 0), (side, side, 0.08), material=lin)
+        # body 0: a large sphere on the floor with 300 small ones touching it, all in its row
+        # (Fibonacci points on its surface); five layers of small spheres fall on them
+        k = np.arange(300) + 0.5
+        polar, azimuth = np.arccos(1 - 2 * k / 300), np.pi * (1 + 5 ** 0.5) * k
+        shell = np.stack([np.sin(polar) * np.cos(azimuth), np.sin(polar) * np.sin(azimuth),
+                          np.cos(polar)], -1)
+        centre = np.array([side / 2, side / 2, 0.0125])
+        x = np.vstack([centre + (0.01 + 0.001 - 1e-5) * shell,
+                       lattice((14, 14, 5), 0.0055, z0=0.042)])
+        s.add_spheres(np.vstack([centre, x]),
+                      np.r_[0.01, np.full(300, 0.001), rng.uniform(0.0015, 0.0025, len(x) - 300)],
+                      material=lin)
+    for b in range(1, len(x) + 1, 7):
+        s.set_body_material(b, hm)
+    s.dt = 1e-5 if periodic else 2e-5
+    s.run(1)
+    big = int(np.sum(s.contacts()["ids"] == 0))
+    batched = 0
+    for k in range(50):
+        if periodic and k == 34:
+            s.velocity_gradient = [[0, 4.0, 0], [0, 0, 0], [0, 0, 0]]  # then shear alone
+        s.run(200 if periodic else 300)
+        batched = max(batched, s._pair_batched())
+    np.savez(out, x=s.positions, v=s.velocities, w=s.angular_velocities, f=s.forces,
+             t=s.torques, contacts=s.num_active_contacts,
+             walls=np.zeros(0) if periodic else s.wall_forces,
+             big=big,
+             batched=batched)
+""")
+
+
+@pytest.mark.skipif(cpu_dispatch()["dem_simd"]["ops"] != "wide",
+                    reason="this CPU runs the narrow form only (no AVX2 + FMA)")
+@pytest.mark.parametrize("kinematics, cell", [("contact_point", "walls"), ("yade", "walls"),
+                                              ("contact_point", "periodic")])
+def test_the_linear_batch_gives_the_narrow_forms_bits_on_each_branch(tmp_path, kinematics,
+                                                                     cell):
+    def run(narrow: bool, threads: int) -> dict:
+        out = tmp_path / f"b{int(narrow)}_{threads}.npz"
+        env = dict(os.environ, CPP_DEM_NARROW="1" if narrow else "0")
+        subprocess.run([sys.executable, "-c", BATCH_SCRIPT, str(out), str(threads), kinematics,
+                        cell], env=env, check=True, timeout=300)
+        return dict(np.load(out))
+
+    narrow, wide1, wide2 = run(True, 1), run(False, 1), run(False, 2)
+    assert int(narrow["contacts"]) > 600  # a packing: contacts everywhere
+    assert int(narrow["batched"]) == 0    # (the Eigen form has no batch)
+    assert int(wide1["batched"]) > 300    # ... the 4-lane form ran one
+    if cell == "walls":
+        assert int(narrow["big"]) > 128   # the large sphere's row was longer than a block
+    for key in narrow:
+        if key != "batched":
+            assert np.array_equal(wide1[key], narrow[key]), key
+            assert np.array_equal(wide2[key], narrow[key]), key

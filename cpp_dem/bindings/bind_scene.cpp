@@ -510,6 +510,8 @@ Replaces an earlier law of the pair; contacts take it at their next step.)doc")
         d["grid_candidates"] = c.grid_candidates;
         return d;
       })
+      .def("_pair_batched", &Scene::pair_batched,
+           "The pair contacts the last pair pass ran eight at a time (tests; docs/core.md).")
       .def("contacts", &contacts_dict, "Active contacts as arrays (see docs).")
       .def_property_readonly("num_active_contacts", &Scene::num_active_contacts);
 }

@@ -454,6 +454,10 @@ class Scene {
   /// Python's. A vector of vectors counts its buffers too.
   std::vector<std::pair<std::string, std::size_t>> memory_by_field() const;
   ColliderStats collider_stats() const;
+  /// The pair contacts the last pair pass ran eight at a time (docs/core.md, "Eight contacts
+  /// at a time"), for tests: the others took the per-contact loop. It depends on the threads
+  /// (a threaded pass runs its cross pairs apart), the results do not.
+  long pair_batched() const { return pair_batched_; }
 
   /// Pair contact k is the k-th candidate pair of the last build, in (i, j) order; one that
   /// carries no history has no record (cand_j_) and is an inactive contact with zero
@@ -825,6 +829,10 @@ class Scene {
   // the reduction then reads those sums, and pair_out_ is not kept (on more threads as on
   // one: pair_cross_, below).
   bool pair_direct_ = false;
+  // The pair passes left to run without the batch of active linear contacts (pair.cpp's
+  // kBatchRest; a speed choice only: both loops give the same bits).
+  int pair_batch_rest_ = 0;
+  long pair_batched_ = 0;  // (the contacts the last pass's batch ran: pair_batched())
   // Per body: the sum over its contacts as i of -force and torque_i, written by the pair
   // pass every step (scratch, not state).
   // i's share of its pair contacts' forces (N) and torques (N m), 4 doubles per body (the

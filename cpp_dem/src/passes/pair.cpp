@@ -5,6 +5,8 @@
 #include <limits>
 #include <type_traits>
 
+#include <unistd.h>
+
 #include "cpp_dem/core/parallel.hpp"
 #include "cpp_dem/core/simd.hpp"
 #include "cpp_dem/geometry/sphere_sphere.hpp"
@@ -12,10 +14,31 @@
 #include "cpp_dem/laws/linear.hpp"
 #include "cpp_dem/laws/registry.hpp"
 #include "cpp_dem/scene.hpp"
+#include "pair_batch.hpp"
 
 namespace cpp_dem {
 
 namespace {
+
+/// The longest row (candidates of one body) the direct pass runs through the batch.
+constexpr int kBatchRow = 128;
+/// The passes without the batch after one that queued under a quarter of its candidates.
+constexpr int kBatchRest = 32;
+
+/// The bodies a thread sums below which the direct pass runs the batch: a thread's rows,
+/// their bodies' state and their records, about 200 B a body, within the core's L2 cache
+/// (sysconf; 1 MiB where it is not known, and on the machine where it was measured:
+/// 5 243 bodies). Beyond it the pass waits on memory, which the per-contact loop hides behind
+/// the contacts' arithmetic and the batch does not: one thread, the step against the loop
+/// alone, 1.18 x as fast at 1 000 bodies, 1.16 x at 2 000, 1.12 x at 4 000, 1.00 x at 7 000,
+/// 0.97 x at 10 000 and 0.85 x at 100 000 (docs/benchmarks.md).
+long batch_bodies_per_thread() {
+  static const long bodies = [] {
+    const long l2 = sysconf(_SC_LEVEL2_CACHE_SIZE);
+    return (l2 > 0 ? l2 : 1L << 20) / 200;
+  }();
+  return bodies;
+}
 
 // The pair pass's modes (compute_pair_forces_hot, pair_bodies_narrow): j's shares into the
 // outputs, summed by the reduction; j's and i's into the bodies' sums at once; a threaded
@@ -24,15 +47,15 @@ constexpr int kPassOutputs = 0, kPassDirect = 1, kPassCross = 2;
 
 /// Pair contact c with the Hertz–Mindlin short kernel (hertz_frictional; kDamped:
 /// hertz_damped, with the dashpots of its cold record's phys) on its hot record: j's force
-/// and torque into force_j and torque_j (PairOutput's padded vectors), i's added to fi and
-/// ti; slip energy into dissip_friction, viscous energy into the cold record. The force and the moments are
+/// and torque into force_j and torque_j (PairOutput's padded vectors), i's shares (as the
+/// pass adds them) into dfi and dti; slip energy into dissip_friction, viscous energy into the cold record. The force and the moments are
 /// general_pair's expressions, to the bit: the composed law's force fn n + fs plus its shear
 /// dashpot's (zero without one), the branches li n and -lj n, and its zero rolling moment
 /// added on j and subtracted on i (a -0 component comes out as general_pair's).
 template <bool kDamped, class Ops, class V>
 ALWAYS_INLINE void hertz_pair(PairContact& c, PairContactCold* cold, Real& dissip_friction,
                               Real* force_j, Real* torque_j, const V& n, Real overlap, Real li, Real lj,
-                              const V& rel_vel, const V& angvel_sum, Real dt, V& fi, V& ti,
+                              const V& rel_vel, const V& angvel_sum, Real dt, V& dfi, V& dti,
                               Ops ops) {
   V fs = ops.load_head(c.fs.data());
   V fvs = ops.zero();
@@ -48,8 +71,8 @@ ALWAYS_INLINE void hertz_pair(PairContact& c, PairContactCold* cold, Real& dissi
   ops.store_padded(force_j, f);
   ops.store_padded(torque_j, V(ops.cross(V(-lj * n), f) + ops.zero()));
   const V f_i = -f;
-  fi += f_i;
-  ti += V(ops.cross(V(li * n), f_i) - ops.zero());
+  dfi = f_i;
+  dti = V(ops.cross(V(li * n), f_i) - ops.zero());
 }
 
 }  // namespace
@@ -246,11 +269,14 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
         sphere_sphere_frame<Ops, kYadeShear>(d, dist, overlap, ri, rj, vi, vj, wi, wj, n, li, lj,
                                              rel_vel);
         if (c.kernel != kLinearKernel) {
+          V dfi, dti;  // (i's shares)
           if (c.kernel == kHertzKernel) {
             alignas(32) Real hf[4], ht[4];  // (direct: j's share, added below)
             hertz_pair<false>(c, nullptr, dis, o ? o->force.data() : hf,
                               o ? o->torque_j.data() : ht, n, overlap, li, lj, rel_vel,
-                              V(wi + wj), dt, fi, ti, ops);
+                              V(wi + wj), dt, dfi, dti, ops);
+            fi += dfi;
+            ti += dti;
             if (!o) {
               ops.store(fsum[j], V(ops.load(fsum[j]) + ops.load_padded(hf)));
               ops.store(tsum[j], V(ops.load(tsum[j]) + ops.load_padded(ht)));
@@ -261,7 +287,9 @@ void Scene::pair_bodies_narrow(int r0, int r1, long& err_out, int mode, int jlim
           } else if (c.kernel == kHertzDampedKernel) {
             // (with the cold part every candidate has its record, at its index: s == k)
             hertz_pair<true>(c, &pair_cold_[s], dis, o->force.data(), o->torque_j.data(),
-                             n, overlap, li, lj, rel_vel, V(wi + wj), dt, fi, ti, ops);
+                             n, overlap, li, lj, rel_vel, V(wi + wj), dt, dfi, dti, ops);
+            fi += dfi;
+            ti += dti;
           } else {
             const auto on_i = general_pair(s, *o, ops.vec(n), overlap, li, lj, ops.vec(rel_vel),
                                            ops.vec(wi + wj), ops.vec(wj - wi));
@@ -552,7 +580,17 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   const V4 l0 = v4(cell_.vel_grad.col(0)), l1 = v4(cell_.vel_grad.col(1)),
            l2 = v4(cell_.vel_grad.col(2)), spin = v4(cell_.spin());
   const Real* const offsets = image_offset_.data()->data();
-#pragma omp parallel reduction(min : err) if (nc > kParallelMin)
+  // The batch (below) runs in a direct pass whose threads' bodies fit the cache
+  // (batch_bodies_per_thread). A pass that queued under a quarter of its candidates (few
+  // active linear contacts: Hertz-Mindlin grains, a loose cloud) turns it off for the next
+  // kBatchRest passes: the loop without it is the faster one there (its instantiation with the
+  // batch ran a scene of few contacts 5 % slower).
+  const long team = nc > kParallelMin ? max_threads() : 1;
+  const bool batching =
+      pair_direct_ && n < team * batch_bodies_per_thread() && pair_batch_rest_ == 0;
+  if (pair_batch_rest_ > 0) --pair_batch_rest_;
+  long queued = 0;  // (the contacts the batch ran)
+#pragma omp parallel reduction(min : err) reduction(+ : queued) if (nc > kParallelMin)
   {
     const auto [t, nt] = thread_and_team();
     const bool crossing = pair_direct_ && nt > 1;
@@ -575,19 +613,126 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
     const bool prefetch = n >= kPrefetchMinBodies;
     // Rows r0 .. r1: bodies, or in kPassCross cross slots (one contact each). kPassDirect:
     // the contacts with j >= jlimit are cross pairs, whose shares are pair_cross_[cursor..].
-    const auto loop = [=, &err, &fresh, &fresh_dissip](auto periodic_tag, auto mode_tag, int r0, int r1, int jlimit,
-                                long cursor) __attribute__((always_inline)) {
+    // batch_tag: the instantiation with the batch (below).
+    const auto loop = [=, &err, &queued, &fresh, &fresh_dissip](
+                          auto periodic_tag, auto mode_tag, auto batch_tag, int r0, int r1,
+                          int jlimit, long cursor) __attribute__((always_inline)) {
     constexpr bool kPeriodic = decltype(periodic_tag)::value;
     // (kDirect: j's share into its sums at once, i's at the end of its contacts; kShares:
     // a cross pair's shares into its PairCross)
     constexpr bool kDirect = decltype(mode_tag)::value == kPassDirect;
     constexpr bool kShares = decltype(mode_tag)::value == kPassCross;
+    // The direct pass runs its active linear contacts eight at a time (pair_batch.hpp): the
+    // rows of a block queue them, the batch runs them, and every share is then added in the
+    // order of the rows and their contacts (flush), so the sums are the per-contact loop's.
+    // The bodies' sums are not read in the pass, so deferring them changes only their time.
+    constexpr bool kBatch = decltype(batch_tag)::value && kDirect;
+    struct Entry {
+      V4 dfi, dti, fj, tj;  // the shares of a contact outside the batch: i's, and j's
+      int q;                // or its place in the queue
+      int j;                // (j: with j's share; -1: i's alone, a cross pair's)
+    };
+    constexpr int kCap = kBatch ? kBatchRow : 1;
+    [[maybe_unused]] pair_batch::Queue<kCap> queue;
+    [[maybe_unused]] Entry entry[kCap];
+    [[maybe_unused]] int row_end[kCap], row_body[kCap];
+    [[maybe_unused]] int nq = 0, ne = 0, nr = 0;
+    [[maybe_unused]] int last_linear = 0;  // (the last row's active linear contacts)
+    [[maybe_unused]] const auto flush = [&]() __attribute__((always_inline)) {
+      // The queued contacts, kLanes at a time (the last lanes repeat the last contact), then
+      // the block's rows in order: each contact's shares (j's into its sums, i's into fi
+      // and ti), then i's sums.
+      queued += nq;
+      if (nq > 0) queue.pad(nq);
+      for (int m = 0; m < nq; m += pair_batch::kLanes)
+        pair_batch::linear8<kYadeShear, kPeriodic>(queue, m, pairs, dissip, vel, angvel, dt, l0,
+                                                   l1, l2, spin);
+      int e = 0;
+      for (int m = 0; m < nr; ++m) {
+        V4 fi = V4{}, ti = V4{};
+        for (; e < row_end[m]; ++e) {
+          const Entry& x = entry[e];
+          if (x.q >= 0) {
+            // (component by component: the same sums as the 4-lane ones; x - y is x + (-y))
+            const int a = x.q, jq = queue.j[a];
+            fsum[jq][0] += queue.fx[a];
+            fsum[jq][1] += queue.fy[a];
+            fsum[jq][2] += queue.fz[a];
+            tsum[jq][0] += queue.tx[a];
+            tsum[jq][1] += queue.ty[a];
+            tsum[jq][2] += queue.tz[a];
+            fi -= V4{queue.fx[a], queue.fy[a], queue.fz[a], 0.0};
+            ti -= V4{queue.lx[a], queue.ly[a], queue.lz[a], 0.0};
+          } else {
+            if (x.j >= 0) {
+              store3(fsum[x.j], v4(fsum[x.j]) + x.fj);
+              store3(tsum[x.j], v4(tsum[x.j]) + x.tj);
+            }
+            fi += x.dfi;
+            ti += x.dti;
+          }
+        }
+        const int i = row_body[m];
+        store3(fsum[i], v4(fsum[i]) + fi);
+        store3(tsum[i], v4(tsum[i]) + ti);
+      }
+      nq = ne = nr = 0;
+    };
     for (int r = r0; r < r1; ++r) {
       const int k0 = kShares ? cross_k[r] : ioff[r], k1 = kShares ? k0 + 1 : ioff[r + 1];
       const int i = kShares ? cross[r].i : r;
       // i's share: -force and torque_i summed over its contacts.
       V4 fi = V4{}, ti = V4{};
       [[maybe_unused]] bool gave = false;  // (kShares)
+      // (kBatch: a row of at most kCap candidates joins the block, its active linear
+      // contacts queued and the others' shares kept in entry, in contact order; a longer row
+      // runs alone, after the block. A block starts at a row after one with such contacts, so
+      // a scene without them (Hertz-Mindlin grains) pays nothing for it.)
+      [[maybe_unused]] const bool batch =
+          kBatch && k1 - k0 <= kCap && (nr > 0 || last_linear > 0);
+      if constexpr (kBatch) last_linear = 0;
+      if constexpr (kBatch) {
+        if (nr > 0 && (!batch || ne + (k1 - k0) > kCap || nr == kCap)) flush();
+      }
+      // i's shares of a contact, and j's share with it (give_ij)
+      const auto give_i = [&](const V4& dfi, const V4& dti) __attribute__((always_inline)) {
+        if (kBatch && batch) {
+          entry[ne].dfi = dfi;
+          entry[ne].dti = dti;
+          entry[ne].q = -1;
+          entry[ne].j = -1;
+          ++ne;
+        } else {
+          fi += dfi;
+          ti += dti;
+        }
+      };
+      // (kSub: i's shares are f and t subtracted, the linear kernel's form; in an entry they
+      // are kept negated, as x - y is x + (-y) to the bit)
+      [[maybe_unused]] const auto give_ij = [&](auto sub_tag, int j, const V4& fj, const V4& tj,
+                                                const V4& f, const V4& t)
+          __attribute__((always_inline)) {
+        constexpr bool kSub = decltype(sub_tag)::value;
+        if (kBatch && batch) {
+          entry[ne].dfi = kSub ? -f : f;
+          entry[ne].dti = kSub ? -t : t;
+          entry[ne].fj = fj;
+          entry[ne].tj = tj;
+          entry[ne].q = -1;
+          entry[ne].j = j;
+          ++ne;
+        } else {
+          store3(fsum[j], v4(fsum[j]) + fj);
+          store3(tsum[j], v4(tsum[j]) + tj);
+          if constexpr (kSub) {
+            fi -= f;
+            ti -= t;
+          } else {
+            fi += f;
+            ti += t;
+          }
+        }
+      };
       if (k0 < k1) {
         const V4 xi = v4(pos[i]), vi = v4(vel[i]);
         V4 wi = v4(angvel[i]);
@@ -605,10 +750,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
             if (j >= jlimit) {
               // a cross pair: its shares were computed first; i's is added in its place
               const PairCross& x = cross[cursor++];
-              if (x.on) {
-                fi += load4(x.fi.data());
-                ti += load4(x.ti.data());
-              }
+              if (x.on) give_i(load4(x.fi.data()), load4(x.ti.data()));
               continue;
             }
           }
@@ -645,6 +787,17 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
             err = std::min(err, static_cast<long>(k));
             continue;
           }
+          if constexpr (kBatch) {
+            // an active contact of the linear kernel: queued for the batch (pair_batch.hpp)
+            if (batch && s >= 0 && dist > 0 && pairs[s].active && !stale &&
+                pairs[s].kernel == kLinearKernel) {
+              queue.put(nq, d, dist, overlap, ri, rj, s, i, j);
+              entry[ne].q = nq++;
+              ++ne;
+              ++last_linear;
+              continue;
+            }
+          }
           if (__builtin_expect(s < 0, 0)) {
             fresh = fresh_pair(j, image);
             fresh_dissip = 0;
@@ -665,28 +818,32 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
                                                    li, lj, rel_vel);
           if (c.kernel != kLinearKernel) {
             if (c.kernel == kHertzKernel) {
+              V4 dfi, dti;  // (i's shares)
               if constexpr (kDirect) {
                 alignas(32) Real hf[4], ht[4];
                 hertz_pair<false>(c, nullptr, dis, hf, ht, n, overlap, li, lj, rel_vel,
-                                  V4(wi + wj), dt, fi, ti, WideOps());
-                store3(fsum[j], v4(fsum[j]) + load4(hf));
-                store3(tsum[j], v4(tsum[j]) + load4(ht));
+                                  V4(wi + wj), dt, dfi, dti, WideOps());
+                give_ij(std::false_type{}, j, load4(hf), load4(ht), dfi, dti);
               } else {
                 hertz_pair<false>(c, nullptr, dis, o->force.data(), o->torque_j.data(), n,
-                                  overlap, li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
+                                  overlap, li, lj, rel_vel, V4(wi + wj), dt, dfi, dti,
+                                  WideOps());
+                give_i(dfi, dti);
               }
               if (__builtin_expect(s < 0, 0)) keep_new_pair(thread, k, c, dis);
             } else if (kDirect || !pair_cold_on_) {
               continue;  // (a bug: pair_cold_missing_ stops the step)
             } else if (c.kernel == kHertzDampedKernel) {
               // (with the cold part every candidate has its record, at its index: s == k)
+              V4 dfi, dti;
               hertz_pair<true>(c, &pair_cold_[s], dis, o->force.data(), o->torque_j.data(),
-                               n, overlap, li, lj, rel_vel, V4(wi + wj), dt, fi, ti, WideOps());
+                               n, overlap, li, lj, rel_vel, V4(wi + wj), dt, dfi, dti,
+                               WideOps());
+              give_i(dfi, dti);
             } else {
               const auto on_i = general_pair(s, *o, vec3(n), overlap, li, lj, vec3(rel_vel),
                                              vec3(wi + wj), vec3(wj - wi));
-              fi += v4(on_i.first);
-              ti += v4(on_i.second);
+              give_i(v4(on_i.first), v4(on_i.second));
             }
             continue;
           }
@@ -702,15 +859,22 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
           // Moments (000 eq 6): -l_j n x F on j, l_i n x (-F) on i; n x F = n x fs.
           const V4 nxf = cross3(n, fs);
           if constexpr (kDirect) {
-            store3(fsum[j], v4(fsum[j]) + f);
-            store3(tsum[j], v4(tsum[j]) + (-lj * nxf));
+            give_ij(std::true_type{}, j, f, -lj * nxf, f, li * nxf);
           } else {
             store4(o->force.data(), f);  // with its padding (lane 3, zero)
             store4(o->torque_j.data(), -lj * nxf);
+            fi -= f;
+            ti -= li * nxf;
           }
-          fi -= f;
-          ti -= li * nxf;
+          if constexpr (kBatch) last_linear += s >= 0;
           if (__builtin_expect(s < 0, 0)) keep_new_pair(thread, k, c, dis);
+        }
+      }
+      if constexpr (kBatch) {
+        if (batch) {
+          row_end[nr] = ne;
+          row_body[nr++] = i;
+          continue;
         }
       }
       // (lane 3 is zero: every term had a zero lane 3)
@@ -726,13 +890,23 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
         store4(out_ti + 4L * i, ti);
       }
     }
+    if constexpr (kBatch) {
+      if (nr > 0) flush();
+    }
     };
     // (inlined: a lambda called apart from the pass would be compiled for the baseline CPU,
     // outside the pass's multiversioned clones)
     const auto run = [&](auto mode_tag, int r0, int r1, int jlimit, long cursor)
         __attribute__((always_inline)) {
-      if (cell_.on) loop(std::true_type{}, mode_tag, r0, r1, jlimit, cursor);
-      else loop(std::false_type{}, mode_tag, r0, r1, jlimit, cursor);
+      constexpr bool kDirect = decltype(mode_tag)::value == kPassDirect;
+      const auto with = [&](auto periodic_tag) __attribute__((always_inline)) {
+        if (kDirect && batching)
+          loop(periodic_tag, mode_tag, std::bool_constant<kDirect>{}, r0, r1, jlimit, cursor);
+        else
+          loop(periodic_tag, mode_tag, std::false_type{}, r0, r1, jlimit, cursor);
+      };
+      if (cell_.on) with(std::true_type{});
+      else with(std::false_type{});
     };
     if (!pair_direct_) {
       run(std::integral_constant<int, kPassOutputs>{}, b0, b1, 0, 0);
@@ -751,6 +925,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
       run(std::integral_constant<int, kPassDirect>{}, b0, b1, b1, pair_cross_t_[t]);
     }
   }
+  if (batching && 4 * queued < nc) pair_batch_rest_ = kBatchRest;
+  pair_batched_ = queued;
   err_contact = err;
 }
 

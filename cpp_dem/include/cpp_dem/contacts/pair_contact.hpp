@@ -38,7 +38,7 @@ struct PairContact {
   Real ks = 0;                  ///< copy of ContactPhys::ks
   Real tan_phi = 0;             ///< copy of ContactPhys::tan_phi
   // (Each vector is followed by a scalar, so the pair pass loads and stores the pair as one
-  // 4-double register.)
+  // 4-double register; its batch reads kn, ks, tan_phi as one too: pair_batch.hpp.)
   Vec3 fs = Vec3::Zero();       ///< ContactState::fs, elastic shear force on j, N
   Real overlap = 0;             ///< ContactState::overlap, m
   Vec3 normal = Vec3::Zero();   ///< ContactState::normal (zero: new contact)
