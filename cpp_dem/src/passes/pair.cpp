@@ -48,10 +48,11 @@ constexpr int kPassOutputs = 0, kPassDirect = 1, kPassCross = 2;
 /// Pair contact c with the Hertz–Mindlin short kernel (hertz_frictional; kDamped:
 /// hertz_damped, with the dashpots of its cold record's phys) on its hot record: j's force
 /// and torque into force_j and torque_j (PairOutput's padded vectors), i's shares (as the
-/// pass adds them) into dfi and dti; slip energy into dissip_friction, viscous energy into the cold record. The force and the moments are
-/// general_pair's expressions, to the bit: the composed law's force fn n + fs plus its shear
-/// dashpot's (zero without one), the branches li n and -lj n, and its zero rolling moment
-/// added on j and subtracted on i (a -0 component comes out as general_pair's).
+/// pass adds them) into dfi and dti; slip energy into dissip_friction, viscous energy into
+/// the cold record. The force and the moments are general_pair's expressions, to the bit:
+/// the composed law's force fn n + fs plus its shear dashpot's (zero without one), the
+/// branches li n and -lj n, and its zero rolling moment added on j and subtracted on i (a -0
+/// component comes out as general_pair's).
 template <bool kDamped, class Ops, class V>
 ALWAYS_INLINE void hertz_pair(PairContact& c, PairContactCold* cold, Real& dissip_friction,
                               Real* force_j, Real* torque_j, const V& n, Real overlap, Real li, Real lj,
@@ -690,8 +691,8 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
       // a scene without them (Hertz-Mindlin grains) pays nothing for it.)
       [[maybe_unused]] const bool batch =
           kBatch && k1 - k0 <= kCap && (nr > 0 || last_linear > 0);
-      if constexpr (kBatch) last_linear = 0;
       if constexpr (kBatch) {
+        last_linear = 0;
         if (nr > 0 && (!batch || ne + (k1 - k0) > kCap || nr == kCap)) flush();
       }
       // i's shares of a contact, and j's share with it (give_ij)

@@ -145,8 +145,8 @@ ALWAYS_INLINE void store8(Real* p, const V8& v) { std::memcpy(p, &v, sizeof v); 
 /// the queued contacts m .. m + 7 of q, each an active contact of the linear kernel with a
 /// current phys and dist > 0; the bodies' velocities (m/s) and spins (rad/s) in vel and
 /// angvel, dt (s); kPeriodic: the cell's velocity gradient by columns l0, l1, l2 (1/s) and
-/// spin (rad/s), added to the stored fluctuations as the loop does. Updates their records (pairs) and slip energies (dissip, J) as the loop
-/// does and puts their results into q. A lane may repeat another's contact (the padding of
+/// spin (rad/s), added to the stored fluctuations as the loop does. Updates their records
+/// (pairs) and slip energies (dissip, J) as the loop does and puts their results into q. A lane may repeat another's contact (the padding of
 /// the last batch): it writes the same values.
 
 template <bool kYadeShear, bool kPeriodic, class Q>
