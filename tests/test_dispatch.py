@@ -46,6 +46,10 @@ def test_the_simd_path_follows_the_cpu_and_the_narrow_switch():
     n = _dispatch_in({"CPP_DEM_NARROW": "1"})
     assert n["dem_simd"]["ops"] == "narrow" and n["cpp_dem_narrow"] == "1"
     assert n["dem_simd"]["level"] == simd["level"]  # (the loader's pick is the CPU's)
+    # the linear contacts eight at a time: in the wide form, where the CPU has AVX-512
+    if simd["clones"]:
+        assert simd["linear_batch"] == (simd["ops"] == "wide" and simd["level"] == "x86-64-v4")
+    assert n["dem_simd"]["linear_batch"] is False
 
 
 def test_numpys_own_dispatch_is_recorded_as_npy_disable_cpu_features_sets_it():

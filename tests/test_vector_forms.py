@@ -163,8 +163,8 @@ BATCH_SCRIPT = textwrap.dedent("""
 """)
 
 
-@pytest.mark.skipif(cpu_dispatch()["dem_simd"]["ops"] != "wide",
-                    reason="this CPU runs the narrow form only (no AVX2 + FMA)")
+@pytest.mark.skipif(not cpu_dispatch()["dem_simd"]["linear_batch"],
+                    reason="this CPU runs no batch of linear contacts (it needs AVX-512)")
 @pytest.mark.parametrize("kinematics, cell", [("contact_point", "walls"), ("yade", "walls"),
                                               ("contact_point", "periodic")])
 def test_the_linear_batch_gives_the_narrow_forms_bits_on_each_branch(tmp_path, kinematics,

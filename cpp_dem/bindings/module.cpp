@@ -29,10 +29,13 @@ PYBIND11_MODULE(_core, m) {
     d["clones"] = false;
     d["level"] = "built for one target";
 #endif
+    d["linear_batch"] = cpp_dem::linear_batch_available();
     return d;
   }, "The step's SIMD path in this process: ops 'wide' (4-lane vector ops) or 'narrow' "
      "(CPP_DEM_NARROW=1, or a CPU without AVX2 + FMA); with clones (the hot loops compiled "
-     "for x86-64-v4, -v3 and baseline), the level the loader picks on this CPU.");
+     "for x86-64-v4, -v3 and baseline), the level the loader picks on this CPU; "
+     "linear_batch: whether the pair pass runs active linear contacts eight at a time "
+     "(wide, on a CPU with AVX-512).");
   m.attr("GEOGRID") = py::bool_(cpp_dem::kGeogridBuilt);  // CMake option CPP_DEM_GEOGRID
   cpp_dem::bind::bind_material(m);
   cpp_dem::bind::bind_scene(m);

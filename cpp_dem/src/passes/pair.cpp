@@ -20,8 +20,7 @@ namespace cpp_dem {
 
 namespace {
 
-/// The longest row (candidates of one body) the direct pass runs through the batch.
-constexpr int kBatchRow = 128;
+using pair_batch::kBatchRow;
 /// The passes without the batch after one that queued under a quarter of its candidates.
 constexpr int kBatchRest = 32;
 
@@ -581,14 +580,18 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   const V4 l0 = v4(cell_.vel_grad.col(0)), l1 = v4(cell_.vel_grad.col(1)),
            l2 = v4(cell_.vel_grad.col(2)), spin = v4(cell_.spin());
   const Real* const offsets = image_offset_.data()->data();
-  // The batch (below) runs in a direct pass whose threads' bodies fit the cache
-  // (batch_bodies_per_thread). A pass that queued under a quarter of its candidates (few
+  const V4 field[4] = {l0, l1, l2, spin};
+  // (the batch's kernel for this CPU, without and with the cell)
+  const pair_batch::Kernel batch_kernel[2] = {pair_batch::kernel<kYadeShear, false>(),
+                                              pair_batch::kernel<kYadeShear, true>()};
+  // The batch (below) runs on a CPU with AVX-512 (pair_batch.cpp), in a direct pass whose
+  // threads' bodies fit the cache (batch_bodies_per_thread). A pass that queued under a quarter of its candidates (few
   // active linear contacts: Hertz-Mindlin grains, a loose cloud) turns it off for the next
   // kBatchRest passes: the loop without it is the faster one there (its instantiation with the
   // batch ran a scene of few contacts 5 % slower).
   const long team = nc > kParallelMin ? max_threads() : 1;
-  const bool batching =
-      pair_direct_ && n < team * batch_bodies_per_thread() && pair_batch_rest_ == 0;
+  const bool batching = pair_direct_ && batch_kernel[0] != nullptr &&
+                        n < team * batch_bodies_per_thread() && pair_batch_rest_ == 0;
   if (pair_batch_rest_ > 0) --pair_batch_rest_;
   long queued = 0;  // (the contacts the batch ran)
 #pragma omp parallel reduction(min : err) reduction(+ : queued) if (nc > kParallelMin)
@@ -644,10 +647,12 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
       // the block's rows in order: each contact's shares (j's into its sums, i's into fi
       // and ti), then i's sums.
       queued += nq;
-      if (nq > 0) queue.pad(nq);
-      for (int m = 0; m < nq; m += pair_batch::kLanes)
-        pair_batch::linear8<kYadeShear, kPeriodic>(queue, m, pairs, dissip, vel, angvel, dt, l0,
-                                                   l1, l2, spin);
+      if constexpr (kBatch) {
+        if (nq > 0) {
+          queue.pad(nq);
+          batch_kernel[kPeriodic](queue, nq, pairs, dissip, vel, angvel, dt, field);
+        }
+      }
       int e = 0;
       for (int m = 0; m < nr; ++m) {
         V4 fi = V4{}, ti = V4{};

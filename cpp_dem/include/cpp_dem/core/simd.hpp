@@ -133,4 +133,8 @@ inline bool use_wide_ops() {
 #endif
 }
 
+/// Whether the pair pass runs its active linear contacts eight at a time on this CPU (its
+/// batch kernel is compiled for AVX-512; passes/pair_batch.cpp), with the wide form on.
+bool linear_batch_available();
+
 }  // namespace cpp_dem
