@@ -216,6 +216,7 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
         ds_on_ && !bodies_.inertia_scale.empty() ? bodies_.inertia_scale.data() : nullptr;
     const bool has_clumps = clumps_.size() > 0;
     const int* const clump_of = bodies_.clump.data();
+    const bool radii_grown = !radius_at_build_.empty();  // (finish_body adds the growth)
     constexpr int kBlock = kBodyBlock;
     const int nblocks = (n + kBlock - 1) / kBlock;
 #pragma omp parallel reduction(min : err) reduction(max : worst) if (n > kParallelMin)
@@ -293,6 +294,21 @@ void Scene::reduce_and_integrate_hot(long& err_body) {
           for (int b = b0; b < b1; ++b) rotate_orientation(bodies_.ori[b], bodies_.angvel[b], dt, renormalize);
         }
         const bool finite = std::isfinite(check);
+        if (finite && !mean_field && !radii_grown) {
+          // The block's largest displacement since the build from its squared lengths,
+          // vectorised, and one square root: sqrt is monotonic and correctly rounded, so
+          // this is the largest of finish_body's lengths, to the bit.
+          const Real* const p0 = pos_at_build_[b0].data();
+          Real d2max = 0;
+#pragma omp simd reduction(max : d2max)
+          for (long k = k0; k < k1; k += 3) {
+            const Real dx = pos[k] - p0[k - k0], dy = pos[k + 1] - p0[k - k0 + 1],
+                       dz = pos[k + 2] - p0[k - k0 + 2];
+            d2max = std::max(d2max, (dx * dx + dy * dy) + dz * dz);
+          }
+          worst = std::max(worst, std::sqrt(d2max));
+          continue;
+        }
         for (int b = b0; b < b1; ++b) {
           if (!finite && (!bodies_.pos[b].allFinite() || !bodies_.vel[b].allFinite() || !bodies_.angvel[b].allFinite())) {
             err = std::min(err, static_cast<long>(b));
