@@ -585,10 +585,10 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   const pair_batch::Kernel batch_kernel[2] = {pair_batch::kernel<kYadeShear, false>(),
                                               pair_batch::kernel<kYadeShear, true>()};
   // The batch (below) runs on a CPU with AVX-512 (pair_batch.cpp), in a direct pass whose
-  // threads' bodies fit the cache (batch_bodies_per_thread). A pass that queued under a quarter of its candidates (few
-  // active linear contacts: Hertz-Mindlin grains, a loose cloud) turns it off for the next
-  // kBatchRest passes: the loop without it is the faster one there (its instantiation with the
-  // batch ran a scene of few contacts 5 % slower).
+  // threads' bodies fit the cache (batch_bodies_per_thread). A pass that queued under a
+  // quarter of its candidates (few active linear contacts: Hertz-Mindlin grains, a loose
+  // cloud) turns it off for the next kBatchRest passes: the loop without it is the faster one
+  // there (its instantiation with the batch ran a scene of few contacts 5 % slower).
   const long team = nc > kParallelMin ? max_threads() : 1;
   const bool batching = pair_direct_ && batch_kernel[0] != nullptr &&
                         n < team * batch_bodies_per_thread() && pair_batch_rest_ == 0;
