@@ -5,8 +5,6 @@
 #include <limits>
 #include <type_traits>
 
-#include <unistd.h>
-
 #include "cpp_dem/core/parallel.hpp"
 #include "cpp_dem/core/simd.hpp"
 #include "cpp_dem/geometry/sphere_sphere.hpp"
@@ -24,20 +22,12 @@ using pair_batch::kBatchRow;
 /// The passes without the batch after one that queued under a quarter of its candidates.
 constexpr int kBatchRest = 32;
 
-/// The bodies a thread sums below which the direct pass runs the batch: a thread's rows,
-/// their bodies' state and their records, about 200 B a body, within the core's L2 cache
-/// (sysconf; 1 MiB where it is not known, and on the machine where it was measured:
-/// 5 243 bodies). Beyond it the pass waits on memory, which the per-contact loop hides behind
-/// the contacts' arithmetic and the batch does not: one thread, the step against the loop
-/// alone, 1.18 x as fast at 1 000 bodies, 1.16 x at 2 000, 1.12 x at 4 000, 1.00 x at 7 000,
-/// 0.97 x at 10 000 and 0.85 x at 100 000 (docs/benchmarks.md).
-long batch_bodies_per_thread() {
-  static const long bodies = [] {
-    const long l2 = sysconf(_SC_LEVEL2_CACHE_SIZE);
-    return (l2 > 0 ? l2 : 1L << 20) / 200;
-  }();
-  return bodies;
-}
+/// The scenes below this many bodies run the batch (with the kernel compiled for AVX-512),
+/// on any number of threads. Measured with the profile driver, the step with the batch
+/// against without, one thread: 1.10 x as fast at 7 000 bodies, 1.09 x at 10 000, 0.97 x at
+/// 20 000; two threads: 1.12 x at 10 000, 0.94 x at 20 000 and 30 000 (the size from which
+/// the per-contact loop prefetches, kPrefetchMinBodies, and its waits on memory grow).
+constexpr int kBatchMaxBodies = 20000;
 
 // The pair pass's modes (compute_pair_forces_hot, pair_bodies_narrow): j's shares into the
 // outputs, summed by the reduction; j's and i's into the bodies' sums at once; a threaded
@@ -584,14 +574,13 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
   // (the batch's kernel for this CPU, without and with the cell)
   const pair_batch::Kernel batch_kernel[2] = {pair_batch::kernel<kYadeShear, false>(),
                                               pair_batch::kernel<kYadeShear, true>()};
-  // The batch (below) runs on a CPU with AVX-512 (pair_batch.cpp), in a direct pass whose
-  // threads' bodies fit the cache (batch_bodies_per_thread). A pass that queued under a
-  // quarter of its candidates (few active linear contacts: Hertz-Mindlin grains, a loose
-  // cloud) turns it off for the next kBatchRest passes: the loop without it is the faster one
-  // there (its instantiation with the batch ran a scene of few contacts 5 % slower).
-  const long team = nc > kParallelMin ? max_threads() : 1;
-  const bool batching = pair_direct_ && batch_kernel[0] != nullptr &&
-                        n < team * batch_bodies_per_thread() && pair_batch_rest_ == 0;
+  // The batch (below) runs on a CPU with AVX-512 (pair_batch.cpp), in a direct pass of a
+  // scene under kBatchMaxBodies. A pass that queued under a quarter of its candidates (few
+  // active linear contacts: Hertz-Mindlin grains, a loose cloud) turns it off for the next
+  // kBatchRest passes: the loop without it is the faster one there (its instantiation with the
+  // batch ran a scene of few contacts 5 % slower).
+  const bool batching = pair_direct_ && batch_kernel[0] != nullptr && n < kBatchMaxBodies &&
+                        pair_batch_rest_ == 0;
   if (pair_batch_rest_ > 0) --pair_batch_rest_;
   long queued = 0;  // (the contacts the batch ran)
 #pragma omp parallel reduction(min : err) reduction(+ : queued) if (nc > kParallelMin)
