@@ -23,10 +23,10 @@ using pair_batch::kBatchRow;
 constexpr int kBatchRest = 32;
 
 /// The scenes below this many bodies run the batch (with the kernel compiled for AVX-512),
-/// on any number of threads. Measured with the profile driver, the step with the batch
-/// against without, one thread: 1.10 x as fast at 7 000 bodies, 1.09 x at 10 000, 0.97 x at
-/// 20 000; two threads: 1.12 x at 10 000, 0.94 x at 20 000 and 30 000 (the size from which
-/// the per-contact loop prefetches, kPrefetchMinBodies, and its waits on memory grow).
+/// on any number of threads. Measured with the profile driver (three runs each, median), the
+/// step with the batch against without, one thread: 1.10 x as fast at 7 000 bodies and at
+/// 10 000, 0.97 x at 20 000; two threads: 1.12 x at 10 000, 0.95 x at 20 000, 0.94 x at
+/// 30 000 (from 20 000 bodies on the per-contact loop prefetches: kPrefetchMinBodies).
 constexpr int kBatchMaxBodies = 20000;
 
 // The pair pass's modes (compute_pair_forces_hot, pair_bodies_narrow): j's shares into the
