@@ -10,8 +10,7 @@
 #include "cpp_dem/core/types.hpp"
 #include "pair_batch.hpp"
 
-#if defined(CPP_DEM_CLONES) && defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
-#define CPP_DEM_BATCH_V4 1
+#if defined(CPP_DEM_MULTIVERSIONED)
 #pragma GCC push_options
 #pragma GCC target("arch=x86-64-v4")
 namespace cpp_dem::pair_batch::isa_v4 {
@@ -30,7 +29,7 @@ namespace pair_batch {
 
 template <bool kYadeShear, bool kPeriodic>
 Kernel kernel() {
-#if defined(CPP_DEM_BATCH_V4)
+#if defined(CPP_DEM_MULTIVERSIONED)
   // (the test of the clones' resolver: a CPU with every feature of the level)
   static const bool v4 = __builtin_cpu_supports("x86-64-v4");
   return v4 ? &isa_v4::run<kYadeShear, kPeriodic> : nullptr;

@@ -32,6 +32,7 @@ inline constexpr bool kGeogridBuilt = true;
 /// last bits (fused multiply-adds), so one machine's results are bitwise repeatable, not every
 /// machine's. CMake: CPP_DEM_CLONES (default ON; off when CPP_DEM_MARCH is set).
 #if defined(CPP_DEM_CLONES) && defined(__x86_64__) && defined(__GNUC__) && !defined(__clang__)
+#define CPP_DEM_MULTIVERSIONED 1  // (the clones exist: pair_batch.cpp compiles for their v4)
 #define CPP_DEM_HOT __attribute__((target_clones("arch=x86-64-v4", "arch=x86-64-v3", "default")))
 #else
 #define CPP_DEM_HOT
