@@ -13,7 +13,8 @@ compression positive), and their PRS - RE difference (what the case compares). E
 over x, y, z of |value - ref| / max |ref|, for the targets and for the difference.
 
 tol: ONE two-way run (femcoupling.coupling.twoway.two_way) of the RE variant with the DEM element at
-the case's smoke size and a tight tolerance; the loop is deterministic, so a looser tolerance
+the case's smoke size (the FEM on the fine mesh BASE_FINE_SIZE_M, as in fem-time) and a
+tight tolerance; the loop is deterministic, so a looser tolerance
 stops earlier on the same sequence of iterations: for each tolerance, the iteration it stops
 at, the cumulative CPU time, and the error of its handed-over targets against the last
 iteration. --check reruns one looser tolerance on its own to confirm the sequence.
@@ -53,8 +54,17 @@ sys.path.insert(0, str(Path(__file__).resolve().parent))  # (bench/: the shared 
 import _cli  # noqa: E402  (one command-line style: bench/_cli.py)
 
 
+#: The fine FEM mesh size of the studies' base (m): the mesh of the tables in
+#: docs/speed_accuracy.md, finer than the case's smoke mesh (0.1 m), which keeps the suite's
+#: FEM solves test-sized.
+BASE_FINE_SIZE_M = 0.05
+
+
 def smoke_params(**kw) -> case.Params:
-    return dataclasses.replace(case.Params(**case.SMOKE), threads=1, **kw)
+    """The case's smoke element on the fine mesh BASE_FINE_SIZE_M, one thread; ``kw`` on
+    top."""
+    return dataclasses.replace(case.Params(**case.SMOKE), threads=1,
+                               **{"fine_size": BASE_FINE_SIZE_M, **kw})
 
 
 class Timed:

@@ -79,7 +79,10 @@ from geogrid_dem.studies.prs_element import (HISTORY_REGIONS, VARIANTS, Params, 
                                              run_element, run_variant)
 
 
-SMOKE = dict(n=300, hold_steps=600, fem_steps=3, mesh_size=1.0, fine_size=0.05,
+# The smoke's FEM mesh: fine size 0.1 m (753 cells). At 0.05 m (2 001 cells) the LU
+# factorisations of the calibrated soil's Newton steps (13-25 iterations a load step) took 75 %
+# of this smoke's CPU; docs/speed_accuracy.md gives each mesh's error.
+SMOKE = dict(n=300, hold_steps=600, fem_steps=3, mesh_size=1.0, fine_size=0.1,
              layer_thickness=0.02, max_steps=80_000, unbalanced=0.05)
 
 
