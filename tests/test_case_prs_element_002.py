@@ -252,7 +252,8 @@ def test_a_finding_about_prs_alone_is_labelled_so_and_an_unresolved_one_says_why
 
 def test_an_element_off_its_fem_path_is_named_in_the_summary_and_the_report(tmp_path):
     """Issue 59: the element's strain is within 0.5-2 x its FEM region's on every axis by
-    default; one outside it is named, per axis (an axis without a ratio is not judged)."""
+    default; one outside it is named, per axis (an axis without a ratio is not judged). The
+    report names an element loaded before its initial hold came to rest too."""
     assert case.off_fem_path({"strain_ratio_to_fem": [1.0, 1.0, 1.3]}) == []
     assert case.off_fem_path({"strain_ratio_to_fem": [1.0, None, 0.41]}) == ["z"]
     assert case.off_fem_path({"strain_ratio_to_fem": [2.5, 1.0, 0.5]}) == ["x"]
@@ -283,6 +284,18 @@ def test_an_element_off_its_fem_path_is_named_in_the_summary_and_the_report(tmp_
     case.write_report(tmp_path, summary)
     report = (tmp_path / "report.md").read_text()
     assert "**Off the FEM path:** standard_RE_s1 (z) strained outside 0.5–2" in report
+    assert "standard_PRS_s1 (" not in report
+    assert "Loaded before the initial hold" not in report
+    # an element whose initial hold did not come to rest is named in the report too
+    summary["elements"]["standard_RE_s1"]["rest_initial"] = {
+        "status": "not_at_rest", "hold_steps": 24000,
+        "failed": ["inertial number 0.000122 > 0.0001"]}
+    summary["elements"]["standard_PRS_s1"]["rest_initial"] = {
+        "status": "at_rest", "hold_steps": 6000, "failed": []}
+    case.write_report(tmp_path, summary)
+    report = (tmp_path / "report.md").read_text()
+    assert ("**Loaded before the initial hold came to rest:** standard_RE_s1 (inertial number "
+            "0.000122 > 0.0001 after 24000 steps). The element is judged") in report, report
     assert "standard_PRS_s1 (" not in report
 
 

@@ -440,6 +440,15 @@ def write_report(out: Path, summary: dict) -> None:
         lines += ["", f"**Off the FEM path:** {named} strained outside {lo:g}–{hi:g} × their "
                   "FEM region on those axes: the element is stiffer or softer there than the "
                   "FEM's soil."]
+    unsettled = {k: e["rest_initial"] for k, e in summary["elements"].items()
+                 if (e.get("rest_initial") or {}).get("status", "at_rest") != "at_rest"}
+    if unsettled:
+        named = "; ".join(f"{k} ({', '.join(r.get('failed') or ['not at rest'])} after "
+                          f"{r['hold_steps']} steps)" for k, r in unsettled.items())
+        lines += ["", f"**Loaded before the initial hold came to rest:** {named}. The element "
+                  "is judged at the end of its loading; its loading's measures include what "
+                  "it still moved under the initial targets (the table's vertical strain in "
+                  "the first stage's hold)."]
     lines += ["", "## Other measures (no direction from 002)", ""]
     lines += findings_table(summary["measures"], with_verdict=False)
     rows = [("grains", lambda e: f"{e['num_grains']}"),
