@@ -95,6 +95,15 @@ def test_every_element_is_loaded_slowly_and_measured_at_rest_on_its_fem_path(smo
         # The walls cannot shear the element: the omission is measured, stated in degrees.
         so = fem["shear_omitted"]
         assert so["friction_principal_deg"] >= so["friction_diagonal_deg"] > 0
+    # The report names the elements loaded before their initial hold came to rest, and only
+    # those (the table's rest column is the end's).
+    report = (out / "report.md").read_text()
+    unsettled = [k for k, e in s["elements"].items() if e["rest_initial"]["status"] != "at_rest"]
+    line = next((ln for ln in report.splitlines()
+                 if ln.startswith("**Loaded before the initial hold came to rest:**")), "")
+    assert bool(line) == bool(unsettled), (unsettled, line)
+    assert all(f"{k} (" in line for k in unsettled), (unsettled, line)
+    assert all(f"{k} (" not in line for k in s["elements"] if k not in unsettled), line
     # The log says which walls are strain-controlled (their stresses are not the targets'),
     # on every loading stage's line: 002's elements on the FEM's strain path, the soil
     # calibration's held.
