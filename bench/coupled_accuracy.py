@@ -12,12 +12,12 @@ handed-over wall targets of the element region after the footing load (x, y, z, 
 compression positive), and their PRS - RE difference (what the case compares). Errors: max
 over x, y, z of |value - ref| / max |ref|, for the targets and for the difference.
 
-tol: ONE two-way run (femcoupling.coupling.twoway.two_way) of the RE variant with the DEM element at
-the case's smoke size (the FEM on the fine mesh BASE_FINE_SIZE_M, as in fem-time) and a
-tight tolerance; the loop is deterministic, so a looser tolerance
-stops earlier on the same sequence of iterations: for each tolerance, the iteration it stops
-at, the cumulative CPU time, and the error of its handed-over targets against the last
-iteration. --check reruns one looser tolerance on its own to confirm the sequence.
+tol: ONE two-way run (femcoupling.coupling.twoway.two_way) of the RE variant with the DEM
+element at the case's smoke size (the FEM on the fine mesh BASE_FINE_SIZE_M, as in fem-time)
+and a tight tolerance; the loop is deterministic, so a looser tolerance stops earlier on the
+same sequence of iterations: for each tolerance, the iteration it stops at, the cumulative CPU
+time, and the error of its handed-over targets against the last iteration. --check reruns one
+looser tolerance on its own to confirm the sequence.
 
 fem-time: the one-way case (FEM solved, stresses handed over, DEM element driven to them)
 with the DEM element holding each target for 600 and 30 000 steps: the number of FEM solves and

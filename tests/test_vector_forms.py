@@ -186,3 +186,60 @@ def test_the_linear_batch_gives_the_narrow_forms_bits_on_each_branch(tmp_path, k
         if key != "batched":
             assert np.array_equal(wide1[key], narrow[key]), key
             assert np.array_equal(wide2[key], narrow[key]), key
+
+
+OVERLAP_SCRIPT = textwrap.dedent("""
+    import sys
+    import numpy as np
+    import cpp_dem as dem
+    out = sys.argv[1]
+    dem.set_num_threads(1)
+    rng = np.random.default_rng(5)
+    s = dem.Scene(local_damping=0.1)
+    lin = s.add_material(dem.linear_material(density=2600, young=1e7, poisson=0.3,
+                                             friction_angle_deg=30))
+    # a compressed lattice of uneven spheres: overlaps of many sizes
+    n, h = 7, 0.00995
+    s.add_box((0, 0, 0), (n * h,) * 3, material=lin)
+    g = np.stack(np.meshgrid(*[np.arange(n)] * 3, indexing="ij"), -1).reshape(-1, 3)
+    s.add_spheres(0.5 * h + h * g, rng.uniform(0.00499, 0.00512, len(g)), material=lin)
+    s.dt = 2e-5
+    s.run(200)
+    batched = s._pair_batched()
+    c = s.contacts()
+    sphere = c["ids"][:, 1] >= 0
+    ratio = c["overlap"][sphere] / 0.00499
+    # the limit below 3 % of the contacts' overlaps: the next step stops on one of them
+    s.max_overlap_ratio = float(np.quantile(ratio, 0.97))
+    try:
+        s.run(1)
+        message = ""
+    except dem.BlowUpError as e:
+        message = str(e)
+    c = s.contacts()
+    np.savez(out, message=message, batched=batched, f=s.forces, t=s.torques,
+             **{"c_" + k: v for k, v in c.items()})
+""")
+
+
+@pytest.mark.skipif(not cpu_dispatch()["dem_simd"]["linear_batch"],
+                    reason="this CPU runs no batch of linear contacts (it needs AVX-512)")
+def test_the_batchs_overlap_check_stops_the_step_as_the_per_contact_loop_does(tmp_path):
+    """The batch takes the square root, the overlap and the check against max_overlap_ratio
+    of its contacts (pair_batch_kernel.inc): a contact beyond the limit stops the step with the
+    per-contact loop's error (the first such candidate), keeps its record, and gives no
+    force, to the bit of the narrow form, which has no batch."""
+    def run(narrow: bool) -> dict:
+        out = tmp_path / f"o{int(narrow)}.npz"
+        env = dict(os.environ, CPP_DEM_NARROW="1" if narrow else "0")
+        subprocess.run([sys.executable, "-c", OVERLAP_SCRIPT, str(out)], env=env, check=True,
+                       timeout=300)
+        return dict(np.load(out))
+
+    narrow, wide = run(True), run(False)
+    assert int(wide["batched"]) > 300 and int(narrow["batched"]) == 0
+    assert str(wide["message"]).startswith("blow-up at step 200: bodies ")
+    assert "of the smaller radius (max_overlap_ratio=" in str(wide["message"])
+    for key in narrow:
+        if key != "batched":
+            assert np.array_equal(wide[key], narrow[key]), key

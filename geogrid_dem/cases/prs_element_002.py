@@ -278,11 +278,12 @@ def _stats(x: list) -> tuple[float, float]:
 STAT_KEYS = ("re_mean", "re_sd", "prs_mean", "prs_sd", "diff_mean", "diff_se", "n")
 
 
-def not_at_rest(e: dict) -> bool:
+def not_at_rest(e: dict, key: str = "rest") -> bool:
     """Whether an element did not come to rest at its targets (its ``rest`` status is
     'at_strength', still moving, or 'not_at_rest', still but a force or servo check failed;
-    ``cpp_dem.elements.box.rest_hold``): it is never measured unless at rest."""
-    return (e.get("rest") or {}).get("status") in ("at_strength", "not_at_rest")
+    ``cpp_dem.elements.box.rest_hold``): it is never measured unless at rest. With
+    ``key="rest_initial"``: whether its initial hold, before the loading, did not."""
+    return (e.get(key) or {}).get("status") in ("at_strength", "not_at_rest")
 
 
 def paired(elements: dict, grid: str, seeds, value) -> dict | None:
@@ -441,7 +442,7 @@ def write_report(out: Path, summary: dict) -> None:
                   "FEM region on those axes: the element is stiffer or softer there than the "
                   "FEM's soil."]
     unsettled = {k: e["rest_initial"] for k, e in summary["elements"].items()
-                 if (e.get("rest_initial") or {}).get("status", "at_rest") != "at_rest"}
+                 if not_at_rest(e, "rest_initial")}
     if unsettled:
         named = "; ".join(f"{k} ({', '.join(r.get('failed') or ['not at rest'])} after "
                           f"{r['hold_steps']} steps)" for k, r in unsettled.items())

@@ -623,7 +623,7 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
     struct Entry {
       V4 dfi, dti, fj, tj;  // the shares of a contact outside the batch: i's, and j's
       int q;                // or its place in the queue
-      int j;                // (j: with j's share; -1: i's alone, a cross pair's)
+      int j;                // (j: with j's share; -1: i's alone, a cross pair's; queued: k)
     };
     constexpr int kCap = kBatch ? kBatchRow : 1;
     [[maybe_unused]] pair_batch::Queue<kCap> queue;
@@ -636,10 +636,12 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
       // the block's rows in order: each contact's shares (j's into its sums, i's into fi
       // and ti), then i's sums.
       queued += nq;
+      bool any_bad = false;
       if constexpr (kBatch) {
         if (nq > 0) {
           queue.pad(nq);
-          batch_kernel[kPeriodic](queue, nq, pairs, dissip, vel, angvel, dt, field);
+          any_bad = batch_kernel[kPeriodic](queue, nq, pairs, dissip, vel, angvel, dt,
+                                            max_ratio, field);
         }
       }
       int e = 0;
@@ -648,8 +650,14 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
         for (; e < row_end[m]; ++e) {
           const Entry& x = entry[e];
           if (x.q >= 0) {
+            const int a = x.q;
+            if (__builtin_expect(any_bad, 0) && queue.bad[a]) {
+              // overlapping beyond the limit (the loop's check, run in the batch)
+              err = std::min(err, static_cast<long>(x.j));
+              continue;
+            }
             // (component by component: the same sums as the 4-lane ones; x - y is x + (-y))
-            const int a = x.q, jq = queue.j[a];
+            const int jq = queue.j[a];
             fsum[jq][0] += queue.fx[a];
             fsum[jq][1] += queue.fy[a];
             fsum[jq][2] += queue.fz[a];
@@ -776,22 +784,25 @@ void Scene::compute_pair_forces_hot(long& err_contact) {
             if (s >= 0 && pairs[s].active) open_pair(s, o);  // the contact opened
             continue;
           }
+          if constexpr (kBatch) {
+            // an active contact of the linear kernel: queued for the batch (pair_batch.hpp),
+            // which takes the square root, the overlap and its check below, eight at a time
+            // (dist2 > 0: dist > 0)
+            if (batch && s >= 0 && dist2 > 0 && pairs[s].active && !stale &&
+                pairs[s].kernel == kLinearKernel) {
+              queue.put(nq, d, dist2, ri, rj, s, i, j);
+              entry[ne].q = nq++;
+              entry[ne].j = k;
+              ++ne;
+              ++last_linear;
+              continue;
+            }
+          }
           const Real dist = std::sqrt(dist2);
           const Real overlap = rsum - dist;
           if (!(overlap <= max_ratio * std::min(ri, rj))) {
             err = std::min(err, static_cast<long>(k));
             continue;
-          }
-          if constexpr (kBatch) {
-            // an active contact of the linear kernel: queued for the batch (pair_batch.hpp)
-            if (batch && s >= 0 && dist > 0 && pairs[s].active && !stale &&
-                pairs[s].kernel == kLinearKernel) {
-              queue.put(nq, d, dist, overlap, ri, rj, s, i, j);
-              entry[ne].q = nq++;
-              ++ne;
-              ++last_linear;
-              continue;
-            }
           }
           if (__builtin_expect(s < 0, 0)) {
             fresh = fresh_pair(j, image);

@@ -25,25 +25,26 @@ constexpr int kBatchRow = 128;
 
 /// The contacts a block of rows queues for the batch (pair.cpp), by field (structure of
 /// arrays), kCap of them and the lanes that pad the last batch: each contact's branch vector
-/// d = x_j - x_i (m), distance and overlap (m), radii (m), its record's slot and its bodies;
-/// and what the batch gives back: j's force f (N) and torque tj (N m), and l_i n x f (N m),
-/// i's torque (the pass subtracts f and it from i's sums).
+/// d = x_j - x_i (m), its squared length (m^2; the batch takes its square root and the
+/// overlap), radii (m), its record's slot and its bodies; and what the batch gives back: j's
+/// force f (N) and torque tj (N m), l_i n x f (N m), i's torque (the pass subtracts f and it
+/// from i's sums), and whether the contact overlaps beyond the scene's limit (bad: nonzero;
+/// its record is left as it was and it gives no force).
 template <int kCap>
 struct Queue {
   static constexpr int kSize = kCap + kLanes;
-  alignas(64) Real dx[kSize], dy[kSize], dz[kSize], dist[kSize], overlap[kSize], ri[kSize],
-      rj[kSize];
+  alignas(64) Real dx[kSize], dy[kSize], dz[kSize], dist2[kSize], ri[kSize], rj[kSize];
   alignas(64) int s[kSize], i[kSize], j[kSize];
   alignas(64) Real fx[kSize], fy[kSize], fz[kSize], tx[kSize], ty[kSize], tz[kSize],
       lx[kSize], ly[kSize], lz[kSize];
+  alignas(64) long long bad[kSize];
   /// Queues a contact at slot m.
-  ALWAYS_INLINE void put(int m, const V4& d, Real dist_, Real overlap_, Real ri_, Real rj_,
-                         int s_, int i_, int j_) {
+  ALWAYS_INLINE void put(int m, const V4& d, Real dist2_, Real ri_, Real rj_, int s_, int i_,
+                         int j_) {
     dx[m] = d[0];
     dy[m] = d[1];
     dz[m] = d[2];
-    dist[m] = dist_;
-    overlap[m] = overlap_;
+    dist2[m] = dist2_;
     ri[m] = ri_;
     rj[m] = rj_;
     s[m] = s_;
@@ -56,8 +57,7 @@ struct Queue {
       dx[m] = dx[n - 1];
       dy[m] = dy[n - 1];
       dz[m] = dz[n - 1];
-      dist[m] = dist[n - 1];
-      overlap[m] = overlap[n - 1];
+      dist2[m] = dist2[n - 1];
       ri[m] = ri[n - 1];
       rj[m] = rj[n - 1];
       s[m] = s[n - 1];
@@ -76,12 +76,16 @@ static_assert(offsetof(PairContact, ks) == offsetof(PairContact, kn) + sizeof(Re
 
 /// The batch's kernel: linear8 (pair_batch_kernel.inc) on the queued contacts 0 .. nq of q
 /// (padded to a multiple of kLanes), each an active contact of the linear kernel with a
-/// current phys and dist > 0; the bodies' velocities (m/s) and spins (rad/s) in vel and
-/// angvel, dt (s); field: the periodic cell's velocity gradient by columns (1/s) and its spin
-/// (rad/s), read where kPeriodic. Updates their records (pairs) and slip energies (dissip,
-/// J) as the per-contact loop does and puts their results into q.
-using Kernel = void (*)(Queue<kBatchRow>& q, int nq, PairContact* pairs, Real* dissip,
-                        const Vec3* vel, const Vec3* angvel, Real dt, const V4* field);
+/// current phys and 0 < dist2 < (ri + rj)^2; the bodies' velocities (m/s) and spins (rad/s)
+/// in vel and angvel, dt (s); max_ratio: the scene's largest overlap over the smaller radius;
+/// field: the periodic cell's velocity gradient by columns (1/s) and its spin (rad/s), read
+/// where kPeriodic. Updates their records (pairs) and slip energies (dissip, J) as the
+/// per-contact loop does and puts their results into q. Returns whether a contact overlaps
+/// beyond max_ratio (each one's q.bad is set, its record and dissip untouched), which the
+/// per-contact loop reports as the pass's error.
+using Kernel = bool (*)(Queue<kBatchRow>& q, int nq, PairContact* pairs, Real* dissip,
+                        const Vec3* vel, const Vec3* angvel, Real dt, Real max_ratio,
+                        const V4* field);
 
 /// The kernel for this CPU (pair_batch.cpp: compiled for AVX-512), or null where it has
 /// none: the pass then runs every contact in its per-contact loop.
