@@ -142,3 +142,18 @@ def test_the_placement_ab_finds_the_same_cloud_and_refuses_bad_sizes(tmp_path):
     bad = subprocess.run([sys.executable, str(bench), "--ref", "HEAD", "--sizes", "30:0.6"],
                          capture_output=True, text=True, cwd=ROOT)
     assert bad.returncode != 0 and "--sizes='30:0.6'" in bad.stderr
+
+
+def test_the_fastest_blocks_ratio_holds_where_the_rounds_ratios_scatter():
+    """A host that slows some blocks: the new build takes 0.9 of the old's time (1.111 x the
+    speed) in every undisturbed block. One disturbed block of each build moves the median of
+    the rounds' ratios off the truth; the ratio of the fastest blocks keeps it. With every
+    block of a build disturbed, it cannot (its documented condition)."""
+    ab = _ab()
+    old, new = [1.0, 1.4, 1.3], [1.3, 0.9, 1.25]
+    r = ab.speed_ratios(old, new)
+    assert r["ratio_fastest"] == pytest.approx(1.0 / 0.9)
+    assert abs(r["ratio_new_over_old"] - 1.0 / 0.9) > 0.05
+    assert (r["ratio_min"], r["ratio_max"]) == (pytest.approx(1.0 / 1.3), pytest.approx(1.4 / 0.9))
+    assert ab.speed_ratios([1.0, 1.0], [0.9, 0.9])["ratio_fastest"] == pytest.approx(1.0 / 0.9)
+    assert abs(ab.speed_ratios([1.0, 1.0], [1.2, 1.1])["ratio_fastest"] - 1.0 / 0.9) > 0.1
