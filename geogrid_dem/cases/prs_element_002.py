@@ -206,12 +206,12 @@ SEEDS_FOR_FINDINGS = 6
 
 def unjudgeable(diff_mean: float, diff_se: float, n: int) -> str:
     """Why a paired difference cannot be judged by Student's t, '' when it can: fewer than 2
-    seeds (no standard error), a mean or standard error not finite, or a standard error of 0
+    pairs (seeds with RE and PRS kept: no standard error), a mean or standard error not finite, or a standard error of 0
     (up to rounding, 1e-9 of the mean): the pairs' differences all equal, as a counted
     measure whose pairs moved by the same count, give no estimate of its scatter, and t
     would be infinite."""
     if n < 2:
-        return "fewer than 2 seeds: no standard error"
+        return "fewer than 2 pairs: no standard error"
     if not (math.isfinite(diff_mean) and math.isfinite(diff_se)):
         return "its mean or standard error is not finite"
     if diff_se <= 1e-9 * abs(diff_mean):
@@ -290,14 +290,16 @@ def paired(elements: dict, grid: str, seeds, value) -> dict | None:
     """RE and PRS values of ``value`` over the seeds with both, and their paired difference
     (PRS - RE): means, sds, the difference's mean and standard error, n; 'unconverged': the
     labels of those elements with a stage that did not converge; 'pairs_left_out': the
-    labels of the pairs left out because an element of theirs is not at rest
-    (:func:`not_at_rest`)."""
+    labels of the pairs left out because an element of theirs is not at rest at the end, or
+    was loaded before its initial hold came to rest (:func:`not_at_rest` of ``rest`` and of
+    ``rest_initial``): a measure's change over the loading starts from that hold, so it
+    would count what the element still moved under the initial targets."""
     re_v, prs_v, unconverged, left_out = [], [], [], []
     for s in seeds:
         re_, prs = elements.get(f"{grid}_RE_s{s}"), elements.get(f"{grid}_PRS_s{s}")
         if re_ is None or prs is None:
             continue
-        if not_at_rest(re_) or not_at_rest(prs):
+        if any(not_at_rest(e, key) for e in (re_, prs) for key in ("rest", "rest_initial")):
             left_out.append(f"{grid}_s{s}")
             continue
         a, b = value(re_), value(prs)
@@ -373,15 +375,19 @@ def _alone(f: dict) -> str:
 
 def unresolved_reason(f: dict) -> str:
     """Why a finding is 'not resolved' where its numbers alone do not say it (an element
-    behind it unconverged, fewer than 2 seeds, a mean or standard error not finite, no
-    scatter of the pairs' differences); empty otherwise (within t crit x se)."""
+    behind it unconverged, fewer than 2 pairs, a mean or standard error not finite, no
+    scatter of the pairs' differences), with the pairs left out (an element not at rest)
+    where there are any; empty otherwise (within t crit x se)."""
     if f.get("verdict") != "not resolved":
         return ""
     if f.get("unconverged"):
         return "an element behind it did not converge: " + ", ".join(f["unconverged"])
     nan = float("nan")
     d, se = f.get("diff_mean"), f.get("diff_se")
-    return unjudgeable(nan if d is None else d, nan if se is None else se, f.get("n", 0))
+    why = unjudgeable(nan if d is None else d, nan if se is None else se, f.get("n", 0))
+    if why and f.get("pairs_left_out"):
+        why += "; left out, an element not at rest: " + ", ".join(f["pairs_left_out"])
+    return why
 
 
 def findings_table(rows: list[dict], *, with_verdict: bool = True) -> list[str]:
@@ -426,7 +432,8 @@ def write_report(out: Path, summary: dict) -> None:
               "|d| > t crit × se; `opposes`: the other sign beyond it; else `not resolved` "
               "(also when an element behind it did not converge). A pair with an element "
               "not at rest at its targets (`at_strength`: still moving; `not_at_rest`: still, "
-              "but its unbalanced force or its walls' error failed) is left out and named.",
+              "but its unbalanced force or its walls' error failed), at the end or in its "
+              "initial hold before the loading, is left out and named.",
               ""]
     lines += findings_table(summary["findings"])
     stalled = sorted({k for f in summary["findings"] for k in f.get("unconverged", [])})
@@ -446,10 +453,10 @@ def write_report(out: Path, summary: dict) -> None:
     if unsettled:
         named = "; ".join(f"{k} ({', '.join(r.get('failed') or ['not at rest'])} after "
                           f"{r['hold_steps']} steps)" for k, r in unsettled.items())
-        lines += ["", f"**Loaded before the initial hold came to rest:** {named}. The element "
-                  "is judged at the end of its loading; its loading's measures include what "
-                  "it still moved under the initial targets (the table's vertical strain in "
-                  "the first stage's hold)."]
+        lines += ["", f"**Loaded before the initial hold came to rest:** {named}. Its "
+                  "loading's measures would include what it still moved under the initial "
+                  "targets (the table's vertical strain in the first stage's hold), so its "
+                  "pair is left out of the findings and measures."]
     lines += ["", "## Other measures (no direction from 002)", ""]
     lines += findings_table(summary["measures"], with_verdict=False)
     rows = [("grains", lambda e: f"{e['num_grains']}"),
