@@ -77,10 +77,13 @@ for ax, f in zip(axes[0], rows):
     for seed in summary["seeds"]:
         pair = [value(el[f"{f['grid']}_{v}_s{seed}"]) for v in ("RE", "PRS")]
         pair = [float("nan") if x is None else x for x in pair]
-        ax.plot([0, 1], pair, "o-", color="0.4")
+        # (a pair left out of the verdict, an element of it not at rest: dashed)
+        left = f"{f['grid']}_s{seed}" in (f.get("pairs_left_out") or [])
+        ax.plot([0, 1], pair, "o--" if left else "o-", color="0.7" if left else "0.4")
     ax.set_xticks([0, 1], ["RE", "PRS"])
     ax.set_title(textwrap.fill(f"{f['name']}: {f['verdict']}", 30), fontsize=8)
-fig.suptitle("002's findings: RE against PRS, one line per seed (paired)")
+fig.suptitle("002's findings: RE against PRS, one line per seed (paired; dashed: left out, "
+             "an element not at rest)")
 fig.tight_layout()
 fig.savefig(args.out / "findings.png", dpi=150)
 print("wrote", *(args.out / f for f in OUTPUTS))
