@@ -324,6 +324,29 @@ def test_an_element_off_its_fem_path_is_named_in_the_summary_and_the_report(tmp_
     assert "standard_PRS_s1 (" not in report
 
 
+def test_a_run_without_pairs_says_why_it_has_no_findings(tmp_path):
+    """--variants PRS (or RE) alone runs no pair: the report's findings table is empty, and
+    the report says why instead of showing an empty table alone."""
+    el = {"num_grains": 200, "stress_final_pa": [2e4, 2e4, 4e4], "converged": [True],
+          "hold_max_rel_error": 0.001, "porosity_final": 0.4,
+          "grid_force_longitudinal_mean_n": 1.0,
+          "density_scaling": {"dt_s": 1e-6}, "preparation_wall_time_s": 1.0,
+          "stage_wall_time_s": [1.0], "wall_time_s": 2.0}
+    summary = {"mode": "DEM-only (stresses given)", "seeds": [1], "findings": [],
+               "measures": [], "params": {"variants": ["PRS"]},
+               "elements": {"standard_PRS_s1": el}}
+    case.write_report(tmp_path, summary)
+    report = (tmp_path / "report.md").read_text()
+    assert "Seeds: [1] (PRS on each seed's grown packing)" in report
+    assert ("**No findings:** the run has no RE element (--variants PRS); a finding is a "
+            "paired difference PRS − RE per seed.") in report
+    summary["params"]["variants"] = ["RE", "PRS"]
+    case.write_report(tmp_path, summary)
+    report = (tmp_path / "report.md").read_text()
+    assert "**No findings:** no seed has both its RE and PRS elements measured." in report
+    assert "Seeds: [1] (RE and PRS on each seed's grown packing)" in report
+
+
 def test_a_verdict_needs_every_element_at_rest():
     """The same resolved difference is 'not resolved' when a stage of one element behind it
     did not converge (its walls off target, or the packing not at rest: a stall)."""

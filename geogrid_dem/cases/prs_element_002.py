@@ -406,12 +406,24 @@ def findings_table(rows: list[dict], *, with_verdict: bool = True) -> list[str]:
     return lines
 
 
+def no_pairs_reason(summary: dict) -> str:
+    """Why a run has no findings (no seed with its RE and PRS both measured): the variants
+    it ran, when one is missing, or else that no seed has both."""
+    variants = (summary.get("params") or {}).get("variants") or list(VARIANTS)
+    missing = [v for v in VARIANTS if v not in variants]
+    if missing:
+        return (f"the run has no {' or '.join(missing)} element (--variants "
+                f"{','.join(variants)}); a finding is a paired difference PRS − RE per seed")
+    return "no seed has both its RE and PRS elements measured"
+
+
 def write_report(out: Path, summary: dict) -> None:
     el = summary["elements"]
+    variants = (summary.get("params") or {}).get("variants") or list(VARIANTS)
     lines = ["# The prestressed reinforced-soil element (clumps, woven grid): report", "",
              f'Source: "{PRESTRESS_PAPER}".', "",
-             f"Mode: {summary['mode']}. Seeds: {summary['seeds']} (RE and PRS on each seed's "
-             "grown packing). Stresses in kPa, compression positive.", ""]
+             f"Mode: {summary['mode']}. Seeds: {summary['seeds']} ({' and '.join(variants)} "
+             "on each seed's grown packing). Stresses in kPa, compression positive.", ""]
     for g, soil in summary.get("soil", {}).items():
         cal = summary.get("calibration", {}).get(g)
         lines += [f"FEM soil of the {g} grid ({soil['source']}): E "
@@ -436,6 +448,8 @@ def write_report(out: Path, summary: dict) -> None:
               "initial hold before the loading, is left out and named.",
               ""]
     lines += findings_table(summary["findings"])
+    if not summary["findings"]:
+        lines += ["", f"**No findings:** {no_pairs_reason(summary)}."]
     stalled = sorted({k for f in summary["findings"] for k in f.get("unconverged", [])})
     if stalled:
         lines += ["", f"**Not at rest:** {', '.join(stalled)} ended a stage NOT converged "
@@ -694,6 +708,8 @@ def run(p: Params, out: Path) -> dict:
     (out / "summary.json").write_text(json.dumps(summary, indent=2, default=float) + "\n")
     write_report(out, summary)
     end_run(out)
+    if not summary["findings"]:
+        log(f"no findings: {no_pairs_reason(summary)}")
     for f in summary["findings"]:
         why = unresolved_reason(f)
         log(f"{f['grid']}: {f['name']}: {f['compare']} {_fmt(f['diff_mean'])} ± "
