@@ -347,6 +347,28 @@ def test_a_run_without_pairs_says_why_it_has_no_findings(tmp_path):
     assert "Seeds: [1] (RE and PRS on each seed's grown packing)" in report
 
 
+def test_fixed_walls_servo_their_stages_without_a_false_alarm(tmp_path):
+    """With --fixed-walls the free walls are ServoWalls, which warn when a run ends short of
+    their target. The element's stages run them in short runs and move their set points at
+    every record (the integral action), so each record's end would say "has not reached its
+    target ... run longer" while the stage converges (11 times here before); the stage judges
+    its own targets and says whether it converged."""
+    import subprocess
+    import sys
+
+    from conftest import ROOT
+    p = subprocess.run([sys.executable, str(ROOT / "cases" / "prs_element_002.py"), "--smoke",
+                        "--out", str(tmp_path / "run"), "--stresses", "2300,2300,5400",
+                        "--grids", "standard", "--n", "250", "--fixed-walls", "x-,y-,z-",
+                        "--seeds", "1", "--variants", "RE", "--gravity", "0"],
+                       capture_output=True, text=True, timeout=600)
+    text = p.stdout + p.stderr
+    assert p.returncode == 0, text[-3000:]
+    assert "has not reached its target" not in text, text[-3000:]
+    stage = [ln for ln in text.splitlines() if "standard_RE_s1 stage 0: walls" in ln]
+    assert stage and "(converged)" in stage[0], stage
+
+
 def test_a_verdict_needs_every_element_at_rest():
     """The same resolved difference is 'not resolved' when a stage of one element behind it
     did not converge (its walls off target, or the packing not at rest: a stall)."""

@@ -47,7 +47,8 @@ from cpp_dem.checkpoint import load_checkpoint, save_checkpoint  # noqa: F401
 from cpp_dem.scene import (BOX_WALLS, ControllerLimitWarning, Scene, apply_threads,
                            free_cores, hertz_mindlin_material,  # noqa: F401
                            set_num_threads, threads_for,
-                    PhysicalRangeWarning, TargetNotMetWarning, TimeStepWarning,
+                    PhysicalRangeWarning, ServoTargetWarning, TargetNotMetWarning,
+                    TimeStepWarning,
                     linear_material)
 from cpp_dem.measure.inertial import InertialNumberWarning  # noqa: F401,E402
 
@@ -84,6 +85,7 @@ __all__ = [
     "ContactModel",
     "ContactLossWarning",
     "ControllerLimitWarning",
+    "ServoTargetWarning",
     "PhysicalRangeWarning",
     "TimeStepWarning",
     "InertialNumberWarning",

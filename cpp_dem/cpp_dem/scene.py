@@ -303,6 +303,14 @@ class ControllerLimitWarning(UserWarning):
     ``scene.strict_controllers = True``."""
 
 
+class ServoTargetWarning(ControllerLimitWarning):
+    """A ControllerLimitWarning: a servo of one wall (ServoWall, CylinderServo, MeshServo)
+    ended a run without its stress within 5 % of its target at any call since the target
+    was set (once per target). A loop of short runs that judges its own convergence filters
+    it (``warnings.simplefilter("ignore", cpp_dem.ServoTargetWarning)``), keeping the
+    warning of a wall that drifts at its cap."""
+
+
 class TargetNotMetWarning(UserWarning):
     """A preparation ended away from a target it was given (e.g. a porosity the sample was
     already denser than): the message names the target, what was reached and why. Make it an
@@ -798,7 +806,7 @@ class Scene(_core.Scene):
                     c.clear_target_report(True)
                     if self.strict_controllers:
                         raise RuntimeError(msg)
-                    warnings.warn(ControllerLimitWarning(msg), stacklevel=3)
+                    warnings.warn(ServoTargetWarning(msg), stacklevel=3)
                 c.clear_target_report(False)
             if not hasattr(c, "limit_report"):
                 continue
