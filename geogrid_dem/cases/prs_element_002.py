@@ -206,10 +206,10 @@ SEEDS_FOR_FINDINGS = 6
 
 def unjudgeable(diff_mean: float, diff_se: float, n: int) -> str:
     """Why a paired difference cannot be judged by Student's t, '' when it can: fewer than 2
-    pairs (seeds with RE and PRS kept: no standard error), a mean or standard error not finite, or a standard error of 0
-    (up to rounding, 1e-9 of the mean): the pairs' differences all equal, as a counted
-    measure whose pairs moved by the same count, give no estimate of its scatter, and t
-    would be infinite."""
+    pairs (seeds with RE and PRS kept: no standard error), a mean or standard error not
+    finite, or a standard error of 0 (up to rounding, 1e-9 of the mean): the pairs'
+    differences all equal, as a counted measure whose pairs moved by the same count, give no
+    estimate of its scatter, and t would be infinite."""
     if n < 2:
         return "fewer than 2 pairs: no standard error"
     if not (math.isfinite(diff_mean) and math.isfinite(diff_se)):
