@@ -406,10 +406,15 @@ def findings_table(rows: list[dict], *, with_verdict: bool = True) -> list[str]:
     return lines
 
 
+def variants_of(summary: dict) -> list[str]:
+    """The variants a run's summary ran (its params' ``variants``; both where it has none)."""
+    return (summary.get("params") or {}).get("variants") or list(VARIANTS)
+
+
 def no_pairs_reason(summary: dict) -> str:
     """Why a run has no findings (no seed with its RE and PRS both measured): the variants
     it ran, when one is missing, or else that no seed has both."""
-    variants = (summary.get("params") or {}).get("variants") or list(VARIANTS)
+    variants = variants_of(summary)
     missing = [v for v in VARIANTS if v not in variants]
     if missing:
         return (f"the run has no {' or '.join(missing)} element (--variants "
@@ -419,7 +424,7 @@ def no_pairs_reason(summary: dict) -> str:
 
 def write_report(out: Path, summary: dict) -> None:
     el = summary["elements"]
-    variants = (summary.get("params") or {}).get("variants") or list(VARIANTS)
+    variants = variants_of(summary)
     lines = ["# The prestressed reinforced-soil element (clumps, woven grid): report", "",
              f'Source: "{PRESTRESS_PAPER}".', "",
              f"Mode: {summary['mode']}. Seeds: {summary['seeds']} ({' and '.join(variants)} "
